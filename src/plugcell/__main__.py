@@ -1,0 +1,5 @@
+import sys
+
+from plugcell.cli import main
+
+sys.exit(main())

@@ -1,0 +1,240 @@
+"""The measurement file: joint readings and tracker measurements, one pose a row.
+
+Format (used by the twin, the calibrator, the services and the docs)::
+
+    # comment lines start with '#'
+    j1,j2,j3,j4,j5,j6,x,y,z,rx,ry,rz,payload_kg
+    10.0,-80.0,-150.0,0.0,30.0,0.0,1712.43,-12.80,1203.55,179.9,0.2,-90.1,36
+
+* ``j1..jn`` — actuated joint readings in **degrees**, in the robot description's
+  order (for the Smart H4: θ1, θ2, θ2', θ4, θ5, θ6).
+* ``x, y, z`` — measured reflector position in **mm** in the tracker frame.
+* ``rx, ry, rz`` — optional measured orientation in **degrees**; the convention is
+  a property of the file set by the reader/writer (``rpy`` = fixed X-Y-Z, default;
+  ``zyz``; ``xyz`` intrinsic).
+* ``payload_kg`` — optional payload carried during the measurement.
+
+Inside the program everything is SI: radians and metres.  Errors name the file,
+the row (1-based line number in the file) and the column.
+"""
+
+from __future__ import annotations
+
+import csv
+import io
+import math
+import re
+from collections.abc import Iterable
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+ROTATION_CONVENTIONS = ("rpy", "zyz", "xyz")
+_JOINT_COLUMN = re.compile(r"^j([1-9][0-9]*)$")
+
+
+class MeasurementFileError(ValueError):
+    """A measurement file that cannot be read; the message names file, row and column."""
+
+
+@dataclass(frozen=True)
+class MeasurementSet:
+    """Poses of one calibration or validation campaign, in SI units.
+
+    ``joints`` (N, n) rad; ``positions`` (N, 3) m; ``angles`` (N, 3) rad or ``None``
+    (convention ``rotation``); ``payload_kg`` (N,) or ``None``.
+    """
+
+    joints: np.ndarray
+    positions: np.ndarray
+    angles: np.ndarray | None = None
+    rotation: str = "rpy"
+    payload_kg: np.ndarray | None = None
+
+    def __post_init__(self) -> None:
+        n = self.joints.shape[0]
+        if self.joints.ndim != 2:
+            raise ValueError(f"joints must be (N, n), got shape {self.joints.shape}")
+        if self.positions.shape != (n, 3):
+            raise ValueError(f"positions must be ({n}, 3), got {self.positions.shape}")
+        if self.angles is not None and self.angles.shape != (n, 3):
+            raise ValueError(f"angles must be ({n}, 3), got {self.angles.shape}")
+        if self.payload_kg is not None and self.payload_kg.shape != (n,):
+            raise ValueError(f"payload_kg must be ({n},), got {self.payload_kg.shape}")
+        if self.rotation not in ROTATION_CONVENTIONS:
+            raise ValueError(
+                f"rotation convention {self.rotation!r} unknown; use one of {ROTATION_CONVENTIONS}"
+            )
+
+    def __len__(self) -> int:
+        return int(self.joints.shape[0])
+
+    @property
+    def n_joints(self) -> int:
+        return int(self.joints.shape[1])
+
+    @property
+    def has_orientation(self) -> bool:
+        return self.angles is not None
+
+    def subset(self, index: np.ndarray | slice) -> MeasurementSet:
+        """The poses selected by ``index`` (a boolean mask, indices or a slice)."""
+        return MeasurementSet(
+            joints=self.joints[index],
+            positions=self.positions[index],
+            angles=None if self.angles is None else self.angles[index],
+            rotation=self.rotation,
+            payload_kg=None if self.payload_kg is None else self.payload_kg[index],
+        )
+
+
+def _parse_header(name: str, header: list[str]) -> tuple[int, dict[str, int]]:
+    cols = [h.strip() for h in header]
+    index: dict[str, int] = {}
+    for i, col in enumerate(cols):
+        if not col:
+            raise MeasurementFileError(f"{name}: header column {i + 1} is empty")
+        if col in index:
+            raise MeasurementFileError(f"{name}: header names column {col!r} twice")
+        index[col] = i
+    joint_numbers = sorted(int(m.group(1)) for c in cols if (m := _JOINT_COLUMN.match(c)))
+    if not joint_numbers:
+        raise MeasurementFileError(f"{name}: header has no joint columns j1..jn: {cols}")
+    if joint_numbers != list(range(1, len(joint_numbers) + 1)):
+        raise MeasurementFileError(
+            f"{name}: joint columns must be j1..j{len(joint_numbers)} without gaps, "
+            f"got {['j%d' % k for k in joint_numbers]}"
+        )
+    for col in ("x", "y", "z"):
+        if col not in index:
+            raise MeasurementFileError(f"{name}: header lacks the column {col!r}")
+    rot = [c for c in ("rx", "ry", "rz") if c in index]
+    if rot and len(rot) != 3:
+        raise MeasurementFileError(f"{name}: orientation needs all of rx, ry, rz; found only {rot}")
+    known = {f"j{k}" for k in joint_numbers} | {"x", "y", "z", "rx", "ry", "rz", "payload_kg"}
+    unknown = [c for c in cols if c not in known]
+    if unknown:
+        raise MeasurementFileError(
+            f"{name}: unknown columns {unknown}; expected j1..jn, x, y, z, "
+            "optional rx, ry, rz and payload_kg"
+        )
+    return len(joint_numbers), index
+
+
+def parse_measurements(
+    text: str,
+    *,
+    rotation: str = "rpy",
+    name: str = "<measurements>",
+    n_joints: int | None = None,
+) -> MeasurementSet:
+    """Parse measurement-file text; see the module docstring for the format.
+
+    ``n_joints`` (the robot's number of actuated joints), when given, is checked
+    against the file's joint columns.
+    """
+    if rotation not in ROTATION_CONVENTIONS:
+        raise MeasurementFileError(
+            f"{name}: rotation convention {rotation!r} unknown; use one of {ROTATION_CONVENTIONS}"
+        )
+    rows: list[tuple[int, list[str]]] = []
+    reader = csv.reader(io.StringIO(text))
+    for line_no, row in enumerate(reader, start=1):
+        if not row or all(not c.strip() for c in row):
+            continue
+        if row[0].lstrip().startswith("#"):
+            continue
+        rows.append((line_no, row))
+    if not rows:
+        raise MeasurementFileError(f"{name}: no header line (the file is empty)")
+    header_line, header = rows[0]
+    nj, index = _parse_header(name, header)
+    if n_joints is not None and nj != n_joints:
+        raise MeasurementFileError(
+            f"{name}: line {header_line}: the file has {nj} joint columns, the robot has {n_joints}"
+        )
+    data = rows[1:]
+    if not data:
+        raise MeasurementFileError(f"{name}: the file has a header but no data rows")
+    ncol = len(header)
+    values = np.empty((len(data), ncol))
+    cols = [h.strip() for h in header]
+    for r, (line_no, row) in enumerate(data):
+        if len(row) != ncol:
+            raise MeasurementFileError(
+                f"{name}: line {line_no}: expected {ncol} values, got {len(row)}"
+            )
+        for c, cell in enumerate(row):
+            try:
+                v = float(cell)
+            except ValueError:
+                raise MeasurementFileError(
+                    f"{name}: line {line_no}, column {cols[c]!r}: not a number: {cell.strip()!r}"
+                ) from None
+            if not math.isfinite(v):
+                raise MeasurementFileError(
+                    f"{name}: line {line_no}, column {cols[c]!r}: not finite: {cell.strip()!r}"
+                )
+            values[r, c] = v
+    joints = np.deg2rad(values[:, [index[f"j{k}"] for k in range(1, nj + 1)]])
+    positions = values[:, [index["x"], index["y"], index["z"]]] / 1000.0
+    angles = None
+    if "rx" in index:
+        angles = np.deg2rad(values[:, [index["rx"], index["ry"], index["rz"]]])
+    payload = None
+    if "payload_kg" in index:
+        payload = values[:, index["payload_kg"]]
+        bad = np.flatnonzero(payload < 0)
+        if bad.size:
+            line_no = data[int(bad[0])][0]
+            raise MeasurementFileError(
+                f"{name}: line {line_no}, column 'payload_kg': negative mass {payload[bad[0]]}"
+            )
+    return MeasurementSet(joints, positions, angles, rotation, payload)
+
+
+def read_measurements(
+    path: str | Path, *, rotation: str = "rpy", n_joints: int | None = None
+) -> MeasurementSet:
+    """Read a measurement file (see :func:`parse_measurements`)."""
+    p = Path(path)
+    try:
+        text = p.read_text(encoding="utf-8")
+    except FileNotFoundError:
+        raise MeasurementFileError(f"{p}: no such file") from None
+    except UnicodeDecodeError as exc:
+        raise MeasurementFileError(f"{p}: not a UTF-8 text file ({exc.reason})") from None
+    except OSError as exc:
+        raise MeasurementFileError(f"{p}: cannot read: {exc.strerror}") from None
+    return parse_measurements(text, rotation=rotation, name=str(p), n_joints=n_joints)
+
+
+def format_measurements(m: MeasurementSet, *, comments: Iterable[str] = ()) -> str:
+    """Render a :class:`MeasurementSet` as measurement-file text (degrees, mm)."""
+    out = io.StringIO()
+    for c in comments:
+        for line in str(c).splitlines() or [""]:
+            out.write(f"# {line}\n")
+    if m.angles is not None:
+        out.write(f"# orientation convention: {m.rotation}\n")
+    header = [f"j{k}" for k in range(1, m.n_joints + 1)] + ["x", "y", "z"]
+    if m.angles is not None:
+        header += ["rx", "ry", "rz"]
+    if m.payload_kg is not None:
+        header.append("payload_kg")
+    out.write(",".join(header) + "\n")
+    cols = [np.rad2deg(m.joints), m.positions * 1000.0]
+    if m.angles is not None:
+        cols.append(np.rad2deg(m.angles))
+    if m.payload_kg is not None:
+        cols.append(m.payload_kg[:, None])
+    table = np.hstack(cols)
+    for row in table:
+        out.write(",".join(f"{v:.9g}" for v in row) + "\n")
+    return out.getvalue()
+
+
+def write_measurements(path: str | Path, m: MeasurementSet, *, comments: Iterable[str] = ()) -> None:
+    """Write a measurement file; the inverse of :func:`read_measurements`."""
+    Path(path).write_text(format_measurements(m, comments=comments), encoding="utf-8")
