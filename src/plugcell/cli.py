@@ -17,6 +17,17 @@ from plugcell import __version__
 COMMAND_MODULES: tuple[str, ...] = (
     "plugcell.commands.kin",
     "plugcell.commands.twin",
+    "plugcell.commands.demo",
+    "plugcell.commands.serve",
+    "plugcell.commands.services",
+    "plugcell.commands.call",
+    "plugcell.commands.wire",
+    "plugcell.commands.router",
+    "plugcell.commands.journal",
+    "plugcell.commands.bench",
+    "plugcell.commands.compensate",
+    "plugcell.commands.calibrate",
+    "plugcell.commands.reproduce",
 )
 
 

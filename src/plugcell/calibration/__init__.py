@@ -1,1 +1,59 @@
-"""plugcell.calibration."""
+"""plugcell.calibration — the error model, identifiability and identification (thesis ch. 6, 8).
+
+Pure math (numpy, SI units), no I/O, no framework imports; files go through
+:mod:`plugcell.io` and the command modules.  See ``docs/calibration.md``.
+
+* :mod:`.parameters` — named error parameters (Δθ1, Δa2', G1, A4, …) with units;
+* :mod:`.structure` — the chain a model runs on (loop or serial family, 8.2.3);
+* :mod:`.compliance` — gravity (6.31) and payload (6.40) deflection regressors;
+* :mod:`.model` — :class:`ErrorModel`: predicts BASE·T6(q + Δq)·PROBE (6.23);
+* :mod:`.jacobian` — the exact analytic identification Jacobian (6.12–6.42, D.5);
+* :mod:`.identifiability` — column scaling, rank-revealing QR, rule 4.10;
+* :mod:`.initial` — BASE/PROBE from the data (AX = YB, rigid registration);
+* :mod:`.identify` — :class:`Calibrator` (Gauss–Newton, LM, robust loss);
+* :mod:`.result`, :mod:`.statistics` — :class:`CalibrationResult`, (8.1)–(8.5);
+* :mod:`.configs` — the five models of 8.2.3; :mod:`.simulation` — the check of 8.1;
+* :mod:`.report` — the self-contained HTML report.
+"""
+
+from plugcell.calibration.configs import MODELS, ModelConfig, model_config
+from plugcell.calibration.data import CalibrationData
+from plugcell.calibration.identifiability import (
+    Identifiability,
+    analyse,
+    combinations_at,
+    structural_identifiability,
+)
+from plugcell.calibration.identify import (
+    CalibrationError,
+    Calibrator,
+    DivergenceError,
+)
+from plugcell.calibration.jacobian import JacobianResult, identification_jacobian
+from plugcell.calibration.model import ErrorModel, PoseBatch
+from plugcell.calibration.parameters import ErrorParameter, ParameterSpace
+from plugcell.calibration.result import CalibrationResult
+from plugcell.calibration.structure import KinematicStructure, kinematic_structure
+
+__all__ = [
+    "MODELS",
+    "CalibrationData",
+    "CalibrationError",
+    "CalibrationResult",
+    "Calibrator",
+    "DivergenceError",
+    "ErrorModel",
+    "ErrorParameter",
+    "Identifiability",
+    "JacobianResult",
+    "KinematicStructure",
+    "ModelConfig",
+    "ParameterSpace",
+    "PoseBatch",
+    "analyse",
+    "combinations_at",
+    "identification_jacobian",
+    "kinematic_structure",
+    "model_config",
+    "structural_identifiability",
+]

@@ -1,1 +1,69 @@
-"""plugcell.compensation."""
+"""plugcell.compensation — the two-stage error compensation of thesis 6.5 (pure math).
+
+1. **Model-based** (6.5.1, eqs. 4.11–4.12): the commanded joints for which the
+   identified model predicts the desired tool pose, starting from the controller's
+   nominal IK — :func:`compensate`, :func:`compensate_joints`, and program filtering
+   (:func:`filter_program`: Cartesian targets in ZYZ/RPY, robot or user frame →
+   compensated joint targets).
+2. **Sensor-based** (6.5.2): the tracker-guided 6-DOF loop δθ = J⁻¹Δx
+   (:func:`correct_6dof`) and the 3-DOF loop of relative moves (:func:`correct_3dof`)
+   against small device protocols (:mod:`.protocols`), measurements brought into the
+   robot base frame with the identified BASE and PROBE (:mod:`.frames`).
+
+Targets are **tool-point poses in the robot base frame**; by default the tool point
+is the T-MAC (the identified PROBE), as in thesis 8.3.  No I/O, no framework or
+twin imports.  See docs/compensation.md.
+"""
+
+from plugcell.compensation.errors import CompensationError, CorrectionError, SensorError
+from plugcell.compensation.frames import MetrologyFrames, RobotFrameSensor
+from plugcell.compensation.model import IdentifiedModel, NominalModel, PoseModel
+from plugcell.compensation.model_based import (
+    CompensationResult,
+    compensate,
+    compensate_joints,
+    nominal_joints,
+)
+from plugcell.compensation.program import filter_program, frame_matrix, target_poses
+from plugcell.compensation.protocols import (
+    CartesianRobot,
+    JointRobot,
+    PoseSensor,
+    PositionSensor,
+    Reading,
+)
+from plugcell.compensation.sensor_based import (
+    CorrectionResult,
+    CorrectionSettings,
+    CorrectionStep,
+    correct_3dof,
+    correct_6dof,
+)
+
+__all__ = [
+    "CartesianRobot",
+    "CompensationError",
+    "CompensationResult",
+    "CorrectionError",
+    "CorrectionResult",
+    "CorrectionSettings",
+    "CorrectionStep",
+    "IdentifiedModel",
+    "JointRobot",
+    "MetrologyFrames",
+    "NominalModel",
+    "PoseModel",
+    "PoseSensor",
+    "PositionSensor",
+    "Reading",
+    "RobotFrameSensor",
+    "SensorError",
+    "compensate",
+    "compensate_joints",
+    "correct_3dof",
+    "correct_6dof",
+    "filter_program",
+    "frame_matrix",
+    "nominal_joints",
+    "target_poses",
+]

@@ -1,1 +1,70 @@
-"""plugcell.framework."""
+"""plugcell.framework — Plug-and-Produce services over Zenoh (thesis ch. 4.1, 5, appendix F).
+
+Modules, one job each:
+
+* :mod:`.model` — the predefined classes and enumerations (appendix F);
+* :mod:`.data` — typed data buffers and their checks against a command (F.4, F.5);
+* :mod:`.wire` — the versioned MessagePack envelope (docs/protocol.md);
+* :mod:`.keys` — the Zenoh key space of a cell;
+* :mod:`.transport` — Zenoh sessions (peer on loopback, or via a router);
+* :mod:`.port` — the CCR Port between Zenoh callbacks and the event loop (E.1);
+* :mod:`.processqueue` — the FIFO process queue with re-scheduling (5.2.3.5);
+* :mod:`.journal` — the SQLite journal of every process and update;
+* :mod:`.participant` — presence, partners, outbound processes (5.2.3.6);
+* :mod:`.process_call` — a process as its sender sees it;
+* :mod:`.service` — the GenericDevice base of every service (5.2.2–5.2.3);
+* :mod:`.client` — the async and blocking client API.
+"""
+
+from plugcell.framework.client import BlockingClient, BlockingProcessCall, Client
+from plugcell.framework.data import DataError, from_data, to_data
+from plugcell.framework.keys import DEFAULT_CELL, KeySpace
+from plugcell.framework.model import (
+    Acknowledgement,
+    Command,
+    CommandTypes,
+    ConnectionStates,
+    Data,
+    DataTypes,
+    Device,
+    DeviceStates,
+    GenericDeviceState,
+    Process,
+    ProcessStates,
+    ProcessUpdateNotification,
+    Tag,
+)
+from plugcell.framework.participant import Participant, PartnerError
+from plugcell.framework.process_call import ProcessCall
+from plugcell.framework.service import DeviceError, GenericDevice
+from plugcell.framework.transport import TransportConfig
+
+__all__ = [
+    "DEFAULT_CELL",
+    "Acknowledgement",
+    "BlockingClient",
+    "BlockingProcessCall",
+    "Client",
+    "Command",
+    "CommandTypes",
+    "ConnectionStates",
+    "Data",
+    "DataError",
+    "DataTypes",
+    "Device",
+    "DeviceError",
+    "DeviceStates",
+    "GenericDevice",
+    "GenericDeviceState",
+    "KeySpace",
+    "Participant",
+    "PartnerError",
+    "Process",
+    "ProcessCall",
+    "ProcessStates",
+    "ProcessUpdateNotification",
+    "Tag",
+    "TransportConfig",
+    "from_data",
+    "to_data",
+]

@@ -1,1 +1,73 @@
-"""plugcell.metrology."""
+"""plugcell.metrology — metrology geometry (pure math, SI units).
+
+Best-fit line/plane/circle, frames from features, BASE/PROBE estimation by the
+procedures of thesis Appendix D, rigid registration, accuracy statistics of
+eqs. 8.1–8.2, straightness (8.3.1) and ISO 9283 pose accuracy/repeatability.
+
+Inputs are numpy arrays in metres and radians; nothing here does I/O or imports
+the framework. Degenerate input raises :class:`MetrologyError` (a ``ValueError``).
+See ``docs/metrology.md``.
+"""
+
+from ._validate import MetrologyError
+from .accuracy import (
+    AccuracyStats,
+    ComponentStats,
+    ErrorStats,
+    Iso9283Result,
+    NormStats,
+    StraightnessResult,
+    accuracy_statistics,
+    iso9283_pose_accuracy,
+    pose_errors,
+    straightness,
+    wrap_angle,
+)
+from .fitting import CircleFit, LineFit, PlaneFit, fit_circle, fit_line, fit_plane
+from .frames import (
+    SMR_RADIUS_HALF_INCH,
+    BaseEstimate,
+    BaseParameters,
+    ProbeEstimate,
+    RigidFit,
+    base_from_features,
+    base_matrix_from_parameters,
+    base_parameters_from_matrix,
+    fit_rigid_transform,
+    frame_from_axes,
+    invert_transform,
+    probe_from_flange_features,
+)
+
+__all__ = [
+    "SMR_RADIUS_HALF_INCH",
+    "AccuracyStats",
+    "BaseEstimate",
+    "BaseParameters",
+    "CircleFit",
+    "ComponentStats",
+    "ErrorStats",
+    "Iso9283Result",
+    "LineFit",
+    "MetrologyError",
+    "NormStats",
+    "PlaneFit",
+    "ProbeEstimate",
+    "RigidFit",
+    "StraightnessResult",
+    "accuracy_statistics",
+    "base_from_features",
+    "base_matrix_from_parameters",
+    "base_parameters_from_matrix",
+    "fit_circle",
+    "fit_line",
+    "fit_plane",
+    "fit_rigid_transform",
+    "frame_from_axes",
+    "invert_transform",
+    "iso9283_pose_accuracy",
+    "pose_errors",
+    "probe_from_flange_features",
+    "straightness",
+    "wrap_angle",
+]

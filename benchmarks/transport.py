@@ -1,0 +1,13 @@
+"""Transport benchmark of thesis 5.3 (Table 5-5).
+
+``python benchmarks/transport.py [--quick] [--json] [--output FILE]``.
+
+Same as ``plugcell bench transport``; the implementation is ``plugcell.bench.transport``.
+"""
+
+import sys
+
+from plugcell.bench.transport import main
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,2 @@
+"""Benchmarks of plugcell (``plugcell bench …``): implementations live here, thin
+wrappers in ``benchmarks/``."""

@@ -1,0 +1,217 @@
+"""Joint deflections: gravity (G1–G3, eq. 6.31) and payload (A, B, C, D, eq. 6.40).
+
+A deflection is added to the joint *readings* before forward kinematics (eq.
+4.16): ``q_link = q_reading + Δq(q)`` with ``Δq(q) = R(q) · c``, linear in the
+compliance constants ``c``.  The regressor ``R(q)`` (``(N, n_readings, n_c)``) is
+evaluated on a fixed *reference* geometry — the nominal description — not on
+the parameters being identified: the torque arms enter the deflection, a
+~1 mm-sized effect, so a 1 mm error in an arm changes it by ~1e-6 mm; fixing
+them keeps the model an exact function whose analytic Jacobian is exact
+(tested against finite differences).
+
+Gravity (link masses), thesis 6.3.1, per parallelogram loop (arm = joint 2,
+crank = joint 2')::
+
+    Δθ_arm   = G1 cos θ_arm                      (6.31)
+    Δθ_crank = G2 cos θ_crank + G3 sin θ_crank
+
+with θ the DH angles (reading + nominal offset) in the loop plane (z0 vertical,
+the loop plane vertical, θ = 0 horizontal).  A serial robot without loops whose
+description gives link masses gets one compliance ``c_j`` (rad/(N·m)) per
+actuated joint instead: ``Δθ_j = c_j τ_j(q)`` with ``τ_j`` the gravity torque of
+the described masses (eq. 4.15).
+
+Payload, thesis 6.3.2, for every actuated joint *i* (eqs. 6.34–6.41)::
+
+    Δθ_i = (m / m_ref) · [K_i3, K_i4 n_y − K_i5 n_x, K_i4 s_y − K_i5 s_x, K_i4 a_y − K_i5 a_x]
+                          · (A_i, B_i, C_i, D_i)
+
+with ``K = Jᵀ`` the manipulator Jacobian at the flange (eq. 6.37; loop joints by
+the closure derivatives, which at the nominal parallelogram are eq. 6.39), ``n,
+s, a`` the columns of the flange rotation R_n^0 and the thesis's ``P = (0, 0,
+mg)`` (so A_i = c_i m g etc.; a physical compliance comes out negative, as in
+Table 8-4).  ``m_ref`` is the payload the constants refer to (the heaviest of
+the calibration set), so one model predicts every payload on the same mount.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from plugcell.calibration.parameters import ErrorParameter
+from plugcell.calibration.structure import CLASS_GRAVITY, CLASS_PAYLOAD
+from plugcell.kinematics import GeometricParameters, RobotDescription, forward, jacobian_from_fk
+
+Array = NDArray[np.float64]
+
+GRAVITY = 9.81
+PAYLOAD_FIELDS: tuple[str, ...] = ("A", "B", "C", "D")
+
+__all__ = [
+    "GRAVITY",
+    "PAYLOAD_FIELDS",
+    "compliance_regressors",
+    "gravity_parameters",
+    "has_masses",
+    "payload_parameters",
+]
+
+
+def has_masses(desc: RobotDescription) -> bool:
+    return any(lk.mass > 0 for lk in desc.links) or any(pm.mass > 0 for pm in desc.point_masses)
+
+
+def gravity_parameters(desc: RobotDescription) -> tuple[ErrorParameter, ...]:
+    """G1–G3 per loop (eq. 6.31) or, for a serial robot with masses, c_j per joint."""
+    out: list[ErrorParameter] = []
+    if desc.loops:
+        for k, loop in enumerate(desc.loops):
+            for m, joint in enumerate((loop.arm, loop.crank, loop.crank)):
+                g = 3 * k + m + 1
+                out.append(
+                    ErrorParameter(
+                        key=f"G{g}", name=f"G{g}", kind="gravity", unit="rad", joint=joint,
+                        priority=(CLASS_GRAVITY, g, 0),
+                    )
+                )
+        return tuple(out)
+    if not has_masses(desc):
+        return ()
+    for j, name in enumerate(desc.actuated):
+        out.append(
+            ErrorParameter(
+                key=f"c{name}", name=f"c{name}", kind="gravity", unit="rad/(N·m)", joint=name,
+                priority=(CLASS_GRAVITY, j, 0),
+            )
+        )
+    return tuple(out)
+
+
+def payload_parameters(desc: RobotDescription) -> tuple[ErrorParameter, ...]:
+    """A_i, B_i, C_i, D_i for every actuated joint *i* (eq. 6.40)."""
+    out: list[ErrorParameter] = []
+    for j, name in enumerate(desc.actuated):
+        for m, f in enumerate(PAYLOAD_FIELDS):
+            out.append(
+                ErrorParameter(
+                    key=f"{f}{name}", name=f"{f}{name}", kind="payload",
+                    unit="rad/m" if f == "A" else "rad", joint=name,
+                    priority=(CLASS_PAYLOAD, j, m),
+                )
+            )
+    return tuple(out)
+
+
+def _gravity_torques(desc: RobotDescription, ref: GeometricParameters, q: Array) -> Array:
+    """Gravity torques ``(N, n)`` of the described masses on a serial robot (z0 up)."""
+    fk = forward(desc, ref, q)
+    frames = fk.frames
+    g = np.array([0.0, 0.0, -GRAVITY])
+    masses: list[tuple[int, float, Array]] = []
+    for i, lk in enumerate(desc.links):
+        if lk.mass > 0:
+            masses.append((i, lk.mass, np.asarray(lk.com, float)))
+    for pm in desc.point_masses:
+        if pm.mass > 0:
+            masses.append((desc.index(pm.link), pm.mass, np.asarray(pm.com, float)))
+    ancestors: list[set[int]] = []
+    for lk in desc.links:
+        s = set()
+        name = lk.name
+        while name != "base":
+            s.add(desc.index(name))
+            name = desc.link(name).parent
+        ancestors.append(s)
+    tau = np.zeros((*q.shape[:-1], desc.n_actuated))
+    for j, name in enumerate(desc.actuated):
+        lj = desc.index(name)
+        parent = desc.links[lj].parent
+        if parent == "base":
+            z = np.broadcast_to([0.0, 0.0, 1.0], (*q.shape[:-1], 3))
+            o = np.zeros((*q.shape[:-1], 3))
+        else:
+            P = frames[..., desc.index(parent), :, :]
+            z, o = P[..., :3, 2], P[..., :3, 3]
+        for i, m, com in masses:
+            if lj not in ancestors[i]:
+                continue
+            F = frames[..., i, :, :]
+            c = np.einsum("...ij,j->...i", F[..., :3, :3], com) + F[..., :3, 3]
+            tau[..., j] += np.sum(np.cross(c - o, m * g) * z, axis=-1)
+    return tau
+
+
+def compliance_regressors(
+    desc: RobotDescription,
+    ref: GeometricParameters,
+    parameters: Sequence[ErrorParameter],
+    q: ArrayLike,
+    payload_kg: ArrayLike | None = None,
+    payload_ref_kg: float = 0.0,
+) -> Array:
+    """Regressor ``R(q)``, ``(N, n_readings, n_c)``: ``Δq = R(q) · c`` (module docstring).
+
+    ``desc``/``ref``: the robot as described and its reference geometry;
+    ``parameters``: gravity/payload parameters (in this order); ``q``: ``(N, n)``
+    joint readings; ``payload_kg``: ``(N,)`` (``None``: no payload);
+    ``payload_ref_kg``: the mass the payload constants refer to.
+    """
+    q = np.atleast_2d(np.asarray(q, dtype=float))
+    N, n = q.shape
+    R = np.zeros((N, n, len(parameters)))
+    if not parameters:
+        return R
+    jidx = {name: j for j, name in enumerate(desc.actuated)}
+    theta = q + np.array([ref.theta[desc.index(nm)] for nm in desc.actuated])
+    loop_g = {}
+    for k, loop in enumerate(desc.loops):
+        ja, jc = jidx[loop.arm], jidx[loop.crank]
+        loop_g[f"G{3 * k + 1}"] = (ja, np.cos(theta[:, ja]))
+        loop_g[f"G{3 * k + 2}"] = (jc, np.cos(theta[:, jc]))
+        loop_g[f"G{3 * k + 3}"] = (jc, np.sin(theta[:, jc]))
+    tau = None
+    payload_reg = None
+    for c, p in enumerate(parameters):
+        if p.kind == "gravity":
+            if p.key in loop_g:
+                j, reg = loop_g[p.key]
+                R[:, j, c] = reg
+            else:
+                if tau is None:
+                    tau = _gravity_torques(desc, ref, q)
+                j = jidx[p.joint]  # type: ignore[index]
+                R[:, j, c] = tau[:, j]
+        elif p.kind == "payload":
+            if payload_reg is None:
+                payload_reg = _payload_regressors(desc, ref, q, payload_kg, payload_ref_kg)
+            j = jidx[p.joint]  # type: ignore[index]
+            R[:, j, c] = payload_reg[:, j, PAYLOAD_FIELDS.index(p.key[0])]
+        else:
+            raise ValueError(f"{p.key!r} is not a compliance parameter")
+    return R
+
+
+def _payload_regressors(
+    desc: RobotDescription,
+    ref: GeometricParameters,
+    q: Array,
+    payload_kg: ArrayLike | None,
+    payload_ref_kg: float,
+) -> Array:
+    """``(N, n, 4)``: the row vector of eq. (6.41) per joint, scaled by m / m_ref."""
+    N = q.shape[0]
+    if payload_kg is None or payload_ref_kg <= 0:
+        return np.zeros((N, desc.n_actuated, 4))
+    scale = np.broadcast_to(np.asarray(payload_kg, dtype=float), (N,)) / payload_ref_kg
+    fk = forward(desc, ref, q, closure="fourbar")
+    K = np.swapaxes(jacobian_from_fk(desc, fk, "flange"), -1, -2)  # (N, n, 6)
+    Rn = fk.flange[:, :3, :3]
+    out = np.empty((N, desc.n_actuated, 4))
+    out[..., 0] = K[..., 2]
+    for m in range(3):  # n, s, a columns of R_n^0
+        col = Rn[:, :, m]
+        out[..., m + 1] = K[..., 3] * col[:, None, 1] - K[..., 4] * col[:, None, 0]
+    return out * scale[:, None, None]

@@ -1,0 +1,105 @@
+"""Calibration data: joint readings with the measured target poses (or positions).
+
+:class:`CalibrationData` is the pure-math view of a measurement file
+(:class:`plugcell.io.measurements.MeasurementSet`, read by :mod:`plugcell.io`):
+SI units, rotations as matrices, no file handling here.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from plugcell.kinematics.rotations import angles_to_matrix
+
+Array = NDArray[np.float64]
+
+__all__ = ["CalibrationData"]
+
+
+def _ro(x: ArrayLike | None) -> Array | None:
+    if x is None:
+        return None
+    a = np.array(x, dtype=float)
+    a.setflags(write=False)
+    return a
+
+
+@dataclass(frozen=True, eq=False)
+class CalibrationData:
+    """``q`` ``(N, n)`` joint readings (rad); ``positions`` ``(N, 3)`` measured target
+    positions (m); ``rotations`` ``(N, 3, 3)`` measured orientations or ``None``
+    (position-only data); ``payload_kg`` ``(N,)``."""
+
+    q: Array
+    positions: Array
+    rotations: Array | None = None
+    payload_kg: Array | None = None
+
+    def __post_init__(self) -> None:
+        q = _ro(self.q)
+        if q is None or q.ndim != 2:
+            raise ValueError(f"q must be (N, n), got {None if q is None else q.shape}")
+        N = q.shape[0]
+        p = _ro(self.positions)
+        if p is None or p.shape != (N, 3):
+            raise ValueError(f"positions must be ({N}, 3), got {None if p is None else p.shape}")
+        R = _ro(self.rotations)
+        if R is not None and R.shape != (N, 3, 3):
+            raise ValueError(f"rotations must be ({N}, 3, 3), got {R.shape}")
+        m = _ro(np.zeros(N) if self.payload_kg is None else self.payload_kg)
+        if m is None or m.shape != (N,):
+            raise ValueError(f"payload_kg must be ({N},)")
+        for name, arr in (("q", q), ("positions", p), ("rotations", R), ("payload_kg", m)):
+            if arr is not None and not np.all(np.isfinite(arr)):
+                raise ValueError(f"{name}: values must be finite")
+        object.__setattr__(self, "q", q)
+        object.__setattr__(self, "positions", p)
+        object.__setattr__(self, "rotations", R)
+        object.__setattr__(self, "payload_kg", m)
+
+    @classmethod
+    def from_measurements(cls, m: Any) -> CalibrationData:
+        """From a :class:`~plugcell.io.measurements.MeasurementSet` (or anything with
+        ``joints``, ``positions``, ``angles``, ``rotation`` and ``payload_kg``)."""
+        R = None if m.angles is None else angles_to_matrix(m.angles, m.rotation)
+        return cls(q=m.joints, positions=m.positions, rotations=R, payload_kg=m.payload_kg)
+
+    @classmethod
+    def from_poses(cls, q: ArrayLike, poses: ArrayLike, payload_kg: ArrayLike | None = None,
+                   *, position_only: bool = False) -> CalibrationData:
+        """From measured poses ``(N, 4, 4)``."""
+        T = np.asarray(poses, dtype=float)
+        return cls(q=q, positions=T[:, :3, 3], rotations=None if position_only else T[:, :3, :3],
+                   payload_kg=payload_kg)
+
+    def __len__(self) -> int:
+        return int(self.q.shape[0])
+
+    @property
+    def six_dof(self) -> bool:
+        return self.rotations is not None
+
+    @property
+    def rows(self) -> int:
+        """Equations per pose: 6 (pose) or 3 (position)."""
+        return 6 if self.six_dof else 3
+
+    @property
+    def poses(self) -> Array:
+        """``(N, 4, 4)`` measured poses (rotation identity for position-only data)."""
+        T = np.broadcast_to(np.eye(4), (len(self), 4, 4)).copy()
+        T[:, :3, 3] = self.positions
+        if self.rotations is not None:
+            T[:, :3, :3] = self.rotations
+        return T
+
+    def subset(self, index: ArrayLike | slice) -> CalibrationData:
+        return CalibrationData(
+            q=self.q[index], positions=self.positions[index],
+            rotations=None if self.rotations is None else self.rotations[index],
+            payload_kg=self.payload_kg[index],  # type: ignore[index]
+        )

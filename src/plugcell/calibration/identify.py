@@ -1,0 +1,531 @@
+"""Identification of the error parameters: the iterative algorithm of Fig. 6-9.
+
+:class:`Calibrator` reads like a scikit-learn estimator::
+
+    result = Calibrator(desc, model="full").fit(data)     # -> CalibrationResult
+    result.predict(q, payload_kg)                          # calibrated T-MAC poses
+    result.to_dict()                                       # PARAMS.json content
+
+``fit`` does what an engineer does with a file of joint readings and tracker
+measurements, and nothing else is needed:
+
+1. **Initial BASE and PROBE** from the data (:mod:`.initial`: AX = YB for 6-DOF,
+   rigid registration for positions), unless the user gives them (appendix D).
+2. **Nominal frames fit**: BASE and PROBE refined by least squares on the nominal
+   robot — the "nominal" accuracy every model is compared with (Table 8-2) — and
+   folded into the references, so the identification starts from the nominal
+   geometry (skipped when the user gives BASE and PROBE: then "nominal" is the
+   nominal robot with them, as with the appendix-D procedure in the thesis).
+3. **Identifiability** (:mod:`.identifiability`): the model's structurally
+   identifiable parameters, checked again on these poses.
+4. **Gauss–Newton** with the exact forward model and the analytic Jacobian:
+   ``Δg = argmin ‖Δx − H Δg‖`` (4.8), ``g ← g + Δg`` until ``‖Δg‖ < tol`` (1e-6,
+   thesis 8.1).  Options: Levenberg–Marquardt (``method="lm"``) and a robust
+   loss (``loss="huber"`` or ``"cauchy"``, iteratively reweighted per pose).
+5. **Statistics** (8.1–8.5) and warnings (ill-conditioning, outliers, few poses).
+
+Residual rows are metres and radians; ``rotation_weight`` (m/rad, default 1 as
+in the thesis) scales the orientation rows of 6-DOF data.
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from plugcell.calibration.configs import ModelConfig, model_config
+from plugcell.calibration.data import CalibrationData
+from plugcell.calibration.identifiability import (
+    Identifiability,
+    analyse,
+    structural_identifiability,
+)
+from plugcell.calibration.initial import (
+    InitialEstimateError,
+    estimate_base_probe_poses,
+    estimate_base_probe_positions,
+)
+from plugcell.calibration.jacobian import identification_jacobian
+from plugcell.calibration.linalg import least_squares
+from plugcell.calibration.model import ErrorModel, PoseBatch, fold_frames
+from plugcell.calibration.result import CalibrationResult, IterationRecord
+from plugcell.calibration.statistics import accuracy, parameter_statistics, pose_residuals
+from plugcell.kinematics import RobotDescription, forward
+from plugcell.kinematics.errors import KinematicsError
+from plugcell.metrology import fit_rigid_transform
+
+Array = NDArray[np.float64]
+
+METHODS: tuple[str, ...] = ("gauss-newton", "lm")
+#: Halvings of a Gauss-Newton step that would increase the cost (a safeguard: the
+#: full step is taken whenever it descends, as in the thesis's algorithm).
+BACKTRACK_STEPS = 8
+#: Default relative rank tolerance on the data: a scaled column closer than this to the
+#: span of the kept ones is not identifiable from measured (noisy) poses.
+DATA_RANK_TOL = 1e-3
+#: Pose residuals below this (m) are never called outliers (tracker noise level).
+#: Mean position error (m) of the nominal robot with fitted BASE/PROBE above which the
+#: data cannot belong to the robot (a real robot's nominal error is a few mm).
+MISMATCH_M = 0.05
+#: ‖Δg‖ of the last iteration above which a non-converged fit counts as diverged.
+UNSETTLED_STEP = 1e-3
+OUTLIER_FLOOR_M = 0.05e-3
+_HINT = "check the units (joints in degrees, positions in mm), the joint order and --rot"
+LOSSES: tuple[str, ...] = ("linear", "huber", "cauchy")
+
+#: Progress callback: ``(stage, iteration, max_iterations, message)``.
+Progress = Callable[[str, int, int, str], None]
+
+__all__ = [
+    "LOSSES",
+    "METHODS",
+    "CalibrationError",
+    "Calibrator",
+    "DivergenceError",
+    "refit_base",
+]
+
+
+class CalibrationError(ValueError):
+    """A calibration that cannot be carried out (bad data, too few poses, …)."""
+
+
+class DivergenceError(CalibrationError):
+    """The iteration diverged (cost exploded, the loop could not close, NaN)."""
+
+
+@dataclass(frozen=True)
+class _Problem:
+    model: ErrorModel
+    data: CalibrationData
+    batch: PoseBatch
+    rotation_weight: float
+
+
+def _residual_rows(p: _Problem, poses: Array) -> Array:
+    r = pose_residuals(p.data, poses)
+    if p.data.six_dof:
+        r = r.copy()
+        r[:, 3:] *= p.rotation_weight
+    return r
+
+
+def _jacobian_rows(p: _Problem, H: Array) -> Array:
+    if p.data.six_dof:
+        H = H.copy()
+        H[:, 3:] *= p.rotation_weight
+        return H
+    return H[:, :3]
+
+
+def _robust_weights(r: Array, loss: str, scale: float) -> Array:
+    """Per-pose IRLS weights from the pose residual norms."""
+    e = np.linalg.norm(r, axis=1)
+    if loss == "linear":
+        return np.ones(len(e))
+    s = scale * max(float(np.median(e)), 1e-15)
+    u = e / s
+    if loss == "huber":
+        return np.where(u <= 1.0, 1.0, 1.0 / np.maximum(u, 1e-300))
+    return 1.0 / (1.0 + u * u)
+
+
+class Calibrator:
+    """Identify the error parameters of one of the five models (module docstring).
+
+    ``desc``: the robot; ``model``: 1–5 or a name (:mod:`.configs`); ``base``,
+    ``probe``: initial BASE/PROBE (4×4), estimated from the data when omitted;
+    ``method``: ``"gauss-newton"`` or ``"lm"``; ``loss``: ``"linear"``, ``"huber"``
+    or ``"cauchy"`` with ``loss_scale`` (× the median pose residual);
+    ``tol``: stop when ‖Δg‖ < tol; ``rotation_weight``: m per rad of the
+    orientation rows; ``condition_limit``: apply the rule of eq. (4.10) on the
+    data (``None``: only report κ); ``payload_ref_kg``: the mass the payload
+    constants refer to (default: the heaviest payload of the data);
+    ``parameters``: identify exactly these keys instead of the analysis' choice;
+    ``rank_tol``: relative distance of a scaled column from the span of the others
+    below which a parameter is not identified from these poses (default 1e-3);
+    ``progress``: callback ``(stage, i, n, message)``.
+    """
+
+    def __init__(
+        self,
+        desc: RobotDescription,
+        model: int | str = 5,
+        *,
+        base: ArrayLike | None = None,
+        probe: ArrayLike | None = None,
+        method: str = "gauss-newton",
+        loss: str = "linear",
+        loss_scale: float = 3.0,
+        tol: float = 1e-6,
+        max_iterations: int = 50,
+        rotation_weight: float = 1.0,
+        condition_limit: float | None = None,
+        payload_ref_kg: float | None = None,
+        parameters: Sequence[str] | None = None,
+        rank_tol: float = DATA_RANK_TOL,
+        progress: Progress | None = None,
+    ) -> None:
+        try:
+            self.config: ModelConfig = model_config(model)
+        except ValueError as exc:
+            raise CalibrationError(str(exc)) from None
+        if method not in METHODS:
+            raise CalibrationError(f"method must be one of {METHODS}, got {method!r}")
+        if loss not in LOSSES:
+            raise CalibrationError(f"loss must be one of {LOSSES}, got {loss!r}")
+        if not (tol > 0 and max_iterations >= 1 and rotation_weight > 0 and loss_scale > 0):
+            raise CalibrationError("tol, max_iterations, rotation_weight, loss_scale must be > 0")
+        self.desc = desc
+        self.base = None if base is None else np.asarray(base, dtype=float)
+        self.probe = None if probe is None else np.asarray(probe, dtype=float)
+        self.method = method
+        self.loss = loss
+        self.loss_scale = float(loss_scale)
+        self.tol = float(tol)
+        self.max_iterations = int(max_iterations)
+        self.rotation_weight = float(rotation_weight)
+        self.condition_limit = condition_limit
+        self.payload_ref_kg = payload_ref_kg
+        self.parameters = None if parameters is None else tuple(parameters)
+        self.rank_tol = float(rank_tol)
+        self.progress = progress
+
+    # ------------------------------------------------------------------ helpers
+    def _say(self, stage: str, i: int, n: int, msg: str) -> None:
+        if self.progress is not None:
+            self.progress(stage, i, n, msg)
+
+    def _coerce(self, data: Any) -> CalibrationData:
+        if not isinstance(data, CalibrationData):
+            try:
+                data = CalibrationData.from_measurements(data)
+            except (AttributeError, ValueError) as exc:
+                raise CalibrationError(f"cannot use the data: {exc}") from None
+        n = self.desc.n_actuated
+        if data.q.shape[1] != n:
+            raise CalibrationError(
+                f"the data have {data.q.shape[1]} joint columns, robot {self.desc.name!r} has {n}"
+            )
+        return data
+
+    def initial_frames(self, data: CalibrationData) -> tuple[Array, Array, float]:
+        """Initial BASE, PROBE and the rms position misfit they leave (m)."""
+        ref = self.desc.nominal_parameters()
+        try:
+            flange = forward(self.desc, ref, data.q, closure="fourbar").flange
+        except KinematicsError as exc:
+            raise CalibrationError(f"nominal kinematics fail on the data: {exc}") from None
+        if self.base is not None and self.probe is not None:
+            pred = self.base @ flange @ self.probe
+            rms = float(np.sqrt(np.mean(np.sum((pred[:, :3, 3] - data.positions) ** 2, 1))))
+            return self.base, self.probe, rms
+        try:
+            if data.six_dof:
+                est = estimate_base_probe_poses(flange, data.poses)
+            else:
+                off = None if self.probe is None else self.probe[:3, 3]
+                est = estimate_base_probe_positions(flange, data.positions, probe_offset=off)
+        except (InitialEstimateError, ValueError) as exc:
+            raise CalibrationError(f"cannot estimate BASE and PROBE from the data: {exc}") from None
+        base = est.base if self.base is None else self.base
+        probe = est.probe if self.probe is None else self.probe
+        return base, probe, est.rms
+
+    # ------------------------------------------------------------------ fit
+    def fit(self, data: Any, *, validation: Any | None = None) -> CalibrationResult:
+        """Identify the parameters from ``data`` (a MeasurementSet or CalibrationData).
+
+        ``validation``: optional independent poses, evaluated with the result.
+        """
+        t0 = time.perf_counter()
+        data = self._coerce(data)
+        cfg = self.config
+        warnings: list[str] = []
+        payloads = np.unique(data.payload_kg)
+        m_ref = float(self.payload_ref_kg if self.payload_ref_kg is not None
+                      else data.payload_kg.max())
+        if cfg.payload and m_ref <= 0:
+            raise CalibrationError(
+                f"model {cfg.number} ({cfg.name}) identifies payload compliance but the data "
+                "carry no payload (payload_kg column missing or zero); use model 4 or add "
+                "--payload-kg"
+            )
+        if not data.six_dof and self.rotation_weight != 1.0:
+            warnings.append("rotation_weight ignored: the data are positions only")
+
+        base0, probe0, rms0 = self.initial_frames(data)
+        self._say("frames", 0, 1, f"initial BASE/PROBE: rms misfit {rms0 * 1e3:.3f} mm")
+        try:
+            model = ErrorModel.create(self.desc, cfg.family, gravity=cfg.gravity,
+                                      payload=cfg.payload, base=base0, probe=probe0,
+                                      payload_ref_kg=m_ref if cfg.payload else 0.0)
+        except ValueError as exc:
+            raise CalibrationError(str(exc)) from None
+        if cfg.gravity and not model.space.of_kind("gravity"):
+            raise CalibrationError(
+                f"model {cfg.number} ({cfg.name}) needs gravity deflection, but robot "
+                f"{self.desc.name!r} has neither a parallelogram nor link masses in its "
+                "description"
+            )
+        batch = model.batch(data.q, data.payload_kg)
+        problem = _Problem(model, data, batch, self.rotation_weight)
+
+        # ---- nominal frames fit (BASE and PROBE on the nominal robot), unless given
+        if self.base is None or self.probe is None:
+            s = model.structure
+            fl = s.desc.flange
+            frame_keys = [k for k in (
+                f"a{s.base_name}", f"b{s.base_name}", f"alpha{s.base_name}",
+                f"beta{s.base_name}", f"theta{s.base_name}", f"d{s.base_name}", f"theta{fl}",
+                f"d{fl}", f"a{fl}", f"alpha{fl}", f"theta{s.probe_name}", f"d{s.probe_name}")
+                if k in model.space]
+            jac = identification_jacobian(model, batch, frame_keys)
+            fa = analyse(_jacobian_rows(problem, jac.H).reshape(-1, len(frame_keys)), frame_keys)
+            fitted, _, _, _ = self._iterate(problem, model, list(fa.kept), "nominal", warnings,
+                                            loss="linear")
+            nominal = fold_frames(fitted)
+        else:
+            nominal = model
+        before = accuracy(data, nominal.predict_batch(batch))
+        if before.position.norm.mean > MISMATCH_M:
+            raise DivergenceError(
+                f"the measurements do not match robot {self.desc.name!r}: even with BASE and "
+                f"PROBE fitted the mean position error is {before.position.norm.mean * 1e3:.1f} "
+                f"mm (> {MISMATCH_M * 1e3:.0f} mm); {_HINT}"
+            )
+        self._say("frames", 1, 1,
+                  f"nominal: mean position error {before.position.norm.mean * 1e3:.3f} mm")
+
+        # ---- identifiability
+        mixed = len(payloads) > 1
+        structural = self._structural(nominal, data, mixed)
+        if self.parameters is not None:
+            unknown = [k for k in self.parameters if k not in model.space]
+            if unknown:
+                raise CalibrationError(
+                    f"unknown parameters {unknown}; known: {list(model.space.keys)}")
+            keys = list(self.parameters)
+        else:
+            keys = list(structural.kept)
+        jac = identification_jacobian(nominal, batch, keys)
+        Hd = _jacobian_rows(problem, jac.H).reshape(-1, len(keys))
+        on_data = analyse(Hd, keys, rank_tol=self.rank_tol,
+                          condition_limit=self.condition_limit)
+        for k in keys:
+            if k not in on_data.kept:
+                how = "removed by the condition-number rule (4.10)" if k in on_data.eliminated \
+                    else "these poses do not separate it from the others"
+                warnings.append(f"parameter {model.space[k].name} not identified: {how}")
+        keys = list(on_data.kept)
+        n_eq = len(data) * data.rows
+        if n_eq <= len(keys):
+            need = len(keys) // data.rows + 1
+            raise CalibrationError(
+                f"too few poses: model {cfg.number} ({cfg.name}) identifies {len(keys)} "
+                f"parameters, {len(data)} {'poses' if data.six_dof else 'positions'} give only "
+                f"{n_eq} equations; measure at least {need} (better {3 * need})"
+            )
+        if len(data) * data.rows < 3 * len(keys):
+            warnings.append(
+                f"few poses: {len(data)} for {len(keys)} parameters; the thesis used 90–150"
+            )
+
+        # ---- identification
+        final, history, converged, weights = self._iterate(
+            problem, nominal, keys, "identify", warnings, loss=self.loss
+        )
+        jac = identification_jacobian(final, batch, keys)
+        r = _residual_rows(problem, jac.poses) * np.sqrt(weights)[:, None]
+        H = _jacobian_rows(problem, jac.H) * np.sqrt(weights)[:, None, None]
+        stats = parameter_statistics(H.reshape(-1, len(keys)), r.reshape(-1))
+        after = accuracy(data, jac.poses)
+        if stats.condition_number > 100:
+            warnings.append(
+                f"ill-conditioned: κ = {stats.condition_number:.0f} > 100 (eq. 4.10); "
+                "spread the poses wider or use a smaller model"
+            )
+        e = np.linalg.norm(data.positions - jac.poses[:, :3, 3], axis=1)
+        med = float(np.median(e))
+        mad = float(np.median(np.abs(e - med))) * 1.4826
+        limit = max(med + 5.0 * mad, 3.0 * med, OUTLIER_FLOOR_M)
+        out = np.flatnonzero(e > limit)
+        if out.size:
+            listed = ", ".join(f"#{i + 1} ({e[i] * 1e3:.3f} mm)" for i in out[:8])
+            warnings.append(
+                f"{out.size} pose(s) with a large residual (> {limit * 1e3:.3f} mm: median + "
+                f"5·MAD, at least 3× the median) — outliers or unmodelled effects: {listed}"
+            )
+        if not converged and history and history[-1].step_norm > UNSETTLED_STEP:
+            raise DivergenceError(
+                f"the fit diverged: still moving after {self.max_iterations} iterations "
+                f"(‖Δg‖ = {history[-1].step_norm:.3g}, mean residual "
+                f"{history[-1].mean_position_mm:.3f} mm); {_HINT}, or try --method lm"
+            )
+        if not converged:
+            warnings.append(
+                f"not converged in {self.max_iterations} iterations (‖Δg‖ ≥ {self.tol:g})")
+        result = CalibrationResult(
+            config=self.config,
+            robot=self.desc.name,
+            model=final,
+            nominal=nominal,
+            keys=tuple(keys),
+            identifiability=structural,
+            data_identifiability=on_data,
+            iterations=len(history),
+            converged=converged,
+            history=tuple(history),
+            statistics=stats,
+            calibration=after,
+            calibration_before=before,
+            six_dof=data.six_dof,
+            n_poses=len(data),
+            pose_weights=weights,
+            warnings=tuple(warnings),
+            elapsed_s=time.perf_counter() - t0,
+            settings={"method": self.method, "loss": self.loss, "tol": self.tol,
+                      "rotation_weight": self.rotation_weight,
+                      "condition_limit": self.condition_limit,
+                      "max_iterations": self.max_iterations},
+        )
+        if validation is not None:
+            result = result.with_validation(self._coerce(validation))
+        return result
+
+    def _structural(self, model: ErrorModel, data: CalibrationData, mixed: bool) -> Identifiability:
+        pos_only = not data.six_dof
+        if not mixed:
+            return structural_identifiability(model, position_only=pos_only)
+        # payloads that vary separate payload constants from gravity ones (A2 vs G1)
+        from plugcell.calibration.identifiability import random_configurations
+
+        keys = model.space.by_priority()
+        q = random_configurations(model, 60, 0)
+        m = np.resize(np.unique(data.payload_kg), len(q))
+        jac = identification_jacobian(model, model.batch(q, m), keys)
+        H = jac.H[:, :3] if pos_only else jac.H
+        return analyse(H.reshape(-1, len(keys)), keys)
+
+    def _iterate(
+        self, p: _Problem, model: ErrorModel, keys: list[str], stage: str, warnings: list[str],
+        *, loss: str,
+    ) -> tuple[ErrorModel, list[IterationRecord], bool, Array]:
+        """Gauss–Newton / LM iterations on ``keys`` (Fig. 6-9)."""
+        weights = np.ones(len(p.data))
+        history: list[IterationRecord] = []
+        if not keys:
+            return model, history, True, weights
+        lam = 1e-3
+        best_cost = None
+        converged = False
+        jac = self._jac(model, p, keys)
+        for it in range(1, self.max_iterations + 1):
+            r = _residual_rows(p, jac.poses)
+            weights = _robust_weights(r, loss, self.loss_scale)
+            sw = np.sqrt(weights)
+            rw = (r * sw[:, None]).reshape(-1)
+            Hw = (_jacobian_rows(p, jac.H) * sw[:, None, None]).reshape(-1, len(keys))
+            cost = float(rw @ rw)
+            if not np.isfinite(cost):
+                raise DivergenceError(f"{stage}: the residuals became NaN/inf at iteration {it}")
+            if best_cost is None:
+                best_cost = cost
+            elif cost > 1e4 * best_cost + 1e-18:
+                raise DivergenceError(
+                    f"{stage}: the fit diverged (cost grew from {best_cost:.3g} to {cost:.3g}); "
+                    f"{_HINT}"
+                )
+            best_cost = min(best_cost, cost)
+            scale = np.linalg.norm(Hw, axis=0)
+            scale = np.where(scale > 0, scale, 1.0)
+            Hs = Hw / scale
+            if self.method == "gauss-newton":
+                step = least_squares(Hs, rw) / scale
+                # full Gauss-Newton step (Fig. 6-9); halved while it increases the cost
+                for _ in range(BACKTRACK_STEPS):
+                    new = model.updated(keys=keys, step=step)
+                    try:
+                        jac_new = self._jac(new, p, keys)
+                        rn = (_residual_rows(p, jac_new.poses) * sw[:, None]).reshape(-1)
+                        if float(rn @ rn) <= cost * (1.0 + 1e-9) + 1e-30:
+                            break
+                    except DivergenceError:
+                        pass
+                    step = 0.5 * step
+                else:
+                    new = model.updated(keys=keys, step=step)
+                    jac_new = self._jac(new, p, keys)
+            else:
+                A = Hs.T @ Hs
+                g = Hs.T @ rw
+                for _ in range(30):
+                    step = np.linalg.solve(A + lam * np.diag(np.diag(A) + 1e-12), g) / scale
+                    new = model.updated(keys=keys, step=step)
+                    try:
+                        jac_new = self._jac(new, p, keys)
+                        rn = (_residual_rows(p, jac_new.poses) * sw[:, None]).reshape(-1)
+                        ok = float(rn @ rn) <= cost
+                    except DivergenceError:
+                        ok = False
+                    if ok:
+                        lam = max(lam / 10.0, 1e-12)
+                        break
+                    lam *= 10.0
+                else:
+                    raise DivergenceError(f"{stage}: Levenberg–Marquardt found no descent step")
+            step_norm = float(np.linalg.norm(step))
+            pos = np.linalg.norm(r[:, :3], axis=1)
+            history.append(IterationRecord(it, step_norm, cost, float(pos.mean() * 1e3),
+                                           float(np.sqrt(np.mean(pos**2)) * 1e3),
+                                           lam if self.method == "lm" else 0.0))
+            self._say(stage, it, self.max_iterations,
+                      f"iteration {it}: mean position residual {pos.mean() * 1e3:.4f} mm, "
+                      f"|Δg| = {step_norm:.3g}")
+            model, jac = new, jac_new
+            if step_norm < self.tol:
+                converged = True
+                break
+        return model, history, converged, weights
+
+    @staticmethod
+    def _jac(model: ErrorModel, p: _Problem, keys: Sequence[str]):
+        try:
+            jac = identification_jacobian(model, p.batch, keys)
+        except KinematicsError as exc:
+            raise DivergenceError(f"the fit diverged: {exc}; {_HINT}") from None
+        if not np.all(np.isfinite(jac.H)) or not np.all(np.isfinite(jac.poses)):
+            raise DivergenceError(f"the fit diverged: non-finite Jacobian; {_HINT}")
+        return jac
+
+
+def refit_base(model: ErrorModel, data: CalibrationData, *, probe: bool = False) -> ErrorModel:
+    """``model`` with its BASE (and, with ``probe=True``, its PROBE) re-identified on ``data``,
+    the robot's geometry and compliance kept: for poses measured after the tracker
+    (or the target) moved — the situation of appendix D's closing note.
+
+    Starts from a rigid registration of the model's predicted target points onto the
+    measured ones, then Gauss–Newton on a0, b0, α0, β0, θ0, d0 (and the PROBE frame).
+    """
+    m = fold_frames(model)
+    robot = np.linalg.inv(m.base()) @ m.predict(data.q, data.payload_kg)
+    fit = fit_rigid_transform(robot[:, :3, 3], data.positions)
+    m = m.with_references(base=fit.transform)
+    s = m.structure
+    keys = [f"{f}{s.base_name}" for f in ("a", "b", "alpha", "beta", "theta", "d")]
+    if probe:
+        fl = s.desc.flange
+        keys += [f"theta{fl}", f"d{fl}", f"a{fl}", f"alpha{fl}", f"theta{s.probe_name}",
+                 f"d{s.probe_name}"]
+    keys = [k for k in keys if k in m.space]
+    cal = Calibrator(s.source, 1)
+    problem = _Problem(m, data, m.batch(data.q, data.payload_kg), 1.0)
+    jac = identification_jacobian(m, problem.batch, keys)
+    fa = analyse(_jacobian_rows(problem, jac.H).reshape(-1, len(keys)), keys)
+    fitted, _, _, _ = cal._iterate(problem, m, list(fa.kept), "base", [], loss="linear")
+    return fitted

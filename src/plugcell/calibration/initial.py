@@ -1,0 +1,179 @@
+"""Initial BASE and PROBE from the measurements themselves (no appendix-D procedure needed).
+
+The tracker measures ``T_i = BASE · F_i · PROBE`` (eq. 6.23) with ``F_i`` the flange
+pose the nominal model gives for the joint readings of pose *i*.  Before the
+identification can linearise, BASE and PROBE must be known roughly — with the
+tracker anywhere in the cell and the target mounted at any angle:
+
+* **6-DOF data: closed-form AX = YB.**  With ``A_ij = F_i⁻¹F_j`` and
+  ``B_ij = T_i⁻¹T_j`` the PROBE ``X`` solves the hand-eye equation ``A X = X B``:
+  the rotation axes satisfy ``log R_A = R_X log R_B``, so ``R_X`` is the
+  orthogonal Procrustes (Kabsch) fit of the rotation vectors (Park & Martin 1994),
+  and ``(R_A − I) t_X = R_X t_B − t_A`` gives ``t_X`` by linear least squares.
+  Then ``BASE = T_i X⁻¹ F_i⁻¹``, averaged over the poses (rotation projected
+  back onto SO(3)).
+* **6-DOF, robust variant**: the rigid registration below for BASE and the target
+  offset, then ``R_X`` as the rotation average of ``(R_BASE R_F,i)ᵀ R_i`` — it needs
+  no rotation between poses, so it also serves poses that all share one
+  orientation (e.g. ISO 9283 cubes), where AX = YB is degenerate.
+  :func:`estimate_base_probe_poses` tries both and keeps the better.
+* **Positions only: rigid registration.**  The unknowns are ``R_Y, t_Y`` (BASE) and
+  the target offset ``t_X`` in the flange frame: alternate a Kabsch registration
+  of the predicted target points onto the measured ones
+  (:func:`plugcell.metrology.fit_rigid_transform`)
+  with the linear least-squares solution for ``t_X, t_Y`` given ``R_Y``.  The
+  target's orientation is not observed; PROBE's rotation is set to identity.
+
+Both are vectorised over poses and exact for noise-free data of a nominal robot.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from plugcell.kinematics.transforms import invert, so3_log
+from plugcell.metrology import fit_rigid_transform
+
+Array = NDArray[np.float64]
+
+__all__ = [
+    "FrameEstimate",
+    "estimate_base_probe",
+    "estimate_base_probe_poses",
+    "estimate_base_probe_positions",
+]
+
+
+class InitialEstimateError(ValueError):
+    """The data do not determine BASE and PROBE (too few or degenerate poses)."""
+
+
+@dataclass(frozen=True)
+class FrameEstimate:
+    """Initial BASE and PROBE (4×4) and the rms position misfit (m) they leave."""
+
+    base: Array
+    probe: Array
+    rms: float
+
+
+def _project_rotation(M: Array) -> Array:
+    U, _, Vt = np.linalg.svd(M)
+    D = np.diag([1.0, 1.0, np.sign(np.linalg.det(U @ Vt)) or 1.0])
+    return U @ D @ Vt
+
+
+def _pairs(n: int) -> tuple[Array, Array]:
+    i = np.arange(n)
+    a = np.concatenate([i, i])
+    b = np.concatenate([(i + 1) % n, (i + n // 2) % n])
+    keep = a != b
+    return a[keep], b[keep]
+
+
+def estimate_base_probe(flange: ArrayLike, measured: ArrayLike) -> FrameEstimate:
+    """AX = YB from 6-DOF data: ``flange`` ``(N, 4, 4)`` nominal flange poses in the robot
+    base frame, ``measured`` ``(N, 4, 4)`` target poses in the tracker frame, N ≥ 3."""
+    F = np.asarray(flange, dtype=float)
+    T = np.asarray(measured, dtype=float)
+    if F.shape != T.shape or F.ndim != 3 or F.shape[1:] != (4, 4):
+        raise InitialEstimateError(f"flange {F.shape} and measured {T.shape} must be (N, 4, 4)")
+    N = len(F)
+    if N < 3:
+        raise InitialEstimateError(f"need at least 3 poses to estimate BASE and PROBE, got {N}")
+    i, j = _pairs(N)
+    A = invert(F[i]) @ F[j]
+    B = invert(T[i]) @ T[j]
+    alpha = so3_log(A[:, :3, :3])
+    beta = so3_log(B[:, :3, :3])
+    w = np.linalg.norm(alpha, axis=1)
+    ok = w > 1e-3
+    if np.count_nonzero(ok) < 2:
+        raise InitialEstimateError("the poses hardly rotate the flange: PROBE is undetermined")
+    # Kabsch: alpha ≈ R_X beta
+    Hm = beta[ok].T @ alpha[ok]
+    U, _, Vt = np.linalg.svd(Hm)
+    D = np.diag([1.0, 1.0, np.sign(np.linalg.det(Vt.T @ U.T)) or 1.0])
+    RX = Vt.T @ D @ U.T
+    # (R_A − I) t_X = R_X t_B − t_A
+    lhs = (A[:, :3, :3] - np.eye(3)).reshape(-1, 3)
+    rhs = (B[:, :3, 3] @ RX.T - A[:, :3, 3]).reshape(-1)
+    tX, *_ = np.linalg.lstsq(lhs, rhs, rcond=None)
+    X = np.eye(4)
+    X[:3, :3], X[:3, 3] = RX, tX
+    Y = T @ invert(X) @ invert(F)
+    RY = _project_rotation(Y[:, :3, :3].sum(axis=0))
+    tY = Y[:, :3, 3].mean(axis=0)
+    base = np.eye(4)
+    base[:3, :3], base[:3, 3] = RY, tY
+    pred = base @ F @ X
+    rms = float(np.sqrt(np.mean(np.sum((pred[:, :3, 3] - T[:, :3, 3]) ** 2, axis=1))))
+    return FrameEstimate(base=base, probe=X, rms=rms)
+
+
+def estimate_base_probe_positions(
+    flange: ArrayLike, positions: ArrayLike, *, probe_offset: ArrayLike | None = None,
+    iterations: int = 20,
+) -> FrameEstimate:
+    """Rigid registration from target positions: ``flange`` ``(N, 4, 4)`` nominal flange
+    poses, ``positions`` ``(N, 3)`` measured target positions, N ≥ 4 (not coplanar
+    with a single orientation).  ``probe_offset``: starting target offset in the
+    flange frame (default 0)."""
+    F = np.asarray(flange, dtype=float)
+    P = np.asarray(positions, dtype=float)
+    N = len(F)
+    if F.shape != (N, 4, 4) or P.shape != (N, 3):
+        raise InitialEstimateError(
+            f"flange {F.shape} must be (N, 4, 4), positions {P.shape} (N, 3)")
+    if N < 4:
+        raise InitialEstimateError(
+            f"need at least 4 poses to estimate BASE and the target, got {N}")
+    tX = np.zeros(3) if probe_offset is None else np.asarray(probe_offset, dtype=float)
+    RF, pF = F[:, :3, :3], F[:, :3, 3]
+    for _ in range(iterations):
+        pts = pF + RF @ tX
+        fit = fit_rigid_transform(pts, P)
+        RY = fit.rotation
+        # P_i − R_Y p_F = R_Y R_F t_X + t_Y : linear in (t_X, t_Y)
+        M = np.concatenate([RY @ RF, np.broadcast_to(np.eye(3), (N, 3, 3))], axis=2)
+        rhs = P - pF @ RY.T
+        sol, *_ = np.linalg.lstsq(M.reshape(-1, 6), rhs.reshape(-1), rcond=None)
+        step = np.linalg.norm(sol[:3] - tX)
+        tX = sol[:3]
+        tY = sol[3:]
+        if step < 1e-12:
+            break
+    base = np.eye(4)
+    base[:3, :3], base[:3, 3] = RY, tY
+    X = np.eye(4)
+    X[:3, 3] = tX
+    pred = (base @ F @ X)[:, :3, 3]
+    rms = float(np.sqrt(np.mean(np.sum((pred - P) ** 2, axis=1))))
+    return FrameEstimate(base=base, probe=X, rms=rms)
+
+
+def _rms(base: Array, F: Array, X: Array, P: Array) -> float:
+    pred = (base @ F @ X)[:, :3, 3]
+    return float(np.sqrt(np.mean(np.sum((pred - P) ** 2, axis=1))))
+
+
+def estimate_base_probe_poses(flange: ArrayLike, measured: ArrayLike) -> FrameEstimate:
+    """6-DOF initial BASE/PROBE: AX = YB and the registration variant (module docstring),
+    whichever leaves the smaller position misfit."""
+    F = np.asarray(flange, dtype=float)
+    T = np.asarray(measured, dtype=float)
+    candidates = []
+    try:
+        candidates.append(estimate_base_probe(F, T))
+    except InitialEstimateError:
+        pass
+    reg = estimate_base_probe_positions(F, T[:, :3, 3])
+    RX = _project_rotation(np.sum(
+        np.swapaxes(reg.base[:3, :3] @ F[:, :3, :3], -1, -2) @ T[:, :3, :3], axis=0))
+    X = reg.probe.copy()
+    X[:3, :3] = RX
+    candidates.append(FrameEstimate(base=reg.base, probe=X, rms=_rms(reg.base, F, X, T[:, :3, 3])))
+    return min(candidates, key=lambda e: e.rms)

@@ -1,0 +1,276 @@
+"""The error model: predicts the measured target pose from joint readings (eq. 6.23).
+
+An :class:`ErrorModel` is immutable (the *model* side, as in Pinocchio): a
+kinematic structure (:mod:`.structure`), the space of candidate error parameters
+and their current values Δg, the reference BASE and PROBE the BASE/PROBE errors
+are relative to, and the payload mass the payload constants refer to.  For joint
+readings ``q`` and payloads ``m`` it predicts::
+
+    T(q, m) = BASE · T_n^0(q + Δq(q, m)) · PROBE                      (6.23, 4.16)
+
+    BASE   = BASE_ref · Tx(a0) Ty(b0) Rx(α0) Ry(β0) Rz(θ0) Tz(d0)      (6.24)
+    PROBE  = Rx(−90°) · Rz(θ7) Tz(d7) Tx(a7) Rx(90° + α7) · PROBE_ref  (frame 7, 6.2.2)
+    Δq     = R(q, m) · c                                              (6.31, 6.40)
+
+``T_n^0`` is the flange of the structure's chain with the nominal geometry plus
+the link errors, the passive angles from the *exact* four-bar closure.  A
+:class:`PoseBatch` (the *data* side) holds a set of readings with their
+compliance regressors, computed once and reused by every iteration of an
+identification.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from plugcell.calibration.compliance import (
+    compliance_regressors,
+    gravity_parameters,
+    payload_parameters,
+)
+from plugcell.calibration.parameters import ParameterSpace
+from plugcell.calibration.structure import KinematicStructure, kinematic_structure
+from plugcell.kinematics import GeometricParameters, RobotDescription, forward
+from plugcell.kinematics.transforms import dh_hayati, rot_x, rot_y, rot_z, translation
+
+Array = NDArray[np.float64]
+
+__all__ = ["ErrorModel", "PoseBatch", "base_transform", "fold_frames", "probe_transform"]
+
+_HALF_PI = 0.5 * math.pi
+
+
+def base_transform(base_ref: Array, a0: float, b0: float, alpha0: float, beta0: float,
+                   theta0: float, d0: float) -> Array:
+    """``BASE_ref · Tx(a0) Ty(b0) Rx(α0) Ry(β0) Rz(θ0) Tz(d0)`` (eq. 6.24 after BASE_ref)."""
+    return (
+        base_ref
+        @ translation([a0, b0, 0.0])
+        @ rot_x(alpha0)
+        @ rot_y(beta0)
+        @ rot_z(theta0)
+        @ translation([0.0, 0.0, d0])
+    )
+
+
+def probe_transform(probe_ref: Array, theta7: float, d7: float, a7: float, alpha7: float) -> Array:
+    """``Rx(−90°) · Rz(θ7) Tz(d7) Tx(a7) Rx(90° + α7) · PROBE_ref`` (virtual frame 7, 6.2.2)."""
+    return rot_x(-_HALF_PI) @ dh_hayati(theta7, d7, a7, _HALF_PI + alpha7) @ probe_ref
+
+
+@dataclass(frozen=True, eq=False)
+class PoseBatch:
+    """Joint readings ``q`` ``(N, n)``, payloads ``(N,)`` and the compliance regressors
+    ``(N, n, n_c)`` of a model (columns in the order of ``ErrorModel.compliance_keys``)."""
+
+    q: Array
+    payload_kg: Array
+    regressors: Array
+
+    def __len__(self) -> int:
+        return int(self.q.shape[0])
+
+
+@dataclass(frozen=True, eq=False)
+class ErrorModel:
+    """Immutable error model (module docstring).  Build one with :meth:`create`."""
+
+    structure: KinematicStructure
+    space: ParameterSpace
+    values: Array
+    base_ref: Array
+    probe_ref: Array
+    payload_ref_kg: float = 0.0
+
+    def __post_init__(self) -> None:
+        v = np.array(self.values, dtype=float)
+        if v.shape != (len(self.space),):
+            raise ValueError(f"values: expected shape ({len(self.space)},), got {v.shape}")
+        v.setflags(write=False)
+        object.__setattr__(self, "values", v)
+        for key in ("base_ref", "probe_ref"):
+            T = np.array(getattr(self, key), dtype=float)
+            if T.shape != (4, 4):
+                raise ValueError(f"{key}: expected a 4x4 transform, got shape {T.shape}")
+            T.setflags(write=False)
+            object.__setattr__(self, key, T)
+        object.__setattr__(self, "_nominal", self.structure.nominal_parameters())
+        object.__setattr__(self, "_reference", self.structure.source.nominal_parameters())
+        object.__setattr__(
+            self, "_compliance", self.space.of_kind("gravity", "payload")
+        )
+
+    # ------------------------------------------------------------------ construction
+    @classmethod
+    def create(
+        cls,
+        desc: RobotDescription,
+        family: str = "loop",
+        *,
+        gravity: bool = False,
+        payload: bool = False,
+        base: ArrayLike | None = None,
+        probe: ArrayLike | None = None,
+        payload_ref_kg: float = 0.0,
+    ) -> ErrorModel:
+        """All candidate parameters of ``family`` (+ gravity, + payload), values zero.
+
+        ``base``/``probe``: the reference BASE (robot base in the measurement frame)
+        and PROBE (target in the flange frame); default: the description's
+        ``base`` and ``tool``.
+        """
+        structure = kinematic_structure(desc, family)
+        params = list(structure.candidates())
+        if gravity:
+            params += gravity_parameters(desc)
+        if payload:
+            params += payload_parameters(desc)
+        space = ParameterSpace(tuple(params))
+        return cls(
+            structure=structure,
+            space=space,
+            values=np.zeros(len(space)),
+            base_ref=np.asarray(desc.base if base is None else base, dtype=float),
+            probe_ref=np.asarray(desc.tool if probe is None else probe, dtype=float),
+            payload_ref_kg=float(payload_ref_kg),
+        )
+
+    # ------------------------------------------------------------------ values
+    def value(self, key: str) -> float:
+        return float(self.values[self.space.index(key)])
+
+    def as_dict(self) -> dict[str, float]:
+        return {k: float(v) for k, v in zip(self.space.keys, self.values, strict=True)}
+
+    def with_values(self, values: ArrayLike) -> ErrorModel:
+        return ErrorModel(self.structure, self.space, np.asarray(values, float), self.base_ref,
+                          self.probe_ref, self.payload_ref_kg)
+
+    def updated(self, delta: Mapping[str, float] | None = None, *,
+                keys: Sequence[str] | None = None, step: ArrayLike | None = None) -> ErrorModel:
+        """A copy with increments added: ``updated({"a2'": 1e-3})`` or ``updated(keys=, step=)``."""
+        v = np.array(self.values)
+        if delta:
+            for k, x in delta.items():
+                v[self.space.index(k)] += float(x)
+        if keys is not None:
+            v[self.space.indices(keys)] += np.asarray(step, dtype=float)
+        return self.with_values(v)
+
+    def with_references(self, base: ArrayLike | None = None, probe: ArrayLike | None = None,
+                        payload_ref_kg: float | None = None) -> ErrorModel:
+        return ErrorModel(
+            self.structure, self.space, self.values,
+            self.base_ref if base is None else np.asarray(base, float),
+            self.probe_ref if probe is None else np.asarray(probe, float),
+            self.payload_ref_kg if payload_ref_kg is None else float(payload_ref_kg),
+        )
+
+    @property
+    def compliance_keys(self) -> tuple[str, ...]:
+        return self._compliance  # type: ignore[attr-defined,no-any-return]
+
+    @property
+    def nominal(self) -> GeometricParameters:
+        """Nominal geometry of the structure's chain."""
+        return self._nominal  # type: ignore[attr-defined,no-any-return]
+
+    # ------------------------------------------------------------------ parts
+    def geometric_parameters(self) -> GeometricParameters:
+        """Nominal geometry of the chain plus the link errors."""
+        delta = {
+            (p.link, p.field): float(v)
+            for p, v in zip(self.space, self.values, strict=True)
+            if p.kind == "link" and v != 0.0
+        }
+        return self.nominal.perturbed(delta) if delta else self.nominal
+
+    def _get(self, kind: str, field: str) -> float:
+        s = self.structure
+        name = s.base_name if kind == "base" else s.probe_name
+        key = f"{field}{name}"
+        return self.value(key) if key in self.space else 0.0
+
+    def base_parameters(self) -> tuple[float, float, float, float, float, float]:
+        """(a0, b0, α0, β0, θ0, d0) relative to ``base_ref``."""
+        g = self._get
+        return (g("base", "a"), g("base", "b"), g("base", "alpha"), g("base", "beta"),
+                g("base", "theta"), g("base", "d"))
+
+    def probe_parameters(self) -> tuple[float, float, float, float]:
+        """(θ7, d7, a7, α7) of the virtual PROBE frame."""
+        g = self._get
+        return (g("probe", "theta"), g("probe", "d"), g("probe", "a"), g("probe", "alpha"))
+
+    def base(self) -> Array:
+        """BASE: the robot base frame in the measurement frame (eq. 6.24)."""
+        return base_transform(self.base_ref, *self.base_parameters())
+
+    def probe(self) -> Array:
+        """PROBE: the target in the flange frame of the identified chain (6.2.2)."""
+        return probe_transform(self.probe_ref, *self.probe_parameters())
+
+    # ------------------------------------------------------------------ prediction
+    def batch(self, q: ArrayLike, payload_kg: ArrayLike | float | None = None) -> PoseBatch:
+        """Readings ``(N, n)`` (radians) with their compliance regressors."""
+        q = np.atleast_2d(np.asarray(q, dtype=float))
+        n = self.structure.n_readings
+        if q.ndim != 2 or q.shape[1] != n:
+            raise ValueError(f"q: expected shape (N, {n}), got {q.shape}")
+        m = np.zeros(len(q)) if payload_kg is None else np.broadcast_to(
+            np.asarray(payload_kg, dtype=float), (len(q),)).copy()
+        params = [self.space[k] for k in self.compliance_keys]
+        R = compliance_regressors(self.structure.source, self._reference, params, q, m,  # type: ignore[attr-defined]
+                                  self.payload_ref_kg)
+        return PoseBatch(q=q, payload_kg=m, regressors=R)
+
+    def deflections(self, batch: PoseBatch) -> Array:
+        """Joint deflections Δq ``(N, n)`` (eq. 4.16)."""
+        if not self.compliance_keys:
+            return np.zeros_like(batch.q)
+        c = self.values[self.space.indices(self.compliance_keys)]
+        return batch.regressors @ c
+
+    def chain_joints(self, batch: PoseBatch) -> Array:
+        """Joint values of the structure's chain: ``reading_map · (q + Δq)``."""
+        return self.structure.joints(batch.q + self.deflections(batch))
+
+    def predict_batch(self, batch: PoseBatch) -> Array:
+        """Predicted target poses ``(N, 4, 4)`` in the measurement frame."""
+        fk = forward(self.structure.desc, self.geometric_parameters(), self.chain_joints(batch),
+                     closure="fourbar")
+        return self.base() @ fk.flange @ self.probe()
+
+    def predict(self, q: ArrayLike, payload_kg: ArrayLike | float | None = None) -> Array:
+        """Predicted target poses ``(N, 4, 4)`` for readings ``q`` (eq. 6.23)."""
+        return self.predict_batch(self.batch(q, payload_kg))
+
+
+def fold_frames(model: ErrorModel) -> ErrorModel:
+    """The same BASE·T·PROBE with every BASE, PROBE-frame and flange-link error folded
+    into the references and set to zero (values of other parameters kept).
+
+    The flange link's θ, d, a, α act after the last joint, so for any joint value
+    ``DH(q + θ, d, a, α) = DH_nominal(q) · [DH_nominal(0)⁻¹ · DH(θ, d, a, α)]`` — a
+    constant that belongs to the PROBE.  Used after the nominal frames fit: the
+    identification then starts from the nominal geometry with fitted BASE/PROBE.
+    """
+    s = model.structure
+    desc = s.desc
+    fl = desc.flange
+    nom = model.nominal
+    i = desc.index(fl)
+    g = model.geometric_parameters()
+    A = dh_hayati(nom.theta[i], nom.d[i], nom.a[i], nom.alpha[i], nom.beta[i])
+    B = dh_hayati(g.theta[i], g.d[i], g.a[i], g.alpha[i], g.beta[i])
+    probe = np.linalg.solve(A, B) @ model.probe()
+    v = np.array(model.values)
+    for j, p in enumerate(model.space):
+        if p.kind in ("base", "probe") or (p.kind == "link" and p.link == fl):
+            v[j] = 0.0
+    return ErrorModel(s, model.space, v, model.base(), probe, model.payload_ref_kg)

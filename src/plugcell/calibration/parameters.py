@@ -1,0 +1,170 @@
+"""Named error parameters: what a calibration model can identify, with units.
+
+An :class:`ErrorParameter` is one scalar unknown of the error model (thesis
+eq. 6.11): a geometric error of a link (Δθ, Δd, Δa, Δα, Δβ of eq. B.10), of the
+BASE (Δa0, Δb0, Δα0, Δβ0, Δθ0, Δd0 of eq. 6.24), of the PROBE through the
+virtual frame 7 (Δθ7, Δd7, Δa7, Δα7 of 6.2.2), a gravity-deflection constant
+(G1–G3 of eq. 6.31) or a payload-compliance constant (A, B, C, D of eq. 6.40).
+
+Every parameter has
+
+* ``key`` — an ASCII name used in files and on the command line:
+  ``theta2'``, ``a0``, ``d7``, ``G1``, ``A4``, ``B2'``;
+* ``name`` — the thesis's symbol: ``Δθ2'``, ``Δa0``, ``G1``, ``A4``;
+* ``unit`` — SI: ``m``, ``rad``, ``rad/m`` (A_i) or ``rad/(N·m)`` (joint compliance);
+* ``priority`` — the order in which the identifiability analysis prefers to
+  keep parameters when several explain the same pose error (see
+  :mod:`plugcell.calibration.identifiability`).
+
+A :class:`ParameterSpace` is an immutable, ordered collection of them.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterable, Iterator, Sequence
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import NDArray
+
+Array = NDArray[np.float64]
+
+#: Kinds of error parameters.
+KINDS: tuple[str, ...] = ("base", "link", "probe", "gravity", "payload")
+
+#: Greek symbols of the geometric fields (thesis notation).
+SYMBOLS: dict[str, str] = {
+    "theta": "θ",
+    "d": "d",
+    "a": "a",
+    "b": "b",
+    "alpha": "α",
+    "beta": "β",
+}
+
+#: SI unit of each geometric field.
+FIELD_UNITS: dict[str, str] = {
+    "theta": "rad",
+    "d": "m",
+    "a": "m",
+    "b": "m",
+    "alpha": "rad",
+    "beta": "rad",
+}
+
+__all__ = ["FIELD_UNITS", "KINDS", "SYMBOLS", "ErrorParameter", "ParameterSpace"]
+
+
+@dataclass(frozen=True)
+class ErrorParameter:
+    """One identifiable-candidate unknown of the error model (see module docstring).
+
+    ``link`` and ``field`` locate geometric parameters (``link`` is the BASE's
+    or the virtual PROBE frame's name for those kinds); ``joint`` is the actuated
+    joint whose deflection a compliance parameter scales (``None`` otherwise).
+    """
+
+    key: str
+    name: str
+    kind: str
+    unit: str
+    link: str | None = None
+    field: str | None = None
+    joint: str | None = None
+    priority: tuple[int, int, int] = (0, 0, 0)
+
+    def __post_init__(self) -> None:
+        if self.kind not in KINDS:
+            raise ValueError(f"ErrorParameter.kind must be one of {KINDS}, got {self.kind!r}")
+
+    @property
+    def is_geometric(self) -> bool:
+        return self.kind in ("base", "link", "probe")
+
+    @property
+    def is_angle(self) -> bool:
+        return self.unit == "rad"
+
+    @property
+    def is_length(self) -> bool:
+        return self.unit == "m"
+
+
+def geometric_parameter(
+    kind: str, link: str, field: str, priority: tuple[int, int, int]
+) -> ErrorParameter:
+    """A geometric error parameter ``Δ<field><link>`` (e.g. ``Δa2'``, key ``a2'``)."""
+    return ErrorParameter(
+        key=f"{field}{link}",
+        name=f"Δ{SYMBOLS[field]}{link}",
+        kind=kind,
+        unit=FIELD_UNITS[field],
+        link=link,
+        field=field,
+        priority=priority,
+    )
+
+
+@dataclass(frozen=True, eq=False)
+class ParameterSpace:
+    """An ordered, immutable collection of :class:`ErrorParameter` with unique keys."""
+
+    parameters: tuple[ErrorParameter, ...]
+
+    def __post_init__(self) -> None:
+        params = tuple(self.parameters)
+        object.__setattr__(self, "parameters", params)
+        keys = [p.key for p in params]
+        if len(set(keys)) != len(keys):
+            dup = sorted({k for k in keys if keys.count(k) > 1})
+            raise ValueError(f"ParameterSpace: duplicate parameter keys {dup}")
+        object.__setattr__(self, "_index", {k: i for i, k in enumerate(keys)})
+
+    # ------------------------------------------------------------------ access
+    def __len__(self) -> int:
+        return len(self.parameters)
+
+    def __iter__(self) -> Iterator[ErrorParameter]:
+        return iter(self.parameters)
+
+    def __getitem__(self, key: str | int) -> ErrorParameter:
+        if isinstance(key, int):
+            return self.parameters[key]
+        return self.parameters[self.index(key)]
+
+    def __contains__(self, key: object) -> bool:
+        return key in self._index  # type: ignore[attr-defined]
+
+    @property
+    def keys(self) -> tuple[str, ...]:
+        return tuple(p.key for p in self.parameters)
+
+    @property
+    def names(self) -> tuple[str, ...]:
+        return tuple(p.name for p in self.parameters)
+
+    def index(self, key: str) -> int:
+        """Position of parameter ``key``; ``KeyError`` lists the known keys."""
+        try:
+            return self._index[key]  # type: ignore[attr-defined,no-any-return]
+        except KeyError:
+            raise KeyError(f"unknown error parameter {key!r}; known: {list(self.keys)}") from None
+
+    def indices(self, keys: Iterable[str]) -> NDArray[np.intp]:
+        return np.array([self.index(k) for k in keys], dtype=np.intp)
+
+    def of_kind(self, *kinds: str) -> tuple[str, ...]:
+        """Keys of the parameters of the given kinds, in space order."""
+        return tuple(p.key for p in self.parameters if p.kind in kinds)
+
+    def subset(self, keys: Sequence[str]) -> ParameterSpace:
+        """The parameters ``keys`` (in that order)."""
+        return ParameterSpace(tuple(self[k] for k in keys))
+
+    def by_priority(self) -> tuple[str, ...]:
+        """Keys sorted by :attr:`ErrorParameter.priority` (stable)."""
+        order = sorted(range(len(self)), key=lambda i: self.parameters[i].priority)
+        return tuple(self.parameters[i].key for i in order)
+
+    def zeros(self) -> Array:
+        return np.zeros(len(self))

@@ -1,0 +1,246 @@
+"""A self-contained, offline HTML report of a calibration (thesis Fig. 8-8 and more).
+
+:func:`render_report` returns one HTML string: plots are PNGs embedded as base64
+(matplotlib's Agg backend, imported lazily — without matplotlib the report has
+the tables only), no scripts, no CDN.  It shows:
+
+* the accuracy before/after on the calibration and validation poses (8.1–8.2);
+* per-component error histograms before and after calibration (Fig. 8-8);
+* the identified parameters with σ (8.5), units and what each stands for;
+* the residual of every pose; a 3-D view of the poses coloured by their error;
+* the convergence history; the warnings (ill-conditioning, outliers, few poses).
+
+Writing the file is the caller's business (``plugcell calibrate --report``).
+"""
+
+from __future__ import annotations
+
+import base64
+import html
+import io
+import math
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from plugcell.calibration.data import CalibrationData
+from plugcell.calibration.result import CalibrationResult
+from plugcell.metrology import pose_errors
+
+Array = NDArray[np.float64]
+
+__all__ = ["display_value", "render_report"]
+
+_CSS = """
+body{font-family:system-ui,-apple-system,Segoe UI,Helvetica,Arial,sans-serif;margin:2em;
+color:#222;max-width:1100px}
+h1{font-size:1.5em}h2{font-size:1.2em;margin-top:2em;border-bottom:1px solid #ccc}
+table{border-collapse:collapse;margin:.5em 0;font-size:.9em}
+td,th{border:1px solid #ccc;padding:.25em .6em;text-align:right}
+th{background:#f3f3f3}td.l,th.l{text-align:left}
+.warn{background:#fff4e0;border-left:4px solid #e69500;padding:.4em .8em;margin:.3em 0}
+.ok{background:#eaf7ea;border-left:4px solid #3a3;padding:.4em .8em}
+img{max-width:100%}.small{color:#666;font-size:.85em}
+"""
+
+
+def display_value(value: float, unit: str) -> tuple[float, str]:
+    """A parameter value in reading units: mm for lengths, degrees for angles."""
+    if unit == "m":
+        return value * 1e3, "mm"
+    if unit == "rad":
+        return math.degrees(value), "°"
+    return value, unit
+
+
+def _png(fig: Any) -> str:
+    buf = io.BytesIO()
+    fig.savefig(buf, format="png", dpi=90)
+    import matplotlib.pyplot as plt
+
+    plt.close(fig)
+    return ('<img alt="plot" src="data:image/png;base64,'
+            + base64.b64encode(buf.getvalue()).decode("ascii") + '">')
+
+
+def _errors(data: CalibrationData, poses: Array) -> tuple[Array, Array | None]:
+    if data.six_dof:
+        dp, dphi = pose_errors(data.poses, poses, orientation="rotvec")
+        return dp * 1e3, np.degrees(dphi)
+    return (data.positions - poses[:, :3, 3]) * 1e3, None
+
+
+def _stats_rows(label: str, before: Any, after: Any) -> str:
+    def cells(st: Any) -> str:
+        if st is None:
+            return "<td></td>" * 5
+        p = st.position.norm
+        o = st.orientation.norm if st.orientation is not None else None
+        ori = "" if o is None else f"{math.degrees(o.mean):.4f}"
+        return (f"<td>{p.mean * 1e3:.3f}</td><td>{p.std * 1e3:.3f}</td>"
+                f"<td>{p.max * 1e3:.3f}</td><td>{p.rms * 1e3:.3f}</td><td>{ori}</td>")
+
+    return (f'<tr><td class="l">{label}, nominal</td>{cells(before)}</tr>'
+            f'<tr><td class="l">{label}, calibrated</td>{cells(after)}</tr>')
+
+
+def render_report(
+    result: CalibrationResult,
+    calibration: CalibrationData,
+    validation: CalibrationData | None = None,
+    *,
+    title: str | None = None,
+) -> str:
+    """The HTML report of ``result`` on its calibration (and validation) data."""
+    def esc(text: str) -> str:
+        return html.escape(text, quote=False)
+
+    cfg = result.config
+    title = title or f"Calibration of {result.robot} — model {cfg.number} ({cfg.name})"
+    st = result.statistics
+    parts: list[str] = [
+        "<!DOCTYPE html><html><head><meta charset='utf-8'>",
+        f"<title>{esc(title)}</title><style>{_CSS}</style></head><body>",
+        f"<h1>{esc(title)}</h1>",
+    ]
+    kappa = "" if st is None else (
+        f"; condition number κ = {st.condition_number:.1f}; σ = "
+        f"{math.sqrt(st.sigma2) * 1e3:.4f} (mm | mrad, eq. 8.3)")
+    val = f", {result.n_validation} validation poses" if result.n_validation else ""
+    kind = "poses (6-DOF)" if result.six_dof else "positions (3-DOF)"
+    conv = "converged" if result.converged else "NOT converged"
+    parts.append(
+        f"<p>{esc(cfg.title)}. {result.n_poses} calibration {kind}{val}; {len(result.keys)} "
+        f"parameters identified in {result.iterations} iterations ({conv}){kappa}; "
+        f"{result.elapsed_s:.2f} s.</p>")
+    # ---- warnings
+    parts.append("<h2>Warnings</h2>")
+    if result.warnings:
+        parts += [f'<div class="warn">{esc(w)}</div>' for w in result.warnings]
+    else:
+        parts.append('<div class="ok">none</div>')
+    # ---- accuracy table
+    parts.append("<h2>Accuracy (eqs. 8.1–8.2)</h2><table><tr><th class='l'>set</th>"
+                 "<th>mean Δp (mm)</th><th>σ (mm)</th><th>max (mm)</th><th>rms (mm)</th>"
+                 "<th>mean Δφ (°)</th></tr>")
+    parts.append(_stats_rows("calibration", result.calibration_before, result.calibration))
+    if result.validation is not None:
+        parts.append(_stats_rows("validation", result.validation_before, result.validation))
+    parts.append("</table><p class='small'>nominal: the robot's nominal geometry with BASE "
+                 "and PROBE fitted; Δφ: angle of the rotation between measured and "
+                 "predicted orientation.</p>")
+
+    try:
+        import matplotlib
+
+        matplotlib.use("Agg")
+        import matplotlib.pyplot as plt
+    except ImportError:  # pragma: no cover - matplotlib is an optional dependency
+        plt = None
+        parts.append("<p class='warn'>matplotlib is not installed: no plots.</p>")
+
+    before_cal = result.predict_nominal(calibration.q, calibration.payload_kg)
+    after_cal = result.predict(calibration.q, calibration.payload_kg)
+    eb, ob = _errors(calibration, before_cal)
+    ea, oa = _errors(calibration, after_cal)
+    if plt is not None:
+        parts.append("<h2>Error distributions before and after (cf. Fig. 8-8)</h2>")
+        ncol = 6 if ob is not None else 3
+        fig, axes = plt.subplots(2, ncol, figsize=(2.2 * ncol, 4.2), squeeze=False)
+        labels = ["Δx (mm)", "Δy (mm)", "Δz (mm)", "Δφx (°)", "Δφy (°)", "Δφz (°)"]
+        for c in range(ncol):
+            for r, (e, o, name, color) in enumerate(((eb, ob, "nominal", "tab:red"),
+                                                     (ea, oa, "calibrated", "tab:blue"))):
+                x = e[:, c] if c < 3 else o[:, c - 3]  # type: ignore[index]
+                ax = axes[r, c]
+                ax.hist(x, bins=20, color=color, alpha=0.8)
+                ax.set_title(f"{name}: mean {x.mean():.3g}, σ {x.std(ddof=1):.2g}", fontsize=7)
+                ax.set_xlabel(labels[c], fontsize=8)
+                ax.tick_params(labelsize=7)
+        fig.tight_layout()
+        parts.append(_png(fig))
+
+        parts.append("<h2>Residual per pose</h2>")
+        fig, ax = plt.subplots(figsize=(10, 2.8))
+        n = len(calibration)
+        ax.plot(np.arange(1, n + 1), np.linalg.norm(eb, axis=1), ".", color="tab:red",
+                label="calibration, nominal")
+        ax.plot(np.arange(1, n + 1), np.linalg.norm(ea, axis=1), ".", color="tab:blue",
+                label="calibration, calibrated")
+        if validation is not None:
+            vb = _errors(validation, result.predict_nominal(validation.q, validation.payload_kg))[0]
+            va = _errors(validation, result.predict(validation.q, validation.payload_kg))[0]
+            x = np.arange(n + 1, n + len(validation) + 1)
+            ax.plot(x, np.linalg.norm(vb, axis=1), "x", color="tab:orange",
+                    label="validation, nominal")
+            ax.plot(x, np.linalg.norm(va, axis=1), "x", color="tab:green",
+                    label="validation, calibrated")
+        ax.set_yscale("log")
+        ax.set_xlabel("pose #")
+        ax.set_ylabel("|Δp| (mm)")
+        ax.legend(fontsize=7, ncol=4)
+        fig.tight_layout()
+        parts.append(_png(fig))
+
+        parts.append("<h2>Poses in the measurement frame, coloured by the calibrated error</h2>")
+        fig = plt.figure(figsize=(6.5, 5))
+        ax3 = fig.add_subplot(projection="3d")
+        p = calibration.positions
+        sc = ax3.scatter(p[:, 0], p[:, 1], p[:, 2], c=np.linalg.norm(ea, axis=1), cmap="viridis")
+        fig.colorbar(sc, ax=ax3, shrink=0.7, label="|Δp| after calibration (mm)")
+        ax3.set_xlabel("x (m)")
+        ax3.set_ylabel("y (m)")
+        ax3.set_zlabel("z (m)")
+        fig.tight_layout()
+        parts.append(_png(fig))
+
+        if result.history:
+            parts.append("<h2>Convergence (Fig. 6-9)</h2>")
+            fig, ax = plt.subplots(figsize=(5.5, 3))
+            it = [h.iteration for h in result.history]
+            ax.semilogy(it, [h.mean_position_mm for h in result.history], "o-",
+                        label="mean |Δp| before the step (mm)")
+            ax.semilogy(it, [max(h.step_norm, 1e-16) for h in result.history], "s--",
+                        label="‖Δg‖")
+            ax.axhline(result.settings.get("tol", 1e-6), color="gray", ls=":")
+            ax.set_xlabel("iteration")
+            ax.legend(fontsize=8)
+            fig.tight_layout()
+            parts.append(_png(fig))
+
+    # ---- parameter table
+    parts.append("<h2>Identified parameters (σ: eq. 8.5)</h2><table><tr><th class='l'>"
+                 "parameter</th><th>value</th><th>σ</th><th class='l'>unit</th>"
+                 "<th class='l'>stands for</th></tr>")
+    for row in result.parameter_table():
+        v, unit = display_value(row["value"], row["unit"])
+        s, _ = display_value(row["sigma"], row["unit"])
+        fmt = ".5g" if unit in ("mm", "°") else ".4g"
+        parts.append(f"<tr><td class='l'>{esc(row['name'])}</td><td>{v:{fmt}}</td>"
+                     f"<td>{s:.2g}</td><td class='l'>{esc(unit)}</td>"
+                     f"<td class='l'>{esc(row['stands_for'])}</td></tr>")
+    parts.append("</table>")
+    ident = result.identifiability
+    if ident is not None and (ident.dropped or ident.zero):
+        names = dict(zip(result.model.space.keys, result.model.space.names, strict=True))
+        dep = ", ".join(f"{names[k]} (via {', '.join(names[v] for v in ident.via.get(k, ()))})"
+                        for k in ident.dropped)
+        parts.append(f"<p class='small'>Identified through others: {esc(dep)}.<br>"
+                     "No effect on the measurements: "
+                     f"{esc(', '.join(names[k] for k in ident.zero)) or 'none'}.</p>")
+    # ---- frames
+    parts.append("<h2>BASE and PROBE</h2><table><tr><th class='l'>frame</th><th>x (mm)</th>"
+                 "<th>y (mm)</th><th>z (mm)</th><th>roll (°)</th><th>pitch (°)</th>"
+                 "<th>yaw (°)</th></tr>")
+    from plugcell.kinematics.rotations import matrix_to_rpy
+
+    for name, T in (("BASE (robot in tracker frame)", result.model.base()),
+                    ("PROBE (target in flange frame)", result.model.probe())):
+        xyz = T[:3, 3] * 1e3
+        rpy = np.degrees(matrix_to_rpy(T[:3, :3]))
+        parts.append(f"<tr><td class='l'>{name}</td>"
+                     + "".join(f"<td>{x:.3f}</td>" for x in xyz)
+                     + "".join(f"<td>{x:.4f}</td>" for x in rpy) + "</tr>")
+    parts.append("</table><p class='small'>generated by plugcell calibrate</p></body></html>")
+    return "\n".join(parts)

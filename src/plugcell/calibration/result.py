@@ -1,0 +1,265 @@
+"""The outcome of an identification: predicts, evaluates, reports, serialises.
+
+:class:`CalibrationResult` is immutable.  ``to_dict()`` is the content of
+``PARAMS.json`` (``plugcell calibrate --out``); :meth:`CalibrationResult.from_dict`
+rebuilds a working result from it together with the robot description, so a
+saved calibration can predict (and compensate) later.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from dataclasses import dataclass, field, replace
+from typing import Any
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from plugcell.calibration.configs import ModelConfig, model_config
+from plugcell.calibration.data import CalibrationData
+from plugcell.calibration.identifiability import Identifiability
+from plugcell.calibration.model import ErrorModel
+from plugcell.calibration.statistics import (
+    ParameterStatistics,
+    accuracy,
+    accuracy_summary,
+    pose_residuals,
+)
+from plugcell.kinematics import RobotDescription
+from plugcell.kinematics.rotations import matrix_to_rpy
+from plugcell.metrology import AccuracyStats
+
+Array = NDArray[np.float64]
+
+FORMAT = "plugcell-calibration"
+FORMAT_VERSION = 1
+
+__all__ = ["FORMAT", "FORMAT_VERSION", "CalibrationResult", "IterationRecord"]
+
+
+@dataclass(frozen=True)
+class IterationRecord:
+    """One Gauss–Newton iteration: residual before the step and the step size."""
+
+    iteration: int
+    step_norm: float
+    cost: float
+    mean_position_mm: float
+    rms_position_mm: float
+    damping: float = 0.0
+
+    def as_dict(self) -> dict[str, float]:
+        return {"iteration": self.iteration, "step_norm": self.step_norm, "cost": self.cost,
+                "mean_position_mm": self.mean_position_mm,
+                "rms_position_mm": self.rms_position_mm, "damping": self.damping}
+
+
+def _frame_dict(T: Array) -> dict[str, Any]:
+    return {
+        "matrix": np.asarray(T).tolist(),
+        "xyz_mm": (np.asarray(T)[:3, 3] * 1e3).tolist(),
+        "rpy_deg": np.degrees(matrix_to_rpy(np.asarray(T)[:3, :3])).tolist(),
+    }
+
+
+def _thesis_base(T: Array) -> dict[str, float] | None:
+    """The BASE as the six parameters of eq. (6.24) (via D.6), when regular."""
+    from plugcell.metrology import MetrologyError, base_parameters_from_matrix
+
+    try:
+        bp = base_parameters_from_matrix(T)
+    except (MetrologyError, ValueError):
+        return None
+    return {"a0_mm": bp.a0 * 1e3, "b0_mm": bp.b0 * 1e3, "alpha0_deg": math.degrees(bp.alpha0),
+            "beta0_deg": math.degrees(bp.beta0), "theta0_deg": math.degrees(bp.theta0),
+            "d0_mm": bp.d0 * 1e3}
+
+
+@dataclass(frozen=True, eq=False)
+class CalibrationResult:
+    """An identified model with its statistics (see module docstring).
+
+    ``model``: the calibrated :class:`ErrorModel`; ``nominal``: the nominal robot
+    with BASE/PROBE fitted (the "before" reference); ``keys``: the identified
+    parameters; ``identifiability``: the structural analysis (what each kept
+    parameter stands for); ``statistics``: σ², σ per parameter, κ;
+    ``calibration``/``calibration_before``: accuracy on the calibration poses
+    after/before; ``validation``/``validation_before``: on independent poses.
+    """
+
+    config: ModelConfig
+    robot: str
+    model: ErrorModel
+    nominal: ErrorModel
+    keys: tuple[str, ...]
+    identifiability: Identifiability | None
+    data_identifiability: Identifiability | None
+    iterations: int
+    converged: bool
+    history: tuple[IterationRecord, ...]
+    statistics: ParameterStatistics | None
+    calibration: AccuracyStats | None
+    calibration_before: AccuracyStats | None
+    six_dof: bool
+    n_poses: int
+    pose_weights: Array | None = None
+    warnings: tuple[str, ...] = ()
+    elapsed_s: float = 0.0
+    settings: dict[str, Any] = field(default_factory=dict)
+    validation: AccuracyStats | None = None
+    validation_before: AccuracyStats | None = None
+    n_validation: int = 0
+
+    # ------------------------------------------------------------------ prediction
+    def predict(self, q: ArrayLike, payload_kg: ArrayLike | float | None = None) -> Array:
+        """Calibrated target poses ``(N, 4, 4)`` in the measurement frame."""
+        return self.model.predict(q, payload_kg)
+
+    def predict_nominal(self, q: ArrayLike, payload_kg: ArrayLike | float | None = None) -> Array:
+        """Poses of the nominal robot with the fitted BASE/PROBE."""
+        return self.nominal.predict(q, payload_kg)
+
+    def residuals(self, data: CalibrationData) -> Array:
+        """``(N, 6)`` (or ``(N, 3)``) measured − calibrated, metres and radians."""
+        return pose_residuals(data, self.predict(data.q, data.payload_kg))
+
+    def evaluate(self, data: CalibrationData, *, refit_base: bool = False,
+                 refit_probe: bool = False) -> tuple[AccuracyStats, AccuracyStats]:
+        """Accuracy (8.1–8.2) on ``data``: (nominal, calibrated).
+
+        ``refit_base``: the data were measured with the tracker elsewhere — BASE is
+        re-identified on them for both models (robot geometry kept), see
+        :func:`plugcell.calibration.identify.refit_base`; ``refit_probe``: the
+        target was remounted too — PROBE re-identified as well.
+        """
+        nominal, model = self.nominal, self.model
+        if refit_base:
+            from plugcell.calibration.identify import refit_base as _refit
+
+            nominal = _refit(nominal, data, probe=refit_probe)
+            model = _refit(model, data, probe=refit_probe)
+        return (accuracy(data, nominal.predict(data.q, data.payload_kg)),
+                accuracy(data, model.predict(data.q, data.payload_kg)))
+
+    def with_validation(self, data: CalibrationData, *, refit_base: bool = False
+                        ) -> CalibrationResult:
+        before, after = self.evaluate(data, refit_base=refit_base)
+        return replace(self, validation=after, validation_before=before, n_validation=len(data))
+
+    # ------------------------------------------------------------------ parameters
+    def value(self, key: str) -> float:
+        return self.model.value(key)
+
+    def sigma(self, key: str) -> float:
+        if self.statistics is None or key not in self.keys:
+            return float("nan")
+        return float(self.statistics.sigma[self.keys.index(key)])
+
+    def stands_for(self, key: str) -> str:
+        names = dict(zip(self.model.space.keys, self.model.space.names, strict=True))
+        if self.identifiability is None:
+            return names[key]
+        return self.identifiability.stands_for(key, names)
+
+    def parameter_table(self) -> list[dict[str, Any]]:
+        """One dict per identified parameter: key, name, value, sigma, unit, stands_for."""
+        out = []
+        for k in self.keys:
+            p = self.model.space[k]
+            out.append({"key": k, "name": p.name, "kind": p.kind, "value": self.value(k),
+                        "sigma": self.sigma(k), "unit": p.unit, "stands_for": self.stands_for(k)})
+        return out
+
+    # ------------------------------------------------------------------ serialisation
+    def to_dict(self) -> dict[str, Any]:
+        """The PARAMS.json content (SI values with units; statistics in mm / deg)."""
+        space = self.model.space
+        ident = self.identifiability
+        dependent = []
+        if ident is not None:
+            for k in ident.dropped:
+                dependent.append({"key": k, "name": space[k].name,
+                                  "identified_via": [space[v].name for v in ident.via.get(k, ())]})
+        cal = None
+        if self.calibration is not None:
+            cal = accuracy_summary(self.calibration)
+            if self.calibration_before is not None:
+                cal["before"] = accuracy_summary(self.calibration_before)
+        val = None
+        if self.validation is not None:
+            val = accuracy_summary(self.validation)
+            if self.validation_before is not None:
+                val["before"] = accuracy_summary(self.validation_before)
+        st = self.statistics
+        return {
+            "format": FORMAT,
+            "format_version": FORMAT_VERSION,
+            "robot": self.robot,
+            "model": self.config.as_dict(),
+            "data": {"poses": self.n_poses, "six_dof": self.six_dof,
+                     "payload_ref_kg": self.model.payload_ref_kg},
+            "parameters": self.parameter_table(),
+            "dependent": dependent,
+            "unidentifiable": [] if ident is None else [space[k].name for k in ident.zero],
+            "values": self.model.as_dict(),
+            "base": {**_frame_dict(self.model.base()),
+                     "thesis_6_24": _thesis_base(self.model.base())},
+            "probe": _frame_dict(self.model.probe()),
+            "references": {"base": self.model.base_ref.tolist(),
+                           "probe": self.model.probe_ref.tolist()},
+            "nominal_frames": {"base": _frame_dict(self.nominal.base()),
+                               "probe": _frame_dict(self.nominal.probe()),
+                               "values": self.nominal.as_dict()},
+            "iterations": self.iterations,
+            "converged": self.converged,
+            "condition_number": None if st is None else st.condition_number,
+            "sigma2": None if st is None else st.sigma2,
+            "dof": None if st is None else st.dof,
+            "history": [h.as_dict() for h in self.history],
+            "calibration": cal,
+            "validation": val,
+            "warnings": list(self.warnings),
+            "elapsed_s": self.elapsed_s,
+            "settings": dict(self.settings),
+        }
+
+    def to_json(self, indent: int | None = 2) -> str:
+        return json.dumps(_clean(self.to_dict()), indent=indent, allow_nan=False)
+
+    @classmethod
+    def from_dict(cls, d: dict[str, Any], desc: RobotDescription) -> CalibrationResult:
+        """A result that predicts, rebuilt from :meth:`to_dict` output and the robot."""
+        if d.get("format") != FORMAT:
+            raise ValueError("not a plugcell calibration (missing 'format')")
+        cfg = model_config(d["model"]["number"])
+        refs = d["references"]
+        m_ref = float(d["data"]["payload_ref_kg"])
+
+        def build(values: dict[str, float]) -> ErrorModel:
+            m = ErrorModel.create(desc, cfg.family, gravity=cfg.gravity, payload=cfg.payload,
+                                  base=np.array(refs["base"]), probe=np.array(refs["probe"]),
+                                  payload_ref_kg=m_ref)
+            return m.with_values([float(values.get(k, 0.0)) for k in m.space.keys])
+
+        model = build(d["values"])
+        nominal = build(d["nominal_frames"]["values"])
+        return cls(config=cfg, robot=d["robot"], model=model, nominal=nominal,
+                   keys=tuple(p["key"] for p in d["parameters"]), identifiability=None,
+                   data_identifiability=None, iterations=int(d["iterations"]),
+                   converged=bool(d["converged"]), history=(), statistics=None,
+                   calibration=None, calibration_before=None, six_dof=bool(d["data"]["six_dof"]),
+                   n_poses=int(d["data"]["poses"]), warnings=tuple(d.get("warnings", ())))
+
+
+def _clean(x: Any) -> Any:
+    """Replace NaN/inf by None so the JSON is strict."""
+    if isinstance(x, dict):
+        return {k: _clean(v) for k, v in x.items()}
+    if isinstance(x, list | tuple):
+        return [_clean(v) for v in x]
+    if isinstance(x, float | np.floating):
+        return float(x) if math.isfinite(x) else None
+    if isinstance(x, np.integer):
+        return int(x)
+    return x

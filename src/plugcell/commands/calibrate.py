@@ -1,0 +1,205 @@
+"""``plugcell calibrate``: identify a robot's error model from a measurement file.
+
+    plugcell calibrate --robot NAME|FILE --model 1..5|NAME --data CAL.csv
+                       [--validate VAL.csv] [--rot rpy|zyz|xyz] [--payload-kg M]
+                       --out PARAMS.json [--report REPORT.html] [--json]
+
+A file of joint readings and tracker measurements is all it needs: BASE and
+PROBE are estimated from the data unless given (``--base``/``--probe``, e.g. from
+the appendix-D procedures).  Progress goes to stderr; ``--json`` prints the
+PARAMS.json object to stdout.  Bad files, unknown robots, too few poses for the
+model and a diverging fit end with a clear message and exit code 2.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import sys
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+
+def register(sub: Any) -> None:
+    p = sub.add_parser(
+        "calibrate", help="identify a robot's error model from tracker measurements",
+        description="Identify the error parameters of one of the thesis's five models "
+                    "(1 serial, 2 loop, 3 serial+gravity, 4 loop+gravity, 5 full) from a "
+                    "measurement file (joint readings + tracker measurements, "
+                    "docs/measurement-files.md).")
+    p.add_argument("--robot", required=True, help="shipped robot name or description file")
+    p.add_argument("--model", required=True,
+                   help="1-5 or serial, loop, serial+gravity, loop+gravity, full")
+    p.add_argument("--data", type=Path, required=True, help="calibration measurement file")
+    p.add_argument("--validate", type=Path, help="independent validation measurement file")
+    p.add_argument("--rot", choices=("rpy", "zyz", "xyz"), default="rpy",
+                   help="orientation convention of rx, ry, rz in the files (default rpy)")
+    p.add_argument("--payload-kg", type=float, metavar="M",
+                   help="payload carried in every pose (overrides a payload_kg column)")
+    p.add_argument("--out", type=Path, required=True, help="PARAMS.json to write")
+    p.add_argument("--report", type=Path, help="self-contained HTML report to write")
+    p.add_argument("--json", action="store_true", help="print the PARAMS.json object to stdout")
+    p.add_argument("--base", help="initial BASE: JSON file (4x4 'matrix' or 'xyz_mm'+'rpy_deg') "
+                                  "or 'x,y,z,roll,pitch,yaw' in mm and degrees")
+    p.add_argument("--probe", help="initial PROBE, same forms as --base")
+    p.add_argument("--method", choices=("gauss-newton", "lm"), default="gauss-newton",
+                   help="iteration (default gauss-newton, thesis Fig. 6-9)")
+    p.add_argument("--loss", choices=("linear", "huber", "cauchy"), default="linear",
+                   help="robust loss for outliers (default linear)")
+    p.add_argument("--max-iterations", type=int, default=50)
+    p.add_argument("--rotation-weight", type=float, default=1.0,
+                   help="weight of orientation rows, m per rad (default 1, as the thesis)")
+    p.add_argument("--condition-limit", type=float,
+                   help="apply the condition-number rule (4.10) with this limit, e.g. 100")
+    p.add_argument("--quiet", action="store_true", help="no progress on stderr")
+    p.set_defaults(func=_run)
+
+
+def _frame(text: str, what: str) -> np.ndarray:
+    """A 4x4 transform from a JSON file or an inline 'x,y,z,r,p,y' (mm, degrees)."""
+    from plugcell.cli import CommandError
+    from plugcell.kinematics.rotations import rpy_to_matrix
+
+    def from_xyz_rpy(xyz: Any, rpy: Any) -> np.ndarray:
+        T = np.eye(4)
+        T[:3, :3] = rpy_to_matrix(*np.radians(np.asarray(rpy, float)))
+        T[:3, 3] = np.asarray(xyz, float) / 1e3
+        return T
+
+    path = Path(text)
+    if path.suffix.lower() == ".json" or path.is_file():
+        try:
+            obj = json.loads(path.read_text(encoding="utf-8"))
+        except OSError as exc:
+            raise CommandError(f"--{what} {path}: cannot read: {exc.strerror}") from None
+        except json.JSONDecodeError as exc:
+            raise CommandError(f"--{what} {path}: invalid JSON: {exc}") from None
+        try:
+            if isinstance(obj, dict) and "matrix" in obj:
+                T = np.asarray(obj["matrix"], float)
+            elif isinstance(obj, dict) and "xyz_mm" in obj:
+                T = from_xyz_rpy(obj["xyz_mm"], obj.get("rpy_deg", [0, 0, 0]))
+            else:
+                T = np.asarray(obj, float)
+        except (TypeError, ValueError) as exc:
+            raise CommandError(f"--{what} {path}: {exc}") from None
+    else:
+        try:
+            vals = [float(x) for x in text.split(",")]
+        except ValueError:
+            raise CommandError(f"--{what}: expected a JSON file or 'x,y,z,roll,pitch,yaw', "
+                               f"got {text!r}") from None
+        if len(vals) != 6:
+            raise CommandError(f"--{what}: expected 6 numbers x,y,z (mm),roll,pitch,yaw (deg)")
+        T = from_xyz_rpy(vals[:3], vals[3:])
+    if T.shape != (4, 4) or not np.all(np.isfinite(T)):
+        raise CommandError(f"--{what}: expected a finite 4x4 transform, got shape {T.shape}")
+    R = T[:3, :3]
+    if not np.allclose(R @ R.T, np.eye(3), atol=1e-6) or np.linalg.det(R) < 0:
+        raise CommandError(f"--{what}: the rotation part is not a rotation matrix")
+    return T
+
+
+def _read(path: Path, rot: str, n: int, payload: float | None):
+    from dataclasses import replace
+
+    from plugcell.calibration import CalibrationData
+    from plugcell.cli import CommandError
+    from plugcell.io.measurements import MeasurementFileError, read_measurements
+
+    try:
+        m = read_measurements(path, rotation=rot, n_joints=n)
+    except MeasurementFileError as exc:
+        raise CommandError(str(exc)) from None
+    if payload is not None:
+        m = replace(m, payload_kg=np.full(len(m), float(payload)))
+    return CalibrationData.from_measurements(m)
+
+
+class _Progress:
+    def __init__(self, quiet: bool) -> None:
+        self.quiet = quiet
+
+    def __call__(self, stage: str, i: int, n: int, message: str) -> None:
+        if not self.quiet:
+            print(f"calibrate [{stage}] {message}", file=sys.stderr, flush=True)
+
+
+def _summary(d: dict[str, Any]) -> str:
+    m = d["model"]
+    lines = [f"robot {d['robot']}, model {m['number']} ({m['name']}): "
+             f"{len(d['parameters'])} parameters from {d['data']['poses']} poses, "
+             f"{d['iterations']} iterations, κ = {d['condition_number']:.1f}"]
+    for key in ("calibration", "validation"):
+        s = d.get(key)
+        if not s:
+            continue
+        b = s.get("before", {})
+        line = (f"  {key:11s} mean {b.get('mean_mm', math.nan):7.3f} -> {s['mean_mm']:7.3f} mm, "
+                f"max {b.get('max_mm', math.nan):7.3f} -> {s['max_mm']:7.3f} mm")
+        if "orientation" in s:
+            line += (f", orientation {b.get('orientation', {}).get('mean_deg', math.nan):.4f} -> "
+                     f"{s['orientation']['mean_deg']:.4f}°")
+        lines.append(line)
+    lines += [f"  warning: {w}" for w in d["warnings"]]
+    return "\n".join(lines)
+
+
+def _run(args: argparse.Namespace) -> int:
+    from plugcell.calibration import CalibrationError, Calibrator
+    from plugcell.cli import CommandError
+    from plugcell.io.robots import load_robot
+    from plugcell.kinematics.errors import DescriptionError
+
+    try:
+        desc = load_robot(args.robot)
+    except DescriptionError as exc:
+        raise CommandError(str(exc)) from None
+    if args.payload_kg is not None and not (math.isfinite(args.payload_kg)
+                                            and args.payload_kg >= 0):
+        raise CommandError(f"--payload-kg must be a mass ≥ 0, got {args.payload_kg}")
+    if args.max_iterations < 1:
+        raise CommandError("--max-iterations must be at least 1")
+    data = _read(args.data, args.rot, desc.n_actuated, args.payload_kg)
+    val = None
+    if args.validate is not None:
+        val = _read(args.validate, args.rot, desc.n_actuated, args.payload_kg)
+        if val.six_dof != data.six_dof:
+            raise CommandError("--validate: the validation file must measure the same (6-DOF "
+                               "or positions) as the calibration file")
+    base = None if args.base is None else _frame(args.base, "base")
+    probe = None if args.probe is None else _frame(args.probe, "probe")
+    progress = _Progress(args.quiet)
+    try:
+        cal = Calibrator(desc, args.model, base=base, probe=probe, method=args.method,
+                         loss=args.loss, max_iterations=args.max_iterations,
+                         rotation_weight=args.rotation_weight,
+                         condition_limit=args.condition_limit, progress=progress)
+        result = cal.fit(data, validation=val)
+    except CalibrationError as exc:
+        raise CommandError(str(exc)) from None
+    d = result.to_dict()
+    text = result.to_json()
+    try:
+        args.out.parent.mkdir(parents=True, exist_ok=True)
+        args.out.write_text(text + "\n", encoding="utf-8")
+    except OSError as exc:
+        raise CommandError(f"{args.out}: cannot write: {exc.strerror}") from None
+    if args.report is not None:
+        from plugcell.calibration.report import render_report
+
+        page = render_report(result, data, val)
+        try:
+            args.report.parent.mkdir(parents=True, exist_ok=True)
+            args.report.write_text(page, encoding="utf-8")
+        except OSError as exc:
+            raise CommandError(f"{args.report}: cannot write: {exc.strerror}") from None
+    if args.json:
+        print(text)
+    else:
+        print(_summary(d))
+        print(f"wrote {args.out}" + (f" and {args.report}" if args.report else ""))
+    return 0

@@ -1,0 +1,108 @@
+"""``plugcell serve KIND --name NAME``: run one service as an OS process until stopped."""
+
+from __future__ import annotations
+
+import argparse
+import asyncio
+import contextlib
+import logging
+import signal
+import sys
+from pathlib import Path
+from typing import Any
+
+from plugcell.commands.cellargs import add_cell_args, cell_of, transport_of
+
+
+def register(subparsers: Any) -> None:
+    from plugcell.services.registry import KINDS
+
+    p = subparsers.add_parser(
+        "serve",
+        help="run a device service (camera, drill, …) in this process",
+        description="Run one Plug-and-Produce service until SIGINT/SIGTERM, then shut it "
+        "down cleanly (Shutdown notification, queued processes end Failed).",
+    )
+    p.add_argument(
+        "kind", help=f"service kind: {', '.join(sorted(KINDS))}, or module:Class of your own"
+    )
+    p.add_argument("--name", help="service (device) name; default: the kind in capitals")
+    add_cell_args(p)
+    p.add_argument(
+        "--param",
+        action="append",
+        default=[],
+        metavar="KEY=VALUE",
+        help="service-specific parameter, e.g. time_scale=0.01 (repeatable)",
+    )
+    p.add_argument("--max-payload", type=int, default=None, help="largest accepted request, bytes")
+    p.add_argument("--journal-dir", type=Path, help="where to keep the journal")
+    p.add_argument("--no-journal", action="store_true", help="do not journal processes")
+    p.add_argument("--log-level", default="WARNING", help="logging level (default WARNING)")
+    p.set_defaults(func=run)
+
+
+def _params(cls: type, pairs: list[str]) -> dict[str, Any]:
+    from plugcell.cli import CommandError
+
+    known: dict[str, type] = getattr(cls, "params", {})
+    out: dict[str, Any] = {}
+    for pair in pairs:
+        key, sep, value = pair.partition("=")
+        if not sep or key not in known:
+            names = ", ".join(sorted(known)) or "none"
+            raise CommandError(f"bad --param {pair!r} for {cls.__name__} (parameters: {names})")
+        try:
+            out[key] = known[key](value)
+        except ValueError as exc:
+            raise CommandError(f"bad value for {key}: {exc}") from None
+    return out
+
+
+def run(args: argparse.Namespace) -> int:
+    from plugcell.cli import CommandError
+    from plugcell.framework.participant import PartnerError
+    from plugcell.services.registry import load_kind
+
+    logging.basicConfig(
+        level=args.log_level.upper(),
+        stream=sys.stderr,
+        format="%(asctime)s %(name)s %(levelname)s %(message)s",
+    )
+    try:
+        cls = load_kind(args.kind)
+    except KeyError as exc:
+        raise CommandError(str(exc.args[0])) from None
+    kwargs = _params(cls, args.param)
+    if args.max_payload:
+        kwargs["max_payload"] = args.max_payload
+    journal: bool | Path = args.journal_dir or not args.no_journal
+    try:
+        service = cls(
+            args.name, cell=cell_of(args), transport=transport_of(args), journal=journal, **kwargs
+        )
+    except (ValueError, TypeError) as exc:
+        raise CommandError(str(exc)) from None
+    try:
+        asyncio.run(_serve(service))
+    except PartnerError as exc:
+        raise CommandError(str(exc)) from None
+    return 0
+
+
+async def _serve(service: Any) -> None:
+    stop = asyncio.Event()
+    loop = asyncio.get_running_loop()
+    for sig in (signal.SIGINT, signal.SIGTERM):
+        loop.add_signal_handler(sig, stop.set)
+    await service.start()
+    print(
+        f"plugcell: {service.name} ({service.kind}) serving in cell {service.keys.cell!r} "
+        f"as instance {service.instance}",
+        flush=True,
+    )
+    try:
+        await stop.wait()
+    finally:
+        with contextlib.suppress(Exception):
+            await service.close()

@@ -1,0 +1,179 @@
+"""``plugcell twin``: the digital twin's error budget and simulated measurement campaigns."""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from plugcell.commands.progress import ProgressBar
+
+
+def register(sub: Any) -> None:
+    p = sub.add_parser(
+        "twin",
+        help="the digital twin: error budget, simulated campaigns",
+        description="The simulated robot whose truth calibration must discover.",
+    )
+    tw = p.add_subparsers(dest="twin_command", metavar="SUBCOMMAND", required=True)
+
+    def common(q: argparse.ArgumentParser) -> None:
+        q.add_argument("--robot", default="smart_h4", help="robot name (default: smart_h4)")
+        q.add_argument(
+            "--seed", type=int, default=0, help="seed of the twin's hidden errors (default: 0)"
+        )
+        q.add_argument(
+            "--scenario", type=Path, help="scenario JSON file (overrides --robot/--seed)"
+        )
+
+    r = tw.add_parser(
+        "report",
+        help="the twin's error budget",
+        description="Nominal accuracy and deflections of the twin in its working "
+        "volume (thesis 8.2): computed, not tabulated.",
+    )
+    common(r)
+    r.add_argument("--poses", type=int, default=300, help="random poses (default: 300)")
+    r.add_argument("--json", action="store_true", help="print JSON")
+    r.set_defaults(func=_report)
+
+    m = tw.add_parser(
+        "measure",
+        help="simulate a calibration campaign into a measurement file",
+        description="Move the twin through random poses in the working volume and "
+        "measure each with the simulated laser tracker (1 s).",
+    )
+    common(m)
+    m.add_argument("--poses", type=int, required=True, help="number of poses")
+    m.add_argument(
+        "--payload",
+        type=float,
+        default=0.0,
+        metavar="KG",
+        help="payload mass in kg (default: 0), mounted off the flange centre",
+    )
+    m.add_argument(
+        "--pose-seed",
+        type=int,
+        default=None,
+        help="seed of the pose draw (default: --seed + 1); use another for validation",
+    )
+    m.add_argument(
+        "--duration",
+        type=float,
+        default=1.0,
+        help="tracker measuring time per pose in s (default: 1)",
+    )
+    m.add_argument(
+        "--rot",
+        choices=("rpy", "zyz", "xyz"),
+        default="rpy",
+        help="orientation convention of rx,ry,rz (default: rpy)",
+    )
+    m.add_argument("--out", type=Path, required=True, help="measurement CSV to write")
+    m.add_argument("--quiet", action="store_true", help="no progress output")
+    m.set_defaults(func=_measure)
+
+
+def _scenario(args: argparse.Namespace):
+    from plugcell.cli import CommandError
+    from plugcell.twin.scenario import ScenarioError, TwinScenario
+
+    try:
+        if args.scenario is not None:
+            try:
+                return TwinScenario.from_json(args.scenario.read_text())
+            except OSError as exc:
+                raise CommandError(f"{args.scenario}: cannot read: {exc.strerror}") from None
+        return TwinScenario(robot=args.robot, seed=args.seed)
+    except ScenarioError as exc:
+        raise CommandError(str(exc)) from None
+
+
+def _report(args: argparse.Namespace) -> int:
+    from plugcell.cli import CommandError
+    from plugcell.twin.report import error_budget
+    from plugcell.twin.scenario import ScenarioError
+
+    if args.poses < 10:
+        raise CommandError(f"--poses must be at least 10, got {args.poses}")
+    scenario = _scenario(args)
+    bar = None if args.json else ProgressBar("error budget")
+    try:
+        budget = error_budget(scenario, poses=args.poses, progress=bar)
+    except ScenarioError as exc:
+        raise CommandError(str(exc)) from None
+    if args.json:
+        print(json.dumps(budget.as_dict(), indent=2))
+        return 0
+    rows = [
+        ("nominal position error, mean (unloaded)", budget.nominal_mean_mm, "mm", "4.03"),
+        ("nominal position error, max", budget.nominal_max_mm, "mm", ""),
+        ("  geometric errors alone, mean", budget.geometric_only_mean_mm, "mm", ""),
+        ("  reducer transmission error alone, mean", budget.transmission_only_mean_mm, "mm", ""),
+        ("  link-mass deflection alone, mean", budget.gravity_only_mean_mm, "mm", ""),
+        ("payload deflection 18 kg, mean", budget.deflection_18kg_mm, "mm", "0.5"),
+        ("payload deflection 36 kg, mean", budget.deflection_36kg_mm, "mm", "1.0"),
+        ("  share of link bending (36 kg)", 100 * budget.bending_share_36kg, "%", "~20"),
+        ("repeatability, 1-σ per axis", budget.repeatability_sigma_mm, "mm", "res. ~0.05"),
+        ("nominal orientation error, mean", budget.orientation_nominal_mean_deg, "deg", ""),
+    ]
+    print(
+        f"Twin of {budget.robot} (seed {budget.seed}), {budget.poses} poses in the working volume"
+    )
+    print(f"{'':42s} {'twin':>10s}      {'thesis':>10s}")
+    for label, value, unit, thesis in rows:
+        print(f"{label:42s} {value:10.3f} {unit:4s} {thesis:>10s}")
+    return 0
+
+
+def _measure(args: argparse.Namespace) -> int:
+    from plugcell.cli import CommandError
+    from plugcell.io.measurements import write_measurements
+    from plugcell.twin.campaign import CampaignError, measure_poses, working_volume_joints
+    from plugcell.twin.robot import RobotTwin
+    from plugcell.twin.scenario import ScenarioError
+    from plugcell.twin.tracker import LaserTracker, TrackerError
+
+    if args.poses < 1:
+        raise CommandError(f"--poses must be positive, got {args.poses}")
+    if not (np.isfinite(args.payload) and args.payload >= 0):
+        raise CommandError(f"--payload must be a mass ≥ 0 kg, got {args.payload}")
+    scenario = _scenario(args).with_payload(args.payload)
+    pose_seed = scenario.seed + 1 if args.pose_seed is None else args.pose_seed
+    try:
+        robot = RobotTwin(scenario)
+        tracker_seed = scenario.tracker_seed if scenario.tracker_seed is not None else scenario.seed
+        tracker = LaserTracker(seed=tracker_seed)
+        joints = working_volume_joints(
+            robot.description,
+            robot.reveal_truth().profile,
+            args.poses,
+            np.random.default_rng(pose_seed),
+        )
+        bar = None if args.quiet else ProgressBar("measuring", stream=sys.stderr)
+        data, sim_s = measure_poses(
+            robot, tracker, joints, duration_s=args.duration, rotation=args.rot, progress=bar
+        )
+    except (ScenarioError, CampaignError, TrackerError, ValueError) as exc:
+        raise CommandError(str(exc)) from None
+    comments = [
+        f"plugcell twin measure: robot {scenario.robot}, {args.poses} poses, "
+        f"payload {args.payload:g} kg, pose seed {pose_seed}",
+        f"scenario: {scenario.to_json()}",
+        f"simulated campaign time: {sim_s:.0f} s",
+    ]
+    try:
+        write_measurements(args.out, data, comments=comments)
+    except OSError as exc:
+        raise CommandError(f"{args.out}: cannot write: {exc.strerror}") from None
+    if not args.quiet:
+        print(
+            f"wrote {len(data)} poses to {args.out} (simulated time {sim_s / 60:.1f} min)",
+            file=sys.stderr,
+        )
+    return 0

@@ -1,0 +1,189 @@
+"""The kinematic models compensation inverts: tool pose and Jacobian in the robot base frame.
+
+What is compensated (a decision, stated once): **the pose of the tool point in the
+robot base frame F0**.  By default the tool point is the reflector the tracker
+measures — the T-MAC — i.e. the tool is the identified PROBE, exactly as in thesis
+8.3 where the laser tracker measures the T-MAC and the residuals of Table 8-5 are
+T-MAC pose errors.  Another TCP (a drill tip, a gripper) can be given as ``tool``
+(flange → TCP); the measurements of the sensor loop are then carried to it through
+PROBE (``frames.MetrologyFrames``).
+
+Two models share the :class:`PoseModel` protocol:
+
+* :class:`IdentifiedModel` — an identified :class:`~plugcell.calibration.model.ErrorModel`
+  (geometry, parallelogram loop, gravity and payload deflection, eqs. 6.23, 6.31,
+  6.40).  Its prediction is ``BASE · T_n^0(q + Δq(q, m)) · PROBE`` (tracker frame);
+  in the robot base frame the tool pose is ``T_n^0(q + Δq(q, m)) · tool``, which is
+  ``BASE⁻¹ · predict(q, m) · PROBE⁻¹ · tool`` — the same numbers (tested).
+* :class:`NominalModel` — the controller's own nominal model (description
+  parameters, eq. 6.1) with a tool: what ``POS_TO_JNTP`` inverts.
+
+``jacobian`` is the manipulator Jacobian at the tool point, thesis eqs. (6.37),
+(6.39) — loop joints through the exact four-bar closure — with the identified
+geometry, in the robot base frame, per unit change of the joint *readings*
+(for a model on the serial structure of eq. 6.3 the chain joints are a linear map
+of the readings).  The derivative of the deflection Δq(q) with respect to q (of
+order 10⁻³ of the identity) is left out: the Newton iteration of 6.5.1 then
+converges linearly with a ratio ~10⁻³ instead of quadratically — two or three
+iterations to 10⁻⁶ either way.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Protocol, runtime_checkable
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from plugcell.calibration.model import ErrorModel
+from plugcell.kinematics import (
+    GeometricParameters,
+    RobotDescription,
+    forward,
+    jacobian_from_fk,
+)
+from plugcell.kinematics.transforms import invert
+
+Array = NDArray[np.float64]
+
+__all__ = ["IdentifiedModel", "NominalModel", "PoseModel", "shift_jacobian"]
+
+
+@runtime_checkable
+class PoseModel(Protocol):
+    """A kinematic model compensation can invert (module docstring).
+
+    ``description``: the robot as its controller knows it (joint order, limits,
+    nominal geometry); ``tool``: the compensated point in the flange frame;
+    ``evaluate(q, payload_kg)`` → tool poses ``(N, 4, 4)`` in the robot base frame
+    and the Jacobian ``(N, 6, n)`` with respect to the joint readings.
+    """
+
+    @property
+    def description(self) -> RobotDescription: ...
+
+    @property
+    def tool(self) -> Array: ...
+
+    def evaluate(self, q: ArrayLike, payload_kg: ArrayLike | float = 0.0) -> tuple[Array, Array]:
+        ...
+
+
+def shift_jacobian(J_flange: Array, p_flange: Array, p_tool: Array) -> Array:
+    """Move the linear rows of a Jacobian from the flange origin to the tool point.
+
+    ``v_tool = v_flange + ω × (p_tool − p_flange)`` (rigid body), so
+    ``J_v,tool = J_v,flange − [p_tool − p_flange]× J_ω``.
+    """
+    r = p_tool - p_flange  # (N, 3)
+    Jw = J_flange[..., 3:, :]
+    Jv = J_flange[..., :3, :] + np.cross(Jw, r[..., :, None], axis=-2)
+    return np.concatenate([Jv, Jw], axis=-2)
+
+
+def _as_batch(q: ArrayLike, n: int) -> Array:
+    q = np.asarray(q, dtype=float)
+    if q.ndim == 1:
+        q = q[None, :]
+    if q.ndim != 2 or q.shape[1] != n:
+        raise ValueError(f"q: expected shape (N, {n}) joint readings, got {q.shape}")
+    if not np.all(np.isfinite(q)):
+        raise ValueError("q: joint readings must be finite")
+    return q
+
+
+@dataclass(frozen=True, eq=False)
+class IdentifiedModel:
+    """An identified error model as a :class:`PoseModel` (module docstring).
+
+    ``error_model``: the identified :class:`ErrorModel` (e.g.
+    ``CalibrationResult.model``); ``tool``: the compensated point in the flange frame
+    of the identified chain, default the identified PROBE (the T-MAC).
+    """
+
+    error_model: ErrorModel
+    tool: Array = field(default=None)  # type: ignore[assignment]
+
+    def __post_init__(self) -> None:
+        em = self.error_model
+        tool = em.probe() if self.tool is None else np.array(self.tool, dtype=float)
+        if tool.shape != (4, 4) or not np.all(np.isfinite(tool)):
+            raise ValueError(f"tool: expected a finite 4x4 transform, got shape {tool.shape}")
+        tool.setflags(write=False)
+        object.__setattr__(self, "tool", tool)
+        object.__setattr__(self, "_params", em.geometric_parameters())
+        base = em.base()
+        base.setflags(write=False)
+        probe = em.probe()
+        probe.setflags(write=False)
+        object.__setattr__(self, "_base", base)
+        object.__setattr__(self, "_probe", probe)
+
+    @property
+    def description(self) -> RobotDescription:
+        """The robot as described (joint readings are in its ``actuated`` order)."""
+        return self.error_model.structure.source
+
+    @property
+    def base(self) -> Array:
+        """Identified BASE: the robot base frame in the measurement (tracker) frame."""
+        return self._base  # type: ignore[attr-defined,no-any-return]
+
+    @property
+    def probe(self) -> Array:
+        """Identified PROBE: the reflector in the flange frame."""
+        return self._probe  # type: ignore[attr-defined,no-any-return]
+
+    def evaluate(self, q: ArrayLike, payload_kg: ArrayLike | float = 0.0) -> tuple[Array, Array]:
+        """Tool poses ``(N, 4, 4)`` in the robot base frame and Jacobian ``(N, 6, n)``."""
+        em = self.error_model
+        qb = _as_batch(q, em.structure.n_readings)
+        batch = em.batch(qb, payload_kg)
+        s = em.structure
+        fk = forward(s.desc, self._params, em.chain_joints(batch), closure="fourbar")  # type: ignore[attr-defined]
+        T = fk.flange @ self.tool
+        J = jacobian_from_fk(s.desc, fk, "flange")
+        J = shift_jacobian(J, fk.flange[:, :3, 3], T[:, :3, 3]) @ s.reading_map
+        return T, J
+
+    def pose(self, q: ArrayLike, payload_kg: ArrayLike | float = 0.0) -> Array:
+        """Tool poses ``(N, 4, 4)`` in the robot base frame."""
+        return self.evaluate(q, payload_kg)[0]
+
+    def predict_measurement(self, q: ArrayLike, payload_kg: ArrayLike | float = 0.0) -> Array:
+        """The reflector pose the tracker should read, ``BASE · T_n^0 · PROBE`` (eq. 6.23)."""
+        T = self.pose(q, payload_kg)
+        return self.base @ T @ invert(self.tool) @ self.probe
+
+
+@dataclass(frozen=True, eq=False)
+class NominalModel:
+    """The controller's nominal model (description parameters) with a tool, as a
+    :class:`PoseModel`.  Payload and deflections are ignored, as a controller does."""
+
+    desc: RobotDescription
+    tool: Array = field(default=None)  # type: ignore[assignment]
+    params: GeometricParameters | None = None
+
+    def __post_init__(self) -> None:
+        tool = np.eye(4) if self.tool is None else np.array(self.tool, dtype=float)
+        if tool.shape != (4, 4) or not np.all(np.isfinite(tool)):
+            raise ValueError(f"tool: expected a finite 4x4 transform, got shape {tool.shape}")
+        tool.setflags(write=False)
+        object.__setattr__(self, "tool", tool)
+        p = self.desc.nominal_parameters() if self.params is None else self.params
+        object.__setattr__(self, "params", p.replace(tool=tool))
+
+    @property
+    def description(self) -> RobotDescription:
+        return self.desc
+
+    def evaluate(self, q: ArrayLike, payload_kg: ArrayLike | float = 0.0) -> tuple[Array, Array]:
+        """Tool poses ``(N, 4, 4)`` in the robot base frame and Jacobian ``(N, 6, n)``."""
+        qb = _as_batch(q, self.desc.n_actuated)
+        fk = forward(self.desc, self.params, qb)
+        return fk.tcp, jacobian_from_fk(self.desc, fk, "tcp")
+
+    def pose(self, q: ArrayLike, payload_kg: ArrayLike | float = 0.0) -> Array:
+        return self.evaluate(q, payload_kg)[0]

@@ -1,0 +1,102 @@
+"""Program filtering: an offline robot program's Cartesian targets → compensated joints.
+
+This is what a user does with a calibrated robot before sending an offline program to
+a controller whose kinematic model cannot be changed (thesis 4.2.1.3: "modification
+is not allowable. Error compensation thereby is usually done by means of software"):
+every Cartesian target is replaced by the joint target that the identified model
+says reaches it (6.5.1).
+
+A target is a position (metres) and an orientation (radians) in one of the angle
+conventions of :mod:`plugcell.kinematics.rotations` — Comau Euler ``"zyz"`` (A, B, C,
+eq. A.4) or roll-pitch-yaw ``"rpy"`` — expressed in the robot base frame or in a
+*user frame* (a Comau ``$UFRAME``: the user frame's pose in the robot base frame,
+``T_robot = UFRAME · T_user``).  The targets are tool-point poses, see
+:mod:`plugcell.compensation.model`.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from plugcell.compensation.model import PoseModel
+from plugcell.compensation.model_based import (
+    MAX_ITERATIONS,
+    TOLERANCE,
+    CompensationResult,
+    compensate,
+)
+from plugcell.kinematics.rotations import matrix_to_angles, pose_to_matrix
+
+Array = NDArray[np.float64]
+
+__all__ = ["filter_program", "frame_matrix", "joint_program", "target_poses"]
+
+
+def frame_matrix(xyz: ArrayLike, angles: ArrayLike, convention: str = "zyz") -> Array:
+    """A frame (e.g. a user frame) from its position (m) and angles (rad): ``(4, 4)``."""
+    xyz = np.asarray(xyz, dtype=float)
+    angles = np.asarray(angles, dtype=float)
+    if xyz.shape != (3,) or angles.shape != (3,):
+        raise ValueError("a frame needs 3 coordinates and 3 angles")
+    if not (np.all(np.isfinite(xyz)) and np.all(np.isfinite(angles))):
+        raise ValueError("frame values must be finite")
+    return pose_to_matrix(xyz, angles, convention)
+
+
+def target_poses(
+    positions: ArrayLike,
+    angles: ArrayLike,
+    convention: str = "zyz",
+    user_frame: ArrayLike | None = None,
+) -> Array:
+    """Targets ``(N, 3)`` positions (m) + ``(N, 3)`` angles (rad) → ``(N, 4, 4)`` poses in
+    the robot base frame (``UFRAME · T_user`` when ``user_frame`` is given)."""
+    p = np.atleast_2d(np.asarray(positions, dtype=float))
+    a = np.atleast_2d(np.asarray(angles, dtype=float))
+    if p.shape[-1] != 3 or a.shape != p.shape or p.ndim != 2:
+        raise ValueError(f"positions and angles must both be (N, 3), got {p.shape} and {a.shape}")
+    if not (np.all(np.isfinite(p)) and np.all(np.isfinite(a))):
+        raise ValueError("target values must be finite")
+    T = pose_to_matrix(p, a, convention)
+    if user_frame is not None:
+        U = np.asarray(user_frame, dtype=float)
+        if U.shape != (4, 4) or not np.all(np.isfinite(U)):
+            raise ValueError(f"user_frame: expected a finite 4x4 transform, got {U.shape}")
+        T = U @ T
+    return T
+
+
+def filter_program(
+    model: PoseModel,
+    positions: ArrayLike,
+    angles: ArrayLike,
+    convention: str = "zyz",
+    *,
+    user_frame: ArrayLike | None = None,
+    payload_kg: ArrayLike | float = 0.0,
+    seed: ArrayLike | None = None,
+    tol: float = TOLERANCE,
+    max_iterations: int = MAX_ITERATIONS,
+    raise_errors: bool = True,
+) -> CompensationResult:
+    """Compensated joint targets for a program's Cartesian targets (module docstring).
+
+    Nominal IK (the controller's ``POS_TO_JNTP``) then 6.5.1 on ``model``, vectorised
+    over the targets.  ``payload_kg`` per target or one for all.  With
+    ``raise_errors=False`` the failing targets are marked in the result.
+    """
+    T = target_poses(positions, angles, convention, user_frame)
+    return compensate(model, T, payload_kg, seed=seed, tol=tol, max_iterations=max_iterations,
+                      raise_errors=raise_errors)
+
+
+def joint_program(result: CompensationResult, *, degrees: bool = True) -> Array:
+    """The compensated joint targets ``(N, n)`` to send (degrees by default, as a
+    controller's joint positions)."""
+    return np.degrees(result.q) if degrees else result.q.copy()
+
+
+def pose_angles(T: ArrayLike, convention: str = "zyz") -> Array:
+    """Angles ``(N, 3)`` (rad) of poses — the inverse of :func:`target_poses`' rotation."""
+    return matrix_to_angles(np.asarray(T, dtype=float)[..., :3, :3], convention)

@@ -1,0 +1,89 @@
+"""The small device interfaces the sensor-based correction talks to (thesis 6.5.2, 8.3.2).
+
+The correction loop must not know whether it drives the digital twin, a robot
+service over Zenoh, or a real controller, nor which metrology system measures —
+the thesis makes the same point for its ``SENSOR_COM`` routine (8.3.2: "if another
+sensor is used instead of the laser tracker, the technician only has to modify the
+relevant commands").  So it sees four :class:`typing.Protocol` interfaces:
+
+* :class:`JointRobot` — read the joint readings, move to joint targets (the
+  corrective move of the 6-DOF loop, Fig. 6-11);
+* :class:`CartesianRobot` — in addition a relative linear move of the TCP along a
+  vector in the robot base frame (the 3-DOF loop, Fig. 6-12: "executes a relative
+  movement along this vector", done by the controller with its own model);
+* :class:`PoseSensor` / :class:`PositionSensor` — one measurement of a given
+  integration time, expressed **in the robot base frame at the tool point**
+  (:class:`~plugcell.compensation.frames.RobotFrameSensor` turns a tracker-frame
+  device into one with the identified BASE and PROBE).
+
+Every call reports how long it took (seconds of device time — simulated for the
+twin, wall-clock for a real device), so the loop can account for the cycle time
+per point without a clock of its own.  A device that cannot deliver raises
+:class:`~plugcell.compensation.errors.SensorError` (sensor) or any exception
+(robot); the loop turns both into a ``CorrectionError`` with the reason.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Protocol, runtime_checkable
+
+import numpy as np
+from numpy.typing import NDArray
+
+Array = NDArray[np.float64]
+
+__all__ = ["CartesianRobot", "JointRobot", "PoseSensor", "PositionSensor", "Reading"]
+
+
+@dataclass(frozen=True, eq=False)
+class Reading:
+    """One measurement: ``position`` ``(3,)`` (m), ``pose`` ``(4, 4)`` or ``None`` for a
+    3-DOF device, the integration time ``duration_s`` and the time the whole reading
+    took, ``elapsed_s`` (acquisition, integration, transfer)."""
+
+    position: Array
+    pose: Array | None
+    duration_s: float
+    elapsed_s: float
+
+
+@runtime_checkable
+class JointRobot(Protocol):
+    """A robot that reports its joint readings and moves to joint targets (radians)."""
+
+    def read_joints(self) -> Array:
+        """Current joint readings ``(n,)`` in the description's actuated order."""
+        ...
+
+    def move_joints(self, q: Array) -> float:
+        """Move to joint readings ``q`` ``(n,)``; returns the time the move took (s)."""
+        ...
+
+
+@runtime_checkable
+class CartesianRobot(JointRobot, Protocol):
+    """A :class:`JointRobot` that also makes relative linear TCP moves."""
+
+    def move_relative(self, dp: Array) -> float:
+        """Move the TCP by ``dp`` ``(3,)`` metres along the robot base axes, keeping its
+        orientation (the controller's own kinematics); returns the time taken (s)."""
+        ...
+
+
+@runtime_checkable
+class PoseSensor(Protocol):
+    """A 6-DOF metrology system (a tracker with a T-MAC)."""
+
+    def measure_pose(self, duration_s: float) -> Reading:
+        """One reading of the tool pose in the robot base frame."""
+        ...
+
+
+@runtime_checkable
+class PositionSensor(Protocol):
+    """A 3-DOF metrology system (a tracker with an SMR)."""
+
+    def measure_position(self, duration_s: float) -> Reading:
+        """One reading of the tool position in the robot base frame."""
+        ...

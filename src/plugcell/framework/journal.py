@@ -1,0 +1,260 @@
+"""The journal: every process and every update in SQLite (WAL), per service.
+
+A cell controller in the thesis "monitors and visualizes the evolution of the
+generated processes, including their statuses and data" (7.6, Figure 7-11); the
+journal is that record, made durable.  Each service writes its own file
+``<home>/cells/<cell>/journal/<service>.sqlite`` (no lock contention between
+services); :func:`read_journal` merges them.
+
+Durability rules (what "killing a service loses nothing it acknowledged" means):
+
+* a process row is **committed before its acknowledgement is sent**;
+* every update is **committed before it is published** — the updates produced in
+  one event-loop turn (a burst of MultipleData frames) share one commit.
+
+WAL with ``synchronous=NORMAL`` survives the death of the process (the OS has the
+pages); use ``durable=True`` (``synchronous=FULL``) to survive a power cut too.
+Checkpoints run in a background thread so a commit never stalls on one.  Only
+a summary of the data (type, size, and the values if small) is stored.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import os
+import sqlite3
+import threading
+import time
+from collections.abc import Iterable
+from pathlib import Path
+from typing import Any
+
+SCHEMA_VERSION = 1
+_SCHEMA = """
+CREATE TABLE IF NOT EXISTS meta (key TEXT PRIMARY KEY, value TEXT);
+CREATE TABLE IF NOT EXISTS processes (  -- append-only: later states are updates
+    recipient TEXT NOT NULL, sender TEXT NOT NULL, identifier INTEGER NOT NULL,
+    recipient_instance TEXT, sender_instance TEXT,
+    command TEXT, option TEXT, command_type TEXT, input TEXT,
+    received_ns INTEGER, acked_ns INTEGER,
+    state TEXT NOT NULL, reason TEXT NOT NULL DEFAULT '',
+    PRIMARY KEY (recipient, sender, identifier));
+CREATE TABLE IF NOT EXISTS updates (
+    recipient TEXT NOT NULL, sender TEXT NOT NULL, identifier INTEGER NOT NULL,
+    seq INTEGER NOT NULL, t_ns INTEGER NOT NULL, state TEXT NOT NULL,
+    reason TEXT NOT NULL DEFAULT '', data TEXT NOT NULL DEFAULT '',
+    PRIMARY KEY (recipient, sender, identifier, seq));
+CREATE TABLE IF NOT EXISTS rejections (
+    recipient TEXT NOT NULL, t_ns INTEGER NOT NULL, sender TEXT, identifier INTEGER,
+    command TEXT, size INTEGER, reason TEXT NOT NULL);
+"""
+
+
+def plugcell_home() -> Path:
+    """``$PLUGCELL_HOME``, else ``$XDG_STATE_HOME/plugcell``, else ``~/.local/state/plugcell``."""
+    if os.environ.get("PLUGCELL_HOME"):
+        return Path(os.environ["PLUGCELL_HOME"])
+    state = os.environ.get("XDG_STATE_HOME") or str(Path.home() / ".local" / "state")
+    return Path(state) / "plugcell"
+
+
+def journal_dir(cell: str, home: Path | None = None) -> Path:
+    """Directory holding the journals of ``cell``."""
+    return (home or plugcell_home()) / "cells" / cell / "journal"
+
+
+class Journal:
+    """The journal of one service (written from its event loop only)."""
+
+    def __init__(self, path: Path, owner: str, *, durable: bool = False) -> None:
+        self.path = path
+        self.owner = owner
+        path.parent.mkdir(parents=True, exist_ok=True)
+        self._db = _connect(path)
+        self._db.execute(f"PRAGMA synchronous={'FULL' if durable else 'NORMAL'}")
+        self._db.execute("PRAGMA wal_autocheckpoint=0")
+        self._db.executescript(_SCHEMA)
+        self._db.execute(
+            "INSERT OR REPLACE INTO meta VALUES ('schema_version', ?)", (str(SCHEMA_VERSION),)
+        )
+        self._pending: list[tuple[Any, ...]] = []
+        self._stop = threading.Event()
+        self._checkpointer = threading.Thread(
+            target=self._checkpoint_loop, name=f"journal-checkpoint-{owner}", daemon=True
+        )
+        self._checkpointer.start()
+
+    # -- writing ---------------------------------------------------------------------
+
+    def record_process(
+        self,
+        *,
+        sender: str,
+        identifier: int,
+        sender_instance: str,
+        recipient_instance: str,
+        command: str,
+        option: str,
+        command_type: str,
+        input_summary: str,
+        received_ns: int,
+        state: str,
+        reason: str = "",
+    ) -> None:
+        """A process accepted (Queued) or refused (Failed) by this service.
+
+        Commit before acknowledging it.  Its later states are its updates.
+        """
+        self._db.execute(
+            "INSERT INTO processes (recipient, sender, identifier, recipient_instance,"
+            " sender_instance, command, option, command_type, input, received_ns, acked_ns,"
+            " state, reason) VALUES (?,?,?,?,?,?,?,?,?,?,?,?,?)",
+            (
+                self.owner,
+                sender,
+                identifier,
+                recipient_instance,
+                sender_instance,
+                command,
+                option,
+                command_type,
+                input_summary,
+                received_ns,
+                time.time_ns(),
+                state,
+                reason,
+            ),
+        )
+
+    def record_update(
+        self, sender: str, identifier: int, seq: int, state: str, reason: str, data: str
+    ) -> None:
+        """One ProcessUpdate (queued; written by the next :meth:`commit`)."""
+        self._pending.append(
+            (self.owner, sender, identifier, seq, time.time_ns(), state, reason, data)
+        )
+
+    def record_rejection(
+        self,
+        sender: str | None,
+        identifier: int | None,
+        command: str | None,
+        size: int,
+        reason: str,
+    ) -> None:
+        """A CreateProcess refused before it became a process."""
+        self._db.execute(
+            "INSERT INTO rejections VALUES (?,?,?,?,?,?,?)",
+            (self.owner, time.time_ns(), sender, identifier, command, size, reason),
+        )
+
+    def flush(self) -> None:
+        """Write queued update rows (inside the current transaction)."""
+        if self._pending:
+            rows, self._pending = self._pending, []
+            self._db.executemany("INSERT INTO updates VALUES (?,?,?,?,?,?,?,?)", rows)
+
+    def commit(self) -> None:
+        """Make everything recorded so far durable."""
+        self.flush()
+        if self._db.in_transaction:
+            self._db.commit()
+
+    def recover(self, reason: str) -> int:
+        """Close processes a previous incarnation left unfinished with a Failed update."""
+        self.commit()
+        cur = self._db.execute(
+            "INSERT INTO updates SELECT p.recipient, p.sender, p.identifier,"
+            " COALESCE((SELECT MAX(u.seq) FROM updates u WHERE u.recipient = p.recipient"
+            " AND u.sender = p.sender AND u.identifier = p.identifier), 0) + 1,"
+            " ?, 'Failed', ?, '' FROM processes p WHERE p.recipient = ? AND p.state = 'Queued'"
+            " AND NOT EXISTS (SELECT 1 FROM updates u WHERE u.recipient = p.recipient"
+            " AND u.sender = p.sender AND u.identifier = p.identifier"
+            " AND u.state IN ('Completed', 'Failed'))",
+            (time.time_ns(), reason, self.owner),
+        )
+        self._db.commit()
+        return cur.rowcount
+
+    def close(self) -> None:
+        """Commit, checkpoint and close."""
+        self._stop.set()
+        self._checkpointer.join(timeout=5)
+        with contextlib.suppress(sqlite3.Error):
+            self.commit()
+            self._db.execute("PRAGMA wal_checkpoint(TRUNCATE)")
+        self._db.close()
+
+    def _checkpoint_loop(self) -> None:
+        db = _connect(self.path)
+        try:
+            while not self._stop.wait(0.5):
+                with contextlib.suppress(sqlite3.Error):
+                    db.execute("PRAGMA wal_checkpoint(PASSIVE)")
+        finally:
+            db.close()
+
+
+def _connect(path: Path) -> sqlite3.Connection:
+    db = sqlite3.connect(path, check_same_thread=False, timeout=10.0)
+    db.execute("PRAGMA journal_mode=WAL")
+    db.execute("PRAGMA busy_timeout=10000")
+    return db
+
+
+# -- reading ---------------------------------------------------------------------------
+
+
+def journal_files(cell: str, home: Path | None = None) -> list[Path]:
+    """The journal files of ``cell`` on this machine."""
+    folder = journal_dir(cell, home)
+    return sorted(folder.glob("*.sqlite")) if folder.is_dir() else []
+
+
+def read_journal(paths: Iterable[Path]) -> list[dict[str, Any]]:
+    """All processes of the given journals, oldest first, each with its updates.
+
+    A process's ``state``, ``reason`` and ``finished_ns`` are those of its last
+    update (``Queued`` if it has none); refused requests have ``rejected: True``.
+    """
+    out: list[dict[str, Any]] = []
+    for path in paths:
+        db = sqlite3.connect(path, timeout=10.0)
+        db.row_factory = sqlite3.Row
+        try:
+            procs = [dict(r) for r in db.execute("SELECT * FROM processes")]
+            by_key: dict[tuple[str, str, int], list[dict[str, Any]]] = {}
+            for r in db.execute("SELECT * FROM updates ORDER BY seq"):
+                row = dict(r)
+                key = (row.pop("recipient"), row.pop("sender"), row.pop("identifier"))
+                by_key.setdefault(key, []).append(row)
+            for p in procs:
+                updates = by_key.get((p["recipient"], p["sender"], p["identifier"]), [])
+                p["updates"] = updates
+                if updates:
+                    last = updates[-1]
+                    p["state"], p["reason"] = last["state"], last["reason"]
+                    if last["state"] in ("Completed", "Failed"):
+                        p["finished_ns"] = last["t_ns"]
+                elif p["state"] == "Failed":
+                    p["finished_ns"] = p["acked_ns"]
+            for r in db.execute("SELECT * FROM rejections"):
+                row = dict(r)
+                out.append(
+                    {
+                        "recipient": row["recipient"],
+                        "sender": row["sender"],
+                        "identifier": row["identifier"],
+                        "command": row["command"],
+                        "received_ns": row["t_ns"],
+                        "state": "Failed",
+                        "reason": row["reason"],
+                        "rejected": True,
+                        "updates": [],
+                    }
+                )
+            out.extend(procs)
+        finally:
+            db.close()
+    out.sort(key=lambda p: p.get("received_ns") or 0)
+    return out

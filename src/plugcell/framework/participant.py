@@ -1,0 +1,604 @@
+"""A participant of a cell: Zenoh session, presence, partners and outbound processes.
+
+This is the *male adapter* side of every service (thesis 4.1.3.1, Figure 4-3):
+the dynamic array of partners (``genericPort``/``genericNotify`` of 5.2.3.3) and
+the outbound message handling of 5.2.3.6 — subscribing to a partner fetches its
+DeviceInfo with ``Get``, ``create_process`` looks the command up in the partner's
+catalogue, converts the data to the declared type and size, sends
+``CreateProcess`` and returns a :class:`ProcessCall`.  A plain client (the CLI, a
+script, a test) is a participant without the inbound side; a service
+(:class:`~plugcell.framework.service.GenericDevice`) adds it.
+
+Presence uses Zenoh liveliness tokens: a participant that dies without a
+``Shutdown`` is noticed (its token disappears), its partners are removed and the
+processes waiting on it end Failed with the reason.
+
+Threading: all state lives in one asyncio event loop.  Zenoh callbacks only post
+to a :class:`~plugcell.framework.port.Port`; one pump task handles the items.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import itertools
+import logging
+import os
+import re
+import socket
+import time
+from collections.abc import AsyncIterator, Callable
+from dataclasses import dataclass, field
+from typing import Any, ClassVar
+
+import msgspec
+import zenoh
+from zenoh.handlers import Callback
+
+from plugcell.framework import wire
+from plugcell.framework.data import DataError, to_data
+from plugcell.framework.keys import DEFAULT_CELL, KeySpace, Presence, Role, check_name
+from plugcell.framework.model import (
+    Acknowledgement,
+    Command,
+    CommandTypes,
+    Data,
+    Device,
+    GenericDeviceState,
+    GetRequest,
+    Message,
+    Process,
+    ProcessUpdateNotification,
+    ShutdownNotification,
+    SubscribeRequest,
+    SubscribeResponse,
+    Tag,
+    UnsubscribeRequest,
+)
+from plugcell.framework.port import Port
+from plugcell.framework.process_call import ProcessCall
+from plugcell.framework.transport import TransportConfig, open_session
+
+log = logging.getLogger("plugcell.framework")
+
+#: How long ``create_process`` waits for an unknown partner to appear before failing.
+DISCOVERY_GRACE = 1.0
+
+
+class PartnerError(RuntimeError):
+    """A partner could not be reached or refused; the message is the reason."""
+
+
+@dataclass
+class Partner:
+    """One entry of the Partners array (Table 5-1) with its notification subscriber."""
+
+    device: Device
+    instance: str
+    subscriber: Any = None
+
+
+@dataclass(frozen=True)
+class PresenceEvent:
+    """A participant joined or left the cell (``kind`` is ``"join"`` or ``"leave"``)."""
+
+    kind: str
+    presence: Presence
+
+
+@dataclass
+class _Pending:
+    replies: list[Any] = field(default_factory=list)
+    done: asyncio.Future[None] | None = None
+
+
+_client_numbers = itertools.count(1)
+
+
+def default_client_name(prefix: str = "client") -> str:
+    """A unique name for a client: ``<prefix>-<host>-<pid>`` (``-<n>`` after the first)."""
+    host = re.sub(r"[^A-Za-z0-9_.\-]", "-", socket.gethostname())[:24] or "host"
+    n = next(_client_numbers)
+    return f"{prefix}-{host}-{os.getpid()}" + (f"-{n}" if n > 1 else "")
+
+
+class Participant:
+    """Everything that takes part in a cell (clients and, by subclassing, services)."""
+
+    role: ClassVar[Role] = "client"
+
+    def __init__(
+        self,
+        name: str | None = None,
+        *,
+        cell: str = DEFAULT_CELL,
+        transport: TransportConfig | None = None,
+    ) -> None:
+        self.name = check_name(name or default_client_name(), "participant name")
+        self.keys = KeySpace(cell)
+        self.transport = transport or TransportConfig.from_env()
+        self.instance = ""
+        self.partners: dict[str, Partner] = {}
+        self.alive: dict[tuple[str, str], set[str]] = {}
+        """``(role, name)`` → live instances, from liveliness tokens."""
+        self.session: zenoh.Session | None = None
+        self._loop: asyncio.AbstractEventLoop | None = None
+        self._port: Port[tuple[Callable[[Any], None], Any]] | None = None
+        self._pump_task: asyncio.Task[None] | None = None
+        self._entities: list[Any] = []
+        self._token: Any = None
+        self._calls: dict[tuple[str, int], ProcessCall] = {}
+        self._last_id = 0
+        self._presence_changed = asyncio.Event()
+        self._watchers: set[asyncio.Queue[PresenceEvent]] = set()
+        self._closed = False
+        self._started = False
+
+    # -- life cycle ----------------------------------------------------------------------
+
+    async def start(self) -> None:
+        """Open the session, watch presence, declare what a subclass needs, then go live."""
+        self._loop = asyncio.get_running_loop()
+        self._port = Port(self._loop)
+        self._pump_task = asyncio.create_task(self._pump(), name=f"{self.name}-pump")
+        self.session = await asyncio.to_thread(open_session, self.transport)
+        self.instance = str(self.session.zid())
+        self._entities.append(
+            self.session.declare_subscriber(
+                self.keys.process_for(self.name), self._callback(self._on_process_update)
+            )
+        )
+        self._entities.append(
+            self.session.liveliness().declare_subscriber(
+                self.keys.live_all(), self._callback(self._on_liveliness), history=True
+            )
+        )
+        await self._declare()
+        self._token = self.session.liveliness().declare_token(
+            self.keys.live(self.role, self.name, self.instance)
+        )
+        self._started = True
+
+    async def _declare(self) -> None:
+        """Hook: a service declares its queryables here, before its token goes live."""
+
+    async def close(self) -> None:
+        """Fail what still waits, withdraw the token and close the session."""
+        if self._closed:
+            return
+        self._closed = True
+        for call in list(self._calls.values()):
+            call._fail(f"{self.name} is closing")
+        self._calls.clear()
+        session = self.session
+        if session is not None:
+            with contextlib.suppress(zenoh.ZError):
+                if self._token is not None:
+                    self._token.undeclare()
+                for partner in self.partners.values():
+                    if partner.subscriber is not None:
+                        partner.subscriber.undeclare()
+                for entity in reversed(self._entities):
+                    entity.undeclare()
+            await asyncio.to_thread(session.close)
+        self.partners.clear()
+        if self._port is not None:
+            self._port.close()
+        if self._pump_task is not None:
+            await self._pump_task
+
+    async def __aenter__(self) -> Participant:
+        await self.start()
+        return self
+
+    async def __aexit__(self, *exc: object) -> None:
+        await self.close()
+
+    # -- plumbing --------------------------------------------------------------------------
+
+    def _callback(self, handler: Callable[[Any], None]) -> Callback:
+        """A Zenoh callback that only enqueues ``(handler, item)`` (Zenoh forbids more)."""
+        port = self._port
+        assert port is not None
+        post = port.post
+        return Callback(lambda item: post((handler, item)), indirect=False)
+
+    def _query_callback(self, pending: _Pending) -> Callback:
+        port = self._port
+        assert port is not None
+        post = port.post
+
+        def reply(item: Any) -> None:
+            pending.replies.append(item)
+
+        def done(_: Any) -> None:
+            if pending.done is not None and not pending.done.done():
+                pending.done.set_result(None)
+
+        return Callback(lambda r: post((reply, r)), lambda: post((done, None)), indirect=False)
+
+    async def _pump(self) -> None:
+        assert self._port is not None
+        while True:
+            items = await self._port.receive_all()
+            if not items:
+                return
+            for handler, item in items:
+                try:
+                    handler(item)
+                except Exception:  # a bad message must not stop the participant
+                    log.exception("%s: error handling %s", self.name, handler.__name__)
+
+    def _encode(self, body: Message) -> bytes:
+        return wire.encode(self.name, self.instance, body)
+
+    async def _query(
+        self, key: str, body: Message | None, timeout: float, *, everyone: bool = False
+    ) -> list[wire.Envelope | str]:
+        """Send one Zenoh query; each reply decoded, or the error text of a bad one."""
+        assert self.session is not None and self._loop is not None
+        pending = _Pending(done=self._loop.create_future())
+        self.session.get(
+            key,
+            self._query_callback(pending),
+            payload=self._encode(body) if body is not None else None,
+            timeout=timeout,
+            target=zenoh.QueryTarget.ALL if everyone else zenoh.QueryTarget.BEST_MATCHING,
+            consolidation=zenoh.QueryConsolidation(zenoh.ConsolidationMode.NONE),
+        )
+        with contextlib.suppress(TimeoutError):
+            await asyncio.wait_for(asyncio.shield(pending.done), timeout + 1.0)  # type: ignore[arg-type]
+        out: list[wire.Envelope | str] = []
+        for reply in list(pending.replies):
+            if reply.ok is None:
+                out.append(_text(reply.err.payload.to_bytes()) if reply.err else "error reply")
+                continue
+            try:
+                out.append(wire.decode(reply.ok.payload.to_bytes()))
+            except wire.WireError as exc:
+                out.append(str(exc))
+        return out
+
+    def _next_identifier(self) -> int:
+        self._last_id = max(self._last_id + 1, time.time_ns())
+        return self._last_id
+
+    # -- presence ------------------------------------------------------------------------
+
+    def _on_liveliness(self, sample: zenoh.Sample) -> None:
+        presence = self.keys.parse_live(str(sample.key_expr))
+        if presence is None:
+            return
+        key = (presence.role, presence.name)
+        if sample.kind == zenoh.SampleKind.PUT:
+            self.alive.setdefault(key, set()).add(presence.instance)
+            event = PresenceEvent("join", presence)
+        else:
+            instances = self.alive.get(key, set())
+            instances.discard(presence.instance)
+            if not instances:
+                self.alive.pop(key, None)
+            event = PresenceEvent("leave", presence)
+            self._on_left(presence)
+        self._presence_changed.set()
+        for queue in list(self._watchers):
+            queue.put_nowait(event)
+
+    def _on_left(self, presence: Presence) -> None:
+        """A participant's token disappeared: drop it as a partner, fail what waits on it."""
+        if presence.role != "service":
+            return
+        partner = self.partners.get(presence.name)
+        reason = f"service {presence.name} lost (liveliness token withdrawn)"
+        if partner is not None and partner.instance == presence.instance:
+            self._drop_partner(presence.name)
+        self._fail_calls(presence.name, presence.instance, reason)
+
+    def _fail_calls(self, partner: str, instance: str | None, reason: str) -> None:
+        for key, call in list(self._calls.items()):
+            if call.partner == partner and (instance is None or call.instance in ("", instance)):
+                call._fail(reason)
+                self._calls.pop(key, None)
+
+    def services(self) -> list[str]:
+        """Names of the services currently alive in the cell."""
+        return sorted(name for role, name in self.alive if role == "service")
+
+    def is_alive(self, name: str, role: Role = "service") -> bool:
+        return (role, name) in self.alive
+
+    async def wait_for(self, name: str, timeout: float = 10.0, role: Role = "service") -> bool:
+        """Wait until ``name`` is alive in the cell; False after ``timeout`` seconds."""
+        deadline = time.monotonic() + timeout
+        while not self.is_alive(name, role):
+            remaining = deadline - time.monotonic()
+            if remaining <= 0:
+                return False
+            self._presence_changed.clear()
+            with contextlib.suppress(TimeoutError):
+                await asyncio.wait_for(self._presence_changed.wait(), remaining)
+        return True
+
+    async def wait_gone(self, name: str, timeout: float = 10.0, role: Role = "service") -> bool:
+        """Wait until no instance of ``name`` is alive; False after ``timeout`` seconds."""
+        deadline = time.monotonic() + timeout
+        while self.is_alive(name, role):
+            remaining = deadline - time.monotonic()
+            if remaining <= 0:
+                return False
+            self._presence_changed.clear()
+            with contextlib.suppress(TimeoutError):
+                await asyncio.wait_for(self._presence_changed.wait(), remaining)
+        return True
+
+    async def events(self) -> AsyncIterator[PresenceEvent]:
+        """Join/leave events from now on (iterate in a task; stop by breaking out)."""
+        queue: asyncio.Queue[PresenceEvent] = asyncio.Queue()
+        self._watchers.add(queue)
+        try:
+            while True:
+                yield await queue.get()
+        finally:
+            self._watchers.discard(queue)
+
+    # -- generic interface of others -------------------------------------------------------
+
+    async def get(self, name: str, timeout: float = 5.0) -> tuple[GenericDeviceState, str]:
+        """``Get`` on service ``name``: its generic state and the answering instance."""
+        check_name(name, "service name")
+        replies = await self._query(self.keys.get(name), GetRequest(), timeout)
+        for reply in replies:
+            if isinstance(reply, wire.Envelope) and isinstance(reply.body, GenericDeviceState):
+                return reply.body, reply.instance
+        if replies:
+            raise PartnerError(f"{name}: bad answer to Get: {replies[0]}")
+        raise PartnerError(f"unknown device {name!r}: no such service in cell {self.keys.cell!r}")
+
+    async def list_services(self, timeout: float = 3.0) -> list[GenericDeviceState]:
+        """Ask every service of the cell for its generic state (one wildcard Get)."""
+        replies = await self._query(self.keys.get("*"), GetRequest(), timeout, everyone=True)
+        states = [
+            r.body
+            for r in replies
+            if isinstance(r, wire.Envelope) and isinstance(r.body, GenericDeviceState)
+        ]
+        return sorted(states, key=lambda s: s.device_info.name)
+
+    async def subscribe(self, partner: str, timeout: float = 5.0) -> Device:
+        """Subscribe to ``partner`` (4.1.3.1): Get its DeviceInfo, add it to Partners."""
+        check_name(partner, "partner name")
+        if partner == self.name:
+            raise PartnerError(f"{self.name} cannot subscribe to itself")
+        if not self.is_alive(partner):
+            await self.wait_for(partner, min(timeout, DISCOVERY_GRACE))
+        state, instance = await self.get(partner, timeout)
+        assert self.session is not None
+        old = self.partners.pop(partner, None)
+        if old is not None and old.subscriber is not None:
+            old.subscriber.undeclare()
+        subscriber = self.session.declare_subscriber(
+            self.keys.notifications(partner), self._callback(self._on_notification)
+        )
+        self.partners[partner] = Partner(state.device_info, instance, subscriber)
+        return state.device_info
+
+    async def unsubscribe(self, partner: str) -> bool:
+        """Drop ``partner`` from Partners; its pending processes end Failed."""
+        found = self._drop_partner(partner)
+        self._fail_calls(partner, None, f"{self.name} unsubscribed from {partner}")
+        return found
+
+    def _drop_partner(self, name: str) -> bool:
+        partner = self.partners.pop(name, None)
+        if partner is None:
+            return False
+        if partner.subscriber is not None:
+            with contextlib.suppress(zenoh.ZError):
+                partner.subscriber.undeclare()
+        return True
+
+    def _on_notification(self, sample: zenoh.Sample) -> None:
+        try:
+            envelope = wire.decode(sample.payload.to_bytes())
+        except wire.WireError as exc:
+            log.warning("%s: bad notification on %s: %s", self.name, sample.key_expr, exc)
+            return
+        body = envelope.body
+        partner = self.partners.get(envelope.sender)
+        if isinstance(body, ShutdownNotification):
+            reason = f"service {body.name} shut down" + (f": {body.reason}" if body.reason else "")
+            if partner is not None and partner.instance == envelope.instance:
+                self._drop_partner(envelope.sender)
+            self._fail_calls(envelope.sender, envelope.instance, reason)
+        elif partner is not None:
+            self.on_partner_notification(envelope.sender, body)
+
+    def on_partner_notification(self, partner: str, body: Message) -> None:
+        """Hook: a StateUpdate/ConnectionUpdate of a partner (default: keep DeviceInfo current)."""
+        p = self.partners.get(partner)
+        if p is None:
+            return
+        state = getattr(body, "state", None)
+        connection = getattr(body, "connection", None)
+        if state is not None:
+            p.device.state = state
+        if connection is not None:
+            p.device.connection = connection
+
+    async def ask_subscribe(
+        self, service: str, partner: str, subscribe: bool = True, timeout: float = 10.0
+    ) -> SubscribeResponse:
+        """Make ``service`` subscribe to (or drop) ``partner`` at run time (``plugcell wire``)."""
+        body: Message = (
+            SubscribeRequest(partner=partner) if subscribe else UnsubscribeRequest(partner=partner)
+        )
+        replies = await self._query(self.keys.subscribe(service), body, timeout)
+        for reply in replies:
+            if isinstance(reply, wire.Envelope) and isinstance(reply.body, SubscribeResponse):
+                return reply.body
+        if replies:
+            return SubscribeResponse(ok=False, reason=f"bad answer from {service}: {replies[0]}")
+        return SubscribeResponse(
+            ok=False,
+            reason=f"unknown device {service!r}: no such service in cell {self.keys.cell!r}",
+        )
+
+    # -- outbound processes (5.2.3.6) ----------------------------------------------------
+
+    async def create_process(
+        self,
+        partner: str,
+        command: str,
+        option: str = "",
+        data: Any = None,
+        *,
+        timeout: float = 10.0,
+        check: bool = True,
+    ) -> ProcessCall:
+        """Create a process at ``partner`` and return it once acknowledged.
+
+        Subscribes to ``partner`` first if needed.  With ``check`` (default) the
+        command and data are checked against the partner's catalogue here, with
+        the same reasons the recipient would give; ``check=False`` sends as-is
+        (``data`` must then be a :class:`Data` or None) and lets the recipient judge.
+        A process that cannot be created is returned already Failed — this
+        method does not raise for bad input or a missing partner.
+        """
+        assert self._loop is not None and self.session is not None
+        identifier = self._next_identifier()
+        call = ProcessCall(self.name, partner, command, identifier, timeout, self._loop)
+        try:
+            process = await self._make_process(
+                partner, command, option, data, identifier, check, timeout
+            )
+        except (PartnerError, DataError, ValueError) as exc:
+            call._fail(str(exc))
+            return call
+        self._calls[(partner, identifier)] = call
+        call.sent_ns = time.perf_counter_ns()
+        pending = _Pending()
+        self.session.get(
+            self.keys.create(partner),
+            self._ack_callback(call, pending),
+            payload=self._encode(process),
+            timeout=timeout,
+        )
+        await call.acknowledged()
+        if call.final is not None:
+            self._calls.pop((partner, identifier), None)
+        return call
+
+    async def _make_process(
+        self,
+        partner: str,
+        command: str,
+        option: str,
+        data: Any,
+        identifier: int,
+        check: bool,
+        timeout: float,
+    ) -> Process:
+        check_name(partner, "service name")
+        if not check:
+            known = self.partners.get(partner)
+            cmd = (known.device.command(command) if known else None) or Command(name=command)
+            if data is not None and not isinstance(data, Data):
+                raise DataError("check=False needs data as a Data buffer or None")
+            return Process(
+                command=msgspec.structs.replace(cmd, option=option),
+                tag=Tag(self.name, partner),
+                identifier=identifier,
+                data=data,
+            )
+        if partner not in self.partners:
+            await self.subscribe(partner, timeout)
+        device = self.partners[partner].device
+        cmd = device.command(command)
+        if cmd is None:
+            known = ", ".join(c.name for c in device.commands) or "none"
+            raise PartnerError(f"unknown command {command!r} for {partner} (commands: {known})")
+        typed = to_data(data, cmd.input_data_type, cmd.input_data_size, f"{cmd.name} input")
+        return Process(
+            command=msgspec.structs.replace(cmd, option=option),
+            tag=Tag(self.name, partner),
+            identifier=identifier,
+            data=typed,
+        )
+
+    def _ack_callback(self, call: ProcessCall, pending: _Pending) -> Callback:
+        port = self._port
+        assert port is not None
+        post = port.post
+
+        def reply(r: Any) -> None:
+            if r.ok is None:
+                text = _text(r.err.payload.to_bytes()) if r.err else "error reply"
+                call._fail(f"{call.partner} answered CreateProcess with an error: {text}")
+                return
+            try:
+                envelope = wire.decode(r.ok.payload.to_bytes())
+            except wire.WireError as exc:
+                call._fail(f"bad acknowledgement from {call.partner}: {exc}")
+                return
+            if isinstance(envelope.body, Acknowledgement):
+                call._on_ack(envelope.body, envelope.instance)
+            else:
+                call._fail(
+                    f"bad acknowledgement from {call.partner}: {type(envelope.body).__name__}"
+                )
+            if call.final is not None:
+                self._calls.pop((call.partner, call.identifier), None)
+
+        def done(_: Any) -> None:
+            if call.ack is None:
+                reason = (
+                    f"unknown device {call.partner!r}: no service answered in cell "
+                    f"{self.keys.cell!r}"
+                    if not self.is_alive(call.partner)
+                    else f"no acknowledgement from {call.partner} within {call.timeout:g} s"
+                )
+                call._fail(reason)
+                self._calls.pop((call.partner, call.identifier), None)
+
+        return Callback(lambda r: post((reply, r)), lambda: post((done, None)), indirect=False)
+
+    def _on_process_update(self, sample: zenoh.Sample) -> None:
+        try:
+            envelope = wire.decode(sample.payload.to_bytes())
+        except wire.WireError as exc:
+            log.warning("%s: bad ProcessUpdate on %s: %s", self.name, sample.key_expr, exc)
+            return
+        update = envelope.body
+        if not isinstance(update, ProcessUpdateNotification):
+            return
+        call = self._calls.get((envelope.sender, update.identifier))
+        if call is None:
+            return
+        call._on_update(update, envelope.instance)
+        if call.final is not None:
+            self._calls.pop((envelope.sender, update.identifier), None)
+
+    async def stop(
+        self, call: ProcessCall, command: str | None = None, timeout: float | None = None
+    ) -> ProcessCall:
+        """Send the StopData command that ends ``call`` (a MultipleData process).
+
+        ``command`` defaults to the first StopData command of the partner's catalogue.
+        """
+        if command is None:
+            partner = self.partners.get(call.partner)
+            stops = [
+                c.name
+                for c in (partner.device.commands if partner else ())
+                if c.type is CommandTypes.StopData
+            ]
+            if not stops:
+                raise PartnerError(f"{call.partner} has no StopData command")
+            command = stops[0]
+        return await self.create_process(
+            call.partner, command, timeout=timeout if timeout is not None else call.timeout
+        )
+
+
+def _text(raw: bytes) -> str:
+    return raw.decode("utf-8", "replace")

@@ -1,0 +1,875 @@
+"""The GenericDevice service: the generic state and interface every service inherits.
+
+Thesis 4.1.3.1 and 5.2.2–5.2.3.  A service is a :class:`Participant` (partners,
+outbound processes) plus the *female adapter*, the Generic Interface (Table 5-2):
+
+* ``Get`` → the generic state: DeviceInfo with its command catalogue, Partners;
+* ``Subscribe``/``Unsubscribe`` a partner at run time (``plugcell wire``);
+* ``CreateProcess`` → acknowledgement, after the process is checked and journaled;
+* the notifications ``ProcessUpdate``, ``StateUpdate``, ``ConnectionUpdate``, ``Shutdown``.
+
+A device service is a small subclass following the CameraService template of
+5.2.3: it declares ``commands`` (its catalogue, as ``StateInitialize`` does) and
+implements the device interface layer of Figure 5-10 — the CommandDispatcher
+(:meth:`GenericDevice.dispatch`) and the FeedbackReceiver, which reports through
+the ports of Table 5-3: ``data_feedback``, ``cmd_feedback``, ``device_state`` and
+``connection_state``.  Queueing, re-scheduling, notifications, partners,
+discovery and the journal are inherited.
+
+The ProcessHandler (5.2.3.4, Figure 5-12) takes one process at a time from the
+:class:`~plugcell.framework.processqueue.ProcessQueue`: it posts Running, sets the
+device Busy, dispatches the command and waits — with the command's timeout — for
+the command feedback; data feedback becomes ProcessUpdates.  A MultipleData
+process holds the device until the StopData of the same sender (5.2.3.5), until
+its sender disappears, or until its timeout.
+
+Update sequence seen by the sender (plugcell makes every process end with exactly
+one final update):
+
+* NoData, StopData: Running → Completed | Failed
+* SingleData: Running → Completed with the data | Failed  (command + data feedback in
+  one notification, 5.2.1.1 b)
+* MultipleData: Running → Running with data × n → Completed once the StopData of the
+  same sender completes | Failed.  (In the thesis the MultipleData process reports
+  Completed on its command feedback and keeps streaming; here it stays Running.)
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import logging
+import threading
+import time
+from collections.abc import Callable
+from datetime import UTC, datetime
+from pathlib import Path
+from typing import Any, ClassVar, Generic, TypeVar
+
+import msgspec
+import zenoh
+
+from plugcell.framework import wire
+from plugcell.framework.data import DataError, check_data, from_data, summary, to_data
+from plugcell.framework.journal import Journal, journal_dir
+from plugcell.framework.keys import DEFAULT_CELL, Presence
+from plugcell.framework.model import (
+    Acknowledgement,
+    Command,
+    CommandTypes,
+    ConnectionStates,
+    ConnectionUpdateNotification,
+    Data,
+    Device,
+    DeviceStates,
+    GenericDeviceState,
+    Message,
+    Process,
+    ProcessStates,
+    ProcessUpdateNotification,
+    ShutdownNotification,
+    StateUpdateNotification,
+    SubscribeRequest,
+    SubscribeResponse,
+    UnsubscribeRequest,
+)
+from plugcell.framework.participant import Participant, PartnerError
+from plugcell.framework.processqueue import Entry, ProcessQueue
+from plugcell.framework.transport import TransportConfig
+
+log = logging.getLogger("plugcell.framework.service")
+
+T = TypeVar("T")
+
+
+class DeviceError(RuntimeError):
+    """Raised by a device interface: the process ends Failed with this message as reason."""
+
+
+class FeedbackPort(Generic[T]):
+    """One port of Table 5-3, fed by the device interface (``post`` from any thread)."""
+
+    def __init__(self, service: GenericDevice, handler: Callable[[T], None], name: str) -> None:
+        self._service = service
+        self._handler = handler
+        self.name = name
+
+    def post(self, value: T) -> None:
+        """Deliver ``value`` to the service's receiver (5.2.3.2)."""
+        loop = self._service._loop
+        if loop is None:
+            raise RuntimeError(f"{self.name}.post before the service started")
+        if threading.get_ident() == self._service._loop_thread:
+            self._handler(value)
+        else:
+            with contextlib.suppress(RuntimeError):  # loop closed: the service is gone
+                loop.call_soon_threadsafe(self._handler, value)
+
+
+class GenericDevice(Participant):
+    """Base of every service.  Subclass, declare ``commands``, implement :meth:`dispatch`."""
+
+    role = "service"
+    kind: ClassVar[str] = ""
+    """Registry name of the service kind (``plugcell serve KIND``)."""
+    default_name: ClassVar[str] = ""
+    """Device name when none is given (default: ``kind`` in capitals)."""
+    vendor: ClassVar[str] = ""
+    info: ClassVar[str] = ""
+    commands: ClassVar[tuple[Command, ...]] = ()
+    """The command catalogue (``state.DeviceInfo.Commands`` of StateInitialize, 5.2.3.3)."""
+    express_updates: ClassVar[bool] = False
+    """Send ProcessUpdates without batching (lower latency; see the transport benchmark)."""
+
+    def __init__(
+        self,
+        name: str | None = None,
+        *,
+        cell: str = DEFAULT_CELL,
+        transport: TransportConfig | None = None,
+        journal: bool | Path = True,
+        max_payload: int = wire.DEFAULT_MAX_PAYLOAD,
+    ) -> None:
+        super().__init__(
+            name or self.default_name or (self.kind or type(self).__name__).upper(),
+            cell=cell,
+            transport=transport,
+        )
+        _check_catalogue(type(self).__name__, self.commands)
+        self.device = Device(
+            name=self.name,
+            vendor=self.vendor,
+            info=self.info,
+            commands=tuple(self.commands),
+            kind=self.kind,
+            connection=ConnectionStates.Offline,
+            state=DeviceStates.Ready,
+        )
+        self.max_payload = max_payload
+        self._journal_setting = journal
+        self.journal: Journal | _NoJournal = _NoJournal()
+        # the ports of Table 5-3
+        self.data_feedback: FeedbackPort[Any] = FeedbackPort(self, self._on_data, "DataFeedback")
+        self.cmd_feedback: FeedbackPort[str] = FeedbackPort(self, self._on_cmd, "CmdFeedback")
+        self.device_state: FeedbackPort[DeviceStates] = FeedbackPort(
+            self, self._on_device_state, "DeviceState"
+        )
+        self.connection_state: FeedbackPort[ConnectionStates] = FeedbackPort(
+            self, self._on_connection_state, "ConnectionState"
+        )
+        self._loop_thread = 0
+        self._queue = ProcessQueue()
+        self._known: dict[tuple[str, int], Entry] = {}
+        self._departed: set[str] = set()
+        self._holder: Entry | None = None
+        self._measuring: Entry | None = None
+        self._single_data: list[Any] = []
+        self._cmd_waiter: asyncio.Future[str] | None = None
+        self._handler_task: asyncio.Task[None] | None = None
+        self._publishers: dict[str, Any] = {}
+        self._closing = False
+        self._flush_scheduled = False
+        self._outbox: list[tuple[Entry, ProcessStates, bool, bytes]] = []
+        self._notify_scheduled = False
+        self._notified = (DeviceStates.Ready, ConnectionStates.Offline)
+        self._create_queryable: Any = None
+        self.stray_feedback = 0
+        """Data/command feedback that arrived when no process expected it."""
+
+    # -- the device interface: override these (Figure 5-10, "Camera Interface") ---------
+
+    async def dispatch(self, command: Command, option: str, data: Any) -> str | None:
+        """CommandDispatcher: send ``command`` to the device.
+
+        ``data`` is the checked input (an n-D numpy array of the declared type and
+        size, or None).  Return the device's command feedback code (compared with
+        ``command.success_code``), or None if the device will post it later on
+        ``self.cmd_feedback``.  Report data on ``self.data_feedback``.  Raise
+        :class:`DeviceError` to fail the process with a reason.  For a MultipleData
+        command, start the stream and return; the StopData command stops it.
+        """
+        raise DeviceError(f"{type(self).__name__} does not implement {command.name}")
+
+    async def connect(self) -> None:
+        """Connect to the device controller at start-up (default: just report Online)."""
+        self.connection_state.post(ConnectionStates.Online)
+
+    async def disconnect(self) -> None:
+        """Disconnect at shutdown (default: report Offline)."""
+        self.connection_state.post(ConnectionStates.Offline)
+
+    # -- life cycle ----------------------------------------------------------------------
+
+    async def start(self) -> None:
+        """Go live in the cell, connect the device, run the ProcessHandler."""
+        self._loop_thread = threading.get_ident()
+        try:
+            await super().start()
+            await self.connect()
+        except BaseException:
+            await self.close()
+            raise
+        self._handler_task = asyncio.create_task(self._process_handler(), name=f"{self.name}-ph")
+
+    async def _declare(self) -> None:
+        """Refuse a duplicate name, open the journal, declare the Generic Interface."""
+        assert self.session is not None
+        if await self._query_live_instances():
+            raise PartnerError(
+                f"a service named {self.name} is already running in cell {self.keys.cell!r}"
+            )
+        self._open_journal()
+        self._entities.append(
+            self.session.declare_queryable(self.keys.get(self.name), self._callback(self._on_get))
+        )
+        self._entities.append(
+            self.session.declare_queryable(
+                self.keys.subscribe(self.name), self._callback(self._on_subscribe)
+            )
+        )
+        self._create_queryable = self.session.declare_queryable(
+            self.keys.create(self.name), self._callback(self._on_create)
+        )
+        self._entities.append(self._create_queryable)
+
+    def _open_journal(self) -> None:
+        if not self._journal_setting:
+            return
+        folder = (
+            self._journal_setting
+            if isinstance(self._journal_setting, Path)
+            else journal_dir(self.keys.cell)
+        )
+        self.journal = Journal(folder / f"{self.name}.sqlite", self.name)
+        recovered = self.journal.recover(
+            f"interrupted: {self.name} stopped before the process finished"
+        )
+        if recovered:
+            log.warning(
+                "%s: %d unfinished processes of a previous run marked Failed", self.name, recovered
+            )
+
+    async def _query_live_instances(self) -> list[str]:
+        assert self.session is not None and self._loop is not None
+        done = self._loop.create_future()
+        found: list[str] = []
+        port = self._port
+        assert port is not None
+
+        def on_reply(r: Any) -> None:
+            if r.ok is not None:
+                found.append(str(r.ok.key_expr))
+
+        def on_done(_: Any) -> None:
+            if not done.done():
+                done.set_result(None)
+
+        self.session.liveliness().get(
+            self.keys.live_services(self.name),
+            zenoh.handlers.Callback(
+                lambda r: port.post((on_reply, r)),
+                lambda: port.post((on_done, None)),
+                indirect=False,
+            ),
+            timeout=1.0,
+        )
+        with contextlib.suppress(TimeoutError):
+            await asyncio.wait_for(done, 3.0)
+        return found
+
+    async def close(self, reason: str = "service shutting down") -> None:
+        """Shutdown: refuse new processes, fail queued ones, stop the running one,
+        notify ``Shutdown`` (5.2.3.6), withdraw the token, close the journal."""
+        if self._closed:
+            return
+        self._closing = True
+        if self._create_queryable is not None:
+            with contextlib.suppress(zenoh.ZError):
+                self._create_queryable.undeclare()
+            self._entities.remove(self._create_queryable)
+            self._create_queryable = None
+        for entry in self._queue.remove_if(lambda e: True):
+            self._finish(entry, ProcessStates.Failed, f"{self.name}: {reason}")
+        if self._holder is not None and not self._holder.abort_reason:
+            self._holder.abort_reason = f"{self.name}: {reason}"
+        self._queue.poke()
+        if self._handler_task is not None:
+            # the handler ends after the current process (bounded by its timeout)
+            done, _ = await asyncio.wait({self._handler_task}, timeout=10.0)
+            if not done:
+                self._handler_task.cancel()
+                with contextlib.suppress(asyncio.CancelledError):
+                    await self._handler_task
+        if self.session is not None and self._started:
+            with contextlib.suppress(Exception):
+                await self.disconnect()
+            self._publish(
+                self.keys.shutdown(self.name), ShutdownNotification(name=self.name, reason=reason)
+            )
+        self._flush()
+        for publisher in self._publishers.values():
+            with contextlib.suppress(zenoh.ZError):
+                publisher.undeclare()
+        self._publishers.clear()
+        await super().close()
+        self.journal.close()
+
+    # -- inbound: Get, Subscribe, CreateProcess (Table 5-2) ----------------------------
+
+    def _reply(self, query: zenoh.Query, body: Message) -> None:
+        with contextlib.suppress(zenoh.ZError):
+            query.reply(query.key_expr, self._encode(body))
+        query.drop()
+
+    def generic_state(self) -> GenericDeviceState:
+        """The generic state (Table 5-1): DeviceInfo and Partners."""
+        return GenericDeviceState(
+            device_info=self.device, partners=[p.device for p in self.partners.values()]
+        )
+
+    def _on_get(self, query: zenoh.Query) -> None:
+        self._reply(query, self.generic_state())
+
+    def _decode_query(self, query: zenoh.Query) -> wire.Envelope | str:
+        payload = query.payload
+        size = len(payload) if payload is not None else 0
+        if size == 0:
+            return "empty request"
+        if size > self.max_payload:
+            return (
+                f"payload of {size} bytes exceeds the limit of {self.max_payload} bytes "
+                f"of {self.name}"
+            )
+        try:
+            return wire.decode(payload.to_bytes(), self.max_payload)  # type: ignore[union-attr]
+        except wire.WireError as exc:
+            return str(exc)
+
+    def _on_subscribe(self, query: zenoh.Query) -> None:
+        envelope = self._decode_query(query)
+        if isinstance(envelope, str):
+            self._reply(query, SubscribeResponse(ok=False, reason=envelope))
+            return
+        body = envelope.body
+        if not isinstance(body, SubscribeRequest | UnsubscribeRequest):
+            self._reply(
+                query,
+                SubscribeResponse(
+                    ok=False, reason=f"expected SubscribeRequest, got {type(body).__name__}"
+                ),
+            )
+            return
+        asyncio.get_running_loop().create_task(self._subscribe_for(query, body))
+
+    async def _subscribe_for(
+        self, query: zenoh.Query, body: SubscribeRequest | UnsubscribeRequest
+    ) -> None:
+        if isinstance(body, UnsubscribeRequest):
+            found = await self.unsubscribe(body.partner)
+            reason = "" if found else f"{body.partner} was not a partner of {self.name}"
+            self._reply(query, SubscribeResponse(ok=found, reason=reason))
+            return
+        try:
+            device = await self.subscribe(body.partner)
+        except PartnerError as exc:
+            self._reply(query, SubscribeResponse(ok=False, reason=str(exc)))
+        else:
+            self._reply(query, SubscribeResponse(ok=True, partner=device))
+
+    def _on_create(self, query: zenoh.Query) -> None:
+        """CreateProcessHandler (5.2.3.4): check, journal, acknowledge, enqueue."""
+        received = time.time_ns()
+        payload = query.payload
+        size = len(payload) if payload is not None else 0
+        envelope = (
+            self._decode_query(query)
+            if not self._closing
+            else f"{self.name}: service shutting down"
+        )
+        if isinstance(envelope, str):
+            self._reject(query, envelope, size)
+            return
+        process = envelope.body
+        if not isinstance(process, Process):
+            self._reject(
+                query, f"expected a Process, got {type(process).__name__}", size, envelope.sender
+            )
+            return
+        sender, identifier = process.tag.sender, process.identifier
+        reason = self._check_process(envelope, process)
+        command = self.device.command(process.command.name)
+        array = None
+        if not reason and command is not None:
+            try:
+                check_data(
+                    process.data,
+                    command.input_data_type,
+                    command.input_data_size,
+                    f"{command.name} input",
+                )
+                array = from_data(process.data)
+            except DataError as exc:
+                reason = str(exc)
+        if (sender, identifier) in self._known:
+            self._reject(
+                query,
+                f"duplicate identifier {identifier} from {sender}",
+                size,
+                sender,
+                identifier,
+                process.command.name,
+            )
+            return
+        state = ProcessStates.Failed if reason else ProcessStates.Queued
+        try:
+            self.journal.record_process(
+                sender=sender,
+                identifier=identifier,
+                sender_instance=envelope.instance,
+                recipient_instance=self.instance,
+                command=process.command.name,
+                option=process.command.option,
+                command_type=command.type.value if command else "",
+                input_summary=summary(process.data),
+                received_ns=received,
+                state=state.value,
+                reason=reason,
+            )
+            self.journal.commit()
+        except Exception as exc:  # sqlite3.IntegrityError: identifier reused
+            self.journal.commit()
+            self._reject(
+                query,
+                f"cannot journal process {identifier} from {sender}: {exc}",
+                size,
+                sender,
+                identifier,
+                process.command.name,
+            )
+            return
+        self._reply(
+            query,
+            Acknowledgement(
+                identifier=identifier, state=state, reason=reason, instance=self.instance
+            ),
+        )
+        if reason:
+            return
+        assert command is not None
+        command = msgspec.structs.replace(command, option=process.command.option)
+        entry = Entry(
+            process=msgspec.structs.replace(process, command=command),
+            command=command,
+            instance=envelope.instance,
+            received_ns=received,
+            input=array,
+        )
+        self._known[(sender, identifier)] = entry
+        self._queue.post(entry)
+
+    def _check_process(self, envelope: wire.Envelope, process: Process) -> str:
+        if process.tag.recipient != self.name:
+            return f"process addressed to {process.tag.recipient}, this is {self.name}"
+        if process.tag.sender != envelope.sender:
+            return (
+                f"tag sender {process.tag.sender} differs from the envelope sender "
+                f"{envelope.sender}"
+            )
+        if envelope.instance and envelope.instance in self._departed:
+            return f"sender {envelope.sender} (instance {envelope.instance}) is already gone"
+        command = self.device.command(process.command.name)
+        if command is None:
+            known = ", ".join(c.name for c in self.commands) or "none"
+            return f"unknown command {process.command.name!r} for {self.name} (commands: {known})"
+        return ""
+
+    def _reject(
+        self,
+        query: zenoh.Query,
+        reason: str,
+        size: int,
+        sender: str | None = None,
+        identifier: int | None = None,
+        command: str | None = None,
+    ) -> None:
+        with contextlib.suppress(Exception):
+            self.journal.record_rejection(sender, identifier, command, size, reason)
+            self.journal.commit()
+        self._reply(
+            query,
+            Acknowledgement(
+                identifier=identifier or 0,
+                state=ProcessStates.Failed,
+                reason=reason,
+                instance=self.instance,
+            ),
+        )
+
+    # -- presence of senders -------------------------------------------------------------
+
+    def _on_left(self, presence: Presence) -> None:
+        super()._on_left(presence)
+        self._departed.add(presence.instance)
+        gone = self._queue.remove_if(
+            lambda e: e.sender == presence.name and e.instance == presence.instance
+        )
+        for entry in gone:
+            self._finish(
+                entry,
+                ProcessStates.Failed,
+                f"sender {presence.name} lost (liveliness) before the process started",
+            )
+        holder = self._holder
+        if (
+            holder is not None
+            and holder.sender == presence.name
+            and holder.instance == presence.instance
+            and not holder.abort_reason
+        ):
+            holder.abort_reason = f"sender {presence.name} lost (liveliness token withdrawn)"
+            self._queue.poke()
+        if not self.is_alive(presence.name, presence.role) and presence.name in self._publishers:
+            with contextlib.suppress(zenoh.ZError):
+                self._publishers.pop(presence.name).undeclare()
+
+    # -- ProcessHandler (5.2.3.4, Figure 5-12) ----------------------------------------
+
+    async def _process_handler(self) -> None:
+        while not self._closing:
+            entry = self._queue.take_next()
+            if entry is None:
+                await self._queue.wait(None)
+                continue
+            try:
+                await self._run(entry)
+            except asyncio.CancelledError:
+                self._finish(entry, ProcessStates.Failed, f"{self.name}: service shutting down")
+                raise
+            except Exception as exc:  # never let one process kill the handler
+                log.exception("%s: error running %s", self.name, entry.command.name)
+                self._finish(entry, ProcessStates.Failed, f"{self.name}: internal error: {exc!r}")
+            finally:
+                self._holder = None
+                self._measuring = None
+                if self.device.state is DeviceStates.Busy:
+                    self._on_device_state(DeviceStates.Ready)
+
+    async def _run(self, entry: Entry) -> None:
+        command = entry.command
+        if command.type is CommandTypes.StopData:
+            self._finish(
+                entry,
+                ProcessStates.Failed,
+                f"{command.name}: no MultipleData process of {entry.sender} is running",
+            )
+            return
+        self._running(entry)
+        if command.type is CommandTypes.MultipleData:
+            await self._hold(entry)
+            return
+        self._measuring = entry if command.type is CommandTypes.SingleData else None
+        self._single_data = []
+        ok, reason = await self._execute(entry)
+        self._measuring = None
+        if not ok:
+            self._finish(entry, ProcessStates.Failed, reason)
+        elif command.type is CommandTypes.SingleData:
+            if not self._single_data:
+                self._finish(
+                    entry,
+                    ProcessStates.Failed,
+                    f"{command.name}: the device reported success but no data",
+                )
+                return
+            try:
+                data = to_data(
+                    self._single_data[0],
+                    command.output_data_type,
+                    command.output_data_size,
+                    f"{command.name} output",
+                )
+            except DataError as exc:
+                self._finish(entry, ProcessStates.Failed, f"device produced invalid data: {exc}")
+                return
+            self._finish(entry, ProcessStates.Completed, "", data)
+        else:
+            self._finish(entry, ProcessStates.Completed, "")
+
+    async def _execute(self, entry: Entry) -> tuple[bool, str]:
+        """Dispatch one command and wait (bounded) for its command feedback."""
+        command = entry.command
+        assert self._loop is not None
+        waiter: asyncio.Future[str] = self._loop.create_future()
+        self._cmd_waiter = waiter
+        try:
+            async with asyncio.timeout(command.timeout):
+                code = await self.dispatch(command, command.option, entry.input)
+                if code is None:
+                    code = await waiter
+        except TimeoutError:
+            return False, (
+                f"{command.name}: no command feedback from the device within {command.timeout:g} s"
+            )
+        except DeviceError as exc:
+            return False, f"{command.name}: {exc}"
+        except Exception as exc:
+            log.exception("%s: device interface error in %s", self.name, command.name)
+            return False, f"{command.name}: device interface error: {exc!r}"
+        finally:
+            self._cmd_waiter = None
+        if code == command.success_code:
+            return True, ""
+        return False, (
+            f"{command.name}: device feedback {code!r} (success code {command.success_code!r})"
+        )
+
+    async def _hold(self, entry: Entry) -> None:
+        """Run a MultipleData process and hold the device until its sender's StopData (5.2.3.5)."""
+        command = entry.command
+        deadline = time.monotonic() + command.timeout
+        self._holder = entry
+        self._measuring = entry
+        ok, reason = await self._execute(entry)
+        if not ok:
+            self._finish(entry, ProcessStates.Failed, reason)
+            return
+        while True:
+            if entry.abort_reason:
+                self._measuring = None
+                await self._stop_device(entry)
+                self._finish(entry, ProcessStates.Failed, entry.abort_reason)
+                return
+            stop = self._queue.take_stop_for(entry.sender)
+            if stop is not None:
+                self._running(stop)
+                ok, reason = await self._execute(stop)
+                self._measuring = None
+                if ok:
+                    self._finish(stop, ProcessStates.Completed, "")
+                    self._finish(entry, ProcessStates.Completed, "")
+                else:
+                    self._finish(stop, ProcessStates.Failed, reason)
+                    self._finish(
+                        entry,
+                        ProcessStates.Failed,
+                        f"stopped by {stop.command.name}, which failed: {reason}",
+                    )
+                return
+            remaining = deadline - time.monotonic()
+            if remaining <= 0:
+                entry.abort_reason = (
+                    f"{command.name}: held the device longer than its timeout "
+                    f"of {command.timeout:g} s"
+                )
+                continue
+            await self._queue.wait(remaining)
+
+    async def _stop_device(self, entry: Entry) -> None:
+        """Stop a MultipleData stream whose sender will not: dispatch the catalogue's StopData."""
+        stops = [c for c in self.commands if c.type is CommandTypes.StopData]
+        if not stops:
+            return
+        stop = stops[0]
+        try:
+            async with asyncio.timeout(stop.timeout):
+                await self.dispatch(stop, "", None)
+        except Exception as exc:
+            log.warning(
+                "%s: %s after %s could not stop the device: %r",
+                self.name,
+                stop.name,
+                entry.command.name,
+                exc,
+            )
+
+    # -- receivers of the feedback ports (5.2.3.2) -------------------------------------
+
+    def _on_data(self, value: Any) -> None:
+        """DataFeedback receiver — the MeasurementsHandler of 5.2.3.4."""
+        entry = self._measuring
+        if entry is None:
+            self.stray_feedback += 1
+            return
+        if entry.command.type is CommandTypes.SingleData:
+            self._single_data.append(value)
+            return
+        try:
+            data = to_data(
+                value,
+                entry.command.output_data_type,
+                entry.command.output_data_size,
+                f"{entry.command.name} output",
+            )
+        except DataError as exc:
+            if not entry.abort_reason:
+                entry.abort_reason = f"device produced invalid data: {exc}"
+                self._queue.poke()
+            return
+        self._update(entry, ProcessStates.Running, "", data)
+
+    def _on_cmd(self, code: str) -> None:
+        """CmdFeedback receiver — the CommandFeedbackHandler of 5.2.3.4."""
+        waiter = self._cmd_waiter
+        if waiter is not None and not waiter.done():
+            waiter.set_result(code)
+            return
+        holder = self._holder
+        if holder is not None and code != holder.command.success_code and not holder.abort_reason:
+            holder.abort_reason = f"{holder.command.name}: device feedback {code!r} while streaming"
+            self._queue.poke()
+            return
+        self.stray_feedback += 1
+
+    def _on_device_state(self, state: DeviceStates) -> None:
+        """DeviceStateHandler (5.2.3.2): write the state, notify StateUpdate.
+
+        The notification goes out at the end of the event-loop turn and only if the
+        state then differs from the last one notified: a process that runs within
+        one turn (Busy → Ready) notifies nothing, as no observer could have seen it.
+        """
+        if state is not self.device.state:
+            self.device.state = state
+            self._notify_soon()
+
+    def _on_connection_state(self, connection: ConnectionStates) -> None:
+        """ConnectionStateHandler: write the connection state, notify ConnectionUpdate."""
+        if connection is not self.device.connection:
+            self.device.connection = connection
+            self._notify_soon()
+
+    def _notify_soon(self) -> None:
+        if not self._notify_scheduled and self._loop is not None:
+            self._notify_scheduled = True
+            self._loop.call_soon(self._notify_states)
+
+    def _notify_states(self) -> None:
+        self._notify_scheduled = False
+        state, connection = self.device.state, self.device.connection
+        if state is not self._notified[0] or connection is not self._notified[1]:
+            self.device.last_updated = datetime.now(UTC)
+        if state is not self._notified[0]:
+            self._publish(
+                self.keys.state(self.name), StateUpdateNotification(name=self.name, state=state)
+            )
+        if connection is not self._notified[1]:
+            self._publish(
+                self.keys.connection(self.name),
+                ConnectionUpdateNotification(name=self.name, connection=connection),
+            )
+        self._notified = (state, connection)
+
+    # -- outbound notifications ------------------------------------------------------
+
+    def _publish(self, key: str, body: Message) -> None:
+        if self.session is None or self.session.is_closed():
+            return
+        with contextlib.suppress(zenoh.ZError):
+            self.session.put(key, self._encode(body))
+
+    def _publisher(self, sender: str) -> Any:
+        publisher = self._publishers.get(sender)
+        if publisher is None:
+            assert self.session is not None
+            publisher = self.session.declare_publisher(
+                self.keys.process(self.name, sender),
+                congestion_control=zenoh.CongestionControl.BLOCK,
+                express=self.express_updates,
+            )
+            self._publishers[sender] = publisher
+        return publisher
+
+    def _running(self, entry: Entry) -> None:
+        """ProcessState.Post(Running) and DeviceState.Post(Busy) of the ProcessHandler."""
+        self._on_device_state(DeviceStates.Busy)
+        self._update(entry, ProcessStates.Running, "", None)
+
+    def _update(self, entry: Entry, state: ProcessStates, reason: str, data: Data | None) -> None:
+        """ProcessStateHandler: journal the ProcessUpdate, then send it (see :meth:`_flush`)."""
+        entry.seq += 1
+        update = ProcessUpdateNotification(
+            tag=entry.process.tag,
+            identifier=entry.identifier,
+            state=state,
+            data=data,
+            reason=reason,
+            seq=entry.seq,
+        )
+        self.journal.record_update(
+            entry.sender, entry.identifier, entry.seq, state.value, reason, summary(data)
+        )
+        self._outbox.append((entry, state, data is not None, self._encode(update)))
+        if state.final:
+            self._flush()
+        elif not self._flush_scheduled and self._loop is not None:
+            self._flush_scheduled = True
+            self._loop.call_soon(self._flush)
+
+    def _flush(self) -> None:
+        """Commit the journal, then publish what it now holds.
+
+        Every update is durable before anyone can see it.  Non-final updates wait
+        for the end of the event-loop turn, so a burst of frames costs one commit;
+        a final update flushes at once.  A data-less Running update whose process
+        ends within the same flush is journaled but not sent (its ``seq`` is skipped):
+        the final update supersedes it.
+        """
+        self._flush_scheduled = False
+        if not self._outbox:
+            return
+        try:
+            self.journal.commit()
+        except Exception:  # a full disk must not silence the service
+            log.exception("%s: journal commit failed", self.name)
+        outbox, self._outbox = self._outbox, []
+        if self.session is None or self.session.is_closed():
+            return
+        ended = {id(entry) for entry, state, _, _ in outbox if state.final}
+        for entry, state, has_data, payload in outbox:
+            if state is ProcessStates.Running and not has_data and id(entry) in ended:
+                continue
+            with contextlib.suppress(zenoh.ZError):
+                self._publisher(entry.sender).put(payload)
+
+    def _finish(
+        self, entry: Entry, state: ProcessStates, reason: str, data: Data | None = None
+    ) -> None:
+        self._known.pop((entry.sender, entry.identifier), None)
+        if reason:
+            log.info(
+                "%s: %s #%d from %s %s: %s",
+                self.name,
+                entry.command.name,
+                entry.identifier,
+                entry.sender,
+                state.value,
+                reason,
+            )
+        self._update(entry, state, reason, data)
+
+
+class _NoJournal:
+    """Stand-in when a service runs without a journal."""
+
+    def __getattr__(self, name: str) -> Callable[..., Any]:
+        return lambda *args, **kwargs: 0
+
+
+def _check_catalogue(owner: str, commands: tuple[Command, ...]) -> None:
+    names = [c.name for c in commands]
+    if len(set(names)) != len(names):
+        raise TypeError(f"{owner}: duplicate command names in {names}")
+    types = {c.type for c in commands}
+    if CommandTypes.MultipleData in types and CommandTypes.StopData not in types:
+        raise TypeError(f"{owner}: a MultipleData command needs a StopData command to stop it")
+    for c in commands:
+        if (
+            c.type in (CommandTypes.SingleData, CommandTypes.MultipleData)
+            and c.output_data_type is None
+            and c.output_data_size != (0,)
+        ):
+            raise TypeError(f"{owner}: {c.name} declares an output size without a type")
+        if c.input_data_size != (0,) and c.input_data_type is None:
+            raise TypeError(f"{owner}: {c.name} declares an input size without a type")
+
+
+__all__ = ["DeviceError", "FeedbackPort", "GenericDevice"]

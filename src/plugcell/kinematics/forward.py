@@ -1,0 +1,233 @@
+"""Forward kinematics through closed loops, thesis eqs. (6.1)–(6.3).
+
+``forward(desc, params, q)`` evaluates every link frame in the robot base frame
+F0 for joint readings ``q`` (``(..., n_actuated)``, radians, in the
+description's ``actuated`` order).  Each link frame is its parent's frame times
+the DH + Hayati link transform (B.1) with the numbers of ``params`` (never the
+description's), so every parameter acts on FK.  The passive angles of each loop
+come from the closure (:mod:`plugcell.kinematics.closure`), and the flange pose
+is taken along the chain through the loop — for the Smart H4 the branch
+(1-2'-3'-4'-3) of eq. (6.2), which carries the loop parameters — while the arm
+(link 2, off the chain) is evaluated too, so branch (1-2-3) of eq. (6.3) can be
+compared (:func:`branch_cut_transform`).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from plugcell.kinematics.closure import fourbar_closure, nominal_closure
+from plugcell.kinematics.description import RobotDescription
+from plugcell.kinematics.parameters import GeometricParameters
+from plugcell.kinematics.transforms import dh_hayati, rot_z
+
+Array = NDArray[np.float64]
+
+CLOSURES: tuple[str, ...] = ("fourbar", "nominal")
+
+__all__ = [
+    "CLOSURES",
+    "FKResult",
+    "branch_cut_transform",
+    "compose_frames",
+    "forward",
+    "joint_angles",
+]
+
+
+@dataclass(frozen=True, eq=False)
+class FKResult:
+    """Result of :func:`forward` for a batch of configurations (shape ``(...)``).
+
+    ``frames``: ``(..., n_links, 4, 4)`` every link frame F_i in the robot base
+    frame F0 (off-chain links such as the Smart H4's arm "2" included).
+    ``theta``: ``(..., n_links)`` the DH angle θ_i each link used.
+    ``passive``: ``(..., n_passive)`` passive angles in ``passive_names`` order.
+    ``passive_jacobian``: ``(..., n_passive, n_actuated)`` ∂θ_passive/∂q.
+    ``passive_d_a``: ``(..., n_passive, n_links)`` ∂θ_passive/∂a_link (four-bar only;
+    zeros for the nominal closure).
+    ``flange``: T_n^0 (eq. 6.1), ``tcp`` = flange·tool, both in the robot base
+    frame; ``world_flange`` = base·flange and ``world_tcp`` = base·tcp in the
+    world/metrology frame (eq. 6.23 with PROBE = tool).
+    ``valid``: ``(...)`` False where a loop could not close (only possible with
+    ``forward(..., raise_errors=False)``; frames there are NaN).
+    """
+
+    link_names: tuple[str, ...]
+    passive_names: tuple[str, ...]
+    frames: Array
+    theta: Array
+    passive: Array
+    passive_jacobian: Array
+    passive_d_a: Array
+    flange: Array
+    tcp: Array
+    world_flange: Array
+    world_tcp: Array
+    valid: NDArray[np.bool_]
+
+    def index(self, name: str) -> int:
+        """Position of link ``name`` in ``frames``/``theta``."""
+        try:
+            return self.link_names.index(name)
+        except ValueError:
+            raise KeyError(f"unknown link {name!r}; links are {list(self.link_names)}") from None
+
+    def frame(self, name: str) -> Array:
+        """``(..., 4, 4)`` frame of link ``name`` in the robot base frame (``"base"``: F0)."""
+        if name == "base":
+            return np.broadcast_to(np.eye(4), self.flange.shape).copy()
+        return self.frames[..., self.index(name), :, :]
+
+    def passive_angle(self, name: str) -> Array:
+        """``(...)`` angle of passive link ``name``."""
+        try:
+            k = self.passive_names.index(name)
+        except ValueError:
+            raise KeyError(
+                f"{name!r} is not a passive link; they are {list(self.passive_names)}"
+            ) from None
+        return self.passive[..., k]
+
+
+def _check_q(desc: RobotDescription, q: ArrayLike) -> Array:
+    q = np.asarray(q, dtype=float)
+    if q.ndim == 0 or q.shape[-1] != desc.n_actuated:
+        raise ValueError(
+            f"q: expected shape (..., {desc.n_actuated}) for joints {list(desc.actuated)}, "
+            f"got {q.shape}"
+        )
+    if not np.all(np.isfinite(q)):
+        raise ValueError("q: joint values must be finite")
+    return q
+
+
+def _check_params(
+    desc: RobotDescription, params: GeometricParameters | None
+) -> GeometricParameters:
+    if params is None:
+        return desc.nominal_parameters()
+    if params.link_names != desc.link_names:
+        raise ValueError(
+            f"params: link names {list(params.link_names)} do not match the description's "
+            f"{list(desc.link_names)}"
+        )
+    return params
+
+
+def joint_angles(
+    desc: RobotDescription,
+    params: GeometricParameters | None,
+    q: ArrayLike,
+    closure: str = "fourbar",
+    *,
+    raise_errors: bool = True,
+) -> tuple[Array, Array, Array, Array, NDArray[np.bool_]]:
+    """DH angles of every link for readings ``q``.
+
+    Returns ``(theta (..., n_links), passive (..., n_p), d_passive_dq (..., n_p, n),
+    d_passive_da (..., n_p, n_links), valid (...))``.
+    """
+    if closure not in CLOSURES:
+        raise ValueError(f"closure must be one of {CLOSURES}, got {closure!r}")
+    p = _check_params(desc, params)
+    q = _check_q(desc, q)
+    batch = q.shape[:-1]
+    n_l, n_a = desc.n_links, desc.n_actuated
+    theta = np.broadcast_to(p.theta, (*batch, n_l)).copy()
+    for j, name in enumerate(desc.actuated):
+        theta[..., desc.index(name)] += q[..., j]
+    n_p = 2 * len(desc.loops)
+    passive = np.zeros((*batch, n_p))
+    dq = np.zeros((*batch, n_p, n_a))
+    da = np.zeros((*batch, n_p, n_l))
+    valid = np.ones(batch, dtype=bool)
+    for k, loop in enumerate(desc.loops):
+        ia, ic, i3, i4 = (desc.index(n) for n in loop.links)
+        ta, tc = theta[..., ia], theta[..., ic]
+        if closure == "nominal":
+            res = nominal_closure(ta, tc, raise_errors=raise_errors)
+        else:
+            res = fourbar_closure(
+                ta, tc, p.a[ia], p.a[ic], p.a[i3], p.a[i4], raise_errors=raise_errors
+            )
+        valid &= res.valid
+        passive[..., 2 * k] = res.coupler
+        passive[..., 2 * k + 1] = res.follower
+        theta[..., i3] += res.coupler
+        theta[..., i4] += res.follower
+        ja, jc = desc.joint_index(loop.arm), desc.joint_index(loop.crank)
+        dq[..., 2 * k : 2 * k + 2, ja] = res.d_driven[..., :, 0]
+        dq[..., 2 * k : 2 * k + 2, jc] = res.d_driven[..., :, 1]
+        for m, il in enumerate((ia, ic, i3, i4)):
+            da[..., 2 * k : 2 * k + 2, il] = res.d_lengths[..., :, m]
+    return theta, passive, dq, da, valid
+
+
+def compose_frames(desc: RobotDescription, params: GeometricParameters, theta: Array) -> Array:
+    """Link frames ``(..., n_links, 4, 4)`` in F0 from full DH angles ``theta``."""
+    local = dh_hayati(theta, params.d, params.a, params.alpha, params.beta)
+    frames = np.empty_like(local)
+    for i, lk in enumerate(desc.links):
+        if i == 0:
+            frames[..., 0, :, :] = local[..., 0, :, :]
+        else:
+            frames[..., i, :, :] = frames[..., desc.index(lk.parent), :, :] @ local[..., i, :, :]
+    return frames
+
+
+def forward(
+    desc: RobotDescription,
+    params: GeometricParameters | None,
+    q: ArrayLike,
+    closure: str = "fourbar",
+    *,
+    raise_errors: bool = True,
+) -> FKResult:
+    """Forward kinematics of every link, thesis eq. (6.1) via branch (6.2).
+
+    ``q``: ``(..., n_actuated)`` joint readings in radians (need not be wrapped;
+    limits are not checked).  ``params``: the geometric parameters to use
+    (``None`` → nominal).  ``closure``: ``"fourbar"`` (exact, default) or
+    ``"nominal"`` (eq. 6.10, what a controller's nominal model does).  Raises
+    :class:`~plugcell.kinematics.errors.LoopClosureError` if a loop cannot be
+    assembled or collapses (with ``raise_errors=False`` it marks those
+    configurations in ``FKResult.valid`` and fills them with NaN instead).
+    """
+    p = _check_params(desc, params)
+    theta, passive, dq, da, valid = joint_angles(desc, p, q, closure, raise_errors=raise_errors)
+    frames = compose_frames(desc, p, theta)
+    flange = frames[..., desc.index(desc.flange), :, :]
+    tcp = flange @ p.tool
+    return FKResult(
+        link_names=desc.link_names,
+        passive_names=desc.passive,
+        frames=frames,
+        theta=theta,
+        passive=passive,
+        passive_jacobian=dq,
+        passive_d_a=da,
+        flange=flange,
+        tcp=tcp,
+        world_flange=p.base @ flange,
+        world_tcp=p.base @ tcp,
+        valid=valid,
+    )
+
+
+def branch_cut_transform(desc: RobotDescription, fk: FKResult, loop_index: int = 0) -> Array:
+    """Frame of the follower's end computed along the *arm* branch, eq. (6.3).
+
+    Returns ``T_arm · Rz(φ4 − θ_arm)`` where φ4 is the absolute direction of the
+    follower's end frame: for a closed planar loop this equals the follower's
+    frame computed along the crank branch (6.2), so ``frame(follower)`` and this
+    matrix agree (they do exactly for a parallelogram with any lengths the
+    four-bar closes, and only approximately when loop twists/β/d are perturbed).
+    """
+    loop = desc.loops[loop_index]
+    ia, ic, i3, i4 = (desc.index(n) for n in loop.links)
+    phi4 = fk.theta[..., ic] + fk.theta[..., i3] + fk.theta[..., i4]
+    return fk.frames[..., ia, :, :] @ rot_z(phi4 - fk.theta[..., ia])

@@ -1,0 +1,543 @@
+"""Nominal inverse kinematics — what a controller's POS_TO_JNTP does.
+
+The Smart H4's wrist is inclined (α4 = −60°, α5 = 60°) and offset (d5 ≠ 0), so
+axes 4–6 do not meet in a point and there is no closed-form decoupling.  The
+solver is numerical and works for any description (loops included):
+
+1. **Damped least squares** (Levenberg–Marquardt with an adaptive damping per
+   target) on ``pose_error_exact(T_target, T(q))`` with the manipulator Jacobian
+   of the actuated joints (:mod:`plugcell.kinematics.jacobian`), step length
+   limited to :data:`MAX_STEP` rad.  Converged when the position error is below
+   ``tol`` metres and the orientation error below ``tol`` radians; starts that
+   stall far from the target are abandoned early.
+2. **Starts**: the seed (default: the description's ``home`` pose); then, for
+   the targets still unsolved, groups of restarts: home turned about axis 1 to
+   face the target, two elbow variants of it and home itself; the "wrist flips"
+   (q4 + π, −q5, q6 + π) of these and of the seed; home turned away from the
+   target and :data:`N_RANDOM_SEEDS` fixed quasi-random configurations.
+3. Each start is iterated with the joint limits **relaxed** (loops kept in a
+   safe band inside their coupled limit's half-turn, so they never collapse),
+   then every angle is moved to its 2π-representative nearest the seed inside
+   its limits; only solutions inside the joint and coupled limits count — free
+   iterations find far more of them than iterations clamped at a limit.  If
+   none is found, all starts are re-run with iterates projected onto the limits.
+   Among the solutions the one **nearest the seed** (Euclidean in joint space)
+   is returned.
+4. Failures: a target farther from the shoulder than the stretched arm →
+   :class:`UnreachableError` ("out of reach") at once; a converged solution
+   only outside the limits → :class:`JointLimitError` naming the joint, its
+   value and the limit; otherwise :class:`UnreachableError` ("no convergence")
+   with the closest approach found.
+
+All of it is vectorised over targets.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from plugcell.kinematics.description import RobotDescription
+from plugcell.kinematics.errors import JointLimitError, UnreachableError
+from plugcell.kinematics.forward import forward
+from plugcell.kinematics.jacobian import jacobian_from_fk
+from plugcell.kinematics.parameters import GeometricParameters
+from plugcell.kinematics.pose_error import pose_error_exact
+
+Array = NDArray[np.float64]
+
+#: Largest joint step (rad) of one iteration.
+MAX_STEP = 0.5
+#: Weight (metres per radian) of the orientation rows in the least-squares cost.
+ORIENTATION_WEIGHT = 1.0
+#: Iteration budget per start.
+MAX_ITERATIONS = 200
+#: Every STALL_WINDOW iterations a start whose cost fell by less than a factor
+#: 1/STALL_RATIO while still above STALL_COST (≈ 3 mm) is abandoned.
+STALL_WINDOW = 10
+STALL_RATIO = 0.5
+STALL_COST = 1e-5
+#: Number of fixed quasi-random restart configurations.
+N_RANDOM_SEEDS = 24
+#: Margin (rad) of the safe band that keeps a loop from collapsing while joint
+#: limits are relaxed: the arm–crank angle stays inside (kπ + margin, (k+1)π − margin),
+#: the half-turn that holds its coupled limit.
+SAFE_MARGIN = math.radians(2.0)
+
+__all__ = ["IKResult", "inverse"]
+
+
+@dataclass(frozen=True, eq=False)
+class IKResult:
+    """Result of :func:`inverse` (arrays batched like the targets, shape ``(...)``).
+
+    ``q``: ``(..., n)`` joint readings (rad) — the solution, or the closest
+    attempt where ``converged`` is False; ``position_error`` (m) and
+    ``orientation_error`` (rad) of ``q``; ``iterations`` spent (all starts);
+    ``within_limits``; ``reason``: ``""`` for a solution inside the limits,
+    else the failure message (only visible with ``raise_errors=False``).
+    """
+
+    q: Array
+    converged: NDArray[np.bool_]
+    position_error: Array
+    orientation_error: Array
+    iterations: NDArray[np.int_]
+    within_limits: NDArray[np.bool_]
+    reason: NDArray[np.object_]
+
+
+# ----------------------------------------------------------------------------- helpers
+@dataclass(frozen=True)
+class _Limits:
+    lo: Array  # (n,)
+    hi: Array
+    pairs: tuple[tuple[int, int, float, float], ...]  # (i, j, lower, upper) on q_i − q_j
+
+
+def _limits(desc: RobotDescription, enforce: bool) -> _Limits:
+    n = desc.n_actuated
+    pairs = []
+    for cl in desc.coupled_limits:
+        i, j = desc.joint_index(cl.joints[0]), desc.joint_index(cl.joints[1])
+        pairs.append((i, j, cl.lower, cl.upper))
+    if enforce:
+        return _Limits(desc.joint_limits[:, 0].copy(), desc.joint_limits[:, 1].copy(), tuple(pairs))
+    # free iterations: only keep each loop inside the half-turn of its coupled limit
+    safe = []
+    for loop in desc.loops:
+        ia, ic = desc.joint_index(loop.arm), desc.joint_index(loop.crank)
+        off = desc.link(loop.arm).theta - desc.link(loop.crank).theta
+        for i, j, lo, hi in pairs:
+            if {i, j} != {ia, ic}:
+                continue
+            # lower end of the arm − crank angle (the limit may be on crank − arm)
+            low = (lo if i == ia else -hi) + off
+            k = math.floor(low / math.pi)
+            safe.append(
+                (ia, ic, k * math.pi + SAFE_MARGIN - off, (k + 1) * math.pi - SAFE_MARGIN - off)
+            )
+            break
+    return _Limits(np.full(n, -np.inf), np.full(n, np.inf), tuple(safe))
+
+
+def _project(q: Array, lim: _Limits) -> Array:
+    q = np.clip(q, lim.lo, lim.hi)
+    for _ in range(3):
+        for i, j, lo, hi in lim.pairs:
+            diff = q[..., i] - q[..., j]
+            excess = np.where(diff > hi, diff - hi, np.where(diff < lo, diff - lo, 0.0))
+            q[..., i] -= 0.5 * excess
+            q[..., j] += 0.5 * excess
+        q = np.clip(q, lim.lo, lim.hi)
+    return q
+
+
+def _errors(e: Array) -> tuple[Array, Array]:
+    return np.linalg.norm(e[..., :3], axis=-1), np.linalg.norm(e[..., 3:], axis=-1)
+
+
+def _solve(
+    desc: RobotDescription,
+    params: GeometricParameters,
+    T: Array,
+    q0: Array,
+    lim: _Limits,
+    closure: str,
+    point: str,
+    tol: float,
+    max_iter: int,
+) -> tuple[Array, NDArray[np.bool_], Array, Array, NDArray[np.int_]]:
+    """Levenberg–Marquardt from ``q0`` (B, n) towards ``T`` (B, 4, 4)."""
+    q = _project(q0.copy(), lim)
+    B = q.shape[0]
+
+    def evaluate(qq: Array, TT: Array) -> tuple[Array, Array, NDArray[np.bool_]]:
+        fk = forward(desc, params, qq, closure, raise_errors=False)
+        Tq = fk.tcp if point == "tcp" else fk.flange
+        e = pose_error_exact(TT, Tq)
+        J = jacobian_from_fk(desc, fk, point)
+        ok = fk.valid & np.all(np.isfinite(e), axis=-1)
+        return np.where(ok[:, None], e, np.inf), J, ok
+
+    e, J, ok = evaluate(q, T)
+    w2 = np.array([1.0, 1.0, 1.0, ORIENTATION_WEIGHT, ORIENTATION_WEIGHT, ORIENTATION_WEIGHT]) ** 2
+    cost = np.where(ok, np.sum(w2 * e * e, axis=-1), np.inf)
+    mu = np.full(B, 1e-3)
+    iters = np.zeros(B, dtype=int)
+    ep, er = _errors(e)
+    done = (ep < tol) & (er < tol)
+    active = ~done & ok
+    checkpoint = cost.copy()
+    for it_no in range(1, max_iter + 1):
+        if not np.any(active):
+            break
+        idx = np.flatnonzero(active)
+        w = np.array([1.0, 1.0, 1.0, ORIENTATION_WEIGHT, ORIENTATION_WEIGHT, ORIENTATION_WEIGHT])
+        Ja, ea = J[idx] * w[:, None], e[idx] * w
+        JJt = Ja @ np.swapaxes(Ja, -1, -2)
+        lam = mu[idx, None, None] * (np.trace(JJt, axis1=-2, axis2=-1)[:, None, None] / 6.0 + 1e-9)
+        A = JJt + lam * np.eye(6)
+        y = np.linalg.solve(A, ea[..., None])[..., 0]  # A is SPD: λ > 0
+        dq = np.einsum("bji,bj->bi", Ja, y)
+        big = np.max(np.abs(dq), axis=-1)
+        dq *= np.minimum(1.0, MAX_STEP / np.maximum(big, 1e-300))[:, None]
+        q_new = _project(q[idx] + dq, lim)
+        e_new, J_new, ok_new = evaluate(q_new, T[idx])
+        cost_new = np.where(ok_new, np.sum(w2 * e_new * e_new, axis=-1), np.inf)
+        better = cost_new < cost[idx]
+        acc = idx[better]
+        q[acc], e[acc], J[acc], cost[acc] = (
+            q_new[better],
+            e_new[better],
+            J_new[better],
+            cost_new[better],
+        )
+        mu[acc] = np.maximum(mu[acc] / 5.0, 1e-12)
+        rej = idx[~better]
+        mu[rej] = mu[rej] * 8.0
+        iters[idx] += 1
+        ep, er = _errors(e)
+        done = (ep < tol) & (er < tol)
+        active = ~done & (mu < 1e8)
+        if it_no % STALL_WINDOW == 0:
+            # give up on starts that are stuck far from the target (local minimum)
+            stalled = (cost > STALL_RATIO * checkpoint) & (cost > STALL_COST)
+            active &= ~stalled
+            checkpoint = cost.copy()
+    ep, er = _errors(e)
+    done = (ep < tol) & (er < tol)
+    return q, done, ep, er, iters
+
+
+def _wrap_to_seed(q: Array, seed: Array, desc: RobotDescription, enforce: bool) -> Array:
+    """Each angle's 2π-representative nearest the seed (inside the limits if possible)."""
+    lo, hi = desc.joint_limits[:, 0], desc.joint_limits[:, 1]
+    ks = np.arange(-3, 4) * 2.0 * np.pi
+    cand = q[..., None] + ks  # (..., n, 7)
+    inside = (cand >= lo[:, None] - 1e-9) & (cand <= hi[:, None] + 1e-9)
+    dist = np.abs(cand - seed[..., None])
+    if enforce:
+        dist = np.where(inside, dist, dist + 1e6)
+    best = np.take_along_axis(cand, np.argmin(dist, axis=-1)[..., None], axis=-1)[..., 0]
+    if not enforce:
+        return best
+    # coupled limits: re-pick the pair's representatives jointly if violated
+    for cl in desc.coupled_limits:
+        i, j = desc.joint_index(cl.joints[0]), desc.joint_index(cl.joints[1])
+        ci = cand[..., i, :, None]  # (..., 7, 1)
+        cj = cand[..., j, None, :]  # (..., 1, 7)
+        diff = ci - cj
+        ok = (
+            (diff >= cl.lower - 1e-9)
+            & (diff <= cl.upper + 1e-9)
+            & inside[..., i, :, None]
+            & inside[..., j, None, :]
+        )
+        d2 = (ci - seed[..., i, None, None]) ** 2 + (cj - seed[..., j, None, None]) ** 2
+        d2 = np.where(ok, d2, np.inf)
+        flat = d2.reshape(*d2.shape[:-2], -1)
+        arg = np.argmin(flat, axis=-1)
+        has = np.isfinite(np.min(flat, axis=-1))
+        bi, bj = np.divmod(arg, 7)
+        qi = np.take_along_axis(cand[..., i, :], bi[..., None], axis=-1)[..., 0]
+        qj = np.take_along_axis(cand[..., j, :], bj[..., None], axis=-1)[..., 0]
+        best[..., i] = np.where(has, qi, best[..., i])
+        best[..., j] = np.where(has, qj, best[..., j])
+    return best
+
+
+def _restart_seeds(
+    desc: RobotDescription,
+    params: GeometricParameters,
+    T: Array,
+    seed: Array,
+    closure: str,
+    point: str,
+) -> list[Array]:
+    """Deterministic restart configurations in groups of ``(B, S_g, n)``, best first.
+
+    Group 1: home turned about axis 1 to face the target, two elbow variants of
+    it (joints between axis 1 and the wrist at the quarter points of their
+    ranges) and plain home.  Group 2: the "wrist flips" (q4 + π, −q5, q6 + π) of
+    group 1 and of the seed.  Group 3: home turned away from the target and
+    :data:`N_RANDOM_SEEDS` fixed quasi-random configurations inside the limits.
+    """
+    n = desc.n_actuated
+    B = T.shape[0]
+    home = np.asarray(desc.home, dtype=float)
+    lo, hi = desc.joint_limits[:, 0], desc.joint_limits[:, 1]
+
+    def tile(x: Array) -> Array:
+        return np.broadcast_to(x, (B, n)).copy()
+
+    # Axis 1 is the root's z: turn home about it so the arm faces the target.
+    j1 = desc.joint_index(desc.links[0].name) if desc.links[0].is_actuated else None
+    fk_home = forward(desc, params, home, closure)
+    p_home = (fk_home.tcp if point == "tcp" else fk_home.flange)[:3, 3]
+    az_home = math.atan2(p_home[1], p_home[0])
+    az_t = np.arctan2(T[:, 1, 3], T[:, 0, 3])
+    aimed, away = tile(home), tile(home)
+    if j1 is not None:
+        aimed[:, j1] = home[j1] + ((az_t - az_home + np.pi) % (2 * np.pi)) - np.pi
+        away[:, j1] = home[j1] + ((az_t - az_home) % (2 * np.pi)) - np.pi
+    group1 = [aimed]
+    if n >= 6:
+        for frac in (0.25, 0.75):
+            v = aimed.copy()
+            for j in range(n - 3):
+                if j != j1:
+                    v[:, j] = lo[j] + frac * (hi[j] - lo[j])
+            group1.append(v)
+    group1.append(tile(home))
+    group2 = []
+    if n >= 6:
+        for base in (*group1, tile(seed) if seed.ndim == 1 else seed.copy()):
+            f = base.copy()
+            f[:, n - 3] += np.pi
+            f[:, n - 2] *= -1.0
+            f[:, n - 1] += np.pi
+            group2.append(f)
+    group3 = [away]
+    rng = np.random.default_rng(20240611)
+    for _ in range(N_RANDOM_SEEDS):
+        group3.append(tile(lo + rng.random(n) * (hi - lo)))
+    return [np.stack(g, axis=1) for g in (group1, group2, group3) if g]
+
+
+def _reach(desc: RobotDescription, params: GeometricParameters, point: str) -> float:
+    """Upper bound of the distance from the first link's origin circle to the point."""
+    loop_links = {n for lp in desc.loops for n in (lp.crank, lp.coupler, lp.follower)}
+    total = 0.0
+    for i in desc.chain[1:]:
+        name = desc.links[i].name
+        if name in loop_links:
+            continue
+        total += math.hypot(params.a[i], params.d[i])
+    for lp in desc.loops:
+        total += abs(params.a[desc.index(lp.arm)])
+    if point == "tcp":
+        total += float(np.linalg.norm(params.tool[:3, 3]))
+    return total
+
+
+def _shoulder_distance(params: GeometricParameters, T: Array) -> Array:
+    """Distance of the target point from the circle swept by the first link's origin."""
+    a1, d1 = abs(params.a[0]), params.d[0]
+    rho = np.hypot(T[:, 0, 3], T[:, 1, 3])
+    return np.hypot(rho - a1, T[:, 2, 3] - d1)
+
+
+def _fmt_index(idx: tuple[int, ...] | None) -> str:
+    if idx is None:
+        return ""
+    return f"target {idx[0] if len(idx) == 1 else idx}: "
+
+
+# ----------------------------------------------------------------------------- API
+def inverse(
+    desc: RobotDescription,
+    params: GeometricParameters | None,
+    T_target: ArrayLike,
+    seed: ArrayLike | None = None,
+    *,
+    enforce_limits: bool = True,
+    tol: float = 1e-10,
+    closure: str = "fourbar",
+    target: str = "flange",
+    max_iterations: int = MAX_ITERATIONS,
+    raise_errors: bool = True,
+) -> IKResult:
+    """Joint readings that put the flange (or TCP) at ``T_target``.
+
+    ``T_target``: ``(..., 4, 4)`` pose(s) in the robot base frame of the flange
+    (``target="flange"``, default) or of the TCP = flange·tool (``"tcp"``).
+    ``seed``: ``(n,)`` or ``(..., n)`` radians; default ``desc.home``.  Returns
+    the converged solution nearest the seed (see the module docstring).
+    ``enforce_limits``: only solutions inside the joint and coupled limits count.
+    ``tol``: convergence threshold, metres for position and radians for
+    orientation.  ``params``: geometric parameters (``None`` → nominal), e.g. an
+    identified model for model-based compensation.
+
+    Raises :class:`UnreachableError` or :class:`JointLimitError` for the first
+    failing target unless ``raise_errors=False``, in which case failures are
+    reported in ``IKResult.converged``/``within_limits``/``reason``.
+    """
+    params = desc.nominal_parameters() if params is None else params
+    if target not in ("flange", "tcp"):
+        raise ValueError(f"target must be 'flange' or 'tcp', got {target!r}")
+    T = np.asarray(T_target, dtype=float)
+    if T.shape[-2:] != (4, 4):
+        raise ValueError(f"T_target: expected shape (..., 4, 4), got {T.shape}")
+    if not np.all(np.isfinite(T)):
+        raise ValueError("T_target: values must be finite")
+    batch = T.shape[:-2]
+    n = desc.n_actuated
+    Tf = T.reshape(-1, 4, 4)
+    B = Tf.shape[0]
+    s = np.asarray(desc.home if seed is None else seed, dtype=float)
+    if s.shape[-1:] != (n,):
+        raise ValueError(
+            f"seed: expected {n} joint values for {list(desc.actuated)}, got shape {s.shape}"
+        )
+    if not np.all(np.isfinite(s)):
+        raise ValueError("seed: values must be finite")
+    s = np.broadcast_to(s, (*batch, n)).reshape(B, n).copy()
+
+    best_q = s.copy()
+    best_ep = np.full(B, np.inf)
+    best_er = np.full(B, np.inf)
+    ok = np.zeros(B, dtype=bool)
+    iters = np.zeros(B, dtype=int)
+    reason = np.full(B, "", dtype=object)
+    failures: dict[int, _Failure] = {}
+
+    # A pose farther from the shoulder than the stretched arm is refused at once.
+    reach = _reach(desc, params, target)
+    dist = _shoulder_distance(params, Tf)
+    far = dist > reach
+    for k in np.flatnonzero(far):
+        failures[int(k)] = _Failure(
+            f"pose is out of reach: {dist[k]:.4f} m from the shoulder, the arm reaches at "
+            f"most {reach:.4f} m",
+            reach_reason="out of reach",
+        )
+    todo = ~far
+
+    def run(group: Array, lim: _Limits, rows: NDArray[np.intp]) -> tuple[Array, ...]:
+        """Solve the targets ``rows`` from each start of ``group`` (B, S, n)."""
+        S = group.shape[1]
+        Tr = np.repeat(Tf[rows], S, axis=0)
+        sr = np.repeat(s[rows], S, axis=0)
+        qr, cr, epr, err_r, itr = _solve(
+            desc, params, Tr, group[rows].reshape(-1, n), lim, closure, target, tol, max_iterations
+        )
+        qr = _wrap_to_seed(qr, sr, desc, enforce_limits)
+        iters[rows] += itr.reshape(-1, S).sum(axis=1)
+        return qr.reshape(-1, S, n), cr.reshape(-1, S), epr.reshape(-1, S), err_r.reshape(-1, S)
+
+    def keep(rows: NDArray[np.intp], qr: Array, good: Array, epr: Array, err_r: Array) -> None:
+        """Record, per target, the good start nearest the seed (else the closest approach)."""
+        dist2 = np.sum((qr - s[rows, None, :]) ** 2, axis=-1)
+        score = np.where(good, dist2, np.inf)
+        pick = np.argmin(score, axis=1)
+        r = np.arange(rows.size)
+        found = np.isfinite(score[r, pick])
+        resid = epr + err_r
+        pick = np.where(found, pick, np.argmin(resid, axis=1))
+        better = found | (resid[r, pick] < best_ep[rows] + best_er[rows])
+        upd = rows[better]
+        best_q[upd] = qr[r, pick][better]
+        best_ep[upd] = epr[r, pick][better]
+        best_er[upd] = err_r[r, pick][better]
+        ok[rows[found]] = True
+
+    # Stage 1: every start solved with the joint limits relaxed (loops kept in a
+    # safe band), then each angle moved to its 2π-representative nearest the seed;
+    # a solution inside the limits counts.  Free iterations find far more
+    # solutions than iterations clamped at the limits.
+    lim_free = _limits(desc, False)
+    starts = [s[:, None, :], *_restart_seeds(desc, params, Tf, s, closure, target)]
+    outside_q = np.full((B, n), np.nan)  # nearest converged solution, limits ignored
+    outside_d = np.full(B, np.inf)
+    for group in starts:
+        rows = np.flatnonzero(todo & ~ok)
+        if not rows.size:
+            break
+        qr, cr, epr, err_r = run(group, lim_free, rows)
+        good = cr & (desc.within_limits(qr) if enforce_limits else True)
+        keep(rows, qr, good, epr, err_r)
+        d2 = np.where(cr, np.sum((qr - s[rows, None, :]) ** 2, axis=-1), np.inf)
+        pick = np.argmin(d2, axis=1)
+        r = np.arange(rows.size)
+        closer = d2[r, pick] < outside_d[rows]
+        outside_d[rows[closer]] = d2[r, pick][closer]
+        outside_q[rows[closer]] = qr[r, pick][closer]
+
+    rows = np.flatnonzero(todo & ~ok)
+    if rows.size and enforce_limits:
+        # Stage 2: the same starts with iterates projected onto the limits — finds
+        # solutions that only a path along a limit leads to.
+        qr, cr, epr, err_r = run(np.concatenate(starts, axis=1), _limits(desc, True), rows)
+        keep(rows, qr, cr & desc.within_limits(qr), epr, err_r)
+        for k in rows:
+            if not ok[k] and np.isfinite(outside_d[k]):
+                failures[int(k)] = _limit_failure(desc, outside_q[k])
+    for k in np.flatnonzero(todo & ~ok):
+        failures.setdefault(
+            int(k),
+            _Failure(
+                f"no joint solution found (no convergence from the seed and the restarts; "
+                f"closest approach {best_ep[k] * 1e3:.3f} mm, {math.degrees(best_er[k]):.3f}°); "
+                f"the pose is probably outside the workspace"
+            ),
+        )
+    for k, f in failures.items():
+        reason[k] = f.message
+    if failures and raise_errors:
+        k = min(failures)
+        idx = tuple(int(i) for i in np.unravel_index(k, batch)) if batch else None
+        raise failures[k].exception(idx)
+
+    conv_final = (best_ep < tol) & (best_er < tol)
+    within = desc.within_limits(best_q)
+    shape_n = (*batch, n)
+    return IKResult(
+        q=best_q.reshape(shape_n),
+        converged=conv_final.reshape(batch),
+        position_error=best_ep.reshape(batch),
+        orientation_error=best_er.reshape(batch),
+        iterations=iters.reshape(batch),
+        within_limits=within.reshape(batch),
+        reason=reason.reshape(batch),
+    )
+
+
+@dataclass
+class _Failure:
+    """Why one target failed, and which exception that maps to."""
+
+    message: str
+    kind: str = "unreachable"  # or "limit"
+    reach_reason: str = "no convergence"
+    joint: str = ""
+    value: float = 0.0
+    limit: tuple[float, float] = (0.0, 0.0)
+
+    def exception(self, idx: tuple[int, ...] | None) -> Exception:
+        msg = _fmt_index(idx) + self.message
+        if self.kind == "limit":
+            return JointLimitError(
+                msg, joint=self.joint, value=self.value, limit=self.limit, index=idx
+            )
+        return UnreachableError(msg, reason=self.reach_reason, index=idx)
+
+
+def _limit_failure(desc: RobotDescription, q: Array) -> _Failure:
+    for j, name in enumerate(desc.actuated):
+        lo, hi = desc.joint_limits[j]
+        if not lo - 1e-9 <= q[j] <= hi + 1e-9:
+            return _Failure(
+                f"no solution inside the joint limits; the nearest solution has joint {name} = "
+                f"{math.degrees(q[j]):.3f}° outside [{math.degrees(lo):g}°, {math.degrees(hi):g}°]",
+                kind="limit",
+                joint=name,
+                value=float(q[j]),
+                limit=(float(lo), float(hi)),
+            )
+    for cl in desc.coupled_limits:
+        v = q[desc.joint_index(cl.joints[0])] - q[desc.joint_index(cl.joints[1])]
+        if not cl.lower - 1e-9 <= v <= cl.upper + 1e-9:
+            return _Failure(
+                f"no solution inside the joint limits; the nearest solution has {cl.joints[0]} − "
+                f"{cl.joints[1]} = {math.degrees(v):.3f}° outside "
+                f"[{math.degrees(cl.lower):g}°, {math.degrees(cl.upper):g}°]",
+                kind="limit",
+                joint=f"{cl.joints[0]} - {cl.joints[1]}",
+                value=float(v),
+                limit=(cl.lower, cl.upper),
+            )
+    return _Failure("no solution inside the joint limits", kind="limit")  # pragma: no cover

@@ -1,0 +1,84 @@
+"""Manipulator Jacobian of the actuated joints, thesis eqs. (6.37) and (6.39).
+
+For every revolute joint i on the chain to the flange (actuated or passive) the
+geometric column at point p is (Spong 5.1.27, thesis 6.37)::
+
+    J_i = [ z_{i−1} × (p − p_{i−1}) ;  z_{i−1} ]
+
+with z_{i−1}, p_{i−1} the axis and origin of the parent frame (the DH θ rotates
+about the parent's z, also for Hayati links) in the robot base frame.  Passive
+joints are driven through the loop closure, so the column of actuated joint j is
+
+    K_j = J_j [if j is on the chain] + Σ_passive (∂θ_passive/∂q_j) · J_passive.
+
+With the nominal closure (6.16) ∂θ3'/∂(θ2, θ2') = (1, −1) and
+∂θ4'/∂(θ2, θ2') = (−1, 1), which gives exactly eq. (6.39) with its primes
+restored: K_2 = K_3' − K_4' and K_2' = K_2' − K_3' + K_4'.  With the exact
+four-bar closure the derivatives come from the implicit-function theorem.
+
+Sign/convention: the columns are the derivative of
+``pose_error(T(q + dq), T(q))`` (see :mod:`plugcell.kinematics.pose_error`),
+i.e. linear velocity of the point and angular velocity, both in the base frame.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from plugcell.kinematics.description import RobotDescription
+from plugcell.kinematics.forward import FKResult, forward
+from plugcell.kinematics.parameters import GeometricParameters
+
+Array = NDArray[np.float64]
+
+__all__ = ["jacobian_from_fk", "manipulator_jacobian"]
+
+
+def jacobian_from_fk(desc: RobotDescription, fk: FKResult, point: str = "flange") -> Array:
+    """Jacobian ``(..., 6, n_actuated)`` from an already computed :class:`FKResult`."""
+    if point == "flange":
+        p = fk.flange[..., :3, 3]
+    elif point == "tcp":
+        p = fk.tcp[..., :3, 3]
+    else:
+        raise ValueError(f"point must be 'flange' or 'tcp', got {point!r}")
+    batch = fk.frames.shape[:-3]
+    J = np.zeros((*batch, 6, desc.n_actuated))
+    passive_pos = {name: k for k, name in enumerate(fk.passive_names)}
+    act_pos = {name: j for j, name in enumerate(desc.actuated)}
+    for i in desc.chain:
+        lk = desc.links[i]
+        if lk.is_fixed:
+            continue
+        if lk.parent == "base":
+            z = np.broadcast_to(np.array([0.0, 0.0, 1.0]), (*batch, 3))
+            o = np.zeros((*batch, 3))
+        else:
+            Tp = fk.frames[..., desc.index(lk.parent), :, :]
+            z = Tp[..., :3, 2]
+            o = Tp[..., :3, 3]
+        col = np.concatenate([np.cross(z, p - o), z], axis=-1)  # (..., 6)
+        if lk.is_actuated:
+            J[..., :, act_pos[lk.name]] += col
+        else:
+            dq = fk.passive_jacobian[..., passive_pos[lk.name], :]  # (..., n)
+            J += col[..., :, None] * dq[..., None, :]
+    return J
+
+
+def manipulator_jacobian(
+    desc: RobotDescription,
+    params: GeometricParameters | None,
+    q: ArrayLike,
+    point: str = "flange",
+    closure: str = "fourbar",
+) -> Array:
+    """Manipulator Jacobian ``(..., 6, n_actuated)`` of the actuated joints.
+
+    Rows: linear velocity of ``point`` ("flange" origin or "tcp" = flange·tool)
+    and angular velocity, both in the robot base frame, per unit joint rate
+    (thesis 6.37; loop joints via 6.39 for ``closure="nominal"`` or the exact
+    four-bar derivatives for ``"fourbar"``).
+    """
+    return jacobian_from_fk(desc, forward(desc, params, q, closure), point)

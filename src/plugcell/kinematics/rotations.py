@@ -1,0 +1,273 @@
+"""Orientation conventions: Euler ZYZ (Comau), roll-pitch-yaw, intrinsic XYZ, projective.
+
+All functions are vectorised over leading axes and work in radians.  Each
+``*_to_matrix`` returns ``(..., 3, 3)`` rotation matrices; each ``matrix_to_*``
+returns ``(..., 3)`` angle triples.
+
+Conventions (R maps frame coordinates to reference coordinates):
+
+``zyz``
+    Comau Euler angles (A, B, C), thesis eq. (A.4): ``R = Rz(A)·Ry(B)·Rz(C)``,
+    B ∈ [0, π], A, C ∈ (−π, π].  Gimbal lock (sin B ≈ 0): C := 0.
+``rpy``
+    Roll-pitch-yaw about the *fixed* X, Y, Z axes (r, p, y):
+    ``R = Rz(y)·Ry(p)·Rx(r)``, p ∈ [−π/2, π/2].  Gimbal lock (cos p ≈ 0): r := 0.
+``xyz``
+    Intrinsic (moving-axes) X-Y-Z (a, b, c): ``R = Rx(a)·Ry(b)·Rz(c)``,
+    b ∈ [−π/2, π/2].  Gimbal lock (cos b ≈ 0): c := 0.
+``prj``
+    Projective (projection) angles (u, v, w) of the tracker service (thesis
+    Table 7-3 names ``prj2tr``/``tr2prj`` but never defines them; this is our
+    definition).  Each angle is the angle of the projection of one frame axis on
+    one coordinate plane of the reference frame:
+
+    * u = atan2(y_z, y_y): the frame's y axis projected on the reference YZ plane,
+      measured from Y towards Z (a rotation about X);
+    * v = atan2(z_x, z_z): the z axis projected on the ZX plane, from Z towards X
+      (about Y);
+    * w = atan2(x_y, x_x): the x axis projected on the XY plane, from X towards Y
+      (about Z).
+
+    To first order (u, v, w) equals the rotation vector, which makes them handy
+    for small corrections.  The map is invertible in closed form: the three axes
+    are ``x ∝ (cos w, sin w, ξ)``, ``y ∝ (η, cos u, sin u)``, ``z ∝ (sin v, ζ, cos v)``
+    and orthogonality is *linear* in (ξ, η, ζ).  Domain: no frame axis may be
+    perpendicular to its projection plane (|angle| < 90° is always safe) and
+    ``sin u sin v sin w + cos u cos v cos w ≠ 0``; outside it :func:`prj_to_matrix`
+    raises ``ValueError``.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from plugcell.kinematics.transforms import identity
+
+Array = NDArray[np.float64]
+
+CONVENTIONS: tuple[str, ...] = ("zyz", "rpy", "xyz", "prj")
+
+#: Below this value of sin(B) (zyz) or cos(p) (rpy, xyz) the middle angle is treated
+#: as a gimbal lock and the last (first for rpy) angle is set to zero.
+GIMBAL_EPS = 1e-9
+
+__all__ = [
+    "CONVENTIONS",
+    "angles_to_matrix",
+    "matrix_to_angles",
+    "matrix_to_pose",
+    "matrix_to_prj",
+    "matrix_to_rpy",
+    "matrix_to_xyz",
+    "matrix_to_zyz",
+    "pose_to_matrix",
+    "prj_to_matrix",
+    "rpy_to_matrix",
+    "xyz_to_matrix",
+    "zyz_to_matrix",
+]
+
+
+def _f(x: ArrayLike) -> Array:
+    return np.asarray(x, dtype=float)
+
+
+def _rz(t: Array) -> Array:
+    c, s = np.cos(t), np.sin(t)
+    z, o = np.zeros_like(t), np.ones_like(t)
+    return np.stack(
+        [np.stack([c, -s, z], -1), np.stack([s, c, z], -1), np.stack([z, z, o], -1)], -2
+    )
+
+
+def _ry(t: Array) -> Array:
+    c, s = np.cos(t), np.sin(t)
+    z, o = np.zeros_like(t), np.ones_like(t)
+    return np.stack(
+        [np.stack([c, z, s], -1), np.stack([z, o, z], -1), np.stack([-s, z, c], -1)], -2
+    )
+
+
+def _rx(t: Array) -> Array:
+    c, s = np.cos(t), np.sin(t)
+    z, o = np.zeros_like(t), np.ones_like(t)
+    return np.stack(
+        [np.stack([o, z, z], -1), np.stack([z, c, -s], -1), np.stack([z, s, c], -1)], -2
+    )
+
+
+def _bcast(*xs: ArrayLike) -> list[Array]:
+    return list(np.broadcast_arrays(*(_f(x) for x in xs)))
+
+
+# --------------------------------------------------------------------------- ZYZ (A.4)
+def zyz_to_matrix(A: ArrayLike, B: ArrayLike, C: ArrayLike) -> Array:
+    """Comau Euler ZYZ angles → rotation matrix ``Rz(A)·Ry(B)·Rz(C)`` (thesis A.4)."""
+    A, B, C = _bcast(A, B, C)
+    return _rz(A) @ _ry(B) @ _rz(C)
+
+
+def matrix_to_zyz(R: ArrayLike) -> Array:
+    """Rotation matrix → Comau (A, B, C), thesis eq. (A.4); B ∈ [0, π].
+
+    ``A = atan2(R23, R13)``, ``B = atan2(√(R13² + R23²), R33)``, ``C = atan2(R32, −R31)``
+    (1-based indices as in the thesis).  Gimbal lock (sin B < 1e-9): C = 0 and A
+    carries the whole rotation about z.
+    """
+    R = _f(R)
+    sB = np.hypot(R[..., 0, 2], R[..., 1, 2])
+    B = np.arctan2(sB, R[..., 2, 2])
+    A = np.arctan2(R[..., 1, 2], R[..., 0, 2])
+    C = np.arctan2(R[..., 2, 1], -R[..., 2, 0])
+    lock = sB < GIMBAL_EPS
+    up = R[..., 2, 2] > 0
+    # B = 0:  R = Rz(A + C);  B = π:  R[:2,:2] = Rz(A − C)·diag(−1, 1)
+    A_lock = np.where(
+        up,
+        np.arctan2(R[..., 1, 0], R[..., 0, 0]),
+        np.arctan2(-R[..., 1, 0], -R[..., 0, 0]),
+    )
+    A = np.where(lock, A_lock, A)
+    C = np.where(lock, 0.0, C)
+    return np.stack([A, B, C], axis=-1)
+
+
+# --------------------------------------------------------------------------- RPY
+def rpy_to_matrix(r: ArrayLike, p: ArrayLike, y: ArrayLike) -> Array:
+    """Roll-pitch-yaw about fixed X, Y, Z → ``Rz(y)·Ry(p)·Rx(r)``."""
+    r, p, y = _bcast(r, p, y)
+    return _rz(y) @ _ry(p) @ _rx(r)
+
+
+def matrix_to_rpy(R: ArrayLike) -> Array:
+    """Rotation matrix → (roll, pitch, yaw), fixed X-Y-Z; pitch ∈ [−π/2, π/2].
+
+    Gimbal lock (cos p < 1e-9): roll = 0, yaw = atan2(−R12, R22) (1-based).
+    """
+    R = _f(R)
+    cp = np.hypot(R[..., 0, 0], R[..., 1, 0])
+    p = np.arctan2(-R[..., 2, 0], cp)
+    r = np.arctan2(R[..., 2, 1], R[..., 2, 2])
+    y = np.arctan2(R[..., 1, 0], R[..., 0, 0])
+    lock = cp < GIMBAL_EPS
+    r = np.where(lock, 0.0, r)
+    y = np.where(lock, np.arctan2(-R[..., 0, 1], R[..., 1, 1]), y)
+    return np.stack([r, p, y], axis=-1)
+
+
+# --------------------------------------------------------------------------- intrinsic XYZ
+def xyz_to_matrix(a: ArrayLike, b: ArrayLike, c: ArrayLike) -> Array:
+    """Intrinsic X-Y-Z angles → ``Rx(a)·Ry(b)·Rz(c)``."""
+    a, b, c = _bcast(a, b, c)
+    return _rx(a) @ _ry(b) @ _rz(c)
+
+
+def matrix_to_xyz(R: ArrayLike) -> Array:
+    """Rotation matrix → intrinsic X-Y-Z (a, b, c); b ∈ [−π/2, π/2].
+
+    Gimbal lock (cos b < 1e-9): c = 0, a = atan2(R32, R22) (1-based).
+    """
+    R = _f(R)
+    cb = np.hypot(R[..., 0, 0], R[..., 0, 1])
+    b = np.arctan2(R[..., 0, 2], cb)
+    a = np.arctan2(-R[..., 1, 2], R[..., 2, 2])
+    c = np.arctan2(-R[..., 0, 1], R[..., 0, 0])
+    lock = cb < GIMBAL_EPS
+    a = np.where(lock, np.arctan2(R[..., 2, 1], R[..., 1, 1]), a)
+    c = np.where(lock, 0.0, c)
+    return np.stack([a, b, c], axis=-1)
+
+
+# --------------------------------------------------------------------------- projective
+def matrix_to_prj(R: ArrayLike) -> Array:
+    """Rotation matrix → projective angles (u, v, w) (see the module docstring).
+
+    ``u = atan2(R32, R22)``, ``v = atan2(R13, R33)``, ``w = atan2(R21, R11)``
+    (1-based).  A degenerate projection (axis perpendicular to its plane) gives
+    ``atan2(0, 0) = 0`` deterministically; such a triple does not round-trip.
+    """
+    R = _f(R)
+    u = np.arctan2(R[..., 2, 1], R[..., 1, 1])
+    v = np.arctan2(R[..., 0, 2], R[..., 2, 2])
+    w = np.arctan2(R[..., 1, 0], R[..., 0, 0])
+    return np.stack([u, v, w], axis=-1)
+
+
+def prj_to_matrix(u: ArrayLike, v: ArrayLike, w: ArrayLike) -> Array:
+    """Projective angles (u, v, w) → rotation matrix (see the module docstring).
+
+    Solves the 3×3 linear system that makes ``x ∝ (cw, sw, ξ)``, ``y ∝ (η, cu, su)``,
+    ``z ∝ (sv, ζ, cv)`` mutually orthogonal, normalises, and checks the frame is
+    right-handed.  Raises ``ValueError`` if the angles are outside the domain
+    (singular system or no proper rotation has these projections).
+    """
+    u, v, w = _bcast(u, v, w)
+    cu, su, cv, sv, cw, sw = np.cos(u), np.sin(u), np.cos(v), np.sin(v), np.cos(w), np.sin(w)
+    # x·y = 0:  cw·η + sw·cu + ξ·su = 0
+    # y·z = 0:  η·sv + cu·ζ + su·cv = 0
+    # z·x = 0:  sv·cw + ζ·sw + cv·ξ = 0
+    M = np.zeros((*u.shape, 3, 3))
+    rhs = np.zeros((*u.shape, 3))
+    M[..., 0, 0], M[..., 0, 1] = su, cw
+    rhs[..., 0] = -sw * cu
+    M[..., 1, 1], M[..., 1, 2] = sv, cu
+    rhs[..., 1] = -su * cv
+    M[..., 2, 0], M[..., 2, 2] = cv, sw
+    rhs[..., 2] = -sv * cw
+    det = su * sv * sw + cu * cv * cw
+    if np.any(np.abs(det) < 1e-12):
+        raise ValueError("prj_to_matrix: angles outside the domain (singular projection system)")
+    sol = np.linalg.solve(M, rhs[..., None])[..., 0]
+    xi, eta, zeta = sol[..., 0], sol[..., 1], sol[..., 2]
+    x = np.stack([cw, sw, xi], -1)
+    y = np.stack([eta, cu, su], -1)
+    z = np.stack([sv, zeta, cv], -1)
+    x = x / np.linalg.norm(x, axis=-1, keepdims=True)
+    y = y / np.linalg.norm(y, axis=-1, keepdims=True)
+    z = z / np.linalg.norm(z, axis=-1, keepdims=True)
+    R = np.stack([x, y, z], axis=-1)
+    if np.any(np.linalg.det(R) < 0.5):
+        raise ValueError("prj_to_matrix: no proper rotation has these projective angles")
+    return R
+
+
+# --------------------------------------------------------------------------- dispatch
+_TO = {"zyz": zyz_to_matrix, "rpy": rpy_to_matrix, "xyz": xyz_to_matrix, "prj": prj_to_matrix}
+_FROM = {"zyz": matrix_to_zyz, "rpy": matrix_to_rpy, "xyz": matrix_to_xyz, "prj": matrix_to_prj}
+
+
+def _check(convention: str) -> str:
+    if convention not in _TO:
+        raise ValueError(f"unknown angle convention {convention!r}; expected one of {CONVENTIONS}")
+    return convention
+
+
+def angles_to_matrix(angles: ArrayLike, convention: str) -> Array:
+    """``(..., 3)`` angle triples in ``convention`` → ``(..., 3, 3)`` rotation matrices."""
+    angles = _f(angles)
+    if angles.shape[-1:] != (3,):
+        raise ValueError(f"expected angles of shape (..., 3), got {angles.shape}")
+    return _TO[_check(convention)](angles[..., 0], angles[..., 1], angles[..., 2])
+
+
+def matrix_to_angles(R: ArrayLike, convention: str) -> Array:
+    """``(..., 3, 3)`` rotation matrices → ``(..., 3)`` angle triples in ``convention``."""
+    return _FROM[_check(convention)](_f(R))
+
+
+def pose_to_matrix(xyz: ArrayLike, angles: ArrayLike, convention: str = "zyz") -> Array:
+    """Position ``(..., 3)`` + angles ``(..., 3)`` (radians) → homogeneous ``(..., 4, 4)``."""
+    xyz = _f(xyz)
+    R = angles_to_matrix(angles, convention)
+    shape = np.broadcast_shapes(xyz.shape[:-1], R.shape[:-2])
+    T = identity(shape)
+    T[..., :3, :3] = R
+    T[..., :3, 3] = xyz
+    return T
+
+
+def matrix_to_pose(T: ArrayLike, convention: str = "zyz") -> tuple[Array, Array]:
+    """Homogeneous ``(..., 4, 4)`` → ``(xyz (..., 3), angles (..., 3))`` in radians."""
+    T = _f(T)
+    return T[..., :3, 3].copy(), matrix_to_angles(T[..., :3, :3], convention)

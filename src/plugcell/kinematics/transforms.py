@@ -1,0 +1,215 @@
+"""Homogeneous transforms and the rotation group SO(3).
+
+Every function broadcasts over leading axes: an angle array of shape ``(...)``
+gives transforms of shape ``(..., 4, 4)``.  Units are SI (metres, radians).
+
+The link transform is the DH + Hayati form of thesis eq. (4.13)/(B.1)::
+
+    T_i^{i-1} = Rot(z, θ) · Tran(z, d) · Tran(x, a) · Rot(x, α) · Rot(y, β)
+
+which reduces to the plain Denavit–Hartenberg link (A.2) for β = 0.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+Array = NDArray[np.float64]
+
+__all__ = [
+    "dh_hayati",
+    "identity",
+    "invert",
+    "rot_x",
+    "rot_y",
+    "rot_z",
+    "skew",
+    "so3_exp",
+    "so3_log",
+    "translation",
+    "vee",
+]
+
+
+def _f(x: ArrayLike) -> Array:
+    return np.asarray(x, dtype=float)
+
+
+def identity(shape: tuple[int, ...] = ()) -> Array:
+    """Identity transforms of shape ``shape + (4, 4)``."""
+    return np.broadcast_to(np.eye(4), (*shape, 4, 4)).copy()
+
+
+def _rot(a: ArrayLike, axis: int) -> Array:
+    a = _f(a)
+    c, s = np.cos(a), np.sin(a)
+    T = np.zeros((*a.shape, 4, 4))
+    i, j = [(1, 2), (2, 0), (0, 1)][axis]
+    T[..., axis, axis] = 1.0
+    T[..., i, i] = c
+    T[..., j, j] = c
+    T[..., i, j] = -s
+    T[..., j, i] = s
+    T[..., 3, 3] = 1.0
+    return T
+
+
+def rot_x(a: ArrayLike) -> Array:
+    """Rotation about x by ``a`` radians, ``(...)`` → ``(..., 4, 4)``."""
+    return _rot(a, 0)
+
+
+def rot_y(a: ArrayLike) -> Array:
+    """Rotation about y by ``a`` radians, ``(...)`` → ``(..., 4, 4)``."""
+    return _rot(a, 1)
+
+
+def rot_z(a: ArrayLike) -> Array:
+    """Rotation about z by ``a`` radians, ``(...)`` → ``(..., 4, 4)``."""
+    return _rot(a, 2)
+
+
+def translation(v: ArrayLike) -> Array:
+    """Pure translation, ``(..., 3)`` → ``(..., 4, 4)``."""
+    v = _f(v)
+    if v.shape[-1:] != (3,):
+        raise ValueError(f"translation: expected shape (..., 3), got {v.shape}")
+    T = identity(v.shape[:-1])
+    T[..., :3, 3] = v
+    return T
+
+
+def invert(T: ArrayLike) -> Array:
+    """Inverse of rigid transforms ``(..., 4, 4)``: ``[Rᵀ, -Rᵀp; 0, 1]``."""
+    T = _f(T)
+    R = T[..., :3, :3]
+    p = T[..., :3, 3]
+    Ti = np.zeros_like(T)
+    Rt = np.swapaxes(R, -1, -2)
+    Ti[..., :3, :3] = Rt
+    Ti[..., :3, 3] = -np.einsum("...ij,...j->...i", Rt, p)
+    Ti[..., 3, 3] = 1.0
+    return Ti
+
+
+def dh_hayati(
+    theta: ArrayLike,
+    d: ArrayLike,
+    a: ArrayLike,
+    alpha: ArrayLike,
+    beta: ArrayLike = 0.0,
+) -> Array:
+    """DH + Hayati link transform, thesis eq. (B.1) (β = 0 gives the DH link A.2).
+
+    ``Rz(θ)·Tz(d)·Tx(a)·Rx(α)·Ry(β)``; all arguments broadcast together and the
+    result has shape ``broadcast_shape + (4, 4)``.
+    """
+    theta, d, a, alpha, beta = np.broadcast_arrays(_f(theta), _f(d), _f(a), _f(alpha), _f(beta))
+    ct, st = np.cos(theta), np.sin(theta)
+    ca, sa = np.cos(alpha), np.sin(alpha)
+    cb, sb = np.cos(beta), np.sin(beta)
+    T = np.zeros((*theta.shape, 4, 4))
+    T[..., 0, 0] = ct * cb - st * sa * sb
+    T[..., 0, 1] = -st * ca
+    T[..., 0, 2] = ct * sb + st * sa * cb
+    T[..., 0, 3] = a * ct
+    T[..., 1, 0] = st * cb + ct * sa * sb
+    T[..., 1, 1] = ct * ca
+    T[..., 1, 2] = st * sb - ct * sa * cb
+    T[..., 1, 3] = a * st
+    T[..., 2, 0] = -ca * sb
+    T[..., 2, 1] = sa
+    T[..., 2, 2] = ca * cb
+    T[..., 2, 3] = d
+    T[..., 3, 3] = 1.0
+    return T
+
+
+def skew(v: ArrayLike) -> Array:
+    """Skew-symmetric matrix ``[v]×`` with ``[v]× u = v × u``; ``(..., 3)`` → ``(..., 3, 3)``."""
+    v = _f(v)
+    S = np.zeros((*v.shape[:-1], 3, 3))
+    S[..., 0, 1] = -v[..., 2]
+    S[..., 0, 2] = v[..., 1]
+    S[..., 1, 0] = v[..., 2]
+    S[..., 1, 2] = -v[..., 0]
+    S[..., 2, 0] = -v[..., 1]
+    S[..., 2, 1] = v[..., 0]
+    return S
+
+
+def vee(S: ArrayLike) -> Array:
+    """Inverse of :func:`skew` applied to the skew-symmetric part of ``S``."""
+    S = _f(S)
+    return 0.5 * np.stack(
+        [S[..., 2, 1] - S[..., 1, 2], S[..., 0, 2] - S[..., 2, 0], S[..., 1, 0] - S[..., 0, 1]],
+        axis=-1,
+    )
+
+
+def so3_exp(w: ArrayLike) -> Array:
+    """Rotation matrix of the rotation vector ``w`` (Rodrigues), ``(..., 3)`` → ``(..., 3, 3)``.
+
+    Uses Taylor series of ``sin θ/θ`` and ``(1 - cos θ)/θ²`` for small angles.
+    """
+    w = _f(w)
+    th2 = np.sum(w * w, axis=-1)
+    th = np.sqrt(th2)
+    small = th < 1e-4
+    ths = np.where(small, 1.0, th)
+    A = np.where(small, 1.0 - th2 / 6.0 + th2 * th2 / 120.0, np.sin(ths) / ths)
+    B = np.where(small, 0.5 - th2 / 24.0 + th2 * th2 / 720.0, (1.0 - np.cos(ths)) / ths**2)
+    K = skew(w)
+    return np.eye(3) + A[..., None, None] * K + B[..., None, None] * (K @ K)
+
+
+def _matrix_to_quat(R: Array) -> Array:
+    """Unit quaternions ``(w, x, y, z)`` with ``w ≥ 0`` by Shepperd's method (robust)."""
+    m00, m11, m22 = R[..., 0, 0], R[..., 1, 1], R[..., 2, 2]
+    tr = m00 + m11 + m22
+    cand = np.stack([tr, m00, m11, m22], axis=-1)
+    k = np.argmax(cand, axis=-1)
+    q = np.empty((*R.shape[:-2], 4))
+    # case 0: w largest
+    t0 = np.sqrt(np.maximum(1.0 + tr, 0.0)) * 2.0  # 4w
+    t1 = np.sqrt(np.maximum(1.0 + m00 - m11 - m22, 0.0)) * 2.0  # 4x
+    t2 = np.sqrt(np.maximum(1.0 - m00 + m11 - m22, 0.0)) * 2.0  # 4y
+    t3 = np.sqrt(np.maximum(1.0 - m00 - m11 + m22, 0.0)) * 2.0  # 4z
+    r21_12 = R[..., 2, 1] - R[..., 1, 2]
+    r02_20 = R[..., 0, 2] - R[..., 2, 0]
+    r10_01 = R[..., 1, 0] - R[..., 0, 1]
+    r01_10 = R[..., 0, 1] + R[..., 1, 0]
+    r02p20 = R[..., 0, 2] + R[..., 2, 0]
+    r12_21 = R[..., 1, 2] + R[..., 2, 1]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        q0 = np.stack([t0 / 4, r21_12 / t0, r02_20 / t0, r10_01 / t0], axis=-1)
+        q1 = np.stack([r21_12 / t1, t1 / 4, r01_10 / t1, r02p20 / t1], axis=-1)
+        q2 = np.stack([r02_20 / t2, r01_10 / t2, t2 / 4, r12_21 / t2], axis=-1)
+        q3 = np.stack([r10_01 / t3, r02p20 / t3, r12_21 / t3, t3 / 4], axis=-1)
+    q = np.where((k == 0)[..., None], q0, q)
+    q = np.where((k == 1)[..., None], q1, q)
+    q = np.where((k == 2)[..., None], q2, q)
+    q = np.where((k == 3)[..., None], q3, q)
+    q = np.where((q[..., :1] < 0), -q, q)
+    return q / np.linalg.norm(q, axis=-1, keepdims=True)
+
+
+def so3_log(R: ArrayLike) -> Array:
+    """Rotation vector of ``R`` (``(..., 3, 3)`` → ``(..., 3)``), angle in [0, π].
+
+    Robust near 0 (series) and near π (via a Shepperd quaternion, whose vector
+    part is well conditioned there).  At exactly π the sign of the axis is that
+    of the quaternion Shepperd's method returns — deterministic.
+    """
+    R = _f(R)
+    q = _matrix_to_quat(R)
+    w = q[..., 0]
+    v = q[..., 1:]
+    n = np.linalg.norm(v, axis=-1)
+    angle = 2.0 * np.arctan2(n, w)
+    small = n < 1e-8
+    ns = np.where(small, 1.0, n)
+    # angle / n → 2/w (1 + O(n²)) for small n (w ≈ 1)
+    scale = np.where(small, 2.0 / np.where(small, w, 1.0), angle / ns)
+    return scale[..., None] * v

@@ -1,0 +1,219 @@
+"""Seeded, serialisable twin scenarios and the hidden truth they produce.
+
+A :class:`TwinScenario` is the *recipe* — which robot, which seed, which payload —
+small enough to print in a report and store in JSON.  :func:`make_truth` turns it
+into a :class:`TwinTruth`: the true geometry (nominal + hidden errors), true BASE
+(robot base in the tracker frame) and PROBE (T-MAC in the flange frame), and the
+physical effects of the robot's twin profile (``twin/profiles/<robot>.toml``).
+
+The truth is what a simulated device reads; calibration code never receives it.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import tomllib
+from dataclasses import asdict, dataclass, field
+from importlib import resources
+from typing import Any
+
+import numpy as np
+
+from plugcell.io.robots import load_robot
+from plugcell.kinematics import GeometricParameters, RobotDescription
+from plugcell.kinematics.rotations import rpy_to_matrix
+from plugcell.kinematics.transforms import rot_z, translation
+from plugcell.twin.physics import Beam, Payload, TransmissionError
+
+#: The thesis's payload is mounted "at an offset distance to the centre of the
+#: flange surface" (8.2.1, Fig. 8-3): 0.15 m sideways and 0.10 m out.
+DEFAULT_PAYLOAD_COM = (0.15, 0.0, 0.10)
+
+
+class ScenarioError(ValueError):
+    """A scenario that cannot be built (unknown robot, no twin profile, bad value)."""
+
+
+@dataclass(frozen=True)
+class TwinProfile:
+    """The physics a robot's twin has beyond its description (see ``docs/twin.md``)."""
+
+    robot: str
+    sigma_length: float  # m
+    sigma_angle: float  # rad
+    encoder_resolution: float  # rad
+    repeatability: float  # rad, 1-σ per joint and move
+    lost_motion: float  # rad, backlash of each reducer
+    preload_torque: float  # N·m: gravity above this holds the gear on one flank
+    transmission_orders: tuple[int, ...]
+    transmission_amplitude: float  # rad, 1-σ of each harmonic's amplitude
+    beams: tuple[Beam, ...]
+    tracker_position: tuple[float, float, float]
+    tracker_yaw: float  # rad
+    probe_position: tuple[float, float, float]
+    probe_rpy: tuple[float, float, float]  # rad
+    reference_zyz: tuple[float, float, float]  # rad
+    spread: float  # rad
+
+    @classmethod
+    def load(cls, robot: str) -> TwinProfile:
+        """The packaged profile ``twin/profiles/<robot>.toml``."""
+        try:
+            text = resources.files("plugcell.twin").joinpath(f"profiles/{robot}.toml").read_text()
+        except FileNotFoundError:
+            raise ScenarioError(
+                f"no twin profile for robot {robot!r}; available: {available_profiles()}"
+            ) from None
+        d = tomllib.loads(text)
+        rad = math.radians
+        try:
+            g, j, c, p = d["geometric_errors"], d["joints"], d["cell"], d["poses"]
+            return cls(
+                robot=d["robot"],
+                sigma_length=g["sigma_length_mm"] * 1e-3,
+                sigma_angle=rad(g["sigma_angle_deg"]),
+                encoder_resolution=rad(j["encoder_resolution_deg"]),
+                repeatability=rad(j["repeatability_deg"]),
+                lost_motion=rad(j["lost_motion_deg"]),
+                preload_torque=float(j["preload_torque_nm"]),
+                transmission_orders=tuple(int(k) for k in j["transmission_orders"]),
+                transmission_amplitude=rad(j["transmission_amplitude_deg"]),
+                beams=tuple(Beam(b["link"], b["carries"], float(b["compliance"]))
+                            for b in d.get("bending", [])),
+                tracker_position=tuple(c["tracker_position_m"]),
+                tracker_yaw=rad(c["tracker_yaw_deg"]),
+                probe_position=tuple(c["probe_position_m"]),
+                probe_rpy=tuple(rad(v) for v in c["probe_rpy_deg"]),
+                reference_zyz=tuple(rad(v) for v in p["reference_zyz_deg"]),
+                spread=rad(p["spread_deg"]),
+            )
+        except KeyError as exc:  # a packaged file: a bug, but say which key
+            raise ScenarioError(f"twin profile {robot!r} lacks the key {exc}") from None
+
+
+def available_profiles() -> list[str]:
+    root = resources.files("plugcell.twin").joinpath("profiles")
+    return sorted(p.name.removesuffix(".toml") for p in root.iterdir() if p.name.endswith(".toml"))
+
+
+@dataclass(frozen=True)
+class TwinScenario:
+    """Which robot, which hidden errors (by seed), which payload.  JSON-serialisable."""
+
+    robot: str = "smart_h4"
+    seed: int = 0
+    payload_kg: float = 0.0
+    payload_com_m: tuple[float, float, float] = DEFAULT_PAYLOAD_COM
+    #: Scale of the hidden geometric errors (1 = the profile's σ; 0 = a perfect robot).
+    error_scale: float = 1.0
+    #: Switches for the physical effects (all on by default).
+    gravity: bool = True
+    bending: bool = True
+    noise: bool = True
+    transmission: bool = True
+    backlash: bool = True
+    tracker_seed: int | None = None
+    extra: dict[str, Any] = field(default_factory=dict)
+
+    def __post_init__(self) -> None:
+        if not (math.isfinite(self.payload_kg) and self.payload_kg >= 0):
+            raise ScenarioError(f"payload_kg must be ≥ 0, got {self.payload_kg!r}")
+        if not (math.isfinite(self.error_scale) and self.error_scale >= 0):
+            raise ScenarioError(f"error_scale must be ≥ 0, got {self.error_scale!r}")
+        object.__setattr__(self, "payload_com_m", tuple(float(v) for v in self.payload_com_m))
+
+    def to_json(self) -> str:
+        return json.dumps(asdict(self), sort_keys=True)
+
+    @classmethod
+    def from_json(cls, text: str) -> TwinScenario:
+        try:
+            d = json.loads(text)
+        except json.JSONDecodeError as exc:
+            raise ScenarioError(f"scenario is not valid JSON: {exc}") from None
+        if not isinstance(d, dict):
+            raise ScenarioError("scenario JSON must be an object")
+        known = set(cls.__dataclass_fields__)
+        unknown = set(d) - known
+        if unknown:
+            raise ScenarioError(f"unknown scenario keys {sorted(unknown)}; known: {sorted(known)}")
+        return cls(**d)
+
+    def with_payload(self, mass_kg: float, com_m: tuple[float, float, float] | None = None
+                     ) -> TwinScenario:
+        d = asdict(self)
+        d["payload_kg"] = float(mass_kg)
+        if com_m is not None:
+            d["payload_com_m"] = tuple(com_m)
+        return TwinScenario(**d)
+
+    @property
+    def payload(self) -> Payload:
+        return Payload(self.payload_kg, self.payload_com_m)
+
+
+@dataclass(frozen=True, eq=False)
+class TwinTruth:
+    """The hidden truth of one simulated robot in its cell (SI units)."""
+
+    description: RobotDescription  # the nominal description (public)
+    params: GeometricParameters  # true geometry
+    base: np.ndarray  # robot base in the tracker frame (thesis BASE, eq. 6.23)
+    probe: np.ndarray  # T-MAC in the flange frame (thesis PROBE)
+    stiffness: np.ndarray  # N·m/rad per actuated joint
+    transmission: TransmissionError  # periodic reducer error per actuated joint
+    profile: TwinProfile
+    scenario: TwinScenario
+
+
+def _hidden_errors(desc: RobotDescription, profile: TwinProfile, rng: np.random.Generator,
+                   scale: float) -> dict[tuple[str, str], float]:
+    """Draw the true DH/Hayati errors: every parameter that exists physically.
+
+    Passive joints' θ are set by the closure (no offset); β only where the link is
+    Hayati (consecutive parallel axes); the off-chain arm's d and α do not exist
+    in the planar loop model (design.md: twists perturb the chain, not the closure).
+    """
+    loop_arms = {lp.arm for lp in desc.loops}
+    errors: dict[tuple[str, str], float] = {}
+    for lk in desc.links:
+        fields = ["theta", "d", "a", "alpha"]
+        if lk.is_passive:
+            fields.remove("theta")
+        if lk.name in loop_arms:
+            fields = [f for f in fields if f in ("theta", "a")]
+        if lk.hayati:
+            fields.append("beta")
+        for f in fields:
+            sigma = profile.sigma_length if f in ("d", "a") else profile.sigma_angle
+            errors[(lk.name, f)] = scale * sigma * float(rng.standard_normal())
+    return errors
+
+
+def make_truth(scenario: TwinScenario) -> TwinTruth:
+    """Build the hidden truth of ``scenario`` (deterministic in its seed)."""
+    try:
+        desc = load_robot(scenario.robot)
+    except Exception as exc:  # DescriptionError or unknown robot
+        raise ScenarioError(str(exc)) from None
+    profile = TwinProfile.load(desc.name)
+    if desc.stiffness is None:
+        raise ScenarioError(f"robot {desc.name!r} has no joint stiffness in its description")
+    rng = np.random.default_rng(scenario.seed)
+    params = desc.nominal_parameters().perturbed(
+        _hidden_errors(desc, profile, rng, scenario.error_scale)
+    )
+    tracker_in_robot = translation(np.array(profile.tracker_position)) @ rot_z(profile.tracker_yaw)
+    base = np.linalg.inv(tracker_in_robot)
+    probe = translation(np.array(profile.probe_position))
+    probe[:3, :3] = rpy_to_matrix(*profile.probe_rpy)
+    n, k = desc.n_actuated, len(profile.transmission_orders)
+    scale = profile.transmission_amplitude if scenario.transmission else 0.0
+    transmission = TransmissionError(
+        profile.transmission_orders,
+        np.abs(scale * rng.standard_normal((n, k))),
+        rng.uniform(0.0, 2 * np.pi, (n, k)),
+    )
+    return TwinTruth(desc, params, base, probe, np.array(desc.stiffness), transmission,
+                     profile, scenario)

@@ -1,0 +1,141 @@
+"""``plugcell calibrate`` and ``plugcell reproduce 8.1`` end to end (files in, files out)."""
+
+from __future__ import annotations
+
+import csv
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from plugcell.cli import main
+from plugcell.io.measurements import write_measurements
+from plugcell.twin.campaign import measure_poses, working_volume_joints
+from plugcell.twin.robot import RobotTwin
+from plugcell.twin.scenario import TwinScenario
+from plugcell.twin.tracker import LaserTracker
+
+SHARED_TABLE = Path(__file__).resolve().parents[3] / "shared" / "data" / "thesis_table_8_1.csv"
+
+
+def _campaign(path: Path, n: int, pose_seed: int, payload: float = 0.0) -> None:
+    robot = RobotTwin(TwinScenario(seed=2).with_payload(payload))
+    q = working_volume_joints(robot.description, robot.reveal_truth().profile, n,
+                              np.random.default_rng(pose_seed))
+    data, _ = measure_poses(robot, LaserTracker(seed=2), q)
+    write_measurements(path, data)
+
+
+@pytest.fixture(scope="module")
+def files(tmp_path_factory):
+    d = tmp_path_factory.mktemp("cal")
+    _campaign(d / "cal.csv", 60, 1)
+    _campaign(d / "val.csv", 30, 2)
+    return d
+
+
+def test_calibrate_writes_params_and_an_offline_report(files, capsys):
+    out, rep = files / "params.json", files / "report.html"
+    rc = main(["calibrate", "--robot", "smart_h4", "--model", "loop+gravity",
+               "--data", str(files / "cal.csv"), "--validate", str(files / "val.csv"),
+               "--out", str(out), "--report", str(rep), "--json"])
+    assert rc == 0
+    captured = capsys.readouterr()
+    printed = json.loads(captured.out)
+    assert "[identify] iteration 1" in captured.err  # progress on stderr
+    saved = json.loads(out.read_text())
+    assert printed["parameters"] == saved["parameters"]
+    assert saved["model"]["number"] == 4 and len(saved["parameters"]) == 37
+    for key in ("calibration", "validation"):
+        assert {"mean_mm", "std_mm", "max_mm"} <= set(saved[key])
+        assert saved[key]["mean_mm"] < 0.2 < saved[key]["before"]["mean_mm"]
+    assert saved["base"]["matrix"] and saved["probe"]["matrix"]
+    assert isinstance(saved["iterations"], int) and saved["condition_number"] > 1
+    row = next(p for p in saved["parameters"] if p["key"] == "theta2'")
+    assert row["name"] == "Δθ2'" and row["stands_for"] == "Δθ2' + Δθ3" and row["unit"] == "rad"
+    html = rep.read_text()
+    assert html.count("data:image/png;base64,") >= 4
+    assert "<script" not in html and "http://" not in html and "https://" not in html
+    assert "Δa2' − Δa4'" in html
+
+
+@pytest.mark.parametrize(
+    ("argv", "message"),
+    [
+        (["--robot", "no_such_robot", "--model", "2"], "unknown robot 'no_such_robot'"),
+        (["--robot", "smart_h4", "--model", "9"], "unknown model '9'"),
+        (["--robot", "smart_h4", "--model", "5"], "carry no payload"),
+    ],
+)
+def test_calibrate_user_errors_exit_2(files, tmp_path, capsys, argv, message):
+    rc = main(["calibrate", *argv, "--data", str(files / "cal.csv"),
+               "--out", str(tmp_path / "p.json"), "--quiet"])
+    assert rc == 2
+    assert message in capsys.readouterr().err
+
+
+def test_calibrate_bad_files_too_few_poses_and_divergence(files, tmp_path, capsys):
+    bad = tmp_path / "bad.csv"
+    bad.write_text("j1,j2,j3,j4,j5,j6,x,y\n1,2,3,4,5,6,7,8\n")
+    assert main(["calibrate", "--robot", "smart_h4", "--model", "2", "--data", str(bad),
+                 "--out", str(tmp_path / "p.json")]) == 2
+    assert "lacks the column 'z'" in capsys.readouterr().err
+    lines = (files / "cal.csv").read_text().splitlines()
+    header = next(i for i, ln in enumerate(lines) if ln.startswith("j1"))
+    few = tmp_path / "few.csv"
+    few.write_text("\n".join(lines[: header + 6]) + "\n")
+    assert main(["calibrate", "--robot", "smart_h4", "--model", "2", "--data", str(few),
+                 "--out", str(tmp_path / "p.json"), "--quiet"]) == 2
+    assert "too few poses" in capsys.readouterr().err
+    rows = list(csv.reader(lines[header:]))
+    swapped = tmp_path / "swapped.csv"
+    body = [",".join([r[0], r[2], r[1], *r[3:]]) for r in rows[1:]]  # θ2 <-> θ2'
+    swapped.write_text("\n".join([",".join(rows[0]), *body]) + "\n")
+    assert main(["calibrate", "--robot", "smart_h4", "--model", "2", "--data", str(swapped),
+                 "--out", str(tmp_path / "p.json"), "--quiet"]) == 2
+    assert "do not match robot 'smart_h4'" in capsys.readouterr().err
+    assert not (tmp_path / "p.json").exists()
+
+
+def test_reproduce_8_1(tmp_path, capsys):
+    rc = main(["reproduce", "8.1", "--json", "--out-dir", str(tmp_path)])
+    assert rc == 0
+    d = json.loads(capsys.readouterr().out)
+    assert d["iterations"] <= 7 and d["converged"]
+    assert d["residual_mean_mm"] < 1e-4
+    assert d["max_param_error"] < 1e-5
+    assert d["parameters_identified"] == 34
+    assert (tmp_path / "8.1.md").is_file() and (tmp_path / "8.1-convergence.png").is_file()
+
+
+@pytest.mark.skipif(not SHARED_TABLE.is_file(), reason="shared data not available")
+def test_embedded_table_8_1_matches_the_shared_csv():
+    from plugcell.commands.reproduce import TABLE_8_1
+
+    rows = [r for r in csv.reader(SHARED_TABLE.read_text().splitlines())
+            if r and not r[0].startswith("#")][1:]
+    shared = {(r[0], r[1]): (float(r[2]) if r[2] else None, float(r[3]) if r[3] else None)
+              for r in rows}
+    ours = {(lk, f): (inp, th) for lk, f, inp, th, _ in TABLE_8_1}
+    for key, (inp, th) in ours.items():
+        assert shared[key] == (inp, th), key
+    assert {k for k, v in shared.items() if v[0] is not None} == set(ours)
+
+
+def test_reproduce_8_2_quick(tmp_path, capsys):
+    rc = main(["reproduce", "8.2", "--quick", "--json", "--out-dir", str(tmp_path)])
+    assert rc == 0
+    d = json.loads(capsys.readouterr().out)
+    un = d["unloaded"]
+    val = {m: un[m]["validation"]["mean_mm"] for m in ("nominal", "model1", "model2", "model3",
+                                                       "model4")}
+    assert 2.0 < val["nominal"] < 8.0  # the twin's nominal error has the thesis's size (4 mm)
+    assert max(val[m] for m in ("model1", "model2", "model3", "model4")) < 0.25 * val["nominal"]
+    assert val["model4"] < min(val["model1"], val["model3"])  # the loop model wins (8.2.3)
+    l36 = d["loaded_36kg"]
+    for m in ("nominal", "model4", "model5"):
+        assert l36[m]["validation"]["mean_mm"] > 0
+    assert l36["model5"]["validation"]["mean_mm"] < l36["model4"]["validation"]["mean_mm"]
+    assert len(d["table_8_4"]) == 50
+    assert (tmp_path / "8.2.md").is_file() and (tmp_path / "8.2-models.png").is_file()

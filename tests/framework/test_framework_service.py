@@ -1,0 +1,399 @@
+"""The generic service in one process: queue semantics, timeouts, bad input, partners, journal.
+
+Services and clients here are real Zenoh participants (separate sessions on
+loopback); the device is scripted so every step is under the test's control.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import time
+from pathlib import Path
+
+import msgspec
+import numpy as np
+import pytest
+from framework_testlib import ScriptedDevice, run, unique_cell
+
+from plugcell.framework import wire
+from plugcell.framework.journal import read_journal
+from plugcell.framework.model import (
+    Acknowledgement,
+    Command,
+    Data,
+    DataTypes,
+    DeviceStates,
+    Process,
+    ProcessStates,
+    Tag,
+)
+from plugcell.framework.participant import Participant
+
+pytestmark = pytest.mark.timeout(60)
+
+Q, R, C, F = (
+    ProcessStates.Queued,
+    ProcessStates.Running,
+    ProcessStates.Completed,
+    ProcessStates.Failed,
+)
+
+
+async def until(predicate, timeout: float = 10.0) -> None:
+    """Wait (bounded) for a condition that another task or process makes true."""
+    deadline = time.monotonic() + timeout
+    while not predicate():
+        assert time.monotonic() < deadline, "condition not reached in time"
+        await asyncio.sleep(0.01)
+
+
+@contextlib.asynccontextmanager
+async def cell_with(tmp_path: Path, *clients: str, **device_kwargs):
+    """A ScriptedDevice "DEV" and the named clients, all in a fresh cell."""
+    cell = unique_cell()
+    dev = ScriptedDevice(cell=cell, journal=tmp_path / "journal", **device_kwargs)
+    await dev.start()
+    parts = [Participant(name, cell=cell) for name in clients]
+    try:
+        for p in parts:
+            await p.start()
+            assert await p.wait_for("DEV", 10)
+        yield dev, *parts
+    finally:
+        for p in parts:
+            await p.close()
+        await dev.close()
+
+
+def states(updates) -> list[ProcessStates]:
+    return [u.state for u in updates]
+
+
+async def collect(call) -> list:
+    return [u async for u in call]
+
+
+def test_create_acknowledge_update_complete(tmp_path):
+    async def body():
+        async with cell_with(tmp_path, "ROBOT") as (dev, robot):
+            dev.gates["g"] = asyncio.Event()
+            work = await robot.create_process("DEV", "Work", "g")
+            assert work.ack.state is Q and work.ack.instance == dev.instance
+            running = await anext(work)
+            assert (running.state, running.seq) == (R, 1)
+            dev.gates["g"].set()
+            assert [(u.state, u.seq) for u in await collect(work)] == [(C, 2)]
+            # a process that ends within one event-loop turn: its data-less Running
+            # update is journaled but superseded by the final one (seq 1 not sent)
+            call = await robot.create_process("DEV", "Measure")
+            updates = await collect(call)
+            assert [(u.state, u.seq) for u in updates] == [(C, 2)]
+            np.testing.assert_array_equal(call.array(updates[-1]), [1.0, 2.0, 3.0])
+            assert dev.device.state is DeviceStates.Ready
+
+    run(body())
+
+
+def test_fifo_one_at_a_time_and_get_while_busy(tmp_path):
+    async def body():
+        async with cell_with(tmp_path, "A", "B") as (dev, a, b):
+            dev.gates["g"] = asyncio.Event()
+            first = await a.create_process("DEV", "Work", "g")
+            await dev.started.wait()
+            second = await b.create_process("DEV", "Work", "b")
+            third = await a.create_process("DEV", "Work", "a2")
+            assert second.ack.state is Q and third.ack.state is Q
+            state, _ = await b.get("DEV")  # Get is served while a process runs
+            assert state.device_info.state is DeviceStates.Busy
+            assert dev.log == ["Work:g"]
+            dev.gates["g"].set()
+            for call in (first, second, third):
+                assert (await call.result()).state is C
+            assert dev.log == ["Work:g", "Work:b", "Work:a2"]
+
+    run(body())
+
+
+def test_multiple_data_holds_the_device_until_the_same_senders_stop(tmp_path):
+    async def body():
+        async with cell_with(tmp_path, "A", "B") as (dev, a, b):
+            stream = await a.create_process("DEV", "Stream")
+            await dev.started.wait()
+            b_work = await b.create_process("DEV", "Work", "b")
+            b_stop = await b.create_process("DEV", "Stop")  # not B's stream: must wait
+            a_work = await a.create_process("DEV", "Work", "a")
+            dev.emit(1.0)
+            dev.emit(2.0)
+            a_stop = await a.create_process("DEV", "Stop")
+            assert (await a_stop.result()).state is C
+            updates = await collect(stream)
+            assert states(updates) == [R, R, R, C]
+            assert [stream.array(u)[0] for u in updates[1:3]] == [1.0, 2.0]
+            assert (await b_work.result()).state is C
+            final = await b_stop.result()
+            assert final.state is F and "no MultipleData process of B is running" in final.reason
+            assert (await a_work.result()).state is C
+            assert dev.log == ["Stream", "Stop", "Work:b", "Work:a"]  # B's Stop never dispatched
+
+    run(body())
+
+
+def test_stop_data_with_nothing_running_fails(tmp_path):
+    async def body():
+        async with cell_with(tmp_path, "A") as (dev, a):
+            final = await (await a.create_process("DEV", "Stop")).result()
+            assert final.state is F
+            assert final.reason == "Stop: no MultipleData process of A is running"
+            assert dev.log == []
+
+    run(body())
+
+
+def test_lost_sender_frees_the_device(tmp_path):
+    async def body():
+        async with cell_with(tmp_path, "A", "B") as (dev, a, b):
+            stream = await a.create_process("DEV", "Stream")
+            await dev.started.wait()
+            queued = await b.create_process("DEV", "Work", "b")
+            await a.close()  # A's liveliness token disappears
+            assert (await queued.result()).state is C
+            assert dev.log == ["Stream", "Stop", "Work:b"]  # the service stopped the stream
+            rows = {r["command"]: r for r in read_journal([dev.journal.path])}
+            assert rows["Stream"]["state"] == "Failed"
+            assert "sender A lost" in rows["Stream"]["reason"]
+            assert stream.final is not None  # A's own view ended when it closed
+
+    run(body())
+
+
+def test_every_wait_has_a_timeout(tmp_path):
+    async def body():
+        async with cell_with(tmp_path, "A") as (dev, a):
+            slow = await (await a.create_process("DEV", "Slow")).result()
+            assert slow.state is F
+            assert "no command feedback from the device within 0.3 s" in slow.reason
+            hold = await (await a.create_process("DEV", "Hold")).result()
+            assert hold.state is F and "held the device longer than its timeout" in hold.reason
+            assert (await (await a.create_process("DEV", "Measure")).result()).state is C
+            # the requester's own timeout: a Work that never finishes
+            dev.gates["never"] = asyncio.Event()
+            call = await a.create_process("DEV", "Work", "never", timeout=0.3)
+            final = await call.result()
+            assert final.state is F and final.seq == 0
+            assert "no update from DEV within 0.3 s" in final.reason
+            dev.gates["never"].set()
+
+    run(body())
+
+
+def test_device_failures_end_failed_with_reason(tmp_path):
+    async def body():
+        async with cell_with(tmp_path, "A") as (_, a):
+            fail = await (await a.create_process("DEV", "Fail")).result()
+            assert fail.reason == "Fail: device feedback 'E42' (success code 'OK')"
+            flaky = await (await a.create_process("DEV", "Flaky")).result()
+            assert "device produced invalid data" in flaky.reason
+            assert "size [2] does not match the declared [3]" in flaky.reason
+            neg = await (await a.create_process("DEV", "Set", data=[-1, 0])).result()
+            assert neg.state is F and neg.reason == "Set: negative values are not allowed"
+            ok = await (await a.create_process("DEV", "Set", data=[1, 2])).result()
+            assert ok.state is C
+
+    run(body())
+
+
+async def _raw_create(client: Participant, payload: bytes) -> Acknowledgement:
+    """Send raw bytes as a CreateProcess and decode the acknowledgement."""
+
+    def ask():
+        return [
+            r for r in client.session.get(client.keys.create("DEV"), payload=payload, timeout=5)
+        ]
+
+    replies = await asyncio.to_thread(ask)
+    assert len(replies) == 1 and replies[0].ok is not None
+    body = wire.decode(replies[0].ok.payload.to_bytes()).body
+    assert isinstance(body, Acknowledgement)
+    return body
+
+
+def test_bad_input_fails_with_a_precise_reason_and_the_service_keeps_serving(tmp_path):
+    async def body():
+        async with cell_with(tmp_path, "A", max_payload=20_000) as (dev, a):
+
+            async def reason_of(command, data=None, **kw):
+                call = await a.create_process("DEV", command, data=data, check=False, **kw)
+                assert call.ack.state is F
+                return call.ack.reason
+
+            assert "unknown command 'Nope' for DEV" in await reason_of("Nope")
+            assert (
+                await reason_of("Set", Data(DataTypes.Double, (2,), b"\0" * 16))
+                == "Set input: type Double does not match the declared Integer"
+            )
+            assert (
+                await reason_of("Set", Data(DataTypes.Integer, (3,), b"\0" * 12))
+                == "Set input: size [3] does not match the declared [2]"
+            )
+            assert (
+                await reason_of("Set", Data(DataTypes.Integer, (2,), b"\0" * 7))
+                == "Set input: buffer of 7 bytes does not match Integer[2] (8 bytes)"
+            )
+            assert await reason_of("Set") == "Set input: Integer[2] expected, got no data"
+            assert "exceeds the limit of 20000 bytes" in await reason_of(
+                "Set", Data(DataTypes.Byte, (30_000,), b"\0" * 30_000)
+            )
+            # checked on the client too, with the same words
+            local = await a.create_process("DEV", "Set", data=[1.5, 2])
+            assert local.final.reason == "Set input: Integer expected, got float64 values"
+            unknown = await a.create_process("NOBODY", "Work")
+            assert "unknown device 'NOBODY'" in unknown.final.reason
+
+            good = wire.encode(
+                "A",
+                a.instance,
+                Process(command=Command(name="Measure"), tag=Tag("A", "DEV"), identifier=424242),
+            )
+            assert (await _raw_create(a, b"\xc1\xc1")).reason.startswith("malformed message")
+            assert (await _raw_create(a, good[:-3])).state is F
+            assert "invalid message" in (await _raw_create(a, b"\x93\x01\x02\x03")).reason
+            wrong = wire.encode(
+                "A",
+                a.instance,
+                Process(command=Command(name="Measure"), tag=Tag("A", "OTHER"), identifier=7),
+            )
+            assert "addressed to OTHER" in (await _raw_create(a, wrong)).reason
+            forged = wire.encode(
+                "A",
+                a.instance,
+                Process(command=Command(name="Measure"), tag=Tag("B", "DEV"), identifier=8),
+            )
+            assert "differs from the envelope sender" in (await _raw_create(a, forged)).reason
+            assert (await _raw_create(a, good)).state is Q
+            dup = await _raw_create(a, good)
+            assert dup.state is F and "424242" in dup.reason
+            not_a_process = wire.encode("A", a.instance, Acknowledgement(identifier=1, state=Q))
+            assert "expected a Process" in (await _raw_create(a, not_a_process)).reason
+
+            final = await (await a.create_process("DEV", "Measure")).result()
+            assert final.state is C  # still serving
+            rejected = [r for r in read_journal([dev.journal.path]) if r.get("rejected")]
+            assert len(rejected) >= 6
+
+    run(body())
+
+
+def test_requester_of_a_service_that_shuts_down_gets_failed(tmp_path):
+    async def body():
+        async with cell_with(tmp_path, "A") as (dev, a):
+            stream = await a.create_process("DEV", "Stream")
+            await dev.started.wait()
+            await dev.close()
+            final = await stream.result()
+            assert final.state is F
+            assert "DEV" in final.reason and ("shut" in final.reason or "lost" in final.reason)
+            assert "DEV" not in a.partners
+
+    run(body())
+
+
+def test_partners_wire_unwire_and_resubscribe_after_restart(tmp_path):
+    async def body():
+        cell = unique_cell()
+        dev = ScriptedDevice(cell=cell, journal=tmp_path / "j1")
+        robot = ScriptedDevice("ROBOT", cell=cell, journal=tmp_path / "j2")
+        ctl = Participant("CONTROLLER", cell=cell)
+        await dev.start()
+        await robot.start()
+        await ctl.start()
+        try:
+            assert await ctl.wait_for("DEV") and await ctl.wait_for("ROBOT")
+            response = await ctl.ask_subscribe("ROBOT", "DEV")
+            assert response.ok and response.partner.name == "DEV"
+            assert [c.name for c in response.partner.commands][:2] == ["Work", "Measure"]
+            state, _ = await ctl.get("ROBOT")
+            assert [p.name for p in state.partners] == ["DEV"]
+            # the service uses its partner like any client (5.2.3.6)
+            final = await (await robot.create_process("DEV", "Measure")).result()
+            assert final.state is C
+            self_wire = await ctl.ask_subscribe("ROBOT", "ROBOT")
+            assert not self_wire.ok and "itself" in self_wire.reason
+            missing = await ctl.ask_subscribe("ROBOT", "NOBODY")
+            assert not missing.ok and "unknown device 'NOBODY'" in missing.reason
+
+            await dev.close()  # partner shuts down: removed from ROBOT's Partners
+            await until(lambda: "DEV" not in robot.partners)
+            dev2 = ScriptedDevice(cell=cell, journal=tmp_path / "j1")
+            await dev2.start()
+            try:
+                assert await ctl.wait_for("DEV")
+                again = await ctl.ask_subscribe("ROBOT", "DEV")
+                assert again.ok and robot.partners["DEV"].instance == dev2.instance
+                gone = await ctl.ask_subscribe("ROBOT", "DEV", subscribe=False)
+                assert gone.ok and "DEV" not in robot.partners
+            finally:
+                await dev2.close()
+        finally:
+            await ctl.close()
+            await robot.close()
+            await dev.close()
+
+    run(body())
+
+
+def test_presence_events_and_cells_are_isolated(tmp_path):
+    async def body():
+        async with cell_with(tmp_path, "A") as (_, a):
+            other = Participant("SPY", cell=unique_cell())
+            await other.start()
+            try:
+                assert "DEV" in a.services()
+                assert other.services() == []
+                assert await other.list_services(1.0) == []
+                blind = await other.create_process("DEV", "Measure", timeout=2)
+                assert blind.final.state is F and "unknown device 'DEV'" in blind.final.reason
+            finally:
+                await other.close()
+            events = a.events()
+            watcher = asyncio.create_task(anext(events))
+            await asyncio.sleep(0)
+            late = Participant("LATE", cell=a.keys.cell)
+            await late.start()
+            event = await asyncio.wait_for(watcher, 10)
+            assert (event.kind, event.presence.name) == ("join", "LATE")
+            await late.close()
+            await until(lambda: not a.is_alive("LATE", "client"))
+            await events.aclose()
+
+    run(body())
+
+
+def test_journal_records_processes_and_updates(tmp_path):
+    async def body():
+        async with cell_with(tmp_path, "A") as (dev, a):
+            await (await a.create_process("DEV", "Measure")).result()
+            await (await a.create_process("DEV", "Fail")).result()
+            await a.create_process("DEV", "Nope", check=False)
+            rows = read_journal([dev.journal.path])
+            by_command = {r["command"]: r for r in rows}
+            measure = by_command["Measure"]
+            assert (measure["sender"], measure["recipient"], measure["state"]) == (
+                "A",
+                "DEV",
+                "Completed",
+            )
+            assert measure["command_type"] == "SingleData"
+            assert measure["acked_ns"] >= measure["received_ns"]
+            assert measure["finished_ns"] >= measure["acked_ns"]
+            assert [(u["seq"], u["state"]) for u in measure["updates"]] == [
+                (1, "Running"),
+                (2, "Completed"),
+            ]
+            assert measure["updates"][1]["data"] == "Double[3] [1.0, 2.0, 3.0]"
+            assert by_command["Fail"]["state"] == "Failed"
+            assert "E42" in by_command["Fail"]["reason"]
+            assert by_command["Nope"]["state"] == "Failed"
+            assert msgspec.json.encode(rows)  # exportable as JSON
+
+    run(body())

@@ -1,0 +1,179 @@
+"""The digital twin: deterministic truth, physics cross-checked, magnitudes as the thesis."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+
+from plugcell.cli import main
+from plugcell.io.measurements import read_measurements
+from plugcell.kinematics import forward, manipulator_jacobian
+from plugcell.twin.campaign import measure_poses, working_volume_joints
+from plugcell.twin.physics import Payload, gravity_torques
+from plugcell.twin.report import error_budget
+from plugcell.twin.robot import RobotTwin, true_flange_poses
+from plugcell.twin.scenario import ScenarioError, TwinScenario, make_truth
+from plugcell.twin.tracker import LaserTracker
+
+
+@pytest.fixture(scope="module")
+def truth():
+    return make_truth(TwinScenario(seed=3))
+
+
+@pytest.fixture(scope="module")
+def joints(truth):
+    rng = np.random.default_rng(11)
+    return working_volume_joints(truth.description, truth.profile, 40, rng)
+
+
+def test_truth_is_deterministic_and_hidden_errors_have_thesis_size(truth):
+    again = make_truth(TwinScenario(seed=3))
+    np.testing.assert_array_equal(truth.params.to_vector(), again.params.to_vector())
+    other = make_truth(TwinScenario(seed=4))
+    assert not np.allclose(truth.params.to_vector(), other.params.to_vector())
+    nominal = truth.description.nominal_parameters()
+    dd = np.abs(truth.params.d - nominal.d)
+    da = np.abs(truth.params.a - nominal.a)
+    assert 1e-4 < np.max(np.r_[dd, da]) < 5e-3  # ~1 mm lengths (Table 8-4)
+    dal = np.abs(truth.params.alpha - nominal.alpha)
+    assert 1e-4 < np.max(dal) < np.deg2rad(0.5)  # ~0.1° angles
+
+
+def test_scenario_json_round_trip_and_errors():
+    sc = TwinScenario(robot="smart_h4", seed=9, payload_kg=18.0)
+    assert TwinScenario.from_json(sc.to_json()) == sc
+    with pytest.raises(ScenarioError, match="unknown scenario keys"):
+        TwinScenario.from_json('{"robot": "smart_h4", "colour": "red"}')
+    with pytest.raises(ScenarioError, match="payload_kg must be"):
+        TwinScenario(payload_kg=-1)
+    with pytest.raises(ScenarioError):
+        make_truth(TwinScenario(robot="no_such_robot"))
+
+
+def test_payload_torques_equal_jacobian_transpose_wrench(truth, joints):
+    """Virtual work through the exact loop closure == τ = Jᵀ W of thesis eq. (6.35).
+
+    With only a payload (link masses removed by subtracting the unloaded torques),
+    the torque the twin computes must equal Jᵀ of the payload's wrench at the
+    flange — an independent check of the twin's torques *and* of the manipulator
+    Jacobian through the parallelogram (6.37, 6.39).
+    """
+    desc, params = truth.description, truth.params
+    q = joints[:10]
+    payload = Payload(36.0, (0.15, 0.0, 0.10))
+    tau = gravity_torques(desc, params, q, payload) - gravity_torques(desc, params, q, Payload())
+    fk = forward(desc, params, q, closure="fourbar")
+    J = manipulator_jacobian(desc, params, q, point="flange", closure="fourbar")
+    F = np.array([0.0, 0.0, -9.81 * payload.mass])
+    r = fk.flange[:, :3, :3] @ np.array(payload.com)
+    W = np.concatenate([np.broadcast_to(F, r.shape), np.cross(r, F)], axis=-1)
+    expected = np.einsum("nki,nk->ni", J, W)
+    np.testing.assert_allclose(tau, expected, rtol=1e-6, atol=1e-5)
+
+
+def test_deflection_pulls_the_arm_down(truth, joints):
+    q = joints[:20]
+    light = true_flange_poses(truth, q, Payload(), bend=False)
+    heavy = true_flange_poses(truth, q, Payload(36.0, (0.15, 0.0, 0.10)), bend=False)
+    dz = heavy[:, 2, 3] - light[:, 2, 3]
+    assert np.all(dz < 0), "a payload must lower the flange"
+
+
+def test_readings_are_encoder_counts_and_moves_repeat_within_resolution(truth, joints):
+    twin = RobotTwin(truth, seed=1)
+    res = truth.profile.encoder_resolution
+    readings = twin.move_joints(joints[0] + 1.234e-5)
+    np.testing.assert_allclose(readings / res, np.round(readings / res), atol=1e-6)
+    points = []
+    for _ in range(30):
+        twin.move_joints(joints[0])
+        points.append(twin.true_flange()[:3, 3])
+    spread = np.std(points, axis=0)
+    assert np.all(spread > 1e-6) and np.all(spread < 5e-5)  # ~0.02 mm: resolution ~0.05 mm
+
+
+def test_error_budget_matches_thesis_magnitudes():
+    """Thesis 8.2: nominal mean ≈ 4 mm; payload deflection ≈ 0.5 / 1.0 mm (Fig. 8-6)."""
+    b = error_budget(TwinScenario(seed=0), poses=150)
+    assert 2.5 < b.nominal_mean_mm < 6.0
+    assert 0.3 < b.deflection_18kg_mm < 0.8
+    assert 0.6 < b.deflection_36kg_mm < 1.5
+    assert b.deflection_36kg_mm == pytest.approx(2 * b.deflection_18kg_mm, rel=0.1)
+    assert 0.08 < b.bending_share_36kg < 0.35
+    assert 0.005 < b.repeatability_sigma_mm < 0.04
+
+
+def test_campaign_measures_the_truth_within_tracker_noise(joints):
+    truth = make_truth(TwinScenario(seed=3, noise=False, backlash=False))
+    twin = RobotTwin(truth, seed=2)
+    tracker = LaserTracker(seed=5)
+    data, sim_s = measure_poses(twin, tracker, joints[:12])
+    assert len(data) == 12 and sim_s > 12
+    # The same joints through the truth: measurements agree to tracker noise (well
+    # under 0.1 mm), and disagree with the nominal model by millimetres.
+    true_pts = (truth.base @ true_flange_poses(truth, data.joints) @ truth.probe)[:, :3, 3]
+    err = np.linalg.norm(data.positions - true_pts, axis=1)
+    assert err.max() < 1e-4
+    desc = truth.description
+    nominal_pts = (truth.base @ forward(desc, desc.nominal_parameters(), data.joints).flange
+                   @ truth.probe)[:, :3, 3]
+    assert np.linalg.norm(data.positions - nominal_pts, axis=1).mean() > 1e-3
+
+
+def test_cli_twin_report_json(capsys):
+    assert main(["twin", "report", "--json", "--poses", "40"]) == 0
+    out = json.loads(capsys.readouterr().out)
+    for key in ("nominal_mean_mm", "nominal_max_mm", "deflection_18kg_mm", "deflection_36kg_mm"):
+        assert isinstance(out[key], float)
+
+
+def test_cli_twin_measure_writes_a_measurement_file(tmp_path, capsys):
+    out = tmp_path / "cal.csv"
+    assert main(["twin", "measure", "--poses", "5", "--payload", "18", "--seed", "2",
+                 "--out", str(out), "--quiet"]) == 0
+    m = read_measurements(out, n_joints=6)
+    assert len(m) == 5 and m.has_orientation
+    np.testing.assert_allclose(m.payload_kg, 18.0)
+
+
+@pytest.mark.parametrize(
+    ("argv", "message"),
+    [
+        (["twin", "measure", "--poses", "0", "--out", "x.csv"], "--poses must be positive"),
+        (["twin", "measure", "--poses", "3", "--payload", "-2", "--out", "x.csv"], "--payload"),
+        (["twin", "measure", "--robot", "nope", "--poses", "3", "--out", "x.csv"], "nope"),
+        (["twin", "report", "--poses", "3"], "--poses must be at least 10"),
+    ],
+)
+def test_cli_twin_errors(argv, message, capsys, tmp_path, monkeypatch):
+    monkeypatch.chdir(tmp_path)
+    assert main(argv) == 2
+    assert message in capsys.readouterr().err
+
+
+def test_backlash_shows_on_reversal_except_where_gravity_preloads_the_gear(joints):
+    truth = make_truth(TwinScenario(seed=3, noise=False))
+    twin = RobotTwin(truth)
+    q = joints[0]
+    lost = truth.profile.lost_motion
+    step = np.zeros_like(q)
+    step[-1] = 0.01  # joint 6: light load, backlash shows
+    twin.move_joints(q - step)
+    twin.move_joints(q)
+    from_below = twin.true_flange()
+    twin.move_joints(q + step)
+    twin.move_joints(q)
+    from_above = twin.true_flange()
+    turn = np.arccos(np.clip((np.trace(from_below[:3, :3] @ from_above[:3, :3].T) - 1) / 2, -1, 1))
+    assert turn == pytest.approx(lost, rel=0.05)
+    step = np.zeros_like(q)
+    step[1] = 0.01  # joint 2 carries the arm: the gear stays on one flank
+    twin.move_joints(q - step)
+    twin.move_joints(q)
+    a = twin.true_flange()
+    twin.move_joints(q + step)
+    twin.move_joints(q)
+    np.testing.assert_allclose(twin.true_flange(), a, atol=1e-12)
