@@ -235,7 +235,8 @@ def write_page(d: dict[str, Any], path: Path) -> None:
                      f"{unit} | {p['stands_for']} |")
     lines += ["", "The same with the command line (files written by the script):", "",
               "```", "plugcell calibrate --robot WORK/ur10.toml --model serial \\",
-              "    --data WORK/series_C.csv --validate WORK/series_D.csv \\",
+              "    --data WORK/series_B.csv --validate WORK/series_D.csv \\",
+              "    --validate-refit base+probe \\",
               "    --out ur10_params.json --report ur10_report.html", "```", ""]
     path.parent.mkdir(parents=True, exist_ok=True)
     path.write_text("\n".join(lines), encoding="utf-8")

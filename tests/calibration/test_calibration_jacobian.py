@@ -221,3 +221,26 @@ def test_folding_the_frames_into_the_references_keeps_the_prediction(h4):
     np.testing.assert_allclose(f.predict(q), m.predict(q), atol=1e-12)
     assert f.value("a0") == f.value("theta6") == f.value("d7") == 0.0
     assert f.value("a2'") == m.value("a2'")
+
+
+def test_serial_gravity_torques_are_minus_the_potential_gradient(ur10):
+    from plugcell.calibration.compliance import GRAVITY, _gravity_torques
+
+    q = random_configurations(ErrorModel.create(ur10, "serial"), 5, seed=14)
+    ref = ur10.nominal_parameters()
+
+    def potential(qq):
+        fk = forward(ur10, ref, qq)
+        V = np.zeros(len(qq))
+        for i, lk in enumerate(ur10.links):
+            c = fk.frames[:, i, :3, :3] @ np.asarray(lk.com) + fk.frames[:, i, :3, 3]
+            V += lk.mass * GRAVITY * c[:, 2]
+        return V
+
+    h = 1e-6
+    tau = _gravity_torques(ur10, ref, q)
+    for j in range(6):
+        dq = np.zeros(6)
+        dq[j] = h
+        grad = (potential(q + dq) - potential(q - dq)) / (2 * h)
+        np.testing.assert_allclose(tau[:, j], -grad, rtol=1e-6, atol=1e-6)

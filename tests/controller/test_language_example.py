@@ -60,7 +60,7 @@ def test_example_deactivates_when_the_camera_fails(program):
 
 
 def test_example_waits_for_a_service_answering_from_another_thread(program):
-    ex, arm, channel = execution(program, speed=1000.0, delay_s=0.05, values=TAUGHT)
+    ex, _, channel = execution(program, speed=1000.0, delay_s=0.05, values=TAUGHT)
     result = ex.run()
     assert result.ok, result.error
     assert channel.lines[-1] == "ACTIVATE TOOL #Drill#Air#550,1100"

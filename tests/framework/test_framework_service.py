@@ -397,3 +397,32 @@ def test_journal_records_processes_and_updates(tmp_path):
             assert msgspec.json.encode(rows)  # exportable as JSON
 
     run(body())
+
+
+def test_two_services_with_one_name_leave_exactly_one(tmp_path):
+    async def body():
+        cell = unique_cell()
+        one = ScriptedDevice(cell=cell, journal=tmp_path / "j1")
+        two = ScriptedDevice(cell=cell, journal=tmp_path / "j2")
+        results = await asyncio.gather(one.start(), two.start(), return_exceptions=True)
+        try:
+            refused = [r for r in results if isinstance(r, Exception)]
+            if not refused:  # both started before seeing each other: the younger withdraws
+                done, _ = await asyncio.wait(
+                    {
+                        asyncio.create_task(one.stopped.wait()),
+                        asyncio.create_task(two.stopped.wait()),
+                    },
+                    timeout=10,
+                    return_when=asyncio.FIRST_COMPLETED,
+                )
+                assert done
+            survivors = [s for s in (one, two) if not s._closing]
+            assert len(survivors) == 1
+            loser = two if survivors[0] is one else one
+            assert "already running" in (loser.conflict or str(refused[0]))
+        finally:
+            await one.close()
+            await two.close()
+
+    run(body())

@@ -50,7 +50,7 @@ from plugcell.calibration.initial import (
     estimate_base_probe_poses,
     estimate_base_probe_positions,
 )
-from plugcell.calibration.jacobian import identification_jacobian
+from plugcell.calibration.jacobian import JacobianResult, identification_jacobian
 from plugcell.calibration.linalg import least_squares
 from plugcell.calibration.model import ErrorModel, PoseBatch, fold_frames
 from plugcell.calibration.result import CalibrationResult, IterationRecord
@@ -195,6 +195,7 @@ class Calibrator:
         self.parameters = None if parameters is None else tuple(parameters)
         self.rank_tol = float(rank_tol)
         self.progress = progress
+        self._cache: dict[Any, Identifiability] = {}
 
     # ------------------------------------------------------------------ helpers
     def _say(self, stage: str, i: int, n: int, msg: str) -> None:
@@ -287,8 +288,8 @@ class Calibrator:
                 if k in model.space]
             jac = identification_jacobian(model, batch, frame_keys)
             fa = analyse(_jacobian_rows(problem, jac.H).reshape(-1, len(frame_keys)), frame_keys)
-            fitted, _, _, _ = self._iterate(problem, model, list(fa.kept), "nominal", warnings,
-                                            loss="linear")
+            fitted, *_ = self._iterate(problem, model, list(fa.kept), "nominal", warnings,
+                                       loss="linear")
             nominal = fold_frames(fitted)
         else:
             nominal = model
@@ -337,10 +338,13 @@ class Calibrator:
             )
 
         # ---- identification
-        final, history, converged, weights = self._iterate(
-            problem, nominal, keys, "identify", warnings, loss=self.loss
+        cols = [jac.keys.index(k) for k in keys]  # the kept columns of the data check
+        jac0 = JacobianResult(poses=jac.poses, H=jac.H[:, :, cols], keys=tuple(keys))
+        final, history, converged, weights, jac = self._iterate(
+            problem, nominal, keys, "identify", warnings, loss=self.loss, jac=jac0
         )
-        jac = identification_jacobian(final, batch, keys)
+        if jac is None:
+            jac = identification_jacobian(final, batch, keys)
         r = _residual_rows(problem, jac.poses) * np.sqrt(weights)[:, None]
         H = _jacobian_rows(problem, jac.H) * np.sqrt(weights)[:, None, None]
         stats = parameter_statistics(H.reshape(-1, len(keys)), r.reshape(-1))
@@ -400,6 +404,15 @@ class Calibrator:
 
     def _structural(self, model: ErrorModel, data: CalibrationData, mixed: bool) -> Identifiability:
         pos_only = not data.six_dof
+        key = (pos_only, tuple(np.unique(data.payload_kg)) if mixed else None,
+               np.round(model.probe_ref, 4).tobytes(), np.round(model.base_ref, 4).tobytes())
+        if key not in self._cache:
+            self._cache[key] = self._structural_analysis(model, data, mixed)
+        return self._cache[key]
+
+    def _structural_analysis(self, model: ErrorModel, data: CalibrationData, mixed: bool
+                             ) -> Identifiability:
+        pos_only = not data.six_dof
         if not mixed:
             return structural_identifiability(model, position_only=pos_only)
         # payloads that vary separate payload constants from gravity ones (A2 vs G1)
@@ -414,17 +427,19 @@ class Calibrator:
 
     def _iterate(
         self, p: _Problem, model: ErrorModel, keys: list[str], stage: str, warnings: list[str],
-        *, loss: str,
-    ) -> tuple[ErrorModel, list[IterationRecord], bool, Array]:
-        """Gauss–Newton / LM iterations on ``keys`` (Fig. 6-9)."""
+        *, loss: str, jac: JacobianResult | None = None,
+    ) -> tuple[ErrorModel, list[IterationRecord], bool, Array, JacobianResult | None]:
+        """Gauss–Newton / LM iterations on ``keys`` (Fig. 6-9); ``jac``: the Jacobian at
+        ``model`` if already known.  Returns the Jacobian at the final model too."""
         weights = np.ones(len(p.data))
         history: list[IterationRecord] = []
         if not keys:
-            return model, history, True, weights
+            return model, history, True, weights, None
         lam = 1e-3
         best_cost = None
         converged = False
-        jac = self._jac(model, p, keys)
+        if jac is None or jac.keys != tuple(keys):
+            jac = self._jac(model, p, keys)
         for it in range(1, self.max_iterations + 1):
             r = _residual_rows(p, jac.poses)
             weights = _robust_weights(r, loss, self.loss_scale)
@@ -491,7 +506,7 @@ class Calibrator:
             if step_norm < self.tol:
                 converged = True
                 break
-        return model, history, converged, weights
+        return model, history, converged, weights, jac
 
     @staticmethod
     def _jac(model: ErrorModel, p: _Problem, keys: Sequence[str]):
@@ -527,5 +542,5 @@ def refit_base(model: ErrorModel, data: CalibrationData, *, probe: bool = False)
     problem = _Problem(m, data, m.batch(data.q, data.payload_kg), 1.0)
     jac = identification_jacobian(m, problem.batch, keys)
     fa = analyse(_jacobian_rows(problem, jac.H).reshape(-1, len(keys)), keys)
-    fitted, _, _, _ = cal._iterate(problem, m, list(fa.kept), "base", [], loss="linear")
+    fitted, *_ = cal._iterate(problem, m, list(fa.kept), "base", [], loss="linear")
     return fitted

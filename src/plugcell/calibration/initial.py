@@ -29,6 +29,7 @@ Both are vectorised over poses and exact for noise-free data of a nominal robot.
 
 from __future__ import annotations
 
+import contextlib
 from dataclasses import dataclass
 
 import numpy as np
@@ -166,10 +167,8 @@ def estimate_base_probe_poses(flange: ArrayLike, measured: ArrayLike) -> FrameEs
     F = np.asarray(flange, dtype=float)
     T = np.asarray(measured, dtype=float)
     candidates = []
-    try:
+    with contextlib.suppress(InitialEstimateError):
         candidates.append(estimate_base_probe(F, T))
-    except InitialEstimateError:
-        pass
     reg = estimate_base_probe_positions(F, T[:, :3, 3])
     RX = _project_rotation(np.sum(
         np.swapaxes(reg.base[:3, :3] @ F[:, :3, :3], -1, -2) @ T[:, :3, :3], axis=0))

@@ -142,9 +142,9 @@ class CalibrationResult:
         return (accuracy(data, nominal.predict(data.q, data.payload_kg)),
                 accuracy(data, model.predict(data.q, data.payload_kg)))
 
-    def with_validation(self, data: CalibrationData, *, refit_base: bool = False
-                        ) -> CalibrationResult:
-        before, after = self.evaluate(data, refit_base=refit_base)
+    def with_validation(self, data: CalibrationData, *, refit_base: bool = False,
+                        refit_probe: bool = False) -> CalibrationResult:
+        before, after = self.evaluate(data, refit_base=refit_base, refit_probe=refit_probe)
         return replace(self, validation=after, validation_before=before, n_validation=len(data))
 
     # ------------------------------------------------------------------ parameters

@@ -7,7 +7,9 @@ from typing import Any
 
 
 def register(subparsers: Any) -> None:
-    p = subparsers.add_parser("bench", help="benchmarks (transport: thesis 5.3)")
+    p = subparsers.add_parser(
+        "bench", help="benchmarks: transport (5.3), calibration (8.2), compensation (6.5.1)"
+    )
     sub = p.add_subparsers(dest="bench", metavar="BENCHMARK", required=True)
     t = sub.add_parser(
         "transport",
@@ -21,8 +23,42 @@ def register(subparsers: Any) -> None:
     add_arguments(t)
     t.set_defaults(func=run)
 
+    c = sub.add_parser(
+        "calibration",
+        help="identification time of model 5 for 150 poses and its scaling (thesis: 5 s)",
+        description="Times the identification of the 52-parameter model on 150 poses "
+        "(median of --repeat runs) and its growth to --max-poses.",
+    )
+    from plugcell.commands import bench_calibration
+
+    bench_calibration.add_arguments(c)
+    c.set_defaults(func=bench_calibration.run)
+
+    m = sub.add_parser(
+        "compensation",
+        help="model-based compensation throughput for a batch of targets (6.5.1)",
+        description="Compensated joint targets per second for --targets targets (model 5).",
+    )
+    m.add_argument("--targets", type=int, default=10_000, help="batch size (default 10000)")
+    m.add_argument("--json", action="store_true", help="print JSON")
+    m.set_defaults(func=run_compensation)
+
 
 def run(args: argparse.Namespace) -> int:
     from plugcell.bench.transport import report_and_exit
 
     return report_and_exit(args)
+
+
+def run_compensation(args: argparse.Namespace) -> int:
+    import json
+
+    from plugcell.cli import CommandError
+    from plugcell.compensation.bench import format_report
+    from plugcell.compensation.bench import run as bench
+
+    if args.targets < 1:
+        raise CommandError(f"--targets must be positive, got {args.targets}")
+    result = bench(args.targets)
+    print(json.dumps(result, indent=2, default=float) if args.json else format_report(result))
+    return 0

@@ -35,6 +35,9 @@ def register(sub: Any) -> None:
                    help="1-5 or serial, loop, serial+gravity, loop+gravity, full")
     p.add_argument("--data", type=Path, required=True, help="calibration measurement file")
     p.add_argument("--validate", type=Path, help="independent validation measurement file")
+    p.add_argument("--validate-refit", choices=("none", "base", "base+probe"), default="none",
+                   help="the validation poses were measured with the tracker (and target) "
+                        "elsewhere: re-identify BASE (and PROBE) on them, geometry kept")
     p.add_argument("--rot", choices=("rpy", "zyz", "xyz"), default="rpy",
                    help="orientation convention of rx, ry, rz in the files (default rpy)")
     p.add_argument("--payload-kg", type=float, metavar="M",
@@ -178,7 +181,11 @@ def _run(args: argparse.Namespace) -> int:
                          loss=args.loss, max_iterations=args.max_iterations,
                          rotation_weight=args.rotation_weight,
                          condition_limit=args.condition_limit, progress=progress)
-        result = cal.fit(data, validation=val)
+        result = cal.fit(data)
+        if val is not None:
+            result = result.with_validation(
+                val, refit_base=args.validate_refit != "none",
+                refit_probe=args.validate_refit == "base+probe")
     except CalibrationError as exc:
         raise CommandError(str(exc)) from None
     d = result.to_dict()

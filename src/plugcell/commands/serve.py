@@ -91,6 +91,8 @@ def run(args: argparse.Namespace) -> int:
 
 
 async def _serve(service: Any) -> None:
+    from plugcell.framework.participant import PartnerError
+
     stop = asyncio.Event()
     loop = asyncio.get_running_loop()
     for sig in (signal.SIGINT, signal.SIGTERM):
@@ -101,8 +103,14 @@ async def _serve(service: Any) -> None:
         f"as instance {service.instance}",
         flush=True,
     )
+    stopping = asyncio.create_task(stop.wait())
+    withdrawn = asyncio.create_task(service.stopped.wait())
     try:
-        await stop.wait()
+        await asyncio.wait({stopping, withdrawn}, return_when=asyncio.FIRST_COMPLETED)
     finally:
+        stopping.cancel()
+        withdrawn.cancel()
         with contextlib.suppress(Exception):
             await service.close()
+    if service.conflict:
+        raise PartnerError(service.conflict)

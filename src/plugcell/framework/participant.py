@@ -142,7 +142,8 @@ class Participant:
         self._port = Port(self._loop)
         self._pump_task = asyncio.create_task(self._pump(), name=f"{self.name}-pump")
         self.session = await asyncio.to_thread(open_session, self.transport)
-        self.instance = str(self.session.zid())
+        # incarnation id: start time first, so instances of one name order by age
+        self.instance = f"{time.time_ns():016x}{self.session.zid()}"
         self._entities.append(
             self.session.declare_subscriber(
                 self.keys.process_for(self.name), self._callback(self._on_process_update)
@@ -273,6 +274,7 @@ class Participant:
         if sample.kind == zenoh.SampleKind.PUT:
             self.alive.setdefault(key, set()).add(presence.instance)
             event = PresenceEvent("join", presence)
+            self._on_joined(presence)
         else:
             instances = self.alive.get(key, set())
             instances.discard(presence.instance)
@@ -283,6 +285,9 @@ class Participant:
         self._presence_changed.set()
         for queue in list(self._watchers):
             queue.put_nowait(event)
+
+    def _on_joined(self, presence: Presence) -> None:
+        """Hook: a participant's token appeared (a service checks for a name conflict)."""
 
     def _on_left(self, presence: Presence) -> None:
         """A participant's token disappeared: drop it as a partner, fail what waits on it."""

@@ -173,6 +173,10 @@ class GenericDevice(Participant):
         self._notify_scheduled = False
         self._notified = (DeviceStates.Ready, ConnectionStates.Offline)
         self._create_queryable: Any = None
+        self.conflict = ""
+        """Why this service withdrew because another one has its name (else empty)."""
+        self.stopped = asyncio.Event()
+        """Set once the service has shut down (by :meth:`close` or a name conflict)."""
         self.stray_feedback = 0
         """Data/command feedback that arrived when no process expected it."""
 
@@ -214,7 +218,7 @@ class GenericDevice(Participant):
     async def _declare(self) -> None:
         """Refuse a duplicate name, open the journal, declare the Generic Interface."""
         assert self.session is not None
-        if await self._query_live_instances():
+        if await self._query_live_instances() or self.alive.get(("service", self.name)):
             raise PartnerError(
                 f"a service named {self.name} is already running in cell {self.keys.cell!r}"
             )
@@ -280,7 +284,8 @@ class GenericDevice(Participant):
     async def close(self, reason: str = "service shutting down") -> None:
         """Shutdown: refuse new processes, fail queued ones, stop the running one,
         notify ``Shutdown`` (5.2.3.6), withdraw the token, close the journal."""
-        if self._closed:
+        if self._closing:  # a close is already under way (or done)
+            await self.stopped.wait()
             return
         self._closing = True
         if self._create_queryable is not None:
@@ -313,6 +318,7 @@ class GenericDevice(Participant):
         self._publishers.clear()
         await super().close()
         self.journal.close()
+        self.stopped.set()
 
     # -- inbound: Get, Subscribe, CreateProcess (Table 5-2) ----------------------------
 
@@ -373,6 +379,9 @@ class GenericDevice(Participant):
             device = await self.subscribe(body.partner)
         except PartnerError as exc:
             self._reply(query, SubscribeResponse(ok=False, reason=str(exc)))
+        except Exception as exc:  # always answer: the asker waits for it
+            log.exception("%s: subscribing to %s", self.name, body.partner)
+            self._reply(query, SubscribeResponse(ok=False, reason=f"{body.partner}: {exc!r}"))
         else:
             self._reply(query, SubscribeResponse(ok=True, partner=device))
 
@@ -506,6 +515,22 @@ class GenericDevice(Participant):
         )
 
     # -- presence of senders -------------------------------------------------------------
+
+    def _on_joined(self, presence: Presence) -> None:
+        """Two live services with one name: the younger withdraws (the older keeps serving)."""
+        if (
+            presence.role == "service"
+            and presence.name == self.name
+            and presence.instance != self.instance
+            and presence.instance < self.instance
+            and self._started  # before that, _declare refuses to start instead
+            and not self._closing
+        ):
+            self.conflict = (
+                f"a service named {self.name} is already running in cell {self.keys.cell!r}"
+            )
+            log.error("%s: %s; withdrawing", self.name, self.conflict)
+            asyncio.get_running_loop().create_task(self.close(self.conflict))
 
     def _on_left(self, presence: Presence) -> None:
         super()._on_left(presence)

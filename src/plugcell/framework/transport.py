@@ -7,8 +7,14 @@ nothing leaves the host.  For a cell spanning machines, run ``plugcell router``
 (the same library in router mode) and give every process ``--connect
 tcp/<router>:7447`` (or ``PLUGCELL_CONNECT``).
 
+Between processes of one host Zenoh moves messages of 3 KiB and more through
+shared memory (its default "transport optimization"); ``shared_memory=False``
+(``PLUGCELL_SHM=0``) forces every byte through the links — what a cell spanning
+machines does anyway.
+
 Environment: ``PLUGCELL_CONNECT`` and ``PLUGCELL_LISTEN`` (comma-separated
-endpoints), ``PLUGCELL_MULTICAST`` (``0`` to disable scouting).
+endpoints), ``PLUGCELL_MULTICAST`` (``0`` to disable scouting), ``PLUGCELL_SHM``
+(``0`` to disable shared memory).
 """
 
 from __future__ import annotations
@@ -37,6 +43,7 @@ class TransportConfig:
     connect: tuple[str, ...] = ()
     multicast: bool = True
     multicast_interface: str = "127.0.0.1"
+    shared_memory: bool = True
     extra: dict[str, object] = field(default_factory=dict)
     """Further Zenoh configuration, ``{"json/path": value}`` (inserted as JSON5)."""
 
@@ -57,6 +64,8 @@ class TransportConfig:
             cfg = replace(cfg, listen=env_listen)
         if os.environ.get("PLUGCELL_MULTICAST", "1") in ("0", "false", "no"):
             cfg = replace(cfg, multicast=False)
+        if os.environ.get("PLUGCELL_SHM", "1") in ("0", "false", "no"):
+            cfg = replace(cfg, shared_memory=False)
         if connect:
             cfg = replace(cfg, connect=tuple(connect))
         if listen:
@@ -72,6 +81,8 @@ class TransportConfig:
         conf.insert_json5("scouting/multicast/enabled", json.dumps(self.multicast))
         if self.multicast:
             conf.insert_json5("scouting/multicast/interface", json.dumps(self.multicast_interface))
+        if not self.shared_memory:
+            conf.insert_json5("transport/shared_memory/enabled", "false")
         for path, value in self.extra.items():
             conf.insert_json5(path, json.dumps(value))
         return conf

@@ -104,7 +104,7 @@ def _parse_header(name: str, header: list[str]) -> tuple[int, dict[str, int]]:
     if joint_numbers != list(range(1, len(joint_numbers) + 1)):
         raise MeasurementFileError(
             f"{name}: joint columns must be j1..j{len(joint_numbers)} without gaps, "
-            f"got {['j%d' % k for k in joint_numbers]}"
+            f"got {[f'j{k}' for k in joint_numbers]}"
         )
     for col in ("x", "y", "z"):
         if col not in index:
@@ -235,6 +235,8 @@ def format_measurements(m: MeasurementSet, *, comments: Iterable[str] = ()) -> s
     return out.getvalue()
 
 
-def write_measurements(path: str | Path, m: MeasurementSet, *, comments: Iterable[str] = ()) -> None:
+def write_measurements(
+    path: str | Path, m: MeasurementSet, *, comments: Iterable[str] = ()
+) -> None:
     """Write a measurement file; the inverse of :func:`read_measurements`."""
     Path(path).write_text(format_measurements(m, comments=comments), encoding="utf-8")

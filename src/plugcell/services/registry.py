@@ -15,6 +15,8 @@ KINDS: dict[str, str] = {
     "camera": "plugcell.services.camera:CameraService",
     "drill": "plugcell.services.tool:DrillService",
     "bench": "plugcell.bench.device:BenchService",
+    "tracker": "plugcell.services.tracker:TrackerService",
+    "compute": "plugcell.services.compute:ComputeService",
 }
 
 

@@ -79,7 +79,7 @@ def measure_probe(robot: RobotTwin, tracker: LaserTracker, q: np.ndarray,
         circle.append(_smr(tracker, p, setup.duration_s))
     robot.move_joints(q)
     flange = truth.base @ robot.true_flange()
-    holes = [_smr(tracker, (flange @ np.r_[h + [0, 0, setup.smr_offset], 1.0])[:3],
+    holes = [_smr(tracker, (flange @ np.r_[h + np.array([0.0, 0.0, setup.smr_offset]), 1.0])[:3],
                   setup.duration_s) for h in DOWEL_HOLES]
     tmac_true = flange @ truth.probe
     tracker.point_at(tmac_true[:3, 3])

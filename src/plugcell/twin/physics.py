@@ -174,9 +174,9 @@ def bending(desc: RobotDescription, frames: Array, flange: Array, beams: Sequenc
         carried = {desc.index(n) for n in chain[chain.index(beam.carries):]}
         sel = np.array([i in carried for i in idx_all], dtype=bool)
         root = frames[..., desc.index(desc.link(beam.link).parent), :3, 3] \
-            if desc.link(beam.link).parent != "base" else np.zeros(flange.shape[:-2] + (3,))
+            if desc.link(beam.link).parent != "base" else np.zeros((*flange.shape[:-2], 3))
         tip = frames[..., desc.index(beam.link), :3, 3]
-        moment = np.zeros(flange.shape[:-2] + (3,))
+        moment = np.zeros((*flange.shape[:-2], 3))
         if sel.any():
             i, m, c = idx_all[sel], mass_all[sel], com_all[sel]
             F = np.take(frames, i, axis=-3)

@@ -51,7 +51,8 @@ def true_flange_poses(truth: TwinTruth, q_motor: ArrayLike, payload: Payload | N
     fk = forward(truth.description, truth.params, q, closure="fourbar")
     flange = fk.flange
     if bend and gravity and truth.profile.beams:
-        flange = bending(truth.description, fk.frames, flange, truth.profile.beams, payload) @ flange
+        bent = bending(truth.description, fk.frames, flange, truth.profile.beams, payload)
+        flange = bent @ flange
     return flange
 
 

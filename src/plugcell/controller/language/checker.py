@@ -202,6 +202,8 @@ class _ModuleChecker:
             k = key(r.name)
             if k in self.scope.routines:
                 other = self.scope.routines[k]
+                if other.module == lib.key and other.routine is r:
+                    continue  # the same library imported twice
                 where = other.via or other.routine.loc
                 raise DeclarationError.at(
                     decl.loc,

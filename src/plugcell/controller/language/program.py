@@ -78,6 +78,8 @@ class Program:
     """
 
     def __init__(self, scopes: Mapping[str, ModuleScope], main_key: str) -> None:
+        for scope in scopes.values():  # read-only from now on
+            scope.freeze()
         self._scopes = MappingProxyType(dict(scopes))
         self._main_key = main_key
         main = scopes[main_key]

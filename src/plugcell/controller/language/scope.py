@@ -16,6 +16,7 @@ from __future__ import annotations
 
 from collections.abc import Mapping
 from dataclasses import dataclass, field
+from types import MappingProxyType
 from typing import Any
 
 from plugcell.controller.language import nodes as n
@@ -83,6 +84,12 @@ class ModuleScope:
     consts: dict[str, ConstInfo] = field(default_factory=dict)
     routines: dict[str, RoutineRef] = field(default_factory=dict)
     externals: Mapping[str, VarInfo] = field(default_factory=dict)
+
+    def freeze(self) -> None:
+        """Make the tables read-only (a loaded Program never changes)."""
+        self.globals = MappingProxyType(dict(self.globals))  # type: ignore[assignment]
+        self.consts = MappingProxyType(dict(self.consts))  # type: ignore[assignment]
+        self.routines = MappingProxyType(dict(self.routines))  # type: ignore[assignment]
 
     def resolve(self, key: str, local: Mapping[str, VarInfo] | None = None) -> Symbol | None:
         """The meaning of upper-case ``key`` (functions before procedures for

@@ -16,7 +16,7 @@ A variable nothing was assigned to holds :data:`UNINIT`; reading it is an error.
 
 from __future__ import annotations
 
-from collections.abc import Iterable, Sequence
+from collections.abc import Sequence
 from dataclasses import dataclass, field, replace
 from typing import Any
 
@@ -202,14 +202,3 @@ def type_of_value(value: Any) -> LangType | None:
     if isinstance(value, ArrayValue):
         return value.type
     return None
-
-
-def flatten(values: Iterable[Any]) -> list[Any]:
-    """Flatten nested sequences (helper for conversions)."""
-    out: list[Any] = []
-    for v in values:
-        if isinstance(v, list | tuple):
-            out.extend(flatten(v))
-        else:
-            out.append(v)
-    return out

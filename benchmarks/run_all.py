@@ -1,0 +1,45 @@
+"""Every benchmark, one after the other, each printing its table: ``make bench``.
+
+    .venv/bin/python benchmarks/run_all.py [--full]
+
+Without ``--full`` the transport benchmark runs in its quick mode and the
+calibration scaling stops at 10 000 poses, so the whole run takes a few
+minutes on 2 cores.  Speed is measured here, never asserted in tests.
+"""
+
+from __future__ import annotations
+
+import platform
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+HERE = Path(__file__).resolve().parent
+
+
+def main(argv: list[str]) -> int:
+    full = "--full" in argv
+    plugcell = [sys.executable, "-m", "plugcell"]
+    runs = [
+        ("transport (thesis 5.3)",
+         [*plugcell, "bench", "transport", *([] if full else ["--quick"])]),
+        ("calibration (thesis 8.2)",
+         [*plugcell, "bench", "calibration", "--max-poses", "100000" if full else "10000"]),
+        ("compensation (thesis 6.5.1)", [*plugcell, "bench", "compensation"]),
+        ("wire decoder fuzz", [sys.executable, str(HERE / "fuzz_wire.py")]),
+    ]
+    print(f"machine: {platform.machine()}, {platform.processor() or 'cpu'}, "
+          f"Python {platform.python_version()}, {platform.system()} {platform.release()}")
+    failed = 0
+    for title, cmd in runs:
+        print(f"\n=== {title} ===", flush=True)
+        t0 = time.monotonic()
+        code = subprocess.call(cmd)
+        print(f"({time.monotonic() - t0:.1f} s, exit {code})", flush=True)
+        failed += code != 0
+    return 1 if failed else 0
+
+
+if __name__ == "__main__":
+    sys.exit(main(sys.argv[1:]))

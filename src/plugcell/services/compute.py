@@ -1,0 +1,147 @@
+"""The compute service: the Matlab service of thesis 7.3 (Table 7-2), without Matlab.
+
+==============  ===========================  =====================  ==================  ==========
+command         option                       input                  output              type
+==============  ===========================  =====================  ==================  ==========
+Set Matrix      matrix_name [":append"]      matrix: Double[m, n]   —                   NoData
+Get Matrix      matrix_name                  —                      matrix: Double[m,n] SingleData
+Evaluate        —                            expression: String[1]  —                   NoData
+==============  ===========================  =====================  ==================  ==========
+
+* **A workspace per requester** (``compute_workspace.py``): each robot's ``mT`` is its
+  own.  The requester is the process's sender, or the participant a routed process is
+  for (``for=``, set by the service that routed the data — ``tracker_routing.py``).
+* **Set Matrix** stores ``matrix`` as ``matrix_name``; with ``:append`` its rows are
+  appended (the matrix is created if absent) — how the calibration program adds each
+  measurement to mT and each joint reading to mJ (8.2.2).  A vector is one row.
+* **Evaluate** runs an expression of the small language of ``compute_expr.py`` —
+  assignments of calls to **registered** functions only (``compute_functions.py``:
+  calibrate, validate, summary, load/save parameters, frame, compensate,
+  compensate_joints, calc_targets, …).  No arbitrary code is ever executed: anything
+  else is refused with the reason, and the service carries on.
+* **Get Matrix** returns a matrix (identified parameters are not matrices: use
+  ``frame(params, 'base')`` etc.).  Its output can be routed (``; to=…``) like any
+  other, e.g. straight into the tracker's Set Base.
+
+Heavy functions run in a worker thread, one process at a time (the queue), so the
+service keeps answering Get and notifications while it computes.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import logging
+from pathlib import Path
+from typing import Any, ClassVar
+
+import numpy as np
+
+from plugcell.framework.journal import plugcell_home
+from plugcell.framework.model import Command, CommandTypes, DataTypes
+from plugcell.framework.service import DeviceError
+from plugcell.services.compute_expr import EvaluationError, evaluate
+from plugcell.services.compute_functions import FUNCTIONS, FunctionContext
+from plugcell.services.compute_workspace import DEFAULT_MAX_ELEMENTS, Workspace, WorkspaceError
+from plugcell.services.tracker_routing import RoutedDevice
+
+log = logging.getLogger("plugcell.services.compute")
+
+APPEND = ":append"
+
+__all__ = ["ComputeService"]
+
+
+class ComputeService(RoutedDevice):
+    """Set Matrix, Get Matrix, Evaluate on per-requester workspaces (module docstring)."""
+
+    kind = "compute"
+    default_name = "COMPUTE"
+    vendor = "plugcell"
+    info = "Computing service (thesis Table 7-2): workspaces per robot, registered functions"
+    commands = (
+        Command(
+            name="Set Matrix", type=CommandTypes.NoData,
+            input_data_type=DataTypes.Double, input_data_size=(),
+            info="store the data as OPTION (a name; 'name:append' appends the rows); "
+                 "a vector is one row",
+        ),
+        Command(
+            name="Get Matrix", type=CommandTypes.SingleData,
+            output_data_type=DataTypes.Double, output_data_size=(-1, -1),
+            info="the matrix named OPTION [; to=SERVICE:Command:Option]",
+        ),
+        Command(
+            name="Evaluate", type=CommandTypes.NoData,
+            input_data_type=DataTypes.String, input_data_size=(1,), timeout=600.0,
+            info="run 'name = function(args…)'; registered functions only (docs/"
+                 "compute-service.md)",
+        ),
+    )
+    params: ClassVar[dict[str, type]] = {"robot": str, "data_dir": str, "max_elements": int}
+
+    def __init__(
+        self,
+        name: str | None = None,
+        *,
+        robot: str = "smart_h4",
+        data_dir: str | Path | None = None,
+        max_elements: int = DEFAULT_MAX_ELEMENTS,
+        **kwargs: Any,
+    ) -> None:
+        super().__init__(name, **kwargs)
+        if max_elements < 1:
+            raise ValueError(f"max_elements must be positive, got {max_elements}")
+        self.robot = robot
+        self._data_dir = Path(data_dir) if data_dir is not None else None
+        self.max_elements = max_elements
+        self.workspaces: dict[str, Workspace] = {}
+        """The workspace of each requester, by name."""
+
+    @property
+    def data_dir(self) -> Path:
+        """Where parameter sets are saved: ``<home>/cells/<cell>/compute/<name>``."""
+        if self._data_dir is not None:
+            return self._data_dir
+        return plugcell_home() / "cells" / self.keys.cell / "compute" / self.name
+
+    def workspace(self, requester: str) -> Workspace:
+        """The workspace of ``requester`` (created empty on first use)."""
+        ws = self.workspaces.get(requester)
+        if ws is None:
+            ws = self.workspaces[requester] = Workspace(requester, self.max_elements)
+        return ws
+
+    async def handle(self, command: Command, option: str, data: Any) -> str:
+        """CommandDispatcher of Table 7-2, in the workspace of ``self.requester``."""
+        ws = self.workspace(self.requester)
+        try:
+            match command.name:
+                case "Set Matrix":
+                    name, append = _target(option)
+                    if append:
+                        ws.append(name, data)
+                    else:
+                        ws.set(name, np.asarray(data, dtype=float))
+                case "Get Matrix":
+                    self.data_feedback.post(ws.matrix(option.strip()))
+                case "Evaluate":
+                    text = str(np.asarray(data, dtype=object).reshape(-1)[0])
+                    names = await asyncio.to_thread(self._evaluate, ws, text)
+                    log.info("%s: %s evaluated %r → %s", self.name, ws.owner, text, names)
+                case _:
+                    raise DeviceError(f"unknown command {command.name}")
+        except (WorkspaceError, EvaluationError) as exc:
+            raise DeviceError(str(exc)) from None
+        return "OK"
+
+    def _evaluate(self, ws: Workspace, text: str) -> list[str]:
+        context = FunctionContext(workspace=ws, robot=self.robot,
+                                  params_dir=self.data_dir / "params")
+        return evaluate(text, ws, FUNCTIONS, context=context)
+
+
+def _target(option: str) -> tuple[str, bool]:
+    text = option.strip()
+    if text.endswith(APPEND):
+        return text[: -len(APPEND)].strip(), True
+    return text, False

@@ -1,0 +1,425 @@
+"""The functions Evaluate may call: the thesis's Matlab functions, registered by name.
+
+Thesis 7.3: "the error identification and compensation algorithms presented in
+sections 6.4, 6.5.1 are programmed in separate Matlab functions that will be called
+by the robot".  These are those functions, on plugcell's engines:
+
+=====================================================  ================================
+function                                               thesis
+=====================================================  ================================
+``calibrate(mJ, mT, model=5, payload=0, …)``            H4Calibration (8.2.2, Fig. 8-4)
+``validate(params, vJ, vT, payload=0, …)``              accuracy on other poses (8.2.3)
+``summary(params)``                                     the figures H4Calibration shows
+``save_params(params, 'name')``, ``load_params('name')``  saving; LoadParams (8.3.2)
+``frame(params, 'base'|'probe', angles='euler')``       BASE/PROBE for Set Base/Set Probe
+``compensate(params, targets, payload=0, …)``           model-based compensation (6.5.1)
+``compensate_joints(params, joints, payload=0, …)``     H4Compensation (8.3.2)
+``calc_targets(holes, corners, base, per_bar=6, …)``    CalcTarget (8.4.1)
+``append(a, b)``, ``row(a, i)``, ``size(a)``, ``clear(…)``  workspace housekeeping
+=====================================================  ================================
+
+Robot units throughout: lengths in mm, angles in degrees, joint readings in degrees
+(what ARM_JNTP gives); a pose 6-vector is ``x, y, z, a, b, c`` with the angles in the
+``angles`` convention: ``'euler'`` (Comau Z-Y-Z, the default), ``'rpy'`` or ``'prj'``.
+Parameters are saved as PARAMS.json (docs/calibration.md) under the service's data
+directory, by bare name only.
+"""
+
+from __future__ import annotations
+
+import functools
+import json
+import os
+import tempfile
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from plugcell.calibration import CalibrationData, CalibrationError, CalibrationResult, Calibrator
+from plugcell.compensation import IdentifiedModel, NominalModel
+from plugcell.compensation import compensate as _compensate
+from plugcell.compensation import compensate_joints as _compensate_joints
+from plugcell.framework.keys import check_name as _check_file_name
+from plugcell.io.robots import available_robots, load_robot
+from plugcell.kinematics import RobotDescription
+from plugcell.kinematics.rotations import angles_to_matrix
+from plugcell.metrology import MetrologyError, fit_line, fit_plane, frame_from_axes
+from plugcell.metrology import invert_transform as _inv
+from plugcell.services.compute_expr import EvaluationError
+from plugcell.services.compute_workspace import Workspace, WorkspaceError, as_matrix
+from plugcell.services.tracker_frames import CONVENTIONS, matrix_from_vector, vector_from_matrix
+
+__all__ = ["FUNCTIONS", "FunctionContext", "Parameters", "register"]
+
+
+class FunctionError(EvaluationError):
+    """A registered function refused its arguments or failed; the message says why."""
+
+
+@dataclass
+class FunctionContext:
+    """What a function may use besides its arguments."""
+
+    workspace: Workspace
+    robot: str = "smart_h4"
+    params_dir: Path = field(default_factory=lambda: Path("."))
+
+
+@dataclass(frozen=True, eq=False)
+class Parameters:
+    """Identified parameters in a workspace: the result and its PARAMS.json document."""
+
+    result: CalibrationResult
+    description: RobotDescription
+    document: dict[str, Any]
+    kind: str = "identified parameters"
+
+
+FUNCTIONS: dict[str, Callable[..., Any]] = {}
+
+
+def register(fn: Callable[..., Any]) -> Callable[..., Any]:
+    """Make ``fn`` callable from Evaluate under its own name."""
+    FUNCTIONS[fn.__name__] = fn
+    return fn
+
+
+# -- argument checks -------------------------------------------------------------------------
+
+
+def _matrix(x: Any, what: str, cols: tuple[int, ...] | None = None) -> np.ndarray:
+    if isinstance(x, Parameters) or isinstance(x, str):
+        raise FunctionError(f"{what}: a matrix expected, got {_kind(x)}")
+    try:
+        m = as_matrix(x, what)
+    except WorkspaceError as exc:
+        raise FunctionError(str(exc)) from None
+    if cols is not None and m.shape[1] not in cols:
+        want = " or ".join(str(c) for c in cols)
+        raise FunctionError(f"{what}: {want} columns expected, got {m.shape[0]}×{m.shape[1]}")
+    return m
+
+
+def _kind(x: Any) -> str:
+    if isinstance(x, str):
+        return f"the string {x!r}"
+    return getattr(x, "kind", type(x).__name__)
+
+
+def _params(x: Any, what: str = "params") -> Parameters:
+    if not isinstance(x, Parameters):
+        raise FunctionError(f"{what}: identified parameters expected (from calibrate or "
+                            f"load_params), got {_kind(x)}")
+    return x
+
+
+def _text(x: Any, what: str) -> str:
+    if not isinstance(x, str):
+        raise FunctionError(f"{what}: a 'string' expected, got {_kind(x)}")
+    return x
+
+
+def _number(x: Any, what: str) -> float:
+    if isinstance(x, np.ndarray) and x.size == 1:
+        x = float(x.reshape(-1)[0])
+    if not isinstance(x, float | int) or not np.isfinite(x):
+        raise FunctionError(f"{what}: a number expected, got {_kind(x)}")
+    return float(x)
+
+
+def _integer(x: Any, what: str) -> int:
+    v = _number(x, what)
+    if v != int(v):
+        raise FunctionError(f"{what}: a whole number expected, got {v:g}")
+    return int(v)
+
+
+def _convention(angles: Any) -> str:
+    name = _text(angles, "angles")
+    if name not in CONVENTIONS:
+        raise FunctionError(f"angles: {name!r} unknown; use {', '.join(CONVENTIONS)}")
+    return name
+
+
+def _payload(x: Any, n: int) -> np.ndarray:
+    if isinstance(x, float | int):
+        m = np.full(n, float(x))
+    else:
+        m = _matrix(x, "payload").reshape(-1)
+        if m.size == 1:
+            m = np.full(n, m[0])
+    if m.shape != (n,) or np.any(m < 0):
+        raise FunctionError(f"payload: one mass ≥ 0 kg or one per pose ({n}) expected")
+    return m
+
+
+@functools.lru_cache(maxsize=8)
+def _robot(name: str) -> RobotDescription:
+    return load_robot(name)
+
+
+def _description(ctx: FunctionContext, robot: Any) -> RobotDescription:
+    if robot is None:
+        return _robot(ctx.robot)
+    name = _text(robot, "robot")
+    if name not in available_robots():  # bare names only: never a path from a program
+        raise FunctionError(f"robot {name!r} unknown; shipped robots: "
+                            f"{', '.join(available_robots())}")
+    return _robot(name)
+
+
+def _poses(rows: np.ndarray, convention: str) -> np.ndarray:
+    """N×6 rows (mm, deg) → (N, 4, 4) in metres."""
+    return np.stack([matrix_from_vector(r, convention) for r in rows]) if len(rows) else (
+        np.empty((0, 4, 4)))
+
+
+def _data(desc: RobotDescription, mJ: Any, mT: Any, payload: Any, angles: Any,
+          names: tuple[str, str]) -> CalibrationData:
+    J = _matrix(mJ, names[0], (desc.n_actuated,))
+    T = _matrix(mT, names[1], (3, 6))
+    if len(J) != len(T):
+        raise FunctionError(f"{names[0]} has {len(J)} rows but {names[1]} has {len(T)}")
+    m = _payload(payload, len(J))
+    rotations = None
+    if T.shape[1] == 6:
+        rotations = angles_to_matrix(np.deg2rad(T[:, 3:]), CONVENTIONS[_convention(angles)])
+    try:
+        return CalibrationData(q=np.deg2rad(J), positions=T[:, :3] * 1e-3,
+                               rotations=rotations, payload_kg=m)
+    except ValueError as exc:
+        raise FunctionError(str(exc)) from None
+
+
+# -- calibration (8.2) ----------------------------------------------------------------------
+
+
+@register
+def calibrate(ctx: FunctionContext, mJ: Any, mT: Any, model: Any = 5.0, payload: Any = 0.0,
+              angles: Any = "euler", robot: Any = None) -> Parameters:
+    """Identify the error parameters from joint readings ``mJ`` (N×n, deg) and tracker
+    measurements ``mT`` (N×6 poses mm/deg, or N×3 positions mm) — H4Calibration."""
+    desc = _description(ctx, robot)
+    data = _data(desc, mJ, mT, payload, angles, ("mJ", "mT"))
+    spec: int | str = model if isinstance(model, str) else _integer(model, "model")
+    try:
+        result = Calibrator(desc, model=spec).fit(data)
+    except (CalibrationError, ValueError) as exc:
+        raise FunctionError(str(exc)) from None
+    return Parameters(result, desc, json.loads(result.to_json()))
+
+
+def _stats_row(before: Any, after: Any, poses: int) -> np.ndarray:
+    orientation = after.orientation.norm.mean if after.orientation is not None else 0.0
+    return np.array([[poses, before.position.norm.mean * 1e3, after.position.norm.mean * 1e3,
+                      after.position.norm.std * 1e3, after.position.norm.max * 1e3,
+                      np.rad2deg(orientation)]])
+
+
+@register
+def validate(ctx: FunctionContext, params: Any, vJ: Any, vT: Any, payload: Any = 0.0,
+             angles: Any = "euler") -> np.ndarray:
+    """Accuracy on other poses: 1×6 ``[poses, mean before, mean after, σ after, max after
+    (mm), mean orientation after (deg)]`` (eqs. 8.1–8.2)."""
+    p = _params(params)
+    data = _data(p.description, vJ, vT, payload, angles, ("vJ", "vT"))
+    before, after = p.result.evaluate(data)
+    return _stats_row(before, after, len(data))
+
+
+@register
+def summary(ctx: FunctionContext, params: Any) -> np.ndarray:
+    """The calibration figures (Fig. 8-8): 1×6 as :func:`validate`, on the calibration
+    poses."""
+    doc = _params(params).document.get("calibration")
+    if not doc:
+        raise FunctionError("these parameters carry no calibration statistics")
+    before = doc.get("before") or {}
+    orientation = (doc.get("orientation") or {}).get("mean_deg", 0.0)
+    return np.array([[doc["poses"], before.get("mean_mm", np.nan), doc["mean_mm"],
+                      doc["std_mm"], doc["max_mm"], orientation]], dtype=float)
+
+
+def _params_path(ctx: FunctionContext, name: Any) -> Path:
+    text = _text(name, "name")
+    try:
+        _check_file_name(text, "parameter set name")
+    except ValueError as exc:
+        raise FunctionError(str(exc)) from None
+    if text.startswith(".") or ".." in text:
+        raise FunctionError(f"parameter set name {text!r}: no dots at the start, no '..'")
+    return ctx.params_dir / f"{text}.json"
+
+
+@register
+def save_params(ctx: FunctionContext, params: Any, name: Any) -> None:
+    """Save identified parameters as PARAMS.json under the service's data directory."""
+    p = _params(params)
+    path = _params_path(ctx, name)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=".params-", suffix=".json")
+    with os.fdopen(fd, "w", encoding="utf-8") as fh:
+        json.dump(p.document, fh, indent=2, allow_nan=False)
+    os.replace(tmp, path)
+
+
+@register
+def load_params(ctx: FunctionContext, name: Any) -> Parameters:
+    """Load parameters saved by :func:`save_params` (or written by ``plugcell calibrate``)
+    — LoadParams of 8.3.2."""
+    path = _params_path(ctx, name)
+    try:
+        doc = json.loads(path.read_text(encoding="utf-8"))
+        desc = _description(ctx, doc.get("robot"))
+        result = CalibrationResult.from_dict(doc, desc)
+    except FileNotFoundError:
+        raise FunctionError(f"no parameter set {path.stem!r} in {path.parent}") from None
+    except (OSError, ValueError, KeyError, TypeError) as exc:
+        raise FunctionError(f"{path.name}: cannot read: {exc}") from None
+    return Parameters(result, desc, doc)
+
+
+@register
+def frame(ctx: FunctionContext, params: Any, which: Any, angles: Any = "euler") -> np.ndarray:
+    """The identified BASE or PROBE as a 1×6 row (mm, deg) for Set Base / Set Probe."""
+    p = _params(params)
+    name = _text(which, "which")
+    if name not in ("base", "probe"):
+        raise FunctionError(f"which: 'base' or 'probe', got {name!r}")
+    T = p.result.model.base() if name == "base" else p.result.model.probe()
+    return vector_from_matrix(T, _convention(angles)).reshape(1, 6)
+
+
+# -- compensation (6.5.1, 8.3.2) ------------------------------------------------------------
+
+
+def _tool(p: Parameters, tool: Any, convention: str) -> np.ndarray | None:
+    if tool is None:
+        return None
+    return matrix_from_vector(_matrix(tool, "tool", (6,)).reshape(-1), convention)
+
+
+def _joints_or_fail(result: Any) -> np.ndarray:
+    if not np.all(result.ok):
+        k = int(np.flatnonzero(~result.ok)[0])
+        raise FunctionError(f"target {k + 1}: {result.reason[k]}")
+    return np.rad2deg(result.q)
+
+
+@register
+def compensate(ctx: FunctionContext, params: Any, targets: Any, payload: Any = 0.0,
+               angles: Any = "euler", tool: Any = None) -> np.ndarray:
+    """Model-based compensation (6.5.1): target poses N×6 (robot base frame, mm/deg) →
+    the joints (N×n, deg) that reach them on the identified model.  ``tool``: the
+    compensated point in the flange frame (6-vector; default the identified PROBE)."""
+    p = _params(params)
+    convention = _convention(angles)
+    T = _poses(_matrix(targets, "targets", (6,)), convention)
+    model = IdentifiedModel(p.result.model, tool=_tool(p, tool, convention))
+    try:
+        res = _compensate(model, T, _payload(payload, len(T)), raise_errors=False)
+    except ValueError as exc:
+        raise FunctionError(str(exc)) from None
+    return _joints_or_fail(res)
+
+
+@register
+def compensate_joints(ctx: FunctionContext, params: Any, joints: Any, payload: Any = 0.0,
+                      angles: Any = "euler", tool: Any = None) -> np.ndarray:
+    """H4Compensation (8.3.2): the nominal joints of a target (POS_TO_JNTP, N×n deg) →
+    the compensated joints (N×n, deg) that put the tool where the nominal robot would."""
+    p = _params(params)
+    desc = p.description
+    q = np.deg2rad(_matrix(joints, "joints", (desc.n_actuated,)))
+    model = IdentifiedModel(p.result.model, tool=_tool(p, tool, _convention(angles)))
+    T = NominalModel(desc, tool=model.tool).pose(q)
+    try:
+        res = _compensate_joints(model, T, q, _payload(payload, len(q)), raise_errors=False)
+    except ValueError as exc:
+        raise FunctionError(str(exc)) from None
+    return _joints_or_fail(res)
+
+
+# -- part localisation (8.4.1) ---------------------------------------------------------------
+
+
+@register
+def calc_targets(ctx: FunctionContext, holes: Any, corners: Any, base: Any,
+                 per_bar: Any = 6.0, angles: Any = "euler", normal: Any = None) -> np.ndarray:
+    """CalcTarget (8.4.1): target frames from holes measured with an SMR (tracker frame).
+
+    ``holes``: (k·per_bar)×3 (or ×6: the first three columns) positions in mm, bar by
+    bar; each hole is the origin of a target frame.  ``corners``: ≥ 3 holes (the four
+    at the corners of the bars) whose best-fit plane's normal is the common z axis —
+    signed towards ``normal`` (3 numbers, tracker frame), by default towards the
+    tracker.  Each bar's best-fit line through its holes (first to last) is its y
+    axis; x = y × z.  The frames are transformed into the robot base frame with
+    ``base`` (a 1×6 BASE in mm/deg, or identified parameters) and returned as
+    (k·per_bar)×6 poses (mm, deg in ``angles``).
+    """
+    convention = _convention(angles)
+    H = _matrix(holes, "holes", (3, 6))[:, :3] * 1e-3
+    C = _matrix(corners, "corners", (3, 6))[:, :3] * 1e-3
+    n = _integer(per_bar, "per_bar")
+    if n < 2 or len(H) % n:
+        raise FunctionError(f"holes: {len(H)} rows is not a whole number of bars of {n} holes "
+                            "(per_bar ≥ 2)")
+    if isinstance(base, Parameters):
+        B = base.result.model.base()
+    else:
+        B = matrix_from_vector(_matrix(base, "base", (6,)).reshape(-1), convention)
+    hint = (-C.mean(axis=0) if normal is None
+            else _matrix(normal, "normal", (3,)).reshape(-1))
+    try:
+        z = fit_plane(C, normal_hint=hint).normal
+        frames = []
+        for k in range(0, len(H), n):
+            bar = H[k:k + n]
+            y = fit_line(bar).direction
+            for origin in bar:
+                frames.append(_inv(B) @ frame_from_axes(origin, z=z, y=y))
+    except MetrologyError as exc:
+        raise FunctionError(str(exc)) from None
+    return np.stack([vector_from_matrix(T, convention) for T in frames])
+
+
+# -- housekeeping ---------------------------------------------------------------------------
+
+
+@register
+def append(ctx: FunctionContext, a: Any, b: Any) -> np.ndarray:
+    """``[a; b]``: the rows of b below those of a (equal numbers of columns)."""
+    A, B = _matrix(a, "a"), _matrix(b, "b")
+    if A.size and A.shape[1] != B.shape[1]:
+        raise FunctionError(f"append: {A.shape[1]} and {B.shape[1]} columns")
+    return np.vstack([A, B]) if A.size else B
+
+
+@register
+def row(ctx: FunctionContext, a: Any, i: Any) -> np.ndarray:
+    """Row ``i`` (1-based, as in the robot language) of ``a``, as a 1×n matrix."""
+    A = _matrix(a, "a")
+    k = _integer(i, "i")
+    if not 1 <= k <= len(A):
+        raise FunctionError(f"row {k} of a matrix with {len(A)} rows")
+    return A[k - 1 : k].copy()
+
+
+@register
+def size(ctx: FunctionContext, a: Any) -> np.ndarray:
+    """``[rows, columns]`` of a matrix."""
+    A = _matrix(a, "a")
+    return np.array([[A.shape[0], A.shape[1]]], dtype=float)
+
+
+@register
+def clear(ctx: FunctionContext, *names: Any) -> None:
+    """Remove the named values (``clear('mJ', 'mT')``), or everything (``clear()``)."""
+    texts = [_text(n, "name") for n in names]
+    try:
+        ctx.workspace.clear(texts or None)
+    except WorkspaceError as exc:
+        raise FunctionError(str(exc)) from None

@@ -1,0 +1,26 @@
+"""plugcell.calibration is pure math: it never imports the twin, the framework or the services."""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+
+
+def test_calibration_imports_no_twin_framework_or_io():
+    code = (
+        "import sys, plugcell.calibration, plugcell.calibration.report, "
+        "plugcell.calibration.simulation\n"
+        "bad = [m for m in sys.modules if m.startswith(('plugcell.twin', 'plugcell.framework', "
+        "'plugcell.services', 'plugcell.io', 'plugcell.commands', 'zenoh', 'matplotlib'))]\n"
+        "print(','.join(bad))"
+    )
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
+    assert out.stdout.strip() == ""
+
+
+def test_bench_calibration_reports_t150():
+    from plugcell.commands.bench_calibration import measure
+
+    d = measure(repeat=1, max_poses=150)
+    assert d["t150_s"] > 0 and d["parameters"] == 50
+    assert [s["poses"] for s in d["scaling"]] == [150]

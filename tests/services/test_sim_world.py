@@ -1,0 +1,58 @@
+"""The sim-only world channel: reflector truth shared between simulated devices."""
+
+from __future__ import annotations
+
+import time
+
+import numpy as np
+import pytest
+
+from plugcell.framework.transport import TransportConfig, open_session
+from plugcell.services.sim.world import ReflectorPublisher, WorldView
+
+
+@pytest.fixture
+def sessions():
+    cfg = TransportConfig.from_env()
+    a, b = open_session(cfg), open_session(cfg)
+    yield a, b
+    a.close()
+    b.close()
+
+
+def _wait(cond, timeout=5.0):
+    end = time.monotonic() + timeout
+    while time.monotonic() < end:
+        if cond():
+            return True
+        time.sleep(0.01)
+    return False
+
+
+def test_late_joiner_gets_the_latest_pose_then_follows_updates(sessions):
+    a, b = sessions
+    cell = "world-test"
+    pub = ReflectorPublisher(a, "robot1", "tmac", cell=cell)
+    pose = np.eye(4)
+    pose[:3, 3] = [1.0, 2.0, 3.0]
+    pub.publish(pose)
+    assert _wait(lambda: WorldView(b, cell=cell).get("robot1") is not None)
+    view = WorldView(b, cell=cell)
+    np.testing.assert_allclose(view.get("robot1").matrix(), pose)
+    pose2 = pose.copy()
+    pose2[0, 3] = 1.5
+    pub.publish(pose2, moving=True)
+    assert _wait(lambda: view.get("robot1").matrix()[0, 3] == 1.5)
+    assert view.get("robot1").moving
+    other = WorldView(b, cell="another-cell")
+    assert other.get("robot1") is None
+    pub.close()
+
+
+def test_bad_poses_are_refused(sessions):
+    a, _ = sessions
+    pub = ReflectorPublisher(a, "r", "smr", cell="world-test2")
+    with pytest.raises(ValueError, match="finite 4x4"):
+        pub.publish(np.full((4, 4), np.nan))
+    with pytest.raises(ValueError, match="kind"):
+        ReflectorPublisher(a, "r2", "laser")
