@@ -28,6 +28,8 @@ COMMAND_MODULES: tuple[str, ...] = (
     "plugcell.commands.compensate",
     "plugcell.commands.calibrate",
     "plugcell.commands.reproduce",
+    "plugcell.commands.cell",
+    "plugcell.commands.controller",
 )
 
 

@@ -17,7 +17,7 @@ import logging
 import re
 import threading
 from collections.abc import Callable, Mapping, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
@@ -68,6 +68,8 @@ class RunInfo:
     execution: Execution
     state: str = "RUNNING"
     message: str = ""
+    ended: threading.Event = field(default_factory=threading.Event)
+    """Set once the ENDED event has been emitted."""
 
 
 def resolve_program(ref: str, library: Sequence[Path] = ()) -> Path:
@@ -193,8 +195,11 @@ class ProgramRunner:
             if self._current is info:
                 self._current = None
             self.last = info
-        self.events(ProgramEnded(info.run, info.program, info.state, result.sim_time,
-                                 result.real_time, info.message))
+        try:
+            self.events(ProgramEnded(info.run, info.program, info.state, result.sim_time,
+                                     result.real_time, info.message))
+        finally:
+            info.ended.set()
 
     def stop(self, reason: str, program: str = "", wait_s: float = STOP_WAIT_S) -> RunInfo:
         """Stop the running program safely (if it is ``program``); wait until it ended."""
@@ -205,7 +210,7 @@ class ProgramRunner:
             raise RunError(f"program {program} is not running (running: {info.program})")
         info.message = reason
         info.execution.stop(reason)
-        if info.execution.join(wait_s) is None:
+        if not info.ended.wait(wait_s):
             raise RunError(f"program {info.program} did not stop within {wait_s:g} s")
         return info
 

@@ -182,6 +182,17 @@ class GenericDevice(Participant):
 
     # -- the device interface: override these (Figure 5-10, "Camera Interface") ---------
 
+    @property
+    def sender(self) -> str:
+        """Who asked for the process being dispatched (its sender's participant name).
+
+        Set while :meth:`dispatch` runs a process from the queue; ``""`` when the
+        framework itself calls ``dispatch`` (e.g. to stop the stream of a sender that
+        disappeared).  Services that keep per-requester state (the tracker's BASE and
+        PROBE, the compute service's workspaces) key it by this name.
+        """
+        return getattr(self, "_sender", "")
+
     async def dispatch(self, command: Command, option: str, data: Any) -> str | None:
         """CommandDispatcher: send ``command`` to the device.
 
@@ -626,6 +637,7 @@ class GenericDevice(Participant):
         assert self._loop is not None
         waiter: asyncio.Future[str] = self._loop.create_future()
         self._cmd_waiter = waiter
+        self._sender = entry.sender
         try:
             async with asyncio.timeout(command.timeout):
                 code = await self.dispatch(command, command.option, entry.input)
@@ -642,6 +654,7 @@ class GenericDevice(Participant):
             return False, f"{command.name}: device interface error: {exc!r}"
         finally:
             self._cmd_waiter = None
+            self._sender = ""
         if code == command.success_code:
             return True, ""
         return False, (

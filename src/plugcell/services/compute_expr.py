@@ -118,7 +118,7 @@ class _Token:
     col: int
 
 
-class _Refusal(EvaluationError):
+class _RefusalError(EvaluationError):
     """A refusal at a character offset (1-based) of the text; made readable by :func:`_at`."""
 
     def __init__(self, col: int, reason: str) -> None:
@@ -127,11 +127,11 @@ class _Refusal(EvaluationError):
         self.reason = reason
 
 
-def _refuse(col: int, reason: str) -> _Refusal:
-    return _Refusal(col, reason)
+def _refuse(col: int, reason: str) -> _RefusalError:
+    return _RefusalError(col, reason)
 
 
-def _at(text: str, exc: _Refusal) -> EvaluationError:
+def _at(text: str, exc: _RefusalError) -> EvaluationError:
     """``column C: reason``, or ``line L, column C: reason`` in a text of several lines."""
     before = text[: max(exc.col - 1, 0)]
     line = before.count("\n") + 1
@@ -352,7 +352,7 @@ def parse(text: str) -> list[Assign]:
         raise EvaluationError(f"expression longer than {MAX_LENGTH} characters")
     try:
         return _Parser(text).program()
-    except _Refusal as exc:
+    except _RefusalError as exc:
         raise _at(text, exc) from None
 
 
@@ -390,7 +390,7 @@ def evaluate(
     try:
         for st in statements:
             _run(st, scope, functions, context, assigned)
-    except _Refusal as exc:
+    except _RefusalError as exc:
         raise _at(text, exc) from None
     return assigned
 
@@ -470,7 +470,7 @@ def _call(node: Call, scope: Scope, functions: Mapping[str, Callable[..., Any]],
         raise _refuse(node.col, f"{node.func}(): {exc}") from None
     try:
         return function(context, *args, **kwargs)
-    except _Refusal:
+    except _RefusalError:
         raise
     except EvaluationError as exc:
         raise _refuse(node.col, f"{node.func}(): {exc}") from None

@@ -15,6 +15,7 @@ function                                               thesis
 ``compensate(params, targets, payload=0, …)``           model-based compensation (6.5.1)
 ``compensate_joints(params, joints, payload=0, …)``     H4Compensation (8.3.2)
 ``calc_targets(holes, corners, base, per_bar=6, …)``    CalcTarget (8.4.1)
+``probe_from_features(…)``, ``base_from_features(…)``   appendix D (the wizards of 7.5)
 ``append(a, b)``, ``row(a, i)``, ``size(a)``, ``clear(…)``  workspace housekeeping
 =====================================================  ================================
 
@@ -46,7 +47,14 @@ from plugcell.framework.keys import check_name as _check_file_name
 from plugcell.io.robots import available_robots, load_robot
 from plugcell.kinematics import RobotDescription
 from plugcell.kinematics.rotations import angles_to_matrix
-from plugcell.metrology import MetrologyError, fit_line, fit_plane, frame_from_axes
+from plugcell.metrology import (
+    MetrologyError,
+    fit_line,
+    fit_plane,
+    frame_from_axes,
+    probe_from_flange_features,
+)
+from plugcell.metrology import base_from_features as _base_from_features
 from plugcell.metrology import invert_transform as _inv
 from plugcell.services.compute_expr import EvaluationError
 from plugcell.services.compute_workspace import Workspace, WorkspaceError, as_matrix
@@ -91,7 +99,7 @@ def register(fn: Callable[..., Any]) -> Callable[..., Any]:
 
 
 def _matrix(x: Any, what: str, cols: tuple[int, ...] | None = None) -> np.ndarray:
-    if isinstance(x, Parameters) or isinstance(x, str):
+    if isinstance(x, Parameters | str):
         raise FunctionError(f"{what}: a matrix expected, got {_kind(x)}")
     try:
         m = as_matrix(x, what)
@@ -384,6 +392,44 @@ def calc_targets(ctx: FunctionContext, holes: Any, corners: Any, base: Any,
     except MetrologyError as exc:
         raise FunctionError(str(exc)) from None
     return np.stack([vector_from_matrix(T, convention) for T in frames])
+
+
+# -- appendix D: initial BASE and PROBE (the visualisation service's wizards, 7.5) -----------
+
+
+def _points(x: Any, what: str) -> np.ndarray:
+    return _matrix(x, what, (3, 6))[:, :3] * 1e-3
+
+
+@register
+def probe_from_features(ctx: FunctionContext, circle: Any, holes: Any, tmac: Any,
+                        angles: Any = "euler", smr_offset: Any = 6.35) -> np.ndarray:
+    """App. D.1: PROBE (1×6, mm/deg) from SMR positions while the last joint turns
+    (``circle``, N×3 mm), the two dowel holes from −y to +y (``holes``), and the T-MAC
+    pose measured without moving (``tmac``, 1×6); ``smr_offset``: SMR centre height (mm)."""
+    convention = _convention(angles)
+    T = matrix_from_vector(_matrix(tmac, "tmac", (6,)).reshape(-1), convention)
+    try:
+        est = probe_from_flange_features(_points(circle, "circle"), _points(holes, "holes"), T,
+                                         smr_offset=_number(smr_offset, "smr_offset") * 1e-3)
+    except MetrologyError as exc:
+        raise FunctionError(str(exc)) from None
+    return vector_from_matrix(est.probe, convention).reshape(1, 6)
+
+
+@register
+def base_from_features(ctx: FunctionContext, circle: Any, plane: Any, line: Any,
+                        angles: Any = "euler", smr_offset: Any = 6.35) -> np.ndarray:
+    """App. D.2: BASE (1×6, mm/deg) from SMR positions on joint 1 while it turns
+    (``circle``), on the base surface (``plane``), and T-MAC positions while the robot
+    moves along its +x (``line``), all N×3 mm in the tracker frame."""
+    try:
+        est = _base_from_features(_points(circle, "circle"), _points(plane, "plane"),
+                                 _points(line, "line"),
+                                 smr_offset=_number(smr_offset, "smr_offset") * 1e-3)
+    except MetrologyError as exc:
+        raise FunctionError(str(exc)) from None
+    return vector_from_matrix(est.base, _convention(angles)).reshape(1, 6)
 
 
 # -- housekeeping ---------------------------------------------------------------------------

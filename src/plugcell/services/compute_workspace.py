@@ -24,7 +24,7 @@ NAME = re.compile(rf"^[A-Za-z][A-Za-z0-9_]{{0,{MAX_NAME - 1}}}$")
 DEFAULT_MAX_ELEMENTS = 8_000_000  # 64 MB of float64 per requester
 MAX_VALUES = 1000
 
-__all__ = ["DEFAULT_MAX_ELEMENTS", "Workspace", "WorkspaceError", "check_name", "as_matrix"]
+__all__ = ["DEFAULT_MAX_ELEMENTS", "Workspace", "WorkspaceError", "as_matrix", "check_name"]
 
 
 class WorkspaceError(ValueError):

@@ -15,8 +15,10 @@ KINDS: dict[str, str] = {
     "camera": "plugcell.services.camera:CameraService",
     "drill": "plugcell.services.tool:DrillService",
     "bench": "plugcell.bench.device:BenchService",
+    "robot": "plugcell.services.robot:RobotService",
     "tracker": "plugcell.services.tracker:TrackerService",
     "compute": "plugcell.services.compute:ComputeService",
+    "controller": "plugcell.services.controller:CellController",
 }
 
 

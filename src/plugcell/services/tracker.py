@@ -46,7 +46,7 @@ import numpy as np
 
 from plugcell.framework.model import Command, CommandTypes, ConnectionStates, DataTypes
 from plugcell.framework.service import DeviceError
-from plugcell.services.tracker_driver import TrackerDriver, TrackerFault, TrackerStatus
+from plugcell.services.tracker_driver import TrackerDriver, TrackerDriverError, TrackerStatus
 from plugcell.services.tracker_frames import FrameError, RequesterFrames
 from plugcell.services.tracker_routing import RoutedDevice
 
@@ -72,7 +72,12 @@ def load_driver(spec: str, **kwargs: Any) -> TrackerDriver:
         cls = getattr(importlib.import_module(module_name), attr)
     except (ImportError, AttributeError) as exc:
         raise ValueError(f"cannot load tracker driver {spec!r}: {exc}") from None
-    driver = cls(**kwargs)
+    if not isinstance(cls, type):
+        raise ValueError(f"{spec} is not a class")
+    try:
+        driver = cls(**kwargs)
+    except Exception as exc:
+        raise ValueError(f"cannot construct tracker driver {spec}: {exc}") from None
     if not isinstance(driver, TrackerDriver):
         raise ValueError(f"{spec} is not a TrackerDriver (point, measure, state, ...)")
     return driver
@@ -206,7 +211,7 @@ class TrackerService(RoutedDevice):
                     raise DeviceError(f"unknown command {command.name}")
         except FrameError as exc:
             raise DeviceError(str(exc)) from None
-        except TrackerFault as exc:
+        except TrackerDriverError as exc:
             raise DeviceError(str(exc)) from None
         return "OK"
 
@@ -223,7 +228,7 @@ class TrackerService(RoutedDevice):
         while True:
             try:
                 reading = await self.driver.measure(interval_s)
-            except TrackerFault as exc:
+            except TrackerDriverError as exc:
                 self.cmd_feedback.post(str(exc))  # ends the process with this reason
                 return
             self.data_feedback.post(frames.measurement(reading.pose, option))

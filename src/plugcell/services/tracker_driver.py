@@ -6,7 +6,7 @@ three things only the instrument can do, in the *tracker* frame and SI units:
 
 * :meth:`TrackerDriver.point` — slew the beam so that it passes through a point and
   re-establish the lock on the reflector found there (the ADM of 2.3.1.1); or fail
-  with :class:`BeamNotLocked` and the reason;
+  with :class:`BeamNotLockedError` and the reason;
 * :meth:`TrackerDriver.measure` — one measurement of the locked reflector averaged
   over a duration (a T-MAC gives a pose, an SMR a position);
 * :meth:`TrackerDriver.state` — what the instrument says about itself.
@@ -29,19 +29,19 @@ from numpy.typing import NDArray
 Array = NDArray[np.float64]
 
 __all__ = [
-    "BeamNotLocked",
+    "BeamNotLockedError",
     "TrackerDriver",
-    "TrackerFault",
+    "TrackerDriverError",
     "TrackerReading",
     "TrackerStatus",
 ]
 
 
-class TrackerFault(RuntimeError):
+class TrackerDriverError(RuntimeError):
     """The instrument cannot do what was asked; ``reason`` is a short machine code.
 
     Codes: ``out_of_range`` (distance, elevation or T-MAC facing), ``device`` (anything
-    else the instrument reports); :class:`BeamNotLocked` adds its own.
+    else the instrument reports); :class:`BeamNotLockedError` adds its own.
     """
 
     def __init__(self, message: str, reason: str = "device") -> None:
@@ -49,7 +49,7 @@ class TrackerFault(RuntimeError):
         self.reason = reason
 
 
-class BeamNotLocked(TrackerFault):
+class BeamNotLockedError(TrackerDriverError):
     """No lock on a reflector.  ``reason``: ``not_pointed`` (never aimed), ``capture``
     (no reflector within the capture radius of the beam), ``line_of_sight``,
     ``tracking_speed`` (the reflector moved faster than the tracker follows)."""
@@ -93,17 +93,17 @@ class TrackerDriver(Protocol):
     """Vendor and model, shown in the service's DeviceInfo."""
 
     async def connect(self) -> None:
-        """Connect to the instrument (raise TrackerFault if it cannot)."""
+        """Connect to the instrument (raise TrackerDriverError if it cannot)."""
 
     async def disconnect(self) -> None:
         """Release the instrument."""
 
     async def point(self, position_m: Array) -> float:
         """Aim the beam through ``position_m`` (tracker frame) and lock on the reflector
-        there.  Returns the time it took (s).  Raises :class:`BeamNotLocked`."""
+        there.  Returns the time it took (s).  Raises :class:`BeamNotLockedError`."""
 
     async def measure(self, duration_s: float) -> TrackerReading:
-        """Measure the locked reflector for ``duration_s``.  Raises :class:`TrackerFault`."""
+        """Measure the locked reflector for ``duration_s``.  Raises :class:`TrackerDriverError`."""
 
     def state(self) -> TrackerStatus:
         """The instrument's current status (cheap, never blocks)."""

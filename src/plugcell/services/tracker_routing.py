@@ -56,14 +56,16 @@ MAX_ROUTES = 4
 DELIVERY_TIMEOUT_S = 10.0
 #: Longest wait, when a routed stream stops, for the values still on their way, s.
 DRAIN_TIMEOUT_S = 10.0
+#: Most values waiting for delivery; a stream whose destination cannot keep up ends.
+MAX_PENDING = 10_000
 
 __all__ = [
     "MAX_ROUTES",
     "DeliveryError",
     "OptionError",
     "ProcessOption",
-    "RoutedDevice",
     "Route",
+    "RoutedDevice",
     "fit_to_declaration",
     "format_option",
     "parse_option",
@@ -187,40 +189,65 @@ class _Delivery:
         self.device = device
         self.command = command
         self.context = context
-        self.queue: asyncio.Queue[Any] = asyncio.Queue()
+        self.queue: asyncio.Queue[Any] = asyncio.Queue(MAX_PENDING)
         self.error: str = ""
         self.delivered = 0
         self.task = asyncio.create_task(self._run(), name=f"{device.name}-route")
 
     def submit(self, value: Any) -> None:
-        if not self.error:
+        if self.error:
+            return
+        try:
             self.queue.put_nowait(np.array(value, copy=True))
+        except asyncio.QueueFull:
+            self._fail(f"delivery of {self.command.name} data: {MAX_PENDING} values waiting; "
+                       "the destination cannot keep up")
+
+    def _fail(self, reason: str) -> None:
+        if not self.error:
+            self.error = reason
+            self.device._delivery_failed(self, reason)
 
     async def _run(self) -> None:
-        while True:
+        while not self.error:
             value = await self.queue.get()
             try:
                 for route in self.context.routes:
                     await self._deliver(route, value)
                 self.delivered += 1
             except DeliveryError as exc:
-                self.error = str(exc)
-                self.device._delivery_failed(self, self.error)
-                return
+                self._fail(str(exc))
+            except Exception as exc:  # never a silent loss
+                log.exception("%s: routing %s", self.device.name, self.command.name)
+                self._fail(f"delivery of {self.command.name} data failed: {exc!r}")
             finally:
                 self.queue.task_done()
 
-    async def _deliver(self, route: Route, value: Any) -> None:
+    async def check(self) -> None:
+        """Before any data: every destination must be a service with that command."""
+        for route in self.context.routes:
+            await self._target(route)
+
+    async def _target(self, route: Route) -> Command:
         device = self.device
         what = f"delivery of {self.command.name} data to {route.service}:{route.command}"
         try:
             if route.service not in device.partners:
                 await device.subscribe(route.service, DELIVERY_TIMEOUT_S)
-            target = device.partners[route.service].device.command(route.command)
-            if target is not None:
-                value = fit_to_declaration(value, target.input_data_size)
+            catalogue = device.partners[route.service].device
         except Exception as exc:  # PartnerError, timeouts: the reason is in the message
             raise DeliveryError(f"{what} failed: {exc}") from None
+        target = catalogue.command(route.command)
+        if target is None:
+            known = ", ".join(c.name for c in catalogue.commands) or "none"
+            raise DeliveryError(f"{what} failed: unknown command {route.command!r} for "
+                                f"{route.service} (commands: {known})")
+        return target
+
+    async def _deliver(self, route: Route, value: Any) -> None:
+        what = f"delivery of {self.command.name} data to {route.service}:{route.command}"
+        device = self.device
+        value = fit_to_declaration(value, (await self._target(route)).input_data_size)
         option = format_option(route.option, on_behalf_of=self.context.requester)
         call = await device.create_process(
             route.service, route.command, option, value, timeout=DELIVERY_TIMEOUT_S
@@ -273,7 +300,6 @@ class RoutedDevice(GenericDevice):
     def __init__(self, name: str | None = None, **kwargs: Any) -> None:
         super().__init__(name, **kwargs)
         self.data_feedback = _RoutingPort(self.data_feedback, self)  # type: ignore[assignment]
-        self._sender = ""
         self._context: RequestContext | None = None
         self._delivery: _Delivery | None = None
         self._stream_delivery: _Delivery | None = None
@@ -296,38 +322,35 @@ class RoutedDevice(GenericDevice):
 
     # -- the framework side ---------------------------------------------------------------
 
-    async def _execute(self, entry: Entry) -> tuple[bool, str]:
-        # The framework dispatches every process through _execute(entry); entry.sender is
-        # the identity we need (a public hook would be better: see docs/tracker-service.md).
-        self._sender = entry.sender
-        try:
-            return await super()._execute(entry)
-        finally:
-            self._sender = ""
-
     async def dispatch(self, command: Command, option: str, data: Any) -> str | None:
         """Split the option, establish the requester, run :meth:`handle`, deliver."""
-        if not self._sender:  # the framework stops the stream of a lost sender itself
+        if not self.sender:  # the framework stops the stream of a lost sender itself
             return await self._stop_routed(command, data, lost=True)
         try:
             parsed = parse_option(option)
         except OptionError as exc:
             raise DeviceError(str(exc)) from None
-        requester = self._sender
+        requester = self.sender
         if parsed.on_behalf_of:
-            if not self.is_alive(self._sender, "service"):
+            if not self.is_alive(self.sender, "service"):
                 raise DeviceError(
                     f"for={parsed.on_behalf_of}: only a service may act on behalf of another "
-                    f"participant ({self._sender} is not a live service)"
+                    f"participant ({self.sender} is not a live service)"
                 )
             requester = parsed.on_behalf_of
         if parsed.routes and not command.gives_output:
             raise DeviceError("no output data to route (to=)")
-        self._context = RequestContext(self._sender, requester, parsed.routes)
+        self._context = RequestContext(self.sender, requester, parsed.routes)
         try:
             if command.type is CommandTypes.StopData:
                 return await self._stop_routed(command, data, lost=False, option=parsed.device)
             delivery = _Delivery(self, command, self._context) if parsed.routes else None
+            if delivery is not None:
+                try:
+                    await delivery.check()
+                except DeliveryError as exc:
+                    await delivery.close()
+                    raise DeviceError(str(exc)) from None
             self._delivery = delivery
             try:
                 code = await self.handle(command, parsed.device, data)

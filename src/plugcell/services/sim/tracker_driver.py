@@ -8,7 +8,7 @@ controllers publish their T-MAC's true pose, fixed SMRs are published once).
 
 * ``point(p)`` — the thesis's *Move*: slew the beam through ``p``; the reflector
   nearest to the new beam axis is acquired if it lies within the capture radius
-  (10 mm, thesis 8.4.3), else :class:`BeamNotLocked` names the nearest one and how
+  (10 mm, thesis 8.4.3), else :class:`BeamNotLockedError` names the nearest one and how
   far off the axis it is.
 * ``measure(t)`` — measure the reflector on the beam with the model (6-DOF for a
   T-MAC, 3-DOF for an SMR).  A reflector the beam is locked on that has moved since
@@ -35,17 +35,13 @@ from plugcell.framework.keys import DEFAULT_CELL
 from plugcell.services.sim.world import ReflectorState, reflector_key
 from plugcell.services.tracker_driver import (
     Array,
-    BeamNotLocked,
-    TrackerFault,
+    BeamNotLockedError,
+    TrackerDriverError,
     TrackerReading,
     TrackerStatus,
 )
-from plugcell.twin.tracker import (
-    BeamNotLockedError,
-    LaserTracker,
-    TargetOutOfRangeError,
-    TrackerError,
-)
+from plugcell.twin import tracker as twin
+from plugcell.twin.tracker import LaserTracker
 
 __all__ = ["SimulatedTrackerDriver"]
 
@@ -57,7 +53,7 @@ _DECODER = msgspec.msgpack.Decoder(ReflectorState)
 FOLLOW_SPEED_M_S = 1.0
 
 
-def _beam_message(exc: BeamNotLockedError) -> str:
+def _beam_message(exc: twin.BeamNotLockedError) -> str:
     """The model's message in the service's vocabulary (Move, not point_at)."""
     return (
         str(exc)
@@ -113,18 +109,18 @@ class SimulatedTrackerDriver:
             try:
                 dt = self.model.point_at(np.asarray(position_m, dtype=float))
             except ValueError as exc:
-                raise TrackerFault(f"cannot aim the beam: {exc}") from None
+                raise TrackerDriverError(f"cannot aim the beam: {exc}") from None
             self._busy_s += dt
             self._target, self._target_position = None, None
             nearest = self._nearest(world)
             radius = self.model.spec.capture_radius_m
             if nearest is None:
-                raise BeamNotLocked(
+                raise BeamNotLockedError(
                     "beam not locked: no reflector in the cell to lock on", reason="capture"
                 )
             offset, state = nearest
             if offset > radius:
-                raise BeamNotLocked(
+                raise BeamNotLockedError(
                     f"beam not locked: no reflector within the {radius * 1e3:.1f} mm capture "
                     f"radius of the beam (nearest: {state.name}, {offset * 1e3:.1f} mm off the "
                     "axis); check BASE, PROBE and the robot pose given to Move",
@@ -140,14 +136,14 @@ class SimulatedTrackerDriver:
         with self._lock:
             self._follow(world)
             if self.model.aim_point is None:
-                raise BeamNotLocked(
+                raise BeamNotLockedError(
                     "beam not locked: the beam has not been pointed at a reflector; "
                     "send Move first",
                     reason="not_pointed",
                 )
             nearest = self._nearest(world)
             if nearest is None:
-                raise BeamNotLocked(
+                raise BeamNotLockedError(
                     "beam not locked: no reflector in the cell to lock on", reason="capture"
                 )
             state = nearest[1]
@@ -156,13 +152,13 @@ class SimulatedTrackerDriver:
             try:
                 m = self.model.measure(pose if six_dof else pose[:3, 3], duration_s,
                                        mode="6dof" if six_dof else "3dof")
-            except BeamNotLockedError as exc:
+            except twin.BeamNotLockedError as exc:
                 self._target = None
-                raise BeamNotLocked(_beam_message(exc), reason=exc.reason) from None
-            except TargetOutOfRangeError as exc:
-                raise TrackerFault(str(exc), reason="out_of_range") from None
-            except (TrackerError, ValueError) as exc:
-                raise TrackerFault(f"{state.name}: {exc}") from None
+                raise BeamNotLockedError(_beam_message(exc), reason=exc.reason) from None
+            except twin.TargetOutOfRangeError as exc:
+                raise TrackerDriverError(str(exc), reason="out_of_range") from None
+            except (twin.TrackerError, ValueError) as exc:
+                raise TrackerDriverError(f"{state.name}: {exc}") from None
             self._target, self._target_position = state.name, pose[:3, 3]
             self._busy_s += m.elapsed_s
         if m.pose is not None:

@@ -1,0 +1,226 @@
+"""Running robot programs on the cell's robots, one after another or together (thesis 7.6).
+
+"Although it is possible to create the tasks to all of the services to which the
+cell controller has subscribed, the main purpose is assigning and activating a
+robot program in the robot service.  If the work cell contains several robots,
+the operator can also specify the synchronization between them: whether they will
+run sequentially or concurrently to each other."
+
+A program is activated with the robot service's ``ACTIVATE`` command (Table 7-1,
+input ``name: String``); the process ends when the program ends, so a *run* is a
+list of ``(robot, program)`` items whose ACTIVATE processes are created one after
+another (``sequential``: the next starts when the previous one Completed, and a
+failure stops the rest) or all at once (``concurrent``).  The program library is
+listed from the files shipped with plugcell.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import itertools
+import re
+import time
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+from plugcell.framework.model import Command, Device, ProcessStates
+
+if TYPE_CHECKING:
+    from plugcell.framework.participant import Participant
+
+MODES = ("sequential", "concurrent")
+ACTIVATE = "ACTIVATE"
+#: Most items of one run.
+MAX_ITEMS = 64
+_PROGRAM_LINE = re.compile(r"^\s*PROGRAM\s+([A-Za-z_]\w*)", re.IGNORECASE | re.MULTILINE)
+_ids = itertools.count(1)
+
+__all__ = [
+    "MODES",
+    "ProgramRun",
+    "RunError",
+    "RunItem",
+    "activate_command",
+    "list_programs",
+    "parse_run_items",
+    "program_library",
+    "run_programs",
+]
+
+
+class RunError(ValueError):
+    """A run that cannot be started; the message says why."""
+
+
+@dataclass
+class RunItem:
+    """One program on one robot."""
+
+    robot: str
+    program: str
+    state: str = "Waiting"
+    reason: str = ""
+    identifier: int = 0
+    started_ns: int = 0
+    ended_ns: int = 0
+
+    def to_json(self) -> dict[str, Any]:
+        return {
+            "robot": self.robot, "program": self.program, "state": self.state,
+            "reason": self.reason, "identifier": str(self.identifier),
+            "startedNs": self.started_ns, "endedNs": self.ended_ns,
+        }
+
+
+@dataclass
+class ProgramRun:
+    """A set of programs run sequentially or concurrently."""
+
+    mode: str
+    items: list[RunItem]
+    id: str = field(default_factory=lambda: f"run-{next(_ids)}")
+    state: str = "Running"
+    started_ns: int = field(default_factory=time.time_ns)
+    ended_ns: int = 0
+
+    def to_json(self) -> dict[str, Any]:
+        return {
+            "id": self.id, "mode": self.mode, "state": self.state,
+            "startedNs": self.started_ns, "endedNs": self.ended_ns,
+            "items": [i.to_json() for i in self.items],
+        }
+
+
+def parse_run_items(items: Any) -> list[tuple[str, str]]:
+    """``[["R1", "prog"], …]``, ``[{"robot": …, "program": …}]`` or ``["R1:prog", …]``."""
+    if not isinstance(items, list) or not items:
+        raise RunError("give at least one robot and program")
+    if len(items) > MAX_ITEMS:
+        raise RunError(f"at most {MAX_ITEMS} programs in one run")
+    out = []
+    for i, item in enumerate(items, 1):
+        if isinstance(item, dict):
+            robot, program = item.get("robot"), item.get("program")
+        elif isinstance(item, list | tuple) and len(item) == 2:
+            robot, program = item
+        elif isinstance(item, str) and ":" in item:
+            robot, _, program = item.partition(":")
+        else:
+            raise RunError(f"item {i}: expected ROBOT:PROGRAM")
+        if not isinstance(robot, str) or not robot.strip():
+            raise RunError(f"item {i}: no robot")
+        if not isinstance(program, str) or not program.strip():
+            raise RunError(f"item {i}: no program")
+        out.append((robot.strip(), program.strip()))
+    return out
+
+
+def activate_command(device: Device) -> Command:
+    """The robot service's ACTIVATE command (RunError if ``device`` has none)."""
+    for command in device.commands:
+        if command.name.upper() == ACTIVATE:
+            return command
+    raise RunError(f"{device.name} is not a robot service: it has no {ACTIVATE} command")
+
+
+def activate_input(command: Command, program: str) -> tuple[str, Any]:
+    """Option and data that name ``program`` for this ACTIVATE declaration."""
+    if not command.takes_input:
+        return program, None
+    if command.input_data_size == ():
+        return "", program
+    return "", [program]
+
+
+def program_library() -> Path:
+    """The folder of the robot programs shipped with plugcell."""
+    import plugcell.controller
+
+    return Path(plugcell.controller.__file__).resolve().parent / "programs"
+
+
+def list_programs(folders: list[Path] | None = None) -> list[dict[str, Any]]:
+    """The programs of the library: name, file, first comment lines; libraries marked."""
+    out = []
+    for folder in [*(folders or []), program_library()]:
+        if not folder.is_dir():
+            continue
+        for path in sorted(folder.glob("*.pdl")):
+            try:
+                text = path.read_text(encoding="utf-8")
+            except (OSError, UnicodeDecodeError):
+                continue
+            match = _PROGRAM_LINE.search(text)
+            about = []
+            for line in text.splitlines():
+                if not line.startswith("--"):
+                    break
+                about.append(line[2:].strip())
+            out.append({
+                "name": path.stem,
+                "program": match.group(1) if match else "",
+                "library": match is None,
+                "path": str(path),
+                "about": " ".join(about)[:600],
+                "lines": text.count("\n") + 1,
+            })
+    return out
+
+
+async def _run_item(
+    participant: Participant, item: RunItem, changed: Callable[[], None]
+) -> bool:
+    item.state = "Starting"
+    item.started_ns = time.time_ns()
+    changed()
+    try:
+        partner = participant.partners.get(item.robot)
+        if partner is None:
+            await participant.subscribe(item.robot, 5.0)
+            partner = participant.partners[item.robot]
+        command = activate_command(partner.device)
+        option, data = activate_input(command, item.program)
+    except Exception as exc:  # PartnerError, RunError: the item fails with the reason
+        item.state, item.reason, item.ended_ns = "Failed", str(exc), time.time_ns()
+        changed()
+        return False
+    call = await participant.create_process(
+        item.robot, command.name, option, data, timeout=max(command.timeout, 5.0)
+    )
+    item.identifier = call.identifier
+    item.state = "Queued" if call.final is None else call.final.state.value
+    changed()
+    async for update in call:
+        if update.state is ProcessStates.Running and item.state != "Running":
+            item.state = "Running"
+            changed()
+    final = call.final
+    assert final is not None
+    item.state, item.reason, item.ended_ns = final.state.value, final.reason, time.time_ns()
+    changed()
+    return final.state is ProcessStates.Completed
+
+
+async def run_programs(
+    participant: Participant, run: ProgramRun, changed: Callable[[], None]
+) -> ProgramRun:
+    """Run ``run``'s items as its mode says; ``changed()`` after every state change."""
+    if run.mode == "concurrent":
+        results = await asyncio.gather(
+            *(_run_item(participant, item, changed) for item in run.items)
+        )
+        ok = all(results)
+    else:
+        ok = True
+        for item in run.items:
+            if not ok:
+                item.state, item.reason = "Skipped", "an earlier program failed"
+                continue
+            ok = await _run_item(participant, item, changed)
+        changed()
+    run.state = "Completed" if ok else "Failed"
+    run.ended_ns = time.time_ns()
+    changed()
+    return run
