@@ -45,7 +45,6 @@ import numpy as np
 
 from plugcell.framework.keys import check_name
 from plugcell.framework.model import Command, CommandTypes, ProcessStates
-from plugcell.framework.processqueue import Entry
 from plugcell.framework.service import DeviceError, GenericDevice
 
 log = logging.getLogger("plugcell.services.routing")
