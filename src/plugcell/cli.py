@@ -30,6 +30,7 @@ COMMAND_MODULES: tuple[str, ...] = (
     "plugcell.commands.reproduce",
     "plugcell.commands.cell",
     "plugcell.commands.controller",
+    "plugcell.commands.certs",
 )
 
 

@@ -419,7 +419,7 @@ def encode(message: Message) -> str:
         return _with_text(f"STREAMEND {'TRUE' if m.ok else 'FALSE'}", m.message)
     if isinstance(m, ResultData):
         if m.text is not None:
-            return f"{'FRAMETEXT' if m.frame else 'TEXT'} {escape(m.text)}".rstrip(" ")
+            return _with_text("FRAMETEXT" if m.frame else "TEXT", m.text)
         if m.rows * m.cols != len(m.values):
             raise ValueError(f"{m.rows} x {m.cols} does not match {len(m.values)} values")
         verb = "FRAME" if m.frame else "DATA"
@@ -432,7 +432,7 @@ def encode(message: Message) -> str:
         if isinstance(m, Value):
             if not _NAME.match(m.name):
                 raise ValueError(f"bad variable name {m.name!r}")
-            return f"{head} {m.name} {escape(m.text)}".rstrip(" ")
+            return _with_text(f"{head} {m.name}", m.text)
         if isinstance(m, Run):
             if not m.program:
                 raise ValueError("RUN needs a program")

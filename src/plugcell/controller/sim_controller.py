@@ -75,6 +75,8 @@ log = logging.getLogger("plugcell.controller")
 MAX_STAGED_RUNS = 8
 MAX_VALUES_PER_RUN = 1000
 LOST = "connection to the robot service lost"
+#: How long a new connection waits for the previous one to finish closing.
+HANDOVER_S = 1.0
 
 
 class Link:
@@ -132,6 +134,8 @@ class SimController:
         self._moving = False
         self._move_stop = threading.Event()
         self._shutdown = threading.Event()
+        self._idle = threading.Event()
+        self._idle.set()
         self.connections = 0
 
     # ------------------------------------------------------------------ links
@@ -174,10 +178,13 @@ class SimController:
                 raise
             sock.settimeout(None)
             sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
+            # a service reconnecting at once may find its old link still closing
+            self._idle.wait(HANDOVER_S)
             with self._link_lock:
                 busy = self._link is not None
                 if not busy:
                     self._link = Link(sock)
+                    self._idle.clear()
                     link = self._link
             if busy:
                 with contextlib.suppress(OSError):
@@ -211,11 +218,12 @@ class SimController:
         except (OSError, ConnectionError):
             pass
         finally:
+            link.close()
+            self._lost(LOST)  # the program stops before another service may connect
             with self._link_lock:
                 if self._link is link:
                     self._link = None
-            link.close()
-            self._lost(LOST)
+            self._idle.set()
 
     def _lost(self, reason: str) -> None:
         """The service is gone: a running program stops safely, a move stops."""
@@ -327,9 +335,10 @@ class SimController:
         return " ".join(f"{k}={v.replace(' ', '_')}" for k, v in fields.items())
 
     def _run(self, req: Run, values: dict[str, str]) -> str:
-        if self._moving:
-            raise RunError("the arm is moving (MOVE in progress)")
-        info = self.runner.start(req.id, req.program, values)
+        with self._move_lock:  # the arm has one owner: a program or a MOVE
+            if self._moving:
+                raise RunError("the arm is moving (MOVE in progress)")
+            info = self.runner.start(req.id, req.program, values)
         return info.program
 
     def _stop(self, req: Stop) -> str:
@@ -340,10 +349,10 @@ class SimController:
         return info.state
 
     def _move(self, req: Move) -> str:
-        busy = self.runner.busy_reason()
-        if busy:
-            raise RunError(busy)
         with self._move_lock:
+            busy = self.runner.busy_reason()
+            if busy:
+                raise RunError(busy)
             if self._moving:
                 raise RunError("the arm is already moving")
             self._moving = True

@@ -75,6 +75,7 @@ from plugcell.framework.model import (
 )
 from plugcell.framework.participant import Participant, PartnerError
 from plugcell.framework.processqueue import Entry, ProcessQueue
+from plugcell.framework.security import AccessPolicy
 from plugcell.framework.transport import TransportConfig
 
 log = logging.getLogger("plugcell.framework.service")
@@ -129,12 +130,16 @@ class GenericDevice(Participant):
         transport: TransportConfig | None = None,
         journal: bool | Path = True,
         max_payload: int = wire.DEFAULT_MAX_PAYLOAD,
+        access: AccessPolicy | None = None,
     ) -> None:
         super().__init__(
             name or self.default_name or (self.kind or type(self).__name__).upper(),
             cell=cell,
             transport=transport,
         )
+        self.transport = self.transport.for_participant(self.name)
+        self.access = access if access is not None else AccessPolicy.from_env()
+        """Who may create processes here and wire this service (docs/security.md)."""
         _check_catalogue(type(self).__name__, self.commands)
         self.device = Device(
             name=self.name,
@@ -376,6 +381,14 @@ class GenericDevice(Participant):
                 ),
             )
             return
+        refused = self.access.check_wire(self, envelope, body.partner)
+        if refused:
+            with contextlib.suppress(Exception):
+                what = type(body).__name__
+                self.journal.record_rejection(envelope.sender, None, what, 0, refused)
+                self.journal.commit()
+            self._reply(query, SubscribeResponse(ok=False, reason=refused))
+            return
         asyncio.get_running_loop().create_task(self._subscribe_for(query, body))
 
     async def _subscribe_for(
@@ -417,6 +430,8 @@ class GenericDevice(Participant):
             return
         sender, identifier = process.tag.sender, process.identifier
         reason = self._check_process(envelope, process)
+        if not reason:  # access control: refusals are journaled below with the reason
+            reason = self.access.check_create(self, envelope, process)
         command = self.device.command(process.command.name)
         array = None
         if not reason and command is not None:

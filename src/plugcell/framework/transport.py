@@ -15,6 +15,16 @@ machines does anyway.
 Environment: ``PLUGCELL_CONNECT`` and ``PLUGCELL_LISTEN`` (comma-separated
 endpoints), ``PLUGCELL_MULTICAST`` (``0`` to disable scouting), ``PLUGCELL_SHM``
 (``0`` to disable shared memory).
+
+Security (docs/security.md): ``PLUGCELL_TLS_CA``, ``PLUGCELL_TLS_CERT``,
+``PLUGCELL_TLS_KEY`` (PEM files from ``plugcell certs``) switch the links to TLS with
+mutual authentication (``PLUGCELL_MTLS=0`` for server-side only);
+``PLUGCELL_TLS_DIR`` + a participant name stand for ``DIR/ca.pem``,
+``DIR/<name>.pem``, ``DIR/<name>.key`` (:meth:`TransportConfig.for_participant`).
+``PLUGCELL_CELL_NAMES`` (the certificates' CNs) adds Zenoh access control so that
+no peer can speak as another.
+``PLUGCELL_USER``, ``PLUGCELL_PASSWORD`` and ``PLUGCELL_USERS_FILE`` add Zenoh's
+user/password authentication.  With neither, the embedded default is unchanged.
 """
 
 from __future__ import annotations
@@ -46,6 +56,45 @@ class TransportConfig:
     shared_memory: bool = True
     extra: dict[str, object] = field(default_factory=dict)
     """Further Zenoh configuration, ``{"json/path": value}`` (inserted as JSON5)."""
+    tls_ca: str = ""
+    """Cell CA certificate (PEM); set → TLS links only (docs/security.md)."""
+    tls_cert: str = ""
+    """This participant's certificate (PEM, CN = its name)."""
+    tls_key: str = ""
+    """Its private key (PEM)."""
+    mtls: bool = True
+    """Demand a certificate from every connecting peer (mutual TLS)."""
+    tls_dir: str = ""
+    """Folder of ``ca.pem``, ``<name>.pem``, ``<name>.key`` (see :meth:`for_participant`)."""
+    username: str = ""
+    password: str = ""
+    users_file: str = ""
+    """``user:password`` lines a listener accepts (Zenoh usrpwd authentication)."""
+    cell_names: tuple[str, ...] = ()
+    """With TLS: the cell's certificate CNs → Zenoh ACL against impersonation
+    (:func:`~plugcell.framework.security.zenoh_acl`)."""
+
+    @property
+    def secure(self) -> bool:
+        """True when the links are TLS."""
+        return bool(self.tls_ca)
+
+    def for_participant(self, name: str) -> TransportConfig:
+        """Fill the certificate of participant ``name`` from :attr:`tls_dir` if unset."""
+        if not self.tls_dir or (self.tls_ca and self.tls_cert):
+            return self
+        folder = os.path.abspath(self.tls_dir)
+        if not self.tls_cert and not os.path.isfile(os.path.join(folder, f"{name}.pem")):
+            raise ValueError(
+                f"no certificate for {name} in {folder}: "
+                f"run `plugcell certs issue {name} --dir {self.tls_dir}`"
+            )
+        return replace(
+            self,
+            tls_ca=self.tls_ca or os.path.join(folder, "ca.pem"),
+            tls_cert=self.tls_cert or os.path.join(folder, f"{name}.pem"),
+            tls_key=self.tls_key or os.path.join(folder, f"{name}.key"),
+        )
 
     @classmethod
     def from_env(
@@ -66,10 +115,13 @@ class TransportConfig:
             cfg = replace(cfg, multicast=False)
         if os.environ.get("PLUGCELL_SHM", "1") in ("0", "false", "no"):
             cfg = replace(cfg, shared_memory=False)
+        cfg = _security_from_env(cfg)
         if connect:
             cfg = replace(cfg, connect=tuple(connect))
         if listen:
             cfg = replace(cfg, listen=tuple(listen))
+        if cfg.tls_ca:  # a TLS cell listens on TLS only
+            cfg = replace(cfg, listen=tuple(_to_tls(e) for e in cfg.listen))
         return cfg
 
     def zenoh_config(self) -> zenoh.Config:
@@ -83,9 +135,52 @@ class TransportConfig:
             conf.insert_json5("scouting/multicast/interface", json.dumps(self.multicast_interface))
         if not self.shared_memory:
             conf.insert_json5("transport/shared_memory/enabled", "false")
+        for path, value in self._security_settings().items():
+            conf.insert_json5(path, json.dumps(value))
         for path, value in self.extra.items():
             conf.insert_json5(path, json.dumps(value))
         return conf
+
+    def _security_settings(self) -> dict[str, object]:
+        from plugcell.framework.security import tls_settings, usrpwd_settings, zenoh_acl
+
+        settings: dict[str, object] = {}
+        if self.tls_ca:
+            settings.update(tls_settings(self.tls_ca, self.tls_cert, self.tls_key, self.mtls))
+            if self.cell_names:
+                settings["access_control"] = zenoh_acl(self.cell_names)
+        settings.update(usrpwd_settings(self.username, self.password, self.users_file))
+        return settings
+
+
+def _security_from_env(cfg: TransportConfig) -> TransportConfig:
+    """Apply ``PLUGCELL_TLS_*``, ``PLUGCELL_MTLS``, ``PLUGCELL_USER``… to ``cfg``."""
+    env = os.environ
+    changes: dict[str, object] = {
+        attr: env[var].strip()
+        for attr, var in (
+            ("tls_ca", "PLUGCELL_TLS_CA"),
+            ("tls_cert", "PLUGCELL_TLS_CERT"),
+            ("tls_key", "PLUGCELL_TLS_KEY"),
+            ("tls_dir", "PLUGCELL_TLS_DIR"),
+            ("username", "PLUGCELL_USER"),
+            ("password", "PLUGCELL_PASSWORD"),
+            ("users_file", "PLUGCELL_USERS_FILE"),
+        )
+        if env.get(var, "").strip()
+    }
+    if _split(env.get("PLUGCELL_CELL_NAMES")):
+        changes["cell_names"] = _split(env.get("PLUGCELL_CELL_NAMES"))
+    if env.get("PLUGCELL_MTLS", "1") in ("0", "false", "no"):
+        changes["mtls"] = False
+    if changes.get("tls_dir") and not changes.get("tls_ca"):
+        changes["tls_ca"] = os.path.join(os.path.abspath(str(changes["tls_dir"])), "ca.pem")
+    return replace(cfg, **changes)  # type: ignore[arg-type]
+
+
+def _to_tls(endpoint: str) -> str:
+    """``tcp/HOST:PORT`` → ``tls/HOST:PORT`` (a TLS cell listens on TLS only)."""
+    return "tls/" + endpoint[4:] if endpoint.startswith("tcp/") else endpoint
 
 
 def open_session(config: TransportConfig | None = None) -> zenoh.Session:

@@ -176,6 +176,7 @@ class CellController(GenericDevice):
         self._background: set[asyncio.Task[Any]] = set()
         self._loops: list[asyncio.Task[Any]] = []
         self._refresh_now = asyncio.Event()
+        self._reapplying = asyncio.Lock()
 
     # -- life cycle ----------------------------------------------------------------------
 
@@ -454,9 +455,12 @@ class CellController(GenericDevice):
         return {"ok": ok, "reason": reason}
 
     async def _reapply(self) -> None:
-        missing = self.keeper.missing(self._alive_set(), self._partner_sets())
-        if not missing:
-            return
+        async with self._reapplying:  # one round at a time: no wire is asked for twice
+            missing = self.keeper.missing(self._alive_set(), self._partner_sets())
+            if missing:
+                await self._reapply_wires(missing)
+
+    async def _reapply_wires(self, missing: list[Wire]) -> None:
         results = await asyncio.gather(*(self._ask(w, True) for w in missing))
         for w, (ok, reason) in zip(missing, results, strict=True):
             if ok:
@@ -512,12 +516,6 @@ class CellController(GenericDevice):
         )
         ack = call.ack
         assert ack is not None
-        record = self.monitor.created(
-            task.service, self.name, call.identifier, command=task.command.name,
-            option=task.option, type=task.command.type.value,
-            state=ack.state.value, reason=ack.reason,
-        )
-        self._dirty.add(record.key)
         task_id = f"{task.service}/{self.name}/{call.identifier}"
         refused = ack.state is ProcessStates.Failed
         self.note("error" if refused else "info",
@@ -528,6 +526,22 @@ class CellController(GenericDevice):
             self._spawn(self._follow(task_id, call))
         return {"id": task_id, "state": ack.state.value, "reason": ack.reason,
                 "identifier": str(call.identifier)}
+
+    async def create_process(
+        self, partner: str, command: str, option: str = "", data: Any = None, **kwargs: Any
+    ) -> ProcessCall:
+        """Every process the controller creates (tasks, ACTIVATE of runs) is monitored."""
+        call = await super().create_process(partner, command, option, data, **kwargs)
+        known = self.partners.get(partner)
+        declared = known.device.command(command) if known else None
+        ack = call.ack
+        record = self.monitor.created(
+            partner, self.name, call.identifier, command=command, option=option,
+            type=declared.type.value if declared else "",
+            state=ack.state.value if ack else "Queued", reason=ack.reason if ack else "",
+        )
+        self._dirty.add(record.key)
+        return call
 
     async def _follow(self, task_id: str, call: ProcessCall) -> None:
         try:

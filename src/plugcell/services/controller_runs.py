@@ -126,12 +126,18 @@ def activate_command(device: Device) -> Command:
 
 
 def activate_input(command: Command, program: str) -> tuple[str, Any]:
-    """Option and data that name ``program`` for this ACTIVATE declaration."""
+    """Option and data that name ``program`` for this ACTIVATE declaration.
+
+    plugcell's robot service completes ACTIVATE when the program *starts* unless the
+    option is ``Wait`` (then when it ends): a run needs the end, so ``Wait`` is
+    asked for whenever the command's description offers it.
+    """
+    option = "Wait" if "'wait'" in command.info.lower() else ""
     if not command.takes_input:
         return program, None
     if command.input_data_size == ():
-        return "", program
-    return "", [program]
+        return option, program
+    return option, [program]
 
 
 def program_library() -> Path:

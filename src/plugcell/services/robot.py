@@ -367,7 +367,7 @@ class RobotService(GenericDevice):
         except ControllerError as exc:
             raise DeviceError(str(exc)) from None
         except BridgeError as exc:
-            raise DeviceError(f"controller: {exc}") from None
+            raise DeviceError(str(exc)) from None
         raise DeviceError(f"{command.name} is not implemented")  # pragma: no cover
 
     @staticmethod

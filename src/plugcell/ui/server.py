@@ -10,7 +10,7 @@ from __future__ import annotations
 import asyncio
 import contextlib
 import signal
-from typing import Any
+import socket
 
 import uvicorn
 
@@ -29,7 +29,18 @@ async def serve(
     reports: ReportFiles | None = None,
     log_level: str = "warning",
 ) -> None:
-    """Start the controller, serve the UI, stop both cleanly on a signal."""
+    """Start the controller, serve the UI, stop both cleanly on a signal.
+
+    The port is bound first (OSError if it is taken), before the controller joins the cell.
+    """
+    family = socket.AF_INET6 if ":" in host else socket.AF_INET
+    sock = socket.socket(family, socket.SOCK_STREAM)
+    try:
+        sock.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
+        sock.bind((host, port))
+    except OSError:
+        sock.close()
+        raise
     await controller.start()
     app = create_app(controller, reports=reports, manage=False,
                      allowed_hosts={host} if host not in ("0.0.0.0", "::") else None)
@@ -40,14 +51,14 @@ async def serve(
     loop = asyncio.get_running_loop()
     for sig in (signal.SIGINT, signal.SIGTERM):
         loop.add_signal_handler(sig, lambda: setattr(server, "should_exit", True))
-    task = asyncio.create_task(server.serve())
+    task = asyncio.create_task(server.serve(sockets=[sock]))
     try:
         while not server.started:
             if task.done():
                 task.result()  # the port was taken …: raise its error
                 raise OSError(f"cannot serve on {host}:{port}")
             await asyncio.sleep(0.02)
-        bound = _bound_port(server) or port
+        bound = int(sock.getsockname()[1])
         shown = "127.0.0.1" if host in ("0.0.0.0", "::") else host
         print(f"plugcell: controller UI on http://{shown}:{bound}/ "
               f"(service {controller.name} in cell {controller.keys.cell!r})", flush=True)
@@ -57,10 +68,3 @@ async def serve(
         with contextlib.suppress(BaseException):
             await asyncio.wait_for(task, 10.0)
         await controller.close()
-
-
-def _bound_port(server: Any) -> int | None:
-    for s in getattr(server, "servers", []):
-        for sock in s.sockets:
-            return int(sock.getsockname()[1])
-    return None

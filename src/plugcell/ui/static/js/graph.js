@@ -11,25 +11,23 @@ const flashing = new Map();
 let positions = new Map();
 
 function layout(width, height) {
+  // The controller on top (it is subscribed to everyone), the services on an ellipse below:
+  // robots (they ask) on the left half, their peripherals on the right.
   const nodes = [...state.services.values()];
   const ctrl = nodes.filter((n) => n.controller);
   const others = nodes.filter((n) => !n.controller);
-  const askers = new Set(others.filter((n) => n.partners.length || n.kind === "robot").map((n) => n.name));
-  const left = others.filter((n) => askers.has(n.name)).sort((a, b) => a.name.localeCompare(b.name));
-  const right = others.filter((n) => !askers.has(n.name)).sort((a, b) => a.name.localeCompare(b.name));
+  const asks = (n) => (n.kind === "robot" || n.partners.length ? 0 : 1);
+  others.sort((a, b) => asks(a) - asks(b) || a.name.localeCompare(b.name));
   const pos = new Map();
-  const top = ctrl.length ? 80 : 30;
-  const column = (list, x) => {
-    const gap = (height - top - 20) / Math.max(list.length, 1);
-    list.forEach((n, i) => pos.set(n.name, { x, y: top + gap * (i + 0.5) }));
-  };
-  if (!left.length) {
-    column(right, width / 2);
-  } else {
-    column(left, width * 0.22);
-    column(right, width * 0.72);
-  }
-  ctrl.forEach((n, i) => pos.set(n.name, { x: width / 2 + i * (W + 10), y: 32 }));
+  const top = ctrl.length ? H + 16 : 0;
+  const cx = width / 2; const cy = top + (height - top) / 2;
+  const rx = Math.max(W, width / 2 - W / 2 - 14); const ry = Math.max(H, (height - top) / 2 - H / 2 - 12);
+  const n = others.length;
+  others.forEach((node, i) => {
+    const a = Math.PI / 2 + (2 * Math.PI * (i + 0.5)) / n;   // bottom → left → top → right
+    pos.set(node.name, { x: cx + rx * Math.cos(a), y: cy + ry * Math.sin(a) });
+  });
+  ctrl.forEach((node, i) => pos.set(node.name, { x: cx + i * (W + 12), y: H / 2 + 8 }));
   return pos;
 }
 
@@ -198,8 +196,10 @@ async function act(url) {
 }
 
 function flash(list) {
+  const recent = Date.now() * 1e6 - 2e9;
   for (const p of list || []) {
     if (p.state !== "Running" && p.state !== "Completed") continue;
+    if ((p.endedNs || p.startedNs || 0) < recent) continue;
     const key = `${p.sender}>${p.recipient}`;
     clearTimeout(flashing.get(key));
     flashing.set(key, setTimeout(() => { flashing.delete(key); const e = document.querySelector(`[data-wire="${CSS.escape(key)}"] .edge`); if (e) e.classList.remove("flash"); }, 700));

@@ -47,7 +47,9 @@ export function applySnapshot(msg) {
   state.journals = Boolean(msg.journals);
   applyCell(msg);
   state.processes.clear();
-  applyProcesses(msg.processes || [], msg.queues || {});
+  for (const p of msg.processes || []) state.processes.set(p.id, p);
+  state.queues = msg.queues || {};
+  emit("processes", null);
   state.runs = new Map((msg.runs || []).map((r) => [r.id, r]));
   emit("runs");
   state.log = msg.log || [];

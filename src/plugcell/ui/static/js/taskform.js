@@ -107,7 +107,8 @@ function render() {
   const cmd = svc && svc.commands.find((c) => c.name === state.selected.command);
   current = null;
   if (!svc || !cmd) {
-    $("#task-title").textContent = "choose a service, then one of its commands";
+    $("#task-title").textContent = "choose a command";
+    form.append(h("p", { class: "hint", text: "Select a service (list or graph), then one of its commands: a form for its option and input data appears here, checked against the command's declared type and size." }));
     return;
   }
   $("#task-title").textContent = `${svc.name} · ${cmd.name}`;
@@ -171,8 +172,10 @@ function check(show) {
       values.push(x);
     }
     if (cellErrors.size) {
-      const [i, err] = [...cellErrors][0];
-      errors.data = `value ${i + 1}: ${err}` + (cellErrors.size > 1 ? ` (and ${cellErrors.size - 1} more)` : "");
+      const typed = [...cellErrors].filter(([i]) => show || fields.cells[i].value !== "");
+      const listed = typed.length ? typed : [...cellErrors];
+      const [i, err] = listed[0];
+      errors.data = `value ${i + 1}: ${err}` + (listed.length > 1 ? ` (and ${listed.length - 1} more)` : "");
     } else data = input.type === "String" && input.size.length === 1 && input.size[0] === 1 ? values : reshape(values, input.size);
   } else if (fields.free) {
     const [x, err] = parseFree(fields.free.value, input.type, input.size);
@@ -215,11 +218,12 @@ function dataText(msg) {
 }
 
 const results = new Map();
+const latest = new Map();   // task id → its last event (it may come before the POST's answer)
 
 function addResult(id, svc, cmd, state0, reason) {
   const li = h("li", { dataset: { state: state0, task: id } });
   results.set(id, { li, svc, cmd, frames: 0 });
-  updateResult(id, { state: state0, reason });
+  updateResult(id, latest.get(id) || { state: state0, reason });
   const list = $("#task-results");
   list.prepend(li);
   while (list.children.length > 8) list.removeChild(list.lastChild);
@@ -233,11 +237,11 @@ function updateResult(id, msg) {
   const stop = r.cmd.type === "MultipleData" && msg.state === "Running"
     ? h("button", { type: "button", class: "danger", text: "Stop", onclick: async () => { const res = await post("/api/tasks/stop", { id }); if (!res.ok) r.li.append(h("div", { class: "field-error", text: firstError(res) })); } })
     : null;
-  clear(r.li).append(
+  clear(r.li).append(...[
     h("div", {}, stateBadge(msg.state), ` ${r.svc}.${r.cmd.name}`, r.frames > 1 ? ` · ${r.frames} frames` : "", " ", stop),
     msg.reason ? h("div", { class: "field-error", text: msg.reason }) : null,
     dataText(msg) ? h("div", { class: "data", text: dataText(msg) }) : null,
-  );
+  ].filter(Boolean));
 }
 
 async function submit(ev) {
@@ -263,5 +267,9 @@ export function initTaskForm() {
     if (current && svc && svc.alive !== current.svc.alive) render();
     else if (current && svc) { current.svc = svc; check(false); }
   });
-  on("task", (msg) => updateResult(msg.id, msg));
+  on("task", (msg) => {
+    latest.set(msg.id, msg);
+    if (latest.size > 200) latest.delete(latest.keys().next().value);
+    updateResult(msg.id, msg);
+  });
 }

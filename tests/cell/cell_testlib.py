@@ -1,0 +1,84 @@
+"""Helpers of the cell controller tests: a robot-like service, unique cells, child processes.
+
+The child-process helpers are the framework tests' (``tests/framework/framework_testlib.py``).
+"""
+
+from __future__ import annotations
+
+import asyncio
+import sys
+from pathlib import Path
+from typing import Any
+
+HERE = Path(__file__).resolve().parent
+sys.path.insert(0, str(HERE.parent / "framework"))
+
+from framework_testlib import Proc, plugcell_argv, run, unique_cell  # noqa: E402
+
+from plugcell.framework import Command, CommandTypes, DataTypes, DeviceError, GenericDevice  # noqa: E402
+
+PROGRAMS = HERE / "programs"
+
+__all__ = ["PROGRAMS", "FakeRobot", "Proc", "SlowDevice", "plugcell_argv", "run", "unique_cell"]
+
+
+class FakeRobot(GenericDevice):
+    """A robot service in miniature: ACTIVATE runs a 'program' that drives its partners.
+
+    Programs: ``drill`` (TOOL Drill, then done), ``snap`` (CAMERA SnapShot), ``wait``
+    (0.3 s), ``fail`` (fails with a reason).  Like plugcell's robot service, ACTIVATE
+    completes when the program ends only with the option ``Wait``.
+    """
+
+    kind = "robot"
+    vendor = "tests"
+    commands = (
+        Command(name="ACTIVATE", type=CommandTypes.NoData, input_data_type=DataTypes.String,
+                input_data_size=(-1,), timeout=30.0,
+                info="run a program: [name]; option 'Wait': until it ends"),
+        Command(name="ARM_POS", type=CommandTypes.SingleData, output_data_type=DataTypes.Double,
+                output_data_size=(6,)),
+    )
+
+    def __init__(self, name: str | None = "ROBOT", **kwargs: Any) -> None:
+        super().__init__(name, **kwargs)
+        self.ran: list[tuple[str, float, float]] = []
+
+    async def dispatch(self, command: Command, option: str, data: Any) -> str:
+        if command.name == "ARM_POS":
+            self.data_feedback.post([1000.0, 0.0, 800.0, 0.0, 90.0, 0.0])
+            return "OK"
+        program = str(data[0])
+        loop = asyncio.get_running_loop()
+        start = loop.time()
+        if program == "drill":
+            final = await (await self.create_process("TOOL", "Drill", "Air", [550, 1100])).result()
+            if final.state.value != "Completed":
+                raise DeviceError(f"TOOL: {final.reason}")
+        elif program == "snap":
+            final = await (await self.create_process("CAMERA", "SnapShot", "", 5)).result()
+            if final.state.value != "Completed":
+                raise DeviceError(f"CAMERA: {final.reason}")
+        elif program == "wait":
+            await asyncio.sleep(0.3)
+        elif program == "fail":
+            raise DeviceError("program fail: the program stopped with an error")
+        else:
+            raise DeviceError(f"no program {program!r}")
+        self.ran.append((program, start, loop.time()))
+        return "OK"
+
+
+class SlowDevice(GenericDevice):
+    """A shared device whose ``Work`` takes ``seconds`` (to see its queue grow)."""
+
+    kind = "slow"
+    vendor = "tests"
+    commands = (
+        Command(name="Work", type=CommandTypes.NoData, input_data_type=DataTypes.Double,
+                input_data_size=(1,), timeout=10.0, info="work for DATA seconds"),
+    )
+
+    async def dispatch(self, command: Command, option: str, data: Any) -> str:
+        await asyncio.sleep(float(data[0]))
+        return "OK"

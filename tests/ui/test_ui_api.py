@@ -1,0 +1,199 @@
+"""The controller's web API with Starlette's TestClient against real services (thesis 7.6)."""
+
+from __future__ import annotations
+
+import math
+import re
+from collections.abc import Iterator
+from pathlib import Path
+from typing import Any
+
+import pytest
+from cell_testlib import PROGRAMS
+from fastapi.testclient import TestClient
+from ui_testlib import HEADERS, make_client, services, until
+
+from plugcell.ui.app import STATIC
+
+
+@pytest.fixture(scope="module")
+def docs(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    root = tmp_path_factory.mktemp("docs")
+    (root / "results").mkdir()
+    (root / "results" / "8.1.md").write_text("# 8.1\n\n| a | b |\n|---|---|\n| 1 | 2 |\n")
+    (root / "results" / "8.1-convergence.png").write_bytes(b"\x89PNG\r\n\x1a\n")
+    (root / "results" / "secret.py").write_text("x = 1")
+    (root / "report.html").write_text("<html><body>calibration</body></html>")
+    return root
+
+
+@pytest.fixture(scope="module")
+def client(module_cell: str, launcher: Any, docs: Path) -> Iterator[TestClient]:
+    launcher.serve("drill", module_cell, "--param", "time_scale=0.001")
+    launcher.serve("camera", module_cell, "--param", "time_scale=0.001")
+    launcher.serve("robot", module_cell, "--param", "sim=true", name="R1")
+    with make_client(module_cell, docs, [docs / "report.html"]) as c:
+        until(lambda: services(c), lambda s: {"TOOL", "CAMERA", "R1"} <= {
+            n for n, v in s.items() if v["alive"] and v["commands"]}
+            and {"TOOL", "CAMERA", "R1"} <= set(s["CONTROLLER"]["partners"]))
+        yield c
+
+
+def test_the_page_is_served_from_plugcell_alone(client: TestClient) -> None:
+    page = client.get("/")
+    assert page.status_code == 200
+    assert '<script type="module" src="/static/js/main.js">' in page.text
+    assert "default-src 'self'" in page.headers["content-security-policy"]
+    for path in STATIC.rglob("*"):
+        if path.suffix in (".html", ".js", ".css"):
+            text = path.read_text(encoding="utf-8")
+            assert not re.search(r"https?://(?!www\.w3\.org/2000/svg)", text), path  # no CDN
+            assert client.get(f"/static/{path.relative_to(STATIC)}").status_code == 200
+
+
+def test_only_local_pages_may_act(client: TestClient) -> None:
+    assert client.post("/api/wire", json={}).status_code == 403  # no X-Plugcell header
+    assert client.get("/api/snapshot", headers={"Host": "evil.example"}).status_code == 403
+    r = client.post("/api/wire", json={}, headers={**HEADERS, "Origin": "http://evil.example"})
+    assert r.status_code == 403 and "not accepted" in r.json()["errors"]["_"]
+    assert client.post("/api/wire", content=b"{", headers=HEADERS).status_code == 400
+    assert client.post("/api/wire", json=[1], headers=HEADERS).status_code == 400
+
+
+def test_snapshot_has_services_catalogues_and_the_controller(client: TestClient) -> None:
+    s = services(client)
+    assert s["CONTROLLER"]["controller"]
+    assert {"TOOL", "CAMERA", "R1"} <= set(s["CONTROLLER"]["partners"])
+    drill = next(c for c in s["TOOL"]["commands"] if c["name"] == "Drill")
+    assert drill["input"] == {"type": "Integer", "size": [2], "text": "Integer[2]"}
+    assert s["R1"]["kind"] == "robot"
+
+
+def test_wire_and_unwire_with_inline_refusals(client: TestClient) -> None:
+    post = lambda url, body: client.post(url, json=body, headers=HEADERS).json()  # noqa: E731
+    assert post("/api/wire", {"service": "R1", "partner": "TOOL"}) == {"ok": True, "reason": ""}
+    assert post("/api/wire", {"service": "R1", "partner": "CAMERA"})["ok"]
+    assert set(services(client)["R1"]["partners"]) == {"TOOL", "CAMERA"}
+    missing = post("/api/wire", {"service": "R1"})
+    assert missing["ok"] is False and missing["errors"] == {"partner": "choose a partner"}
+    ghost = post("/api/wire", {"service": "R1", "partner": "GHOST"})
+    assert ghost["ok"] is False and "GHOST" in ghost["errors"]["partner"]
+    assert post("/api/unwire", {"service": "R1", "partner": "CAMERA"})["ok"]
+    assert services(client)["R1"]["partners"] == ["TOOL"]
+    assert post("/api/wire", {"service": "R1", "partner": "CAMERA"})["ok"]
+
+
+@pytest.mark.timeout(60)
+def test_a_task_runs_and_its_updates_reach_the_websocket(client: TestClient) -> None:
+    bad = client.post("/api/tasks/check", headers=HEADERS, json={
+        "service": "TOOL", "command": "Drill", "option": "Air", "data": [15], "timeout": -2}).json()
+    assert bad["ok"] is False
+    assert bad["errors"] == {"data": "size [1] does not match the declared [2]",
+                             "timeout": "between 0 and 604800 s"}
+    with client.websocket_connect("/ws") as ws:
+        first = ws.receive_json()
+        assert first["type"] == "snapshot" and first["cell"]
+        ack = client.post("/api/tasks", headers=HEADERS, json={
+            "service": "CAMERA", "command": "SnapShot", "data": 5}).json()
+        assert ack["ok"] and ack["state"] == "Queued"
+        for _ in range(200):
+            msg = ws.receive_json()
+            if msg["type"] == "task" and msg["id"] == ack["id"] and msg["state"] == "Completed":
+                assert msg["data"] == {"type": "Byte", "size": [480, 640], "min": 0,
+                                       "max": msg["data"]["max"], "mean": msg["data"]["mean"]}
+                break
+        else:
+            pytest.fail("the task's final update never reached the websocket")
+    refused = client.post("/api/tasks", headers=HEADERS, json={
+        "service": "TOOL", "command": "Drill", "option": "Oil", "data": [550, 1100]}).json()
+    assert refused["ok"] is True  # accepted; the device fails it — see the monitor
+    snap = until(lambda: client.get("/api/snapshot").json(),
+                 lambda s: any(p["id"] == refused["id"] and p["state"] == "Failed"
+                               for p in s["processes"]))
+    failed = next(p for p in snap["processes"] if p["id"] == refused["id"])
+    assert "unknown option 'Oil'" in failed["reason"] and failed["sender"] == "CONTROLLER"
+
+
+def test_a_robot_program_runs_and_its_processes_are_monitored(client: TestClient) -> None:
+    bad = client.post("/api/runs", headers=HEADERS, json={"items": [], "mode": "sequential"}).json()
+    assert bad["ok"] is False and "at least one" in bad["errors"]["items"]
+    bad = client.post("/api/runs", headers=HEADERS, json={"items": ["R1:x"], "mode": "both"}).json()
+    assert "mode must be one of" in bad["errors"]["items"]
+    run = client.post("/api/runs", headers=HEADERS, json={
+        "items": [{"robot": "R1", "program": str(PROGRAMS / "cellcheck.pdl")}]}).json()["run"]
+    snap = until(lambda: client.get("/api/snapshot").json(),
+                 lambda s: any(r["id"] == run["id"] and r["state"] != "Running" for r in s["runs"]))
+    done = next(r for r in snap["runs"] if r["id"] == run["id"])
+    assert done["state"] == "Completed", done
+    until(lambda: client.get("/api/snapshot").json()["processes"],
+          lambda ps: {("R1", "TOOL", "Drill", "Completed"),
+                      ("R1", "CAMERA", "SnapShot", "Completed"),
+                      ("CONTROLLER", "R1", "ACTIVATE", "Completed")}
+          <= {(p["sender"], p["recipient"], p["command"], p["state"]) for p in ps})
+    programs = client.get("/api/programs").json()["programs"]
+    assert {"example", "calibration"} <= {p["name"] for p in programs}
+    assert "PROGRAM" in client.get("/api/programs/example").text.upper()
+    assert client.get("/api/programs/nothing").status_code == 404
+
+
+def test_wiring_is_saved_downloaded_and_loaded(client: TestClient, tmp_path: Path) -> None:
+    r = client.post("/api/wiring/save", headers=HEADERS, json={"path": str(tmp_path / "w.json")})
+    assert r.json()["ok"] and {"service": "R1", "partner": "TOOL"} in r.json()["document"]["wires"]
+    down = client.get("/api/wiring")
+    assert "attachment" in down.headers["content-disposition"]
+    assert down.json()["wires"] == r.json()["document"]["wires"]
+    bad = client.post("/api/wiring/save", headers=HEADERS, json={"path": str(tmp_path)}).json()
+    assert bad["ok"] is False and "cannot write" in bad["errors"]["path"]
+    bad = client.post("/api/wiring/load", headers=HEADERS,
+                      json={"path": str(tmp_path / "no")}).json()
+    assert bad["ok"] is False and "cannot read" in bad["errors"]["path"]
+    loaded = client.post("/api/wiring/load", headers=HEADERS, json={"document": {
+        "wires": [{"service": "R1", "partner": "TOOL"}, {"service": "TOOL", "partner": "GHOST"}]}}
+    ).json()
+    assert loaded["ok"]
+    states = {(w["service"], w["partner"]): w["state"] for w in loaded["wiring"]}
+    assert states[("R1", "TOOL")] == "in place" and states[("TOOL", "GHOST")] == "waiting"
+
+
+def circle(n: int = 12, r: float = 100.0) -> list[list[float]]:
+    return [[1000 + r * math.cos(2 * math.pi * i / n), 200 + r * math.sin(2 * math.pi * i / n),
+             500.0] for i in range(n)]
+
+
+def test_fits_and_the_appendix_d_wizards(client: TestClient) -> None:
+    post = lambda url, body: client.post(url, json=body, headers=HEADERS).json()  # noqa: E731
+    fit = post("/api/fit", {"kind": "circle", "points": circle()})
+    assert fit["ok"] and abs(fit["radius"] - 100) < 1e-9 and len(fit["residuals"]) == 12
+    bad = post("/api/fit", {"kind": "circle", "points": [[0, 0, 0], [1, 1, 1]]})
+    assert bad["ok"] is False and "at least 3 points" in bad["errors"]["points"]
+    bad = post("/api/fit", {"kind": "line", "points": [[0, 0, 0], [0, 0, 0]]})
+    assert bad["ok"] is False and bad["errors"]["points"]
+    assert post("/api/fit", {"kind": "sphere", "points": []})["errors"] == {
+        "kind": "one of circle, line, plane"}
+    probe = post("/api/wizard/probe", {"circle": circle(), "holes": [[1000, 150, 500],
+                                                                     [1000, 250, 500]],
+                                       "tmac": [1000, 200, 600, 0, 0, 0], "smr_offset": 0})
+    assert probe["ok"]
+    assert probe["probe"]["vector"] == pytest.approx([0, 0, 100, 0, 0, 0], abs=1e-6)
+    base = post("/api/wizard/base", {
+        "circle": circle(r=300), "plane": [[0, 0, 0], [500, 0, 0], [0, 500, 0], [400, 400, 0]],
+        "line": [[0, 0, 900], [100, 0, 900]], "smr_offset": 0})
+    assert base["ok"] and base["base"]["xyz_mm"] == pytest.approx([1000, 200, 0], abs=1e-6)
+    assert post("/api/wizard/base", {"circle": circle()})["errors"]["plane"]
+    assert post("/api/wizard/probe", {"circle": circle(), "holes": [[0, 0, 0], [0, 1, 0]],
+                                      "tmac": [1, 2]})["errors"] == {
+        "tmac": "a 6-vector [x, y, z mm, roll, pitch, yaw deg] or 4×4"}
+
+
+def test_reports_are_listed_and_only_they_are_served(client: TestClient) -> None:
+    listing = client.get("/api/reports").json()["reports"]
+    names = {r["name"] for r in listing}
+    assert names == {"report.html", "8.1.md", "8.1-convergence.png"}
+    assert client.get("/reports/results/8.1.md").text.startswith("# 8.1")
+    assert client.get("/reports/results/8.1-convergence.png").headers["content-type"] == "image/png"
+    assert client.get("/reports/results/secret.py").status_code == 404
+    assert client.get("/reports/results/..%2F..%2Freport.html").status_code == 404
+    cal = client.get("/reports/calibration/0")
+    assert cal.status_code == 200 and "calibration" in cal.text
+    assert "default-src 'none'" in cal.headers["content-security-policy"]
+    assert client.get("/reports/calibration/5").status_code == 404

@@ -1,0 +1,85 @@
+"""Property tests of the web API's inputs: whatever a page sends, a precise answer, never a 500."""
+
+from __future__ import annotations
+
+import json
+from collections.abc import Iterator
+from typing import Any
+
+import pytest
+from fastapi.testclient import TestClient
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
+from ui_testlib import HEADERS, make_client, services, until
+
+JSON = st.recursive(
+    st.none() | st.booleans() | st.integers(-2**70, 2**70) | st.floats() | st.text(max_size=8),
+    lambda inner: st.lists(inner, max_size=6)
+    | st.dictionaries(st.text(max_size=6), inner, max_size=4),
+    max_leaves=30,
+)
+COMMANDS = st.sampled_from(["Drill", "SnapShot", "Connect", "MovieShot", "StopMovie", "", "?"])
+SETTINGS = settings(max_examples=150, deadline=None,
+                    suppress_health_check=[HealthCheck.function_scoped_fixture])
+
+
+@pytest.fixture(scope="module")
+def client(module_cell: str, launcher: Any) -> Iterator[TestClient]:
+    launcher.serve("drill", module_cell, "--param", "time_scale=0.001")
+    launcher.serve("camera", module_cell, "--param", "time_scale=0.001")
+    with make_client(module_cell) as c:
+        until(lambda: services(c), lambda s: all(
+            s.get(n, {}).get("commands") for n in ("TOOL", "CAMERA")))
+        yield c
+
+
+def send(client: TestClient, url: str, body: Any) -> Any:
+    """POST ``body`` as Python writes JSON (NaN and Infinity included, as some clients do)."""
+    return client.post(url, headers={**HEADERS, "Content-Type": "application/json"},
+                       content=json.dumps(body))
+
+
+def answered(response: Any) -> dict[str, Any]:
+    assert response.status_code in (200, 400, 413), response.text
+    body = response.json()
+    assert isinstance(body.get("ok"), bool)
+    if not body["ok"]:
+        assert body["errors"] and all(isinstance(v, str) and v for v in body["errors"].values())
+    return body
+
+
+@SETTINGS
+@given(service=st.sampled_from(["TOOL", "CAMERA", "GHOST", "", "a/b"]) | JSON,
+       command=COMMANDS | JSON, option=JSON, data=JSON, timeout=JSON)
+def test_task_checks_answer_every_body(client: TestClient, service: Any, command: Any, option: Any,
+                                       data: Any, timeout: Any) -> None:
+    body = answered(send(client, "/api/tasks/check", {
+        "service": service, "command": command, "option": option, "data": data,
+        "timeout": timeout}))
+    if body["ok"]:
+        assert service in ("TOOL", "CAMERA")
+    else:
+        assert set(body["errors"]) <= {"service", "command", "option", "data", "timeout"}
+
+
+@SETTINGS
+@given(kind=st.sampled_from(["circle", "line", "plane"]) | JSON,
+       points=st.lists(st.lists(st.floats(-1e4, 1e4) | JSON, min_size=0, max_size=4), max_size=8)
+       | JSON)
+def test_fits_answer_every_body(client: TestClient, kind: Any, points: Any) -> None:
+    body = answered(send(client, "/api/fit", {"kind": kind, "points": points}))
+    if body["ok"]:
+        assert len(body["residuals"]) == len(points)
+
+
+@SETTINGS
+@given(which=st.sampled_from(["probe", "base"]), body=st.dictionaries(
+    st.sampled_from(["circle", "holes", "tmac", "plane", "line", "smr_offset"]), JSON, max_size=6))
+def test_wizards_answer_every_body(client: TestClient, which: str, body: dict[str, Any]) -> None:
+    answered(send(client, f"/api/wizard/{which}", body))
+
+
+@SETTINGS
+@given(raw=st.binary(max_size=64))
+def test_any_bytes_are_refused_cleanly(client: TestClient, raw: bytes) -> None:
+    answered(client.post("/api/wiring/load", headers=HEADERS, content=raw))
