@@ -27,13 +27,5 @@ def test_parser_refuses_bad_input_precisely(target: str) -> None:
     assert report["slowest_case_ms"] < 2000  # no hang
 
 
-@pytest.mark.xfail(
-    raises=ParserCrashError,
-    strict=True,
-    reason="plugcell.io.measurements.parse_measurements lets csv.Error escape for a bare "
-    "carriage return in the text (read_measurements is safe: it reads with newline "
-    "translation); found by this fuzzer — remove the xfail when parse_measurements "
-    "turns it into MeasurementFileError",
-)
 def test_measurement_text_parser_bare_carriage_return() -> None:
     fuzz("measurements_text", 3000, seed=7)

@@ -120,3 +120,11 @@ def test_format_then_parse_is_identity(nj, n, with_angles, seed):
     back = parse_measurements(format_measurements(m))
     np.testing.assert_allclose(back.joints, m.joints, atol=1e-7)
     np.testing.assert_allclose(back.positions, m.positions, atol=1e-8)
+
+
+def test_bare_carriage_returns_end_lines_like_a_file():
+    """Found by the parser fuzzer: '\\r' alone must not crash the text parser."""
+    m = parse_measurements("j1,x,y,z\r1,2,3,4\r\n5,6,7,8\n")
+    assert len(m) == 2
+    with pytest.raises(MeasurementFileError):
+        parse_measurements('j1,x,y,z\n"1,2,3,4\n')

@@ -35,6 +35,17 @@ def register(subparsers: Any) -> None:
         metavar="KEY=VALUE",
         help="service-specific parameter, e.g. time_scale=0.01 (repeatable)",
     )
+    dev = p.add_argument_group(
+        "device options (each passed to the kinds that declare it, like --param)"
+    )
+    dev.add_argument("--sim", action="store_true",
+                     help="drive the simulated device (robot: its simulated controller; "
+                     "tracker: the tracker model)")
+    dev.add_argument("--controller", metavar="HOST:PORT", help="robot: a real controller")
+    dev.add_argument("--robot", help="robot: description name or file (default smart_h4)")
+    dev.add_argument("--payload-kg", type=float, help="robot: payload carried by the twin")
+    dev.add_argument("--speed", type=float, help="robot: simulation speed factor")
+    dev.add_argument("--seed", type=int, help="seed of the simulated device")
     p.add_argument("--max-payload", type=int, default=None, help="largest accepted request, bytes")
     p.add_argument("--journal-dir", type=Path, help="where to keep the journal")
     p.add_argument("--no-journal", action="store_true", help="do not journal processes")
@@ -59,6 +70,30 @@ def _params(cls: type, pairs: list[str]) -> dict[str, Any]:
     return out
 
 
+def _device_options(cls: type, args: argparse.Namespace) -> list[str]:
+    """The device flags that were given, as ``KEY=VALUE`` pairs for :func:`_params`."""
+    from plugcell.cli import CommandError
+
+    known: dict[str, Any] = getattr(cls, "params", {})
+    pairs = []
+    if args.sim:
+        if "sim" in known:
+            pairs.append("sim=true")
+        elif "driver" in known:
+            pairs.append("driver=sim")
+        else:
+            raise CommandError(f"--sim: {cls.__name__} has no simulated mode")
+    for flag, key in (("controller", "controller"), ("robot", "robot"),
+                      ("payload_kg", "payload_kg"), ("speed", "speed"), ("seed", "seed")):
+        value = getattr(args, flag)
+        if value is not None:
+            if key not in known:
+                option = "--" + flag.replace("_", "-")
+                raise CommandError(f"{option}: not an option of {cls.__name__}")
+            pairs.append(f"{key}={value}")
+    return pairs
+
+
 def run(args: argparse.Namespace) -> int:
     from plugcell.cli import CommandError
     from plugcell.framework.participant import PartnerError
@@ -73,7 +108,7 @@ def run(args: argparse.Namespace) -> int:
         cls = load_kind(args.kind)
     except KeyError as exc:
         raise CommandError(str(exc.args[0])) from None
-    kwargs = _params(cls, args.param)
+    kwargs = _params(cls, [*_device_options(cls, args), *args.param])
     if args.max_payload:
         kwargs["max_payload"] = args.max_payload
     journal: bool | Path = args.journal_dir or not args.no_journal

@@ -139,13 +139,17 @@ def parse_measurements(
             f"{name}: rotation convention {rotation!r} unknown; use one of {ROTATION_CONVENTIONS}"
         )
     rows: list[tuple[int, list[str]]] = []
-    reader = csv.reader(io.StringIO(text))
-    for line_no, row in enumerate(reader, start=1):
-        if not row or all(not c.strip() for c in row):
-            continue
-        if row[0].lstrip().startswith("#"):
-            continue
-        rows.append((line_no, row))
+    # universal newlines, as when reading a file: \r\n, \r and \n all end a line
+    reader = csv.reader(io.StringIO(text, newline=None))
+    try:
+        for line_no, row in enumerate(reader, start=1):
+            if not row or all(not c.strip() for c in row):
+                continue
+            if row[0].lstrip().startswith("#"):
+                continue
+            rows.append((line_no, row))
+    except csv.Error as exc:
+        raise MeasurementFileError(f"{name}: line {reader.line_num}: {exc}") from None
     if not rows:
         raise MeasurementFileError(f"{name}: no header line (the file is empty)")
     header_line, header = rows[0]

@@ -100,9 +100,15 @@ class WorldView:
         self._lock = threading.Lock()
         self._states: dict[str, ReflectorState] = {}
         self._on_change = on_change
-        key = reflector_key(cell)
-        self._subscriber = session.declare_subscriber(key, self._on_sample)
-        for reply in session.get(key, timeout=1.0):
+        self._session = session
+        self._key = reflector_key(cell)
+        self._subscriber = session.declare_subscriber(self._key, self._on_sample)
+        self.refresh()
+
+    def refresh(self, timeout: float = 1.0) -> None:
+        """Ask every reflector publisher for its latest pose (a view created before
+        discovery finished would otherwise miss a reflector until it next moves)."""
+        for reply in self._session.get(self._key, timeout=timeout):
             if reply.ok is not None:
                 self._store(bytes(reply.ok.payload.to_bytes()))
 
@@ -121,9 +127,16 @@ class WorldView:
 
     def get(self, name: str) -> ReflectorState | None:
         with self._lock:
-            return self._states.get(name)
+            state = self._states.get(name)
+        if state is None:
+            self.refresh(timeout=0.5)
+            with self._lock:
+                state = self._states.get(name)
+        return state
 
-    def all(self) -> dict[str, ReflectorState]:
+    def all(self, refresh: bool = False) -> dict[str, ReflectorState]:
+        if refresh:
+            self.refresh(timeout=0.5)
         with self._lock:
             return dict(self._states)
 

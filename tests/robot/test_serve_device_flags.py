@@ -1,0 +1,38 @@
+"""``plugcell serve KIND --sim --robot ... --seed ...``: device flags reach the kinds that have them."""
+
+from __future__ import annotations
+
+import argparse
+
+import pytest
+
+from plugcell.cli import CommandError, main
+from plugcell.commands.serve import _device_options, _params
+from plugcell.services.registry import load_kind
+
+
+def _args(**kw):
+    base = dict(sim=False, controller=None, robot=None, payload_kg=None, speed=None, seed=None)
+    base.update(kw)
+    return argparse.Namespace(**base)
+
+
+def test_robot_flags_become_parameters():
+    cls = load_kind("robot")
+    pairs = _device_options(cls, _args(sim=True, robot="elbow6", payload_kg=36.0, speed=50.0,
+                                       seed=3))
+    kw = _params(cls, pairs)
+    assert kw == {"sim": True, "robot": "elbow6", "payload_kg": 36.0, "speed": 50.0, "seed": 3}
+
+
+def test_tracker_sim_selects_the_model_driver():
+    cls = load_kind("tracker")
+    assert _params(cls, _device_options(cls, _args(sim=True, seed=4))) == {
+        "driver": "sim", "seed": 4}
+
+
+def test_flags_a_kind_does_not_have_are_refused(capsys):
+    with pytest.raises(CommandError, match="--robot: not an option of TrackerService"):
+        _device_options(load_kind("tracker"), _args(robot="smart_h4"))
+    assert main(["serve", "camera", "--sim", "--cell", "flags-test"]) == 2
+    assert "has no simulated mode" in capsys.readouterr().err
