@@ -11,7 +11,7 @@ import pytest
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[2] / "benchmarks"))
 
-from fuzz_parsers import ParserCrashError, fuzz
+from fuzz_parsers import fuzz
 
 pytestmark = pytest.mark.timeout(120)
 

@@ -1,4 +1,4 @@
-"""``plugcell serve KIND --sim --robot ... --seed ...``: device flags reach the kinds that have them."""
+"""`serve --sim --robot --seed`: device flags reach the kinds that have them."""
 
 from __future__ import annotations
 
