@@ -43,6 +43,7 @@ class ProcessCall:
         self.timeout = timeout
         self.tag = Tag(sender, partner)
         self.ack: Acknowledgement | None = None
+        self._synthetic_ack = False
         self.instance = ""
         """The recipient incarnation that acknowledged the process."""
         self.final: ProcessUpdateNotification | None = None
@@ -64,6 +65,10 @@ class ProcessCall:
 
     def _on_ack(self, ack: Acknowledgement, instance: str) -> None:
         if self._acked.done():
+            # the real acknowledgement after an update overtook it: keep the real one
+            if self._synthetic_ack and ack.state is not ProcessStates.Failed:
+                self.ack = ack
+                self._synthetic_ack = False
             self.instance = self.instance or instance or ack.instance
             return
         self.ack = ack
@@ -78,8 +83,12 @@ class ProcessCall:
         self._last_seq = update.seq
         if not self._acked.done():  # the update overtook the acknowledgement
             self._on_ack(
-                Acknowledgement(identifier=self.identifier, state=ProcessStates.Queued), instance
+                Acknowledgement(
+                    identifier=self.identifier, state=ProcessStates.Queued, instance=instance
+                ),
+                instance,
             )
+            self._synthetic_ack = True
         self._push(update)
 
     def _fail(self, reason: str) -> None:
