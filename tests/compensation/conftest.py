@@ -6,9 +6,9 @@ from dataclasses import dataclass
 
 import numpy as np
 import pytest
+from compensation_testlib import perturbed_error_model
 
 from plugcell.calibration.identify import Calibrator
-from plugcell.calibration.model import ErrorModel
 from plugcell.calibration.result import CalibrationResult
 from plugcell.compensation import IdentifiedModel
 from plugcell.io.robots import load_robot
@@ -22,16 +22,6 @@ from plugcell.twin.tracker import LaserTracker
 @pytest.fixture(scope="session")
 def h4() -> RobotDescription:
     return load_robot("smart_h4")
-
-
-def perturbed_error_model(desc: RobotDescription, seed: int = 1, family: str = "loop",
-                          payload: bool = True) -> ErrorModel:
-    """Model 5 (or the serial family) with every parameter perturbed at a realistic size."""
-    em = ErrorModel.create(desc, family, gravity=True, payload=payload, payload_ref_kg=36.0)
-    rng = np.random.default_rng(seed)
-    scale = np.array([5e-4 if p.unit == "m" else 5e-4 if p.kind in ("gravity", "payload")
-                      else np.radians(0.05) for p in em.space])
-    return em.with_values(scale * rng.standard_normal(len(em.space)))
 
 
 @pytest.fixture(scope="session")

@@ -6,7 +6,7 @@ import math
 
 import numpy as np
 import pytest
-from conftest import perturbed_error_model
+from compensation_testlib import perturbed_error_model
 
 from plugcell.compensation import (
     CompensationError,

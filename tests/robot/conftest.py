@@ -2,60 +2,13 @@
 
 from __future__ import annotations
 
-import os
 from collections.abc import Iterator
-from pathlib import Path
-from typing import Any
 
 import pytest
-from robot_testlib import Proc, group_alive, plugcell_argv, unique_cell, until
+from robot_cell import HERE, Launcher, RobotCell
+from robot_testlib import unique_cell
 
-from plugcell.framework import BlockingClient, ProcessStates, from_data
-
-HERE = Path(__file__).resolve().parent
-#: The twin's taught points of the EXAMPLE (thesis 4.1.3.2): in the working volume.
-PNT0001 = "1500,0,1300,0,90,0"
-PNT0002 = "1500,200,1000,0,90,0"
-
-
-class Launcher:
-    """Starts child processes in one cell and home; all stopped (and checked gone) after."""
-
-    def __init__(self, home: Path, cell: str) -> None:
-        self.home = home
-        self.cell = cell
-        self.env = {
-            **os.environ,
-            "PLUGCELL_HOME": str(home),
-            "PYTHONUNBUFFERED": "1",
-            "PYTHONPATH": os.pathsep.join(
-                [str(HERE), *filter(None, [os.environ.get("PYTHONPATH")])]
-            ),
-        }
-        self.started: list[Proc] = []
-
-    def start(self, argv: list[str]) -> Proc:
-        proc = Proc(argv, self.env)
-        self.started.append(proc)
-        return proc
-
-    def serve(self, kind: str, *extra: str, name: str | None = None) -> Proc:
-        """``plugcell serve KIND`` in this cell (not waited for: see :meth:`ready`)."""
-        argv = plugcell_argv("serve", kind, "--cell", self.cell, *extra)
-        if name:
-            argv += ["--name", name]
-        return self.start(argv)
-
-    @staticmethod
-    def ready(*procs: Proc, timeout: float = 30.0) -> None:
-        for proc in procs:
-            proc.wait_line(lambda line: "serving in cell" in line, timeout)
-
-    def stop_all(self) -> None:
-        for proc in self.started:
-            proc.stop()
-        for proc in self.started:  # the simulated controllers went with their services
-            until(lambda p=proc: not group_alive(p.pid), 10.0, f"end of {proc.argv[3:5]}")
+from plugcell.framework import BlockingClient
 
 
 @pytest.fixture(scope="module")
@@ -66,32 +19,6 @@ def launcher(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Launcher]:
         yield started
     finally:
         started.stop_all()
-
-
-class RobotCell:
-    """CAMERA, TOOL, PROBE and a simulated ROBOT wired to them, and a client."""
-
-    def __init__(self, launcher: Launcher, client: BlockingClient) -> None:
-        self.launcher = launcher
-        self.client = client
-        self.cell = launcher.cell
-        self.home = launcher.home
-
-    def activate(self, program: str | Path, *values: str, wait: bool = True,
-                 robot: str = "ROBOT", timeout: float = 60.0) -> Any:
-        """ACTIVATE a program (option Wait: until it ends); the final update."""
-        call = self.client.create_process(robot, "ACTIVATE", "Wait" if wait else "",
-                                          [str(program), *values], timeout=timeout)
-        return call.result()
-
-    def status(self, robot: str = "ROBOT") -> list[str]:
-        """PROGRAM_STATUS: [program, state, simulated s, message, console lines…]."""
-        final = self.client.create_process(robot, "PROGRAM_STATUS").result()
-        assert final.state is ProcessStates.Completed, final.reason
-        return [str(s) for s in from_data(final.data).reshape(-1)]
-
-    def console(self, robot: str = "ROBOT") -> list[str]:
-        return self.status(robot)[4:]
 
 
 @pytest.fixture(scope="module")

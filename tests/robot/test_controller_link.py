@@ -21,7 +21,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from conftest import Launcher
+from robot_cell import Launcher
 from robot_testlib import Proc, until
 
 from plugcell.framework import BlockingClient, ProcessStates, from_data

@@ -11,7 +11,7 @@ import time
 from pathlib import Path
 
 import pytest
-from conftest import PNT0001, PNT0002, RobotCell
+from robot_cell import PNT0001, PNT0002, RobotCell
 from robot_testlib import until
 
 from plugcell.framework import KeySpace, ProcessStates, ProcessUpdateNotification, from_data
