@@ -61,6 +61,8 @@ def test_an_engineer_session_in_the_browser(module_cell: str, launcher: Any,
         try:
             page = ctx.new_page()
             page.set_default_timeout(15_000)
+            # waits, not speed checks: generous for a loaded 2-core CI machine
+            expect.set_options(timeout=20_000)
             page.on("console", lambda m: errors.append(m.text) if m.type == "error" else None)
             page.on("pageerror", lambda e: errors.append(f"page error: {e}"))
             shot = lambda name: page.screenshot(path=str(ARTIFACTS / f"{name}.png"))  # noqa: E731
