@@ -21,7 +21,6 @@ from plugcell.controller.language import (
     Vector,
     WaitTimeoutError,
 )
-from plugcell.kinematics.rotations import zyz_to_matrix
 
 
 def program(body: str, decls: str = "", routines: str = "") -> str:
@@ -566,36 +565,64 @@ def test_library_global_variables_are_shared_with_exported_from(tmp_path: Path):
 
 
 # --------------------------------------------------------------------------- shipped programs
-def test_shipped_calibration_program_runs_fifteen_simulated_minutes_in_seconds():
+def _split(line: str) -> tuple[str, str, str, str]:
+    """``ACTIVATE DEVICE #Command#Option#Data`` → its four parts."""
+    head, command, option, data = line.split("#", 3)
+    return head.split()[1], command, option, data
+
+
+@pytest.mark.parametrize("route", [True, False])
+def test_shipped_calibration_program_runs_fifteen_simulated_minutes_in_seconds(route):
+    """Fig. 8-4: 100 poses, a 1 s measurement at each; measurements routed straight to
+    COMPUTE (9.3) or, as in the thesis, through the program."""
     rng = np.random.default_rng(0)
     configs = rng.uniform(-60, 60, size=(100, 6))
-    received: list[str] = []
     arm = FakeArm(move_s=8.0)
 
     def respond(line: str):
-        received.append(line)
-        if "#Measure#" in line:
-            ex.clock.advance(1.0)  # the tracker's single measurement takes about 1 s
-            return True, np.array(arm.arm_pos().as_tuple()[:3]) / 1000.0, ""
+        _, command, _, data = _split(line)
+        if command == "Single Measurement":
+            ex.clock.advance(float(data) / 1000.0)  # the tracker integrates that long
+            return True, np.array(arm.arm_pos().as_tuple()), ""
         return True, None, ""
 
     prog = Program.load(BUILTIN_LIBRARY / "calibration.pdl")
-    padded = np.zeros((200, 6))
-    padded[:100] = configs
-    ex, arm, channel = execution(
-        prog, respond, arm=arm, values={"configs": padded, "n_configs": 100}, speed=float("inf")
-    )
+    identify = "params = calibrate(mJ, mT, model=5, payload=36); save_params(params, 'h4')"
+    ex, arm, channel = execution(  # 100 of the 200 rows given: the rest stay uninitialised
+        prog, respond, arm=arm, speed=float("inf"),
+        values={"configs": configs.tolist(), "n_configs": 100, "route": route,
+                "base_est": [4000.0, 100.0, -300.0, 10.0, 2.0, -20.0],
+                "probe_est": [45.0, -30.0, 140.0, 30.0, 2.0, 1.5],
+                "duration_ms": 1000, "identify": identify})
     result = ex.run()
     assert result.ok, result.error
-    assert result.sim_time == pytest.approx(100 * 9.0)  # 15 simulated minutes
+    assert result.sim_time == pytest.approx(101 * 8.0 + 100 * 1.0)  # 15 simulated minutes
     assert result.real_time < 5.0
-    assert sum("#Measure#" in line for line in channel.lines) == 100
-    assert channel.lines[-1] == "ACTIVATE MATLAB #H4Calibration##"
-    mj = [line for line in channel.lines if "#AddRow#mJ#" in line]
-    assert len(mj) == 100
-    first = [float(x) for x in mj[0].rsplit("#", 1)[1].split(",")]
-    np.testing.assert_allclose(first, configs[0], atol=1e-6)
-    assert ex.console[-1] == "calibration done after 900 s"
+    parts = [_split(line) for line in channel.lines]
+    measured = [p for p in parts if p[1] == "Single Measurement"]
+    assert len(measured) == 100 and {p[0] for p in measured} == {"TRACKER"}
+    mT = [p for p in parts if p[1:3] == ("Set Matrix", "mT:append")]
+    if route:
+        assert {p[2] for p in measured} == {"tr2euler; to=COMPUTE:Set Matrix:mT:append"}
+        assert mT == []
+    else:
+        assert {p[2] for p in measured} == {"tr2euler"} and len(mT) == 100
+    mJ = [p for p in parts if p[1:3] == ("Set Matrix", "mJ:append")]
+    assert len(mJ) == 100
+    np.testing.assert_allclose([float(x) for x in mJ[0][3].split(",")], configs[0], atol=1e-6)
+    # the beam is caught with the estimates, then measurements are raw
+    assert parts[1][1:] == ("Set Base", "euler2tr", "4000.000000,100.000000,-300.000000,"
+                                                    "10.000000,2.000000,-20.000000")
+    assert parts[4][1:] == ("Set Base", "euler2tr", "0,0,0,0,0,0")
+    assert parts[-1] == ("COMPUTE", "Evaluate", "", identify)
+    assert ex.console[-1] == "calibration: identified after 908 s"
+
+
+def test_calibration_program_values_that_do_not_fit_are_refused_with_the_line():
+    prog = Program.load(BUILTIN_LIBRARY / "calibration.pdl")
+    with pytest.raises(ValueConversionError, match=r"calibration.pdl:\d+:\d+: cannot set configs"):
+        execution(prog, lambda line: (True, None, ""),
+                  values={"configs": np.zeros((201, 6)).tolist()})
 
 
 def test_shipped_compensation_library_converges_with_a_fake_tracker(tmp_path: Path):
@@ -605,33 +632,37 @@ def test_shipped_compensation_library_converges_with_a_fake_tracker(tmp_path: Pa
     state = {"corrections": 0}
 
     def respond(line: str):
-        command = line.split("#")[1]
-        if command == "LoadParams":
+        device, command, option, data = _split(line)
+        if (device, command) == ("COMPUTE", "Evaluate"):
             return True, None, ""
-        if command == "H4Compensation":
-            joints = [float(x) for x in line.rsplit("#", 1)[1].split(",")]
-            return True, np.array(joints) + 0.01, ""
-        if command == "Measure":  # the true pose: the target plus a residual error
-            T = np.eye(4)
-            T[:3, :3] = zyz_to_matrix(*np.radians([0.0, 90.0, 0.0]))
-            T[:3, 3] = (np.array([800.0, 0.0, 600.0]) + bias / 2 ** state["corrections"]) / 1e3
-            return True, T, ""
+        if (device, command, option) == ("COMPUTE", "Get Matrix", "q"):
+            return True, np.full(6, 0.01), ""  # the compensated joints
+        if device == "COMPUTE" and command == "Get Matrix":  # base, routed to the tracker
+            return True, np.zeros((1, 6)), ""
+        if device == "TRACKER" and command in ("Set Probe", "Move"):
+            return True, None, ""
+        if command == "Single Measurement":  # the true pose: the target plus an error
+            xyz = np.array([800.0, 0.0, 600.0]) + bias / 2 ** state["corrections"]
+            return True, np.r_[xyz, 0.0, 90.0, 0.0], ""
         if command == "JointIncrement":
+            values = [float(v) for v in data.split(",")]
+            err = float(np.linalg.norm(np.subtract(values[:3], values[6:9])))
             state["corrections"] += 1
-            return True, np.zeros(6), ""
+            return True, np.r_[err, 0.0, np.zeros(6)], ""
         return False, None, f"unknown {command}"
 
     text = """PROGRAM holes
+IMPORT 'services'
 IMPORT 'compensation'
 VAR target : POSITION
     iterations : INTEGER
 BEGIN
-  IF NOT INITIALIZE THEN
+  IF NOT INITIALIZE('h4') THEN
     DEACTIVATE
   ENDIF
   target := POS(800, 0, 600, 0, 90, 0)
   MOVE TO target
-  IF MODEL_COM(target) THEN
+  IF MODEL_COM(target, 36) THEN
     iterations := SENSOR_COM(target)
   ENDIF
 END holes
@@ -640,11 +671,14 @@ END holes
     ex, arm, channel = execution(prog, respond, arm=arm)
     result = ex.run()
     assert result.ok, result.error
-    # 0.99 mm → 0.49 → 0.25 → 0.12 → 0.06 < 0.08: four corrections
+    # 0.99 mm → 0.49 → 0.25 → 0.12 → 0.06 < 0.08: four corrections (five CALCs)
     assert ex.get_variable("iterations") == 4
-    assert state["corrections"] == 4
-    assert channel.lines[0] == "ACTIVATE MATLAB #LoadParams##"
-    assert arm.q[5] == pytest.approx(0.01)  # H4Compensation's joints were used
+    assert state["corrections"] == 5
+    assert channel.lines[0] == ("ACTIVATE COMPUTE #Evaluate##params = load_params(\"h4\"); "
+                                "base = frame(params, \"base\")")
+    assert channel.lines[1] == "ACTIVATE COMPUTE #Get Matrix#base; to=TRACKER:Set Base:euler2tr#"
+    assert "payload=36.000000)" in channel.lines[3]
+    assert arm.q[5] == pytest.approx(0.01)  # the compensated joints were used
 
 
 def test_shipped_programs_all_load():

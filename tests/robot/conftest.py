@@ -5,6 +5,7 @@ from __future__ import annotations
 from collections.abc import Iterator
 
 import pytest
+from metrology_cell import MetrologyCell
 from robot_cell import HERE, Launcher, RobotCell
 from robot_testlib import unique_cell
 
@@ -38,3 +39,12 @@ def robot_cell(launcher: Launcher) -> Iterator[RobotCell]:
             response = client.ask_subscribe("ROBOT", partner)
             assert response.ok, response.reason
         yield RobotCell(launcher, client)
+
+
+@pytest.fixture(scope="module")
+def metrology_cell(launcher: Launcher) -> Iterator[MetrologyCell]:
+    launcher.ready(*MetrologyCell.start(launcher), timeout=60.0)
+    with BlockingClient("tester", cell=launcher.cell) as client:
+        cell = MetrologyCell(launcher, client)
+        cell.wire()
+        yield cell

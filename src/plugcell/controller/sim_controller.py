@@ -43,12 +43,15 @@ from plugcell.controller.protocol import (
     VERSION,
     ArmJntp,
     ArmPos,
+    Console,
     Hello,
     JntpToPos,
     Message,
     Move,
     Ping,
     PosToJntp,
+    ProgramEnded,
+    ProgramStarted,
     ProtocolError,
     Reply,
     Request,
@@ -65,6 +68,7 @@ from plugcell.controller.protocol import (
     format_numbers,
 )
 from plugcell.controller.runner import TEXT_MAX, ProgramRunner, RunError
+from plugcell.controller.serial_line import SerialLine
 from plugcell.controller.sim_arm import TwinArm
 
 __all__ = ["SimController", "main"]
@@ -121,8 +125,11 @@ class SimController:
         name: str = "ROBOT",
         library: Sequence[Path] = (),
         extra_hello: dict[str, str] | None = None,
+        link_baud: float = 0.0,
     ) -> None:
         self.arm = arm
+        #: the robot ↔ PC serial line in simulated time (None: a network link, free)
+        self.serial = SerialLine(link_baud) if link_baud > 0 else None
         self.clock = SimClock(speed=speed)
         self.name = name
         self.extra_hello = dict(extra_hello or {})
@@ -145,10 +152,20 @@ class SimController:
             return self._link
 
     def _event(self, message: Message) -> None:
+        if self.serial is not None:
+            if isinstance(message, ProgramStarted):
+                self.serial.reset()
+            elif isinstance(message, ProgramEnded):  # the run's line usage, on its console
+                self._event(Console(message.run, str(self.serial.usage())))
         link = self.link
         if link is not None:
             with contextlib.suppress(ConnectionError):
                 link.send(message)
+
+    def carry(self, line: str, outbound: bool) -> None:
+        """A program's line crossed the serial line: its time passes on the clock."""
+        if self.serial is not None:
+            self.clock.advance(self.serial.carry(line, outbound))
 
     def hello(self) -> Hello:
         fields = {
@@ -160,6 +177,8 @@ class SimController:
             "name": self.name,
             "sim": "1",
         }
+        if self.serial is not None:
+            fields["baud"] = format_number(self.serial.baud)
         fields.update(self.extra_hello)
         return Hello(VERSION, fields)
 
@@ -243,6 +262,8 @@ class SimController:
             ident = _leading_id(line)
             link.send(Reply(ident, False, f"garbled line: {exc}"))
             return
+        if isinstance(message, ResultData | Result | StreamEnd):
+            self.carry(line, outbound=False)
         if isinstance(message, ResultData):
             if message.frame:
                 self.runner.frame(message)
@@ -386,6 +407,7 @@ class _ProgramChannel:
         link = self.controller.link
         if link is None:
             raise ConnectionError("no connection to the robot service")
+        self.controller.carry(line, outbound=True)
         link.send_line(line)
 
 
@@ -414,6 +436,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--seed", type=int, default=0, help="twin scenario seed (hidden errors)")
     p.add_argument("--library", action="append", default=[], type=Path,
                    help="folder of robot programs (repeatable; the shipped ones come last)")
+    p.add_argument("--link-baud", type=float, default=0.0,
+                   help="simulate the serial line to the PC at this bit rate (thesis: "
+                   "19200; 0: a network link that costs no simulated time)")
     p.add_argument("--no-world", action="store_true",
                    help="do not publish the reflector truth to the sim world")
     p.add_argument("--parent-watch", action="store_true",
@@ -435,6 +460,8 @@ def main(argv: Sequence[str] | None = None) -> int:
         check_name(args.name, "robot service name")
         if not (args.speed > 0):
             raise ValueError(f"--speed must be positive, not {args.speed}")
+        if not (args.link_baud >= 0):
+            raise ValueError(f"--link-baud must be 0 or positive, not {args.link_baud}")
         twin = RobotTwin(TwinScenario(robot=args.robot, seed=args.seed,
                                       payload_kg=args.payload_kg))
     except Exception as exc:
@@ -448,7 +475,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     arm = TwinArm(twin, on_move=world.on_move if world else None)
     if world is not None:
         world.publish(twin.true_reflector_in_tracker(), moving=False)
-    controller = SimController(arm, speed=args.speed, name=args.name, library=args.library)
+    controller = SimController(arm, speed=args.speed, name=args.name, library=args.library,
+                               link_baud=args.link_baud)
     listener = socket.create_server((args.host, args.port))
     host, port = listener.getsockname()[:2]
     parent = os.getppid()

@@ -68,7 +68,8 @@ class ComputeService(RoutedDevice):
         Command(
             name="Get Matrix", type=CommandTypes.SingleData,
             output_data_type=DataTypes.Double, output_data_size=(-1, -1),
-            info="the matrix named OPTION [; to=SERVICE:Command:Option]",
+            info="the matrix named OPTION ('name@OWNER': read another requester's) "
+                 "[; to=SERVICE:Command:Option]",
         ),
         Command(
             name="Evaluate", type=CommandTypes.NoData,
@@ -123,7 +124,7 @@ class ComputeService(RoutedDevice):
                     else:
                         ws.set(name, np.asarray(data, dtype=float))
                 case "Get Matrix":
-                    self.data_feedback.post(ws.matrix(option.strip()))
+                    self.data_feedback.post(self._readable(ws, option.strip()))
                 case "Evaluate":
                     text = str(np.asarray(data, dtype=object).reshape(-1)[0])
                     names = await asyncio.to_thread(self._evaluate, ws, text)
@@ -133,6 +134,20 @@ class ComputeService(RoutedDevice):
         except (WorkspaceError, EvaluationError) as exc:
             raise DeviceError(str(exc)) from None
         return "OK"
+
+    def _readable(self, ws: Workspace, ref: str) -> np.ndarray:
+        """``name`` in the requester's workspace, or ``name@OWNER`` in OWNER's — read
+        only, so that a cell controller or an engineer can look at what a robot's
+        program measured (the workspaces keep robots from mixing data, not secrets)."""
+        name, at, owner = ref.partition("@")
+        if not at:
+            return ws.matrix(name)
+        owner = owner.strip()
+        other = self.workspaces.get(owner)
+        if other is None:
+            known = ", ".join(sorted(self.workspaces)) or "none"
+            raise WorkspaceError(f"no workspace of {owner!r} (workspaces: {known})")
+        return other.matrix(name.strip())
 
     def _evaluate(self, ws: Workspace, text: str) -> list[str]:
         context = FunctionContext(workspace=ws, robot=self.robot,

@@ -128,16 +128,16 @@ class Workspace(Scope):
         return self._values[name]
 
     def clear(self, names: list[str] | None = None) -> list[str]:
-        """Remove the given names (all if None); returns what was removed."""
+        """Remove the given names (all if None); returns what was removed.  A name
+        that is not there is not an error (a program clears before it starts), but
+        it must be a valid name."""
         if names is None:
             gone = self.names()
             self._values.clear()
             return gone
         for n in names:
-            self.get(n)
-        for n in names:
-            del self._values[n]
-        return list(names)
+            check_name(n)
+        return [n for n in names if self._values.pop(n, None) is not None]
 
     def _check_room(self, name: str, size: int) -> None:
         old = self._values.get(name)

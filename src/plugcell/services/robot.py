@@ -81,7 +81,7 @@ from plugcell.framework.model import Command, CommandTypes, ConnectionStates, Da
 from plugcell.framework.participant import PartnerError
 from plugcell.framework.service import DeviceError, GenericDevice
 from plugcell.kinematics import RobotDescription
-from plugcell.services.robot_increment import joint_increment
+from plugcell.services.robot_increment import joint_increment, pose_error_sizes
 from plugcell.services.robot_outbound import ExternalProcessHandler
 from plugcell.services.robot_sim import SimControllerError, SimControllerProcess
 
@@ -151,7 +151,7 @@ class RobotService(GenericDevice):
         Command(name="JointIncrement", type=CommandTypes.SingleData, input_data_type=_D,
                 input_data_size=(12,), output_data_type=_D, output_data_size=(-1,),
                 info="joint increment J^-1 dx from the target and the measured position "
-                     "(8.3.2 CALC), deg"),
+                     "(8.3.2 CALC), deg; option 'errors': [|dp| mm, angle deg, increment...]"),
         Command(name="PROGRAM_STATUS", type=CommandTypes.SingleData, output_data_type=_S,
                 output_data_size=(-1,),
                 info="[program, state, simulated s, message, console lines...]"),
@@ -164,6 +164,7 @@ class RobotService(GenericDevice):
         "speed": float,
         "seed": int,
         "library": str,
+        "link_baud": float,
     }
 
     def __init__(
@@ -177,6 +178,7 @@ class RobotService(GenericDevice):
         speed: float = 1.0,
         seed: int = 0,
         library: str = "",
+        link_baud: float = 0.0,
         connect_timeout: float = 30.0,
         **kwargs: Any,
     ) -> None:
@@ -189,8 +191,11 @@ class RobotService(GenericDevice):
             raise ValueError(f"speed must be positive, not {speed}")
         if not (math.isfinite(payload_kg) and payload_kg >= 0):
             raise ValueError(f"payload_kg must be ≥ 0, not {payload_kg}")
+        if not (link_baud >= 0):
+            raise ValueError(f"link_baud must be 0 (no serial line) or positive, not {link_baud}")
         super().__init__(name, **kwargs)
         self.sim = sim
+        self.link_baud = link_baud
         self.endpoint: tuple[str, int] | None = parse_address(controller) if controller else None
         self.robot = robot
         self.payload_kg = payload_kg
@@ -215,6 +220,7 @@ class RobotService(GenericDevice):
                     name=self.name, cell=self.keys.cell, robot=self.robot,
                     payload_kg=self.payload_kg, speed=self.speed, seed=self.seed,
                     library=self.library, transport=self.transport,
+                    link_baud=self.link_baud,
                 )
                 self.endpoint = await self.sim_process.start(self.connect_timeout)
             assert self.endpoint is not None
@@ -361,7 +367,7 @@ class RobotService(GenericDevice):
                                            timeout=command.timeout - 1)
                     return self._numbers(text)
                 case "JointIncrement":
-                    return await self._joint_increment(data)
+                    return await self._joint_increment(option, data)
                 case "PROGRAM_STATUS":
                     return await self._program_status()
         except ControllerError as exc:
@@ -405,7 +411,11 @@ class RobotService(GenericDevice):
             return None
         raise DeviceError(f"program {ended.program} {ended.state.lower()}: {ended.message}")
 
-    async def _joint_increment(self, data: Any) -> np.ndarray:
+    async def _joint_increment(self, option: str, data: Any) -> np.ndarray:
+        """δθ; with option ``errors``: [‖Δp‖ mm, ∠ΔR °, δθ…] (SENSOR_COM's test, 8.3.2)."""
+        mode = option.strip().lower()
+        if mode not in ("", "errors"):
+            raise DeviceError(f"JointIncrement: unknown option {option!r} ('' or 'errors')")
         if self.robot_description is None:
             robot = self.bridge.field("robot") or "?"
             raise DeviceError(f"the controller's robot {robot!r} has no description here: "
@@ -413,9 +423,12 @@ class RobotService(GenericDevice):
         values = [float(v) for v in np.asarray(data).reshape(-1)]
         joints = self._numbers(await self.bridge.request(ArmJntp(self.bridge.new_id())))
         try:
-            return joint_increment(self.robot_description, joints, values[:6], values[6:])
+            dq = joint_increment(self.robot_description, joints, values[:6], values[6:])
         except ValueError as exc:
             raise DeviceError(str(exc)) from None
+        if mode == "errors":
+            return np.concatenate([pose_error_sizes(values[:6], values[6:]), dq])
+        return dq
 
     async def _program_status(self) -> list[str]:
         p = self.program

@@ -19,7 +19,7 @@ import numpy as np
 from plugcell.controller.poses import pose_matrix
 from plugcell.kinematics import RobotDescription, manipulator_jacobian, pose_error
 
-__all__ = ["MAX_CONDITION", "joint_increment"]
+__all__ = ["MAX_CONDITION", "joint_increment", "pose_error_sizes"]
 
 #: Beyond this condition number of J the arm is at a singularity: no increment.
 MAX_CONDITION = 1e8
@@ -49,3 +49,14 @@ def joint_increment(
     else:  # not 6 axes: least squares (minimum norm)
         dq = np.linalg.lstsq(J, dx, rcond=None)[0]
     return np.degrees(dq)
+
+
+def pose_error_sizes(target: Sequence[float], measured: Sequence[float]) -> tuple[float, float]:
+    """‖position error‖ (mm) and rotation angle between the poses (°): the tolerance
+    test of SENSOR_COM (8.3.2: 0.08 mm, 0.05°), which PDL cannot do on Euler angles
+    near their wrap-around."""
+    T_t, T_m = pose_matrix(target), pose_matrix(measured)
+    position_mm = float(np.linalg.norm(T_t[:3, 3] - T_m[:3, 3])) * 1e3
+    R = T_t[:3, :3] @ T_m[:3, :3].T
+    angle = float(np.degrees(np.arccos(np.clip((np.trace(R) - 1.0) / 2.0, -1.0, 1.0))))
+    return position_mm, angle

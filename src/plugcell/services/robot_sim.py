@@ -43,6 +43,7 @@ class SimControllerProcess:
         library: list[Path] | None = None,
         transport: TransportConfig | None = None,
         log_level: str = "WARNING",
+        link_baud: float = 0.0,
     ) -> None:
         self.argv = [
             sys.executable, "-m", "plugcell.controller.sim_controller",
@@ -50,6 +51,7 @@ class SimControllerProcess:
             "--payload-kg", repr(float(payload_kg)),
             "--speed", "inf" if math.isinf(speed) else repr(float(speed)),
             "--seed", str(int(seed)), "--parent-watch", "--log-level", log_level,
+            "--link-baud", repr(float(link_baud)),
         ]
         for folder in library or []:
             self.argv += ["--library", str(folder)]

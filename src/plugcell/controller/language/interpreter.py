@@ -205,7 +205,7 @@ class Execution:
         self._routine_infos: dict[int, dict[str, VarInfo]] = {}
         if values:
             for name, value in values.items():
-                info, v = self._convert(name, value, any_global=True)
+                info, v = self._preset(name, value)
                 self._stores[info.store][n.key(info.name)] = v
         self._stmt_dispatch: dict[type, Callable[[Any, _Frame], None]] = {
             n.Assign: self._exec_assign,
@@ -377,11 +377,33 @@ class Execution:
             self._traps.discard(code)
 
     # ================================================================= variables
-    def _convert(self, name: str, value: Any, any_global: bool = False) -> tuple[VarInfo, Any]:
+    def _preset(self, name: str, value: Any) -> tuple[VarInfo, Any]:
+        """A preset value (the variable file): an array may be given its first rows
+        only — PDL's variable files hold partly initialised arrays; the rest stays
+        uninitialised."""
+        info, t = self._convert(name, None, any_global=True, check_only=True)
+        short = (isinstance(t, ArrayType) and t.dims[0] is not None
+                 and isinstance(value, list | tuple) and 0 < len(value) < t.dims[0])
+        if not short:
+            return self._convert(name, value, any_global=True)
+        part_type = ArrayType(t.element, (len(value), *t.dims[1:]))
+        try:
+            part = to_language(value, part_type)
+        except ConversionError as exc:
+            raise ValueConversionError.at(
+                info.loc, f"cannot set {info.name} ({info.type}): {exc}") from None
+        full = ArrayValue.empty(t)
+        full.data[: len(part.data)] = part.data
+        return info, full
+
+    def _convert(self, name: str, value: Any, any_global: bool = False,
+                 check_only: bool = False) -> tuple[VarInfo, Any]:
         try:
             info = self.program.variable(name)
         except KeyError as exc:
             raise ValueConversionError(self.program.file, 0, str(exc.args[0])) from None
+        if check_only:
+            return info, info.type
         try:
             return info, to_language(value, info.type)
         except ConversionError as exc:
