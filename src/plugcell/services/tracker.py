@@ -148,6 +148,8 @@ class TrackerService(RoutedDevice):
         self.time_scale = time_scale
         self.frames: dict[str, RequesterFrames] = {}
         """BASE, PROBE and angle convention of each requester (robot) by name."""
+        self.beam_for: str | None = None
+        """The requester whose Move the beam is locked for (None: no Move yet)."""
         self._stream: asyncio.Task[None] | None = None
 
     # -- connection -----------------------------------------------------------------------
@@ -190,14 +192,18 @@ class TrackerService(RoutedDevice):
                     self.frames_of(self.requester).set_probe(data, option)
                 case "Move":
                     target = self.frames_of(self.requester).reflector(data, option)
+                    self.beam_for = None
                     await self.driver.point(target[:3, 3])
+                    self.beam_for = self.requester
                 case "Single Measurement":
+                    self._check_beam(command)
                     duration = _milliseconds(data, "duration", 1)
                     frames = self.frames_of(self.requester)
                     frames.output_convention(option)  # refuse a bad option before measuring
                     reading = await self.driver.measure(duration)
                     self.data_feedback.post(frames.measurement(reading.pose, option))
                 case "Continuous Measurement":
+                    self._check_beam(command)
                     interval = _milliseconds(data, "interval", MIN_INTERVAL_MS)
                     frames = self.frames_of(self.requester)
                     frames.output_convention(option)
@@ -214,6 +220,15 @@ class TrackerService(RoutedDevice):
         except TrackerDriverError as exc:
             raise DeviceError(str(exc)) from None
         return "OK"
+
+    def _check_beam(self, command: Command) -> None:
+        """Measure only the reflector the requester's own Move locked on (7.4): if another
+        requester's Move took the beam since, refuse with the reason — the requester's
+        program Moves again (``compensation.pdl``'s MEASURE does)."""
+        owner = self.beam_for
+        if owner is not None and owner != self.requester:
+            raise DeviceError(f"the beam was pointed for {owner} after "
+                              f"{self.requester}'s last Move; send Move again")
 
     async def _measure_continuously(self, frames: RequesterFrames, option: str,
                                     interval_s: float) -> None:
