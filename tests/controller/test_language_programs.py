@@ -637,9 +637,9 @@ def test_shipped_compensation_library_converges_with_a_fake_tracker(tmp_path: Pa
             return True, None, ""
         if (device, command, option) == ("COMPUTE", "Get Matrix", "q"):
             return True, np.full(6, 0.01), ""  # the compensated joints
-        if device == "COMPUTE" and command == "Get Matrix":  # base, routed to the tracker
+        if device == "COMPUTE" and command == "Get Matrix":  # the identified base
             return True, np.zeros((1, 6)), ""
-        if device == "TRACKER" and command in ("Set Probe", "Move"):
+        if device == "TRACKER" and command in ("Set Base", "Set Probe", "Move"):
             return True, None, ""
         if command == "Single Measurement":  # the true pose: the target plus an error
             xyz = np.array([800.0, 0.0, 600.0]) + bias / 2 ** state["corrections"]
@@ -676,8 +676,9 @@ END holes
     assert state["corrections"] == 5
     assert channel.lines[0] == ("ACTIVATE COMPUTE #Evaluate##params = load_params(\"h4\"); "
                                 "base = frame(params, \"base\")")
-    assert channel.lines[1] == "ACTIVATE COMPUTE #Get Matrix#base; to=TRACKER:Set Base:euler2tr#"
-    assert "payload=36.000000)" in channel.lines[3]
+    assert channel.lines[1] == "ACTIVATE COMPUTE #Get Matrix#base#"
+    assert channel.lines[2].startswith("ACTIVATE TRACKER #Set Base#euler2tr#0.000000,")
+    assert "payload=36.000000)" in channel.lines[4]
     assert arm.q[5] == pytest.approx(0.01)  # the compensated joints were used
 
 
