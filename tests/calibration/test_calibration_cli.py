@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 from plugcell.cli import main
-from plugcell.io.measurements import write_measurements
+from plugcell.io.measurements import read_measurements, write_measurements
 from plugcell.twin.campaign import measure_poses, working_volume_joints
 from plugcell.twin.robot import RobotTwin
 from plugcell.twin.scenario import TwinScenario
@@ -152,3 +152,28 @@ def test_calibrate_a_serial_robot_without_loop(tmp_path, capsys):
     assert d["model"]["family"] == "serial"
     assert any(p["kind"] == "gravity" for p in d["parameters"])  # compliance from its masses
     assert d["validation"]["mean_mm"] < 0.5 * d["validation"]["before"]["mean_mm"]
+
+
+def test_calibrate_exports_every_poses_residual(files, tmp_path, capsys):
+    out, res = tmp_path / "p.json", tmp_path / "out" / "residuals.json"
+    assert main(["calibrate", "--robot", "smart_h4", "--model", "loop",
+                 "--data", str(files / "cal.csv"), "--validate", str(files / "val.csv"),
+                 "--out", str(out), "--residuals", str(res), "--quiet"]) == 0
+    assert capsys.readouterr().out.rstrip().endswith(f"wrote {out} and {res}")
+    params, doc = json.loads(out.read_text()), json.loads(res.read_text())
+    assert doc["format"] == "plugcell-residuals" and doc["robot"] == "smart_h4"
+    poses = doc["poses"]
+    assert [p["set"] for p in poses] == ["calibration"] * 60 + ["validation"] * 30
+    measured = read_measurements(files / "cal.csv").positions * 1e3
+    np.testing.assert_allclose([p["measured_mm"] for p in poses[:60]], measured, atol=1e-9)
+    for name in ("calibration", "validation"):
+        mine = [p for p in poses if p["set"] == name]
+        after = np.linalg.norm([p["after_mm"] for p in mine], axis=1)
+        before = np.linalg.norm([p["before_mm"] for p in mine], axis=1)
+        assert after.mean() == pytest.approx(params[name]["mean_mm"], rel=1e-9)
+        assert before.mean() == pytest.approx(params[name]["before"]["mean_mm"], rel=1e-9)
+        assert after.max() == pytest.approx(params[name]["max_mm"], rel=1e-9)
+    assert main(["calibrate", "--robot", "smart_h4", "--model", "loop", "--data",
+                 str(files / "cal.csv"), "--out", str(out), "--residuals", str(tmp_path),
+                 "--quiet"]) == 2
+    assert "cannot write" in capsys.readouterr().err

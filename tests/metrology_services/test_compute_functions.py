@@ -76,6 +76,29 @@ def test_calibrate_identifies_what_the_calibration_engine_does(identified, campa
     assert v[2] < 0.3 < 1.0 < v[1]  # calibrated well below a millimetre (thesis: < 1 mm)
 
 
+def test_residuals_give_every_pose_measured_and_measured_minus_model(identified, campaign):
+    ws = identified
+    ev(ws, "r = residuals(params, vJ, vT, payload=36); v = validate(params, vJ, vT, payload=36)"
+           "; rc = residuals(params, mJ, mT, payload=36); s = summary(params)")
+    r, v = ws.get("r"), ws.get("v")[0]
+    assert r.shape == (30, 6)
+    _, val = campaign
+    np.testing.assert_allclose(r[:, :3], val.positions * 1e3, atol=1e-9)  # measured, mm
+    model = ws.get("params").result
+    predicted = model.predict(np.deg2rad(ws.get("vJ")), 36.0)[:, :3, 3] * 1e3
+    np.testing.assert_allclose(r[:, 3:], r[:, :3] - predicted, atol=1e-9)  # measured − model
+    norms = np.linalg.norm(r[:, 3:], axis=1)
+    assert norms.mean() == pytest.approx(v[2]) and norms.max() == pytest.approx(v[4])
+    assert np.linalg.norm(ws.get("rc")[:, 3:], axis=1).mean() == pytest.approx(ws.get("s")[0][2])
+    ws.set("row1", ws.get("vT")[:1, :3])  # one position: a residual, no statistics needed
+    ev(ws, "one = residuals(params, row(vJ, 1), row1, payload=36)")
+    np.testing.assert_allclose(ws.get("one"), r[:1], atol=1e-9)
+    with pytest.raises(EvaluationError, match=r"residuals\(\): mJ has 30 rows but mT has 60"):
+        ev(ws, "residuals(params, vJ, mT)")
+    with pytest.raises(EvaluationError, match="identified parameters expected"):
+        ev(ws, "residuals(mJ, mJ, mT)")
+
+
 def test_parameters_saved_and_loaded_predict_the_same(identified, tmp_path):
     ws = identified
     ev(ws, "save_params(params, 'h4_36kg'); again = load_params('h4_36kg')")
@@ -174,6 +197,10 @@ def test_housekeeping_functions(ws):
     np.testing.assert_allclose(ws.get("n"), [[3, 2]])
     ev(ws, "clear('a', 'b')")
     assert "a" not in ws and "b" not in ws and "r" in ws
+    ev(ws, "clear('a', 'never_set')")  # absent names: nothing to do (programs clear first)
+    with pytest.raises(EvaluationError, match="bad matrix name"):
+        ev(ws, "clear('r', '1x')")
+    assert "r" in ws  # a refused clear removes nothing
     ev(ws, "clear()")
     assert ws.names() == []
     np.testing.assert_allclose(vector_from_matrix(np.eye(4), "euler"), np.zeros(6), atol=1e-12)

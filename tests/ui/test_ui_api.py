@@ -197,3 +197,93 @@ def test_reports_are_listed_and_only_they_are_served(client: TestClient) -> None
     assert cal.status_code == 200 and "calibration" in cal.text
     assert "default-src 'none'" in cal.headers["content-security-policy"]
     assert client.get("/reports/calibration/5").status_code == 404
+
+
+@pytest.fixture(scope="module")
+def residual_document() -> dict[str, Any]:
+    """A real ``plugcell calibrate --residuals`` document: the twin, 30 + 12 poses, model 2."""
+    import json
+
+    import numpy as np
+
+    from plugcell.calibration import CalibrationData, Calibrator
+    from plugcell.io.robots import load_robot
+    from plugcell.twin.campaign import measure_poses, working_volume_joints
+    from plugcell.twin.robot import RobotTwin
+    from plugcell.twin.scenario import TwinScenario
+    from plugcell.twin.tracker import LaserTracker
+
+    robot = RobotTwin(TwinScenario(seed=2))
+    sets = []
+    for n, seed in ((30, 1), (12, 2)):
+        q = working_volume_joints(robot.description, robot.reveal_truth().profile, n,
+                                  np.random.default_rng(seed))
+        sets.append(CalibrationData.from_measurements(measure_poses(robot, LaserTracker(seed=2),
+                                                                    q)[0]))
+    result = Calibrator(load_robot("smart_h4"), "loop").fit(sets[0], validation=sets[1])
+    return json.loads(result.residuals_json())
+
+
+def test_calibration_residuals_for_the_3d_view(client: TestClient, launcher: Any,
+                                               module_cell: str,
+                                               residual_document: dict[str, Any]) -> None:
+    post = lambda body: client.post("/api/residuals", json=body, headers=HEADERS).json()  # noqa: E731
+    # a residual file of plugcell calibrate: every pose, its norms, the summaries it carries
+    doc = residual_document
+    view = post({"document": doc})
+    assert view["ok"] and view["source"] == "document"
+    assert view["title"] == "smart_h4 · model 2 (loop)"
+    assert len(view["poses"]) == 42 and view["poses"][0]["measured"] == doc["poses"][0][
+        "measured_mm"]
+    for name in ("calibration", "validation"):
+        assert view["sets"][name]["poses"] == doc["sets"][name]["poses"]
+        assert view["sets"][name]["mean_mm"] == pytest.approx(doc["sets"][name]["mean_mm"])
+        assert view["sets"][name]["max_mm"] == pytest.approx(doc["sets"][name]["max_mm"])
+        assert view["sets"][name]["before_mean_mm"] == pytest.approx(
+            doc["sets"][name]["before"]["mean_mm"])
+    assert view["max_mm"] == pytest.approx(max(p["after_norm_mm"] for p in doc["poses"]))
+    # bad files and matrices: inline errors naming the field and the pose
+    assert "not a residual file" in post({"document": {"format": "plugcell-calibration"}})[
+        "errors"]["document"]
+    broken = {**doc, "poses": [dict(p) for p in doc["poses"][:3]]}
+    broken["poses"][2]["measured_mm"] = [1.0, 2.0]
+    assert post({"document": broken})["errors"] == {
+        "document": "pose 3: measured_mm must be [x, y, z] in mm"}
+    broken["poses"][2] = {**doc["poses"][2], "set": "test"}
+    assert "pose 3: set must be one of" in post({"document": broken})["errors"]["document"]
+    assert post({"document": {**doc, "format_version": 9}})["errors"]["document"].startswith(
+        "format_version 9")
+    rows = [[1000.0 + 10 * i, 200.0, 500.0, 0.01 * i, -0.02, 0.03] for i in range(20)]
+    view = post({"matrix": rows})
+    assert view["ok"] and set(view["sets"]) == {"calibration"}
+    assert view["poses"][1]["after_norm"] == pytest.approx(math.hypot(0.01, 0.02, 0.03))
+    assert view["sets"]["calibration"]["before_mean_mm"] is None
+    assert post({"matrix": [rows[0], rows[1][:5]]})["errors"]["matrix"].startswith(
+        "row 2: 6 numbers")
+    assert post({"matrix": []})["errors"] == {"matrix": "no rows: a non-empty list expected"}
+    nan = client.post("/api/residuals", content=b'{"matrix": [[1, 2, 3, 4, 5, NaN]]}',
+                      headers={**HEADERS, "Content-Type": "application/json"}).json()
+    assert nan["errors"]["matrix"].startswith("row 1: 6 numbers")
+    assert post({"matrix": [[1, 2, 3, 4, 5, True]]})["ok"] is False
+    assert set(post({})["errors"]) == {"_"}
+    # a compute service's matrix, from a robot's workspace (Get Matrix; for=R1)
+    launcher.serve("compute", module_cell)
+    until(lambda: services(client), lambda s: s.get("COMPUTE", {}).get("alive")
+          and s["COMPUTE"]["commands"])
+    ack = client.post("/api/tasks", headers=HEADERS, json={
+        "service": "COMPUTE", "command": "Set Matrix", "option": "res; for=R1",
+        "data": rows}).json()
+    assert ack["ok"], ack
+    until(lambda: client.get("/api/snapshot").json()["processes"],
+          lambda ps: any(p["id"] == ack["id"] and p["state"] == "Completed" for p in ps))
+    view = post({"service": "COMPUTE", "name": "res", "workspace": "R1"})
+    assert view["ok"], view
+    assert view["title"] == "COMPUTE: res of R1" and len(view["poses"]) == 20
+    assert view["poses"][3]["measured"] == rows[3][:3] and view["poses"][3]["after"] == rows[3][3:]
+    missing = post({"service": "COMPUTE", "name": "res"})  # the controller's own: empty
+    assert "Get Matrix res" in missing["errors"]["name"]
+    assert post({"service": "TOOL", "name": "res"})["errors"] == {
+        "service": "a live compute service (one with Get Matrix)"}
+    assert set(post({"service": "COMPUTE", "name": "1x"})["errors"]) == {"name"}
+    assert set(post({"service": "COMPUTE", "name": "res", "workspace": "a/b"})["errors"]) == {
+        "workspace"}

@@ -5,13 +5,15 @@ Figures 7-9 … 7-11): discover the cell → wire the robot to its peripherals (
 the toolbar and by dragging in the graph) → a task with an inline error, then
 Completed → run a robot program → watch its processes complete in the monitor →
 save the wiring, unwire, load it back, reload the page → a service dies and greys
-out → the PROBE wizard of appendix D → the reports.  Screenshots are kept under
+out → the PROBE wizard of appendix D → calibration residuals in the 3-D view → the
+reports.  Screenshots are kept under
 ``test-artifacts/ui/``; any console error of the page fails the test.  Skipped
 only when ``/usr/bin/chromium`` is absent (CI installs it).
 """
 
 from __future__ import annotations
 
+import json
 import math
 import re
 import tempfile
@@ -36,6 +38,20 @@ pytestmark = [
 def circle_text(n: int = 16) -> str:
     return "\n".join(f"{1000 + 80 * math.cos(2 * math.pi * i / n):.4f} "
                      f"{200 + 80 * math.sin(2 * math.pi * i / n):.4f} 600" for i in range(n))
+
+
+def residual_file(n: int = 24) -> bytes:
+    """A small file in the format of ``plugcell calibrate --residuals``."""
+    poses = []
+    for i in range(n):
+        a = 2 * math.pi * i / n
+        poses.append({
+            "set": "calibration" if i < 18 else "validation", "index": i + 1 if i < 18 else i - 17,
+            "measured_mm": [1000 + 300 * math.cos(a), 200 + 300 * math.sin(a), 600 + 20 * i],
+            "before_mm": [2 * math.cos(a), 1.5, -1.0],
+            "after_mm": [0.02 * math.sin(a), 0.05, 0.01]})
+    return json.dumps({"format": "plugcell-residuals", "format_version": 1, "robot": "smart_h4",
+                       "model": {"number": 4, "name": "loop+gravity"}, "poses": poses}).encode()
 
 
 def test_an_engineer_session_in_the_browser(module_cell: str, launcher: Any,
@@ -161,7 +177,7 @@ def test_an_engineer_session_in_the_browser(module_cell: str, launcher: Any,
             expect(page.locator('.cmd[data-command="SnapShot"]')).to_be_disabled()
             shot("06-camera-gone")
 
-            # 8. the PROBE wizard of appendix D; 9. the reports
+            # 8. the PROBE wizard of appendix D
             page.click('button[data-tab="metrology"]')
             page.fill('textarea[name="points-circle"]', "1 2\n")
             expect(page.locator('.field-error[data-for="circle"]')).to_have_text(
@@ -177,12 +193,39 @@ def test_an_engineer_session_in_the_browser(module_cell: str, launcher: Any,
             expect(result).to_contain_text("rpy2tr vector: 0.0000, 0.0000, 106.3500")
             result.scroll_into_view_if_needed()
             shot("07-probe-wizard")
+
+            # 9. calibration residuals in the 3-D view (the file of plugcell calibrate --residuals)
+            page.click('#wizard-tabs button[data-wizard="residuals"]')
+            page.fill('textarea[name="residual-text"]', "1000 200 600 0.1\n")
+            page.click('[data-step="residual-file"] button.primary')
+            expect(page.locator('.field-error[data-for="residuals"]')).to_have_text(
+                "line 1: expected 6 numbers x y z dx dy dz (mm)")
+            page.fill('textarea[name="residual-text"]', '{"format": "x"}')
+            page.click('[data-step="residual-file"] button.primary')
+            expect(page.locator('.field-error[data-for="residuals"]')).to_contain_text(
+                "not a residual file")
+            page.set_input_files('input[aria-label="residual file"]', files=[{
+                "name": "residuals.json", "mimeType": "application/json",
+                "buffer": residual_file()}])
+            table = page.locator('.result[data-result="residuals"]')
+            expect(table).to_contain_text("smart_h4 · model 4 (loop+gravity)")
+            expect(table.locator('tr[data-set="calibration"] td').nth(1)).to_have_text("18")
+            expect(table.locator('tr[data-set="validation"] td').nth(1)).to_have_text("6")
+            expect(page.locator('.field-error[data-for="residuals"]')).to_have_text("")
+            expect(page.locator("#legend")).to_contain_text("calibration residual after")
+            page.check('input[aria-label="arrows before calibration"]')
+            expect(page.locator("#legend")).to_contain_text("grey: before")
+            page.select_option('select[aria-label="poses shown"]', "validation")
+            page.locator("#view3d").scroll_into_view_if_needed()
+            shot("08-residuals")
+
+            # 10. the reports
             page.click('button[data-tab="reports"]')
             expect(page.locator("#report-list a").first).to_be_visible()
             page.locator("#report-list a", has_text="8.3-fig-8-12.png").click()
             expect(page.locator('#report-view img[alt="8.3-fig-8-12.png"]')).to_be_visible()
             expect(page.locator("#report-title")).to_have_text("8.3-fig-8-12.png")
-            shot("08-reports")
+            shot("09-reports")
         finally:
             ctx.close()
     assert not errors, f"console errors: {errors}"

@@ -8,7 +8,7 @@ from typing import Any
 
 import pytest
 from fastapi.testclient import TestClient
-from hypothesis import HealthCheck, given, settings
+from hypothesis import HealthCheck, example, given, settings
 from hypothesis import strategies as st
 from ui_testlib import HEADERS, make_client, services, until
 
@@ -83,3 +83,27 @@ def test_wizards_answer_every_body(client: TestClient, which: str, body: dict[st
 @given(raw=st.binary(max_size=64))
 def test_any_bytes_are_refused_cleanly(client: TestClient, raw: bytes) -> None:
     answered(client.post("/api/wiring/load", headers=HEADERS, content=raw))
+
+
+NUMBER = st.floats(-1e4, 1e4) | st.floats() | st.integers(-2**70, 2**70)
+XYZ = st.lists(NUMBER, min_size=3, max_size=3)
+POSE = st.dictionaries(st.sampled_from(["set", "index", "measured_mm", "after_mm", "before_mm"]),
+                       st.sampled_from(["calibration", "validation"]) | XYZ | JSON, max_size=5)
+RESIDUAL_FILE = st.fixed_dictionaries({
+    "format": st.just("plugcell-residuals") | JSON, "format_version": st.just(1) | JSON,
+    "poses": st.lists(POSE, max_size=4) | JSON, "robot": JSON, "model": JSON})
+
+
+@SETTINGS
+@given(body=st.fixed_dictionaries({"document": RESIDUAL_FILE | JSON})
+       | st.fixed_dictionaries({"matrix": st.lists(st.lists(NUMBER, min_size=5, max_size=7),
+                                                   min_size=1, max_size=5) | JSON})
+       | st.dictionaries(st.sampled_from(["service", "name", "workspace"]), JSON, max_size=3))
+@example(body={"matrix": [[1e308, 1e308, 0, 1e308, 1e308, 0]]})  # norms must stay finite
+def test_residual_views_answer_every_body(client: TestClient, body: dict[str, Any]) -> None:
+    answer = answered(send(client, "/api/residuals", body))
+    if answer["ok"]:
+        assert answer["poses"] and all(len(p["measured"]) == 3 for p in answer["poses"])
+    else:
+        assert set(answer["errors"]) <= {"document", "matrix", "service", "name", "workspace",
+                                         "_"}

@@ -11,7 +11,8 @@ Pure math (numpy, SI units), no I/O, no framework imports; files go through
 * :mod:`.identifiability` — column scaling, rank-revealing QR, rule 4.10;
 * :mod:`.initial` — BASE/PROBE from the data (AX = YB, rigid registration);
 * :mod:`.identify` — :class:`Calibrator` (Gauss–Newton, LM, robust loss);
-* :mod:`.result`, :mod:`.statistics` — :class:`CalibrationResult`, (8.1)–(8.5);
+* :mod:`.result`, :mod:`.statistics` — :class:`CalibrationResult`, (8.1)–(8.5), the
+  residual of every pose (:class:`PoseResiduals`);
 * :mod:`.configs` — the five models of 8.2.3; :mod:`.simulation` — the check of 8.1;
 * :mod:`.report` — the self-contained HTML report.
 """
@@ -33,6 +34,7 @@ from plugcell.calibration.jacobian import JacobianResult, identification_jacobia
 from plugcell.calibration.model import ErrorModel, PoseBatch
 from plugcell.calibration.parameters import ErrorParameter, ParameterSpace
 from plugcell.calibration.result import CalibrationResult
+from plugcell.calibration.statistics import PoseResiduals
 from plugcell.calibration.structure import KinematicStructure, kinematic_structure
 
 __all__ = [
@@ -50,6 +52,7 @@ __all__ = [
     "ModelConfig",
     "ParameterSpace",
     "PoseBatch",
+    "PoseResiduals",
     "analyse",
     "combinations_at",
     "identification_jacobian",

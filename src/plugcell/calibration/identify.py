@@ -54,7 +54,12 @@ from plugcell.calibration.jacobian import JacobianResult, identification_jacobia
 from plugcell.calibration.linalg import least_squares
 from plugcell.calibration.model import ErrorModel, PoseBatch, fold_frames
 from plugcell.calibration.result import CalibrationResult, IterationRecord
-from plugcell.calibration.statistics import accuracy, parameter_statistics, pose_residuals
+from plugcell.calibration.statistics import (
+    PoseResiduals,
+    accuracy,
+    parameter_statistics,
+    pose_residuals,
+)
 from plugcell.kinematics import RobotDescription, forward
 from plugcell.kinematics.errors import KinematicsError
 from plugcell.metrology import fit_rigid_transform
@@ -293,7 +298,8 @@ class Calibrator:
             nominal = fold_frames(fitted)
         else:
             nominal = model
-        before = accuracy(data, nominal.predict_batch(batch))
+        nominal_poses = nominal.predict_batch(batch)
+        before = accuracy(data, nominal_poses)
         if before.position.norm.mean > MISMATCH_M:
             raise DivergenceError(
                 f"the measurements do not match robot {self.desc.name!r}: even with BASE and "
@@ -348,13 +354,14 @@ class Calibrator:
         r = _residual_rows(problem, jac.poses) * np.sqrt(weights)[:, None]
         H = _jacobian_rows(problem, jac.H) * np.sqrt(weights)[:, None, None]
         stats = parameter_statistics(H.reshape(-1, len(keys)), r.reshape(-1))
-        after = accuracy(data, jac.poses)
+        residuals = PoseResiduals.from_poses(data, nominal_poses, jac.poses)
+        after = residuals.accuracy("after")
         if stats.condition_number > 100:
             warnings.append(
                 f"ill-conditioned: κ = {stats.condition_number:.0f} > 100 (eq. 4.10); "
                 "spread the poses wider or use a smaller model"
             )
-        e = np.linalg.norm(data.positions - jac.poses[:, :3, 3], axis=1)
+        e = residuals.norms("after")
         med = float(np.median(e))
         mad = float(np.median(np.abs(e - med))) * 1.4826
         limit = max(med + 5.0 * mad, 3.0 * med, OUTLIER_FLOOR_M)
@@ -388,6 +395,7 @@ class Calibrator:
             statistics=stats,
             calibration=after,
             calibration_before=before,
+            calibration_residuals=residuals,
             six_dof=data.six_dof,
             n_poses=len(data),
             pose_weights=weights,

@@ -19,14 +19,14 @@ import base64
 import html
 import io
 import math
-from typing import Any
+from typing import Any, Literal
 
 import numpy as np
 from numpy.typing import NDArray
 
 from plugcell.calibration.data import CalibrationData
 from plugcell.calibration.result import CalibrationResult
-from plugcell.metrology import pose_errors
+from plugcell.calibration.statistics import PoseResiduals
 
 Array = NDArray[np.float64]
 
@@ -64,11 +64,21 @@ def _png(fig: Any) -> str:
             + base64.b64encode(buf.getvalue()).decode("ascii") + '">')
 
 
-def _errors(data: CalibrationData, poses: Array) -> tuple[Array, Array | None]:
-    if data.six_dof:
-        dp, dphi = pose_errors(data.poses, poses, orientation="rotvec")
-        return dp * 1e3, np.degrees(dphi)
-    return (data.positions - poses[:, :3, 3]) * 1e3, None
+def _residuals(stored: PoseResiduals | None, result: CalibrationResult,
+               data: CalibrationData) -> PoseResiduals:
+    """The residuals the result carries for ``data`` (so a validation with a re-fitted
+    BASE shows what its statistics are of), else computed."""
+    if stored is not None and len(stored) == len(data) and np.array_equal(stored.positions,
+                                                                        data.positions):
+        return stored
+    return result.evaluate_poses(data)
+
+
+def _errors(res: PoseResiduals, which: Literal["before", "after"]
+            ) -> tuple[Array, Array | None]:
+    """Position errors (mm) and orientation errors (deg, or None), before or after."""
+    dp, dphi = res.errors(which)
+    return dp * 1e3, None if dphi is None else np.degrees(dphi)
 
 
 def _stats_rows(label: str, before: Any, after: Any) -> str:
@@ -140,10 +150,9 @@ def render_report(
         plt = None
         parts.append("<p class='warn'>matplotlib is not installed: no plots.</p>")
 
-    before_cal = result.predict_nominal(calibration.q, calibration.payload_kg)
-    after_cal = result.predict(calibration.q, calibration.payload_kg)
-    eb, ob = _errors(calibration, before_cal)
-    ea, oa = _errors(calibration, after_cal)
+    res_cal = _residuals(result.calibration_residuals, result, calibration)
+    eb, ob = _errors(res_cal, "before")
+    ea, oa = _errors(res_cal, "after")
     if plt is not None:
         parts.append("<h2>Error distributions before and after (cf. Fig. 8-8)</h2>")
         ncol = 6 if ob is not None else 3
@@ -169,8 +178,8 @@ def render_report(
         ax.plot(np.arange(1, n + 1), np.linalg.norm(ea, axis=1), ".", color="tab:blue",
                 label="calibration, calibrated")
         if validation is not None:
-            vb = _errors(validation, result.predict_nominal(validation.q, validation.payload_kg))[0]
-            va = _errors(validation, result.predict(validation.q, validation.payload_kg))[0]
+            res_val = _residuals(result.validation_residuals, result, validation)
+            vb, va = _errors(res_val, "before")[0], _errors(res_val, "after")[0]
             x = np.arange(n + 1, n + len(validation) + 1)
             ax.plot(x, np.linalg.norm(vb, axis=1), "x", color="tab:orange",
                     label="validation, nominal")

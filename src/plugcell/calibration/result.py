@@ -3,7 +3,10 @@
 :class:`CalibrationResult` is immutable.  ``to_dict()`` is the content of
 ``PARAMS.json`` (``plugcell calibrate --out``); :meth:`CalibrationResult.from_dict`
 rebuilds a working result from it together with the robot description, so a
-saved calibration can predict (and compensate) later.
+saved calibration can predict (and compensate) later.  ``residuals_dict()`` is the
+per-pose residual file (``plugcell calibrate --residuals``): every pose's measured
+position and its error vector before and after calibration, for the 3-D view of the
+controller UI.
 """
 
 from __future__ import annotations
@@ -22,7 +25,7 @@ from plugcell.calibration.identifiability import Identifiability
 from plugcell.calibration.model import ErrorModel
 from plugcell.calibration.statistics import (
     ParameterStatistics,
-    accuracy,
+    PoseResiduals,
     accuracy_summary,
     pose_residuals,
 )
@@ -34,8 +37,18 @@ Array = NDArray[np.float64]
 
 FORMAT = "plugcell-calibration"
 FORMAT_VERSION = 1
+#: ``format`` of the per-pose residual file (:meth:`CalibrationResult.residuals_dict`).
+RESIDUALS_FORMAT = "plugcell-residuals"
+RESIDUALS_FORMAT_VERSION = 1
 
-__all__ = ["FORMAT", "FORMAT_VERSION", "CalibrationResult", "IterationRecord"]
+__all__ = [
+    "FORMAT",
+    "FORMAT_VERSION",
+    "RESIDUALS_FORMAT",
+    "RESIDUALS_FORMAT_VERSION",
+    "CalibrationResult",
+    "IterationRecord",
+]
 
 
 @dataclass(frozen=True)
@@ -85,7 +98,10 @@ class CalibrationResult:
     parameters; ``identifiability``: the structural analysis (what each kept
     parameter stands for); ``statistics``: σ², σ per parameter, κ;
     ``calibration``/``calibration_before``: accuracy on the calibration poses
-    after/before; ``validation``/``validation_before``: on independent poses.
+    after/before; ``validation``/``validation_before``: on independent poses;
+    ``calibration_residuals``/``validation_residuals``: the residual of every pose
+    (:class:`~plugcell.calibration.statistics.PoseResiduals`) those figures are the
+    statistics of (``None`` in a result rebuilt by :meth:`from_dict`).
     """
 
     config: ModelConfig
@@ -110,6 +126,8 @@ class CalibrationResult:
     validation: AccuracyStats | None = None
     validation_before: AccuracyStats | None = None
     n_validation: int = 0
+    calibration_residuals: PoseResiduals | None = None
+    validation_residuals: PoseResiduals | None = None
 
     # ------------------------------------------------------------------ prediction
     def predict(self, q: ArrayLike, payload_kg: ArrayLike | float | None = None) -> Array:
@@ -124,9 +142,9 @@ class CalibrationResult:
         """``(N, 6)`` (or ``(N, 3)``) measured − calibrated, metres and radians."""
         return pose_residuals(data, self.predict(data.q, data.payload_kg))
 
-    def evaluate(self, data: CalibrationData, *, refit_base: bool = False,
-                 refit_probe: bool = False) -> tuple[AccuracyStats, AccuracyStats]:
-        """Accuracy (8.1–8.2) on ``data``: (nominal, calibrated).
+    def evaluate_poses(self, data: CalibrationData, *, refit_base: bool = False,
+                       refit_probe: bool = False) -> PoseResiduals:
+        """The residual of every pose of ``data``, nominal and calibrated.
 
         ``refit_base``: the data were measured with the tracker elsewhere — BASE is
         re-identified on them for both models (robot geometry kept), see
@@ -139,13 +157,23 @@ class CalibrationResult:
 
             nominal = _refit(nominal, data, probe=refit_probe)
             model = _refit(model, data, probe=refit_probe)
-        return (accuracy(data, nominal.predict(data.q, data.payload_kg)),
-                accuracy(data, model.predict(data.q, data.payload_kg)))
+        return PoseResiduals.from_poses(data, nominal.predict(data.q, data.payload_kg),
+                                        model.predict(data.q, data.payload_kg))
+
+    def evaluate(self, data: CalibrationData, *, refit_base: bool = False,
+                 refit_probe: bool = False) -> tuple[AccuracyStats, AccuracyStats]:
+        """Accuracy (8.1–8.2) on ``data``: (nominal, calibrated); the statistics of
+        :meth:`evaluate_poses` (same options)."""
+        r = self.evaluate_poses(data, refit_base=refit_base, refit_probe=refit_probe)
+        return r.accuracy("before"), r.accuracy("after")
 
     def with_validation(self, data: CalibrationData, *, refit_base: bool = False,
                         refit_probe: bool = False) -> CalibrationResult:
-        before, after = self.evaluate(data, refit_base=refit_base, refit_probe=refit_probe)
-        return replace(self, validation=after, validation_before=before, n_validation=len(data))
+        """This result with the accuracy and residuals on independent poses ``data``."""
+        r = self.evaluate_poses(data, refit_base=refit_base, refit_probe=refit_probe)
+        return replace(self, validation=r.accuracy("after"),
+                       validation_before=r.accuracy("before"), n_validation=len(data),
+                       validation_residuals=r)
 
     # ------------------------------------------------------------------ parameters
     def value(self, key: str) -> float:
@@ -172,6 +200,18 @@ class CalibrationResult:
         return out
 
     # ------------------------------------------------------------------ serialisation
+    def _summaries(self) -> dict[str, dict[str, Any]]:
+        """The accuracy summaries (mm, deg) of the calibration and validation sets, each
+        with its ``before``."""
+        out: dict[str, dict[str, Any]] = {}
+        for name, after, before in (("calibration", self.calibration, self.calibration_before),
+                                    ("validation", self.validation, self.validation_before)):
+            if after is not None:
+                out[name] = accuracy_summary(after)
+                if before is not None:
+                    out[name]["before"] = accuracy_summary(before)
+        return out
+
     def to_dict(self) -> dict[str, Any]:
         """The PARAMS.json content (SI values with units; statistics in mm / deg)."""
         space = self.model.space
@@ -181,16 +221,8 @@ class CalibrationResult:
             for k in ident.dropped:
                 dependent.append({"key": k, "name": space[k].name,
                                   "identified_via": [space[v].name for v in ident.via.get(k, ())]})
-        cal = None
-        if self.calibration is not None:
-            cal = accuracy_summary(self.calibration)
-            if self.calibration_before is not None:
-                cal["before"] = accuracy_summary(self.calibration_before)
-        val = None
-        if self.validation is not None:
-            val = accuracy_summary(self.validation)
-            if self.validation_before is not None:
-                val["before"] = accuracy_summary(self.validation_before)
+        summaries = self._summaries()
+        cal, val = summaries.get("calibration"), summaries.get("validation")
         st = self.statistics
         return {
             "format": FORMAT,
@@ -226,6 +258,40 @@ class CalibrationResult:
 
     def to_json(self, indent: int | None = 2) -> str:
         return json.dumps(_clean(self.to_dict()), indent=indent, allow_nan=False)
+
+    def residuals_dict(self) -> dict[str, Any]:
+        """The per-pose residual file (``plugcell calibrate --residuals``), mm and degrees.
+
+        ``format``, ``format_version``, ``robot``, ``model`` {number, name}, ``six_dof``,
+        ``units``, ``convention``; ``sets`` {calibration, validation}: the accuracy
+        summaries of PARAMS.json; ``poses``: one entry per pose, calibration poses
+        first — ``set``, ``index``, ``measured_mm``, ``before_mm``, ``after_mm``,
+        ``before_norm_mm``, ``after_norm_mm`` (+ orientation errors in degrees for
+        6-DOF data, + the robust-loss ``weight`` of a calibration pose).  Raises
+        ``ValueError`` for a result without residuals (one rebuilt from PARAMS.json).
+        """
+        if self.calibration_residuals is None:
+            raise ValueError("this result carries no per-pose residuals (rebuilt from "
+                             "PARAMS.json?): evaluate_poses(data) computes them")
+        poses = self.calibration_residuals.records("calibration", self.pose_weights)
+        if self.validation_residuals is not None:
+            poses += self.validation_residuals.records("validation")
+        return {
+            "format": RESIDUALS_FORMAT,
+            "format_version": RESIDUALS_FORMAT_VERSION,
+            "robot": self.robot,
+            "model": {"number": self.config.number, "name": self.config.name},
+            "six_dof": self.six_dof,
+            "units": {"length": "mm", "angle": "deg"},
+            "convention": "residual = measured - predicted, measurement (tracker) frame; "
+                          "before: nominal robot with BASE/PROBE fitted; after: calibrated",
+            "sets": self._summaries(),
+            "poses": poses,
+        }
+
+    def residuals_json(self, indent: int | None = 2) -> str:
+        """:meth:`residuals_dict` as strict JSON."""
+        return json.dumps(_clean(self.residuals_dict()), indent=indent, allow_nan=False)
 
     @classmethod
     def from_dict(cls, d: dict[str, Any], desc: RobotDescription) -> CalibrationResult:

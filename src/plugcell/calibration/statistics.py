@@ -8,6 +8,9 @@
   at any attitude) rather than the thesis's differences of roll-pitch-yaw angles,
   which are meaningless near pitch ±90° — for small errors away from that
   singularity the two agree to first order up to a change of axes.
+* Per-pose residuals (:class:`PoseResiduals`): the error vectors those statistics are
+  taken over, before (nominal robot with fitted BASE/PROBE) and after calibration,
+  with the measured positions — what a 3-D view of the residuals shows.
 * Parameter statistics (8.3–8.5): ``σ² = Σ Δx² / (n − r)``, ``C = (HᵀH)⁻¹``,
   ``σ_Δg_j = σ·sqrt(C_jj)``; computed from the SVD of the column-scaled H.
 """
@@ -15,7 +18,7 @@
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Any
+from typing import Any, Literal
 
 import numpy as np
 from numpy.typing import NDArray
@@ -29,11 +32,15 @@ Array = NDArray[np.float64]
 
 __all__ = [
     "ParameterStatistics",
+    "PoseResiduals",
     "accuracy",
     "accuracy_summary",
+    "error_vectors",
     "parameter_statistics",
     "pose_residuals",
 ]
+
+Which = Literal["before", "after"]
 
 
 def pose_residuals(measured: CalibrationData, predicted: Array) -> Array:
@@ -43,14 +50,124 @@ def pose_residuals(measured: CalibrationData, predicted: Array) -> Array:
     return measured.positions - predicted[:, :3, 3]
 
 
+def error_vectors(measured: CalibrationData, predicted: Array) -> tuple[Array, Array | None]:
+    """Per-pose errors measured − predicted: ``Δp`` ``(N, 3)`` (m) and ``Δφ`` ``(N, 3)``
+    (rad, rotation vector of ``R_predicted⁻¹ R_measured``), or ``None`` for positions only.
+
+    The vectors the accuracy statistics (8.1–8.2) are taken over.
+    """
+    if measured.six_dof:
+        return pose_errors(measured.poses, predicted, orientation="rotvec")
+    return measured.positions - np.asarray(predicted)[:, :3, 3], None
+
+
 def accuracy(measured: CalibrationData, predicted: Array) -> AccuracyStats:
     """Accuracy statistics (8.1–8.2) of predicted against measured poses."""
     if len(measured) < 2:
         raise ValueError("accuracy statistics need at least 2 poses")
-    if measured.six_dof:
-        dp, dphi = pose_errors(measured.poses, predicted, orientation="rotvec")
-        return accuracy_statistics(dp, dphi)
-    return accuracy_statistics(measured.positions - predicted[:, :3, 3])
+    return accuracy_statistics(*error_vectors(measured, predicted))
+
+
+def _frozen(x: Any, name: str, n: int | None) -> Array:
+    a = np.array(x, dtype=float)
+    if a.ndim != 2 or a.shape[1] != 3 or (n is not None and a.shape[0] != n):
+        want = "(N, 3)" if n is None else f"({n}, 3)"
+        raise ValueError(f"{name} must be {want}, got {a.shape}")
+    a.setflags(write=False)
+    return a
+
+
+@dataclass(frozen=True, eq=False)
+class PoseResiduals:
+    """The residual of every pose of one set, before and after calibration (8.2.1).
+
+    ``positions`` ``(N, 3)``: the measured target positions (m, measurement frame);
+    ``before``/``after`` ``(N, 3)``: position errors measured − predicted (m) by the
+    nominal robot with BASE/PROBE fitted and by the calibrated model;
+    ``orientation_before``/``orientation_after`` ``(N, 3)``: orientation errors (rad,
+    rotation vector, see :func:`error_vectors`), ``None`` for position-only data.
+
+    Their statistics are the result's accuracy figures:
+    ``result.calibration_residuals.accuracy("after")`` is ``result.calibration``.
+    Read-only arrays; build one with :meth:`from_poses`.
+    """
+
+    positions: Array
+    before: Array
+    after: Array
+    orientation_before: Array | None = None
+    orientation_after: Array | None = None
+
+    def __post_init__(self) -> None:
+        p = _frozen(self.positions, "positions", None)
+        n = len(p)
+        object.__setattr__(self, "positions", p)
+        for name in ("before", "after"):
+            object.__setattr__(self, name, _frozen(getattr(self, name), name, n))
+        ob, oa = self.orientation_before, self.orientation_after
+        if (ob is None) != (oa is None):
+            raise ValueError("orientation_before and orientation_after: both or neither")
+        if ob is not None:
+            object.__setattr__(self, "orientation_before",
+                               _frozen(ob, "orientation_before", n))
+            object.__setattr__(self, "orientation_after", _frozen(oa, "orientation_after", n))
+
+    @classmethod
+    def from_poses(cls, measured: CalibrationData, nominal: Array,
+                   calibrated: Array) -> PoseResiduals:
+        """The residuals of ``measured`` against the poses ``(N, 4, 4)`` predicted by
+        the nominal and by the calibrated model."""
+        dp0, dphi0 = error_vectors(measured, nominal)
+        dp1, dphi1 = error_vectors(measured, calibrated)
+        return cls(measured.positions, dp0, dp1, dphi0, dphi1)
+
+    def __len__(self) -> int:
+        return int(self.positions.shape[0])
+
+    @property
+    def six_dof(self) -> bool:
+        return self.orientation_after is not None
+
+    def errors(self, which: Which = "after") -> tuple[Array, Array | None]:
+        """``(Δp, Δφ)`` before or after calibration (m, rad; Δφ ``None`` for positions)."""
+        if which == "before":
+            return self.before, self.orientation_before
+        if which == "after":
+            return self.after, self.orientation_after
+        raise ValueError(f"which must be 'before' or 'after', got {which!r}")
+
+    def norms(self, which: Which = "after") -> Array:
+        """``(N,)`` position error norms |Δp| (m)."""
+        return np.linalg.norm(self.errors(which)[0], axis=1)
+
+    def accuracy(self, which: Which = "after") -> AccuracyStats:
+        """The accuracy statistics (8.1–8.2) of these residuals (at least 2 poses)."""
+        if len(self) < 2:
+            raise ValueError("accuracy statistics need at least 2 poses")
+        return accuracy_statistics(*self.errors(which))
+
+    def records(self, set_name: str, weights: Array | None = None) -> list[dict[str, Any]]:
+        """One JSON-ready dict per pose, in mm and degrees: ``set``, ``index`` (1-based),
+        ``measured_mm``, ``before_mm``, ``after_mm``, ``before_norm_mm``,
+        ``after_norm_mm`` (and ``orientation_before_deg``, ``orientation_after_deg``,
+        ``weight`` when known)."""
+        out = []
+        nb, na = self.norms("before"), self.norms("after")
+        for i in range(len(self)):
+            r: dict[str, Any] = {
+                "set": set_name, "index": i + 1,
+                "measured_mm": (self.positions[i] * 1e3).tolist(),
+                "before_mm": (self.before[i] * 1e3).tolist(),
+                "after_mm": (self.after[i] * 1e3).tolist(),
+                "before_norm_mm": float(nb[i] * 1e3), "after_norm_mm": float(na[i] * 1e3),
+            }
+            if self.orientation_before is not None and self.orientation_after is not None:
+                r["orientation_before_deg"] = np.degrees(self.orientation_before[i]).tolist()
+                r["orientation_after_deg"] = np.degrees(self.orientation_after[i]).tolist()
+            if weights is not None:
+                r["weight"] = float(weights[i])
+            out.append(r)
+        return out
 
 
 def accuracy_summary(stats: AccuracyStats) -> dict[str, Any]:

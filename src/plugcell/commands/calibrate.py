@@ -2,11 +2,14 @@
 
     plugcell calibrate --robot NAME|FILE --model 1..5|NAME --data CAL.csv
                        [--validate VAL.csv] [--rot rpy|zyz|xyz] [--payload-kg M]
-                       --out PARAMS.json [--report REPORT.html] [--json]
+                       --out PARAMS.json [--report REPORT.html] [--residuals RES.json]
+                       [--json]
 
 A file of joint readings and tracker measurements is all it needs: BASE and
 PROBE are estimated from the data unless given (``--base``/``--probe``, e.g. from
-the appendix-D procedures).  Progress goes to stderr; ``--json`` prints the
+the appendix-D procedures).  ``--residuals`` writes the residual of every pose
+(measured position, error before/after in mm; calibration and validation poses) for
+the 3-D view of the controller UI.  Progress goes to stderr; ``--json`` prints the
 PARAMS.json object to stdout.  Bad files, unknown robots, too few poses for the
 model and a diverging fit end with a clear message and exit code 2.
 """
@@ -44,6 +47,9 @@ def register(sub: Any) -> None:
                    help="payload carried in every pose (overrides a payload_kg column)")
     p.add_argument("--out", type=Path, required=True, help="PARAMS.json to write")
     p.add_argument("--report", type=Path, help="self-contained HTML report to write")
+    p.add_argument("--residuals", type=Path, metavar="RES.json",
+                   help="write every pose's residual (measured position, error before and "
+                        "after calibration, mm) for the UI's 3-D view")
     p.add_argument("--json", action="store_true", help="print the PARAMS.json object to stdout")
     p.add_argument("--base", help="initial BASE: JSON file (4x4 'matrix' or 'xyz_mm'+'rpy_deg') "
                                   "or 'x,y,z,roll,pitch,yaw' in mm and degrees")
@@ -190,23 +196,30 @@ def _run(args: argparse.Namespace) -> int:
         raise CommandError(str(exc)) from None
     d = result.to_dict()
     text = result.to_json()
-    try:
-        args.out.parent.mkdir(parents=True, exist_ok=True)
-        args.out.write_text(text + "\n", encoding="utf-8")
-    except OSError as exc:
-        raise CommandError(f"{args.out}: cannot write: {exc.strerror}") from None
+    _write(args.out, text + "\n")
+    written = [args.out]
     if args.report is not None:
         from plugcell.calibration.report import render_report
 
-        page = render_report(result, data, val)
-        try:
-            args.report.parent.mkdir(parents=True, exist_ok=True)
-            args.report.write_text(page, encoding="utf-8")
-        except OSError as exc:
-            raise CommandError(f"{args.report}: cannot write: {exc.strerror}") from None
+        _write(args.report, render_report(result, data, val))
+        written.append(args.report)
+    if args.residuals is not None:
+        _write(args.residuals, result.residuals_json() + "\n")
+        written.append(args.residuals)
     if args.json:
         print(text)
     else:
         print(_summary(d))
-        print(f"wrote {args.out}" + (f" and {args.report}" if args.report else ""))
+        print("wrote " + ", ".join(str(w) for w in written[:-1])
+              + (" and " if len(written) > 1 else "") + str(written[-1]))
     return 0
+
+
+def _write(path: Path, text: str) -> None:
+    from plugcell.cli import CommandError
+
+    try:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        path.write_text(text, encoding="utf-8")
+    except OSError as exc:
+        raise CommandError(f"{path}: cannot write: {exc.strerror}") from None

@@ -32,7 +32,7 @@ import json
 import os
 import time
 from collections.abc import Callable
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any
 
@@ -77,7 +77,7 @@ class DemoConfig:
     speed: float = 20.0
     calibration_poses: int = 150
     validation_poses: int = 50
-    line_test: ExperimentConfig = ExperimentConfig()
+    line_test: ExperimentConfig = field(default_factory=ExperimentConfig)
     bars: int = 4
     holes_per_bar: int = 6
     watch_period_ms: int = 3000

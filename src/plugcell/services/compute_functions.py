@@ -9,6 +9,7 @@ function                                               thesis
 =====================================================  ================================
 ``calibrate(mJ, mT, model=5, payload=0, …)``            H4Calibration (8.2.2, Fig. 8-4)
 ``validate(params, vJ, vT, payload=0, …)``              accuracy on other poses (8.2.3)
+``residuals(params, mJ, mT, payload=0, …)``             each pose's residual (3-D view, 7.5)
 ``summary(params)``                                     the figures H4Calibration shows
 ``save_params(params, 'name')``, ``load_params('name')``  saving; LoadParams (8.3.2)
 ``frame(params, 'base'|'probe', angles='euler')``       BASE/PROBE for Set Base/Set Probe
@@ -236,6 +237,21 @@ def validate(ctx: FunctionContext, params: Any, vJ: Any, vT: Any, payload: Any =
     data = _data(p.description, vJ, vT, payload, angles, ("vJ", "vT"))
     before, after = p.result.evaluate(data)
     return _stats_row(before, after, len(data))
+
+
+@register
+def residuals(ctx: FunctionContext, params: Any, mJ: Any, mT: Any, payload: Any = 0.0,
+              angles: Any = "euler") -> np.ndarray:
+    """The residual of every pose: N×6 ``[x, y, z, dx, dy, dz]`` (mm) — the measured
+    position and measured − calibrated model, in the tracker frame (what the 3-D view of
+    the visualisation service shows, 7.5)."""
+    p = _params(params)
+    data = _data(p.description, mJ, mT, payload, angles, ("mJ", "mT"))
+    try:
+        res = p.result.evaluate_poses(data)
+    except ValueError as exc:
+        raise FunctionError(str(exc)) from None
+    return np.hstack([res.positions, res.after]) * 1e3
 
 
 @register

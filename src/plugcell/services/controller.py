@@ -554,6 +554,23 @@ class CellController(GenericDevice):
         finally:
             self.tasks.pop(task_id, None)
 
+    async def fetch(self, partner: str, command: str, option: str = "", *,
+                    timeout: float = 10.0) -> tuple[ProcessUpdateNotification, Any]:
+        """A process the controller needs the data of itself (the UI's residual view
+        reads a compute service's matrix): created, monitored like a task, awaited —
+        each wait bounded by ``timeout`` — and returned as the final update with the
+        last data any update carried, in full (a task's events carry only a summary
+        of large data)."""
+        call = await self.create_process(partner, command, option, timeout=timeout)
+        data = None
+        async for update in call:
+            record = self.monitor.updated(call.partner, update, source="controller")
+            self._dirty.add(record.key)
+            if update.data is not None:
+                data = update.data
+        assert call.final is not None
+        return call.final, data
+
     async def stop_task(self, task_id: str) -> dict[str, Any]:
         """Send the StopData that ends a MultipleData task."""
         call = self.tasks.get(task_id)

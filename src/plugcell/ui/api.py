@@ -13,6 +13,9 @@
 ``POST /api/wiring/save``   ``{path}``;  ``POST /api/wiring/load`` ``{path}`` or ``{document}``
 ``POST /api/fit``           ``{kind: circle|line|plane, points}`` (mm)
 ``POST /api/wizard/probe``  appendix D.1;  ``POST /api/wizard/base`` appendix D.2
+``POST /api/residuals``     calibration residuals for the 3-D view: ``{document}`` (a
+                            ``plugcell calibrate --residuals`` file), ``{matrix}`` (N×6
+                            mm) or ``{service, name, workspace}`` (Get Matrix)
 ==========================  =====================================================
 
 Refused input (a field that does not fit, a wire a service refuses) is answered
@@ -35,6 +38,7 @@ from plugcell.services.controller_tasks import TaskInputError, check_task
 from plugcell.services.controller_wiring import WiringError, dump_wiring
 from plugcell.ui.guard import BadRequestError, RefusedError, error_response, json_body
 from plugcell.ui.metrology import FitInputError, fit_json, wizard_base, wizard_probe
+from plugcell.ui.residuals import fetch_residuals, residuals_from_document, residuals_from_matrix
 
 __all__ = ["make_router"]
 
@@ -47,6 +51,17 @@ def _names(body: dict[str, Any]) -> tuple[str, str]:
     if errors:
         raise RefusedError(errors)
     return body["service"], body["partner"]
+
+
+def _file(path: str) -> Path:
+    """The file a form names (RefusedError for what the OS would refuse otherwise than
+    with an OSError: a NUL character, ``~user`` of an unknown user)."""
+    if "\0" in path:
+        raise RefusedError({"path": "a file name cannot hold a NUL character"})
+    try:
+        return Path(path.strip()).expanduser()
+    except RuntimeError as exc:
+        raise RefusedError({"path": f"{path.strip()}: {exc}"}) from None
 
 
 def make_router(controller: CellController) -> APIRouter:
@@ -133,7 +148,7 @@ def make_router(controller: CellController) -> APIRouter:
         if not isinstance(path, str) or not path.strip():
             raise RefusedError({"path": "a file name, e.g. cell-wiring.json"})
         try:
-            doc = controller.save(Path(path.strip()).expanduser())
+            doc = controller.save(_file(path))
         except WiringError as exc:
             raise RefusedError({"path": str(exc)}) from None
         return JSONResponse({"ok": True, "path": path.strip(), "document": doc})
@@ -145,7 +160,7 @@ def make_router(controller: CellController) -> APIRouter:
             if isinstance(body.get("document"), dict):
                 wires = controller.load(body["document"])
             elif isinstance(body.get("path"), str) and body["path"].strip():
-                wires = controller.load(Path(body["path"].strip()).expanduser())
+                wires = controller.load(_file(body["path"]))
             else:
                 raise RefusedError({"path": "a wiring file to load"})
         except WiringError as exc:
@@ -172,6 +187,23 @@ def make_router(controller: CellController) -> APIRouter:
         except FitInputError as exc:
             raise RefusedError(exc.errors) from None
         return JSONResponse({"ok": True, **result})
+
+    @router.post("/residuals")
+    async def residuals(request: Request) -> JSONResponse:
+        body = await json_body(request)
+        try:
+            if "document" in body:
+                view = residuals_from_document(body["document"])
+            elif "matrix" in body:
+                view = residuals_from_matrix(body["matrix"])
+            elif "service" in body:
+                view = await fetch_residuals(controller, body)
+            else:
+                raise RefusedError({"_": "a residual file (document), an N×6 matrix or a "
+                                         "compute service's matrix (service, name)"})
+        except FitInputError as exc:
+            raise RefusedError(exc.errors) from None
+        return JSONResponse({"ok": True, **view})
 
     return router
 

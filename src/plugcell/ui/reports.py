@@ -63,7 +63,7 @@ class ReportFiles:
     def result(self, name: str) -> Path | None:
         """The file ``docs/results/<name>`` if it is a plain file there with a known suffix."""
         results = self._results()
-        if results is None or "/" in name or "\\" in name or name.startswith("."):
+        if results is None or any(c in name for c in "/\\\0") or name.startswith("."):
             return None
         path = (results / name).resolve()
         if path.parent != results.resolve() or path.suffix not in SUFFIXES:

@@ -9,6 +9,7 @@ import { initMonitor } from "./monitor.js";
 import { initView3d } from "./view3d.js";
 import { initWizard } from "./wizard.js";
 import { initReports } from "./reports.js";
+import { initResiduals } from "./residuals.js";
 
 let retry = 500;
 
@@ -99,6 +100,7 @@ function init() {
   initMonitor();
   initView3d();
   initWizard();
+  initResiduals();
   initReports();
   connect();
 }

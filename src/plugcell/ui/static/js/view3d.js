@@ -1,11 +1,14 @@
 // A small 3-D view on a 2-D canvas (the visualisation service of thesis 7.5, Figure 7-8):
-// tracker measurements as they arrive, wizard points coloured by their fit residual, fitted geometry.
+// tracker measurements as they arrive, wizard points coloured by their fit residual, fitted geometry,
+// and the residual of every calibration pose as an arrow from its measured position.
 import { $ } from "./dom.js";
 import { on, state } from "./store.js";
 
 const live = [];          // [x, y, z] mm
 const MAX_LIVE = 5000;
 let fits = [];            // [{name, points, residuals, geometry}]
+let residuals = null;     // the answer of /api/residuals: {poses: [{set, measured, after, before, …}], max_mm, …}
+const resOpts = { set: "all", before: false };
 const cam = { yaw: -0.8, pitch: 0.55, dist: 3000, target: [0, 0, 0] };
 let canvas; let ctx; let dragging = null; let pending = false;
 
@@ -25,7 +28,13 @@ function allPoints() {
   const pts = [];
   if ($("#show-live").checked) pts.push(...live);
   if ($("#show-fits").checked) for (const f of fits) pts.push(...f.points);
+  pts.push(...shownResiduals().map((p) => p.measured));
   return pts;
+}
+
+function shownResiduals() {
+  if (!residuals || !$("#show-residuals").checked) return [];
+  return residuals.poses.filter((p) => resOpts.set === "all" || p.set === resOpts.set);
 }
 
 export function resetView() {
@@ -41,6 +50,16 @@ export function resetView() {
 
 /** Show the points and fits of a wizard (replacing the previous ones). */
 export function setFits(layers) { fits = layers; resetView(); }
+
+/** Show calibration residuals (an answer of /api/residuals; null removes them). */
+export function setResiduals(view) { residuals = view; $("#show-residuals").checked = true; resetView(); }
+
+/** {set: "all" | "calibration" | "validation", before: show the arrows before calibration}. */
+export function setResidualOptions(options) {
+  const moved = options.set !== undefined && options.set !== resOpts.set;
+  Object.assign(resOpts, options);
+  if (moved && residuals) resetView(); else redraw();
+}
 
 function project(p) {
   const [tx, ty, tz] = cam.target;
@@ -102,6 +121,40 @@ function drawGeometry(g) {
   }
 }
 
+function arrow(a, b, style) {
+  const p = project(a); const q = project(b);
+  const dx = q.x - p.x; const dy = q.y - p.y; const len = Math.hypot(dx, dy);
+  ctx.strokeStyle = style; ctx.lineWidth = 1.5;
+  ctx.beginPath(); ctx.moveTo(p.x, p.y); ctx.lineTo(q.x, q.y);
+  if (len > 4) {
+    const head = Math.min(7, len / 3); const ux = dx / len; const uy = dy / len;
+    ctx.moveTo(q.x, q.y); ctx.lineTo(q.x - head * (ux - 0.5 * uy), q.y - head * (uy + 0.5 * ux));
+    ctx.moveTo(q.x, q.y); ctx.lineTo(q.x - head * (ux + 0.5 * uy), q.y - head * (uy - 0.5 * ux));
+  }
+  ctx.stroke();
+}
+
+/** Arrows ×scale (the longest 15 % of the scene), points coloured by |Δp| after. Returns the legend. */
+function drawResiduals(items) {
+  const poses = shownResiduals();
+  if (!poses.length) return "";
+  const lo = [0, 1, 2].map((i) => Math.min(...poses.map((p) => p.measured[i])));
+  const hi = [0, 1, 2].map((i) => Math.max(...poses.map((p) => p.measured[i])));
+  const extent = Math.max(50, ...hi.map((v, i) => v - lo[i]));
+  const maxAfter = Math.max(0.001, ...poses.map((p) => p.after_norm));
+  const longest = Math.max(maxAfter, ...(resOpts.before ? poses.map((p) => p.before_norm || 0) : []));
+  const scale = (0.15 * extent) / longest;
+  const tip = (p, d) => p.measured.map((x, i) => x + d[i] * scale);
+  for (const p of poses) {
+    if (resOpts.before && p.before) arrow(p.measured, tip(p, p.before), "rgba(170,180,195,.55)");
+    const c = colour(p.after_norm, maxAfter);
+    arrow(p.measured, tip(p, p.after), c);
+    items.push({ p: p.measured, c, r: p.set === "validation" ? 2.5 : 3.5, square: p.set === "validation" });
+  }
+  const s = scale >= 10 ? scale.toFixed(0) : scale.toPrecision(2);
+  return `calibration residual after: green 0 → red ${maxAfter.toFixed(3)} mm · arrows ×${s}${resOpts.before ? " (grey: before)" : ""} · ● calibration ■ validation`;
+}
+
 function drawAxes() {
   const [tx, ty, tz] = cam.target;
   const size = cam.dist * 0.12;
@@ -138,12 +191,20 @@ function draw() {
       f.points.forEach((p, i) => items.push({ p, c: f.residuals ? colour(f.residuals[i], maxRes) : "#c8d3e0", r: 3.5 }));
     }
   }
+  const resLegend = drawResiduals(items);
   items.map((it) => ({ ...it, q: project(it.p) })).sort((a, b) => b.q.d - a.q.d).forEach((it) => {
-    ctx.fillStyle = it.c; ctx.beginPath(); ctx.arc(it.q.x, it.q.y, it.r, 0, 2 * Math.PI); ctx.fill();
+    ctx.fillStyle = it.c; ctx.beginPath();
+    if (it.square) ctx.rect(it.q.x - it.r, it.q.y - it.r, 2 * it.r, 2 * it.r);
+    else ctx.arc(it.q.x, it.q.y, it.r, 0, 2 * Math.PI);
+    ctx.fill();
   });
   ctx.fillStyle = "#8393a7"; ctx.font = "11px monospace";
-  ctx.fillText(`${live.length} live · ${fits.reduce((n, f) => n + f.points.length, 0)} fitted points`, 8, canvas.height - 8);
-  $("#legend").textContent = fits.some((f) => f.residuals) ? `residual colour: green 0 → red ${maxRes.toFixed(3)} mm` : "";
+  const nres = shownResiduals().length;
+  ctx.fillText(`${live.length} live · ${fits.reduce((n, f) => n + f.points.length, 0)} fitted points${nres ? ` · ${nres} calibration residuals` : ""}`, 8, canvas.height - 8);
+  const legend = [];
+  if (fits.some((f) => f.residuals)) legend.push(`residual colour: green 0 → red ${maxRes.toFixed(3)} mm`);
+  if (resLegend) legend.push(resLegend);
+  $("#legend").textContent = legend.join(" · ");
 }
 
 export function redraw() { if (!pending) { pending = true; requestAnimationFrame(draw); } }
@@ -161,7 +222,7 @@ export function initView3d() {
   canvas.addEventListener("wheel", (ev) => { ev.preventDefault(); cam.dist *= Math.exp(ev.deltaY * 0.001); redraw(); }, { passive: false });
   $("#view-reset").addEventListener("click", resetView);
   $("#view-clear").addEventListener("click", () => { live.length = 0; redraw(); });
-  for (const id of ["#show-live", "#show-fits"]) $(id).addEventListener("change", redraw);
+  for (const id of ["#show-live", "#show-fits", "#show-residuals"]) $(id).addEventListener("change", redraw);
   on("processes", (list) => {
     const t = trackers();
     let added = false;
@@ -169,7 +230,7 @@ export function initView3d() {
     if (added) redraw();
   });
   on("task", (msg) => { if (msg.data && trackers().has(msg.id.split("/")[0])) { addLive(msg); redraw(); } });
-  on("tab", (tab) => { if (tab === "metrology") { if (live.length || fits.length) resetView(); else redraw(); } });
+  on("tab", (tab) => { if (tab === "metrology") { if (live.length || fits.length || residuals) resetView(); else redraw(); } });
   window.addEventListener("resize", redraw);
   redraw();
 }

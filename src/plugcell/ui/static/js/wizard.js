@@ -6,6 +6,7 @@ import { firstError, post } from "./api.js";
 import { liveServices, on, state } from "./store.js";
 import { runTask, stopTask } from "./tasks.js";
 import { setFits } from "./view3d.js";
+import { renderResiduals } from "./residuals.js";
 
 const WIZARDS = {
   probe: {
@@ -198,7 +199,9 @@ function matrixTable(m) {
 function render() {
   const box = clear($("#wizard"));
   const slot = stepState[current] = {};
+  $("#wizard-panel .source-row").style.display = current === "residuals" ? "none" : "";
   if (current === "fit") { renderFit(box, slot); return; }
+  if (current === "residuals") { renderResiduals(box); return; }
   const wiz = WIZARDS[current];
   box.append(h("p", { class: "hint", text: wiz.title }));
   wiz.steps.forEach((step, i) => box.append(stepBox(i + 1, step, slot)));
