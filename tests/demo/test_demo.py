@@ -41,6 +41,10 @@ def test_demo_fast_runs_the_three_steps_over_services(tmp_path: Path) -> None:
     assert d["kuka_smr_spread_mm"] < 0.05  # a fixed SMR, measured again and again
     # the files: the JSON, the report, every service's journal
     assert json.loads((tmp_path / "demo.json").read_text())["cell"] == r["cell"]
-    assert "8.3: 3σ position after sensor" in (tmp_path / "report.html").read_text()
+    page = (tmp_path / "report.html").read_text()
+    assert "8.3: 3σ position after sensor" in page and "<img src='errors.png'" in page
+    assert (tmp_path / "errors.png").read_bytes()[:4] == b"\x89PNG"
+    assert len(k["errors_mm"]["sensor"]) == k["targets"]
+    assert len(d["errors_mm"]["nominal"]) == d["targets"]
     names = {Path(p).stem for p in r["journal"]}
     assert {"TRACKER", "COMPUTE", "H4", "KUKA", "CONTROLLER"} <= names

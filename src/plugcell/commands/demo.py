@@ -61,7 +61,7 @@ def _demo(args: argparse.Namespace) -> int:
     except DemoError as exc:
         raise CommandError(f"demo: {exc}") from None
     report = args.out / "report.html"
-    report.write_text(_html(result))
+    report.write_text(_html(result, _plot(result, args.out / "errors.png")))
     if args.json:
         print(json.dumps(result, indent=2, default=float))
         return 0
@@ -100,12 +100,44 @@ def _table(result: dict[str, Any]) -> str:
     return "\n".join(f"{a:<{w[0]}}  {b:>{w[1]}}  {c}" for a, b, c in rows)
 
 
-def _html(result: dict[str, Any]) -> str:
+def _plot(result: dict[str, Any], path: Path) -> str | None:
+    """Position error per target of 8.3 and 8.4, each stage (PNG); None without
+    matplotlib (``pip install plugcell[plots]``)."""
+    try:
+        import matplotlib
+
+        matplotlib.use("Agg")
+        import matplotlib.pyplot as plt
+    except ImportError:
+        return None
+    fig, axes = plt.subplots(2, 1, figsize=(9, 6.5))
+    for ax, (key, title) in zip(axes, (("compensation", "8.3: line test"),
+                                       ("demonstration", "8.4: stabiliser holes")),
+                                strict=True):
+        for stage, errors in result[key]["errors_mm"].items():
+            ax.plot(range(1, len(errors) + 1), errors, "o-", ms=3, label=stage)
+        ax.set_yscale("log")
+        ax.axhline(0.1, color="grey", ls=":", lw=1)
+        ax.set_title(title)
+        ax.set_xlabel("target")
+        ax.set_ylabel("position error (mm)")
+        ax.legend()
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+    return path.name
+
+
+def _html(result: dict[str, Any], plot: str | None = None) -> str:
     body = "".join(f"<tr><td>{html.escape(a)}</td><td>{html.escape(b)}</td>"
                    f"<td>{html.escape(c)}</td></tr>" for a, b, c in _rows(result))
     return ("<!doctype html><meta charset=utf-8><title>plugcell demo</title>"
             "<style>body{font-family:sans-serif;margin:2em}td,th{padding:.3em 1em;"
             "border-bottom:1px solid #ddd}</style><h1>plugcell demo — thesis chapter 8 "
             "over services</h1><table><tr><th></th><th>plugcell</th><th>thesis</th></tr>"
-            f"{body}</table><h2>Everything</h2><pre>"
+            f"{body}</table>"
+            + (f"<h2>Position error per target</h2><img src='{html.escape(plot)}' "
+               "alt='position error per target, each stage'>" if plot else
+               "<p>(pip install plugcell[plots] for the plots)</p>")
+            + "<h2>Everything</h2><pre>"
             f"{html.escape(json.dumps(result, indent=2, default=float))}</pre>")

@@ -146,7 +146,7 @@ def _pose_stats(rows: np.ndarray, targets: np.ndarray) -> dict[str, float]:
     pos = d["position"]
     assert isinstance(pos, dict)
     return {"mean_mm": pos["mean"], "sigma3_mm": pos["three_sigma"], "max_mm": pos["max"],
-            "poses": len(rows)}
+            "poses": len(rows), "norms_mm": (np.linalg.norm(e[:, :3], axis=1) * 1e3).tolist()}
 
 
 def _stabiliser(desc_probe: np.ndarray, bars: int, per_bar: int,
@@ -287,6 +287,7 @@ def _compensate(cell: _Cell, cfg: DemoConfig, probe: np.ndarray, result: dict[st
         "targets": len(targets),
         "sigma3_position_mm": {"model": model["sigma3_mm"], "sensor": sensor["sigma3_mm"]},
         "mean_position_mm": {"model": model["mean_mm"], "sensor": sensor["mean_mm"]},
+        "errors_mm": {"model": model["norms_mm"], "sensor": sensor["norms_mm"]},
         "iterations_per_point": float(np.mean(iterations[iterations >= 0])),
         "not_corrected": int(np.sum(iterations < 0)),
         "simulated_s_per_point": run["sim_s"] / len(targets),
@@ -370,6 +371,7 @@ def _demonstrate(cell: _Cell, cfg: DemoConfig, h4_truth: Any, kuka_truth: Any,
                              "model": stats["model"]["mean_mm"],
                              "sensor": stats["sensor"]["mean_mm"]},
         "initial_measured": stats["nominal"]["poses"],
+        "errors_mm": {k: v["norms_mm"] for k, v in stats.items()},
         "tracker_served": {"robot1": served.get("H4", 0), "robot2": served.get("KUKA", 0)},
         "tracker_wait_s": {"robot1": waited.get("H4", 0.0), "robot2": waited.get("KUKA", 0.0)},
         "kuka_smr_spread_mm": float(np.linalg.norm(watched[:, :3].std(axis=0)))
