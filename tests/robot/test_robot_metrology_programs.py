@@ -97,7 +97,7 @@ def test_example_calibration_and_compensation_on_one_set_of_services(
     vectors = np.array([vector_from_matrix(T, "euler") for T in targets])
     final = cell.activate("H4", "comp_test", f"targets={rows(vectors)}",
                           f"n_targets={len(vectors)}", "params_name=h4", "payload_kg=36",
-                          "sensor=TRUE", timeout=240)
+                          "sensor=TRUE", "nominal=FALSE", timeout=240)
     assert final.state is C, final.reason
     status = cell.status("H4")
     assert status[1] == "FINISHED", status
