@@ -16,6 +16,7 @@ import numpy as np
 import pytest
 from framework_testlib import ScriptedDevice, run, unique_cell
 
+from plugcell.framework import service as service_module
 from plugcell.framework import wire
 from plugcell.framework.journal import read_journal
 from plugcell.framework.model import (
@@ -135,6 +136,29 @@ def test_multiple_data_holds_the_device_until_the_same_senders_stop(tmp_path):
             assert final.state is F and "no MultipleData process of B is running" in final.reason
             assert (await a_work.result()).state is C
             assert dev.log == ["Stream", "Stop", "Work:b", "Work:a"]  # B's Stop never dispatched
+
+    run(body())
+
+
+def test_a_process_queued_behind_a_long_hold_outwaits_its_timeout(tmp_path, monkeypatch):
+    """While it waits in the queue the service's Queued heartbeat keeps it alive: the
+    requester's timeout bounds silence, not the queue (a robot waiting for the tracker
+    behind another robot's Continuous Measurement, 8.4.3)."""
+    monkeypatch.setattr(service_module, "QUEUED_HEARTBEAT_S", 0.1)
+
+    async def body():
+        async with cell_with(tmp_path, "A", "B") as (dev, a, b):
+            stream = await a.create_process("DEV", "Stream")
+            await dev.started.wait()
+            queued = await b.create_process("DEV", "Work", "b", timeout=0.5)
+            await asyncio.sleep(1.5)  # three times B's timeout
+            assert not queued.done
+            assert (await (await a.create_process("DEV", "Stop")).result()).state is C
+            seen = states(await collect(queued))
+            assert seen[-1] is C and Q not in seen  # heartbeats are not passed on as updates
+            assert (await stream.result()).state is C
+            rows = [r for r in read_journal([dev.journal.path]) if r["command"] == "Work"]
+            assert [u["state"] for u in rows[0]["updates"]] == ["Running", "Completed"]
 
     run(body())
 

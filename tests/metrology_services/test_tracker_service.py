@@ -140,6 +140,33 @@ def test_a_robot_whose_beam_another_robot_took_is_told_to_move_again(cell, world
     run(body())
 
 
+def test_a_reflector_that_vanishes_ends_the_lock_with_its_name(cell, world):
+    """The T-MAC's robot is switched off (its world publisher gone): the tracker says
+    which reflector it lost, not that another one 'jumped' (it measures nothing else)."""
+    tmac_a = world(cell.name, "TMAC_A")
+    tmac_a.publish(reflector(BASE_A, POSE_A, PROBE_A))
+    world(cell.name, "TMAC_B").publish(reflector(BASE_B, POSE_B, PROBE_B))
+
+    async def body():
+        async with Client("VANISH", cell=cell.name) as a:
+            assert await a.wait_for("TRACKER")
+            await setup_robot(a, BASE_A, PROBE_A, POSE_A)
+            assert_pose(await ok(a, "Single Measurement", "tr2euler", 50), POSE_A)
+            tmac_a.close()
+            for _ in range(2):  # and it stays lost until the next Move
+                final = await (await a.create_process("TRACKER", "Single Measurement",
+                                                      "tr2euler", 50, timeout=30)).result()
+                assert final.state is F
+                assert "the reflector TMAC_A the beam was locked on is gone; send Move again" \
+                    in final.reason
+            again = world(cell.name, "TMAC_A")
+            again.publish(reflector(BASE_A, POSE_A, PROBE_A))
+            await ok(a, "Move", "", POSE_A)
+            assert_pose(await ok(a, "Single Measurement", "tr2euler", 50), POSE_A)
+
+    run(body())
+
+
 def test_the_second_robot_waits_for_the_first_robots_stop_measurement(cell, world):
     world(cell.name, "TMAC_A").publish(reflector(BASE_A, POSE_A, PROBE_A))
     world(cell.name, "TMAC_B").publish(reflector(BASE_B, POSE_B, PROBE_B))
@@ -251,7 +278,7 @@ def test_beam_not_locked_fails_with_the_reason_and_the_service_carries_on(world_
                 tmac.close()
                 final = await asyncio.wait_for(stream.result(), 10)
                 assert final.state is F and "beam not locked" in final.reason
-                assert "no reflector" in final.reason
+                assert "the reflector TMAC the beam was locked on is gone" in final.reason
                 reason = await failed("Single Measurement", "", 0)
                 assert reason == "Single Measurement: duration 0 ms outside 1…60000 ms"
                 reason = await failed("Set Base", "quaternion2tr", BASE_A)

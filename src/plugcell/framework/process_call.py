@@ -54,6 +54,8 @@ class ProcessCall:
         self._waiter: asyncio.Future[None] | None = None
         self._delivered_final = False
         self._last_seq = 0
+        self._heard = 0.0
+        """Loop time of the last sign of life of the process (an update or a heartbeat)."""
 
     def __repr__(self) -> str:
         state = (
@@ -81,6 +83,17 @@ class ProcessCall:
         if self.final is not None or update.seq <= self._last_seq:
             return
         self._last_seq = update.seq
+        if update.state is ProcessStates.Queued:  # still waiting in the queue: heartbeat
+            self._heard = self._loop.time()
+            if not self._acked.done():
+                self._on_ack(Acknowledgement(identifier=self.identifier,
+                                             state=ProcessStates.Queued, instance=instance),
+                             instance)
+                self._synthetic_ack = True
+            waiter = self._waiter
+            if waiter is not None and not waiter.done():
+                waiter.set_result(None)  # re-arm the inactivity timer
+            return
         if not self._acked.done():  # the update overtook the acknowledgement
             self._on_ack(
                 Acknowledgement(
@@ -151,16 +164,19 @@ class ProcessCall:
     async def __anext__(self) -> ProcessUpdateNotification:
         if self._delivered_final and not self._updates:
             raise StopAsyncIteration
-        if not self._updates:
+        self._heard = self._loop.time()
+        while not self._updates:
+            left = self._heard + self.timeout - self._loop.time()
+            if left <= 0:
+                self._fail(f"no update from {self.partner} within {self.timeout:g} s")
+                break
             waiter = self._waiter = self._loop.create_future()
-            handle = self._loop.call_later(self.timeout, _wake, waiter)
+            handle = self._loop.call_later(left, _wake, waiter)
             try:
                 await waiter
             finally:
                 handle.cancel()
                 self._waiter = None
-            if not self._updates:
-                self._fail(f"no update from {self.partner} within {self.timeout:g} s")
         update = self._updates.popleft()
         if update.state.final:
             self._delivered_final = True

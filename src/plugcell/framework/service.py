@@ -82,6 +82,11 @@ log = logging.getLogger("plugcell.framework.service")
 
 T = TypeVar("T")
 
+#: While a process waits in the queue its sender hears from the service at least this
+#: often (a ``Queued`` ProcessUpdate, not journalled): a requester waiting behind a long
+#: hold keeps waiting while the service lives, instead of timing out (docs/protocol.md).
+QUEUED_HEARTBEAT_S = 2.0
+
 
 class DeviceError(RuntimeError):
     """Raised by a device interface: the process ends Failed with this message as reason."""
@@ -171,6 +176,7 @@ class GenericDevice(Participant):
         self._single_data: list[Any] = []
         self._cmd_waiter: asyncio.Future[str] | None = None
         self._handler_task: asyncio.Task[None] | None = None
+        self._heartbeat_task: asyncio.Task[None] | None = None
         self._publishers: dict[str, Any] = {}
         self._closing = False
         self._flush_scheduled = False
@@ -230,6 +236,8 @@ class GenericDevice(Participant):
             await self.close()
             raise
         self._handler_task = asyncio.create_task(self._process_handler(), name=f"{self.name}-ph")
+        self._heartbeat_task = asyncio.create_task(self._queued_heartbeat(),
+                                                   name=f"{self.name}-queued")
 
     async def _declare(self) -> None:
         """Refuse a duplicate name, open the journal, declare the Generic Interface."""
@@ -314,6 +322,11 @@ class GenericDevice(Participant):
         if self._holder is not None and not self._holder.abort_reason:
             self._holder.abort_reason = f"{self.name}: {reason}"
         self._queue.poke()
+        heartbeat, self._heartbeat_task = self._heartbeat_task, None
+        if heartbeat is not None:
+            heartbeat.cancel()
+            with contextlib.suppress(asyncio.CancelledError):
+                await heartbeat
         if self._handler_task is not None:
             # the handler ends after the current process (bounded by its timeout)
             done, _ = await asyncio.wait({self._handler_task}, timeout=10.0)
@@ -604,6 +617,24 @@ class GenericDevice(Participant):
                 self._measuring = None
                 if self.device.state is DeviceStates.Busy:
                     self._on_device_state(DeviceStates.Ready)
+
+    async def _queued_heartbeat(self) -> None:
+        """Tell the senders of waiting processes, every :data:`QUEUED_HEARTBEAT_S`, that
+        their process is still queued (the process's seq advances; the journal keeps
+        the state changes only)."""
+        while not self._closing:
+            await asyncio.sleep(QUEUED_HEARTBEAT_S)
+            now = time.time_ns()
+            for entry in self._queue:
+                if now - entry.received_ns < QUEUED_HEARTBEAT_S * 1e9:
+                    continue
+                entry.seq += 1
+                update = ProcessUpdateNotification(
+                    tag=entry.process.tag, identifier=entry.identifier,
+                    state=ProcessStates.Queued, seq=entry.seq)
+                if self.session is not None and not self.session.is_closed():
+                    with contextlib.suppress(zenoh.ZError):
+                        self._publisher(entry.sender).put(self._encode(update))
 
     async def _run(self, entry: Entry) -> None:
         command = entry.command

@@ -81,6 +81,8 @@ class _Stream:
     command: str
     call: ProcessCall
     forwarding: bool = True
+    stopped: bool = False
+    """The program's own StopData completed: the partner needs no other."""
     ready: asyncio.Event = field(default_factory=asyncio.Event)
 
 
@@ -154,7 +156,7 @@ class ExternalProcessHandler:
         for stream in list(self._streams.values()):
             if run is None or stream.run == run:
                 stream.forwarding = False
-                if stream.call.final is None:
+                if stream.call.final is None and not stream.stopped:
                     log.info("%s: stopping %s %s (%s)", self.service.name, stream.device,
                              stream.command, why)
                     self._spawn(self._stop_partner(stream))
@@ -229,6 +231,8 @@ class ExternalProcessHandler:
         final = await call.result()
         if final.state is not ProcessStates.Completed:
             return False, None, _failure(a, final.reason)
+        if command.type is CommandTypes.StopData and stream is not None:
+            stream.stopped = True  # its final update may still be on its way
         output = call.array(final) if command.type is CommandTypes.SingleData else None
         return True, output, ""
 

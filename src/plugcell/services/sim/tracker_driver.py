@@ -93,6 +93,9 @@ class SimulatedTrackerDriver:
         self._lock = threading.Lock()  # guards the model; never held across a wait
         self._target: str | None = None
         self._target_position: Array | None = None
+        self._lost = ""
+        """The reflector the lock was lost on when it vanished ("" if none): until the
+        next Move, measurements fail with its name."""
         self._busy_s = 0.0
 
     # -- TrackerDriver --------------------------------------------------------------------
@@ -111,7 +114,7 @@ class SimulatedTrackerDriver:
             except ValueError as exc:
                 raise TrackerDriverError(f"cannot aim the beam: {exc}") from None
             self._busy_s += dt
-            self._target, self._target_position = None, None
+            self._target, self._target_position, self._lost = None, None, ""
             nearest = self._nearest(world)
             radius = self.model.spec.capture_radius_m
             if nearest is None:
@@ -134,6 +137,16 @@ class SimulatedTrackerDriver:
     async def measure(self, duration_s: float) -> TrackerReading:
         world = await self._world()
         with self._lock:
+            if self._target is not None and self._target not in world:
+                gone, self._target = self._target, None  # e.g. its robot was switched off
+                self._lost = gone
+                raise BeamNotLockedError(
+                    f"beam not locked: the reflector {gone} the beam was locked on is gone; "
+                    "send Move again", reason="line_of_sight")
+            if self._lost:
+                raise BeamNotLockedError(
+                    f"beam not locked: the reflector {self._lost} the beam was locked on is "
+                    "gone; send Move again", reason="line_of_sight")
             self._follow(world)
             if self.model.aim_point is None:
                 raise BeamNotLockedError(

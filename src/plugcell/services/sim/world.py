@@ -67,6 +67,7 @@ class ReflectorPublisher:
         self._lock = threading.Lock()
         self._last: bytes | None = None
         self._seq = 0
+        self._closed = False
         self._publisher = session.declare_publisher(self._key)
         self._queryable = session.declare_queryable(self._key, self._on_query)
 
@@ -88,6 +89,10 @@ class ReflectorPublisher:
         self._publisher.put(payload)
 
     def close(self) -> None:
+        """Withdraw the reflector (idempotent)."""
+        if self._closed:
+            return
+        self._closed = True
         self._queryable.undeclare()
         self._publisher.undeclare()
 
