@@ -554,14 +554,19 @@ class Participant:
             if call.final is not None:
                 self._calls.pop((call.partner, call.identifier), None)
 
+        asked = time.monotonic()
+
         def done(_: Any) -> None:
             if call.ack is None:
-                reason = (
-                    f"unknown device {call.partner!r}: no service answered in cell "
-                    f"{self.keys.cell!r}"
-                    if not self.is_alive(call.partner)
-                    else f"no acknowledgement from {call.partner} within {call.timeout:g} s"
-                )
+                waited = time.monotonic() - asked
+                if not self.is_alive(call.partner):
+                    reason = (f"unknown device {call.partner!r}: no service answered in cell "
+                              f"{self.keys.cell!r}")
+                elif waited < call.timeout - 0.5:  # the query ended early: no one replied
+                    reason = (f"{call.partner} did not answer CreateProcess (no reply after "
+                              f"{waited * 1e3:.0f} ms; the service may be stopping)")
+                else:
+                    reason = f"no acknowledgement from {call.partner} within {call.timeout:g} s"
                 call._fail(reason)
                 self._calls.pop((call.partner, call.identifier), None)
 
