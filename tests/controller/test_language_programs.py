@@ -695,3 +695,16 @@ def test_vectors_add():
     )
     assert out == ["2,3,3"]
     assert Vector(1, 2, 3).get("Y") == 2
+
+
+def test_value_texts_read_back_as_what_they_were():
+    """numbers_text / rows_text write what value_from_text reads (program values)."""
+    from plugcell.controller.language.types import JOINTPOS, POSITION, ArrayType
+    from plugcell.controller.value_text import numbers_text, rows_text, value_from_text
+
+    pos = [1500.0, -0.25, 1200.125, 10.0, 90.0, -179.5]
+    assert value_from_text(numbers_text(pos), POSITION) == pos
+    rows = np.array([[1.0, -2.0, 3.0, 4.0, 5.0, 6.0], [0.5, 0.0, -0.5, 1e-6, 2.0, 3.0]])
+    back = value_from_text(rows_text(rows), ArrayType(JOINTPOS, (200,)))
+    np.testing.assert_allclose(back, rows, atol=1e-6)
+    assert numbers_text(np.float64(2.5)) == "2.500000"

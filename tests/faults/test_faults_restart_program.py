@@ -12,11 +12,11 @@ measurements after the restart agree with those before.
 from __future__ import annotations
 
 import json
-import time
 from pathlib import Path
 
 import numpy as np
 import pytest
+from childproc import until
 from faults_testlib import FaultCell
 
 from plugcell.framework import BlockingClient, ProcessStates, from_data
@@ -44,16 +44,6 @@ def _measured(client: BlockingClient) -> np.ndarray:
     return np.atleast_2d(np.asarray(from_data(final.data), dtype=float))
 
 
-def _until(predicate, timeout: float, what: str):
-    deadline = time.monotonic() + timeout
-    while True:
-        value = predicate()
-        if value:
-            return value
-        assert time.monotonic() < deadline, f"{what} not reached within {timeout:g} s"
-        time.sleep(0.05)
-
-
 def test_a_program_outlives_a_restart_of_the_tracker(fault_cell: FaultCell,
                                                      tmp_path: Path) -> None:
     truth = make_truth(TwinScenario(robot="smart_h4", seed=0))
@@ -74,7 +64,7 @@ def test_a_program_outlives_a_restart_of_the_tracker(fault_cell: FaultCell,
     try:
         with BlockingClient("tester", cell=fault_cell.name) as client:
             assert client.wait_for("H4", 20) and client.wait_for("COMPUTE", 20)
-            _until(lambda: {"TRACKER", "COMPUTE"} <= {p.name for p in
+            until(lambda: {"TRACKER", "COMPUTE"} <= {p.name for p in
                                                       client.get("H4").partners},
                    30, "the controller wiring H4")
             # without Wait: ACTIVATE completes once the program runs, so that H4 can
@@ -85,16 +75,16 @@ def test_a_program_outlives_a_restart_of_the_tracker(fault_cell: FaultCell,
                                                                               "euler")),
                 f"want={WANT}", "max_attempts=20000", "period_ms=2000"], timeout=30)
             assert run.result().state is ProcessStates.Completed, run.result().reason
-            _until(lambda: len(_measured(client)) >= 3, 60, "three measurements")
+            until(lambda: len(_measured(client)) >= 3, 60, "three measurements")
             tracker.kill9()
-            failed = _until(lambda: next((s for s in _status(client)
+            failed = until(lambda: next((s for s in _status(client)
                                           if "watch_restart: failed:" in s), None),
                             30, "the program seeing the tracker gone")
             assert "TRACKER" in failed, failed
             before = _measured(client)
             assert len(before) < WANT
             fault_cell.serve(*tracker_args)  # a new TRACKER; the controller re-wires it
-            status = _until(lambda: (st := _status(client))[1] != "RUNNING" and st, 90,
+            status = until(lambda: (st := _status(client))[1] != "RUNNING" and st, 90,
                             "the end of the program")
             assert status[1] == "FINISHED", status
             print("\n".join(status[4:]))

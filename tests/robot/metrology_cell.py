@@ -14,6 +14,7 @@ from dataclasses import dataclass
 import numpy as np
 from robot_cell import Launcher
 
+from plugcell.controller.value_text import numbers_text
 from plugcell.framework import BlockingClient, ProcessStates, from_data
 from plugcell.services.tracker_frames import vector_from_matrix
 from plugcell.twin.robot import RobotTwin
@@ -24,16 +25,6 @@ SPEED = 100.0
 H4 = dict(name="H4", robot="smart_h4", seed=4, payload_kg=36.0)
 KUKA = dict(name="KUKA", robot="elbow6", seed=5, payload_kg=0.0)
 PARTNERS = {"H4": ("CAMERA", "TOOL", "TRACKER", "COMPUTE"), "KUKA": ("TRACKER", "COMPUTE")}
-
-
-def text(values: np.ndarray | list[float]) -> str:
-    """Numbers as a program value / ACTIVATE data text."""
-    return ",".join(f"{float(v):.6f}" for v in np.ravel(values))
-
-
-def rows(matrix: np.ndarray) -> str:
-    """Rows of numbers as an ARRAY OF POSITION/JOINTPOS value: rows separated by ';'."""
-    return ";".join(text(r) for r in np.atleast_2d(matrix))
 
 
 @dataclass
@@ -55,7 +46,7 @@ class RobotInCell:
                                                               rng.normal(0, 0.02, 3)]
         probe = vector_from_matrix(truth.probe, "euler") + np.r_[rng.normal(0, 0.4, 3),
                                                                 rng.normal(0, 0.02, 3)]
-        return text(base), text(probe)
+        return numbers_text(base), numbers_text(probe)
 
 
 class MetrologyCell:

@@ -13,6 +13,8 @@ import uuid
 from collections.abc import Callable
 from typing import Any
 
+from childproc import until  # noqa: F401  (re-exported for the robot tests)
+
 
 def unique_cell(prefix: str = "r") -> str:
     """A fresh cell name: tests never see each other (nor anything else on the host)."""
@@ -22,17 +24,6 @@ def unique_cell(prefix: str = "r") -> str:
 def plugcell_argv(*args: str) -> list[str]:
     """Command line of the real CLI: ``python -m plugcell …``."""
     return [sys.executable, "-m", "plugcell", *args]
-
-
-def until(predicate: Callable[[], Any], timeout: float = 15.0, what: str = "condition") -> Any:
-    """Poll (bounded) for a condition another process makes true; its value."""
-    deadline = time.monotonic() + timeout
-    while True:
-        value = predicate()
-        if value:
-            return value
-        assert time.monotonic() < deadline, f"{what} not reached within {timeout:g} s"
-        time.sleep(0.02)
 
 
 class Proc:

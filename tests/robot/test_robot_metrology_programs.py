@@ -12,10 +12,11 @@ import re
 
 import numpy as np
 import pytest
-from metrology_cell import MetrologyCell, rows
+from metrology_cell import MetrologyCell
 from robot_cell import PNT0001, PNT0002
 
 from plugcell.calibration import CalibrationData, Calibrator
+from plugcell.controller.value_text import rows_text
 from plugcell.experiments.reproduce_8_3 import ExperimentConfig, line_targets
 from plugcell.framework import ProcessStates
 from plugcell.services.tracker_frames import vector_from_matrix
@@ -31,7 +32,7 @@ N_CAL, N_VAL = 60, 25
 IDENTIFY = "params = calibrate(mJ, mT, model=5, payload=36); save_params(params, '{}')"
 
 
-def _campaign_rows(ms) -> tuple[np.ndarray, np.ndarray]:
+def _campaign_rows_text(ms) -> tuple[np.ndarray, np.ndarray]:
     """A campaign's measurement set as the program's mJ (deg) and mT (mm, deg ZYZ) rows."""
     return (np.rad2deg(ms.joints),
             np.hstack([ms.positions * 1e3, np.rad2deg(ms.angles)]))
@@ -40,7 +41,7 @@ def _campaign_rows(ms) -> tuple[np.ndarray, np.ndarray]:
 def _calibrate_by_program(cell: MetrologyCell, q_cal: np.ndarray, route: bool, name: str):
     base, probe = cell.h4.estimates(np.random.default_rng(1))
     final = cell.activate(
-        "H4", "calibration", f"configs={rows(np.rad2deg(q_cal))}", f"n_configs={len(q_cal)}",
+        "H4", "calibration", f"configs={rows_text(np.rad2deg(q_cal))}", f"n_configs={len(q_cal)}",
         f"base_est={base}", f"probe_est={probe}", "duration_ms=1000",
         f"route={'TRUE' if route else 'FALSE'}", f"identify={IDENTIFY.format(name)}",
         timeout=240)
@@ -74,7 +75,7 @@ def test_example_calibration_and_compensation_on_one_set_of_services(
     twin = RobotTwin(TwinScenario(seed=4, payload_kg=36.0))
     cal, _ = measure_poses(twin, LaserTracker(seed=99), q_cal, rotation="zyz")
     val, _ = measure_poses(twin, LaserTracker(seed=98), q_val, rotation="zyz")
-    vJ, vT = _campaign_rows(val)
+    vJ, vT = _campaign_rows_text(val)
     cell.client.create_process("COMPUTE", "Set Matrix", "vJ", vJ).result()
     cell.client.create_process("COMPUTE", "Set Matrix", "vT", vT).result()
     cell.evaluate("p = load_params('h4'); v = validate(p, vJ, vT, payload=36)")
@@ -95,7 +96,7 @@ def test_example_calibration_and_compensation_on_one_set_of_services(
     # 3. the compensation test of 8.3 on the parameters the program saved
     targets = line_targets(ExperimentConfig.fast(), truth.probe).reshape(-1, 4, 4)
     vectors = np.array([vector_from_matrix(T, "euler") for T in targets])
-    final = cell.activate("H4", "comp_test", f"targets={rows(vectors)}",
+    final = cell.activate("H4", "comp_test", f"targets={rows_text(vectors)}",
                           f"n_targets={len(vectors)}", "params_name=h4", "payload_kg=36",
                           "sensor=TRUE", "nominal=FALSE", timeout=240)
     assert final.state is C, final.reason

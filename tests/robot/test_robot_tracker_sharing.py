@@ -25,9 +25,10 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from metrology_cell import H4, KUKA, SPEED, MetrologyCell, text
+from metrology_cell import H4, KUKA, SPEED, MetrologyCell
 from robot_testlib import Proc, until
 
+from plugcell.controller.value_text import numbers_text
 from plugcell.framework import ProcessStates
 from plugcell.framework.journal import journal_files, read_journal
 from plugcell.metrology import invert_transform
@@ -75,7 +76,7 @@ class Robot:
 
 def home_text(home: np.ndarray) -> str:
     """A joint configuration (rad) as the JOINTPOS text of the ACTIVATE (deg)."""
-    return text(np.rad2deg(home))
+    return numbers_text(np.rad2deg(home))
 
 
 @dataclass
@@ -169,8 +170,8 @@ def check_measurement(robot: Robot, measured: Measured, home: np.ndarray) -> Non
     position_mm = float(np.linalg.norm(got[:3, 3] - expected[:3, 3]) * 1e3)
     dR = got[:3, :3] @ expected[:3, :3].T
     rotation_deg = float(np.rad2deg(np.arccos(np.clip((np.trace(dR) - 1) / 2, -1, 1))))
-    print(f"{robot.name}: measured {text(measured.pose)}; expected "
-          f"{text(vector_from_matrix(expected, 'euler'))}; off by {position_mm:.4f} mm, "
+    print(f"{robot.name}: measured {numbers_text(measured.pose)}; expected "
+          f"{numbers_text(vector_from_matrix(expected, 'euler'))}; off by {position_mm:.4f} mm, "
           f"{rotation_deg:.4f}°")
     assert position_mm < POSITION_TOL_MM, (robot.name, position_mm)
     assert rotation_deg < ROTATION_TOL_DEG, (robot.name, rotation_deg)

@@ -17,6 +17,18 @@ import time
 from collections.abc import Callable
 
 
+def until(predicate: Callable[[], object], timeout: float = 15.0,
+          what: str = "condition") -> object:
+    """Poll (bounded) for a condition another process makes true; its value."""
+    deadline = time.monotonic() + timeout
+    while True:
+        value = predicate()
+        if value:
+            return value
+        assert time.monotonic() < deadline, f"{what} not reached within {timeout:g} s"
+        time.sleep(0.02)
+
+
 def plugcell_argv(*args: str) -> list[str]:
     """Command line of the real CLI: ``python -m plugcell …``."""
     return [sys.executable, "-m", "plugcell", *args]

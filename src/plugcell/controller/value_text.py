@@ -13,6 +13,8 @@ from __future__ import annotations
 
 from typing import Any
 
+import numpy as np
+
 from plugcell.controller.language.types import (
     BOOLEAN,
     INTEGER,
@@ -26,7 +28,7 @@ from plugcell.controller.language.types import (
 )
 from plugcell.controller.protocol import ProtocolError, parse_number
 
-__all__ = ["value_from_text"]
+__all__ = ["numbers_text", "rows_text", "value_from_text"]
 
 
 def _numbers(text: str, what: str) -> list[float]:
@@ -84,3 +86,14 @@ def value_from_text(text: str, t: LangType) -> Any:
             for d in reversed(dims[1:]):
                 items = [items[i : i + d] for i in range(0, len(items), d or 1)]
     return items
+
+
+def numbers_text(values: Any) -> str:
+    """Numbers as a value's text (``1500.000000,0.000000,…``: a POSITION, a JOINTPOS,
+    or the data of an ACTIVATE string); 6 decimals, as WRITE prints a REAL."""
+    return ",".join(f"{v:.6f}" for v in np.ravel(np.asarray(values, dtype=float)))
+
+
+def rows_text(rows: Any) -> str:
+    """Rows of numbers as the text of an ARRAY OF POSITION/JOINTPOS (rows joined by ``;``)."""
+    return ";".join(numbers_text(r) for r in np.atleast_2d(np.asarray(rows, dtype=float)))

@@ -38,6 +38,7 @@ from typing import Any
 
 import numpy as np
 
+from plugcell.controller.value_text import numbers_text, rows_text
 from plugcell.experiments.cell_processes import CellProcesses
 from plugcell.experiments.reproduce_8_3 import ExperimentConfig, line_targets
 from plugcell.framework import BlockingClient, ProcessStates, from_data
@@ -86,14 +87,6 @@ class DemoConfig:
     def fast(cls, seed: int = 0) -> DemoConfig:
         return cls(seed=seed, speed=50.0, calibration_poses=50, validation_poses=20,
                    line_test=ExperimentConfig.fast(), bars=2)
-
-
-def _text(values: Any) -> str:
-    return ",".join(f"{float(v):.6f}" for v in np.ravel(values))
-
-
-def _rows(matrix: Any) -> str:
-    return ";".join(_text(r) for r in np.atleast_2d(matrix))
 
 
 class _Cell:
@@ -245,8 +238,9 @@ def _calibrate(cell: _Cell, cfg: DemoConfig, h4: RobotTwin, rng: np.random.Gener
             f"calibration.pdl on H4, {n} poses, 1 s measurements routed to COMPUTE ==")
         t0 = time.monotonic()
         runs[step] = cell.run("H4", "calibration", {
-            "configs": _rows(np.rad2deg(q)), "n_configs": str(n), "base_est": _text(base),
-            "probe_est": _text(probe), "duration_ms": "1000", "route": "TRUE",
+            "configs": rows_text(np.rad2deg(q)), "n_configs": str(n),
+            "base_est": numbers_text(base), "probe_est": numbers_text(probe),
+            "duration_ms": "1000", "route": "TRUE",
             "identify": identify}, timeout=600 + 10 * n)
         runs[step]["wall_s"] = time.monotonic() - t0
         say(f"   {runs[step]['sim_s']:.0f} s simulated in {runs[step]['wall_s']:.1f} s wall; "
@@ -277,7 +271,7 @@ def _compensate(cell: _Cell, cfg: DemoConfig, probe: np.ndarray, result: dict[st
     say(f"== 2. Two-stage compensation (8.3): comp_test.pdl on H4, {len(targets)} targets ==")
     t0 = time.monotonic()
     run = cell.run("H4", "comp_test", {
-        "targets": _rows(targets), "n_targets": str(len(targets)), "params_name": PARAMS,
+        "targets": rows_text(targets), "n_targets": str(len(targets)), "params_name": PARAMS,
         "payload_kg": f"{PAYLOAD_KG:g}", "sensor": "TRUE", "nominal": "FALSE"},
         timeout=600 + 30 * len(targets))
     model = _pose_stats(cell.matrix("mM@H4"), targets)
@@ -334,7 +328,7 @@ def _demonstrate(cell: _Cell, cfg: DemoConfig, h4_truth: Any, kuka_truth: Any,
         cell.call("COMPUTE", "Evaluate", "",
                   f"corners = {corners}; targets = calc_targets(holes, corners, "
                   f"[0, 0, 0, 0, 0, 0], per_bar={cfg.holes_per_bar}, "
-                  f"normal=[{_text(normal)}])")
+                  f"normal=[{numbers_text(normal)}])")
         targets = cell.matrix("targets")
         probe = matrix_from_vector(cell.matrix("pr")[0], "euler")
     finally:
@@ -345,14 +339,14 @@ def _demonstrate(cell: _Cell, cfg: DemoConfig, h4_truth: Any, kuka_truth: Any,
     say(f"   {n} holes measured, {n} target frames by CalcTarget (COMPUTE)")
     t_start = time.time_ns()
     kuka_call = client.create_process("KUKA", "ACTIVATE", "", [
-        "smr_watch", f"smr={_text(np.r_[kuka_smr * 1e3, 0, 0, 0])}",
-        f"base_est={_text(vector_from_matrix(kuka_truth.base, 'euler'))}", "count=10000",
+        "smr_watch", f"smr={numbers_text(np.r_[kuka_smr * 1e3, 0, 0, 0])}",
+        f"base_est={numbers_text(vector_from_matrix(kuka_truth.base, 'euler'))}", "count=10000",
         f"period_ms={cfg.watch_period_ms}", "duration_ms=200"], timeout=60)
     if kuka_call.result().state is not C:
         raise DemoError(f"KUKA smr_watch: {kuka_call.result().reason}")
     try:
         run = cell.run("H4", "comp_test", {
-            "targets": _rows(targets), "flange_targets": _rows(flange),
+            "targets": rows_text(targets), "flange_targets": rows_text(flange),
             "n_targets": str(n), "params_name": PARAMS, "payload_kg": f"{PAYLOAD_KG:g}",
             "sensor": "TRUE", "nominal": "TRUE"}, timeout=600 + 40 * n)
     finally:
