@@ -42,6 +42,7 @@ def _demo(args: argparse.Namespace) -> int:
     from dataclasses import replace
 
     from plugcell.cli import CommandError
+    from plugcell.commands.progress import ProgressBar
     from plugcell.experiments.demo_services import DemoConfig, DemoError, run_demo
 
     cfg = DemoConfig.fast(args.seed) if args.fast else DemoConfig(seed=args.seed)
@@ -57,7 +58,9 @@ def _demo(args: argparse.Namespace) -> int:
             print(text, file=sys.stderr, flush=True)
 
     try:
-        result = run_demo(cfg, args.out.resolve(), say)
+        stream = sys.stderr if args.json else sys.stdout
+        result = run_demo(cfg, args.out.resolve(), say,
+                          progress=lambda label: ProgressBar(f"   {label}", stream=stream))
     except DemoError as exc:
         raise CommandError(f"demo: {exc}") from None
     report = args.out / "report.html"
@@ -115,9 +118,10 @@ def _plot(result: dict[str, Any], path: Path) -> str | None:
                                        ("demonstration", "8.4: stabiliser holes")),
                                 strict=True):
         for stage, errors in result[key]["errors_mm"].items():
-            ax.plot(range(1, len(errors) + 1), errors, "o-", ms=3, label=stage)
+            ax.plot(range(1, len(errors) + 1), errors, "o-", ms=3, label=stage,
+                    color={"nominal": "C3", "model": "C0", "sensor": "C2"}.get(stage))
         ax.set_yscale("log")
-        ax.axhline(0.1, color="grey", ls=":", lw=1)
+        ax.axhline(0.1, color="grey", ls=":", lw=1, label="0.1 mm")
         ax.set_title(title)
         ax.set_xlabel("target")
         ax.set_ylabel("position error (mm)")

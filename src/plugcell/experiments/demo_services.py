@@ -52,7 +52,10 @@ from plugcell.twin.campaign import working_volume_joints
 from plugcell.twin.robot import RobotTwin
 from plugcell.twin.scenario import TwinScenario
 
-__all__ = ["DemoConfig", "DemoError", "run_demo"]
+__all__ = ["DemoConfig", "DemoError", "ProgressFactory", "run_demo"]
+
+#: ``progress(label)`` → a callable ``(done, total)`` (e.g. :class:`ProgressBar`).
+ProgressFactory = Callable[[str], Callable[[int, int], None]]
 
 C = ProcessStates.Completed
 PARAMS = "h4_36kg"
@@ -92,19 +95,50 @@ class DemoConfig:
 class _Cell:
     """The demo's client: programs, matrices, the journal."""
 
-    def __init__(self, client: BlockingClient, processes: CellProcesses) -> None:
+    def __init__(self, client: BlockingClient, processes: CellProcesses,
+                 progress: ProgressFactory | None = None) -> None:
         self.client = client
         self.processes = processes
+        self.progress = progress
 
-    def run(self, robot: str, program: str, values: dict[str, str], timeout: float) -> dict:
-        final = self.client.create_process(
-            robot, "ACTIVATE", "Wait", [program, *(f"{k}={v}" for k, v in values.items())],
-            timeout=timeout).result()
-        status = self.status(robot)
-        if final.state is not C or status[1] != "FINISHED":
+    def run(self, robot: str, program: str, values: dict[str, str], timeout: float,
+            counted: tuple[str, int] | None = None) -> dict:
+        """Run ``program`` on ``robot`` to its end; progress from the rows of the
+        ``counted`` matrix (``name@ROBOT``, expected rows) while it runs.
+
+        ACTIVATE without Wait completes once the program runs, so the robot service's
+        queue stays free for PROGRAM_STATUS meanwhile."""
+        started = self.client.create_process(
+            robot, "ACTIVATE", "", [program, *(f"{k}={v}" for k, v in values.items())],
+            timeout=60).result()
+        if started.state is not C:
+            raise DemoError(f"{robot} {program}: {started.reason}")
+        bar = (self.progress(f"{robot} {program}") if self.progress and counted else None)
+        deadline = time.monotonic() + timeout
+        shown = -1
+        while True:
+            status = self.status(robot)
+            if status[0].upper() == program.upper() and status[1] != "RUNNING":
+                break
+            if time.monotonic() > deadline:
+                raise DemoError(f"{robot} {program}: still running after {timeout:g} s")
+            if bar is not None and counted is not None:
+                shown = min(self.rows(counted[0]), counted[1])
+                bar(shown, counted[1])
+            time.sleep(0.5)
+        if status[1] != "FINISHED":
             console = "\n   ".join(status[4:][-8:])
-            raise DemoError(f"{robot} {program}: {final.reason or status[1]}\n   {console}")
+            raise DemoError(f"{robot} {program}: {status[1]} {status[3]}\n   {console}")
+        if bar is not None and counted is not None and shown < counted[1]:
+            bar(counted[1], counted[1])
         return {"sim_s": float(status[2]), "console": status[4:]}
+
+    def rows(self, name: str) -> int:
+        """Rows of a workspace matrix (0 while it does not exist)."""
+        final = self.client.create_process("COMPUTE", "Get Matrix", name).result()
+        if final.state is not C or final.data is None:
+            return 0
+        return int(np.atleast_2d(np.asarray(from_data(final.data))).shape[0])
 
     def status(self, robot: str) -> list[str]:
         final = self.client.create_process(robot, "PROGRAM_STATUS").result()
@@ -162,7 +196,8 @@ def _stabiliser(desc_probe: np.ndarray, bars: int, per_bar: int,
     return holes, placed, R[:, 2]
 
 
-def run_demo(cfg: DemoConfig, out: Path, say: Callable[[str], None]) -> dict[str, Any]:
+def run_demo(cfg: DemoConfig, out: Path, say: Callable[[str], None],
+             progress: ProgressFactory | None = None) -> dict[str, Any]:
     """Run the three steps over service processes; the result table (also in out/)."""
     out.mkdir(parents=True, exist_ok=True)
     home = out / "home"
@@ -192,7 +227,7 @@ def run_demo(cfg: DemoConfig, out: Path, say: Callable[[str], None]) -> dict[str
         procs.serve("controller", "CONTROLLER", wiring=wiring)
         procs.wait_ready()
         with BlockingClient("DEMO", cell=cell_name) as client:
-            cell = _Cell(client, procs)
+            cell = _Cell(client, procs, progress)
             _wait_wired(client)
             say("   wired by the controller from the cell file: H4, KUKA → TRACKER, COMPUTE")
             _calibrate(cell, cfg, h4, rng, result, say)
@@ -241,7 +276,7 @@ def _calibrate(cell: _Cell, cfg: DemoConfig, h4: RobotTwin, rng: np.random.Gener
             "configs": rows_text(np.rad2deg(q)), "n_configs": str(n),
             "base_est": numbers_text(base), "probe_est": numbers_text(probe),
             "duration_ms": "1000", "route": "TRUE",
-            "identify": identify}, timeout=600 + 10 * n)
+            "identify": identify}, timeout=600 + 10 * n, counted=("mJ@H4", n))
         runs[step]["wall_s"] = time.monotonic() - t0
         say(f"   {runs[step]['sim_s']:.0f} s simulated in {runs[step]['wall_s']:.1f} s wall; "
             f"{next((c for c in runs[step]['console'] if c.startswith('serial')), '')}")
@@ -273,7 +308,7 @@ def _compensate(cell: _Cell, cfg: DemoConfig, probe: np.ndarray, result: dict[st
     run = cell.run("H4", "comp_test", {
         "targets": rows_text(targets), "n_targets": str(len(targets)), "params_name": PARAMS,
         "payload_kg": f"{PAYLOAD_KG:g}", "sensor": "TRUE", "nominal": "FALSE"},
-        timeout=600 + 30 * len(targets))
+        timeout=600 + 30 * len(targets), counted=("mS@H4", len(targets)))
     model = _pose_stats(cell.matrix("mM@H4"), targets)
     sensor = _pose_stats(cell.matrix("mS@H4"), targets)
     iterations = cell.matrix("mI@H4").ravel()
@@ -348,7 +383,7 @@ def _demonstrate(cell: _Cell, cfg: DemoConfig, h4_truth: Any, kuka_truth: Any,
         run = cell.run("H4", "comp_test", {
             "targets": rows_text(targets), "flange_targets": rows_text(flange),
             "n_targets": str(n), "params_name": PARAMS, "payload_kg": f"{PAYLOAD_KG:g}",
-            "sensor": "TRUE", "nominal": "TRUE"}, timeout=600 + 40 * n)
+            "sensor": "TRUE", "nominal": "TRUE"}, timeout=600 + 40 * n, counted=("mN@H4", n))
     finally:
         watch_final = client.create_process("KUKA", "DEACTIVATE", "", ["smr_watch"],
                                             timeout=30).result()
