@@ -26,6 +26,8 @@ def test_demo_fast_runs_the_three_steps_over_services(tmp_path: Path) -> None:
     r = json.loads(proc.stdout)
     assert "1. Calibration" in proc.stderr  # progress goes to stderr with --json
     c, k, d = r["calibration"], r["compensation"], r["demonstration"]
+    print(json.dumps({"calibration": c, "compensation": k, "demonstration": d}, indent=1,
+                     default=float)[:4000])  # shown when an assertion below fails
     # 8.2: model 5 identified from the program's measurements, checked on other poses
     assert c["validation"]["before_mean_mm"] > 1.0
     assert c["validation"]["mean_mm"] < 0.3

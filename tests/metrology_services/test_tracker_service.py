@@ -117,25 +117,35 @@ def test_two_robots_with_their_own_base_and_probe_get_their_own_measurements(cel
     run(body())
 
 
-def test_a_robot_whose_beam_another_robot_took_is_told_to_move_again(cell, world):
-    """The beam is locked for the last Move's requester: a measurement by another robot
-    would measure the wrong reflector, so it is refused with the reason (7.4)."""
+def test_a_robot_whose_beam_another_robot_took_is_measured_not_the_other(cell, world):
+    """The beam is locked for the last Move's requester.  A measurement by another
+    robot aims the beam back where that robot's own last Move put it, so it measures
+    its own reflector — never the other robot's — and two robots taking turns cannot
+    starve each other by stealing the beam (7.4, 8.4.3)."""
     world(cell.name, "TMAC_A").publish(reflector(BASE_A, POSE_A, PROBE_A))
     world(cell.name, "TMAC_B").publish(reflector(BASE_B, POSE_B, PROBE_B))
 
     async def body():
-        async with Client("KUKA_A", cell=cell.name) as a, Client("COMAU_B", cell=cell.name) as b:
+        async with Client("KUKA_A", cell=cell.name) as a, Client("COMAU_B", cell=cell.name) as b, \
+                Client("NEWCOMER", cell=cell.name) as c:
             assert await a.wait_for("TRACKER") and await b.wait_for("TRACKER")
             await setup_robot(a, BASE_A, PROBE_A, POSE_A)
             await setup_robot(b, BASE_B, PROBE_B, POSE_B)  # B took the beam
-            for command, data in (("Single Measurement", 50), ("Continuous Measurement", 50)):
-                final = await (await a.create_process("TRACKER", command, "tr2euler", data,
-                                                      timeout=30)).result()
-                assert final.state is F
-                assert final.reason == (f"{command}: the beam was pointed for COMAU_B after "
-                                        "KUKA_A's last Move; send Move again")
-            await ok(a, "Move", "", POSE_A)
             assert_pose(await ok(a, "Single Measurement", "tr2euler", 50), POSE_A)
+            assert_pose(await ok(b, "Single Measurement", "tr2euler", 50), POSE_B)
+            stream = await a.create_process("TRACKER", "Continuous Measurement", "tr2euler",
+                                            20, timeout=30)
+            first = await anext(aiter(stream))
+            while first.data is None:
+                first = await anext(aiter(stream))
+            assert_pose(ProcessCall.array(first), POSE_A)
+            await ok(a, "Stop Measurement")
+            # a requester that never moved the beam is not given someone else's reflector
+            final = await (await c.create_process("TRACKER", "Single Measurement", "tr2euler",
+                                                  50, timeout=30)).result()
+            assert final.state is F
+            assert final.reason == ("Single Measurement: the beam is pointed for KUKA_A; "
+                                    "send Move first")
 
     run(body())
 

@@ -150,6 +150,8 @@ class TrackerService(RoutedDevice):
         """BASE, PROBE and angle convention of each requester (robot) by name."""
         self.beam_for: str | None = None
         """The requester whose Move the beam is locked for (None: no Move yet)."""
+        self.aims: dict[str, np.ndarray] = {}
+        """Where each requester's last successful Move aimed the beam (tracker frame, m)."""
         self._stream: asyncio.Task[None] | None = None
 
     # -- connection -----------------------------------------------------------------------
@@ -193,17 +195,19 @@ class TrackerService(RoutedDevice):
                 case "Move":
                     target = self.frames_of(self.requester).reflector(data, option)
                     self.beam_for = None
+                    self.aims.pop(self.requester, None)
                     await self.driver.point(target[:3, 3])
                     self.beam_for = self.requester
+                    self.aims[self.requester] = target[:3, 3]
                 case "Single Measurement":
-                    self._check_beam(command)
+                    await self._reaim()
                     duration = _milliseconds(data, "duration", 1)
                     frames = self.frames_of(self.requester)
                     frames.output_convention(option)  # refuse a bad option before measuring
                     reading = await self.driver.measure(duration)
                     self.data_feedback.post(frames.measurement(reading.pose, option))
                 case "Continuous Measurement":
-                    self._check_beam(command)
+                    await self._reaim()
                     interval = _milliseconds(data, "interval", MIN_INTERVAL_MS)
                     frames = self.frames_of(self.requester)
                     frames.output_convention(option)
@@ -221,14 +225,20 @@ class TrackerService(RoutedDevice):
             raise DeviceError(str(exc)) from None
         return "OK"
 
-    def _check_beam(self, command: Command) -> None:
-        """Measure only the reflector the requester's own Move locked on (7.4): if another
-        requester's Move took the beam since, refuse with the reason — the requester's
-        program Moves again (``compensation.pdl``'s MEASURE does)."""
+    async def _reaim(self) -> None:
+        """Measure only the reflector of the requester's own Move (7.4).  If another
+        requester's Move took the beam since, aim it back where this requester's last
+        Move put it first — one robot's measurement never measures another's reflector,
+        and two robots taking turns cannot starve each other."""
         owner = self.beam_for
-        if owner is not None and owner != self.requester:
-            raise DeviceError(f"the beam was pointed for {owner} after "
-                              f"{self.requester}'s last Move; send Move again")
+        if owner is None or owner == self.requester:
+            return
+        aim = self.aims.get(self.requester)
+        if aim is None:
+            raise DeviceError(f"the beam is pointed for {owner}; send Move first")
+        self.beam_for = None
+        await self.driver.point(aim)  # BeamNotLockedError: the reflector is not there now
+        self.beam_for = self.requester
 
     async def _measure_continuously(self, frames: RequesterFrames, option: str,
                                     interval_s: float) -> None:
