@@ -148,7 +148,7 @@ def test_the_documented_policy_is_valid() -> None:
     assert block is not None
     text = "\n".join(line.removeprefix("   ") for line in block.group(1).splitlines())
     p = AccessPolicy.from_mapping(tomllib.loads(text), "docs/security.md")
-    assert p.identity == "tls" and p.default == "deny"
+    assert p.identity == "signed" and p.default == "deny"
     assert p.decide("create", "ROBOT1", "TRACKER", "Move", role="service") == ""
     assert p.decide("create", "ROBOT1", "TRACKER", "Move", role="client") != ""
     assert p.decide("create", "TRACKER", "COMPUTE", "Evaluate", role="service") == ""

@@ -57,6 +57,7 @@ from plugcell.framework.model import (
 )
 from plugcell.framework.port import Port
 from plugcell.framework.process_call import ProcessCall
+from plugcell.framework.signing import RequestSigner, is_request
 from plugcell.framework.transport import TransportConfig, open_session
 
 log = logging.getLogger("plugcell.framework")
@@ -133,6 +134,9 @@ class Participant:
         self._watchers: set[asyncio.Queue[PresenceEvent]] = set()
         self._closed = False
         self._started = False
+        self.signer: RequestSigner | None = None
+        """Signs this participant's requests (set at :meth:`start` from the transport's
+        certificate and key, unless set before; docs/security.md, "Signed requests")."""
 
     # -- life cycle ----------------------------------------------------------------------
 
@@ -140,6 +144,14 @@ class Participant:
         """Open the session, watch presence, declare what a subclass needs, then go live."""
         self._loop = asyncio.get_running_loop()
         self._port = Port(self._loop)
+        if self.signer is None:
+            self.signer = RequestSigner.from_transport(self.transport)
+            if self.signer is not None and self.signer.name != self.name:
+                log.warning(
+                    "%s: signing requests with the certificate of %s: services that check "
+                    "signatures will refuse them (give this participant the name %s)",
+                    self.name, self.signer.name, self.signer.name,
+                )
         self._pump_task = asyncio.create_task(self._pump(), name=f"{self.name}-pump")
         self.session = await asyncio.to_thread(open_session, self.transport)
         # incarnation id: start time first, so instances of one name order by age
@@ -230,11 +242,30 @@ class Participant:
                 except Exception:  # a bad message must not stop the participant
                     log.exception("%s: error handling %s", self.name, handler.__name__)
 
-    def _encode(self, body: Message) -> bytes:
+    def _encode(self, body: Message, to: str = "") -> bytes:
+        """The envelope of ``body``; a request to service ``to`` is signed when this
+        participant has a :attr:`signer` (bound to ``to``'s instance when it is known)."""
+        if to and self.signer is not None and is_request(body):
+            sign = self.signer.signer(self.keys.cell, to, self._instance_of(to))
+            return wire.encode(self.name, self.instance, body, sign)
         return wire.encode(self.name, self.instance, body)
 
+    def _instance_of(self, service: str) -> str:
+        """The one live instance of ``service`` known here (else ``""``: any)."""
+        live = self.alive.get(("service", service), set())
+        partner = self.partners.get(service)
+        if partner is not None and live == {partner.instance}:
+            return partner.instance
+        return next(iter(live)) if len(live) == 1 and partner is None else ""
+
     async def _query(
-        self, key: str, body: Message | None, timeout: float, *, everyone: bool = False
+        self,
+        key: str,
+        body: Message | None,
+        timeout: float,
+        *,
+        everyone: bool = False,
+        to: str = "",
     ) -> list[wire.Envelope | str]:
         """Send one Zenoh query; each reply decoded, or the error text of a bad one."""
         assert self.session is not None and self._loop is not None
@@ -242,7 +273,7 @@ class Participant:
         self.session.get(
             key,
             self._query_callback(pending),
-            payload=self._encode(body) if body is not None else None,
+            payload=self._encode(body, to) if body is not None else None,
             timeout=timeout,
             target=zenoh.QueryTarget.ALL if everyone else zenoh.QueryTarget.BEST_MATCHING,
             consolidation=zenoh.QueryConsolidation(zenoh.ConsolidationMode.NONE),
@@ -437,7 +468,7 @@ class Participant:
         body: Message = (
             SubscribeRequest(partner=partner) if subscribe else UnsubscribeRequest(partner=partner)
         )
-        replies = await self._query(self.keys.subscribe(service), body, timeout)
+        replies = await self._query(self.keys.subscribe(service), body, timeout, to=service)
         for reply in replies:
             if isinstance(reply, wire.Envelope) and isinstance(reply.body, SubscribeResponse):
                 return reply.body
@@ -485,7 +516,7 @@ class Participant:
         self.session.get(
             self.keys.create(partner),
             self._ack_callback(call, pending),
-            payload=self._encode(process),
+            payload=self._encode(process, to=partner),
             timeout=timeout,
         )
         await call.acknowledged()

@@ -13,12 +13,19 @@ Two layers (docs/security.md):
   consults before a process enters its queue (``CreateProcess``) and before it
   accepts a wiring request (``Subscribe``/``Unsubscribe``).  A refusal is journaled
   with its reason (the process is acknowledged ``Failed: access denied: …``).
+  Who the sender is comes from the request's signature (``identity = "signed"``,
+  :mod:`~.signing`, any network path), from the TLS link it came over
+  (``identity = "tls"``, direct peers only) or from its claim (``"none"``).
 
 The policy file (TOML, ``PLUGCELL_ACL`` or ``GenericDevice(access=...)``)::
 
     default = "deny"          # what happens when no rule matches ("allow" | "deny")
-    identity = "tls"          # "tls": the Tag's sender must be the certificate CN of
-                              # the link the request's instance came over; "none"
+    identity = "signed"       # "signed": every request must be signed by the Tag's
+                              # sender (certificate of the cell's CA, CN = sender),
+                              # whatever the path; "tls": the Tag's sender must be the
+                              # certificate CN of the link the request's instance came
+                              # over (direct peers only); "none"
+    signature_window = 30     # seconds: accepted clock difference of a signed request
 
     [[rule]]                  # first matching rule wins
     effect = "allow"          # "allow" | "deny"
@@ -45,6 +52,7 @@ if TYPE_CHECKING:  # pragma: no cover
     from plugcell.framework.wire import Envelope
 
 ACTIONS = ("create", "wire")
+IDENTITIES = ("none", "tls", "signed")
 ENV_ACL = "PLUGCELL_ACL"
 
 
@@ -202,6 +210,9 @@ class AccessPolicy:
     rules: tuple[Rule, ...] = ()
     default: str = "allow"
     identity: str = "none"
+    signature_window: float = 30.0
+    """With ``identity = "signed"``: the accepted difference, in seconds, between a
+    request's timestamp and the service's clock (and how long nonces are kept)."""
     source: str = field(default="", compare=False)
 
     # construction ------------------------------------------------------------------
@@ -212,15 +223,26 @@ class AccessPolicy:
 
     @classmethod
     def from_mapping(cls, data: Mapping[str, Any], source: str = "policy") -> AccessPolicy:
-        unknown = set(data) - {"default", "identity", "rule"}
+        unknown = set(data) - {"default", "identity", "signature_window", "rule"}
         if unknown:
             raise PolicyError(f"{source}: unknown keys {sorted(unknown)}")
         default = data.get("default", "deny")
         if default not in ("allow", "deny"):
             raise PolicyError(f"{source}: default must be 'allow' or 'deny', got {default!r}")
         identity = data.get("identity", "none")
-        if identity not in ("none", "tls"):
-            raise PolicyError(f"{source}: identity must be 'none' or 'tls', got {identity!r}")
+        if identity not in IDENTITIES:
+            raise PolicyError(
+                f"{source}: identity must be 'none', 'tls' or 'signed', got {identity!r}"
+            )
+        window = data.get("signature_window", 30.0)
+        if (
+            isinstance(window, bool)
+            or not isinstance(window, int | float)
+            or not 0 < window <= 3600
+        ):
+            raise PolicyError(
+                f"{source}: signature_window must be seconds in (0, 3600], got {window!r}"
+            )
         raw = data.get("rule", [])
         if not isinstance(raw, list):
             raise PolicyError(f"{source}: 'rule' must be an array of tables ([[rule]])")
@@ -230,7 +252,8 @@ class AccessPolicy:
             else _raise(f"{source}: rule {i + 1} is not a table")
             for i, r in enumerate(raw)
         )
-        return cls(rules=rules, default=default, identity=identity, source=source)
+        return cls(rules=rules, default=default, identity=identity,
+                   signature_window=float(window), source=source)
 
     @classmethod
     def load(cls, path: str | Path) -> AccessPolicy:
@@ -267,25 +290,83 @@ class AccessPolicy:
             return ""
         return _denied(action, sender, service, command, "no rule allows it")
 
-    def check_create(self, service: GenericDevice, envelope: Envelope, process: Process) -> str:
-        """The hook :class:`GenericDevice` calls before queueing a process."""
-        sender, command = process.tag.sender, process.command.name
-        reason = self.check_identity(service, sender, envelope.instance)
-        if reason:
-            return reason
-        return self.decide("create", sender, service.name, command, _role(service, sender))
+    def authenticate(
+        self,
+        service: GenericDevice,
+        envelope: Envelope,
+        payload: bytes | bytearray | memoryview | None = None,
+    ) -> str:
+        """Is the envelope's sender who sent it (``identity``)?  ``""`` if so (or if the
+        policy does not ask), else the reason; ``payload``: the request's bytes, which
+        ``identity = "signed"`` needs.  A service calls this first and journals a
+        refusal as a rejection (nothing is recorded under the claimed sender's name)."""
+        return self.check_identity(service, envelope.sender, envelope.instance, envelope, payload)
 
-    def check_wire(self, service: GenericDevice, envelope: Envelope, partner: str) -> str:
-        """The hook :class:`GenericDevice` calls before a Subscribe/Unsubscribe."""
+    def authorize_create(self, service: GenericDevice, envelope: Envelope,
+                         process: Process) -> str:
+        """May the (authenticated) sender run this process here?  ``""`` or the reason."""
+        sender = process.tag.sender
+        return self.decide("create", sender, service.name, process.command.name,
+                           _role(service, sender))
+
+    def authorize_wire(self, service: GenericDevice, envelope: Envelope, partner: str) -> str:
+        """May the (authenticated) sender wire this service to ``partner``?"""
         sender = envelope.sender
-        reason = self.check_identity(service, sender, envelope.instance)
-        if reason:
-            return reason
         return self.decide("wire", sender, service.name, partner, _role(service, sender))
 
-    def check_identity(self, service: GenericDevice, sender: str, instance: str) -> str:
-        """With ``identity = "tls"``: the claimed sender must be the certificate CN of
-        the link to the Zenoh session its instance names (peer mode, mTLS)."""
+    def check_create(
+        self,
+        service: GenericDevice,
+        envelope: Envelope,
+        process: Process,
+        payload: bytes | bytearray | memoryview | None = None,
+    ) -> str:
+        """:meth:`authenticate` then :meth:`authorize_create` in one call."""
+        return self.authenticate(service, envelope, payload) or self.authorize_create(
+            service, envelope, process
+        )
+
+    def check_wire(
+        self,
+        service: GenericDevice,
+        envelope: Envelope,
+        partner: str,
+        payload: bytes | bytearray | memoryview | None = None,
+    ) -> str:
+        """:meth:`authenticate` then :meth:`authorize_wire` in one call."""
+        return self.authenticate(service, envelope, payload) or self.authorize_wire(
+            service, envelope, partner
+        )
+
+    def check_identity(
+        self,
+        service: GenericDevice,
+        sender: str,
+        instance: str,
+        envelope: Envelope | None = None,
+        payload: bytes | bytearray | memoryview | None = None,
+    ) -> str:
+        """Is the claimed sender the one who sent the request?
+
+        ``identity = "tls"``: the sender must be the certificate CN of the link to the
+        Zenoh session its instance names (peer mode, mTLS).  ``identity = "signed"``:
+        the request must carry a valid signature of the sender
+        (:meth:`~.signing.RequestVerifier.verify`, the service's verifier).
+        """
+        if self.identity == "signed":
+            if envelope is None:
+                return f"access denied: request of {sender} not signed"
+            try:
+                verifier = service.request_verifier()
+            except ValueError as exc:  # no CA configured (SigningError)
+                return f"access denied: cannot verify signed requests: {exc}"
+            return verifier.verify(
+                envelope,
+                payload,
+                cell=service.keys.cell,
+                recipient=service.name,
+                recipient_instance=service.instance,
+            )
         if self.identity != "tls":
             return ""
         session = service.session
@@ -325,6 +406,7 @@ def _denied(action: str, sender: str, service: str, command: str, why: str) -> s
 
 __all__ = [
     "ENV_ACL",
+    "IDENTITIES",
     "AccessPolicy",
     "PolicyError",
     "Rule",

@@ -76,6 +76,7 @@ from plugcell.framework.model import (
 from plugcell.framework.participant import Participant, PartnerError
 from plugcell.framework.processqueue import Entry, ProcessQueue
 from plugcell.framework.security import AccessPolicy
+from plugcell.framework.signing import RequestVerifier, SigningError
 from plugcell.framework.transport import TransportConfig
 
 log = logging.getLogger("plugcell.framework.service")
@@ -242,6 +243,8 @@ class GenericDevice(Participant):
     async def _declare(self) -> None:
         """Refuse a duplicate name, open the journal, declare the Generic Interface."""
         assert self.session is not None
+        if self.access.identity == "signed":
+            self.request_verifier()  # no CA: refuse to start, with the reason
         if await self._query_live_instances() or self.alive.get(("service", self.name)):
             raise PartnerError(
                 f"a service named {self.name} is already running in cell {self.keys.cell!r}"
@@ -365,7 +368,8 @@ class GenericDevice(Participant):
     def _on_get(self, query: zenoh.Query) -> None:
         self._reply(query, self.generic_state())
 
-    def _decode_query(self, query: zenoh.Query) -> wire.Envelope | str:
+    def _decode_query(self, query: zenoh.Query) -> tuple[wire.Envelope, bytes] | str:
+        """The request of ``query`` and its bytes (a signature covers them), or why not."""
         payload = query.payload
         size = len(payload) if payload is not None else 0
         if size == 0:
@@ -375,16 +379,33 @@ class GenericDevice(Participant):
                 f"payload of {size} bytes exceeds the limit of {self.max_payload} bytes "
                 f"of {self.name}"
             )
+        raw = payload.to_bytes()  # type: ignore[union-attr]
         try:
-            return wire.decode(payload.to_bytes(), self.max_payload)  # type: ignore[union-attr]
+            return wire.decode(raw, self.max_payload), raw
         except wire.WireError as exc:
             return str(exc)
 
+    def request_verifier(self) -> RequestVerifier:
+        """The checker of signed requests (``identity = "signed"``), from the cell's CA
+        of this service's transport (``PLUGCELL_TLS_CA``/``PLUGCELL_TLS_DIR``)."""
+        window = self.access.signature_window
+        verifier = getattr(self, "_request_verifier", None)
+        if verifier is None or verifier.window_s != window:
+            if not self.transport.tls_ca:
+                raise SigningError(
+                    f"{self.name}: identity = 'signed' needs the cell's CA "
+                    "(PLUGCELL_TLS_CA or PLUGCELL_TLS_DIR)"
+                )
+            verifier = RequestVerifier.load(self.transport.tls_ca, window)
+            self._request_verifier = verifier
+        return verifier
+
     def _on_subscribe(self, query: zenoh.Query) -> None:
-        envelope = self._decode_query(query)
-        if isinstance(envelope, str):
-            self._reply(query, SubscribeResponse(ok=False, reason=envelope))
+        decoded = self._decode_query(query)
+        if isinstance(decoded, str):
+            self._reply(query, SubscribeResponse(ok=False, reason=decoded))
             return
+        envelope, raw = decoded
         body = envelope.body
         if not isinstance(body, SubscribeRequest | UnsubscribeRequest):
             self._reply(
@@ -394,7 +415,7 @@ class GenericDevice(Participant):
                 ),
             )
             return
-        refused = self.access.check_wire(self, envelope, body.partner)
+        refused = self.access.check_wire(self, envelope, body.partner, raw)  # journaled below
         if refused:
             with contextlib.suppress(Exception):
                 what = type(body).__name__
@@ -427,14 +448,15 @@ class GenericDevice(Participant):
         received = time.time_ns()
         payload = query.payload
         size = len(payload) if payload is not None else 0
-        envelope = (
+        decoded = (
             self._decode_query(query)
             if not self._closing
             else f"{self.name}: service shutting down"
         )
-        if isinstance(envelope, str):
-            self._reject(query, envelope, size)
+        if isinstance(decoded, str):
+            self._reject(query, decoded, size)
             return
+        envelope, raw = decoded
         process = envelope.body
         if not isinstance(process, Process):
             self._reject(
@@ -442,9 +464,13 @@ class GenericDevice(Participant):
             )
             return
         sender, identifier = process.tag.sender, process.identifier
+        unauthenticated = self.access.authenticate(self, envelope, raw)
+        if unauthenticated:  # a rejection: nothing is recorded under the claimed name
+            self._reject(query, unauthenticated, size, sender, identifier, process.command.name)
+            return
         reason = self._check_process(envelope, process)
         if not reason:  # access control: refusals are journaled below with the reason
-            reason = self.access.check_create(self, envelope, process)
+            reason = self.access.authorize_create(self, envelope, process)
         command = self.device.command(process.command.name)
         array = None
         if not reason and command is not None:

@@ -23,6 +23,8 @@ mutual authentication (``PLUGCELL_MTLS=0`` for server-side only);
 ``DIR/<name>.pem``, ``DIR/<name>.key`` (:meth:`TransportConfig.for_participant`).
 ``PLUGCELL_CELL_NAMES`` (the certificates' CNs) adds Zenoh access control so that
 no peer can speak as another.
+A participant with a certificate and key also signs its requests
+(:mod:`~plugcell.framework.signing`; ``PLUGCELL_SIGN=0`` to stop).
 ``PLUGCELL_USER``, ``PLUGCELL_PASSWORD`` and ``PLUGCELL_USERS_FILE`` add Zenoh's
 user/password authentication.  With neither, the embedded default is unchanged.
 """
@@ -73,6 +75,9 @@ class TransportConfig:
     cell_names: tuple[str, ...] = ()
     """With TLS: the cell's certificate CNs → Zenoh ACL against impersonation
     (:func:`~plugcell.framework.security.zenoh_acl`)."""
+    sign_requests: bool = True
+    """With a certificate and key: sign every request (:mod:`~plugcell.framework.signing`;
+    ``PLUGCELL_SIGN=0`` turns it off)."""
 
     @property
     def secure(self) -> bool:
@@ -173,6 +178,8 @@ def _security_from_env(cfg: TransportConfig) -> TransportConfig:
         changes["cell_names"] = _split(env.get("PLUGCELL_CELL_NAMES"))
     if env.get("PLUGCELL_MTLS", "1") in ("0", "false", "no"):
         changes["mtls"] = False
+    if env.get("PLUGCELL_SIGN", "1") in ("0", "false", "no"):
+        changes["sign_requests"] = False
     if changes.get("tls_dir") and not changes.get("tls_ca"):
         changes["tls_ca"] = os.path.join(os.path.abspath(str(changes["tls_dir"])), "ca.pem")
     return replace(cfg, **changes)  # type: ignore[arg-type]
