@@ -2,9 +2,10 @@
 
     .venv/bin/python benchmarks/run_all.py [--full]
 
-Without ``--full`` the transport benchmark runs in its quick mode and the
-calibration scaling stops at 10 000 poses, so the whole run takes a few
-minutes on 2 cores.  Speed is measured here, never asserted in tests.
+Without ``--full`` the transport benchmark runs in its quick mode, the
+calibration scaling stops at 10 000 poses and the web API fuzz sends 20 000
+requests (not 100 000), so the whole run takes a few minutes on 2 cores.  Speed
+is measured here, never asserted in tests.
 """
 
 from __future__ import annotations
@@ -28,6 +29,10 @@ def main(argv: list[str]) -> int:
          [*plugcell, "bench", "calibration", "--max-poses", "100000" if full else "10000"]),
         ("compensation (thesis 6.5.1)", [*plugcell, "bench", "compensation"]),
         ("wire decoder fuzz", [sys.executable, str(HERE / "fuzz_wire.py")]),
+        ("signed requests (cost)", [sys.executable, str(HERE / "signing.py"),
+                                    *(["--fuzz", "100000"] if full else [])]),
+        ("web API fuzz",
+         [sys.executable, str(HERE / "fuzz_web.py"), *([] if full else ["--cases", "20000"])]),
     ]
     print(f"machine: {platform.machine()}, {platform.processor() or 'cpu'}, "
           f"Python {platform.python_version()}, {platform.system()} {platform.release()}")

@@ -31,7 +31,7 @@ def docs(tmp_path_factory: pytest.TempPathFactory) -> Path:
 def client(module_cell: str, launcher: Any, docs: Path) -> Iterator[TestClient]:
     launcher.serve("drill", module_cell, "--param", "time_scale=0.001")
     launcher.serve("camera", module_cell, "--param", "time_scale=0.001")
-    launcher.serve("robot", module_cell, "--param", "sim=true", name="R1")
+    launcher.serve("robot", module_cell, "--param", "sim=true", "--param", "speed=50", name="R1")
     with make_client(module_cell, docs, [docs / "report.html"]) as c:
         until(lambda: services(c), lambda s: {"TOOL", "CAMERA", "R1"} <= {
             n for n, v in s.items() if v["alive"] and v["commands"]}
@@ -125,6 +125,8 @@ def test_a_robot_program_runs_and_its_processes_are_monitored(client: TestClient
                  lambda s: any(r["id"] == run["id"] and r["state"] != "Running" for r in s["runs"]))
     done = next(r for r in snap["runs"] if r["id"] == run["id"])
     assert done["state"] == "Completed", done
+    item = done["items"][0]  # how the program ended: the robot's PROGRAM_STATUS
+    assert item["programState"] == "FINISHED" and item["simS"] > 0, item
     until(lambda: client.get("/api/snapshot").json()["processes"],
           lambda ps: {("R1", "TOOL", "Drill", "Completed"),
                       ("R1", "CAMERA", "SnapShot", "Completed"),
@@ -134,6 +136,33 @@ def test_a_robot_program_runs_and_its_processes_are_monitored(client: TestClient
     assert {"example", "calibration"} <= {p["name"] for p in programs}
     assert "PROGRAM" in client.get("/api/programs/example").text.upper()
     assert client.get("/api/programs/nothing").status_code == 404
+
+
+def test_a_program_gets_its_values(client: TestClient) -> None:
+    """The EXAMPLE's taught points come with the ACTIVATE (docs/robot-programs.md)."""
+    post = lambda items: client.post("/api/runs", headers=HEADERS, json={"items": items}).json()  # noqa: E731
+
+    def ended(run: dict[str, Any]) -> dict[str, Any]:
+        snap = until(lambda: client.get("/api/snapshot").json(), lambda s: any(
+            r["id"] == run["id"] and r["state"] != "Running" for r in s["runs"]))
+        return next(r for r in snap["runs"] if r["id"] == run["id"])
+
+    points = ["pnt0001=1500,0,1300,0,90,0", "pnt0002 = 1500,200,1000,0,90,0"]
+    done = ended(post([{"robot": "R1", "program": "example", "values": points}])["run"])
+    assert done["state"] == "Completed", done
+    assert done["items"][0]["values"] == 2 and done["items"][0]["programState"] == "FINISHED"
+    # the controller's Run command's form: values follow their program
+    assert ended(post(["R1:example", *points])["run"])["state"] == "Completed"
+    # without them the program fails, and says why
+    bare = ended(post([{"robot": "R1", "program": "example"}])["run"])
+    assert bare["state"] == "Failed" and "pnt0001" in bare["items"][0]["reason"], bare
+    # bad values are refused before anything runs
+    for values, words in ((["pnt0001"], "value 1 'pnt0001': expected name=value"),
+                          (["1x=2"], "expected name=value"), ("a=1", "values are"),
+                          (["a=1\nb=2"], "line break"), ({"a": [1]}, "text or a number")):
+        bad = post([{"robot": "R1", "program": "example", "values": values}])
+        assert bad["ok"] is False and words in bad["errors"]["items"], (values, bad)
+    assert post([{"robot": "R1", "program": "example", "values": {"n": 3, "s": "x"}}])["ok"]
 
 
 def test_wiring_is_saved_downloaded_and_loaded(client: TestClient, tmp_path: Path) -> None:

@@ -107,3 +107,39 @@ def test_residual_views_answer_every_body(client: TestClient, body: dict[str, An
     else:
         assert set(answer["errors"]) <= {"document", "matrix", "service", "name", "workspace",
                                          "_"}
+
+
+LIVE_FIELDS = {"robot", "tracker", "compute", "reflectors", "base_est", "duration_ms", "matrix",
+               "timeout", "joints", "sweep", "line", "_"}
+SIX = st.lists(NUMBER, min_size=3, max_size=6)
+
+
+@SETTINGS
+@given(body=st.fixed_dictionaries({
+    "reflectors": st.lists(SIX, min_size=1, max_size=3) | JSON,
+    "base_est": st.lists(NUMBER, min_size=6, max_size=6) | JSON,
+}, optional={
+    "robot": st.sampled_from(["TOOL", "GHOST", ""]) | JSON,
+    "duration_ms": st.integers(-5, 70_000) | JSON, "matrix": st.sampled_from(["pts", "1x"]) | JSON,
+    "timeout": NUMBER | JSON, "joints": st.lists(NUMBER, max_size=11) | JSON,
+    "sweep": st.fixed_dictionaries({"joint": st.integers(-1, 12) | JSON, "from": NUMBER | JSON,
+                                    "to": NUMBER | JSON, "count": st.integers(-1, 120) | JSON})
+    | JSON,
+    "line": st.fixed_dictionaries({"axis": st.sampled_from(["x", "q"]) | JSON,
+                                   "length": NUMBER | JSON, "count": st.integers(-1, 120)})
+    | JSON}))
+def test_live_wizard_steps_answer_every_body(client: TestClient, body: dict[str, Any]) -> None:
+    """No robot here: every body is refused, each with the field it concerns."""
+    answer = answered(send(client, "/api/wizard/live", body))
+    assert answer["ok"] is False and set(answer["errors"]) <= LIVE_FIELDS, answer
+
+
+@SETTINGS
+@given(values=st.lists(st.text(max_size=12) | st.sampled_from(["a=1", "b = 2", "=3", "x"]),
+                       max_size=5) | st.dictionaries(st.text(max_size=4), JSON, max_size=3)
+       | JSON)
+def test_run_values_answer_every_body(client: TestClient, values: Any) -> None:
+    answer = answered(send(client, "/api/runs", {
+        "items": [{"robot": "GHOST", "program": "example", "values": values}]}))
+    if not answer["ok"]:
+        assert set(answer["errors"]) == {"items"}

@@ -57,8 +57,7 @@ from plugcell.services.controller_runs import (
     MODES,
     ProgramRun,
     RunError,
-    RunItem,
-    parse_run_items,
+    parse_runs,
     run_programs,
 )
 from plugcell.services.controller_tasks import CheckedTask, describe_command
@@ -554,22 +553,22 @@ class CellController(GenericDevice):
         finally:
             self.tasks.pop(task_id, None)
 
-    async def fetch(self, partner: str, command: str, option: str = "", *,
+    async def fetch(self, partner: str, command: str, option: str = "", data: Any = None, *,
                     timeout: float = 10.0) -> tuple[ProcessUpdateNotification, Any]:
         """A process the controller needs the data of itself (the UI's residual view
-        reads a compute service's matrix): created, monitored like a task, awaited —
-        each wait bounded by ``timeout`` — and returned as the final update with the
-        last data any update carried, in full (a task's events carry only a summary
-        of large data)."""
-        call = await self.create_process(partner, command, option, timeout=timeout)
-        data = None
+        reads a compute service's matrix, the live wizards a robot's joints): created
+        with ``data`` as its input, monitored like a task, awaited — each wait bounded
+        by ``timeout`` — and returned as the final update with the last data any update
+        carried, in full (a task's events carry only a summary of large data)."""
+        call = await self.create_process(partner, command, option, data, timeout=timeout)
+        out = None
         async for update in call:
             record = self.monitor.updated(call.partner, update, source="controller")
             self._dirty.add(record.key)
             if update.data is not None:
-                data = update.data
+                out = update.data
         assert call.final is not None
-        return call.final, data
+        return call.final, out
 
     async def stop_task(self, task_id: str) -> dict[str, Any]:
         """Send the StopData that ends a MultipleData task."""
@@ -586,15 +585,18 @@ class CellController(GenericDevice):
     # -- program runs ------------------------------------------------------------------
 
     def start_run(self, items: Any, mode: str = "sequential") -> ProgramRun:
-        """Start running programs (RunError for a bad request); follow it in :attr:`runs`."""
+        """Start running programs (RunError for a bad request); follow it in :attr:`runs`.
+
+        ``items``: see :func:`~plugcell.services.controller_runs.parse_runs` (robot,
+        program and the program's ``name=value`` values)."""
         if mode not in MODES:
             raise RunError(f"mode must be one of {', '.join(MODES)}, not {mode!r}")
-        pairs = parse_run_items(items)
-        run = ProgramRun(mode, [RunItem(r, p) for r, p in pairs])
+        run = ProgramRun(mode, parse_runs(items))
         self.runs[run.id] = run
         while len(self.runs) > 100:
             self.runs.pop(next(iter(self.runs)))
-        text = ", ".join(f"{r}:{p}" for r, p in pairs)
+        text = ", ".join(f"{i.robot}:{i.program}" + (f" ({len(i.values)} values)" if i.values
+                                                     else "") for i in run.items)
         self.note("info", f"{run.id} ({mode}): {text}")
         run_task = self._spawn(run_programs(self, run, lambda: self._run_changed(run)))
         self._run_tasks[run.id] = run_task
@@ -603,6 +605,14 @@ class CellController(GenericDevice):
             "info" if run.state == "Completed" else "error", f"{run.id} {run.state.lower()}"))
         self._run_changed(run)
         return run
+
+    async def wait_run(self, run: ProgramRun, timeout: float) -> bool:
+        """Wait (at most ``timeout`` s) until ``run`` has ended; False if it still runs."""
+        task = self._run_tasks.get(run.id)
+        if task is not None:
+            with contextlib.suppress(TimeoutError):
+                await asyncio.wait_for(asyncio.shield(task), timeout)
+        return run.state != "Running"
 
     def _run_changed(self, run: ProgramRun) -> None:
         self.emit({"type": "run", "run": run.to_json()})

@@ -7,15 +7,19 @@
 ``POST /api/tasks``         ``{service, command, option, data, timeout}`` → ack
 ``POST /api/tasks/check``   the same, only checked (inline form errors)
 ``POST /api/tasks/stop``    ``{id}`` — StopData of a MultipleData task
-``POST /api/runs``          ``{items: [{robot, program}], mode}``
+``POST /api/runs``          ``{items: [{robot, program, values}], mode}`` (values:
+                            the program's ``["name=value", …]``)
 ``GET  /api/programs``      the robot program library; ``/api/programs/{name}`` its text
 ``GET  /api/wiring``        the wiring file of the cell (download)
 ``POST /api/wiring/save``   ``{path}``;  ``POST /api/wiring/load`` ``{path}`` or ``{document}``
 ``POST /api/fit``           ``{kind: circle|line|plane, points}`` (mm)
 ``POST /api/wizard/probe``  appendix D.1;  ``POST /api/wizard/base`` appendix D.2
+``POST /api/wizard/live``   a wizard step measured live: the robot moves, the tracker
+                            measures (program ``frame_points``; ``wizard_live.py``)
 ``POST /api/residuals``     calibration residuals for the 3-D view: ``{document}`` (a
                             ``plugcell calibrate --residuals`` file), ``{matrix}`` (N×6
                             mm) or ``{service, name, workspace}`` (Get Matrix)
+``POST /api/matrix``        a compute service's matrix: ``{service, name, workspace}``
 ==========================  =====================================================
 
 Refused input (a field that does not fit, a wire a service refuses) is answered
@@ -38,7 +42,13 @@ from plugcell.services.controller_tasks import TaskInputError, check_task
 from plugcell.services.controller_wiring import WiringError, dump_wiring
 from plugcell.ui.guard import BadRequestError, RefusedError, error_response, json_body
 from plugcell.ui.metrology import FitInputError, fit_json, wizard_base, wizard_probe
-from plugcell.ui.residuals import fetch_residuals, residuals_from_document, residuals_from_matrix
+from plugcell.ui.residuals import (
+    fetch_matrix,
+    fetch_residuals,
+    residuals_from_document,
+    residuals_from_matrix,
+)
+from plugcell.ui.wizard_live import measure_live
 
 __all__ = ["make_router"]
 
@@ -55,13 +65,16 @@ def _names(body: dict[str, Any]) -> tuple[str, str]:
 
 def _file(path: str) -> Path:
     """The file a form names (RefusedError for what the OS would refuse otherwise than
-    with an OSError: a NUL character, ``~user`` of an unknown user)."""
+    with an OSError: a NUL character, ``~user`` of an unknown user, ``.``)."""
     if "\0" in path:
         raise RefusedError({"path": "a file name cannot hold a NUL character"})
     try:
-        return Path(path.strip()).expanduser()
+        file = Path(path.strip()).expanduser()
     except RuntimeError as exc:
         raise RefusedError({"path": f"{path.strip()}: {exc}"}) from None
+    if not file.name:
+        raise RefusedError({"path": f"{path.strip()!r} is a folder, not a file name"})
+    return file
 
 
 def make_router(controller: CellController) -> APIRouter:
@@ -177,6 +190,14 @@ def make_router(controller: CellController) -> APIRouter:
         except FitInputError as exc:
             raise RefusedError(exc.errors) from None
 
+    @router.post("/wizard/live")
+    async def wizard_live(request: Request) -> JSONResponse:
+        body = await json_body(request)
+        try:
+            return JSONResponse({"ok": True, **await measure_live(controller, body)})
+        except FitInputError as exc:
+            raise RefusedError(exc.errors) from None
+
     @router.post("/wizard/{which}")
     async def wizard(which: str, request: Request) -> JSONResponse:
         body = await json_body(request)
@@ -204,6 +225,16 @@ def make_router(controller: CellController) -> APIRouter:
         except FitInputError as exc:
             raise RefusedError(exc.errors) from None
         return JSONResponse({"ok": True, **view})
+
+    @router.post("/matrix")
+    async def matrix(request: Request) -> JSONResponse:
+        body = await json_body(request)
+        try:
+            arr, title = await fetch_matrix(controller, body)
+        except FitInputError as exc:
+            raise RefusedError(exc.errors) from None
+        return JSONResponse({"ok": True, "title": title, "shape": list(arr.shape),
+                             "rows": arr.tolist()})
 
     return router
 

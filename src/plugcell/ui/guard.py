@@ -16,6 +16,8 @@ Bodies are JSON objects of at most :data:`MAX_BODY` bytes; anything else is a
 from __future__ import annotations
 
 import json
+import re
+import sys
 from typing import Any
 from urllib.parse import urlsplit
 
@@ -67,8 +69,11 @@ def check_connection(conn: HTTPConnection, extra_hosts: set[str] | frozenset[str
         return f"host {host!r} is not this machine"
     origin = conn.headers.get("origin")
     if origin and origin != "null":
-        parts = urlsplit(origin)
-        if _host(parts.netloc) != host or parts.netloc != conn.headers.get("host", ""):
+        try:
+            netloc = urlsplit(origin).netloc
+        except ValueError:  # "http://[": not a URL
+            return f"malformed Origin header {origin!r}"
+        if _host(netloc) != host or netloc != conn.headers.get("host", ""):
             return f"requests from {origin} are not accepted"
     writes = conn.scope["type"] == "http" and conn.scope.get("method") not in ("GET", "HEAD")
     if writes and conn.headers.get(HEADER) != "1":
@@ -85,9 +90,56 @@ async def json_body(request: Request) -> dict[str, Any]:
     if len(raw) > MAX_BODY:
         raise BadRequestError({"_": f"body larger than {MAX_BODY} bytes"}, 413)
     try:
-        value = json.loads(raw or b"{}")
+        value = json.loads(raw or b"{}", parse_int=_integer)
     except (json.JSONDecodeError, UnicodeDecodeError) as exc:
         raise BadRequestError({"_": f"body is not JSON: {exc}"}) from None
+    except RecursionError:
+        raise BadRequestError({"_": "body is not JSON this server reads: nested too deeply"}
+                              ) from None
+    except ValueError as exc:  # an integer beyond the numbers of this API (_integer)
+        raise BadRequestError({"_": f"body is not JSON this server reads: {exc}"}) from None
     if not isinstance(value, dict):
         raise BadRequestError({"_": "body must be a JSON object"})
+    if _SURROGATE.search(raw) or b"\0" in raw:  # NUL bytes: UTF-16 or UTF-32
+        _check_text(value)
     return value
+
+
+#: The largest integer a body may hold: beyond it no number of the API (a float) can
+#: stand for it, and converting it raises OverflowError deep inside.
+_MAX_INT = int(sys.float_info.max)
+
+
+def _integer(text: str) -> int:
+    # a length check first: int() of thousands of digits is slow (and refused past 4300)
+    if len(text) > 310 or abs(value := int(text)) > _MAX_INT:
+        raise ValueError(f"the integer {text[:12]}… ({len(text.lstrip('-'))} digits) is beyond "
+                         f"±{sys.float_info.max:.1e}")
+    return value
+
+
+#: A ``\uD800``–``\uDFFF`` escape or such a code point in UTF-8 (``json.loads`` decodes
+#: bytes with ``surrogatepass``): the ways a UTF-8 body gives a string that is not text.
+_SURROGATE = re.compile(rb"\\u[dD][89a-fA-F]|\xed[\xa0-\xbf]")
+
+
+def _check_text(value: Any) -> None:
+    """BadRequestError if a string (or key) of ``value`` holds a lone surrogate.
+
+    Such a string cannot be written as UTF-8: not a name, a path or a log line.
+    """
+    stack = [value]
+    while stack:  # iterative: the body may be nested deeper than the recursion limit
+        node = stack.pop()
+        if isinstance(node, dict):
+            stack.extend(node)
+            stack.extend(node.values())
+        elif isinstance(node, list):
+            stack.extend(node)
+        elif isinstance(node, str):
+            try:
+                node.encode("utf-8")
+            except UnicodeEncodeError as exc:
+                bad = node[exc.start]
+                raise BadRequestError({"_": f"body is not Unicode text: a string holds the "
+                                            f"lone surrogate \\u{ord(bad):04x}"}) from None

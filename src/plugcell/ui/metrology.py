@@ -30,6 +30,9 @@ from plugcell.services.tracker_frames import FrameError, matrix_from_vector, vec
 
 MM = 1e-3
 MAX_POINTS = 100_000
+#: Largest coordinate a fit takes (mm): 1 000 km, far beyond any tracker; the squares
+#: of much larger ones overflow the fits.
+MAX_MM = 1e9
 KINDS = ("circle", "line", "plane")
 
 __all__ = ["KINDS", "FitInputError", "fit_json", "points_mm", "wizard_base", "wizard_probe"]
@@ -59,6 +62,9 @@ def points_mm(value: Any, field: str, minimum: int) -> np.ndarray:
             v = p[j]
             if isinstance(v, bool) or not isinstance(v, int | float) or not math.isfinite(v):
                 raise FitInputError({field: f"point {i + 1}: coordinate {j + 1} is not a number"})
+            if abs(v) > MAX_MM:
+                raise FitInputError({field: f"point {i + 1}: coordinate {j + 1} is beyond "
+                                            f"±{MAX_MM:g} mm"})
             out[i, j] = float(v)
     return out * MM
 
@@ -80,8 +86,27 @@ def _transform_json(T: np.ndarray) -> dict[str, Any]:
     }
 
 
+def _finite(result: dict[str, Any], field: str) -> dict[str, Any]:
+    """``result`` if all its numbers are finite (JSON has no NaN or infinity)."""
+    stack: list[Any] = [result]
+    while stack:
+        node = stack.pop()
+        if isinstance(node, dict):
+            stack.extend(node.values())
+        elif isinstance(node, list):
+            stack.extend(node)
+        elif isinstance(node, float) and not math.isfinite(node):
+            raise FitInputError({field: "no finite result: numbers too large or too small "
+                                        "for the fit"})
+    return result
+
+
 def fit_json(kind: Any, points: Any) -> dict[str, Any]:
     """Fit a circle, line or plane through points in mm; JSON in mm with residuals."""
+    return _finite(_fit(kind, points), "points")
+
+
+def _fit(kind: Any, points: Any) -> dict[str, Any]:
     if kind not in KINDS:
         raise FitInputError({"kind": f"one of {', '.join(KINDS)}"})
     p = points_mm(points, "points", {"circle": 3, "line": 2, "plane": 3}[kind])
@@ -145,6 +170,10 @@ def _offset(value: Any) -> float | None:
 
 def wizard_probe(body: dict[str, Any]) -> dict[str, Any]:
     """Appendix D.1: circle (joint n turning), dowel holes, T-MAC pose → PROBE."""
+    return _finite(_probe(body), "_")
+
+
+def _probe(body: dict[str, Any]) -> dict[str, Any]:
     circle = points_mm(body.get("circle"), "circle", 3)
     holes = points_mm(body.get("holes"), "holes", 2)
     tmac = _pose(body.get("tmac"), "tmac")
@@ -169,6 +198,10 @@ def wizard_probe(body: dict[str, Any]) -> dict[str, Any]:
 
 def wizard_base(body: dict[str, Any]) -> dict[str, Any]:
     """Appendix D.2: circle (joint 1 turning), base plane, x move → BASE and eq. D.6."""
+    return _finite(_base(body), "_")
+
+
+def _base(body: dict[str, Any]) -> dict[str, Any]:
     circle = points_mm(body.get("circle"), "circle", 3)
     plane = points_mm(body.get("plane"), "plane", 3)
     line = points_mm(body.get("line"), "line", 2)

@@ -35,8 +35,8 @@ MAX_MM = 1e9
 #: Seconds each wait of a Get Matrix may take.
 FETCH_TIMEOUT = 10.0
 
-__all__ = ["SETS", "fetch_residuals", "residual_view", "residuals_from_document",
-           "residuals_from_matrix"]
+__all__ = ["SETS", "fetch_matrix", "fetch_residuals", "residual_view",
+           "residuals_from_document", "residuals_from_matrix"]
 
 
 def _number(v: Any) -> bool:
@@ -131,9 +131,10 @@ def residual_view(poses: list[dict[str, Any]], *, source: str, title: str = "") 
             "max_before_mm": max((p["before_norm"] or 0.0) for p in poses)}
 
 
-async def fetch_residuals(controller: Any, body: dict[str, Any]) -> dict[str, Any]:
-    """The residual matrix ``name`` of a compute service (``Get Matrix``; from the
-    workspace of ``workspace`` when given, else the controller's own)."""
+async def fetch_matrix(controller: Any, body: dict[str, Any]) -> tuple[np.ndarray, str]:
+    """The matrix ``name`` of a compute service (``Get Matrix``; from the workspace of
+    ``workspace`` when given, else the controller's own) as a 2-D array of numbers, and
+    where it came from (``COMPUTE: mT of H4``)."""
     service, name, owner = body.get("service"), body.get("name"), body.get("workspace")
     device = controller.device_of(service) if isinstance(service, str) else None
     if device is None or not any(c.name == "Get Matrix" for c in device.commands):
@@ -144,15 +145,26 @@ async def fetch_residuals(controller: Any, body: dict[str, Any]) -> dict[str, An
     if owner not in (None, ""):
         try:
             option += f"; for={check_name(owner, 'workspace')}"
-        except ValueError as exc:
+        except (TypeError, ValueError) as exc:
             raise FitInputError({"workspace": str(exc)}) from None
     final, data = await controller.fetch(service, "Get Matrix", option, timeout=FETCH_TIMEOUT)
     if final.state.value != "Completed":
         raise FitInputError({"name": f"{service} Get Matrix {option}: {final.reason}"})
     arr = from_data(data)
-    if arr is None or arr.ndim != 2 or arr.shape[1] != 6:
-        shape = "nothing" if arr is None else "×".join(str(n) for n in arr.shape)
-        raise FitInputError({"name": f"{name} is {shape}: an N×6 residual matrix expected "
-                                     "(residuals(params, mJ, mT))"})
-    where = f"{service}: {name}" + (f" of {owner}" if owner else "")
-    return residuals_from_matrix(np.asarray(arr, dtype=float).tolist(), "name", title=where)
+    try:
+        arr = None if arr is None else np.atleast_2d(np.asarray(arr, dtype=float))
+    except (TypeError, ValueError):
+        arr = None
+    if arr is None or arr.ndim != 2 or not np.all(np.isfinite(arr)):
+        raise FitInputError({"name": f"{name} is not a matrix of numbers"})
+    return arr, f"{service}: {name}" + (f" of {owner}" if owner else "")
+
+
+async def fetch_residuals(controller: Any, body: dict[str, Any]) -> dict[str, Any]:
+    """The residual matrix ``name`` of a compute service (:func:`fetch_matrix`)."""
+    arr, where = await fetch_matrix(controller, body)
+    if arr.shape[1] != 6:
+        shape = "×".join(str(n) for n in arr.shape)
+        raise FitInputError({"name": f"{body['name']} is {shape}: an N×6 residual matrix "
+                                     "expected (residuals(params, mJ, mT))"})
+    return residuals_from_matrix(arr.tolist(), "name", title=where)

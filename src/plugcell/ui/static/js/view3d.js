@@ -6,6 +6,7 @@ import { on, state } from "./store.js";
 
 const live = [];          // [x, y, z] mm
 const MAX_LIVE = 5000;
+const shownFrames = new Map();   // process id → data frames already drawn (a record comes again on every change)
 let fits = [];            // [{name, points, residuals, geometry}]
 let residuals = null;     // the answer of /api/residuals: {poses: [{set, measured, after, before, …}], max_mm, …}
 const resOpts = { set: "all", before: false };
@@ -226,7 +227,14 @@ export function initView3d() {
   on("processes", (list) => {
     const t = trackers();
     let added = false;
-    for (const p of list || []) if (t.has(p.recipient) && p.data && p.sender !== state.controller) { addLive(p); added = true; }
+    for (const p of list || []) {
+      if (!t.has(p.recipient) || !p.data || p.sender === state.controller) continue;
+      const frames = p.frames || 1;
+      if ((shownFrames.get(p.id) || 0) >= frames) continue;
+      shownFrames.set(p.id, frames);
+      if (shownFrames.size > 20000) shownFrames.delete(shownFrames.keys().next().value);
+      addLive(p); added = true;
+    }
     if (added) redraw();
   });
   on("task", (msg) => { if (msg.data && trackers().has(msg.id.split("/")[0])) { addLive(msg); redraw(); } });
