@@ -66,6 +66,14 @@ def test_cell_cli_discovers_wires_saves_loads_runs_and_monitors(
     assert {(x["sender"], x["recipient"], x["command"], x["state"]) for x in seen} >= {
         ("R1", "TOOL", "Drill", "Completed"), ("R1", "CAMERA", "SnapShot", "Completed")}
 
+    # the thesis EXAMPLE needs its taught points: given as program values
+    r = cli(home, "cell", "run", "R1", "example", "--cell", cell)
+    assert r.returncode == 1 and "pnt0001 is uninitialized" in lines(r.stdout)[-2]["reason"]
+    r = cli(home, "cell", "run", "R1", "example", "--value", "pnt0001=1500,0,1300,0,90,0",
+            "--value", "R1:pnt0002=1500,200,1000,0,90,0", "--cell", cell)
+    assert r.returncode == 0 and lines(r.stdout)[-1]["state"] == "Completed", r.stdout
+    r = cli(home, "cell", "run", "R1", "example", "--value", "pnt0001", "--cell", cell)
+    assert r.returncode == 2 and "expected [ROBOT:]NAME=VALUE" in r.stderr
     r = cli(home, "cell", "run", "R1", "no_such_program", "--cell", cell)
     assert r.returncode == 1 and "no_such_program" in lines(r.stdout)[-2]["reason"]
     r = cli(home, "cell", "run", "R1", "--cell", cell)

@@ -57,6 +57,9 @@ def test_unreadable_files_name_the_path(tmp_path: Path) -> None:
         load_wiring(tmp_path / "bin.json")
     with pytest.raises(WiringError, match="cannot write"):
         save_wiring([], "c", tmp_path)  # a folder cannot be replaced by the file
+    for bad in (Path("."), Path("a\x00b.json")):  # the controller's Save task, fuzzed
+        with pytest.raises(WiringError, match="not a file name"):
+            save_wiring([], "c", bad)
 
 
 JSONS = st.recursive(

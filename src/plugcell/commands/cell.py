@@ -6,7 +6,7 @@
     plugcell cell wire A B | unwire A B            A subscribes to / drops partner B
     plugcell cell save FILE                        the wiring of the cell to a file
     plugcell cell load FILE [--wait S] [--keep]    re-apply a saved wiring (and keep it)
-    plugcell cell run ROBOT PROGRAM [ROBOT PROGRAM …] [--concurrent]
+    plugcell cell run ROBOT PROGRAM [ROBOT PROGRAM …] [--concurrent] [--value [ROBOT:]N=V …]
     plugcell cell monitor [--json] [--duration S] [--count N] [--service NAME]
 
 The same functions as the web UI (``plugcell controller``), scriptable: ``--json``
@@ -80,6 +80,9 @@ def register(subparsers: Any) -> None:
     mode = run.add_mutually_exclusive_group()
     mode.add_argument("--concurrent", action="store_true", help="all robots at once")
     mode.add_argument("--sequential", action="store_true", help="one after another (default)")
+    run.add_argument("--value", action="append", default=[], metavar="[ROBOT:]NAME=VALUE",
+                     help="a program value (repeatable; docs/robot-programs.md), e.g. "
+                          "--value pnt0001=1500,0,1300,0,90,0; ROBOT: when several robots run")
     run.add_argument("--via", metavar="CONTROLLER", help="ask this cell controller service")
     run.set_defaults(func=run_run)
 
@@ -333,7 +336,27 @@ def run_run(args: argparse.Namespace) -> int:
         raise CommandError("give ROBOT PROGRAM pairs, e.g. cell run R1 example R2 example")
     pairs = list(zip(args.pairs[::2], args.pairs[1::2], strict=True))
     mode = "concurrent" if args.concurrent else "sequential"
+    args.values_of = _values_of(args.value, [r for r, _ in pairs])
     return asyncio.run(_run(args, pairs, mode))
+
+
+def _values_of(values: list[str], robots: list[str]) -> dict[str, list[str]]:
+    """``--value [ROBOT:]NAME=VALUE`` → each robot's ``name=value`` texts."""
+    from plugcell.cli import CommandError
+
+    out: dict[str, list[str]] = {r: [] for r in robots}
+    for text in values:
+        head, sep, rest = text.partition(":")
+        robot, item = (head, rest) if sep and head in out and "=" not in head else ("", text)
+        if "=" not in item or not item.partition("=")[0].strip():
+            raise CommandError(f"--value {text!r}: expected [ROBOT:]NAME=VALUE")
+        if not robot:
+            if len(out) > 1:
+                raise CommandError(f"--value {text!r}: several robots run; say which "
+                                   f"(ROBOT:NAME=VALUE, ROBOT one of {', '.join(out)})")
+            robot = robots[0]
+        out[robot].append(item)
+    return out
 
 
 async def _run(args: argparse.Namespace, pairs: list[tuple[str, str]], mode: str) -> int:
@@ -342,14 +365,14 @@ async def _run(args: argparse.Namespace, pairs: list[tuple[str, str]], mode: str
     client = await _participant(args, "run")
     try:
         if args.via:
-            ok, reason = await _via(client, args, "Run", mode, [f"{r}:{p}" for r, p in pairs],
-                                    timeout=86400.0)
+            items = [x for r, p in pairs for x in (f"{r}:{p}", *args.values_of[r])]
+            ok, reason = await _via(client, args, "Run", mode, items, timeout=86400.0)
             _emit({"event": "run", "mode": mode, "state": "Completed" if ok else "Failed",
                    "reason": reason})
             return 0 if ok else 1
         for robot, _ in pairs:
             await client.wait_for(robot, min(args.timeout, 5.0))
-        run = ProgramRun(mode, [RunItem(r, p) for r, p in pairs])
+        run = ProgramRun(mode, [RunItem(r, p, args.values_of[r]) for r, p in pairs])
         last: list[str] = []
 
         def changed() -> None:

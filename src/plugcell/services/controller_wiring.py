@@ -141,6 +141,8 @@ def save_wiring(wires: list[Wire] | set[Wire], cell: str, path: Path) -> dict[st
     """Write the wiring file (atomically: a temporary file renamed); return the document."""
     doc = dump_wiring(wires, cell)
     path = Path(path)
+    if not path.name or path.name in (".", "..") or "\x00" in str(path):
+        raise WiringError(f"{str(path)!r}: not a file name to save the wiring to")
     tmp = path.with_name(path.name + ".tmp")
     try:
         path.parent.mkdir(parents=True, exist_ok=True)
