@@ -54,7 +54,7 @@ from pathlib import Path
 from typing import Any
 from urllib.parse import quote
 
-import httpx
+import httpx2 as httpx  # the HTTP client of the dev dependencies (Starlette's TestClient uses it)
 from starlette.routing import Mount, Route
 
 from plugcell.services.controller import CellController
