@@ -2,97 +2,16 @@
 
 from __future__ import annotations
 
-import contextlib
-import os
-import signal
-import subprocess
-import sys
-import threading
-import time
 import uuid
-from collections.abc import Callable
-from typing import Any
 
-from childproc import until  # noqa: F401  (re-exported for the robot tests)
+from childproc import (  # noqa: F401  (re-exported for the robot tests)
+    Proc,
+    group_alive,
+    plugcell_argv,
+    until,
+)
 
 
 def unique_cell(prefix: str = "r") -> str:
     """A fresh cell name: tests never see each other (nor anything else on the host)."""
     return f"{prefix}{uuid.uuid4().hex[:12]}"
-
-
-def plugcell_argv(*args: str) -> list[str]:
-    """Command line of the real CLI: ``python -m plugcell …``."""
-    return [sys.executable, "-m", "plugcell", *args]
-
-
-class Proc:
-    """A child process (its own process group) whose stdout lines a thread collects."""
-
-    def __init__(self, argv: list[str], env: dict[str, str]) -> None:
-        self.argv = argv
-        self.popen = subprocess.Popen(
-            argv, stdin=subprocess.DEVNULL, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
-            text=True, env=env, start_new_session=True,
-        )
-        self.lines: list[str] = []
-        self.errors: list[str] = []
-        self._cond = threading.Condition()
-        for stream, sink in ((self.popen.stdout, self.lines), (self.popen.stderr, self.errors)):
-            threading.Thread(target=self._read, args=(stream, sink), daemon=True).start()
-
-    def _read(self, stream: Any, sink: list[str]) -> None:
-        for line in stream:
-            with self._cond:
-                sink.append(line.rstrip("\n"))
-                self._cond.notify_all()
-        with self._cond:
-            self._cond.notify_all()
-
-    def wait_line(self, predicate: Callable[[str], bool], timeout: float = 30.0) -> str:
-        """The first stdout line satisfying ``predicate`` (AssertionError after ``timeout``)."""
-        deadline = time.monotonic() + timeout
-        with self._cond:
-            while True:
-                for line in self.lines:
-                    if predicate(line):
-                        return line
-                left = deadline - time.monotonic()
-                if left <= 0 or self.popen.poll() is not None:
-                    break
-                self._cond.wait(min(left, 0.2))
-        raise AssertionError(f"no such line from {self.argv}: {self.lines} {self.errors[-20:]}")
-
-    @property
-    def pid(self) -> int:
-        return self.popen.pid
-
-    def kill9(self) -> None:
-        """SIGKILL the whole process group (a service and its simulated controller)."""
-        if self.popen.poll() is None:
-            os.killpg(self.popen.pid, signal.SIGKILL)
-        self.popen.wait(10)
-
-    def stop(self) -> None:
-        """SIGTERM the group, SIGKILL after 15 s; every wait bounded."""
-        if self.popen.poll() is None:
-            os.killpg(self.popen.pid, signal.SIGTERM)
-            try:
-                self.popen.wait(15)
-            except subprocess.TimeoutExpired:
-                os.killpg(self.popen.pid, signal.SIGKILL)
-                self.popen.wait(10)
-        else:  # the leader is gone: make sure nothing of its group is left
-            with contextlib.suppress(ProcessLookupError, PermissionError):
-                os.killpg(self.popen.pid, signal.SIGKILL)
-
-
-def group_alive(pgid: int) -> bool:
-    """Whether any process of process group ``pgid`` still exists."""
-    try:
-        os.killpg(pgid, 0)
-    except ProcessLookupError:
-        return False
-    except PermissionError:  # pragma: no cover
-        return True
-    return True

@@ -8,6 +8,7 @@ behind.
 
 from __future__ import annotations
 
+import contextlib
 import os
 import signal
 import subprocess
@@ -15,6 +16,7 @@ import sys
 import threading
 import time
 from collections.abc import Callable
+from typing import IO
 
 
 def until(predicate: Callable[[], object], timeout: float = 15.0,
@@ -35,59 +37,56 @@ def plugcell_argv(*args: str) -> list[str]:
 
 
 class Proc:
-    """A child process whose stdout lines are collected by a thread."""
+    """A child process (its own process group) whose stdout lines, and stderr lines in
+    ``errors``, threads collect."""
 
     def __init__(self, argv: list[str], env: dict[str, str]) -> None:
         self.argv = argv
         self.popen = subprocess.Popen(
-            argv,
-            stdout=subprocess.PIPE,
-            stderr=subprocess.PIPE,
-            text=True,
-            env=env,
-            start_new_session=True,
+            argv, stdin=subprocess.DEVNULL, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+            text=True, env=env, start_new_session=True,
         )
         self.lines: list[str] = []
+        self.errors: list[str] = []
         self._cond = threading.Condition()
-        self._reader = threading.Thread(target=self._read, daemon=True)
-        self._reader.start()
+        for stream, sink in ((self.popen.stdout, self.lines), (self.popen.stderr, self.errors)):
+            threading.Thread(target=self._read, args=(stream, sink), daemon=True).start()
 
-    def _read(self) -> None:
-        assert self.popen.stdout is not None
-        for line in self.popen.stdout:
+    def _read(self, stream: IO[str], sink: list[str]) -> None:
+        for line in stream:
             with self._cond:
-                self.lines.append(line.rstrip("\n"))
+                sink.append(line.rstrip("\n"))
                 self._cond.notify_all()
         with self._cond:
             self._cond.notify_all()
 
     def wait_line(self, predicate: Callable[[str], bool], timeout: float = 30.0) -> str:
-        """The first stdout line satisfying ``predicate`` (AssertionError after timeout)."""
+        """The first stdout line satisfying ``predicate`` (AssertionError after ``timeout``,
+        or when the process has ended without it)."""
         deadline = time.monotonic() + timeout
         with self._cond:
-            found = False
-            while not found and time.monotonic() < deadline:  # poll(): exit without a notify
-                found = self._cond.wait_for(
-                    lambda: any(predicate(x) for x in self.lines) or self.popen.poll() is not None,
-                    0.2,
-                )
-            for line in self.lines:
-                if predicate(line):
-                    return line
-        err = (
-            self.popen.stderr.read() if self.popen.poll() is not None and self.popen.stderr else ""
-        )
-        raise AssertionError(f"no such line from {self.argv} (found={found}): {self.lines} {err}")
+            while True:
+                for line in self.lines:
+                    if predicate(line):
+                        return line
+                left = deadline - time.monotonic()
+                if left <= 0 or self.popen.poll() is not None:
+                    break
+                self._cond.wait(min(left, 0.2))
+        raise AssertionError(f"no such line from {self.argv}: {self.lines} {self.errors[-20:]}")
 
     @property
     def pid(self) -> int:
         return self.popen.pid
 
     def kill9(self) -> None:
-        os.killpg(self.popen.pid, signal.SIGKILL)
+        """SIGKILL the whole process group (e.g. a service and its simulated controller)."""
+        if self.popen.poll() is None:
+            os.killpg(self.popen.pid, signal.SIGKILL)
         self.popen.wait(10)
 
     def stop(self) -> None:
+        """SIGTERM the group, SIGKILL after 15 s; every wait bounded."""
         if self.popen.poll() is None:
             os.killpg(self.popen.pid, signal.SIGTERM)
             try:
@@ -95,6 +94,17 @@ class Proc:
             except subprocess.TimeoutExpired:
                 os.killpg(self.popen.pid, signal.SIGKILL)
                 self.popen.wait(10)
-        for stream in (self.popen.stdout, self.popen.stderr):
-            if stream is not None:
-                stream.close()
+        else:  # the leader is gone: make sure nothing of its group is left
+            with contextlib.suppress(ProcessLookupError, PermissionError):
+                os.killpg(self.popen.pid, signal.SIGKILL)
+
+
+def group_alive(pgid: int) -> bool:
+    """Whether any process of process group ``pgid`` still exists."""
+    try:
+        os.killpg(pgid, 0)
+    except ProcessLookupError:
+        return False
+    except PermissionError:  # pragma: no cover
+        return True
+    return True
