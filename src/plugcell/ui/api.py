@@ -41,7 +41,7 @@ from plugcell.services.controller_runs import RunError, list_programs
 from plugcell.services.controller_tasks import TaskInputError, check_task
 from plugcell.services.controller_wiring import WiringError, dump_wiring
 from plugcell.ui.guard import BadRequestError, RefusedError, error_response, json_body
-from plugcell.ui.metrology import FitInputError, fit_json, wizard_base, wizard_probe
+from plugcell.ui.metrology import fit_json, wizard_base, wizard_probe
 from plugcell.ui.residuals import (
     fetch_matrix,
     fetch_residuals,
@@ -185,54 +185,39 @@ def make_router(controller: CellController) -> APIRouter:
     @router.post("/fit")
     async def fit(request: Request) -> JSONResponse:
         body = await json_body(request)
-        try:
-            return JSONResponse({"ok": True, **fit_json(body.get("kind"), body.get("points"))})
-        except FitInputError as exc:
-            raise RefusedError(exc.errors) from None
+        return JSONResponse({"ok": True, **fit_json(body.get("kind"), body.get("points"))})
 
     @router.post("/wizard/live")
     async def wizard_live(request: Request) -> JSONResponse:
         body = await json_body(request)
-        try:
-            return JSONResponse({"ok": True, **await measure_live(controller, body)})
-        except FitInputError as exc:
-            raise RefusedError(exc.errors) from None
+        return JSONResponse({"ok": True, **await measure_live(controller, body)})
 
     @router.post("/wizard/{which}")
     async def wizard(which: str, request: Request) -> JSONResponse:
         body = await json_body(request)
         if which not in ("probe", "base"):
             raise BadRequestError({"_": f"no wizard {which!r} (probe, base)"}, 404)
-        try:
-            result = wizard_probe(body) if which == "probe" else wizard_base(body)
-        except FitInputError as exc:
-            raise RefusedError(exc.errors) from None
+        result = wizard_probe(body) if which == "probe" else wizard_base(body)
         return JSONResponse({"ok": True, **result})
 
     @router.post("/residuals")
     async def residuals(request: Request) -> JSONResponse:
         body = await json_body(request)
-        try:
-            if "document" in body:
-                view = residuals_from_document(body["document"])
-            elif "matrix" in body:
-                view = residuals_from_matrix(body["matrix"])
-            elif "service" in body:
-                view = await fetch_residuals(controller, body)
-            else:
-                raise RefusedError({"_": "a residual file (document), an N×6 matrix or a "
-                                         "compute service's matrix (service, name)"})
-        except FitInputError as exc:
-            raise RefusedError(exc.errors) from None
+        if "document" in body:
+            view = residuals_from_document(body["document"])
+        elif "matrix" in body:
+            view = residuals_from_matrix(body["matrix"])
+        elif "service" in body:
+            view = await fetch_residuals(controller, body)
+        else:
+            raise RefusedError({"_": "a residual file (document), an N×6 matrix or a "
+                                     "compute service's matrix (service, name)"})
         return JSONResponse({"ok": True, **view})
 
     @router.post("/matrix")
     async def matrix(request: Request) -> JSONResponse:
         body = await json_body(request)
-        try:
-            arr, title = await fetch_matrix(controller, body)
-        except FitInputError as exc:
-            raise RefusedError(exc.errors) from None
+        arr, title = await fetch_matrix(controller, body)
         return JSONResponse({"ok": True, "title": title, "shape": list(arr.shape),
                              "rows": arr.tolist()})
 

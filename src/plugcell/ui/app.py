@@ -29,6 +29,7 @@ from starlette.middleware.base import BaseHTTPMiddleware, RequestResponseEndpoin
 from plugcell.services.controller import CellController
 from plugcell.ui.api import make_router
 from plugcell.ui.guard import BadRequestError, check_connection, error_response
+from plugcell.ui.metrology import FitInputError
 from plugcell.ui.reports import SUFFIXES, ReportFiles
 
 STATIC = Path(__file__).resolve().parent / "static"
@@ -82,6 +83,12 @@ def create_app(
     @app.exception_handler(BadRequestError)
     async def bad_request(request: Request, exc: BadRequestError) -> JSONResponse:
         return error_response(exc.errors, exc.status)
+
+    @app.exception_handler(FitInputError)
+    async def refused_input(request: Request, exc: FitInputError) -> JSONResponse:
+        """Points, poses or matrices the metrology endpoints cannot use: field errors
+        (200, ``ok: false``, as :class:`RefusedError`)."""
+        return error_response(exc.errors, 200)
 
     app.include_router(make_router(controller))
     app.mount("/static", StaticFiles(directory=STATIC), name="static")
