@@ -50,3 +50,11 @@ def test_demo_fast_runs_the_three_steps_over_services(tmp_path: Path) -> None:
     assert len(d["errors_mm"]["nominal"]) == d["targets"]
     names = {Path(p).stem for p in r["journal"]}
     assert {"TRACKER", "COMPUTE", "H4", "KUKA", "CONTROLLER"} <= names
+
+
+def test_demo_refuses_a_speed_that_is_not_one(tmp_path: Path, capsys) -> None:
+    from plugcell.cli import main
+
+    assert main(["demo", "--fast", "--speed", "0", "--out", str(tmp_path)]) == 2
+    assert "--speed must be positive, not 0.0" in capsys.readouterr().err
+    assert not (tmp_path / "demo.json").exists()  # refused before anything started

@@ -96,6 +96,15 @@ def test_every_bad_request_reaches_the_program_as_a_clear_error(robot_cell: Robo
     assert console["9"].startswith("ROBOT POS_TO_JNTP: POS_TO_JNTP(9000, 0, 0, 0, 0, 0): "
                                    "pose is out of reach")
     assert console["10"] == "TRUE"  # the thesis's own "##, 500" form (5.2.3.6) is accepted
+    # a service's own command with an option it does not have: refused, the service serves on
+    pose = [1500.0, 0.0, 1300.0, 0.0, 90.0, 0.0]
+    bad = robot_cell.client.create_process("ROBOT", "JointIncrement", "sideways",
+                                           pose + pose).result()
+    assert bad.state is F
+    assert bad.reason == "JointIncrement: unknown option 'sideways' ('' or 'errors')"
+    good = robot_cell.client.create_process("ROBOT", "JointIncrement", "errors",
+                                            pose + pose).result()
+    assert good.state is C and _values(good)[:2] == [0.0, 0.0]  # no error: 0 mm, 0°
 
 
 def test_a_partner_that_dies_mid_command_fails_the_command(robot_cell: RobotCell,

@@ -36,3 +36,12 @@ def test_flags_a_kind_does_not_have_are_refused(capsys):
         _device_options(load_kind("tracker"), _args(robot="smart_h4"))
     assert main(["serve", "camera", "--sim", "--cell", "flags-test"]) == 2
     assert "has no simulated mode" in capsys.readouterr().err
+
+
+def test_a_serial_line_rate_that_is_not_a_rate_is_refused():
+    from plugcell.controller.sim_controller import main as controller_main
+    from plugcell.services.robot import RobotService
+
+    with pytest.raises(ValueError, match="link_baud must be 0 .no serial line. or positive"):
+        RobotService("R1", sim=True, link_baud=-1.0)
+    assert controller_main(["--link-baud", "-5", "--no-world"]) == 2

@@ -260,3 +260,43 @@ def test_requests_that_cannot_be_done_now(link: Line, tmp_path: Path) -> None:
     ended, _ = link.until("EVENT ENDED 9")
     assert ended.endswith("break.pdl:3:3: WRITE pc_client failed: a pc_client line cannot "
                           "contain a line break")
+
+
+def test_the_serial_line_costs_simulated_time_by_the_character() -> None:
+    """link_baud: every line between program and service takes 10 bits a character at the
+    baud rate on the simulated clock (the thesis's C3G link, 19.2 kbit/s); the run's use
+    is written to its console when it ends."""
+    from plugcell.controller.serial_line import SerialLine
+
+    with pytest.raises(ValueError, match="baud rate must be positive"):
+        SerialLine(0)
+    assert SerialLine(19200).carry("x" * 95, outbound=True) == pytest.approx(96 * 10 / 19200)
+
+    twin = RobotTwin(TwinScenario(robot="smart_h4", seed=1))
+    sim = SimController(TwinArm(twin), speed=math.inf, name="R1", link_baud=19200)
+    listener = socket.create_server(("127.0.0.1", 0))
+    thread = threading.Thread(target=sim.serve, args=(listener,), daemon=True)
+    thread.start()
+    line = Line(listener.getsockname()[1])
+    try:
+        assert "baud=19200" in line.recv()
+        line.send(*(p.format(id=8) for p in PNT), "RUN 8 example")
+        line.until("EVENT STARTED 8 EXAMPLE")
+        out = [line.until("ACTIVATE ")[0]]
+        answers = ["DATA 1 2 1,2", "RESULT TRUE"]
+        line.send(*answers)
+        out.append(line.until("ACTIVATE ")[0])
+        answers.append("RESULT TRUE")
+        line.send(answers[-1])
+        _, before = line.until("EVENT ENDED 8 ")
+        chars_out = sum(len(x) + 1 for x in out)
+        chars_in = sum(len(x) + 1 for x in answers)
+        usage = next(x for x in before if x.startswith("EVENT CONSOLE 8 serial line:"))
+        assert usage == (f"EVENT CONSOLE 8 serial line: {chars_out} characters out, "
+                         f"{chars_in} in, {(chars_out + chars_in) * 10 / 19200:.3f} s at "
+                         "19200 bit/s")
+    finally:
+        line.close()
+        sim.shutdown()
+        thread.join(5)
+        listener.close()

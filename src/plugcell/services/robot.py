@@ -415,7 +415,7 @@ class RobotService(GenericDevice):
         """δθ; with option ``errors``: [‖Δp‖ mm, ∠ΔR °, δθ…] (SENSOR_COM's test, 8.3.2)."""
         mode = option.strip().lower()
         if mode not in ("", "errors"):
-            raise DeviceError(f"JointIncrement: unknown option {option!r} ('' or 'errors')")
+            raise DeviceError(f"unknown option {option!r} ('' or 'errors')")
         if self.robot_description is None:
             robot = self.bridge.field("robot") or "?"
             raise DeviceError(f"the controller's robot {robot!r} has no description here: "
