@@ -20,6 +20,7 @@ import threading
 import zenoh
 from zenoh.handlers import Callback
 
+from plugcell.framework import eventloop
 from plugcell.framework.transport import TransportConfig, open_session
 
 
@@ -95,7 +96,7 @@ def main(argv: list[str] | None = None) -> int:
     if args.role == "raw":
         serve_raw(args.cell, transport)
     else:
-        asyncio.run(serve_service(args.cell, transport, not args.no_journal))
+        eventloop.run(serve_service(args.cell, transport, not args.no_journal))
     return 0
 
 

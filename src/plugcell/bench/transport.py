@@ -44,6 +44,7 @@ import zenoh
 from zenoh.handlers import Callback
 
 from plugcell.bench.peer import raw_keys
+from plugcell.framework import eventloop
 from plugcell.framework.model import ProcessStates
 from plugcell.framework.transport import TransportConfig, open_session
 
@@ -380,7 +381,7 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
     if args.networked:
         return _run_networked(args)
     try:
-        rows = asyncio.run(_measure(args, cell, env, payloads, progress))
+        rows = eventloop.run(_measure(args, cell, env, payloads, progress))
     finally:
         shutil.rmtree(home, ignore_errors=True)
     networked = bool(args.peer_netns)

@@ -18,6 +18,7 @@ import time
 from typing import Any
 
 from plugcell.commands.cellargs import add_cell_args, cell_of, transport_of
+from plugcell.framework import eventloop
 
 
 def register(subparsers: Any) -> None:
@@ -60,7 +61,7 @@ def run(args: argparse.Namespace) -> int:
             data = json.loads(args.data)
         except json.JSONDecodeError as exc:
             raise CommandError(f"--data is not JSON: {exc}") from None
-    return asyncio.run(_call(args, data))
+    return eventloop.run(_call(args, data))
 
 
 def _update_json(update: Any, full: bool) -> dict[str, Any]:

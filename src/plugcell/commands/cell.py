@@ -28,6 +28,7 @@ from pathlib import Path
 from typing import Any
 
 from plugcell.commands.cellargs import add_cell_args, cell_of, transport_of
+from plugcell.framework import eventloop
 
 
 def _emit(obj: dict[str, Any]) -> None:
@@ -116,7 +117,7 @@ async def _participant(args: argparse.Namespace, prefix: str) -> Any:
 def run_ls(args: argparse.Namespace) -> int:
     from plugcell.services.controller_tasks import describe_command
 
-    states = asyncio.run(_states(args, args.settle))
+    states = eventloop.run(_states(args, args.settle))
     wires = _wires(states)
     if args.json:
         print(json.dumps({
@@ -181,7 +182,7 @@ def _wires(states: list[Any]) -> list[Any]:
 def run_wire(args: argparse.Namespace) -> int:
     from plugcell.cli import CommandError
 
-    ok, reason = asyncio.run(_wire(args))
+    ok, reason = eventloop.run(_wire(args))
     if args.json:
         print(json.dumps({"ok": ok, "service": args.service, "partner": args.partner,
                           "reason": reason}))
@@ -224,7 +225,7 @@ def run_save(args: argparse.Namespace) -> int:
     from plugcell.cli import CommandError
     from plugcell.services.controller_wiring import WiringError, save_wiring
 
-    states = asyncio.run(_states(args, args.settle))
+    states = eventloop.run(_states(args, args.settle))
     try:
         doc = save_wiring(_wires(states), cell_of(args), args.file)
     except WiringError as exc:
@@ -244,7 +245,7 @@ def run_load(args: argparse.Namespace) -> int:
         wires, _ = load_wiring(args.file)
     except WiringError as exc:
         raise CommandError(str(exc)) from None
-    return asyncio.run(_load(args, wires))
+    return eventloop.run(_load(args, wires))
 
 
 async def _load(args: argparse.Namespace, wires: list[Any]) -> int:
@@ -337,7 +338,7 @@ def run_run(args: argparse.Namespace) -> int:
     pairs = list(zip(args.pairs[::2], args.pairs[1::2], strict=True))
     mode = "concurrent" if args.concurrent else "sequential"
     args.values_of = _values_of(args.value, [r for r, _ in pairs])
-    return asyncio.run(_run(args, pairs, mode))
+    return eventloop.run(_run(args, pairs, mode))
 
 
 def _values_of(values: list[str], robots: list[str]) -> dict[str, list[str]]:
@@ -397,13 +398,13 @@ async def _run(args: argparse.Namespace, pairs: list[tuple[str, str]], mode: str
 
 
 def run_monitor(args: argparse.Namespace) -> int:
-    asyncio.run(_monitor(args))
+    eventloop.run(_monitor(args))
     return 0
 
 
 async def _monitor(args: argparse.Namespace) -> None:
     from plugcell.framework import wire
-    from plugcell.framework.model import ProcessUpdateNotification
+    from plugcell.framework.model import process_updates
     from plugcell.services.controller_journal import JournalTail
     from plugcell.services.controller_monitor import ProcessMonitor
 
@@ -447,8 +448,9 @@ async def _monitor(args: argparse.Namespace) -> None:
             envelope = wire.decode(sample.payload.to_bytes())
         except wire.WireError:
             return
-        if len(parts) == 6 and isinstance(envelope.body, ProcessUpdateNotification):
-            show(monitor.updated(parts[3], envelope.body))
+        if len(parts) == 6:
+            for update in process_updates(envelope.body):
+                show(monitor.updated(parts[3], update))
 
     assert client.session is not None
     subscriber = client.session.declare_subscriber(

@@ -10,13 +10,13 @@ appendix D, and the reports.  Local use only; everything is served from plugcell
 from __future__ import annotations
 
 import argparse
-import asyncio
 import logging
 import sys
 from pathlib import Path
 from typing import Any
 
 from plugcell.commands.cellargs import add_cell_args, cell_of, transport_of
+from plugcell.framework import eventloop
 
 
 def register(subparsers: Any) -> None:
@@ -63,7 +63,7 @@ def run(args: argparse.Namespace) -> int:
         raise CommandError(str(exc)) from None
     reports = ReportFiles(args.docs or default_docs_dir(), list(args.report))
     try:
-        asyncio.run(serve(controller, host=args.host, port=args.port, reports=reports,
+        eventloop.run(serve(controller, host=args.host, port=args.port, reports=reports,
                           log_level=args.log_level.lower()))
     except PartnerError as exc:
         raise CommandError(str(exc)) from None

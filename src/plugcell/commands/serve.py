@@ -12,6 +12,7 @@ from pathlib import Path
 from typing import Any
 
 from plugcell.commands.cellargs import add_cell_args, cell_of, transport_of
+from plugcell.framework import eventloop
 
 
 def register(subparsers: Any) -> None:
@@ -119,7 +120,7 @@ def run(args: argparse.Namespace) -> int:
     except (ValueError, TypeError) as exc:
         raise CommandError(str(exc)) from None
     try:
-        asyncio.run(_serve(service))
+        eventloop.run(_serve(service))
     except PartnerError as exc:
         raise CommandError(str(exc)) from None
     return 0

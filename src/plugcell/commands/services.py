@@ -10,6 +10,7 @@ from typing import Any
 import msgspec
 
 from plugcell.commands.cellargs import add_cell_args, cell_of, transport_of
+from plugcell.framework import eventloop
 
 
 def register(subparsers: Any) -> None:
@@ -32,7 +33,7 @@ def register(subparsers: Any) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    states = asyncio.run(_collect(args))
+    states = eventloop.run(_collect(args))
     if args.json:
         print(json.dumps([msgspec.to_builtins(s) for s in states], indent=2))
         return 0

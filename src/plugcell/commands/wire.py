@@ -7,13 +7,13 @@ DeviceInfo with Get and adds it to its Partners — no restart, no reprogramming
 from __future__ import annotations
 
 import argparse
-import asyncio
 import json
 from typing import Any
 
 import msgspec
 
 from plugcell.commands.cellargs import add_cell_args, cell_of, transport_of
+from plugcell.framework import eventloop
 
 
 def register(subparsers: Any) -> None:
@@ -39,7 +39,7 @@ def register(subparsers: Any) -> None:
 def run(args: argparse.Namespace) -> int:
     from plugcell.cli import CommandError
 
-    response = asyncio.run(_ask(args))
+    response = eventloop.run(_ask(args))
     if args.json:
         print(json.dumps(msgspec.to_builtins(response)))
     elif response.ok:

@@ -31,6 +31,7 @@ from plugcell.framework.model import (
     GenericDeviceState,
     Process,
     ProcessStates,
+    ProcessUpdateBatch,
     ProcessUpdateNotification,
     Tag,
 )
@@ -62,6 +63,7 @@ __all__ = [
     "Process",
     "ProcessCall",
     "ProcessStates",
+    "ProcessUpdateBatch",
     "ProcessUpdateNotification",
     "Tag",
     "TransportConfig",

@@ -24,6 +24,7 @@ import threading
 from collections.abc import Coroutine, Iterator
 from typing import Any, TypeVar
 
+from plugcell.framework import eventloop
 from plugcell.framework.keys import DEFAULT_CELL
 from plugcell.framework.model import (
     Acknowledgement,
@@ -91,7 +92,7 @@ class BlockingClient:
         cell: str = DEFAULT_CELL,
         transport: TransportConfig | None = None,
     ) -> None:
-        self._loop = asyncio.new_event_loop()
+        self._loop = eventloop.new_event_loop()
         self._thread = threading.Thread(
             target=self._loop.run_forever, name="plugcell-client", daemon=True
         )

@@ -224,6 +224,18 @@ class ProcessUpdateNotification(_Message):
     seq: int = 0
 
 
+class ProcessUpdateBatch(_Message):
+    """Several ``ProcessUpdate`` notifications of one service to one sender, in order.
+
+    plugcell extension (docs/protocol.md, "Batches"): the updates a service produces
+    for one sender in one turn of its loop travel in one Zenoh sample, so a stream
+    of small frames costs one transport message per burst instead of one per frame.
+    A receiver treats it exactly as its ``updates`` arriving one after another.
+    """
+
+    updates: list[ProcessUpdateNotification]
+
+
 class StateUpdateNotification(_Message):
     """Table F-12: body of the ``StateUpdate`` notification."""
 
@@ -269,6 +281,7 @@ Message = (
     Process
     | Acknowledgement
     | ProcessUpdateNotification
+    | ProcessUpdateBatch
     | StateUpdateNotification
     | ConnectionUpdateNotification
     | ShutdownNotification
@@ -279,3 +292,12 @@ Message = (
     | SubscribeResponse
 )
 """Every message body; the MessagePack map carries its class name under ``"Kind"``."""
+
+
+def process_updates(body: Message) -> list[ProcessUpdateNotification]:
+    """The ProcessUpdates a notification carries, in order: one, a batch's, or none."""
+    if isinstance(body, ProcessUpdateNotification):
+        return [body]
+    if isinstance(body, ProcessUpdateBatch):
+        return body.updates
+    return []

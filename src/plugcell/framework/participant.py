@@ -14,7 +14,8 @@ Presence uses Zenoh liveliness tokens: a participant that dies without a
 processes waiting on it end Failed with the reason.
 
 Threading: all state lives in one asyncio event loop.  Zenoh callbacks only post
-to a :class:`~plugcell.framework.port.Port`; one pump task handles the items.
+to a :class:`~plugcell.framework.port.Port`, whose items the loop hands to
+:meth:`Participant._handle` in order.
 """
 
 from __future__ import annotations
@@ -48,12 +49,12 @@ from plugcell.framework.model import (
     GetRequest,
     Message,
     Process,
-    ProcessUpdateNotification,
     ShutdownNotification,
     SubscribeRequest,
     SubscribeResponse,
     Tag,
     UnsubscribeRequest,
+    process_updates,
 )
 from plugcell.framework.port import Port
 from plugcell.framework.process_call import ProcessCall
@@ -125,7 +126,6 @@ class Participant:
         self.session: zenoh.Session | None = None
         self._loop: asyncio.AbstractEventLoop | None = None
         self._port: Port[tuple[Callable[[Any], None], Any]] | None = None
-        self._pump_task: asyncio.Task[None] | None = None
         self._entities: list[Any] = []
         self._token: Any = None
         self._calls: dict[tuple[str, int], ProcessCall] = {}
@@ -143,7 +143,7 @@ class Participant:
     async def start(self) -> None:
         """Open the session, watch presence, declare what a subclass needs, then go live."""
         self._loop = asyncio.get_running_loop()
-        self._port = Port(self._loop)
+        self._port = Port(self._loop, self._handle)
         if self.signer is None:
             self.signer = RequestSigner.from_transport(self.transport)
             if self.signer is not None and self.signer.name != self.name:
@@ -152,7 +152,6 @@ class Participant:
                     "signatures will refuse them (give this participant the name %s)",
                     self.name, self.signer.name, self.signer.name,
                 )
-        self._pump_task = asyncio.create_task(self._pump(), name=f"{self.name}-pump")
         self.session = await asyncio.to_thread(open_session, self.transport)
         # incarnation id: start time first, so instances of one name order by age
         self.instance = f"{time.time_ns():016x}{self.session.zid()}"
@@ -197,8 +196,6 @@ class Participant:
         self.partners.clear()
         if self._port is not None:
             self._port.close()
-        if self._pump_task is not None:
-            await self._pump_task
 
     async def __aenter__(self) -> Participant:
         await self.start()
@@ -230,17 +227,13 @@ class Participant:
 
         return Callback(lambda r: post((reply, r)), lambda: post((done, None)), indirect=False)
 
-    async def _pump(self) -> None:
-        assert self._port is not None
-        while True:
-            items = await self._port.receive_all()
-            if not items:
-                return
-            for handler, item in items:
-                try:
-                    handler(item)
-                except Exception:  # a bad message must not stop the participant
-                    log.exception("%s: error handling %s", self.name, handler.__name__)
+    def _handle(self, items: list[tuple[Callable[[Any], None], Any]]) -> None:
+        """Run the handler of each item the Zenoh callbacks posted, in order."""
+        for handler, item in items:
+            try:
+                handler(item)
+            except Exception:  # a bad message must not stop the participant
+                log.exception("%s: error handling %s", self.name, handler.__name__)
 
     def _encode(self, body: Message, to: str = "") -> bytes:
         """The envelope of ``body``; a request to service ``to`` is signed when this
@@ -609,15 +602,13 @@ class Participant:
         except wire.WireError as exc:
             log.warning("%s: bad ProcessUpdate on %s: %s", self.name, sample.key_expr, exc)
             return
-        update = envelope.body
-        if not isinstance(update, ProcessUpdateNotification):
-            return
-        call = self._calls.get((envelope.sender, update.identifier))
-        if call is None:
-            return
-        call._on_update(update, envelope.instance)
-        if call.final is not None:
-            self._calls.pop((envelope.sender, update.identifier), None)
+        for update in process_updates(envelope.body):
+            call = self._calls.get((envelope.sender, update.identifier))
+            if call is None:
+                continue
+            call._on_update(update, envelope.instance)
+            if call.final is not None:
+                self._calls.pop((envelope.sender, update.identifier), None)
 
     async def stop(
         self, call: ProcessCall, command: str | None = None, timeout: float | None = None

@@ -2,10 +2,11 @@
 
 Zenoh calls its callbacks on its own threads and forbids calling Zenoh or
 blocking inside them, so every callback of plugcell does exactly one thing:
-``port.post(item)``.  One asyncio task of the owning participant receives the
-items in order.  The lock only guards the deque append/pop; it is never held
-across a wait.  The event loop is woken once per burst, not once per message,
-which is what keeps high notification rates cheap.
+``port.post(item)``.  The owning participant's event loop hands the items, in
+order, to one receiver.  The lock only guards the deque; it is never held across
+a wait.  The loop is woken once per burst, not once per message — the receiver
+runs directly in that wake-up (no task switch in between), which is what keeps
+both the latency of one message and the cost of high notification rates low.
 """
 
 from __future__ import annotations
@@ -14,19 +15,23 @@ import asyncio
 import contextlib
 import threading
 from collections import deque
+from collections.abc import Callable
 from typing import Generic, TypeVar
 
 T = TypeVar("T")
 
 
 class Port(Generic[T]):
-    """FIFO queue: ``post`` from any thread, ``receive``/``receive_all`` in the loop."""
+    """FIFO queue: ``post`` from any thread; ``receiver(items)`` runs in the loop."""
 
-    def __init__(self, loop: asyncio.AbstractEventLoop) -> None:
+    def __init__(
+        self, loop: asyncio.AbstractEventLoop, receiver: Callable[[list[T]], None]
+    ) -> None:
         self._loop = loop
+        self._receiver = receiver
         self._items: deque[T] = deque()
         self._lock = threading.Lock()
-        self._waiter: asyncio.Future[None] | None = None
+        self._scheduled = False
         self._closed = False
 
     def post(self, item: T) -> None:
@@ -35,19 +40,25 @@ class Port(Generic[T]):
             if self._closed:
                 return
             self._items.append(item)
-            waiter, self._waiter = self._waiter, None
-        if waiter is not None:
-            with contextlib.suppress(RuntimeError):  # loop closed under a late callback
-                self._loop.call_soon_threadsafe(_wake, waiter)
+            if self._scheduled:
+                return
+            self._scheduled = True
+        with contextlib.suppress(RuntimeError):  # loop closed under a late callback
+            self._loop.call_soon_threadsafe(self._drain)
+
+    def _drain(self) -> None:
+        with self._lock:
+            items = list(self._items)
+            self._items.clear()
+            self._scheduled = False
+        if items:
+            self._receiver(items)
 
     def close(self) -> None:
-        """Drop pending items, refuse new ones and release a waiting receiver."""
+        """Drop pending items and refuse new ones."""
         with self._lock:
             self._closed = True
             self._items.clear()
-            waiter, self._waiter = self._waiter, None
-        if waiter is not None and not waiter.done():
-            waiter.set_result(None)
 
     @property
     def closed(self) -> bool:
@@ -55,22 +66,3 @@ class Port(Generic[T]):
 
     def __len__(self) -> int:
         return len(self._items)
-
-    async def receive_all(self) -> list[T]:
-        """Everything posted so far (at least one item), in order; ``[]`` once closed."""
-        while True:
-            with self._lock:
-                if self._items:
-                    items = list(self._items)
-                    self._items.clear()
-                    return items
-                if self._closed:
-                    return []
-                waiter = self._loop.create_future()
-                self._waiter = waiter
-            await waiter
-
-
-def _wake(waiter: asyncio.Future[None]) -> None:
-    if not waiter.done():
-        waiter.set_result(None)

@@ -66,6 +66,7 @@ from plugcell.framework.model import (
     Message,
     Process,
     ProcessStates,
+    ProcessUpdateBatch,
     ProcessUpdateNotification,
     ShutdownNotification,
     StateUpdateNotification,
@@ -87,6 +88,10 @@ T = TypeVar("T")
 #: often (a ``Queued`` ProcessUpdate, not journalled): a requester waiting behind a long
 #: hold keeps waiting while the service lives, instead of timing out (docs/protocol.md).
 QUEUED_HEARTBEAT_S = 2.0
+
+#: Largest data (bytes) one :class:`ProcessUpdateBatch` carries; a frame larger than
+#: this travels alone.
+BATCH_BYTES = 64 * 1024
 
 
 class DeviceError(RuntimeError):
@@ -125,7 +130,7 @@ class GenericDevice(Participant):
     info: ClassVar[str] = ""
     commands: ClassVar[tuple[Command, ...]] = ()
     """The command catalogue (``state.DeviceInfo.Commands`` of StateInitialize, 5.2.3.3)."""
-    express_updates: ClassVar[bool] = False
+    express_updates: ClassVar[bool] = True
     """Send ProcessUpdates without batching (lower latency; see the transport benchmark)."""
 
     def __init__(
@@ -181,7 +186,8 @@ class GenericDevice(Participant):
         self._publishers: dict[str, Any] = {}
         self._closing = False
         self._flush_scheduled = False
-        self._outbox: list[tuple[Entry, ProcessStates, bool, bytes]] = []
+        self._outbox: list[tuple[Entry, ProcessUpdateNotification]] = []
+        self._acks: list[tuple[zenoh.Query, Acknowledgement]] = []
         self._notify_scheduled = False
         self._notified = (DeviceStates.Ready, ConnectionStates.Offline)
         self._create_queryable: Any = None
@@ -509,7 +515,6 @@ class GenericDevice(Participant):
                 state=state.value,
                 reason=reason,
             )
-            self.journal.commit()
         except Exception as exc:  # sqlite3.IntegrityError: identifier reused
             self.journal.commit()
             self._reject(
@@ -521,12 +526,12 @@ class GenericDevice(Participant):
                 process.command.name,
             )
             return
-        self._reply(
-            query,
-            Acknowledgement(
+        self._acks.append(
+            (query, Acknowledgement(
                 identifier=identifier, state=state, reason=reason, instance=self.instance
-            ),
+            ))
         )
+        self._flush_soon()
         if reason:
             return
         assert command is not None
@@ -907,38 +912,62 @@ class GenericDevice(Participant):
         self.journal.record_update(
             entry.sender, entry.identifier, entry.seq, state.value, reason, summary(data)
         )
-        self._outbox.append((entry, state, data is not None, self._encode(update)))
+        self._outbox.append((entry, update))
         if state.final:
             self._flush()
-        elif not self._flush_scheduled and self._loop is not None:
+        else:
+            self._flush_soon()
+
+    def _flush_soon(self) -> None:
+        if not self._flush_scheduled and self._loop is not None:
             self._flush_scheduled = True
             self._loop.call_soon(self._flush)
 
     def _flush(self) -> None:
-        """Commit the journal, then publish what it now holds.
+        """Commit the journal, then acknowledge and publish what it now holds.
 
-        Every update is durable before anyone can see it.  Non-final updates wait
-        for the end of the event-loop turn, so a burst of frames costs one commit;
-        a final update flushes at once.  A data-less Running update whose process
-        ends within the same flush is journaled but not sent (its ``seq`` is skipped):
-        the final update supersedes it.
+        Every accepted process and every update is durable before anyone can see
+        it.  What one event-loop turn produces — acknowledgements, a burst of
+        frames — shares one commit; a final update flushes at once.  The updates
+        for one sender go out in one sample (a :class:`ProcessUpdateBatch` when
+        there are several, up to :data:`BATCH_BYTES` of data each).  A data-less
+        Running update whose process ends within the same flush is journaled but
+        not sent (its ``seq`` is skipped): the final update supersedes it.
         """
         self._flush_scheduled = False
-        if not self._outbox:
+        if not self._outbox and not self._acks:
             return
         try:
             self.journal.commit()
         except Exception:  # a full disk must not silence the service
             log.exception("%s: journal commit failed", self.name)
+        acks, self._acks = self._acks, []
+        for query, ack in acks:
+            self._reply(query, ack)
         outbox, self._outbox = self._outbox, []
         if self.session is None or self.session.is_closed():
             return
-        ended = {id(entry) for entry, state, _, _ in outbox if state.final}
-        for entry, state, has_data, payload in outbox:
-            if state is ProcessStates.Running and not has_data and id(entry) in ended:
+        ended = {id(entry) for entry, update in outbox if update.state.final}
+        batch: list[ProcessUpdateNotification] = []
+        sender, size = "", 0
+        for entry, update in outbox:
+            if (update.state is ProcessStates.Running and update.data is None
+                    and id(entry) in ended):
                 continue
-            with contextlib.suppress(zenoh.ZError):
-                self._publisher(entry.sender).put(payload)
+            nbytes = len(update.data.buffer) if update.data is not None else 0
+            if batch and (entry.sender != sender or size + nbytes > BATCH_BYTES):
+                self._send_updates(sender, batch)
+                batch, size = [], 0
+            batch.append(update)
+            sender, size = entry.sender, size + nbytes
+        if batch:
+            self._send_updates(sender, batch)
+
+    def _send_updates(self, sender: str, updates: list[ProcessUpdateNotification]) -> None:
+        """Publish ``updates`` for ``sender`` in one sample (docs/protocol.md, "Batches")."""
+        body = updates[0] if len(updates) == 1 else ProcessUpdateBatch(updates=updates)
+        with contextlib.suppress(zenoh.ZError):
+            self._publisher(sender).put(self._encode(body))
 
     def _finish(
         self, entry: Entry, state: ProcessStates, reason: str, data: Data | None = None

@@ -47,6 +47,7 @@ from plugcell.framework.model import (
     Message,
     ProcessStates,
     ProcessUpdateNotification,
+    process_updates,
 )
 from plugcell.framework.participant import PartnerError
 from plugcell.framework.process_call import ProcessCall
@@ -628,8 +629,7 @@ class CellController(GenericDevice):
             envelope = wire_codec.decode(sample.payload.to_bytes())
         except wire_codec.WireError:
             return
-        update = envelope.body
-        if isinstance(update, ProcessUpdateNotification):
+        for update in process_updates(envelope.body):
             record = self.monitor.updated(recipient, update)
             self._dirty.add(record.key)
 
