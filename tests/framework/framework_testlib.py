@@ -3,14 +3,19 @@
 from __future__ import annotations
 
 import asyncio
+import contextlib
+import time
 import uuid
-from collections.abc import Coroutine
+from collections.abc import AsyncIterator, Coroutine
+from pathlib import Path
 from typing import Any
 
 import numpy as np
 from childproc import Proc, plugcell_argv  # noqa: F401  (re-exported for the tests)
 
 from plugcell.framework import Command, CommandTypes, DataTypes, DeviceError, GenericDevice
+from plugcell.framework.model import ProcessStates
+from plugcell.framework.participant import Participant
 
 
 def unique_cell(prefix: str = "t") -> str:
@@ -109,6 +114,44 @@ class ScriptedDevice(GenericDevice):
                 if int(data[0]) < 0:
                     raise DeviceError("negative values are not allowed")
         return "OK"
+
+
+# -- one cell in this process (async tests) ---------------------------------------------
+
+
+async def until(predicate: Any, timeout: float = 10.0) -> None:
+    """Wait (bounded) for a condition that another task or process makes true."""
+    deadline = time.monotonic() + timeout
+    while not predicate():
+        assert time.monotonic() < deadline, "condition not reached in time"
+        await asyncio.sleep(0.01)
+
+
+@contextlib.asynccontextmanager
+async def cell_with(tmp_path: Path, *clients: str, **device_kwargs: Any) -> AsyncIterator[Any]:
+    """A ScriptedDevice "DEV" and the named clients, all in a fresh cell."""
+    cell = unique_cell()
+    dev = ScriptedDevice(cell=cell, journal=tmp_path / "journal", **device_kwargs)
+    await dev.start()
+    parts = [Participant(name, cell=cell) for name in clients]
+    try:
+        for p in parts:
+            await p.start()
+            assert await p.wait_for("DEV", 10)
+        yield dev, *parts
+    finally:
+        for p in parts:
+            await p.close()
+        await dev.close()
+
+
+def states(updates: Any) -> list[ProcessStates]:
+    return [u.state for u in updates]
+
+
+async def collect(call: Any) -> list[Any]:
+    return [u async for u in call]
+
 
 
 # -- OS processes ------------------------------------------------------------------------

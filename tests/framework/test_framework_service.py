@@ -7,14 +7,11 @@ loopback); the device is scripted so every step is under the test's control.
 from __future__ import annotations
 
 import asyncio
-import contextlib
-import time
-from pathlib import Path
 
 import msgspec
 import numpy as np
 import pytest
-from framework_testlib import ScriptedDevice, run, unique_cell
+from framework_testlib import ScriptedDevice, cell_with, collect, run, states, unique_cell, until
 
 from plugcell.framework import service as service_module
 from plugcell.framework import wire
@@ -39,40 +36,6 @@ Q, R, C, F = (
     ProcessStates.Completed,
     ProcessStates.Failed,
 )
-
-
-async def until(predicate, timeout: float = 10.0) -> None:
-    """Wait (bounded) for a condition that another task or process makes true."""
-    deadline = time.monotonic() + timeout
-    while not predicate():
-        assert time.monotonic() < deadline, "condition not reached in time"
-        await asyncio.sleep(0.01)
-
-
-@contextlib.asynccontextmanager
-async def cell_with(tmp_path: Path, *clients: str, **device_kwargs):
-    """A ScriptedDevice "DEV" and the named clients, all in a fresh cell."""
-    cell = unique_cell()
-    dev = ScriptedDevice(cell=cell, journal=tmp_path / "journal", **device_kwargs)
-    await dev.start()
-    parts = [Participant(name, cell=cell) for name in clients]
-    try:
-        for p in parts:
-            await p.start()
-            assert await p.wait_for("DEV", 10)
-        yield dev, *parts
-    finally:
-        for p in parts:
-            await p.close()
-        await dev.close()
-
-
-def states(updates) -> list[ProcessStates]:
-    return [u.state for u in updates]
-
-
-async def collect(call) -> list:
-    return [u async for u in call]
 
 
 def test_create_acknowledge_update_complete(tmp_path):

@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import contextlib
 import sqlite3
+import threading
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -41,6 +42,9 @@ class JournalTail:
     cell: str
     home: Path | None = None
     files: dict[Path, _File] = field(default_factory=dict)
+    _lock: threading.Lock = field(default_factory=threading.Lock, repr=False)
+    """:meth:`poll` runs in a worker thread; :meth:`close` must not close a
+    connection under it (sqlite3 with ``check_same_thread=False`` would crash)."""
 
     @property
     def folder(self) -> Path:
@@ -48,6 +52,10 @@ class JournalTail:
 
     def poll(self) -> tuple[list[dict[str, Any]], list[dict[str, Any]]]:
         """New process rows and new update rows since the last poll, of every journal."""
+        with self._lock:
+            return self._poll()
+
+    def _poll(self) -> tuple[list[dict[str, Any]], list[dict[str, Any]]]:
         processes: list[dict[str, Any]] = []
         updates: list[dict[str, Any]] = []
         folder = self.folder
@@ -107,6 +115,8 @@ class JournalTail:
         f.db = None
 
     def close(self) -> None:
-        for f in self.files.values():
-            self._close(f)
-        self.files.clear()
+        """Close every journal (after a poll under way in another thread ends)."""
+        with self._lock:
+            for f in self.files.values():
+                self._close(f)
+            self.files.clear()
