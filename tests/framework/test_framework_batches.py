@@ -111,7 +111,7 @@ def test_a_requester_reads_a_batch_it_did_not_expect_in_one_piece(tmp_path):
     async def body():
         async with cell_with(tmp_path, "A") as (dev, a):
             stream = await a.create_process("DEV", "Stream")
-            await dev.started.wait()
+            first = await anext(stream)  # the Running of the stream itself
             tag = Tag("A", "DEV")
             stray = ProcessUpdateNotification(tag=tag, identifier=1, state=R, seq=1)
             frame = ProcessUpdateNotification(
@@ -120,7 +120,6 @@ def test_a_requester_reads_a_batch_it_did_not_expect_in_one_piece(tmp_path):
             )
             payload = wire.encode("DEV", dev.instance, ProcessUpdateBatch(updates=[stray, frame]))
             a.session.put(dev.keys.process("DEV", "A"), payload)  # as DEV would
-            first = await anext(stream)  # the Running of the stream itself
             second = await anext(stream)
             assert (first.seq, second.seq) == (1, 2) and stream.array(second)[0] == 0.0
             stop = await a.create_process("DEV", "Stop")

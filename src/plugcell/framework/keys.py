@@ -10,6 +10,8 @@ key                                    Zenoh       message
 ``live/client/<name>/<instance>``      liveliness  presence of a client (CLI, script, test)
 ``svc/<name>/get``                     queryable   Get → GenericDeviceState (Table 5-1)
 ``svc/<name>/create``                  queryable   CreateProcess(Process) → Acknowledgement
+``svc/<name>/create/<sender>``         pub/sub     CreateProcess(Process) → Acknowledgement
+                                                   on ``process/<sender>``
 ``svc/<name>/subscribe``               queryable   Subscribe/UnsubscribeRequest → Response
 ``svc/<name>/process/<sender>``        pub/sub     ProcessUpdate for processes of <sender>
 ``svc/<name>/state``                   pub/sub     StateUpdate
@@ -89,6 +91,14 @@ class KeySpace:
 
     def create(self, name: str) -> str:
         return f"{self.prefix}/svc/{name}/create"
+
+    def request(self, name: str, sender: str) -> str:
+        """Where ``sender`` publishes its CreateProcess requests to service ``name``."""
+        return f"{self.prefix}/svc/{name}/create/{sender}"
+
+    def requests(self, name: str) -> str:
+        """Every CreateProcess published to service ``name``."""
+        return f"{self.prefix}/svc/{name}/create/*"
 
     def subscribe(self, name: str) -> str:
         return f"{self.prefix}/svc/{name}/subscribe"

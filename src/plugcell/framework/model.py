@@ -225,15 +225,18 @@ class ProcessUpdateNotification(_Message):
 
 
 class ProcessUpdateBatch(_Message):
-    """Several ``ProcessUpdate`` notifications of one service to one sender, in order.
+    """Acknowledgements and ProcessUpdates of one service for one sender, in order.
 
-    plugcell extension (docs/protocol.md, "Batches"): the updates a service produces
-    for one sender in one turn of its loop travel in one Zenoh sample, so a stream
-    of small frames costs one transport message per burst instead of one per frame.
-    A receiver treats it exactly as its ``updates`` arriving one after another.
+    plugcell extension (docs/protocol.md, "Batches"): what a service produces for
+    one sender in one turn of its loop travels in one Zenoh sample — the
+    acknowledgements of the requests that sender published, then the updates — so
+    a request and its first updates cost one transport message, and a stream of
+    small frames one per burst instead of one per frame.  A receiver treats it
+    exactly as its ``acks`` and then its ``updates`` arriving one after another.
     """
 
-    updates: list[ProcessUpdateNotification]
+    acks: list[Acknowledgement] = msgspec.field(default_factory=list)
+    updates: list[ProcessUpdateNotification] = msgspec.field(default_factory=list)
 
 
 class StateUpdateNotification(_Message):
@@ -300,4 +303,13 @@ def process_updates(body: Message) -> list[ProcessUpdateNotification]:
         return [body]
     if isinstance(body, ProcessUpdateBatch):
         return body.updates
+    return []
+
+
+def process_acks(body: Message) -> list[Acknowledgement]:
+    """The Acknowledgements a notification on a process key carries: one, a batch's, none."""
+    if isinstance(body, Acknowledgement):
+        return [body]
+    if isinstance(body, ProcessUpdateBatch):
+        return body.acks
     return []

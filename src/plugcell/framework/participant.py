@@ -54,6 +54,7 @@ from plugcell.framework.model import (
     SubscribeResponse,
     Tag,
     UnsubscribeRequest,
+    process_acks,
     process_updates,
 )
 from plugcell.framework.port import Port
@@ -129,6 +130,8 @@ class Participant:
         self._entities: list[Any] = []
         self._token: Any = None
         self._calls: dict[tuple[str, int], ProcessCall] = {}
+        self._doors: dict[str, Any] = {}
+        """Publishers of CreateProcess requests, per partner (:meth:`_request_door`)."""
         self._last_id = 0
         self._presence_changed = asyncio.Event()
         self._watchers: set[asyncio.Queue[PresenceEvent]] = set()
@@ -190,6 +193,8 @@ class Participant:
                 for partner in self.partners.values():
                     if partner.subscriber is not None:
                         partner.subscriber.undeclare()
+                for door in self._doors.values():
+                    door.undeclare()
                 for entity in reversed(self._entities):
                     entity.undeclare()
             await asyncio.to_thread(session.close)
@@ -360,15 +365,23 @@ class Participant:
                 await asyncio.wait_for(self._presence_changed.wait(), remaining)
         return True
 
-    async def events(self) -> AsyncIterator[PresenceEvent]:
-        """Join/leave events from now on (iterate in a task; stop by breaking out)."""
+    def events(self) -> AsyncIterator[PresenceEvent]:
+        """Join/leave events from this call on (iterate in a task; stop by breaking out).
+
+        The events are collected from the call, not from the first iteration: nothing
+        that happens before the iterating task first runs is missed.
+        """
         queue: asyncio.Queue[PresenceEvent] = asyncio.Queue()
         self._watchers.add(queue)
-        try:
-            while True:
-                yield await queue.get()
-        finally:
-            self._watchers.discard(queue)
+
+        async def stream() -> AsyncIterator[PresenceEvent]:
+            try:
+                while True:
+                    yield await queue.get()
+            finally:
+                self._watchers.discard(queue)
+
+        return stream()
 
     # -- generic interface of others -------------------------------------------------------
 
@@ -505,13 +518,18 @@ class Participant:
             return call
         self._calls[(partner, identifier)] = call
         call.sent_ns = time.perf_counter_ns()
-        pending = _Pending()
-        self.session.get(
-            self.keys.create(partner),
-            self._ack_callback(call, pending),
-            payload=self._encode(process, to=partner),
-            timeout=timeout,
-        )
+        payload = self._encode(process, to=partner)
+        door = self._request_door(partner)
+        if door is not None:  # the partner takes published requests: ack on the process key
+            try:
+                door.put(payload, attachment=wire.attach_identifier(identifier))
+            except zenoh.ZError as exc:
+                call._fail(f"cannot send CreateProcess to {partner}: {exc}")
+        else:
+            self.session.get(
+                self.keys.create(partner), self._ack_callback(call), payload=payload,
+                timeout=timeout,
+            )
         await call.acknowledged()
         if call.final is not None:
             self._calls.pop((partner, identifier), None)
@@ -554,7 +572,26 @@ class Participant:
             data=typed,
         )
 
-    def _ack_callback(self, call: ProcessCall, pending: _Pending) -> Callback:
+    def _request_door(self, partner: str) -> Any:
+        """The publisher of requests to ``partner`` if ``partner`` subscribes to them
+        (Zenoh's matching status, known locally), else None: use the queryable."""
+        door = self._doors.get(partner)
+        if door is None:
+            assert self.session is not None
+            door = self.session.declare_publisher(
+                self.keys.request(partner, self.name),
+                express=True,
+                congestion_control=zenoh.CongestionControl.BLOCK,
+            )
+            self._doors[partner] = door
+        return door if door.matching_status.matching else None
+
+    def _on_ack(self, call: ProcessCall, ack: Acknowledgement, instance: str) -> None:
+        call._on_ack(ack, instance)
+        if call.final is not None:
+            self._calls.pop((call.partner, call.identifier), None)
+
+    def _ack_callback(self, call: ProcessCall) -> Callback:
         port = self._port
         assert port is not None
         post = port.post
@@ -570,13 +607,11 @@ class Participant:
                 call._fail(f"bad acknowledgement from {call.partner}: {exc}")
                 return
             if isinstance(envelope.body, Acknowledgement):
-                call._on_ack(envelope.body, envelope.instance)
+                self._on_ack(call, envelope.body, envelope.instance)
             else:
                 call._fail(
                     f"bad acknowledgement from {call.partner}: {type(envelope.body).__name__}"
                 )
-            if call.final is not None:
-                self._calls.pop((call.partner, call.identifier), None)
 
         asked = time.monotonic()
 
@@ -602,6 +637,10 @@ class Participant:
         except wire.WireError as exc:
             log.warning("%s: bad ProcessUpdate on %s: %s", self.name, sample.key_expr, exc)
             return
+        for ack in process_acks(envelope.body):
+            call = self._calls.get((envelope.sender, ack.identifier))
+            if call is not None:
+                self._on_ack(call, ack, envelope.instance)
         for update in process_updates(envelope.body):
             call = self._calls.get((envelope.sender, update.identifier))
             if call is None:

@@ -104,7 +104,8 @@ def zenoh_acl(names: Iterable[str]) -> dict[str, object]:
 
     ``names`` are the certificate CNs of the cell (its participants).  Every node
     accepts from a peer whose CN is N only the publications, queryables and
-    liveliness tokens of N (``plugcell/*/svc/N/**``, ``plugcell/*/live/*/N/*``):
+    liveliness tokens of N (``plugcell/*/svc/N/**``, ``plugcell/*/live/*/N/*``) and
+    N's own published requests (``plugcell/*/svc/*/create/N``):
     nobody can publish a forged Shutdown or StateUpdate of another service, answer its
     queries, or declare its presence (which would make the real one withdraw).
     Subscriptions, queries and replies are open to every certified peer; who may
@@ -130,7 +131,8 @@ def zenoh_acl(names: Iterable[str]) -> dict[str, object]:
     for i, name in enumerate(names):
         rules.append({"id": f"as{i}", "permission": "allow", "flows": ["ingress"],
                       "messages": writes,
-                      "key_exprs": [f"plugcell/*/svc/{name}/**", f"plugcell/*/live/*/{name}/*"]})
+                      "key_exprs": [f"plugcell/*/svc/{name}/**", f"plugcell/*/live/*/{name}/*",
+                                    f"plugcell/*/svc/*/create/{name}"]})
         subjects.append({"id": f"cn{i}", "cert_common_names": [name]})
         policies.append({"id": f"as{i}", "rules": [f"as{i}"], "subjects": [f"cn{i}"]})
     return {"enabled": True, "default_permission": "deny", "rules": rules,

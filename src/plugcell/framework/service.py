@@ -52,7 +52,7 @@ import zenoh
 from plugcell.framework import wire
 from plugcell.framework.data import DataError, check_data, from_data, summary, to_data
 from plugcell.framework.journal import Journal, journal_dir
-from plugcell.framework.keys import DEFAULT_CELL, Presence
+from plugcell.framework.keys import DEFAULT_CELL, Presence, check_name
 from plugcell.framework.model import (
     Acknowledgement,
     Command,
@@ -88,6 +88,9 @@ T = TypeVar("T")
 #: often (a ``Queued`` ProcessUpdate, not journalled): a requester waiting behind a long
 #: hold keeps waiting while the service lives, instead of timing out (docs/protocol.md).
 QUEUED_HEARTBEAT_S = 2.0
+
+Answer = zenoh.Query | str
+"""Where a CreateProcess is acknowledged: its query, or the sender that published it."""
 
 #: Largest data (bytes) one :class:`ProcessUpdateBatch` carries; a frame larger than
 #: this travels alone.
@@ -187,10 +190,11 @@ class GenericDevice(Participant):
         self._closing = False
         self._flush_scheduled = False
         self._outbox: list[tuple[Entry, ProcessUpdateNotification]] = []
-        self._acks: list[tuple[zenoh.Query, Acknowledgement]] = []
+        self._acks: list[tuple[Answer, Acknowledgement]] = []
         self._notify_scheduled = False
         self._notified = (DeviceStates.Ready, ConnectionStates.Offline)
-        self._create_queryable: Any = None
+        self._create_doors: list[Any] = []
+        """The queryable ``svc/<name>/create`` and the subscriber ``svc/<name>/create/*``."""
         self.conflict = ""
         """Why this service withdrew because another one has its name (else empty)."""
         self.stopped = asyncio.Event()
@@ -264,10 +268,15 @@ class GenericDevice(Participant):
                 self.keys.subscribe(self.name), self._callback(self._on_subscribe)
             )
         )
-        self._create_queryable = self.session.declare_queryable(
-            self.keys.create(self.name), self._callback(self._on_create)
-        )
-        self._entities.append(self._create_queryable)
+        self._create_doors = [
+            self.session.declare_queryable(
+                self.keys.create(self.name), self._callback(self._on_create)
+            ),
+            self.session.declare_subscriber(
+                self.keys.requests(self.name), self._callback(self._on_request)
+            ),
+        ]
+        self._entities.extend(self._create_doors)
 
     def _open_journal(self) -> None:
         if not self._journal_setting:
@@ -321,11 +330,11 @@ class GenericDevice(Participant):
             await self.stopped.wait()
             return
         self._closing = True
-        if self._create_queryable is not None:
+        for door in self._create_doors:
             with contextlib.suppress(zenoh.ZError):
-                self._create_queryable.undeclare()
-            self._entities.remove(self._create_queryable)
-            self._create_queryable = None
+                door.undeclare()
+            self._entities.remove(door)
+        self._create_doors = []
         for entry in self._queue.remove_if(lambda e: True):
             self._finish(entry, ProcessStates.Failed, f"{self.name}: {reason}")
         if self._holder is not None and not self._holder.abort_reason:
@@ -376,7 +385,10 @@ class GenericDevice(Participant):
 
     def _decode_query(self, query: zenoh.Query) -> tuple[wire.Envelope, bytes] | str:
         """The request of ``query`` and its bytes (a signature covers them), or why not."""
-        payload = query.payload
+        return self._decode_request(query.payload)
+
+    def _decode_request(self, payload: zenoh.ZBytes | None) -> tuple[wire.Envelope, bytes] | str:
+        """A request's envelope and its bytes, or why not."""
         size = len(payload) if payload is not None else 0
         if size == 0:
             return "empty request"
@@ -450,29 +462,56 @@ class GenericDevice(Participant):
             self._reply(query, SubscribeResponse(ok=True, partner=device))
 
     def _on_create(self, query: zenoh.Query) -> None:
-        """CreateProcessHandler (5.2.3.4): check, journal, acknowledge, enqueue."""
+        """CreateProcess through the queryable: the acknowledgement is the reply."""
+        self._create(query.payload, query)
+
+    def _on_request(self, sample: zenoh.Sample) -> None:
+        """CreateProcess published on ``svc/<name>/create/<sender>``: the acknowledgement
+        goes to ``<sender>`` on its process key, in one sample with the first updates."""
+        sender = str(sample.key_expr).rsplit("/", 1)[-1]
+        try:
+            check_name(sender, "sender name")
+        except ValueError as exc:  # nobody to answer: journal it only
+            size = len(sample.payload) if sample.payload is not None else 0
+            with contextlib.suppress(Exception):
+                self.journal.record_rejection(None, None, None, size, str(exc))
+                self.journal.commit()
+            return
+        self._create(sample.payload, sender, wire.attached_identifier(sample.attachment))
+
+    def _create(self, payload: zenoh.ZBytes | None, answer: Answer, attached: int = 0) -> None:
+        """CreateProcessHandler (5.2.3.4): check, journal, acknowledge, enqueue.
+
+        ``answer`` is where the acknowledgement goes: the query (queryable door) or
+        the name of the sender that published the request (publication door, whose
+        ``attached`` identifier acknowledges even a request that cannot be read).
+        """
         received = time.time_ns()
-        payload = query.payload
         size = len(payload) if payload is not None else 0
         decoded = (
-            self._decode_query(query)
+            self._decode_request(payload)
             if not self._closing
             else f"{self.name}: service shutting down"
         )
         if isinstance(decoded, str):
-            self._reject(query, decoded, size)
+            sender = answer if isinstance(answer, str) else None
+            self._reject(answer, decoded, size, sender, attached or None)
             return
         envelope, raw = decoded
         process = envelope.body
+        if isinstance(answer, str) and envelope.sender != answer:
+            self._reject(answer, f"envelope sender {envelope.sender} differs from the sender "
+                         f"{answer} of the request key", size, answer)
+            return
         if not isinstance(process, Process):
             self._reject(
-                query, f"expected a Process, got {type(process).__name__}", size, envelope.sender
+                answer, f"expected a Process, got {type(process).__name__}", size, envelope.sender
             )
             return
         sender, identifier = process.tag.sender, process.identifier
         unauthenticated = self.access.authenticate(self, envelope, raw)
         if unauthenticated:  # a rejection: nothing is recorded under the claimed name
-            self._reject(query, unauthenticated, size, sender, identifier, process.command.name)
+            self._reject(answer, unauthenticated, size, sender, identifier, process.command.name)
             return
         reason = self._check_process(envelope, process)
         if not reason:  # access control: refusals are journaled below with the reason
@@ -492,7 +531,7 @@ class GenericDevice(Participant):
                 reason = str(exc)
         if (sender, identifier) in self._known:
             self._reject(
-                query,
+                answer,
                 f"duplicate identifier {identifier} from {sender}",
                 size,
                 sender,
@@ -518,7 +557,7 @@ class GenericDevice(Participant):
         except Exception as exc:  # sqlite3.IntegrityError: identifier reused
             self.journal.commit()
             self._reject(
-                query,
+                answer,
                 f"cannot journal process {identifier} from {sender}: {exc}",
                 size,
                 sender,
@@ -527,24 +566,25 @@ class GenericDevice(Participant):
             )
             return
         self._acks.append(
-            (query, Acknowledgement(
+            (answer, Acknowledgement(
                 identifier=identifier, state=state, reason=reason, instance=self.instance
             ))
         )
+        if not reason:
+            assert command is not None
+            command = msgspec.structs.replace(command, option=process.command.option)
+            entry = Entry(
+                process=msgspec.structs.replace(process, command=command),
+                command=command,
+                instance=envelope.instance,
+                received_ns=received,
+                input=array,
+            )
+            self._known[(sender, identifier)] = entry
+            self._queue.post(entry)
+        # after the post: a process the handler starts (or ends) in this turn of the
+        # loop shares the acknowledgement's commit and sample
         self._flush_soon()
-        if reason:
-            return
-        assert command is not None
-        command = msgspec.structs.replace(command, option=process.command.option)
-        entry = Entry(
-            process=msgspec.structs.replace(process, command=command),
-            command=command,
-            instance=envelope.instance,
-            received_ns=received,
-            input=array,
-        )
-        self._known[(sender, identifier)] = entry
-        self._queue.post(entry)
 
     def _check_process(self, envelope: wire.Envelope, process: Process) -> str:
         if process.tag.recipient != self.name:
@@ -564,25 +604,23 @@ class GenericDevice(Participant):
 
     def _reject(
         self,
-        query: zenoh.Query,
+        answer: Answer,
         reason: str,
         size: int,
         sender: str | None = None,
         identifier: int | None = None,
         command: str | None = None,
     ) -> None:
+        """Journal a refused request; acknowledge it Failed with the reason (at the flush)."""
         with contextlib.suppress(Exception):
             self.journal.record_rejection(sender, identifier, command, size, reason)
-            self.journal.commit()
-        self._reply(
-            query,
-            Acknowledgement(
-                identifier=identifier or 0,
-                state=ProcessStates.Failed,
-                reason=reason,
-                instance=self.instance,
-            ),
-        )
+        self._acks.append((answer, Acknowledgement(
+            identifier=identifier or 0,
+            state=ProcessStates.Failed,
+            reason=reason,
+            instance=self.instance,
+        )))
+        self._flush_soon()
 
     # -- presence of senders -------------------------------------------------------------
 
@@ -942,8 +980,12 @@ class GenericDevice(Participant):
         except Exception:  # a full disk must not silence the service
             log.exception("%s: journal commit failed", self.name)
         acks, self._acks = self._acks, []
-        for query, ack in acks:
-            self._reply(query, ack)
+        to_senders: dict[str, list[Acknowledgement]] = {}
+        for answer, ack in acks:
+            if isinstance(answer, str):
+                to_senders.setdefault(answer, []).append(ack)
+            else:
+                self._reply(answer, ack)
         outbox, self._outbox = self._outbox, []
         if self.session is None or self.session.is_closed():
             return
@@ -956,16 +998,25 @@ class GenericDevice(Participant):
                 continue
             nbytes = len(update.data.buffer) if update.data is not None else 0
             if batch and (entry.sender != sender or size + nbytes > BATCH_BYTES):
-                self._send_updates(sender, batch)
+                self._send(sender, to_senders.pop(sender, []), batch)
                 batch, size = [], 0
             batch.append(update)
             sender, size = entry.sender, size + nbytes
         if batch:
-            self._send_updates(sender, batch)
+            self._send(sender, to_senders.pop(sender, []), batch)
+        for sender, acknowledgements in to_senders.items():
+            self._send(sender, acknowledgements, [])
 
-    def _send_updates(self, sender: str, updates: list[ProcessUpdateNotification]) -> None:
-        """Publish ``updates`` for ``sender`` in one sample (docs/protocol.md, "Batches")."""
-        body = updates[0] if len(updates) == 1 else ProcessUpdateBatch(updates=updates)
+    def _send(
+        self, sender: str, acks: list[Acknowledgement], updates: list[ProcessUpdateNotification]
+    ) -> None:
+        """Publish acknowledgements, then updates, for ``sender`` in one sample
+        (docs/protocol.md, "Batches")."""
+        body: Message
+        if len(acks) + len(updates) == 1:
+            body = acks[0] if acks else updates[0]
+        else:
+            body = ProcessUpdateBatch(acks=acks, updates=updates)
         with contextlib.suppress(zenoh.ZError):
             self._publisher(sender).put(self._encode(body))
 

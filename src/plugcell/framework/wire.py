@@ -133,6 +133,20 @@ def encode(
     )
 
 
+def attach_identifier(identifier: int) -> bytes:
+    """The attachment of a published CreateProcess: its identifier (docs/protocol.md §5)."""
+    return struct.pack("<Q", identifier)
+
+
+def attached_identifier(attachment: object) -> int:
+    """The identifier a published request carries in its attachment (0: none or bad)."""
+    try:
+        raw = attachment.to_bytes() if attachment is not None else b""  # type: ignore[attr-defined]
+    except Exception:
+        return 0
+    return struct.unpack("<Q", raw)[0] if len(raw) == 8 else 0
+
+
 def signing_input(
     auth: Auth, sender: str, instance: str, time_ns: int, body: bytes | memoryview
 ) -> bytes:

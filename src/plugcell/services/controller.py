@@ -31,6 +31,7 @@ import json
 import logging
 import time
 from collections import deque
+from collections.abc import AsyncIterator
 from pathlib import Path
 from typing import Any, ClassVar
 
@@ -49,7 +50,7 @@ from plugcell.framework.model import (
     ProcessUpdateNotification,
     process_updates,
 )
-from plugcell.framework.participant import PartnerError
+from plugcell.framework.participant import PartnerError, PresenceEvent
 from plugcell.framework.process_call import ProcessCall
 from plugcell.framework.service import DeviceError, GenericDevice
 from plugcell.services.controller_journal import JournalTail
@@ -197,7 +198,8 @@ class CellController(GenericDevice):
             except WiringError as exc:
                 self.note("error", str(exc))
         self._loops = [
-            asyncio.create_task(self._discovery_loop(), name=f"{self.name}-discovery"),
+            asyncio.create_task(self._discovery_loop(self.events()),
+                                name=f"{self.name}-discovery"),
             asyncio.create_task(self._refresh_loop(), name=f"{self.name}-refresh"),
             asyncio.create_task(self._flush_loop(), name=f"{self.name}-flush"),
         ]
@@ -304,8 +306,9 @@ class CellController(GenericDevice):
 
     # -- discovery (Figure 7-9) ---------------------------------------------------------
 
-    async def _discovery_loop(self) -> None:
-        async for event in self.events():
+    async def _discovery_loop(self, events: AsyncIterator[PresenceEvent]) -> None:
+        """Presence events from before :meth:`start` listed ``alive`` on."""
+        async for event in events:
             self._presence(event.presence, joined=event.kind == "join")
 
     def _presence(self, presence: Presence, *, joined: bool) -> None:
