@@ -12,8 +12,10 @@ from plugcell.framework.data import (
     DTYPES,
     DataError,
     check_data,
+    describe,
     from_data,
     size_matches,
+    summary,
     to_data,
 )
 from plugcell.framework.model import Data, DataTypes
@@ -130,3 +132,19 @@ def test_huge_declared_size_does_not_allocate():
     lie = Data(DataTypes.Double, (2**31 - 1, 2**31 - 1, 2**31 - 1), b"\0" * 8)
     with pytest.raises(DataError, match="does not match"):
         check_data(lie, DataTypes.Double, ())
+
+
+@settings(max_examples=300, deadline=None)
+@given(st.binary(max_size=24), st.sampled_from([DataTypes.Byte, DataTypes.Boolean]))
+def test_summary_of_bytes_reads_like_the_values(buffer, data_type):
+    """The journal's text of a small buffer lists its values (Byte without numpy, the
+    same text the generic path gives); a large one only its declaration."""
+    if data_type is DataTypes.Boolean:
+        buffer = bytes(b & 1 for b in buffer)
+    data = Data(data_type, (len(buffer),), buffer)
+    text = summary(data)
+    head = describe(data_type, (len(buffer),))
+    if len(buffer) > 16:
+        assert text == head
+    else:
+        assert text == f"{head} {from_data(data).tolist()}"

@@ -11,6 +11,7 @@ does not allow, or that claims another name than its certificate's, is refused
 from __future__ import annotations
 
 import asyncio
+import time
 
 from framework_testlib import run
 from sec_testlib import SecureCell
@@ -147,3 +148,39 @@ def test_robot_refuses_an_unauthorised_peer(secure_cell: SecureCell) -> None:
                                          "(no rule allows it)")
     assert any(p["recipient"] == "R1" and p["reason"] == reason for p in _journal(secure_cell))
     assert run(ask("CONTROLLER")) == ("Completed", "")
+
+
+def test_the_publication_door_is_bound_to_the_certificate(secure_cell: SecureCell) -> None:
+    """A certified peer publishing a request under another name's key never reaches
+    the tracker (the Zenoh ACL drops it); under its own name it does (and is judged)."""
+    from plugcell.framework import wire
+    from plugcell.framework.keys import KeySpace
+    from plugcell.framework.model import Command, Process, Tag
+    from plugcell.framework.transport import open_session
+
+    keys = KeySpace(secure_cell.name)
+
+    def request(sender: str, identifier: int) -> bytes:
+        body = Process(command=Command(name="Set Base"), tag=Tag(sender, "TRACKER"),
+                       identifier=identifier)
+        return wire.encode(sender, "raw", body)
+
+    def rows() -> list[dict]:
+        return [p for p in _journal(secure_cell) if p.get("identifier") in (71, 72)]
+
+    session = open_session(secure_cell.transport("ROBOT2"))
+    try:
+        time.sleep(1.0)  # the link and the tracker's subscriber are known
+        session.put(keys.request("TRACKER", "ROBOT1"), request("ROBOT1", 71),
+                    attachment=wire.attach_identifier(71))
+        session.put(keys.request("TRACKER", "ROBOT2"), request("ROBOT2", 72),
+                    attachment=wire.attach_identifier(72))
+        deadline = time.monotonic() + 10
+        while not rows() and time.monotonic() < deadline:
+            time.sleep(0.05)
+        time.sleep(0.5)
+    finally:
+        session.close()
+    seen = rows()
+    assert [p["identifier"] for p in seen] == [72]  # ROBOT1's forged request never arrived
+    assert seen[0]["state"] == "Failed" and seen[0]["reason"].startswith("access denied")

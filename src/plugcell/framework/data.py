@@ -210,19 +210,25 @@ def from_data(data: Data | None) -> np.ndarray | None:
     return np.frombuffer(data.buffer, dtype=DTYPES[data.type]).reshape(data.size)
 
 
+_described = functools.lru_cache(maxsize=1024)(describe)
+""":func:`describe` of a buffer's type and size (a tuple), remembered: streams repeat one."""
+
+
 def summary(data: Data | None, limit: int = 16) -> str:
     """A short text for journals and logs: the declaration and, if small, the values."""
     if data is None:
         return ""
-    head = describe(data.type, data.size)
-    if len(data.buffer) <= limit * 8 and math.prod(data.size) <= limit:
-        try:
-            arr = from_data(data)
-        except (ValueError, TypeError):
-            return head
-        assert arr is not None
-        return f"{head} {arr.reshape(-1).tolist()}"
-    return head
+    head = _described(data.type, data.size)
+    if len(data.buffer) > limit * 8 or math.prod(data.size) > limit:
+        return head
+    if data.type is DataTypes.Byte and isinstance(data.buffer, bytes):
+        return f"{head} {list(data.buffer)}"  # the same text, without numpy (streams)
+    try:
+        arr = from_data(data)
+    except (ValueError, TypeError):
+        return head
+    assert arr is not None
+    return f"{head} {arr.reshape(-1).tolist()}"
 
 
 def to_json_value(data: Data | None, max_items: int = 1000) -> Any:

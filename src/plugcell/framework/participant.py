@@ -59,7 +59,7 @@ from plugcell.framework.model import (
 )
 from plugcell.framework.port import Port
 from plugcell.framework.process_call import ProcessCall
-from plugcell.framework.signing import RequestSigner, is_request
+from plugcell.framework.signing import RequestSigner, certificate_name, is_request
 from plugcell.framework.transport import TransportConfig, open_session
 
 log = logging.getLogger("plugcell.framework")
@@ -130,6 +130,7 @@ class Participant:
         self._entities: list[Any] = []
         self._token: Any = None
         self._calls: dict[tuple[str, int], ProcessCall] = {}
+        self._publishes_requests = True
         self._doors: dict[str, Any] = {}
         """Publishers of CreateProcess requests, per partner (:meth:`_request_door`)."""
         self._last_id = 0
@@ -155,6 +156,8 @@ class Participant:
                     "signatures will refuse them (give this participant the name %s)",
                     self.name, self.signer.name, self.signer.name,
                 )
+        cert = self.transport.tls_cert
+        self._publishes_requests = not cert or certificate_name(cert) == self.name
         self.session = await asyncio.to_thread(open_session, self.transport)
         # incarnation id: start time first, so instances of one name order by age
         self.instance = f"{time.time_ns():016x}{self.session.zid()}"
@@ -574,7 +577,14 @@ class Participant:
 
     def _request_door(self, partner: str) -> Any:
         """The publisher of requests to ``partner`` if ``partner`` subscribes to them
-        (Zenoh's matching status, known locally), else None: use the queryable."""
+        (Zenoh's matching status, known locally), else None: use the queryable.
+
+        Also None for a participant whose certificate has another name: a secure
+        cell's Zenoh ACL drops such publications silently, while the queryable door
+        brings back the service's precise refusal.
+        """
+        if not self._publishes_requests:  # the cell's ACL would drop them unanswered
+            return None
         door = self._doors.get(partner)
         if door is None:
             assert self.session is not None

@@ -69,6 +69,14 @@ def common_name(cert: x509.Certificate) -> str:
     return value if isinstance(value, str) else value.decode("utf-8", "replace")
 
 
+def certificate_name(path: str | Path) -> str:
+    """The CN of the PEM certificate at ``path`` (``""`` if it cannot be read)."""
+    try:
+        return common_name(x509.load_pem_x509_certificate(Path(path).read_bytes()))
+    except (OSError, ValueError):
+        return ""
+
+
 def _hash_for(key: Any) -> hashes.HashAlgorithm:
     size = key.curve.key_size
     return hashes.SHA256() if size <= 256 else hashes.SHA384() if size <= 384 else hashes.SHA512()
