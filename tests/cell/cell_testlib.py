@@ -76,9 +76,11 @@ class SlowDevice(GenericDevice):
     vendor = "tests"
     commands = (
         Command(name="Work", type=CommandTypes.NoData, input_data_type=DataTypes.Double,
-                input_data_size=(1,), timeout=10.0, info="work for DATA seconds"),
+                input_data_size=(1,), timeout=10.0,
+                info="work for DATA seconds (0: done at once, within the acknowledgement's turn)"),
     )
 
     async def dispatch(self, command: Command, option: str, data: Any) -> str:
-        await asyncio.sleep(float(data[0]))
+        if float(data[0]) > 0:
+            await asyncio.sleep(float(data[0]))
         return "OK"

@@ -111,11 +111,26 @@ def test_tasks_runs_and_the_monitor(cell: str, home: Path) -> None:
                     assert (await ctl.wire(robot, partner))["ok"]
 
             # a task: any command of any service, with its option and data
+            events = ctl.listen()
             ack = await ctl.assign(check_task(ctl.device_of("TOOL"), "TOOL", "Drill", "Air",
                                               [550, 1100]))
             assert ack["state"] == "Queued"
             key = ("TOOL", "CONTROLLER", int(ack["identifier"]))
             await eventually(lambda: ctl.monitor.records[key].state == "Completed")
+            # its listeners hear it end, even when the end came with the acknowledgement
+            instant = await ctl.assign(check_task(ctl.device_of("SLOW"), "SLOW", "Work", "",
+                                                  [0.0]))
+            task_states: list[str] = []
+
+            def drained() -> bool:
+                while not events.empty():
+                    e = events.get_nowait()
+                    if e["type"] == "task" and e["id"].endswith("/" + instant["identifier"]):
+                        task_states.append(e["state"])
+                return "Completed" in task_states
+
+            await eventually(drained)
+            ctl.unlisten(events)
             refused = await ctl.assign(check_task(ctl.device_of("TOOL"), "TOOL", "Drill", "Oil",
                                                   [550, 1100]))
             fkey = ("TOOL", "CONTROLLER", int(refused["identifier"]))

@@ -257,6 +257,7 @@ def machine() -> dict[str, Any]:
         "python": platform.python_version(),
         "zenoh": metadata.version("eclipse-zenoh"),
         "msgspec": metadata.version("msgspec"),
+        "event_loop": eventloop.name(),
         "load_avg_1min": os.getloadavg()[0] if hasattr(os, "getloadavg") else None,
     }
 
@@ -474,7 +475,8 @@ def format_table(report: dict[str, Any]) -> str:
         f"plugcell transport benchmark — thesis 5.3, beside {report['thesis']}",
         f"mode: {report['mode']}",
         f"machine: {m['cpu']}, {m['cores']} cores, {m['system']}, Python {m['python']}, "
-        f"eclipse-zenoh {m['zenoh']}; journal {'on' if report['journal'] else 'off'}; "
+        f"eclipse-zenoh {m['zenoh']}, {m.get('event_loop', 'asyncio')} loop; "
+        f"journal {'on' if report['journal'] else 'off'}; "
         f"{'quick' if report['quick'] else 'full'} run, {report['seconds']:.0f} s",
         "",
         f"{'payload':<19}| {'throughput r (msg/s)':^32} | "

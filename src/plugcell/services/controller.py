@@ -524,7 +524,7 @@ class CellController(GenericDevice):
         self.note("error" if refused else "info",
                   f"task {task.service}.{task.command.name} "
                   + (f"refused: {ack.reason}" if refused else "queued"))
-        if call.final is None:
+        if not refused:  # its updates may already be here (they travel with the ack)
             self.tasks[task_id] = call
             self._spawn(self._follow(task_id, call))
         return {"id": task_id, "state": ack.state.value, "reason": ack.reason,
