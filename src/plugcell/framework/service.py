@@ -134,7 +134,9 @@ class GenericDevice(Participant):
     commands: ClassVar[tuple[Command, ...]] = ()
     """The command catalogue (``state.DeviceInfo.Commands`` of StateInitialize, 5.2.3.3)."""
     express_updates: ClassVar[bool] = True
-    """Send ProcessUpdates without batching (lower latency; see the transport benchmark)."""
+    """Publish process notifications with Zenoh's ``express`` flag (sent at once, not held
+    for Zenoh's own batching): the service already sends one sample per sender per
+    loop turn (:meth:`_flush`), so holding it only adds latency."""
 
     def __init__(
         self,
