@@ -26,6 +26,7 @@ from plugcell.framework.model import (
     Command,
     Process,
     ProcessStates,
+    ProcessUpdateNotification,
     Tag,
     process_acks,
 )
@@ -153,5 +154,31 @@ def test_a_recipient_with_only_the_queryable_is_served_through_it(tmp_path):
             assert call.ack.state is Q and call.ack.instance == dev.instance
             assert (await call.result()).state is C
             assert not a._request_door("DEV")  # no subscriber matches: the query was used
+
+    run(body())
+
+
+def test_updates_from_another_incarnation_of_the_name_are_not_ours(tmp_path):
+    """While two services briefly share a name both hear a published request; the
+    requester follows the incarnation that acknowledged it, not the other one."""
+
+    async def body():
+        async with cell_with(tmp_path, "A") as (dev, a):
+            stream = await a.create_process("DEV", "Stream")
+            first = await anext(stream)
+            assert stream.instance == dev.instance
+            impostor = ProcessUpdateNotification(
+                tag=Tag("A", "DEV"), identifier=stream.identifier, state=F, seq=9,
+                reason="DEV: a service named DEV is already running")
+            a.session.put(dev.keys.process("DEV", "A"),
+                          wire.encode("DEV", "f" * 16 + "other", impostor))
+            await asyncio.sleep(0.3)
+            assert stream.final is None  # the other incarnation's Failed was not taken
+            dev.emit(5.0)
+            frame = await anext(stream)
+            assert (first.seq, frame.seq, stream.array(frame)[0]) == (1, 2, 5.0)
+            stop = await a.create_process("DEV", "Stop")
+            assert (await stop.result()).state is C
+            assert (await stream.result()).state is C
 
     run(body())

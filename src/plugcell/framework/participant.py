@@ -655,6 +655,10 @@ class Participant:
             call = self._calls.get((envelope.sender, update.identifier))
             if call is None:
                 continue
+            if call.instance and envelope.instance and envelope.instance != call.instance:
+                # another incarnation of the name (two at once, briefly, until the
+                # younger withdraws — both hear a published request): not our process
+                continue
             call._on_update(update, envelope.instance)
             if call.final is not None:
                 self._calls.pop((envelope.sender, update.identifier), None)
