@@ -66,6 +66,9 @@ def journal_dir(cell: str, home: Path | None = None) -> Path:
 class Journal:
     """The journal of one service (written from its event loop only)."""
 
+    enabled = True
+    """(A service without a journal has a stand-in whose ``enabled`` is False.)"""
+
     def __init__(self, path: Path, owner: str, *, durable: bool = False) -> None:
         self.path = path
         self.owner = owner

@@ -949,9 +949,10 @@ class GenericDevice(Participant):
             reason=reason,
             seq=entry.seq,
         )
-        self.journal.record_update(
-            entry.sender, entry.identifier, entry.seq, state.value, reason, summary(data)
-        )
+        if self.journal.enabled:
+            self.journal.record_update(
+                entry.sender, entry.identifier, entry.seq, state.value, reason, summary(data)
+            )
         self._outbox.append((entry, update))
         if state.final:
             self._flush()
@@ -1041,6 +1042,8 @@ class GenericDevice(Participant):
 
 class _NoJournal:
     """Stand-in when a service runs without a journal."""
+
+    enabled = False
 
     def __getattr__(self, name: str) -> Callable[..., Any]:
         return lambda *args, **kwargs: 0
