@@ -182,3 +182,20 @@ def test_updates_from_another_incarnation_of_the_name_are_not_ours(tmp_path):
             assert (await stream.result()).state is C
 
     run(body())
+
+
+def test_every_waiter_of_an_acknowledgement_is_woken_by_it():
+    from plugcell.framework.process_call import ProcessCall
+
+    async def body():
+        loop = asyncio.get_running_loop()
+        call = ProcessCall("A", "DEV", "Work", 5, timeout=30.0, loop=loop)
+        waiters = [asyncio.create_task(call.acknowledged()) for _ in range(3)]
+        await asyncio.sleep(0)
+        started = loop.time()
+        call._on_ack(Acknowledgement(identifier=5, state=Q, instance="i"), "i")
+        acks = await asyncio.wait_for(asyncio.gather(*waiters), 2.0)
+        assert [a.state for a in acks] == [Q, Q, Q] and loop.time() - started < 1.0
+        assert call._ack_waiters == []
+
+    run(body())

@@ -50,6 +50,7 @@ class ProcessCall:
         self.sent_ns = 0
         self._loop = loop
         self._acked: asyncio.Future[Acknowledgement] = loop.create_future()
+        self._ack_waiters: list[asyncio.Future[None]] = []
         self._updates: deque[ProcessUpdateNotification] = deque()
         self._waiter: asyncio.Future[None] | None = None
         self._delivered_final = False
@@ -76,6 +77,8 @@ class ProcessCall:
         self.ack = ack
         self.instance = instance or ack.instance
         self._acked.set_result(ack)
+        for waiter in self._ack_waiters:
+            _wake(waiter)
         if ack.state is ProcessStates.Failed:
             self._push(self._local(ack.reason or "rejected"))
 
@@ -148,12 +151,13 @@ class ProcessCall:
         """The acknowledgement (waits at most ``timeout``; a timeout acknowledges Failed)."""
         if not self._acked.done():
             waiter = self._loop.create_future()
-            self._acked.add_done_callback(lambda _: _wake(waiter))
+            self._ack_waiters.append(waiter)
             handle = self._loop.call_later(self.timeout, _wake, waiter)
             try:
-                await waiter
+                await waiter  # woken by _on_ack itself: no extra turn of the loop
             finally:
                 handle.cancel()
+                self._ack_waiters.remove(waiter)
             if not self._acked.done():
                 self._fail(f"no acknowledgement from {self.partner} within {self.timeout:g} s")
         return self._acked.result()
