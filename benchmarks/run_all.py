@@ -27,6 +27,7 @@ def main(argv: list[str]) -> int:
          [*plugcell, "bench", "transport", *([] if full else ["--quick"])]),
         ("calibration (thesis 8.2)",
          [*plugcell, "bench", "calibration", "--max-poses", "100000" if full else "10000"]),
+        ("service path per streamed frame", [sys.executable, str(HERE / "service_frames.py")]),
         ("compensation (thesis 6.5.1)", [*plugcell, "bench", "compensation"]),
         ("wire decoder fuzz", [sys.executable, str(HERE / "fuzz_wire.py")]),
         ("signed requests (cost)", [sys.executable, str(HERE / "signing.py"),

@@ -1,0 +1,104 @@
+"""What one streamed frame costs a service itself, with and without its journal.
+
+    .venv/bin/python benchmarks/service_frames.py [--frames 64000] [--repeat 3]
+
+Drives the publisher of ``plugcell bench transport`` (:class:`BenchService`) the
+way its Push does — ``data_feedback.post`` of a frame, 64 per event-loop turn —
+through the real DataFeedback receiver, the ProcessUpdate, the journal (SQLite in
+a temporary folder) and the per-turn flush with its batching and encoding, but
+with the Zenoh publisher replaced by one that counts the samples.  So the table is the
+Python cost of the service's own path per frame, without the transport and
+without another process competing for the cores: the part of the transport
+benchmark's throughput that plugcell's code, not Zenoh, decides.  Best of
+``--repeat`` runs.
+"""
+
+from __future__ import annotations
+
+import argparse
+import asyncio
+import platform
+import sys
+import tempfile
+import threading
+import time
+from pathlib import Path
+
+import numpy as np
+
+from plugcell.bench.device import BURST, BenchService
+from plugcell.framework.journal import Journal
+from plugcell.framework.model import Process, Tag
+from plugcell.framework.processqueue import Entry
+
+#: The payloads where per-frame work, not copying bytes, decides the rate (from 64 KiB
+#: on, the copy of each frame into its buffer — with the page faults of fresh
+#: memory — dominates and varies from run to run by more than the journal costs).
+SHAPES = ((4,), (32,), (1024,), (4096,))
+
+
+class _CountingPublisher:
+    """Stands in for the Zenoh publisher: counts the samples the flush puts."""
+
+    def __init__(self) -> None:
+        self.samples = 0
+
+    def put(self, payload: bytes) -> None:
+        self.samples += 1
+
+
+class _OpenSession:
+    def is_closed(self) -> bool:
+        return False
+
+
+async def _per_frame_us(shape: tuple[int, ...], frames: int, folder: Path | None) -> float:
+    service = BenchService("PUBLISHER", journal=False)
+    service._loop = asyncio.get_running_loop()
+    service._loop_thread = threading.get_ident()
+    if folder is not None:
+        service.journal = Journal(folder / f"frames-{time.time_ns()}.sqlite", "PUBLISHER")
+    publisher = _CountingPublisher()
+    service.session = _OpenSession()  # type: ignore[assignment]
+    service._publisher = lambda sender: publisher  # type: ignore[method-assign]
+    push = service.device.command("Push")
+    assert push is not None
+    entry = Entry(process=Process(command=push, tag=Tag("CONSUMER", "PUBLISHER"),
+                                  identifier=1), command=push)
+    service._measuring = entry
+    frame = np.full(shape, 7, np.uint8)
+    started = time.perf_counter()
+    for i in range(frames):
+        service.data_feedback.post(frame)
+        if i % BURST == BURST - 1:
+            await asyncio.sleep(0)
+    await asyncio.sleep(0)
+    elapsed = time.perf_counter() - started
+    if entry.seq != frames or service._outbox or not publisher.samples:
+        raise RuntimeError(f"{entry.seq} of {frames} frames made, {publisher.samples} samples")
+    service.journal.close()
+    return elapsed / frames * 1e6
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--frames", type=int, default=64000)
+    parser.add_argument("--repeat", type=int, default=3)
+    args = parser.parse_args(argv)
+    print(f"service path per streamed frame (µs, best of {args.repeat}), "
+          f"{platform.processor() or platform.machine()}, Python {platform.python_version()}")
+    print(f"{'payload':>9} | {'no journal':>10} | {'journal':>8} | {'journal share':>13}")
+    print("-" * 50)
+    with tempfile.TemporaryDirectory(prefix="plugcell-frames-") as tmp:
+        for shape in SHAPES:
+            bare, kept = float("inf"), float("inf")
+            for _ in range(args.repeat):  # alternated, so both see the same machine
+                bare = min(bare, asyncio.run(_per_frame_us(shape, args.frames, None)))
+                kept = min(kept, asyncio.run(_per_frame_us(shape, args.frames, Path(tmp))))
+            print(f"{shape[0]:>7} B | {bare:>10.2f} | {kept:>8.2f} | "
+                  f"{(kept - bare) / kept:>12.0%}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
