@@ -20,6 +20,7 @@ the program gave the tracker.
 from __future__ import annotations
 
 import time
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -126,6 +127,16 @@ def program_rows(rows: list[dict], robot: str) -> list[dict]:
     return of(rows, robot)
 
 
+def holding(cell: MetrologyCell, robot: str, since_ns: int) -> Callable[[], bool]:
+    """Whether ``robot``'s Continuous Measurement is running and has sent frames."""
+
+    def holds() -> bool:
+        rows = of(tracker_rows(cell, since_ns), robot, "Continuous Measurement")
+        return bool(rows) and rows[-1]["state"] == "Running" and len(rows[-1]["updates"]) > 1
+
+    return holds
+
+
 def start(cell: MetrologyCell, robot: Robot, home: np.ndarray, hold_ms: int) -> None:
     """ACTIVATE share_tracker (completed once the program runs; the test polls its end)."""
     final = cell.activate(robot.name, str(PROGRAM), *robot.values(home, hold_ms),
@@ -184,11 +195,7 @@ def test_two_robot_programs_share_the_tracker_each_in_its_own_frame(
     t0 = time.time_ns()
     start(cell, h4, h4.homes[0], LONG_HOLD_MS)
 
-    def h4_holds() -> bool:  # H4's stream is running and has sent frames
-        rows = of(tracker_rows(cell, t0), "H4", "Continuous Measurement")
-        return bool(rows) and rows[-1]["state"] == "Running" and len(rows[-1]["updates"]) > 1
-
-    until(h4_holds, 20.0, "H4 holding the tracker")
+    until(holding(cell, "H4", t0), 20.0, "H4 holding the tracker")
     start(cell, kuka, kuka.homes[0], SHORT_HOLD_MS)
     until(lambda: console_has(cell, "KUKA", "asking for the tracker"), 10.0,
           "KUKA asking for the tracker")
@@ -240,11 +247,7 @@ def test_a_robot_that_dies_holding_the_tracker_does_not_block_the_other(
     t0 = time.time_ns()
     start(cell, kuka, kuka.homes[1], FOREVER_MS)
 
-    def kuka_holds() -> bool:
-        rows = of(tracker_rows(cell, t0), "KUKA", "Continuous Measurement")
-        return bool(rows) and rows[-1]["state"] == "Running" and len(rows[-1]["updates"]) > 1
-
-    until(kuka_holds, 20.0, "KUKA holding the tracker")
+    until(holding(cell, "KUKA", t0), 20.0, "KUKA holding the tracker")
     until(lambda: console_has(cell, "KUKA", "measured "), 10.0, "KUKA's first frame")
     start(cell, h4, h4.homes[1], SHORT_HOLD_MS)
 

@@ -13,20 +13,13 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "framework"))
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 from framework_testlib import Proc, plugcell_argv, unique_cell
-from sec_testlib import NAMES, POLICY, SecureCell, free_port
-
-from plugcell.commands.certs import create_ca, issue_certificate
+from sec_testlib import NAMES, POLICY, SecureCell, free_port, issue_cell_certificates
 
 
 @pytest.fixture(scope="module")
 def secure_cell(tmp_path_factory: pytest.TempPathFactory) -> Iterator[SecureCell]:
     base = tmp_path_factory.mktemp("secure")
-    certs, rogue, home = base / "certs", base / "rogue", base / "home"
-    create_ca(certs, "secure")
-    for name in NAMES:
-        issue_certificate(certs, name)
-    create_ca(rogue, "rogue")
-    issue_certificate(rogue, "ROBOT1")
+    certs, rogue, home = issue_cell_certificates(base, "secure")
     (base / "policy.toml").write_text(POLICY)
     endpoint = f"tls/127.0.0.1:{free_port()}"
     env = {

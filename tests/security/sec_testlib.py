@@ -37,6 +37,22 @@ services = ["R1"]
 NAMES = ("TRACKER", "R1", "ROBOT1", "ROBOT2", "CONTROLLER")
 
 
+def issue_cell_certificates(
+    base: Path, ca_name: str, names: tuple[str, ...] = NAMES
+) -> tuple[Path, Path, Path]:
+    """``base/certs`` (the cell's CA and a certificate for each of ``names``),
+    ``base/rogue`` (another CA with a ROBOT1 of its own) and ``base/home``."""
+    from plugcell.commands.certs import create_ca, issue_certificate
+
+    certs, rogue, home = base / "certs", base / "rogue", base / "home"
+    create_ca(certs, ca_name)
+    for name in names:
+        issue_certificate(certs, name)
+    create_ca(rogue, "rogue")
+    issue_certificate(rogue, "ROBOT1")
+    return certs, rogue, home
+
+
 def free_port() -> int:
     with socket.socket() as s:
         s.bind(("127.0.0.1", 0))

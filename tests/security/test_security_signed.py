@@ -22,9 +22,8 @@ from pathlib import Path
 import pytest
 import zenoh
 from framework_testlib import Proc, plugcell_argv, run, unique_cell
-from sec_testlib import free_port
+from sec_testlib import free_port, issue_cell_certificates
 
-from plugcell.commands.certs import create_ca, issue_certificate
 from plugcell.framework import Client, TransportConfig, wire
 from plugcell.framework.journal import journal_files, read_journal
 from plugcell.framework.keys import KeySpace
@@ -75,12 +74,7 @@ class RoutedCell:
 @pytest.fixture(scope="module")
 def routed(tmp_path_factory: pytest.TempPathFactory) -> Iterator[RoutedCell]:
     base = tmp_path_factory.mktemp("routed")
-    certs, rogue, home = base / "certs", base / "rogue", base / "home"
-    create_ca(certs, "routed")
-    for name in NAMES:
-        issue_certificate(certs, name)
-    create_ca(rogue, "rogue")
-    issue_certificate(rogue, "ROBOT1")
+    certs, rogue, home = issue_cell_certificates(base, "routed", NAMES)
     for identity in ("signed", "tls"):
         (base / f"{identity}.toml").write_text(POLICY.format(identity=identity))
     router = f"tls/127.0.0.1:{free_port()}"
