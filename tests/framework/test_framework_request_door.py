@@ -17,6 +17,8 @@ import time
 
 import pytest
 from framework_testlib import cell_with, collect, run, states
+from hypothesis import given, settings
+from hypothesis import strategies as st
 from zenoh.handlers import Callback
 
 from plugcell.framework import wire
@@ -199,3 +201,27 @@ def test_every_waiter_of_an_acknowledgement_is_woken_by_it():
         assert call._ack_waiters == []
 
     run(body())
+
+
+class _Attachment:
+    def __init__(self, raw: bytes) -> None:
+        self.raw = raw
+
+    def to_bytes(self) -> bytes:
+        return self.raw
+
+
+class _Unreadable:
+    def to_bytes(self) -> bytes:
+        raise ValueError("not bytes")
+
+
+@settings(max_examples=300, deadline=None)
+@given(st.binary(max_size=16), st.integers(0, 2**64 - 1))
+def test_the_attached_identifier_reads_any_attachment(raw, identifier):
+    """8 bytes little-endian is an identifier; anything else (or nothing) is 0."""
+    assert wire.attached_identifier(_Attachment(wire.attach_identifier(identifier))) == identifier
+    expected = int.from_bytes(raw, "little") if len(raw) == 8 else 0
+    assert wire.attached_identifier(_Attachment(raw)) == expected
+    assert wire.attached_identifier(None) == 0
+    assert wire.attached_identifier(_Unreadable()) == 0
