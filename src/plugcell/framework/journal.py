@@ -29,7 +29,12 @@ from collections.abc import Iterable
 from pathlib import Path
 from typing import Any
 
-SCHEMA_VERSION = 1
+SCHEMA_VERSION = 2
+"""2: ``updates`` has no primary key (version 1 had one on (recipient, sender,
+identifier, seq)).  Its b-tree doubled the pages every commit writes; the service
+makes each ``seq`` unique by construction, and the readers look updates up by
+scanning once (:meth:`Journal.recover`, the controller's tail) or merge them in
+Python (:func:`read_journal`).  Both versions are read and written alike."""
 _SCHEMA = """
 CREATE TABLE IF NOT EXISTS meta (key TEXT PRIMARY KEY, value TEXT);
 CREATE TABLE IF NOT EXISTS processes (  -- append-only: later states are updates
@@ -42,8 +47,7 @@ CREATE TABLE IF NOT EXISTS processes (  -- append-only: later states are updates
 CREATE TABLE IF NOT EXISTS updates (
     recipient TEXT NOT NULL, sender TEXT NOT NULL, identifier INTEGER NOT NULL,
     seq INTEGER NOT NULL, t_ns INTEGER NOT NULL, state TEXT NOT NULL,
-    reason TEXT NOT NULL DEFAULT '', data TEXT NOT NULL DEFAULT '',
-    PRIMARY KEY (recipient, sender, identifier, seq));
+    reason TEXT NOT NULL DEFAULT '', data TEXT NOT NULL DEFAULT '');
 CREATE TABLE IF NOT EXISTS rejections (
     recipient TEXT NOT NULL, t_ns INTEGER NOT NULL, sender TEXT, identifier INTEGER,
     command TEXT, size INTEGER, reason TEXT NOT NULL);
@@ -78,7 +82,7 @@ class Journal:
         self._db.execute("PRAGMA wal_autocheckpoint=0")
         self._db.executescript(_SCHEMA)
         self._db.execute(
-            "INSERT OR REPLACE INTO meta VALUES ('schema_version', ?)", (str(SCHEMA_VERSION),)
+            "INSERT OR IGNORE INTO meta VALUES ('schema_version', ?)", (str(SCHEMA_VERSION),)
         )
         self._pending: list[tuple[Any, ...]] = []
         self._stop = threading.Event()
@@ -164,20 +168,39 @@ class Journal:
             self._db.commit()
 
     def recover(self, reason: str) -> int:
-        """Close processes a previous incarnation left unfinished with a Failed update."""
+        """Close processes a previous incarnation left unfinished with a Failed update.
+
+        One pass over the updates (grouped per process), not a lookup per process:
+        the ``updates`` table has no index (see :data:`SCHEMA_VERSION`).  The pass
+        starts where the last recovery ended (``meta.recovered_through``: every
+        process up to there has finished), so a start-up reads only what the
+        previous incarnation wrote, however long the journal.
+        """
         self.commit()
+        mark = self._db.execute(
+            "SELECT value FROM meta WHERE key = 'recovered_through'"
+        ).fetchone()
+        last_process, last_update = (int(v) for v in mark[0].split()) if mark else (0, 0)
         cur = self._db.execute(
             "INSERT INTO updates SELECT p.recipient, p.sender, p.identifier,"
-            " COALESCE((SELECT MAX(u.seq) FROM updates u WHERE u.recipient = p.recipient"
-            " AND u.sender = p.sender AND u.identifier = p.identifier), 0) + 1,"
-            " ?, 'Failed', ?, '' FROM processes p WHERE p.recipient = ? AND p.state = 'Queued'"
-            " AND NOT EXISTS (SELECT 1 FROM updates u WHERE u.recipient = p.recipient"
-            " AND u.sender = p.sender AND u.identifier = p.identifier"
-            " AND u.state IN ('Completed', 'Failed'))",
-            (time.time_ns(), reason, self.owner),
+            " COALESCE(l.seq, 0) + 1, :t, 'Failed', :reason, '' FROM processes p"
+            " LEFT JOIN (SELECT sender, identifier, MAX(seq) AS seq,"
+            " MAX(state IN ('Completed', 'Failed')) AS ended FROM updates"
+            " WHERE rowid > :u AND recipient = :owner GROUP BY sender, identifier) l"
+            " ON l.sender = p.sender AND l.identifier = p.identifier"
+            " WHERE p.rowid > :p AND p.recipient = :owner AND p.state = 'Queued'"
+            " AND COALESCE(l.ended, 0) = 0",
+            {"t": time.time_ns(), "reason": reason, "owner": self.owner,
+             "p": last_process, "u": last_update},
+        )
+        recovered = cur.rowcount
+        self._db.execute(
+            "INSERT OR REPLACE INTO meta SELECT 'recovered_through',"
+            " (SELECT COALESCE(MAX(rowid), 0) FROM processes) || ' ' ||"
+            " (SELECT COALESCE(MAX(rowid), 0) FROM updates)"
         )
         self._db.commit()
-        return cur.rowcount
+        return recovered
 
     def close(self) -> None:
         """Commit, checkpoint and close."""

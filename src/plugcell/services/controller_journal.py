@@ -83,8 +83,8 @@ class JournalTail:
             top = db.execute("SELECT COALESCE(MAX(rowid), 0) FROM processes").fetchone()[0]
             f.last_process = max(0, top - HISTORY)
             first = db.execute(
-                "SELECT MIN(u.rowid) FROM updates u JOIN processes p ON p.recipient = u.recipient"
-                " AND p.sender = u.sender AND p.identifier = u.identifier WHERE p.rowid > ?",
+                "SELECT MIN(rowid) FROM updates WHERE (recipient, sender, identifier) IN"
+                " (SELECT recipient, sender, identifier FROM processes WHERE rowid > ?)",
                 (f.last_process,),
             ).fetchone()[0]
             f.last_update = (first - 1) if first else db.execute(
