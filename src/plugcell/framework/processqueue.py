@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
+import functools
 import time
 from collections import deque
 from collections.abc import Callable, Iterator
@@ -41,11 +42,11 @@ class Entry:
     abort_reason: str = ""
     """Set while running to ask the ProcessHandler to stop this process."""
 
-    @property
+    @functools.cached_property
     def sender(self) -> str:
         return self.process.tag.sender
 
-    @property
+    @functools.cached_property
     def identifier(self) -> int:
         return self.process.identifier
 
