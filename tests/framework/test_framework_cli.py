@@ -134,11 +134,21 @@ def test_bench_transport_smoke(procs):
         "20",
         "--messages",
         "100",
+        "--repeat",
+        "2",
     )
     report = json.loads(result.stdout)
     assert [r["payload_bytes"] for r in report["rows"]] == [4, 65536]
+    assert report["throughput_runs"] == 2
     for row in report["rows"]:
         assert row["throughput_msg_s"] > 0 and row["raw_zenoh_latency_ms"]["avg"] > 0
+        # the best of the runs, every run kept
+        for best, runs in ((row["throughput_msg_s"], row["throughput_runs_msg_s"]),
+                           (row["raw_zenoh_throughput_msg_s"],
+                            row["raw_zenoh_throughput_runs_msg_s"])):
+            assert len(runs) == 2 and best == max(runs)
         assert set(row["latency_ms"]) >= {"avg", "max", "min", "std"}
         assert row["thesis"]["latency_ms"]["avg"] in (0.23, 4.23)
     assert set(report["targets"]) >= {"throughput_10x_thesis_every_payload"}
+    refused = cli(procs, "bench", "transport", "--repeat", "0", check=False)
+    assert refused.returncode == 2 and "--repeat: must be at least 1" in refused.stderr
