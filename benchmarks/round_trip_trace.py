@@ -1,0 +1,194 @@
+"""Where one CreateProcess → ProcessUpdate round trip spends its time, step by step.
+
+    .venv/bin/python benchmarks/round_trip_trace.py [--cycles 2000] [--no-journal]
+
+The transport benchmark's latency test (``Echo`` of 4 bytes to the
+:class:`~plugcell.bench.device.BenchService` in a second OS process), with probes
+on both sides: each records ``time.perf_counter_ns()`` — CLOCK_MONOTONIC, one
+clock for every process of the machine — at the seams of the path (the Zenoh
+callback, the event loop's wake-up, the service's check-and-journal, the commit,
+the put, the requester's resumption).  The two traces are merged and the median
+of each step over the cycles is printed.
+
+A diagnostic, not a figure of merit: the probes wrap framework methods (about
+1 µs each), so the total is a little above ``plugcell bench transport``'s.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import statistics
+import subprocess
+import sys
+import tempfile
+import time
+from collections import Counter
+from collections.abc import Callable
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+Trace = list[tuple[str, int]]
+
+
+def _probe(trace: Trace, owner: Any, name: str, before: str, after: str = "") -> None:
+    """Wrap ``owner.name`` so that it records ``before`` (and ``after``) around each call."""
+    inner: Callable[..., Any] = getattr(owner, name)
+    clock = time.perf_counter_ns
+
+    def probed(*args: Any, **kwargs: Any) -> Any:
+        trace.append((before, clock()))
+        try:
+            return inner(*args, **kwargs)
+        finally:
+            if after:
+                trace.append((after, clock()))
+
+    setattr(owner, name, probed)
+
+
+def _probe_framework(trace: Trace) -> None:
+    from plugcell.framework import journal, port, service
+
+    _probe(trace, port.Port, "_drain", "loop wakes")
+    _probe(trace, service.GenericDevice, "_create", "check+journal", "checked")
+    _probe(trace, service.GenericDevice, "_flush", "flush")
+    _probe(trace, journal.Journal, "commit", "commit", "committed")
+    _probe(trace, service.GenericDevice, "_send", "put", "sent")
+
+
+def serve(cell: str, journal: bool, out: str) -> None:
+    """The publisher, probed; its trace goes to ``out`` when it stops (SIGTERM)."""
+    import atexit
+
+    from plugcell.bench import peer
+
+    trace: Trace = []
+    _probe_framework(trace)
+    atexit.register(lambda: Path(out).write_text(json.dumps(trace)))
+    peer.main(["service", "--cell", cell, *([] if journal else ["--no-journal"])])
+
+
+class _ProbedDoor:
+    """The requester's request publisher, with probes around its put."""
+
+    def __init__(self, door: Any, trace: Trace) -> None:
+        self._door, self._trace = door, trace
+
+    def put(self, *args: Any, **kwargs: Any) -> None:
+        self._trace.append(("put request", time.perf_counter_ns()))
+        self._door.put(*args, **kwargs)
+        self._trace.append(("request sent", time.perf_counter_ns()))
+
+    def __getattr__(self, name: str) -> Any:
+        return getattr(self._door, name)
+
+
+async def _requester(cell: str, journal: bool, cycles: int, trace: Trace) -> None:
+    from plugcell.bench.device import BenchService
+    from plugcell.framework.transport import TransportConfig
+
+    consumer = BenchService("CONSUMER", cell=cell, transport=TransportConfig.from_env(),
+                            journal=journal)
+    await consumer.start()
+    try:
+        if not await consumer.wait_for("PUBLISHER", 15):
+            raise RuntimeError("the publisher did not appear")
+        await consumer.subscribe("PUBLISHER")
+        data = np.full((4,), 7, np.uint8)
+        for i in range(200 + cycles):
+            if i == 200:  # warmed up: probe from here on
+                _probe_framework(trace)
+                door = consumer._doors["PUBLISHER"]
+                consumer._doors["PUBLISHER"] = _ProbedDoor(door, trace)
+            probed = i >= 200
+            if probed:
+                trace.append(("create_process", time.perf_counter_ns()))
+            call = await consumer.create_process("PUBLISHER", "Echo", data=data)
+            if probed:
+                trace.append(("resumed", time.perf_counter_ns()))
+            async for update in call:
+                if update.state.final:
+                    break
+        consumer._doors["PUBLISHER"] = door
+    finally:
+        await consumer.close()
+
+
+def _first_of_each(cycle: Trace) -> Trace:
+    seen: set[str] = set()
+    return [(n, t) for n, t in cycle if not (n in seen or seen.add(n))]
+
+
+def breakdown(requester: Trace, service: Trace) -> tuple[list[tuple[str, float]], int, int]:
+    """Median duration of each step of the most common sequence, per cycle."""
+    events = sorted([("requester: " + n, t) for n, t in requester]
+                    + [("service: " + n, t) for n, t in service], key=lambda e: e[1])
+    cycles: list[Trace] = []
+    for name, t in events:
+        if name == "requester: create_process":
+            cycles.append([])
+        if cycles:
+            cycles[-1].append((name, t))
+    # a round trip ends when the requester resumes; the first time each step is seen
+    # is the one on the path (the service may run an empty flush while the answer travels)
+    end = "requester: resumed"
+    cycles = [_first_of_each(c) for c in cycles if end in (n for n, _ in c)]
+    cycles = [c[: [n for n, _ in c].index(end) + 1] for c in cycles]
+    shapes = Counter(tuple(n for n, _ in c) for c in cycles)
+    shape, count = shapes.most_common(1)[0]
+    steps: list[list[int]] = [[] for _ in shape]
+    for c in cycles:
+        if tuple(n for n, _ in c) == shape:
+            for k in range(1, len(c)):
+                steps[k].append(c[k][1] - c[k - 1][1])
+    rows = [(f"{shape[k - 1]} → {shape[k]}", statistics.median(steps[k]) / 1e3)
+            for k in range(1, len(shape))]
+    return rows, count, len(cycles)
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--cycles", type=int, default=2000)
+    parser.add_argument("--no-journal", action="store_true")
+    parser.add_argument("--serve", nargs=2, metavar=("CELL", "OUT"), help=argparse.SUPPRESS)
+    args = parser.parse_args(argv)
+    journal = not args.no_journal
+    if args.serve:
+        serve(args.serve[0], journal, args.serve[1])
+        return 0
+    from plugcell.framework import eventloop
+
+    with tempfile.TemporaryDirectory(prefix="plugcell-trace-") as tmp:
+        os.environ["PLUGCELL_HOME"] = tmp
+        cell, out = f"trace{os.getpid()}", os.path.join(tmp, "service-trace.json")
+        child = subprocess.Popen(
+            [sys.executable, __file__, "--serve", cell, out,
+             *([] if journal else ["--no-journal"])],
+            stdout=subprocess.PIPE, text=True,
+        )
+        try:
+            assert child.stdout is not None
+            if child.stdout.readline().strip() != "ready":
+                raise RuntimeError("the publisher did not start")
+            trace: Trace = []
+            eventloop.run(_requester(cell, journal, args.cycles, trace))
+        finally:
+            child.terminate()
+            child.wait(15)
+        service = [(n, t) for n, t in json.loads(Path(out).read_text())]
+    rows, count, total = breakdown(trace, service)
+    print(f"4-byte Echo round trip, journal {'on' if journal else 'off'}, "
+          f"median of {count} of {total} cycles that took the usual path (µs)")
+    width = max(len(name) for name, _ in rows)
+    for name, us in rows:
+        print(f"  {name:<{width}}  {us:7.1f}")
+    print(f"  {'round trip (sum of the medians)':<{width}}  {sum(us for _, us in rows):7.1f}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
