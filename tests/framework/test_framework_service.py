@@ -356,6 +356,47 @@ def test_presence_events_and_cells_are_isolated(tmp_path):
     run(body())
 
 
+def test_presence_streams_stop_collecting_when_dropped_left_or_closed(tmp_path):
+    """A stream of events() that its owner drops (never iterated, or left by break)
+    stops collecting at once; aclose ends even an iteration that waits."""
+
+    async def body():
+        async with cell_with(tmp_path, "A") as (_, a):
+            kept, dropped = a.events(), a.events()
+            del dropped  # never iterated: no longer collecting
+            assert len(a._watchers) == 1
+
+            async def first_event():
+                async for event in a.events():
+                    return event  # leaves the loop: the stream is dropped
+
+            leaver = asyncio.create_task(first_event())
+            waiting = a.events()
+            pending = asyncio.create_task(anext(waiting))
+            await asyncio.sleep(0)
+            assert len(a._watchers) == 3
+            late = Participant("LATE", cell=a.keys.cell)
+            await late.start()
+            try:
+                event = await asyncio.wait_for(anext(kept), 10)
+                assert (event.kind, event.presence.name) == ("join", "LATE")
+                assert (await asyncio.wait_for(pending, 10)).presence.name == "LATE"
+                assert (await asyncio.wait_for(leaver, 10)).presence.name == "LATE"
+                assert len(a._watchers) == 2  # kept and waiting
+                closing = asyncio.create_task(anext(waiting))
+                await asyncio.sleep(0)
+                await waiting.aclose()
+                with pytest.raises(StopAsyncIteration):
+                    await asyncio.wait_for(closing, 5)
+                await late.close()
+                await until(lambda: len(kept) >= 1)  # LATE's leave
+                assert len(waiting) == 0  # closed: collects nothing
+            finally:
+                await late.close()
+
+    run(body())
+
+
 def test_journal_records_processes_and_updates(tmp_path):
     async def body():
         async with cell_with(tmp_path, "A") as (dev, a):

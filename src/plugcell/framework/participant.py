@@ -28,7 +28,8 @@ import os
 import re
 import socket
 import time
-from collections.abc import AsyncIterator, Callable
+import weakref
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any, ClassVar
 
@@ -89,6 +90,43 @@ class PresenceEvent:
     presence: Presence
 
 
+class PresenceEvents:
+    """The join/leave events of a cell, from the :meth:`Participant.events` call on.
+
+    An async iterator.  The participant holds it weakly: a stream that its owner
+    drops — iterated or not, left by ``break`` or never started — stops collecting
+    events as soon as it is garbage; :meth:`aclose` ends it explicitly.
+    """
+
+    def __init__(self) -> None:
+        self._queue: asyncio.Queue[PresenceEvent | None] = asyncio.Queue()
+        self._closed = False
+
+    def _put(self, event: PresenceEvent) -> None:
+        if not self._closed:
+            self._queue.put_nowait(event)
+
+    def __aiter__(self) -> PresenceEvents:
+        return self
+
+    async def __anext__(self) -> PresenceEvent:
+        event = None if self._closed else await self._queue.get()
+        if event is None:
+            raise StopAsyncIteration
+        return event
+
+    async def aclose(self) -> None:
+        """Stop collecting and end the iteration, a waiting one included (what was
+        collected and not taken is dropped)."""
+        self._closed = True
+        waiting, self._queue = self._queue, asyncio.Queue()
+        waiting.put_nowait(None)  # ends an __anext__ that waits on it
+
+    def __len__(self) -> int:
+        """Events collected and not yet taken."""
+        return self._queue.qsize()
+
+
 @dataclass
 class _Pending:
     replies: list[Any] = field(default_factory=list)
@@ -135,7 +173,7 @@ class Participant:
         """Publishers of CreateProcess requests, per partner (:meth:`_request_door`)."""
         self._last_id = 0
         self._presence_changed = asyncio.Event()
-        self._watchers: set[asyncio.Queue[PresenceEvent]] = set()
+        self._watchers: weakref.WeakSet[PresenceEvents] = weakref.WeakSet()
         self._closed = False
         self._started = False
         self.signer: RequestSigner | None = None
@@ -315,8 +353,8 @@ class Participant:
             event = PresenceEvent("leave", presence)
             self._on_left(presence)
         self._presence_changed.set()
-        for queue in list(self._watchers):
-            queue.put_nowait(event)
+        for watcher in list(self._watchers):
+            watcher._put(event)
 
     def _on_joined(self, presence: Presence) -> None:
         """Hook: a participant's token appeared (a service checks for a name conflict)."""
@@ -368,23 +406,16 @@ class Participant:
                 await asyncio.wait_for(self._presence_changed.wait(), remaining)
         return True
 
-    def events(self) -> AsyncIterator[PresenceEvent]:
+    def events(self) -> PresenceEvents:
         """Join/leave events from this call on (iterate in a task; stop by breaking out).
 
         The events are collected from the call, not from the first iteration: nothing
-        that happens before the iterating task first runs is missed.
+        that happens before the iterating task first runs is missed.  Dropping the
+        stream — or :meth:`PresenceEvents.aclose` — stops the collecting.
         """
-        queue: asyncio.Queue[PresenceEvent] = asyncio.Queue()
-        self._watchers.add(queue)
-
-        async def stream() -> AsyncIterator[PresenceEvent]:
-            try:
-                while True:
-                    yield await queue.get()
-            finally:
-                self._watchers.discard(queue)
-
-        return stream()
+        stream = PresenceEvents()
+        self._watchers.add(stream)
+        return stream
 
     # -- generic interface of others -------------------------------------------------------
 
