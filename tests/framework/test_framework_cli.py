@@ -8,6 +8,8 @@ import subprocess
 import pytest
 from framework_testlib import plugcell_argv, unique_cell
 
+from plugcell.bench.transport import format_table
+
 pytestmark = pytest.mark.timeout(90)
 
 
@@ -150,5 +152,9 @@ def test_bench_transport_smoke(procs):
         assert set(row["latency_ms"]) >= {"avg", "max", "min", "std"}
         assert row["thesis"]["latency_ms"]["avg"] in (0.23, 4.23)
     assert set(report["targets"]) >= {"throughput_10x_thesis_every_payload"}
+    table = format_table(report).splitlines()  # what the command prints without --json
+    assert "r is the best of 2 runs" in table[2]
+    assert [line.split("|")[0].strip() for line in table[7:9]] == ["4 B", "64 KiB"]
+    assert table[-1].startswith("raw Zenoh's own 4 B latency (the floor): avg ")
     refused = cli(procs, "bench", "transport", "--repeat", "0", check=False)
     assert refused.returncode == 2 and "--repeat: must be at least 1" in refused.stderr
