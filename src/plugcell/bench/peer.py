@@ -27,11 +27,16 @@ from plugcell.framework.transport import TransportConfig, open_session
 def raw_keys(cell: str) -> dict[str, str]:
     """Keys of the raw Zenoh floor (outside the plugcell key space, isolated by cell)."""
     root = f"plugcell-bench/{cell}"
-    return {k: f"{root}/{k}" for k in ("ping", "pong", "push", "data")}
+    return {k: f"{root}/{k}" for k in ("ping", "pong", "push", "data", "echo", "echoed")}
 
 
 def serve_raw(cell: str, transport: TransportConfig) -> None:
-    """Echo every ping as a pong; on ``push`` (count, size) put ``count`` samples on ``data``."""
+    """Echo every ping as a pong; on ``push`` (count, size) put ``count`` samples on ``data``.
+
+    Also echo ``echo`` as ``echoed`` inside Zenoh's callback itself — what Zenoh
+    alone costs, without the hop to a thread that plugcell's callbacks must make
+    (and the ping/pong floor makes too): a reference, never a way to serve.
+    """
     keys = raw_keys(cell)
     session = open_session(transport)
     inbox: queue.SimpleQueue[tuple[str, bytes]] = queue.SimpleQueue()
@@ -50,6 +55,10 @@ def serve_raw(cell: str, transport: TransportConfig) -> None:
     pong = session.declare_publisher(
         keys["pong"], express=True, congestion_control=zenoh.CongestionControl.BLOCK
     )
+    echoed = session.declare_publisher(keys["echoed"], express=True)
+    subs.append(session.declare_subscriber(
+        keys["echo"], Callback(lambda s: echoed.put(s.payload.to_bytes()), indirect=False)
+    ))
     data = session.declare_publisher(keys["data"], congestion_control=zenoh.CongestionControl.BLOCK)
     print("ready", flush=True)
     try:
@@ -66,6 +75,7 @@ def serve_raw(cell: str, transport: TransportConfig) -> None:
         for s in subs:
             s.undeclare()
         pong.undeclare()
+        echoed.undeclare()
         data.undeclare()
         session.close()
 

@@ -17,7 +17,10 @@ and a *consumer* (a service in this process).
   (Table 5-4), as Byte arrays of those shapes;
 * the floor: plain Zenoh pub/sub between two Python processes (ping-pong for
   latency, a burst of puts for throughput), measured in the same run, payload by
-  payload, interleaved with ours.
+  payload, interleaved with ours; its callbacks hand each sample to a thread, as
+  plugcell's must.  For reference, the same ping-pong answered inside Zenoh's
+  callbacks themselves (``raw_zenoh_in_callback_latency_ms``): what Zenoh alone
+  costs on the machine.
 """
 
 from __future__ import annotations
@@ -38,6 +41,7 @@ import sys
 import tempfile
 import threading
 import time
+from collections.abc import Callable
 from dataclasses import dataclass
 from importlib import metadata
 from typing import Any
@@ -159,6 +163,11 @@ class RawFloor:
         self._ping = self.session.declare_publisher(
             self.keys["ping"], express=True, congestion_control=zenoh.CongestionControl.BLOCK
         )
+        self._echo = self.session.declare_publisher(self.keys["echo"], express=True)
+        self._on_echoed: Callable[[], None] = lambda: None
+        self._subs.append(self.session.declare_subscriber(
+            self.keys["echoed"], Callback(lambda _: self._on_echoed(), indirect=False)
+        ))
         self._push = self.session.declare_publisher(self.keys["push"])
         # handshake: declarations propagate asynchronously, so ping until a pong comes
         for _ in range(100):
@@ -189,6 +198,46 @@ class RawFloor:
                 trips.append((time.perf_counter_ns() - t0) // 2)
         return stats_ms(trips)
 
+    def latency_in_callback(self, nbytes: int, cycles: int, warmup: int) -> dict[str, float]:
+        """Ping-pong with both sides answering inside Zenoh's callbacks (no thread hop).
+
+        Each echo's callback sends the next one, so the cycles chain by themselves;
+        this thread only waits for the last.
+        """
+        payload, total = bytes(nbytes), warmup + cycles
+        trips: list[int] = []
+        done = threading.Event()
+        for _ in range(100):  # the peer's echo subscriber may not be matched yet
+            self._on_echoed = done.set
+            self._echo.put(payload)
+            if done.wait(0.1):
+                break
+        else:
+            raise RuntimeError("raw peer does not echo inside its callback")
+        time.sleep(0.2)  # late duplicates of the handshake
+        done.clear()
+        cycle = {"number": 1, "sent_ns": 0}
+
+        def on_echoed() -> None:
+            now = time.perf_counter_ns()
+            if cycle["number"] > warmup:
+                trips.append((now - cycle["sent_ns"]) // 2)
+            if cycle["number"] == total:
+                done.set()
+                return
+            cycle["number"] += 1
+            cycle["sent_ns"] = time.perf_counter_ns()
+            self._echo.put(payload)
+
+        self._on_echoed = on_echoed
+        cycle["sent_ns"] = time.perf_counter_ns()
+        self._echo.put(payload)
+        finished = done.wait(max(30.0, total * 0.01))
+        self._on_echoed = lambda: None
+        if not finished:
+            raise RuntimeError(f"in-callback ping-pong: {len(trips)}/{cycles} echoes arrived")
+        return stats_ms(trips)
+
     def throughput(self, nbytes: int, messages: int) -> float:
         self._count, self._target = 0, messages
         self._done.clear()
@@ -202,6 +251,7 @@ class RawFloor:
         for s in self._subs:
             s.undeclare()
         self._ping.undeclare()
+        self._echo.undeclare()
         self._push.undeclare()
         self.session.close()
 
@@ -293,6 +343,8 @@ async def _measure(
             warmup = min(50, cycles)
             progress(f"{p.label}: raw latency")
             raw_lat = raw.latency(p.nbytes, cycles, warmup)
+            progress(f"{p.label}: raw latency inside Zenoh's callbacks")
+            raw_cb = raw.latency_in_callback(p.nbytes, cycles, warmup)
             progress(f"{p.label}: latency ({cycles} cycles)")
             lat = await our_latency(consumer, p, cycles, warmup)
             raw_runs, runs = [], []
@@ -318,6 +370,7 @@ async def _measure(
                     "raw_zenoh_throughput_msg_s": raw_thr,
                     "raw_zenoh_throughput_runs_msg_s": raw_runs,
                     "raw_zenoh_latency_ms": raw_lat,
+                    "raw_zenoh_in_callback_latency_ms": raw_cb,
                     "latency_vs_raw": lat["avg"] / raw_lat["avg"],
                     "throughput_vs_thesis": thr / thesis_r_num,
                     "thesis": {
@@ -535,6 +588,12 @@ def format_table(report: dict[str, Any]) -> str:
             f"raw Zenoh's own 4 B latency (the floor): avg {raw['avg']:.3f} ms "
             f"(target for plugcell 0.05), max {raw['max']:.3f} ms (target 1)"
         )
+        bare = four.get("raw_zenoh_in_callback_latency_ms")
+        if bare is not None:
+            lines.append(
+                f"  answered inside Zenoh's callbacks, with no hop to a thread: avg "
+                f"{bare['avg']:.3f} ms, max {bare['max']:.3f} ms"
+            )
     return "\n".join(lines)
 
 
