@@ -60,15 +60,40 @@ def _probe_framework(trace: Trace) -> None:
     _probe(trace, service.GenericDevice, "_send", "put", "sent")
 
 
+#: Steps of the service whose CPU time is compared with their wall time.
+CPU_STEPS = (("service", "_create"), ("journal", "commit"), ("service", "_send"))
+
+
+def _probe_cpu(spent: list[tuple[str, int, int]], owner: Any, name: str) -> None:
+    """Wrap ``owner.name`` to record its wall time and its thread's CPU time per call."""
+    inner: Callable[..., Any] = getattr(owner, name)
+
+    def probed(*args: Any, **kwargs: Any) -> Any:
+        wall, cpu = time.perf_counter_ns(), time.thread_time_ns()
+        try:
+            return inner(*args, **kwargs)
+        finally:
+            spent.append((name, time.perf_counter_ns() - wall, time.thread_time_ns() - cpu))
+
+    setattr(owner, name, probed)
+
+
 def serve(cell: str, journal: bool, out: str) -> None:
     """The publisher, probed; its trace goes to ``out`` when it stops (SIGTERM)."""
     import atexit
 
     from plugcell.bench import peer
+    from plugcell.framework import journal as journal_module
+    from plugcell.framework import service
 
     trace: Trace = []
+    spent: list[tuple[str, int, int]] = []
     _probe_framework(trace)
-    atexit.register(lambda: Path(out).write_text(json.dumps(trace)))
+    # inside the step probes, so they time just what those enclose
+    for owner, step in CPU_STEPS:
+        _probe_cpu(spent, {"service": service.GenericDevice,
+                           "journal": journal_module.Journal}[owner], step)
+    atexit.register(lambda: Path(out).write_text(json.dumps({"trace": trace, "cpu": spent})))
     peer.main(["service", "--cell", cell, *([] if journal else ["--no-journal"])])
 
 
@@ -179,7 +204,8 @@ def main(argv: list[str] | None = None) -> int:
         finally:
             child.terminate()
             child.wait(15)
-        service = [(n, t) for n, t in json.loads(Path(out).read_text())]
+        recorded = json.loads(Path(out).read_text())
+        service = [(n, t) for n, t in recorded["trace"]]
     rows, count, total = breakdown(trace, service)
     print(f"4-byte Echo round trip, journal {'on' if journal else 'off'}, "
           f"median of {count} of {total} cycles that took the usual path (µs)")
@@ -187,6 +213,12 @@ def main(argv: list[str] | None = None) -> int:
     for name, us in rows:
         print(f"  {name:<{width}}  {us:7.1f}")
     print(f"  {'round trip (sum of the medians)':<{width}}  {sum(us for _, us in rows):7.1f}")
+    print("the service's steps, wall time against its thread's CPU time (median µs):")
+    for _, step in CPU_STEPS:
+        calls = [(w, c) for n, w, c in recorded["cpu"][600:] if n == step]  # warmed up
+        if calls:
+            print(f"  {step:<8} wall {statistics.median(w for w, _ in calls) / 1e3:6.1f}"
+                  f"   CPU {statistics.median(c for _, c in calls) / 1e3:6.1f}")
     return 0
 
 
