@@ -4,12 +4,20 @@ and readers that scan the index-less ``updates`` table once, not per process."""
 from __future__ import annotations
 
 import sqlite3
+import subprocess
+import sys
 import time
 from pathlib import Path
 
 import pytest
 
-from plugcell.framework.journal import SCHEMA_VERSION, Journal, journal_dir, read_journal
+from plugcell.framework.journal import (
+    SCHEMA_VERSION,
+    Journal,
+    JournalInUseError,
+    journal_dir,
+    read_journal,
+)
 from plugcell.services import controller_journal
 from plugcell.services.controller_journal import JournalTail
 
@@ -166,3 +174,31 @@ def test_tail_starts_at_the_first_update_of_its_history(
     assert [p["identifier"] for p in processes] == [7, 8]
     # from the first update of process 7 on: its own, 8's, and the late one of 2
     assert [(u["identifier"], u["seq"]) for u in updates] == [(7, 1), (8, 1), (2, 3)]
+
+
+def test_one_process_at_a_time_holds_a_journal(tmp_path: Path) -> None:
+    """A second opener — another service of the same name on this host — is refused
+    while the first holds the journal, and admitted once it closes or dies (kill -9)."""
+    path = tmp_path / "DEV.sqlite"
+    first = Journal(path, "DEV")
+    with pytest.raises(JournalInUseError, match="is in use by another process"):
+        Journal(path, "DEV")
+    first.close()
+    Journal(path, "DEV").close()
+
+    holder = subprocess.Popen(
+        [sys.executable, "-c",
+         "import sys, time; from pathlib import Path; from plugcell.framework.journal import "
+         "Journal; Journal(Path(sys.argv[1]), 'DEV'); print('open', flush=True); time.sleep(60)",
+         str(path)],
+        stdout=subprocess.PIPE, text=True,
+    )
+    try:
+        assert holder.stdout is not None and holder.stdout.readline().strip() == "open"
+        with pytest.raises(JournalInUseError):
+            Journal(path, "DEV")
+    finally:
+        holder.kill()
+        holder.wait(10)
+    Journal(path, "DEV").close()  # the kernel released the dead holder's lock
+    assert [p.name for p in sorted(tmp_path.glob("*.sqlite"))] == ["DEV.sqlite"]

@@ -26,7 +26,7 @@ from plugcell.framework.model import (
     ProcessStates,
     Tag,
 )
-from plugcell.framework.participant import Participant
+from plugcell.framework.participant import Participant, PartnerError
 
 pytestmark = pytest.mark.timeout(60)
 
@@ -423,6 +423,30 @@ def test_journal_records_processes_and_updates(tmp_path):
             assert "E42" in by_command["Fail"]["reason"]
             assert by_command["Nope"]["state"] == "Failed"
             assert msgspec.json.encode(rows)  # exportable as JSON
+
+    run(body())
+
+
+def test_a_second_service_of_one_name_on_this_host_is_refused_by_the_journal(tmp_path):
+    """Even where presence cannot tell (here: another cell), a service whose journal
+    another process holds does not start, and the first keeps serving."""
+
+    async def body():
+        first = ScriptedDevice(cell=unique_cell(), journal=tmp_path)
+        await first.start()
+        try:
+            second = ScriptedDevice(cell=unique_cell(), journal=tmp_path)
+            with pytest.raises(PartnerError, match="already running on this host"):
+                await second.start()
+            client = Participant("A", cell=first.keys.cell)
+            await client.start()
+            try:
+                done = await (await client.create_process("DEV", "Measure")).result()
+                assert done.state is C
+            finally:
+                await client.close()
+        finally:
+            await first.close()
 
     run(body())
 

@@ -67,6 +67,30 @@ def journal_dir(cell: str, home: Path | None = None) -> Path:
     return (home or plugcell_home()) / "cells" / cell / "journal"
 
 
+class JournalInUseError(RuntimeError):
+    """Another process has this journal open: a service of the same name on this host."""
+
+
+def _lock(path: Path) -> int | None:
+    """Hold an exclusive advisory lock on ``<journal>.lock`` while the journal is open.
+
+    Two services of one name on one host would otherwise share the file, and the
+    younger's :meth:`Journal.recover` would fail the elder's running processes.
+    The kernel releases the lock when its process dies, however it dies.
+    """
+    try:
+        import fcntl
+    except ImportError:  # not POSIX: no lock
+        return None
+    fd = os.open(path.with_name(path.name + ".lock"), os.O_RDWR | os.O_CREAT, 0o644)
+    try:
+        fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+    except BlockingIOError:
+        os.close(fd)
+        raise JournalInUseError(f"the journal {path} is in use by another process") from None
+    return fd
+
+
 class Journal:
     """The journal of one service (written from its event loop only)."""
 
@@ -77,13 +101,19 @@ class Journal:
         self.path = path
         self.owner = owner
         path.parent.mkdir(parents=True, exist_ok=True)
-        self._db = _connect(path)
-        self._db.execute(f"PRAGMA synchronous={'FULL' if durable else 'NORMAL'}")
-        self._db.execute("PRAGMA wal_autocheckpoint=0")
-        self._db.executescript(_SCHEMA)
-        self._db.execute(
-            "INSERT OR IGNORE INTO meta VALUES ('schema_version', ?)", (str(SCHEMA_VERSION),)
-        )
+        self._lock_fd = _lock(path)  # raises JournalInUseError
+        try:
+            self._db = _connect(path)
+            self._db.execute(f"PRAGMA synchronous={'FULL' if durable else 'NORMAL'}")
+            self._db.execute("PRAGMA wal_autocheckpoint=0")
+            self._db.executescript(_SCHEMA)
+            self._db.execute(
+                "INSERT OR IGNORE INTO meta VALUES ('schema_version', ?)", (str(SCHEMA_VERSION),)
+            )
+        except BaseException:
+            if self._lock_fd is not None:
+                os.close(self._lock_fd)
+            raise
         self._pending: list[tuple[Any, ...]] = []
         self._stop = threading.Event()
         self._checkpointer = threading.Thread(
@@ -210,6 +240,9 @@ class Journal:
             self.commit()
             self._db.execute("PRAGMA wal_checkpoint(TRUNCATE)")
         self._db.close()
+        if self._lock_fd is not None:
+            os.close(self._lock_fd)  # releases the lock
+            self._lock_fd = None
 
     def _checkpoint_loop(self) -> None:
         db = _connect(self.path)

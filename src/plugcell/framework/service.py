@@ -51,7 +51,7 @@ import zenoh
 
 from plugcell.framework import wire
 from plugcell.framework.data import DataError, check_data, from_data, summary, to_data
-from plugcell.framework.journal import Journal, journal_dir
+from plugcell.framework.journal import Journal, JournalInUseError, journal_dir
 from plugcell.framework.keys import DEFAULT_CELL, Presence, check_name
 from plugcell.framework.model import (
     Acknowledgement,
@@ -288,7 +288,12 @@ class GenericDevice(Participant):
             if isinstance(self._journal_setting, Path)
             else journal_dir(self.keys.cell)
         )
-        self.journal = Journal(folder / f"{self.name}.sqlite", self.name)
+        try:
+            self.journal = Journal(folder / f"{self.name}.sqlite", self.name)
+        except JournalInUseError as exc:
+            raise PartnerError(
+                f"a service named {self.name} is already running on this host ({exc})"
+            ) from None
         recovered = self.journal.recover(
             f"interrupted: {self.name} stopped before the process finished"
         )
@@ -365,8 +370,10 @@ class GenericDevice(Participant):
             with contextlib.suppress(zenoh.ZError):
                 publisher.undeclare()
         self._publishers.clear()
-        await super().close()
+        # nothing is journaled after the last flush: release the journal (and its
+        # lock) before the token goes, so a successor started on our leave can open it
         self.journal.close()
+        await super().close()
         self.stopped.set()
 
     # -- inbound: Get, Subscribe, CreateProcess (Table 5-2) ----------------------------
