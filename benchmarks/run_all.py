@@ -28,6 +28,7 @@ def main(argv: list[str]) -> int:
         ("calibration (thesis 8.2)",
          [*plugcell, "bench", "calibration", "--max-poses", "100000" if full else "10000"]),
         ("service path per streamed frame", [sys.executable, str(HERE / "service_frames.py")]),
+        ("journal: schema 1 against 2, recovery", [sys.executable, str(HERE / "journal.py")]),
         ("one round trip, step by step",
          [sys.executable, str(HERE / "round_trip_trace.py"),
           *([] if full else ["--cycles", "500"])]),
