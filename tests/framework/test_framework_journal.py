@@ -10,6 +10,8 @@ import time
 from pathlib import Path
 
 import pytest
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
 
 from plugcell.framework.journal import (
     SCHEMA_VERSION,
@@ -101,6 +103,30 @@ def test_recover_fails_exactly_the_unfinished_processes(tmp_path: Path, version:
         )
         keyed = db.execute("PRAGMA index_list(updates)").fetchall()
         assert bool(keyed) == (version == 1)
+
+
+@settings(max_examples=60, deadline=None,
+          suppress_health_check=[HealthCheck.function_scoped_fixture])
+@given(mark=st.one_of(st.text(max_size=30), st.integers(-(2**63), 2**63 - 1),
+                      st.binary(max_size=8), st.floats(allow_nan=True),
+                      st.just("99999999999999999999 3"), st.just(f"{2**63 - 1} 3")))
+def test_a_damaged_recovery_mark_only_makes_recovery_read_everything(
+    tmp_path_factory: pytest.TempPathFactory, mark: object
+) -> None:
+    """Whatever ``meta.recovered_through`` holds, recovery fails exactly the unfinished
+    processes (reading everything if the mark cannot be read) and writes a good mark."""
+    path = tmp_path_factory.mktemp("mark") / "DEV.sqlite"
+    journal = Journal(path, "DEV")
+    _history(journal)
+    journal._db.execute("INSERT OR REPLACE INTO meta VALUES ('recovered_through', ?)", (mark,))
+    journal.commit()
+    readable = mark == f"{2**63 - 1} 3"  # a mark past every process: nothing to recover
+    assert journal.recover("interrupted") == (0 if readable else 3)
+    good = journal._db.execute(
+        "SELECT value FROM meta WHERE key = 'recovered_through'").fetchone()[0]
+    journal.close()
+    # 6 processes; 7 updates, and the 3 Failed ones unless the mark was past them all
+    assert [int(v) for v in good.split()] == [6, 7 if readable else 10]
 
 
 def _plan(db: sqlite3.Connection, sql: str) -> list[str]:

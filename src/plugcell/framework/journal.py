@@ -211,7 +211,7 @@ class Journal:
         mark = self._db.execute(
             "SELECT value FROM meta WHERE key = 'recovered_through'"
         ).fetchone()
-        last_process, last_update = (int(v) for v in mark[0].split()) if mark else (0, 0)
+        last_process, last_update = _recovery_mark(mark[0] if mark else None)
         cur = self._db.execute(
             "INSERT INTO updates SELECT p.recipient, p.sender, p.identifier,"
             " COALESCE(l.seq, 0) + 1, :t, 'Failed', :reason, '' FROM processes p"
@@ -253,6 +253,18 @@ class Journal:
                     db.execute("PRAGMA wal_checkpoint(PASSIVE)")
         finally:
             db.close()
+
+
+def _recovery_mark(value: object) -> tuple[int, int]:
+    """The rowids of ``meta.recovered_through`` (``"<process> <update>"``); a missing or
+    unreadable mark reads as (0, 0): recovery then passes over everything, which is
+    always right, only slower."""
+    parts = value.split() if isinstance(value, str) else []
+    if len(parts) == 2 and all(p.isascii() and p.isdigit() for p in parts):
+        rowids = int(parts[0]), int(parts[1])
+        if max(rowids) < 2**63:  # SQLite's largest rowid
+            return rowids
+    return 0, 0
 
 
 def _connect(path: Path) -> sqlite3.Connection:
