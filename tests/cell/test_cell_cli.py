@@ -6,6 +6,7 @@ import json
 import os
 import subprocess
 import urllib.request
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
@@ -55,16 +56,33 @@ def test_cell_cli_discovers_wires_saves_loads_runs_and_monitors(
     r = cli(home, "cell", "load", str(broken), "--cell", cell)
     assert r.returncode == 2 and "broken.json: wire 1" in r.stderr
 
-    monitor = procs.start(plugcell_argv("cell", "monitor", "--json", "--count", "3",
-                                        "--duration", "25", "--cell", cell))
+    # every process of the cell, and only TOOL's until one has ended; both watch before the run
+    everything = procs.start(plugcell_argv("cell", "monitor", "--json", "--duration", "25",
+                                           "--cell", cell))
+    tool = procs.start(plugcell_argv("cell", "monitor", "--json", "--service", "TOOL",
+                                     "--count", "1", "--duration", "25", "--cell", cell))
+    for monitor in (everything, tool):
+        ready = json.loads(monitor.wait_line(lambda x: '"monitoring"' in x, 30.0))
+        assert ready == {"event": "monitoring", "cell": cell}
     program = str(PROGRAMS / "cellcheck.pdl")
     r = cli(home, "cell", "run", "R1", program, "--cell", cell)
     assert r.returncode == 0, r.stdout + r.stderr
     assert lines(r.stdout)[-1]["state"] == "Completed"
-    monitor.popen.wait(20)
-    seen = [x for x in (json.loads(line) for line in monitor.lines if line.startswith("{"))]
-    assert {(x["sender"], x["recipient"], x["command"], x["state"]) for x in seen} >= {
-        ("R1", "TOOL", "Drill", "Completed"), ("R1", "CAMERA", "SnapShot", "Completed")}
+
+    def ended(sender: str, recipient: str, command: str) -> Callable[[str], bool]:
+        def match(line: str) -> bool:
+            x = json.loads(line)
+            return x["event"] == "process" and x["state"] == "Completed" and (
+                x["sender"], x["recipient"], x["command"]) == (sender, recipient, command)
+        return match
+
+    everything.wait_line(ended("R1", "TOOL", "Drill"), 20.0)
+    everything.wait_line(ended("R1", "CAMERA", "SnapShot"), 20.0)
+    assert tool.popen.wait(20) == 0  # --count 1: it stops by itself
+    seen = [x for x in map(json.loads, tool.lines) if x["event"] == "process"]
+    assert all("TOOL" in (x["sender"], x["recipient"]) for x in seen)
+    assert (seen[-1]["sender"], seen[-1]["command"], seen[-1]["state"]) == (
+        "R1", "Drill", "Completed")
 
     # the thesis EXAMPLE needs its taught points: given as program values
     r = cli(home, "cell", "run", "R1", "example", "--cell", cell)

@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 from plugcell.framework.model import Data, DataTypes, ProcessStates, ProcessUpdateNotification, Tag
-from plugcell.services.controller_monitor import ProcessMonitor
+from plugcell.services.controller_monitor import MonitorFeed, ProcessMonitor
 
 
 def update(sender: str, recipient: str, identifier: int, state: str, seq: int,
@@ -64,3 +64,46 @@ def test_memory_is_bounded_and_keeps_what_is_going_on() -> None:
     assert len(m.records) == 10
     assert ("S", "R", 0) in m.records  # still queued: kept
     assert len(m.snapshot(limit=5)) == 5
+
+
+class Clock:
+    def __init__(self) -> None:
+        self.t = 100.0
+
+    def __call__(self) -> float:
+        return self.t
+
+
+def test_the_feed_holds_an_unnamed_process_for_its_journal_row_and_counts_each_end_once() -> None:
+    m, clock = ProcessMonitor(), Clock()
+    feed = MonitorFeed(hold_s=1.0, clock=clock)
+    r = m.updated("TOOL", update("R1", "TOOL", 3, "Completed", 2), t_ns=5)
+    assert not feed.offer(r) and feed.held() == [r.key] and feed.ended == 0
+    m.created("TOOL", "R1", 3, command="Drill", t_ns=4, source="journal")  # the row names it
+    assert feed.offer(r) and feed.held() == [] and feed.ended == 1
+    assert not feed.offer(r)  # nothing new
+
+    late = m.updated("CAMERA", update("R1", "CAMERA", 4, "Completed", 1), t_ns=6)
+    assert not feed.offer(late)
+    clock.t += 1.0  # no row came in time: shown without its command …
+    assert feed.offer(late) and feed.ended == 2
+    m.created("CAMERA", "R1", 4, command="SnapShot", t_ns=5, source="journal")
+    assert feed.offer(late) and (late.command, feed.ended) == ("SnapShot", 2)  # … then named
+
+
+def test_the_feed_skips_history_and_other_services_and_shows_state_changes() -> None:
+    m = ProcessMonitor()
+    old = m.created("TOOL", "R1", 1, command="Drill", state="Completed", t_ns=1)
+    feed = MonitorFeed(service="TOOL", hold_s=0.0)
+    feed.history(m.records.values())
+    assert not feed.offer(old) and feed.ended == 0
+    other = m.created("CAMERA", "R1", 2, command="SnapShot", t_ns=2)
+    assert not feed.offer(other)
+    r = m.created("TOOL", "R2", 3, command="Drill", t_ns=3)
+    assert feed.offer(r)  # Queued
+    for state, seq in (("Running", 1), ("Completed", 2)):
+        m.updated("TOOL", update("R2", "TOOL", 3, state, seq), t_ns=4 + seq)
+        assert feed.offer(r) and r.state == state
+    assert feed.ended == 1 and not feed.offer(r)
+    unnamed = m.updated("TOOL", update("R3", "TOOL", 9, "Failed", 1, reason="x"), t_ns=9)
+    assert feed.offer(unnamed) and feed.ended == 2  # nothing to wait for without journals

@@ -402,31 +402,31 @@ def run_monitor(args: argparse.Namespace) -> int:
     return 0
 
 
+def _monitoring(args: argparse.Namespace) -> None:
+    """Say that the monitor is watching: every process that ends from now on is shown
+    (what ended before is history, read but not printed)."""
+    if args.json:
+        _emit({"event": "monitoring", "cell": cell_of(args)})
+    else:
+        print(f"monitoring cell {cell_of(args)!r} (Ctrl-C to stop)", flush=True)
+
+
 async def _monitor(args: argparse.Namespace) -> None:
     from plugcell.framework import wire
     from plugcell.framework.model import process_updates
     from plugcell.services.controller_journal import JournalTail
-    from plugcell.services.controller_monitor import ProcessMonitor
+    from plugcell.services.controller_monitor import MonitorFeed, ProcessMonitor
 
     client = await _participant(args, "monitor")
     monitor = ProcessMonitor()
-    shown: dict[tuple[str, str, int], str] = {}
-    ended = 0
     stop = asyncio.Event()
     tail = None if args.no_journals else JournalTail(cell_of(args))
-    waiting: dict[tuple[str, str, int], float] = {}
+    # without the journals no row will name the command: nothing to wait for
+    feed = MonitorFeed(service=args.service, hold_s=0.0 if tail is None else 1.0)
 
     def show(record: Any) -> None:
-        nonlocal ended
-        if args.service and args.service not in (record.sender, record.recipient):
+        if not feed.offer(record):
             return
-        first_seen = waiting.setdefault(record.key, time.monotonic())
-        if tail is not None and not record.command and time.monotonic() - first_seen < 1.0:
-            return  # its journal row, read soon, names the command
-        waiting.pop(record.key, None)
-        if shown.get(record.key) == record.state:
-            return
-        shown[record.key] = record.state
         if args.json:
             _emit({"event": "process", **record.to_json()})
         else:
@@ -437,10 +437,8 @@ async def _monitor(args: argparse.Namespace) -> None:
             data = f"  {record.data_text}" if record.data_text else ""
             print(f"{t} {record.sender:>14} → {record.recipient:<12} {record.command:<22} "
                   f"{record.state:<9}{extra}{data}{reason}", flush=True)
-        if record.final:
-            ended += 1
-            if args.count is not None and ended >= args.count:
-                stop.set()
+        if args.count is not None and feed.ended >= args.count:
+            stop.set()
 
     def on_sample(sample: Any) -> None:
         parts = str(sample.key_expr).split("/")
@@ -478,10 +476,12 @@ async def _monitor(args: argparse.Namespace) -> None:
                         u["reason"] or "", u["data"] or "", u["t_ns"])
                     if found is not None and not first:
                         show(found)
-                if first:  # history: mark as shown without printing
-                    shown.update({k: r.state for k, r in monitor.records.items()})
+                if first:  # history: read, not printed
+                    feed.history(monitor.records.values())
+            if first:
+                _monitoring(args)
                 first = False
-            for key in list(waiting):
+            for key in feed.held():
                 if key in monitor.records:
                     show(monitor.records[key])
             with contextlib.suppress(TimeoutError):

@@ -21,6 +21,7 @@ from __future__ import annotations
 
 import time
 from collections import OrderedDict
+from collections.abc import Callable, Iterable
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -35,7 +36,7 @@ MAX_VALUES = 96
 Key = tuple[str, str, int]
 _ORDER = {"Queued": 0, "Running": 1, "Completed": 2, "Failed": 2}
 
-__all__ = ["ProcessMonitor", "ProcessRecord"]
+__all__ = ["MonitorFeed", "ProcessMonitor", "ProcessRecord"]
 
 
 @dataclass
@@ -260,3 +261,48 @@ class ProcessMonitor:
         for record in self.records.values():
             out[record.state] = out.get(record.state, 0) + 1
         return out
+
+
+class MonitorFeed:
+    """Which changes of the records a line-per-change feed (``plugcell cell monitor``)
+    prints, and how many processes it has seen end.
+
+    A record is printed when its state changes, and once more when its command becomes
+    known (a ProcessUpdate does not name it; the journal row does, a little later).  A
+    record without a command is held back up to ``hold_s`` for that row, then printed
+    anyway.  ``history`` marks what was already there as printed.  ``service`` keeps
+    only the processes it sent or received.  Pure bookkeeping with an injected clock.
+    """
+
+    def __init__(self, *, service: str | None = None, hold_s: float = 1.0,
+                 clock: Callable[[], float] = time.monotonic) -> None:
+        self.service = service
+        self.hold_s = hold_s
+        self.clock = clock
+        self.ended = 0
+        self._shown: dict[Key, tuple[str, str]] = {}
+        self._held: dict[Key, float] = {}
+
+    def history(self, records: Iterable[ProcessRecord]) -> None:
+        """What ``records`` show now is past: never printed."""
+        self._shown.update({r.key: (r.state, r.command) for r in records})
+
+    def held(self) -> list[Key]:
+        """The records waiting for their command (offer them again to release them)."""
+        return list(self._held)
+
+    def offer(self, record: ProcessRecord) -> bool:
+        """Whether to print ``record`` now (it is then counted as shown)."""
+        if self.service and self.service not in (record.sender, record.recipient):
+            return False
+        first_seen = self._held.setdefault(record.key, self.clock())
+        if self.hold_s > 0 and not record.command and self.clock() - first_seen < self.hold_s:
+            return False
+        del self._held[record.key]
+        before = self._shown.get(record.key)
+        if before == (record.state, record.command):
+            return False
+        self._shown[record.key] = (record.state, record.command)
+        if record.final and (before is None or before[0] != record.state):
+            self.ended += 1
+        return True
