@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import json
 import math
 import re
 from collections.abc import Iterator
@@ -126,7 +127,7 @@ def test_a_robot_program_runs_and_its_processes_are_monitored(client: TestClient
     done = next(r for r in snap["runs"] if r["id"] == run["id"])
     assert done["state"] == "Completed", done
     item = done["items"][0]  # how the program ended: the robot's PROGRAM_STATUS
-    assert item["programState"] == "FINISHED" and item["simS"] > 0, item
+    assert item["programState"] == "FINISHED" and item["simS"] > 0, json.dumps(item)
     until(lambda: client.get("/api/snapshot").json()["processes"],
           lambda ps: {("R1", "TOOL", "Drill", "Completed"),
                       ("R1", "CAMERA", "SnapShot", "Completed"),
