@@ -1,8 +1,11 @@
 """The ``plugcell`` command.
 
-Each sub-command lives in its own module under :mod:`plugcell.commands` and
-exposes ``register(subparsers)``; the module's ``register`` adds its parser and
-sets ``func`` (``func(args) -> int`` exit code).  This file only assembles them.
+Each sub-command is declared here by a light :class:`Command` (its name, its one-line
+help and where its options are defined) and lives in its own module under
+:mod:`plugcell.commands`.  The module's ``configure(parser)`` adds the options and sets
+``func`` (``func(args) -> int`` exit code).  Only the module of the sub-command being
+run is imported, so ``plugcell calibrate --help`` does not load Zenoh, FastAPI or the
+service framework (``benchmarks/cli_startup.py`` measures the start-up).
 """
 
 from __future__ import annotations
@@ -10,27 +13,73 @@ from __future__ import annotations
 import argparse
 import importlib
 import sys
+from collections.abc import Sequence
+from dataclasses import dataclass
 
 from plugcell import __version__
 
-#: Sub-command modules, in the order ``plugcell --help`` lists them.
-COMMAND_MODULES: tuple[str, ...] = (
-    "plugcell.commands.kin",
-    "plugcell.commands.twin",
-    "plugcell.commands.demo",
-    "plugcell.commands.serve",
-    "plugcell.commands.services",
-    "plugcell.commands.call",
-    "plugcell.commands.wire",
-    "plugcell.commands.router",
-    "plugcell.commands.journal",
-    "plugcell.commands.bench",
-    "plugcell.commands.compensate",
-    "plugcell.commands.calibrate",
-    "plugcell.commands.reproduce",
-    "plugcell.commands.cell",
-    "plugcell.commands.controller",
-    "plugcell.commands.certs",
+
+@dataclass(frozen=True)
+class Command:
+    """A sub-command of ``plugcell``, declared without importing its module.
+
+    Attributes
+    ----------
+    name : str
+        The word on the command line (``plugcell NAME …``).
+    help : str
+        One line for ``plugcell --help``.
+    configure : str
+        ``"module:function"``; ``function(parser)`` adds the options and ``func``.
+    """
+
+    name: str
+    help: str
+    configure: str
+
+    def load(self, parser: argparse.ArgumentParser) -> None:
+        """Import the module and let it configure ``parser``."""
+        module, _, function = self.configure.partition(":")
+        getattr(importlib.import_module(module), function)(parser)
+
+
+#: The sub-commands, in the order ``plugcell --help`` lists them.
+COMMANDS: tuple[Command, ...] = (
+    Command("kin", "robot kinematics: forward/inverse kinematics, robot descriptions",
+            "plugcell.commands.kin:configure"),
+    Command("twin", "the digital twin: error budget, simulated campaigns",
+            "plugcell.commands.twin:configure"),
+    Command("demo", "run the thesis demonstration on simulated devices over services",
+            "plugcell.commands.demo:configure"),
+    Command("serve", "run a device service (camera, drill, …) in this process",
+            "plugcell.commands.serve:configure"),
+    Command("services", "list the services of the cell and their commands",
+            "plugcell.commands.services:configure"),
+    Command("call", "create a process at a service and print its updates as JSON lines",
+            "plugcell.commands.call:configure"),
+    Command("wire", "make service A subscribe to partner B",
+            "plugcell.commands.wire:configure_wire"),
+    Command("unwire", "make service A drop partner B",
+            "plugcell.commands.wire:configure_unwire"),
+    Command("router", "run a Zenoh router so a cell can span machines",
+            "plugcell.commands.router:configure"),
+    Command("journal", "show the journal of the cell's processes",
+            "plugcell.commands.journal:configure"),
+    Command("bench", "benchmarks: transport (5.3), calibration (8.2), compensation (6.5.1)",
+            "plugcell.commands.bench:configure"),
+    Command("compensate",
+            "model-based compensation of Cartesian targets -> joint targets (thesis 6.5.1)",
+            "plugcell.commands.compensate:configure"),
+    Command("calibrate", "identify a robot's error model from tracker measurements",
+            "plugcell.commands.calibrate:configure"),
+    Command("reproduce", "recompute the thesis's calibration tables",
+            "plugcell.commands.reproduce:configure"),
+    Command("cell", "discover, wire, save/load, run programs, monitor (the cell controller's CLI)",
+            "plugcell.commands.cell:configure"),
+    Command("controller", "run the cell controller service and its web UI",
+            "plugcell.commands.controller:configure"),
+    Command("certs", "create a cell's CA and per-service TLS certificates",
+            "plugcell.commands.certs:configure"),
 )
 
 
@@ -38,20 +87,42 @@ class CommandError(Exception):
     """A user-facing error: printed as ``plugcell: error: <message>``, exit code 2."""
 
 
-def build_parser() -> argparse.ArgumentParser:
+def chosen_command(argv: Sequence[str]) -> str | None:
+    """The sub-command named in ``argv``: its first word that is not an option.
+
+    ``plugcell`` itself has only flag options (``--help``, ``--version``), so the first
+    non-option word is the sub-command (or a typo argparse will report).
+    """
+    return next((a for a in argv if not a.startswith("-")), None)
+
+
+def build_parser(command: str | None = None) -> argparse.ArgumentParser:
+    """The ``plugcell`` parser; only ``command``'s options are loaded (all: ``"*"``).
+
+    Every sub-command is listed with its help; the others parse nothing, which is all
+    ``plugcell --help`` and an unknown name need.
+    """
     parser = argparse.ArgumentParser(
         prog="plugcell",
         description="Plug-and-produce robot work-cells made accurate.",
     )
     parser.add_argument("--version", action="version", version=f"plugcell {__version__}")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND")
-    for name in COMMAND_MODULES:
-        importlib.import_module(name).register(sub)
+    for cmd in COMMANDS:
+        p = sub.add_parser(cmd.name, help=cmd.help)
+        if command in (cmd.name, "*"):
+            cmd.load(p)
     return parser
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = build_parser()
+    """Run ``plugcell`` with ``argv`` (default ``sys.argv[1:]``); returns the exit code."""
+    argv = sys.argv[1:] if argv is None else argv
+    return _run(argv)
+
+
+def _run(argv: list[str]) -> int:
+    parser = build_parser(chosen_command(argv))
     args = parser.parse_args(argv)
     func = getattr(args, "func", None)
     if func is None:

@@ -3,13 +3,10 @@
 from __future__ import annotations
 
 import argparse
-from typing import Any
 
 
-def register(subparsers: Any) -> None:
-    p = subparsers.add_parser(
-        "bench", help="benchmarks: transport (5.3), calibration (8.2), compensation (6.5.1)"
-    )
+def configure(p: argparse.ArgumentParser) -> None:
+    """Add the ``bench`` options to its parser (declared in :mod:`plugcell.cli`)."""
     sub = p.add_subparsers(dest="bench", metavar="BENCHMARK", required=True)
     t = sub.add_parser(
         "transport",

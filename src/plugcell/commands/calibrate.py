@@ -26,13 +26,14 @@ from typing import Any
 import numpy as np
 
 
-def register(sub: Any) -> None:
-    p = sub.add_parser(
-        "calibrate", help="identify a robot's error model from tracker measurements",
-        description="Identify the error parameters of one of the thesis's five models "
-                    "(1 serial, 2 loop, 3 serial+gravity, 4 loop+gravity, 5 full) from a "
-                    "measurement file (joint readings + tracker measurements, "
-                    "docs/measurement-files.md).")
+def configure(p: argparse.ArgumentParser) -> None:
+    """Add the ``calibrate`` options to its parser (declared in :mod:`plugcell.cli`)."""
+    p.description = (
+        "Identify the error parameters of one of the thesis's five models "
+        "(1 serial, 2 loop, 3 serial+gravity, 4 loop+gravity, 5 full) from a "
+        "measurement file (joint readings + tracker measurements, "
+        "docs/measurement-files.md)."
+    )
     p.add_argument("--robot", required=True, help="shipped robot name or description file")
     p.add_argument("--model", required=True,
                    help="1-5 or serial, loop, serial+gravity, loop+gravity, full")

@@ -21,12 +21,11 @@ from plugcell.commands.cellargs import add_cell_args, cell_of, transport_of
 from plugcell.framework import eventloop
 
 
-def register(subparsers: Any) -> None:
-    p = subparsers.add_parser(
-        "call",
-        help="create a process at a service and print its updates as JSON lines",
-        description="CreateProcess at SERVICE and print the acknowledgement and every "
-        "ProcessUpdate as one JSON object per line.",
+def configure(p: argparse.ArgumentParser) -> None:
+    """Add the ``call`` options to its parser (declared in :mod:`plugcell.cli`)."""
+    p.description = (
+        "CreateProcess at SERVICE and print the acknowledgement and every "
+        "ProcessUpdate as one JSON object per line."
     )
     p.add_argument("service")
     p.add_argument("command")

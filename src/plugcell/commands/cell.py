@@ -36,12 +36,11 @@ def _emit(obj: dict[str, Any]) -> None:
     sys.stdout.flush()
 
 
-def register(subparsers: Any) -> None:
-    p = subparsers.add_parser(
-        "cell",
-        help="discover, wire, save/load, run programs, monitor (the cell controller's CLI)",
-        description="The cell controller from the terminal: list the services, wire and "
-        "unwire partners, save and load the wiring, run robot programs, monitor processes.",
+def configure(p: argparse.ArgumentParser) -> None:
+    """Add the ``cell`` options to its parser (declared in :mod:`plugcell.cli`)."""
+    p.description = (
+        "The cell controller from the terminal: list the services, wire and "
+        "unwire partners, save and load the wiring, run robot programs, monitor processes."
     )
     sub = p.add_subparsers(dest="cell_command", metavar="ACTION", required=True)
 

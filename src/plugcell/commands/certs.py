@@ -15,17 +15,15 @@ import datetime as dt
 import ipaddress
 import os
 from pathlib import Path
-from typing import Any
 
 DEFAULT_DIR = "plugcell-certs"
 
 
-def register(subparsers: Any) -> None:
-    p = subparsers.add_parser(
-        "certs",
-        help="create a cell's CA and per-service TLS certificates",
-        description="Create the certificate authority of a cell and the certificates of its "
-        "services (CN = service name) for Zenoh mutual TLS (docs/security.md).",
+def configure(p: argparse.ArgumentParser) -> None:
+    """Add the ``certs`` options to its parser (declared in :mod:`plugcell.cli`)."""
+    p.description = (
+        "Create the certificate authority of a cell and the certificates of its "
+        "services (CN = service name) for Zenoh mutual TLS (docs/security.md)."
     )
     sub = p.add_subparsers(dest="certs_command", metavar="ACTION", required=True)
     init = sub.add_parser("init", help="create the cell CA (ca.pem, ca.key)")

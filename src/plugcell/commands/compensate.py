@@ -35,12 +35,11 @@ COLUMNS = ("x", "y", "z", "rx", "ry", "rz")
 OPTIONAL = ("name", "payload_kg")
 
 
-def register(sub: Any) -> None:
-    p = sub.add_parser(
-        "compensate",
-        help="model-based compensation of Cartesian targets -> joint targets (thesis 6.5.1)",
-        description="Turn a program's Cartesian targets into the joint targets for which the "
-                    "identified model predicts them (nominal IK, then the model, ‖Δx‖ < 1e-6).",
+def configure(p: argparse.ArgumentParser) -> None:
+    """Add the ``compensate`` options to its parser (declared in :mod:`plugcell.cli`)."""
+    p.description = (
+        "Turn a program's Cartesian targets into the joint targets for which the "
+        "identified model predicts them (nominal IK, then the model, ‖Δx‖ < 1e-6)."
     )
     p.add_argument("--params", type=Path, required=True,
                    help="identified parameters (PARAMS.json from plugcell calibrate)")

@@ -13,18 +13,16 @@ import argparse
 import logging
 import sys
 from pathlib import Path
-from typing import Any
 
 from plugcell.commands.cellargs import add_cell_args, cell_of, transport_of
 from plugcell.framework import eventloop
 
 
-def register(subparsers: Any) -> None:
-    p = subparsers.add_parser(
-        "controller",
-        help="run the cell controller service and its web UI",
-        description="Run the cell controller service (discover, wire, save/load, assign "
-        "tasks, run robot programs, monitor) and serve its web UI on localhost.",
+def configure(p: argparse.ArgumentParser) -> None:
+    """Add the ``controller`` options to its parser (declared in :mod:`plugcell.cli`)."""
+    p.description = (
+        "Run the cell controller service (discover, wire, save/load, assign "
+        "tasks, run robot programs, monitor) and serve its web UI on localhost."
     )
     p.add_argument("--port", type=int, default=8765, help="TCP port (default 8765; 0: any)")
     p.add_argument("--host", default="127.0.0.1", help="address to serve on (default 127.0.0.1)")

@@ -22,11 +22,9 @@ from pathlib import Path
 from typing import Any
 
 
-def register(sub: Any) -> None:
-    p = sub.add_parser(
-        "demo", help="run the thesis demonstration on simulated devices over services",
-        description=__doc__.split("\n\n")[0],
-    )
+def configure(p: argparse.ArgumentParser) -> None:
+    """Add the ``demo`` options to its parser (declared in :mod:`plugcell.cli`)."""
+    p.description = __doc__.split("\n\n")[0]
     p.add_argument("--out", type=Path, default=Path("out/demo"),
                    help="directory for the files it writes (default: out/demo)")
     p.add_argument("--fast", action="store_true",

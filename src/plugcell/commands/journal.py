@@ -6,15 +6,13 @@ import argparse
 import json
 from datetime import datetime
 from pathlib import Path
-from typing import Any
 
 
-def register(subparsers: Any) -> None:
-    p = subparsers.add_parser(
-        "journal",
-        help="show the journal of the cell's processes",
-        description="Every process the services of this machine received: who asked whom, "
-        "which command, when, every update, the final state and its reason.",
+def configure(p: argparse.ArgumentParser) -> None:
+    """Add the ``journal`` options to its parser (declared in :mod:`plugcell.cli`)."""
+    p.description = (
+        "Every process the services of this machine received: who asked whom, "
+        "which command, when, every update, the final state and its reason."
     )
     p.add_argument("--cell", default=None, help="cell name (default: $PLUGCELL_CELL or 'default')")
     p.add_argument("--service", help="only this recipient")

@@ -46,12 +46,10 @@ def _error(msg: str) -> Exception:
     return CommandError(msg)
 
 
-def register(subparsers: Any) -> None:
-    """Add the ``kin`` command and its sub-commands to the ``plugcell`` parser."""
-    kin = subparsers.add_parser(
-        "kin",
-        help="robot kinematics: forward/inverse kinematics, robot descriptions",
-        description="Forward and inverse kinematics of a described robot (see docs/kinematics.md).",
+def configure(kin: argparse.ArgumentParser) -> None:
+    """Add the ``kin`` options to its parser (declared in :mod:`plugcell.cli`)."""
+    kin.description = (
+        "Forward and inverse kinematics of a described robot (see docs/kinematics.md)."
     )
     sub = kin.add_subparsers(dest="kin_command", metavar="SUBCOMMAND")
 

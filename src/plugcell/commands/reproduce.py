@@ -52,10 +52,12 @@ TABLE_8_1: tuple[tuple[str, str, float | None, float | None, str], ...] = (
 THESIS_8_1 = {"iterations": "4–7", "residual_mean_mm": 3.4e-5, "param_tolerance": 1e-5}
 
 
-def register(sub: Any) -> None:
-    p = sub.add_parser("reproduce", help="recompute the thesis's calibration tables",
-                       description="Reproduce thesis 8.1 (simulation) and 8.2 (calibration on "
-                                   "the digital twin) from the code.")
+def configure(p: argparse.ArgumentParser) -> None:
+    """Add the ``reproduce`` options to its parser (declared in :mod:`plugcell.cli`)."""
+    p.description = (
+        "Reproduce thesis 8.1 (simulation) and 8.2 (calibration on "
+        "the digital twin) from the code."
+    )
     rp = p.add_subparsers(dest="section", metavar="SECTION", required=True)
     a = rp.add_parser("8.1", help="Table 8-1: noise-free simulated identification",
                       description="Table 8-1's errors added to the nominal Smart H4 and "

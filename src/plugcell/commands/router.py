@@ -9,17 +9,13 @@ from __future__ import annotations
 import argparse
 import signal
 import threading
-from typing import Any
 
 from plugcell.commands.cellargs import transport_of
 
 
-def register(subparsers: Any) -> None:
-    p = subparsers.add_parser(
-        "router",
-        help="run a Zenoh router so a cell can span machines",
-        description="Run Zenoh in router mode until SIGINT/SIGTERM.",
-    )
+def configure(p: argparse.ArgumentParser) -> None:
+    """Add the ``router`` options to its parser (declared in :mod:`plugcell.cli`)."""
+    p.description = "Run Zenoh in router mode until SIGINT/SIGTERM."
     p.add_argument(
         "--listen",
         action="append",

@@ -15,14 +15,13 @@ from plugcell.commands.cellargs import add_cell_args, cell_of, transport_of
 from plugcell.framework import eventloop
 
 
-def register(subparsers: Any) -> None:
+def configure(p: argparse.ArgumentParser) -> None:
+    """Add the ``serve`` options to its parser (declared in :mod:`plugcell.cli`)."""
     from plugcell.services.registry import KINDS
 
-    p = subparsers.add_parser(
-        "serve",
-        help="run a device service (camera, drill, …) in this process",
-        description="Run one Plug-and-Produce service until SIGINT/SIGTERM, then shut it "
-        "down cleanly (Shutdown notification, queued processes end Failed).",
+    p.description = (
+        "Run one Plug-and-Produce service until SIGINT/SIGTERM, then shut it "
+        "down cleanly (Shutdown notification, queued processes end Failed)."
     )
     p.add_argument(
         "kind", help=f"service kind: {', '.join(sorted(KINDS))}, or module:Class of your own"

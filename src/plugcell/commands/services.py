@@ -13,12 +13,11 @@ from plugcell.commands.cellargs import add_cell_args, cell_of, transport_of
 from plugcell.framework import eventloop
 
 
-def register(subparsers: Any) -> None:
-    p = subparsers.add_parser(
-        "services",
-        help="list the services of the cell and their commands",
-        description="Discover the services of a cell (liveliness + Get) and print their "
-        "DeviceInfo: state, connection, command catalogue, partners.",
+def configure(p: argparse.ArgumentParser) -> None:
+    """Add the ``services`` options to its parser (declared in :mod:`plugcell.cli`)."""
+    p.description = (
+        "Discover the services of a cell (liveliness + Get) and print their "
+        "DeviceInfo: state, connection, command catalogue, partners."
     )
     add_cell_args(p)
     p.add_argument("--json", action="store_true", help="print JSON")

@@ -6,19 +6,15 @@ import argparse
 import json
 import sys
 from pathlib import Path
-from typing import Any
 
 import numpy as np
 
 from plugcell.commands.progress import ProgressBar
 
 
-def register(sub: Any) -> None:
-    p = sub.add_parser(
-        "twin",
-        help="the digital twin: error budget, simulated campaigns",
-        description="The simulated robot whose truth calibration must discover.",
-    )
+def configure(p: argparse.ArgumentParser) -> None:
+    """Add the ``twin`` options to its parser (declared in :mod:`plugcell.cli`)."""
+    p.description = "The simulated robot whose truth calibration must discover."
     tw = p.add_subparsers(dest="twin_command", metavar="SUBCOMMAND", required=True)
 
     def common(q: argparse.ArgumentParser) -> None:

@@ -16,24 +16,28 @@ from plugcell.commands.cellargs import add_cell_args, cell_of, transport_of
 from plugcell.framework import eventloop
 
 
-def register(subparsers: Any) -> None:
-    for name, subscribe in (("wire", True), ("unwire", False)):
-        p = subparsers.add_parser(
-            name,
-            help=f"make service A {'subscribe to' if subscribe else 'drop'} partner B",
-            description=(
-                "Service A subscribes to partner B at run time (Get B's DeviceInfo, "
-                "add it to A's Partners)."
-                if subscribe
-                else "Service A drops partner B from its Partners at run time."
-            ),
-        )
-        p.add_argument("service", metavar="A")
-        p.add_argument("partner", metavar="B")
-        add_cell_args(p)
-        p.add_argument("--timeout", type=float, default=10.0)
-        p.add_argument("--json", action="store_true", help="print the response as JSON")
-        p.set_defaults(func=run, subscribe=subscribe)
+def configure_wire(p: argparse.ArgumentParser) -> None:
+    """Add the ``wire`` options to its parser (declared in :mod:`plugcell.cli`)."""
+    p.description = (
+        "Service A subscribes to partner B at run time (Get B's DeviceInfo, "
+        "add it to A's Partners)."
+    )
+    _arguments(p, subscribe=True)
+
+
+def configure_unwire(p: argparse.ArgumentParser) -> None:
+    """Add the ``unwire`` options to its parser (declared in :mod:`plugcell.cli`)."""
+    p.description = "Service A drops partner B from its Partners at run time."
+    _arguments(p, subscribe=False)
+
+
+def _arguments(p: argparse.ArgumentParser, subscribe: bool) -> None:
+    p.add_argument("service", metavar="A")
+    p.add_argument("partner", metavar="B")
+    add_cell_args(p)
+    p.add_argument("--timeout", type=float, default=10.0)
+    p.add_argument("--json", action="store_true", help="print the response as JSON")
+    p.set_defaults(func=run, subscribe=subscribe)
 
 
 def run(args: argparse.Namespace) -> int:

@@ -1,0 +1,75 @@
+"""How long ``plugcell`` takes to start: wall time of a whole process, best and median.
+
+    .venv/bin/python benchmarks/cli_startup.py [--repeat 15] [--limit 0.3]
+
+Each command is run ``--repeat`` times as its own process (the installed ``plugcell``
+script beside this Python, else ``python -m plugcell``), output discarded; the
+interpreter alone (``python -c pass``) is the floor.  The start-up a user feels is
+what the parser and the chosen sub-command import: only that sub-command's module is
+loaded (:mod:`plugcell.cli`), so ``--help`` of any command does not load Zenoh or the
+web server.  On a loaded machine run it with ``nice -n 0`` (or not at all under
+``nice``): the figures are wall time.
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import platform
+import statistics
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+#: (label, arguments after ``plugcell``)
+COMMANDS: tuple[tuple[str, list[str]], ...] = (
+    ("plugcell --help", ["--help"]),
+    ("plugcell kin fk (Smart H4)",
+     ["kin", "fk", "--robot", "smart_h4", "--joints", "0,-90,-187,0,90,0"]),
+    ("plugcell calibrate --help", ["calibrate", "--help"]),
+)
+
+
+def plugcell_command() -> list[str]:
+    """The ``plugcell`` console script of this environment, else ``python -m plugcell``."""
+    script = Path(sys.executable).with_name("plugcell")
+    return [str(script)] if script.is_file() else [sys.executable, "-m", "plugcell"]
+
+
+def wall_times(cmd: list[str], repeat: int) -> list[float]:
+    """Wall time (s) of ``repeat`` runs of ``cmd``; raises if one fails."""
+    times = []
+    for _ in range(repeat):
+        t0 = time.perf_counter()
+        subprocess.run(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, check=True)
+        times.append(time.perf_counter() - t0)
+    return times
+
+
+def main(argv: list[str]) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("--repeat", type=int, default=15, help="runs per command (default 15)")
+    ap.add_argument("--limit", type=float, default=0.3,
+                    help="target start-up, s (default 0.3); rows above it are marked")
+    args = ap.parse_args(argv)
+    base = plugcell_command()
+    print(f"plugcell start-up, {platform.processor() or platform.machine()}, "
+          f"{os.cpu_count()} cores, Python {platform.python_version()}, "
+          f"nice {os.nice(0)}, load {os.getloadavg()[0]:.2f}; {args.repeat} runs each")
+    print(f"{'command':32s} | {'best s':>7s} | {'median s':>8s} | {'worst s':>7s} | "
+          f"{'< ' + format(args.limit, 'g') + ' s':>8s}")
+    print("-" * 74)
+    rows = [("python -c pass (interpreter)", [sys.executable, "-c", "pass"])]
+    rows += [(label, base + extra) for label, extra in COMMANDS]
+    for label, cmd in rows:
+        t = wall_times(cmd, args.repeat)
+        med = statistics.median(t)
+        ok = med < args.limit
+        print(f"{label:32s} | {min(t):7.3f} | {med:8.3f} | {max(t):7.3f} | "
+              f"{'yes' if ok else 'NO':>8s}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main(sys.argv[1:]))

@@ -1,0 +1,94 @@
+"""The ``plugcell`` entry point: lazy sub-commands and how it ends."""
+
+from __future__ import annotations
+
+import ast
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+import plugcell.commands
+from plugcell.cli import COMMANDS, build_parser, chosen_command, main
+
+#: Modules a parser must not need: the service stack, the web server, scipy.
+HEAVY = ("zenoh", "fastapi", "uvicorn", "starlette", "scipy", "plugcell.framework",
+         "cryptography", "matplotlib")
+
+
+def _imported_after_parser(command: str | None) -> list[str]:
+    """Modules (of HEAVY) loaded by ``import plugcell.cli`` + ``build_parser(command)``,
+    in a fresh interpreter."""
+    code = (
+        "import json, sys\n"
+        "import plugcell.cli as cli\n"
+        f"cli.build_parser({command!r})\n"
+        f"heavy = {HEAVY!r}\n"
+        "print(json.dumps(sorted(m for m in sys.modules\n"
+        "                        if any(m == h or m.startswith(h + '.') for h in heavy))))\n"
+    )
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                         check=True, timeout=60)
+    return json.loads(out.stdout)
+
+
+@pytest.mark.parametrize("command", [None, "kin", "calibrate", "compensate", "reproduce"])
+def test_parser_does_not_import_the_service_stack(command):
+    assert _imported_after_parser(command) == []
+
+
+def test_top_level_parser_imports_no_command_module():
+    code = ("import sys, plugcell.cli as cli; cli.build_parser()\n"
+            "print([m for m in sys.modules if m.startswith('plugcell.commands.')])")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                         check=True, timeout=60)
+    assert out.stdout.strip() == "[]"
+
+
+def test_chosen_command_is_the_first_word():
+    assert chosen_command(["kin", "fk", "--robot", "x"]) == "kin"
+    assert chosen_command(["--version"]) is None
+    assert chosen_command(["-h", "calibrate"]) == "calibrate"
+    assert chosen_command([]) is None
+
+
+@pytest.mark.parametrize("cmd", COMMANDS, ids=[c.name for c in COMMANDS])
+def test_every_declared_command_configures_its_parser(cmd, capsys):
+    with pytest.raises(SystemExit) as exc:
+        main([cmd.name, "--help"])
+    assert exc.value.code == 0
+    out = capsys.readouterr().out
+    assert out.startswith(f"usage: plugcell {cmd.name}")
+
+
+def test_every_command_module_is_declared_once():
+    """A command module defines ``configure*`` functions, each declared in COMMANDS, and
+    no old-style ``register`` (which the lazy parser would never call)."""
+    declared = {c.configure for c in COMMANDS}
+    assert len(declared) == len(COMMANDS)
+    assert len({c.name for c in COMMANDS}) == len(COMMANDS)
+    found = set()
+    for path in Path(plugcell.commands.__file__).parent.glob("*.py"):
+        tree = ast.parse(path.read_text(encoding="utf-8"))
+        names = [n.name for n in tree.body if isinstance(n, ast.FunctionDef)]
+        assert "register" not in names, f"{path.name}: register() is never called; " \
+            "declare the command in plugcell.cli.COMMANDS with a configure function"
+        found |= {f"plugcell.commands.{path.stem}:{n}" for n in names
+                  if n.startswith("configure")}
+    assert found == declared
+
+
+def test_full_parser_builds():
+    parser = build_parser("*")
+    args = parser.parse_args(["kin", "fk", "--robot", "smart_h4", "--joints", "0,0,0,0,0,0"])
+    assert args.func.__name__ == "_cmd_fk"
+
+
+def test_unknown_command_lists_the_commands(capsys):
+    with pytest.raises(SystemExit) as exc:
+        main(["bogus"])
+    assert exc.value.code == 2
+    err = capsys.readouterr().err
+    assert "invalid choice: 'bogus'" in err and "'calibrate'" in err
