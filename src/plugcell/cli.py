@@ -12,11 +12,16 @@ from __future__ import annotations
 
 import argparse
 import importlib
+import os
 import sys
 from collections.abc import Sequence
 from dataclasses import dataclass
 
 from plugcell import __version__
+
+#: Exit status after the reader of stdout went away (``plugcell … | head``): 128 + SIGPIPE,
+#: what a shell reports for a program that SIGPIPE ended.
+EXIT_BROKEN_PIPE = 141
 
 
 @dataclass(frozen=True)
@@ -116,9 +121,23 @@ def build_parser(command: str | None = None) -> argparse.ArgumentParser:
 
 
 def main(argv: list[str] | None = None) -> int:
-    """Run ``plugcell`` with ``argv`` (default ``sys.argv[1:]``); returns the exit code."""
+    """Run ``plugcell`` with ``argv`` (default ``sys.argv[1:]``); returns the exit code.
+
+    A reader of stdout that went away (``plugcell … | head``) ends the command quietly
+    with :data:`EXIT_BROKEN_PIPE` instead of a ``BrokenPipeError`` traceback.
+    """
     argv = sys.argv[1:] if argv is None else argv
-    return _run(argv)
+    try:
+        try:
+            return _run(argv)
+        finally:  # also after argparse's SystemExit (--help): a failed flush at exit warns
+            sys.stdout.flush()
+    except BrokenPipeError:
+        # The Python recipe (library docs, signal, "Note on SIGPIPE"): stdout onto
+        # devnull, so the interpreter's last flush has nowhere to fail, and exit quietly.
+        devnull = os.open(os.devnull, os.O_WRONLY)
+        os.dup2(devnull, sys.stdout.fileno())
+        return EXIT_BROKEN_PIPE
 
 
 def _run(argv: list[str]) -> int:

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import ast
 import json
+import os
 import subprocess
 import sys
 from pathlib import Path
@@ -11,7 +12,7 @@ from pathlib import Path
 import pytest
 
 import plugcell.commands
-from plugcell.cli import COMMANDS, build_parser, chosen_command, main
+from plugcell.cli import COMMANDS, EXIT_BROKEN_PIPE, build_parser, chosen_command, main
 
 #: Modules a parser must not need: the service stack, the web server, scipy.
 HEAVY = ("zenoh", "fastapi", "uvicorn", "starlette", "scipy", "plugcell.framework",
@@ -92,3 +93,22 @@ def test_unknown_command_lists_the_commands(capsys):
     assert exc.value.code == 2
     err = capsys.readouterr().err
     assert "invalid choice: 'bogus'" in err and "'calibrate'" in err
+
+
+@pytest.mark.parametrize(("args", "code"), [
+    (["kin", "describe", "--robot", "smart_h4"], EXIT_BROKEN_PIPE),  # more than 8 KiB
+    (["kin", "robots"], EXIT_BROKEN_PIPE),                          # a few lines
+    (["--help"], 0),  # argparse ignores a failed write of its help and exits 0
+])
+def test_a_closed_pipe_ends_quietly(args, code):
+    """``plugcell … | head``: the reader is gone before plugcell writes (the read end is
+    closed before the process starts, so every write fails with EPIPE)."""
+    read_end, write_end = os.pipe()
+    os.close(read_end)
+    try:
+        proc = subprocess.run([sys.executable, "-m", "plugcell", *args], stdout=write_end,
+                              stderr=subprocess.PIPE, text=True, timeout=60)
+    finally:
+        os.close(write_end)
+    assert proc.stderr == ""
+    assert proc.returncode == code
