@@ -177,3 +177,57 @@ def test_calibrate_exports_every_poses_residual(files, tmp_path, capsys):
                  str(files / "cal.csv"), "--out", str(out), "--residuals", str(tmp_path),
                  "--quiet"]) == 2
     assert "cannot write" in capsys.readouterr().err
+
+
+def _validation(argv: list[str], capsys) -> dict:
+    assert main(["calibrate", *argv, "--quiet", "--json"]) == 0
+    return json.loads(capsys.readouterr().out)["validation"]
+
+
+def test_validate_refit_honours_the_rotation_weight_or_positions_only(files, tmp_path, capsys):
+    """6-DOF files; the refit of BASE on the validation poses weighs their orientations by
+    --rotation-weight (it used 1 whatever the option said), or ignores them."""
+    common = ["--robot", "smart_h4", "--model", "loop", "--data", str(files / "cal.csv"),
+              "--validate", str(files / "val.csv"), "--out", str(tmp_path / "p.json"),
+              "--validate-refit", "base"]
+    assert read_measurements(files / "val.csv").angles is not None
+    # --rotation-weight sets the weight of the fit and of the refit, so compare at one weight
+    light = _validation([*common, "--rotation-weight", "0.01"], capsys)
+    light_positions = _validation([*common, "--rotation-weight", "0.01",
+                                   "--refit-positions-only"], capsys)
+    heavy = _validation([*common, "--rotation-weight", "100"], capsys)
+    positions = _validation([*common, "--rotation-weight", "100", "--refit-positions-only"],
+                            capsys)
+    # a light orientation weight is nearly the positions-only registration ...
+    assert light["mean_mm"] == pytest.approx(light_positions["mean_mm"], rel=1e-4)
+    # ... a heavy one is not (the twin's measured orientations have their own noise)
+    assert heavy["mean_mm"] > positions["mean_mm"] * (1 + 1e-3)
+    assert "orientation" in positions  # orientations still evaluated
+
+
+@pytest.mark.parametrize(
+    ("extra", "message"),
+    [
+        (["--refit-positions-only"], "--refit-positions-only needs --validate-refit"),
+        (["--validate-refit", "base"], "--validate-refit needs a --validate file"),
+        (["--rotation-weight", "0"], "--rotation-weight must be a finite number > 0"),
+        (["--rotation-weight", "inf"], "--rotation-weight must be a finite number > 0"),
+    ],
+)
+def test_calibrate_refit_option_errors(files, tmp_path, capsys, extra, message):
+    assert main(["calibrate", "--robot", "smart_h4", "--model", "loop", "--data",
+                 str(files / "cal.csv"), "--out", str(tmp_path / "p.json"), "--quiet",
+                 *extra]) == 2
+    assert message in capsys.readouterr().err
+    assert not (tmp_path / "p.json").exists()
+
+
+def test_refit_positions_only_refuses_position_files(tmp_path, capsys):
+    pos = tmp_path / "pos.csv"
+    lines = ["j1,j2,j3,j4,j5,j6,x,y,z"]
+    lines += ["0,-90,-187,0,90,0,1,2,3"] * 3
+    pos.write_text("\n".join(lines) + "\n")
+    assert main(["calibrate", "--robot", "smart_h4", "--model", "loop", "--data", str(pos),
+                 "--validate", str(pos), "--validate-refit", "base", "--refit-positions-only",
+                 "--out", str(tmp_path / "p.json"), "--quiet"]) == 2
+    assert "measures positions only" in capsys.readouterr().err

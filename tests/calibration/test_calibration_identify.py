@@ -231,3 +231,35 @@ def test_validation_after_the_tracker_moved(h4, full_truth):
     assert res.evaluate(val_moved)[1].position.norm.mean > 100 * same  # BASE is stale
     _, after = res.evaluate(val_moved, refit_base=True)
     assert after.position.norm.mean == pytest.approx(same, rel=0.2, abs=2e-6)
+
+
+def test_refit_after_the_tracker_moved_honours_the_rotation_weight(h4, full_truth):
+    """The target's measured orientations are off by a constant 0.57° (a T-MAC whose
+    orientation is less trusted): the refit BASE follows them in proportion to the
+    rotation weight; on positions alone it does not see them at all."""
+    cal = _data(full_truth, 60, 21, payloads=(36.0,), noise=1e-5)
+    val = _data(full_truth, 30, 22, payloads=(36.0,), noise=1e-5)
+    moved = np.eye(4)
+    moved[:3, :3] = so3_exp([0.1, -0.05, 1.2])
+    moved[:3, 3] = [0.8, -2.0, 0.3]
+    T = moved @ val.poses
+    T[:, :3, :3] = T[:, :3, :3] @ so3_exp([0.01, 0.0, 0.0])
+    val_moved = CalibrationData.from_poses(val.q, T, val.payload_kg)
+    res = Calibrator(h4, 5, rotation_weight=10.0).fit(cal)
+    same = res.evaluate(val)[1].position.norm.mean
+
+    def after(**kw):
+        return res.evaluate(val_moved, refit_base=True, **kw)[1].position.norm.mean
+
+    heavy, unit, light = after(rotation_weight=10.0), after(rotation_weight=1.0), \
+        after(rotation_weight=1e-3)
+    assert heavy > 2 * unit > 20 * same  # the orientations pull BASE, more so when weighed more
+    assert light == pytest.approx(same, rel=0.2, abs=2e-6)
+    positions = after(refit_positions_only=True)
+    assert positions == pytest.approx(same, rel=0.2, abs=2e-6)
+    assert after() == heavy  # default: the weight the model was fitted with
+    refit = res.with_validation(val_moved, refit_base=True, refit_positions_only=True)
+    assert refit.validation.position.norm.mean == positions
+    assert refit.validation.orientation is not None  # still reported, from 6-DOF data
+    with pytest.raises(CalibrationError, match="rotation_weight"):
+        res.evaluate(val_moved, refit_base=True, rotation_weight=float("nan"))

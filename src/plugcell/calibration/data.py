@@ -97,6 +97,10 @@ class CalibrationData:
             T[:, :3, :3] = self.rotations
         return T
 
+    def positions_only(self) -> CalibrationData:
+        """The same poses with their measured orientations dropped (3 equations each)."""
+        return CalibrationData(q=self.q, positions=self.positions, payload_kg=self.payload_kg)
+
     def subset(self, index: ArrayLike | slice) -> CalibrationData:
         return CalibrationData(
             q=self.q[index], positions=self.positions[index],

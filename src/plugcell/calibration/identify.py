@@ -527,14 +527,23 @@ class Calibrator:
         return jac
 
 
-def refit_base(model: ErrorModel, data: CalibrationData, *, probe: bool = False) -> ErrorModel:
+def refit_base(model: ErrorModel, data: CalibrationData, *, probe: bool = False,
+               rotation_weight: float = 1.0, positions_only: bool = False) -> ErrorModel:
     """``model`` with its BASE (and, with ``probe=True``, its PROBE) re-identified on ``data``,
     the robot's geometry and compliance kept: for poses measured after the tracker
     (or the target) moved — the situation of appendix D's closing note.
 
     Starts from a rigid registration of the model's predicted target points onto the
-    measured ones, then Gauss–Newton on a0, b0, α0, β0, θ0, d0 (and the PROBE frame).
+    measured ones, then Gauss–Newton on a0, b0, α0, β0, θ0, d0 (and the PROBE frame)
+    minimising ``Σ ‖Δp‖² + w² ‖Δφ‖²`` over the poses, ``w = rotation_weight`` (m/rad, as
+    in :class:`Calibrator`); ``positions_only``: register 6-DOF data on their positions
+    alone (``Σ ‖Δp‖²``), e.g. when the measured orientations are less trusted.
     """
+    if not (np.isfinite(rotation_weight) and rotation_weight > 0):
+        raise CalibrationError(f"rotation_weight must be a finite number > 0, got "
+                               f"{rotation_weight}")
+    if positions_only:
+        data = data.positions_only()
     m = fold_frames(model)
     robot = np.linalg.inv(m.base()) @ m.predict(data.q, data.payload_kg)
     fit = fit_rigid_transform(robot[:, :3, 3], data.positions)
@@ -547,7 +556,7 @@ def refit_base(model: ErrorModel, data: CalibrationData, *, probe: bool = False)
                  f"d{s.probe_name}"]
     keys = [k for k in keys if k in m.space]
     cal = Calibrator(s.source, 1)
-    problem = _Problem(m, data, m.batch(data.q, data.payload_kg), 1.0)
+    problem = _Problem(m, data, m.batch(data.q, data.payload_kg), float(rotation_weight))
     jac = identification_jacobian(m, problem.batch, keys)
     fa = analyse(_jacobian_rows(problem, jac.H).reshape(-1, len(keys)), keys)
     fitted, *_ = cal._iterate(problem, m, list(fa.kept), "base", [], loss="linear")

@@ -143,34 +143,49 @@ class CalibrationResult:
         return pose_residuals(data, self.predict(data.q, data.payload_kg))
 
     def evaluate_poses(self, data: CalibrationData, *, refit_base: bool = False,
-                       refit_probe: bool = False) -> PoseResiduals:
+                       refit_probe: bool = False, rotation_weight: float | None = None,
+                       refit_positions_only: bool = False) -> PoseResiduals:
         """The residual of every pose of ``data``, nominal and calibrated.
 
         ``refit_base``: the data were measured with the tracker elsewhere — BASE is
         re-identified on them for both models (robot geometry kept), see
         :func:`plugcell.calibration.identify.refit_base`; ``refit_probe``: the
-        target was remounted too — PROBE re-identified as well.
+        target was remounted too — PROBE re-identified as well.  The refit weighs
+        orientation rows by ``rotation_weight`` (m/rad; default: the weight of the fit,
+        ``settings["rotation_weight"]``) or, with ``refit_positions_only``, uses the
+        positions alone.
         """
         nominal, model = self.nominal, self.model
         if refit_base:
             from plugcell.calibration.identify import refit_base as _refit
 
-            nominal = _refit(nominal, data, probe=refit_probe)
-            model = _refit(model, data, probe=refit_probe)
+            w = self.settings.get("rotation_weight", 1.0) if rotation_weight is None \
+                else rotation_weight
+            opts = {"probe": refit_probe, "rotation_weight": w,
+                    "positions_only": refit_positions_only}
+            nominal = _refit(nominal, data, **opts)
+            model = _refit(model, data, **opts)
         return PoseResiduals.from_poses(data, nominal.predict(data.q, data.payload_kg),
                                         model.predict(data.q, data.payload_kg))
 
     def evaluate(self, data: CalibrationData, *, refit_base: bool = False,
-                 refit_probe: bool = False) -> tuple[AccuracyStats, AccuracyStats]:
+                 refit_probe: bool = False, rotation_weight: float | None = None,
+                 refit_positions_only: bool = False) -> tuple[AccuracyStats, AccuracyStats]:
         """Accuracy (8.1–8.2) on ``data``: (nominal, calibrated); the statistics of
         :meth:`evaluate_poses` (same options)."""
-        r = self.evaluate_poses(data, refit_base=refit_base, refit_probe=refit_probe)
+        r = self.evaluate_poses(data, refit_base=refit_base, refit_probe=refit_probe,
+                                rotation_weight=rotation_weight,
+                                refit_positions_only=refit_positions_only)
         return r.accuracy("before"), r.accuracy("after")
 
     def with_validation(self, data: CalibrationData, *, refit_base: bool = False,
-                        refit_probe: bool = False) -> CalibrationResult:
-        """This result with the accuracy and residuals on independent poses ``data``."""
-        r = self.evaluate_poses(data, refit_base=refit_base, refit_probe=refit_probe)
+                        refit_probe: bool = False, rotation_weight: float | None = None,
+                        refit_positions_only: bool = False) -> CalibrationResult:
+        """This result with the accuracy and residuals on independent poses ``data``
+        (options of :meth:`evaluate_poses`)."""
+        r = self.evaluate_poses(data, refit_base=refit_base, refit_probe=refit_probe,
+                                rotation_weight=rotation_weight,
+                                refit_positions_only=refit_positions_only)
         return replace(self, validation=r.accuracy("after"),
                        validation_before=r.accuracy("before"), n_validation=len(data),
                        validation_residuals=r)

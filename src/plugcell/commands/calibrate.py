@@ -41,7 +41,11 @@ def configure(p: argparse.ArgumentParser) -> None:
     p.add_argument("--validate", type=Path, help="independent validation measurement file")
     p.add_argument("--validate-refit", choices=("none", "base", "base+probe"), default="none",
                    help="the validation poses were measured with the tracker (and target) "
-                        "elsewhere: re-identify BASE (and PROBE) on them, geometry kept")
+                        "elsewhere: re-identify BASE (and PROBE) on them, geometry kept; "
+                        "orientation rows weighed by --rotation-weight")
+    p.add_argument("--refit-positions-only", action="store_true",
+                   help="with --validate-refit and 6-DOF files: re-identify on the measured "
+                        "positions alone (orientations still evaluated)")
     p.add_argument("--rot", choices=("rpy", "zyz", "xyz"), default="rpy",
                    help="orientation convention of rx, ry, rz in the files (default rpy)")
     p.add_argument("--payload-kg", type=float, metavar="M",
@@ -61,7 +65,8 @@ def configure(p: argparse.ArgumentParser) -> None:
                    help="robust loss for outliers (default linear)")
     p.add_argument("--max-iterations", type=int, default=50)
     p.add_argument("--rotation-weight", type=float, default=1.0,
-                   help="weight of orientation rows, m per rad (default 1, as the thesis)")
+                   help="weight of orientation rows, m per rad, in the fit and the "
+                        "--validate-refit (default 1, as the thesis)")
     p.add_argument("--condition-limit", type=float,
                    help="apply the condition-number rule (4.10) with this limit, e.g. 100")
     p.add_argument("--quiet", action="store_true", help="no progress on stderr")
@@ -111,6 +116,14 @@ def _frame(text: str, what: str) -> np.ndarray:
     if not np.allclose(R @ R.T, np.eye(3), atol=1e-6) or np.linalg.det(R) < 0:
         raise CommandError(f"--{what}: the rotation part is not a rotation matrix")
     return T
+
+
+def _positive(value: float, option: str, unit: str) -> None:
+    """Refuse a ``value`` of ``option`` that is not a finite number > 0."""
+    from plugcell.cli import CommandError
+
+    if not (math.isfinite(value) and value > 0):
+        raise CommandError(f"{option} must be a finite number > 0 ({unit}), got {value}")
 
 
 def _read(path: Path, rot: str, n: int, payload: float | None):
@@ -173,6 +186,11 @@ def _run(args: argparse.Namespace) -> int:
         raise CommandError(f"--payload-kg must be a mass ≥ 0, got {args.payload_kg}")
     if args.max_iterations < 1:
         raise CommandError("--max-iterations must be at least 1")
+    _positive(args.rotation_weight, "--rotation-weight", "m per rad")
+    if args.validate_refit != "none" and args.validate is None:
+        raise CommandError("--validate-refit needs a --validate file")
+    if args.refit_positions_only and args.validate_refit == "none":
+        raise CommandError("--refit-positions-only needs --validate-refit base or base+probe")
     data = _read(args.data, args.rot, desc.n_actuated, args.payload_kg)
     val = None
     if args.validate is not None:
@@ -180,6 +198,9 @@ def _run(args: argparse.Namespace) -> int:
         if val.six_dof != data.six_dof:
             raise CommandError("--validate: the validation file must measure the same (6-DOF "
                                "or positions) as the calibration file")
+        if args.refit_positions_only and not val.six_dof:
+            raise CommandError(f"--refit-positions-only: {args.validate} measures positions "
+                               "only; the refit uses them without the option")
     base = None if args.base is None else _frame(args.base, "base")
     probe = None if args.probe is None else _frame(args.probe, "probe")
     progress = _Progress(args.quiet)
@@ -192,7 +213,9 @@ def _run(args: argparse.Namespace) -> int:
         if val is not None:
             result = result.with_validation(
                 val, refit_base=args.validate_refit != "none",
-                refit_probe=args.validate_refit == "base+probe")
+                refit_probe=args.validate_refit == "base+probe",
+                rotation_weight=args.rotation_weight,
+                refit_positions_only=args.refit_positions_only)
     except CalibrationError as exc:
         raise CommandError(str(exc)) from None
     d = result.to_dict()
