@@ -233,6 +233,27 @@ def test_validation_after_the_tracker_moved(h4, full_truth):
     assert after.position.norm.mean == pytest.approx(same, rel=0.2, abs=2e-6)
 
 
+@pytest.mark.parametrize(("n", "position_only"), [(15, False), (30, True)])
+def test_few_equations_warning_counts_equations(h4, n, position_only):
+    """15 poses × 6 = 90 or 30 positions × 3 = 90 equations: fewer than 3 per parameter
+    of model 2; the warning says so and how many poses would do."""
+    truth = _truth(h4, "loop", gravity=False, payload=False, seed=5,
+                   position_only=position_only)
+    res = Calibrator(h4, 2).fit(_data(truth, n, 6, payloads=(0.0,),
+                                      position_only=position_only))
+    k = len(res.keys)
+    what, rows = ("positions", 3) if position_only else ("poses", 6)
+    need = -(-3 * k // rows)
+    assert 3 * k > 90 and need > n
+    warning = next(w for w in res.warnings if w.startswith("few"))
+    assert warning == (f"few equations: {n} {what} × {rows} = 90 equations for {k} "
+                       f"parameters, fewer than 3 per parameter; measure at least {need} "
+                       f"{what} (the thesis used 90–150 poses)")
+    enough = Calibrator(h4, 2).fit(_data(truth, need, 7, payloads=(0.0,),
+                                         position_only=position_only))
+    assert not [w for w in enough.warnings if w.startswith("few")]
+
+
 def test_refit_after_the_tracker_moved_honours_the_rotation_weight(h4, full_truth):
     """The target's measured orientations are off by a constant 0.57° (a T-MAC whose
     orientation is less trusted): the refit BASE follows them in proportion to the

@@ -80,6 +80,8 @@ MISMATCH_M = 0.05
 #: ‖Δg‖ of the last iteration above which a non-converged fit counts as diverged.
 UNSETTLED_STEP = 1e-3
 OUTLIER_FLOOR_M = 0.05e-3
+#: Equations per identified parameter below which a fit is flagged (noise is not averaged).
+EQUATIONS_PER_PARAMETER = 3
 _HINT = "check the units (joints in degrees, positions in mm), the joint order and --rot"
 LOSSES: tuple[str, ...] = ("linear", "huber", "cauchy")
 
@@ -94,6 +96,16 @@ __all__ = [
     "DivergenceError",
     "refit_base",
 ]
+
+
+def few_equations(poses: int, rows: int, parameters: int) -> str:
+    """The warning for ``poses × rows`` equations fewer than
+    :data:`EQUATIONS_PER_PARAMETER` per parameter, with the poses that would do."""
+    what = "poses" if rows == 6 else "positions"
+    need = -(-EQUATIONS_PER_PARAMETER * parameters // rows)
+    return (f"few equations: {poses} {what} × {rows} = {poses * rows} equations for "
+            f"{parameters} parameters, fewer than {EQUATIONS_PER_PARAMETER} per parameter; "
+            f"measure at least {need} {what} (the thesis used 90–150 poses)")
 
 
 class CalibrationError(ValueError):
@@ -338,10 +350,8 @@ class Calibrator:
                 f"parameters, {len(data)} {'poses' if data.six_dof else 'positions'} give only "
                 f"{n_eq} equations; measure at least {need} (better {3 * need})"
             )
-        if len(data) * data.rows < 3 * len(keys):
-            warnings.append(
-                f"few poses: {len(data)} for {len(keys)} parameters; the thesis used 90–150"
-            )
+        if n_eq < EQUATIONS_PER_PARAMETER * len(keys):
+            warnings.append(few_equations(len(data), data.rows, len(keys)))
 
         # ---- identification
         cols = [jac.keys.index(k) for k in keys]  # the kept columns of the data check

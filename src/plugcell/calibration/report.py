@@ -8,7 +8,7 @@ the tables only), no scripts, no CDN.  It shows:
 * per-component error histograms before and after calibration (Fig. 8-8);
 * the identified parameters with σ (8.5), units and what each stands for;
 * the residual of every pose; a 3-D view of the poses coloured by their error;
-* the convergence history; the warnings (ill-conditioning, outliers, few poses).
+* the convergence history; the warnings (ill-conditioning, outliers, few equations).
 
 Writing the file is the caller's business (``plugcell calibrate --report``).
 """
