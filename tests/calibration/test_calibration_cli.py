@@ -231,3 +231,53 @@ def test_refit_positions_only_refuses_position_files(tmp_path, capsys):
                  "--validate", str(pos), "--validate-refit", "base", "--refit-positions-only",
                  "--out", str(tmp_path / "p.json"), "--quiet"]) == 2
     assert "measures positions only" in capsys.readouterr().err
+
+
+def test_loss_scale_sets_the_robust_threshold(files, tmp_path, capsys):
+    """One pose 3 mm off: with --loss huber the pose is down-weighted when the threshold
+    --loss-scale × median residual is below its residual, not when it is far above."""
+    from plugcell.calibration.identify import DEFAULT_LOSS_SCALE
+
+    lines = (files / "cal.csv").read_text().splitlines()
+    header = next(i for i, ln in enumerate(lines) if ln.startswith("j1"))
+    cells = lines[header + 5].split(",")
+    cells[6] = f"{float(cells[6]) + 3.0:.6f}"  # x of pose #5, mm
+    lines[header + 5] = ",".join(cells)
+    bad = tmp_path / "outlier.csv"
+    bad.write_text("\n".join(lines) + "\n")
+
+    def weight_of_pose_5(*scale: str) -> tuple[float, dict]:
+        res = tmp_path / "res.json"
+        assert main(["calibrate", "--robot", "smart_h4", "--model", "loop", "--data", str(bad),
+                     "--out", str(tmp_path / "p.json"), "--residuals", str(res), "--quiet",
+                     "--loss", "huber", *scale]) == 0
+        capsys.readouterr()
+        poses = json.loads(res.read_text())["poses"]
+        return poses[4]["weight"], json.loads((tmp_path / "p.json").read_text())["settings"]
+
+    tight, settings = weight_of_pose_5("--loss-scale", "2")
+    assert tight < 0.2 and settings["loss_scale"] == 2.0
+    loose, settings = weight_of_pose_5("--loss-scale", "1000")
+    assert loose == 1.0 and settings["loss_scale"] == 1000.0
+    default, settings = weight_of_pose_5()
+    assert tight < default < loose and settings["loss_scale"] == DEFAULT_LOSS_SCALE
+    with pytest.raises(SystemExit):
+        main(["calibrate", "--help"])
+    assert f"(default {DEFAULT_LOSS_SCALE:g})" in " ".join(capsys.readouterr().out.split())
+
+
+@pytest.mark.parametrize(
+    ("extra", "message"),
+    [
+        (["--loss", "huber", "--loss-scale", "0"], "--loss-scale must be a finite number > 0"),
+        (["--loss", "cauchy", "--loss-scale", "-1"], "--loss-scale must be a finite number > 0"),
+        (["--loss", "huber", "--loss-scale", "nan"], "--loss-scale must be a finite number > 0"),
+        (["--loss", "huber", "--loss-scale", "inf"], "--loss-scale must be a finite number > 0"),
+        (["--loss-scale", "2"], "the linear loss has none"),
+    ],
+)
+def test_loss_scale_errors(files, tmp_path, capsys, extra, message):
+    assert main(["calibrate", "--robot", "smart_h4", "--model", "loop", "--data",
+                 str(files / "cal.csv"), "--out", str(tmp_path / "p.json"), "--quiet",
+                 *extra]) == 2
+    assert message in capsys.readouterr().err

@@ -84,11 +84,14 @@ OUTLIER_FLOOR_M = 0.05e-3
 EQUATIONS_PER_PARAMETER = 3
 _HINT = "check the units (joints in degrees, positions in mm), the joint order and --rot"
 LOSSES: tuple[str, ...] = ("linear", "huber", "cauchy")
+#: Default threshold of the Huber/Cauchy loss, × the median pose residual.
+DEFAULT_LOSS_SCALE = 3.0
 
 #: Progress callback: ``(stage, iteration, max_iterations, message)``.
 Progress = Callable[[str, int, int, str], None]
 
 __all__ = [
+    "DEFAULT_LOSS_SCALE",
     "LOSSES",
     "METHODS",
     "CalibrationError",
@@ -178,7 +181,7 @@ class Calibrator:
         probe: ArrayLike | None = None,
         method: str = "gauss-newton",
         loss: str = "linear",
-        loss_scale: float = 3.0,
+        loss_scale: float = DEFAULT_LOSS_SCALE,
         tol: float = 1e-6,
         max_iterations: int = 50,
         rotation_weight: float = 1.0,
@@ -411,7 +414,8 @@ class Calibrator:
             pose_weights=weights,
             warnings=tuple(warnings),
             elapsed_s=time.perf_counter() - t0,
-            settings={"method": self.method, "loss": self.loss, "tol": self.tol,
+            settings={"method": self.method, "loss": self.loss, "loss_scale": self.loss_scale,
+                      "tol": self.tol,
                       "rotation_weight": self.rotation_weight,
                       "condition_limit": self.condition_limit,
                       "max_iterations": self.max_iterations},

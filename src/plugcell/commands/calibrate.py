@@ -63,6 +63,9 @@ def configure(p: argparse.ArgumentParser) -> None:
                    help="iteration (default gauss-newton, thesis Fig. 6-9)")
     p.add_argument("--loss", choices=("linear", "huber", "cauchy"), default="linear",
                    help="robust loss for outliers (default linear)")
+    p.add_argument("--loss-scale", type=float, metavar="S",
+                   help="threshold of the huber/cauchy loss: S × the median pose residual "
+                        "(default 3); a pose beyond it is down-weighted")
     p.add_argument("--max-iterations", type=int, default=50)
     p.add_argument("--rotation-weight", type=float, default=1.0,
                    help="weight of orientation rows, m per rad, in the fit and the "
@@ -187,6 +190,11 @@ def _run(args: argparse.Namespace) -> int:
     if args.max_iterations < 1:
         raise CommandError("--max-iterations must be at least 1")
     _positive(args.rotation_weight, "--rotation-weight", "m per rad")
+    if args.loss_scale is not None:
+        if args.loss == "linear":
+            raise CommandError("--loss-scale sets the threshold of --loss huber or cauchy; "
+                               "the linear loss has none")
+        _positive(args.loss_scale, "--loss-scale", "× the median pose residual")
     if args.validate_refit != "none" and args.validate is None:
         raise CommandError("--validate-refit needs a --validate file")
     if args.refit_positions_only and args.validate_refit == "none":
@@ -207,6 +215,7 @@ def _run(args: argparse.Namespace) -> int:
     try:
         cal = Calibrator(desc, args.model, base=base, probe=probe, method=args.method,
                          loss=args.loss, max_iterations=args.max_iterations,
+                         **({} if args.loss_scale is None else {"loss_scale": args.loss_scale}),
                          rotation_weight=args.rotation_weight,
                          condition_limit=args.condition_limit, progress=progress)
         result = cal.fit(data)
