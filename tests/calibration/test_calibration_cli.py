@@ -281,3 +281,20 @@ def test_loss_scale_errors(files, tmp_path, capsys, extra, message):
                  str(files / "cal.csv"), "--out", str(tmp_path / "p.json"), "--quiet",
                  *extra]) == 2
     assert message in capsys.readouterr().err
+
+
+def test_calibrate_json_needs_no_out(files, tmp_path, monkeypatch, capsys):
+    monkeypatch.chdir(tmp_path)
+    argv = ["calibrate", "--robot", "smart_h4", "--model", "loop", "--data",
+            str(files / "cal.csv"), "--quiet"]
+    assert main([*argv, "--json"]) == 0
+    captured = capsys.readouterr()
+    d = json.loads(captured.out)
+    assert d["model"]["number"] == 2 and d["calibration"]["mean_mm"] > 0
+    assert captured.err == ""
+    assert main(argv) == 0  # neither: the summary, and a word that nothing was saved
+    captured = capsys.readouterr()
+    assert captured.out.startswith("robot smart_h4, model 2 (loop)")
+    assert "wrote" not in captured.out
+    assert "parameters not saved: give --out PARAMS.json" in captured.err
+    assert list(tmp_path.iterdir()) == []

@@ -59,6 +59,20 @@ def test_happy_path(calibrated, params_file, tmp_path, capsys):
     np.testing.assert_allclose(p, T[:, :3, 3], atol=1e-6)
 
 
+def test_without_out_the_joints_go_to_stdout(calibrated, params_file, tmp_path, capsys):
+    targets = _write(tmp_path / "t.csv", ["name", "x", "y", "z", "rx", "ry", "rz"],
+                     _rows(calibrated))
+    out = tmp_path / "joints.csv"
+    argv = ["compensate", "--params", str(params_file), "--targets", str(targets),
+            "--payload-kg", "36"]
+    assert main([*argv, "--out", str(out)]) == 0
+    capsys.readouterr()
+    assert main(argv) == 0
+    captured = capsys.readouterr()
+    assert captured.out == out.read_text()  # the same CSV, on stdout
+    assert "compensated 5 targets" in captured.err and "wrote" not in captured.err
+
+
 def test_payload_column_and_user_frame(calibrated, params_file, tmp_path):
     rows = [[*r[1:], 18.0] for r in _rows(calibrated, 3)]
     shifted = [[x - 100.0, y, z - 50.0, a, b, c, m] for x, y, z, a, b, c, m in rows]

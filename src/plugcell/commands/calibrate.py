@@ -2,8 +2,8 @@
 
     plugcell calibrate --robot NAME|FILE --model 1..5|NAME --data CAL.csv
                        [--validate VAL.csv] [--rot rpy|zyz|xyz] [--payload-kg M]
-                       --out PARAMS.json [--report REPORT.html] [--residuals RES.json]
-                       [--json]
+                       [--out PARAMS.json] [--json] [--report REPORT.html]
+                       [--residuals RES.json]
 
 A file of joint readings and tracker measurements is all it needs: BASE and
 PROBE are estimated from the data unless given (``--base``/``--probe``, e.g. from
@@ -50,7 +50,8 @@ def configure(p: argparse.ArgumentParser) -> None:
                    help="orientation convention of rx, ry, rz in the files (default rpy)")
     p.add_argument("--payload-kg", type=float, metavar="M",
                    help="payload carried in every pose (overrides a payload_kg column)")
-    p.add_argument("--out", type=Path, required=True, help="PARAMS.json to write")
+    p.add_argument("--out", type=Path,
+                   help="PARAMS.json to write (optional: --json prints it instead)")
     p.add_argument("--report", type=Path, help="self-contained HTML report to write")
     p.add_argument("--residuals", type=Path, metavar="RES.json",
                    help="write every pose's residual (measured position, error before and "
@@ -229,8 +230,10 @@ def _run(args: argparse.Namespace) -> int:
         raise CommandError(str(exc)) from None
     d = result.to_dict()
     text = result.to_json()
-    _write(args.out, text + "\n")
-    written = [args.out]
+    written = []
+    if args.out is not None:
+        _write(args.out, text + "\n")
+        written.append(args.out)
     if args.report is not None:
         from plugcell.calibration.report import render_report
 
@@ -243,8 +246,12 @@ def _run(args: argparse.Namespace) -> int:
         print(text)
     else:
         print(_summary(d))
-        print("wrote " + ", ".join(str(w) for w in written[:-1])
-              + (" and " if len(written) > 1 else "") + str(written[-1]))
+        if written:
+            print("wrote " + ", ".join(str(w) for w in written[:-1])
+                  + (" and " if len(written) > 1 else "") + str(written[-1]))
+        if args.out is None:
+            print("parameters not saved: give --out PARAMS.json (or --json to print them)",
+                  file=sys.stderr)
     return 0
 
 

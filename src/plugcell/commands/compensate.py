@@ -1,6 +1,6 @@
 """``plugcell compensate``: filter an offline program through an identified model (6.5.1).
 
-    plugcell compensate --params PARAMS.json --targets TARGETS.csv --out JOINTS.csv
+    plugcell compensate --params PARAMS.json --targets TARGETS.csv [--out JOINTS.csv]
                         [--payload-kg M] [--rot zyz|rpy] [--user-frame X,Y,Z,A,B,C]
 
 ``PARAMS.json`` is what ``plugcell calibrate`` writes
@@ -13,8 +13,9 @@ header line, ``#`` comments, one target per row::
 positions in mm, angles in degrees in the ``--rot`` convention (Comau ZYZ by
 default), poses of the tool point (default: the T-MAC/PROBE the model was
 identified with) in the robot base frame — or in the user frame ``--user-frame``.
-``JOINTS.csv`` gets one row per target: ``name,j1..jn`` in degrees (the compensated
-joint targets for the controller), ``iterations`` and the final model residual.
+``JOINTS.csv`` (stdout without ``--out``; the summary then goes to stderr) gets one row
+per target: ``name,j1..jn`` in degrees (the compensated joint targets for the
+controller), ``iterations`` and the final model residual.
 Errors name the file, the line and the column.
 """
 
@@ -25,6 +26,7 @@ import csv
 import io
 import json
 import math
+import sys
 import time
 from pathlib import Path
 from typing import Any
@@ -45,7 +47,8 @@ def configure(p: argparse.ArgumentParser) -> None:
                    help="identified parameters (PARAMS.json from plugcell calibrate)")
     p.add_argument("--targets", type=Path, required=True,
                    help="CSV: [name,]x,y,z,rx,ry,rz[,payload_kg] (mm, degrees)")
-    p.add_argument("--out", type=Path, required=True, help="CSV of compensated joints to write")
+    p.add_argument("--out", type=Path,
+                   help="CSV of compensated joints to write (default: print it to stdout)")
     p.add_argument("--payload-kg", type=float, default=None, metavar="M",
                    help="payload carried (kg) for rows without a payload_kg column "
                         "(default: the payload the parameters were identified with)")
@@ -200,7 +203,9 @@ def _run(args: argparse.Namespace) -> int:
     _write(args, result, names, res, payload)
     print(f"compensated {len(names)} targets with model {result.config.number} "
           f"({result.config.name}) in {dt * 1e3:.1f} ms: at most {int(res.iterations.max())} "
-          f"iterations, residual ≤ {float(res.residual.max()):.1e}; wrote {args.out}")
+          f"iterations, residual ≤ {float(res.residual.max()):.1e}"
+          + ("" if args.out is None else f"; wrote {args.out}"),
+          file=sys.stderr if args.out is None else sys.stdout)
     return 0
 
 
@@ -222,6 +227,9 @@ def _write(args: argparse.Namespace, result: Any, names: list[str], res: Any,
     for i, nm in enumerate(names):
         w.writerow([nm, *[f"{v:.6f}" for v in q[i]], f"{payload[i]:g}",
                     int(res.iterations[i]), f"{res.residual[i]:.2e}"])
+    if args.out is None:
+        sys.stdout.write(buf.getvalue())
+        return
     try:
         args.out.write_text(buf.getvalue())
     except OSError as exc:
