@@ -109,6 +109,15 @@ def test_reproduce_8_1(tmp_path, capsys):
     assert (tmp_path / "8.1.md").is_file() and (tmp_path / "8.1-convergence.png").is_file()
 
 
+def test_reproduce_writes_under_out_by_default(tmp_path, monkeypatch, capsys):
+    """Run from any folder, it writes out/reproduce/ there — no stray docs/ folder."""
+    monkeypatch.chdir(tmp_path)
+    assert main(["reproduce", "8.1", "--poses", "12"]) == 0
+    assert "wrote out/reproduce/8.1.md" in capsys.readouterr().err
+    assert (tmp_path / "out" / "reproduce" / "8.1.md").is_file()
+    assert not (tmp_path / "docs").exists()
+
+
 @pytest.mark.skipif(not SHARED_TABLE.is_file(), reason="shared data not available")
 def test_embedded_table_8_1_matches_the_shared_csv():
     from plugcell.commands.reproduce import TABLE_8_1

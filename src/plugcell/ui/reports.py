@@ -1,7 +1,7 @@
 """The calibration report and the reproduced thesis figures, listed for the UI.
 
-``plugcell reproduce`` writes its pages and figures to ``docs/results/``
-(``8.1.md``, ``8.3-fig-8-12.png`` …) and ``plugcell calibrate --report`` writes a
+``plugcell reproduce … --out-dir docs/results`` writes the repository's pages and figures
+there (``8.1.md``, ``8.3-fig-8-12.png`` …) and ``plugcell calibrate --report`` writes a
 self-contained HTML report.  The UI lists them and serves them read-only: only
 files inside the folders given here, only the suffixes below, never a path that
 leaves them.
