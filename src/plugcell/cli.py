@@ -13,6 +13,7 @@ from __future__ import annotations
 import argparse
 import importlib
 import os
+import select
 import sys
 from collections.abc import Sequence
 from dataclasses import dataclass
@@ -133,11 +134,25 @@ def main(argv: list[str] | None = None) -> int:
         finally:  # also after argparse's SystemExit (--help): a failed flush at exit warns
             sys.stdout.flush()
     except BrokenPipeError:
+        if not _stdout_reader_gone():
+            raise  # another pipe or socket broke: a real error, not `| head`
         # The Python recipe (library docs, signal, "Note on SIGPIPE"): stdout onto
         # devnull, so the interpreter's last flush has nowhere to fail, and exit quietly.
         devnull = os.open(os.devnull, os.O_WRONLY)
         os.dup2(devnull, sys.stdout.fileno())
         return EXIT_BROKEN_PIPE
+
+
+def _stdout_reader_gone() -> bool:
+    """Whether stdout is a pipe whose reading end is closed (``poll`` reports POLLERR);
+    ``True`` when that cannot be told (no ``poll``, stdout without a descriptor)."""
+    try:
+        fd = sys.stdout.fileno()
+        poller = select.poll()
+    except (AttributeError, OSError, ValueError):
+        return True
+    poller.register(fd, select.POLLOUT)
+    return any(events & (select.POLLERR | select.POLLHUP) for _, events in poller.poll(0))
 
 
 def _run(argv: list[str]) -> int:

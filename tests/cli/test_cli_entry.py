@@ -112,3 +112,16 @@ def test_a_closed_pipe_ends_quietly(args, code):
         os.close(write_end)
     assert proc.stderr == ""
     assert proc.returncode == code
+
+
+def test_a_broken_pipe_elsewhere_is_not_hidden():
+    """A BrokenPipeError while stdout is fine (a socket, a child's pipe) is a real error."""
+    code = ("import sys, plugcell.cli as cli\n"
+            "def broken(argv):\n"
+            "    raise BrokenPipeError(32, 'Broken pipe: a socket')\n"
+            "cli._run = broken\n"
+            "sys.exit(cli.main(['kin']))\n")
+    proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                          timeout=60)
+    assert proc.returncode == 1
+    assert "BrokenPipeError: [Errno 32] Broken pipe: a socket" in proc.stderr
