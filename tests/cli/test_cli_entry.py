@@ -19,14 +19,14 @@ HEAVY = ("zenoh", "fastapi", "uvicorn", "starlette", "scipy", "plugcell.framewor
          "cryptography", "matplotlib")
 
 
-def _imported_after_parser(command: str | None) -> list[str]:
-    """Modules (of HEAVY) loaded by ``import plugcell.cli`` + ``build_parser(command)``,
+def _imported_after_parser(command: str | None, heavy: tuple[str, ...] = HEAVY) -> list[str]:
+    """Modules (of ``heavy``) loaded by ``import plugcell.cli`` + ``build_parser(command)``,
     in a fresh interpreter."""
     code = (
         "import json, sys\n"
         "import plugcell.cli as cli\n"
         f"cli.build_parser({command!r})\n"
-        f"heavy = {HEAVY!r}\n"
+        f"heavy = {heavy!r}\n"
         "print(json.dumps(sorted(m for m in sys.modules\n"
         "                        if any(m == h or m.startswith(h + '.') for h in heavy))))\n"
     )
@@ -38,6 +38,11 @@ def _imported_after_parser(command: str | None) -> list[str]:
 @pytest.mark.parametrize("command", [None, "kin", "calibrate", "compensate", "reproduce"])
 def test_parser_does_not_import_the_service_stack(command):
     assert _imported_after_parser(command) == []
+
+
+@pytest.mark.parametrize("command", [None, "calibrate"])
+def test_help_needs_no_numpy(command):
+    assert _imported_after_parser(command, ("numpy",)) == []
 
 
 def test_top_level_parser_imports_no_command_module():

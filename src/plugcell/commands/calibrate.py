@@ -21,9 +21,10 @@ import json
 import math
 import sys
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
-import numpy as np
+if TYPE_CHECKING:  # numpy is imported where it is used: `--help` does not load it
+    import numpy as np
 
 
 def configure(p: argparse.ArgumentParser) -> None:
@@ -79,6 +80,8 @@ def configure(p: argparse.ArgumentParser) -> None:
 
 def _frame(text: str, what: str) -> np.ndarray:
     """A 4x4 transform from a JSON file or an inline 'x,y,z,r,p,y' (mm, degrees)."""
+    import numpy as np
+
     from plugcell.cli import CommandError
     from plugcell.kinematics.rotations import rpy_to_matrix
 
@@ -132,6 +135,8 @@ def _positive(value: float, option: str, unit: str) -> None:
 
 def _read(path: Path, rot: str, n: int, payload: float | None):
     from dataclasses import replace
+
+    import numpy as np
 
     from plugcell.calibration import CalibrationData
     from plugcell.cli import CommandError
