@@ -6,6 +6,11 @@ help and where its options are defined) and lives in its own module under
 ``func`` (``func(args) -> int`` exit code).  Only the module of the sub-command being
 run is imported, so ``plugcell calibrate --help`` does not load Zenoh, FastAPI or the
 service framework (``benchmarks/cli_startup.py`` measures the start-up).
+
+A new sub-command is a module with ``configure(parser)`` (heavy imports inside the
+functions that run it, not at the top) and one :class:`Command` line in
+:data:`COMMANDS`; ``tests/cli/test_cli_entry.py`` checks that every such module is
+declared.
 """
 
 from __future__ import annotations
