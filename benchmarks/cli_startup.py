@@ -4,11 +4,12 @@
 
 Each command is run ``--repeat`` times as its own process (the installed ``plugcell``
 script beside this Python, else ``python -m plugcell``), output discarded; the
-interpreter alone (``python -c pass``) is the floor.  The start-up a user feels is
-what the parser and the chosen sub-command import: only that sub-command's module is
-loaded (:mod:`plugcell.cli`), so ``--help`` of any command does not load Zenoh or the
-web server.  On a loaded machine run it with ``nice -n 0`` (or not at all under
-``nice``): the figures are wall time.
+interpreter alone (``python -c pass``) is the floor.  Wall time (best, median, worst)
+and the median CPU time (user + system), which depends less on the machine's load.
+The start-up a user feels is what the parser and the chosen sub-command import: only
+that sub-command's module is loaded (:mod:`plugcell.cli`), so ``--help`` of any command
+does not load Zenoh or the web server.  On a loaded machine run it with ``nice -n 0``
+(or not at all under ``nice``): the figures are wall time.
 """
 
 from __future__ import annotations
@@ -16,6 +17,7 @@ from __future__ import annotations
 import argparse
 import os
 import platform
+import resource
 import statistics
 import subprocess
 import sys
@@ -37,14 +39,18 @@ def plugcell_command() -> list[str]:
     return [str(script)] if script.is_file() else [sys.executable, "-m", "plugcell"]
 
 
-def wall_times(cmd: list[str], repeat: int) -> list[float]:
-    """Wall time (s) of ``repeat`` runs of ``cmd``; raises if one fails."""
-    times = []
+def run_times(cmd: list[str], repeat: int) -> tuple[list[float], list[float]]:
+    """Wall and CPU time (user + system, s) of each of ``repeat`` runs of ``cmd``; raises
+    if one fails.  CPU time hardly depends on what else the machine runs; wall time does."""
+    wall, cpu = [], []
     for _ in range(repeat):
+        before = resource.getrusage(resource.RUSAGE_CHILDREN)
         t0 = time.perf_counter()
         subprocess.run(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, check=True)
-        times.append(time.perf_counter() - t0)
-    return times
+        wall.append(time.perf_counter() - t0)
+        after = resource.getrusage(resource.RUSAGE_CHILDREN)
+        cpu.append(after.ru_utime - before.ru_utime + after.ru_stime - before.ru_stime)
+    return wall, cpu
 
 
 def main(argv: list[str]) -> int:
@@ -58,16 +64,16 @@ def main(argv: list[str]) -> int:
           f"{os.cpu_count()} cores, Python {platform.python_version()}, "
           f"nice {os.nice(0)}, load {os.getloadavg()[0]:.2f}; {args.repeat} runs each")
     print(f"{'command':32s} | {'best s':>7s} | {'median s':>8s} | {'worst s':>7s} | "
-          f"{'< ' + format(args.limit, 'g') + ' s':>8s}")
-    print("-" * 74)
+          f"{'CPU s':>6s} | {'< ' + format(args.limit, 'g') + ' s':>8s}")
+    print("-" * 83)
     rows = [("python -c pass (interpreter)", [sys.executable, "-c", "pass"])]
     rows += [(label, base + extra) for label, extra in COMMANDS]
     for label, cmd in rows:
-        t = wall_times(cmd, args.repeat)
+        t, cpu = run_times(cmd, args.repeat)
         med = statistics.median(t)
         ok = med < args.limit
         print(f"{label:32s} | {min(t):7.3f} | {med:8.3f} | {max(t):7.3f} | "
-              f"{'yes' if ok else 'NO':>8s}")
+              f"{statistics.median(cpu):6.3f} | {'yes' if ok else 'NO':>8s}")
     return 0
 
 
