@@ -16,6 +16,7 @@ from typing import Any
 
 import numpy as np
 import pytest
+from coupling_testlib import hand_converted
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 from kinematics_testlib import perturbed_params, random_configs
@@ -38,29 +39,6 @@ DEG = math.pi / 180.0
 @pytest.fixture(scope="module")
 def fanuc() -> RobotDescription:
     return load_robot("fanuc_m20ia")
-
-
-def hand_converted(desc: RobotDescription) -> RobotDescription:
-    """What a user did before couplings existed: readings converted outside plugcell.
-
-    The coupling offsets are folded into the links' ``theta`` and the description
-    takes ``M · readings`` as its joint values (limits: the box of those values).
-    """
-    d = desc.to_dict()
-    c = d.pop("coupling")
-    M = np.array(c["matrix"])
-    lo, hi = np.radians(np.array(c["limits"])).T
-    klo = np.degrees(np.minimum(M * lo, M * hi).sum(axis=1))
-    khi = np.degrees(np.maximum(M * lo, M * hi).sum(axis=1))
-    act = {n: k for k, n in enumerate(d["actuated"])}
-    for lk in d["links"]:
-        if lk["name"] in act:
-            k = act[lk["name"]]
-            lk["theta"] += c["offsets"][k]
-            lk["limits"] = [klo[k], khi[k]]
-    d["home"] = list(np.degrees(M @ np.radians(d["home"])))
-    d["coupled_limits"] = []
-    return RobotDescription.from_dict(d)
 
 
 # ----------------------------------------------------------------------------- Fanuc

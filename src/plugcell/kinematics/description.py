@@ -799,6 +799,9 @@ class RobotDescription:
         """
         if self.coupling is None:
             return self
+        cached = self.__dict__.get("_uncoupled")
+        if cached is not None:
+            return cached  # type: ignore[no-any-return]
         coupled = []
         for k, loop in enumerate(self.loops):
             i, j, cst = self.loop_readings(k)
@@ -812,7 +815,7 @@ class RobotDescription:
                     )
                     coupled.append(CoupledLimit((loop.arm, loop.crank), a + shift, b + shift))
                     break
-        return RobotDescription(
+        kin = RobotDescription(
             name=self.name,
             links=self.links,
             actuated=self.actuated,
@@ -828,6 +831,8 @@ class RobotDescription:
             point_masses=self.point_masses,
             working_volume=self.working_volume,
         )
+        object.__setattr__(self, "_uncoupled", kin)
+        return kin
 
     @property
     def chain(self) -> tuple[int, ...]:
