@@ -9,8 +9,12 @@ input, and property tests of the ``[coupling]`` parser (dict and TOML text).
 
 from __future__ import annotations
 
+import contextlib
 import copy
+import io
 import math
+import re
+import tomllib
 from pathlib import Path
 from typing import Any
 
@@ -430,3 +434,38 @@ def test_toml_coupling_parser(tmp_path, case):
     q = np.linspace(-1.0, 1.0, n_r)
     np.testing.assert_allclose(desc.kinematic_joints(q), M @ q + np.radians(off), atol=1e-12)
     np.testing.assert_allclose(desc.readings(desc.kinematic_joints(q)), q, atol=1e-9)
+
+
+# ----------------------------------------------------------------------------- docs
+_DOC = Path(__file__).parents[2] / "docs" / "robot-description.md"
+
+
+def _doc_section() -> str:
+    text = _DOC.read_text(encoding="utf-8")
+    return text[text.index("## Vendor joint conventions"):text.index("## Errors")]
+
+
+def test_docs_fanuc_coupling_is_the_shipped_one(fanuc):
+    (snippet,) = re.findall(r"```toml\n(.*?)```", _doc_section(), flags=re.S)
+    c = tomllib.loads(snippet)["coupling"]
+    np.testing.assert_array_equal(c["matrix"], fanuc.coupling.matrix)
+    np.testing.assert_allclose(np.radians(c["offsets"]), fanuc.coupling.offset)
+    np.testing.assert_allclose(np.radians(c["limits"]), fanuc.joint_limits)
+    assert tuple(c["readings"]) == fanuc.reading_names
+
+
+def test_docs_pose_check_prints_the_documented_table():
+    section = _doc_section()
+    (code,) = re.findall(r"```python\n(.*?)```", section, flags=re.S)
+    out = io.StringIO()
+    with contextlib.redirect_stdout(out):
+        exec(compile(code, "docs/robot-description.md", "exec"), {})
+    printed = [[float(x) for x in re.findall(r"-?\d+\.?\d*", line.split("X Y Z")[1])]
+               for line in out.getvalue().splitlines()]
+    rows = [line for line in section.splitlines() if re.match(r"\| -?\d", line)]
+    assert len(rows) == len(printed) == 4
+    for row, got in zip(rows, printed, strict=True):
+        cells = row.strip("|").split("|")
+        want = [float(x) for x in re.findall(r"[-−]?\d+\.?\d*",
+                                             (cells[1] + "," + cells[2]).replace("−", "-"))]
+        np.testing.assert_allclose(got, want, atol=0.006)
