@@ -208,6 +208,27 @@ def test_inverse_returns_readings_inside_the_reading_limits(fanuc):
     np.testing.assert_allclose(forward(fanuc, None, res.q).flange, T, atol=1e-9)
 
 
+def test_inverse_of_a_loop_robot_with_coupling(h4):
+    flipped = sign_flipped_h4(h4)
+    q = random_configs(flipped, 8, seed=13)
+    T = forward(flipped, None, q).flange
+    res = inverse(flipped, None, T, seed=q + 0.05)
+    assert flipped.within_limits(res.q).all()
+    np.testing.assert_allclose(forward(flipped, None, res.q).flange, T, atol=1e-9)
+    # the readings are the uncoupled robot's solution, mapped back
+    ref = inverse(h4, None, T, seed=flipped.kinematic_joints(q + 0.05))
+    np.testing.assert_allclose(flipped.kinematic_joints(res.q), ref.q, atol=1e-8)
+
+
+def test_inverse_of_a_mimic_robot_returns_its_five_readings(elbow):
+    mimic = mimic_elbow(elbow)
+    q = random_configs(mimic, 6, seed=14)
+    T = forward(mimic, None, q).flange
+    res = inverse(mimic, None, T, seed=q + 0.02)
+    assert res.q.shape == (6, 5)
+    np.testing.assert_allclose(forward(mimic, None, res.q).flange, T, atol=1e-9)
+
+
 def test_inverse_does_not_wrap_readings_of_fractional_gears(elbow):
     gear, _ = _gear_and_mimic(elbow)
     q = random_configs(gear, 6, seed=12)
