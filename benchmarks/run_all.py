@@ -33,6 +33,8 @@ def main(argv: list[str]) -> int:
          [sys.executable, str(HERE / "round_trip_trace.py"),
           *([] if full else ["--cycles", "500"])]),
         ("compensation (thesis 6.5.1)", [*plugcell, "bench", "compensation"]),
+        ("vendor joint conventions (cost of a coupling)",
+         [sys.executable, str(HERE / "coupling.py")]),
         ("wire decoder fuzz", [sys.executable, str(HERE / "fuzz_wire.py")]),
         ("signed requests (cost)", [sys.executable, str(HERE / "signing.py"),
                                     *(["--fuzz", "100000"] if full else [])]),
