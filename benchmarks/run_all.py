@@ -34,6 +34,8 @@ def main(argv: list[str]) -> int:
           *([] if full else ["--cycles", "500"])]),
         ("compensation (thesis 6.5.1)", [*plugcell, "bench", "compensation"]),
         ("command start-up", [sys.executable, str(HERE / "cli_startup.py")]),
+        ("vendor joint conventions (cost of a coupling)",
+         [sys.executable, str(HERE / "coupling.py")]),
         ("wire decoder fuzz", [sys.executable, str(HERE / "fuzz_wire.py")]),
         ("signed requests (cost)", [sys.executable, str(HERE / "signing.py"),
                                     *(["--fuzz", "100000"] if full else [])]),

@@ -205,10 +205,10 @@ def _run(args: argparse.Namespace) -> int:
         raise CommandError("--validate-refit needs a --validate file")
     if args.refit_positions_only and args.validate_refit == "none":
         raise CommandError("--refit-positions-only needs --validate-refit base or base+probe")
-    data = _read(args.data, args.rot, desc.n_actuated, args.payload_kg)
+    data = _read(args.data, args.rot, desc.n_readings, args.payload_kg)
     val = None
     if args.validate is not None:
-        val = _read(args.validate, args.rot, desc.n_actuated, args.payload_kg)
+        val = _read(args.validate, args.rot, desc.n_readings, args.payload_kg)
         if val.six_dof != data.six_dof:
             raise CommandError("--validate: the validation file must measure the same (6-DOF "
                                "or positions) as the calibration file")
