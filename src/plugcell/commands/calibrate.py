@@ -25,6 +25,8 @@ from typing import Any
 
 import numpy as np
 
+from plugcell.commands.robotargs import add_robot_args
+
 
 def register(sub: Any) -> None:
     p = sub.add_parser(
@@ -33,7 +35,7 @@ def register(sub: Any) -> None:
                     "(1 serial, 2 loop, 3 serial+gravity, 4 loop+gravity, 5 full) from a "
                     "measurement file (joint readings + tracker measurements, "
                     "docs/measurement-files.md).")
-    p.add_argument("--robot", required=True, help="shipped robot name or description file")
+    add_robot_args(p, required=True)
     p.add_argument("--model", required=True,
                    help="1-5 or serial, loop, serial+gravity, loop+gravity, full")
     p.add_argument("--data", type=Path, required=True, help="calibration measurement file")
@@ -160,13 +162,9 @@ def _summary(d: dict[str, Any]) -> str:
 def _run(args: argparse.Namespace) -> int:
     from plugcell.calibration import CalibrationError, Calibrator
     from plugcell.cli import CommandError
-    from plugcell.io.robots import load_robot
-    from plugcell.kinematics.errors import DescriptionError
+    from plugcell.commands.robotargs import load_robot_of, robot_source_of
 
-    try:
-        desc = load_robot(args.robot)
-    except DescriptionError as exc:
-        raise CommandError(str(exc)) from None
+    desc = load_robot_of(args)
     if args.payload_kg is not None and not (math.isfinite(args.payload_kg)
                                             and args.payload_kg >= 0):
         raise CommandError(f"--payload-kg must be a mass ≥ 0, got {args.payload_kg}")
@@ -194,8 +192,11 @@ def _run(args: argparse.Namespace) -> int:
                 refit_probe=args.validate_refit == "base+probe")
     except CalibrationError as exc:
         raise CommandError(str(exc)) from None
-    d = result.to_dict()
-    text = result.to_json()
+    d = json.loads(result.to_json())
+    # where the robot came from and what it was: export and compensate find it again
+    d["robot_source"] = robot_source_of(args).absolute().to_dict()
+    d["description"] = desc.to_dict()
+    text = json.dumps(d, indent=2, allow_nan=False)
     _write(args.out, text + "\n")
     written = [args.out]
     if args.report is not None:

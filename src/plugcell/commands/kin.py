@@ -5,7 +5,8 @@
     plugcell kin fk --robot smart_h4 --joints 0,-90,-187,0,90,0
     plugcell kin ik --robot smart_h4 --pose 1500,0,1200,0,90,0 [--seed 0,-90,-187,0,90,0]
     plugcell kin robots
-    plugcell kin describe --robot smart_h4
+    plugcell kin describe --robot smart_h4 [--format toml]
+    plugcell kin describe --robot ur.urdf.xacro --robot-arg ur_type=ur10 --robot-arg name=ur10
 
 Joint values in degrees (description order), positions in millimetres,
 orientations as Comau Euler ZYZ angles (A, B, C) in degrees; the printed 4×4
@@ -24,9 +25,9 @@ from typing import Any
 
 import numpy as np
 
-from plugcell.io.robots import available_robots, load_robot
+from plugcell.commands.robotargs import add_robot_args, load_robot_of
+from plugcell.io.robots import available_robots
 from plugcell.kinematics import (
-    DescriptionError,
     KinematicsError,
     RobotDescription,
     forward,
@@ -61,13 +62,12 @@ def register(subparsers: Any) -> None:
 
     kin.set_defaults(func=no_sub)
 
-    robot_help = "shipped robot name (see 'plugcell kin robots') or a description file path"
     fk = sub.add_parser(
         "fk",
         help="forward kinematics: flange pose for joint values",
         description="Print the flange pose in the robot base frame as JSON.",
     )
-    fk.add_argument("--robot", required=True, help=robot_help)
+    add_robot_args(fk, required=True)
     fk.add_argument("--joints", required=True, help="j1,...,jn in degrees, description order")
     fk.add_argument(
         "--closure",
@@ -82,7 +82,7 @@ def register(subparsers: Any) -> None:
         help="inverse kinematics: joint values for a flange pose",
         description="Print joint values (degrees) that put the flange at the pose, as JSON.",
     )
-    ik.add_argument("--robot", required=True, help=robot_help)
+    add_robot_args(ik, required=True)
     ik.add_argument("--pose", required=True, help="x,y,z (mm),A,B,C (Comau ZYZ, degrees)")
     ik.add_argument("--seed", help="j1,...,jn in degrees (default: the robot's home pose)")
     ik.add_argument("--closure", choices=("fourbar", "nominal"), default="fourbar")
@@ -92,9 +92,14 @@ def register(subparsers: Any) -> None:
     robots.set_defaults(func=_cmd_robots)
 
     describe = sub.add_parser(
-        "describe", help="print a robot description (file units: m, deg, kg) as JSON"
+        "describe",
+        help="print a robot description (file units: m, deg, kg) as JSON or TOML",
+        description="Print a robot description in file form — for a URDF/xacro robot, what "
+        "was imported. '--format toml' is a description file that loads back unchanged.",
     )
-    describe.add_argument("--robot", required=True, help=robot_help)
+    add_robot_args(describe, required=True)
+    describe.add_argument("--format", choices=("json", "toml"), default="json",
+                          help="json (default) or toml (plugcell's description file)")
     describe.set_defaults(func=_cmd_describe)
 
     for p in (fk, ik):
@@ -103,11 +108,8 @@ def register(subparsers: Any) -> None:
 
 
 # ----------------------------------------------------------------------------- helpers
-def _robot(name: str) -> RobotDescription:
-    try:
-        return load_robot(name)
-    except DescriptionError as exc:
-        raise _error(str(exc)) from None
+def _robot(args: argparse.Namespace) -> RobotDescription:
+    return load_robot_of(args)
 
 
 def _floats(text: str, n: int, option: str, what: str) -> np.ndarray:
@@ -158,7 +160,7 @@ def _r(x: float, nd: int = 9) -> float:
 
 # ----------------------------------------------------------------------------- commands
 def _cmd_fk(args: argparse.Namespace) -> int:
-    desc = _robot(args.robot)
+    desc = _robot(args)
     qdeg = _floats(args.joints, desc.n_actuated, "--joints", _joint_names(desc))
     q = np.radians(qdeg)
     try:
@@ -181,7 +183,7 @@ def _cmd_fk(args: argparse.Namespace) -> int:
 
 
 def _cmd_ik(args: argparse.Namespace) -> int:
-    desc = _robot(args.robot)
+    desc = _robot(args)
     pose = _floats(args.pose, 6, "--pose", "x,y,z in mm and A,B,C Comau ZYZ in degrees")
     seed = None
     if args.seed is not None:
@@ -209,5 +211,11 @@ def _cmd_robots(args: argparse.Namespace) -> int:
 
 
 def _cmd_describe(args: argparse.Namespace) -> int:
-    _print(_robot(args.robot).to_dict())
+    desc = _robot(args)
+    if args.format == "toml":
+        from plugcell.io.robots import description_to_toml
+
+        print(description_to_toml(desc), end="")
+    else:
+        _print(desc.to_dict())
     return 0

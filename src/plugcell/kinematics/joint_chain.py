@@ -1,0 +1,277 @@
+"""A serial chain of joints with general origins (URDF style) → DH/Hayati description.
+
+A URDF (or any joint-origin model) places joint *k* at a rigid ``origin`` in the
+frame of its parent link and turns (about the unit ``axis``, in the joint frame)
+the child link by the joint variable:
+``T_child = T_parent · origin · Rot(axis, q)``.  Fixed joints have no variable.
+:func:`description_from_chain` converts such a chain **exactly** into the DH +
+Hayati rows of :class:`~plugcell.kinematics.description.RobotDescription`
+(thesis eq. B.1, ``F_i = F_{i-1} Rz(θ_i) Tz(d_i) Tx(a_i) Rx(α_i) Ry(β_i)``):
+
+* only the joint *axis lines* at q = 0 matter, so fixed joints between moving ones
+  fold into the neighbouring rows;
+* frame F_{i−1} has its z axis on joint *i*'s axis line; the row of link *i* takes
+  it to joint *i+1*'s line — along the common normal (β = 0) when the axes are not
+  parallel, and with Hayati's β when they are (d_i = 0 there, which fixes the
+  otherwise free position along the parallel axes; the row is then marked
+  ``hayati``, as the calibrator needs);
+* the first row takes the chain's base frame to joint 1's line (a ``fixed`` link
+  ``mount``, omitted when the base frame's z axis already is that line);
+* the last row (the flange) only turns about and moves along the last axis
+  (``θ_n, d_n``) towards the tip frame; the remaining constant transform is the
+  description's ``tool``, so ``forward(...).tcp`` is the tip frame.
+
+Masses of the bodies that move with joint *i* are lumped into link *i* (mass and
+centre of mass in F_i).  Pure math: no files; :mod:`plugcell.io.urdf` reads URDFs.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+from numpy.typing import NDArray
+
+from plugcell.kinematics.description import Link, RobotDescription
+from plugcell.kinematics.errors import DescriptionError
+from plugcell.kinematics.transforms import dh_hayati
+
+Array = NDArray[np.float64]
+
+__all__ = ["JOINT_KINDS", "ChainJoint", "JointChain", "description_from_chain"]
+
+#: Joint kinds of a chain: ``revolute`` (also URDF ``continuous``) and ``fixed``.
+JOINT_KINDS: tuple[str, ...] = ("revolute", "fixed")
+#: Name of the fixed link from the chain's base frame to joint 1's axis line.
+MOUNT = "mount"
+#: Below this |sin| of the angle between two axes (0.57°) they count as parallel and
+#: get a Hayati row: the common normal of nearly parallel axes is ill-conditioned
+#: (its position error grows like ε/sin²), the Hayati row is exact for any angle.
+PARALLEL_SIN = 1e-2
+#: Lengths (m) and angles (rad) below this are rounded to 0 in the DH rows.
+_ZERO = 1e-14
+
+
+@dataclass(frozen=True, eq=False)
+class ChainJoint:
+    """One joint of a serial chain.
+
+    ``origin``: (4, 4) pose of the joint frame in the parent link's frame at q = 0;
+    ``axis``: (3,) unit axis in the joint frame (ignored for ``fixed``);
+    ``limits``: (lower, upper) radians or ``None`` (unlimited, e.g. URDF continuous);
+    ``mass`` (kg) and ``com`` (m, child link frame): the child body's inertial data
+    (with whatever is rigidly attached to it off the chain).
+    """
+
+    name: str
+    kind: str
+    origin: Array
+    axis: Array = field(default_factory=lambda: np.array([0.0, 0.0, 1.0]))
+    limits: tuple[float, float] | None = None
+    mass: float = 0.0
+    com: tuple[float, float, float] = (0.0, 0.0, 0.0)
+
+
+@dataclass(frozen=True, eq=False)
+class JointChain:
+    """Joints from a base link to a tip link, in order; the base frame is the root."""
+
+    name: str
+    joints: tuple[ChainJoint, ...]
+    notes: str = ""
+
+    @property
+    def moving(self) -> tuple[ChainJoint, ...]:
+        return tuple(j for j in self.joints if j.kind != "fixed")
+
+
+@dataclass(frozen=True)
+class _Row:
+    theta: float
+    d: float
+    a: float
+    alpha: float
+    beta: float
+    hayati: bool
+
+
+def _clean(x: float) -> float:
+    return 0.0 if abs(x) < _ZERO else float(x)
+
+
+def line_step(frame: Array, point: Array, direction: Array) -> _Row:
+    """The DH + Hayati row taking ``frame``'s z axis onto the line ``point + s·direction``.
+
+    Not parallel: x_new = z × w / |z × w| on the common normal, d and a the offsets
+    along z and x_new, α the angle about x_new from z to w, β = 0.  Parallel or nearly
+    (|z × w| below :data:`PARALLEL_SIN`): d = 0 (the new origin is the point of the line
+    in the plane of ``frame``'s x and y axes), x_new towards it (or ``frame``'s x if the lines
+    coincide), then Rx(α) Ry(β) with w = (sin β, −sin α cos β, cos α cos β) in the new
+    x, y, z axes — exact also for nearly parallel lines.
+    """
+    R, o = frame[:3, :3], frame[:3, 3]
+    x, z = R[:, 0], R[:, 2]
+    w = direction / np.linalg.norm(direction)
+    c = np.cross(z, w)
+    s = float(np.linalg.norm(c))
+    r = point - o
+    if s > PARALLEL_SIN:
+        xn = c / s
+        zw = float(z @ w)
+        A = np.array([[1.0, -zw], [zw, -1.0]])
+        t, u = np.linalg.solve(A, [r @ z, r @ w])
+        foot = point + u * w
+        d = float(t)
+        a = float((foot - (o + t * z)) @ xn)
+        theta = math.atan2(float(np.cross(x, xn) @ z), float(x @ xn))
+        alpha = math.atan2(float(np.cross(z, w) @ xn), zw)
+        return _Row(_clean(theta), _clean(d), _clean(a), _clean(alpha), 0.0, False)
+    u = -float(r @ z) / float(w @ z)
+    v = r + u * w  # new origin − o, in the x-y plane of frame
+    a = float(np.linalg.norm(v))
+    xn = v / a if a > 1e-12 else x
+    if a <= 1e-12:
+        a = 0.0
+    yn = np.cross(z, xn)
+    wx, wy, wz = float(w @ xn), float(w @ yn), float(w @ z)
+    beta = math.asin(max(-1.0, min(1.0, wx)))
+    alpha = math.atan2(-wy, wz)
+    theta = math.atan2(float(np.cross(x, xn) @ z), float(x @ xn))
+    return _Row(_clean(theta), 0.0, _clean(a), _clean(alpha), _clean(beta), True)
+
+
+def _row_transform(row: _Row) -> Array:
+    return dh_hayati(
+        np.array(row.theta), np.array(row.d), np.array(row.a), np.array(row.alpha),
+        np.array(row.beta),
+    )
+
+
+def _axis_rotation(axis: Array, q: float) -> Array:
+    """Rodrigues rotation (4, 4) about unit ``axis`` by ``q``."""
+    k = axis / np.linalg.norm(axis)
+    K = np.array([[0, -k[2], k[1]], [k[2], 0, -k[0]], [-k[1], k[0], 0]])
+    T = np.eye(4)
+    T[:3, :3] = np.eye(3) + math.sin(q) * K + (1 - math.cos(q)) * (K @ K)
+    return T
+
+
+def chain_forward(chain: JointChain, q: Array) -> Array:
+    """Tip frame (4, 4) of the chain for moving-joint values ``q`` (reference FK).
+
+    ``T = Π_k origin_k · Rot(axis_k, q_k)`` over the joints in order (fixed: no
+    rotation) — the URDF definition, used to check the DH conversion.
+    """
+    T = np.eye(4)
+    j = 0
+    for jt in chain.joints:
+        T = T @ jt.origin
+        if jt.kind != "fixed":
+            T = T @ _axis_rotation(jt.axis, float(q[j]))
+            j += 1
+    return T
+
+
+def description_from_chain(chain: JointChain, unlimited: float = 2 * math.pi) -> RobotDescription:
+    """The exact DH/Hayati :class:`RobotDescription` of a serial chain (module docstring).
+
+    Parameters
+    ----------
+    chain : JointChain
+        Joints from the base link (the description's base frame F0's parent, i.e.
+        the robot base frame) to the tip (the TCP: ``tool`` in the flange frame).
+    unlimited : float
+        Limit (± rad) given to joints without limits (URDF ``continuous``).
+
+    Returns
+    -------
+    RobotDescription
+        One actuated link per moving joint, named after the joint, in chain order
+        (which is the joint-reading order); joint reading = URDF joint position.
+
+    Raises
+    ------
+    DescriptionError
+        No moving joint, an unsupported joint kind or a zero axis (location
+        ``joints[k]``).
+    """
+    T = np.eye(4)
+    frames: list[Array] = []  # joint frames (at q = 0) of the moving joints
+    axes: list[Array] = []
+    bodies: list[tuple[int, float, Array]] = []  # (moving index, mass, com in base)
+    m = -1
+    for k, jt in enumerate(chain.joints):
+        if jt.kind not in JOINT_KINDS:
+            raise DescriptionError(
+                f"joints[{k}] ({jt.name})",
+                f"joint kind {jt.kind!r} is not supported (supported: {', '.join(JOINT_KINDS)})",
+            )
+        T = T @ np.asarray(jt.origin, dtype=float)
+        if jt.kind != "fixed":
+            ax = np.asarray(jt.axis, dtype=float)
+            n = float(np.linalg.norm(ax))
+            if not (np.all(np.isfinite(ax)) and n > 1e-12):
+                raise DescriptionError(f"joints[{k}] ({jt.name}).axis", "must be a non-zero vector")
+            frames.append(T.copy())
+            axes.append(T[:3, :3] @ (ax / n))
+            m += 1
+        if jt.mass > 0 and m >= 0:
+            bodies.append((m, jt.mass, T[:3, :3] @ np.asarray(jt.com) + T[:3, 3]))
+    tip = T
+    if not frames:
+        raise DescriptionError("joints", "the chain has no moving joint")
+    moving = chain.moving
+    n = len(moving)
+
+    links: list[Link] = []
+    F = np.eye(4)
+    first = line_step(F, frames[0][:3, 3], axes[0])
+    parent = "base"
+    if any((first.theta, first.d, first.a, first.alpha, first.beta)):
+        links.append(Link(MOUNT, parent, "fixed", first.theta, first.d, first.a, first.alpha,
+                          first.beta, first.hayati))
+        F = F @ _row_transform(first)
+        parent = MOUNT
+    dh_frames: list[Array] = []
+    rows: list[_Row] = []
+    for i in range(n):
+        if i + 1 < n:
+            row = line_step(F, frames[i + 1][:3, 3], axes[i + 1])
+        else:
+            z, x, o = F[:3, 2], F[:3, 0], F[:3, 3]
+            xt = tip[:3, 0] - (tip[:3, 0] @ z) * z
+            th = math.atan2(float(np.cross(x, xt) @ z), float(x @ xt)) if np.linalg.norm(
+                xt) > 1e-9 else 0.0
+            row = _Row(_clean(th), _clean(float((tip[:3, 3] - o) @ z)), 0.0, 0.0, 0.0, False)
+        F = F @ _row_transform(row)
+        dh_frames.append(F.copy())
+        rows.append(row)
+    for i, (jt, row) in enumerate(zip(moving, rows, strict=True)):
+        mass = sum(b[1] for b in bodies if b[0] == i)
+        com = np.zeros(3)
+        if mass > 0:
+            pw = sum(b[1] * b[2] for b in bodies if b[0] == i) / mass
+            Fi = dh_frames[i]
+            com = Fi[:3, :3].T @ (pw - Fi[:3, 3])
+        links.append(Link(jt.name, parent, "actuated", row.theta, row.d, row.a, row.alpha,
+                          row.beta, row.hayati, float(mass),
+                          (float(com[0]), float(com[1]), float(com[2]))))
+        parent = jt.name
+    tool = np.linalg.inv(dh_frames[-1]) @ tip
+    tool[3] = [0.0, 0.0, 0.0, 1.0]
+    limits = np.array([jt.limits if jt.limits is not None else (-unlimited, unlimited)
+                       for jt in moving], dtype=float)
+    home = np.clip(np.zeros(n), limits[:, 0], limits[:, 1])
+    return RobotDescription(
+        name=chain.name,
+        links=tuple(links),
+        actuated=tuple(jt.name for jt in moving),
+        flange=moving[-1].name,
+        loops=(),
+        base=np.eye(4),
+        tool=tool,
+        joint_limits=limits,
+        notes=chain.notes,
+        home=home,
+    )
