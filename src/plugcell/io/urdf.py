@@ -229,7 +229,8 @@ class ImportedRobot:
     """What :func:`import_urdf` read: the description and where it came from.
 
     ``urdf``: the (expanded) URDF text; ``joints``: the chain's joint names in order
-    (fixed ones included); ``base_link``, ``tip_link``: the chain's ends.
+    (fixed ones included); ``base_link``, ``tip_link``: the chain's ends; ``chain``:
+    the joints as read (origins, axes), from which the description was converted.
     """
 
     description: RobotDescription
@@ -239,6 +240,7 @@ class ImportedRobot:
     joints: tuple[str, ...]
     source: Path
     args: Mapping[str, str] = field(default_factory=dict)
+    chain: JointChain | None = None
 
 
 def _tree(urdf: Any, label: str) -> tuple[dict[str, Any], dict[str, list[Any]], list[str]]:
@@ -506,4 +508,5 @@ def import_urdf(
         desc = description_from_chain(chain)
     except DescriptionError as exc:
         raise exc.with_prefix(label) from None
-    return ImportedRobot(desc, text, base, tip, tuple(j.name for j in chain.joints), p, args)
+    return ImportedRobot(desc, text, base, tip, tuple(j.name for j in chain.joints), p, args,
+                         chain)

@@ -29,17 +29,27 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
 
 from plugcell.kinematics.description import Link, RobotDescription
 from plugcell.kinematics.errors import DescriptionError
-from plugcell.kinematics.transforms import dh_hayati
+from plugcell.kinematics.parameters import GeometricParameters
+from plugcell.kinematics.transforms import dh_hayati, rot_z
 
 Array = NDArray[np.float64]
 
-__all__ = ["JOINT_KINDS", "ChainJoint", "JointChain", "description_from_chain"]
+__all__ = [
+    "JOINT_KINDS",
+    "CalibratedOrigins",
+    "ChainJoint",
+    "JointChain",
+    "calibrated_origins",
+    "chain_forward",
+    "description_from_chain",
+]
 
 #: Joint kinds of a chain: ``revolute`` (also URDF ``continuous``) and ``fixed``.
 JOINT_KINDS: tuple[str, ...] = ("revolute", "fixed")
@@ -275,3 +285,83 @@ def description_from_chain(chain: JointChain, unlimited: float = 2 * math.pi) ->
         notes=chain.notes,
         home=home,
     )
+
+
+@dataclass(frozen=True, eq=False)
+class CalibratedOrigins:
+    """Joint origins of a chain that reproduce a calibrated DH/Hayati geometry.
+
+    ``origins``: ``(n_joints, 4, 4)`` the new ``origin`` of every joint of the chain
+    (fixed joints unchanged except ``tip_joint``); ``tip_joint``: index of the fixed
+    joint that took up the flange's calibrated offset (``None`` if the chain has no
+    fixed joint after its last moving joint); ``residual``: (4, 4) the constant
+    ``E = tip_exported⁻¹ · tip_calibrated`` left when no joint could take it up
+    (identity otherwise).
+    """
+
+    origins: Array
+    tip_joint: int | None
+    residual: Array
+
+
+def calibrated_origins(chain: JointChain, desc: RobotDescription,
+                       params: GeometricParameters, *, fixed_tip: bool = True
+                       ) -> CalibratedOrigins:
+    """New joint origins that give ``chain`` the geometry ``params`` of ``desc``.
+
+    ``desc`` must be :func:`description_from_chain` of ``chain``.  Joint *i*'s frame
+    at q = 0 is ``J_i = F_{i−1} Rz(θ_i) K_i`` with ``K_i`` constant (nominal), so the
+    calibrated frame is ``J'_i = F'_{i−1} Rz(θ'_i) K_i`` — on the calibrated axis, with
+    the URDF axis vector along it — and origin'_i = (previous link frame')⁻¹ J'_i.
+    The tip: ``tip' = F'_n · tool``; with ``fixed_tip`` the first fixed joint after the
+    last moving joint takes up the difference (exact); otherwise (or without such a
+    joint) it is returned as ``residual``.  Link frames stay on their joint axes, so
+    meshes and inertias keep their place on the bodies.
+    """
+    from plugcell.kinematics.forward import forward
+
+    moving = [k for k, j in enumerate(chain.joints) if j.kind != "fixed"]
+    q0 = np.zeros(desc.n_actuated)
+    nom = forward(desc, None, q0)
+    cal = forward(desc, params, q0)
+    p_nom = desc.nominal_parameters()
+
+    def axis_frame(fk: Any, p: GeometricParameters, name: str) -> Array:
+        lk = desc.link(name)
+        parent = fk.frame(lk.parent) if lk.parent != "base" else np.eye(4)
+        return np.asarray(parent @ rot_z(p.theta[desc.index(name)]))
+
+    # nominal joint frames from the chain itself
+    T = np.eye(4)
+    J_nom: dict[int, Array] = {}
+    for k, jt in enumerate(chain.joints):
+        T = T @ jt.origin
+        if k in moving:
+            J_nom[k] = T.copy()
+    origins = np.array([np.asarray(j.origin, dtype=float) for j in chain.joints])
+    T = np.eye(4)
+    for m, k in enumerate(moving):
+        name = desc.actuated[m]
+        K = np.linalg.inv(axis_frame(nom, p_nom, name)) @ J_nom[k]
+        J_cal = axis_frame(cal, params, name) @ K
+        # fixed joints before this one keep their origins
+        for kk in range(moving[m - 1] + 1 if m else 0, k):
+            T = T @ origins[kk]
+        origins[k] = np.linalg.inv(T) @ J_cal
+        T = J_cal
+    tip_cal = cal.flange @ desc.tool
+    after = list(range(moving[-1] + 1, len(chain.joints)))
+    tip_joint = after[0] if (after and fixed_tip) else None
+    if tip_joint is not None:
+        rest = np.eye(4)
+        for kk in after[1:]:
+            rest = rest @ origins[kk]
+        origins[tip_joint] = np.linalg.inv(T) @ tip_cal @ np.linalg.inv(rest)
+        residual = np.eye(4)
+    else:
+        tip_exp = T
+        for kk in after:
+            tip_exp = tip_exp @ origins[kk]
+        residual = np.linalg.inv(tip_exp) @ tip_cal
+    origins[:, 3] = [0.0, 0.0, 0.0, 1.0]
+    return CalibratedOrigins(origins, tip_joint, residual)
