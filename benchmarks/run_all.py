@@ -33,6 +33,8 @@ def main(argv: list[str]) -> int:
          [sys.executable, str(HERE / "round_trip_trace.py"),
           *([] if full else ["--cycles", "500"])]),
         ("compensation (thesis 6.5.1)", [*plugcell, "bench", "compensation"]),
+        ("UR10 from ur_description: xacro in, calibration, UR kinematics out",
+         [sys.executable, str(HERE / "urdf_roundtrip_ur10.py")]),
         ("wire decoder fuzz", [sys.executable, str(HERE / "fuzz_wire.py")]),
         ("signed requests (cost)", [sys.executable, str(HERE / "signing.py"),
                                     *(["--fuzz", "100000"] if full else [])]),

@@ -159,6 +159,7 @@ def test_toml_export_loads_back_to_the_calibrated_model(
                        back.nominal_parameters().table(), atol=0, rtol=0)
 
 
+@pytest.mark.slow
 def test_generic_urdf_of_a_toml_robot(tmp_path: Path) -> None:
     desc = load_robot("elbow6")
     res = _calibrate(desc, seed=3)
@@ -194,6 +195,7 @@ def test_loop_robot_serial_equivalent() -> None:
 
 
 @needs_urdf
+@pytest.mark.slow
 def test_ur_kinematics_yaml_expands_to_the_calibrated_ur10(tmp_path: Path) -> None:
     """The official ur_description xacro with the exported YAML is the calibrated robot."""
     args = {"ur_type": "ur10", "name": "ur10"}
@@ -240,3 +242,33 @@ def test_cli_export(tmp_path: Path, arm: tuple[Path, RobotDescription, Calibrati
     assert main(["export", "--params", str(bad), "--format", "toml", "--out",
                  str(tmp_path / "x.toml")]) == 2
     assert "bad.json: expected a JSON object" in capsys.readouterr().err
+
+
+@pytest.mark.slow
+@pytest.mark.skipif(not (URDF_DIR.parent / "ipa-robot-accuracy").is_dir(),
+                    reason="../shared/data/ipa-robot-accuracy not available")
+def test_ipa_ur10_calibrates_alike_from_xacro_and_hand_dh(tmp_path: Path) -> None:
+    """docs/results/ur10.md's figures with the imported ur_description (within 0.002 mm)."""
+    import sys
+
+    sys.path.insert(0, str(Path(__file__).resolve().parents[2] / "benchmarks"))
+    from calibration_ur10 import SERIES, read_series, ur10_toml
+    from plugcell.kinematics.rotations import angles_to_matrix
+
+    ipa = URDF_DIR.parent / "ipa-robot-accuracy"
+    sets = {}
+    for key in "AB":
+        q, p, a = read_series(ipa / SERIES[key][0])
+        sets[key] = CalibrationData(q, p, angles_to_matrix(a, "xyz"))
+    (tmp_path / "ur10.toml").write_text(ur10_toml())
+    figures = []
+    for desc in (load_robot(tmp_path / "ur10.toml"),
+                 import_urdf(UR_XACRO, {"ur_type": "ur10", "name": "ur10"}).description):
+        res = Calibrator(desc, "serial").fit(sets["A"])
+        _, val = res.evaluate(sets["B"], refit_base=True)
+        figures.append([res.calibration.position.norm.mean, res.calibration.position.norm.max,
+                        val.position.norm.mean, val.position.norm.max])
+    f = np.array(figures) * 1e3
+    assert np.abs(f[0] - f[1]).max() < 0.002
+    # docs/results/ur10.md: calibration A 0.403 / 1.158, validation B 0.498 / 2.413 mm
+    np.testing.assert_allclose(f[1], [0.403, 1.158, 0.498, 2.413], atol=0.0015)
