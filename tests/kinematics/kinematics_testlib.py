@@ -11,9 +11,9 @@ def random_configs(desc: RobotDescription, n: int, seed: int) -> np.ndarray:
     """``n`` configurations drawn uniformly inside the joint and coupled limits."""
     rng = np.random.default_rng(seed)
     lo, hi = desc.joint_limits[:, 0], desc.joint_limits[:, 1]
-    out = np.empty((0, desc.n_actuated))
+    out = np.empty((0, desc.n_readings))
     while len(out) < n:
-        q = lo + rng.random((2 * n, desc.n_actuated)) * (hi - lo)
+        q = lo + rng.random((2 * n, desc.n_readings)) * (hi - lo)
         out = np.concatenate([out, q[desc.within_limits(q)]])
     return out[:n]
 

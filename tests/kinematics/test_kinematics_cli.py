@@ -88,7 +88,7 @@ def test_robot_file_path_and_listing(capsys, tmp_path: Path):
         ),
         (
             ["fk", "--robot", "kuka", "--joints", "0"],
-            "unknown robot 'kuka'; available robots: elbow6, smart_h4",
+            "unknown robot 'kuka'; available robots: elbow6, fanuc_m20ia, smart_h4",
         ),
         (
             ["fk", "--robot", "/no/such/robot.toml", "--joints", "0"],

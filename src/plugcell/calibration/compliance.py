@@ -2,7 +2,10 @@
 
 A deflection is added to the joint *readings* before forward kinematics (eq.
 4.16): ``q_link = q_reading + Δq(q)`` with ``Δq(q) = R(q) · c``, linear in the
-compliance constants ``c``.  The regressor ``R(q)`` (``(N, n_readings, n_c)``) is
+compliance constants ``c``.  With a joint ``coupling`` (vendor convention) the
+deflection is that of the kinematic joints θ_kin = M·q + offset — the joint, not
+the motor, deflects — and every "reading" below means θ_kin (the readings
+themselves without a coupling).  The regressor ``R(q)`` (``(N, n_actuated, n_c)``) is
 evaluated on a fixed *reference* geometry — the nominal description — not on
 the parameters being identified: the torque arms enter the deflection, a
 ~1 mm-sized effect, so a 1 mm error in an arm changes it by ~1e-6 mm; fixing
@@ -152,14 +155,16 @@ def compliance_regressors(
     payload_kg: ArrayLike | None = None,
     payload_ref_kg: float = 0.0,
 ) -> Array:
-    """Regressor ``R(q)``, ``(N, n_readings, n_c)``: ``Δq = R(q) · c`` (module docstring).
+    """Regressor ``R(q)``, ``(N, n_actuated, n_c)``: ``Δθ = R(q) · c`` (module docstring).
 
     ``desc``/``ref``: the robot as described and its reference geometry;
-    ``parameters``: gravity/payload parameters (in this order); ``q``: ``(N, n)``
-    joint readings; ``payload_kg``: ``(N,)`` (``None``: no payload);
-    ``payload_ref_kg``: the mass the payload constants refer to.
+    ``parameters``: gravity/payload parameters (in this order); ``q``:
+    ``(N, n_readings)`` joint readings; ``payload_kg``: ``(N,)`` (``None``: no
+    payload); ``payload_ref_kg``: the mass the payload constants refer to.
     """
     q = np.atleast_2d(np.asarray(q, dtype=float))
+    q = desc.kinematic_joints(q)  # the deflections are those of the kinematic joints
+    desc = desc.uncoupled()
     N, n = q.shape
     R = np.zeros((N, n, len(parameters)))
     if not parameters:

@@ -196,7 +196,7 @@ def random_configurations(model: ErrorModel, n: int, seed: int = 0) -> Array:
     out: list[Array] = []
     total = 0
     for _ in range(100):
-        q = rng.uniform(lo, hi, size=(4 * n, desc.n_actuated))
+        q = rng.uniform(lo, hi, size=(4 * n, desc.n_readings))
         q = q[desc.within_limits(q)]
         out.append(q)
         total += len(q)

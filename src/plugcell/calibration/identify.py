@@ -213,7 +213,7 @@ class Calibrator:
                 data = CalibrationData.from_measurements(data)
             except (AttributeError, ValueError) as exc:
                 raise CalibrationError(f"cannot use the data: {exc}") from None
-        n = self.desc.n_actuated
+        n = self.desc.n_readings
         if data.q.shape[1] != n:
             raise CalibrationError(
                 f"the data have {data.q.shape[1]} joint columns, robot {self.desc.name!r} has {n}"

@@ -6,11 +6,14 @@ and their current values Δg, the reference BASE and PROBE the BASE/PROBE errors
 are relative to, and the payload mass the payload constants refer to.  For joint
 readings ``q`` and payloads ``m`` it predicts::
 
-    T(q, m) = BASE · T_n^0(q + Δq(q, m)) · PROBE                      (6.23, 4.16)
+    T(q, m) = BASE · T_n^0(θ(q) + Δθ(q, m)) · PROBE                   (6.23, 4.16)
 
     BASE   = BASE_ref · Tx(a0) Ty(b0) Rx(α0) Ry(β0) Rz(θ0) Tz(d0)      (6.24)
     PROBE  = Rx(−90°) · Rz(θ7) Tz(d7) Tx(a7) Rx(90° + α7) · PROBE_ref  (frame 7, 6.2.2)
-    Δq     = R(q, m) · c                                              (6.31, 6.40)
+    Δθ     = R(q, m) · c                                              (6.31, 6.40)
+
+with θ(q) the kinematic joints of the readings q (the readings themselves unless
+the description has a joint ``coupling``, θ = M·q + offset).
 
 ``T_n^0`` is the flange of the structure's chain with the nominal geometry plus
 the link errors, the passive angles from the *exact* four-bar closure.  A
@@ -65,8 +68,9 @@ def probe_transform(probe_ref: Array, theta7: float, d7: float, a7: float, alpha
 
 @dataclass(frozen=True, eq=False)
 class PoseBatch:
-    """Joint readings ``q`` ``(N, n)``, payloads ``(N,)`` and the compliance regressors
-    ``(N, n, n_c)`` of a model (columns in the order of ``ErrorModel.compliance_keys``)."""
+    """Joint readings ``q`` ``(N, n_readings)``, payloads ``(N,)`` and the compliance
+    regressors ``(N, n_actuated, n_c)`` of a model (joint deflections of the kinematic
+    joints; columns in the order of ``ErrorModel.compliance_keys``)."""
 
     q: Array
     payload_kg: Array
@@ -230,15 +234,15 @@ class ErrorModel:
         return PoseBatch(q=q, payload_kg=m, regressors=R)
 
     def deflections(self, batch: PoseBatch) -> Array:
-        """Joint deflections Δq ``(N, n)`` (eq. 4.16)."""
+        """Joint deflections Δθ ``(N, n_actuated)`` of the kinematic joints (eq. 4.16)."""
         if not self.compliance_keys:
-            return np.zeros_like(batch.q)
+            return np.zeros(batch.regressors.shape[:2])
         c = self.values[self.space.indices(self.compliance_keys)]
         return batch.regressors @ c
 
     def chain_joints(self, batch: PoseBatch) -> Array:
-        """Joint values of the structure's chain: ``reading_map · (q + Δq)``."""
-        return self.structure.joints(batch.q + self.deflections(batch))
+        """Joint values of the structure's chain: ``reading_map · (θ(q) + Δθ)``."""
+        return self.structure.joints(batch.q, self.deflections(batch))
 
     def predict_batch(self, batch: PoseBatch) -> Array:
         """Predicted target poses ``(N, 4, 4)`` in the measurement frame."""

@@ -14,6 +14,13 @@ Two *families* (thesis 8.2.3):
     readings (:attr:`KinematicStructure.reading_map`).  A robot without a loop is
     its own serial structure.
 
+A description with a joint ``coupling`` (vendor convention, θ_kin = M·q + offset)
+is calibrated on its kinematic joints: the structure's chain is built from
+``desc.uncoupled()`` and the readings enter through ``desc.kinematic_joints``, so
+the identified parameters (joint offsets Δθ included) are the same as for a
+hand-converted description, while data, results and compensation keep the
+readings exactly as the controller reports them.
+
 The candidate error parameters (before the identifiability analysis removes the
 redundant ones) are, per structure:
 
@@ -80,10 +87,12 @@ class StructureError(ValueError):
 class KinematicStructure:
     """The chain forward kinematics runs on, for one model family (module docstring).
 
-    ``source``: the user's description (joint readings are in its ``actuated``
-    order); ``desc``: the description FK uses (``source`` itself for the loop
-    family and for robots without loops); ``reading_map``: ``(n_desc, n_source)``
-    matrix with ``q_desc = reading_map @ q_reading``; ``base_name``, ``probe_name``:
+    ``source``: the user's description (joint readings are in its reading order);
+    ``desc``: the description FK uses (``source.uncoupled()`` for the loop family
+    and for robots without loops, i.e. ``source`` itself unless it has a joint
+    coupling); ``reading_map``: ``(n_desc, n_actuated)`` matrix from the source's
+    kinematic joints θ_kin (= the readings without a coupling) to the joints of
+    ``desc``: ``q_desc = reading_map @ θ_kin``; ``base_name``, ``probe_name``:
     link names of the BASE ("0") and of the virtual PROBE frame ("7" after a flange
     "6"); ``parallel``: chain links whose Hayati β is a candidate parameter.
     """
@@ -98,16 +107,28 @@ class KinematicStructure:
 
     @property
     def n_readings(self) -> int:
-        return self.source.n_actuated
+        return self.source.n_readings
 
     @property
     def has_loops(self) -> bool:
         return bool(self.desc.loops)
 
-    def joints(self, q_reading: ArrayLike) -> Array:
-        """``(..., n_desc)`` joint values of ``desc`` for readings ``(..., n_source)``."""
-        q = np.asarray(q_reading, dtype=float)
-        return q @ self.reading_map.T
+    @property
+    def reading_jacobian(self) -> Array:
+        """``∂q_desc/∂q_reading`` ``(n_desc, n_readings)`` = ``reading_map · M_coupling``."""
+        return self.reading_map @ self.source.reading_jacobian
+
+    def joints(self, q_reading: ArrayLike, deflection: ArrayLike | None = None) -> Array:
+        """``(..., n_desc)`` joint values of ``desc`` for readings ``(..., n_readings)``.
+
+        ``q_desc = reading_map · (θ_kin(q) + Δθ)`` with θ_kin the source's kinematic
+        joints (:meth:`RobotDescription.kinematic_joints`) and ``deflection`` Δθ
+        ``(..., n_actuated)`` joint deflections (compliance), default none.
+        """
+        k = self.source.kinematic_joints(np.asarray(q_reading, dtype=float))
+        if deflection is not None:
+            k = k + np.asarray(deflection, dtype=float)
+        return k @ self.reading_map.T
 
     def nominal_parameters(self) -> GeometricParameters:
         return self.desc.nominal_parameters()
@@ -263,11 +284,12 @@ def kinematic_structure(desc: RobotDescription, family: str) -> KinematicStructu
     """
     if family not in FAMILIES:
         raise StructureError(f"family must be one of {FAMILIES}, got {family!r}")
+    kin = desc.uncoupled()
     if family == "serial" and desc.loops:
-        fk_desc, M = _serial_equivalent(desc)
+        fk_desc, M = _serial_equivalent(kin)
         fam = "serial"
     else:
-        fk_desc, M = desc, np.eye(desc.n_actuated)
+        fk_desc, M = kin, np.eye(desc.n_actuated)
         fam = "loop" if desc.loops else "serial"
     M.setflags(write=False)
     base, probe = _frame_names(fk_desc)

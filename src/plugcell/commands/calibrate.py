@@ -170,10 +170,10 @@ def _run(args: argparse.Namespace) -> int:
         raise CommandError(f"--payload-kg must be a mass ≥ 0, got {args.payload_kg}")
     if args.max_iterations < 1:
         raise CommandError("--max-iterations must be at least 1")
-    data = _read(args.data, args.rot, desc.n_actuated, args.payload_kg)
+    data = _read(args.data, args.rot, desc.n_readings, args.payload_kg)
     val = None
     if args.validate is not None:
-        val = _read(args.validate, args.rot, desc.n_actuated, args.payload_kg)
+        val = _read(args.validate, args.rot, desc.n_readings, args.payload_kg)
         if val.six_dof != data.six_dof:
             raise CommandError("--validate: the validation file must measure the same (6-DOF "
                                "or positions) as the calibration file")

@@ -132,7 +132,7 @@ def _floats(text: str, n: int, option: str, what: str) -> np.ndarray:
 
 
 def _joint_names(desc: RobotDescription) -> str:
-    return "joints " + ", ".join(desc.actuated) + " in degrees"
+    return "joints " + ", ".join(desc.reading_names) + " in degrees"
 
 
 def _dumps(obj: Any, indent: int = 0) -> str:
@@ -161,7 +161,7 @@ def _r(x: float, nd: int = 9) -> float:
 # ----------------------------------------------------------------------------- commands
 def _cmd_fk(args: argparse.Namespace) -> int:
     desc = _robot(args)
-    qdeg = _floats(args.joints, desc.n_actuated, "--joints", _joint_names(desc))
+    qdeg = _floats(args.joints, desc.n_readings, "--joints", _joint_names(desc))
     q = np.radians(qdeg)
     try:
         fk = forward(desc, None, q, closure=args.closure)
@@ -187,7 +187,7 @@ def _cmd_ik(args: argparse.Namespace) -> int:
     pose = _floats(args.pose, 6, "--pose", "x,y,z in mm and A,B,C Comau ZYZ in degrees")
     seed = None
     if args.seed is not None:
-        seed = np.radians(_floats(args.seed, desc.n_actuated, "--seed", _joint_names(desc)))
+        seed = np.radians(_floats(args.seed, desc.n_readings, "--seed", _joint_names(desc)))
     T = pose_to_matrix(pose[:3] * 1e-3, np.radians(pose[3:]), "zyz")
     try:
         res = inverse(desc, None, T, seed, closure=args.closure)

@@ -59,7 +59,7 @@ def bench_targets(model: IdentifiedModel, n: int, seed: int = 0) -> Array:
     found: list[Array] = []
     count = 0
     while count < n:
-        q = lo + rng.random((4 * n + 64, desc.n_actuated)) * (hi - lo)
+        q = lo + rng.random((4 * n + 64, desc.n_readings)) * (hi - lo)
         q = q[desc.within_limits(q)]
         T = model.pose(q, 0.0)
         keep = box.contains(T[:, :3, 3]) if box is not None else np.ones(len(T), bool)

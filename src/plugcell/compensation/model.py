@@ -122,7 +122,7 @@ class IdentifiedModel:
 
     @property
     def description(self) -> RobotDescription:
-        """The robot as described (joint readings are in its ``actuated`` order)."""
+        """The robot as described (joint readings are in its reading order)."""
         return self.error_model.structure.source
 
     @property
@@ -144,7 +144,7 @@ class IdentifiedModel:
         fk = forward(s.desc, self._params, em.chain_joints(batch), closure="fourbar")  # type: ignore[attr-defined]
         T = fk.flange @ self.tool
         J = jacobian_from_fk(s.desc, fk, "flange")
-        J = shift_jacobian(J, fk.flange[:, :3, 3], T[:, :3, 3]) @ s.reading_map
+        J = shift_jacobian(J, fk.flange[:, :3, 3], T[:, :3, 3]) @ s.reading_jacobian
         return T, J
 
     def pose(self, q: ArrayLike, payload_kg: ArrayLike | float = 0.0) -> Array:
@@ -181,7 +181,7 @@ class NominalModel:
 
     def evaluate(self, q: ArrayLike, payload_kg: ArrayLike | float = 0.0) -> tuple[Array, Array]:
         """Tool poses ``(N, 4, 4)`` in the robot base frame and Jacobian ``(N, 6, n)``."""
-        qb = _as_batch(q, self.desc.n_actuated)
+        qb = _as_batch(q, self.desc.n_readings)
         fk = forward(self.desc, self.params, qb)
         return fk.tcp, jacobian_from_fk(self.desc, fk, "tcp")
 

@@ -129,7 +129,7 @@ def _step(J: Array, dx: Array) -> Array:
 
 def _limit_reason(desc: RobotDescription, q: Array) -> tuple[str, str, float, tuple[float, float]]:
     """Which limit ``q`` violates: (message, joint, value, limit)."""
-    for j, name in enumerate(desc.actuated):
+    for j, name in enumerate(desc.reading_names):
         lo, hi = desc.joint_limits[j]
         if not lo - 1e-9 <= q[j] <= hi + 1e-9:
             return (
@@ -172,7 +172,7 @@ def compensate_joints(
     T = _targets(T_target)
     N = T.shape[0]
     desc = model.description
-    n = desc.n_actuated
+    n = desc.n_readings
     q0 = np.broadcast_to(np.asarray(q_start, dtype=float), (N, n)).copy()
     if not np.all(np.isfinite(q0)):
         raise ValueError("q_start: joint values must be finite")

@@ -78,7 +78,7 @@ class TwinArm:
     # ------------------------------------------------------------------ kinematics
     @property
     def axes(self) -> int:
-        return int(self.description.n_actuated)
+        return int(self.description.n_readings)
 
     def _joints_rad(self, joints: Sequence[float]) -> np.ndarray:
         q = np.radians(np.asarray([float(v) for v in joints], dtype=float))

@@ -14,6 +14,7 @@ from plugcell.kinematics.description import (
     Box,
     CoupledLimit,
     FourBarLoop,
+    JointCoupling,
     Link,
     PointMass,
     RobotDescription,
@@ -27,7 +28,11 @@ from plugcell.kinematics.errors import (
 )
 from plugcell.kinematics.forward import FKResult, branch_cut_transform, forward
 from plugcell.kinematics.inverse import IKResult, inverse
-from plugcell.kinematics.jacobian import jacobian_from_fk, manipulator_jacobian
+from plugcell.kinematics.jacobian import (
+    jacobian_from_fk,
+    kinematic_jacobian_from_fk,
+    manipulator_jacobian,
+)
 from plugcell.kinematics.parameters import FIELDS, GeometricParameters
 from plugcell.kinematics.pose_error import pose_error, pose_error_exact, rotation_error
 from plugcell.kinematics.rotations import (
@@ -70,6 +75,7 @@ __all__ = [
     "FourBarLoop",
     "GeometricParameters",
     "IKResult",
+    "JointCoupling",
     "JointLimitError",
     "KinematicsError",
     "Link",
@@ -86,6 +92,7 @@ __all__ = [
     "inverse",
     "invert",
     "jacobian_from_fk",
+    "kinematic_jacobian_from_fk",
     "manipulator_jacobian",
     "matrix_to_angles",
     "matrix_to_pose",

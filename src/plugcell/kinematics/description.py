@@ -5,7 +5,8 @@ A robot is *data*.  :class:`RobotDescription` holds the DH/Hayati rows (one
 in which order the controller reports them, the flange link, closed loops
 (:class:`FourBarLoop`), joint limits (also on joint *differences*,
 :class:`CoupledLimit`), BASE and tool transforms, masses (for the digital twin),
-joint stiffnesses and a home pose.
+joint stiffnesses, a home pose and, optionally, the vendor's joint convention
+(:class:`JointCoupling`: kinematic joints = M · readings + offset).
 
 :meth:`RobotDescription.from_dict` builds one from the plain dictionary of a
 description file (lengths in metres, angles in **degrees**, masses in kg; the
@@ -41,6 +42,9 @@ FORMAT_VERSION = 1
 #: Coupled limits of a loop must keep the arm–crank angle at least this far (rad)
 #: from a multiple of π, where the parallelogram collapses.
 LOOP_MARGIN = math.radians(1.0)
+#: A coupling matrix whose smallest singular value is below this (relative to the
+#: largest) is singular: readings could not be recovered from kinematic joints.
+COUPLING_RANK_TOL = 1e-9
 
 __all__ = [
     "FORMAT_VERSION",
@@ -49,6 +53,7 @@ __all__ = [
     "Box",
     "CoupledLimit",
     "FourBarLoop",
+    "JointCoupling",
     "Link",
     "PointMass",
     "RobotDescription",
@@ -132,6 +137,79 @@ class CoupledLimit:
     upper: float
 
 
+@dataclass(frozen=True, eq=False)
+class JointCoupling:
+    """The controller's joint readings → the kinematic joint variables (a vendor convention).
+
+    ``θ_kin = matrix · readings + offset`` with ``matrix`` ``(n_actuated, n_readings)``
+    (rows in the description's ``actuated`` order, columns in ``readings`` order) and
+    ``offset`` ``(n_actuated,)`` radians.  θ_kin is what the DH rows see before the
+    link's own ``theta`` offset is added.  Covers a J2/J3 interaction (Fanuc:
+    θ3 = −J2 − J3), reversed directions (−1), zero offsets and gear couplings of
+    wrist axes (fractional entries); ``n_readings < n_actuated`` maps several
+    kinematic joints on one reading (URDF ``mimic``).  The map must be injective
+    (full column rank) so readings can be recovered from kinematic joints.
+
+    Validated by :class:`RobotDescription` (shapes, finite values, rank); errors
+    name the file keys ``coupling.readings``, ``coupling.matrix``, ``coupling.offsets``.
+    """
+
+    readings: tuple[str, ...]
+    matrix: Array
+    offset: Array
+
+    def __post_init__(self) -> None:
+        S = object.__setattr__
+        S(self, "readings", tuple(self.readings))
+        seen: dict[str, int] = {}
+        for j, name in enumerate(self.readings):
+            if not isinstance(name, str) or not name:
+                raise DescriptionError(f"coupling.readings[{j}]", "must be a non-empty string")
+            if name in seen:
+                raise DescriptionError(
+                    f"coupling.readings[{j}]",
+                    f"duplicate reading name {name!r} (also readings[{seen[name]}])",
+                )
+            seen[name] = j
+        if not self.readings:
+            raise DescriptionError("coupling.readings", "at least one reading is required")
+        try:
+            M = np.array(self.matrix, dtype=float)
+            off = np.array(self.offset, dtype=float)
+        except (TypeError, ValueError) as exc:
+            raise DescriptionError("coupling.matrix", f"expected numbers: {exc}") from None
+        if M.ndim != 2:
+            raise DescriptionError("coupling.matrix", f"expected a 2-D matrix, got {M.ndim}-D")
+        if off.ndim != 1:
+            raise DescriptionError("coupling.offsets", f"expected a vector, got {off.ndim}-D")
+        M.setflags(write=False)
+        off.setflags(write=False)
+        S(self, "matrix", M)
+        S(self, "offset", off)
+
+    @property
+    def n_readings(self) -> int:
+        return len(self.readings)
+
+    def kinematic(self, readings: Any) -> Array:
+        """``θ_kin = M · r + offset`` for readings ``(..., n_readings)`` → ``(..., n_actuated)``."""
+        r = np.asarray(readings, dtype=float)
+        return r @ self.matrix.T + self.offset
+
+    def readings_of(self, kinematic: Any) -> Array:
+        """Least-squares inverse ``r = M⁺ (θ_kin − offset)`` (exact in the map's range)."""
+        k = np.asarray(kinematic, dtype=float)
+        return (k - self.offset) @ self._left_inverse().T
+
+    def _left_inverse(self) -> Array:
+        L = self.__dict__.get("_pinv")
+        if L is None:
+            L = np.linalg.pinv(self.matrix)
+            L.setflags(write=False)
+            object.__setattr__(self, "_pinv", L)
+        return L  # type: ignore[no-any-return]
+
+
 @dataclass(frozen=True)
 class PointMass:
     """A lumped mass (kg) at ``com`` (m, in frame ``link``) — e.g. a counterweight."""
@@ -177,9 +255,17 @@ class RobotDescription:
 
     Construction validates the structure and raises ``DescriptionError`` with a
     file-style location (``links[2].parent``, ``loops[0].coupler``…).
-    ``joint_limits`` is ``(n_actuated, 2)`` radians in ``actuated`` order;
-    ``stiffness`` ``(n_actuated,)`` N·m/rad or ``None``; ``home`` ``(n_actuated,)``
-    radians — the documented default seed of inverse kinematics.
+
+    Joint *readings* ``q`` (what the controller reports, what files, programs and
+    services carry) are ``(..., n_readings)`` in :attr:`reading_names` order; the
+    *kinematic* joints θ_kin (one per actuated link, ``actuated`` order) are
+    ``coupling.matrix · q + coupling.offset`` — or ``q`` itself without a
+    ``coupling``, where readings and kinematic joints are the same thing
+    (:meth:`kinematic_joints`, :meth:`readings`).  ``joint_limits``
+    ``(n_readings, 2)`` radians, ``home`` ``(n_readings,)`` radians (the
+    documented default seed of inverse kinematics) and ``coupled_limits`` are on
+    the readings; ``stiffness`` ``(n_actuated,)`` N·m/rad (or ``None``) is per
+    actuated link.
     """
 
     name: str
@@ -196,6 +282,7 @@ class RobotDescription:
     home: Array | None = None
     point_masses: tuple[PointMass, ...] = ()
     working_volume: Box | None = None
+    coupling: JointCoupling | None = None
     # derived (filled in __post_init__)
     _index: dict[str, int] = field(default_factory=dict, init=False, repr=False)
     _chain: tuple[int, ...] = field(default=(), init=False, repr=False)
@@ -217,7 +304,8 @@ class RobotDescription:
         chain = self._check_flange(index)
         S(self, "_chain", chain)
         self._check_loops(index, chain)
-        n = len(self.actuated)
+        self._check_coupling()
+        n = self.n_readings
         for key in ("base", "tool"):
             try:
                 T = _ro(getattr(self, key), (4, 4))
@@ -229,9 +317,9 @@ class RobotDescription:
             lim = _ro(self.joint_limits, (n, 2))
         except ValueError as exc:
             raise DescriptionError("joint_limits", str(exc)) from None
-        for j, name in enumerate(self.actuated):
+        for j in range(n):
             lo, hi = lim[j]
-            loc = f"links[{index[name]}].limits"
+            loc = self._limit_location(j)
             if not (np.isfinite(lo) and np.isfinite(hi)):
                 raise DescriptionError(loc, "limits must be finite")
             if not lo < hi:
@@ -242,7 +330,7 @@ class RobotDescription:
         S(self, "joint_limits", lim)
         if self.stiffness is not None:
             try:
-                k = _ro(self.stiffness, (n,))
+                k = _ro(self.stiffness, (len(self.actuated),))
             except ValueError as exc:
                 raise DescriptionError("stiffness", str(exc)) from None
             for j, name in enumerate(self.actuated):
@@ -260,6 +348,56 @@ class RobotDescription:
                 raise DescriptionError(f"point_masses[{i}].mass", "must be ≥ 0")
         if self.working_volume is not None and not all(s > 0 for s in self.working_volume.size):
             raise DescriptionError("working_volume.size", "edge lengths must be positive")
+
+    def _check_coupling(self) -> None:
+        c = self.coupling
+        if c is None:
+            return
+        if not isinstance(c, JointCoupling):
+            raise DescriptionError("coupling", f"expected a JointCoupling, got {type(c).__name__}")
+        n_a, n_r = len(self.actuated), c.n_readings
+        M, off = c.matrix, c.offset
+        if M.shape != (n_a, n_r):
+            raise DescriptionError(
+                "coupling.matrix",
+                f"expected {n_a}×{n_r} (one row per actuated joint {list(self.actuated)}, one "
+                f"column per reading {list(c.readings)}), got {M.shape[0]}×{M.shape[1]}",
+            )
+        if off.shape != (n_a,):
+            raise DescriptionError(
+                "coupling.offsets",
+                f"expected {n_a} numbers (one per actuated joint), got {off.size}",
+            )
+        for r in range(n_a):
+            for j in range(n_r):
+                if not math.isfinite(M[r, j]):
+                    raise DescriptionError(
+                        f"coupling.matrix[{r}][{j}]", f"must be finite, got {M[r, j]!r}"
+                    )
+            if not math.isfinite(off[r]):
+                raise DescriptionError(f"coupling.offsets[{r}]", f"must be finite, got {off[r]!r}")
+        for j in range(n_r):
+            if not np.any(M[:, j] != 0.0):
+                raise DescriptionError(
+                    "coupling.matrix",
+                    f"reading {c.readings[j]!r} (column {j}) moves no joint: "
+                    "the column is all zero",
+                )
+        sv = np.linalg.svd(M, compute_uv=False)
+        if n_r > n_a or sv[-1] <= COUPLING_RANK_TOL * max(sv[0], 1.0):
+            rank = int(np.sum(sv > COUPLING_RANK_TOL * max(sv[0], 1.0)))
+            raise DescriptionError(
+                "coupling.matrix",
+                f"singular: rank {rank} < {n_r} readings, so different readings give the same "
+                "joint angles and the readings cannot be recovered (inverse kinematics, "
+                "compensation) — the map from readings to joints must be injective",
+            )
+
+    def _limit_location(self, j: int) -> str:
+        """File location of the limits of reading ``j``."""
+        if self.coupling is not None:
+            return f"coupling.limits[{j}]"
+        return f"links[{self._index[self.actuated[j]]}].limits"
 
     def _check_links(self) -> None:
         if not self.links:
@@ -434,30 +572,29 @@ class RobotDescription:
                 )
 
     def _check_coupled(self, index: dict[str, int]) -> None:
-        act = {n: j for j, n in enumerate(self.actuated)}
+        act = {n: j for j, n in enumerate(self.reading_names)}
+        what = "a joint reading" if self.coupling is not None else "an actuated joint"
         for k, cl in enumerate(self.coupled_limits):
             loc = f"coupled_limits[{k}]"
             if len(cl.joints) != 2:
                 raise DescriptionError(f"{loc}.joints", "expected two joint names")
             for m, name in enumerate(cl.joints):
                 if name not in act:
-                    raise DescriptionError(
-                        f"{loc}.joints[{m}]", f"{name!r} is not an actuated joint"
-                    )
+                    raise DescriptionError(f"{loc}.joints[{m}]", f"{name!r} is not {what}")
             if cl.joints[0] == cl.joints[1]:
                 raise DescriptionError(f"{loc}.joints", "the two joints must differ")
             if not (math.isfinite(cl.lower) and math.isfinite(cl.upper)) or not cl.lower < cl.upper:
                 raise DescriptionError(f"{loc}", "min must be below max (finite)")
         for k, loop in enumerate(self.loops):
-            ia, ic = index[loop.arm], index[loop.crank]
-            off = self.links[ia].theta - self.links[ic].theta
+            i, j, off = self.loop_readings(k)
+            ri, rj = self.reading_names[i], self.reading_names[j]
             found = False
             for m, cl in enumerate(self.coupled_limits):
-                if set(cl.joints) != {loop.arm, loop.crank}:
+                if set(cl.joints) != {ri, rj}:
                     continue
                 found = True
                 lo, hi = cl.lower, cl.upper
-                if cl.joints[0] != loop.arm:  # limit on crank − arm
+                if cl.joints[0] != ri:  # limit on reading j − reading i
                     lo, hi = -hi, -lo
                 lo, hi = lo + off, hi + off
                 kk = math.floor(lo / math.pi)
@@ -466,7 +603,7 @@ class RobotDescription:
                 ):
                     raise DescriptionError(
                         f"coupled_limits[{m}]",
-                        f"the range of {loop.arm} − {loop.crank} lets the loop collapse: the angle "
+                        f"the range of {ri} − {rj} lets the loop collapse: the angle "
                         f"between arm and crank spans "
                         f"[{math.degrees(lo):g}°, {math.degrees(hi):g}°], "
                         f"which must stay at least {math.degrees(LOOP_MARGIN):g}° inside "
@@ -475,12 +612,39 @@ class RobotDescription:
             if not found:
                 raise DescriptionError(
                     "coupled_limits",
-                    f"loops[{k}] needs a coupled limit on {loop.arm} − {loop.crank} that keeps "
+                    f"loops[{k}] needs a coupled limit on {ri} − {rj} that keeps "
                     f"sin({loop.arm} − {loop.crank}) away from 0",
                 )
 
+    def loop_readings(self, k: int) -> tuple[int, int, float]:
+        """Readings ``(i, j)`` and constant ``c`` with ``θ_arm − θ_crank = q_i − q_j + c``.
+
+        θ are the DH angles (kinematic joint + the link's ``theta``) of loop ``k``'s
+        arm and crank.  Without a coupling ``i, j`` are the arm and crank themselves;
+        with one, the arm − crank row of the matrix must be the difference of two
+        readings (else :class:`DescriptionError` at ``coupling.matrix``).
+        """
+        loop = self.loops[k]
+        ka, kc = self.actuated.index(loop.arm), self.actuated.index(loop.crank)
+        c = self.links[self._index[loop.arm]].theta - self.links[self._index[loop.crank]].theta
+        if self.coupling is None:
+            return ka, kc, c
+        M, off = self.coupling.matrix, self.coupling.offset
+        row = M[ka] - M[kc]
+        nz = np.flatnonzero(np.abs(row) > 1e-12)
+        if len(nz) == 2 and np.allclose(np.sort(row[nz]), [-1.0, 1.0], rtol=0.0, atol=1e-12):
+            i = int(nz[np.argmax(row[nz])])
+            j = int(nz[np.argmin(row[nz])])
+            return i, j, c + float(off[ka] - off[kc])
+        raise DescriptionError(
+            "coupling.matrix",
+            f"loops[{k}]: the arm − crank angle ({loop.arm} − {loop.crank}) must be the "
+            f"difference of two readings (rows {ka} − {kc} = {row.tolist()}), so a coupled "
+            "limit on those readings can keep the parallelogram from collapsing",
+        )
+
     def _check_home(self) -> None:
-        n = len(self.actuated)
+        n = self.n_readings
         lim = self.joint_limits
         if self.home is None:
             home = lim.mean(axis=1)
@@ -488,18 +652,19 @@ class RobotDescription:
         else:
             home = np.array(self.home, dtype=float).reshape(-1)
             if home.shape != (n,):
+                per = "joint reading" if self.coupling is not None else "actuated joint"
                 raise DescriptionError(
-                    "home", f"expected {n} numbers (one per actuated joint), got {home.size}"
+                    "home", f"expected {n} numbers (one per {per}), got {home.size}"
                 )
             where = "home"
-        for j, name in enumerate(self.actuated):
+        for j, name in enumerate(self.reading_names):
             if not lim[j, 0] <= home[j] <= lim[j, 1]:
                 raise DescriptionError(
                     f"{where}[{j}]",
                     f"joint {name} = {math.degrees(home[j]):g}° is outside its limits "
                     f"[{math.degrees(lim[j, 0]):g}°, {math.degrees(lim[j, 1]):g}°]",
                 )
-        act = {nm: j for j, nm in enumerate(self.actuated)}
+        act = {nm: j for j, nm in enumerate(self.reading_names)}
         for cl in self.coupled_limits:
             v = home[act[cl.joints[0]]] - home[act[cl.joints[1]]]
             if not cl.lower <= v <= cl.upper:
@@ -536,13 +701,138 @@ class RobotDescription:
         return self.links[self.index(name)]
 
     def joint_index(self, name: str) -> int:
-        """Position of actuated link ``name`` in the joint vector ``q``."""
+        """Position of reading ``name`` in the joint-reading vector ``q``.
+
+        Without a coupling the readings are the actuated links, so ``name`` is an
+        actuated link name (:meth:`actuated_index`).
+        """
+        try:
+            return self.reading_names.index(name)
+        except ValueError:
+            raise KeyError(
+                f"{name!r} is not a joint reading; readings are {list(self.reading_names)}"
+            ) from None
+
+    def actuated_index(self, name: str) -> int:
+        """Position of actuated link ``name`` in the kinematic joint vector θ_kin."""
         try:
             return self.actuated.index(name)
         except ValueError:
             raise KeyError(
                 f"{name!r} is not an actuated joint; joints are {list(self.actuated)}"
             ) from None
+
+    # ------------------------------------------------------------------ readings
+    @property
+    def reading_names(self) -> tuple[str, ...]:
+        """Names of the joint readings, in ``q`` order (the ``actuated`` links if uncoupled)."""
+        return self.coupling.readings if self.coupling is not None else self.actuated
+
+    @property
+    def n_readings(self) -> int:
+        """Length of a joint-reading vector ``q``."""
+        return len(self.reading_names)
+
+    @property
+    def reading_jacobian(self) -> Array:
+        """``∂θ_kin/∂q`` ``(n_actuated, n_readings)``: the coupling matrix, or the identity."""
+        if self.coupling is not None:
+            return self.coupling.matrix
+        eye = np.eye(self.n_actuated)
+        eye.setflags(write=False)
+        return eye
+
+    def kinematic_joints(self, q: Any) -> Array:
+        """Kinematic joints θ_kin ``(..., n_actuated)`` of readings ``q`` ``(..., n_readings)``.
+
+        ``θ_kin = M · q + offset`` (the :class:`JointCoupling`); ``q`` itself (as a
+        float array) without a coupling.  Radians.
+        """
+        q = np.asarray(q, dtype=float)
+        if self.coupling is None:
+            return q
+        return self.coupling.kinematic(q)
+
+    def readings(self, theta: Any) -> Array:
+        """Joint readings ``(..., n_readings)`` of kinematic joints θ_kin ``(..., n_actuated)``.
+
+        ``q = M⁺ (θ_kin − offset)`` — exact when θ_kin is reachable by the coupling
+        (always when M is square); otherwise the readings whose kinematic joints are
+        nearest in the least-squares sense.  Identity without a coupling.
+        """
+        theta = np.asarray(theta, dtype=float)
+        if self.coupling is None:
+            return theta
+        return self.coupling.readings_of(theta)
+
+    @property
+    def periodic_readings(self) -> NDArray[np.bool_]:
+        """``(n_readings,)``: where adding 2π to the reading leaves the robot's pose unchanged
+        (every kinematic joint it drives moves by a whole number of turns)."""
+        M = self.reading_jacobian
+        return np.all(np.abs(M - np.round(M)) < 1e-12, axis=0)
+
+    def kinematic_limits(self) -> Array:
+        """``(n_actuated, 2)``: the box of kinematic joints θ_kin the reading limits allow.
+
+        Interval arithmetic on ``θ_kin = M·q + offset`` (exact per joint, the box
+        encloses the image); the joint limits themselves without a coupling.
+        """
+        c = self.coupling
+        if c is None:
+            return self.joint_limits
+        M, off = c.matrix, c.offset
+        lo, hi = self.joint_limits[:, 0], self.joint_limits[:, 1]
+        klo = np.minimum(M * lo, M * hi).sum(axis=1) + off
+        khi = np.maximum(M * lo, M * hi).sum(axis=1) + off
+        out = np.stack([klo, khi], axis=1)
+        out.setflags(write=False)
+        return out
+
+    def uncoupled(self) -> RobotDescription:
+        """The same robot with its kinematic joints as readings (no coupling).
+
+        Links, loops, BASE, tool, masses and stiffnesses are kept; limits are the
+        box enclosing the image of the reading limits, a loop's coupled limit is
+        moved onto arm − crank, ``home`` is θ_kin of the home readings.  Without a
+        coupling this is ``self``.  Calibration builds its models on it.
+        """
+        if self.coupling is None:
+            return self
+        cached = self.__dict__.get("_uncoupled")
+        if cached is not None:
+            return cached  # type: ignore[no-any-return]
+        coupled = []
+        for k, loop in enumerate(self.loops):
+            i, j, cst = self.loop_readings(k)
+            ri, rj = self.reading_names[i], self.reading_names[j]
+            for cl in self.coupled_limits:
+                if set(cl.joints) == {ri, rj}:
+                    a, b = (cl.lower, cl.upper) if cl.joints[0] == ri else (-cl.upper, -cl.lower)
+                    shift = cst - (
+                        self.links[self._index[loop.arm]].theta
+                        - self.links[self._index[loop.crank]].theta
+                    )
+                    coupled.append(CoupledLimit((loop.arm, loop.crank), a + shift, b + shift))
+                    break
+        kin = RobotDescription(
+            name=self.name,
+            links=self.links,
+            actuated=self.actuated,
+            flange=self.flange,
+            loops=self.loops,
+            base=self.base,
+            tool=self.tool,
+            joint_limits=self.kinematic_limits(),
+            stiffness=self.stiffness,
+            notes=self.notes,
+            coupled_limits=tuple(coupled),
+            home=self.kinematic_joints(self.home),
+            point_masses=self.point_masses,
+            working_volume=self.working_volume,
+        )
+        object.__setattr__(self, "_uncoupled", kin)
+        return kin
 
     @property
     def chain(self) -> tuple[int, ...]:
@@ -568,10 +858,10 @@ class RobotDescription:
         )
 
     def limit_violations(self, q: Any, tol: float = 0.0) -> list[str]:
-        """Human-readable list of limit violations of one configuration ``q`` (radians)."""
+        """Human-readable list of limit violations of one reading vector ``q`` (radians)."""
         q = np.asarray(q, dtype=float)
         out = []
-        for j, name in enumerate(self.actuated):
+        for j, name in enumerate(self.reading_names):
             lo, hi = self.joint_limits[j]
             if not lo - tol <= q[j] <= hi + tol:
                 out.append(
@@ -588,7 +878,7 @@ class RobotDescription:
         return out
 
     def within_limits(self, q: Any, tol: float = 1e-9) -> NDArray[np.bool_]:
-        """Mask ``(...)``: configurations ``(..., n)`` inside joint and coupled limits."""
+        """Mask ``(...)``: readings ``(..., n_readings)`` inside joint and coupled limits."""
         q = np.asarray(q, dtype=float)
         lo, hi = self.joint_limits[:, 0], self.joint_limits[:, 1]
         ok = np.all((q >= lo - tol) & (q <= hi + tol), axis=-1)
@@ -628,7 +918,8 @@ class RobotDescription:
             d["com"] = list(lk.com)
             if lk.name in act:
                 j = act[lk.name]
-                d["limits"] = [math.degrees(x) for x in self.joint_limits[j]]
+                if self.coupling is None:
+                    d["limits"] = [math.degrees(x) for x in self.joint_limits[j]]
                 if self.stiffness is not None:
                     d["stiffness"] = float(self.stiffness[j])
             links.append(d)
@@ -659,6 +950,14 @@ class RobotDescription:
                 for p in self.point_masses
             ],
         }
+        if self.coupling is not None:
+            c = self.coupling
+            out["coupling"] = {
+                "readings": list(c.readings),
+                "matrix": [[float(x) for x in row] for row in c.matrix],
+                "offsets": [math.degrees(x) for x in c.offset],
+                "limits": [[math.degrees(x) for x in lim] for lim in self.joint_limits],
+            }
         if self.working_volume is not None:
             out["working_volume"] = {
                 "center": list(self.working_volume.center),
@@ -697,7 +996,9 @@ _TOP_KEYS = {
     "coupled_limits",
     "point_masses",
     "working_volume",
+    "coupling",
 }
+_COUPLING_KEYS = {"readings", "matrix", "offsets", "limits"}
 _LINK_KEYS = {
     "name",
     "parent",
@@ -834,6 +1135,9 @@ def _parse(data: Any) -> RobotDescription:
             parts.append(s)
         notes = "\n".join(parts)
 
+    coupling, reading_limits = (
+        _parse_coupling(top["coupling"]) if "coupling" in top else (None, None)
+    )
     raw_links = _list(_req(top, "links", ""), "links")
     links: list[Link] = []
     limits: dict[str, tuple[float, float]] = {}
@@ -864,12 +1168,16 @@ def _parse(data: Any) -> RobotDescription:
             raise DescriptionError(f"{loc}.mass", f"must be ≥ 0, got {mass:g}")
         com = tuple(_vec(_opt(t, "com", [0.0, 0.0, 0.0]), 3, f"{loc}.com"))
         if joint == "actuated":
-            lim = _vec(_req(t, "limits", loc), 2, f"{loc}.limits")
-            if not lim[0] < lim[1]:
-                raise DescriptionError(
-                    f"{loc}.limits", f"lower limit {lim[0]:g} must be below upper limit {lim[1]:g}"
-                )
-            limits[lname] = (lim[0] * _DEG, lim[1] * _DEG)
+            if coupling is not None:
+                if "limits" in t:
+                    raise DescriptionError(
+                        f"{loc}.limits",
+                        "with a [coupling] the joint limits are on the readings: give them in "
+                        "coupling.limits",
+                    )
+            else:
+                lim = _limit_pair(_req(t, "limits", loc), f"{loc}.limits")
+                limits[lname] = (lim[0] * _DEG, lim[1] * _DEG)
             if "stiffness" in t:
                 k = _num(t["stiffness"], f"{loc}.stiffness")
                 if k <= 0:
@@ -951,13 +1259,16 @@ def _parse(data: Any) -> RobotDescription:
     tool = _parse_transform(top["tool"], "tool") if "tool" in top else np.eye(4)
 
     # order limits by the actuated list (unknown names are reported by the model)
-    n = len(actuated)
-    jl = np.zeros((n, 2))
-    for j, nm in enumerate(actuated):
-        jl[j] = limits.get(nm, (-math.pi, math.pi))
+    if reading_limits is not None:
+        jl = reading_limits
+    else:
+        jl = np.zeros((len(actuated), 2))
+        for j, nm in enumerate(actuated):
+            jl[j] = limits.get(nm, (-math.pi, math.pi))
+    declared = {lk.name for lk in links if lk.joint == "actuated"}
     stiffness = None
     if stiff:
-        missing = [nm for nm in actuated if nm in limits and nm not in stiff]
+        missing = [nm for nm in actuated if nm in declared and nm not in stiff]
         if missing:
             i = next(i for i, lk in enumerate(links) if lk.name == missing[0])
             raise DescriptionError(
@@ -986,4 +1297,52 @@ def _parse(data: Any) -> RobotDescription:
         home=home,
         point_masses=tuple(pms),
         working_volume=box,
+        coupling=coupling,
     )
+
+
+def _limit_pair(v: Any, loc: str) -> list[float]:
+    lim = _vec(v, 2, loc)
+    if not lim[0] < lim[1]:
+        raise DescriptionError(
+            loc, f"lower limit {lim[0]:g} must be below upper limit {lim[1]:g}"
+        )
+    return lim
+
+
+def _parse_coupling(v: Any) -> tuple[JointCoupling, Array]:
+    """The ``[coupling]`` table → (:class:`JointCoupling`, reading limits ``(n_r, 2)`` rad)."""
+    loc = "coupling"
+    t = _table(v, loc, _COUPLING_KEYS)
+    raw_r = _list(_req(t, "readings", loc), f"{loc}.readings")
+    readings = tuple(_str(x, f"{loc}.readings[{j}]") for j, x in enumerate(raw_r))
+    n_r = len(readings)
+    rows = _list(_req(t, "matrix", loc), f"{loc}.matrix")
+    if not rows:
+        raise DescriptionError(f"{loc}.matrix", "expected one row per actuated joint, got none")
+    matrix = []
+    for r, row in enumerate(rows):
+        seq = _list(row, f"{loc}.matrix[{r}]")
+        if len(seq) != len(_list(rows[0], f"{loc}.matrix[0]")):
+            raise DescriptionError(
+                f"{loc}.matrix[{r}]",
+                f"expected {len(rows[0])} numbers like row 0 (one per reading), got {len(seq)}",
+            )
+        matrix.append([_num(x, f"{loc}.matrix[{r}][{j}]") for j, x in enumerate(seq)])
+    n_a = len(matrix)
+    if "offsets" in t:  # its length is checked against `actuated` by the model
+        offs = _list(t["offsets"], f"{loc}.offsets")
+        offset = [_num(x, f"{loc}.offsets[{k}]") * _DEG for k, x in enumerate(offs)]
+    else:
+        offset = [0.0] * n_a
+    raw_l = _list(_req(t, "limits", loc), f"{loc}.limits")
+    if len(raw_l) != n_r:
+        raise DescriptionError(
+            f"{loc}.limits",
+            f"expected {n_r} [lower, upper] pairs (one per reading), got {len(raw_l)}",
+        )
+    lims = np.array(
+        [_limit_pair(x, f"{loc}.limits[{j}]") for j, x in enumerate(raw_l)], dtype=float
+    ).reshape(n_r, 2) * _DEG
+    return JointCoupling(readings, np.array(matrix, dtype=float).reshape(n_a, -1),
+                         np.array(offset)), lims

@@ -1,15 +1,18 @@
 """Forward kinematics through closed loops, thesis eqs. (6.1)–(6.3).
 
 ``forward(desc, params, q)`` evaluates every link frame in the robot base frame
-F0 for joint readings ``q`` (``(..., n_actuated)``, radians, in the
-description's ``actuated`` order).  Each link frame is its parent's frame times
-the DH + Hayati link transform (B.1) with the numbers of ``params`` (never the
-description's), so every parameter acts on FK.  The passive angles of each loop
-come from the closure (:mod:`plugcell.kinematics.closure`), and the flange pose
-is taken along the chain through the loop — for the Smart H4 the branch
-(1-2'-3'-4'-3) of eq. (6.2), which carries the loop parameters — while the arm
-(link 2, off the chain) is evaluated too, so branch (1-2-3) of eq. (6.3) can be
-compared (:func:`branch_cut_transform`).
+F0 for joint readings ``q`` (``(..., n_readings)``, radians, in the
+description's reading order — its ``actuated`` order unless it has a
+``coupling``, whose kinematic joints ``θ_kin = M·q + offset`` are what the DH
+rows then see, :meth:`RobotDescription.kinematic_joints`).  Each link frame is
+its parent's frame times the DH + Hayati link transform (B.1) with the numbers
+of ``params`` (never the description's), so every parameter acts on FK.  The
+passive angles of each loop come from the closure
+(:mod:`plugcell.kinematics.closure`), and the flange pose is taken along the
+chain through the loop — for the Smart H4 the branch (1-2'-3'-4'-3) of eq.
+(6.2), which carries the loop parameters — while the arm (link 2, off the
+chain) is evaluated too, so branch (1-2-3) of eq. (6.3) can be compared
+(:func:`branch_cut_transform`).
 """
 
 from __future__ import annotations
@@ -46,7 +49,8 @@ class FKResult:
     frame F0 (off-chain links such as the Smart H4's arm "2" included).
     ``theta``: ``(..., n_links)`` the DH angle θ_i each link used.
     ``passive``: ``(..., n_passive)`` passive angles in ``passive_names`` order.
-    ``passive_jacobian``: ``(..., n_passive, n_actuated)`` ∂θ_passive/∂q.
+    ``passive_jacobian``: ``(..., n_passive, n_actuated)`` ∂θ_passive/∂θ_kin, w.r.t. the
+    kinematic joints (the readings when the description has no coupling).
     ``passive_d_a``: ``(..., n_passive, n_links)`` ∂θ_passive/∂a_link (four-bar only;
     zeros for the nominal closure).
     ``flange``: T_n^0 (eq. 6.1), ``tcp`` = flange·tool, both in the robot base
@@ -95,9 +99,9 @@ class FKResult:
 
 def _check_q(desc: RobotDescription, q: ArrayLike) -> Array:
     q = np.asarray(q, dtype=float)
-    if q.ndim == 0 or q.shape[-1] != desc.n_actuated:
+    if q.ndim == 0 or q.shape[-1] != desc.n_readings:
         raise ValueError(
-            f"q: expected shape (..., {desc.n_actuated}) for joints {list(desc.actuated)}, "
+            f"q: expected shape (..., {desc.n_readings}) for joints {list(desc.reading_names)}, "
             f"got {q.shape}"
         )
     if not np.all(np.isfinite(q)):
@@ -126,10 +130,12 @@ def joint_angles(
     *,
     raise_errors: bool = True,
 ) -> tuple[Array, Array, Array, Array, NDArray[np.bool_]]:
-    """DH angles of every link for readings ``q``.
+    """DH angles of every link for readings ``q`` ``(..., n_readings)``.
 
-    Returns ``(theta (..., n_links), passive (..., n_p), d_passive_dq (..., n_p, n),
-    d_passive_da (..., n_p, n_links), valid (...))``.
+    θ_i = θ_kin,j + theta_i for actuated link i (θ_kin = ``desc.kinematic_joints(q)``),
+    the closure angle + theta_i for passive links, theta_i for fixed ones.
+    Returns ``(theta (..., n_links), passive (..., n_p), d_passive_dθkin (..., n_p,
+    n_actuated), d_passive_da (..., n_p, n_links), valid (...))``.
     """
     if closure not in CLOSURES:
         raise ValueError(f"closure must be one of {CLOSURES}, got {closure!r}")
@@ -138,8 +144,9 @@ def joint_angles(
     batch = q.shape[:-1]
     n_l, n_a = desc.n_links, desc.n_actuated
     theta = np.broadcast_to(p.theta, (*batch, n_l)).copy()
+    q_kin = desc.kinematic_joints(q)
     for j, name in enumerate(desc.actuated):
-        theta[..., desc.index(name)] += q[..., j]
+        theta[..., desc.index(name)] += q_kin[..., j]
     n_p = 2 * len(desc.loops)
     passive = np.zeros((*batch, n_p))
     dq = np.zeros((*batch, n_p, n_a))
@@ -159,7 +166,7 @@ def joint_angles(
         passive[..., 2 * k + 1] = res.follower
         theta[..., i3] += res.coupler
         theta[..., i4] += res.follower
-        ja, jc = desc.joint_index(loop.arm), desc.joint_index(loop.crank)
+        ja, jc = desc.actuated_index(loop.arm), desc.actuated_index(loop.crank)
         dq[..., 2 * k : 2 * k + 2, ja] = res.d_driven[..., :, 0]
         dq[..., 2 * k : 2 * k + 2, jc] = res.d_driven[..., :, 1]
         for m, il in enumerate((ia, ic, i3, i4)):
@@ -189,8 +196,9 @@ def forward(
 ) -> FKResult:
     """Forward kinematics of every link, thesis eq. (6.1) via branch (6.2).
 
-    ``q``: ``(..., n_actuated)`` joint readings in radians (need not be wrapped;
-    limits are not checked).  ``params``: the geometric parameters to use
+    ``q``: ``(..., n_readings)`` joint readings in radians (need not be wrapped;
+    limits are not checked; a description's ``coupling`` maps them to its
+    kinematic joints).  ``params``: the geometric parameters to use
     (``None`` → nominal).  ``closure``: ``"fourbar"`` (exact, default) or
     ``"nominal"`` (eq. 6.10, what a controller's nominal model does).  Raises
     :class:`~plugcell.kinematics.errors.LoopClosureError` if a loop cannot be

@@ -29,7 +29,10 @@ solver is numerical and works for any description (loops included):
    value and the limit; otherwise :class:`UnreachableError` ("no convergence")
    with the closest approach found.
 
-All of it is vectorised over targets.
+All of it is vectorised over targets.  The unknowns are the joint *readings*
+(a description's ``coupling`` enters through forward kinematics and the
+Jacobian w.r.t. the readings), so the solution comes back as the controller
+would report it, inside the limits on the readings.
 """
 
 from __future__ import annotations
@@ -74,7 +77,7 @@ __all__ = ["IKResult", "inverse"]
 class IKResult:
     """Result of :func:`inverse` (arrays batched like the targets, shape ``(...)``).
 
-    ``q``: ``(..., n)`` joint readings (rad) — the solution, or the closest
+    ``q``: ``(..., n_readings)`` joint readings (rad) — the solution, or the closest
     attempt where ``converged`` is False; ``position_error`` (m) and
     ``orientation_error`` (rad) of ``q``; ``iterations`` spent (all starts);
     ``within_limits``; ``reason``: ``""`` for a solution inside the limits,
@@ -99,7 +102,7 @@ class _Limits:
 
 
 def _limits(desc: RobotDescription, enforce: bool) -> _Limits:
-    n = desc.n_actuated
+    n = desc.n_readings
     pairs = []
     for cl in desc.coupled_limits:
         i, j = desc.joint_index(cl.joints[0]), desc.joint_index(cl.joints[1])
@@ -108,9 +111,8 @@ def _limits(desc: RobotDescription, enforce: bool) -> _Limits:
         return _Limits(desc.joint_limits[:, 0].copy(), desc.joint_limits[:, 1].copy(), tuple(pairs))
     # free iterations: only keep each loop inside the half-turn of its coupled limit
     safe = []
-    for loop in desc.loops:
-        ia, ic = desc.joint_index(loop.arm), desc.joint_index(loop.crank)
-        off = desc.link(loop.arm).theta - desc.link(loop.crank).theta
+    for k_loop in range(len(desc.loops)):
+        ia, ic, off = desc.loop_readings(k_loop)  # θ_arm − θ_crank = q_ia − q_ic + off
         for i, j, lo, hi in pairs:
             if {i, j} != {ia, ic}:
                 continue
@@ -214,9 +216,13 @@ def _solve(
 
 
 def _wrap_to_seed(q: Array, seed: Array, desc: RobotDescription, enforce: bool) -> Array:
-    """Each angle's 2π-representative nearest the seed (inside the limits if possible)."""
+    """Each angle's 2π-representative nearest the seed (inside the limits if possible).
+
+    Only readings whose 2π shift leaves the pose unchanged are moved
+    (``desc.periodic_readings``; all of them without a coupling).
+    """
     lo, hi = desc.joint_limits[:, 0], desc.joint_limits[:, 1]
-    ks = np.arange(-3, 4) * 2.0 * np.pi
+    ks = np.where(desc.periodic_readings[:, None], np.arange(-3, 4) * 2.0 * np.pi, 0.0)
     cand = q[..., None] + ks  # (..., n, 7)
     inside = (cand >= lo[:, None] - 1e-9) & (cand <= hi[:, None] + 1e-9)
     dist = np.abs(cand - seed[..., None])
@@ -265,18 +271,23 @@ def _restart_seeds(
     ranges) and plain home.  Group 2: the "wrist flips" (q4 + π, −q5, q6 + π) of
     group 1 and of the seed.  Group 3: home turned away from the target and
     :data:`N_RANDOM_SEEDS` fixed quasi-random configurations inside the limits.
+    Groups 1 and 2 are built on the kinematic joints θ_kin and mapped back to
+    readings (the same thing without a coupling).
     """
     n = desc.n_actuated
+    n_r = desc.n_readings
     B = T.shape[0]
-    home = np.asarray(desc.home, dtype=float)
-    lo, hi = desc.joint_limits[:, 0], desc.joint_limits[:, 1]
+    home_q = np.asarray(desc.home, dtype=float)
+    home = desc.kinematic_joints(home_q)
+    kin_limits = desc.kinematic_limits()
+    lo, hi = kin_limits[:, 0], kin_limits[:, 1]
 
     def tile(x: Array) -> Array:
-        return np.broadcast_to(x, (B, n)).copy()
+        return np.broadcast_to(x, (B, x.shape[-1])).copy()
 
     # Axis 1 is the root's z: turn home about it so the arm faces the target.
-    j1 = desc.joint_index(desc.links[0].name) if desc.links[0].is_actuated else None
-    fk_home = forward(desc, params, home, closure)
+    j1 = desc.actuated_index(desc.links[0].name) if desc.links[0].is_actuated else None
+    fk_home = forward(desc, params, home_q, closure)
     p_home = (fk_home.tcp if point == "tcp" else fk_home.flange)[:3, 3]
     az_home = math.atan2(p_home[1], p_home[0])
     az_t = np.arctan2(T[:, 1, 3], T[:, 0, 3])
@@ -295,16 +306,20 @@ def _restart_seeds(
     group1.append(tile(home))
     group2 = []
     if n >= 6:
-        for base in (*group1, tile(seed) if seed.ndim == 1 else seed.copy()):
+        seed_k = desc.kinematic_joints(seed)
+        for base in (*group1, tile(seed_k) if seed_k.ndim == 1 else seed_k.copy()):
             f = base.copy()
             f[:, n - 3] += np.pi
             f[:, n - 2] *= -1.0
             f[:, n - 1] += np.pi
             group2.append(f)
-    group3 = [away]
+    group1 = [desc.readings(g) for g in group1]
+    group2 = [desc.readings(g) for g in group2]
+    group3 = [desc.readings(away)]
     rng = np.random.default_rng(20240611)
+    q_lo, q_hi = desc.joint_limits[:, 0], desc.joint_limits[:, 1]
     for _ in range(N_RANDOM_SEEDS):
-        group3.append(tile(lo + rng.random(n) * (hi - lo)))
+        group3.append(tile(q_lo + rng.random(n_r) * (q_hi - q_lo)))
     return [np.stack(g, axis=1) for g in (group1, group2, group3) if g]
 
 
@@ -355,7 +370,8 @@ def inverse(
 
     ``T_target``: ``(..., 4, 4)`` pose(s) in the robot base frame of the flange
     (``target="flange"``, default) or of the TCP = flange·tool (``"tcp"``).
-    ``seed``: ``(n,)`` or ``(..., n)`` radians; default ``desc.home``.  Returns
+    ``seed``: ``(n_readings,)`` or ``(..., n_readings)`` joint readings, radians;
+    default ``desc.home``.  Returns
     the converged solution nearest the seed (see the module docstring).
     ``enforce_limits``: only solutions inside the joint and coupled limits count.
     ``tol``: convergence threshold, metres for position and radians for
@@ -375,13 +391,13 @@ def inverse(
     if not np.all(np.isfinite(T)):
         raise ValueError("T_target: values must be finite")
     batch = T.shape[:-2]
-    n = desc.n_actuated
+    n = desc.n_readings
     Tf = T.reshape(-1, 4, 4)
     B = Tf.shape[0]
     s = np.asarray(desc.home if seed is None else seed, dtype=float)
     if s.shape[-1:] != (n,):
         raise ValueError(
-            f"seed: expected {n} joint values for {list(desc.actuated)}, got shape {s.shape}"
+            f"seed: expected {n} joint values for {list(desc.reading_names)}, got shape {s.shape}"
         )
     if not np.all(np.isfinite(s)):
         raise ValueError("seed: values must be finite")
@@ -517,7 +533,7 @@ class _Failure:
 
 
 def _limit_failure(desc: RobotDescription, q: Array) -> _Failure:
-    for j, name in enumerate(desc.actuated):
+    for j, name in enumerate(desc.reading_names):
         lo, hi = desc.joint_limits[j]
         if not lo - 1e-9 <= q[j] <= hi + 1e-9:
             return _Failure(

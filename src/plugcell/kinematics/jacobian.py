@@ -16,6 +16,10 @@ With the nominal closure (6.16) ∂θ3'/∂(θ2, θ2') = (1, −1) and
 restored: K_2 = K_3' − K_4' and K_2' = K_2' − K_3' + K_4'.  With the exact
 four-bar closure the derivatives come from the implicit-function theorem.
 
+A description with a joint ``coupling`` (θ_kin = M·q + offset) has its readings
+q as joint variables: by the chain rule the columns w.r.t. the readings are
+``J_q = J_θkin · M`` (:func:`kinematic_jacobian_from_fk` gives ``J_θkin``).
+
 Sign/convention: the columns are the derivative of
 ``pose_error(T(q + dq), T(q))`` (see :mod:`plugcell.kinematics.pose_error`),
 i.e. linear velocity of the point and angular velocity, both in the base frame.
@@ -32,11 +36,25 @@ from plugcell.kinematics.parameters import GeometricParameters
 
 Array = NDArray[np.float64]
 
-__all__ = ["jacobian_from_fk", "manipulator_jacobian"]
+__all__ = ["jacobian_from_fk", "kinematic_jacobian_from_fk", "manipulator_jacobian"]
 
 
 def jacobian_from_fk(desc: RobotDescription, fk: FKResult, point: str = "flange") -> Array:
-    """Jacobian ``(..., 6, n_actuated)`` from an already computed :class:`FKResult`."""
+    """Jacobian ``(..., 6, n_readings)`` w.r.t. the joint readings, from an :class:`FKResult`.
+
+    ``J_q = J_θkin · M`` with M = ``desc.reading_jacobian`` (the coupling matrix;
+    without a coupling ``J_q = J_θkin``, computed once).
+    """
+    J = kinematic_jacobian_from_fk(desc, fk, point)
+    if desc.coupling is None:
+        return J
+    return J @ desc.coupling.matrix
+
+
+def kinematic_jacobian_from_fk(
+    desc: RobotDescription, fk: FKResult, point: str = "flange"
+) -> Array:
+    """Jacobian ``(..., 6, n_actuated)`` w.r.t. the kinematic joints θ_kin (module docstring)."""
     if point == "flange":
         p = fk.flange[..., :3, 3]
     elif point == "tcp":
@@ -74,10 +92,11 @@ def manipulator_jacobian(
     point: str = "flange",
     closure: str = "fourbar",
 ) -> Array:
-    """Manipulator Jacobian ``(..., 6, n_actuated)`` of the actuated joints.
+    """Manipulator Jacobian ``(..., 6, n_readings)`` w.r.t. the joint readings.
 
     Rows: linear velocity of ``point`` ("flange" origin or "tcp" = flange·tool)
-    and angular velocity, both in the robot base frame, per unit joint rate
+    and angular velocity, both in the robot base frame, per unit reading rate
+    (``J_θkin · M`` for a coupled description)
     (thesis 6.37; loop joints via 6.39 for ``closure="nominal"`` or the exact
     four-bar derivatives for ``"fourbar"``).
     """

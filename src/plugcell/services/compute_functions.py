@@ -188,7 +188,7 @@ def _poses(rows: np.ndarray, convention: str) -> np.ndarray:
 
 def _data(desc: RobotDescription, mJ: Any, mT: Any, payload: Any, angles: Any,
           names: tuple[str, str]) -> CalibrationData:
-    J = _matrix(mJ, names[0], (desc.n_actuated,))
+    J = _matrix(mJ, names[0], (desc.n_readings,))
     T = _matrix(mT, names[1], (3, 6))
     if len(J) != len(T):
         raise FunctionError(f"{names[0]} has {len(J)} rows but {names[1]} has {len(T)}")
@@ -357,7 +357,7 @@ def compensate_joints(ctx: FunctionContext, params: Any, joints: Any, payload: A
     the compensated joints (N×n, deg) that put the tool where the nominal robot would."""
     p = _params(params)
     desc = p.description
-    q = np.deg2rad(_matrix(joints, "joints", (desc.n_actuated,)))
+    q = np.deg2rad(_matrix(joints, "joints", (desc.n_readings,)))
     model = IdentifiedModel(p.result.model, tool=_tool(p, tool, _convention(angles)))
     T = NominalModel(desc, tool=model.tool).pose(q)
     try:

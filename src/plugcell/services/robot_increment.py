@@ -36,7 +36,7 @@ def joint_increment(
     ValueError (with the reason) for bad input or a singular configuration.
     """
     q = np.radians(np.asarray([float(v) for v in joints_deg], dtype=float))
-    n = description.n_actuated
+    n = description.n_readings
     if q.shape != (n,) or not np.all(np.isfinite(q)):
         raise ValueError(f"{description.name} has {n} axes; got joints {list(joints_deg)}")
     dx = pose_error(pose_matrix(target), pose_matrix(measured))

@@ -68,7 +68,7 @@ def measure_probe(robot: RobotTwin, tracker: LaserTracker, q: np.ndarray,
                   setup: FrameProcedureSetup = FrameProcedureSetup()) -> ProbeEstimate:
     """Appendix D.1 at joint configuration ``q`` (rad)."""
     truth = robot.reveal_truth()  # the physical world: where the SMR really is
-    j6 = robot.description.n_actuated - 1
+    j6 = robot.description.n_readings - 1
     hole = DOWEL_HOLES[1] + [0.0, 0.0, setup.smr_offset]
     circle = []
     for a in np.deg2rad(setup.joint6_angles_deg):

@@ -75,7 +75,7 @@ def working_volume_joints(desc: RobotDescription, profile: TwinProfile, n: int,
             continue
         ok = np.asarray(res.converged) & np.asarray(res.within_limits)
         found.append(np.asarray(res.q)[ok][:need])
-    q = np.concatenate(found) if found else np.empty((0, desc.n_actuated))
+    q = np.concatenate(found) if found else np.empty((0, desc.n_readings))
     if len(q) < n:
         raise CampaignError(f"found only {len(q)} of {n} reachable poses in the working volume")
     return q[:n]

@@ -16,6 +16,11 @@ real arm does:
    joints follow the *exact* four-bar closure of the true loop;
 4. the links bend (:func:`~plugcell.twin.physics.bending`).
 
+Motors, encoders and reducers (steps 1–2) act on the joint *readings*; a
+description with a joint ``coupling`` (vendor convention) maps them to its
+kinematic joints before the joints yield (step 3) — the joint stiffnesses are
+those of the links.  Without a coupling readings and kinematic joints coincide.
+
 Only simulated devices (the tracker model, the simulated controller) may ask for
 :meth:`RobotTwin.true_flange`.  Service and calibration code see joint readings
 and tracker measurements, like with a real robot.
@@ -26,7 +31,7 @@ from __future__ import annotations
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from plugcell.kinematics import forward
+from plugcell.kinematics import RobotDescription, forward
 from plugcell.twin.physics import Payload, bending, deflected_joints, gravity_torques
 from plugcell.twin.scenario import TwinScenario, TwinTruth, make_truth
 
@@ -45,15 +50,27 @@ def true_flange_poses(truth: TwinTruth, q_motor: ArrayLike, payload: Payload | N
     gravity = sc.gravity if gravity is None else gravity
     bend = sc.bending if bend is None else bend
     q = np.asarray(q_motor, dtype=float)
-    q = q + truth.transmission(q)
-    if gravity:
-        q = deflected_joints(truth.description, truth.params, q, truth.stiffness, payload)
-    fk = forward(truth.description, truth.params, q, closure="fourbar")
+    desc, q = _link_joints(truth, q + truth.transmission(q), payload, gravity)
+    fk = forward(desc, truth.params, q, closure="fourbar")
     flange = fk.flange
     if bend and gravity and truth.profile.beams:
-        bent = bending(truth.description, fk.frames, flange, truth.profile.beams, payload)
+        bent = bending(desc, fk.frames, flange, truth.profile.beams, payload)
         flange = bent @ flange
     return flange
+
+
+def _link_joints(truth: TwinTruth, q_reached: Array, payload: Payload, gravity: bool
+                 ) -> tuple[RobotDescription, Array]:
+    """The robot on its kinematic joints and their link-side angles for reached readings.
+
+    θ = θ_kin(q) (the description's coupling), then the joints yield to gravity.
+    """
+    desc = truth.description
+    q = desc.kinematic_joints(q_reached)
+    kin = desc.uncoupled()
+    if gravity:
+        q = deflected_joints(kin, truth.params, q, truth.stiffness, payload)
+    return kin, q
 
 
 class RobotTwin:
@@ -71,7 +88,7 @@ class RobotTwin:
         desc = self._truth.description
         self._motor = np.array(desc.home, dtype=float)
         self._reached = self._motor.copy()
-        self._flank = np.ones(desc.n_actuated)  # side of the backlash each gear sits on
+        self._flank = np.ones(desc.n_readings)  # side of the backlash each gear sits on
         self.moves = 0
 
     # ------------------------------------------------------------------ public face
@@ -94,13 +111,13 @@ class RobotTwin:
         return np.round(np.asarray(q, dtype=float) / res) * res
 
     def move_joints(self, q_command: ArrayLike) -> Array:
-        """Servo to ``q_command`` (rad, actuated order); returns the joint readings.
+        """Servo to ``q_command`` (joint readings, rad); returns the joint readings.
 
         Joint limits are the controller's business (the simulated controller checks
         them before calling this); the arm goes where it is told.
         """
         q = np.asarray(q_command, dtype=float)
-        n = self.description.n_actuated
+        n = self.description.n_readings
         if q.shape != (n,) or not np.all(np.isfinite(q)):
             raise ValueError(f"move_joints: expected {n} finite joint angles, got {q!r}")
         motor = self.quantise(q)
@@ -145,7 +162,5 @@ def true_link_frames(truth: TwinTruth, q_motor: ArrayLike, payload: Payload | No
     sc = truth.scenario
     payload = sc.payload if payload is None else payload
     q = np.asarray(q_motor, dtype=float)
-    q = q + truth.transmission(q)
-    if sc.gravity:
-        q = deflected_joints(truth.description, truth.params, q, truth.stiffness, payload)
-    return forward(truth.description, truth.params, q, closure="fourbar").frames
+    desc, q = _link_joints(truth, q + truth.transmission(q), payload, sc.gravity)
+    return forward(desc, truth.params, q, closure="fourbar").frames

@@ -161,8 +161,8 @@ class TwinTruth:
     params: GeometricParameters  # true geometry
     base: np.ndarray  # robot base in the tracker frame (thesis BASE, eq. 6.23)
     probe: np.ndarray  # T-MAC in the flange frame (thesis PROBE)
-    stiffness: np.ndarray  # N·m/rad per actuated joint
-    transmission: TransmissionError  # periodic reducer error per actuated joint
+    stiffness: np.ndarray  # N·m/rad per actuated joint (kinematic joints of a coupling)
+    transmission: TransmissionError  # periodic reducer error per motor (joint reading)
     profile: TwinProfile
     scenario: TwinScenario
 
@@ -208,7 +208,7 @@ def make_truth(scenario: TwinScenario) -> TwinTruth:
     base = np.linalg.inv(tracker_in_robot)
     probe = translation(np.array(profile.probe_position))
     probe[:3, :3] = rpy_to_matrix(*profile.probe_rpy)
-    n, k = desc.n_actuated, len(profile.transmission_orders)
+    n, k = desc.n_readings, len(profile.transmission_orders)  # one reducer per motor
     scale = profile.transmission_amplitude if scenario.transmission else 0.0
     transmission = TransmissionError(
         profile.transmission_orders,
