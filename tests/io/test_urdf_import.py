@@ -254,8 +254,8 @@ def test_good_urdf(tmp_path: Path) -> None:
     (_GOOD.replace('lower="-2" upper="2"', 'lower="2" upper="2"'), {},
      r"joint 'j2': <limit>.*lower 2.0 must be below upper 2.0"),
     (_GOOD.replace('<axis xyz="0 0 1"/>\n    <limit lower="-2"',
-                   '<axis xyz="0 0 1"/><mimic joint="j1"/>\n    <limit lower="-2"'), {},
-     r"joint 'j2': mimics joint 'j1'"),
+                   '<axis xyz="0 0 1"/><mimic joint="jx"/>\n    <limit lower="-2"'), {},
+     r"robot.urdf: joints\[1\] \(j2\).mimic: mimics 'jx', which is not a moving joint"),
     (_GOOD.replace('type="fixed"', 'type="prismatic"').replace(
         '<origin xyz="0 0 0.1" rpy="0 0 0"/>',
         '<origin xyz="0 0 0.1" rpy="0 0 0"/><axis xyz="0 0 1"/>'
@@ -269,6 +269,26 @@ def test_good_urdf(tmp_path: Path) -> None:
 def test_bad_urdf(tmp_path: Path, text: str, kwargs: dict[str, str], match: str) -> None:
     with pytest.raises(DescriptionError, match=match):
         import_urdf(_write(tmp_path, text), **kwargs)
+
+
+def test_mimic_joint_becomes_a_coupling(tmp_path: Path) -> None:
+    """URDF <mimic>: the mimic joint is no reading; θ_j2 = −2·q_j1 + 0.3 (the coupling)."""
+    text = _GOOD.replace('<axis xyz="0 0 1"/>\n    <limit lower="-2"',
+                         '<axis xyz="0 1 0"/><mimic joint="j1" multiplier="-2" offset="0.3"/>'
+                         '\n    <limit lower="-2"')
+    imp = import_urdf(_write(tmp_path, text))
+    desc = imp.description
+    assert desc.reading_names == ("j1",) and desc.actuated == ("j1", "j2")
+    np.testing.assert_allclose(desc.coupling.matrix, [[1.0], [-2.0]])
+    np.testing.assert_allclose(desc.coupling.offset, [0.0, 0.3])
+    q = np.random.default_rng(4).uniform(-3, 3, size=(200, 1))
+    ours = forward(desc, None, q).world_tcp
+    ref = pinocchio_tip_poses(imp.urdf, desc.actuated, imp.tip_link, desc.kinematic_joints(q))
+    dp, dr = _pose_errors(ours, ref)
+    assert dp < 1e-9 and dr < 1e-9
+    back = tmp_path / "m.toml"
+    back.write_text(description_to_toml(desc))
+    assert load_robot(back).coupling is not None
 
 
 def test_branching_robot_needs_tip(tmp_path: Path) -> None:

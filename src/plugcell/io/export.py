@@ -150,7 +150,8 @@ def calibrated_description(desc: RobotDescription, gp: GeometricParameters, base
         name=desc.name, links=tuple(links), actuated=desc.actuated, flange=desc.flange,
         loops=desc.loops, base=base, tool=tool, joint_limits=desc.joint_limits,
         stiffness=desc.stiffness, notes=notes, coupled_limits=desc.coupled_limits,
-        home=desc.home, point_masses=desc.point_masses, working_volume=desc.working_volume)
+        home=desc.home, point_masses=desc.point_masses, working_volume=desc.working_volume,
+        coupling=desc.coupling)
 
 
 def _export_toml(result: Any, desc: RobotDescription, params_path: str,
@@ -160,9 +161,9 @@ def _export_toml(result: Any, desc: RobotDescription, params_path: str,
     chain_desc, gp, rmap = _geometry(result, desc, serial_equivalent, "toml")
     note = (f"calibrated: {params_path} (model {result.config.name}); base = BASE, "
             "tool = PROBE of the calibration")
-    try:
-        cal = calibrated_description(chain_desc, gp, result.model.base(), result.model.probe(),
-                                     note)
+    try:  # the robot itself (its coupling and reading limits) unless the chain differs
+        cal = calibrated_description(desc if rmap is None else chain_desc, gp,
+                                     result.model.base(), result.model.probe(), note)
     except DescriptionError as exc:
         raise ExportError(
             f"the calibrated geometry is not a valid description ({exc}); a description "
@@ -256,6 +257,12 @@ def _export_urdf(result: Any, desc: RobotDescription, source: RobotSource | None
         tip_from_flange = chain_desc.tool
     reasons: list[str] = []
     extra: dict[str, Any] = {}
+    if imp is None and desc.coupling is not None:
+        reasons.append("the joint coupling: the URDF's joints are the kinematic joints "
+                       "θ = matrix · readings + offset")
+        extra["coupling"] = {"readings": list(desc.coupling.readings),
+                             "matrix": desc.coupling.matrix.tolist(),
+                             "offset": desc.coupling.offset.tolist()}
     if include_base:
         if any(el.find("child") is not None and el.find("child").get("link") == base_link
                for el in root.findall("joint")):

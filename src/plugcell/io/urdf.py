@@ -412,14 +412,15 @@ def chain_from_urdf(urdf: Any, label: str, base_link: str | None = None,
             raise DescriptionError(loc, "prismatic joints are not supported yet")
         if kind not in ("revolute", "continuous", "fixed"):
             raise DescriptionError(loc, f"unknown joint type {kind!r}")
+        mimic = None
         if jt.mimic is not None:
-            raise DescriptionError(
-                loc,
-                f"mimics joint {jt.mimic.joint!r}: mimic joints (joint couplings) are not "
-                "supported by the URDF import yet",
-            )
+            mult = 1.0 if jt.mimic.multiplier is None else float(jt.mimic.multiplier)
+            off = 0.0 if jt.mimic.offset is None else float(jt.mimic.offset)
+            if not (math.isfinite(mult) and math.isfinite(off)):
+                raise DescriptionError(f"{loc}: <mimic>", "multiplier and offset must be finite")
+            mimic = (str(jt.mimic.joint), mult, off)
         limits = None
-        if kind == "revolute":
+        if kind == "revolute" and mimic is None:
             lim = jt.limit
             if lim is None or lim.lower is None or lim.upper is None:
                 raise DescriptionError(loc, "a revolute joint needs <limit lower= upper=>")
@@ -442,6 +443,7 @@ def chain_from_urdf(urdf: Any, label: str, base_link: str | None = None,
             limits=limits,
             mass=mass,
             com=(float(com[0]), float(com[1]), float(com[2])),
+            mimic=mimic,
         ))
     name = str(urdf.robot.name or "robot")
     chain = JointChain(name=name, joints=tuple(joints))

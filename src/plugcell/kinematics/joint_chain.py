@@ -34,7 +34,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from plugcell.kinematics.description import Link, RobotDescription
+from plugcell.kinematics.description import JointCoupling, Link, RobotDescription
 from plugcell.kinematics.errors import DescriptionError
 from plugcell.kinematics.parameters import GeometricParameters
 from plugcell.kinematics.transforms import dh_hayati, rot_z
@@ -71,7 +71,9 @@ class ChainJoint:
     ``axis``: (3,) unit axis in the joint frame (ignored for ``fixed``);
     ``limits``: (lower, upper) radians or ``None`` (unlimited, e.g. URDF continuous);
     ``mass`` (kg) and ``com`` (m, child link frame): the child body's inertial data
-    (with whatever is rigidly attached to it off the chain).
+    (with whatever is rigidly attached to it off the chain); ``mimic``:
+    ``(joint, multiplier, offset)`` — this joint's value is ``multiplier · q_joint +
+    offset`` (URDF ``<mimic>``, offset in radians), so it is no reading of its own.
     """
 
     name: str
@@ -81,6 +83,7 @@ class ChainJoint:
     limits: tuple[float, float] | None = None
     mass: float = 0.0
     com: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    mimic: tuple[str, float, float] | None = None
 
 
 @dataclass(frozen=True, eq=False)
@@ -270,9 +273,11 @@ def description_from_chain(chain: JointChain, unlimited: float = 2 * math.pi) ->
         parent = jt.name
     tool = np.linalg.inv(dh_frames[-1]) @ tip
     tool[3] = [0.0, 0.0, 0.0, 1.0]
+    coupling = _mimic_coupling(chain)
+    readings = [jt for jt in moving if jt.mimic is None]
     limits = np.array([jt.limits if jt.limits is not None else (-unlimited, unlimited)
-                       for jt in moving], dtype=float)
-    home = np.clip(np.zeros(n), limits[:, 0], limits[:, 1])
+                       for jt in readings], dtype=float)
+    home = np.clip(np.zeros(len(readings)), limits[:, 0], limits[:, 1])
     return RobotDescription(
         name=chain.name,
         links=tuple(links),
@@ -284,7 +289,43 @@ def description_from_chain(chain: JointChain, unlimited: float = 2 * math.pi) ->
         joint_limits=limits,
         notes=chain.notes,
         home=home,
+        coupling=coupling,
     )
+
+
+def _mimic_coupling(chain: JointChain) -> JointCoupling | None:
+    """The reading → joint map of the chain's mimic joints (``None`` without any).
+
+    Readings are the moving joints that mimic none, in chain order; a mimic joint's
+    row is ``multiplier`` at the column of the reading it follows (through other mimic
+    joints, multipliers multiplied and offsets carried), with its ``offset``.
+    """
+    moving = chain.moving
+    if all(jt.mimic is None for jt in moving):
+        return None
+    by_name = {jt.name: (k, jt) for k, jt in enumerate(chain.joints)}
+    readings = [jt.name for jt in moving if jt.mimic is None]
+    col = {nm: c for c, nm in enumerate(readings)}
+    M = np.zeros((len(moving), len(readings)))
+    off = np.zeros(len(moving))
+    for i, jt in enumerate(moving):
+        # θ_jt = mult·θ_cur + offset; cur mimics target: θ_cur = m·θ_target + o
+        mult, offset, cur, seen = 1.0, 0.0, jt, {jt.name}
+        while cur.mimic is not None:
+            target, m, o = cur.mimic
+            mult, offset = mult * m, offset + mult * o
+            if target not in by_name or by_name[target][1].kind == "fixed":
+                loc = f"joints[{by_name[cur.name][0]}] ({cur.name}).mimic"
+                raise DescriptionError(
+                    loc, f"mimics {target!r}, which is not a moving joint of the chain")
+            if target in seen:
+                raise DescriptionError(f"joints[{by_name[cur.name][0]}] ({cur.name}).mimic",
+                                       "mimic joints follow each other in a circle")
+            seen.add(target)
+            cur = by_name[target][1]
+        M[i, col[cur.name]] = mult
+        off[i] = offset
+    return JointCoupling(tuple(readings), M, off)
 
 
 @dataclass(frozen=True, eq=False)
@@ -321,6 +362,7 @@ def calibrated_origins(chain: JointChain, desc: RobotDescription,
     from plugcell.kinematics.forward import forward
 
     moving = [k for k, j in enumerate(chain.joints) if j.kind != "fixed"]
+    desc = desc.uncoupled()  # the chain's q = 0 is θ_kin = 0 (mimic joints included)
     q0 = np.zeros(desc.n_actuated)
     nom = forward(desc, None, q0)
     cal = forward(desc, params, q0)
