@@ -387,3 +387,65 @@ def test_cli_ur10_xacro(capsys: pytest.CaptureFixture[str]) -> None:
                  "--robot-arg", "name=ur10"]) == 0
     out = capsys.readouterr().out
     assert '"shoulder_pan_joint"' in out and '"d": 0.1273' in out
+
+
+@needs_urdf
+def test_cli_fk_prints_the_tip_link(capsys: pytest.CaptureFixture[str]) -> None:
+    """kin fk of a URDF robot whose tip is not the DH flange prints T_tcp = pinocchio's tool0."""
+    import json
+
+    from plugcell.cli import main
+
+    q = [10.0, -20.0, 30.0, 40.0, -50.0, 60.0]
+    assert main(["kin", "fk", "--robot", str(FANUC_XACRO), "--joints",
+                 ",".join(str(v) for v in q)]) == 0
+    out = json.loads(capsys.readouterr().out)
+    imp = import_urdf(FANUC_XACRO)
+    ref = pinocchio_tip_poses(imp.urdf, imp.description.actuated, "tool0",
+                              np.radians([q]))[0]
+    np.testing.assert_allclose(out["T_tcp"], ref, atol=1e-11)
+
+
+@settings(max_examples=200, deadline=None)
+@given(st.lists(st.text(max_size=8), max_size=4))
+def test_robot_arg_parser(pairs: list[str]) -> None:
+    from plugcell.commands.robotargs import parse_robot_args
+
+    try:
+        d = parse_robot_args(pairs)
+    except ValueError as exc:
+        assert "--robot-arg" in str(exc) and "NAME=VALUE" in str(exc)
+    else:
+        for p in pairs:
+            name = p.partition("=")[0].strip().removesuffix(":")
+            assert name in d
+
+
+@settings(max_examples=200, deadline=None)
+@given(st.recursive(st.none() | st.booleans() | st.integers() | st.text(max_size=5),
+                    lambda c: st.lists(c, max_size=3)
+                    | st.dictionaries(st.sampled_from(["ref", "args", "package_paths",
+                                                       "base_link", "tip_link", "x"]), c,
+                                      max_size=5), max_leaves=10))
+def test_robot_source_from_any_json(d: object) -> None:
+    """PARAMS.json's robot_source: a RobotSource or a DescriptionError, nothing else."""
+    try:
+        src = RobotSource.from_dict(d)
+    except DescriptionError as exc:
+        assert str(exc).startswith("robot_source")
+    else:
+        assert RobotSource.from_dict(src.to_dict()) == src
+
+
+def test_description_of_params(tmp_path: Path) -> None:
+    from plugcell.io.robots import description_of_params
+
+    f = _write(tmp_path, _GOOD)
+    desc = import_urdf(f).description
+    assert description_of_params({"description": desc.to_dict()}).actuated == ("j1", "j2")
+    assert description_of_params({"robot_source": {"ref": str(f)}}).actuated == ("j1", "j2")
+    assert description_of_params({"robot": "elbow6"}).name == "elbow6"
+    with pytest.raises(DescriptionError, match=r"P.json: description: links"):
+        description_of_params({"description": {**desc.to_dict(), "links": 3}}, "P.json")
+    with pytest.raises(DescriptionError, match=r"P.json: robot_source: .*not found"):
+        description_of_params({"robot_source": {"ref": str(tmp_path / "gone.urdf")}}, "P.json")

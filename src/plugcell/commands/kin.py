@@ -10,7 +10,8 @@
 
 Joint values in degrees (description order), positions in millimetres,
 orientations as Comau Euler ZYZ angles (A, B, C) in degrees; the printed 4×4
-matrix ``T`` is the flange pose in the robot base frame, in metres.  FK evaluates
+matrix ``T`` is the flange pose in the robot base frame, in metres (``T_tcp``: the tool,
+printed when the description has one — for a URDF robot its tip link).  FK evaluates
 any configuration the loop can assemble and *reports* limit violations in
 ``warnings``; IK only returns solutions inside the limits.
 """
@@ -174,6 +175,11 @@ def _cmd_fk(args: argparse.Namespace) -> int:
         "pose_mm_zyz": [_r(v * 1e3, 6) for v in xyz] + [_r(math.degrees(v), 6) for v in zyz],
         "warnings": desc.limit_violations(q),
     }
+    if not np.allclose(desc.tool, np.eye(4), atol=1e-12):  # e.g. a URDF's tip link (tool0)
+        txyz, tzyz = matrix_to_pose(fk.tcp, "zyz")
+        out["T_tcp"] = [[_r(v, 12) for v in row] for row in fk.tcp]
+        out["tcp_mm_zyz"] = ([_r(v * 1e3, 6) for v in txyz]
+                             + [_r(math.degrees(v), 6) for v in tzyz])
     if fk.passive_names:
         out["passive_deg"] = {
             name: _r(math.degrees(fk.passive[k]), 9) for k, name in enumerate(fk.passive_names)
