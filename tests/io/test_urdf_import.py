@@ -139,7 +139,7 @@ def _chain_urdf(joints: list[dict[str, object]], name: str = "rand") -> str:
                 f'    <origin xyz="{_xyz(j["xyz"])}" rpy="{_xyz(j["rpy"])}"/>\n')
         if j["type"] != "fixed":
             body += f'    <axis xyz="{_xyz(j["axis"])}"/>\n'
-        if j["type"] == "revolute":
+        if j["type"] in ("revolute", "prismatic"):
             body += '    <limit lower="-3" upper="3" effort="1" velocity="1"/>\n'
         out.append(f'  <joint name="j{i}" type="{j["type"]}">\n{body}  </joint>')
     out.append("</robot>")
@@ -154,7 +154,7 @@ _LEN = st.sampled_from([0.0]) | st.floats(-0.8, 0.8)
 
 @st.composite
 def _joint(draw: st.DrawFn) -> dict[str, object]:
-    kind = draw(st.sampled_from(["revolute", "revolute", "continuous", "fixed"]))
+    kind = draw(st.sampled_from(["revolute", "revolute", "continuous", "prismatic", "fixed"]))
     return {"type": kind,
             "xyz": np.array([draw(_LEN) for _ in range(3)]),
             "rpy": np.array([draw(_ANGLES) for _ in range(3)]),
@@ -165,7 +165,8 @@ def _joint(draw: st.DrawFn) -> dict[str, object]:
 @given(st.lists(_joint(), min_size=1, max_size=9), st.integers(0, 2**31 - 1))
 def test_random_chain_matches_pinocchio(tmp_path_factory: pytest.TempPathFactory,
                                         joints: list[dict[str, object]], seed: int) -> None:
-    """Any chain of revolute/continuous/fixed joints converts exactly to DH/Hayati rows."""
+    """Any chain of revolute/continuous/prismatic/fixed joints converts exactly to DH/Hayati
+    rows (a robot on a linear track included)."""
     if all(j["type"] == "fixed" for j in joints):
         joints = [*joints, {"type": "revolute", "xyz": np.zeros(3), "rpy": np.zeros(3),
                             "axis": _AXES[0]}]
@@ -256,11 +257,8 @@ def test_good_urdf(tmp_path: Path) -> None:
     (_GOOD.replace('<axis xyz="0 0 1"/>\n    <limit lower="-2"',
                    '<axis xyz="0 0 1"/><mimic joint="jx"/>\n    <limit lower="-2"'), {},
      r"robot.urdf: joints\[1\] \(j2\).mimic: mimics 'jx', which is not a moving joint"),
-    (_GOOD.replace('type="fixed"', 'type="prismatic"').replace(
-        '<origin xyz="0 0 0.1" rpy="0 0 0"/>',
-        '<origin xyz="0 0 0.1" rpy="0 0 0"/><axis xyz="0 0 1"/>'
-        '<limit lower="0" upper="1" effort="1" velocity="1"/>'), {},
-     r"joint 't': prismatic joints are not supported yet"),
+    (_GOOD.replace('type="fixed"', 'type="prismatic"'), {},
+     r"robot.urdf: joint 't': a prismatic joint needs <limit lower= upper=>"),
     ('<robot name="r"><link name="a"/><link name="b"/></robot>', {},
      r"robot.urdf: the URDF has 2 root links"),
     ('<robot name="r"><link name="a"/></robot>', {}, r"robot.urdf: the robot has no moving joint"),

@@ -8,7 +8,8 @@
     plugcell kin describe --robot smart_h4 [--format toml]
     plugcell kin describe --robot ur.urdf.xacro --robot-arg ur_type=ur10 --robot-arg name=ur10
 
-Joint values in degrees (description order), positions in millimetres,
+Joint values in degrees (millimetres for a prismatic joint; description order),
+positions in millimetres,
 orientations as Comau Euler ZYZ angles (A, B, C) in degrees; the printed 4×4
 matrix ``T`` is the flange pose in the robot base frame, in metres (``T_tcp``: the tool,
 printed when the description has one — for a URDF robot its tip link).  FK evaluates
@@ -69,7 +70,8 @@ def register(subparsers: Any) -> None:
         description="Print the flange pose in the robot base frame as JSON.",
     )
     add_robot_args(fk, required=True)
-    fk.add_argument("--joints", required=True, help="j1,...,jn in degrees, description order")
+    fk.add_argument("--joints", required=True,
+                    help="j1,...,jn in degrees (prismatic: mm), description order")
     fk.add_argument(
         "--closure",
         choices=("fourbar", "nominal"),
@@ -85,7 +87,8 @@ def register(subparsers: Any) -> None:
     )
     add_robot_args(ik, required=True)
     ik.add_argument("--pose", required=True, help="x,y,z (mm),A,B,C (Comau ZYZ, degrees)")
-    ik.add_argument("--seed", help="j1,...,jn in degrees (default: the robot's home pose)")
+    ik.add_argument("--seed",
+                    help="j1,...,jn in degrees (prismatic: mm; default: the robot's home pose)")
     ik.add_argument("--closure", choices=("fourbar", "nominal"), default="fourbar")
     ik.set_defaults(func=_cmd_ik)
 
@@ -133,7 +136,10 @@ def _floats(text: str, n: int, option: str, what: str) -> np.ndarray:
 
 
 def _joint_names(desc: RobotDescription) -> str:
-    return "joints " + ", ".join(desc.reading_names) + " in degrees"
+    units = " (mm for " + ", ".join(n for n, p in zip(desc.reading_names, desc.prismatic_readings,
+                                                       strict=True) if p) + ")" \
+        if desc.prismatic_readings.any() else ""
+    return "joints " + ", ".join(desc.reading_names) + " in degrees" + units
 
 
 def _dumps(obj: Any, indent: int = 0) -> str:
@@ -163,7 +169,7 @@ def _r(x: float, nd: int = 9) -> float:
 def _cmd_fk(args: argparse.Namespace) -> int:
     desc = _robot(args)
     qdeg = _floats(args.joints, desc.n_readings, "--joints", _joint_names(desc))
-    q = np.radians(qdeg)
+    q = qdeg * desc.reading_scale()
     try:
         fk = forward(desc, None, q, closure=args.closure)
     except KinematicsError as exc:
@@ -193,7 +199,8 @@ def _cmd_ik(args: argparse.Namespace) -> int:
     pose = _floats(args.pose, 6, "--pose", "x,y,z in mm and A,B,C Comau ZYZ in degrees")
     seed = None
     if args.seed is not None:
-        seed = np.radians(_floats(args.seed, desc.n_readings, "--seed", _joint_names(desc)))
+        seed = (_floats(args.seed, desc.n_readings, "--seed", _joint_names(desc))
+                * desc.reading_scale())
     T = pose_to_matrix(pose[:3] * 1e-3, np.radians(pose[3:]), "zyz")
     try:
         res = inverse(desc, None, T, seed, closure=args.closure)
@@ -202,7 +209,7 @@ def _cmd_ik(args: argparse.Namespace) -> int:
     _print(
         {
             "robot": desc.name,
-            "joints": [_r(math.degrees(v), 9) for v in res.q],
+            "joints": [_r(v, 9) for v in np.asarray(res.q) / desc.reading_scale()],
             "position_error_mm": float(f"{res.position_error * 1e3:.3g}"),
             "orientation_error_deg": float(f"{math.degrees(res.orientation_error):.3g}"),
         }

@@ -329,7 +329,7 @@ def _generic_urdf(desc: RobotDescription, gp: GeometricParameters,
             etree.SubElement(inert, "inertia", ixx="0", ixy="0", ixz="0", iyy="0", iyz="0",
                              izz="0")
         T = M(lk.parent) @ np.asarray(rot_z(gp.theta[gp.index(lk.name)]))
-        kind = "revolute" if lk.is_actuated else "fixed"
+        kind = "prismatic" if lk.is_prismatic else ("revolute" if lk.is_actuated else "fixed")
         j = etree.SubElement(root, "joint", name=lk.name, type=kind)
         etree.SubElement(j, "origin", **_origin_attrs(T))
         etree.SubElement(j, "parent", link=base if lk.parent == "base" else names[lk.parent])

@@ -408,9 +408,7 @@ def chain_from_urdf(urdf: Any, label: str, base_link: str | None = None,
                 loc, f"{kind} joints cannot be part of a robot's chain (choose --base-link "
                 "below it)"
             )
-        if kind == "prismatic":
-            raise DescriptionError(loc, "prismatic joints are not supported yet")
-        if kind not in ("revolute", "continuous", "fixed"):
+        if kind not in ("revolute", "continuous", "prismatic", "fixed"):
             raise DescriptionError(loc, f"unknown joint type {kind!r}")
         mimic = None
         if jt.mimic is not None:
@@ -420,10 +418,10 @@ def chain_from_urdf(urdf: Any, label: str, base_link: str | None = None,
                 raise DescriptionError(f"{loc}: <mimic>", "multiplier and offset must be finite")
             mimic = (str(jt.mimic.joint), mult, off)
         limits = None
-        if kind == "revolute" and mimic is None:
+        if kind in ("revolute", "prismatic") and mimic is None:
             lim = jt.limit
             if lim is None or lim.lower is None or lim.upper is None:
-                raise DescriptionError(loc, "a revolute joint needs <limit lower= upper=>")
+                raise DescriptionError(loc, f"a {kind} joint needs <limit lower= upper=>")
             if not float(lim.lower) < float(lim.upper):
                 raise DescriptionError(
                     f"{loc}: <limit>",
@@ -437,7 +435,7 @@ def chain_from_urdf(urdf: Any, label: str, base_link: str | None = None,
             raise DescriptionError(f"{loc}: <axis>", "must be a non-zero vector")
         joints.append(ChainJoint(
             name=jt.name,
-            kind="fixed" if kind == "fixed" else "revolute",
+            kind={"fixed": "fixed", "prismatic": "prismatic"}.get(kind, "revolute"),
             origin=_origin(jt),
             axis=axis,
             limits=limits,

@@ -51,8 +51,9 @@ __all__ = [
     "description_from_chain",
 ]
 
-#: Joint kinds of a chain: ``revolute`` (also URDF ``continuous``) and ``fixed``.
-JOINT_KINDS: tuple[str, ...] = ("revolute", "fixed")
+#: Joint kinds of a chain: ``revolute`` (also URDF ``continuous``), ``prismatic``
+#: (moves the child along the axis) and ``fixed``.
+JOINT_KINDS: tuple[str, ...] = ("revolute", "prismatic", "fixed")
 #: Name of the fixed link from the chain's base frame to joint 1's axis line.
 MOUNT = "mount"
 #: Below this |sin| of the angle between two axes (0.57°) they count as parallel and
@@ -173,15 +174,20 @@ def _axis_rotation(axis: Array, q: float) -> Array:
 def chain_forward(chain: JointChain, q: Array) -> Array:
     """Tip frame (4, 4) of the chain for moving-joint values ``q`` (reference FK).
 
-    ``T = Π_k origin_k · Rot(axis_k, q_k)`` over the joints in order (fixed: no
-    rotation) — the URDF definition, used to check the DH conversion.
+    ``T = Π_k origin_k · Rot(axis_k, q_k)`` (prismatic: ``Trans(axis_k · q_k)``) over the
+    joints in order (fixed: nothing) — the URDF definition.
     """
     T = np.eye(4)
     j = 0
     for jt in chain.joints:
         T = T @ jt.origin
-        if jt.kind != "fixed":
+        if jt.kind == "revolute":
             T = T @ _axis_rotation(jt.axis, float(q[j]))
+        elif jt.kind == "prismatic":
+            S = np.eye(4)
+            S[:3, 3] = np.asarray(jt.axis) / np.linalg.norm(jt.axis) * float(q[j])
+            T = T @ S
+        if jt.kind != "fixed":
             j += 1
     return T
 
@@ -200,8 +206,10 @@ def description_from_chain(chain: JointChain, unlimited: float = 2 * math.pi) ->
     Returns
     -------
     RobotDescription
-        One actuated link per moving joint, named after the joint, in chain order
-        (which is the joint-reading order); joint reading = URDF joint position.
+        One actuated (revolute) or prismatic link per moving joint, named after the
+        joint, in chain order (which is the joint-reading order); joint reading = URDF
+        joint position (rad or m).  A prismatic joint's row turns its axis line like a
+        revolute one; its reading moves ``d`` along it.
 
     Raises
     ------
@@ -267,7 +275,8 @@ def description_from_chain(chain: JointChain, unlimited: float = 2 * math.pi) ->
             pw = sum(b[1] * b[2] for b in bodies if b[0] == i) / mass
             Fi = dh_frames[i]
             com = Fi[:3, :3].T @ (pw - Fi[:3, 3])
-        links.append(Link(jt.name, parent, "actuated", row.theta, row.d, row.a, row.alpha,
+        kind = "prismatic" if jt.kind == "prismatic" else "actuated"
+        links.append(Link(jt.name, parent, kind, row.theta, row.d, row.a, row.alpha,
                           row.beta, row.hayati, float(mass),
                           (float(com[0]), float(com[1]), float(com[2]))))
         parent = jt.name
