@@ -217,3 +217,68 @@ def test_cli_fk_takes_millimetres(tmp_path: Path, track: tuple[RobotDescription,
     sol = json.loads(capsys.readouterr().out)
     assert sol["position_error_mm"] < 1e-3
     assert 0 <= sol["joints"][0] <= 3000
+
+
+@pytest.mark.slow
+def test_track_robot_command_line_end_to_end(tmp_path: Path,
+                                             capsys: pytest.CaptureFixture[str]) -> None:
+    """calibrate --robot track.urdf on a measurement file with the track in mm, export the
+    URDF (pinocchio = calibrated model), compensate (joints back in degrees and mm)."""
+    import json
+
+    from plugcell.calibration.result import CalibrationResult
+    from plugcell.cli import main
+    from plugcell.io.measurements import MeasurementSet, write_measurements
+    from plugcell.kinematics.rotations import matrix_to_angles
+
+    pytest.importorskip("pinocchio")
+    from pinocchio_fk import pinocchio_tip_poses
+
+    urdf = tmp_path / "track_ur.urdf"
+    urdf.write_text(TRACK_ROBOT)
+    desc = import_urdf(urdf).description
+    true = desc.nominal_parameters().perturbed({("track", "alpha"): 1e-3, ("j2", "a"): 5e-4})
+    base = np.eye(4)
+    base[:3, 3] = [1.0, -2.0, 0.1]
+    probe = np.eye(4)
+    probe[:3, 3] = [0.0, 0.03, 0.12]
+    for name, seed in (("cal.csv", 1), ("val.csv", 2)):
+        q = _q(desc, 80, seed)
+        T = base @ forward(desc, true, q).flange @ probe
+        ms = MeasurementSet(q, T[:, :3, 3], matrix_to_angles(T[:, :3, :3], "rpy"), "rpy")
+        write_measurements(tmp_path / name, ms, joint_scale=desc.reading_scale())
+    assert "1" in (tmp_path / "cal.csv").read_text().splitlines()[2]  # the track in mm
+    params = tmp_path / "params.json"
+    assert main(["calibrate", "--robot", str(urdf), "--model", "serial", "--data",
+                 str(tmp_path / "cal.csv"), "--validate", str(tmp_path / "val.csv"),
+                 "--out", str(params), "--quiet"]) == 0
+    d = json.loads(params.read_text())
+    assert d["validation"]["mean_mm"] < 1e-4
+    out = tmp_path / "cal.urdf"
+    assert main(["export", "--params", str(params), "--format", "urdf", "--out", str(out),
+                 "--include-base", "--include-probe"]) == 0
+    res = CalibrationResult.from_dict(d, desc)
+    q = _q(desc, 200, 3)
+    ref = pinocchio_tip_poses(out.read_text(), desc.actuated, "probe", q)
+    assert np.abs(ref[:, :3, 3] - res.predict(q)[:, :3, 3]).max() < 1e-9
+    # compensation: the targets of known joints come back as those joints (deg and mm)
+    qt = _q(desc, 3, 4)
+    Tt = np.linalg.inv(res.model.base()) @ res.predict(qt)
+    from plugcell.kinematics.rotations import matrix_to_zyz
+
+    rows = ["name,x,y,z,rx,ry,rz"] + [
+        f"P{i},{','.join(f'{v:.9f}' for v in Tt[i, :3, 3] * 1e3)},"
+        f"{','.join(f'{v:.9f}' for v in np.degrees(matrix_to_zyz(Tt[i, :3, :3])))}"
+        for i in range(3)]
+    (tmp_path / "targets.csv").write_text("\n".join(rows) + "\n")
+    capsys.readouterr()
+    assert main(["compensate", "--params", str(params), "--targets",
+                 str(tmp_path / "targets.csv"), "--out", str(tmp_path / "joints.csv")]) == 0
+    lines = [ln for ln in (tmp_path / "joints.csv").read_text().splitlines()
+             if not ln.startswith("#")][1:]
+    got = np.array([[float(v) for v in ln.split(",")[1:8]] for ln in lines])
+    # 7 axes for a 6-DOF pose: any of the solutions; the model puts the tool on the target
+    q_back = got * desc.reading_scale()  # degrees and the track's mm → SI
+    assert np.all((got[:, 0] >= 0) & (got[:, 0] <= 3000))
+    T_back = np.linalg.inv(res.model.base()) @ res.predict(q_back)
+    assert np.abs(T_back[:, :3, 3] - Tt[:, :3, 3]).max() < 1e-6

@@ -114,7 +114,7 @@ def _frame(text: str, what: str) -> np.ndarray:
     return T
 
 
-def _read(path: Path, rot: str, n: int, payload: float | None):
+def _read(path: Path, rot: str, n: int, payload: float | None, scale: Any = None):
     from dataclasses import replace
 
     from plugcell.calibration import CalibrationData
@@ -122,7 +122,7 @@ def _read(path: Path, rot: str, n: int, payload: float | None):
     from plugcell.io.measurements import MeasurementFileError, read_measurements
 
     try:
-        m = read_measurements(path, rotation=rot, n_joints=n)
+        m = read_measurements(path, rotation=rot, n_joints=n, joint_scale=scale)
     except MeasurementFileError as exc:
         raise CommandError(str(exc)) from None
     if payload is not None:
@@ -170,10 +170,11 @@ def _run(args: argparse.Namespace) -> int:
         raise CommandError(f"--payload-kg must be a mass ≥ 0, got {args.payload_kg}")
     if args.max_iterations < 1:
         raise CommandError("--max-iterations must be at least 1")
-    data = _read(args.data, args.rot, desc.n_readings, args.payload_kg)
+    scale = desc.reading_scale()  # degrees, mm for a prismatic joint
+    data = _read(args.data, args.rot, desc.n_readings, args.payload_kg, scale)
     val = None
     if args.validate is not None:
-        val = _read(args.validate, args.rot, desc.n_readings, args.payload_kg)
+        val = _read(args.validate, args.rot, desc.n_readings, args.payload_kg, scale)
         if val.six_dof != data.six_dof:
             raise CommandError("--validate: the validation file must measure the same (6-DOF "
                                "or positions) as the calibration file")

@@ -216,12 +216,13 @@ def _write(args: argparse.Namespace, result: Any, names: list[str], res: Any,
     from plugcell.cli import CommandError
 
     n = res.q.shape[1]
-    q = np.degrees(res.q)
+    q = res.q / result.model.structure.source.reading_scale()  # degrees (prismatic: mm)
     buf = io.StringIO()
     buf.write(f"# plugcell compensate: {len(names)} targets from {args.targets.name}, "
               f"parameters {args.params.name} (model {result.config.number}, robot "
               f"{result.robot}), angles {args.rot}\n")
-    buf.write("# j1..jn: compensated joint targets (degrees); residual: final ‖Δx‖ of the "
+    buf.write("# j1..jn: compensated joint targets (degrees, mm for a prismatic joint); "
+              "residual: final ‖Δx‖ of the "
               "model (m, rad)\n")
     w = csv.writer(buf, lineterminator="\n")
     w.writerow(["name", *[f"j{k + 1}" for k in range(n)], "payload_kg", "iterations",

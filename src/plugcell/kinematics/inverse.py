@@ -413,8 +413,11 @@ def inverse(
     reason = np.full(B, "", dtype=object)
     failures: dict[int, _Failure] = {}
 
-    # A pose farther from the shoulder than the stretched arm is refused at once.
-    reach = _reach(desc, params, target)
+    # A pose farther from the shoulder than the stretched arm is refused at once (only
+    # where the first link turns about the base z: not on a track, nor after a mount).
+    first = desc.links[0]
+    simple = first.is_actuated and not first.is_prismatic and not desc.prismatic_links.any()
+    reach = _reach(desc, params, target) if simple else math.inf
     dist = _shoulder_distance(params, Tf)
     far = dist > reach
     for k in np.flatnonzero(far):
