@@ -35,6 +35,8 @@ def main(argv: list[str]) -> int:
         ("compensation (thesis 6.5.1)", [*plugcell, "bench", "compensation"]),
         ("UR10 from ur_description: xacro in, calibration, UR kinematics out",
          [sys.executable, str(HERE / "urdf_roundtrip_ur10.py")]),
+        ("vendor joint conventions (cost of a coupling)",
+         [sys.executable, str(HERE / "coupling.py")]),
         ("wire decoder fuzz", [sys.executable, str(HERE / "fuzz_wire.py")]),
         ("signed requests (cost)", [sys.executable, str(HERE / "signing.py"),
                                     *(["--fuzz", "100000"] if full else [])]),

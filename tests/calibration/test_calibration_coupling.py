@@ -17,7 +17,7 @@ from plugcell.calibration import CalibrationData, Calibrator, ErrorModel
 from plugcell.calibration.identifiability import random_configurations, structural_identifiability
 from plugcell.compensation import IdentifiedModel, compensate, compensate_joints, nominal_joints
 from plugcell.io.robots import load_robot
-from plugcell.kinematics import forward
+from plugcell.kinematics import forward, pose_error
 from plugcell.kinematics.transforms import so3_exp
 
 TRACKER = np.eye(4)
@@ -111,3 +111,20 @@ def test_compensated_joint_targets_come_back_as_readings(results, fanuc, campaig
     np.testing.assert_allclose(full_c.q @ M.T, full_h.q, atol=1e-8)
     np.testing.assert_allclose(fanuc.kinematic_joints(full_c.q) - fanuc.coupling.offset,
                                full_h.q, atol=1e-8)
+
+
+def test_compensation_jacobian_is_wrt_readings(results, campaign):
+    """IdentifiedModel.evaluate's J (chain rule through the coupling) = central differences
+    of its pose in the readings (deflections off: J then is the exact derivative)."""
+    em = results[0].model
+    v = np.array(em.values)
+    v[em.space.indices(em.compliance_keys)] = 0.0
+    model = IdentifiedModel(em.with_values(v))
+    q = random_configurations(campaign[0], 5, seed=166)
+    T, J = model.evaluate(q)
+    eps = 1e-6
+    for j in range(6):
+        dq = np.zeros(6)
+        dq[j] = eps
+        fd = (pose_error(model.pose(q + dq), T) - pose_error(model.pose(q - dq), T)) / (2 * eps)
+        np.testing.assert_allclose(J[:, :, j], fd, atol=1e-8)

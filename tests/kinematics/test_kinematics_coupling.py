@@ -20,7 +20,7 @@ from typing import Any
 
 import numpy as np
 import pytest
-from coupling_testlib import hand_converted
+from coupling_testlib import hand_converted, mimic_elbow, sign_flipped_h4, wrist_gear_elbow
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 from kinematics_testlib import perturbed_params, random_configs
@@ -135,25 +135,7 @@ def test_uncoupled_description_is_the_kinematic_robot(fanuc):
 
 # ----------------------------------------------------------------------------- Jacobians
 def _gear_and_mimic(elbow: RobotDescription) -> list[RobotDescription]:
-    """elbow6 with a wrist gear coupling (θ5 += 0.37·J4, θ6 += −0.21·J4 + 0.5·J5) and
-    with a mimic joint (five readings; θ3 = −0.8·R2 + 0.1)."""
-    d = elbow.to_dict()
-    lims = [lk.pop("limits") for lk in d["links"]]
-    gear = np.eye(6)
-    gear[4, 3], gear[5, 3], gear[5, 4] = 0.37, -0.21, 0.5
-    a = copy.deepcopy(d)
-    a["coupling"] = {"readings": [f"A{i}" for i in range(1, 7)], "matrix": gear.tolist(),
-                     "offsets": [1.0, -2.0, 3.0, 0.0, 5.0, -6.0], "limits": lims}
-    mimic = np.zeros((6, 5))
-    for r, c in ((0, 0), (1, 1), (3, 2), (4, 3), (5, 4)):
-        mimic[r, c] = 1.0
-    mimic[2, 1] = -0.8
-    b = copy.deepcopy(d)
-    b["coupling"] = {"readings": ["R1", "R2", "R4", "R5", "R6"], "matrix": mimic.tolist(),
-                     "offsets": [0.0, 0.0, math.degrees(0.1), 0.0, 0.0, 0.0],
-                     "limits": [lims[i] for i in (0, 1, 3, 4, 5)]}
-    b["home"] = [d["home"][i] for i in (0, 1, 3, 4, 5)]
-    return [RobotDescription.from_dict(a), RobotDescription.from_dict(b)]
+    return [wrist_gear_elbow(elbow), mimic_elbow(elbow)]
 
 
 def _fd_jacobian(desc, params, q, point, h=1e-6):
@@ -171,7 +153,7 @@ def _fd_jacobian(desc, params, q, point, h=1e-6):
 
 
 def test_jacobian_wrt_readings_matches_central_differences(fanuc, elbow, h4):
-    h4_flipped = _with_sign_flips(h4)
+    h4_flipped = sign_flipped_h4(h4)
     for desc in (fanuc, *_gear_and_mimic(elbow), h4_flipped):
         params = perturbed_params(desc, 5)
         for q in random_configs(desc, 4, seed=7):
@@ -193,25 +175,8 @@ def test_mimic_coupling_round_trip(elbow):
 
 
 # ----------------------------------------------------------------------------- loops
-def _with_sign_flips(h4: RobotDescription) -> RobotDescription:
-    """Smart H4 whose controller counts axes 4 and 6 backwards and axis 1 from 10°."""
-    d = h4.to_dict()
-    lims = [lk.pop("limits") for lk in d["links"] if lk["joint"] == "actuated"]
-    M = np.diag([1.0, 1.0, 1.0, -1.0, 1.0, -1.0])
-    names = ["A1", "A2", "A3", "A4", "A5", "A6"]
-    lims[0] = [lims[0][0] + 10.0, lims[0][1] + 10.0]
-    lims[3] = [-lims[3][1], -lims[3][0]]
-    lims[5] = [-lims[5][1], -lims[5][0]]
-    d["coupling"] = {"readings": names, "matrix": M.tolist(),
-                     "offsets": [-10.0, 0, 0, 0, 0, 0], "limits": lims}
-    d["home"] = list(np.array(d["home"]) * np.diag(M) + [10.0, 0, 0, 0, 0, 0])
-    for cl in d["coupled_limits"]:
-        cl["joints"] = ["A2", "A3"]
-    return RobotDescription.from_dict(d)
-
-
 def test_loop_robot_with_coupling(h4):
-    flipped = _with_sign_flips(h4)
+    flipped = sign_flipped_h4(h4)
     assert flipped.loop_readings(0) == h4.loop_readings(0)
     q = random_configs(flipped, 30, seed=9)
     np.testing.assert_allclose(
@@ -241,6 +206,27 @@ def test_inverse_returns_readings_inside_the_reading_limits(fanuc):
     assert res.q.shape == (12, 6)
     assert fanuc.within_limits(res.q).all()
     np.testing.assert_allclose(forward(fanuc, None, res.q).flange, T, atol=1e-9)
+
+
+def test_inverse_of_a_loop_robot_with_coupling(h4):
+    flipped = sign_flipped_h4(h4)
+    q = random_configs(flipped, 8, seed=13)
+    T = forward(flipped, None, q).flange
+    res = inverse(flipped, None, T, seed=q + 0.05)
+    assert flipped.within_limits(res.q).all()
+    np.testing.assert_allclose(forward(flipped, None, res.q).flange, T, atol=1e-9)
+    # the readings are the uncoupled robot's solution, mapped back
+    ref = inverse(h4, None, T, seed=flipped.kinematic_joints(q + 0.05))
+    np.testing.assert_allclose(flipped.kinematic_joints(res.q), ref.q, atol=1e-8)
+
+
+def test_inverse_of_a_mimic_robot_returns_its_five_readings(elbow):
+    mimic = mimic_elbow(elbow)
+    q = random_configs(mimic, 6, seed=14)
+    T = forward(mimic, None, q).flange
+    res = inverse(mimic, None, T, seed=q + 0.02)
+    assert res.q.shape == (6, 5)
+    np.testing.assert_allclose(forward(mimic, None, res.q).flange, T, atol=1e-9)
 
 
 def test_inverse_does_not_wrap_readings_of_fractional_gears(elbow):

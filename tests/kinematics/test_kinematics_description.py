@@ -267,6 +267,20 @@ def test_from_dict_raises_only_description_errors(d):
     assert isinstance(desc, RobotDescription)
 
 
+_FANUC = load_robot("fanuc_m20ia").to_dict()  # with a [coupling] table
+
+
+@settings(max_examples=150, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(_mutated(_FANUC))
+def test_from_dict_of_a_coupled_robot_raises_only_description_errors(d):
+    try:
+        desc = RobotDescription.from_dict(d)
+    except DescriptionError as exc:
+        assert str(exc)
+        return
+    assert isinstance(desc, RobotDescription)
+
+
 # ----------------------------------------------------------------------------- files
 def test_load_by_path_and_file_errors(tmp_path: Path):
     src = Path(__file__).parents[2] / "src" / "plugcell" / "robots" / "smart_h4.toml"

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
 from plugcell.kinematics import RobotDescription
@@ -29,4 +31,49 @@ def hand_converted(desc: RobotDescription) -> RobotDescription:
             lk["limits"] = [float(klo[k]), float(khi[k])]
     d["home"] = [float(x) for x in np.degrees(M @ np.radians(d["home"]))]
     d["coupled_limits"] = []
+    return RobotDescription.from_dict(d)
+
+
+def sign_flipped_h4(h4: RobotDescription) -> RobotDescription:
+    """Smart H4 whose controller counts axes 4 and 6 backwards and axis 1 from 10°
+    (readings A1..A6): a loop robot with a coupling."""
+    d = h4.to_dict()
+    lims = [lk.pop("limits") for lk in d["links"] if lk["joint"] == "actuated"]
+    M = np.diag([1.0, 1.0, 1.0, -1.0, 1.0, -1.0])
+    lims[0] = [lims[0][0] + 10.0, lims[0][1] + 10.0]
+    lims[3] = [-lims[3][1], -lims[3][0]]
+    lims[5] = [-lims[5][1], -lims[5][0]]
+    d["coupling"] = {"readings": ["A1", "A2", "A3", "A4", "A5", "A6"], "matrix": M.tolist(),
+                     "offsets": [-10.0, 0, 0, 0, 0, 0], "limits": lims}
+    d["home"] = list(np.array(d["home"]) * np.diag(M) + [10.0, 0, 0, 0, 0, 0])
+    for cl in d["coupled_limits"]:
+        cl["joints"] = ["A2", "A3"]
+    return RobotDescription.from_dict(d)
+
+
+def wrist_gear_elbow(elbow: RobotDescription) -> RobotDescription:
+    """elbow6 with a gear-coupled wrist and vendor zero offsets (readings A1..A6):
+    θ5 = A5 + 0.37·A4 + 5°, θ6 = A6 − 0.21·A4 + 0.5·A5 − 6°."""
+    d = elbow.to_dict()
+    lims = [lk.pop("limits") for lk in d["links"]]
+    gear = np.eye(6)
+    gear[4, 3], gear[5, 3], gear[5, 4] = 0.37, -0.21, 0.5
+    d["coupling"] = {"readings": [f"A{i}" for i in range(1, 7)], "matrix": gear.tolist(),
+                     "offsets": [1.0, -2.0, 3.0, 0.0, 5.0, -6.0], "limits": lims}
+    return RobotDescription.from_dict(d)
+
+
+def mimic_elbow(elbow: RobotDescription) -> RobotDescription:
+    """elbow6 with five readings R1, R2, R4, R5, R6: joint 3 mimics R2 (θ3 = −0.8·R2 +
+    0.1 rad), the way an imported URDF ``mimic`` joint becomes an extra coupling row."""
+    d = elbow.to_dict()
+    lims = [lk.pop("limits") for lk in d["links"]]
+    mimic = np.zeros((6, 5))
+    for r, c in ((0, 0), (1, 1), (3, 2), (4, 3), (5, 4)):
+        mimic[r, c] = 1.0
+    mimic[2, 1] = -0.8
+    d["coupling"] = {"readings": ["R1", "R2", "R4", "R5", "R6"], "matrix": mimic.tolist(),
+                     "offsets": [0.0, 0.0, math.degrees(0.1), 0.0, 0.0, 0.0],
+                     "limits": [lims[i] for i in (0, 1, 3, 4, 5)]}
+    d["home"] = [d["home"][i] for i in (0, 1, 3, 4, 5)]
     return RobotDescription.from_dict(d)

@@ -336,6 +336,15 @@ class RobotDescription:
                     f"lower limit {self._fmt(j, lo)} must be below upper {self._fmt(j, hi)}",
                 )
         S(self, "joint_limits", lim)
+        if self.coupling is not None:
+            with np.errstate(over="ignore", invalid="ignore"):
+                kin_lim = self.kinematic_limits()
+            bad = np.flatnonzero(~np.all(np.isfinite(kin_lim), axis=1))
+            if bad.size:
+                raise DescriptionError(
+                    f"coupling.matrix[{int(bad[0])}]",
+                    "values too large: the joint angles the reading limits allow overflow",
+                )
         if self.stiffness is not None:
             try:
                 k = _ro(self.stiffness, (len(self.actuated),))
