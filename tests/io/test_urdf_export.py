@@ -272,3 +272,12 @@ def test_ipa_ur10_calibrates_alike_from_xacro_and_hand_dh(tmp_path: Path) -> Non
     assert np.abs(f[0] - f[1]).max() < 0.002
     # docs/results/ur10.md: calibration A 0.403 / 1.158, validation B 0.498 / 2.413 mm
     np.testing.assert_allclose(f[1], [0.403, 1.158, 0.498, 2.413], atol=0.0015)
+
+
+@pytest.mark.slow
+def test_loop_robot_toml_export_is_refused_or_exact(tmp_path: Path) -> None:
+    """A calibrated parallelogram that is no longer exact cannot be a description file."""
+    desc = load_robot("smart_h4")
+    res = _calibrate(desc, model="loop", seed=1)
+    with pytest.raises(ExportError, match=r"not a valid description.*keep PARAMS.json"):
+        export_calibration(res, desc, "toml")

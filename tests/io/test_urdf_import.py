@@ -447,3 +447,53 @@ def test_description_of_params(tmp_path: Path) -> None:
         description_of_params({"description": {**desc.to_dict(), "links": 3}}, "P.json")
     with pytest.raises(DescriptionError, match=r"P.json: robot_source: .*not found"):
         description_of_params({"robot_source": {"ref": str(tmp_path / "gone.urdf")}}, "P.json")
+
+
+_XACRO = """<?xml version="1.0"?>
+<robot xmlns:xacro="http://wiki.ros.org/xacro" name="x">
+  <xacro:arg name="len" default="0.4"/>
+  <xacro:property name="l" value="$(arg len)"/>
+  <xacro:macro name="seg" params="n parent">
+    <link name="l${n}"/>
+    <joint name="j${n}" type="revolute"><parent link="${parent}"/><child link="l${n}"/>
+      <origin xyz="${l} 0 0" rpy="0 ${pi/2} 0"/><axis xyz="0 0 1"/>
+      <limit lower="-3" upper="3" effort="1" velocity="1"/></joint>
+  </xacro:macro>
+  <link name="base"/>
+  <xacro:seg n="1" parent="base"/>
+  <xacro:seg n="2" parent="l1"/>
+</robot>
+"""
+
+
+def test_xacro_arguments_reach_the_robot(tmp_path: Path) -> None:
+    f = _write(tmp_path, _XACRO, "x.urdf.xacro")
+    a = import_urdf(f).description
+    b = import_urdf(f, {"len": "0.7"}).description
+    q = np.array([[0.3, -0.2]])
+    pa, pb = forward(a, None, q).tcp[0, :3, 3], forward(b, None, q).tcp[0, :3, 3]
+    assert not np.allclose(pa, pb)
+
+
+@settings(max_examples=100, deadline=None, suppress_health_check=[HealthCheck.too_slow,
+                                                                   HealthCheck.function_scoped_fixture])
+@given(st.data())
+def test_mutated_xacro_gives_description_error_or_robot(tmp_path: Path,
+                                                       data: st.DataObject) -> None:
+    """Any damage to a xacro file is a DescriptionError naming it — never another exception."""
+    text = _XACRO
+    for _ in range(data.draw(st.integers(1, 3))):
+        i = data.draw(st.integers(0, len(text) - 1))
+        n = data.draw(st.integers(0, 10))
+        ins = data.draw(st.sampled_from(["", "<", ">", '"', "${", "}", "$(arg len)", "$(find q)",
+                                         "xacro:", "/>", "1/0", "n", "&", "$(", "l9"]))
+        text = text[:i] + ins + text[i + n:]
+    f = _write(tmp_path, text, "m.urdf.xacro")
+    args = data.draw(st.dictionaries(st.sampled_from(["len", "other"]),
+                                     st.sampled_from(["0.5", "x", "", "${1}"]), max_size=2))
+    try:
+        desc = import_urdf(f, args).description
+    except DescriptionError as exc:
+        assert str(exc).startswith("m.urdf.xacro")
+    else:
+        assert desc.n_readings >= 1

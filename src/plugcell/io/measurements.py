@@ -7,8 +7,9 @@ Format (used by the twin, the calibrator, the services and the docs)::
     10.0,-80.0,-150.0,0.0,30.0,0.0,1712.43,-12.80,1203.55,179.9,0.2,-90.1,36
 
 * ``j1..jn`` — joint readings in **degrees** (a prismatic joint: **mm**) as the
-  controller reports them, in the robot description's reading order (for the Smart H4: θ1, θ2, θ2', θ4, θ5, θ6; for a
-  description with a joint ``coupling``, its ``readings``, e.g. Fanuc J1..J6).
+  controller reports them, in the robot description's reading order (for the Smart
+  H4: θ1, θ2, θ2', θ4, θ5, θ6; for a description with a joint ``coupling``, its
+  ``readings``, e.g. Fanuc J1..J6).
 * ``x, y, z`` — measured reflector position in **mm** in the tracker frame.
 * ``rx, ry, rz`` — optional measured orientation in **degrees**; the convention is
   a property of the file set by the reader/writer (``rpy`` = fixed X-Y-Z, default;

@@ -15,6 +15,7 @@ that loads the robot, is recorded in PARAMS.json and is passed to sub-processes.
 from __future__ import annotations
 
 import os
+import re
 import tomllib
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
@@ -227,7 +228,17 @@ def description_to_toml(desc: RobotDescription, header: str = "") -> str:
         if not d.get(key):
             d.pop(key, None)
     lines = "".join(f"# {ln}\n" for ln in header.splitlines())
-    return lines + tomli_w.dumps(d)
+    return lines + _one_line_arrays(tomli_w.dumps(d))
+
+
+_SCALAR_ARRAY = re.compile(r"\[\n((?:    [^\[\]{}\n]+,\n)+)\]")
+
+
+def _one_line_arrays(text: str) -> str:
+    """tomli-w writes an array an element a line; put arrays of scalars on one line."""
+    return _SCALAR_ARRAY.sub(
+        lambda m: "[" + ", ".join(x.strip().rstrip(",") for x in m.group(1).splitlines()) + "]",
+        text)
 
 
 def description_of_params(d: Mapping[str, Any], label: str = "PARAMS") -> RobotDescription:

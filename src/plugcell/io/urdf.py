@@ -27,6 +27,7 @@ from collections.abc import Iterator, Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
+from xml.parsers.expat import ExpatError
 
 import numpy as np
 
@@ -137,8 +138,12 @@ def expand_xacro(path: Path, args: Mapping[str, str], resolver: PackageResolver)
         raise DescriptionError(loc, f"xacro: {' '.join(msg.split())}") from None
     except OSError as exc:
         raise DescriptionError(label, f"cannot read: {exc.strerror or exc}") from None
-    except Exception as exc:  # expat / minidom errors of malformed XML
+    except ExpatError as exc:
         raise DescriptionError(label, f"malformed XML: {exc}") from None
+    except Exception as exc:  # anything else xacro's evaluation raises
+        where = _xacro_file()
+        loc = label if where in (None, str(path)) else f"{label} (in {where})"
+        raise DescriptionError(loc, f"xacro: {type(exc).__name__}: {exc}") from None
 
 
 def _xacro_file() -> str | None:
