@@ -383,8 +383,12 @@ def test_cli_ur10_xacro(capsys: pytest.CaptureFixture[str]) -> None:
 
     assert main(["kin", "describe", "--robot", str(UR_XACRO), "--robot-arg", "ur_type:=ur10",
                  "--robot-arg", "name=ur10"]) == 0
-    out = capsys.readouterr().out
-    assert '"shoulder_pan_joint"' in out and '"d": 0.1273' in out
+    out = capsys.readouterr().out  # a URDF robot is printed as a description file
+    assert '"shoulder_pan_joint"' in out and "d = 0.1273" in out
+    assert tomllib.loads(out)["name"] == "ur10"
+    assert main(["kin", "describe", "--robot", str(UR_XACRO), "--robot-arg", "ur_type:=ur10",
+                 "--robot-arg", "name=ur10", "--format", "json"]) == 0
+    assert '"d": 0.1273' in capsys.readouterr().out
 
 
 @needs_urdf

@@ -102,8 +102,10 @@ def register(subparsers: Any) -> None:
         "was imported. '--format toml' is a description file that loads back unchanged.",
     )
     add_robot_args(describe, required=True)
-    describe.add_argument("--format", choices=("json", "toml"), default="json",
-                          help="json (default) or toml (plugcell's description file)")
+    describe.add_argument("--format", choices=("json", "toml"), default=None,
+                          help="toml (plugcell's description file; the default for a "
+                          ".urdf/.xacro robot: what was imported) or json (the default "
+                          "otherwise)")
     describe.set_defaults(func=_cmd_describe)
 
     for p in (fk, ik):
@@ -225,7 +227,12 @@ def _cmd_robots(args: argparse.Namespace) -> int:
 
 def _cmd_describe(args: argparse.Namespace) -> int:
     desc = _robot(args)
-    if args.format == "toml":
+    fmt = args.format
+    if fmt is None:
+        from plugcell.io.urdf import is_urdf_path
+
+        fmt = "toml" if is_urdf_path(args.robot) else "json"
+    if fmt == "toml":
         from plugcell.io.robots import description_to_toml
 
         print(description_to_toml(desc), end="")
