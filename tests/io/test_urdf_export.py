@@ -281,3 +281,25 @@ def test_loop_robot_toml_export_is_refused_or_exact(tmp_path: Path) -> None:
     res = _calibrate(desc, model="loop", seed=1)
     with pytest.raises(ExportError, match=r"not a valid description.*keep PARAMS.json"):
         export_calibration(res, desc, "toml")
+
+
+def test_cli_export_source_gone(tmp_path: Path, arm: tuple[Path, RobotDescription,
+                                                           CalibrationResult],
+                                capsys: pytest.CaptureFixture[str]) -> None:
+    """The source URDF moved: the message says so and how to give it; --robot does."""
+    from plugcell.cli import main
+
+    f, desc, res = arm
+    d = res.to_dict()
+    d["robot_source"] = {"ref": str(tmp_path / "moved.urdf")}
+    d["description"] = desc.to_dict()
+    params = tmp_path / "params.json"
+    params.write_text(json.dumps(d, default=float))
+    out = tmp_path / "cal.urdf"
+    assert main(["export", "--params", str(params), "--format", "urdf", "--out", str(out)]) == 2
+    err = capsys.readouterr().err
+    assert "params.json: the robot's source URDF" in err and "--robot FILE" in err
+    assert main(["export", "--params", str(params), "--format", "urdf", "--out", str(out),
+                 "--robot", str(f)]) == 0
+    assert main(["export", "--params", str(params), "--format", "toml", "--out",
+                 str(tmp_path / "cal.toml")]) == 0  # the embedded description suffices

@@ -84,7 +84,8 @@ def _run(args: argparse.Namespace) -> int:
     except ExportError as exc:
         raise CommandError(f"{args.params}: cannot export as {args.format}: {exc}") from None
     except DescriptionError as exc:
-        raise CommandError(f"robot source: {exc}") from None
+        raise CommandError(f"{args.params}: the robot's source URDF: {exc} (give the robot "
+                           "again with --robot FILE and its options)") from None
     written = [str(args.out)]
     _write(args.out, out.text)
     side_path = None
