@@ -501,3 +501,43 @@ def test_mutated_xacro_gives_description_error_or_robot(tmp_path: Path,
         assert str(exc).startswith("m.urdf.xacro")
     else:
         assert desc.n_readings >= 1
+
+
+@st.composite
+def _near_parallel_chain(draw: st.DrawFn) -> JointChain:
+    """Chains whose consecutive axes are parallel, nearly parallel (1e-9 … 1e-2 rad) or
+    not: every branch of the row conversion, prismatic joints included."""
+    joints = []
+    for k in range(draw(st.integers(1, 7))):
+        kind = draw(st.sampled_from(["revolute", "revolute", "prismatic", "fixed"]))
+        tilt = draw(st.sampled_from([0.0, 1e-9, 1e-6, 1e-4, 5e-3, 2e-2, 0.5, math.pi / 2,
+                                     math.pi]))
+        az = draw(st.floats(-math.pi, math.pi))
+        T = np.eye(4)
+        c, s = math.cos(tilt), math.sin(tilt)
+        R = np.array([[1, 0, 0], [0, c, -s], [0, s, c]])
+        Rz = np.array([[math.cos(az), -math.sin(az), 0], [math.sin(az), math.cos(az), 0],
+                       [0, 0, 1]])
+        T[:3, :3] = Rz @ R
+        T[:3, 3] = [draw(st.floats(-0.5, 0.5)) for _ in range(3)]
+        lim = (-2.0, 2.0)
+        joints.append(ChainJoint(f"j{k}", kind, T, np.array([0.0, 0.0, 1.0]),
+                                 None if kind == "fixed" else lim))
+    if all(j.kind == "fixed" for j in joints):
+        joints.append(ChainJoint("jz", "revolute", np.eye(4), np.array([0.0, 0.0, 1.0]),
+                                 (-2.0, 2.0)))
+    return JointChain("c", tuple(joints))
+
+
+@settings(max_examples=300, deadline=None)
+@given(_near_parallel_chain(), st.integers(0, 2**31 - 1))
+def test_conversion_is_exact_for_any_axes(chain: JointChain, seed: int) -> None:
+    """description_from_chain reproduces the chain's own FK (origin · Rot/Trans per joint)."""
+    from plugcell.kinematics.joint_chain import description_from_chain
+
+    desc = description_from_chain(chain)
+    q = np.random.default_rng(seed).uniform(-2, 2, size=(8, desc.n_readings))
+    ours = forward(desc, None, q).tcp
+    ref = np.array([chain_forward(chain, row) for row in q])
+    dp, dr = _pose_errors(ours, ref)
+    assert dp < 1e-12 and dr < 1e-12, (dp, dr)

@@ -143,6 +143,7 @@ def line_step(frame: Array, point: Array, direction: Array) -> _Row:
         return _Row(_clean(theta), _clean(d), _clean(a), _clean(alpha), 0.0, False)
     u = -float(r @ z) / float(w @ z)
     v = r + u * w  # new origin − o, in the x-y plane of frame
+    v = v - float(v @ z) * z  # exactly in it (v·z is round-off of 0.5-sized numbers)
     a = float(np.linalg.norm(v))
     xn = v / a if a > 1e-12 else x
     if a <= 1e-12:
