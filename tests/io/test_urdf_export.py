@@ -20,7 +20,6 @@ from plugcell.io.robots import RobotSource, load_robot
 from plugcell.io.urdf import import_urdf
 from plugcell.kinematics import RobotDescription, forward
 
-pytest.importorskip("pinocchio")
 needs_urdf = pytest.mark.skipif(not URDF_DIR.is_dir(), reason="../shared/data/urdf not available")
 
 ROBOT = """<robot name="arm">

@@ -22,8 +22,6 @@ from plugcell.io.urdf import PackageResolver, import_urdf
 from plugcell.kinematics import DescriptionError, RobotDescription, forward
 from plugcell.kinematics.joint_chain import ChainJoint, JointChain, chain_forward, line_step
 
-pytest.importorskip("pinocchio")
-
 needs_urdf = pytest.mark.skipif(not URDF_DIR.is_dir(), reason="../shared/data/urdf not available")
 
 VENDOR = [

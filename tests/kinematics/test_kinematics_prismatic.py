@@ -90,7 +90,6 @@ def test_track_robot_is_seven_axes_with_a_prismatic_first(track: tuple[RobotDesc
 
 
 def test_track_fk_matches_pinocchio(track: tuple[RobotDescription, str]) -> None:
-    pytest.importorskip("pinocchio")
     from pinocchio_fk import pinocchio_tip_poses
 
     desc, urdf = track
@@ -226,13 +225,12 @@ def test_track_robot_command_line_end_to_end(tmp_path: Path,
     URDF (pinocchio = calibrated model), compensate (joints back in degrees and mm)."""
     import json
 
+    from pinocchio_fk import pinocchio_tip_poses
+
     from plugcell.calibration.result import CalibrationResult
     from plugcell.cli import main
     from plugcell.io.measurements import MeasurementSet, write_measurements
     from plugcell.kinematics.rotations import matrix_to_angles
-
-    pytest.importorskip("pinocchio")
-    from pinocchio_fk import pinocchio_tip_poses
 
     urdf = tmp_path / "track_ur.urdf"
     urdf.write_text(TRACK_ROBOT)
