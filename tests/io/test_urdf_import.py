@@ -159,7 +159,8 @@ def _joint(draw: st.DrawFn) -> dict[str, object]:
             "axis": draw(st.sampled_from(_AXES))}
 
 
-@settings(max_examples=60, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@settings(max_examples=60, deadline=None, derandomize=True,
+          suppress_health_check=[HealthCheck.too_slow])
 @given(st.lists(_joint(), min_size=1, max_size=9), st.integers(0, 2**31 - 1))
 def test_random_chain_matches_pinocchio(tmp_path_factory: pytest.TempPathFactory,
                                         joints: list[dict[str, object]], seed: int) -> None:
@@ -180,7 +181,7 @@ def test_random_chain_matches_pinocchio(tmp_path_factory: pytest.TempPathFactory
     assert dp < 1e-9 and dr < 1e-9, (dp, dr)
 
 
-@settings(max_examples=200, deadline=None)
+@settings(max_examples=200, deadline=None, derandomize=True)
 @given(st.floats(-3.1, 3.1), st.floats(-1, 1), st.floats(-1, 1), st.floats(-1e-5, 1e-5),
        st.floats(-1e-5, 1e-5))
 def test_line_step_nearly_parallel_is_exact(th: float, px: float, py: float, ex: float,
@@ -328,8 +329,8 @@ def test_robot_source_options_only_for_urdf() -> None:
                           "--package-path", "/p", "--base-link", "b", "--tip-link", "t"]
 
 
-@settings(max_examples=150, deadline=None, suppress_health_check=[HealthCheck.too_slow,
-                                                                   HealthCheck.function_scoped_fixture])
+@settings(max_examples=150, deadline=None, derandomize=True,
+          suppress_health_check=[HealthCheck.too_slow, HealthCheck.function_scoped_fixture])
 @given(st.data())
 def test_mutated_urdf_gives_description_error_or_robot(tmp_path: Path, data: st.DataObject) -> None:
     """Any damage to a URDF is a DescriptionError naming the file — never another exception."""
@@ -406,7 +407,7 @@ def test_cli_fk_prints_the_tip_link(capsys: pytest.CaptureFixture[str]) -> None:
     np.testing.assert_allclose(out["T_tcp"], ref, atol=1e-11)
 
 
-@settings(max_examples=200, deadline=None)
+@settings(max_examples=200, deadline=None, derandomize=True)
 @given(st.lists(st.text(max_size=8), max_size=4))
 def test_robot_arg_parser(pairs: list[str]) -> None:
     from plugcell.commands.robotargs import parse_robot_args
@@ -421,7 +422,7 @@ def test_robot_arg_parser(pairs: list[str]) -> None:
             assert name in d
 
 
-@settings(max_examples=200, deadline=None)
+@settings(max_examples=200, deadline=None, derandomize=True)
 @given(st.recursive(st.none() | st.booleans() | st.integers() | st.text(max_size=5),
                     lambda c: st.lists(c, max_size=3)
                     | st.dictionaries(st.sampled_from(["ref", "args", "package_paths",
@@ -477,8 +478,8 @@ def test_xacro_arguments_reach_the_robot(tmp_path: Path) -> None:
     assert not np.allclose(pa, pb)
 
 
-@settings(max_examples=100, deadline=None, suppress_health_check=[HealthCheck.too_slow,
-                                                                   HealthCheck.function_scoped_fixture])
+@settings(max_examples=100, deadline=None, derandomize=True,
+          suppress_health_check=[HealthCheck.too_slow, HealthCheck.function_scoped_fixture])
 @given(st.data())
 def test_mutated_xacro_gives_description_error_or_robot(tmp_path: Path,
                                                        data: st.DataObject) -> None:
@@ -527,10 +528,14 @@ def _near_parallel_chain(draw: st.DrawFn) -> JointChain:
     return JointChain("c", tuple(joints))
 
 
-@settings(max_examples=300, deadline=None)
+@settings(max_examples=300, deadline=None, derandomize=True)
 @given(_near_parallel_chain(), st.integers(0, 2**31 - 1))
 def test_conversion_is_exact_for_any_axes(chain: JointChain, seed: int) -> None:
-    """description_from_chain reproduces the chain's own FK (origin · Rot/Trans per joint)."""
+    """description_from_chain reproduces the chain's own FK (origin · Rot/Trans per joint).
+
+    To 1e-11 m: the common normal of axes just beyond the Hayati threshold (0.57°) is
+    conditioned like 1/sin² ≈ 1e4, which turns 1e-16 round-off into ~1e-12 m.
+    """
     from plugcell.kinematics.joint_chain import description_from_chain
 
     desc = description_from_chain(chain)
@@ -538,4 +543,4 @@ def test_conversion_is_exact_for_any_axes(chain: JointChain, seed: int) -> None:
     ours = forward(desc, None, q).tcp
     ref = np.array([chain_forward(chain, row) for row in q])
     dp, dr = _pose_errors(ours, ref)
-    assert dp < 1e-12 and dr < 1e-12, (dp, dr)
+    assert dp < 1e-11 and dr < 1e-11, (dp, dr)

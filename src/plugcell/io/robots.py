@@ -185,8 +185,8 @@ class RobotSource:
     @classmethod
     def from_dict(cls, d: Any) -> RobotSource:
         """Inverse of :meth:`to_dict` (raises :class:`DescriptionError` on bad input)."""
-        if not isinstance(d, Mapping) or not isinstance(d.get("ref"), str):
-            raise DescriptionError("robot_source", "expected an object with a string 'ref'")
+        if not isinstance(d, Mapping) or not isinstance(d.get("ref"), str) or not d["ref"]:
+            raise DescriptionError("robot_source", "expected an object with a non-empty 'ref'")
         args = d.get("args", {})
         paths = d.get("package_paths", [])
         if not (isinstance(args, Mapping) and all(isinstance(k, str) and isinstance(v, str)
@@ -198,7 +198,8 @@ class RobotSource:
         for k, v in ends.items():
             if v is not None and not isinstance(v, str):
                 raise DescriptionError(f"robot_source.{k}", "expected a string")
-        return cls(d["ref"], dict(args), tuple(paths), ends["base_link"], ends["tip_link"])
+        return cls(d["ref"], dict(args), tuple(paths), ends["base_link"] or None,
+                   ends["tip_link"] or None)
 
     def argv(self, option: str = "--robot") -> list[str]:
         """Command-line options that give this source to another plugcell process."""

@@ -145,8 +145,8 @@ def line_step(frame: Array, point: Array, direction: Array) -> _Row:
     v = r + u * w  # new origin − o, in the x-y plane of frame
     v = v - float(v @ z) * z  # exactly in it (v·z is round-off of 0.5-sized numbers)
     a = float(np.linalg.norm(v))
-    xn = v / a if a > 1e-12 else x
-    if a <= 1e-12:
+    xn = v / a if a > _ZERO else x  # below _ZERO the lines coincide (a rounds to 0)
+    if a <= _ZERO:
         a = 0.0
     yn = np.cross(z, xn)
     wx, wy, wz = float(w @ xn), float(w @ yn), float(w @ z)
