@@ -34,6 +34,8 @@ def main(argv: list[str]) -> int:
           *([] if full else ["--cycles", "500"])]),
         ("compensation (thesis 6.5.1)", [*plugcell, "bench", "compensation"]),
         ("command start-up", [sys.executable, str(HERE / "cli_startup.py")]),
+        ("UR10 from ur_description: xacro in, calibration, UR kinematics out",
+         [sys.executable, str(HERE / "urdf_roundtrip_ur10.py")]),
         ("vendor joint conventions (cost of a coupling)",
          [sys.executable, str(HERE / "coupling.py")]),
         ("wire decoder fuzz", [sys.executable, str(HERE / "fuzz_wire.py")]),

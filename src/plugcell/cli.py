@@ -83,6 +83,8 @@ COMMANDS: tuple[Command, ...] = (
             "plugcell.commands.compensate:configure"),
     Command("calibrate", "identify a robot's error model from tracker measurements",
             "plugcell.commands.calibrate:configure"),
+    Command("export", "write a calibrated robot as URDF, UR kinematics YAML or plugcell TOML",
+            "plugcell.commands.export:configure"),
     Command("reproduce", "recompute the thesis's calibration tables",
             "plugcell.commands.reproduce:configure"),
     Command("cell", "discover, wire, save/load, run programs, monitor (the cell controller's CLI)",

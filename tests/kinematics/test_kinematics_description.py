@@ -101,7 +101,8 @@ def test_nominal_parameters_and_perturbed(h4):
             lambda d: d["links"][0].update(parent="2"),
             "links[0].parent: the first link must have parent 'base'",
         ),
-        (lambda d: d["links"][2].update(joint="prismatic"), "links[2].joint: expected one of"),
+        (lambda d: d["links"][2].update(joint="spherical"), "links[2].joint: expected one of"),
+        (lambda d: d["links"][2].update(joint="prismatic"), "must be revolute, not prismatic"),
         (
             lambda d: d["links"][2].update(limits=[10, -10]),
             "links[2].limits: lower limit 10 must be below",

@@ -109,7 +109,8 @@ def payload_parameters(desc: RobotDescription) -> tuple[ErrorParameter, ...]:
 
 
 def _gravity_torques(desc: RobotDescription, ref: GeometricParameters, q: Array) -> Array:
-    """Gravity torques ``(N, n)`` of the described masses on a serial robot (z0 up)."""
+    """Gravity torques ``(N, n)`` of the described masses on a serial robot (z0 up);
+    for a prismatic joint the force along its axis (``Σ m g·z``, N)."""
     fk = forward(desc, ref, q)
     frames = fk.frames
     g = np.array([0.0, 0.0, -GRAVITY])
@@ -142,6 +143,9 @@ def _gravity_torques(desc: RobotDescription, ref: GeometricParameters, q: Array)
             if lj not in ancestors[i]:
                 continue
             F = frames[..., i, :, :]
+            if desc.links[lj].is_prismatic:  # a force along the axis, N
+                tau[..., j] += np.sum(m * g * z, axis=-1)
+                continue
             c = np.einsum("...ij,j->...i", F[..., :3, :3], com) + F[..., :3, 3]
             tau[..., j] += np.sum(np.cross(c - o, m * g) * z, axis=-1)
     return tau

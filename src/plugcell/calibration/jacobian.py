@@ -121,7 +121,10 @@ def identification_jacobian(
     want_comp = [k for k in keys if k in comp]
     if want_comp:
         act = [desc.index(n) for n in desc.actuated]
-        Hq = np.swapaxes(cols["theta"][:, act], 1, 2) @ s.reading_map  # (N, 6, n_read)
+        # a joint's column: θ of a revolute link, d of a prismatic one
+        Hj = np.where(desc.prismatic_links[None, :, None], cols["d"][:, act],
+                      cols["theta"][:, act])
+        Hq = np.swapaxes(Hj, 1, 2) @ s.reading_map  # (N, 6, n_read)
         ci = [comp.index(k) for k in want_comp]
         Hc = Hq @ batch.regressors[:, :, ci]  # (N, 6, n_c)
         comp_col = dict(zip(want_comp, np.moveaxis(Hc, -1, 0), strict=True))

@@ -26,6 +26,8 @@ from typing import TYPE_CHECKING, Any
 if TYPE_CHECKING:  # numpy is imported where it is used: `--help` does not load it
     import numpy as np
 
+from plugcell.commands.robotargs import add_robot_args
+
 
 def configure(p: argparse.ArgumentParser) -> None:
     """Add the ``calibrate`` options to its parser (declared in :mod:`plugcell.cli`)."""
@@ -35,7 +37,7 @@ def configure(p: argparse.ArgumentParser) -> None:
         "measurement file (joint readings + tracker measurements, "
         "docs/measurement-files.md)."
     )
-    p.add_argument("--robot", required=True, help="shipped robot name or description file")
+    add_robot_args(p, required=True)
     p.add_argument("--model", required=True,
                    help="1-5 or serial, loop, serial+gravity, loop+gravity, full")
     p.add_argument("--data", type=Path, required=True, help="calibration measurement file")
@@ -133,7 +135,7 @@ def _positive(value: float, option: str, unit: str) -> None:
         raise CommandError(f"{option} must be a finite number > 0 ({unit}), got {value}")
 
 
-def _read(path: Path, rot: str, n: int, payload: float | None):
+def _read(path: Path, rot: str, n: int, payload: float | None, scale: Any = None):
     from dataclasses import replace
 
     import numpy as np
@@ -143,7 +145,7 @@ def _read(path: Path, rot: str, n: int, payload: float | None):
     from plugcell.io.measurements import MeasurementFileError, read_measurements
 
     try:
-        m = read_measurements(path, rotation=rot, n_joints=n)
+        m = read_measurements(path, rotation=rot, n_joints=n, joint_scale=scale)
     except MeasurementFileError as exc:
         raise CommandError(str(exc)) from None
     if payload is not None:
@@ -183,13 +185,9 @@ def _summary(d: dict[str, Any]) -> str:
 def _run(args: argparse.Namespace) -> int:
     from plugcell.calibration import CalibrationError, Calibrator
     from plugcell.cli import CommandError
-    from plugcell.io.robots import load_robot
-    from plugcell.kinematics.errors import DescriptionError
+    from plugcell.commands.robotargs import load_robot_of, robot_source_of
 
-    try:
-        desc = load_robot(args.robot)
-    except DescriptionError as exc:
-        raise CommandError(str(exc)) from None
+    desc = load_robot_of(args)
     if args.payload_kg is not None and not (math.isfinite(args.payload_kg)
                                             and args.payload_kg >= 0):
         raise CommandError(f"--payload-kg must be a mass ≥ 0, got {args.payload_kg}")
@@ -205,10 +203,11 @@ def _run(args: argparse.Namespace) -> int:
         raise CommandError("--validate-refit needs a --validate file")
     if args.refit_positions_only and args.validate_refit == "none":
         raise CommandError("--refit-positions-only needs --validate-refit base or base+probe")
-    data = _read(args.data, args.rot, desc.n_readings, args.payload_kg)
+    scale = desc.reading_scale()  # degrees, mm for a prismatic joint
+    data = _read(args.data, args.rot, desc.n_readings, args.payload_kg, scale)
     val = None
     if args.validate is not None:
-        val = _read(args.validate, args.rot, desc.n_readings, args.payload_kg)
+        val = _read(args.validate, args.rot, desc.n_readings, args.payload_kg, scale)
         if val.six_dof != data.six_dof:
             raise CommandError("--validate: the validation file must measure the same (6-DOF "
                                "or positions) as the calibration file")
@@ -233,8 +232,11 @@ def _run(args: argparse.Namespace) -> int:
                 refit_positions_only=args.refit_positions_only)
     except CalibrationError as exc:
         raise CommandError(str(exc)) from None
-    d = result.to_dict()
-    text = result.to_json()
+    d = json.loads(result.to_json())
+    # where the robot came from and what it was: export and compensate find it again
+    d["robot_source"] = robot_source_of(args).absolute().to_dict()
+    d["description"] = desc.to_dict()
+    text = json.dumps(d, indent=2, allow_nan=False)
     written = []
     if args.out is not None:
         _write(args.out, text + "\n")

@@ -33,6 +33,8 @@ from typing import Any
 
 import numpy as np
 
+from plugcell.commands.robotargs import add_robot_args
+
 COLUMNS = ("x", "y", "z", "rx", "ry", "rz")
 OPTIONAL = ("name", "payload_kg")
 
@@ -61,8 +63,8 @@ def configure(p: argparse.ArgumentParser) -> None:
     p.add_argument("--tool", default=None, metavar="X,Y,Z,A,B,C",
                    help="compensated tool point in the flange frame (mm, degrees; default: the "
                         "identified PROBE, i.e. the T-MAC)")
-    p.add_argument("--robot", default=None,
-                   help="robot description (name or file) instead of the one named in PARAMS")
+    add_robot_args(p, help="robot description (name, .toml, .urdf or .xacro) instead of the "
+                   "one recorded in PARAMS")
     p.add_argument("--tol", type=float, default=1e-6, help="‖Δx‖ threshold (default 1e-6)")
     p.set_defaults(func=_run)
 
@@ -140,10 +142,11 @@ def parse_targets(text: str, name: str) -> tuple[list[str], np.ndarray, np.ndarr
     return names, vals[:, :3] / 1e3, np.radians(vals[:, 3:]), pay, lines
 
 
-def _load_params(path: Path, robot: str | None) -> Any:
+def _load_params(path: Path, args: argparse.Namespace) -> Any:
     from plugcell.calibration.result import CalibrationResult
     from plugcell.cli import CommandError
-    from plugcell.io.robots import load_robot
+    from plugcell.commands.robotargs import load_robot_of
+    from plugcell.io.robots import description_of_params
     from plugcell.kinematics.errors import DescriptionError
 
     try:
@@ -154,10 +157,13 @@ def _load_params(path: Path, robot: str | None) -> Any:
         raise CommandError(f"{path}: not valid JSON: line {exc.lineno}: {exc.msg}") from None
     if not isinstance(d, dict):
         raise CommandError(f"{path}: expected a JSON object written by plugcell calibrate")
-    try:
-        desc = load_robot(robot or d.get("robot", ""))
-    except DescriptionError as exc:
-        raise CommandError(f"{path}: robot: {exc}") from None
+    if args.robot is not None:
+        desc = load_robot_of(args)
+    else:
+        try:
+            desc = description_of_params(d, str(path))
+        except DescriptionError as exc:
+            raise CommandError(str(exc)) from None
     try:
         return CalibrationResult.from_dict(d, desc)
     except (KeyError, TypeError, ValueError) as exc:
@@ -175,7 +181,7 @@ def _run(args: argparse.Namespace) -> int:
         raise CommandError(f"--payload-kg must be a mass ≥ 0 kg, got {args.payload_kg}")
     if not args.tol > 0:
         raise CommandError(f"--tol must be > 0, got {args.tol}")
-    result = _load_params(args.params, args.robot)
+    result = _load_params(args.params, args)
     try:
         text = args.targets.read_text()
     except OSError as exc:
@@ -214,12 +220,13 @@ def _write(args: argparse.Namespace, result: Any, names: list[str], res: Any,
     from plugcell.cli import CommandError
 
     n = res.q.shape[1]
-    q = np.degrees(res.q)
+    q = res.q / result.model.structure.source.reading_scale()  # degrees (prismatic: mm)
     buf = io.StringIO()
     buf.write(f"# plugcell compensate: {len(names)} targets from {args.targets.name}, "
               f"parameters {args.params.name} (model {result.config.number}, robot "
               f"{result.robot}), angles {args.rot}\n")
-    buf.write("# j1..jn: compensated joint targets (degrees); residual: final ‖Δx‖ of the "
+    buf.write("# j1..jn: compensated joint targets (degrees, mm for a prismatic joint); "
+              "residual: final ‖Δx‖ of the "
               "model (m, rad)\n")
     w = csv.writer(buf, lineterminator="\n")
     w.writerow(["name", *[f"j{k + 1}" for k in range(n)], "payload_kg", "iterations",

@@ -5,11 +5,14 @@
     plugcell kin fk --robot smart_h4 --joints 0,-90,-187,0,90,0
     plugcell kin ik --robot smart_h4 --pose 1500,0,1200,0,90,0 [--seed 0,-90,-187,0,90,0]
     plugcell kin robots
-    plugcell kin describe --robot smart_h4
+    plugcell kin describe --robot smart_h4 [--format toml]
+    plugcell kin describe --robot ur.urdf.xacro --robot-arg ur_type=ur10 --robot-arg name=ur10
 
-Joint values in degrees (description order), positions in millimetres,
+Joint values in degrees (millimetres for a prismatic joint; description order),
+positions in millimetres,
 orientations as Comau Euler ZYZ angles (A, B, C) in degrees; the printed 4×4
-matrix ``T`` is the flange pose in the robot base frame, in metres.  FK evaluates
+matrix ``T`` is the flange pose in the robot base frame, in metres (``T_tcp``: the tool,
+printed when the description has one — for a URDF robot its tip link).  FK evaluates
 any configuration the loop can assemble and *reports* limit violations in
 ``warnings``; IK only returns solutions inside the limits.
 """
@@ -24,9 +27,9 @@ from typing import Any
 
 import numpy as np
 
-from plugcell.io.robots import available_robots, load_robot
+from plugcell.commands.robotargs import add_robot_args, load_robot_of
+from plugcell.io.robots import available_robots
 from plugcell.kinematics import (
-    DescriptionError,
     KinematicsError,
     RobotDescription,
     forward,
@@ -59,14 +62,14 @@ def configure(kin: argparse.ArgumentParser) -> None:
 
     kin.set_defaults(func=no_sub)
 
-    robot_help = "shipped robot name (see 'plugcell kin robots') or a description file path"
     fk = sub.add_parser(
         "fk",
         help="forward kinematics: flange pose for joint values",
         description="Print the flange pose in the robot base frame as JSON.",
     )
-    fk.add_argument("--robot", required=True, help=robot_help)
-    fk.add_argument("--joints", required=True, help="j1,...,jn in degrees, description order")
+    add_robot_args(fk, required=True)
+    fk.add_argument("--joints", required=True,
+                    help="j1,...,jn in degrees (prismatic: mm), description order")
     fk.add_argument(
         "--closure",
         choices=("fourbar", "nominal"),
@@ -80,9 +83,10 @@ def configure(kin: argparse.ArgumentParser) -> None:
         help="inverse kinematics: joint values for a flange pose",
         description="Print joint values (degrees) that put the flange at the pose, as JSON.",
     )
-    ik.add_argument("--robot", required=True, help=robot_help)
+    add_robot_args(ik, required=True)
     ik.add_argument("--pose", required=True, help="x,y,z (mm),A,B,C (Comau ZYZ, degrees)")
-    ik.add_argument("--seed", help="j1,...,jn in degrees (default: the robot's home pose)")
+    ik.add_argument("--seed",
+                    help="j1,...,jn in degrees (prismatic: mm; default: the robot's home pose)")
     ik.add_argument("--closure", choices=("fourbar", "nominal"), default="fourbar")
     ik.set_defaults(func=_cmd_ik)
 
@@ -90,9 +94,16 @@ def configure(kin: argparse.ArgumentParser) -> None:
     robots.set_defaults(func=_cmd_robots)
 
     describe = sub.add_parser(
-        "describe", help="print a robot description (file units: m, deg, kg) as JSON"
+        "describe",
+        help="print a robot description (file units: m, deg, kg) as JSON or TOML",
+        description="Print a robot description in file form — for a URDF/xacro robot, what "
+        "was imported. '--format toml' is a description file that loads back unchanged.",
     )
-    describe.add_argument("--robot", required=True, help=robot_help)
+    add_robot_args(describe, required=True)
+    describe.add_argument("--format", choices=("json", "toml"), default=None,
+                          help="toml (plugcell's description file; the default for a "
+                          ".urdf/.xacro robot: what was imported) or json (the default "
+                          "otherwise)")
     describe.set_defaults(func=_cmd_describe)
 
     for p in (fk, ik):
@@ -101,11 +112,8 @@ def configure(kin: argparse.ArgumentParser) -> None:
 
 
 # ----------------------------------------------------------------------------- helpers
-def _robot(name: str) -> RobotDescription:
-    try:
-        return load_robot(name)
-    except DescriptionError as exc:
-        raise _error(str(exc)) from None
+def _robot(args: argparse.Namespace) -> RobotDescription:
+    return load_robot_of(args)
 
 
 def _floats(text: str, n: int, option: str, what: str) -> np.ndarray:
@@ -128,7 +136,10 @@ def _floats(text: str, n: int, option: str, what: str) -> np.ndarray:
 
 
 def _joint_names(desc: RobotDescription) -> str:
-    return "joints " + ", ".join(desc.reading_names) + " in degrees"
+    units = " (mm for " + ", ".join(n for n, p in zip(desc.reading_names, desc.prismatic_readings,
+                                                       strict=True) if p) + ")" \
+        if desc.prismatic_readings.any() else ""
+    return "joints " + ", ".join(desc.reading_names) + " in degrees" + units
 
 
 def _dumps(obj: Any, indent: int = 0) -> str:
@@ -156,9 +167,9 @@ def _r(x: float, nd: int = 9) -> float:
 
 # ----------------------------------------------------------------------------- commands
 def _cmd_fk(args: argparse.Namespace) -> int:
-    desc = _robot(args.robot)
+    desc = _robot(args)
     qdeg = _floats(args.joints, desc.n_readings, "--joints", _joint_names(desc))
-    q = np.radians(qdeg)
+    q = qdeg * desc.reading_scale()
     try:
         fk = forward(desc, None, q, closure=args.closure)
     except KinematicsError as exc:
@@ -170,6 +181,11 @@ def _cmd_fk(args: argparse.Namespace) -> int:
         "pose_mm_zyz": [_r(v * 1e3, 6) for v in xyz] + [_r(math.degrees(v), 6) for v in zyz],
         "warnings": desc.limit_violations(q),
     }
+    if not np.allclose(desc.tool, np.eye(4), atol=1e-12):  # e.g. a URDF's tip link (tool0)
+        txyz, tzyz = matrix_to_pose(fk.tcp, "zyz")
+        out["T_tcp"] = [[_r(v, 12) for v in row] for row in fk.tcp]
+        out["tcp_mm_zyz"] = ([_r(v * 1e3, 6) for v in txyz]
+                             + [_r(math.degrees(v), 6) for v in tzyz])
     if fk.passive_names:
         out["passive_deg"] = {
             name: _r(math.degrees(fk.passive[k]), 9) for k, name in enumerate(fk.passive_names)
@@ -179,11 +195,12 @@ def _cmd_fk(args: argparse.Namespace) -> int:
 
 
 def _cmd_ik(args: argparse.Namespace) -> int:
-    desc = _robot(args.robot)
+    desc = _robot(args)
     pose = _floats(args.pose, 6, "--pose", "x,y,z in mm and A,B,C Comau ZYZ in degrees")
     seed = None
     if args.seed is not None:
-        seed = np.radians(_floats(args.seed, desc.n_readings, "--seed", _joint_names(desc)))
+        seed = (_floats(args.seed, desc.n_readings, "--seed", _joint_names(desc))
+                * desc.reading_scale())
     T = pose_to_matrix(pose[:3] * 1e-3, np.radians(pose[3:]), "zyz")
     try:
         res = inverse(desc, None, T, seed, closure=args.closure)
@@ -192,7 +209,7 @@ def _cmd_ik(args: argparse.Namespace) -> int:
     _print(
         {
             "robot": desc.name,
-            "joints": [_r(math.degrees(v), 9) for v in res.q],
+            "joints": [_r(v, 9) for v in np.asarray(res.q) / desc.reading_scale()],
             "position_error_mm": float(f"{res.position_error * 1e3:.3g}"),
             "orientation_error_deg": float(f"{math.degrees(res.orientation_error):.3g}"),
         }
@@ -207,5 +224,16 @@ def _cmd_robots(args: argparse.Namespace) -> int:
 
 
 def _cmd_describe(args: argparse.Namespace) -> int:
-    _print(_robot(args.robot).to_dict())
+    desc = _robot(args)
+    fmt = args.format
+    if fmt is None:
+        from plugcell.io.urdf import is_urdf_path
+
+        fmt = "toml" if is_urdf_path(args.robot) else "json"
+    if fmt == "toml":
+        from plugcell.io.robots import description_to_toml
+
+        print(description_to_toml(desc), end="")
+    else:
+        _print(desc.to_dict())
     return 0

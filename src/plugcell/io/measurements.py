@@ -6,9 +6,10 @@ Format (used by the twin, the calibrator, the services and the docs)::
     j1,j2,j3,j4,j5,j6,x,y,z,rx,ry,rz,payload_kg
     10.0,-80.0,-150.0,0.0,30.0,0.0,1712.43,-12.80,1203.55,179.9,0.2,-90.1,36
 
-* ``j1..jn`` — joint readings in **degrees** as the controller reports them, in the
-  robot description's reading order (for the Smart H4: θ1, θ2, θ2', θ4, θ5, θ6; for a
-  description with a joint ``coupling``, its ``readings``, e.g. Fanuc J1..J6).
+* ``j1..jn`` — joint readings in **degrees** (a prismatic joint: **mm**) as the
+  controller reports them, in the robot description's reading order (for the Smart
+  H4: θ1, θ2, θ2', θ4, θ5, θ6; for a description with a joint ``coupling``, its
+  ``readings``, e.g. Fanuc J1..J6).
 * ``x, y, z`` — measured reflector position in **mm** in the tracker frame.
 * ``rx, ry, rz`` — optional measured orientation in **degrees**; the convention is
   a property of the file set by the reader/writer (``rpy`` = fixed X-Y-Z, default;
@@ -129,11 +130,14 @@ def parse_measurements(
     rotation: str = "rpy",
     name: str = "<measurements>",
     n_joints: int | None = None,
+    joint_scale: np.ndarray | None = None,
 ) -> MeasurementSet:
     """Parse measurement-file text; see the module docstring for the format.
 
     ``n_joints`` (the robot's number of joint readings), when given, is checked
-    against the file's joint columns.
+    against the file's joint columns.  ``joint_scale``: SI per file unit of each
+    joint column (``desc.reading_scale()``: π/180 for degrees, 1e-3 for the mm of a
+    prismatic joint); default degrees for all.
     """
     if rotation not in ROTATION_CONVENTIONS:
         raise MeasurementFileError(
@@ -182,7 +186,8 @@ def parse_measurements(
                     f"{name}: line {line_no}, column {cols[c]!r}: not finite: {cell.strip()!r}"
                 )
             values[r, c] = v
-    joints = np.deg2rad(values[:, [index[f"j{k}"] for k in range(1, nj + 1)]])
+    joints = values[:, [index[f"j{k}"] for k in range(1, nj + 1)]] * (
+        math.pi / 180.0 if joint_scale is None else np.asarray(joint_scale, dtype=float))
     positions = values[:, [index["x"], index["y"], index["z"]]] / 1000.0
     angles = None
     if "rx" in index:
@@ -200,7 +205,8 @@ def parse_measurements(
 
 
 def read_measurements(
-    path: str | Path, *, rotation: str = "rpy", n_joints: int | None = None
+    path: str | Path, *, rotation: str = "rpy", n_joints: int | None = None,
+    joint_scale: np.ndarray | None = None,
 ) -> MeasurementSet:
     """Read a measurement file (see :func:`parse_measurements`)."""
     p = Path(path)
@@ -212,11 +218,14 @@ def read_measurements(
         raise MeasurementFileError(f"{p}: not a UTF-8 text file ({exc.reason})") from None
     except OSError as exc:
         raise MeasurementFileError(f"{p}: cannot read: {exc.strerror}") from None
-    return parse_measurements(text, rotation=rotation, name=str(p), n_joints=n_joints)
+    return parse_measurements(text, rotation=rotation, name=str(p), n_joints=n_joints,
+                              joint_scale=joint_scale)
 
 
-def format_measurements(m: MeasurementSet, *, comments: Iterable[str] = ()) -> str:
-    """Render a :class:`MeasurementSet` as measurement-file text (degrees, mm)."""
+def format_measurements(m: MeasurementSet, *, comments: Iterable[str] = (),
+                        joint_scale: np.ndarray | None = None) -> str:
+    """Render a :class:`MeasurementSet` as measurement-file text (degrees, mm;
+    ``joint_scale`` as in :func:`parse_measurements`)."""
     out = io.StringIO()
     for c in comments:
         for line in str(c).splitlines() or [""]:
@@ -229,7 +238,8 @@ def format_measurements(m: MeasurementSet, *, comments: Iterable[str] = ()) -> s
     if m.payload_kg is not None:
         header.append("payload_kg")
     out.write(",".join(header) + "\n")
-    cols = [np.rad2deg(m.joints), m.positions * 1000.0]
+    cols = [m.joints / (math.pi / 180.0 if joint_scale is None
+                        else np.asarray(joint_scale, dtype=float)), m.positions * 1000.0]
     if m.angles is not None:
         cols.append(np.rad2deg(m.angles))
     if m.payload_kg is not None:
@@ -241,7 +251,9 @@ def format_measurements(m: MeasurementSet, *, comments: Iterable[str] = ()) -> s
 
 
 def write_measurements(
-    path: str | Path, m: MeasurementSet, *, comments: Iterable[str] = ()
+    path: str | Path, m: MeasurementSet, *, comments: Iterable[str] = (),
+    joint_scale: np.ndarray | None = None,
 ) -> None:
     """Write a measurement file; the inverse of :func:`read_measurements`."""
-    Path(path).write_text(format_measurements(m, comments=comments), encoding="utf-8")
+    Path(path).write_text(format_measurements(m, comments=comments, joint_scale=joint_scale),
+                          encoding="utf-8")

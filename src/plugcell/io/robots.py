@@ -1,25 +1,37 @@
-"""Robot description files (TOML) → :class:`~plugcell.kinematics.RobotDescription`.
+"""Robot description files (TOML, URDF, xacro) → :class:`~plugcell.kinematics.RobotDescription`.
 
 The file format is documented in ``docs/robot-description.md``.  Shipped robots
 live in the package directory ``plugcell/robots/`` and are addressed by bare
 name (``"smart_h4"``); anything that looks like a path (contains a path
-separator or ends in ``.toml``) is read as a file.  Every error names the file
-and the key: ``smart_h4.toml: links[3].alpha: expected a number, got 'x'``.
+separator or ends in ``.toml``, ``.urdf`` or ``.xacro``) is read as a file —
+URDF and xacro files through :mod:`plugcell.io.urdf`.  Every error names the
+file and the key: ``smart_h4.toml: links[3].alpha: expected a number, got 'x'``.
+
+:class:`RobotSource` is *where a robot comes from* (the name or path and, for
+URDF/xacro, the xacro arguments, package directories and chain ends): one value
+that loads the robot, is recorded in PARAMS.json and is passed to sub-processes.
 """
 
 from __future__ import annotations
 
 import os
+import re
 import tomllib
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field
 from importlib import resources
 from pathlib import Path
+from typing import Any
 
 from plugcell.kinematics.description import RobotDescription
 from plugcell.kinematics.errors import DescriptionError
 
 __all__ = [
     "RobotNotFoundError",
+    "RobotSource",
     "available_robots",
+    "description_of_params",
+    "description_to_toml",
     "load_robot",
     "load_robot_file",
     "robot_path",
@@ -48,7 +60,10 @@ def available_robots() -> list[str]:
 
 
 def _looks_like_path(name: str) -> bool:
-    return name.endswith(SUFFIX) or os.sep in name or (os.altsep is not None and os.altsep in name)
+    from plugcell.io.urdf import is_urdf_path
+
+    return (name.endswith(SUFFIX) or is_urdf_path(name) or os.sep in name
+            or (os.altsep is not None and os.altsep in name))
 
 
 def robot_path(name_or_path: str | os.PathLike[str]) -> Path:
@@ -87,6 +102,160 @@ def load_robot_file(path: str | os.PathLike[str]) -> RobotDescription:
         raise exc.with_prefix(label) from None
 
 
-def load_robot(name_or_path: str | os.PathLike[str]) -> RobotDescription:
-    """Load a shipped robot by name (``"smart_h4"``) or a description file by path."""
-    return load_robot_file(robot_path(name_or_path))
+def load_robot(
+    name_or_path: str | os.PathLike[str],
+    *,
+    args: Mapping[str, str] | None = None,
+    package_paths: Sequence[str | os.PathLike[str]] = (),
+    base_link: str | None = None,
+    tip_link: str | None = None,
+) -> RobotDescription:
+    """Load a shipped robot by name (``"smart_h4"``) or a description file by path.
+
+    A ``.urdf``/``.xacro`` path is imported (:func:`plugcell.io.urdf.import_urdf`)
+    with the xacro ``args``, ROS ``package_paths`` and chain ends; these options are
+    an error for any other robot.
+    """
+    return RobotSource(str(name_or_path), dict(args or {}),
+                       tuple(str(p) for p in package_paths), base_link, tip_link).load()
+
+
+@dataclass(frozen=True)
+class RobotSource:
+    """Where a robot comes from: ``ref`` (shipped name or file path) and import options.
+
+    ``args`` (xacro arguments), ``package_paths``, ``base_link`` and ``tip_link``
+    apply to URDF/xacro files only.
+    """
+
+    ref: str
+    args: Mapping[str, str] = field(default_factory=dict)
+    package_paths: tuple[str, ...] = ()
+    base_link: str | None = None
+    tip_link: str | None = None
+
+    @property
+    def is_urdf(self) -> bool:
+        from plugcell.io.urdf import is_urdf_path
+
+        return is_urdf_path(self.ref)
+
+    def load(self) -> RobotDescription:
+        """The description (raises :class:`DescriptionError` naming file and element)."""
+        if self.is_urdf:
+            return self.import_urdf().description
+        extra = [opt for opt, v in (("--robot-arg", self.args),
+                                    ("--package-path", self.package_paths),
+                                    ("--base-link", self.base_link),
+                                    ("--tip-link", self.tip_link)) if v]
+        if extra:
+            raise DescriptionError(
+                extra[0], f"applies to .urdf/.xacro robots only, not to {self.ref!r}")
+        return load_robot_file(robot_path(self.ref))
+
+    def import_urdf(self) -> Any:
+        """The :class:`~plugcell.io.urdf.ImportedRobot` of a URDF/xacro source."""
+        from plugcell.io.urdf import import_urdf
+
+        return import_urdf(self.ref, self.args, self.package_paths, self.base_link,
+                           self.tip_link)
+
+    def absolute(self) -> RobotSource:
+        """The same source with file paths made absolute (to record or pass on)."""
+        ref = self.ref
+        if _looks_like_path(ref):
+            ref = str(Path(ref).resolve())
+        return RobotSource(ref, dict(self.args), tuple(str(Path(p).resolve())
+                                                       for p in self.package_paths),
+                           self.base_link, self.tip_link)
+
+    def to_dict(self) -> dict[str, Any]:
+        """JSON form (``robot_source`` of PARAMS.json)."""
+        out: dict[str, Any] = {"ref": self.ref}
+        if self.args:
+            out["args"] = dict(self.args)
+        if self.package_paths:
+            out["package_paths"] = list(self.package_paths)
+        if self.base_link:
+            out["base_link"] = self.base_link
+        if self.tip_link:
+            out["tip_link"] = self.tip_link
+        return out
+
+    @classmethod
+    def from_dict(cls, d: Any) -> RobotSource:
+        """Inverse of :meth:`to_dict` (raises :class:`DescriptionError` on bad input)."""
+        if not isinstance(d, Mapping) or not isinstance(d.get("ref"), str) or not d["ref"]:
+            raise DescriptionError("robot_source", "expected an object with a non-empty 'ref'")
+        args = d.get("args", {})
+        paths = d.get("package_paths", [])
+        if not (isinstance(args, Mapping) and all(isinstance(k, str) and isinstance(v, str)
+                                                  for k, v in args.items())):
+            raise DescriptionError("robot_source.args", "expected an object of strings")
+        if not (isinstance(paths, list) and all(isinstance(p, str) for p in paths)):
+            raise DescriptionError("robot_source.package_paths", "expected a list of strings")
+        ends = {k: d.get(k) for k in ("base_link", "tip_link")}
+        for k, v in ends.items():
+            if v is not None and not isinstance(v, str):
+                raise DescriptionError(f"robot_source.{k}", "expected a string")
+        return cls(d["ref"], dict(args), tuple(paths), ends["base_link"] or None,
+                   ends["tip_link"] or None)
+
+    def argv(self, option: str = "--robot") -> list[str]:
+        """Command-line options that give this source to another plugcell process."""
+        out = [option, self.ref]
+        for k, v in self.args.items():
+            out += ["--robot-arg", f"{k}={v}"]
+        for p in self.package_paths:
+            out += ["--package-path", p]
+        if self.base_link:
+            out += ["--base-link", self.base_link]
+        if self.tip_link:
+            out += ["--tip-link", self.tip_link]
+        return out
+
+
+def description_to_toml(desc: RobotDescription, header: str = "") -> str:
+    """The description as a TOML description file (loads back to the same robot).
+
+    ``header``: comment lines put at the top (without ``#``).
+    """
+    import tomli_w
+
+    d = desc.to_dict()
+    if not d.get("notes"):
+        d.pop("notes", None)
+    for key in ("loops", "coupled_limits", "point_masses"):
+        if not d.get(key):
+            d.pop(key, None)
+    lines = "".join(f"# {ln}\n" for ln in header.splitlines())
+    return lines + _one_line_arrays(tomli_w.dumps(d))
+
+
+_SCALAR_ARRAY = re.compile(r"\[\n((?:    [^\[\]{}\n]+,\n)+)\]")
+
+
+def _one_line_arrays(text: str) -> str:
+    """tomli-w writes an array an element a line; put arrays of scalars on one line."""
+    return _SCALAR_ARRAY.sub(
+        lambda m: "[" + ", ".join(x.strip().rstrip(",") for x in m.group(1).splitlines()) + "]",
+        text)
+
+
+def description_of_params(d: Mapping[str, Any], label: str = "PARAMS") -> RobotDescription:
+    """The robot a calibration (PARAMS.json dictionary) was made for.
+
+    The embedded ``description`` (written by ``plugcell calibrate``) if present, else
+    the ``robot_source`` it was loaded from, else the shipped robot named ``robot``.
+    Errors are :class:`DescriptionError` located at ``label``.
+    """
+    try:
+        if "description" in d:
+            return RobotDescription.from_dict(d["description"])
+        if "robot_source" in d:
+            return RobotSource.from_dict(d["robot_source"]).load()
+        return load_robot(str(d.get("robot", "")))
+    except DescriptionError as exc:
+        key = "description" if "description" in d else (
+            "robot_source" if "robot_source" in d else "robot")
+        raise exc.with_prefix(f"{label}: {key}") from None

@@ -5,7 +5,8 @@ Transforms and DH/Hayati links (:mod:`.transforms`), orientation conventions
 robot descriptions (:mod:`.description`) and parameter sets (:mod:`.parameters`),
 parallelogram loop closure (:mod:`.closure`), forward kinematics through loops
 (:mod:`.forward`), the manipulator Jacobian (:mod:`.jacobian`) and nominal
-inverse kinematics (:mod:`.inverse`).  No I/O, no framework imports; files are
+inverse kinematics (:mod:`.inverse`); joint-origin chains (URDF style) converted
+exactly to DH/Hayati rows (:mod:`.joint_chain`).  No I/O, no framework imports; files are
 read by :mod:`plugcell.io.robots`.  See docs/kinematics.md.
 """
 
@@ -33,6 +34,7 @@ from plugcell.kinematics.jacobian import (
     kinematic_jacobian_from_fk,
     manipulator_jacobian,
 )
+from plugcell.kinematics.joint_chain import ChainJoint, JointChain, description_from_chain
 from plugcell.kinematics.parameters import FIELDS, GeometricParameters
 from plugcell.kinematics.pose_error import pose_error, pose_error_exact, rotation_error
 from plugcell.kinematics.rotations import (
@@ -68,6 +70,7 @@ __all__ = [
     "CONVENTIONS",
     "FIELDS",
     "Box",
+    "ChainJoint",
     "ClosureResult",
     "CoupledLimit",
     "DescriptionError",
@@ -75,6 +78,7 @@ __all__ = [
     "FourBarLoop",
     "GeometricParameters",
     "IKResult",
+    "JointChain",
     "JointCoupling",
     "JointLimitError",
     "KinematicsError",
@@ -85,6 +89,7 @@ __all__ = [
     "UnreachableError",
     "angles_to_matrix",
     "branch_cut_transform",
+    "description_from_chain",
     "dh_hayati",
     "forward",
     "fourbar_closure",

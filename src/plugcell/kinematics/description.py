@@ -32,9 +32,10 @@ from plugcell.kinematics.rotations import matrix_to_rpy, rpy_to_matrix, zyz_to_m
 
 Array = NDArray[np.float64]
 
-#: Joint types.  ``actuated``: θ = reading + offset; ``passive``: θ from a loop
-#: closure (+ offset); ``fixed``: θ is a constant.
-JOINT_TYPES: tuple[str, ...] = ("actuated", "passive", "fixed")
+#: Joint types.  ``actuated``: θ = reading + offset (revolute); ``prismatic``:
+#: d = reading + offset, θ constant (a linear axis, e.g. a track); ``passive``: θ
+#: from a loop closure (+ offset); ``fixed``: θ is a constant.
+JOINT_TYPES: tuple[str, ...] = ("actuated", "prismatic", "passive", "fixed")
 #: Parent name of the first link: the robot base frame F0.
 ROOT = "base"
 #: Description file format version understood by :meth:`RobotDescription.from_dict`.
@@ -69,7 +70,8 @@ class Link:
 
     The link frame F_i is ``F_parent · Rz(θ) Tz(d) Tx(a) Rx(α) Ry(β)``.  ``theta``
     is an offset added to the joint reading (actuated), to the loop-closure angle
-    (passive) or the constant angle (fixed, e.g. Smart H4 link 3: −83°).
+    (passive) or the constant angle (fixed, e.g. Smart H4 link 3: −83°; prismatic,
+    whose reading is added to ``d`` instead).
     ``hayati`` marks links whose β is a meaningful (identifiable) parameter;
     ``mass`` (kg) and ``com`` (m, in the link's own frame F_i) feed the twin.
     """
@@ -88,7 +90,13 @@ class Link:
 
     @property
     def is_actuated(self) -> bool:
-        return self.joint == "actuated"
+        """Driven by a joint reading (revolute ``actuated`` or ``prismatic``)."""
+        return self.joint in ("actuated", "prismatic")
+
+    @property
+    def is_prismatic(self) -> bool:
+        """A linear joint: its reading adds to ``d`` (metres), ``theta`` is constant."""
+        return self.joint == "prismatic"
 
     @property
     def is_passive(self) -> bool:
@@ -325,7 +333,7 @@ class RobotDescription:
             if not lo < hi:
                 raise DescriptionError(
                     loc,
-                    f"lower limit {math.degrees(lo):g}° must be below upper {math.degrees(hi):g}°",
+                    f"lower limit {self._fmt(j, lo)} must be below upper {self._fmt(j, hi)}",
                 )
         S(self, "joint_limits", lim)
         if self.coupling is not None:
@@ -362,6 +370,12 @@ class RobotDescription:
         c = self.coupling
         if c is None:
             return
+        for i, lk in enumerate(self.links):
+            if lk.is_prismatic:
+                raise DescriptionError(
+                    f"links[{i}].joint",
+                    "a joint coupling of a robot with prismatic joints is not supported",
+                )
         if not isinstance(c, JointCoupling):
             raise DescriptionError("coupling", f"expected a JointCoupling, got {type(c).__name__}")
         n_a, n_r = len(self.actuated), c.n_readings
@@ -506,6 +520,10 @@ class RobotDescription:
                 for r in ("arm", "crank", "coupler", "follower")
             }
             for role in ("arm", "crank"):
+                if L[role].is_prismatic:
+                    raise DescriptionError(
+                        f"{loc}.{role}", f"link {L[role].name!r} must be revolute, not prismatic"
+                    )
                 if not L[role].is_actuated:
                     raise DescriptionError(
                         f"{loc}.{role}", f"link {L[role].name!r} must be actuated"
@@ -590,6 +608,9 @@ class RobotDescription:
             for m, name in enumerate(cl.joints):
                 if name not in act:
                     raise DescriptionError(f"{loc}.joints[{m}]", f"{name!r} is not {what}")
+                if self.prismatic_readings[act[name]]:
+                    raise DescriptionError(f"{loc}.joints[{m}]",
+                                           f"{name!r} is prismatic (coupled limits are on angles)")
             if cl.joints[0] == cl.joints[1]:
                 raise DescriptionError(f"{loc}.joints", "the two joints must differ")
             if not (math.isfinite(cl.lower) and math.isfinite(cl.upper)) or not cl.lower < cl.upper:
@@ -670,8 +691,8 @@ class RobotDescription:
             if not lim[j, 0] <= home[j] <= lim[j, 1]:
                 raise DescriptionError(
                     f"{where}[{j}]",
-                    f"joint {name} = {math.degrees(home[j]):g}° is outside its limits "
-                    f"[{math.degrees(lim[j, 0]):g}°, {math.degrees(lim[j, 1]):g}°]",
+                    f"joint {name} = {self._fmt(j, home[j])} is outside its limits "
+                    f"[{self._fmt(j, lim[j, 0])}, {self._fmt(j, lim[j, 1])}]",
                 )
         act = {nm: j for j, nm in enumerate(self.reading_names)}
         for cl in self.coupled_limits:
@@ -777,9 +798,39 @@ class RobotDescription:
     @property
     def periodic_readings(self) -> NDArray[np.bool_]:
         """``(n_readings,)``: where adding 2π to the reading leaves the robot's pose unchanged
-        (every kinematic joint it drives moves by a whole number of turns)."""
+        (every kinematic joint it drives moves by a whole number of turns; never a
+        prismatic joint)."""
         M = self.reading_jacobian
-        return np.all(np.abs(M - np.round(M)) < 1e-12, axis=0)
+        return np.all(np.abs(M - np.round(M)) < 1e-12, axis=0) & ~self.prismatic_readings
+
+    @property
+    def prismatic_readings(self) -> NDArray[np.bool_]:
+        """``(n_readings,)``: which readings are lengths (prismatic joints, metres)."""
+        if self.coupling is not None:  # couplings of prismatic joints are refused
+            return np.zeros(self.n_readings, dtype=bool)
+        return np.array([self.links[self._index[n]].is_prismatic for n in self.actuated],
+                        dtype=bool)
+
+    @property
+    def prismatic_links(self) -> NDArray[np.bool_]:
+        """``(n_actuated,)``: which actuated links are prismatic (``actuated`` order)."""
+        return np.array([self.links[self._index[n]].is_prismatic for n in self.actuated],
+                        dtype=bool)
+
+    def reading_scale(self, units: str = "robot") -> Array:
+        """``(n_readings,)`` SI per unit of a reading: ``"robot"`` units are degrees and
+        millimetres (command line, measurement files), ``"file"`` units degrees and
+        metres (description files)."""
+        length = {"robot": 1e-3, "file": 1.0}[units]
+        return np.where(self.prismatic_readings, length, _DEG)
+
+    def _fmt(self, j: int, v: float, digits: int | None = None) -> str:
+        """Reading ``j``'s value ``v`` (SI) for a message: degrees or millimetres."""
+        if self.prismatic_readings[j]:
+            x, unit = v * 1e3, " mm"
+        else:
+            x, unit = math.degrees(v), "°"
+        return (f"{x:.{digits}f}" if digits is not None else f"{x:g}") + unit
 
     def kinematic_limits(self) -> Array:
         """``(n_actuated, 2)``: the box of kinematic joints θ_kin the reading limits allow.
@@ -874,8 +925,8 @@ class RobotDescription:
             lo, hi = self.joint_limits[j]
             if not lo - tol <= q[j] <= hi + tol:
                 out.append(
-                    f"joint {name} = {math.degrees(q[j]):.4f}° outside "
-                    f"[{math.degrees(lo):g}°, {math.degrees(hi):g}°]"
+                    f"joint {name} = {self._fmt(j, q[j], 4)} outside "
+                    f"[{self._fmt(j, lo)}, {self._fmt(j, hi)}]"
                 )
         for cl in self.coupled_limits:
             v = q[self.joint_index(cl.joints[0])] - q[self.joint_index(cl.joints[1])]
@@ -928,7 +979,8 @@ class RobotDescription:
             if lk.name in act:
                 j = act[lk.name]
                 if self.coupling is None:
-                    d["limits"] = [math.degrees(x) for x in self.joint_limits[j]]
+                    scale = 1.0 if lk.is_prismatic else 180.0 / math.pi
+                    d["limits"] = [float(x) * scale for x in self.joint_limits[j]]
                 if self.stiffness is not None:
                     d["stiffness"] = float(self.stiffness[j])
             links.append(d)
@@ -938,7 +990,8 @@ class RobotDescription:
             "notes": self.notes,
             "actuated": list(self.actuated),
             "flange": self.flange,
-            "home": [math.degrees(x) for x in (self.home if self.home is not None else [])],
+            "home": ([float(x) for x in np.asarray(self.home) / self.reading_scale("file")]
+                     if self.home is not None else []),
             "base": _transform_to_dict(self.base),
             "tool": _transform_to_dict(self.tool),
             "links": links,
@@ -1176,7 +1229,7 @@ def _parse(data: Any) -> RobotDescription:
         if mass < 0:
             raise DescriptionError(f"{loc}.mass", f"must be ≥ 0, got {mass:g}")
         com = tuple(_vec(_opt(t, "com", [0.0, 0.0, 0.0]), 3, f"{loc}.com"))
-        if joint == "actuated":
+        if joint in ("actuated", "prismatic"):
             if coupling is not None:
                 if "limits" in t:
                     raise DescriptionError(
@@ -1186,7 +1239,8 @@ def _parse(data: Any) -> RobotDescription:
                     )
             else:
                 lim = _limit_pair(_req(t, "limits", loc), f"{loc}.limits")
-                limits[lname] = (lim[0] * _DEG, lim[1] * _DEG)
+                unit = 1.0 if joint == "prismatic" else _DEG  # metres or degrees
+                limits[lname] = (lim[0] * unit, lim[1] * unit)
             if "stiffness" in t:
                 k = _num(t["stiffness"], f"{loc}.stiffness")
                 if k <= 0:
@@ -1289,7 +1343,13 @@ def _parse(data: Any) -> RobotDescription:
     home = None
     if "home" in top:
         seq = _list(top["home"], "home")  # length checked against `actuated` by the model
-        home = np.array([_num(x, f"home[{i}]") for i, x in enumerate(seq)]) * _DEG
+        home = np.array([_num(x, f"home[{i}]") for i, x in enumerate(seq)])
+        if coupling is None:  # prismatic readings in metres, the others in degrees
+            kinds = {lk.name: lk.joint for lk in links}
+            unit = [1.0 if kinds.get(nm) == "prismatic" else _DEG for nm in actuated]
+            home = home * (np.array(unit) if len(unit) == len(home) else _DEG)
+        else:
+            home = home * _DEG
 
     return RobotDescription(
         name=name,

@@ -38,6 +38,7 @@ __all__ = [
     "compose_frames",
     "forward",
     "joint_angles",
+    "link_lengths",
 ]
 
 
@@ -133,7 +134,8 @@ def joint_angles(
     """DH angles of every link for readings ``q`` ``(..., n_readings)``.
 
     θ_i = θ_kin,j + theta_i for actuated link i (θ_kin = ``desc.kinematic_joints(q)``),
-    the closure angle + theta_i for passive links, theta_i for fixed ones.
+    the closure angle + theta_i for passive links, theta_i for fixed and prismatic
+    ones (a prismatic reading moves ``d``: :func:`link_lengths`).
     Returns ``(theta (..., n_links), passive (..., n_p), d_passive_dθkin (..., n_p,
     n_actuated), d_passive_da (..., n_p, n_links), valid (...))``.
     """
@@ -145,8 +147,10 @@ def joint_angles(
     n_l, n_a = desc.n_links, desc.n_actuated
     theta = np.broadcast_to(p.theta, (*batch, n_l)).copy()
     q_kin = desc.kinematic_joints(q)
+    prismatic = desc.prismatic_links
     for j, name in enumerate(desc.actuated):
-        theta[..., desc.index(name)] += q_kin[..., j]
+        if not prismatic[j]:
+            theta[..., desc.index(name)] += q_kin[..., j]
     n_p = 2 * len(desc.loops)
     passive = np.zeros((*batch, n_p))
     dq = np.zeros((*batch, n_p, n_a))
@@ -174,9 +178,27 @@ def joint_angles(
     return theta, passive, dq, da, valid
 
 
-def compose_frames(desc: RobotDescription, params: GeometricParameters, theta: Array) -> Array:
-    """Link frames ``(..., n_links, 4, 4)`` in F0 from full DH angles ``theta``."""
-    local = dh_hayati(theta, params.d, params.a, params.alpha, params.beta)
+def link_lengths(desc: RobotDescription, params: GeometricParameters, q: ArrayLike) -> Array:
+    """DH offsets ``d`` of every link ``(..., n_links)`` for readings ``q``.
+
+    ``d_i = reading + d`` for a prismatic link, ``d`` of ``params`` for the others.
+    """
+    q = np.asarray(q, dtype=float)
+    d = np.broadcast_to(params.d, (*q.shape[:-1], desc.n_links)).copy()
+    prismatic = desc.prismatic_links
+    if prismatic.any():
+        q_kin = desc.kinematic_joints(q)
+        for j, name in enumerate(desc.actuated):
+            if prismatic[j]:
+                d[..., desc.index(name)] += q_kin[..., j]
+    return d
+
+
+def compose_frames(desc: RobotDescription, params: GeometricParameters, theta: Array,
+                   d: Array | None = None) -> Array:
+    """Link frames ``(..., n_links, 4, 4)`` in F0 from full DH angles ``theta`` (and the
+    offsets ``d`` of :func:`link_lengths`; default: those of ``params``)."""
+    local = dh_hayati(theta, params.d if d is None else d, params.a, params.alpha, params.beta)
     frames = np.empty_like(local)
     for i, lk in enumerate(desc.links):
         if i == 0:
@@ -207,7 +229,8 @@ def forward(
     """
     p = _check_params(desc, params)
     theta, passive, dq, da, valid = joint_angles(desc, p, q, closure, raise_errors=raise_errors)
-    frames = compose_frames(desc, p, theta)
+    frames = compose_frames(desc, p, theta, link_lengths(desc, p, q) if desc.prismatic_links.any()
+                            else None)
     flange = frames[..., desc.index(desc.flange), :, :]
     tcp = flange @ p.tool
     return FKResult(

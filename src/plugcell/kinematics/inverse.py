@@ -286,7 +286,9 @@ def _restart_seeds(
         return np.broadcast_to(x, (B, x.shape[-1])).copy()
 
     # Axis 1 is the root's z: turn home about it so the arm faces the target.
-    j1 = desc.actuated_index(desc.links[0].name) if desc.links[0].is_actuated else None
+    first = desc.links[0]
+    j1 = (desc.actuated_index(first.name)
+          if first.is_actuated and not first.is_prismatic else None)
     fk_home = forward(desc, params, home_q, closure)
     p_home = (fk_home.tcp if point == "tcp" else fk_home.flange)[:3, 3]
     az_home = math.atan2(p_home[1], p_home[0])
@@ -411,8 +413,11 @@ def inverse(
     reason = np.full(B, "", dtype=object)
     failures: dict[int, _Failure] = {}
 
-    # A pose farther from the shoulder than the stretched arm is refused at once.
-    reach = _reach(desc, params, target)
+    # A pose farther from the shoulder than the stretched arm is refused at once (only
+    # where the first link turns about the base z: not on a track, nor after a mount).
+    first = desc.links[0]
+    simple = first.is_actuated and not first.is_prismatic and not desc.prismatic_links.any()
+    reach = _reach(desc, params, target) if simple else math.inf
     dist = _shoulder_distance(params, Tf)
     far = dist > reach
     for k in np.flatnonzero(far):

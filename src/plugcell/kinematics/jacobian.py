@@ -6,7 +6,8 @@ geometric column at point p is (Spong 5.1.27, thesis 6.37)::
     J_i = [ z_{i−1} × (p − p_{i−1}) ;  z_{i−1} ]
 
 with z_{i−1}, p_{i−1} the axis and origin of the parent frame (the DH θ rotates
-about the parent's z, also for Hayati links) in the robot base frame.  Passive
+about the parent's z, also for Hayati links) in the robot base frame; a prismatic
+joint (its reading moves d along z_{i−1}) has the column ``[z_{i−1}; 0]``.  Passive
 joints are driven through the loop closure, so the column of actuated joint j is
 
     K_j = J_j [if j is on the chain] + Σ_passive (∂θ_passive/∂q_j) · J_passive.
@@ -76,7 +77,10 @@ def kinematic_jacobian_from_fk(
             Tp = fk.frames[..., desc.index(lk.parent), :, :]
             z = Tp[..., :3, 2]
             o = Tp[..., :3, 3]
-        col = np.concatenate([np.cross(z, p - o), z], axis=-1)  # (..., 6)
+        if lk.is_prismatic:  # d moves along the parent's z: [z; 0]
+            col = np.concatenate([z, np.zeros_like(z)], axis=-1)
+        else:
+            col = np.concatenate([np.cross(z, p - o), z], axis=-1)  # (..., 6)
         if lk.is_actuated:
             J[..., :, act_pos[lk.name]] += col
         else:

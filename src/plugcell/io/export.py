@@ -1,0 +1,432 @@
+"""The calibrated robot out: URDF, Universal Robots' kinematics file, plugcell TOML.
+
+A calibration (:class:`~plugcell.calibration.CalibrationResult`) predicts the
+measured target as ``BASE · F_n'(q + Δq) · PROBE`` (docs/calibration.md): the
+calibrated DH/Hayati chain ``F_n'`` (the *geometric* model), BASE and PROBE, and
+joint deflections Δq from compliance/payload terms.  The exports carry:
+
+* ``toml`` — plugcell's description with the calibrated rows, ``base`` = BASE and
+  ``tool`` = PROBE (``forward(...).world_tcp`` is the calibrated geometric model);
+* ``urdf`` — the source URDF (when the robot came from one; links, limits, inertias,
+  meshes kept) with calibrated joint origins
+  (:func:`~plugcell.kinematics.joint_chain.calibrated_origins`), else a URDF built
+  from the calibrated rows; optionally BASE (a new root link ``measurement``) and
+  PROBE (a link ``probe`` on the tip) as fixed joints;
+* ``ur-kinematics`` — ``default_kinematics.yaml`` of Universal Robots' ROS
+  description (x, y, z, roll, pitch, yaw of each joint origin) for a robot imported
+  from ``ur_description``.
+
+What a format cannot carry (compliance and payload terms, BASE/PROBE when not
+included, the flange offset a UR kinematics file has no place for) is returned as
+the *side* dictionary, written next to the file.  Loop robots are refused for URDF
+(a URDF is a tree) unless the serial-equivalent chain (``--model serial``) is asked for.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import math
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from plugcell.io.robots import RobotSource, description_to_toml
+from plugcell.kinematics.description import Link, RobotDescription
+from plugcell.kinematics.parameters import GeometricParameters
+from plugcell.kinematics.rotations import matrix_to_rpy
+from plugcell.kinematics.transforms import dh_hayati, rot_z
+
+__all__ = ["FORMATS", "UR_KINEMATICS_KEYS", "ExportError", "Exported", "export_calibration"]
+
+FORMATS: tuple[str, ...] = ("urdf", "ur-kinematics", "toml")
+#: Joint name (without tf_prefix) → section of ur_description's default_kinematics.yaml.
+UR_KINEMATICS_KEYS: dict[str, str] = {
+    "shoulder_pan_joint": "shoulder",
+    "shoulder_lift_joint": "upper_arm",
+    "elbow_joint": "forearm",
+    "wrist_1_joint": "wrist_1",
+    "wrist_2_joint": "wrist_2",
+    "wrist_3_joint": "wrist_3",
+}
+
+
+class ExportError(ValueError):
+    """The calibration cannot be exported in the asked form (the message says why)."""
+
+
+@dataclass(frozen=True)
+class Exported:
+    """``text`` of the main file; ``side``: what it cannot carry (``None``: nothing)."""
+
+    text: str
+    side: dict[str, Any] | None
+    notes: tuple[str, ...] = field(default_factory=tuple)
+
+
+def _frame(T: np.ndarray) -> dict[str, Any]:
+    return {"matrix": [[float(v) for v in row] for row in T],
+            "xyz_mm": [float(v) * 1e3 for v in T[:3, 3]],
+            "rpy_deg": [math.degrees(v) for v in matrix_to_rpy(T[:3, :3])]}
+
+
+def _fmt(v: float) -> str:
+    v = float(v)
+    return "0" if v == 0 else repr(v)
+
+
+def _origin_attrs(T: np.ndarray) -> dict[str, str]:
+    rpy = matrix_to_rpy(T[:3, :3])
+    return {"xyz": " ".join(_fmt(x) for x in T[:3, 3]), "rpy": " ".join(_fmt(x) for x in rpy)}
+
+
+# =============================================================================== checks
+def _geometry(result: Any, desc: RobotDescription, serial_equivalent: bool,
+              fmt: str) -> tuple[RobotDescription, GeometricParameters, np.ndarray | None]:
+    """The chain description, its calibrated parameters and the reading map (or None)."""
+    structure = result.model.structure
+    chain_desc = structure.desc
+    gp = result.model.geometric_parameters()
+    same = (chain_desc.link_names == desc.link_names
+            and structure.reading_map.shape == (desc.n_actuated, desc.n_actuated)
+            and np.allclose(structure.reading_map, np.eye(desc.n_actuated)))
+    if desc.loops and fmt != "toml":
+        if not serial_equivalent:
+            raise ExportError(
+                f"{desc.name} has a closed loop (parallelogram {desc.loops[0].arm}/"
+                f"{desc.loops[0].crank}): a URDF describes a tree of joints and cannot carry "
+                "the loop or its calibrated parameters; export --format toml, or calibrate with "
+                "--model serial and export --serial-equivalent (the serial chain of eq. 6.3, "
+                "whose joints are a linear map of the readings)")
+        if same:
+            raise ExportError(
+                f"--serial-equivalent: this calibration (model {result.config.name}) identified "
+                "the loop itself; calibrate with --model serial (or serial+gravity) to export "
+                "the serial-equivalent chain")
+    if not same and not serial_equivalent:
+        raise ExportError("the calibrated chain is the serial equivalent of the robot "
+                          "(its joints are not the readings); add --serial-equivalent")
+    return chain_desc, gp, (None if same else np.asarray(structure.reading_map))
+
+
+def _side(result: Any, params_path: str, fmt: str, reasons: list[str],
+          extra: Mapping[str, Any]) -> dict[str, Any] | None:
+    comp = []
+    for key in result.model.compliance_keys:
+        p = result.model.space[key]
+        comp.append({"key": key, "name": p.name, "unit": p.unit, "kind": p.kind,
+                     "value": result.model.value(key)})
+    if comp:
+        reasons.append("compliance/payload terms (joint deflections, docs/calibration.md) are "
+                       "not geometry")
+    if not reasons:
+        return None
+    out: dict[str, Any] = {
+        "format": "plugcell-export-extra", "format_version": 1, "params": params_path,
+        "robot": result.robot, "model": result.config.name, "exported_format": fmt,
+        "not_in_main_file": reasons, **extra,
+    }
+    if comp:
+        out["compliance"] = comp
+        out["payload_ref_kg"] = result.model.payload_ref_kg
+    return out
+
+
+# =============================================================================== toml
+def calibrated_description(desc: RobotDescription, gp: GeometricParameters, base: np.ndarray,
+                           tool: np.ndarray, note: str) -> RobotDescription:
+    """``desc`` with the calibrated rows of ``gp``, ``base`` = BASE and ``tool`` = PROBE."""
+    links = []
+    for lk in desc.links:
+        i = gp.index(lk.name)
+        beta = float(gp.beta[i])
+        links.append(Link(lk.name, lk.parent, lk.joint, float(gp.theta[i]), float(gp.d[i]),
+                          float(gp.a[i]), float(gp.alpha[i]), beta, lk.hayati or beta != 0.0,
+                          lk.mass, lk.com))
+    notes = (desc.notes + "\n" if desc.notes else "") + note
+    return RobotDescription(
+        name=desc.name, links=tuple(links), actuated=desc.actuated, flange=desc.flange,
+        loops=desc.loops, base=base, tool=tool, joint_limits=desc.joint_limits,
+        stiffness=desc.stiffness, notes=notes, coupled_limits=desc.coupled_limits,
+        home=desc.home, point_masses=desc.point_masses, working_volume=desc.working_volume,
+        coupling=desc.coupling)
+
+
+def _export_toml(result: Any, desc: RobotDescription, params_path: str,
+                 serial_equivalent: bool) -> Exported:
+    from plugcell.kinematics.errors import DescriptionError
+
+    chain_desc, gp, rmap = _geometry(result, desc, serial_equivalent, "toml")
+    note = (f"calibrated: {params_path} (model {result.config.name}); base = BASE, "
+            "tool = PROBE of the calibration")
+    try:  # the robot itself (its coupling and reading limits) unless the chain differs
+        cal = calibrated_description(desc if rmap is None else chain_desc, gp,
+                                     result.model.base(), result.model.probe(), note)
+    except DescriptionError as exc:
+        raise ExportError(
+            f"the calibrated geometry is not a valid description ({exc}); a description "
+            "file requires the nominal parallelogram — export the nominal description and "
+            "keep PARAMS.json for the calibrated loop") from None
+    reasons: list[str] = []
+    extra: dict[str, Any] = {}
+    if rmap is not None:
+        reasons.append("the serial-equivalent chain's joints are reading_map @ readings")
+        extra["reading_map"] = rmap.tolist()
+    header = f"{cal.name}, calibrated by plugcell ({params_path}, model {result.config.name})"
+    return Exported(description_to_toml(cal, header=header),
+                    _side(result, params_path, "toml", reasons, extra))
+
+
+# =============================================================================== urdf
+def _source_urdf(source: RobotSource | None, desc: RobotDescription) -> Any | None:
+    """The re-imported source URDF of a URDF robot (None for other robots)."""
+    if source is None or not source.is_urdf:
+        return None
+    imp = source.import_urdf()
+    a, b = imp.description, desc
+    same = (a.link_names == b.link_names and a.actuated == b.actuated
+            and np.allclose(a.nominal_parameters().table(), b.nominal_parameters().table(),
+                            atol=1e-12) and np.allclose(a.tool, b.tool, atol=1e-12))
+    if not same:
+        raise ExportError(f"{source.ref}: the robot it describes now differs from the one "
+                          "that was calibrated (was the URDF or a xacro argument changed?)")
+    return imp
+
+
+def _set_origin(joint_el: Any, T: np.ndarray) -> None:
+    from lxml import etree
+
+    o = joint_el.find("origin")
+    if o is None:
+        o = etree.SubElement(joint_el, "origin")
+    for k, v in _origin_attrs(T).items():
+        o.set(k, v)
+
+
+def _add_fixed(root: Any, name: str, parent: str, child: str, T: np.ndarray,
+               new_link: str | None = None) -> None:
+    from lxml import etree
+
+    if new_link is not None:
+        root.append(etree.Element("link", name=new_link))
+    j = etree.SubElement(root, "joint", name=name, type="fixed")
+    etree.SubElement(j, "origin", **_origin_attrs(T))
+    etree.SubElement(j, "parent", link=parent)
+    etree.SubElement(j, "child", link=child)
+
+
+def _unique(root: Any, name: str) -> str:
+    names = {el.get("name") for el in root.iter("link", "joint")}
+    out, k = name, 1
+    while out in names:
+        k += 1
+        out = f"{name}_{k}"
+    return out
+
+
+def _export_urdf(result: Any, desc: RobotDescription, source: RobotSource | None,
+                 params_path: str, include_base: bool, include_probe: bool,
+                 serial_equivalent: bool) -> Exported:
+    from lxml import etree
+
+    from plugcell.kinematics.joint_chain import calibrated_origins
+
+    chain_desc, gp, rmap = _geometry(result, desc, serial_equivalent, "urdf")
+    imp = _source_urdf(source, desc) if rmap is None else None
+    notes: list[str] = []
+    if imp is not None:
+        root = etree.fromstring(imp.urdf.encode("utf-8"))
+        co = calibrated_origins(imp.chain, desc, gp)
+        joints = {el.get("name"): el for el in root.findall("joint")}
+        for k, jt in enumerate(imp.chain.joints):
+            if not np.allclose(co.origins[k], jt.origin, atol=0, rtol=0):
+                _set_origin(joints[jt.name], co.origins[k])
+        base_link, tip_link = imp.base_link, imp.tip_link
+        if co.tip_joint is None and not np.allclose(co.residual, np.eye(4), atol=1e-15):
+            new = _unique(root, f"{tip_link}_calibrated")
+            _add_fixed(root, _unique(root, f"{tip_link}-{new}"), tip_link, new, co.residual,
+                       new_link=new)
+            notes.append(f"the calibrated tip is the new link {new!r} ({tip_link!r} has no "
+                         "fixed joint to take up the flange's calibrated offset)")
+            tip_link = new
+        tip_from_flange = desc.tool
+    else:
+        root, base_link, tip_link = _generic_urdf(chain_desc, gp, result.robot)
+        tip_from_flange = chain_desc.tool
+    reasons: list[str] = []
+    extra: dict[str, Any] = {}
+    if imp is None and desc.coupling is not None:
+        reasons.append("the joint coupling: the URDF's joints are the kinematic joints "
+                       "θ = matrix · readings + offset")
+        extra["coupling"] = {"readings": list(desc.coupling.readings),
+                             "matrix": desc.coupling.matrix.tolist(),
+                             "offset": desc.coupling.offset.tolist()}
+    if include_base:
+        if any(el.find("child") is not None and el.find("child").get("link") == base_link
+               for el in root.findall("joint")):
+            raise ExportError(f"--include-base: the chain starts at {base_link!r}, which is not "
+                              "the URDF's root link (it would get two parents)")
+        new = _unique(root, "measurement")
+        _add_fixed(root, _unique(root, f"{new}-{base_link}"), new, base_link,
+                   result.model.base())
+        root.insert(0, etree.Element("link", name=new))
+    else:
+        reasons.append("BASE (the robot base in the measurement frame): add --include-base")
+        extra["base"] = _frame(result.model.base())
+    probe_in_tip = np.linalg.inv(tip_from_flange) @ result.model.probe()
+    if include_probe:
+        new = _unique(root, "probe")
+        _add_fixed(root, _unique(root, f"{tip_link}-{new}"), tip_link, new, probe_in_tip,
+                   new_link=new)
+    else:
+        reasons.append(f"PROBE (the measured target in {tip_link!r}): add --include-probe")
+        extra["probe_in_tip"] = _frame(probe_in_tip)
+    if rmap is not None:
+        reasons.append("the serial-equivalent chain's joints are reading_map @ readings")
+        extra["reading_map"] = rmap.tolist()
+    extra["tip_link"] = tip_link
+    root.insert(0, etree.Comment(
+        f" calibrated by plugcell: {params_path} (model {result.config.name}) "))
+    text = etree.tostring(root, pretty_print=True, xml_declaration=True,
+                          encoding="utf-8").decode("utf-8")
+    return Exported(text, _side(result, params_path, "urdf", reasons, extra), tuple(notes))
+
+
+def _generic_urdf(desc: RobotDescription, gp: GeometricParameters,
+                  name: str) -> tuple[Any, str, str]:
+    """A URDF of DH/Hayati rows: link *i*'s frame is ``F_{i−1} Rz(q_i + θ_i)``.
+
+    Joint *i*'s origin is ``M_parent · Rz(θ_i)`` with ``M = Tz(d) Tx(a) Rx(α) Ry(β)``
+    of the parent row; the ``flange`` link is F_n and ``tool0`` the description's tool.
+    """
+    from lxml import etree
+
+    root = etree.Element("robot", name=name)
+    base = "base_link"
+    root.append(etree.Element("link", name=base))
+    chain = set(desc.chain)
+
+    def M(name: str) -> np.ndarray:
+        if name == "base":
+            return np.eye(4)
+        i = gp.index(name)
+        return np.asarray(dh_hayati(np.array(0.0), np.array(gp.d[i]), np.array(gp.a[i]),
+                                    np.array(gp.alpha[i]), np.array(gp.beta[i])))
+
+    names = {lk.name: f"link_{lk.name}" for lk in desc.links}
+    for i, lk in enumerate(desc.links):
+        if i not in chain:
+            continue
+        link = etree.SubElement(root, "link", name=names[lk.name])
+        if lk.mass > 0:
+            inert = etree.SubElement(link, "inertial")
+            com = M(lk.name) @ np.array([*lk.com, 1.0])
+            etree.SubElement(inert, "origin", xyz=" ".join(_fmt(x) for x in com[:3]),
+                             rpy="0 0 0")
+            etree.SubElement(inert, "mass", value=_fmt(lk.mass))
+            etree.SubElement(inert, "inertia", ixx="0", ixy="0", ixz="0", iyy="0", iyz="0",
+                             izz="0")
+        T = M(lk.parent) @ np.asarray(rot_z(gp.theta[gp.index(lk.name)]))
+        kind = "prismatic" if lk.is_prismatic else ("revolute" if lk.is_actuated else "fixed")
+        j = etree.SubElement(root, "joint", name=lk.name, type=kind)
+        etree.SubElement(j, "origin", **_origin_attrs(T))
+        etree.SubElement(j, "parent", link=base if lk.parent == "base" else names[lk.parent])
+        etree.SubElement(j, "child", link=names[lk.name])
+        if lk.is_actuated:
+            etree.SubElement(j, "axis", xyz="0 0 1")
+            lo, hi = desc.joint_limits[desc.joint_index(lk.name)]
+            etree.SubElement(j, "limit", lower=_fmt(lo), upper=_fmt(hi), effort="0",
+                             velocity="0")
+    root.append(etree.Element("link", name="flange"))
+    _add_fixed(root, "flange_joint", names[desc.flange], "flange", M(desc.flange))
+    root.append(etree.Element("link", name="tool0"))
+    _add_fixed(root, "tool0_joint", "flange", "tool0", desc.tool)
+    return root, base, "tool0"
+
+
+# =============================================================================== UR yaml
+def _export_ur(result: Any, desc: RobotDescription, source: RobotSource | None,
+               params_path: str) -> Exported:
+    import yaml
+
+    from plugcell.kinematics.joint_chain import calibrated_origins
+
+    _geometry(result, desc, False, "ur-kinematics")
+    imp = _source_urdf(source, desc)
+    if imp is None:
+        raise ExportError("ur-kinematics needs a robot imported from Universal Robots' "
+                          "ur_description (--robot .../ur.urdf.xacro --robot-arg ur_type=...)")
+    co = calibrated_origins(imp.chain, desc, result.model.geometric_parameters(),
+                            fixed_tip=False)
+    sections: dict[str, dict[str, float]] = {}
+    for k, jt in enumerate(imp.chain.joints):
+        if jt.kind == "fixed":
+            continue
+        key = next((v for j, v in UR_KINEMATICS_KEYS.items() if jt.name.endswith(j)), None)
+        if key is None:
+            raise ExportError(f"joint {jt.name!r} is not a joint of ur_description "
+                              f"(expected {', '.join(UR_KINEMATICS_KEYS)})")
+        T = co.origins[k]
+        r, p, y = matrix_to_rpy(T[:3, :3])
+        sections[key] = {"x": float(T[0, 3]), "y": float(T[1, 3]), "z": float(T[2, 3]),
+                         "roll": float(r), "pitch": float(p), "yaw": float(y)}
+    missing = set(UR_KINEMATICS_KEYS.values()) - set(sections)
+    if missing:
+        raise ExportError(f"the chain lacks ur_description joints for {sorted(missing)}")
+    digest = hashlib.sha256(json.dumps(sections, sort_keys=True).encode()).hexdigest()[:16]
+    doc = {"kinematics": {**{k: sections[k] for k in UR_KINEMATICS_KEYS.values()},
+                          "hash": f"plugcell_{digest}"}}
+    text = (f"# calibrated by plugcell: {params_path} (model {result.config.name})\n"
+            + yaml.safe_dump(doc, sort_keys=False))
+    tip = imp.tip_link
+    reasons = ["BASE (the robot base in the measurement frame)",
+               f"the TCP: the measured target in {tip!r}, with the flange's calibrated offset "
+               "across the last axis (which the kinematics file has no place for) folded in"]
+    extra = {"base": _frame(result.model.base()),
+             "tcp_in_tip": _frame(co.residual @ np.linalg.inv(desc.tool) @ result.model.probe()),
+             "flange_correction": _frame(co.residual), "tip_link": tip}
+    return Exported(text, _side(result, params_path, "ur-kinematics", reasons, extra))
+
+
+# =============================================================================== entry
+def export_calibration(result: Any, desc: RobotDescription, fmt: str, *,
+                       source: RobotSource | None = None, params_path: str = "PARAMS.json",
+                       include_base: bool = False, include_probe: bool = False,
+                       serial_equivalent: bool = False) -> Exported:
+    """Export a calibration of robot ``desc`` as ``fmt`` (one of :data:`FORMATS`).
+
+    Parameters
+    ----------
+    result : CalibrationResult
+        The calibration (e.g. ``CalibrationResult.from_dict(PARAMS, desc)``).
+    desc : RobotDescription
+        The robot it was made for.
+    fmt : str
+        ``"urdf"``, ``"ur-kinematics"`` or ``"toml"``.
+    source : RobotSource, optional
+        Where the robot came from (a URDF source keeps its links, meshes, limits).
+    include_base, include_probe : bool
+        URDF: add BASE (root link ``measurement``) and PROBE (link ``probe``).
+    serial_equivalent : bool
+        Allow exporting the serial-equivalent chain of a loop robot.
+
+    Returns
+    -------
+    Exported
+        The file text and the side dictionary of what it cannot carry.
+
+    Raises
+    ------
+    ExportError
+        The format cannot represent this calibration (the message says why).
+    """
+    if fmt == "toml":
+        return _export_toml(result, desc, params_path, serial_equivalent)
+    if fmt == "urdf":
+        return _export_urdf(result, desc, source, params_path, include_base, include_probe,
+                            serial_equivalent)
+    if fmt == "ur-kinematics":
+        return _export_ur(result, desc, source, params_path)
+    raise ExportError(f"unknown format {fmt!r}; expected one of {', '.join(FORMATS)}")
