@@ -33,6 +33,7 @@ def main(argv: list[str]) -> int:
          [sys.executable, str(HERE / "round_trip_trace.py"),
           *([] if full else ["--cycles", "500"])]),
         ("compensation (thesis 6.5.1)", [*plugcell, "bench", "compensation"]),
+        ("campaign planning (issue 17)", [sys.executable, str(HERE / "planning_speed.py")]),
         ("wire decoder fuzz", [sys.executable, str(HERE / "fuzz_wire.py")]),
         ("signed requests (cost)", [sys.executable, str(HERE / "signing.py"),
                                     *(["--fuzz", "100000"] if full else [])]),

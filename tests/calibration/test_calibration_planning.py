@@ -40,22 +40,31 @@ def _scaled(H):
     return H / (np.linalg.norm(H.reshape(-1, H.shape[2]), axis=0) / np.sqrt(len(H)))
 
 
-def _direct(Hs, criterion):
+def _direct(Hs, criterion, region=None):
     """The criterion from the singular values of the stacked scaled Jacobian."""
     n, k = Hs.shape[0], Hs.shape[2]
+    if criterion == "I":
+        R = region.reshape(-1, k)
+        Hf = Hs.reshape(-1, k)
+        return -np.trace(R.T @ R / len(region) @ np.linalg.inv(Hf.T @ Hf / n))
     s = np.linalg.svd(Hs.reshape(-1, k), compute_uv=False) / np.sqrt(n)
     lam = s**2
     return {"D": 2 * np.sum(np.log(s)) / k, "A": -np.sum(1 / lam), "E": lam.min(),
             "O": lam.min() / np.sqrt(lam.max())}[criterion]
 
 
-@pytest.mark.parametrize("criterion", ["D", "A", "E", "O"])
+@pytest.mark.parametrize("criterion", ["D", "A", "E", "O", "I"])
 def test_criterion_value_matches_direct_computation(setup, criterion):
     model, cands, keys, _, H = setup
     plan = PosePlanner(model, keys, criterion=criterion).plan(cands, 25, blocks=H)
     Hs = _scaled(H)
-    assert plan.value == pytest.approx(_direct(Hs[plan.index], criterion), rel=1e-9)
-    assert criterion_value(Hs[plan.index], criterion) == pytest.approx(plan.value, rel=1e-9)
+    assert plan.value == pytest.approx(_direct(Hs[plan.index], criterion, Hs), rel=1e-8)
+    assert criterion_value(Hs[plan.index], criterion, region=Hs) == pytest.approx(
+        plan.value, rel=1e-8)
+    # I does not depend on the column scaling; D only by a constant
+    if criterion == "I":
+        assert criterion_value(H[plan.index], "I", region=H) == pytest.approx(plan.value,
+                                                                                rel=1e-8)
 
 
 def test_predicted_sigma_and_kappa_are_the_identifications(setup):
@@ -183,6 +192,8 @@ def test_bad_arguments(setup):
         planner.plan(cands, 3, blocks=H)
     with pytest.raises(PlanningError, match="positive"):
         planner.plan(cands, 0, blocks=H)
+    with pytest.raises(PlanningError, match="region"):
+        criterion_value(H, "I")
     with pytest.raises(PlanningError, match="acceptance"):
         Visibility(TRACKER, 0.0)
     with pytest.raises(PlanningError, match="payloads"):

@@ -35,6 +35,14 @@ parameter is excited; D-optimality does not depend on the scaling at all.)
     E:  λ_min                                   (the worst-determined direction)
     O:  λ_min / √λ_max                          (noise amplification index O4,
                                                  Nahvi & Hollerbach 1996)
+    I:  −trace(W (M/n)⁻¹),  W = Σ_c X_cᵀX_c / C  (the mean prediction variance of a pose
+                                                 over all candidates, ×n/σ²)
+
+I ("integrated", or V-optimal) asks directly for what a validation measures: how well
+the calibrated model predicts poses *where the robot works* — the candidates stand for
+that region.  It does not depend on the column scaling at all, and on the twin it gives
+the best validation accuracy of the five (docs/planning.md), so it is the default of
+``plugcell plan``; D, A, E, O are the classical criteria of the calibration literature.
 
 **Search** (:class:`PosePlanner`): a greedy start (each step adds the candidate with the
 largest D-gain ``log det(I + X_c M⁻¹ X_cᵀ)``, from a small ridge ``εI``) and then exchange
@@ -73,7 +81,7 @@ from plugcell.kinematics import Box
 Array = NDArray[np.float64]
 
 #: The optimality criteria :class:`PosePlanner` knows.
-CRITERIA: tuple[str, ...] = ("D", "A", "E", "O")
+CRITERIA: tuple[str, ...] = ("D", "A", "E", "O", "I")
 #: Default measurement noise per row (m, or m-equivalent for orientation rows): the
 #: unmodelled residual a calibrated robot keeps (thesis 8.2: ~0.1 mm).
 DEFAULT_NOISE_M = 1e-4
@@ -242,8 +250,8 @@ def filter_candidates(model: ErrorModel, q: ArrayLike, *, payloads: Sequence[flo
 
 def sample_candidates(model: ErrorModel, count: int, *, payloads: Sequence[float] = (0.0,),
                       volume: Box | None = None, visibility: Visibility | None = None,
-                      seed: int = 0, max_draws: int = 5_000_000, chunk: int = 20_000
-                      ) -> Candidates:
+                      seed: int = 0, max_draws: int = 2_000_000, chunk: int = 20_000,
+                      give_up: int = 100_000) -> Candidates:
     """About ``count`` candidates: configurations uniform in joint space over the feasible
     set (joint and coupled limits, target in ``volume``, visible), each with every payload.
 
@@ -251,7 +259,8 @@ def sample_candidates(model: ErrorModel, count: int, *, payloads: Sequence[float
     drawn in the joint-space bounding box of the accepted ones widened by a quarter of the
     limit range on each side (clipped to the limits) — the feasible set is tested exactly
     every time, so the distribution is uniform on the feasible set as long as it lies in
-    that box.  Raises :class:`PlanningError` if nothing is feasible after ``max_draws``.
+    that box.  Raises :class:`PlanningError` if nothing is feasible after ``give_up``
+    draws (fewer than ``count`` are returned when ``max_draws`` is reached first).
     """
     if count < 1:
         raise PlanningError(f"the number of candidates must be positive, got {count}")
@@ -266,7 +275,7 @@ def sample_candidates(model: ErrorModel, count: int, *, payloads: Sequence[float
     total = 0
     drawn = 0
     counts: dict[str, int] = {}
-    while total < n_cfg and drawn < max_draws:
+    while total < n_cfg and drawn < max_draws and (total > 0 or drawn < give_up):
         q = rng.uniform(lo, hi, size=(chunk, len(lo)))
         drawn += chunk
         ok, T, c = _feasible(model, q, volume, visibility)
@@ -295,8 +304,8 @@ def _check_criterion(criterion: str) -> str:
     c = str(criterion).strip().upper()
     if c not in CRITERIA:
         raise PlanningError(f"unknown criterion {criterion!r}; choose one of "
-                            f"{', '.join(CRITERIA)} (D-, A-, E-optimal or O = noise "
-                            "amplification index)")
+                            f"{', '.join(CRITERIA)} (D-, A-, E-, I-optimal or O = "
+                            "noise amplification index)")
     return c
 
 
@@ -315,11 +324,16 @@ def _value_from_information(M: Array, criterion: str) -> float:
     return float(w[0] / np.sqrt(w[-1])) if w[-1] > 0 else -np.inf
 
 
-def criterion_value(X: Array, criterion: str) -> float:
+def criterion_value(X: Array, criterion: str, *, region: Array | None = None) -> float:
     """The criterion (module doc) of the design whose scaled Jacobian blocks are ``X``
-    ``(n, r, k)``: computed directly from ``M/n = Σ X_cᵀ X_c / n``."""
+    ``(n, r, k)``: computed directly from ``M/n = Σ X_cᵀ X_c / n``.  ``region``
+    ``(C, r, k)``: the blocks of the poses the I-criterion averages over (required for I)."""
     c = _check_criterion(criterion)
     X = np.asarray(X, dtype=float)
+    if c == "I":
+        if region is None:
+            raise PlanningError("the I-criterion needs the region's blocks (region=)")
+        X, c = _whiten(X, np.asarray(region, dtype=float)), "A"
     Xf = X.reshape(-1, X.shape[-1])
     return _value_from_information(Xf.T @ Xf / X.shape[0], c)
 
@@ -385,6 +399,7 @@ class PosePlanner:
     places the tracker, its PROBE the target); ``keys``: its parameters to plan for
     (default :func:`planning_keys`); ``criterion``: ``"D"``, ``"A"``, ``"E"`` or ``"O"``;
     ``rotation_weight``: m per rad of the orientation rows, as the identification;
+    (or ``"I"``: the mean prediction variance over the candidates);
     ``position_only``: the tracker measures positions only; ``noise_m``: σ per row for
     the predicted parameter deviations; ``max_exchanges``: bound on the excursions.
     """
@@ -451,11 +466,15 @@ class PosePlanner:
             raise PlanningError(f"{n} poses give {n * r} equations for {k} parameters; "
                                 f"plan at least {-(-k // r)} poses (better {3 * -(-k // r)})")
         X = np.ascontiguousarray(H / scale)
-        sel, history, exchanges = _Search(X, self.criterion, self.max_exchanges).run(n)
+        # I: trace(W M⁻¹) = trace(M'⁻¹) for the blocks X L⁻ᵀ, W = L Lᵀ — A-optimal there
+        Xc = _whiten(X, X) if self.criterion == "I" else X
+        search = "A" if self.criterion == "I" else self.criterion
+        sel, history, exchanges = _Search(Xc, search, self.max_exchanges).run(n)
         sel = _measuring_order(candidates, sel)
         Xs = X[sel].reshape(-1, k)
         Ms = Xs.T @ Xs
-        value = _value_from_information(Ms / n, self.criterion)
+        Xw = Xc[sel].reshape(-1, k)
+        value = _value_from_information(Xw.T @ Xw / n, search)
         cov = np.linalg.pinv(Ms) / np.outer(scale, scale)
         d = np.sqrt(np.diag(Ms))
         w = np.linalg.eigvalsh(Ms / np.outer(d, d))
@@ -619,6 +638,18 @@ class _Search:
             history.append(value)
             exchanges += 1
         return np.flatnonzero(chosen), history, exchanges
+
+
+def _whiten(X: Array, region: Array) -> Array:
+    """Blocks ``X L⁻ᵀ`` with ``L Lᵀ = W = Σ_c R_cᵀ R_c / C`` the mean information of the
+    ``region`` blocks ``R``: in these coordinates A-optimality is I-optimality."""
+    from scipy.linalg import solve_triangular
+
+    k = X.shape[-1]
+    Rf = region.reshape(-1, k)
+    L = np.linalg.cholesky(Rf.T @ Rf / region.shape[0])
+    Xf = X.reshape(-1, k)
+    return np.ascontiguousarray(solve_triangular(L, Xf.T, lower=True).T).reshape(X.shape)
 
 
 def _outer(A: Array, B: Array) -> Array:
