@@ -189,3 +189,19 @@ def test_ipa_series_c_region_flags_series_a(ur10, monkeypatch):
     assert np.all(check.joint_excess_rad > 0)
     before, after = res.evaluate(a, refit_base=True, refit_probe=True)
     assert after.position.norm.mean > 0.9 * before.position.norm.mean
+
+
+def test_report_shows_the_coverage(calibrated, h4):
+    from plugcell.calibration.report import render_report
+
+    result, data = calibrated
+    qv = random_configurations(result.model, 10, 9)
+    val = CalibrationData.from_poses(qv, result.model.predict(qv))
+    page = render_report(result.with_validation(val), data, val)
+    assert "Calibrated region (where the model may be trusted)" in page
+    assert "Coverage of the joint ranges" in page
+    assert f"{result.validity.threshold_m * 1e3:.0f} mm</b>" in page
+    assert "poses outside" in page
+    old = CalibrationResult.from_dict(
+        {k: v for k, v in json.loads(result.to_json()).items() if k != "validity"}, h4)
+    assert "Calibrated region" not in render_report(old, data)
