@@ -150,7 +150,12 @@ def main() -> int:
     ap.add_argument("--draws", type=int, default=20)
     ap.add_argument("--out", type=Path, help="write the results (JSON)")
     ap.add_argument("--figure", type=Path, help="write the figure (PNG, needs matplotlib)")
+    ap.add_argument("--plot-only", type=Path, metavar="JSON",
+                    help="only draw --figure from the results of an earlier --out")
     args = ap.parse_args()
+    if args.plot_only is not None:
+        plot(json.loads(args.plot_only.read_text(encoding="utf-8")), args.figure)
+        return 0
     d = run(QUICK_N if args.quick else FULL_N, 5 if args.quick else args.draws)
     print(f"{'N':>4s} {'planned I':>10s} {'planned D':>10s} {'random median':>14s}  (mm, "
           f"validation mean; nominal {d['nominal_mm']:.3f} mm; {d['elapsed_s']:.0f} s)")
