@@ -150,12 +150,12 @@ def plot(d: dict[str, Any], path: Path) -> None:
                     color="0.85", label=f"random, 10–90 % of {d['draws']} draws")
     ax.plot(n, [r["random_median_mm"] for r in rows], "o-", color="0.35", label="random, median")
     ax.plot(n, [r["planned_I_mm"] for r in rows], "s-", color="tab:blue",
-            label="planned, I-optimal (default)")
+            label="planned from the pool, I-optimal")
     ax.plot(n, [r["planned_D_mm"] for r in rows], "^--", color="tab:orange",
-            label="planned, D-optimal")
+            label="planned from the pool, D-optimal")
     if "planned_drawn_mm" in rows[0]:
         ax.plot(n, [r["planned_drawn_mm"] for r in rows], "v-.", color="tab:purple",
-                label="planned, I, from drawn candidates (45°)")
+                label="planned, I, from candidates drawn as plugcell plan does (45°)")
     last = rows[-1]["random_median_mm"]
     ax.axhline(1.1 * last, color="tab:red", lw=0.8, ls=":",
                label=f"+10 % of {rows[-1]['n']} random poses")

@@ -15,7 +15,8 @@ Pure math (numpy, SI units), no I/O, no framework imports; files go through
   residual of every pose (:class:`PoseResiduals`);
 * :mod:`.configs` — the five models of 8.2.3; :mod:`.simulation` — the check of 8.1;
 * :mod:`.report` — the self-contained HTML report;
-* :mod:`.planning` — choosing the poses of a campaign (D/A/E/O-optimal, visible).
+* :mod:`.planning` — choosing the poses of a campaign (I/D/A/E/O-optimal, visible);
+* :mod:`.validity` — the region a calibration was identified on, and checks against it.
 """
 
 from plugcell.calibration.configs import MODELS, ModelConfig, model_config

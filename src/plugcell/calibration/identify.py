@@ -402,7 +402,9 @@ class Calibrator:
             pose_weights=weights,
             warnings=tuple(warnings),
             elapsed_s=time.perf_counter() - t0,
-            validity=ValidityRegion.from_poses(final, data.q, data.payload_kg),
+            validity=ValidityRegion.from_poses(
+                final, data.q, data.payload_kg,
+                targets=(np.linalg.inv(final.base()) @ jac.poses)[:, :3, 3]),
             settings={"method": self.method, "loss": self.loss, "tol": self.tol,
                       "rotation_weight": self.rotation_weight,
                       "condition_limit": self.condition_limit,

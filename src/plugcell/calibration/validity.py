@@ -47,6 +47,8 @@ Array = NDArray[np.float64]
 MAX_POSES = 1000
 #: Percentile of the leave-one-out nearest-neighbour distances taken as the threshold.
 THRESHOLD_PERCENTILE = 99.0
+#: Poses the lever arms are averaged over (evenly spaced among the calibration poses).
+LEVER_POSES = 2000
 #: Smallest lever arm, as a fraction of the largest (no joint is ignored).
 LEVER_FLOOR = 0.1
 #: A joint is beyond its calibrated range by more than this (rad) before it counts.
@@ -174,23 +176,32 @@ class ValidityRegion:
     # ------------------------------------------------------------------ building
     @classmethod
     def from_poses(cls, model: ErrorModel, q: ArrayLike, payload_kg: ArrayLike | None = None,
-                   *, max_poses: int = MAX_POSES) -> ValidityRegion:
+                   *, targets: ArrayLike | None = None, max_poses: int = MAX_POSES
+                   ) -> ValidityRegion:
         """The region of calibration readings ``q`` ``(N, n)`` (rad) for ``model`` (its
-        geometry gives the lever arms and the targets in the robot base frame)."""
+        geometry gives the lever arms).  ``targets`` ``(N, 3)``: the target positions in
+        the robot base frame (m) if known, else predicted by ``model``."""
         q = np.atleast_2d(np.asarray(q, dtype=float))
         m = np.zeros(len(q)) if payload_kg is None else np.asarray(payload_kg, dtype=float)
         robot = model.with_references(base=np.eye(4))
-        p0 = robot.predict(q, m)[:, :3, 3]
+        p0 = (robot.predict(q, m)[:, :3, 3] if targets is None
+              else np.asarray(targets, dtype=float).reshape(len(q), 3))
+        # lever arms: central differences, on at most LEVER_POSES evenly spaced poses
+        s = np.unique(np.linspace(0, len(q) - 1, min(len(q), LEVER_POSES)).astype(int))
         h = 1e-6
         lever = np.empty(q.shape[1])
         for j in range(q.shape[1]):
             dq = np.zeros(q.shape[1])
             dq[j] = h
-            dp = (robot.predict(q + dq, m)[:, :3, 3] - robot.predict(q - dq, m)[:, :3, 3]) / (2 * h)
+            dp = (robot.predict(q[s] + dq, m[s])[:, :3, 3]
+                  - robot.predict(q[s] - dq, m[s])[:, :3, 3]) / (2 * h)
             lever[j] = float(np.sqrt(np.mean(np.sum(dp**2, axis=1))))
         lever = np.maximum(lever, LEVER_FLOOR * max(float(lever.max()), 1e-3))
         X = q * lever
-        keep = _farthest_points(X, max_poses)
+        # farthest points among at most 10·max_poses evenly spaced poses (the cover radius
+        # below is measured against all of them)
+        pre = np.unique(np.linspace(0, len(q) - 1, min(len(q), 10 * max_poses)).astype(int))
+        keep = pre[_farthest_points(X[pre], max_poses)]
         cover = 0.0
         if len(keep) < len(q):
             cover = float(cKDTree(X[keep]).query(X)[0].max())
@@ -284,11 +295,12 @@ def _farthest_points(X: Array, k: int) -> NDArray[np.int64]:
     n = len(X)
     if n <= k:
         return np.arange(n, dtype=np.int64)
+    X = np.ascontiguousarray(X)
     first = int(np.argmin(np.sum((X - X.mean(axis=0)) ** 2, axis=1)))
     chosen = [first]
-    d = np.linalg.norm(X - X[first], axis=1)
+    d2 = np.sum((X - X[first]) ** 2, axis=1)
     for _ in range(k - 1):
-        i = int(np.argmax(d))
+        i = int(np.argmax(d2))
         chosen.append(i)
-        d = np.minimum(d, np.linalg.norm(X - X[i], axis=1))
+        np.minimum(d2, np.sum((X - X[i]) ** 2, axis=1), out=d2)
     return np.sort(np.asarray(chosen, dtype=np.int64))
