@@ -10,7 +10,10 @@ the pool (the median of ``--draws`` draws is shown, with the 10–90 % band); a 
 campaign is N poses chosen from the same pool by :class:`PosePlanner` (criteria I and D),
 as ``plugcell plan --from pool.csv`` does; a third curve plans from 5000 candidates drawn
 as ``plugcell plan`` draws them by default (uniform in joint space, 45° line of sight) —
-poses the twin then measures.  Every campaign is calibrated with model 5
+poses the twin then measures.  Each campaign is validated twice: on 300 poses drawn as
+``twin measure`` draws them (the pool's distribution) and on 300 poses drawn as
+``plugcell plan`` draws its candidates (wider: any wrist orientation within 45° of the
+tracker).  Every campaign is calibrated with model 5
 (51 parameters) and validated on 300 independent poses (100 at each payload, another
 seed).  ``--quick``: N = 20, 40, 150 and 5 draws.
 """
@@ -85,22 +88,29 @@ def run(n_values: tuple[int, ...], draws: int, pool_size: int = 1500) -> dict[st
     keys = planning_keys(model, PAYLOADS)
     H = PosePlanner(model, keys).blocks(cands, keys)
 
-    def validate(index: np.ndarray) -> float:
+    # candidates drawn as plugcell plan draws them by default (joint space, 45° line of sight)
+    def draw(count: int, seed: int) -> Candidates:
+        return sample_candidates(model.with_references(base=np.eye(4)), count,
+                                 payloads=PAYLOADS, volume=desc.working_volume,
+                                 visibility=Visibility(prof.tracker_position, np.radians(45.0)),
+                                 seed=seed)
+
+    drawn = draw(5000, 0)
+    H_drawn = PosePlanner(model, keys).blocks(drawn, keys)
+    # a second, wider validation set: 100 other drawn configurations at each payload
+    qw = draw(300, 5).q[:: len(PAYLOADS)][:100]
+    wide = _concat([_measure(scenario, qw, m, 88 + int(m)) for m in PAYLOADS])
+
+    def validate(index: np.ndarray) -> tuple[float, float]:
         return _validate(pool.subset(index))
 
-    def _validate(data: CalibrationData) -> float:
+    def _validate(data: CalibrationData) -> tuple[float, float]:
         try:
             res = Calibrator(desc, 5).fit(data)
         except CalibrationError:
-            return float("nan")
-        return float(res.evaluate(validation)[1].position.norm.mean * 1e3)
-
-    # candidates drawn as plugcell plan draws them by default (joint space, 45° line of sight)
-    drawn = sample_candidates(model.with_references(base=np.eye(4)), 5000, payloads=PAYLOADS,
-                              volume=desc.working_volume,
-                              visibility=Visibility(prof.tracker_position, np.radians(45.0)),
-                              seed=0)
-    H_drawn = PosePlanner(model, keys).blocks(drawn, keys)
+            return float("nan"), float("nan")
+        return (float(res.evaluate(validation)[1].position.norm.mean * 1e3),
+                float(res.evaluate(wide)[1].position.norm.mean * 1e3))
 
     rng = np.random.default_rng(2026)
     rows = []
@@ -110,29 +120,35 @@ def run(n_values: tuple[int, ...], draws: int, pool_size: int = 1500) -> dict[st
             t = time.perf_counter()
             plan = PosePlanner(model, keys, criterion=crit).plan(cands, n, blocks=H)
             row[f"plan_{crit}_s"] = time.perf_counter() - t
-            row[f"planned_{crit}_mm"] = validate(plan.index)
+            row[f"planned_{crit}_mm"], row[f"planned_{crit}_wide_mm"] = validate(plan.index)
             row[f"planned_{crit}_kappa"] = plan.condition_number
             row[f"planned_{crit}_payloads"] = {f"{m:g}": int(np.sum(plan.payload_kg == m))
                                                for m in PAYLOADS}
         plan = PosePlanner(model, keys, criterion="I").plan(drawn, n, blocks=H_drawn)
-        row["planned_drawn_mm"] = _validate(_concat([
+        row["planned_drawn_mm"], row["planned_drawn_wide_mm"] = _validate(_concat([
             _measure(scenario, plan.q[plan.payload_kg == m], m, 5 + int(m))
             for m in PAYLOADS if np.any(plan.payload_kg == m)]))
-        r = np.array([validate(rng.choice(len(cands), n, replace=False)) for _ in range(draws)])
-        row["random_mm"] = r.tolist()
-        row["random_median_mm"] = float(np.nanmedian(r))
-        row["random_p10_mm"], row["random_p90_mm"] = (float(v) for v in
-                                                      np.nanpercentile(r, [10, 90]))
+        both = np.array([validate(rng.choice(len(cands), n, replace=False))
+                         for _ in range(draws)])
+        for key, r in (("random", both[:, 0]), ("random_wide", both[:, 1])):
+            row[f"{key}_mm"] = r.tolist()
+            row[f"{key}_median_mm"] = float(np.nanmedian(r))
+            row[f"{key}_p10_mm"], row[f"{key}_p90_mm"] = (float(v) for v in
+                                                          np.nanpercentile(r, [10, 90]))
         rows.append(row)
         print(f"N = {n:3d}: planned I {row['planned_I_mm']:.4f}, D {row['planned_D_mm']:.4f}, "
               f"I from drawn candidates {row['planned_drawn_mm']:.4f} mm; "
               f"random median {row['random_median_mm']:.4f} mm "
-              f"[{row['random_p10_mm']:.4f}, {row['random_p90_mm']:.4f}]", flush=True)
+              f"[{row['random_p10_mm']:.4f}, {row['random_p90_mm']:.4f}]; wide validation: "
+              f"planned I {row['planned_I_wide_mm']:.4f}, I drawn "
+              f"{row['planned_drawn_wide_mm']:.4f}, random {row['random_wide_median_mm']:.4f}",
+              flush=True)
     before = Calibrator(desc, 5).fit(pool.subset(np.arange(0, len(cq), 7))).evaluate(
         validation)[0].position.norm.mean * 1e3
     return {"machine": f"{platform.machine()}, Python {platform.python_version()}",
             "pool_configurations": pool_size, "candidates": len(cands), "parameters": len(keys),
-            "validation_poses": len(validation), "draws": draws, "nominal_mm": before,
+            "validation_poses": len(validation), "wide_validation_poses": len(wide),
+            "draws": draws, "nominal_mm": before,
             "measure_s": t_measure, "rows": rows,
             "elapsed_s": time.perf_counter() - t0}
 
@@ -145,25 +161,33 @@ def plot(d: dict[str, Any], path: Path) -> None:
 
     rows = d["rows"]
     n = [r["n"] for r in rows]
-    fig, ax = plt.subplots(figsize=(7, 4.2))
-    ax.fill_between(n, [r["random_p10_mm"] for r in rows], [r["random_p90_mm"] for r in rows],
-                    color="0.85", label=f"random, 10–90 % of {d['draws']} draws")
-    ax.plot(n, [r["random_median_mm"] for r in rows], "o-", color="0.35", label="random, median")
-    ax.plot(n, [r["planned_I_mm"] for r in rows], "s-", color="tab:blue",
-            label="planned from the pool, I-optimal")
-    ax.plot(n, [r["planned_D_mm"] for r in rows], "^--", color="tab:orange",
-            label="planned from the pool, D-optimal")
-    if "planned_drawn_mm" in rows[0]:
-        ax.plot(n, [r["planned_drawn_mm"] for r in rows], "v-.", color="tab:purple",
-                label="planned, I, from candidates drawn as plugcell plan does (45°)")
-    last = rows[-1]["random_median_mm"]
-    ax.axhline(1.1 * last, color="tab:red", lw=0.8, ls=":",
-               label=f"+10 % of {rows[-1]['n']} random poses")
-    ax.set_xlabel("poses in the calibration campaign (N)")
-    ax.set_ylabel("validation mean position error (mm)")
-    ax.set_title("Smart H4 twin, model 5, payloads 0/18/36 kg")
-    ax.grid(alpha=0.3)
-    ax.legend(fontsize=8)
+    wide = "random_wide_median_mm" in rows[0]
+    fig, axes = plt.subplots(1, 2 if wide else 1, figsize=(13 if wide else 7, 4.4),
+                             squeeze=False)
+    panels = [("", "validation: 300 poses as twin measure draws them")]
+    if wide:
+        panels.append(("_wide", "validation: 300 poses drawn as plugcell plan draws them"))
+    for ax, (sfx, title) in zip(axes[0], panels, strict=True):
+        ax.fill_between(n, [r[f"random{sfx}_p10_mm"] for r in rows],
+                        [r[f"random{sfx}_p90_mm"] for r in rows], color="0.85",
+                        label=f"random from the pool, 10–90 % of {d['draws']} draws")
+        ax.plot(n, [r[f"random{sfx}_median_mm"] for r in rows], "o-", color="0.35",
+                label="random from the pool, median")
+        ax.plot(n, [r[f"planned_I{sfx}_mm"] for r in rows], "s-", color="tab:blue",
+                label="planned from the pool, I-optimal")
+        ax.plot(n, [r[f"planned_D{sfx}_mm"] for r in rows], "^--", color="tab:orange",
+                label="planned from the pool, D-optimal")
+        if f"planned_drawn{sfx}_mm" in rows[0]:
+            ax.plot(n, [r[f"planned_drawn{sfx}_mm"] for r in rows], "v-.", color="tab:purple",
+                    label="planned, I, from candidates drawn as plugcell plan does (45°)")
+        last = rows[-1][f"random{sfx}_median_mm"]
+        ax.axhline(1.1 * last, color="tab:red", lw=0.8, ls=":",
+                   label=f"+10 % of {rows[-1]['n']} random poses")
+        ax.set_xlabel("poses in the calibration campaign (N)")
+        ax.set_ylabel("validation mean position error (mm)")
+        ax.set_title(f"Smart H4 twin, model 5, 0/18/36 kg — {title}", fontsize=9)
+        ax.grid(alpha=0.3)
+        ax.legend(fontsize=7)
     fig.tight_layout()
     path.parent.mkdir(parents=True, exist_ok=True)
     fig.savefig(path, dpi=110)

@@ -70,10 +70,20 @@ def test_plan_from_measured_poses(planned, capsys):
     assert rc == 0
     sub = read_plan(planned / "sub.csv", n_joints=6)
     cal = read_measurements(planned / "cal.csv")
-    # every planned row is one of the measured configurations
-    d = np.abs(sub.joints[:, None, :] - cal.joints[None]).max(axis=2).min(axis=1)
-    assert np.all(d < 1e-9)
+    # every planned row is one of the measured poses, with its measurement and payload
+    d = np.abs(sub.joints[:, None, :] - cal.joints[None]).max(axis=2)
+    assert np.all(d.min(axis=1) < 1e-9)
+    rows = d.argmin(axis=1)
+    assert len(set(rows.tolist())) == 12
+    got = read_measurements(planned / "sub.csv")
+    np.testing.assert_allclose(got.positions, cal.positions[rows], atol=1e-9)
+    np.testing.assert_allclose(got.payload_kg, cal.payload_kg[rows])
     assert "estimated from 30 measured poses" in capsys.readouterr().err
+    # measured poses keep their payloads
+    assert main(["plan", "--robot", "smart_h4", "--poses", "12", "--from",
+                 str(planned / "cal.csv"), "--out", str(planned / "x.csv"),
+                 "--payloads", "0,36", "--quiet"]) == 2
+    assert "measured with their own payloads" in capsys.readouterr().err
 
 
 @pytest.mark.parametrize("argv, message", [

@@ -10,7 +10,9 @@ working volume and facing the tracker (or read with ``--from``: a plan file of a
 configurations or a measurement file of poses already measured — then BASE and PROBE
 come from its measurements); ``N`` of them are chosen to maximise the criterion of the
 identification Jacobian (:mod:`plugcell.calibration.planning`).  The plan file is what
-``plugcell twin measure --plan`` reads; ``--program`` writes the values of the
+``plugcell twin measure --plan`` reads (with ``--from`` a measurement file: the chosen
+rows with their measurements, ready for ``plugcell calibrate``); ``--program`` writes
+the values of the
 ``calibration`` robot program (one file per payload).  Bad input ends with a clear
 message and exit code 2.
 """
@@ -213,10 +215,10 @@ def _run(args: argparse.Namespace) -> int:
                            if ln.strip() and not ln.lstrip().startswith("#")), "")
             has_xyz = {"x", "y", "z"} <= {c.strip() for c in header.split(",")}
             if has_xyz:
-                m = read_measurements(args.from_file, rotation=args.rot,
-                                      n_joints=desc.n_actuated)
-                measured = CalibrationData.from_measurements(m)
-                q_from, m_from = m.joints, m.payload_kg
+                mset = read_measurements(args.from_file, rotation=args.rot,
+                                         n_joints=desc.n_actuated)
+                measured = CalibrationData.from_measurements(mset)
+                q_from, m_from = mset.joints, mset.payload_kg
             else:
                 pf = read_plan(args.from_file, n_joints=desc.n_actuated)
                 q_from, m_from = pf.joints, pf.payload_kg
@@ -243,6 +245,11 @@ def _run(args: argparse.Namespace) -> int:
             vis = Visibility(tuple(tracker), math.radians(args.line_of_sight_deg))
         if args.from_file is not None:
             own = m_from if (m_from is not None and args.payloads is None) else None
+            if measured is not None:
+                if args.payloads is not None:
+                    raise PlanningError(f"--payloads: the poses of {args.from_file} were "
+                                        "measured with their own payloads")
+                own = measured.payload_kg
             if cfg.payload and own is not None and np.max(own) <= 0:
                 raise PlanningError(f"--from {args.from_file}: every pose has payload 0; "
                                     "model 5 needs payloads (give --payloads)")
@@ -269,7 +276,10 @@ def _run(args: argparse.Namespace) -> int:
         raise CommandError(str(exc)) from None
     elapsed = time.perf_counter() - t0
     summary = _summary(plan, model, desc.name, cfg, what, elapsed)
-    _write_plan(args.out, plan, summary)
+    if measured is not None:
+        _write_measured(args.out, mset, cands.source[plan.index], summary, args.from_file)
+    else:
+        _write_plan(args.out, plan, summary)
     written = [str(args.out)]
     if args.program is not None:
         written += _write_program(args.program, plan)
@@ -343,6 +353,21 @@ def _write_plan(path: Path, plan: Any, d: dict[str, Any]) -> None:
         "rows grouped by payload (one change per group), short joint moves within a group",
     ]
     _write(path, format_plan(MeasurementPlan(plan.q, plan.payload_kg), comments=comments))
+
+
+def _write_measured(path: Path, m: Any, rows: np.ndarray, d: dict[str, Any],
+                    source: Path) -> None:
+    """Planning among poses already measured: the chosen rows of the measurement file,
+    measurements included (a measurement file is a plan too) — ready for calibrate."""
+    from plugcell.io.measurements import format_measurements
+
+    comments = [
+        f"plugcell plan: {d['poses']} of the {d['candidates']} measured poses of {source}, "
+        f"robot {d['robot']}, model {d['model']['number']} ({d['model']['name']}), "
+        f"criterion {d['criterion']}",
+        f"predicted: criterion {d['value']:.6g}, condition number {d['condition_number']:.1f}",
+    ]
+    _write(path, format_measurements(m.subset(rows), comments=comments))
 
 
 def _write_program(path: Path, plan: Any) -> list[str]:
