@@ -164,9 +164,9 @@ def plot(d: dict[str, Any], path: Path) -> None:
     wide = "random_wide_median_mm" in rows[0]
     fig, axes = plt.subplots(1, 2 if wide else 1, figsize=(13 if wide else 7, 4.4),
                              squeeze=False)
-    panels = [("", "validation: 300 poses as twin measure draws them")]
+    panels = [("", "validated on poses as twin measure draws them")]
     if wide:
-        panels.append(("_wide", "validation: 300 poses drawn as plugcell plan draws them"))
+        panels.append(("_wide", "validated on poses as plugcell plan draws them"))
     for ax, (sfx, title) in zip(axes[0], panels, strict=True):
         ax.fill_between(n, [r[f"random{sfx}_p10_mm"] for r in rows],
                         [r[f"random{sfx}_p90_mm"] for r in rows], color="0.85",
@@ -185,7 +185,7 @@ def plot(d: dict[str, Any], path: Path) -> None:
                    label=f"+10 % of {rows[-1]['n']} random poses")
         ax.set_xlabel("poses in the calibration campaign (N)")
         ax.set_ylabel("validation mean position error (mm)")
-        ax.set_title(f"Smart H4 twin, model 5, 0/18/36 kg — {title}", fontsize=9)
+        ax.set_title(f"Smart H4 twin, model 5, 0/18/36 kg: {title}", fontsize=8.5)
         ax.grid(alpha=0.3)
         ax.legend(fontsize=7)
     fig.tight_layout()
