@@ -6,6 +6,8 @@ import itertools
 
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from plugcell.calibration import ErrorModel
 from plugcell.calibration.identifiability import random_configurations
@@ -201,3 +203,28 @@ def test_bad_arguments(setup):
     with pytest.raises(PlanningError, match="joints"):
         filter_candidates(model, np.zeros((3, 4)))
     assert isinstance(cands, Candidates)
+
+
+# ---------------------------------------------------------------------- properties
+
+
+@settings(max_examples=25, deadline=None)
+@given(st.integers(0, 10_000), st.sampled_from(["D", "A", "E", "O"]), st.integers(3, 6),
+       st.sampled_from([3, 6]))
+def test_search_on_random_problems(seed, criterion, n, r):
+    """Any information structure: the exchanges only improve, the design has n distinct
+    poses, and the tracked value equals the criterion recomputed from scratch."""
+    rng = np.random.default_rng(seed)
+    k = 5
+    X = rng.standard_normal((30, r, k)) * rng.uniform(0.1, 3.0, k)
+    n = max(n, -(-k // r))
+    sel, history, _ = _Search(X, criterion, None).run(n)
+    assert len(set(sel.tolist())) == n
+    assert all(b > a for a, b in itertools.pairwise(history))
+    Xs = X[sel].reshape(-1, k)
+    M = Xs.T @ Xs
+    M = M + 1e-10 * np.trace(M) / k * np.eye(k)  # the search's tiny ridge
+    lam = np.linalg.eigvalsh(M / n)
+    direct = {"D": np.sum(np.log(lam)) / k, "A": -np.sum(1 / lam), "E": lam[0],
+              "O": lam[0] / np.sqrt(lam[-1])}[criterion]
+    assert history[-1] == pytest.approx(direct, rel=1e-6, abs=1e-12)
