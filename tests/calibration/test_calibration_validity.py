@@ -191,6 +191,7 @@ def test_ipa_series_c_region_flags_series_a(ur10, monkeypatch):
     assert after.position.norm.mean > 0.9 * before.position.norm.mean
 
 
+@pytest.mark.slow
 def test_report_shows_the_coverage(calibrated, h4):
     from plugcell.calibration.report import render_report
 
