@@ -4,7 +4,8 @@
 
 Without ``--full`` the transport benchmark runs in its quick mode, the
 calibration scaling stops at 10 000 poses and the web API fuzz sends 20 000
-requests (not 100 000), so the whole run takes a few minutes on 2 cores.  Speed
+requests (not 100 000), so the whole run takes a few minutes on 2 cores; ``--full``
+adds the planning comparisons (twin: ~5 min, IPA UR10 when its data are present).  Speed
 is measured here, never asserted in tests.
 """
 
@@ -38,6 +39,13 @@ def main(argv: list[str]) -> int:
          [sys.executable, str(HERE / "urdf_roundtrip_ur10.py")]),
         ("vendor joint conventions (cost of a coupling)",
          [sys.executable, str(HERE / "coupling.py")]),
+        ("campaign planning: speed", [sys.executable, str(HERE / "planning_speed.py")]),
+        *([("campaign planning: planned vs random on the twin",
+            [sys.executable, str(HERE / "planning_twin.py")])] if full else []),
+        *([("campaign planning: IPA UR10 real data",
+            [sys.executable, str(HERE / "planning_ur10.py")])]
+          if full and (HERE.parents[1] / "shared" / "data" / "ipa-robot-accuracy").is_dir()
+          else []),
         ("wire decoder fuzz", [sys.executable, str(HERE / "fuzz_wire.py")]),
         ("signed requests (cost)", [sys.executable, str(HERE / "signing.py"),
                                     *(["--fuzz", "100000"] if full else [])]),

@@ -85,6 +85,8 @@ COMMANDS: tuple[Command, ...] = (
             "plugcell.commands.calibrate:configure"),
     Command("export", "write a calibrated robot as URDF, UR kinematics YAML or plugcell TOML",
             "plugcell.commands.export:configure"),
+    Command("plan", "choose the poses of a calibration campaign (optimal, reachable, visible)",
+            "plugcell.commands.plan:configure"),
     Command("reproduce", "recompute the thesis's calibration tables",
             "plugcell.commands.reproduce:configure"),
     Command("cell", "discover, wire, save/load, run programs, monitor (the cell controller's CLI)",

@@ -9,6 +9,7 @@ import sys
 def test_calibration_imports_no_twin_framework_or_io():
     code = (
         "import sys, plugcell.calibration, plugcell.calibration.report, "
+        "plugcell.calibration.planning, "
         "plugcell.calibration.simulation\n"
         "bad = [m for m in sys.modules if m.startswith(('plugcell.twin', 'plugcell.framework', "
         "'plugcell.services', 'plugcell.io', 'plugcell.commands', 'zenoh', 'matplotlib'))]\n"

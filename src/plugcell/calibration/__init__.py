@@ -14,7 +14,9 @@ Pure math (numpy, SI units), no I/O, no framework imports; files go through
 * :mod:`.result`, :mod:`.statistics` — :class:`CalibrationResult`, (8.1)–(8.5), the
   residual of every pose (:class:`PoseResiduals`);
 * :mod:`.configs` — the five models of 8.2.3; :mod:`.simulation` — the check of 8.1;
-* :mod:`.report` — the self-contained HTML report.
+* :mod:`.report` — the self-contained HTML report;
+* :mod:`.planning` — choosing the poses of a campaign (I/D/A/E/O-optimal, visible);
+* :mod:`.validity` — the region a calibration was identified on, and checks against it.
 """
 
 from plugcell.calibration.configs import MODELS, ModelConfig, model_config

@@ -60,6 +60,7 @@ from plugcell.calibration.statistics import (
     parameter_statistics,
     pose_residuals,
 )
+from plugcell.calibration.validity import ValidityRegion
 from plugcell.kinematics import RobotDescription, forward
 from plugcell.kinematics.errors import KinematicsError
 from plugcell.metrology import fit_rigid_transform
@@ -414,6 +415,9 @@ class Calibrator:
             pose_weights=weights,
             warnings=tuple(warnings),
             elapsed_s=time.perf_counter() - t0,
+            validity=ValidityRegion.from_poses(
+                final, data.q, data.payload_kg,
+                targets=(np.linalg.inv(final.base()) @ jac.poses)[:, :3, 3]),
             settings={"method": self.method, "loss": self.loss, "loss_scale": self.loss_scale,
                       "tol": self.tol,
                       "rotation_weight": self.rotation_weight,

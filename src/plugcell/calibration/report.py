@@ -8,7 +8,9 @@ the tables only), no scripts, no CDN.  It shows:
 * per-component error histograms before and after calibration (Fig. 8-8);
 * the identified parameters with σ (8.5), units and what each stands for;
 * the residual of every pose; a 3-D view of the poses coloured by their error;
-* the convergence history; the warnings (ill-conditioning, outliers, few equations).
+* the convergence history; the warnings (ill-conditioning, outliers, few equations);
+* the calibrated region: joint ranges covered against the limits, the distance
+  threshold, and the validation poses outside it (docs/planning.md).
 
 Writing the file is the caller's business (``plugcell calibrate --report``).
 """
@@ -95,6 +97,72 @@ def _stats_rows(label: str, before: Any, after: Any) -> str:
             f'<tr><td class="l">{label}, calibrated</td>{cells(after)}</tr>')
 
 
+def _coverage_table(result: CalibrationResult) -> list[str]:
+    """The calibrated region (docs/planning.md): per joint the range covered against the
+    limits, the threshold, payloads, the Cartesian box, validation poses outside."""
+    region = result.validity
+    if region is None:
+        return []
+    desc = result.model.structure.source
+    lim = np.degrees(desc.joint_limits)
+    lo, hi = np.degrees(region.joint_lower), np.degrees(region.joint_upper)
+    out = ["<h2>Calibrated region (where the model may be trusted)</h2>",
+           "<table><tr><th class='l'>joint</th><th>calibrated from (°)</th><th>to (°)</th>"
+           "<th>limits (°)</th><th>covered</th><th>lever arm (mm/°)</th></tr>"]
+    for j, name in enumerate(desc.actuated):
+        span = max(lim[j, 1] - lim[j, 0], 1e-9)
+        out.append(f"<tr><td class='l'>{html.escape(name)}</td><td>{lo[j]:.1f}</td>"
+                   f"<td>{hi[j]:.1f}</td><td>{lim[j, 0]:.0f} … {lim[j, 1]:.0f}</td>"
+                   f"<td>{100 * (hi[j] - lo[j]) / span:.0f} %</td>"
+                   f"<td>{region.lever_m[j] * 1e3 * math.pi / 180:.2f}</td></tr>")
+    tl, tu = region.target_lower * 1e3, region.target_upper * 1e3
+    out.append("</table>")
+    val = ""
+    if result.validation_region is not None:
+        v = result.validation_region
+        val = (f" Validation: {v.count} of {len(v)} poses outside"
+               + (f" (largest distance {v.distance_m.max() * 1e3:.0f} mm)." if v.count else "."))
+    out.append(
+        f"<p>{region.n_poses} calibration poses; a pose farther than "
+        f"<b>{region.threshold_m * 1e3:.0f} mm</b> (joint-space distance scaled by the lever "
+        "arms, mm of target motion) from every calibration pose, or beyond a joint's range, "
+        f"is outside. Payloads {region.payload_kg[0]:g}–{region.payload_kg[1]:g} kg; targets "
+        f"(robot base frame) x {tl[0]:.0f}…{tu[0]:.0f}, y {tl[1]:.0f}…{tu[1]:.0f}, "
+        f"z {tl[2]:.0f}…{tu[2]:.0f} mm.{html.escape(val)}</p>")
+    return out
+
+
+def _coverage_figure(plt: Any, result: CalibrationResult, calibration: CalibrationData,
+                     validation: CalibrationData | None) -> Any:
+    """Per joint: limits (grey), calibration poses (blue), validation poses (green inside,
+    red outside the region)."""
+    region = result.validity
+    assert region is not None
+    desc = result.model.structure.source
+    n = desc.n_actuated
+    lim = np.degrees(desc.joint_limits)
+    fig, ax = plt.subplots(figsize=(8, 0.45 * n + 1.2))
+    for j in range(n):
+        y = n - 1 - j
+        ax.plot(lim[j], [y, y], color="0.85", lw=8, solid_capstyle="butt")
+        ax.plot(np.degrees(calibration.q[:, j]), np.full(len(calibration), y + 0.12), "|",
+                color="tab:blue", ms=7)
+        if validation is not None:
+            out = result.check_region(validation.q, validation.payload_kg)
+            flag = np.zeros(len(validation), bool) if out is None else out.outside
+            qv = np.degrees(validation.q[:, j])
+            ax.plot(qv[~flag], np.full(int((~flag).sum()), y - 0.15), "|", color="tab:green",
+                    ms=6)
+            ax.plot(qv[flag], np.full(int(flag.sum()), y - 0.15), "|", color="tab:red", ms=6)
+    ax.set_yticks(range(n))
+    ax.set_yticklabels([f"joint {a}" for a in reversed(desc.actuated)])
+    ax.set_xlabel("joint reading (°); grey: limits, blue: calibration poses, "
+                  "green/red: validation poses inside/outside the region")
+    ax.tick_params(labelsize=8)
+    fig.tight_layout()
+    return fig
+
+
 def render_report(
     result: CalibrationResult,
     calibration: CalibrationData,
@@ -140,6 +208,7 @@ def render_report(
     parts.append("</table><p class='small'>nominal: the robot's nominal geometry with BASE "
                  "and PROBE fitted; Δφ: angle of the rotation between measured and "
                  "predicted orientation.</p>")
+    parts += _coverage_table(result)
 
     try:
         import matplotlib
@@ -203,6 +272,10 @@ def render_report(
         ax3.set_zlabel("z (m)")
         fig.tight_layout()
         parts.append(_png(fig))
+
+        if result.validity is not None:
+            parts.append("<h2>Coverage of the joint ranges</h2>")
+            parts.append(_png(_coverage_figure(plt, result, calibration, validation)))
 
         if result.history:
             parts.append("<h2>Convergence (Fig. 6-9)</h2>")

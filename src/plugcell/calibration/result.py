@@ -29,6 +29,7 @@ from plugcell.calibration.statistics import (
     accuracy_summary,
     pose_residuals,
 )
+from plugcell.calibration.validity import RegionCheck, ValidityRegion
 from plugcell.kinematics import RobotDescription
 from plugcell.kinematics.rotations import matrix_to_rpy
 from plugcell.metrology import AccuracyStats
@@ -101,7 +102,11 @@ class CalibrationResult:
     after/before; ``validation``/``validation_before``: on independent poses;
     ``calibration_residuals``/``validation_residuals``: the residual of every pose
     (:class:`~plugcell.calibration.statistics.PoseResiduals`) those figures are the
-    statistics of (``None`` in a result rebuilt by :meth:`from_dict`).
+    statistics of (``None`` in a result rebuilt by :meth:`from_dict`);
+    ``validity``: the region the calibration poses covered
+    (:class:`~plugcell.calibration.validity.ValidityRegion`; ``None`` for a PARAMS.json
+    written before it was recorded); ``validation_region``: the validation poses checked
+    against it.
     """
 
     config: ModelConfig
@@ -128,6 +133,8 @@ class CalibrationResult:
     n_validation: int = 0
     calibration_residuals: PoseResiduals | None = None
     validation_residuals: PoseResiduals | None = None
+    validity: ValidityRegion | None = None
+    validation_region: RegionCheck | None = None
 
     # ------------------------------------------------------------------ prediction
     def predict(self, q: ArrayLike, payload_kg: ArrayLike | float | None = None) -> Array:
@@ -186,9 +193,21 @@ class CalibrationResult:
         r = self.evaluate_poses(data, refit_base=refit_base, refit_probe=refit_probe,
                                 rotation_weight=rotation_weight,
                                 refit_positions_only=refit_positions_only)
+        check = self.check_region(data.q, data.payload_kg)
+        warnings = self.warnings
+        if check is not None and check.count:
+            warnings = (*warnings, "validation: " + check.message("validation poses"))
         return replace(self, validation=r.accuracy("after"),
                        validation_before=r.accuracy("before"), n_validation=len(data),
-                       validation_residuals=r)
+                       validation_residuals=r, validation_region=check, warnings=warnings)
+
+    def check_region(self, q: ArrayLike, payload_kg: ArrayLike | float | None = None,
+                     targets: ArrayLike | None = None) -> RegionCheck | None:
+        """Configurations ``q`` (rad) checked against the calibrated region (``None`` when
+        the result has no region: a PARAMS.json from before it was recorded)."""
+        if self.validity is None:
+            return None
+        return self.validity.check(q, payload_kg, targets)
 
     # ------------------------------------------------------------------ parameters
     def value(self, key: str) -> float:
@@ -225,6 +244,8 @@ class CalibrationResult:
                 out[name] = accuracy_summary(after)
                 if before is not None:
                     out[name]["before"] = accuracy_summary(before)
+        if "validation" in out and self.validation_region is not None:
+            out["validation"]["region"] = self.validation_region.summary()
         return out
 
     def to_dict(self) -> dict[str, Any]:
@@ -269,6 +290,7 @@ class CalibrationResult:
             "warnings": list(self.warnings),
             "elapsed_s": self.elapsed_s,
             "settings": dict(self.settings),
+            "validity": None if self.validity is None else self.validity.to_dict(),
         }
 
     def to_json(self, indent: int | None = 2) -> str:
@@ -325,12 +347,16 @@ class CalibrationResult:
 
         model = build(d["values"])
         nominal = build(d["nominal_frames"]["values"])
+        validity = None
+        if d.get("validity"):  # absent in files written before the region was recorded
+            validity = ValidityRegion.from_dict(d["validity"])
         return cls(config=cfg, robot=d["robot"], model=model, nominal=nominal,
                    keys=tuple(p["key"] for p in d["parameters"]), identifiability=None,
                    data_identifiability=None, iterations=int(d["iterations"]),
                    converged=bool(d["converged"]), history=(), statistics=None,
                    calibration=None, calibration_before=None, six_dof=bool(d["data"]["six_dof"]),
-                   n_poses=int(d["data"]["poses"]), warnings=tuple(d.get("warnings", ())))
+                   n_poses=int(d["data"]["poses"]), warnings=tuple(d.get("warnings", ())),
+                   validity=validity)
 
 
 def _clean(x: Any) -> Any:

@@ -206,17 +206,33 @@ def _run(args: argparse.Namespace) -> int:
         more = f"\n... and {bad.size - 5} more" if bad.size > 5 else ""
         raise CommandError(f"{bad.size} of {len(names)} targets cannot be compensated:\n"
                            + "\n".join(msgs) + more)
-    _write(args, result, names, res, payload)
+    region = _region(result, res.q, payload)
+    _write(args, result, names, res, payload, region)
     print(f"compensated {len(names)} targets with model {result.config.number} "
           f"({result.config.name}) in {dt * 1e3:.1f} ms: at most {int(res.iterations.max())} "
           f"iterations, residual ≤ {float(res.residual.max()):.1e}"
           + ("" if args.out is None else f"; wrote {args.out}"),
           file=sys.stderr if args.out is None else sys.stdout)
+    if region is not None and region.count:
+        print(f"warning: {region.message('targets')}", file=sys.stderr)
+        for k in np.flatnonzero(region.outside)[:5]:
+            print(f"  {args.targets}: line {lines[k]} ({names[k]}): {region.reasons(int(k))}",
+                  file=sys.stderr)
     return 0
 
 
+def _region(result: Any, q: np.ndarray, payload: np.ndarray) -> Any:
+    """The compensated joints (and their T-MAC positions in the robot base frame) checked
+    against the region the parameters were identified on; ``None`` for old PARAMS.json."""
+    if result.validity is None:
+        return None
+    m = result.model
+    targets = (np.linalg.inv(m.base()) @ m.predict(q, payload))[:, :3, 3]
+    return result.check_region(q, payload, targets)
+
+
 def _write(args: argparse.Namespace, result: Any, names: list[str], res: Any,
-           payload: np.ndarray) -> None:
+           payload: np.ndarray, region: Any = None) -> None:
     from plugcell.cli import CommandError
 
     n = res.q.shape[1]
@@ -228,12 +244,19 @@ def _write(args: argparse.Namespace, result: Any, names: list[str], res: Any,
     buf.write("# j1..jn: compensated joint targets (degrees, mm for a prismatic joint); "
               "residual: final ‖Δx‖ of the "
               "model (m, rad)\n")
+    extra: list[str] = []
+    if region is not None:
+        buf.write("# outside_region: 1 where the model extrapolates (docs/planning.md); "
+                  "region_distance_mm: to the nearest calibration pose\n")
+        extra = ["outside_region", "region_distance_mm"]
     w = csv.writer(buf, lineterminator="\n")
     w.writerow(["name", *[f"j{k + 1}" for k in range(n)], "payload_kg", "iterations",
-                "residual"])
+                "residual", *extra])
     for i, nm in enumerate(names):
+        more = [] if region is None else [int(region.outside[i]),
+                                          f"{region.distance_m[i] * 1e3:.1f}"]
         w.writerow([nm, *[f"{v:.6f}" for v in q[i]], f"{payload[i]:g}",
-                    int(res.iterations[i]), f"{res.residual[i]:.2e}"])
+                    int(res.iterations[i]), f"{res.residual[i]:.2e}", *more])
     if args.out is None:
         sys.stdout.write(buf.getvalue())
         return

@@ -6,6 +6,7 @@ import argparse
 import json
 import sys
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -44,7 +45,11 @@ def configure(p: argparse.ArgumentParser) -> None:
         "measure each with the simulated laser tracker (1 s).",
     )
     common(m)
-    m.add_argument("--poses", type=int, required=True, help="number of poses")
+    which = m.add_mutually_exclusive_group(required=True)
+    which.add_argument("--poses", type=int, help="number of random poses in the working volume")
+    which.add_argument("--plan", type=Path, metavar="PLAN.csv",
+                       help="measure the poses of a plan file (plugcell plan), each with its "
+                            "payload; --payload is the payload of rows without one")
     m.add_argument(
         "--payload",
         type=float,
@@ -130,12 +135,12 @@ def _report(args: argparse.Namespace) -> int:
 def _measure(args: argparse.Namespace) -> int:
     from plugcell.cli import CommandError
     from plugcell.io.measurements import write_measurements
-    from plugcell.twin.campaign import CampaignError, measure_poses, working_volume_joints
+    from plugcell.twin.campaign import CampaignError, working_volume_joints
     from plugcell.twin.robot import RobotTwin
     from plugcell.twin.scenario import ScenarioError
     from plugcell.twin.tracker import LaserTracker, TrackerError
 
-    if args.poses < 1:
+    if args.poses is not None and args.poses < 1:
         raise CommandError(f"--poses must be positive, got {args.poses}")
     if not (np.isfinite(args.payload) and args.payload >= 0):
         raise CommandError(f"--payload must be a mass ≥ 0 kg, got {args.payload}")
@@ -145,21 +150,24 @@ def _measure(args: argparse.Namespace) -> int:
         robot = RobotTwin(scenario)
         tracker_seed = scenario.tracker_seed if scenario.tracker_seed is not None else scenario.seed
         tracker = LaserTracker(seed=tracker_seed)
-        joints = working_volume_joints(
-            robot.description,
-            robot.reveal_truth().profile,
-            args.poses,
-            np.random.default_rng(pose_seed),
-        )
+        if args.plan is not None:
+            joints, payloads = _plan_joints(args.plan, robot.description, args.payload)
+        else:
+            joints = working_volume_joints(
+                robot.description,
+                robot.reveal_truth().profile,
+                args.poses,
+                np.random.default_rng(pose_seed),
+            )
+            payloads = np.full(len(joints), args.payload)
         bar = None if args.quiet else ProgressBar("measuring", stream=sys.stderr)
-        data, sim_s = measure_poses(
-            robot, tracker, joints, duration_s=args.duration, rotation=args.rot, progress=bar
-        )
+        data, sim_s = _measure_groups(scenario, robot, tracker, joints, payloads, args, bar)
     except (ScenarioError, CampaignError, TrackerError, ValueError) as exc:
         raise CommandError(str(exc)) from None
+    what = (f"{len(joints)} poses of plan {args.plan}" if args.plan is not None
+            else f"{args.poses} poses, payload {args.payload:g} kg, pose seed {pose_seed}")
     comments = [
-        f"plugcell twin measure: robot {scenario.robot}, {args.poses} poses, "
-        f"payload {args.payload:g} kg, pose seed {pose_seed}",
+        f"plugcell twin measure: robot {scenario.robot}, {what}",
         f"scenario: {scenario.to_json()}",
         f"simulated campaign time: {sim_s:.0f} s",
     ]
@@ -173,3 +181,52 @@ def _measure(args: argparse.Namespace) -> int:
             file=sys.stderr,
         )
     return 0
+
+
+def _plan_joints(path: Path, desc: Any, default_payload: float) -> tuple[np.ndarray, np.ndarray]:
+    """Joint targets and payloads of a plan file, checked against the robot's limits."""
+    from plugcell.cli import CommandError
+    from plugcell.io.plans import PlanFileError, read_plan
+
+    try:
+        plan = read_plan(path, n_joints=desc.n_actuated)
+    except PlanFileError as exc:
+        raise CommandError(str(exc)) from None
+    bad = np.flatnonzero(~desc.within_limits(plan.joints))
+    if bad.size:
+        raise CommandError(f"{path}: {bad.size} row(s) outside the joint or coupled limits of "
+                           f"{desc.name}, the first is row {int(bad[0]) + 1}")
+    m = plan.payload_kg if plan.payload_kg is not None else np.full(len(plan), default_payload)
+    return plan.joints, m
+
+
+def _measure_groups(scenario: Any, robot: Any, tracker: Any, joints: np.ndarray,
+                    payloads: np.ndarray, args: argparse.Namespace, bar: Any):
+    """Measure ``joints`` in order, changing the payload between runs of equal payload
+    (the same robot — its hidden errors — carrying another mass)."""
+    from plugcell.io.measurements import MeasurementSet
+    from plugcell.twin.campaign import measure_poses
+    from plugcell.twin.robot import RobotTwin
+
+    change = np.flatnonzero(np.diff(payloads) != 0) + 1
+    starts = np.r_[0, change]
+    ends = np.r_[change, len(joints)]
+    parts, sim_total = [], 0.0
+    for s, e in zip(starts, ends, strict=True):
+        m = float(payloads[s])
+        twin = robot if m == robot.payload.mass else RobotTwin(scenario.with_payload(m))
+
+        def progress(i: int, n: int, s: int = int(s)) -> None:
+            if bar is not None:
+                bar(s + i, len(joints))
+
+        data, sim_s = measure_poses(twin, tracker, joints[s:e], duration_s=args.duration,
+                                    rotation=args.rot, progress=progress)
+        parts.append(data)
+        sim_total += sim_s
+    if len(parts) == 1:
+        return parts[0], sim_total
+    return MeasurementSet(
+        np.concatenate([p.joints for p in parts]), np.concatenate([p.positions for p in parts]),
+        np.concatenate([p.angles for p in parts]), parts[0].rotation,
+        np.concatenate([p.payload_kg for p in parts])), sim_total

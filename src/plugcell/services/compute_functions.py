@@ -367,6 +367,22 @@ def compensate_joints(ctx: FunctionContext, params: Any, joints: Any, payload: A
     return _joints_or_fail(res)
 
 
+@register
+def region(ctx: FunctionContext, params: Any, joints: Any, payload: Any = 0.0) -> np.ndarray:
+    """Joints (N×n, deg; e.g. what :func:`compensate` returned) checked against the region
+    the parameters were identified on: N×3 ``[outside (1/0), distance to the nearest
+    calibration pose (mm), worst joint beyond its calibrated range (deg)]``
+    (docs/planning.md).  Fails for parameters saved before the region was recorded."""
+    p = _params(params)
+    q = np.deg2rad(_matrix(joints, "joints", (p.description.n_actuated,)))
+    check = p.result.check_region(q, _payload(payload, len(q)))
+    if check is None:
+        raise FunctionError("these parameters record no calibrated region (saved by an older "
+                            "plugcell): calibrate again to have one")
+    return np.column_stack([check.outside.astype(float), check.distance_m * 1e3,
+                            np.degrees(check.joint_excess_rad)])
+
+
 # -- part localisation (8.4.1) ---------------------------------------------------------------
 
 

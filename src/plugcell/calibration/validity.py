@@ -1,0 +1,306 @@
+"""Where a calibration can be trusted: the region its poses covered, and checks against it.
+
+A calibrated model interpolates well between the poses it was identified on and may
+extrapolate badly away from them (on the IPA UR10 data, a model identified in one joint
+region makes another region *worse*; docs/planning.md).  :class:`ValidityRegion` records
+the region of the calibration poses; :meth:`ValidityRegion.check` says, for any joint
+configurations (validation poses, compensated targets), which lie outside and how far.
+
+The measure (chosen on the IPA data, docs/planning.md):
+
+* **Joint ranges**: ``[min_i q_ij, max_i q_ij]`` of every actuated joint j over the
+  calibration poses; the *excess* of a configuration is how far (rad) its worst joint
+  lies beyond its range.
+* **Distance to the nearest calibration pose** in a scaled joint space, in metres of
+  target motion: ``d(q) = min_i ‖ℓ ∘ (q − q_i)‖``, ``ℓ_j`` the RMS over the calibration
+  poses of ``|∂p/∂q_j|`` (the lever arm of joint j at the target, m/rad), at least a tenth
+  of the largest one so that no joint is ignored.
+* **Threshold** ``τ``: the 99th percentile of the (kept) calibration poses' own nearest-
+  neighbour distances (leave-one-out) — how far apart the campaign's poses are; a sparse,
+  well-spread campaign covers a region with larger gaps than a dense one.
+* **Payload** range ``[min m, max m]``, and the **Cartesian** box of the targets (robot
+  base frame) — for the report and for compensated targets.
+
+A configuration is *outside* when a joint exceeds its range, its distance exceeds ``τ``
+or its payload lies outside the range.  At most :data:`MAX_POSES` calibration poses are
+kept (a farthest-point subsample, nearly uniform over the region; its covering radius —
+the largest distance of a dropped pose to a kept one — is recorded, and τ is at least
+that, so every calibration pose lies inside).
+Pure math (numpy, scipy's k-d tree), SI units; ``to_dict``/``from_dict`` use mm and degrees.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+from scipy.spatial import cKDTree
+
+from plugcell.calibration.model import ErrorModel
+
+Array = NDArray[np.float64]
+
+#: Calibration poses stored in a region (farthest-point subsample beyond).
+MAX_POSES = 1000
+#: Percentile of the leave-one-out nearest-neighbour distances taken as the threshold.
+THRESHOLD_PERCENTILE = 99.0
+#: Poses the lever arms are averaged over (evenly spaced among the calibration poses).
+LEVER_POSES = 2000
+#: Smallest lever arm, as a fraction of the largest (no joint is ignored).
+LEVER_FLOOR = 0.1
+#: A joint is beyond its calibrated range by more than this (rad) before it counts.
+RANGE_TOL = math.radians(0.01)
+
+__all__ = ["MAX_POSES", "RegionCheck", "ValidityRegion"]
+
+
+@dataclass(frozen=True, eq=False)
+class RegionCheck:
+    """Configurations checked against a :class:`ValidityRegion`, one entry per pose.
+
+    ``distance_m`` ``(N,)``: to the nearest calibration pose (scaled joint space, m of
+    target motion); ``threshold_m``: τ; ``joint_excess_rad`` ``(N,)``: how far the worst
+    joint lies beyond its range (0 inside) and ``worst_joint`` ``(N,)`` (0-based);
+    ``payload_excess_kg`` ``(N,)``; ``target_excess_m`` ``(N,)`` beyond the Cartesian box
+    (0 inside, or when no targets were given); ``outside`` ``(N,)``.
+    """
+
+    distance_m: Array
+    threshold_m: float
+    joint_excess_rad: Array
+    worst_joint: NDArray[np.int64]
+    payload_excess_kg: Array
+    target_excess_m: Array
+    outside: NDArray[np.bool_]
+
+    def __len__(self) -> int:
+        return int(self.outside.shape[0])
+
+    @property
+    def count(self) -> int:
+        return int(np.count_nonzero(self.outside))
+
+    def reasons(self, i: int, joint_names: tuple[str, ...] | None = None) -> str:
+        """Why pose ``i`` is outside, e.g. ``"joint 1 12.5° beyond its range; 340 mm from
+        the nearest calibration pose (region 110 mm)"`` ('' when inside)."""
+        if not self.outside[i]:
+            return ""
+        out = []
+        if self.joint_excess_rad[i] > RANGE_TOL:
+            j = int(self.worst_joint[i])
+            name = joint_names[j] if joint_names else str(j + 1)
+            out.append(f"joint {name} {math.degrees(self.joint_excess_rad[i]):.1f}° "
+                       "beyond its calibrated range")
+        if self.distance_m[i] > self.threshold_m:
+            out.append(f"{self.distance_m[i] * 1e3:.0f} mm from the nearest calibration pose "
+                       f"(region {self.threshold_m * 1e3:.0f} mm)")
+        if self.payload_excess_kg[i] > 0:
+            out.append(f"payload {self.payload_excess_kg[i]:g} kg beyond the calibrated range")
+        if self.target_excess_m[i] > 0:
+            out.append(f"target {self.target_excess_m[i] * 1e3:.0f} mm outside the calibrated "
+                       "volume")
+        return "; ".join(out)
+
+    def summary(self) -> dict[str, Any]:
+        """JSON-ready: counts, the largest distance and joint excess (mm, degrees)."""
+        o = self.outside
+        return {
+            "poses": len(self), "outside": self.count,
+            "threshold_mm": self.threshold_m * 1e3,
+            "max_distance_mm": float(self.distance_m.max() * 1e3) if len(self) else 0.0,
+            "beyond_joint_range": int(np.count_nonzero(self.joint_excess_rad > RANGE_TOL)),
+            "max_joint_excess_deg": float(np.degrees(self.joint_excess_rad.max()))
+            if len(self) else 0.0,
+            "beyond_distance": int(np.count_nonzero(self.distance_m > self.threshold_m)),
+            "beyond_payload": int(np.count_nonzero(self.payload_excess_kg > 0)),
+            "beyond_volume": int(np.count_nonzero(self.target_excess_m > 0)),
+            "outside_indices": np.flatnonzero(o).tolist(),
+        }
+
+    def message(self, what: str = "poses") -> str:
+        """One line for a warning, '' when every pose is inside."""
+        if not self.count:
+            return ""
+        s = self.summary()
+        parts = []
+        if s["beyond_joint_range"]:
+            parts.append(f"{s['beyond_joint_range']} beyond a joint's calibrated range (up to "
+                         f"{s['max_joint_excess_deg']:.1f}°)")
+        if s["beyond_distance"]:
+            parts.append(f"{s['beyond_distance']} farther than {s['threshold_mm']:.0f} mm from "
+                         f"every calibration pose (up to {s['max_distance_mm']:.0f} mm)")
+        if s["beyond_payload"]:
+            parts.append(f"{s['beyond_payload']} with a payload outside the calibrated range")
+        if s["beyond_volume"]:
+            parts.append(f"{s['beyond_volume']} with the target outside the calibrated volume")
+        return (f"{self.count} of {len(self)} {what} outside the calibrated region — the model "
+                f"extrapolates there: " + "; ".join(parts))
+
+
+@dataclass(frozen=True, eq=False)
+class ValidityRegion:
+    """The region a calibration was identified on (module docstring).
+
+    ``joint_lower``/``joint_upper`` ``(n,)`` rad; ``lever_m`` ``(n,)`` m/rad;
+    ``poses`` ``(P, n)`` rad (≤ :data:`MAX_POSES`); ``threshold_m``: τ;
+    ``cover_m``: covering radius of the kept poses; ``payload_kg`` (min, max);
+    ``target_lower``/``target_upper`` ``(3,)`` m, robot base frame; ``n_poses``: the
+    calibration poses it was built from.
+    """
+
+    joint_lower: Array
+    joint_upper: Array
+    lever_m: Array
+    poses: Array
+    threshold_m: float
+    cover_m: float
+    payload_kg: tuple[float, float]
+    target_lower: Array
+    target_upper: Array
+    n_poses: int
+
+    def __post_init__(self) -> None:
+        n = len(self.joint_lower)
+        for name in ("joint_lower", "joint_upper", "lever_m", "poses", "target_lower",
+                     "target_upper"):
+            a = np.array(getattr(self, name), dtype=float)
+            a.setflags(write=False)
+            object.__setattr__(self, name, a)
+        if self.poses.ndim != 2 or self.poses.shape[1] != n or self.lever_m.shape != (n,):
+            raise ValueError(f"validity region: poses must be (P, {n}) and lever ({n},)")
+        object.__setattr__(self, "_tree", cKDTree(self.poses * self.lever_m))
+
+    # ------------------------------------------------------------------ building
+    @classmethod
+    def from_poses(cls, model: ErrorModel, q: ArrayLike, payload_kg: ArrayLike | None = None,
+                   *, targets: ArrayLike | None = None, max_poses: int = MAX_POSES
+                   ) -> ValidityRegion:
+        """The region of calibration readings ``q`` ``(N, n)`` (rad) for ``model`` (its
+        geometry gives the lever arms).  ``targets`` ``(N, 3)``: the target positions in
+        the robot base frame (m) if known, else predicted by ``model``."""
+        q = np.atleast_2d(np.asarray(q, dtype=float))
+        m = np.zeros(len(q)) if payload_kg is None else np.asarray(payload_kg, dtype=float)
+        robot = model.with_references(base=np.eye(4))
+        p0 = (robot.predict(q, m)[:, :3, 3] if targets is None
+              else np.asarray(targets, dtype=float).reshape(len(q), 3))
+        # lever arms: central differences, on at most LEVER_POSES evenly spaced poses
+        s = np.unique(np.linspace(0, len(q) - 1, min(len(q), LEVER_POSES)).astype(int))
+        h = 1e-6
+        lever = np.empty(q.shape[1])
+        for j in range(q.shape[1]):
+            dq = np.zeros(q.shape[1])
+            dq[j] = h
+            dp = (robot.predict(q[s] + dq, m[s])[:, :3, 3]
+                  - robot.predict(q[s] - dq, m[s])[:, :3, 3]) / (2 * h)
+            lever[j] = float(np.sqrt(np.mean(np.sum(dp**2, axis=1))))
+        lever = np.maximum(lever, LEVER_FLOOR * max(float(lever.max()), 1e-3))
+        X = q * lever
+        # farthest points among at most 10·max_poses evenly spaced poses (the cover radius
+        # below is measured against all of them)
+        pre = np.unique(np.linspace(0, len(q) - 1, min(len(q), 10 * max_poses)).astype(int))
+        keep = pre[_farthest_points(X[pre], max_poses)]
+        cover = 0.0
+        if len(keep) < len(q):
+            cover = float(cKDTree(X[keep]).query(X)[0].max())
+        threshold = 0.0
+        if len(keep) > 1:
+            d, _ = cKDTree(X[keep]).query(X[keep], k=2)
+            # ≥ the covering radius (farthest-point sampling), so every calibration pose
+            # lies inside its own region
+            threshold = max(float(np.percentile(d[:, 1], THRESHOLD_PERCENTILE)), cover)
+        return cls(joint_lower=q.min(axis=0), joint_upper=q.max(axis=0), lever_m=lever,
+                   poses=q[keep], threshold_m=threshold, cover_m=cover,
+                   payload_kg=(float(m.min()), float(m.max())), target_lower=p0.min(axis=0),
+                   target_upper=p0.max(axis=0), n_poses=len(q))
+
+    # ------------------------------------------------------------------ checking
+    def distance(self, q: ArrayLike) -> Array:
+        """``(N,)`` distance (m) of configurations ``q`` to the nearest calibration pose."""
+        q = np.atleast_2d(np.asarray(q, dtype=float))
+        d, _ = self._tree.query(q * self.lever_m)  # type: ignore[attr-defined]
+        return np.asarray(d, dtype=float)
+
+    def check(self, q: ArrayLike, payload_kg: ArrayLike | float | None = None,
+              targets: ArrayLike | None = None) -> RegionCheck:
+        """Check configurations ``q`` ``(N, n)`` (rad), their payloads and optionally their
+        target positions ``(N, 3)`` (m, robot base frame)."""
+        q = np.atleast_2d(np.asarray(q, dtype=float))
+        if q.shape[1] != len(self.joint_lower):
+            raise ValueError(f"q: expected (N, {len(self.joint_lower)}), got {q.shape}")
+        below = self.joint_lower - q
+        above = q - self.joint_upper
+        excess = np.maximum(np.maximum(below, above), 0.0)
+        worst = np.argmax(excess, axis=1).astype(np.int64)
+        jexc = excess[np.arange(len(q)), worst] if len(q) else np.zeros(0)
+        m = np.zeros(len(q)) if payload_kg is None else np.broadcast_to(
+            np.asarray(payload_kg, dtype=float), (len(q),))
+        lo, hi = self.payload_kg
+        pexc = np.maximum(np.maximum(lo - m, m - hi), 0.0)
+        pexc = np.where(pexc > 1e-9, pexc, 0.0)
+        texc = np.zeros(len(q))
+        if targets is not None:
+            t = np.asarray(targets, dtype=float).reshape(len(q), 3)
+            out = np.maximum(np.maximum(self.target_lower - t, t - self.target_upper), 0.0)
+            texc = np.linalg.norm(out, axis=1)
+        d = self.distance(q)
+        outside = (jexc > RANGE_TOL) | (d > self.threshold_m) | (pexc > 0) | (texc > 0)
+        return RegionCheck(distance_m=d, threshold_m=self.threshold_m, joint_excess_rad=jexc,
+                           worst_joint=worst, payload_excess_kg=pexc, target_excess_m=texc,
+                           outside=outside)
+
+    # ------------------------------------------------------------------ serialisation
+    def to_dict(self) -> dict[str, Any]:
+        """PARAMS.json's ``validity`` (mm, degrees)."""
+        return {
+            "measure": "joint ranges + distance to the nearest calibration pose in joint space "
+                       "scaled by each joint's lever arm at the target (mm of target motion)",
+            "poses": self.n_poses,
+            "joint_lower_deg": np.degrees(self.joint_lower).tolist(),
+            "joint_upper_deg": np.degrees(self.joint_upper).tolist(),
+            "lever_mm_per_rad": (self.lever_m * 1e3).tolist(),
+            "threshold_mm": self.threshold_m * 1e3,
+            "cover_mm": self.cover_m * 1e3,
+            "payload_kg": list(self.payload_kg),
+            "target_lower_mm": (self.target_lower * 1e3).tolist(),
+            "target_upper_mm": (self.target_upper * 1e3).tolist(),
+            "poses_deg": np.round(np.degrees(self.poses), 6).tolist(),
+        }
+
+    @classmethod
+    def from_dict(cls, d: dict[str, Any]) -> ValidityRegion:
+        """Inverse of :meth:`to_dict`; ``ValueError`` naming the key for a bad one."""
+        try:
+            return cls(joint_lower=np.radians(d["joint_lower_deg"]),
+                       joint_upper=np.radians(d["joint_upper_deg"]),
+                       lever_m=np.asarray(d["lever_mm_per_rad"], float) / 1e3,
+                       poses=np.radians(np.asarray(d["poses_deg"], float)),
+                       threshold_m=float(d["threshold_mm"]) / 1e3,
+                       cover_m=float(d.get("cover_mm", 0.0)) / 1e3,
+                       payload_kg=(float(d["payload_kg"][0]), float(d["payload_kg"][1])),
+                       target_lower=np.asarray(d["target_lower_mm"], float) / 1e3,
+                       target_upper=np.asarray(d["target_upper_mm"], float) / 1e3,
+                       n_poses=int(d["poses"]))
+        except KeyError as exc:
+            raise ValueError(f"validity: missing key {exc}") from None
+        except (TypeError, IndexError) as exc:
+            raise ValueError(f"validity: {exc}") from None
+
+
+def _farthest_points(X: Array, k: int) -> NDArray[np.int64]:
+    """Indices of at most ``k`` rows of ``X`` chosen by farthest-point sampling (a greedy
+    k-centre cover), starting from the row nearest the mean; all rows if ``len(X) ≤ k``."""
+    n = len(X)
+    if n <= k:
+        return np.arange(n, dtype=np.int64)
+    X = np.ascontiguousarray(X)
+    first = int(np.argmin(np.sum((X - X.mean(axis=0)) ** 2, axis=1)))
+    chosen = [first]
+    d2 = np.sum((X - X[first]) ** 2, axis=1)
+    for _ in range(k - 1):
+        i = int(np.argmax(d2))
+        chosen.append(i)
+        np.minimum(d2, np.sum((X - X[i]) ** 2, axis=1), out=d2)
+    return np.sort(np.asarray(chosen, dtype=np.int64))

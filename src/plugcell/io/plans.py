@@ -1,0 +1,169 @@
+"""The measurement-plan file: the joint configurations of a campaign, one pose a row.
+
+Written by ``plugcell plan``, read by ``plugcell twin measure --plan`` and by
+``plugcell plan --from`` (a file of allowed configurations)::
+
+    # plugcell plan: robot smart_h4, model 5 (full), criterion D, 40 of 10002 candidates
+    j1,j2,j3,j4,j5,j6,payload_kg
+    -8.41,-63.2,-147.9,3.1,28.4,-5.0,0
+
+* ``j1..jn`` — joint readings to move to, **degrees**, in the robot description's
+  ``actuated`` order (the columns of a measurement file);
+* ``payload_kg`` — optional payload to carry (a plan's rows are grouped by payload:
+  one payload change per group).
+
+A measurement file (docs/measurement-files.md) is a valid plan too: its ``x, y, z``
+and ``rx, ry, rz`` columns are read past, so the poses of a campaign already measured
+can be planned from.  Inside the program everything is SI (radians).  Errors name the
+file, the line and the column.
+"""
+
+from __future__ import annotations
+
+import csv
+import io
+import math
+import re
+from collections.abc import Iterable
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+_JOINT_COLUMN = re.compile(r"^j([1-9][0-9]*)$")
+#: Columns of a measurement file a plan reader passes over.
+MEASUREMENT_COLUMNS = ("x", "y", "z", "rx", "ry", "rz")
+
+__all__ = ["MeasurementPlan", "PlanFileError", "format_plan", "parse_plan", "read_plan",
+           "write_plan"]
+
+
+class PlanFileError(ValueError):
+    """A plan file that cannot be read; the message names file, line and column."""
+
+
+@dataclass(frozen=True)
+class MeasurementPlan:
+    """``joints`` ``(N, n)`` rad; ``payload_kg`` ``(N,)`` or ``None`` (not given)."""
+
+    joints: np.ndarray
+    payload_kg: np.ndarray | None = None
+
+    def __post_init__(self) -> None:
+        if self.joints.ndim != 2 or self.joints.shape[0] == 0:
+            raise ValueError(f"joints must be (N, n) with N ≥ 1, got {self.joints.shape}")
+        if self.payload_kg is not None and self.payload_kg.shape != (self.joints.shape[0],):
+            raise ValueError(f"payload_kg must be ({self.joints.shape[0]},), "
+                             f"got {self.payload_kg.shape}")
+
+    def __len__(self) -> int:
+        return int(self.joints.shape[0])
+
+
+def _header(name: str, line_no: int, header: list[str]) -> tuple[list[int], int | None]:
+    cols = [h.strip() for h in header]
+    seen: set[str] = set()
+    for i, c in enumerate(cols):
+        if not c:
+            raise PlanFileError(f"{name}: line {line_no}: header column {i + 1} is empty")
+        if c in seen:
+            raise PlanFileError(f"{name}: line {line_no}: header names column {c!r} twice")
+        seen.add(c)
+    joints = {int(m.group(1)): i for i, c in enumerate(cols) if (m := _JOINT_COLUMN.match(c))}
+    if not joints:
+        raise PlanFileError(f"{name}: line {line_no}: header has no joint columns j1..jn: "
+                            f"{cols}")
+    if sorted(joints) != list(range(1, len(joints) + 1)):
+        raise PlanFileError(f"{name}: line {line_no}: joint columns must be j1..j{len(joints)} "
+                            f"without gaps, got {[f'j{k}' for k in sorted(joints)]}")
+    unknown = [c for c in cols if not _JOINT_COLUMN.match(c)
+               and c not in (*MEASUREMENT_COLUMNS, "payload_kg")]
+    if unknown:
+        raise PlanFileError(f"{name}: line {line_no}: unknown columns {unknown}; expected "
+                            "j1..jn, optional payload_kg (x, y, z, rx, ry, rz are passed over)")
+    payload = cols.index("payload_kg") if "payload_kg" in cols else None
+    return [joints[k] for k in range(1, len(joints) + 1)], payload
+
+
+def parse_plan(text: str, *, name: str = "<plan>", n_joints: int | None = None
+               ) -> MeasurementPlan:
+    """Parse plan-file text (module docstring); ``n_joints`` checked when given."""
+    rows: list[tuple[int, list[str]]] = []
+    reader = csv.reader(io.StringIO(text, newline=None))
+    try:
+        for line_no, row in enumerate(reader, start=1):
+            if not row or all(not c.strip() for c in row) or row[0].lstrip().startswith("#"):
+                continue
+            rows.append((line_no, row))
+    except csv.Error as exc:
+        raise PlanFileError(f"{name}: line {reader.line_num}: {exc}") from None
+    if not rows:
+        raise PlanFileError(f"{name}: no header line (the file is empty)")
+    (hline, header), data = rows[0], rows[1:]
+    jcols, pcol = _header(name, hline, header)
+    if n_joints is not None and len(jcols) != n_joints:
+        raise PlanFileError(f"{name}: line {hline}: the file has {len(jcols)} joint columns, "
+                            f"the robot has {n_joints}")
+    if not data:
+        raise PlanFileError(f"{name}: the file has a header but no rows")
+    cols = [h.strip() for h in header]
+    values = np.empty((len(data), len(cols)))
+    for r, (line_no, row) in enumerate(data):
+        if len(row) != len(cols):
+            raise PlanFileError(f"{name}: line {line_no}: expected {len(cols)} values, "
+                                f"got {len(row)}")
+        for c, cell in enumerate(row):
+            try:
+                v = float(cell)
+            except ValueError:
+                raise PlanFileError(f"{name}: line {line_no}, column {cols[c]!r}: not a number: "
+                                    f"{cell.strip()!r}") from None
+            if not math.isfinite(v):
+                raise PlanFileError(f"{name}: line {line_no}, column {cols[c]!r}: not finite: "
+                                    f"{cell.strip()!r}")
+            values[r, c] = v
+    payload = None
+    if pcol is not None:
+        payload = values[:, pcol]
+        bad = np.flatnonzero(payload < 0)
+        if bad.size:
+            raise PlanFileError(f"{name}: line {data[int(bad[0])][0]}, column 'payload_kg': "
+                                f"negative mass {payload[bad[0]]:g}")
+    return MeasurementPlan(np.deg2rad(values[:, jcols]), payload)
+
+
+def read_plan(path: str | Path, *, n_joints: int | None = None) -> MeasurementPlan:
+    """Read a plan file (or a measurement file) — see :func:`parse_plan`."""
+    p = Path(path)
+    try:
+        text = p.read_text(encoding="utf-8")
+    except FileNotFoundError:
+        raise PlanFileError(f"{p}: no such file") from None
+    except UnicodeDecodeError as exc:
+        raise PlanFileError(f"{p}: not a UTF-8 text file ({exc.reason})") from None
+    except OSError as exc:
+        raise PlanFileError(f"{p}: cannot read: {exc.strerror}") from None
+    return parse_plan(text, name=str(p), n_joints=n_joints)
+
+
+def format_plan(plan: MeasurementPlan, *, comments: Iterable[str] = ()) -> str:
+    """A plan as file text (degrees)."""
+    out = io.StringIO()
+    for c in comments:
+        for line in str(c).splitlines() or [""]:
+            out.write(f"# {line}\n")
+    n = plan.joints.shape[1]
+    header = [f"j{k}" for k in range(1, n + 1)]
+    table = np.rad2deg(plan.joints)
+    if plan.payload_kg is not None:
+        header.append("payload_kg")
+        table = np.hstack([table, plan.payload_kg[:, None]])
+    out.write(",".join(header) + "\n")
+    for row in table:
+        out.write(",".join(f"{v:.10g}" for v in row) + "\n")
+    return out.getvalue()
+
+
+def write_plan(path: str | Path, plan: MeasurementPlan, *, comments: Iterable[str] = ()) -> None:
+    """Write a plan file; the inverse of :func:`read_plan` (to 1e-10 relative)."""
+    Path(path).write_text(format_plan(plan, comments=comments), encoding="utf-8")

@@ -1,0 +1,122 @@
+"""``plugcell plan`` end to end: plan file → twin campaign → calibration; bad input."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+
+from plugcell.cli import main
+from plugcell.controller.language.types import JOINTPOS, ArrayType
+from plugcell.controller.value_text import value_from_text
+from plugcell.io.measurements import read_measurements
+from plugcell.io.plans import read_plan
+from plugcell.io.robots import load_robot
+
+
+@pytest.fixture(scope="module")
+def planned(tmp_path_factory):
+    d = tmp_path_factory.mktemp("plan")
+    rc = main(["plan", "--robot", "smart_h4", "--poses", "30", "--candidates", "600",
+               "--out", str(d / "plan.csv"), "--program", str(d / "prog.json"), "--json",
+               "--quiet"])
+    assert rc == 0
+    return d
+
+
+def test_plan_file_is_measured_by_the_twin_with_its_payloads(planned, capsys):
+    plan = read_plan(planned / "plan.csv", n_joints=6)
+    assert len(plan) == 30
+    assert set(np.unique(plan.payload_kg)) <= {0.0, 18.0, 36.0}
+    assert len(np.unique(plan.payload_kg)) >= 2
+    assert np.all(np.diff(plan.payload_kg) >= 0)
+    assert np.all(load_robot("smart_h4").within_limits(plan.joints))
+    rc = main(["twin", "measure", "--plan", str(planned / "plan.csv"), "--out",
+               str(planned / "cal.csv"), "--quiet"])
+    assert rc == 0
+    m = read_measurements(planned / "cal.csv")
+    np.testing.assert_allclose(m.payload_kg, plan.payload_kg)
+    # the readings are the planned joints plus the twin's encoder/repeatability noise
+    assert np.max(np.abs(m.joints - plan.joints)) < np.radians(0.05)
+
+
+def test_plan_summary_json_and_program_values(planned, capsys):
+    rc = main(["plan", "--robot", "smart_h4", "--poses", "30", "--candidates", "600",
+               "--out", str(planned / "again.csv"), "--json", "--quiet"])
+    assert rc == 0
+    d = json.loads(capsys.readouterr().out)
+    assert d["poses"] == 30 and d["criterion"] == "I" and d["model"]["number"] == 5
+    assert d["condition_number"] > 1 and len(d["predicted_sigma"]) == 51
+    assert (planned / "again.csv").read_text().split("\n", 4)[4] == \
+        (planned / "plan.csv").read_text().split("\n", 4)[4], "deterministic"
+    files = sorted(planned.glob("prog*.json"))
+    assert len(files) == len(d["payload_groups"])
+    total = 0
+    for f in files:
+        values = json.loads(f.read_text())
+        assert values[0] == "calibration"
+        kv = dict(v.split("=", 1) for v in values[1:])
+        rows = value_from_text(kv["configs"], ArrayType(JOINTPOS, (200,)))
+        assert len(rows) == int(kv["n_configs"])
+        total += len(rows)
+    assert total == 30
+
+
+def test_plan_from_measured_poses(planned, capsys):
+    rc = main(["plan", "--robot", "smart_h4", "--model", "4", "--poses", "12",
+               "--from", str(planned / "cal.csv"), "--out", str(planned / "sub.csv"),
+               "--criterion", "D"])
+    assert rc == 0
+    sub = read_plan(planned / "sub.csv", n_joints=6)
+    cal = read_measurements(planned / "cal.csv")
+    # every planned row is one of the measured poses, with its measurement and payload
+    d = np.abs(sub.joints[:, None, :] - cal.joints[None]).max(axis=2)
+    assert np.all(d.min(axis=1) < 1e-9)
+    rows = d.argmin(axis=1)
+    assert len(set(rows.tolist())) == 12
+    got = read_measurements(planned / "sub.csv")
+    np.testing.assert_allclose(got.positions, cal.positions[rows], atol=1e-9)
+    np.testing.assert_allclose(got.payload_kg, cal.payload_kg[rows])
+    assert "estimated from 30 measured poses" in capsys.readouterr().err
+    # measured poses keep their payloads
+    assert main(["plan", "--robot", "smart_h4", "--poses", "12", "--from",
+                 str(planned / "cal.csv"), "--out", str(planned / "x.csv"),
+                 "--payloads", "0,36", "--quiet"]) == 2
+    assert "measured with their own payloads" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize("argv, message", [
+    (["--tracker", "-4000,0,1000", "--line-of-sight-deg", "1"], "line of sight"),
+    (["--poses", "5000"], "only"),
+    (["--criterion", "X"], "unknown criterion 'X'"),
+    (["--poses", "2"], "equations for"),
+    (["--payloads", "0,-3"], "--payloads"),
+    (["--payloads", "0"], "model 5 identifies payload"),
+    (["--volume", "1,2,3"], "--volume"),
+    (["--tracker", "a,b,c"], "--tracker"),
+    (["--line-of-sight-deg", "0"], "--line-of-sight-deg"),
+    (["--model", "9"], "--model"),
+    (["--from", "/nonexistent/q.csv"], "cannot read"),
+])
+def test_bad_input_is_a_clear_error(planned, capsys, argv, message):
+    base = {"--poses": "20", "--candidates": "300"}
+    for i in range(0, len(argv), 2):
+        base[argv[i]] = argv[i + 1]
+    if "--from" in base:
+        base.pop("--candidates")
+    args = ["plan", "--robot", "smart_h4", "--out", str(planned / "bad.csv"), "--quiet"]
+    args += [f"{k}={v}" for k, v in base.items()]
+    assert main(args) == 2
+    err = capsys.readouterr().err
+    assert err.startswith("plugcell: error:") and message in err, err
+
+
+def test_bad_plan_file_for_the_twin(planned, capsys):
+    bad = planned / "bad_plan.csv"
+    bad.write_text("j1,j2,j3,j4,j5,j6\n0,0,0,0,0,0\n")
+    assert main(["twin", "measure", "--plan", str(bad), "--out", str(planned / "x.csv")]) == 2
+    assert "outside the joint or coupled limits" in capsys.readouterr().err
+    bad.write_text("j1,j2,j3\n0,0,0\n")
+    assert main(["twin", "measure", "--plan", str(bad), "--out", str(planned / "x.csv")]) == 2
+    assert "3 joint columns, the robot has 6" in capsys.readouterr().err
