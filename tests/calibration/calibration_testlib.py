@@ -7,12 +7,25 @@ import numpy as np
 from plugcell.kinematics import RobotDescription
 from plugcell.kinematics.transforms import so3_exp
 
+_UR10_A = [0.0, -0.612, -0.5723, 0.0, 0.0, 0.0]
+_UR10_D = [0.1273, 0.0, 0.0, 0.163941, 0.1157, 0.0922]
+_UR10_ALPHA = [90.0, 0.0, 0.0, 90.0, -90.0, 0.0]
+
+
+def ur10_toml() -> str:
+    """:func:`ur10_description` without masses as a description file (for CLI tests)."""
+    out = ['format_version = 1', 'name = "ur10-test"', 'actuated = ["1", "2", "3", "4", "5", "6"]',
+           'flange = "6"', "home = [0.0, -90.0, 90.0, 0.0, 90.0, 0.0]"]
+    for i in range(6):
+        out += ["[[links]]", f'name = "{i + 1}"', f'parent = "{"base" if i == 0 else i}"',
+                'joint = "actuated"', f"d = {_UR10_D[i]}", f"a = {_UR10_A[i]}",
+                f"alpha = {_UR10_ALPHA[i]}", "limits = [-360.0, 360.0]"]
+    return "\n".join(out) + "\n"
+
 
 def ur10_description() -> RobotDescription:
     """A plain 6R robot without a loop: the UR10's nominal DH (issue 3), with masses."""
-    a = [0.0, -0.612, -0.5723, 0.0, 0.0, 0.0]
-    d = [0.1273, 0.0, 0.0, 0.163941, 0.1157, 0.0922]
-    alpha = [90.0, 0.0, 0.0, 90.0, -90.0, 0.0]
+    a, d, alpha = _UR10_A, _UR10_D, _UR10_ALPHA
     mass = [7.1, 12.7, 4.3, 2.0, 2.0, 0.4]
     com = [[0, -0.02, 0], [0.3, 0, 0.15], [0.25, 0, 0.03], [0, 0, 0], [0, 0, 0], [0, 0, -0.02]]
     links = []

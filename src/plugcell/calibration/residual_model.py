@@ -98,10 +98,12 @@ def calibration_fingerprint(model: ErrorModel) -> str:
 
 
 def workspace_cells(points: ArrayLike, cell_size_m: float) -> Array:
-    """Group index of each point: the cubic cell of edge ``cell_size_m`` it lies in.
+    """Group index of each point: the cubic cell of edge ``cell_size_m`` it lies in, the
+    grid anchored at the points' lower corner.
 
     ``points`` ``(N, 3)`` m → ``(N,)`` int, cells numbered in lexicographic order."""
-    cells = np.floor(np.asarray(points, float) / cell_size_m).astype(np.int64)
+    p = np.asarray(points, float)
+    cells = np.floor((p - p.min(axis=0)) / cell_size_m).astype(np.int64)
     _, groups = np.unique(cells, axis=0, return_inverse=True)
     return np.asarray(groups).reshape(-1)
 
@@ -199,7 +201,7 @@ class LearnedResidual:
                 "robot": self.robot, "fingerprint": self.fingerprint,
                 "features": feature_names(self.uses_payload, self.uses_temperature),
                 "frame": "robot base", "orientation": self.orientation,
-                "params": {**_FIXED, **self.params}, "threshold": self.threshold,
+                "params": dict(self.params), "threshold": self.threshold,
                 "useful": self.useful, "poses": self.n_poses,
                 "cross_validation": self.cv.as_dict(), "sklearn_version": self.sklearn_version}
 
@@ -292,6 +294,8 @@ class ResidualLearner:
     use_temperature, use_payload : bool or None
         Features; ``None``: use the temperature when the data carry it and the payload
         when it varies in the data.
+    trees : int
+        Boosting iterations of every regressor (default 300).
     min_poses : int
         Fewest poses accepted (:data:`MIN_POSES`).
     seed : int
@@ -304,7 +308,7 @@ class ResidualLearner:
                  grid: Sequence[Mapping[str, Any]] = DEFAULT_GRID,
                  domain_quantile: float = 0.95, orientation: bool = True,
                  use_temperature: bool | None = None, use_payload: bool | None = None,
-                 min_poses: int = MIN_POSES, seed: int = 0,
+                 trees: int = 300, min_poses: int = MIN_POSES, seed: int = 0,
                  progress: Progress | None = None) -> None:
         if not (cell_size_m > 0 and math.isfinite(cell_size_m)):
             raise ResidualModelError(f"cell size must be > 0 m, got {cell_size_m}")
@@ -314,6 +318,9 @@ class ResidualLearner:
             raise ResidualModelError(f"domain quantile must be in (0, 1], got {domain_quantile}")
         if not grid:
             raise ResidualModelError("empty hyper-parameter grid")
+        if trees < 1:
+            raise ResidualModelError(f"trees must be at least 1, got {trees}")
+        self.trees = int(trees)
         self.cell_size_m = float(cell_size_m)
         self.n_splits = int(n_splits)
         self.grid = tuple(dict(g) for g in grid)
@@ -332,7 +339,8 @@ class ResidualLearner:
     def _regressor(self, params: Mapping[str, Any]) -> Any:
         from sklearn.ensemble import HistGradientBoostingRegressor
 
-        return HistGradientBoostingRegressor(random_state=self.seed, **{**_FIXED, **params})
+        return HistGradientBoostingRegressor(
+            random_state=self.seed, **{**_FIXED, "max_iter": self.trees, **params})
 
     def fit(self, model: ErrorModel, data: CalibrationData, *, robot: str = "") -> LearnedResidual:
         """Learn the residual of ``model`` (an identified physical model) on ``data``.
@@ -409,7 +417,8 @@ class ResidualLearner:
         return LearnedResidual(
             robot=robot, fingerprint=calibration_fingerprint(model), estimators=estimators,
             neighbours=NearestNeighbors(n_neighbors=1).fit(X), threshold=threshold,
-            uses_temperature=temp, uses_payload=pay, orientation=n_out == 6, params=params,
+            uses_temperature=temp, uses_payload=pay, orientation=n_out == 6,
+            params={**_FIXED, "max_iter": self.trees, **params},
             cv=cv, useful=score < float(phys_norm.mean()), n_poses=n,
             sklearn_version=sklearn.__version__)
 

@@ -23,6 +23,12 @@ from plugcell.calibration.configs import ModelConfig, model_config
 from plugcell.calibration.data import CalibrationData
 from plugcell.calibration.identifiability import Identifiability
 from plugcell.calibration.model import ErrorModel
+from plugcell.calibration.residual_model import (
+    LearnedResidual,
+    calibration_fingerprint,
+    hybrid_poses,
+    hybrid_residuals,
+)
 from plugcell.calibration.statistics import (
     ParameterStatistics,
     PoseResiduals,
@@ -101,7 +107,12 @@ class CalibrationResult:
     after/before; ``validation``/``validation_before``: on independent poses;
     ``calibration_residuals``/``validation_residuals``: the residual of every pose
     (:class:`~plugcell.calibration.statistics.PoseResiduals`) those figures are the
-    statistics of (``None`` in a result rebuilt by :meth:`from_dict`).
+    statistics of (``None`` in a result rebuilt by :meth:`from_dict`);
+    ``residual_model``: a learned residual layer on top (hybrid model,
+    :mod:`~plugcell.calibration.residual_model`), set by :meth:`with_residual_model`;
+    ``hybrid_validation_residuals``: physical (``before``) vs hybrid (``after``) on the
+    validation poses, ``hybrid_fallbacks``: validation poses outside the layer's
+    trained region (physical model used).
     """
 
     config: ModelConfig
@@ -128,6 +139,9 @@ class CalibrationResult:
     n_validation: int = 0
     calibration_residuals: PoseResiduals | None = None
     validation_residuals: PoseResiduals | None = None
+    residual_model: LearnedResidual | None = None
+    hybrid_validation_residuals: PoseResiduals | None = None
+    hybrid_fallbacks: int = 0
 
     # ------------------------------------------------------------------ prediction
     def predict(self, q: ArrayLike, payload_kg: ArrayLike | float | None = None) -> Array:
@@ -169,11 +183,37 @@ class CalibrationResult:
 
     def with_validation(self, data: CalibrationData, *, refit_base: bool = False,
                         refit_probe: bool = False) -> CalibrationResult:
-        """This result with the accuracy and residuals on independent poses ``data``."""
+        """This result with the accuracy and residuals on independent poses ``data``
+        (and, with a residual model, physical vs hybrid on them)."""
         r = self.evaluate_poses(data, refit_base=refit_base, refit_probe=refit_probe)
-        return replace(self, validation=r.accuracy("after"),
-                       validation_before=r.accuracy("before"), n_validation=len(data),
-                       validation_residuals=r)
+        out = replace(self, validation=r.accuracy("after"),
+                      validation_before=r.accuracy("before"), n_validation=len(data),
+                      validation_residuals=r)
+        if self.residual_model is not None:
+            h, pred = hybrid_residuals(self.model, self.residual_model, data,
+                                       refit_base=refit_base, refit_probe=refit_probe)
+            out = replace(out, hybrid_validation_residuals=h, hybrid_fallbacks=pred.fallback_count)
+        return out
+
+    def with_residual_model(self, layer: LearnedResidual) -> CalibrationResult:
+        """This result with a learned residual layer (trained on this calibration's
+        model: :func:`~plugcell.calibration.residual_model.calibration_fingerprint`)."""
+        if layer.fingerprint != calibration_fingerprint(self.model):
+            raise ValueError("the residual model was trained on top of another calibration")
+        return replace(self, residual_model=layer, hybrid_validation_residuals=None,
+                       hybrid_fallbacks=0)
+
+    def predict_hybrid(self, q: ArrayLike, payload_kg: ArrayLike | float | None = None,
+                       temperature_c: ArrayLike | float | None = None
+                       ) -> tuple[Array, Array]:
+        """Hybrid target poses ``(N, 4, 4)`` (measurement frame) and ``(N,)`` in-domain
+        flags (False: the physical model's pose); the physical ones without a layer."""
+        P = self.predict(q, payload_kg)
+        if self.residual_model is None:
+            return P, np.ones(len(P), dtype=bool)
+        m = np.zeros(len(P)) if payload_kg is None else payload_kg
+        pred = self.residual_model.predict(q, m, temperature_c)
+        return hybrid_poses(P, self.model.base()[:3, :3], pred.correction), pred.in_domain
 
     # ------------------------------------------------------------------ parameters
     def value(self, key: str) -> float:
@@ -212,8 +252,11 @@ class CalibrationResult:
                     out[name]["before"] = accuracy_summary(before)
         return out
 
-    def to_dict(self) -> dict[str, Any]:
-        """The PARAMS.json content (SI values with units; statistics in mm / deg)."""
+    def to_dict(self, residual_file: dict[str, Any] | None = None) -> dict[str, Any]:
+        """The PARAMS.json content (SI values with units; statistics in mm / deg).
+
+        ``residual_file``: what :func:`plugcell.io.residual_models.save_residual`
+        returned (side-file name, SHA-256), recorded under ``residual_model``."""
         space = self.model.space
         ident = self.identifiability
         dependent = []
@@ -252,12 +295,25 @@ class CalibrationResult:
             "calibration": cal,
             "validation": val,
             "warnings": list(self.warnings),
+            "residual_model": None if self.residual_model is None
+            else {**self.residual_model.summary(), **(residual_file or {})},
+            "validation_hybrid": self._hybrid_summary(),
             "elapsed_s": self.elapsed_s,
             "settings": dict(self.settings),
         }
 
-    def to_json(self, indent: int | None = 2) -> str:
-        return json.dumps(_clean(self.to_dict()), indent=indent, allow_nan=False)
+    def _hybrid_summary(self) -> dict[str, Any] | None:
+        """Physical vs hybrid accuracy on the validation poses (mm, deg)."""
+        h = self.hybrid_validation_residuals
+        if h is None:
+            return None
+        return {"physical": accuracy_summary(h.accuracy("before")),
+                "hybrid": accuracy_summary(h.accuracy("after")),
+                "poses": len(h), "fallbacks": self.hybrid_fallbacks}
+
+    def to_json(self, indent: int | None = 2,
+                residual_file: dict[str, Any] | None = None) -> str:
+        return json.dumps(_clean(self.to_dict(residual_file)), indent=indent, allow_nan=False)
 
     def residuals_dict(self) -> dict[str, Any]:
         """The per-pose residual file (``plugcell calibrate --residuals``), mm and degrees.

@@ -62,6 +62,11 @@ def register(sub: Any) -> None:
     p.add_argument("--robot", default=None,
                    help="robot description (name or file) instead of the one named in PARAMS")
     p.add_argument("--tol", type=float, default=1e-6, help="‖Δx‖ threshold (default 1e-6)")
+    p.add_argument("--physical-only", action="store_true",
+                   help="ignore a learned residual model recorded in PARAMS (hybrid model "
+                        "by default when there is one)")
+    p.add_argument("--temperature-c", type=float, default=None, metavar="T",
+                   help="temperature (°C) for a residual model that uses it")
     p.set_defaults(func=_run)
 
 
@@ -138,7 +143,7 @@ def parse_targets(text: str, name: str) -> tuple[list[str], np.ndarray, np.ndarr
     return names, vals[:, :3] / 1e3, np.radians(vals[:, 3:]), pay, lines
 
 
-def _load_params(path: Path, robot: str | None) -> Any:
+def _load_params(path: Path, robot: str | None, residual: bool = True) -> Any:
     from plugcell.calibration.result import CalibrationResult
     from plugcell.cli import CommandError
     from plugcell.io.robots import load_robot
@@ -157,10 +162,20 @@ def _load_params(path: Path, robot: str | None) -> Any:
     except DescriptionError as exc:
         raise CommandError(f"{path}: robot: {exc}") from None
     try:
-        return CalibrationResult.from_dict(d, desc)
+        result = CalibrationResult.from_dict(d, desc)
     except (KeyError, TypeError, ValueError) as exc:
         what = f"missing key {exc}" if isinstance(exc, KeyError) else str(exc)
         raise CommandError(f"{path}: not a plugcell calibration: {what}") from None
+    entry = d.get("residual_model")
+    if residual and entry:
+        from plugcell.io.residual_models import ResidualFileError, load_residual
+
+        try:
+            layer = load_residual(entry, path, robot=result.robot, model=result.model)
+        except ResidualFileError as exc:
+            raise CommandError(f"{exc} (--physical-only ignores it)") from None
+        result = result.with_residual_model(layer)
+    return result
 
 
 # ----------------------------------------------------------------------------- run
@@ -173,7 +188,11 @@ def _run(args: argparse.Namespace) -> int:
         raise CommandError(f"--payload-kg must be a mass ≥ 0 kg, got {args.payload_kg}")
     if not args.tol > 0:
         raise CommandError(f"--tol must be > 0, got {args.tol}")
-    result = _load_params(args.params, args.robot)
+    result = _load_params(args.params, args.robot, not args.physical_only)
+    layer = result.residual_model
+    if layer is not None and layer.uses_temperature and args.temperature_c is None:
+        raise CommandError(f"{args.params}: its residual model uses the temperature: give "
+                           "--temperature-c (or --physical-only)")
     try:
         text = args.targets.read_text()
     except OSError as exc:
@@ -187,7 +206,7 @@ def _run(args: argparse.Namespace) -> int:
     tool = None if args.tool is None else _frame_arg(args.tool, "--tool", args.rot)
     default_m = result.model.payload_ref_kg if args.payload_kg is None else args.payload_kg
     payload = pay if pay is not None else np.full(len(names), default_m)
-    model = IdentifiedModel(result.model, tool)
+    model = IdentifiedModel(result.model, tool, residual=layer, temperature_c=args.temperature_c)
     t0 = time.perf_counter()
     res = filter_program(model, pos, ang, args.rot, user_frame=user, payload_kg=payload,
                          tol=args.tol, raise_errors=False)
@@ -199,9 +218,15 @@ def _run(args: argparse.Namespace) -> int:
         raise CommandError(f"{bad.size} of {len(names)} targets cannot be compensated:\n"
                            + "\n".join(msgs) + more)
     _write(args, result, names, res, payload)
+    hybrid = ""
+    if layer is not None:
+        inside = model.in_domain(res.q, payload)
+        hybrid = (f" + learned residual ({int(inside.sum())} in its trained region, "
+                  f"{int((~inside).sum())} physical only)")
     print(f"compensated {len(names)} targets with model {result.config.number} "
-          f"({result.config.name}) in {dt * 1e3:.1f} ms: at most {int(res.iterations.max())} "
-          f"iterations, residual ≤ {float(res.residual.max()):.1e}; wrote {args.out}")
+          f"({result.config.name}){hybrid} in {dt * 1e3:.1f} ms: at most "
+          f"{int(res.iterations.max())} iterations, residual ≤ {float(res.residual.max()):.1e}; "
+          f"wrote {args.out}")
     return 0
 
 

@@ -31,7 +31,7 @@ iterations to 10⁻⁶ either way.
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import Protocol, runtime_checkable
+from typing import Any, Protocol, runtime_checkable
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -43,7 +43,7 @@ from plugcell.kinematics import (
     forward,
     jacobian_from_fk,
 )
-from plugcell.kinematics.transforms import invert
+from plugcell.kinematics.transforms import invert, so3_exp
 
 Array = NDArray[np.float64]
 
@@ -99,11 +99,20 @@ class IdentifiedModel:
 
     ``error_model``: the identified :class:`ErrorModel` (e.g.
     ``CalibrationResult.model``); ``tool``: the compensated point in the flange frame
-    of the identified chain, default the identified PROBE (the T-MAC).
+    of the identified chain, default the identified PROBE (the T-MAC);
+    ``residual``: a learned residual layer
+    (:class:`~plugcell.calibration.residual_model.LearnedResidual`) on top — the hybrid
+    model: its base-frame correction ``(e, φ)`` of the PROBE point is added, carried
+    to the tool point as a small rigid motion (``p ← p + e + φ × (p − p_probe)``,
+    ``R ← Exp(φ) R``), where the pose is inside the layer's trained region (elsewhere
+    the physical model alone); the Jacobian stays the physical one (the boosted trees
+    are piecewise constant); ``temperature_c``: the temperature, when the layer uses it.
     """
 
     error_model: ErrorModel
     tool: Array = field(default=None)  # type: ignore[assignment]
+    residual: Any = None
+    temperature_c: float | None = None
 
     def __post_init__(self) -> None:
         em = self.error_model
@@ -145,7 +154,24 @@ class IdentifiedModel:
         T = fk.flange @ self.tool
         J = jacobian_from_fk(s.desc, fk, "flange")
         J = shift_jacobian(J, fk.flange[:, :3, 3], T[:, :3, 3]) @ s.reading_map
+        if self.residual is not None:
+            T = self._corrected(T, fk.flange @ self._probe, qb, batch.payload_kg)  # type: ignore[attr-defined]
         return T, J
+
+    def _corrected(self, T: Array, T_probe: Array, q: Array, payload_kg: Array) -> Array:
+        c = self.residual.predict(q, payload_kg, self.temperature_c).correction
+        out = T.copy()
+        out[:, :3, 3] += c[:, :3] + np.cross(c[:, 3:], T[:, :3, 3] - T_probe[:, :3, 3])
+        out[:, :3, :3] = so3_exp(c[:, 3:]) @ T[:, :3, :3]
+        return out
+
+    def in_domain(self, q: ArrayLike, payload_kg: ArrayLike | float = 0.0) -> Array:
+        """``(N,)`` True where the learned layer applies (all True without one)."""
+        qb = _as_batch(q, self.error_model.structure.n_readings)
+        if self.residual is None:
+            return np.ones(len(qb), dtype=bool)
+        m = np.broadcast_to(np.asarray(payload_kg, float), (len(qb),))
+        return np.asarray(self.residual.predict(qb, m, self.temperature_c).in_domain)
 
     def pose(self, q: ArrayLike, payload_kg: ArrayLike | float = 0.0) -> Array:
         """Tool poses ``(N, 4, 4)`` in the robot base frame."""
