@@ -190,7 +190,7 @@ def test_cli_calibrate_and_compensate_with_the_learned_layer(tmp_path, capsys):
     rc = main(["calibrate", "--robot", str(tmp_path / "ur10.toml"), "--model", "serial",
                "--data", str(tmp_path / "cal.csv"), "--validate", str(tmp_path / "val.csv"),
                "--residual-model", "learned", "--residual-trees", "40", "--out", str(out),
-               "--quiet"])
+               "--report", str(tmp_path / "r.html"), "--quiet"])
     text = capsys.readouterr().out
     assert rc == 0, text
     assert "residual model: grouped 5-fold CV" in text and "hybrid" in text
@@ -198,6 +198,8 @@ def test_cli_calibrate_and_compensate_with_the_learned_layer(tmp_path, capsys):
     hv = d["validation_hybrid"]
     assert hv["hybrid"]["mean_mm"] < hv["physical"]["mean_mm"]
     assert (tmp_path / d["residual_model"]["file"]).is_file()
+    html = (tmp_path / "r.html").read_text()
+    assert "Learned residual layer" in html and "validation, hybrid" in html
     # compensate: targets in the robot base frame (mm, deg, zyz)
     T = np.linalg.inv(np.array(d["base"]["matrix"])) @ cal.poses[:5]
     ang = np.degrees(matrix_to_angles(T[:, :3, :3], "zyz"))
