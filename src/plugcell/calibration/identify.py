@@ -154,7 +154,9 @@ class Calibrator:
     ``parameters``: identify exactly these keys instead of the analysis' choice;
     ``rank_tol``: relative distance of a scaled column from the span of the others
     below which a parameter is not identified from these poses (default 1e-3);
-    ``progress``: callback ``(stage, i, n, message)``.
+    ``progress``: callback ``(stage, i, n, message)``; ``harmonics``: add the
+    joint-angle harmonics up to this order (0, 1, 2) to the model (transmission
+    error, :mod:`.compliance`).
     """
 
     def __init__(
@@ -175,6 +177,7 @@ class Calibrator:
         parameters: Sequence[str] | None = None,
         rank_tol: float = DATA_RANK_TOL,
         progress: Progress | None = None,
+        harmonics: int = 0,
     ) -> None:
         try:
             self.config: ModelConfig = model_config(model)
@@ -186,6 +189,9 @@ class Calibrator:
             raise CalibrationError(f"loss must be one of {LOSSES}, got {loss!r}")
         if not (tol > 0 and max_iterations >= 1 and rotation_weight > 0 and loss_scale > 0):
             raise CalibrationError("tol, max_iterations, rotation_weight, loss_scale must be > 0")
+        if harmonics not in (0, 1, 2):
+            raise CalibrationError(f"harmonics: order 0, 1 or 2, got {harmonics!r}")
+        self.harmonics = int(harmonics)
         self.desc = desc
         self.base = None if base is None else np.asarray(base, dtype=float)
         self.probe = None if probe is None else np.asarray(probe, dtype=float)
@@ -270,7 +276,8 @@ class Calibrator:
         try:
             model = ErrorModel.create(self.desc, cfg.family, gravity=cfg.gravity,
                                       payload=cfg.payload, base=base0, probe=probe0,
-                                      payload_ref_kg=m_ref if cfg.payload else 0.0)
+                                      payload_ref_kg=m_ref if cfg.payload else 0.0,
+                                      harmonics=self.harmonics)
         except ValueError as exc:
             raise CalibrationError(str(exc)) from None
         if cfg.gravity and not model.space.of_kind("gravity"):
@@ -404,7 +411,7 @@ class Calibrator:
             settings={"method": self.method, "loss": self.loss, "tol": self.tol,
                       "rotation_weight": self.rotation_weight,
                       "condition_limit": self.condition_limit,
-                      "max_iterations": self.max_iterations},
+                      "max_iterations": self.max_iterations, "harmonics": self.harmonics},
         )
         if validation is not None:
             result = result.with_validation(self._coerce(validation))

@@ -31,6 +31,7 @@ from numpy.typing import ArrayLike, NDArray
 from plugcell.calibration.compliance import (
     compliance_regressors,
     gravity_parameters,
+    harmonic_parameters,
     payload_parameters,
 )
 from plugcell.calibration.parameters import ParameterSpace
@@ -102,7 +103,7 @@ class ErrorModel:
         object.__setattr__(self, "_nominal", self.structure.nominal_parameters())
         object.__setattr__(self, "_reference", self.structure.source.nominal_parameters())
         object.__setattr__(
-            self, "_compliance", self.space.of_kind("gravity", "payload")
+            self, "_compliance", self.space.of_kind("gravity", "payload", "harmonic")
         )
 
     # ------------------------------------------------------------------ construction
@@ -117,8 +118,10 @@ class ErrorModel:
         base: ArrayLike | None = None,
         probe: ArrayLike | None = None,
         payload_ref_kg: float = 0.0,
+        harmonics: int = 0,
     ) -> ErrorModel:
-        """All candidate parameters of ``family`` (+ gravity, + payload), values zero.
+        """All candidate parameters of ``family`` (+ gravity, + payload, + joint-angle
+        harmonics up to order ``harmonics``), values zero.
 
         ``base``/``probe``: the reference BASE (robot base in the measurement frame)
         and PROBE (target in the flange frame); default: the description's
@@ -130,6 +133,7 @@ class ErrorModel:
             params += gravity_parameters(desc)
         if payload:
             params += payload_parameters(desc)
+        params += harmonic_parameters(desc, harmonics)
         space = ParameterSpace(tuple(params))
         return cls(
             structure=structure,

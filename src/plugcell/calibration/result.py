@@ -271,7 +271,7 @@ class CalibrationResult:
             "format": FORMAT,
             "format_version": FORMAT_VERSION,
             "robot": self.robot,
-            "model": self.config.as_dict(),
+            "model": {**self.config.as_dict(), "harmonics": harmonic_order(self.model)},
             "data": {"poses": self.n_poses, "six_dof": self.six_dof,
                      "payload_ref_kg": self.model.payload_ref_kg},
             "parameters": self.parameter_table(),
@@ -361,7 +361,8 @@ class CalibrationResult:
         def build(values: dict[str, float]) -> ErrorModel:
             m = ErrorModel.create(desc, cfg.family, gravity=cfg.gravity, payload=cfg.payload,
                                   base=np.array(refs["base"]), probe=np.array(refs["probe"]),
-                                  payload_ref_kg=m_ref)
+                                  payload_ref_kg=m_ref,
+                                  harmonics=int(d["model"].get("harmonics", 0)))
             return m.with_values([float(values.get(k, 0.0)) for k in m.space.keys])
 
         model = build(d["values"])
@@ -372,6 +373,11 @@ class CalibrationResult:
                    converged=bool(d["converged"]), history=(), statistics=None,
                    calibration=None, calibration_before=None, six_dof=bool(d["data"]["six_dof"]),
                    n_poses=int(d["data"]["poses"]), warnings=tuple(d.get("warnings", ())))
+
+
+def harmonic_order(model: ErrorModel) -> int:
+    """The highest joint-angle harmonic order among the model's parameters (0: none)."""
+    return max((int(p.key[1]) for p in model.space if p.kind == "harmonic"), default=0)
 
 
 def _clean(x: Any) -> Any:

@@ -63,6 +63,9 @@ def register(sub: Any) -> None:
                    help="weight of orientation rows, m per rad (default 1, as the thesis)")
     p.add_argument("--condition-limit", type=float,
                    help="apply the condition-number rule (4.10) with this limit, e.g. 100")
+    p.add_argument("--harmonics", type=int, choices=(0, 1, 2), default=0,
+                   help="add joint-angle harmonics Δθ_j = Σ s sin(k q_j) + c cos(k q_j), "
+                        "k ≤ this order, to the physical model (transmission error)")
     p.add_argument("--residual-model", choices=("none", "learned"), default="none",
                    help="after the physical identification, learn the remaining error from "
                         "the joint readings (gradient boosting, grouped cross-validation; "
@@ -208,7 +211,8 @@ def _run(args: argparse.Namespace) -> int:
         cal = Calibrator(desc, args.model, base=base, probe=probe, method=args.method,
                          loss=args.loss, max_iterations=args.max_iterations,
                          rotation_weight=args.rotation_weight,
-                         condition_limit=args.condition_limit, progress=progress)
+                         condition_limit=args.condition_limit, progress=progress,
+                         harmonics=args.harmonics)
         result = cal.fit(data)
         if args.residual_model == "learned":
             from plugcell.calibration.residual_model import ResidualLearner
