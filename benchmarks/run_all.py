@@ -2,7 +2,9 @@
 
     .venv/bin/python benchmarks/run_all.py [--full]
 
-Without ``--full`` the transport benchmark runs in its quick mode, the
+Without ``--full`` the transport benchmark runs in its quick mode, the learned
+residual layer's benchmarks run small and write their pages to the temporary
+directory (``--full`` regenerates docs/results/ur10-residual.md and twin-residual.md), the
 calibration scaling stops at 10 000 poses and the web API fuzz sends 20 000
 requests (not 100 000), so the whole run takes a few minutes on 2 cores.  Speed
 is measured here, never asserted in tests.
@@ -13,6 +15,7 @@ from __future__ import annotations
 import platform
 import subprocess
 import sys
+import tempfile
 import time
 from pathlib import Path
 
@@ -22,6 +25,7 @@ HERE = Path(__file__).resolve().parent
 def main(argv: list[str]) -> int:
     full = "--full" in argv
     plugcell = [sys.executable, "-m", "plugcell"]
+    scratch = Path(tempfile.gettempdir()) / "plugcell-bench"
     runs = [
         ("transport (thesis 5.3)",
          [*plugcell, "bench", "transport", *([] if full else ["--quick"])]),
@@ -33,6 +37,13 @@ def main(argv: list[str]) -> int:
          [sys.executable, str(HERE / "round_trip_trace.py"),
           *([] if full else ["--cycles", "500"])]),
         ("compensation (thesis 6.5.1)", [*plugcell, "bench", "compensation"]),
+        # quick runs write their pages to the temporary directory, not over docs/results
+        ("learned residual layer on the twin",
+         [sys.executable, str(HERE / "residual_twin.py"),
+          *([] if full else ["--poses", "300", "--out", str(scratch / "twin-residual.md")])]),
+        ("learned residual layer on the IPA UR10 (skipped without the data)",
+         [sys.executable, str(HERE / "residual_ur10.py"),
+          *([] if full else ["--quick", "--out", str(scratch / "ur10-residual.md")])]),
         ("wire decoder fuzz", [sys.executable, str(HERE / "fuzz_wire.py")]),
         ("signed requests (cost)", [sys.executable, str(HERE / "signing.py"),
                                     *(["--fuzz", "100000"] if full else [])]),
