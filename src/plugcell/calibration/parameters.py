@@ -31,7 +31,7 @@ from numpy.typing import NDArray
 Array = NDArray[np.float64]
 
 #: Kinds of error parameters.
-KINDS: tuple[str, ...] = ("base", "link", "probe", "gravity", "payload", "harmonic")
+KINDS: tuple[str, ...] = ("base", "link", "probe", "gravity", "payload", "harmonic", "thermal")
 
 #: Greek symbols of the geometric fields (thesis notation).
 SYMBOLS: dict[str, str] = {

@@ -246,7 +246,7 @@ def residual_targets(model: ErrorModel, data: CalibrationData) -> tuple[Array, A
     Returns ``E`` ``(N, 3|6)`` = ``[R_Bᵀ Δp, R_Bᵀ Δφ]`` (m, rad; Δφ = ``log(R_M R_Pᵀ)``,
     measurement-frame axes) and ``p_b`` ``(N, 3)`` the predicted
     target positions in the base frame (m)."""
-    P = model.predict(data.q, data.payload_kg)
+    P = model.predict(data.q, data.payload_kg, data.temperature_c)
     dp, dphi = _measured_minus(data, P)
     B = model.base()
     Rb = B[:3, :3]
@@ -470,8 +470,9 @@ def hybrid_residuals(model: ErrorModel, layer: LearnedResidual, data: Calibratio
     if refit_base and pred.in_domain.any():
         hyb = _refit(model, _remove_correction(data, phys.base()[:3, :3], pred.correction),
                      probe=refit_probe)
-    P_phys = phys.predict(data.q, data.payload_kg)
-    P_hyb = hybrid_poses(hyb.predict(data.q, data.payload_kg), hyb.base()[:3, :3],
+    P_phys = phys.predict(data.q, data.payload_kg, data.temperature_c)
+    P_hyb = hybrid_poses(hyb.predict(data.q, data.payload_kg, data.temperature_c),
+                         hyb.base()[:3, :3],
                          pred.correction)
     return PoseResiduals.from_poses(data, P_phys, P_hyb), pred
 

@@ -22,7 +22,7 @@ from numpy.typing import ArrayLike, NDArray
 from plugcell.calibration.configs import ModelConfig, model_config
 from plugcell.calibration.data import CalibrationData
 from plugcell.calibration.identifiability import Identifiability
-from plugcell.calibration.model import ErrorModel
+from plugcell.calibration.model import THERMAL_KEY, ErrorModel
 from plugcell.calibration.residual_model import (
     LearnedResidual,
     calibration_fingerprint,
@@ -144,17 +144,19 @@ class CalibrationResult:
     hybrid_fallbacks: int = 0
 
     # ------------------------------------------------------------------ prediction
-    def predict(self, q: ArrayLike, payload_kg: ArrayLike | float | None = None) -> Array:
+    def predict(self, q: ArrayLike, payload_kg: ArrayLike | float | None = None,
+                temperature_c: ArrayLike | float | None = None) -> Array:
         """Calibrated target poses ``(N, 4, 4)`` in the measurement frame."""
-        return self.model.predict(q, payload_kg)
+        return self.model.predict(q, payload_kg, temperature_c)
 
-    def predict_nominal(self, q: ArrayLike, payload_kg: ArrayLike | float | None = None) -> Array:
+    def predict_nominal(self, q: ArrayLike, payload_kg: ArrayLike | float | None = None,
+                        temperature_c: ArrayLike | float | None = None) -> Array:
         """Poses of the nominal robot with the fitted BASE/PROBE."""
-        return self.nominal.predict(q, payload_kg)
+        return self.nominal.predict(q, payload_kg, temperature_c)
 
     def residuals(self, data: CalibrationData) -> Array:
         """``(N, 6)`` (or ``(N, 3)``) measured − calibrated, metres and radians."""
-        return pose_residuals(data, self.predict(data.q, data.payload_kg))
+        return pose_residuals(data, self.predict(data.q, data.payload_kg, data.temperature_c))
 
     def evaluate_poses(self, data: CalibrationData, *, refit_base: bool = False,
                        refit_probe: bool = False) -> PoseResiduals:
@@ -171,8 +173,9 @@ class CalibrationResult:
 
             nominal = _refit(nominal, data, probe=refit_probe)
             model = _refit(model, data, probe=refit_probe)
-        return PoseResiduals.from_poses(data, nominal.predict(data.q, data.payload_kg),
-                                        model.predict(data.q, data.payload_kg))
+        t = data.temperature_c
+        return PoseResiduals.from_poses(data, nominal.predict(data.q, data.payload_kg, t),
+                                        model.predict(data.q, data.payload_kg, t))
 
     def evaluate(self, data: CalibrationData, *, refit_base: bool = False,
                  refit_probe: bool = False) -> tuple[AccuracyStats, AccuracyStats]:
@@ -208,7 +211,7 @@ class CalibrationResult:
                        ) -> tuple[Array, Array]:
         """Hybrid target poses ``(N, 4, 4)`` (measurement frame) and ``(N,)`` in-domain
         flags (False: the physical model's pose); the physical ones without a layer."""
-        P = self.predict(q, payload_kg)
+        P = self.predict(q, payload_kg, temperature_c)
         if self.residual_model is None:
             return P, np.ones(len(P), dtype=bool)
         m = np.zeros(len(P)) if payload_kg is None else payload_kg
@@ -271,7 +274,9 @@ class CalibrationResult:
             "format": FORMAT,
             "format_version": FORMAT_VERSION,
             "robot": self.robot,
-            "model": {**self.config.as_dict(), "harmonics": harmonic_order(self.model)},
+            "model": {**self.config.as_dict(), "harmonics": harmonic_order(self.model),
+                      "thermal": THERMAL_KEY in self.model.space,
+                      "temperature_ref_c": self.model.temperature_ref_c},
             "data": {"poses": self.n_poses, "six_dof": self.six_dof,
                      "payload_ref_kg": self.model.payload_ref_kg},
             "parameters": self.parameter_table(),
@@ -362,7 +367,10 @@ class CalibrationResult:
             m = ErrorModel.create(desc, cfg.family, gravity=cfg.gravity, payload=cfg.payload,
                                   base=np.array(refs["base"]), probe=np.array(refs["probe"]),
                                   payload_ref_kg=m_ref,
-                                  harmonics=int(d["model"].get("harmonics", 0)))
+                                  harmonics=int(d["model"].get("harmonics", 0)),
+                                  thermal=bool(d["model"].get("thermal", False)),
+                                  temperature_ref_c=float(d["model"].get("temperature_ref_c",
+                                                                         0.0)))
             return m.with_values([float(values.get(k, 0.0)) for k in m.space.keys])
 
         model = build(d["values"])

@@ -66,6 +66,9 @@ def register(sub: Any) -> None:
     p.add_argument("--harmonics", type=int, choices=(0, 1, 2), default=0,
                    help="add joint-angle harmonics Δθ_j = Σ s sin(k q_j) + c cos(k q_j), "
                         "k ≤ this order, to the physical model (transmission error)")
+    p.add_argument("--thermal", action="store_true",
+                   help="identify a thermal expansion κT of the robot's lengths (1/K) about "
+                        "the data's mean temperature (needs a temperature_c column)")
     p.add_argument("--residual-model", choices=("none", "learned"), default="none",
                    help="after the physical identification, learn the remaining error from "
                         "the joint readings (gradient boosting, grouped cross-validation; "
@@ -212,7 +215,7 @@ def _run(args: argparse.Namespace) -> int:
                          loss=args.loss, max_iterations=args.max_iterations,
                          rotation_weight=args.rotation_weight,
                          condition_limit=args.condition_limit, progress=progress,
-                         harmonics=args.harmonics)
+                         harmonics=args.harmonics, thermal=args.thermal)
         result = cal.fit(data)
         if args.residual_model == "learned":
             from plugcell.calibration.residual_model import ResidualLearner
