@@ -27,6 +27,7 @@ COMMAND_MODULES: tuple[str, ...] = (
     "plugcell.commands.bench",
     "plugcell.commands.compensate",
     "plugcell.commands.calibrate",
+    "plugcell.commands.drift",
     "plugcell.commands.reproduce",
     "plugcell.commands.cell",
     "plugcell.commands.controller",

@@ -88,12 +88,14 @@ class ResidualModelError(ValueError):
 
 
 def calibration_fingerprint(model: ErrorModel) -> str:
-    """A short hash of the physical model's parameter values and frames: the learned
-    layer is valid only on top of the calibration it was trained with."""
+    """A short hash of the physical model's robot parameters (every kind but BASE and
+    PROBE): the learned layer is valid only on top of the robot model it was trained
+    with; re-registering BASE (the tracker moved, the drift watch) keeps it valid."""
     h = hashlib.sha256()
-    h.update(np.round(np.asarray(model.values, float), 12).tobytes())
-    h.update(np.round(model.base_ref, 12).tobytes())
-    h.update(np.round(model.probe_ref, 12).tobytes())
+    for p, v in zip(model.space, np.asarray(model.values, float), strict=True):
+        if p.kind not in ("base", "probe"):
+            h.update(p.key.encode())
+            h.update(np.round(np.float64(v), 15).tobytes())
     return h.hexdigest()[:16]
 
 
