@@ -20,6 +20,7 @@ Protocol (stated on the page it writes, docs/results/ur10-residual.md):
     rest learnable there?), and A with the temperature column as a feature.
 (d) the physical joint-angle harmonics (issue 19 §1): model 3 + harmonics of order 1
     and 2 identified on A (their σ), validated on B, C, D as in (b).
+(e) the thermal expansion term κT (issue 19 §3) on each series' temperature column.
 
     .venv/bin/python benchmarks/residual_ur10.py [--data DIR] [--quick] [--json]
                                                  [--out docs/results/ur10-residual.md]
@@ -193,6 +194,23 @@ def harmonics(desc: Any, sets: dict[str, CalibrationData]) -> dict[str, Any]:
     return out
 
 
+def thermal(desc: Any, sets: dict[str, CalibrationData]) -> dict[str, Any]:
+    """(e): model 3 + κT on each series (its own temperature column)."""
+    from plugcell.calibration.model import THERMAL_KEY
+
+    out: dict[str, Any] = {}
+    for key, d in sets.items():
+        res = Calibrator(desc, "serial+gravity", thermal=True).fit(d)
+        ok = THERMAL_KEY in res.keys
+        out[key] = {"span_k": float(np.ptp(d.temperature_c)),
+                    "kappa_per_k": res.value(THERMAL_KEY) if ok else None,
+                    "sigma_per_k": res.sigma(THERMAL_KEY) if ok else None,
+                    "mean_mm": res.calibration.position.norm.mean * 1e3}
+        print(f"  (e) {key}: ΔT span {out[key]['span_k']:.2f} K, κT "
+              f"{out[key]['kappa_per_k']} ± {out[key]['sigma_per_k']} /K", flush=True)
+    return out
+
+
 def plots(d: dict[str, Any], out_dir: Path) -> list[str]:
     try:
         import matplotlib
@@ -325,6 +343,21 @@ def write_page(d: dict[str, Any], path: Path, images: list[str]) -> None:
         L.append(f"| {t_['name']} | {t_['value_urad']:.1f} | {t_['sigma_urad']:.1f} | "
                  f"{abs(t_['value_urad']) / t_['sigma_urad']:.1f} |")
     L += [""] + [f"* {w}" for w in h.get("unidentified", [])]
+    L += ["", "## (e) Thermal expansion term κT (§3)", "",
+          "Model 3 plus κT — every length of the arm scaled by `1 + κT (T − T̄)`, T̄ the "
+          "series' mean temperature (`plugcell calibrate --thermal`; the measurement file's "
+          "`temperature_c` column) — identified on each series alone:", "",
+          "| series | temperature span (K) | κT (10⁻⁶/K) | σ (10⁻⁶/K) | |κT|/σ | mean error (mm) |",
+          "|---|---|---|---|---|---|"]
+    for k, v in d["thermal"].items():
+        if v["kappa_per_k"] is None:
+            L.append(f"| {k} | {v['span_k']:.2f} | not identified | | | {v['mean_mm']:.3f} |")
+        else:
+            L.append(f"| {k} | {v['span_k']:.2f} | {v['kappa_per_k'] * 1e6:.1f} | "
+                     f"{v['sigma_per_k'] * 1e6:.1f} | "
+                     f"{abs(v['kappa_per_k']) / v['sigma_per_k']:.1f} | {v['mean_mm']:.3f} |")
+    L += ["", "(For comparison: aluminium 23 × 10⁻⁶/K, steel 12 × 10⁻⁶/K. Over a span of "
+          "under 1 K, 23 × 10⁻⁶/K moves a point 1.3 m from the base by under 0.03 mm.)", ""]
     L += ["", "## Reading the results", "", d["reading"], ""]
     path.parent.mkdir(parents=True, exist_ok=True)
     path.write_text("\n".join(L), encoding="utf-8")
@@ -408,12 +441,15 @@ def main() -> int:
         c = diagnostics(desc, sets, kw)
         print("(d) joint-angle harmonics", flush=True)
         hm = harmonics(desc, plain)
+        print("(e) thermal expansion", flush=True)
+        th = thermal(desc, sets)
     d: dict[str, Any] = {
         "machine": f"{platform.machine()} {platform.processor() or ''}, Python "
                    f"{platform.python_version()}".replace("  ", " "),
         "quick": args.quick, "grid": list(kw["grid"]), "trees": kw["trees"],
         "poses": {k: len(v) for k, v in sets.items()},
         "nested_cv": a, "transfer": t, "diagnostics": c, "harmonics": hm,
+        "thermal": th,
         "elapsed_s": time.perf_counter() - t0}
     d["reading"] = reading(d)
     images = plots(d, args.out.parent)
