@@ -186,7 +186,21 @@ class LearnedResidual:
 
     def predict(self, q: ArrayLike, payload_kg: ArrayLike | float | None = None,
                 temperature_c: ArrayLike | float | None = None) -> ResidualPrediction:
-        """The correction of each pose in the robot base frame (module docstring)."""
+        """The correction of each pose in the robot base frame (module docstring).
+
+        Parameters
+        ----------
+        q : (N, n) array
+            Joint readings (rad).
+        payload_kg, temperature_c : (N,) array or float, optional
+            Required when the layer uses them as features (kg, °C).
+
+        Returns
+        -------
+        ResidualPrediction
+            ``correction`` (N, 6) m and rad (zero outside the trained region),
+            ``in_domain`` (N,), ``distance`` (N,) in feature space.
+        """
         X = self.features(q, payload_kg, temperature_c)
         dist = self.neighbours.kneighbors(X, n_neighbors=1, return_distance=True)[0][:, 0]
         inside = (dist <= self.threshold) & self.useful
