@@ -91,3 +91,24 @@ def test_thermal_term_needs_temperatures():
     assert THERMAL_KEY not in res.keys
     assert any("span only 0.00 K" in w for w in res.warnings)
     assert any("κT not identified" in w for w in res.warnings)
+
+
+def test_compensation_model_applies_the_thermal_term():
+    """IdentifiedModel at a temperature = the thermal model's prediction in the base
+    frame; its Jacobian against central differences of that prediction."""
+    from plugcell.compensation import IdentifiedModel
+
+    desc, cal = _expanding(23e-6, 300, 1)
+    res = Calibrator(desc, "serial", thermal=True).fit(cal)
+    q = cal.q[:5]
+    im = IdentifiedModel(res.model, temperature_c=25.0)
+    T, J = im.evaluate(q)
+    P = res.predict(q, None, 25.0)
+    np.testing.assert_allclose(im.base @ T, P, atol=1e-12)
+    h = 1e-7
+    for j in range(q.shape[1]):
+        dq = np.zeros_like(q)
+        dq[:, j] = h
+        Tp, Tm = im.evaluate(q + dq)[0], im.evaluate(q - dq)[0]
+        v = (Tp[:, :3, 3] - Tm[:, :3, 3]) / (2 * h)
+        np.testing.assert_allclose(J[:, :3, j], v, atol=1e-3 * np.abs(v).max() + 1e-9)

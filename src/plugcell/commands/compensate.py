@@ -66,7 +66,8 @@ def register(sub: Any) -> None:
                    help="ignore a learned residual model recorded in PARAMS (hybrid model "
                         "by default when there is one)")
     p.add_argument("--temperature-c", type=float, default=None, metavar="T",
-                   help="temperature (°C) for a residual model that uses it")
+                   help="cell temperature (°C): for a residual model that uses it and a "
+                        "model with the thermal term (default: its reference temperature)")
     p.set_defaults(func=_run)
 
 

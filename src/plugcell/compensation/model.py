@@ -106,7 +106,10 @@ class IdentifiedModel:
     to the tool point as a small rigid motion (``p ← p + e + φ × (p − p_probe)``,
     ``R ← Exp(φ) R``), where the pose is inside the layer's trained region (elsewhere
     the physical model alone); the Jacobian stays the physical one (the boosted trees
-    are piecewise constant); ``temperature_c``: the temperature, when the layer uses it.
+    are piecewise constant); ``temperature_c``: the cell's temperature (°C) — for a
+    layer that uses it, and for a model with the thermal term κT (the flange position
+    and the linear rows of its Jacobian scale by ``1 + κT (T − T_ref)``); ``None``: the
+    model's reference temperature.
     """
 
     error_model: ErrorModel
@@ -151,11 +154,19 @@ class IdentifiedModel:
         batch = em.batch(qb, payload_kg)
         s = em.structure
         fk = forward(s.desc, self._params, em.chain_joints(batch), closure="fourbar")  # type: ignore[attr-defined]
-        T = fk.flange @ self.tool
+        flange = fk.flange
         J = jacobian_from_fk(s.desc, fk, "flange")
-        J = shift_jacobian(J, fk.flange[:, :3, 3], T[:, :3, 3]) @ s.reading_map
+        scale = em.thermal_scale(em.batch(qb, payload_kg, self.temperature_c)) \
+            if self.temperature_c is not None else None
+        if scale is not None:  # thermal term: the flange position scales, so do its rates
+            flange = flange.copy()
+            flange[:, :3, 3] *= scale[:, None]
+            J = J.copy()
+            J[:, :3] *= scale[:, None, None]
+        T = flange @ self.tool
+        J = shift_jacobian(J, flange[:, :3, 3], T[:, :3, 3]) @ s.reading_map
         if self.residual is not None:
-            T = self._corrected(T, fk.flange @ self._probe, qb, batch.payload_kg)  # type: ignore[attr-defined]
+            T = self._corrected(T, flange @ self._probe, qb, batch.payload_kg)  # type: ignore[attr-defined]
         return T, J
 
     def _corrected(self, T: Array, T_probe: Array, q: Array, payload_kg: Array) -> Array:
