@@ -35,6 +35,7 @@ from plugcell.io.residual_models import (
     save_residual,
 )
 from plugcell.kinematics.rotations import matrix_to_angles
+from plugcell.kinematics.transforms import so3_exp
 
 SMALL = ({"max_leaf_nodes": 15, "min_samples_leaf": 20},)
 
@@ -107,8 +108,32 @@ def test_hybrid_pose_and_compensation_model_agree(fitted):
     T0 = IdentifiedModel(res.model, tool).evaluate(q)[0]
     c = layer.predict(q).correction
     p_probe = IdentifiedModel(res.model).evaluate(q)[0][:, :3, 3]  # physical PROBE point
-    expect = T0[:, :3, 3] + c[:, :3] + np.cross(c[:, 3:], T0[:, :3, 3] - p_probe)
+    R = so3_exp(c[:, 3:])
+    expect = np.einsum("nij,nj->ni", R, T0[:, :3, 3] - p_probe) + p_probe + c[:, :3]
     np.testing.assert_allclose(T2[:, :3, 3], expect, atol=1e-12)
+    np.testing.assert_allclose(T2[:, :3, :3], R @ T0[:, :3, :3], atol=1e-12)
+    G = IdentifiedModel(res.model, tool, residual=layer).correction(q)
+    np.testing.assert_allclose(G @ T0, T2, atol=1e-12)
+
+
+def test_hybrid_compensation_reaches_the_hybrid_target(fitted):
+    """compensate_joints on the hybrid model: the hybrid pose of the result is the
+    target (outer fixed point on the correction), the physical pose is not."""
+    from plugcell.compensation.model_based import compensate_joints
+
+    _desc, cal, res, layer = fitted
+    hyb = IdentifiedModel(res.model, residual=layer)
+    phys = IdentifiedModel(res.model)
+    q0 = cal.q[:40]
+    T = phys.evaluate(q0 + 2e-3)[0]           # targets near the poses of the data
+    out = compensate_joints(hyb, T, q0, raise_errors=False)
+    assert out.hybrid_fallback is not None
+    ok = ~out.hybrid_fallback
+    assert out.converged.all() and ok.sum() >= 35
+    Th = hyb.evaluate(out.q[ok])[0]
+    np.testing.assert_allclose(Th[:, :3, 3], T[ok, :3, 3], atol=2e-6)
+    moved = np.linalg.norm(phys.evaluate(out.q[ok])[0][:, :3, 3] - T[ok, :3, 3], axis=1)
+    assert np.median(moved) > 10e-6            # the learned correction was compensated
 
 
 def test_hybrid_poses_applies_a_base_frame_correction():

@@ -222,6 +222,8 @@ def _run(args: argparse.Namespace) -> int:
     hybrid = ""
     if layer is not None:
         inside = model.in_domain(res.q, payload)
+        if res.hybrid_fallback is not None:
+            inside &= ~res.hybrid_fallback
         hybrid = (f" + learned residual ({int(inside.sum())} in its trained region, "
                   f"{int((~inside).sum())} physical only)")
     print(f"compensated {len(names)} targets with model {result.config.number} "

@@ -102,14 +102,16 @@ class IdentifiedModel:
     of the identified chain, default the identified PROBE (the T-MAC);
     ``residual``: a learned residual layer
     (:class:`~plugcell.calibration.residual_model.LearnedResidual`) on top — the hybrid
-    model: its base-frame correction ``(e, φ)`` of the PROBE point is added, carried
-    to the tool point as a small rigid motion (``p ← p + e + φ × (p − p_probe)``,
-    ``R ← Exp(φ) R``), where the pose is inside the layer's trained region (elsewhere
-    the physical model alone); the Jacobian stays the physical one (the boosted trees
-    are piecewise constant); ``temperature_c``: the cell's temperature (°C) — for a
-    layer that uses it, and for a model with the thermal term κT (the flange position
-    and the linear rows of its Jacobian scale by ``1 + κT (T − T_ref)``); ``None``: the
-    model's reference temperature.
+    model: its base-frame correction ``(e, φ)`` of the PROBE point is applied to the
+    tool as the rigid motion ``G = Trans(p_probe + e) · Rot(Exp φ) · Trans(−p_probe)``
+    (``T ← G·T``: the PROBE point moves by ``e``, every orientation turns by φ), where
+    the pose is inside the layer's trained region (elsewhere the physical model
+    alone); the Jacobian stays the physical one (the boosted trees are piecewise
+    constant — :func:`~plugcell.compensation.model_based.compensate_joints` solves the
+    hybrid model by an outer fixed point on ``G``); ``temperature_c``: the cell's
+    temperature (°C) — for a layer that uses it, and for a model with the thermal term
+    κT (the flange position and the linear rows of its Jacobian scale by
+    ``1 + κT (T − T_ref)``); ``None``: the model's reference temperature.
     """
 
     error_model: ErrorModel
@@ -166,15 +168,33 @@ class IdentifiedModel:
         T = flange @ self.tool
         J = shift_jacobian(J, flange[:, :3, 3], T[:, :3, 3]) @ s.reading_map
         if self.residual is not None:
-            T = self._corrected(T, flange @ self._probe, qb, batch.payload_kg)  # type: ignore[attr-defined]
+            T = self._correction(flange @ self._probe, qb, batch.payload_kg) @ T  # type: ignore[attr-defined]
         return T, J
 
-    def _corrected(self, T: Array, T_probe: Array, q: Array, payload_kg: Array) -> Array:
+    def _correction(self, T_probe: Array, q: Array, payload_kg: Array) -> Array:
+        """``G`` ``(N, 4, 4)`` (class docstring) at the PROBE poses ``T_probe``."""
         c = self.residual.predict(q, payload_kg, self.temperature_c).correction
-        out = T.copy()
-        out[:, :3, 3] += c[:, :3] + np.cross(c[:, 3:], T[:, :3, 3] - T_probe[:, :3, 3])
-        out[:, :3, :3] = so3_exp(c[:, 3:]) @ T[:, :3, :3]
-        return out
+        R = so3_exp(c[:, 3:])
+        p = T_probe[:, :3, 3]
+        G = np.broadcast_to(np.eye(4), (len(q), 4, 4)).copy()
+        G[:, :3, :3] = R
+        G[:, :3, 3] = p + c[:, :3] - np.einsum("nij,nj->ni", R, p)
+        return G
+
+    def physical(self) -> IdentifiedModel:
+        """The same model without the learned layer."""
+        return IdentifiedModel(self.error_model, self.tool, None, self.temperature_c)
+
+    def correction(self, q: ArrayLike, payload_kg: ArrayLike | float = 0.0) -> Array:
+        """The learned layer's rigid correction ``G`` ``(N, 4, 4)`` at ``q`` (identity
+        without a layer or outside its trained region): hybrid pose = ``G ·`` physical."""
+        qb = _as_batch(q, self.error_model.structure.n_readings)
+        if self.residual is None:
+            return np.broadcast_to(np.eye(4), (len(qb), 4, 4)).copy()
+        phys = self.physical().evaluate(qb, payload_kg)[0]
+        T_probe = phys @ invert(self.tool) @ self._probe  # type: ignore[attr-defined]
+        m = np.broadcast_to(np.asarray(payload_kg, float), (len(qb),))
+        return self._correction(T_probe, qb, m)
 
     def in_domain(self, q: ArrayLike, payload_kg: ArrayLike | float = 0.0) -> Array:
         """``(N,)`` True where the learned layer applies (all True without one)."""
