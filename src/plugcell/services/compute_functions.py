@@ -280,10 +280,20 @@ def _params_path(ctx: FunctionContext, name: Any) -> Path:
 
 @register
 def save_params(ctx: FunctionContext, params: Any, name: Any) -> None:
-    """Save identified parameters as PARAMS.json under the service's data directory."""
+    """Save identified parameters as PARAMS.json under the service's data directory
+    (with a learned residual layer, its side file ``NAME.residual.skops`` beside it)."""
     p = _params(params)
     path = _params_path(ctx, name)
     path.parent.mkdir(parents=True, exist_ok=True)
+    layer = p.result.residual_model
+    if layer is not None:
+        from plugcell.io.residual_models import ResidualFileError, residual_path, save_residual
+
+        try:
+            entry = save_residual(layer, residual_path(path))
+        except ResidualFileError as exc:
+            raise FunctionError(str(exc)) from None
+        p.document["residual_model"] = {**(p.document.get("residual_model") or {}), **entry}
     fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=".params-", suffix=".json")
     with os.fdopen(fd, "w", encoding="utf-8") as fh:
         json.dump(p.document, fh, indent=2, allow_nan=False)
@@ -303,6 +313,15 @@ def load_params(ctx: FunctionContext, name: Any) -> Parameters:
         raise FunctionError(f"no parameter set {path.stem!r} in {path.parent}") from None
     except (OSError, ValueError, KeyError, TypeError) as exc:
         raise FunctionError(f"{path.name}: cannot read: {exc}") from None
+    entry = doc.get("residual_model")
+    if entry:  # a learned residual layer: the hybrid model (docs/calibration.md)
+        from plugcell.io.residual_models import ResidualFileError, load_residual
+
+        try:
+            layer = load_residual(entry, path, robot=result.robot, model=result.model)
+        except ResidualFileError as exc:
+            raise FunctionError(str(exc)) from None
+        result = result.with_residual_model(layer)
     return Parameters(result, desc, doc)
 
 
@@ -342,7 +361,8 @@ def compensate(ctx: FunctionContext, params: Any, targets: Any, payload: Any = 0
     p = _params(params)
     convention = _convention(angles)
     T = _poses(_matrix(targets, "targets", (6,)), convention)
-    model = IdentifiedModel(p.result.model, tool=_tool(p, tool, convention))
+    model = IdentifiedModel(p.result.model, tool=_tool(p, tool, convention),
+                            residual=p.result.residual_model)
     try:
         res = _compensate(model, T, _payload(payload, len(T)), raise_errors=False)
     except ValueError as exc:
@@ -358,7 +378,8 @@ def compensate_joints(ctx: FunctionContext, params: Any, joints: Any, payload: A
     p = _params(params)
     desc = p.description
     q = np.deg2rad(_matrix(joints, "joints", (desc.n_actuated,)))
-    model = IdentifiedModel(p.result.model, tool=_tool(p, tool, _convention(angles)))
+    model = IdentifiedModel(p.result.model, tool=_tool(p, tool, _convention(angles)),
+                            residual=p.result.residual_model)
     T = NominalModel(desc, tool=model.tool).pose(q)
     try:
         res = _compensate_joints(model, T, q, _payload(payload, len(q)), raise_errors=False)
