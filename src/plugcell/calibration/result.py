@@ -383,6 +383,28 @@ class CalibrationResult:
                    n_poses=int(d["data"]["poses"]), warnings=tuple(d.get("warnings", ())))
 
 
+def rebase_document(document: dict[str, Any], result: CalibrationResult, base: ArrayLike,
+                    event: dict[str, Any] | None = None) -> dict[str, Any]:
+    """A copy of the PARAMS.json ``document`` of ``result`` with BASE re-registered to
+    ``base`` ``(4, 4)`` (the drift watch): the reference becomes the new BASE, the BASE
+    parameters' values zero, ``event`` appended to ``drift_history``; ``parameters``
+    stays the record of the identification."""
+    import copy
+
+    B = np.asarray(base, dtype=float)
+    if B.shape != (4, 4) or not np.all(np.isfinite(B)):
+        raise ValueError(f"base: expected a finite 4x4 transform, got shape {B.shape}")
+    d = copy.deepcopy(document)
+    for p in result.model.space:
+        if p.kind == "base":
+            d["values"][p.key] = 0.0
+    d["references"]["base"] = B.tolist()
+    d["base"] = {**_frame_dict(B), "thesis_6_24": _thesis_base(B)}
+    if event is not None:
+        d.setdefault("drift_history", []).append(dict(event))
+    return d
+
+
 def harmonic_order(model: ErrorModel) -> int:
     """The highest joint-angle harmonic order among the model's parameters (0: none)."""
     return max((int(p.key[1]) for p in model.space if p.kind == "harmonic"), default=0)

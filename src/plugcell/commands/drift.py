@@ -137,7 +137,11 @@ def _check(args: argparse.Namespace) -> int:
         raise CommandError(f"{args.nests}: {exc}") from None
     updated = False
     if est.alarm and args.update and est.consistent:
-        _rebase(d, result, est)
+        from plugcell.calibration.result import rebase_document
+
+        event = {"time_utc": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime()),
+                 **{k: v for k, v in est.as_dict().items() if k != "base"}}
+        d = rebase_document(d, result, est.base, event)
         _write(args.params, json.dumps(d, indent=2) + "\n")
         updated = True
     if args.json:
@@ -156,22 +160,3 @@ def _check(args: argparse.Namespace) -> int:
         if updated:
             print(f"re-registered BASE in {args.params}")
     return 1 if est.alarm else 0
-
-
-def _rebase(d: dict[str, Any], result: Any, est: Any) -> None:
-    """PARAMS.json with BASE = ``est.base``: the reference becomes the new BASE and the
-    BASE parameters' values zero (BASE_ref · I), the event appended to
-    ``drift_history`` (``parameters`` stays the record of the identification)."""
-    from plugcell.kinematics.rotations import matrix_to_rpy
-
-    space = result.model.space
-    for p in space:
-        if p.kind == "base":
-            d["values"][p.key] = 0.0
-    d["references"]["base"] = est.base.tolist()
-    d["base"] = {"matrix": est.base.tolist(), "xyz_mm": (est.base[:3, 3] * 1e3).tolist(),
-                 "rpy_deg": np.degrees(matrix_to_rpy(est.base[:3, :3])).tolist(),
-                 "thesis_6_24": None}
-    d.setdefault("drift_history", []).append(
-        {"time_utc": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime()),
-         **{k: v for k, v in est.as_dict().items() if k != "base"}})

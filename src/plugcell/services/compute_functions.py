@@ -336,6 +336,58 @@ def frame(ctx: FunctionContext, params: Any, which: Any, angles: Any = "euler") 
     return vector_from_matrix(T, _convention(angles)).reshape(1, 6)
 
 
+# -- drift watch (issue 19) -------------------------------------------------------------------
+
+
+@register
+def base_drift(ctx: FunctionContext, params: Any, nests: Any, measured: Any,
+               threshold: Any = 0.05) -> np.ndarray:
+    """The drift of BASE from re-measured reference nests (docs/metrology.md): ``nests``
+    K×3 or K×6, the registered nest positions in the robot base frame (mm); ``measured``
+    K×3 or K×6, the same nests measured now with the tracker's BASE set to the identified
+    one (robot base frame, mm); ``threshold`` mm.  → 1×9 ``[displacement mm, alarm 0|1,
+    consistent 0|1, tx, ty, tz (mm), rx, ry, rz (deg)]``: the drift ``D`` in the tracker
+    frame (``BASE' = D · BASE``) and its largest displacement at the nests."""
+    from plugcell.metrology.drift import estimate_base_drift
+
+    p = _params(params)
+    n = _matrix(nests, "nests")
+    m = _matrix(measured, "measured")
+    if n.shape[1] not in (3, 6) or m.shape[1] not in (3, 6):
+        raise FunctionError("nests and measured: K×3 or K×6 rows (mm[, deg])")
+    B = p.result.model.base()
+    m_tracker = m[:, :3] / 1e3 @ B[:3, :3].T + B[:3, 3]
+    try:
+        est = estimate_base_drift(B, n[:, :3] / 1e3, m_tracker,
+                                  threshold_m=_number(threshold, "threshold") * 1e-3)
+    except ValueError as exc:
+        raise FunctionError(str(exc)) from None
+    return np.r_[est.displacement_m * 1e3, float(est.alarm), float(est.consistent),
+                 est.translation_m * 1e3, np.degrees(est.rotation_rad)].reshape(1, 9)
+
+
+@register
+def rebase(ctx: FunctionContext, params: Any, drift: Any) -> Parameters:
+    """Parameters with BASE re-registered by a :func:`base_drift` row: ``BASE' = D·BASE``
+    (the robot's parameters and a learned residual layer unchanged)."""
+    from plugcell.calibration.result import rebase_document
+    from plugcell.kinematics.transforms import so3_exp
+
+    p = _params(params)
+    row = _matrix(drift, "drift", (9,))[0]
+    D = np.eye(4)
+    D[:3, :3] = so3_exp(np.radians(row[6:9]))
+    D[:3, 3] = row[3:6] / 1e3
+    doc = rebase_document(p.document, p.result, D @ p.result.model.base(),
+                          {"displacement_mm": float(row[0]), "alarm": bool(row[1] > 0.5),
+                           "translation_mm": row[3:6].tolist(),
+                           "rotation_deg": row[6:9].tolist()})
+    result = CalibrationResult.from_dict(doc, p.description)
+    if p.result.residual_model is not None:
+        result = result.with_residual_model(p.result.residual_model)
+    return Parameters(result, p.description, doc)
+
+
 # -- compensation (6.5.1, 8.3.2) ------------------------------------------------------------
 
 
