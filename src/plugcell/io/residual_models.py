@@ -12,7 +12,8 @@ Loading checks, each failure a :class:`ResidualFileError` naming the file:
 * the file exists and its SHA-256 is the one PARAMS.json recorded;
 * it contains only trusted types;
 * its robot and calibration fingerprint are those of PARAMS.json (a layer trained
-  on another robot or on another calibration of the same robot is refused);
+  on another robot or on another calibration of the same robot is refused; the
+  fingerprint covers the robot's parameters, not BASE and PROBE);
 * it was written by the same scikit-learn major.minor version (tree predictors are
   not guaranteed across versions: re-run ``plugcell calibrate``).
 """
