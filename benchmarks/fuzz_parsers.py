@@ -14,7 +14,9 @@ with the input, and the run exits 1); every refusal must carry a message:
   text itself (no newline translation) → ``MeasurementFileError``;
 * ``description`` — :func:`plugcell.io.robots.load_robot_file` (a robot description
   file) → ``DescriptionError`` (or ``RobotNotFoundError``, never for an existing file);
-* ``compute`` — :func:`plugcell.services.compute_expr.parse` → ``EvaluationError``.
+* ``compute`` — :func:`plugcell.services.compute_expr.parse` → ``EvaluationError``;
+* ``nests`` — :func:`plugcell.io.nests.parse_nests` (drift-watch nest files) →
+  ``NestFileError``.
 
 Inputs: mutations of valid samples (character flips, insertions from the target's
 alphabet, deletions, duplicated spans, splices, truncations) and random text.  The
@@ -38,6 +40,7 @@ from plugcell.io.measurements import (
     parse_measurements,
     read_measurements,
 )
+from plugcell.io.nests import NestFileError, parse_nests
 from plugcell.io.robots import load_robot_file
 from plugcell.kinematics.errors import DescriptionError
 from plugcell.services.compute_expr import EvaluationError, parse
@@ -57,6 +60,11 @@ MEASUREMENT_SEEDS = [
     "10.0,-80.0,-150.0,0.0,30.0,0.0,1712.43,-12.80,1203.55,179.9,0.2,-90.1,36\n"
     "11.0,-81.0,-151.0,1.0,31.0,1.0,1702.43,-11.80,1213.55,178.9,0.3,-90.0,0\n",
     "j1,j2,j3,j4,x,y,z\n1,2,3,4,1000,0,500\n5,6,7,8,1100,10,520\n",
+    "j1,j2,x,y,z,temperature_c\n1,2,1000,0,500,21.5\n5,6,1100,10,520,22.25\n",
+]
+NEST_SEEDS = [
+    "# nests\nname,x,y,z\nN1,1520.31,-840.07,12.55\nN2,2400,200,50\nN3,1200,1500,0\n",
+    "name,x,y,z\nA,1,2,3\nB,4,5,6\nC,7,8,10\nD,-1e3,2.5e2,0\n",
 ]
 COMPUTE_SEEDS = [
     "p = scale(mJ, k=-2.5e1)\nq = [1, 2; 3, .5]; 'text'",
@@ -71,6 +79,7 @@ ALPHABETS = {
     "measurements_text": "0123456789.,-+eE#\n\r\" jxyzr_naINF\t",
     "description": "[]{}=\",.#\n 0123456789-+eE_abcdefghijklmnopqrstuvwxyz'\t",
     "compute": "[](),;=.'\"\n +-*/^0123456789eEabkpqxyz_ \t#\\",
+    "nests": "0123456789.,-+eE#\n\r\" nameNxyz_INF\t",
 }
 
 
@@ -81,6 +90,8 @@ def _seeds(target: str) -> list[str]:
         return MEASUREMENT_SEEDS
     if target == "compute":
         return COMPUTE_SEEDS
+    if target == "nests":
+        return NEST_SEEDS
     if target == "language":
         return [(PROGRAMS / n).read_text() for n in ("example.pdl", "calibration.pdl")]
     return [p.read_text() for p in sorted((PKG / "robots").glob("*.toml"))]
@@ -143,6 +154,8 @@ def _checker(target: str, tmp: Path) -> tuple[Callable[[str], object], type[Exce
         return read, MeasurementFileError
     if target == "compute":
         return parse, EvaluationError
+    if target == "nests":
+        return (lambda t: parse_nests(t, "fuzz.csv")), NestFileError
     path = tmp / "fuzz_robot.toml"
 
     def load(text: str) -> object:
@@ -153,7 +166,7 @@ def _checker(target: str, tmp: Path) -> tuple[Callable[[str], object], type[Exce
 
 
 TARGETS = ("activate", "language", "measurements", "measurements_text", "description",
-           "compute")
+           "compute", "nests")
 
 
 class ParserCrashError(AssertionError):

@@ -2,7 +2,9 @@
 
     .venv/bin/python benchmarks/run_all.py [--full]
 
-Without ``--full`` the transport benchmark runs in its quick mode, the
+Without ``--full`` the transport benchmark runs in its quick mode, the learned
+residual layer's benchmarks run small and write their pages to the temporary
+directory (``--full`` regenerates docs/results/ur10-residual.md and twin-residual.md), the
 calibration scaling stops at 10 000 poses and the web API fuzz sends 20 000
 requests (not 100 000), so the whole run takes a few minutes on 2 cores; ``--full``
 adds the planning comparisons (twin: ~5 min, IPA UR10 when its data are present).  Speed
@@ -14,6 +16,7 @@ from __future__ import annotations
 import platform
 import subprocess
 import sys
+import tempfile
 import time
 from pathlib import Path
 
@@ -23,6 +26,7 @@ HERE = Path(__file__).resolve().parent
 def main(argv: list[str]) -> int:
     full = "--full" in argv
     plugcell = [sys.executable, "-m", "plugcell"]
+    scratch = Path(tempfile.gettempdir()) / "plugcell-bench"
     runs = [
         ("transport (thesis 5.3)",
          [*plugcell, "bench", "transport", *([] if full else ["--quick"])]),
@@ -46,6 +50,16 @@ def main(argv: list[str]) -> int:
             [sys.executable, str(HERE / "planning_ur10.py")])]
           if full and (HERE.parents[1] / "shared" / "data" / "ipa-robot-accuracy").is_dir()
           else []),
+        # quick runs write their pages to the temporary directory, not over docs/results
+        ("learned residual layer on the twin",
+         [sys.executable, str(HERE / "residual_twin.py"),
+          *([] if full else ["--poses", "300", "--out", str(scratch / "twin-residual.md")])]),
+        ("drift watch over an 8-hour shift (twin)",
+         [sys.executable, str(HERE / "drift_twin.py"),
+          *([] if full else ["--out", str(scratch / "drift-watch.md")])]),
+        ("learned residual layer on the IPA UR10 (skipped without the data)",
+         [sys.executable, str(HERE / "residual_ur10.py"),
+          *([] if full else ["--quick", "--out", str(scratch / "ur10-residual.md")])]),
         ("wire decoder fuzz", [sys.executable, str(HERE / "fuzz_wire.py")]),
         ("signed requests (cost)", [sys.executable, str(HERE / "signing.py"),
                                     *(["--fuzz", "100000"] if full else [])]),

@@ -85,6 +85,8 @@ COMMANDS: tuple[Command, ...] = (
             "plugcell.commands.calibrate:configure"),
     Command("export", "write a calibrated robot as URDF, UR kinematics YAML or plugcell TOML",
             "plugcell.commands.export:configure"),
+    Command("drift", "drift watch: re-measure reference nests, estimate and correct the drift "
+            "of BASE", "plugcell.commands.drift:configure"),
     Command("plan", "choose the poses of a calibration campaign (optimal, reachable, visible)",
             "plugcell.commands.plan:configure"),
     Command("reproduce", "recompute the thesis's calibration tables",

@@ -7,12 +7,25 @@ import numpy as np
 from plugcell.kinematics import RobotDescription
 from plugcell.kinematics.transforms import so3_exp
 
+_UR10_A = [0.0, -0.612, -0.5723, 0.0, 0.0, 0.0]
+_UR10_D = [0.1273, 0.0, 0.0, 0.163941, 0.1157, 0.0922]
+_UR10_ALPHA = [90.0, 0.0, 0.0, 90.0, -90.0, 0.0]
+
+
+def ur10_toml() -> str:
+    """:func:`ur10_description` without masses as a description file (for CLI tests)."""
+    out = ['format_version = 1', 'name = "ur10-test"', 'actuated = ["1", "2", "3", "4", "5", "6"]',
+           'flange = "6"', "home = [0.0, -90.0, 90.0, 0.0, 90.0, 0.0]"]
+    for i in range(6):
+        out += ["[[links]]", f'name = "{i + 1}"', f'parent = "{"base" if i == 0 else i}"',
+                'joint = "actuated"', f"d = {_UR10_D[i]}", f"a = {_UR10_A[i]}",
+                f"alpha = {_UR10_ALPHA[i]}", "limits = [-360.0, 360.0]"]
+    return "\n".join(out) + "\n"
+
 
 def ur10_description() -> RobotDescription:
     """A plain 6R robot without a loop: the UR10's nominal DH (issue 3), with masses."""
-    a = [0.0, -0.612, -0.5723, 0.0, 0.0, 0.0]
-    d = [0.1273, 0.0, 0.0, 0.163941, 0.1157, 0.0922]
-    alpha = [90.0, 0.0, 0.0, 90.0, -90.0, 0.0]
+    a, d, alpha = _UR10_A, _UR10_D, _UR10_ALPHA
     mass = [7.1, 12.7, 4.3, 2.0, 2.0, 0.4]
     com = [[0, -0.02, 0], [0.3, 0, 0.15], [0.25, 0, 0.03], [0, 0, 0], [0, 0, 0], [0, 0, -0.02]]
     links = []
@@ -34,3 +47,31 @@ def random_frame(rng: np.random.Generator, angle: float = 1.0, dist: float = 1.0
     T[:3, :3] = so3_exp(rng.normal(size=3) * angle)
     T[:3, 3] = rng.normal(size=3) * dist
     return T
+
+
+def harmonic_campaign(n: int, seed: int = 0, amplitude_rad: float = 4e-4,
+                      noise_m: float = 10e-6, base: np.ndarray | None = None):
+    """Poses of the UR10 test robot with an effect no physical model of the library has:
+    a transmission error ``Δθ_j = A sin(2 q_j + j)`` on joints 2–4 (reducer
+    eccentricity), plus tracker noise.  Returns (description, CalibrationData) in a
+    tracker frame ``base`` (default a fixed offset frame), positions and orientations.
+    """
+    from plugcell.calibration import CalibrationData, ErrorModel
+
+    desc = ur10_description()
+    rng = np.random.default_rng(seed)
+    q = np.column_stack([rng.uniform(-2.5, -0.5, n), rng.uniform(-2.2, -0.4, n),
+                         rng.uniform(0.4, 2.2, n), rng.uniform(-2.5, 0.5, n),
+                         rng.uniform(-2.0, 2.0, n), rng.uniform(-1.5, 1.5, n)])
+    B = np.eye(4)
+    B[:3, 3] = [2.0, -1.0, 0.3]
+    B = B if base is None else base
+    probe = np.eye(4)
+    probe[:3, 3] = [0.02, 0.03, 0.08]
+    m = ErrorModel.create(desc, "serial", base=B, probe=probe)
+    dq = np.zeros_like(q)
+    for j in (1, 2, 3):
+        dq[:, j] = amplitude_rad * np.sin(2 * q[:, j] + j)
+    T = m.predict(q + dq)
+    T[:, :3, 3] += rng.normal(scale=noise_m, size=(n, 3))
+    return desc, CalibrationData.from_poses(q, T)

@@ -16,7 +16,7 @@ from fuzz_parsers import fuzz
 pytestmark = pytest.mark.timeout(120)
 
 CASES = {"activate": 5000, "compute": 5000, "measurements": 3000, "description": 2000,
-         "language": 1500}
+         "language": 1500, "nests": 3000}
 
 
 @pytest.mark.parametrize("target", sorted(CASES))

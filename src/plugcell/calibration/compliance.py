@@ -35,6 +35,18 @@ s, a`` the columns of the flange rotation R_n^0 and the thesis's ``P = (0, 0,
 mg)`` (so A_i = c_i m g etc.; a physical compliance comes out negative, as in
 Table 8-4).  ``m_ref`` is the payload the constants refer to (the heaviest of
 the calibration set), so one model predicts every payload on the same mount.
+
+Joint-angle harmonics (issue 19, not in the thesis), for every actuated joint *j*
+and order *k* ≤ K (K = 1 or 2)::
+
+    Δθ_j = Σ_k  s_jk sin(k q_j) + c_jk cos(k q_j)
+
+with ``q_j`` the joint reading: the transmission error of a reducer (first order:
+eccentricity of a gear or of the encoder; second order: ovality, the harmonic
+drive's two-lobe wave generator).  Parameters ``h{k}s_{j}``, ``h{k}c_{j}`` (rad).
+A constant term is the joint offset Δθ_j already in the geometric model; whether a
+harmonic is separable from it (and from the rest) on given poses is decided by the
+identifiability analysis like every other parameter.
 """
 
 from __future__ import annotations
@@ -45,7 +57,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from plugcell.calibration.parameters import ErrorParameter
-from plugcell.calibration.structure import CLASS_GRAVITY, CLASS_PAYLOAD
+from plugcell.calibration.structure import CLASS_GRAVITY, CLASS_HARMONIC, CLASS_PAYLOAD
 from plugcell.kinematics import GeometricParameters, RobotDescription, forward, jacobian_from_fk
 
 Array = NDArray[np.float64]
@@ -58,6 +70,7 @@ __all__ = [
     "PAYLOAD_FIELDS",
     "compliance_regressors",
     "gravity_parameters",
+    "harmonic_parameters",
     "has_masses",
     "payload_parameters",
 ]
@@ -105,6 +118,21 @@ def payload_parameters(desc: RobotDescription) -> tuple[ErrorParameter, ...]:
                     priority=(CLASS_PAYLOAD, j, m),
                 )
             )
+    return tuple(out)
+
+
+def harmonic_parameters(desc: RobotDescription, order: int) -> tuple[ErrorParameter, ...]:
+    """``h{k}s_{j}``, ``h{k}c_{j}`` for every actuated joint *j* and ``k = 1..order``."""
+    if order not in (0, 1, 2):
+        raise ValueError(f"harmonics: order 0, 1 or 2, got {order}")
+    out: list[ErrorParameter] = []
+    for j, name in enumerate(desc.actuated):
+        for k in range(1, order + 1):
+            for m, (f, fn) in enumerate((("s", "sin"), ("c", "cos"))):
+                arg = f"q{name}" if k == 1 else f"{k}q{name}"
+                out.append(ErrorParameter(
+                    key=f"h{k}{f}_{name}", name=f"Δθ{name}·{fn} {arg}", kind="harmonic",
+                    unit="rad", joint=name, priority=(CLASS_HARMONIC, j, 2 * (k - 1) + m)))
     return tuple(out)
 
 
@@ -193,6 +221,10 @@ def compliance_regressors(
                     tau = _gravity_torques(desc, ref, q)
                 j = jidx[p.joint]  # type: ignore[index]
                 R[:, j, c] = tau[:, j]
+        elif p.kind == "harmonic":
+            j = jidx[p.joint]  # type: ignore[index]
+            k = int(p.key[1])
+            R[:, j, c] = np.sin(k * q[:, j]) if p.key[2] == "s" else np.cos(k * q[:, j])
         elif p.kind == "payload":
             if payload_reg is None:
                 payload_reg = _payload_regressors(desc, ref, q, payload_kg, payload_ref_kg)

@@ -32,12 +32,14 @@ def _ro(x: ArrayLike | None) -> Array | None:
 class CalibrationData:
     """``q`` ``(N, n)`` joint readings (rad); ``positions`` ``(N, 3)`` measured target
     positions (m); ``rotations`` ``(N, 3, 3)`` measured orientations or ``None``
-    (position-only data); ``payload_kg`` ``(N,)``."""
+    (position-only data); ``payload_kg`` ``(N,)``; ``temperature_c`` ``(N,)`` the
+    temperature (°C) at each pose or ``None`` (not measured)."""
 
     q: Array
     positions: Array
     rotations: Array | None = None
     payload_kg: Array | None = None
+    temperature_c: Array | None = None
 
     def __post_init__(self) -> None:
         q = _ro(self.q)
@@ -53,20 +55,29 @@ class CalibrationData:
         m = _ro(np.zeros(N) if self.payload_kg is None else self.payload_kg)
         if m is None or m.shape != (N,):
             raise ValueError(f"payload_kg must be ({N},)")
+        t = _ro(self.temperature_c)
+        if t is not None and t.shape != (N,):
+            raise ValueError(f"temperature_c must be ({N},), got {t.shape}")
         for name, arr in (("q", q), ("positions", p), ("rotations", R), ("payload_kg", m)):
             if arr is not None and not np.all(np.isfinite(arr)):
                 raise ValueError(f"{name}: values must be finite")
+        if t is not None and not np.all(np.isfinite(t)):
+            bad = np.flatnonzero(~np.isfinite(t))
+            raise ValueError(f"temperature_c: {bad.size} missing or non-finite value(s), first at "
+                             f"pose {int(bad[0]) + 1}: a temperature column must be complete")
         object.__setattr__(self, "q", q)
         object.__setattr__(self, "positions", p)
         object.__setattr__(self, "rotations", R)
         object.__setattr__(self, "payload_kg", m)
+        object.__setattr__(self, "temperature_c", t)
 
     @classmethod
     def from_measurements(cls, m: Any) -> CalibrationData:
         """From a :class:`~plugcell.io.measurements.MeasurementSet` (or anything with
         ``joints``, ``positions``, ``angles``, ``rotation`` and ``payload_kg``)."""
         R = None if m.angles is None else angles_to_matrix(m.angles, m.rotation)
-        return cls(q=m.joints, positions=m.positions, rotations=R, payload_kg=m.payload_kg)
+        return cls(q=m.joints, positions=m.positions, rotations=R, payload_kg=m.payload_kg,
+                   temperature_c=getattr(m, "temperature_c", None))
 
     @classmethod
     def from_poses(cls, q: ArrayLike, poses: ArrayLike, payload_kg: ArrayLike | None = None,
@@ -106,4 +117,5 @@ class CalibrationData:
             q=self.q[index], positions=self.positions[index],
             rotations=None if self.rotations is None else self.rotations[index],
             payload_kg=self.payload_kg[index],  # type: ignore[index]
+            temperature_c=None if self.temperature_c is None else self.temperature_c[index],
         )

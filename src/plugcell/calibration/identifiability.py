@@ -34,7 +34,7 @@ from numpy.typing import NDArray
 
 from plugcell.calibration.jacobian import identification_jacobian
 from plugcell.calibration.linalg import r_factor
-from plugcell.calibration.model import ErrorModel
+from plugcell.calibration.model import THERMAL_KEY, ErrorModel, PoseBatch
 
 Array = NDArray[np.float64]
 
@@ -229,9 +229,19 @@ def structural_identifiability(
     if model.payload_ref_kg <= 0 and any(model.space[k].kind == "payload" for k in keys):
         model = model.with_references(payload_ref_kg=1.0)
     m = np.full(len(q), model.payload_ref_kg)
-    jac = identification_jacobian(model, model.batch(q, m), order)
+    jac = identification_jacobian(model, random_batch(model, q, m), order)
     H = jac.H[:, :3] if position_only else jac.H
     return analyse(H.reshape(-1, len(order)), order, condition_limit=condition_limit)
+
+
+def random_batch(model: ErrorModel, q: Array, payload_kg: Array, seed: int = 0) -> PoseBatch:
+    """The batch of the structural analysis: with a thermal term, temperatures spread
+    uniformly over ±2 K about the reference (a constant temperature would make κT a
+    zero column — which is what the data check then says of isothermal data)."""
+    t = None
+    if THERMAL_KEY in model.space:
+        t = model.temperature_ref_c + np.random.default_rng(seed).uniform(-2.0, 2.0, len(q))
+    return model.batch(q, payload_kg, t)
 
 
 def combinations_at(
@@ -260,7 +270,7 @@ def combinations_at(
     if model.payload_ref_kg <= 0 and any(model.space[k].kind == "payload" for k in kept + dropped):
         model = model.with_references(payload_ref_kg=1.0)
     m = np.full(len(q), model.payload_ref_kg)
-    H = identification_jacobian(model, model.batch(q, m), kept + dropped).H
+    H = identification_jacobian(model, random_batch(model, q, m), kept + dropped).H
     if position_only:
         H = H[:, :3]
     H = H.reshape(-1, len(kept) + len(dropped))

@@ -170,7 +170,11 @@ class Calibrator:
     ``parameters``: identify exactly these keys instead of the analysis' choice;
     ``rank_tol``: relative distance of a scaled column from the span of the others
     below which a parameter is not identified from these poses (default 1e-3);
-    ``progress``: callback ``(stage, i, n, message)``.
+    ``progress``: callback ``(stage, i, n, message)``; ``harmonics``: add the
+    joint-angle harmonics up to this order (0, 1, 2) to the model (transmission
+    error, :mod:`.compliance`); ``thermal``: add the thermal expansion κT of the
+    chain's lengths about the calibration data's mean temperature (needs their
+    ``temperature_c``).
     """
 
     def __init__(
@@ -191,6 +195,8 @@ class Calibrator:
         parameters: Sequence[str] | None = None,
         rank_tol: float = DATA_RANK_TOL,
         progress: Progress | None = None,
+        harmonics: int = 0,
+        thermal: bool = False,
     ) -> None:
         try:
             self.config: ModelConfig = model_config(model)
@@ -202,6 +208,10 @@ class Calibrator:
             raise CalibrationError(f"loss must be one of {LOSSES}, got {loss!r}")
         if not (tol > 0 and max_iterations >= 1 and rotation_weight > 0 and loss_scale > 0):
             raise CalibrationError("tol, max_iterations, rotation_weight, loss_scale must be > 0")
+        if harmonics not in (0, 1, 2):
+            raise CalibrationError(f"harmonics: order 0, 1 or 2, got {harmonics!r}")
+        self.harmonics = int(harmonics)
+        self.thermal = bool(thermal)
         self.desc = desc
         self.base = None if base is None else np.asarray(base, dtype=float)
         self.probe = None if probe is None else np.asarray(probe, dtype=float)
@@ -281,12 +291,23 @@ class Calibrator:
         if not data.six_dof and self.rotation_weight != 1.0:
             warnings.append("rotation_weight ignored: the data are positions only")
 
+        t_ref = 0.0
+        if self.thermal:
+            if data.temperature_c is None:
+                raise CalibrationError("the thermal term needs a temperature per pose: the "
+                                       "measurement file has no temperature_c column")
+            t_ref = float(np.mean(data.temperature_c))
+            if np.ptp(data.temperature_c) < 0.1:
+                warnings.append(f"thermal term: the temperatures span only "
+                                f"{np.ptp(data.temperature_c):.2f} K")
         base0, probe0, rms0 = self.initial_frames(data)
         self._say("frames", 0, 1, f"initial BASE/PROBE: rms misfit {rms0 * 1e3:.3f} mm")
         try:
             model = ErrorModel.create(self.desc, cfg.family, gravity=cfg.gravity,
                                       payload=cfg.payload, base=base0, probe=probe0,
-                                      payload_ref_kg=m_ref if cfg.payload else 0.0)
+                                      payload_ref_kg=m_ref if cfg.payload else 0.0,
+                                      harmonics=self.harmonics, thermal=self.thermal,
+                                      temperature_ref_c=t_ref)
         except ValueError as exc:
             raise CalibrationError(str(exc)) from None
         if cfg.gravity and not model.space.of_kind("gravity"):
@@ -295,7 +316,7 @@ class Calibrator:
                 f"{self.desc.name!r} has neither a parallelogram nor link masses in its "
                 "description"
             )
-        batch = model.batch(data.q, data.payload_kg)
+        batch = model.batch(data.q, data.payload_kg, data.temperature_c)
         problem = _Problem(model, data, batch, self.rotation_weight)
 
         # ---- nominal frames fit (BASE and PROBE on the nominal robot), unless given
@@ -422,7 +443,8 @@ class Calibrator:
                       "tol": self.tol,
                       "rotation_weight": self.rotation_weight,
                       "condition_limit": self.condition_limit,
-                      "max_iterations": self.max_iterations},
+                      "max_iterations": self.max_iterations, "harmonics": self.harmonics,
+                      "thermal": self.thermal},
         )
         if validation is not None:
             result = result.with_validation(self._coerce(validation))
@@ -442,12 +464,12 @@ class Calibrator:
         if not mixed:
             return structural_identifiability(model, position_only=pos_only)
         # payloads that vary separate payload constants from gravity ones (A2 vs G1)
-        from plugcell.calibration.identifiability import random_configurations
+        from plugcell.calibration.identifiability import random_batch, random_configurations
 
         keys = model.space.by_priority()
         q = random_configurations(model, 60, 0)
         m = np.resize(np.unique(data.payload_kg), len(q))
-        jac = identification_jacobian(model, model.batch(q, m), keys)
+        jac = identification_jacobian(model, random_batch(model, q, m), keys)
         H = jac.H[:, :3] if pos_only else jac.H
         return analyse(H.reshape(-1, len(keys)), keys)
 
@@ -563,7 +585,7 @@ def refit_base(model: ErrorModel, data: CalibrationData, *, probe: bool = False,
     if positions_only:
         data = data.positions_only()
     m = fold_frames(model)
-    robot = np.linalg.inv(m.base()) @ m.predict(data.q, data.payload_kg)
+    robot = np.linalg.inv(m.base()) @ m.predict(data.q, data.payload_kg, data.temperature_c)
     fit = fit_rigid_transform(robot[:, :3, 3], data.positions)
     m = m.with_references(base=fit.transform)
     s = m.structure
@@ -574,7 +596,8 @@ def refit_base(model: ErrorModel, data: CalibrationData, *, probe: bool = False,
                  f"d{s.probe_name}"]
     keys = [k for k in keys if k in m.space]
     cal = Calibrator(s.source, 1)
-    problem = _Problem(m, data, m.batch(data.q, data.payload_kg), float(rotation_weight))
+    problem = _Problem(m, data, m.batch(data.q, data.payload_kg, data.temperature_c),
+                       float(rotation_weight))
     jac = identification_jacobian(m, problem.batch, keys)
     fa = analyse(_jacobian_rows(problem, jac.H).reshape(-1, len(keys)), keys)
     fitted, *_ = cal._iterate(problem, m, list(fa.kept), "base", [], loss="linear")

@@ -79,7 +79,12 @@ def identification_jacobian(
     params = model.geometric_parameters()
     fk = forward(desc, params, model.chain_joints(batch), closure="fourbar")
     B = model.base()
-    W = B @ fk.frames  # (N, L, 4, 4) world frames
+    frames = fk.frames
+    scale = model.thermal_scale(batch)
+    if scale is not None:  # every length scaled: the frame origins in the base frame
+        frames = frames.copy()
+        frames[..., :3, 3] *= scale[:, None, None]
+    W = B @ frames  # (N, L, 4, 4) world frames
     N, L = W.shape[:2]
     i_fl = desc.index(desc.flange)
     T_fl = W[:, i_fl]
@@ -103,8 +108,8 @@ def identification_jacobian(
     m = on_chain[None, :, None]
     cols = {
         "theta": _cat(np.cross(z, pp - op), z) * m,
-        "d": _cat(z, None) * m,
-        "a": _cat(xt, None) * m,
+        "d": _cat(z, None) * m * (1.0 if scale is None else scale[:, None, None]),
+        "a": _cat(xt, None) * m * (1.0 if scale is None else scale[:, None, None]),
         "alpha": _cat(np.cross(xt, pp - o), xt) * m,
         "beta": _cat(np.cross(y, pp - o), y) * m,
     }
@@ -142,6 +147,11 @@ def identification_jacobian(
             if probe_cols is None:
                 probe_cols = _probe_columns(model, T_fl, p)
             H[:, :, c] = probe_cols[prm.field]  # type: ignore[index]
+        elif prm.kind == "thermal":
+            # ∂p/∂κT = ΔT · R_B p_fl (unscaled flange position in the base frame)
+            dT = batch.delta_t(model.temperature_ref_c)
+            H[:, :3, c] = dT[:, None] * (B[:3, :3] @ fk.flange[:, :3, 3, None])[..., 0]
+            H[:, 3:, c] = 0.0
         else:
             H[:, :, c] = comp_col[key]
     return JacobianResult(poses=T, H=H, keys=keys)

@@ -34,10 +34,15 @@ from numpy.typing import ArrayLike, NDArray
 from plugcell.calibration.compliance import (
     compliance_regressors,
     gravity_parameters,
+    harmonic_parameters,
     payload_parameters,
 )
-from plugcell.calibration.parameters import ParameterSpace
-from plugcell.calibration.structure import KinematicStructure, kinematic_structure
+from plugcell.calibration.parameters import ErrorParameter, ParameterSpace
+from plugcell.calibration.structure import (
+    CLASS_THERMAL,
+    KinematicStructure,
+    kinematic_structure,
+)
 from plugcell.kinematics import GeometricParameters, RobotDescription, forward
 from plugcell.kinematics.transforms import dh_hayati, rot_x, rot_y, rot_z, translation
 
@@ -47,6 +52,13 @@ __all__ = ["ErrorModel", "PoseBatch", "base_transform", "fold_frames", "probe_tr
 
 _HALF_PI = 0.5 * math.pi
 
+
+#: Key of the thermal expansion term: every length of the chain scales by
+#: ``1 + κT·(T − T_ref)`` — the flange position in the robot base frame scales by it
+#: (rotations do not depend on lengths), the PROBE is not scaled.
+THERMAL_KEY = "kT"
+THERMAL_PARAMETER = ErrorParameter(key=THERMAL_KEY, name="κT", kind="thermal", unit="1/K",
+                                   priority=(CLASS_THERMAL, 0, 0))
 
 def base_transform(base_ref: Array, a0: float, b0: float, alpha0: float, beta0: float,
                    theta0: float, d0: float) -> Array:
@@ -70,11 +82,19 @@ def probe_transform(probe_ref: Array, theta7: float, d7: float, a7: float, alpha
 class PoseBatch:
     """Joint readings ``q`` ``(N, n_readings)``, payloads ``(N,)`` and the compliance
     regressors ``(N, n_actuated, n_c)`` of a model (joint deflections of the kinematic
-    joints; columns in the order of ``ErrorModel.compliance_keys``)."""
+    joints; columns in the order of ``ErrorModel.compliance_keys``);
+    ``temperature_c`` ``(N,)`` or ``None`` (poses at the model's reference temperature)."""
 
     q: Array
     payload_kg: Array
     regressors: Array
+    temperature_c: Array | None = None
+
+    def delta_t(self, reference_c: float) -> Array:
+        """``(N,)`` temperature above the reference, K (zero without temperatures)."""
+        if self.temperature_c is None:
+            return np.zeros(len(self.q))
+        return self.temperature_c - reference_c
 
     def __len__(self) -> int:
         return int(self.q.shape[0])
@@ -90,6 +110,7 @@ class ErrorModel:
     base_ref: Array
     probe_ref: Array
     payload_ref_kg: float = 0.0
+    temperature_ref_c: float = 0.0
 
     def __post_init__(self) -> None:
         v = np.array(self.values, dtype=float)
@@ -106,7 +127,7 @@ class ErrorModel:
         object.__setattr__(self, "_nominal", self.structure.nominal_parameters())
         object.__setattr__(self, "_reference", self.structure.source.nominal_parameters())
         object.__setattr__(
-            self, "_compliance", self.space.of_kind("gravity", "payload")
+            self, "_compliance", self.space.of_kind("gravity", "payload", "harmonic")
         )
 
     # ------------------------------------------------------------------ construction
@@ -121,8 +142,13 @@ class ErrorModel:
         base: ArrayLike | None = None,
         probe: ArrayLike | None = None,
         payload_ref_kg: float = 0.0,
+        harmonics: int = 0,
+        thermal: bool = False,
+        temperature_ref_c: float = 0.0,
     ) -> ErrorModel:
-        """All candidate parameters of ``family`` (+ gravity, + payload), values zero.
+        """All candidate parameters of ``family`` (+ gravity, + payload, + joint-angle
+        harmonics up to order ``harmonics``, + the thermal expansion κT about
+        ``temperature_ref_c`` when ``thermal``), values zero.
 
         ``base``/``probe``: the reference BASE (robot base in the measurement frame)
         and PROBE (target in the flange frame); default: the description's
@@ -134,6 +160,9 @@ class ErrorModel:
             params += gravity_parameters(desc)
         if payload:
             params += payload_parameters(desc)
+        params += harmonic_parameters(desc, harmonics)
+        if thermal:
+            params.append(THERMAL_PARAMETER)
         space = ParameterSpace(tuple(params))
         return cls(
             structure=structure,
@@ -142,6 +171,7 @@ class ErrorModel:
             base_ref=np.asarray(desc.base if base is None else base, dtype=float),
             probe_ref=np.asarray(desc.tool if probe is None else probe, dtype=float),
             payload_ref_kg=float(payload_ref_kg),
+            temperature_ref_c=float(temperature_ref_c),
         )
 
     # ------------------------------------------------------------------ values
@@ -153,7 +183,7 @@ class ErrorModel:
 
     def with_values(self, values: ArrayLike) -> ErrorModel:
         return ErrorModel(self.structure, self.space, np.asarray(values, float), self.base_ref,
-                          self.probe_ref, self.payload_ref_kg)
+                          self.probe_ref, self.payload_ref_kg, self.temperature_ref_c)
 
     def updated(self, delta: Mapping[str, float] | None = None, *,
                 keys: Sequence[str] | None = None, step: ArrayLike | None = None) -> ErrorModel:
@@ -173,6 +203,7 @@ class ErrorModel:
             self.base_ref if base is None else np.asarray(base, float),
             self.probe_ref if probe is None else np.asarray(probe, float),
             self.payload_ref_kg if payload_ref_kg is None else float(payload_ref_kg),
+            self.temperature_ref_c,
         )
 
     @property
@@ -220,8 +251,10 @@ class ErrorModel:
         return probe_transform(self.probe_ref, *self.probe_parameters())
 
     # ------------------------------------------------------------------ prediction
-    def batch(self, q: ArrayLike, payload_kg: ArrayLike | float | None = None) -> PoseBatch:
-        """Readings ``(N, n)`` (radians) with their compliance regressors."""
+    def batch(self, q: ArrayLike, payload_kg: ArrayLike | float | None = None,
+              temperature_c: ArrayLike | float | None = None) -> PoseBatch:
+        """Readings ``(N, n)`` (radians) with their compliance regressors (and the
+        temperatures ``(N,)``, °C, for the thermal term)."""
         q = np.atleast_2d(np.asarray(q, dtype=float))
         n = self.structure.n_readings
         if q.ndim != 2 or q.shape[1] != n:
@@ -231,7 +264,16 @@ class ErrorModel:
         params = [self.space[k] for k in self.compliance_keys]
         R = compliance_regressors(self.structure.source, self._reference, params, q, m,  # type: ignore[attr-defined]
                                   self.payload_ref_kg)
-        return PoseBatch(q=q, payload_kg=m, regressors=R)
+        t = None if temperature_c is None else np.broadcast_to(
+            np.asarray(temperature_c, dtype=float), (len(q),)).copy()
+        return PoseBatch(q=q, payload_kg=m, regressors=R, temperature_c=t)
+
+    def thermal_scale(self, batch: PoseBatch) -> Array | None:
+        """``(N,)`` scale ``1 + κT·(T − T_ref)`` of the chain's lengths, or ``None``
+        when the model has no thermal term."""
+        if THERMAL_KEY not in self.space:
+            return None
+        return 1.0 + self.value(THERMAL_KEY) * batch.delta_t(self.temperature_ref_c)
 
     def deflections(self, batch: PoseBatch) -> Array:
         """Joint deflections Δθ ``(N, n_actuated)`` of the kinematic joints (eq. 4.16)."""
@@ -248,11 +290,18 @@ class ErrorModel:
         """Predicted target poses ``(N, 4, 4)`` in the measurement frame."""
         fk = forward(self.structure.desc, self.geometric_parameters(), self.chain_joints(batch),
                      closure="fourbar")
-        return self.base() @ fk.flange @ self.probe()
+        flange = fk.flange
+        scale = self.thermal_scale(batch)
+        if scale is not None:
+            flange = flange.copy()
+            flange[:, :3, 3] *= scale[:, None]
+        return self.base() @ flange @ self.probe()
 
-    def predict(self, q: ArrayLike, payload_kg: ArrayLike | float | None = None) -> Array:
-        """Predicted target poses ``(N, 4, 4)`` for readings ``q`` (eq. 6.23)."""
-        return self.predict_batch(self.batch(q, payload_kg))
+    def predict(self, q: ArrayLike, payload_kg: ArrayLike | float | None = None,
+                temperature_c: ArrayLike | float | None = None) -> Array:
+        """Predicted target poses ``(N, 4, 4)`` for readings ``q`` (eq. 6.23; at the
+        temperatures ``temperature_c`` when the model has the thermal term)."""
+        return self.predict_batch(self.batch(q, payload_kg, temperature_c))
 
 
 def fold_frames(model: ErrorModel) -> ErrorModel:
@@ -277,4 +326,5 @@ def fold_frames(model: ErrorModel) -> ErrorModel:
     for j, p in enumerate(model.space):
         if p.kind in ("base", "probe") or (p.kind == "link" and p.link == fl):
             v[j] = 0.0
-    return ErrorModel(s, model.space, v, model.base(), probe, model.payload_ref_kg)
+    return ErrorModel(s, model.space, v, model.base(), probe, model.payload_ref_kg,
+                      model.temperature_ref_c)

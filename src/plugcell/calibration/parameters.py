@@ -4,7 +4,8 @@ An :class:`ErrorParameter` is one scalar unknown of the error model (thesis
 eq. 6.11): a geometric error of a link (Δθ, Δd, Δa, Δα, Δβ of eq. B.10), of the
 BASE (Δa0, Δb0, Δα0, Δβ0, Δθ0, Δd0 of eq. 6.24), of the PROBE through the
 virtual frame 7 (Δθ7, Δd7, Δa7, Δα7 of 6.2.2), a gravity-deflection constant
-(G1–G3 of eq. 6.31) or a payload-compliance constant (A, B, C, D of eq. 6.40).
+(G1–G3 of eq. 6.31), a payload-compliance constant (A, B, C, D of eq. 6.40) or
+the amplitude of a joint-angle harmonic (transmission error, ``h1s_2`` …).
 
 Every parameter has
 
@@ -30,7 +31,7 @@ from numpy.typing import NDArray
 Array = NDArray[np.float64]
 
 #: Kinds of error parameters.
-KINDS: tuple[str, ...] = ("base", "link", "probe", "gravity", "payload")
+KINDS: tuple[str, ...] = ("base", "link", "probe", "gravity", "payload", "harmonic", "thermal")
 
 #: Greek symbols of the geometric fields (thesis notation).
 SYMBOLS: dict[str, str] = {

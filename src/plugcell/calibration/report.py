@@ -163,6 +163,33 @@ def _coverage_figure(plt: Any, result: CalibrationResult, calibration: Calibrati
     return fig
 
 
+def _hybrid_section(result: CalibrationResult) -> list[str]:
+    """Physical vs hybrid on the validation poses and the layer's grouped CV."""
+    layer = result.residual_model
+    if layer is None:
+        return []
+    cv = layer.cv
+    out = ["<h2>Learned residual layer (hybrid model)</h2>",
+           f"<p>Gradient-boosted trees on {', '.join(layer.summary()['features'])}; residual in "
+           f"the robot base frame; grouped {cv.folds}-fold cross-validation over {cv.cells} "
+           f"workspace cells of {cv.cell_size_m:g} m: held-out mean position error "
+           f"{cv.physical_mm:.3f} mm (physical) → {cv.hybrid_mm:.3f} mm (hybrid)"
+           + ("" if layer.useful else " — <b>no gain: the layer is not applied</b>") + ".</p>"]
+    h = result.hybrid_validation_residuals
+    if h is None:
+        out.append("<p class='small'>No validation set: the hybrid model was not validated "
+                   "on independent poses (it is never evaluated on its training poses).</p>")
+        return out
+    out.append("<table><tr><th class='l'>validation</th><th>mean Δp (mm)</th><th>σ (mm)</th>"
+               "<th>max (mm)</th><th>rms (mm)</th><th>mean Δφ (°)</th></tr>")
+    rows = _stats_rows("validation", h.accuracy("before"), h.accuracy("after"))
+    rows = rows.replace(", nominal<", ", physical<").replace(", calibrated<", ", hybrid<")
+    out.append(rows + "</table>")
+    out.append(f"<p class='small'>{result.hybrid_fallbacks} of {len(h)} validation poses lie "
+               "outside the layer's trained region: the physical model is used for them.</p>")
+    return out
+
+
 def render_report(
     result: CalibrationResult,
     calibration: CalibrationData,
@@ -209,6 +236,7 @@ def render_report(
                  "and PROBE fitted; Δφ: angle of the rotation between measured and "
                  "predicted orientation.</p>")
     parts += _coverage_table(result)
+    parts += _hybrid_section(result)
 
     try:
         import matplotlib

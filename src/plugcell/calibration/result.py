@@ -22,7 +22,13 @@ from numpy.typing import ArrayLike, NDArray
 from plugcell.calibration.configs import ModelConfig, model_config
 from plugcell.calibration.data import CalibrationData
 from plugcell.calibration.identifiability import Identifiability
-from plugcell.calibration.model import ErrorModel
+from plugcell.calibration.model import THERMAL_KEY, ErrorModel
+from plugcell.calibration.residual_model import (
+    LearnedResidual,
+    calibration_fingerprint,
+    hybrid_poses,
+    hybrid_residuals,
+)
 from plugcell.calibration.statistics import (
     ParameterStatistics,
     PoseResiduals,
@@ -107,6 +113,11 @@ class CalibrationResult:
     (:class:`~plugcell.calibration.validity.ValidityRegion`; ``None`` for a PARAMS.json
     written before it was recorded); ``validation_region``: the validation poses checked
     against it.
+    ``residual_model``: a learned residual layer on top (hybrid model,
+    :mod:`~plugcell.calibration.residual_model`), set by :meth:`with_residual_model`;
+    ``hybrid_validation_residuals``: physical (``before``) vs hybrid (``after``) on the
+    validation poses, ``hybrid_fallbacks``: validation poses outside the layer's
+    trained region (physical model used).
     """
 
     config: ModelConfig
@@ -135,19 +146,24 @@ class CalibrationResult:
     validation_residuals: PoseResiduals | None = None
     validity: ValidityRegion | None = None
     validation_region: RegionCheck | None = None
+    residual_model: LearnedResidual | None = None
+    hybrid_validation_residuals: PoseResiduals | None = None
+    hybrid_fallbacks: int = 0
 
     # ------------------------------------------------------------------ prediction
-    def predict(self, q: ArrayLike, payload_kg: ArrayLike | float | None = None) -> Array:
+    def predict(self, q: ArrayLike, payload_kg: ArrayLike | float | None = None,
+                temperature_c: ArrayLike | float | None = None) -> Array:
         """Calibrated target poses ``(N, 4, 4)`` in the measurement frame."""
-        return self.model.predict(q, payload_kg)
+        return self.model.predict(q, payload_kg, temperature_c)
 
-    def predict_nominal(self, q: ArrayLike, payload_kg: ArrayLike | float | None = None) -> Array:
+    def predict_nominal(self, q: ArrayLike, payload_kg: ArrayLike | float | None = None,
+                        temperature_c: ArrayLike | float | None = None) -> Array:
         """Poses of the nominal robot with the fitted BASE/PROBE."""
-        return self.nominal.predict(q, payload_kg)
+        return self.nominal.predict(q, payload_kg, temperature_c)
 
     def residuals(self, data: CalibrationData) -> Array:
         """``(N, 6)`` (or ``(N, 3)``) measured − calibrated, metres and radians."""
-        return pose_residuals(data, self.predict(data.q, data.payload_kg))
+        return pose_residuals(data, self.predict(data.q, data.payload_kg, data.temperature_c))
 
     def evaluate_poses(self, data: CalibrationData, *, refit_base: bool = False,
                        refit_probe: bool = False, rotation_weight: float | None = None,
@@ -172,8 +188,9 @@ class CalibrationResult:
                     "positions_only": refit_positions_only}
             nominal = _refit(nominal, data, **opts)
             model = _refit(model, data, **opts)
-        return PoseResiduals.from_poses(data, nominal.predict(data.q, data.payload_kg),
-                                        model.predict(data.q, data.payload_kg))
+        t = data.temperature_c
+        return PoseResiduals.from_poses(data, nominal.predict(data.q, data.payload_kg, t),
+                                        model.predict(data.q, data.payload_kg, t))
 
     def evaluate(self, data: CalibrationData, *, refit_base: bool = False,
                  refit_probe: bool = False, rotation_weight: float | None = None,
@@ -189,7 +206,8 @@ class CalibrationResult:
                         refit_probe: bool = False, rotation_weight: float | None = None,
                         refit_positions_only: bool = False) -> CalibrationResult:
         """This result with the accuracy and residuals on independent poses ``data``
-        (options of :meth:`evaluate_poses`)."""
+        (options of :meth:`evaluate_poses`; with a residual model also physical vs hybrid
+        on them)."""
         r = self.evaluate_poses(data, refit_base=refit_base, refit_probe=refit_probe,
                                 rotation_weight=rotation_weight,
                                 refit_positions_only=refit_positions_only)
@@ -197,9 +215,18 @@ class CalibrationResult:
         warnings = self.warnings
         if check is not None and check.count:
             warnings = (*warnings, "validation: " + check.message("validation poses"))
-        return replace(self, validation=r.accuracy("after"),
-                       validation_before=r.accuracy("before"), n_validation=len(data),
-                       validation_residuals=r, validation_region=check, warnings=warnings)
+        out = replace(self, validation=r.accuracy("after"),
+                      validation_before=r.accuracy("before"), n_validation=len(data),
+                      validation_residuals=r, validation_region=check, warnings=warnings)
+        if self.residual_model is not None:
+            w = self.settings.get("rotation_weight", 1.0) if rotation_weight is None \
+                else rotation_weight
+            h, pred = hybrid_residuals(self.model, self.residual_model, data,
+                                       refit_base=refit_base, refit_probe=refit_probe,
+                                       rotation_weight=w,
+                                       refit_positions_only=refit_positions_only)
+            out = replace(out, hybrid_validation_residuals=h, hybrid_fallbacks=pred.fallback_count)
+        return out
 
     def check_region(self, q: ArrayLike, payload_kg: ArrayLike | float | None = None,
                      targets: ArrayLike | None = None) -> RegionCheck | None:
@@ -208,6 +235,26 @@ class CalibrationResult:
         if self.validity is None:
             return None
         return self.validity.check(q, payload_kg, targets)
+
+    def with_residual_model(self, layer: LearnedResidual) -> CalibrationResult:
+        """This result with a learned residual layer (trained on this calibration's
+        model: :func:`~plugcell.calibration.residual_model.calibration_fingerprint`)."""
+        if layer.fingerprint != calibration_fingerprint(self.model):
+            raise ValueError("the residual model was trained on top of another calibration")
+        return replace(self, residual_model=layer, hybrid_validation_residuals=None,
+                       hybrid_fallbacks=0)
+
+    def predict_hybrid(self, q: ArrayLike, payload_kg: ArrayLike | float | None = None,
+                       temperature_c: ArrayLike | float | None = None
+                       ) -> tuple[Array, Array]:
+        """Hybrid target poses ``(N, 4, 4)`` (measurement frame) and ``(N,)`` in-domain
+        flags (False: the physical model's pose); the physical ones without a layer."""
+        P = self.predict(q, payload_kg, temperature_c)
+        if self.residual_model is None:
+            return P, np.ones(len(P), dtype=bool)
+        m = np.zeros(len(P)) if payload_kg is None else payload_kg
+        pred = self.residual_model.predict(q, m, temperature_c)
+        return hybrid_poses(P, self.model.base()[:3, :3], pred.correction), pred.in_domain
 
     # ------------------------------------------------------------------ parameters
     def value(self, key: str) -> float:
@@ -248,8 +295,11 @@ class CalibrationResult:
             out["validation"]["region"] = self.validation_region.summary()
         return out
 
-    def to_dict(self) -> dict[str, Any]:
-        """The PARAMS.json content (SI values with units; statistics in mm / deg)."""
+    def to_dict(self, residual_file: dict[str, Any] | None = None) -> dict[str, Any]:
+        """The PARAMS.json content (SI values with units; statistics in mm / deg).
+
+        ``residual_file``: what :func:`plugcell.io.residual_models.save_residual`
+        returned (side-file name, SHA-256), recorded under ``residual_model``."""
         space = self.model.space
         ident = self.identifiability
         dependent = []
@@ -264,7 +314,9 @@ class CalibrationResult:
             "format": FORMAT,
             "format_version": FORMAT_VERSION,
             "robot": self.robot,
-            "model": self.config.as_dict(),
+            "model": {**self.config.as_dict(), "harmonics": harmonic_order(self.model),
+                      "thermal": THERMAL_KEY in self.model.space,
+                      "temperature_ref_c": self.model.temperature_ref_c},
             "data": {"poses": self.n_poses, "six_dof": self.six_dof,
                      "payload_ref_kg": self.model.payload_ref_kg},
             "parameters": self.parameter_table(),
@@ -288,13 +340,26 @@ class CalibrationResult:
             "calibration": cal,
             "validation": val,
             "warnings": list(self.warnings),
+            "residual_model": None if self.residual_model is None
+            else {**self.residual_model.summary(), **(residual_file or {})},
+            "validation_hybrid": self._hybrid_summary(),
             "elapsed_s": self.elapsed_s,
             "settings": dict(self.settings),
             "validity": None if self.validity is None else self.validity.to_dict(),
         }
 
-    def to_json(self, indent: int | None = 2) -> str:
-        return json.dumps(_clean(self.to_dict()), indent=indent, allow_nan=False)
+    def _hybrid_summary(self) -> dict[str, Any] | None:
+        """Physical vs hybrid accuracy on the validation poses (mm, deg)."""
+        h = self.hybrid_validation_residuals
+        if h is None:
+            return None
+        return {"physical": accuracy_summary(h.accuracy("before")),
+                "hybrid": accuracy_summary(h.accuracy("after")),
+                "poses": len(h), "fallbacks": self.hybrid_fallbacks}
+
+    def to_json(self, indent: int | None = 2,
+                residual_file: dict[str, Any] | None = None) -> str:
+        return json.dumps(_clean(self.to_dict(residual_file)), indent=indent, allow_nan=False)
 
     def residuals_dict(self) -> dict[str, Any]:
         """The per-pose residual file (``plugcell calibrate --residuals``), mm and degrees.
@@ -342,7 +407,11 @@ class CalibrationResult:
         def build(values: dict[str, float]) -> ErrorModel:
             m = ErrorModel.create(desc, cfg.family, gravity=cfg.gravity, payload=cfg.payload,
                                   base=np.array(refs["base"]), probe=np.array(refs["probe"]),
-                                  payload_ref_kg=m_ref)
+                                  payload_ref_kg=m_ref,
+                                  harmonics=int(d["model"].get("harmonics", 0)),
+                                  thermal=bool(d["model"].get("thermal", False)),
+                                  temperature_ref_c=float(d["model"].get("temperature_ref_c",
+                                                                         0.0)))
             return m.with_values([float(values.get(k, 0.0)) for k in m.space.keys])
 
         model = build(d["values"])
@@ -357,6 +426,33 @@ class CalibrationResult:
                    calibration=None, calibration_before=None, six_dof=bool(d["data"]["six_dof"]),
                    n_poses=int(d["data"]["poses"]), warnings=tuple(d.get("warnings", ())),
                    validity=validity)
+
+
+def rebase_document(document: dict[str, Any], result: CalibrationResult, base: ArrayLike,
+                    event: dict[str, Any] | None = None) -> dict[str, Any]:
+    """A copy of the PARAMS.json ``document`` of ``result`` with BASE re-registered to
+    ``base`` ``(4, 4)`` (the drift watch): the reference becomes the new BASE, the BASE
+    parameters' values zero, ``event`` appended to ``drift_history``; ``parameters``
+    stays the record of the identification."""
+    import copy
+
+    B = np.asarray(base, dtype=float)
+    if B.shape != (4, 4) or not np.all(np.isfinite(B)):
+        raise ValueError(f"base: expected a finite 4x4 transform, got shape {B.shape}")
+    d = copy.deepcopy(document)
+    for p in result.model.space:
+        if p.kind == "base":
+            d["values"][p.key] = 0.0
+    d["references"]["base"] = B.tolist()
+    d["base"] = {**_frame_dict(B), "thesis_6_24": _thesis_base(B)}
+    if event is not None:
+        d.setdefault("drift_history", []).append(dict(event))
+    return d
+
+
+def harmonic_order(model: ErrorModel) -> int:
+    """The highest joint-angle harmonic order among the model's parameters (0: none)."""
+    return max((int(p.key[1]) for p in model.space if p.kind == "harmonic"), default=0)
 
 
 def _clean(x: Any) -> Any:

@@ -76,6 +76,21 @@ def configure(p: argparse.ArgumentParser) -> None:
                         "--validate-refit (default 1, as the thesis)")
     p.add_argument("--condition-limit", type=float,
                    help="apply the condition-number rule (4.10) with this limit, e.g. 100")
+    p.add_argument("--harmonics", type=int, choices=(0, 1, 2), default=0,
+                   help="add joint-angle harmonics Δθ_j = Σ s sin(k q_j) + c cos(k q_j), "
+                        "k ≤ this order, to the physical model (transmission error)")
+    p.add_argument("--thermal", action="store_true",
+                   help="identify a thermal expansion κT of the robot's lengths (1/K) about "
+                        "the data's mean temperature (needs a temperature_c column)")
+    p.add_argument("--residual-model", choices=("none", "learned"), default="none",
+                   help="after the physical identification, learn the remaining error from "
+                        "the joint readings (gradient boosting, grouped cross-validation; "
+                        "written next to --out as PARAMS.residual.skops)")
+    p.add_argument("--residual-cell-m", type=float, default=0.4, metavar="M",
+                   help="workspace cell edge grouping poses for the residual model's "
+                        "cross-validation (default 0.4 m)")
+    p.add_argument("--residual-trees", type=int, default=300, metavar="N",
+                   help="boosting iterations of each residual regressor (default 300)")
     p.add_argument("--quiet", action="store_true", help="no progress on stderr")
     p.set_defaults(func=_run)
 
@@ -178,12 +193,23 @@ def _summary(d: dict[str, Any]) -> str:
             line += (f", orientation {b.get('orientation', {}).get('mean_deg', math.nan):.4f} -> "
                      f"{s['orientation']['mean_deg']:.4f}°")
         lines.append(line)
+    rm, hv = d.get("residual_model"), d.get("validation_hybrid")
+    if rm:
+        cv = rm["cross_validation"]
+        lines.append(f"  residual model: grouped {cv['folds']}-fold CV over {cv['cells']} cells of "
+                     f"{cv['cell_size_m']:g} m: {cv['physical_mm']:.3f} -> {cv['hybrid_mm']:.3f} mm"
+                     + ("" if rm["useful"] else " (no gain: not applied)"))
+    if hv:
+        lines.append(f"  validation  physical {hv['physical']['mean_mm']:7.3f} mm, hybrid "
+                     f"{hv['hybrid']['mean_mm']:7.3f} mm ({hv['fallbacks']} of {hv['poses']} "
+                     "poses outside the trained region: physical model used)")
     lines += [f"  warning: {w}" for w in d["warnings"]]
     return "\n".join(lines)
 
 
 def _run(args: argparse.Namespace) -> int:
     from plugcell.calibration import CalibrationError, Calibrator
+    from plugcell.calibration.residual_model import ResidualModelError
     from plugcell.cli import CommandError
     from plugcell.commands.robotargs import load_robot_of, robot_source_of
 
@@ -203,6 +229,11 @@ def _run(args: argparse.Namespace) -> int:
         raise CommandError("--validate-refit needs a --validate file")
     if args.refit_positions_only and args.validate_refit == "none":
         raise CommandError("--refit-positions-only needs --validate-refit base or base+probe")
+    if not (math.isfinite(args.residual_cell_m) and args.residual_cell_m > 0):
+        raise CommandError(f"--residual-cell-m must be > 0, got {args.residual_cell_m}")
+    if args.residual_model == "learned" and args.out is None:
+        raise CommandError("--residual-model learned needs --out PARAMS.json: the layer is "
+                           "saved beside it (PARAMS.residual.skops)")
     scale = desc.reading_scale()  # degrees, mm for a prismatic joint
     data = _read(args.data, args.rot, desc.n_readings, args.payload_kg, scale)
     val = None
@@ -222,25 +253,44 @@ def _run(args: argparse.Namespace) -> int:
                          loss=args.loss, max_iterations=args.max_iterations,
                          **({} if args.loss_scale is None else {"loss_scale": args.loss_scale}),
                          rotation_weight=args.rotation_weight,
-                         condition_limit=args.condition_limit, progress=progress)
+                         condition_limit=args.condition_limit, progress=progress,
+                         harmonics=args.harmonics, thermal=args.thermal)
         result = cal.fit(data)
+        if args.residual_model == "learned":
+            from plugcell.calibration.residual_model import ResidualLearner
+
+            learner = ResidualLearner(
+                cell_size_m=args.residual_cell_m, trees=args.residual_trees,
+                progress=lambda t: progress("residual", 0, 0, t))
+            result = result.with_residual_model(learner.fit(result.model, data,
+                                                            robot=result.robot))
         if val is not None:
             result = result.with_validation(
                 val, refit_base=args.validate_refit != "none",
                 refit_probe=args.validate_refit == "base+probe",
                 rotation_weight=args.rotation_weight,
                 refit_positions_only=args.refit_positions_only)
-    except CalibrationError as exc:
+    except (CalibrationError, ResidualModelError) as exc:
         raise CommandError(str(exc)) from None
-    d = json.loads(result.to_json())
+    written = []
+    side = None
+    if result.residual_model is not None:
+        from plugcell.io.residual_models import ResidualFileError, residual_path, save_residual
+
+        try:
+            side = save_residual(result.residual_model, residual_path(args.out))
+        except ResidualFileError as exc:
+            raise CommandError(str(exc)) from None
+    d = json.loads(result.to_json(residual_file=side))
     # where the robot came from and what it was: export and compensate find it again
     d["robot_source"] = robot_source_of(args).absolute().to_dict()
     d["description"] = desc.to_dict()
     text = json.dumps(d, indent=2, allow_nan=False)
-    written = []
     if args.out is not None:
         _write(args.out, text + "\n")
         written.append(args.out)
+        if side is not None:
+            written.append(residual_path(args.out))
     if args.report is not None:
         from plugcell.calibration.report import render_report
 

@@ -66,6 +66,12 @@ def configure(p: argparse.ArgumentParser) -> None:
     add_robot_args(p, help="robot description (name, .toml, .urdf or .xacro) instead of the "
                    "one recorded in PARAMS")
     p.add_argument("--tol", type=float, default=1e-6, help="‖Δx‖ threshold (default 1e-6)")
+    p.add_argument("--physical-only", action="store_true",
+                   help="ignore a learned residual model recorded in PARAMS (hybrid model "
+                        "by default when there is one)")
+    p.add_argument("--temperature-c", type=float, default=None, metavar="T",
+                   help="cell temperature (°C): for a residual model that uses it and a "
+                        "model with the thermal term (default: its reference temperature)")
     p.set_defaults(func=_run)
 
 
@@ -142,7 +148,7 @@ def parse_targets(text: str, name: str) -> tuple[list[str], np.ndarray, np.ndarr
     return names, vals[:, :3] / 1e3, np.radians(vals[:, 3:]), pay, lines
 
 
-def _load_params(path: Path, args: argparse.Namespace) -> Any:
+def _load_params(path: Path, args: argparse.Namespace, residual: bool = True) -> Any:
     from plugcell.calibration.result import CalibrationResult
     from plugcell.cli import CommandError
     from plugcell.commands.robotargs import load_robot_of
@@ -165,10 +171,20 @@ def _load_params(path: Path, args: argparse.Namespace) -> Any:
         except DescriptionError as exc:
             raise CommandError(str(exc)) from None
     try:
-        return CalibrationResult.from_dict(d, desc)
+        result = CalibrationResult.from_dict(d, desc)
     except (KeyError, TypeError, ValueError) as exc:
         what = f"missing key {exc}" if isinstance(exc, KeyError) else str(exc)
         raise CommandError(f"{path}: not a plugcell calibration: {what}") from None
+    entry = d.get("residual_model")
+    if residual and entry:
+        from plugcell.io.residual_models import ResidualFileError, load_residual
+
+        try:
+            layer = load_residual(entry, path, robot=result.robot, model=result.model)
+        except ResidualFileError as exc:
+            raise CommandError(f"{exc} (--physical-only ignores it)") from None
+        result = result.with_residual_model(layer)
+    return result
 
 
 # ----------------------------------------------------------------------------- run
@@ -181,7 +197,11 @@ def _run(args: argparse.Namespace) -> int:
         raise CommandError(f"--payload-kg must be a mass ≥ 0 kg, got {args.payload_kg}")
     if not args.tol > 0:
         raise CommandError(f"--tol must be > 0, got {args.tol}")
-    result = _load_params(args.params, args)
+    result = _load_params(args.params, args, not args.physical_only)
+    layer = result.residual_model
+    if layer is not None and layer.uses_temperature and args.temperature_c is None:
+        raise CommandError(f"{args.params}: its residual model uses the temperature: give "
+                           "--temperature-c (or --physical-only)")
     try:
         text = args.targets.read_text()
     except OSError as exc:
@@ -195,7 +215,7 @@ def _run(args: argparse.Namespace) -> int:
     tool = None if args.tool is None else _frame_arg(args.tool, "--tool", args.rot)
     default_m = result.model.payload_ref_kg if args.payload_kg is None else args.payload_kg
     payload = pay if pay is not None else np.full(len(names), default_m)
-    model = IdentifiedModel(result.model, tool)
+    model = IdentifiedModel(result.model, tool, residual=layer, temperature_c=args.temperature_c)
     t0 = time.perf_counter()
     res = filter_program(model, pos, ang, args.rot, user_frame=user, payload_kg=payload,
                          tol=args.tol, raise_errors=False)
@@ -208,9 +228,16 @@ def _run(args: argparse.Namespace) -> int:
                            + "\n".join(msgs) + more)
     region = _region(result, res.q, payload)
     _write(args, result, names, res, payload, region)
+    hybrid = ""
+    if layer is not None:
+        inside = model.in_domain(res.q, payload)
+        if res.hybrid_fallback is not None:
+            inside &= ~res.hybrid_fallback
+        hybrid = (f" + learned residual ({int(inside.sum())} in its trained region, "
+                  f"{int((~inside).sum())} physical only)")
     print(f"compensated {len(names)} targets with model {result.config.number} "
-          f"({result.config.name}) in {dt * 1e3:.1f} ms: at most {int(res.iterations.max())} "
-          f"iterations, residual ≤ {float(res.residual.max()):.1e}"
+          f"({result.config.name}){hybrid} in {dt * 1e3:.1f} ms: at most "
+          f"{int(res.iterations.max())} iterations, residual ≤ {float(res.residual.max()):.1e}"
           + ("" if args.out is None else f"; wrote {args.out}"),
           file=sys.stderr if args.out is None else sys.stdout)
     if region is not None and region.count:

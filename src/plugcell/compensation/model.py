@@ -31,7 +31,7 @@ iterations to 10⁻⁶ either way.
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import Protocol, runtime_checkable
+from typing import Any, Protocol, runtime_checkable
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -43,7 +43,7 @@ from plugcell.kinematics import (
     forward,
     jacobian_from_fk,
 )
-from plugcell.kinematics.transforms import invert
+from plugcell.kinematics.transforms import invert, so3_exp
 
 Array = NDArray[np.float64]
 
@@ -99,11 +99,25 @@ class IdentifiedModel:
 
     ``error_model``: the identified :class:`ErrorModel` (e.g.
     ``CalibrationResult.model``); ``tool``: the compensated point in the flange frame
-    of the identified chain, default the identified PROBE (the T-MAC).
+    of the identified chain, default the identified PROBE (the T-MAC);
+    ``residual``: a learned residual layer
+    (:class:`~plugcell.calibration.residual_model.LearnedResidual`) on top — the hybrid
+    model: its base-frame correction ``(e, φ)`` of the PROBE point is applied to the
+    tool as the rigid motion ``G = Trans(p_probe + e) · Rot(Exp φ) · Trans(−p_probe)``
+    (``T ← G·T``: the PROBE point moves by ``e``, every orientation turns by φ), where
+    the pose is inside the layer's trained region (elsewhere the physical model
+    alone); the Jacobian stays the physical one (the boosted trees are piecewise
+    constant — :func:`~plugcell.compensation.model_based.compensate_joints` solves the
+    hybrid model by an outer fixed point on ``G``); ``temperature_c``: the cell's
+    temperature (°C) — for a layer that uses it, and for a model with the thermal term
+    κT (the flange position and the linear rows of its Jacobian scale by
+    ``1 + κT (T − T_ref)``); ``None``: the model's reference temperature.
     """
 
     error_model: ErrorModel
     tool: Array = field(default=None)  # type: ignore[assignment]
+    residual: Any = None
+    temperature_c: float | None = None
 
     def __post_init__(self) -> None:
         em = self.error_model
@@ -142,10 +156,53 @@ class IdentifiedModel:
         batch = em.batch(qb, payload_kg)
         s = em.structure
         fk = forward(s.desc, self._params, em.chain_joints(batch), closure="fourbar")  # type: ignore[attr-defined]
-        T = fk.flange @ self.tool
+        flange = fk.flange
         J = jacobian_from_fk(s.desc, fk, "flange")
-        J = shift_jacobian(J, fk.flange[:, :3, 3], T[:, :3, 3]) @ s.reading_jacobian
+        scale = em.thermal_scale(em.batch(qb, payload_kg, self.temperature_c)) \
+            if self.temperature_c is not None else None
+        if scale is not None:  # thermal term: the flange position scales, so do its rates
+            flange = flange.copy()
+            flange[:, :3, 3] *= scale[:, None]
+            J = J.copy()
+            J[:, :3] *= scale[:, None, None]
+        T = flange @ self.tool
+        J = shift_jacobian(J, flange[:, :3, 3], T[:, :3, 3]) @ s.reading_jacobian
+        if self.residual is not None:
+            T = self._correction(flange @ self._probe, qb, batch.payload_kg) @ T  # type: ignore[attr-defined]
         return T, J
+
+    def _correction(self, T_probe: Array, q: Array, payload_kg: Array) -> Array:
+        """``G`` ``(N, 4, 4)`` (class docstring) at the PROBE poses ``T_probe``."""
+        c = self.residual.predict(q, payload_kg, self.temperature_c).correction
+        R = so3_exp(c[:, 3:])
+        p = T_probe[:, :3, 3]
+        G = np.broadcast_to(np.eye(4), (len(q), 4, 4)).copy()
+        G[:, :3, :3] = R
+        G[:, :3, 3] = p + c[:, :3] - np.einsum("nij,nj->ni", R, p)
+        return G
+
+    def physical(self) -> IdentifiedModel:
+        """The same model without the learned layer."""
+        return IdentifiedModel(self.error_model, self.tool, None, self.temperature_c)
+
+    def correction(self, q: ArrayLike, payload_kg: ArrayLike | float = 0.0) -> Array:
+        """The learned layer's rigid correction ``G`` ``(N, 4, 4)`` at ``q`` (identity
+        without a layer or outside its trained region): hybrid pose = ``G ·`` physical."""
+        qb = _as_batch(q, self.error_model.structure.n_readings)
+        if self.residual is None:
+            return np.broadcast_to(np.eye(4), (len(qb), 4, 4)).copy()
+        phys = self.physical().evaluate(qb, payload_kg)[0]
+        T_probe = phys @ invert(self.tool) @ self._probe  # type: ignore[attr-defined]
+        m = np.broadcast_to(np.asarray(payload_kg, float), (len(qb),))
+        return self._correction(T_probe, qb, m)
+
+    def in_domain(self, q: ArrayLike, payload_kg: ArrayLike | float = 0.0) -> Array:
+        """``(N,)`` True where the learned layer applies (all True without one)."""
+        qb = _as_batch(q, self.error_model.structure.n_readings)
+        if self.residual is None:
+            return np.ones(len(qb), dtype=bool)
+        m = np.broadcast_to(np.asarray(payload_kg, float), (len(qb),))
+        return np.asarray(self.residual.predict(qb, m, self.temperature_c).in_domain)
 
     def pose(self, q: ArrayLike, payload_kg: ArrayLike | float = 0.0) -> Array:
         """Tool poses ``(N, 4, 4)`` in the robot base frame."""

@@ -29,6 +29,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -81,6 +82,10 @@ class CompensationResult:
     orientation_error: Array
     reason: NDArray[np.object_]
     kind: NDArray[np.object_]
+    #: with a learned residual layer: targets compensated with the physical model alone
+    #: because the layer's correction did not settle (a boundary of its trained region
+    #: or of its trees between the iterates); ``None`` without a layer
+    hybrid_fallback: NDArray[np.bool_] | None = None
 
     def __len__(self) -> int:
         return int(self.q.shape[0])
@@ -169,6 +174,10 @@ def compensate_joints(
     """
     if not (tol > 0 and max_iterations >= 0):
         raise ValueError("tol must be > 0 and max_iterations ≥ 0")
+    if getattr(model, "residual", None) is not None:
+        return _compensate_hybrid(model, T_target, q_start, payload_kg, tol=tol,
+                                  max_iterations=max_iterations, check_limits=check_limits,
+                                  raise_errors=raise_errors)
     T = _targets(T_target)
     N = T.shape[0]
     desc = model.description
@@ -236,6 +245,75 @@ def compensate_joints(
     return result
 
 
+#: rounds of the hybrid model's outer fixed point
+HYBRID_ROUNDS = 4
+
+
+def _compensate_hybrid(model: Any, T_target: ArrayLike, q_start: ArrayLike,
+                       payload_kg: ArrayLike | float, *, tol: float, max_iterations: int,
+                       check_limits: bool, raise_errors: bool) -> CompensationResult:
+    """Compensation on a hybrid model (physical + learned layer, hybrid pose = ``G(q)·T(q)``).
+
+    The layer's correction ``G`` is piecewise constant in ``q``, so Newton's iteration on
+    the hybrid pose can alternate across a step of it.  Instead, an outer fixed point:
+    solve the physical model for the target with the correction taken out,
+    ``T(q) = G_k⁻¹ · T_target`` (b.–f. of 6.5.1), re-evaluate ``G_{k+1} = G(q)`` and
+    repeat until it no longer changes (‖Δ‖ < tol; at most :data:`HYBRID_ROUNDS`
+    rounds).  A target whose correction keeps changing sits on a step of the layer: it
+    is compensated with the physical model alone and marked in ``hybrid_fallback``.
+    """
+    T = _targets(T_target)
+    N = T.shape[0]
+    n = model.description.n_actuated
+    q = np.broadcast_to(np.asarray(q_start, dtype=float), (N, n)).copy()
+    m = _payload(payload_kg, N)
+    phys = model.physical()
+    G = model.correction(q, m)
+    iters = np.zeros(N, dtype=int)
+    moving = np.ones(N, dtype=bool)
+    res = None
+    for _ in range(HYBRID_ROUNDS):
+        res = compensate_joints(phys, np.linalg.inv(G) @ T, q, m, tol=tol,
+                                max_iterations=max_iterations, check_limits=check_limits,
+                                raise_errors=False)
+        iters += res.iterations
+        q = res.q
+        G_new = model.correction(q, m)
+        moving = np.linalg.norm(pose_error_exact(G_new, G), axis=-1) >= tol
+        G = G_new
+        if not moving.any():
+            break
+    assert res is not None
+    if moving.any():  # on a step of the layer: the physical model for these targets
+        k = np.flatnonzero(moving)
+        r2 = compensate_joints(phys, T[k], q[k], m[k], tol=tol, max_iterations=max_iterations,
+                               check_limits=check_limits, raise_errors=False)
+        q[k] = r2.q
+        iters[k] += r2.iterations
+    Tq = model.evaluate(q, m)[0]
+    Tq[moving] = phys.evaluate(q[moving], m[moving])[0]
+    dx = pose_error_exact(T, Tq)
+    residual = np.linalg.norm(dx, axis=-1)
+    converged = residual < tol
+    within = model.description.within_limits(q) if check_limits else np.ones(N, dtype=bool)
+    reason = np.full(N, "", dtype=object)
+    kind = np.full(N, "", dtype=object)
+    for i in np.flatnonzero(~converged):
+        kind[i], reason[i] = "no_convergence", (
+            f"hybrid compensation did not converge: ‖Δx‖ = {residual[i]:.3g} ≥ {tol:g}")
+    for i in np.flatnonzero(converged & ~within):
+        kind[i], reason[i] = "joint_limit", _limit_reason(model.description, q[i])[0]
+    out = CompensationResult(
+        q=q, q_start=np.broadcast_to(np.asarray(q_start, dtype=float), (N, n)).copy(),
+        converged=converged, within_limits=within, iterations=iters, residual=residual,
+        position_error=np.linalg.norm(dx[:, :3], axis=-1),
+        orientation_error=np.linalg.norm(dx[:, 3:], axis=-1), reason=reason, kind=kind,
+        hybrid_fallback=moving)
+    if raise_errors:
+        _raise_first(out, model.description)
+    return out
+
+
 def _raise_first(result: CompensationResult, desc: RobotDescription) -> None:
     bad = np.flatnonzero(~result.ok)
     if not bad.size:
@@ -298,6 +376,7 @@ def compensate(
             q=res.q, q_start=res.q_start, converged=conv, within_limits=res.within_limits,
             iterations=res.iterations, residual=res.residual, position_error=res.position_error,
             orientation_error=res.orientation_error, reason=reason, kind=kind,
+            hybrid_fallback=res.hybrid_fallback,
         )
     if raise_errors:
         _raise_first(res, model.description)

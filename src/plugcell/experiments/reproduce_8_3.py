@@ -58,6 +58,7 @@ from numpy.typing import NDArray
 
 from plugcell.calibration.data import CalibrationData
 from plugcell.calibration.identify import Calibrator
+from plugcell.calibration.residual_model import ResidualLearner
 from plugcell.calibration.result import CalibrationResult
 from plugcell.compensation import (
     CorrectionError,
@@ -134,6 +135,9 @@ class ExperimentConfig:
     spacing_m: float = 0.150
     flange_zyz_deg: tuple[float, float, float] = (0.0, 90.0, 0.0)
     verify_duration_s: float = 1.0
+    #: learn a residual layer on the calibration poses and compensate with the hybrid
+    #: model (issue 19; needs ≥ 200 calibration poses)
+    residual_model: bool = False
     correction: CorrectionSettings = field(
         default_factory=lambda: CorrectionSettings(overhead_s=C3G_OVERHEAD_S))
     timing: TwinTiming = field(default_factory=TwinTiming)
@@ -176,6 +180,10 @@ def _calibrate(cell: TwinCell, cfg: ExperimentConfig, seed: int) -> tuple[Calibr
     q = working_volume_joints(robot.description, profile, cfg.calibration_poses, rng)
     ms, sim_t = measure_poses(robot, cell.tracker, q)
     result = Calibrator(robot.description, cfg.model).fit(ms)
+    if cfg.residual_model:
+        layer = ResidualLearner().fit(result.model, CalibrationData.from_measurements(ms),
+                                      robot=robot.description.name)
+        result = result.with_residual_model(layer)
     if cfg.validation_poses > 0:
         qv = working_volume_joints(robot.description, profile, cfg.validation_poses,
                                    np.random.default_rng(seed + 2))
@@ -345,7 +353,7 @@ def run(fast: bool = False, seed: int = 0, progress: Progress | None = None,
 
     cal, cal_time = _calibrate(cell, cfg, seed)
     tick()
-    model = IdentifiedModel(cal.model)
+    model = IdentifiedModel(cal.model, residual=cal.residual_model)
     frames = MetrologyFrames(model.base, model.probe)
     grid = line_targets(cfg, model.probe)
     L, P = grid.shape[:2]
@@ -385,6 +393,12 @@ def run(fast: bool = False, seed: int = 0, progress: Progress | None = None,
             "validation_nominal_mean_position_mm": _mean_mm(cal.validation_before),
             "parameters": len(cal.keys), "converged": cal.converged,
             "warnings": list(cal.warnings), "campaign_time_s": cal_time,
+            "residual_model": None if cal.residual_model is None else {
+                "cv": cal.residual_model.cv.as_dict(),
+                "validation_hybrid_mean_position_mm": None
+                if cal.hybrid_validation_residuals is None
+                else float(cal.hybrid_validation_residuals.norms("after").mean() * 1e3),
+                "validation_fallbacks": cal.hybrid_fallbacks},
         },
         "model_compensation": {"iterations_max": int(comp.iterations.max()),
                                "residual_max": float(comp.residual.max())},

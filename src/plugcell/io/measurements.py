@@ -15,6 +15,9 @@ Format (used by the twin, the calibrator, the services and the docs)::
   a property of the file set by the reader/writer (``rpy`` = fixed X-Y-Z, default;
   ``zyz``; ``xyz`` intrinsic).
 * ``payload_kg`` — optional payload carried during the measurement.
+* ``temperature_c`` — optional temperature (°C) at the measurement; when present,
+  every row must have it (an empty cell is refused, naming the line): the learned
+  residual layer and a thermal term use it as a feature.
 
 Inside the program everything is SI: radians and metres.  Errors name the file,
 the row (1-based line number in the file) and the column.
@@ -45,7 +48,8 @@ class MeasurementSet:
     """Poses of one calibration or validation campaign, in SI units.
 
     ``joints`` (N, n) rad; ``positions`` (N, 3) m; ``angles`` (N, 3) rad or ``None``
-    (convention ``rotation``); ``payload_kg`` (N,) or ``None``.
+    (convention ``rotation``); ``payload_kg`` (N,) or ``None``; ``temperature_c`` (N,)
+    °C or ``None``.
     """
 
     joints: np.ndarray
@@ -53,6 +57,7 @@ class MeasurementSet:
     angles: np.ndarray | None = None
     rotation: str = "rpy"
     payload_kg: np.ndarray | None = None
+    temperature_c: np.ndarray | None = None
 
     def __post_init__(self) -> None:
         n = self.joints.shape[0]
@@ -64,6 +69,8 @@ class MeasurementSet:
             raise ValueError(f"angles must be ({n}, 3), got {self.angles.shape}")
         if self.payload_kg is not None and self.payload_kg.shape != (n,):
             raise ValueError(f"payload_kg must be ({n},), got {self.payload_kg.shape}")
+        if self.temperature_c is not None and self.temperature_c.shape != (n,):
+            raise ValueError(f"temperature_c must be ({n},), got {self.temperature_c.shape}")
         if self.rotation not in ROTATION_CONVENTIONS:
             raise ValueError(
                 f"rotation convention {self.rotation!r} unknown; use one of {ROTATION_CONVENTIONS}"
@@ -88,6 +95,7 @@ class MeasurementSet:
             angles=None if self.angles is None else self.angles[index],
             rotation=self.rotation,
             payload_kg=None if self.payload_kg is None else self.payload_kg[index],
+            temperature_c=None if self.temperature_c is None else self.temperature_c[index],
         )
 
 
@@ -114,12 +122,13 @@ def _parse_header(name: str, header: list[str]) -> tuple[int, dict[str, int]]:
     rot = [c for c in ("rx", "ry", "rz") if c in index]
     if rot and len(rot) != 3:
         raise MeasurementFileError(f"{name}: orientation needs all of rx, ry, rz; found only {rot}")
-    known = {f"j{k}" for k in joint_numbers} | {"x", "y", "z", "rx", "ry", "rz", "payload_kg"}
+    known = {f"j{k}" for k in joint_numbers} | {"x", "y", "z", "rx", "ry", "rz", "payload_kg",
+                                                "temperature_c"}
     unknown = [c for c in cols if c not in known]
     if unknown:
         raise MeasurementFileError(
             f"{name}: unknown columns {unknown}; expected j1..jn, x, y, z, "
-            "optional rx, ry, rz and payload_kg"
+            "optional rx, ry, rz, payload_kg and temperature_c"
         )
     return len(joint_numbers), index
 
@@ -175,6 +184,11 @@ def parse_measurements(
                 f"{name}: line {line_no}: expected {ncol} values, got {len(row)}"
             )
         for c, cell in enumerate(row):
+            if not cell.strip() and cols[c] == "temperature_c":
+                raise MeasurementFileError(
+                    f"{name}: line {line_no}, column 'temperature_c': missing value (a "
+                    "temperature column must be complete; drop the column or the row)"
+                )
             try:
                 v = float(cell)
             except ValueError:
@@ -201,7 +215,8 @@ def parse_measurements(
             raise MeasurementFileError(
                 f"{name}: line {line_no}, column 'payload_kg': negative mass {payload[bad[0]]}"
             )
-    return MeasurementSet(joints, positions, angles, rotation, payload)
+    temperature = values[:, index["temperature_c"]] if "temperature_c" in index else None
+    return MeasurementSet(joints, positions, angles, rotation, payload, temperature)
 
 
 def read_measurements(
@@ -237,6 +252,8 @@ def format_measurements(m: MeasurementSet, *, comments: Iterable[str] = (),
         header += ["rx", "ry", "rz"]
     if m.payload_kg is not None:
         header.append("payload_kg")
+    if m.temperature_c is not None:
+        header.append("temperature_c")
     out.write(",".join(header) + "\n")
     cols = [m.joints / (math.pi / 180.0 if joint_scale is None
                         else np.asarray(joint_scale, dtype=float)), m.positions * 1000.0]
@@ -244,6 +261,8 @@ def format_measurements(m: MeasurementSet, *, comments: Iterable[str] = (),
         cols.append(np.rad2deg(m.angles))
     if m.payload_kg is not None:
         cols.append(m.payload_kg[:, None])
+    if m.temperature_c is not None:
+        cols.append(m.temperature_c[:, None])
     table = np.hstack(cols)
     for row in table:
         out.write(",".join(f"{v:.9g}" for v in row) + "\n")

@@ -280,10 +280,20 @@ def _params_path(ctx: FunctionContext, name: Any) -> Path:
 
 @register
 def save_params(ctx: FunctionContext, params: Any, name: Any) -> None:
-    """Save identified parameters as PARAMS.json under the service's data directory."""
+    """Save identified parameters as PARAMS.json under the service's data directory
+    (with a learned residual layer, its side file ``NAME.residual.skops`` beside it)."""
     p = _params(params)
     path = _params_path(ctx, name)
     path.parent.mkdir(parents=True, exist_ok=True)
+    layer = p.result.residual_model
+    if layer is not None:
+        from plugcell.io.residual_models import ResidualFileError, residual_path, save_residual
+
+        try:
+            entry = save_residual(layer, residual_path(path))
+        except ResidualFileError as exc:
+            raise FunctionError(str(exc)) from None
+        p.document["residual_model"] = {**(p.document.get("residual_model") or {}), **entry}
     fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=".params-", suffix=".json")
     with os.fdopen(fd, "w", encoding="utf-8") as fh:
         json.dump(p.document, fh, indent=2, allow_nan=False)
@@ -303,6 +313,15 @@ def load_params(ctx: FunctionContext, name: Any) -> Parameters:
         raise FunctionError(f"no parameter set {path.stem!r} in {path.parent}") from None
     except (OSError, ValueError, KeyError, TypeError) as exc:
         raise FunctionError(f"{path.name}: cannot read: {exc}") from None
+    entry = doc.get("residual_model")
+    if entry:  # a learned residual layer: the hybrid model (docs/calibration.md)
+        from plugcell.io.residual_models import ResidualFileError, load_residual
+
+        try:
+            layer = load_residual(entry, path, robot=result.robot, model=result.model)
+        except ResidualFileError as exc:
+            raise FunctionError(str(exc)) from None
+        result = result.with_residual_model(layer)
     return Parameters(result, desc, doc)
 
 
@@ -315,6 +334,58 @@ def frame(ctx: FunctionContext, params: Any, which: Any, angles: Any = "euler") 
         raise FunctionError(f"which: 'base' or 'probe', got {name!r}")
     T = p.result.model.base() if name == "base" else p.result.model.probe()
     return vector_from_matrix(T, _convention(angles)).reshape(1, 6)
+
+
+# -- drift watch (issue 19) -------------------------------------------------------------------
+
+
+@register
+def base_drift(ctx: FunctionContext, params: Any, nests: Any, measured: Any,
+               threshold: Any = 0.05) -> np.ndarray:
+    """The drift of BASE from re-measured reference nests (docs/metrology.md): ``nests``
+    K×3 or K×6, the registered nest positions in the robot base frame (mm); ``measured``
+    K×3 or K×6, the same nests measured now with the tracker's BASE set to the identified
+    one (robot base frame, mm); ``threshold`` mm.  → 1×9 ``[displacement mm, alarm 0|1,
+    consistent 0|1, tx, ty, tz (mm), rx, ry, rz (deg)]``: the drift ``D`` in the tracker
+    frame (``BASE' = D · BASE``) and its largest displacement at the nests."""
+    from plugcell.metrology.drift import estimate_base_drift
+
+    p = _params(params)
+    n = _matrix(nests, "nests")
+    m = _matrix(measured, "measured")
+    if n.shape[1] not in (3, 6) or m.shape[1] not in (3, 6):
+        raise FunctionError("nests and measured: K×3 or K×6 rows (mm[, deg])")
+    B = p.result.model.base()
+    m_tracker = m[:, :3] / 1e3 @ B[:3, :3].T + B[:3, 3]
+    try:
+        est = estimate_base_drift(B, n[:, :3] / 1e3, m_tracker,
+                                  threshold_m=_number(threshold, "threshold") * 1e-3)
+    except ValueError as exc:
+        raise FunctionError(str(exc)) from None
+    return np.r_[est.displacement_m * 1e3, float(est.alarm), float(est.consistent),
+                 est.translation_m * 1e3, np.degrees(est.rotation_rad)].reshape(1, 9)
+
+
+@register
+def rebase(ctx: FunctionContext, params: Any, drift: Any) -> Parameters:
+    """Parameters with BASE re-registered by a :func:`base_drift` row: ``BASE' = D·BASE``
+    (the robot's parameters and a learned residual layer unchanged)."""
+    from plugcell.calibration.result import rebase_document
+    from plugcell.kinematics.transforms import so3_exp
+
+    p = _params(params)
+    row = _matrix(drift, "drift", (9,))[0]
+    D = np.eye(4)
+    D[:3, :3] = so3_exp(np.radians(row[6:9]))
+    D[:3, 3] = row[3:6] / 1e3
+    doc = rebase_document(p.document, p.result, D @ p.result.model.base(),
+                          {"displacement_mm": float(row[0]), "alarm": bool(row[1] > 0.5),
+                           "translation_mm": row[3:6].tolist(),
+                           "rotation_deg": row[6:9].tolist()})
+    result = CalibrationResult.from_dict(doc, p.description)
+    if p.result.residual_model is not None:
+        result = result.with_residual_model(p.result.residual_model)
+    return Parameters(result, p.description, doc)
 
 
 # -- compensation (6.5.1, 8.3.2) ------------------------------------------------------------
@@ -342,7 +413,8 @@ def compensate(ctx: FunctionContext, params: Any, targets: Any, payload: Any = 0
     p = _params(params)
     convention = _convention(angles)
     T = _poses(_matrix(targets, "targets", (6,)), convention)
-    model = IdentifiedModel(p.result.model, tool=_tool(p, tool, convention))
+    model = IdentifiedModel(p.result.model, tool=_tool(p, tool, convention),
+                            residual=p.result.residual_model)
     try:
         res = _compensate(model, T, _payload(payload, len(T)), raise_errors=False)
     except ValueError as exc:
@@ -358,7 +430,8 @@ def compensate_joints(ctx: FunctionContext, params: Any, joints: Any, payload: A
     p = _params(params)
     desc = p.description
     q = np.deg2rad(_matrix(joints, "joints", (desc.n_readings,)))
-    model = IdentifiedModel(p.result.model, tool=_tool(p, tool, _convention(angles)))
+    model = IdentifiedModel(p.result.model, tool=_tool(p, tool, _convention(angles)),
+                            residual=p.result.residual_model)
     T = NominalModel(desc, tool=model.tool).pose(q)
     try:
         res = _compensate_joints(model, T, q, _payload(payload, len(q)), raise_errors=False)

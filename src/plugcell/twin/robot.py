@@ -34,6 +34,7 @@ from numpy.typing import ArrayLike, NDArray
 from plugcell.kinematics import RobotDescription, forward
 from plugcell.twin.physics import Payload, bending, deflected_joints, gravity_torques
 from plugcell.twin.scenario import TwinScenario, TwinTruth, make_truth
+from plugcell.twin.thermal import ThermalDrift
 
 Array = NDArray[np.float64]
 
@@ -90,6 +91,40 @@ class RobotTwin:
         self._reached = self._motor.copy()
         self._flank = np.ones(desc.n_readings)  # side of the backlash each gear sits on
         self.moves = 0
+        self._thermal: ThermalDrift | None = None
+        self._temperature_c = 20.0
+
+    # ------------------------------------------------------------------ thermal drift
+    def set_thermal_drift(self, drift: ThermalDrift | None, temperature_c: float | None = None
+                          ) -> None:
+        """Let the cell drift with temperature (:mod:`plugcell.twin.thermal`; ``None``:
+        no drift); ``temperature_c`` default the drift's reference."""
+        self._thermal = drift
+        if drift is not None:
+            self._temperature_c = drift.reference_c if temperature_c is None else temperature_c
+
+    def set_temperature(self, temperature_c: float) -> None:
+        """The hall's temperature now (°C): moves BASE and scales the arm's lengths."""
+        if not np.isfinite(temperature_c):
+            raise ValueError(f"temperature_c must be finite, got {temperature_c!r}")
+        self._temperature_c = float(temperature_c)
+
+    @property
+    def temperature_c(self) -> float:
+        """The temperature a sensor in the cell reads (°C)."""
+        return self._temperature_c
+
+    def true_base(self) -> Array:
+        """True BASE now (robot base in the tracker frame) — simulators only."""
+        if self._thermal is None:
+            return self._truth.base
+        return self._thermal.base_drift(self._temperature_c) @ self._truth.base
+
+    def true_point_in_tracker(self, point_base: ArrayLike) -> Array:
+        """Where a point fixed to the robot's foundation (robot base frame, m) is in the
+        tracker frame now (a reference nest) — simulators only."""
+        B = self.true_base()
+        return B[:3, :3] @ np.asarray(point_base, float) + B[:3, 3]
 
     # ------------------------------------------------------------------ public face
     @property
@@ -144,11 +179,15 @@ class RobotTwin:
     # ------------------------------------------------------------------ truth (simulators only)
     def true_flange(self) -> Array:
         """True flange pose in the robot base frame — for simulated devices only."""
-        return true_flange_poses(self._truth, self._reached, self._payload)
+        T = true_flange_poses(self._truth, self._reached, self._payload)
+        if self._thermal is not None:
+            T = np.array(T, copy=True)
+            T[..., :3, 3] *= self._thermal.length_scale(self._temperature_c)
+        return T
 
     def true_reflector_in_tracker(self) -> Array:
         """True T-MAC pose in the tracker frame, BASE·T6·PROBE (eq. 6.23)."""
-        return self._truth.base @ self.true_flange() @ self._truth.probe
+        return self.true_base() @ self.true_flange() @ self._truth.probe
 
     def reveal_truth(self) -> TwinTruth:
         """The hidden truth — for tests and error budgets, never for calibration."""

@@ -1,0 +1,498 @@
+"""A learned residual layer on top of the physical error model (hybrid model).
+
+After the physical identification a real robot keeps an error the model's terms
+do not explain (~0.4 mm on the IPA UR10).  :class:`ResidualLearner` fits that rest
+as a function of the joint readings (and the temperature and payload when the
+data carry them) with scikit-learn's gradient boosting, one
+:class:`~sklearn.ensemble.HistGradientBoostingRegressor` per component.  The
+hybrid pose is::
+
+    p_hybrid = p_phys + R_B · e(x)          R_hybrid = Exp(R_B · φ(x)) · R_phys
+
+with ``p_phys, R_phys`` the physical model's prediction (measurement frame),
+``R_B`` the rotation of its BASE and ``e, φ`` the learned position and
+orientation residuals **in the robot base frame** — so the layer transfers when
+BASE (and PROBE) are re-identified after the tracker moved.  The features are
+``x = (sin q, cos q[, T / 2 K][, m / 10 kg])``.
+
+Honest validation is built in:
+
+* hyper-parameters are chosen by **grouped** cross-validation inside the
+  calibration set — the groups are contiguous cubic cells (``cell_size_m``) of
+  the target position in the robot base frame, never a random split of
+  near-identical poses;
+* an **in-domain test**: a pose is in the trained region when its nearest
+  training pose in feature space is no farther than ``threshold`` — the
+  ``domain_quantile`` of the distances from held-out cells to the training poses
+  of the cross-validation, i.e. the distances at which the layer was shown to
+  work.  Outside, the hybrid model falls back to the physical one (and says so:
+  :attr:`ResidualPrediction.in_domain`);
+* if the layer does not beat the physical model on the held-out cells it is
+  marked not useful and never applied.
+
+Pure math (numpy, scikit-learn), no files: serialisation is
+:mod:`plugcell.io.residual_models`.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import math
+from collections.abc import Callable, Mapping, Sequence
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from plugcell.calibration.data import CalibrationData
+from plugcell.calibration.model import ErrorModel
+from plugcell.calibration.statistics import PoseResiduals
+from plugcell.kinematics.transforms import so3_exp
+
+Array = NDArray[np.float64]
+
+__all__ = [
+    "DEFAULT_GRID",
+    "MIN_POSES",
+    "CrossValidation",
+    "LearnedResidual",
+    "ResidualLearner",
+    "ResidualModelError",
+    "ResidualPrediction",
+    "calibration_fingerprint",
+    "hybrid_poses",
+    "hybrid_residuals",
+    "workspace_cells",
+]
+
+#: fewest poses the learner accepts (with at least ``n_splits`` workspace cells).
+MIN_POSES = 200
+#: the default hyper-parameter grid (gradient boosting, 300 trees, learning rate 0.1).
+DEFAULT_GRID: tuple[dict[str, Any], ...] = (
+    {"max_leaf_nodes": 15, "min_samples_leaf": 20},
+    {"max_leaf_nodes": 31, "min_samples_leaf": 20},
+    {"max_leaf_nodes": 15, "min_samples_leaf": 50},
+    {"max_leaf_nodes": 31, "min_samples_leaf": 50},
+)
+_FIXED = {"max_iter": 300, "learning_rate": 0.1, "early_stopping": False}
+#: feature scales: 2 K of temperature or 10 kg of payload count as one unit (≈ one radian).
+TEMPERATURE_SCALE_K = 2.0
+PAYLOAD_SCALE_KG = 10.0
+
+Progress = Callable[[str], None]
+
+
+class ResidualModelError(ValueError):
+    """Bad input for the learned residual layer (too few poses, mismatched features…)."""
+
+
+def calibration_fingerprint(model: ErrorModel) -> str:
+    """A short hash of the physical model's robot parameters (every kind but BASE and
+    PROBE): the learned layer is valid only on top of the robot model it was trained
+    with; re-registering BASE (the tracker moved, the drift watch) keeps it valid."""
+    h = hashlib.sha256()
+    for p, v in zip(model.space, np.asarray(model.values, float), strict=True):
+        if p.kind not in ("base", "probe"):
+            h.update(p.key.encode())
+            h.update(np.round(np.float64(v), 15).tobytes())
+    return h.hexdigest()[:16]
+
+
+def workspace_cells(points: ArrayLike, cell_size_m: float) -> Array:
+    """Group index of each point: the cubic cell of edge ``cell_size_m`` it lies in, the
+    grid anchored at the points' lower corner.
+
+    ``points`` ``(N, 3)`` m → ``(N,)`` int, cells numbered in lexicographic order."""
+    p = np.asarray(points, float)
+    cells = np.floor((p - p.min(axis=0)) / cell_size_m).astype(np.int64)
+    _, groups = np.unique(cells, axis=0, return_inverse=True)
+    return np.asarray(groups).reshape(-1)
+
+
+@dataclass(frozen=True)
+class CrossValidation:
+    """Grouped cross-validation of the layer on the calibration set (mm).
+
+    ``physical_mm``/``hybrid_mm``: mean position error of the held-out poses with the
+    physical and the hybrid model (chosen hyper-parameters); ``scores``: mean
+    hybrid error per candidate of the grid; ``folds``, ``cells``, ``cell_size_m``."""
+
+    physical_mm: float
+    hybrid_mm: float
+    physical_orientation_deg: float | None
+    hybrid_orientation_deg: float | None
+    folds: int
+    cells: int
+    cell_size_m: float
+    scores: tuple[tuple[dict[str, Any], float], ...]
+
+    def as_dict(self) -> dict[str, Any]:
+        return {"physical_mm": self.physical_mm, "hybrid_mm": self.hybrid_mm,
+                "physical_orientation_deg": self.physical_orientation_deg,
+                "hybrid_orientation_deg": self.hybrid_orientation_deg,
+                "folds": self.folds, "cells": self.cells, "cell_size_m": self.cell_size_m,
+                "grid": [{"params": p, "hybrid_mm": s} for p, s in self.scores]}
+
+
+@dataclass(frozen=True)
+class ResidualPrediction:
+    """The learned correction of ``N`` poses: ``correction`` ``(N, 6)`` (m, rad; position
+    then rotation vector, robot base frame), zero where ``in_domain`` is False;
+    ``distance`` ``(N,)`` to the nearest training pose in feature space."""
+
+    correction: Array
+    in_domain: Array
+    distance: Array
+
+    @property
+    def fallback_count(self) -> int:
+        """Poses outside the trained region (physical model used)."""
+        return int(np.count_nonzero(~self.in_domain))
+
+
+@dataclass(frozen=True, eq=False)
+class LearnedResidual:
+    """A fitted residual layer (see module docstring).
+
+    ``robot``: the robot's name; ``fingerprint``: :func:`calibration_fingerprint` of
+    the physical model it was trained on; ``estimators``: one fitted regressor per
+    component (3 position, + 3 orientation when ``orientation``); ``neighbours``: the
+    fitted nearest-neighbour index of the training features; ``threshold``: the
+    in-domain distance; ``uses_temperature``/``uses_payload``: the features;
+    ``params``: the chosen hyper-parameters; ``cv``: the grouped cross-validation;
+    ``useful``: False when it did not beat the physical model on held-out cells (then
+    it is never applied); ``n_poses``.
+    """
+
+    robot: str
+    fingerprint: str
+    estimators: tuple[Any, ...]
+    neighbours: Any
+    threshold: float
+    uses_temperature: bool
+    uses_payload: bool
+    orientation: bool
+    params: dict[str, Any]
+    cv: CrossValidation
+    useful: bool
+    n_poses: int
+    sklearn_version: str = field(default="")
+
+    def features(self, q: ArrayLike, payload_kg: ArrayLike | float | None = None,
+                 temperature_c: ArrayLike | float | None = None) -> Array:
+        """The feature matrix ``(N, f)`` of joint readings ``q`` ``(N, n)`` (rad)."""
+        return _features(q, payload_kg, temperature_c, self.uses_payload, self.uses_temperature)
+
+    def predict(self, q: ArrayLike, payload_kg: ArrayLike | float | None = None,
+                temperature_c: ArrayLike | float | None = None) -> ResidualPrediction:
+        """The correction of each pose in the robot base frame (module docstring).
+
+        Parameters
+        ----------
+        q : (N, n) array
+            Joint readings (rad).
+        payload_kg, temperature_c : (N,) array or float, optional
+            Required when the layer uses them as features (kg, °C).
+
+        Returns
+        -------
+        ResidualPrediction
+            ``correction`` (N, 6) m and rad (zero outside the trained region),
+            ``in_domain`` (N,), ``distance`` (N,) in feature space.
+        """
+        X = self.features(q, payload_kg, temperature_c)
+        dist = self.neighbours.kneighbors(X, n_neighbors=1, return_distance=True)[0][:, 0]
+        inside = (dist <= self.threshold) & self.useful
+        corr = np.zeros((len(X), 6))
+        if inside.any():
+            from threadpoolctl import threadpool_limits
+
+            Xi = X[inside]
+            with threadpool_limits(1):
+                for j, est in enumerate(self.estimators):
+                    corr[inside, j] = est.predict(Xi)
+        return ResidualPrediction(corr, inside, dist)
+
+    def summary(self) -> dict[str, Any]:
+        """What PARAMS.json records about the layer (no estimator state)."""
+        return {"kind": "learned", "learner": "sklearn.HistGradientBoostingRegressor",
+                "robot": self.robot, "fingerprint": self.fingerprint,
+                "features": feature_names(self.uses_payload, self.uses_temperature),
+                "frame": "robot base", "orientation": self.orientation,
+                "params": dict(self.params), "threshold": self.threshold,
+                "useful": self.useful, "poses": self.n_poses,
+                "cross_validation": self.cv.as_dict(), "sklearn_version": self.sklearn_version}
+
+
+def feature_names(payload: bool, temperature: bool) -> list[str]:
+    names = ["sin q", "cos q"]
+    if temperature:
+        names.append(f"temperature / {TEMPERATURE_SCALE_K:g} K")
+    if payload:
+        names.append(f"payload / {PAYLOAD_SCALE_KG:g} kg")
+    return names
+
+
+def _column(x: ArrayLike | float | None, n: int, what: str) -> Array:
+    if x is None:
+        raise ResidualModelError(f"the residual model uses the {what}: give it for every pose")
+    a = np.broadcast_to(np.asarray(x, float), (n,)).astype(float)
+    if not np.all(np.isfinite(a)):
+        bad = int(np.flatnonzero(~np.isfinite(a))[0])
+        raise ResidualModelError(f"{what}: missing or non-finite value at pose {bad + 1}")
+    return a
+
+
+def _features(q: ArrayLike, payload_kg: ArrayLike | float | None,
+              temperature_c: ArrayLike | float | None, payload: bool,
+              temperature: bool) -> Array:
+    qa = np.atleast_2d(np.asarray(q, float))
+    cols = [np.sin(qa), np.cos(qa)]
+    if temperature:
+        cols.append(_column(temperature_c, len(qa), "temperature")[:, None] / TEMPERATURE_SCALE_K)
+    if payload:
+        cols.append(_column(payload_kg, len(qa), "payload")[:, None] / PAYLOAD_SCALE_KG)
+    return np.hstack(cols)
+
+
+def residual_targets(model: ErrorModel, data: CalibrationData) -> tuple[Array, Array]:
+    """Physical residuals in the robot base frame and the predicted target positions.
+
+    Returns ``E`` ``(N, 3|6)`` = ``[R_Bᵀ Δp, R_Bᵀ Δφ]`` (m, rad; Δφ = ``log(R_M R_Pᵀ)``,
+    measurement-frame axes) and ``p_b`` ``(N, 3)`` the predicted
+    target positions in the base frame (m)."""
+    P = model.predict(data.q, data.payload_kg, data.temperature_c)
+    dp, dphi = _measured_minus(data, P)
+    B = model.base()
+    Rb = B[:3, :3]
+    E = dp @ Rb if dphi is None else np.hstack([dp @ Rb, dphi @ Rb])
+    p_b = (P[:, :3, 3] - B[:3, 3]) @ Rb
+    return E, p_b
+
+
+def _measured_minus(data: CalibrationData, P: Array) -> tuple[Array, Array | None]:
+    """Δp and the spatial rotation vector ``log(R_M R_Pᵀ)`` (measurement frame)."""
+    from plugcell.kinematics import pose_error_exact
+
+    if data.six_dof:
+        e = pose_error_exact(data.poses, P)
+        return e[:, :3], e[:, 3:]
+    return data.positions - P[:, :3, 3], None
+
+
+def hybrid_poses(poses: ArrayLike, base_rotation: ArrayLike, correction: ArrayLike) -> Array:
+    """Apply a base-frame correction ``(N, 6)`` to physical poses ``(N, 4, 4)``.
+
+    ``p ← p + R_B e``, ``R ← Exp(R_B φ) R`` (module docstring)."""
+    T = np.array(poses, dtype=float, copy=True)
+    Rb = np.asarray(base_rotation, float)
+    c = np.asarray(correction, float)
+    T[:, :3, 3] += c[:, :3] @ Rb.T
+    if np.any(c[:, 3:]):
+        T[:, :3, :3] = so3_exp(c[:, 3:] @ Rb.T) @ T[:, :3, :3]
+    return T
+
+
+class ResidualLearner:
+    """Fits a :class:`LearnedResidual` on the residuals of a physical model.
+
+    Parameters
+    ----------
+    cell_size_m : float
+        Edge of the workspace cells that group poses for cross-validation (m).
+    n_splits : int
+        Folds of the grouped cross-validation (the data need at least as many cells).
+    grid : sequence of dict
+        Candidate hyper-parameters of ``HistGradientBoostingRegressor`` (merged with
+        300 trees, learning rate 0.1, no early stopping); default :data:`DEFAULT_GRID`.
+    domain_quantile : float
+        Quantile of the held-out-cell distances that bounds the trained region.
+    orientation : bool
+        Also learn the orientation residual (6-DOF data only).
+    use_temperature, use_payload : bool or None
+        Features; ``None``: use the temperature when the data carry it and the payload
+        when it varies in the data.
+    trees : int
+        Boosting iterations of every regressor (default 300).
+    min_poses : int
+        Fewest poses accepted (:data:`MIN_POSES`).
+    seed : int
+        Seed of the regressors (deterministic).
+    n_threads : int
+        OpenMP threads of the regressors (default 1: on a shared machine
+        scikit-learn's default — every core — was measured 15× slower than one thread).
+    progress : callable, optional
+        Called with a line of text per stage.
+    """
+
+    def __init__(self, *, cell_size_m: float = 0.4, n_splits: int = 5,
+                 grid: Sequence[Mapping[str, Any]] = DEFAULT_GRID,
+                 domain_quantile: float = 0.95, orientation: bool = True,
+                 use_temperature: bool | None = None, use_payload: bool | None = None,
+                 trees: int = 300, min_poses: int = MIN_POSES, seed: int = 0,
+                 n_threads: int = 1, progress: Progress | None = None) -> None:
+        if not (cell_size_m > 0 and math.isfinite(cell_size_m)):
+            raise ResidualModelError(f"cell size must be > 0 m, got {cell_size_m}")
+        if n_splits < 2:
+            raise ResidualModelError(f"n_splits must be at least 2, got {n_splits}")
+        if not 0 < domain_quantile <= 1:
+            raise ResidualModelError(f"domain quantile must be in (0, 1], got {domain_quantile}")
+        if not grid:
+            raise ResidualModelError("empty hyper-parameter grid")
+        if trees < 1:
+            raise ResidualModelError(f"trees must be at least 1, got {trees}")
+        self.trees = int(trees)
+        if n_threads < 1:
+            raise ResidualModelError(f"n_threads must be at least 1, got {n_threads}")
+        self.n_threads = int(n_threads)
+        self.cell_size_m = float(cell_size_m)
+        self.n_splits = int(n_splits)
+        self.grid = tuple(dict(g) for g in grid)
+        self.domain_quantile = float(domain_quantile)
+        self.orientation = orientation
+        self.use_temperature = use_temperature
+        self.use_payload = use_payload
+        self.min_poses = int(min_poses)
+        self.seed = int(seed)
+        self.progress = progress
+
+    def _say(self, text: str) -> None:
+        if self.progress is not None:
+            self.progress(text)
+
+    def _regressor(self, params: Mapping[str, Any]) -> Any:
+        from sklearn.ensemble import HistGradientBoostingRegressor
+
+        return HistGradientBoostingRegressor(
+            random_state=self.seed, **{**_FIXED, "max_iter": self.trees, **params})
+
+    def fit(self, model: ErrorModel, data: CalibrationData, *, robot: str = "") -> LearnedResidual:
+        """Learn the residual of ``model`` (an identified physical model) on ``data``.
+
+        Raises
+        ------
+        ResidualModelError
+            Too few poses (the message says how many are needed), too few workspace
+            cells for the folds, or an incomplete temperature/payload column.
+        """
+        from threadpoolctl import threadpool_limits
+
+        with threadpool_limits(self.n_threads):
+            return self._fit(model, data, robot)
+
+    def _fit(self, model: ErrorModel, data: CalibrationData, robot: str) -> LearnedResidual:
+        import sklearn
+        from sklearn.model_selection import GroupKFold
+        from sklearn.neighbors import NearestNeighbors
+
+        n = len(data)
+        if n < self.min_poses:
+            raise ResidualModelError(
+                f"too few poses to learn the residual from: {n}, at least {self.min_poses} "
+                f"needed (spread over at least {self.n_splits} cells of {self.cell_size_m:g} m)")
+        temp = data.temperature_c is not None if self.use_temperature is None \
+            else self.use_temperature
+        if temp and data.temperature_c is None:
+            raise ResidualModelError("temperature requested as a feature but the data have no "
+                                     "temperature column")
+        pay = bool(np.ptp(data.payload_kg) > 0) if self.use_payload is None else self.use_payload
+        X = _features(data.q, data.payload_kg, data.temperature_c, pay, temp)
+        E, p_b = residual_targets(model, data)
+        k_pos = 3
+        n_out = 6 if (self.orientation and E.shape[1] == 6) else 3
+        groups = workspace_cells(p_b, self.cell_size_m)
+        n_cells = int(groups.max()) + 1
+        if n_cells < self.n_splits:
+            raise ResidualModelError(
+                f"the poses span {n_cells} workspace cell(s) of {self.cell_size_m:g} m; the "
+                f"grouped cross-validation needs at least {self.n_splits}: spread the poses "
+                "wider or use smaller cells")
+        folds = list(GroupKFold(n_splits=self.n_splits).split(X, E, groups))
+        phys_norm = np.linalg.norm(E[:, :k_pos], axis=1)
+        scores: list[tuple[dict[str, Any], float]] = []
+        best: tuple[float, dict[str, Any], Array] | None = None
+        for i, params in enumerate(self.grid):
+            pred = np.zeros((n, k_pos))
+            for tr, te in folds:
+                for j in range(k_pos):
+                    pred[te, j] = self._regressor(params).fit(X[tr], E[tr, j]).predict(X[te])
+            score = float(np.linalg.norm(E[:, :k_pos] - pred, axis=1).mean())
+            scores.append((dict(params), score * 1e3))
+            self._say(f"grouped {self.n_splits}-fold CV {i + 1}/{len(self.grid)} {params}: "
+                      f"{phys_norm.mean() * 1e3:.3f} -> {score * 1e3:.3f} mm")
+            if best is None or score < best[0]:
+                best = (score, dict(params), pred)
+        assert best is not None
+        score, params, pred = best
+        ori_phys = ori_hyb = None
+        if n_out == 6:
+            pred_o = np.zeros((n, 3))
+            for tr, te in folds:
+                for j in range(3):
+                    pred_o[te, j] = self._regressor(params).fit(X[tr], E[tr, 3 + j]).predict(X[te])
+            ori_phys = math.degrees(float(np.linalg.norm(E[:, 3:], axis=1).mean()))
+            ori_hyb = math.degrees(float(np.linalg.norm(E[:, 3:] - pred_o, axis=1).mean()))
+        # the in-domain threshold: how far the held-out cells were from the training poses
+        dist = np.empty(n)
+        for tr, te in folds:
+            nn = NearestNeighbors(n_neighbors=1).fit(X[tr])
+            dist[te] = nn.kneighbors(X[te])[0][:, 0]
+        threshold = float(np.quantile(dist, self.domain_quantile))
+        self._say(f"fitting {n_out} regressors on {n} poses with {params}")
+        estimators = tuple(self._regressor(params).fit(X, E[:, j]) for j in range(n_out))
+        cv = CrossValidation(physical_mm=float(phys_norm.mean() * 1e3), hybrid_mm=score * 1e3,
+                             physical_orientation_deg=ori_phys, hybrid_orientation_deg=ori_hyb,
+                             folds=self.n_splits, cells=n_cells, cell_size_m=self.cell_size_m,
+                             scores=tuple(scores))
+        return LearnedResidual(
+            robot=robot, fingerprint=calibration_fingerprint(model), estimators=estimators,
+            neighbours=NearestNeighbors(n_neighbors=1).fit(X), threshold=threshold,
+            uses_temperature=temp, uses_payload=pay, orientation=n_out == 6,
+            params={**_FIXED, "max_iter": self.trees, **params},
+            cv=cv, useful=score < float(phys_norm.mean()), n_poses=n,
+            sklearn_version=sklearn.__version__)
+
+
+def _remove_correction(data: CalibrationData, base_rotation: Array,
+                       correction: Array) -> CalibrationData:
+    """The measurements with a base-frame correction taken out (for re-identifying
+    BASE/PROBE under the hybrid model)."""
+    Rb = base_rotation
+    p = data.positions - correction[:, :3] @ Rb.T
+    R = None
+    if data.rotations is not None:
+        R = so3_exp(-(correction[:, 3:] @ Rb.T)) @ data.rotations
+    return CalibrationData(data.q, p, R, data.payload_kg, data.temperature_c)
+
+
+def hybrid_residuals(model: ErrorModel, layer: LearnedResidual, data: CalibrationData, *,
+                     refit_base: bool = False, refit_probe: bool = False,
+                     rotation_weight: float = 1.0, refit_positions_only: bool = False
+                     ) -> tuple[PoseResiduals, ResidualPrediction]:
+    """Physical vs hybrid residual of every pose of ``data`` (never training poses).
+
+    Returns :class:`PoseResiduals` with ``before`` = the physical model and ``after``
+    = the hybrid model, and the layer's prediction (``in_domain`` says where it fell
+    back).  ``refit_base``/``refit_probe``: BASE (and PROBE) re-identified on ``data``
+    (tracker moved) — for the physical model on the raw measurements, for the hybrid
+    one on the measurements with the learned correction taken out, so that neither
+    absorbs the other's terms; ``rotation_weight`` (m/rad) and ``refit_positions_only``
+    as in :func:`~plugcell.calibration.identify.refit_base`.
+    """
+    from plugcell.calibration.identify import refit_base as _refit
+
+    opts = {"probe": refit_probe, "rotation_weight": rotation_weight,
+            "positions_only": refit_positions_only}
+    pred = layer.predict(data.q, data.payload_kg, data.temperature_c)
+    phys = _refit(model, data, **opts) if refit_base else model
+    hyb = phys
+    if refit_base and pred.in_domain.any():
+        hyb = _refit(model, _remove_correction(data, phys.base()[:3, :3], pred.correction),
+                     **opts)
+    P_phys = phys.predict(data.q, data.payload_kg, data.temperature_c)
+    P_hyb = hybrid_poses(hyb.predict(data.q, data.payload_kg, data.temperature_c),
+                         hyb.base()[:3, :3],
+                         pred.correction)
+    return PoseResiduals.from_poses(data, P_phys, P_hyb), pred
+

@@ -1,0 +1,98 @@
+"""Reference-nest files of the drift watch: one nest a row, positions in mm.
+
+Format::
+
+    # comment lines start with '#'
+    name,x,y,z
+    N1,1520.31,-840.07,12.55
+
+``name``: a unique label; ``x, y, z``: the nest's position in mm — measured by the
+tracker (tracker frame) for :func:`read_nests`, or in the robot base frame in a
+registration file written by ``plugcell drift register``.  Errors name the file, the
+line and the column.
+"""
+
+from __future__ import annotations
+
+import csv
+import io
+import math
+from pathlib import Path
+
+import numpy as np
+
+__all__ = ["NestFileError", "format_nests", "parse_nests", "read_nests"]
+
+HEADER = ("name", "x", "y", "z")
+
+
+class NestFileError(ValueError):
+    """A nest file that cannot be read (the message names file, line and column)."""
+
+
+def parse_nests(text: str, name: str = "<nests>") -> tuple[list[str], np.ndarray]:
+    """Names and positions ``(K, 3)`` in **metres** of a nest file's text."""
+    rows: list[tuple[int, list[str]]] = []
+    reader = csv.reader(io.StringIO(text, newline=None))
+    try:
+        for line_no, row in enumerate(reader, start=1):
+            if not row or all(not c.strip() for c in row) or row[0].lstrip().startswith("#"):
+                continue
+            rows.append((line_no, row))
+    except csv.Error as exc:
+        raise NestFileError(f"{name}: line {reader.line_num}: {exc}") from None
+    if not rows:
+        raise NestFileError(f"{name}: no header line (the file is empty)")
+    line_no, header = rows[0]
+    if tuple(h.strip() for h in header) != HEADER:
+        raise NestFileError(f"{name}: line {line_no}: header must be 'name,x,y,z', got "
+                            f"{','.join(h.strip() for h in header)!r}")
+    names: list[str] = []
+    pos = []
+    for line_no, row in rows[1:]:
+        if len(row) != 4:
+            raise NestFileError(f"{name}: line {line_no}: expected 4 values, got {len(row)}")
+        label = row[0].strip()
+        if not label:
+            raise NestFileError(f"{name}: line {line_no}, column 'name': empty")
+        if label in names:
+            raise NestFileError(f"{name}: line {line_no}: nest {label!r} named twice")
+        xyz = []
+        for col, cell in zip(HEADER[1:], row[1:], strict=True):
+            try:
+                v = float(cell)
+            except ValueError:
+                raise NestFileError(f"{name}: line {line_no}, column {col!r}: not a number: "
+                                    f"{cell.strip()!r}") from None
+            if not math.isfinite(v):
+                raise NestFileError(f"{name}: line {line_no}, column {col!r}: not finite")
+            xyz.append(v / 1e3)
+        names.append(label)
+        pos.append(xyz)
+    if len(names) < 3:
+        raise NestFileError(f"{name}: {len(names)} nest(s); the drift watch needs at least 3 "
+                            "(not on one line)")
+    return names, np.array(pos)
+
+
+def read_nests(path: str | Path) -> tuple[list[str], np.ndarray]:
+    """Read a nest file (:func:`parse_nests`)."""
+    p = Path(path)
+    try:
+        text = p.read_text(encoding="utf-8")
+    except FileNotFoundError:
+        raise NestFileError(f"{p}: no such file") from None
+    except (OSError, UnicodeDecodeError) as exc:
+        raise NestFileError(f"{p}: cannot read: {exc}") from None
+    return parse_nests(text, str(p))
+
+
+def format_nests(names: list[str], positions: np.ndarray, comments: tuple[str, ...] = ()) -> str:
+    """Nest-file text of ``names`` and ``positions`` ``(K, 3)`` in metres."""
+    out = io.StringIO()
+    for c in comments:
+        out.write(f"# {c}\n")
+    out.write(",".join(HEADER) + "\n")
+    for n, p in zip(names, np.asarray(positions, float), strict=True):
+        out.write(f"{n},{p[0] * 1e3:.6f},{p[1] * 1e3:.6f},{p[2] * 1e3:.6f}\n")
+    return out.getvalue()

@@ -1,0 +1,150 @@
+"""The learned residual layer's side file (``PARAMS.residual.skops``).
+
+``plugcell calibrate --residual-model learned --out PARAMS.json`` writes the fitted
+:class:`~plugcell.calibration.residual_model.LearnedResidual` next to PARAMS.json,
+serialised with **skops** (no pickle: loading never runs code from the file, and
+only the scikit-learn types listed in :data:`TRUSTED_TYPES` are accepted).
+PARAMS.json records the file name, its SHA-256, the robot, the fingerprint of the
+physical calibration and the scikit-learn version in ``residual_model``.
+
+Loading checks, each failure a :class:`ResidualFileError` naming the file:
+
+* the file exists and its SHA-256 is the one PARAMS.json recorded;
+* it contains only trusted types;
+* its robot and calibration fingerprint are those of PARAMS.json (a layer trained
+  on another robot or on another calibration of the same robot is refused; the
+  fingerprint covers the robot's parameters, not BASE and PROBE);
+* it was written by the same scikit-learn major.minor version (tree predictors are
+  not guaranteed across versions: re-run ``plugcell calibrate``).
+"""
+
+from __future__ import annotations
+
+import hashlib
+from dataclasses import asdict
+from pathlib import Path
+from typing import Any
+
+from plugcell.calibration.residual_model import (
+    CrossValidation,
+    LearnedResidual,
+    calibration_fingerprint,
+)
+
+__all__ = ["FORMAT", "TRUSTED_TYPES", "ResidualFileError", "load_residual", "residual_path",
+           "save_residual"]
+
+FORMAT = "plugcell-residual-model"
+FORMAT_VERSION = 1
+#: The only non-builtin types a side file may contain.
+TRUSTED_TYPES = (
+    "sklearn.ensemble._hist_gradient_boosting.gradient_boosting.HistGradientBoostingRegressor",
+    "sklearn.ensemble._hist_gradient_boosting.predictor.TreePredictor",
+    "sklearn.ensemble._hist_gradient_boosting.binning._BinMapper",
+    "sklearn._loss.loss.HalfSquaredError",
+    "sklearn._loss.link.IdentityLink",
+    "sklearn._loss.link.Interval",
+    "sklearn.neighbors._unsupervised.NearestNeighbors",
+    "sklearn.neighbors._kd_tree.KDTree",
+    "sklearn.neighbors._ball_tree.BallTree",
+    "sklearn.metrics._dist_metrics.EuclideanDistance64",
+    "numpy.dtype",
+    "numpy.ndarray",
+    "builtins.slice",
+)
+
+
+class ResidualFileError(ValueError):
+    """A residual-model side file that cannot be used (message names the file)."""
+
+
+def residual_path(params_path: str | Path) -> Path:
+    """The side file next to ``PARAMS.json``: ``PARAMS.residual.skops``."""
+    p = Path(params_path)
+    return p.with_name(p.stem + ".residual.skops")
+
+
+def _minor(version: str) -> str:
+    return ".".join(version.split(".")[:2])
+
+
+def save_residual(layer: LearnedResidual, path: str | Path) -> dict[str, Any]:
+    """Write ``layer`` to ``path`` (skops); returns the ``residual_model`` entry of
+    PARAMS.json (its summary + ``file`` (name, relative to PARAMS.json) + ``sha256``)."""
+    import skops.io as sio
+
+    p = Path(path)
+    meta = layer.summary()
+    obj = {"format": FORMAT, "format_version": FORMAT_VERSION, "meta": meta,
+           "cv": {**asdict(layer.cv), "scores": [[dict(s), v] for s, v in layer.cv.scores]},
+           "estimators": list(layer.estimators), "neighbours": layer.neighbours}
+    blob = sio.dumps(obj)
+    try:
+        p.parent.mkdir(parents=True, exist_ok=True)
+        p.write_bytes(blob)
+    except OSError as exc:
+        raise ResidualFileError(f"{p}: cannot write: {exc.strerror}") from None
+    return {**meta, "file": p.name, "sha256": hashlib.sha256(blob).hexdigest()}
+
+
+def load_residual(entry: dict[str, Any], params_path: str | Path, *, robot: str,
+                  model: Any) -> LearnedResidual:
+    """The layer PARAMS.json's ``residual_model`` ``entry`` refers to.
+
+    ``params_path``: the PARAMS.json (the side file's name is relative to it);
+    ``robot``, ``model``: the calibration's robot name and physical
+    :class:`~plugcell.calibration.model.ErrorModel` it must belong to.
+    """
+    import sklearn
+    import skops.io as sio
+
+    try:
+        p = Path(params_path).parent / str(entry["file"])
+        want = str(entry["sha256"])
+    except (KeyError, TypeError):
+        raise ResidualFileError(f"{params_path}: 'residual_model' lacks 'file' or "
+                                "'sha256'") from None
+    try:
+        blob = p.read_bytes()
+    except OSError as exc:
+        raise ResidualFileError(f"{p}: cannot read the residual model named by {params_path}: "
+                                f"{exc.strerror}") from None
+    if hashlib.sha256(blob).hexdigest() != want:
+        raise ResidualFileError(f"{p}: not the residual model {params_path} was written with "
+                                "(SHA-256 differs): from another calibration?")
+    try:
+        untrusted = sio.get_untrusted_types(data=blob)
+    except Exception as exc:  # skops raises several types on damaged data
+        raise ResidualFileError(f"{p}: not a skops file: {exc}") from None
+    bad = sorted(set(untrusted) - set(TRUSTED_TYPES))
+    if bad:
+        raise ResidualFileError(f"{p}: contains types plugcell does not load: {bad}")
+    try:
+        obj = sio.loads(blob, trusted=list(untrusted))
+    except Exception as exc:
+        raise ResidualFileError(f"{p}: cannot load: {exc}") from None
+    if not isinstance(obj, dict) or obj.get("format") != FORMAT:
+        raise ResidualFileError(f"{p}: not a plugcell residual model")
+    meta = obj["meta"]
+    if meta.get("robot") != robot:
+        raise ResidualFileError(f"{p}: residual model of robot {meta.get('robot')!r}, the "
+                                f"calibration is of {robot!r}")
+    fp = calibration_fingerprint(model)
+    if meta.get("fingerprint") != fp:
+        raise ResidualFileError(f"{p}: trained on top of another calibration (fingerprint "
+                                f"{meta.get('fingerprint')}, this one {fp}): re-run calibrate")
+    if _minor(str(meta.get("sklearn_version", ""))) != _minor(sklearn.__version__):
+        raise ResidualFileError(
+            f"{p}: written with scikit-learn {meta.get('sklearn_version')}, this is "
+            f"{sklearn.__version__}: re-run plugcell calibrate --residual-model learned")
+    cvd = dict(obj["cv"])
+    cvd["scores"] = tuple((dict(s), float(v)) for s, v in cvd["scores"])
+    features = list(meta["features"])
+    return LearnedResidual(
+        robot=robot, fingerprint=fp, estimators=tuple(obj["estimators"]),
+        neighbours=obj["neighbours"], threshold=float(meta["threshold"]),
+        uses_temperature=any(f.startswith("temperature") for f in features),
+        uses_payload=any(f.startswith("payload") for f in features),
+        orientation=bool(meta["orientation"]), params=dict(meta["params"]),
+        cv=CrossValidation(**cvd), useful=bool(meta["useful"]), n_poses=int(meta["poses"]),
+        sklearn_version=str(meta["sklearn_version"]))

@@ -1,0 +1,117 @@
+"""Drift watch: BASE re-registered from a few fixed reference nests (issue 19 §3).
+
+During production the tracker (or the floor under it) moves a little — a warming
+hall, a knocked tripod — and BASE, the robot base in the tracker frame, with it.
+Reference nests fixed to the robot's foundation are measured once when BASE is
+identified; their positions in the robot base frame ``n_k = BASE⁻¹ m_k`` are then
+constants.  Re-measured later (``m'_k``, tracker frame) they give the current BASE
+by rigid registration (Kabsch, :func:`~plugcell.metrology.frames.fit_rigid_transform`)::
+
+    BASE' = argmin Σ |m'_k − BASE' n_k|²        D = BASE' · BASE⁻¹   (tracker frame)
+
+``D`` is the 6-DOF drift.  Its effect is judged where it matters: the largest
+displacement ``|(BASE' − BASE) p|`` over points ``p`` of the work volume (robot base
+frame; default the nests themselves).  Above ``threshold_m`` the watch alarms; the
+fit's rms tells whether the nests still agree with each other (a knocked nest
+breaks the rigid fit: :attr:`DriftEstimate.consistent`).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from plugcell.kinematics.transforms import invert, so3_log
+from plugcell.metrology._validate import MetrologyError, as_points
+from plugcell.metrology.frames import fit_rigid_transform
+
+Array = NDArray[np.float64]
+
+__all__ = ["DriftEstimate", "estimate_base_drift", "nests_in_base"]
+
+
+def nests_in_base(base: ArrayLike, measured: ArrayLike) -> Array:
+    """Nest positions ``(K, 3)`` in the robot base frame from their tracker measurements
+    ``(K, 3)`` (m) and the identified BASE ``(4, 4)``: ``n_k = BASE⁻¹ m_k``."""
+    m = as_points(measured, "nests", 3)
+    Bi = invert(np.asarray(base, float))
+    return m @ Bi[:3, :3].T + Bi[:3, 3]
+
+
+@dataclass(frozen=True)
+class DriftEstimate:
+    """The drift of BASE since registration (module docstring).
+
+    ``base``: the re-registered BASE ``(4, 4)``; ``drift``: ``D = BASE'·BASE⁻¹`` in the
+    tracker frame; ``translation_m``/``rotation_rad``: D's translation and rotation
+    vector; ``displacement_m``: the largest displacement over the work points;
+    ``rms_m``: rms of the rigid fit of the nests; ``alarm``: displacement above the
+    threshold; ``consistent``: the fit's rms is below ``fit_tolerance_m``.
+    """
+
+    base: Array
+    drift: Array
+    translation_m: Array
+    rotation_rad: Array
+    displacement_m: float
+    rms_m: float
+    threshold_m: float
+    alarm: bool
+    consistent: bool
+
+    def as_dict(self) -> dict[str, object]:
+        """mm and degrees, for ``--json`` and the journal."""
+        return {"displacement_mm": self.displacement_m * 1e3,
+                "translation_mm": (self.translation_m * 1e3).tolist(),
+                "rotation_deg": np.degrees(self.rotation_rad).tolist(),
+                "fit_rms_mm": self.rms_m * 1e3, "threshold_mm": self.threshold_m * 1e3,
+                "alarm": self.alarm, "consistent": self.consistent,
+                "base": self.base.tolist()}
+
+
+def estimate_base_drift(base: ArrayLike, nests: ArrayLike, measured: ArrayLike, *,
+                        threshold_m: float = 0.05e-3, work_points: ArrayLike | None = None,
+                        fit_tolerance_m: float = 0.05e-3) -> DriftEstimate:
+    """Re-register BASE on re-measured nests (module docstring).
+
+    Parameters
+    ----------
+    base : (4, 4) array
+        BASE in use (robot base in the tracker frame, m).
+    nests : (K, 3) array
+        Nest positions in the robot base frame (:func:`nests_in_base`), K ≥ 3, not
+        collinear.
+    measured : (K, 3) array
+        The same nests measured now, tracker frame (m).
+    threshold_m : float
+        Alarm above this displacement (m).
+    work_points : (P, 3) array, optional
+        Where the displacement is judged (robot base frame, m); default the nests.
+    fit_tolerance_m : float
+        rms of the nests' rigid fit above which they disagree (a nest moved).
+
+    Returns
+    -------
+    DriftEstimate
+    """
+    B = np.asarray(base, float)
+    if B.shape != (4, 4) or not np.all(np.isfinite(B)):
+        raise MetrologyError(f"base: expected a finite 4x4 transform, got shape {B.shape}")
+    if not (threshold_m > 0 and fit_tolerance_m > 0):
+        raise MetrologyError("threshold_m and fit_tolerance_m must be > 0")
+    n = as_points(nests, "nests", 3)
+    m = as_points(measured, "measured nests", 3)
+    if n.shape != m.shape:
+        raise MetrologyError(f"{len(n)} registered nests but {len(m)} measured")
+    fit = fit_rigid_transform(n, m)
+    B_new = fit.transform
+    D = B_new @ invert(B)
+    pts = n if work_points is None else as_points(work_points, "work_points", 1)
+    delta = pts @ (B_new[:3, :3] - B[:3, :3]).T + (B_new[:3, 3] - B[:3, 3])
+    disp = float(np.max(np.linalg.norm(delta, axis=1)))
+    return DriftEstimate(base=B_new, drift=D, translation_m=D[:3, 3].copy(),
+                         rotation_rad=so3_log(D[:3, :3]), displacement_m=disp,
+                         rms_m=float(fit.rms), threshold_m=float(threshold_m),
+                         alarm=disp > threshold_m, consistent=float(fit.rms) <= fit_tolerance_m)
