@@ -31,6 +31,7 @@ COMMAND_MODULES: tuple[str, ...] = (
     "plugcell.commands.cell",
     "plugcell.commands.controller",
     "plugcell.commands.certs",
+    "plugcell.commands.opcua",
 )
 
 
