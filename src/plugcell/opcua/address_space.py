@@ -119,7 +119,8 @@ async def add_service(
     }
     for key, text in fixed.items():
         variables[key] = await node.add_property(
-            node_id(idx, name, key), ua.QualifiedName(key, idx), ua.Variant(text, ua.VariantType.String)
+            node_id(idx, name, key), ua.QualifiedName(key, idx),
+            ua.Variant(text, ua.VariantType.String),
         )
     live: dict[str, ua.Variant] = {
         "DeviceState": ua.Variant(device.state.value, ua.VariantType.String),

@@ -67,6 +67,10 @@ log = logging.getLogger("plugcell.opcua")
 _caller_name: contextvars.ContextVar[str | None] = contextvars.ContextVar(
     "plugcell_opcua_caller", default=None
 )
+#: The OPC UA session of the method call being served (its id).
+_caller_session: contextvars.ContextVar[int] = contextvars.ContextVar(
+    "plugcell_opcua_session", default=0
+)
 
 #: Seconds added to a command's own timeout for the gateway's wait on its process.
 CALL_MARGIN = 5.0
@@ -154,6 +158,8 @@ class CellGateway:
         self._tasks: set[asyncio.Task[Any]] = set()
         self._event_lock = asyncio.Lock()
         self._event: Any = None
+        self._streams: dict[int, dict[int, tuple[Participant, ProcessCall]]] = {}
+        """Running MultipleData processes per OPC UA session (stopped when it closes)."""
         self._changes: asyncio.Queue[tuple[str, str]] = asyncio.Queue()
         """``(kind, service)`` to apply in order: join, leave, state."""
 
@@ -168,7 +174,7 @@ class CellGateway:
         server.set_server_name(f"plugcell cell {self.cell}")
         await server.set_application_uri(f"urn:plugcell:opcua:{self.cell}:{self.name}")
         await self._configure_security()
-        _capture_session_users(server)
+        _capture_session_users(server, self._session_closed)
         self.idx = await server.register_namespace(f"urn:plugcell:cell:{self.cell}")
         self.cell_node = await server.nodes.objects.add_folder(
             ua.NodeId("Cell", self.idx), ua.QualifiedName("Cell", self.idx)
@@ -205,8 +211,8 @@ class CellGateway:
             policies.append(ua.SecurityPolicyType.NoSecurity)
         server.set_security_policy(policies)
         if sec.trusted_ca is not None:
-            from asyncua.crypto.validator import CertificateValidator
             from asyncua.crypto.truststore import TrustStore
+            from asyncua.crypto.validator import CertificateValidator
 
             store = TrustStore([sec.trusted_ca], [])
             await store.load()
@@ -405,6 +411,8 @@ class CellGateway:
         process = await add_process(
             self.server, node, command, caller.name, call.identifier, stop
         )
+        session = _caller_session.get()
+        self._streams.setdefault(session, {})[call.identifier] = (caller, call)
         await self._announce(service, command, call, ProcessStates.Running, "")
         self._spawn(self._pump(service, command, call, process))
         result = ua.CallMethodResult()
@@ -431,6 +439,8 @@ class CellGateway:
                 )
         final = call.final
         assert final is not None
+        for streams in self._streams.values():
+            streams.pop(call.identifier, None)
         with contextlib.suppress(Exception):  # the service's node may be gone already
             await process.reason.write_value(ua.Variant(final.reason, ua.VariantType.String))
             await process.state.write_value(ua.Variant(final.state.value, ua.VariantType.String))
@@ -438,6 +448,13 @@ class CellGateway:
         await asyncio.sleep(self.linger)
         with contextlib.suppress(Exception):
             await process.node.delete(recursive=True)
+
+    async def _session_closed(self, session: int) -> None:
+        """An OPC UA session ended: stop the MultipleData processes it started."""
+        for caller, call in list(self._streams.pop(session, {}).values()):
+            if not call.done:
+                with contextlib.suppress(Exception):
+                    await caller.stop(call)
 
     async def _announce(
         self, service: str, command: Command, call: ProcessCall, state: ProcessStates,
@@ -484,13 +501,14 @@ def _failure_code(reason: str) -> int:
     return ua.StatusCodes.BadDeviceFailure
 
 
-def _capture_session_users(server: Server) -> None:
-    """Make the session's user known to method callbacks (:data:`_caller_name`).
+def _capture_session_users(server: Server, closed: Any) -> None:
+    """Make the session's user known to method callbacks (:data:`_caller_name`), and
+    tell ``closed(session id)`` when a session ends.
 
     asyncua hands a method callback only the object and the arguments; the user of
     the session that called lives on the session (``InternalSession.user``).  Each
     session this server creates gets its ``call`` wrapped to set the context
-    variable for the duration of the call.
+    variables for the duration of the call, and its ``close_session`` wrapped.
     """
     iserver = server.iserver
     create = iserver.create_session
@@ -499,15 +517,26 @@ def _capture_session_users(server: Server) -> None:
         session = create(*args, **kwargs)
         call = session.call
 
+        close = session.close_session
+
         async def call_as_user(params: Any) -> Any:
             user = getattr(session, "user", None)
             token = _caller_name.set(getattr(user, "name", None))
+            ident = _caller_session.set(id(session))
             try:
                 return await call(params)
             finally:
                 _caller_name.reset(token)
+                _caller_session.reset(ident)
+
+        async def close_session(*args: Any, **kwargs: Any) -> Any:
+            try:
+                return await close(*args, **kwargs)
+            finally:
+                await closed(id(session))
 
         session.call = call_as_user
+        session.close_session = close_session
         return session
 
     iserver.create_session = create_session  # type: ignore[method-assign]

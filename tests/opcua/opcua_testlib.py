@@ -1,0 +1,49 @@
+"""Helpers of the OPC UA tests: the node-opcua harness (tests/opcua/js) and free ports."""
+
+from __future__ import annotations
+
+import json
+import shutil
+import socket
+import subprocess
+import uuid
+from pathlib import Path
+from typing import Any
+
+from childproc import Proc, plugcell_argv, until  # noqa: F401  (re-exported)
+
+JS = Path(__file__).resolve().parent / "js"
+
+
+def unique_cell(prefix: str = "ua") -> str:
+    return f"{prefix}-{uuid.uuid4().hex[:10]}"
+
+
+def free_port() -> int:
+    """A TCP port on 127.0.0.1 that was free a moment ago."""
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return int(s.getsockname()[1])
+
+
+def ensure_node_harness() -> None:
+    """node and the harness's node_modules (``npm ci`` once if missing; `make test` does it)."""
+    assert shutil.which("node"), "node is not installed (.ci/run installs nodejs)"
+    if not (JS / "node_modules" / "node-opcua").is_dir():
+        assert shutil.which("npm"), "npm is not installed (.ci/run installs npm)"
+        subprocess.run(["npm", "ci", "--no-audit", "--no-fund", "--silent"], cwd=JS,
+                       check=True, timeout=300)
+
+
+def run_js(script: str, *args: str, options: dict[str, Any] | None = None,
+           limit_s: float = 30.0) -> dict[str, Any]:
+    """Run ``node js/SCRIPT args… OPTIONS`` (bounded) and return the JSON it printed."""
+    opts = {"limitMs": int(limit_s * 1000), **(options or {})}
+    proc = subprocess.run(
+        ["node", str(JS / script), *args, json.dumps(opts)],
+        capture_output=True, text=True, timeout=limit_s + 10, cwd=JS,
+    )
+    assert proc.returncode == 0, f"{script} {args[:1]} failed ({proc.returncode}):\n{proc.stderr}"
+    lines = [line for line in proc.stdout.splitlines() if line.startswith("{")]
+    assert lines, f"{script} printed no result:\n{proc.stdout}\n{proc.stderr}"
+    return json.loads(lines[-1])
