@@ -47,3 +47,37 @@ def run_js(script: str, *args: str, options: dict[str, Any] | None = None,
     lines = [line for line in proc.stdout.splitlines() if line.startswith("{")]
     assert lines, f"{script} printed no result:\n{proc.stdout}\n{proc.stderr}"
     return json.loads(lines[-1])
+
+
+def shown_services(url: str, cell: str, timeout: float = 5.0, **login: Any) -> set[str]:
+    """The services under ``Objects/Cell`` now, read with asyncua (a quick poll for the
+    tests' waits; what they check is read by node-opcua)."""
+    import asyncio
+
+    from asyncua import Client, ua
+
+    async def read() -> set[str]:
+        client = Client(url, timeout=timeout)
+        if login.get("user"):
+            client.set_user(login["user"])
+            client.set_password(login["password"])
+        async with client:
+            idx = await client.get_namespace_index(f"urn:plugcell:cell:{cell}")
+            children = await client.get_node(ua.NodeId("Cell", idx)).get_children()
+            return {(await c.read_browse_name()).Name for c in children}
+
+    return asyncio.run(read())
+
+
+def wait_shown(url: str, cell: str, want: set[str], gone: set[str] = frozenset(),
+               timeout: float = 30.0) -> set[str]:
+    """Wait until the gateway shows every service of ``want`` and none of ``gone``."""
+    seen: set[str] = set()
+
+    def ready() -> bool:
+        seen.clear()
+        seen.update(shown_services(url, cell))
+        return want <= seen and not (gone & seen)
+
+    until(ready, timeout, f"services {sorted(want)} shown, {sorted(gone)} not")
+    return seen

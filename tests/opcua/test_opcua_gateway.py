@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from opcua_testlib import run_js, until
+from opcua_testlib import run_js, wait_shown
 
 from plugcell.framework.transport import TransportConfig, open_session
 from plugcell.services.sim.world import ReflectorPublisher
@@ -21,15 +21,9 @@ POSE = [1200.0, 100.0, 900.0, 10.0, 150.0, -20.0]
 
 
 def browse(ua_cell, want: set[str]) -> dict:
-    """The browse scenario once the gateway shows (at least) the services ``want``."""
-    seen: dict = {}
-
-    def shown() -> bool:
-        seen.update(run_js("client.js", "browse", ua_cell.url, ua_cell.name))
-        return want <= set(seen.get("services", []))
-
-    until(shown, 30.0, f"services {sorted(want)} in the address space")
-    return seen
+    """node-opcua's browse once the gateway shows (at least) the services ``want``."""
+    wait_shown(ua_cell.url, ua_cell.name, want)
+    return run_js("client.js", "browse", ua_cell.url, ua_cell.name)
 
 
 def test_browse_the_cell_and_read_a_cameras_device_info(ua_cell):
@@ -52,7 +46,7 @@ def test_browse_the_cell_and_read_a_cameras_device_info(ua_cell):
 
 
 def test_snapshot_returns_the_480_by_640_image(ua_cell):
-    browse(ua_cell, {"CAMERA"})
+    wait_shown(ua_cell.url, ua_cell.name, {"CAMERA"})
     got = run_js("client.js", "snapshot", ua_cell.url, ua_cell.name)
     assert got["status"] == "Good"
     image = got["image"]
@@ -61,7 +55,7 @@ def test_snapshot_returns_the_480_by_640_image(ua_cell):
 
 
 def test_bad_arguments_and_an_unknown_method_are_refused_and_the_server_keeps_serving(ua_cell):
-    browse(ua_cell, {"CAMERA"})
+    wait_shown(ua_cell.url, ua_cell.name, {"CAMERA"})
     got = run_js("client.js", "bad", ua_cell.url, ua_cell.name)
     assert got["double"]["status"] == "BadInvalidArgument"
     assert got["double"]["inputResults"] == ["Good", "BadInvalidArgument"]
@@ -82,7 +76,7 @@ def test_bad_arguments_and_an_unknown_method_are_refused_and_the_server_keeps_se
 
 
 def test_movieshot_is_a_process_object_to_subscribe_to_and_stop(ua_cell):
-    browse(ua_cell, {"CAMERA"})
+    wait_shown(ua_cell.url, ua_cell.name, {"CAMERA"})
     got = run_js("client.js", "movie", ua_cell.url, ua_cell.name)
     assert got["status"] == "Good"
     assert got["process"].startswith("ns=") and "/CAMERA/Processes/" in got["process"]
@@ -96,7 +90,7 @@ def test_movieshot_is_a_process_object_to_subscribe_to_and_stop(ua_cell):
 
 
 def test_a_failed_process_is_a_bad_status_and_an_event_with_the_reason(ua_cell):
-    browse(ua_cell, {"CAMERA"})
+    wait_shown(ua_cell.url, ua_cell.name, {"CAMERA"})
     got = run_js("client.js", "events", ua_cell.url, ua_cell.name)
     assert got["fail"] == "BadDeviceFailure"
     assert got["bad"] == "BadInvalidArgument" and got["good"] == "Good"
@@ -114,7 +108,7 @@ def test_a_failed_process_is_a_bad_status_and_an_event_with_the_reason(ua_cell):
 
 
 def test_a_trackers_measurements_arrive_by_subscription(ua_cell):
-    browse(ua_cell, {"TRACKER"})
+    wait_shown(ua_cell.url, ua_cell.name, {"TRACKER"})
     session = open_session(TransportConfig.from_env())
     try:
         tmac = ReflectorPublisher(session, "TMAC_UA", "tmac", cell=ua_cell.name)
@@ -136,11 +130,11 @@ def test_a_trackers_measurements_arrive_by_subscription(ua_cell):
 
 
 def test_services_appear_and_disappear_as_they_come_and_go(ua_cell):
-    browse(ua_cell, {"CAMERA"})
+    wait_shown(ua_cell.url, ua_cell.name, {"CAMERA"})
     extra = ua_cell.serve("camera", "--name", "CAMERA2", "--no-journal")
-    seen = browse(ua_cell, {"CAMERA2"})
+    wait_shown(ua_cell.url, ua_cell.name, {"CAMERA2"})
+    seen = run_js("client.js", "browse", ua_cell.url, ua_cell.name)
     assert {"CAMERA", "CAMERA2", "TRACKER"} <= set(seen["services"])
     extra.stop()
-    until(lambda: "CAMERA2" not in run_js("client.js", "browse", ua_cell.url,
-                                          ua_cell.name)["services"],
-          30.0, "CAMERA2 removed from the address space")
+    wait_shown(ua_cell.url, ua_cell.name, set(), gone={"CAMERA2"})
+    assert "CAMERA2" not in run_js("client.js", "browse", ua_cell.url, ua_cell.name)["services"]

@@ -406,7 +406,10 @@ class CellGateway:
                 await self._emit(service, ended.tag.recipient, caller.name, ended.identifier,
                                  "Failed", ended.reason)
                 return ua.StatusCode(_failure_code(ended.reason))
+            await finished.wait()  # State and Reason show the end when Stop returns
             return ua.StatusCode(ua.StatusCodes.Good)
+
+        finished = asyncio.Event()
 
         process = await add_process(
             self.server, node, command, caller.name, call.identifier, stop
@@ -414,7 +417,7 @@ class CellGateway:
         session = _caller_session.get()
         self._streams.setdefault(session, {})[call.identifier] = (caller, call)
         await self._announce(service, command, call, ProcessStates.Running, "")
-        self._spawn(self._pump(service, command, call, process))
+        self._spawn(self._pump(service, command, call, process, finished))
         result = ua.CallMethodResult()
         result.StatusCode = ua.StatusCode(ua.StatusCodes.Good)
         result.OutputArguments = [ua.Variant(process.node.nodeid, ua.VariantType.NodeId)]
@@ -422,7 +425,8 @@ class CellGateway:
         return result
 
     async def _pump(
-        self, service: str, command: Command, call: ProcessCall, process: ProcessNode
+        self, service: str, command: Command, call: ProcessCall, process: ProcessNode,
+        finished: asyncio.Event,
     ) -> None:
         """Follow a MultipleData process: Data, Frames, then State and Reason at its end."""
         frames = 0
@@ -444,6 +448,7 @@ class CellGateway:
         with contextlib.suppress(Exception):  # the service's node may be gone already
             await process.reason.write_value(ua.Variant(final.reason, ua.VariantType.String))
             await process.state.write_value(ua.Variant(final.state.value, ua.VariantType.String))
+        finished.set()
         await self._announce(service, command, call, final.state, final.reason)
         await asyncio.sleep(self.linger)
         with contextlib.suppress(Exception):
