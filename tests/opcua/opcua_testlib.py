@@ -36,7 +36,7 @@ def ensure_node_harness() -> None:
 
 
 def run_js(script: str, *args: str, options: dict[str, Any] | None = None,
-           limit_s: float = 30.0) -> dict[str, Any]:
+           limit_s: float = 30.0) -> Any:
     """Run ``node js/SCRIPT args… OPTIONS`` (bounded) and return the JSON it printed."""
     opts = {"limitMs": int(limit_s * 1000), **(options or {})}
     proc = subprocess.run(
@@ -44,7 +44,7 @@ def run_js(script: str, *args: str, options: dict[str, Any] | None = None,
         capture_output=True, text=True, timeout=limit_s + 10, cwd=JS,
     )
     assert proc.returncode == 0, f"{script} {args[:1]} failed ({proc.returncode}):\n{proc.stderr}"
-    lines = [line for line in proc.stdout.splitlines() if line.startswith("{")]
+    lines = [line for line in proc.stdout.splitlines() if line.startswith(("{", "["))]
     assert lines, f"{script} printed no result:\n{proc.stdout}\n{proc.stderr}"
     return json.loads(lines[-1])
 

@@ -46,8 +46,26 @@ def register(subparsers: Any) -> None:
     issue.add_argument("--days", type=int, default=825, help="validity (days)")
     issue.set_defaults(func=run_issue)
 
+    opc = sub.add_parser(
+        "opcua",
+        help="issue OPC UA application certificates NAME.opcua.pem/.key (RSA, Basic256Sha256)",
+        description="Issue OPC UA application instance certificates signed by the cell's OPC "
+        "UA authority (opcua-ca.pem, RSA, made on first use): for `plugcell opcua serve`, "
+        "`plugcell serve opcua-device` and OPC UA clients (docs/opcua.md).",
+    )
+    opc.add_argument("names", nargs="+", metavar="NAME", help="application names (the CN)")
+    opc.add_argument("--dir", type=Path, default=Path(DEFAULT_DIR), help="CA/output folder")
+    opc.add_argument("--host", action="append", default=[],
+                     help="DNS name or IP address of the application (repeatable)")
+    opc.add_argument("--uri", help="application URI (one NAME only; default "
+                     "urn:plugcell:opcua:NAME)")
+    opc.add_argument("--cell", default="default", help="cell name (in a new CA's CN)")
+    opc.add_argument("--days", type=int, default=825, help="validity (days)")
+    opc.set_defaults(func=run_opcua)
 
-def _write(path: Path, data: bytes, private: bool) -> None:
+
+def write_file(path: Path, data: bytes, private: bool) -> None:
+    """Write ``data`` to ``path`` (mode 0600 if ``private``, else 0644), folders made."""
     path.parent.mkdir(parents=True, exist_ok=True)
     flags = os.O_WRONLY | os.O_CREAT | os.O_TRUNC
     fd = os.open(path, flags, 0o600 if private else 0o644)
@@ -91,7 +109,7 @@ def create_ca(folder: Path, cell: str = "default", days: int = 3650) -> Path:
         .add_extension(x509.SubjectKeyIdentifier.from_public_key(key.public_key()), critical=False)
         .sign(key, hashes.SHA256())
     )
-    _write(
+    write_file(
         folder / "ca.key",
         key.private_bytes(
             serialization.Encoding.PEM,
@@ -100,7 +118,7 @@ def create_ca(folder: Path, cell: str = "default", days: int = 3650) -> Path:
         ),
         private=True,
     )
-    _write(folder / "ca.pem", cert.public_bytes(serialization.Encoding.PEM), private=False)
+    write_file(folder / "ca.pem", cert.public_bytes(serialization.Encoding.PEM), private=False)
     return folder / "ca.pem"
 
 
@@ -144,7 +162,7 @@ def issue_certificate(
         )
         .sign(ca_key, hashes.SHA256())  # type: ignore[arg-type]
     )
-    _write(
+    write_file(
         folder / f"{name}.key",
         key.private_bytes(
             serialization.Encoding.PEM,
@@ -153,7 +171,7 @@ def issue_certificate(
         ),
         private=True,
     )
-    _write(folder / f"{name}.pem", cert.public_bytes(serialization.Encoding.PEM), private=False)
+    write_file(folder / f"{name}.pem", cert.public_bytes(serialization.Encoding.PEM), private=False)
     return folder / f"{name}.pem"
 
 
@@ -178,4 +196,20 @@ def run_issue(args: argparse.Namespace) -> int:
         except ValueError as exc:
             raise CommandError(str(exc)) from None
         print(f"plugcell: {name}: {path} and {args.dir / (name + '.key')}")
+    return 0
+
+
+def run_opcua(args: argparse.Namespace) -> int:
+    from plugcell.cli import CommandError
+    from plugcell.opcua.certificates import certificate_paths, issue_application_certificate
+
+    if args.uri and len(args.names) > 1:
+        raise CommandError("--uri names one application: give one NAME with it")
+    for name in args.names:
+        try:
+            path = issue_application_certificate(args.dir, name, args.host, args.uri,
+                                                 args.days, args.cell)
+        except ValueError as exc:
+            raise CommandError(str(exc)) from None
+        print(f"plugcell: {name}: {path} and {certificate_paths(args.dir, name)[1]}")
     return 0

@@ -42,6 +42,9 @@ def register(subparsers: Any) -> None:
                        help="TOML users file ([users] NAME = hash; plugcell opcua hash-password)")
     serve.add_argument("--allow-anonymous", action="store_true",
                        help="accept anonymous sessions (they call as --name)")
+    serve.add_argument("--certs", type=Path, metavar="DIR",
+                       help="the cell's certificate folder: use DIR/NAME.opcua.pem/.key and "
+                       "trust clients of DIR/opcua-ca.pem (plugcell certs opcua NAME)")
     serve.add_argument("--certificate", type=Path, metavar="PEM",
                        help="the server's application certificate (plugcell certs opcua)")
     serve.add_argument("--key", type=Path, metavar="PEM", help="its private key")
@@ -90,6 +93,16 @@ def run_serve(args: argparse.Namespace) -> int:
                         format="%(asctime)s %(name)s %(levelname)s %(message)s")
     if args.log_level.upper() != "DEBUG":
         logging.getLogger("asyncua").setLevel(logging.ERROR)
+    if args.certs is not None:
+        from plugcell.opcua.certificates import CA_CERT, certificate_paths
+
+        cert, key = certificate_paths(args.certs, args.name)
+        args.certificate = args.certificate or cert
+        args.key = args.key or key
+        args.trust_ca = args.trust_ca or args.certs / CA_CERT
+        if not cert.is_file():
+            raise CommandError(f"no certificate {cert}: run `plugcell certs opcua {args.name} "
+                               f"--dir {args.certs}`")
     if (args.certificate is None) != (args.key is None):
         raise CommandError("--certificate and --key go together")
     for path in (args.certificate, args.key, args.trust_ca):

@@ -204,19 +204,19 @@ class CellGateway:
         if sec.certificate is None:
             server.set_security_policy([ua.SecurityPolicyType.NoSecurity])
             return
-        await server.load_certificate(str(sec.certificate))
-        await server.load_private_key(str(sec.private_key))
+        from plugcell.opcua.certificates import uri_of
+
+        uri = uri_of(sec.certificate)
+        if uri:  # the application URI must be the certificate's (OPC 10000-4 §6.1.3)
+            await server.set_application_uri(uri)
+        await server.load_certificate(str(sec.certificate), format="PEM")
+        await server.load_private_key(str(sec.private_key), format="PEM")
         policies = [ua.SecurityPolicyType.Basic256Sha256_SignAndEncrypt]
         if sec.allow_insecure:
             policies.append(ua.SecurityPolicyType.NoSecurity)
         server.set_security_policy(policies)
         if sec.trusted_ca is not None:
-            from asyncua.crypto.truststore import TrustStore
-            from asyncua.crypto.validator import CertificateValidator
-
-            store = TrustStore([sec.trusted_ca], [])
-            await store.load()
-            server.set_certificate_validator(CertificateValidator(trust_store=store))
+            server.set_certificate_validator(_client_validator(sec.trusted_ca))
 
     async def close(self) -> None:
         """Stop serving, end the mirror tasks and leave the cell."""
@@ -545,3 +545,29 @@ def _capture_session_users(server: Server, closed: Any) -> None:
         return session
 
     iserver.create_session = create_session  # type: ignore[method-assign]
+
+
+def _client_validator(authority: Path) -> Any:
+    """asyncua's certificate check of a connecting client, plus: issued by ``authority``.
+
+    asyncua's own validator checks the validity period, the application URI against
+    the certificate, the key usages and the client-auth extended key usage; a client
+    certificate that another authority issued is refused ``BadCertificateUntrusted``.
+    """
+    from asyncua.common.utils import ServiceError
+    from asyncua.crypto.validator import CertificateValidator, CertificateValidatorOptions
+
+    from plugcell.opcua.certificates import verify_issued
+
+    checks = CertificateValidator(
+        CertificateValidatorOptions.EXT_VALIDATION | CertificateValidatorOptions.PEER_CLIENT
+    )
+
+    async def validate(certificate: Any, description: ua.ApplicationDescription) -> None:
+        await checks.validate(certificate, description)
+        why = verify_issued(certificate, authority)
+        if why:
+            log.warning("opcua: client certificate refused: %s", why)
+            raise ServiceError(ua.StatusCodes.BadCertificateUntrusted)
+
+    return validate

@@ -4,7 +4,8 @@
 //
 // prints one JSON object (what it saw) on stdout and exits 0; any unexpected error
 // exits 1 with the error on stderr; the whole run is bounded (OPTIONS.limitMs).
-// OPTIONS: {user, password, certificate, privateKey, secure, limitMs}.
+// OPTIONS: {user, password, certificate, privateKey, applicationUri, trustCa, secure,
+//           limitMs}.
 "use strict";
 
 const {
@@ -30,12 +31,22 @@ const double = (v) => variant(DataType.Double, v);
 
 function statusName(code) { return code.name; }
 
-async function open() {
+async function open(options) {
   // one PKI folder for every run (node-opcua makes its client certificate once, ~3 s)
   const pki = path.join(os.tmpdir(), `plugcell-opcua-test-pki-${os.userInfo().uid}`);
   const clientCertificateManager = new OPCUACertificateManager({
     rootFolder: pki, automaticallyAcceptUnknownCertificate: true,
   });
+  if (options.trustCa) {  // the cell's OPC UA authority (plugcell certs opcua)
+    await clientCertificateManager.initialize();
+    const { readCertificate } = require("node-opcua-crypto");
+    await clientCertificateManager.addIssuer(readCertificate(options.trustCa), false, true);
+    if (options.trustCrl) {
+      const { readCertificateRevocationList } = require("node-opcua-crypto");
+      await clientCertificateManager.addRevocationList(
+        await readCertificateRevocationList(options.trustCrl), "trusted");
+    }
+  }
   const settings = {
     endpointMustExist: false,
     connectionStrategy: { maxRetry: 0, initialDelay: 100, maxDelay: 200 },
@@ -47,6 +58,7 @@ async function open() {
     settings.securityPolicy = SecurityPolicy.Basic256Sha256;
     settings.certificateFile = options.certificate;
     settings.privateKeyFile = options.privateKey;
+    settings.applicationUri = options.applicationUri;
   }
   const client = OPCUAClient.create(settings);
   await client.connect(endpoint);
@@ -273,20 +285,30 @@ const scenarios = {
   },
 };
 
-(async () => {
-  const fn = scenarios[scenario];
-  if (!fn) throw new Error(`unknown scenario ${scenario}`);
+// one connection with `settings`: the scenario's result, or {refused: reason}
+async function attempt(fn, settings) {
   let c;
   try {
-    c = await open();
-  } catch (err) {
-    // a refused connection or session is a result the tests look at
-    process.stdout.write(JSON.stringify({ refused: String(err.message || err) }) + "\n");
-    clearTimeout(limit);
-    process.exit(0);
+    c = await open(settings);
+  } catch (err) {  // a refused connection or session is a result the tests look at
+    return { refused: String(err.message || err) };
   }
   const result = await fn(c);
   await close(c);
+  return result;
+}
+
+(async () => {
+  const fn = scenarios[scenario];
+  if (!fn) throw new Error(`unknown scenario ${scenario}`);
+  // OPTIONS.attempts: several connections in one run, each with its own settings
+  let result;
+  if (options.attempts) {
+    result = [];
+    for (const extra of options.attempts) result.push(await attempt(fn, { ...options, ...extra }));
+  } else {
+    result = await attempt(fn, options);
+  }
   process.stdout.write(JSON.stringify(result) + "\n");
   clearTimeout(limit);
   process.exit(0);
