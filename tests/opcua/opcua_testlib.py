@@ -7,10 +7,11 @@ import shutil
 import socket
 import subprocess
 import uuid
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from childproc import Proc, plugcell_argv, until  # noqa: F401  (re-exported)
+from childproc import Proc, plugcell_argv, until
 
 JS = Path(__file__).resolve().parent / "js"
 
@@ -24,6 +25,38 @@ def free_port() -> int:
     with socket.socket() as s:
         s.bind(("127.0.0.1", 0))
         return int(s.getsockname()[1])
+
+
+@dataclass
+class UaCell:
+    """A cell of services run as processes, and ``plugcell opcua serve`` for it."""
+
+    name: str
+    home: Path
+    env: dict[str, str]
+    procs: list[Proc] = field(default_factory=list)
+    url: str = ""
+
+    def start(self, *args: str, env: dict[str, str] | None = None) -> Proc:
+        proc = Proc(plugcell_argv(*args), {**self.env, **(env or {})})
+        self.procs.append(proc)
+        return proc
+
+    def serve(self, kind: str, *extra: str, env: dict[str, str] | None = None) -> Proc:
+        proc = self.start("serve", kind, "--cell", self.name, *extra, env=env)
+        proc.wait_line(lambda line: "serving in cell" in line, 30.0)
+        return proc
+
+    def gateway(self, *extra: str, env: dict[str, str] | None = None) -> tuple[Proc, str]:
+        port = free_port()
+        proc = self.start("opcua", "serve", "--cell", self.name, "--port", str(port), *extra,
+                          env=env)
+        line = proc.wait_line(lambda line: "OPC UA gateway" in line, 30.0)
+        return proc, line.split(" at ")[1].split()[0]
+
+    def stop(self) -> None:
+        for proc in reversed(self.procs):
+            proc.stop()
 
 
 def ensure_node_harness() -> None:

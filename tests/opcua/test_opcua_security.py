@@ -10,8 +10,7 @@ import subprocess
 from pathlib import Path
 
 import pytest
-from conftest import UaCell
-from opcua_testlib import plugcell_argv, run_js, unique_cell, until, wait_shown
+from opcua_testlib import UaCell, plugcell_argv, run_js, unique_cell, until, wait_shown
 
 from plugcell.opcua.certificates import issue_application_certificate
 from plugcell.opcua.users import hash_password
