@@ -1,0 +1,158 @@
+"""`plugcell serve opcua-device`: an OPC UA server's device (a gripper written with
+node-opcua, tests/opcua/js/gripper_server.js) becomes a plugcell service that a robot
+program drives with ACTIVATE strings (docs/opcua.md, "OPC UA devices as services")."""
+
+from __future__ import annotations
+
+import json
+import os
+import subprocess
+from collections.abc import Iterator
+from pathlib import Path
+
+import pytest
+from opcua_testlib import JS, Proc, free_port, plugcell_argv, unique_cell, until
+
+from plugcell.framework import BlockingClient, ProcessStates, from_data
+
+pytestmark = pytest.mark.slow
+
+HERE = Path(__file__).resolve().parent
+MAP = HERE / "gripper.toml"
+C, F = ProcessStates.Completed, ProcessStates.Failed
+
+
+class GripperCell:
+    """The node-opcua gripper server, GRIPPER (opcua-device) and a simulated ROBOT."""
+
+    def __init__(self, home: Path) -> None:
+        self.name = unique_cell("uad")
+        self.home = home
+        self.env = {**os.environ, "PLUGCELL_HOME": str(home), "PYTHONUNBUFFERED": "1"}
+        self.port = free_port()
+        self.endpoint = f"opc.tcp://127.0.0.1:{self.port}/gripper"
+        self.procs: list[Proc] = []
+        self.server: Proc | None = None
+
+    def start_server(self) -> Proc:
+        self.server = Proc(["node", str(JS / "gripper_server.js"), str(self.port)], self.env)
+        self.procs.append(self.server)
+        self.server.wait_line(lambda line: '"listening"' in line, 30.0)
+        return self.server
+
+    def serve(self, kind: str, *extra: str) -> Proc:
+        proc = Proc(plugcell_argv("serve", kind, "--cell", self.name, *extra), self.env)
+        self.procs.append(proc)
+        proc.wait_line(lambda line: "serving in cell" in line, 30.0)
+        return proc
+
+    def calls(self) -> list[dict]:
+        """What the gripper server was asked, in order."""
+        assert self.server is not None
+        return [json.loads(line) for line in self.server.lines if line.startswith('{"called"')]
+
+    def stop(self) -> None:
+        for proc in reversed(self.procs):
+            proc.stop()
+
+
+@pytest.fixture(scope="module")
+def gripper_cell(tmp_path_factory, node_harness) -> Iterator[GripperCell]:
+    cell = GripperCell(tmp_path_factory.mktemp("home"))
+    try:
+        cell.start_server()
+        cell.serve("opcua-device", "--endpoint", cell.endpoint, "--map", str(MAP),
+                   "--param", "watch_s=0.3")
+        cell.serve("robot", "--param", "sim=true", "--param", "speed=1000", "--param", "seed=3",
+                   "--param", f"library={HERE / 'programs'}")
+        yield cell
+    finally:
+        cell.stop()
+
+
+def test_a_robot_program_drives_the_opc_ua_gripper_with_activate_strings(gripper_cell):
+    with BlockingClient("tester", cell=gripper_cell.name) as client:
+        assert client.wait_for("ROBOT", 10.0) and client.wait_for("GRIPPER", 10.0)
+        assert client.ask_subscribe("ROBOT", "GRIPPER").ok
+        final = client.create_process("ROBOT", "ACTIVATE", "Wait", ["grip"],
+                                      timeout=60.0).result()
+        assert final.state is C, final.reason
+        status = client.create_process("ROBOT", "PROGRAM_STATUS").result()
+        console = [str(s) for s in from_data(status.data).reshape(-1)][4:]
+    assert console[0] == "closed at 20.0 N"
+    assert console[1] == "holding 20 N"
+    assert console[2].startswith("refused: ") and "BadOutOfRange" in console[2]
+    assert console[3] == "released"
+    assert gripper_cell.calls() == [{"called": "Close", "force": 20},
+                                    {"called": "Close", "force": 500}, {"called": "Open"}]
+
+
+def test_a_lost_connection_fails_the_stream_and_the_service_reconnects(gripper_cell):
+    with BlockingClient("watcher", cell=gripper_cell.name) as client:
+        assert client.wait_for("GRIPPER", 10.0)
+        assert client.create_process("GRIPPER", "Close", "", 10.0).result().state is C
+        stream = client.create_process("GRIPPER", "WatchForce", timeout=30.0)  # it creeps
+        frames = 0
+        updates = iter(stream)
+        for update in updates:
+            frames += update.data is not None
+            if frames == 2:
+                break
+        assert gripper_cell.server is not None
+        gripper_cell.server.kill9()  # the device's server dies
+        final = stream.result()
+        assert final.state is F
+        assert final.reason.startswith(
+            f"WatchForce: device feedback 'connection to {gripper_cell.endpoint} lost: "
+        ) and final.reason.endswith("' while streaming"), final.reason
+        down = client.create_process("GRIPPER", "Force").result()
+        assert down.state is F and f"connection to {gripper_cell.endpoint} lost" in down.reason
+        assert client.get("GRIPPER").device_info.connection.value == "Error"
+        gripper_cell.start_server()  # back on the same port
+
+        def force_read() -> bool:
+            return client.create_process("GRIPPER", "Force").result().state is C
+
+        until(force_read, 30.0, "GRIPPER reading the force again")
+        assert client.get("GRIPPER").device_info.connection.value == "Online"
+
+
+def _serve_with(cell: GripperCell, map_text: str, tmp_path: Path) -> subprocess.CompletedProcess:
+    path = tmp_path / "device.toml"
+    path.write_text(map_text)
+    return subprocess.run(
+        plugcell_argv("serve", "opcua-device", "--cell", unique_cell("bad"), "--no-journal",
+                      "--endpoint", cell.endpoint, "--map", str(path), "--name", "BROKEN"),
+        capture_output=True, text=True, env=cell.env, timeout=60,
+    )
+
+
+def test_a_map_naming_nodes_that_do_not_exist_stops_the_service_at_start(gripper_cell,
+                                                                          tmp_path):
+    until(lambda: gripper_cell.server is not None and gripper_cell.server.popen.poll() is None,
+          5.0, "the gripper server")
+    text = MAP.read_text()
+    missing = _serve_with(gripper_cell, text.replace("s=Gripper.Open", "s=Gripper.Twist"),
+                          tmp_path)
+    assert missing.returncode == 2
+    assert "command 'Open': method ns=" in missing.stderr
+    assert ";s=Gripper.Twist does not exist on " + gripper_cell.endpoint in missing.stderr
+    uri = _serve_with(gripper_cell, text.replace("nsu=urn:plugcell:test:gripper;s=Gripper.Force",
+                                                 "nsu=urn:nowhere;s=Gripper.Force"), tmp_path)
+    assert uri.returncode == 2 and "the server has no namespace urn:nowhere" in uri.stderr
+    typed = _serve_with(gripper_cell, text.replace(
+        'read = "nsu=urn:plugcell:test:gripper;s=Gripper.Force"\noutput = { type = "Double"',
+        'read = "nsu=urn:plugcell:test:gripper;s=Gripper.Force"\noutput = { type = "Integer"'),
+        tmp_path)
+    assert typed.returncode == 2 and "holds i=11, but the map declares Integer (i=6)" in (
+        typed.stderr)
+    cls = _serve_with(gripper_cell, text.replace(
+        'read = "nsu=urn:plugcell:test:gripper;s=Gripper.Force"',
+        'read = "nsu=urn:plugcell:test:gripper;s=Gripper.Open"'), tmp_path)
+    assert cls.returncode == 2 and "is a Method, not a Variable" in cls.stderr
+    nobody = subprocess.run(
+        plugcell_argv("serve", "opcua-device", "--cell", unique_cell("bad"), "--no-journal",
+                      "--endpoint", f"opc.tcp://127.0.0.1:{free_port()}/none", "--map",
+                      str(MAP)),
+        capture_output=True, text=True, env=gripper_cell.env, timeout=60)
+    assert nobody.returncode == 2 and "cannot connect to opc.tcp://127.0.0.1:" in nobody.stderr
