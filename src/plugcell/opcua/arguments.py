@@ -23,9 +23,9 @@ coming in is checked with the framework's own :func:`~plugcell.framework.data.to
 
 from __future__ import annotations
 
-import math
 from typing import Any
 
+import numpy as np
 from asyncua import ua
 
 from plugcell.framework.data import DataError, describe, from_data, to_data
@@ -120,8 +120,8 @@ def input_value(variant: Any, command: Command) -> Data | None:
     value = variant.Value
     if command.input_data_size == (1,) and isinstance(value, list) and len(value) == 1:
         value = value[0]
-    if isinstance(value, list) and command.input_data_type is DataTypes.Byte:
-        value = [int(v) for v in value]
+    if isinstance(value, bytes | bytearray):  # a Byte array some stacks send as bytes
+        value = np.frombuffer(value, np.uint8)
     try:
         return to_data(value, command.input_data_type, command.input_data_size, what)
     except DataError as exc:
@@ -162,8 +162,3 @@ def _variant_text(variant: ua.Variant) -> str:
         shape = variant.Dimensions or [len(variant.Value or [])]
         return f"{name}[{', '.join(map(str, shape))}]"
     return f"scalar {name}"
-
-
-def element_count(size: tuple[int, ...]) -> int:
-    """Number of elements of a concrete size (for messages)."""
-    return math.prod(size)
