@@ -35,6 +35,7 @@ import contextlib
 import contextvars
 import logging
 from dataclasses import dataclass
+from datetime import UTC, datetime
 from pathlib import Path
 from typing import Any
 
@@ -434,13 +435,17 @@ class CellGateway:
         async for update in call:
             if update.data is not None:
                 frames += 1
+                now = datetime.now(UTC)  # each frame a new sample, equal or not
                 await server.write_attribute_value(
-                    process.data.nodeid, ua.DataValue(data_variant(update.data))
+                    process.data.nodeid,
+                    ua.DataValue(data_variant(update.data), SourceTimestamp=now,
+                                 ServerTimestamp=now),
                 )
                 await server.write_attribute_value(
                     process.frames.nodeid,
                     ua.DataValue(ua.Variant(frames, ua.VariantType.UInt32)),
                 )
+                await asyncio.sleep(0)  # a burst of frames must not starve the server
         final = call.final
         assert final is not None
         for streams in self._streams.values():
