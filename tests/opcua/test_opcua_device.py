@@ -4,6 +4,7 @@ program drives with ACTIVATE strings (docs/opcua.md, "OPC UA devices as services
 
 from __future__ import annotations
 
+import asyncio
 import json
 import os
 import subprocess
@@ -13,7 +14,9 @@ from pathlib import Path
 import pytest
 from opcua_testlib import JS, Proc, free_port, plugcell_argv, unique_cell, until
 
-from plugcell.framework import BlockingClient, ProcessStates, from_data
+from plugcell.framework import BlockingClient, DeviceError, ProcessStates, from_data
+from plugcell.opcua.device import OpcUaDevice
+from plugcell.opcua.device_map import parse_device_map
 
 pytestmark = pytest.mark.slow
 
@@ -127,6 +130,19 @@ def _serve_with(cell: GripperCell, map_text: str, tmp_path: Path) -> subprocess.
     )
 
 
+async def _connect_with(cell: GripperCell, maps: list[str]) -> list[str]:
+    """Why the device interface refuses each map (its DeviceError at connect)."""
+    reasons = []
+    for text in maps:
+        device = OpcUaDevice("BROKEN", endpoint=cell.endpoint, journal=False,
+                             map=parse_device_map(text, "device.toml"))
+        with pytest.raises(DeviceError) as err:
+            await device.connect()
+        assert str(err.value).startswith("device.toml: command ")
+        reasons.append(str(err.value))
+    return reasons
+
+
 def test_a_map_naming_nodes_that_do_not_exist_stops_the_service_at_start(gripper_cell,
                                                                           tmp_path):
     until(lambda: gripper_cell.server is not None and gripper_cell.server.popen.poll() is None,
@@ -135,21 +151,29 @@ def test_a_map_naming_nodes_that_do_not_exist_stops_the_service_at_start(gripper
     missing = _serve_with(gripper_cell, text.replace("s=Gripper.Open", "s=Gripper.Twist"),
                           tmp_path)
     assert missing.returncode == 2
-    assert "command 'Open': method ns=" in missing.stderr
-    assert ";s=Gripper.Twist does not exist on " + gripper_cell.endpoint in missing.stderr
-    uri = _serve_with(gripper_cell, text.replace("nsu=urn:plugcell:test:gripper;s=Gripper.Force",
-                                                 "nsu=urn:nowhere;s=Gripper.Force"), tmp_path)
-    assert uri.returncode == 2 and "the server has no namespace urn:nowhere" in uri.stderr
-    typed = _serve_with(gripper_cell, text.replace(
-        'read = "nsu=urn:plugcell:test:gripper;s=Gripper.Force"\noutput = { type = "Double"',
-        'read = "nsu=urn:plugcell:test:gripper;s=Gripper.Force"\noutput = { type = "Integer"'),
-        tmp_path)
-    assert typed.returncode == 2 and "holds i=11, but the map declares Integer (i=6)" in (
-        typed.stderr)
-    cls = _serve_with(gripper_cell, text.replace(
-        'read = "nsu=urn:plugcell:test:gripper;s=Gripper.Force"',
-        'read = "nsu=urn:plugcell:test:gripper;s=Gripper.Open"'), tmp_path)
-    assert cls.returncode == 2 and "is a Method, not a Variable" in cls.stderr
+    assert ("command 'Open': method nsu=urn:plugcell:test:gripper;s=Gripper.Twist does not "
+            f"exist on {gripper_cell.endpoint} (BadNodeIdUnknown)") in missing.stderr
+    # the same checks, straight from the device interface (no service process each)
+    reasons = asyncio.run(_connect_with(gripper_cell, [
+        text.replace("nsu=urn:plugcell:test:gripper;s=Gripper.Force",
+                     "nsu=urn:nowhere;s=Gripper.Force"),
+        text.replace('read = "nsu=urn:plugcell:test:gripper;s=Gripper.Force"\n'
+                     'output = { type = "Double"',
+                     'read = "nsu=urn:plugcell:test:gripper;s=Gripper.Force"\n'
+                     'output = { type = "Integer"'),
+        text.replace('read = "nsu=urn:plugcell:test:gripper;s=Gripper.Force"',
+                     'read = "nsu=urn:plugcell:test:gripper;s=Gripper.Open"'),
+        text.replace('object = "nsu=urn:plugcell:test:gripper;s=Gripper"',
+                     'object = "nsu=urn:plugcell:test:gripper;s=Gripper.Hand"'),
+    ]))
+    assert "command 'Force': read nsu=urn:nowhere;s=Gripper.Force: the server has no " \
+        "namespace urn:nowhere" in reasons[0]
+    assert "variable nsu=urn:plugcell:test:gripper;s=Gripper.Force holds i=11, but the map " \
+        "declares Integer (i=6)" \
+        in reasons[1]
+    assert ";s=Gripper.Open is a Method, not a Variable" in reasons[2]
+    assert "command 'Open': object nsu=urn:plugcell:test:gripper;s=Gripper.Hand does not " \
+        "exist" in reasons[3]
     nobody = subprocess.run(
         plugcell_argv("serve", "opcua-device", "--cell", unique_cell("bad"), "--no-journal",
                       "--endpoint", f"opc.tcp://127.0.0.1:{free_port()}/none", "--map",

@@ -186,16 +186,18 @@ class OpcUaDevice(GenericDevice):
         return _Resolved(node)
 
     async def _node(self, client: Client, text: str, where: str, what: str) -> Node:
+        """The node of a map's node id text (``nsu=`` resolved on this server)."""
+        resolved = text
+        if text.startswith("nsu="):
+            uri, _, rest = text[4:].partition(";")
+            try:
+                idx = await client.get_namespace_index(uri)
+            except ValueError:
+                raise DeviceError(f"{where}: {what} {text}: the server has no namespace "
+                                  f"{uri}") from None
+            resolved = f"ns={idx};{rest}"
+        node = client.get_node(ua.NodeId.from_string(resolved))
         try:
-            if text.startswith("nsu="):
-                uri, _, rest = text[4:].partition(";")
-                try:
-                    idx = await client.get_namespace_index(uri)
-                except ValueError:
-                    raise DeviceError(f"{where}: {what} {text}: the server has no namespace "
-                                      f"{uri}") from None
-                text = f"ns={idx};{rest}"
-            node = client.get_node(ua.NodeId.from_string(text))
             await node.read_browse_name()
         except ua.UaStatusCodeError as exc:
             raise DeviceError(f"{where}: {what} {text} does not exist on {self.endpoint} "
