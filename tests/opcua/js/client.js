@@ -242,6 +242,16 @@ const scenarios = {
              stopAgain: stopAgain.status };
   },
 
+  // a MultipleData started and left running: closing the session must stop it
+  async abandon(c) {
+    const { session, id } = c;
+    const r = await call(session, id("CAMERA"), id("CAMERA/MovieShot"), [str(""), int32(5)]);
+    if (r.status !== "Good") return { status: r.status };
+    const sub = await subscription(session);
+    const frames = await watch(sub, `${r.outputs[0].value.toString()}/Data`, 1, false);
+    return { status: r.status, frames: frames.length };  // closed without Stop
+  },
+
   // a process that fails: a Bad status and a ProcessEventType event with the reason
   async events(c) {
     const { session, id, ns } = c;
