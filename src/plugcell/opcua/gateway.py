@@ -355,7 +355,12 @@ class CellGateway:
             data = input_value(args[1] if len(args) > 1 else None, command)
         except ArgumentError as exc:
             return await self._refuse(service, command, 1, len(args), str(exc))
-        caller = await self._caller()
+        try:
+            caller = await self._caller()
+        except ValueError as exc:  # a secure cell without this user's certificate
+            await self._emit(service, command.name, _caller_name.get() or self.name, 0,
+                             "Refused", str(exc))
+            return _bad(ua.StatusCodes.BadUserAccessDenied, len(args))
         call = await caller.create_process(
             service, command.name, option, data, timeout=command.timeout + CALL_MARGIN
         )

@@ -157,13 +157,17 @@ async function events(sub, ns) {
     { nodeId: "i=2253", attributeId: AttributeIds.EventNotifier },
     { queueSize: 100, filter: constructEventFilter(fields) }, TimestampsToReturn.Both);
   const got = [];
+  const live = new Promise((resolve, reject) => {
+    item.on("initialized", resolve);
+    item.on("err", (e) => reject(new Error(`event monitor: ${e}`)));
+  });
   item.on("changed", (values) => {
     const event = {};
     fields.forEach((f, i) => { event[f.replace(/^\d+:/, "")] = plain(values[i].value); });
     if (event.Message && event.Message.text !== undefined) event.Message = event.Message.text;
     got.push(event);
   });
-  await new Promise((resolve) => setTimeout(resolve, 300));  // the item is live
+  await live;  // the monitored item exists: no event of the calls below is missed
   return { item, got };
 }
 
