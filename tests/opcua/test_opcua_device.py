@@ -11,8 +11,9 @@ import subprocess
 from collections.abc import Iterator
 from pathlib import Path
 
+import numpy as np
 import pytest
-from opcua_testlib import JS, Proc, free_port, plugcell_argv, unique_cell, until
+from opcua_testlib import JS, Proc, free_port, plugcell_argv, run_js, unique_cell, until
 
 from plugcell.framework import BlockingClient, DeviceError, ProcessStates, from_data
 from plugcell.opcua.device import OpcUaDevice
@@ -36,6 +37,7 @@ class GripperCell:
         self.endpoint = f"opc.tcp://127.0.0.1:{self.port}/gripper"
         self.procs: list[Proc] = []
         self.server: Proc | None = None
+        self.gateway_url = ""
 
     def start_server(self) -> Proc:
         self.server = Proc(["node", str(JS / "gripper_server.js"), str(self.port)], self.env)
@@ -68,6 +70,12 @@ def gripper_cell(tmp_path_factory, node_harness) -> Iterator[GripperCell]:
                    "--param", "watch_s=0.3")
         cell.serve("robot", "--param", "sim=true", "--param", "speed=1000", "--param", "seed=3",
                    "--param", f"library={HERE / 'programs'}")
+        gateway = Proc(plugcell_argv("opcua", "serve", "--cell", cell.name, "--port",
+                                     str(free_port()), "--allow-anonymous", "--robot-poll",
+                                     "0.2"), cell.env)
+        cell.procs.append(gateway)
+        line = gateway.wait_line(lambda line: "OPC UA gateway" in line, 30.0)
+        cell.gateway_url = line.split(" at ")[1].split()[0]
         yield cell
     finally:
         cell.stop()
@@ -88,6 +96,27 @@ def test_a_robot_program_drives_the_opc_ua_gripper_with_activate_strings(gripper
     assert console[3] == "released"
     assert gripper_cell.calls() == [{"called": "Close", "force": 20},
                                     {"called": "Close", "force": 500}, {"called": "Open"}]
+
+
+def test_the_robot_shows_its_joints_and_flange_pose_as_opc_40010_names_them(gripper_cell):
+    """Through the gateway (node-opcua reading): the robot's axes and flange pose are
+    what the robot service itself answers (ARM_JNTP, ARM_POS), the robot standing still."""
+    with BlockingClient("direct", cell=gripper_cell.name) as client:
+        assert client.wait_for("ROBOT", 10.0)
+        joints = from_data(client.create_process("ROBOT", "ARM_JNTP").result().data)
+        pose = from_data(client.create_process("ROBOT", "ARM_POS").result().data)
+    seen: dict = {}
+
+    def shown() -> bool:
+        seen.clear()
+        seen.update(run_js("client.js", "robot", gripper_cell.gateway_url, gripper_cell.name))
+        return (len(seen["joints"]) == len(joints)
+                and np.allclose(seen["joints"], joints, atol=1e-9)
+                and np.allclose(seen["flange"], pose, atol=1e-9))
+
+    until(shown, 30.0, "the robot's joints and flange pose in the address space")
+    assert seen["axes"] == [f"Axis{k}" for k in range(1, len(joints) + 1)]
+    assert len(joints) == 6 and len(seen["flange"]) == 6
 
 
 def test_a_lost_connection_fails_the_stream_and_the_service_reconnects(gripper_cell):

@@ -52,6 +52,9 @@ def register(subparsers: Any) -> None:
                        help="accept only client certificates issued by this CA")
     serve.add_argument("--allow-insecure", action="store_true",
                        help="with a certificate, also offer SecurityPolicy None")
+    serve.add_argument("--robot-poll", type=float, default=1.0, metavar="S",
+                       help="seconds between reads of each robot's joints and flange pose "
+                       "for its OPC 40010 variables (default 1; 0: off)")
     serve.add_argument("--log-level", default="WARNING", help="logging level (default WARNING)")
     add_cell_args(serve)
     serve.set_defaults(func=run_serve)
@@ -118,6 +121,7 @@ def run_serve(args: argparse.Namespace) -> int:
             name=args.name, users=users, allow_anonymous=args.allow_anonymous,
             security=GatewaySecurity(args.certificate, args.key, args.trust_ca,
                                      args.allow_insecure),
+            robot_poll=args.robot_poll,
         )
     except ValueError as exc:
         raise CommandError(str(exc)) from None

@@ -19,8 +19,10 @@ Layout (namespace ``urn:plugcell:cell:<cell>``, string NodeIds = browse paths)::
             Data                                   the command's output type/size
             Stop()                                 Method
 
-The nodes of a service are made by :func:`add_service` and deleted, children and
-all, by :meth:`ServiceNode.delete`.
+A robot service also gets ``Axes/AxisN/ParameterSet/ActualPosition`` and
+``FlangePose`` (OPC 40010 names; :mod:`plugcell.opcua.robots`).  The nodes of a service
+are made by :func:`add_service` and deleted, children and all, by
+:meth:`ServiceNode.delete`.
 """
 
 from __future__ import annotations

@@ -60,6 +60,7 @@ from plugcell.opcua.address_space import (
     node_id,
 )
 from plugcell.opcua.arguments import ArgumentError, data_variant, input_value, option_of
+from plugcell.opcua.robots import RobotMirror, is_robot
 from plugcell.opcua.users import GatewayUsers, UserBook
 
 log = logging.getLogger("plugcell.opcua")
@@ -124,6 +125,9 @@ class CellGateway:
         Seconds between refreshes of every service's Partners.
     linger
         Seconds a finished MultipleData process object stays in the address space.
+    robot_poll
+        Seconds between reads of each robot's joints and flange pose for the OPC 40010
+        variables (:mod:`plugcell.opcua.robots`); 0 turns them off.
     """
 
     def __init__(
@@ -139,6 +143,7 @@ class CellGateway:
         security: GatewaySecurity | None = None,
         refresh: float = 5.0,
         linger: float = 30.0,
+        robot_poll: float = 1.0,
     ) -> None:
         if users is None and not allow_anonymous:
             raise ValueError("no way to log in: give users (--users FILE) or allow anonymous")
@@ -150,6 +155,8 @@ class CellGateway:
         self.security = security or GatewaySecurity()
         self.refresh = refresh
         self.linger = linger
+        self.robot_poll = robot_poll
+        self._robots: dict[str, asyncio.Task[None]] = {}
         self.watcher = _CellWatcher(self, name, cell=cell, transport=self.transport)
         self.server = Server(user_manager=self.users)  # type: ignore[arg-type]
         self.idx = 0
@@ -286,18 +293,29 @@ class CellGateway:
             if old.variables and await old.variables["Instance"].read_value() == instance:
                 self.services[service] = old
                 return
-            await old.delete()
+            await self._forget(service, old)
         partners = [p.name for p in state.partners]
-        self.services[service] = await add_service(
+        node = self.services[service] = await add_service(
             self.server, self.cell_node, self.idx, state.device_info, instance, partners,
             lambda command: self._method(service, command),
         )
+        if self.robot_poll > 0 and is_robot(state.device_info):
+            mirror = RobotMirror(self.server, node, self.watcher, self.robot_poll)
+            self._robots[service] = self._spawn(mirror.run())
         log.info("opcua: %s added", service)
+
+    async def _forget(self, service: str, node: ServiceNode) -> None:
+        robot = self._robots.pop(service, None)
+        if robot is not None:
+            robot.cancel()
+            with contextlib.suppress(asyncio.CancelledError, Exception):
+                await robot
+        await node.delete()
 
     async def _remove(self, service: str) -> None:
         node = self.services.pop(service, None)
         if node is not None:
-            await node.delete()
+            await self._forget(service, node)
             log.info("opcua: %s removed", service)
 
     async def _show(self, service: str, partners: list[str] | None = None) -> None:

@@ -292,6 +292,18 @@ const scenarios = {
              state: await read(session, `${process}/State`) };
   },
 
+  // a robot's OPC 40010 variables: Axes/AxisN/ParameterSet/ActualPosition, FlangePose
+  async robot(c) {
+    const { session, id } = c;
+    const axes = (await session.browse(id("ROBOT/Axes"))).references
+      .map((r) => r.browseName.name).sort();
+    const joints = [];
+    for (const axis of axes) {
+      joints.push(await read(session, id(`ROBOT/Axes/${axis}/ParameterSet/ActualPosition`)));
+    }
+    return { axes, joints, flange: plain(await read(session, id("ROBOT/FlangePose"))) };
+  },
+
   // security: who may log in, who may call
   async login(c) {
     const r = await call(c.session, c.id("CAMERA"), c.id("CAMERA/SnapShot"), [str(""), int32(1)]);
