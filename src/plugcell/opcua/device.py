@@ -25,6 +25,7 @@ from __future__ import annotations
 import asyncio
 import contextlib
 import logging
+import os
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, ClassVar
@@ -57,7 +58,9 @@ class OpcUaDevice(GenericDevice):
     kind = "opcua-device"
     vendor = ""
     info = "an OPC UA device (plugcell serve opcua-device --endpoint … --map …)"
-    params: ClassVar[dict[str, type]] = {"endpoint": str, "map": str, "watch_s": float}
+    params: ClassVar[dict[str, type]] = {
+        "endpoint": str, "map": str, "watch_s": float, "certs": str, "user": str,
+    }
 
     def __init__(
         self,
@@ -66,6 +69,8 @@ class OpcUaDevice(GenericDevice):
         endpoint: str = "",
         map: str | Path | DeviceMap = "",
         watch_s: float = 1.0,
+        certs: str | Path = "",
+        user: str = "",
         **kwargs: Any,
     ) -> None:
         if not endpoint:
@@ -82,6 +87,11 @@ class OpcUaDevice(GenericDevice):
         super().__init__(name, **kwargs)
         self.endpoint = endpoint
         self.watch_s = watch_s
+        self.certs = Path(certs) if certs else None
+        """The cell's certificate folder: connect with Basic256Sha256 SignAndEncrypt as
+        ``<certs>/<name>.opcua.pem`` (``plugcell certs opcua NAME``)."""
+        self.user = user
+        """OPC UA user name; its password is ``$PLUGCELL_OPCUA_PASSWORD``."""
         self.client: Client | None = None
         self._nodes: dict[str, _Resolved] = {}
         self._lost = ""
@@ -99,9 +109,14 @@ class OpcUaDevice(GenericDevice):
 
     async def _open(self) -> None:
         client = Client(self.endpoint, timeout=max(2.0, self.watch_s * 2))
+        if self.user:
+            client.set_user(self.user)
+            client.set_password(os.environ.get("PLUGCELL_OPCUA_PASSWORD", ""))
         try:
+            if self.certs is not None:
+                await self._secure(client, self.certs)
             await client.connect()
-        except (TimeoutError, OSError, ua.UaError) as exc:
+        except (TimeoutError, OSError, ValueError, ua.UaError) as exc:
             raise DeviceError(f"cannot connect to {self.endpoint}: {_why(exc)}") from None
         try:
             self._nodes = {m.command.name: await self._resolve(client, m)
@@ -112,6 +127,22 @@ class OpcUaDevice(GenericDevice):
             raise
         self.client = client
         self._lost = ""
+
+    async def _secure(self, client: Client, folder: Path) -> None:
+        """Basic256Sha256 SignAndEncrypt with this service's application certificate."""
+        from asyncua.crypto.security_policies import SecurityPolicyBasic256Sha256
+        from asyncua.crypto.uacrypto import CertProperties
+
+        from plugcell.opcua.certificates import application_uri, certificate_paths, uri_of
+
+        cert, key = certificate_paths(folder, self.name)
+        if not cert.is_file() or not key.is_file():
+            raise DeviceError(f"no OPC UA certificate {cert}: run `plugcell certs opcua "
+                              f"{self.name} --dir {folder}`")
+        client.application_uri = uri_of(cert) or application_uri(self.name)
+        await client.set_security(
+            SecurityPolicyBasic256Sha256, CertProperties(cert, "pem"), CertProperties(key, "pem"),
+            mode=ua.MessageSecurityMode.SignAndEncrypt)
 
     async def disconnect(self) -> None:
         if self._watch is not None:

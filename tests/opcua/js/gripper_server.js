@@ -2,29 +2,52 @@
 // object Gripper with methods Open() and Close(force: Double) and variables Force
 // (Double, N) and Closed (Boolean), in namespace urn:plugcell:test:gripper.
 //
-//   node gripper_server.js PORT
+//   node gripper_server.js PORT [CA_PEM CA_CRL]
+//
+// With CA_PEM and CA_CRL (the cell's OPC UA authority and its revocation list) the server
+// offers only Basic256Sha256 SignAndEncrypt, trusts application certificates of that
+// authority and accepts the one user plc / gripper-pw (no anonymous sessions).
 //
 // prints {"listening": URL} when ready and one {"called": …} line per method call;
 // runs until killed.  Close ramps Force up to the asked force in 5 steps of 20 ms.
 "use strict";
 
-const { OPCUAServer, Variant, DataType, StatusCodes, OPCUACertificateManager } = require("node-opcua");
+const {
+  OPCUAServer, Variant, DataType, StatusCodes, OPCUACertificateManager, SecurityPolicy,
+  MessageSecurityMode,
+} = require("node-opcua");
 const os = require("os");
 const path = require("path");
 
 const port = Number(process.argv[2]);
+const [caPem, caCrl] = process.argv.slice(3);
 
 function say(obj) { process.stdout.write(JSON.stringify(obj) + "\n"); }
 
 (async () => {
-  const pki = path.join(os.tmpdir(), `plugcell-opcua-test-server-pki-${os.userInfo().uid}`);
-  const server = new OPCUAServer({
-    port, hostname: "127.0.0.1", resourcePath: "/gripper",
-    serverCertificateManager: new OPCUACertificateManager({
-      rootFolder: pki, automaticallyAcceptUnknownCertificate: true,
-    }),
-    buildInfo: { productName: "test gripper", manufacturerName: "plugcell tests" },
+  const pki = path.join(os.tmpdir(),
+    `plugcell-opcua-test-server-pki-${os.userInfo().uid}${caPem ? "-secure" : ""}`);
+  const serverCertificateManager = new OPCUACertificateManager({
+    rootFolder: pki, automaticallyAcceptUnknownCertificate: !caPem,
   });
+  const options = {
+    port, hostname: "127.0.0.1", resourcePath: "/gripper", serverCertificateManager,
+    buildInfo: { productName: "test gripper", manufacturerName: "plugcell tests" },
+  };
+  if (caPem) {
+    await serverCertificateManager.initialize();
+    const { readCertificate, readCertificateRevocationList } = require("node-opcua-crypto");
+    await serverCertificateManager.addIssuer(readCertificate(caPem), false, true);
+    await serverCertificateManager.addRevocationList(await readCertificateRevocationList(caCrl),
+                                                     "trusted");
+    Object.assign(options, {
+      securityPolicies: [SecurityPolicy.Basic256Sha256],
+      securityModes: [MessageSecurityMode.SignAndEncrypt],
+      allowAnonymous: false,
+      userManager: { isValidUser: (user, password) => user === "plc" && password === "gripper-pw" },
+    });
+  }
+  const server = new OPCUAServer(options);
   await server.initialize();
   const space = server.engine.addressSpace;
   const ns = space.registerNamespace("urn:plugcell:test:gripper");
