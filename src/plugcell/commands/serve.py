@@ -91,7 +91,7 @@ def _device_options(cls: type, args: argparse.Namespace) -> list[str]:
     for flag, key in (("controller", "controller"), ("robot", "robot"),
                       ("payload_kg", "payload_kg"), ("speed", "speed"), ("seed", "seed"),
                       ("endpoint", "endpoint"), ("map", "map")):
-        value = getattr(args, flag)
+        value = getattr(args, flag, None)
         if value is not None:
             if key not in known:
                 option = "--" + flag.replace("_", "-")
