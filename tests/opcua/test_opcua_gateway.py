@@ -146,3 +146,18 @@ def test_services_appear_and_disappear_as_they_come_and_go(ua_cell):
     extra.stop()
     wait_shown(ua_cell.url, ua_cell.name, set(), gone={"CAMERA2"})
     assert "CAMERA2" not in run_js("client.js", "browse", ua_cell.url, ua_cell.name)["services"]
+
+
+def test_the_quick_start_of_the_docs_runs(ua_cell, capsys):
+    """docs/opcua.md's Python example, pointed at this module's gateway and cell."""
+    import re
+    from pathlib import Path
+
+    doc = (Path(__file__).resolve().parents[2] / "docs" / "opcua.md").read_text()
+    code = re.search(r"\(asyncua\), for instance:\n\n```python\n(.*?)```", doc,
+                     re.S).group(1)
+    code = code.replace("opc.tcp://127.0.0.1:4840/plugcell", ua_cell.url).replace(
+        "urn:plugcell:cell:default", f"urn:plugcell:cell:{ua_cell.name}")
+    wait_shown(ua_cell.url, ua_cell.name, {"CAMERA"})
+    exec(compile(code, "docs/opcua.md", "exec"), {})
+    assert capsys.readouterr().out.split()[-2:] == ["480", "640"]
