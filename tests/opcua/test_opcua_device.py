@@ -16,7 +16,6 @@ import pytest
 from opcua_testlib import JS, Proc, free_port, plugcell_argv, run_js, unique_cell, until
 
 from plugcell.framework import BlockingClient, DeviceError, ProcessStates, from_data
-from plugcell.opcua.certificates import issue_application_certificate
 from plugcell.opcua.device import OpcUaDevice
 from plugcell.opcua.device_map import parse_device_map
 
@@ -213,25 +212,31 @@ def test_a_map_naming_nodes_that_do_not_exist_stops_the_service_at_start(gripper
 
 
 def test_a_secured_device_server_is_reached_with_the_cells_certificate_and_a_user(
-        gripper_cell, tmp_path):
+        gripper_cell, cell_certs, monkeypatch):
     """Basic256Sha256 SignAndEncrypt, the cell's application certificate of the service,
-    the user plc (password from $PLUGCELL_OPCUA_PASSWORD); a wrong password stops the
-    service at start with the server's refusal."""
-    certs = tmp_path / "certs"
-    issue_application_certificate(certs, "SECURE_GRIPPER")
+    the user plc (password from $PLUGCELL_OPCUA_PASSWORD); a wrong password is refused at
+    connection with the server's reason."""
+    certs, _ = cell_certs
     port = free_port()
     endpoint = f"opc.tcp://127.0.0.1:{port}/gripper"
     server = Proc(["node", str(JS / "gripper_server.js"), str(port), str(certs / "opcua-ca.pem"),
                    str(certs / "opcua-ca.crl")], gripper_cell.env)
     gripper_cell.procs.append(server)
     server.wait_line(lambda line: '"listening"' in line, 30.0)
-    argv = plugcell_argv("serve", "opcua-device", "--cell", gripper_cell.name, "--endpoint",
-                         endpoint, "--map", str(MAP), "--name", "SECURE_GRIPPER", "--param",
-                         f"certs={certs}", "--param", "user=plc", "--no-journal")
-    refused = subprocess.run(argv, capture_output=True, text=True, timeout=60,
-                             env={**gripper_cell.env, "PLUGCELL_OPCUA_PASSWORD": "wrong"})
-    assert refused.returncode == 2 and "BadUserAccessDenied" in refused.stderr
-    service = Proc(argv, {**gripper_cell.env, "PLUGCELL_OPCUA_PASSWORD": "gripper-pw"})
+
+    async def refused() -> str:
+        device = OpcUaDevice("SECURE_GRIPPER", endpoint=endpoint, map=MAP, certs=certs,
+                             user="plc", journal=False)
+        with pytest.raises(DeviceError) as err:
+            await device.connect()
+        return str(err.value)
+
+    monkeypatch.setenv("PLUGCELL_OPCUA_PASSWORD", "wrong")
+    assert "BadUserAccessDenied" in asyncio.run(refused())
+    service = Proc(plugcell_argv(
+        "serve", "opcua-device", "--cell", gripper_cell.name, "--endpoint", endpoint, "--map",
+        str(MAP), "--name", "SECURE_GRIPPER", "--param", f"certs={certs}", "--param",
+        "user=plc", "--no-journal"), {**gripper_cell.env, "PLUGCELL_OPCUA_PASSWORD": "gripper-pw"})
     gripper_cell.procs.append(service)
     service.wait_line(lambda line: "serving in cell" in line, 30.0)
     with BlockingClient("secure-tester", cell=gripper_cell.name) as client:

@@ -12,21 +12,17 @@ from pathlib import Path
 import pytest
 from opcua_testlib import UaCell, plugcell_argv, run_js, unique_cell, until, wait_shown
 
-from plugcell.opcua.certificates import issue_application_certificate
 from plugcell.opcua.users import hash_password
 
 pytestmark = pytest.mark.slow
 
 
 @pytest.fixture(scope="module")
-def secure_cell(tmp_path_factory, node_harness):
+def secure_cell(tmp_path_factory, node_harness, cell_certs):
     """CAMERA with an access policy (alice may take pictures, nobody else) and a gateway
     that only speaks Basic256Sha256 SignAndEncrypt to users alice and bob."""
     root = tmp_path_factory.mktemp("secure")
-    certs, rogue = root / "certs", root / "rogue"
-    for name in ("OPCUA", "HMI"):
-        issue_application_certificate(certs, name)
-    issue_application_certificate(rogue, "HMI")  # the same name, another authority
+    certs, rogue = cell_certs
     users = root / "users.toml"
     users.write_text(f'[users]\nalice = "{hash_password("alice-pw")}"\n'
                      f'bob = "{hash_password("bob-pw")}"\n')
