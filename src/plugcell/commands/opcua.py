@@ -89,7 +89,8 @@ def run_hash(args: argparse.Namespace) -> int:
 
 def run_serve(args: argparse.Namespace) -> int:
     from plugcell.cli import CommandError
-    from plugcell.opcua.gateway import CellGateway, GatewaySecurity
+    from plugcell.opcua.gateway import CellGateway
+    from plugcell.opcua.server_security import GatewaySecurity
     from plugcell.opcua.users import UserBook, UsersFileError
 
     logging.basicConfig(level=args.log_level.upper(), stream=sys.stderr,

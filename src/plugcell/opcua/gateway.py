@@ -32,11 +32,8 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
-import contextvars
 import logging
-from dataclasses import dataclass
 from datetime import UTC, datetime
-from pathlib import Path
 from typing import Any
 
 from asyncua import Server, ua
@@ -61,33 +58,15 @@ from plugcell.opcua.address_space import (
 )
 from plugcell.opcua.arguments import ArgumentError, data_variant, input_value, option_of
 from plugcell.opcua.robots import RobotMirror, is_robot
+from plugcell.opcua.server_security import GatewaySecurity, configure_security
+from plugcell.opcua.sessions import caller_name, caller_session, capture_session_users
 from plugcell.opcua.users import GatewayUsers, UserBook
 
 log = logging.getLogger("plugcell.opcua")
 
-#: The OPC UA user of the method call being served (None: anonymous).
-_caller_name: contextvars.ContextVar[str | None] = contextvars.ContextVar(
-    "plugcell_opcua_caller", default=None
-)
-#: The OPC UA session of the method call being served (its id).
-_caller_session: contextvars.ContextVar[int] = contextvars.ContextVar(
-    "plugcell_opcua_session", default=0
-)
 
 #: Seconds added to a command's own timeout for the gateway's wait on its process.
 CALL_MARGIN = 5.0
-
-
-@dataclass(frozen=True)
-class GatewaySecurity:
-    """The server's certificate and what it accepts (docs/opcua.md, "Security")."""
-
-    certificate: Path | None = None
-    private_key: Path | None = None
-    trusted_ca: Path | None = None
-    """Accept client application certificates issued by this CA only (PEM)."""
-    allow_insecure: bool = False
-    """Also offer SecurityPolicy None (messages in clear)."""
 
 
 class _CellWatcher(Participant):
@@ -181,8 +160,8 @@ class CellGateway:
         server.set_endpoint(self.url)
         server.set_server_name(f"plugcell cell {self.cell}")
         await server.set_application_uri(f"urn:plugcell:opcua:{self.cell}:{self.name}")
-        await self._configure_security()
-        _capture_session_users(server, self._session_closed)
+        await configure_security(server, self.security, self.users.allow_anonymous)
+        capture_session_users(server, self._session_closed)
         self.idx = await server.register_namespace(f"urn:plugcell:cell:{self.cell}")
         self.cell_node = await server.nodes.objects.add_folder(
             ua.NodeId("Cell", self.idx), ua.QualifiedName("Cell", self.idx)
@@ -201,30 +180,6 @@ class CellGateway:
         self._spawn(self._follow_presence(events))
         self._spawn(self._apply_changes())
         self._spawn(self._refresh_partners())
-
-    async def _configure_security(self) -> None:
-        sec = self.security
-        server = self.server
-        tokens: list[type] = [ua.UserNameIdentityToken]
-        if self.users.allow_anonymous:
-            tokens.append(ua.AnonymousIdentityToken)
-        server.set_identity_tokens(tokens)
-        if sec.certificate is None:
-            server.set_security_policy([ua.SecurityPolicyType.NoSecurity])
-            return
-        from plugcell.opcua.certificates import uri_of
-
-        uri = uri_of(sec.certificate)
-        if uri:  # the application URI must be the certificate's (OPC 10000-4 §6.1.3)
-            await server.set_application_uri(uri)
-        await server.load_certificate(str(sec.certificate), format="PEM")
-        await server.load_private_key(str(sec.private_key), format="PEM")
-        policies = [ua.SecurityPolicyType.Basic256Sha256_SignAndEncrypt]
-        if sec.allow_insecure:
-            policies.append(ua.SecurityPolicyType.NoSecurity)
-        server.set_security_policy(policies)
-        if sec.trusted_ca is not None:
-            server.set_certificate_validator(_client_validator(sec.trusted_ca))
 
     async def close(self) -> None:
         """Stop serving, end the mirror tasks and leave the cell."""
@@ -339,7 +294,7 @@ class CellGateway:
 
     async def _caller(self) -> Participant:
         """The participant that sends the current OPC UA user's processes."""
-        user = _caller_name.get()
+        user = caller_name()
         if user is None:
             return self.watcher
         async with self._caller_lock:
@@ -376,7 +331,7 @@ class CellGateway:
         try:
             caller = await self._caller()
         except ValueError as exc:  # a secure cell without this user's certificate
-            await self._emit(service, command.name, _caller_name.get() or self.name, 0,
+            await self._emit(service, command.name, caller_name() or self.name, 0,
                              "Refused", str(exc))
             return _bad(ua.StatusCodes.BadUserAccessDenied, len(args))
         call = await caller.create_process(
@@ -405,7 +360,7 @@ class CellGateway:
         infos = [ua.DiagnosticInfo() for _ in result.InputArgumentResults]
         infos[index] = ua.DiagnosticInfo(AdditionalInfo=reason)
         result.InputArgumentDiagnosticInfos = infos
-        await self._emit(service, command.name, _caller_name.get() or self.name, 0,
+        await self._emit(service, command.name, caller_name() or self.name, 0,
                          "Refused", reason)
         return result
 
@@ -438,7 +393,7 @@ class CellGateway:
         process = await add_process(
             self.server, node, command, caller.name, call.identifier, stop
         )
-        session = _caller_session.get()
+        session = caller_session()
         self._streams.setdefault(session, {})[call.identifier] = (caller, call)
         await self._announce(service, command, call, ProcessStates.Running, "")
         self._spawn(self._pump(service, command, call, process, finished))
@@ -532,70 +487,3 @@ def _failure_code(reason: str) -> int:
     if reason.startswith(("no acknowledgement", "no update")):
         return ua.StatusCodes.BadTimeout
     return ua.StatusCodes.BadDeviceFailure
-
-
-def _capture_session_users(server: Server, closed: Any) -> None:
-    """Make the session's user known to method callbacks (:data:`_caller_name`), and
-    tell ``closed(session id)`` when a session ends.
-
-    asyncua hands a method callback only the object and the arguments; the user of
-    the session that called lives on the session (``InternalSession.user``).  Each
-    session this server creates gets its ``call`` wrapped to set the context
-    variables for the duration of the call, and its ``close_session`` wrapped.
-    """
-    iserver = server.iserver
-    create = iserver.create_session
-
-    def create_session(*args: Any, **kwargs: Any) -> Any:
-        session = create(*args, **kwargs)
-        call = session.call
-
-        close = session.close_session
-
-        async def call_as_user(params: Any) -> Any:
-            user = getattr(session, "user", None)
-            token = _caller_name.set(getattr(user, "name", None))
-            ident = _caller_session.set(id(session))
-            try:
-                return await call(params)
-            finally:
-                _caller_name.reset(token)
-                _caller_session.reset(ident)
-
-        async def close_session(*args: Any, **kwargs: Any) -> Any:
-            try:
-                return await close(*args, **kwargs)
-            finally:
-                await closed(id(session))
-
-        session.call = call_as_user
-        session.close_session = close_session
-        return session
-
-    iserver.create_session = create_session  # type: ignore[method-assign]
-
-
-def _client_validator(authority: Path) -> Any:
-    """asyncua's certificate check of a connecting client, plus: issued by ``authority``.
-
-    asyncua's own validator checks the validity period, the application URI against
-    the certificate, the key usages and the client-auth extended key usage; a client
-    certificate that another authority issued is refused ``BadCertificateUntrusted``.
-    """
-    from asyncua.common.utils import ServiceError
-    from asyncua.crypto.validator import CertificateValidator, CertificateValidatorOptions
-
-    from plugcell.opcua.certificates import verify_issued
-
-    checks = CertificateValidator(
-        CertificateValidatorOptions.EXT_VALIDATION | CertificateValidatorOptions.PEER_CLIENT
-    )
-
-    async def validate(certificate: Any, description: ua.ApplicationDescription) -> None:
-        await checks.validate(certificate, description)
-        why = verify_issued(certificate, authority)
-        if why:
-            log.warning("opcua: client certificate refused: %s", why)
-            raise ServiceError(ua.StatusCodes.BadCertificateUntrusted)
-
-    return validate
