@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import json
 import os
+import socket
 import subprocess
 from pathlib import Path
 
@@ -106,7 +107,7 @@ def test_the_services_access_policy_decides_on_the_opc_ua_user_and_the_journal_r
         "access denied: bob may not run SnapShot on CAMERA")
 
 
-def test_a_users_file_that_cannot_be_used_stops_the_gateway_with_the_reason(tmp_path):
+def test_a_gateway_that_cannot_start_says_why(tmp_path):
     bad = tmp_path / "users.toml"
     bad.write_text('[users]\n"no good" = "scrypt$1$2$3$zz$00"\n')
     proc = subprocess.run(plugcell_argv("opcua", "serve", "--users", str(bad)),
@@ -116,6 +117,16 @@ def test_a_users_file_that_cannot_be_used_stops_the_gateway_with_the_reason(tmp_
     proc = subprocess.run(plugcell_argv("opcua", "serve"), capture_output=True, text=True,
                           timeout=60)
     assert proc.returncode == 2 and "no way to log in" in proc.stderr
+    with socket.socket() as taken:
+        taken.bind(("127.0.0.1", 0))
+        taken.listen()
+        port = taken.getsockname()[1]
+        proc = subprocess.run(
+            plugcell_argv("opcua", "serve", "--allow-anonymous", "--port", str(port), "--cell",
+                          unique_cell("taken")), capture_output=True, text=True, timeout=60,
+            env={**os.environ, "PLUGCELL_HOME": str(tmp_path)})
+    assert proc.returncode == 2
+    assert f"plugcell: error: cannot serve at opc.tcp://127.0.0.1:{port}/plugcell" in proc.stderr
 
 
 def test_a_client_without_security_cannot_even_browse(secure_cell):

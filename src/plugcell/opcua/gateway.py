@@ -153,7 +153,15 @@ class CellGateway:
     # -- life cycle ------------------------------------------------------------------
 
     async def start(self) -> None:
-        """Join the cell, build the address space, start serving and mirroring."""
+        """Join the cell, build the address space, start serving and mirroring (closed
+        again if any of it fails, e.g. the port is taken)."""
+        try:
+            await self._start()
+        except BaseException:
+            await self.close()
+            raise
+
+    async def _start(self) -> None:
         await self.watcher.start()
         server = self.server
         await server.init()
