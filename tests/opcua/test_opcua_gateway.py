@@ -86,6 +86,10 @@ def test_movieshot_is_a_process_object_to_subscribe_to_and_stop(ua_cell):
     assert got["stop"] == "Good" and got["state"] == "Completed"
     assert got["counted"] >= 3
     assert got["stopAgain"] == "BadInvalidState"
+    # the DeviceInfo variables are live: Busy while filming; Offline/Online as it goes
+    assert got["busy"] == "Busy"
+    assert (got["disconnect"], got["offline"]) == ("Good", "Offline")
+    assert (got["reconnect"], got["online"]) == ("Good", "Online")
 
 
 def test_a_closed_session_stops_the_streams_it_started(ua_cell):

@@ -237,13 +237,27 @@ const scenarios = {
     const process = r.outputs[0].value.toString();
     const sub = await subscription(session);
     const frames = await watch(sub, `${process}/Data`, 3, false);
+    const busy = await read(session, id("CAMERA/DeviceState"));  // live: StateUpdate
     const stop = await call(session, process, `${process}/Stop`, []);
     const state = await read(session, `${process}/State`);
     const counted = await read(session, `${process}/Frames`);
     const stopAgain = await call(session, process, `${process}/Stop`, []);
     await sub.terminate();
-    return { status: r.status, process, frames, stop: stop.status, state, counted,
-             stopAgain: stopAgain.status };
+    // ConnectionState follows the camera's ConnectionUpdate notifications
+    const connection = async (want) => {
+      const deadline = Date.now() + 5000;
+      while (Date.now() < deadline) {
+        if (await read(session, id("CAMERA/ConnectionState")) === want) return want;
+        await new Promise((resolve) => setTimeout(resolve, 50));
+      }
+      return await read(session, id("CAMERA/ConnectionState"));
+    };
+    const disconnect = (await call(session, id("CAMERA"), id("CAMERA/Disconnect"), [str("")])).status;
+    const offline = await connection("Offline");
+    const reconnect = (await call(session, id("CAMERA"), id("CAMERA/Connect"), [str("")])).status;
+    const online = await connection("Online");
+    return { status: r.status, process, frames, busy, stop: stop.status, state, counted,
+             stopAgain: stopAgain.status, disconnect, offline, reconnect, online };
   },
 
   // a MultipleData started and left running: closing the session must stop it
