@@ -39,6 +39,10 @@ from plugcell.opcua.arguments import VARIANT_TYPES
 from plugcell.opcua.device_map import DeviceMap, MappedCommand, load_device_map
 
 log = logging.getLogger("plugcell.opcua.device")
+if logging.getLogger("asyncua").level == logging.NOTSET:
+    # asyncua warns of things nobody can act on (revised session timeouts …); its
+    # errors still show, and `--log-level DEBUG` of `plugcell serve` sets a level first
+    logging.getLogger("asyncua").setLevel(logging.ERROR)
 
 #: Built-in DataType NodeIds (ns=0) of the variant types a map may declare.
 _DATATYPE_IDS = {vtype: ua.NodeId(vtype.value) for vtype in VARIANT_TYPES.values()}
