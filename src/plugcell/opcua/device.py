@@ -41,7 +41,7 @@ from plugcell.opcua.device_map import DeviceMap, MappedCommand, load_device_map
 log = logging.getLogger("plugcell.opcua.device")
 if logging.getLogger("asyncua").level == logging.NOTSET:
     # asyncua warns of things nobody can act on (revised session timeouts …); its
-    # errors still show, and `--log-level DEBUG` of `plugcell serve` sets a level first
+    # errors still show (a program that wants its warnings sets the level before)
     logging.getLogger("asyncua").setLevel(logging.ERROR)
 
 #: Built-in DataType NodeIds (ns=0) of the variant types a map may declare.
