@@ -95,7 +95,7 @@ def test_movieshot_is_a_process_object_to_subscribe_to_and_stop(ua_cell):
 def test_a_closed_session_stops_the_streams_it_started(ua_cell):
     wait_shown(ua_cell.url, ua_cell.name, {"CAMERA"})
     left = run_js("client.js", "abandon", ua_cell.url, ua_cell.name)
-    assert left == {"status": "Good", "frames": 1}
+    assert left["status"] == "Good" and left["frames"] >= 1
     # the camera is free again: a SnapShot does not wait behind a 10-minute MovieShot hold
     got = run_js("client.js", "snapshot", ua_cell.url, ua_cell.name, limit_s=20.0)
     assert got["status"] == "Good"

@@ -31,7 +31,7 @@ from collections.abc import Awaitable, Callable
 from dataclasses import dataclass, field
 from typing import Any
 
-from asyncua import Node, Server, ua
+from asyncua import Node, ua
 
 from plugcell.framework.model import Command, CommandTypes, Device, DeviceStates
 from plugcell.opcua.arguments import (
@@ -96,7 +96,6 @@ class ServiceNode:
 
 
 async def add_service(
-    server: Server,
     cell: Node,
     idx: int,
     device: Device,
@@ -170,7 +169,6 @@ class ProcessNode:
 
 
 async def add_process(
-    server: Server,
     service: ServiceNode,
     command: Command,
     sender: str,

@@ -259,7 +259,7 @@ class CellGateway:
             await self._forget(service, old)
         partners = [p.name for p in state.partners]
         node = self.services[service] = await add_service(
-            self.server, self.cell_node, self.idx, state.device_info, instance, partners,
+            self.cell_node, self.idx, state.device_info, instance, partners,
             lambda command: self._method(service, command),
         )
         if self.robot_poll > 0 and is_robot(state.device_info):
@@ -398,9 +398,7 @@ class CellGateway:
 
         finished = asyncio.Event()
 
-        process = await add_process(
-            self.server, node, command, caller.name, call.identifier, stop
-        )
+        process = await add_process(node, command, caller.name, call.identifier, stop)
         session = caller_session()
         self._streams.setdefault(session, {})[call.identifier] = (caller, call)
         await self._announce(service, command, call, ProcessStates.Running, "")
