@@ -218,3 +218,14 @@ def test_a_random_map_fuzz_is_seeded_and_bounded():
         except DeviceMapError:
             refused += 1
     assert refused > 0
+
+
+@settings(max_examples=100, deadline=None)
+@given(st.lists(st.text(max_size=8), min_size=1, max_size=6))
+def test_strings_go_out_and_come_back_unchanged(texts):
+    data = to_data(texts, DataTypes.String, (-1,))
+    command = Command(name="Say", type=CommandTypes.SingleData, input_data_type=DataTypes.String,
+                      input_data_size=(-1,))
+    wire = ua.ua_binary.variant_from_binary(ua.utils.Buffer(ua.ua_binary.variant_to_binary(
+        data_variant(data))))
+    assert input_value(wire, command) == data
