@@ -63,6 +63,9 @@ def main(argv: list[str]) -> int:
         ("wire decoder fuzz", [sys.executable, str(HERE / "fuzz_wire.py")]),
         ("signed requests (cost)", [sys.executable, str(HERE / "signing.py"),
                                     *(["--fuzz", "100000"] if full else [])]),
+        ("OPC UA gateway: method call, subscription updates",
+         [sys.executable, str(HERE / "opcua_gateway.py"),
+          *(["--calls", "1000", "--cold", "10"] if full else [])]),
         ("web API fuzz",
          [sys.executable, str(HERE / "fuzz_web.py"), *([] if full else ["--cases", "20000"])]),
     ]

@@ -33,8 +33,8 @@ from cryptography.hazmat.primitives import hashes, serialization
 from cryptography.hazmat.primitives.asymmetric import ed25519, rsa
 from cryptography.x509.oid import NameOID
 
-from plugcell.commands.certs import create_ca, issue_certificate
 from plugcell.framework import wire
+from plugcell.framework.certificates import create_ca, issue_certificate
 from plugcell.framework.model import Command, Data, DataTypes, Process, Tag
 from plugcell.framework.signing import RequestSigner, RequestVerifier
 

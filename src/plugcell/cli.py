@@ -97,6 +97,8 @@ COMMANDS: tuple[Command, ...] = (
             "plugcell.commands.controller:configure"),
     Command("certs", "create a cell's CA and per-service TLS certificates",
             "plugcell.commands.certs:configure"),
+    Command("opcua", "the cell as an OPC UA server (for MES, SCADA, HMI)",
+            "plugcell.commands.opcua:configure"),
 )
 
 

@@ -45,3 +45,9 @@ def test_a_serial_line_rate_that_is_not_a_rate_is_refused():
     with pytest.raises(ValueError, match=r"link_baud must be 0 \(no serial line\) or positive"):
         RobotService("R1", sim=True, link_baud=-1.0)
     assert controller_main(["--link-baud", "-5", "--no-world"]) == 2
+
+
+def test_opcua_device_flags_become_parameters():
+    cls = load_kind("opcua-device")
+    pairs = _device_options(cls, _args(endpoint="opc.tcp://127.0.0.1:4840", map="gripper.toml"))
+    assert _params(cls, pairs) == {"endpoint": "opc.tcp://127.0.0.1:4840", "map": "gripper.toml"}

@@ -42,7 +42,7 @@ def issue_cell_certificates(
 ) -> tuple[Path, Path, Path]:
     """``base/certs`` (the cell's CA and a certificate for each of ``names``),
     ``base/rogue`` (another CA with a ROBOT1 of its own) and ``base/home``."""
-    from plugcell.commands.certs import create_ca, issue_certificate
+    from plugcell.framework.certificates import create_ca, issue_certificate
 
     certs, rogue, home = base / "certs", base / "rogue", base / "home"
     create_ca(certs, ca_name)

@@ -26,8 +26,8 @@ from cryptography.x509.oid import NameOID
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from plugcell.commands.certs import create_ca, issue_certificate
 from plugcell.framework import wire
+from plugcell.framework.certificates import create_ca, issue_certificate
 from plugcell.framework.model import (
     Command,
     Data,

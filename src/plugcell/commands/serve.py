@@ -46,6 +46,10 @@ def configure(p: argparse.ArgumentParser) -> None:
     dev.add_argument("--payload-kg", type=float, help="robot: payload carried by the twin")
     dev.add_argument("--speed", type=float, help="robot: simulation speed factor")
     dev.add_argument("--seed", type=int, help="seed of the simulated device")
+    dev.add_argument("--endpoint", metavar="opc.tcp://HOST:PORT",
+                     help="opcua-device: the OPC UA server of the device")
+    dev.add_argument("--map", metavar="FILE",
+                     help="opcua-device: the device map (docs/opcua.md)")
     p.add_argument("--max-payload", type=int, default=None, help="largest accepted request, bytes")
     p.add_argument("--journal-dir", type=Path, help="where to keep the journal")
     p.add_argument("--no-journal", action="store_true", help="do not journal processes")
@@ -84,8 +88,9 @@ def _device_options(cls: type, args: argparse.Namespace) -> list[str]:
         else:
             raise CommandError(f"--sim: {cls.__name__} has no simulated mode")
     for flag, key in (("controller", "controller"), ("robot", "robot"),
-                      ("payload_kg", "payload_kg"), ("speed", "speed"), ("seed", "seed")):
-        value = getattr(args, flag)
+                      ("payload_kg", "payload_kg"), ("speed", "speed"), ("seed", "seed"),
+                      ("endpoint", "endpoint"), ("map", "map")):
+        value = getattr(args, flag, None)
         if value is not None:
             if key not in known:
                 option = "--" + flag.replace("_", "-")
@@ -97,6 +102,7 @@ def _device_options(cls: type, args: argparse.Namespace) -> list[str]:
 def run(args: argparse.Namespace) -> int:
     from plugcell.cli import CommandError
     from plugcell.framework.participant import PartnerError
+    from plugcell.framework.service import DeviceError
     from plugcell.services.registry import load_kind
 
     logging.basicConfig(
@@ -120,7 +126,7 @@ def run(args: argparse.Namespace) -> int:
         raise CommandError(str(exc)) from None
     try:
         eventloop.run(_serve(service))
-    except PartnerError as exc:
+    except (PartnerError, DeviceError) as exc:  # a name conflict; a device it cannot reach
         raise CommandError(str(exc)) from None
     return 0
 

@@ -1074,4 +1074,11 @@ def _check_catalogue(owner: str, commands: tuple[Command, ...]) -> None:
             raise TypeError(f"{owner}: {c.name} declares an input size without a type")
 
 
-__all__ = ["DeviceError", "FeedbackPort", "GenericDevice"]
+def check_catalogue(owner: str, commands: tuple[Command, ...]) -> None:
+    """Check a command catalogue as a service does at construction: unique names, a
+    StopData for any MultipleData, a type wherever a size is declared (TypeError naming
+    ``owner`` and the command).  For catalogues read from files (a device map)."""
+    _check_catalogue(owner, commands)
+
+
+__all__ = ["DeviceError", "FeedbackPort", "GenericDevice", "check_catalogue"]

@@ -19,6 +19,7 @@ KINDS: dict[str, str] = {
     "tracker": "plugcell.services.tracker:TrackerService",
     "compute": "plugcell.services.compute:ComputeService",
     "controller": "plugcell.services.controller:CellController",
+    "opcua-device": "plugcell.opcua.device:OpcUaDevice",
 }
 
 
