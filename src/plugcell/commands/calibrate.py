@@ -26,6 +26,7 @@ from typing import TYPE_CHECKING, Any
 if TYPE_CHECKING:  # numpy is imported where it is used: `--help` does not load it
     import numpy as np
 
+from plugcell.commands.files import write_text
 from plugcell.commands.robotargs import add_robot_args
 
 
@@ -287,17 +288,17 @@ def _run(args: argparse.Namespace) -> int:
     d["description"] = desc.to_dict()
     text = json.dumps(d, indent=2, allow_nan=False)
     if args.out is not None:
-        _write(args.out, text + "\n")
+        write_text(args.out, text + "\n")
         written.append(args.out)
         if side is not None:
             written.append(residual_path(args.out))
     if args.report is not None:
         from plugcell.calibration.report import render_report
 
-        _write(args.report, render_report(result, data, val))
+        write_text(args.report, render_report(result, data, val))
         written.append(args.report)
     if args.residuals is not None:
-        _write(args.residuals, result.residuals_json() + "\n")
+        write_text(args.residuals, result.residuals_json() + "\n")
         written.append(args.residuals)
     if args.json:
         print(text)
@@ -311,12 +312,3 @@ def _run(args: argparse.Namespace) -> int:
                   file=sys.stderr)
     return 0
 
-
-def _write(path: Path, text: str) -> None:
-    from plugcell.cli import CommandError
-
-    try:
-        path.parent.mkdir(parents=True, exist_ok=True)
-        path.write_text(text, encoding="utf-8")
-    except OSError as exc:
-        raise CommandError(f"{path}: cannot write: {exc.strerror}") from None

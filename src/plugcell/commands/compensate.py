@@ -24,7 +24,6 @@ from __future__ import annotations
 import argparse
 import csv
 import io
-import json
 import math
 import sys
 import time
@@ -149,32 +148,10 @@ def parse_targets(text: str, name: str) -> tuple[list[str], np.ndarray, np.ndarr
 
 
 def _load_params(path: Path, args: argparse.Namespace, residual: bool = True) -> Any:
-    from plugcell.calibration.result import CalibrationResult
     from plugcell.cli import CommandError
-    from plugcell.commands.robotargs import load_robot_of
-    from plugcell.io.robots import description_of_params
-    from plugcell.kinematics.errors import DescriptionError
+    from plugcell.commands.files import read_calibration
 
-    try:
-        d = json.loads(path.read_text())
-    except OSError as exc:
-        raise CommandError(f"{path}: cannot read: {exc.strerror or exc}") from None
-    except json.JSONDecodeError as exc:
-        raise CommandError(f"{path}: not valid JSON: line {exc.lineno}: {exc.msg}") from None
-    if not isinstance(d, dict):
-        raise CommandError(f"{path}: expected a JSON object written by plugcell calibrate")
-    if args.robot is not None:
-        desc = load_robot_of(args)
-    else:
-        try:
-            desc = description_of_params(d, str(path))
-        except DescriptionError as exc:
-            raise CommandError(str(exc)) from None
-    try:
-        result = CalibrationResult.from_dict(d, desc)
-    except (KeyError, TypeError, ValueError) as exc:
-        what = f"missing key {exc}" if isinstance(exc, KeyError) else str(exc)
-        raise CommandError(f"{path}: not a plugcell calibration: {what}") from None
+    d, result = read_calibration(path, args)
     entry = d.get("residual_model")
     if residual and entry:
         from plugcell.io.residual_models import ResidualFileError, load_residual

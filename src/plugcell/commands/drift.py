@@ -27,6 +27,8 @@ from typing import Any
 
 import numpy as np
 
+from plugcell.commands.files import write_text
+
 
 def configure(p: argparse.ArgumentParser) -> None:
     """Add the ``drift`` actions to its parser (declared in :mod:`plugcell.cli`)."""
@@ -55,27 +57,9 @@ def configure(p: argparse.ArgumentParser) -> None:
 
 
 def _params(path: Path) -> tuple[dict[str, Any], Any]:
-    from plugcell.calibration.result import CalibrationResult
-    from plugcell.cli import CommandError
-    from plugcell.io.robots import load_robot
-    from plugcell.kinematics.errors import DescriptionError
+    from plugcell.commands.files import read_calibration
 
-    try:
-        d = json.loads(path.read_text(encoding="utf-8"))
-    except OSError as exc:
-        raise CommandError(f"{path}: cannot read: {exc.strerror or exc}") from None
-    except json.JSONDecodeError as exc:
-        raise CommandError(f"{path}: not valid JSON: line {exc.lineno}: {exc.msg}") from None
-    if not isinstance(d, dict):
-        raise CommandError(f"{path}: expected a JSON object written by plugcell calibrate")
-    try:
-        desc = load_robot(d.get("robot", ""))
-        return d, CalibrationResult.from_dict(d, desc)
-    except DescriptionError as exc:
-        raise CommandError(f"{path}: robot: {exc}") from None
-    except (KeyError, TypeError, ValueError) as exc:
-        what = f"missing key {exc}" if isinstance(exc, KeyError) else str(exc)
-        raise CommandError(f"{path}: not a plugcell calibration: {what}") from None
+    return read_calibration(path)
 
 
 def _nests(path: Path) -> tuple[list[str], np.ndarray]:
@@ -88,15 +72,6 @@ def _nests(path: Path) -> tuple[list[str], np.ndarray]:
         raise CommandError(str(exc)) from None
 
 
-def _write(path: Path, text: str) -> None:
-    from plugcell.cli import CommandError
-
-    try:
-        path.parent.mkdir(parents=True, exist_ok=True)
-        path.write_text(text, encoding="utf-8")
-    except OSError as exc:
-        raise CommandError(f"{path}: cannot write: {exc.strerror}") from None
-
 
 def _register(args: argparse.Namespace) -> int:
     from plugcell.io.nests import format_nests
@@ -105,7 +80,7 @@ def _register(args: argparse.Namespace) -> int:
     _, result = _params(args.params)
     names, measured = _nests(args.measured)
     base = result.model.base()
-    _write(args.out, format_nests(names, nests_in_base(base, measured), (
+    write_text(args.out, format_nests(names, nests_in_base(base, measured), (
         f"plugcell drift register: {len(names)} nests in the robot base frame (mm), from "
         f"{args.measured.name} with the BASE of {args.params.name}",)))
     print(f"registered {len(names)} nests in the robot base frame; wrote {args.out}")
@@ -141,7 +116,7 @@ def _check(args: argparse.Namespace) -> int:
         event = {"time_utc": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime()),
                  **{k: v for k, v in est.as_dict().items() if k != "base"}}
         d = rebase_document(d, result, est.base, event)
-        _write(args.params, json.dumps(d, indent=2) + "\n")
+        write_text(args.params, json.dumps(d, indent=2) + "\n")
         updated = True
     if args.json:
         print(json.dumps({**est.as_dict(), "updated": updated}, indent=2))

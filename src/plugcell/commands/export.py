@@ -18,6 +18,7 @@ import argparse
 import json
 from pathlib import Path
 
+from plugcell.commands.files import write_text
 from plugcell.commands.robotargs import add_robot_args
 
 
@@ -45,35 +46,23 @@ def configure(p: argparse.ArgumentParser) -> None:
 
 
 def _run(args: argparse.Namespace) -> int:
-    from plugcell.calibration.result import CalibrationResult
     from plugcell.cli import CommandError
-    from plugcell.commands.robotargs import load_robot_of, robot_source_of
+    from plugcell.commands.files import read_calibration
+    from plugcell.commands.robotargs import robot_source_of
     from plugcell.io.export import ExportError, export_calibration
-    from plugcell.io.robots import RobotSource, description_of_params
+    from plugcell.io.robots import RobotSource
     from plugcell.kinematics.errors import DescriptionError
 
-    try:
-        d = json.loads(args.params.read_text(encoding="utf-8"))
-    except OSError as exc:
-        raise CommandError(f"{args.params}: cannot read: {exc.strerror or exc}") from None
-    except (json.JSONDecodeError, UnicodeDecodeError) as exc:
-        raise CommandError(f"{args.params}: not valid JSON: {exc}") from None
-    if not isinstance(d, dict):
-        raise CommandError(f"{args.params}: expected a JSON object written by plugcell calibrate")
-    try:
-        if args.robot is not None:
-            desc = load_robot_of(args)
-            source: RobotSource | None = robot_source_of(args)
-        else:
-            desc = description_of_params(d, str(args.params))
+    d, result = read_calibration(args.params, args)
+    if args.robot is not None:
+        source: RobotSource | None = robot_source_of(args)
+    else:
+        try:
             source = (RobotSource.from_dict(d["robot_source"]) if "robot_source" in d
                       else RobotSource(str(d.get("robot", ""))))
-        result = CalibrationResult.from_dict(d, desc)
-    except DescriptionError as exc:
-        raise CommandError(str(exc)) from None
-    except (KeyError, TypeError, ValueError) as exc:
-        what = f"missing key {exc}" if isinstance(exc, KeyError) else str(exc)
-        raise CommandError(f"{args.params}: not a plugcell calibration: {what}") from None
+        except DescriptionError as exc:
+            raise CommandError(f"{args.params}: {exc}") from None
+    desc = result.model.structure.source
     try:
         out = export_calibration(result, desc, args.format, source=source,
                                  params_path=args.params.name, include_base=args.include_base,
@@ -85,11 +74,11 @@ def _run(args: argparse.Namespace) -> int:
         raise CommandError(f"{args.params}: the robot's source URDF: {exc} (give the robot "
                            "again with --robot FILE and its options)") from None
     written = [str(args.out)]
-    _write(args.out, out.text)
+    write_text(args.out, out.text)
     side_path = None
     if out.side is not None:
         side_path = args.out.parent / (args.out.name + ".extra.json")
-        _write(side_path, json.dumps(out.side, indent=2) + "\n")
+        write_text(side_path, json.dumps(out.side, indent=2) + "\n")
         written.append(str(side_path))
     if args.json:
         print(json.dumps({"out": str(args.out), "format": args.format,
@@ -106,12 +95,3 @@ def _run(args: argparse.Namespace) -> int:
             print(f"  - {r}")
     return 0
 
-
-def _write(path: Path, text: str) -> None:
-    from plugcell.cli import CommandError
-
-    try:
-        path.parent.mkdir(parents=True, exist_ok=True)
-        path.write_text(text, encoding="utf-8")
-    except OSError as exc:
-        raise CommandError(f"{path}: cannot write: {exc.strerror or exc}") from None

@@ -29,6 +29,7 @@ from typing import Any
 
 import numpy as np
 
+from plugcell.commands.files import write_text
 from plugcell.commands.robotargs import add_robot_args, load_robot_of
 
 #: Default line-of-sight acceptance of a T-MAC (deg).
@@ -329,15 +330,6 @@ def _text(d: dict[str, Any]) -> str:
     return "\n".join(lines)
 
 
-def _write(path: Path, text: str) -> None:
-    from plugcell.cli import CommandError
-
-    try:
-        path.parent.mkdir(parents=True, exist_ok=True)
-        path.write_text(text, encoding="utf-8")
-    except OSError as exc:
-        raise CommandError(f"{path}: cannot write: {exc.strerror}") from None
-
 
 def _write_plan(path: Path, plan: Any, d: dict[str, Any]) -> None:
     from plugcell.io.plans import MeasurementPlan, format_plan
@@ -349,7 +341,7 @@ def _write_plan(path: Path, plan: Any, d: dict[str, Any]) -> None:
         f"predicted: criterion {d['value']:.6g}, condition number {d['condition_number']:.1f}",
         "rows grouped by payload (one change per group), short joint moves within a group",
     ]
-    _write(path, format_plan(MeasurementPlan(plan.q, plan.payload_kg), comments=comments))
+    write_text(path, format_plan(MeasurementPlan(plan.q, plan.payload_kg), comments=comments))
 
 
 def _write_measured(path: Path, m: Any, rows: np.ndarray, d: dict[str, Any],
@@ -364,7 +356,7 @@ def _write_measured(path: Path, m: Any, rows: np.ndarray, d: dict[str, Any],
         f"criterion {d['criterion']}",
         f"predicted: criterion {d['value']:.6g}, condition number {d['condition_number']:.1f}",
     ]
-    _write(path, format_measurements(m.subset(rows), comments=comments))
+    write_text(path, format_measurements(m.subset(rows), comments=comments))
 
 
 def _write_program(path: Path, plan: Any) -> list[str]:
@@ -383,6 +375,6 @@ def _write_program(path: Path, plan: Any) -> list[str]:
             f"{path.stem}-{g + 1}-{m:g}kg{path.suffix}")
         values = ["calibration", f"configs={rows_text(q)}", f"n_configs={len(q)}",
                   "duration_ms=1000", "route=TRUE"]
-        _write(target, json.dumps(values) + "\n")
+        write_text(target, json.dumps(values) + "\n")
         written.append(f"{target} ({len(q)} poses, {m:g} kg)")
     return written
