@@ -13,7 +13,9 @@ from __future__ import annotations
 import datetime as dt
 import ipaddress
 import os
+from collections.abc import Iterable
 from pathlib import Path
+from typing import Any
 
 
 def write_file(path: Path, data: bytes, private: bool) -> None:
@@ -23,6 +25,20 @@ def write_file(path: Path, data: bytes, private: bool) -> None:
     fd = os.open(path, flags, 0o600 if private else 0o644)
     with os.fdopen(fd, "wb") as f:
         f.write(data)
+
+
+def host_names(hosts: Iterable[str]) -> list[Any]:
+    """Subject alternative names of a certificate: ``localhost``, ``127.0.0.1`` and
+    ``hosts`` (each an IP address if it parses as one, else a DNS name)."""
+    from cryptography import x509
+
+    alt: list[x509.GeneralName] = []
+    for host in ("localhost", "127.0.0.1", *hosts):
+        try:
+            alt.append(x509.IPAddress(ipaddress.ip_address(host)))
+        except ValueError:
+            alt.append(x509.DNSName(host))
+    return alt
 
 
 def create_ca(folder: Path, cell: str = "default", days: int = 3650) -> Path:
@@ -89,12 +105,7 @@ def issue_certificate(
     ca_key = serialization.load_pem_private_key((folder / "ca.key").read_bytes(), None)
     ca_cert = x509.load_pem_x509_certificate((folder / "ca.pem").read_bytes())
     key = ec.generate_private_key(ec.SECP256R1())
-    alt: list[x509.GeneralName] = []
-    for host in ("localhost", "127.0.0.1", *hosts):
-        try:
-            alt.append(x509.IPAddress(ipaddress.ip_address(host)))
-        except ValueError:
-            alt.append(x509.DNSName(host))
+    alt = host_names(hosts)
     now = dt.datetime.now(dt.UTC)
     cert = (
         x509.CertificateBuilder()

@@ -20,7 +20,6 @@ by the OPC UA authority of the cell, in its validity period.
 from __future__ import annotations
 
 import datetime as dt
-import ipaddress
 from pathlib import Path
 
 from cryptography import x509
@@ -28,7 +27,7 @@ from cryptography.hazmat.primitives import hashes, serialization
 from cryptography.hazmat.primitives.asymmetric import rsa
 from cryptography.x509.oid import ExtendedKeyUsageOID, NameOID
 
-from plugcell.framework.certificates import write_file
+from plugcell.framework.certificates import host_names, write_file
 
 CA_CERT, CA_KEY, CA_CRL = "opcua-ca.pem", "opcua-ca.key", "opcua-ca.crl"
 
@@ -95,12 +94,7 @@ def issue_application_certificate(
     ca_key = serialization.load_pem_private_key((folder / CA_KEY).read_bytes(), None)
     ca_cert = x509.load_pem_x509_certificate((folder / CA_CERT).read_bytes())
     key = rsa.generate_private_key(public_exponent=65537, key_size=2048)
-    alt: list[x509.GeneralName] = [x509.UniformResourceIdentifier(uri or application_uri(name))]
-    for host in ("localhost", "127.0.0.1", *hosts):
-        try:
-            alt.append(x509.IPAddress(ipaddress.ip_address(host)))
-        except ValueError:
-            alt.append(x509.DNSName(host))
+    alt = [x509.UniformResourceIdentifier(uri or application_uri(name)), *host_names(hosts)]
     now = dt.datetime.now(dt.UTC)
     cert = (
         x509.CertificateBuilder()
