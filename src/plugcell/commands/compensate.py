@@ -95,13 +95,9 @@ def parse_targets(text: str, name: str) -> tuple[list[str], np.ndarray, np.ndarr
 
     Raises ``ValueError`` naming the file, line and column of the first bad cell.
     """
-    rows: list[tuple[int, list[str]]] = []
-    for line_no, row in enumerate(csv.reader(io.StringIO(text)), start=1):
-        if not row or all(not c.strip() for c in row) or row[0].lstrip().startswith("#"):
-            continue
-        rows.append((line_no, row))
-    if not rows:
-        raise ValueError(f"{name}: no header line (the file is empty)")
+    from plugcell.io.csvtable import table_number, table_rows
+
+    rows = table_rows(text, name, ValueError)
     header_line, header = rows[0]
     cols = [h.strip().lower() for h in header]
     for i, c in enumerate(cols):
@@ -129,18 +125,11 @@ def parse_targets(text: str, name: str) -> tuple[list[str], np.ndarray, np.ndarr
         for c, col in enumerate(cols):
             if col == "name":
                 continue
-            cell = row[c].strip()
-            try:
-                v = float(cell)
-            except ValueError:
-                raise ValueError(f"{name}: line {line_no}, column {col!r}: not a number: "
-                                 f"{cell!r}") from None
-            if not math.isfinite(v):
-                raise ValueError(f"{name}: line {line_no}, column {col!r}: not finite: {cell!r}")
+            v = table_number(row[c], name, line_no, col, ValueError)
             if col == "payload_kg":
                 if v < 0:
                     raise ValueError(f"{name}: line {line_no}, column 'payload_kg': negative "
-                                     f"mass {cell!r}")
+                                     f"mass {row[c].strip()!r}")
                 pay[r] = v  # type: ignore[index]
             else:
                 vals[r, COLUMNS.index(col)] = v

@@ -25,7 +25,6 @@ the row (1-based line number in the file) and the column.
 
 from __future__ import annotations
 
-import csv
 import io
 import math
 import re
@@ -34,6 +33,8 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
+
+from plugcell.io.csvtable import table_number, table_rows
 
 ROTATION_CONVENTIONS = ("rpy", "zyz", "xyz")
 _JOINT_COLUMN = re.compile(r"^j([1-9][0-9]*)$")
@@ -152,20 +153,7 @@ def parse_measurements(
         raise MeasurementFileError(
             f"{name}: rotation convention {rotation!r} unknown; use one of {ROTATION_CONVENTIONS}"
         )
-    rows: list[tuple[int, list[str]]] = []
-    # universal newlines, as when reading a file: \r\n, \r and \n all end a line
-    reader = csv.reader(io.StringIO(text, newline=None))
-    try:
-        for line_no, row in enumerate(reader, start=1):
-            if not row or all(not c.strip() for c in row):
-                continue
-            if row[0].lstrip().startswith("#"):
-                continue
-            rows.append((line_no, row))
-    except csv.Error as exc:
-        raise MeasurementFileError(f"{name}: line {reader.line_num}: {exc}") from None
-    if not rows:
-        raise MeasurementFileError(f"{name}: no header line (the file is empty)")
+    rows = table_rows(text, name, MeasurementFileError)
     header_line, header = rows[0]
     nj, index = _parse_header(name, header)
     if n_joints is not None and nj != n_joints:
@@ -189,17 +177,7 @@ def parse_measurements(
                     f"{name}: line {line_no}, column 'temperature_c': missing value (a "
                     "temperature column must be complete; drop the column or the row)"
                 )
-            try:
-                v = float(cell)
-            except ValueError:
-                raise MeasurementFileError(
-                    f"{name}: line {line_no}, column {cols[c]!r}: not a number: {cell.strip()!r}"
-                ) from None
-            if not math.isfinite(v):
-                raise MeasurementFileError(
-                    f"{name}: line {line_no}, column {cols[c]!r}: not finite: {cell.strip()!r}"
-                )
-            values[r, c] = v
+            values[r, c] = table_number(cell, name, line_no, cols[c], MeasurementFileError)
     joints = values[:, [index[f"j{k}"] for k in range(1, nj + 1)]] * (
         math.pi / 180.0 if joint_scale is None else np.asarray(joint_scale, dtype=float))
     positions = values[:, [index["x"], index["y"], index["z"]]] / 1000.0

@@ -14,12 +14,12 @@ line and the column.
 
 from __future__ import annotations
 
-import csv
 import io
-import math
 from pathlib import Path
 
 import numpy as np
+
+from plugcell.io.csvtable import table_number, table_rows
 
 __all__ = ["NestFileError", "format_nests", "parse_nests", "read_nests"]
 
@@ -32,17 +32,7 @@ class NestFileError(ValueError):
 
 def parse_nests(text: str, name: str = "<nests>") -> tuple[list[str], np.ndarray]:
     """Names and positions ``(K, 3)`` in **metres** of a nest file's text."""
-    rows: list[tuple[int, list[str]]] = []
-    reader = csv.reader(io.StringIO(text, newline=None))
-    try:
-        for line_no, row in enumerate(reader, start=1):
-            if not row or all(not c.strip() for c in row) or row[0].lstrip().startswith("#"):
-                continue
-            rows.append((line_no, row))
-    except csv.Error as exc:
-        raise NestFileError(f"{name}: line {reader.line_num}: {exc}") from None
-    if not rows:
-        raise NestFileError(f"{name}: no header line (the file is empty)")
+    rows = table_rows(text, name, NestFileError)
     line_no, header = rows[0]
     if tuple(h.strip() for h in header) != HEADER:
         raise NestFileError(f"{name}: line {line_no}: header must be 'name,x,y,z', got "
@@ -57,16 +47,8 @@ def parse_nests(text: str, name: str = "<nests>") -> tuple[list[str], np.ndarray
             raise NestFileError(f"{name}: line {line_no}, column 'name': empty")
         if label in names:
             raise NestFileError(f"{name}: line {line_no}: nest {label!r} named twice")
-        xyz = []
-        for col, cell in zip(HEADER[1:], row[1:], strict=True):
-            try:
-                v = float(cell)
-            except ValueError:
-                raise NestFileError(f"{name}: line {line_no}, column {col!r}: not a number: "
-                                    f"{cell.strip()!r}") from None
-            if not math.isfinite(v):
-                raise NestFileError(f"{name}: line {line_no}, column {col!r}: not finite")
-            xyz.append(v / 1e3)
+        xyz = [table_number(cell, name, line_no, col, NestFileError) / 1e3
+               for col, cell in zip(HEADER[1:], row[1:], strict=True)]
         names.append(label)
         pos.append(xyz)
     if len(names) < 3:

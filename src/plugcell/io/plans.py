@@ -20,15 +20,15 @@ file, the line and the column.
 
 from __future__ import annotations
 
-import csv
 import io
-import math
 import re
 from collections.abc import Iterable
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
+
+from plugcell.io.csvtable import table_number, table_rows
 
 _JOINT_COLUMN = re.compile(r"^j([1-9][0-9]*)$")
 #: Columns of a measurement file a plan reader passes over.
@@ -88,17 +88,7 @@ def _header(name: str, line_no: int, header: list[str]) -> tuple[list[int], int 
 def parse_plan(text: str, *, name: str = "<plan>", n_joints: int | None = None
                ) -> MeasurementPlan:
     """Parse plan-file text (module docstring); ``n_joints`` checked when given."""
-    rows: list[tuple[int, list[str]]] = []
-    reader = csv.reader(io.StringIO(text, newline=None))
-    try:
-        for line_no, row in enumerate(reader, start=1):
-            if not row or all(not c.strip() for c in row) or row[0].lstrip().startswith("#"):
-                continue
-            rows.append((line_no, row))
-    except csv.Error as exc:
-        raise PlanFileError(f"{name}: line {reader.line_num}: {exc}") from None
-    if not rows:
-        raise PlanFileError(f"{name}: no header line (the file is empty)")
+    rows = table_rows(text, name, PlanFileError)
     (hline, header), data = rows[0], rows[1:]
     jcols, pcol = _header(name, hline, header)
     if n_joints is not None and len(jcols) != n_joints:
@@ -113,15 +103,7 @@ def parse_plan(text: str, *, name: str = "<plan>", n_joints: int | None = None
             raise PlanFileError(f"{name}: line {line_no}: expected {len(cols)} values, "
                                 f"got {len(row)}")
         for c, cell in enumerate(row):
-            try:
-                v = float(cell)
-            except ValueError:
-                raise PlanFileError(f"{name}: line {line_no}, column {cols[c]!r}: not a number: "
-                                    f"{cell.strip()!r}") from None
-            if not math.isfinite(v):
-                raise PlanFileError(f"{name}: line {line_no}, column {cols[c]!r}: not finite: "
-                                    f"{cell.strip()!r}")
-            values[r, c] = v
+            values[r, c] = table_number(cell, name, line_no, cols[c], PlanFileError)
     payload = None
     if pcol is not None:
         payload = values[:, pcol]

@@ -1,0 +1,49 @@
+"""The CSV tables of plugcell's text files: rows with their line numbers, numbers checked.
+
+Measurement files, plan files, nest files and compensation targets are comma-separated
+tables with a header line; blank lines and lines starting with ``#`` are passed over,
+``\\r\\n``, ``\\r`` and ``\\n`` all end a line.  :func:`table_rows` returns the rows that
+count with their line numbers, :func:`table_number` one finite number of a cell; both
+raise the file format's own error class with a message naming the file, the line and
+the column.
+"""
+
+from __future__ import annotations
+
+import csv
+import io
+import math
+
+
+def table_rows(text: str, name: str, error: type[Exception]) -> list[tuple[int, list[str]]]:
+    """``[(line number, cells), …]`` of ``text``, the header first.
+
+    Raises ``error`` (``"NAME: line L: …"``) on a CSV syntax error and when no line
+    counts (``"NAME: no header line (the file is empty)"``).
+    """
+    rows: list[tuple[int, list[str]]] = []
+    reader = csv.reader(io.StringIO(text, newline=None))
+    try:
+        for line_no, row in enumerate(reader, start=1):
+            if not row or all(not c.strip() for c in row) or row[0].lstrip().startswith("#"):
+                continue
+            rows.append((line_no, row))
+    except csv.Error as exc:
+        raise error(f"{name}: line {reader.line_num}: {exc}") from None
+    if not rows:
+        raise error(f"{name}: no header line (the file is empty)")
+    return rows
+
+
+def table_number(cell: str, name: str, line_no: int, column: str,
+                 error: type[Exception]) -> float:
+    """The finite number in ``cell`` of ``column`` at ``line_no``, else ``error`` saying
+    ``"NAME: line L, column 'C': not a number: '…'"`` (or ``not finite``)."""
+    try:
+        v = float(cell)
+    except ValueError:
+        raise error(f"{name}: line {line_no}, column {column!r}: not a number: "
+                    f"{cell.strip()!r}") from None
+    if not math.isfinite(v):
+        raise error(f"{name}: line {line_no}, column {column!r}: not finite: {cell.strip()!r}")
+    return v
