@@ -32,7 +32,7 @@ def model5(h4: RobotDescription) -> IdentifiedModel:
 @pytest.fixture(scope="session")
 def workspace_q(h4: RobotDescription) -> np.ndarray:
     """40 joint configurations whose nominal flange is in the working volume."""
-    from plugcell.twin.scenario import TwinProfile
+    from plugcell.twin.profile import TwinProfile
 
     return working_volume_joints(h4, TwinProfile.load("smart_h4"), 40,
                                  np.random.default_rng(7))

@@ -51,3 +51,39 @@ def test_opcua_device_flags_become_parameters():
     cls = load_kind("opcua-device")
     pairs = _device_options(cls, _args(endpoint="opc.tcp://127.0.0.1:4840", map="gripper.toml"))
     assert _params(cls, pairs) == {"endpoint": "opc.tcp://127.0.0.1:4840", "map": "gripper.toml"}
+
+
+def test_a_urdf_robot_reaches_the_robot_service_as_a_description_file(tmp_path, monkeypatch):
+    """`serve robot --robot ur.urdf.xacro --robot-arg …`: the robot service and its simulated
+    controller take a robot as one string, so the import is written once as a description
+    file under $PLUGCELL_HOME/robots and its path is passed on (reused when unchanged)."""
+    from shared_data import UR_XACRO, URDF_DIR
+
+    from plugcell.io.robots import load_robot
+
+    if not UR_XACRO.is_file():
+        pytest.skip(f"the shared URDF data are not at {URDF_DIR}")
+    monkeypatch.setenv("PLUGCELL_HOME", str(tmp_path))
+    cls = load_kind("robot")
+    args = _args(sim=True, robot=str(UR_XACRO), robot_arg=["ur_type=ur10", "name=ur10"],
+                 package_path=[str(URDF_DIR)], base_link=None, tip_link=None)
+    kw = _params(cls, _device_options(cls, args))
+    path = kw["robot"]
+    assert path.startswith(str(tmp_path / "robots" / "ur10-")) and path.endswith(".toml")
+    imported = load_robot(UR_XACRO, args={"ur_type": "ur10", "name": "ur10"},
+                          package_paths=[URDF_DIR])
+    again = load_robot(path)
+    assert again.name == "ur10"
+    q = imported.home + 0.3
+    from plugcell.kinematics import forward
+
+    a = forward(imported, imported.nominal_parameters(), q).flange
+    b = forward(again, again.nominal_parameters(), q).flange
+    assert abs(a - b).max() < 1e-12
+    assert _params(cls, _device_options(cls, args))["robot"] == path  # the same file
+    assert len(list((tmp_path / "robots").iterdir())) == 1
+
+
+def test_urdf_options_without_a_robot_are_refused():
+    with pytest.raises(CommandError, match="give it with --robot FILE"):
+        _device_options(load_kind("robot"), _args(robot_arg=["ur_type=ur10"]))

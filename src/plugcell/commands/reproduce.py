@@ -101,7 +101,7 @@ def reproduce_8_1(poses: int = 100, seed: int = 0) -> dict[str, Any]:
     from plugcell.calibration.simulation import simulated_identification
     from plugcell.io.robots import load_robot
     from plugcell.twin.campaign import working_volume_joints
-    from plugcell.twin.scenario import TwinProfile
+    from plugcell.twin.profile import TwinProfile
 
     desc = load_robot("smart_h4")
     errors = {(lk, f): v * 1e-3 for lk, f, v, _, _ in TABLE_8_1 if v is not None}

@@ -82,6 +82,40 @@ def load_robot_of(args: argparse.Namespace, ref: str | None = None) -> RobotDesc
         raise _error(str(exc)) from None
 
 
+def robot_file_of(args: argparse.Namespace) -> str:
+    """``--robot`` as one string another process can load (a name or a file path).
+
+    A shipped name or a ``.toml`` file is returned as given.  A URDF/xacro robot is
+    imported and written as a description file
+    ``$PLUGCELL_HOME/robots/NAME-HASH.toml`` (HASH: of its content, so each distinct
+    import is its own file and a re-import reuses it), whose path is returned: the
+    robot service and its simulated controller take a robot as one string.
+    """
+    import hashlib
+
+    from plugcell.framework.journal import plugcell_home
+    from plugcell.io.robots import description_to_toml
+
+    src = robot_source_of(args)
+    if not src.is_urdf:
+        load_robot_of(args)  # a bad name, file or option is the command's error now
+        return str(args.robot)
+    desc = load_robot_of(args)
+    text = description_to_toml(desc, f"imported by plugcell from {src.ref}\n"
+                                     f"options: {' '.join(src.argv()[2:])}")
+    digest = hashlib.sha256(text.encode()).hexdigest()[:12]
+    path = plugcell_home() / "robots" / f"{desc.name}-{digest}.toml"
+    try:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        if not path.exists():
+            tmp = path.with_suffix(".tmp")
+            tmp.write_text(text, encoding="utf-8")
+            tmp.replace(path)
+    except OSError as exc:
+        raise _error(f"{path}: cannot write the imported robot: {exc.strerror or exc}") from None
+    return str(path)
+
+
 def _error(msg: str) -> Exception:
     try:
         from plugcell.cli import CommandError

@@ -12,6 +12,7 @@ from pathlib import Path
 from typing import Any
 
 from plugcell.commands.cellargs import add_cell_args, cell_of, transport_of
+from plugcell.commands.robotargs import add_robot_args
 from plugcell.framework import eventloop
 
 
@@ -42,7 +43,9 @@ def configure(p: argparse.ArgumentParser) -> None:
                      help="drive the simulated device (robot: its simulated controller; "
                      "tracker: the tracker model)")
     dev.add_argument("--controller", metavar="HOST:PORT", help="robot: a real controller")
-    dev.add_argument("--robot", help="robot: description name or file (default smart_h4)")
+    add_robot_args(dev, help="robot: shipped name (default smart_h4), description file "
+                   "(.toml) or URDF/xacro file (with --robot-arg, --package-path, --base-link, "
+                   "--tip-link)")
     dev.add_argument("--payload-kg", type=float, help="robot: payload carried by the twin")
     dev.add_argument("--speed", type=float, help="robot: simulation speed factor")
     dev.add_argument("--seed", type=int, help="seed of the simulated device")
@@ -77,9 +80,15 @@ def _params(cls: type, pairs: list[str]) -> dict[str, Any]:
 def _device_options(cls: type, args: argparse.Namespace) -> list[str]:
     """The device flags that were given, as ``KEY=VALUE`` pairs for :func:`_params`."""
     from plugcell.cli import CommandError
+    from plugcell.commands.robotargs import robot_file_of
 
     known: dict[str, Any] = getattr(cls, "params", {})
     pairs = []
+    urdf_options = [getattr(args, k, None) for k in ("robot_arg", "package_path", "base_link",
+                                                     "tip_link")]
+    if args.robot is None and any(urdf_options):
+        raise CommandError("--robot-arg, --package-path, --base-link and --tip-link describe "
+                           "a URDF robot: give it with --robot FILE")
     if args.sim:
         if "sim" in known:
             pairs.append("sim=true")
@@ -91,6 +100,8 @@ def _device_options(cls: type, args: argparse.Namespace) -> list[str]:
                       ("payload_kg", "payload_kg"), ("speed", "speed"), ("seed", "seed"),
                       ("endpoint", "endpoint"), ("map", "map")):
         value = getattr(args, flag, None)
+        if flag == "robot" and value is not None and key in known:
+            value = robot_file_of(args)  # a URDF robot: imported, as a description file
         if value is not None:
             if key not in known:
                 option = "--" + flag.replace("_", "-")

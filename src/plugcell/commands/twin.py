@@ -11,6 +11,7 @@ from typing import Any
 import numpy as np
 
 from plugcell.commands.progress import ProgressBar
+from plugcell.commands.robotargs import add_robot_args
 
 
 def configure(p: argparse.ArgumentParser) -> None:
@@ -19,7 +20,10 @@ def configure(p: argparse.ArgumentParser) -> None:
     tw = p.add_subparsers(dest="twin_command", metavar="SUBCOMMAND", required=True)
 
     def common(q: argparse.ArgumentParser) -> None:
-        q.add_argument("--robot", default="smart_h4", help="robot name (default: smart_h4)")
+        add_robot_args(q, default="smart_h4",
+                       help="shipped robot name (default: smart_h4), a description file "
+                       "(.toml) or a URDF/xacro file; a robot without a twin profile of its "
+                       "own gets an estimated one (docs/twin.md)")
         q.add_argument(
             "--seed", type=int, default=0, help="seed of the twin's hidden errors (default: 0)"
         )
@@ -82,6 +86,8 @@ def configure(p: argparse.ArgumentParser) -> None:
 
 def _scenario(args: argparse.Namespace):
     from plugcell.cli import CommandError
+    from plugcell.commands.robotargs import load_robot_of, robot_source_of
+    from plugcell.kinematics.errors import DescriptionError
     from plugcell.twin.scenario import ScenarioError, TwinScenario
 
     try:
@@ -90,8 +96,14 @@ def _scenario(args: argparse.Namespace):
                 return TwinScenario.from_json(args.scenario.read_text())
             except OSError as exc:
                 raise CommandError(f"{args.scenario}: cannot read: {exc.strerror}") from None
+        source = robot_source_of(args)
+        if source.is_urdf:  # the scenario carries the imported description itself
+            desc = load_robot_of(args)
+            return TwinScenario(robot=desc.name, seed=args.seed, description=desc.to_dict())
+        if any((source.args, source.package_paths, source.base_link, source.tip_link)):
+            source.load()  # the options apply to URDF robots only: say so
         return TwinScenario(robot=args.robot, seed=args.seed)
-    except ScenarioError as exc:
+    except (ScenarioError, DescriptionError) as exc:
         raise CommandError(str(exc)) from None
 
 

@@ -234,6 +234,10 @@ class RobotService(GenericDevice):
         assert self.endpoint is not None
         hello = await self.bridge.connect(*self.endpoint, timeout or self.connect_timeout)
         robot = hello.fields.get("robot", "")
+        if self.sim_process is not None:
+            # our own simulated controller: it loaded the robot we gave it (a name or a
+            # description file, e.g. an imported URDF) and says only the robot's name
+            robot = self.robot
         self.robot_description = None
         if robot:
             from plugcell.io.robots import load_robot

@@ -20,8 +20,8 @@ from plugcell.kinematics import RobotDescription, inverse
 from plugcell.kinematics.errors import KinematicsError
 from plugcell.kinematics.rotations import matrix_to_angles, zyz_to_matrix
 from plugcell.kinematics.transforms import so3_exp
+from plugcell.twin.profile import TwinProfile
 from plugcell.twin.robot import RobotTwin
-from plugcell.twin.scenario import TwinProfile
 from plugcell.twin.tracker import LaserTracker
 
 Array = NDArray[np.float64]

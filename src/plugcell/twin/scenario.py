@@ -13,9 +13,7 @@ from __future__ import annotations
 
 import json
 import math
-import tomllib
 from dataclasses import asdict, dataclass, field
-from importlib import resources
 from typing import Any
 
 import numpy as np
@@ -24,84 +22,29 @@ from plugcell.io.robots import load_robot
 from plugcell.kinematics import GeometricParameters, RobotDescription
 from plugcell.kinematics.rotations import rpy_to_matrix
 from plugcell.kinematics.transforms import rot_z, translation
-from plugcell.twin.physics import Beam, Payload, TransmissionError
+from plugcell.twin.generic import generic_twin
+from plugcell.twin.physics import Payload, TransmissionError
+from plugcell.twin.profile import ScenarioError, TwinProfile, available_profiles
+
+__all__ = ["ScenarioError", "TwinProfile", "TwinScenario", "TwinTruth", "available_profiles",
+           "make_truth"]
 
 #: The thesis's payload is mounted "at an offset distance to the centre of the
 #: flange surface" (8.2.1, Fig. 8-3): 0.15 m sideways and 0.10 m out.
 DEFAULT_PAYLOAD_COM = (0.15, 0.0, 0.10)
 
 
-class ScenarioError(ValueError):
-    """A scenario that cannot be built (unknown robot, no twin profile, bad value)."""
-
-
-@dataclass(frozen=True)
-class TwinProfile:
-    """The physics a robot's twin has beyond its description (see ``docs/twin.md``)."""
-
-    robot: str
-    sigma_length: float  # m
-    sigma_angle: float  # rad
-    encoder_resolution: float  # rad
-    repeatability: float  # rad, 1-σ per joint and move
-    lost_motion: float  # rad, backlash of each reducer
-    preload_torque: float  # N·m: gravity above this holds the gear on one flank
-    transmission_orders: tuple[int, ...]
-    transmission_amplitude: float  # rad, 1-σ of each harmonic's amplitude
-    beams: tuple[Beam, ...]
-    tracker_position: tuple[float, float, float]
-    tracker_yaw: float  # rad
-    probe_position: tuple[float, float, float]
-    probe_rpy: tuple[float, float, float]  # rad
-    reference_zyz: tuple[float, float, float]  # rad
-    spread: float  # rad
-
-    @classmethod
-    def load(cls, robot: str) -> TwinProfile:
-        """The packaged profile ``twin/profiles/<robot>.toml``."""
-        try:
-            text = resources.files("plugcell.twin").joinpath(f"profiles/{robot}.toml").read_text()
-        except FileNotFoundError:
-            raise ScenarioError(
-                f"no twin profile for robot {robot!r}; available: {available_profiles()}"
-            ) from None
-        d = tomllib.loads(text)
-        rad = math.radians
-        try:
-            g, j, c, p = d["geometric_errors"], d["joints"], d["cell"], d["poses"]
-            return cls(
-                robot=d["robot"],
-                sigma_length=g["sigma_length_mm"] * 1e-3,
-                sigma_angle=rad(g["sigma_angle_deg"]),
-                encoder_resolution=rad(j["encoder_resolution_deg"]),
-                repeatability=rad(j["repeatability_deg"]),
-                lost_motion=rad(j["lost_motion_deg"]),
-                preload_torque=float(j["preload_torque_nm"]),
-                transmission_orders=tuple(int(k) for k in j["transmission_orders"]),
-                transmission_amplitude=rad(j["transmission_amplitude_deg"]),
-                beams=tuple(Beam(b["link"], b["carries"], float(b["compliance"]))
-                            for b in d.get("bending", [])),
-                tracker_position=tuple(c["tracker_position_m"]),
-                tracker_yaw=rad(c["tracker_yaw_deg"]),
-                probe_position=tuple(c["probe_position_m"]),
-                probe_rpy=tuple(rad(v) for v in c["probe_rpy_deg"]),
-                reference_zyz=tuple(rad(v) for v in p["reference_zyz_deg"]),
-                spread=rad(p["spread_deg"]),
-            )
-        except KeyError as exc:  # a packaged file: a bug, but say which key
-            raise ScenarioError(f"twin profile {robot!r} lacks the key {exc}") from None
-
-
-def available_profiles() -> list[str]:
-    root = resources.files("plugcell.twin").joinpath("profiles")
-    return sorted(p.name.removesuffix(".toml") for p in root.iterdir() if p.name.endswith(".toml"))
-
-
 @dataclass(frozen=True)
 class TwinScenario:
-    """Which robot, which hidden errors (by seed), which payload.  JSON-serialisable."""
+    """Which robot, which hidden errors (by seed), which payload.  JSON-serialisable.
+
+    ``robot``: a shipped robot's name or a description file; ``description``: the
+    robot's description itself (:meth:`RobotDescription.to_dict`, e.g. imported from a
+    URDF) — then ``robot`` is only its name.
+    """
 
     robot: str = "smart_h4"
+    description: dict[str, Any] | None = None
     seed: int = 0
     payload_kg: float = 0.0
     payload_com_m: tuple[float, float, float] = DEFAULT_PAYLOAD_COM
@@ -194,10 +137,14 @@ def _hidden_errors(desc: RobotDescription, profile: TwinProfile, rng: np.random.
 def make_truth(scenario: TwinScenario) -> TwinTruth:
     """Build the hidden truth of ``scenario`` (deterministic in its seed)."""
     try:
-        desc = load_robot(scenario.robot)
+        desc = (RobotDescription.from_dict(scenario.description)
+                if scenario.description is not None else load_robot(scenario.robot))
     except Exception as exc:  # DescriptionError or unknown robot
         raise ScenarioError(str(exc)) from None
-    profile = TwinProfile.load(desc.name)
+    if desc.name in available_profiles():
+        profile = TwinProfile.load(desc.name)
+    else:  # a robot without a profile of its own: estimated (twin/generic.py)
+        desc, profile = generic_twin(desc)
     if desc.stiffness is None:
         raise ScenarioError(f"robot {desc.name!r} has no joint stiffness in its description")
     rng = np.random.default_rng(scenario.seed)
