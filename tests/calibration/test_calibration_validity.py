@@ -206,3 +206,47 @@ def test_report_shows_the_coverage(calibrated, h4):
     old = CalibrationResult.from_dict(
         {k: v for k, v in json.loads(result.to_json()).items() if k != "validity"}, h4)
     assert "Calibrated region" not in render_report(old, data)
+
+
+def test_compute_compensation_notes_targets_outside_the_region(calibrated):
+    """compensate_joints (the compensation functions of the compute service) warn, with
+    how far, when a compensated target lies outside the calibrated region; the compute
+    service turns the warning into its process's note (the Completed reason)."""
+    from plugcell.services.compute_functions import FUNCTIONS, FunctionContext, Parameters
+    from plugcell.services.compute_workspace import Workspace
+
+    result, data = calibrated
+    p = Parameters(result, result.model.structure.source, json.loads(result.to_json()))
+    ctx = FunctionContext(Workspace("R1"))
+    inside = np.degrees(data.q[:2])
+    FUNCTIONS["compensate_joints"](ctx, p, inside)
+    assert ctx.warnings == []
+    outside = inside.copy()
+    outside[1, 0] = np.degrees(data.q[:, 0].max()) + 25.0
+    FUNCTIONS["compensate_joints"](ctx, p, outside)
+    assert len(ctx.warnings) == 1
+    w = ctx.warnings[0]
+    assert w.startswith("compensate_joints: 1 of 2 targets outside the calibrated region")
+    assert "target 2: joint" in w and "beyond its calibrated range" in w
+
+
+def test_a_step_beyond_a_range_counts_by_the_target_motion_it_makes(model):
+    """A joint's excess counts once it moves the target by more than τ/20: a compensation's
+    0.05° correction at the edge of a range, or a joint the campaign held nearly fixed, is
+    no extrapolation; 20° is."""
+    from plugcell.calibration.validity import RANGE_TOL_FRACTION
+
+    q = random_configurations(model, 150, 9)
+    q[:, 5] = np.linspace(0.0, math.radians(0.5), len(q))  # joint 6 nearly fixed
+    region = ValidityRegion.from_poses(model, q, np.zeros(len(q)))
+    edge = q[np.argmax(q[:, 0])].copy()
+    probes = np.array([edge, edge, edge])
+    probes[0, 0] += math.radians(0.05)
+    probes[1, 5] += math.radians(0.05)
+    probes[2, 0] += math.radians(20.0)
+    check = region.check(probes)
+    assert check.beyond_range.tolist() == [False, False, True]
+    assert check.worst_joint[2] == 0
+    motion = check.joint_excess_rad[2] * region.lever_m[0]
+    assert motion > RANGE_TOL_FRACTION * region.threshold_m
+    assert check.reasons(0) == "" and "joint 1 20.0° beyond" in check.reasons(2)

@@ -31,7 +31,8 @@ def run(coro: Coroutine[Any, Any, Any], timeout: float = 45.0) -> Any:
 class ScriptedDevice(GenericDevice):
     """A device whose every step the test controls (for the queue semantics).
 
-    ``Work`` (NoData): logs its option, then waits for ``gates[option]`` if set.
+    ``Work`` (NoData): logs its option, then waits for ``gates[option]`` if set; an
+    option ``note:TEXT`` notes TEXT on the process (:meth:`GenericDevice.note`).
     ``Measure`` (SingleData): returns ``[1, 2, 3]``.  ``Stream`` (MultipleData):
     posts one value per ``emit()``.  ``Stop`` (StopData).  ``Slow`` never answers
     (timeout 0.3 s).  ``Hold`` is a MultipleData with a 0.5 s timeout.
@@ -93,6 +94,8 @@ class ScriptedDevice(GenericDevice):
         self.log.append(f"{command.name}:{option}" if option else command.name)
         match command.name:
             case "Work":
+                if option.startswith("note:"):
+                    self.note(option.removeprefix("note:"))
                 self.started.set()
                 gate = self.gates.get(option)
                 if gate is not None:

@@ -59,6 +59,19 @@ def test_create_acknowledge_update_complete(tmp_path):
     run(body())
 
 
+def test_a_device_note_is_the_reason_of_the_completed_update(tmp_path):
+    """GenericDevice.note: a warning on a process that succeeds reaches its sender as the
+    Completed update's reason — and only that process's."""
+    async def body():
+        async with cell_with(tmp_path, "ROBOT") as (_dev, robot):
+            noted = await collect(await robot.create_process("DEV", "Work", "note:mind it"))
+            assert (noted[-1].state, noted[-1].reason) == (C, "mind it")
+            plain = await collect(await robot.create_process("DEV", "Work", "x"))
+            assert (plain[-1].state, plain[-1].reason) == (C, "")
+
+    run(body())
+
+
 def test_fifo_one_at_a_time_and_get_while_busy(tmp_path):
     async def body():
         async with cell_with(tmp_path, "A", "B") as (dev, a, b):

@@ -174,6 +174,19 @@ def test_the_calibration_functions_in_the_service_match_the_engine(cell):
             await ok(robot, "Set Matrix", "vT", vT)
             await ok(robot, "Evaluate", "", "w = validate(p, vJ, vT)")
             np.testing.assert_allclose(await ok(robot, "Get Matrix", "w"), [v], rtol=1e-12)
+            # a compensation target outside the calibrated region: Completed, with a note
+            # two poses well inside the calibrated joint ranges (compensation moves a
+            # joint by up to ~0.1°: a pose at a range's edge may step beyond it)
+            k = np.argsort(np.abs((mJ - np.median(mJ, axis=0)) / np.ptp(mJ, axis=0)).max(1))[:2]
+            far = mJ[k].copy()
+            far[1, 0] = mJ[:, 0].max() + 25.0
+            await ok(robot, "Set Matrix", "far", far)
+            await ok(robot, "Set Matrix", "near", mJ[k])
+            final, _ = await call(robot, "Evaluate", "", "qc = compensate_joints(p, far)")
+            assert final.state is C
+            assert "1 of 2 targets outside the calibrated region" in final.reason
+            final, _ = await call(robot, "Evaluate", "", "qn = compensate_joints(p, near)")
+            assert (final.state, final.reason) == (C, "")
 
     run(body())
     saved = json.loads((cell.home / "compute" / "params" / "h4_unloaded.json").read_text())

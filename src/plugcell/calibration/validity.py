@@ -10,7 +10,8 @@ The measure (chosen on the IPA data, docs/planning.md):
 
 * **Joint ranges**: ``[min_i q_ij, max_i q_ij]`` of every actuated joint j over the
   calibration poses; the *excess* of a configuration is how far (rad) its worst joint
-  lies beyond its range.
+  lies beyond its range — worst by the target motion ``ℓ_j · excess_j`` (below), which
+  must exceed ``τ / 20`` to count.
 * **Distance to the nearest calibration pose** in a scaled joint space, in metres of
   target motion: ``d(q) = min_i ‖ℓ ∘ (q − q_i)‖``, ``ℓ_j`` the RMS over the calibration
   poses of ``|∂p/∂q_j|`` (the lever arm of joint j at the target, m/rad), at least a tenth
@@ -51,8 +52,12 @@ THRESHOLD_PERCENTILE = 99.0
 LEVER_POSES = 2000
 #: Smallest lever arm, as a fraction of the largest (no joint is ignored).
 LEVER_FLOOR = 0.1
-#: A joint is beyond its calibrated range by more than this (rad) before it counts.
-RANGE_TOL = math.radians(0.01)
+#: A joint counts as beyond its calibrated range when the target motion of the excess,
+#: ``ℓ_j · excess_j``, exceeds this fraction of the threshold τ: a step shorter than a
+#: twentieth of the campaign's own spacing is no extrapolation (e.g. the correction a
+#: compensation adds to a pose at the edge of a range, or a joint the campaign held
+#: nearly fixed).
+RANGE_TOL_FRACTION = 0.05
 
 __all__ = ["MAX_POSES", "RegionCheck", "ValidityRegion"]
 
@@ -65,7 +70,8 @@ class RegionCheck:
     target motion); ``threshold_m``: τ; ``joint_excess_rad`` ``(N,)``: how far the worst
     joint lies beyond its range (0 inside) and ``worst_joint`` ``(N,)`` (0-based);
     ``payload_excess_kg`` ``(N,)``; ``target_excess_m`` ``(N,)`` beyond the Cartesian box
-    (0 inside, or when no targets were given); ``outside`` ``(N,)``.
+    (0 inside, or when no targets were given); ``beyond_range`` ``(N,)``: the joint
+    excess counts (its target motion exceeds ``τ / 20``); ``outside`` ``(N,)``.
     """
 
     distance_m: Array
@@ -75,6 +81,7 @@ class RegionCheck:
     payload_excess_kg: Array
     target_excess_m: Array
     outside: NDArray[np.bool_]
+    beyond_range: NDArray[np.bool_]
 
     def __len__(self) -> int:
         return int(self.outside.shape[0])
@@ -89,7 +96,7 @@ class RegionCheck:
         if not self.outside[i]:
             return ""
         out = []
-        if self.joint_excess_rad[i] > RANGE_TOL:
+        if self.beyond_range[i]:
             j = int(self.worst_joint[i])
             name = joint_names[j] if joint_names else str(j + 1)
             out.append(f"joint {name} {math.degrees(self.joint_excess_rad[i]):.1f}° "
@@ -111,9 +118,10 @@ class RegionCheck:
             "poses": len(self), "outside": self.count,
             "threshold_mm": self.threshold_m * 1e3,
             "max_distance_mm": float(self.distance_m.max() * 1e3) if len(self) else 0.0,
-            "beyond_joint_range": int(np.count_nonzero(self.joint_excess_rad > RANGE_TOL)),
-            "max_joint_excess_deg": float(np.degrees(self.joint_excess_rad.max()))
-            if len(self) else 0.0,
+            "beyond_joint_range": int(np.count_nonzero(self.beyond_range)),
+            "max_joint_excess_deg": float(np.degrees(self.joint_excess_rad[self.beyond_range]
+                                                     .max()))
+            if self.beyond_range.any() else 0.0,
             "beyond_distance": int(np.count_nonzero(self.distance_m > self.threshold_m)),
             "beyond_payload": int(np.count_nonzero(self.payload_excess_kg > 0)),
             "beyond_volume": int(np.count_nonzero(self.target_excess_m > 0)),
@@ -233,8 +241,12 @@ class ValidityRegion:
         below = self.joint_lower - q
         above = q - self.joint_upper
         excess = np.maximum(np.maximum(below, above), 0.0)
-        worst = np.argmax(excess, axis=1).astype(np.int64)
-        jexc = excess[np.arange(len(q)), worst] if len(q) else np.zeros(0)
+        motion = excess * self.lever_m  # m of target motion beyond each range
+        worst = np.argmax(motion, axis=1).astype(np.int64)
+        rows = np.arange(len(q))
+        jexc = excess[rows, worst] if len(q) else np.zeros(0)
+        beyond = (motion[rows, worst] > RANGE_TOL_FRACTION * self.threshold_m) if len(q) \
+            else np.zeros(0, dtype=bool)
         m = np.zeros(len(q)) if payload_kg is None else np.broadcast_to(
             np.asarray(payload_kg, dtype=float), (len(q),))
         lo, hi = self.payload_kg
@@ -246,10 +258,10 @@ class ValidityRegion:
             out = np.maximum(np.maximum(self.target_lower - t, t - self.target_upper), 0.0)
             texc = np.linalg.norm(out, axis=1)
         d = self.distance(q)
-        outside = (jexc > RANGE_TOL) | (d > self.threshold_m) | (pexc > 0) | (texc > 0)
+        outside = beyond | (d > self.threshold_m) | (pexc > 0) | (texc > 0)
         return RegionCheck(distance_m=d, threshold_m=self.threshold_m, joint_excess_rad=jexc,
                            worst_joint=worst, payload_excess_kg=pexc, target_excess_m=texc,
-                           outside=outside)
+                           outside=outside, beyond_range=beyond)
 
     # ------------------------------------------------------------------ serialisation
     def to_dict(self) -> dict[str, Any]:

@@ -185,6 +185,7 @@ class GenericDevice(Participant):
         self._holder: Entry | None = None
         self._measuring: Entry | None = None
         self._single_data: list[Any] = []
+        self._notes: list[str] = []
         self._cmd_waiter: asyncio.Future[str] | None = None
         self._handler_task: asyncio.Task[None] | None = None
         self._heartbeat_task: asyncio.Task[None] | None = None
@@ -216,6 +217,15 @@ class GenericDevice(Participant):
         PROBE, the compute service's workspaces) key it by this name.
         """
         return getattr(self, "_sender", "")
+
+    def note(self, text: str) -> None:
+        """Remark on the NoData or SingleData process being dispatched — a warning its
+        sender should see although the process succeeds (e.g. "target 3 lies outside the
+        calibrated region").  The notes (joined by ``"; "``) become the ``reason`` of the
+        process's ``Completed`` update, which is otherwise empty; a Failed process keeps
+        its own reason."""
+        if text:
+            self._notes.append(str(text))
 
     async def dispatch(self, command: Command, option: str, data: Any) -> str | None:
         """CommandDispatcher: send ``command`` to the device.
@@ -729,8 +739,10 @@ class GenericDevice(Participant):
             return
         self._measuring = entry if command.type is CommandTypes.SingleData else None
         self._single_data = []
+        self._notes = []
         ok, reason = await self._execute(entry)
         self._measuring = None
+        note, self._notes = "; ".join(self._notes), []
         if not ok:
             self._finish(entry, ProcessStates.Failed, reason)
         elif command.type is CommandTypes.SingleData:
@@ -751,9 +763,9 @@ class GenericDevice(Participant):
             except DataError as exc:
                 self._finish(entry, ProcessStates.Failed, f"device produced invalid data: {exc}")
                 return
-            self._finish(entry, ProcessStates.Completed, "", data)
+            self._finish(entry, ProcessStates.Completed, note, data)
         else:
-            self._finish(entry, ProcessStates.Completed, "")
+            self._finish(entry, ProcessStates.Completed, note)
 
     async def _execute(self, entry: Entry) -> tuple[bool, str]:
         """Dispatch one command and wait (bounded) for its command feedback."""

@@ -19,6 +19,10 @@ Evaluate        —                            expression: String[1]  —       
   calibrate, validate, summary, load/save parameters, frame, compensate,
   compensate_joints, calc_targets, …).  No arbitrary code is ever executed: anything
   else is refused with the reason, and the service carries on.
+* A function's **warnings** (``compensate`` and ``compensate_joints``: targets outside
+  the region the parameters were calibrated on, with how far — docs/planning.md) come
+  back as the reason of the Evaluate process's ``Completed`` update (a robot program
+  reads it as ``ext_cmd_message``) and in the service's log.
 * **Get Matrix** returns a matrix (identified parameters are not matrices: use
   ``frame(params, 'base')`` etc.).  Its output can be routed (``; to=…``) like any
   other, e.g. straight into the tracker's Set Base.
@@ -127,8 +131,11 @@ class ComputeService(RoutedDevice):
                     self.data_feedback.post(self._readable(ws, option.strip()))
                 case "Evaluate":
                     text = str(np.asarray(data, dtype=object).reshape(-1)[0])
-                    names = await asyncio.to_thread(self._evaluate, ws, text)
+                    names, warnings = await asyncio.to_thread(self._evaluate, ws, text)
                     log.info("%s: %s evaluated %r → %s", self.name, ws.owner, text, names)
+                    for w in warnings:
+                        log.warning("%s: %s: %s", self.name, ws.owner, w)
+                        self.note(w)
                 case _:
                     raise DeviceError(f"unknown command {command.name}")
         except (WorkspaceError, EvaluationError) as exc:
@@ -149,10 +156,11 @@ class ComputeService(RoutedDevice):
             raise WorkspaceError(f"no workspace of {owner!r} (workspaces: {known})")
         return other.matrix(name.strip())
 
-    def _evaluate(self, ws: Workspace, text: str) -> list[str]:
+    def _evaluate(self, ws: Workspace, text: str) -> tuple[list[str], list[str]]:
+        """The names assigned by ``text`` and the warnings of its functions."""
         context = FunctionContext(workspace=ws, robot=self.robot,
                                   params_dir=self.data_dir / "params")
-        return evaluate(text, ws, FUNCTIONS, context=context)
+        return evaluate(text, ws, FUNCTIONS, context=context), context.warnings
 
 
 def _target(option: str) -> tuple[str, bool]:

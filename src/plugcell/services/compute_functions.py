@@ -75,6 +75,9 @@ class FunctionContext:
     workspace: Workspace
     robot: str = "smart_h4"
     params_dir: Path = field(default_factory=lambda: Path("."))
+    #: Warnings of the functions evaluated (the compute service notes them on the
+    #: process: the reason of its Completed update).
+    warnings: list[str] = field(default_factory=list)
 
 
 @dataclass(frozen=True, eq=False)
@@ -397,6 +400,20 @@ def _tool(p: Parameters, tool: Any, convention: str) -> np.ndarray | None:
     return matrix_from_vector(_matrix(tool, "tool", (6,)).reshape(-1), convention)
 
 
+def _note_region(ctx: FunctionContext, p: Parameters, function: str, q: np.ndarray,
+                 payload: np.ndarray) -> None:
+    """Warn (``ctx.warnings``) about compensated joints ``q`` (rad) outside the region the
+    parameters were identified on: how many, and the first three with how far."""
+    check = p.result.check_region(q, payload)
+    if check is None or not check.count:
+        return
+    names = p.description.actuated
+    first = [f"target {int(k) + 1}: {check.reasons(int(k), names)}"
+             for k in np.flatnonzero(check.outside)[:3]]
+    more = f"; … and {check.count - 3} more" if check.count > 3 else ""
+    ctx.warnings.append(f"{function}: {check.message('targets')} — " + "; ".join(first) + more)
+
+
 def _joints_or_fail(result: Any) -> np.ndarray:
     if not np.all(result.ok):
         k = int(np.flatnonzero(~result.ok)[0])
@@ -415,11 +432,14 @@ def compensate(ctx: FunctionContext, params: Any, targets: Any, payload: Any = 0
     T = _poses(_matrix(targets, "targets", (6,)), convention)
     model = IdentifiedModel(p.result.model, tool=_tool(p, tool, convention),
                             residual=p.result.residual_model)
+    m = _payload(payload, len(T))
     try:
-        res = _compensate(model, T, _payload(payload, len(T)), raise_errors=False)
+        res = _compensate(model, T, m, raise_errors=False)
     except ValueError as exc:
         raise FunctionError(str(exc)) from None
-    return _joints_or_fail(res)
+    q = _joints_or_fail(res)
+    _note_region(ctx, p, "compensate", res.q, m)
+    return q
 
 
 @register
@@ -433,11 +453,14 @@ def compensate_joints(ctx: FunctionContext, params: Any, joints: Any, payload: A
     model = IdentifiedModel(p.result.model, tool=_tool(p, tool, _convention(angles)),
                             residual=p.result.residual_model)
     T = NominalModel(desc, tool=model.tool).pose(q)
+    m = _payload(payload, len(q))
     try:
-        res = _compensate_joints(model, T, q, _payload(payload, len(q)), raise_errors=False)
+        res = _compensate_joints(model, T, q, m, raise_errors=False)
     except ValueError as exc:
         raise FunctionError(str(exc)) from None
-    return _joints_or_fail(res)
+    out = _joints_or_fail(res)
+    _note_region(ctx, p, "compensate_joints", res.q, m)
+    return out
 
 
 @register

@@ -234,7 +234,7 @@ class ExternalProcessHandler:
         if command.type is CommandTypes.StopData and stream is not None:
             stream.stopped = True  # its final update may still be on its way
         output = call.array(final) if command.type is CommandTypes.SingleData else None
-        return True, output, ""
+        return True, output, final.reason  # the device's note on a success, usually ""
 
     async def _own(self, a: ActivateString) -> Outcome:
         """A command of the robot service itself (``ACTIVATE ROBOT #JointIncrement##…``)."""
