@@ -411,8 +411,6 @@ def _monitoring(args: argparse.Namespace) -> None:
 
 
 async def _monitor(args: argparse.Namespace) -> None:
-    from plugcell.framework import wire
-    from plugcell.framework.model import process_updates
     from plugcell.services.controller_journal import JournalTail
     from plugcell.services.controller_monitor import MonitorFeed, ProcessMonitor
 
@@ -439,19 +437,8 @@ async def _monitor(args: argparse.Namespace) -> None:
         if args.count is not None and feed.ended >= args.count:
             stop.set()
 
-    def on_sample(sample: Any) -> None:
-        parts = str(sample.key_expr).split("/")
-        try:
-            envelope = wire.decode(sample.payload.to_bytes())
-        except wire.WireError:
-            return
-        if len(parts) == 6:
-            for update in process_updates(envelope.body):
-                show(monitor.updated(parts[3], update))
-
-    assert client.session is not None
-    subscriber = client.session.declare_subscriber(
-        client.keys.all_processes(), client._callback(on_sample))
+    subscriber = client.watch_processes(
+        lambda service, update: show(monitor.updated(service, update)))
     loop = asyncio.get_running_loop()
     for sig in (signal.SIGINT, signal.SIGTERM):
         loop.add_signal_handler(sig, stop.set)

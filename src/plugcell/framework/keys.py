@@ -115,6 +115,18 @@ class KeySpace:
         """Every ProcessUpdate of the cell (for a cell controller's monitor, 7.6)."""
         return f"{self.prefix}/svc/*/process/*"
 
+    # the simulated cell (services/sim/world.py): the true pose of each reflector
+    def reflector(self, name: str = "*") -> str:
+        """Pub/sub and queryable of reflector ``name``'s true pose (``*``: every one)."""
+        return f"{self.prefix}/sim/reflector/{name}"
+
+    def parse_process(self, key: str) -> tuple[str, str] | None:
+        """``(service, sender)`` of a :meth:`process` key of this cell, else None."""
+        parts = key.split("/")
+        if len(parts) != 6 or parts[:3] != [ROOT, self.cell, "svc"] or parts[4] != "process":
+            return None
+        return parts[3], parts[5]
+
     def state(self, name: str) -> str:
         return f"{self.prefix}/svc/{name}/state"
 

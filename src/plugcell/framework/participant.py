@@ -50,6 +50,7 @@ from plugcell.framework.model import (
     GetRequest,
     Message,
     Process,
+    ProcessUpdateNotification,
     ShutdownNotification,
     SubscribeRequest,
     SubscribeResponse,
@@ -671,6 +672,29 @@ class Participant:
                 self._calls.pop((call.partner, call.identifier), None)
 
         return Callback(lambda r: post((reply, r)), lambda: post((done, None)), indirect=False)
+
+    def watch_processes(
+        self, handler: Callable[[str, ProcessUpdateNotification], None]
+    ) -> Any:
+        """Follow every ProcessUpdate of the cell, whoever sent the process (a cell
+        controller's monitor, thesis 7.6): ``handler(service, update)`` runs on the event
+        loop for each update.  Returns the Zenoh subscriber: ``undeclare()`` it to stop
+        (a participant's own declarations end with it)."""
+        assert self.session is not None, "watch_processes before start()"
+        keys = self.keys
+
+        def on_sample(sample: zenoh.Sample) -> None:
+            where = keys.parse_process(str(sample.key_expr))
+            if where is None:
+                return
+            try:
+                envelope = wire.decode(sample.payload.to_bytes())
+            except wire.WireError:
+                return
+            for update in process_updates(envelope.body):
+                handler(where[0], update)
+
+        return self.session.declare_subscriber(keys.all_processes(), self._callback(on_sample))
 
     def _on_process_update(self, sample: zenoh.Sample) -> None:
         try:

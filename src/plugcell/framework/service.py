@@ -111,14 +111,8 @@ class FeedbackPort(Generic[T]):
 
     def post(self, value: T) -> None:
         """Deliver ``value`` to the service's receiver (5.2.3.2)."""
-        loop = self._service._loop
-        if loop is None:
+        if not self._service.call_in_loop(self._handler, value):
             raise RuntimeError(f"{self.name}.post before the service started")
-        if threading.get_ident() == self._service._loop_thread:
-            self._handler(value)
-        else:
-            with contextlib.suppress(RuntimeError):  # loop closed: the service is gone
-                loop.call_soon_threadsafe(self._handler, value)
 
 
 class GenericDevice(Participant):
@@ -217,6 +211,21 @@ class GenericDevice(Participant):
         PROBE, the compute service's workspaces) key it by this name.
         """
         return getattr(self, "_sender", "")
+
+    def call_in_loop(self, fn: Callable[..., Any], *args: Any) -> bool:
+        """Run ``fn(*args)`` on the service's event loop: at once when called there, else
+        scheduled thread-safely (so device threads can feed the service).  False when the
+        service has not started; a call after the loop closed is dropped (the service is
+        gone)."""
+        loop = self._loop
+        if loop is None:
+            return False
+        if threading.get_ident() == self._loop_thread:
+            fn(*args)
+        else:
+            with contextlib.suppress(RuntimeError):  # loop closed: the service is gone
+                loop.call_soon_threadsafe(fn, *args)
+        return True
 
     def note(self, text: str) -> None:
         """Remark on the NoData or SingleData process being dispatched — a warning its

@@ -35,9 +35,6 @@ from collections.abc import AsyncIterator
 from pathlib import Path
 from typing import Any, ClassVar
 
-import zenoh
-
-from plugcell.framework import wire as wire_codec
 from plugcell.framework.keys import Presence
 from plugcell.framework.model import (
     Command,
@@ -48,7 +45,6 @@ from plugcell.framework.model import (
     Message,
     ProcessStates,
     ProcessUpdateNotification,
-    process_updates,
 )
 from plugcell.framework.participant import PartnerError, PresenceEvent
 from plugcell.framework.process_call import ProcessCall
@@ -184,11 +180,7 @@ class CellController(GenericDevice):
     async def _declare(self) -> None:
         await super()._declare()
         assert self.session is not None
-        self._entities.append(
-            self.session.declare_subscriber(
-                self.keys.all_processes(), self._callback(self._on_any_process)
-            )
-        )
+        self._entities.append(self.watch_processes(self._on_any_process))
 
     async def start(self) -> None:
         await super().start()
@@ -623,18 +615,9 @@ class CellController(GenericDevice):
 
     # -- the monitor (Figure 7-11) -----------------------------------------------------
 
-    def _on_any_process(self, sample: zenoh.Sample) -> None:
-        parts = str(sample.key_expr).split("/")
-        if len(parts) != 6:
-            return
-        recipient = parts[3]
-        try:
-            envelope = wire_codec.decode(sample.payload.to_bytes())
-        except wire_codec.WireError:
-            return
-        for update in process_updates(envelope.body):
-            record = self.monitor.updated(recipient, update)
-            self._dirty.add(record.key)
+    def _on_any_process(self, service: str, update: ProcessUpdateNotification) -> None:
+        record = self.monitor.updated(service, update)
+        self._dirty.add(record.key)
 
     async def _journal_loop(self) -> None:
         assert self.journal_tail is not None

@@ -37,7 +37,6 @@ from __future__ import annotations
 import asyncio
 import contextlib
 import logging
-import threading
 from dataclasses import dataclass
 from typing import Any
 
@@ -284,12 +283,7 @@ class _RoutingPort:
         self.name = inner.name
 
     def post(self, value: Any) -> None:
-        device = self._device
-        if threading.get_ident() == device._loop_thread:
-            device._submit(value)
-        elif device._loop is not None:
-            with contextlib.suppress(RuntimeError):
-                device._loop.call_soon_threadsafe(device._submit, value)
+        self._device.call_in_loop(self._device._submit, value)
         self._inner.post(value)
 
 

@@ -30,7 +30,7 @@ import msgspec
 import numpy as np
 import zenoh
 
-from plugcell.framework.keys import DEFAULT_CELL, check_name
+from plugcell.framework.keys import DEFAULT_CELL, KeySpace, check_name
 
 
 class ReflectorState(msgspec.Struct, frozen=True):
@@ -51,7 +51,8 @@ _DECODER = msgspec.msgpack.Decoder(ReflectorState)
 
 
 def reflector_key(cell: str, name: str = "*") -> str:
-    return f"plugcell/{check_name(cell, 'cell name')}/sim/reflector/{name}"
+    """The key of reflector ``name`` in ``cell`` (the framework's key space owns it)."""
+    return KeySpace(cell).reflector(name)
 
 
 class ReflectorPublisher:
