@@ -1,0 +1,123 @@
+"""One contract, run over every registered service kind (as scikit-learn's common
+estimator checks run over every estimator): what any device service promises whatever it
+drives.  A new kind in ``services/registry.py`` is checked here without a line more.
+
+Static, for every kind: the class declares its kind, a valid default name, vendor and
+info, a catalogue the framework accepts, and parameters ``plugcell serve`` can convert.
+Running, for every kind that runs without outside hardware (simulated drivers): ``Get``
+answers the declared catalogue; an unknown command, data of the wrong size and a
+malformed request each end Failed with a precise reason — or are dropped — and the
+service keeps serving.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import uuid
+from typing import Any
+
+import numpy as np
+import pytest
+
+from plugcell.framework import Client, ProcessStates
+from plugcell.framework.data import to_data
+from plugcell.framework.keys import check_name
+from plugcell.framework.model import Command, DataTypes
+from plugcell.framework.service import check_catalogue
+from plugcell.services.registry import KINDS, load_kind
+
+#: How each kind runs here without hardware: constructor keywords (simulated drivers).
+#: A kind missing from this table fails test_every_kind_can_be_run_or_says_why.
+RUNNABLE: dict[str, dict[str, Any]] = {
+    "camera": {"time_scale": 0.0},
+    "drill": {"time_scale": 0.0},
+    "bench": {},
+    "tracker": {"driver": "sim"},
+    "compute": {},
+    "controller": {"journals": 0},
+    "robot": {"sim": True, "speed": 100.0},
+}
+#: Kinds that need a partner outside plugcell to start (tested with one elsewhere).
+NEEDS_OUTSIDE = {"opcua-device": "an OPC UA server (tests/opcua run it against node-opcua)"}
+#: Kinds whose catalogue, vendor and info each instance declares (from its device map).
+PER_INSTANCE = {"opcua-device"}
+
+F = ProcessStates.Failed
+
+
+def test_every_kind_can_be_run_or_says_why():
+    assert set(KINDS) == set(RUNNABLE) | set(NEEDS_OUTSIDE)
+
+
+@pytest.mark.parametrize("kind", sorted(KINDS))
+def test_the_class_declares_what_every_service_has(kind):
+    cls = load_kind(kind)
+    assert cls.kind == kind
+    check_name(cls.default_name or kind.upper(), "default name")
+    assert isinstance(cls.info, str) and cls.info
+    assert isinstance(cls.vendor, str) and (cls.vendor or kind in PER_INSTANCE)
+    assert cls.commands or kind in PER_INSTANCE, f"{kind}: no commands"
+    check_catalogue(cls.__name__, tuple(cls.commands))  # raises with the reason
+    for c in cls.commands:
+        assert isinstance(c, Command) and c.timeout > 0, c
+    for key, convert in getattr(cls, "params", {}).items():
+        assert key.isidentifier() and callable(convert), (kind, key)
+
+
+def _fixed_input(commands: tuple[Command, ...]) -> Command | None:
+    """A command with a declared, fixed input size (to send the wrong size to)."""
+    for c in commands:
+        size = c.input_data_size  # () takes any size, -1 any length along an axis
+        if c.input_data_type is not None and size and size != (0,) and all(
+                n > 0 for n in size):
+            return c
+    return None
+
+
+_SAMPLE = {DataTypes.Double: 0.0, DataTypes.Integer: 0, DataTypes.Byte: 0,
+           DataTypes.Boolean: False, DataTypes.String: "x"}
+
+
+async def _contract(cls: type, kwargs: dict[str, Any], cell: str, tmp_path) -> None:
+    service = cls(None, cell=cell, journal=tmp_path / "journal", **kwargs)
+    await service.start()
+    name = service.name
+    try:
+        async with Client("CONFORMANCE", cell=cell) as client:
+            assert await client.wait_for(name, 20)
+            state, instance = await client.get(name)
+            assert instance == service.instance
+            declared = {c.name for c in cls.commands}
+            assert {c.name for c in state.device_info.commands} == declared
+
+            # an unknown command: Failed, naming it; the service carries on
+            final = await (await client.create_process(name, "NoSuchCommand", check=False)
+                           ).result()
+            assert final.state is F and "NoSuchCommand" in final.reason
+
+            # data of the wrong size for a command that declares its input
+            c = _fixed_input(tuple(cls.commands))
+            if c is not None:
+                n = int(np.prod(c.input_data_size)) + 1
+                wrong = to_data([_SAMPLE[c.input_data_type]] * n, c.input_data_type, (n,))
+                final = await (await client.create_process(name, c.name, data=wrong,
+                                                           check=False)).result()
+                assert final.state is F and c.name in final.reason, final.reason
+
+            # a malformed request on the service's request key: dropped, nothing breaks
+            assert client.session is not None
+            client.session.put(client.keys.request(name, client.name), b"\x00not msgpack")
+            await asyncio.sleep(0.2)
+            state, again = await client.get(name)
+            assert again == instance and not service.stopped.is_set()
+    finally:
+        await service.close()
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("kind", sorted(RUNNABLE))
+def test_a_running_service_keeps_the_contract(kind, tmp_path, monkeypatch):
+    monkeypatch.setenv("PLUGCELL_HOME", str(tmp_path / "home"))
+    cell = f"conf{uuid.uuid4().hex[:10]}"
+    asyncio.run(asyncio.wait_for(_contract(load_kind(kind), RUNNABLE[kind], cell, tmp_path),
+                                 90))
