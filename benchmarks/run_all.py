@@ -38,6 +38,8 @@ def main(argv: list[str]) -> int:
          [sys.executable, str(HERE / "round_trip_trace.py"),
           *([] if full else ["--cycles", "500"])]),
         ("compensation (thesis 6.5.1)", [*plugcell, "bench", "compensation"]),
+        ("an idle cell: 20 services, CPU share",
+         [sys.executable, str(HERE / "idle_cost.py"), *([] if full else ["--seconds", "15"])]),
         ("command start-up", [sys.executable, str(HERE / "cli_startup.py")]),
         ("UR10 from ur_description: xacro in, calibration, UR kinematics out",
          [sys.executable, str(HERE / "urdf_roundtrip_ur10.py")]),

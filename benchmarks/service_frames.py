@@ -35,6 +35,9 @@ from plugcell.framework.processqueue import Entry
 #: on, the copy of each frame into its buffer — with the page faults of fresh
 #: memory — dominates and varies from run to run by more than the journal costs).
 SHAPES = ((4,), (32,), (1024,), (4096,))
+#: ``--large``: the camera-sized frames, where the copies decide — with the C allocator
+#: as plugcell tunes it (framework/memory.py) and as glibc leaves it.
+LARGE = ((65536,), (307200,), (921600,))
 
 
 class _CountingPublisher:
@@ -84,7 +87,12 @@ def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--frames", type=int, default=64000)
     parser.add_argument("--repeat", type=int, default=3)
+    parser.add_argument("--large", action="store_true",
+                        help="64 KiB – 0.9 MB frames, allocator tuned against glibc's default "
+                        "(a child process each, since the tuning is process-wide)")
     args = parser.parse_args(argv)
+    if args.large:
+        return _large(args.repeat)
     print(f"service path per streamed frame (µs, best of {args.repeat}), "
           f"{platform.processor() or platform.machine()}, Python {platform.python_version()}")
     print(f"{'payload':>9} | {'no journal':>10} | {'journal':>8} | {'journal share':>13}")
@@ -97,6 +105,33 @@ def main(argv: list[str] | None = None) -> int:
                 kept = min(kept, asyncio.run(_per_frame_us(shape, args.frames, Path(tmp))))
             print(f"{shape[0]:>7} B | {bare:>10.2f} | {kept:>8.2f} | "
                   f"{(kept - bare) / kept:>12.0%}")
+    return 0
+
+
+def _large(repeat: int) -> int:
+    """Per-frame cost of the large frames, journal on, tuned vs default allocator."""
+    import os
+    import subprocess
+
+    print(f"service path per large frame, journal on (µs, best of {repeat}), "
+          f"{platform.machine()}, Python {platform.python_version()}")
+    print(f"{'payload':>9} | {'tuned allocator':>15} | {'glibc default':>13}")
+    print("-" * 45)
+    code = ("import asyncio, sys, tempfile; from pathlib import Path; sys.path.insert(0, {here!r});"
+            "import service_frames as sf; from plugcell.framework.memory import tune_allocator;"
+            "tune_allocator(); shape = ({n},);"
+            "print(min(asyncio.run(sf._per_frame_us(shape, 1000, Path(tempfile.mkdtemp())))"
+            " for _ in range({repeat})))")
+    here = str(Path(__file__).resolve().parent)
+    for (n,) in LARGE:
+        row = []
+        for malloc in ("", "default"):
+            env = {**os.environ, "PLUGCELL_MALLOC": malloc}
+            out = subprocess.run([sys.executable, "-c", code.format(here=here, n=n,
+                                                                    repeat=repeat)],
+                                 env=env, capture_output=True, text=True, check=True)
+            row.append(float(out.stdout))
+        print(f"{n:>7} B | {row[0]:>15.1f} | {row[1]:>13.1f}")
     return 0
 
 

@@ -40,6 +40,7 @@ from zenoh.handlers import Callback
 from plugcell.framework import wire
 from plugcell.framework.data import DataError, to_data
 from plugcell.framework.keys import DEFAULT_CELL, KeySpace, Presence, Role, check_name
+from plugcell.framework.memory import tune_allocator
 from plugcell.framework.model import (
     Acknowledgement,
     Command,
@@ -185,6 +186,7 @@ class Participant:
 
     async def start(self) -> None:
         """Open the session, watch presence, declare what a subclass needs, then go live."""
+        tune_allocator()  # large frames reuse memory instead of faulting in fresh pages
         self._loop = asyncio.get_running_loop()
         self._port = Port(self._loop, self._handle)
         if self.signer is None:

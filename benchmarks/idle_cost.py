@@ -1,0 +1,108 @@
+"""What an idle cell costs: N services, each its own process, doing nothing.
+
+    .venv/bin/python benchmarks/idle_cost.py [--services 20] [--seconds 30]
+
+Starts ``--services`` services (cameras, drills, benchmark publishers and compute
+services in turn, simulated, Zenoh peer mode on loopback, journals on) as
+``plugcell serve KIND`` processes in a fresh cell, waits until every one says it is
+serving and has settled, then reads the CPU time (user + system, from
+``/proc/PID/stat``) of all of them over ``--seconds`` of idleness: presence, the
+queued-process heartbeat and Zenoh's own keep-alive are all that runs.  Then the same
+for as many bare Zenoh sessions (``zenoh.open`` with plugcell's transport
+configuration, nothing declared): the floor Zenoh's peer mesh sets.  Prints each total
+as a share of one core and per process.  Linux only (reads /proc).
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import platform
+import subprocess
+import sys
+import tempfile
+import time
+import uuid
+from pathlib import Path
+
+KINDS = ("camera", "drill", "bench", "compute")
+#: A bare Zenoh session with plugcell's transport configuration, announcing itself.
+BARE = ("import time\n"
+        "from plugcell.framework.transport import TransportConfig, open_session\n"
+        "s = open_session(TransportConfig.from_env())\n"
+        "print('serving in cell (bare zenoh session)', flush=True)\n"
+        "time.sleep(1e6)\n")
+TICK = os.sysconf("SC_CLK_TCK")
+
+
+def cpu_seconds(pid: int) -> float:
+    """User + system CPU time of process ``pid`` (s)."""
+    fields = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()
+    return (int(fields[11]) + int(fields[12])) / TICK  # utime, stime (fields 14, 15)
+
+
+def measure(commands: list[list[str]], env: dict[str, str], seconds: float,
+            settle: float) -> tuple[float, float, list[float]]:
+    """Start the processes, wait until each says it is serving, settle, then their CPU
+    time over ``seconds``: (start-up s, measured wall s, CPU s of each process)."""
+    procs: list[subprocess.Popen[str]] = []
+    t0 = time.monotonic()
+    try:
+        for argv in commands:
+            procs.append(subprocess.Popen(argv, env=env, stdout=subprocess.PIPE,
+                                          stderr=subprocess.STDOUT, text=True))
+        for p in procs:
+            assert p.stdout is not None
+            for line in p.stdout:
+                if "serving in cell" in line:
+                    break
+            else:
+                raise SystemExit(f"a process ended before serving (exit {p.wait()})")
+        started = time.monotonic() - t0
+        time.sleep(settle)
+        before = [cpu_seconds(p.pid) for p in procs]
+        t1 = time.monotonic()
+        time.sleep(seconds)
+        after = [cpu_seconds(p.pid) for p in procs]
+        wall = time.monotonic() - t1
+    finally:
+        for p in procs:
+            p.terminate()
+        for p in procs:
+            try:
+                p.wait(10)
+            except subprocess.TimeoutExpired:
+                p.kill()
+    return started, wall, [a - b for a, b in zip(after, before, strict=True)]
+
+
+def main() -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--services", type=int, default=20)
+    ap.add_argument("--seconds", type=float, default=30.0)
+    ap.add_argument("--settle", type=float, default=5.0,
+                    help="seconds to wait after the last process is serving")
+    args = ap.parse_args()
+    cell = f"idle{uuid.uuid4().hex[:8]}"
+    home = Path(tempfile.mkdtemp(prefix="plugcell-idle-"))
+    env = {**os.environ, "PLUGCELL_HOME": str(home), "PYTHONUNBUFFERED": "1"}
+    services = [[sys.executable, "-m", "plugcell", "serve", KINDS[i % len(KINDS)], "--cell",
+                 cell, "--name", f"{KINDS[i % len(KINDS)].upper()}{i}"]
+                for i in range(args.services)]
+    bare = [[sys.executable, "-c", BARE]] * args.services
+    print(f"idle cell: {args.services} processes, Zenoh peer mode on loopback; "
+          f"{platform.machine()}, Python {platform.python_version()}, {os.cpu_count()} cores, "
+          f"load {os.getloadavg()[0]:.1f}")
+    print(f"{'':34s} {'started in s':>13} {'measured s':>11} {'CPU of one core':>16} "
+          f"{'per process':>12} {'busiest':>9}")
+    for label, commands in ((f"plugcell services ({', '.join(KINDS)})", services),
+                            ("bare Zenoh sessions (the floor)", bare)):
+        started, wall, used = measure(commands, env, args.seconds, args.settle)
+        total = sum(used) / wall
+        print(f"{label:34s} {started:13.1f} {wall:11.1f} {100 * total:15.2f}% "
+              f"{100 * total / len(used):11.3f}% {100 * max(used) / wall:8.3f}%", flush=True)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
