@@ -480,6 +480,8 @@ def hybrid_residuals(model: ErrorModel, layer: LearnedResidual, data: Calibratio
     absorbs the other's terms; ``rotation_weight`` (m/rad) and ``refit_positions_only``
     as in :func:`~plugcell.calibration.identify.refit_base`.
     """
+    # identify imports this module (through result.py): the circle is broken
+    # here, where the refit is needed
     from plugcell.calibration.identify import refit_base as _refit
 
     opts = {"probe": refit_probe, "rotation_weight": rotation_weight,

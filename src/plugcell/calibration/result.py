@@ -180,6 +180,8 @@ class CalibrationResult:
         """
         nominal, model = self.nominal, self.model
         if refit_base:
+            # identify builds results (it imports this module): the one import circle
+            # of the calibration package, broken here where the refit is needed
             from plugcell.calibration.identify import refit_base as _refit
 
             w = self.settings.get("rotation_weight", 1.0) if rotation_weight is None \

@@ -38,6 +38,8 @@ from dataclasses import dataclass, field, replace
 
 import zenoh
 
+from plugcell.framework.security import tls_settings, usrpwd_settings, zenoh_acl
+
 LOOPBACK_LISTEN = ("tcp/127.0.0.1:0",)
 ROUTER_LISTEN = ("tcp/0.0.0.0:7447",)
 
@@ -147,8 +149,6 @@ class TransportConfig:
         return conf
 
     def _security_settings(self) -> dict[str, object]:
-        from plugcell.framework.security import tls_settings, usrpwd_settings, zenoh_acl
-
         settings: dict[str, object] = {}
         if self.tls_ca:
             settings.update(tls_settings(self.tls_ca, self.tls_cert, self.tls_key, self.mtls))

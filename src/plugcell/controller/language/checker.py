@@ -29,6 +29,7 @@ from plugcell.controller.language.operators import (
     binary_type,
     unary_type,
 )
+from plugcell.controller.language.printer import format_expr
 from plugcell.controller.language.scope import (
     ConstInfo,
     ModuleScope,
@@ -529,8 +530,6 @@ def _count(k: int) -> str:
 
 
 def _describe(e: n.Expr) -> str:
-    from plugcell.controller.language.printer import format_expr
-
     return format_expr(e)
 
 

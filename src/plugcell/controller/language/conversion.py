@@ -28,6 +28,7 @@ from typing import Any
 
 import numpy as np
 
+from plugcell.controller.language.errors import ValueConversionError
 from plugcell.controller.language.types import (
     BOOLEAN,
     INT_MAX,
@@ -53,6 +54,8 @@ __all__ = ["ConversionError", "position_from_matrix", "to_language", "to_python"
 
 #: Most joints a JOINTPOS may have.
 MAX_JOINTS = 10
+#: Capacity of EXT_CMD_DATA (REAL values a service's answer may carry).
+EXT_DATA_MAX = 4096
 #: Millimetres per unit of the translation of a 4×4 matrix (metres → mm).
 MATRIX_UNIT_MM = 1000.0
 
@@ -265,9 +268,6 @@ def data_updates(data: Any, file: str = "<program>") -> list[tuple[str, Any]]:
     """The ``ext_cmd_*`` data variables for a service's answer ``data``
     (see :meth:`Execution.post_result
     <plugcell.controller.language.interpreter.Execution.post_result>`)."""
-    from plugcell.controller.language.errors import ValueConversionError
-    from plugcell.controller.language.predefined import EXT_DATA_MAX
-
     if data is None:
         return [("ext_cmd_count", 0), ("ext_cmd_rows", 0), ("ext_cmd_cols", 0)]
     if isinstance(data, str | bytes):

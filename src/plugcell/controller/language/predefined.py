@@ -15,6 +15,7 @@ from typing import Any, Protocol
 
 from plugcell.controller.language import errors
 from plugcell.controller.language.conversion import (
+    EXT_DATA_MAX,
     ConversionError,
     position_from_matrix,
     to_language,
@@ -434,8 +435,6 @@ PROCEDURES: dict[str, Builtin] = {
     "ERR_TRAP_OFF": _fn("ERR_TRAP_OFF", [INT_], None, _trap(False)),
 }
 
-#: Capacity of EXT_CMD_DATA (REAL values a service's answer may carry).
-EXT_DATA_MAX = 4096
 
 #: Trap code that matches every run-time error.
 ERR_ANY = 1
