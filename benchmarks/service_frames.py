@@ -64,6 +64,7 @@ async def _per_frame_us(shape: tuple[int, ...], frames: int, folder: Path | None
     publisher = _CountingPublisher()
     service.session = _OpenSession()  # type: ignore[assignment]
     service._publisher = lambda sender: publisher  # type: ignore[method-assign]
+    service.outbox.loop = service._loop
     push = service.device.command("Push")
     assert push is not None
     entry = Entry(process=Process(command=push, tag=Tag("CONSUMER", "PUBLISHER"),
@@ -77,7 +78,7 @@ async def _per_frame_us(shape: tuple[int, ...], frames: int, folder: Path | None
             await asyncio.sleep(0)
     await asyncio.sleep(0)
     elapsed = time.perf_counter() - started
-    if entry.seq != frames or service._outbox or not publisher.samples:
+    if entry.seq != frames or service.outbox or not publisher.samples:
         raise RuntimeError(f"{entry.seq} of {frames} frames made, {publisher.samples} samples")
     service.journal.close()
     return elapsed / frames * 1e6

@@ -17,7 +17,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from zenoh.handlers import Callback
 
-from plugcell.framework import service as service_module
+from plugcell.framework import outbox as outbox_module
 from plugcell.framework import wire
 from plugcell.framework.journal import read_journal
 from plugcell.framework.model import (
@@ -85,7 +85,7 @@ def test_a_burst_of_frames_travels_in_a_few_batches_whole_and_in_order(tmp_path)
 
 
 def test_no_batch_carries_more_than_the_limit(tmp_path, monkeypatch):
-    monkeypatch.setattr(service_module, "BATCH_BYTES", 20)  # 8-byte frames: 2 per batch
+    monkeypatch.setattr(outbox_module, "BATCH_BYTES", 20)  # 8-byte frames: 2 per batch
     updates, bodies, stream, _ = run(_stream_burst(tmp_path, 41))
     assert [stream.array(u)[0] for u in updates[1:42]] == [float(i) for i in range(41)]
     sizes = [
@@ -97,7 +97,7 @@ def test_no_batch_carries_more_than_the_limit(tmp_path, monkeypatch):
 
 
 def test_a_frame_larger_than_the_limit_travels_alone(tmp_path, monkeypatch):
-    monkeypatch.setattr(service_module, "BATCH_BYTES", 4)  # every 8-byte frame is too big
+    monkeypatch.setattr(outbox_module, "BATCH_BYTES", 4)  # every 8-byte frame is too big
     updates, bodies, stream, _ = run(_stream_burst(tmp_path, 10))
     assert [stream.array(u)[0] for u in updates[1:11]] == [float(i) for i in range(10)]
     data_bodies = [b for b in bodies if any(u.data is not None for u in process_updates(b))]

@@ -66,7 +66,6 @@ from plugcell.framework.model import (
     Message,
     Process,
     ProcessStates,
-    ProcessUpdateBatch,
     ProcessUpdateNotification,
     ShutdownNotification,
     StateUpdateNotification,
@@ -74,6 +73,7 @@ from plugcell.framework.model import (
     SubscribeResponse,
     UnsubscribeRequest,
 )
+from plugcell.framework.outbox import Outbox
 from plugcell.framework.participant import Participant, PartnerError
 from plugcell.framework.processqueue import Entry, ProcessQueue
 from plugcell.framework.security import AccessPolicy
@@ -92,9 +92,6 @@ QUEUED_HEARTBEAT_S = 2.0
 Answer = zenoh.Query | str
 """Where a CreateProcess is acknowledged: its query, or the sender that published it."""
 
-#: Largest data (bytes) one :class:`ProcessUpdateBatch` carries; a frame larger than
-#: this travels alone.
-BATCH_BYTES = 64 * 1024
 
 
 class DeviceError(RuntimeError):
@@ -130,7 +127,8 @@ class GenericDevice(Participant):
     express_updates: ClassVar[bool] = True
     """Publish process notifications with Zenoh's ``express`` flag (sent at once, not held
     for Zenoh's own batching): the service already sends one sample per sender per
-    loop turn (:meth:`_flush`), so holding it only adds latency."""
+    loop turn (:class:`~plugcell.framework.outbox.Outbox`), so holding it only adds
+    latency."""
 
     def __init__(
         self,
@@ -185,9 +183,10 @@ class GenericDevice(Participant):
         self._heartbeat_task: asyncio.Task[None] | None = None
         self._publishers: dict[str, Any] = {}
         self._closing = False
-        self._flush_scheduled = False
-        self._outbox: list[tuple[Entry, ProcessUpdateNotification]] = []
-        self._acks: list[tuple[Answer, Acknowledgement]] = []
+        self.outbox = Outbox(self.name, commit=lambda: self.journal.commit(),
+                             reply=self._reply, publish=self._send_to,
+                             is_open=self._session_open)
+        """Acknowledgements and updates of this turn of the loop (framework/outbox.py)."""
         self._notify_scheduled = False
         self._notified = (DeviceStates.Ready, ConnectionStates.Offline)
         self._create_doors: list[Any] = []
@@ -261,6 +260,7 @@ class GenericDevice(Participant):
     async def start(self) -> None:
         """Go live in the cell, connect the device, run the ProcessHandler."""
         self._loop_thread = threading.get_ident()
+        self.outbox.loop = asyncio.get_running_loop()
         try:
             await super().start()
             await self.connect()
@@ -384,7 +384,7 @@ class GenericDevice(Participant):
             self._publish(
                 self.keys.shutdown(self.name), ShutdownNotification(name=self.name, reason=reason)
             )
-        self._flush()
+        self.outbox.flush()
         for publisher in self._publishers.values():
             with contextlib.suppress(zenoh.ZError):
                 publisher.undeclare()
@@ -593,11 +593,8 @@ class GenericDevice(Participant):
                 process.command.name,
             )
             return
-        self._acks.append(
-            (answer, Acknowledgement(
-                identifier=identifier, state=state, reason=reason, instance=self.instance
-            ))
-        )
+        ack = Acknowledgement(identifier=identifier, state=state, reason=reason,
+                              instance=self.instance)
         if not reason:
             assert command is not None
             command = msgspec.structs.replace(command, option=process.command.option)
@@ -612,7 +609,7 @@ class GenericDevice(Participant):
             self._queue.post(entry)
         # after the post: a process the handler starts (or ends) in this turn of the
         # loop shares the acknowledgement's commit and sample
-        self._flush_soon()
+        self.outbox.acknowledge(answer, ack)
 
     def _check_process(self, envelope: wire.Envelope, process: Process) -> str:
         if process.tag.recipient != self.name:
@@ -642,13 +639,12 @@ class GenericDevice(Participant):
         """Journal a refused request; acknowledge it Failed with the reason (at the flush)."""
         with contextlib.suppress(Exception):
             self.journal.record_rejection(sender, identifier, command, size, reason)
-        self._acks.append((answer, Acknowledgement(
+        self.outbox.acknowledge(answer, Acknowledgement(
             identifier=identifier or 0,
             state=ProcessStates.Failed,
             reason=reason,
             instance=self.instance,
-        )))
-        self._flush_soon()
+        ))
 
     # -- presence of senders -------------------------------------------------------------
 
@@ -967,7 +963,7 @@ class GenericDevice(Participant):
         self._update(entry, ProcessStates.Running, "", None)
 
     def _update(self, entry: Entry, state: ProcessStates, reason: str, data: Data | None) -> None:
-        """ProcessStateHandler: journal the ProcessUpdate, then send it (see :meth:`_flush`)."""
+        """ProcessStateHandler: journal the ProcessUpdate, then send it (the outbox)."""
         entry.seq += 1
         update = ProcessUpdateNotification(
             tag=entry.process.tag,
@@ -981,73 +977,13 @@ class GenericDevice(Participant):
             self.journal.record_update(
                 entry.sender, entry.identifier, entry.seq, state.value, reason, summary(data)
             )
-        self._outbox.append((entry, update))
-        if state.final:
-            self._flush()
-        else:
-            self._flush_soon()
+        self.outbox.update(entry, update)
 
-    def _flush_soon(self) -> None:
-        if not self._flush_scheduled and self._loop is not None:
-            self._flush_scheduled = True
-            self._loop.call_soon(self._flush)
+    def _session_open(self) -> bool:
+        return self.session is not None and not self.session.is_closed()
 
-    def _flush(self) -> None:
-        """Commit the journal, then acknowledge and publish what it now holds.
-
-        Every accepted process and every update is durable before anyone can see
-        it.  What one event-loop turn produces — acknowledgements, a burst of
-        frames — shares one commit; a final update flushes at once.  The updates
-        for one sender go out in one sample (a :class:`ProcessUpdateBatch` when
-        there are several, up to :data:`BATCH_BYTES` of data each).  A data-less
-        Running update whose process ends within the same flush is journaled but
-        not sent (its ``seq`` is skipped): the final update supersedes it.
-        """
-        self._flush_scheduled = False
-        if not self._outbox and not self._acks:
-            return
-        try:
-            self.journal.commit()
-        except Exception:  # a full disk must not silence the service
-            log.exception("%s: journal commit failed", self.name)
-        acks, self._acks = self._acks, []
-        to_senders: dict[str, list[Acknowledgement]] = {}
-        for answer, ack in acks:
-            if isinstance(answer, str):
-                to_senders.setdefault(answer, []).append(ack)
-            else:
-                self._reply(answer, ack)
-        outbox, self._outbox = self._outbox, []
-        if self.session is None or self.session.is_closed():
-            return
-        ended = {id(entry) for entry, update in outbox if update.state.final}
-        batch: list[ProcessUpdateNotification] = []
-        sender, size = "", 0
-        for entry, update in outbox:
-            if (update.state is ProcessStates.Running and update.data is None
-                    and id(entry) in ended):
-                continue
-            nbytes = len(update.data.buffer) if update.data is not None else 0
-            if batch and (entry.sender != sender or size + nbytes > BATCH_BYTES):
-                self._send(sender, to_senders.pop(sender, []), batch)
-                batch, size = [], 0
-            batch.append(update)
-            sender, size = entry.sender, size + nbytes
-        if batch:
-            self._send(sender, to_senders.pop(sender, []), batch)
-        for sender, acknowledgements in to_senders.items():
-            self._send(sender, acknowledgements, [])
-
-    def _send(
-        self, sender: str, acks: list[Acknowledgement], updates: list[ProcessUpdateNotification]
-    ) -> None:
-        """Publish acknowledgements, then updates, for ``sender`` in one sample
-        (docs/protocol.md, "Batches")."""
-        body: Message
-        if len(acks) + len(updates) == 1:
-            body = acks[0] if acks else updates[0]
-        else:
-            body = ProcessUpdateBatch(acks=acks, updates=updates)
+    def _send_to(self, sender: str, body: Message) -> None:
+        """One sample for ``sender`` on its process key (the outbox's publish)."""
         with contextlib.suppress(zenoh.ZError):
             self._publisher(sender).put(self._encode(body))
 
