@@ -50,7 +50,13 @@ import msgspec
 import zenoh
 
 from plugcell.framework import wire
-from plugcell.framework.data import DataError, check_data, from_data, summary, to_data
+from plugcell.framework.admission import (
+    check_envelope,
+    check_input,
+    check_process,
+    decode_request,
+)
+from plugcell.framework.data import DataError, summary, to_data
 from plugcell.framework.journal import Journal, JournalInUseError, journal_dir
 from plugcell.framework.keys import DEFAULT_CELL, Presence, check_name
 from plugcell.framework.model import (
@@ -416,20 +422,8 @@ class GenericDevice(Participant):
         return self._decode_request(query.payload)
 
     def _decode_request(self, payload: zenoh.ZBytes | None) -> tuple[wire.Envelope, bytes] | str:
-        """A request's envelope and its bytes, or why not."""
-        size = len(payload) if payload is not None else 0
-        if size == 0:
-            return "empty request"
-        if size > self.max_payload:
-            return (
-                f"payload of {size} bytes exceeds the limit of {self.max_payload} bytes "
-                f"of {self.name}"
-            )
-        raw = payload.to_bytes()  # type: ignore[union-attr]
-        try:
-            return wire.decode(raw, self.max_payload), raw
-        except wire.WireError as exc:
-            return str(exc)
+        """A request's envelope and its bytes, or why not (admission step 1)."""
+        return decode_request(payload, self.max_payload, self.name)
 
     def request_verifier(self) -> RequestVerifier:
         """The checker of signed requests (``identity = "signed"``), from the cell's CA
@@ -508,7 +502,8 @@ class GenericDevice(Participant):
         self._create(sample.payload, sender, wire.attached_identifier(sample.attachment))
 
     def _create(self, payload: zenoh.ZBytes | None, answer: Answer, attached: int = 0) -> None:
-        """CreateProcessHandler (5.2.3.4): check, journal, acknowledge, enqueue.
+        """CreateProcessHandler (5.2.3.4): admit (framework/admission.py: decode,
+        authenticate, check, authorise, journal), acknowledge, enqueue.
 
         ``answer`` is where the acknowledgement goes: the query (queryable door) or
         the name of the sender that published the request (publication door, whose
@@ -526,37 +521,25 @@ class GenericDevice(Participant):
             self._reject(answer, decoded, size, sender, attached or None)
             return
         envelope, raw = decoded
+        published_by = answer if isinstance(answer, str) else None
+        invalid = check_envelope(envelope, published_by)
+        if invalid:
+            self._reject(answer, invalid, size, published_by or envelope.sender)
+            return
         process = envelope.body
-        if isinstance(answer, str) and envelope.sender != answer:
-            self._reject(answer, f"envelope sender {envelope.sender} differs from the sender "
-                         f"{answer} of the request key", size, answer)
-            return
-        if not isinstance(process, Process):
-            self._reject(
-                answer, f"expected a Process, got {type(process).__name__}", size, envelope.sender
-            )
-            return
+        assert isinstance(process, Process)
         sender, identifier = process.tag.sender, process.identifier
         unauthenticated = self.access.authenticate(self, envelope, raw)
         if unauthenticated:  # a rejection: nothing is recorded under the claimed name
             self._reject(answer, unauthenticated, size, sender, identifier, process.command.name)
             return
-        reason = self._check_process(envelope, process)
+        reason = check_process(self.name, self.device, envelope, process, self._departed)
         if not reason:  # access control: refusals are journaled below with the reason
             reason = self.access.authorize_create(self, envelope, process)
         command = self.device.command(process.command.name)
         array = None
         if not reason and command is not None:
-            try:
-                check_data(
-                    process.data,
-                    command.input_data_type,
-                    command.input_data_size,
-                    f"{command.name} input",
-                )
-                array = from_data(process.data)
-            except DataError as exc:
-                reason = str(exc)
+            array, reason = check_input(command, process)
         if (sender, identifier) in self._known:
             self._reject(
                 answer,
@@ -610,22 +593,6 @@ class GenericDevice(Participant):
         # after the post: a process the handler starts (or ends) in this turn of the
         # loop shares the acknowledgement's commit and sample
         self.outbox.acknowledge(answer, ack)
-
-    def _check_process(self, envelope: wire.Envelope, process: Process) -> str:
-        if process.tag.recipient != self.name:
-            return f"process addressed to {process.tag.recipient}, this is {self.name}"
-        if process.tag.sender != envelope.sender:
-            return (
-                f"tag sender {process.tag.sender} differs from the envelope sender "
-                f"{envelope.sender}"
-            )
-        if envelope.instance and envelope.instance in self._departed:
-            return f"sender {envelope.sender} (instance {envelope.instance}) is already gone"
-        command = self.device.command(process.command.name)
-        if command is None:
-            known = ", ".join(c.name for c in self.commands) or "none"
-            return f"unknown command {process.command.name!r} for {self.name} (commands: {known})"
-        return ""
 
     def _reject(
         self,
