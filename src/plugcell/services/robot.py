@@ -458,7 +458,10 @@ def main(argv: Sequence[str] | None = None) -> int:
     how = p.add_mutually_exclusive_group(required=True)
     how.add_argument("--sim", action="store_true", help="start a simulated controller (twin)")
     how.add_argument("--controller", metavar="HOST:PORT", help="connect to a real controller")
-    p.add_argument("--robot", default="smart_h4", help="robot of the simulated controller")
+    from plugcell.commands.robotargs import add_robot_args, robot_source_of
+
+    add_robot_args(p, default="smart_h4",
+                   help="robot of the simulated controller: name, .toml or URDF/xacro file")
     p.add_argument("--payload-kg", type=float, default=0.0)
     p.add_argument("--speed", type=float, default=1.0, help="simulated seconds per real second")
     p.add_argument("--seed", type=int, default=0, help="twin seed of the simulated controller")
@@ -476,8 +479,9 @@ def main(argv: Sequence[str] | None = None) -> int:
         forward.append("--no-journal")
     params = {"sim": "true"} if args.sim else {"controller": args.controller}
     if args.sim:
-        params.update(robot=args.robot, payload_kg=repr(args.payload_kg),
-                      speed=repr(args.speed), seed=str(args.seed))
+        forward += robot_source_of(args).argv()  # --robot and its URDF options, as given
+        params.update(payload_kg=repr(args.payload_kg), speed=repr(args.speed),
+                      seed=str(args.seed))
     if args.library:
         params["library"] = ",".join(args.library)
     for key, value in params.items():
