@@ -92,6 +92,8 @@ def robot_file_of(args: argparse.Namespace) -> str:
     robot service and its simulated controller take a robot as one string.
     """
     import hashlib
+    import os
+    import tempfile
 
     from plugcell.framework.journal import plugcell_home
     from plugcell.io.robots import description_to_toml
@@ -107,10 +109,11 @@ def robot_file_of(args: argparse.Namespace) -> str:
     path = plugcell_home() / "robots" / f"{desc.name}-{digest}.toml"
     try:
         path.parent.mkdir(parents=True, exist_ok=True)
-        if not path.exists():
-            tmp = path.with_suffix(".tmp")
-            tmp.write_text(text, encoding="utf-8")
-            tmp.replace(path)
+        if not path.exists():  # written whole, then renamed: a reader never sees half
+            fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=path.name, suffix=".tmp")
+            with os.fdopen(fd, "w", encoding="utf-8") as f:
+                f.write(text)
+            os.replace(tmp, path)
     except OSError as exc:
         raise _error(f"{path}: cannot write the imported robot: {exc.strerror or exc}") from None
     return str(path)
