@@ -129,8 +129,12 @@ def test_a_partner_that_dies_mid_command_fails_the_command(robot_cell: RobotCell
     # the journal has Running before the acknowledgement is even sent
     session = open_session()
     updates: list[object] = []
-    watch = session.declare_subscriber(KeySpace(robot_cell.cell).process("TOOL2", "ROBOT"),
-                                       updates.append)
+    keys = KeySpace(robot_cell.cell)
+    watch = session.declare_subscriber(keys.process("TOOL2", "ROBOT"), updates.append)
+    # a fresh session hears TOOL2's one Running update only once it is linked to TOOL2's
+    # peer: wait until TOOL2's presence answers through it
+    until(lambda: list(session.liveliness().get(keys.live_services("TOOL2"), timeout=1.0)),
+          20.0, "the watching session linked to TOOL2")
     try:
         assert robot_cell.activate(program, wait=False).state is C  # started
         until(lambda: updates, 20.0, "TOOL2 drilling")  # its Running update was sent
