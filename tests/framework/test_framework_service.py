@@ -13,7 +13,7 @@ import numpy as np
 import pytest
 from framework_testlib import ScriptedDevice, cell_with, collect, run, states, unique_cell, until
 
-from plugcell.framework import service as service_module
+from plugcell.framework import scheduler as scheduler_module
 from plugcell.framework import wire
 from plugcell.framework.journal import read_journal
 from plugcell.framework.model import (
@@ -120,7 +120,7 @@ def test_a_process_queued_behind_a_long_hold_outwaits_its_timeout(tmp_path, monk
     """While it waits in the queue the service's Queued heartbeat keeps it alive: the
     requester's timeout bounds silence, not the queue (a robot waiting for the tracker
     behind another robot's Continuous Measurement, 8.4.3)."""
-    monkeypatch.setattr(service_module, "QUEUED_HEARTBEAT_S", 0.1)
+    monkeypatch.setattr(scheduler_module, "QUEUED_HEARTBEAT_S", 0.1)
 
     async def body():
         async with cell_with(tmp_path, "A", "B") as (dev, a, b):

@@ -16,7 +16,8 @@ the ports of Table 5-3: ``data_feedback``, ``cmd_feedback``, ``device_state`` an
 ``connection_state``.  Queueing, re-scheduling, notifications, partners,
 discovery and the journal are inherited.
 
-The ProcessHandler (5.2.3.4, Figure 5-12) takes one process at a time from the
+The ProcessHandler (5.2.3.4, Figure 5-12; :mod:`plugcell.framework.scheduler`) takes
+one process at a time from the
 :class:`~plugcell.framework.processqueue.ProcessQueue`: it posts Running, sets the
 device Busy, dispatches the command and waits — with the command's timeout — for
 the command feedback; data feedback becomes ProcessUpdates.  A MultipleData
@@ -56,7 +57,7 @@ from plugcell.framework.admission import (
     check_process,
     decode_request,
 )
-from plugcell.framework.data import DataError, summary, to_data
+from plugcell.framework.data import summary
 from plugcell.framework.journal import Journal, JournalInUseError, journal_dir
 from plugcell.framework.keys import DEFAULT_CELL, Presence, check_name
 from plugcell.framework.model import (
@@ -81,7 +82,8 @@ from plugcell.framework.model import (
 )
 from plugcell.framework.outbox import Outbox
 from plugcell.framework.participant import Participant, PartnerError
-from plugcell.framework.processqueue import Entry, ProcessQueue
+from plugcell.framework.processqueue import Entry
+from plugcell.framework.scheduler import DeviceError, ProcessScheduler
 from plugcell.framework.security import AccessPolicy
 from plugcell.framework.signing import RequestVerifier, SigningError
 from plugcell.framework.transport import TransportConfig
@@ -90,18 +92,9 @@ log = logging.getLogger("plugcell.framework.service")
 
 T = TypeVar("T")
 
-#: While a process waits in the queue its sender hears from the service at least this
-#: often (a ``Queued`` ProcessUpdate, not journalled): a requester waiting behind a long
-#: hold keeps waiting while the service lives, instead of timing out (docs/protocol.md).
-QUEUED_HEARTBEAT_S = 2.0
-
 Answer = zenoh.Query | str
 """Where a CreateProcess is acknowledged: its query, or the sender that published it."""
 
-
-
-class DeviceError(RuntimeError):
-    """Raised by a device interface: the process ends Failed with this message as reason."""
 
 
 class FeedbackPort(Generic[T]):
@@ -167,9 +160,17 @@ class GenericDevice(Participant):
         self.max_payload = max_payload
         self._journal_setting = journal
         self.journal: Journal | _NoJournal = _NoJournal()
+        self.scheduler = ProcessScheduler(
+            self.name, self.device, update=self._update, busy=self._busy,
+            heartbeat=self._heartbeat,
+            # looked up per call: a subclass or a test may replace dispatch on the instance
+            dispatch=lambda command, option, data: self.dispatch(command, option, data))
+        """Queue, holds, heartbeats and timeouts of the processes (framework/scheduler.py)."""
         # the ports of Table 5-3
-        self.data_feedback: FeedbackPort[Any] = FeedbackPort(self, self._on_data, "DataFeedback")
-        self.cmd_feedback: FeedbackPort[str] = FeedbackPort(self, self._on_cmd, "CmdFeedback")
+        self.data_feedback: FeedbackPort[Any] = FeedbackPort(
+            self, self.scheduler.on_data, "DataFeedback")
+        self.cmd_feedback: FeedbackPort[str] = FeedbackPort(
+            self, self.scheduler.on_cmd, "CmdFeedback")
         self.device_state: FeedbackPort[DeviceStates] = FeedbackPort(
             self, self._on_device_state, "DeviceState"
         )
@@ -177,16 +178,7 @@ class GenericDevice(Participant):
             self, self._on_connection_state, "ConnectionState"
         )
         self._loop_thread = 0
-        self._queue = ProcessQueue()
-        self._known: dict[tuple[str, int], Entry] = {}
         self._departed: set[str] = set()
-        self._holder: Entry | None = None
-        self._measuring: Entry | None = None
-        self._single_data: list[Any] = []
-        self._notes: list[str] = []
-        self._cmd_waiter: asyncio.Future[str] | None = None
-        self._handler_task: asyncio.Task[None] | None = None
-        self._heartbeat_task: asyncio.Task[None] | None = None
         self._publishers: dict[str, Any] = {}
         self._closing = False
         self.outbox = Outbox(self.name, commit=lambda: self.journal.commit(),
@@ -201,8 +193,6 @@ class GenericDevice(Participant):
         """Why this service withdrew because another one has its name (else empty)."""
         self.stopped = asyncio.Event()
         """Set once the service has shut down (by :meth:`close` or a name conflict)."""
-        self.stray_feedback = 0
-        """Data/command feedback that arrived when no process expected it."""
 
     # -- the device interface: override these (Figure 5-10, "Camera Interface") ---------
 
@@ -215,7 +205,21 @@ class GenericDevice(Participant):
         disappeared).  Services that keep per-requester state (the tracker's BASE and
         PROBE, the compute service's workspaces) key it by this name.
         """
-        return getattr(self, "_sender", "")
+        return self.scheduler.sender
+
+    @property
+    def stray_feedback(self) -> int:
+        """Data/command feedback that arrived when no process expected it."""
+        return self.scheduler.stray_feedback
+
+    @property
+    def _measuring(self) -> Entry | None:
+        """The process the data feedback belongs to (the scheduler's; benchmarks set it)."""
+        return self.scheduler.measuring
+
+    @_measuring.setter
+    def _measuring(self, entry: Entry | None) -> None:
+        self.scheduler.measuring = entry
 
     def call_in_loop(self, fn: Callable[..., Any], *args: Any) -> bool:
         """Run ``fn(*args)`` on the service's event loop: at once when called there, else
@@ -238,8 +242,7 @@ class GenericDevice(Participant):
         calibrated region").  The notes (joined by ``"; "``) become the ``reason`` of the
         process's ``Completed`` update, which is otherwise empty; a Failed process keeps
         its own reason."""
-        if text:
-            self._notes.append(str(text))
+        self.scheduler.note(text)
 
     async def dispatch(self, command: Command, option: str, data: Any) -> str | None:
         """CommandDispatcher: send ``command`` to the device.
@@ -273,9 +276,7 @@ class GenericDevice(Participant):
         except BaseException:
             await self.close()
             raise
-        self._handler_task = asyncio.create_task(self._process_handler(), name=f"{self.name}-ph")
-        self._heartbeat_task = asyncio.create_task(self._queued_heartbeat(),
-                                                   name=f"{self.name}-queued")
+        self.scheduler.start()
 
     async def _declare(self) -> None:
         """Refuse a duplicate name, open the journal, declare the Generic Interface."""
@@ -367,23 +368,8 @@ class GenericDevice(Participant):
                 door.undeclare()
             self._entities.remove(door)
         self._create_doors = []
-        for entry in self._queue.remove_if(lambda e: True):
-            self._finish(entry, ProcessStates.Failed, f"{self.name}: {reason}")
-        if self._holder is not None and not self._holder.abort_reason:
-            self._holder.abort_reason = f"{self.name}: {reason}"
-        self._queue.poke()
-        heartbeat, self._heartbeat_task = self._heartbeat_task, None
-        if heartbeat is not None:
-            heartbeat.cancel()
-            with contextlib.suppress(asyncio.CancelledError):
-                await heartbeat
-        if self._handler_task is not None:
-            # the handler ends after the current process (bounded by its timeout)
-            done, _ = await asyncio.wait({self._handler_task}, timeout=10.0)
-            if not done:
-                self._handler_task.cancel()
-                with contextlib.suppress(asyncio.CancelledError):
-                    await self._handler_task
+        self.scheduler.shut(f"{self.name}: {reason}")
+        await self.scheduler.stop()  # after the current process (bounded by its timeout)
         if self.session is not None and self._started:
             with contextlib.suppress(Exception):
                 await self.disconnect()
@@ -540,7 +526,7 @@ class GenericDevice(Participant):
         array = None
         if not reason and command is not None:
             array, reason = check_input(command, process)
-        if (sender, identifier) in self._known:
+        if self.scheduler.knows(sender, identifier):
             self._reject(
                 answer,
                 f"duplicate identifier {identifier} from {sender}",
@@ -588,8 +574,7 @@ class GenericDevice(Participant):
                 received_ns=received,
                 input=array,
             )
-            self._known[(sender, identifier)] = entry
-            self._queue.post(entry)
+            self.scheduler.post(entry)
         # after the post: a process the handler starts (or ends) in this turn of the
         # loop shares the acknowledgement's commit and sample
         self.outbox.acknowledge(answer, ack)
@@ -634,237 +619,13 @@ class GenericDevice(Participant):
     def _on_left(self, presence: Presence) -> None:
         super()._on_left(presence)
         self._departed.add(presence.instance)
-        gone = self._queue.remove_if(
-            lambda e: e.sender == presence.name and e.instance == presence.instance
-        )
-        for entry in gone:
-            self._finish(
-                entry,
-                ProcessStates.Failed,
-                f"sender {presence.name} lost (liveliness) before the process started",
-            )
-        holder = self._holder
-        if (
-            holder is not None
-            and holder.sender == presence.name
-            and holder.instance == presence.instance
-            and not holder.abort_reason
-        ):
-            holder.abort_reason = f"sender {presence.name} lost (liveliness token withdrawn)"
-            self._queue.poke()
+        self.scheduler.sender_lost(presence.name, presence.instance)
         if not self.is_alive(presence.name, presence.role) and presence.name in self._publishers:
             with contextlib.suppress(zenoh.ZError):
                 self._publishers.pop(presence.name).undeclare()
 
-    # -- ProcessHandler (5.2.3.4, Figure 5-12) ----------------------------------------
-
-    async def _process_handler(self) -> None:
-        while not self._closing:
-            entry = self._queue.take_next()
-            if entry is None:
-                await self._queue.wait(None)
-                continue
-            try:
-                await self._run(entry)
-            except asyncio.CancelledError:
-                self._finish(entry, ProcessStates.Failed, f"{self.name}: service shutting down")
-                raise
-            except Exception as exc:  # never let one process kill the handler
-                log.exception("%s: error running %s", self.name, entry.command.name)
-                self._finish(entry, ProcessStates.Failed, f"{self.name}: internal error: {exc!r}")
-            finally:
-                self._holder = None
-                self._measuring = None
-                if self.device.state is DeviceStates.Busy:
-                    self._on_device_state(DeviceStates.Ready)
-
-    async def _queued_heartbeat(self) -> None:
-        """Tell the senders of waiting processes, every :data:`QUEUED_HEARTBEAT_S`, that
-        their process is still queued (the process's seq advances; the journal keeps
-        the state changes only)."""
-        while not self._closing:
-            await asyncio.sleep(QUEUED_HEARTBEAT_S)
-            now = time.time_ns()
-            for entry in self._queue:
-                if now - entry.received_ns < QUEUED_HEARTBEAT_S * 1e9:
-                    continue
-                entry.seq += 1
-                update = ProcessUpdateNotification(
-                    tag=entry.process.tag, identifier=entry.identifier,
-                    state=ProcessStates.Queued, seq=entry.seq)
-                if self.session is not None and not self.session.is_closed():
-                    with contextlib.suppress(zenoh.ZError):
-                        self._publisher(entry.sender).put(self._encode(update))
-
-    async def _run(self, entry: Entry) -> None:
-        command = entry.command
-        if command.type is CommandTypes.StopData:
-            self._finish(
-                entry,
-                ProcessStates.Failed,
-                f"{command.name}: no MultipleData process of {entry.sender} is running",
-            )
-            return
-        self._running(entry)
-        if command.type is CommandTypes.MultipleData:
-            await self._hold(entry)
-            return
-        self._measuring = entry if command.type is CommandTypes.SingleData else None
-        self._single_data = []
-        self._notes = []
-        ok, reason = await self._execute(entry)
-        self._measuring = None
-        note, self._notes = "; ".join(self._notes), []
-        if not ok:
-            self._finish(entry, ProcessStates.Failed, reason)
-        elif command.type is CommandTypes.SingleData:
-            if not self._single_data:
-                self._finish(
-                    entry,
-                    ProcessStates.Failed,
-                    f"{command.name}: the device reported success but no data",
-                )
-                return
-            try:
-                data = to_data(
-                    self._single_data[0],
-                    command.output_data_type,
-                    command.output_data_size,
-                    f"{command.name} output",
-                )
-            except DataError as exc:
-                self._finish(entry, ProcessStates.Failed, f"device produced invalid data: {exc}")
-                return
-            self._finish(entry, ProcessStates.Completed, note, data)
-        else:
-            self._finish(entry, ProcessStates.Completed, note)
-
-    async def _execute(self, entry: Entry) -> tuple[bool, str]:
-        """Dispatch one command and wait (bounded) for its command feedback."""
-        command = entry.command
-        assert self._loop is not None
-        waiter: asyncio.Future[str] = self._loop.create_future()
-        self._cmd_waiter = waiter
-        self._sender = entry.sender
-        try:
-            async with asyncio.timeout(command.timeout):
-                code = await self.dispatch(command, command.option, entry.input)
-                if code is None:
-                    code = await waiter
-        except TimeoutError:
-            return False, (
-                f"{command.name}: no command feedback from the device within {command.timeout:g} s"
-            )
-        except DeviceError as exc:
-            return False, f"{command.name}: {exc}"
-        except Exception as exc:
-            log.exception("%s: device interface error in %s", self.name, command.name)
-            return False, f"{command.name}: device interface error: {exc!r}"
-        finally:
-            self._cmd_waiter = None
-            self._sender = ""
-        if code == command.success_code:
-            return True, ""
-        return False, (
-            f"{command.name}: device feedback {code!r} (success code {command.success_code!r})"
-        )
-
-    async def _hold(self, entry: Entry) -> None:
-        """Run a MultipleData process and hold the device until its sender's StopData (5.2.3.5)."""
-        command = entry.command
-        deadline = time.monotonic() + command.timeout
-        self._holder = entry
-        self._measuring = entry
-        ok, reason = await self._execute(entry)
-        if not ok:
-            self._finish(entry, ProcessStates.Failed, reason)
-            return
-        while True:
-            if entry.abort_reason:
-                self._measuring = None
-                await self._stop_device(entry)
-                self._finish(entry, ProcessStates.Failed, entry.abort_reason)
-                return
-            stop = self._queue.take_stop_for(entry.sender)
-            if stop is not None:
-                self._running(stop)
-                ok, reason = await self._execute(stop)
-                self._measuring = None
-                if ok:
-                    self._finish(stop, ProcessStates.Completed, "")
-                    self._finish(entry, ProcessStates.Completed, "")
-                else:
-                    self._finish(stop, ProcessStates.Failed, reason)
-                    self._finish(
-                        entry,
-                        ProcessStates.Failed,
-                        f"stopped by {stop.command.name}, which failed: {reason}",
-                    )
-                return
-            remaining = deadline - time.monotonic()
-            if remaining <= 0:
-                entry.abort_reason = (
-                    f"{command.name}: held the device longer than its timeout "
-                    f"of {command.timeout:g} s"
-                )
-                continue
-            await self._queue.wait(remaining)
-
-    async def _stop_device(self, entry: Entry) -> None:
-        """Stop a MultipleData stream whose sender will not: dispatch the catalogue's StopData."""
-        stops = [c for c in self.commands if c.type is CommandTypes.StopData]
-        if not stops:
-            return
-        stop = stops[0]
-        try:
-            async with asyncio.timeout(stop.timeout):
-                await self.dispatch(stop, "", None)
-        except Exception as exc:
-            log.warning(
-                "%s: %s after %s could not stop the device: %r",
-                self.name,
-                stop.name,
-                entry.command.name,
-                exc,
-            )
-
-    # -- receivers of the feedback ports (5.2.3.2) -------------------------------------
-
-    def _on_data(self, value: Any) -> None:
-        """DataFeedback receiver — the MeasurementsHandler of 5.2.3.4."""
-        entry = self._measuring
-        if entry is None:
-            self.stray_feedback += 1
-            return
-        if entry.command.type is CommandTypes.SingleData:
-            self._single_data.append(value)
-            return
-        try:
-            data = to_data(
-                value,
-                entry.command.output_data_type,
-                entry.command.output_data_size,
-                f"{entry.command.name} output",
-            )
-        except DataError as exc:
-            if not entry.abort_reason:
-                entry.abort_reason = f"device produced invalid data: {exc}"
-                self._queue.poke()
-            return
-        self._update(entry, ProcessStates.Running, "", data)
-
-    def _on_cmd(self, code: str) -> None:
-        """CmdFeedback receiver — the CommandFeedbackHandler of 5.2.3.4."""
-        waiter = self._cmd_waiter
-        if waiter is not None and not waiter.done():
-            waiter.set_result(code)
-            return
-        holder = self._holder
-        if holder is not None and code != holder.command.success_code and not holder.abort_reason:
-            holder.abort_reason = f"{holder.command.name}: device feedback {code!r} while streaming"
-            self._queue.poke()
-            return
-        self.stray_feedback += 1
+    # -- receivers of the device state ports (5.2.3.2); the data and command feedback
+    # go to the ProcessScheduler ----------------------------------------------------
 
     def _on_device_state(self, state: DeviceStates) -> None:
         """DeviceStateHandler (5.2.3.2): write the state, notify StateUpdate.
@@ -924,10 +685,19 @@ class GenericDevice(Participant):
             self._publishers[sender] = publisher
         return publisher
 
-    def _running(self, entry: Entry) -> None:
-        """ProcessState.Post(Running) and DeviceState.Post(Busy) of the ProcessHandler."""
-        self._on_device_state(DeviceStates.Busy)
-        self._update(entry, ProcessStates.Running, "", None)
+    def _busy(self, busy: bool) -> None:
+        """The scheduler's seam: Busy while a process runs, Ready after (if it was Busy)."""
+        if busy:
+            self._on_device_state(DeviceStates.Busy)
+        elif self.device.state is DeviceStates.Busy:
+            self._on_device_state(DeviceStates.Ready)
+
+    def _heartbeat(self, entry: Entry, update: ProcessUpdateNotification) -> None:
+        """The scheduler's seam: a Queued update straight to its sender (no journal,
+        no batch)."""
+        if self.session is not None and not self.session.is_closed():
+            with contextlib.suppress(zenoh.ZError):
+                self._publisher(entry.sender).put(self._encode(update))
 
     def _update(self, entry: Entry, state: ProcessStates, reason: str, data: Data | None) -> None:
         """ProcessStateHandler: journal the ProcessUpdate, then send it (the outbox)."""
@@ -953,22 +723,6 @@ class GenericDevice(Participant):
         """One sample for ``sender`` on its process key (the outbox's publish)."""
         with contextlib.suppress(zenoh.ZError):
             self._publisher(sender).put(self._encode(body))
-
-    def _finish(
-        self, entry: Entry, state: ProcessStates, reason: str, data: Data | None = None
-    ) -> None:
-        self._known.pop((entry.sender, entry.identifier), None)
-        if reason:
-            log.info(
-                "%s: %s #%d from %s %s: %s",
-                self.name,
-                entry.command.name,
-                entry.identifier,
-                entry.sender,
-                state.value,
-                reason,
-            )
-        self._update(entry, state, reason, data)
 
 
 class _NoJournal:
