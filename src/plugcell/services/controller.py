@@ -16,7 +16,9 @@ it has a name in the cell, a command catalogue and a journal.  It
   **runs robot programs** on several robots sequentially or concurrently
   (``controller_runs.py``);
 * **monitors** every process of the cell live: state, data, duration, who asked
-  whom, and the queue of each shared device (``controller_monitor.py``, Figure 7-11).
+  whom, and the queue of each shared device (``controller_monitor.py``, Figure 7-11);
+* **feeds** its listeners (the web UI): the activity log and batched changes of the
+  cell and of the processes (``controller_feed.py``).
 
 Its own commands make all of that available to any participant (a script, a
 robot program through its robot service, ``plugcell call CONTROLLER …``); the web
@@ -31,7 +33,7 @@ import json
 import logging
 import time
 from collections import deque
-from collections.abc import AsyncIterator
+from collections.abc import AsyncIterator, Iterable
 from pathlib import Path
 from typing import Any, ClassVar
 
@@ -49,6 +51,7 @@ from plugcell.framework.model import (
 from plugcell.framework.participant import PartnerError, PresenceEvent
 from plugcell.framework.process_call import ProcessCall
 from plugcell.framework.service import DeviceError, GenericDevice
+from plugcell.services.controller_feed import UiFeed
 from plugcell.services.controller_journal import JournalTail
 from plugcell.services.controller_monitor import ProcessMonitor, data_view
 from plugcell.services.controller_runs import (
@@ -74,10 +77,6 @@ log = logging.getLogger("plugcell.services.controller")
 REFRESH_PERIOD = 1.5
 #: Seconds between two reads of the journals (queued processes).
 JOURNAL_PERIOD = 0.5
-#: Seconds between two batches of process events to listeners.
-FLUSH_PERIOD = 0.1
-#: Lines of the activity log kept.
-LOG_LINES = 300
 
 __all__ = ["CellController"]
 
@@ -165,11 +164,10 @@ class CellController(GenericDevice):
         self.runs: dict[str, ProgramRun] = {}
         self.tasks: dict[str, ProcessCall] = {}
         self._run_tasks: dict[str, asyncio.Task[Any]] = {}
-        self.activity: deque[dict[str, Any]] = deque(maxlen=LOG_LINES)
         self.wiring_file = Path(wiring) if wiring else None
-        self._listeners: set[asyncio.Queue[dict[str, Any]]] = set()
-        self._dirty: set[tuple[str, str, int]] = set()
-        self._cell_dirty = False
+        self.feed = UiFeed(self.name, cell=self.cell_json, processes=self._processes_event,
+                           log=log)
+        """What the web UI hears (controller_feed.py)."""
         self._background: set[asyncio.Task[Any]] = set()
         self._loops: list[asyncio.Task[Any]] = []
         self._refresh_now = asyncio.Event()
@@ -188,12 +186,12 @@ class CellController(GenericDevice):
             try:
                 self.load(self.wiring_file)
             except WiringError as exc:
-                self.note("error", str(exc))
+                self._log("error", str(exc))
         self._loops = [
             asyncio.create_task(self._discovery_loop(self.events()),
                                 name=f"{self.name}-discovery"),
             asyncio.create_task(self._refresh_loop(), name=f"{self.name}-refresh"),
-            asyncio.create_task(self._flush_loop(), name=f"{self.name}-flush"),
+            asyncio.create_task(self.feed.run(), name=f"{self.name}-flush"),
         ]
         if self.journal_tail is not None:
             self._loops.append(
@@ -225,36 +223,24 @@ class CellController(GenericDevice):
     # -- events to listeners (the web UI) ------------------------------------------------
 
     def listen(self, maxsize: int = 2000) -> asyncio.Queue[dict[str, Any]]:
-        """A queue of events from now on (``{"type": …}``); :meth:`unlisten` when done.
-
-        If a listener falls behind, its queue is emptied and it gets one
-        ``{"type": "resync"}``: it should ask for a new :meth:`snapshot`.
-        """
-        queue: asyncio.Queue[dict[str, Any]] = asyncio.Queue(maxsize)
-        self._listeners.add(queue)
-        return queue
+        """A queue of events from now on (:meth:`UiFeed.listen`)."""
+        return self.feed.listen(maxsize)
 
     def unlisten(self, queue: asyncio.Queue[dict[str, Any]]) -> None:
-        self._listeners.discard(queue)
+        self.feed.unlisten(queue)
 
     def emit(self, event: dict[str, Any]) -> None:
-        for queue in list(self._listeners):
-            try:
-                queue.put_nowait(event)
-            except asyncio.QueueFull:
-                while not queue.empty():
-                    queue.get_nowait()
-                queue.put_nowait({"type": "resync"})
+        """Send ``event`` to every listener now."""
+        self.feed.emit(event)
 
-    def note(self, level: str, text: str) -> None:
+    @property
+    def activity(self) -> deque[dict[str, Any]]:
+        """The last lines of the activity log."""
+        return self.feed.activity
+
+    def _log(self, level: str, text: str) -> None:
         """A line of the activity log (shown in the UI, logged)."""
-        line = {"t": time.time_ns(), "level": level, "text": text}
-        self.activity.append(line)
-        getattr(log, "warning" if level == "error" else "info")("%s: %s", self.name, text)
-        self.emit({"type": "log", "line": line})
-
-    def _cell_changed(self) -> None:
-        self._cell_dirty = True
+        self.feed.log(level, text)
 
     def cell_json(self) -> dict[str, Any]:
         """Services (alive and dead), clients, and the wanted wiring with its status."""
@@ -280,21 +266,10 @@ class CellController(GenericDevice):
             "journals": self.journal_tail is not None,
         }
 
-    async def _flush_loop(self) -> None:
-        while True:
-            await asyncio.sleep(FLUSH_PERIOD)
-            if self._cell_dirty:
-                self._cell_dirty = False
-                self.emit({"type": "cell", **self.cell_json()})
-            if self._dirty:
-                keys, self._dirty = self._dirty, set()
-                now = time.time_ns()
-                records = [self.monitor.records[k] for k in keys if k in self.monitor.records]
-                self.emit({
-                    "type": "processes",
-                    "processes": [r.to_json(now) for r in records],
-                    "queues": self.monitor.queues(),
-                })
+    def _processes_event(self, keys: Iterable[tuple[str, str, int]]) -> dict[str, Any]:
+        now = time.time_ns()
+        records = [self.monitor.records[k] for k in keys if k in self.monitor.records]
+        return {"processes": [r.to_json(now) for r in records], "queues": self.monitor.queues()}
 
     # -- discovery (Figure 7-9) ---------------------------------------------------------
 
@@ -309,7 +284,7 @@ class CellController(GenericDevice):
                 self.clients.add(presence.name)
             elif not self.is_alive(presence.name, "client"):
                 self.clients.discard(presence.name)
-            self._cell_changed()
+            self.feed.cell_changed()
             return
         record = self.records.get(presence.name)
         if record is None:
@@ -320,7 +295,7 @@ class CellController(GenericDevice):
             record.alive, record.instance = True, presence.instance
             record.joined_ns, record.left_ns = time.time_ns(), 0
             if presence.name != self.name:
-                self.note("info", f"{presence.name} joined the cell")
+                self._log("info", f"{presence.name} joined the cell")
             self.keeper.reset_backoff(presence.name)
             self._spawn(self._adopt(presence.name))
         elif not self.is_alive(presence.name):
@@ -328,28 +303,28 @@ class CellController(GenericDevice):
             record.left_ns = time.time_ns()
             record.partners = []
             for lost in self.monitor.service_lost(presence.name):
-                self._dirty.add(lost.key)
+                self.feed.process_changed(lost.key)
             for other in self.records.values():
                 if presence.name in other.partners:
                     other.partners.remove(presence.name)
-            self.note("warning", f"{presence.name} left the cell")
-        self._cell_changed()
+            self._log("warning", f"{presence.name} left the cell")
+        self.feed.cell_changed()
 
     async def _adopt(self, name: str) -> None:
         """A service appeared: fetch its state, subscribe to it, re-apply its wires."""
         try:
             state, _ = await self.get(name, 3.0)
         except PartnerError as exc:
-            self.note("error", f"{name}: {exc}")
+            self._log("error", f"{name}: {exc}")
             return
         self._update_record(state)
         if name != self.name:
             try:
                 await self.subscribe(name, 3.0)
             except PartnerError as exc:
-                self.note("error", f"cannot subscribe to {name}: {exc}")
+                self._log("error", f"cannot subscribe to {name}: {exc}")
         await self._reapply()
-        self._cell_changed()
+        self.feed.cell_changed()
 
     def _update_record(self, state: GenericDeviceState) -> None:
         info = state.device_info
@@ -358,7 +333,7 @@ class CellController(GenericDevice):
             return
         partners = sorted(p.name for p in state.partners)
         if record.device is None or record.partners != partners or _differs(record.device, info):
-            self._cell_changed()
+            self.feed.cell_changed()
         record.device, record.partners = info, partners
 
     def on_partner_notification(self, partner: str, body: Message) -> None:
@@ -367,7 +342,7 @@ class CellController(GenericDevice):
         p = self.partners.get(partner)
         if record is not None and p is not None:
             record.device = p.device
-            self._cell_changed()
+            self.feed.cell_changed()
 
     async def _refresh_loop(self) -> None:
         while True:
@@ -418,7 +393,7 @@ class CellController(GenericDevice):
                 record.partners = sorted([*record.partners, wire.partner])
             if not subscribe and wire.partner in record.partners:
                 record.partners = [p for p in record.partners if p != wire.partner]
-            self._cell_changed()
+            self.feed.cell_changed()
         return response.ok, response.reason
 
     async def wire(self, service: str, partner: str) -> dict[str, Any]:
@@ -430,11 +405,11 @@ class CellController(GenericDevice):
         self.keeper.want(w)
         ok, reason = await self._ask(w, True)
         if ok:
-            self.note("info", f"wired {w}")
+            self._log("info", f"wired {w}")
         else:
             self.keeper.failed(w, reason)
-            self.note("error", f"cannot wire {w}: {reason}")
-        self._cell_changed()
+            self._log("error", f"cannot wire {w}: {reason}")
+        self.feed.cell_changed()
         return {"ok": ok, "reason": reason}
 
     async def unwire(self, service: str, partner: str) -> dict[str, Any]:
@@ -445,8 +420,8 @@ class CellController(GenericDevice):
             return {"ok": False, "reason": str(exc)}
         self.keeper.drop(w)
         ok, reason = await self._ask(w, False)
-        self.note("info" if ok else "error", f"unwired {w}" if ok else f"unwire {w}: {reason}")
-        self._cell_changed()
+        self._log("info" if ok else "error", f"unwired {w}" if ok else f"unwire {w}: {reason}")
+        self.feed.cell_changed()
         return {"ok": ok, "reason": reason}
 
     async def _reapply(self) -> None:
@@ -460,11 +435,11 @@ class CellController(GenericDevice):
         for w, (ok, reason) in zip(missing, results, strict=True):
             if ok:
                 self.keeper.succeeded(w)
-                self.note("info", f"re-applied {w}")
+                self._log("info", f"re-applied {w}")
             else:
                 self.keeper.failed(w, reason)
-                self.note("error", f"cannot re-apply {w}: {reason}")
-        self._cell_changed()
+                self._log("error", f"cannot re-apply {w}: {reason}")
+        self.feed.cell_changed()
 
     def wiring_document(self) -> list[Wire]:
         """What :meth:`save` writes: the wires in place plus those wanted but waiting."""
@@ -474,8 +449,8 @@ class CellController(GenericDevice):
         """Save the wiring of the cell (WiringError if the file cannot be written)."""
         doc = save_wiring(self.wiring_document(), self.keys.cell, Path(path))
         self.wiring_file = Path(path)
-        self.note("info", f"saved {len(doc['wires'])} wires to {path}")
-        self._cell_changed()
+        self._log("info", f"saved {len(doc['wires'])} wires to {path}")
+        self.feed.cell_changed()
         return doc
 
     def load(self, source: Path | dict[str, Any]) -> list[Wire]:
@@ -490,11 +465,11 @@ class CellController(GenericDevice):
         for w in wires:
             self.keeper.want(w)
         if cell and cell != self.keys.cell:
-            self.note("warning", f"{where} was saved in cell {cell!r}; applying to "
+            self._log("warning", f"{where} was saved in cell {cell!r}; applying to "
                                  f"{self.keys.cell!r}")
-        self.note("info", f"loaded {len(wires)} wires from {where}")
+        self._log("info", f"loaded {len(wires)} wires from {where}")
         self._refresh_now.set()
-        self._cell_changed()
+        self.feed.cell_changed()
         return wires
 
     # -- tasks (Figure 7-10) ---------------------------------------------------------------
@@ -513,7 +488,7 @@ class CellController(GenericDevice):
         assert ack is not None
         task_id = f"{task.service}/{self.name}/{call.identifier}"
         refused = ack.state is ProcessStates.Failed
-        self.note("error" if refused else "info",
+        self._log("error" if refused else "info",
                   f"task {task.service}.{task.command.name} "
                   + (f"refused: {ack.reason}" if refused else "queued"))
         if not refused:  # its updates may already be here (they travel with the ack)
@@ -535,14 +510,14 @@ class CellController(GenericDevice):
             type=declared.type.value if declared else "",
             state=ack.state.value if ack else "Queued", reason=ack.reason if ack else "",
         )
-        self._dirty.add(record.key)
+        self.feed.process_changed(record.key)
         return call
 
     async def _follow(self, task_id: str, call: ProcessCall) -> None:
         try:
             async for update in call:
                 record = self.monitor.updated(call.partner, update, source="controller")
-                self._dirty.add(record.key)
+                self.feed.process_changed(record.key)
                 data, text = data_view(update.data)
                 self.emit({"type": "task", "id": task_id, "state": update.state.value,
                            "reason": update.reason, "data": data, "dataText": text})
@@ -560,7 +535,7 @@ class CellController(GenericDevice):
         out = None
         async for update in call:
             record = self.monitor.updated(call.partner, update, source="controller")
-            self._dirty.add(record.key)
+            self.feed.process_changed(record.key)
             if update.data is not None:
                 out = update.data
         assert call.final is not None
@@ -593,11 +568,11 @@ class CellController(GenericDevice):
             self.runs.pop(next(iter(self.runs)))
         text = ", ".join(f"{i.robot}:{i.program}" + (f" ({len(i.values)} values)" if i.values
                                                      else "") for i in run.items)
-        self.note("info", f"{run.id} ({mode}): {text}")
+        self._log("info", f"{run.id} ({mode}): {text}")
         run_task = self._spawn(run_programs(self, run, lambda: self._run_changed(run)))
         self._run_tasks[run.id] = run_task
         run_task.add_done_callback(lambda _: self._run_tasks.pop(run.id, None))
-        run_task.add_done_callback(lambda _: self.note(
+        run_task.add_done_callback(lambda _: self._log(
             "info" if run.state == "Completed" else "error", f"{run.id} {run.state.lower()}"))
         self._run_changed(run)
         return run
@@ -617,7 +592,7 @@ class CellController(GenericDevice):
 
     def _on_any_process(self, service: str, update: ProcessUpdateNotification) -> None:
         record = self.monitor.updated(service, update)
-        self._dirty.add(record.key)
+        self.feed.process_changed(record.key)
 
     async def _journal_loop(self) -> None:
         assert self.journal_tail is not None
@@ -634,14 +609,14 @@ class CellController(GenericDevice):
                     state=p["state"], reason=p["reason"] or "", t_ns=p["received_ns"],
                     source="journal",
                 )
-                self._dirty.add(record.key)
+                self.feed.process_changed(record.key)
             for u in updates:
                 found = self.monitor.journal_update(
                     u["recipient"], u["sender"], u["identifier"], u["seq"], u["state"],
                     u["reason"] or "", u["data"] or "", u["t_ns"],
                 )
                 if found is not None:
-                    self._dirty.add(found.key)
+                    self.feed.process_changed(found.key)
             await asyncio.sleep(JOURNAL_PERIOD)
 
     # -- the controller's own commands -----------------------------------------------
