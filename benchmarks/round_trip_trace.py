@@ -51,17 +51,17 @@ def _probe(trace: Trace, owner: Any, name: str, before: str, after: str = "") ->
 
 
 def _probe_framework(trace: Trace) -> None:
-    from plugcell.framework import journal, port, service
+    from plugcell.framework import journal, outbox, port, service
 
     _probe(trace, port.Port, "_drain", "loop wakes")
     _probe(trace, service.GenericDevice, "_create", "check+journal", "checked")
-    _probe(trace, service.GenericDevice, "_flush", "flush")
+    _probe(trace, outbox.Outbox, "flush", "flush")
     _probe(trace, journal.Journal, "commit", "commit", "committed")
-    _probe(trace, service.GenericDevice, "_send", "put", "sent")
+    _probe(trace, outbox.Outbox, "_send", "put", "sent")
 
 
 #: Steps of the service whose CPU time is compared with their wall time.
-CPU_STEPS = (("service", "_create"), ("journal", "commit"), ("service", "_send"))
+CPU_STEPS = (("service", "_create"), ("journal", "commit"), ("outbox", "_send"))
 
 
 def _probe_cpu(spent: list[tuple[str, int, int]], owner: Any, name: str) -> None:
@@ -84,14 +84,14 @@ def serve(cell: str, journal: bool, out: str) -> None:
 
     from plugcell.bench import peer
     from plugcell.framework import journal as journal_module
-    from plugcell.framework import service
+    from plugcell.framework import outbox, service
 
     trace: Trace = []
     spent: list[tuple[str, int, int]] = []
     _probe_framework(trace)
     # inside the step probes, so they time just what those enclose
     for owner, step in CPU_STEPS:
-        _probe_cpu(spent, {"service": service.GenericDevice,
+        _probe_cpu(spent, {"service": service.GenericDevice, "outbox": outbox.Outbox,
                            "journal": journal_module.Journal}[owner], step)
     atexit.register(lambda: Path(out).write_text(json.dumps({"trace": trace, "cpu": spent})))
     peer.main(["service", "--cell", cell, *([] if journal else ["--no-journal"])])
