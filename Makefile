@@ -4,7 +4,7 @@ PYTHON ?= python3
 VENV   ?= .venv
 BIN     = $(VENV)/bin
 
-.PHONY: demo test lint bench clean
+.PHONY: demo test test-fast lint bench clean
 
 OPCUA_JS = tests/opcua/js
 
@@ -26,6 +26,12 @@ demo: $(BIN)/.plugcell-installed
 test: $(BIN)/.plugcell-installed $(OPCUA_JS)/node_modules/.installed
 	$(BIN)/ruff check src tests benchmarks
 	$(BIN)/python -m pytest -q
+
+# the inner loop while developing: lint and every test not marked slow (the slow ones
+# start services as processes, a browser or node-opcua); CI runs `make test`, all of them
+test-fast: $(BIN)/.plugcell-installed
+	$(BIN)/ruff check src tests benchmarks
+	$(BIN)/python -m pytest -q -m "not slow"
 
 bench: $(BIN)/.plugcell-installed
 	$(BIN)/python benchmarks/run_all.py

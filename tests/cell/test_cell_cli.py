@@ -10,7 +10,10 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
+import pytest
 from cell_testlib import PROGRAMS, plugcell_argv
+
+pytestmark = pytest.mark.slow  # starts services and a controller as processes
 
 
 def cli(home: Path, *args: str, timeout: float = 30.0) -> subprocess.CompletedProcess[str]:

@@ -26,7 +26,7 @@ from plugcell.framework.journal import journal_files, read_journal
 from plugcell.framework.transport import TransportConfig, open_session
 from plugcell.services.sim.world import ReflectorPublisher
 
-pytestmark = pytest.mark.timeout(90)
+pytestmark = [pytest.mark.slow, pytest.mark.timeout(90)]
 
 BASE = [2500.0, -800.0, -600.0, 30.0, 2.0, -20.0]
 PROBE = [0.0, 0.0, 120.0, 0.0, 0.0, 0.0]

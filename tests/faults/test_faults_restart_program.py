@@ -25,7 +25,7 @@ from plugcell.services.sim.world import ReflectorPublisher
 from plugcell.services.tracker_frames import vector_from_matrix
 from plugcell.twin.scenario import TwinScenario, make_truth
 
-pytestmark = pytest.mark.timeout(180)
+pytestmark = [pytest.mark.slow, pytest.mark.timeout(180)]
 
 PROGRAMS = Path(__file__).resolve().parent / "programs"
 SMR_MM = np.array([1400.0, -300.0, 600.0])  # in H4's base frame

@@ -10,7 +10,7 @@ from framework_testlib import plugcell_argv, unique_cell
 
 from plugcell.bench.transport import format_table
 
-pytestmark = pytest.mark.timeout(90)
+pytestmark = [pytest.mark.slow, pytest.mark.timeout(90)]
 
 
 def cli(procs, *args: str, check: bool = True) -> subprocess.CompletedProcess[str]:

@@ -15,7 +15,7 @@ import pytest
 
 from plugcell.bench.netns import VethPair, netns_available
 
-pytestmark = [pytest.mark.netns, pytest.mark.timeout(120)]
+pytestmark = [pytest.mark.slow, pytest.mark.netns, pytest.mark.timeout(120)]
 
 _why_not = netns_available() if sys.platform == "linux" else "Linux only"
 

@@ -12,7 +12,7 @@ from framework_testlib import plugcell_argv
 from plugcell.framework import BlockingClient, ProcessStates, TransportConfig
 from plugcell.framework.journal import journal_files, read_journal
 
-pytestmark = pytest.mark.timeout(90)
+pytestmark = [pytest.mark.slow, pytest.mark.timeout(90)]
 
 C, F, R = ProcessStates.Completed, ProcessStates.Failed, ProcessStates.Running
 

@@ -30,7 +30,7 @@ from plugcell.services.sim.world import WorldView
 from plugcell.twin.robot import RobotTwin
 from plugcell.twin.scenario import TwinScenario
 
-pytestmark = pytest.mark.timeout(120)
+pytestmark = [pytest.mark.slow, pytest.mark.timeout(120)]
 
 
 def controller_argv(*args: str) -> list[str]:

@@ -25,7 +25,7 @@ from plugcell.twin.robot import RobotTwin
 from plugcell.twin.scenario import TwinScenario
 from plugcell.twin.tracker import LaserTracker
 
-pytestmark = pytest.mark.timeout(300)
+pytestmark = [pytest.mark.slow, pytest.mark.timeout(300)]
 
 C = ProcessStates.Completed
 N_CAL, N_VAL = 60, 25

@@ -38,7 +38,7 @@ from plugcell.twin.campaign import working_volume_joints
 from plugcell.twin.robot import RobotTwin
 from plugcell.twin.scenario import TwinScenario
 
-pytestmark = pytest.mark.timeout(120)
+pytestmark = [pytest.mark.slow, pytest.mark.timeout(120)]
 
 PROGRAM = Path(__file__).resolve().parent / "programs" / "share_tracker.pdl"
 SPECS = {spec["name"]: spec for spec in (H4, KUKA)}

@@ -20,7 +20,7 @@ from plugcell.services.controller import CellController
 from plugcell.ui.app import create_app
 from plugcell.ui.reports import ReportFiles
 
-pytestmark = pytest.mark.timeout(120)
+pytestmark = [pytest.mark.slow, pytest.mark.timeout(120)]
 
 
 def test_every_route_answers_bad_input_precisely(tmp_path: Path) -> None:
