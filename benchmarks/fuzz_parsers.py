@@ -14,7 +14,7 @@ with the input, and the run exits 1); every refusal must carry a message:
   text itself (no newline translation) → ``MeasurementFileError``;
 * ``description`` — :func:`plugcell.io.robots.load_robot_file` (a robot description
   file) → ``DescriptionError`` (or ``RobotNotFoundError``, never for an existing file);
-* ``compute`` — :func:`plugcell.services.compute_expr.parse` → ``EvaluationError``;
+* ``compute`` — :func:`plugcell.services.compute.expr.parse` → ``EvaluationError``;
 * ``nests`` — :func:`plugcell.io.nests.parse_nests` (drift-watch nest files) →
   ``NestFileError``.
 
@@ -43,7 +43,7 @@ from plugcell.io.measurements import (
 from plugcell.io.nests import NestFileError, parse_nests
 from plugcell.io.robots import load_robot_file
 from plugcell.kinematics.errors import DescriptionError
-from plugcell.services.compute_expr import EvaluationError, parse
+from plugcell.services.compute.expr import EvaluationError, parse
 
 PKG = Path(__file__).resolve().parents[1] / "src" / "plugcell"
 PROGRAMS = PKG / "controller" / "programs"

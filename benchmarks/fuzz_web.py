@@ -5,7 +5,7 @@ Every HTTP route of :func:`plugcell.ui.app.create_app` — found by walking
 ``app.routes``, not listed here; the static mount counts as one route, the websocket
 is left out — gets an equal share of the cases, sent in-process through httpx's ASGI
 transport (as uvicorn would pass them, on port 8765) to the app on a real
-:class:`~plugcell.services.controller.CellController` in a fresh cell, with an
+:class:`~plugcell.services.cell.service.CellController` in a fresh cell, with an
 in-process drill service (``TOOL``, time scale 0.001) so tasks reach a real catalogue.
 Zenoh runs in-process; no child process is started.  ``fuzz_web()`` is what
 ``tests/ui/test_ui_fuzz_web.py`` runs with a few thousand cases.
@@ -57,7 +57,7 @@ from urllib.parse import quote
 import httpx2 as httpx  # the HTTP client of the dev dependencies (Starlette's TestClient uses it)
 from starlette.routing import Mount, Route
 
-from plugcell.services.controller import CellController
+from plugcell.services.cell.service import CellController
 from plugcell.services.tool import DrillService
 from plugcell.ui.app import create_app
 from plugcell.ui.guard import MAX_BODY

@@ -18,9 +18,9 @@ from cell_testlib import FakeRobot, SlowDevice, run
 
 from plugcell.framework import Client
 from plugcell.services.camera import CameraService
-from plugcell.services.controller import CellController
-from plugcell.services.controller_tasks import check_task
-from plugcell.services.controller_wiring import load_wiring
+from plugcell.services.cell.service import CellController
+from plugcell.services.cell.tasks import check_task
+from plugcell.services.cell.wiring import load_wiring
 from plugcell.services.tool import DrillService
 
 

@@ -1,4 +1,4 @@
-"""The controller's journal reader under its worker thread (services/controller_journal.py).
+"""The controller's journal reader under its worker thread (services/cell/journal_tail.py).
 
 The controller polls the journals in a worker thread; closing the controller while
 a poll is under way once closed a SQLite connection under it and crashed the
@@ -12,7 +12,7 @@ import threading
 import time
 
 from plugcell.framework.journal import Journal, journal_dir
-from plugcell.services.controller_journal import JournalTail
+from plugcell.services.cell.journal_tail import JournalTail
 
 
 def test_close_while_a_poll_runs_in_another_thread(tmp_path):

@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 from plugcell.framework.model import Data, DataTypes, ProcessStates, ProcessUpdateNotification, Tag
-from plugcell.services.controller_monitor import MonitorFeed, ProcessMonitor
+from plugcell.services.cell.monitor import MonitorFeed, ProcessMonitor
 
 
 def update(sender: str, recipient: str, identifier: int, state: str, seq: int,

@@ -12,10 +12,10 @@ from hypothesis import strategies as st
 from plugcell.framework.data import from_data, size_matches
 from plugcell.framework.model import Device
 from plugcell.services.camera import CameraService
-from plugcell.services.compute import ComputeService
-from plugcell.services.controller_tasks import TaskInputError, check_task, describe_command
+from plugcell.services.cell.tasks import TaskInputError, check_task, describe_command
+from plugcell.services.compute.service import ComputeService
 from plugcell.services.tool import DrillService
-from plugcell.services.tracker import TrackerService
+from plugcell.services.tracker.service import TrackerService
 
 DEVICES = {
     cls.default_name or cls.kind.upper(): Device(name=cls.default_name or cls.kind.upper(),

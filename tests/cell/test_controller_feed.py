@@ -1,4 +1,4 @@
-"""The cell controller's feed to its listeners, on its own (services/controller_feed.py)."""
+"""The cell controller's feed to its listeners, on its own (services/cell/feed.py)."""
 
 from __future__ import annotations
 
@@ -9,8 +9,8 @@ from typing import Any
 
 import pytest
 
-from plugcell.services import controller_feed
-from plugcell.services.controller_feed import LOG_LINES, UiFeed
+from plugcell.services.cell import feed as controller_feed
+from plugcell.services.cell.feed import LOG_LINES, UiFeed
 
 
 class Seams:

@@ -34,7 +34,7 @@ POSE = [1200.0, 100.0, 900.0, 10.0, 150.0, -20.0]
 
 
 def _pose(v: list[float]) -> np.ndarray:
-    from plugcell.services.tracker_frames import matrix_from_vector
+    from plugcell.services.tracker.frames import matrix_from_vector
 
     return matrix_from_vector(v, "euler")  # mm, deg (ZYZ) → 4×4 in metres
 

@@ -22,7 +22,7 @@ from faults_testlib import FaultCell
 from plugcell.framework import BlockingClient, ProcessStates, from_data
 from plugcell.framework.transport import TransportConfig, open_session
 from plugcell.services.sim.world import ReflectorPublisher
-from plugcell.services.tracker_frames import vector_from_matrix
+from plugcell.services.tracker.frames import vector_from_matrix
 from plugcell.twin.scenario import TwinScenario, make_truth
 
 pytestmark = [pytest.mark.slow, pytest.mark.timeout(180)]

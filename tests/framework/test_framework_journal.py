@@ -20,8 +20,8 @@ from plugcell.framework.journal import (
     journal_dir,
     read_journal,
 )
-from plugcell.services import controller_journal
-from plugcell.services.controller_journal import JournalTail
+from plugcell.services.cell import journal_tail as controller_journal
+from plugcell.services.cell.journal_tail import JournalTail
 
 #: The version-1 schema (``updates`` keyed by (recipient, sender, identifier, seq)),
 #: as journals written before version 2 still have it.

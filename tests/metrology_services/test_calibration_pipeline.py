@@ -17,7 +17,7 @@ from metrology_testlib import run
 from plugcell.calibration import CalibrationData, Calibrator
 from plugcell.framework import Client, ProcessCall, ProcessStates
 from plugcell.kinematics import forward
-from plugcell.services.tracker_frames import vector_from_matrix
+from plugcell.services.tracker.frames import vector_from_matrix
 from plugcell.twin.campaign import measure_poses, working_volume_joints
 from plugcell.twin.robot import RobotTwin
 from plugcell.twin.scenario import TwinScenario

@@ -10,10 +10,10 @@ import pytest
 from plugcell.calibration import CalibrationData, Calibrator
 from plugcell.compensation import IdentifiedModel
 from plugcell.io.robots import load_robot
-from plugcell.services.compute_expr import EvaluationError, evaluate
-from plugcell.services.compute_functions import FUNCTIONS, FunctionContext, Parameters
-from plugcell.services.compute_workspace import Workspace
-from plugcell.services.tracker_frames import matrix_from_vector, vector_from_matrix
+from plugcell.services.compute.expr import EvaluationError, evaluate
+from plugcell.services.compute.functions import FUNCTIONS, FunctionContext, Parameters
+from plugcell.services.compute.workspace import Workspace
+from plugcell.services.tracker.frames import matrix_from_vector, vector_from_matrix
 from plugcell.twin.campaign import measure_poses, working_volume_joints
 from plugcell.twin.robot import RobotTwin
 from plugcell.twin.scenario import TwinScenario

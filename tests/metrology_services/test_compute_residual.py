@@ -14,9 +14,9 @@ from plugcell.calibration.residual_model import ResidualLearner
 from plugcell.compensation import IdentifiedModel, NominalModel, compensate_joints
 from plugcell.io.residual_models import residual_path, save_residual
 from plugcell.io.robots import load_robot
-from plugcell.services.compute_expr import EvaluationError, evaluate
-from plugcell.services.compute_functions import FUNCTIONS, FunctionContext
-from plugcell.services.compute_workspace import Workspace
+from plugcell.services.compute.expr import EvaluationError, evaluate
+from plugcell.services.compute.functions import FUNCTIONS, FunctionContext
+from plugcell.services.compute.workspace import Workspace
 
 
 @pytest.fixture(scope="module")

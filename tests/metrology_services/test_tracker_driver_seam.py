@@ -9,8 +9,8 @@ from metrology_testlib import pose, run, unique_cell
 
 from plugcell.framework import Client, ProcessCall, ProcessStates
 from plugcell.services.registry import load_kind
-from plugcell.services.tracker import TrackerService, load_driver
-from plugcell.services.tracker_driver import TrackerDriver
+from plugcell.services.tracker.driver import TrackerDriver
+from plugcell.services.tracker.service import TrackerService, load_driver
 
 BASE, PROBE, ROBOT = [3000, 0, 0, 90, 0, 0], [0, 0, 100, 0, 0, 0], [1000, 200, 500, 0, 180, 0]
 

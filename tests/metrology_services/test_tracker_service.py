@@ -16,8 +16,8 @@ from metrology_testlib import pose, run, unique_cell
 from plugcell.framework import Client, ProcessCall, ProcessStates
 from plugcell.framework.transport import TransportConfig, open_session
 from plugcell.services.sim.world import ReflectorPublisher
-from plugcell.services.tracker import TrackerService
-from plugcell.services.tracker_frames import matrix_from_vector
+from plugcell.services.tracker.frames import matrix_from_vector
+from plugcell.services.tracker.service import TrackerService
 
 pytestmark = pytest.mark.timeout(90)
 

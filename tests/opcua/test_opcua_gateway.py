@@ -12,7 +12,7 @@ from opcua_testlib import run_js, wait_shown
 
 from plugcell.framework.transport import TransportConfig, open_session
 from plugcell.services.sim.world import ReflectorPublisher
-from plugcell.services.tracker_frames import matrix_from_vector
+from plugcell.services.tracker.frames import matrix_from_vector
 
 pytestmark = pytest.mark.slow
 

@@ -16,7 +16,7 @@ from robot_cell import Launcher
 
 from plugcell.controller.value_text import numbers_text
 from plugcell.framework import BlockingClient, ProcessStates, from_data
-from plugcell.services.tracker_frames import vector_from_matrix
+from plugcell.services.tracker.frames import vector_from_matrix
 from plugcell.twin.robot import RobotTwin
 from plugcell.twin.scenario import TwinScenario
 

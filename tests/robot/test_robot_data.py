@@ -10,8 +10,8 @@ from hypothesis import strategies as st
 from plugcell.controller.protocol import ResultData
 from plugcell.framework import Command, CommandTypes, DataTypes
 from plugcell.services.camera import CameraService
-from plugcell.services.robot import RobotService
-from plugcell.services.robot_data import DataTextError, data_from_text, result_data
+from plugcell.services.robot.data import DataTextError, data_from_text, result_data
+from plugcell.services.robot.service import RobotService
 from plugcell.services.tool import DrillService
 
 

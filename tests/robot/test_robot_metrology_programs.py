@@ -19,7 +19,7 @@ from plugcell.calibration import CalibrationData, Calibrator
 from plugcell.controller.value_text import rows_text
 from plugcell.experiments.reproduce_8_3 import ExperimentConfig, line_targets
 from plugcell.framework import ProcessStates
-from plugcell.services.tracker_frames import vector_from_matrix
+from plugcell.services.tracker.frames import vector_from_matrix
 from plugcell.twin.campaign import measure_poses, working_volume_joints
 from plugcell.twin.robot import RobotTwin
 from plugcell.twin.scenario import TwinScenario

@@ -33,7 +33,7 @@ from plugcell.controller.value_text import numbers_text
 from plugcell.framework import ProcessStates
 from plugcell.framework.journal import journal_files, read_journal
 from plugcell.metrology import invert_transform
-from plugcell.services.tracker_frames import matrix_from_vector, vector_from_matrix
+from plugcell.services.tracker.frames import matrix_from_vector, vector_from_matrix
 from plugcell.twin.campaign import working_volume_joints
 from plugcell.twin.robot import RobotTwin
 from plugcell.twin.scenario import TwinScenario

@@ -40,7 +40,7 @@ def test_flags_a_kind_does_not_have_are_refused(capsys):
 
 def test_a_serial_line_rate_that_is_not_a_rate_is_refused():
     from plugcell.controller.sim_controller import main as controller_main
-    from plugcell.services.robot import RobotService
+    from plugcell.services.robot.service import RobotService
 
     with pytest.raises(ValueError, match=r"link_baud must be 0 \(no serial line\) or positive"):
         RobotService("R1", sim=True, link_baud=-1.0)

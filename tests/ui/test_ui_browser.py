@@ -40,7 +40,7 @@ from flange_smr import FlangeSMRs
 
 from plugcell.controller.value_text import numbers_text, rows_text
 from plugcell.kinematics import so3_log
-from plugcell.services.tracker_frames import matrix_from_vector, vector_from_matrix
+from plugcell.services.tracker.frames import matrix_from_vector, vector_from_matrix
 from plugcell.twin.campaign import working_volume_joints
 from plugcell.twin.robot import RobotTwin
 from plugcell.twin.scenario import TwinScenario

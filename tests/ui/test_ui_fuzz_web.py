@@ -16,7 +16,7 @@ from fastapi.testclient import TestClient
 sys.path.insert(0, str(Path(__file__).resolve().parents[2] / "benchmarks"))
 
 from fuzz_web import fuzz_web, judge
-from plugcell.services.controller import CellController
+from plugcell.services.cell.service import CellController
 from plugcell.ui.app import create_app
 from plugcell.ui.reports import ReportFiles
 

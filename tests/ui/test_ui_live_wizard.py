@@ -23,7 +23,7 @@ from ui_testlib import HEADERS, make_client, services, until
 from plugcell.kinematics import so3_log
 from plugcell.metrology import SMR_RADIUS_HALF_INCH
 from plugcell.services.sim.world import ReflectorPublisher
-from plugcell.services.tracker_frames import matrix_from_vector, vector_from_matrix
+from plugcell.services.tracker.frames import matrix_from_vector, vector_from_matrix
 from plugcell.twin.campaign import working_volume_joints
 from plugcell.twin.robot import RobotTwin
 from plugcell.twin.scenario import TwinScenario

@@ -9,7 +9,7 @@ from typing import Any
 
 from fastapi.testclient import TestClient
 
-from plugcell.services.controller import CellController
+from plugcell.services.cell.service import CellController
 from plugcell.ui.app import create_app
 from plugcell.ui.reports import ReportFiles
 

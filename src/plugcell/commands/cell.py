@@ -114,7 +114,7 @@ async def _participant(args: argparse.Namespace, prefix: str) -> Any:
 
 
 def run_ls(args: argparse.Namespace) -> int:
-    from plugcell.services.controller_tasks import describe_command
+    from plugcell.services.cell.tasks import describe_command
 
     states = eventloop.run(_states(args, args.settle))
     wires = _wires(states)
@@ -164,7 +164,7 @@ async def _states(args: argparse.Namespace, settle: float) -> list[Any]:
 
 def _wires(states: list[Any]) -> list[Any]:
     """The wires between services; a cell controller's own subscriptions left out."""
-    from plugcell.services.controller_wiring import Wire
+    from plugcell.services.cell.wiring import Wire
 
     out = []
     for s in states:
@@ -222,7 +222,7 @@ async def _via(client: Any, args: argparse.Namespace, command: str, option: str,
 
 def run_save(args: argparse.Namespace) -> int:
     from plugcell.cli import CommandError
-    from plugcell.services.controller_wiring import WiringError, save_wiring
+    from plugcell.services.cell.wiring import WiringError, save_wiring
 
     states = eventloop.run(_states(args, args.settle))
     try:
@@ -238,7 +238,7 @@ def run_save(args: argparse.Namespace) -> int:
 
 def run_load(args: argparse.Namespace) -> int:
     from plugcell.cli import CommandError
-    from plugcell.services.controller_wiring import WiringError, load_wiring
+    from plugcell.services.cell.wiring import WiringError, load_wiring
 
     try:
         wires, _ = load_wiring(args.file)
@@ -248,7 +248,7 @@ def run_load(args: argparse.Namespace) -> int:
 
 
 async def _load(args: argparse.Namespace, wires: list[Any]) -> int:
-    from plugcell.services.controller_wiring import WiringKeeper
+    from plugcell.services.cell.wiring import WiringKeeper
 
     client = await _participant(args, "cell")
     try:
@@ -360,7 +360,7 @@ def _values_of(values: list[str], robots: list[str]) -> dict[str, list[str]]:
 
 
 async def _run(args: argparse.Namespace, pairs: list[tuple[str, str]], mode: str) -> int:
-    from plugcell.services.controller_runs import ProgramRun, RunItem, run_programs
+    from plugcell.services.cell.runs import ProgramRun, RunItem, run_programs
 
     client = await _participant(args, "run")
     try:
@@ -411,8 +411,8 @@ def _monitoring(args: argparse.Namespace) -> None:
 
 
 async def _monitor(args: argparse.Namespace) -> None:
-    from plugcell.services.controller_journal import JournalTail
-    from plugcell.services.controller_monitor import MonitorFeed, ProcessMonitor
+    from plugcell.services.cell.journal_tail import JournalTail
+    from plugcell.services.cell.monitor import MonitorFeed, ProcessMonitor
 
     client = await _participant(args, "monitor")
     monitor = ProcessMonitor()

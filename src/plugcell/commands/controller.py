@@ -42,7 +42,7 @@ def configure(p: argparse.ArgumentParser) -> None:
 def run(args: argparse.Namespace) -> int:
     from plugcell.cli import CommandError
     from plugcell.framework.participant import PartnerError
-    from plugcell.services.controller import CellController
+    from plugcell.services.cell.service import CellController
     from plugcell.ui.reports import ReportFiles, default_docs_dir
     from plugcell.ui.server import serve
 

@@ -47,7 +47,7 @@ from plugcell.kinematics.pose_error import pose_error_exact
 from plugcell.kinematics.rotations import zyz_to_matrix
 from plugcell.metrology import accuracy_statistics
 from plugcell.services.sim.world import ReflectorPublisher
-from plugcell.services.tracker_frames import matrix_from_vector, vector_from_matrix
+from plugcell.services.tracker.frames import matrix_from_vector, vector_from_matrix
 from plugcell.twin.campaign import working_volume_joints
 from plugcell.twin.robot import RobotTwin
 from plugcell.twin.scenario import TwinScenario

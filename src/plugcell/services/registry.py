@@ -1,6 +1,6 @@
 """The one registry of service kinds: ``plugcell serve KIND`` looks them up here.
 
-Add a kind with one line (``"robot": "plugcell.services.robot:RobotService"``) or,
+Add a kind with one line (``"robot": "plugcell.services.robot.service:RobotService"``) or,
 from outside the package, with :func:`register_kind`.  Targets are imported only
 when served, so a broken kind never breaks the others.
 """
@@ -15,10 +15,10 @@ KINDS: dict[str, str] = {
     "camera": "plugcell.services.camera:CameraService",
     "drill": "plugcell.services.tool:DrillService",
     "bench": "plugcell.bench.device:BenchService",
-    "robot": "plugcell.services.robot:RobotService",
-    "tracker": "plugcell.services.tracker:TrackerService",
-    "compute": "plugcell.services.compute:ComputeService",
-    "controller": "plugcell.services.controller:CellController",
+    "robot": "plugcell.services.robot.service:RobotService",
+    "tracker": "plugcell.services.tracker.service:TrackerService",
+    "compute": "plugcell.services.compute.service:ComputeService",
+    "controller": "plugcell.services.cell.service:CellController",
     "opcua-device": "plugcell.opcua.device:OpcUaDevice",
 }
 

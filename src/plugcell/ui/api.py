@@ -36,10 +36,10 @@ from typing import Any
 from fastapi import APIRouter, Request
 from fastapi.responses import JSONResponse, PlainTextResponse, Response
 
-from plugcell.services.controller import CellController
-from plugcell.services.controller_runs import RunError, list_programs
-from plugcell.services.controller_tasks import TaskInputError, check_task
-from plugcell.services.controller_wiring import WiringError, dump_wiring
+from plugcell.services.cell.runs import RunError, list_programs
+from plugcell.services.cell.service import CellController
+from plugcell.services.cell.tasks import TaskInputError, check_task
+from plugcell.services.cell.wiring import WiringError, dump_wiring
 from plugcell.ui.guard import BadRequestError, RefusedError, error_response, json_body
 from plugcell.ui.metrology import fit_json, wizard_base, wizard_probe
 from plugcell.ui.residuals import (

@@ -26,7 +26,7 @@ from fastapi.responses import FileResponse, JSONResponse, Response
 from fastapi.staticfiles import StaticFiles
 from starlette.middleware.base import BaseHTTPMiddleware, RequestResponseEndpoint
 
-from plugcell.services.controller import CellController
+from plugcell.services.cell.service import CellController
 from plugcell.ui.api import make_router
 from plugcell.ui.guard import BadRequestError, check_connection, error_response
 from plugcell.ui.metrology import FitInputError

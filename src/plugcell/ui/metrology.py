@@ -26,7 +26,7 @@ from plugcell.metrology import (
     fit_plane,
     probe_from_flange_features,
 )
-from plugcell.services.tracker_frames import FrameError, matrix_from_vector, vector_from_matrix
+from plugcell.services.tracker.frames import FrameError, matrix_from_vector, vector_from_matrix
 
 MM = 1e-3
 MAX_POINTS = 100_000

@@ -26,7 +26,7 @@ import numpy as np
 from plugcell.calibration.result import RESIDUALS_FORMAT, RESIDUALS_FORMAT_VERSION
 from plugcell.framework.data import from_data
 from plugcell.framework.keys import check_name
-from plugcell.services.compute_workspace import NAME as MATRIX_NAME
+from plugcell.services.compute.workspace import NAME as MATRIX_NAME
 from plugcell.ui.metrology import MAX_POINTS, FitInputError
 
 SETS = ("calibration", "validation")

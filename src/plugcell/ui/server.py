@@ -14,7 +14,7 @@ import socket
 
 import uvicorn
 
-from plugcell.services.controller import CellController
+from plugcell.services.cell.service import CellController
 from plugcell.ui.app import create_app
 from plugcell.ui.reports import ReportFiles
 

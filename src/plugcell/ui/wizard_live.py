@@ -39,9 +39,9 @@ import numpy as np
 
 from plugcell.controller.value_text import numbers_text, rows_text
 from plugcell.framework.data import from_data
-from plugcell.services.compute_workspace import NAME as MATRIX_NAME
-from plugcell.services.controller_runs import RunError
-from plugcell.services.tracker_frames import FrameError, matrix_from_vector, vector_from_matrix
+from plugcell.services.cell.runs import RunError
+from plugcell.services.compute.workspace import NAME as MATRIX_NAME
+from plugcell.services.tracker.frames import FrameError, matrix_from_vector, vector_from_matrix
 from plugcell.ui.metrology import FitInputError
 
 #: The robot program that moves and measures (src/plugcell/controller/programs).

@@ -1,6 +1,6 @@
 """The simulated laser tracker driver: the foundation's tracker model aimed at the sim world.
 
-A :class:`~plugcell.services.tracker_driver.TrackerDriver` for ``plugcell serve
+A :class:`~plugcell.services.tracker.driver.TrackerDriver` for ``plugcell serve
 tracker`` (the default).  The instrument is :class:`plugcell.twin.tracker.LaserTracker`
 (noise, capture radius, ADM, simulated clock; docs/tracker-model.md); the reflectors
 are wherever the simulated world says they are (``services/sim/world.py``: robot
@@ -33,7 +33,7 @@ import numpy as np
 
 from plugcell.framework.keys import DEFAULT_CELL
 from plugcell.services.sim.world import ReflectorState, reflector_key
-from plugcell.services.tracker_driver import (
+from plugcell.services.tracker.driver import (
     Array,
     BeamNotLockedError,
     TrackerDriverError,

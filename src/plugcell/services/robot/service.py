@@ -28,10 +28,10 @@ PROGRAM_STATUS  SingleData  → String[*]            program, state, simulated s
 
 Positions are PDL's: mm and Comau ZYZ degrees.  The controller is reached over
 the line protocol (:mod:`plugcell.controller.bridge`): with ``sim`` the service
-starts its own simulated controller process (:mod:`plugcell.services.robot_sim`),
+starts its own simulated controller process (:mod:`plugcell.services.robot.sim_launcher`),
 otherwise it connects to ``controller = HOST:PORT`` — a real controller speaking
 docs/controller-protocol.md.  The program's ACTIVATE strings are handled by the
-:class:`~plugcell.services.robot_outbound.ExternalProcessHandler`.
+:class:`~plugcell.services.robot.outbound.ExternalProcessHandler`.
 
 ``plugcell serve robot --name R1 --param sim=true [--param robot=smart_h4]
 [--param payload_kg=36] [--param speed=100]``, or with the issue's flags
@@ -81,13 +81,13 @@ from plugcell.framework.model import Command, CommandTypes, ConnectionStates, Da
 from plugcell.framework.participant import PartnerError
 from plugcell.framework.service import DeviceError, GenericDevice
 from plugcell.kinematics import RobotDescription
-from plugcell.services.robot_increment import joint_increment, pose_error_sizes
-from plugcell.services.robot_outbound import ExternalProcessHandler
-from plugcell.services.robot_sim import SimControllerError, SimControllerProcess
+from plugcell.services.robot.increment import joint_increment, pose_error_sizes
+from plugcell.services.robot.outbound import ExternalProcessHandler
+from plugcell.services.robot.sim_launcher import SimControllerError, SimControllerProcess
 
 __all__ = ["ProgramStatus", "RobotService", "main"]
 
-log = logging.getLogger("plugcell.services.robot")
+log = logging.getLogger("plugcell.services.robot.service")
 
 #: Console lines of the last program kept for PROGRAM_STATUS.
 CONSOLE_LINES = 50

@@ -27,9 +27,9 @@ Stop Measurement          —                        —               —      
   wait their turn in the FIFO queue (the framework's re-scheduling, 5.2.3.5).  A
   holder that dies is stopped by the framework and the queue moves on.
 * **Routing** (9.3): option clauses ``; to=SERVICE:Command:Option`` send every
-  measurement on to another service as well (``services/tracker_routing.py``).
+  measurement on to another service as well (``services/tracker/routing.py``).
 
-The instrument is behind :class:`~plugcell.services.tracker_driver.TrackerDriver`;
+The instrument is behind :class:`~plugcell.services.tracker.driver.TrackerDriver`;
 ``plugcell serve tracker`` uses the simulated one (``--param seed=S``,
 ``--param time_scale=X``); ``--param driver=module:Class`` plugs in another.
 """
@@ -46,11 +46,11 @@ import numpy as np
 
 from plugcell.framework.model import Command, CommandTypes, ConnectionStates, DataTypes
 from plugcell.framework.service import DeviceError
-from plugcell.services.tracker_driver import TrackerDriver, TrackerDriverError, TrackerStatus
-from plugcell.services.tracker_frames import FrameError, RequesterFrames
-from plugcell.services.tracker_routing import RoutedDevice
+from plugcell.services.tracker.driver import TrackerDriver, TrackerDriverError, TrackerStatus
+from plugcell.services.tracker.frames import FrameError, RequesterFrames
+from plugcell.services.tracker.routing import RoutedDevice
 
-log = logging.getLogger("plugcell.services.tracker")
+log = logging.getLogger("plugcell.services.tracker.service")
 
 #: Longest measuring time of a Single Measurement and longest Continuous interval (ms).
 MAX_DURATION_MS = 60_000

@@ -57,9 +57,9 @@ from plugcell.metrology import (
 )
 from plugcell.metrology import base_from_features as _base_from_features
 from plugcell.metrology import invert_transform as _inv
-from plugcell.services.compute_expr import EvaluationError
-from plugcell.services.compute_workspace import Workspace, WorkspaceError, as_matrix
-from plugcell.services.tracker_frames import CONVENTIONS, matrix_from_vector, vector_from_matrix
+from plugcell.services.compute.expr import EvaluationError
+from plugcell.services.compute.workspace import Workspace, WorkspaceError, as_matrix
+from plugcell.services.tracker.frames import CONVENTIONS, matrix_from_vector, vector_from_matrix
 
 __all__ = ["FUNCTIONS", "FunctionContext", "Parameters", "register"]
 

@@ -18,7 +18,7 @@ from typing import Any
 
 import numpy as np
 
-from plugcell.services.compute_expr import MAX_NAME, Scope
+from plugcell.services.compute.expr import MAX_NAME, Scope
 
 NAME = re.compile(rf"^[A-Za-z][A-Za-z0-9_]{{0,{MAX_NAME - 1}}}$")
 DEFAULT_MAX_ELEMENTS = 8_000_000  # 64 MB of float64 per requester

@@ -10,15 +10,15 @@ it has a name in the cell, a command catalogue and a journal.  It
 * **wires and unwires** partners between *other* services at run time
   (``ask_subscribe``: robot → tracker, robot → compute, Figure 7-3), **saves** the
   wiring of the cell to a file and **loads** it again, re-applying each wire as
-  soon as both of its services are (back) in the cell (``controller_wiring.py``);
+  soon as both of its services are (back) in the cell (``cell/wiring.py``);
 * **assigns tasks** — any command of any service with its option and input data,
-  checked against the declaration (``controller_tasks.py``, Figure 7-10) — and
+  checked against the declaration (``cell/tasks.py``, Figure 7-10) — and
   **runs robot programs** on several robots sequentially or concurrently
-  (``controller_runs.py``);
+  (``cell/runs.py``);
 * **monitors** every process of the cell live: state, data, duration, who asked
-  whom, and the queue of each shared device (``controller_monitor.py``, Figure 7-11);
+  whom, and the queue of each shared device (``cell/monitor.py``, Figure 7-11);
 * **feeds** its listeners (the web UI): the activity log and batched changes of the
-  cell and of the processes (``controller_feed.py``).
+  cell and of the processes (``cell/feed.py``).
 
 Its own commands make all of that available to any participant (a script, a
 robot program through its robot service, ``plugcell call CONTROLLER …``); the web
@@ -51,18 +51,18 @@ from plugcell.framework.model import (
 from plugcell.framework.participant import PartnerError, PresenceEvent
 from plugcell.framework.process_call import ProcessCall
 from plugcell.framework.service import DeviceError, GenericDevice
-from plugcell.services.controller_feed import UiFeed
-from plugcell.services.controller_journal import JournalTail
-from plugcell.services.controller_monitor import ProcessMonitor, data_view
-from plugcell.services.controller_runs import (
+from plugcell.services.cell.feed import UiFeed
+from plugcell.services.cell.journal_tail import JournalTail
+from plugcell.services.cell.monitor import ProcessMonitor, data_view
+from plugcell.services.cell.runs import (
     MODES,
     ProgramRun,
     RunError,
     parse_runs,
     run_programs,
 )
-from plugcell.services.controller_tasks import CheckedTask, describe_command
-from plugcell.services.controller_wiring import (
+from plugcell.services.cell.tasks import CheckedTask, describe_command
+from plugcell.services.cell.wiring import (
     Wire,
     WiringError,
     WiringKeeper,
@@ -71,7 +71,7 @@ from plugcell.services.controller_wiring import (
     save_wiring,
 )
 
-log = logging.getLogger("plugcell.services.controller")
+log = logging.getLogger("plugcell.services.cell.service")
 
 #: Seconds between two rounds of Get to every service (partners, i.e. the wiring).
 REFRESH_PERIOD = 1.5
@@ -167,7 +167,7 @@ class CellController(GenericDevice):
         self.wiring_file = Path(wiring) if wiring else None
         self.feed = UiFeed(self.name, cell=self.cell_json, processes=self._processes_event,
                            log=log)
-        """What the web UI hears (controller_feed.py)."""
+        """What the web UI hears (cell/feed.py)."""
         self._background: set[asyncio.Task[Any]] = set()
         self._loops: list[asyncio.Task[Any]] = []
         self._refresh_now = asyncio.Event()
@@ -558,7 +558,7 @@ class CellController(GenericDevice):
     def start_run(self, items: Any, mode: str = "sequential") -> ProgramRun:
         """Start running programs (RunError for a bad request); follow it in :attr:`runs`.
 
-        ``items``: see :func:`~plugcell.services.controller_runs.parse_runs` (robot,
+        ``items``: see :func:`~plugcell.services.cell.runs.parse_runs` (robot,
         program and the program's ``name=value`` values)."""
         if mode not in MODES:
             raise RunError(f"mode must be one of {', '.join(MODES)}, not {mode!r}")

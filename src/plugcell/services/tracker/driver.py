@@ -1,6 +1,6 @@
 """The seam between the laser tracker service and a tracker: :class:`TrackerDriver`.
 
-The service (``services/tracker.py``) does the thesis's part of Table 7-3 — frames
+The service (``services/tracker/service.py``) does the thesis's part of Table 7-3 — frames
 per robot, eqs. (7.1)–(7.2), conversions, the queue — and asks a driver for the
 three things only the instrument can do, in the *tracker* frame and SI units:
 

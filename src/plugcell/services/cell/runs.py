@@ -37,7 +37,7 @@ from plugcell.framework.model import Command, Device, ProcessStates
 if TYPE_CHECKING:
     from plugcell.framework.participant import Participant
 
-log = logging.getLogger("plugcell.services.controller")
+log = logging.getLogger("plugcell.services.cell.service")
 
 MODES = ("sequential", "concurrent")
 ACTIVATE = "ACTIVATE"

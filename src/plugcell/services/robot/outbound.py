@@ -43,14 +43,14 @@ from plugcell.controller.protocol import Message, Result, StreamEnd
 from plugcell.framework.model import Command, CommandTypes, ProcessStates
 from plugcell.framework.process_call import ProcessCall
 from plugcell.framework.service import DeviceError
-from plugcell.services.robot_data import DataTextError, data_from_text, result_data
+from plugcell.services.robot.data import DataTextError, data_from_text, result_data
 
 if TYPE_CHECKING:
-    from plugcell.services.robot import RobotService
+    from plugcell.services.robot.service import RobotService
 
 __all__ = ["CALL_MARGIN_S", "SELF_ALIAS", "ExternalProcessHandler"]
 
-log = logging.getLogger("plugcell.services.robot")
+log = logging.getLogger("plugcell.services.robot.service")
 
 #: The device name by which a program addresses its own robot service.
 SELF_ALIAS = "ROBOT"

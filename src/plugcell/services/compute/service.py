@@ -8,14 +8,14 @@ Get Matrix      matrix_name                  —                      matrix: Do
 Evaluate        —                            expression: String[1]  —                   NoData
 ==============  ===========================  =====================  ==================  ==========
 
-* **A workspace per requester** (``compute_workspace.py``): each robot's ``mT`` is its
+* **A workspace per requester** (``compute/workspace.py``): each robot's ``mT`` is its
   own.  The requester is the process's sender, or the participant a routed process is
-  for (``for=``, set by the service that routed the data — ``tracker_routing.py``).
+  for (``for=``, set by the service that routed the data — ``tracker/routing.py``).
 * **Set Matrix** stores ``matrix`` as ``matrix_name``; with ``:append`` its rows are
   appended (the matrix is created if absent) — how the calibration program adds each
   measurement to mT and each joint reading to mJ (8.2.2).  A vector is one row.
-* **Evaluate** runs an expression of the small language of ``compute_expr.py`` —
-  assignments of calls to **registered** functions only (``compute_functions.py``:
+* **Evaluate** runs an expression of the small language of ``compute/expr.py`` —
+  assignments of calls to **registered** functions only (``compute/functions.py``:
   calibrate, validate, summary, load/save parameters, frame, compensate,
   compensate_joints, calc_targets, …).  No arbitrary code is ever executed: anything
   else is refused with the reason, and the service carries on.
@@ -43,12 +43,12 @@ import numpy as np
 from plugcell.framework.journal import plugcell_home
 from plugcell.framework.model import Command, CommandTypes, DataTypes
 from plugcell.framework.service import DeviceError
-from plugcell.services.compute_expr import EvaluationError, evaluate
-from plugcell.services.compute_functions import FUNCTIONS, FunctionContext
-from plugcell.services.compute_workspace import DEFAULT_MAX_ELEMENTS, Workspace, WorkspaceError
-from plugcell.services.tracker_routing import RoutedDevice
+from plugcell.services.compute.expr import EvaluationError, evaluate
+from plugcell.services.compute.functions import FUNCTIONS, FunctionContext
+from plugcell.services.compute.workspace import DEFAULT_MAX_ELEMENTS, Workspace, WorkspaceError
+from plugcell.services.tracker.routing import RoutedDevice
 
-log = logging.getLogger("plugcell.services.compute")
+log = logging.getLogger("plugcell.services.compute.service")
 
 APPEND = ":append"
 
