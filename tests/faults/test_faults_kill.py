@@ -22,7 +22,9 @@ from faults_testlib import FaultCell
 from framework_testlib import run
 
 from plugcell.framework import Client, ProcessCall, ProcessStates
+from plugcell.framework.bus import Bus
 from plugcell.framework.journal import journal_files, read_journal
+from plugcell.framework.keys import KeySpace
 from plugcell.framework.transport import TransportConfig, open_session
 from plugcell.services.sim.world import ReflectorPublisher
 
@@ -67,7 +69,7 @@ async def first_frame(call: ProcessCall) -> None:
 @pytest.fixture
 def tmac(fault_cell: FaultCell):
     session = open_session(TransportConfig.from_env())
-    pub = ReflectorPublisher(session, "TMAC", "tmac", cell=fault_cell.name)
+    pub = ReflectorPublisher(Bus(session, KeySpace(fault_cell.name)), "TMAC", "tmac")
     pub.publish(reflector())
     yield pub
     with contextlib.suppress(Exception):  # a test may have closed it (beam lost)

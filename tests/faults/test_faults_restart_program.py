@@ -20,6 +20,8 @@ from childproc import until
 from faults_testlib import FaultCell
 
 from plugcell.framework import BlockingClient, ProcessStates, from_data
+from plugcell.framework.bus import Bus
+from plugcell.framework.keys import KeySpace
 from plugcell.framework.transport import TransportConfig, open_session
 from plugcell.services.sim.world import ReflectorPublisher
 from plugcell.services.tracker.frames import vector_from_matrix
@@ -59,7 +61,7 @@ def test_a_program_outlives_a_restart_of_the_tracker(fault_cell: FaultCell,
                      "--param", f"library={PROGRAMS}")
     fault_cell.serve("controller", "--param", f"wiring={wiring}")
     session = open_session(TransportConfig.from_env())
-    smr = ReflectorPublisher(session, "FIXED_SMR", "smr", cell=fault_cell.name)
+    smr = ReflectorPublisher(Bus(session, KeySpace(fault_cell.name)), "FIXED_SMR", "smr")
     smr.publish(truth.base @ np.r_[np.c_[np.eye(3), SMR_MM / 1e3], [[0, 0, 0, 1]]])
     try:
         with BlockingClient("tester", cell=fault_cell.name) as client:

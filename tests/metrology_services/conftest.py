@@ -11,6 +11,8 @@ from pathlib import Path
 import pytest
 from metrology_testlib import Proc, plugcell_argv, unique_cell
 
+from plugcell.framework.bus import Bus
+from plugcell.framework.keys import KeySpace
 from plugcell.framework.transport import TransportConfig, open_session
 from plugcell.services.sim.world import ReflectorPublisher
 
@@ -63,7 +65,7 @@ def world(world_session: object) -> Iterator[object]:
     made: list[ReflectorPublisher] = []
 
     def publisher(cell: str, name: str, kind: str = "tmac") -> ReflectorPublisher:
-        pub = ReflectorPublisher(world_session, name, kind, cell=cell)  # type: ignore[arg-type]
+        pub = ReflectorPublisher(Bus(world_session, KeySpace(cell)), name, kind)  # type: ignore[arg-type]
         made.append(pub)
         return pub
 

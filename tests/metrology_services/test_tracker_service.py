@@ -14,6 +14,8 @@ import pytest
 from metrology_testlib import pose, run, unique_cell
 
 from plugcell.framework import Client, ProcessCall, ProcessStates
+from plugcell.framework.bus import Bus
+from plugcell.framework.keys import KeySpace
 from plugcell.framework.transport import TransportConfig, open_session
 from plugcell.services.sim.world import ReflectorPublisher
 from plugcell.services.tracker.frames import matrix_from_vector
@@ -254,7 +256,7 @@ def test_beam_not_locked_fails_with_the_reason_and_the_service_carries_on(world_
         tracker = TrackerService(cell=cell, journal=False, seed=3)
         await tracker.start()
         session = open_session(TransportConfig.from_env())
-        tmac = ReflectorPublisher(session, "TMAC", "tmac", cell=cell)
+        tmac = ReflectorPublisher(Bus(session, KeySpace(cell)), "TMAC", "tmac")
         tmac.publish(reflector(BASE_A, POSE_A, PROBE_A))
         try:
             async with Client("ROBOT", cell=cell) as robot:
@@ -294,7 +296,7 @@ def test_beam_not_locked_fails_with_the_reason_and_the_service_carries_on(world_
                 reason = await failed("Set Base", "quaternion2tr", BASE_A)
                 assert "unknown option 'quaternion2tr'" in reason
                 # still serving: a new reflector, Move, measure
-                again = ReflectorPublisher(session, "TMAC2", "smr", cell=cell)
+                again = ReflectorPublisher(Bus(session, KeySpace(cell)), "TMAC2", "smr")
                 again.publish(reflector(BASE_A, POSE_A, PROBE_A))
                 await ok(robot, "Move", "", POSE_A)
                 smr = await ok(robot, "Single Measurement", "tr2euler", 100)

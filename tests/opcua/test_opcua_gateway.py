@@ -10,6 +10,8 @@ import numpy as np
 import pytest
 from opcua_testlib import run_js, wait_shown
 
+from plugcell.framework.bus import Bus
+from plugcell.framework.keys import KeySpace
 from plugcell.framework.transport import TransportConfig, open_session
 from plugcell.services.sim.world import ReflectorPublisher
 from plugcell.services.tracker.frames import matrix_from_vector
@@ -123,7 +125,7 @@ def test_a_trackers_measurements_arrive_by_subscription(ua_cell):
     wait_shown(ua_cell.url, ua_cell.name, {"TRACKER"})
     session = open_session(TransportConfig.from_env())
     try:
-        tmac = ReflectorPublisher(session, "TMAC_UA", "tmac", cell=ua_cell.name)
+        tmac = ReflectorPublisher(Bus(session, KeySpace(ua_cell.name)), "TMAC_UA", "tmac")
         truth = (matrix_from_vector(BASE, "euler") @ matrix_from_vector(POSE, "euler")
                  @ matrix_from_vector(PROBE, "euler"))
         tmac.publish(truth)

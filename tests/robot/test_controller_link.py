@@ -25,6 +25,8 @@ from robot_cell import Launcher
 from robot_testlib import Proc, until
 
 from plugcell.framework import BlockingClient, ProcessStates, from_data
+from plugcell.framework.bus import Bus
+from plugcell.framework.keys import KeySpace
 from plugcell.framework.transport import open_session
 from plugcell.services.sim.world import WorldView
 from plugcell.twin.robot import RobotTwin
@@ -63,12 +65,12 @@ def test_moves_publish_the_true_reflector_pose(launcher: Launcher) -> None:
     port = listening_port(proc)
     session = open_session()
     states: list = []
-    world = WorldView(session, launcher.cell, on_change=states.append)
+    world = WorldView(Bus(session, KeySpace(launcher.cell)), on_change=states.append)
     deadline = time.monotonic() + 15.0
     while world.get("R9") is None:  # WorldView asks once: before discovery it finds nothing
         assert time.monotonic() < deadline, "the initial reflector pose not seen"
         world.close()
-        world = WorldView(session, launcher.cell, on_change=states.append)
+        world = WorldView(Bus(session, KeySpace(launcher.cell)), on_change=states.append)
     try:
         twin = RobotTwin(TwinScenario(robot="smart_h4", seed=5))  # the same twin, in the test
         assert np.allclose(world.get("R9").matrix(), twin.true_reflector_in_tracker())

@@ -7,6 +7,8 @@ import time
 import numpy as np
 import pytest
 
+from plugcell.framework.bus import Bus
+from plugcell.framework.keys import KeySpace
 from plugcell.framework.transport import TransportConfig, open_session
 from plugcell.services.sim.world import ReflectorPublisher, WorldView
 
@@ -32,27 +34,27 @@ def _wait(cond, timeout=5.0):
 def test_late_joiner_gets_the_latest_pose_then_follows_updates(sessions):
     a, b = sessions
     cell = "world-test"
-    pub = ReflectorPublisher(a, "robot1", "tmac", cell=cell)
+    pub = ReflectorPublisher(Bus(a, KeySpace(cell)), "robot1", "tmac")
     pose = np.eye(4)
     pose[:3, 3] = [1.0, 2.0, 3.0]
     pub.publish(pose)
-    assert _wait(lambda: WorldView(b, cell=cell).get("robot1") is not None)
-    view = WorldView(b, cell=cell)
+    assert _wait(lambda: WorldView(Bus(b, KeySpace(cell))).get("robot1") is not None)
+    view = WorldView(Bus(b, KeySpace(cell)))
     np.testing.assert_allclose(view.get("robot1").matrix(), pose)
     pose2 = pose.copy()
     pose2[0, 3] = 1.5
     pub.publish(pose2, moving=True)
     assert _wait(lambda: view.get("robot1").matrix()[0, 3] == 1.5)
     assert view.get("robot1").moving
-    other = WorldView(b, cell="another-cell")
+    other = WorldView(Bus(b, KeySpace("another-cell")))
     assert other.get("robot1") is None
     pub.close()
 
 
 def test_bad_poses_are_refused(sessions):
     a, _ = sessions
-    pub = ReflectorPublisher(a, "r", "smr", cell="world-test2")
+    pub = ReflectorPublisher(Bus(a, KeySpace("world-test2")), "r", "smr")
     with pytest.raises(ValueError, match="finite 4x4"):
         pub.publish(np.full((4, 4), np.nan))
     with pytest.raises(ValueError, match="kind"):
-        ReflectorPublisher(a, "r2", "laser")
+        ReflectorPublisher(Bus(a, KeySpace("world-test2")), "r2", "laser")

@@ -16,6 +16,8 @@ from typing import Any
 
 import numpy as np
 
+from plugcell.framework.bus import Bus
+from plugcell.framework.keys import KeySpace
 from plugcell.framework.transport import TransportConfig, open_session
 from plugcell.metrology import SMR_RADIUS_HALF_INCH
 from plugcell.services.sim.world import ReflectorPublisher, ReflectorState, WorldView
@@ -35,10 +37,11 @@ class FlangeSMRs:
         self._holes = [np.r_[h[:2], h[2] + smr_offset] for h in DOWEL_HOLES]
         self._lock = threading.Lock()
         self.session: Any = open_session(TransportConfig.from_env())
-        self._smrs = [ReflectorPublisher(self.session, f"{robot}_HOLE{i + 1}", "smr", cell=cell)
+        bus = Bus(self.session, KeySpace(cell))
+        self._smrs = [ReflectorPublisher(bus, f"{robot}_HOLE{i + 1}", "smr")
                       for i in range(len(self._holes))]
         self.moves = 0
-        self._view = WorldView(self.session, cell, on_change=self._moved)
+        self._view = WorldView(bus, on_change=self._moved)
 
     def _moved(self, state: ReflectorState) -> None:
         if state.name != self.robot:

@@ -20,6 +20,8 @@ from fastapi.testclient import TestClient
 from flange_smr import FlangeSMRs
 from ui_testlib import HEADERS, make_client, services, until
 
+from plugcell.framework.bus import Bus
+from plugcell.framework.keys import KeySpace
 from plugcell.kinematics import so3_log
 from plugcell.metrology import SMR_RADIUS_HALF_INCH
 from plugcell.services.sim.world import ReflectorPublisher
@@ -173,7 +175,8 @@ def test_the_live_base_wizard_on_the_same_cell(cell: dict[str, Any]) -> None:
         for i, (x, y) in enumerate(spots):
             pose = np.eye(4)
             pose[:3, 3] = (truth.base @ np.r_[x * 1e-3, y * 1e-3, SMR_RADIUS_HALF_INCH, 1.0])[:3]
-            pub = ReflectorPublisher(session, f"BASE_SMR{i + 1}", "smr", cell=cell["cell"])
+            bus = Bus(session, KeySpace(cell["cell"]))
+            pub = ReflectorPublisher(bus, f"BASE_SMR{i + 1}", "smr")
             pub.publish(pose)
             publishers.append(pub)
         for x, y in spots:

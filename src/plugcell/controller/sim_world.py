@@ -16,9 +16,10 @@ import math
 import threading
 
 import numpy as np
-import zenoh
 
-from plugcell.framework.transport import TransportConfig, open_session
+from plugcell.framework.bus import Bus, TransportError
+from plugcell.framework.keys import KeySpace
+from plugcell.framework.transport import TransportConfig
 from plugcell.services.sim.world import ReflectorPublisher
 
 __all__ = ["ReflectorTruth"]
@@ -32,14 +33,14 @@ class ReflectorTruth:
     def __init__(self, name: str, cell: str, speed: float,
                  transport: TransportConfig | None = None) -> None:
         self.speed = speed
-        self._session: zenoh.Session = open_session(transport or TransportConfig.from_env())
-        self._publisher = ReflectorPublisher(self._session, name=name, kind="tmac", cell=cell)
+        self._bus = Bus.connect(transport or TransportConfig.from_env(), KeySpace(cell))
+        self._publisher = ReflectorPublisher(self._bus, name=name, kind="tmac")
         self._lock = threading.Lock()
         self._timer: threading.Timer | None = None
         self._closed = False
 
     def publish(self, pose: np.ndarray, moving: bool = False) -> None:
-        with contextlib.suppress(zenoh.ZError):
+        with contextlib.suppress(TransportError):
             self._publisher.publish(pose, moving=moving)
 
     def on_move(self, pose: np.ndarray, duration_s: float) -> None:
@@ -72,4 +73,4 @@ class ReflectorTruth:
         with contextlib.suppress(Exception):
             self._publisher.close()
         with contextlib.suppress(Exception):
-            self._session.close()
+            self._bus.close()

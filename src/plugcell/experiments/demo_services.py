@@ -335,15 +335,15 @@ def _demonstrate(cell: _Cell, cfg: DemoConfig, h4_truth: Any, kuka_truth: Any,
     say(f"== 3. Demonstration (8.4): {cfg.bars} bars × {cfg.holes_per_bar} holes, "
         "part localisation, H4 aligns, KUKA watches a fixed SMR ==")
     cad, placed, normal = _stabiliser(h4_truth.probe, cfg.bars, cfg.holes_per_bar, rng)
-    session = client.participant.session
-    assert session is not None
+    bus = client.participant.bus
+    assert bus is not None
     smrs = []
     for i, p in enumerate(placed):  # SMRs in the holes, as the tracker sees them
-        pub = ReflectorPublisher(session, f"HOLE{i + 1:02d}", "smr", cell=cell.processes.cell)
+        pub = ReflectorPublisher(bus, f"HOLE{i + 1:02d}", "smr")
         pub.publish(h4_truth.base @ np.r_[np.c_[np.eye(3), p], [[0, 0, 0, 1]]])
         smrs.append(pub)
     kuka_smr = np.array([0.9, 0.45, 0.3])  # m, KUKA base frame
-    watch = ReflectorPublisher(session, "KUKA_SMR", "smr", cell=cell.processes.cell)
+    watch = ReflectorPublisher(bus, "KUKA_SMR", "smr")
     watch.publish(kuka_truth.base @ np.r_[np.c_[np.eye(3), kuka_smr], [[0, 0, 0, 1]]])
     try:
         # part localisation: the operator has the tracker measure every hole (H4 frame)

@@ -100,6 +100,10 @@ class KeySpace:
         """Every CreateProcess published to service ``name``."""
         return f"{self.prefix}/svc/{name}/create/*"
 
+    def request_sender(self, key: str) -> str:
+        """The sender named by a :meth:`request` key (its last segment, unchecked)."""
+        return key.rsplit("/", 1)[-1]
+
     def subscribe(self, name: str) -> str:
         return f"{self.prefix}/svc/{name}/subscribe"
 

@@ -35,9 +35,9 @@ from typing import Any, ClassVar
 
 import msgspec
 import zenoh
-from zenoh.handlers import Callback
 
 from plugcell.framework import wire
+from plugcell.framework.bus import Bus, QueryDoor
 from plugcell.framework.data import DataError, to_data
 from plugcell.framework.keys import DEFAULT_CELL, KeySpace, Presence, Role, check_name
 from plugcell.framework.memory import tune_allocator
@@ -63,7 +63,7 @@ from plugcell.framework.model import (
 from plugcell.framework.port import Port
 from plugcell.framework.process_call import ProcessCall
 from plugcell.framework.signing import RequestSigner, certificate_name, is_request
-from plugcell.framework.transport import TransportConfig, open_session
+from plugcell.framework.transport import TransportConfig
 
 log = logging.getLogger("plugcell.framework")
 
@@ -164,7 +164,8 @@ class Participant:
         self.partners: dict[str, Partner] = {}
         self.alive: dict[tuple[str, str], set[str]] = {}
         """``(role, name)`` → live instances, from liveliness tokens."""
-        self.session: zenoh.Session | None = None
+        self.bus: Bus | None = None
+        """The transport adapter (framework/bus.py), from :meth:`start`."""
         self._loop: asyncio.AbstractEventLoop | None = None
         self._port: Port[tuple[Callable[[Any], None], Any]] | None = None
         self._entities: list[Any] = []
@@ -199,24 +200,21 @@ class Participant:
                 )
         cert = self.transport.tls_cert
         self._publishes_requests = not cert or certificate_name(cert) == self.name
-        self.session = await asyncio.to_thread(open_session, self.transport)
+        self.bus = bus = await asyncio.to_thread(
+            Bus.connect, self.transport, self.keys, self._port.post)
         # incarnation id: start time first, so instances of one name order by age
-        self.instance = f"{time.time_ns():016x}{self.session.zid()}"
-        self._entities.append(
-            self.session.declare_subscriber(
-                self.keys.process_for(self.name), self._callback(self._on_process_update)
-            )
-        )
-        self._entities.append(
-            self.session.liveliness().declare_subscriber(
-                self.keys.live_all(), self._callback(self._on_liveliness), history=True
-            )
-        )
+        self.instance = f"{time.time_ns():016x}{bus.zid}"
+        self._entities.append(bus.follow_processes(self.name, self._on_process_update))
+        self._entities.append(bus.watch_presence(self._on_presence))
         await self._declare()
-        self._token = self.session.liveliness().declare_token(
-            self.keys.live(self.role, self.name, self.instance)
-        )
+        self._token = bus.announce(self.role, self.name, self.instance)
         self._started = True
+
+    @property
+    def session(self) -> zenoh.Session | None:
+        """The raw Zenoh session (None before :meth:`start`) — for tests that inject
+        what no participant would send; plugcell itself goes through :attr:`bus`."""
+        return self.bus.session if self.bus is not None else None
 
     async def _declare(self) -> None:
         """Hook: a service declares its queryables here, before its token goes live."""
@@ -229,8 +227,8 @@ class Participant:
         for call in list(self._calls.values()):
             call._fail(f"{self.name} is closing")
         self._calls.clear()
-        session = self.session
-        if session is not None:
+        bus = self.bus
+        if bus is not None:
             with contextlib.suppress(zenoh.ZError):
                 if self._token is not None:
                     self._token.undeclare()
@@ -241,7 +239,7 @@ class Participant:
                     door.undeclare()
                 for entity in reversed(self._entities):
                     entity.undeclare()
-            await asyncio.to_thread(session.close)
+            await asyncio.to_thread(bus.close)
         self.partners.clear()
         if self._port is not None:
             self._port.close()
@@ -254,27 +252,6 @@ class Participant:
         await self.close()
 
     # -- plumbing --------------------------------------------------------------------------
-
-    def _callback(self, handler: Callable[[Any], None]) -> Callback:
-        """A Zenoh callback that only enqueues ``(handler, item)`` (Zenoh forbids more)."""
-        port = self._port
-        assert port is not None
-        post = port.post
-        return Callback(lambda item: post((handler, item)), indirect=False)
-
-    def _query_callback(self, pending: _Pending) -> Callback:
-        port = self._port
-        assert port is not None
-        post = port.post
-
-        def reply(item: Any) -> None:
-            pending.replies.append(item)
-
-        def done(_: Any) -> None:
-            if pending.done is not None and not pending.done.done():
-                pending.done.set_result(None)
-
-        return Callback(lambda r: post((reply, r)), lambda: post((done, None)), indirect=False)
 
     def _handle(self, items: list[tuple[Callable[[Any], None], Any]]) -> None:
         """Run the handler of each item the Zenoh callbacks posted, in order."""
@@ -302,24 +279,25 @@ class Participant:
 
     async def _query(
         self,
-        key: str,
+        door: QueryDoor,
+        name: str,
         body: Message | None,
         timeout: float,
         *,
         everyone: bool = False,
         to: str = "",
     ) -> list[wire.Envelope | str]:
-        """Send one Zenoh query; each reply decoded, or the error text of a bad one."""
-        assert self.session is not None and self._loop is not None
+        """Query service ``name``'s ``door``; each reply decoded, or the error text of a
+        bad one."""
+        assert self.bus is not None and self._loop is not None
         pending = _Pending(done=self._loop.create_future())
-        self.session.get(
-            key,
-            self._query_callback(pending),
-            payload=self._encode(body, to) if body is not None else None,
-            timeout=timeout,
-            target=zenoh.QueryTarget.ALL if everyone else zenoh.QueryTarget.BEST_MATCHING,
-            consolidation=zenoh.QueryConsolidation(zenoh.ConsolidationMode.NONE),
-        )
+
+        def done(_: Any) -> None:
+            if pending.done is not None and not pending.done.done():
+                pending.done.set_result(None)
+
+        self.bus.query(door, name, self._encode(body, to) if body is not None else None,
+                       pending.replies.append, done, timeout=timeout, everyone=everyone)
         with contextlib.suppress(TimeoutError):
             await asyncio.wait_for(asyncio.shield(pending.done), timeout + 1.0)  # type: ignore[arg-type]
         out: list[wire.Envelope | str] = []
@@ -339,12 +317,9 @@ class Participant:
 
     # -- presence ------------------------------------------------------------------------
 
-    def _on_liveliness(self, sample: zenoh.Sample) -> None:
-        presence = self.keys.parse_live(str(sample.key_expr))
-        if presence is None:
-            return
+    def _on_presence(self, presence: Presence, joined: bool) -> None:
         key = (presence.role, presence.name)
-        if sample.kind == zenoh.SampleKind.PUT:
+        if joined:
             self.alive.setdefault(key, set()).add(presence.instance)
             event = PresenceEvent("join", presence)
             self._on_joined(presence)
@@ -425,7 +400,7 @@ class Participant:
     async def get(self, name: str, timeout: float = 5.0) -> tuple[GenericDeviceState, str]:
         """``Get`` on service ``name``: its generic state and the answering instance."""
         check_name(name, "service name")
-        replies = await self._query(self.keys.get(name), GetRequest(), timeout)
+        replies = await self._query("get", name, GetRequest(), timeout)
         for reply in replies:
             if isinstance(reply, wire.Envelope) and isinstance(reply.body, GenericDeviceState):
                 return reply.body, reply.instance
@@ -435,7 +410,7 @@ class Participant:
 
     async def list_services(self, timeout: float = 3.0) -> list[GenericDeviceState]:
         """Ask every service of the cell for its generic state (one wildcard Get)."""
-        replies = await self._query(self.keys.get("*"), GetRequest(), timeout, everyone=True)
+        replies = await self._query("get", "*", GetRequest(), timeout, everyone=True)
         states = [
             r.body
             for r in replies
@@ -451,13 +426,11 @@ class Participant:
         if not self.is_alive(partner):
             await self.wait_for(partner, min(timeout, DISCOVERY_GRACE))
         state, instance = await self.get(partner, timeout)
-        assert self.session is not None
+        assert self.bus is not None
         old = self.partners.pop(partner, None)
         if old is not None and old.subscriber is not None:
             old.subscriber.undeclare()
-        subscriber = self.session.declare_subscriber(
-            self.keys.notifications(partner), self._callback(self._on_notification)
-        )
+        subscriber = self.bus.follow_notifications(partner, self._on_notification)
         self.partners[partner] = Partner(state.device_info, instance, subscriber)
         return state.device_info
 
@@ -511,7 +484,7 @@ class Participant:
         body: Message = (
             SubscribeRequest(partner=partner) if subscribe else UnsubscribeRequest(partner=partner)
         )
-        replies = await self._query(self.keys.subscribe(service), body, timeout, to=service)
+        replies = await self._query("subscribe", service, body, timeout, to=service)
         for reply in replies:
             if isinstance(reply, wire.Envelope) and isinstance(reply.body, SubscribeResponse):
                 return reply.body
@@ -543,7 +516,7 @@ class Participant:
         A process that cannot be created is returned already Failed — this
         method does not raise for bad input or a missing partner.
         """
-        assert self._loop is not None and self.session is not None
+        assert self._loop is not None and self.bus is not None
         identifier = self._next_identifier()
         call = ProcessCall(self.name, partner, command, identifier, timeout, self._loop)
         try:
@@ -563,10 +536,8 @@ class Participant:
             except zenoh.ZError as exc:
                 call._fail(f"cannot send CreateProcess to {partner}: {exc}")
         else:
-            self.session.get(
-                self.keys.create(partner), self._ack_callback(call), payload=payload,
-                timeout=timeout,
-            )
+            self.bus.query("create", partner, payload, *self._ack_handlers(call),
+                           timeout=timeout)
         await call.acknowledged()
         if call.final is not None:
             self._calls.pop((partner, identifier), None)
@@ -621,12 +592,8 @@ class Participant:
             return None
         door = self._doors.get(partner)
         if door is None:
-            assert self.session is not None
-            door = self.session.declare_publisher(
-                self.keys.request(partner, self.name),
-                express=True,
-                congestion_control=zenoh.CongestionControl.BLOCK,
-            )
+            assert self.bus is not None
+            door = self.bus.request_door(partner, self.name)
             self._doors[partner] = door
         return door if door.matching_status.matching else None
 
@@ -635,10 +602,10 @@ class Participant:
         if call.final is not None:
             self._calls.pop((call.partner, call.identifier), None)
 
-    def _ack_callback(self, call: ProcessCall) -> Callback:
-        port = self._port
-        assert port is not None
-        post = port.post
+    def _ack_handlers(
+        self, call: ProcessCall
+    ) -> tuple[Callable[[Any], None], Callable[[Any], None]]:
+        """The reply and done handlers of a CreateProcess sent through the queryable."""
 
         def reply(r: Any) -> None:
             if r.ok is None:
@@ -673,7 +640,7 @@ class Participant:
                 call._fail(reason)
                 self._calls.pop((call.partner, call.identifier), None)
 
-        return Callback(lambda r: post((reply, r)), lambda: post((done, None)), indirect=False)
+        return reply, done
 
     def watch_processes(
         self, handler: Callable[[str, ProcessUpdateNotification], None]
@@ -682,21 +649,17 @@ class Participant:
         controller's monitor, thesis 7.6): ``handler(service, update)`` runs on the event
         loop for each update.  Returns the Zenoh subscriber: ``undeclare()`` it to stop
         (a participant's own declarations end with it)."""
-        assert self.session is not None, "watch_processes before start()"
-        keys = self.keys
+        assert self.bus is not None, "watch_processes before start()"
 
-        def on_sample(sample: zenoh.Sample) -> None:
-            where = keys.parse_process(str(sample.key_expr))
-            if where is None:
-                return
+        def on_sample(service: str, sample: zenoh.Sample) -> None:
             try:
                 envelope = wire.decode(sample.payload.to_bytes())
             except wire.WireError:
                 return
             for update in process_updates(envelope.body):
-                handler(where[0], update)
+                handler(service, update)
 
-        return self.session.declare_subscriber(keys.all_processes(), self._callback(on_sample))
+        return self.bus.watch_processes(on_sample)
 
     def _on_process_update(self, sample: zenoh.Sample) -> None:
         try:

@@ -371,15 +371,8 @@ class AccessPolicy:
             )
         if self.identity != "tls":
             return ""
-        session = service.session
         zid = instance[16:] if len(instance) > 16 else ""
-        ids = set()
-        if session is not None and zid:
-            ids = {
-                str(link.auth_identifier or "")
-                for link in session.info.links()
-                if str(link.zid) == zid
-            }
+        ids = service.bus.link_identities(zid) if service.bus is not None and zid else set()
         if sender in ids:
             return ""
         seen = ", ".join(sorted(i for i in ids if i)) or "no authenticated link"

@@ -57,6 +57,7 @@ from plugcell.framework.admission import (
     check_process,
     decode_request,
 )
+from plugcell.framework.bus import Notification
 from plugcell.framework.data import summary
 from plugcell.framework.journal import Journal, JournalInUseError, journal_dir
 from plugcell.framework.keys import DEFAULT_CELL, Presence, check_name
@@ -280,7 +281,8 @@ class GenericDevice(Participant):
 
     async def _declare(self) -> None:
         """Refuse a duplicate name, open the journal, declare the Generic Interface."""
-        assert self.session is not None
+        bus = self.bus
+        assert bus is not None
         if self.access.identity == "signed":
             self.request_verifier()  # no CA: refuse to start, with the reason
         if await self._query_live_instances() or self.alive.get(("service", self.name)):
@@ -288,21 +290,11 @@ class GenericDevice(Participant):
                 f"a service named {self.name} is already running in cell {self.keys.cell!r}"
             )
         self._open_journal()
-        self._entities.append(
-            self.session.declare_queryable(self.keys.get(self.name), self._callback(self._on_get))
-        )
-        self._entities.append(
-            self.session.declare_queryable(
-                self.keys.subscribe(self.name), self._callback(self._on_subscribe)
-            )
-        )
+        self._entities.append(bus.serve("get", self.name, self._on_get))
+        self._entities.append(bus.serve("subscribe", self.name, self._on_subscribe))
         self._create_doors = [
-            self.session.declare_queryable(
-                self.keys.create(self.name), self._callback(self._on_create)
-            ),
-            self.session.declare_subscriber(
-                self.keys.requests(self.name), self._callback(self._on_request)
-            ),
+            bus.serve("create", self.name, self._on_create),
+            bus.take_requests(self.name, self._on_request),
         ]
         self._entities.extend(self._create_doors)
 
@@ -328,30 +320,17 @@ class GenericDevice(Participant):
                 "%s: %d unfinished processes of a previous run marked Failed", self.name, recovered
             )
 
-    async def _query_live_instances(self) -> list[str]:
-        assert self.session is not None and self._loop is not None
+    async def _query_live_instances(self) -> list[Presence]:
+        """The live instances of this service's name (another one already running?)."""
+        assert self.bus is not None and self._loop is not None
         done = self._loop.create_future()
-        found: list[str] = []
-        port = self._port
-        assert port is not None
-
-        def on_reply(r: Any) -> None:
-            if r.ok is not None:
-                found.append(str(r.ok.key_expr))
+        found: list[Presence] = []
 
         def on_done(_: Any) -> None:
             if not done.done():
                 done.set_result(None)
 
-        self.session.liveliness().get(
-            self.keys.live_services(self.name),
-            zenoh.handlers.Callback(
-                lambda r: port.post((on_reply, r)),
-                lambda: port.post((on_done, None)),
-                indirect=False,
-            ),
-            timeout=1.0,
-        )
+        self.bus.find_service(self.name, found.append, on_done, timeout=1.0)
         with contextlib.suppress(TimeoutError):
             await asyncio.wait_for(done, 3.0)
         return found
@@ -370,12 +349,10 @@ class GenericDevice(Participant):
         self._create_doors = []
         self.scheduler.shut(f"{self.name}: {reason}")
         await self.scheduler.stop()  # after the current process (bounded by its timeout)
-        if self.session is not None and self._started:
+        if self.bus is not None and self._started:
             with contextlib.suppress(Exception):
                 await self.disconnect()
-            self._publish(
-                self.keys.shutdown(self.name), ShutdownNotification(name=self.name, reason=reason)
-            )
+            self._publish("shutdown", ShutdownNotification(name=self.name, reason=reason))
         self.outbox.flush()
         for publisher in self._publishers.values():
             with contextlib.suppress(zenoh.ZError):
@@ -473,10 +450,9 @@ class GenericDevice(Participant):
         """CreateProcess through the queryable: the acknowledgement is the reply."""
         self._create(query.payload, query)
 
-    def _on_request(self, sample: zenoh.Sample) -> None:
+    def _on_request(self, sender: str, sample: zenoh.Sample) -> None:
         """CreateProcess published on ``svc/<name>/create/<sender>``: the acknowledgement
         goes to ``<sender>`` on its process key, in one sample with the first updates."""
-        sender = str(sample.key_expr).rsplit("/", 1)[-1]
         try:
             check_name(sender, "sender name")
         except ValueError as exc:  # nobody to answer: journal it only
@@ -655,33 +631,29 @@ class GenericDevice(Participant):
         if state is not self._notified[0] or connection is not self._notified[1]:
             self.device.last_updated = datetime.now(UTC)
         if state is not self._notified[0]:
-            self._publish(
-                self.keys.state(self.name), StateUpdateNotification(name=self.name, state=state)
-            )
+            self._publish("state", StateUpdateNotification(name=self.name, state=state))
         if connection is not self._notified[1]:
             self._publish(
-                self.keys.connection(self.name),
-                ConnectionUpdateNotification(name=self.name, connection=connection),
+                "connection", ConnectionUpdateNotification(name=self.name, connection=connection)
             )
         self._notified = (state, connection)
 
     # -- outbound notifications ------------------------------------------------------
 
-    def _publish(self, key: str, body: Message) -> None:
-        if self.session is None or self.session.is_closed():
+    def _publish(self, kind: Notification, body: Message) -> None:
+        """A state, connection or shutdown notification to the subscribed partners."""
+        if not self._session_open():
             return
+        assert self.bus is not None
         with contextlib.suppress(zenoh.ZError):
-            self.session.put(key, self._encode(body))
+            self.bus.notify(kind, self.name, self._encode(body))
 
     def _publisher(self, sender: str) -> Any:
         publisher = self._publishers.get(sender)
         if publisher is None:
-            assert self.session is not None
-            publisher = self.session.declare_publisher(
-                self.keys.process(self.name, sender),
-                congestion_control=zenoh.CongestionControl.BLOCK,
-                express=self.express_updates,
-            )
+            assert self.bus is not None
+            publisher = self.bus.process_publisher(self.name, sender,
+                                                   express=self.express_updates)
             self._publishers[sender] = publisher
         return publisher
 
@@ -695,7 +667,7 @@ class GenericDevice(Participant):
     def _heartbeat(self, entry: Entry, update: ProcessUpdateNotification) -> None:
         """The scheduler's seam: a Queued update straight to its sender (no journal,
         no batch)."""
-        if self.session is not None and not self.session.is_closed():
+        if self._session_open():
             with contextlib.suppress(zenoh.ZError):
                 self._publisher(entry.sender).put(self._encode(update))
 
@@ -717,7 +689,7 @@ class GenericDevice(Participant):
         self.outbox.update(entry, update)
 
     def _session_open(self) -> bool:
-        return self.session is not None and not self.session.is_closed()
+        return self.bus is not None and self.bus.is_open
 
     def _send_to(self, sender: str, body: Message) -> None:
         """One sample for ``sender`` on its process key (the outbox's publish)."""

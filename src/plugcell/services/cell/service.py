@@ -177,7 +177,6 @@ class CellController(GenericDevice):
 
     async def _declare(self) -> None:
         await super()._declare()
-        assert self.session is not None
         self._entities.append(self.watch_processes(self._on_any_process))
 
     async def start(self) -> None:

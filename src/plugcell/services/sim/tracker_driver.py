@@ -26,13 +26,12 @@ from __future__ import annotations
 
 import asyncio
 import threading
-from typing import Any
 
 import msgspec
 import numpy as np
 
-from plugcell.framework.keys import DEFAULT_CELL
-from plugcell.services.sim.world import ReflectorState, reflector_key
+from plugcell.framework.bus import Bus
+from plugcell.services.sim.world import ReflectorState
 from plugcell.services.tracker.driver import (
     Array,
     BeamNotLockedError,
@@ -65,7 +64,7 @@ def _beam_message(exc: twin.BeamNotLockedError) -> str:
 class SimulatedTrackerDriver:
     """The tracker model behind the TrackerDriver seam (module docstring).
 
-    ``session``: an open Zenoh session (the service's); ``cell``: whose world;
+    ``bus``: the service's transport (its cell's world is looked at through it);
     ``tracker``: the instrument model (default ``LaserTracker(seed=seed)``);
     ``time_scale``: real seconds slept per simulated second (0: none);
     ``query_timeout_s``: bound of one look at the world.
@@ -75,8 +74,7 @@ class SimulatedTrackerDriver:
 
     def __init__(
         self,
-        session: Any,
-        cell: str = DEFAULT_CELL,
+        bus: Bus,
         *,
         tracker: LaserTracker | None = None,
         seed: int = 0,
@@ -85,8 +83,7 @@ class SimulatedTrackerDriver:
     ) -> None:
         if not (time_scale >= 0 and np.isfinite(time_scale)):
             raise ValueError(f"time_scale must be >= 0, got {time_scale}")
-        self.session = session
-        self.cell = cell
+        self.bus = bus
         self.model = tracker if tracker is not None else LaserTracker(seed=seed)
         self.time_scale = float(time_scale)
         self.query_timeout_s = query_timeout_s
@@ -201,12 +198,9 @@ class SimulatedTrackerDriver:
 
     def _query(self) -> dict[str, ReflectorState]:
         found: dict[str, ReflectorState] = {}
-        replies = self.session.get(reflector_key(self.cell), timeout=self.query_timeout_s)
-        for reply in replies:
-            if reply.ok is None:
-                continue
+        for payload in self.bus.query_reflectors(self.query_timeout_s):
             try:
-                state = _DECODER.decode(bytes(reply.ok.payload.to_bytes()))
+                state = _DECODER.decode(payload)
             except msgspec.DecodeError:
                 continue  # not ours to judge: a malformed sim message is ignored
             if state.name not in found or state.seq >= found[state.name].seq:

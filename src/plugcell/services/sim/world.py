@@ -28,9 +28,9 @@ from collections.abc import Callable
 
 import msgspec
 import numpy as np
-import zenoh
 
-from plugcell.framework.keys import DEFAULT_CELL, KeySpace, check_name
+from plugcell.framework.bus import Bus
+from plugcell.framework.keys import check_name
 
 
 class ReflectorState(msgspec.Struct, frozen=True):
@@ -50,33 +50,25 @@ _ENCODER = msgspec.msgpack.Encoder()
 _DECODER = msgspec.msgpack.Decoder(ReflectorState)
 
 
-def reflector_key(cell: str, name: str = "*") -> str:
-    """The key of reflector ``name`` in ``cell`` (the framework's key space owns it)."""
-    return KeySpace(cell).reflector(name)
-
-
 class ReflectorPublisher:
-    """Publishes one reflector's true pose; answers queries with the latest one."""
+    """Publishes one reflector's true pose on ``bus``'s cell; answers queries with the
+    latest one.  ``bus``: a :class:`~plugcell.framework.bus.Bus` whose handlers run on
+    Zenoh's threads (no hand-off), or a participant's."""
 
-    def __init__(self, session: zenoh.Session, name: str, kind: str = "tmac",
-                 cell: str = DEFAULT_CELL) -> None:
+    def __init__(self, bus: Bus, name: str, kind: str = "tmac") -> None:
         check_name(name, "reflector name")
         if kind not in ("tmac", "smr"):
             raise ValueError(f"reflector kind must be 'tmac' or 'smr', got {kind!r}")
         self.name, self.kind = name, kind
-        self._key = reflector_key(cell, name)
         self._lock = threading.Lock()
         self._last: bytes | None = None
         self._seq = 0
         self._closed = False
-        self._publisher = session.declare_publisher(self._key)
-        self._queryable = session.declare_queryable(self._key, self._on_query)
+        self._publisher, self._queryable = bus.reflector(name, self._latest)
 
-    def _on_query(self, query: zenoh.Query) -> None:
+    def _latest(self) -> bytes | None:
         with self._lock:
-            last = self._last
-        if last is not None:
-            query.reply(self._key, last)
+            return self._last
 
     def publish(self, pose: np.ndarray, moving: bool = False) -> None:
         pose = np.asarray(pose, dtype=float)
@@ -99,27 +91,23 @@ class ReflectorPublisher:
 
 
 class WorldView:
-    """The latest :class:`ReflectorState` of every reflector of a cell (thread-safe)."""
+    """The latest :class:`ReflectorState` of every reflector of ``bus``'s cell
+    (thread-safe; ``bus`` without a hand-off, so ``on_change`` runs on Zenoh's thread)."""
 
-    def __init__(self, session: zenoh.Session, cell: str = DEFAULT_CELL,
+    def __init__(self, bus: Bus,
                  on_change: Callable[[ReflectorState], None] | None = None) -> None:
         self._lock = threading.Lock()
         self._states: dict[str, ReflectorState] = {}
         self._on_change = on_change
-        self._session = session
-        self._key = reflector_key(cell)
-        self._subscriber = session.declare_subscriber(self._key, self._on_sample)
+        self._bus = bus
+        self._subscriber = bus.watch_reflectors(self._store)
         self.refresh()
 
     def refresh(self, timeout: float = 1.0) -> None:
         """Ask every reflector publisher for its latest pose (a view created before
         discovery finished would otherwise miss a reflector until it next moves)."""
-        for reply in self._session.get(self._key, timeout=timeout):
-            if reply.ok is not None:
-                self._store(bytes(reply.ok.payload.to_bytes()))
-
-    def _on_sample(self, sample: zenoh.Sample) -> None:
-        self._store(bytes(sample.payload.to_bytes()))
+        for payload in self._bus.query_reflectors(timeout):
+            self._store(payload)
 
     def _store(self, payload: bytes) -> None:
         try:

@@ -157,12 +157,12 @@ class TrackerService(RoutedDevice):
     # -- connection -----------------------------------------------------------------------
 
     async def connect(self) -> None:
-        if self.driver is None:  # the simulated instrument needs our session to see the world
+        if self.driver is None:  # the simulated instrument sees the world through our bus
             from plugcell.services.sim.tracker_driver import SimulatedTrackerDriver
 
-            self.driver = SimulatedTrackerDriver(
-                self.session, self.keys.cell, seed=self.seed, time_scale=self.time_scale
-            )
+            assert self.bus is not None
+            self.driver = SimulatedTrackerDriver(self.bus, seed=self.seed,
+                                                 time_scale=self.time_scale)
         await self.driver.connect()
         self.device.vendor = self.driver.info
         self.connection_state.post(ConnectionStates.Online)

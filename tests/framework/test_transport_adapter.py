@@ -1,0 +1,219 @@
+"""The transport adapter (framework/bus.py): the one holder of a Zenoh session.
+
+Two buses on loopback in peer mode exercise each door by purpose; a static check (ast,
+no import) keeps every module outside ``plugcell/framework`` off Zenoh and sessions.
+"""
+
+from __future__ import annotations
+
+import ast
+import threading
+import time
+import uuid
+from collections.abc import Callable, Iterator
+from pathlib import Path
+from typing import Any
+
+import pytest
+
+from plugcell.framework.bus import Bus
+from plugcell.framework.keys import KeySpace, Presence
+from plugcell.framework.transport import TransportConfig
+
+SRC = Path(__file__).resolve().parents[2] / "src" / "plugcell"
+
+#: Modules outside the framework allowed to touch Zenoh or sessions, and why.
+RAW_ZENOH = {
+    "bench/transport.py": "measures raw Zenoh between two processes: the floor plugcell is "
+                          "compared with (thesis 5.3)",
+    "bench/peer.py": "the raw-Zenoh peer of that floor and of round_trip_trace",
+}
+OPENS_A_BARE_SESSION = {
+    "commands/router.py": "a router declares nothing: it only routes, for every cell",
+}
+
+
+def until(predicate: Callable[[], object], timeout: float = 5.0) -> bool:
+    end = time.monotonic() + timeout
+    while time.monotonic() < end:
+        if predicate():
+            return True
+        time.sleep(0.01)
+    return False
+
+
+@pytest.fixture
+def buses() -> Iterator[tuple[Bus, Bus]]:
+    cell = f"bus{uuid.uuid4().hex[:10]}"
+    cfg = TransportConfig.from_env()
+    a, b = Bus.connect(cfg, KeySpace(cell)), Bus.connect(cfg, KeySpace(cell))
+    yield a, b
+    a.close()
+    b.close()
+
+
+def test_a_service_door_answers_a_query_by_name(buses: tuple[Bus, Bus]) -> None:
+    a, b = buses
+    served = a.serve("get", "CAMERA", lambda q: q.reply(q.key_expr, b"state of CAMERA"))
+    replies: list[bytes] = []
+    done = threading.Event()
+
+    def ask() -> bool:
+        replies.clear()
+        done.clear()
+        b.query("get", "CAMERA", None, lambda r: replies.append(r.ok.payload.to_bytes()),
+                lambda _: done.set(), timeout=1.0)
+        return done.wait(3.0) and replies == [b"state of CAMERA"]
+
+    assert until(ask)
+    # another name, another door: nobody answers
+    done.clear()
+    b.query("subscribe", "CAMERA", None, replies.append, lambda _: done.set(), timeout=0.3)
+    assert done.wait(3.0)
+    served.undeclare()
+
+
+def test_published_requests_arrive_with_their_sender(buses: tuple[Bus, Bus]) -> None:
+    a, b = buses
+    got: list[tuple[str, bytes]] = []
+    a.take_requests("DRILL", lambda sender, s: got.append((sender, s.payload.to_bytes())))
+    door = b.request_door("DRILL", "ROBOT")
+    assert until(lambda: door.matching_status.matching)
+    door.put(b"create")
+    assert until(lambda: got == [("ROBOT", b"create")])
+    door.undeclare()
+
+
+def test_presence_is_seen_coming_and_going(buses: tuple[Bus, Bus]) -> None:
+    a, b = buses
+    seen: list[tuple[Presence, bool]] = []
+    b.watch_presence(lambda p, joined: seen.append((p, joined)))
+    token = a.announce("service", "TRACKER", "0001abc")
+    me = Presence("service", "TRACKER", "0001abc")
+    assert until(lambda: (me, True) in seen)
+    found: list[Presence] = []
+    done = threading.Event()
+    b.find_service("TRACKER", found.append, lambda _: done.set())
+    assert done.wait(3.0) and found == [me]
+    token.undeclare()
+    assert until(lambda: (me, False) in seen)
+
+
+def test_process_updates_reach_their_sender_and_the_cells_monitor(
+        buses: tuple[Bus, Bus]) -> None:
+    a, b = buses
+    to_robot: list[bytes] = []
+    monitored: list[tuple[str, bytes]] = []
+    b.follow_processes("ROBOT", lambda s: to_robot.append(s.payload.to_bytes()))
+    b.watch_processes(lambda service, s: monitored.append((service, s.payload.to_bytes())))
+    publisher = a.process_publisher("CAMERA", "ROBOT", express=True)
+    other = a.process_publisher("CAMERA", "UI", express=False)
+    assert until(lambda: publisher.matching_status.matching)
+    publisher.put(b"update for ROBOT")
+    other.put(b"update for UI")
+    assert until(lambda: len(monitored) == 2)
+    assert to_robot == [b"update for ROBOT"]
+    assert sorted(monitored) == [("CAMERA", b"update for ROBOT"), ("CAMERA", b"update for UI")]
+
+
+def test_notifications_reach_the_partners_that_follow_them(buses: tuple[Bus, Bus]) -> None:
+    a, b = buses
+    heard: list[bytes] = []
+    b.follow_notifications("CAMERA", lambda s: heard.append(s.payload.to_bytes()))
+
+    def published() -> bool:
+        a.notify("state", "CAMERA", b"Busy")
+        return b"Busy" in heard
+    assert until(published)
+    a.notify("shutdown", "CAMERA", b"bye")
+    a.notify("state", "DRILL", b"not CAMERA's")
+    assert until(lambda: b"bye" in heard)
+    assert b"not CAMERA's" not in heard
+
+
+def test_the_reflector_channel_keeps_the_latest_pose(buses: tuple[Bus, Bus]) -> None:
+    a, b = buses
+    latest: list[bytes] = []
+    publisher, queryable = a.reflector("TMAC", lambda: latest[-1] if latest else None)
+    assert b.query_reflectors(0.3) == []  # nothing published yet: the queryable is silent
+    seen: list[bytes] = []
+    b.watch_reflectors(seen.append)
+    latest.append(b"pose 1")
+    assert until(lambda: b.query_reflectors(0.5) == [b"pose 1"])
+    publisher.put(b"pose 2")
+    assert until(lambda: seen == [b"pose 2"])
+    other = Bus(b.session, KeySpace("another-cell"))  # same session, other cell's keys
+    assert other.query_reflectors(0.3) == []
+    publisher.undeclare()
+    queryable.undeclare()
+
+
+def test_with_a_hand_off_handlers_run_where_the_owner_runs_them() -> None:
+    handed: list[tuple[Callable[[Any], None], Any]] = []
+    cell = f"bus{uuid.uuid4().hex[:10]}"
+    cfg = TransportConfig.from_env()
+    owner = Bus.connect(cfg, KeySpace(cell), hand_off=handed.append)
+    other = Bus.connect(cfg, KeySpace(cell))
+    try:
+        ran: list[tuple[str, bytes]] = []
+        owner.take_requests("DRILL", lambda sender, s: ran.append((sender, bytes(s.payload))))
+        door = other.request_door("DRILL", "ROBOT")
+        assert until(lambda: door.matching_status.matching)
+        door.put(b"create")
+        assert until(lambda: len(handed) == 1)
+        assert ran == []  # not on Zenoh's thread: the owner runs it
+        handler, item = handed[0]
+        handler(item)
+        assert ran == [("ROBOT", b"create")]
+    finally:
+        owner.close()
+        other.close()
+
+
+# -- only the framework holds a session ---------------------------------------------------
+
+
+def transport_offences(source: str, where: str) -> list[str]:
+    """What ``source`` (a module outside the framework) does that only the transport
+    adapter may: import Zenoh, open a session, reach for a participant's session."""
+    found = []
+    for node in ast.walk(ast.parse(source)):
+        if isinstance(node, ast.Import):
+            found += [f"{where}:{node.lineno}: imports zenoh" for a in node.names
+                      if a.name.split(".")[0] == "zenoh"]
+        elif isinstance(node, ast.ImportFrom) and (node.module or "").split(".")[0] == "zenoh":
+            found.append(f"{where}:{node.lineno}: imports zenoh")
+        elif isinstance(node, ast.ImportFrom) and any(a.name == "open_session"
+                                                      for a in node.names):
+            found.append(f"{where}:{node.lineno}: opens a session")
+        elif (isinstance(node, ast.Attribute) and node.attr == "session"
+              and not (isinstance(node.value, ast.Name) and node.value.id == "self")):
+            found.append(f"{where}:{node.lineno}: reaches for a session")
+    return found
+
+
+def test_the_check_sees_each_offence() -> None:
+    bad = ("import zenoh\nfrom zenoh.handlers import Callback\n"
+           "from plugcell.framework.transport import open_session\n"
+           "def f(client):\n    return client.participant.session\n")
+    assert [o.split(": ", 1)[1] for o in transport_offences(bad, "bad.py")] == [
+        "imports zenoh", "imports zenoh", "opens a session", "reaches for a session"]
+    assert transport_offences("from plugcell.framework.bus import Bus\n", "ok.py") == []
+
+
+def test_only_the_framework_touches_zenoh_and_sessions() -> None:
+    offences = []
+    for path in SRC.rglob("*.py"):
+        where = path.relative_to(SRC).as_posix()
+        if where.startswith("framework/") or where in RAW_ZENOH:
+            continue
+        found = transport_offences(path.read_text(encoding="utf-8"), where)
+        if where in OPENS_A_BARE_SESSION:
+            found = [f for f in found if not f.endswith("opens a session")]
+        offences += found
+    assert offences == []
+
+
+def test_the_exceptions_still_exist() -> None:
+    for where in [*RAW_ZENOH, *OPENS_A_BARE_SESSION]:
+        assert (SRC / where).is_file(), f"stale exception: {where}"
