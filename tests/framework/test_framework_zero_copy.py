@@ -24,7 +24,15 @@ from hypothesis.extra import numpy as hnp
 
 from plugcell.bench.device import BenchService
 from plugcell.framework import wire
-from plugcell.framework.data import DTYPES, DataError, check_data, from_data, summary, to_data
+from plugcell.framework.data import (
+    DTYPES,
+    VIEW_MIN_BYTES,
+    DataError,
+    check_data,
+    from_data,
+    summary,
+    to_data,
+)
 from plugcell.framework.journal import Journal
 from plugcell.framework.model import (
     Data,
@@ -99,12 +107,18 @@ def test_strings_arrive_as_sent(items):
 
 @pytest.mark.parametrize("data_type", NUMERIC)
 def test_a_read_only_array_is_sent_from_its_own_memory(data_type):
-    arr = _read_only(np.ones((4, 5), DTYPES[data_type]))
-    data = to_data(arr, data_type, (4, 5))
+    shape = (64, VIEW_MIN_BYTES // 64)
+    arr = _read_only(np.ones(shape, DTYPES[data_type]))
+    data = to_data(arr, data_type, shape)
     assert isinstance(data.buffer, memoryview) and data.buffer.readonly
     assert len(data.buffer) == arr.nbytes and data.buffer.format == "B"
     assert np.shares_memory(np.frombuffer(data.buffer, np.uint8), arr)
-    check_data(data, data_type, (4, 5))
+    check_data(data, data_type, shape)
+
+
+def test_a_small_array_is_copied_a_copy_being_cheaper_than_a_view():
+    arr = _read_only(np.ones(VIEW_MIN_BYTES - 1, np.uint8))
+    assert type(to_data(arr, DataTypes.Byte, ()).buffer) is bytes
 
 
 def test_a_writeable_array_is_copied_so_its_owner_may_reuse_it():
@@ -153,6 +167,16 @@ def test_views_are_checked_like_bytes():
         check_data(Data(DataTypes.Integer, (2,), wide), DataTypes.Integer, (2,))
     with pytest.raises(DataError, match=r"buffer of 3 bytes does not match Integer\[1\]"):
         check_data(Data(DataTypes.Integer, (1,), memoryview(b"abc")), DataTypes.Integer, (1,))
+
+
+@settings(max_examples=200, deadline=None)
+@given(st.binary(max_size=40), st.sampled_from([DataTypes.Byte, DataTypes.Boolean]))
+def test_the_journal_text_of_a_view_is_that_of_its_bytes(buffer, data_type):
+    if data_type is DataTypes.Boolean:
+        buffer = bytes(b & 1 for b in buffer)
+    size = (len(buffer),)
+    assert summary(Data(data_type, size, memoryview(buffer))) == summary(
+        Data(data_type, size, buffer))
 
 
 def test_a_batch_decodes_every_frame_as_a_view():
