@@ -10,7 +10,9 @@ with the Zenoh publisher replaced by one that counts the samples.  So the table 
 Python cost of the service's own path per frame, without the transport and
 without another process competing for the cores: the part of the transport
 benchmark's throughput that plugcell's code, not Zenoh, decides.  Best of
-``--repeat`` runs.
+``--repeat`` runs.  The frame is read-only, as Push's is, so it is encoded straight
+from its memory (framework/data.py); ``--large`` also shows a writeable frame, which
+the service copies first.
 """
 
 from __future__ import annotations
@@ -36,7 +38,8 @@ from plugcell.framework.processqueue import Entry
 #: memory — dominates and varies from run to run by more than the journal costs).
 SHAPES = ((4,), (32,), (1024,), (4096,))
 #: ``--large``: the camera-sized frames, where the copies decide — with the C allocator
-#: as plugcell tunes it (framework/memory.py) and as glibc leaves it.
+#: as plugcell tunes it (framework/memory.py) and as glibc leaves it, and a writeable
+#: frame (copied into its buffer first) beside the read-only one (not copied).
 LARGE = ((65536,), (307200,), (921600,))
 
 
@@ -55,7 +58,8 @@ class _OpenSession:
         return False
 
 
-async def _per_frame_us(shape: tuple[int, ...], frames: int, folder: Path | None) -> float:
+async def _per_frame_us(shape: tuple[int, ...], frames: int, folder: Path | None,
+                        read_only: bool = True) -> float:
     service = BenchService("PUBLISHER", journal=False)
     service._loop = asyncio.get_running_loop()
     service._loop_thread = threading.get_ident()
@@ -71,6 +75,7 @@ async def _per_frame_us(shape: tuple[int, ...], frames: int, folder: Path | None
                                   identifier=1), command=push)
     service._measuring = entry
     frame = np.full(shape, 7, np.uint8)
+    frame.flags.writeable = not read_only
     started = time.perf_counter()
     for i in range(frames):
         service.data_feedback.post(frame)
@@ -116,23 +121,26 @@ def _large(repeat: int) -> int:
 
     print(f"service path per large frame, journal on (µs, best of {repeat}), "
           f"{platform.machine()}, Python {platform.python_version()}")
-    print(f"{'payload':>9} | {'tuned allocator':>15} | {'glibc default':>13}")
-    print("-" * 45)
+    print(f"{'':>9} | {'read-only frame (not copied)':>29} | {'writeable frame (copied)':>29}")
+    print(f"{'payload':>9} | {'tuned allocator':>15} {'glibc default':>13} | "
+          f"{'tuned allocator':>15} {'glibc default':>13}")
+    print("-" * 73)
     code = ("import asyncio, sys, tempfile; from pathlib import Path; sys.path.insert(0, {here!r});"
             "import service_frames as sf; from plugcell.framework.memory import tune_allocator;"
             "tune_allocator(); shape = ({n},);"
-            "print(min(asyncio.run(sf._per_frame_us(shape, 1000, Path(tempfile.mkdtemp())))"
-            " for _ in range({repeat})))")
+            "print(min(asyncio.run(sf._per_frame_us(shape, 1000, Path(tempfile.mkdtemp()),"
+            " {read_only})) for _ in range({repeat})))")
     here = str(Path(__file__).resolve().parent)
     for (n,) in LARGE:
         row = []
-        for malloc in ("", "default"):
-            env = {**os.environ, "PLUGCELL_MALLOC": malloc}
-            out = subprocess.run([sys.executable, "-c", code.format(here=here, n=n,
-                                                                    repeat=repeat)],
-                                 env=env, capture_output=True, text=True, check=True)
-            row.append(float(out.stdout))
-        print(f"{n:>7} B | {row[0]:>15.1f} | {row[1]:>13.1f}")
+        for read_only in (True, False):
+            for malloc in ("", "default"):
+                env = {**os.environ, "PLUGCELL_MALLOC": malloc}
+                argv = [sys.executable, "-c", code.format(here=here, n=n, read_only=read_only,
+                                                          repeat=repeat)]
+                out = subprocess.run(argv, env=env, capture_output=True, text=True, check=True)
+                row.append(float(out.stdout))
+        print(f"{n:>7} B | {row[0]:>15.1f} {row[1]:>13.1f} | {row[2]:>15.1f} {row[3]:>13.1f}")
     return 0
 
 

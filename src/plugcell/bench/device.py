@@ -62,6 +62,7 @@ class BenchService(GenericDevice):
                 if data is None or len(data) < 2 or int(data[0]) < 0:
                     raise DeviceError("Push needs [count, *shape] with count >= 0")
                 frame = np.full(tuple(int(d) for d in data[1:]), 7, np.uint8)
+                frame.flags.writeable = False  # never changes: streamed without a copy
                 self._pusher = asyncio.create_task(self._push(int(data[0]), frame))
             case "StopPush":
                 if self._pusher is not None:

@@ -259,6 +259,7 @@ class RawFloor:
 async def our_latency(consumer: Any, payload: Payload, cycles: int, warmup: int) -> dict:
     """CreateProcess(Echo, data) → the ProcessUpdate with the same data; half the round trip."""
     data = np.full(payload.shape, 7, np.uint8)
+    data.flags.writeable = False  # never changes: sent without a copy
     trips = []
     for i in range(warmup + cycles):
         t0 = time.perf_counter_ns()

@@ -1,7 +1,8 @@
 """Large frames without page faults: the C allocator kept from returning big blocks.
 
-A streamed camera frame (0.3–0.9 MB) is copied a few times on its way — into its
-typed buffer, into the Zenoh sample, out of it on the other side.  glibc serves a
+A streamed camera frame (0.3–0.9 MB) is still copied on its way — into its message's
+encoding, into the Zenoh sample, out of it on the other side (and into its typed buffer
+first when the device posts a writeable array; framework/data.py).  glibc serves a
 block of 128 KiB or more with a fresh ``mmap`` and returns it with ``munmap`` when
 freed, so every copy of every frame lands in fresh pages and pays a page fault per
 4 KiB: on the development machine a 0.9 MB copy took ~480 µs that way against ~80 µs

@@ -126,13 +126,19 @@ class Data(msgspec.Struct, rename="pascal", frozen=True):
     ``int32`` for Integer, ``float64`` for Double, one byte per element for Byte
     and Boolean (0/1); for String it is the array of UTF-8 strings.  ``size`` is
     the actual n-D shape (no ``-1``).
+
+    A numeric ``buffer`` is any bytes-like object: ``bytes``, or a read-only
+    ``memoryview`` of unsigned bytes — a decoded message's buffers are views into the
+    received payload (no copy; each keeps the whole payload alive while it is
+    referenced), and :func:`~plugcell.framework.data.to_data` of a read-only array is a
+    view of that array.  Both encode to the same MessagePack ``bin``.
     """
 
     type: DataTypes
     size: Annotated[
         tuple[Annotated[int, msgspec.Meta(ge=0)], ...], msgspec.Meta(max_length=MAX_RANK)
     ]
-    buffer: bytes | list[str]
+    buffer: memoryview | list[str]
 
 
 class Device(msgspec.Struct, rename="pascal", kw_only=True):

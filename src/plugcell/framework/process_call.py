@@ -195,7 +195,8 @@ class ProcessCall:
 
     @staticmethod
     def array(update: ProcessUpdateNotification) -> np.ndarray | Any:
-        """The data of an update as an n-D numpy array (None if it carries none)."""
+        """The data of an update as an n-D numpy array (None if it carries none): for
+        numbers a read-only view into the bytes of the sample it came in (no copy)."""
         return from_data(update.data)
 
 
