@@ -1,6 +1,7 @@
 """What an idle cell costs: N services, each its own process, doing nothing.
 
     .venv/bin/python benchmarks/idle_cost.py [--services 20] [--seconds 30]
+        [--settings default,no-shm,lean]
 
 Starts ``--services`` services (cameras, drills, benchmark publishers and compute
 services in turn, simulated, Zenoh peer mode on loopback, journals on) as
@@ -11,6 +12,12 @@ queued-process heartbeat and Zenoh's own keep-alive are all that runs.  Then the
 for as many bare Zenoh sessions (``zenoh.open`` with plugcell's transport
 configuration, nothing declared): the floor Zenoh's peer mesh sets.  Prints each total
 as a share of one core and per process.  Linux only (reads /proc).
+
+Each of ``--settings`` runs both, with the transport settings an idle cell's cost
+depends on (framework/transport.py): ``default`` (Zenoh's shared memory on, its 10 s
+lease), ``no-shm`` (``PLUGCELL_SHM=0``: no shared-memory watchdog waking every process
+ten times a second) and ``lean`` (``PLUGCELL_SHM=0 PLUGCELL_LEASE=60``: keep-alives on
+each link every 15 s instead of 2.5 s).
 """
 
 from __future__ import annotations
@@ -33,6 +40,11 @@ BARE = ("import time\n"
         "print('serving in cell (bare zenoh session)', flush=True)\n"
         "time.sleep(1e6)\n")
 TICK = os.sysconf("SC_CLK_TCK")
+SETTINGS: dict[str, dict[str, str]] = {
+    "default": {},
+    "no-shm": {"PLUGCELL_SHM": "0"},
+    "lean": {"PLUGCELL_SHM": "0", "PLUGCELL_LEASE": "60"},
+}
 
 
 def cpu_seconds(pid: int) -> float:
@@ -82,10 +94,15 @@ def main() -> int:
     ap.add_argument("--seconds", type=float, default=30.0)
     ap.add_argument("--settle", type=float, default=5.0,
                     help="seconds to wait after the last process is serving")
+    ap.add_argument("--settings", default="default,no-shm,lean",
+                    help=f"comma-separated, of {', '.join(SETTINGS)}")
     args = ap.parse_args()
+    chosen = [x.strip() for x in args.settings.split(",") if x.strip()]
+    unknown = [x for x in chosen if x not in SETTINGS]
+    if unknown:
+        ap.error(f"unknown settings {', '.join(unknown)} (known: {', '.join(SETTINGS)})")
     cell = f"idle{uuid.uuid4().hex[:8]}"
-    home = Path(tempfile.mkdtemp(prefix="plugcell-idle-"))
-    env = {**os.environ, "PLUGCELL_HOME": str(home), "PYTHONUNBUFFERED": "1"}
+    base_env = {k: v for k, v in os.environ.items() if k not in ("PLUGCELL_SHM", "PLUGCELL_LEASE")}
     services = [[sys.executable, "-m", "plugcell", "serve", KINDS[i % len(KINDS)], "--cell",
                  cell, "--name", f"{KINDS[i % len(KINDS)].upper()}{i}"]
                 for i in range(args.services)]
@@ -93,14 +110,19 @@ def main() -> int:
     print(f"idle cell: {args.services} processes, Zenoh peer mode on loopback; "
           f"{platform.machine()}, Python {platform.python_version()}, {os.cpu_count()} cores, "
           f"load {os.getloadavg()[0]:.1f}")
-    print(f"{'':34s} {'started in s':>13} {'measured s':>11} {'CPU of one core':>16} "
-          f"{'per process':>12} {'busiest':>9}")
-    for label, commands in ((f"plugcell services ({', '.join(KINDS)})", services),
-                            ("bare Zenoh sessions (the floor)", bare)):
-        started, wall, used = measure(commands, env, args.seconds, args.settle)
-        total = sum(used) / wall
-        print(f"{label:34s} {started:13.1f} {wall:11.1f} {100 * total:15.2f}% "
-              f"{100 * total / len(used):11.3f}% {100 * max(used) / wall:8.3f}%", flush=True)
+    print(f"{'settings':9s} {'':34s} {'started in s':>13} {'measured s':>11} "
+          f"{'CPU of one core':>16} {'per process':>12} {'busiest':>9}")
+    for setting in chosen:
+        for label, commands in ((f"plugcell services ({', '.join(KINDS)})", services),
+                                ("bare Zenoh sessions (the floor)", bare)):
+            home = Path(tempfile.mkdtemp(prefix="plugcell-idle-"))
+            env = {**base_env, **SETTINGS[setting], "PLUGCELL_HOME": str(home),
+                   "PYTHONUNBUFFERED": "1"}
+            started, wall, used = measure(commands, env, args.seconds, args.settle)
+            total = sum(used) / wall
+            print(f"{setting:9s} {label:34s} {started:13.1f} {wall:11.1f} "
+                  f"{100 * total:15.2f}% {100 * total / len(used):11.3f}% "
+                  f"{100 * max(used) / wall:8.3f}%", flush=True)
     return 0
 
 

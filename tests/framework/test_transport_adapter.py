@@ -217,3 +217,75 @@ def test_only_the_framework_touches_zenoh_and_sessions() -> None:
 def test_the_exceptions_still_exist() -> None:
     for where in [*RAW_ZENOH, *OPENS_A_BARE_SESSION]:
         assert (SRC / where).is_file(), f"stale exception: {where}"
+
+
+# -- the settings an idle cell's cost depends on -------------------------------------------
+
+
+def test_lease_and_shared_memory_come_from_the_environment(
+        monkeypatch: pytest.MonkeyPatch) -> None:
+    monkeypatch.delenv("PLUGCELL_LEASE", raising=False)
+    monkeypatch.delenv("PLUGCELL_SHM", raising=False)
+    default = TransportConfig.from_env()
+    assert default.lease_s == 10.0 and default.shared_memory
+    conf = default.zenoh_config()  # Zenoh's own defaults
+    assert conf.get_json("transport/link/tx/lease") == "10000"
+    assert conf.get_json("transport/shared_memory/enabled") == "true"
+    monkeypatch.setenv("PLUGCELL_LEASE", "60")
+    monkeypatch.setenv("PLUGCELL_SHM", "0")
+    lean = TransportConfig.from_env()
+    assert lean.lease_s == 60.0 and not lean.shared_memory
+    conf = lean.zenoh_config()
+    assert conf.get_json("transport/link/tx/lease") == "60000"
+    assert conf.get_json("transport/shared_memory/enabled") == "false"
+
+
+@pytest.mark.parametrize(("text", "reason"), [
+    ("soon", "PLUGCELL_LEASE must be a number of seconds, got 'soon'"),
+    ("0.5", "PLUGCELL_LEASE must be between 1 and 3600 s, got 0.5"),
+    ("1e9", "PLUGCELL_LEASE must be between 1 and 3600 s, got 1e9"),
+])
+def test_a_bad_lease_is_refused_with_the_reason(
+        monkeypatch: pytest.MonkeyPatch, text: str, reason: str) -> None:
+    monkeypatch.setenv("PLUGCELL_LEASE", text)
+    with pytest.raises(ValueError) as caught:
+        TransportConfig.from_env()
+    assert str(caught.value) == reason
+
+
+def test_a_lean_cell_still_sees_a_killed_peer_leave_at_once(
+        monkeypatch: pytest.MonkeyPatch) -> None:
+    """With a long lease and no shared memory, a peer that dies still leaves at once:
+    its links close with its process (the lease only bounds a hung peer)."""
+    import subprocess
+    import sys
+
+    monkeypatch.setenv("PLUGCELL_LEASE", "120")
+    monkeypatch.setenv("PLUGCELL_SHM", "0")
+    cell = f"bus{uuid.uuid4().hex[:10]}"
+    watcher = Bus.connect(TransportConfig.from_env(), KeySpace(cell))
+    seen: list[tuple[Presence, bool]] = []
+    watcher.watch_presence(lambda p, joined: seen.append((p, joined)))
+    child = subprocess.Popen(
+        [sys.executable, "-c",
+         "import sys, time\n"
+         "from plugcell.framework.bus import Bus\n"
+         "from plugcell.framework.keys import KeySpace\n"
+         "from plugcell.framework.transport import TransportConfig\n"
+         f"bus = Bus.connect(TransportConfig.from_env(), KeySpace({cell!r}))\n"
+         "token = bus.announce('service', 'DOOMED', '0001')\n"
+         "print('up', flush=True)\n"
+         "time.sleep(600)\n"],
+        stdout=subprocess.PIPE, text=True)
+    try:
+        assert child.stdout is not None and child.stdout.readline().strip() == "up"
+        doomed = Presence("service", "DOOMED", "0001")
+        assert until(lambda: (doomed, True) in seen, 10.0)
+        child.kill()
+        killed = time.monotonic()
+        assert until(lambda: (doomed, False) in seen, 10.0)
+        assert time.monotonic() - killed < 10.0  # far below the 120 s lease
+    finally:
+        child.kill()
+        child.wait()
+        watcher.close()

@@ -29,6 +29,9 @@ from collections.abc import Iterable
 from pathlib import Path
 from typing import Any
 
+#: Seconds between two WAL checkpoints while commits come (none while idle).
+CHECKPOINT_PERIOD_S = 0.5
+
 SCHEMA_VERSION = 2
 """2: ``updates`` has no primary key (version 1 had one on (recipient, sender,
 identifier, seq)).  Its b-tree cost every row a second insert — a quarter of what
@@ -117,6 +120,8 @@ class Journal:
             raise
         self._pending: list[tuple[Any, ...]] = []
         self._stop = threading.Event()
+        self._written = threading.Event()
+        """Set by each commit, cleared by the checkpointer: an idle journal sleeps."""
         self._checkpointer = threading.Thread(
             target=self._checkpoint_loop, name=f"journal-checkpoint-{owner}", daemon=True
         )
@@ -197,6 +202,7 @@ class Journal:
         self.flush()
         if self._db.in_transaction:
             self._db.commit()
+            self._written.set()
 
     def recover(self, reason: str) -> int:
         """Close processes a previous incarnation left unfinished with a Failed update.
@@ -236,6 +242,7 @@ class Journal:
     def close(self) -> None:
         """Commit, checkpoint and close."""
         self._stop.set()
+        self._written.set()  # wake the checkpointer so that it sees the stop
         self._checkpointer.join(timeout=5)
         with contextlib.suppress(sqlite3.Error):
             self.commit()
@@ -246,9 +253,16 @@ class Journal:
             self._lock_fd = None
 
     def _checkpoint_loop(self) -> None:
+        """Copy the WAL back into the database (a PASSIVE checkpoint, never blocking a
+        writer) at most every :data:`CHECKPOINT_PERIOD_S` while commits come, and not at
+        all while none do: an idle service's journal does not wake its process."""
         db = _connect(self.path)
         try:
-            while not self._stop.wait(0.5):
+            while True:
+                self._written.wait()
+                if self._stop.wait(CHECKPOINT_PERIOD_S):
+                    break
+                self._written.clear()
                 with contextlib.suppress(sqlite3.Error):
                     db.execute("PRAGMA wal_checkpoint(PASSIVE)")
         finally:

@@ -108,6 +108,8 @@ class ProcessScheduler:
         self._cmd_waiter: asyncio.Future[str] | None = None
         self._handler_task: asyncio.Task[None] | None = None
         self._heartbeat_task: asyncio.Task[None] | None = None
+        self._queued = asyncio.Event()
+        """Set when a process is posted: the heartbeat sleeps while the queue is empty."""
 
     # -- life cycle ------------------------------------------------------------------
 
@@ -152,6 +154,7 @@ class ProcessScheduler:
         """Queue an admitted process (``ProcessQueue.Post`` of the CreateProcessHandler)."""
         self.known[(entry.sender, entry.identifier)] = entry
         self.queue.post(entry)
+        self._queued.set()
 
     def sender_lost(self, name: str, instance: str) -> None:
         """A sender's incarnation left the cell: its queued processes end Failed, its
@@ -200,8 +203,13 @@ class ProcessScheduler:
     async def _queued_heartbeat(self) -> None:
         """Tell the senders of waiting processes, every :data:`QUEUED_HEARTBEAT_S`, that
         their process is still queued (the process's seq advances; the journal keeps
-        the state changes only)."""
+        the state changes only).  While nothing waits it sleeps until a process is
+        posted: an idle service does not wake."""
         while not self.closing:
+            if not len(self.queue):
+                self._queued.clear()
+                await self._queued.wait()
+                continue
             await asyncio.sleep(QUEUED_HEARTBEAT_S)
             now = time.time_ns()
             for entry in self.queue:

@@ -14,7 +14,12 @@ machines does anyway.
 
 Environment: ``PLUGCELL_CONNECT`` and ``PLUGCELL_LISTEN`` (comma-separated
 endpoints), ``PLUGCELL_MULTICAST`` (``0`` to disable scouting), ``PLUGCELL_SHM``
-(``0`` to disable shared memory).
+(``0`` to disable shared memory), ``PLUGCELL_LEASE`` (seconds a silent link is
+trusted; Zenoh's 10 s by default).
+
+What an idle cell costs is mostly these settings (docs/framework.md, "An idle cell"):
+shared memory wakes each process ten times a second (Zenoh's SHM watchdog), and each
+link sends keep-alives every quarter lease.
 
 Security (docs/security.md): ``PLUGCELL_TLS_CA``, ``PLUGCELL_TLS_CERT``,
 ``PLUGCELL_TLS_KEY`` (PEM files from ``plugcell certs``) switch the links to TLS with
@@ -41,7 +46,20 @@ import zenoh
 from plugcell.framework.security import tls_settings, usrpwd_settings, zenoh_acl
 
 LOOPBACK_LISTEN = ("tcp/127.0.0.1:0",)
+#: Zenoh's own default lease (transport/link/tx/lease), seconds.
+ZENOH_LEASE_S = 10.0
 ROUTER_LISTEN = ("tcp/0.0.0.0:7447",)
+
+
+def parse_lease(text: str, what: str = "lease") -> float:
+    """A lease in seconds from ``text``: a number in [1, 3600] (ValueError with why)."""
+    try:
+        value = float(text)
+    except ValueError:
+        raise ValueError(f"{what} must be a number of seconds, got {text!r}") from None
+    if not 1.0 <= value <= 3600.0:
+        raise ValueError(f"{what} must be between 1 and 3600 s, got {text}")
+    return value
 
 
 def _split(value: str | None) -> tuple[str, ...]:
@@ -58,6 +76,11 @@ class TransportConfig:
     multicast: bool = True
     multicast_interface: str = "127.0.0.1"
     shared_memory: bool = True
+    lease_s: float = ZENOH_LEASE_S
+    """How long a link may stay silent before Zenoh declares its peer gone; keep-alives
+    go every quarter of it on every link (an idle cost — docs/framework.md, "An idle
+    cell").  A process that dies closes its links at once whatever the lease; the lease
+    bounds the detection of a peer that hangs or a network that breaks."""
     extra: dict[str, object] = field(default_factory=dict)
     """Further Zenoh configuration, ``{"json/path": value}`` (inserted as JSON5)."""
     tls_ca: str = ""
@@ -122,6 +145,9 @@ class TransportConfig:
             cfg = replace(cfg, multicast=False)
         if os.environ.get("PLUGCELL_SHM", "1") in ("0", "false", "no"):
             cfg = replace(cfg, shared_memory=False)
+        lease = os.environ.get("PLUGCELL_LEASE")
+        if lease:
+            cfg = replace(cfg, lease_s=parse_lease(lease, "PLUGCELL_LEASE"))
         cfg = _security_from_env(cfg)
         if connect:
             cfg = replace(cfg, connect=tuple(connect))
@@ -142,6 +168,8 @@ class TransportConfig:
             conf.insert_json5("scouting/multicast/interface", json.dumps(self.multicast_interface))
         if not self.shared_memory:
             conf.insert_json5("transport/shared_memory/enabled", "false")
+        if self.lease_s != ZENOH_LEASE_S:
+            conf.insert_json5("transport/link/tx/lease", json.dumps(round(self.lease_s * 1000)))
         for path, value in self._security_settings().items():
             conf.insert_json5(path, json.dumps(value))
         for path, value in self.extra.items():
