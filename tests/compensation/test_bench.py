@@ -3,7 +3,7 @@
 
 from __future__ import annotations
 
-from plugcell.compensation.bench import format_report, run
+from plugcell.bench.compensation import format_report, run
 
 
 def test_bench_small():

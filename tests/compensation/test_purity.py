@@ -9,7 +9,7 @@ import sys
 
 def test_compensation_imports_no_twin_or_framework():
     code = (
-        "import sys, plugcell.compensation, plugcell.compensation.bench\n"
+        "import sys, plugcell.compensation\n"
         "bad = [m for m in sys.modules if m.startswith(('plugcell.twin', 'plugcell.framework',"
         " 'plugcell.services', 'plugcell.experiments', 'plugcell.io'))]\n"
         "print(','.join(bad))\n"

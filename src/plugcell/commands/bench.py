@@ -50,9 +50,9 @@ def run(args: argparse.Namespace) -> int:
 def run_compensation(args: argparse.Namespace) -> int:
     import json
 
+    from plugcell.bench.compensation import format_report
+    from plugcell.bench.compensation import run as bench
     from plugcell.cli import CommandError
-    from plugcell.compensation.bench import format_report
-    from plugcell.compensation.bench import run as bench
 
     if args.targets < 1:
         raise CommandError(f"--targets must be positive, got {args.targets}")

@@ -1,0 +1,129 @@
+"""The packages of plugcell in layers, and no import upward (read with ``ast``, nothing
+imported — so an import inside a function counts as much as one at the top).
+
+====================  =====================================================  ===========
+layer                 packages / modules                                     may import
+====================  =====================================================  ===========
+math                  kinematics, metrology, calibration, compensation       math
+io                    io (file formats: robots, URDF, measurements, ...)     math, io
+framework             framework (Zenoh, the service base, the journal)       framework
+sim                   twin, services/sim, controller/sim_* (the simulated     all but apps
+                      truth, instruments and controllers)
+devices               services, opcua, controller (the robot language and    all but apps
+                      the robot controller link), robots (description files)
+apps                  cli, commands, ui, experiments, bench, every            everything
+                      ``__main__`` module (a program, not a library)
+====================  =====================================================  ===========
+
+The math never reads a file, speaks Zenoh or knows a device; the framework knows no
+device; nothing below the apps calls a command line.
+"""
+
+from __future__ import annotations
+
+import ast
+from pathlib import Path
+
+import pytest
+
+SRC = Path(__file__).resolve().parents[1] / "src" / "plugcell"
+
+MATH = {"kinematics", "metrology", "calibration", "compensation"}
+APPS = {"cli", "commands", "ui", "experiments", "bench"}
+DEVICES = {"services", "opcua", "controller", "robots"}
+#: What each layer must not import.
+FORBIDDEN = {
+    "math": {"io", "framework", "sim", "devices", "apps"},
+    "io": {"framework", "sim", "devices", "apps"},
+    "framework": {"math", "io", "sim", "devices", "apps"},
+    "sim": {"apps"},
+    "devices": {"apps"},
+    "apps": set(),
+}
+
+
+def layer_of(module: str) -> str | None:
+    """The layer of ``plugcell.…`` module ``module`` (None: not plugcell's)."""
+    parts = module.split(".")
+    if parts[0] != "plugcell":
+        return None
+    if len(parts) == 1:
+        return "apps"  # the package itself: its version, nothing else
+    top = parts[1]
+    if parts[-1] == "__main__" or top in APPS or top == "__main__":
+        return "apps"
+    if top in MATH:
+        return "math"
+    if top in ("io", "framework"):
+        return top
+    if top == "twin" or (top == "services" and parts[2:3] == ["sim"]) or (
+            top == "controller" and len(parts) > 2 and parts[2].startswith("sim_")):
+        return "sim"
+    if top in DEVICES:
+        return "devices"
+    raise AssertionError(f"{module}: no layer — add its package to tests/test_layering.py")
+
+
+def upward_imports(source: str, module: str) -> list[str]:
+    """Every import of ``source`` (module ``module``) its layer forbids."""
+    mine = layer_of(module)
+    assert mine is not None
+    found = []
+    for node in ast.walk(ast.parse(source)):
+        if isinstance(node, ast.Import):
+            targets = [a.name for a in node.names]
+        elif isinstance(node, ast.ImportFrom) and node.level == 0 and node.module:
+            targets = [node.module]
+        else:
+            continue
+        for target in targets:
+            theirs = layer_of(target)
+            if theirs in FORBIDDEN[mine]:
+                found.append(f"{module}:{node.lineno} ({mine}) imports {target} ({theirs})")
+    return found
+
+
+def modules() -> list[tuple[str, Path]]:
+    out = []
+    for path in sorted(SRC.rglob("*.py")):
+        parts = path.relative_to(SRC).with_suffix("").parts
+        if parts[-1] == "__init__":
+            parts = parts[:-1]
+        out.append((".".join(("plugcell", *parts)), path))
+    return out
+
+
+def test_no_module_imports_upward() -> None:
+    offences = [o for module, path in modules()
+                for o in upward_imports(path.read_text(encoding="utf-8"), module)]
+    assert offences == []
+
+
+def test_every_package_has_a_layer() -> None:
+    for module, _ in modules():
+        assert layer_of(module) is not None
+
+
+@pytest.mark.parametrize(("module", "source", "offence"), [
+    ("plugcell.calibration.fit", "from plugcell.io.robots import load_robot\n",
+     "plugcell.calibration.fit:1 (math) imports plugcell.io.robots (io)"),
+    ("plugcell.kinematics.forward", "def f():\n    import plugcell.framework.wire\n",
+     "plugcell.kinematics.forward:2 (math) imports plugcell.framework.wire (framework)"),
+    ("plugcell.framework.service", "from plugcell.services.camera import CameraService\n",
+     "plugcell.framework.service:1 (framework) imports plugcell.services.camera (devices)"),
+    ("plugcell.services.robot.service", "def main():\n    from plugcell.cli import main\n",
+     "plugcell.services.robot.service:2 (devices) imports plugcell.cli (apps)"),
+    ("plugcell.twin.robot", "from plugcell.commands.twin import run\n",
+     "plugcell.twin.robot:1 (sim) imports plugcell.commands.twin (apps)"),
+])
+def test_a_wrong_import_is_reported(module: str, source: str, offence: str) -> None:
+    assert upward_imports(source, module) == [offence]
+
+
+def test_programs_and_lower_layers_may_import_what_they_need() -> None:
+    assert upward_imports("from plugcell.cli import main\n",
+                          "plugcell.services.robot.__main__") == []
+    assert upward_imports("from plugcell.kinematics import forward\nimport numpy\n",
+                          "plugcell.io.robots") == []
+    assert upward_imports("from plugcell.framework.service import GenericDevice\n",
+                          "plugcell.services.camera") == []
