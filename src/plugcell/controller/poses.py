@@ -2,8 +2,9 @@
 
 A PDL POSITION is x, y, z in millimetres and Comau ZYZ Euler angles a, b, c in
 degrees (thesis eq. A.4); plugcell's kinematics works in metres and radians with
-4×4 transforms.  Used by the simulated controller (its arm) and by the robot
-service (the joint increment of 8.3.2).
+4×4 transforms — the conversion is :mod:`plugcell.io.units` (the one units boundary);
+this module adds the check a PDL position needs.  Used by the simulated controller (its
+arm) and by the robot service (the joint increment of 8.3.2).
 """
 
 from __future__ import annotations
@@ -12,7 +13,7 @@ from collections.abc import Sequence
 
 import numpy as np
 
-from plugcell.kinematics import matrix_to_pose, pose_to_matrix
+from plugcell.io.units import pose_from_robot, robot_from_pose
 
 __all__ = ["pose_matrix", "pose_values"]
 
@@ -25,12 +26,10 @@ def pose_matrix(values: Sequence[float]) -> np.ndarray:
     v = np.asarray([float(x) for x in values], dtype=float)
     if v.shape != (6,) or not np.all(np.isfinite(v)):
         raise ValueError(f"a position needs 6 finite numbers x, y, z, a, b, c; got {list(values)}")
-    return pose_to_matrix(v[:3] / 1000.0, np.radians(v[3:]), "zyz")
+    return pose_from_robot(v, "euler")
 
 
 def pose_values(T: np.ndarray) -> tuple[float, float, float, float, float, float]:
     """4×4 transform in metres → ``(x, y, z, a, b, c)`` (mm, ZYZ degrees)."""
-    xyz, angles = matrix_to_pose(np.asarray(T, dtype=float), "zyz")
-    x, y, z = (float(c) * 1000.0 for c in xyz)
-    a, b, c = (float(d) for d in np.degrees(angles))
+    x, y, z, a, b, c = (float(v) for v in robot_from_pose(T, "euler"))
     return (x, y, z, a, b, c)

@@ -130,8 +130,9 @@ def _sequence(value: Any, what: str) -> Sequence[Any]:
 
 
 def position_from_matrix(T: Any, unit_mm: float = MATRIX_UNIT_MM) -> Position:
-    """A 4×4 homogeneous transform (translation in units of ``unit_mm`` mm) → POSITION."""
-    from plugcell.kinematics.rotations import matrix_to_zyz
+    """A 4×4 homogeneous transform (translation in units of ``unit_mm`` mm) → POSITION
+    (the conversion: :func:`plugcell.io.units.robot_from_pose`, Z-Y-Z)."""
+    from plugcell.io.units import MM_PER_M, robot_from_pose
 
     M = np.asarray(T, dtype=float)
     if M.shape != (4, 4) or not np.all(np.isfinite(M)):
@@ -141,9 +142,10 @@ def position_from_matrix(T: Any, unit_mm: float = MATRIX_UNIT_MM) -> Position:
     R = M[:3, :3]
     if not np.allclose(R.T @ R, np.eye(3), atol=1e-6) or np.linalg.det(R) < 0:
         raise ConversionError("the rotation part of the pose matrix is not a rotation")
-    a, b, c = np.degrees(matrix_to_zyz(R))
-    x, y, z = M[:3, 3] * unit_mm
-    return Position(float(x), float(y), float(z), float(a), float(b), float(c))
+    x, y, z, a, b, c = robot_from_pose(M, "euler")
+    scale = unit_mm / MM_PER_M  # robot_from_pose reads the translation as metres
+    return Position(float(x * scale), float(y * scale), float(z * scale),
+                    float(a), float(b), float(c))
 
 
 def _position(value: Any) -> Position:

@@ -16,7 +16,9 @@ euler2tr  tr2euler  Euler Z-Y-Z (Comau): Rz(A)·Ry(B)·Rz(C)
 prj2tr    tr2prj    projective angles (defined in rotations.py)
 ========  ========  ===================================================
 
-Pure functions on numpy arrays; inside they work in metres and radians.
+Pure functions on numpy arrays; inside they work in metres and radians.  The
+conversions themselves are :mod:`plugcell.io.units` (the one units boundary); this module
+names them as the tracker's options do and raises :class:`FrameError`.
 """
 
 from __future__ import annotations
@@ -26,13 +28,11 @@ from dataclasses import dataclass, field
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from plugcell.kinematics.rotations import matrix_to_pose, pose_to_matrix
+from plugcell.io.units import CONVENTIONS, UnitsError, pose_from_robot, robot_from_pose
 from plugcell.metrology import invert_transform
 
 Array = NDArray[np.float64]
 
-#: Thesis option name → plugcell.kinematics.rotations convention.
-CONVENTIONS = {"rpy": "rpy", "euler": "zyz", "prj": "prj"}
 #: The convention of a requester that has not said otherwise: Comau's (thesis 7.4).
 DEFAULT_CONVENTION = "euler"
 TO_MATRIX = {f"{k}2tr": k for k in CONVENTIONS}
@@ -67,21 +67,15 @@ def _convention(option: str, table: dict[str, str], default: str) -> str:
 
 def matrix_from_vector(v: ArrayLike, convention: str) -> Array:
     """``x, y, z`` (mm), three angles (deg) → 4×4 (metres): rpy2tr / euler2tr / prj2tr."""
-    a = np.asarray(v, dtype=float).reshape(-1)
-    if a.shape != (6,):
-        raise FrameError(f"expected 6 numbers (x, y, z mm, 3 angles deg), got {a.size}")
-    if not np.all(np.isfinite(a)):
-        raise FrameError("values must be finite")
     try:
-        return pose_to_matrix(a[:3] * 1e-3, np.deg2rad(a[3:]), CONVENTIONS[convention])
-    except ValueError as exc:  # projective angles outside their domain
+        return pose_from_robot(v, convention)
+    except UnitsError as exc:
         raise FrameError(str(exc)) from None
 
 
 def vector_from_matrix(T: ArrayLike, convention: str) -> Array:
     """4×4 (metres) → ``x, y, z`` (mm), three angles (deg): tr2rpy / tr2euler / tr2prj."""
-    xyz, angles = matrix_to_pose(np.asarray(T, dtype=float), CONVENTIONS[convention])
-    return np.concatenate([xyz * 1e3, np.rad2deg(angles)])
+    return robot_from_pose(T, convention)
 
 
 @dataclass

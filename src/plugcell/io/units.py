@@ -1,0 +1,106 @@
+"""Robot units ↔ SI: the one boundary between the two.
+
+Robot controllers, their programs, tracker software and people speak millimetres and
+degrees, and write a pose as six numbers — ``x, y, z`` in mm and three angles in degrees
+in a named convention.  Inside plugcell everything is metres, radians and 4×4
+homogeneous transforms.  This module turns one into the other::
+
+    T(x, y, z, a, b, c) = | R(a°, b°, c°)   10⁻³·(x, y, z)ᵀ |
+                          | 0   0   0       1               |
+
+with the rotation ``R`` of the convention (:mod:`plugcell.kinematics.rotations`):
+
+=========  ==================================================  ===========================
+name       R(a, b, c)                                          used by
+=========  ==================================================  ===========================
+``euler``  Z-Y-Z Euler angles: Rz(a)·Ry(b)·Rz(c)               Comau PDL POSITION (A.4),
+                                                               the tracker's ``euler2tr``
+``rpy``    roll-pitch-yaw about fixed X, Y, Z: Rz(c)·Ry(b)·Rx(a)  the tracker's ``rpy2tr``
+``prj``    projective angles (rotations.py)                    the tracker's ``prj2tr``
+=========  ==================================================  ===========================
+
+The robot service, the simulated controller, the tracker service, the compute service
+and the web UI all convert here (``controller/poses.py``, ``services/tracker/frames.py``
+and ``controller/language/conversion.py`` only add their own checks and errors).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from plugcell.kinematics.rotations import matrix_to_pose, pose_to_matrix
+
+Array = NDArray[np.float64]
+
+#: Metres per millimetre, and millimetres per metre.
+M_PER_MM = 1e-3
+MM_PER_M = 1e3
+#: Convention name (as robots and the tracker's options say it) → rotations.py's name.
+CONVENTIONS = {"rpy": "rpy", "euler": "zyz", "prj": "prj"}
+#: A Comau robot's convention: PDL's POSITION (thesis A.4).
+ROBOT_CONVENTION = "euler"
+
+__all__ = [
+    "CONVENTIONS",
+    "MM_PER_M",
+    "M_PER_MM",
+    "ROBOT_CONVENTION",
+    "UnitsError",
+    "pose_from_robot",
+    "robot_from_pose",
+]
+
+
+class UnitsError(ValueError):
+    """Six numbers that are no pose (the message says why)."""
+
+
+def pose_from_robot(values: ArrayLike, convention: str = ROBOT_CONVENTION) -> Array:
+    """``x, y, z`` (mm), three angles (deg) in ``convention`` → 4×4 transform (m).
+
+    Parameters
+    ----------
+    values
+        Six numbers, shape ``(6,)`` (any shape of six elements is flattened).
+    convention
+        ``"euler"`` (Z-Y-Z), ``"rpy"`` or ``"prj"`` (module doc).
+
+    Returns
+    -------
+    ndarray, shape (4, 4)
+        The homogeneous transform, translation in metres.
+
+    Raises
+    ------
+    UnitsError
+        Not six finite numbers, or angles outside the convention's domain.
+    """
+    a = np.asarray(values, dtype=float).reshape(-1)
+    if a.shape != (6,):
+        raise UnitsError(f"expected 6 numbers (x, y, z mm, 3 angles deg), got {a.size}")
+    if not np.all(np.isfinite(a)):
+        raise UnitsError("values must be finite")
+    try:
+        return pose_to_matrix(a[:3] * M_PER_MM, np.deg2rad(a[3:]), CONVENTIONS[convention])
+    except ValueError as exc:  # projective angles outside their domain
+        raise UnitsError(str(exc)) from None
+
+
+def robot_from_pose(T: ArrayLike, convention: str = ROBOT_CONVENTION) -> Array:
+    """4×4 transform (m) → ``x, y, z`` (mm), three angles (deg) in ``convention``.
+
+    Parameters
+    ----------
+    T
+        Homogeneous transform, shape ``(4, 4)``, translation in metres.
+    convention
+        ``"euler"`` (Z-Y-Z), ``"rpy"`` or ``"prj"`` (module doc).
+
+    Returns
+    -------
+    ndarray, shape (6,)
+        ``x, y, z`` in millimetres, then the three angles in degrees.
+    """
+    xyz, angles = matrix_to_pose(np.asarray(T, dtype=float), CONVENTIONS[convention])
+    return np.concatenate([np.asarray(xyz) * MM_PER_M, np.rad2deg(angles)])
