@@ -55,6 +55,8 @@ from plugcell.calibration.linalg import least_squares
 from plugcell.calibration.model import ErrorModel, PoseBatch, fold_frames
 from plugcell.calibration.result import CalibrationResult, IterationRecord
 from plugcell.calibration.statistics import (
+    AccuracyStats,
+    ParameterStatistics,
     PoseResiduals,
     accuracy,
     parameter_statistics,
@@ -273,13 +275,87 @@ class Calibrator:
     def fit(self, data: Any, *, validation: Any | None = None) -> CalibrationResult:
         """Identify the parameters from ``data`` (a MeasurementSet or CalibrationData).
 
-        ``validation``: optional independent poses, evaluated with the result.
+        The stages, each a method below: the references the model needs (payload,
+        temperature) → initial BASE/PROBE (:meth:`initial_frames`) → the error model
+        (:meth:`_error_model`) → BASE/PROBE fitted on the nominal robot
+        (:meth:`_nominal_fit`) → which parameters these poses identify
+        (:meth:`_identifiable`) → the iterations (:meth:`_iterate`) → diagnostics of
+        the fit (:meth:`_diagnose`).
+
+        Parameters
+        ----------
+        data
+            The calibration poses: joint readings ``q`` (n, n_readings), rad; measured
+            positions (n, 3) or poses (n, 4, 4), m; payload (n,), kg.
+        validation
+            Optional independent poses of the same form, evaluated with the result.
+
+        Returns
+        -------
+        CalibrationResult
+            The identified model, its statistics, residuals and warnings.
         """
         t0 = time.perf_counter()
         data = self._coerce(data)
-        cfg = self.config
         warnings: list[str] = []
-        payloads = np.unique(data.payload_kg)
+        m_ref, t_ref = self._references(data, warnings)
+        base0, probe0, rms0 = self.initial_frames(data)
+        self._say("frames", 0, 1, f"initial BASE/PROBE: rms misfit {rms0 * 1e3:.3f} mm")
+        model = self._error_model(base0, probe0, m_ref, t_ref)
+        batch = model.batch(data.q, data.payload_kg, data.temperature_c)
+        problem = _Problem(model, data, batch, self.rotation_weight)
+        nominal = self._nominal_fit(problem, model, warnings)
+        nominal_poses = nominal.predict_batch(batch)
+        before = self._check_nominal(data, nominal_poses)
+        structural, on_data, jac0 = self._identifiable(problem, nominal, warnings)
+        keys = list(jac0.keys)
+        final, history, converged, weights, jac = self._iterate(
+            problem, nominal, keys, "identify", warnings, loss=self.loss, jac=jac0
+        )
+        if jac is None:
+            jac = identification_jacobian(final, batch, keys)
+        stats, residuals = self._diagnose(problem, nominal_poses, jac, weights, history,
+                                          converged, warnings)
+        result = CalibrationResult(
+            config=self.config,
+            robot=self.desc.name,
+            model=final,
+            nominal=nominal,
+            keys=tuple(keys),
+            identifiability=structural,
+            data_identifiability=on_data,
+            iterations=len(history),
+            converged=converged,
+            history=tuple(history),
+            statistics=stats,
+            calibration=residuals.accuracy("after"),
+            calibration_before=before,
+            calibration_residuals=residuals,
+            six_dof=data.six_dof,
+            n_poses=len(data),
+            pose_weights=weights,
+            warnings=tuple(warnings),
+            elapsed_s=time.perf_counter() - t0,
+            validity=ValidityRegion.from_poses(
+                final, data.q, data.payload_kg,
+                targets=(np.linalg.inv(final.base()) @ jac.poses)[:, :3, 3]),
+            settings={"method": self.method, "loss": self.loss, "loss_scale": self.loss_scale,
+                      "tol": self.tol,
+                      "rotation_weight": self.rotation_weight,
+                      "condition_limit": self.condition_limit,
+                      "max_iterations": self.max_iterations, "harmonics": self.harmonics,
+                      "thermal": self.thermal},
+        )
+        if validation is not None:
+            result = result.with_validation(self._coerce(validation))
+        return result
+
+    def _references(self, data: CalibrationData, warnings: list[str]) -> tuple[float, float]:
+        """The payload m_ref (kg) the payload constants refer to — the given one, else
+        the heaviest of the data — and the temperature T_ref (°C) the thermal term
+        expands about, the mean of the data's (0 without the term); refuses a model
+        that needs what the data lack."""
+        cfg = self.config
         m_ref = float(self.payload_ref_kg if self.payload_ref_kg is not None
                       else data.payload_kg.max())
         if cfg.payload and m_ref <= 0:
@@ -290,7 +366,6 @@ class Calibrator:
             )
         if not data.six_dof and self.rotation_weight != 1.0:
             warnings.append("rotation_weight ignored: the data are positions only")
-
         t_ref = 0.0
         if self.thermal:
             if data.temperature_c is None:
@@ -300,8 +375,13 @@ class Calibrator:
             if np.ptp(data.temperature_c) < 0.1:
                 warnings.append(f"thermal term: the temperatures span only "
                                 f"{np.ptp(data.temperature_c):.2f} K")
-        base0, probe0, rms0 = self.initial_frames(data)
-        self._say("frames", 0, 1, f"initial BASE/PROBE: rms misfit {rms0 * 1e3:.3f} mm")
+        return m_ref, t_ref
+
+    def _error_model(self, base0: Array, probe0: Array, m_ref: float,
+                     t_ref: float) -> ErrorModel:
+        """The error model of the configuration (:mod:`.configs`) at the nominal robot,
+        with the initial BASE (4×4, m) and PROBE (4×4, m)."""
+        cfg = self.config
         try:
             model = ErrorModel.create(self.desc, cfg.family, gravity=cfg.gravity,
                                       payload=cfg.payload, base=base0, probe=probe0,
@@ -316,26 +396,32 @@ class Calibrator:
                 f"{self.desc.name!r} has neither a parallelogram nor link masses in its "
                 "description"
             )
-        batch = model.batch(data.q, data.payload_kg, data.temperature_c)
-        problem = _Problem(model, data, batch, self.rotation_weight)
+        return model
 
-        # ---- nominal frames fit (BASE and PROBE on the nominal robot), unless given
-        if self.base is None or self.probe is None:
-            s = model.structure
-            fl = s.desc.flange
-            frame_keys = [k for k in (
-                f"a{s.base_name}", f"b{s.base_name}", f"alpha{s.base_name}",
-                f"beta{s.base_name}", f"theta{s.base_name}", f"d{s.base_name}", f"theta{fl}",
-                f"d{fl}", f"a{fl}", f"alpha{fl}", f"theta{s.probe_name}", f"d{s.probe_name}")
-                if k in model.space]
-            jac = identification_jacobian(model, batch, frame_keys)
-            fa = analyse(_jacobian_rows(problem, jac.H).reshape(-1, len(frame_keys)), frame_keys)
-            fitted, *_ = self._iterate(problem, model, list(fa.kept), "nominal", warnings,
-                                       loss="linear")
-            nominal = fold_frames(fitted)
-        else:
-            nominal = model
-        nominal_poses = nominal.predict_batch(batch)
+    def _nominal_fit(self, problem: _Problem, model: ErrorModel,
+                     warnings: list[str]) -> ErrorModel:
+        """BASE and PROBE fitted on the nominal robot, unless both were given: the
+        least-squares fit min Σᵢ ‖r_i(g)‖² over the frame parameters g that these poses
+        identify (the base link's and flange's DH/Hayati parameters, the probe's
+        θ, d), folded back into the two frames (:func:`~.model.fold_frames`)."""
+        if self.base is not None and self.probe is not None:
+            return model
+        s = model.structure
+        fl = s.desc.flange
+        frame_keys = [k for k in (
+            f"a{s.base_name}", f"b{s.base_name}", f"alpha{s.base_name}",
+            f"beta{s.base_name}", f"theta{s.base_name}", f"d{s.base_name}", f"theta{fl}",
+            f"d{fl}", f"a{fl}", f"alpha{fl}", f"theta{s.probe_name}", f"d{s.probe_name}")
+            if k in model.space]
+        jac = identification_jacobian(model, problem.batch, frame_keys)
+        fa = analyse(_jacobian_rows(problem, jac.H).reshape(-1, len(frame_keys)), frame_keys)
+        fitted, *_ = self._iterate(problem, model, list(fa.kept), "nominal", warnings,
+                                   loss="linear")
+        return fold_frames(fitted)
+
+    def _check_nominal(self, data: CalibrationData, nominal_poses: Array) -> AccuracyStats:
+        """The accuracy of the nominal robot in its fitted frames; refuses measurements
+        that cannot be of this robot (mean position error > :data:`MISMATCH_M`)."""
         before = accuracy(data, nominal_poses)
         if before.position.norm.mean > MISMATCH_M:
             raise DivergenceError(
@@ -345,10 +431,21 @@ class Calibrator:
             )
         self._say("frames", 1, 1,
                   f"nominal: mean position error {before.position.norm.mean * 1e3:.3f} mm")
+        return before
 
-        # ---- identifiability
-        mixed = len(payloads) > 1
-        structural = self._structural(nominal, data, mixed)
+    def _identifiable(
+        self, problem: _Problem, nominal: ErrorModel, warnings: list[str]
+    ) -> tuple[Identifiability, Identifiability, JacobianResult]:
+        """Which parameters to identify: the structural analysis of the model (or the
+        ``parameters`` asked for), then the analysis on these poses' weighted
+        identification Jacobian H (rows: poses × 3 or 6, columns: parameters) — a column
+        within ``rank_tol`` of the span of the others, or removed by the condition rule
+        κ(H) ≤ limit (eq. 4.10), is dropped with a warning.  Refuses fewer equations
+        than parameters.  Returns both analyses and the Jacobian of the kept columns at
+        the nominal model."""
+        data, model = problem.data, problem.model
+        cfg = self.config
+        structural = self._structural(nominal, data, len(np.unique(data.payload_kg)) > 1)
         if self.parameters is not None:
             unknown = [k for k in self.parameters if k not in model.space]
             if unknown:
@@ -357,7 +454,7 @@ class Calibrator:
             keys = list(self.parameters)
         else:
             keys = list(structural.kept)
-        jac = identification_jacobian(nominal, batch, keys)
+        jac = identification_jacobian(nominal, problem.batch, keys)
         Hd = _jacobian_rows(problem, jac.H).reshape(-1, len(keys))
         on_data = analyse(Hd, keys, rank_tol=self.rank_tol,
                           condition_limit=self.condition_limit)
@@ -377,20 +474,26 @@ class Calibrator:
             )
         if n_eq < EQUATIONS_PER_PARAMETER * len(keys):
             warnings.append(few_equations(len(data), data.rows, len(keys)))
-
-        # ---- identification
         cols = [jac.keys.index(k) for k in keys]  # the kept columns of the data check
-        jac0 = JacobianResult(poses=jac.poses, H=jac.H[:, :, cols], keys=tuple(keys))
-        final, history, converged, weights, jac = self._iterate(
-            problem, nominal, keys, "identify", warnings, loss=self.loss, jac=jac0
-        )
-        if jac is None:
-            jac = identification_jacobian(final, batch, keys)
+        return structural, on_data, JacobianResult(poses=jac.poses, H=jac.H[:, :, cols],
+                                                   keys=tuple(keys))
+
+    def _diagnose(
+        self, problem: _Problem, nominal_poses: Array, jac: JacobianResult, weights: Array,
+        history: list[IterationRecord], converged: bool, warnings: list[str],
+    ) -> tuple[ParameterStatistics, PoseResiduals]:
+        """The statistics of the identified parameters from the weighted residuals
+        r_w = √w·r and Jacobian H_w = √w·H at the solution (σ̂² = ‖r_w‖²/(m − p),
+        cov = σ̂²·(H_wᵀH_w)⁻¹, :func:`~.statistics.parameter_statistics`), the pose
+        residuals before and after, and the warnings: κ > 100 (eq. 4.10), poses whose
+        residual exceeds max(median + 5·MAD, 3·median) (outliers or unmodelled
+        effects), no convergence — or a :class:`DivergenceError` if still moving."""
+        data = problem.data
+        keys = list(jac.keys)
         r = _residual_rows(problem, jac.poses) * np.sqrt(weights)[:, None]
         H = _jacobian_rows(problem, jac.H) * np.sqrt(weights)[:, None, None]
         stats = parameter_statistics(H.reshape(-1, len(keys)), r.reshape(-1))
         residuals = PoseResiduals.from_poses(data, nominal_poses, jac.poses)
-        after = residuals.accuracy("after")
         if stats.condition_number > 100:
             warnings.append(
                 f"ill-conditioned: κ = {stats.condition_number:.0f} > 100 (eq. 4.10); "
@@ -416,39 +519,7 @@ class Calibrator:
         if not converged:
             warnings.append(
                 f"not converged in {self.max_iterations} iterations (‖Δg‖ ≥ {self.tol:g})")
-        result = CalibrationResult(
-            config=self.config,
-            robot=self.desc.name,
-            model=final,
-            nominal=nominal,
-            keys=tuple(keys),
-            identifiability=structural,
-            data_identifiability=on_data,
-            iterations=len(history),
-            converged=converged,
-            history=tuple(history),
-            statistics=stats,
-            calibration=after,
-            calibration_before=before,
-            calibration_residuals=residuals,
-            six_dof=data.six_dof,
-            n_poses=len(data),
-            pose_weights=weights,
-            warnings=tuple(warnings),
-            elapsed_s=time.perf_counter() - t0,
-            validity=ValidityRegion.from_poses(
-                final, data.q, data.payload_kg,
-                targets=(np.linalg.inv(final.base()) @ jac.poses)[:, :3, 3]),
-            settings={"method": self.method, "loss": self.loss, "loss_scale": self.loss_scale,
-                      "tol": self.tol,
-                      "rotation_weight": self.rotation_weight,
-                      "condition_limit": self.condition_limit,
-                      "max_iterations": self.max_iterations, "harmonics": self.harmonics,
-                      "thermal": self.thermal},
-        )
-        if validation is not None:
-            result = result.with_validation(self._coerce(validation))
-        return result
+        return stats, residuals
 
     def _structural(self, model: ErrorModel, data: CalibrationData, mixed: bool) -> Identifiability:
         pos_only = not data.six_dof
