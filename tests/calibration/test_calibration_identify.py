@@ -284,3 +284,37 @@ def test_refit_after_the_tracker_moved_honours_the_rotation_weight(h4, full_trut
     assert refit.validation.orientation is not None  # still reported, from 6-DOF data
     with pytest.raises(CalibrationError, match="rotation_weight"):
         res.evaluate(val_moved, refit_base=True, rotation_weight=float("nan"))
+
+
+def test_scipy_least_squares_finds_what_gauss_newton_finds(h4):
+    """``method="least-squares"`` (SciPy's trust-region reflective, x_scale="jac", the
+    analytic Jacobian) reaches the same minimum as the thesis's Gauss–Newton, and its
+    robust loss keeps outliers out as the IRLS weights do."""
+    truth = _truth(h4, "loop", gravity=False, payload=False, seed=9)
+    clean = _data(truth, 80, 10, payloads=(0.0,), noise=1e-5)
+    gn = Calibrator(h4, 2).fit(clean)
+    ls = Calibrator(h4, 2, method="least-squares").fit(clean)
+    assert ls.converged and ls.keys == gn.keys
+    for k in gn.keys:
+        assert ls.value(k) == pytest.approx(gn.value(k), abs=1e-8)
+    assert ls.settings["method"] == "least-squares"
+    T = clean.poses.copy()
+    bad = [5, 40, 63]
+    T[bad, :3, 3] += [[4e-3, 0, 0], [0, -5e-3, 0], [0, 0, 6e-3]]
+    dirty = CalibrationData.from_poses(clean.q, T)
+    plain = Calibrator(h4, 2, method="least-squares").fit(dirty)
+    robust = Calibrator(h4, 2, method="least-squares", loss="cauchy").fit(dirty)
+    qv = random_configurations(truth, 30, 96)
+
+    def val_err(r):
+        return np.linalg.norm(r.predict(qv)[:, :3, 3] - truth.predict(qv)[:, :3, 3], axis=1).mean()
+
+    assert val_err(robust) < 0.2 * val_err(plain)
+    assert robust.pose_weights[bad].max() < 0.05
+
+
+def test_an_unknown_method_is_refused_with_the_choices(h4):
+    with pytest.raises(CalibrationError) as caught:
+        Calibrator(h4, 2, method="newton")
+    assert str(caught.value) == (
+        "method must be one of ('gauss-newton', 'lm', 'least-squares'), got 'newton'")

@@ -69,7 +69,7 @@ from plugcell.metrology import fit_rigid_transform
 
 Array = NDArray[np.float64]
 
-METHODS: tuple[str, ...] = ("gauss-newton", "lm")
+METHODS: tuple[str, ...] = ("gauss-newton", "lm", "least-squares")
 #: Halvings of a Gauss-Newton step that would increase the cost (a safeguard: the
 #: full step is taken whenever it descends, as in the thesis's algorithm).
 BACKTRACK_STEPS = 8
@@ -163,8 +163,8 @@ class Calibrator:
 
     ``desc``: the robot; ``model``: 1–5 or a name (:mod:`.configs`); ``base``,
     ``probe``: initial BASE/PROBE (4×4), estimated from the data when omitted;
-    ``method``: ``"gauss-newton"`` or ``"lm"``; ``loss``: ``"linear"``, ``"huber"``
-    or ``"cauchy"`` with ``loss_scale`` (× the median pose residual);
+    ``method``: ``"gauss-newton"``, ``"lm"`` or ``"least-squares"`` (SciPy's);
+    ``loss``: ``"linear"``, ``"huber"`` or ``"cauchy"`` with ``loss_scale`` (× the median pose residual);
     ``tol``: stop when ‖Δg‖ < tol; ``rotation_weight``: m per rad of the
     orientation rows; ``condition_limit``: apply the rule of eq. (4.10) on the
     data (``None``: only report κ); ``payload_ref_kg``: the mass the payload
@@ -549,11 +549,21 @@ class Calibrator:
         *, loss: str, jac: JacobianResult | None = None,
     ) -> tuple[ErrorModel, list[IterationRecord], bool, Array, JacobianResult | None]:
         """Gauss–Newton / LM iterations on ``keys`` (Fig. 6-9); ``jac``: the Jacobian at
-        ``model`` if already known.  Returns the Jacobian at the final model too."""
+        ``model`` if already known.  Returns the Jacobian at the final model too.
+
+        Each iteration solves, on the column-scaled Jacobian H_s = H_w·S⁻¹ (S: the
+        column norms), Gauss–Newton's Δg = S⁻¹·argmin ‖H_s·x − r_w‖ (halved while it
+        raises the cost) or Levenberg–Marquardt's
+        Δg = S⁻¹·(H_sᵀH_s + λ·diag(H_sᵀH_s))⁻¹·H_sᵀ·r_w, where r_w = √w·r and
+        H_w = √w·H carry the robust per-pose weights w (:func:`_robust_weights`);
+        it stops when ‖Δg‖ < ``tol``.  ``method="least-squares"`` hands the same
+        problem to SciPy (:meth:`_iterate_scipy`)."""
         weights = np.ones(len(p.data))
         history: list[IterationRecord] = []
         if not keys:
             return model, history, True, weights, None
+        if self.method == "least-squares":
+            return self._iterate_scipy(p, model, keys, stage, loss=loss)
         lam = 1e-3
         best_cost = None
         converged = False
@@ -626,6 +636,74 @@ class Calibrator:
                 converged = True
                 break
         return model, history, converged, weights, jac
+
+    def _iterate_scipy(
+        self, p: _Problem, model: ErrorModel, keys: list[str], stage: str, *, loss: str,
+    ) -> tuple[ErrorModel, list[IterationRecord], bool, Array, JacobianResult | None]:
+        """The same least-squares problem solved by :func:`scipy.optimize.least_squares`
+        (trust-region reflective, ``x_scale="jac"``) with the analytic Jacobian.
+
+        Unknowns x (the increments of ``keys`` from ``model``'s values), residuals
+        f(x) = r(g₀ + x) stacked (n·rows,), Jacobian ∂f/∂x = −H(g₀ + x).  A robust
+        ``loss`` is SciPy's of the same name, applied to each residual component with
+        ``f_scale`` = ``loss_scale`` × the median pose residual of a first, plain fit
+        (then the robust fit starts from it) — per component, where the Gauss–Newton
+        path re-weights whole poses at every iteration.  Stops when SciPy's
+        relative step test ‖Δx‖ < ``tol``·(``tol`` + ‖x‖) holds (``xtol``) or
+        ``max_iterations`` Jacobians were evaluated.  The per-pose weights returned are
+        those of :func:`_robust_weights` at the solution (ones for ``"linear"``).
+        """
+        from scipy.optimize import least_squares as scipy_least_squares
+
+        history: list[IterationRecord] = []
+        cache: dict[bytes, JacobianResult] = {}
+
+        def at(x: Array) -> JacobianResult:
+            key = x.tobytes()
+            if key not in cache:
+                cache.clear()
+                cache[key] = self._jac(model.updated(keys=keys, step=x), p, keys)
+            return cache[key]
+
+        def fun(x: Array) -> Array:
+            return _residual_rows(p, at(x).poses).reshape(-1)
+
+        def jac(x: Array) -> Array:
+            j = at(x)
+            H = _jacobian_rows(p, j.H).reshape(-1, len(keys))
+            r = _residual_rows(p, j.poses)
+            pos = np.linalg.norm(r[:, :3], axis=1)
+            # the step since the previous Jacobian (an accepted iteration of SciPy's)
+            step_norm = float(np.linalg.norm(x - history_x[-1])) if history_x else 0.0
+            history_x.append(x.copy())
+            history.append(IterationRecord(len(history) + 1, step_norm, float(np.sum(r * r)),
+                                           float(pos.mean() * 1e3),
+                                           float(np.sqrt(np.mean(pos**2)) * 1e3), 0.0))
+            self._say(stage, len(history), self.max_iterations,
+                      f"iteration {len(history)}: mean position residual "
+                      f"{pos.mean() * 1e3:.4f} mm")
+            return -H
+
+        history_x: list[Array] = []
+
+        def solve(x0: Array, loss_name: str, f_scale: float) -> Any:
+            try:
+                return scipy_least_squares(
+                    fun, x0, jac=jac, method="trf", x_scale="jac", loss=loss_name,
+                    f_scale=f_scale, xtol=self.tol, ftol=1e-15, gtol=1e-15,
+                    max_nfev=self.max_iterations * 4)
+            except (ValueError, np.linalg.LinAlgError) as exc:
+                raise DivergenceError(f"{stage}: SciPy's least_squares failed: {exc}") from None
+
+        solution = solve(np.zeros(len(keys)), "linear", 1.0)
+        if loss != "linear":  # the scale from the residuals at the plain solution
+            r1 = _residual_rows(p, at(solution.x).poses)
+            f_scale = self.loss_scale * max(float(np.median(np.linalg.norm(r1, axis=1))), 1e-15)
+            solution = solve(solution.x, loss, f_scale)
+        final = model.updated(keys=keys, step=solution.x)
+        jac_final = self._jac(final, p, keys)
+        weights = _robust_weights(_residual_rows(p, jac_final.poses), loss, self.loss_scale)
+        return final, history, bool(solution.status > 0), weights, jac_final
 
     @staticmethod
     def _jac(model: ErrorModel, p: _Problem, keys: Sequence[str]):

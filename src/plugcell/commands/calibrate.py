@@ -64,8 +64,10 @@ def configure(p: argparse.ArgumentParser) -> None:
     p.add_argument("--base", help="initial BASE: JSON file (4x4 'matrix' or 'xyz_mm'+'rpy_deg') "
                                   "or 'x,y,z,roll,pitch,yaw' in mm and degrees")
     p.add_argument("--probe", help="initial PROBE, same forms as --base")
-    p.add_argument("--method", choices=("gauss-newton", "lm"), default="gauss-newton",
-                   help="iteration (default gauss-newton, thesis Fig. 6-9)")
+    p.add_argument("--method", choices=("gauss-newton", "lm", "least-squares"),
+                   default="gauss-newton",
+                   help="iteration (default gauss-newton, thesis Fig. 6-9; least-squares: "
+                        "SciPy's trust-region solver, same minimum, slower)")
     p.add_argument("--loss", choices=("linear", "huber", "cauchy"), default="linear",
                    help="robust loss for outliers (default linear)")
     p.add_argument("--loss-scale", type=float, metavar="S",
