@@ -164,7 +164,8 @@ class Calibrator:
     ``desc``: the robot; ``model``: 1–5 or a name (:mod:`.configs`); ``base``,
     ``probe``: initial BASE/PROBE (4×4), estimated from the data when omitted;
     ``method``: ``"gauss-newton"``, ``"lm"`` or ``"least-squares"`` (SciPy's);
-    ``loss``: ``"linear"``, ``"huber"`` or ``"cauchy"`` with ``loss_scale`` (× the median pose residual);
+    ``loss``: ``"linear"``, ``"huber"`` or ``"cauchy"`` with ``loss_scale`` (× the
+    median pose residual);
     ``tol``: stop when ‖Δg‖ < tol; ``rotation_weight``: m per rad of the
     orientation rows; ``condition_limit``: apply the rule of eq. (4.10) on the
     data (``None``: only report κ); ``payload_ref_kg``: the mass the payload
