@@ -8,7 +8,7 @@ import sys
 
 def test_calibration_imports_no_twin_framework_or_io():
     code = (
-        "import sys, plugcell.calibration, plugcell.calibration.report, "
+        "import sys, plugcell.calibration, "
         "plugcell.calibration.planning, "
         "plugcell.calibration.simulation\n"
         "bad = [m for m in sys.modules if m.startswith(('plugcell.twin', 'plugcell.framework', "

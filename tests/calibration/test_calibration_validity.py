@@ -193,7 +193,7 @@ def test_ipa_series_c_region_flags_series_a(ur10, monkeypatch):
 
 @pytest.mark.slow
 def test_report_shows_the_coverage(calibrated, h4):
-    from plugcell.calibration.report import render_report
+    from plugcell.io.calibration_report import render_report
 
     result, data = calibrated
     qv = random_configurations(result.model, 10, 9)

@@ -295,7 +295,7 @@ def _run(args: argparse.Namespace) -> int:
         if side is not None:
             written.append(residual_path(args.out))
     if args.report is not None:
-        from plugcell.calibration.report import render_report
+        from plugcell.io.calibration_report import render_report
 
         write_text(args.report, render_report(result, data, val))
         written.append(args.report)
