@@ -37,6 +37,7 @@ from __future__ import annotations
 import asyncio
 import contextlib
 import logging
+from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any
 
@@ -183,8 +184,10 @@ class RequestContext:
 class _Delivery:
     """Delivers the output values of one process to its routes, in order, one at a time."""
 
-    def __init__(self, device: RoutedDevice, command: Command, context: RequestContext) -> None:
+    def __init__(self, device: RoutedDevice, command: Command, context: RequestContext,
+                 on_failure: Callable[[_Delivery, str], None]) -> None:
         self.device = device
+        self._on_failure = on_failure
         self.command = command
         self.context = context
         self.queue: asyncio.Queue[Any] = asyncio.Queue(MAX_PENDING)
@@ -204,7 +207,7 @@ class _Delivery:
     def _fail(self, reason: str) -> None:
         if not self.error:
             self.error = reason
-            self.device._delivery_failed(self, reason)
+            self._on_failure(self, reason)
 
     async def _run(self) -> None:
         while not self.error:
@@ -275,15 +278,15 @@ class _Delivery:
 
 
 class _RoutingPort:
-    """Wraps the DataFeedback port: each value also goes to the current delivery."""
+    """Wraps the DataFeedback port: each value also goes to ``route`` (from any thread)."""
 
-    def __init__(self, inner: Any, device: RoutedDevice) -> None:
+    def __init__(self, inner: Any, route: Callable[[Any], object]) -> None:
         self._inner = inner
-        self._device = device
+        self._route = route
         self.name = inner.name
 
     def post(self, value: Any) -> None:
-        self._device.call_in_loop(self._device._submit, value)
+        self._route(value)
         self._inner.post(value)
 
 
@@ -292,7 +295,8 @@ class RoutedDevice(GenericDevice):
 
     def __init__(self, name: str | None = None, **kwargs: Any) -> None:
         super().__init__(name, **kwargs)
-        self.data_feedback = _RoutingPort(self.data_feedback, self)  # type: ignore[assignment]
+        self.data_feedback = _RoutingPort(  # type: ignore[assignment]
+            self.data_feedback, lambda value: self.call_in_loop(self._submit, value))
         self._context: RequestContext | None = None
         self._delivery: _Delivery | None = None
         self._stream_delivery: _Delivery | None = None
@@ -337,7 +341,8 @@ class RoutedDevice(GenericDevice):
         try:
             if command.type is CommandTypes.StopData:
                 return await self._stop_routed(command, data, lost=False, option=parsed.device)
-            delivery = _Delivery(self, command, self._context) if parsed.routes else None
+            delivery = (_Delivery(self, command, self._context, self._delivery_failed)
+                        if parsed.routes else None)
             if delivery is not None:
                 try:
                     await delivery.check()
