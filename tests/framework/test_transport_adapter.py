@@ -170,6 +170,35 @@ def test_with_a_hand_off_handlers_run_where_the_owner_runs_them() -> None:
         other.close()
 
 
+def test_a_direct_view_runs_handlers_on_zenohs_threads_and_closes_nothing() -> None:
+    handed: list[tuple[Callable[[Any], None], Any]] = []
+    cell = f"bus{uuid.uuid4().hex[:10]}"
+    cfg = TransportConfig.from_env()
+    owner = Bus.connect(cfg, KeySpace(cell), hand_off=handed.append)
+    other = Bus.connect(cfg, KeySpace(cell))
+    try:
+        view = owner.direct()
+        assert view.session is owner.session and view.keys == owner.keys
+        threads: list[str] = []
+
+        def latest() -> bytes:
+            threads.append(threading.current_thread().name)
+            return b"pose"
+
+        publisher, queryable = view.reflector("SMR", latest)
+        assert until(lambda: other.query_reflectors(0.5) == [b"pose"])
+        assert handed == []  # answered at once, not handed to the owner's loop
+        assert threads and threading.main_thread().name not in threads
+        publisher.undeclare()
+        queryable.undeclare()
+        view.close()
+        assert owner.is_open  # the view closed nothing: the session is the owner's
+    finally:
+        owner.close()
+        other.close()
+    assert not owner.is_open
+
+
 # -- only the framework holds a session ---------------------------------------------------
 
 

@@ -17,6 +17,8 @@ import struct
 import sys
 import threading
 
+# Zenoh itself, not plugcell's transport adapter (framework/bus.py): the raw peer is
+# the far side of the raw-Zenoh floor of ``plugcell bench transport``.
 import zenoh
 from zenoh.handlers import Callback
 

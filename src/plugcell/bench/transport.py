@@ -144,6 +144,10 @@ class Child:
 class RawFloor:
     """Plain Zenoh pub/sub from this process to the raw peer."""
 
+    # Zenoh itself, not plugcell's transport adapter (framework/bus.py): this is the
+    # raw-Zenoh floor plugcell is compared with, so it must not go through plugcell
+    # (tests/framework/test_transport_adapter.py lists it as the exception).
+
     def __init__(self, cell: str, transport: TransportConfig) -> None:
         self.keys = raw_keys(cell)
         self.session = open_session(transport)

@@ -335,8 +335,8 @@ def _demonstrate(cell: _Cell, cfg: DemoConfig, h4_truth: Any, kuka_truth: Any,
     say(f"== 3. Demonstration (8.4): {cfg.bars} bars × {cfg.holes_per_bar} holes, "
         "part localisation, H4 aligns, KUKA watches a fixed SMR ==")
     cad, placed, normal = _stabiliser(h4_truth.probe, cfg.bars, cfg.holes_per_bar, rng)
-    bus = client.participant.bus
-    assert bus is not None
+    assert client.participant.bus is not None
+    bus = client.participant.bus.direct()  # the reflectors answer on Zenoh's threads
     smrs = []
     for i, p in enumerate(placed):  # SMRs in the holes, as the tracker sees them
         pub = ReflectorPublisher(bus, f"HOLE{i + 1:02d}", "smr")

@@ -54,14 +54,17 @@ class Bus:
     hand_off
         Where Zenoh's callbacks put ``(handler, item)`` for the handler to run on the
         owner's event loop; ``None``: handlers run on Zenoh's threads.
+    owns_session
+        Whether :meth:`close` closes the session (False for a :meth:`direct` view).
     """
 
     def __init__(self, session: zenoh.Session, keys: KeySpace,
-                 hand_off: HandOff | None = None) -> None:
+                 hand_off: HandOff | None = None, *, owns_session: bool = True) -> None:
         self.session = session
         """The Zenoh session (for the framework's tests and the raw-Zenoh benchmark)."""
         self.keys = keys
         self._hand_off = hand_off
+        self._owns_session = owns_session
 
     @classmethod
     def connect(cls, transport: TransportConfig | None, keys: KeySpace,
@@ -81,8 +84,17 @@ class Bus:
         return not self.session.is_closed()
 
     def close(self) -> None:
-        """Close the session (blocking; what was declared on it goes with it)."""
-        self.session.close()
+        """Close the session (blocking; what was declared on it goes with it) — unless
+        this bus is a :meth:`direct` view of another's, which closes nothing."""
+        if self._owns_session:
+            self.session.close()
+
+    def direct(self) -> Bus:
+        """A view of this bus — same session, same keys — whose handlers run on Zenoh's
+        threads (no hand-off): for quick, thread-safe handlers that must not wait for
+        the owner's event loop, such as a reflector of the simulated world published
+        from a client (experiments/demo_services.py).  Its :meth:`close` closes nothing."""
+        return Bus(self.session, self.keys, owns_session=False)
 
     def link_identities(self, zid: str) -> set[str]:
         """The authenticated identities (TLS certificate names) of this session's links

@@ -53,7 +53,7 @@ _DECODER = msgspec.msgpack.Decoder(ReflectorState)
 class ReflectorPublisher:
     """Publishes one reflector's true pose on ``bus``'s cell; answers queries with the
     latest one.  ``bus``: a :class:`~plugcell.framework.bus.Bus` whose handlers run on
-    Zenoh's threads (no hand-off), or a participant's."""
+    Zenoh's threads (no hand-off; of a participant's bus, its ``direct()`` view)."""
 
     def __init__(self, bus: Bus, name: str, kind: str = "tmac") -> None:
         check_name(name, "reflector name")
