@@ -167,10 +167,37 @@ def compensate_joints(
 ) -> CompensationResult:
     """Steps b.–f. of 6.5.1 from given start joints (e.g. the controller's nominal IK).
 
-    ``T_target``: ``(N, 4, 4)`` desired tool poses in the robot base frame;
-    ``q_start``: ``(N, n)`` or ``(n,)`` joint readings to start from;
-    ``payload_kg``: scalar or ``(N,)``.  Returns a :class:`CompensationResult`;
-    raises the first target's :class:`CompensationError` unless ``raise_errors=False``.
+    Newton iterations on the identified model: ``Δx = e(T_target, T_model(q))`` (the
+    exact pose error), ``q ← q + J(q)⁻¹ · Δx`` (eq. 4.11; a pseudo-inverse for a
+    singular or non-square ``J``), until ``‖Δx‖ < tol``.
+
+    Parameters
+    ----------
+    model
+        The identified model (or a hybrid one with a learned residual layer).
+    T_target
+        Desired tool poses, shape ``(N, 4, 4)``, metres, in the robot base frame.
+    q_start
+        Joint readings to start from, shape ``(N, n)`` or ``(n,)``, radians.
+    payload_kg
+        Payload, scalar or shape ``(N,)``, kg.
+    tol, max_iterations
+        Stop when ‖Δx‖ < ``tol`` (m and rad); the iteration bound.
+    check_limits
+        Refuse solutions outside the joint limits.
+    raise_errors
+        With ``False``, failures are reported per target instead of raising.
+
+    Returns
+    -------
+    CompensationResult
+        The compensated joint readings ``(N, n)`` radians, with per-target
+        convergence and residuals.
+
+    Raises
+    ------
+    CompensationError
+        For the first failing target (unless ``raise_errors=False``).
     """
     if not (tol > 0 and max_iterations >= 0):
         raise ValueError("tol must be > 0 and max_iterations ≥ 0")

@@ -218,14 +218,39 @@ def forward(
 ) -> FKResult:
     """Forward kinematics of every link, thesis eq. (6.1) via branch (6.2).
 
-    ``q``: ``(..., n_readings)`` joint readings in radians (need not be wrapped;
-    limits are not checked; a description's ``coupling`` maps them to its
-    kinematic joints).  ``params``: the geometric parameters to use
-    (``None`` → nominal).  ``closure``: ``"fourbar"`` (exact, default) or
-    ``"nominal"`` (eq. 6.10, what a controller's nominal model does).  Raises
-    :class:`~plugcell.kinematics.errors.LoopClosureError` if a loop cannot be
-    assembled or collapses (with ``raise_errors=False`` it marks those
-    configurations in ``FKResult.valid`` and fills them with NaN instead).
+    Each link's frame is its parent's times its joint transform,
+    ``T_i = T_parent(i) · A_i(θ_i)``, with ``A_i`` the DH (or Hayati) transform of the
+    link's parameters; the flange is ``T_flange`` and the TCP ``T_flange · tool``.
+    Passive joints of a four-bar loop take the angles that close it.
+
+    Parameters
+    ----------
+    desc
+        The robot.
+    params
+        The geometric parameters to use; ``None``: the nominal ones.
+    q
+        Joint readings, shape ``(..., n_readings)``, radians (metres for a prismatic
+        joint); need not be wrapped, limits are not checked; a description's
+        ``coupling`` maps them to its kinematic joints.
+    closure
+        ``"fourbar"`` (exact, default) or ``"nominal"`` (eq. 6.10, what a
+        controller's nominal model does).
+    raise_errors
+        With ``False``, configurations whose loop cannot close are marked in
+        ``FKResult.valid`` and filled with NaN instead of raising.
+
+    Returns
+    -------
+    FKResult
+        ``frames`` ``(..., n_links, 4, 4)``, ``flange`` and ``tcp`` ``(..., 4, 4)``,
+        metres, in the robot base frame; the DH angles ``theta`` used; ``valid``
+        (the class documents every field).
+
+    Raises
+    ------
+    LoopClosureError
+        A loop cannot be assembled or collapses (unless ``raise_errors=False``).
     """
     p = _check_params(desc, params)
     theta, passive, dq, da, valid = joint_angles(desc, p, q, closure, raise_errors=raise_errors)

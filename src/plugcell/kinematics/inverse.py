@@ -370,19 +370,46 @@ def inverse(
 ) -> IKResult:
     """Joint readings that put the flange (or TCP) at ``T_target``.
 
-    ``T_target``: ``(..., 4, 4)`` pose(s) in the robot base frame of the flange
-    (``target="flange"``, default) or of the TCP = flange·tool (``"tcp"``).
-    ``seed``: ``(n_readings,)`` or ``(..., n_readings)`` joint readings, radians;
-    default ``desc.home``.  Returns
-    the converged solution nearest the seed (see the module docstring).
-    ``enforce_limits``: only solutions inside the joint and coupled limits count.
-    ``tol``: convergence threshold, metres for position and radians for
-    orientation.  ``params``: geometric parameters (``None`` → nominal), e.g. an
-    identified model for model-based compensation.
+    Damped least-squares iterations on the exact pose error ``e(q)`` between the
+    target and ``T(q)`` (position, rotation vector):
+    ``q ← q + Jᵀ (J Jᵀ + λ I)⁻¹ · e(q)``, ``λ = μ · tr(J Jᵀ) / 6`` with ``μ`` adapted
+    per iteration (``J``: :func:`manipulator_jacobian`), until ``‖e‖ < tol``, from the
+    seed and, when that fails, from further seeds; the converged solution nearest
+    the seed wins (module docstring).
 
-    Raises :class:`UnreachableError` or :class:`JointLimitError` for the first
-    failing target unless ``raise_errors=False``, in which case failures are
-    reported in ``IKResult.converged``/``within_limits``/``reason``.
+    Parameters
+    ----------
+    desc
+        The robot.
+    params
+        Geometric parameters; ``None``: the nominal ones (an identified model's for
+        model-based compensation).
+    T_target
+        Pose(s), shape ``(..., 4, 4)``, metres, in the robot base frame, of the flange
+        (``target="flange"``, default) or of the TCP = flange · tool (``"tcp"``).
+    seed
+        Joint readings, shape ``(n_readings,)`` or ``(..., n_readings)``, radians;
+        default ``desc.home``.
+    enforce_limits
+        Only solutions inside the joint and coupled limits count.
+    tol
+        Convergence threshold: metres for the position, radians for the orientation.
+    closure, target, max_iterations
+        As in :func:`forward`; which frame ``T_target`` places; the iteration bound.
+    raise_errors
+        With ``False``, failures are reported in ``IKResult.converged``,
+        ``within_limits`` and ``reason`` instead of raising.
+
+    Returns
+    -------
+    IKResult
+        ``q`` ``(..., n_readings)`` radians, with per-target convergence, limits and
+        reasons.
+
+    Raises
+    ------
+    UnreachableError, JointLimitError
+        For the first failing target (unless ``raise_errors=False``).
     """
     params = desc.nominal_parameters() if params is None else params
     if target not in ("flange", "tcp"):

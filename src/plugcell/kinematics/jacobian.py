@@ -96,12 +96,32 @@ def manipulator_jacobian(
     point: str = "flange",
     closure: str = "fourbar",
 ) -> Array:
-    """Manipulator Jacobian ``(..., 6, n_readings)`` w.r.t. the joint readings.
+    """Manipulator Jacobian w.r.t. the joint readings, thesis eq. (6.37).
 
-    Rows: linear velocity of ``point`` ("flange" origin or "tcp" = flange·tool)
-    and angular velocity, both in the robot base frame, per unit reading rate
-    (``J_θkin · M`` for a coupled description)
-    (thesis 6.37; loop joints via 6.39 for ``closure="nominal"`` or the exact
-    four-bar derivatives for ``"fourbar"``).
+    For a revolute joint i with axis ``z_i`` through ``p_i`` (base frame), column i
+    is ``[z_i × (p − p_i); z_i]``, for a prismatic one ``[z_i; 0]``, ``p`` being the
+    point's position; a loop's passive joints add their derivatives w.r.t. the
+    driven ones (eq. 6.39 for ``closure="nominal"``, the exact four-bar derivatives
+    for ``"fourbar"``); a coupled description multiplies by the reading map:
+    ``J = J_θkin · M``.
+
+    Parameters
+    ----------
+    desc
+        The robot.
+    params
+        Geometric parameters; ``None``: the nominal ones.
+    q
+        Joint readings, shape ``(..., n_readings)``, radians.
+    point
+        ``"flange"`` (its origin) or ``"tcp"`` (flange · tool).
+    closure
+        ``"fourbar"`` (exact, default) or ``"nominal"``.
+
+    Returns
+    -------
+    ndarray, shape (..., 6, n_readings)
+        Rows 0–2: the point's linear velocity (m/s per rad/s of reading rate);
+        rows 3–5: the angular velocity (rad/s per rad/s); both in the base frame.
     """
     return jacobian_from_fk(desc, forward(desc, params, q, closure), point)
