@@ -15,6 +15,7 @@ from pathlib import Path
 from typing import Any
 
 import pytest
+from childproc import until
 
 from plugcell.framework.bus import Bus
 from plugcell.framework.keys import KeySpace, Presence
@@ -33,13 +34,22 @@ OPENS_A_BARE_SESSION = {
 }
 
 
-def until(predicate: Callable[[], object], timeout: float = 5.0) -> bool:
-    end = time.monotonic() + timeout
-    while time.monotonic() < end:
-        if predicate():
-            return True
-        time.sleep(0.01)
-    return False
+Handed = list[tuple[Callable[[Any], None], Any]]
+
+
+@pytest.fixture
+def owner_and_other() -> Iterator[tuple[Bus, Bus, Handed]]:
+    """Two buses of one cell; the first hands its callbacks to a list (as a
+    participant hands them to its loop), the second runs them on Zenoh's threads."""
+    handed: Handed = []
+    cell = f"bus{uuid.uuid4().hex[:10]}"
+    cfg = TransportConfig.from_env()
+    owner = Bus.connect(cfg, KeySpace(cell), hand_off=handed.append)
+    other = Bus.connect(cfg, KeySpace(cell))
+    yield owner, other, handed
+    for bus in (owner, other):
+        if bus.is_open:
+            bus.close()
 
 
 @pytest.fixture
@@ -148,54 +158,41 @@ def test_the_reflector_channel_keeps_the_latest_pose(buses: tuple[Bus, Bus]) -> 
     queryable.undeclare()
 
 
-def test_with_a_hand_off_handlers_run_where_the_owner_runs_them() -> None:
-    handed: list[tuple[Callable[[Any], None], Any]] = []
-    cell = f"bus{uuid.uuid4().hex[:10]}"
-    cfg = TransportConfig.from_env()
-    owner = Bus.connect(cfg, KeySpace(cell), hand_off=handed.append)
-    other = Bus.connect(cfg, KeySpace(cell))
-    try:
-        ran: list[tuple[str, bytes]] = []
-        owner.take_requests("DRILL", lambda sender, s: ran.append((sender, bytes(s.payload))))
-        door = other.request_door("DRILL", "ROBOT")
-        assert until(lambda: door.matching_status.matching)
-        door.put(b"create")
-        assert until(lambda: len(handed) == 1)
-        assert ran == []  # not on Zenoh's thread: the owner runs it
-        handler, item = handed[0]
-        handler(item)
-        assert ran == [("ROBOT", b"create")]
-    finally:
-        owner.close()
-        other.close()
+def test_with_a_hand_off_handlers_run_where_the_owner_runs_them(
+        owner_and_other: tuple[Bus, Bus, Handed]) -> None:
+    owner, other, handed = owner_and_other
+    ran: list[tuple[str, bytes]] = []
+    owner.take_requests("DRILL", lambda sender, s: ran.append((sender, bytes(s.payload))))
+    door = other.request_door("DRILL", "ROBOT")
+    assert until(lambda: door.matching_status.matching)
+    door.put(b"create")
+    assert until(lambda: len(handed) == 1)
+    assert ran == []  # not on Zenoh's thread: the owner runs it
+    handler, item = handed[0]
+    handler(item)
+    assert ran == [("ROBOT", b"create")]
 
 
-def test_a_direct_view_runs_handlers_on_zenohs_threads_and_closes_nothing() -> None:
-    handed: list[tuple[Callable[[Any], None], Any]] = []
-    cell = f"bus{uuid.uuid4().hex[:10]}"
-    cfg = TransportConfig.from_env()
-    owner = Bus.connect(cfg, KeySpace(cell), hand_off=handed.append)
-    other = Bus.connect(cfg, KeySpace(cell))
-    try:
-        view = owner.direct()
-        assert view.session is owner.session and view.keys == owner.keys
-        threads: list[str] = []
+def test_a_direct_view_runs_handlers_on_zenohs_threads_and_closes_nothing(
+        owner_and_other: tuple[Bus, Bus, Handed]) -> None:
+    owner, other, handed = owner_and_other
+    view = owner.direct()
+    assert view.session is owner.session and view.keys == owner.keys
+    threads: list[str] = []
 
-        def latest() -> bytes:
-            threads.append(threading.current_thread().name)
-            return b"pose"
+    def latest() -> bytes:
+        threads.append(threading.current_thread().name)
+        return b"pose"
 
-        publisher, queryable = view.reflector("SMR", latest)
-        assert until(lambda: other.query_reflectors(0.5) == [b"pose"])
-        assert handed == []  # answered at once, not handed to the owner's loop
-        assert threads and threading.main_thread().name not in threads
-        publisher.undeclare()
-        queryable.undeclare()
-        view.close()
-        assert owner.is_open  # the view closed nothing: the session is the owner's
-    finally:
-        owner.close()
-        other.close()
+    publisher, queryable = view.reflector("SMR", latest)
+    assert until(lambda: other.query_reflectors(0.5) == [b"pose"])
+    assert handed == []  # answered at once, not handed to the owner's loop
+    assert threads and threading.main_thread().name not in threads
+    publisher.undeclare()
+    queryable.undeclare()
+    view.close()
+    assert owner.is_open  # the view closed nothing: the session is the owner's
+    owner.close()
     assert not owner.is_open
 
 
