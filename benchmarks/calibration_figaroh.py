@@ -153,10 +153,10 @@ def write_csv(path: Path, q_serial: np.ndarray, positions: np.ndarray) -> None:
 
 def run(figaroh_python: str, work: Path, seed: int = 0, n_cal: int = 90, n_val: int = 90
         ) -> dict[str, Any]:
-    from plugcell.commands.reproduce import _campaign
-    from plugcell.twin.robot import RobotTwin
-    from plugcell.twin.scenario import TwinScenario
-    from plugcell.twin.tracker import LaserTracker
+    from plugcell.apps.reproduce.models_8_2 import campaign as _campaign
+    from plugcell.sim.twin.robot import RobotTwin
+    from plugcell.sim.twin.scenario import TwinScenario
+    from plugcell.sim.twin.tracker import LaserTracker
 
     robot = RobotTwin(TwinScenario(seed=seed))
     tracker = LaserTracker(seed=seed)

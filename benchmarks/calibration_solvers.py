@@ -25,10 +25,10 @@ from typing import Any
 import numpy as np
 
 from plugcell.calibration import CalibrationData, Calibrator
-from plugcell.twin.campaign import measure_poses, working_volume_joints
-from plugcell.twin.robot import RobotTwin
-from plugcell.twin.scenario import TwinScenario
-from plugcell.twin.tracker import LaserTracker
+from plugcell.sim.twin.campaign import measure_poses, working_volume_joints
+from plugcell.sim.twin.robot import RobotTwin
+from plugcell.sim.twin.scenario import TwinScenario
+from plugcell.sim.twin.tracker import LaserTracker
 
 ROOT = Path(__file__).resolve().parents[1]
 SOLVERS = ("gauss-newton", "least-squares")

@@ -7,7 +7,7 @@ script beside this Python, else ``python -m plugcell``), output discarded; the
 interpreter alone (``python -c pass``) is the floor.  Wall time (best, median, worst)
 and the median CPU time (user + system), which depends less on the machine's load.
 The start-up a user feels is what the parser and the chosen sub-command import: only
-that sub-command's module is loaded (:mod:`plugcell.cli`), so ``--help`` of any command
+that sub-command's module is loaded (:mod:`plugcell.apps.cli`), so ``--help`` of any command
 does not load Zenoh or the web server.  On a loaded machine run it with ``nice -n 0``
 (or not at all under ``nice``): the figures are wall time.
 """

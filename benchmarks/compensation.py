@@ -3,14 +3,14 @@
     .venv/bin/python benchmarks/compensation.py [N]
 
 Prints a table; ``plugcell bench compensation`` runs the same
-:func:`plugcell.bench.compensation.run`.
+:func:`plugcell.apps.bench.compensation.run`.
 """
 
 from __future__ import annotations
 
 import sys
 
-from plugcell.bench.compensation import format_report, run
+from plugcell.apps.bench.compensation import format_report, run
 
 
 def main(argv: list[str]) -> int:

@@ -2,7 +2,7 @@
 
 The Smart H4 twin is calibrated (model 4, 150 poses) at 20 °C; four reference nests on
 the robot's foundation are registered with the identified BASE.  Then the hall warms
-up through a shift (``plugcell.twin.thermal.shift_temperature``: +6 K, a gate opened
+up through a shift (``plugcell.sim.twin.thermal.shift_temperature``: +6 K, a gate opened
 at 4 h) and the cell drifts with it (``ThermalDrift``: BASE moves ~10 µm/K and turns
 ~5 µrad/K as seen from the tracker; the arm's lengths grow 12·10⁻⁶/K).  Every 15
 minutes twelve fixed test poses are measured and compared with the model's
@@ -32,11 +32,11 @@ import numpy as np
 
 from plugcell.calibration import CalibrationData, Calibrator
 from plugcell.metrology.drift import estimate_base_drift, nests_in_base
-from plugcell.twin.campaign import measure_poses, working_volume_joints
-from plugcell.twin.robot import RobotTwin
-from plugcell.twin.scenario import TwinScenario
-from plugcell.twin.thermal import ThermalDrift, shift_temperature
-from plugcell.twin.tracker import LaserTracker
+from plugcell.sim.twin.campaign import measure_poses, working_volume_joints
+from plugcell.sim.twin.robot import RobotTwin
+from plugcell.sim.twin.scenario import TwinScenario
+from plugcell.sim.twin.thermal import ThermalDrift, shift_temperature
+from plugcell.sim.twin.tracker import LaserTracker
 
 ROOT = Path(__file__).resolve().parents[1]
 #: Reference nests on the foundation around the robot (robot base frame, m).
@@ -137,7 +137,7 @@ def write_page(d: dict[str, Any], path: Path, image: bool) -> None:
          f"{d['machine']}, twin seed {d['seed']}, {d['elapsed_s']:.0f} s.", "",
          "Protocol: model 4 calibrated at 20 °C from 150 poses; four reference nests on the "
          "foundation registered with its BASE (`plugcell drift register`). Through the shift "
-         "the hall warms by up to 6 K (`plugcell.twin.thermal.shift_temperature`, a gate "
+         "the hall warms by up to 6 K (`plugcell.sim.twin.thermal.shift_temperature`, a gate "
          "opened at 4 h), BASE drifts as seen from the tracker and the arm's lengths grow "
          "(`ThermalDrift`, assumed: "
          f"{np.array(d['full']['drift']['base_translation_m_per_k']) * 1e6} µm/K, "

@@ -4,7 +4,7 @@
 Targets and the only exception each may raise (anything else is a crash, printed
 with the input, and the run exits 1); every refusal must carry a message:
 
-* ``activate`` — :func:`plugcell.controller.activate.parse_activate` →
+* ``activate`` — :func:`plugcell.devices.robot.activate.parse_activate` →
   ``ActivateSyntaxError``;
 * ``language`` — ``Program.from_source`` (robot language: parse + check) →
   ``ProgramError``;
@@ -14,7 +14,7 @@ with the input, and the run exits 1); every refusal must carry a message:
   text itself (no newline translation) → ``MeasurementFileError``;
 * ``description`` — :func:`plugcell.io.robots.load_robot_file` (a robot description
   file) → ``DescriptionError`` (or ``RobotNotFoundError``, never for an existing file);
-* ``compute`` — :func:`plugcell.services.compute.expr.parse` → ``EvaluationError``;
+* ``compute`` — :func:`plugcell.devices.compute.expr.parse` → ``EvaluationError``;
 * ``nests`` — :func:`plugcell.io.nests.parse_nests` (drift-watch nest files) →
   ``NestFileError``.
 
@@ -33,8 +33,8 @@ import time
 from collections.abc import Callable
 from pathlib import Path
 
-from plugcell.controller.activate import ActivateSyntaxError, parse_activate
-from plugcell.controller.language import Program, ProgramError
+from plugcell.devices.compute.expr import EvaluationError, parse
+from plugcell.devices.robot.activate import ActivateSyntaxError, parse_activate
 from plugcell.io.measurements import (
     MeasurementFileError,
     parse_measurements,
@@ -43,10 +43,10 @@ from plugcell.io.measurements import (
 from plugcell.io.nests import NestFileError, parse_nests
 from plugcell.io.robots import load_robot_file
 from plugcell.kinematics.errors import DescriptionError
-from plugcell.services.compute.expr import EvaluationError, parse
+from plugcell.pdl import Program, ProgramError
 
 PKG = Path(__file__).resolve().parents[1] / "src" / "plugcell"
-PROGRAMS = PKG / "controller" / "programs"
+PROGRAMS = PKG / "pdl" / "programs"
 
 ACTIVATE_SEEDS = [
     "ACTIVATE CAMERA #SnapShot##500",

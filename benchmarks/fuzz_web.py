@@ -1,11 +1,11 @@
 """Fuzz the web API of the cell controller UI (issue 10 §4):
 ``python benchmarks/fuzz_web.py [--cases N] [--seed S] [--hang-s T]`` (default 100 000 cases).
 
-Every HTTP route of :func:`plugcell.ui.app.create_app` — found by walking
+Every HTTP route of :func:`plugcell.apps.ui.app.create_app` — found by walking
 ``app.routes``, not listed here; the static mount counts as one route, the websocket
 is left out — gets an equal share of the cases, sent in-process through httpx's ASGI
 transport (as uvicorn would pass them, on port 8765) to the app on a real
-:class:`~plugcell.services.cell.service.CellController` in a fresh cell, with an
+:class:`~plugcell.devices.cell.service.CellController` in a fresh cell, with an
 in-process drill service (``TOOL``, time scale 0.001) so tasks reach a real catalogue.
 Zenoh runs in-process; no child process is started.  ``fuzz_web()`` is what
 ``tests/ui/test_ui_fuzz_web.py`` runs with a few thousand cases.
@@ -57,11 +57,11 @@ from urllib.parse import quote
 import httpx2 as httpx  # the HTTP client of the dev dependencies (Starlette's TestClient uses it)
 from starlette.routing import Mount, Route
 
-from plugcell.services.cell.service import CellController
-from plugcell.services.tool import DrillService
-from plugcell.ui.app import create_app
-from plugcell.ui.guard import MAX_BODY
-from plugcell.ui.reports import ReportFiles
+from plugcell.apps.ui.app import create_app
+from plugcell.apps.ui.guard import MAX_BODY
+from plugcell.apps.ui.reports import ReportFiles
+from plugcell.devices.cell.service import CellController
+from plugcell.devices.drill import DrillService
 
 HEADERS = {"X-Plugcell": "1", "Content-Type": "application/json"}
 #: With a port, as uvicorn serves it (the ASGI scope's port is None without one, and

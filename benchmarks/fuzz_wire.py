@@ -10,7 +10,7 @@ import json
 import sys
 import time
 
-from plugcell.bench.fuzz import fuzz_decoder
+from plugcell.apps.bench.fuzz import fuzz_decoder
 
 
 def main() -> int:

@@ -1,6 +1,6 @@
 """Thesis 8.3 on the twin with the physical and with the hybrid model (issue 19).
 
-The two-stage compensation of 8.3 (``plugcell.experiments.reproduce_8_3``: 36 kg,
+The two-stage compensation of 8.3 (``plugcell.apps.reproduce.compensation_8_3``: 36 kg,
 model 5, 6 lines × 13 points, model stage then the tracker loop to 0.08 mm / 0.05°)
 run twice on the same twin, tracker and campaign — 400 calibration poses (the learned
 layer needs at least 200), 100 validation poses: once with the physical model 5, once
@@ -20,7 +20,7 @@ import time
 from pathlib import Path
 from typing import Any
 
-from plugcell.experiments.reproduce_8_3 import ExperimentConfig, run
+from plugcell.apps.reproduce.compensation_8_3 import ExperimentConfig, run
 
 ROOT = Path(__file__).resolve().parents[1]
 

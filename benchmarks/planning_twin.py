@@ -38,10 +38,10 @@ from plugcell.calibration.planning import (
     sample_candidates,
 )
 from plugcell.kinematics.rotations import rpy_to_matrix
-from plugcell.twin.campaign import measure_poses, working_volume_joints
-from plugcell.twin.robot import RobotTwin
-from plugcell.twin.scenario import TwinProfile, TwinScenario
-from plugcell.twin.tracker import LaserTracker
+from plugcell.sim.twin.campaign import measure_poses, working_volume_joints
+from plugcell.sim.twin.robot import RobotTwin
+from plugcell.sim.twin.scenario import TwinProfile, TwinScenario
+from plugcell.sim.twin.tracker import LaserTracker
 
 ROOT = Path(__file__).resolve().parents[1]
 PAYLOADS = (0.0, 18.0, 36.0)

@@ -5,7 +5,7 @@ errors (orders 1, 2, 31), lost motion and link bending (docs/twin.md) — and ca
 them off, leaving a robot the thesis's model 4 describes exactly (up to noise).  For
 both twins: a campaign of ``--poses`` calibration poses and half as many independent
 validation poses in the working volume (the operator's procedure,
-``plugcell.twin.campaign``); model 4 (loop + gravity), model 4 with joint-angle
+``plugcell.sim.twin.campaign``); model 4 (loop + gravity), model 4 with joint-angle
 harmonics of order 2, and model 4 + the learned residual layer are compared on the
 validation poses (never the training ones).  Writes docs/results/twin-residual.md.
 
@@ -26,10 +26,10 @@ import numpy as np
 
 from plugcell.calibration import CalibrationData, Calibrator
 from plugcell.calibration.residual_model import ResidualLearner, hybrid_residuals
-from plugcell.twin.campaign import measure_poses, working_volume_joints
-from plugcell.twin.robot import RobotTwin
-from plugcell.twin.scenario import TwinScenario
-from plugcell.twin.tracker import LaserTracker
+from plugcell.sim.twin.campaign import measure_poses, working_volume_joints
+from plugcell.sim.twin.robot import RobotTwin
+from plugcell.sim.twin.scenario import TwinScenario
+from plugcell.sim.twin.tracker import LaserTracker
 
 ROOT = Path(__file__).resolve().parents[1]
 

@@ -3,7 +3,7 @@
     .venv/bin/python benchmarks/round_trip_trace.py [--cycles 2000] [--no-journal]
 
 The transport benchmark's latency test (``Echo`` of 4 bytes to the
-:class:`~plugcell.bench.device.BenchService` in a second OS process), with probes
+:class:`~plugcell.apps.bench.device.BenchService` in a second OS process), with probes
 on both sides: each records ``time.perf_counter_ns()`` — CLOCK_MONOTONIC, one
 clock for every process of the machine — at the seams of the path (the Zenoh
 callback, the event loop's wake-up, the service's check-and-journal, the commit,
@@ -82,7 +82,7 @@ def serve(cell: str, journal: bool, out: str) -> None:
     """The publisher, probed; its trace goes to ``out`` when it stops (SIGTERM)."""
     import atexit
 
-    from plugcell.bench import peer
+    from plugcell.apps.bench import peer
     from plugcell.framework import journal as journal_module
     from plugcell.framework import outbox, service
 
@@ -113,7 +113,7 @@ class _ProbedDoor:
 
 
 async def _requester(cell: str, journal: bool, cycles: int, trace: Trace) -> None:
-    from plugcell.bench.device import BenchService
+    from plugcell.apps.bench.device import BenchService
     from plugcell.framework.transport import TransportConfig
 
     consumer = BenchService("CONSUMER", cell=cell, transport=TransportConfig.from_env(),

@@ -28,9 +28,9 @@ from pathlib import Path
 
 import numpy as np
 
-from plugcell.bench.device import BURST, BenchService
+from plugcell.apps.bench.device import BURST, BenchService
 from plugcell.framework.journal import Journal
-from plugcell.framework.model import Process, Tag
+from plugcell.framework.messages import Process, Tag
 from plugcell.framework.processqueue import Entry
 
 #: The payloads where per-frame work, not copying bytes, decides the rate (from 64 KiB

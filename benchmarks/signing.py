@@ -35,7 +35,7 @@ from cryptography.x509.oid import NameOID
 
 from plugcell.framework import wire
 from plugcell.framework.certificates import create_ca, issue_certificate
-from plugcell.framework.model import Command, Data, DataTypes, Process, Tag
+from plugcell.framework.messages import Command, Data, DataTypes, Process, Tag
 from plugcell.framework.signing import RequestSigner, RequestVerifier
 
 
@@ -168,7 +168,7 @@ def e2e(folder: Path, n: int) -> list[dict[str, Any]]:
 
 
 def fuzz(folder: Path, cases: int, seed: int = 20261122) -> dict[str, Any]:
-    from plugcell.framework.model import SubscribeRequest
+    from plugcell.framework.messages import SubscribeRequest
 
     robot = RequestSigner.load(folder / "ROBOT1.pem", folder / "ROBOT1.key")
     process = Process(command=Command(name="Move"), tag=Tag("ROBOT1", "TRACKER"),

@@ -2,12 +2,12 @@
 
 ``python benchmarks/transport.py [--quick] [--json] [--output FILE]``.
 
-Same as ``plugcell bench transport``; the implementation is ``plugcell.bench.transport``.
+Same as ``plugcell bench transport``; the implementation is ``plugcell.apps.bench.transport``.
 """
 
 import sys
 
-from plugcell.bench.transport import main
+from plugcell.apps.bench.transport import main
 
 if __name__ == "__main__":
     sys.exit(main())

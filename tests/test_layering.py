@@ -2,21 +2,24 @@
 imported — so an import inside a function counts as much as one at the top).
 
 ====================  =====================================================  ===========
-layer                 packages / modules                                     may import
+layer                 packages                                               may import
 ====================  =====================================================  ===========
 math                  kinematics, metrology, calibration, compensation       math
-io                    io (file formats: robots, URDF, measurements, ...)     math, io
+io                    io (file formats: robots, URDF, measurements, units)   math, io
 framework             framework (Zenoh, the service base, the journal)       framework
-sim                   twin, services/sim, controller/sim_* (the simulated     all but apps
-                      truth, instruments and controllers)
-devices               services, opcua, controller (the robot language and    all but apps
-                      the robot controller link), robots (description files)
-apps                  cli, commands, ui, experiments, bench, every            everything
+pdl                   pdl (the robot language: parser, checker, interpreter)  math, io, pdl
+devices               devices (camera, drill, robot, tracker, compute,       all but apps
+                      cell, opcua)
+sim                   sim (twin, simulated controller, drivers, world)       all but apps
+apps                  apps (cli, commands, ui, demo, reproduce, bench), every everything
                       ``__main__`` module (a program, not a library)
 ====================  =====================================================  ===========
 
 The math never reads a file, speaks Zenoh or knows a device; the framework knows no
-device; nothing below the apps calls a command line.
+device; the robot language knows neither the framework nor a device; nothing below the
+apps calls a command line.  Devices and sim share a tier: a simulated instrument
+implements a device's driver interface, and a device's default driver (the camera's,
+the drill's, the tracker's ``sim``) is the simulated one.
 """
 
 from __future__ import annotations
@@ -29,13 +32,12 @@ import pytest
 SRC = Path(__file__).resolve().parents[1] / "src" / "plugcell"
 
 MATH = {"kinematics", "metrology", "calibration", "compensation"}
-APPS = {"cli", "commands", "ui", "experiments", "bench"}
-DEVICES = {"services", "opcua", "controller", "robots"}
 #: What each layer must not import.
 FORBIDDEN = {
-    "math": {"io", "framework", "sim", "devices", "apps"},
-    "io": {"framework", "sim", "devices", "apps"},
-    "framework": {"math", "io", "sim", "devices", "apps"},
+    "math": {"io", "framework", "pdl", "sim", "devices", "apps"},
+    "io": {"framework", "pdl", "sim", "devices", "apps"},
+    "framework": {"math", "io", "pdl", "sim", "devices", "apps"},
+    "pdl": {"framework", "sim", "devices", "apps"},
     "sim": {"apps"},
     "devices": {"apps"},
     "apps": set(),
@@ -50,17 +52,12 @@ def layer_of(module: str) -> str | None:
     if len(parts) == 1:
         return "apps"  # the package itself: its version, nothing else
     top = parts[1]
-    if parts[-1] == "__main__" or top in APPS or top == "__main__":
+    if parts[-1] == "__main__" or top in ("apps", "__main__"):
         return "apps"
     if top in MATH:
         return "math"
-    if top in ("io", "framework"):
+    if top in ("io", "framework", "pdl", "devices", "sim"):
         return top
-    if top == "twin" or (top == "services" and parts[2:3] == ["sim"]) or (
-            top == "controller" and len(parts) > 2 and parts[2].startswith("sim_")):
-        return "sim"
-    if top in DEVICES:
-        return "devices"
     raise AssertionError(f"{module}: no layer — add its package to tests/test_layering.py")
 
 
@@ -109,21 +106,21 @@ def test_every_package_has_a_layer() -> None:
      "plugcell.calibration.fit:1 (math) imports plugcell.io.robots (io)"),
     ("plugcell.kinematics.forward", "def f():\n    import plugcell.framework.wire\n",
      "plugcell.kinematics.forward:2 (math) imports plugcell.framework.wire (framework)"),
-    ("plugcell.framework.service", "from plugcell.services.camera import CameraService\n",
-     "plugcell.framework.service:1 (framework) imports plugcell.services.camera (devices)"),
-    ("plugcell.services.robot.service", "def main():\n    from plugcell.cli import main\n",
-     "plugcell.services.robot.service:2 (devices) imports plugcell.cli (apps)"),
-    ("plugcell.twin.robot", "from plugcell.commands.twin import run\n",
-     "plugcell.twin.robot:1 (sim) imports plugcell.commands.twin (apps)"),
+    ("plugcell.framework.service", "from plugcell.devices.camera import CameraService\n",
+     "plugcell.framework.service:1 (framework) imports plugcell.devices.camera (devices)"),
+    ("plugcell.devices.robot.service", "def main():\n    from plugcell.apps.cli import main\n",
+     "plugcell.devices.robot.service:2 (devices) imports plugcell.apps.cli (apps)"),
+    ("plugcell.sim.twin.robot", "from plugcell.apps.commands.twin import run\n",
+     "plugcell.sim.twin.robot:1 (sim) imports plugcell.apps.commands.twin (apps)"),
 ])
 def test_a_wrong_import_is_reported(module: str, source: str, offence: str) -> None:
     assert upward_imports(source, module) == [offence]
 
 
 def test_programs_and_lower_layers_may_import_what_they_need() -> None:
-    assert upward_imports("from plugcell.cli import main\n",
-                          "plugcell.services.robot.__main__") == []
+    assert upward_imports("from plugcell.apps.cli import main\n",
+                          "plugcell.devices.robot.__main__") == []
     assert upward_imports("from plugcell.kinematics import forward\nimport numpy\n",
                           "plugcell.io.robots") == []
     assert upward_imports("from plugcell.framework.service import GenericDevice\n",
-                          "plugcell.services.camera") == []
+                          "plugcell.devices.camera") == []

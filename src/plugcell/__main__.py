@@ -1,5 +1,5 @@
 import sys
 
-from plugcell.cli import main
+from plugcell.apps.cli import main
 
 sys.exit(main())

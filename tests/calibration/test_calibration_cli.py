@@ -9,12 +9,12 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from plugcell.cli import main
+from plugcell.apps.cli import main
 from plugcell.io.measurements import read_measurements, write_measurements
-from plugcell.twin.campaign import measure_poses, working_volume_joints
-from plugcell.twin.robot import RobotTwin
-from plugcell.twin.scenario import TwinScenario
-from plugcell.twin.tracker import LaserTracker
+from plugcell.sim.twin.campaign import measure_poses, working_volume_joints
+from plugcell.sim.twin.robot import RobotTwin
+from plugcell.sim.twin.scenario import TwinScenario
+from plugcell.sim.twin.tracker import LaserTracker
 
 SHARED_TABLE = Path(__file__).resolve().parents[3] / "shared" / "data" / "thesis_table_8_1.csv"
 
@@ -120,7 +120,7 @@ def test_reproduce_writes_under_out_by_default(tmp_path, monkeypatch, capsys):
 
 @pytest.mark.skipif(not SHARED_TABLE.is_file(), reason="shared data not available")
 def test_embedded_table_8_1_matches_the_shared_csv():
-    from plugcell.commands.reproduce import TABLE_8_1
+    from plugcell.apps.reproduce.identification_8_1 import TABLE_8_1
 
     rows = [r for r in csv.reader(SHARED_TABLE.read_text().splitlines())
             if r and not r[0].startswith("#")][1:]

@@ -11,8 +11,8 @@ def test_calibration_imports_no_twin_framework_or_io():
         "import sys, plugcell.calibration, "
         "plugcell.calibration.planning, "
         "plugcell.calibration.simulation\n"
-        "bad = [m for m in sys.modules if m.startswith(('plugcell.twin', 'plugcell.framework', "
-        "'plugcell.services', 'plugcell.io', 'plugcell.commands', 'zenoh', 'matplotlib'))]\n"
+        "bad = [m for m in sys.modules if m.startswith(('plugcell.sim.twin', 'plugcell.framework', "
+        "'plugcell.devices', 'plugcell.io', 'plugcell.apps.commands', 'zenoh', 'matplotlib'))]\n"
         "print(','.join(bad))"
     )
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
@@ -20,7 +20,7 @@ def test_calibration_imports_no_twin_framework_or_io():
 
 
 def test_bench_calibration_reports_t150():
-    from plugcell.commands.bench_calibration import measure
+    from plugcell.apps.bench.calibration import measure
 
     d = measure(repeat=1, max_poses=150)
     assert d["t150_s"] > 0 and d["parameters"] == 50

@@ -11,6 +11,7 @@ import numpy as np
 import pytest
 from calibration_testlib import harmonic_campaign, random_frame, ur10_toml
 
+from plugcell.apps.cli import main
 from plugcell.calibration import CalibrationData, Calibrator
 from plugcell.calibration.residual_model import (
     MIN_POSES,
@@ -20,7 +21,6 @@ from plugcell.calibration.residual_model import (
     hybrid_residuals,
     workspace_cells,
 )
-from plugcell.cli import main
 from plugcell.compensation import IdentifiedModel
 from plugcell.io.measurements import (
     MeasurementFileError,

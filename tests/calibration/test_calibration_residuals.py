@@ -11,10 +11,10 @@ import pytest
 from plugcell.calibration import CalibrationData, CalibrationResult, Calibrator, PoseResiduals
 from plugcell.calibration.result import RESIDUALS_FORMAT
 from plugcell.kinematics.transforms import so3_exp
-from plugcell.twin.campaign import measure_poses, working_volume_joints
-from plugcell.twin.robot import RobotTwin
-from plugcell.twin.scenario import TwinScenario
-from plugcell.twin.tracker import LaserTracker
+from plugcell.sim.twin.campaign import measure_poses, working_volume_joints
+from plugcell.sim.twin.robot import RobotTwin
+from plugcell.sim.twin.scenario import TwinScenario
+from plugcell.sim.twin.tracker import LaserTracker
 
 
 def _campaign(n: int, seed: int) -> CalibrationData:

@@ -125,7 +125,7 @@ def test_old_params_json_without_region_still_loads(calibrated, h4):
 
 
 def test_compensate_flags_targets_outside(calibrated, tmp_path, capsys):
-    from plugcell.cli import main
+    from plugcell.apps.cli import main
     from plugcell.kinematics.rotations import matrix_to_angles
 
     result, data = calibrated
@@ -151,7 +151,7 @@ def test_compensate_flags_targets_outside(calibrated, tmp_path, capsys):
 
 
 def test_compute_service_region_function(calibrated):
-    from plugcell.services.compute.functions import FUNCTIONS, FunctionError, Parameters
+    from plugcell.devices.compute.functions import FUNCTIONS, FunctionError, Parameters
 
     result, data = calibrated
     p = Parameters(result, result.model.structure.source, json.loads(result.to_json()))
@@ -212,8 +212,8 @@ def test_compute_compensation_notes_targets_outside_the_region(calibrated):
     """compensate_joints (the compensation functions of the compute service) warn, with
     how far, when a compensated target lies outside the calibrated region; the compute
     service turns the warning into its process's note (the Completed reason)."""
-    from plugcell.services.compute.functions import FUNCTIONS, FunctionContext, Parameters
-    from plugcell.services.compute.workspace import Workspace
+    from plugcell.devices.compute.functions import FUNCTIONS, FunctionContext, Parameters
+    from plugcell.devices.compute.workspace import Workspace
 
     result, data = calibrated
     p = Parameters(result, result.model.structure.source, json.loads(result.to_json()))

@@ -7,12 +7,12 @@ import json
 import numpy as np
 import pytest
 
-from plugcell.cli import main
-from plugcell.controller.language.types import JOINTPOS, ArrayType
-from plugcell.controller.value_text import value_from_text
+from plugcell.apps.cli import main
+from plugcell.devices.robot.value_text import value_from_text
 from plugcell.io.measurements import read_measurements
 from plugcell.io.plans import read_plan
 from plugcell.io.robots import load_robot
+from plugcell.pdl.types import JOINTPOS, ArrayType
 
 
 @pytest.fixture(scope="module")

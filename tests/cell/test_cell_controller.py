@@ -16,12 +16,12 @@ from pathlib import Path
 
 from cell_testlib import FakeRobot, SlowDevice, run
 
+from plugcell.devices.camera import CameraService
+from plugcell.devices.cell.service import CellController
+from plugcell.devices.cell.tasks import check_task
+from plugcell.devices.cell.wiring import load_wiring
+from plugcell.devices.drill import DrillService
 from plugcell.framework import Client
-from plugcell.services.camera import CameraService
-from plugcell.services.cell.service import CellController
-from plugcell.services.cell.tasks import check_task
-from plugcell.services.cell.wiring import load_wiring
-from plugcell.services.tool import DrillService
 
 
 async def eventually(predicate: Callable[[], bool], timeout: float = 8.0) -> None:

@@ -11,8 +11,8 @@ from __future__ import annotations
 import threading
 import time
 
+from plugcell.devices.cell.journal_tail import JournalTail
 from plugcell.framework.journal import Journal, journal_dir
-from plugcell.services.cell.journal_tail import JournalTail
 
 
 def test_close_while_a_poll_runs_in_another_thread(tmp_path):

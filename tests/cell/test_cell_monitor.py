@@ -2,8 +2,14 @@
 
 from __future__ import annotations
 
-from plugcell.framework.model import Data, DataTypes, ProcessStates, ProcessUpdateNotification, Tag
-from plugcell.services.cell.monitor import MonitorFeed, ProcessMonitor
+from plugcell.devices.cell.monitor import MonitorFeed, ProcessMonitor
+from plugcell.framework.messages import (
+    Data,
+    DataTypes,
+    ProcessStates,
+    ProcessUpdateNotification,
+    Tag,
+)
 
 
 def update(sender: str, recipient: str, identifier: int, state: str, seq: int,

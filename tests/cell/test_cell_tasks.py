@@ -9,13 +9,13 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
+from plugcell.devices.camera import CameraService
+from plugcell.devices.cell.tasks import TaskInputError, check_task, describe_command
+from plugcell.devices.compute.service import ComputeService
+from plugcell.devices.drill import DrillService
+from plugcell.devices.tracker.service import TrackerService
 from plugcell.framework.data import from_data, size_matches
-from plugcell.framework.model import Device
-from plugcell.services.camera import CameraService
-from plugcell.services.cell.tasks import TaskInputError, check_task, describe_command
-from plugcell.services.compute.service import ComputeService
-from plugcell.services.tool import DrillService
-from plugcell.services.tracker.service import TrackerService
+from plugcell.framework.messages import Device
 
 DEVICES = {
     cls.default_name or cls.kind.upper(): Device(name=cls.default_name or cls.kind.upper(),

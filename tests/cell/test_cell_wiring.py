@@ -9,7 +9,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from plugcell.services.cell.wiring import (
+from plugcell.devices.cell.wiring import (
     FORMAT,
     Wire,
     WiringError,

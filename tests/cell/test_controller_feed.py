@@ -9,8 +9,8 @@ from typing import Any
 
 import pytest
 
-from plugcell.services.cell import feed as controller_feed
-from plugcell.services.cell.feed import LOG_LINES, UiFeed
+from plugcell.devices.cell import feed as controller_feed
+from plugcell.devices.cell.feed import LOG_LINES, UiFeed
 
 
 class Seams:

@@ -11,8 +11,8 @@ from pathlib import Path
 
 import pytest
 
-import plugcell.commands
-from plugcell.cli import COMMANDS, EXIT_BROKEN_PIPE, build_parser, chosen_command, main
+import plugcell.apps.commands
+from plugcell.apps.cli import COMMANDS, EXIT_BROKEN_PIPE, build_parser, chosen_command, main
 
 #: Modules a parser must not need: the service stack, the web server, scipy.
 HEAVY = ("zenoh", "fastapi", "uvicorn", "starlette", "scipy", "plugcell.framework",
@@ -20,11 +20,11 @@ HEAVY = ("zenoh", "fastapi", "uvicorn", "starlette", "scipy", "plugcell.framewor
 
 
 def _imported_after_parser(command: str | None, heavy: tuple[str, ...] = HEAVY) -> list[str]:
-    """Modules (of ``heavy``) loaded by ``import plugcell.cli`` + ``build_parser(command)``,
+    """Modules (of ``heavy``) loaded by ``import plugcell.apps.cli`` + ``build_parser(command)``,
     in a fresh interpreter."""
     code = (
         "import json, sys\n"
-        "import plugcell.cli as cli\n"
+        "import plugcell.apps.cli as cli\n"
         f"cli.build_parser({command!r})\n"
         f"heavy = {heavy!r}\n"
         "print(json.dumps(sorted(m for m in sys.modules\n"
@@ -46,8 +46,8 @@ def test_help_needs_no_numpy(command):
 
 
 def test_top_level_parser_imports_no_command_module():
-    code = ("import sys, plugcell.cli as cli; cli.build_parser()\n"
-            "print([m for m in sys.modules if m.startswith('plugcell.commands.')])")
+    code = ("import sys, plugcell.apps.cli as cli; cli.build_parser()\n"
+            "print([m for m in sys.modules if m.startswith('plugcell.apps.commands.')])")
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
                          check=True, timeout=60)
     assert out.stdout.strip() == "[]"
@@ -76,12 +76,12 @@ def test_every_command_module_is_declared_once():
     assert len(declared) == len(COMMANDS)
     assert len({c.name for c in COMMANDS}) == len(COMMANDS)
     found = set()
-    for path in Path(plugcell.commands.__file__).parent.glob("*.py"):
+    for path in Path(plugcell.apps.commands.__file__).parent.glob("*.py"):
         tree = ast.parse(path.read_text(encoding="utf-8"))
         names = [n.name for n in tree.body if isinstance(n, ast.FunctionDef)]
         assert "register" not in names, f"{path.name}: register() is never called; " \
-            "declare the command in plugcell.cli.COMMANDS with a configure function"
-        found |= {f"plugcell.commands.{path.stem}:{n}" for n in names
+            "declare the command in plugcell.apps.cli.COMMANDS with a configure function"
+        found |= {f"plugcell.apps.commands.{path.stem}:{n}" for n in names
                   if n.startswith("configure")}
     assert found == declared
 
@@ -121,7 +121,7 @@ def test_a_closed_pipe_ends_quietly(args, code):
 
 def test_a_broken_pipe_elsewhere_is_not_hidden():
     """A BrokenPipeError while stdout is fine (a socket, a child's pipe) is a real error."""
-    code = ("import sys, plugcell.cli as cli\n"
+    code = ("import sys, plugcell.apps.cli as cli\n"
             "def broken(argv):\n"
             "    raise BrokenPipeError(32, 'Broken pipe: a socket')\n"
             "cli._run = broken\n"

@@ -13,10 +13,10 @@ from plugcell.calibration.result import CalibrationResult
 from plugcell.compensation import IdentifiedModel
 from plugcell.io.robots import load_robot
 from plugcell.kinematics import RobotDescription
-from plugcell.twin.campaign import measure_poses, working_volume_joints
-from plugcell.twin.robot import RobotTwin
-from plugcell.twin.scenario import TwinScenario
-from plugcell.twin.tracker import LaserTracker
+from plugcell.sim.twin.campaign import measure_poses, working_volume_joints
+from plugcell.sim.twin.robot import RobotTwin
+from plugcell.sim.twin.scenario import TwinScenario
+from plugcell.sim.twin.tracker import LaserTracker
 
 
 @pytest.fixture(scope="session")
@@ -32,7 +32,7 @@ def model5(h4: RobotDescription) -> IdentifiedModel:
 @pytest.fixture(scope="session")
 def workspace_q(h4: RobotDescription) -> np.ndarray:
     """40 joint configurations whose nominal flange is in the working volume."""
-    from plugcell.twin.profile import TwinProfile
+    from plugcell.sim.twin.profile import TwinProfile
 
     return working_volume_joints(h4, TwinProfile.load("smart_h4"), 40,
                                  np.random.default_rng(7))

@@ -3,7 +3,7 @@
 
 from __future__ import annotations
 
-from plugcell.bench.compensation import format_report, run
+from plugcell.apps.bench.compensation import format_report, run
 
 
 def test_bench_small():

@@ -8,7 +8,7 @@ import math
 import numpy as np
 import pytest
 
-from plugcell.cli import main
+from plugcell.apps.cli import main
 from plugcell.compensation import IdentifiedModel, compensate, target_poses
 from plugcell.kinematics.rotations import matrix_to_angles, zyz_to_matrix
 

@@ -10,8 +10,8 @@ import sys
 def test_compensation_imports_no_twin_or_framework():
     code = (
         "import sys, plugcell.compensation\n"
-        "bad = [m for m in sys.modules if m.startswith(('plugcell.twin', 'plugcell.framework',"
-        " 'plugcell.services', 'plugcell.experiments', 'plugcell.io'))]\n"
+        "bad = [m for m in sys.modules if m.startswith(('plugcell.sim.twin', 'plugcell.framework',"
+        " 'plugcell.devices', 'plugcell.apps.reproduce', 'plugcell.io'))]\n"
         "print(','.join(bad))\n"
     )
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)

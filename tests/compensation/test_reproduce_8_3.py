@@ -11,7 +11,7 @@ import json
 import numpy as np
 import pytest
 
-from plugcell.experiments.reproduce_8_3 import STAGES, format_table, run, write_pages
+from plugcell.apps.reproduce.compensation_8_3 import STAGES, format_table, run, write_pages
 
 
 @pytest.fixture(scope="module")

@@ -25,11 +25,11 @@ from plugcell.compensation import (
     correct_6dof,
     nominal_joints,
 )
-from plugcell.experiments.twin_devices import TwinCell
 from plugcell.kinematics.pose_error import pose_error_exact
 from plugcell.kinematics.rotations import zyz_to_matrix
-from plugcell.twin.robot import RobotTwin
-from plugcell.twin.tracker import LaserTracker
+from plugcell.sim.twin.robot import RobotTwin
+from plugcell.sim.twin.tracker import LaserTracker
+from plugcell.sim.twin_cell import TwinCell
 
 
 def _cell(calibrated, seed: int = 5):

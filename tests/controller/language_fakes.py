@@ -7,7 +7,7 @@ import time
 from collections.abc import Callable, Sequence
 from typing import Any
 
-from plugcell.controller.language import Execution, JointPos, Position, Program, SimClock
+from plugcell.pdl import Execution, JointPos, Position, Program, SimClock
 
 
 class FakeArm:

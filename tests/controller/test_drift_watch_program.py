@@ -13,14 +13,14 @@ from language_fakes import execution
 
 from plugcell.calibration import CalibrationData, Calibrator, ErrorModel
 from plugcell.calibration.identifiability import random_configurations
-from plugcell.controller.language import Program
+from plugcell.devices.compute.expr import evaluate
+from plugcell.devices.compute.functions import FUNCTIONS, FunctionContext
+from plugcell.devices.compute.workspace import Workspace
 from plugcell.io.robots import load_robot
 from plugcell.kinematics.transforms import so3_exp
-from plugcell.services.compute.expr import evaluate
-from plugcell.services.compute.functions import FUNCTIONS, FunctionContext
-from plugcell.services.compute.workspace import Workspace
+from plugcell.pdl import Program
 
-PROGRAMS = Path(__file__).resolve().parents[2] / "src" / "plugcell" / "controller" / "programs"
+PROGRAMS = Path(__file__).resolve().parents[2] / "src" / "plugcell" / "pdl" / "programs"
 NESTS_MM = np.array([[1000.0, -1300.0, 0.0], [2400.0, 200.0, 50.0], [1200.0, 1500.0, 0.0],
                      [300.0, -200.0, 400.0]])
 

@@ -7,8 +7,8 @@ from pathlib import Path
 
 from lark.lexer import PatternStr
 
-from plugcell.controller.language import predefined
-from plugcell.controller.language.parser import _lark
+from plugcell.pdl import predefined
+from plugcell.pdl.parser import _lark
 
 DOC = (Path(__file__).resolve().parents[2] / "docs" / "robot-language.md").read_text()
 

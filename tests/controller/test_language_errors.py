@@ -7,7 +7,7 @@ import textwrap
 import pytest
 from language_fakes import run_source
 
-from plugcell.controller.language import (
+from plugcell.pdl import (
     ArgumentError,
     DeclarationError,
     DivisionByZeroError,
@@ -219,7 +219,7 @@ def test_a_dropped_connection_fails_the_write():
 
 
 def test_no_arm_attached_is_a_motion_error():
-    from plugcell.controller.language import Execution
+    from plugcell.pdl import Execution
 
     prog = Program.from_source("PROGRAM x\nBEGIN\n  MOVE TO ARM_POS\nEND x\n")
     result = Execution(prog).run()

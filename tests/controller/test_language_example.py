@@ -8,7 +8,7 @@ import time
 import pytest
 from language_fakes import FakeArm, FakeChannel, execution
 
-from plugcell.controller.language import (
+from plugcell.pdl import (
     BUILTIN_LIBRARY,
     Execution,
     ExecutionState,

@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 from language_fakes import FakeArm, execution, run_source
 
-from plugcell.controller.language import (
+from plugcell.pdl import (
     BUILTIN_LIBRARY,
     ExecutionState,
     JointPos,
@@ -699,8 +699,8 @@ def test_vectors_add():
 
 def test_value_texts_read_back_as_what_they_were():
     """numbers_text / rows_text write what value_from_text reads (program values)."""
-    from plugcell.controller.language.types import JOINTPOS, POSITION, ArrayType
-    from plugcell.controller.value_text import numbers_text, rows_text, value_from_text
+    from plugcell.devices.robot.value_text import numbers_text, rows_text, value_from_text
+    from plugcell.pdl.types import JOINTPOS, POSITION, ArrayType
 
     pos = [1500.0, -0.25, 1200.125, 10.0, 90.0, -179.5]
     assert value_from_text(numbers_text(pos), POSITION) == pos

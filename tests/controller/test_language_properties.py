@@ -10,7 +10,7 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from plugcell.controller.language import (
+from plugcell.pdl import (
     BUILTIN_LIBRARY,
     DivisionByZeroError,
     Execution,
@@ -22,8 +22,8 @@ from plugcell.controller.language import (
     format_module,
     parse_module,
 )
-from plugcell.controller.language import nodes as n
-from plugcell.controller.language.types import (
+from plugcell.pdl import nodes as n
+from plugcell.pdl.types import (
     BOOLEAN,
     INTEGER,
     POSITION,

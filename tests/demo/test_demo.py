@@ -53,7 +53,7 @@ def test_demo_fast_runs_the_three_steps_over_services(tmp_path: Path) -> None:
 
 
 def test_demo_refuses_a_speed_that_is_not_one(tmp_path: Path, capsys) -> None:
-    from plugcell.cli import main
+    from plugcell.apps.cli import main
 
     assert main(["demo", "--fast", "--speed", "0", "--out", str(tmp_path)]) == 2
     assert "--speed must be positive, not 0.0" in capsys.readouterr().err

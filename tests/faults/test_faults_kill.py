@@ -26,7 +26,7 @@ from plugcell.framework.bus import Bus
 from plugcell.framework.journal import journal_files, read_journal
 from plugcell.framework.keys import KeySpace
 from plugcell.framework.transport import TransportConfig, open_session
-from plugcell.services.sim.world import ReflectorPublisher
+from plugcell.sim.world import ReflectorPublisher
 
 pytestmark = [pytest.mark.slow, pytest.mark.timeout(90)]
 
@@ -36,7 +36,7 @@ POSE = [1200.0, 100.0, 900.0, 10.0, 150.0, -20.0]
 
 
 def _pose(v: list[float]) -> np.ndarray:
-    from plugcell.services.tracker.frames import matrix_from_vector
+    from plugcell.devices.tracker.frames import matrix_from_vector
 
     return matrix_from_vector(v, "euler")  # mm, deg (ZYZ) → 4×4 in metres
 

@@ -19,13 +19,13 @@ import pytest
 from childproc import until
 from faults_testlib import FaultCell
 
+from plugcell.devices.tracker.frames import vector_from_matrix
 from plugcell.framework import BlockingClient, ProcessStates, from_data
 from plugcell.framework.bus import Bus
 from plugcell.framework.keys import KeySpace
 from plugcell.framework.transport import TransportConfig, open_session
-from plugcell.services.sim.world import ReflectorPublisher
-from plugcell.services.tracker.frames import vector_from_matrix
-from plugcell.twin.scenario import TwinScenario, make_truth
+from plugcell.sim.twin.scenario import TwinScenario, make_truth
+from plugcell.sim.world import ReflectorPublisher
 
 pytestmark = [pytest.mark.slow, pytest.mark.timeout(180)]
 

@@ -14,7 +14,7 @@ import numpy as np
 from childproc import Proc, plugcell_argv  # noqa: F401  (re-exported for the tests)
 
 from plugcell.framework import Command, CommandTypes, DataTypes, DeviceError, GenericDevice
-from plugcell.framework.model import ProcessStates
+from plugcell.framework.messages import ProcessStates
 from plugcell.framework.participant import Participant
 
 

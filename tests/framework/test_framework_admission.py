@@ -15,7 +15,7 @@ from plugcell.framework.admission import (
     decode_request,
 )
 from plugcell.framework.data import to_data
-from plugcell.framework.model import (
+from plugcell.framework.messages import (
     Command,
     CommandTypes,
     DataTypes,

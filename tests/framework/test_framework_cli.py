@@ -8,7 +8,7 @@ import subprocess
 import pytest
 from framework_testlib import plugcell_argv, unique_cell
 
-from plugcell.bench.transport import format_table
+from plugcell.apps.bench.transport import format_table
 
 pytestmark = [pytest.mark.slow, pytest.mark.timeout(90)]
 

@@ -8,10 +8,10 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from plugcell.bench.fuzz import fuzz_decoder
+from plugcell.apps.bench.fuzz import fuzz_decoder
 from plugcell.framework import wire
 from plugcell.framework.data import DTYPES, to_data
-from plugcell.framework.model import (
+from plugcell.framework.messages import (
     Acknowledgement,
     Command,
     CommandTypes,

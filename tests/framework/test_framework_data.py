@@ -18,7 +18,7 @@ from plugcell.framework.data import (
     summary,
     to_data,
 )
-from plugcell.framework.model import Data, DataTypes
+from plugcell.framework.messages import Data, DataTypes
 
 pytestmark = pytest.mark.timeout(120)
 

@@ -13,6 +13,8 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
+from plugcell.devices.cell import journal_tail as controller_journal
+from plugcell.devices.cell.journal_tail import JournalTail
 from plugcell.framework.journal import (
     SCHEMA_VERSION,
     Journal,
@@ -20,8 +22,6 @@ from plugcell.framework.journal import (
     journal_dir,
     read_journal,
 )
-from plugcell.services.cell import journal_tail as controller_journal
-from plugcell.services.cell.journal_tail import JournalTail
 
 #: The version-1 schema (``updates`` keyed by (recipient, sender, identifier, seq)),
 #: as journals written before version 2 still have it.

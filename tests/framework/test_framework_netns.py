@@ -13,7 +13,7 @@ import sys
 
 import pytest
 
-from plugcell.bench.netns import VethPair, netns_available
+from plugcell.apps.bench.netns import VethPair, netns_available
 
 pytestmark = [pytest.mark.slow, pytest.mark.netns, pytest.mark.timeout(120)]
 

@@ -7,7 +7,7 @@ from __future__ import annotations
 
 import asyncio
 
-from plugcell.framework.model import (
+from plugcell.framework.messages import (
     Acknowledgement,
     Command,
     Process,

@@ -6,7 +6,7 @@ import asyncio
 
 import pytest
 
-from plugcell.framework.model import Command, CommandTypes, Process, Tag
+from plugcell.framework.messages import Command, CommandTypes, Process, Tag
 from plugcell.framework.processqueue import Entry, ProcessQueue
 
 pytestmark = pytest.mark.timeout(30)

@@ -23,7 +23,7 @@ from zenoh.handlers import Callback
 
 from plugcell.framework import wire
 from plugcell.framework.journal import read_journal
-from plugcell.framework.model import (
+from plugcell.framework.messages import (
     Acknowledgement,
     Command,
     Process,

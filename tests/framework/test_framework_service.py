@@ -16,7 +16,7 @@ from framework_testlib import ScriptedDevice, cell_with, collect, run, states, u
 from plugcell.framework import scheduler as scheduler_module
 from plugcell.framework import wire
 from plugcell.framework.journal import read_journal
-from plugcell.framework.model import (
+from plugcell.framework.messages import (
     Acknowledgement,
     Command,
     Data,

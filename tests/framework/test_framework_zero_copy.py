@@ -22,7 +22,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from hypothesis.extra import numpy as hnp
 
-from plugcell.bench.device import BenchService
+from plugcell.apps.bench.device import BenchService
 from plugcell.framework import wire
 from plugcell.framework.data import (
     DTYPES,
@@ -34,7 +34,7 @@ from plugcell.framework.data import (
     to_data,
 )
 from plugcell.framework.journal import Journal
-from plugcell.framework.model import (
+from plugcell.framework.messages import (
     Data,
     DataTypes,
     ProcessStates,

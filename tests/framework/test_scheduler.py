@@ -17,7 +17,7 @@ import pytest
 
 from plugcell.framework import scheduler as scheduler_module
 from plugcell.framework.data import from_data
-from plugcell.framework.model import (
+from plugcell.framework.messages import (
     Command,
     CommandTypes,
     DataTypes,

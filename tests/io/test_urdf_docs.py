@@ -14,7 +14,7 @@ DOC = Path(__file__).resolve().parents[2] / "docs" / "urdf.md"
 
 @pytest.mark.skipif(not URDF_DIR.is_dir(), reason="../shared/data/urdf not available")
 def test_import_examples_run(capsys: pytest.CaptureFixture[str]) -> None:
-    from plugcell.cli import main
+    from plugcell.apps.cli import main
 
     block = re.findall(r"```sh\n(.*?)```", DOC.read_text(encoding="utf-8"), flags=re.S)[0]
     env: dict[str, str] = {}

@@ -228,7 +228,7 @@ def test_ur_kinematics_yaml_expands_to_the_calibrated_ur10(tmp_path: Path) -> No
 
 def test_cli_export(tmp_path: Path, arm: tuple[Path, RobotDescription, CalibrationResult],
                     capsys: pytest.CaptureFixture[str]) -> None:
-    from plugcell.cli import main
+    from plugcell.apps.cli import main
 
     f, desc, res = arm
     d = res.to_dict()
@@ -294,7 +294,7 @@ def test_cli_export_source_gone(tmp_path: Path, arm: tuple[Path, RobotDescriptio
                                                            CalibrationResult],
                                 capsys: pytest.CaptureFixture[str]) -> None:
     """The source URDF moved: the message says so and how to give it; --robot does."""
-    from plugcell.cli import main
+    from plugcell.apps.cli import main
 
     f, desc, res = arm
     d = res.to_dict()

@@ -359,7 +359,7 @@ def test_toml_of_imported_robot_is_a_description_file(tmp_path: Path) -> None:
 
 # =============================================================================== command line
 def test_cli_describe_and_fk_of_a_urdf(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
-    from plugcell.cli import main
+    from plugcell.apps.cli import main
 
     f = _write(tmp_path, _GOOD)
     assert main(["kin", "describe", "--robot", str(f), "--format", "toml"]) == 0
@@ -378,7 +378,7 @@ def test_cli_describe_and_fk_of_a_urdf(tmp_path: Path, capsys: pytest.CaptureFix
 
 @needs_urdf
 def test_cli_ur10_xacro(capsys: pytest.CaptureFixture[str]) -> None:
-    from plugcell.cli import main
+    from plugcell.apps.cli import main
 
     assert main(["kin", "describe", "--robot", str(UR_XACRO), "--robot-arg", "ur_type:=ur10",
                  "--robot-arg", "name=ur10"]) == 0
@@ -395,7 +395,7 @@ def test_cli_fk_prints_the_tip_link(capsys: pytest.CaptureFixture[str]) -> None:
     """kin fk of a URDF robot whose tip is not the DH flange prints T_tcp = pinocchio's tool0."""
     import json
 
-    from plugcell.cli import main
+    from plugcell.apps.cli import main
 
     q = [10.0, -20.0, 30.0, 40.0, -50.0, 60.0]
     assert main(["kin", "fk", "--robot", str(FANUC_XACRO), "--joints",
@@ -410,7 +410,7 @@ def test_cli_fk_prints_the_tip_link(capsys: pytest.CaptureFixture[str]) -> None:
 @settings(max_examples=200, deadline=None, derandomize=True)
 @given(st.lists(st.text(max_size=8), max_size=4))
 def test_robot_arg_parser(pairs: list[str]) -> None:
-    from plugcell.commands.robotargs import parse_robot_args
+    from plugcell.apps.commands.robotargs import parse_robot_args
 
     try:
         d = parse_robot_args(pairs)

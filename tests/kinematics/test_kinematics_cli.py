@@ -1,4 +1,4 @@
-"""``plugcell kin``: fk/ik through plugcell.cli.main, and its error paths."""
+"""``plugcell kin``: fk/ik through plugcell.apps.cli.main, and its error paths."""
 
 from __future__ import annotations
 
@@ -8,7 +8,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from plugcell.cli import main
+from plugcell.apps.cli import main
 from plugcell.io.robots import load_robot
 from plugcell.kinematics import forward, matrix_to_zyz
 

@@ -201,7 +201,7 @@ def test_cli_fk_takes_millimetres(tmp_path: Path, track: tuple[RobotDescription,
                                   capsys: pytest.CaptureFixture[str]) -> None:
     import json
 
-    from plugcell.cli import main
+    from plugcell.apps.cli import main
 
     desc, _ = track
     f = tmp_path / "track.toml"
@@ -227,8 +227,8 @@ def test_track_robot_command_line_end_to_end(tmp_path: Path,
 
     from pinocchio_fk import pinocchio_tip_poses
 
+    from plugcell.apps.cli import main
     from plugcell.calibration.result import CalibrationResult
-    from plugcell.cli import main
     from plugcell.io.measurements import MeasurementSet, write_measurements
     from plugcell.kinematics.rotations import matrix_to_angles
 

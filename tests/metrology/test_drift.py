@@ -10,9 +10,9 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
+from plugcell.apps.cli import main
 from plugcell.calibration import CalibrationData, Calibrator, ErrorModel
 from plugcell.calibration.identifiability import random_configurations
-from plugcell.cli import main
 from plugcell.io.nests import NestFileError, format_nests, parse_nests
 from plugcell.io.robots import load_robot
 from plugcell.kinematics.transforms import so3_exp

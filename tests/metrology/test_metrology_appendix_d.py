@@ -20,7 +20,7 @@ from plugcell.metrology import (
     invert_transform,
     probe_from_flange_features,
 )
-from plugcell.twin.tracker import LaserTracker
+from plugcell.sim.twin.tracker import LaserTracker
 
 H = SMR_RADIUS_HALF_INCH
 

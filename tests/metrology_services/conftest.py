@@ -14,7 +14,7 @@ from metrology_testlib import Proc, plugcell_argv, unique_cell
 from plugcell.framework.bus import Bus
 from plugcell.framework.keys import KeySpace
 from plugcell.framework.transport import TransportConfig, open_session
-from plugcell.services.sim.world import ReflectorPublisher
+from plugcell.sim.world import ReflectorPublisher
 
 
 @dataclass

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from plugcell.services.tracker.driver import BeamNotLockedError, TrackerReading, TrackerStatus
+from plugcell.devices.tracker.driver import BeamNotLockedError, TrackerReading, TrackerStatus
 
 
 class ScriptedDriver:

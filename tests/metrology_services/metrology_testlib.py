@@ -11,7 +11,7 @@ from typing import Any
 import numpy as np
 from childproc import Proc, plugcell_argv  # noqa: F401  (re-exported for the tests)
 
-from plugcell.services.tracker.frames import matrix_from_vector
+from plugcell.devices.tracker.frames import matrix_from_vector
 
 
 def unique_cell(prefix: str = "m") -> str:

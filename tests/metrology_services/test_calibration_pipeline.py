@@ -15,13 +15,13 @@ import pytest
 from metrology_testlib import run
 
 from plugcell.calibration import CalibrationData, Calibrator
+from plugcell.devices.tracker.frames import vector_from_matrix
 from plugcell.framework import Client, ProcessCall, ProcessStates
 from plugcell.kinematics import forward
-from plugcell.services.tracker.frames import vector_from_matrix
-from plugcell.twin.campaign import measure_poses, working_volume_joints
-from plugcell.twin.robot import RobotTwin
-from plugcell.twin.scenario import TwinScenario
-from plugcell.twin.tracker import LaserTracker
+from plugcell.sim.twin.campaign import measure_poses, working_volume_joints
+from plugcell.sim.twin.robot import RobotTwin
+from plugcell.sim.twin.scenario import TwinScenario
+from plugcell.sim.twin.tracker import LaserTracker
 
 pytestmark = pytest.mark.timeout(90)
 

@@ -10,7 +10,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from plugcell.services.compute.expr import (
+from plugcell.devices.compute.expr import (
     Assign,
     Call,
     EvaluationError,
@@ -22,7 +22,7 @@ from plugcell.services.compute.expr import (
     evaluate,
     parse,
 )
-from plugcell.services.compute.workspace import Workspace
+from plugcell.devices.compute.workspace import Workspace
 
 calls: list[tuple] = []
 

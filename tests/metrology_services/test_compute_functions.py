@@ -9,15 +9,15 @@ import pytest
 
 from plugcell.calibration import CalibrationData, Calibrator
 from plugcell.compensation import IdentifiedModel
+from plugcell.devices.compute.expr import EvaluationError, evaluate
+from plugcell.devices.compute.functions import FUNCTIONS, FunctionContext, Parameters
+from plugcell.devices.compute.workspace import Workspace
+from plugcell.devices.tracker.frames import matrix_from_vector, vector_from_matrix
 from plugcell.io.robots import load_robot
-from plugcell.services.compute.expr import EvaluationError, evaluate
-from plugcell.services.compute.functions import FUNCTIONS, FunctionContext, Parameters
-from plugcell.services.compute.workspace import Workspace
-from plugcell.services.tracker.frames import matrix_from_vector, vector_from_matrix
-from plugcell.twin.campaign import measure_poses, working_volume_joints
-from plugcell.twin.robot import RobotTwin
-from plugcell.twin.scenario import TwinScenario
-from plugcell.twin.tracker import LaserTracker
+from plugcell.sim.twin.campaign import measure_poses, working_volume_joints
+from plugcell.sim.twin.robot import RobotTwin
+from plugcell.sim.twin.scenario import TwinScenario
+from plugcell.sim.twin.tracker import LaserTracker
 
 
 def rows(m) -> tuple[np.ndarray, np.ndarray]:

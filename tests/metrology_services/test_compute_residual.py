@@ -12,11 +12,11 @@ from plugcell.calibration import CalibrationData, Calibrator, ErrorModel
 from plugcell.calibration.identifiability import random_configurations
 from plugcell.calibration.residual_model import ResidualLearner
 from plugcell.compensation import IdentifiedModel, NominalModel, compensate_joints
+from plugcell.devices.compute.expr import EvaluationError, evaluate
+from plugcell.devices.compute.functions import FUNCTIONS, FunctionContext
+from plugcell.devices.compute.workspace import Workspace
 from plugcell.io.residual_models import residual_path, save_residual
 from plugcell.io.robots import load_robot
-from plugcell.services.compute.expr import EvaluationError, evaluate
-from plugcell.services.compute.functions import FUNCTIONS, FunctionContext
-from plugcell.services.compute.workspace import Workspace
 
 
 @pytest.fixture(scope="module")

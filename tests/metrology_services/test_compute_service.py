@@ -13,10 +13,10 @@ from test_compute_functions import rows
 from plugcell.calibration import CalibrationData, Calibrator
 from plugcell.framework import Client, ProcessCall, ProcessStates
 from plugcell.io.robots import load_robot
-from plugcell.twin.campaign import measure_poses, working_volume_joints
-from plugcell.twin.robot import RobotTwin
-from plugcell.twin.scenario import TwinScenario
-from plugcell.twin.tracker import LaserTracker
+from plugcell.sim.twin.campaign import measure_poses, working_volume_joints
+from plugcell.sim.twin.robot import RobotTwin
+from plugcell.sim.twin.scenario import TwinScenario
+from plugcell.sim.twin.tracker import LaserTracker
 
 pytestmark = pytest.mark.timeout(90)
 

@@ -5,10 +5,10 @@ from __future__ import annotations
 import re
 from pathlib import Path
 
-from plugcell.services.compute.expr import parse
-from plugcell.services.compute.functions import FUNCTIONS
-from plugcell.services.compute.service import ComputeService
-from plugcell.services.tracker.service import TrackerService
+from plugcell.devices.compute.expr import parse
+from plugcell.devices.compute.functions import FUNCTIONS
+from plugcell.devices.compute.service import ComputeService
+from plugcell.devices.tracker.service import TrackerService
 
 DOCS = Path(__file__).resolve().parents[2] / "docs"
 

@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from plugcell.services.tracker.routing import (
+from plugcell.devices.tracker.routing import (
     OptionError,
     ProcessOption,
     Route,

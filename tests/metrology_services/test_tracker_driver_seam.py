@@ -7,10 +7,10 @@ import pytest
 from fake_tracker_driver import ScriptedDriver
 from metrology_testlib import pose, run, unique_cell
 
+from plugcell.devices.registry import load_kind
+from plugcell.devices.tracker.driver import TrackerDriver
+from plugcell.devices.tracker.service import TrackerService, load_driver
 from plugcell.framework import Client, ProcessCall, ProcessStates
-from plugcell.services.registry import load_kind
-from plugcell.services.tracker.driver import TrackerDriver
-from plugcell.services.tracker.service import TrackerService, load_driver
 
 BASE, PROBE, ROBOT = [3000, 0, 0, 90, 0, 0], [0, 0, 100, 0, 0, 0], [1000, 200, 500, 0, 180, 0]
 

@@ -7,7 +7,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from plugcell.services.tracker.frames import (
+from plugcell.devices.tracker.frames import (
     FrameError,
     RequesterFrames,
     matrix_from_vector,

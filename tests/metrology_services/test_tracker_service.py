@@ -13,13 +13,13 @@ import numpy as np
 import pytest
 from metrology_testlib import pose, run, unique_cell
 
+from plugcell.devices.tracker.frames import matrix_from_vector
+from plugcell.devices.tracker.service import TrackerService
 from plugcell.framework import Client, ProcessCall, ProcessStates
 from plugcell.framework.bus import Bus
 from plugcell.framework.keys import KeySpace
 from plugcell.framework.transport import TransportConfig, open_session
-from plugcell.services.sim.world import ReflectorPublisher
-from plugcell.services.tracker.frames import matrix_from_vector
-from plugcell.services.tracker.service import TrackerService
+from plugcell.sim.world import ReflectorPublisher
 
 pytestmark = pytest.mark.timeout(90)
 

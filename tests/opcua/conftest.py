@@ -19,7 +19,7 @@ def node_harness() -> None:
 def cell_certs(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, Path]:
     """The cell's OPC UA authority and certificates (OPCUA, HMI, SECURE_GRIPPER), and a
     rogue authority's HMI certificate (the same name, another CA) — made once (RSA)."""
-    from plugcell.opcua.certificates import issue_application_certificate
+    from plugcell.devices.opcua.certificates import issue_application_certificate
 
     root = tmp_path_factory.mktemp("opcua-certs")
     certs, rogue = root / "certs", root / "rogue"

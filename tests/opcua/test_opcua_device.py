@@ -15,9 +15,9 @@ import numpy as np
 import pytest
 from opcua_testlib import JS, Proc, free_port, plugcell_argv, run_js, unique_cell, until
 
+from plugcell.devices.opcua.device import OpcUaDevice
+from plugcell.devices.opcua.device_map import parse_device_map
 from plugcell.framework import BlockingClient, DeviceError, ProcessStates, from_data
-from plugcell.opcua.device import OpcUaDevice
-from plugcell.opcua.device_map import parse_device_map
 
 pytestmark = pytest.mark.slow
 

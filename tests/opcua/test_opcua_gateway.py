@@ -10,11 +10,11 @@ import numpy as np
 import pytest
 from opcua_testlib import run_js, wait_shown
 
+from plugcell.devices.tracker.frames import matrix_from_vector
 from plugcell.framework.bus import Bus
 from plugcell.framework.keys import KeySpace
 from plugcell.framework.transport import TransportConfig, open_session
-from plugcell.services.sim.world import ReflectorPublisher
-from plugcell.services.tracker.frames import matrix_from_vector
+from plugcell.sim.world import ReflectorPublisher
 
 pytestmark = pytest.mark.slow
 

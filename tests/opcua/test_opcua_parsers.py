@@ -13,11 +13,11 @@ from asyncua import ua
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
+from plugcell.devices.opcua.arguments import ArgumentError, data_variant, input_value, option_of
+from plugcell.devices.opcua.device_map import DeviceMapError, load_device_map, parse_device_map
+from plugcell.devices.opcua.users import UserBook, UsersFileError, hash_password
 from plugcell.framework.data import to_data
-from plugcell.framework.model import Command, CommandTypes, DataTypes
-from plugcell.opcua.arguments import ArgumentError, data_variant, input_value, option_of
-from plugcell.opcua.device_map import DeviceMapError, load_device_map, parse_device_map
-from plugcell.opcua.users import UserBook, UsersFileError, hash_password
+from plugcell.framework.messages import Command, CommandTypes, DataTypes
 
 MAP = Path(__file__).resolve().parent / "gripper.toml"
 GOOD = MAP.read_text()

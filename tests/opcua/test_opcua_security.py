@@ -13,7 +13,7 @@ from pathlib import Path
 import pytest
 from opcua_testlib import UaCell, plugcell_argv, run_js, unique_cell, until, wait_shown
 
-from plugcell.opcua.users import hash_password
+from plugcell.devices.opcua.users import hash_password
 
 pytestmark = pytest.mark.slow
 

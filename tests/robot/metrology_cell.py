@@ -14,11 +14,11 @@ from dataclasses import dataclass
 import numpy as np
 from robot_cell import Launcher
 
-from plugcell.controller.value_text import numbers_text
+from plugcell.devices.robot.value_text import numbers_text
+from plugcell.devices.tracker.frames import vector_from_matrix
 from plugcell.framework import BlockingClient, ProcessStates, from_data
-from plugcell.services.tracker.frames import vector_from_matrix
-from plugcell.twin.robot import RobotTwin
-from plugcell.twin.scenario import TwinScenario
+from plugcell.sim.twin.robot import RobotTwin
+from plugcell.sim.twin.scenario import TwinScenario
 
 #: Simulated seconds per real second of the robots; the tracker keeps the same clock.
 SPEED = 100.0

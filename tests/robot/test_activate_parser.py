@@ -6,7 +6,7 @@ import pytest
 from hypothesis import example, given, settings
 from hypothesis import strategies as st
 
-from plugcell.controller.activate import (
+from plugcell.devices.robot.activate import (
     ActivateString,
     ActivateSyntaxError,
     format_activate,

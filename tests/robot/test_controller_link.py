@@ -28,15 +28,15 @@ from plugcell.framework import BlockingClient, ProcessStates, from_data
 from plugcell.framework.bus import Bus
 from plugcell.framework.keys import KeySpace
 from plugcell.framework.transport import open_session
-from plugcell.services.sim.world import WorldView
-from plugcell.twin.robot import RobotTwin
-from plugcell.twin.scenario import TwinScenario
+from plugcell.sim.twin.robot import RobotTwin
+from plugcell.sim.twin.scenario import TwinScenario
+from plugcell.sim.world import WorldView
 
 pytestmark = [pytest.mark.slow, pytest.mark.timeout(120)]
 
 
 def controller_argv(*args: str) -> list[str]:
-    return [sys.executable, "-m", "plugcell.controller.sim_controller", *args]
+    return [sys.executable, "-m", "plugcell.sim.controller.controller", *args]
 
 
 def listening_port(proc: Proc) -> int:
@@ -97,7 +97,7 @@ def test_a_real_controller_can_take_the_simulated_ones_place(launcher: Launcher)
     ctl = launcher.start(controller_argv("--port", "0", "--no-world", "--speed", "inf",
                                          "--library", str(Path(__file__).parent / "programs")))
     port = listening_port(ctl)
-    service = launcher.start([sys.executable, "-m", "plugcell.services.robot", "--name", "R5",
+    service = launcher.start([sys.executable, "-m", "plugcell.devices.robot", "--name", "R5",
                               "--controller", f"127.0.0.1:{port}", "--cell", launcher.cell])
     launcher.ready(service)
     with BlockingClient("link-tester", cell=launcher.cell) as client:
@@ -125,15 +125,15 @@ def test_a_real_controller_can_take_the_simulated_ones_place(launcher: Launcher)
 
 
 def test_the_issue_command_line_and_no_leftover_process(launcher: Launcher) -> None:
-    """``python -m plugcell.services.robot --name N --sim [--robot] [--payload-kg] [--speed]``."""
-    service = launcher.start([sys.executable, "-m", "plugcell.services.robot", "--name", "R7",
+    """``python -m plugcell.devices.robot --name N --sim [--robot] [--payload-kg] [--speed]``."""
+    service = launcher.start([sys.executable, "-m", "plugcell.devices.robot", "--name", "R7",
                               "--sim", "--robot", "smart_h4", "--payload-kg", "36", "--speed",
                               "100", "--cell", launcher.cell])
     launcher.ready(service)
     children = Path(f"/proc/{service.pid}/task/{service.pid}/children").read_text().split()
     assert len(children) == 1  # its simulated controller
     controller = int(children[0])
-    assert "plugcell.controller.sim_controller" in Path(f"/proc/{controller}/cmdline").read_text()
+    assert "plugcell.sim.controller.controller" in Path(f"/proc/{controller}/cmdline").read_text()
     with BlockingClient("cli-tester", cell=launcher.cell) as client:
         assert client.wait_for("R7")
         pos = client.create_process("R7", "POS_TO_JNTP", "", [1500, 0, 1300, 0, 90, 0]).result()

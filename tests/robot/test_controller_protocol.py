@@ -8,9 +8,9 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from plugcell.controller.activate import ActivateString
-from plugcell.controller.framing import FramingError, LineBuffer, frame_line
-from plugcell.controller.protocol import (
+from plugcell.devices.robot.activate import ActivateString
+from plugcell.devices.robot.framing import FramingError, LineBuffer, frame_line
+from plugcell.devices.robot.protocol import (
     PROGRAM_STATES,
     ActivateLine,
     ArmJntp,

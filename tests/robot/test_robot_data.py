@@ -7,12 +7,12 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from plugcell.controller.protocol import ResultData
+from plugcell.devices.camera import CameraService
+from plugcell.devices.drill import DrillService
+from plugcell.devices.robot.data import DataTextError, data_from_text, result_data
+from plugcell.devices.robot.protocol import ResultData
+from plugcell.devices.robot.service import RobotService
 from plugcell.framework import Command, CommandTypes, DataTypes
-from plugcell.services.camera import CameraService
-from plugcell.services.robot.data import DataTextError, data_from_text, result_data
-from plugcell.services.robot.service import RobotService
-from plugcell.services.tool import DrillService
 
 
 def command(service: type, name: str) -> Command:

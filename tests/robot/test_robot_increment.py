@@ -5,10 +5,10 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from plugcell.controller.poses import pose_matrix, pose_values
+from plugcell.devices.robot.increment import joint_increment, pose_error_sizes
+from plugcell.devices.robot.poses import pose_matrix, pose_values
 from plugcell.io.robots import load_robot
 from plugcell.kinematics import forward
-from plugcell.services.robot.increment import joint_increment, pose_error_sizes
 
 DESC = load_robot("smart_h4")
 Q0 = np.degrees(DESC.home) + np.array([5.0, 10.0, 20.0, -15.0, -20.0, 30.0])

@@ -15,15 +15,15 @@ import pytest
 from metrology_cell import MetrologyCell
 from robot_cell import PNT0001, PNT0002
 
+from plugcell.apps.reproduce.compensation_8_3 import ExperimentConfig, line_targets
 from plugcell.calibration import CalibrationData, Calibrator
-from plugcell.controller.value_text import rows_text
-from plugcell.experiments.reproduce_8_3 import ExperimentConfig, line_targets
+from plugcell.devices.robot.value_text import rows_text
+from plugcell.devices.tracker.frames import vector_from_matrix
 from plugcell.framework import ProcessStates
-from plugcell.services.tracker.frames import vector_from_matrix
-from plugcell.twin.campaign import measure_poses, working_volume_joints
-from plugcell.twin.robot import RobotTwin
-from plugcell.twin.scenario import TwinScenario
-from plugcell.twin.tracker import LaserTracker
+from plugcell.sim.twin.campaign import measure_poses, working_volume_joints
+from plugcell.sim.twin.robot import RobotTwin
+from plugcell.sim.twin.scenario import TwinScenario
+from plugcell.sim.twin.tracker import LaserTracker
 
 pytestmark = [pytest.mark.slow, pytest.mark.timeout(300)]
 

@@ -29,14 +29,14 @@ import pytest
 from metrology_cell import H4, KUKA, SPEED, MetrologyCell
 from robot_testlib import Proc, until
 
-from plugcell.controller.value_text import numbers_text
+from plugcell.devices.robot.value_text import numbers_text
+from plugcell.devices.tracker.frames import matrix_from_vector, vector_from_matrix
 from plugcell.framework import ProcessStates
 from plugcell.framework.journal import journal_files, read_journal
 from plugcell.metrology import invert_transform
-from plugcell.services.tracker.frames import matrix_from_vector, vector_from_matrix
-from plugcell.twin.campaign import working_volume_joints
-from plugcell.twin.robot import RobotTwin
-from plugcell.twin.scenario import TwinScenario
+from plugcell.sim.twin.campaign import working_volume_joints
+from plugcell.sim.twin.robot import RobotTwin
+from plugcell.sim.twin.scenario import TwinScenario
 
 pytestmark = [pytest.mark.slow, pytest.mark.timeout(120)]
 

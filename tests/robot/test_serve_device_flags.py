@@ -6,9 +6,9 @@ import argparse
 
 import pytest
 
-from plugcell.cli import CommandError, main
-from plugcell.commands.serve import _device_options, _params
-from plugcell.services.registry import load_kind
+from plugcell.apps.cli import CommandError, main
+from plugcell.apps.commands.serve import _device_options, _params
+from plugcell.devices.registry import load_kind
 
 
 def _args(**kw):
@@ -39,8 +39,8 @@ def test_flags_a_kind_does_not_have_are_refused(capsys):
 
 
 def test_a_serial_line_rate_that_is_not_a_rate_is_refused():
-    from plugcell.controller.sim_controller import main as controller_main
-    from plugcell.services.robot.service import RobotService
+    from plugcell.devices.robot.service import RobotService
+    from plugcell.sim.controller.controller import main as controller_main
 
     with pytest.raises(ValueError, match=r"link_baud must be 0 \(no serial line\) or positive"):
         RobotService("R1", sim=True, link_baud=-1.0)

@@ -16,11 +16,11 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from plugcell.controller.framing import LineBuffer
-from plugcell.controller.sim_arm import JOINT_SPEED_DEG_S, RAMP_S, TwinArm
-from plugcell.controller.sim_controller import SimController
-from plugcell.twin.robot import RobotTwin
-from plugcell.twin.scenario import TwinScenario
+from plugcell.devices.robot.framing import LineBuffer
+from plugcell.sim.controller.arm import JOINT_SPEED_DEG_S, RAMP_S, TwinArm
+from plugcell.sim.controller.controller import SimController
+from plugcell.sim.twin.robot import RobotTwin
+from plugcell.sim.twin.scenario import TwinScenario
 
 pytestmark = pytest.mark.timeout(60)
 
@@ -266,7 +266,7 @@ def test_the_serial_line_costs_simulated_time_by_the_character() -> None:
     """link_baud: every line between program and service takes 10 bits a character at the
     baud rate on the simulated clock (the thesis's C3G link, 19.2 kbit/s); the run's use
     is written to its console when it ends."""
-    from plugcell.controller.serial_line import SerialLine
+    from plugcell.devices.robot.serial_line import SerialLine
 
     with pytest.raises(ValueError, match="baud rate must be positive"):
         SerialLine(0)

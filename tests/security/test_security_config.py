@@ -10,7 +10,7 @@ import pytest
 import zenoh
 from cryptography import x509
 
-from plugcell.cli import main
+from plugcell.apps.cli import main
 from plugcell.framework.security import AccessPolicy, PolicyError, tls_settings, usrpwd_settings
 from plugcell.framework.transport import TransportConfig
 

@@ -27,7 +27,7 @@ from sec_testlib import free_port, issue_cell_certificates
 from plugcell.framework import Client, TransportConfig, wire
 from plugcell.framework.journal import journal_files, read_journal
 from plugcell.framework.keys import KeySpace
-from plugcell.framework.model import Acknowledgement, Command, Data, DataTypes, Process, Tag
+from plugcell.framework.messages import Acknowledgement, Command, Data, DataTypes, Process, Tag
 from plugcell.framework.signing import RequestSigner
 
 pytestmark = pytest.mark.timeout(240)

@@ -28,7 +28,7 @@ from hypothesis import strategies as st
 
 from plugcell.framework import wire
 from plugcell.framework.certificates import create_ca, issue_certificate
-from plugcell.framework.model import (
+from plugcell.framework.messages import (
     Command,
     Data,
     DataTypes,
@@ -179,7 +179,7 @@ def test_the_documented_signing_example_is_exact() -> None:
 def test_only_requests_are_signed() -> None:
     assert is_request(process()) and is_request(SubscribeRequest(partner="A"))
     assert is_request(UnsubscribeRequest(partner="A"))
-    from plugcell.framework.model import Acknowledgement, GetRequest, ProcessStates
+    from plugcell.framework.messages import Acknowledgement, GetRequest, ProcessStates
 
     assert not is_request(GetRequest())
     assert not is_request(Acknowledgement(identifier=1, state=ProcessStates.Queued))

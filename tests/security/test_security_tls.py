@@ -155,7 +155,7 @@ def test_the_publication_door_is_bound_to_the_certificate(secure_cell: SecureCel
     the tracker (the Zenoh ACL drops it); under its own name it does (and is judged)."""
     from plugcell.framework import wire
     from plugcell.framework.keys import KeySpace
-    from plugcell.framework.model import Command, Process, Tag
+    from plugcell.framework.messages import Command, Process, Tag
     from plugcell.framework.transport import open_session
 
     keys = KeySpace(secure_cell.name)

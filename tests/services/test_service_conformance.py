@@ -19,12 +19,12 @@ from typing import Any
 import numpy as np
 import pytest
 
+from plugcell.devices.registry import KINDS, load_kind
 from plugcell.framework import Client, ProcessStates
 from plugcell.framework.data import to_data
 from plugcell.framework.keys import check_name
-from plugcell.framework.model import Command, DataTypes
+from plugcell.framework.messages import Command, DataTypes
 from plugcell.framework.service import check_catalogue
-from plugcell.services.registry import KINDS, load_kind
 
 #: How each kind runs here without hardware: constructor keywords (simulated drivers).
 #: A kind missing from this table fails test_every_kind_can_be_run_or_says_why.

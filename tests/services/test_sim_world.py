@@ -10,7 +10,7 @@ import pytest
 from plugcell.framework.bus import Bus
 from plugcell.framework.keys import KeySpace
 from plugcell.framework.transport import TransportConfig, open_session
-from plugcell.services.sim.world import ReflectorPublisher, WorldView
+from plugcell.sim.world import ReflectorPublisher, WorldView
 
 
 @pytest.fixture

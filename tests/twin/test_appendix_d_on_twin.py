@@ -6,11 +6,11 @@ import numpy as np
 import pytest
 
 from plugcell.kinematics import so3_log
-from plugcell.twin.appendix_d import measure_base, measure_probe
-from plugcell.twin.campaign import working_volume_joints
-from plugcell.twin.robot import RobotTwin
-from plugcell.twin.scenario import TwinScenario
-from plugcell.twin.tracker import LaserTracker
+from plugcell.sim.twin.appendix_d import measure_base, measure_probe
+from plugcell.sim.twin.campaign import working_volume_joints
+from plugcell.sim.twin.robot import RobotTwin
+from plugcell.sim.twin.scenario import TwinScenario
+from plugcell.sim.twin.tracker import LaserTracker
 
 
 def _differences(A, B):

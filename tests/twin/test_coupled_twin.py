@@ -15,14 +15,14 @@ import pytest
 from coupling_testlib import hand_converted
 
 from plugcell.calibration import Calibrator
-from plugcell.controller.language.interfaces import MotionError
-from plugcell.controller.language.values import JointPos
-from plugcell.controller.sim_arm import TwinArm
 from plugcell.kinematics import forward
-from plugcell.twin.campaign import measure_poses, working_volume_joints
-from plugcell.twin.robot import RobotTwin, true_flange_poses
-from plugcell.twin.scenario import TwinScenario, make_truth
-from plugcell.twin.tracker import LaserTracker
+from plugcell.pdl.interfaces import MotionError
+from plugcell.pdl.values import JointPos
+from plugcell.sim.controller.arm import TwinArm
+from plugcell.sim.twin.campaign import measure_poses, working_volume_joints
+from plugcell.sim.twin.robot import RobotTwin, true_flange_poses
+from plugcell.sim.twin.scenario import TwinScenario, make_truth
+from plugcell.sim.twin.tracker import LaserTracker
 
 
 @pytest.fixture(scope="module")

@@ -7,15 +7,15 @@ import json
 import numpy as np
 import pytest
 
-from plugcell.cli import main
+from plugcell.apps.cli import main
 from plugcell.io.measurements import read_measurements
 from plugcell.kinematics import forward, manipulator_jacobian
-from plugcell.twin.campaign import measure_poses, working_volume_joints
-from plugcell.twin.physics import Payload, gravity_torques
-from plugcell.twin.report import error_budget
-from plugcell.twin.robot import RobotTwin, true_flange_poses
-from plugcell.twin.scenario import ScenarioError, TwinScenario, make_truth
-from plugcell.twin.tracker import LaserTracker
+from plugcell.sim.twin.campaign import measure_poses, working_volume_joints
+from plugcell.sim.twin.physics import Payload, gravity_torques
+from plugcell.sim.twin.report import error_budget
+from plugcell.sim.twin.robot import RobotTwin, true_flange_poses
+from plugcell.sim.twin.scenario import ScenarioError, TwinScenario, make_truth
+from plugcell.sim.twin.tracker import LaserTracker
 
 
 @pytest.fixture(scope="module")

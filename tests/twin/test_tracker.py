@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
-from plugcell.twin.tracker import (
+from plugcell.sim.twin.tracker import (
     BeamNotLockedError,
     LaserTracker,
     TargetOutOfRangeError,

@@ -12,14 +12,14 @@ import numpy as np
 import pytest
 from shared_data import UR_XACRO, URDF_DIR
 
-from plugcell.cli import main
+from plugcell.apps.cli import main
 from plugcell.io.robots import description_to_toml, load_robot
 from plugcell.kinematics import forward
 from plugcell.kinematics.rotations import zyz_to_matrix
-from plugcell.twin.campaign import working_volume_joints
-from plugcell.twin.generic import DEFLECTION, generic_twin
-from plugcell.twin.physics import gravity_torques
-from plugcell.twin.scenario import TwinScenario, make_truth
+from plugcell.sim.twin.campaign import working_volume_joints
+from plugcell.sim.twin.generic import DEFLECTION, generic_twin
+from plugcell.sim.twin.physics import gravity_torques
+from plugcell.sim.twin.scenario import TwinScenario, make_truth
 
 UR_ARGS = ["--robot", str(UR_XACRO), "--robot-arg", "ur_type=ur10", "--robot-arg", "name=ur10",
            "--package-path", str(URDF_DIR)]

@@ -7,10 +7,10 @@ import numpy as np
 import pytest
 
 from plugcell.metrology.drift import estimate_base_drift, nests_in_base
-from plugcell.twin.robot import RobotTwin
-from plugcell.twin.scenario import TwinScenario
-from plugcell.twin.thermal import ThermalDrift, shift_temperature
-from plugcell.twin.tracker import LaserTracker
+from plugcell.sim.twin.robot import RobotTwin
+from plugcell.sim.twin.scenario import TwinScenario
+from plugcell.sim.twin.thermal import ThermalDrift, shift_temperature
+from plugcell.sim.twin.tracker import LaserTracker
 
 NESTS = np.array([[1.0, -1.3, 0.0], [2.4, 0.2, 0.05], [1.2, 1.5, 0.0], [0.3, -0.2, 0.4]])
 

@@ -20,8 +20,8 @@ from plugcell.framework.bus import Bus
 from plugcell.framework.keys import KeySpace
 from plugcell.framework.transport import TransportConfig, open_session
 from plugcell.metrology import SMR_RADIUS_HALF_INCH
-from plugcell.services.sim.world import ReflectorPublisher, ReflectorState, WorldView
-from plugcell.twin.appendix_d import DOWEL_HOLES
+from plugcell.sim.twin.appendix_d import DOWEL_HOLES
+from plugcell.sim.world import ReflectorPublisher, ReflectorState, WorldView
 
 __all__ = ["FlangeSMRs"]
 

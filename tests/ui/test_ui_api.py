@@ -14,7 +14,7 @@ from cell_testlib import PROGRAMS
 from fastapi.testclient import TestClient
 from ui_testlib import HEADERS, make_client, services, until
 
-from plugcell.ui.app import STATIC
+from plugcell.apps.ui.app import STATIC
 
 
 @pytest.fixture(scope="module")
@@ -238,10 +238,10 @@ def residual_document() -> dict[str, Any]:
 
     from plugcell.calibration import CalibrationData, Calibrator
     from plugcell.io.robots import load_robot
-    from plugcell.twin.campaign import measure_poses, working_volume_joints
-    from plugcell.twin.robot import RobotTwin
-    from plugcell.twin.scenario import TwinScenario
-    from plugcell.twin.tracker import LaserTracker
+    from plugcell.sim.twin.campaign import measure_poses, working_volume_joints
+    from plugcell.sim.twin.robot import RobotTwin
+    from plugcell.sim.twin.scenario import TwinScenario
+    from plugcell.sim.twin.tracker import LaserTracker
 
     robot = RobotTwin(TwinScenario(seed=2))
     sets = []

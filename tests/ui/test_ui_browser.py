@@ -38,12 +38,12 @@ import pytest
 from cell_testlib import PROGRAMS, plugcell_argv, unique_cell
 from flange_smr import FlangeSMRs
 
-from plugcell.controller.value_text import numbers_text, rows_text
+from plugcell.devices.robot.value_text import numbers_text, rows_text
+from plugcell.devices.tracker.frames import matrix_from_vector, vector_from_matrix
 from plugcell.kinematics import so3_log
-from plugcell.services.tracker.frames import matrix_from_vector, vector_from_matrix
-from plugcell.twin.campaign import working_volume_joints
-from plugcell.twin.robot import RobotTwin
-from plugcell.twin.scenario import TwinScenario
+from plugcell.sim.twin.campaign import working_volume_joints
+from plugcell.sim.twin.robot import RobotTwin
+from plugcell.sim.twin.scenario import TwinScenario
 
 CHROMIUM = Path("/usr/bin/chromium")
 ARTIFACTS = Path(__file__).resolve().parents[2] / "test-artifacts" / "ui"

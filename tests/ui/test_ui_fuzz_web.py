@@ -16,9 +16,9 @@ from fastapi.testclient import TestClient
 sys.path.insert(0, str(Path(__file__).resolve().parents[2] / "benchmarks"))
 
 from fuzz_web import fuzz_web, judge
-from plugcell.services.cell.service import CellController
-from plugcell.ui.app import create_app
-from plugcell.ui.reports import ReportFiles
+from plugcell.apps.ui.app import create_app
+from plugcell.apps.ui.reports import ReportFiles
+from plugcell.devices.cell.service import CellController
 
 pytestmark = [pytest.mark.slow, pytest.mark.timeout(120)]
 

@@ -20,15 +20,15 @@ from fastapi.testclient import TestClient
 from flange_smr import FlangeSMRs
 from ui_testlib import HEADERS, make_client, services, until
 
+from plugcell.devices.tracker.frames import matrix_from_vector, vector_from_matrix
 from plugcell.framework.bus import Bus
 from plugcell.framework.keys import KeySpace
 from plugcell.kinematics import so3_log
 from plugcell.metrology import SMR_RADIUS_HALF_INCH
-from plugcell.services.sim.world import ReflectorPublisher
-from plugcell.services.tracker.frames import matrix_from_vector, vector_from_matrix
-from plugcell.twin.campaign import working_volume_joints
-from plugcell.twin.robot import RobotTwin
-from plugcell.twin.scenario import TwinScenario
+from plugcell.sim.twin.campaign import working_volume_joints
+from plugcell.sim.twin.robot import RobotTwin
+from plugcell.sim.twin.scenario import TwinScenario
+from plugcell.sim.world import ReflectorPublisher
 
 pytestmark = pytest.mark.timeout(120)
 

@@ -9,9 +9,9 @@ from typing import Any
 
 from fastapi.testclient import TestClient
 
-from plugcell.services.cell.service import CellController
-from plugcell.ui.app import create_app
-from plugcell.ui.reports import ReportFiles
+from plugcell.apps.ui.app import create_app
+from plugcell.apps.ui.reports import ReportFiles
+from plugcell.devices.cell.service import CellController
 
 HEADERS = {"X-Plugcell": "1"}
 

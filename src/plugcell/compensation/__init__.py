@@ -17,13 +17,13 @@ twin imports.  See docs/compensation.md.
 
 from plugcell.compensation.errors import CompensationError, CorrectionError, SensorError
 from plugcell.compensation.frames import MetrologyFrames, RobotFrameSensor
-from plugcell.compensation.model import IdentifiedModel, NominalModel, PoseModel
 from plugcell.compensation.model_based import (
     CompensationResult,
     compensate,
     compensate_joints,
     nominal_joints,
 )
+from plugcell.compensation.pose_model import IdentifiedModel, NominalModel, PoseModel
 from plugcell.compensation.program import filter_program, frame_matrix, target_poses
 from plugcell.compensation.protocols import (
     CartesianRobot,

@@ -35,7 +35,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from plugcell.compensation.errors import CompensationError
-from plugcell.compensation.model import PoseModel
+from plugcell.compensation.pose_model import PoseModel
 from plugcell.kinematics import RobotDescription, inverse
 from plugcell.kinematics.pose_error import pose_error_exact
 

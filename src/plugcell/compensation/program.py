@@ -11,7 +11,7 @@ conventions of :mod:`plugcell.kinematics.rotations` — Comau Euler ``"zyz"`` (A
 eq. A.4) or roll-pitch-yaw ``"rpy"`` — expressed in the robot base frame or in a
 *user frame* (a Comau ``$UFRAME``: the user frame's pose in the robot base frame,
 ``T_robot = UFRAME · T_user``).  The targets are tool-point poses, see
-:mod:`plugcell.compensation.model`.
+:mod:`plugcell.compensation.pose_model`.
 """
 
 from __future__ import annotations
@@ -19,13 +19,13 @@ from __future__ import annotations
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from plugcell.compensation.model import PoseModel
 from plugcell.compensation.model_based import (
     MAX_ITERATIONS,
     TOLERANCE,
     CompensationResult,
     compensate,
 )
+from plugcell.compensation.pose_model import PoseModel
 from plugcell.kinematics.rotations import matrix_to_angles, pose_to_matrix
 
 Array = NDArray[np.float64]

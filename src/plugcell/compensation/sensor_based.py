@@ -39,7 +39,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from plugcell.compensation.errors import CorrectionError, SensorError
-from plugcell.compensation.model import PoseModel
+from plugcell.compensation.pose_model import PoseModel
 from plugcell.compensation.protocols import (
     CartesianRobot,
     JointRobot,

@@ -19,7 +19,7 @@ Modules, one job each:
 from plugcell.framework.client import BlockingClient, BlockingProcessCall, Client
 from plugcell.framework.data import DataError, from_data, to_data
 from plugcell.framework.keys import DEFAULT_CELL, KeySpace
-from plugcell.framework.model import (
+from plugcell.framework.messages import (
     Acknowledgement,
     Command,
     CommandTypes,

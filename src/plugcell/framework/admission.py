@@ -24,7 +24,7 @@ from typing import Any
 
 from plugcell.framework import wire
 from plugcell.framework.data import DataError, check_data, from_data
-from plugcell.framework.model import Command, Device, Process
+from plugcell.framework.messages import Command, Device, Process
 
 
 def decode_request(payload: Any, max_payload: int, owner: str

@@ -10,7 +10,7 @@ whose layouts it applies); everything above it is transport-free.
 Zenoh calls its callbacks on its own threads and forbids blocking in them; a bus given a
 ``hand_off`` (a participant's :class:`~plugcell.framework.port.Port`) passes each
 ``(handler, item)`` to it, so every handler runs on the participant's event loop in
-arrival order.  A bus without one (the simulated world, ``controller/sim_world.py``)
+arrival order.  A bus without one (the simulated world, ``sim/controller/reflector.py``)
 calls handlers on Zenoh's threads: they must be thread-safe and quick.
 
 Doors (docs/protocol.md, "Key space"): ``get``, ``subscribe`` and ``create`` are a
@@ -93,7 +93,7 @@ class Bus:
         """A view of this bus — same session, same keys — whose handlers run on Zenoh's
         threads (no hand-off): for quick, thread-safe handlers that must not wait for
         the owner's event loop, such as a reflector of the simulated world published
-        from a client (experiments/demo_services.py).  Its :meth:`close` closes nothing."""
+        from a client (apps/demo/services.py).  Its :meth:`close` closes nothing."""
         return Bus(self.session, self.keys, owns_session=False)
 
     def link_identities(self, zid: str) -> set[str]:
@@ -232,7 +232,7 @@ class Bus:
             congestion_control=zenoh.CongestionControl.BLOCK,
         )
 
-    # -- the simulated world's reflectors (services/sim/world.py) ---------------------------
+    # -- the simulated world's reflectors (sim/world.py) ---------------------------
 
     def reflector(self, name: str, latest: Callable[[], bytes | None]) -> tuple[Entity, Entity]:
         """A publisher of reflector ``name``'s true pose, and a queryable answering each

@@ -5,7 +5,7 @@ makes ``NAME.pem``/``NAME.key`` signed by it, CN = NAME (what a service's access
 checks), valid for TLS server and client use, with the subject alternative names
 ``localhost``, ``127.0.0.1`` and the given hosts; :func:`write_file` writes private keys
 mode 0600.  ``plugcell certs`` is the command line over these (docs/security.md);
-:mod:`plugcell.opcua.certificates` adds the RSA authority OPC UA needs.
+:mod:`plugcell.devices.opcua.certificates` adds the RSA authority OPC UA needs.
 """
 
 from __future__ import annotations

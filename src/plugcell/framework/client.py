@@ -26,7 +26,7 @@ from typing import Any, TypeVar
 
 from plugcell.framework import eventloop
 from plugcell.framework.keys import DEFAULT_CELL
-from plugcell.framework.model import (
+from plugcell.framework.messages import (
     Acknowledgement,
     Device,
     GenericDeviceState,

@@ -1,4 +1,4 @@
-"""Typed data buffers: numpy arrays ↔ :class:`~plugcell.framework.model.Data` (F.4, F.5).
+"""Typed data buffers: numpy arrays ↔ :class:`~plugcell.framework.messages.Data` (F.4, F.5).
 
 The thesis carries process data as a generic ``Object`` that "can be converted to
 the right types and sizes thanks to the descriptions given in the fields
@@ -30,7 +30,7 @@ from typing import Any
 
 import numpy as np
 
-from plugcell.framework.model import MAX_RANK, Data, DataTypes
+from plugcell.framework.messages import MAX_RANK, Data, DataTypes
 
 #: Smallest read-only array :func:`to_data` takes as a view rather than copying: below
 #: it a copy (``tobytes``) is cheaper than a view, whose creation and encoding cost a

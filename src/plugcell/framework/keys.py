@@ -119,7 +119,7 @@ class KeySpace:
         """Every ProcessUpdate of the cell (for a cell controller's monitor, 7.6)."""
         return f"{self.prefix}/svc/*/process/*"
 
-    # the simulated cell (services/sim/world.py): the true pose of each reflector
+    # the simulated cell (sim/world.py): the true pose of each reflector
     def reflector(self, name: str = "*") -> str:
         """Pub/sub and queryable of reflector ``name``'s true pose (``*``: every one)."""
         return f"{self.prefix}/sim/reflector/{name}"

@@ -4,7 +4,7 @@ Acknowledgements of CreateProcess and ProcessUpdates collect during a turn of th
 service's event loop; :meth:`Outbox.flush` (scheduled once per turn, or at once for a
 final update) commits the journal — every accepted process and every update is durable
 before anyone can see it — then sends them: the updates for one sender in one sample
-(a :class:`~plugcell.framework.model.ProcessUpdateBatch` when there are several, up to
+(a :class:`~plugcell.framework.messages.ProcessUpdateBatch` when there are several, up to
 :data:`BATCH_BYTES` of data each, its acknowledgements first; docs/protocol.md,
 "Batches").  A data-less Running update whose process ends within the same flush is
 journaled but not sent (its ``seq`` is skipped): the final update supersedes it.
@@ -22,7 +22,7 @@ import logging
 from collections.abc import Callable
 from typing import Any
 
-from plugcell.framework.model import (
+from plugcell.framework.messages import (
     Acknowledgement,
     Message,
     ProcessStates,

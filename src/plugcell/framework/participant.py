@@ -41,7 +41,7 @@ from plugcell.framework.bus import Bus, QueryDoor
 from plugcell.framework.data import DataError, to_data
 from plugcell.framework.keys import DEFAULT_CELL, KeySpace, Presence, Role, check_name
 from plugcell.framework.memory import tune_allocator
-from plugcell.framework.model import (
+from plugcell.framework.messages import (
     Acknowledgement,
     Command,
     CommandTypes,

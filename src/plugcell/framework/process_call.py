@@ -14,7 +14,7 @@ from collections import deque
 from typing import TYPE_CHECKING, Any
 
 from plugcell.framework.data import from_data
-from plugcell.framework.model import (
+from plugcell.framework.messages import (
     Acknowledgement,
     ProcessStates,
     ProcessUpdateNotification,

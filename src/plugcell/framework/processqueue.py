@@ -22,7 +22,7 @@ from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field
 from typing import Any
 
-from plugcell.framework.model import Command, CommandTypes, Process
+from plugcell.framework.messages import Command, CommandTypes, Process
 
 
 @dataclass(eq=False)

@@ -32,7 +32,7 @@ from collections.abc import Awaitable, Callable
 from typing import Any
 
 from plugcell.framework.data import DataError, to_data
-from plugcell.framework.model import (
+from plugcell.framework.messages import (
     Command,
     CommandTypes,
     Data,

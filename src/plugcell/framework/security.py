@@ -47,7 +47,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 if TYPE_CHECKING:  # pragma: no cover
-    from plugcell.framework.model import Process
+    from plugcell.framework.messages import Process
     from plugcell.framework.service import GenericDevice
     from plugcell.framework.wire import Envelope
 

@@ -61,7 +61,7 @@ from plugcell.framework.bus import Notification
 from plugcell.framework.data import summary
 from plugcell.framework.journal import Journal, JournalInUseError, journal_dir
 from plugcell.framework.keys import DEFAULT_CELL, Presence, check_name
-from plugcell.framework.model import (
+from plugcell.framework.messages import (
     Acknowledgement,
     Command,
     CommandTypes,

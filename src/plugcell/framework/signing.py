@@ -40,7 +40,7 @@ from cryptography.hazmat.primitives.asymmetric import ec, ed25519, padding, rsa
 from cryptography.x509.oid import ExtendedKeyUsageOID, NameOID
 
 from plugcell.framework import wire
-from plugcell.framework.model import Message, Process, SubscribeRequest, UnsubscribeRequest
+from plugcell.framework.messages import Message, Process, SubscribeRequest, UnsubscribeRequest
 
 if TYPE_CHECKING:  # pragma: no cover
     from plugcell.framework.transport import TransportConfig

@@ -37,7 +37,7 @@ from typing import Annotated
 
 import msgspec
 
-from plugcell.framework.model import Message, Name
+from plugcell.framework.messages import Message, Name
 
 #: The protocol version this implementation speaks.
 VERSION = 1

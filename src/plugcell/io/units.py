@@ -20,8 +20,8 @@ name       R(a, b, c)                                          used by
 =========  ==================================================  ===========================
 
 The robot service, the simulated controller, the tracker service, the compute service
-and the web UI all convert here (``controller/poses.py``, ``services/tracker/frames.py``
-and ``controller/language/conversion.py`` only add their own checks and errors).
+and the web UI all convert here (``devices/robot/poses.py``, ``devices/tracker/frames.py``
+and ``pdl/conversion.py`` only add their own checks and errors).
 """
 
 from __future__ import annotations

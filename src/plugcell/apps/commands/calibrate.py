@@ -1,0 +1,316 @@
+"""``plugcell calibrate``: identify a robot's error model from a measurement file.
+
+    plugcell calibrate --robot NAME|FILE --model 1..5|NAME --data CAL.csv
+                       [--validate VAL.csv] [--rot rpy|zyz|xyz] [--payload-kg M]
+                       [--out PARAMS.json] [--json] [--report REPORT.html]
+                       [--residuals RES.json]
+
+A file of joint readings and tracker measurements is all it needs: BASE and
+PROBE are estimated from the data unless given (``--base``/``--probe``, e.g. from
+the appendix-D procedures).  ``--residuals`` writes the residual of every pose
+(measured position, error before/after in mm; calibration and validation poses) for
+the 3-D view of the controller UI.  Progress goes to stderr; ``--json`` prints the
+PARAMS.json object to stdout.  Bad files, unknown robots, too few poses for the
+model and a diverging fit end with a clear message and exit code 2.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import sys
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+if TYPE_CHECKING:  # numpy is imported where it is used: `--help` does not load it
+    import numpy as np
+
+from plugcell.apps.commands.files import write_text
+from plugcell.apps.commands.robotargs import add_robot_args
+
+
+def configure(p: argparse.ArgumentParser) -> None:
+    """Add the ``calibrate`` options to its parser (declared in :mod:`plugcell.apps.cli`)."""
+    p.description = (
+        "Identify the error parameters of one of the thesis's five models "
+        "(1 serial, 2 loop, 3 serial+gravity, 4 loop+gravity, 5 full) from a "
+        "measurement file (joint readings + tracker measurements, "
+        "docs/measurement-files.md)."
+    )
+    add_robot_args(p, required=True)
+    p.add_argument("--model", required=True,
+                   help="1-5 or serial, loop, serial+gravity, loop+gravity, full")
+    p.add_argument("--data", type=Path, required=True, help="calibration measurement file")
+    p.add_argument("--validate", type=Path, help="independent validation measurement file")
+    p.add_argument("--validate-refit", choices=("none", "base", "base+probe"), default="none",
+                   help="the validation poses were measured with the tracker (and target) "
+                        "elsewhere: re-identify BASE (and PROBE) on them, geometry kept; "
+                        "orientation rows weighed by --rotation-weight")
+    p.add_argument("--refit-positions-only", action="store_true",
+                   help="with --validate-refit and 6-DOF files: re-identify on the measured "
+                        "positions alone (orientations still evaluated)")
+    p.add_argument("--rot", choices=("rpy", "zyz", "xyz"), default="rpy",
+                   help="orientation convention of rx, ry, rz in the files (default rpy)")
+    p.add_argument("--payload-kg", type=float, metavar="M",
+                   help="payload carried in every pose (overrides a payload_kg column)")
+    p.add_argument("--out", type=Path,
+                   help="PARAMS.json to write (optional: --json prints it instead)")
+    p.add_argument("--report", type=Path, help="self-contained HTML report to write")
+    p.add_argument("--residuals", type=Path, metavar="RES.json",
+                   help="write every pose's residual (measured position, error before and "
+                        "after calibration, mm) for the UI's 3-D view")
+    p.add_argument("--json", action="store_true", help="print the PARAMS.json object to stdout")
+    p.add_argument("--base", help="initial BASE: JSON file (4x4 'matrix' or 'xyz_mm'+'rpy_deg') "
+                                  "or 'x,y,z,roll,pitch,yaw' in mm and degrees")
+    p.add_argument("--probe", help="initial PROBE, same forms as --base")
+    p.add_argument("--method", choices=("gauss-newton", "lm", "least-squares"),
+                   default="gauss-newton",
+                   help="iteration (default gauss-newton, thesis Fig. 6-9; least-squares: "
+                        "SciPy's trust-region solver, same minimum, slower)")
+    p.add_argument("--loss", choices=("linear", "huber", "cauchy"), default="linear",
+                   help="robust loss for outliers (default linear)")
+    p.add_argument("--loss-scale", type=float, metavar="S",
+                   help="threshold of the huber/cauchy loss: S × the median pose residual "
+                        "(default 3); a pose beyond it is down-weighted")
+    p.add_argument("--max-iterations", type=int, default=50)
+    p.add_argument("--rotation-weight", type=float, default=1.0,
+                   help="weight of orientation rows, m per rad, in the fit and the "
+                        "--validate-refit (default 1, as the thesis)")
+    p.add_argument("--condition-limit", type=float,
+                   help="apply the condition-number rule (4.10) with this limit, e.g. 100")
+    p.add_argument("--harmonics", type=int, choices=(0, 1, 2), default=0,
+                   help="add joint-angle harmonics Δθ_j = Σ s sin(k q_j) + c cos(k q_j), "
+                        "k ≤ this order, to the physical model (transmission error)")
+    p.add_argument("--thermal", action="store_true",
+                   help="identify a thermal expansion κT of the robot's lengths (1/K) about "
+                        "the data's mean temperature (needs a temperature_c column)")
+    p.add_argument("--residual-model", choices=("none", "learned"), default="none",
+                   help="after the physical identification, learn the remaining error from "
+                        "the joint readings (gradient boosting, grouped cross-validation; "
+                        "written next to --out as PARAMS.residual.skops)")
+    p.add_argument("--residual-cell-m", type=float, default=0.4, metavar="M",
+                   help="workspace cell edge grouping poses for the residual model's "
+                        "cross-validation (default 0.4 m)")
+    p.add_argument("--residual-trees", type=int, default=300, metavar="N",
+                   help="boosting iterations of each residual regressor (default 300)")
+    p.add_argument("--quiet", action="store_true", help="no progress on stderr")
+    p.set_defaults(func=_run)
+
+
+def _frame(text: str, what: str) -> np.ndarray:
+    """A 4x4 transform from a JSON file or an inline 'x,y,z,r,p,y' (mm, degrees)."""
+    import numpy as np
+
+    from plugcell.apps.cli import CommandError
+    from plugcell.kinematics.rotations import rpy_to_matrix
+
+    def from_xyz_rpy(xyz: Any, rpy: Any) -> np.ndarray:
+        T = np.eye(4)
+        T[:3, :3] = rpy_to_matrix(*np.radians(np.asarray(rpy, float)))
+        T[:3, 3] = np.asarray(xyz, float) / 1e3
+        return T
+
+    path = Path(text)
+    if path.suffix.lower() == ".json" or path.is_file():
+        try:
+            obj = json.loads(path.read_text(encoding="utf-8"))
+        except OSError as exc:
+            raise CommandError(f"--{what} {path}: cannot read: {exc.strerror}") from None
+        except json.JSONDecodeError as exc:
+            raise CommandError(f"--{what} {path}: invalid JSON: {exc}") from None
+        try:
+            if isinstance(obj, dict) and "matrix" in obj:
+                T = np.asarray(obj["matrix"], float)
+            elif isinstance(obj, dict) and "xyz_mm" in obj:
+                T = from_xyz_rpy(obj["xyz_mm"], obj.get("rpy_deg", [0, 0, 0]))
+            else:
+                T = np.asarray(obj, float)
+        except (TypeError, ValueError) as exc:
+            raise CommandError(f"--{what} {path}: {exc}") from None
+    else:
+        try:
+            vals = [float(x) for x in text.split(",")]
+        except ValueError:
+            raise CommandError(f"--{what}: expected a JSON file or 'x,y,z,roll,pitch,yaw', "
+                               f"got {text!r}") from None
+        if len(vals) != 6:
+            raise CommandError(f"--{what}: expected 6 numbers x,y,z (mm),roll,pitch,yaw (deg)")
+        T = from_xyz_rpy(vals[:3], vals[3:])
+    if T.shape != (4, 4) or not np.all(np.isfinite(T)):
+        raise CommandError(f"--{what}: expected a finite 4x4 transform, got shape {T.shape}")
+    R = T[:3, :3]
+    if not np.allclose(R @ R.T, np.eye(3), atol=1e-6) or np.linalg.det(R) < 0:
+        raise CommandError(f"--{what}: the rotation part is not a rotation matrix")
+    return T
+
+
+def _positive(value: float, option: str, unit: str) -> None:
+    """Refuse a ``value`` of ``option`` that is not a finite number > 0."""
+    from plugcell.apps.cli import CommandError
+
+    if not (math.isfinite(value) and value > 0):
+        raise CommandError(f"{option} must be a finite number > 0 ({unit}), got {value}")
+
+
+def _read(path: Path, rot: str, n: int, payload: float | None, scale: Any = None):
+    from dataclasses import replace
+
+    import numpy as np
+
+    from plugcell.apps.cli import CommandError
+    from plugcell.calibration import CalibrationData
+    from plugcell.io.measurements import MeasurementFileError, read_measurements
+
+    try:
+        m = read_measurements(path, rotation=rot, n_joints=n, joint_scale=scale)
+    except MeasurementFileError as exc:
+        raise CommandError(str(exc)) from None
+    if payload is not None:
+        m = replace(m, payload_kg=np.full(len(m), float(payload)))
+    return CalibrationData.from_measurements(m)
+
+
+class _Progress:
+    def __init__(self, quiet: bool) -> None:
+        self.quiet = quiet
+
+    def __call__(self, stage: str, i: int, n: int, message: str) -> None:
+        if not self.quiet:
+            print(f"calibrate [{stage}] {message}", file=sys.stderr, flush=True)
+
+
+def _summary(d: dict[str, Any]) -> str:
+    m = d["model"]
+    lines = [f"robot {d['robot']}, model {m['number']} ({m['name']}): "
+             f"{len(d['parameters'])} parameters from {d['data']['poses']} poses, "
+             f"{d['iterations']} iterations, κ = {d['condition_number']:.1f}"]
+    for key in ("calibration", "validation"):
+        s = d.get(key)
+        if not s:
+            continue
+        b = s.get("before", {})
+        line = (f"  {key:11s} mean {b.get('mean_mm', math.nan):7.3f} -> {s['mean_mm']:7.3f} mm, "
+                f"max {b.get('max_mm', math.nan):7.3f} -> {s['max_mm']:7.3f} mm")
+        if "orientation" in s:
+            line += (f", orientation {b.get('orientation', {}).get('mean_deg', math.nan):.4f} -> "
+                     f"{s['orientation']['mean_deg']:.4f}°")
+        lines.append(line)
+    rm, hv = d.get("residual_model"), d.get("validation_hybrid")
+    if rm:
+        cv = rm["cross_validation"]
+        lines.append(f"  residual model: grouped {cv['folds']}-fold CV over {cv['cells']} cells of "
+                     f"{cv['cell_size_m']:g} m: {cv['physical_mm']:.3f} -> {cv['hybrid_mm']:.3f} mm"
+                     + ("" if rm["useful"] else " (no gain: not applied)"))
+    if hv:
+        lines.append(f"  validation  physical {hv['physical']['mean_mm']:7.3f} mm, hybrid "
+                     f"{hv['hybrid']['mean_mm']:7.3f} mm ({hv['fallbacks']} of {hv['poses']} "
+                     "poses outside the trained region: physical model used)")
+    lines += [f"  warning: {w}" for w in d["warnings"]]
+    return "\n".join(lines)
+
+
+def _run(args: argparse.Namespace) -> int:
+    from plugcell.apps.cli import CommandError
+    from plugcell.apps.commands.robotargs import load_robot_of, robot_source_of
+    from plugcell.calibration import CalibrationError, Calibrator
+    from plugcell.calibration.residual_model import ResidualModelError
+
+    desc = load_robot_of(args)
+    if args.payload_kg is not None and not (math.isfinite(args.payload_kg)
+                                            and args.payload_kg >= 0):
+        raise CommandError(f"--payload-kg must be a mass ≥ 0, got {args.payload_kg}")
+    if args.max_iterations < 1:
+        raise CommandError("--max-iterations must be at least 1")
+    _positive(args.rotation_weight, "--rotation-weight", "m per rad")
+    if args.loss_scale is not None:
+        if args.loss == "linear":
+            raise CommandError("--loss-scale sets the threshold of --loss huber or cauchy; "
+                               "the linear loss has none")
+        _positive(args.loss_scale, "--loss-scale", "× the median pose residual")
+    if args.validate_refit != "none" and args.validate is None:
+        raise CommandError("--validate-refit needs a --validate file")
+    if args.refit_positions_only and args.validate_refit == "none":
+        raise CommandError("--refit-positions-only needs --validate-refit base or base+probe")
+    if not (math.isfinite(args.residual_cell_m) and args.residual_cell_m > 0):
+        raise CommandError(f"--residual-cell-m must be > 0, got {args.residual_cell_m}")
+    if args.residual_model == "learned" and args.out is None:
+        raise CommandError("--residual-model learned needs --out PARAMS.json: the layer is "
+                           "saved beside it (PARAMS.residual.skops)")
+    scale = desc.reading_scale()  # degrees, mm for a prismatic joint
+    data = _read(args.data, args.rot, desc.n_readings, args.payload_kg, scale)
+    val = None
+    if args.validate is not None:
+        val = _read(args.validate, args.rot, desc.n_readings, args.payload_kg, scale)
+        if val.six_dof != data.six_dof:
+            raise CommandError("--validate: the validation file must measure the same (6-DOF "
+                               "or positions) as the calibration file")
+        if args.refit_positions_only and not val.six_dof:
+            raise CommandError(f"--refit-positions-only: {args.validate} measures positions "
+                               "only; the refit uses them without the option")
+    base = None if args.base is None else _frame(args.base, "base")
+    probe = None if args.probe is None else _frame(args.probe, "probe")
+    progress = _Progress(args.quiet)
+    try:
+        cal = Calibrator(desc, args.model, base=base, probe=probe, method=args.method,
+                         loss=args.loss, max_iterations=args.max_iterations,
+                         **({} if args.loss_scale is None else {"loss_scale": args.loss_scale}),
+                         rotation_weight=args.rotation_weight,
+                         condition_limit=args.condition_limit, progress=progress,
+                         harmonics=args.harmonics, thermal=args.thermal)
+        result = cal.fit(data)
+        if args.residual_model == "learned":
+            from plugcell.calibration.residual_model import ResidualLearner
+
+            learner = ResidualLearner(
+                cell_size_m=args.residual_cell_m, trees=args.residual_trees,
+                progress=lambda t: progress("residual", 0, 0, t))
+            result = result.with_residual_model(learner.fit(result.model, data,
+                                                            robot=result.robot))
+        if val is not None:
+            result = result.with_validation(
+                val, refit_base=args.validate_refit != "none",
+                refit_probe=args.validate_refit == "base+probe",
+                rotation_weight=args.rotation_weight,
+                refit_positions_only=args.refit_positions_only)
+    except (CalibrationError, ResidualModelError) as exc:
+        raise CommandError(str(exc)) from None
+    written = []
+    side = None
+    if result.residual_model is not None:
+        from plugcell.io.residual_models import ResidualFileError, residual_path, save_residual
+
+        try:
+            side = save_residual(result.residual_model, residual_path(args.out))
+        except ResidualFileError as exc:
+            raise CommandError(str(exc)) from None
+    d = json.loads(result.to_json(residual_file=side))
+    # where the robot came from and what it was: export and compensate find it again
+    d["robot_source"] = robot_source_of(args).absolute().to_dict()
+    d["description"] = desc.to_dict()
+    text = json.dumps(d, indent=2, allow_nan=False)
+    if args.out is not None:
+        write_text(args.out, text + "\n")
+        written.append(args.out)
+        if side is not None:
+            written.append(residual_path(args.out))
+    if args.report is not None:
+        from plugcell.io.calibration_report import render_report
+
+        write_text(args.report, render_report(result, data, val))
+        written.append(args.report)
+    if args.residuals is not None:
+        write_text(args.residuals, result.residuals_json() + "\n")
+        written.append(args.residuals)
+    if args.json:
+        print(text)
+    else:
+        print(_summary(d))
+        if written:
+            print("wrote " + ", ".join(str(w) for w in written[:-1])
+                  + (" and " if len(written) > 1 else "") + str(written[-1]))
+        if args.out is None:
+            print("parameters not saved: give --out PARAMS.json (or --json to print them)",
+                  file=sys.stderr)
+    return 0
+

@@ -1,0 +1,97 @@
+"""``plugcell export`` — the calibrated robot in a format other tools read.
+
+::
+
+    plugcell export --params PARAMS.json --format urdf|ur-kinematics|toml --out FILE
+                    [--include-base] [--include-probe] [--serial-equivalent] [--json]
+
+The robot is the one PARAMS.json records (``robot_source``: the file and xacro
+arguments it was loaded from; ``description``: what was calibrated); ``--robot``
+(with the URDF options) overrides it.  What the format cannot carry goes into
+``FILE.extra.json`` next to it, and the command says so (docs/robot-description.md,
+"Export").
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+from pathlib import Path
+
+from plugcell.apps.commands.files import write_text
+from plugcell.apps.commands.robotargs import add_robot_args
+
+
+def configure(p: argparse.ArgumentParser) -> None:
+    """Add the ``export`` options to its parser (declared in :mod:`plugcell.apps.cli`)."""
+    p.description = (
+        "Export a calibration (PARAMS.json of plugcell calibrate): 'urdf' (the "
+        "source URDF with calibrated joint origins, links/meshes/limits kept), "
+        "'ur-kinematics' (default_kinematics.yaml of ur_description) or 'toml' (plugcell's "
+        "description with the calibrated values). What the format cannot carry goes into "
+        "OUT.extra.json.")
+    p.add_argument("--params", type=Path, required=True, help="PARAMS.json of plugcell calibrate")
+    p.add_argument("--format", required=True, choices=("urdf", "ur-kinematics", "toml"))
+    p.add_argument("--out", type=Path, required=True, help="file to write")
+    p.add_argument("--include-base", action="store_true",
+                   help="urdf: add BASE as a root link 'measurement' (the tracker frame)")
+    p.add_argument("--include-probe", action="store_true",
+                   help="urdf: add PROBE (the measured target) as a link 'probe' on the tip")
+    p.add_argument("--serial-equivalent", action="store_true",
+                   help="loop robot calibrated with --model serial: export its serial chain")
+    p.add_argument("--json", action="store_true", help="print a JSON summary")
+    add_robot_args(p, help="robot (name, .toml, .urdf, .xacro) instead of the one PARAMS.json "
+                   "records")
+    p.set_defaults(func=_run)
+
+
+def _run(args: argparse.Namespace) -> int:
+    from plugcell.apps.cli import CommandError
+    from plugcell.apps.commands.files import read_calibration
+    from plugcell.apps.commands.robotargs import robot_source_of
+    from plugcell.io.export import ExportError, export_calibration
+    from plugcell.io.robots import RobotSource
+    from plugcell.kinematics.errors import DescriptionError
+
+    d, result = read_calibration(args.params, args)
+    if args.robot is not None:
+        source: RobotSource | None = robot_source_of(args)
+    else:
+        try:
+            source = (RobotSource.from_dict(d["robot_source"]) if "robot_source" in d
+                      else RobotSource(str(d.get("robot", ""))))
+        except DescriptionError as exc:
+            raise CommandError(f"{args.params}: {exc}") from None
+    desc = result.model.structure.source
+    try:
+        out = export_calibration(result, desc, args.format, source=source,
+                                 params_path=args.params.name, include_base=args.include_base,
+                                 include_probe=args.include_probe,
+                                 serial_equivalent=args.serial_equivalent)
+    except ExportError as exc:
+        raise CommandError(f"{args.params}: cannot export as {args.format}: {exc}") from None
+    except DescriptionError as exc:
+        raise CommandError(f"{args.params}: the robot's source URDF: {exc} (give the robot "
+                           "again with --robot FILE and its options)") from None
+    written = [str(args.out)]
+    write_text(args.out, out.text)
+    side_path = None
+    if out.side is not None:
+        side_path = args.out.parent / (args.out.name + ".extra.json")
+        write_text(side_path, json.dumps(out.side, indent=2) + "\n")
+        written.append(str(side_path))
+    if args.json:
+        print(json.dumps({"out": str(args.out), "format": args.format,
+                          "side_file": None if side_path is None else str(side_path),
+                          "not_in_main_file": (out.side or {}).get("not_in_main_file", []),
+                          "notes": list(out.notes)}, indent=2))
+        return 0
+    print(f"wrote {args.out} ({args.format}, robot {result.robot}, model {result.config.name})")
+    for n in out.notes:
+        print(f"  note: {n}")
+    if out.side is not None:
+        print(f"wrote {side_path}: what {args.format} cannot carry —")
+        for r in out.side["not_in_main_file"]:
+            print(f"  - {r}")
+    return 0
+

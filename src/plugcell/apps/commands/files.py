@@ -1,0 +1,88 @@
+"""The files every command reads or writes, with one-line errors that name them.
+
+:func:`write_text` writes an output file (folders made); :func:`read_calibration`
+reads a PARAMS.json of ``plugcell calibrate`` into the dictionary and the
+:class:`~plugcell.calibration.result.CalibrationResult` it describes, for the robot the
+file records (``description``, else ``robot_source``, else the shipped ``robot``) or the
+one the command's ``--robot`` options name.  Every failure is a
+:class:`~plugcell.apps.cli.CommandError` naming the file: exit code 2, nothing written.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+if TYPE_CHECKING:
+    from plugcell.calibration.result import CalibrationResult
+
+
+def write_text(path: Path, text: str) -> None:
+    """Write ``text`` (UTF-8) to ``path``, making its folder; an OS error names the file."""
+    from plugcell.apps.cli import CommandError
+
+    try:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        path.write_text(text, encoding="utf-8")
+    except OSError as exc:
+        raise CommandError(f"{path}: cannot write: {exc.strerror or exc}") from None
+
+
+def read_params_document(path: Path) -> dict[str, Any]:
+    """The JSON object of a PARAMS.json file (unreadable, not JSON, not an object: error)."""
+    from plugcell.apps.cli import CommandError
+
+    try:
+        d = json.loads(path.read_text(encoding="utf-8"))
+    except OSError as exc:
+        raise CommandError(f"{path}: cannot read: {exc.strerror or exc}") from None
+    except UnicodeDecodeError as exc:
+        raise CommandError(f"{path}: not valid JSON: {exc}") from None
+    except json.JSONDecodeError as exc:
+        raise CommandError(f"{path}: not valid JSON: line {exc.lineno}: {exc.msg}") from None
+    if not isinstance(d, dict):
+        raise CommandError(f"{path}: expected a JSON object written by plugcell calibrate")
+    return d
+
+
+def read_calibration(path: Path, args: argparse.Namespace | None = None
+                     ) -> tuple[dict[str, Any], CalibrationResult]:
+    """PARAMS.json ``path`` as ``(document, result)``.
+
+    Parameters
+    ----------
+    path : Path
+        A PARAMS.json written by ``plugcell calibrate``.
+    args : argparse.Namespace, optional
+        The command's options: when ``args.robot`` is given (with the URDF options of
+        :func:`~plugcell.apps.commands.robotargs.add_robot_args`) that robot replaces the one
+        the file records.
+
+    Returns
+    -------
+    document : dict
+        The file's JSON object.
+    result : CalibrationResult
+        The calibration, ready to predict (no residual layer: the caller loads it).
+    """
+    from plugcell.apps.cli import CommandError
+    from plugcell.apps.commands.robotargs import load_robot_of
+    from plugcell.calibration.result import CalibrationResult
+    from plugcell.io.robots import description_of_params
+    from plugcell.kinematics.errors import DescriptionError
+
+    d = read_params_document(path)
+    if args is not None and getattr(args, "robot", None) is not None:
+        desc = load_robot_of(args)
+    else:
+        try:
+            desc = description_of_params(d, str(path))
+        except DescriptionError as exc:
+            raise CommandError(str(exc)) from None
+    try:
+        return d, CalibrationResult.from_dict(d, desc)
+    except (KeyError, TypeError, ValueError) as exc:
+        what = f"missing key {exc}" if isinstance(exc, KeyError) else str(exc)
+        raise CommandError(f"{path}: not a plugcell calibration: {what}") from None

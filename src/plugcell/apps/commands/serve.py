@@ -1,0 +1,168 @@
+"""``plugcell serve KIND --name NAME``: run one service as an OS process until stopped."""
+
+from __future__ import annotations
+
+import argparse
+import asyncio
+import contextlib
+import logging
+import signal
+import sys
+from pathlib import Path
+from typing import Any
+
+from plugcell.apps.commands.cellargs import add_cell_args, cell_of, transport_of
+from plugcell.apps.commands.robotargs import add_robot_args
+from plugcell.framework import eventloop
+
+
+def configure(p: argparse.ArgumentParser) -> None:
+    """Add the ``serve`` options to its parser (declared in :mod:`plugcell.apps.cli`)."""
+    from plugcell.devices.registry import KINDS
+
+    p.description = (
+        "Run one Plug-and-Produce service until SIGINT/SIGTERM, then shut it "
+        "down cleanly (Shutdown notification, queued processes end Failed)."
+    )
+    p.add_argument(
+        "kind", help=f"service kind: {', '.join(sorted(KINDS))}, or module:Class of your own"
+    )
+    p.add_argument("--name", help="service (device) name; default: the kind in capitals")
+    add_cell_args(p)
+    p.add_argument(
+        "--param",
+        action="append",
+        default=[],
+        metavar="KEY=VALUE",
+        help="service-specific parameter, e.g. time_scale=0.01 (repeatable)",
+    )
+    dev = p.add_argument_group(
+        "device options (each passed to the kinds that declare it, like --param)"
+    )
+    dev.add_argument("--sim", action="store_true",
+                     help="drive the simulated device (robot: its simulated controller; "
+                     "tracker: the tracker model)")
+    dev.add_argument("--controller", metavar="HOST:PORT", help="robot: a real controller")
+    add_robot_args(dev, help="robot: shipped name (default smart_h4), description file "
+                   "(.toml) or URDF/xacro file (with --robot-arg, --package-path, --base-link, "
+                   "--tip-link)")
+    dev.add_argument("--payload-kg", type=float, help="robot: payload carried by the twin")
+    dev.add_argument("--speed", type=float, help="robot: simulation speed factor")
+    dev.add_argument("--seed", type=int, help="seed of the simulated device")
+    dev.add_argument("--endpoint", metavar="opc.tcp://HOST:PORT",
+                     help="opcua-device: the OPC UA server of the device")
+    dev.add_argument("--map", metavar="FILE",
+                     help="opcua-device: the device map (docs/opcua.md)")
+    p.add_argument("--max-payload", type=int, default=None, help="largest accepted request, bytes")
+    p.add_argument("--journal-dir", type=Path, help="where to keep the journal")
+    p.add_argument("--no-journal", action="store_true", help="do not journal processes")
+    p.add_argument("--log-level", default="WARNING", help="logging level (default WARNING)")
+    p.set_defaults(func=run)
+
+
+def _params(cls: type, pairs: list[str]) -> dict[str, Any]:
+    from plugcell.apps.cli import CommandError
+
+    known: dict[str, type] = getattr(cls, "params", {})
+    out: dict[str, Any] = {}
+    for pair in pairs:
+        key, sep, value = pair.partition("=")
+        if not sep or key not in known:
+            names = ", ".join(sorted(known)) or "none"
+            raise CommandError(f"bad --param {pair!r} for {cls.__name__} (parameters: {names})")
+        try:
+            out[key] = known[key](value)
+        except ValueError as exc:
+            raise CommandError(f"bad value for {key}: {exc}") from None
+    return out
+
+
+def _device_options(cls: type, args: argparse.Namespace) -> list[str]:
+    """The device flags that were given, as ``KEY=VALUE`` pairs for :func:`_params`."""
+    from plugcell.apps.cli import CommandError
+    from plugcell.apps.commands.robotargs import robot_file_of
+
+    known: dict[str, Any] = getattr(cls, "params", {})
+    pairs = []
+    urdf_options = [getattr(args, k, None) for k in ("robot_arg", "package_path", "base_link",
+                                                     "tip_link")]
+    if args.robot is None and any(urdf_options):
+        raise CommandError("--robot-arg, --package-path, --base-link and --tip-link describe "
+                           "a URDF robot: give it with --robot FILE")
+    if args.sim:
+        if "sim" in known:
+            pairs.append("sim=true")
+        elif "driver" in known:
+            pairs.append("driver=sim")
+        else:
+            raise CommandError(f"--sim: {cls.__name__} has no simulated mode")
+    for flag, key in (("controller", "controller"), ("robot", "robot"),
+                      ("payload_kg", "payload_kg"), ("speed", "speed"), ("seed", "seed"),
+                      ("endpoint", "endpoint"), ("map", "map")):
+        value = getattr(args, flag, None)
+        if flag == "robot" and value is not None and key in known:
+            value = robot_file_of(args)  # a URDF robot: imported, as a description file
+        if value is not None:
+            if key not in known:
+                option = "--" + flag.replace("_", "-")
+                raise CommandError(f"{option}: not an option of {cls.__name__}")
+            pairs.append(f"{key}={value}")
+    return pairs
+
+
+def run(args: argparse.Namespace) -> int:
+    from plugcell.apps.cli import CommandError
+    from plugcell.devices.registry import load_kind
+    from plugcell.framework.participant import PartnerError
+    from plugcell.framework.service import DeviceError
+
+    logging.basicConfig(
+        level=args.log_level.upper(),
+        stream=sys.stderr,
+        format="%(asctime)s %(name)s %(levelname)s %(message)s",
+    )
+    try:
+        cls = load_kind(args.kind)
+    except KeyError as exc:
+        raise CommandError(str(exc.args[0])) from None
+    kwargs = _params(cls, [*_device_options(cls, args), *args.param])
+    if args.max_payload:
+        kwargs["max_payload"] = args.max_payload
+    journal: bool | Path = args.journal_dir or not args.no_journal
+    try:
+        service = cls(
+            args.name, cell=cell_of(args), transport=transport_of(args), journal=journal, **kwargs
+        )
+    except (ValueError, TypeError) as exc:
+        raise CommandError(str(exc)) from None
+    try:
+        eventloop.run(_serve(service))
+    except (PartnerError, DeviceError) as exc:  # a name conflict; a device it cannot reach
+        raise CommandError(str(exc)) from None
+    return 0
+
+
+async def _serve(service: Any) -> None:
+    from plugcell.framework.participant import PartnerError
+
+    stop = asyncio.Event()
+    loop = asyncio.get_running_loop()
+    for sig in (signal.SIGINT, signal.SIGTERM):
+        loop.add_signal_handler(sig, stop.set)
+    await service.start()
+    print(
+        f"plugcell: {service.name} ({service.kind}) serving in cell {service.keys.cell!r} "
+        f"as instance {service.instance}",
+        flush=True,
+    )
+    stopping = asyncio.create_task(stop.wait())
+    withdrawn = asyncio.create_task(service.stopped.wait())
+    try:
+        await asyncio.wait({stopping, withdrawn}, return_when=asyncio.FIRST_COMPLETED)
+    finally:
+        stopping.cancel()
+        withdrawn.cancel()
+        with contextlib.suppress(Exception):
+            await service.close()
+    if service.conflict:
+        raise PartnerError(service.conflict)

@@ -1,0 +1,1 @@
+"""plugcell.apps.ui."""

@@ -1,0 +1,139 @@
+"""The camera service: the CameraService design template of thesis 5.2.3.
+
+Commands (5.1.1.1, 5.2.3.3, Figure 5-3): ``Connect``/``Disconnect`` (NoData),
+``SnapShot`` (SingleData: exposure time in ms → a 480×640 8-bit image),
+``MovieShot`` (MultipleData: frame rate in frames/s → a stream of images) and
+``StopMovie`` (StopData).  The device interface layer (Figure 5-10) is
+:meth:`CameraService.dispatch`; everything else is inherited.
+
+The thesis listing declares the image as ``{640, 480}`` (width, height); by F.5
+(d) a matrix size is rows first, so the catalogue says ``(480, 640)``.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+from typing import Any, ClassVar
+
+import numpy as np
+
+from plugcell.framework.messages import Command, CommandTypes, ConnectionStates, DataTypes
+from plugcell.framework.service import DeviceError, GenericDevice
+from plugcell.sim.drivers.camera import HEIGHT, MAX_FPS, WIDTH, CameraError, SimulatedCamera
+
+S = "S"  # the success code of the thesis's camera API
+IMAGE = (HEIGHT, WIDTH)
+
+
+class CameraService(GenericDevice):
+    """A 640×480 grayscale camera (simulated unless given another controller)."""
+
+    kind = "camera"
+    vendor = "plugcell (simulated)"
+    info = "Specs: 640x480, 8bit Grayscale, Framerate: 80fps"
+    commands = (
+        Command(
+            name="Connect",
+            type=CommandTypes.NoData,
+            success_code=S,
+            info="connect to the camera controller",
+        ),
+        Command(
+            name="Disconnect",
+            type=CommandTypes.NoData,
+            success_code=S,
+            info="disconnect from the camera controller",
+        ),
+        Command(
+            name="SnapShot",
+            type=CommandTypes.SingleData,
+            success_code=S,
+            input_data_type=DataTypes.Integer,
+            input_data_size=(1,),
+            output_data_type=DataTypes.Byte,
+            output_data_size=IMAGE,
+            timeout=15.0,
+            info="one image; input: exposure time in ms",
+        ),
+        Command(
+            name="MovieShot",
+            type=CommandTypes.MultipleData,
+            success_code=S,
+            input_data_type=DataTypes.Integer,
+            input_data_size=(1,),
+            output_data_type=DataTypes.Byte,
+            output_data_size=IMAGE,
+            timeout=600.0,
+            info="a stream of images until StopMovie; input: frame rate in frames/s",
+        ),
+        Command(
+            name="StopMovie", type=CommandTypes.StopData, success_code=S, info="stop the movie"
+        ),
+    )
+    params: ClassVar[dict[str, type]] = {"time_scale": float}
+
+    def __init__(
+        self,
+        name: str | None = None,
+        *,
+        camera: SimulatedCamera | None = None,
+        time_scale: float = 1.0,
+        **kwargs: Any,
+    ) -> None:
+        super().__init__(name, **kwargs)
+        self.camera = camera or SimulatedCamera(time_scale=time_scale)
+        self._movie: asyncio.Task[None] | None = None
+
+    async def connect(self) -> None:
+        await self.camera.connect()
+        self.connection_state.post(ConnectionStates.Online)
+
+    async def disconnect(self) -> None:
+        await self._stop_movie()
+        await self.camera.disconnect()
+        self.connection_state.post(ConnectionStates.Offline)
+
+    async def dispatch(self, command: Command, option: str, data: np.ndarray | None) -> str:
+        """CommandDispatcher of the camera interface."""
+        try:
+            match command.name:
+                case "Connect":
+                    await self.connect()
+                case "Disconnect":
+                    await self.disconnect()
+                case "SnapShot":
+                    assert data is not None
+                    self.data_feedback.post(await self.camera.grab(int(data[0])))
+                case "MovieShot":
+                    assert data is not None
+                    self._start_movie(int(data[0]))
+                case "StopMovie":
+                    await self._stop_movie()
+        except CameraError as exc:
+            raise DeviceError(str(exc)) from exc
+        return S
+
+    def _start_movie(self, fps: int) -> None:
+        if not self.camera.connected:
+            raise CameraError("camera offline: send Connect first")
+        if not 1 <= fps <= MAX_FPS:
+            raise CameraError(f"frame rate {fps} outside 1…{MAX_FPS} frames/s")
+        self._movie = asyncio.create_task(self._film(fps))
+
+    async def _film(self, fps: int) -> None:
+        """The FeedbackReceiver of a movie: one DataFeedback per frame."""
+        period = 1.0 / fps
+        loop = asyncio.get_running_loop()
+        next_frame = loop.time()
+        while True:
+            self.data_feedback.post(await self.camera.grab(1))
+            next_frame += period
+            await asyncio.sleep(max(0.0, next_frame - loop.time()) * self.camera.time_scale)
+
+    async def _stop_movie(self) -> None:
+        movie, self._movie = self._movie, None
+        if movie is not None:
+            movie.cancel()
+            with contextlib.suppress(asyncio.CancelledError):
+                await movie

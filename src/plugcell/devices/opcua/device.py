@@ -1,0 +1,312 @@
+"""``plugcell serve opcua-device``: an OPC UA server's device as a plugcell service.
+
+The service's catalogue is its device map (:mod:`plugcell.devices.opcua.device_map`); its
+device interface is an asyncua client of ``endpoint``:
+
+* ``method`` commands call the method (input data — and the option, if the map
+  says so — as its arguments; a SingleData command's data is its first output);
+* ``write`` commands write their input to a variable;
+* ``read`` commands read a variable (SingleData);
+* ``subscribe`` commands stream a variable's value changes (an OPC UA
+  subscription; MultipleData) until the sender's StopData deletes it.
+
+At start the service connects and resolves every node of the map: a node that does
+not exist, is of the wrong node class, or holds another data type than the map
+declares stops it with the reason (the file, the command, the node).  Then a watch
+reads the server's state every ``watch_s``: a lost connection makes the service
+``ConnectionState Error``, fails a running stream (``device feedback 'connection to
+… lost: …' while streaming``) and every command until the connection is back; the
+service keeps reconnecting every ``watch_s`` and re-resolves the map each time (the
+server's namespace indexes may have changed), then reports Online again.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import logging
+import os
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any, ClassVar
+
+import numpy as np
+from asyncua import Client, Node, ua
+
+from plugcell.devices.opcua.arguments import VARIANT_TYPES
+from plugcell.devices.opcua.device_map import DeviceMap, MappedCommand, load_device_map
+from plugcell.framework.messages import Command, ConnectionStates, DataTypes
+from plugcell.framework.service import DeviceError, GenericDevice
+
+log = logging.getLogger("plugcell.devices.opcua.device")
+if logging.getLogger("asyncua").level == logging.NOTSET:
+    # asyncua warns of things nobody can act on (revised session timeouts …); its
+    # errors still show (a program that wants its warnings sets the level before)
+    logging.getLogger("asyncua").setLevel(logging.ERROR)
+
+#: Built-in DataType NodeIds (ns=0) of the variant types a map may declare.
+_DATATYPE_IDS = {vtype: ua.NodeId(vtype.value) for vtype in VARIANT_TYPES.values()}
+
+
+@dataclass
+class _Resolved:
+    """The nodes of one mapped command on the connected server."""
+
+    node: Node | None = None
+    object: Node | None = None
+
+
+class OpcUaDevice(GenericDevice):
+    """A device behind an OPC UA server, mapped to a catalogue by a device map."""
+
+    kind = "opcua-device"
+    vendor = ""
+    info = "an OPC UA device (plugcell serve opcua-device --endpoint … --map …)"
+    params: ClassVar[dict[str, type]] = {
+        "endpoint": str, "map": str, "watch_s": float, "certs": str, "user": str,
+    }
+
+    def __init__(
+        self,
+        name: str | None = None,
+        *,
+        endpoint: str = "",
+        map: str | Path | DeviceMap = "",
+        watch_s: float = 1.0,
+        certs: str | Path = "",
+        user: str = "",
+        **kwargs: Any,
+    ) -> None:
+        if not endpoint:
+            raise ValueError("opcua-device needs --endpoint opc.tcp://HOST:PORT")
+        if not map:
+            raise ValueError("opcua-device needs --map FILE (docs/opcua.md)")
+        self.map = map if isinstance(map, DeviceMap) else load_device_map(map)
+        # the catalogue and identity come from the map (instance attributes shadow the
+        # class's, before GenericDevice reads them)
+        self.commands = tuple(c.command for c in self.map.commands)
+        self.vendor = self.map.vendor
+        self.info = self.map.info or f"OPC UA device at {endpoint}"
+        self.default_name = self.map.name
+        super().__init__(name, **kwargs)
+        self.endpoint = endpoint
+        self.watch_s = watch_s
+        self.certs = Path(certs) if certs else None
+        """The cell's certificate folder: connect with Basic256Sha256 SignAndEncrypt as
+        ``<certs>/<name>.opcua.pem`` (``plugcell certs opcua NAME``)."""
+        self.user = user
+        """OPC UA user name; its password is ``$PLUGCELL_OPCUA_PASSWORD``."""
+        self.client: Client | None = None
+        self._nodes: dict[str, _Resolved] = {}
+        self._lost = ""
+        """Why the connection is down ("" while connected)."""
+        self._watch: asyncio.Task[None] | None = None
+        self._subscription: Any = None
+
+    # -- connection --------------------------------------------------------------------
+
+    async def connect(self) -> None:
+        """Connect and resolve the map (DeviceError with the reason if either fails)."""
+        await self._open()
+        self.connection_state.post(ConnectionStates.Online)
+        self._watch = asyncio.create_task(self._watch_connection(), name=f"{self.name}-watch")
+
+    async def _open(self) -> None:
+        client = Client(self.endpoint, timeout=max(2.0, self.watch_s * 2))
+        if self.user:
+            client.set_user(self.user)
+            client.set_password(os.environ.get("PLUGCELL_OPCUA_PASSWORD", ""))
+        try:
+            if self.certs is not None:
+                await self._secure(client, self.certs)
+            await client.connect()
+        except (TimeoutError, OSError, ValueError, ua.UaError) as exc:
+            raise DeviceError(f"cannot connect to {self.endpoint}: {_why(exc)}") from None
+        try:
+            self._nodes = {m.command.name: await self._resolve(client, m)
+                           for m in self.map.commands}
+        except BaseException:
+            with contextlib.suppress(Exception):
+                await client.disconnect()
+            raise
+        self.client = client
+        self._lost = ""
+
+    async def _secure(self, client: Client, folder: Path) -> None:
+        """Basic256Sha256 SignAndEncrypt with this service's application certificate."""
+        from asyncua.crypto.security_policies import SecurityPolicyBasic256Sha256
+        from asyncua.crypto.uacrypto import CertProperties
+
+        from plugcell.devices.opcua.certificates import application_uri, certificate_paths, uri_of
+
+        cert, key = certificate_paths(folder, self.name)
+        if not cert.is_file() or not key.is_file():
+            raise DeviceError(f"no OPC UA certificate {cert}: run `plugcell certs opcua "
+                              f"{self.name} --dir {folder}`")
+        client.application_uri = uri_of(cert) or application_uri(self.name)
+        await client.set_security(
+            SecurityPolicyBasic256Sha256, CertProperties(cert, "pem"), CertProperties(key, "pem"),
+            mode=ua.MessageSecurityMode.SignAndEncrypt)
+
+    async def disconnect(self) -> None:
+        if self._watch is not None:
+            self._watch.cancel()
+            with contextlib.suppress(asyncio.CancelledError):
+                await self._watch
+        await self._close_client()
+        self.connection_state.post(ConnectionStates.Offline)
+
+    async def _close_client(self) -> None:
+        client, self.client, self._subscription = self.client, None, None
+        if client is not None:
+            with contextlib.suppress(Exception):
+                await asyncio.wait_for(client.disconnect(), 2.0)
+
+    async def _watch_connection(self) -> None:
+        """Notice a lost connection, fail what runs, reconnect (module docstring)."""
+        state = ua.NodeId(ua.ObjectIds.Server_ServerStatus_State)
+        while True:
+            await asyncio.sleep(self.watch_s)
+            if self.client is not None:
+                try:
+                    await asyncio.wait_for(self.client.get_node(state).read_value(),
+                                           self.watch_s * 2)
+                    continue
+                except Exception as exc:  # any failure of the link is a lost connection
+                    self._connection_lost(_why(exc))
+                    await self._close_client()
+            try:
+                await self._open()
+            except Exception as exc:
+                self._lost = f"connection to {self.endpoint} lost: {_why(exc)} (reconnecting)"
+                continue
+            log.warning("%s: reconnected to %s", self.name, self.endpoint)
+            self.connection_state.post(ConnectionStates.Online)
+
+    def _connection_lost(self, why: str) -> None:
+        self._lost = f"connection to {self.endpoint} lost: {why}"
+        log.warning("%s: %s", self.name, self._lost)
+        self.connection_state.post(ConnectionStates.Error)
+        if self._subscription is not None:  # a stream is running: it ends Failed
+            self.cmd_feedback.post(self._lost)
+
+    # -- the map on the server ---------------------------------------------------------
+
+    async def _resolve(self, client: Client, mapped: MappedCommand) -> _Resolved:
+        where = f"{self.map.source}: command {mapped.command.name!r}"
+        if not mapped.action:
+            return _Resolved()
+        node = await self._node(client, mapped.node, where, mapped.action)
+        want = ua.NodeClass.Method if mapped.action == "method" else ua.NodeClass.Variable
+        if (cls := await node.read_node_class()) != want:
+            raise DeviceError(f"{where}: {mapped.node} is a {cls.name}, not a {want.name}")
+        if mapped.action == "method":
+            if mapped.object:
+                obj = await self._node(client, mapped.object, where, "object")
+            else:
+                obj = await node.get_parent()
+                if obj is None:
+                    raise DeviceError(f"{where}: method {mapped.node} has no parent object; "
+                                      "name one with object = …")
+            return _Resolved(node, obj)
+        declared = (mapped.command.input_data_type if mapped.action == "write"
+                    else mapped.command.output_data_type)
+        assert declared is not None
+        expected = _DATATYPE_IDS[VARIANT_TYPES[declared]]
+        actual = await node.read_data_type()
+        if actual != expected:
+            raise DeviceError(
+                f"{where}: variable {mapped.node} holds {actual.to_string()}, but the map "
+                f"declares {declared.value} ({expected.to_string()})")
+        return _Resolved(node)
+
+    async def _node(self, client: Client, text: str, where: str, what: str) -> Node:
+        """The node of a map's node id text (``nsu=`` resolved on this server)."""
+        resolved = text
+        if text.startswith("nsu="):
+            uri, _, rest = text[4:].partition(";")
+            try:
+                idx = await client.get_namespace_index(uri)
+            except ValueError:
+                raise DeviceError(f"{where}: {what} {text}: the server has no namespace "
+                                  f"{uri}") from None
+            resolved = f"ns={idx};{rest}"
+        node = client.get_node(ua.NodeId.from_string(resolved))
+        try:
+            await node.read_browse_name()
+        except ua.UaStatusCodeError as exc:
+            raise DeviceError(f"{where}: {what} {text} does not exist on {self.endpoint} "
+                              f"({type(exc).__name__})") from None
+        return node
+
+    # -- the device interface ----------------------------------------------------------
+
+    async def dispatch(self, command: Command, option: str, data: Any) -> str:
+        mapped = self.map.command(command.name)
+        if self._lost or self.client is None:
+            raise DeviceError(self._lost or f"not connected to {self.endpoint}")
+        nodes = self._nodes[command.name]
+        try:
+            match mapped.action:
+                case "method":
+                    assert nodes.object is not None and nodes.node is not None
+                    args = [ua.Variant(option, ua.VariantType.String) if a == "option"
+                            else _variant(data, command.input_data_type, command.input_data_size)
+                            for a in mapped.arguments]
+                    result = await nodes.object.call_method(nodes.node, *args)
+                    if command.gives_output:
+                        self.data_feedback.post(result[0] if isinstance(result, list)
+                                                else result)
+                case "write":
+                    assert nodes.node is not None
+                    await nodes.node.write_value(
+                        _variant(data, command.input_data_type, command.input_data_size))
+                case "read":
+                    assert nodes.node is not None
+                    self.data_feedback.post(await nodes.node.read_value())
+                case "subscribe":
+                    assert nodes.node is not None
+                    await self._stop_stream()
+                    self._subscription = await self.client.create_subscription(
+                        mapped.interval_ms, _Stream(self))
+                    await self._subscription.subscribe_data_change(nodes.node)
+                case "":  # StopData: end the stream
+                    await self._stop_stream()
+        except ua.UaStatusCodeError as exc:
+            raise DeviceError(f"the server answered {type(exc).__name__}: {exc}") from None
+        except (TimeoutError, OSError, ConnectionError) as exc:
+            raise DeviceError(f"connection to {self.endpoint}: {_why(exc)}") from None
+        return command.success_code
+
+    async def _stop_stream(self) -> None:
+        subscription, self._subscription = self._subscription, None
+        if subscription is not None and not self._lost:
+            with contextlib.suppress(Exception):
+                await asyncio.wait_for(subscription.delete(), 5.0)
+
+
+class _Stream:
+    """asyncua's subscription handler: each value change is one DataFeedback."""
+
+    def __init__(self, device: OpcUaDevice) -> None:
+        self.device = device
+
+    def datachange_notification(self, node: Node, value: Any, data: Any) -> None:
+        if self.device._subscription is not None:
+            self.device.data_feedback.post(value)
+
+
+def _variant(data: Any, data_type: DataTypes | None, size: tuple[int, ...]) -> ua.Variant:
+    """Checked input data (numpy) as the variant an OPC UA method or variable takes."""
+    assert data_type is not None
+    vtype = VARIANT_TYPES[data_type]
+    arr = np.asarray(data)
+    if size == (1,):
+        value = arr.reshape(-1)[0]
+        return ua.Variant(value if data_type is DataTypes.String else value.item(), vtype)
+    dims = list(arr.shape) if arr.ndim > 1 else None
+    return ua.Variant(arr.reshape(-1).tolist(), vtype, dims, is_array=True)
+
+
+def _why(exc: BaseException) -> str:
+    return str(exc) or type(exc).__name__

@@ -1,0 +1,120 @@
+"""Simulated measurement campaigns: poses in the working volume, measured by the tracker.
+
+The campaign does what an operator does with a real robot and tracker (thesis
+8.2.1–8.2.2, Fig. 8-4): choose flange poses in the working volume, turn them into
+joint targets with the controller's nominal inverse kinematics, move the robot
+through them while the tracker follows the T-MAC, and take a 1 s measurement at
+each pose.  The result is a :class:`~plugcell.io.measurements.MeasurementSet`:
+joint *readings* and tracker measurements — nothing of the truth.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+
+import numpy as np
+from numpy.typing import NDArray
+
+from plugcell.io.measurements import MeasurementSet
+from plugcell.kinematics import RobotDescription, inverse
+from plugcell.kinematics.errors import KinematicsError
+from plugcell.kinematics.rotations import matrix_to_angles, zyz_to_matrix
+from plugcell.kinematics.transforms import so3_exp
+from plugcell.sim.twin.profile import TwinProfile
+from plugcell.sim.twin.robot import RobotTwin
+from plugcell.sim.twin.tracker import LaserTracker
+
+Array = NDArray[np.float64]
+
+#: Joint speed of the simulated moves between measurement poses (rad/s) and the
+#: settling time before a measurement (s): a 150-pose campaign then takes ~15 min
+#: of simulated time, as in thesis 8.2.3.
+JOINT_SPEED = np.deg2rad(40.0)
+SETTLE_S = 2.0
+
+Progress = Callable[[int, int], None]
+
+
+class CampaignError(RuntimeError):
+    """A campaign that cannot be carried out (no reachable poses, lost beam...)."""
+
+
+def random_flange_targets(desc: RobotDescription, profile: TwinProfile, n: int,
+                          rng: np.random.Generator) -> Array:
+    """``n`` flange poses (n, 4, 4): positions uniform in the description's working
+    volume, orientations within ``profile.spread`` of the reference orientation."""
+    if desc.working_volume is None:
+        raise CampaignError(f"robot {desc.name!r} has no working_volume in its description")
+    box = desc.working_volume
+    p = rng.uniform(box.lower, box.upper, size=(n, 3))
+    axis = rng.standard_normal((n, 3))
+    axis /= np.linalg.norm(axis, axis=1, keepdims=True)
+    angle = profile.spread * rng.uniform(0.0, 1.0, size=(n, 1)) ** (1 / 3)
+    R = so3_exp(axis * angle) @ zyz_to_matrix(*profile.reference_zyz)
+    T = np.broadcast_to(np.eye(4), (n, 4, 4)).copy()
+    T[:, :3, :3] = R
+    T[:, :3, 3] = p
+    return T
+
+
+def working_volume_joints(desc: RobotDescription, profile: TwinProfile, n: int,
+                          rng: np.random.Generator, *, max_rounds: int = 20) -> Array:
+    """``n`` joint configurations (n, n_act) whose nominal flange lies in the working
+    volume, found by nominal IK within the joint limits (unreachable draws are
+    replaced by new ones)."""
+    params = desc.nominal_parameters()
+    found: list[Array] = []
+    for _ in range(max_rounds):
+        need = n - sum(len(f) for f in found)
+        if need <= 0:
+            break
+        T = random_flange_targets(desc, profile, max(2 * need, 8), rng)
+        try:
+            res = inverse(desc, params, T, seed=desc.home, raise_errors=False)
+        except KinematicsError:
+            continue
+        ok = np.asarray(res.converged) & np.asarray(res.within_limits)
+        found.append(np.asarray(res.q)[ok][:need])
+    q = np.concatenate(found) if found else np.empty((0, desc.n_readings))
+    if len(q) < n:
+        raise CampaignError(f"found only {len(q)} of {n} reachable poses in the working volume")
+    return q[:n]
+
+
+def move_time(q_from: Array, q_to: Array) -> float:
+    """Simulated duration of a joint move plus settling (s)."""
+    return float(np.max(np.abs(q_to - q_from)) / JOINT_SPEED + SETTLE_S)
+
+
+def measure_poses(robot: RobotTwin, tracker: LaserTracker, joints: Array, *,
+                  duration_s: float = 1.0, rotation: str = "rpy",
+                  progress: Progress | None = None) -> tuple[MeasurementSet, float]:
+    """Move through ``joints`` and take one tracker measurement at each pose.
+
+    The operator catches the beam on the T-MAC once at the start (as with a real
+    tracker); from then on the tracker follows the reflector through each move.
+    Returns the measurement set and the simulated time (s) the campaign took.
+    """
+    n = len(joints)
+    readings = np.empty_like(joints)
+    positions = np.empty((n, 3))
+    angles = np.empty((n, 3))
+    sim_time = 0.0
+    q_prev = robot.joint_readings()
+    robot.move_joints(joints[0])
+    tracker.point_at(robot.true_reflector_in_tracker()[:3, 3])  # operator catches the beam
+    for i, q in enumerate(joints):
+        if i > 0:
+            robot.move_joints(q)
+        dt = move_time(q_prev, q)
+        tracker.track(robot.true_reflector_in_tracker(), dt)
+        m = tracker.measure(robot.true_reflector_in_tracker(), duration_s, mode="6dof")
+        sim_time += dt + duration_s
+        readings[i] = robot.joint_readings()
+        positions[i] = m.pose[:3, 3]
+        angles[i] = matrix_to_angles(m.pose[:3, :3], rotation)
+        q_prev = readings[i]
+        if progress is not None:
+            progress(i + 1, n)
+    payload = np.full(n, robot.payload.mass)
+    return MeasurementSet(readings, positions, angles, rotation, payload), sim_time
