@@ -58,6 +58,7 @@ __all__ = [
     "Link",
     "PointMass",
     "RobotDescription",
+    "check_rigid",
 ]
 
 _DEG = math.pi / 180.0
@@ -319,7 +320,7 @@ class RobotDescription:
                 T = _ro(getattr(self, key), (4, 4))
             except ValueError as exc:
                 raise DescriptionError(key, str(exc)) from None
-            _check_rigid(T, key)
+            check_rigid(T, key)
             S(self, key, T)
         try:
             lim = _ro(self.joint_limits, (n, 2))
@@ -1028,7 +1029,21 @@ class RobotDescription:
         return out
 
 
-def _check_rigid(T: Array, loc: str) -> None:
+def check_rigid(T: Array, loc: str) -> None:
+    """Check that ``T`` is a rigid transform (finite, a proper rotation, last row 0 0 0 1).
+
+    Parameters
+    ----------
+    T : ndarray, shape (4, 4)
+        The homogeneous transform (metres).
+    loc : str
+        Location named by the error (``"base"``, ``"tool.matrix"``).
+
+    Raises
+    ------
+    DescriptionError
+        At ``loc``, saying which of the three conditions fails.
+    """
     R = T[:3, :3]
     if not np.all(np.isfinite(T)):
         raise DescriptionError(loc, "transform must be finite")
@@ -1159,7 +1174,7 @@ def _parse_transform(v: Any, loc: str) -> Array:
         if len(rows) != 4:
             raise DescriptionError(f"{loc}.matrix", f"expected 4 rows, got {len(rows)}")
         T = np.array([_vec(r, 4, f"{loc}.matrix[{i}]") for i, r in enumerate(rows)])
-        _check_rigid(T, f"{loc}.matrix")
+        check_rigid(T, f"{loc}.matrix")
         return T
     xyz = _vec(t["xyz"], 3, f"{loc}.xyz") if "xyz" in t else [0.0, 0.0, 0.0]
     if "rpy" in t and "zyz" in t:
