@@ -124,3 +124,32 @@ def test_programs_and_lower_layers_may_import_what_they_need() -> None:
                           "plugcell.io.robots") == []
     assert upward_imports("from plugcell.framework.service import GenericDevice\n",
                           "plugcell.devices.camera") == []
+
+
+#: Libraries of file formats: their schemas are io's (the robot file schema is
+#: plugcell.io.robot_schema); the math takes and returns arrays and objects.
+FILE_FORMATS = ("msgspec", "tomllib", "tomli_w")
+
+
+def file_format_imports(source: str, module: str) -> list[str]:
+    """Every import of a file-format library by ``source`` (module ``module``)."""
+    found = []
+    for node in ast.walk(ast.parse(source)):
+        if isinstance(node, ast.Import):
+            targets = [a.name for a in node.names]
+        elif isinstance(node, ast.ImportFrom) and node.level == 0 and node.module:
+            targets = [node.module]
+        else:
+            continue
+        found += [f"{module}:{node.lineno} imports {t}" for t in targets
+                  if t.split(".")[0] in FILE_FORMATS]
+    return found
+
+
+def test_the_math_parses_no_file_format() -> None:
+    offences = [o for module, path in modules() if layer_of(module) == "math"
+                for o in file_format_imports(path.read_text(encoding="utf-8"), module)]
+    assert offences == []
+    assert file_format_imports("def f():\n    from msgspec import convert\n",
+                               "plugcell.kinematics.description") == [
+        "plugcell.kinematics.description:2 imports msgspec"]

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from plugcell.io.robot_schema import description_from_dict
 from plugcell.kinematics import RobotDescription
 from plugcell.kinematics.transforms import so3_exp
 
@@ -35,7 +36,7 @@ def ur10_description() -> RobotDescription:
             "d": d[i], "a": a[i], "alpha": alpha[i], "limits": [-360.0, 360.0],
             "mass": mass[i], "com": com[i],
         })
-    return RobotDescription.from_dict({
+    return description_from_dict({
         "name": "ur10-test", "actuated": [str(i + 1) for i in range(6)], "flange": "6",
         "links": links, "home": [0.0, -90.0, 90.0, 0.0, 90.0, 0.0],
     })

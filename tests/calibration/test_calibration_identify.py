@@ -18,6 +18,7 @@ from plugcell.calibration import (
     ErrorModel,
 )
 from plugcell.calibration.identifiability import random_configurations, structural_identifiability
+from plugcell.io.robot_schema import description_from_dict, description_to_dict
 from plugcell.kinematics.transforms import so3_exp
 
 TRACKER = np.eye(4)
@@ -183,12 +184,11 @@ def test_serial_robot_with_masses(ur10):
     with pytest.raises(CalibrationError, match="neither a parallelogram nor link masses"):
         from calibration_testlib import ur10_description
 
-        d = ur10_description().to_dict()
+        d = description_to_dict(ur10_description())
         for lk in d["links"]:
             lk["mass"] = 0.0
-        from plugcell.kinematics import RobotDescription
 
-        Calibrator(RobotDescription.from_dict(d), 3).fit(_data(truth, 30, 17, payloads=(0.0,)))
+        Calibrator(description_from_dict(d), 3).fit(_data(truth, 30, 17, payloads=(0.0,)))
 
 
 def test_model_5_with_150_poses_is_fast(h4, full_truth):

@@ -16,6 +16,7 @@ from shared_data import UR_XACRO, URDF_DIR
 from plugcell.calibration import CalibrationData, Calibrator
 from plugcell.calibration.result import CalibrationResult
 from plugcell.io.export import ExportError, export_calibration
+from plugcell.io.robot_schema import description_to_dict
 from plugcell.io.robots import RobotSource, load_robot
 from plugcell.io.urdf import import_urdf
 from plugcell.kinematics import RobotDescription, forward
@@ -233,7 +234,7 @@ def test_cli_export(tmp_path: Path, arm: tuple[Path, RobotDescription, Calibrati
     f, desc, res = arm
     d = res.to_dict()
     d["robot_source"] = RobotSource(str(f)).absolute().to_dict()
-    d["description"] = desc.to_dict()
+    d["description"] = description_to_dict(desc)
     params = tmp_path / "params.json"
     params.write_text(json.dumps(d, default=float))
     out = tmp_path / "cal.urdf"
@@ -299,7 +300,7 @@ def test_cli_export_source_gone(tmp_path: Path, arm: tuple[Path, RobotDescriptio
     f, desc, res = arm
     d = res.to_dict()
     d["robot_source"] = {"ref": str(tmp_path / "moved.urdf")}
-    d["description"] = desc.to_dict()
+    d["description"] = description_to_dict(desc)
     params = tmp_path / "params.json"
     params.write_text(json.dumps(d, default=float))
     out = tmp_path / "cal.urdf"

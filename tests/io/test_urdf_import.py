@@ -17,6 +17,7 @@ from hypothesis import strategies as st
 from pinocchio_fk import pinocchio_tip_poses
 from shared_data import FANUC_XACRO, STAUBLI_XACRO, UR_XACRO, URDF_DIR
 
+from plugcell.io.robot_schema import description_from_dict, description_to_dict
 from plugcell.io.robots import RobotSource, description_to_toml, load_robot
 from plugcell.io.urdf import PackageResolver, import_urdf
 from plugcell.kinematics import DescriptionError, RobotDescription, forward
@@ -354,7 +355,7 @@ def test_mutated_urdf_gives_description_error_or_robot(tmp_path: Path, data: st.
 def test_toml_of_imported_robot_is_a_description_file(tmp_path: Path) -> None:
     desc = import_urdf(_write(tmp_path, _GOOD)).description
     d = tomllib.loads(description_to_toml(desc, header="hello"))
-    assert RobotDescription.from_dict(d).actuated == desc.actuated
+    assert description_from_dict(d).actuated == desc.actuated
 
 
 # =============================================================================== command line
@@ -443,11 +444,12 @@ def test_description_of_params(tmp_path: Path) -> None:
 
     f = _write(tmp_path, _GOOD)
     desc = import_urdf(f).description
-    assert description_of_params({"description": desc.to_dict()}).actuated == ("j1", "j2")
+    assert description_of_params(
+        {"description": description_to_dict(desc)}).actuated == ("j1", "j2")
     assert description_of_params({"robot_source": {"ref": str(f)}}).actuated == ("j1", "j2")
     assert description_of_params({"robot": "elbow6"}).name == "elbow6"
     with pytest.raises(DescriptionError, match=r"P.json: description: links"):
-        description_of_params({"description": {**desc.to_dict(), "links": 3}}, "P.json")
+        description_of_params({"description": {**description_to_dict(desc), "links": 3}}, "P.json")
     with pytest.raises(DescriptionError, match=r"P.json: robot_source: .*not found"):
         description_of_params({"robot_source": {"ref": str(tmp_path / "gone.urdf")}}, "P.json")
 

@@ -26,6 +26,7 @@ from hypothesis import strategies as st
 from kinematics_testlib import perturbed_params, random_configs
 from scipy.spatial.transform import Rotation
 
+from plugcell.io.robot_schema import description_from_dict, description_to_dict
 from plugcell.io.robots import load_robot, load_robot_file
 from plugcell.kinematics import (
     DescriptionError,
@@ -188,14 +189,14 @@ def test_loop_robot_with_coupling(h4):
 
 
 def test_loop_arm_crank_must_be_a_difference_of_readings(h4):
-    d = h4.to_dict()
+    d = description_to_dict(h4)
     lims = [lk.pop("limits") for lk in d["links"] if lk["joint"] == "actuated"]
     M = np.eye(6)
     M[2, 1] = 1.0  # θ2' = R2 + R3: θ2 − θ2' = −R3, not a difference of two readings
     d["coupling"] = {"readings": list("ABCDEF"), "matrix": M.tolist(), "limits": lims}
     d["coupled_limits"] = [{"joints": ["B", "C"], "min": 25.0, "max": 155.0}]
     with pytest.raises(DescriptionError, match=r"coupling.matrix: loops\[0\]: the arm − crank"):
-        RobotDescription.from_dict(d)
+        description_from_dict(d)
 
 
 # ----------------------------------------------------------------------------- IK
@@ -240,7 +241,7 @@ def test_inverse_does_not_wrap_readings_of_fractional_gears(elbow):
 # ----------------------------------------------------------------------------- errors
 @pytest.fixture(scope="module")
 def fanuc_dict(fanuc) -> dict[str, Any]:
-    return fanuc.to_dict()
+    return description_to_dict(fanuc)
 
 
 def _set(path: tuple, value: Any):
@@ -304,7 +305,7 @@ def test_bad_coupling_input_gives_precise_errors(fanuc_dict, mutate, expected):
     d = copy.deepcopy(fanuc_dict)
     mutate(d)
     with pytest.raises(DescriptionError) as exc:
-        RobotDescription.from_dict(d)
+        description_from_dict(d)
     assert expected in str(exc.value)
 
 
@@ -312,7 +313,7 @@ def test_a_reading_that_moves_nothing_is_named(fanuc_dict):
     d = copy.deepcopy(fanuc_dict)
     d["coupling"]["matrix"] = [[*r[:5], 0.0] for r in d["coupling"]["matrix"]]
     with pytest.raises(DescriptionError, match="reading 'J6' \\(column 5\\) moves no joint"):
-        RobotDescription.from_dict(d)
+        description_from_dict(d)
 
 
 def test_errors_name_the_file(tmp_path: Path):
@@ -330,12 +331,12 @@ def test_errors_name_the_file(tmp_path: Path):
 
 
 def test_to_dict_round_trip_keeps_the_coupling(fanuc):
-    back = RobotDescription.from_dict(fanuc.to_dict())
+    back = description_from_dict(description_to_dict(fanuc))
     np.testing.assert_array_equal(back.coupling.matrix, fanuc.coupling.matrix)
     np.testing.assert_allclose(back.coupling.offset, fanuc.coupling.offset, atol=1e-15)
     np.testing.assert_allclose(back.joint_limits, fanuc.joint_limits, atol=1e-15)
     assert back.reading_names == fanuc.reading_names
-    assert back.to_dict() == fanuc.to_dict()
+    assert description_to_dict(back) == description_to_dict(fanuc)
 
 
 # ----------------------------------------------------------------------------- properties
@@ -348,7 +349,7 @@ _leaf = st.one_of(
 
 @st.composite
 def _mutated_coupling(draw: st.DrawFn) -> dict[str, Any]:
-    d = load_robot("fanuc_m20ia").to_dict()
+    d = description_to_dict(load_robot("fanuc_m20ia"))
     c = d["coupling"]
     for _ in range(draw(st.integers(1, 3))):
         key = draw(st.sampled_from(["readings", "matrix", "offsets", "limits", "new"]))
@@ -366,7 +367,7 @@ def _mutated_coupling(draw: st.DrawFn) -> dict[str, Any]:
 @given(_mutated_coupling())
 def test_coupling_parser_raises_only_description_errors(d):
     try:
-        desc = RobotDescription.from_dict(d)
+        desc = description_from_dict(d)
     except DescriptionError as exc:
         assert str(exc).startswith(("coupling", "home", "links", "coupled_limits"))
         return

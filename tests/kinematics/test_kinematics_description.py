@@ -12,18 +12,19 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
+from plugcell.io.robot_schema import description_from_dict, description_to_dict
 from plugcell.io.robots import RobotNotFoundError, available_robots, load_robot
 from plugcell.kinematics import DescriptionError, GeometricParameters, RobotDescription
 
 
 @pytest.fixture(scope="module")
 def h4_dict(h4) -> dict[str, Any]:
-    return h4.to_dict()
+    return description_to_dict(h4)
 
 
 def _err(d: dict[str, Any]) -> str:
     with pytest.raises(DescriptionError) as exc:
-        RobotDescription.from_dict(d)
+        description_from_dict(d)
     return str(exc.value)
 
 
@@ -55,7 +56,7 @@ def test_coupled_limit_keeps_loop_away_from_collapse(h4):
 
 def test_to_dict_round_trip(h4, elbow):
     for desc in (h4, elbow):
-        back = RobotDescription.from_dict(desc.to_dict())
+        back = description_from_dict(description_to_dict(desc))
         assert back.links == desc.links or all(
             a.name == b.name
             and np.allclose(
@@ -253,28 +254,28 @@ def _mutated(draw: st.DrawFn, base: dict[str, Any]) -> dict[str, Any]:
     return d
 
 
-_BASE = load_robot("smart_h4").to_dict()
+_BASE = description_to_dict(load_robot("smart_h4"))
 
 
 @settings(max_examples=300, deadline=None, suppress_health_check=[HealthCheck.too_slow])
 @given(_mutated(_BASE))
 def test_from_dict_raises_only_description_errors(d):
     try:
-        desc = RobotDescription.from_dict(d)
+        desc = description_from_dict(d)
     except DescriptionError as exc:
         assert str(exc)
         return
     assert isinstance(desc, RobotDescription)
 
 
-_FANUC = load_robot("fanuc_m20ia").to_dict()  # with a [coupling] table
+_FANUC = description_to_dict(load_robot("fanuc_m20ia"))  # with a [coupling] table
 
 
 @settings(max_examples=150, deadline=None, suppress_health_check=[HealthCheck.too_slow])
 @given(_mutated(_FANUC))
 def test_from_dict_of_a_coupled_robot_raises_only_description_errors(d):
     try:
-        desc = RobotDescription.from_dict(d)
+        desc = description_from_dict(d)
     except DescriptionError as exc:
         assert str(exc)
         return

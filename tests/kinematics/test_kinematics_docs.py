@@ -11,7 +11,7 @@ from pathlib import Path
 
 import numpy as np
 
-from plugcell.kinematics import RobotDescription
+from plugcell.io.robot_schema import description_from_dict, description_to_dict
 
 DOC = Path(__file__).resolve().parents[2] / "docs" / "robot-description.md"
 
@@ -41,7 +41,7 @@ def test_snippets_are_valid_fragments():
     Fanuc [coupling] example is checked against its file in test_kinematics_coupling)."""
     from plugcell.io.robots import load_robot
 
-    base = load_robot("smart_h4").to_dict()
+    base = description_to_dict(load_robot("smart_h4"))
     for snippet in _blocks("toml")[1:]:
         if snippet.startswith("[coupling]"):
             continue
@@ -49,4 +49,4 @@ def test_snippets_are_valid_fragments():
         d = {**base}
         for k, v in frag.items():
             d[k] = v
-        RobotDescription.from_dict(d)
+        description_from_dict(d)

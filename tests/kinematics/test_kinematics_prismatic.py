@@ -15,6 +15,7 @@ from plugcell.calibration import CalibrationData, Calibrator
 from plugcell.calibration.identifiability import random_configurations
 from plugcell.calibration.jacobian import identification_jacobian
 from plugcell.calibration.model import ErrorModel
+from plugcell.io.robot_schema import description_from_dict, description_to_dict
 from plugcell.io.robots import description_to_toml, load_robot
 from plugcell.io.urdf import import_urdf
 from plugcell.kinematics import (
@@ -184,15 +185,15 @@ def test_description_file_round_trip_in_metres(tmp_path: Path,
     np.testing.assert_allclose(back.joint_limits, desc.joint_limits, atol=1e-12)
     np.testing.assert_allclose(back.home, desc.home, atol=1e-12)
     k = back.index("track")
-    assert back.to_dict()["links"][k]["limits"] == [0.0, 3.0]
-    d = back.to_dict()
+    assert description_to_dict(back)["links"][k]["limits"] == [0.0, 3.0]
+    d = description_to_dict(back)
     d["links"][k]["limits"] = [1.0, 0.5]
     with pytest.raises(DescriptionError, match=rf"links\[{k}\].limits"):
-        RobotDescription.from_dict(d)
+        description_from_dict(d)
     d["links"][k]["limits"] = [0.0, 3.0]
     d["home"][0] = 4.0
     with pytest.raises(DescriptionError, match=r"home\[0\]: joint track = 4000 mm is outside"):
-        RobotDescription.from_dict(d)
+        description_from_dict(d)
     assert "joint track = 3500.0000 mm outside [0 mm, 3000 mm]" in back.limit_violations(
         np.r_[3.5, np.zeros(6)])[0]
 

@@ -13,6 +13,7 @@ import pytest
 from shared_data import UR_XACRO, URDF_DIR
 
 from plugcell.apps.cli import main
+from plugcell.io.robot_schema import description_to_dict
 from plugcell.io.robots import description_to_toml, load_robot
 from plugcell.kinematics import forward
 from plugcell.kinematics.rotations import zyz_to_matrix
@@ -78,7 +79,7 @@ def test_poses_are_found_in_the_estimated_volume(bare_elbow):
 def test_a_shipped_robot_keeps_its_own_profile():
     by_name = make_truth(TwinScenario(robot="elbow6", seed=4))
     by_description = make_truth(TwinScenario(robot="elbow6", seed=4,
-                                             description=load_robot("elbow6").to_dict()))
+                                             description=description_to_dict(load_robot("elbow6"))))
     assert by_name.profile == by_description.profile
     np.testing.assert_array_equal(by_name.base, by_description.base)
     for f in ("theta", "d", "a", "alpha", "beta"):
@@ -92,7 +93,7 @@ def test_a_description_file_without_a_profile_gets_the_estimate(bare_elbow, tmp_
     truth = make_truth(TwinScenario(robot=str(path), seed=1))
     assert truth.profile.robot == "my_elbow" and truth.profile.beams == ()
     assert truth.description.working_volume == generic_twin(bare_elbow)[0].working_volume
-    scenario = TwinScenario(robot="my_elbow", seed=1, description=bare_elbow.to_dict())
+    scenario = TwinScenario(robot="my_elbow", seed=1, description=description_to_dict(bare_elbow))
     assert TwinScenario.from_json(scenario.to_json()) == scenario  # JSON round trip
 
 

@@ -4,8 +4,9 @@ The file format is documented in ``docs/robot-description.md``.  Shipped robots
 live in the package directory ``plugcell/robots/`` and are addressed by bare
 name (``"smart_h4"``); anything that looks like a path (contains a path
 separator or ends in ``.toml``, ``.urdf`` or ``.xacro``) is read as a file —
-URDF and xacro files through :mod:`plugcell.io.urdf`.  Every error names the
-file and the key: ``smart_h4.toml: links[3].alpha: expected a number, got 'x'``.
+URDF and xacro files through :mod:`plugcell.io.urdf`, TOML files through the
+file schema of :mod:`plugcell.io.robot_schema`.  Every error names the file and
+the key: ``smart_h4.toml: links[3].alpha: expected a number, got 'x'``.
 
 :class:`RobotSource` is *where a robot comes from* (the name or path and, for
 URDF/xacro, the xacro arguments, package directories and chain ends): one value
@@ -23,6 +24,7 @@ from importlib import resources
 from pathlib import Path
 from typing import Any
 
+from plugcell.io.robot_schema import description_from_dict, description_to_dict
 from plugcell.kinematics.description import RobotDescription
 from plugcell.kinematics.errors import DescriptionError
 
@@ -97,7 +99,7 @@ def load_robot_file(path: str | os.PathLike[str]) -> RobotDescription:
     except UnicodeDecodeError as exc:
         raise DescriptionError(label, f"invalid TOML: not UTF-8 ({exc.reason})") from None
     try:
-        return RobotDescription.from_dict(data)
+        return description_from_dict(data)
     except DescriptionError as exc:
         raise exc.with_prefix(label) from None
 
@@ -222,7 +224,7 @@ def description_to_toml(desc: RobotDescription, header: str = "") -> str:
     """
     import tomli_w
 
-    d = desc.to_dict()
+    d = description_to_dict(desc)
     if not d.get("notes"):
         d.pop("notes", None)
     for key in ("loops", "coupled_limits", "point_masses"):
@@ -251,7 +253,7 @@ def description_of_params(d: Mapping[str, Any], label: str = "PARAMS") -> RobotD
     """
     try:
         if "description" in d:
-            return RobotDescription.from_dict(d["description"])
+            return description_from_dict(d["description"])
         if "robot_source" in d:
             return RobotSource.from_dict(d["robot_source"]).load()
         return load_robot(str(d.get("robot", "")))

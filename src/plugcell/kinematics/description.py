@@ -8,18 +8,20 @@ in which order the controller reports them, the flange link, closed loops
 joint stiffnesses, a home pose and, optionally, the vendor's joint convention
 (:class:`JointCoupling`: kinematic joints = M · readings + offset).
 
-:meth:`RobotDescription.from_dict` builds one from the plain dictionary of a
-description file (lengths in metres, angles in **degrees**, masses in kg; the
-format is documented in ``docs/robot-description.md``) and reports every problem
-as a :class:`~plugcell.kinematics.errors.DescriptionError` whose location is a
-path into that dictionary (``links[3].alpha``).  Inside the model all angles are
-radians.  This module does no file I/O; :mod:`plugcell.io.robots` reads files.
+Everything here is SI with angles in radians, and the model takes and returns
+arrays and objects only.  Building one validates its physical consistency (one
+root, parents listed first, loops that close, an injective coupling, ``home``
+inside the limits…) and reports every problem as a
+:class:`~plugcell.kinematics.errors.DescriptionError` whose location is where the
+value sits in a description file (``links[3].alpha``), so a file loader can pass it
+on unchanged.  This module reads no file format: the file schema (the dictionary
+of a TOML file ↔ a description, with its units) is :mod:`plugcell.io.robot_schema`,
+and :mod:`plugcell.io.robots` reads the files.
 """
 
 from __future__ import annotations
 
 import math
-from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -28,7 +30,6 @@ from numpy.typing import NDArray
 
 from plugcell.kinematics.errors import DescriptionError
 from plugcell.kinematics.parameters import GeometricParameters
-from plugcell.kinematics.rotations import matrix_to_rpy, rpy_to_matrix, zyz_to_matrix
 
 Array = NDArray[np.float64]
 
@@ -38,8 +39,6 @@ Array = NDArray[np.float64]
 JOINT_TYPES: tuple[str, ...] = ("actuated", "prismatic", "passive", "fixed")
 #: Parent name of the first link: the robot base frame F0.
 ROOT = "base"
-#: Description file format version understood by :meth:`RobotDescription.from_dict`.
-FORMAT_VERSION = 1
 #: Coupled limits of a loop must keep the arm–crank angle at least this far (rad)
 #: from a multiple of π, where the parallelogram collapses.
 LOOP_MARGIN = math.radians(1.0)
@@ -48,7 +47,6 @@ LOOP_MARGIN = math.radians(1.0)
 COUPLING_RANK_TOL = 1e-9
 
 __all__ = [
-    "FORMAT_VERSION",
     "JOINT_TYPES",
     "ROOT",
     "Box",
@@ -58,6 +56,7 @@ __all__ = [
     "Link",
     "PointMass",
     "RobotDescription",
+    "check_rigid",
 ]
 
 _DEG = math.pi / 180.0
@@ -319,7 +318,7 @@ class RobotDescription:
                 T = _ro(getattr(self, key), (4, 4))
             except ValueError as exc:
                 raise DescriptionError(key, str(exc)) from None
-            _check_rigid(T, key)
+            check_rigid(T, key)
             S(self, key, T)
         try:
             lim = _ro(self.joint_limits, (n, 2))
@@ -947,88 +946,22 @@ class RobotDescription:
             ok &= (v >= cl.lower - tol) & (v <= cl.upper + tol)
         return ok
 
-    # ------------------------------------------------------------------ dict form
-    @classmethod
-    def from_dict(cls, data: Any) -> RobotDescription:
-        """Build and validate a description from a file dictionary (metres, degrees, kg).
 
-        Every problem raises :class:`DescriptionError` with a path-like location;
-        no other exception escapes for any input.
-        """
-        return _parse(data)
+def check_rigid(T: Array, loc: str) -> None:
+    """Check that ``T`` is a rigid transform (finite, a proper rotation, last row 0 0 0 1).
 
-    def to_dict(self) -> dict[str, Any]:
-        """The file dictionary of this description (inverse of :meth:`from_dict`)."""
-        act = {n: j for j, n in enumerate(self.actuated)}
-        links = []
-        for lk in self.links:
-            d: dict[str, Any] = {
-                "name": lk.name,
-                "parent": lk.parent,
-                "joint": lk.joint,
-                "theta": math.degrees(lk.theta),
-                "d": lk.d,
-                "a": lk.a,
-                "alpha": math.degrees(lk.alpha),
-            }
-            if lk.hayati:
-                d["hayati"] = True
-                d["beta"] = math.degrees(lk.beta)
-            d["mass"] = lk.mass
-            d["com"] = list(lk.com)
-            if lk.name in act:
-                j = act[lk.name]
-                if self.coupling is None:
-                    scale = 1.0 if lk.is_prismatic else 180.0 / math.pi
-                    d["limits"] = [float(x) * scale for x in self.joint_limits[j]]
-                if self.stiffness is not None:
-                    d["stiffness"] = float(self.stiffness[j])
-            links.append(d)
-        out: dict[str, Any] = {
-            "format_version": FORMAT_VERSION,
-            "name": self.name,
-            "notes": self.notes,
-            "actuated": list(self.actuated),
-            "flange": self.flange,
-            "home": ([float(x) for x in np.asarray(self.home) / self.reading_scale("file")]
-                     if self.home is not None else []),
-            "base": _transform_to_dict(self.base),
-            "tool": _transform_to_dict(self.tool),
-            "links": links,
-            "loops": [
-                {"arm": lp.arm, "crank": lp.crank, "coupler": lp.coupler, "follower": lp.follower}
-                for lp in self.loops
-            ],
-            "coupled_limits": [
-                {
-                    "joints": list(c.joints),
-                    "min": math.degrees(c.lower),
-                    "max": math.degrees(c.upper),
-                }
-                for c in self.coupled_limits
-            ],
-            "point_masses": [
-                {"name": p.name, "link": p.link, "mass": p.mass, "com": list(p.com)}
-                for p in self.point_masses
-            ],
-        }
-        if self.coupling is not None:
-            c = self.coupling
-            out["coupling"] = {
-                "readings": list(c.readings),
-                "matrix": [[float(x) for x in row] for row in c.matrix],
-                "offsets": [math.degrees(x) for x in c.offset],
-                "limits": [[math.degrees(x) for x in lim] for lim in self.joint_limits],
-            }
-        if self.working_volume is not None:
-            out["working_volume"] = {
-                "center": list(self.working_volume.center),
-                "size": list(self.working_volume.size),
-            }
-        return out
+    Parameters
+    ----------
+    T : ndarray, shape (4, 4)
+        The homogeneous transform (metres).
+    loc : str
+        Location named by the error (``"base"``, ``"tool.matrix"``).
 
-
-def _check_rigid(T: Array, loc: str) -> None:
+    Raises
+    ------
+    DescriptionError
+        At ``loc``, saying which of the three conditions fails.
+    """
     R = T[:3, :3]
     if not np.all(np.isfinite(T)):
         raise DescriptionError(loc, "transform must be finite")
@@ -1036,382 +969,3 @@ def _check_rigid(T: Array, loc: str) -> None:
         raise DescriptionError(loc, "rotation part is not a proper rotation matrix")
     if np.abs(T[3] - [0, 0, 0, 1]).max() > 1e-12:
         raise DescriptionError(loc, "last row must be [0, 0, 0, 1]")
-
-
-def _transform_to_dict(T: Array) -> dict[str, Any]:
-    rpy = matrix_to_rpy(T[:3, :3])
-    return {"xyz": [float(x) for x in T[:3, 3]], "rpy": [math.degrees(x) for x in rpy]}
-
-
-# =============================================================================== parsing
-_TOP_KEYS = {
-    "format_version",
-    "name",
-    "notes",
-    "actuated",
-    "flange",
-    "home",
-    "base",
-    "tool",
-    "links",
-    "loops",
-    "coupled_limits",
-    "point_masses",
-    "working_volume",
-    "coupling",
-}
-_COUPLING_KEYS = {"readings", "matrix", "offsets", "limits"}
-_LINK_KEYS = {
-    "name",
-    "parent",
-    "joint",
-    "theta",
-    "d",
-    "a",
-    "alpha",
-    "beta",
-    "hayati",
-    "mass",
-    "com",
-    "limits",
-    "stiffness",
-}
-_LOOP_KEYS = {"type", "arm", "crank", "coupler", "follower"}
-_COUPLED_KEYS = {"joints", "min", "max"}
-_PM_KEYS = {"name", "link", "mass", "com"}
-_TRANSFORM_KEYS = {"xyz", "rpy", "zyz", "matrix"}
-
-
-def _typename(v: Any) -> str:
-    return repr(v) if isinstance(v, (str, int, float, bool)) else type(v).__name__
-
-
-def _table(v: Any, loc: str, allowed: set[str]) -> Mapping[str, Any]:
-    if not isinstance(v, Mapping):
-        raise DescriptionError(loc, f"expected a table, got {_typename(v)}")
-    for key in v:
-        if not isinstance(key, str):
-            raise DescriptionError(loc, f"keys must be strings, got {key!r}")
-        if key not in allowed:
-            raise DescriptionError(
-                f"{loc}.{key}" if loc else key,
-                f"unknown key (allowed: {', '.join(sorted(allowed))})",
-            )
-    return v
-
-
-def _sub(loc: str, key: str) -> str:
-    return f"{loc}.{key}" if loc else key
-
-
-def _req(t: Mapping[str, Any], key: str, loc: str) -> Any:
-    if key not in t:
-        raise DescriptionError(_sub(loc, key), "missing required key")
-    return t[key]
-
-
-def _num(v: Any, loc: str) -> float:
-    if isinstance(v, bool) or not isinstance(v, (int, float)):
-        raise DescriptionError(loc, f"expected a number, got {_typename(v)}")
-    x = float(v)
-    if not math.isfinite(x):
-        raise DescriptionError(loc, f"expected a finite number, got {v!r}")
-    return x
-
-
-def _str(v: Any, loc: str) -> str:
-    if not isinstance(v, str):
-        raise DescriptionError(loc, f"expected a string, got {_typename(v)}")
-    if not v:
-        raise DescriptionError(loc, "must not be empty")
-    return v
-
-
-def _bool(v: Any, loc: str) -> bool:
-    if not isinstance(v, bool):
-        raise DescriptionError(loc, f"expected true or false, got {_typename(v)}")
-    return v
-
-
-def _list(v: Any, loc: str) -> Sequence[Any]:
-    if isinstance(v, (str, bytes, Mapping)) or not isinstance(v, Sequence):
-        raise DescriptionError(loc, f"expected an array, got {_typename(v)}")
-    return v
-
-
-def _vec(v: Any, n: int, loc: str) -> list[float]:
-    seq = _list(v, loc)
-    if len(seq) != n:
-        raise DescriptionError(loc, f"expected {n} numbers, got {len(seq)}")
-    return [_num(x, f"{loc}[{i}]") for i, x in enumerate(seq)]
-
-
-def _opt(t: Mapping[str, Any], key: str, default: Any) -> Any:
-    return t.get(key, default)
-
-
-def _parse_transform(v: Any, loc: str) -> Array:
-    t = _table(v, loc, _TRANSFORM_KEYS)
-    if "matrix" in t:
-        if set(t) - {"matrix"}:
-            raise DescriptionError(loc, "give either 'matrix' or 'xyz' with 'rpy'/'zyz', not both")
-        rows = _list(t["matrix"], f"{loc}.matrix")
-        if len(rows) != 4:
-            raise DescriptionError(f"{loc}.matrix", f"expected 4 rows, got {len(rows)}")
-        T = np.array([_vec(r, 4, f"{loc}.matrix[{i}]") for i, r in enumerate(rows)])
-        _check_rigid(T, f"{loc}.matrix")
-        return T
-    xyz = _vec(t["xyz"], 3, f"{loc}.xyz") if "xyz" in t else [0.0, 0.0, 0.0]
-    if "rpy" in t and "zyz" in t:
-        raise DescriptionError(loc, "give one of 'rpy' or 'zyz', not both")
-    T = np.eye(4)
-    if "rpy" in t:
-        r = _vec(t["rpy"], 3, f"{loc}.rpy")
-        T[:3, :3] = rpy_to_matrix(*(x * _DEG for x in r))
-    elif "zyz" in t:
-        r = _vec(t["zyz"], 3, f"{loc}.zyz")
-        T[:3, :3] = zyz_to_matrix(*(x * _DEG for x in r))
-    T[:3, 3] = xyz
-    return T
-
-
-def _parse(data: Any) -> RobotDescription:
-    top = _table(data, "", _TOP_KEYS)
-    if "format_version" in top:
-        fv = top["format_version"]
-        if isinstance(fv, bool) or not isinstance(fv, int) or fv != FORMAT_VERSION:
-            raise DescriptionError(
-                "format_version",
-                f"unsupported format version {_typename(fv)} (expected {FORMAT_VERSION})",
-            )
-    name = _str(_req(top, "name", ""), "name")
-    notes_v = _opt(top, "notes", "")
-    if isinstance(notes_v, str):
-        notes = notes_v
-    else:
-        seq = _list(notes_v, "notes")
-        parts = []
-        for i, s in enumerate(seq):
-            if not isinstance(s, str):
-                raise DescriptionError(f"notes[{i}]", f"expected a string, got {_typename(s)}")
-            parts.append(s)
-        notes = "\n".join(parts)
-
-    coupling, reading_limits = (
-        _parse_coupling(top["coupling"]) if "coupling" in top else (None, None)
-    )
-    raw_links = _list(_req(top, "links", ""), "links")
-    links: list[Link] = []
-    limits: dict[str, tuple[float, float]] = {}
-    stiff: dict[str, float] = {}
-    for i, raw in enumerate(raw_links):
-        loc = f"links[{i}]"
-        t = _table(raw, loc, _LINK_KEYS)
-        lname = _str(_req(t, "name", loc), f"{loc}.name")
-        parent = _str(_req(t, "parent", loc), f"{loc}.parent")
-        joint = _str(_req(t, "joint", loc), f"{loc}.joint")
-        if joint not in JOINT_TYPES:
-            raise DescriptionError(
-                f"{loc}.joint", f"expected one of {list(JOINT_TYPES)}, got {joint!r}"
-            )
-        if joint == "fixed":
-            theta = _num(_req(t, "theta", loc), f"{loc}.theta")
-        else:
-            theta = _num(_opt(t, "theta", 0.0), f"{loc}.theta")
-        d = _num(_req(t, "d", loc), f"{loc}.d")
-        a = _num(_req(t, "a", loc), f"{loc}.a")
-        alpha = _num(_req(t, "alpha", loc), f"{loc}.alpha")
-        hayati = _bool(_opt(t, "hayati", False), f"{loc}.hayati")
-        beta = _num(_opt(t, "beta", 0.0), f"{loc}.beta")
-        if "beta" in t and not hayati:
-            raise DescriptionError(f"{loc}.beta", "beta requires hayati = true")
-        mass = _num(_opt(t, "mass", 0.0), f"{loc}.mass")
-        if mass < 0:
-            raise DescriptionError(f"{loc}.mass", f"must be ≥ 0, got {mass:g}")
-        com = tuple(_vec(_opt(t, "com", [0.0, 0.0, 0.0]), 3, f"{loc}.com"))
-        if joint in ("actuated", "prismatic"):
-            if coupling is not None:
-                if "limits" in t:
-                    raise DescriptionError(
-                        f"{loc}.limits",
-                        "with a [coupling] the joint limits are on the readings: give them in "
-                        "coupling.limits",
-                    )
-            else:
-                lim = _limit_pair(_req(t, "limits", loc), f"{loc}.limits")
-                unit = 1.0 if joint == "prismatic" else _DEG  # metres or degrees
-                limits[lname] = (lim[0] * unit, lim[1] * unit)
-            if "stiffness" in t:
-                k = _num(t["stiffness"], f"{loc}.stiffness")
-                if k <= 0:
-                    raise DescriptionError(f"{loc}.stiffness", f"must be positive, got {k:g}")
-                stiff[lname] = k
-        else:
-            for key in ("limits", "stiffness"):
-                if key in t:
-                    raise DescriptionError(f"{loc}.{key}", f"only actuated joints take {key!r}")
-        links.append(
-            Link(
-                name=lname,
-                parent=parent,
-                joint=joint,
-                theta=theta * _DEG,
-                d=d,
-                a=a,
-                alpha=alpha * _DEG,
-                beta=beta * _DEG,
-                hayati=hayati,
-                mass=mass,
-                com=(com[0], com[1], com[2]),
-            )
-        )
-
-    raw_act = _list(_req(top, "actuated", ""), "actuated")
-    actuated = tuple(_str(v, f"actuated[{j}]") for j, v in enumerate(raw_act))
-    flange = _str(_req(top, "flange", ""), "flange")
-
-    loops = []
-    for k, raw in enumerate(_list(_opt(top, "loops", []), "loops")):
-        loc = f"loops[{k}]"
-        t = _table(raw, loc, _LOOP_KEYS)
-        typ = _str(_opt(t, "type", "parallelogram"), f"{loc}.type")
-        if typ not in ("parallelogram", "fourbar"):
-            raise DescriptionError(f"{loc}.type", f"expected 'parallelogram', got {typ!r}")
-        roles = {
-            r: _str(_req(t, r, loc), f"{loc}.{r}") for r in ("arm", "crank", "coupler", "follower")
-        }
-        loops.append(FourBarLoop(**roles))
-
-    coupled = []
-    for k, raw in enumerate(_list(_opt(top, "coupled_limits", []), "coupled_limits")):
-        loc = f"coupled_limits[{k}]"
-        t = _table(raw, loc, _COUPLED_KEYS)
-        js = _list(_req(t, "joints", loc), f"{loc}.joints")
-        if len(js) != 2:
-            raise DescriptionError(f"{loc}.joints", f"expected 2 joint names, got {len(js)}")
-        j0, j1 = (_str(v, f"{loc}.joints[{m}]") for m, v in enumerate(js))
-        lo = _num(_req(t, "min", loc), f"{loc}.min")
-        hi = _num(_req(t, "max", loc), f"{loc}.max")
-        if not lo < hi:
-            raise DescriptionError(loc, f"min {lo:g} must be below max {hi:g}")
-        coupled.append(CoupledLimit((j0, j1), lo * _DEG, hi * _DEG))
-
-    pms = []
-    for k, raw in enumerate(_list(_opt(top, "point_masses", []), "point_masses")):
-        loc = f"point_masses[{k}]"
-        t = _table(raw, loc, _PM_KEYS)
-        pm_name = _str(_req(t, "name", loc), f"{loc}.name")
-        pm_link = _str(_req(t, "link", loc), f"{loc}.link")
-        pm_mass = _num(_req(t, "mass", loc), f"{loc}.mass")
-        if pm_mass < 0:
-            raise DescriptionError(f"{loc}.mass", f"must be ≥ 0, got {pm_mass:g}")
-        c = _vec(_req(t, "com", loc), 3, f"{loc}.com")
-        pms.append(PointMass(pm_name, pm_link, pm_mass, (c[0], c[1], c[2])))
-
-    box = None
-    if "working_volume" in top:
-        t = _table(top["working_volume"], "working_volume", {"center", "size"})
-        c = _vec(_req(t, "center", "working_volume"), 3, "working_volume.center")
-        s = _vec(_req(t, "size", "working_volume"), 3, "working_volume.size")
-        for i, x in enumerate(s):
-            if x <= 0:
-                raise DescriptionError(f"working_volume.size[{i}]", f"must be positive, got {x:g}")
-        box = Box((c[0], c[1], c[2]), (s[0], s[1], s[2]))
-
-    base = _parse_transform(top["base"], "base") if "base" in top else np.eye(4)
-    tool = _parse_transform(top["tool"], "tool") if "tool" in top else np.eye(4)
-
-    # order limits by the actuated list (unknown names are reported by the model)
-    if reading_limits is not None:
-        jl = reading_limits
-    else:
-        jl = np.zeros((len(actuated), 2))
-        for j, nm in enumerate(actuated):
-            jl[j] = limits.get(nm, (-math.pi, math.pi))
-    declared = {lk.name for lk in links if lk.joint == "actuated"}
-    stiffness = None
-    if stiff:
-        missing = [nm for nm in actuated if nm in declared and nm not in stiff]
-        if missing:
-            i = next(i for i, lk in enumerate(links) if lk.name == missing[0])
-            raise DescriptionError(
-                f"links[{i}].stiffness",
-                "missing: give a stiffness for every actuated joint or for none",
-            )
-        stiffness = np.array([stiff.get(nm, 1.0) for nm in actuated])
-
-    home = None
-    if "home" in top:
-        seq = _list(top["home"], "home")  # length checked against `actuated` by the model
-        home = np.array([_num(x, f"home[{i}]") for i, x in enumerate(seq)])
-        if coupling is None:  # prismatic readings in metres, the others in degrees
-            kinds = {lk.name: lk.joint for lk in links}
-            unit = [1.0 if kinds.get(nm) == "prismatic" else _DEG for nm in actuated]
-            home = home * (np.array(unit) if len(unit) == len(home) else _DEG)
-        else:
-            home = home * _DEG
-
-    return RobotDescription(
-        name=name,
-        links=tuple(links),
-        actuated=actuated,
-        flange=flange,
-        loops=tuple(loops),
-        base=base,
-        tool=tool,
-        joint_limits=jl,
-        stiffness=stiffness,
-        notes=notes,
-        coupled_limits=tuple(coupled),
-        home=home,
-        point_masses=tuple(pms),
-        working_volume=box,
-        coupling=coupling,
-    )
-
-
-def _limit_pair(v: Any, loc: str) -> list[float]:
-    lim = _vec(v, 2, loc)
-    if not lim[0] < lim[1]:
-        raise DescriptionError(
-            loc, f"lower limit {lim[0]:g} must be below upper limit {lim[1]:g}"
-        )
-    return lim
-
-
-def _parse_coupling(v: Any) -> tuple[JointCoupling, Array]:
-    """The ``[coupling]`` table → (:class:`JointCoupling`, reading limits ``(n_r, 2)`` rad)."""
-    loc = "coupling"
-    t = _table(v, loc, _COUPLING_KEYS)
-    raw_r = _list(_req(t, "readings", loc), f"{loc}.readings")
-    readings = tuple(_str(x, f"{loc}.readings[{j}]") for j, x in enumerate(raw_r))
-    n_r = len(readings)
-    rows = _list(_req(t, "matrix", loc), f"{loc}.matrix")
-    if not rows:
-        raise DescriptionError(f"{loc}.matrix", "expected one row per actuated joint, got none")
-    matrix = []
-    for r, row in enumerate(rows):
-        seq = _list(row, f"{loc}.matrix[{r}]")
-        if len(seq) != len(_list(rows[0], f"{loc}.matrix[0]")):
-            raise DescriptionError(
-                f"{loc}.matrix[{r}]",
-                f"expected {len(rows[0])} numbers like row 0 (one per reading), got {len(seq)}",
-            )
-        matrix.append([_num(x, f"{loc}.matrix[{r}][{j}]") for j, x in enumerate(seq)])
-    n_a = len(matrix)
-    if "offsets" in t:  # its length is checked against `actuated` by the model
-        offs = _list(t["offsets"], f"{loc}.offsets")
-        offset = [_num(x, f"{loc}.offsets[{k}]") * _DEG for k, x in enumerate(offs)]
-    else:
-        offset = [0.0] * n_a
-    raw_l = _list(_req(t, "limits", loc), f"{loc}.limits")
-    if len(raw_l) != n_r:
-        raise DescriptionError(
-            f"{loc}.limits",
-            f"expected {n_r} [lower, upper] pairs (one per reading), got {len(raw_l)}",
-        )
-    lims = np.array(
-        [_limit_pair(x, f"{loc}.limits[{j}]") for j, x in enumerate(raw_l)], dtype=float
-    ).reshape(n_r, 2) * _DEG
-    return JointCoupling(readings, np.array(matrix, dtype=float).reshape(n_a, -1),
-                         np.array(offset)), lims

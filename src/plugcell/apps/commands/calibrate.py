@@ -215,6 +215,7 @@ def _run(args: argparse.Namespace) -> int:
     from plugcell.apps.commands.robotargs import load_robot_of, robot_source_of
     from plugcell.calibration import CalibrationError, Calibrator
     from plugcell.calibration.residual_model import ResidualModelError
+    from plugcell.io.robot_schema import description_to_dict
 
     desc = load_robot_of(args)
     if args.payload_kg is not None and not (math.isfinite(args.payload_kg)
@@ -287,7 +288,7 @@ def _run(args: argparse.Namespace) -> int:
     d = json.loads(result.to_json(residual_file=side))
     # where the robot came from and what it was: export and compensate find it again
     d["robot_source"] = robot_source_of(args).absolute().to_dict()
-    d["description"] = desc.to_dict()
+    d["description"] = description_to_dict(desc)
     text = json.dumps(d, indent=2, allow_nan=False)
     if args.out is not None:
         write_text(args.out, text + "\n")

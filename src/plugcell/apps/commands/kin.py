@@ -28,6 +28,7 @@ from typing import Any
 import numpy as np
 
 from plugcell.apps.commands.robotargs import add_robot_args, load_robot_of
+from plugcell.io.robot_schema import description_to_dict
 from plugcell.io.robots import available_robots
 from plugcell.kinematics import (
     KinematicsError,
@@ -237,5 +238,5 @@ def _cmd_describe(args: argparse.Namespace) -> int:
 
         print(description_to_toml(desc), end="")
     else:
-        _print(desc.to_dict())
+        _print(description_to_dict(desc))
     return 0

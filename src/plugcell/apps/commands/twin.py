@@ -87,6 +87,7 @@ def configure(p: argparse.ArgumentParser) -> None:
 def _scenario(args: argparse.Namespace):
     from plugcell.apps.cli import CommandError
     from plugcell.apps.commands.robotargs import load_robot_of, robot_source_of
+    from plugcell.io.robot_schema import description_to_dict
     from plugcell.kinematics.errors import DescriptionError
     from plugcell.sim.twin.scenario import ScenarioError, TwinScenario
 
@@ -99,7 +100,8 @@ def _scenario(args: argparse.Namespace):
         source = robot_source_of(args)
         if source.is_urdf:  # the scenario carries the imported description itself
             desc = load_robot_of(args)
-            return TwinScenario(robot=desc.name, seed=args.seed, description=desc.to_dict())
+            return TwinScenario(robot=desc.name, seed=args.seed,
+                                description=description_to_dict(desc))
         if any((source.args, source.package_paths, source.base_link, source.tip_link)):
             source.load()  # the options apply to URDF robots only: say so
         return TwinScenario(robot=args.robot, seed=args.seed)

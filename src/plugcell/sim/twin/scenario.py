@@ -18,6 +18,7 @@ from typing import Any
 
 import numpy as np
 
+from plugcell.io.robot_schema import description_from_dict
 from plugcell.io.robots import load_robot
 from plugcell.kinematics import GeometricParameters, RobotDescription
 from plugcell.kinematics.rotations import rpy_to_matrix
@@ -39,7 +40,7 @@ class TwinScenario:
     """Which robot, which hidden errors (by seed), which payload.  JSON-serialisable.
 
     ``robot``: a shipped robot's name or a description file; ``description``: the
-    robot's description itself (:meth:`RobotDescription.to_dict`, e.g. imported from a
+    robot's description itself (:func:`~plugcell.io.robot_schema.description_to_dict`, e.g. from a
     URDF) — then ``robot`` is only its name.
     """
 
@@ -137,7 +138,7 @@ def _hidden_errors(desc: RobotDescription, profile: TwinProfile, rng: np.random.
 def make_truth(scenario: TwinScenario) -> TwinTruth:
     """Build the hidden truth of ``scenario`` (deterministic in its seed)."""
     try:
-        desc = (RobotDescription.from_dict(scenario.description)
+        desc = (description_from_dict(scenario.description)
                 if scenario.description is not None else load_robot(scenario.robot))
     except Exception as exc:  # DescriptionError or unknown robot
         raise ScenarioError(str(exc)) from None
