@@ -28,7 +28,7 @@ PROGRAM_STATUS  SingleData  → String[*]            program, state, simulated s
 
 Positions are PDL's: mm and Comau ZYZ degrees.  The controller is reached over
 the line protocol (:mod:`plugcell.devices.robot.bridge`): with ``sim`` the service
-starts its own simulated controller process (:mod:`plugcell.devices.robot.sim_launcher`),
+starts its own simulated controller process (:mod:`plugcell.sim.controller.launcher`),
 otherwise it connects to ``controller = HOST:PORT`` — a real controller speaking
 docs/controller-protocol.md.  The program's ACTIVATE strings are handled by the
 :class:`~plugcell.devices.robot.outbound.ExternalProcessHandler`.
@@ -75,12 +75,12 @@ from plugcell.devices.robot.protocol import (
     parse_fields,
     parse_numbers,
 )
-from plugcell.devices.robot.sim_launcher import SimControllerError, SimControllerProcess
 from plugcell.framework.messages import Command, CommandTypes, ConnectionStates, DataTypes
 from plugcell.framework.participant import PartnerError
 from plugcell.framework.service import DeviceError, GenericDevice
 from plugcell.kinematics import RobotDescription
 from plugcell.pdl.predefined import EXT_DATA_MAX
+from plugcell.sim.controller.launcher import SimControllerError, SimControllerProcess
 
 __all__ = ["ProgramStatus", "RobotService"]
 
