@@ -111,7 +111,7 @@ def public_api(packages: tuple[str, ...] = PACKAGES) -> Iterator[tuple[str, Any]
 
 
 #: Packages whose docstrings are still being brought up to the standard (strict xfail).
-PENDING: set[str] = {"calibration", "compensation"}
+PENDING: set[str] = {"compensation"}
 
 
 @pytest.mark.parametrize(

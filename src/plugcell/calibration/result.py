@@ -60,7 +60,21 @@ __all__ = [
 
 @dataclass(frozen=True)
 class IterationRecord:
-    """One Gauss–Newton iteration: residual before the step and the step size."""
+    """One Gauss–Newton iteration: residual before the step and the step size.
+
+    Attributes
+    ----------
+    iteration : int
+        Iteration number.
+    step_norm : float
+        ‖Δg‖ of the step, in the parameters' own units (m, rad, …).
+    cost : float
+        ``Σ_i w_i ‖W Δx_i‖²`` before the step (m²; ``w_i`` the robust-loss weights).
+    mean_position_mm, rms_position_mm : float, mm
+        Mean and rms position residual before the step.
+    damping : float
+        Levenberg–Marquardt damping λ (0 for Gauss–Newton).
+    """
 
     iteration: int
     step_norm: float
@@ -70,6 +84,7 @@ class IterationRecord:
     damping: float = 0.0
 
     def as_dict(self) -> dict[str, float]:
+        """The fields as a JSON-ready dict."""
         return {"iteration": self.iteration, "step_norm": self.step_norm, "cost": self.cost,
                 "mean_position_mm": self.mean_position_mm,
                 "rms_position_mm": self.rms_position_mm, "damping": self.damping}
@@ -100,24 +115,63 @@ def _thesis_base(T: Array) -> dict[str, float] | None:
 class CalibrationResult:
     """An identified model with its statistics (see module docstring).
 
-    ``model``: the calibrated :class:`ErrorModel`; ``nominal``: the nominal robot
-    with BASE/PROBE fitted (the "before" reference); ``keys``: the identified
-    parameters; ``identifiability``: the structural analysis (what each kept
-    parameter stands for); ``statistics``: σ², σ per parameter, κ;
-    ``calibration``/``calibration_before``: accuracy on the calibration poses
-    after/before; ``validation``/``validation_before``: on independent poses;
-    ``calibration_residuals``/``validation_residuals``: the residual of every pose
-    (:class:`~plugcell.calibration.statistics.PoseResiduals`) those figures are the
-    statistics of (``None`` in a result rebuilt by :meth:`from_dict`);
-    ``validity``: the region the calibration poses covered
-    (:class:`~plugcell.calibration.validity.ValidityRegion`; ``None`` for a PARAMS.json
-    written before it was recorded); ``validation_region``: the validation poses checked
-    against it.
-    ``residual_model``: a learned residual layer on top (hybrid model,
-    :mod:`~plugcell.calibration.residual_model`), set by :meth:`with_residual_model`;
-    ``hybrid_validation_residuals``: physical (``before``) vs hybrid (``after``) on the
-    validation poses, ``hybrid_fallbacks``: validation poses outside the layer's
-    trained region (physical model used).
+    Attributes
+    ----------
+    config : ModelConfig
+        Which of the five models.
+    robot : str
+        Robot name.
+    model : ErrorModel
+        The calibrated model, ``T = BASE · T_n^0(θ + Δθ) · PROBE`` (6.23).
+    nominal : ErrorModel
+        The nominal robot with BASE/PROBE fitted (the "before" reference).
+    keys : tuple of str
+        The identified parameters.
+    identifiability : Identifiability or None
+        The structural analysis (what each kept parameter stands for).
+    data_identifiability : Identifiability or None
+        The same analysis on the calibration poses.
+    iterations : int
+        Iterations of the final stage.
+    converged : bool
+        Whether ‖Δg‖ < tol was reached.
+    history : tuple of IterationRecord
+        Per-iteration record.
+    statistics : ParameterStatistics or None
+        σ̂² (8.3), σ per parameter (8.5), covariance (8.4), κ.
+    calibration, calibration_before : AccuracyStats or None
+        Accuracy (8.1–8.2, m and rad) on the calibration poses after/before.
+    six_dof : bool
+        Orientations were measured.
+    n_poses : int
+        Calibration poses.
+    pose_weights : (N,) array or None
+        Final robust-loss weights of the poses.
+    warnings : tuple of str
+        Warnings raised during the fit.
+    elapsed_s : float, s
+        Wall time of the fit.
+    settings : dict
+        The calibrator's settings.
+    validation, validation_before : AccuracyStats or None
+        Accuracy on independent poses after/before.
+    n_validation : int
+        Validation poses.
+    calibration_residuals, validation_residuals : PoseResiduals or None
+        The residual of every pose those figures are the statistics of (``None`` in a
+        result rebuilt by :meth:`from_dict`).
+    validity : ValidityRegion or None
+        The region the calibration poses covered (``None`` for a PARAMS.json written
+        before it was recorded).
+    validation_region : RegionCheck or None
+        The validation poses checked against it.
+    residual_model : LearnedResidual or None
+        A learned residual layer on top (hybrid model,
+        :mod:`~plugcell.calibration.residual_model`), set by :meth:`with_residual_model`.
+    hybrid_validation_residuals : PoseResiduals or None
+        Physical (``before``) vs hybrid (``after``) on the validation poses.
+    hybrid_fallbacks : int
+        Validation poses outside the layer's trained region (physical model used).
     """
 
     config: ModelConfig
@@ -435,7 +489,29 @@ def rebase_document(document: dict[str, Any], result: CalibrationResult, base: A
     """A copy of the PARAMS.json ``document`` of ``result`` with BASE re-registered to
     ``base`` ``(4, 4)`` (the drift watch): the reference becomes the new BASE, the BASE
     parameters' values zero, ``event`` appended to ``drift_history``; ``parameters``
-    stays the record of the identification."""
+    stays the record of the identification.
+
+    Parameters
+    ----------
+    document : dict
+        The PARAMS.json document of ``result``.
+    result : CalibrationResult
+        The calibration.
+    base : (4, 4) array_like, m
+        The re-registered BASE.
+    event : dict, optional
+        The drift event to record.
+
+    Returns
+    -------
+    dict
+        The new document (``document`` is not changed).
+
+    Raises
+    ------
+    ValueError
+        ``base`` not a finite 4×4 matrix.
+    """
     import copy
 
     B = np.asarray(base, dtype=float)
@@ -453,7 +529,18 @@ def rebase_document(document: dict[str, Any], result: CalibrationResult, base: A
 
 
 def harmonic_order(model: ErrorModel) -> int:
-    """The highest joint-angle harmonic order among the model's parameters (0: none)."""
+    """The highest joint-angle harmonic order K among the model's parameters.
+
+    Parameters
+    ----------
+    model : ErrorModel
+        The model.
+
+    Returns
+    -------
+    int
+        K (0: no harmonics).
+    """
     return max((int(p.key[1]) for p in model.space if p.kind == "harmonic"), default=0)
 
 
