@@ -110,15 +110,7 @@ def public_api(packages: tuple[str, ...] = PACKAGES) -> Iterator[tuple[str, Any]
                     yield f"{modname}:{n}", obj
 
 
-#: Packages whose docstrings are still being brought up to the standard (strict xfail).
-PENDING: set[str] = {"compensation"}
-
-
-@pytest.mark.parametrize(
-    "package",
-    [pytest.param(p, marks=pytest.mark.xfail(strict=True, reason="docstrings in progress"))
-     if p in PENDING else p for p in PACKAGES],
-)
+@pytest.mark.parametrize("package", PACKAGES)
 def test_public_math_api_has_numpydoc_sections(package: str) -> None:
     api = list(public_api((package,)))
     assert len(api) > 10  # the walk found the package
