@@ -207,16 +207,57 @@ class CalibrationResult:
     # ------------------------------------------------------------------ prediction
     def predict(self, q: ArrayLike, payload_kg: ArrayLike | float | None = None,
                 temperature_c: ArrayLike | float | None = None) -> Array:
-        """Calibrated target poses ``(N, 4, 4)`` in the measurement frame."""
+        """Calibrated target poses, ``T = BASE · T_n^0(θ(q) + Δθ(q, m)) · PROBE`` (6.23).
+
+        Parameters
+        ----------
+        q : (N, n) array_like, rad
+            Joint readings.
+        payload_kg : float or (N,) array_like, kg, optional
+            Payloads (default 0).
+        temperature_c : float or (N,) array_like, °C, optional
+            Temperatures (default: the model's reference).
+
+        Returns
+        -------
+        (N, 4, 4) array, m
+            Target poses in the measurement frame.
+        """
         return self.model.predict(q, payload_kg, temperature_c)
 
     def predict_nominal(self, q: ArrayLike, payload_kg: ArrayLike | float | None = None,
                         temperature_c: ArrayLike | float | None = None) -> Array:
-        """Poses of the nominal robot with the fitted BASE/PROBE."""
+        """Poses of the nominal robot with the fitted BASE/PROBE (the "before" model).
+
+        Parameters
+        ----------
+        q : (N, n) array_like, rad
+            Joint readings.
+        payload_kg : float or (N,) array_like, kg, optional
+            Payloads (default 0).
+        temperature_c : float or (N,) array_like, °C, optional
+            Temperatures (default: the model's reference).
+
+        Returns
+        -------
+        (N, 4, 4) array, m
+            Target poses in the measurement frame.
+        """
         return self.nominal.predict(q, payload_kg, temperature_c)
 
     def residuals(self, data: CalibrationData) -> Array:
-        """``(N, 6)`` (or ``(N, 3)``) measured − calibrated, metres and radians."""
+        """Residuals measured − calibrated, ``Δx_i = [p_M − p; log(R_M Rᵀ)∨]``.
+
+        Parameters
+        ----------
+        data : CalibrationData
+            Measured poses.
+
+        Returns
+        -------
+        (N, 6) or (N, 3) array
+            Metres and radians (3 columns for position-only data).
+        """
         return pose_residuals(data, self.predict(data.q, data.payload_kg, data.temperature_c))
 
     def evaluate_poses(self, data: CalibrationData, *, refit_base: bool = False,
@@ -231,6 +272,22 @@ class CalibrationResult:
         orientation rows by ``rotation_weight`` (m/rad; default: the weight of the fit,
         ``settings["rotation_weight"]``) or, with ``refit_positions_only``, uses the
         positions alone.
+
+        Parameters
+        ----------
+        data : CalibrationData
+            Measured poses.
+        refit_base, refit_probe : bool
+            Re-identify BASE (and PROBE) on ``data``.
+        rotation_weight : float, m/rad, optional
+            Weight of the orientation rows of the refit.
+        refit_positions_only : bool
+            Refit on the positions alone.
+
+        Returns
+        -------
+        PoseResiduals
+            ``before`` (nominal) and ``after`` (calibrated) errors, m and rad.
         """
         nominal, model = self.nominal, self.model
         if refit_base:
@@ -251,8 +308,20 @@ class CalibrationResult:
     def evaluate(self, data: CalibrationData, *, refit_base: bool = False,
                  refit_probe: bool = False, rotation_weight: float | None = None,
                  refit_positions_only: bool = False) -> tuple[AccuracyStats, AccuracyStats]:
-        """Accuracy (8.1–8.2) on ``data``: (nominal, calibrated); the statistics of
-        :meth:`evaluate_poses` (same options)."""
+        """Accuracy (8.1–8.2) on ``data``: the statistics of :meth:`evaluate_poses`.
+
+        Parameters
+        ----------
+        data : CalibrationData
+            Measured poses (at least 2).
+        refit_base, refit_probe, rotation_weight, refit_positions_only
+            As :meth:`evaluate_poses`.
+
+        Returns
+        -------
+        nominal, calibrated : AccuracyStats
+            Mean, σ (m − 1), max … of the errors, m and rad.
+        """
         r = self.evaluate_poses(data, refit_base=refit_base, refit_probe=refit_probe,
                                 rotation_weight=rotation_weight,
                                 refit_positions_only=refit_positions_only)
@@ -262,8 +331,21 @@ class CalibrationResult:
                         refit_probe: bool = False, rotation_weight: float | None = None,
                         refit_positions_only: bool = False) -> CalibrationResult:
         """This result with the accuracy and residuals on independent poses ``data``
-        (options of :meth:`evaluate_poses`; with a residual model also physical vs hybrid
-        on them)."""
+        (with a residual model also physical vs hybrid on them).
+
+        Parameters
+        ----------
+        data : CalibrationData
+            Validation poses (at least 2).
+        refit_base, refit_probe, rotation_weight, refit_positions_only
+            As :meth:`evaluate_poses`.
+
+        Returns
+        -------
+        CalibrationResult
+            A copy with ``validation``, ``validation_before``, ``validation_residuals`` and
+            ``validation_region`` set (and a warning for poses outside the region).
+        """
         r = self.evaluate_poses(data, refit_base=refit_base, refit_probe=refit_probe,
                                 rotation_weight=rotation_weight,
                                 refit_positions_only=refit_positions_only)
@@ -286,15 +368,46 @@ class CalibrationResult:
 
     def check_region(self, q: ArrayLike, payload_kg: ArrayLike | float | None = None,
                      targets: ArrayLike | None = None) -> RegionCheck | None:
-        """Configurations ``q`` (rad) checked against the calibrated region (``None`` when
-        the result has no region: a PARAMS.json from before it was recorded)."""
+        """Configurations checked against the calibrated region (:meth:`ValidityRegion.check`).
+
+        Parameters
+        ----------
+        q : (N, n) array_like, rad
+            Configurations.
+        payload_kg : float or (N,) array_like, kg, optional
+            Payloads.
+        targets : (N, 3) array_like, m, optional
+            Target positions, robot base frame.
+
+        Returns
+        -------
+        RegionCheck or None
+            ``None`` when the result has no region (a PARAMS.json from before it was
+            recorded).
+        """
         if self.validity is None:
             return None
         return self.validity.check(q, payload_kg, targets)
 
     def with_residual_model(self, layer: LearnedResidual) -> CalibrationResult:
-        """This result with a learned residual layer (trained on this calibration's
-        model: :func:`~plugcell.calibration.residual_model.calibration_fingerprint`)."""
+        """This result with a learned residual layer.
+
+        Parameters
+        ----------
+        layer : LearnedResidual
+            A layer trained on this calibration's model
+            (:func:`~plugcell.calibration.residual_model.calibration_fingerprint`).
+
+        Returns
+        -------
+        CalibrationResult
+            A copy with ``residual_model`` set (hybrid validation cleared).
+
+        Raises
+        ------
+        ValueError
+            The layer was trained on another calibration.
+        """
         if layer.fingerprint != calibration_fingerprint(self.model):
             raise ValueError("the residual model was trained on top of another calibration")
         return replace(self, residual_model=layer, hybrid_validation_residuals=None,
@@ -303,8 +416,24 @@ class CalibrationResult:
     def predict_hybrid(self, q: ArrayLike, payload_kg: ArrayLike | float | None = None,
                        temperature_c: ArrayLike | float | None = None
                        ) -> tuple[Array, Array]:
-        """Hybrid target poses ``(N, 4, 4)`` (measurement frame) and ``(N,)`` in-domain
-        flags (False: the physical model's pose); the physical ones without a layer."""
+        """Hybrid target poses: the calibrated poses with the learned layer's correction.
+
+        Parameters
+        ----------
+        q : (N, n) array_like, rad
+            Joint readings.
+        payload_kg : float or (N,) array_like, kg, optional
+            Payloads (default 0).
+        temperature_c : float or (N,) array_like, °C, optional
+            Temperatures (default: the model's reference).
+
+        Returns
+        -------
+        T : (N, 4, 4) array, m
+            Target poses in the measurement frame (the physical ones without a layer).
+        in_domain : (N,) bool array
+            False where the physical model's pose was used.
+        """
         P = self.predict(q, payload_kg, temperature_c)
         if self.residual_model is None:
             return P, np.ones(len(P), dtype=bool)
@@ -314,21 +443,63 @@ class CalibrationResult:
 
     # ------------------------------------------------------------------ parameters
     def value(self, key: str) -> float:
+        """Identified value Δĝ of parameter ``key`` (in its unit, :class:`ErrorParameter`).
+
+        Parameters
+        ----------
+        key : str
+            Parameter key.
+
+        Returns
+        -------
+        float
+            The value.
+        """
         return self.model.value(key)
 
     def sigma(self, key: str) -> float:
+        """Standard deviation ``σ_Δg = σ̂ √C_jj`` (8.5) of identified parameter ``key``.
+
+        Parameters
+        ----------
+        key : str
+            Parameter key.
+
+        Returns
+        -------
+        float
+            σ in the parameter's unit; NaN if not identified or without statistics.
+        """
         if self.statistics is None or key not in self.keys:
             return float("nan")
         return float(self.statistics.sigma[self.keys.index(key)])
 
     def stands_for(self, key: str) -> str:
+        """The combination ``Δg_k + Σ_j c_jk Δg_j`` kept parameter ``key`` stands for.
+
+        Parameters
+        ----------
+        key : str
+            Parameter key.
+
+        Returns
+        -------
+        str
+            E.g. ``"Δa2' − Δa4'"`` (the parameter's own name without an analysis).
+        """
         names = dict(zip(self.model.space.keys, self.model.space.names, strict=True))
         if self.identifiability is None:
             return names[key]
         return self.identifiability.stands_for(key, names)
 
     def parameter_table(self) -> list[dict[str, Any]]:
-        """One dict per identified parameter: key, name, value, sigma, unit, stands_for."""
+        """One dict per identified parameter: key, name, kind, value, sigma, unit, stands_for.
+
+        Returns
+        -------
+        list of dict
+            Values and σ in SI units.
+        """
         out = []
         for k in self.keys:
             p = self.model.space[k]
