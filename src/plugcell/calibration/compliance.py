@@ -77,11 +77,38 @@ __all__ = [
 
 
 def has_masses(desc: RobotDescription) -> bool:
+    """Whether the description gives any link or point mass (``m > 0``).
+
+    Parameters
+    ----------
+    desc : RobotDescription
+        The robot.
+
+    Returns
+    -------
+    bool
+        True when a serial robot can get the gravity compliances ``c_j`` (eq. 4.15).
+    """
     return any(lk.mass > 0 for lk in desc.links) or any(pm.mass > 0 for pm in desc.point_masses)
 
 
 def gravity_parameters(desc: RobotDescription) -> tuple[ErrorParameter, ...]:
-    """G1–G3 per loop (eq. 6.31) or, for a serial robot with masses, c_j per joint."""
+    """Gravity-compliance parameters: G1–G3 per loop (eq. 6.31) or c_j per joint (eq. 4.15).
+
+    Loop *k*: ``Δθ_arm = G_{3k+1} cos θ_arm``, ``Δθ_crank = G_{3k+2} cos θ_crank +
+    G_{3k+3} sin θ_crank`` (G in rad); serial robot with masses: ``Δθ_j = c_j τ_j(q)``
+    (c_j in rad/(N·m)).
+
+    Parameters
+    ----------
+    desc : RobotDescription
+        The robot.
+
+    Returns
+    -------
+    tuple of ErrorParameter
+        Empty for a serial robot without masses.
+    """
     out: list[ErrorParameter] = []
     if desc.loops:
         for k, loop in enumerate(desc.loops):
@@ -107,7 +134,21 @@ def gravity_parameters(desc: RobotDescription) -> tuple[ErrorParameter, ...]:
 
 
 def payload_parameters(desc: RobotDescription) -> tuple[ErrorParameter, ...]:
-    """A_i, B_i, C_i, D_i for every actuated joint *i* (eq. 6.40)."""
+    """Payload-compliance parameters A_i, B_i, C_i, D_i of every actuated joint *i* (eq. 6.40).
+
+    ``Δθ_i = (m/m_ref) · [K_i3, K_i4 n_y − K_i5 n_x, K_i4 s_y − K_i5 s_x, K_i4 a_y − K_i5 a_x]
+    · (A_i, B_i, C_i, D_i)`` (module docstring).
+
+    Parameters
+    ----------
+    desc : RobotDescription
+        The robot.
+
+    Returns
+    -------
+    tuple of ErrorParameter
+        ``4 · n_actuated`` parameters; A in rad/m, B–D in rad.
+    """
     out: list[ErrorParameter] = []
     for j, name in enumerate(desc.actuated):
         for m, f in enumerate(PAYLOAD_FIELDS):
@@ -122,7 +163,27 @@ def payload_parameters(desc: RobotDescription) -> tuple[ErrorParameter, ...]:
 
 
 def harmonic_parameters(desc: RobotDescription, order: int) -> tuple[ErrorParameter, ...]:
-    """``h{k}s_{j}``, ``h{k}c_{j}`` for every actuated joint *j* and ``k = 1..order``."""
+    """Joint-angle harmonics ``h{k}s_{j}``, ``h{k}c_{j}`` for every actuated joint *j*.
+
+    ``Δθ_j = Σ_{k=1..order} s_jk sin(k q_j) + c_jk cos(k q_j)`` (module docstring).
+
+    Parameters
+    ----------
+    desc : RobotDescription
+        The robot.
+    order : {0, 1, 2}
+        Highest harmonic order K.
+
+    Returns
+    -------
+    tuple of ErrorParameter
+        ``2 · order · n_actuated`` parameters, rad.
+
+    Raises
+    ------
+    ValueError
+        ``order`` not 0, 1 or 2.
+    """
     if order not in (0, 1, 2):
         raise ValueError(f"harmonics: order 0, 1 or 2, got {order}")
     out: list[ErrorParameter] = []
@@ -187,12 +248,39 @@ def compliance_regressors(
     payload_kg: ArrayLike | None = None,
     payload_ref_kg: float = 0.0,
 ) -> Array:
-    """Regressor ``R(q)``, ``(N, n_actuated, n_c)``: ``Δθ = R(q) · c`` (module docstring).
+    """Compliance regressor ``R(q)`` with ``Δθ = R(q) · c`` (eqs. 6.31, 6.40, 4.15).
 
-    ``desc``/``ref``: the robot as described and its reference geometry;
-    ``parameters``: gravity/payload parameters (in this order); ``q``:
-    ``(N, n_readings)`` joint readings; ``payload_kg``: ``(N,)`` (``None``: no
-    payload); ``payload_ref_kg``: the mass the payload constants refer to.
+    Column of each parameter (module docstring): ``cos θ_arm`` / ``cos θ_crank`` /
+    ``sin θ_crank`` for G1–G3 (θ = θ_kin + nominal offset), the gravity torque
+    ``τ_j(q)`` for a serial ``c_j``, ``sin(k q_j)`` / ``cos(k q_j)`` for harmonics and the
+    row of eq. (6.41) times ``m / m_ref`` for payload constants — all evaluated on the
+    reference geometry ``ref``.
+
+    Parameters
+    ----------
+    desc : RobotDescription
+        The robot as described.
+    ref : GeometricParameters
+        Its reference (nominal) geometry, m and rad.
+    parameters : sequence of ErrorParameter
+        Gravity, payload and harmonic parameters (the columns, in this order).
+    q : (N, n_readings) array_like, rad
+        Joint readings (mapped to the kinematic joints θ_kin by a coupling).
+    payload_kg : (N,) array_like, kg, optional
+        Payload masses (``None``: no payload, zero payload columns).
+    payload_ref_kg : float, kg
+        The mass the payload constants refer to (≤ 0: zero payload columns).
+
+    Returns
+    -------
+    R : (N, n_actuated, n_c) array
+        Deflection of each kinematic joint per unit of each constant (rad per the
+        constant's unit).
+
+    Raises
+    ------
+    ValueError
+        A parameter that is not a compliance parameter.
     """
     q = np.atleast_2d(np.asarray(q, dtype=float))
     q = desc.kinematic_joints(q)  # the deflections are those of the kinematic joints

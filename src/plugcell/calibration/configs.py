@@ -24,7 +24,23 @@ __all__ = ["MODELS", "ModelConfig", "model_config"]
 
 @dataclass(frozen=True)
 class ModelConfig:
-    """One of the five models: structure family and which deflections it includes."""
+    """One of the five models of thesis 8.2.3: structure family and which deflections it includes.
+
+    Attributes
+    ----------
+    number : int
+        1–5.
+    name : str
+        Short name (``serial``, ``loop``, ``serial+gravity``, ``loop+gravity``, ``full``).
+    family : str
+        ``"serial"`` (eq. 6.3) or ``"loop"`` (6.2).
+    gravity : bool
+        Includes the gravity deflection G1–G3 (6.31).
+    payload : bool
+        Includes the payload compliance A, B, C, D (6.40).
+    title : str
+        One-line description.
+    """
 
     number: int
     name: str
@@ -34,6 +50,7 @@ class ModelConfig:
     title: str
 
     def as_dict(self) -> dict[str, object]:
+        """The fields as a JSON-ready dict."""
         return {"number": self.number, "name": self.name, "family": self.family,
                 "gravity": self.gravity, "payload": self.payload, "title": self.title}
 
@@ -53,7 +70,23 @@ MODELS: tuple[ModelConfig, ...] = (
 
 
 def model_config(spec: int | str) -> ModelConfig:
-    """The model numbered ``spec`` (1–5, also as a string) or named ``spec``."""
+    """The model numbered ``spec`` (1–5, also as a string) or named ``spec``.
+
+    Parameters
+    ----------
+    spec : int or str
+        Number or name (case-insensitive).
+
+    Returns
+    -------
+    ModelConfig
+        The model.
+
+    Raises
+    ------
+    ValueError
+        No such model.
+    """
     s = str(spec).strip().lower()
     for m in MODELS:
         if s in (str(m.number), m.name):

@@ -30,10 +30,28 @@ def _ro(x: ArrayLike | None) -> Array | None:
 
 @dataclass(frozen=True, eq=False)
 class CalibrationData:
-    """``q`` ``(N, n)`` joint readings (rad); ``positions`` ``(N, 3)`` measured target
-    positions (m); ``rotations`` ``(N, 3, 3)`` measured orientations or ``None``
-    (position-only data); ``payload_kg`` ``(N,)``; ``temperature_c`` ``(N,)`` the
-    temperature (°C) at each pose or ``None`` (not measured)."""
+    """A calibration measurement set: joint readings and the measured target poses.
+
+    Read-only arrays, validated on construction.
+
+    Attributes
+    ----------
+    q : (N, n) array, rad
+        Joint readings.
+    positions : (N, 3) array, m
+        Measured target positions (measurement frame).
+    rotations : (N, 3, 3) array or None
+        Measured orientations, ``None`` for position-only data.
+    payload_kg : (N,) array, kg
+        Payloads (zeros when not given).
+    temperature_c : (N,) array, °C, or None
+        Temperature at each pose, ``None`` when not measured.
+
+    Raises
+    ------
+    ValueError
+        Wrong shapes or non-finite values.
+    """
 
     q: Array
     positions: Array
@@ -74,7 +92,18 @@ class CalibrationData:
     @classmethod
     def from_measurements(cls, m: Any) -> CalibrationData:
         """From a :class:`~plugcell.io.measurements.MeasurementSet` (or anything with
-        ``joints``, ``positions``, ``angles``, ``rotation`` and ``payload_kg``)."""
+        ``joints``, ``positions``, ``angles``, ``rotation`` and ``payload_kg``).
+
+        Parameters
+        ----------
+        m : MeasurementSet
+            Measurements in SI units (angles in rad, in convention ``m.rotation``).
+
+        Returns
+        -------
+        CalibrationData
+            Rotations ``R = R_convention(angles)`` or ``None`` without angles.
+        """
         R = None if m.angles is None else angles_to_matrix(m.angles, m.rotation)
         return cls(q=m.joints, positions=m.positions, rotations=R, payload_kg=m.payload_kg,
                    temperature_c=getattr(m, "temperature_c", None))
@@ -82,7 +111,24 @@ class CalibrationData:
     @classmethod
     def from_poses(cls, q: ArrayLike, poses: ArrayLike, payload_kg: ArrayLike | None = None,
                    *, position_only: bool = False) -> CalibrationData:
-        """From measured poses ``(N, 4, 4)``."""
+        """From measured poses.
+
+        Parameters
+        ----------
+        q : (N, n) array_like, rad
+            Joint readings.
+        poses : (N, 4, 4) array_like, m
+            Measured target poses.
+        payload_kg : (N,) array_like, kg, optional
+            Payloads.
+        position_only : bool
+            Drop the orientations.
+
+        Returns
+        -------
+        CalibrationData
+            The data set.
+        """
         T = np.asarray(poses, dtype=float)
         return cls(q=q, positions=T[:, :3, 3], rotations=None if position_only else T[:, :3, :3],
                    payload_kg=payload_kg)
@@ -92,6 +138,7 @@ class CalibrationData:
 
     @property
     def six_dof(self) -> bool:
+        """Whether orientations were measured."""
         return self.rotations is not None
 
     @property
@@ -101,7 +148,7 @@ class CalibrationData:
 
     @property
     def poses(self) -> Array:
-        """``(N, 4, 4)`` measured poses (rotation identity for position-only data)."""
+        """``(N, 4, 4)`` measured poses ``[R p; 0 1]``, m (rotation I for position-only data)."""
         T = np.broadcast_to(np.eye(4), (len(self), 4, 4)).copy()
         T[:, :3, 3] = self.positions
         if self.rotations is not None:
@@ -109,10 +156,28 @@ class CalibrationData:
         return T
 
     def positions_only(self) -> CalibrationData:
-        """The same poses with their measured orientations dropped (3 equations each)."""
+        """The same poses with their measured orientations dropped (3 equations each).
+
+        Returns
+        -------
+        CalibrationData
+            Position-only data (temperatures are not carried over).
+        """
         return CalibrationData(q=self.q, positions=self.positions, payload_kg=self.payload_kg)
 
     def subset(self, index: ArrayLike | slice) -> CalibrationData:
+        """The poses at ``index``.
+
+        Parameters
+        ----------
+        index : array_like of int or bool, or slice
+            Poses to keep.
+
+        Returns
+        -------
+        CalibrationData
+            The subset.
+        """
         return CalibrationData(
             q=self.q[index], positions=self.positions[index],
             rotations=None if self.rotations is None else self.rotations[index],

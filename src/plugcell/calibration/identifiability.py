@@ -62,13 +62,25 @@ __all__ = [
 class Identifiability:
     """Result of :func:`analyse`.
 
-    ``kept``: identifiable parameters (in the order given to :func:`analyse`);
-    ``dropped``: parameters identified through kept ones; ``zero``: parameters with
-    no effect; ``eliminated``: removed by the condition-number rule (4.10);
-    ``combinations[k]``: ``((key, coefficient), …)`` — kept ``k`` stands for
-    ``Σ coefficient·Δkey`` (itself with coefficient 1 first);
-    ``via[j]``: the kept parameters a dropped ``j`` is identified through;
-    ``condition_number``: σ1/σr of the scaled kept columns; ``singular_values``.
+    Attributes
+    ----------
+    kept : tuple of str
+        Identifiable parameters (in the order given to :func:`analyse`).
+    dropped : tuple of str
+        Parameters identified through kept ones (``h_j = Σ_k c_jk h_k``).
+    zero : tuple of str
+        Parameters with no effect (``‖h_j‖ ≤ zero_tol · max_k ‖h_k‖``).
+    eliminated : tuple of str
+        Removed by the condition-number rule (4.10).
+    combinations : dict of str to tuple of (str, float)
+        ``combinations[k] = ((k, 1), (j, c_jk), …)``: kept ``k`` stands for
+        ``Δg_k + Σ_j c_jk Δg_j`` (coefficients in the parameters' own units).
+    via : dict of str to tuple of str
+        The kept parameters a dropped ``j`` is identified through.
+    condition_number : float
+        ``κ = σ₁/σ_r`` of the unit-norm kept columns (inf if there are none).
+    singular_values : (r,) array
+        ``σ₁ ≥ … ≥ σ_r`` of those columns.
     """
 
     kept: tuple[str, ...]
@@ -81,7 +93,24 @@ class Identifiability:
     singular_values: Array = field(repr=False)
 
     def stands_for(self, key: str, names: dict[str, str] | None = None, digits: int = 4) -> str:
-        """Human-readable combination of kept ``key``, e.g. ``"Δa2' − Δa4'"``."""
+        """Human-readable combination ``Δg_k + Σ_j c_jk Δg_j`` of kept ``key``.
+
+        E.g. ``"Δa2' − Δa4'"``.
+
+        Parameters
+        ----------
+        key : str
+            A parameter key (one not in ``combinations`` stands for itself).
+        names : dict of str to str, optional
+            Display name per key (default: the keys).
+        digits : int
+            Significant digits of coefficients other than ±1.
+
+        Returns
+        -------
+        str
+            The combination.
+        """
         terms = self.combinations.get(key, ((key, 1.0),))
         name = (lambda k: names.get(k, k)) if names else (lambda k: k)
         out = ""
@@ -105,8 +134,39 @@ def analyse(
     condition_limit: float | None = None,
     protect: Sequence[str] = (),
 ) -> Identifiability:
-    """Identifiability of the columns of ``H`` (``(rows, len(keys))``), visited in ``keys``
-    order (the priority order).  ``protect``: keys the condition rule must not remove."""
+    """Identifiability of the columns of ``H``, visited in ``keys`` (priority) order (4.2.1.2).
+
+    Columns are scaled to unit norm ``ĥ_j = h_j / ‖h_j‖``; ``ĥ_j`` is kept when its
+    distance from the span of the kept columns, ``‖(I − QQᵀ) ĥ_j‖``, exceeds ``rank_tol``
+    (Gram–Schmidt QR in priority order); while ``κ = σ₁/σ_r > condition_limit`` the kept
+    parameter with the largest ``|v_r|`` entry is eliminated (rule 4.10).  Dropped
+    columns are expressed as ``h_j = Σ_k c_jk h_k`` (least squares on the unscaled columns).
+
+    Parameters
+    ----------
+    H : (rows, k) array
+        Stacked identification Jacobian (e.g. ``(N·6, k)``), columns in parameter units.
+    keys : sequence of str
+        The ``k`` parameter keys, in priority order.
+    zero_tol : float
+        Relative norm below which a column has no effect.
+    rank_tol : float
+        Distance (of a unit column) below which it depends on the kept ones.
+    condition_limit : float, optional
+        Apply rule 4.10 with this limit (thesis: 100); ``None``: no elimination.
+    protect : sequence of str
+        Keys the condition rule must not remove.
+
+    Returns
+    -------
+    Identifiability
+        Kept, dropped, zero and eliminated keys, their combinations and κ.
+
+    Raises
+    ------
+    ValueError
+        ``H`` not 2-D with ``len(keys)`` columns.
+    """
     H = np.asarray(H, dtype=float)
     keys = tuple(keys)
     if H.ndim != 2 or H.shape[1] != len(keys):
@@ -188,8 +248,30 @@ def analyse(
 
 
 def random_configurations(model: ErrorModel, n: int, seed: int = 0) -> Array:
-    """``n`` joint readings ``(n, n_readings)`` uniform within the joint limits and the
-    coupled limits of the robot (loops assemble everywhere inside them)."""
+    """Random joint readings, ``q ~ U(q_min, q_max)`` kept where the coupled limits hold.
+
+    Rejection sampling: uniform draws within the joint limits, kept when
+    ``desc.within_limits(q)`` (loops assemble everywhere inside them).
+
+    Parameters
+    ----------
+    model : ErrorModel
+        The model (its robot's limits).
+    n : int
+        Number of configurations.
+    seed : int
+        Seed of the random generator.
+
+    Returns
+    -------
+    (n, n_readings) array, rad
+        Joint readings.
+
+    Raises
+    ------
+    ValueError
+        Fewer than ``n`` configurations found within the limits after 100 rounds.
+    """
     desc = model.structure.source
     rng = np.random.default_rng(seed)
     lo, hi = desc.joint_limits[:, 0], desc.joint_limits[:, 1]
@@ -219,9 +301,29 @@ def structural_identifiability(
 ) -> Identifiability:
     """The identifiable parameters of ``model`` on random configurations (module doc).
 
-    ``keys``: candidates (default: all of ``model.space``), visited in priority
-    order; payload columns are evaluated with the model's reference payload (or
-    1 kg if it has none).  ``position_only``: only the position rows (3-DOF data).
+    ``analyse(H)`` with ``H`` the stacked identification Jacobian (eq. 6.11) at
+    ``n_poses`` random configurations; payload columns are evaluated with the model's
+    reference payload (or 1 kg if it has none).
+
+    Parameters
+    ----------
+    model : ErrorModel
+        The model, linearised at its current values.
+    position_only : bool
+        Only the position rows (3-DOF data).
+    keys : sequence of str, optional
+        Candidates (default: all of ``model.space``), visited in priority order.
+    n_poses : int
+        Number of random configurations.
+    seed : int
+        Seed of the configurations.
+    condition_limit : float, optional
+        Rule 4.10 limit (see :func:`analyse`).
+
+    Returns
+    -------
+    Identifiability
+        The structural answer.
     """
     keys = tuple(model.space.keys if keys is None else keys)
     order = [k for k in model.space.by_priority() if k in set(keys)]
@@ -237,7 +339,24 @@ def structural_identifiability(
 def random_batch(model: ErrorModel, q: Array, payload_kg: Array, seed: int = 0) -> PoseBatch:
     """The batch of the structural analysis: with a thermal term, temperatures spread
     uniformly over ±2 K about the reference (a constant temperature would make κT a
-    zero column — which is what the data check then says of isothermal data)."""
+    zero column — which is what the data check then says of isothermal data).
+
+    Parameters
+    ----------
+    model : ErrorModel
+        The model.
+    q : (N, n_readings) array, rad
+        Joint readings.
+    payload_kg : (N,) array, kg
+        Payloads.
+    seed : int
+        Seed of the temperatures.
+
+    Returns
+    -------
+    PoseBatch
+        The batch, with temperatures ``T_ref + U(−2, 2)`` °C when the model is thermal.
+    """
     t = None
     if THERMAL_KEY in model.space:
         t = model.temperature_ref_c + np.random.default_rng(seed).uniform(-2.0, 2.0, len(q))
@@ -262,8 +381,27 @@ def combinations_at(
     a noise-free identification reproduces the combination *at the identified
     point* (least-squares coefficients of the dropped columns on the kept ones
     there), not the nominal one; thesis Table 8-1 shows the same second-order
-    differences.  Returns ``{kept: ((key, coefficient), …)}`` like
-    :attr:`Identifiability.combinations` (no coefficient rounding).
+    differences.  ``C = argmin ‖H_kept C − H_dropped‖`` (least squares), kept ``k``
+    stands for ``Δg_k + Σ_j C_kj Δg_j``.
+
+    Parameters
+    ----------
+    model : ErrorModel
+        The model at the point of linearisation (e.g. identified values).
+    kept, dropped : sequence of str
+        The kept and dropped parameter keys.
+    position_only : bool
+        Only the position rows.
+    n_poses : int
+        Number of random configurations.
+    seed : int
+        Seed of the configurations.
+
+    Returns
+    -------
+    dict of str to tuple of (str, float)
+        ``{kept: ((kept, 1.0), (dropped, coefficient), …)}`` like
+        :attr:`Identifiability.combinations` (no coefficient rounding).
     """
     kept, dropped = list(kept), list(dropped)
     q = random_configurations(model, n_poses, seed)

@@ -161,23 +161,54 @@ def _robust_weights(r: Array, loss: str, scale: float) -> Array:
 class Calibrator:
     """Identify the error parameters of one of the five models (module docstring).
 
-    ``desc``: the robot; ``model``: 1–5 or a name (:mod:`.configs`); ``base``,
-    ``probe``: initial BASE/PROBE (4×4), estimated from the data when omitted;
-    ``method``: ``"gauss-newton"``, ``"lm"`` or ``"least-squares"`` (SciPy's);
-    ``loss``: ``"linear"``, ``"huber"`` or ``"cauchy"`` with ``loss_scale`` (× the
-    median pose residual);
-    ``tol``: stop when ‖Δg‖ < tol; ``rotation_weight``: m per rad of the
-    orientation rows; ``condition_limit``: apply the rule of eq. (4.10) on the
-    data (``None``: only report κ); ``payload_ref_kg``: the mass the payload
-    constants refer to (default: the heaviest payload of the data);
-    ``parameters``: identify exactly these keys instead of the analysis' choice;
-    ``rank_tol``: relative distance of a scaled column from the span of the others
-    below which a parameter is not identified from these poses (default 1e-3);
-    ``progress``: callback ``(stage, i, n, message)``; ``harmonics``: add the
-    joint-angle harmonics up to this order (0, 1, 2) to the model (transmission
-    error, :mod:`.compliance`); ``thermal``: add the thermal expansion κT of the
-    chain's lengths about the calibration data's mean temperature (needs their
-    ``temperature_c``).
+    Minimises ``Σ_i w_i ‖W Δx_i‖²`` with ``Δx_i = [p_M − p; φ]`` of eq. 6.23 over the kept
+    parameters (``w_i`` the IRLS weights of the robust loss, 1 for ``"linear"``), each
+    Gauss–Newton step ``Δg = argmin ‖√w W (H Δg − Δx)‖`` (eq. 4.8) — see :meth:`fit`.
+
+    Parameters
+    ----------
+    desc : RobotDescription
+        The robot.
+    model : int or str
+        1–5 or a name (:mod:`.configs`).
+    base, probe : (4, 4) array_like, m, optional
+        Initial BASE/PROBE, estimated from the data when omitted.
+    method : {"gauss-newton", "lm", "least-squares"}
+        Iteration (``"least-squares"``: SciPy's).
+    loss : {"linear", "huber", "cauchy"}
+        Robust loss ρ.
+    loss_scale : float
+        Scale of the robust loss, × the median pose residual.
+    tol : float
+        Stop when ‖Δg‖ < tol (the step in the parameters' own units, m, rad, …).
+    max_iterations : int
+        Iteration bound.
+    rotation_weight : float, m/rad
+        Weight w of the orientation rows, ``W = diag(1, 1, 1, w, w, w)``.
+    condition_limit : float, optional
+        Apply the rule of eq. (4.10) on the data (``None``: only report κ).
+    payload_ref_kg : float, kg, optional
+        The mass the payload constants refer to (default: the heaviest payload of the
+        data).
+    parameters : sequence of str, optional
+        Identify exactly these keys instead of the analysis' choice.
+    rank_tol : float
+        Relative distance of a scaled column from the span of the others below which a
+        parameter is not identified from these poses (default 1e-3).
+    progress : callable, optional
+        Callback ``(stage, i, n, message)``.
+    harmonics : {0, 1, 2}
+        Add the joint-angle harmonics up to this order to the model (transmission
+        error, :mod:`.compliance`).
+    thermal : bool
+        Add the thermal expansion κT of the chain's lengths about the calibration data's
+        mean temperature (needs their ``temperature_c``).
+
+    Raises
+    ------
+    CalibrationError
+        Unknown model, method or loss, non-positive tolerances or weights, a bad
+        harmonic order.
     """
 
     def __init__(
@@ -726,8 +757,31 @@ def refit_base(model: ErrorModel, data: CalibrationData, *, probe: bool = False,
     Starts from a rigid registration of the model's predicted target points onto the
     measured ones, then Gauss–Newton on a0, b0, α0, β0, θ0, d0 (and the PROBE frame)
     minimising ``Σ ‖Δp‖² + w² ‖Δφ‖²`` over the poses, ``w = rotation_weight`` (m/rad, as
-    in :class:`Calibrator`); ``positions_only``: register 6-DOF data on their positions
-    alone (``Σ ‖Δp‖²``), e.g. when the measured orientations are less trusted.
+    in :class:`Calibrator`).
+
+    Parameters
+    ----------
+    model : ErrorModel
+        The calibrated model.
+    data : CalibrationData
+        Poses measured in the new setup.
+    probe : bool
+        Also re-identify the PROBE frame (and the flange link's θ, d, a, α).
+    rotation_weight : float, m/rad
+        Weight ``w`` of the orientation rows.
+    positions_only : bool
+        Register 6-DOF data on their positions alone (``Σ ‖Δp‖²``), e.g. when the
+        measured orientations are less trusted.
+
+    Returns
+    -------
+    ErrorModel
+        ``model`` with the new BASE (and PROBE), geometry and compliance unchanged.
+
+    Raises
+    ------
+    CalibrationError
+        ``rotation_weight`` not a finite number > 0.
     """
     if not (np.isfinite(rotation_weight) and rotation_weight > 0):
         raise CalibrationError(f"rotation_weight must be a finite number > 0, got "

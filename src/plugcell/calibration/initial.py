@@ -54,7 +54,17 @@ class InitialEstimateError(ValueError):
 
 @dataclass(frozen=True)
 class FrameEstimate:
-    """Initial BASE and PROBE (4×4) and the rms position misfit (m) they leave."""
+    """Initial BASE and PROBE and the rms position misfit they leave.
+
+    Attributes
+    ----------
+    base : (4, 4) array, m
+        BASE (robot base frame in the measurement frame).
+    probe : (4, 4) array, m
+        PROBE (target in the flange frame).
+    rms : float, m
+        ``√(Σ_i ‖p(BASE F_i PROBE) − p_i‖² / N)``.
+    """
 
     base: Array
     probe: Array
@@ -76,8 +86,30 @@ def _pairs(n: int) -> tuple[Array, Array]:
 
 
 def estimate_base_probe(flange: ArrayLike, measured: ArrayLike) -> FrameEstimate:
-    """AX = YB from 6-DOF data: ``flange`` ``(N, 4, 4)`` nominal flange poses in the robot
-    base frame, ``measured`` ``(N, 4, 4)`` target poses in the tracker frame, N ≥ 3."""
+    """Closed-form BASE and PROBE from 6-DOF data (hand-eye ``A X = X B``, module docstring).
+
+    With ``A_ij = F_i⁻¹F_j``, ``B_ij = T_i⁻¹T_j``: ``R_X = argmin Σ ‖log R_A − R_X log R_B‖²``
+    (Kabsch), ``(R_A − I) t_X = R_X t_B − t_A`` (least squares), then
+    ``BASE = proj_SO(3)(Σ_i R(T_i X⁻¹ F_i⁻¹))`` with the mean translation.
+
+    Parameters
+    ----------
+    flange : (N, 4, 4) array_like, m
+        Nominal flange poses in the robot base frame, ``N ≥ 3``.
+    measured : (N, 4, 4) array_like, m
+        Measured target poses in the tracker frame.
+
+    Returns
+    -------
+    FrameEstimate
+        BASE, PROBE (m) and the rms position misfit (m).
+
+    Raises
+    ------
+    InitialEstimateError
+        Shape mismatch, fewer than 3 poses, or fewer than 2 pose pairs that rotate
+        the flange by more than 1e-3 rad (PROBE undetermined).
+    """
     F = np.asarray(flange, dtype=float)
     T = np.asarray(measured, dtype=float)
     if F.shape != T.shape or F.ndim != 3 or F.shape[1:] != (4, 4):
@@ -119,10 +151,34 @@ def estimate_base_probe_positions(
     flange: ArrayLike, positions: ArrayLike, *, probe_offset: ArrayLike | None = None,
     iterations: int = 20,
 ) -> FrameEstimate:
-    """Rigid registration from target positions: ``flange`` ``(N, 4, 4)`` nominal flange
-    poses, ``positions`` ``(N, 3)`` measured target positions, N ≥ 4 (not coplanar
-    with a single orientation).  ``probe_offset``: starting target offset in the
-    flange frame (default 0)."""
+    """BASE and the target offset from target positions by alternating registration.
+
+    Model ``p_i = R_Y (p_F,i + R_F,i t_X) + t_Y``: alternate ``R_Y`` from a Kabsch
+    registration of the predicted points onto the measured ones with the linear
+    least-squares ``(t_X, t_Y)`` of ``p_i − R_Y p_F,i = R_Y R_F,i t_X + t_Y``, until the
+    offset moves less than 1e-12 m.  PROBE's rotation is the identity.
+
+    Parameters
+    ----------
+    flange : (N, 4, 4) array_like, m
+        Nominal flange poses, ``N ≥ 4`` (not coplanar with a single orientation).
+    positions : (N, 3) array_like, m
+        Measured target positions, tracker frame.
+    probe_offset : (3,) array_like, m, optional
+        Starting target offset ``t_X`` in the flange frame (default 0).
+    iterations : int
+        Most alternations (must be ≥ 1).
+
+    Returns
+    -------
+    FrameEstimate
+        BASE, PROBE ``[I t_X; 0 1]`` (m) and the rms position misfit (m).
+
+    Raises
+    ------
+    InitialEstimateError
+        Malformed shapes or fewer than 4 poses.
+    """
     F = np.asarray(flange, dtype=float)
     P = np.asarray(positions, dtype=float)
     N = len(F)
@@ -162,8 +218,29 @@ def _rms(base: Array, F: Array, X: Array, P: Array) -> float:
 
 
 def estimate_base_probe_poses(flange: ArrayLike, measured: ArrayLike) -> FrameEstimate:
-    """6-DOF initial BASE/PROBE: AX = YB and the registration variant (module docstring),
-    whichever leaves the smaller position misfit."""
+    """6-DOF initial BASE/PROBE: the better of the hand-eye and registration estimates.
+
+    Candidates: :func:`estimate_base_probe` (if the poses rotate enough) and
+    :func:`estimate_base_probe_positions` with ``R_X = proj_SO(3)(Σ_i (R_BASE R_F,i)ᵀ R_i)``;
+    the one with the smaller rms position misfit is returned.
+
+    Parameters
+    ----------
+    flange : (N, 4, 4) array_like, m
+        Nominal flange poses in the robot base frame, ``N ≥ 4``.
+    measured : (N, 4, 4) array_like, m
+        Measured target poses in the tracker frame.
+
+    Returns
+    -------
+    FrameEstimate
+        BASE, PROBE (m) and the rms position misfit (m).
+
+    Raises
+    ------
+    InitialEstimateError
+        Malformed shapes or fewer than 4 poses.
+    """
     F = np.asarray(flange, dtype=float)
     T = np.asarray(measured, dtype=float)
     candidates = []

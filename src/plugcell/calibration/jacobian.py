@@ -54,7 +54,18 @@ _FIELDS = ("theta", "d", "a", "alpha", "beta")
 
 @dataclass(frozen=True, eq=False)
 class JacobianResult:
-    """Predicted poses ``(N, 4, 4)`` and the Jacobian ``H`` ``(N, 6, k)`` for ``keys``."""
+    """Predicted poses and the identification Jacobian ``H`` (``Δx ≈ H Δg``) for ``keys``.
+
+    Attributes
+    ----------
+    poses : (N, 4, 4) array, m
+        Predicted target poses ``T = BASE · T_n^0 · PROBE`` (eq. 6.23), measurement frame.
+    H : (N, 6, k) array
+        Rows: ``[ṗ (m per unit of the parameter); ω (rad per unit)]``; column c is
+        ``∂T/∂g_c`` for ``keys[c]``.
+    keys : tuple of str
+        The parameters of the columns.
+    """
 
     poses: Array
     H: Array
@@ -68,10 +79,28 @@ def _cat(a: Array, b: Array | None) -> Array:
 def identification_jacobian(
     model: ErrorModel, batch: PoseBatch, keys: Sequence[str] | None = None
 ) -> JacobianResult:
-    """Analytic H ``(N, 6, k)`` of ``model`` at the readings of ``batch`` (module docstring).
+    """Analytic identification Jacobian of ``model`` at the readings of ``batch`` (eq. 6.11).
 
-    ``keys``: the parameters (columns), default every parameter of ``model.space``.
+    ``Δx_i ≈ H_i Δg`` with the columns of the module docstring: link columns
+    ``H_θ = [z_{i−1} × (p − p_{i−1}); z_{i−1}]``, ``H_d = [z_{i−1}; 0]``, ``H_a = [x̃_i; 0]``,
+    ``H_α = [x̃_i × (p − p_i); x̃_i]``, ``H_β = [y_i × (p − p_i); y_i]`` (6.12, B.13), loop
+    terms ``Σ_k (∂θ_k/∂g) H_θk`` (6.20–6.22), BASE (D.5), PROBE (frame 7), compliance
+    ``H_c = Σ_j H_qj R_jc(q)`` (6.32, 6.42) and thermal ``∂p/∂κT = ΔT · R_B p_fl``.
     Vectorised over poses: one forward-kinematics pass, no loop over poses.
+
+    Parameters
+    ----------
+    model : ErrorModel
+        The model, at its current parameter values (the Jacobian is exact there).
+    batch : PoseBatch
+        ``N`` joint readings (rad), payloads (kg), regressors and temperatures.
+    keys : sequence of str, optional
+        The parameters (columns); default every parameter of ``model.space``.
+
+    Returns
+    -------
+    JacobianResult
+        Predicted poses ``(N, 4, 4)`` (m) and ``H`` ``(N, 6, k)``.
     """
     keys = tuple(model.space.keys if keys is None else keys)
     s = model.structure

@@ -22,8 +22,22 @@ __all__ = ["GRAM_ROWS", "least_squares", "r_factor"]
 
 
 def r_factor(H: Array) -> Array:
-    """An upper-triangular ``R`` (``k × k``) with ``RᵀR = HᵀH``: the same column geometry
-    (norms, angles, singular values, linear relations) in a small matrix."""
+    """An upper-triangular ``R`` with ``RᵀR = HᵀH``: the same column geometry (norms,
+    angles, singular values, linear relations) in a small matrix.
+
+    QR (``H = QR``) up to :data:`GRAM_ROWS` rows, the Cholesky factor of ``HᵀH`` beyond
+    (QR again if that fails).
+
+    Parameters
+    ----------
+    H : (n, k) array
+        A tall matrix.
+
+    Returns
+    -------
+    R : (k, k) array
+        Upper triangular (``(n, k)`` if ``n < k``).
+    """
     H = np.asarray(H, dtype=float)
     if H.shape[0] <= max(GRAM_ROWS, 2 * H.shape[1]):
         return np.asarray(np.linalg.qr(H, mode="r"))
@@ -36,7 +50,24 @@ def r_factor(H: Array) -> Array:
 
 
 def least_squares(A: Array, b: Array) -> Array:
-    """``argmin ‖A x − b‖`` (eq. 4.8); SVD-based if ``A`` is rank deficient."""
+    """``x = argmin ‖A x − b‖`` (eq. 4.8).
+
+    ``x = R⁻¹ Qᵀ b`` by QR; by the normal equations ``AᵀA x = Aᵀb`` (Cholesky) above
+    :data:`GRAM_ROWS` rows; the SVD-based minimum-norm solution if ``A`` is rank
+    deficient (or the Cholesky fails).
+
+    Parameters
+    ----------
+    A : (n, k) array
+        Design matrix.
+    b : (n,) array
+        Right-hand side.
+
+    Returns
+    -------
+    x : (k,) array
+        The least-squares solution.
+    """
     A = np.asarray(A, dtype=float)
     if A.shape[0] > GRAM_ROWS:
         try:

@@ -62,7 +62,24 @@ THERMAL_PARAMETER = ErrorParameter(key=THERMAL_KEY, name="κT", kind="thermal", 
 
 def base_transform(base_ref: Array, a0: float, b0: float, alpha0: float, beta0: float,
                    theta0: float, d0: float) -> Array:
-    """``BASE_ref · Tx(a0) Ty(b0) Rx(α0) Ry(β0) Rz(θ0) Tz(d0)`` (eq. 6.24 after BASE_ref)."""
+    """``BASE = BASE_ref · Tx(a0) Ty(b0) Rx(α0) Ry(β0) Rz(θ0) Tz(d0)`` (eq. 6.24 after BASE_ref).
+
+    Parameters
+    ----------
+    base_ref : (4, 4) array, m
+        Reference BASE the errors are relative to.
+    a0, b0 : float, m
+        Translations along the reference x, y.
+    alpha0, beta0, theta0 : float, rad
+        Rotations about the successive x, y, z.
+    d0 : float, m
+        Translation along the final z.
+
+    Returns
+    -------
+    (4, 4) array, m
+        BASE, the robot base frame in the measurement frame.
+    """
     return (
         base_ref
         @ translation([a0, b0, 0.0])
@@ -74,16 +91,45 @@ def base_transform(base_ref: Array, a0: float, b0: float, alpha0: float, beta0: 
 
 
 def probe_transform(probe_ref: Array, theta7: float, d7: float, a7: float, alpha7: float) -> Array:
-    """``Rx(−90°) · Rz(θ7) Tz(d7) Tx(a7) Rx(90° + α7) · PROBE_ref`` (virtual frame 7, 6.2.2)."""
+    """``PROBE = Rx(−90°) · Rz(θ7) Tz(d7) Tx(a7) Rx(90° + α7) · PROBE_ref`` (frame 7, 6.2.2).
+
+    Parameters
+    ----------
+    probe_ref : (4, 4) array, m
+        Reference PROBE the errors are relative to.
+    theta7 : float, rad
+        Rotation about the flange's y axis (the z of the virtual parent frame).
+    d7 : float, m
+        Translation along that axis.
+    a7 : float, m
+        Translation along the virtual frame's x.
+    alpha7 : float, rad
+        Twist about that x.
+
+    Returns
+    -------
+    (4, 4) array, m
+        PROBE, the target in the flange frame.
+    """
     return rot_x(-_HALF_PI) @ dh_hayati(theta7, d7, a7, _HALF_PI + alpha7) @ probe_ref
 
 
 @dataclass(frozen=True, eq=False)
 class PoseBatch:
-    """Joint readings ``q`` ``(N, n_readings)``, payloads ``(N,)`` and the compliance
-    regressors ``(N, n_actuated, n_c)`` of a model (joint deflections of the kinematic
-    joints; columns in the order of ``ErrorModel.compliance_keys``);
-    ``temperature_c`` ``(N,)`` or ``None`` (poses at the model's reference temperature)."""
+    """Joint readings with their payloads, compliance regressors and temperatures.
+
+    Attributes
+    ----------
+    q : (N, n_readings) array, rad
+        Joint readings.
+    payload_kg : (N,) array, kg
+        Payloads.
+    regressors : (N, n_actuated, n_c) array
+        Compliance regressors ``R(q, m)`` of a model, ``Δθ = R c`` (joint deflections of
+        the kinematic joints; columns in the order of ``ErrorModel.compliance_keys``).
+    temperature_c : (N,) array, °C, or None
+        Temperatures, ``None``: poses at the model's reference temperature.
+    """
 
     q: Array
     payload_kg: Array
@@ -102,7 +148,32 @@ class PoseBatch:
 
 @dataclass(frozen=True, eq=False)
 class ErrorModel:
-    """Immutable error model (module docstring).  Build one with :meth:`create`."""
+    """Immutable error model (module docstring).  Build one with :meth:`create`.
+
+    ``T(q, m) = BASE · T_n^0(θ(q) + Δθ(q, m)) · PROBE`` (6.23, 4.16).
+
+    Attributes
+    ----------
+    structure : KinematicStructure
+        The chain and model family.
+    space : ParameterSpace
+        The candidate error parameters Δg.
+    values : (len(space),) array
+        Their current values, each in its parameter's unit (read-only).
+    base_ref : (4, 4) array, m
+        Reference BASE the BASE errors are relative to.
+    probe_ref : (4, 4) array, m
+        Reference PROBE the PROBE errors are relative to.
+    payload_ref_kg : float, kg
+        Payload the payload constants refer to.
+    temperature_ref_c : float, °C
+        Reference temperature of the thermal term.
+
+    Raises
+    ------
+    ValueError
+        ``values`` of the wrong shape.
+    """
 
     structure: KinematicStructure
     space: ParameterSpace
@@ -310,8 +381,19 @@ def fold_frames(model: ErrorModel) -> ErrorModel:
 
     The flange link's θ, d, a, α act after the last joint, so for any joint value
     ``DH(q + θ, d, a, α) = DH_nominal(q) · [DH_nominal(0)⁻¹ · DH(θ, d, a, α)]`` — a
-    constant that belongs to the PROBE.  Used after the nominal frames fit: the
-    identification then starts from the nominal geometry with fitted BASE/PROBE.
+    constant that belongs to the PROBE: ``PROBE_ref' = A_nom⁻¹ · A · PROBE``,
+    ``BASE_ref' = BASE``.  Used after the nominal frames fit: the identification then
+    starts from the nominal geometry with fitted BASE/PROBE.
+
+    Parameters
+    ----------
+    model : ErrorModel
+        The model.
+
+    Returns
+    -------
+    ErrorModel
+        The same prediction with zero BASE, PROBE and flange-link errors.
     """
     s = model.structure
     desc = s.desc

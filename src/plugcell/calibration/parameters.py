@@ -58,11 +58,32 @@ __all__ = ["FIELD_UNITS", "KINDS", "SYMBOLS", "ErrorParameter", "ParameterSpace"
 
 @dataclass(frozen=True)
 class ErrorParameter:
-    """One identifiable-candidate unknown of the error model (see module docstring).
+    """One identifiable-candidate unknown Δg_k of the error model (eq. 6.11, module docstring).
 
-    ``link`` and ``field`` locate geometric parameters (``link`` is the BASE's
-    or the virtual PROBE frame's name for those kinds); ``joint`` is the actuated
-    joint whose deflection a compliance parameter scales (``None`` otherwise).
+    Attributes
+    ----------
+    key : str
+        ASCII name used in files and on the command line (``theta2'``, ``a0``, ``G1``).
+    name : str
+        The thesis's symbol (``Δθ2'``, ``Δa0``, ``G1``).
+    kind : str
+        One of :data:`KINDS`.
+    unit : str
+        SI unit of the value: ``m``, ``rad``, ``rad/m``, ``rad/(N·m)``, ``1/K``, … .
+    link : str or None
+        Link of a geometric parameter (the BASE's or the virtual PROBE frame's name
+        for those kinds).
+    field : str or None
+        Geometric field (``theta``, ``d``, ``a``, ``b``, ``alpha``, ``beta``).
+    joint : str or None
+        The actuated joint whose deflection a compliance parameter scales.
+    priority : (int, int, int)
+        Sort key of the identifiability analysis (lower is kept first).
+
+    Raises
+    ------
+    ValueError
+        ``kind`` not one of :data:`KINDS`.
     """
 
     key: str
@@ -80,21 +101,41 @@ class ErrorParameter:
 
     @property
     def is_geometric(self) -> bool:
+        """True for BASE, link and PROBE parameters."""
         return self.kind in ("base", "link", "probe")
 
     @property
     def is_angle(self) -> bool:
+        """True when the unit is rad."""
         return self.unit == "rad"
 
     @property
     def is_length(self) -> bool:
+        """True when the unit is m."""
         return self.unit == "m"
 
 
 def geometric_parameter(
     kind: str, link: str, field: str, priority: tuple[int, int, int]
 ) -> ErrorParameter:
-    """A geometric error parameter ``Δ<field><link>`` (e.g. ``Δa2'``, key ``a2'``)."""
+    """A geometric error parameter ``Δ<field><link>`` (e.g. ``Δa2'``, key ``a2'``).
+
+    Parameters
+    ----------
+    kind : str
+        ``"base"``, ``"link"`` or ``"probe"``.
+    link : str
+        The link (or BASE/PROBE frame) name.
+    field : str
+        One of :data:`SYMBOLS` (``theta``, ``d``, ``a``, ``b``, ``alpha``, ``beta``).
+    priority : (int, int, int)
+        Identifiability priority.
+
+    Returns
+    -------
+    ErrorParameter
+        With the unit of the field (m or rad).
+    """
     return ErrorParameter(
         key=f"{field}{link}",
         name=f"Δ{SYMBOLS[field]}{link}",
@@ -108,7 +149,20 @@ def geometric_parameter(
 
 @dataclass(frozen=True, eq=False)
 class ParameterSpace:
-    """An ordered, immutable collection of :class:`ErrorParameter` with unique keys."""
+    """An ordered, immutable collection of :class:`ErrorParameter` with unique keys.
+
+    The order is that of the parameter vector ``Δg`` (eq. 6.11).
+
+    Attributes
+    ----------
+    parameters : tuple of ErrorParameter
+        The parameters, in vector order.
+
+    Raises
+    ------
+    ValueError
+        Duplicate keys.
+    """
 
     parameters: tuple[ErrorParameter, ...]
 
@@ -138,34 +192,103 @@ class ParameterSpace:
 
     @property
     def keys(self) -> tuple[str, ...]:
+        """Parameter keys, in vector order."""
         return tuple(p.key for p in self.parameters)
 
     @property
     def names(self) -> tuple[str, ...]:
+        """Thesis symbols, in vector order."""
         return tuple(p.name for p in self.parameters)
 
     def index(self, key: str) -> int:
-        """Position of parameter ``key``; ``KeyError`` lists the known keys."""
+        """Position of parameter ``key`` in the vector Δg.
+
+        Parameters
+        ----------
+        key : str
+            A parameter key.
+
+        Returns
+        -------
+        int
+            Its index.
+
+        Raises
+        ------
+        KeyError
+            Unknown key (the message lists the known keys).
+        """
         try:
             return self._index[key]  # type: ignore[attr-defined,no-any-return]
         except KeyError:
             raise KeyError(f"unknown error parameter {key!r}; known: {list(self.keys)}") from None
 
     def indices(self, keys: Iterable[str]) -> NDArray[np.intp]:
+        """Positions of several parameters.
+
+        Parameters
+        ----------
+        keys : iterable of str
+            Parameter keys.
+
+        Returns
+        -------
+        (len(keys),) int array
+            Their indices, in the order given.
+
+        Raises
+        ------
+        KeyError
+            An unknown key.
+        """
         return np.array([self.index(k) for k in keys], dtype=np.intp)
 
     def of_kind(self, *kinds: str) -> tuple[str, ...]:
-        """Keys of the parameters of the given kinds, in space order."""
+        """Keys of the parameters of the given kinds, in space order.
+
+        Parameters
+        ----------
+        *kinds : str
+            Kinds from :data:`KINDS`.
+
+        Returns
+        -------
+        tuple of str
+            The matching keys.
+        """
         return tuple(p.key for p in self.parameters if p.kind in kinds)
 
     def subset(self, keys: Sequence[str]) -> ParameterSpace:
-        """The parameters ``keys`` (in that order)."""
+        """The sub-space of the parameters ``keys`` (in that order).
+
+        Parameters
+        ----------
+        keys : sequence of str
+            Parameter keys.
+
+        Returns
+        -------
+        ParameterSpace
+            The subset.
+
+        Raises
+        ------
+        KeyError
+            An unknown key.
+        """
         return ParameterSpace(tuple(self[k] for k in keys))
 
     def by_priority(self) -> tuple[str, ...]:
-        """Keys sorted by :attr:`ErrorParameter.priority` (stable)."""
+        """Keys sorted by :attr:`ErrorParameter.priority` (stable).
+
+        Returns
+        -------
+        tuple of str
+            All keys, highest priority (lowest tuple) first.
+        """
         order = sorted(range(len(self)), key=lambda i: self.parameters[i].priority)
         return tuple(self.parameters[i].key for i in order)
 
     def zeros(self) -> Array:
+        """A zero parameter vector ``Δg = 0``, shape ``(len(self),)``."""
         return np.zeros(len(self))

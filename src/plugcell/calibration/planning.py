@@ -117,12 +117,22 @@ class PlanningError(ValueError):
 # ---------------------------------------------------------------------- candidates
 @dataclass(frozen=True)
 class Visibility:
-    """Where the tracker stands and what it can see.
+    """Where the tracker stands and what it can see: ``angle(R a, t − p) ≤ γ``.
 
-    ``tracker_position`` ``(3,)``: the tracker's head in the robot base frame (m);
-    ``acceptance_rad``: the largest angle between the target's facing axis and the
-    direction to the tracker (T-MAC: about ±45°); ``facing_axis`` ``(3,)``: that axis
-    in the target (PROBE) frame.
+    Attributes
+    ----------
+    tracker_position : (float, float, float), m
+        The tracker's head ``t`` in the robot base frame.
+    acceptance_rad : float, rad
+        γ, the largest angle between the target's facing axis and the direction to
+        the tracker (T-MAC: about ±45°); in (0, π].
+    facing_axis : (float, float, float)
+        That axis ``a`` in the target (PROBE) frame (need not be unit).
+
+    Raises
+    ------
+    PlanningError
+        Non-finite position, a zero axis or γ outside (0, π].
     """
 
     tracker_position: tuple[float, float, float]
@@ -142,8 +152,20 @@ class Visibility:
                 f"{np.degrees(self.acceptance_rad):g}°")
 
     def angles(self, targets: Array) -> Array:
-        """``(N,)`` angle (rad) between each target's facing axis and the direction to the
-        tracker; ``targets`` ``(N, 4, 4)`` target poses in the robot base frame."""
+        """Angle between each target's facing axis and the direction to the tracker.
+
+        ``angle_i = acos((R_i â)·(t − p_i) / ‖t − p_i‖)``.
+
+        Parameters
+        ----------
+        targets : (N, 4, 4) array, m
+            Target poses in the robot base frame.
+
+        Returns
+        -------
+        (N,) array, rad
+            Angles in [0, π].
+        """
         a = np.asarray(self.facing_axis, dtype=float)
         facing = targets[:, :3, :3] @ (a / np.linalg.norm(a))
         to_tracker = np.asarray(self.tracker_position) - targets[:, :3, 3]
@@ -152,14 +174,36 @@ class Visibility:
         return np.arccos(np.clip(cos, -1.0, 1.0))
 
     def visible(self, targets: Array) -> NDArray[np.bool_]:
+        """Whether the tracker sees each target, ``angle_i ≤ γ``.
+
+        Parameters
+        ----------
+        targets : (N, 4, 4) array, m
+            Target poses in the robot base frame.
+
+        Returns
+        -------
+        (N,) bool array
+            Visible targets.
+        """
         return self.angles(targets) <= self.acceptance_rad
 
 
 @dataclass(frozen=True, eq=False)
 class Candidates:
-    """Poses a plan may choose from: ``q`` ``(C, n)`` joint readings (rad), ``payload_kg``
-    ``(C,)``, ``targets`` ``(C, 3)`` nominal target positions in the robot base frame (m),
-    ``source`` ``(C,)`` the row of the configuration it came from (for ``--from``)."""
+    """Poses a plan may choose from.
+
+    Attributes
+    ----------
+    q : (C, n) array, rad
+        Joint readings.
+    payload_kg : (C,) array, kg
+        Payload of each candidate.
+    targets : (C, 3) array, m
+        Nominal target positions in the robot base frame.
+    source : (C,) int array
+        The row of the configuration each came from (for ``--from``).
+    """
 
     q: Array
     payload_kg: Array
@@ -170,6 +214,18 @@ class Candidates:
         return int(self.q.shape[0])
 
     def subset(self, index: ArrayLike) -> Candidates:
+        """The candidates at ``index``.
+
+        Parameters
+        ----------
+        index : array_like of int or bool
+            Rows (or a mask) to keep.
+
+        Returns
+        -------
+        Candidates
+            The subset.
+        """
         i = np.asarray(index)
         return Candidates(self.q[i], self.payload_kg[i], self.targets[i], self.source[i])
 
@@ -223,13 +279,37 @@ def _why(counts: dict[str, int], total: int) -> str:
 def filter_candidates(model: ErrorModel, q: ArrayLike, *, payloads: Sequence[float] = (0.0,),
                       payload_kg: ArrayLike | None = None, volume: Box | None = None,
                       visibility: Visibility | None = None) -> Candidates:
-    """Candidates from given configurations ``q`` ``(N, n)`` (rad): a file of allowed
-    configurations or of poses already measured.
+    """Candidates from given configurations: a file of allowed configurations or of poses
+    already measured.
 
-    Those outside the limits, the ``volume`` or the line of sight are left out.
-    ``payload_kg`` ``(N,)``: each configuration's own payload (poses already measured);
-    otherwise each configuration is offered with every one of ``payloads``.
-    Raises :class:`PlanningError` when none is left, saying which test removed them.
+    Those outside the limits, the ``volume`` or the line of sight
+    (``angle(R a, t − p) ≤ γ``) are left out.
+
+    Parameters
+    ----------
+    model : ErrorModel
+        The model (nominal targets are predicted with BASE = I, robot base frame).
+    q : (N, n) array_like, rad
+        Joint readings.
+    payloads : sequence of float, kg
+        Each configuration is offered with every one of these (unless ``payload_kg``).
+    payload_kg : (N,) array_like, kg, optional
+        Each configuration's own payload (poses already measured).
+    volume : Box, optional
+        Working volume the target must lie in (robot base frame, m).
+    visibility : Visibility, optional
+        The tracker's line of sight.
+
+    Returns
+    -------
+    Candidates
+        The usable configurations (× payloads).
+
+    Raises
+    ------
+    PlanningError
+        Wrong number of joints, a malformed ``payload_kg`` or ``payloads``, or none left
+        (the message says which test removed them).
     """
     q = np.atleast_2d(np.asarray(q, dtype=float))
     n = model.structure.n_readings
@@ -259,8 +339,38 @@ def sample_candidates(model: ErrorModel, count: int, *, payloads: Sequence[float
     drawn in the joint-space bounding box of the accepted ones widened by a quarter of the
     limit range on each side (clipped to the limits) — the feasible set is tested exactly
     every time, so the distribution is uniform on the feasible set as long as it lies in
-    that box.  Raises :class:`PlanningError` if nothing is feasible after ``give_up``
-    draws (fewer than ``count`` are returned when ``max_draws`` is reached first).
+    that box.
+
+    Parameters
+    ----------
+    model : ErrorModel
+        The model.
+    count : int
+        Candidates wanted (configurations × payloads, rounded up to whole configurations).
+    payloads : sequence of float, kg
+        Payloads each configuration is offered with.
+    volume : Box, optional
+        Working volume (robot base frame, m).
+    visibility : Visibility, optional
+        The tracker's line of sight.
+    seed : int
+        Random seed.
+    max_draws : int
+        Most configurations drawn (fewer than ``count`` are returned when reached).
+    chunk : int
+        Configurations drawn per round.
+    give_up : int
+        Draws after which, with nothing feasible, the sampling fails.
+
+    Returns
+    -------
+    Candidates
+        Up to ``count`` candidates.
+
+    Raises
+    ------
+    PlanningError
+        ``count < 1``, bad payloads, or nothing feasible after ``give_up`` draws.
     """
     if count < 1:
         raise PlanningError(f"the number of candidates must be positive, got {count}")
@@ -325,9 +435,31 @@ def _value_from_information(M: Array, criterion: str) -> float:
 
 
 def criterion_value(X: Array, criterion: str, *, region: Array | None = None) -> float:
-    """The criterion (module doc) of the design whose scaled Jacobian blocks are ``X``
-    ``(n, r, k)``: computed directly from ``M/n = Σ X_cᵀ X_c / n``.  ``region``
-    ``(C, r, k)``: the blocks of the poses the I-criterion averages over (required for I)."""
+    """The optimality criterion of a design, from ``M/n = Σ_c X_cᵀ X_c / n`` (module doc).
+
+    ``D = (1/k) log det(M/n)``, ``A = −trace((M/n)⁻¹)``, ``E = λ_min``,
+    ``O = λ_min / √λ_max``, ``I = −trace(W (M/n)⁻¹)`` with ``W = Σ_{region} X_cᵀX_c / C``
+    (−inf for a singular design where the criterion needs an inverse).
+
+    Parameters
+    ----------
+    X : (n, r, k) array
+        Scaled Jacobian blocks of the design's poses (dimensionless).
+    criterion : {"D", "A", "E", "O", "I"}
+        The criterion (case-insensitive).
+    region : (C, r, k) array, optional
+        Blocks of the poses the I-criterion averages over (required for I).
+
+    Returns
+    -------
+    float
+        The criterion value (maximised).
+
+    Raises
+    ------
+    PlanningError
+        Unknown criterion, or I without ``region``.
+    """
     c = _check_criterion(criterion)
     X = np.asarray(X, dtype=float)
     if c == "I":
@@ -343,13 +475,37 @@ def criterion_value(X: Array, criterion: str, *, region: Array | None = None) ->
 class CampaignPlan:
     """The chosen poses, ordered for measuring (payload groups, short moves).
 
-    ``index`` ``(n,)``: rows of the candidates; ``q`` ``(n, n_joints)`` rad;
-    ``payload_kg`` ``(n,)``; ``keys``: the parameters planned for; ``criterion`` and its
-    ``value`` (module doc, of ``M/n``); ``sigma`` ``(k,)``: predicted standard deviation
-    of each parameter (SI) for the noise ``noise_m``; ``condition_number``: κ of the
-    column-scaled Jacobian of the chosen poses (4.10); ``history``: the criterion after
-    the greedy start and after each improving exchange; ``unidentifiable``: parameters
-    the candidates cannot determine (left out).
+    Attributes
+    ----------
+    index : (n,) int array
+        Rows of the candidates.
+    q : (n, n_joints) array, rad
+        Joint readings.
+    payload_kg : (n,) array, kg
+        Payloads.
+    keys : tuple of str
+        The parameters planned for.
+    criterion : str
+        The criterion (``D``, ``A``, ``E``, ``O`` or ``I``).
+    value : float
+        Its value for ``M/n`` (module doc).
+    sigma : (k,) array
+        Predicted standard deviation ``σ_j = noise_m √((HᵀH)⁻¹)_jj`` (8.4) of each
+        parameter, in its SI unit.
+    condition_number : float
+        κ = σ₁/σ_k of the unit-norm-column Jacobian of the chosen poses (4.10).
+    noise_m : float, m
+        The measurement noise σ per row assumed.
+    history : tuple of float
+        The criterion after the greedy start and after each improving exchange.
+    exchanges : int
+        Number of improving exchanges.
+    n_candidates : int
+        Number of candidates chosen from.
+    unidentifiable : tuple of str
+        Parameters the candidates cannot determine (left out).
+    targets : (n, 3) array, m
+        Nominal target positions in the robot base frame.
     """
 
     index: NDArray[np.int64]
@@ -377,7 +533,31 @@ def planning_keys(model: ErrorModel, payloads: Sequence[float] = (0.0,), *,
     """The parameters the identification keeps for ``model`` (structural analysis, as
     :class:`~plugcell.calibration.identify.Calibrator` does): random configurations in
     the limits, the payloads cycled over them (several payloads separate payload from
-    gravity constants)."""
+    gravity constants); ``analyse(H).kept`` of the stacked Jacobian (4.2.1.2).
+
+    Parameters
+    ----------
+    model : ErrorModel
+        The model at nominal values.
+    payloads : sequence of float, kg
+        Payloads of the campaign.
+    position_only : bool
+        Only the position rows.
+    n_poses : int
+        Number of random configurations.
+    seed : int
+        Their seed.
+
+    Returns
+    -------
+    tuple of str
+        The kept keys, in priority order.
+
+    Raises
+    ------
+    PlanningError
+        Bad payloads.
+    """
     from plugcell.calibration.identifiability import random_configurations
 
     m = _payload_list(payloads)
@@ -393,15 +573,30 @@ def planning_keys(model: ErrorModel, payloads: Sequence[float] = (0.0,), *,
 
 
 class PosePlanner:
-    """Choose poses maximising an optimality criterion (module doc).
+    """Choose poses maximising an optimality criterion of ``M = Σ X_cᵀ X_c`` (module doc).
 
-    ``model``: the error model to be identified (nominal values; its BASE reference
-    places the tracker, its PROBE the target); ``keys``: its parameters to plan for
-    (default :func:`planning_keys`); ``criterion``: ``"D"``, ``"A"``, ``"E"`` or ``"O"``;
-    ``rotation_weight``: m per rad of the orientation rows, as the identification;
-    (or ``"I"``: the mean prediction variance over the candidates);
-    ``position_only``: the tracker measures positions only; ``noise_m``: σ per row for
-    the predicted parameter deviations; ``max_exchanges``: bound on the excursions.
+    Parameters
+    ----------
+    model : ErrorModel
+        The error model to be identified (nominal values; its BASE reference places the
+        tracker, its PROBE the target).
+    keys : sequence of str, optional
+        Its parameters to plan for (default :func:`planning_keys`).
+    criterion : {"D", "A", "E", "O", "I"}
+        The criterion; ``"I"``: the mean prediction variance over the candidates.
+    rotation_weight : float, m/rad
+        Weight of the orientation rows, as the identification.
+    position_only : bool
+        The tracker measures positions only.
+    noise_m : float, m
+        σ per row for the predicted parameter deviations.
+    max_exchanges : int, optional
+        Bound on the exchange excursions.
+
+    Raises
+    ------
+    PlanningError
+        Unknown criterion, non-positive weight or noise.
     """
 
     def __init__(self, model: ErrorModel, keys: Sequence[str] | None = None, *,
@@ -422,7 +617,22 @@ class PosePlanner:
 
     # -------------------------------------------------------------- Jacobian blocks
     def blocks(self, candidates: Candidates, keys: Sequence[str]) -> Array:
-        """``(C, r, k)`` row-weighted identification Jacobian of every candidate (SI)."""
+        """Row-weighted identification Jacobian ``W H_c`` of every candidate (eq. 6.11).
+
+        Parameters
+        ----------
+        candidates : Candidates
+            The candidates (readings and payloads).
+        keys : sequence of str
+            The parameters (columns).
+
+        Returns
+        -------
+        (C, r, k) array
+            ``r = 6`` (orientation rows × ``rotation_weight``) or 3 (position only);
+            position rows in m per parameter unit, orientation rows in m/rad × rad per
+            parameter unit.
+        """
         model = self.model
         if model.space.of_kind("payload") and model.payload_ref_kg <= 0:
             model = model.with_references(
@@ -439,9 +649,29 @@ class PosePlanner:
     def plan(self, candidates: Candidates, n: int, *, blocks: Array | None = None) -> CampaignPlan:
         """Choose ``n`` of ``candidates`` (greedy start, exchange improvement).
 
-        ``blocks``: the candidates' Jacobian blocks if already computed (:meth:`blocks`,
-        with ``self.keys``).  Raises :class:`PlanningError` for ``n`` larger than the
-        candidates or too small for the parameters.
+        Maximises the criterion of ``M(S)/n`` over sets S of ``n`` candidates (module
+        doc); the predicted σ are ``noise_m · √diag((HᵀH)⁻¹)`` (8.4).
+
+        Parameters
+        ----------
+        candidates : Candidates
+            The candidates.
+        n : int
+            Number of poses.
+        blocks : (C, r, k) array, optional
+            The candidates' Jacobian blocks if already computed (:meth:`blocks`, with
+            ``self.keys``).
+
+        Returns
+        -------
+        CampaignPlan
+            The chosen poses in measuring order and their predicted statistics.
+
+        Raises
+        ------
+        PlanningError
+            ``n < 1``, ``n`` larger than the candidates or too small for the parameters,
+            or blocks of the wrong shape.
         """
         C = len(candidates)
         if n < 1:

@@ -60,7 +60,21 @@ __all__ = [
 
 @dataclass(frozen=True)
 class IterationRecord:
-    """One Gauss–Newton iteration: residual before the step and the step size."""
+    """One Gauss–Newton iteration: residual before the step and the step size.
+
+    Attributes
+    ----------
+    iteration : int
+        Iteration number.
+    step_norm : float
+        ‖Δg‖ of the step, in the parameters' own units (m, rad, …).
+    cost : float
+        ``Σ_i w_i ‖W Δx_i‖²`` before the step (m²; ``w_i`` the robust-loss weights).
+    mean_position_mm, rms_position_mm : float, mm
+        Mean and rms position residual before the step.
+    damping : float
+        Levenberg–Marquardt damping λ (0 for Gauss–Newton).
+    """
 
     iteration: int
     step_norm: float
@@ -70,6 +84,7 @@ class IterationRecord:
     damping: float = 0.0
 
     def as_dict(self) -> dict[str, float]:
+        """The fields as a JSON-ready dict."""
         return {"iteration": self.iteration, "step_norm": self.step_norm, "cost": self.cost,
                 "mean_position_mm": self.mean_position_mm,
                 "rms_position_mm": self.rms_position_mm, "damping": self.damping}
@@ -100,24 +115,63 @@ def _thesis_base(T: Array) -> dict[str, float] | None:
 class CalibrationResult:
     """An identified model with its statistics (see module docstring).
 
-    ``model``: the calibrated :class:`ErrorModel`; ``nominal``: the nominal robot
-    with BASE/PROBE fitted (the "before" reference); ``keys``: the identified
-    parameters; ``identifiability``: the structural analysis (what each kept
-    parameter stands for); ``statistics``: σ², σ per parameter, κ;
-    ``calibration``/``calibration_before``: accuracy on the calibration poses
-    after/before; ``validation``/``validation_before``: on independent poses;
-    ``calibration_residuals``/``validation_residuals``: the residual of every pose
-    (:class:`~plugcell.calibration.statistics.PoseResiduals`) those figures are the
-    statistics of (``None`` in a result rebuilt by :meth:`from_dict`);
-    ``validity``: the region the calibration poses covered
-    (:class:`~plugcell.calibration.validity.ValidityRegion`; ``None`` for a PARAMS.json
-    written before it was recorded); ``validation_region``: the validation poses checked
-    against it.
-    ``residual_model``: a learned residual layer on top (hybrid model,
-    :mod:`~plugcell.calibration.residual_model`), set by :meth:`with_residual_model`;
-    ``hybrid_validation_residuals``: physical (``before``) vs hybrid (``after``) on the
-    validation poses, ``hybrid_fallbacks``: validation poses outside the layer's
-    trained region (physical model used).
+    Attributes
+    ----------
+    config : ModelConfig
+        Which of the five models.
+    robot : str
+        Robot name.
+    model : ErrorModel
+        The calibrated model, ``T = BASE · T_n^0(θ + Δθ) · PROBE`` (6.23).
+    nominal : ErrorModel
+        The nominal robot with BASE/PROBE fitted (the "before" reference).
+    keys : tuple of str
+        The identified parameters.
+    identifiability : Identifiability or None
+        The structural analysis (what each kept parameter stands for).
+    data_identifiability : Identifiability or None
+        The same analysis on the calibration poses.
+    iterations : int
+        Iterations of the final stage.
+    converged : bool
+        Whether ‖Δg‖ < tol was reached.
+    history : tuple of IterationRecord
+        Per-iteration record.
+    statistics : ParameterStatistics or None
+        σ̂² (8.3), σ per parameter (8.5), covariance (8.4), κ.
+    calibration, calibration_before : AccuracyStats or None
+        Accuracy (8.1–8.2, m and rad) on the calibration poses after/before.
+    six_dof : bool
+        Orientations were measured.
+    n_poses : int
+        Calibration poses.
+    pose_weights : (N,) array or None
+        Final robust-loss weights of the poses.
+    warnings : tuple of str
+        Warnings raised during the fit.
+    elapsed_s : float, s
+        Wall time of the fit.
+    settings : dict
+        The calibrator's settings.
+    validation, validation_before : AccuracyStats or None
+        Accuracy on independent poses after/before.
+    n_validation : int
+        Validation poses.
+    calibration_residuals, validation_residuals : PoseResiduals or None
+        The residual of every pose those figures are the statistics of (``None`` in a
+        result rebuilt by :meth:`from_dict`).
+    validity : ValidityRegion or None
+        The region the calibration poses covered (``None`` for a PARAMS.json written
+        before it was recorded).
+    validation_region : RegionCheck or None
+        The validation poses checked against it.
+    residual_model : LearnedResidual or None
+        A learned residual layer on top (hybrid model,
+        :mod:`~plugcell.calibration.residual_model`), set by :meth:`with_residual_model`.
+    hybrid_validation_residuals : PoseResiduals or None
+        Physical (``before``) vs hybrid (``after``) on the validation poses.
+    hybrid_fallbacks : int
+        Validation poses outside the layer's trained region (physical model used).
     """
 
     config: ModelConfig
@@ -153,16 +207,57 @@ class CalibrationResult:
     # ------------------------------------------------------------------ prediction
     def predict(self, q: ArrayLike, payload_kg: ArrayLike | float | None = None,
                 temperature_c: ArrayLike | float | None = None) -> Array:
-        """Calibrated target poses ``(N, 4, 4)`` in the measurement frame."""
+        """Calibrated target poses, ``T = BASE · T_n^0(θ(q) + Δθ(q, m)) · PROBE`` (6.23).
+
+        Parameters
+        ----------
+        q : (N, n) array_like, rad
+            Joint readings.
+        payload_kg : float or (N,) array_like, kg, optional
+            Payloads (default 0).
+        temperature_c : float or (N,) array_like, °C, optional
+            Temperatures (default: the model's reference).
+
+        Returns
+        -------
+        (N, 4, 4) array, m
+            Target poses in the measurement frame.
+        """
         return self.model.predict(q, payload_kg, temperature_c)
 
     def predict_nominal(self, q: ArrayLike, payload_kg: ArrayLike | float | None = None,
                         temperature_c: ArrayLike | float | None = None) -> Array:
-        """Poses of the nominal robot with the fitted BASE/PROBE."""
+        """Poses of the nominal robot with the fitted BASE/PROBE (the "before" model).
+
+        Parameters
+        ----------
+        q : (N, n) array_like, rad
+            Joint readings.
+        payload_kg : float or (N,) array_like, kg, optional
+            Payloads (default 0).
+        temperature_c : float or (N,) array_like, °C, optional
+            Temperatures (default: the model's reference).
+
+        Returns
+        -------
+        (N, 4, 4) array, m
+            Target poses in the measurement frame.
+        """
         return self.nominal.predict(q, payload_kg, temperature_c)
 
     def residuals(self, data: CalibrationData) -> Array:
-        """``(N, 6)`` (or ``(N, 3)``) measured − calibrated, metres and radians."""
+        """Residuals measured − calibrated, ``Δx_i = [p_M − p; log(R_M Rᵀ)∨]``.
+
+        Parameters
+        ----------
+        data : CalibrationData
+            Measured poses.
+
+        Returns
+        -------
+        (N, 6) or (N, 3) array
+            Metres and radians (3 columns for position-only data).
+        """
         return pose_residuals(data, self.predict(data.q, data.payload_kg, data.temperature_c))
 
     def evaluate_poses(self, data: CalibrationData, *, refit_base: bool = False,
@@ -177,6 +272,22 @@ class CalibrationResult:
         orientation rows by ``rotation_weight`` (m/rad; default: the weight of the fit,
         ``settings["rotation_weight"]``) or, with ``refit_positions_only``, uses the
         positions alone.
+
+        Parameters
+        ----------
+        data : CalibrationData
+            Measured poses.
+        refit_base, refit_probe : bool
+            Re-identify BASE (and PROBE) on ``data``.
+        rotation_weight : float, m/rad, optional
+            Weight of the orientation rows of the refit.
+        refit_positions_only : bool
+            Refit on the positions alone.
+
+        Returns
+        -------
+        PoseResiduals
+            ``before`` (nominal) and ``after`` (calibrated) errors, m and rad.
         """
         nominal, model = self.nominal, self.model
         if refit_base:
@@ -197,8 +308,20 @@ class CalibrationResult:
     def evaluate(self, data: CalibrationData, *, refit_base: bool = False,
                  refit_probe: bool = False, rotation_weight: float | None = None,
                  refit_positions_only: bool = False) -> tuple[AccuracyStats, AccuracyStats]:
-        """Accuracy (8.1–8.2) on ``data``: (nominal, calibrated); the statistics of
-        :meth:`evaluate_poses` (same options)."""
+        """Accuracy (8.1–8.2) on ``data``: the statistics of :meth:`evaluate_poses`.
+
+        Parameters
+        ----------
+        data : CalibrationData
+            Measured poses (at least 2).
+        refit_base, refit_probe, rotation_weight, refit_positions_only
+            As :meth:`evaluate_poses`.
+
+        Returns
+        -------
+        nominal, calibrated : AccuracyStats
+            Mean, σ (m − 1), max … of the errors, m and rad.
+        """
         r = self.evaluate_poses(data, refit_base=refit_base, refit_probe=refit_probe,
                                 rotation_weight=rotation_weight,
                                 refit_positions_only=refit_positions_only)
@@ -208,8 +331,21 @@ class CalibrationResult:
                         refit_probe: bool = False, rotation_weight: float | None = None,
                         refit_positions_only: bool = False) -> CalibrationResult:
         """This result with the accuracy and residuals on independent poses ``data``
-        (options of :meth:`evaluate_poses`; with a residual model also physical vs hybrid
-        on them)."""
+        (with a residual model also physical vs hybrid on them).
+
+        Parameters
+        ----------
+        data : CalibrationData
+            Validation poses (at least 2).
+        refit_base, refit_probe, rotation_weight, refit_positions_only
+            As :meth:`evaluate_poses`.
+
+        Returns
+        -------
+        CalibrationResult
+            A copy with ``validation``, ``validation_before``, ``validation_residuals`` and
+            ``validation_region`` set (and a warning for poses outside the region).
+        """
         r = self.evaluate_poses(data, refit_base=refit_base, refit_probe=refit_probe,
                                 rotation_weight=rotation_weight,
                                 refit_positions_only=refit_positions_only)
@@ -232,15 +368,46 @@ class CalibrationResult:
 
     def check_region(self, q: ArrayLike, payload_kg: ArrayLike | float | None = None,
                      targets: ArrayLike | None = None) -> RegionCheck | None:
-        """Configurations ``q`` (rad) checked against the calibrated region (``None`` when
-        the result has no region: a PARAMS.json from before it was recorded)."""
+        """Configurations checked against the calibrated region (:meth:`ValidityRegion.check`).
+
+        Parameters
+        ----------
+        q : (N, n) array_like, rad
+            Configurations.
+        payload_kg : float or (N,) array_like, kg, optional
+            Payloads.
+        targets : (N, 3) array_like, m, optional
+            Target positions, robot base frame.
+
+        Returns
+        -------
+        RegionCheck or None
+            ``None`` when the result has no region (a PARAMS.json from before it was
+            recorded).
+        """
         if self.validity is None:
             return None
         return self.validity.check(q, payload_kg, targets)
 
     def with_residual_model(self, layer: LearnedResidual) -> CalibrationResult:
-        """This result with a learned residual layer (trained on this calibration's
-        model: :func:`~plugcell.calibration.residual_model.calibration_fingerprint`)."""
+        """This result with a learned residual layer.
+
+        Parameters
+        ----------
+        layer : LearnedResidual
+            A layer trained on this calibration's model
+            (:func:`~plugcell.calibration.residual_model.calibration_fingerprint`).
+
+        Returns
+        -------
+        CalibrationResult
+            A copy with ``residual_model`` set (hybrid validation cleared).
+
+        Raises
+        ------
+        ValueError
+            The layer was trained on another calibration.
+        """
         if layer.fingerprint != calibration_fingerprint(self.model):
             raise ValueError("the residual model was trained on top of another calibration")
         return replace(self, residual_model=layer, hybrid_validation_residuals=None,
@@ -249,8 +416,24 @@ class CalibrationResult:
     def predict_hybrid(self, q: ArrayLike, payload_kg: ArrayLike | float | None = None,
                        temperature_c: ArrayLike | float | None = None
                        ) -> tuple[Array, Array]:
-        """Hybrid target poses ``(N, 4, 4)`` (measurement frame) and ``(N,)`` in-domain
-        flags (False: the physical model's pose); the physical ones without a layer."""
+        """Hybrid target poses: the calibrated poses with the learned layer's correction.
+
+        Parameters
+        ----------
+        q : (N, n) array_like, rad
+            Joint readings.
+        payload_kg : float or (N,) array_like, kg, optional
+            Payloads (default 0).
+        temperature_c : float or (N,) array_like, °C, optional
+            Temperatures (default: the model's reference).
+
+        Returns
+        -------
+        T : (N, 4, 4) array, m
+            Target poses in the measurement frame (the physical ones without a layer).
+        in_domain : (N,) bool array
+            False where the physical model's pose was used.
+        """
         P = self.predict(q, payload_kg, temperature_c)
         if self.residual_model is None:
             return P, np.ones(len(P), dtype=bool)
@@ -260,21 +443,63 @@ class CalibrationResult:
 
     # ------------------------------------------------------------------ parameters
     def value(self, key: str) -> float:
+        """Identified value Δĝ of parameter ``key`` (in its unit, :class:`ErrorParameter`).
+
+        Parameters
+        ----------
+        key : str
+            Parameter key.
+
+        Returns
+        -------
+        float
+            The value.
+        """
         return self.model.value(key)
 
     def sigma(self, key: str) -> float:
+        """Standard deviation ``σ_Δg = σ̂ √C_jj`` (8.5) of identified parameter ``key``.
+
+        Parameters
+        ----------
+        key : str
+            Parameter key.
+
+        Returns
+        -------
+        float
+            σ in the parameter's unit; NaN if not identified or without statistics.
+        """
         if self.statistics is None or key not in self.keys:
             return float("nan")
         return float(self.statistics.sigma[self.keys.index(key)])
 
     def stands_for(self, key: str) -> str:
+        """The combination ``Δg_k + Σ_j c_jk Δg_j`` kept parameter ``key`` stands for.
+
+        Parameters
+        ----------
+        key : str
+            Parameter key.
+
+        Returns
+        -------
+        str
+            E.g. ``"Δa2' − Δa4'"`` (the parameter's own name without an analysis).
+        """
         names = dict(zip(self.model.space.keys, self.model.space.names, strict=True))
         if self.identifiability is None:
             return names[key]
         return self.identifiability.stands_for(key, names)
 
     def parameter_table(self) -> list[dict[str, Any]]:
-        """One dict per identified parameter: key, name, value, sigma, unit, stands_for."""
+        """One dict per identified parameter: key, name, kind, value, sigma, unit, stands_for.
+
+        Returns
+        -------
+        list of dict
+            Values and σ in SI units.
+        """
         out = []
         for k in self.keys:
             p = self.model.space[k]
@@ -435,7 +660,29 @@ def rebase_document(document: dict[str, Any], result: CalibrationResult, base: A
     """A copy of the PARAMS.json ``document`` of ``result`` with BASE re-registered to
     ``base`` ``(4, 4)`` (the drift watch): the reference becomes the new BASE, the BASE
     parameters' values zero, ``event`` appended to ``drift_history``; ``parameters``
-    stays the record of the identification."""
+    stays the record of the identification.
+
+    Parameters
+    ----------
+    document : dict
+        The PARAMS.json document of ``result``.
+    result : CalibrationResult
+        The calibration.
+    base : (4, 4) array_like, m
+        The re-registered BASE.
+    event : dict, optional
+        The drift event to record.
+
+    Returns
+    -------
+    dict
+        The new document (``document`` is not changed).
+
+    Raises
+    ------
+    ValueError
+        ``base`` not a finite 4×4 matrix.
+    """
     import copy
 
     B = np.asarray(base, dtype=float)
@@ -453,7 +700,18 @@ def rebase_document(document: dict[str, Any], result: CalibrationResult, base: A
 
 
 def harmonic_order(model: ErrorModel) -> int:
-    """The highest joint-angle harmonic order among the model's parameters (0: none)."""
+    """The highest joint-angle harmonic order K among the model's parameters.
+
+    Parameters
+    ----------
+    model : ErrorModel
+        The model.
+
+    Returns
+    -------
+    int
+        K (0: no harmonics).
+    """
     return max((int(p.key[1]) for p in model.space if p.kind == "harmonic"), default=0)
 
 

@@ -38,11 +38,29 @@ __all__ = ["SimulationReport", "simulated_identification"]
 class SimulationReport:
     """Outcome of :func:`simulated_identification`.
 
-    ``rows``: one dict per identified parameter — ``key``, ``name``, ``input``
-    (the parameter's own simulated error), ``identified``, ``stands_for`` (the
-    nominal combination, e.g. ``Δa2' − Δa4'``), ``expected`` (that combination of
-    the inputs, linearised at the identified point), ``error`` = identified
-    combination − expected; ``dependent``: dropped parameters with their input.
+    Attributes
+    ----------
+    result : CalibrationResult
+        The identification.
+    iterations : int
+        Iterations it took.
+    converged : bool
+        Whether it converged.
+    residual_mean_mm : float, mm
+        Mean position residual after calibration.
+    max_param_error : float
+        Largest ``|error|`` over ``rows`` (unit of that parameter).
+    max_param_key : str
+        Its parameter.
+    rows : tuple of dict
+        One per identified parameter — ``key``, ``name``, ``unit``, ``input`` (the
+        parameter's own simulated error), ``identified``, ``stands_for`` (the nominal
+        combination, e.g. ``Δa2' − Δa4'``), ``expected = Σ_j c_kj Δg_j,true`` (that
+        combination of the inputs, linearised at the identified point), ``error`` =
+        ``Σ_j c_kj Δĝ_j − expected``; SI units.
+    dependent : tuple of dict
+        Dropped geometric parameters with their input and the kept ones they are
+        identified through.
     """
 
     result: CalibrationResult
@@ -55,6 +73,7 @@ class SimulationReport:
     dependent: tuple[dict[str, Any], ...]
 
     def as_dict(self) -> dict[str, Any]:
+        """The report as a JSON-ready dict (the fields above plus the condition number)."""
         st = self.result.statistics
         return {
             "iterations": self.iterations,
@@ -77,8 +96,30 @@ def simulated_identification(
     model: int | str = "loop",
     tol: float = 1e-6,
 ) -> SimulationReport:
-    """Identify ``errors`` (``{(link, field): value}``, SI) back from noise-free poses at
-    readings ``q`` (BASE = PROBE = identity, known)."""
+    """Identify known errors back from noise-free poses (the check of thesis 8.1).
+
+    Poses ``T_i = T_n^0(q_i; g_nom + Δg_true)`` (exact four-bar closure, BASE = PROBE = I,
+    known) are identified with :class:`Calibrator`; each kept parameter is compared with
+    the combination of the inputs it stands for (:func:`combinations_at`).
+
+    Parameters
+    ----------
+    desc : RobotDescription
+        The robot.
+    errors : mapping of (str, str) to float
+        ``{(link, field): Δg}``, m or rad.
+    q : (N, n_readings) array_like, rad
+        Joint readings.
+    model : int or str
+        The model (:func:`~plugcell.calibration.configs.model_config`).
+    tol : float
+        Convergence tolerance of the identification.
+
+    Returns
+    -------
+    SimulationReport
+        Identified against expected values per parameter.
+    """
     q = np.asarray(q, dtype=float)
     truth = desc.nominal_parameters().perturbed(dict(errors))
     T = forward(desc, truth, q, closure="fourbar").flange

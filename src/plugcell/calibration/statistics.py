@@ -44,17 +44,47 @@ Which = Literal["before", "after"]
 
 
 def pose_residuals(measured: CalibrationData, predicted: Array) -> Array:
-    """``(N, rows)`` residuals measured − predicted (6 per pose, or 3 for positions)."""
+    """Identification residuals measured − predicted, ``Δx_i = [p_M − p; log(R_M Rᵀ)∨]``.
+
+    Parameters
+    ----------
+    measured : CalibrationData
+        The measurements (6-DOF poses or positions), measurement frame.
+    predicted : (N, 4, 4) array, m
+        Predicted target poses.
+
+    Returns
+    -------
+    (N, 6) or (N, 3) array
+        ``[Δp (m); φ (rad)]`` per pose (:func:`~plugcell.kinematics.pose_error_exact`,
+        rotation about the measurement-frame axes), or ``Δp`` only for positions.
+    """
     if measured.six_dof:
         return pose_error_exact(measured.poses, predicted)
     return measured.positions - predicted[:, :3, 3]
 
 
 def error_vectors(measured: CalibrationData, predicted: Array) -> tuple[Array, Array | None]:
-    """Per-pose errors measured − predicted: ``Δp`` ``(N, 3)`` (m) and ``Δφ`` ``(N, 3)``
-    (rad, rotation vector of ``R_predicted⁻¹ R_measured``), or ``None`` for positions only.
+    """Per-pose errors measured − predicted, ``Δp = p_M − p``, ``Δφ = log(Rᵀ R_M)∨``.
 
-    The vectors the accuracy statistics (8.1–8.2) are taken over.
+    The vectors the accuracy statistics (8.1–8.2) are taken over.  Note that ``Δφ``
+    here is about the *predicted* frame's axes (``R_predicted⁻¹ R_measured``), while
+    :func:`pose_residuals` gives the rotation about the measurement-frame axes; the
+    norms agree.
+
+    Parameters
+    ----------
+    measured : CalibrationData
+        The measurements.
+    predicted : (N, 4, 4) array, m
+        Predicted target poses.
+
+    Returns
+    -------
+    dp : (N, 3) array, m
+        Position errors.
+    dphi : (N, 3) array, rad, or None
+        Rotation vectors, ``None`` for position-only data.
     """
     if measured.six_dof:
         return pose_errors(measured.poses, predicted, orientation="rotvec")
@@ -62,7 +92,28 @@ def error_vectors(measured: CalibrationData, predicted: Array) -> tuple[Array, A
 
 
 def accuracy(measured: CalibrationData, predicted: Array) -> AccuracyStats:
-    """Accuracy statistics (8.1–8.2) of predicted against measured poses."""
+    """Accuracy statistics (8.1–8.2) of predicted against measured poses.
+
+    ``Δ̄ = Σ|Δ_i|/m``, ``σ = √(Σ(|Δ_i| − Δ̄)²/(m − 1))`` over the vectors of
+    :func:`error_vectors`.
+
+    Parameters
+    ----------
+    measured : CalibrationData
+        The measurements, ``N ≥ 2``.
+    predicted : (N, 4, 4) array, m
+        Predicted target poses.
+
+    Returns
+    -------
+    AccuracyStats
+        Position (m) and, for 6-DOF data, orientation (rad) statistics.
+
+    Raises
+    ------
+    ValueError
+        Fewer than 2 poses.
+    """
     if len(measured) < 2:
         raise ValueError("accuracy statistics need at least 2 poses")
     return accuracy_statistics(*error_vectors(measured, predicted))
@@ -81,11 +132,16 @@ def _frozen(x: Any, name: str, n: int | None) -> Array:
 class PoseResiduals:
     """The residual of every pose of one set, before and after calibration (8.2.1).
 
-    ``positions`` ``(N, 3)``: the measured target positions (m, measurement frame);
-    ``before``/``after`` ``(N, 3)``: position errors measured − predicted (m) by the
-    nominal robot with BASE/PROBE fitted and by the calibrated model;
-    ``orientation_before``/``orientation_after`` ``(N, 3)``: orientation errors (rad,
-    rotation vector, see :func:`error_vectors`), ``None`` for position-only data.
+    Attributes
+    ----------
+    positions : (N, 3) array, m
+        The measured target positions, measurement frame.
+    before, after : (N, 3) array, m
+        Position errors ``p_M − p`` by the nominal robot with BASE/PROBE fitted and by
+        the calibrated model.
+    orientation_before, orientation_after : (N, 3) array, rad, or None
+        Orientation errors (rotation vector, see :func:`error_vectors`), ``None`` for
+        position-only data.
 
     Their statistics are the result's accuracy figures:
     ``result.calibration_residuals.accuracy("after")`` is ``result.calibration``.
@@ -115,8 +171,22 @@ class PoseResiduals:
     @classmethod
     def from_poses(cls, measured: CalibrationData, nominal: Array,
                    calibrated: Array) -> PoseResiduals:
-        """The residuals of ``measured`` against the poses ``(N, 4, 4)`` predicted by
-        the nominal and by the calibrated model."""
+        """The residuals of ``measured`` against the poses predicted by two models.
+
+        Parameters
+        ----------
+        measured : CalibrationData
+            The measurements.
+        nominal : (N, 4, 4) array, m
+            Poses predicted by the nominal robot (BASE/PROBE fitted).
+        calibrated : (N, 4, 4) array, m
+            Poses predicted by the calibrated model.
+
+        Returns
+        -------
+        PoseResiduals
+            Errors of :func:`error_vectors` before and after.
+        """
         dp0, dphi0 = error_vectors(measured, nominal)
         dp1, dphi1 = error_vectors(measured, calibrated)
         return cls(measured.positions, dp0, dp1, dphi0, dphi1)
@@ -126,10 +196,29 @@ class PoseResiduals:
 
     @property
     def six_dof(self) -> bool:
+        """True when orientation errors are present."""
         return self.orientation_after is not None
 
     def errors(self, which: Which = "after") -> tuple[Array, Array | None]:
-        """``(Δp, Δφ)`` before or after calibration (m, rad; Δφ ``None`` for positions)."""
+        """``(Δp, Δφ)`` before or after calibration.
+
+        Parameters
+        ----------
+        which : {"before", "after"}
+            Which model's residuals.
+
+        Returns
+        -------
+        dp : (N, 3) array, m
+            Position errors.
+        dphi : (N, 3) array, rad, or None
+            Orientation errors, ``None`` for positions only.
+
+        Raises
+        ------
+        ValueError
+            Unknown ``which``.
+        """
         if which == "before":
             return self.before, self.orientation_before
         if which == "after":
@@ -137,11 +226,38 @@ class PoseResiduals:
         raise ValueError(f"which must be 'before' or 'after', got {which!r}")
 
     def norms(self, which: Which = "after") -> Array:
-        """``(N,)`` position error norms |Δp| (m)."""
+        """Position error norms ``|Δp_i|``.
+
+        Parameters
+        ----------
+        which : {"before", "after"}
+            Which model's residuals.
+
+        Returns
+        -------
+        (N,) array, m
+            The norms.
+        """
         return np.linalg.norm(self.errors(which)[0], axis=1)
 
     def accuracy(self, which: Which = "after") -> AccuracyStats:
-        """The accuracy statistics (8.1–8.2) of these residuals (at least 2 poses)."""
+        """The accuracy statistics (8.1–8.2) of these residuals.
+
+        Parameters
+        ----------
+        which : {"before", "after"}
+            Which model's residuals.
+
+        Returns
+        -------
+        AccuracyStats
+            Mean, σ (m − 1), max … of the norms and components (m, rad).
+
+        Raises
+        ------
+        ValueError
+            Fewer than 2 poses, or unknown ``which``.
+        """
         if len(self) < 2:
             raise ValueError("accuracy statistics need at least 2 poses")
         return accuracy_statistics(*self.errors(which))
@@ -150,7 +266,20 @@ class PoseResiduals:
         """One JSON-ready dict per pose, in mm and degrees: ``set``, ``index`` (1-based),
         ``measured_mm``, ``before_mm``, ``after_mm``, ``before_norm_mm``,
         ``after_norm_mm`` (and ``orientation_before_deg``, ``orientation_after_deg``,
-        ``weight`` when known)."""
+        ``weight`` when known).
+
+        Parameters
+        ----------
+        set_name : str
+            Value of the ``set`` field (e.g. ``"calibration"``).
+        weights : (N,) array, optional
+            Per-pose weights to include.
+
+        Returns
+        -------
+        list of dict
+            One record per pose.
+        """
         out = []
         nb, na = self.norms("before"), self.norms("after")
         for i in range(len(self)):
@@ -172,7 +301,18 @@ class PoseResiduals:
 
 def accuracy_summary(stats: AccuracyStats) -> dict[str, Any]:
     """JSON-ready summary: ``mean_mm``, ``std_mm``, ``max_mm``, ``rms_mm``, per-component
-    means/σ (mm), and the orientation (deg) when measured."""
+    means/σ (mm), and the orientation (deg) when measured.
+
+    Parameters
+    ----------
+    stats : AccuracyStats
+        Statistics in SI units (m, rad).
+
+    Returns
+    -------
+    dict
+        The summary in mm and degrees.
+    """
     d = stats.as_dict(length_unit="mm", angle_unit="deg")
     pos = d["position"]
     out: dict[str, Any] = {
@@ -193,7 +333,22 @@ def accuracy_summary(stats: AccuracyStats) -> dict[str, Any]:
 @dataclass(frozen=True)
 class ParameterStatistics:
     """σ² (8.3), parameter σ (8.5), covariance (8.4) and the condition number of the
-    column-scaled identification Jacobian."""
+    column-scaled identification Jacobian.
+
+    Attributes
+    ----------
+    sigma2 : float
+        ``σ̂² = rᵀr / (n − k)`` (8.3), in the squared unit of the (weighted) residuals
+        (NaN when ``n ≤ k``).
+    sigma : (k,) array
+        ``σ_Δg_j = σ̂ √C_jj`` (8.5), in each parameter's unit.
+    covariance : (k, k) array
+        ``σ̂² C`` with ``C = (HᵀH)⁻¹`` (8.4; pseudo-inverse on a rank-deficient H).
+    condition_number : float
+        ``σ₁/σ_k`` of the column-scaled H.
+    dof : int
+        ``n − k``.
+    """
 
     sigma2: float
     sigma: Array
@@ -203,7 +358,24 @@ class ParameterStatistics:
 
 
 def parameter_statistics(H: Array, r: Array) -> ParameterStatistics:
-    """``H`` ``(n, k)`` stacked (weighted) Jacobian, ``r`` ``(n,)`` final residuals."""
+    """Parameter statistics of a least-squares fit, eqs. (8.3)–(8.5).
+
+    ``σ̂² = rᵀr / (n − k)``, ``C = (HᵀH)⁻¹``, ``σ_Δg_j = σ̂ √C_jj``; ``C`` from the SVD of the
+    column-scaled ``H S⁻¹ = U Σ Vᵀ``: ``C = S⁻¹ V Σ⁻² Vᵀ S⁻¹`` (singular values below
+    ``1e-14 σ₁`` are dropped, a pseudo-inverse).
+
+    Parameters
+    ----------
+    H : (n, k) array
+        Stacked (weighted) identification Jacobian.
+    r : (n,) array
+        Final (weighted) residuals, m and rad.
+
+    Returns
+    -------
+    ParameterStatistics
+        σ̂², per-parameter σ, covariance, condition number and degrees of freedom.
+    """
     n, k = H.shape
     dof = n - k
     sigma2 = float(r @ r / dof) if dof > 0 else float("nan")

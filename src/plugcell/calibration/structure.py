@@ -87,14 +87,24 @@ class StructureError(ValueError):
 class KinematicStructure:
     """The chain forward kinematics runs on, for one model family (module docstring).
 
-    ``source``: the user's description (joint readings are in its reading order);
-    ``desc``: the description FK uses (``source.uncoupled()`` for the loop family
-    and for robots without loops, i.e. ``source`` itself unless it has a joint
-    coupling); ``reading_map``: ``(n_desc, n_actuated)`` matrix from the source's
-    kinematic joints θ_kin (= the readings without a coupling) to the joints of
-    ``desc``: ``q_desc = reading_map @ θ_kin``; ``base_name``, ``probe_name``:
-    link names of the BASE ("0") and of the virtual PROBE frame ("7" after a flange
-    "6"); ``parallel``: chain links whose Hayati β is a candidate parameter.
+    Attributes
+    ----------
+    family : str
+        ``"loop"`` or ``"serial"``.
+    source : RobotDescription
+        The user's description (joint readings are in its reading order).
+    desc : RobotDescription
+        The description FK uses (``source.uncoupled()`` for the loop family and for
+        robots without loops, i.e. ``source`` itself unless it has a joint coupling;
+        the serial equivalent of eq. 6.3 for the serial family of a loop robot).
+    reading_map : (n_desc, n_actuated) array
+        Map from the source's kinematic joints θ_kin (= the readings without a
+        coupling) to the joints of ``desc``: ``q_desc = reading_map · θ_kin``.
+    base_name, probe_name : str
+        Link names of the BASE ("0") and of the virtual PROBE frame ("7" after a
+        flange "6").
+    parallel : frozenset of str
+        Chain links whose Hayati β is a candidate parameter.
     """
 
     family: str
@@ -107,15 +117,17 @@ class KinematicStructure:
 
     @property
     def n_readings(self) -> int:
+        """Number of joint readings of the source description."""
         return self.source.n_readings
 
     @property
     def has_loops(self) -> bool:
+        """Whether ``desc`` keeps closed loops (loop family of a loop robot)."""
         return bool(self.desc.loops)
 
     @property
     def reading_jacobian(self) -> Array:
-        """``∂q_desc/∂q_reading`` ``(n_desc, n_readings)`` = ``reading_map · M_coupling``."""
+        """``∂q_desc/∂q_reading = reading_map · M_coupling``, ``(n_desc, n_readings)``."""
         return self.reading_map @ self.source.reading_jacobian
 
     def joints(self, q_reading: ArrayLike, deflection: ArrayLike | None = None) -> Array:
@@ -124,6 +136,18 @@ class KinematicStructure:
         ``q_desc = reading_map · (θ_kin(q) + Δθ)`` with θ_kin the source's kinematic
         joints (:meth:`RobotDescription.kinematic_joints`) and ``deflection`` Δθ
         ``(..., n_actuated)`` joint deflections (compliance), default none.
+
+        Parameters
+        ----------
+        q_reading : (..., n_readings) array_like, rad
+            Joint readings.
+        deflection : (..., n_actuated) array_like, rad, optional
+            Joint deflections Δθ.
+
+        Returns
+        -------
+        (..., n_desc) array, rad
+            Joint values of ``desc``.
         """
         k = self.source.kinematic_joints(np.asarray(q_reading, dtype=float))
         if deflection is not None:
@@ -131,11 +155,22 @@ class KinematicStructure:
         return k @ self.reading_map.T
 
     def nominal_parameters(self) -> GeometricParameters:
+        """The nominal geometry of ``desc`` (m, rad)."""
         return self.desc.nominal_parameters()
 
     # ------------------------------------------------------------------ candidates
     def candidates(self) -> tuple[ErrorParameter, ...]:
-        """Candidate geometric error parameters (BASE, links, PROBE frame), see module doc."""
+        """Candidate geometric error parameters (BASE, links, PROBE frame), see module doc.
+
+        BASE a0, b0, α0, β0 (first) and θ0, d0 (eq. 6.24); per chain link Δθ (not for
+        passive links), Δd, Δa, Δα and, for parallel axes, Δβ (B.10); Δθ, Δa for an
+        off-chain loop arm; PROBE Δθ7, Δd7, Δa7, Δα7 (6.2.2) — with their priorities.
+
+        Returns
+        -------
+        tuple of ErrorParameter
+            The candidates (m and rad).
+        """
         desc = self.desc
         out: list[ErrorParameter] = []
         base_prio = -1
@@ -280,7 +315,25 @@ def kinematic_structure(desc: RobotDescription, family: str) -> KinematicStructu
     """Build the ``family`` structure (``"loop"`` or ``"serial"``) of ``desc``.
 
     A robot without loops has only the serial structure; asking for ``"loop"``
-    returns it too (the loop family of a serial robot is the serial robot).
+    returns it too (the loop family of a serial robot is the serial robot).  The
+    serial family of a loop robot is its serial equivalent (eq. 6.3).
+
+    Parameters
+    ----------
+    desc : RobotDescription
+        The robot.
+    family : {"loop", "serial"}
+        The model family (thesis 8.2.3).
+
+    Returns
+    -------
+    KinematicStructure
+        The structure.
+
+    Raises
+    ------
+    StructureError
+        Unknown family (or a description the serial equivalent cannot be built of).
     """
     if family not in FAMILIES:
         raise StructureError(f"family must be one of {FAMILIES}, got {family!r}")

@@ -66,12 +66,27 @@ __all__ = ["MAX_POSES", "RegionCheck", "ValidityRegion"]
 class RegionCheck:
     """Configurations checked against a :class:`ValidityRegion`, one entry per pose.
 
-    ``distance_m`` ``(N,)``: to the nearest calibration pose (scaled joint space, m of
-    target motion); ``threshold_m``: τ; ``joint_excess_rad`` ``(N,)``: how far the worst
-    joint lies beyond its range (0 inside) and ``worst_joint`` ``(N,)`` (0-based);
-    ``payload_excess_kg`` ``(N,)``; ``target_excess_m`` ``(N,)`` beyond the Cartesian box
-    (0 inside, or when no targets were given); ``beyond_range`` ``(N,)``: the joint
-    excess counts (its target motion exceeds ``τ / 20``); ``outside`` ``(N,)``.
+    ``outside = beyond_range ∨ (d > τ) ∨ (payload excess > 0) ∨ (target excess > 0)``.
+
+    Attributes
+    ----------
+    distance_m : (N,) array, m
+        ``d(q) = min_i ‖ℓ ∘ (q − q_i)‖`` to the nearest calibration pose (scaled joint
+        space, m of target motion).
+    threshold_m : float, m
+        τ.
+    joint_excess_rad : (N,) array, rad
+        How far the worst joint lies beyond its range (0 inside).
+    worst_joint : (N,) int array
+        That joint (0-based; worst by ``ℓ_j · excess_j``).
+    payload_excess_kg : (N,) array, kg
+        How far the payload lies outside the calibrated range.
+    target_excess_m : (N,) array, m
+        Distance beyond the Cartesian box (0 inside, or when no targets were given).
+    outside : (N,) bool array
+        The pose lies outside the region.
+    beyond_range : (N,) bool array
+        The joint excess counts: ``ℓ_j · excess_j > τ / 20``.
     """
 
     distance_m: Array
@@ -88,11 +103,25 @@ class RegionCheck:
 
     @property
     def count(self) -> int:
+        """Number of poses outside."""
         return int(np.count_nonzero(self.outside))
 
     def reasons(self, i: int, joint_names: tuple[str, ...] | None = None) -> str:
         """Why pose ``i`` is outside, e.g. ``"joint 1 12.5° beyond its range; 340 mm from
-        the nearest calibration pose (region 110 mm)"`` ('' when inside)."""
+        the nearest calibration pose (region 110 mm)"``.
+
+        Parameters
+        ----------
+        i : int
+            Pose index.
+        joint_names : tuple of str, optional
+            Joint names (default: 1-based numbers).
+
+        Returns
+        -------
+        str
+            The reasons, ``''`` when inside.
+        """
         if not self.outside[i]:
             return ""
         out = []
@@ -112,7 +141,14 @@ class RegionCheck:
         return "; ".join(out)
 
     def summary(self) -> dict[str, Any]:
-        """JSON-ready: counts, the largest distance and joint excess (mm, degrees)."""
+        """JSON-ready: counts, the largest distance and joint excess (mm, degrees).
+
+        Returns
+        -------
+        dict
+            ``poses``, ``outside``, ``threshold_mm``, ``max_distance_mm``, the counts per
+            reason, ``max_joint_excess_deg`` and ``outside_indices``.
+        """
         o = self.outside
         return {
             "poses": len(self), "outside": self.count,
@@ -129,7 +165,18 @@ class RegionCheck:
         }
 
     def message(self, what: str = "poses") -> str:
-        """One line for a warning, '' when every pose is inside."""
+        """One line for a warning, '' when every pose is inside.
+
+        Parameters
+        ----------
+        what : str
+            What the poses are called in the message.
+
+        Returns
+        -------
+        str
+            The warning.
+        """
         if not self.count:
             return ""
         s = self.summary()
@@ -152,11 +199,29 @@ class RegionCheck:
 class ValidityRegion:
     """The region a calibration was identified on (module docstring).
 
-    ``joint_lower``/``joint_upper`` ``(n,)`` rad; ``lever_m`` ``(n,)`` m/rad;
-    ``poses`` ``(P, n)`` rad (≤ :data:`MAX_POSES`); ``threshold_m``: τ;
-    ``cover_m``: covering radius of the kept poses; ``payload_kg`` (min, max);
-    ``target_lower``/``target_upper`` ``(3,)`` m, robot base frame; ``n_poses``: the
-    calibration poses it was built from.
+    Attributes
+    ----------
+    joint_lower, joint_upper : (n,) array, rad
+        ``min_i q_ij``, ``max_i q_ij`` per joint.
+    lever_m : (n,) array, m/rad
+        Lever arms ``ℓ_j = RMS_i |∂p/∂q_j|`` (floored at a tenth of the largest).
+    poses : (P, n) array, rad
+        Kept calibration poses (≤ :data:`MAX_POSES`).
+    threshold_m : float, m
+        τ.
+    cover_m : float, m
+        Covering radius of the kept poses.
+    payload_kg : (float, float), kg
+        ``(min, max)`` payload.
+    target_lower, target_upper : (3,) array, m
+        Cartesian box of the targets, robot base frame.
+    n_poses : int
+        The calibration poses it was built from.
+
+    Raises
+    ------
+    ValueError
+        ``poses`` not ``(P, n)`` or ``lever_m`` not ``(n,)``.
     """
 
     joint_lower: Array
@@ -186,9 +251,31 @@ class ValidityRegion:
     def from_poses(cls, model: ErrorModel, q: ArrayLike, payload_kg: ArrayLike | None = None,
                    *, targets: ArrayLike | None = None, max_poses: int = MAX_POSES
                    ) -> ValidityRegion:
-        """The region of calibration readings ``q`` ``(N, n)`` (rad) for ``model`` (its
-        geometry gives the lever arms).  ``targets`` ``(N, 3)``: the target positions in
-        the robot base frame (m) if known, else predicted by ``model``."""
+        """The region of calibration readings ``q`` for ``model`` (module docstring).
+
+        Lever arms by central differences (h = 1e-6 rad) of the predicted target
+        position, ``ℓ_j = √(mean_i ‖∂p/∂q_j‖²)``; τ = max(99th percentile of the kept
+        poses' nearest-neighbour distances, covering radius).
+
+        Parameters
+        ----------
+        model : ErrorModel
+            The model (its geometry gives the lever arms; BASE is not used).
+        q : (N, n) array_like, rad
+            Calibration readings.
+        payload_kg : (N,) array_like, kg, optional
+            Their payloads (default 0).
+        targets : (N, 3) array_like, m, optional
+            Target positions in the robot base frame if known, else predicted by
+            ``model``.
+        max_poses : int
+            Most poses kept (farthest-point subsample).
+
+        Returns
+        -------
+        ValidityRegion
+            The region.
+        """
         q = np.atleast_2d(np.asarray(q, dtype=float))
         m = np.zeros(len(q)) if payload_kg is None else np.asarray(payload_kg, dtype=float)
         robot = model.with_references(base=np.eye(4))
@@ -226,15 +313,45 @@ class ValidityRegion:
 
     # ------------------------------------------------------------------ checking
     def distance(self, q: ArrayLike) -> Array:
-        """``(N,)`` distance (m) of configurations ``q`` to the nearest calibration pose."""
+        """Distance to the nearest calibration pose, ``d(q) = min_i ‖ℓ ∘ (q − q_i)‖``.
+
+        Parameters
+        ----------
+        q : (N, n) array_like, rad
+            Configurations.
+
+        Returns
+        -------
+        (N,) array, m
+            Distances in m of target motion.
+        """
         q = np.atleast_2d(np.asarray(q, dtype=float))
         d, _ = self._tree.query(q * self.lever_m)  # type: ignore[attr-defined]
         return np.asarray(d, dtype=float)
 
     def check(self, q: ArrayLike, payload_kg: ArrayLike | float | None = None,
               targets: ArrayLike | None = None) -> RegionCheck:
-        """Check configurations ``q`` ``(N, n)`` (rad), their payloads and optionally their
-        target positions ``(N, 3)`` (m, robot base frame)."""
+        """Check configurations, their payloads and optionally their target positions.
+
+        Parameters
+        ----------
+        q : (N, n) array_like, rad
+            Configurations.
+        payload_kg : float or (N,) array_like, kg, optional
+            Payloads (default 0).
+        targets : (N, 3) array_like, m, optional
+            Target positions, robot base frame.
+
+        Returns
+        -------
+        RegionCheck
+            Per-pose distances, excesses and the ``outside`` flags.
+
+        Raises
+        ------
+        ValueError
+            ``q`` with the wrong number of joints.
+        """
         q = np.atleast_2d(np.asarray(q, dtype=float))
         if q.shape[1] != len(self.joint_lower):
             raise ValueError(f"q: expected (N, {len(self.joint_lower)}), got {q.shape}")
@@ -265,7 +382,13 @@ class ValidityRegion:
 
     # ------------------------------------------------------------------ serialisation
     def to_dict(self) -> dict[str, Any]:
-        """PARAMS.json's ``validity`` (mm, degrees)."""
+        """PARAMS.json's ``validity`` (mm, degrees).
+
+        Returns
+        -------
+        dict
+            JSON-ready, lengths in mm and angles in degrees.
+        """
         return {
             "measure": "joint ranges + distance to the nearest calibration pose in joint space "
                        "scaled by each joint's lever arm at the target (mm of target motion)",
@@ -283,7 +406,23 @@ class ValidityRegion:
 
     @classmethod
     def from_dict(cls, d: dict[str, Any]) -> ValidityRegion:
-        """Inverse of :meth:`to_dict`; ``ValueError`` naming the key for a bad one."""
+        """Inverse of :meth:`to_dict`.
+
+        Parameters
+        ----------
+        d : dict
+            PARAMS.json's ``validity`` (mm, degrees).
+
+        Returns
+        -------
+        ValidityRegion
+            The region in SI units.
+
+        Raises
+        ------
+        ValueError
+            A missing or malformed key (named in the message).
+        """
         try:
             return cls(joint_lower=np.radians(d["joint_lower_deg"]),
                        joint_upper=np.radians(d["joint_upper_deg"]),

@@ -41,8 +41,22 @@ def _transform(x: ArrayLike, name: str) -> Array:
 
 @dataclass(frozen=True, eq=False)
 class MetrologyFrames:
-    """Identified BASE (robot base in the sensor frame), PROBE (reflector in the flange
-    frame) and TOOL (tool point in the flange frame, default PROBE)."""
+    """Identified BASE, PROBE and TOOL: ``T_tool = BASE⁻¹ · T_meas · PROBE⁻¹ · TOOL``.
+
+    Attributes
+    ----------
+    base : (4, 4) array, m
+        BASE, the robot base in the sensor frame.
+    probe : (4, 4) array, m
+        PROBE, the reflector in the flange frame.
+    tool : (4, 4) array, m
+        TOOL, the tool point in the flange frame (default: PROBE).
+
+    Raises
+    ------
+    ValueError
+        A transform that is not a finite 4×4 matrix.
+    """
 
     base: Array
     probe: Array
@@ -58,21 +72,57 @@ class MetrologyFrames:
 
     @property
     def tool_is_probe(self) -> bool:
+        """Whether TOOL equals PROBE (to 1e-12), so positions locate the tool point."""
         return bool(np.allclose(self.tool, self.probe, atol=1e-12))
 
     def pose_to_robot(self, T_meas: ArrayLike) -> Array:
-        """Tool pose(s) in the robot base frame from reflector pose(s) in the sensor frame."""
+        """Tool pose in the robot base frame, ``T_tool = BASE⁻¹ · T_meas · PROBE⁻¹ · TOOL``.
+
+        Parameters
+        ----------
+        T_meas : (..., 4, 4) array_like, m
+            Reflector poses in the sensor frame.
+
+        Returns
+        -------
+        (..., 4, 4) array, m
+            Tool poses in the robot base frame.
+        """
         return self._base_inv @ np.asarray(T_meas, dtype=float) @ self._probe_to_tool  # type: ignore[attr-defined,no-any-return]
 
     def position_to_robot(self, p_meas: ArrayLike) -> Array:
-        """Reflector position(s) ``(..., 3)`` in the robot base frame."""
+        """Reflector position in the robot base frame, ``p = BASE⁻¹ · p_meas``.
+
+        Parameters
+        ----------
+        p_meas : (..., 3) array_like, m
+            Reflector positions in the sensor frame.
+
+        Returns
+        -------
+        (..., 3) array, m
+            The positions in the robot base frame.
+        """
         Bi = self._base_inv  # type: ignore[attr-defined]
         p = np.asarray(p_meas, dtype=float)
         return p @ Bi[:3, :3].T + Bi[:3, 3]  # type: ignore[no-any-return]
 
     def robot_to_sensor(self, T_tool: ArrayLike) -> Array:
-        """Where the reflector should be, in the sensor frame, for tool pose(s) in the
-        robot base frame (to point a tracker at a target before moving there)."""
+        """Where the reflector should be, in the sensor frame, for tool poses in the robot
+        base frame (to point a tracker at a target before moving there).
+
+        ``T_meas = BASE · T_tool · TOOL⁻¹ · PROBE``, the inverse of :meth:`pose_to_robot`.
+
+        Parameters
+        ----------
+        T_tool : (..., 4, 4) array_like, m
+            Tool poses in the robot base frame.
+
+        Returns
+        -------
+        (..., 4, 4) array, m
+            Reflector poses in the sensor frame.
+        """
         return self.base @ np.asarray(T_tool, dtype=float) @ invert(self._probe_to_tool)  # type: ignore[attr-defined,no-any-return]
 
 
@@ -80,19 +130,57 @@ class RawSensor(Protocol):
     """A metrology device reading the reflector in its own frame."""
 
     def measure(self, duration_s: float, mode: str) -> Reading:
-        """``mode`` ``"6dof"`` (pose) or ``"3dof"`` (position)."""
+        """One reading of the reflector in the sensor's own frame.
+
+        Parameters
+        ----------
+        duration_s : float, s
+            Averaging time.
+        mode : {"6dof", "3dof"}
+            Pose or position.
+
+        Returns
+        -------
+        Reading
+            Position (m) and, for ``"6dof"``, pose (4, 4), m.
+        """
         ...
 
 
 @dataclass(eq=False)
 class RobotFrameSensor:
     """A :class:`RawSensor` seen through :class:`MetrologyFrames`: implements
-    :class:`~plugcell.compensation.protocols.PoseSensor` and ``PositionSensor``."""
+    :class:`~plugcell.compensation.protocols.PoseSensor` and ``PositionSensor``.
+
+    Attributes
+    ----------
+    sensor : RawSensor
+        The device, reading in its own frame.
+    frames : MetrologyFrames
+        BASE, PROBE and TOOL used to bring readings into the robot base frame.
+    """
 
     sensor: RawSensor
     frames: MetrologyFrames
 
     def measure_pose(self, duration_s: float) -> Reading:
+        """Tool pose in the robot base frame, ``BASE⁻¹ · T_meas · PROBE⁻¹ · TOOL``.
+
+        Parameters
+        ----------
+        duration_s : float, s
+            Averaging time.
+
+        Returns
+        -------
+        Reading
+            ``pose`` (4, 4) and ``position`` (3,), m, robot base frame.
+
+        Raises
+        ------
+        ValueError
+            The sensor returned no orientation.
+        """
         r = self.sensor.measure(duration_s, "6dof")
         if r.pose is None:
             raise ValueError("the sensor returned no orientation for a 6-DOF reading")
@@ -101,6 +189,23 @@ class RobotFrameSensor:
                        elapsed_s=r.elapsed_s)
 
     def measure_position(self, duration_s: float) -> Reading:
+        """Reflector position in the robot base frame, ``p = BASE⁻¹ · p_meas``.
+
+        Parameters
+        ----------
+        duration_s : float, s
+            Averaging time.
+
+        Returns
+        -------
+        Reading
+            ``position`` (3,), m, robot base frame; ``pose`` None.
+
+        Raises
+        ------
+        ValueError
+            TOOL is not PROBE (a position locates the reflector only).
+        """
         if not self.frames.tool_is_probe:
             raise ValueError("a position-only reading locates the reflector: the tool point "
                              "must be the reflector (TOOL = PROBE)")

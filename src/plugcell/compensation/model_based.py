@@ -63,13 +63,31 @@ __all__ = [
 class CompensationResult:
     """Compensated joints for a batch of ``N`` targets.
 
-    ``q``: ``(N, n)`` compensated joint readings (rad) — the commanded joints;
-    ``q_start``: ``(N, n)`` where the iteration started (nominal IK);
-    ``converged``: ‖Δx‖ < tol reached; ``within_limits``: ``q`` inside the joint
-    and coupled limits; ``iterations``: steps e. taken; ``residual``: final ‖Δx‖;
-    ``position_error`` (m) and ``orientation_error`` (rad) of the final Δx;
-    ``reason``: ``""`` for a usable target, else why it failed; ``kind``: ``""`` or
-    the :class:`CompensationError` kind.
+    Attributes
+    ----------
+    q : (N, n) array, rad
+        Compensated joint readings — the commanded joints.
+    q_start : (N, n) array, rad
+        Where the iteration started (nominal IK).
+    converged : (N,) bool array
+        ``‖Δx‖ < tol`` reached.
+    within_limits : (N,) bool array
+        ``q`` inside the joint and coupled limits.
+    iterations : (N,) int array
+        Steps e. taken.
+    residual : (N,) array
+        Final ``‖Δx‖`` (the 6-vector in m and rad).
+    position_error : (N,) array, m
+        ``‖Δp‖`` of the final Δx.
+    orientation_error : (N,) array, rad
+        ``‖φ‖`` of the final Δx.
+    reason : (N,) object array of str
+        ``""`` for a usable target, else why it failed.
+    kind : (N,) object array of str
+        ``""`` or the :class:`CompensationError` kind.
+    hybrid_fallback : (N,) bool array or None
+        With a learned residual layer: targets compensated with the physical model
+        alone; ``None`` without a layer.
     """
 
     q: Array
@@ -92,11 +110,17 @@ class CompensationResult:
 
     @property
     def ok(self) -> NDArray[np.bool_]:
-        """Targets whose compensated joints can be sent to the controller."""
+        """``(N,)`` targets whose compensated joints can be sent: ``converged ∧ within_limits``."""
         return self.converged & self.within_limits
 
     def first_error(self) -> CompensationError | None:
-        """The failure of the first failing target as an exception (``None`` if all ok)."""
+        """The failure of the first failing target as an exception.
+
+        Returns
+        -------
+        CompensationError or None
+            ``None`` if every target is ok.
+        """
         bad = np.flatnonzero(~self.ok)
         if not bad.size:
             return None
@@ -358,9 +382,31 @@ def nominal_joints(
 ) -> tuple[Array, NDArray[np.bool_], NDArray[np.object_]]:
     """Step a.: the controller's nominal IK (``POS_TO_JNTP``) of the tool poses.
 
-    Nominal description geometry with the model's tool as the controller's tool.
-    Returns ``(q (N, n), ok (N,), reason (N,))``; ``reason`` is the IK's message where
-    no solution inside the limits exists.
+    Nominal description geometry with the model's tool as the controller's tool:
+    solves ``T_nominal(q) · tool = T_target`` (:func:`~plugcell.kinematics.inverse`).
+
+    Parameters
+    ----------
+    model : PoseModel
+        The model (its description and tool).
+    T_target : (N, 4, 4) or (4, 4) array_like, m
+        Desired tool poses in the robot base frame.
+    seed : (n,) or (N, n) array_like, rad, optional
+        IK seed (default the description's home).
+
+    Returns
+    -------
+    q : (N, n) array, rad
+        Nominal joint readings.
+    ok : (N,) bool array
+        Converged inside the limits.
+    reason : (N,) object array of str
+        The IK's message where no solution inside the limits exists.
+
+    Raises
+    ------
+    ValueError
+        Malformed or non-finite targets.
     """
     T = _targets(T_target)
     desc = model.description
@@ -382,10 +428,38 @@ def compensate(
 ) -> CompensationResult:
     """The whole of 6.5.1: nominal IK (a.), then iterate on the identified model (b.–f.).
 
-    ``T_target``: ``(N, 4, 4)`` desired tool poses in the robot base frame;
-    ``seed``: joint seed of the nominal IK (default the description's home), ``(n,)``
-    or ``(N, n)``.  Targets without a nominal solution fail with kind
-    ``"unreachable"``.
+    ``q₀ = IK_nominal(x^d)``, then ``q ← q + J(q)⁻¹ (x^d ⊖ x^a(q))`` (4.11, 4.12) until
+    ``‖Δx‖ < tol`` (:func:`compensate_joints`).  Targets without a nominal solution fail
+    with kind ``"unreachable"``.
+
+    Parameters
+    ----------
+    model : PoseModel
+        The identified model.
+    T_target : (N, 4, 4) or (4, 4) array_like, m
+        Desired tool poses in the robot base frame.
+    payload_kg : float or (N,) array_like, kg
+        Payload.
+    seed : (n,) or (N, n) array_like, rad, optional
+        Joint seed of the nominal IK (default the description's home).
+    tol : float
+        Stop when ‖Δx‖ < tol (m and rad).
+    max_iterations : int
+        Iteration bound.
+    raise_errors : bool
+        With ``False``, failures are reported per target instead of raising.
+
+    Returns
+    -------
+    CompensationResult
+        Compensated joint readings ``(N, n)``, rad, with per-target convergence.
+
+    Raises
+    ------
+    ValueError
+        Malformed targets, payloads or tolerances.
+    CompensationError
+        For the first failing target (unless ``raise_errors=False``).
     """
     T = _targets(T_target)
     q_nom, ok, why = nominal_joints(model, T, seed)

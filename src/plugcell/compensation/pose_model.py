@@ -74,7 +74,21 @@ def shift_jacobian(J_flange: Array, p_flange: Array, p_tool: Array) -> Array:
     """Move the linear rows of a Jacobian from the flange origin to the tool point.
 
     ``v_tool = v_flange + ω × (p_tool − p_flange)`` (rigid body), so
-    ``J_v,tool = J_v,flange − [p_tool − p_flange]× J_ω``.
+    ``J_v,tool = J_v,flange − [p_tool − p_flange]× J_ω``; the angular rows are unchanged.
+
+    Parameters
+    ----------
+    J_flange : (N, 6, n) array
+        Jacobian at the flange origin, linear rows (m/rad) over angular rows (rad/rad).
+    p_flange : (N, 3) array, m
+        Flange origins.
+    p_tool : (N, 3) array, m
+        Tool points, same frame.
+
+    Returns
+    -------
+    (N, 6, n) array
+        The Jacobian at the tool point.
     """
     r = p_tool - p_flange  # (N, 3)
     Jw = J_flange[..., 3:, :]
@@ -97,21 +111,35 @@ def _as_batch(q: ArrayLike, n: int) -> Array:
 class IdentifiedModel:
     """An identified error model as a :class:`PoseModel` (module docstring).
 
-    ``error_model``: the identified :class:`ErrorModel` (e.g.
-    ``CalibrationResult.model``); ``tool``: the compensated point in the flange frame
-    of the identified chain, default the identified PROBE (the T-MAC);
-    ``residual``: a learned residual layer
-    (:class:`~plugcell.calibration.residual_model.LearnedResidual`) on top — the hybrid
-    model: its base-frame correction ``(e, φ)`` of the PROBE point is applied to the
-    tool as the rigid motion ``G = Trans(p_probe + e) · Rot(Exp φ) · Trans(−p_probe)``
-    (``T ← G·T``: the PROBE point moves by ``e``, every orientation turns by φ), where
-    the pose is inside the layer's trained region (elsewhere the physical model
-    alone); the Jacobian stays the physical one (the boosted trees are piecewise
-    constant — :func:`~plugcell.compensation.model_based.compensate_joints` solves the
-    hybrid model by an outer fixed point on ``G``); ``temperature_c``: the cell's
-    temperature (°C) — for a layer that uses it, and for a model with the thermal term
-    κT (the flange position and the linear rows of its Jacobian scale by
-    ``1 + κT (T − T_ref)``); ``None``: the model's reference temperature.
+    Tool pose in the robot base frame ``T = T_n^0(θ(q) + Δθ(q, m)) · tool`` (6.23 without
+    BASE), with the learned correction ``T ← G · T`` when a residual layer is set.
+
+    Attributes
+    ----------
+    error_model : ErrorModel
+        The identified model (e.g. ``CalibrationResult.model``).
+    tool : (4, 4) array, m
+        The compensated point in the flange frame of the identified chain, default the
+        identified PROBE (the T-MAC).
+    residual : LearnedResidual or None
+        A learned residual layer (:mod:`~plugcell.calibration.residual_model`) on top —
+        the hybrid model: its base-frame correction ``(e, φ)`` of the PROBE point is
+        applied to the tool as the rigid motion
+        ``G = Trans(p_probe + e) · Rot(Exp φ) · Trans(−p_probe)`` (``T ← G·T``: the PROBE
+        point moves by ``e``, every orientation turns by φ), where the pose is inside the
+        layer's trained region (elsewhere the physical model alone); the Jacobian stays
+        the physical one (the boosted trees are piecewise constant —
+        :func:`~plugcell.compensation.model_based.compensate_joints` solves the hybrid
+        model by an outer fixed point on ``G``).
+    temperature_c : float or None, °C
+        The cell's temperature — for a layer that uses it, and for a model with the
+        thermal term κT (the flange position and the linear rows of its Jacobian scale
+        by ``1 + κT (T − T_ref)``); ``None``: the model's reference temperature.
+
+    Raises
+    ------
+    ValueError
+        ``tool`` not a finite 4×4 matrix.
     """
 
     error_model: ErrorModel
@@ -150,7 +178,30 @@ class IdentifiedModel:
         return self._probe  # type: ignore[attr-defined,no-any-return]
 
     def evaluate(self, q: ArrayLike, payload_kg: ArrayLike | float = 0.0) -> tuple[Array, Array]:
-        """Tool poses ``(N, 4, 4)`` in the robot base frame and Jacobian ``(N, 6, n)``."""
+        """Tool poses and the manipulator Jacobian at the tool (eqs. 6.23, 6.37, 6.39).
+
+        ``T = G · T_n^0(θ(q) + Δθ(q, m)) · tool``; ``J = shift(J_flange) · ∂q_chain/∂q``
+        (deflection derivative left out, module docstring).
+
+        Parameters
+        ----------
+        q : (N, n) or (n,) array_like, rad
+            Joint readings.
+        payload_kg : float or (N,) array_like, kg
+            Payloads.
+
+        Returns
+        -------
+        T : (N, 4, 4) array, m
+            Tool poses in the robot base frame.
+        J : (N, 6, n) array
+            ``∂[p; φ]/∂q`` w.r.t. the readings (m/rad over rad/rad), robot base frame.
+
+        Raises
+        ------
+        ValueError
+            ``q`` of the wrong shape or not finite.
+        """
         em = self.error_model
         qb = _as_batch(q, em.structure.n_readings)
         batch = em.batch(qb, payload_kg)
@@ -182,12 +233,30 @@ class IdentifiedModel:
         return G
 
     def physical(self) -> IdentifiedModel:
-        """The same model without the learned layer."""
+        """The same model without the learned layer.
+
+        Returns
+        -------
+        IdentifiedModel
+            ``residual = None``.
+        """
         return IdentifiedModel(self.error_model, self.tool, None, self.temperature_c)
 
     def correction(self, q: ArrayLike, payload_kg: ArrayLike | float = 0.0) -> Array:
-        """The learned layer's rigid correction ``G`` ``(N, 4, 4)`` at ``q`` (identity
-        without a layer or outside its trained region): hybrid pose = ``G ·`` physical."""
+        """The learned layer's rigid correction ``G`` at ``q``: hybrid pose = ``G ·`` physical.
+
+        Parameters
+        ----------
+        q : (N, n) or (n,) array_like, rad
+            Joint readings.
+        payload_kg : float or (N,) array_like, kg
+            Payloads.
+
+        Returns
+        -------
+        G : (N, 4, 4) array, m
+            Identity without a layer or outside its trained region.
+        """
         qb = _as_batch(q, self.error_model.structure.n_readings)
         if self.residual is None:
             return np.broadcast_to(np.eye(4), (len(qb), 4, 4)).copy()
@@ -197,7 +266,20 @@ class IdentifiedModel:
         return self._correction(T_probe, qb, m)
 
     def in_domain(self, q: ArrayLike, payload_kg: ArrayLike | float = 0.0) -> Array:
-        """``(N,)`` True where the learned layer applies (all True without one)."""
+        """Where the learned layer applies.
+
+        Parameters
+        ----------
+        q : (N, n) or (n,) array_like, rad
+            Joint readings.
+        payload_kg : float or (N,) array_like, kg
+            Payloads.
+
+        Returns
+        -------
+        (N,) bool array
+            True inside the layer's trained region (all True without a layer).
+        """
         qb = _as_batch(q, self.error_model.structure.n_readings)
         if self.residual is None:
             return np.ones(len(qb), dtype=bool)
@@ -205,11 +287,40 @@ class IdentifiedModel:
         return np.asarray(self.residual.predict(qb, m, self.temperature_c).in_domain)
 
     def pose(self, q: ArrayLike, payload_kg: ArrayLike | float = 0.0) -> Array:
-        """Tool poses ``(N, 4, 4)`` in the robot base frame."""
+        """Tool poses in the robot base frame (the first output of :meth:`evaluate`).
+
+        Parameters
+        ----------
+        q : (N, n) or (n,) array_like, rad
+            Joint readings.
+        payload_kg : float or (N,) array_like, kg
+            Payloads.
+
+        Returns
+        -------
+        (N, 4, 4) array, m
+            Tool poses.
+        """
         return self.evaluate(q, payload_kg)[0]
 
     def predict_measurement(self, q: ArrayLike, payload_kg: ArrayLike | float = 0.0) -> Array:
-        """The reflector pose the tracker should read, ``BASE · T_n^0 · PROBE`` (eq. 6.23)."""
+        """The reflector pose the tracker should read, ``BASE · T_n^0 · PROBE`` (eq. 6.23).
+
+        Computed as ``BASE · T · tool⁻¹ · PROBE`` from the tool pose ``T`` (with the learned
+        correction when a layer is set).
+
+        Parameters
+        ----------
+        q : (N, n) or (n,) array_like, rad
+            Joint readings.
+        payload_kg : float or (N,) array_like, kg
+            Payloads.
+
+        Returns
+        -------
+        (N, 4, 4) array, m
+            Reflector poses in the measurement frame.
+        """
         T = self.pose(q, payload_kg)
         return self.base @ T @ invert(self.tool) @ self.probe
 
@@ -217,7 +328,24 @@ class IdentifiedModel:
 @dataclass(frozen=True, eq=False)
 class NominalModel:
     """The controller's nominal model (description parameters) with a tool, as a
-    :class:`PoseModel`.  Payload and deflections are ignored, as a controller does."""
+    :class:`PoseModel`.  Payload and deflections are ignored, as a controller does.
+
+    ``T = T_n^0(q) · tool`` (eq. 6.1, exact four-bar closure).
+
+    Attributes
+    ----------
+    desc : RobotDescription
+        The robot.
+    tool : (4, 4) array, m
+        The TCP in the flange frame (default identity).
+    params : GeometricParameters
+        Geometry used (default the description's nominal one; its tool is set to ``tool``).
+
+    Raises
+    ------
+    ValueError
+        ``tool`` not a finite 4×4 matrix.
+    """
 
     desc: RobotDescription
     tool: Array = field(default=None)  # type: ignore[assignment]
@@ -234,13 +362,35 @@ class NominalModel:
 
     @property
     def description(self) -> RobotDescription:
+        """The robot."""
         return self.desc
 
     def evaluate(self, q: ArrayLike, payload_kg: ArrayLike | float = 0.0) -> tuple[Array, Array]:
-        """Tool poses ``(N, 4, 4)`` in the robot base frame and Jacobian ``(N, 6, n)``."""
+        """Tool poses and the manipulator Jacobian at the TCP (eqs. 6.1, 6.37).
+
+        Parameters
+        ----------
+        q : (N, n) or (n,) array_like, rad
+            Joint readings.
+        payload_kg : float or (N,) array_like
+            Ignored.
+
+        Returns
+        -------
+        T : (N, 4, 4) array, m
+            Tool poses in the robot base frame.
+        J : (N, 6, n) array
+            Jacobian at the TCP w.r.t. the readings (m/rad over rad/rad).
+
+        Raises
+        ------
+        ValueError
+            ``q`` of the wrong shape or not finite.
+        """
         qb = _as_batch(q, self.desc.n_readings)
         fk = forward(self.desc, self.params, qb)
         return fk.tcp, jacobian_from_fk(self.desc, fk, "tcp")
 
     def pose(self, q: ArrayLike, payload_kg: ArrayLike | float = 0.0) -> Array:
+        """Tool poses ``(N, 4, 4)`` (m) in the robot base frame for readings ``q`` (rad)."""
         return self.evaluate(q, payload_kg)[0]

@@ -34,7 +34,27 @@ __all__ = ["filter_program", "frame_matrix", "joint_program", "target_poses"]
 
 
 def frame_matrix(xyz: ArrayLike, angles: ArrayLike, convention: str = "zyz") -> Array:
-    """A frame (e.g. a user frame) from its position (m) and angles (rad): ``(4, 4)``."""
+    """A frame (e.g. a user frame) from its position and angles, ``T = [R(angles) xyz; 0 1]``.
+
+    Parameters
+    ----------
+    xyz : (3,) array_like, m
+        Origin.
+    angles : (3,) array_like, rad
+        Orientation in ``convention``.
+    convention : str
+        ``"zyz"`` (Comau A, B, C, eq. A.4), ``"rpy"``, … (:mod:`plugcell.kinematics.rotations`).
+
+    Returns
+    -------
+    (4, 4) array, m
+        The frame.
+
+    Raises
+    ------
+    ValueError
+        Wrong shapes, non-finite values or an unknown convention.
+    """
     xyz = np.asarray(xyz, dtype=float)
     angles = np.asarray(angles, dtype=float)
     if xyz.shape != (3,) or angles.shape != (3,):
@@ -50,8 +70,29 @@ def target_poses(
     convention: str = "zyz",
     user_frame: ArrayLike | None = None,
 ) -> Array:
-    """Targets ``(N, 3)`` positions (m) + ``(N, 3)`` angles (rad) → ``(N, 4, 4)`` poses in
-    the robot base frame (``UFRAME · T_user`` when ``user_frame`` is given)."""
+    """Program targets → poses in the robot base frame, ``T = UFRAME · [R(angles) p; 0 1]``.
+
+    Parameters
+    ----------
+    positions : (N, 3) array_like, m
+        Target positions (in the user frame if given).
+    angles : (N, 3) array_like, rad
+        Target orientations in ``convention``.
+    convention : str
+        Angle convention (``"zyz"``, ``"rpy"``, …).
+    user_frame : (4, 4) array_like, m, optional
+        UFRAME, the user frame in the robot base frame (default: identity).
+
+    Returns
+    -------
+    (N, 4, 4) array, m
+        Tool-point poses in the robot base frame.
+
+    Raises
+    ------
+    ValueError
+        Wrong shapes, non-finite values, an unknown convention or a bad user frame.
+    """
     p = np.atleast_2d(np.asarray(positions, dtype=float))
     a = np.atleast_2d(np.asarray(angles, dtype=float))
     if p.shape[-1] != 3 or a.shape != p.shape or p.ndim != 2:
@@ -83,8 +124,43 @@ def filter_program(
     """Compensated joint targets for a program's Cartesian targets (module docstring).
 
     Nominal IK (the controller's ``POS_TO_JNTP``) then 6.5.1 on ``model``, vectorised
-    over the targets.  ``payload_kg`` per target or one for all.  With
-    ``raise_errors=False`` the failing targets are marked in the result.
+    over the targets: ``q ← q + J⁻¹ e(T_target, T_model(q))`` (eq. 4.11) until
+    ``‖Δx‖ < tol``.
+
+    Parameters
+    ----------
+    model : PoseModel
+        The identified model.
+    positions : (N, 3) array_like, m
+        Target positions.
+    angles : (N, 3) array_like, rad
+        Target orientations in ``convention``.
+    convention : str
+        Angle convention (``"zyz"``, ``"rpy"``, …).
+    user_frame : (4, 4) array_like, m, optional
+        UFRAME the targets are given in.
+    payload_kg : float or (N,) array_like, kg
+        Payload per target or one for all.
+    seed : (n,) or (N, n) array_like, rad, optional
+        Start of the nominal IK.
+    tol : float
+        Convergence tolerance on ‖Δx‖ (m and rad).
+    max_iterations : int
+        Iteration bound.
+    raise_errors : bool
+        With ``False`` the failing targets are marked in the result.
+
+    Returns
+    -------
+    CompensationResult
+        Compensated joint readings ``(N, n)``, rad.
+
+    Raises
+    ------
+    ValueError
+        Malformed targets (see :func:`target_poses`).
+    CompensationError
+        For the first failing target (unless ``raise_errors=False``).
     """
     T = target_poses(positions, angles, convention, user_frame)
     return compensate(model, T, payload_kg, seed=seed, tol=tol, max_iterations=max_iterations,
@@ -92,11 +168,37 @@ def filter_program(
 
 
 def joint_program(result: CompensationResult, *, degrees: bool = True) -> Array:
-    """The compensated joint targets ``(N, n)`` to send (degrees by default, as a
-    controller's joint positions)."""
+    """The compensated joint targets to send (degrees by default, as a controller's joint
+    positions).
+
+    Parameters
+    ----------
+    result : CompensationResult
+        The compensation.
+    degrees : bool
+        Convert every column from rad to degrees (also a prismatic joint's, which is m).
+
+    Returns
+    -------
+    (N, n) array, deg (or rad)
+        Joint targets (a copy).
+    """
     return np.degrees(result.q) if degrees else result.q.copy()
 
 
 def pose_angles(T: ArrayLike, convention: str = "zyz") -> Array:
-    """Angles ``(N, 3)`` (rad) of poses — the inverse of :func:`target_poses`' rotation."""
+    """Angles of poses — the inverse of :func:`target_poses`' rotation.
+
+    Parameters
+    ----------
+    T : (N, 4, 4) array_like
+        Poses.
+    convention : str
+        Angle convention.
+
+    Returns
+    -------
+    (N, 3) array, rad
+        Angle triples.
+    """
     return matrix_to_angles(np.asarray(T, dtype=float)[..., :3, :3], convention)

@@ -38,9 +38,20 @@ __all__ = ["CartesianRobot", "JointRobot", "PoseSensor", "PositionSensor", "Read
 
 @dataclass(frozen=True, eq=False)
 class Reading:
-    """One measurement: ``position`` ``(3,)`` (m), ``pose`` ``(4, 4)`` or ``None`` for a
-    3-DOF device, the integration time ``duration_s`` and the time the whole reading
-    took, ``elapsed_s`` (acquisition, integration, transfer)."""
+    """One measurement, in the frame the device reports (robot base frame for a
+    :class:`PoseSensor`/:class:`PositionSensor`).
+
+    Attributes
+    ----------
+    position : (3,) array, m
+        The measured point.
+    pose : (4, 4) array, m, or None
+        The measured pose, ``None`` for a 3-DOF device.
+    duration_s : float, s
+        Integration time.
+    elapsed_s : float, s
+        Time the whole reading took (acquisition, integration, transfer).
+    """
 
     position: Array
     pose: Array | None

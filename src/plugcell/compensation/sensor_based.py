@@ -64,11 +64,28 @@ __all__ = [
 class CorrectionSettings:
     """Parameters of the correction loops (defaults: thesis 6.5.2 and 8.3.2).
 
-    ``position_tol_m`` 0.08 mm, ``orientation_tol_rad`` 0.05°, ``duration_s`` 50 ms
-    per measurement, ``max_iterations`` corrective moves before giving up,
-    ``overhead_s`` seconds added per corrective iteration for computation and data
-    transfer outside the devices (0 by default), ``check_limits`` refuse a move that
-    leaves the joint limits.
+    The loops stop when ``‖Δp‖ < position_tol_m`` (and, 6-DOF, ``‖Δφ‖ < orientation_tol_rad``).
+
+    Attributes
+    ----------
+    position_tol_m : float, m
+        Position threshold (0.08 mm).
+    orientation_tol_rad : float, rad
+        Orientation threshold (0.05°).
+    duration_s : float, s
+        Integration time per measurement (50 ms).
+    max_iterations : int
+        Corrective moves before giving up.
+    overhead_s : float, s
+        Time added per corrective iteration for computation and data transfer outside
+        the devices (0 by default).
+    check_limits : bool
+        Refuse a move that leaves the joint limits.
+
+    Raises
+    ------
+    ValueError
+        Non-positive thresholds or duration, negative iteration count or overhead.
     """
 
     position_tol_m: float = 0.08e-3
@@ -91,13 +108,28 @@ class CorrectionSettings:
 class CorrectionStep:
     """One iteration: a measurement and (unless it ended the loop) the move it caused.
 
-    ``index`` 0 is the first measurement; ``q`` the joint readings when measuring;
-    ``measured`` the reading (robot base frame); ``error`` Δx ``(6,)`` (6-DOF) or Δp
-    ``(3,)`` (3-DOF); ``position_error_m`` ‖Δp‖; ``orientation_error_rad`` ‖Δφ‖ (NaN for
-    3-DOF); ``measure_duration_s``/``measure_elapsed_s`` of the reading; ``move`` the
-    commanded increment (δθ ``(n,)`` rad, or Δp ``(3,)`` m) or ``None``;
-    ``move_time_s`` and ``overhead_s`` of this iteration; ``clock_s`` the loop's time
-    at the end of the step.
+    Attributes
+    ----------
+    index : int
+        0 for the first measurement.
+    q : (n,) array, rad
+        Joint readings when measuring.
+    measured : Reading
+        The reading (robot base frame).
+    error : (6,) or (3,) array
+        ``Δx = [Δp (m); φ (rad)]`` (6-DOF) or ``Δp`` (m, 3-DOF).
+    position_error_m : float, m
+        ‖Δp‖.
+    orientation_error_rad : float, rad
+        ‖Δφ‖ (NaN for 3-DOF).
+    measure_duration_s, measure_elapsed_s : float, s
+        Integration time and total time of the reading.
+    move : (n,) or (3,) array, or None
+        The commanded increment (δθ = J⁻¹Δx, rad, or Δp, m), ``None`` if none.
+    move_time_s, overhead_s : float, s
+        Move time and overhead of this iteration.
+    clock_s : float, s
+        The loop's time at the end of the step.
     """
 
     index: int
@@ -133,7 +165,25 @@ class CorrectionStep:
 @dataclass(frozen=True, eq=False)
 class CorrectionResult:
     """The record of one correction: every :class:`CorrectionStep`, whether the
-    thresholds were met, and the final joint readings."""
+    thresholds were met, and the final joint readings.
+
+    Attributes
+    ----------
+    mode : str
+        ``"6dof"`` or ``"3dof"``.
+    target : (4, 4) array, m
+        Target tool pose in the robot base frame (position only for 3-DOF).
+    settings : CorrectionSettings
+        The settings used.
+    steps : tuple of CorrectionStep
+        Every iteration.
+    converged : bool
+        The thresholds were met.
+    reason : str
+        ``""`` or why the loop stopped (``"max_iterations"``, ``"sensor:…"``, …).
+    q_final : (n,) array, rad, or None
+        Joint readings at the last measurement.
+    """
 
     mode: str
     target: Array
@@ -150,6 +200,7 @@ class CorrectionResult:
 
     @property
     def measurements(self) -> int:
+        """Number of measurements taken."""
         return len(self.steps)
 
     @property
@@ -159,13 +210,16 @@ class CorrectionResult:
 
     @property
     def final_position_error_m(self) -> float:
+        """‖Δp‖ of the last measurement (m; NaN without one)."""
         return self.steps[-1].position_error_m if self.steps else math.nan
 
     @property
     def final_orientation_error_rad(self) -> float:
+        """‖Δφ‖ of the last measurement (rad; NaN without one or for 3-DOF)."""
         return self.steps[-1].orientation_error_rad if self.steps else math.nan
 
     def as_dict(self) -> dict[str, Any]:
+        """JSON-ready summary with every step (mm, degrees, seconds)."""
         return {
             "mode": self.mode, "converged": self.converged, "reason": self.reason,
             "iterations": self.iterations, "measurements": self.measurements,
@@ -235,10 +289,41 @@ def correct_6dof(
     *,
     payload_kg: float = 0.0,
 ) -> CorrectionResult:
-    """The 6-DOF loop of 6.5.2 (module docstring) towards tool pose ``target`` (robot
-    base frame).  ``model`` supplies ``J(θ)`` (the identified model); returns the
-    :class:`CorrectionResult` once the thresholds are met, raises
-    :class:`CorrectionError` otherwise."""
+    """The 6-DOF loop of 6.5.2 (Fig. 6-11, module docstring) towards a tool pose.
+
+    Repeat: measure ``x^m``, ``Δx = x^d ⊖ x^m`` (exact log-map pose error), stop when
+    ``‖Δp‖ < position_tol_m`` and ``‖Δφ‖ < orientation_tol_rad``, else
+    ``δθ = J(θ)⁻¹ Δx`` (pseudo-inverse if J is not square or singular) and move to
+    ``θ + δθ``.
+
+    Parameters
+    ----------
+    robot : JointRobot
+        Reads joints and makes the corrective moves.
+    sensor : PoseSensor
+        Measures the tool pose in the robot base frame.
+    model : PoseModel
+        Supplies ``J(θ)`` (the identified model) and the joint limits.
+    target : (4, 4) array_like, m
+        Desired tool pose in the robot base frame.
+    settings : CorrectionSettings, optional
+        Thresholds, timing and limits (default: the thesis's).
+    payload_kg : float, kg
+        Payload for the model's Jacobian.
+
+    Returns
+    -------
+    CorrectionResult
+        The record, once the thresholds are met.
+
+    Raises
+    ------
+    CorrectionError
+        The loop stopped early (sensor failure, iteration cap, joint limit, robot
+        failure), with the partial result.
+    ValueError
+        A malformed target or a reading without a pose.
+    """
     s = settings or CorrectionSettings()
     Td = _target_pose(target)
     loop = _Loop("6dof", Td, s)
@@ -280,7 +365,31 @@ def correct_3dof(
     settings: CorrectionSettings | None = None,
 ) -> CorrectionResult:
     """The 3-DOF loop of 6.5.2 (Fig. 6-12): relative moves along ``Δp = p^d − p^m`` until
-    ``‖Δp‖ < position_tol_m``.  ``target_position`` ``(3,)`` in the robot base frame."""
+    ``‖Δp‖ < position_tol_m``.
+
+    Parameters
+    ----------
+    robot : CartesianRobot
+        Reads joints and makes the relative linear moves.
+    sensor : PositionSensor
+        Measures the tool point in the robot base frame.
+    target_position : (3,) array_like, m
+        Desired position in the robot base frame.
+    settings : CorrectionSettings, optional
+        Threshold, timing (default: the thesis's).
+
+    Returns
+    -------
+    CorrectionResult
+        The record, once the threshold is met.
+
+    Raises
+    ------
+    CorrectionError
+        The loop stopped early (sensor failure, iteration cap, robot failure).
+    ValueError
+        A malformed target.
+    """
     s = settings or CorrectionSettings()
     pd = np.asarray(target_position, dtype=float)
     if pd.shape != (3,) or not np.all(np.isfinite(pd)):

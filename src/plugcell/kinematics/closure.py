@@ -55,11 +55,17 @@ __all__ = ["MIN_SIN", "ClosureResult", "fourbar_closure", "nominal_closure"]
 class ClosureResult:
     """Passive angles of one loop and their derivatives (all ``(...)``-batched).
 
-    ``coupler``, ``follower``: θ3', θ4' (radians).
-    ``d_driven``: ``(..., 2, 2)``, rows (θ3', θ4'), columns (θ_arm, θ_crank).
-    ``d_lengths``: ``(..., 2, 4)``, rows (θ3', θ4'), columns (a_arm, a_crank, a_cpl, a_fol).
-    ``valid``: ``(...)`` bool — False where the loop cannot assemble or collapses
-    (only when called with ``raise_errors=False``; the angles there are NaN).
+    Attributes
+    ----------
+    coupler, follower : (...) array, rad
+        The passive angles θ3', θ4'.
+    d_driven : (..., 2, 2) array, rad/rad
+        ``∂(θ3', θ4')/∂(θ_arm, θ_crank)``: rows (θ3', θ4'), columns (θ_arm, θ_crank).
+    d_lengths : (..., 2, 4) array, rad/m
+        ``∂(θ3', θ4')/∂(a_arm, a_crank, a_cpl, a_fol)`` (zeros for the nominal closure).
+    valid : (...) bool array
+        False where the loop cannot assemble or collapses (only when called with
+        ``raise_errors=False``; the angles and derivatives there are NaN).
     """
 
     coupler: Array
@@ -93,8 +99,30 @@ def nominal_closure(
 ) -> ClosureResult:
     """Parallelogram closure, thesis eq. (6.10): θ3' = θ2 − θ2', θ4' = π − θ2 + θ2'.
 
-    Derivatives are the constants of eq. (6.16).  Raises :class:`LoopClosureError`
-    when sin(θ2 − θ2') ≈ 0 (the parallelogram collapses into a line).
+    Derivatives are the constants of eq. (6.16),
+    ``∂(θ3', θ4')/∂(θ2, θ2') = [[1, −1], [−1, 1]]``; the length derivatives are zero.
+
+    Parameters
+    ----------
+    theta_arm : (...) array_like, rad
+        DH angle θ2 of the arm.
+    theta_crank : (...) array_like, rad
+        DH angle θ2' of the crank; broadcast with ``theta_arm``.
+    raise_errors : bool, default True
+        With ``False``, collapsed configurations are marked invalid (NaN angles).
+    min_sin : float
+        Collapse threshold on ``|sin(θ2 − θ2')|``.
+
+    Returns
+    -------
+    ClosureResult
+        θ3', θ4' ``(...)`` rad and their derivatives.
+
+    Raises
+    ------
+    LoopClosureError
+        When ``|sin(θ2 − θ2')| < min_sin`` (the parallelogram collapses into a line),
+        unless ``raise_errors=False``.
     """
     ta, tc = np.broadcast_arrays(np.asarray(theta_arm, float), np.asarray(theta_crank, float))
     diff = ta - tc
@@ -125,13 +153,42 @@ def fourbar_closure(
     raise_errors: bool = True,
     min_sin: float = MIN_SIN,
 ) -> ClosureResult:
-    """Exact planar four-bar closure (appendix C, re-derived; see module docstring).
+    """Exact planar four-bar closure (appendix C, eqs. C.1–C.2, re-derived).
 
-    Picks the assembly branch continuous with the nominal parallelogram and
-    wraps θ3', θ4' next to their nominal values (6.10).  Raises
-    :class:`LoopClosureError` if the loop cannot be assembled
-    (``|cos θ4'| > 1``: the coupler and follower cannot span the gap) or collapses
-    (sin θ4' ≈ 0 or sin(θ_arm − θ_crank) ≈ 0).
+    With ``r = a_arm·e(θ_arm) − a_crank·e(θ_crank)``, ``e(φ) = (cos φ, sin φ)``::
+
+        cos θ4' = (|r|² − a_cpl² − a_fol²) / (2·a_cpl·a_fol)
+        θ4'     = σ·acos(cos θ4'),  σ = sign sin(θ_arm − θ_crank)
+        θ3'     = atan2(r) − atan2(a_fol sin θ4', a_cpl + a_fol cos θ4') − θ_crank
+
+    i.e. the assembly branch continuous with the nominal parallelogram, each angle
+    wrapped to the 2π-representative nearest its nominal value (6.10).  Derivatives
+    by the implicit-function theorem on ``F = a_crank·e(θ_c) + a_cpl·e(φ3) +
+    a_fol·e(φ4) − a_arm·e(θ_a) = 0``: ``∂φ/∂x = −(∂F/∂φ)⁻¹ ∂F/∂x``.
+
+    Parameters
+    ----------
+    theta_arm, theta_crank : (...) array_like, rad
+        DH angles of the arm (θ2) and the crank (θ2').
+    a_arm, a_crank, a_coupler, a_follower : (...) array_like, m
+        Planar lengths ``a`` of the four loop links.  All arguments broadcast together.
+    raise_errors : bool, default True
+        With ``False``, failing configurations are marked invalid (NaN angles).
+    min_sin : float
+        Collapse threshold on ``|sin θ4'|`` and ``|sin(θ_arm − θ_crank)|``.
+
+    Returns
+    -------
+    ClosureResult
+        θ3', θ4' ``(...)`` rad, their derivatives w.r.t. the driven angles and the four
+        lengths, and ``valid``.
+
+    Raises
+    ------
+    LoopClosureError
+        If the loop cannot be assembled (``|cos θ4'| > 1``: the coupler and follower
+        cannot span the gap) or collapses (sin θ4' ≈ 0 or sin(θ_arm − θ_crank) ≈ 0),
+        unless ``raise_errors=False``.
     """
     ta, tc, la, lc, l3, l4 = np.broadcast_arrays(
         *(

@@ -25,7 +25,18 @@ class DescriptionError(KinematicsError, ValueError):
         super().__init__(f"{location}: {reason}" if location else reason)
 
     def with_prefix(self, prefix: str) -> DescriptionError:
-        """The same error with ``prefix`` (e.g. a file name) before the location."""
+        """The same error with ``prefix`` (e.g. a file name) before the location.
+
+        Parameters
+        ----------
+        prefix : str
+            Text to put before the location, ``"prefix: location"``.
+
+        Returns
+        -------
+        DescriptionError
+            A new error (this one is unchanged).
+        """
         loc = f"{prefix}: {self.location}" if self.location else prefix
         return DescriptionError(loc, self.reason)
 

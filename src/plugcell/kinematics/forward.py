@@ -46,19 +46,34 @@ __all__ = [
 class FKResult:
     """Result of :func:`forward` for a batch of configurations (shape ``(...)``).
 
-    ``frames``: ``(..., n_links, 4, 4)`` every link frame F_i in the robot base
-    frame F0 (off-chain links such as the Smart H4's arm "2" included).
-    ``theta``: ``(..., n_links)`` the DH angle θ_i each link used.
-    ``passive``: ``(..., n_passive)`` passive angles in ``passive_names`` order.
-    ``passive_jacobian``: ``(..., n_passive, n_actuated)`` ∂θ_passive/∂θ_kin, w.r.t. the
-    kinematic joints (the readings when the description has no coupling).
-    ``passive_d_a``: ``(..., n_passive, n_links)`` ∂θ_passive/∂a_link (four-bar only;
-    zeros for the nominal closure).
-    ``flange``: T_n^0 (eq. 6.1), ``tcp`` = flange·tool, both in the robot base
-    frame; ``world_flange`` = base·flange and ``world_tcp`` = base·tcp in the
-    world/metrology frame (eq. 6.23 with PROBE = tool).
-    ``valid``: ``(...)`` False where a loop could not close (only possible with
-    ``forward(..., raise_errors=False)``; frames there are NaN).
+    Attributes
+    ----------
+    link_names : tuple of str
+        Link names, the order of ``frames`` and ``theta``.
+    passive_names : tuple of str
+        Passive link names, the order of ``passive``.
+    frames : (..., n_links, 4, 4) array, m
+        Every link frame ``F_i = F_parent(i) · A_i`` in the robot base frame F0
+        (off-chain links such as the Smart H4's arm "2" included).
+    theta : (..., n_links) array, rad
+        The DH angle θ_i each link used.
+    passive : (..., n_passive) array, rad
+        Passive angles in ``passive_names`` order.
+    passive_jacobian : (..., n_passive, n_actuated) array, rad/rad
+        ``∂θ_passive/∂θ_kin``, w.r.t. the kinematic joints (the readings when the
+        description has no coupling).
+    passive_d_a : (..., n_passive, n_links) array, rad/m
+        ``∂θ_passive/∂a_link`` (four-bar only; zeros for the nominal closure).
+    flange : (..., 4, 4) array, m
+        ``T_n^0`` (eq. 6.1) in the robot base frame.
+    tcp : (..., 4, 4) array, m
+        ``flange · tool`` in the robot base frame.
+    world_flange, world_tcp : (..., 4, 4) array, m
+        ``base · flange`` and ``base · tcp`` in the world/metrology frame (eq. 6.23
+        with PROBE = tool).
+    valid : (...) bool array
+        False where a loop could not close (only possible with
+        ``forward(..., raise_errors=False)``; frames there are NaN).
     """
 
     link_names: tuple[str, ...]
@@ -75,20 +90,68 @@ class FKResult:
     valid: NDArray[np.bool_]
 
     def index(self, name: str) -> int:
-        """Position of link ``name`` in ``frames``/``theta``."""
+        """Position of link ``name`` in ``frames``/``theta``.
+
+        Parameters
+        ----------
+        name : str
+            A link name.
+
+        Returns
+        -------
+        int
+            Its index along the ``n_links`` axis.
+
+        Raises
+        ------
+        KeyError
+            Unknown link.
+        """
         try:
             return self.link_names.index(name)
         except ValueError:
             raise KeyError(f"unknown link {name!r}; links are {list(self.link_names)}") from None
 
     def frame(self, name: str) -> Array:
-        """``(..., 4, 4)`` frame of link ``name`` in the robot base frame (``"base"``: F0)."""
+        """Frame ``F_name`` of one link in the robot base frame (``"base"``: F0 = I).
+
+        Parameters
+        ----------
+        name : str
+            A link name, or ``"base"``.
+
+        Returns
+        -------
+        (..., 4, 4) array, m
+            The link frame for every configuration.
+
+        Raises
+        ------
+        KeyError
+            Unknown link.
+        """
         if name == "base":
             return np.broadcast_to(np.eye(4), self.flange.shape).copy()
         return self.frames[..., self.index(name), :, :]
 
     def passive_angle(self, name: str) -> Array:
-        """``(...)`` angle of passive link ``name``."""
+        """Closure angle of one passive link (θ3' or θ4' of eq. 6.10 / appendix C).
+
+        Parameters
+        ----------
+        name : str
+            A passive link name.
+
+        Returns
+        -------
+        (...) array, rad
+            Its angle for every configuration.
+
+        Raises
+        ------
+        KeyError
+            ``name`` is not a passive link.
+        """
         try:
             k = self.passive_names.index(name)
         except ValueError:
@@ -131,13 +194,48 @@ def joint_angles(
     *,
     raise_errors: bool = True,
 ) -> tuple[Array, Array, Array, Array, NDArray[np.bool_]]:
-    """DH angles of every link for readings ``q`` ``(..., n_readings)``.
+    """DH angles of every link for joint readings ``q``.
 
-    θ_i = θ_kin,j + theta_i for actuated link i (θ_kin = ``desc.kinematic_joints(q)``),
-    the closure angle + theta_i for passive links, theta_i for fixed and prismatic
-    ones (a prismatic reading moves ``d``: :func:`link_lengths`).
-    Returns ``(theta (..., n_links), passive (..., n_p), d_passive_dθkin (..., n_p,
-    n_actuated), d_passive_da (..., n_p, n_links), valid (...))``.
+    ``θ_i = θ_kin,j + theta_i`` for actuated link i (``θ_kin = desc.kinematic_joints(q)``,
+    ``= M·q + offset`` with a coupling), ``θ_i = θ_closure + theta_i`` for passive
+    links (:func:`~plugcell.kinematics.closure.fourbar_closure` or
+    :func:`~plugcell.kinematics.closure.nominal_closure`, eq. 6.10), ``θ_i = theta_i``
+    for fixed and prismatic ones (a prismatic reading moves ``d``: :func:`link_lengths`).
+
+    Parameters
+    ----------
+    desc : RobotDescription
+        The robot.
+    params : GeometricParameters or None
+        Geometric parameters; ``None``: the nominal ones.
+    q : (..., n_readings) array_like, rad (m for prismatic)
+        Joint readings.
+    closure : {"fourbar", "nominal"}
+        Loop closure to use.
+    raise_errors : bool, default True
+        With ``False``, configurations whose loop cannot close are flagged in
+        ``valid`` (NaN angles) instead of raising.
+
+    Returns
+    -------
+    theta : (..., n_links) array, rad
+        DH angle of every link.
+    passive : (..., n_p) array, rad
+        Passive angles (two per loop: coupler, follower).
+    d_passive_dθkin : (..., n_p, n_actuated) array, rad/rad
+        ``∂θ_passive/∂θ_kin``.
+    d_passive_da : (..., n_p, n_links) array, rad/m
+        ``∂θ_passive/∂a``.
+    valid : (...) bool array
+        False where a loop could not close.
+
+    Raises
+    ------
+    ValueError
+        Unknown ``closure``, ``q`` of the wrong shape or not finite, or ``params`` for
+        other links.
+    LoopClosureError
+        A loop cannot close (unless ``raise_errors=False``).
     """
     if closure not in CLOSURES:
         raise ValueError(f"closure must be one of {CLOSURES}, got {closure!r}")
@@ -179,9 +277,24 @@ def joint_angles(
 
 
 def link_lengths(desc: RobotDescription, params: GeometricParameters, q: ArrayLike) -> Array:
-    """DH offsets ``d`` of every link ``(..., n_links)`` for readings ``q``.
+    """DH offsets ``d`` of every link for joint readings ``q``.
 
-    ``d_i = reading + d`` for a prismatic link, ``d`` of ``params`` for the others.
+    ``d_i = θ_kin,j + d_i`` for a prismatic link (its kinematic joint value, the
+    reading itself without a coupling), ``d_i`` of ``params`` for the others.
+
+    Parameters
+    ----------
+    desc : RobotDescription
+        The robot.
+    params : GeometricParameters
+        Geometric parameters (``d`` in m).
+    q : (..., n_readings) array_like, rad / m
+        Joint readings (m for prismatic joints).
+
+    Returns
+    -------
+    d : (..., n_links) array, m
+        The offsets every link uses.
     """
     q = np.asarray(q, dtype=float)
     d = np.broadcast_to(params.d, (*q.shape[:-1], desc.n_links)).copy()
@@ -196,8 +309,27 @@ def link_lengths(desc: RobotDescription, params: GeometricParameters, q: ArrayLi
 
 def compose_frames(desc: RobotDescription, params: GeometricParameters, theta: Array,
                    d: Array | None = None) -> Array:
-    """Link frames ``(..., n_links, 4, 4)`` in F0 from full DH angles ``theta`` (and the
-    offsets ``d`` of :func:`link_lengths`; default: those of ``params``)."""
+    """Link frames in F0 from full DH angles: ``F_i = F_parent(i) · A_i(θ_i, d_i, a_i, α_i, β_i)``.
+
+    ``A_i`` is the DH + Hayati link transform (eq. B.1); links are composed in
+    description order (a parent precedes its children), the first from F0.
+
+    Parameters
+    ----------
+    desc : RobotDescription
+        The robot (link tree).
+    params : GeometricParameters
+        ``a, α, β`` (and ``d`` unless given) of every link, m and rad.
+    theta : (..., n_links) array, rad
+        Full DH angles (e.g. from :func:`joint_angles`).
+    d : (..., n_links) array, m, optional
+        DH offsets from :func:`link_lengths`; default: ``params.d``.
+
+    Returns
+    -------
+    frames : (..., n_links, 4, 4) array, m
+        Every link frame in the robot base frame F0.
+    """
     local = dh_hayati(theta, params.d if d is None else d, params.a, params.alpha, params.beta)
     frames = np.empty_like(local)
     for i, lk in enumerate(desc.links):
@@ -277,11 +409,25 @@ def forward(
 def branch_cut_transform(desc: RobotDescription, fk: FKResult, loop_index: int = 0) -> Array:
     """Frame of the follower's end computed along the *arm* branch, eq. (6.3).
 
-    Returns ``T_arm · Rz(φ4 − θ_arm)`` where φ4 is the absolute direction of the
-    follower's end frame: for a closed planar loop this equals the follower's
-    frame computed along the crank branch (6.2), so ``frame(follower)`` and this
-    matrix agree (they do exactly for a parallelogram with any lengths the
-    four-bar closes, and only approximately when loop twists/β/d are perturbed).
+    ``T = F_arm · Rz(φ4 − θ_arm)`` with ``φ4 = θ_crank + θ3' + θ4'`` the absolute
+    direction of the follower's end frame: for a closed planar loop this equals the
+    follower's frame computed along the crank branch (6.2), so ``frame(follower)``
+    and this matrix agree (exactly for a parallelogram with any lengths the four-bar
+    closes, only approximately when loop twists/β/d are perturbed).
+
+    Parameters
+    ----------
+    desc : RobotDescription
+        The robot.
+    fk : FKResult
+        Forward kinematics of ``desc``.
+    loop_index : int, default 0
+        Which loop of ``desc.loops``.
+
+    Returns
+    -------
+    T : (..., 4, 4) array, m
+        The follower's end frame along branch (1-2-3), in the robot base frame.
     """
     loop = desc.loops[loop_index]
     ia, ic, i3, i4 = (desc.index(n) for n in loop.links)

@@ -77,11 +77,24 @@ __all__ = ["IKResult", "inverse"]
 class IKResult:
     """Result of :func:`inverse` (arrays batched like the targets, shape ``(...)``).
 
-    ``q``: ``(..., n_readings)`` joint readings (rad) — the solution, or the closest
-    attempt where ``converged`` is False; ``position_error`` (m) and
-    ``orientation_error`` (rad) of ``q``; ``iterations`` spent (all starts);
-    ``within_limits``; ``reason``: ``""`` for a solution inside the limits,
-    else the failure message (only visible with ``raise_errors=False``).
+    Attributes
+    ----------
+    q : (..., n_readings) array, rad
+        Joint readings — the solution, or the closest attempt where ``converged`` is
+        False.
+    converged : (...) bool array
+        Whether both ``position_error`` and ``orientation_error`` are below ``tol``.
+    position_error : (...) array, m
+        ``‖Δp‖``, the translational part of the pose error of ``q``.
+    orientation_error : (...) array, rad
+        ``‖φ‖``, the rotational part of the pose error of ``q``.
+    iterations : (...) int array
+        Iterations spent (all starts).
+    within_limits : (...) bool array
+        Whether ``q`` respects the joint limits.
+    reason : (...) object array of str
+        ``""`` for a solution inside the limits, else the failure message (only
+        visible with ``raise_errors=False``).
     """
 
     q: Array

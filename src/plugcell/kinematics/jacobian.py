@@ -41,10 +41,31 @@ __all__ = ["jacobian_from_fk", "kinematic_jacobian_from_fk", "manipulator_jacobi
 
 
 def jacobian_from_fk(desc: RobotDescription, fk: FKResult, point: str = "flange") -> Array:
-    """Jacobian ``(..., 6, n_readings)`` w.r.t. the joint readings, from an :class:`FKResult`.
+    """Manipulator Jacobian w.r.t. the joint readings, from an :class:`FKResult`.
 
-    ``J_q = J_θkin · M`` with M = ``desc.reading_jacobian`` (the coupling matrix;
-    without a coupling ``J_q = J_θkin``, computed once).
+    ``J_q = J_θkin · M`` with ``M`` the coupling matrix (``desc.coupling.matrix``;
+    without a coupling ``J_q = J_θkin``), ``J_θkin`` from
+    :func:`kinematic_jacobian_from_fk` (eqs. 6.37, 6.39).
+
+    Parameters
+    ----------
+    desc : RobotDescription
+        The robot ``fk`` was computed for.
+    fk : FKResult
+        Forward kinematics at the configurations of interest.
+    point : {"flange", "tcp"}
+        The point whose velocity the rows 0–2 give.
+
+    Returns
+    -------
+    J : (..., 6, n_readings) array
+        Rows 0–2: linear velocity of the point (m per rad of reading; m/m for a
+        prismatic reading); rows 3–5: angular velocity (rad/rad), base frame.
+
+    Raises
+    ------
+    ValueError
+        Unknown ``point``.
     """
     J = kinematic_jacobian_from_fk(desc, fk, point)
     if desc.coupling is None:
@@ -55,7 +76,35 @@ def jacobian_from_fk(desc: RobotDescription, fk: FKResult, point: str = "flange"
 def kinematic_jacobian_from_fk(
     desc: RobotDescription, fk: FKResult, point: str = "flange"
 ) -> Array:
-    """Jacobian ``(..., 6, n_actuated)`` w.r.t. the kinematic joints θ_kin (module docstring)."""
+    """Manipulator Jacobian w.r.t. the kinematic joints θ_kin, eqs. (6.37), (6.39).
+
+    Column of actuated joint j::
+
+        K_j = J_j [if j is on the chain] + Σ_passive (∂θ_passive/∂θ_kin,j) · J_passive
+        J_i = [z_{i−1} × (p − p_{i−1}); z_{i−1}]   (revolute),   [z_{i−1}; 0]  (prismatic)
+
+    with ``z_{i−1}``, ``p_{i−1}`` the axis and origin of the parent frame in the robot
+    base frame and ``p`` the point (module docstring).
+
+    Parameters
+    ----------
+    desc : RobotDescription
+        The robot ``fk`` was computed for.
+    fk : FKResult
+        Forward kinematics (its ``passive_jacobian`` supplies ∂θ_passive/∂θ_kin).
+    point : {"flange", "tcp"}
+        The point ``p``.
+
+    Returns
+    -------
+    J : (..., 6, n_actuated) array
+        Linear (m/rad) over angular (rad/rad) velocity rows, base frame.
+
+    Raises
+    ------
+    ValueError
+        Unknown ``point``.
+    """
     if point == "flange":
         p = fk.flange[..., :3, 3]
     elif point == "tcp":

@@ -66,15 +66,30 @@ _ZERO = 1e-14
 
 @dataclass(frozen=True, eq=False)
 class ChainJoint:
-    """One joint of a serial chain.
+    """One joint of a serial chain: ``T_child = T_parent · origin · Rot(axis, q)``.
 
-    ``origin``: (4, 4) pose of the joint frame in the parent link's frame at q = 0;
-    ``axis``: (3,) unit axis in the joint frame (ignored for ``fixed``);
-    ``limits``: (lower, upper) radians or ``None`` (unlimited, e.g. URDF continuous);
-    ``mass`` (kg) and ``com`` (m, child link frame): the child body's inertial data
-    (with whatever is rigidly attached to it off the chain); ``mimic``:
-    ``(joint, multiplier, offset)`` — this joint's value is ``multiplier · q_joint +
-    offset`` (URDF ``<mimic>``, offset in radians), so it is no reading of its own.
+    Attributes
+    ----------
+    name : str
+        Joint name (becomes the link name in the description).
+    kind : str
+        One of :data:`JOINT_KINDS`: ``revolute``, ``prismatic`` (``Trans(axis · q)``)
+        or ``fixed``.
+    origin : (4, 4) array, m
+        Pose of the joint frame in the parent link's frame at q = 0.
+    axis : (3,) array
+        Unit axis in the joint frame (ignored for ``fixed``).
+    limits : (float, float) or None
+        ``(lower, upper)``, rad (m for prismatic), or ``None`` (unlimited, e.g. URDF
+        continuous).
+    mass : float, kg
+        The child body's mass (with whatever is rigidly attached to it off the chain).
+    com : (float, float, float), m
+        Its centre of mass in the child link frame.
+    mimic : (str, float, float) or None
+        ``(joint, multiplier, offset)``: this joint's value is
+        ``q = multiplier · q_joint + offset`` (URDF ``<mimic>``, offset in rad), so it
+        is no reading of its own.
     """
 
     name: str
@@ -89,7 +104,19 @@ class ChainJoint:
 
 @dataclass(frozen=True, eq=False)
 class JointChain:
-    """Joints from a base link to a tip link, in order; the base frame is the root."""
+    """Joints from a base link to a tip link, in order; the base frame is the root.
+
+    ``T_tip = Π_k origin_k · Rot(axis_k, q_k)`` (:func:`chain_forward`).
+
+    Attributes
+    ----------
+    name : str
+        Robot name.
+    joints : tuple of ChainJoint
+        The joints, base to tip.
+    notes : str
+        Free text carried into the description.
+    """
 
     name: str
     joints: tuple[ChainJoint, ...]
@@ -97,6 +124,7 @@ class JointChain:
 
     @property
     def moving(self) -> tuple[ChainJoint, ...]:
+        """The non-fixed joints, in chain order (the joint-reading order)."""
         return tuple(j for j in self.joints if j.kind != "fixed")
 
 
@@ -122,7 +150,22 @@ def line_step(frame: Array, point: Array, direction: Array) -> _Row:
     (|z × w| below :data:`PARALLEL_SIN`): d = 0 (the new origin is the point of the line
     in the plane of ``frame``'s x and y axes), x_new towards it (or ``frame``'s x if the lines
     coincide), then Rx(α) Ry(β) with w = (sin β, −sin α cos β, cos α cos β) in the new
-    x, y, z axes — exact also for nearly parallel lines.
+    x, y, z axes — exact also for nearly parallel lines.  In both cases θ is the angle
+    about z from ``frame``'s x to x_new.
+
+    Parameters
+    ----------
+    frame : (4, 4) array, m
+        The current frame F_{i−1} (its z axis is the current joint axis line).
+    point : (3,) array, m
+        A point of the next axis line, in the same frame as ``frame``.
+    direction : (3,) array
+        Direction of the next axis line (need not be unit).
+
+    Returns
+    -------
+    _Row
+        ``(θ, d, a, α, β, hayati)`` with θ, α, β in rad and d, a in m.
     """
     R, o = frame[:3, :3], frame[:3, 3]
     x, z = R[:, 0], R[:, 2]
@@ -173,10 +216,23 @@ def _axis_rotation(axis: Array, q: float) -> Array:
 
 
 def chain_forward(chain: JointChain, q: Array) -> Array:
-    """Tip frame (4, 4) of the chain for moving-joint values ``q`` (reference FK).
+    """Tip frame of the chain for moving-joint values ``q`` (reference FK).
 
     ``T = Π_k origin_k · Rot(axis_k, q_k)`` (prismatic: ``Trans(axis_k · q_k)``) over the
     joints in order (fixed: nothing) — the URDF definition.
+
+    Parameters
+    ----------
+    chain : JointChain
+        The chain.
+    q : (n_moving,) array, rad (m for prismatic)
+        Values of the moving joints in chain order (mimic joints included; their
+        ``mimic`` relation is not applied here).
+
+    Returns
+    -------
+    T : (4, 4) array, m
+        The tip frame in the chain's base frame.
     """
     T = np.eye(4)
     j = 0
@@ -342,12 +398,17 @@ def _mimic_coupling(chain: JointChain) -> JointCoupling | None:
 class CalibratedOrigins:
     """Joint origins of a chain that reproduce a calibrated DH/Hayati geometry.
 
-    ``origins``: ``(n_joints, 4, 4)`` the new ``origin`` of every joint of the chain
-    (fixed joints unchanged except ``tip_joint``); ``tip_joint``: index of the fixed
-    joint that took up the flange's calibrated offset (``None`` if the chain has no
-    fixed joint after its last moving joint); ``residual``: (4, 4) the constant
-    ``E = tip_exported⁻¹ · tip_calibrated`` left when no joint could take it up
-    (identity otherwise).
+    Attributes
+    ----------
+    origins : (n_joints, 4, 4) array, m
+        The new ``origin`` of every joint of the chain (fixed joints unchanged except
+        ``tip_joint``).
+    tip_joint : int or None
+        Index of the fixed joint that took up the flange's calibrated offset (``None``
+        if none did).
+    residual : (4, 4) array, m
+        The constant ``E = tip_exported⁻¹ · tip_calibrated`` left when no joint could
+        take it up (identity otherwise).
     """
 
     origins: Array
@@ -368,6 +429,22 @@ def calibrated_origins(chain: JointChain, desc: RobotDescription,
     last moving joint takes up the difference (exact); otherwise (or without such a
     joint) it is returned as ``residual``.  Link frames stay on their joint axes, so
     meshes and inertias keep their place on the bodies.
+
+    Parameters
+    ----------
+    chain : JointChain
+        The chain ``desc`` was made from.
+    desc : RobotDescription
+        ``description_from_chain(chain)``.
+    params : GeometricParameters
+        The calibrated geometry (m, rad).
+    fixed_tip : bool, default True
+        Let the first fixed joint after the last moving one take up the tip offset.
+
+    Returns
+    -------
+    CalibratedOrigins
+        ``(n_joints, 4, 4)`` new origins (m), the tip joint used and the residual.
     """
     from plugcell.kinematics.forward import forward
 

@@ -44,10 +44,33 @@ def _frozen(x: ArrayLike, shape: tuple[int, ...], name: str) -> Array:
 class GeometricParameters:
     """DH + Hayati parameters of every link (SI: metres, radians) and BASE/tool.
 
-    Attributes are read-only numpy arrays: ``theta, d, a, alpha, beta`` of shape
-    ``(n_links,)`` in description order, ``base`` and ``tool`` of shape (4, 4).
-    ``base`` is the robot base frame in the world/metrology frame (thesis BASE of
-    eq. 6.23); ``tool`` the TCP (or PROBE) in the flange frame.
+    Link *i* contributes ``A_i = Rz(θ_i) Tz(d_i) Tx(a_i) Rx(α_i) Ry(β_i)`` (eq. B.1)
+    and the world TCP is ``base · T_flange · tool`` (eq. 6.23 with PROBE = tool).
+    All arrays are read-only copies, validated (shape, finite) on construction.
+
+    Attributes
+    ----------
+    link_names : tuple of str
+        Link names in description order (unique).
+    theta : (n_links,) array, rad
+        DH angle offsets θ (see the module docstring for their meaning per joint type).
+    d : (n_links,) array, m
+        DH offsets along z.
+    a : (n_links,) array, m
+        DH link lengths along x.
+    alpha : (n_links,) array, rad
+        DH twists α about x.
+    beta : (n_links,) array, rad
+        Hayati twists β about y (0 for a plain DH row).
+    base : (4, 4) array, m
+        The robot base frame in the world/metrology frame (thesis BASE of eq. 6.23).
+    tool : (4, 4) array, m
+        The TCP (or PROBE) in the flange frame.
+
+    Raises
+    ------
+    ValueError
+        Duplicate link names, an array of the wrong shape or non-finite values.
     """
 
     link_names: tuple[str, ...]
@@ -73,28 +96,86 @@ class GeometricParameters:
     # ------------------------------------------------------------------ access
     @property
     def n_links(self) -> int:
+        """Number of links ``n_links``."""
         return len(self.link_names)
 
     def index(self, link: str) -> int:
-        """Position of ``link`` in the parameter arrays."""
+        """Position of ``link`` in the parameter arrays.
+
+        Parameters
+        ----------
+        link : str
+            A link name.
+
+        Returns
+        -------
+        int
+            Its index ``i`` in ``theta``, ``d``, … .
+
+        Raises
+        ------
+        KeyError
+            Unknown link.
+        """
         try:
             return self.link_names.index(link)
         except ValueError:
             raise KeyError(f"unknown link {link!r}; links are {list(self.link_names)}") from None
 
     def get(self, link: str, field_name: str) -> float:
-        """One parameter value, e.g. ``params.get("2'", "beta")``."""
+        """One parameter value, e.g. ``params.get("2'", "beta")``.
+
+        Parameters
+        ----------
+        link : str
+            A link name.
+        field_name : str
+            One of :data:`FIELDS` (``theta``, ``d``, ``a``, ``alpha``, ``beta``).
+
+        Returns
+        -------
+        float
+            The value, m or rad according to the field.
+
+        Raises
+        ------
+        KeyError
+            Unknown link or field.
+        """
         if field_name not in FIELDS:
             raise KeyError(f"unknown parameter field {field_name!r}; expected one of {FIELDS}")
         return float(getattr(self, field_name)[self.index(link)])
 
     def table(self) -> Array:
-        """``(n_links, 5)`` array with columns θ, d, a, α, β."""
+        """The DH + Hayati table, one row ``(θ_i, d_i, a_i, α_i, β_i)`` per link.
+
+        Returns
+        -------
+        (n_links, 5) array
+            Columns θ (rad), d (m), a (m), α (rad), β (rad).
+        """
         return np.stack([getattr(self, f) for f in FIELDS], axis=-1)
 
     # ------------------------------------------------------------------ derive
     def replace(self, **changes: Any) -> GeometricParameters:
-        """A copy with some attributes replaced (``theta=..., base=...``)."""
+        """A copy with some attributes replaced (``theta=..., base=...``).
+
+        Parameters
+        ----------
+        **changes
+            New values for any of ``theta, d, a, alpha, beta`` (``(n_links,)``, m/rad)
+            and ``base, tool`` (``(4, 4)``, m).
+
+        Returns
+        -------
+        GeometricParameters
+            The new, validated set (same link names).
+
+        Raises
+        ------
+        TypeError
+            A keyword that is not one of those fields.
+        """
         allowed = {*FIELDS, "base", "tool"}
         bad = set(changes) - allowed
         if bad:
@@ -106,7 +187,23 @@ class GeometricParameters:
     def perturbed(self, delta: Mapping[tuple[str, str], float]) -> GeometricParameters:
         """A copy with ``delta[(link, field)]`` *added* to each named parameter.
 
-        ``params.perturbed({("2'", "a"): 1e-3, ("3'", "beta"): 2e-4})``
+        ``g'_{link, field} = g_{link, field} + δ``, e.g.
+        ``params.perturbed({("2'", "a"): 1e-3, ("3'", "beta"): 2e-4})``.
+
+        Parameters
+        ----------
+        delta : mapping of (str, str) to float
+            ``(link, field) → δ``, m or rad according to the field.
+
+        Returns
+        -------
+        GeometricParameters
+            The perturbed set (BASE and tool unchanged).
+
+        Raises
+        ------
+        KeyError
+            A key that is not a ``(link, field)`` pair, or an unknown link or field.
         """
         arrays = {f: np.array(getattr(self, f)) for f in FIELDS}
         for key, value in delta.items():
@@ -120,15 +217,43 @@ class GeometricParameters:
 
     # ------------------------------------------------------------------ vector form
     def labels(self) -> list[tuple[str, str]]:
-        """``(link, field)`` labels of :meth:`to_vector`, field-major (all θ, then all d, …)."""
+        """``(link, field)`` labels of :meth:`to_vector`, field-major (all θ, then all d, …).
+
+        Returns
+        -------
+        list of (str, str)
+            ``5 · n_links`` labels.
+        """
         return [(n, f) for f in FIELDS for n in self.link_names]
 
     def to_vector(self) -> Array:
-        """All link parameters as one vector, field-major (see :meth:`labels`)."""
+        """All link parameters as one vector, ``g = (θ_1..θ_n, d_1..d_n, a, α, β)``.
+
+        Returns
+        -------
+        (5 · n_links,) array
+            Field-major (see :meth:`labels`), m or rad per entry.
+        """
         return np.concatenate([getattr(self, f) for f in FIELDS])
 
     def with_vector(self, x: ArrayLike) -> GeometricParameters:
-        """Inverse of :meth:`to_vector` (BASE and tool unchanged)."""
+        """Inverse of :meth:`to_vector` (BASE and tool unchanged).
+
+        Parameters
+        ----------
+        x : (5 · n_links,) array_like
+            Field-major parameter vector, m or rad per entry.
+
+        Returns
+        -------
+        GeometricParameters
+            A copy with these link parameters.
+
+        Raises
+        ------
+        ValueError
+            Wrong shape.
+        """
         x = np.asarray(x, dtype=float)
         n = self.n_links
         if x.shape != (len(FIELDS) * n,):

@@ -43,22 +43,64 @@ def _rel(T_target: ArrayLike, T_actual: ArrayLike) -> tuple[Array, Array]:
 
 
 def pose_error(T_target: ArrayLike, T_actual: ArrayLike) -> Array:
-    """First-order pose error ``[p_t − p_a; vee(skew(R_t R_aᵀ − I))]``, ``(..., 6)``.
+    """First-order pose error ``Δx = [p_t − p_a; vee(R_t R_aᵀ − I)]``.
 
-    Rotational part as in thesis eq. (B.15); translational part referenced at the
-    point (see the module docstring).  Both parts in the base frame.
+    Rotational part as in thesis eq. (B.15), ``φ = vee(R_t R_aᵀ − I)`` (so
+    ``R_t ≈ exp([φ]×) R_a``); translational part referenced at the point, not at the
+    base origin (see the module docstring).  Both parts in the base frame.
+
+    Parameters
+    ----------
+    T_target : (..., 4, 4) array_like, m
+        Target poses ``[R_t p_t; 0 1]``.
+    T_actual : (..., 4, 4) array_like, m
+        Actual poses ``[R_a p_a; 0 1]``; broadcast with ``T_target``.
+
+    Returns
+    -------
+    dx : (..., 6) array
+        ``[Δp (m); φ (rad)]``.
     """
     dp, Rrel = _rel(T_target, T_actual)
     return np.concatenate([dp, vee(Rrel)], axis=-1)
 
 
 def pose_error_exact(T_target: ArrayLike, T_actual: ArrayLike) -> Array:
-    """As :func:`pose_error` with ``φ = so3_log(R_target·R_actualᵀ)`` (exact rotation vector)."""
+    """Exact pose error ``Δx = [p_t − p_a; log(R_t R_aᵀ)∨]``.
+
+    As :func:`pose_error` with the exact rotation vector ``φ = so3_log(R_t·R_aᵀ)``
+    (equal to first order, exact for large rotations).
+
+    Parameters
+    ----------
+    T_target : (..., 4, 4) array_like, m
+        Target poses.
+    T_actual : (..., 4, 4) array_like, m
+        Actual poses; broadcast with ``T_target``.
+
+    Returns
+    -------
+    dx : (..., 6) array
+        ``[Δp (m); φ (rad)]``, ``‖φ‖ ≤ π``.
+    """
     dp, Rrel = _rel(T_target, T_actual)
     return np.concatenate([dp, so3_log(Rrel)], axis=-1)
 
 
 def rotation_error(T_target: ArrayLike, T_actual: ArrayLike) -> Array:
-    """Angle (radians, ``(...)``) of the rotation between the two orientations."""
+    """Angle of the rotation between two orientations, ``Δφ = ‖log(R_t R_aᵀ)∨‖``.
+
+    Parameters
+    ----------
+    T_target : (..., 4, 4) array_like
+        Target poses (only the rotation block is read).
+    T_actual : (..., 4, 4) array_like
+        Actual poses; broadcast with ``T_target``.
+
+    Returns
+    -------
+    angle : (...) array, rad
+        Rotation angles in [0, π].
+    """
     _, Rrel = _rel(T_target, T_actual)
     return np.linalg.norm(so3_log(Rrel), axis=-1)

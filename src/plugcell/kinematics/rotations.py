@@ -103,17 +103,39 @@ def _bcast(*xs: ArrayLike) -> list[Array]:
 
 # --------------------------------------------------------------------------- ZYZ (A.4)
 def zyz_to_matrix(A: ArrayLike, B: ArrayLike, C: ArrayLike) -> Array:
-    """Comau Euler ZYZ angles → rotation matrix ``Rz(A)·Ry(B)·Rz(C)`` (thesis A.4)."""
+    """Comau Euler ZYZ angles → rotation matrix, ``R = Rz(A) · Ry(B) · Rz(C)`` (thesis A.4).
+
+    Parameters
+    ----------
+    A, B, C : (...) array_like, rad
+        The three Euler angles; they broadcast together.
+
+    Returns
+    -------
+    R : (..., 3, 3) array
+        Rotation matrices (frame coordinates → reference coordinates).
+    """
     A, B, C = _bcast(A, B, C)
     return _rz(A) @ _ry(B) @ _rz(C)
 
 
 def matrix_to_zyz(R: ArrayLike) -> Array:
-    """Rotation matrix → Comau (A, B, C), thesis eq. (A.4); B ∈ [0, π].
+    """Rotation matrix → Comau Euler angles (A, B, C), thesis eq. (A.4); B ∈ [0, π].
 
     ``A = atan2(R23, R13)``, ``B = atan2(√(R13² + R23²), R33)``, ``C = atan2(R32, −R31)``
     (1-based indices as in the thesis).  Gimbal lock (sin B < 1e-9): C = 0 and A
-    carries the whole rotation about z.
+    carries the whole rotation about z, ``A = atan2(R21, R11)`` for B = 0,
+    ``A = atan2(−R21, −R11)`` for B = π.
+
+    Parameters
+    ----------
+    R : (..., 3, 3) array_like
+        Rotation matrices.
+
+    Returns
+    -------
+    angles : (..., 3) array, rad
+        ``(A, B, C)`` with A, C ∈ (−π, π], B ∈ [0, π].
     """
     R = _f(R)
     sB = np.hypot(R[..., 0, 2], R[..., 1, 2])
@@ -135,15 +157,38 @@ def matrix_to_zyz(R: ArrayLike) -> Array:
 
 # --------------------------------------------------------------------------- RPY
 def rpy_to_matrix(r: ArrayLike, p: ArrayLike, y: ArrayLike) -> Array:
-    """Roll-pitch-yaw about fixed X, Y, Z → ``Rz(y)·Ry(p)·Rx(r)``."""
+    """Roll-pitch-yaw about the fixed X, Y, Z axes → ``R = Rz(y) · Ry(p) · Rx(r)``.
+
+    Parameters
+    ----------
+    r, p, y : (...) array_like, rad
+        Roll (about X), pitch (about Y), yaw (about Z); they broadcast together.
+
+    Returns
+    -------
+    R : (..., 3, 3) array
+        Rotation matrices.
+    """
     r, p, y = _bcast(r, p, y)
     return _rz(y) @ _ry(p) @ _rx(r)
 
 
 def matrix_to_rpy(R: ArrayLike) -> Array:
-    """Rotation matrix → (roll, pitch, yaw), fixed X-Y-Z; pitch ∈ [−π/2, π/2].
+    """Rotation matrix → (roll, pitch, yaw) about fixed X-Y-Z; pitch ∈ [−π/2, π/2].
 
-    Gimbal lock (cos p < 1e-9): roll = 0, yaw = atan2(−R12, R22) (1-based).
+    Inverts ``R = Rz(y) Ry(p) Rx(r)``: ``p = atan2(−R31, √(R11² + R21²))``,
+    ``r = atan2(R32, R33)``, ``y = atan2(R21, R11)`` (1-based).  Gimbal lock
+    (cos p < 1e-9): roll = 0, yaw = atan2(−R12, R22).
+
+    Parameters
+    ----------
+    R : (..., 3, 3) array_like
+        Rotation matrices.
+
+    Returns
+    -------
+    angles : (..., 3) array, rad
+        ``(r, p, y)``.
     """
     R = _f(R)
     cp = np.hypot(R[..., 0, 0], R[..., 1, 0])
@@ -158,15 +203,38 @@ def matrix_to_rpy(R: ArrayLike) -> Array:
 
 # --------------------------------------------------------------------------- intrinsic XYZ
 def xyz_to_matrix(a: ArrayLike, b: ArrayLike, c: ArrayLike) -> Array:
-    """Intrinsic X-Y-Z angles → ``Rx(a)·Ry(b)·Rz(c)``."""
+    """Intrinsic (moving-axes) X-Y-Z angles → ``R = Rx(a) · Ry(b) · Rz(c)``.
+
+    Parameters
+    ----------
+    a, b, c : (...) array_like, rad
+        Angles about the moving X, Y, Z axes; they broadcast together.
+
+    Returns
+    -------
+    R : (..., 3, 3) array
+        Rotation matrices.
+    """
     a, b, c = _bcast(a, b, c)
     return _rx(a) @ _ry(b) @ _rz(c)
 
 
 def matrix_to_xyz(R: ArrayLike) -> Array:
-    """Rotation matrix → intrinsic X-Y-Z (a, b, c); b ∈ [−π/2, π/2].
+    """Rotation matrix → intrinsic X-Y-Z angles (a, b, c); b ∈ [−π/2, π/2].
 
-    Gimbal lock (cos b < 1e-9): c = 0, a = atan2(R32, R22) (1-based).
+    Inverts ``R = Rx(a) Ry(b) Rz(c)``: ``b = atan2(R13, √(R11² + R12²))``,
+    ``a = atan2(−R23, R33)``, ``c = atan2(−R12, R11)`` (1-based).  Gimbal lock
+    (cos b < 1e-9): c = 0, a = atan2(R32, R22).
+
+    Parameters
+    ----------
+    R : (..., 3, 3) array_like
+        Rotation matrices.
+
+    Returns
+    -------
+    angles : (..., 3) array, rad
+        ``(a, b, c)``.
     """
     R = _f(R)
     cb = np.hypot(R[..., 0, 0], R[..., 0, 1])
@@ -186,6 +254,16 @@ def matrix_to_prj(R: ArrayLike) -> Array:
     ``u = atan2(R32, R22)``, ``v = atan2(R13, R33)``, ``w = atan2(R21, R11)``
     (1-based).  A degenerate projection (axis perpendicular to its plane) gives
     ``atan2(0, 0) = 0`` deterministically; such a triple does not round-trip.
+
+    Parameters
+    ----------
+    R : (..., 3, 3) array_like
+        Rotation matrices.
+
+    Returns
+    -------
+    angles : (..., 3) array, rad
+        ``(u, v, w)``.
     """
     R = _f(R)
     u = np.arctan2(R[..., 2, 1], R[..., 1, 1])
@@ -198,9 +276,31 @@ def prj_to_matrix(u: ArrayLike, v: ArrayLike, w: ArrayLike) -> Array:
     """Projective angles (u, v, w) → rotation matrix (see the module docstring).
 
     Solves the 3×3 linear system that makes ``x ∝ (cw, sw, ξ)``, ``y ∝ (η, cu, su)``,
-    ``z ∝ (sv, ζ, cv)`` mutually orthogonal, normalises, and checks the frame is
-    right-handed.  Raises ``ValueError`` if the angles are outside the domain
-    (singular system or no proper rotation has these projections).
+    ``z ∝ (sv, ζ, cv)`` mutually orthogonal::
+
+        su·ξ + cw·η        = −sw·cu      (x·y = 0)
+               sv·η + cu·ζ = −su·cv      (y·z = 0)
+        cv·ξ        + sw·ζ = −sv·cw      (z·x = 0)
+
+    then normalises the columns ``R = [x/‖x‖, y/‖y‖, z/‖z‖]`` and checks the frame is
+    right-handed.
+
+    Parameters
+    ----------
+    u, v, w : (...) array_like, rad
+        Projective angles about X, Y, Z; they broadcast together.
+
+    Returns
+    -------
+    R : (..., 3, 3) array
+        Rotation matrices.
+
+    Raises
+    ------
+    ValueError
+        If the angles are outside the domain: the system is singular
+        (``|su·sv·sw + cu·cv·cw| < 1e-12``) or no proper rotation has these
+        projections (det R < 0.5).
     """
     u, v, w = _bcast(u, v, w)
     cu, su, cv, sv, cw, sw = np.cos(u), np.sin(u), np.cos(v), np.sin(v), np.cos(w), np.sin(w)
@@ -244,7 +344,28 @@ def _check(convention: str) -> str:
 
 
 def angles_to_matrix(angles: ArrayLike, convention: str) -> Array:
-    """``(..., 3)`` angle triples in ``convention`` → ``(..., 3, 3)`` rotation matrices."""
+    """Angle triples → rotation matrices, ``R = R_convention(θ₁, θ₂, θ₃)``.
+
+    Dispatches to :func:`zyz_to_matrix`, :func:`rpy_to_matrix`, :func:`xyz_to_matrix`
+    or :func:`prj_to_matrix`.
+
+    Parameters
+    ----------
+    angles : (..., 3) array_like, rad
+        Angle triples in the order of ``convention``.
+    convention : str
+        One of :data:`CONVENTIONS` (``"zyz"``, ``"rpy"``, ``"xyz"``, ``"prj"``).
+
+    Returns
+    -------
+    R : (..., 3, 3) array
+        Rotation matrices.
+
+    Raises
+    ------
+    ValueError
+        Unknown convention, last axis not 3, or ``prj`` angles outside the domain.
+    """
     angles = _f(angles)
     if angles.shape[-1:] != (3,):
         raise ValueError(f"expected angles of shape (..., 3), got {angles.shape}")
@@ -252,12 +373,50 @@ def angles_to_matrix(angles: ArrayLike, convention: str) -> Array:
 
 
 def matrix_to_angles(R: ArrayLike, convention: str) -> Array:
-    """``(..., 3, 3)`` rotation matrices → ``(..., 3)`` angle triples in ``convention``."""
+    """Rotation matrices → angle triples, the inverse of :func:`angles_to_matrix`.
+
+    Parameters
+    ----------
+    R : (..., 3, 3) array_like
+        Rotation matrices.
+    convention : str
+        One of :data:`CONVENTIONS`.
+
+    Returns
+    -------
+    angles : (..., 3) array, rad
+        Angle triples (gimbal-lock rules of the per-convention functions).
+
+    Raises
+    ------
+    ValueError
+        Unknown convention.
+    """
     return _FROM[_check(convention)](_f(R))
 
 
 def pose_to_matrix(xyz: ArrayLike, angles: ArrayLike, convention: str = "zyz") -> Array:
-    """Position ``(..., 3)`` + angles ``(..., 3)`` (radians) → homogeneous ``(..., 4, 4)``."""
+    """Position + orientation angles → homogeneous transform, ``T = [R(angles) xyz; 0 1]``.
+
+    Parameters
+    ----------
+    xyz : (..., 3) array_like, m
+        Positions.
+    angles : (..., 3) array_like, rad
+        Angle triples in ``convention``; broadcast with ``xyz``.
+    convention : str, default ``"zyz"``
+        One of :data:`CONVENTIONS`.
+
+    Returns
+    -------
+    T : (..., 4, 4) array, m
+        Homogeneous transforms.
+
+    Raises
+    ------
+    ValueError
+        Unknown convention or malformed angles (see :func:`angles_to_matrix`).
+    """
     xyz = _f(xyz)
     R = angles_to_matrix(angles, convention)
     shape = np.broadcast_shapes(xyz.shape[:-1], R.shape[:-2])
@@ -268,6 +427,27 @@ def pose_to_matrix(xyz: ArrayLike, angles: ArrayLike, convention: str = "zyz") -
 
 
 def matrix_to_pose(T: ArrayLike, convention: str = "zyz") -> tuple[Array, Array]:
-    """Homogeneous ``(..., 4, 4)`` → ``(xyz (..., 3), angles (..., 3))`` in radians."""
+    """Homogeneous transform → position and orientation angles, the inverse of
+    :func:`pose_to_matrix`.
+
+    Parameters
+    ----------
+    T : (..., 4, 4) array_like, m
+        Homogeneous transforms.
+    convention : str, default ``"zyz"``
+        One of :data:`CONVENTIONS`.
+
+    Returns
+    -------
+    xyz : (..., 3) array, m
+        Translations (a copy).
+    angles : (..., 3) array, rad
+        Angle triples in ``convention``.
+
+    Raises
+    ------
+    ValueError
+        Unknown convention.
+    """
     T = _f(T)
     return T[..., :3, 3].copy(), matrix_to_angles(T[..., :3, :3], convention)

@@ -37,7 +37,18 @@ def _f(x: ArrayLike) -> Array:
 
 
 def identity(shape: tuple[int, ...] = ()) -> Array:
-    """Identity transforms of shape ``shape + (4, 4)``."""
+    """Identity transforms, ``T = I₄``, one per index of ``shape``.
+
+    Parameters
+    ----------
+    shape : tuple of int
+        Batch shape ``(...)``; ``()`` for a single transform.
+
+    Returns
+    -------
+    T : (..., 4, 4) array
+        Identity homogeneous transforms (a fresh, writable copy).
+    """
     return np.broadcast_to(np.eye(4), (*shape, 4, 4)).copy()
 
 
@@ -56,22 +67,80 @@ def _rot(a: ArrayLike, axis: int) -> Array:
 
 
 def rot_x(a: ArrayLike) -> Array:
-    """Rotation about x by ``a`` radians, ``(...)`` → ``(..., 4, 4)``."""
+    """Homogeneous rotation about x, ``Rx(a) = [R 0; 0 1]``.
+
+    ``R = [[1, 0, 0], [0, cos a, −sin a], [0, sin a, cos a]]``
+    (right-handed: positive counter-clockwise seen from +x).
+
+    Parameters
+    ----------
+    a : (...) array_like, rad
+        Rotation angles.
+
+    Returns
+    -------
+    T : (..., 4, 4) array
+        Rotation transforms (no translation).
+    """
     return _rot(a, 0)
 
 
 def rot_y(a: ArrayLike) -> Array:
-    """Rotation about y by ``a`` radians, ``(...)`` → ``(..., 4, 4)``."""
+    """Homogeneous rotation about y, ``Ry(a) = [R 0; 0 1]``.
+
+    ``R = [[cos a, 0, sin a], [0, 1, 0], [−sin a, 0, cos a]]``
+    (right-handed: positive counter-clockwise seen from +y).
+
+    Parameters
+    ----------
+    a : (...) array_like, rad
+        Rotation angles.
+
+    Returns
+    -------
+    T : (..., 4, 4) array
+        Rotation transforms (no translation).
+    """
     return _rot(a, 1)
 
 
 def rot_z(a: ArrayLike) -> Array:
-    """Rotation about z by ``a`` radians, ``(...)`` → ``(..., 4, 4)``."""
+    """Homogeneous rotation about z, ``Rz(a) = [R 0; 0 1]``.
+
+    ``R = [[cos a, −sin a, 0], [sin a, cos a, 0], [0, 0, 1]]``
+    (right-handed: positive counter-clockwise seen from +z).
+
+    Parameters
+    ----------
+    a : (...) array_like, rad
+        Rotation angles.
+
+    Returns
+    -------
+    T : (..., 4, 4) array
+        Rotation transforms (no translation).
+    """
     return _rot(a, 2)
 
 
 def translation(v: ArrayLike) -> Array:
-    """Pure translation, ``(..., 3)`` → ``(..., 4, 4)``."""
+    """Pure translation, ``T = [I₃ v; 0 1]``.
+
+    Parameters
+    ----------
+    v : (..., 3) array_like, m
+        Translation vectors.
+
+    Returns
+    -------
+    T : (..., 4, 4) array, m
+        Translation transforms.
+
+    Raises
+    ------
+    ValueError
+        If the last axis of ``v`` is not 3.
+    """
     v = _f(v)
     if v.shape[-1:] != (3,):
         raise ValueError(f"translation: expected shape (..., 3), got {v.shape}")
@@ -81,7 +150,20 @@ def translation(v: ArrayLike) -> Array:
 
 
 def invert(T: ArrayLike) -> Array:
-    """Inverse of rigid transforms ``(..., 4, 4)``: ``[Rᵀ, -Rᵀp; 0, 1]``."""
+    """Inverse of rigid transforms, ``T⁻¹ = [Rᵀ  −Rᵀp; 0 1]`` for ``T = [R p; 0 1]``.
+
+    Exact only for rigid transforms (``R`` orthonormal); the bottom row is not read.
+
+    Parameters
+    ----------
+    T : (..., 4, 4) array_like, m
+        Rigid transforms.
+
+    Returns
+    -------
+    T_inv : (..., 4, 4) array, m
+        Their inverses.
+    """
     T = _f(T)
     R = T[..., :3, :3]
     p = T[..., :3, 3]
@@ -102,8 +184,27 @@ def dh_hayati(
 ) -> Array:
     """DH + Hayati link transform, thesis eq. (B.1) (β = 0 gives the DH link A.2).
 
-    ``Rz(θ)·Tz(d)·Tx(a)·Rx(α)·Ry(β)``; all arguments broadcast together and the
-    result has shape ``broadcast_shape + (4, 4)``.
+    ``A(θ, d, a, α, β) = Rz(θ) · Tz(d) · Tx(a) · Rx(α) · Ry(β)``, i.e. rotation
+    ``R = Rz(θ) Rx(α) Ry(β)`` and translation ``p = (a cos θ, a sin θ, d)``.
+    All arguments broadcast together.
+
+    Parameters
+    ----------
+    theta : (...) array_like, rad
+        Joint angle θ about z.
+    d : (...) array_like, m
+        Offset along z.
+    a : (...) array_like, m
+        Link length along the new x.
+    alpha : (...) array_like, rad
+        Twist α about the new x.
+    beta : (...) array_like, rad
+        Hayati twist β about the new y (0: plain DH).
+
+    Returns
+    -------
+    T : (..., 4, 4) array, m
+        Link transforms ``T_i^{i-1}``, shape ``broadcast_shape + (4, 4)``.
     """
     theta, d, a, alpha, beta = np.broadcast_arrays(_f(theta), _f(d), _f(a), _f(alpha), _f(beta))
     ct, st = np.cos(theta), np.sin(theta)
@@ -127,7 +228,20 @@ def dh_hayati(
 
 
 def skew(v: ArrayLike) -> Array:
-    """Skew-symmetric matrix ``[v]×`` with ``[v]× u = v × u``; ``(..., 3)`` → ``(..., 3, 3)``."""
+    """Skew-symmetric matrix ``[v]×`` with ``[v]× u = v × u``.
+
+    ``[v]× = [[0, −v_z, v_y], [v_z, 0, −v_x], [−v_y, v_x, 0]]``.
+
+    Parameters
+    ----------
+    v : (..., 3) array_like
+        Vectors (any unit; the result has the same).
+
+    Returns
+    -------
+    S : (..., 3, 3) array
+        Their cross-product matrices.
+    """
     v = _f(v)
     S = np.zeros((*v.shape[:-1], 3, 3))
     S[..., 0, 1] = -v[..., 2]
@@ -140,7 +254,21 @@ def skew(v: ArrayLike) -> Array:
 
 
 def vee(S: ArrayLike) -> Array:
-    """Inverse of :func:`skew` applied to the skew-symmetric part of ``S``."""
+    """Inverse of :func:`skew` applied to the skew-symmetric part of ``S``.
+
+    ``v = ½ (S₂₁ − S₁₂, S₀₂ − S₂₀, S₁₀ − S₀₁)``, so ``vee(skew(v)) = v`` and the
+    symmetric part of ``S`` is ignored.
+
+    Parameters
+    ----------
+    S : (..., 3, 3) array_like
+        Matrices (skew-symmetric up to noise).
+
+    Returns
+    -------
+    v : (..., 3) array
+        The vectors of their skew-symmetric parts.
+    """
     S = _f(S)
     return 0.5 * np.stack(
         [S[..., 2, 1] - S[..., 1, 2], S[..., 0, 2] - S[..., 2, 0], S[..., 1, 0] - S[..., 0, 1]],
@@ -149,9 +277,20 @@ def vee(S: ArrayLike) -> Array:
 
 
 def so3_exp(w: ArrayLike) -> Array:
-    """Rotation matrix of the rotation vector ``w`` (Rodrigues), ``(..., 3)`` → ``(..., 3, 3)``.
+    """Rotation matrix of the rotation vector ``w`` (Rodrigues' formula).
 
-    Uses Taylor series of ``sin θ/θ`` and ``(1 - cos θ)/θ²`` for small angles.
+    ``R = exp([w]×) = I + (sin θ/θ) [w]× + ((1 − cos θ)/θ²) [w]×²`` with
+    ``θ = ‖w‖``; Taylor series of both coefficients for θ < 1e-4.
+
+    Parameters
+    ----------
+    w : (..., 3) array_like, rad
+        Rotation vectors (axis × angle).
+
+    Returns
+    -------
+    R : (..., 3, 3) array
+        Rotation matrices.
     """
     w = _f(w)
     th2 = np.sum(w * w, axis=-1)
@@ -196,11 +335,23 @@ def _matrix_to_quat(R: Array) -> Array:
 
 
 def so3_log(R: ArrayLike) -> Array:
-    """Rotation vector of ``R`` (``(..., 3, 3)`` → ``(..., 3)``), angle in [0, π].
+    """Rotation vector of ``R``, ``w = log(R)∨ = θ·u`` with angle θ in [0, π].
 
-    Robust near 0 (series) and near π (via a Shepperd quaternion, whose vector
-    part is well conditioned there).  At exactly π the sign of the axis is that
-    of the quaternion Shepperd's method returns — deterministic.
+    Computed from the unit quaternion ``(q_w, q_v)`` (Shepperd's method, ``q_w ≥ 0``):
+    ``θ = 2 atan2(‖q_v‖, q_w)``, ``w = θ · q_v / ‖q_v‖`` (→ ``2 q_v / q_w`` for small
+    ``‖q_v‖``).  Robust near 0 and near π, where the quaternion's vector part is well
+    conditioned.  At exactly π the sign of the axis is that of the quaternion
+    Shepperd's method returns — deterministic.
+
+    Parameters
+    ----------
+    R : (..., 3, 3) array_like
+        Rotation matrices.
+
+    Returns
+    -------
+    w : (..., 3) array, rad
+        Rotation vectors, ``‖w‖ ≤ π``.
     """
     R = _f(R)
     q = _matrix_to_quat(R)

@@ -69,7 +69,18 @@ def _scale(kind: str, unit: str) -> float:
 
 
 def wrap_angle(a: ArrayLike) -> FloatArray:
-    """Wrap angles to ``(−π, π]``."""
+    """Wrap angles to ``(−π, π]``: ``w = ((a + π) mod 2π) − π``, with −π mapped to π.
+
+    Parameters
+    ----------
+    a : (...) array_like, rad
+        Angles.
+
+    Returns
+    -------
+    (...) array, rad
+        The wrapped angles.
+    """
     x = np.asarray(a, dtype=float)
     w = np.mod(x + np.pi, 2.0 * np.pi) - np.pi
     return np.where(w == -np.pi, np.pi, w)
@@ -81,18 +92,34 @@ def pose_errors(
     *,
     orientation: Literal["rpy", "rotvec"] = "rpy",
 ) -> tuple[FloatArray, FloatArray]:
-    """Per-pose position and orientation errors, measured − model.
+    """Per-pose position and orientation errors, measured − model (thesis 8.2.1).
 
-    Args:
-        measured: ``(N, 4, 4)`` measured poses (e.g. tracker T-MAC poses).
-        model: ``(N, 4, 4)`` poses predicted by a kinematic model.
-        orientation: ``"rpy"`` — difference of roll-pitch-yaw angles (fixed
-            X-Y-Z, ``R = Rz(φz) Ry(φy) Rx(φx)``), wrapped to ``(−π, π]``, as in
-            thesis 8.2.1; ``"rotvec"`` — rotation vector of ``R_model⁻¹ R_measured``
-            (exact, in the model frame).
+    ``Δp_i = p_M,i − p_i``; ``Δφ_i = wrap(rpy(R_M,i) − rpy(R_i))`` or
+    ``Δφ_i = log(R_iᵀ R_M,i)∨``.
 
-    Returns:
-        ``(Δp, Δφ)``, each ``(N, 3)``, in m and rad.
+    Parameters
+    ----------
+    measured : (N, 4, 4) or (4, 4) array_like, m
+        Measured poses (e.g. tracker T-MAC poses).
+    model : (N, 4, 4) or (4, 4) array_like, m
+        Poses predicted by a kinematic model, same shape.
+    orientation : {"rpy", "rotvec"}
+        ``"rpy"`` — difference of roll-pitch-yaw angles (fixed X-Y-Z,
+        ``R = Rz(φz) Ry(φy) Rx(φx)``), wrapped to ``(−π, π]``, as in thesis 8.2.1;
+        ``"rotvec"`` — rotation vector of ``R_model⁻¹ R_measured`` (exact, in the model
+        frame).
+
+    Returns
+    -------
+    dp : (N, 3) array, m
+        Position errors Δp.
+    dphi : (N, 3) array, rad
+        Orientation errors Δφ.
+
+    Raises
+    ------
+    MetrologyError
+        Shape mismatch, non-finite poses or an unknown ``orientation``.
     """
     M = np.asarray(measured, dtype=float)
     E = np.asarray(model, dtype=float)
@@ -122,7 +149,16 @@ def pose_errors(
 class ComponentStats:
     """Per-component statistics of ``(N, 3)`` errors (x, y, z), eqs. 8.1–8.2.
 
-    ``std`` uses ``N − 1`` (8.2); ``three_sigma = 3·std``.
+    Attributes
+    ----------
+    mean : (3,) array
+        ``x̄_c = Σᵢ x_i,c / N`` (8.1), in the unit of the errors (m or rad).
+    std : (3,) array
+        ``σ_c = √(Σᵢ (x_i,c − x̄_c)² / (N − 1))`` (8.2).
+    three_sigma : (3,) array
+        ``3·std``.
+    min, max : (3,) array
+        Extremes per component.
     """
 
     mean: FloatArray
@@ -133,7 +169,7 @@ class ComponentStats:
 
     @property
     def band(self) -> FloatArray:
-        """``max − min`` per component."""
+        """``max − min`` per component, ``(3,)``, unit of the errors."""
         return self.max - self.min
 
 
@@ -141,14 +177,23 @@ class ComponentStats:
 class NormStats:
     """Statistics of the per-pose error norms ``|Δ_i|``, eqs. 8.1–8.2.
 
-    Attributes:
-        mean: ``Δ̄`` (8.1).
-        std: ``σ_Δ`` with ``N − 1`` (8.2).
-        min, max: extremes of ``|Δ_i|``.
-        three_sigma: ``mean + 3·std`` — the thesis's "3σ accuracy" (8.3.3, see
-            module docstring; reproduces Table 8-5 → 6.50/0.87/0.12 mm).
-        rss_three_sigma: ``3·sqrt(σ_x² + σ_y² + σ_z²)`` of the components.
-        rms: ``sqrt(mean |Δ_i|²)``.
+    All in the unit of the errors (m or rad).
+
+    Attributes
+    ----------
+    mean : float
+        ``Δ̄ = Σᵢ |Δ_i| / m`` (8.1).
+    std : float
+        ``σ_Δ = √(Σᵢ (|Δ_i| − Δ̄)² / (m − 1))`` (8.2).
+    min, max : float
+        Extremes of ``|Δ_i|``.
+    three_sigma : float
+        ``Δ̄ + 3·σ_Δ`` — the thesis's "3σ accuracy" (8.3.3, see module docstring;
+        reproduces Table 8-5 → 6.50/0.87/0.12 mm).
+    rss_three_sigma : float
+        ``3·√(σ_x² + σ_y² + σ_z²)`` of the per-component σ.
+    rms : float
+        ``√(Σᵢ |Δ_i|² / m)``.
     """
 
     mean: float
@@ -162,7 +207,15 @@ class NormStats:
 
 @dataclass(frozen=True)
 class ErrorStats:
-    """Component and norm statistics of one kind of error (position or orientation)."""
+    """Component and norm statistics of one kind of error (position or orientation).
+
+    Attributes
+    ----------
+    components : ComponentStats
+        Per-axis statistics.
+    norm : NormStats
+        Statistics of the per-pose norms.
+    """
 
     components: ComponentStats
     norm: NormStats
@@ -189,10 +242,14 @@ def _error_stats(e: FloatArray) -> ErrorStats:
 class AccuracyStats:
     """Accuracy statistics of a set of poses (thesis 8.2.1, Tables 8-2, 8-3, 8-5).
 
-    Attributes:
-        count: number of poses ``m``.
-        position: statistics of ``Δp`` (m).
-        orientation: statistics of ``Δφ`` (rad), or ``None``.
+    Attributes
+    ----------
+    count : int
+        Number of poses ``m``.
+    position : ErrorStats
+        Statistics of ``Δp`` (m).
+    orientation : ErrorStats or None
+        Statistics of ``Δφ`` (rad), or ``None``.
     """
 
     count: int
@@ -209,6 +266,23 @@ class AccuracyStats:
         ``three_sigma``, ``rss_three_sigma``, ``rms`` of the norm and
         ``components`` → ``mean``, ``std``, ``three_sigma``, ``min``, ``max``
         (lists ``[x, y, z]``).
+
+        Parameters
+        ----------
+        length_unit : {"m", "mm", "um"}
+            Unit of the position figures.
+        angle_unit : {"rad", "deg"}
+            Unit of the orientation figures.
+
+        Returns
+        -------
+        dict
+            The statistics, scaled to the units.
+
+        Raises
+        ------
+        MetrologyError
+            Unknown unit.
         """
         out: dict[str, object] = {
             "count": self.count, "length_unit": length_unit, "angle_unit": angle_unit,
@@ -239,14 +313,26 @@ def accuracy_statistics(
 ) -> AccuracyStats:
     """Accuracy statistics of eqs. 8.1–8.2, per component and overall.
 
-    Args:
-        position_errors: ``(N, 3)`` measured − model positions (m), ``N ≥ 2``.
-        orientation_errors: optional ``(N, 3)`` measured − model orientation
-            angles (rad), e.g. RPY differences from :func:`pose_errors`.
+    ``Δ̄ = Σᵢ Δ_i / m`` (8.1), ``σ_Δ = √(Σᵢ (Δ_i − Δ̄)² / (m − 1))`` (8.2), applied to the
+    norms ``|Δp_i|`` and to each component (see :class:`NormStats`, :class:`ComponentStats`).
 
-    Raises:
-        MetrologyError: fewer than 2 poses (σ needs ``N − 1 ≥ 1``), shape
-            mismatch, non-finite values.
+    Parameters
+    ----------
+    position_errors : (N, 3) array_like, m
+        Measured − model positions, ``N ≥ 2``.
+    orientation_errors : (N, 3) array_like, rad, optional
+        Measured − model orientation angles, e.g. RPY differences from
+        :func:`pose_errors`.
+
+    Returns
+    -------
+    AccuracyStats
+        Position statistics (m) and, if given, orientation statistics (rad).
+
+    Raises
+    ------
+    MetrologyError
+        Fewer than 2 poses (σ needs ``N − 1 ≥ 1``), shape mismatch, non-finite values.
     """
     dp = as_points(position_errors, "position_errors", 2, "poses")
     orient = None
@@ -267,14 +353,20 @@ def accuracy_statistics(
 class StraightnessResult:
     """Straightness of a travel about its best-fit datum line (thesis 8.3.1).
 
-    Attributes:
-        line: the best-fit datum line.
-        directions: ``(2, 3)`` unit directions the deviations are measured along
-            (the requested directions made perpendicular to the line).
-        labels: names of the two directions (e.g. ``("z", "x")``).
-        deviations: ``(N, 2)`` signed deviations of the points from the line (m).
-        band: ``(2,)`` error band ``max − min`` of the deviations (m) — the
-            thesis's 1.32/0.67 → 0.43/0.44 → 0.16/0.13 mm (Figs. 8-16, 8-17).
+    Attributes
+    ----------
+    line : LineFit
+        The best-fit datum line.
+    directions : (2, 3) array
+        Unit directions the deviations are measured along (the requested directions
+        made perpendicular to the line).
+    labels : (str, str)
+        Names of the two directions (e.g. ``("z", "x")``).
+    deviations : (N, 2) array, m
+        Signed deviations ``(p_i − project(p_i))·e_k`` of the points from the line.
+    band : (2,) array, m
+        Error band ``max − min`` of the deviations — the thesis's 1.32/0.67 →
+        0.43/0.44 → 0.16/0.13 mm (Figs. 8-16, 8-17).
     """
 
     line: LineFit
@@ -284,7 +376,23 @@ class StraightnessResult:
     band: FloatArray
 
     def as_dict(self, length_unit: LengthUnit = "mm") -> dict[str, object]:
-        """``{label: {"band", "min", "max"}}`` in ``length_unit``."""
+        """``{label: {"band", "min", "max"}}`` in ``length_unit`` (plus unit and count).
+
+        Parameters
+        ----------
+        length_unit : {"m", "mm", "um"}
+            Unit of the figures.
+
+        Returns
+        -------
+        dict
+            JSON-ready figures.
+
+        Raises
+        ------
+        MetrologyError
+            Unknown unit.
+        """
         k = _scale("length", length_unit)
         return {
             lab: {
@@ -307,11 +415,28 @@ def straightness(
     (:func:`fit_line`). Each point's perpendicular deviation from it is
     resolved along two directions — by default the thesis's Z and X for lines
     parallel to Y (Figs. 8-16, 8-17) — each made perpendicular to the line
-    first. The band per direction is ``max − min``.
+    first: ``e_k = (d_k − (d_k·u) u) / ‖…‖``, deviation ``δ_ik = (p_i − project(p_i))·e_k``,
+    band ``max_i δ_ik − min_i δ_ik``.
 
-    Raises:
-        MetrologyError: fewer than 3 points, non-finite values, a direction
-            (nearly) parallel to the line.
+    Parameters
+    ----------
+    points : (N, 3) array_like, m
+        Points along the travel, ``N ≥ 3``.
+    directions : (2, 3) array_like
+        Directions to resolve the deviations along.
+    labels : (str, str)
+        Names of the two directions.
+
+    Returns
+    -------
+    StraightnessResult
+        Datum line, deviations (m) and bands (m).
+
+    Raises
+    ------
+    MetrologyError
+        Fewer than 3 points, non-finite values, malformed directions or labels, a
+        direction (nearly) parallel to the line.
     """
     p = as_points(points, "straightness points", 3)
     d = np.asarray(directions, dtype=float)
@@ -346,14 +471,21 @@ def straightness(
 class Iso9283Result:
     """ISO 9283 pose accuracy (AP) and pose repeatability (RP) of one commanded pose.
 
-    Attributes:
-        barycentre: mean attained position ``x̄`` (m).
-        ap: positional accuracy ``AP_p = |x̄ − x_c|`` (m).
-        ap_components: ``x̄ − x_c`` per axis (m).
-        rp: positional repeatability ``RP_l = l̄ + 3·S_l`` with
-            ``l_j = |x_j − x̄|`` and ``S_l`` the sample σ (m).
-        orientation_ap: ``ā − a_c`` per angle (rad) or ``None``.
-        orientation_rp: ``±3·S_a`` per angle (rad) or ``None``.
+    Attributes
+    ----------
+    barycentre : (3,) array, m
+        Mean attained position ``x̄``.
+    ap : float, m
+        Positional accuracy ``AP_p = |x̄ − x_c|``.
+    ap_components : (3,) array, m
+        ``x̄ − x_c`` per axis.
+    rp : float, m
+        Positional repeatability ``RP_l = l̄ + 3·S_l`` with ``l_j = |x_j − x̄|`` and
+        ``S_l`` the sample σ (``n − 1``).
+    orientation_ap : (3,) array, rad, or None
+        ``ā − a_c`` per angle (wrapped).
+    orientation_rp : (3,) array, rad, or None
+        ``3·S_a`` per angle (the half-width of ``±3·S_a``).
     """
 
     barycentre: FloatArray
@@ -373,11 +505,30 @@ def iso9283_pose_accuracy(
 ) -> Iso9283Result:
     """ISO 9283 AP and RP for ``n`` visits of one commanded pose (thesis 8.3.1 cites it).
 
-    Args:
-        attained: ``(n, 3)`` attained positions (m), ``n ≥ 2``.
-        commanded: ``(3,)`` commanded position (m).
-        attained_angles: optional ``(n, 3)`` attained orientation angles (rad).
-        commanded_angles: ``(3,)`` commanded angles, required with ``attained_angles``.
+    ``AP_p = |x̄ − x_c|``, ``RP_l = l̄ + 3·S_l`` with ``l_j = |x_j − x̄|``; for angles
+    ``AP_a = ā − a_c`` and ``RP_a = 3·S_a`` (differences wrapped to (−π, π]).
+
+    Parameters
+    ----------
+    attained : (n, 3) array_like, m
+        Attained positions, ``n ≥ 2``.
+    commanded : (3,) array_like, m
+        Commanded position.
+    attained_angles : (n, 3) array_like, rad, optional
+        Attained orientation angles.
+    commanded_angles : (3,) array_like, rad, optional
+        Commanded angles, required with ``attained_angles``.
+
+    Returns
+    -------
+    Iso9283Result
+        AP and RP (m; rad for the angles).
+
+    Raises
+    ------
+    MetrologyError
+        Fewer than 2 visits, malformed or non-finite inputs, angles without
+        ``commanded_angles``.
     """
     x = as_points(attained, "attained", 2, "visits")
     xc = np.asarray(commanded, dtype=float)

@@ -33,8 +33,25 @@ __all__ = ["DriftEstimate", "estimate_base_drift", "nests_in_base"]
 
 
 def nests_in_base(base: ArrayLike, measured: ArrayLike) -> Array:
-    """Nest positions ``(K, 3)`` in the robot base frame from their tracker measurements
-    ``(K, 3)`` (m) and the identified BASE ``(4, 4)``: ``n_k = BASE⁻¹ m_k``."""
+    """Nest positions in the robot base frame from their tracker measurements, ``n_k = BASE⁻¹ m_k``.
+
+    Parameters
+    ----------
+    base : (4, 4) array_like, m
+        The identified BASE (robot base in the tracker frame).
+    measured : (K, 3) array_like, m
+        Nest positions in the tracker frame, ``K ≥ 3``.
+
+    Returns
+    -------
+    (K, 3) array, m
+        Nest positions in the robot base frame.
+
+    Raises
+    ------
+    MetrologyError
+        Fewer than 3 nests or non-finite values.
+    """
     m = as_points(measured, "nests", 3)
     Bi = invert(np.asarray(base, float))
     return m @ Bi[:3, :3].T + Bi[:3, 3]
@@ -44,11 +61,26 @@ def nests_in_base(base: ArrayLike, measured: ArrayLike) -> Array:
 class DriftEstimate:
     """The drift of BASE since registration (module docstring).
 
-    ``base``: the re-registered BASE ``(4, 4)``; ``drift``: ``D = BASE'·BASE⁻¹`` in the
-    tracker frame; ``translation_m``/``rotation_rad``: D's translation and rotation
-    vector; ``displacement_m``: the largest displacement over the work points;
-    ``rms_m``: rms of the rigid fit of the nests; ``alarm``: displacement above the
-    threshold; ``consistent``: the fit's rms is below ``fit_tolerance_m``.
+    Attributes
+    ----------
+    base : (4, 4) array, m
+        The re-registered BASE'.
+    drift : (4, 4) array, m
+        ``D = BASE' · BASE⁻¹`` in the tracker frame.
+    translation_m : (3,) array, m
+        D's translation.
+    rotation_rad : (3,) array, rad
+        D's rotation vector ``log(R_D)∨``.
+    displacement_m : float, m
+        ``max_p ‖(BASE' − BASE) p‖`` over the work points.
+    rms_m : float, m
+        rms of the rigid fit of the nests.
+    threshold_m : float, m
+        The alarm threshold used.
+    alarm : bool
+        ``displacement_m > threshold_m``.
+    consistent : bool
+        ``rms_m ≤ fit_tolerance_m`` (the nests still agree with each other).
     """
 
     base: Array
@@ -62,7 +94,14 @@ class DriftEstimate:
     consistent: bool
 
     def as_dict(self) -> dict[str, object]:
-        """mm and degrees, for ``--json`` and the journal."""
+        """The estimate in mm and degrees, for ``--json`` and the journal.
+
+        Returns
+        -------
+        dict
+            ``displacement_mm``, ``translation_mm``, ``rotation_deg``, ``fit_rms_mm``,
+            ``threshold_mm``, ``alarm``, ``consistent`` and ``base`` (m, nested lists).
+        """
         return {"displacement_mm": self.displacement_m * 1e3,
                 "translation_mm": (self.translation_m * 1e3).tolist(),
                 "rotation_deg": np.degrees(self.rotation_rad).tolist(),
@@ -75,6 +114,9 @@ def estimate_base_drift(base: ArrayLike, nests: ArrayLike, measured: ArrayLike, 
                         threshold_m: float = 0.05e-3, work_points: ArrayLike | None = None,
                         fit_tolerance_m: float = 0.05e-3) -> DriftEstimate:
     """Re-register BASE on re-measured nests (module docstring).
+
+    ``BASE' = argmin Σ_k ‖m'_k − BASE' n_k‖²`` (Kabsch), ``D = BASE' · BASE⁻¹``,
+    displacement ``max_p ‖(BASE' − BASE) p‖``.
 
     Parameters
     ----------
@@ -95,6 +137,13 @@ def estimate_base_drift(base: ArrayLike, nests: ArrayLike, measured: ArrayLike, 
     Returns
     -------
     DriftEstimate
+        BASE' (m), the drift D and the alarm/consistency flags.
+
+    Raises
+    ------
+    MetrologyError
+        Malformed BASE, non-positive thresholds, fewer than 3 or mismatched nests,
+        collinear nests.
     """
     B = np.asarray(base, float)
     if B.shape != (4, 4) or not np.all(np.isfinite(B)):

@@ -77,15 +77,20 @@ def _rms(x: FloatArray) -> float:
 
 @dataclass(frozen=True)
 class LineFit:
-    """A 3-D line ``point + t·direction`` fitted by total least squares.
+    """A 3-D line ``x(t) = point + t·direction`` fitted by total least squares.
 
-    Attributes:
-        point: centroid of the fitted points, a point on the line (m).
-        direction: unit direction (sign: see module docstring).
-        residuals: perpendicular distance of each fitted point to the line (m, ≥ 0).
-        rms: root mean square of ``residuals`` (m).
-        singular_values: singular values of the centred points (spread along,
-            then across the line).
+    Attributes
+    ----------
+    point : (3,) array, m
+        Centroid of the fitted points, a point on the line.
+    direction : (3,) array
+        Unit direction (sign: see module docstring).
+    residuals : (N,) array, m
+        Perpendicular distance ``‖(p − c) − ((p − c)·d) d‖ ≥ 0`` of each fitted point.
+    rms : float, m
+        ``√(Σ rᵢ² / N)`` of ``residuals``.
+    singular_values : (3,) array, m
+        Singular values of the centred points (spread along, then across the line).
     """
 
     point: FloatArray
@@ -96,26 +101,70 @@ class LineFit:
 
     @property
     def max_residual(self) -> float:
-        """Largest perpendicular distance of a fitted point (m)."""
+        """Largest perpendicular distance of a fitted point, ``max rᵢ`` (m)."""
         return float(self.residuals.max()) if self.residuals.size else 0.0
 
     def parameters(self, points: ArrayLike) -> FloatArray:
-        """Line parameter ``t`` of the orthogonal projection of each point."""
+        """Line parameter of the orthogonal projection, ``t = (p − point)·direction``.
+
+        Parameters
+        ----------
+        points : (..., 3) array_like, m
+            Points.
+
+        Returns
+        -------
+        t : (...) array, m
+            Signed distance along the line from ``point``.
+        """
         p = np.asarray(points, dtype=float)
         return (p - self.point) @ self.direction
 
     def project(self, points: ArrayLike) -> FloatArray:
-        """Closest point on the line to each point, shape ``(N, 3)``."""
+        """Closest point on the line, ``point + t·direction`` with ``t`` of :meth:`parameters`.
+
+        Parameters
+        ----------
+        points : (..., 3) array_like, m
+            Points.
+
+        Returns
+        -------
+        (..., 3) array, m
+            Their orthogonal projections onto the line.
+        """
         t = self.parameters(points)
         return self.point + t[..., None] * self.direction
 
     def deviations(self, points: ArrayLike) -> FloatArray:
-        """Perpendicular deviation vectors ``p − project(p)``, shape ``(N, 3)``."""
+        """Perpendicular deviation vectors ``p − project(p)``.
+
+        Parameters
+        ----------
+        points : (..., 3) array_like, m
+            Points.
+
+        Returns
+        -------
+        (..., 3) array, m
+            Deviation vectors, perpendicular to ``direction``.
+        """
         p = np.asarray(points, dtype=float)
         return p - self.project(p)
 
     def distance(self, points: ArrayLike) -> FloatArray:
-        """Perpendicular distance of each point to the line (m)."""
+        """Perpendicular distance to the line, ``‖p − project(p)‖``.
+
+        Parameters
+        ----------
+        points : (..., 3) array_like, m
+            Points.
+
+        Returns
+        -------
+        (...) array, m
+            Distances (≥ 0).
+        """
         return np.linalg.norm(self.deviations(points), axis=-1)
 
 
@@ -126,17 +175,29 @@ def fit_line(
 ) -> LineFit:
     """Fit a 3-D line by total least squares (principal axis of the points).
 
+    ``c = mean(p)``, ``direction = v₁`` the first right-singular vector of the centred
+    points ``P − c = U S Vᵀ`` (it minimises ``Σ ‖(pᵢ − c) − ((pᵢ − c)·d) d‖²``).
     Used for the dowel-hole axis ``y_n`` (App. D.1, eq. D.2), the robot's
     ``x_0`` axis from a linear move (App. D.2) and the straightness datum line
     (8.3.1).
 
-    Args:
-        points: ``(N, 3)`` points, ``N ≥ 2``.
-        direction_hint: optional vector; the direction is signed to agree with it.
-            Default: from the first towards the last point.
+    Parameters
+    ----------
+    points : (N, 3) array_like, m
+        Points, ``N ≥ 2``.
+    direction_hint : (3,) array_like, optional
+        The direction is signed so that ``direction·hint ≥ 0``.  Default: from the
+        first towards the last point.
 
-    Raises:
-        MetrologyError: fewer than 2 points, non-finite values, coincident points.
+    Returns
+    -------
+    LineFit
+        Centroid (m), unit direction, residuals (m).
+
+    Raises
+    ------
+    MetrologyError
+        Fewer than 2 points, non-finite values, coincident points.
     """
     p = as_points(points, "fit_line points", 2)
     c, s, vt = _centred_svd(p)
@@ -160,13 +221,19 @@ def fit_line(
 class PlaneFit:
     """A plane ``(x − centroid)·normal = 0`` fitted by total least squares.
 
-    Attributes:
-        centroid: centroid of the fitted points, a point of the plane (m).
-        normal: unit normal (sign: see module docstring).
-        residuals: signed distance of each fitted point, positive on the side
-            the normal points to (m).
-        rms: root mean square of ``residuals`` (m).
-        singular_values: singular values of the centred points.
+    Attributes
+    ----------
+    centroid : (3,) array, m
+        Centroid of the fitted points, a point of the plane.
+    normal : (3,) array
+        Unit normal (sign: see module docstring).
+    residuals : (N,) array, m
+        Signed distance ``(pᵢ − centroid)·normal`` of each fitted point, positive on
+        the side the normal points to.
+    rms : float, m
+        ``√(Σ rᵢ² / N)`` of ``residuals``.
+    singular_values : (3,) array, m
+        Singular values of the centred points.
     """
 
     centroid: FloatArray
@@ -186,15 +253,43 @@ class PlaneFit:
         return float(self.residuals.max() - self.residuals.min())
 
     def basis(self) -> tuple[FloatArray, FloatArray]:
-        """Two in-plane unit vectors ``(u, v)`` with ``u × v = normal``."""
+        """Two in-plane unit vectors ``(u, v)`` with ``u × v = normal``.
+
+        Returns
+        -------
+        u, v : (3,) array
+            Orthonormal in-plane basis.
+        """
         return _plane_basis(self.normal)
 
     def signed_distance(self, points: ArrayLike) -> FloatArray:
-        """Signed distance of each point to the plane (m)."""
+        """Signed distance to the plane, ``(p − centroid)·normal``.
+
+        Parameters
+        ----------
+        points : (..., 3) array_like, m
+            Points.
+
+        Returns
+        -------
+        (...) array, m
+            Distances, positive on the side the normal points to.
+        """
         return (np.asarray(points, dtype=float) - self.centroid) @ self.normal
 
     def project(self, points: ArrayLike) -> FloatArray:
-        """Orthogonal projection of each point onto the plane."""
+        """Orthogonal projection onto the plane, ``p − ((p − centroid)·n) n``.
+
+        Parameters
+        ----------
+        points : (..., 3) array_like, m
+            Points.
+
+        Returns
+        -------
+        (..., 3) array, m
+            Their projections.
+        """
         p = np.asarray(points, dtype=float)
         return p - self.signed_distance(p)[..., None] * self.normal
 
@@ -219,17 +314,29 @@ def fit_plane(
 ) -> PlaneFit:
     """Fit a plane by total least squares (normal = least principal axis).
 
-    Used for the robot base plane ``z = 0`` (App. D.2) and the common ``z`` of the
-    target frames (8.4.1).
+    ``c = mean(p)``, ``normal = v₃`` the last right-singular vector of ``P − c = U S Vᵀ``
+    (it minimises ``Σ ((pᵢ − c)·n)²``).  Used for the robot base plane ``z = 0``
+    (App. D.2) and the common ``z`` of the target frames (8.4.1).
 
-    Args:
-        points: ``(N, 3)`` points, ``N ≥ 3``, not collinear.
-        normal_hint: optional vector the normal is signed to agree with.
-        rtol: collinearity tolerance on the ratio of the two largest singular values.
+    Parameters
+    ----------
+    points : (N, 3) array_like, m
+        Points, ``N ≥ 3``, not collinear.
+    normal_hint : (3,) array_like, optional
+        The normal is signed so that ``normal·hint ≥ 0``; default: its largest
+        component positive.
+    rtol : float
+        Collinearity tolerance: fails when ``s₂ ≤ rtol · s₁``.
 
-    Raises:
-        MetrologyError: fewer than 3 points, non-finite values, coincident or
-            collinear points.
+    Returns
+    -------
+    PlaneFit
+        Centroid (m), unit normal, signed residuals (m).
+
+    Raises
+    ------
+    MetrologyError
+        Fewer than 3 points, non-finite values, coincident or collinear points.
     """
     p = as_points(points, "fit_plane points", 3)
     c, s, vt = _centred_svd(p)
@@ -256,18 +363,27 @@ class CircleFit:
     Fitted in two stages: the plane by total least squares, then the circle in
     that plane (algebraic Kåsa fit refined by geometric least squares).
 
-    Attributes:
-        centre: circle centre (m).
-        normal: unit normal of the circle's plane (sign: right-hand rule along
-            the point order, see module docstring).
-        radius: radius (m).
-        residuals: signed in-plane radial residual of each point,
-            ``|q − centre| − radius`` of its projection ``q`` (m; > 0 outside).
-        out_of_plane: signed distance of each point to the circle's plane (m).
-        rms: rms of the 3-D distances ``hypot(residuals, out_of_plane)`` (m).
-        plane: the intermediate plane fit.
-        sweep: angle swept from the first to the last point about ``normal``
-            (rad, unwrapped; ``2π`` for one full turn).
+    Attributes
+    ----------
+    centre : (3,) array, m
+        Circle centre.
+    normal : (3,) array
+        Unit normal of the circle's plane (sign: right-hand rule along the point
+        order, see module docstring).
+    radius : float, m
+        Radius.
+    residuals : (N,) array, m
+        Signed in-plane radial residual ``‖q − centre‖ − radius`` of each point's
+        projection ``q`` (> 0 outside).
+    out_of_plane : (N,) array, m
+        Signed distance of each point to the circle's plane.
+    rms : float, m
+        rms of the 3-D distances ``hypot(residuals, out_of_plane)``.
+    plane : PlaneFit
+        The intermediate plane fit.
+    sweep : float, rad
+        Angle swept from the first to the last point about ``normal`` (unwrapped;
+        ``2π`` for one full turn).
     """
 
     centre: FloatArray
@@ -281,21 +397,49 @@ class CircleFit:
 
     @property
     def distances(self) -> FloatArray:
-        """3-D distance of each fitted point to the circle (m)."""
+        """3-D distance of each fitted point to the circle, ``hypot(residuals, out_of_plane)``."""
         return np.hypot(self.residuals, self.out_of_plane)
 
     def basis(self) -> tuple[FloatArray, FloatArray]:
-        """In-plane unit vectors ``(u, v)`` with ``u × v = normal``."""
+        """In-plane unit vectors ``(u, v)`` with ``u × v = normal``.
+
+        Returns
+        -------
+        u, v : (3,) array
+            Orthonormal basis of the circle's plane.
+        """
         return _plane_basis(self.normal)
 
     def angles(self, points: ArrayLike) -> FloatArray:
-        """Angle of each point about ``normal`` from the ``u`` axis of :meth:`basis`."""
+        """Angle about ``normal`` from the ``u`` axis, ``φ = atan2((p − c)·v, (p − c)·u)``.
+
+        Parameters
+        ----------
+        points : (..., 3) array_like, m
+            Points.
+
+        Returns
+        -------
+        (...) array, rad
+            Angles in (−π, π].
+        """
         u, v = self.basis()
         d = np.asarray(points, dtype=float) - self.centre
         return np.arctan2(d @ v, d @ u)
 
     def point_at(self, angle: ArrayLike) -> FloatArray:
-        """Point(s) of the circle at ``angle`` (rad) from the ``u`` axis."""
+        """Point of the circle at an angle, ``x(φ) = c + r (cos φ u + sin φ v)``.
+
+        Parameters
+        ----------
+        angle : (...) array_like, rad
+            Angle from the ``u`` axis of :meth:`basis`.
+
+        Returns
+        -------
+        (..., 3) array, m
+            Points of the circle.
+        """
         a = np.asarray(angle, dtype=float)
         u, v = self.basis()
         return self.centre + self.radius * (
@@ -328,18 +472,33 @@ def fit_circle(
     on the radial residuals. Works on arcs as well as full turns; on short arcs
     the radius is correspondingly less certain.
 
+    In-plane coordinates ``(xᵢ, yᵢ)``: Kåsa solves ``xᵢ² + yᵢ² + D xᵢ + E yᵢ + F = 0`` in
+    the least-squares sense (``x_c = −D/2``, ``y_c = −E/2``, ``r² = x_c² + y_c² − F``),
+    then ``min Σ (‖(xᵢ, yᵢ) − (x_c, y_c)‖ − r)²`` refines ``(x_c, y_c, r)``.
+
     Thesis: App. D.1 (joint ``n`` → origin ``O_n`` and ``z_n`` of the flange),
     App. D.2 (joint 1 → ``O_0`` offset and ``z_0``).
 
-    Args:
-        points: ``(N, 3)`` points, ``N ≥ 3``, not collinear, in angular order if
-            the normal's sign is to follow the rotation.
-        normal_hint: optional vector the normal is signed to agree with.
-        rtol: collinearity tolerance (see :func:`fit_plane`).
+    Parameters
+    ----------
+    points : (N, 3) array_like, m
+        Points, ``N ≥ 3``, not collinear, in angular order if the normal's sign is
+        to follow the rotation.
+    normal_hint : (3,) array_like, optional
+        The normal is signed so that ``normal·hint ≥ 0``.
+    rtol : float
+        Collinearity tolerance (see :func:`fit_plane`).
 
-    Raises:
-        MetrologyError: fewer than 3 points, non-finite values, coincident or
-            collinear points, failed fit.
+    Returns
+    -------
+    CircleFit
+        Centre (m), unit normal, radius (m), residuals (m), swept angle (rad).
+
+    Raises
+    ------
+    MetrologyError
+        Fewer than 3 points, non-finite values, coincident or collinear points,
+        failed fit.
     """
     p = as_points(points, "fit_circle points", 3)
     plane = fit_plane(p, normal_hint=normal_hint, rtol=rtol)

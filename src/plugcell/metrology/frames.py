@@ -69,7 +69,23 @@ _PARALLEL_TOL = 1e-9
 
 
 def invert_transform(T: ArrayLike) -> FloatArray:
-    """Inverse of homogeneous rigid transform(s) ``(..., 4, 4)``: ``[Rᵀ, −Rᵀp]``."""
+    """Inverse of homogeneous rigid transforms, ``T⁻¹ = [Rᵀ  −Rᵀp; 0 1]``.
+
+    Parameters
+    ----------
+    T : (..., 4, 4) array_like, m
+        Rigid transforms ``[R p; 0 1]``.
+
+    Returns
+    -------
+    (..., 4, 4) array, m
+        Their inverses.
+
+    Raises
+    ------
+    MetrologyError
+        Not of shape ``(..., 4, 4)``.
+    """
     a = np.asarray(T, dtype=float)
     if a.shape[-2:] != (4, 4):
         raise MetrologyError(f"invert_transform: expected (..., 4, 4), got shape {a.shape}")
@@ -99,11 +115,27 @@ def frame_from_axes(
     * ``y`` given (App. D.1, 8.4.1): ``x = y × z`` (normalised), then ``y = z × x``;
     * ``x`` given (App. D.2): ``y = z × x`` (normalised), then ``x = y × z``.
 
-    The columns of the returned rotation are ``[x y z]`` (eq. D.2's ``n o a``).
+    The columns of the returned rotation are ``[x y z]`` (eq. D.2's ``n o a``):
+    ``T = [x y z origin; 0 0 0 1]``.
 
-    Raises:
-        MetrologyError: both or neither of ``x``/``y`` given; zero, non-finite or
-            parallel axes.
+    Parameters
+    ----------
+    origin : (3,) array_like, m
+        Frame origin.
+    z : (3,) array_like
+        The z axis (normalised, kept exactly).
+    x, y : (3,) array_like, optional
+        Exactly one: the second axis (need not be unit or perpendicular to ``z``).
+
+    Returns
+    -------
+    T : (4, 4) array, m
+        The right-handed frame.
+
+    Raises
+    ------
+    MetrologyError
+        Both or neither of ``x``/``y`` given; zero, non-finite or parallel axes.
     """
     o = as_vector3(origin, "origin")
     zz = as_vector3(z, "z", unit=True)
@@ -135,12 +167,18 @@ def frame_from_axes(
 class RigidFit:
     """Least-squares rigid transform ``b ≈ R a + t`` between paired points.
 
-    Attributes:
-        transform: 4×4 homogeneous ``[R t; 0 1]`` mapping frame A to frame B.
-        residuals: ``b − (R a + t)`` per point, shape ``(N, 3)`` (m).
-        distances: ``|residuals|`` per point (m).
-        rms: root mean square of ``distances`` (unweighted) (m).
-        weights: the weights used (normalised to sum 1).
+    Attributes
+    ----------
+    transform : (4, 4) array, m
+        Homogeneous ``[R t; 0 1]`` mapping frame A to frame B.
+    residuals : (N, 3) array, m
+        ``bᵢ − (R aᵢ + t)`` per point.
+    distances : (N,) array, m
+        ``‖residualsᵢ‖``.
+    rms : float, m
+        ``√(Σ distancesᵢ² / N)`` (unweighted).
+    weights : (N,) array
+        The weights used, normalised to ``Σ wᵢ = 1``.
     """
 
     transform: FloatArray
@@ -160,12 +198,29 @@ class RigidFit:
         return self.transform[:3, 3]
 
     def apply(self, points: ArrayLike) -> FloatArray:
-        """Map points from frame A to frame B."""
+        """Map points from frame A to frame B, ``b = R a + t``.
+
+        Parameters
+        ----------
+        points : (..., 3) array_like, m
+            Points in frame A.
+
+        Returns
+        -------
+        (..., 3) array, m
+            The same points in frame B.
+        """
         p = np.asarray(points, dtype=float)
         return p @ self.rotation.T + self.translation
 
     def inverse(self) -> FloatArray:
-        """4×4 transform mapping frame B to frame A."""
+        """Transform mapping frame B to frame A, ``[Rᵀ  −Rᵀt; 0 1]``.
+
+        Returns
+        -------
+        (4, 4) array, m
+            The inverse of ``transform``.
+        """
         return invert_transform(self.transform)
 
 
@@ -180,16 +235,29 @@ def fit_rigid_transform(
     Minimises ``Σ w_i |b_i − (R a_i + t)|²`` over proper rotations ``R``
     (``det R = +1``, reflections excluded). Calibration uses it to initialise
     BASE from nominal flange/T-MAC positions ``a`` (robot frame) and their tracker
-    measurements ``b``.
+    measurements ``b``.  Closed form: with weighted centroids ``ā = Σ wᵢ aᵢ``,
+    ``b̄ = Σ wᵢ bᵢ`` and ``H = Σ wᵢ (aᵢ − ā)(bᵢ − b̄)ᵀ = U S Vᵀ``,
+    ``R = V diag(1, 1, sign det(V Uᵀ)) Uᵀ`` and ``t = b̄ − R ā``.
 
-    Args:
-        points_a: ``(N, 3)`` points in frame A, ``N ≥ 3``, not collinear.
-        points_b: ``(N, 3)`` the same points measured in frame B.
-        weights: optional ``(N,)`` non-negative weights, at least 3 positive.
+    Parameters
+    ----------
+    points_a : (N, 3) array_like, m
+        Points in frame A, ``N ≥ 3``, not collinear.
+    points_b : (N, 3) array_like, m
+        The same points measured in frame B.
+    weights : (N,) array_like, optional
+        Non-negative weights, at least 3 positive (normalised to sum 1); default equal.
 
-    Raises:
-        MetrologyError: shape mismatch, fewer than 3 points, non-finite values,
-            bad weights, collinear points (rotation about their line undefined).
+    Returns
+    -------
+    RigidFit
+        ``[R t; 0 1]`` (m) and the per-point residuals (m).
+
+    Raises
+    ------
+    MetrologyError
+        Shape mismatch, fewer than 3 points, non-finite values, bad weights,
+        collinear points (rotation about their line undefined).
     """
     a = as_points(points_a, "fit_rigid_transform points_a", 3)
     b = as_points(points_b, "fit_rigid_transform points_b", 3)
@@ -242,14 +310,21 @@ def fit_rigid_transform(
 class ProbeEstimate:
     """Result of the PROBE procedure of App. D.1.
 
-    Attributes:
-        probe: ``PROBE = T_TMAC^n`` (eq. D.3), 4×4.
-        flange_pose: ``T_n^LT`` (eq. D.2), the flange frame in the tracker frame.
-        circle: circle fitted to the SMR positions while joint ``n`` turned.
-        hole_line: line fitted through the dowel-hole measurements.
-        smr_offset: SMR centre height above the flange face used (m).
-        hole_line_tilt: angle between the dowel-hole line and the flange plane
-            (rad); ideally 0, a large value flags a bad measurement.
+    Attributes
+    ----------
+    probe : (4, 4) array, m
+        ``PROBE = T_TMAC^n = (T_n^LT)⁻¹ T_TMAC^LT`` (eq. D.3).
+    flange_pose : (4, 4) array, m
+        ``T_n^LT`` (eq. D.2), the flange frame in the tracker frame.
+    circle : CircleFit
+        Circle fitted to the SMR positions while joint ``n`` turned.
+    hole_line : LineFit
+        Line fitted through the dowel-hole measurements.
+    smr_offset : float, m
+        SMR centre height above the flange face used.
+    hole_line_tilt : float, rad
+        Angle between the dowel-hole line and the flange plane, ``asin |y·z_n|``;
+        ideally 0, a large value flags a bad measurement.
     """
 
     probe: FloatArray
@@ -270,27 +345,41 @@ def probe_from_flange_features(
 ) -> ProbeEstimate:
     """Estimate PROBE from flange features, App. D.1 (eqs. D.2, D.3).
 
-    Args:
-        circle_points: ``(N, 3)`` SMR positions (tracker frame) while the last
-            joint turns in its *positive* direction with the SMR in a flange dowel
-            hole; ``N ≥ 3``. The circle's right-hand normal is ``z_n``.
-        hole_points: ``(M, 3)`` SMR positions in the two dowel holes that define
-            ``y_n``, ordered from the hole at ``−y_n`` to the hole at ``+y_n``
-            (repeated readings per hole are fine); ``M ≥ 2``.
-        tmac_measurement: 4×4 T-MAC pose ``T_TMAC^LT`` measured without moving
-            the robot after mounting the T-MAC.
-        smr_offset: SMR centre height above the flange face (m); the flange
-            origin is ``circle centre − smr_offset·z_n`` (module docstring).
-            ``0`` reproduces App. D literally.
-        normal_hint: optional vector to sign ``z_n`` by instead of the rotation
-            sense (e.g. when the joint was turned negatively).
+    ``z_n`` = circle normal, ``O_n = centre − smr_offset · z_n``, ``y_n`` = dowel-hole
+    line direction, ``x_n = y_n × z_n`` (re-orthogonalised), ``T_n^LT = [x_n y_n z_n O_n]``
+    (D.2) and ``PROBE = (T_n^LT)⁻¹ T_TMAC^LT`` (D.3).
 
-    Returns:
-        :class:`ProbeEstimate` with ``probe = (T_n^LT)⁻¹ T_TMAC^LT``.
+    Parameters
+    ----------
+    circle_points : (N, 3) array_like, m
+        SMR positions (tracker frame) while the last joint turns in its *positive*
+        direction with the SMR in a flange dowel hole; ``N ≥ 3``.  The circle's
+        right-hand normal is ``z_n``.
+    hole_points : (M, 3) array_like, m
+        SMR positions in the two dowel holes that define ``y_n``, ordered from the
+        hole at ``−y_n`` to the hole at ``+y_n`` (repeated readings per hole are
+        fine); ``M ≥ 2``.
+    tmac_measurement : (4, 4) array_like, m
+        T-MAC pose ``T_TMAC^LT`` measured without moving the robot after mounting
+        the T-MAC.
+    smr_offset : float, m
+        SMR centre height above the flange face (module docstring); ``0`` reproduces
+        App. D literally.
+    normal_hint : (3,) array_like, optional
+        Vector to sign ``z_n`` by instead of the rotation sense (e.g. when the joint
+        was turned negatively).
 
-    Raises:
-        MetrologyError: degenerate features (see :func:`fit_circle`,
-            :func:`fit_line`), holes along ``z_n``, malformed T-MAC pose.
+    Returns
+    -------
+    ProbeEstimate
+        ``probe`` (4, 4), m, and the fitted features.
+
+    Raises
+    ------
+    MetrologyError
+        Degenerate features (see :func:`fit_circle`, :func:`fit_line`), holes along
+        ``z_n`` (line more than 80° out of the flange plane), malformed T-MAC pose,
+        non-finite ``smr_offset``.
     """
     T_tmac = as_transform(tmac_measurement, "tmac_measurement")
     if not np.isfinite(smr_offset):
@@ -321,15 +410,23 @@ def probe_from_flange_features(
 class BaseEstimate:
     """Result of the BASE procedure of App. D.2.
 
-    Attributes:
-        base: BASE = frame ``F_0`` in the tracker frame, 4×4.
-        circle: circle fitted to the SMR positions while joint 1 turned.
-        plane: plane fitted to the SMR positions on the base surface.
-        line: line fitted to the T-MAC positions during the move along ``x_0``.
-        smr_offset: SMR centre height above the base surface used (m).
-        axis_plane_angle: angle between the joint-1 axis and the base-plane
-            normal (rad) — squareness of axis 1 to the mounting surface.
-        line_tilt: angle between the ``x`` move and the plane ``⟂ z_0`` (rad).
+    Attributes
+    ----------
+    base : (4, 4) array, m
+        BASE = frame ``F_0`` in the tracker frame.
+    circle : CircleFit
+        Circle fitted to the SMR positions while joint 1 turned.
+    plane : PlaneFit
+        Plane fitted to the SMR positions on the base surface.
+    line : LineFit
+        Line fitted to the T-MAC positions during the move along ``x_0``.
+    smr_offset : float, m
+        SMR centre height above the base surface used.
+    axis_plane_angle : float, rad
+        Angle between the joint-1 axis and the base-plane normal — squareness of
+        axis 1 to the mounting surface.
+    line_tilt : float, rad
+        Angle between the ``x`` move and the plane ``⟂ z_0``, ``asin |d·z_0|``.
     """
 
     base: FloatArray
@@ -342,7 +439,7 @@ class BaseEstimate:
 
     @property
     def parameters(self) -> BaseParameters:
-        """The BASE parameters of eq. 6.24 from eq. D.6."""
+        """The BASE parameters of eq. 6.24 from eq. D.6 (:func:`base_parameters_from_matrix`)."""
         return base_parameters_from_matrix(self.base)
 
 
@@ -367,10 +464,33 @@ def base_from_features(
       against ``z_0``; ``y_0 = z_0 × x_0``.
 
     Only directions are taken from the line (the T-MAC is offset from the flange).
+    The origin is ``O_0 = c + t z_0`` with ``t = ((p₀ − c)·n) / (z_0·n)``, ``c`` the
+    circle centre, ``n`` the plane normal and ``p₀ = centroid − smr_offset · n``.
 
-    Raises:
-        MetrologyError: degenerate features, the move along (nearly) ``z_0``,
-            the base plane (nearly) parallel to the joint-1 axis.
+    Parameters
+    ----------
+    joint1_circle_points : (N, 3) array_like, m
+        SMR positions (tracker frame) while joint 1 turns positively, ``N ≥ 3``.
+    base_plane_points : (M, 3) array_like, m
+        SMR centres on the base surface, ``M ≥ 3``, not collinear.
+    x_axis_line_points : (K, 3) array_like, m
+        T-MAC positions while the robot moves along its ``+x``, in measured order.
+    smr_offset : float, m
+        SMR centre height above the base surface (module docstring).
+    normal_hint : (3,) array_like, optional
+        Vector to sign ``z_0`` by instead of the rotation sense.
+
+    Returns
+    -------
+    BaseEstimate
+        ``base`` (4, 4), m, and the fitted features.
+
+    Raises
+    ------
+    MetrologyError
+        Degenerate features, the move along (nearly) ``z_0`` (> 80°), the base plane
+        (nearly) parallel to the joint-1 axis (normal > 80° from it), non-finite
+        ``smr_offset``.
     """
     if not np.isfinite(smr_offset):
         raise MetrologyError(f"smr_offset: must be finite, got {smr_offset}")
@@ -409,7 +529,17 @@ def base_from_features(
 class BaseParameters:
     """Parameters of eq. 6.24 (= D.4): lengths in m, angles in rad.
 
-    Scalars for one BASE, arrays for a stack (from the vectorised functions).
+    ``BASE = Tran(x,a0) Tran(y,b0) Rot(x,α0) Rot(y,β0) Rot(z,θ0) Tran(z,d0)``.
+    Scalars for one BASE, arrays ``(...)`` for a stack (from the vectorised functions).
+
+    Attributes
+    ----------
+    a0, b0 : float or (...) array, m
+        Translations along x and y.
+    alpha0, beta0, theta0 : float or (...) array, rad
+        Rotations about x, y, z.
+    d0 : float or (...) array, m
+        Translation along the final z.
     """
 
     a0: FloatArray | float
@@ -420,7 +550,13 @@ class BaseParameters:
     d0: FloatArray | float
 
     def as_array(self) -> FloatArray:
-        """``[a0, b0, alpha0, beta0, theta0, d0]`` stacked on the last axis."""
+        """The parameters as one vector ``[a0, b0, α0, β0, θ0, d0]``.
+
+        Returns
+        -------
+        (..., 6) array
+            Stacked on the last axis, m and rad.
+        """
         return np.stack(
             np.broadcast_arrays(
                 *(np.asarray(v, dtype=float) for v in
@@ -430,7 +566,13 @@ class BaseParameters:
         )
 
     def matrix(self) -> FloatArray:
-        """BASE matrix, eq. 6.24."""
+        """BASE matrix, eq. 6.24 (:func:`base_matrix_from_parameters`).
+
+        Returns
+        -------
+        (..., 4, 4) array, m
+            The BASE transform(s).
+        """
         return base_matrix_from_parameters(
             self.a0, self.b0, self.alpha0, self.beta0, self.theta0, self.d0
         )
@@ -446,9 +588,22 @@ def base_matrix_from_parameters(
 ) -> FloatArray:
     """BASE = Tran(x,a0) Tran(y,b0) Rot(x,α0) Rot(y,β0) Rot(z,θ0) Tran(z,d0), eq. 6.24.
 
-    Arguments broadcast; the result has shape ``broadcast_shape + (4, 4)``.
     Closed form: ``R = Rx(α0) Ry(β0) Rz(θ0)``,
     ``p = (a0 + d0 sβ0, b0 − d0 sα0 cβ0, d0 cα0 cβ0)``.
+
+    Parameters
+    ----------
+    a0, b0 : (...) array_like, m
+        Translations along x and y.
+    alpha0, beta0, theta0 : (...) array_like, rad
+        Rotations about x, y, z.
+    d0 : (...) array_like, m
+        Translation along the final z.  All arguments broadcast together.
+
+    Returns
+    -------
+    BASE : (..., 4, 4) array, m
+        Shape ``broadcast_shape + (4, 4)``.
     """
     a, b, al, be, th, d = np.broadcast_arrays(
         *(np.asarray(v, dtype=float) for v in (a0, b0, alpha0, beta0, theta0, d0))
@@ -479,12 +634,26 @@ def base_parameters_from_matrix(BASE: ArrayLike, *, singular_tol: float = 1e-6) 
     ``α0 = atan2(−B23, B33)``, ``β0 = atan2(B13, −sα0 B23 + cα0 B33)``,
     ``θ0 = atan2(−B12, B11)``, ``d0 = B34 / (cα0 cβ0)``, ``a0 = B14 − d0 sβ0``,
     ``b0 = B24 + d0 sα0 cβ0`` (1-based indices as in the thesis). The returned
-    ``β0`` lies in ``[−π/2, π/2]``. Accepts ``(4, 4)`` or a stack ``(..., 4, 4)``.
+    ``β0`` lies in ``[−π/2, π/2]``.
 
-    Raises:
-        MetrologyError: malformed matrix, or ``|cα0 cβ0| = |B33| < singular_tol``
-            (robot ``z_0`` perpendicular to the tracker ``z``): ``d0`` is then
-            undefined and the parametrisation singular.
+    Parameters
+    ----------
+    BASE : (4, 4) or (..., 4, 4) array_like, m
+        BASE transform(s); the rotation block must be proper (``|RᵀR − I| ≤ 1e-6``).
+    singular_tol : float
+        Smallest accepted ``|B33| = |cα0 cβ0|``.
+
+    Returns
+    -------
+    BaseParameters
+        Floats for one matrix, ``(...)`` arrays for a stack; m and rad.
+
+    Raises
+    ------
+    MetrologyError
+        Malformed or non-finite matrix, an improper rotation block, or
+        ``|B33| < singular_tol`` (robot ``z_0`` perpendicular to the tracker ``z``):
+        ``d0`` is then undefined and the parametrisation singular.
     """
     B = np.asarray(BASE, dtype=float)
     if B.shape[-2:] != (4, 4):
