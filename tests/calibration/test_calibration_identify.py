@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import json
-import time
 
 import numpy as np
 import pytest
@@ -191,15 +190,10 @@ def test_serial_robot_with_masses(ur10):
         Calibrator(description_from_dict(d), 3).fit(_data(truth, 30, 17, payloads=(0.0,)))
 
 
-def test_model_5_with_150_poses_is_fast(h4, full_truth):
+def test_model_5_with_150_poses_identifies_50_parameters(h4, full_truth):
+    # its speed (≈ 0.05 s) is measured by `plugcell bench calibration`, never asserted here
     data = _data(full_truth, 150, 18, payloads=(36.0,), noise=2e-5)
-    cal = Calibrator(h4, 5)
-    times = []
-    for _ in range(3):
-        t = time.perf_counter()
-        res = cal.fit(data)
-        times.append(time.perf_counter() - t)
-    assert min(times) < 1.0  # measured ≈ 0.05 s on 2 cores (best of 3: robust to load)
+    res = Calibrator(h4, 5).fit(data)
     assert len(res.keys) == 50  # one payload: A2 is −a2·G1 (see identifiability tests)
 
 
