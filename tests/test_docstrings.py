@@ -27,8 +27,6 @@ PACKAGES = ("kinematics", "metrology", "calibration", "compensation")
 
 #: Modules not checked, with the reason.
 SKIP_MODULES = {
-    # being rewritten in the package move of #21 (file schema → io/); documented there
-    "plugcell.kinematics.description": "under the #21 package move",
     "plugcell.calibration.residual_model": "under concurrent edit (#21)",
 }
 

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import math
 
 import numpy as np
@@ -54,3 +55,29 @@ def test_target_validation():
         target_poses(np.zeros((1, 3)), np.zeros((1, 3)), "abc")
     with pytest.raises(ValueError):
         frame_matrix([0, 0], [0, 0, 0])
+
+
+def test_joint_program_converts_only_revolute_joints():
+    """A prismatic joint's reading stays in metres; the revolute ones go to degrees."""
+    from plugcell.compensation.model_based import CompensationResult
+    from plugcell.kinematics import Link, RobotDescription
+
+    desc = RobotDescription(
+        name="track_arm",
+        links=(Link("track", "base", "prismatic", 0.0, 0.0, 0.0, 0.0),
+               Link("j1", "track", "actuated", 0.0, 0.1, 0.3, 0.0)),
+        actuated=("track", "j1"), flange="j1", loops=(), base=np.eye(4), tool=np.eye(4),
+        joint_limits=[[0.0, 3.0], [-3.0, 3.0]], home=[1.0, 0.0],
+    )
+    q = np.array([[2.5, math.pi / 2], [0.5, -math.pi / 4]])
+    n = len(q)
+    res = CompensationResult(
+        q=q, q_start=q.copy(), converged=np.ones(n, bool), within_limits=np.ones(n, bool),
+        iterations=np.ones(n, int), residual=np.zeros(n), position_error=np.zeros(n),
+        orientation_error=np.zeros(n), reason=np.full(n, "", object),
+        kind=np.full(n, "", object))
+    np.testing.assert_allclose(joint_program(res, desc), [[2.5, 90.0], [0.5, -45.0]])
+    np.testing.assert_allclose(joint_program(res, desc, degrees=False), q)
+    assert joint_program(res, desc, degrees=False) is not res.q
+    with pytest.raises(ValueError, match="2 joint readings"):
+        joint_program(dataclasses.replace(res, q=q[:, :1]), desc)

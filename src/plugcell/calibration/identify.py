@@ -281,7 +281,39 @@ class Calibrator:
         return data
 
     def initial_frames(self, data: CalibrationData) -> tuple[Array, Array, float]:
-        """Initial BASE, PROBE and the rms position misfit they leave (m)."""
+        """Initial BASE, PROBE and the rms position misfit they leave.
+
+        The nominal flange poses ``F_i = T_n^0(q_i; g_nom)`` (exact four-bar closure) are
+        registered onto the measurements, ``T_i ≈ BASE · F_i · PROBE``: with both frames
+        given to the calibrator they are returned as they are; otherwise they are
+        estimated — from 6-DOF poses by :func:`estimate_base_probe_poses`, from positions
+        ``p_i ≈ R_BASE (p_F,i + R_F,i t_PROBE) + t_BASE`` by
+        :func:`estimate_base_probe_positions` (a given PROBE's offset as the start) — and
+        a frame given to the calibrator replaces its estimate.
+
+        Parameters
+        ----------
+        data : CalibrationData
+            The calibration poses: readings ``q`` ``(N, n_readings)``, rad; measured
+            positions ``(N, 3)`` or poses ``(N, 4, 4)``, m.
+
+        Returns
+        -------
+        base : (4, 4) array, m
+            BASE, the robot base frame in the measurement frame.
+        probe : (4, 4) array, m
+            PROBE, the target in the flange frame.
+        rms : float, m
+            ``sqrt(mean_i ‖p_i − p̂_i‖²)`` of the position misfit — of the returned
+            frames when both were given, else of the estimated pair (before a given
+            frame replaces its estimate).
+
+        Raises
+        ------
+        CalibrationError
+            The nominal kinematics fail on the readings, or the data do not determine
+            BASE and PROBE (too few or degenerate poses).
+        """
         ref = self.desc.nominal_parameters()
         try:
             flange = forward(self.desc, ref, data.q, closure="fourbar").flange

@@ -178,7 +178,11 @@ def estimate_base_probe_positions(
     ------
     InitialEstimateError
         Malformed shapes or fewer than 4 poses.
+    ValueError
+        ``iterations < 1``.
     """
+    if iterations < 1:
+        raise ValueError(f"iterations must be ≥ 1, got {iterations}")
     F = np.asarray(flange, dtype=float)
     P = np.asarray(positions, dtype=float)
     N = len(F)

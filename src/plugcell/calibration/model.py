@@ -137,7 +137,18 @@ class PoseBatch:
     temperature_c: Array | None = None
 
     def delta_t(self, reference_c: float) -> Array:
-        """``(N,)`` temperature above the reference, K (zero without temperatures)."""
+        """Temperature above the reference, ``ΔT_i = T_i − T_ref``.
+
+        Parameters
+        ----------
+        reference_c : float, °C
+            The reference temperature T_ref (the model's ``temperature_ref_c``).
+
+        Returns
+        -------
+        (N,) array, K
+            ΔT per pose; zeros when the batch has no temperatures.
+        """
         if self.temperature_c is None:
             return np.zeros(len(self.q))
         return self.temperature_c - reference_c
@@ -221,9 +232,39 @@ class ErrorModel:
         harmonics up to order ``harmonics``, + the thermal expansion κT about
         ``temperature_ref_c`` when ``thermal``), values zero.
 
-        ``base``/``probe``: the reference BASE (robot base in the measurement frame)
-        and PROBE (target in the flange frame); default: the description's
-        ``base`` and ``tool``.
+        With Δg = 0 the model predicts the nominal robot,
+        ``T(q) = BASE_ref · T_n^0(θ(q)) · PROBE_ref`` (eq. 6.23 without errors).
+
+        Parameters
+        ----------
+        desc : RobotDescription
+            The robot.
+        family : str
+            Model family of the kinematic structure
+            (:func:`~plugcell.calibration.structure.kinematic_structure`), e.g. ``"loop"``.
+        gravity : bool
+            Add the gravity compliance parameters (Δθ = R_g(q) c_g, eqs. 6.31, 6.40).
+        payload : bool
+            Add the payload compliance constants (eq. 6.41, scaled by m / m_ref).
+        base : (4, 4) array_like, m, optional
+            Reference BASE, the robot base in the measurement frame (default
+            ``desc.base``).
+        probe : (4, 4) array_like, m, optional
+            Reference PROBE, the target in the flange frame (default ``desc.tool``).
+        payload_ref_kg : float, kg
+            The payload m_ref the payload constants refer to.
+        harmonics : int
+            Highest order k of the joint-angle harmonics ``sin(k q_j)``, ``cos(k q_j)``
+            (0: none).
+        thermal : bool
+            Add the thermal expansion coefficient κT (1/K).
+        temperature_ref_c : float, °C
+            Reference temperature of κT.
+
+        Returns
+        -------
+        ErrorModel
+            The model, every value zero.
         """
         structure = kinematic_structure(desc, family)
         params = list(structure.candidates())
@@ -247,18 +288,80 @@ class ErrorModel:
 
     # ------------------------------------------------------------------ values
     def value(self, key: str) -> float:
+        """The current value of one parameter.
+
+        Parameters
+        ----------
+        key : str
+            Parameter key (e.g. ``"a2'"``).
+
+        Returns
+        -------
+        float
+            Δg_key, in the parameter's unit (m, rad, rad/(N·m)…, ``space[key].unit``).
+
+        Raises
+        ------
+        KeyError
+            Unknown key.
+        """
         return float(self.values[self.space.index(key)])
 
     def as_dict(self) -> dict[str, float]:
+        """Every parameter's value by key.
+
+        Returns
+        -------
+        dict of str to float
+            ``{key: Δg_key}``, in :attr:`space` order, each in its parameter's unit.
+        """
         return {k: float(v) for k, v in zip(self.space.keys, self.values, strict=True)}
 
     def with_values(self, values: ArrayLike) -> ErrorModel:
+        """The same model (structure, space, references) with other parameter values.
+
+        Parameters
+        ----------
+        values : (len(space),) array_like
+            New Δg, each in its parameter's unit.
+
+        Returns
+        -------
+        ErrorModel
+            The new model.
+
+        Raises
+        ------
+        ValueError
+            ``values`` of the wrong shape.
+        """
         return ErrorModel(self.structure, self.space, np.asarray(values, float), self.base_ref,
                           self.probe_ref, self.payload_ref_kg, self.temperature_ref_c)
 
     def updated(self, delta: Mapping[str, float] | None = None, *,
                 keys: Sequence[str] | None = None, step: ArrayLike | None = None) -> ErrorModel:
-        """A copy with increments added: ``updated({"a2'": 1e-3})`` or ``updated(keys=, step=)``."""
+        """A copy with increments added, ``Δg ← Δg + δ``: ``updated({"a2'": 1e-3})`` or
+        ``updated(keys=, step=)`` (both may be given; both add).
+
+        Parameters
+        ----------
+        delta : mapping of str to float, optional
+            ``{key: δ}``, each in its parameter's unit.
+        keys : sequence of str, optional
+            Parameters ``step`` applies to (e.g. the identified ones).
+        step : (len(keys),) array_like, optional
+            Increments, in ``keys`` order (required with ``keys``; e.g. a Gauss–Newton step).
+
+        Returns
+        -------
+        ErrorModel
+            The updated model.
+
+        Raises
+        ------
+        KeyError
+            An unknown key.
+        """
         v = np.array(self.values)
         if delta:
             for k, x in delta.items():
@@ -269,6 +372,28 @@ class ErrorModel:
 
     def with_references(self, base: ArrayLike | None = None, probe: ArrayLike | None = None,
                         payload_ref_kg: float | None = None) -> ErrorModel:
+        """The same model with other references BASE_ref, PROBE_ref, m_ref (values kept,
+        so BASE/PROBE errors now act on the new references).
+
+        Parameters
+        ----------
+        base : (4, 4) array_like, m, optional
+            New BASE_ref (default: unchanged).
+        probe : (4, 4) array_like, m, optional
+            New PROBE_ref (default: unchanged).
+        payload_ref_kg : float, kg, optional
+            New m_ref (default: unchanged).
+
+        Returns
+        -------
+        ErrorModel
+            The new model.
+
+        Raises
+        ------
+        ValueError
+            A reference that is not 4×4.
+        """
         return ErrorModel(
             self.structure, self.space, self.values,
             self.base_ref if base is None else np.asarray(base, float),
@@ -279,6 +404,8 @@ class ErrorModel:
 
     @property
     def compliance_keys(self) -> tuple[str, ...]:
+        """Keys of the compliance parameters c (gravity, payload, harmonic), in the order
+        of the columns of :attr:`PoseBatch.regressors`."""
         return self._compliance  # type: ignore[attr-defined,no-any-return]
 
     @property
@@ -288,7 +415,13 @@ class ErrorModel:
 
     # ------------------------------------------------------------------ parts
     def geometric_parameters(self) -> GeometricParameters:
-        """Nominal geometry of the chain plus the link errors."""
+        """Nominal geometry of the chain plus the link errors, ``g = g_nom + Δg_link``.
+
+        Returns
+        -------
+        GeometricParameters
+            θ, α, β (rad), d, a (m) per link of the structure's description.
+        """
         delta = {
             (p.link, p.field): float(v)
             for p, v in zip(self.space, self.values, strict=True)
@@ -303,29 +436,78 @@ class ErrorModel:
         return self.value(key) if key in self.space else 0.0
 
     def base_parameters(self) -> tuple[float, float, float, float, float, float]:
-        """(a0, b0, α0, β0, θ0, d0) relative to ``base_ref``."""
+        """The BASE errors of eq. (6.24), relative to ``base_ref`` (0 when not a parameter).
+
+        Returns
+        -------
+        (a0, b0, alpha0, beta0, theta0, d0) : tuple of float
+            a0, b0, d0 in m; α0, β0, θ0 in rad.
+        """
         g = self._get
         return (g("base", "a"), g("base", "b"), g("base", "alpha"), g("base", "beta"),
                 g("base", "theta"), g("base", "d"))
 
     def probe_parameters(self) -> tuple[float, float, float, float]:
-        """(θ7, d7, a7, α7) of the virtual PROBE frame."""
+        """The errors of the virtual PROBE frame 7 (6.2.2), 0 when not a parameter.
+
+        Returns
+        -------
+        (theta7, d7, a7, alpha7) : tuple of float
+            θ7, α7 in rad; d7, a7 in m.
+        """
         g = self._get
         return (g("probe", "theta"), g("probe", "d"), g("probe", "a"), g("probe", "alpha"))
 
     def base(self) -> Array:
-        """BASE: the robot base frame in the measurement frame (eq. 6.24)."""
+        """BASE: the robot base frame in the measurement frame (eq. 6.24),
+        ``BASE = BASE_ref · Tx(a0) Ty(b0) Rx(α0) Ry(β0) Rz(θ0) Tz(d0)``.
+
+        Returns
+        -------
+        (4, 4) array, m
+            BASE (:func:`base_transform` of :meth:`base_parameters`).
+        """
         return base_transform(self.base_ref, *self.base_parameters())
 
     def probe(self) -> Array:
-        """PROBE: the target in the flange frame of the identified chain (6.2.2)."""
+        """PROBE: the target in the flange frame of the identified chain (6.2.2),
+        ``PROBE = Rx(−90°) · Rz(θ7) Tz(d7) Tx(a7) Rx(90° + α7) · PROBE_ref``.
+
+        Returns
+        -------
+        (4, 4) array, m
+            PROBE (:func:`probe_transform` of :meth:`probe_parameters`).
+        """
         return probe_transform(self.probe_ref, *self.probe_parameters())
 
     # ------------------------------------------------------------------ prediction
     def batch(self, q: ArrayLike, payload_kg: ArrayLike | float | None = None,
               temperature_c: ArrayLike | float | None = None) -> PoseBatch:
-        """Readings ``(N, n)`` (radians) with their compliance regressors (and the
-        temperatures ``(N,)``, °C, for the thermal term)."""
+        """Readings with their compliance regressors ``R(q, m)`` (``Δθ = R c``, eqs. 6.31,
+        6.40, 6.41) and temperatures, computed once for every prediction on them.
+
+        Parameters
+        ----------
+        q : (N, n_readings) or (n_readings,) array_like, rad
+            Joint readings (one vector is one pose).
+        payload_kg : float or (N,) array_like, kg, optional
+            Payload per pose or one for all (default 0).
+        temperature_c : float or (N,) array_like, °C, optional
+            Temperature per pose or one for all, for the thermal term (default: none,
+            the reference temperature).
+
+        Returns
+        -------
+        PoseBatch
+            ``q`` ``(N, n_readings)``, ``payload_kg`` ``(N,)``, ``regressors``
+            ``(N, n_actuated, len(compliance_keys))``, ``temperature_c`` ``(N,)`` or None.
+
+        Raises
+        ------
+        ValueError
+            ``q`` not of width ``n_readings``, or payloads/temperatures that do not
+            broadcast to ``(N,)``.
+        """
         q = np.atleast_2d(np.asarray(q, dtype=float))
         n = self.structure.n_readings
         if q.ndim != 2 or q.shape[1] != n:
@@ -340,25 +522,84 @@ class ErrorModel:
         return PoseBatch(q=q, payload_kg=m, regressors=R, temperature_c=t)
 
     def thermal_scale(self, batch: PoseBatch) -> Array | None:
-        """``(N,)`` scale ``1 + κT·(T − T_ref)`` of the chain's lengths, or ``None``
-        when the model has no thermal term."""
+        """Scale ``s_i = 1 + κT·(T_i − T_ref)`` of the chain's lengths.
+
+        Parameters
+        ----------
+        batch : PoseBatch
+            The poses (their temperatures).
+
+        Returns
+        -------
+        (N,) array or None
+            s per pose (dimensionless; 1 for a batch without temperatures), ``None`` when
+            the model has no thermal term.
+        """
         if THERMAL_KEY not in self.space:
             return None
         return 1.0 + self.value(THERMAL_KEY) * batch.delta_t(self.temperature_ref_c)
 
     def deflections(self, batch: PoseBatch) -> Array:
-        """Joint deflections Δθ ``(N, n_actuated)`` of the kinematic joints (eq. 4.16)."""
+        """Joint deflections of the kinematic joints, ``Δθ = R(q, m) · c`` (eqs. 4.16, 6.31,
+        6.40) with c the current compliance values.
+
+        Parameters
+        ----------
+        batch : PoseBatch
+            The poses with their regressors R ``(N, n_actuated, n_c)``.
+
+        Returns
+        -------
+        (N, n_actuated) array, rad
+            Δθ (zeros without compliance parameters).
+        """
         if not self.compliance_keys:
             return np.zeros(batch.regressors.shape[:2])
         c = self.values[self.space.indices(self.compliance_keys)]
         return batch.regressors @ c
 
     def chain_joints(self, batch: PoseBatch) -> Array:
-        """Joint values of the structure's chain: ``reading_map · (θ(q) + Δθ)``."""
+        """Joint values of the structure's chain, ``q_desc = reading_map · (θ(q) + Δθ)``.
+
+        θ(q) are the kinematic joints of the readings (``M·q + offset`` with a coupling),
+        Δθ the :meth:`deflections`.
+
+        Parameters
+        ----------
+        batch : PoseBatch
+            The poses.
+
+        Returns
+        -------
+        (N, n_desc) array, rad (m for prismatic)
+            Joint values of the structure's description.
+        """
         return self.structure.joints(batch.q, self.deflections(batch))
 
     def predict_batch(self, batch: PoseBatch) -> Array:
-        """Predicted target poses ``(N, 4, 4)`` in the measurement frame."""
+        """Predicted target poses in the measurement frame (eq. 6.23),
+        ``T_i = BASE · S_i · T_n^0(q_desc,i; g) · PROBE``.
+
+        T_n^0 is the flange of the structure's chain with geometry
+        :meth:`geometric_parameters`, joints :meth:`chain_joints` and the passive angles
+        from the exact four-bar closure; S_i scales the flange position by
+        :meth:`thermal_scale` (identity without the thermal term).
+
+        Parameters
+        ----------
+        batch : PoseBatch
+            The poses (from :meth:`batch` of a model with the same parameter space).
+
+        Returns
+        -------
+        (N, 4, 4) array, m
+            Predicted target poses.
+
+        Raises
+        ------
+        LoopClosureError
+            A loop that cannot close at some pose.
+        """
         fk = forward(self.structure.desc, self.geometric_parameters(), self.chain_joints(batch),
                      closure="fourbar")
         flange = fk.flange
@@ -370,8 +611,32 @@ class ErrorModel:
 
     def predict(self, q: ArrayLike, payload_kg: ArrayLike | float | None = None,
                 temperature_c: ArrayLike | float | None = None) -> Array:
-        """Predicted target poses ``(N, 4, 4)`` for readings ``q`` (eq. 6.23; at the
-        temperatures ``temperature_c`` when the model has the thermal term)."""
+        """Predicted target poses for readings ``q`` (eq. 6.23),
+        ``T(q, m) = BASE · T_n^0(θ(q) + Δθ(q, m)) · PROBE`` — at the temperatures
+        ``temperature_c`` when the model has the thermal term.
+        ``predict_batch(batch(q, payload_kg, temperature_c))``.
+
+        Parameters
+        ----------
+        q : (N, n_readings) or (n_readings,) array_like, rad
+            Joint readings.
+        payload_kg : float or (N,) array_like, kg, optional
+            Payloads (default 0).
+        temperature_c : float or (N,) array_like, °C, optional
+            Temperatures (default: the reference).
+
+        Returns
+        -------
+        (N, 4, 4) array, m
+            Predicted target poses in the measurement frame (N = 1 for one vector).
+
+        Raises
+        ------
+        ValueError
+            Malformed ``q``, payloads or temperatures.
+        LoopClosureError
+            A loop that cannot close at some pose.
+        """
         return self.predict_batch(self.batch(q, payload_kg, temperature_c))
 
 

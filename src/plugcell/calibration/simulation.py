@@ -27,7 +27,7 @@ from numpy.typing import ArrayLike
 
 from plugcell.calibration.data import CalibrationData
 from plugcell.calibration.identifiability import combinations_at
-from plugcell.calibration.identify import Calibrator
+from plugcell.calibration.identify import CalibrationError, Calibrator
 from plugcell.calibration.result import CalibrationResult
 from plugcell.kinematics import RobotDescription, forward
 
@@ -119,6 +119,12 @@ def simulated_identification(
     -------
     SimulationReport
         Identified against expected values per parameter.
+
+    Raises
+    ------
+    CalibrationError
+        The identification fails, or its result lacks the identifiability analysis or
+        the accuracy statistics the report is built from.
     """
     q = np.asarray(q, dtype=float)
     truth = desc.nominal_parameters().perturbed(dict(errors))
@@ -128,7 +134,9 @@ def simulated_identification(
     fin = result.model
     space = fin.space
     ident = result.identifiability
-    assert ident is not None
+    if ident is None:
+        raise CalibrationError(
+            "the fit returned no identifiability analysis (result.identifiability is None)")
     dropped = [k for k in ident.dropped if space[k].is_geometric]
     combos = combinations_at(fin, result.keys, dropped)
     values = fin.as_dict()
@@ -153,7 +161,9 @@ def simulated_identification(
     dependent = [{"key": k, "name": space[k].name, "input": truth_of(k),
                   "identified_via": [space[v].name for v in ident.via.get(k, ())]}
                  for k in ident.dropped if space[k].is_geometric]
-    assert result.calibration is not None
+    if result.calibration is None:
+        raise CalibrationError(
+            "the fit returned no accuracy statistics (result.calibration is None)")
     return SimulationReport(
         result=result,
         iterations=result.iterations,

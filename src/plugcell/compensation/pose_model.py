@@ -61,12 +61,40 @@ class PoseModel(Protocol):
     """
 
     @property
-    def description(self) -> RobotDescription: ...
+    def description(self) -> RobotDescription:
+        """The robot as its controller knows it: joint reading order, limits, nominal
+        geometry (the seed of the nominal inverse kinematics)."""
+        ...
 
     @property
-    def tool(self) -> Array: ...
+    def tool(self) -> Array:
+        """``(4, 4)`` m: the compensated point (TCP) in the flange frame."""
+        ...
 
     def evaluate(self, q: ArrayLike, payload_kg: ArrayLike | float = 0.0) -> tuple[Array, Array]:
+        """Tool poses and the manipulator Jacobian at the tool point, the two things the
+        compensation's Newton step ``q ← q + J⁻¹ e(T_target, T(q))`` (eq. 4.11) needs.
+
+        Parameters
+        ----------
+        q : (N, n_readings) or (n_readings,) array_like, rad (m for prismatic)
+            Joint readings.
+        payload_kg : float or (N,) array_like, kg
+            Payload per pose or one for all (a model may ignore it).
+
+        Returns
+        -------
+        T : (N, 4, 4) array, m
+            Tool poses ``T(q, m)`` in the robot base frame.
+        J : (N, 6, n_readings) array
+            ``∂[p; φ]/∂q`` at the tool point, robot base frame: linear rows (m/rad) over
+            angular rows (rad/rad).
+
+        Raises
+        ------
+        ValueError
+            ``q`` of the wrong shape or not finite.
+        """
         ...
 
 
@@ -392,5 +420,24 @@ class NominalModel:
         return fk.tcp, jacobian_from_fk(self.desc, fk, "tcp")
 
     def pose(self, q: ArrayLike, payload_kg: ArrayLike | float = 0.0) -> Array:
-        """Tool poses ``(N, 4, 4)`` (m) in the robot base frame for readings ``q`` (rad)."""
+        """Tool poses in the robot base frame, ``T = T_n^0(q) · tool`` (eq. 6.1): the first
+        result of :meth:`evaluate`.
+
+        Parameters
+        ----------
+        q : (N, n_readings) or (n_readings,) array_like, rad (m for prismatic)
+            Joint readings.
+        payload_kg : float or (N,) array_like
+            Ignored (a controller's nominal model has no deflections).
+
+        Returns
+        -------
+        (N, 4, 4) array, m
+            Tool poses.
+
+        Raises
+        ------
+        ValueError
+            ``q`` of the wrong shape or not finite.
+        """
         return self.evaluate(q, payload_kg)[0]

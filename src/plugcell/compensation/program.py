@@ -26,6 +26,7 @@ from plugcell.compensation.model_based import (
     compensate,
 )
 from plugcell.compensation.pose_model import PoseModel
+from plugcell.kinematics.description import RobotDescription
 from plugcell.kinematics.rotations import matrix_to_angles, pose_to_matrix
 
 Array = NDArray[np.float64]
@@ -167,23 +168,52 @@ def filter_program(
                       raise_errors=raise_errors)
 
 
-def joint_program(result: CompensationResult, *, degrees: bool = True) -> Array:
-    """The compensated joint targets to send (degrees by default, as a controller's joint
+def joint_program(
+    result: CompensationResult,
+    description: RobotDescription | None = None,
+    *,
+    degrees: bool = True,
+) -> Array:
+    """The compensated joint targets to send, in degrees by default (a controller's joint
     positions).
+
+    With ``degrees``, a revolute reading is converted ``q_deg = q · 180/π`` and a
+    prismatic reading (a linear axis, :attr:`RobotDescription.prismatic_readings`) is
+    left in metres — the units of a description file,
+    ``q / RobotDescription.reading_scale("file")``.
 
     Parameters
     ----------
     result : CompensationResult
-        The compensation.
+        The compensation; ``result.q`` ``(N, n_readings)``, rad (m for a prismatic joint).
+    description : RobotDescription, optional
+        The robot the joints belong to (``model.description``), which says which readings
+        are prismatic.  Without it every reading is taken as an angle: give it for a
+        robot with a linear axis.
     degrees : bool
-        Convert every column from rad to degrees (also a prismatic joint's, which is m).
+        Convert the revolute readings from rad to degrees.
 
     Returns
     -------
-    (N, n) array, deg (or rad)
+    (N, n_readings) array, deg and m (or rad and m)
         Joint targets (a copy).
+
+    Raises
+    ------
+    ValueError
+        ``description`` has another number of readings than ``result.q`` has columns.
     """
-    return np.degrees(result.q) if degrees else result.q.copy()
+    q = np.array(result.q, dtype=float)
+    if not degrees:
+        return q
+    if description is None:
+        return np.degrees(q)
+    if description.n_readings != q.shape[-1]:
+        raise ValueError(
+            f"{description.name} has {description.n_readings} joint readings, "
+            f"the program {q.shape[-1]}"
+        )
+    return q / description.reading_scale("file")
 
 
 def pose_angles(T: ArrayLike, convention: str = "zyz") -> Array:

@@ -64,11 +64,29 @@ class JointRobot(Protocol):
     """A robot that reports its joint readings and moves to joint targets (radians)."""
 
     def read_joints(self) -> Array:
-        """Current joint readings ``(n,)`` in the description's actuated order."""
+        """The robot's current joint readings.
+
+        Returns
+        -------
+        (n_readings,) array, rad (m for prismatic)
+            Readings in the description's reading order (its ``actuated`` order without
+            a coupling).
+        """
         ...
 
     def move_joints(self, q: Array) -> float:
-        """Move to joint readings ``q`` ``(n,)``; returns the time the move took (s)."""
+        """Move to joint readings ``q`` and wait until the move ends.
+
+        Parameters
+        ----------
+        q : (n_readings,) array, rad (m for prismatic)
+            Target readings, description reading order.
+
+        Returns
+        -------
+        float, s
+            Time the move took (device time).
+        """
         ...
 
 
@@ -77,8 +95,20 @@ class CartesianRobot(JointRobot, Protocol):
     """A :class:`JointRobot` that also makes relative linear TCP moves."""
 
     def move_relative(self, dp: Array) -> float:
-        """Move the TCP by ``dp`` ``(3,)`` metres along the robot base axes, keeping its
-        orientation (the controller's own kinematics); returns the time taken (s)."""
+        """Move the TCP linearly by ``dp`` along the robot base axes, keeping its
+        orientation, ``p_TCP ← p_TCP + dp`` as the controller's own (nominal) kinematics
+        sees it — the corrective step of the 3-DOF loop (Fig. 6-12).
+
+        Parameters
+        ----------
+        dp : (3,) array, m
+            Displacement, robot base frame.
+
+        Returns
+        -------
+        float, s
+            Time the move took (device time).
+        """
         ...
 
 
@@ -87,7 +117,24 @@ class PoseSensor(Protocol):
     """A 6-DOF metrology system (a tracker with a T-MAC)."""
 
     def measure_pose(self, duration_s: float) -> Reading:
-        """One reading of the tool pose in the robot base frame."""
+        """One reading of the tool pose in the robot base frame.
+
+        Parameters
+        ----------
+        duration_s : float, s
+            Integration time (the device averages over it).
+
+        Returns
+        -------
+        Reading
+            ``pose`` ``(4, 4)`` m and ``position`` ``(3,)`` m of the tool point, robot base
+            frame.
+
+        Raises
+        ------
+        SensorError
+            The device cannot deliver (target lost, out of range…).
+        """
         ...
 
 
@@ -96,5 +143,21 @@ class PositionSensor(Protocol):
     """A 3-DOF metrology system (a tracker with an SMR)."""
 
     def measure_position(self, duration_s: float) -> Reading:
-        """One reading of the tool position in the robot base frame."""
+        """One reading of the tool position in the robot base frame.
+
+        Parameters
+        ----------
+        duration_s : float, s
+            Integration time (the device averages over it).
+
+        Returns
+        -------
+        Reading
+            ``position`` ``(3,)`` m of the tool point, robot base frame (``pose`` None).
+
+        Raises
+        ------
+        SensorError
+            The device cannot deliver (target lost, out of range…).
+        """
         ...

@@ -67,12 +67,45 @@ _DEG = math.pi / 180.0
 class Link:
     """One DH + Hayati link (thesis eqs. A.2, B.1), SI units, angles in radians.
 
-    The link frame F_i is ``F_parent · Rz(θ) Tz(d) Tx(a) Rx(α) Ry(β)``.  ``theta``
-    is an offset added to the joint reading (actuated), to the loop-closure angle
-    (passive) or the constant angle (fixed, e.g. Smart H4 link 3: −83°; prismatic,
-    whose reading is added to ``d`` instead).
-    ``hayati`` marks links whose β is a meaningful (identifiable) parameter;
-    ``mass`` (kg) and ``com`` (m, in the link's own frame F_i) feed the twin.
+    The link frame F_i in its parent's frame is (eq. 4.13/B.1,
+    :func:`~plugcell.kinematics.transforms.dh_hayati`)::
+
+        T_i^parent = Rz(θ_i) · Tz(d_i) · Tx(a_i) · Rx(α_i) · Ry(β_i)
+
+    with, by joint type,
+
+    * ``actuated`` (revolute): θ_i = θ_kin,j + ``theta``, d_i = ``d``;
+    * ``prismatic``: θ_i = ``theta``, d_i = θ_kin,j + ``d`` (θ_kin,j in metres);
+    * ``passive``: θ_i = (loop-closure angle) + ``theta`` (:class:`FourBarLoop`);
+    * ``fixed``: θ_i = ``theta`` (e.g. Smart H4 link 3: −83°),
+
+    where θ_kin,j is the link's kinematic joint (:meth:`RobotDescription.kinematic_joints`).
+    β = 0 gives the plain Denavit–Hartenberg link (A.2).
+
+    Attributes
+    ----------
+    name : str
+        Link name, unique, not ``"base"`` (:data:`ROOT`).
+    parent : str
+        Name of the parent link, ``"base"`` for the first link only.
+    joint : str
+        Joint type, one of :data:`JOINT_TYPES`.
+    theta : float, rad
+        DH joint angle offset θ (the constant angle of a fixed or prismatic joint).
+    d : float, m
+        DH offset along z (the offset a prismatic reading is added to).
+    a : float, m
+        DH length along x.
+    alpha : float, rad
+        DH twist about x.
+    beta : float, rad
+        Hayati twist about y; non-zero only if ``hayati``.
+    hayati : bool
+        β is a meaningful (identifiable) parameter of this link (a near-parallel joint axis).
+    mass : float, kg
+        Link mass, ≥ 0 (for the digital twin's gravity model).
+    com : (3,) tuple of float, m
+        Centre of mass in the link's own frame F_i.
     """
 
     name: str
@@ -99,10 +132,12 @@ class Link:
 
     @property
     def is_passive(self) -> bool:
+        """Its angle comes from a loop closure (a :class:`FourBarLoop` coupler or follower)."""
         return self.joint == "passive"
 
     @property
     def is_fixed(self) -> bool:
+        """A constant angle ``theta``: no joint variable."""
         return self.joint == "fixed"
 
 
@@ -111,10 +146,35 @@ class FourBarLoop:
     """A planar parallelogram (four-bar) loop closed at a virtually cut joint (thesis 6.1).
 
     ``arm`` and ``crank`` are the two actuated links on a common axis (Smart H4:
-    ``"2"``, a = 1.05, off the flange chain; ``"2'"``, a = 0.45); ``coupler``
+    ``"2"``, a = 1.05 m, off the flange chain; ``"2'"``, a = 0.45 m); ``coupler``
     (``"3'"``) and ``follower`` (``"4'"``) carry the passive joints.  The end frame
     of ``follower`` must coincide, in the loop plane, with the end frame of
-    ``arm`` (constraints 6.4–6.5).  Nominally a_coupler = a_arm, a_follower = a_crank.
+    ``arm`` (constraints 6.4–6.5)::
+
+        a_crank·e(θ_crank) + a_cpl·e(θ_crank + θ_cpl)
+            + a_fol·e(θ_crank + θ_cpl + θ_fol) = a_arm·e(θ_arm),   e(φ) = (cos φ, sin φ)
+
+    with θ_arm, θ_crank the DH angles of arm and crank (kinematic joint + ``theta``) and
+    θ_cpl, θ_fol the closure angles (the coupler's and follower's DH angles are these
+    plus their ``theta``).  Only parallelograms are accepted
+    (a_coupler = a_arm, a_follower = a_crank, planar: α = β = 0, coupler and follower
+    d = 0), whose solution is eq. (6.10): θ_cpl = θ_arm − θ_crank,
+    θ_fol = π − θ_arm + θ_crank (:func:`~plugcell.kinematics.closure.nominal_closure`;
+    the exact four-bar for perturbed lengths is
+    :func:`~plugcell.kinematics.closure.fourbar_closure`).  The closure is defined
+    while ``sin(θ_arm − θ_crank) ≠ 0``, which a :class:`CoupledLimit` on the arm and
+    crank readings must guarantee (:data:`LOOP_MARGIN`).
+
+    Attributes
+    ----------
+    arm : str
+        Actuated link off the flange chain, sharing its parent with ``crank``.
+    crank : str
+        Actuated (revolute) link the coupler hangs from.
+    coupler : str
+        Passive link, child of ``crank``.
+    follower : str
+        Passive link, child of ``coupler``, on the chain to the flange.
     """
 
     arm: str
@@ -124,20 +184,37 @@ class FourBarLoop:
 
     @property
     def driven(self) -> tuple[str, str]:
+        """``(arm, crank)``: the loop's actuated links."""
         return (self.arm, self.crank)
 
     @property
     def passive(self) -> tuple[str, str]:
+        """``(coupler, follower)``: the loop's passive links."""
         return (self.coupler, self.follower)
 
     @property
     def links(self) -> tuple[str, str, str, str]:
+        """``(arm, crank, coupler, follower)``."""
         return (self.arm, self.crank, self.coupler, self.follower)
 
 
 @dataclass(frozen=True)
 class CoupledLimit:
-    """``lower ≤ q[first] − q[second] ≤ upper`` on joint readings (radians)."""
+    """A limit on the difference of two revolute joint readings,
+    ``lower ≤ q[joints[0]] − q[joints[1]] ≤ upper``.
+
+    A parallelogram loop needs one on its arm and crank readings, keeping the
+    arm–crank angle inside ``(k·π + LOOP_MARGIN, (k+1)·π − LOOP_MARGIN)``.
+
+    Attributes
+    ----------
+    joints : (str, str)
+        The two reading names (actuated link names without a coupling); not prismatic.
+    lower : float, rad
+        Smallest allowed difference, finite.
+    upper : float, rad
+        Largest allowed difference, finite, above ``lower``.
+    """
 
     joints: tuple[str, str]
     lower: float
@@ -159,6 +236,21 @@ class JointCoupling:
 
     Validated by :class:`RobotDescription` (shapes, finite values, rank); errors
     name the file keys ``coupling.readings``, ``coupling.matrix``, ``coupling.offsets``.
+
+    Parameters
+    ----------
+    readings : sequence of str
+        Names of the controller's joint readings, unique, non-empty (column order).
+    matrix : (n_actuated, n_readings) array_like
+        ``M = ∂θ_kin/∂q``, dimensionless (rad per rad); stored read-only.
+    offset : (n_actuated,) array_like, rad
+        Constant added to each kinematic joint; stored read-only.
+
+    Raises
+    ------
+    DescriptionError
+        Empty or duplicate reading names, non-numeric values, a matrix that is not 2-D
+        or an offset that is not 1-D (the remaining checks are the description's).
     """
 
     readings: tuple[str, ...]
@@ -196,15 +288,42 @@ class JointCoupling:
 
     @property
     def n_readings(self) -> int:
+        """Number of joint readings (columns of ``matrix``)."""
         return len(self.readings)
 
     def kinematic(self, readings: Any) -> Array:
-        """``θ_kin = M · r + offset`` for readings ``(..., n_readings)`` → ``(..., n_actuated)``."""
+        """Kinematic joints of joint readings, ``θ_kin = M · q + offset``.
+
+        Parameters
+        ----------
+        readings : (..., n_readings) array_like, rad
+            Joint readings q, in ``readings`` order.
+
+        Returns
+        -------
+        (..., n_actuated) array, rad
+            θ_kin, in the description's ``actuated`` order.
+        """
         r = np.asarray(readings, dtype=float)
         return r @ self.matrix.T + self.offset
 
     def readings_of(self, kinematic: Any) -> Array:
-        """Least-squares inverse ``r = M⁺ (θ_kin − offset)`` (exact in the map's range)."""
+        """Joint readings of kinematic joints, the least-squares inverse
+        ``q = M⁺ (θ_kin − offset)`` (M⁺ the Moore–Penrose pseudo-inverse).
+
+        Exact when θ_kin is in the map's range (always for a square, invertible M);
+        otherwise the readings whose kinematic joints are nearest in the 2-norm.
+
+        Parameters
+        ----------
+        kinematic : (..., n_actuated) array_like, rad
+            Kinematic joints θ_kin.
+
+        Returns
+        -------
+        (..., n_readings) array, rad
+            Joint readings q.
+        """
         k = np.asarray(kinematic, dtype=float)
         return (k - self.offset) @ self._left_inverse().T
 
@@ -219,7 +338,19 @@ class JointCoupling:
 
 @dataclass(frozen=True)
 class PointMass:
-    """A lumped mass (kg) at ``com`` (m, in frame ``link``) — e.g. a counterweight."""
+    """A lumped mass (kg) at ``com`` (m, in frame ``link``) — e.g. a counterweight.
+
+    Attributes
+    ----------
+    name : str
+        Label (messages, the twin).
+    link : str
+        The link whose frame F_i carries it.
+    mass : float, kg
+        Mass, ≥ 0.
+    com : (3,) tuple of float, m
+        Position in the link frame F_i.
+    """
 
     name: str
     link: str
@@ -229,21 +360,43 @@ class PointMass:
 
 @dataclass(frozen=True)
 class Box:
-    """Axis-aligned box in the robot base frame: ``center`` and edge lengths ``size`` (m)."""
+    """Axis-aligned box in the robot base frame, ``{p : |p − center| ≤ size / 2}`` per axis.
+
+    Attributes
+    ----------
+    center : (3,) tuple of float, m
+        Centre, robot base frame.
+    size : (3,) tuple of float, m
+        Edge lengths along x, y, z (positive in a description).
+    """
 
     center: tuple[float, float, float]
     size: tuple[float, float, float]
 
     @property
     def lower(self) -> Array:
+        """``(3,)`` m: the lowest corner, ``center − size / 2``."""
         return np.asarray(self.center) - 0.5 * np.asarray(self.size)
 
     @property
     def upper(self) -> Array:
+        """``(3,)`` m: the highest corner, ``center + size / 2``."""
         return np.asarray(self.center) + 0.5 * np.asarray(self.size)
 
     def contains(self, p: Any) -> NDArray[np.bool_]:
-        """Which points ``(..., 3)`` lie inside (boundary included)."""
+        """Which points lie inside, ``lower ≤ p ≤ upper`` on every axis (boundary included,
+        with a 1e-12 m tolerance).
+
+        Parameters
+        ----------
+        p : (..., 3) array_like, m
+            Points in the robot base frame.
+
+        Returns
+        -------
+        (...) bool array
+            True inside the box.
+        """
         p = np.asarray(p, dtype=float)
         return np.all((p >= self.lower - 1e-12) & (p <= self.upper + 1e-12), axis=-1)
 
@@ -272,7 +425,65 @@ class RobotDescription:
     ``(n_readings, 2)`` radians, ``home`` ``(n_readings,)`` radians (the
     documented default seed of inverse kinematics) and ``coupled_limits`` are on
     the readings; ``stiffness`` ``(n_actuated,)`` N·m/rad (or ``None``) is per
-    actuated link.
+    actuated link.  A prismatic reading, its limits and home value are in metres.
+
+    The flange pose in the robot base frame F0 is the product of the link transforms
+    along :attr:`chain` (:class:`Link`), ``T_n^0 = Π_{i ∈ chain} T_i^parent(θ_i, d_i)``
+    (eq. 6.1), the passive angles from the loop closure (:class:`FourBarLoop`); the
+    tool point is ``T_n^0 · tool`` and, in the world (metrology) frame,
+    ``BASE · T_n^0 · tool`` (:func:`~plugcell.kinematics.forward`).
+
+    Parameters
+    ----------
+    name : str
+        Robot name, non-empty.
+    links : sequence of Link
+        The links, parents listed before their children, one root (parent ``"base"``).
+    actuated : sequence of str
+        Every actuated and prismatic link, in kinematic joint (θ_kin) order.
+    flange : str
+        The link whose frame is the flange.
+    loops : sequence of FourBarLoop
+        Closed loops.
+    base : (4, 4) array_like, m
+        BASE: the robot base frame F0 in the world (metrology) frame, a rigid transform.
+    tool : (4, 4) array_like, m
+        The tool point in the flange frame, a rigid transform.
+    joint_limits : (n_readings, 2) array_like, rad (m for prismatic)
+        ``[lower, upper]`` per reading, finite, ``lower < upper``.
+    stiffness : (n_actuated,) array_like, N·m/rad, optional
+        Joint stiffness per actuated link, positive.
+    notes : str
+        Free text (provenance).
+    coupled_limits : sequence of CoupledLimit
+        Limits on reading differences; one per loop is required.
+    home : (n_readings,) array_like, rad (m for prismatic), optional
+        Home readings, inside every limit (default: mid-range of ``joint_limits``).
+    point_masses : sequence of PointMass
+        Extra lumped masses for the twin.
+    working_volume : Box, optional
+        Where the robot works (robot base frame).
+    coupling : JointCoupling, optional
+        Readings → kinematic joints; ``None``: the readings are the kinematic joints.
+
+    Attributes
+    ----------
+    base, tool : (4, 4) array, m
+        As given, read-only.
+    joint_limits : (n_readings, 2) array
+        As given, read-only.
+    stiffness : (n_actuated,) array or None
+        As given, read-only.
+    home : (n_readings,) array
+        The home readings (the default filled in), read-only.
+
+    Raises
+    ------
+    DescriptionError
+        The first inconsistency found, at its file location (e.g. ``links[2].parent``):
+        names, parents, joint types, a flange off the tree, a loop that is not a
+        closable parallelogram or lacks its coupled limit, a non-rigid BASE/tool, limit
+        or shape errors, a singular or overflowing coupling, ``home`` outside the limits.
     """
 
     name: str
@@ -649,9 +860,28 @@ class RobotDescription:
         """Readings ``(i, j)`` and constant ``c`` with ``θ_arm − θ_crank = q_i − q_j + c``.
 
         θ are the DH angles (kinematic joint + the link's ``theta``) of loop ``k``'s
-        arm and crank.  Without a coupling ``i, j`` are the arm and crank themselves;
-        with one, the arm − crank row of the matrix must be the difference of two
-        readings (else :class:`DescriptionError` at ``coupling.matrix``).
+        arm and crank.  Without a coupling ``i, j`` are the arm and crank themselves and
+        ``c = theta_arm − theta_crank``; with one, the arm − crank row of the matrix,
+        ``M[arm] − M[crank]``, must be ``e_i − e_j`` (the difference of two readings), and
+        ``c = theta_arm − theta_crank + offset[arm] − offset[crank]``.
+
+        Parameters
+        ----------
+        k : int
+            Index into :attr:`loops`.
+
+        Returns
+        -------
+        i, j : int
+            Positions of the two readings in ``q``.
+        c : float, rad
+            The constant.
+
+        Raises
+        ------
+        DescriptionError
+            At ``coupling.matrix``, when the arm − crank row is not a difference of two
+            readings.
         """
         loop = self.loops[k]
         ka, kc = self.actuated.index(loop.arm), self.actuated.index(loop.crank)
@@ -709,24 +939,60 @@ class RobotDescription:
     # ------------------------------------------------------------------ queries
     @property
     def n_actuated(self) -> int:
+        """Number of kinematic joints θ_kin (actuated and prismatic links)."""
         return len(self.actuated)
 
     @property
     def n_links(self) -> int:
+        """Number of links."""
         return len(self.links)
 
     @property
     def link_names(self) -> tuple[str, ...]:
+        """Link names, in :attr:`links` order."""
         return tuple(lk.name for lk in self.links)
 
     def index(self, name: str) -> int:
-        """Position of link ``name`` in :attr:`links` (and in parameter arrays)."""
+        """Position of link ``name`` in :attr:`links` (and in parameter arrays).
+
+        Parameters
+        ----------
+        name : str
+            A link name.
+
+        Returns
+        -------
+        int
+            Its index.
+
+        Raises
+        ------
+        KeyError
+            Unknown link (the message lists the links).
+        """
         try:
             return self._index[name]
         except KeyError:
             raise KeyError(f"unknown link {name!r}; links are {list(self.link_names)}") from None
 
     def link(self, name: str) -> Link:
+        """The link called ``name``.
+
+        Parameters
+        ----------
+        name : str
+            A link name.
+
+        Returns
+        -------
+        Link
+            The link.
+
+        Raises
+        ------
+        KeyError
+            Unknown link.
+        """
         return self.links[self.index(name)]
 
     def joint_index(self, name: str) -> int:
@@ -734,6 +1000,21 @@ class RobotDescription:
 
         Without a coupling the readings are the actuated links, so ``name`` is an
         actuated link name (:meth:`actuated_index`).
+
+        Parameters
+        ----------
+        name : str
+            A reading name (:attr:`reading_names`).
+
+        Returns
+        -------
+        int
+            Its column in ``q``.
+
+        Raises
+        ------
+        KeyError
+            Not a reading (the message lists the readings).
         """
         try:
             return self.reading_names.index(name)
@@ -743,7 +1024,23 @@ class RobotDescription:
             ) from None
 
     def actuated_index(self, name: str) -> int:
-        """Position of actuated link ``name`` in the kinematic joint vector θ_kin."""
+        """Position of actuated link ``name`` in the kinematic joint vector θ_kin.
+
+        Parameters
+        ----------
+        name : str
+            An actuated (or prismatic) link name.
+
+        Returns
+        -------
+        int
+            Its position in :attr:`actuated`.
+
+        Raises
+        ------
+        KeyError
+            Not an actuated link.
+        """
         try:
             return self.actuated.index(name)
         except ValueError:
@@ -764,7 +1061,8 @@ class RobotDescription:
 
     @property
     def reading_jacobian(self) -> Array:
-        """``∂θ_kin/∂q`` ``(n_actuated, n_readings)``: the coupling matrix, or the identity."""
+        """``∂θ_kin/∂q`` ``(n_actuated, n_readings)``, dimensionless: the coupling matrix
+        M, or the identity without a coupling (read-only)."""
         if self.coupling is not None:
             return self.coupling.matrix
         eye = np.eye(self.n_actuated)
@@ -775,7 +1073,17 @@ class RobotDescription:
         """Kinematic joints θ_kin ``(..., n_actuated)`` of readings ``q`` ``(..., n_readings)``.
 
         ``θ_kin = M · q + offset`` (the :class:`JointCoupling`); ``q`` itself (as a
-        float array) without a coupling.  Radians.
+        float array) without a coupling.
+
+        Parameters
+        ----------
+        q : (..., n_readings) array_like, rad (m for prismatic)
+            Joint readings, :attr:`reading_names` order.
+
+        Returns
+        -------
+        (..., n_actuated) array, rad (m for prismatic)
+            θ_kin, :attr:`actuated` order.
         """
         q = np.asarray(q, dtype=float)
         if self.coupling is None:
@@ -788,6 +1096,16 @@ class RobotDescription:
         ``q = M⁺ (θ_kin − offset)`` — exact when θ_kin is reachable by the coupling
         (always when M is square); otherwise the readings whose kinematic joints are
         nearest in the least-squares sense.  Identity without a coupling.
+
+        Parameters
+        ----------
+        theta : (..., n_actuated) array_like, rad (m for prismatic)
+            Kinematic joints θ_kin, :attr:`actuated` order.
+
+        Returns
+        -------
+        (..., n_readings) array, rad (m for prismatic)
+            Joint readings q.
         """
         theta = np.asarray(theta, dtype=float)
         if self.coupling is None:
@@ -796,9 +1114,9 @@ class RobotDescription:
 
     @property
     def periodic_readings(self) -> NDArray[np.bool_]:
-        """``(n_readings,)``: where adding 2π to the reading leaves the robot's pose unchanged
-        (every kinematic joint it drives moves by a whole number of turns; never a
-        prismatic joint)."""
+        """``(n_readings,)`` bool: where adding 2π to the reading leaves the robot's pose
+        unchanged — column j of M is integer (``M[:, j] ∈ ℤ^n``, every kinematic joint it
+        drives moves by a whole number of turns) and the reading is not prismatic."""
         M = self.reading_jacobian
         return np.all(np.abs(M - np.round(M)) < 1e-12, axis=0) & ~self.prismatic_readings
 
@@ -817,9 +1135,25 @@ class RobotDescription:
                         dtype=bool)
 
     def reading_scale(self, units: str = "robot") -> Array:
-        """``(n_readings,)`` SI per unit of a reading: ``"robot"`` units are degrees and
-        millimetres (command line, measurement files), ``"file"`` units degrees and
-        metres (description files)."""
+        """SI per unit of each reading, ``q_SI = scale · q_units``.
+
+        Parameters
+        ----------
+        units : {"robot", "file"}
+            ``"robot"``: degrees and millimetres (command line, measurement files);
+            ``"file"``: degrees and metres (description files).
+
+        Returns
+        -------
+        (n_readings,) array
+            π/180 (rad per degree) for a revolute reading; 1e-3 (``"robot"``) or 1
+            (``"file"``) m per unit for a prismatic one.
+
+        Raises
+        ------
+        KeyError
+            Unknown ``units``.
+        """
         length = {"robot": 1e-3, "file": 1.0}[units]
         return np.where(self.prismatic_readings, length, _DEG)
 
@@ -834,8 +1168,18 @@ class RobotDescription:
     def kinematic_limits(self) -> Array:
         """``(n_actuated, 2)``: the box of kinematic joints θ_kin the reading limits allow.
 
-        Interval arithmetic on ``θ_kin = M·q + offset`` (exact per joint, the box
-        encloses the image); the joint limits themselves without a coupling.
+        Interval arithmetic on ``θ_kin = M·q + offset``::
+
+            θ_kin,min,r = Σ_j min(M_rj·q_min,j, M_rj·q_max,j) + offset_r
+            θ_kin,max,r = Σ_j max(M_rj·q_min,j, M_rj·q_max,j) + offset_r
+
+        (each bound is attained, the box encloses the image); the joint limits
+        themselves without a coupling.
+
+        Returns
+        -------
+        (n_actuated, 2) array, rad (m for prismatic)
+            ``[lower, upper]`` per kinematic joint (read-only).
         """
         c = self.coupling
         if c is None:
@@ -853,8 +1197,15 @@ class RobotDescription:
 
         Links, loops, BASE, tool, masses and stiffnesses are kept; limits are the
         box enclosing the image of the reading limits, a loop's coupled limit is
-        moved onto arm − crank, ``home`` is θ_kin of the home readings.  Without a
+        moved onto arm − crank (shifted by ``offset[arm] − offset[crank]``); other
+        coupled limits are dropped (they are on readings, which this robot no longer
+        has); ``home`` is θ_kin of the home readings.  Without a
         coupling this is ``self``.  Calibration builds its models on it.
+
+        Returns
+        -------
+        RobotDescription
+            The uncoupled description (computed once, then cached).
         """
         if self.coupling is None:
             return self
@@ -904,7 +1255,14 @@ class RobotDescription:
         return tuple(n for loop in self.loops for n in loop.passive)
 
     def nominal_parameters(self) -> GeometricParameters:
-        """The description's DH + Hayati rows, BASE and tool as a parameter set."""
+        """The description's DH + Hayati rows, BASE and tool as a parameter set.
+
+        Returns
+        -------
+        GeometricParameters
+            ``theta``, ``alpha``, ``beta`` (rad), ``d``, ``a`` (m) per link in
+            :attr:`links` order, ``base`` and ``tool`` (4, 4) m.
+        """
         return GeometricParameters(
             link_names=self.link_names,
             theta=[lk.theta for lk in self.links],
@@ -917,7 +1275,23 @@ class RobotDescription:
         )
 
     def limit_violations(self, q: Any, tol: float = 0.0) -> list[str]:
-        """Human-readable list of limit violations of one reading vector ``q`` (radians)."""
+        """Human-readable list of limit violations of one reading vector.
+
+        Checks ``q_min,j − tol ≤ q_j ≤ q_max,j + tol`` for every reading and
+        ``lower − tol ≤ q_a − q_b ≤ upper + tol`` for every :class:`CoupledLimit`.
+
+        Parameters
+        ----------
+        q : (n_readings,) array_like, rad (m for prismatic)
+            Joint readings.
+        tol : float, rad (m for prismatic)
+            Slack allowed beyond each limit.
+
+        Returns
+        -------
+        list of str
+            One message per violated limit (degrees or mm); empty if none.
+        """
         q = np.asarray(q, dtype=float)
         out = []
         for j, name in enumerate(self.reading_names):
@@ -937,7 +1311,21 @@ class RobotDescription:
         return out
 
     def within_limits(self, q: Any, tol: float = 1e-9) -> NDArray[np.bool_]:
-        """Mask ``(...)``: readings ``(..., n_readings)`` inside joint and coupled limits."""
+        """Which reading vectors lie inside the joint and the coupled limits (the test of
+        :meth:`limit_violations`, vectorised).
+
+        Parameters
+        ----------
+        q : (..., n_readings) array_like, rad (m for prismatic)
+            Joint readings.
+        tol : float, rad (m for prismatic)
+            Slack allowed beyond each limit.
+
+        Returns
+        -------
+        (...) bool array
+            True where every limit holds.
+        """
         q = np.asarray(q, dtype=float)
         lo, hi = self.joint_limits[:, 0], self.joint_limits[:, 1]
         ok = np.all((q >= lo - tol) & (q <= hi + tol), axis=-1)
