@@ -46,3 +46,19 @@ def test_simulated_identification_checks_its_fit_without_assert(h4, monkeypatch,
     q = random_configurations(ErrorModel.create(h4, "loop"), 40, seed=1)
     with pytest.raises(CalibrationError, match=missing):
         simulation.simulated_identification(h4, {}, q, model="loop")
+
+
+def test_updated_refuses_keys_without_a_step_of_their_length():
+    # before: keys without step set those parameters to NaN silently
+    from plugcell.io.robots import load_robot
+
+    m = ErrorModel.create(load_robot("smart_h4"), "loop")
+    keys = list(m.space.keys[:2])
+    with pytest.raises(ValueError, match="needs step"):
+        m.updated(keys=keys)
+    with pytest.raises(ValueError, match="1 increment"):
+        m.updated(keys=keys, step=[1e-3])
+    moved = m.updated(keys=keys, step=[1e-3, -2e-3])
+    assert np.all(np.isfinite(moved.values))
+    np.testing.assert_allclose(np.asarray(moved.values)[m.space.indices(keys)],
+                               np.asarray(m.values)[m.space.indices(keys)] + [1e-3, -2e-3])

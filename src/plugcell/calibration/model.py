@@ -361,13 +361,20 @@ class ErrorModel:
         ------
         KeyError
             An unknown key.
+        ValueError
+            ``keys`` without ``step``, or a ``step`` of another length than ``keys``.
         """
         v = np.array(self.values)
         if delta:
             for k, x in delta.items():
                 v[self.space.index(k)] += float(x)
         if keys is not None:
-            v[self.space.indices(keys)] += np.asarray(step, dtype=float)
+            if step is None:
+                raise ValueError("updated(keys=...) needs step: one increment per key")
+            s = np.asarray(step, dtype=float).reshape(-1)
+            if s.shape != (len(keys),):
+                raise ValueError(f"step has {s.size} increment(s) for {len(keys)} key(s)")
+            v[self.space.indices(keys)] += s
         return self.with_values(v)
 
     def with_references(self, base: ArrayLike | None = None, probe: ArrayLike | None = None,
