@@ -1,13 +1,13 @@
-"""The public API of the math packages has numpydoc ``Parameters``/``Returns`` sections (#21).
+"""The public API of the math packages and ``io`` has numpydoc ``Parameters``/``Returns`` (#21).
 
-For every public function and class of ``kinematics``, ``metrology``, ``calibration`` and
-``compensation`` — the names of each module's ``__all__``, else the public functions and
-classes defined in the module — a function that takes arguments must have a
-``Parameters`` section and one that returns something other than ``None`` a ``Returns``
-(or ``Yields``) section; a class whose constructor takes arguments must document them in
-``Parameters`` or, for a dataclass/record, ``Attributes``.  The check only looks for the
-section headers (a title line underlined with dashes), so it is cheap and imports nothing
-beyond the packages themselves.
+For every public function and class of ``kinematics``, ``metrology``, ``calibration``,
+``compensation`` and ``io`` (the file formats) — the names of each module's ``__all__``,
+else the public functions and classes defined in the module — a function that takes
+arguments must have a ``Parameters`` section and one that returns something other than
+``None`` a ``Returns`` (or ``Yields``) section; a class whose constructor takes arguments
+must document them in ``Parameters`` or, for a dataclass/record, ``Attributes``.  The
+check only looks for the section headers (a title line underlined with dashes), so it is
+cheap and imports nothing beyond the packages themselves.
 """
 
 from __future__ import annotations
@@ -23,11 +23,13 @@ from typing import Any, Protocol
 
 import pytest
 
-PACKAGES = ("kinematics", "metrology", "calibration", "compensation")
+PACKAGES = ("kinematics", "metrology", "calibration", "compensation", "io")
 
 #: Modules not checked, with the reason.
 SKIP_MODULES = {
     "plugcell.calibration.residual_model": "under concurrent edit (#21)",
+    "plugcell.io.params": "being edited in parallel (#21); documented on merge",
+    "plugcell.io.residual_models": "being edited in parallel (#21); documented on merge",
 }
 
 #: Classes exempt from the constructor check, by kind, with the reason.

@@ -48,7 +48,22 @@ img{max-width:100%}.small{color:#666;font-size:.85em}
 
 
 def display_value(value: float, unit: str) -> tuple[float, str]:
-    """A parameter value in reading units: mm for lengths, degrees for angles."""
+    """A parameter value in reading units: m → mm for lengths, rad → degrees for angles.
+
+    Parameters
+    ----------
+    value : float
+        The value in SI, unit ``unit``.
+    unit : str
+        Its unit as a parameter space states it (``"m"``, ``"rad"``, ``"rad/(N·m)"``…).
+
+    Returns
+    -------
+    value : float
+        ``value · 10³`` for ``"m"``, ``value · 180/π`` for ``"rad"``, else unchanged.
+    unit : str
+        ``"mm"``, ``"°"``, or ``unit`` unchanged (compound units are not converted).
+    """
     if unit == "m":
         return value * 1e3, "mm"
     if unit == "rad":
@@ -197,7 +212,34 @@ def render_report(
     *,
     title: str | None = None,
 ) -> str:
-    """The HTML report of ``result`` on its calibration (and validation) data."""
+    """The HTML report of a calibration on its calibration (and validation) data.
+
+    One self-contained page (module docstring): summary, warnings, accuracy table
+    (mm, degrees), joint-range coverage, hybrid-layer section, then — when matplotlib
+    is installed, whose backend is switched to Agg here — error histograms, residual
+    per pose, a 3-D view of the poses, coverage and convergence plots as embedded
+    PNGs; last the identified parameters (mm and degrees, :func:`display_value`) and
+    BASE/PROBE (x, y, z mm; roll, pitch, yaw degrees).  SI values of ``result`` are
+    converted for display only here.
+
+    Parameters
+    ----------
+    result : CalibrationResult
+        The calibration (statistics, parameters, history, validity).
+    calibration : CalibrationData
+        The N calibration poses ``result`` was fitted on (positions (N, 3) m); their
+        residuals are recomputed unless ``result`` stores them for these poses.
+    validation : CalibrationData, optional
+        M validation poses, plotted after the calibration poses in the residual plot.
+        (The accuracy table's validation row comes from ``result.validation``.)
+    title : str, optional
+        The page title; default ``"Calibration of ROBOT — model K (NAME)"``.
+
+    Returns
+    -------
+    str
+        The HTML document (UTF-8 text, no scripts, no external resources).
+    """
     def esc(text: str) -> str:
         return html.escape(text, quote=False)
 

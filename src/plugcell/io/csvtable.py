@@ -16,10 +16,30 @@ import math
 
 
 def table_rows(text: str, name: str, error: type[Exception]) -> list[tuple[int, list[str]]]:
-    """``[(line number, cells), …]`` of ``text``, the header first.
+    """The rows of a CSV table that count, with their 1-based line numbers, header first.
 
-    Raises ``error`` (``"NAME: line L: …"``) on a CSV syntax error and when no line
-    counts (``"NAME: no header line (the file is empty)"``).
+    Blank lines (every cell blank) and lines whose first cell starts with ``#`` are
+    passed over; cells are returned as read (not stripped, not converted).
+
+    Parameters
+    ----------
+    text : str
+        The file's text; ``\\r\\n``, ``\\r`` and ``\\n`` all end a line.
+    name : str
+        The file's name, first word of every error message.
+    error : type of Exception
+        The file format's error class, raised with one message argument.
+
+    Returns
+    -------
+    list of (int, list of str)
+        ``[(line number, cells), …]``: the header row first, then the data rows.
+
+    Raises
+    ------
+    error
+        ``"NAME: line L: …"`` on a CSV syntax error;
+        ``"NAME: no header line (the file is empty)"`` when no line counts.
     """
     rows: list[tuple[int, list[str]]] = []
     reader = csv.reader(io.StringIO(text, newline=None))
@@ -37,8 +57,32 @@ def table_rows(text: str, name: str, error: type[Exception]) -> list[tuple[int, 
 
 def table_number(cell: str, name: str, line_no: int, column: str,
                  error: type[Exception]) -> float:
-    """The finite number in ``cell`` of ``column`` at ``line_no``, else ``error`` saying
-    ``"NAME: line L, column 'C': not a number: '…'"`` (or ``not finite``)."""
+    """The finite number in one cell of a CSV table (no unit conversion).
+
+    Parameters
+    ----------
+    cell : str
+        The cell's text (surrounding blanks allowed), as :func:`table_rows` returns it.
+    name : str
+        The file's name, for the error message.
+    line_no : int
+        1-based line number of the cell's row, for the error message.
+    column : str
+        The column's header name, for the error message.
+    error : type of Exception
+        The file format's error class.
+
+    Returns
+    -------
+    float
+        The number, in the file's unit of that column.
+
+    Raises
+    ------
+    error
+        ``"NAME: line L, column 'C': not a number: '…'"``, or ``… not finite: '…'``
+        for ``nan``/``inf``.
+    """
     try:
         v = float(cell)
     except ValueError:

@@ -59,7 +59,23 @@ class ExportError(ValueError):
 
 @dataclass(frozen=True)
 class Exported:
-    """``text`` of the main file; ``side``: what it cannot carry (``None``: nothing)."""
+    """An exported calibration: the main file's text and what it cannot carry.
+
+    Attributes
+    ----------
+    text : str
+        The main file: URDF XML (m, rad), UR ``default_kinematics.yaml`` (m, rad) or
+        plugcell TOML (m, degrees).
+    side : dict or None
+        The side dictionary (``format: plugcell-export-extra``), written next to the
+        file: ``not_in_main_file`` (the reasons) and, as the case may be, ``base``,
+        ``probe_in_tip``, ``tcp_in_tip``, ``flange_correction`` (each a frame
+        ``{"matrix": 4×4 m, "xyz_mm": mm, "rpy_deg": degrees}``), ``compliance``
+        (parameters with their units), ``payload_ref_kg``, ``reading_map``,
+        ``coupling``, ``tip_link``; ``None`` when the file carries everything.
+    notes : tuple of str
+        Remarks for the user (e.g. a tip link added to take up the flange offset).
+    """
 
     text: str
     side: dict[str, Any] | None
@@ -137,7 +153,34 @@ def _side(result: Any, params_path: str, fmt: str, reasons: list[str],
 # =============================================================================== toml
 def calibrated_description(desc: RobotDescription, gp: GeometricParameters, base: np.ndarray,
                            tool: np.ndarray, note: str) -> RobotDescription:
-    """``desc`` with the calibrated rows of ``gp``, ``base`` = BASE and ``tool`` = PROBE."""
+    """``desc`` with the calibrated rows of ``gp``, ``base`` = BASE and ``tool`` = PROBE.
+
+    A link gets ``hayati = true`` when its calibrated β is non-zero.
+
+    Parameters
+    ----------
+    desc : RobotDescription
+        The robot (SI, radians); masses, limits, loops and coupling are kept.
+    gp : GeometricParameters
+        Calibrated θ, d, a, α, β of every link (m, rad), looked up by link name.
+    base : (4, 4) ndarray, m
+        The calibrated BASE (robot base in the measurement frame).
+    tool : (4, 4) ndarray, m
+        The calibrated PROBE (measured target in the flange frame).
+    note : str
+        A line appended to the description's notes.
+
+    Returns
+    -------
+    RobotDescription
+        The calibrated description.
+
+    Raises
+    ------
+    DescriptionError
+        The calibrated geometry is no valid description (e.g. a parallelogram that is
+        no longer one).
+    """
     links = []
     for lk in desc.links:
         i = gp.index(lk.name)
@@ -407,6 +450,9 @@ def export_calibration(result: Any, desc: RobotDescription, fmt: str, *,
         ``"urdf"``, ``"ur-kinematics"`` or ``"toml"``.
     source : RobotSource, optional
         Where the robot came from (a URDF source keeps its links, meshes, limits).
+    params_path : str
+        The calibration file's name, written in the file's header comment and the side
+        dictionary.
     include_base, include_probe : bool
         URDF: add BASE (root link ``measurement``) and PROBE (link ``probe``).
     serial_equivalent : bool
@@ -415,12 +461,19 @@ def export_calibration(result: Any, desc: RobotDescription, fmt: str, *,
     Returns
     -------
     Exported
-        The file text and the side dictionary of what it cannot carry.
+        The file text (units of the format: URDF and UR yaml in m and rad, TOML in m
+        and degrees) and the side dictionary of what it cannot carry.
 
     Raises
     ------
     ExportError
-        The format cannot represent this calibration (the message says why).
+        The format cannot represent this calibration (the message says why): an
+        unknown ``fmt``, a loop robot for URDF/UR without ``serial_equivalent``, a
+        serial-equivalent chain not asked for, ``ur-kinematics`` for a robot not from
+        ``ur_description``, a URDF source that changed since the calibration, BASE on
+        a chain that does not start at the URDF's root.
+    DescriptionError
+        A URDF ``source`` that can no longer be imported.
     """
     if fmt == "toml":
         return _export_toml(result, desc, params_path, serial_equivalent)

@@ -48,9 +48,32 @@ class MeasurementFileError(ValueError):
 class MeasurementSet:
     """Poses of one calibration or validation campaign, in SI units.
 
-    ``joints`` (N, n) rad; ``positions`` (N, 3) m; ``angles`` (N, 3) rad or ``None``
-    (convention ``rotation``); ``payload_kg`` (N,) or ``None``; ``temperature_c`` (N,)
-    °C or ``None``.
+    ``len(m)`` is the number of poses N.  The file readers convert into these units
+    (:func:`parse_measurements`), the writers out of them (:func:`format_measurements`).
+
+    Attributes
+    ----------
+    joints : (N, n) ndarray, rad
+        Joint readings in the robot description's reading order (a prismatic joint: m,
+        when read with its ``joint_scale``).
+    positions : (N, 3) ndarray, m
+        Measured reflector positions in the tracker frame.
+    angles : (N, 3) ndarray, rad, or None
+        Measured orientations in the convention ``rotation``; ``None`` when the
+        campaign measured positions only.
+    rotation : str
+        The angles' convention: ``"rpy"`` (fixed X-Y-Z, default), ``"zyz"`` or
+        ``"xyz"`` (intrinsic); kept even when ``angles`` is ``None``.
+    payload_kg : (N,) ndarray, kg, or None
+        Payload carried at each pose.
+    temperature_c : (N,) ndarray, °C, or None
+        Temperature at each measurement.
+
+    Raises
+    ------
+    ValueError
+        ``joints`` not two-dimensional, another array of the wrong shape, or an
+        unknown ``rotation``.
     """
 
     joints: np.ndarray
@@ -82,14 +105,27 @@ class MeasurementSet:
 
     @property
     def n_joints(self) -> int:
+        """The number n of joint readings a pose (columns of ``joints``)."""
         return int(self.joints.shape[1])
 
     @property
     def has_orientation(self) -> bool:
+        """Whether the campaign measured orientations (``angles`` is not ``None``)."""
         return self.angles is not None
 
     def subset(self, index: np.ndarray | slice) -> MeasurementSet:
-        """The poses selected by ``index`` (a boolean mask, indices or a slice)."""
+        """The poses selected by ``index``, every per-pose array indexed alike.
+
+        Parameters
+        ----------
+        index : (N,) bool ndarray, int ndarray or slice
+            A boolean mask over the poses, pose indices, or a slice.
+
+        Returns
+        -------
+        MeasurementSet
+            The selected poses, same ``rotation``.
+        """
         return MeasurementSet(
             joints=self.joints[index],
             positions=self.positions[index],
@@ -142,12 +178,43 @@ def parse_measurements(
     n_joints: int | None = None,
     joint_scale: np.ndarray | None = None,
 ) -> MeasurementSet:
-    """Parse measurement-file text; see the module docstring for the format.
+    """Parse measurement-file text into a :class:`MeasurementSet`, converting to SI here.
 
-    ``n_joints`` (the robot's number of joint readings), when given, is checked
-    against the file's joint columns.  ``joint_scale``: SI per file unit of each
-    joint column (``desc.reading_scale()``: π/180 for degrees, 1e-3 for the mm of a
-    prismatic joint); default degrees for all.
+    The file (module docstring) holds joint readings in degrees (prismatic: mm),
+    positions ``x, y, z`` in mm and optional angles ``rx, ry, rz`` in degrees; they
+    become rad (m), m and rad.  Columns may come in any order; ``payload_kg`` (kg) and
+    ``temperature_c`` (°C) are taken as they are.
+
+    Parameters
+    ----------
+    text : str
+        The file's text.
+    rotation : str
+        Convention of the ``rx, ry, rz`` columns: ``"rpy"`` (default), ``"zyz"`` or
+        ``"xyz"``; the file does not say it, the caller does.
+    name : str
+        The file's name, for error messages.
+    n_joints : int, optional
+        The robot's number of joint readings; when given, the file's joint columns must
+        number exactly this.
+    joint_scale : (n,) array_like, optional
+        SI per file unit of each joint column (``desc.reading_scale()``: π/180 for
+        degrees, 1e-3 for the mm of a prismatic joint); default π/180 for all.
+
+    Returns
+    -------
+    MeasurementSet
+        ``joints`` (N, n) rad (or m), ``positions`` (N, 3) m, ``angles`` (N, 3) rad or
+        ``None``, ``payload_kg`` (N,) or ``None``, ``temperature_c`` (N,) or ``None``.
+
+    Raises
+    ------
+    MeasurementFileError
+        An unknown ``rotation``; an empty, repeated or unknown header column; joint
+        columns missing or with gaps; no ``x, y, z``; only some of ``rx, ry, rz``; a
+        joint count other than ``n_joints``; no data rows; a row of the wrong length; a
+        cell that is not a finite number (an empty ``temperature_c`` cell included); a
+        negative payload.
     """
     if rotation not in ROTATION_CONVENTIONS:
         raise MeasurementFileError(
@@ -201,7 +268,30 @@ def read_measurements(
     path: str | Path, *, rotation: str = "rpy", n_joints: int | None = None,
     joint_scale: np.ndarray | None = None,
 ) -> MeasurementSet:
-    """Read a measurement file (see :func:`parse_measurements`)."""
+    """Read a measurement file into a :class:`MeasurementSet` (SI units).
+
+    Parameters
+    ----------
+    path : str or Path
+        The file, UTF-8 text (layout in the module docstring: degrees and mm).
+    rotation : str
+        Convention of the file's ``rx, ry, rz`` columns (:func:`parse_measurements`).
+    n_joints : int, optional
+        The robot's number of joint readings, checked when given.
+    joint_scale : (n,) array_like, optional
+        SI per file unit of each joint column; default π/180 (degrees) for all.
+
+    Returns
+    -------
+    MeasurementSet
+        The poses in rad and m (:func:`parse_measurements`).
+
+    Raises
+    ------
+    MeasurementFileError
+        No such file, not UTF-8, unreadable, or any error of
+        :func:`parse_measurements`.
+    """
     p = Path(path)
     try:
         text = p.read_text(encoding="utf-8")
@@ -217,8 +307,26 @@ def read_measurements(
 
 def format_measurements(m: MeasurementSet, *, comments: Iterable[str] = (),
                         joint_scale: np.ndarray | None = None) -> str:
-    """Render a :class:`MeasurementSet` as measurement-file text (degrees, mm;
-    ``joint_scale`` as in :func:`parse_measurements`)."""
+    """A :class:`MeasurementSet` as measurement-file text, converted SI → degrees and mm.
+
+    Parameters
+    ----------
+    m : MeasurementSet
+        The poses (rad, m).
+    comments : iterable of str
+        Written first as ``# …`` lines, one per line of each comment; a set with
+        orientations adds ``# orientation convention: ROT`` (informative only: the
+        reader does not parse it).
+    joint_scale : (n,) array_like, optional
+        SI per file unit of each joint column; joints are divided by it.  Default
+        π/180 (degrees) for all.
+
+    Returns
+    -------
+    str
+        Header ``j1..jn,x,y,z`` then ``rx,ry,rz``, ``payload_kg``, ``temperature_c``
+        when present; one row a pose, 9 significant digits.
+    """
     out = io.StringIO()
     for c in comments:
         for line in str(c).splitlines() or [""]:
@@ -251,6 +359,18 @@ def write_measurements(
     path: str | Path, m: MeasurementSet, *, comments: Iterable[str] = (),
     joint_scale: np.ndarray | None = None,
 ) -> None:
-    """Write a measurement file; the inverse of :func:`read_measurements`."""
+    """Write a measurement file; the inverse of :func:`read_measurements` (to 9 digits).
+
+    Parameters
+    ----------
+    path : str or Path
+        The file to write (replaced if it exists), UTF-8.
+    m : MeasurementSet
+        The poses (rad, m), written in degrees and mm (:func:`format_measurements`).
+    comments : iterable of str
+        Comment lines written first.
+    joint_scale : (n,) array_like, optional
+        SI per file unit of each joint column; default degrees.
+    """
     Path(path).write_text(format_measurements(m, comments=comments, joint_scale=joint_scale),
                           encoding="utf-8")

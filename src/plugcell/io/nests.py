@@ -31,7 +31,32 @@ class NestFileError(ValueError):
 
 
 def parse_nests(text: str, name: str = "<nests>") -> tuple[list[str], np.ndarray]:
-    """Names and positions ``(K, 3)`` in **metres** of a nest file's text."""
+    """The nests of a nest file's text: names, and positions converted mm → m.
+
+    Parameters
+    ----------
+    text : str
+        The file's text: the header ``name,x,y,z`` then one nest a row, ``x, y, z`` in
+        mm (module docstring); ``#`` comment lines and blank lines are passed over.
+    name : str
+        The file's name, for error messages.
+
+    Returns
+    -------
+    names : list of str, length K
+        The nests' labels, in file order (stripped, unique).
+    positions : (K, 3) ndarray, m
+        The nests' positions, in the frame the file was written in (tracker frame for a
+        measured nest file, robot base frame for a registration file); the mm → m
+        conversion happens here.
+
+    Raises
+    ------
+    NestFileError
+        Wrong header, a row without exactly 4 values, an empty or repeated name, a cell
+        that is not a finite number, or fewer than 3 nests (the drift watch's minimum;
+        whether they are collinear is not checked here).
+    """
     rows = table_rows(text, name, NestFileError)
     line_no, header = rows[0]
     if tuple(h.strip() for h in header) != HEADER:
@@ -58,7 +83,26 @@ def parse_nests(text: str, name: str = "<nests>") -> tuple[list[str], np.ndarray
 
 
 def read_nests(path: str | Path) -> tuple[list[str], np.ndarray]:
-    """Read a nest file (:func:`parse_nests`)."""
+    """Read a nest file (format in the module docstring; positions mm → m).
+
+    Parameters
+    ----------
+    path : str or Path
+        The file, UTF-8 text.
+
+    Returns
+    -------
+    names : list of str, length K
+        The nests' labels, in file order.
+    positions : (K, 3) ndarray, m
+        The nests' positions (:func:`parse_nests`).
+
+    Raises
+    ------
+    NestFileError
+        No such file, an unreadable or non-UTF-8 file, or any error of
+        :func:`parse_nests`.
+    """
     p = Path(path)
     try:
         text = p.read_text(encoding="utf-8")
@@ -70,7 +114,28 @@ def read_nests(path: str | Path) -> tuple[list[str], np.ndarray]:
 
 
 def format_nests(names: list[str], positions: np.ndarray, comments: tuple[str, ...] = ()) -> str:
-    """Nest-file text of ``names`` and ``positions`` ``(K, 3)`` in metres."""
+    """Nest-file text of named positions, converted m → mm; the inverse of :func:`parse_nests`.
+
+    Parameters
+    ----------
+    names : list of str, length K
+        The nests' labels (written as they are: no CSV quoting, so a label must not
+        contain a comma or a line break; uniqueness is not checked here).
+    positions : (K, 3) array_like, m
+        The nests' positions; written in mm with 6 decimals (nanometre resolution).
+    comments : tuple of str
+        Lines written first, each as ``# line``.
+
+    Returns
+    -------
+    str
+        The file text: comments, the header ``name,x,y,z``, one row a nest.
+
+    Raises
+    ------
+    ValueError
+        ``names`` and ``positions`` of different lengths.
+    """
     out = io.StringIO()
     for c in comments:
         out.write(f"# {c}\n")

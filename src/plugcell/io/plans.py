@@ -44,7 +44,25 @@ class PlanFileError(ValueError):
 
 @dataclass(frozen=True)
 class MeasurementPlan:
-    """``joints`` ``(N, n)`` rad; ``payload_kg`` ``(N,)`` or ``None`` (not given)."""
+    """The joint configurations of a measurement campaign, in SI units (radians).
+
+    ``len(plan)`` is the number of poses N.
+
+    Attributes
+    ----------
+    joints : (N, n) ndarray, rad
+        Joint readings to move to, in the robot description's reading order; N ≥ 1.
+        (The file reader converts every joint column from degrees: unlike measurement
+        files, plans take no ``joint_scale`` for a prismatic joint's mm.)
+    payload_kg : (N,) ndarray, kg, or None
+        Payload to carry at each pose; ``None`` when the plan does not say.
+
+    Raises
+    ------
+    ValueError
+        ``joints`` not two-dimensional with at least one row, or ``payload_kg`` not of
+        shape ``(N,)``.
+    """
 
     joints: np.ndarray
     payload_kg: np.ndarray | None = None
@@ -87,7 +105,32 @@ def _header(name: str, line_no: int, header: list[str]) -> tuple[list[int], int 
 
 def parse_plan(text: str, *, name: str = "<plan>", n_joints: int | None = None
                ) -> MeasurementPlan:
-    """Parse plan-file text (module docstring); ``n_joints`` checked when given."""
+    """Parse plan-file text into a :class:`MeasurementPlan`; joints deg → rad here.
+
+    Parameters
+    ----------
+    text : str
+        The file's text (layout in the module docstring): a header with the joint
+        columns ``j1..jn`` (degrees) and optionally ``payload_kg`` (kg), in any order;
+        the ``x, y, z, rx, ry, rz`` columns of a measurement file are read and dropped.
+    name : str
+        The file's name, for error messages.
+    n_joints : int, optional
+        The robot's number of joint readings; when given, the file's joint columns must
+        number exactly this.
+
+    Returns
+    -------
+    MeasurementPlan
+        ``joints`` (N, n) rad, ``payload_kg`` (N,) kg or ``None``.
+
+    Raises
+    ------
+    PlanFileError
+        Empty, repeated or unknown header columns, joint columns missing or with gaps,
+        a joint count other than ``n_joints``, no data rows, a row of the wrong length,
+        a cell that is not a finite number, or a negative payload.
+    """
     rows = table_rows(text, name, PlanFileError)
     (hline, header), data = rows[0], rows[1:]
     jcols, pcol = _header(name, hline, header)
@@ -115,7 +158,25 @@ def parse_plan(text: str, *, name: str = "<plan>", n_joints: int | None = None
 
 
 def read_plan(path: str | Path, *, n_joints: int | None = None) -> MeasurementPlan:
-    """Read a plan file (or a measurement file) — see :func:`parse_plan`."""
+    """Read a plan file (or a measurement file) into a :class:`MeasurementPlan`.
+
+    Parameters
+    ----------
+    path : str or Path
+        The file, UTF-8 text (layout in the module docstring; joints in degrees).
+    n_joints : int, optional
+        The robot's number of joint readings, checked when given (:func:`parse_plan`).
+
+    Returns
+    -------
+    MeasurementPlan
+        ``joints`` (N, n) rad, ``payload_kg`` (N,) kg or ``None``.
+
+    Raises
+    ------
+    PlanFileError
+        No such file, not UTF-8, unreadable, or any error of :func:`parse_plan`.
+    """
     p = Path(path)
     try:
         text = p.read_text(encoding="utf-8")
@@ -129,7 +190,21 @@ def read_plan(path: str | Path, *, n_joints: int | None = None) -> MeasurementPl
 
 
 def format_plan(plan: MeasurementPlan, *, comments: Iterable[str] = ()) -> str:
-    """A plan as file text (degrees)."""
+    """A plan as plan-file text, joints converted rad → deg (10 significant digits).
+
+    Parameters
+    ----------
+    plan : MeasurementPlan
+        ``joints`` (N, n) rad, optional ``payload_kg`` (N,) kg.
+    comments : iterable of str
+        Written first as ``# …`` lines, one per line of each comment.
+
+    Returns
+    -------
+    str
+        The header ``j1,…,jn`` (plus ``payload_kg`` when the plan has payloads) and one
+        row a pose.
+    """
     out = io.StringIO()
     for c in comments:
         for line in str(c).splitlines() or [""]:
@@ -147,5 +222,15 @@ def format_plan(plan: MeasurementPlan, *, comments: Iterable[str] = ()) -> str:
 
 
 def write_plan(path: str | Path, plan: MeasurementPlan, *, comments: Iterable[str] = ()) -> None:
-    """Write a plan file; the inverse of :func:`read_plan` (to 1e-10 relative)."""
+    """Write a plan file; the inverse of :func:`read_plan` (to 1e-10 relative).
+
+    Parameters
+    ----------
+    path : str or Path
+        The file to write (replaced if it exists), UTF-8.
+    plan : MeasurementPlan
+        The poses, joints in rad (written in degrees, :func:`format_plan`).
+    comments : iterable of str
+        Comment lines written first.
+    """
     Path(path).write_text(format_plan(plan, comments=comments), encoding="utf-8")

@@ -92,7 +92,22 @@ class _Table(msgspec.Struct, forbid_unknown_fields=True, kw_only=True):
 
 
 class TransformTable(_Table, kw_only=True):
-    """``base``/``tool``: ``xyz`` (m) with ``rpy`` or ``zyz`` (°), or a 4×4 ``matrix``."""
+    """``base``/``tool``: ``xyz`` (m) with ``rpy`` or ``zyz`` (°), or a 4×4 ``matrix``.
+
+    Converted to a 4×4 transform (m) by :func:`description_from_document`; ``rpy``
+    and ``zyz`` exclude each other, ``matrix`` excludes the three others.
+
+    Attributes
+    ----------
+    xyz : (3,) tuple of float, m, optional
+        Translation; default zero.
+    rpy : (3,) tuple of float, degrees, optional
+        Roll, pitch, yaw about the fixed X, Y, Z axes: ``R = Rz(yaw)·Ry(pitch)·Rx(roll)``.
+    zyz : (3,) tuple of float, degrees, optional
+        Z-Y-Z Euler angles (Comau A, B, C): ``R = Rz(a)·Ry(b)·Rz(c)``.
+    matrix : (4, 4) tuple of rows, translation in m, optional
+        A rigid homogeneous transform, row by row.
+    """
 
     xyz: Vec3 | UnsetType = UNSET
     rpy: Vec3 | UnsetType = UNSET
@@ -101,7 +116,35 @@ class TransformTable(_Table, kw_only=True):
 
 
 class LinkTable(_Table, kw_only=True):
-    """One ``[[links]]`` entry: a DH + Hayati row (m, °), its joint, mass and limits."""
+    """One ``[[links]]`` entry: a DH + Hayati row (m, °), its joint, mass and limits.
+
+    Attributes
+    ----------
+    name, parent : str
+        The link, and its parent link (``"base"`` for the first).
+    joint : str
+        ``"actuated"``, ``"prismatic"``, ``"passive"`` or ``"fixed"``.
+    theta : float, degrees, optional
+        Joint offset (actuated, passive) or constant angle (fixed, prismatic);
+        required for a fixed joint, else default 0.
+    d, a : float, m
+        DH offsets along z and x.
+    alpha : float, degrees
+        DH twist about x.
+    hayati : bool, optional
+        Whether the row has the Hayati rotation β about y; default false.
+    beta : float, degrees, optional
+        Hayati angle, only with ``hayati = true``; default 0.
+    mass : float, kg
+        Link mass, ≥ 0; default 0.
+    com : (3,) tuple of float, m
+        Centre of mass in the link's own frame; default the origin.
+    limits : (2,) tuple of float, optional
+        ``[lower, upper]`` of the joint reading: degrees (prismatic: m); required on
+        actuated and prismatic joints without a ``[coupling]``, forbidden otherwise.
+    stiffness : float, N·m/rad (prismatic: N/m), optional
+        Joint stiffness, > 0; actuated joints only, all of them or none.
+    """
 
     name: Name
     parent: Name
@@ -119,7 +162,17 @@ class LinkTable(_Table, kw_only=True):
 
 
 class LoopTable(_Table, kw_only=True):
-    """One ``[[loops]]`` entry: a parallelogram's four links."""
+    """One ``[[loops]]`` entry: a parallelogram's four links.
+
+    Attributes
+    ----------
+    type : str, optional
+        ``"parallelogram"`` (the documented default) or ``"fourbar"``; checked against
+        these two names but not otherwise read: every loop becomes the same
+        :class:`~plugcell.kinematics.description.FourBarLoop`.
+    arm, crank, coupler, follower : str
+        Names of the loop's four links (``[[links]]`` names).
+    """
 
     type: LoopType | UnsetType = UNSET
     arm: Name
@@ -129,7 +182,15 @@ class LoopTable(_Table, kw_only=True):
 
 
 class CoupledLimitTable(_Table, kw_only=True):
-    """One ``[[coupled_limits]]`` entry: ``min ≤ joints[0] − joints[1] ≤ max`` (°)."""
+    """One ``[[coupled_limits]]`` entry: ``min ≤ joints[0] − joints[1] ≤ max`` (°).
+
+    Attributes
+    ----------
+    joints : (2,) tuple of str
+        The two joint readings whose difference is limited.
+    lower, upper : float, degrees
+        The file's keys ``min`` and ``max``; ``min < max``.
+    """
 
     joints: tuple[Name, Name]
     lower: Number = msgspec.field(name="min")
@@ -137,7 +198,19 @@ class CoupledLimitTable(_Table, kw_only=True):
 
 
 class PointMassTable(_Table, kw_only=True):
-    """One ``[[point_masses]]`` entry: ``mass`` (kg) at ``com`` (m) in frame ``link``."""
+    """One ``[[point_masses]]`` entry: ``mass`` (kg) at ``com`` (m) in frame ``link``.
+
+    Attributes
+    ----------
+    name : str
+        The mass's label (e.g. a counterweight).
+    link : str
+        The link whose frame ``com`` is given in.
+    mass : float, kg
+        ≥ 0.
+    com : (3,) tuple of float, m
+        Position in that link's frame.
+    """
 
     name: Name
     link: Name
@@ -146,14 +219,35 @@ class PointMassTable(_Table, kw_only=True):
 
 
 class BoxTable(_Table, kw_only=True):
-    """``[working_volume]``: ``center`` and edge lengths ``size`` (m), base frame."""
+    """``[working_volume]``: ``center`` and edge lengths ``size`` (m), base frame.
+
+    Attributes
+    ----------
+    center : (3,) tuple of float, m
+        The box's centre in the robot base frame.
+    size : (3,) tuple of float, m
+        Edge lengths along the base frame's x, y, z, all > 0 (checked by the model).
+    """
 
     center: Vec3
     size: Vec3
 
 
 class CouplingTable(_Table, kw_only=True):
-    """``[coupling]``: kinematic joints = ``matrix`` · readings + ``offsets`` (°)."""
+    """``[coupling]``: kinematic joints = ``matrix`` · readings + ``offsets`` (°).
+
+    Attributes
+    ----------
+    readings : list of str, length n_r
+        Names of the joint readings (as the controller reports them, e.g. J1..J6).
+    matrix : (n_actuated, n_r) list of rows of float
+        Dimensionless map from readings to kinematic joints, one row per ``actuated``
+        link.
+    offsets : (n_actuated,) list of float, degrees, optional
+        Added after the map; default 0.
+    limits : (n_r, 2) list of float, degrees
+        ``[lower, upper]`` of each reading (the actuated links then take no limits).
+    """
 
     readings: list[Name]
     matrix: list[list[Number]]
@@ -162,7 +256,41 @@ class CouplingTable(_Table, kw_only=True):
 
 
 class RobotFile(_Table, kw_only=True):
-    """A whole description file (the order of the fields is the order written)."""
+    """A whole description file (the order of the fields is the order written).
+
+    Layout and units: ``docs/robot-description.md`` (lengths m, angles degrees, masses
+    kg); :func:`description_from_document` converts to SI radians.
+
+    Attributes
+    ----------
+    format_version : int
+        Must be 1 (:data:`FORMAT_VERSION`).
+    name : str
+        The robot's name.
+    notes : str or list of str
+        Free text (a list is joined with line breaks).
+    actuated : list of str
+        The actuated links, in joint-reading order (without a coupling).
+    flange : str
+        The link whose frame is the flange.
+    home : list of float, degrees (prismatic: m), optional
+        One value per joint reading; default the middle of each range.
+    base, tool : TransformTable, optional
+        The robot base frame F0 in the world/metrology frame (BASE, eq. 6.23), and
+        the TCP (or a probe) in the flange frame; default identity.
+    links : list of LinkTable
+        The DH + Hayati rows.
+    loops : list of LoopTable
+        Closed loops (parallelograms).
+    coupled_limits : list of CoupledLimitTable
+        Limits on differences of two readings.
+    point_masses : list of PointMassTable
+        Masses on links besides the links' own.
+    coupling : CouplingTable, optional
+        A vendor joint convention: readings ≠ kinematic joints.
+    working_volume : BoxTable, optional
+        The box the robot works in.
+    """
 
     format_version: Literal[1] = FORMAT_VERSION
     name: Name

@@ -43,7 +43,13 @@ SUFFIX = ".toml"
 
 
 class RobotNotFoundError(DescriptionError, LookupError):
-    """No shipped robot of that name, or no such file."""
+    """No shipped robot of that name, or no such file.
+
+    Parameters
+    ----------
+    message : str
+        The whole message (the error's location is empty).
+    """
 
     def __init__(self, message: str) -> None:
         super().__init__("", message)
@@ -54,7 +60,14 @@ def _robots_dir() -> Path:
 
 
 def available_robots() -> list[str]:
-    """Names of the robots shipped with plugcell (sorted)."""
+    """Names of the robots shipped with plugcell, sorted.
+
+    Returns
+    -------
+    list of str
+        The stems of the ``*.toml`` files of the package directory ``plugcell/robots/``
+        (``["fanuc_m20ia", "smart_h4", …]``); empty if the directory is missing.
+    """
     d = _robots_dir()
     if not d.is_dir():
         return []
@@ -69,7 +82,26 @@ def _looks_like_path(name: str) -> bool:
 
 
 def robot_path(name_or_path: str | os.PathLike[str]) -> Path:
-    """The file a robot name or path refers to (raises :class:`RobotNotFoundError`)."""
+    """The file a robot name or path refers to.
+
+    Parameters
+    ----------
+    name_or_path : str or os.PathLike
+        A shipped robot's bare name (``"smart_h4"``), or a path: any ``os.PathLike``, or
+        a string ending in ``.toml``, ``.urdf``, ``.xacro`` or holding a path separator.
+
+    Returns
+    -------
+    Path
+        The existing file: ``plugcell/robots/NAME.toml`` for a name, the path as given
+        (not resolved) otherwise.
+
+    Raises
+    ------
+    RobotNotFoundError
+        A path that is no file, or a name of no shipped robot (the message lists the
+        shipped ones).
+    """
     if isinstance(name_or_path, os.PathLike) or _looks_like_path(str(name_or_path)):
         p = Path(name_or_path)
         if not p.is_file():
@@ -84,7 +116,31 @@ def robot_path(name_or_path: str | os.PathLike[str]) -> Path:
 
 
 def load_robot_file(path: str | os.PathLike[str]) -> RobotDescription:
-    """Read and validate one description file; errors are prefixed with its name."""
+    """Read and validate one TOML description file.
+
+    The file's units (lengths m, angles degrees, masses kg, stiffness N·m/rad; layout
+    in ``docs/robot-description.md``) become SI radians in
+    :func:`plugcell.io.robot_schema.description_from_document`.
+
+    Parameters
+    ----------
+    path : str or os.PathLike
+        The ``.toml`` file (UTF-8).  URDF/xacro files are not read here: use
+        :func:`load_robot`.
+
+    Returns
+    -------
+    RobotDescription
+        The validated model, in SI units with radians.
+
+    Raises
+    ------
+    RobotNotFoundError
+        No such file.
+    DescriptionError
+        Located at ``FILE.toml: key``: an unreadable file, invalid TOML or UTF-8, a
+        schema error or an inconsistent robot.
+    """
     p = Path(path)
     label = p.name
     try:
@@ -116,7 +172,35 @@ def load_robot(
 
     A ``.urdf``/``.xacro`` path is imported (:func:`plugcell.io.urdf.import_urdf`)
     with the xacro ``args``, ROS ``package_paths`` and chain ends; these options are
-    an error for any other robot.
+    an error for any other robot.  The same as
+    ``RobotSource(name_or_path, args, package_paths, base_link, tip_link).load()``.
+
+    Parameters
+    ----------
+    name_or_path : str or os.PathLike
+        A shipped robot's name, or a ``.toml``, ``.urdf`` or ``.xacro`` file
+        (:func:`robot_path` says which is which).
+    args : mapping of str to str, optional
+        xacro arguments (``name:=value``), URDF/xacro only.
+    package_paths : sequence of str or os.PathLike
+        Directories holding ROS packages for ``$(find PKG)``, URDF/xacro only.
+    base_link, tip_link : str, optional
+        The chain's ends in a URDF; default the root link and the chain's single (or
+        ``tool0``) tip.
+
+    Returns
+    -------
+    RobotDescription
+        The validated model, in SI units with radians (TOML files are in m and
+        degrees, URDF in m and rad).
+
+    Raises
+    ------
+    RobotNotFoundError
+        No shipped robot of that name, or no such file.
+    DescriptionError
+        A file that is not a valid description (located at file and key or element), or
+        URDF-only options given for a TOML robot.
     """
     return RobotSource(str(name_or_path), dict(args or {}),
                        tuple(str(p) for p in package_paths), base_link, tip_link).load()
@@ -126,8 +210,19 @@ def load_robot(
 class RobotSource:
     """Where a robot comes from: ``ref`` (shipped name or file path) and import options.
 
-    ``args`` (xacro arguments), ``package_paths``, ``base_link`` and ``tip_link``
-    apply to URDF/xacro files only.
+    One value that loads the robot (:meth:`load`), is recorded in PARAMS.json
+    (:meth:`to_dict`, :meth:`from_dict`) and is passed to sub-processes (:meth:`argv`).
+
+    Attributes
+    ----------
+    ref : str
+        A shipped robot's name or a ``.toml``/``.urdf``/``.xacro`` file path.
+    args : mapping of str to str
+        xacro arguments; URDF/xacro only.
+    package_paths : tuple of str
+        Directories holding ROS packages; URDF/xacro only.
+    base_link, tip_link : str or None
+        The chain's ends; URDF/xacro only, ``None`` for the default.
     """
 
     ref: str
@@ -138,12 +233,28 @@ class RobotSource:
 
     @property
     def is_urdf(self) -> bool:
+        """Whether ``ref`` names a URDF or xacro file (:func:`~plugcell.io.urdf.is_urdf_path`)."""
         from plugcell.io.urdf import is_urdf_path
 
         return is_urdf_path(self.ref)
 
     def load(self) -> RobotDescription:
-        """The description (raises :class:`DescriptionError` naming file and element)."""
+        """Load the robot this source names.
+
+        Returns
+        -------
+        RobotDescription
+            The validated model, in SI units with radians.
+
+        Raises
+        ------
+        RobotNotFoundError
+            No shipped robot of that name, or no such file.
+        DescriptionError
+            An invalid description (naming file and element), or URDF-only options
+            (``args``, ``package_paths``, ``base_link``, ``tip_link``) on a TOML robot
+            (located at the command-line option, e.g. ``--robot-arg``).
+        """
         if self.is_urdf:
             return self.import_urdf().description
         extra = [opt for opt, v in (("--robot-arg", self.args),
@@ -156,14 +267,32 @@ class RobotSource:
         return load_robot_file(robot_path(self.ref))
 
     def import_urdf(self) -> Any:
-        """The :class:`~plugcell.io.urdf.ImportedRobot` of a URDF/xacro source."""
+        """Import a URDF/xacro source (:func:`plugcell.io.urdf.import_urdf`).
+
+        Returns
+        -------
+        ImportedRobot
+            The description, the chain and the expanded URDF text.
+
+        Raises
+        ------
+        DescriptionError
+            The file cannot be expanded, parsed or converted (naming file and element).
+        """
         from plugcell.io.urdf import import_urdf
 
         return import_urdf(self.ref, self.args, self.package_paths, self.base_link,
                            self.tip_link)
 
     def absolute(self) -> RobotSource:
-        """The same source with file paths made absolute (to record or pass on)."""
+        """The same source with file paths made absolute (to record or pass on).
+
+        Returns
+        -------
+        RobotSource
+            ``ref`` resolved if it looks like a path (a shipped name stays as it is),
+            every ``package_paths`` entry resolved; the other fields copied.
+        """
         ref = self.ref
         if _looks_like_path(ref):
             ref = str(Path(ref).resolve())
@@ -172,7 +301,14 @@ class RobotSource:
                            self.base_link, self.tip_link)
 
     def to_dict(self) -> dict[str, Any]:
-        """JSON form (``robot_source`` of PARAMS.json)."""
+        """JSON form (``robot_source`` of PARAMS.json).
+
+        Returns
+        -------
+        dict
+            ``{"ref": …}`` plus ``args``, ``package_paths``, ``base_link`` and
+            ``tip_link`` when they are set.
+        """
         out: dict[str, Any] = {"ref": self.ref}
         if self.args:
             out["args"] = dict(self.args)
@@ -186,7 +322,26 @@ class RobotSource:
 
     @classmethod
     def from_dict(cls, d: Any) -> RobotSource:
-        """Inverse of :meth:`to_dict` (raises :class:`DescriptionError` on bad input)."""
+        """Inverse of :meth:`to_dict`.
+
+        Parameters
+        ----------
+        d : Any
+            A ``robot_source`` object of PARAMS.json (a mapping with a non-empty
+            ``ref``); anything else is an error.
+
+        Returns
+        -------
+        RobotSource
+            The source; empty ``base_link``/``tip_link`` strings become ``None``.
+
+        Raises
+        ------
+        DescriptionError
+            Located at ``robot_source`` or its key: not a mapping, no ``ref``, ``args``
+            not an object of strings, ``package_paths`` not a list of strings, or a link
+            name that is not a string.
+        """
         if not isinstance(d, Mapping) or not isinstance(d.get("ref"), str) or not d["ref"]:
             raise DescriptionError("robot_source", "expected an object with a non-empty 'ref'")
         args = d.get("args", {})
@@ -204,7 +359,19 @@ class RobotSource:
                    ends["tip_link"] or None)
 
     def argv(self, option: str = "--robot") -> list[str]:
-        """Command-line options that give this source to another plugcell process."""
+        """Command-line options that give this source to another plugcell process.
+
+        Parameters
+        ----------
+        option : str
+            The option naming the robot, ``--robot`` by default.
+
+        Returns
+        -------
+        list of str
+            ``[option, ref]`` then ``--robot-arg K=V``, ``--package-path P``,
+            ``--base-link``, ``--tip-link`` as set.
+        """
         out = [option, self.ref]
         for k, v in self.args.items():
             out += ["--robot-arg", f"{k}={v}"]
@@ -220,7 +387,22 @@ class RobotSource:
 def description_to_toml(desc: RobotDescription, header: str = "") -> str:
     """The description as a TOML description file (loads back to the same robot).
 
-    ``header``: comment lines put at the top (without ``#``).
+    Written through :func:`plugcell.io.robot_schema.description_to_dict`, so in the
+    file's units (lengths m, angles degrees); empty ``notes``, ``loops``,
+    ``coupled_limits`` and ``point_masses`` are left out, arrays of numbers are
+    written on one line.
+
+    Parameters
+    ----------
+    desc : RobotDescription
+        The model (SI, radians).
+    header : str
+        Comment lines put at the top, without ``#`` (each line gets ``# ``).
+
+    Returns
+    -------
+    str
+        The TOML text (needs the ``tomli_w`` package).
     """
     import tomli_w
 
@@ -247,9 +429,28 @@ def _one_line_arrays(text: str) -> str:
 def description_of_params(d: Mapping[str, Any], label: str = "PARAMS") -> RobotDescription:
     """The robot a calibration (PARAMS.json dictionary) was made for.
 
-    The embedded ``description`` (written by ``plugcell calibrate``) if present, else
-    the ``robot_source`` it was loaded from, else the shipped robot named ``robot``.
-    Errors are :class:`DescriptionError` located at ``label``.
+    The embedded ``description`` (written by ``plugcell calibrate``; file units, m
+    and degrees) if present, else the ``robot_source`` it was loaded from, else the
+    shipped robot named ``robot``.
+
+    Parameters
+    ----------
+    d : mapping
+        The PARAMS.json dictionary.
+    label : str
+        Where the dictionary comes from (its file name), the start of error locations.
+
+    Returns
+    -------
+    RobotDescription
+        The model, in SI units with radians.
+
+    Raises
+    ------
+    DescriptionError
+        Located at ``LABEL: description`` (or ``robot_source``, ``robot``): an invalid
+        embedded description, a bad or unloadable source, or an unknown robot name
+        (also when the dictionary names none).
     """
     try:
         if "description" in d:

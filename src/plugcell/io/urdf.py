@@ -55,20 +55,50 @@ TOOL0 = "tool0"
 
 
 def is_urdf_path(name: str | os.PathLike[str]) -> bool:
-    """Whether ``name`` ends like a URDF or xacro file."""
+    """Whether ``name`` ends like a URDF or xacro file.
+
+    Parameters
+    ----------
+    name : str or os.PathLike
+        A file name or path (need not exist).
+
+    Returns
+    -------
+    bool
+        True when it ends, case-insensitively, in one of :data:`URDF_SUFFIXES`
+        (``.urdf``, ``.xacro``).
+    """
     return str(name).lower().endswith(URDF_SUFFIXES)
 
 
 # =============================================================================== packages
 @dataclass(frozen=True)
 class PackageResolver:
-    """Finds ROS package folders without ROS (``$(find PKG)``, ``package://PKG/``)."""
+    """Finds ROS package folders without ROS (``$(find PKG)``, ``package://PKG/``).
+
+    Package ``PKG`` is a sub-folder named ``PKG`` of one of :meth:`search_dirs`.
+
+    Attributes
+    ----------
+    package_paths : tuple of Path
+        Directories searched first (``--package-path``).
+    source : Path or None
+        The file being read; the folder above its own package (the nearest folder
+        with a ``package.xml``) is searched last.
+    """
 
     package_paths: tuple[Path, ...] = ()
     source: Path | None = None
 
     def search_dirs(self) -> list[Path]:
-        """Directories whose sub-folder ``PKG`` is package ``PKG``, in search order."""
+        """Directories whose sub-folder ``PKG`` is package ``PKG``, in search order.
+
+        Returns
+        -------
+        list of Path
+            ``package_paths``, then the entries of ``$PLUGCELL_PACKAGE_PATH``
+            (colon-separated), then the parent of :meth:`own_package` if any.
+        """
         dirs = [Path(p) for p in self.package_paths]
         env = os.environ.get(PACKAGE_PATH_ENV, "")
         dirs += [Path(p) for p in env.split(":") if p]
@@ -78,7 +108,13 @@ class PackageResolver:
         return dirs
 
     def own_package(self) -> Path | None:
-        """The nearest folder above the source file that holds a ``package.xml``."""
+        """The nearest folder above the source file that holds a ``package.xml``.
+
+        Returns
+        -------
+        Path or None
+            That folder (resolved), or ``None`` without ``source`` or such a folder.
+        """
         if self.source is None:
             return None
         for d in Path(self.source).resolve().parents:
@@ -87,7 +123,23 @@ class PackageResolver:
         return None
 
     def find(self, package: str) -> Path:
-        """The folder of ``package``; raises :class:`LookupError` naming where it looked."""
+        """The folder of a ROS package.
+
+        Parameters
+        ----------
+        package : str
+            The package name (no ``/``, not ``.`` or ``..``).
+
+        Returns
+        -------
+        Path
+            The first ``DIR/package`` folder of :meth:`search_dirs`, resolved.
+
+        Raises
+        ------
+        LookupError
+            An invalid name, or no such folder (the message lists where it looked).
+        """
         if not package or "/" in package or package in (".", ".."):
             raise LookupError(f"invalid package name {package!r}")
         dirs = self.search_dirs()
@@ -114,9 +166,28 @@ def _find_hook(resolver: PackageResolver) -> Iterator[None]:
 
 
 def expand_xacro(path: Path, args: Mapping[str, str], resolver: PackageResolver) -> str:
-    """The URDF text of xacro file ``path`` expanded with arguments ``args``.
+    """The URDF text of a xacro file expanded with its arguments.
 
-    Raises :class:`DescriptionError` located at the file name (``x.xacro: xacro: ...``).
+    Parameters
+    ----------
+    path : Path
+        The xacro file.
+    args : mapping of str to str
+        xacro arguments (``name:=value`` on the xacro command line).
+    resolver : PackageResolver
+        Where ``$(find PKG)`` looks while expanding.
+
+    Returns
+    -------
+    str
+        The expanded URDF, pretty-printed XML (units as in URDF: m, rad).
+
+    Raises
+    ------
+    DescriptionError
+        Located at the file name (``x.xacro: xacro: …``, or ``x.xacro (in INCLUDED)``
+        for an included file): a xacro error, an argument without value, an unknown
+        package, an unreadable file or malformed XML.
     """
     import xacro
 
@@ -155,7 +226,31 @@ def _xacro_file() -> str | None:
 
 # =============================================================================== URDF
 def parse_urdf(text: str, label: str) -> Any:
-    """A ``yourdfpy.URDF`` of URDF ``text`` (no meshes loaded); errors name ``label``."""
+    """Parse URDF text into a ``yourdfpy.URDF`` (no meshes loaded).
+
+    Before yourdfpy reads it, every ``<link>`` and ``<joint>`` is checked for a unique
+    name, every joint for a type, known ``<parent>``/``<child>`` links and finite
+    numbers in ``<origin xyz rpy>`` (m, rad), ``<axis xyz>`` and ``<limit lower upper>``
+    (rad, or m for a prismatic joint).
+
+    Parameters
+    ----------
+    text : str
+        The URDF XML, root element ``<robot>``.
+    label : str
+        The file name, the start of error locations.
+
+    Returns
+    -------
+    yourdfpy.URDF
+        The parsed robot (no scene graph, no meshes).
+
+    Raises
+    ------
+    DescriptionError
+        Located at ``LABEL`` or ``LABEL: joint 'J'`` (with the element): malformed XML,
+        a root other than ``<robot>``, a failed element check, or yourdfpy's error.
+    """
     from lxml import etree
     from yourdfpy import URDF
     from yourdfpy.urdf import URDFError
@@ -233,9 +328,24 @@ def _check_elements(root: Any, label: str) -> None:
 class ImportedRobot:
     """What :func:`import_urdf` read: the description and where it came from.
 
-    ``urdf``: the (expanded) URDF text; ``joints``: the chain's joint names in order
-    (fixed ones included); ``base_link``, ``tip_link``: the chain's ends; ``chain``:
-    the joints as read (origins, axes), from which the description was converted.
+    Attributes
+    ----------
+    description : RobotDescription
+        The converted model (DH/Hayati, SI, radians); its joint readings are the URDF
+        joint positions (rad, m for prismatic joints) in chain order.
+    urdf : str
+        The (expanded) URDF text.
+    base_link, tip_link : str
+        The chain's ends.
+    joints : tuple of str
+        The chain's joint names in order, fixed ones included.
+    source : Path
+        The file read.
+    args : mapping of str to str
+        The xacro arguments used.
+    chain : JointChain or None
+        The joints as read (origins 4×4 in m, unit axes), from which the description
+        was converted.
     """
 
     description: RobotDescription
@@ -372,9 +482,37 @@ def _lumped(urdf: Any, children: dict[str, list[Any]], link: str,
 
 def chain_from_urdf(urdf: Any, label: str, base_link: str | None = None,
                     tip_link: str | None = None) -> tuple[JointChain, str, str]:
-    """The :class:`JointChain` from ``base_link`` (default: the root) to ``tip_link``.
+    """The :class:`JointChain` of a parsed URDF from ``base_link`` to ``tip_link``.
 
-    Returns ``(chain, base_link, tip_link)``.
+    The masses of links fixed to a chain link off the chain are lumped into it.
+
+    Parameters
+    ----------
+    urdf : yourdfpy.URDF
+        The robot (:func:`parse_urdf`).
+    label : str
+        The file name, the start of error locations.
+    base_link : str, optional
+        The chain's first link; default the URDF's single root link.
+    tip_link : str, optional
+        The chain's last link; default the end of the only actuated chain (its single
+        fixed leaf, else ``tool0``, else the last moving joint's child link).
+
+    Returns
+    -------
+    chain : JointChain
+        The joints in order: origin (4, 4) m, axis (3,), limits rad (prismatic: m) or
+        ``None`` for continuous and mimic joints, lumped mass kg and centre of mass
+        (3,) m in the child link's frame, mimic ``(joint, multiplier, offset)``.
+    base_link, tip_link : str
+        The chain's ends as chosen.
+
+    Raises
+    ------
+    DescriptionError
+        Unknown links, several roots, a closed loop, a branching robot without
+        ``tip_link``, a tip not below the base, a floating/planar/unknown joint on the
+        chain, missing or empty limits, a zero axis, non-finite mimic numbers.
     """
     parent, children, roots = _tree(urdf, label)
     links = set(children)
@@ -479,6 +617,15 @@ def import_urdf(
     ImportedRobot
         The description (DH/Hayati, joint readings = URDF joint positions in
         radians, chain order), the expanded URDF text and the chain's ends.
+
+    Raises
+    ------
+    RobotNotFoundError
+        No such file.
+    DescriptionError
+        Located at the file name: xacro arguments for a plain ``.urdf``, an unreadable
+        or non-UTF-8 file, or any error of :func:`expand_xacro`, :func:`parse_urdf`,
+        :func:`chain_from_urdf` or the DH/Hayati conversion.
     """
     p = Path(path)
     label = p.name
