@@ -69,7 +69,7 @@ def read_calibration(path: Path, args: argparse.Namespace | None = None
     """
     from plugcell.apps.cli import CommandError
     from plugcell.apps.commands.robotargs import load_robot_of
-    from plugcell.calibration.result import CalibrationResult
+    from plugcell.io.params import result_from_params
     from plugcell.io.robots import description_of_params
     from plugcell.kinematics.errors import DescriptionError
 
@@ -82,7 +82,7 @@ def read_calibration(path: Path, args: argparse.Namespace | None = None
         except DescriptionError as exc:
             raise CommandError(str(exc)) from None
     try:
-        return d, CalibrationResult.from_dict(d, desc)
+        return d, result_from_params(d, desc)
     except (KeyError, TypeError, ValueError) as exc:
         what = f"missing key {exc}" if isinstance(exc, KeyError) else str(exc)
         raise CommandError(f"{path}: not a plugcell calibration: {what}") from None
