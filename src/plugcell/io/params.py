@@ -11,7 +11,8 @@ of the controller UI.
 
 The documents hold SI values with their units (m, rad) for the model and millimetres /
 degrees for the statistics, frames and the validity region; NaN and infinities are
-written as ``null`` (strict JSON).
+written as ``null`` (strict JSON).  A document that cannot be read raises
+:class:`ParamsError` (a ``ValueError``) naming the key that is missing or wrong.
 The calibration itself (:mod:`plugcell.calibration`) never sees a file or a document.
 """
 
@@ -276,7 +277,7 @@ def validity_from_document(d: dict[str, Any]) -> ValidityRegion:
                               n_poses=int(d["poses"]))
     except KeyError as exc:
         raise ParamsError(f"validity: missing key {exc}") from None
-    except (TypeError, IndexError, ValueError) as exc:
+    except (TypeError, IndexError, ValueError, OverflowError) as exc:
         raise ParamsError(f"validity: {exc}") from None
 
 
@@ -379,8 +380,84 @@ def params_json(result: CalibrationResult, indent: int | None = 2,
                       allow_nan=False)
 
 
-def result_from_params(document: dict[str, Any],
-                       description: RobotDescription) -> CalibrationResult:
+def _typename(x: Any) -> str:
+    if x is None:
+        return "null"
+    if isinstance(x, bool):
+        return "a boolean"
+    if isinstance(x, int | float):
+        return f"the number {x!r}"
+    if isinstance(x, str):
+        return f"the string {x!r}"
+    if isinstance(x, list):
+        return "a list"
+    if isinstance(x, dict):
+        return "an object"
+    return type(x).__name__
+
+
+def _at(document: dict[str, Any], *path: str, default: Any = KeyError) -> Any:
+    """``document[path[0]][path[1]]…``; a :class:`ParamsError` naming the dotted key when
+    one is missing (unless ``default`` is given) or a container is not an object."""
+    x: Any = document
+    for i, key in enumerate(path):
+        if not isinstance(x, dict):
+            raise ParamsError(f"{'.'.join(path[:i])}: expected an object, got {_typename(x)}")
+        if key not in x:
+            if default is not KeyError:
+                return default
+            raise ParamsError(f"missing key {'.'.join(path[:i + 1])!r}")
+        x = x[key]
+    return x
+
+
+def _number(document: dict[str, Any], *path: str, default: Any = KeyError) -> float:
+    x = _at(document, *path, default=default)
+    try:
+        f = float("nan") if isinstance(x, bool) or not isinstance(x, int | float) else float(x)
+    except OverflowError:  # an integer beyond float
+        f = float("inf")
+    if not math.isfinite(f):
+        raise ParamsError(f"{'.'.join(path)}: expected a finite number, got {_typename(x)}")
+    return f
+
+
+def _integer(document: dict[str, Any], *path: str, default: Any = KeyError) -> int:
+    x = _at(document, *path, default=default)
+    if isinstance(x, bool) or not isinstance(x, int):
+        raise ParamsError(f"{'.'.join(path)}: expected an integer, got {_typename(x)}")
+    return x
+
+
+def _flag(document: dict[str, Any], *path: str, default: Any = KeyError) -> bool:
+    x = _at(document, *path, default=default)
+    if not isinstance(x, bool):
+        raise ParamsError(f"{'.'.join(path)}: expected true or false, got {_typename(x)}")
+    return x
+
+
+def _values(document: dict[str, Any], *path: str) -> dict[str, float]:
+    x = _at(document, *path)
+    if not isinstance(x, dict):
+        raise ParamsError(f"{'.'.join(path)}: expected an object, got {_typename(x)}")
+    for k in x:
+        _number(document, *path, k)  # names the dotted key of a bad value
+    return x
+
+
+def _transform(document: dict[str, Any], *path: str) -> Array:
+    x = _at(document, *path)
+    try:
+        T = np.array(x, dtype=float)
+    except (TypeError, ValueError, OverflowError):
+        T = np.zeros(0)
+    if T.shape != (4, 4) or not np.all(np.isfinite(T)):
+        raise ParamsError(f"{'.'.join(path)}: expected a finite 4x4 matrix")
+    return T
+
+
+def result_from_params(document: dict[str, Any], description: RobotDescription, *,
+                       check_robot: bool = True) -> CalibrationResult:
     """A result that predicts, rebuilt from a PARAMS.json document and its robot.
 
     The model and the nominal robot (values, BASE/PROBE references, payload and
@@ -396,43 +473,98 @@ def result_from_params(document: dict[str, Any],
         ``model.thermal``, ``model.temperature_ref_c``, ``warnings`` and ``validity``
         may be absent (files written before they were recorded).
     description : RobotDescription
-        The robot the calibration was identified on.
+        The robot the calibration was identified on (its ``name`` is the document's
+        ``robot``).
+    check_robot : bool, default True
+        Refuse a document whose ``robot`` is not ``description.name`` (a calibration of
+        another robot).  ``False`` when ``description`` was taken from the document
+        itself (its ``description`` or ``robot_source``), which then names the robot.
 
     Returns
     -------
     CalibrationResult
         Without statistics, history or residuals.
+
+    Raises
+    ------
+    ParamsError
+        Not a plugcell calibration (``format``), a newer ``format_version``, a missing
+        key or a value of the wrong type (the message names the dotted key), a
+        calibration of another robot (``check_robot``), or identified parameters the
+        model does not have.
     """
-    d = document
-    if d.get("format") != FORMAT:
+    if not isinstance(document, dict) or document.get("format") != FORMAT:
         raise ParamsError("not a plugcell calibration (missing 'format')")
-    cfg = model_config(d["model"]["number"])
-    refs = d["references"]
-    m_ref = float(d["data"]["payload_ref_kg"])
+    version = document.get("format_version", FORMAT_VERSION)
+    if isinstance(version, bool) or not isinstance(version, int) or version > FORMAT_VERSION:
+        raise ParamsError(f"format_version {version!r}: this plugcell reads up to "
+                          f"{FORMAT_VERSION} (written by a newer plugcell?)")
+    robot = _at(document, "robot")
+    if not isinstance(robot, str):
+        raise ParamsError(f"robot: expected a name, got {_typename(robot)}")
+    if check_robot and robot != description.name:
+        raise ParamsError(f"a calibration of robot {robot!r}, not of {description.name!r}")
+    number = _at(document, "model", "number")
+    try:
+        cfg = model_config(number)
+    except ValueError as exc:
+        raise ParamsError(f"model.number: {exc}") from None
+    base_ref = _transform(document, "references", "base")
+    probe_ref = _transform(document, "references", "probe")
+    m_ref = _number(document, "data", "payload_ref_kg")
+    harmonics = _integer(document, "model", "harmonics", default=0)
+    if harmonics not in (0, 1, 2):
+        raise ParamsError(f"model.harmonics: 0, 1 or 2, got {harmonics}")
+    thermal = _flag(document, "model", "thermal", default=False)
+    t_ref = _number(document, "model", "temperature_ref_c", default=0.0)
+    values = _values(document, "values")
+    nominal_values = _values(document, "nominal_frames", "values")
+    rows = _at(document, "parameters")
+    if not isinstance(rows, list):
+        raise ParamsError(f"parameters: expected a list, got {_typename(rows)}")
+    keys = []
+    for i, row in enumerate(rows):
+        key = row.get("key") if isinstance(row, dict) else None
+        if not isinstance(key, str):
+            raise ParamsError(f"parameters[{i}]: expected an object with a 'key' name")
+        keys.append(key)
+    iterations = _integer(document, "iterations")
+    converged = _flag(document, "converged")
+    six_dof = _flag(document, "data", "six_dof")
+    n_poses = _integer(document, "data", "poses")
+    warnings = _at(document, "warnings", default=[])
+    if not isinstance(warnings, list) or not all(isinstance(w, str) for w in warnings):
+        raise ParamsError("warnings: expected a list of strings")
 
-    def build(values: dict[str, float]) -> ErrorModel:
+    def build(v: dict[str, float]) -> ErrorModel:
         m = ErrorModel.create(description, cfg.family, gravity=cfg.gravity,
-                              payload=cfg.payload, base=np.array(refs["base"]),
-                              probe=np.array(refs["probe"]), payload_ref_kg=m_ref,
-                              harmonics=int(d["model"].get("harmonics", 0)),
-                              thermal=bool(d["model"].get("thermal", False)),
-                              temperature_ref_c=float(d["model"].get("temperature_ref_c",
-                                                                     0.0)))
-        return m.with_values([float(values.get(k, 0.0)) for k in m.space.keys])
+                              payload=cfg.payload, base=base_ref, probe=probe_ref,
+                              payload_ref_kg=m_ref, harmonics=harmonics, thermal=thermal,
+                              temperature_ref_c=t_ref)
+        return m.with_values([float(v.get(k, 0.0)) for k in m.space.keys])
 
-    model = build(d["values"])
-    nominal = build(d["nominal_frames"]["values"])
+    try:
+        model = build(values)
+        nominal = build(nominal_values)
+    except ValueError as exc:  # the model cannot be built on this robot
+        raise ParamsError(f"model {cfg.number} ({cfg.name}) on {description.name!r}: "
+                          f"{exc}") from None
+    unknown = [k for k in keys if k not in model.space.keys]
+    if unknown:
+        raise ParamsError(f"parameters: {', '.join(map(repr, unknown))} not in model "
+                          f"{cfg.number} ({cfg.name}) of {description.name!r}")
     validity = None
-    if d.get("validity"):  # absent in files written before the region was recorded
-        validity = validity_from_document(d["validity"])
+    v = document.get("validity")
+    if v:  # absent in files written before the region was recorded
+        if not isinstance(v, dict):
+            raise ParamsError(f"validity: expected an object, got {_typename(v)}")
+        validity = validity_from_document(v)
     return CalibrationResult(
-        config=cfg, robot=d["robot"], model=model, nominal=nominal,
-        keys=tuple(p["key"] for p in d["parameters"]), identifiability=None,
-        data_identifiability=None, iterations=int(d["iterations"]),
-        converged=bool(d["converged"]), history=(), statistics=None, calibration=None,
-        calibration_before=None, six_dof=bool(d["data"]["six_dof"]),
-        n_poses=int(d["data"]["poses"]), warnings=tuple(d.get("warnings", ())),
-        validity=validity)
+        config=cfg, robot=robot, model=model, nominal=nominal, keys=tuple(keys),
+        identifiability=None, data_identifiability=None, iterations=iterations,
+        converged=converged, history=(), statistics=None, calibration=None,
+        calibration_before=None, six_dof=six_dof, n_poses=n_poses,
+        warnings=tuple(warnings), validity=validity)
 
 
 def rebase_document(document: dict[str, Any], result: CalibrationResult, base: ArrayLike,
