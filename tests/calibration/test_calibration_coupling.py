@@ -16,6 +16,7 @@ from coupling_testlib import hand_converted
 from plugcell.calibration import CalibrationData, Calibrator, ErrorModel
 from plugcell.calibration.identifiability import random_configurations, structural_identifiability
 from plugcell.compensation import IdentifiedModel, compensate, compensate_joints, nominal_joints
+from plugcell.io.params import params_document, result_from_params
 from plugcell.io.robots import load_robot
 from plugcell.kinematics import forward, pose_error
 from plugcell.kinematics.transforms import so3_exp
@@ -84,7 +85,7 @@ def test_coupled_and_hand_converted_calibrate_identically(results, campaign):
 
 def test_result_round_trip_keeps_readings(results, fanuc, campaign):
     res_c, _ = results
-    back = type(res_c).from_dict(res_c.to_dict(), fanuc)
+    back = result_from_params(params_document(res_c), fanuc)
     qv = random_configurations(campaign[0], 5, seed=164)
     np.testing.assert_allclose(back.predict(qv), res_c.predict(qv), atol=1e-12)
 

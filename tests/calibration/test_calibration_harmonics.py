@@ -8,9 +8,10 @@ import pytest
 from calibration_testlib import harmonic_campaign, random_frame
 from test_calibration_jacobian import _fd_columns
 
-from plugcell.calibration import CalibrationError, CalibrationResult, Calibrator, ErrorModel
+from plugcell.calibration import CalibrationError, Calibrator, ErrorModel
 from plugcell.calibration.identifiability import random_configurations, structural_identifiability
 from plugcell.calibration.jacobian import identification_jacobian
+from plugcell.io.params import params_document, result_from_params
 
 
 @pytest.mark.parametrize(("robot", "family"), [("h4", "loop"), ("ur10", "serial")])
@@ -61,7 +62,7 @@ def test_identifies_a_transmission_error_and_reports_sigma(tmp_path):
     for k in ("h2s_1", "h2s_5", "h1c_6"):
         if k in harm.keys:
             assert abs(harm.value(k)) < 5 * harm.sigma(k) + 2e-5
-    back = CalibrationResult.from_dict(harm.to_dict(), desc)
+    back = result_from_params(params_document(harm), desc)
     np.testing.assert_allclose(back.predict(val.q), harm.predict(val.q), atol=1e-12)
     with pytest.raises(CalibrationError, match="order 0, 1 or 2"):
         Calibrator(desc, "serial", harmonics=3)

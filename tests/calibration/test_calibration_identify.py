@@ -11,12 +11,12 @@ from calibration_testlib import random_frame
 from plugcell.calibration import (
     CalibrationData,
     CalibrationError,
-    CalibrationResult,
     Calibrator,
     DivergenceError,
     ErrorModel,
 )
 from plugcell.calibration.identifiability import random_configurations, structural_identifiability
+from plugcell.io.params import params_json, result_from_params
 from plugcell.io.robot_schema import description_from_dict, description_to_dict
 from plugcell.kinematics.transforms import so3_exp
 
@@ -163,14 +163,14 @@ def test_result_serialises_and_predicts_after_reload(h4, full_truth):
     cal = _data(full_truth, 60, 13)
     val = _data(full_truth, 30, 14)
     res = Calibrator(h4, 5).fit(cal, validation=val)
-    d = json.loads(res.to_json())
+    d = json.loads(params_json(res))
     assert d["model"]["number"] == 5 and d["iterations"] == res.iterations
     assert d["calibration"]["mean_mm"] < 1e-6 and d["validation"]["mean_mm"] < 1e-6
     assert d["validation"]["before"]["mean_mm"] > 1.0
     row = next(p for p in d["parameters"] if p["key"] == "a2'")
     assert row["stands_for"] == "Δa2' − Δa4'" and row["unit"] == "m" and row["sigma"] is not None
     assert {"mean_mm", "std_mm", "max_mm"} <= set(d["calibration"])
-    back = CalibrationResult.from_dict(d, h4)
+    back = result_from_params(d, h4)
     q = random_configurations(full_truth, 10, 95)
     np.testing.assert_allclose(back.predict(q, 36.0), res.predict(q, 36.0), atol=1e-12)
 

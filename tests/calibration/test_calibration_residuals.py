@@ -1,5 +1,6 @@
 """The residual of every pose (``PoseResiduals``): consistent with the model and with the
-accuracy statistics (8.1–8.2) the result reports, and exported as ``residuals_dict``."""
+accuracy statistics (8.1–8.2) the result reports, and exported as the residual file
+(``plugcell.io.params.residuals_document``)."""
 
 from __future__ import annotations
 
@@ -9,7 +10,13 @@ import numpy as np
 import pytest
 
 from plugcell.calibration import CalibrationData, CalibrationResult, Calibrator, PoseResiduals
-from plugcell.calibration.result import RESIDUALS_FORMAT
+from plugcell.io.params import (
+    RESIDUALS_FORMAT,
+    params_document,
+    residuals_document,
+    residuals_json,
+    result_from_params,
+)
 from plugcell.kinematics.transforms import so3_exp
 from plugcell.sim.twin.campaign import measure_poses, working_volume_joints
 from plugcell.sim.twin.robot import RobotTwin
@@ -90,7 +97,7 @@ def test_validation_residuals_follow_the_validation_statistics(h4, result, sets)
 
 
 def test_residual_file_per_pose_in_mm_matches_its_summaries(result):
-    doc = json.loads(result.residuals_json())
+    doc = json.loads(residuals_json(result))
     assert doc["format"] == RESIDUALS_FORMAT and doc["six_dof"] is True
     assert doc["model"] == {"number": 2, "name": "loop"}
     poses = doc["poses"]
@@ -107,7 +114,7 @@ def test_residual_file_per_pose_in_mm_matches_its_summaries(result):
         assert np.linalg.norm(before, axis=1).mean() == pytest.approx(
             summary["before"]["mean_mm"], rel=1e-9)
         assert max(p["after_norm_mm"] for p in mine) == pytest.approx(summary["max_mm"])
-        assert summary == result.to_dict()[name]
+        assert summary == params_document(result)[name]
     first = poses[0]
     np.testing.assert_allclose(first["measured_mm"],
                                result.calibration_residuals.positions[0] * 1e3)
@@ -122,12 +129,12 @@ def test_positions_only_and_a_result_rebuilt_from_params(h4, sets, result):
     r = res.calibration_residuals
     assert not r.six_dof and r.orientation_after is None
     _same_stats(r, res.calibration, res.calibration_before)
-    assert "orientation_after_deg" not in res.residuals_dict()["poses"][0]
-    assert "validation" not in res.residuals_dict()["sets"]
-    loaded = CalibrationResult.from_dict(result.to_dict(), h4)
+    assert "orientation_after_deg" not in residuals_document(res)["poses"][0]
+    assert "validation" not in residuals_document(res)["sets"]
+    loaded = result_from_params(params_document(result), h4)
     assert loaded.calibration_residuals is None
     with pytest.raises(ValueError, match="no per-pose residuals"):
-        loaded.residuals_dict()
+        residuals_document(loaded)
     again = loaded.evaluate_poses(cal)  # a saved calibration recomputes them from the data
     np.testing.assert_allclose(again.after, result.calibration_residuals.after, atol=1e-9)
 

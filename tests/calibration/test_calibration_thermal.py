@@ -11,13 +11,13 @@ from test_calibration_jacobian import _fd_columns
 from plugcell.calibration import (
     CalibrationData,
     CalibrationError,
-    CalibrationResult,
     Calibrator,
     ErrorModel,
 )
 from plugcell.calibration.identifiability import random_configurations
 from plugcell.calibration.jacobian import identification_jacobian
 from plugcell.calibration.model import THERMAL_KEY
+from plugcell.io.params import params_document, result_from_params
 
 
 @pytest.mark.parametrize(("robot", "family"), [("h4", "loop"), ("ur10", "serial")])
@@ -73,7 +73,7 @@ def test_identifies_the_expansion_coefficient_with_sigma():
     assert res.model.temperature_ref_c == pytest.approx(np.mean(cal.temperature_c))
     plain = Calibrator(desc, "serial").fit(cal)
     assert res.calibration.position.norm.mean < 0.5 * plain.calibration.position.norm.mean
-    back = CalibrationResult.from_dict(res.to_dict(), desc)
+    back = result_from_params(params_document(res), desc)
     np.testing.assert_allclose(back.predict(cal.q, None, cal.temperature_c),
                                res.predict(cal.q, None, cal.temperature_c), atol=1e-12)
     # a robot that does not expand: κT not significant

@@ -11,8 +11,14 @@ import pytest
 
 from plugcell.calibration import CalibrationData, Calibrator, ErrorModel
 from plugcell.calibration.identifiability import random_configurations
-from plugcell.calibration.result import CalibrationResult
 from plugcell.calibration.validity import ValidityRegion
+from plugcell.io.params import (
+    params_document,
+    params_json,
+    result_from_params,
+    validity_document,
+    validity_from_document,
+)
 
 _HERE = Path(__file__).resolve()
 IPA = next((p / "shared" / "data" / "ipa-robot-accuracy" for p in _HERE.parents
@@ -78,14 +84,14 @@ def test_outside_poses_are_flagged_with_how_far(model, h4):
 def test_round_trip_through_params_json(model):
     q = random_configurations(model, 120, 5)
     region = ValidityRegion.from_poses(model, q, np.linspace(0, 36, 120))
-    back = ValidityRegion.from_dict(json.loads(json.dumps(region.to_dict())))
+    back = validity_from_document(json.loads(json.dumps(validity_document(region))))
     probe = random_configurations(model, 50, 6)
     a, b = region.check(probe), back.check(probe)
     np.testing.assert_allclose(a.distance_m, b.distance_m, rtol=1e-7)
     np.testing.assert_array_equal(a.outside, b.outside)
     assert back.payload_kg == (0.0, 36.0)
     with pytest.raises(ValueError, match="validity: missing key 'threshold_mm'"):
-        ValidityRegion.from_dict({k: v for k, v in region.to_dict().items()
+        validity_from_document({k: v for k, v in validity_document(region).items()
                                   if k != "threshold_mm"})
 
 
@@ -106,7 +112,7 @@ def calibrated(h4):
 def test_result_records_its_region_and_flags_validation(calibrated):
     result, data = calibrated
     assert result.validity is not None and result.validity.n_poses == len(data)
-    d = result.to_dict()
+    d = params_document(result)
     assert d["validity"]["poses"] == len(data)
     assert d["validation"]["region"]["outside"] > 0
     assert any(w.startswith("validation: ") and "outside the calibrated region" in w
@@ -115,12 +121,12 @@ def test_result_records_its_region_and_flags_validation(calibrated):
 
 def test_old_params_json_without_region_still_loads(calibrated, h4):
     result, data = calibrated
-    d = json.loads(result.to_json())
+    d = json.loads(params_json(result))
     del d["validity"]
-    old = CalibrationResult.from_dict(d, h4)
+    old = result_from_params(d, h4)
     assert old.validity is None and old.check_region(data.q) is None
     np.testing.assert_allclose(old.predict(data.q), result.predict(data.q), atol=1e-12)
-    new = CalibrationResult.from_dict(json.loads(result.to_json()), h4)
+    new = result_from_params(json.loads(params_json(result)), h4)
     assert not new.check_region(data.q).outside.any()
 
 
@@ -130,7 +136,7 @@ def test_compensate_flags_targets_outside(calibrated, tmp_path, capsys):
 
     result, data = calibrated
     params = tmp_path / "params.json"
-    params.write_text(result.to_json())
+    params.write_text(params_json(result))
     q = data.q[:2].copy()
     q[1, 0] = math.radians(120.0)  # joint 1 far outside ±30°
     T = result.model.predict(q)
@@ -154,13 +160,13 @@ def test_compute_service_region_function(calibrated):
     from plugcell.devices.compute.functions import FUNCTIONS, FunctionError, Parameters
 
     result, data = calibrated
-    p = Parameters(result, result.model.structure.source, json.loads(result.to_json()))
+    p = Parameters(result, result.model.structure.source, json.loads(params_json(result)))
     q = np.degrees(data.q[:3]).copy()
     q[2, 0] = 150.0
     out = FUNCTIONS["region"](None, p, q)
     assert out.shape == (3, 3) and out[:, 0].tolist() == [0.0, 0.0, 1.0]
     assert out[2, 2] == pytest.approx(150.0 - np.degrees(data.q[:, 0].max()), rel=1e-6)
-    old = Parameters(CalibrationResult.from_dict(
+    old = Parameters(result_from_params(
         {k: v for k, v in p.document.items() if k != "validity"}, p.description),
         p.description, p.document)
     with pytest.raises(FunctionError, match="no calibrated region"):
@@ -203,8 +209,8 @@ def test_report_shows_the_coverage(calibrated, h4):
     assert "Coverage of the joint ranges" in page
     assert f"{result.validity.threshold_m * 1e3:.0f} mm</b>" in page
     assert "poses outside" in page
-    old = CalibrationResult.from_dict(
-        {k: v for k, v in json.loads(result.to_json()).items() if k != "validity"}, h4)
+    old = result_from_params(
+        {k: v for k, v in json.loads(params_json(result)).items() if k != "validity"}, h4)
     assert "Calibrated region" not in render_report(old, data)
 
 
@@ -216,7 +222,7 @@ def test_compute_compensation_notes_targets_outside_the_region(calibrated):
     from plugcell.devices.compute.workspace import Workspace
 
     result, data = calibrated
-    p = Parameters(result, result.model.structure.source, json.loads(result.to_json()))
+    p = Parameters(result, result.model.structure.source, json.loads(params_json(result)))
     ctx = FunctionContext(Workspace("R1"))
     inside = np.degrees(data.q[:2])
     FUNCTIONS["compensate_joints"](ctx, p, inside)

@@ -10,13 +10,14 @@ import pytest
 
 from plugcell.apps.cli import main
 from plugcell.compensation import IdentifiedModel, compensate, target_poses
+from plugcell.io.params import params_json
 from plugcell.kinematics.rotations import matrix_to_angles, zyz_to_matrix
 
 
 @pytest.fixture(scope="module")
 def params_file(calibrated, tmp_path_factory):
     p = tmp_path_factory.mktemp("params") / "params.json"
-    p.write_text(calibrated.result.to_json())
+    p.write_text(params_json(calibrated.result))
     return p
 
 

@@ -16,6 +16,7 @@ from shared_data import UR_XACRO, URDF_DIR
 from plugcell.calibration import CalibrationData, Calibrator
 from plugcell.calibration.result import CalibrationResult
 from plugcell.io.export import ExportError, export_calibration
+from plugcell.io.params import params_document
 from plugcell.io.robot_schema import description_to_dict
 from plugcell.io.robots import RobotSource, load_robot
 from plugcell.io.urdf import import_urdf
@@ -232,7 +233,7 @@ def test_cli_export(tmp_path: Path, arm: tuple[Path, RobotDescription, Calibrati
     from plugcell.apps.cli import main
 
     f, desc, res = arm
-    d = res.to_dict()
+    d = params_document(res)
     d["robot_source"] = RobotSource(str(f)).absolute().to_dict()
     d["description"] = description_to_dict(desc)
     params = tmp_path / "params.json"
@@ -298,7 +299,7 @@ def test_cli_export_source_gone(tmp_path: Path, arm: tuple[Path, RobotDescriptio
     from plugcell.apps.cli import main
 
     f, desc, res = arm
-    d = res.to_dict()
+    d = params_document(res)
     d["robot_source"] = {"ref": str(tmp_path / "moved.urdf")}
     d["description"] = description_to_dict(desc)
     params = tmp_path / "params.json"

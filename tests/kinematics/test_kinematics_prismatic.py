@@ -229,8 +229,8 @@ def test_track_robot_command_line_end_to_end(tmp_path: Path,
     from pinocchio_fk import pinocchio_tip_poses
 
     from plugcell.apps.cli import main
-    from plugcell.calibration.result import CalibrationResult
     from plugcell.io.measurements import MeasurementSet, write_measurements
+    from plugcell.io.params import result_from_params
     from plugcell.kinematics.rotations import matrix_to_angles
 
     urdf = tmp_path / "track_ur.urdf"
@@ -256,7 +256,7 @@ def test_track_robot_command_line_end_to_end(tmp_path: Path,
     out = tmp_path / "cal.urdf"
     assert main(["export", "--params", str(params), "--format", "urdf", "--out", str(out),
                  "--include-base", "--include-probe"]) == 0
-    res = CalibrationResult.from_dict(d, desc)
+    res = result_from_params(d, desc)
     q = _q(desc, 200, 3)
     ref = pinocchio_tip_poses(out.read_text(), desc.actuated, "probe", q)
     assert np.abs(ref[:, :3, 3] - res.predict(q)[:, :3, 3]).max() < 1e-9

@@ -14,6 +14,7 @@ from plugcell.apps.cli import main
 from plugcell.calibration import CalibrationData, Calibrator, ErrorModel
 from plugcell.calibration.identifiability import random_configurations
 from plugcell.io.nests import NestFileError, format_nests, parse_nests
+from plugcell.io.params import params_json
 from plugcell.io.robots import load_robot
 from plugcell.kinematics.transforms import so3_exp
 from plugcell.metrology import MetrologyError
@@ -102,7 +103,7 @@ def params(tmp_path_factory):
     q = random_configurations(truth, 60, seed=1)
     res = Calibrator(desc, "loop").fit(CalibrationData.from_poses(q, truth.predict(q)))
     path = tmp_path_factory.mktemp("drift") / "params.json"
-    path.write_text(res.to_json())
+    path.write_text(params_json(res))
     return path, res
 
 

@@ -15,6 +15,7 @@ from plugcell.compensation import IdentifiedModel, NominalModel, compensate_join
 from plugcell.devices.compute.expr import EvaluationError, evaluate
 from plugcell.devices.compute.functions import FUNCTIONS, FunctionContext
 from plugcell.devices.compute.workspace import Workspace
+from plugcell.io.params import params_json
 from plugcell.io.residual_models import residual_path, save_residual
 from plugcell.io.robots import load_robot
 
@@ -34,7 +35,7 @@ def hybrid(tmp_path_factory):
     d = tmp_path_factory.mktemp("params")
     path = d / "h4_hybrid.json"
     entry = save_residual(layer, residual_path(path))
-    path.write_text(res.with_residual_model(layer).to_json(residual_file=entry))
+    path.write_text(params_json(res.with_residual_model(layer), residual_file=entry))
     return d, res, q
 
 

@@ -16,6 +16,7 @@ from plugcell.calibration.identifiability import random_configurations
 from plugcell.devices.compute.expr import evaluate
 from plugcell.devices.compute.functions import FUNCTIONS, FunctionContext
 from plugcell.devices.compute.workspace import Workspace
+from plugcell.io.params import params_json
 from plugcell.io.robots import load_robot
 from plugcell.kinematics.transforms import so3_exp
 from plugcell.pdl import Program
@@ -83,7 +84,7 @@ class Cell:
 
 def _run(saved_params, tmp_path, D, update=True):
     _d, res = saved_params
-    (tmp_path / "h4.json").write_text(res.to_json())
+    (tmp_path / "h4.json").write_text(params_json(res))
     cell = Cell(tmp_path, res.model.base(), D)
     program = Program.from_source((PROGRAMS / "drift_watch.pdl").read_text(),
                                   "drift_watch.pdl", base_dir=PROGRAMS)

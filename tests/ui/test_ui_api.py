@@ -237,6 +237,7 @@ def residual_document() -> dict[str, Any]:
     import numpy as np
 
     from plugcell.calibration import CalibrationData, Calibrator
+    from plugcell.io.params import residuals_json
     from plugcell.io.robots import load_robot
     from plugcell.sim.twin.campaign import measure_poses, working_volume_joints
     from plugcell.sim.twin.robot import RobotTwin
@@ -251,7 +252,7 @@ def residual_document() -> dict[str, Any]:
         sets.append(CalibrationData.from_measurements(measure_poses(robot, LaserTracker(seed=2),
                                                                     q)[0]))
     result = Calibrator(load_robot("smart_h4"), "loop").fit(sets[0], validation=sets[1])
-    return json.loads(result.residuals_json())
+    return json.loads(residuals_json(result))
 
 
 def test_calibration_residuals_for_the_3d_view(client: TestClient, launcher: Any,

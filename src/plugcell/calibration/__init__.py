@@ -12,9 +12,10 @@ Pure math (numpy, SI units), no I/O, no framework imports; files go through
 * :mod:`.initial` — BASE/PROBE from the data (AX = YB, rigid registration);
 * :mod:`.identify` — :class:`Calibrator` (Gauss–Newton, LM, robust loss);
 * :mod:`.result`, :mod:`.statistics` — :class:`CalibrationResult`, (8.1)–(8.5), the
-  residual of every pose (:class:`PoseResiduals`);
+  residual of every pose (:class:`PoseResiduals`); their files (PARAMS.json, the
+  residual file, the HTML report) are :mod:`plugcell.io.params` and
+  :mod:`plugcell.io.calibration_report`;
 * :mod:`.configs` — the five models of 8.2.3; :mod:`.simulation` — the check of 8.1;
-* :mod:`.report` — the self-contained HTML report;
 * :mod:`.planning` — choosing the poses of a campaign (I/D/A/E/O-optimal, visible);
 * :mod:`.validity` — the region a calibration was identified on, and checks against it.
 """

@@ -4,7 +4,7 @@
 
     result = Calibrator(desc, model="full").fit(data)     # -> CalibrationResult
     result.predict(q, payload_kg)                          # calibrated T-MAC poses
-    result.to_dict()                                       # PARAMS.json content
+    plugcell.io.params.params_document(result)             # PARAMS.json content
 
 ``fit`` does what an engineer does with a file of joint readings and tracker
 measurements, and nothing else is needed:

@@ -1,60 +1,43 @@
-"""The outcome of an identification: predicts, evaluates, reports, serialises.
+"""The outcome of an identification: predicts, evaluates, reports.
 
-:class:`CalibrationResult` is immutable.  ``to_dict()`` is the content of
-``PARAMS.json`` (``plugcell calibrate --out``); :meth:`CalibrationResult.from_dict`
-rebuilds a working result from it together with the robot description, so a
-saved calibration can predict (and compensate) later.  ``residuals_dict()`` is the
-per-pose residual file (``plugcell calibrate --residuals``): every pose's measured
-position and its error vector before and after calibration, for the 3-D view of the
-controller UI.
+:class:`CalibrationResult` is immutable: the calibrated :class:`ErrorModel`, the nominal
+robot with fitted BASE/PROBE, the parameter statistics (8.3–8.5), the accuracy before and
+after (8.1–8.2) and the residual of every pose.  Objects and arrays only: its files —
+``PARAMS.json`` (``plugcell calibrate --out``) and the per-pose residual file
+(``--residuals``) — are written and read by :mod:`plugcell.io.params`
+(:func:`~plugcell.io.params.params_document`,
+:func:`~plugcell.io.params.result_from_params`,
+:func:`~plugcell.io.params.residuals_document`).
 """
 
 from __future__ import annotations
 
-import json
-import math
 from dataclasses import dataclass, field, replace
 from typing import Any
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from plugcell.calibration.configs import ModelConfig, model_config
+from plugcell.calibration.configs import ModelConfig
 from plugcell.calibration.data import CalibrationData
 from plugcell.calibration.identifiability import Identifiability
-from plugcell.calibration.model import THERMAL_KEY, ErrorModel
+from plugcell.calibration.model import ErrorModel
 from plugcell.calibration.residual_model import (
     LearnedResidual,
     calibration_fingerprint,
     hybrid_poses,
     hybrid_residuals,
 )
-from plugcell.calibration.statistics import (
-    ParameterStatistics,
-    PoseResiduals,
-    accuracy_summary,
-    pose_residuals,
-)
+from plugcell.calibration.statistics import ParameterStatistics, PoseResiduals, pose_residuals
 from plugcell.calibration.validity import RegionCheck, ValidityRegion
-from plugcell.kinematics import RobotDescription
-from plugcell.kinematics.rotations import matrix_to_rpy
 from plugcell.metrology import AccuracyStats
 
 Array = NDArray[np.float64]
 
-FORMAT = "plugcell-calibration"
-FORMAT_VERSION = 1
-#: ``format`` of the per-pose residual file (:meth:`CalibrationResult.residuals_dict`).
-RESIDUALS_FORMAT = "plugcell-residuals"
-RESIDUALS_FORMAT_VERSION = 1
-
 __all__ = [
-    "FORMAT",
-    "FORMAT_VERSION",
-    "RESIDUALS_FORMAT",
-    "RESIDUALS_FORMAT_VERSION",
     "CalibrationResult",
     "IterationRecord",
+    "harmonic_order",
 ]
 
 
@@ -82,33 +65,6 @@ class IterationRecord:
     mean_position_mm: float
     rms_position_mm: float
     damping: float = 0.0
-
-    def as_dict(self) -> dict[str, float]:
-        """The fields as a JSON-ready dict."""
-        return {"iteration": self.iteration, "step_norm": self.step_norm, "cost": self.cost,
-                "mean_position_mm": self.mean_position_mm,
-                "rms_position_mm": self.rms_position_mm, "damping": self.damping}
-
-
-def _frame_dict(T: Array) -> dict[str, Any]:
-    return {
-        "matrix": np.asarray(T).tolist(),
-        "xyz_mm": (np.asarray(T)[:3, 3] * 1e3).tolist(),
-        "rpy_deg": np.degrees(matrix_to_rpy(np.asarray(T)[:3, :3])).tolist(),
-    }
-
-
-def _thesis_base(T: Array) -> dict[str, float] | None:
-    """The BASE as the six parameters of eq. (6.24) (via D.6), when regular."""
-    from plugcell.metrology import MetrologyError, base_parameters_from_matrix
-
-    try:
-        bp = base_parameters_from_matrix(T)
-    except (MetrologyError, ValueError):
-        return None
-    return {"a0_mm": bp.a0 * 1e3, "b0_mm": bp.b0 * 1e3, "alpha0_deg": math.degrees(bp.alpha0),
-            "beta0_deg": math.degrees(bp.beta0), "theta0_deg": math.degrees(bp.theta0),
-            "d0_mm": bp.d0 * 1e3}
 
 
 @dataclass(frozen=True, eq=False)
@@ -159,7 +115,8 @@ class CalibrationResult:
         Validation poses.
     calibration_residuals, validation_residuals : PoseResiduals or None
         The residual of every pose those figures are the statistics of (``None`` in a
-        result rebuilt by :meth:`from_dict`).
+        result rebuilt from PARAMS.json by
+        :func:`plugcell.io.params.result_from_params`).
     validity : ValidityRegion or None
         The region the calibration poses covered (``None`` for a PARAMS.json written
         before it was recorded).
@@ -507,197 +464,6 @@ class CalibrationResult:
                         "sigma": self.sigma(k), "unit": p.unit, "stands_for": self.stands_for(k)})
         return out
 
-    # ------------------------------------------------------------------ serialisation
-    def _summaries(self) -> dict[str, dict[str, Any]]:
-        """The accuracy summaries (mm, deg) of the calibration and validation sets, each
-        with its ``before``."""
-        out: dict[str, dict[str, Any]] = {}
-        for name, after, before in (("calibration", self.calibration, self.calibration_before),
-                                    ("validation", self.validation, self.validation_before)):
-            if after is not None:
-                out[name] = accuracy_summary(after)
-                if before is not None:
-                    out[name]["before"] = accuracy_summary(before)
-        if "validation" in out and self.validation_region is not None:
-            out["validation"]["region"] = self.validation_region.summary()
-        return out
-
-    def to_dict(self, residual_file: dict[str, Any] | None = None) -> dict[str, Any]:
-        """The PARAMS.json content (SI values with units; statistics in mm / deg).
-
-        ``residual_file``: what :func:`plugcell.io.residual_models.save_residual`
-        returned (side-file name, SHA-256), recorded under ``residual_model``."""
-        space = self.model.space
-        ident = self.identifiability
-        dependent = []
-        if ident is not None:
-            for k in ident.dropped:
-                dependent.append({"key": k, "name": space[k].name,
-                                  "identified_via": [space[v].name for v in ident.via.get(k, ())]})
-        summaries = self._summaries()
-        cal, val = summaries.get("calibration"), summaries.get("validation")
-        st = self.statistics
-        return {
-            "format": FORMAT,
-            "format_version": FORMAT_VERSION,
-            "robot": self.robot,
-            "model": {**self.config.as_dict(), "harmonics": harmonic_order(self.model),
-                      "thermal": THERMAL_KEY in self.model.space,
-                      "temperature_ref_c": self.model.temperature_ref_c},
-            "data": {"poses": self.n_poses, "six_dof": self.six_dof,
-                     "payload_ref_kg": self.model.payload_ref_kg},
-            "parameters": self.parameter_table(),
-            "dependent": dependent,
-            "unidentifiable": [] if ident is None else [space[k].name for k in ident.zero],
-            "values": self.model.as_dict(),
-            "base": {**_frame_dict(self.model.base()),
-                     "thesis_6_24": _thesis_base(self.model.base())},
-            "probe": _frame_dict(self.model.probe()),
-            "references": {"base": self.model.base_ref.tolist(),
-                           "probe": self.model.probe_ref.tolist()},
-            "nominal_frames": {"base": _frame_dict(self.nominal.base()),
-                               "probe": _frame_dict(self.nominal.probe()),
-                               "values": self.nominal.as_dict()},
-            "iterations": self.iterations,
-            "converged": self.converged,
-            "condition_number": None if st is None else st.condition_number,
-            "sigma2": None if st is None else st.sigma2,
-            "dof": None if st is None else st.dof,
-            "history": [h.as_dict() for h in self.history],
-            "calibration": cal,
-            "validation": val,
-            "warnings": list(self.warnings),
-            "residual_model": None if self.residual_model is None
-            else {**self.residual_model.summary(), **(residual_file or {})},
-            "validation_hybrid": self._hybrid_summary(),
-            "elapsed_s": self.elapsed_s,
-            "settings": dict(self.settings),
-            "validity": None if self.validity is None else self.validity.to_dict(),
-        }
-
-    def _hybrid_summary(self) -> dict[str, Any] | None:
-        """Physical vs hybrid accuracy on the validation poses (mm, deg)."""
-        h = self.hybrid_validation_residuals
-        if h is None:
-            return None
-        return {"physical": accuracy_summary(h.accuracy("before")),
-                "hybrid": accuracy_summary(h.accuracy("after")),
-                "poses": len(h), "fallbacks": self.hybrid_fallbacks}
-
-    def to_json(self, indent: int | None = 2,
-                residual_file: dict[str, Any] | None = None) -> str:
-        return json.dumps(_clean(self.to_dict(residual_file)), indent=indent, allow_nan=False)
-
-    def residuals_dict(self) -> dict[str, Any]:
-        """The per-pose residual file (``plugcell calibrate --residuals``), mm and degrees.
-
-        ``format``, ``format_version``, ``robot``, ``model`` {number, name}, ``six_dof``,
-        ``units``, ``convention``; ``sets`` {calibration, validation}: the accuracy
-        summaries of PARAMS.json; ``poses``: one entry per pose, calibration poses
-        first — ``set``, ``index``, ``measured_mm``, ``before_mm``, ``after_mm``,
-        ``before_norm_mm``, ``after_norm_mm`` (+ orientation errors in degrees for
-        6-DOF data, + the robust-loss ``weight`` of a calibration pose).  Raises
-        ``ValueError`` for a result without residuals (one rebuilt from PARAMS.json).
-        """
-        if self.calibration_residuals is None:
-            raise ValueError("this result carries no per-pose residuals (rebuilt from "
-                             "PARAMS.json?): evaluate_poses(data) computes them")
-        poses = self.calibration_residuals.records("calibration", self.pose_weights)
-        if self.validation_residuals is not None:
-            poses += self.validation_residuals.records("validation")
-        return {
-            "format": RESIDUALS_FORMAT,
-            "format_version": RESIDUALS_FORMAT_VERSION,
-            "robot": self.robot,
-            "model": {"number": self.config.number, "name": self.config.name},
-            "six_dof": self.six_dof,
-            "units": {"length": "mm", "angle": "deg"},
-            "convention": "residual = measured - predicted, measurement (tracker) frame; "
-                          "before: nominal robot with BASE/PROBE fitted; after: calibrated",
-            "sets": self._summaries(),
-            "poses": poses,
-        }
-
-    def residuals_json(self, indent: int | None = 2) -> str:
-        """:meth:`residuals_dict` as strict JSON."""
-        return json.dumps(_clean(self.residuals_dict()), indent=indent, allow_nan=False)
-
-    @classmethod
-    def from_dict(cls, d: dict[str, Any], desc: RobotDescription) -> CalibrationResult:
-        """A result that predicts, rebuilt from :meth:`to_dict` output and the robot."""
-        if d.get("format") != FORMAT:
-            raise ValueError("not a plugcell calibration (missing 'format')")
-        cfg = model_config(d["model"]["number"])
-        refs = d["references"]
-        m_ref = float(d["data"]["payload_ref_kg"])
-
-        def build(values: dict[str, float]) -> ErrorModel:
-            m = ErrorModel.create(desc, cfg.family, gravity=cfg.gravity, payload=cfg.payload,
-                                  base=np.array(refs["base"]), probe=np.array(refs["probe"]),
-                                  payload_ref_kg=m_ref,
-                                  harmonics=int(d["model"].get("harmonics", 0)),
-                                  thermal=bool(d["model"].get("thermal", False)),
-                                  temperature_ref_c=float(d["model"].get("temperature_ref_c",
-                                                                         0.0)))
-            return m.with_values([float(values.get(k, 0.0)) for k in m.space.keys])
-
-        model = build(d["values"])
-        nominal = build(d["nominal_frames"]["values"])
-        validity = None
-        if d.get("validity"):  # absent in files written before the region was recorded
-            validity = ValidityRegion.from_dict(d["validity"])
-        return cls(config=cfg, robot=d["robot"], model=model, nominal=nominal,
-                   keys=tuple(p["key"] for p in d["parameters"]), identifiability=None,
-                   data_identifiability=None, iterations=int(d["iterations"]),
-                   converged=bool(d["converged"]), history=(), statistics=None,
-                   calibration=None, calibration_before=None, six_dof=bool(d["data"]["six_dof"]),
-                   n_poses=int(d["data"]["poses"]), warnings=tuple(d.get("warnings", ())),
-                   validity=validity)
-
-
-def rebase_document(document: dict[str, Any], result: CalibrationResult, base: ArrayLike,
-                    event: dict[str, Any] | None = None) -> dict[str, Any]:
-    """A copy of the PARAMS.json ``document`` of ``result`` with BASE re-registered to
-    ``base`` ``(4, 4)`` (the drift watch): the reference becomes the new BASE, the BASE
-    parameters' values zero, ``event`` appended to ``drift_history``; ``parameters``
-    stays the record of the identification.
-
-    Parameters
-    ----------
-    document : dict
-        The PARAMS.json document of ``result``.
-    result : CalibrationResult
-        The calibration.
-    base : (4, 4) array_like, m
-        The re-registered BASE.
-    event : dict, optional
-        The drift event to record.
-
-    Returns
-    -------
-    dict
-        The new document (``document`` is not changed).
-
-    Raises
-    ------
-    ValueError
-        ``base`` not a finite 4×4 matrix.
-    """
-    import copy
-
-    B = np.asarray(base, dtype=float)
-    if B.shape != (4, 4) or not np.all(np.isfinite(B)):
-        raise ValueError(f"base: expected a finite 4x4 transform, got shape {B.shape}")
-    d = copy.deepcopy(document)
-    for p in result.model.space:
-        if p.kind == "base":
-            d["values"][p.key] = 0.0
-    d["references"]["base"] = B.tolist()
-    d["base"] = {**_frame_dict(B), "thesis_6_24": _thesis_base(B)}
-    if event is not None:
-        d.setdefault("drift_history", []).append(dict(event))
-    return d
-
 
 def harmonic_order(model: ErrorModel) -> int:
     """The highest joint-angle harmonic order K among the model's parameters.
@@ -713,16 +479,3 @@ def harmonic_order(model: ErrorModel) -> int:
         K (0: no harmonics).
     """
     return max((int(p.key[1]) for p in model.space if p.kind == "harmonic"), default=0)
-
-
-def _clean(x: Any) -> Any:
-    """Replace NaN/inf by None so the JSON is strict."""
-    if isinstance(x, dict):
-        return {k: _clean(v) for k, v in x.items()}
-    if isinstance(x, list | tuple):
-        return [_clean(v) for v in x]
-    if isinstance(x, float | np.floating):
-        return float(x) if math.isfinite(x) else None
-    if isinstance(x, np.integer):
-        return int(x)
-    return x

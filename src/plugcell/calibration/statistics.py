@@ -10,7 +10,8 @@
   singularity the two agree to first order up to a change of axes.
 * Per-pose residuals (:class:`PoseResiduals`): the error vectors those statistics are
   taken over, before (nominal robot with fitted BASE/PROBE) and after calibration,
-  with the measured positions — what a 3-D view of the residuals shows.
+  with the measured positions — what a 3-D view of the residuals shows (the file,
+  in mm and degrees: :func:`plugcell.io.params.residuals_document`).
 * Parameter statistics (8.3–8.5): ``σ² = Σ Δx² / (n − r)``, ``C = (HᵀH)⁻¹``,
   ``σ_Δg_j = σ·sqrt(C_jj)``; computed from the SVD of the column-scaled H.
 """
@@ -34,7 +35,6 @@ __all__ = [
     "ParameterStatistics",
     "PoseResiduals",
     "accuracy",
-    "accuracy_summary",
     "error_vectors",
     "parameter_statistics",
     "pose_residuals",
@@ -261,73 +261,6 @@ class PoseResiduals:
         if len(self) < 2:
             raise ValueError("accuracy statistics need at least 2 poses")
         return accuracy_statistics(*self.errors(which))
-
-    def records(self, set_name: str, weights: Array | None = None) -> list[dict[str, Any]]:
-        """One JSON-ready dict per pose, in mm and degrees: ``set``, ``index`` (1-based),
-        ``measured_mm``, ``before_mm``, ``after_mm``, ``before_norm_mm``,
-        ``after_norm_mm`` (and ``orientation_before_deg``, ``orientation_after_deg``,
-        ``weight`` when known).
-
-        Parameters
-        ----------
-        set_name : str
-            Value of the ``set`` field (e.g. ``"calibration"``).
-        weights : (N,) array, optional
-            Per-pose weights to include.
-
-        Returns
-        -------
-        list of dict
-            One record per pose.
-        """
-        out = []
-        nb, na = self.norms("before"), self.norms("after")
-        for i in range(len(self)):
-            r: dict[str, Any] = {
-                "set": set_name, "index": i + 1,
-                "measured_mm": (self.positions[i] * 1e3).tolist(),
-                "before_mm": (self.before[i] * 1e3).tolist(),
-                "after_mm": (self.after[i] * 1e3).tolist(),
-                "before_norm_mm": float(nb[i] * 1e3), "after_norm_mm": float(na[i] * 1e3),
-            }
-            if self.orientation_before is not None and self.orientation_after is not None:
-                r["orientation_before_deg"] = np.degrees(self.orientation_before[i]).tolist()
-                r["orientation_after_deg"] = np.degrees(self.orientation_after[i]).tolist()
-            if weights is not None:
-                r["weight"] = float(weights[i])
-            out.append(r)
-        return out
-
-
-def accuracy_summary(stats: AccuracyStats) -> dict[str, Any]:
-    """JSON-ready summary: ``mean_mm``, ``std_mm``, ``max_mm``, ``rms_mm``, per-component
-    means/σ (mm), and the orientation (deg) when measured.
-
-    Parameters
-    ----------
-    stats : AccuracyStats
-        Statistics in SI units (m, rad).
-
-    Returns
-    -------
-    dict
-        The summary in mm and degrees.
-    """
-    d = stats.as_dict(length_unit="mm", angle_unit="deg")
-    pos = d["position"]
-    out: dict[str, Any] = {
-        "poses": stats.count,
-        "mean_mm": pos["mean"], "std_mm": pos["std"], "max_mm": pos["max"], "rms_mm": pos["rms"],
-        "components_mm": {"mean": pos["components"]["mean"], "std": pos["components"]["std"]},
-    }
-    if "orientation" in d:
-        o = d["orientation"]
-        out["orientation"] = {
-            "mean_deg": o["mean"], "std_deg": o["std"], "max_deg": o["max"],
-            "components_deg": {"mean": o["components"]["mean"], "std": o["components"]["std"]},
-            "convention": "rotation vector of R_model^-1 R_measured",
-        }
-    return out
 
 
 @dataclass(frozen=True)

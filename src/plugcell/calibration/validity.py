@@ -27,7 +27,8 @@ or its payload lies outside the range.  At most :data:`MAX_POSES` calibration po
 kept (a farthest-point subsample, nearly uniform over the region; its covering radius —
 the largest distance of a dropped pose to a kept one — is recorded, and τ is at least
 that, so every calibration pose lies inside).
-Pure math (numpy, scipy's k-d tree), SI units; ``to_dict``/``from_dict`` use mm and degrees.
+Pure math (numpy, scipy's k-d tree), SI units; PARAMS.json's ``validity`` (mm and degrees)
+is written and read by :mod:`plugcell.io.params`.
 """
 
 from __future__ import annotations
@@ -379,65 +380,6 @@ class ValidityRegion:
         return RegionCheck(distance_m=d, threshold_m=self.threshold_m, joint_excess_rad=jexc,
                            worst_joint=worst, payload_excess_kg=pexc, target_excess_m=texc,
                            outside=outside, beyond_range=beyond)
-
-    # ------------------------------------------------------------------ serialisation
-    def to_dict(self) -> dict[str, Any]:
-        """PARAMS.json's ``validity`` (mm, degrees).
-
-        Returns
-        -------
-        dict
-            JSON-ready, lengths in mm and angles in degrees.
-        """
-        return {
-            "measure": "joint ranges + distance to the nearest calibration pose in joint space "
-                       "scaled by each joint's lever arm at the target (mm of target motion)",
-            "poses": self.n_poses,
-            "joint_lower_deg": np.degrees(self.joint_lower).tolist(),
-            "joint_upper_deg": np.degrees(self.joint_upper).tolist(),
-            "lever_mm_per_rad": (self.lever_m * 1e3).tolist(),
-            "threshold_mm": self.threshold_m * 1e3,
-            "cover_mm": self.cover_m * 1e3,
-            "payload_kg": list(self.payload_kg),
-            "target_lower_mm": (self.target_lower * 1e3).tolist(),
-            "target_upper_mm": (self.target_upper * 1e3).tolist(),
-            "poses_deg": np.round(np.degrees(self.poses), 6).tolist(),
-        }
-
-    @classmethod
-    def from_dict(cls, d: dict[str, Any]) -> ValidityRegion:
-        """Inverse of :meth:`to_dict`.
-
-        Parameters
-        ----------
-        d : dict
-            PARAMS.json's ``validity`` (mm, degrees).
-
-        Returns
-        -------
-        ValidityRegion
-            The region in SI units.
-
-        Raises
-        ------
-        ValueError
-            A missing or malformed key (named in the message).
-        """
-        try:
-            return cls(joint_lower=np.radians(d["joint_lower_deg"]),
-                       joint_upper=np.radians(d["joint_upper_deg"]),
-                       lever_m=np.asarray(d["lever_mm_per_rad"], float) / 1e3,
-                       poses=np.radians(np.asarray(d["poses_deg"], float)),
-                       threshold_m=float(d["threshold_mm"]) / 1e3,
-                       cover_m=float(d.get("cover_mm", 0.0)) / 1e3,
-                       payload_kg=(float(d["payload_kg"][0]), float(d["payload_kg"][1])),
-                       target_lower=np.asarray(d["target_lower_mm"], float) / 1e3,
-                       target_upper=np.asarray(d["target_upper_mm"], float) / 1e3,
-                       n_poses=int(d["poses"]))
-        except KeyError as exc:
-            raise ValueError(f"validity: missing key {exc}") from None
-        except (TypeError, IndexError) as exc:
-            raise ValueError(f"validity: {exc}") from None
 
 
 def _farthest_points(X: Array, k: int) -> NDArray[np.int64]:

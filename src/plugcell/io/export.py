@@ -443,7 +443,7 @@ def export_calibration(result: Any, desc: RobotDescription, fmt: str, *,
     Parameters
     ----------
     result : CalibrationResult
-        The calibration (e.g. ``CalibrationResult.from_dict(PARAMS, desc)``).
+        The calibration (e.g. ``result_from_params(PARAMS, desc)``, :mod:`plugcell.io.params`).
     desc : RobotDescription
         The robot it was made for.
     fmt : str

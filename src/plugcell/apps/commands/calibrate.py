@@ -215,6 +215,7 @@ def _run(args: argparse.Namespace) -> int:
     from plugcell.apps.commands.robotargs import load_robot_of, robot_source_of
     from plugcell.calibration import CalibrationError, Calibrator
     from plugcell.calibration.residual_model import ResidualModelError
+    from plugcell.io.params import params_json, residuals_json
     from plugcell.io.robot_schema import description_to_dict
 
     desc = load_robot_of(args)
@@ -285,7 +286,7 @@ def _run(args: argparse.Namespace) -> int:
             side = save_residual(result.residual_model, residual_path(args.out))
         except ResidualFileError as exc:
             raise CommandError(str(exc)) from None
-    d = json.loads(result.to_json(residual_file=side))
+    d = json.loads(params_json(result, residual_file=side))
     # where the robot came from and what it was: export and compensate find it again
     d["robot_source"] = robot_source_of(args).absolute().to_dict()
     d["description"] = description_to_dict(desc)
@@ -301,7 +302,7 @@ def _run(args: argparse.Namespace) -> int:
         write_text(args.report, render_report(result, data, val))
         written.append(args.report)
     if args.residuals is not None:
-        write_text(args.residuals, result.residuals_json() + "\n")
+        write_text(args.residuals, residuals_json(result) + "\n")
         written.append(args.residuals)
     if args.json:
         print(text)

@@ -4,7 +4,7 @@
                         [--payload-kg M] [--rot zyz|rpy] [--user-frame X,Y,Z,A,B,C]
 
 ``PARAMS.json`` is what ``plugcell calibrate`` writes
-(:meth:`plugcell.calibration.result.CalibrationResult.to_dict`).  ``TARGETS.csv``: a
+(:func:`plugcell.io.params.params_document`).  ``TARGETS.csv``: a
 header line, ``#`` comments, one target per row::
 
     name,x,y,z,rx,ry,rz,payload_kg        (name and payload_kg optional)

@@ -111,7 +111,7 @@ def _check(args: argparse.Namespace) -> int:
         raise CommandError(f"{args.nests}: {exc}") from None
     updated = False
     if est.alarm and args.update and est.consistent:
-        from plugcell.calibration.result import rebase_document
+        from plugcell.io.params import rebase_document
 
         event = {"time_utc": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime()),
                  **{k: v for k, v in est.as_dict().items() if k != "base"}}

@@ -69,12 +69,13 @@ def read_calibration(path: Path, args: argparse.Namespace | None = None
     """
     from plugcell.apps.cli import CommandError
     from plugcell.apps.commands.robotargs import load_robot_of
-    from plugcell.calibration.result import CalibrationResult
+    from plugcell.io.params import ParamsError, result_from_params
     from plugcell.io.robots import description_of_params
     from plugcell.kinematics.errors import DescriptionError
 
     d = read_params_document(path)
-    if args is not None and getattr(args, "robot", None) is not None:
+    given = args is not None and getattr(args, "robot", None) is not None
+    if given:
         desc = load_robot_of(args)
     else:
         try:
@@ -82,7 +83,11 @@ def read_calibration(path: Path, args: argparse.Namespace | None = None
         except DescriptionError as exc:
             raise CommandError(str(exc)) from None
     try:
-        return d, CalibrationResult.from_dict(d, desc)
+        # the robot the command was given must be the one calibrated; one the file
+        # records is (a file naming another robot elsewhere fails on its side file)
+        return d, result_from_params(d, desc, check_robot=given)
+    except ParamsError as exc:  # names the key, the robot or the format
+        raise CommandError(f"{path}: {exc}") from None
     except (KeyError, TypeError, ValueError) as exc:
         what = f"missing key {exc}" if isinstance(exc, KeyError) else str(exc)
         raise CommandError(f"{path}: not a plugcell calibration: {what}") from None

@@ -47,7 +47,7 @@ def campaign(robot: Any, tracker: Any, n: int, pose_seed: int, payload: float) -
 
 
 def _row(stats: Any) -> dict[str, Any]:
-    from plugcell.calibration.statistics import accuracy_summary
+    from plugcell.io.params import accuracy_summary
 
     return accuracy_summary(stats)
 

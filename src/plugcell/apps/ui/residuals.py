@@ -24,10 +24,10 @@ from typing import Any
 import numpy as np
 
 from plugcell.apps.ui.metrology import MAX_POINTS, FitInputError
-from plugcell.calibration.result import RESIDUALS_FORMAT, RESIDUALS_FORMAT_VERSION
 from plugcell.devices.compute.workspace import NAME as MATRIX_NAME
 from plugcell.framework.data import from_data
 from plugcell.framework.keys import check_name
+from plugcell.io.params import RESIDUALS_FORMAT, RESIDUALS_FORMAT_VERSION
 
 SETS = ("calibration", "validation")
 #: Largest coordinate accepted (mm): 1000 km, far beyond any cell.

@@ -48,6 +48,7 @@ from plugcell.devices.compute.expr import EvaluationError
 from plugcell.devices.compute.workspace import Workspace, WorkspaceError, as_matrix
 from plugcell.devices.tracker.frames import CONVENTIONS, matrix_from_vector, vector_from_matrix
 from plugcell.framework.keys import check_name as _check_file_name
+from plugcell.io.params import params_json, rebase_document, result_from_params
 from plugcell.io.robots import available_robots, load_robot
 from plugcell.kinematics import RobotDescription
 from plugcell.kinematics.rotations import angles_to_matrix
@@ -221,7 +222,7 @@ def calibrate(ctx: FunctionContext, mJ: Any, mT: Any, model: Any = 5.0, payload:
         result = Calibrator(desc, model=spec).fit(data)
     except (CalibrationError, ValueError) as exc:
         raise FunctionError(str(exc)) from None
-    return Parameters(result, desc, json.loads(result.to_json()))
+    return Parameters(result, desc, json.loads(params_json(result)))
 
 
 def _stats_row(before: Any, after: Any, poses: int) -> np.ndarray:
@@ -311,7 +312,7 @@ def load_params(ctx: FunctionContext, name: Any) -> Parameters:
     try:
         doc = json.loads(path.read_text(encoding="utf-8"))
         desc = _description(ctx, doc.get("robot"))
-        result = CalibrationResult.from_dict(doc, desc)
+        result = result_from_params(doc, desc)
     except FileNotFoundError:
         raise FunctionError(f"no parameter set {path.stem!r} in {path.parent}") from None
     except (OSError, ValueError, KeyError, TypeError) as exc:
@@ -373,7 +374,6 @@ def base_drift(ctx: FunctionContext, params: Any, nests: Any, measured: Any,
 def rebase(ctx: FunctionContext, params: Any, drift: Any) -> Parameters:
     """Parameters with BASE re-registered by a :func:`base_drift` row: ``BASE' = D·BASE``
     (the robot's parameters and a learned residual layer unchanged)."""
-    from plugcell.calibration.result import rebase_document
     from plugcell.kinematics.transforms import so3_exp
 
     p = _params(params)
@@ -385,7 +385,7 @@ def rebase(ctx: FunctionContext, params: Any, drift: Any) -> Parameters:
                           {"displacement_mm": float(row[0]), "alarm": bool(row[1] > 0.5),
                            "translation_mm": row[3:6].tolist(),
                            "rotation_deg": row[6:9].tolist()})
-    result = CalibrationResult.from_dict(doc, p.description)
+    result = result_from_params(doc, p.description)
     if p.result.residual_model is not None:
         result = result.with_residual_model(p.result.residual_model)
     return Parameters(result, p.description, doc)

@@ -1,0 +1,673 @@
+"""PARAMS.json and the per-pose residual file: a calibration's documents.
+
+``plugcell calibrate --out PARAMS.json`` writes :func:`params_json` of the
+:class:`~plugcell.calibration.result.CalibrationResult` (plus the robot's source and
+description, added by the command); :func:`result_from_params` rebuilds a result that
+predicts (and compensates) from that document and the robot's description;
+:func:`rebase_document` re-registers its BASE (the drift watch).
+``plugcell calibrate --residuals RES.json`` writes :func:`residuals_json`: every pose's
+measured position and its error vector before and after calibration, for the 3-D view
+of the controller UI.
+
+The documents hold SI values with their units (m, rad) for the model and millimetres /
+degrees for the statistics, frames and the validity region; NaN and infinities are
+written as ``null`` (strict JSON).  A document that cannot be read raises
+:class:`ParamsError` (a ``ValueError``) naming the key that is missing or wrong.
+The calibration itself (:mod:`plugcell.calibration`) never sees a file or a document.
+"""
+
+from __future__ import annotations
+
+import copy
+import json
+import math
+from typing import Any
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from plugcell.calibration.configs import model_config
+from plugcell.calibration.model import THERMAL_KEY, ErrorModel
+from plugcell.calibration.result import CalibrationResult, IterationRecord, harmonic_order
+from plugcell.calibration.statistics import PoseResiduals
+from plugcell.calibration.validity import ValidityRegion
+from plugcell.kinematics import RobotDescription
+from plugcell.kinematics.rotations import matrix_to_rpy
+from plugcell.metrology import AccuracyStats
+
+Array = NDArray[np.float64]
+
+#: ``format`` of PARAMS.json (:func:`params_document`).
+FORMAT = "plugcell-calibration"
+FORMAT_VERSION = 1
+#: ``format`` of the per-pose residual file (:func:`residuals_document`).
+RESIDUALS_FORMAT = "plugcell-residuals"
+RESIDUALS_FORMAT_VERSION = 1
+
+__all__ = [
+    "FORMAT",
+    "FORMAT_VERSION",
+    "RESIDUALS_FORMAT",
+    "RESIDUALS_FORMAT_VERSION",
+    "ParamsError",
+    "accuracy_summary",
+    "params_document",
+    "params_json",
+    "pose_records",
+    "rebase_document",
+    "residuals_document",
+    "residuals_json",
+    "result_from_params",
+    "validity_document",
+    "validity_from_document",
+]
+
+
+class ParamsError(ValueError):
+    """A PARAMS.json document that cannot be used; the message names the key."""
+
+
+# ---------------------------------------------------------------------- pieces
+
+
+def accuracy_summary(stats: AccuracyStats) -> dict[str, Any]:
+    """The accuracy figures (8.1–8.2) as a document entry, millimetres and degrees.
+
+    Parameters
+    ----------
+    stats : AccuracyStats
+        Statistics of the position (m) and, when measured, orientation (rad) errors.
+
+    Returns
+    -------
+    dict
+        ``poses``, ``mean_mm``, ``std_mm``, ``max_mm``, ``rms_mm``, ``components_mm``
+        {mean, std} (3 each), and ``orientation`` {mean_deg, std_deg, max_deg,
+        components_deg, convention} when orientations were measured.
+    """
+    d = stats.as_dict(length_unit="mm", angle_unit="deg")
+    pos = d["position"]
+    out: dict[str, Any] = {
+        "poses": stats.count,
+        "mean_mm": pos["mean"], "std_mm": pos["std"], "max_mm": pos["max"], "rms_mm": pos["rms"],
+        "components_mm": {"mean": pos["components"]["mean"], "std": pos["components"]["std"]},
+    }
+    if "orientation" in d:
+        o = d["orientation"]
+        out["orientation"] = {
+            "mean_deg": o["mean"], "std_deg": o["std"], "max_deg": o["max"],
+            "components_deg": {"mean": o["components"]["mean"], "std": o["components"]["std"]},
+            "convention": "rotation vector of R_model^-1 R_measured",
+        }
+    return out
+
+
+def pose_records(residuals: PoseResiduals, set_name: str,
+                 weights: ArrayLike | None = None) -> list[dict[str, Any]]:
+    """One residual-file entry per pose, millimetres and degrees.
+
+    Parameters
+    ----------
+    residuals : PoseResiduals
+        The residuals of N poses (m, rad).
+    set_name : str
+        ``"calibration"`` or ``"validation"``, recorded as ``set``.
+    weights : array_like, shape (N,), optional
+        The robust-loss weight of each pose, recorded as ``weight``.
+
+    Returns
+    -------
+    list of dict
+        ``set``, ``index`` (1-based), ``measured_mm``, ``before_mm``, ``after_mm`` (3
+        each), ``before_norm_mm``, ``after_norm_mm``; ``orientation_before_deg`` and
+        ``orientation_after_deg`` (3 each) for 6-DOF data; ``weight`` when given.
+    """
+    out = []
+    nb, na = residuals.norms("before"), residuals.norms("after")
+    w = None if weights is None else np.asarray(weights, dtype=float)
+    ob, oa = residuals.orientation_before, residuals.orientation_after
+    for i in range(len(residuals)):
+        r: dict[str, Any] = {
+            "set": set_name, "index": i + 1,
+            "measured_mm": (residuals.positions[i] * 1e3).tolist(),
+            "before_mm": (residuals.before[i] * 1e3).tolist(),
+            "after_mm": (residuals.after[i] * 1e3).tolist(),
+            "before_norm_mm": float(nb[i] * 1e3), "after_norm_mm": float(na[i] * 1e3),
+        }
+        if ob is not None and oa is not None:
+            r["orientation_before_deg"] = np.degrees(ob[i]).tolist()
+            r["orientation_after_deg"] = np.degrees(oa[i]).tolist()
+        if w is not None:
+            r["weight"] = float(w[i])
+        out.append(r)
+    return out
+
+
+def _iteration_dict(h: IterationRecord) -> dict[str, float]:
+    return {"iteration": h.iteration, "step_norm": h.step_norm, "cost": h.cost,
+            "mean_position_mm": h.mean_position_mm, "rms_position_mm": h.rms_position_mm,
+            "damping": h.damping}
+
+
+def _frame_dict(T: Array) -> dict[str, Any]:
+    return {
+        "matrix": np.asarray(T).tolist(),
+        "xyz_mm": (np.asarray(T)[:3, 3] * 1e3).tolist(),
+        "rpy_deg": np.degrees(matrix_to_rpy(np.asarray(T)[:3, :3])).tolist(),
+    }
+
+
+def _thesis_base(T: Array) -> dict[str, float] | None:
+    """The BASE as the six parameters of eq. (6.24) (via D.6), when regular."""
+    from plugcell.metrology import MetrologyError, base_parameters_from_matrix
+
+    try:
+        bp = base_parameters_from_matrix(T)
+    except (MetrologyError, ValueError):
+        return None
+    return {"a0_mm": bp.a0 * 1e3, "b0_mm": bp.b0 * 1e3, "alpha0_deg": math.degrees(bp.alpha0),
+            "beta0_deg": math.degrees(bp.beta0), "theta0_deg": math.degrees(bp.theta0),
+            "d0_mm": bp.d0 * 1e3}
+
+
+def _summaries(result: CalibrationResult) -> dict[str, dict[str, Any]]:
+    """The accuracy summaries (mm, deg) of the calibration and validation sets, each
+    with its ``before``."""
+    out: dict[str, dict[str, Any]] = {}
+    for name, after, before in (
+            ("calibration", result.calibration, result.calibration_before),
+            ("validation", result.validation, result.validation_before)):
+        if after is not None:
+            out[name] = accuracy_summary(after)
+            if before is not None:
+                out[name]["before"] = accuracy_summary(before)
+    if "validation" in out and result.validation_region is not None:
+        out["validation"]["region"] = result.validation_region.summary()
+    return out
+
+
+def _hybrid_summary(result: CalibrationResult) -> dict[str, Any] | None:
+    """Physical vs hybrid accuracy on the validation poses (mm, deg)."""
+    h = result.hybrid_validation_residuals
+    if h is None:
+        return None
+    return {"physical": accuracy_summary(h.accuracy("before")),
+            "hybrid": accuracy_summary(h.accuracy("after")),
+            "poses": len(h), "fallbacks": result.hybrid_fallbacks}
+
+
+def _clean(x: Any) -> Any:
+    """Replace NaN/inf by None so the JSON is strict."""
+    if isinstance(x, dict):
+        return {k: _clean(v) for k, v in x.items()}
+    if isinstance(x, list | tuple):
+        return [_clean(v) for v in x]
+    if isinstance(x, float | np.floating):
+        return float(x) if math.isfinite(x) else None
+    if isinstance(x, np.integer):
+        return int(x)
+    return x
+
+
+# ---------------------------------------------------------------------- validity
+
+
+def validity_document(region: ValidityRegion) -> dict[str, Any]:
+    """PARAMS.json's ``validity``: the region a calibration's poses covered.
+
+    Parameters
+    ----------
+    region : ValidityRegion
+        Joint ranges (rad), lever arms (m/rad), kept poses ``(P, n)`` (rad), threshold
+        and cover (m), payload range (kg), target box (m).
+
+    Returns
+    -------
+    dict
+        ``measure`` (what the distance is), ``poses`` (calibration poses the region was
+        built from), ``joint_lower_deg``/``joint_upper_deg`` (n each),
+        ``lever_mm_per_rad`` (n), ``threshold_mm``, ``cover_mm``, ``payload_kg``
+        [min, max], ``target_lower_mm``/``target_upper_mm`` (3 each), ``poses_deg``
+        (P × n, rounded to 1e-6°).
+    """
+    return {
+        "measure": "joint ranges + distance to the nearest calibration pose in joint space "
+                   "scaled by each joint's lever arm at the target (mm of target motion)",
+        "poses": region.n_poses,
+        "joint_lower_deg": np.degrees(region.joint_lower).tolist(),
+        "joint_upper_deg": np.degrees(region.joint_upper).tolist(),
+        "lever_mm_per_rad": (region.lever_m * 1e3).tolist(),
+        "threshold_mm": region.threshold_m * 1e3,
+        "cover_mm": region.cover_m * 1e3,
+        "payload_kg": list(region.payload_kg),
+        "target_lower_mm": (region.target_lower * 1e3).tolist(),
+        "target_upper_mm": (region.target_upper * 1e3).tolist(),
+        "poses_deg": np.round(np.degrees(region.poses), 6).tolist(),
+    }
+
+
+def validity_from_document(d: dict[str, Any]) -> ValidityRegion:
+    """The region of a :func:`validity_document` (inverse; ``cover_mm`` optional).
+
+    Parameters
+    ----------
+    d : dict
+        PARAMS.json's ``validity``.
+
+    Returns
+    -------
+    ValidityRegion
+        In SI units.
+
+    Raises
+    ------
+    ParamsError
+        ``"validity: missing key 'threshold_mm'"`` and the like for a bad entry.
+    """
+    try:
+        return ValidityRegion(joint_lower=np.radians(d["joint_lower_deg"]),
+                              joint_upper=np.radians(d["joint_upper_deg"]),
+                              lever_m=np.asarray(d["lever_mm_per_rad"], float) / 1e3,
+                              poses=np.radians(np.asarray(d["poses_deg"], float)),
+                              threshold_m=float(d["threshold_mm"]) / 1e3,
+                              cover_m=float(d.get("cover_mm", 0.0)) / 1e3,
+                              payload_kg=(float(d["payload_kg"][0]), float(d["payload_kg"][1])),
+                              target_lower=np.asarray(d["target_lower_mm"], float) / 1e3,
+                              target_upper=np.asarray(d["target_upper_mm"], float) / 1e3,
+                              n_poses=int(d["poses"]))
+    except KeyError as exc:
+        raise ParamsError(f"validity: missing key {exc}") from None
+    except (TypeError, IndexError, ValueError, OverflowError) as exc:
+        raise ParamsError(f"validity: {exc}") from None
+
+
+# ---------------------------------------------------------------------- PARAMS.json
+
+
+def params_document(result: CalibrationResult,
+                    residual_file: dict[str, Any] | None = None) -> dict[str, Any]:
+    """The PARAMS.json content of ``result`` (before the NaN → null of :func:`params_json`).
+
+    Parameters
+    ----------
+    result : CalibrationResult
+        The identified model and its statistics.
+    residual_file : dict, optional
+        What :func:`plugcell.io.residual_models.save_residual` returned (side-file name,
+        SHA-256), recorded under ``residual_model`` beside the layer's summary.
+
+    Returns
+    -------
+    dict
+        ``format``, ``format_version``, ``robot``, ``model`` (number, name, family,
+        gravity, payload, title, harmonics, thermal, temperature_ref_c), ``data``
+        (poses, six_dof, payload_ref_kg), ``parameters`` (one row per identified
+        parameter: key, name, kind, value, sigma, unit, stands_for), ``dependent``,
+        ``unidentifiable``, ``values`` (every parameter of the model, SI),
+        ``base``/``probe`` (matrix, xyz_mm, rpy_deg; BASE also as eq. 6.24),
+        ``references``, ``nominal_frames``, ``iterations``, ``converged``,
+        ``condition_number``, ``sigma2``, ``dof``, ``history``, ``calibration``,
+        ``validation`` (accuracy summaries, mm/deg), ``warnings``, ``residual_model``,
+        ``validation_hybrid``, ``elapsed_s``, ``settings``, ``validity``.
+    """
+    model = result.model
+    space = model.space
+    ident = result.identifiability
+    dependent = []
+    if ident is not None:
+        for k in ident.dropped:
+            dependent.append({"key": k, "name": space[k].name,
+                              "identified_via": [space[v].name for v in ident.via.get(k, ())]})
+    summaries = _summaries(result)
+    cal, val = summaries.get("calibration"), summaries.get("validation")
+    st = result.statistics
+    return {
+        "format": FORMAT,
+        "format_version": FORMAT_VERSION,
+        "robot": result.robot,
+        "model": {**result.config.as_dict(), "harmonics": harmonic_order(model),
+                  "thermal": THERMAL_KEY in space,
+                  "temperature_ref_c": model.temperature_ref_c},
+        "data": {"poses": result.n_poses, "six_dof": result.six_dof,
+                 "payload_ref_kg": model.payload_ref_kg},
+        "parameters": result.parameter_table(),
+        "dependent": dependent,
+        "unidentifiable": [] if ident is None else [space[k].name for k in ident.zero],
+        "values": model.as_dict(),
+        "base": {**_frame_dict(model.base()), "thesis_6_24": _thesis_base(model.base())},
+        "probe": _frame_dict(model.probe()),
+        "references": {"base": model.base_ref.tolist(), "probe": model.probe_ref.tolist()},
+        "nominal_frames": {"base": _frame_dict(result.nominal.base()),
+                           "probe": _frame_dict(result.nominal.probe()),
+                           "values": result.nominal.as_dict()},
+        "iterations": result.iterations,
+        "converged": result.converged,
+        "condition_number": None if st is None else st.condition_number,
+        "sigma2": None if st is None else st.sigma2,
+        "dof": None if st is None else st.dof,
+        "history": [_iteration_dict(h) for h in result.history],
+        "calibration": cal,
+        "validation": val,
+        "warnings": list(result.warnings),
+        "residual_model": None if result.residual_model is None
+        else {**result.residual_model.summary(), **(residual_file or {})},
+        "validation_hybrid": _hybrid_summary(result),
+        "elapsed_s": result.elapsed_s,
+        "settings": dict(result.settings),
+        "validity": None if result.validity is None else validity_document(result.validity),
+    }
+
+
+def params_json(result: CalibrationResult, indent: int | None = 2,
+                residual_file: dict[str, Any] | None = None) -> str:
+    """:func:`params_document` as strict JSON (NaN and infinities → ``null``).
+
+    Parameters
+    ----------
+    result : CalibrationResult
+        The calibration.
+    indent : int or None, default 2
+        JSON indentation (``None``: one line).
+    residual_file : dict, optional
+        As in :func:`params_document`.
+
+    Returns
+    -------
+    str
+        The JSON text (no trailing newline).
+    """
+    return json.dumps(_clean(params_document(result, residual_file)), indent=indent,
+                      allow_nan=False)
+
+
+def _typename(x: Any) -> str:
+    if x is None:
+        return "null"
+    if isinstance(x, bool):
+        return "a boolean"
+    if isinstance(x, int | float):
+        return f"the number {x!r}"
+    if isinstance(x, str):
+        return f"the string {x!r}"
+    if isinstance(x, list):
+        return "a list"
+    if isinstance(x, dict):
+        return "an object"
+    return type(x).__name__
+
+
+def _at(document: dict[str, Any], *path: str, default: Any = KeyError) -> Any:
+    """``document[path[0]][path[1]]…``; a :class:`ParamsError` naming the dotted key when
+    one is missing (unless ``default`` is given) or a container is not an object."""
+    x: Any = document
+    for i, key in enumerate(path):
+        if not isinstance(x, dict):
+            raise ParamsError(f"{'.'.join(path[:i])}: expected an object, got {_typename(x)}")
+        if key not in x:
+            if default is not KeyError:
+                return default
+            raise ParamsError(f"missing key {'.'.join(path[:i + 1])!r}")
+        x = x[key]
+    return x
+
+
+def _number(document: dict[str, Any], *path: str, default: Any = KeyError) -> float:
+    x = _at(document, *path, default=default)
+    try:
+        f = float("nan") if isinstance(x, bool) or not isinstance(x, int | float) else float(x)
+    except OverflowError:  # an integer beyond float
+        f = float("inf")
+    if not math.isfinite(f):
+        raise ParamsError(f"{'.'.join(path)}: expected a finite number, got {_typename(x)}")
+    return f
+
+
+def _integer(document: dict[str, Any], *path: str, default: Any = KeyError) -> int:
+    x = _at(document, *path, default=default)
+    if isinstance(x, bool) or not isinstance(x, int):
+        raise ParamsError(f"{'.'.join(path)}: expected an integer, got {_typename(x)}")
+    return x
+
+
+def _flag(document: dict[str, Any], *path: str, default: Any = KeyError) -> bool:
+    x = _at(document, *path, default=default)
+    if not isinstance(x, bool):
+        raise ParamsError(f"{'.'.join(path)}: expected true or false, got {_typename(x)}")
+    return x
+
+
+def _values(document: dict[str, Any], *path: str) -> dict[str, float]:
+    x = _at(document, *path)
+    if not isinstance(x, dict):
+        raise ParamsError(f"{'.'.join(path)}: expected an object, got {_typename(x)}")
+    for k in x:
+        _number(document, *path, k)  # names the dotted key of a bad value
+    return x
+
+
+def _transform(document: dict[str, Any], *path: str) -> Array:
+    x = _at(document, *path)
+    try:
+        T = np.array(x, dtype=float)
+    except (TypeError, ValueError, OverflowError):
+        T = np.zeros(0)
+    if T.shape != (4, 4) or not np.all(np.isfinite(T)):
+        raise ParamsError(f"{'.'.join(path)}: expected a finite 4x4 matrix")
+    return T
+
+
+def result_from_params(document: dict[str, Any], description: RobotDescription, *,
+                       check_robot: bool = True) -> CalibrationResult:
+    """A result that predicts, rebuilt from a PARAMS.json document and its robot.
+
+    The model and the nominal robot (values, BASE/PROBE references, payload and
+    temperature references, harmonics, thermal expansion), the identified keys, the
+    iteration count, the warnings and the validity region come back; the statistics,
+    the per-pose residuals and the learned residual layer do not (the caller loads the
+    layer's side file: :func:`plugcell.io.residual_models.load_residual`).
+
+    Parameters
+    ----------
+    document : dict
+        What :func:`params_document` wrote (as read from JSON).  ``model.harmonics``,
+        ``model.thermal``, ``model.temperature_ref_c``, ``warnings`` and ``validity``
+        may be absent (files written before they were recorded).
+    description : RobotDescription
+        The robot the calibration was identified on (its ``name`` is the document's
+        ``robot``).
+    check_robot : bool, default True
+        Refuse a document whose ``robot`` is not ``description.name`` (a calibration of
+        another robot).  ``False`` when ``description`` was taken from the document
+        itself (its ``description`` or ``robot_source``), which then names the robot.
+
+    Returns
+    -------
+    CalibrationResult
+        Without statistics, history or residuals.
+
+    Raises
+    ------
+    ParamsError
+        Not a plugcell calibration (``format``), a newer ``format_version``, a missing
+        key or a value of the wrong type (the message names the dotted key), a
+        calibration of another robot (``check_robot``), or identified parameters the
+        model does not have.
+    """
+    if not isinstance(document, dict) or document.get("format") != FORMAT:
+        raise ParamsError("not a plugcell calibration (missing 'format')")
+    version = document.get("format_version", FORMAT_VERSION)
+    if isinstance(version, bool) or not isinstance(version, int) or version > FORMAT_VERSION:
+        raise ParamsError(f"format_version {version!r}: this plugcell reads up to "
+                          f"{FORMAT_VERSION} (written by a newer plugcell?)")
+    robot = _at(document, "robot")
+    if not isinstance(robot, str):
+        raise ParamsError(f"robot: expected a name, got {_typename(robot)}")
+    if check_robot and robot != description.name:
+        raise ParamsError(f"a calibration of robot {robot!r}, not of {description.name!r}")
+    number = _at(document, "model", "number")
+    try:
+        cfg = model_config(number)
+    except ValueError as exc:
+        raise ParamsError(f"model.number: {exc}") from None
+    base_ref = _transform(document, "references", "base")
+    probe_ref = _transform(document, "references", "probe")
+    m_ref = _number(document, "data", "payload_ref_kg")
+    harmonics = _integer(document, "model", "harmonics", default=0)
+    if harmonics not in (0, 1, 2):
+        raise ParamsError(f"model.harmonics: 0, 1 or 2, got {harmonics}")
+    thermal = _flag(document, "model", "thermal", default=False)
+    t_ref = _number(document, "model", "temperature_ref_c", default=0.0)
+    values = _values(document, "values")
+    nominal_values = _values(document, "nominal_frames", "values")
+    rows = _at(document, "parameters")
+    if not isinstance(rows, list):
+        raise ParamsError(f"parameters: expected a list, got {_typename(rows)}")
+    keys = []
+    for i, row in enumerate(rows):
+        key = row.get("key") if isinstance(row, dict) else None
+        if not isinstance(key, str):
+            raise ParamsError(f"parameters[{i}]: expected an object with a 'key' name")
+        keys.append(key)
+    iterations = _integer(document, "iterations")
+    converged = _flag(document, "converged")
+    six_dof = _flag(document, "data", "six_dof")
+    n_poses = _integer(document, "data", "poses")
+    warnings = _at(document, "warnings", default=[])
+    if not isinstance(warnings, list) or not all(isinstance(w, str) for w in warnings):
+        raise ParamsError("warnings: expected a list of strings")
+
+    def build(v: dict[str, float]) -> ErrorModel:
+        m = ErrorModel.create(description, cfg.family, gravity=cfg.gravity,
+                              payload=cfg.payload, base=base_ref, probe=probe_ref,
+                              payload_ref_kg=m_ref, harmonics=harmonics, thermal=thermal,
+                              temperature_ref_c=t_ref)
+        return m.with_values([float(v.get(k, 0.0)) for k in m.space.keys])
+
+    try:
+        model = build(values)
+        nominal = build(nominal_values)
+    except ValueError as exc:  # the model cannot be built on this robot
+        raise ParamsError(f"model {cfg.number} ({cfg.name}) on {description.name!r}: "
+                          f"{exc}") from None
+    unknown = [k for k in keys if k not in model.space.keys]
+    if unknown:
+        raise ParamsError(f"parameters: {', '.join(map(repr, unknown))} not in model "
+                          f"{cfg.number} ({cfg.name}) of {description.name!r}")
+    validity = None
+    v = document.get("validity")
+    if v:  # absent in files written before the region was recorded
+        if not isinstance(v, dict):
+            raise ParamsError(f"validity: expected an object, got {_typename(v)}")
+        validity = validity_from_document(v)
+    return CalibrationResult(
+        config=cfg, robot=robot, model=model, nominal=nominal, keys=tuple(keys),
+        identifiability=None, data_identifiability=None, iterations=iterations,
+        converged=converged, history=(), statistics=None, calibration=None,
+        calibration_before=None, six_dof=six_dof, n_poses=n_poses,
+        warnings=tuple(warnings), validity=validity)
+
+
+def rebase_document(document: dict[str, Any], result: CalibrationResult, base: ArrayLike,
+                    event: dict[str, Any] | None = None) -> dict[str, Any]:
+    """A copy of PARAMS.json ``document`` with BASE re-registered (the drift watch).
+
+    The reference becomes the new BASE, the BASE parameters' values zero, ``event`` is
+    appended to ``drift_history``; ``parameters`` stays the record of the
+    identification.
+
+    Parameters
+    ----------
+    document : dict
+        The PARAMS.json document of ``result``.
+    result : CalibrationResult
+        The calibration ``document`` describes (which of its parameters are BASE's).
+    base : array_like, shape (4, 4)
+        The new BASE (robot base in the measurement frame, m).
+    event : dict, optional
+        What happened (time, displacement…), appended to ``drift_history``.
+
+    Returns
+    -------
+    dict
+        The new document (``document`` is not changed).
+
+    Raises
+    ------
+    ValueError
+        ``base`` is not a finite 4×4 transform.
+    """
+    B = np.asarray(base, dtype=float)
+    if B.shape != (4, 4) or not np.all(np.isfinite(B)):
+        raise ValueError(f"base: expected a finite 4x4 transform, got shape {B.shape}")
+    d = copy.deepcopy(document)
+    for p in result.model.space:
+        if p.kind == "base":
+            d["values"][p.key] = 0.0
+    d["references"]["base"] = B.tolist()
+    d["base"] = {**_frame_dict(B), "thesis_6_24": _thesis_base(B)}
+    if event is not None:
+        d.setdefault("drift_history", []).append(dict(event))
+    return d
+
+
+# ---------------------------------------------------------------------- residual file
+
+
+def residuals_document(result: CalibrationResult) -> dict[str, Any]:
+    """The per-pose residual file (``plugcell calibrate --residuals``), mm and degrees.
+
+    Parameters
+    ----------
+    result : CalibrationResult
+        A result with per-pose residuals (one from a fit, not from PARAMS.json).
+
+    Returns
+    -------
+    dict
+        ``format``, ``format_version``, ``robot``, ``model`` {number, name},
+        ``six_dof``, ``units``, ``convention``; ``sets`` {calibration, validation}: the
+        accuracy summaries of PARAMS.json; ``poses``: one entry per pose
+        (:func:`pose_records`), calibration poses first, each calibration pose with its
+        robust-loss ``weight`` when known.
+
+    Raises
+    ------
+    ValueError
+        ``result`` carries no per-pose residuals (rebuilt from PARAMS.json).
+    """
+    if result.calibration_residuals is None:
+        raise ValueError("this result carries no per-pose residuals (rebuilt from "
+                         "PARAMS.json?): evaluate_poses(data) computes them")
+    poses = pose_records(result.calibration_residuals, "calibration", result.pose_weights)
+    if result.validation_residuals is not None:
+        poses += pose_records(result.validation_residuals, "validation")
+    return {
+        "format": RESIDUALS_FORMAT,
+        "format_version": RESIDUALS_FORMAT_VERSION,
+        "robot": result.robot,
+        "model": {"number": result.config.number, "name": result.config.name},
+        "six_dof": result.six_dof,
+        "units": {"length": "mm", "angle": "deg"},
+        "convention": "residual = measured - predicted, measurement (tracker) frame; "
+                      "before: nominal robot with BASE/PROBE fitted; after: calibrated",
+        "sets": _summaries(result),
+        "poses": poses,
+    }
+
+
+def residuals_json(result: CalibrationResult, indent: int | None = 2) -> str:
+    """:func:`residuals_document` as strict JSON (NaN and infinities → ``null``).
+
+    Parameters
+    ----------
+    result : CalibrationResult
+        A result with per-pose residuals.
+    indent : int or None, default 2
+        JSON indentation.
+
+    Returns
+    -------
+    str
+        The JSON text (no trailing newline).
+    """
+    return json.dumps(_clean(residuals_document(result)), indent=indent, allow_nan=False)
