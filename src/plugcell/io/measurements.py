@@ -84,9 +84,9 @@ class MeasurementSet:
     temperature_c: np.ndarray | None = None
 
     def __post_init__(self) -> None:
-        n = self.joints.shape[0]
         if self.joints.ndim != 2:
             raise ValueError(f"joints must be (N, n), got shape {self.joints.shape}")
+        n = self.joints.shape[0]
         if self.positions.shape != (n, 3):
             raise ValueError(f"positions must be ({n}, 3), got {self.positions.shape}")
         if self.angles is not None and self.angles.shape != (n, 3):
@@ -137,6 +137,7 @@ class MeasurementSet:
 
 
 def _parse_header(name: str, header: list[str]) -> tuple[int, dict[str, int]]:
+    """The joint count and column indices of a header; ``name`` is ``"FILE: line L"``."""
     cols = [h.strip() for h in header]
     index: dict[str, int] = {}
     for i, col in enumerate(cols):
@@ -222,7 +223,7 @@ def parse_measurements(
         )
     rows = table_rows(text, name, MeasurementFileError)
     header_line, header = rows[0]
-    nj, index = _parse_header(name, header)
+    nj, index = _parse_header(f"{name}: line {header_line}", header)
     if n_joints is not None and nj != n_joints:
         raise MeasurementFileError(
             f"{name}: line {header_line}: the file has {nj} joint columns, the robot has {n_joints}"
