@@ -128,3 +128,45 @@ def test_bare_carriage_returns_end_lines_like_a_file():
     assert len(m) == 2
     with pytest.raises(MeasurementFileError):
         parse_measurements('j1,x,y,z\n"1,2,3,4\n')
+
+
+def test_a_0d_or_1d_joints_array_is_a_value_error():
+    for joints in (np.array(1.0), np.zeros(3)):
+        with pytest.raises(ValueError, match=r"joints must be \(N, n\)"):
+            MeasurementSet(joints, np.zeros((1, 3)))
+
+
+@pytest.mark.parametrize(("text", "line"), [
+    ("j1,x,y\n1,2,3\n", 1),
+    ("# c\n\n# c\nj1,x,y\n1,2,3\n", 4),
+    ("# c\nj1,j3,x,y,z\n1,2,3,4,5\n", 2),
+    ("j1,x,y,z,rx\n1,2,3,4,5\n", 1),
+    ("\nj1,x,y,z,foo\n1,2,3,4,5\n", 2),
+    ("j1,x,x,y,z\n1,2,3,4,5\n", 1),
+    ("j1,,x,y,z\n1,2,3,4,5\n", 1),
+    ("x,y,z\n1,2,3\n", 1),
+])
+def test_header_errors_name_the_header_line(text, line):
+    with pytest.raises(MeasurementFileError, match=rf"^cal\.csv: line {line}: "):
+        parse_measurements(text, name="cal.csv")
+
+
+def test_the_documented_error_messages_are_the_printed_ones():
+    """docs/measurement-files.md shows these messages: they are what the reader says."""
+    from pathlib import Path
+
+    doc = (Path(__file__).parents[2] / "docs" / "measurement-files.md").read_text()
+    block = doc.split("Errors name the file, the line and the column, for example")[1]
+    shown = block.split("```")[1].strip().splitlines()
+    rows = "".join(f"{k},0,0,{k},0,{k},1,2,3\n" for k in range(2, 17))
+    files = [
+        "j1,j2,j3,j4,j5,j6,x,y,z\n" + rows + '1,2,3,4,5,6,7,"12,5",9\n',
+        "j1,j2,j3,j4,j5,x,y,z\n1,2,3,4,5,6,7,8\n",
+        "j1,j2,j3,j4,j5,j6,x,y,z,rx,ry\n1,2,3,4,5,6,7,8,9,10,11\n",
+    ]
+    printed = []
+    for text in files:
+        with pytest.raises(MeasurementFileError) as exc:
+            parse_measurements(text, name="cal.csv", n_joints=6)
+        printed.append(str(exc.value))
+    assert shown == printed

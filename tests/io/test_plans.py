@@ -90,3 +90,51 @@ def test_any_text_is_a_plan_or_a_clear_error(text):
         assert str(exc).startswith("t.csv")
     else:
         assert p.joints.ndim == 2 and np.all(np.isfinite(p.joints))
+
+
+def test_every_measurement_column_is_accepted_and_passed_over():
+    """A measurement file with any of its optional columns is a plan (#1 of the io review)."""
+    from plugcell.io.measurements import MeasurementSet, format_measurements
+
+    rng = np.random.default_rng(4)
+    m = MeasurementSet(rng.uniform(-3, 3, (5, 6)), rng.uniform(-2, 2, (5, 3)),
+                       angles=rng.uniform(-3, 3, (5, 3)), payload_kg=np.full(5, 18.0),
+                       temperature_c=np.full(5, 21.5))
+    p = parse_plan(format_measurements(m), n_joints=6)
+    np.testing.assert_allclose(p.joints, m.joints, rtol=1e-8, atol=1e-9)
+    np.testing.assert_array_equal(p.payload_kg, m.payload_kg)
+    p = parse_plan("j1,x,y,z,temperature_c\n10,1,2,3,20\n")
+    np.testing.assert_allclose(p.joints, np.radians([[10]]))
+    with pytest.raises(PlanFileError, match=r"unknown columns \['speed'\]; expected j1\.\.jn"):
+        parse_plan("j1,speed\n1,2\n")
+
+
+def test_a_prismatic_joint_is_read_and_written_in_mm():
+    """``joint_scale`` as for measurement files: a track's 1500 mm is 1.5 m, not 1500°."""
+    scale = np.array([1e-3, np.pi / 180])  # a linear track, then a revolute joint
+    p = parse_plan("j1,j2\n1500,90\n", joint_scale=scale)
+    np.testing.assert_allclose(p.joints, [[1.5, np.pi / 2]])
+    text = format_plan(p, joint_scale=scale)
+    assert text.splitlines()[1] == "1500,90"
+    with pytest.raises(PlanFileError, match=r"^p\.csv: line 1: joint_scale has 3 entries"):
+        parse_plan("j1,j2\n1,2\n", name="p.csv", joint_scale=[1, 1, 1])
+
+
+def test_a_prismatic_plan_file_round_trips(tmp_path):
+    scale = np.array([1e-3, np.pi / 180, np.pi / 180])
+    plan = MeasurementPlan(np.array([[2.25, 0.5, -1.0], [0.0, 1.0, 2.0]]), np.array([0.0, 5.0]))
+    write_plan(tmp_path / "p.csv", plan, joint_scale=scale)
+    assert (tmp_path / "p.csv").read_text().splitlines()[1].startswith("2250,")
+    back = read_plan(tmp_path / "p.csv", n_joints=3, joint_scale=scale)
+    np.testing.assert_allclose(back.joints, plan.joints, rtol=1e-9, atol=1e-12)
+
+
+@settings(max_examples=60, deadline=None)
+@given(st.lists(st.booleans(), min_size=1, max_size=7),
+       st.lists(st.floats(-3000, 3000, allow_nan=False), min_size=1, max_size=40))
+def test_round_trip_with_prismatic_joints_property(prismatic, values):
+    n = len(prismatic)
+    scale = np.where(prismatic, 1e-3, np.pi / 180)
+    q = np.resize(np.asarray(values), (max(1, len(values) // n), n)) * scale
+    back = parse_plan(format_plan(MeasurementPlan(q), joint_scale=scale), joint_scale=scale)
+    np.testing.assert_allclose(back.joints, q, rtol=1e-9, atol=1e-12)

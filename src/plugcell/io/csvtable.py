@@ -19,7 +19,9 @@ def table_rows(text: str, name: str, error: type[Exception]) -> list[tuple[int, 
     """The rows of a CSV table that count, with their 1-based line numbers, header first.
 
     Blank lines (every cell blank) and lines whose first cell starts with ``#`` are
-    passed over; cells are returned as read (not stripped, not converted).
+    passed over; cells are returned as read (not stripped, not converted).  A row's
+    line number is the line its record starts on, also after a quoted cell that spans
+    several lines.
 
     Parameters
     ----------
@@ -33,7 +35,8 @@ def table_rows(text: str, name: str, error: type[Exception]) -> list[tuple[int, 
     Returns
     -------
     list of (int, list of str)
-        ``[(line number, cells), …]``: the header row first, then the data rows.
+        ``[(line number, cells), …]``: the header row first, then the data rows; the
+        line number (1-based) is that of the record's first line.
 
     Raises
     ------
@@ -43,8 +46,10 @@ def table_rows(text: str, name: str, error: type[Exception]) -> list[tuple[int, 
     """
     rows: list[tuple[int, list[str]]] = []
     reader = csv.reader(io.StringIO(text, newline=None))
+    ended = 0  # the line the previous record ended on: a record starts on the next one
     try:
-        for line_no, row in enumerate(reader, start=1):
+        for row in reader:
+            line_no, ended = ended + 1, reader.line_num
             if not row or all(not c.strip() for c in row) or row[0].lstrip().startswith("#"):
                 continue
             rows.append((line_no, row))

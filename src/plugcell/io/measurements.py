@@ -38,6 +38,71 @@ from plugcell.io.csvtable import table_number, table_rows
 
 ROTATION_CONVENTIONS = ("rpy", "zyz", "xyz")
 _JOINT_COLUMN = re.compile(r"^j([1-9][0-9]*)$")
+#: The columns a measurement file may have besides its joint readings ``j1..jn``.
+MEASUREMENT_COLUMNS = ("x", "y", "z", "rx", "ry", "rz", "payload_kg", "temperature_c")
+_DEGREE = math.pi / 180.0
+
+
+def _scale(joint_scale: np.ndarray | None, n: int) -> float | np.ndarray:
+    if joint_scale is None:
+        return _DEGREE
+    scale = np.asarray(joint_scale, dtype=float)
+    if scale.shape not in ((), (n,)):  # one scale for all columns, or one a column
+        raise ValueError(f"joint_scale has {scale.size} entries for {n} joint columns")
+    if not np.all(np.isfinite(scale) & (scale != 0)):
+        raise ValueError(f"joint_scale must be finite and non-zero, got {scale.tolist()}")
+    return scale
+
+
+def joints_to_si(values: np.ndarray, joint_scale: np.ndarray | None = None) -> np.ndarray:
+    """Joint columns as a file holds them (degrees; a prismatic joint: mm) → SI.
+
+    The one conversion of the joint columns of measurement files and plan files.
+
+    Parameters
+    ----------
+    values : (N, n) ndarray
+        The joint columns ``j1..jn``, in file units.
+    joint_scale : (n,) array_like, optional
+        SI per file unit of each column (``desc.reading_scale()``: π/180 for degrees,
+        1e-3 for the mm of a prismatic joint); default π/180 for all.
+
+    Returns
+    -------
+    (N, n) ndarray
+        The joints in rad (a prismatic joint: m).
+
+    Raises
+    ------
+    ValueError
+        ``joint_scale`` neither a scalar nor of shape ``(n,)``, or not finite and
+        non-zero.
+    """
+    return values * _scale(joint_scale, values.shape[-1])
+
+
+def joints_from_si(joints: np.ndarray, joint_scale: np.ndarray | None = None) -> np.ndarray:
+    """Joints in SI → the file's units (degrees; a prismatic joint: mm); see :func:`joints_to_si`.
+
+    Parameters
+    ----------
+    joints : (N, n) ndarray
+        Joints in rad (a prismatic joint: m).
+    joint_scale : (n,) array_like, optional
+        SI per file unit of each column; default π/180 (degrees) for all.
+
+    Returns
+    -------
+    (N, n) ndarray
+        The joint columns ``j1..jn`` in file units.
+
+    Raises
+    ------
+    ValueError
+        ``joint_scale`` neither a scalar nor of shape ``(n,)``, or not finite and
+        non-zero.
+    """
+    return joints / _scale(joint_scale, joints.shape[-1])
 
 
 class MeasurementFileError(ValueError):
@@ -84,9 +149,9 @@ class MeasurementSet:
     temperature_c: np.ndarray | None = None
 
     def __post_init__(self) -> None:
-        n = self.joints.shape[0]
         if self.joints.ndim != 2:
             raise ValueError(f"joints must be (N, n), got shape {self.joints.shape}")
+        n = self.joints.shape[0]
         if self.positions.shape != (n, 3):
             raise ValueError(f"positions must be ({n}, 3), got {self.positions.shape}")
         if self.angles is not None and self.angles.shape != (n, 3):
@@ -137,6 +202,7 @@ class MeasurementSet:
 
 
 def _parse_header(name: str, header: list[str]) -> tuple[int, dict[str, int]]:
+    """The joint count and column indices of a header; ``name`` is ``"FILE: line L"``."""
     cols = [h.strip() for h in header]
     index: dict[str, int] = {}
     for i, col in enumerate(cols):
@@ -159,8 +225,7 @@ def _parse_header(name: str, header: list[str]) -> tuple[int, dict[str, int]]:
     rot = [c for c in ("rx", "ry", "rz") if c in index]
     if rot and len(rot) != 3:
         raise MeasurementFileError(f"{name}: orientation needs all of rx, ry, rz; found only {rot}")
-    known = {f"j{k}" for k in joint_numbers} | {"x", "y", "z", "rx", "ry", "rz", "payload_kg",
-                                                "temperature_c"}
+    known = {f"j{k}" for k in joint_numbers} | set(MEASUREMENT_COLUMNS)
     unknown = [c for c in cols if c not in known]
     if unknown:
         raise MeasurementFileError(
@@ -214,7 +279,7 @@ def parse_measurements(
         columns missing or with gaps; no ``x, y, z``; only some of ``rx, ry, rz``; a
         joint count other than ``n_joints``; no data rows; a row of the wrong length; a
         cell that is not a finite number (an empty ``temperature_c`` cell included); a
-        negative payload.
+        negative payload; a ``joint_scale`` that does not fit the joint columns.
     """
     if rotation not in ROTATION_CONVENTIONS:
         raise MeasurementFileError(
@@ -222,7 +287,7 @@ def parse_measurements(
         )
     rows = table_rows(text, name, MeasurementFileError)
     header_line, header = rows[0]
-    nj, index = _parse_header(name, header)
+    nj, index = _parse_header(f"{name}: line {header_line}", header)
     if n_joints is not None and nj != n_joints:
         raise MeasurementFileError(
             f"{name}: line {header_line}: the file has {nj} joint columns, the robot has {n_joints}"
@@ -245,8 +310,11 @@ def parse_measurements(
                     "temperature column must be complete; drop the column or the row)"
                 )
             values[r, c] = table_number(cell, name, line_no, cols[c], MeasurementFileError)
-    joints = values[:, [index[f"j{k}"] for k in range(1, nj + 1)]] * (
-        math.pi / 180.0 if joint_scale is None else np.asarray(joint_scale, dtype=float))
+    try:
+        joints = joints_to_si(values[:, [index[f"j{k}"] for k in range(1, nj + 1)]],
+                              joint_scale)
+    except ValueError as exc:
+        raise MeasurementFileError(f"{name}: line {header_line}: {exc}") from None
     positions = values[:, [index["x"], index["y"], index["z"]]] / 1000.0
     angles = None
     if "rx" in index:
@@ -341,8 +409,7 @@ def format_measurements(m: MeasurementSet, *, comments: Iterable[str] = (),
     if m.temperature_c is not None:
         header.append("temperature_c")
     out.write(",".join(header) + "\n")
-    cols = [m.joints / (math.pi / 180.0 if joint_scale is None
-                        else np.asarray(joint_scale, dtype=float)), m.positions * 1000.0]
+    cols = [joints_from_si(m.joints, joint_scale), m.positions * 1000.0]
     if m.angles is not None:
         cols.append(np.rad2deg(m.angles))
     if m.payload_kg is not None:

@@ -6,14 +6,17 @@ Format::
     name,x,y,z
     N1,1520.31,-840.07,12.55
 
-``name``: a unique label; ``x, y, z``: the nest's position in mm — measured by the
-tracker (tracker frame) for :func:`read_nests`, or in the robot base frame in a
-registration file written by ``plugcell drift register``.  Errors name the file, the
+``name``: a unique label (CSV-quoted when it holds a comma or a quote); ``x, y, z``:
+the nest's position in mm — measured by the tracker (tracker frame) for
+:func:`read_nests`, or in the robot base frame in a registration file written by
+``plugcell drift register``.  At least 3 nests (the drift watch's 6-DOF fit also needs
+them off one line: that is checked by the fit, not here).  Errors name the file, the
 line and the column.
 """
 
 from __future__ import annotations
 
+import csv
 import io
 from pathlib import Path
 
@@ -28,6 +31,7 @@ HEADER = ("name", "x", "y", "z")
 
 class NestFileError(ValueError):
     """A nest file that cannot be read (the message names file, line and column)."""
+
 
 
 def parse_nests(text: str, name: str = "<nests>") -> tuple[list[str], np.ndarray]:
@@ -55,7 +59,8 @@ def parse_nests(text: str, name: str = "<nests>") -> tuple[list[str], np.ndarray
     NestFileError
         Wrong header, a row without exactly 4 values, an empty or repeated name, a cell
         that is not a finite number, or fewer than 3 nests (the drift watch's minimum;
-        whether they are collinear is not checked here).
+        collinear nests are refused by the drift fit,
+        :func:`plugcell.metrology.drift.estimate_base_drift`, not here).
     """
     rows = table_rows(text, name, NestFileError)
     line_no, header = rows[0]
@@ -77,8 +82,7 @@ def parse_nests(text: str, name: str = "<nests>") -> tuple[list[str], np.ndarray
         names.append(label)
         pos.append(xyz)
     if len(names) < 3:
-        raise NestFileError(f"{name}: {len(names)} nest(s); the drift watch needs at least 3 "
-                            "(not on one line)")
+        raise NestFileError(f"{name}: {len(names)} nest(s); the drift watch needs at least 3")
     return names, np.array(pos)
 
 
@@ -119,12 +123,14 @@ def format_nests(names: list[str], positions: np.ndarray, comments: tuple[str, .
     Parameters
     ----------
     names : list of str, length K
-        The nests' labels (written as they are: no CSV quoting, so a label must not
-        contain a comma or a line break; uniqueness is not checked here).
+        The nests' labels: unique, non-empty, without blanks around them, a line break
+        or a leading ``#`` (what :func:`parse_nests` reads back unchanged); CSV-quoted
+        when they hold a comma or a quote.
     positions : (K, 3) array_like, m
-        The nests' positions; written in mm with 6 decimals (nanometre resolution).
+        The nests' positions, finite, K ≥ 3; written in mm with 6 decimals (nanometre
+        resolution).
     comments : tuple of str
-        Lines written first, each as ``# line``.
+        Lines written first, each as ``# line`` (one per line of a comment).
 
     Returns
     -------
@@ -134,12 +140,37 @@ def format_nests(names: list[str], positions: np.ndarray, comments: tuple[str, .
     Raises
     ------
     ValueError
-        ``names`` and ``positions`` of different lengths.
+        What :func:`parse_nests` would refuse or change, with the nest's number
+        (1-based): ``positions`` not of shape ``(len(names), 3)``; an empty, repeated
+        or unreadable name; a non-finite position; fewer than 3 nests.
     """
+    pos = np.asarray(positions, float)
+    if pos.shape != (len(names), 3):
+        raise ValueError(f"positions must be ({len(names)}, 3) for {len(names)} names, got "
+                         f"{pos.shape}")
+    seen: set[str] = set()
+    for k, (n, p) in enumerate(zip(names, pos, strict=True), start=1):
+        if not n:
+            raise ValueError(f"nest {k}: empty name")
+        if n != n.strip():
+            raise ValueError(f"nest {k}: name {n!r} has blanks around it (read back stripped)")
+        if "\n" in n or "\r" in n:
+            raise ValueError(f"nest {k}: name {n!r} has a line break")
+        if n.startswith("#"):
+            raise ValueError(f"nest {k}: name {n!r} starts with '#' (read back as a comment)")
+        if n in seen:
+            raise ValueError(f"nest {k}: nest {n!r} named twice")
+        seen.add(n)
+        if not np.all(np.isfinite(p)):
+            raise ValueError(f"nest {k}: position not finite: {p.tolist()}")
+    if len(names) < 3:
+        raise ValueError(f"{len(names)} nest(s); the drift watch needs at least 3")
     out = io.StringIO()
     for c in comments:
-        out.write(f"# {c}\n")
-    out.write(",".join(HEADER) + "\n")
-    for n, p in zip(names, np.asarray(positions, float), strict=True):
-        out.write(f"{n},{p[0] * 1e3:.6f},{p[1] * 1e3:.6f},{p[2] * 1e3:.6f}\n")
+        for line in str(c).splitlines() or [""]:
+            out.write(f"# {line}\n")
+    writer = csv.writer(out, lineterminator="\n")
+    writer.writerow(HEADER)
+    for n, p in zip(names, pos, strict=True):
+        writer.writerow([n, *(f"{v * 1e3:.6f}" for v in p)])
     return out.getvalue()
