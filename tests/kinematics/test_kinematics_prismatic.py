@@ -281,3 +281,33 @@ def test_track_robot_command_line_end_to_end(tmp_path: Path,
     assert np.all((got[:, 0] >= 0) & (got[:, 0] <= 3000))
     T_back = np.linalg.inv(res.model.base()) @ res.predict(q_back)
     assert np.abs(T_back[:, :3, 3] - Tt[:, :3, 3]).max() < 1e-6
+
+
+def test_plan_and_twin_files_hold_the_track_in_millimetres(tmp_path: Path) -> None:
+    """plan → twin measure --plan → calibrate with a prismatic axis: every file holds the
+    track in mm (as measurement files do), so the three commands agree on it."""
+    import json
+
+    from plugcell.apps.cli import main
+
+    urdf = tmp_path / "track_ur.urdf"
+    urdf.write_text(TRACK_ROBOT)
+    plan, cal, val, params = (tmp_path / n for n in ("plan.csv", "cal.csv", "val.csv", "p.json"))
+    assert main(["plan", "--robot", str(urdf), "--model", "serial", "--poses", "40",
+                 "--out", str(plan)]) == 0
+
+    def track_column(path: Path) -> np.ndarray:
+        rows = [ln for ln in path.read_text().splitlines() if not ln.startswith("#")][1:]
+        return np.array([float(r.split(",")[0]) for r in rows])
+
+    planned = track_column(plan)
+    assert planned.max() > 500.0  # mm on a 0–3000 mm track (its metres read as radians: < 172°)
+    assert main(["twin", "measure", "--robot", str(urdf), "--plan", str(plan), "--out",
+                 str(cal), "--quiet"]) == 0
+    np.testing.assert_allclose(track_column(cal), planned, atol=0.05)  # the track's error
+    assert main(["twin", "measure", "--robot", str(urdf), "--poses", "30", "--pose-seed", "5",
+                 "--out", str(val), "--quiet"]) == 0
+    assert main(["calibrate", "--robot", str(urdf), "--model", "serial", "--data", str(cal),
+                 "--validate", str(val), "--out", str(params), "--quiet"]) == 0
+    d = json.loads(params.read_text())
+    assert d["validation"]["mean_mm"] < d["validation"]["before"]["mean_mm"]

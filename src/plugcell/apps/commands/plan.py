@@ -157,6 +157,7 @@ def _run(args: argparse.Namespace) -> int:
 
     t0 = time.perf_counter()
     desc = load_robot_of(args)
+    scale = desc.reading_scale()  # files hold degrees, and mm for a prismatic joint
     try:
         cfg = model_config(args.model)
     except ValueError as exc:
@@ -214,11 +215,11 @@ def _run(args: argparse.Namespace) -> int:
             has_xyz = {"x", "y", "z"} <= {c.strip() for c in header.split(",")}
             if has_xyz:
                 mset = read_measurements(args.from_file, rotation=args.rot,
-                                         n_joints=desc.n_actuated)
+                                         n_joints=desc.n_actuated, joint_scale=scale)
                 measured = CalibrationData.from_measurements(mset)
                 q_from, m_from = mset.joints, mset.payload_kg
             else:
-                pf = read_plan(args.from_file, n_joints=desc.n_actuated)
+                pf = read_plan(args.from_file, n_joints=desc.n_actuated, joint_scale=scale)
                 q_from, m_from = pf.joints, pf.payload_kg
     except (MeasurementFileError, PlanFileError) as exc:
         raise CommandError(str(exc)) from None
@@ -275,12 +276,13 @@ def _run(args: argparse.Namespace) -> int:
     elapsed = time.perf_counter() - t0
     summary = _summary(plan, model, desc.name, cfg, what, elapsed)
     if measured is not None:
-        _write_measured(args.out, mset, cands.source[plan.index], summary, args.from_file)
+        _write_measured(args.out, mset, cands.source[plan.index], summary, args.from_file,
+                        scale)
     else:
-        _write_plan(args.out, plan, summary)
+        _write_plan(args.out, plan, summary, scale)
     written = [str(args.out)]
     if args.program is not None:
-        written += _write_program(args.program, plan)
+        written += _write_program(args.program, plan, scale)
     if args.json:
         print(json.dumps(summary, indent=2))
     else:
@@ -331,7 +333,7 @@ def _text(d: dict[str, Any]) -> str:
 
 
 
-def _write_plan(path: Path, plan: Any, d: dict[str, Any]) -> None:
+def _write_plan(path: Path, plan: Any, d: dict[str, Any], scale: np.ndarray) -> None:
     from plugcell.io.plans import MeasurementPlan, format_plan
 
     comments = [
@@ -341,11 +343,12 @@ def _write_plan(path: Path, plan: Any, d: dict[str, Any]) -> None:
         f"predicted: criterion {d['value']:.6g}, condition number {d['condition_number']:.1f}",
         "rows grouped by payload (one change per group), short joint moves within a group",
     ]
-    write_text(path, format_plan(MeasurementPlan(plan.q, plan.payload_kg), comments=comments))
+    write_text(path, format_plan(MeasurementPlan(plan.q, plan.payload_kg), comments=comments,
+                                 joint_scale=scale))
 
 
 def _write_measured(path: Path, m: Any, rows: np.ndarray, d: dict[str, Any],
-                    source: Path) -> None:
+                    source: Path, scale: np.ndarray) -> None:
     """Planning among poses already measured: the chosen rows of the measurement file,
     measurements included (a measurement file is a plan too) — ready for calibrate."""
     from plugcell.io.measurements import format_measurements
@@ -356,17 +359,18 @@ def _write_measured(path: Path, m: Any, rows: np.ndarray, d: dict[str, Any],
         f"criterion {d['criterion']}",
         f"predicted: criterion {d['value']:.6g}, condition number {d['condition_number']:.1f}",
     ]
-    write_text(path, format_measurements(m.subset(rows), comments=comments))
+    write_text(path, format_measurements(m.subset(rows), comments=comments,
+                                         joint_scale=scale))
 
 
-def _write_program(path: Path, plan: Any) -> list[str]:
+def _write_program(path: Path, plan: Any, scale: np.ndarray) -> list[str]:
     """The calibration program's values, one JSON ACTIVATE-data file per payload (and per
     200 configurations): ``["calibration", "configs=…", "n_configs=N", …]``."""
     from plugcell.devices.robot.value_text import rows_text
 
     groups = []
     for m in np.unique(plan.payload_kg):
-        q = np.rad2deg(plan.q[plan.payload_kg == m])
+        q = plan.q[plan.payload_kg == m] / scale  # robot units: degrees, mm
         for i in range(0, len(q), PROGRAM_MAX_CONFIGS):
             groups.append((float(m), q[i:i + PROGRAM_MAX_CONFIGS]))
     written = []

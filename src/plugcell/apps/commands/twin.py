@@ -186,7 +186,8 @@ def _measure(args: argparse.Namespace) -> int:
         f"simulated campaign time: {sim_s:.0f} s",
     ]
     try:
-        write_measurements(args.out, data, comments=comments)
+        write_measurements(args.out, data, comments=comments,
+                           joint_scale=robot.description.reading_scale())
     except OSError as exc:
         raise CommandError(f"{args.out}: cannot write: {exc.strerror}") from None
     if not args.quiet:
@@ -203,7 +204,7 @@ def _plan_joints(path: Path, desc: Any, default_payload: float) -> tuple[np.ndar
     from plugcell.io.plans import PlanFileError, read_plan
 
     try:
-        plan = read_plan(path, n_joints=desc.n_actuated)
+        plan = read_plan(path, n_joints=desc.n_actuated, joint_scale=desc.reading_scale())
     except PlanFileError as exc:
         raise CommandError(str(exc)) from None
     bad = np.flatnonzero(~desc.within_limits(plan.joints))
