@@ -21,6 +21,12 @@ Protocol (stated on the page it writes, docs/results/ur10-residual.md):
 (d) the physical joint-angle harmonics (issue 19 §1): model 3 + harmonics of order 1
     and 2 identified on A (their σ), validated on B, C, D as in (b).
 (e) the thermal expansion term κT (issue 19 §3) on each series' temperature column.
+(f) how the representation was chosen (issue 19 "Show (b)"): the identified PROBE of
+    each series (is the T-MAC lever the same?), and single-stage candidates — base
+    frame vs joint-1 frame, all joints vs the arm-shape joints, position at the point vs
+    a flange twist — scored on **A alone** by grouped CV over 0.4 m cells and over
+    joint-1 sectors (the A-only stand-in for a set-up at another azimuth); their
+    transfer to B, C, D is printed for the record and is not used for the choice.
 
     .venv/bin/python benchmarks/residual_ur10.py [--data DIR] [--quick] [--json]
                                                  [--out docs/results/ur10-residual.md]
@@ -49,8 +55,11 @@ from plugcell.calibration import CalibrationData, Calibrator
 from plugcell.calibration.residual_model import (
     DEFAULT_GRID,
     ResidualLearner,
+    from_joint1_frame,
     hybrid_residuals,
     residual_targets,
+    shape_features,
+    to_joint1_frame,
     workspace_cells,
 )
 from plugcell.io.robots import load_robot
@@ -131,7 +140,9 @@ def transfer(desc: Any, sets: dict[str, CalibrationData], learner: ResidualLearn
                                            "cv_hybrid_mm": layer.cv.hybrid_mm,
                                            "params": layer.params, "threshold": layer.threshold},
                            "validation": {}}
-    unguarded = replace(layer, threshold=math.inf)
+    unguarded = replace(layer, threshold=math.inf, shape=None if layer.shape is None
+                        else replace(layer.shape, threshold=math.inf))
+    out["calibration"]["shape"] = None if layer.shape is None else layer.shape.summary()
     for key in "BCD":
         val = sets[key]
         r, pred = hybrid_residuals(res.model, layer, val, refit_base=True, refit_probe=True)
@@ -140,6 +151,7 @@ def transfer(desc: Any, sets: dict[str, CalibrationData], learner: ResidualLearn
         out["validation"][key] = {
             "poses": len(val), "physical_mm": _mm(r.norms("before")),
             "hybrid_mm": _mm(r.norms("after")), "in_domain": float(pred.in_domain.mean()),
+            "local_in_domain": float(np.mean(pred.local)) if pred.local is not None else None,
             "hybrid_without_domain_test_mm": _mm(ru.norms("after")),
             "physical_orientation_deg": math.degrees(o[0].norm.mean) if o[0] else None,
             "hybrid_orientation_deg": math.degrees(o[1].norm.mean) if o[1] else None,
@@ -208,6 +220,100 @@ def thermal(desc: Any, sets: dict[str, CalibrationData]) -> dict[str, Any]:
                     "mean_mm": res.calibration.position.norm.mean * 1e3}
         print(f"  (e) {key}: ΔT span {out[key]['span_k']:.2f} K, κT "
               f"{out[key]['kappa_per_k']} ± {out[key]['sigma_per_k']} /K", flush=True)
+    return out
+
+
+#: (f) single-stage candidates: name, residual frame ("base" | "joint 1"), joints
+#: (0-based) of the sin/cos features, and whether the position is learned as a flange twist
+CANDIDATES = (
+    ("base frame, q1…q6 (format 1)", "base", (0, 1, 2, 3, 4, 5), False),
+    ("base frame, q1…q6, flange twist", "base", (0, 1, 2, 3, 4, 5), True),
+    ("base frame, q2…q6", "base", (1, 2, 3, 4, 5), False),
+    ("joint-1 frame, q2…q6", "joint 1", (1, 2, 3, 4, 5), False),
+    ("joint-1 frame, q2…q4", "joint 1", (1, 2, 3), False),
+    ("joint-1 frame, q2, q3", "joint 1", (1, 2), False),
+)
+
+
+def _geometry(model: Any, d: CalibrationData) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Target point and flange origin in the robot base frame, base-frame residual (N, 6)."""
+    E, x = residual_targets(model, d)
+    B = model.base()
+    F = np.linalg.inv(B) @ model.predict(d.q) @ np.linalg.inv(model.probe())
+    return x, F[:, :3, 3], E
+
+
+def _encode(frame: str, twist: bool, q: np.ndarray, x: np.ndarray, o: np.ndarray,
+            E: np.ndarray) -> np.ndarray:
+    """Base-frame point residual → what the candidate learns."""
+    e, phi = E[:, :3], E[:, 3:]
+    if twist:  # the flange's translation: δp = e_F + φ × (x − o)
+        e = e - np.cross(phi, x - o)
+    Y = np.hstack([e, phi])
+    return to_joint1_frame(q[:, 0], Y) if frame == "joint 1" else Y
+
+
+def _decode(frame: str, twist: bool, q: np.ndarray, x: np.ndarray, o: np.ndarray,
+            Y: np.ndarray) -> np.ndarray:
+    Y = from_joint1_frame(q[:, 0], Y) if frame == "joint 1" else Y
+    e, phi = Y[:, :3], Y[:, 3:]
+    if twist:
+        e = e + np.cross(phi, x - o)
+    return e
+
+
+def screening(desc: Any, sets: dict[str, CalibrationData], params: dict[str, Any],
+              trees: int) -> dict[str, Any]:
+    """(f): PROBE per series and single-stage candidates on A (module docstring)."""
+    from sklearn.ensemble import HistGradientBoostingRegressor
+    from sklearn.model_selection import GroupKFold
+
+    from plugcell.calibration.identify import refit_base
+
+    def reg() -> Any:
+        return HistGradientBoostingRegressor(max_iter=trees, learning_rate=0.1,
+                                             early_stopping=False, random_state=0, **params)
+
+    A = sets["A"]
+    mA = Calibrator(desc, "serial+gravity").fit(A).model
+    models = {"A": mA, **{k: refit_base(mA, sets[k], probe=True) for k in "BCD"}}
+    out: dict[str, Any] = {"probe": {}, "candidates": [], "params": params, "trees": trees}
+    PA = mA.probe()
+    for k, m in models.items():
+        P = m.probe()
+        ang = np.arccos(np.clip((np.trace(PA[:3, :3].T @ P[:3, :3]) - 1) / 2, -1, 1))
+        out["probe"][k] = {"translation_mm": (P[:3, 3] * 1e3).tolist(),
+                           "offset_from_A_mm": float(np.linalg.norm(P[:3, 3] - PA[:3, 3]) * 1e3),
+                           "rotation_from_A_mrad": float(ang * 1e3),
+                           "lever_mm": float(np.linalg.norm(P[:3, 3]) * 1e3)}
+    xA, oA, EA = _geometry(mA, A)
+    cells = workspace_cells(xA, 0.4)
+    q1 = A.q[:, 0]
+    sectors = np.digitize(q1, np.quantile(q1, [0.2, 0.4, 0.6, 0.8]))
+    pos = np.linalg.norm(EA[:, :3], axis=1)
+    for name, frame, joints, twist in CANDIDATES:
+        X = shape_features(A.q, joints)
+        Y = _encode(frame, twist, A.q, xA, oA, EA)
+        row: dict[str, Any] = {"name": name, "physical_mm": _mm(pos)}
+        for tag, groups in (("cells_mm", cells), ("sectors_mm", sectors)):
+            pred = np.zeros_like(Y)
+            for tr, te in GroupKFold(n_splits=5).split(X, Y, groups):
+                pred[te] = np.column_stack([reg().fit(X[tr], Y[tr, j]).predict(X[te])
+                                            for j in range(6)])
+            row[tag] = _mm(np.linalg.norm(EA[:, :3] - _decode(frame, twist, A.q, xA, oA, pred),
+                                          axis=1))
+        ests = [reg().fit(X, Y[:, j]) for j in range(6)]
+        row["transfer"] = {}
+        for k in "BCD":
+            x, o, E = _geometry(models[k], sets[k])
+            Yk = np.column_stack([e.predict(shape_features(sets[k].q, joints)) for e in ests])
+            hyb = np.linalg.norm(E[:, :3] - _decode(frame, twist, sets[k].q, x, o, Yk), axis=1)
+            row["transfer"][k] = {"physical_mm": _mm(np.linalg.norm(E[:, :3], axis=1)),
+                                  "hybrid_mm": _mm(hyb)}
+        out["candidates"].append(row)
+        print(f"  (f) {name}: A cells {row['cells_mm']:.3f}, A sectors {row['sectors_mm']:.3f} mm;"
+              " " + ", ".join(f"{k} {v['physical_mm']:.3f} -> {v['hybrid_mm']:.3f}"
+                              for k, v in row["transfer"].items()), flush=True)
     return out
 
 
@@ -469,13 +575,15 @@ def main() -> int:
         hm = harmonics(desc, plain)
         print("(e) thermal expansion", flush=True)
         th = thermal(desc, sets)
+        print("(f) choice of the representation (A alone; B, C, D for the record)", flush=True)
+        sc = screening(desc, plain, dict(DEFAULT_GRID[2]), kw["trees"])
     d: dict[str, Any] = {
         "machine": f"{platform.machine()} {platform.processor() or ''}, Python "
                    f"{platform.python_version()}".replace("  ", " "),
         "quick": args.quick, "grid": list(kw["grid"]), "trees": kw["trees"],
         "poses": {k: len(v) for k, v in sets.items()},
         "nested_cv": a, "transfer": t, "diagnostics": c, "harmonics": hm,
-        "thermal": th,
+        "thermal": th, "screening": sc,
         "elapsed_s": time.perf_counter() - t0}
     d["reading"] = reading(d)
     images = plots(d, args.out.parent)
