@@ -15,6 +15,21 @@ orientation residuals **in the robot base frame** — so the layer transfers whe
 BASE (and PROBE) are re-identified after the tracker moved.  The features are
 ``x = (sin q, cos q[, T / 2 K][, m / 10 kg])``.
 
+Where a pose lies outside the region of that layer (another set-up, other joint
+combinations) a second, coarser stage may apply — the **arm-shape stage**
+(:class:`ShapeStage`)::
+
+    (e, φ) = R_z(q1) · s(sin q2, cos q2, sin q3, cos q3)
+
+the residual expressed in the frame that turns with joint 1, a function of the
+shoulder and elbow angles alone.  The arm above joint 1 is the same body wherever
+joint 1 points and gravity lies along joint 1's axis, so an error of the arm's shape
+is the same vector in that frame for the same ``q2, q3``; these two joints carry
+the long levers.  What depends on ``q1`` itself, on the wrist combinations of one
+campaign or on where the tracker stood is not in it.  Precedence: the full layer
+where it is in domain, else the shape stage where it is in domain, else the physical
+model (:attr:`ResidualPrediction.local`, :attr:`ResidualPrediction.in_domain`).
+
 Honest validation is built in:
 
 * hyper-parameters are chosen by **grouped** cross-validation inside the
@@ -149,9 +164,10 @@ class ResidualPrediction:
     then rotation vector, robot base frame), zero where ``in_domain`` is False;
     ``distance`` ``(N,)`` to the nearest training pose in feature space (all features).
 
-    With an arm-shape stage (:class:`ShapeStage`) ``in_domain`` is True where any part
-    of the correction applies and ``local`` where the set-up's own stage applies too;
-    without one, ``local`` equals ``in_domain``."""
+    With an arm-shape stage (:class:`ShapeStage`) ``local`` is True where the layer of
+    the calibration set-up applies, ``in_domain`` where it or the shape stage does (the
+    shape stage's correction is used where ``in_domain & ~local``); without one,
+    ``local`` equals ``in_domain``."""
 
     correction: Array
     in_domain: Array
@@ -254,7 +270,7 @@ class LearnedResidual:
     ``params``: the chosen hyper-parameters; ``cv``: the grouped cross-validation;
     ``useful``: False when it did not beat the physical model on held-out cells (then
     it is never applied); ``n_poses``; ``shape``: the transferable arm-shape stage
-    (:class:`ShapeStage`) the estimators sit on (they learned what it leaves), or None.
+    (:class:`ShapeStage`) used where the pose is outside this layer's region, or None.
     """
 
     robot: str
@@ -298,20 +314,19 @@ class LearnedResidual:
         dist = self.neighbours.kneighbors(X, n_neighbors=1, return_distance=True)[0][:, 0]
         local = (dist <= self.threshold) & self.useful
         corr = np.zeros((len(X), 6))
-        shape_in = np.ones(len(X), dtype=bool)
-        if self.shape is not None:
+        inside = local.copy()
+        if self.shape is not None and self.useful and not local.all():
             c, shape_in, _ = self.shape.predict(q)
-            shape_in &= self.useful
-            corr[shape_in, :c.shape[1]] = c[shape_in]
-            local &= shape_in  # the set-up's stage learned what the shape stage leaves
+            use = shape_in & ~local            # the set-up's own layer comes first
+            corr[use, :c.shape[1]] = c[use]
+            inside |= use
         if local.any():
             from threadpoolctl import threadpool_limits
 
             Xi = X[local]
             with threadpool_limits(1):
                 for j, est in enumerate(self.estimators):
-                    corr[local, j] += est.predict(Xi)
-        inside = local | (shape_in if self.shape is not None else local)
+                    corr[local, j] = est.predict(Xi)
         return ResidualPrediction(corr, inside, dist, local)
 
     def summary(self) -> dict[str, Any]:
@@ -520,24 +535,19 @@ class ResidualLearner:
                 "wider or use smaller cells")
         folds = list(GroupKFold(n_splits=self.n_splits).split(X, E, groups))
         phys_norm = np.linalg.norm(E[:, :k_pos], axis=1)
-        use_shape = bool(self.shape_joints) and data.q.shape[1] > max(self.shape_joints)
-        # stage 1 (transferable): the residual in the joint-1 frame of the arm's shape,
-        # cross-fitted on the same cell folds; stage 2 learns what it leaves
+        # stage 1 (transferable): the residual in the joint-1 frame of the arm's shape
         shape: ShapeStage | None = None
-        S_cv = np.zeros((n, n_out))       # stage 1 held-out predictions (base frame)
-        S_in: list[Array] = []            # stage 1 in-fold fits of the training poses
-        if use_shape:
-            shape, S_cv, S_in = self._fit_shape(data.q, E[:, :n_out], folds, phys_norm)
+        if self.shape_joints and data.q.shape[1] > max(self.shape_joints):
+            shape = self._fit_shape(data.q, E[:, :n_out], folds, phys_norm)
             if not shape.useful:  # no gain on held-out cells: not used
-                shape, use_shape, S_cv = None, False, np.zeros((n, n_out))
+                shape = None
         scores: list[tuple[dict[str, Any], float]] = []
         best: tuple[float, dict[str, Any], Array] | None = None
         for i, params in enumerate(self.grid):
-            pred = S_cv[:, :k_pos].copy()
-            for f, (tr, te) in enumerate(folds):
-                T = E[tr, :k_pos] - (S_in[f][:, :k_pos] if use_shape else 0.0)
+            pred = np.zeros((n, k_pos))
+            for tr, te in folds:
                 for j in range(k_pos):
-                    pred[te, j] += self._regressor(params).fit(X[tr], T[:, j]).predict(X[te])
+                    pred[te, j] = self._regressor(params).fit(X[tr], E[tr, j]).predict(X[te])
             score = float(np.linalg.norm(E[:, :k_pos] - pred, axis=1).mean())
             scores.append((dict(params), score * 1e3))
             self._say(f"grouped {self.n_splits}-fold CV {i + 1}/{len(self.grid)} {params}: "
@@ -548,11 +558,10 @@ class ResidualLearner:
         score, params, pred = best
         ori_phys = ori_hyb = None
         if n_out == 6:
-            pred_o = S_cv[:, 3:].copy()
-            for f, (tr, te) in enumerate(folds):
-                T = E[tr, 3:] - (S_in[f][:, 3:] if use_shape else 0.0)
+            pred_o = np.zeros((n, 3))
+            for tr, te in folds:
                 for j in range(3):
-                    pred_o[te, j] += self._regressor(params).fit(X[tr], T[:, j]).predict(X[te])
+                    pred_o[te, j] = self._regressor(params).fit(X[tr], E[tr, 3 + j]).predict(X[te])
             ori_phys = math.degrees(float(np.linalg.norm(E[:, 3:], axis=1).mean()))
             ori_hyb = math.degrees(float(np.linalg.norm(E[:, 3:] - pred_o, axis=1).mean()))
         # the in-domain threshold: how far the held-out cells were from the training poses
@@ -562,13 +571,7 @@ class ResidualLearner:
             dist[te] = nn.kneighbors(X[te])[0][:, 0]
         threshold = float(np.quantile(dist, self.domain_quantile))
         self._say(f"fitting {n_out} regressors on {n} poses with {params}")
-        E2 = E[:, :n_out].copy()
-        if shape is not None:
-            qa = np.asarray(data.q, float)
-            Xs = shape_features(qa, shape.joints)
-            E2 -= from_joint1_frame(qa[:, 0], np.column_stack(
-                [est.predict(Xs) for est in shape.estimators]))
-        estimators = tuple(self._regressor(params).fit(X, E2[:, j]) for j in range(n_out))
+        estimators = tuple(self._regressor(params).fit(X, E[:, j]) for j in range(n_out))
         cv = CrossValidation(physical_mm=float(phys_norm.mean() * 1e3), hybrid_mm=score * 1e3,
                              physical_orientation_deg=ori_phys, hybrid_orientation_deg=ori_hyb,
                              folds=self.n_splits, cells=n_cells, cell_size_m=self.cell_size_m,
@@ -582,10 +585,10 @@ class ResidualLearner:
             sklearn_version=sklearn.__version__, shape=shape)
 
     def _fit_shape(self, q: ArrayLike, E: Array, folds: list[tuple[Array, Array]],
-                   phys_norm: Array) -> tuple[ShapeStage, Array, list[Array]]:
-        """Stage 1 on the cell folds: its hyper-parameters (the grid, held-out position
-        error), its threshold (the ``domain_quantile`` of the held-out distances in its
-        feature space), its held-out predictions and in-fold fits (base frame)."""
+                   phys_norm: Array) -> ShapeStage:
+        """The arm-shape stage on the cell folds: its hyper-parameters (the grid, held-out
+        position error) and its threshold (the ``domain_quantile`` of the held-out
+        distances in its feature space)."""
         from sklearn.neighbors import NearestNeighbors
 
         qa = np.asarray(q, float)
@@ -607,15 +610,8 @@ class ResidualLearner:
                 best = (score, dict(params))
         assert best is not None
         score, params = best
-        S_cv = np.zeros((n, n_out))
-        S_in: list[Array] = []
         dist = np.empty(n)
         for tr, te in folds:
-            ests = [self._regressor(params).fit(Xs[tr], Y[tr, j]) for j in range(n_out)]
-            S_cv[te] = from_joint1_frame(qa[te, 0], np.column_stack(
-                [e.predict(Xs[te]) for e in ests]))
-            S_in.append(from_joint1_frame(qa[tr, 0], np.column_stack(
-                [e.predict(Xs[tr]) for e in ests])))
             dist[te] = NearestNeighbors(n_neighbors=1).fit(Xs[tr]).kneighbors(Xs[te])[0][:, 0]
         estimators = tuple(self._regressor(params).fit(Xs, Y[:, j]) for j in range(n_out))
         stage = ShapeStage(
@@ -625,7 +621,7 @@ class ResidualLearner:
             params={**_FIXED, "max_iter": self.trees, **params},
             physical_mm=float(phys_norm.mean() * 1e3), cv_mm=score * 1e3,
             useful=score < float(phys_norm.mean()))
-        return stage, S_cv, S_in
+        return stage
 
 
 def _remove_correction(data: CalibrationData, base_rotation: Array,
