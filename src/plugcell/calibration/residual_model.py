@@ -15,6 +15,21 @@ orientation residuals **in the robot base frame** — so the layer transfers whe
 BASE (and PROBE) are re-identified after the tracker moved.  The features are
 ``x = (sin q, cos q[, T / 2 K][, m / 10 kg])``.
 
+Where a pose lies outside the region of that layer (another set-up, other joint
+combinations) a second, coarser stage may apply — the **arm-shape stage**
+(:class:`ShapeStage`)::
+
+    (e, φ) = R_z(q1) · s(sin q2, cos q2, sin q3, cos q3)
+
+the residual expressed in the frame that turns with joint 1, a function of the
+shoulder and elbow angles alone.  The arm above joint 1 is the same body wherever
+joint 1 points and gravity lies along joint 1's axis, so an error of the arm's shape
+is the same vector in that frame for the same ``q2, q3``; these two joints carry
+the long levers.  What depends on ``q1`` itself, on the wrist combinations of one
+campaign or on where the tracker stood is not in it.  Precedence: the full layer
+where it is in domain, else the shape stage where it is in domain, else the physical
+model (:attr:`ResidualPrediction.local`, :attr:`ResidualPrediction.in_domain`).
+
 Honest validation is built in:
 
 * hyper-parameters are chosen by **grouped** cross-validation inside the
@@ -55,19 +70,27 @@ Array = NDArray[np.float64]
 __all__ = [
     "DEFAULT_GRID",
     "MIN_POSES",
+    "SHAPE_JOINTS",
     "CrossValidation",
     "LearnedResidual",
     "ResidualLearner",
     "ResidualModelError",
     "ResidualPrediction",
+    "ShapeStage",
     "calibration_fingerprint",
+    "from_joint1_frame",
     "hybrid_poses",
     "hybrid_residuals",
+    "joint1_rotation",
+    "shape_features",
+    "to_joint1_frame",
     "workspace_cells",
 ]
 
 #: fewest poses the learner accepts (with at least ``n_splits`` workspace cells).
 MIN_POSES = 200
+#: joints (0-based) of the arm-shape stage: shoulder and elbow (module docstring).
+SHAPE_JOINTS = (1, 2)
 #: the default hyper-parameter grid (gradient boosting, 300 trees, learning rate 0.1).
 DEFAULT_GRID: tuple[dict[str, Any], ...] = (
     {"max_leaf_nodes": 15, "min_samples_leaf": 20},
@@ -139,16 +162,100 @@ class CrossValidation:
 class ResidualPrediction:
     """The learned correction of ``N`` poses: ``correction`` ``(N, 6)`` (m, rad; position
     then rotation vector, robot base frame), zero where ``in_domain`` is False;
-    ``distance`` ``(N,)`` to the nearest training pose in feature space."""
+    ``distance`` ``(N,)`` to the nearest training pose in feature space (all features).
+
+    With an arm-shape stage (:class:`ShapeStage`) ``local`` is True where the layer of
+    the calibration set-up applies, ``in_domain`` where it or the shape stage does (the
+    shape stage's correction is used where ``in_domain & ~local``); without one,
+    ``local`` equals ``in_domain``."""
 
     correction: Array
     in_domain: Array
     distance: Array
+    local: Array | None = None
 
     @property
     def fallback_count(self) -> int:
         """Poses outside the trained region (physical model used)."""
         return int(np.count_nonzero(~self.in_domain))
+
+
+def joint1_rotation(q1: ArrayLike) -> Array:
+    """``(N, 3, 3)`` rotations ``R_z(q1)`` about the base z axis (joint 1's axis)."""
+    a = np.asarray(q1, float).reshape(-1)
+    c, s = np.cos(a), np.sin(a)
+    R = np.zeros((len(a), 3, 3))
+    R[:, 0, 0] = c
+    R[:, 0, 1] = -s
+    R[:, 1, 0] = s
+    R[:, 1, 1] = c
+    R[:, 2, 2] = 1.0
+    return R
+
+
+def to_joint1_frame(q1: ArrayLike, vectors: ArrayLike) -> Array:
+    """Base-frame vectors ``(N, 3k)`` (position, rotation vector…) expressed in the frame
+    that turns with joint 1: ``R_z(q1)ᵀ v`` for every 3-vector."""
+    R = joint1_rotation(q1)
+    v = np.asarray(vectors, float)
+    return np.hstack([np.einsum("nji,nj->ni", R, v[:, k:k + 3])
+                      for k in range(0, v.shape[1], 3)])
+
+
+def from_joint1_frame(q1: ArrayLike, vectors: ArrayLike) -> Array:
+    """The inverse of :func:`to_joint1_frame`: ``R_z(q1) v``."""
+    R = joint1_rotation(q1)
+    v = np.asarray(vectors, float)
+    return np.hstack([np.einsum("nij,nj->ni", R, v[:, k:k + 3])
+                      for k in range(0, v.shape[1], 3)])
+
+
+def shape_features(q: ArrayLike, joints: Sequence[int]) -> Array:
+    """``(sin, cos)`` of the arm-shape joints ``joints`` (0-based) of readings ``q``."""
+    qa = np.atleast_2d(np.asarray(q, float))[:, list(joints)]
+    return np.hstack([np.sin(qa), np.cos(qa)])
+
+
+@dataclass(frozen=True, eq=False)
+class ShapeStage:
+    """The first, transferable stage of a :class:`LearnedResidual` (module docstring):
+    the residual **in the frame that turns with joint 1** as a function of the arm's
+    shape, ``(sin, cos)`` of ``joints`` (0-based; default shoulder and elbow).
+
+    ``estimators``: one regressor per component (joint-1 frame); ``neighbours``,
+    ``threshold``: its own in-domain test in its feature space; ``params``: its
+    hyper-parameters; ``physical_mm``/``cv_mm``: held-out-cell mean position error
+    without and with this stage alone; ``useful``: it beat the physical model there."""
+
+    joints: tuple[int, ...]
+    estimators: tuple[Any, ...]
+    neighbours: Any
+    threshold: float
+    params: dict[str, Any]
+    physical_mm: float
+    cv_mm: float
+    useful: bool
+
+    def predict(self, q: ArrayLike) -> tuple[Array, Array, Array]:
+        """``(N, k)`` base-frame correction (zero outside), in-domain flags, distances."""
+        qa = np.atleast_2d(np.asarray(q, float))
+        X = shape_features(qa, self.joints)
+        dist = self.neighbours.kneighbors(X, n_neighbors=1, return_distance=True)[0][:, 0]
+        inside = (dist <= self.threshold) & self.useful
+        corr = np.zeros((len(X), len(self.estimators)))
+        if inside.any():
+            from threadpoolctl import threadpool_limits
+
+            with threadpool_limits(1):
+                y = np.column_stack([est.predict(X[inside]) for est in self.estimators])
+            corr[inside] = from_joint1_frame(qa[inside, 0], y)
+        return corr, inside, dist
+
+    def summary(self) -> dict[str, Any]:
+        return {"joints": [j + 1 for j in self.joints], "frame": "joint 1",
+                "features": [f"sin/cos q{j + 1}" for j in self.joints],
+                "params": dict(self.params), "threshold": self.threshold,
+                "physical_mm": self.physical_mm, "cv_mm": self.cv_mm, "useful": self.useful}
 
 
 @dataclass(frozen=True, eq=False)
@@ -162,7 +269,8 @@ class LearnedResidual:
     in-domain distance; ``uses_temperature``/``uses_payload``: the features;
     ``params``: the chosen hyper-parameters; ``cv``: the grouped cross-validation;
     ``useful``: False when it did not beat the physical model on held-out cells (then
-    it is never applied); ``n_poses``.
+    it is never applied); ``n_poses``; ``shape``: the transferable arm-shape stage
+    (:class:`ShapeStage`) used where the pose is outside this layer's region, or None.
     """
 
     robot: str
@@ -178,6 +286,7 @@ class LearnedResidual:
     useful: bool
     n_poses: int
     sklearn_version: str = field(default="")
+    shape: ShapeStage | None = None
 
     def features(self, q: ArrayLike, payload_kg: ArrayLike | float | None = None,
                  temperature_c: ArrayLike | float | None = None) -> Array:
@@ -203,16 +312,22 @@ class LearnedResidual:
         """
         X = self.features(q, payload_kg, temperature_c)
         dist = self.neighbours.kneighbors(X, n_neighbors=1, return_distance=True)[0][:, 0]
-        inside = (dist <= self.threshold) & self.useful
+        local = (dist <= self.threshold) & self.useful
         corr = np.zeros((len(X), 6))
-        if inside.any():
+        inside = local.copy()
+        if self.shape is not None and self.useful and not local.all():
+            c, shape_in, _ = self.shape.predict(q)
+            use = shape_in & ~local            # the set-up's own layer comes first
+            corr[use, :c.shape[1]] = c[use]
+            inside |= use
+        if local.any():
             from threadpoolctl import threadpool_limits
 
-            Xi = X[inside]
+            Xi = X[local]
             with threadpool_limits(1):
                 for j, est in enumerate(self.estimators):
-                    corr[inside, j] = est.predict(Xi)
-        return ResidualPrediction(corr, inside, dist)
+                    corr[local, j] = est.predict(Xi)
+        return ResidualPrediction(corr, inside, dist, local)
 
     def summary(self) -> dict[str, Any]:
         """What PARAMS.json records about the layer (no estimator state)."""
@@ -222,7 +337,8 @@ class LearnedResidual:
                 "frame": "robot base", "orientation": self.orientation,
                 "params": dict(self.params), "threshold": self.threshold,
                 "useful": self.useful, "poses": self.n_poses,
-                "cross_validation": self.cv.as_dict(), "sklearn_version": self.sklearn_version}
+                "cross_validation": self.cv.as_dict(), "sklearn_version": self.sklearn_version,
+                "shape_stage": None if self.shape is None else self.shape.summary()}
 
 
 def feature_names(payload: bool, temperature: bool) -> list[str]:
@@ -322,6 +438,10 @@ class ResidualLearner:
     n_threads : int
         OpenMP threads of the regressors (default 1: on a shared machine
         scikit-learn's default — every core — was measured 15× slower than one thread).
+    shape_joints : sequence of int
+        Joints (0-based) of the transferable arm-shape stage (:class:`ShapeStage`,
+        default shoulder and elbow ``(1, 2)``; joint 1 must turn about the base z axis);
+        ``()``: no shape stage (the layer of format 1).
     progress : callable, optional
         Called with a line of text per stage.
     """
@@ -331,7 +451,8 @@ class ResidualLearner:
                  domain_quantile: float = 0.95, orientation: bool = True,
                  use_temperature: bool | None = None, use_payload: bool | None = None,
                  trees: int = 300, min_poses: int = MIN_POSES, seed: int = 0,
-                 n_threads: int = 1, progress: Progress | None = None) -> None:
+                 n_threads: int = 1, shape_joints: Sequence[int] = SHAPE_JOINTS,
+                 progress: Progress | None = None) -> None:
         if not (cell_size_m > 0 and math.isfinite(cell_size_m)):
             raise ResidualModelError(f"cell size must be > 0 m, got {cell_size_m}")
         if n_splits < 2:
@@ -355,6 +476,10 @@ class ResidualLearner:
         self.use_payload = use_payload
         self.min_poses = int(min_poses)
         self.seed = int(seed)
+        self.shape_joints = tuple(int(j) for j in shape_joints)
+        if any(j < 1 for j in self.shape_joints):
+            raise ResidualModelError("shape_joints: joints after joint 1 (0-based index ≥ 1), "
+                                     f"got {shape_joints}")
         self.progress = progress
 
     def _say(self, text: str) -> None:
@@ -410,6 +535,12 @@ class ResidualLearner:
                 "wider or use smaller cells")
         folds = list(GroupKFold(n_splits=self.n_splits).split(X, E, groups))
         phys_norm = np.linalg.norm(E[:, :k_pos], axis=1)
+        # stage 1 (transferable): the residual in the joint-1 frame of the arm's shape
+        shape: ShapeStage | None = None
+        if self.shape_joints and data.q.shape[1] > max(self.shape_joints):
+            shape = self._fit_shape(data.q, E[:, :n_out], folds, phys_norm)
+            if not shape.useful:  # no gain on held-out cells: not used
+                shape = None
         scores: list[tuple[dict[str, Any], float]] = []
         best: tuple[float, dict[str, Any], Array] | None = None
         for i, params in enumerate(self.grid):
@@ -451,7 +582,46 @@ class ResidualLearner:
             uses_temperature=temp, uses_payload=pay, orientation=n_out == 6,
             params={**_FIXED, "max_iter": self.trees, **params},
             cv=cv, useful=score < float(phys_norm.mean()), n_poses=n,
-            sklearn_version=sklearn.__version__)
+            sklearn_version=sklearn.__version__, shape=shape)
+
+    def _fit_shape(self, q: ArrayLike, E: Array, folds: list[tuple[Array, Array]],
+                   phys_norm: Array) -> ShapeStage:
+        """The arm-shape stage on the cell folds: its hyper-parameters (the grid, held-out
+        position error) and its threshold (the ``domain_quantile`` of the held-out
+        distances in its feature space)."""
+        from sklearn.neighbors import NearestNeighbors
+
+        qa = np.asarray(q, float)
+        n, n_out = E.shape
+        Xs = shape_features(qa, self.shape_joints)
+        Y = to_joint1_frame(qa[:, 0], E)
+        best: tuple[float, dict[str, Any]] | None = None
+        for params in self.grid:
+            pred = np.zeros((n, 3))
+            for tr, te in folds:
+                for j in range(3):
+                    pred[te, j] = self._regressor(params).fit(Xs[tr], Y[tr, j]).predict(Xs[te])
+            pred = from_joint1_frame(qa[:, 0], pred)
+            score = float(np.linalg.norm(E[:, :3] - pred, axis=1).mean())
+            self._say(f"shape stage (sin/cos q{', q'.join(str(j + 1) for j in self.shape_joints)}"
+                      f", joint-1 frame) {params}: {phys_norm.mean() * 1e3:.3f} -> "
+                      f"{score * 1e3:.3f} mm")
+            if best is None or score < best[0]:
+                best = (score, dict(params))
+        assert best is not None
+        score, params = best
+        dist = np.empty(n)
+        for tr, te in folds:
+            dist[te] = NearestNeighbors(n_neighbors=1).fit(Xs[tr]).kneighbors(Xs[te])[0][:, 0]
+        estimators = tuple(self._regressor(params).fit(Xs, Y[:, j]) for j in range(n_out))
+        stage = ShapeStage(
+            joints=self.shape_joints, estimators=estimators,
+            neighbours=NearestNeighbors(n_neighbors=1).fit(Xs),
+            threshold=float(np.quantile(dist, self.domain_quantile)),
+            params={**_FIXED, "max_iter": self.trees, **params},
+            physical_mm=float(phys_norm.mean() * 1e3), cv_mm=score * 1e3,
+            useful=score < float(phys_norm.mean()))
+        return stage
 
 
 def _remove_correction(data: CalibrationData, base_rotation: Array,

@@ -16,6 +16,10 @@ Loading checks, each failure a :class:`ResidualFileError` naming the file:
   fingerprint covers the robot's parameters, not BASE and PROBE);
 * it was written by the same scikit-learn major.minor version (tree predictors are
   not guaranteed across versions: re-run ``plugcell calibrate``).
+
+Format 2 (this version) adds the transferable arm-shape stage
+(:class:`~plugcell.calibration.residual_model.ShapeStage`: its estimators,
+nearest-neighbour index and summary); format-1 files (no shape stage) still load.
 """
 
 from __future__ import annotations
@@ -28,6 +32,7 @@ from typing import Any
 from plugcell.calibration.residual_model import (
     CrossValidation,
     LearnedResidual,
+    ShapeStage,
     calibration_fingerprint,
 )
 
@@ -35,7 +40,9 @@ __all__ = ["FORMAT", "TRUSTED_TYPES", "ResidualFileError", "load_residual", "res
            "save_residual"]
 
 FORMAT = "plugcell-residual-model"
-FORMAT_VERSION = 1
+FORMAT_VERSION = 2
+#: versions :func:`load_residual` reads (1: no arm-shape stage).
+READABLE_VERSIONS = (1, 2)
 #: The only non-builtin types a side file may contain.
 TRUSTED_TYPES = (
     "sklearn.ensemble._hist_gradient_boosting.gradient_boosting.HistGradientBoostingRegressor",
@@ -78,6 +85,9 @@ def save_residual(layer: LearnedResidual, path: str | Path) -> dict[str, Any]:
     obj = {"format": FORMAT, "format_version": FORMAT_VERSION, "meta": meta,
            "cv": {**asdict(layer.cv), "scores": [[dict(s), v] for s, v in layer.cv.scores]},
            "estimators": list(layer.estimators), "neighbours": layer.neighbours}
+    if layer.shape is not None:
+        obj["shape"] = {"estimators": list(layer.shape.estimators),
+                        "neighbours": layer.shape.neighbours}
     blob = sio.dumps(obj)
     try:
         p.parent.mkdir(parents=True, exist_ok=True)
@@ -125,6 +135,11 @@ def load_residual(entry: dict[str, Any], params_path: str | Path, *, robot: str,
         raise ResidualFileError(f"{p}: cannot load: {exc}") from None
     if not isinstance(obj, dict) or obj.get("format") != FORMAT:
         raise ResidualFileError(f"{p}: not a plugcell residual model")
+    version = obj.get("format_version")
+    if isinstance(version, bool) or version not in READABLE_VERSIONS:
+        raise ResidualFileError(f"{p}: residual model format version {version!r}, this "
+                                f"plugcell reads {', '.join(map(str, READABLE_VERSIONS))}: "
+                                "re-run plugcell calibrate --residual-model learned")
     meta = obj["meta"]
     if meta.get("robot") != robot:
         raise ResidualFileError(f"{p}: residual model of robot {meta.get('robot')!r}, the "
@@ -140,6 +155,16 @@ def load_residual(entry: dict[str, Any], params_path: str | Path, *, robot: str,
     cvd = dict(obj["cv"])
     cvd["scores"] = tuple((dict(s), float(v)) for s, v in cvd["scores"])
     features = list(meta["features"])
+    shape = None
+    if meta.get("shape_stage") is not None:
+        sm, so = meta["shape_stage"], obj.get("shape")
+        if not isinstance(so, dict):
+            raise ResidualFileError(f"{p}: the shape stage's estimators are missing")
+        shape = ShapeStage(
+            joints=tuple(int(j) - 1 for j in sm["joints"]), estimators=tuple(so["estimators"]),
+            neighbours=so["neighbours"], threshold=float(sm["threshold"]),
+            params=dict(sm["params"]), physical_mm=float(sm["physical_mm"]),
+            cv_mm=float(sm["cv_mm"]), useful=bool(sm["useful"]))
     return LearnedResidual(
         robot=robot, fingerprint=fp, estimators=tuple(obj["estimators"]),
         neighbours=obj["neighbours"], threshold=float(meta["threshold"]),
@@ -147,4 +172,4 @@ def load_residual(entry: dict[str, Any], params_path: str | Path, *, robot: str,
         uses_payload=any(f.startswith("payload") for f in features),
         orientation=bool(meta["orientation"]), params=dict(meta["params"]),
         cv=CrossValidation(**cvd), useful=bool(meta["useful"]), n_poses=int(meta["poses"]),
-        sklearn_version=str(meta["sklearn_version"]))
+        sklearn_version=str(meta["sklearn_version"]), shape=shape)
