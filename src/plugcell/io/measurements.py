@@ -26,7 +26,6 @@ the row (1-based line number in the file) and the column.
 from __future__ import annotations
 
 import io
-import math
 import re
 from collections.abc import Iterable
 from dataclasses import dataclass
@@ -35,76 +34,12 @@ from pathlib import Path
 import numpy as np
 
 from plugcell.io.csvtable import table_number, table_rows
+from plugcell.io.units import MM_PER_M, joints_from_si, joints_to_si
 
 ROTATION_CONVENTIONS = ("rpy", "zyz", "xyz")
 _JOINT_COLUMN = re.compile(r"^j([1-9][0-9]*)$")
 #: The columns a measurement file may have besides its joint readings ``j1..jn``.
 MEASUREMENT_COLUMNS = ("x", "y", "z", "rx", "ry", "rz", "payload_kg", "temperature_c")
-_DEGREE = math.pi / 180.0
-
-
-def _scale(joint_scale: np.ndarray | None, n: int) -> float | np.ndarray:
-    if joint_scale is None:
-        return _DEGREE
-    scale = np.asarray(joint_scale, dtype=float)
-    if scale.shape not in ((), (n,)):  # one scale for all columns, or one a column
-        raise ValueError(f"joint_scale has {scale.size} entries for {n} joint columns")
-    if not np.all(np.isfinite(scale) & (scale != 0)):
-        raise ValueError(f"joint_scale must be finite and non-zero, got {scale.tolist()}")
-    return scale
-
-
-def joints_to_si(values: np.ndarray, joint_scale: np.ndarray | None = None) -> np.ndarray:
-    """Joint columns as a file holds them (degrees; a prismatic joint: mm) → SI.
-
-    The one conversion of the joint columns of measurement files and plan files.
-
-    Parameters
-    ----------
-    values : (N, n) ndarray
-        The joint columns ``j1..jn``, in file units.
-    joint_scale : (n,) array_like, optional
-        SI per file unit of each column (``desc.reading_scale()``: π/180 for degrees,
-        1e-3 for the mm of a prismatic joint); default π/180 for all.
-
-    Returns
-    -------
-    (N, n) ndarray
-        The joints in rad (a prismatic joint: m).
-
-    Raises
-    ------
-    ValueError
-        ``joint_scale`` neither a scalar nor of shape ``(n,)``, or not finite and
-        non-zero.
-    """
-    return values * _scale(joint_scale, values.shape[-1])
-
-
-def joints_from_si(joints: np.ndarray, joint_scale: np.ndarray | None = None) -> np.ndarray:
-    """Joints in SI → the file's units (degrees; a prismatic joint: mm); see :func:`joints_to_si`.
-
-    Parameters
-    ----------
-    joints : (N, n) ndarray
-        Joints in rad (a prismatic joint: m).
-    joint_scale : (n,) array_like, optional
-        SI per file unit of each column; default π/180 (degrees) for all.
-
-    Returns
-    -------
-    (N, n) ndarray
-        The joint columns ``j1..jn`` in file units.
-
-    Raises
-    ------
-    ValueError
-        ``joint_scale`` neither a scalar nor of shape ``(n,)``, or not finite and
-        non-zero.
-    """
-    return joints / _scale(joint_scale, joints.shape[-1])
-
-
 class MeasurementFileError(ValueError):
     """A measurement file that cannot be read; the message names file, row and column."""
 
@@ -315,7 +250,7 @@ def parse_measurements(
                               joint_scale)
     except ValueError as exc:
         raise MeasurementFileError(f"{name}: line {header_line}: {exc}") from None
-    positions = values[:, [index["x"], index["y"], index["z"]]] / 1000.0
+    positions = values[:, [index["x"], index["y"], index["z"]]] / MM_PER_M
     angles = None
     if "rx" in index:
         angles = np.deg2rad(values[:, [index["rx"], index["ry"], index["rz"]]])
@@ -409,7 +344,7 @@ def format_measurements(m: MeasurementSet, *, comments: Iterable[str] = (),
     if m.temperature_c is not None:
         header.append("temperature_c")
     out.write(",".join(header) + "\n")
-    cols = [joints_from_si(m.joints, joint_scale), m.positions * 1000.0]
+    cols = [joints_from_si(m.joints, joint_scale), m.positions * MM_PER_M]
     if m.angles is not None:
         cols.append(np.rad2deg(m.angles))
     if m.payload_kg is not None:

@@ -23,6 +23,7 @@ from pathlib import Path
 import numpy as np
 
 from plugcell.io.csvtable import table_number, table_rows
+from plugcell.io.units import MM_PER_M
 
 __all__ = ["NestFileError", "format_nests", "parse_nests", "read_nests"]
 
@@ -77,7 +78,7 @@ def parse_nests(text: str, name: str = "<nests>") -> tuple[list[str], np.ndarray
             raise NestFileError(f"{name}: line {line_no}, column 'name': empty")
         if label in names:
             raise NestFileError(f"{name}: line {line_no}: nest {label!r} named twice")
-        xyz = [table_number(cell, name, line_no, col, NestFileError) / 1e3
+        xyz = [table_number(cell, name, line_no, col, NestFileError) / MM_PER_M
                for col, cell in zip(HEADER[1:], row[1:], strict=True)]
         names.append(label)
         pos.append(xyz)
@@ -172,5 +173,5 @@ def format_nests(names: list[str], positions: np.ndarray, comments: tuple[str, .
     writer = csv.writer(out, lineterminator="\n")
     writer.writerow(HEADER)
     for n, p in zip(names, pos, strict=True):
-        writer.writerow([n, *(f"{v * 1e3:.6f}" for v in p)])
+        writer.writerow([n, *(f"{v * MM_PER_M:.6f}" for v in p)])
     return out.getvalue()

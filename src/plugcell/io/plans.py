@@ -32,7 +32,8 @@ from pathlib import Path
 import numpy as np
 
 from plugcell.io.csvtable import table_number, table_rows
-from plugcell.io.measurements import MEASUREMENT_COLUMNS, joints_from_si, joints_to_si
+from plugcell.io.measurements import MEASUREMENT_COLUMNS
+from plugcell.io.units import joints_from_si, joints_to_si
 
 _JOINT_COLUMN = re.compile(r"^j([1-9][0-9]*)$")
 #: Columns of a measurement file a plan reader passes over (all but ``payload_kg``).

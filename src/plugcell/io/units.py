@@ -36,6 +36,8 @@ Array = NDArray[np.float64]
 #: Metres per millimetre, and millimetres per metre.
 M_PER_MM = 1e-3
 MM_PER_M = 1e3
+#: Radians per degree: a revolute joint's reading scale.
+DEG = np.pi / 180.0
 #: Convention name (as robots and the tracker's options say it) → rotations.py's name.
 CONVENTIONS = {"rpy": "rpy", "euler": "zyz", "prj": "prj"}
 #: A Comau robot's convention: PDL's POSITION (thesis A.4).
@@ -43,10 +45,13 @@ ROBOT_CONVENTION = "euler"
 
 __all__ = [
     "CONVENTIONS",
+    "DEG",
     "MM_PER_M",
     "M_PER_MM",
     "ROBOT_CONVENTION",
     "UnitsError",
+    "joints_from_si",
+    "joints_to_si",
     "pose_from_robot",
     "robot_from_pose",
 ]
@@ -104,3 +109,68 @@ def robot_from_pose(T: ArrayLike, convention: str = ROBOT_CONVENTION) -> Array:
     """
     xyz, angles = matrix_to_pose(np.asarray(T, dtype=float), CONVENTIONS[convention])
     return np.concatenate([np.asarray(xyz) * MM_PER_M, np.rad2deg(angles)])
+
+
+
+
+def _scale(joint_scale: np.ndarray | None, n: int) -> float | np.ndarray:
+    if joint_scale is None:
+        return DEG
+    scale = np.asarray(joint_scale, dtype=float)
+    if scale.shape not in ((), (n,)):  # one scale for all columns, or one a column
+        raise ValueError(f"joint_scale has {scale.size} entries for {n} joint columns")
+    if not np.all(np.isfinite(scale) & (scale != 0)):
+        raise ValueError(f"joint_scale must be finite and non-zero, got {scale.tolist()}")
+    return scale
+
+
+def joints_to_si(values: np.ndarray, joint_scale: np.ndarray | None = None) -> np.ndarray:
+    """Joint readings in robot units (degrees; a prismatic joint: mm) → SI: ``q = s · v``.
+
+    The one conversion of joint readings: measurement files, plan files and the compute
+    service's functions use it.
+
+    Parameters
+    ----------
+    values : (N, n) ndarray
+        The joint readings ``j1..jn``, in robot units.
+    joint_scale : (n,) array_like, optional
+        SI per file unit of each column (``desc.reading_scale()``: π/180 for degrees,
+        1e-3 for the mm of a prismatic joint); default π/180 for all.
+
+    Returns
+    -------
+    (N, n) ndarray
+        The joints in rad (a prismatic joint: m).
+
+    Raises
+    ------
+    ValueError
+        ``joint_scale`` neither a scalar nor of shape ``(n,)``, or not finite and
+        non-zero.
+    """
+    return values * _scale(joint_scale, values.shape[-1])
+
+
+def joints_from_si(joints: np.ndarray, joint_scale: np.ndarray | None = None) -> np.ndarray:
+    """Joints in SI → robot units (degrees; a prismatic joint: mm): ``v = q / s``.
+
+    Parameters
+    ----------
+    joints : (N, n) ndarray
+        Joints in rad (a prismatic joint: m).
+    joint_scale : (n,) array_like, optional
+        SI per file unit of each column; default π/180 (degrees) for all.
+
+    Returns
+    -------
+    (N, n) ndarray
+        The joint readings ``j1..jn`` in robot units.
+
+    Raises
+    ------
+    ValueError
+        ``joint_scale`` neither a scalar nor of shape ``(n,)``, or not finite and
+        non-zero.
+    """
+    return joints / _scale(joint_scale, joints.shape[-1])

@@ -20,8 +20,9 @@ function                                               thesis
 ``append(a, b)``, ``row(a, i)``, ``size(a)``, ``clear(…)``  workspace housekeeping
 =====================================================  ================================
 
-Robot units throughout: lengths in mm, angles in degrees, joint readings in degrees
-(what ARM_JNTP gives); a pose 6-vector is ``x, y, z, a, b, c`` with the angles in the
+Robot units throughout, converted to SI by :mod:`plugcell.io.units`: lengths in mm,
+angles in degrees, joint readings in degrees (a prismatic joint: mm; what ARM_JNTP
+gives); a pose 6-vector is ``x, y, z, a, b, c`` with the angles in the
 ``angles`` convention: ``'euler'`` (Comau Z-Y-Z, the default), ``'rpy'`` or ``'prj'``.
 Parameters are saved as PARAMS.json (docs/calibration.md) under the service's data
 directory, by bare name only.
@@ -50,6 +51,7 @@ from plugcell.devices.tracker.frames import CONVENTIONS, matrix_from_vector, vec
 from plugcell.framework.keys import check_name as _check_file_name
 from plugcell.io.params import params_json, rebase_document, result_from_params
 from plugcell.io.robots import available_robots, load_robot
+from plugcell.io.units import M_PER_MM, MM_PER_M, joints_from_si, joints_to_si
 from plugcell.kinematics import RobotDescription
 from plugcell.kinematics.rotations import angles_to_matrix
 from plugcell.metrology import (
@@ -201,7 +203,8 @@ def _data(desc: RobotDescription, mJ: Any, mT: Any, payload: Any, angles: Any,
     if T.shape[1] == 6:
         rotations = angles_to_matrix(np.deg2rad(T[:, 3:]), CONVENTIONS[_convention(angles)])
     try:
-        return CalibrationData(q=np.deg2rad(J), positions=T[:, :3] * 1e-3,
+        return CalibrationData(q=joints_to_si(J, desc.reading_scale()),
+                               positions=T[:, :3] * M_PER_MM,
                                rotations=rotations, payload_kg=m)
     except ValueError as exc:
         raise FunctionError(str(exc)) from None
@@ -227,8 +230,9 @@ def calibrate(ctx: FunctionContext, mJ: Any, mT: Any, model: Any = 5.0, payload:
 
 def _stats_row(before: Any, after: Any, poses: int) -> np.ndarray:
     orientation = after.orientation.norm.mean if after.orientation is not None else 0.0
-    return np.array([[poses, before.position.norm.mean * 1e3, after.position.norm.mean * 1e3,
-                      after.position.norm.std * 1e3, after.position.norm.max * 1e3,
+    return np.array([[poses, before.position.norm.mean * MM_PER_M,
+                      after.position.norm.mean * MM_PER_M, after.position.norm.std * MM_PER_M,
+                      after.position.norm.max * MM_PER_M,
                       np.rad2deg(orientation)]])
 
 
@@ -255,7 +259,7 @@ def residuals(ctx: FunctionContext, params: Any, mJ: Any, mT: Any, payload: Any 
         res = p.result.evaluate_poses(data)
     except ValueError as exc:
         raise FunctionError(str(exc)) from None
-    return np.hstack([res.positions, res.after]) * 1e3
+    return np.hstack([res.positions, res.after]) * MM_PER_M
 
 
 @register
@@ -360,14 +364,14 @@ def base_drift(ctx: FunctionContext, params: Any, nests: Any, measured: Any,
     if n.shape[1] not in (3, 6) or m.shape[1] not in (3, 6):
         raise FunctionError("nests and measured: K×3 or K×6 rows (mm[, deg])")
     B = p.result.model.base()
-    m_tracker = m[:, :3] / 1e3 @ B[:3, :3].T + B[:3, 3]
+    m_tracker = m[:, :3] / MM_PER_M @ B[:3, :3].T + B[:3, 3]
     try:
-        est = estimate_base_drift(B, n[:, :3] / 1e3, m_tracker,
-                                  threshold_m=_number(threshold, "threshold") * 1e-3)
+        est = estimate_base_drift(B, n[:, :3] / MM_PER_M, m_tracker,
+                                  threshold_m=_number(threshold, "threshold") * M_PER_MM)
     except ValueError as exc:
         raise FunctionError(str(exc)) from None
-    return np.r_[est.displacement_m * 1e3, float(est.alarm), float(est.consistent),
-                 est.translation_m * 1e3, np.degrees(est.rotation_rad)].reshape(1, 9)
+    return np.r_[est.displacement_m * MM_PER_M, float(est.alarm), float(est.consistent),
+                 est.translation_m * MM_PER_M, np.degrees(est.rotation_rad)].reshape(1, 9)
 
 
 @register
@@ -380,7 +384,7 @@ def rebase(ctx: FunctionContext, params: Any, drift: Any) -> Parameters:
     row = _matrix(drift, "drift", (9,))[0]
     D = np.eye(4)
     D[:3, :3] = so3_exp(np.radians(row[6:9]))
-    D[:3, 3] = row[3:6] / 1e3
+    D[:3, 3] = row[3:6] / MM_PER_M
     doc = rebase_document(p.document, p.result, D @ p.result.model.base(),
                           {"displacement_mm": float(row[0]), "alarm": bool(row[1] > 0.5),
                            "translation_mm": row[3:6].tolist(),
@@ -414,11 +418,11 @@ def _note_region(ctx: FunctionContext, p: Parameters, function: str, q: np.ndarr
     ctx.warnings.append(f"{function}: {check.message('targets')} — " + "; ".join(first) + more)
 
 
-def _joints_or_fail(result: Any) -> np.ndarray:
+def _joints_or_fail(result: Any, desc: RobotDescription) -> np.ndarray:
     if not np.all(result.ok):
         k = int(np.flatnonzero(~result.ok)[0])
         raise FunctionError(f"target {k + 1}: {result.reason[k]}")
-    return np.rad2deg(result.q)
+    return joints_from_si(result.q, desc.reading_scale())
 
 
 @register
@@ -437,7 +441,7 @@ def compensate(ctx: FunctionContext, params: Any, targets: Any, payload: Any = 0
         res = _compensate(model, T, m, raise_errors=False)
     except ValueError as exc:
         raise FunctionError(str(exc)) from None
-    q = _joints_or_fail(res)
+    q = _joints_or_fail(res, p.description)
     _note_region(ctx, p, "compensate", res.q, m)
     return q
 
@@ -449,7 +453,7 @@ def compensate_joints(ctx: FunctionContext, params: Any, joints: Any, payload: A
     the compensated joints (N×n, deg) that put the tool where the nominal robot would."""
     p = _params(params)
     desc = p.description
-    q = np.deg2rad(_matrix(joints, "joints", (desc.n_readings,)))
+    q = joints_to_si(_matrix(joints, "joints", (desc.n_readings,)), desc.reading_scale())
     model = IdentifiedModel(p.result.model, tool=_tool(p, tool, _convention(angles)),
                             residual=p.result.residual_model)
     T = NominalModel(desc, tool=model.tool).pose(q)
@@ -458,7 +462,7 @@ def compensate_joints(ctx: FunctionContext, params: Any, joints: Any, payload: A
         res = _compensate_joints(model, T, q, m, raise_errors=False)
     except ValueError as exc:
         raise FunctionError(str(exc)) from None
-    out = _joints_or_fail(res)
+    out = _joints_or_fail(res, desc)
     _note_region(ctx, p, "compensate_joints", res.q, m)
     return out
 
@@ -470,12 +474,13 @@ def region(ctx: FunctionContext, params: Any, joints: Any, payload: Any = 0.0) -
     calibration pose (mm), worst joint beyond its calibrated range (deg)]``
     (docs/planning.md).  Fails for parameters saved before the region was recorded."""
     p = _params(params)
-    q = np.deg2rad(_matrix(joints, "joints", (p.description.n_actuated,)))
+    q = joints_to_si(_matrix(joints, "joints", (p.description.n_readings,)),
+                     p.description.reading_scale())
     check = p.result.check_region(q, _payload(payload, len(q)))
     if check is None:
         raise FunctionError("these parameters record no calibrated region (saved by an older "
                             "plugcell): calibrate again to have one")
-    return np.column_stack([check.outside.astype(float), check.distance_m * 1e3,
+    return np.column_stack([check.outside.astype(float), check.distance_m * MM_PER_M,
                             np.degrees(check.joint_excess_rad)])
 
 
@@ -497,8 +502,8 @@ def calc_targets(ctx: FunctionContext, holes: Any, corners: Any, base: Any,
     (k·per_bar)×6 poses (mm, deg in ``angles``).
     """
     convention = _convention(angles)
-    H = _matrix(holes, "holes", (3, 6))[:, :3] * 1e-3
-    C = _matrix(corners, "corners", (3, 6))[:, :3] * 1e-3
+    H = _matrix(holes, "holes", (3, 6))[:, :3] * M_PER_MM
+    C = _matrix(corners, "corners", (3, 6))[:, :3] * M_PER_MM
     n = _integer(per_bar, "per_bar")
     if n < 2 or len(H) % n:
         raise FunctionError(f"holes: {len(H)} rows is not a whole number of bars of {n} holes "
@@ -526,7 +531,7 @@ def calc_targets(ctx: FunctionContext, holes: Any, corners: Any, base: Any,
 
 
 def _points(x: Any, what: str) -> np.ndarray:
-    return _matrix(x, what, (3, 6))[:, :3] * 1e-3
+    return _matrix(x, what, (3, 6))[:, :3] * M_PER_MM
 
 
 @register
@@ -539,7 +544,7 @@ def probe_from_features(ctx: FunctionContext, circle: Any, holes: Any, tmac: Any
     T = matrix_from_vector(_matrix(tmac, "tmac", (6,)).reshape(-1), convention)
     try:
         est = probe_from_flange_features(_points(circle, "circle"), _points(holes, "holes"), T,
-                                         smr_offset=_number(smr_offset, "smr_offset") * 1e-3)
+                                         smr_offset=_number(smr_offset, "smr_offset") * M_PER_MM)
     except MetrologyError as exc:
         raise FunctionError(str(exc)) from None
     return vector_from_matrix(est.probe, convention).reshape(1, 6)
@@ -554,7 +559,7 @@ def base_from_features(ctx: FunctionContext, circle: Any, plane: Any, line: Any,
     try:
         est = _base_from_features(_points(circle, "circle"), _points(plane, "plane"),
                                  _points(line, "line"),
-                                 smr_offset=_number(smr_offset, "smr_offset") * 1e-3)
+                                 smr_offset=_number(smr_offset, "smr_offset") * M_PER_MM)
     except MetrologyError as exc:
         raise FunctionError(str(exc)) from None
     return vector_from_matrix(est.base, _convention(angles)).reshape(1, 6)
