@@ -26,11 +26,7 @@ import pytest
 PACKAGES = ("kinematics", "metrology", "calibration", "compensation", "io")
 
 #: Modules not checked, with the reason.
-SKIP_MODULES = {
-    "plugcell.calibration.residual_model": "under concurrent edit (#21)",
-    "plugcell.io.params": "being edited in parallel (#21); documented on merge",
-    "plugcell.io.residual_models": "being edited in parallel (#21); documented on merge",
-}
+SKIP_MODULES: dict[str, str] = {}
 
 #: Classes exempt from the constructor check, by kind, with the reason.
 #: - exceptions: their constructor is Exception's (a message), documented by the class line;

@@ -111,9 +111,25 @@ class ResidualModelError(ValueError):
 
 
 def calibration_fingerprint(model: ErrorModel) -> str:
-    """A short hash of the physical model's robot parameters (every kind but BASE and
-    PROBE): the learned layer is valid only on top of the robot model it was trained
-    with; re-registering BASE (the tracker moved, the drift watch) keeps it valid."""
+    """A short hash of the physical model's robot parameters (every kind but BASE and PROBE).
+
+    ``fingerprint = SHA-256(key₁ ‖ round(g₁, 15) ‖ key₂ ‖ round(g₂, 15) ‖ …)[:16 hex]`` over
+    the parameters ``g_i`` of ``model.space`` whose kind is neither ``base`` nor
+    ``probe``, in the order of the space (each value as its float64 bytes, rounded to 15
+    decimals).  The learned layer is valid only on top of the robot model it was trained
+    with; re-registering BASE/PROBE (the tracker moved, the drift watch) keeps it valid.
+
+    Parameters
+    ----------
+    model : ErrorModel
+        The identified physical model (its current parameter values, SI units: m, rad,
+        and each parameter's own unit).
+
+    Returns
+    -------
+    str
+        16 hexadecimal characters.
+    """
     h = hashlib.sha256()
     for p, v in zip(model.space, np.asarray(model.values, float), strict=True):
         if p.kind not in ("base", "probe"):
@@ -123,10 +139,26 @@ def calibration_fingerprint(model: ErrorModel) -> str:
 
 
 def workspace_cells(points: ArrayLike, cell_size_m: float) -> Array:
-    """Group index of each point: the cubic cell of edge ``cell_size_m`` it lies in, the
-    grid anchored at the points' lower corner.
+    """Group index of each point: the cubic workspace cell of edge ``cell_size_m`` it lies in.
 
-    ``points`` ``(N, 3)`` m → ``(N,)`` int, cells numbered in lexicographic order."""
+    The cell of point ``p`` is the integer triple ``c = ⌊(p − p_min) / s⌋`` (component-wise),
+    ``p_min`` the component-wise minimum of ``points`` (the grid is anchored at their lower
+    corner) and ``s = cell_size_m``; the occupied cells are then numbered ``0 … K−1`` in
+    lexicographic order of ``c`` (empty cells get no number).
+
+    Parameters
+    ----------
+    points : (N, 3) array_like, m
+        Positions (the learner passes the predicted target positions in the robot base
+        frame).
+    cell_size_m : float, m
+        Edge ``s`` of the cubic cells, > 0.
+
+    Returns
+    -------
+    (N,) ndarray of int
+        The cell number of each point, in ``0 … K−1`` with ``K`` the occupied cells.
+    """
     p = np.asarray(points, float)
     cells = np.floor((p - p.min(axis=0)) / cell_size_m).astype(np.int64)
     _, groups = np.unique(cells, axis=0, return_inverse=True)
@@ -135,11 +167,35 @@ def workspace_cells(points: ArrayLike, cell_size_m: float) -> Array:
 
 @dataclass(frozen=True)
 class CrossValidation:
-    """Grouped cross-validation of the layer on the calibration set (mm).
+    """Grouped cross-validation of the layer on the calibration set (mm, deg).
 
-    ``physical_mm``/``hybrid_mm``: mean position error of the held-out poses with the
-    physical and the hybrid model (chosen hyper-parameters); ``scores``: mean
-    hybrid error per candidate of the grid; ``folds``, ``cells``, ``cell_size_m``."""
+    The poses are grouped by workspace cell (:func:`workspace_cells` of the predicted
+    target positions in the base frame) and split by ``GroupKFold`` into ``folds`` folds,
+    so no cell is both trained and tested on.  Every pose is predicted once, by the
+    regressors trained on the other folds; the error of pose i is
+    ``‖e_i − ê_i‖`` (hybrid) against ``‖e_i‖`` (physical), ``e_i`` the physical residual
+    in the base frame.
+
+    Attributes
+    ----------
+    physical_mm : float, mm
+        Mean position error ``mean_i ‖e_i‖`` of the physical model over all poses.
+    hybrid_mm : float, mm
+        Mean held-out position error ``mean_i ‖e_i − ê_i‖`` of the hybrid model with the
+        chosen hyper-parameters (the best of ``scores``).
+    physical_orientation_deg, hybrid_orientation_deg : float or None, deg
+        The same for the orientation (norm of the rotation-vector residual, converted to
+        degrees); ``None`` when the layer learns no orientation (3-DOF data or
+        ``orientation=False``).
+    folds : int
+        Number of folds ``n_splits``.
+    cells : int
+        Number of occupied workspace cells.
+    cell_size_m : float, m
+        Edge of the workspace cells.
+    scores : tuple of (dict, float)
+        ``(hyper-parameters, hybrid_mm)`` for each candidate of the grid, in grid order.
+    """
 
     physical_mm: float
     hybrid_mm: float
@@ -151,6 +207,14 @@ class CrossValidation:
     scores: tuple[tuple[dict[str, Any], float], ...]
 
     def as_dict(self) -> dict[str, Any]:
+        """The record as PARAMS.json stores it (``residual_model.cross_validation``).
+
+        Returns
+        -------
+        dict
+            The attributes (mm, deg, m) with ``scores`` as ``grid``: a list of
+            ``{"params": dict, "hybrid_mm": float}``.
+        """
         return {"physical_mm": self.physical_mm, "hybrid_mm": self.hybrid_mm,
                 "physical_orientation_deg": self.physical_orientation_deg,
                 "hybrid_orientation_deg": self.hybrid_orientation_deg,
@@ -160,14 +224,29 @@ class CrossValidation:
 
 @dataclass(frozen=True)
 class ResidualPrediction:
-    """The learned correction of ``N`` poses: ``correction`` ``(N, 6)`` (m, rad; position
-    then rotation vector, robot base frame), zero where ``in_domain`` is False;
-    ``distance`` ``(N,)`` to the nearest training pose in feature space (all features).
+    """The learned correction ``(e, φ)`` of ``N`` poses and where it applies.
 
-    With an arm-shape stage (:class:`ShapeStage`) ``local`` is True where the layer of
-    the calibration set-up applies, ``in_domain`` where it or the shape stage does (the
-    shape stage's correction is used where ``in_domain & ~local``); without one,
-    ``local`` equals ``in_domain``."""
+    In domain means ``d(x) = min_j ‖x − x_j‖ ≤ threshold`` (nearest training pose ``x_j``
+    in feature space) and a useful layer.  Precedence per pose: the full layer where
+    ``local``, else the arm-shape stage (:class:`ShapeStage`) where its own test passes,
+    else no correction (physical model).
+
+    Attributes
+    ----------
+    correction : (N, 6) array, m and rad
+        ``[e; φ]``: position correction (m) then rotation vector (rad), robot base frame;
+        zero where ``in_domain`` is False (and the last three zero when the layer learns
+        no orientation).  Applied by :func:`hybrid_poses`.
+    in_domain : (N,) bool array
+        True where the full layer or the shape stage corrects the pose.
+    distance : (N,) array, feature units
+        ``d(x)`` of the full layer: distance to the nearest training pose over all its
+        features (``sin q, cos q[, T/2 K][, m/10 kg]``, dimensionless).
+    local : (N,) bool array or None
+        True where the full layer of the calibration set-up applies (the shape stage's
+        correction is used where ``in_domain & ~local``); without a shape stage it
+        equals ``in_domain``.  ``None`` only when built without it.
+    """
 
     correction: Array
     in_domain: Array
@@ -181,7 +260,20 @@ class ResidualPrediction:
 
 
 def joint1_rotation(q1: ArrayLike) -> Array:
-    """``(N, 3, 3)`` rotations ``R_z(q1)`` about the base z axis (joint 1's axis)."""
+    """Rotations ``R_z(q1)`` about the base z axis (joint 1's axis).
+
+    ``R_z(q) = [[cos q, −sin q, 0], [sin q, cos q, 0], [0, 0, 1]]``.
+
+    Parameters
+    ----------
+    q1 : (N,) array_like or float, rad
+        Joint-1 readings (flattened).
+
+    Returns
+    -------
+    (N, 3, 3) ndarray
+        One rotation matrix per reading.
+    """
     a = np.asarray(q1, float).reshape(-1)
     c, s = np.cos(a), np.sin(a)
     R = np.zeros((len(a), 3, 3))
@@ -194,8 +286,23 @@ def joint1_rotation(q1: ArrayLike) -> Array:
 
 
 def to_joint1_frame(q1: ArrayLike, vectors: ArrayLike) -> Array:
-    """Base-frame vectors ``(N, 3k)`` (position, rotation vector…) expressed in the frame
-    that turns with joint 1: ``R_z(q1)ᵀ v`` for every 3-vector."""
+    """Base-frame vectors expressed in the frame that turns with joint 1.
+
+    ``v₁ = R_z(q1)ᵀ v`` for every consecutive 3-vector ``v`` of a row (position, rotation
+    vector…); the inverse of :func:`from_joint1_frame`.
+
+    Parameters
+    ----------
+    q1 : (N,) array_like, rad
+        Joint-1 reading of each row.
+    vectors : (N, 3k) array_like
+        ``k`` 3-vectors per row in the robot base frame (any unit, e.g. m then rad).
+
+    Returns
+    -------
+    (N, 3k) ndarray
+        The same vectors in the joint-1 frame, same units.
+    """
     R = joint1_rotation(q1)
     v = np.asarray(vectors, float)
     return np.hstack([np.einsum("nji,nj->ni", R, v[:, k:k + 3])
@@ -203,7 +310,22 @@ def to_joint1_frame(q1: ArrayLike, vectors: ArrayLike) -> Array:
 
 
 def from_joint1_frame(q1: ArrayLike, vectors: ArrayLike) -> Array:
-    """The inverse of :func:`to_joint1_frame`: ``R_z(q1) v``."""
+    """Joint-1-frame vectors back in the robot base frame (inverse of :func:`to_joint1_frame`).
+
+    ``v = R_z(q1) v₁`` for every consecutive 3-vector ``v₁`` of a row.
+
+    Parameters
+    ----------
+    q1 : (N,) array_like, rad
+        Joint-1 reading of each row.
+    vectors : (N, 3k) array_like
+        ``k`` 3-vectors per row in the joint-1 frame (any unit, e.g. m then rad).
+
+    Returns
+    -------
+    (N, 3k) ndarray
+        The same vectors in the robot base frame, same units.
+    """
     R = joint1_rotation(q1)
     v = np.asarray(vectors, float)
     return np.hstack([np.einsum("nij,nj->ni", R, v[:, k:k + 3])
@@ -211,21 +333,60 @@ def from_joint1_frame(q1: ArrayLike, vectors: ArrayLike) -> Array:
 
 
 def shape_features(q: ArrayLike, joints: Sequence[int]) -> Array:
-    """``(sin, cos)`` of the arm-shape joints ``joints`` (0-based) of readings ``q``."""
+    """Features of the arm-shape stage: ``x_s = (sin q_J, cos q_J)`` of the joints ``J``.
+
+    Parameters
+    ----------
+    q : (N, n) or (n,) array_like, rad
+        Joint readings.
+    joints : sequence of int
+        The joints ``J`` (0-based column indices of ``q``), e.g. :data:`SHAPE_JOINTS`.
+
+    Returns
+    -------
+    (N, 2·len(joints)) ndarray, dimensionless
+        The sines of the selected joints, then their cosines.
+    """
     qa = np.atleast_2d(np.asarray(q, float))[:, list(joints)]
     return np.hstack([np.sin(qa), np.cos(qa)])
 
 
 @dataclass(frozen=True, eq=False)
 class ShapeStage:
-    """The first, transferable stage of a :class:`LearnedResidual` (module docstring):
-    the residual **in the frame that turns with joint 1** as a function of the arm's
-    shape, ``(sin, cos)`` of ``joints`` (0-based; default shoulder and elbow).
+    """The transferable arm-shape stage of a :class:`LearnedResidual` (module docstring).
 
-    ``estimators``: one regressor per component (joint-1 frame); ``neighbours``,
-    ``threshold``: its own in-domain test in its feature space; ``params``: its
-    hyper-parameters; ``physical_mm``/``cv_mm``: held-out-cell mean position error
-    without and with this stage alone; ``useful``: it beat the physical model there."""
+    The residual **in the frame that turns with joint 1** as a function of the arm's
+    shape alone::
+
+        (e, φ) = R_z(q1) · s(x_s),    x_s = (sin q_J, cos q_J)
+
+    with ``J = joints`` (default shoulder and elbow, :data:`SHAPE_JOINTS`) and ``s`` the
+    regressors, fitted on the base-frame residuals turned into the joint-1 frame
+    (``R_z(q1)ᵀ e``, ``R_z(q1)ᵀ φ``).  In domain: the nearest training pose in the shape
+    feature space is no farther than ``threshold``.
+
+    Attributes
+    ----------
+    joints : tuple of int
+        The shape joints ``J`` (0-based; joint 1, index 0, turns about the base z axis).
+    estimators : tuple of regressor
+        One fitted ``HistGradientBoostingRegressor`` per component of the correction in
+        the joint-1 frame: 3 (position, m) or 6 (position m, then rotation vector rad).
+    neighbours : sklearn.neighbors.NearestNeighbors
+        Index of the training features ``x_s``.
+    threshold : float, feature units (dimensionless)
+        In-domain distance: the ``domain_quantile`` of the held-out-cell distances to the
+        training poses in the grouped cross-validation.
+    params : dict
+        The chosen hyper-parameters (with the fixed ones: trees, learning rate).
+    physical_mm : float, mm
+        Mean position error of the physical model on the calibration poses.
+    cv_mm : float, mm
+        Mean held-out-cell position error with this stage alone.
+    useful : bool
+        ``cv_mm < physical_mm``: the stage beat the physical model on held-out cells
+        (a stage that is not useful is never applied).
+    """
 
     joints: tuple[int, ...]
     estimators: tuple[Any, ...]
@@ -237,7 +398,23 @@ class ShapeStage:
     useful: bool
 
     def predict(self, q: ArrayLike) -> tuple[Array, Array, Array]:
-        """``(N, k)`` base-frame correction (zero outside), in-domain flags, distances."""
+        """The shape stage's correction ``R_z(q1) · s(sin q_J, cos q_J)`` of each pose.
+
+        Parameters
+        ----------
+        q : (N, n) or (n,) array_like, rad
+            Joint readings (column 0 is joint 1; ``n > max(joints)``).
+
+        Returns
+        -------
+        correction : (N, k) ndarray, m and rad
+            The correction in the robot base frame, ``k = len(estimators)`` (3: position
+            m; 6: position m then rotation vector rad); zero outside the domain.
+        in_domain : (N,) bool ndarray
+            ``distance ≤ threshold`` and the stage is ``useful``.
+        distance : (N,) ndarray, dimensionless
+            Distance to the nearest training pose in the shape feature space.
+        """
         qa = np.atleast_2d(np.asarray(q, float))
         X = shape_features(qa, self.joints)
         dist = self.neighbours.kneighbors(X, n_neighbors=1, return_distance=True)[0][:, 0]
@@ -252,6 +429,14 @@ class ShapeStage:
         return corr, inside, dist
 
     def summary(self) -> dict[str, Any]:
+        """What PARAMS.json records about the stage (no estimator state).
+
+        Returns
+        -------
+        dict
+            ``joints`` (1-based), ``frame`` (``"joint 1"``), ``features``, ``params``,
+            ``threshold`` (dimensionless), ``physical_mm``, ``cv_mm`` (mm), ``useful``.
+        """
         return {"joints": [j + 1 for j in self.joints], "frame": "joint 1",
                 "features": [f"sin/cos q{j + 1}" for j in self.joints],
                 "params": dict(self.params), "threshold": self.threshold,
@@ -260,17 +445,49 @@ class ShapeStage:
 
 @dataclass(frozen=True, eq=False)
 class LearnedResidual:
-    """A fitted residual layer (see module docstring).
+    """A fitted residual layer (see module docstring); built by :meth:`ResidualLearner.fit`.
 
-    ``robot``: the robot's name; ``fingerprint``: :func:`calibration_fingerprint` of
-    the physical model it was trained on; ``estimators``: one fitted regressor per
-    component (3 position, + 3 orientation when ``orientation``); ``neighbours``: the
-    fitted nearest-neighbour index of the training features; ``threshold``: the
-    in-domain distance; ``uses_temperature``/``uses_payload``: the features;
-    ``params``: the chosen hyper-parameters; ``cv``: the grouped cross-validation;
-    ``useful``: False when it did not beat the physical model on held-out cells (then
-    it is never applied); ``n_poses``; ``shape``: the transferable arm-shape stage
-    (:class:`ShapeStage`) used where the pose is outside this layer's region, or None.
+    The hybrid pose (applied by :func:`hybrid_poses`)::
+
+        p_hybrid = p_phys + R_B · e(x)          R_hybrid = Exp(R_B · φ(x)) · R_phys
+
+    with ``(e, φ)`` the regressors' output in the robot base frame and the features
+    ``x = (sin q, cos q[, T / 2 K][, m / 10 kg])`` (T the temperature in °C, m the
+    payload in kg).
+
+    Attributes
+    ----------
+    robot : str
+        The robot's name.
+    fingerprint : str
+        :func:`calibration_fingerprint` of the physical model it was trained on.
+    estimators : tuple of regressor
+        One fitted ``HistGradientBoostingRegressor`` per component, base frame: 3
+        position components (m), then 3 rotation-vector components (rad) when
+        ``orientation``.
+    neighbours : sklearn.neighbors.NearestNeighbors
+        Index of the training features ``x``.
+    threshold : float, feature units (dimensionless)
+        In-domain distance: the ``domain_quantile`` of the distances from held-out cells
+        to the training poses in the grouped cross-validation.
+    uses_temperature, uses_payload : bool
+        Whether ``T / 2 K`` and ``m / 10 kg`` are features.
+    orientation : bool
+        Whether the orientation residual ``φ`` is learned (6-DOF data).
+    params : dict
+        The chosen hyper-parameters (with the fixed ones: trees, learning rate).
+    cv : CrossValidation
+        The grouped cross-validation.
+    useful : bool
+        False when it did not beat the physical model on held-out cells: then neither it
+        nor its shape stage is ever applied.
+    n_poses : int
+        Number of training poses.
+    sklearn_version : str
+        scikit-learn version that fitted it ("" when unknown).
+    shape : ShapeStage or None
+        The transferable arm-shape stage, used where a pose is outside this layer's
+        region, or ``None``.
     """
 
     robot: str
@@ -290,25 +507,59 @@ class LearnedResidual:
 
     def features(self, q: ArrayLike, payload_kg: ArrayLike | float | None = None,
                  temperature_c: ArrayLike | float | None = None) -> Array:
-        """The feature matrix ``(N, f)`` of joint readings ``q`` ``(N, n)`` (rad)."""
+        """The feature matrix ``x = (sin q, cos q[, T / 2 K][, m / 10 kg])`` of each pose.
+
+        Parameters
+        ----------
+        q : (N, n) or (n,) array_like, rad
+            Joint readings.
+        payload_kg : (N,) array_like or float, kg, optional
+            Payload; required when ``uses_payload`` (ignored otherwise).
+        temperature_c : (N,) array_like or float, °C, optional
+            Temperature; required when ``uses_temperature`` (ignored otherwise).
+
+        Returns
+        -------
+        (N, f) ndarray, dimensionless
+            ``f = 2n`` (+1 with temperature, +1 with payload): sines, cosines, then
+            ``T / 2`` and ``m / 10``.
+
+        Raises
+        ------
+        ResidualModelError
+            A feature the layer uses is missing or not finite.
+        """
         return _features(q, payload_kg, temperature_c, self.uses_payload, self.uses_temperature)
 
     def predict(self, q: ArrayLike, payload_kg: ArrayLike | float | None = None,
                 temperature_c: ArrayLike | float | None = None) -> ResidualPrediction:
-        """The correction of each pose in the robot base frame (module docstring).
+        """The correction ``(e(x), φ(x))`` of each pose in the robot base frame.
+
+        A pose is in the layer's domain when ``min_j ‖x − x_j‖ ≤ threshold`` (nearest
+        training pose in feature space) and the layer is ``useful``; there the
+        regressors give ``(e, φ)``.  Elsewhere the shape stage's correction
+        ``R_z(q1) · s(sin q_J, cos q_J)`` is used where its own test passes, else zero
+        (physical model).
 
         Parameters
         ----------
-        q : (N, n) array
-            Joint readings (rad).
-        payload_kg, temperature_c : (N,) array or float, optional
-            Required when the layer uses them as features (kg, °C).
+        q : (N, n) or (n,) array_like, rad
+            Joint readings.
+        payload_kg : (N,) array_like or float, kg, optional
+            Payload; required when the layer uses it as a feature.
+        temperature_c : (N,) array_like or float, °C, optional
+            Temperature; required when the layer uses it as a feature.
 
         Returns
         -------
         ResidualPrediction
             ``correction`` (N, 6) m and rad (zero outside the trained region),
-            ``in_domain`` (N,), ``distance`` (N,) in feature space.
+            ``in_domain`` (N,), ``distance`` (N,) in feature space, ``local`` (N,).
+
+        Raises
+        ------
+        ResidualModelError
+            A feature the layer uses is missing or not finite.
         """
         X = self.features(q, payload_kg, temperature_c)
         dist = self.neighbours.kneighbors(X, n_neighbors=1, return_distance=True)[0][:, 0]
@@ -330,7 +581,17 @@ class LearnedResidual:
         return ResidualPrediction(corr, inside, dist, local)
 
     def summary(self) -> dict[str, Any]:
-        """What PARAMS.json records about the layer (no estimator state)."""
+        """What PARAMS.json records about the layer (no estimator state).
+
+        Returns
+        -------
+        dict
+            ``kind``, ``learner``, ``robot``, ``fingerprint``, ``features`` (names),
+            ``frame`` (``"robot base"``), ``orientation``, ``params``, ``threshold``
+            (dimensionless), ``useful``, ``poses``, ``cross_validation``
+            (:meth:`CrossValidation.as_dict`, mm and deg), ``sklearn_version`` and
+            ``shape_stage`` (:meth:`ShapeStage.summary` or ``None``).
+        """
         return {"kind": "learned", "learner": "sklearn.HistGradientBoostingRegressor",
                 "robot": self.robot, "fingerprint": self.fingerprint,
                 "features": feature_names(self.uses_payload, self.uses_temperature),
@@ -342,6 +603,19 @@ class LearnedResidual:
 
 
 def feature_names(payload: bool, temperature: bool) -> list[str]:
+    """The names of the feature groups of ``x = (sin q, cos q[, T / 2 K][, m / 10 kg])``.
+
+    Parameters
+    ----------
+    payload, temperature : bool
+        Whether the payload and the temperature are features.
+
+    Returns
+    -------
+    list of str
+        ``["sin q", "cos q"]`` then ``"temperature / 2 K"`` and ``"payload / 10 kg"``
+        when used (the names :func:`~plugcell.io.residual_models.load_residual` reads).
+    """
     names = ["sin q", "cos q"]
     if temperature:
         names.append(f"temperature / {TEMPERATURE_SCALE_K:g} K")
@@ -375,9 +649,25 @@ def _features(q: ArrayLike, payload_kg: ArrayLike | float | None,
 def residual_targets(model: ErrorModel, data: CalibrationData) -> tuple[Array, Array]:
     """Physical residuals in the robot base frame and the predicted target positions.
 
-    Returns ``E`` ``(N, 3|6)`` = ``[R_Bᵀ Δp, R_Bᵀ Δφ]`` (m, rad; Δφ = ``log(R_M R_Pᵀ)``,
-    measurement-frame axes) and ``p_b`` ``(N, 3)`` the predicted
-    target positions in the base frame (m)."""
+    ``e = R_Bᵀ (p_M − p_P)``, ``φ = R_Bᵀ log(R_M R_Pᵀ)`` (the measurement-frame rotation
+    vector turned into base-frame axes) and ``p_b = R_Bᵀ (p_P − t_B)``, with ``(R_B, t_B)``
+    the model's BASE, ``P`` its prediction and ``M`` the measurement.
+
+    Parameters
+    ----------
+    model : ErrorModel
+        The identified physical model.
+    data : CalibrationData
+        ``N`` poses: joint readings (rad), measured positions (m) and, for 6-DOF data,
+        rotations, payloads (kg), temperatures (°C).
+
+    Returns
+    -------
+    E : (N, 3) or (N, 6) ndarray, m and rad
+        ``[e, φ]`` per pose (``φ`` only for 6-DOF data).
+    p_b : (N, 3) ndarray, m
+        The predicted target positions in the robot base frame.
+    """
     P = model.predict(data.q, data.payload_kg, data.temperature_c)
     dp, dphi = _measured_minus(data, P)
     B = model.base()
@@ -398,9 +688,25 @@ def _measured_minus(data: CalibrationData, P: Array) -> tuple[Array, Array | Non
 
 
 def hybrid_poses(poses: ArrayLike, base_rotation: ArrayLike, correction: ArrayLike) -> Array:
-    """Apply a base-frame correction ``(N, 6)`` to physical poses ``(N, 4, 4)``.
+    """Apply a base-frame correction to physical poses: the hybrid pose.
 
-    ``p ← p + R_B e``, ``R ← Exp(R_B φ) R`` (module docstring)."""
+    ``p_hybrid = p_phys + R_B · e``, ``R_hybrid = Exp(R_B · φ) · R_phys`` (module
+    docstring), ``Exp`` the SO(3) exponential of a rotation vector.
+
+    Parameters
+    ----------
+    poses : (N, 4, 4) array_like, m
+        Physical model's predicted target poses, measurement frame.
+    base_rotation : (3, 3) array_like
+        ``R_B``, the rotation of the model's BASE (base frame → measurement frame).
+    correction : (N, 6) array_like, m and rad
+        ``[e; φ]`` in the robot base frame (:attr:`ResidualPrediction.correction`).
+
+    Returns
+    -------
+    (N, 4, 4) ndarray, m
+        The hybrid poses (a new array; ``poses`` is not modified).
+    """
     T = np.array(poses, dtype=float, copy=True)
     Rb = np.asarray(base_rotation, float)
     c = np.asarray(correction, float)
@@ -412,6 +718,11 @@ def hybrid_poses(poses: ArrayLike, base_rotation: ArrayLike, correction: ArrayLi
 
 class ResidualLearner:
     """Fits a :class:`LearnedResidual` on the residuals of a physical model.
+
+    Gradient boosting (one ``HistGradientBoostingRegressor`` per component) of the
+    base-frame residual ``(e, φ)`` on the features ``x = (sin q, cos q[, T / 2 K][, m / 10
+    kg])``, hyper-parameters chosen by cross-validation grouped by workspace cell
+    ``⌊(p_b − p_min) / cell_size_m⌋`` (:meth:`fit`).
 
     Parameters
     ----------
@@ -444,6 +755,13 @@ class ResidualLearner:
         ``()``: no shape stage (the layer of format 1).
     progress : callable, optional
         Called with a line of text per stage.
+
+    Raises
+    ------
+    ResidualModelError
+        ``cell_size_m`` not a positive finite length, ``n_splits < 2``,
+        ``domain_quantile`` outside (0, 1], an empty grid, ``trees < 1``,
+        ``n_threads < 1`` or a shape joint before joint 2 (0-based index < 1).
     """
 
     def __init__(self, *, cell_size_m: float = 0.4, n_splits: int = 5,
@@ -494,6 +812,33 @@ class ResidualLearner:
 
     def fit(self, model: ErrorModel, data: CalibrationData, *, robot: str = "") -> LearnedResidual:
         """Learn the residual of ``model`` (an identified physical model) on ``data``.
+
+        The targets are the physical residuals in the base frame ``e = R_Bᵀ Δp``,
+        ``φ = R_Bᵀ Δφ`` (:func:`residual_targets`), the features
+        ``x = (sin q, cos q[, T / 2 K][, m / 10 kg])``.  The poses are grouped by
+        workspace cell ``⌊(p_b − p_min) / cell_size_m⌋`` of their predicted base-frame
+        position and split by ``GroupKFold(n_splits)``; each grid candidate is scored by
+        the mean held-out position error ``mean ‖e − ê‖`` and the best one is refitted
+        on all poses.  The in-domain threshold is the ``domain_quantile`` of the
+        distances from each held-out pose to the nearest training pose of its fold; the
+        layer is ``useful`` when its held-out error is below ``mean ‖e‖``.  The arm-shape
+        stage (:class:`ShapeStage`) is fitted on the same folds and kept only when useful.
+
+        Parameters
+        ----------
+        model : ErrorModel
+            The identified physical model (its BASE gives ``R_B``).
+        data : CalibrationData
+            ``N ≥ min_poses`` calibration poses: joint readings ``(N, n)`` (rad), measured
+            positions ``(N, 3)`` (m) and, for 6-DOF data, rotations ``(N, 3, 3)``,
+            payloads ``(N,)`` (kg), temperatures ``(N,)`` (°C) or None.
+        robot : str
+            The robot's name, recorded in the layer.
+
+        Returns
+        -------
+        LearnedResidual
+            The fitted layer with its cross-validation (and shape stage, or None).
 
         Raises
         ------
@@ -640,15 +985,50 @@ def hybrid_residuals(model: ErrorModel, layer: LearnedResidual, data: Calibratio
                      refit_base: bool = False, refit_probe: bool = False,
                      rotation_weight: float = 1.0, refit_positions_only: bool = False
                      ) -> tuple[PoseResiduals, ResidualPrediction]:
-    """Physical vs hybrid residual of every pose of ``data`` (never training poses).
+    """Physical vs hybrid residual of every pose of ``data`` (validation poses, never training).
 
-    Returns :class:`PoseResiduals` with ``before`` = the physical model and ``after``
-    = the hybrid model, and the layer's prediction (``in_domain`` says where it fell
-    back).  ``refit_base``/``refit_probe``: BASE (and PROBE) re-identified on ``data``
-    (tracker moved) — for the physical model on the raw measurements, for the hybrid
-    one on the measurements with the learned correction taken out, so that neither
-    absorbs the other's terms; ``rotation_weight`` (m/rad) and ``refit_positions_only``
-    as in :func:`~plugcell.calibration.identify.refit_base`.
+    ``before = p_M − p_phys``, ``after = p_M − p_hybrid`` with
+    ``p_hybrid = p_phys' + R_B' · e(x)``, ``R_hybrid = Exp(R_B' · φ(x)) · R_phys'``
+    (:func:`hybrid_poses`).  Without refit the primed model is ``model``.  With
+    ``refit_base`` BASE (and PROBE) are re-identified on ``data`` (tracker moved): for the
+    physical model on the raw measurements, for the hybrid one on the measurements with
+    the learned correction taken out (``p_M − R_B·e``, ``Exp(−R_B·φ)·R_M``, ``R_B`` of the
+    physical refit), so that neither absorbs the other's terms.
+
+    Parameters
+    ----------
+    model : ErrorModel
+        The identified physical model the layer was trained on.
+    layer : LearnedResidual
+        The learned residual layer.
+    data : CalibrationData
+        ``N`` poses: joint readings ``(N, n)`` (rad), measured positions ``(N, 3)`` (m),
+        rotations ``(N, 3, 3)`` or None, payloads ``(N,)`` (kg), temperatures ``(N,)``
+        (°C) or None.
+    refit_base : bool
+        Re-identify BASE on ``data`` for both models.
+    refit_probe : bool
+        Also re-identify PROBE (with ``refit_base``).
+    rotation_weight : float, m/rad
+        Weight ``w`` of the orientation in the refit, ``Σ ‖Δp‖² + w² ‖Δφ‖²``
+        (:func:`~plugcell.calibration.identify.refit_base`).
+    refit_positions_only : bool
+        Refit on the positions only (as in
+        :func:`~plugcell.calibration.identify.refit_base`).
+
+    Returns
+    -------
+    residuals : PoseResiduals
+        ``before`` = the physical model, ``after`` = the hybrid model, ``(N, 3)`` m
+        (orientations ``(N, 3)`` rad for 6-DOF data).
+    prediction : ResidualPrediction
+        The layer's prediction on ``data`` (``in_domain`` says where it fell back to
+        the physical model).
+
+    Raises
+    ------
+    ResidualModelError
+        A feature the layer uses (temperature, payload) is missing from ``data``.
     """
     # identify imports this module (through result.py): the circle is broken
     # here, where the refit is needed

@@ -66,7 +66,18 @@ class ResidualFileError(ValueError):
 
 
 def residual_path(params_path: str | Path) -> Path:
-    """The side file next to ``PARAMS.json``: ``PARAMS.residual.skops``."""
+    """The side file next to a PARAMS.json: ``<dir>/<stem>.residual.skops``.
+
+    Parameters
+    ----------
+    params_path : str or Path
+        The PARAMS.json path (e.g. ``out/PARAMS.json``).
+
+    Returns
+    -------
+    Path
+        The side file's path in the same directory (``out/PARAMS.residual.skops``).
+    """
     p = Path(params_path)
     return p.with_name(p.stem + ".residual.skops")
 
@@ -76,8 +87,32 @@ def _minor(version: str) -> str:
 
 
 def save_residual(layer: LearnedResidual, path: str | Path) -> dict[str, Any]:
-    """Write ``layer`` to ``path`` (skops); returns the ``residual_model`` entry of
-    PARAMS.json (its summary + ``file`` (name, relative to PARAMS.json) + ``sha256``)."""
+    """Write ``layer`` to ``path`` (skops, format :data:`FORMAT_VERSION`).
+
+    The file holds the layer's summary, cross-validation, estimators and nearest-
+    neighbour index (and those of its shape stage); its SHA-256 goes into the entry.
+
+    Parameters
+    ----------
+    layer : LearnedResidual
+        The fitted layer.
+    path : str or Path
+        The side file to write (parent directories are created); to be found again by
+        :func:`load_residual` it must lie in the directory of PARAMS.json — use
+        :func:`residual_path`.
+
+    Returns
+    -------
+    dict
+        The ``residual_model`` entry of PARAMS.json: :meth:`LearnedResidual.summary`
+        plus ``file`` (the file's name only, resolved against PARAMS.json's directory)
+        and ``sha256`` (hex digest of the bytes written).
+
+    Raises
+    ------
+    ResidualFileError
+        The file cannot be written.
+    """
     import skops.io as sio
 
     p = Path(path)
@@ -99,11 +134,37 @@ def save_residual(layer: LearnedResidual, path: str | Path) -> dict[str, Any]:
 
 def load_residual(entry: dict[str, Any], params_path: str | Path, *, robot: str,
                   model: Any) -> LearnedResidual:
-    """The layer PARAMS.json's ``residual_model`` ``entry`` refers to.
+    """The layer PARAMS.json's ``residual_model`` ``entry`` refers to, checked.
 
-    ``params_path``: the PARAMS.json (the side file's name is relative to it);
-    ``robot``, ``model``: the calibration's robot name and physical
-    :class:`~plugcell.calibration.model.ErrorModel` it must belong to.
+    Accepted only when ``SHA-256(file) = entry["sha256"]``, the file holds only
+    :data:`TRUSTED_TYPES`, its format version is readable, its robot is ``robot``, its
+    fingerprint is ``calibration_fingerprint(model)`` and its scikit-learn major.minor
+    version is the installed one (module docstring).
+
+    Parameters
+    ----------
+    entry : dict
+        PARAMS.json's ``residual_model`` (needs ``file`` and ``sha256``).
+    params_path : str or Path
+        The PARAMS.json; the side file is ``params_path.parent / entry["file"]``.
+    robot : str
+        The calibration's robot name.
+    model : ErrorModel
+        The calibration's physical model (its :func:`calibration_fingerprint` must
+        match the file's).
+
+    Returns
+    -------
+    LearnedResidual
+        The layer (with its arm-shape stage when the file has one; format 1 has none).
+
+    Raises
+    ------
+    ResidualFileError
+        The entry lacks ``file``/``sha256``, or the file is missing, differs from the
+        recorded SHA-256, is not a skops file, contains untrusted types, is not a
+        plugcell residual model of a readable version, belongs to another robot or
+        calibration, or was written by another scikit-learn major.minor version.
     """
     import sklearn
     import skops.io as sio
