@@ -61,22 +61,26 @@ def layer_of(module: str) -> str | None:
     raise AssertionError(f"{module}: no layer — add its package to tests/test_layering.py")
 
 
+def imports(source: str) -> list[tuple[int, str]]:
+    """``(line, module)`` of every absolute import in ``source``, also inside functions."""
+    found = []
+    for node in ast.walk(ast.parse(source)):
+        if isinstance(node, ast.Import):
+            found += [(node.lineno, a.name) for a in node.names]
+        elif isinstance(node, ast.ImportFrom) and node.level == 0 and node.module:
+            found.append((node.lineno, node.module))
+    return found
+
+
 def upward_imports(source: str, module: str) -> list[str]:
     """Every import of ``source`` (module ``module``) its layer forbids."""
     mine = layer_of(module)
     assert mine is not None
     found = []
-    for node in ast.walk(ast.parse(source)):
-        if isinstance(node, ast.Import):
-            targets = [a.name for a in node.names]
-        elif isinstance(node, ast.ImportFrom) and node.level == 0 and node.module:
-            targets = [node.module]
-        else:
-            continue
-        for target in targets:
-            theirs = layer_of(target)
-            if theirs in FORBIDDEN[mine]:
-                found.append(f"{module}:{node.lineno} ({mine}) imports {target} ({theirs})")
+    for line, target in imports(source):
+        theirs = layer_of(target)
+        if theirs in FORBIDDEN[mine]:
+            found.append(f"{module}:{line} ({mine}) imports {target} ({theirs})")
     return found
 
 
@@ -133,17 +137,8 @@ FILE_FORMATS = ("msgspec", "tomllib", "tomli_w")
 
 def file_format_imports(source: str, module: str) -> list[str]:
     """Every import of a file-format library by ``source`` (module ``module``)."""
-    found = []
-    for node in ast.walk(ast.parse(source)):
-        if isinstance(node, ast.Import):
-            targets = [a.name for a in node.names]
-        elif isinstance(node, ast.ImportFrom) and node.level == 0 and node.module:
-            targets = [node.module]
-        else:
-            continue
-        found += [f"{module}:{node.lineno} imports {t}" for t in targets
-                  if t.split(".")[0] in FILE_FORMATS]
-    return found
+    return [f"{module}:{line} imports {target}" for line, target in imports(source)
+            if target.split(".")[0] in FILE_FORMATS]
 
 
 def test_the_math_parses_no_file_format() -> None:

@@ -9,8 +9,8 @@ from typing import Any
 
 import numpy as np
 import pytest
+from damaged_documents import damaged
 from hypothesis import HealthCheck, given, settings
-from hypothesis import strategies as st
 
 from plugcell.io.robot_schema import description_from_dict, description_to_dict
 from plugcell.io.robots import RobotNotFoundError, available_robots, load_robot
@@ -204,61 +204,11 @@ def test_top_level_must_be_a_table():
 
 
 # ----------------------------------------------------------------------------- property
-_leaf = st.one_of(
-    st.none(),
-    st.booleans(),
-    st.integers(-(10**6), 10**6),
-    st.floats(allow_nan=True, allow_infinity=True),
-    st.text(max_size=5),
-    st.lists(st.floats(-1e3, 1e3), max_size=5),
-    st.dictionaries(st.text(max_size=3), st.integers(), max_size=2),
-)
-
-
-def _paths(obj: Any, prefix: tuple = ()) -> list[tuple]:
-    out = [prefix]
-    if isinstance(obj, dict):
-        for k, v in obj.items():
-            out += _paths(v, (*prefix, k))
-    elif isinstance(obj, list):
-        for i, v in enumerate(obj):
-            out += _paths(v, (*prefix, i))
-    return out
-
-
-@st.composite
-def _mutated(draw: st.DrawFn, base: dict[str, Any]) -> dict[str, Any]:
-    d = copy.deepcopy(base)
-    for _ in range(draw(st.integers(1, 3))):
-        paths = _paths(d)
-        path = draw(st.sampled_from(paths))
-        if not path:
-            continue
-        parent = d
-        for key in path[:-1]:
-            parent = parent[key]
-        key = path[-1]
-        action = draw(st.sampled_from(["replace", "delete", "insert", "perturb"]))
-        if action == "replace":
-            parent[key] = draw(_leaf)
-        elif action == "delete":
-            del parent[key]
-        elif action == "insert" and isinstance(parent, dict):
-            parent[draw(st.text(max_size=4))] = draw(_leaf)
-        elif (
-            action == "perturb"
-            and isinstance(parent[key], (int, float))
-            and not isinstance(parent[key], bool)
-        ):
-            parent[key] = parent[key] + draw(st.floats(-200, 200))
-    return d
-
-
 _BASE = description_to_dict(load_robot("smart_h4"))
 
 
 @settings(max_examples=300, deadline=None, suppress_health_check=[HealthCheck.too_slow])
-@given(_mutated(_BASE))
+@given(damaged(_BASE))
 def test_from_dict_raises_only_description_errors(d):
     try:
         desc = description_from_dict(d)
@@ -272,7 +222,7 @@ _FANUC = description_to_dict(load_robot("fanuc_m20ia"))  # with a [coupling] tab
 
 
 @settings(max_examples=150, deadline=None, suppress_health_check=[HealthCheck.too_slow])
-@given(_mutated(_FANUC))
+@given(damaged(_FANUC))
 def test_from_dict_of_a_coupled_robot_raises_only_description_errors(d):
     try:
         desc = description_from_dict(d)
