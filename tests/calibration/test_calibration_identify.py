@@ -312,3 +312,10 @@ def test_an_unknown_method_is_refused_with_the_choices(h4):
         Calibrator(h4, 2, method="newton")
     assert str(caught.value) == (
         "method must be one of ('gauss-newton', 'lm', 'least-squares'), got 'newton'")
+
+
+def test_a_payload_under_a_gram_is_no_payload(h4, full_truth):
+    # the payload compliances scale with m / m_ref: a reference of 0.5 g would blow them up
+    crumbs = _data(full_truth, 30, 12, payloads=(0.0005,))
+    with pytest.raises(CalibrationError, match="carry no payload"):
+        Calibrator(h4, "full").fit(crumbs)

@@ -10,6 +10,7 @@ from typing import Any
 
 import numpy as np
 import pytest
+from damaged_documents import damaged
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
@@ -70,7 +71,7 @@ def results(draw: st.DrawFn) -> CalibrationResult:
     harmonics = draw(st.integers(0, 2))
     thermal = draw(st.booleans())
     t_ref = draw(st.floats(-20.0, 60.0)) if thermal else 0.0
-    m_ref = draw(st.floats(0.0, 60.0))
+    m_ref = draw(st.just(0.0) | st.floats(0.1, 60.0))  # none, or a payload a robot carries
     base = _transform(draw(_rot3), draw(_vec3))
     probe = _transform(draw(_rot3), draw(_vec3))
     empty = ErrorModel.create(desc, cfg.family, gravity=cfg.gravity, payload=cfg.payload,
@@ -176,6 +177,10 @@ def _with(d: dict[str, Any], value: Any, *path: str | int) -> dict[str, Any]:
      r"^model.thermal: expected true or false, got the string 'yes'$"),
     (lambda d: _with(d, None, "data", "payload_ref_kg"),
      r"^data.payload_ref_kg: expected a finite number, got null$"),
+    (lambda d: _with(d, 5e-324, "data", "payload_ref_kg"),
+     r"^data.payload_ref_kg: 0 \(no payload\) or at least 0.001 kg, got 4.94066e-324$"),
+    (lambda d: _with(d, -2.0, "data", "payload_ref_kg"),
+     r"^data.payload_ref_kg: 0 \(no payload\) or at least 0.001 kg, got -2$"),
     (lambda d: _with(d, 1, "data", "six_dof"),
      r"^data.six_dof: expected true or false, got the number 1$"),
     (lambda d: _with(d, 2.5, "data", "poses"),
@@ -237,46 +242,10 @@ def test_rebase_document_moves_base_and_records_the_event(document):
         rebase_document(document, result, np.eye(3))
 
 
-_leaf = st.one_of(
-    st.none(), st.booleans(), st.integers(-(10**6), 10**6),
-    st.floats(allow_nan=True, allow_infinity=True), st.text(max_size=5),
-    st.lists(st.floats(-1e3, 1e3), max_size=5),
-    st.dictionaries(st.text(max_size=3), st.integers(), max_size=2),
-)
-
-
-def _paths(obj: Any, prefix: tuple = ()) -> list[tuple]:
-    out = [prefix]
-    if isinstance(obj, dict):
-        for k, v in obj.items():
-            out += _paths(v, (*prefix, k))
-    elif isinstance(obj, list):
-        for i, v in enumerate(obj):
-            out += _paths(v, (*prefix, i))
-    return out
-
-
-@st.composite
-def _mutated(draw: st.DrawFn, base: dict[str, Any]) -> dict[str, Any]:
-    d = copy.deepcopy(base)
-    for _ in range(draw(st.integers(1, 3))):
-        path = draw(st.sampled_from(_paths(d)))
-        if not path:
-            continue
-        parent = d
-        for key in path[:-1]:
-            parent = parent[key]
-        if draw(st.booleans()):
-            parent[path[-1]] = draw(_leaf)
-        else:
-            del parent[path[-1]]
-    return d
-
-
 @settings(max_examples=200, deadline=None, suppress_health_check=[HealthCheck.too_slow])
 @given(data=st.data())
 def test_any_damaged_document_loads_or_raises_params_error(document, data):
-    d = data.draw(_mutated(document))
+    d = data.draw(damaged(document, actions=("replace", "delete")))
     try:
         res = result_from_params(d, ROBOTS["smart_h4"])
     except ParamsError as exc:

@@ -52,7 +52,7 @@ from plugcell.calibration.initial import (
 )
 from plugcell.calibration.jacobian import JacobianResult, identification_jacobian
 from plugcell.calibration.linalg import least_squares
-from plugcell.calibration.model import ErrorModel, PoseBatch, fold_frames
+from plugcell.calibration.model import MIN_PAYLOAD_REF_KG, ErrorModel, PoseBatch, fold_frames
 from plugcell.calibration.result import CalibrationResult, IterationRecord
 from plugcell.calibration.statistics import (
     AccuracyStats,
@@ -422,11 +422,11 @@ class Calibrator:
         cfg = self.config
         m_ref = float(self.payload_ref_kg if self.payload_ref_kg is not None
                       else data.payload_kg.max())
-        if cfg.payload and m_ref <= 0:
+        if cfg.payload and m_ref < MIN_PAYLOAD_REF_KG:
             raise CalibrationError(
                 f"model {cfg.number} ({cfg.name}) identifies payload compliance but the data "
-                "carry no payload (payload_kg column missing or zero); use model 4 or add "
-                "--payload-kg"
+                "carry no payload (payload_kg column missing, zero or under 1 g); use model 4 "
+                "or add --payload-kg"
             )
         if not data.six_dof and self.rotation_weight != 1.0:
             warnings.append("rotation_weight ignored: the data are positions only")

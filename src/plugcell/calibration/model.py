@@ -48,7 +48,14 @@ from plugcell.kinematics.transforms import dh_hayati, rot_x, rot_y, rot_z, trans
 
 Array = NDArray[np.float64]
 
-__all__ = ["ErrorModel", "PoseBatch", "base_transform", "fold_frames", "probe_transform"]
+__all__ = [
+    "MIN_PAYLOAD_REF_KG",
+    "ErrorModel",
+    "PoseBatch",
+    "base_transform",
+    "fold_frames",
+    "probe_transform",
+]
 
 _HALF_PI = 0.5 * math.pi
 
@@ -113,6 +120,11 @@ def probe_transform(probe_ref: Array, theta7: float, d7: float, a7: float, alpha
     """
     return rot_x(-_HALF_PI) @ dh_hayati(theta7, d7, a7, _HALF_PI + alpha7) @ probe_ref
 
+
+
+#: The smallest payload reference a model can have (kg): the payload compliances scale
+#: with m / m_ref (eq. 6.41), so a reference of a gram or less is no payload at all.
+MIN_PAYLOAD_REF_KG = 1e-3
 
 @dataclass(frozen=True, eq=False)
 class PoseBatch:

@@ -27,7 +27,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from plugcell.calibration.configs import model_config
-from plugcell.calibration.model import THERMAL_KEY, ErrorModel
+from plugcell.calibration.model import MIN_PAYLOAD_REF_KG, THERMAL_KEY, ErrorModel
 from plugcell.calibration.result import CalibrationResult, IterationRecord, harmonic_order
 from plugcell.calibration.statistics import PoseResiduals
 from plugcell.calibration.validity import ValidityRegion
@@ -512,6 +512,9 @@ def result_from_params(document: dict[str, Any], description: RobotDescription, 
     base_ref = _transform(document, "references", "base")
     probe_ref = _transform(document, "references", "probe")
     m_ref = _number(document, "data", "payload_ref_kg")
+    if m_ref != 0.0 and m_ref < MIN_PAYLOAD_REF_KG:  # compliance scales with m / m_ref
+        raise ParamsError(f"data.payload_ref_kg: 0 (no payload) or at least "
+                          f"{MIN_PAYLOAD_REF_KG:g} kg, got {m_ref:g}")
     harmonics = _integer(document, "model", "harmonics", default=0)
     if harmonics not in (0, 1, 2):
         raise ParamsError(f"model.harmonics: 0, 1 or 2, got {harmonics}")
