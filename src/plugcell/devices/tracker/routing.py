@@ -47,7 +47,7 @@ from plugcell.framework.keys import check_name
 from plugcell.framework.messages import Command, CommandTypes, ProcessStates
 from plugcell.framework.service import DeviceError, GenericDevice
 
-log = logging.getLogger("plugcell.devices.routing")
+log = logging.getLogger(__name__)
 
 SEPARATOR = ";"
 MAX_ROUTES = 4
