@@ -145,6 +145,7 @@ def test_bench_transport_smoke(procs):
     for row in report["rows"]:
         assert row["throughput_msg_s"] > 0 and row["raw_zenoh_latency_ms"]["avg"] > 0
         assert row["raw_zenoh_in_callback_latency_ms"]["avg"] > 0
+        assert row["raw_zenoh_event_loop_latency_ms"]["avg"] > 0
         # the best of the runs, every run kept
         for best, runs in ((row["throughput_msg_s"], row["throughput_runs_msg_s"]),
                            (row["raw_zenoh_throughput_msg_s"],
@@ -156,7 +157,8 @@ def test_bench_transport_smoke(procs):
     table = format_table(report).splitlines()  # what the command prints without --json
     assert "r is the best of 2 runs" in table[2]
     assert [line.split("|")[0].strip() for line in table[7:9]] == ["4 B", "64 KiB"]
-    assert table[-2].startswith("raw Zenoh's own 4 B latency (the floor): avg ")
-    assert table[-1].startswith("  answered inside Zenoh's callbacks, with no hop to a thread")
+    assert table[-3].startswith("raw Zenoh's own 4 B latency (the floor): avg ")
+    assert table[-2].startswith("  answered inside Zenoh's callbacks, with no hop to a thread")
+    assert table[-1].startswith("  answered from an event loop on each side (")
     refused = cli(procs, "bench", "transport", "--repeat", "0", check=False)
     assert refused.returncode == 2 and "--repeat: must be at least 1" in refused.stderr

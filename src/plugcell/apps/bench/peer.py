@@ -29,7 +29,8 @@ from plugcell.framework.transport import TransportConfig, open_session
 def raw_keys(cell: str) -> dict[str, str]:
     """Keys of the raw Zenoh floor (outside the plugcell key space, isolated by cell)."""
     root = f"plugcell-bench/{cell}"
-    return {k: f"{root}/{k}" for k in ("ping", "pong", "push", "data", "echo", "echoed")}
+    return {k: f"{root}/{k}" for k in ("ping", "pong", "push", "data", "echo", "echoed",
+                                       "aping", "apong")}
 
 
 def serve_raw(cell: str, transport: TransportConfig) -> None:
@@ -37,7 +38,10 @@ def serve_raw(cell: str, transport: TransportConfig) -> None:
 
     Also echo ``echo`` as ``echoed`` inside Zenoh's callback itself — what Zenoh
     alone costs, without the hop to a thread that plugcell's callbacks must make
-    (and the ping/pong floor makes too): a reference, never a way to serve.
+    (and the ping/pong floor makes too): a reference, never a way to serve.  And
+    echo ``aping`` as ``apong`` from an event loop (plugcell's, in a thread of its
+    own) that each sample reaches by ``call_soon_threadsafe`` — the hop every
+    asyncio service makes, plugcell's included, with nothing else on the path.
     """
     keys = raw_keys(cell)
     session = open_session(transport)
@@ -62,6 +66,17 @@ def serve_raw(cell: str, transport: TransportConfig) -> None:
         keys["echo"], Callback(lambda s: echoed.put(s.payload.to_bytes()), indirect=False)
     ))
     data = session.declare_publisher(keys["data"], congestion_control=zenoh.CongestionControl.BLOCK)
+    apong = session.declare_publisher(
+        keys["apong"], express=True, congestion_control=zenoh.CongestionControl.BLOCK
+    )
+    loop = eventloop.new_event_loop()
+    looper = threading.Thread(target=loop.run_forever, name="asyncio floor", daemon=True)
+    looper.start()
+    subs.append(session.declare_subscriber(
+        keys["aping"],
+        Callback(lambda s: loop.call_soon_threadsafe(apong.put, s.payload.to_bytes()),
+                 indirect=False),
+    ))
     print("ready", flush=True)
     try:
         while not stop.is_set():
@@ -76,8 +91,11 @@ def serve_raw(cell: str, transport: TransportConfig) -> None:
     finally:
         for s in subs:
             s.undeclare()
+        loop.call_soon_threadsafe(loop.stop)
+        looper.join(5)
         pong.undeclare()
         echoed.undeclare()
+        apong.undeclare()
         data.undeclare()
         session.close()
 

@@ -20,7 +20,9 @@ and a *consumer* (a service in this process).
   payload, interleaved with ours; its callbacks hand each sample to a thread, as
   plugcell's must.  For reference, the same ping-pong answered inside Zenoh's
   callbacks themselves (``raw_zenoh_in_callback_latency_ms``): what Zenoh alone
-  costs on the machine.
+  costs on the machine; and the same ping-pong with each sample handed to an event
+  loop on each side (``raw_zenoh_event_loop_latency_ms``): the floor of any asyncio
+  service, plugcell's design, before plugcell does any work.
 """
 
 from __future__ import annotations
@@ -173,6 +175,14 @@ class RawFloor:
             self.keys["echoed"], Callback(lambda _: self._on_echoed(), indirect=False)
         ))
         self._push = self.session.declare_publisher(self.keys["push"])
+        self._aping = self.session.declare_publisher(
+            self.keys["aping"], express=True, congestion_control=zenoh.CongestionControl.BLOCK
+        )
+        self._on_apong: Callable[[bytes], None] = lambda _: None
+        self._subs.append(self.session.declare_subscriber(
+            self.keys["apong"],
+            Callback(lambda s: self._on_apong(s.payload.to_bytes()), indirect=False),
+        ))
         # handshake: declarations propagate asynchronously, so ping until a pong comes
         for _ in range(100):
             self._ping.put(b"hello")
@@ -242,6 +252,60 @@ class RawFloor:
             raise RuntimeError(f"in-callback ping-pong: {len(trips)}/{cycles} echoes arrived")
         return stats_ms(trips)
 
+    def latency_in_loop(self, nbytes: int, cycles: int, warmup: int) -> dict[str, float]:
+        """Ping-pong where each side's callback hands the sample to an event loop.
+
+        Both ends run plugcell's event loop (uvloop; here in a thread of its own) and
+        reach it by ``call_soon_threadsafe``; this side awaits a future per cycle, the
+        peer puts the answer from its loop — the hops of any asyncio service and
+        nothing of plugcell's own work: the floor of the event-loop design.
+        """
+        payload = bytes(nbytes)
+
+        async def ping_pong() -> list[int]:
+            loop = asyncio.get_running_loop()
+            waiting: list[asyncio.Future[bytes]] = []
+
+            def arrived(answer: bytes) -> None:
+                if waiting and not waiting[0].done():
+                    waiting[0].set_result(answer)
+
+            self._on_apong = lambda b: loop.call_soon_threadsafe(arrived, b)
+            for _ in range(100):  # the peer's subscriber may not be matched yet
+                waiting[:] = [loop.create_future()]
+                self._aping.put(payload)
+                with contextlib.suppress(TimeoutError):
+                    await asyncio.wait_for(waiting[0], 0.1)
+                    break
+            else:
+                raise RuntimeError("raw peer does not answer from its event loop")
+            await asyncio.sleep(0.2)  # late duplicates of the handshake
+            trips = []
+            for i in range(warmup + cycles):
+                waiting[:] = [loop.create_future()]
+                t0 = time.perf_counter_ns()
+                self._aping.put(payload)
+                await asyncio.wait_for(waiting[0], 10)
+                if i >= warmup:
+                    trips.append((time.perf_counter_ns() - t0) // 2)
+            return trips
+
+        result: list[list[int] | BaseException] = []
+
+        def run_loop() -> None:
+            try:
+                result.append(eventloop.run(ping_pong()))
+            except BaseException as exc:  # re-raised in the caller's thread
+                result.append(exc)
+
+        runner = threading.Thread(target=run_loop, name="asyncio floor")
+        runner.start()
+        runner.join()
+        self._on_apong = lambda _: None
+        if isinstance(result[0], BaseException):
+            raise result[0]
+        return stats_ms(result[0])
+
     def throughput(self, nbytes: int, messages: int) -> float:
         self._count, self._target = 0, messages
         self._done.clear()
@@ -257,6 +321,7 @@ class RawFloor:
         self._ping.undeclare()
         self._echo.undeclare()
         self._push.undeclare()
+        self._aping.undeclare()
         self.session.close()
 
 
@@ -350,6 +415,8 @@ async def _measure(
             raw_lat = raw.latency(p.nbytes, cycles, warmup)
             progress(f"{p.label}: raw latency inside Zenoh's callbacks")
             raw_cb = raw.latency_in_callback(p.nbytes, cycles, warmup)
+            progress(f"{p.label}: raw latency through event loops")
+            raw_loop = raw.latency_in_loop(p.nbytes, cycles, warmup)
             progress(f"{p.label}: latency ({cycles} cycles)")
             lat = await our_latency(consumer, p, cycles, warmup)
             raw_runs, runs = [], []
@@ -376,6 +443,7 @@ async def _measure(
                     "raw_zenoh_throughput_runs_msg_s": raw_runs,
                     "raw_zenoh_latency_ms": raw_lat,
                     "raw_zenoh_in_callback_latency_ms": raw_cb,
+                    "raw_zenoh_event_loop_latency_ms": raw_loop,
                     "latency_vs_raw": lat["avg"] / raw_lat["avg"],
                     "throughput_vs_thesis": thr / thesis_r_num,
                     "thesis": {
@@ -598,6 +666,12 @@ def format_table(report: dict[str, Any]) -> str:
             lines.append(
                 f"  answered inside Zenoh's callbacks, with no hop to a thread: avg "
                 f"{bare['avg']:.3f} ms, max {bare['max']:.3f} ms"
+            )
+        looped = four.get("raw_zenoh_event_loop_latency_ms")
+        if looped is not None:
+            lines.append(
+                f"  answered from an event loop on each side ({m.get('event_loop', 'asyncio')}, "
+                f"call_soon_threadsafe): avg {looped['avg']:.3f} ms, max {looped['max']:.3f} ms"
             )
     return "\n".join(lines)
 
