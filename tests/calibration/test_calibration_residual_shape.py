@@ -137,3 +137,31 @@ def test_fitted_layer_has_a_shape_stage_and_the_side_file_keeps_it(tmp_path):
     back1 = load_residual({**entry1, "sha256": hashlib.sha256(blob1).hexdigest()}, params,
                           robot=desc.name, model=res.model)
     assert back1.shape is None
+
+
+def test_shape_stage_applies_when_the_set_up_stage_is_not_useful():
+    """Each stage is judged by its own held-out cells: a set-up stage without gain is
+    never applied, and the kept shape stage still corrects where it is in its domain."""
+    from dataclasses import replace
+
+    from calibration_testlib import harmonic_campaign
+
+    from plugcell.calibration import Calibrator
+    from plugcell.calibration.residual_model import ResidualLearner
+
+    desc, cal = harmonic_campaign(400, seed=1)
+    res = Calibrator(desc, "serial").fit(cal)
+    grid = ({"max_leaf_nodes": 15, "min_samples_leaf": 20},)
+    layer = ResidualLearner(grid=grid, trees=40).fit(res.model, cal, robot=desc.name)
+    assert layer.useful and layer.shape is not None and layer.shape.useful
+    q = cal.q[:50]
+    idle = replace(layer, useful=False)
+    pred = idle.predict(q)
+    shape_corr, shape_in, _ = layer.shape.predict(q)
+    assert pred.local is not None and not pred.local.any()
+    assert shape_in.any()
+    np.testing.assert_array_equal(pred.in_domain, shape_in)
+    np.testing.assert_array_equal(pred.correction[:, :shape_corr.shape[1]], shape_corr)
+    # without a shape stage, a layer without gain corrects nothing
+    bare = replace(idle, shape=None).predict(q)
+    assert not bare.in_domain.any() and np.all(bare.correction == 0)

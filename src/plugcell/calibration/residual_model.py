@@ -479,8 +479,9 @@ class LearnedResidual:
     cv : CrossValidation
         The grouped cross-validation.
     useful : bool
-        False when it did not beat the physical model on held-out cells: then neither it
-        nor its shape stage is ever applied.
+        False when it did not beat the physical model on held-out cells: then this
+        stage is never applied.  The shape stage is judged by its own held-out cells
+        (it exists only when it beat the physical model there) and applies either way.
     n_poses : int
         Number of training poses.
     sklearn_version : str
@@ -537,7 +538,8 @@ class LearnedResidual:
 
         A pose is in the layer's domain when ``min_j ‖x − x_j‖ ≤ threshold`` (nearest
         training pose in feature space) and the layer is ``useful``; there the
-        regressors give ``(e, φ)``.  Elsewhere the shape stage's correction
+        regressors give ``(e, φ)``.  Elsewhere (everywhere when the layer is not
+        ``useful``) the shape stage's correction
         ``R_z(q1) · s(sin q_J, cos q_J)`` is used where its own test passes, else zero
         (physical model).
 
@@ -566,7 +568,7 @@ class LearnedResidual:
         local = (dist <= self.threshold) & self.useful
         corr = np.zeros((len(X), 6))
         inside = local.copy()
-        if self.shape is not None and self.useful and not local.all():
+        if self.shape is not None and not local.all():
             c, shape_in, _ = self.shape.predict(q)
             use = shape_in & ~local            # the set-up's own layer comes first
             corr[use, :c.shape[1]] = c[use]

@@ -189,7 +189,12 @@ def _hybrid_section(result: CalibrationResult) -> list[str]:
            f"the robot base frame; grouped {cv.folds}-fold cross-validation over {cv.cells} "
            f"workspace cells of {cv.cell_size_m:g} m: held-out mean position error "
            f"{cv.physical_mm:.3f} mm (physical) → {cv.hybrid_mm:.3f} mm (hybrid)"
-           + ("" if layer.useful else " — <b>no gain: the layer is not applied</b>") + ".</p>"]
+           + ("" if layer.useful else " — <b>no gain: this stage is not applied</b>")
+           + ("" if layer.shape is None else
+              f"; arm-shape stage (joint-1 frame, sin/cos of "
+              f"{', '.join(f'q{j + 1}' for j in layer.shape.joints)}): "
+              f"{layer.shape.physical_mm:.3f} → {layer.shape.cv_mm:.3f} mm, applied where the "
+              "first stage is not") + ".</p>"]
     h = result.hybrid_validation_residuals
     if h is None:
         out.append("<p class='small'>No validation set: the hybrid model was not validated "

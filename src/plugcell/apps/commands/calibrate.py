@@ -202,6 +202,11 @@ def _summary(d: dict[str, Any]) -> str:
         lines.append(f"  residual model: grouped {cv['folds']}-fold CV over {cv['cells']} cells of "
                      f"{cv['cell_size_m']:g} m: {cv['physical_mm']:.3f} -> {cv['hybrid_mm']:.3f} mm"
                      + ("" if rm["useful"] else " (no gain: not applied)"))
+        sh = rm.get("shape_stage")
+        if sh:
+            lines.append(f"  arm-shape stage (joint-1 frame, {', '.join(sh['features'])}): "
+                         f"{sh['physical_mm']:.3f} -> {sh['cv_mm']:.3f} mm, applied where the "
+                         "first stage is not")
     if hv:
         lines.append(f"  validation  physical {hv['physical']['mean_mm']:7.3f} mm, hybrid "
                      f"{hv['hybrid']['mean_mm']:7.3f} mm ({hv['fallbacks']} of {hv['poses']} "
