@@ -53,9 +53,17 @@ class _CountingPublisher:
         self.samples += 1
 
 
-class _OpenSession:
-    def is_closed(self) -> bool:
-        return False
+class _CountingBus:
+    """Stands in for the service's transport adapter (framework/bus.py): always open,
+    every process publisher is the counting one."""
+
+    is_open = True
+
+    def __init__(self, publisher: _CountingPublisher) -> None:
+        self.publisher = publisher
+
+    def process_publisher(self, name: str, sender: str, *, express: bool) -> _CountingPublisher:
+        return self.publisher
 
 
 async def _per_frame_us(shape: tuple[int, ...], frames: int, folder: Path | None,
@@ -66,8 +74,7 @@ async def _per_frame_us(shape: tuple[int, ...], frames: int, folder: Path | None
     if folder is not None:
         service.journal = Journal(folder / f"frames-{time.time_ns()}.sqlite", "PUBLISHER")
     publisher = _CountingPublisher()
-    service.session = _OpenSession()  # type: ignore[assignment]
-    service._publisher = lambda sender: publisher  # type: ignore[method-assign]
+    service.bus = _CountingBus(publisher)  # type: ignore[assignment]
     service.outbox.loop = service._loop
     push = service.device.command("Push")
     assert push is not None
