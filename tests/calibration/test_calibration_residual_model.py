@@ -4,7 +4,10 @@ transfer, the skops side file, the CLI and the bad inputs of issue 19."""
 from __future__ import annotations
 
 import json
+import os
 import re
+import subprocess
+import sys
 from pathlib import Path
 
 import numpy as np
@@ -260,3 +263,34 @@ def test_cli_calibrate_and_compensate_with_the_learned_layer(tmp_path, capsys):
     assert main(["compensate", "--params", str(other), "--targets",
                  str(tmp_path / "targets.csv"), "--out", str(tmp_path / "x.csv")]) == 2
     assert "residual model of robot 'ur10-test'" in capsys.readouterr().err
+
+
+@pytest.mark.skipif((os.cpu_count() or 1) < 2, reason="one core: every pool has one thread")
+def test_fit_uses_n_threads_even_as_the_first_fit_of_a_process():
+    """threadpoolctl limits only the pools loaded when its limit is entered: a first fit
+    in a fresh interpreter must still run scikit-learn's OpenMP on ``n_threads``."""
+    code = """
+import numpy as np
+from threadpoolctl import threadpool_info
+from calibration_testlib import harmonic_campaign
+from plugcell.calibration import Calibrator
+from plugcell.calibration.residual_model import ResidualLearner
+
+seen = []
+class Spy(ResidualLearner):
+    def _regressor(self, params):
+        seen.extend(p["num_threads"] for p in threadpool_info() if p["user_api"] == "openmp")
+        return super()._regressor(params)
+
+desc, cal = harmonic_campaign(300, seed=2)
+res = Calibrator(desc, "serial").fit(cal)
+Spy(grid=({"max_leaf_nodes": 7, "min_samples_leaf": 20},), trees=5,
+    shape_joints=()).fit(res.model, cal, robot=desc.name)
+print(sorted(set(seen)))
+"""
+    env = {**os.environ, "PYTHONPATH": os.pathsep.join(
+        [str(Path(__file__).parent), *sys.path])}
+    done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                          env=env, timeout=120)
+    assert done.returncode == 0, done.stderr[-2000:]
+    assert done.stdout.strip() == "[1]", done.stdout

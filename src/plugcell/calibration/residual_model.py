@@ -848,7 +848,14 @@ class ResidualLearner:
             Too few poses (the message says how many are needed), too few workspace
             cells for the folds, or an incomplete temperature/payload column.
         """
+        # threadpoolctl limits the thread pools loaded when the limit is entered: load
+        # scikit-learn's (OpenMP, BLAS) first, or a first fit in a process runs on all cores
+        import importlib
+
         from threadpoolctl import threadpool_limits
+
+        for module in ("sklearn.ensemble", "sklearn.neighbors"):
+            importlib.import_module(module)
 
         with threadpool_limits(self.n_threads):
             return self._fit(model, data, robot)
