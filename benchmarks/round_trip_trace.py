@@ -50,10 +50,12 @@ def _probe(trace: Trace, owner: Any, name: str, before: str, after: str = "") ->
     setattr(owner, name, probed)
 
 
-def _probe_framework(trace: Trace) -> None:
+def _probe_framework(trace: Trace, arrival: bool = False) -> None:
     from plugcell.framework import journal, outbox, port, service
 
     _probe(trace, port.Port, "_drain", "loop wakes")
+    if arrival:  # the Zenoh callback's hand-off, on Zenoh's thread
+        _probe(trace, port.Port, "post", "Zenoh callback")
     _probe(trace, service.GenericDevice, "_create", "check+journal", "checked")
     _probe(trace, outbox.Outbox, "flush", "flush")
     _probe(trace, journal.Journal, "commit", "commit", "committed")
@@ -78,7 +80,28 @@ def _probe_cpu(spent: list[tuple[str, int, int]], owner: Any, name: str) -> None
     setattr(owner, name, probed)
 
 
-def serve(cell: str, journal: bool, out: str) -> None:
+def _spy_on_requests(trace: Trace) -> None:
+    """Beside the service's own subscriber of requests, a plain Zenoh subscriber of the
+    same key on the same session, recording when each request sample reaches it: the
+    transfer alone, whatever plugcell's callback does."""
+    from zenoh.handlers import Callback
+
+    from plugcell.framework.bus import Bus
+
+    take_requests = Bus.take_requests
+    spies: list[Any] = []
+
+    def spied(self: Bus, name: str, handler: Any) -> Any:
+        spies.append(self.session.declare_subscriber(
+            self.keys.requests(name),
+            Callback(lambda _: trace.append(("sample arrives", time.perf_counter_ns())),
+                     indirect=False)))
+        return take_requests(self, name, handler)
+
+    Bus.take_requests = spied  # type: ignore[method-assign]
+
+
+def serve(cell: str, journal: bool, out: str, arrival: bool = False) -> None:
     """The publisher, probed; its trace goes to ``out`` when it stops (SIGTERM)."""
     import atexit
 
@@ -88,7 +111,9 @@ def serve(cell: str, journal: bool, out: str) -> None:
 
     trace: Trace = []
     spent: list[tuple[str, int, int]] = []
-    _probe_framework(trace)
+    _probe_framework(trace, arrival)
+    if arrival:
+        _spy_on_requests(trace)
     # inside the step probes, so they time just what those enclose
     for owner, step in CPU_STEPS:
         _probe_cpu(spent, {"service": service.GenericDevice, "outbox": outbox.Outbox,
@@ -112,10 +137,15 @@ class _ProbedDoor:
         return getattr(self._door, name)
 
 
-async def _requester(cell: str, journal: bool, cycles: int, trace: Trace) -> None:
+async def _requester(cell: str, journal: bool, cycles: int, trace: Trace,
+                     arrival: bool = False) -> None:
     from plugcell.apps.bench.device import BenchService
     from plugcell.framework.transport import TransportConfig
 
+    if arrival:  # before start: the transport adapter keeps the bound hand-off it gets
+        from plugcell.framework import port
+
+        _probe(trace, port.Port, "post", "Zenoh callback")
     consumer = BenchService("CONSUMER", cell=cell, transport=TransportConfig.from_env(),
                             journal=journal)
     await consumer.start()
@@ -179,11 +209,15 @@ def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--cycles", type=int, default=2000)
     parser.add_argument("--no-journal", action="store_true")
+    parser.add_argument("--arrival", action="store_true",
+                        help="also time each sample's arrival: the Zenoh callback's hand-off "
+                        "on both sides, and a plain Zenoh subscriber of the requests beside "
+                        "the service's (the transfer alone)")
     parser.add_argument("--serve", nargs=2, metavar=("CELL", "OUT"), help=argparse.SUPPRESS)
     args = parser.parse_args(argv)
     journal = not args.no_journal
     if args.serve:
-        serve(args.serve[0], journal, args.serve[1])
+        serve(args.serve[0], journal, args.serve[1], args.arrival)
         return 0
     from plugcell.framework import eventloop
 
@@ -192,7 +226,7 @@ def main(argv: list[str] | None = None) -> int:
         cell, out = f"trace{os.getpid()}", os.path.join(tmp, "service-trace.json")
         child = subprocess.Popen(
             [sys.executable, __file__, "--serve", cell, out,
-             *([] if journal else ["--no-journal"])],
+             *([] if journal else ["--no-journal"]), *(["--arrival"] if args.arrival else [])],
             stdout=subprocess.PIPE, text=True,
         )
         try:
@@ -200,7 +234,7 @@ def main(argv: list[str] | None = None) -> int:
             if child.stdout.readline().strip() != "ready":
                 raise RuntimeError("the publisher did not start")
             trace: Trace = []
-            eventloop.run(_requester(cell, journal, args.cycles, trace))
+            eventloop.run(_requester(cell, journal, args.cycles, trace, args.arrival))
         finally:
             child.terminate()
             child.wait(15)

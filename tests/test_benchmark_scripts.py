@@ -21,13 +21,14 @@ SCRIPTS = [
     ("service_frames.py", ["--frames", "256", "--repeat", "1"], "4 B |"),
     ("journal.py", ["--processes", "200", "--updates", "5", "--repeat", "1"], "per request µs"),
     ("round_trip_trace.py", ["--cycles", "30"], "round trip (sum of the medians)"),
+    ("round_trip_trace.py", ["--cycles", "30", "--arrival"], "service: sample arrives"),
     ("round_trip_profile.py", ["--cycles", "30", "--top", "3"], "journal (SQLite)"),
 ]
 
 
 @pytest.mark.slow
 @pytest.mark.parametrize(("script", "args", "expected"), SCRIPTS,
-                         ids=[s for s, _, _ in SCRIPTS])
+                         ids=[" ".join([s, *a]) for s, a, _ in SCRIPTS])
 def test_benchmark_script_runs(script: str, args: list[str], expected: str,
                                tmp_path: Path) -> None:
     env = {**os.environ, "PLUGCELL_HOME": str(tmp_path)}
