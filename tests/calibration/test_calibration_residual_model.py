@@ -228,6 +228,10 @@ def test_cli_calibrate_and_compensate_with_the_learned_layer(tmp_path, capsys):
     assert (tmp_path / d["residual_model"]["file"]).is_file()
     html = (tmp_path / "r.html").read_text()
     assert "Learned residual layer" in html and "validation, hybrid" in html
+    # the arm-shape stage is shown in the summary and the report exactly when it was kept
+    shape = d["residual_model"]["shape_stage"]
+    assert ("arm-shape stage (joint-1 frame, sin/cos q2, sin/cos q3)" in text) == bool(shape)
+    assert ("arm-shape stage (joint-1 frame, sin/cos of q2, q3)" in html) == bool(shape)
     # compensate: targets in the robot base frame (mm, deg, zyz)
     T = np.linalg.inv(np.array(d["base"]["matrix"])) @ cal.poses[:5]
     ang = np.degrees(matrix_to_angles(T[:, :3, :3], "zyz"))

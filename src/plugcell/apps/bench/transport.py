@@ -256,8 +256,9 @@ class RawFloor:
         """Ping-pong where each side's callback hands the sample to an event loop.
 
         Both ends run plugcell's event loop (uvloop; here in a thread of its own) and
-        reach it by ``call_soon_threadsafe``; this side awaits a future per cycle, the
-        peer puts the answer from its loop — the hops of any asyncio service and
+        reach it by ``call_soon_threadsafe``; this side awaits a future per cycle (under
+        a 10 s timeout, as plugcell's calls wait under theirs), the peer puts the answer
+        from its loop — the hops of any asyncio service and
         nothing of plugcell's own work: the floor of the event-loop design.
         """
         payload = bytes(nbytes)
