@@ -298,3 +298,32 @@ print(sorted(set(seen)))
                           env=env, timeout=120)
     assert done.returncode == 0, done.stderr[-2000:]
     assert done.stdout.strip() == "[1]", done.stdout
+
+
+@pytest.mark.slow
+def test_cli_calibrate_on_a_prior_arm_shape_stage_and_its_refusals(tmp_path, capsys):
+    _, cal_a = harmonic_campaign(300, seed=1)
+    _, cal_b = harmonic_campaign(200, seed=3)
+    (tmp_path / "ur10.toml").write_text(ur10_toml())
+    _write_set(tmp_path / "a.csv", cal_a)
+    _write_set(tmp_path / "b.csv", cal_b)
+    common = ["calibrate", "--robot", str(tmp_path / "ur10.toml"), "--model", "serial",
+              "--residual-trees", "40", "--quiet"]
+    on_b = [*common, "--data", str(tmp_path / "b.csv"), "--out", str(tmp_path / "b.json")]
+    assert main([*common, "--data", str(tmp_path / "a.csv"),
+                 "--out", str(tmp_path / "plain.json")]) == 0
+    capsys.readouterr()
+    # a calibration without a learned layer is no prior; the prior needs a layer here too
+    assert main([*on_b, "--residual-model", "learned",
+                 "--residual-prior", str(tmp_path / "plain.json")]) == 2
+    assert "has no learned residual layer" in capsys.readouterr().err
+    assert main([*on_b, "--residual-prior", str(tmp_path / "plain.json")]) == 2
+    assert "--residual-prior needs --residual-model learned" in capsys.readouterr().err
+    assert main([*common, "--data", str(tmp_path / "a.csv"), "--residual-model", "learned",
+                 "--out", str(tmp_path / "a.json")]) == 0
+    capsys.readouterr()
+    assert main([*on_b, "--residual-model", "learned",
+                 "--residual-prior", str(tmp_path / "a.json")]) == 0
+    assert "on top of a prior arm-shape stage (sin/cos q2, sin/cos q3" in capsys.readouterr().out
+    a, b = (json.loads((tmp_path / f"{k}.json").read_text())["residual_model"] for k in "ab")
+    assert b["prior_stage"] == a["shape_stage"] and b["prior_stage"]["joints"] == [2, 3]

@@ -4,6 +4,7 @@ the joint-1 frame, its rotation covariance, the two stages' domains and the side
 from __future__ import annotations
 
 import hashlib
+from dataclasses import replace
 
 import numpy as np
 import pytest
@@ -118,7 +119,7 @@ def test_fitted_layer_has_a_shape_stage_and_the_side_file_keeps_it(tmp_path):
 
     blob = residual_path(params).read_bytes()
     obj = sio.loads(blob, trusted=sio.get_untrusted_types(data=blob))
-    assert obj["format_version"] == FORMAT_VERSION == 2
+    assert obj["format_version"] == FORMAT_VERSION == 3
     obj["format_version"] = 99
     bad = sio.dumps(obj)
     (tmp_path / "bad.skops").write_bytes(bad)
@@ -165,3 +166,55 @@ def test_shape_stage_applies_when_the_set_up_stage_is_not_useful():
     # without a shape stage, a layer without gain corrects nothing
     bare = replace(idle, shape=None).predict(q)
     assert not bare.in_domain.any() and np.all(bare.correction == 0)
+
+
+def test_a_layer_learned_on_a_prior_stage_adds_it_and_its_file_keeps_it(tmp_path):
+    """``fit(prior=…)`` (calibrate --residual-prior): the targets are what another
+    set-up's arm-shape stage leaves, every prediction adds that stage's correction, and
+    the side file (format 3) keeps it; a format-2 file (no prior) still loads."""
+    import skops.io as sio
+    from calibration_testlib import harmonic_campaign
+
+    from plugcell.calibration import Calibrator
+    from plugcell.calibration.residual_model import ResidualLearner, residual_targets
+    from plugcell.io.residual_models import residual_path, save_residual
+
+    desc, cal_a = harmonic_campaign(400, seed=1)
+    _, cal_b = harmonic_campaign(300, seed=2)
+    grid = ({"max_leaf_nodes": 15, "min_samples_leaf": 20},)
+    a = ResidualLearner(grid=grid, trees=40).fit(Calibrator(desc, "serial").fit(cal_a).model,
+                                                 cal_a, robot=desc.name)
+    assert a.shape is not None
+    model_b = Calibrator(desc, "serial").fit(cal_b).model
+    b = ResidualLearner(grid=grid, trees=40).fit(model_b, cal_b, robot=desc.name,
+                                                 prior=a.shape)
+    assert b.prior is a.shape and b.summary()["prior_stage"] == a.shape.summary()
+    E, _ = residual_targets(model_b, cal_b)
+    c_all = a.shape.predict(cal_b.q)[0]
+    left = np.linalg.norm(E[:, :3] - c_all[:, :3], axis=1).mean() * 1e3
+    assert b.cv.physical_mm == pytest.approx(left)  # the baseline: what the prior leaves
+    q = cal_b.q[:40]
+    both, own = b.predict(q), replace(b, prior=None).predict(q)
+    c, inside, _ = a.shape.predict(q)
+    assert inside.any()
+    np.testing.assert_allclose(both.correction[:, :c.shape[1]],
+                               own.correction[:, :c.shape[1]] + c, atol=1e-15)
+    np.testing.assert_array_equal(both.in_domain, own.in_domain | inside)
+    params = tmp_path / "b.json"
+    entry = save_residual(b, residual_path(params))
+    back = load_residual(entry, params, robot=desc.name, model=model_b)
+    assert back.prior is not None and back.prior.joints == a.shape.joints
+    np.testing.assert_array_equal(back.predict(q).correction, both.correction)
+    # a format-2 file: no prior stage, still read
+    plain = replace(b, prior=None)
+    entry2 = save_residual(plain, tmp_path / "two.skops")
+    o2 = sio.loads((tmp_path / "two.skops").read_bytes(),
+                   trusted=sio.get_untrusted_types(data=(tmp_path / "two.skops").read_bytes()))
+    o2["format_version"] = 2
+    o2["meta"].pop("prior_stage")
+    blob2 = sio.dumps(o2)
+    (tmp_path / "two.skops").write_bytes(blob2)
+    back2 = load_residual({**entry2, "sha256": hashlib.sha256(blob2).hexdigest()}, params,
+                          robot=desc.name, model=model_b)
+    assert back2.prior is None
+    np.testing.assert_array_equal(back2.predict(q).correction, own.correction)

@@ -489,6 +489,11 @@ class LearnedResidual:
     shape : ShapeStage or None
         The transferable arm-shape stage, used where a pose is outside this layer's
         region, or ``None``.
+    prior : ShapeStage or None
+        An arm-shape stage learned in another set-up (another calibration's layer of the
+        same robot), applied underneath: this layer's stages were fitted on the residual
+        it leaves, and every prediction adds its correction where its own in-domain test
+        passes; or ``None``.
     """
 
     robot: str
@@ -505,6 +510,7 @@ class LearnedResidual:
     n_poses: int
     sklearn_version: str = field(default="")
     shape: ShapeStage | None = None
+    prior: ShapeStage | None = None
 
     def features(self, q: ArrayLike, payload_kg: ArrayLike | float | None = None,
                  temperature_c: ArrayLike | float | None = None) -> Array:
@@ -541,7 +547,8 @@ class LearnedResidual:
         regressors give ``(e, φ)``.  Elsewhere (everywhere when the layer is not
         ``useful``) the shape stage's correction
         ``R_z(q1) · s(sin q_J, cos q_J)`` is used where its own test passes, else zero
-        (physical model).
+        (physical model).  A ``prior`` stage's correction is added everywhere its own test
+        passes (the stages above were fitted on what it leaves).
 
         Parameters
         ----------
@@ -580,6 +587,10 @@ class LearnedResidual:
             with threadpool_limits(1):
                 for j, est in enumerate(self.estimators):
                     corr[local, j] = est.predict(Xi)
+        if self.prior is not None:
+            c, prior_in, _ = self.prior.predict(q)
+            corr[:, :c.shape[1]] += c
+            inside |= prior_in
         return ResidualPrediction(corr, inside, dist, local)
 
     def summary(self) -> dict[str, Any]:
@@ -592,7 +603,7 @@ class LearnedResidual:
             ``frame`` (``"robot base"``), ``orientation``, ``params``, ``threshold``
             (dimensionless), ``useful``, ``poses``, ``cross_validation``
             (:meth:`CrossValidation.as_dict`, mm and deg), ``sklearn_version`` and
-            ``shape_stage`` (:meth:`ShapeStage.summary` or ``None``).
+            ``shape_stage`` and ``prior_stage`` (:meth:`ShapeStage.summary` or ``None``).
         """
         return {"kind": "learned", "learner": "sklearn.HistGradientBoostingRegressor",
                 "robot": self.robot, "fingerprint": self.fingerprint,
@@ -601,7 +612,8 @@ class LearnedResidual:
                 "params": dict(self.params), "threshold": self.threshold,
                 "useful": self.useful, "poses": self.n_poses,
                 "cross_validation": self.cv.as_dict(), "sklearn_version": self.sklearn_version,
-                "shape_stage": None if self.shape is None else self.shape.summary()}
+                "shape_stage": None if self.shape is None else self.shape.summary(),
+                "prior_stage": None if self.prior is None else self.prior.summary()}
 
 
 def feature_names(payload: bool, temperature: bool) -> list[str]:
@@ -812,7 +824,8 @@ class ResidualLearner:
         return HistGradientBoostingRegressor(
             random_state=self.seed, **{**_FIXED, "max_iter": self.trees, **params})
 
-    def fit(self, model: ErrorModel, data: CalibrationData, *, robot: str = "") -> LearnedResidual:
+    def fit(self, model: ErrorModel, data: CalibrationData, *, robot: str = "",
+            prior: ShapeStage | None = None) -> LearnedResidual:
         """Learn the residual of ``model`` (an identified physical model) on ``data``.
 
         The targets are the physical residuals in the base frame ``e = R_Bᵀ Δp``,
@@ -836,6 +849,12 @@ class ResidualLearner:
             payloads ``(N,)`` (kg), temperatures ``(N,)`` (°C) or None.
         robot : str
             The robot's name, recorded in the layer.
+        prior : ShapeStage, optional
+            An arm-shape stage learned in another set-up of the same robot (another
+            calibration's ``LearnedResidual.shape``): the targets become what it leaves,
+            ``e − c_prior(q)``, and the layer carries it (:attr:`LearnedResidual.prior`).
+            Its cross-validation's "physical" figure is then the physical model with the
+            prior stage.
 
         Returns
         -------
@@ -858,9 +877,10 @@ class ResidualLearner:
             importlib.import_module(module)
 
         with threadpool_limits(self.n_threads):
-            return self._fit(model, data, robot)
+            return self._fit(model, data, robot, prior)
 
-    def _fit(self, model: ErrorModel, data: CalibrationData, robot: str) -> LearnedResidual:
+    def _fit(self, model: ErrorModel, data: CalibrationData, robot: str,
+             prior: ShapeStage | None = None) -> LearnedResidual:
         import sklearn
         from sklearn.model_selection import GroupKFold
         from sklearn.neighbors import NearestNeighbors
@@ -878,6 +898,11 @@ class ResidualLearner:
         pay = bool(np.ptp(data.payload_kg) > 0) if self.use_payload is None else self.use_payload
         X = _features(data.q, data.payload_kg, data.temperature_c, pay, temp)
         E, p_b = residual_targets(model, data)
+        if prior is not None:  # learn what the other set-up's arm-shape stage leaves
+            c, _, _ = prior.predict(data.q)
+            k = min(c.shape[1], E.shape[1])
+            E = E.copy()
+            E[:, :k] -= c[:, :k]
         k_pos = 3
         n_out = 6 if (self.orientation and E.shape[1] == 6) else 3
         groups = workspace_cells(p_b, self.cell_size_m)
@@ -936,7 +961,7 @@ class ResidualLearner:
             uses_temperature=temp, uses_payload=pay, orientation=n_out == 6,
             params={**_FIXED, "max_iter": self.trees, **params},
             cv=cv, useful=score < float(phys_norm.mean()), n_poses=n,
-            sklearn_version=sklearn.__version__, shape=shape)
+            sklearn_version=sklearn.__version__, shape=shape, prior=prior)
 
     def _fit_shape(self, q: ArrayLike, E: Array, folds: list[tuple[Array, Array]],
                    phys_norm: Array) -> ShapeStage:

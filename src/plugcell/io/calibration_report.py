@@ -194,7 +194,12 @@ def _hybrid_section(result: CalibrationResult) -> list[str]:
               f"; arm-shape stage (joint-1 frame, sin/cos of "
               f"{', '.join(f'q{j + 1}' for j in layer.shape.joints)}): "
               f"{layer.shape.physical_mm:.3f} → {layer.shape.cv_mm:.3f} mm, applied where the "
-              "first stage is not") + ".</p>"]
+              "first stage is not")
+           + ("" if layer.prior is None else
+              "; learned on top of a prior arm-shape stage from another calibration "
+              "(sin/cos of " + ", ".join(f"q{j + 1}" for j in layer.prior.joints)
+              + "), which every prediction adds and the “physical” figure includes")
+           + ".</p>"]
     h = result.hybrid_validation_residuals
     if h is None:
         out.append("<p class='small'>No validation set: the hybrid model was not validated "

@@ -17,9 +17,11 @@ Loading checks, each failure a :class:`ResidualFileError` naming the file:
 * it was written by the same scikit-learn major.minor version (tree predictors are
   not guaranteed across versions: re-run ``plugcell calibrate``).
 
-Format 2 (this version) adds the transferable arm-shape stage
+Format 2 added the transferable arm-shape stage
 (:class:`~plugcell.calibration.residual_model.ShapeStage`: its estimators,
-nearest-neighbour index and summary); format-1 files (no shape stage) still load.
+nearest-neighbour index and summary); format 3 (this version) adds the prior stage, an
+arm-shape stage of another set-up the layer was learned on top of
+(``calibrate --residual-prior``).  Format-1 and format-2 files still load.
 """
 
 from __future__ import annotations
@@ -40,9 +42,9 @@ __all__ = ["FORMAT", "TRUSTED_TYPES", "ResidualFileError", "load_residual", "res
            "save_residual"]
 
 FORMAT = "plugcell-residual-model"
-FORMAT_VERSION = 2
-#: versions :func:`load_residual` reads (1: no arm-shape stage).
-READABLE_VERSIONS = (1, 2)
+FORMAT_VERSION = 3
+#: versions :func:`load_residual` reads (1: no arm-shape stage; 2: no prior stage).
+READABLE_VERSIONS = (1, 2, 3)
 #: The only non-builtin types a side file may contain.
 TRUSTED_TYPES = (
     "sklearn.ensemble._hist_gradient_boosting.gradient_boosting.HistGradientBoostingRegressor",
@@ -120,9 +122,9 @@ def save_residual(layer: LearnedResidual, path: str | Path) -> dict[str, Any]:
     obj = {"format": FORMAT, "format_version": FORMAT_VERSION, "meta": meta,
            "cv": {**asdict(layer.cv), "scores": [[dict(s), v] for s, v in layer.cv.scores]},
            "estimators": list(layer.estimators), "neighbours": layer.neighbours}
-    if layer.shape is not None:
-        obj["shape"] = {"estimators": list(layer.shape.estimators),
-                        "neighbours": layer.shape.neighbours}
+    for key, stage in (("shape", layer.shape), ("prior", layer.prior)):
+        if stage is not None:
+            obj[key] = {"estimators": list(stage.estimators), "neighbours": stage.neighbours}
     blob = sio.dumps(obj)
     try:
         p.parent.mkdir(parents=True, exist_ok=True)
@@ -156,7 +158,8 @@ def load_residual(entry: dict[str, Any], params_path: str | Path, *, robot: str,
     Returns
     -------
     LearnedResidual
-        The layer (with its arm-shape stage when the file has one; format 1 has none).
+        The layer (with its arm-shape stage and its prior stage when the file has them;
+        format 1 has neither, format 2 no prior stage).
 
     Raises
     ------
@@ -216,16 +219,8 @@ def load_residual(entry: dict[str, Any], params_path: str | Path, *, robot: str,
     cvd = dict(obj["cv"])
     cvd["scores"] = tuple((dict(s), float(v)) for s, v in cvd["scores"])
     features = list(meta["features"])
-    shape = None
-    if meta.get("shape_stage") is not None:
-        sm, so = meta["shape_stage"], obj.get("shape")
-        if not isinstance(so, dict):
-            raise ResidualFileError(f"{p}: the shape stage's estimators are missing")
-        shape = ShapeStage(
-            joints=tuple(int(j) - 1 for j in sm["joints"]), estimators=tuple(so["estimators"]),
-            neighbours=so["neighbours"], threshold=float(sm["threshold"]),
-            params=dict(sm["params"]), physical_mm=float(sm["physical_mm"]),
-            cv_mm=float(sm["cv_mm"]), useful=bool(sm["useful"]))
+    shape = _stage(meta.get("shape_stage"), obj.get("shape"), p, "shape")
+    prior = _stage(meta.get("prior_stage"), obj.get("prior"), p, "prior")
     return LearnedResidual(
         robot=robot, fingerprint=fp, estimators=tuple(obj["estimators"]),
         neighbours=obj["neighbours"], threshold=float(meta["threshold"]),
@@ -233,4 +228,19 @@ def load_residual(entry: dict[str, Any], params_path: str | Path, *, robot: str,
         uses_payload=any(f.startswith("payload") for f in features),
         orientation=bool(meta["orientation"]), params=dict(meta["params"]),
         cv=CrossValidation(**cvd), useful=bool(meta["useful"]), n_poses=int(meta["poses"]),
-        sklearn_version=str(meta["sklearn_version"]), shape=shape)
+        sklearn_version=str(meta["sklearn_version"]), shape=shape, prior=prior)
+
+
+def _stage(summary: dict[str, Any] | None, fitted: Any, p: Path, what: str
+           ) -> ShapeStage | None:
+    """An arm-shape stage from its summary (PARAMS.json's words) and its fitted parts."""
+    if summary is None:
+        return None
+    if not isinstance(fitted, dict):
+        raise ResidualFileError(f"{p}: the {what} stage's estimators are missing")
+    return ShapeStage(
+        joints=tuple(int(j) - 1 for j in summary["joints"]),
+        estimators=tuple(fitted["estimators"]), neighbours=fitted["neighbours"],
+        threshold=float(summary["threshold"]), params=dict(summary["params"]),
+        physical_mm=float(summary["physical_mm"]), cv_mm=float(summary["cv_mm"]),
+        useful=bool(summary["useful"]))

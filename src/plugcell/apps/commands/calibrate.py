@@ -94,6 +94,11 @@ def configure(p: argparse.ArgumentParser) -> None:
                         "cross-validation (default 0.4 m)")
     p.add_argument("--residual-trees", type=int, default=300, metavar="N",
                    help="boosting iterations of each residual regressor (default 300)")
+    p.add_argument("--residual-prior", type=Path, metavar="PARAMS.json",
+                   help="learn the layer on top of the arm-shape stage of another "
+                        "calibration of this robot with a learned layer (its PARAMS.json "
+                        "and side file), e.g. one made in another set-up: a short campaign "
+                        "here then adds to what that one taught (docs/calibration.md)")
     p.add_argument("--quiet", action="store_true", help="no progress on stderr")
     p.set_defaults(func=_run)
 
@@ -202,6 +207,11 @@ def _summary(d: dict[str, Any]) -> str:
         lines.append(f"  residual model: grouped {cv['folds']}-fold CV over {cv['cells']} cells of "
                      f"{cv['cell_size_m']:g} m: {cv['physical_mm']:.3f} -> {cv['hybrid_mm']:.3f} mm"
                      + ("" if rm["useful"] else " (no gain: not applied)"))
+        pr = rm.get("prior_stage")
+        if pr:
+            lines.append(f"  on top of a prior arm-shape stage ({', '.join(pr['features'])}; "
+                         f"its own set-up {pr['physical_mm']:.3f} -> {pr['cv_mm']:.3f} mm): the "
+                         "CV's first figure is the physical model with it")
         sh = rm.get("shape_stage")
         if sh:
             lines.append(f"  arm-shape stage (joint-1 frame, {', '.join(sh['features'])}): "
@@ -213,6 +223,28 @@ def _summary(d: dict[str, Any]) -> str:
                      "poses outside the trained region: physical model used)")
     lines += [f"  warning: {w}" for w in d["warnings"]]
     return "\n".join(lines)
+
+
+def _prior_stage(path: Path, args: argparse.Namespace) -> Any:
+    """The arm-shape stage of the learned layer of calibration ``path`` (--residual-prior),
+    read with this command's robot: a calibration of another robot is refused."""
+    from plugcell.apps.cli import CommandError
+    from plugcell.apps.commands.files import read_calibration
+    from plugcell.io.residual_models import ResidualFileError, load_residual
+
+    d, result = read_calibration(path, args)
+    entry = d.get("residual_model")
+    if not entry:
+        raise CommandError(f"--residual-prior {path}: that calibration has no learned "
+                           "residual layer (calibrate it with --residual-model learned)")
+    try:
+        layer = load_residual(entry, path, robot=result.robot, model=result.model)
+    except ResidualFileError as exc:
+        raise CommandError(f"--residual-prior: {exc}") from None
+    if layer.shape is None:
+        raise CommandError(f"--residual-prior {path}: its layer has no arm-shape stage (none "
+                           "beat the physical model on its held-out cells)")
+    return layer.shape
 
 
 def _run(args: argparse.Namespace) -> int:
@@ -241,6 +273,8 @@ def _run(args: argparse.Namespace) -> int:
         raise CommandError("--refit-positions-only needs --validate-refit base or base+probe")
     if not (math.isfinite(args.residual_cell_m) and args.residual_cell_m > 0):
         raise CommandError(f"--residual-cell-m must be > 0, got {args.residual_cell_m}")
+    if args.residual_prior is not None and args.residual_model != "learned":
+        raise CommandError("--residual-prior needs --residual-model learned")
     if args.residual_model == "learned" and args.out is None:
         raise CommandError("--residual-model learned needs --out PARAMS.json: the layer is "
                            "saved beside it (PARAMS.residual.skops)")
@@ -255,6 +289,7 @@ def _run(args: argparse.Namespace) -> int:
         if args.refit_positions_only and not val.six_dof:
             raise CommandError(f"--refit-positions-only: {args.validate} measures positions "
                                "only; the refit uses them without the option")
+    prior = None if args.residual_prior is None else _prior_stage(args.residual_prior, args)
     base = None if args.base is None else _frame(args.base, "base")
     probe = None if args.probe is None else _frame(args.probe, "probe")
     progress = _Progress(args.quiet)
@@ -273,7 +308,7 @@ def _run(args: argparse.Namespace) -> int:
                 cell_size_m=args.residual_cell_m, trees=args.residual_trees,
                 progress=lambda t: progress("residual", 0, 0, t))
             result = result.with_residual_model(learner.fit(result.model, data,
-                                                            robot=result.robot))
+                                                            robot=result.robot, prior=prior))
         if val is not None:
             result = result.with_validation(
                 val, refit_base=args.validate_refit != "none",
