@@ -327,3 +327,10 @@ def test_cli_calibrate_on_a_prior_arm_shape_stage_and_its_refusals(tmp_path, cap
     assert "on top of a prior arm-shape stage (sin/cos q2, sin/cos q3" in capsys.readouterr().out
     a, b = (json.loads((tmp_path / f"{k}.json").read_text())["residual_model"] for k in "ab")
     assert b["prior_stage"] == a["shape_stage"] and b["prior_stage"]["joints"] == [2, 3]
+    # a prior calibrated on another robot is refused with the reason
+    (tmp_path / "other.toml").write_text(ur10_toml().replace('"ur10-test"', '"ur10-other"'))
+    other = [*on_b, "--residual-model", "learned", "--residual-prior", str(tmp_path / "a.json")]
+    other[other.index("--robot") + 1] = str(tmp_path / "other.toml")
+    assert main(other) == 2
+    err = capsys.readouterr().err
+    assert "a.json" in err and "ur10-test" in err and "ur10-other" in err, err
