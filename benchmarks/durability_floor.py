@@ -14,9 +14,12 @@ committed before its acknowledgement is sent; every update before it is publishe
   updates) encoded with msgspec and appended to a file with one ``os.write``: the
   cheapest write that, like SQLite's WAL with ``synchronous=NORMAL``, survives the
   death of the process (the kernel has the bytes);
-* ``SQLite journal`` — the real :class:`~plugcell.framework.journal.Journal`:
+* ``SQLite commit`` — the same rows inserted into the journal's tables and committed
+  in one SQLite transaction (WAL, ``synchronous=NORMAL``): how plugcell's journal kept
+  the rule until 2026-11-26;
+* ``Journal`` — the real :class:`~plugcell.framework.journal.Journal`:
   ``record_process``, two ``record_update`` and one ``commit``, as an ``Echo`` costs
-  the service.
+  the service (a log append; its rows move into SQLite in the background).
 
 No decoding, admission, scheduling or outbox: whatever a native or Python framework
 adds comes on top, so the table bounds from below what the request path can reach with
@@ -31,6 +34,7 @@ import argparse
 import asyncio
 import os
 import platform
+import sqlite3
 import statistics
 import subprocess
 import sys
@@ -42,13 +46,13 @@ from pathlib import Path
 import msgspec
 import zenoh
 
-VARIANTS = ("nothing", "log append", "SQLite journal")
+VARIANTS = ("nothing", "log append", "SQLite commit", "Journal")
 
 
 def _serve(variant: str, key: str, folder: str) -> None:
     """Answer every ``key/ping`` on ``key/pong`` from an event loop, after ``variant``."""
     from plugcell.framework import eventloop
-    from plugcell.framework.journal import Journal
+    from plugcell.framework.journal import TABLES, Journal
     from plugcell.framework.transport import TransportConfig, open_session
 
     session = open_session(TransportConfig.from_env())
@@ -57,13 +61,19 @@ def _serve(variant: str, key: str, folder: str) -> None:
     )
     loop = eventloop.new_event_loop()
     journal = (
-        Journal(Path(folder) / "SERVICE.sqlite", "SERVICE") if variant == VARIANTS[2] else None
+        Journal(Path(folder) / "SERVICE.sqlite", "SERVICE") if variant == "Journal" else None
     )
     log = (
         os.open(Path(folder) / "SERVICE.log", os.O_WRONLY | os.O_CREAT | os.O_APPEND, 0o644)
-        if variant == VARIANTS[1]
+        if variant == "log append"
         else None
     )
+    db = None
+    if variant == "SQLite commit":
+        db = sqlite3.connect(Path(folder) / "SERVICE.sqlite")
+        db.execute("PRAGMA journal_mode=WAL")
+        db.execute("PRAGMA synchronous=NORMAL")
+        db.executescript(TABLES)
     encoder = msgspec.msgpack.Encoder()
     count = 0
 
@@ -80,6 +90,18 @@ def _serve(variant: str, key: str, folder: str) -> None:
             journal.record_update("REQUESTER", count, 1, "Running", "", "")
             journal.record_update("REQUESTER", count, 2, "Completed", "", "Integer[1] [7]")
             journal.commit()
+        elif db is not None:
+            now = time.time_ns()
+            db.execute(
+                "INSERT INTO processes VALUES (?,?,?,?,?,?,?,?,?,?,?,?,?)",
+                ("SERVICE", "REQUESTER", count, "service-instance", "requester-instance",
+                 "Echo", "", "Get", "Integer[1] [7]", now, now, "Queued", ""),
+            )
+            db.executemany("INSERT INTO updates VALUES (?,?,?,?,?,?,?,?)", (
+                ("SERVICE", "REQUESTER", count, 1, now, "Running", "", ""),
+                ("SERVICE", "REQUESTER", count, 2, now, "Completed", "", "Integer[1] [7]"),
+            ))
+            db.commit()
         elif log is not None:
             now = time.time_ns()
             os.write(log, encoder.encode((

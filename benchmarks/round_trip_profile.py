@@ -7,7 +7,7 @@ the publisher of ``plugcell bench transport`` — in **one** process and one eve
 over a real Zenoh session each (peer mode, loopback), journals on; ``--cycles`` Echo
 round trips of 4 bytes run under :mod:`cProfile`.  Both sides' Python then runs on one
 thread, so the profile holds all of it: the table sums the functions' own time per
-round trip by where it is spent (the journal's SQLite, Zenoh's calls, msgspec, the
+round trip by where it is spent (the journal: its log and SQLite, Zenoh's calls, msgspec, the
 rest of Python) and lists the largest functions.  The profiler adds its own cost to
 every call (compare the plain and profiled times it prints); the shares are what
 matter.  The two-process picture with both clocks is ``round_trip_trace.py``.
@@ -30,8 +30,9 @@ import numpy as np
 def _kind(func: tuple[str, int, str]) -> str:
     """Where a profiled function's own time is spent."""
     filename, _, name = func
-    if "sqlite3" in name or "sqlite3" in filename:
-        return "journal (SQLite)"
+    if ("sqlite3" in name or "sqlite3" in filename or "posix.write" in name
+            or filename.endswith(("journal.py", "journal_log.py"))):
+        return "journal (its log, SQLite)"
     if "Publisher" in name or "zenoh" in filename or "builtins.Session" in name:
         return "Zenoh calls"
     if "msgspec" in name or "Encoder" in name or "Decoder" in name:

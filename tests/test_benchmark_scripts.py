@@ -22,9 +22,9 @@ SCRIPTS = [
     ("journal.py", ["--processes", "200", "--updates", "5", "--repeat", "1"], "per request µs"),
     ("round_trip_trace.py", ["--cycles", "30"], "round trip (sum of the medians)"),
     ("round_trip_trace.py", ["--cycles", "30", "--arrival"], "service: sample arrives"),
-    ("round_trip_profile.py", ["--cycles", "30", "--top", "3"], "journal (SQLite)"),
+    ("round_trip_profile.py", ["--cycles", "30", "--top", "3"], "journal (its log, SQLite)"),
     ("durability_floor.py", ["--cycles", "30", "--warmup", "5", "--repeat", "1"],
-     "SQLite journal"),
+     "SQLite commit"),
 ]
 
 

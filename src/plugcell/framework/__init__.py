@@ -9,7 +9,8 @@ Modules, one job each:
 * :mod:`.transport` — Zenoh sessions (peer on loopback, or via a router);
 * :mod:`.port` — the CCR Port between Zenoh callbacks and the event loop (E.1);
 * :mod:`.processqueue` — the FIFO process queue with re-scheduling (5.2.3.5);
-* :mod:`.journal` — the SQLite journal of every process and update;
+* :mod:`.journal` — the journal of every process and update (SQLite, fed by
+  :mod:`.journal_log`, the append-only log each commit writes);
 * :mod:`.participant` — presence, partners, outbound processes (5.2.3.6);
 * :mod:`.process_call` — a process as its sender sees it;
 * :mod:`.service` — the GenericDevice base of every service (5.2.2–5.2.3);

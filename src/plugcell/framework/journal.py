@@ -12,25 +12,51 @@ Durability rules (what "killing a service loses nothing it acknowledged" means):
 * every update is **committed before it is published** — the updates produced in
   one event-loop turn (a burst of MultipleData frames) share one commit.
 
-WAL with ``synchronous=NORMAL`` survives the death of the process (the OS has the
-pages); use ``durable=True`` (``synchronous=FULL``) to survive a power cut too.
-Checkpoints run in a background thread so a commit never stalls on one.  Only
-a summary of the data (type, size, and the values if small) is stored.
+A commit is one append to the journal's log (``<service>.sqlite.log``,
+:mod:`.journal_log`), which, like SQLite's WAL with ``synchronous=NORMAL``, survives
+the death of the process (the kernel has the bytes); ``durable=True`` also syncs each
+append to the disk, surviving a power cut.  A background thread moves the rows into
+the SQLite database (WAL) and checkpoints it, so a commit never waits for SQLite.
+Only a summary of the data (type, size, and the values if small) is stored.
 """
 
 from __future__ import annotations
 
-import contextlib
+import logging
 import os
 import sqlite3
 import threading
 import time
-from collections.abc import Iterable
+from collections import deque
+from collections.abc import Callable, Iterable
 from pathlib import Path
-from typing import Any
+from typing import Any, TypeVar
+
+import msgspec
+
+from plugcell.framework.journal_log import (
+    HEADER,
+    PROCESS,
+    REJECTION,
+    UPDATE,
+    LogWriter,
+    Row,
+    encode,
+    log_path,
+    read_log,
+)
+
+log = logging.getLogger("plugcell.framework.journal")
+_T = TypeVar("_T")
+
+#: Seconds between two moves of the log's rows into the database while commits come.
+MOVE_PERIOD_S = 0.05
 
 #: Seconds between two WAL checkpoints while commits come (none while idle).
 CHECKPOINT_PERIOD_S = 0.5
+
+#: Once all moved, a log this long starts afresh.
+LOG_RESTART_BYTES = 1 << 20
 
 SCHEMA_VERSION = 2
 """2: ``updates`` has no primary key (version 1 had one on (recipient, sender,
@@ -39,7 +65,7 @@ a streamed frame costs the service (``benchmarks/journal.py``); the service make
 each ``seq`` unique by construction, and the readers look updates up by scanning
 once (:meth:`Journal.recover`, the controller's tail) or merge them in Python
 (:func:`read_journal`).  Both versions are read and written alike."""
-_SCHEMA = """
+TABLES = """
 CREATE TABLE IF NOT EXISTS meta (key TEXT PRIMARY KEY, value TEXT);
 CREATE TABLE IF NOT EXISTS processes (  -- append-only: later states are updates
     recipient TEXT NOT NULL, sender TEXT NOT NULL, identifier INTEGER NOT NULL,
@@ -56,6 +82,7 @@ CREATE TABLE IF NOT EXISTS rejections (
     recipient TEXT NOT NULL, t_ns INTEGER NOT NULL, sender TEXT, identifier INTEGER,
     command TEXT, size INTEGER, reason TEXT NOT NULL);
 """
+"""The journal's tables (SQL, idempotent)."""
 
 
 def plugcell_home() -> Path:
@@ -95,8 +122,20 @@ def _lock(path: Path) -> int | None:
     return fd
 
 
+class DuplicateProcessError(ValueError):
+    """A process whose (sender, identifier) the journal already holds."""
+
+
 class Journal:
-    """The journal of one service (written from its event loop only)."""
+    """The journal of one service (written from its event loop only).
+
+    Rows go first to the journal's log (``<service>.sqlite.log``, one ``write`` per
+    :meth:`commit`: :mod:`.journal_log`), then, in the background and at most every
+    :data:`MOVE_PERIOD_S` while commits come, into the SQLite database in one
+    transaction per batch; opening a journal moves whatever its last incarnation left in
+    the log.  The readers (:func:`read_journal`, the cell controller's tail) read the
+    database and the part of the log not moved yet.
+    """
 
     enabled = True
     """(A service without a journal has a stand-in whose ``enabled`` is False.)"""
@@ -110,22 +149,41 @@ class Journal:
             self._db = _connect(path)
             self._db.execute(f"PRAGMA synchronous={'FULL' if durable else 'NORMAL'}")
             self._db.execute("PRAGMA wal_autocheckpoint=0")
-            self._db.executescript(_SCHEMA)
+            self._db.executescript(TABLES)
             self._db.execute(
                 "INSERT OR IGNORE INTO meta VALUES ('schema_version', ?)", (str(SCHEMA_VERSION),)
             )
+            self._db.commit()
+            self._log = LogWriter(log_path(path), durable=durable)
+            try:
+                self._take_over_log()
+            except BaseException:
+                self._log.close(delete=False)
+                raise
         except BaseException:
+            if hasattr(self, "_db"):
+                self._db.close()
             if self._lock_fd is not None:
                 os.close(self._lock_fd)
             raise
-        self._pending: list[tuple[Any, ...]] = []
+        self._rows: list[Row] = []
+        """Recorded since the last :meth:`commit`."""
+        self._moving: deque[tuple[int, list[Row]]] = deque()
+        """Committed (in the log) and not yet in the database: (log offset after, rows)."""
+        self._highest: dict[str, int] = {}
+        """The highest identifier journaled per sender (identifiers only grow)."""
+        self._encoder = msgspec.msgpack.Encoder()
+        self._log_lock = threading.Lock()
+        """Held while the log or :attr:`_moving` changes."""
+        self._move_lock = threading.Lock()
+        """Held while rows move into the database (or the log restarts)."""
         self._stop = threading.Event()
         self._written = threading.Event()
-        """Set by each commit, cleared by the checkpointer: an idle journal sleeps."""
-        self._checkpointer = threading.Thread(
-            target=self._checkpoint_loop, name=f"journal-checkpoint-{owner}", daemon=True
+        """Set by each commit, cleared by the mover: an idle journal sleeps."""
+        self._mover = threading.Thread(
+            target=self._move_loop, name=f"journal-{owner}", daemon=True
         )
-        self._checkpointer.start()
+        self._mover.start()
 
     # -- writing ---------------------------------------------------------------------
 
@@ -146,35 +204,28 @@ class Journal:
     ) -> None:
         """A process accepted (Queued) or refused (Failed) by this service.
 
-        Commit before acknowledging it.  Its later states are its updates.
+        Commit before acknowledging it.  Its later states are its updates.  Raises
+        :class:`DuplicateProcessError` if the journal holds this (sender, identifier).
         """
-        self._db.execute(
-            "INSERT INTO processes (recipient, sender, identifier, recipient_instance,"
-            " sender_instance, command, option, command_type, input, received_ns, acked_ns,"
-            " state, reason) VALUES (?,?,?,?,?,?,?,?,?,?,?,?,?)",
-            (
-                self.owner,
-                sender,
-                identifier,
-                recipient_instance,
-                sender_instance,
-                command,
-                option,
-                command_type,
-                input_summary,
-                received_ns,
-                time.time_ns(),
-                state,
-                reason,
-            ),
-        )
+        highest = self._highest.get(sender)
+        if highest is None:
+            highest = self._highest_in_database(sender)
+        if highest is not None and identifier <= highest and self._holds(sender, identifier):
+            raise DuplicateProcessError(
+                f"process {identifier} from {sender} is already in the journal"
+            )
+        self._highest[sender] = identifier if highest is None else max(highest, identifier)
+        self._rows.append((PROCESS, [
+            self.owner, sender, identifier, recipient_instance, sender_instance, command,
+            option, command_type, input_summary, received_ns, time.time_ns(), state, reason,
+        ]))
 
     def record_update(
         self, sender: str, identifier: int, seq: int, state: str, reason: str, data: str
     ) -> None:
-        """One ProcessUpdate (queued; written by the next :meth:`commit`)."""
-        self._pending.append(
-            (self.owner, sender, identifier, seq, time.time_ns(), state, reason, data)
+        """One ProcessUpdate (written by the next :meth:`commit`)."""
+        self._rows.append(
+            (UPDATE, [self.owner, sender, identifier, seq, time.time_ns(), state, reason, data])
         )
 
     def record_rejection(
@@ -186,23 +237,126 @@ class Journal:
         reason: str,
     ) -> None:
         """A CreateProcess refused before it became a process."""
-        self._db.execute(
-            "INSERT INTO rejections VALUES (?,?,?,?,?,?,?)",
-            (self.owner, time.time_ns(), sender, identifier, command, size, reason),
+        self._rows.append(
+            (REJECTION, [self.owner, time.time_ns(), sender, identifier, command, size, reason])
         )
 
-    def flush(self) -> None:
-        """Write queued update rows (inside the current transaction)."""
-        if self._pending:
-            rows, self._pending = self._pending, []
-            self._db.executemany("INSERT INTO updates VALUES (?,?,?,?,?,?,?,?)", rows)
-
     def commit(self) -> None:
-        """Make everything recorded so far durable."""
-        self.flush()
-        if self._db.in_transaction:
+        """Make everything recorded so far durable: one append to the log."""
+        if self._db.in_transaction:  # written directly (recovery)
             self._db.commit()
-            self._written.set()
+        if not self._rows:
+            return
+        rows, self._rows = self._rows, []
+        record = encode(rows, self._encoder)
+        with self._log_lock:
+            try:
+                end = self._log.append(record)
+            except BaseException:  # a full disk: the rows wait for the next commit
+                self._rows[:0] = rows
+                raise
+            self._moving.append((end, rows))
+        self._written.set()
+
+    def settle(self) -> None:
+        """Commit, and move every committed row into the database now (rather than
+        within :data:`MOVE_PERIOD_S`)."""
+        self.commit()
+        self._move(self._db)
+
+    def _highest_in_database(self, sender: str) -> int | None:
+        """At a sender's first process in this incarnation: its highest identifier so far
+        (everything earlier incarnations wrote was moved into the database at opening)."""
+        row = self._db.execute(
+            "SELECT MAX(identifier) FROM processes WHERE recipient = ? AND sender = ?",
+            (self.owner, sender),
+        ).fetchone()
+        return row[0] if row else None
+
+    def _holds(self, sender: str, identifier: int) -> bool:
+        """Whether (sender, identifier) is journaled: an identifier that does not grow, so
+        rare that it may move everything into the database first and look it up there."""
+        self.settle()
+        return self._db.execute(
+            "SELECT 1 FROM processes WHERE recipient = ? AND sender = ? AND identifier = ?",
+            (self.owner, sender, identifier),
+        ).fetchone() is not None
+
+    # -- moving rows from the log into the database --------------------------------------
+
+    def _take_over_log(self) -> None:
+        """At opening: move what the log holds beyond the database's mark (the rows of an
+        incarnation that died), then start the log afresh."""
+        mark = _log_mark(self._db)
+        found = read_log(self._log.path)
+        if found is not None:
+            if mark is not None and mark[0] == found.generation:
+                rows = [row for end, batch in found.records if end > mark[1] for row in batch]
+            else:  # no mark, or the log was restarted after the mark was written
+                rows = found.rows
+            _insert(self._db, rows)
+            _set_log_mark(self._db, found.generation, found.end)
+            self._db.commit()
+        generation = self._log.restart()  # the file first: a crash here re-reads it
+        _set_log_mark(self._db, generation, HEADER.size)
+        self._db.commit()
+
+    def _move(self, db: sqlite3.Connection) -> None:
+        """Move the committed rows into the database, with the log's mark, in one
+        transaction; on an error they stay in the log and in memory for the next try."""
+        with self._move_lock:
+            with self._log_lock:
+                batch = list(self._moving)
+            if not batch:
+                return
+            try:
+                _insert(db, [row for _, rows in batch for row in rows])
+                _set_log_mark(db, self._log.generation, batch[-1][0])
+                db.commit()
+            except BaseException:
+                db.rollback()
+                raise
+            with self._log_lock:
+                for _ in batch:
+                    self._moving.popleft()
+
+    def _restart_log_if_long(self, db: sqlite3.Connection) -> None:
+        """Empty the log once it is :data:`LOG_RESTART_BYTES` long and all moved."""
+        if self._log.size < LOG_RESTART_BYTES:
+            return
+        with self._move_lock, self._log_lock:
+            if self._moving or self._log.size < LOG_RESTART_BYTES:
+                return
+            generation = self._log.restart()
+            _set_log_mark(db, generation, HEADER.size)
+            db.commit()
+
+    def _move_loop(self) -> None:
+        """Move the rows into the database at most every :data:`MOVE_PERIOD_S` while
+        commits come, and checkpoint the WAL (PASSIVE: never blocking a writer) at most
+        every :data:`CHECKPOINT_PERIOD_S`; while none come, sleep: an idle journal does
+        not wake its process."""
+        db = _connect(self.path)
+        checkpointed = time.monotonic()
+        try:
+            while True:
+                self._written.wait()
+                if self._stop.wait(MOVE_PERIOD_S):
+                    break  # close() moves the rest
+                self._written.clear()
+                try:
+                    self._move(db)
+                    self._restart_log_if_long(db)
+                    if time.monotonic() - checkpointed >= CHECKPOINT_PERIOD_S:
+                        db.execute("PRAGMA wal_checkpoint(PASSIVE)")
+                        checkpointed = time.monotonic()
+                except sqlite3.Error as exc:  # the rows stay in the log: retried next turn
+                    log.warning("journal %s: moving rows into the database: %s", self.path, exc)
+                    self._written.set()
+        finally:
+            db.close()
+
+    # -- start-up and shutdown -------------------------------------------------------
 
     def recover(self, reason: str) -> int:
         """Close processes a previous incarnation left unfinished with a Failed update.
@@ -213,60 +367,143 @@ class Journal:
         process up to there has finished), so a start-up reads only what the
         previous incarnation wrote, however long the journal.
         """
-        self.commit()
-        mark = self._db.execute(
-            "SELECT value FROM meta WHERE key = 'recovered_through'"
-        ).fetchone()
-        last_process, last_update = _recovery_mark(mark[0] if mark else None)
-        cur = self._db.execute(
-            "INSERT INTO updates SELECT p.recipient, p.sender, p.identifier,"
-            " COALESCE(l.seq, 0) + 1, :t, 'Failed', :reason, '' FROM processes p"
-            " LEFT JOIN (SELECT sender, identifier, MAX(seq) AS seq,"
-            " MAX(state IN ('Completed', 'Failed')) AS ended FROM updates"
-            " WHERE rowid > :u AND recipient = :owner GROUP BY sender, identifier) l"
-            " ON l.sender = p.sender AND l.identifier = p.identifier"
-            " WHERE p.rowid > :p AND p.recipient = :owner AND p.state = 'Queued'"
-            " AND COALESCE(l.ended, 0) = 0",
-            {"t": time.time_ns(), "reason": reason, "owner": self.owner,
-             "p": last_process, "u": last_update},
-        )
-        recovered = cur.rowcount
-        self._db.execute(
-            "INSERT OR REPLACE INTO meta SELECT 'recovered_through',"
-            " (SELECT COALESCE(MAX(rowid), 0) FROM processes) || ' ' ||"
-            " (SELECT COALESCE(MAX(rowid), 0) FROM updates)"
-        )
-        self._db.commit()
+        self.settle()
+        with self._move_lock:
+            mark = self._db.execute(
+                "SELECT value FROM meta WHERE key = 'recovered_through'"
+            ).fetchone()
+            last_process, last_update = _recovery_mark(mark[0] if mark else None)
+            cur = self._db.execute(
+                "INSERT INTO updates SELECT p.recipient, p.sender, p.identifier,"
+                " COALESCE(l.seq, 0) + 1, :t, 'Failed', :reason, '' FROM processes p"
+                " LEFT JOIN (SELECT sender, identifier, MAX(seq) AS seq,"
+                " MAX(state IN ('Completed', 'Failed')) AS ended FROM updates"
+                " WHERE rowid > :u AND recipient = :owner GROUP BY sender, identifier) l"
+                " ON l.sender = p.sender AND l.identifier = p.identifier"
+                " WHERE p.rowid > :p AND p.recipient = :owner AND p.state = 'Queued'"
+                " AND COALESCE(l.ended, 0) = 0",
+                {"t": time.time_ns(), "reason": reason, "owner": self.owner,
+                 "p": last_process, "u": last_update},
+            )
+            recovered = cur.rowcount
+            self._db.execute(
+                "INSERT OR REPLACE INTO meta SELECT 'recovered_through',"
+                " (SELECT COALESCE(MAX(rowid), 0) FROM processes) || ' ' ||"
+                " (SELECT COALESCE(MAX(rowid), 0) FROM updates)"
+            )
+            self._db.commit()
         return recovered
 
     def close(self) -> None:
-        """Commit, checkpoint and close."""
+        """Commit, move everything into the database, checkpoint and close; the log
+        file goes once it is all in the database."""
         self._stop.set()
-        self._written.set()  # wake the checkpointer so that it sees the stop
-        self._checkpointer.join(timeout=5)
-        with contextlib.suppress(sqlite3.Error):
-            self.commit()
-            self._db.execute("PRAGMA wal_checkpoint(TRUNCATE)")
-        self._db.close()
-        if self._lock_fd is not None:
-            os.close(self._lock_fd)  # releases the lock
-            self._lock_fd = None
-
-    def _checkpoint_loop(self) -> None:
-        """Copy the WAL back into the database (a PASSIVE checkpoint, never blocking a
-        writer) at most every :data:`CHECKPOINT_PERIOD_S` while commits come, and not at
-        all while none do: an idle service's journal does not wake its process."""
-        db = _connect(self.path)
+        self._written.set()  # wake the mover so that it sees the stop
+        self._mover.join(timeout=5)
+        moved = False
         try:
-            while True:
-                self._written.wait()
-                if self._stop.wait(CHECKPOINT_PERIOD_S):
-                    break
-                self._written.clear()
-                with contextlib.suppress(sqlite3.Error):
-                    db.execute("PRAGMA wal_checkpoint(PASSIVE)")
+            self.settle()
+            moved = True
+            self._db.execute("PRAGMA wal_checkpoint(TRUNCATE)")
+        except (sqlite3.Error, OSError) as exc:
+            log.warning("journal %s: closing: %s (what is committed stays in its log)",
+                        self.path, exc)
         finally:
-            db.close()
+            self._log.close(delete=moved)
+            self._db.close()
+            if self._lock_fd is not None:
+                os.close(self._lock_fd)  # releases the lock
+                self._lock_fd = None
+
+
+_INSERTS = {
+    PROCESS: "INSERT OR IGNORE INTO processes (recipient, sender, identifier,"
+    " recipient_instance, sender_instance, command, option, command_type, input,"
+    " received_ns, acked_ns, state, reason) VALUES (?,?,?,?,?,?,?,?,?,?,?,?,?)",
+    UPDATE: "INSERT INTO updates VALUES (?,?,?,?,?,?,?,?)",
+    REJECTION: "INSERT INTO rejections VALUES (?,?,?,?,?,?,?)",
+}
+"""Per row kind.  ``OR IGNORE``: :meth:`Journal.record_process` refuses a duplicate
+before it reaches the log, and a row that reached it anyway must not stop the rows
+after it from moving."""
+
+_COLUMNS = {
+    PROCESS: ("recipient", "sender", "identifier", "recipient_instance", "sender_instance",
+              "command", "option", "command_type", "input", "received_ns", "acked_ns",
+              "state", "reason"),
+    UPDATE: ("recipient", "sender", "identifier", "seq", "t_ns", "state", "reason", "data"),
+    REJECTION: ("recipient", "t_ns", "sender", "identifier", "command", "size", "reason"),
+}
+"""The columns of each kind's row, as ``SELECT *`` names them."""
+
+
+def _insert(db: sqlite3.Connection, rows: list[Row]) -> None:
+    """Insert log rows, each table's in their log order (inside the current transaction)."""
+    by_kind: dict[int, list[list[Any]]] = {kind: [] for kind in _INSERTS}
+    for kind, row in rows:
+        by_kind[kind].append(row)
+    for kind, sql in _INSERTS.items():
+        if by_kind[kind]:
+            db.executemany(sql, by_kind[kind])
+
+
+def _log_mark(db: sqlite3.Connection) -> tuple[int, int] | None:
+    """``meta.log_moved``: the log's generation and the offset up to which its rows are
+    in the database (None if never written or unreadable: then nothing of the log is)."""
+    row = db.execute("SELECT value FROM meta WHERE key = 'log_moved'").fetchone()
+    parts = row[0].split() if row and isinstance(row[0], str) else []
+    if len(parts) == 2 and all(p.isascii() and p.isdigit() for p in parts):
+        return int(parts[0]), int(parts[1])
+    return None
+
+
+def _set_log_mark(db: sqlite3.Connection, generation: int, offset: int) -> None:
+    db.execute(
+        "INSERT OR REPLACE INTO meta VALUES ('log_moved', ?)", (f"{generation} {offset}",)
+    )
+
+
+def unmoved_rows(database: Path, mark: tuple[int, int] | None) -> list[Row] | None:
+    """The rows of ``database``'s log that are not in it as of ``mark`` (read in the same
+    snapshot); None when the log restarted after that snapshot (read again)."""
+    found = read_log(log_path(database))
+    if found is None:
+        return []
+    if mark is None:
+        return found.rows
+    if mark[0] != found.generation:
+        return None
+    return [row for end, batch in found.records if end > mark[1] for row in batch]
+
+
+def snapshot(
+    db: sqlite3.Connection, database: Path, read: Callable[[sqlite3.Connection], _T]
+) -> tuple[_T, list[Row]]:
+    """``read(db)`` and the log rows not in the database, both of one moment.
+
+    ``read`` runs in one read transaction with the log's mark; the log is read after it.
+    Should the log restart in between (its rows all moved), the snapshot is taken again;
+    if it still disagrees after a few tries — the writer died between restarting the log
+    and marking it — every row of the log is new.
+    """
+    for _ in range(5):
+        db.execute("BEGIN")
+        try:
+            result = read(db)
+            mark = _log_mark(db)
+        finally:
+            db.rollback()
+        rows = unmoved_rows(database, mark)
+        if rows is not None:
+            return result, rows
+        time.sleep(0.01)
+    found = read_log(log_path(database))
+    return result, found.rows if found is not None else []
+
+
+def as_dict(kind: int, row: list[Any]) -> dict[str, Any]:
+    """A log row as the dictionary ``SELECT *`` of its table gives."""
+    return dict(zip(_COLUMNS[kind], row, strict=True))
 
 
 def _recovery_mark(value: object) -> tuple[int, int]:
@@ -302,45 +539,60 @@ def read_journal(paths: Iterable[Path]) -> list[dict[str, Any]]:
 
     A process's ``state``, ``reason`` and ``finished_ns`` are those of its last
     update (``Queued`` if it has none); refused requests have ``rejected: True``.
+    Rows still in a journal's log (committed, not yet moved into its database) are
+    included.
     """
     out: list[dict[str, Any]] = []
     for path in paths:
         db = sqlite3.connect(path, timeout=10.0)
         db.row_factory = sqlite3.Row
         try:
-            procs = [dict(r) for r in db.execute("SELECT * FROM processes")]
-            by_key: dict[tuple[str, str, int], list[dict[str, Any]]] = {}
-            for r in db.execute("SELECT * FROM updates ORDER BY seq"):
-                row = dict(r)
-                key = (row.pop("recipient"), row.pop("sender"), row.pop("identifier"))
-                by_key.setdefault(key, []).append(row)
-            for p in procs:
-                updates = by_key.get((p["recipient"], p["sender"], p["identifier"]), [])
-                p["updates"] = updates
-                if updates:
-                    last = updates[-1]
-                    p["state"], p["reason"] = last["state"], last["reason"]
-                    if last["state"] in ("Completed", "Failed"):
-                        p["finished_ns"] = last["t_ns"]
-                elif p["state"] == "Failed":
-                    p["finished_ns"] = p["acked_ns"]
-            for r in db.execute("SELECT * FROM rejections"):
-                row = dict(r)
-                out.append(
-                    {
-                        "recipient": row["recipient"],
-                        "sender": row["sender"],
-                        "identifier": row["identifier"],
-                        "command": row["command"],
-                        "received_ns": row["t_ns"],
-                        "state": "Failed",
-                        "reason": row["reason"],
-                        "rejected": True,
-                        "updates": [],
-                    }
-                )
-            out.extend(procs)
+            tables, unmoved = snapshot(db, path, _read_tables)
         finally:
             db.close()
+        procs, updates, rejections = tables
+        for kind, row in unmoved:
+            {PROCESS: procs, UPDATE: updates, REJECTION: rejections}[kind].append(
+                as_dict(kind, row)
+            )
+        by_key: dict[tuple[str, str, int], list[dict[str, Any]]] = {}
+        for row in sorted(updates, key=lambda u: u["seq"]):
+            key = (row.pop("recipient"), row.pop("sender"), row.pop("identifier"))
+            by_key.setdefault(key, []).append(row)
+        for p in procs:
+            p_updates = by_key.get((p["recipient"], p["sender"], p["identifier"]), [])
+            p["updates"] = p_updates
+            if p_updates:
+                last = p_updates[-1]
+                p["state"], p["reason"] = last["state"], last["reason"]
+                if last["state"] in ("Completed", "Failed"):
+                    p["finished_ns"] = last["t_ns"]
+            elif p["state"] == "Failed":
+                p["finished_ns"] = p["acked_ns"]
+        for row in rejections:
+            out.append(
+                {
+                    "recipient": row["recipient"],
+                    "sender": row["sender"],
+                    "identifier": row["identifier"],
+                    "command": row["command"],
+                    "received_ns": row["t_ns"],
+                    "state": "Failed",
+                    "reason": row["reason"],
+                    "rejected": True,
+                    "updates": [],
+                }
+            )
+        out.extend(procs)
     out.sort(key=lambda p: p.get("received_ns") or 0)
     return out
+
+
+def _read_tables(
+    db: sqlite3.Connection,
+) -> tuple[list[dict[str, Any]], list[dict[str, Any]], list[dict[str, Any]]]:
+    return (
+        [dict(r) for r in db.execute("SELECT * FROM processes")],
+        [dict(r) for r in db.execute("SELECT * FROM updates")],
+        [dict(r) for r in db.execute("SELECT * FROM rejections")],
+    )

@@ -527,7 +527,7 @@ class GenericDevice(Participant):
                 state=state.value,
                 reason=reason,
             )
-        except Exception as exc:  # sqlite3.IntegrityError: identifier reused
+        except Exception as exc:  # DuplicateProcessError: an identifier reused
             self.journal.commit()
             self._reject(
                 answer,
