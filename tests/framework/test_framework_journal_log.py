@@ -13,6 +13,7 @@ import sys
 import time
 from pathlib import Path
 
+import msgspec
 import pytest
 from hypothesis import HealthCheck, example, given, settings
 from hypothesis import strategies as st
@@ -130,7 +131,7 @@ def test_a_torn_write_at_the_end_is_dropped_and_the_log_goes_on(tmp_path: Path) 
     path = tmp_path / "DEV.sqlite"
     _killed_writer(path, 3)
     whole = encode([(journal_log.PROCESS, ["DEV", "A", 99] + [""] * 10)],
-                   __import__("msgspec").msgpack.Encoder())
+                   msgspec.msgpack.Encoder())
     with open(log_path(path), "ab") as f:
         f.write(whole[: len(whole) // 2])  # a crash in the middle of a write
     assert [s[1] for s in _summary(path)] == [1, 2, 3]  # the torn record is not read
@@ -149,7 +150,7 @@ def test_a_restarted_log_without_its_mark_is_read_whole(tmp_path: Path) -> None:
     journal = Journal(path, "DEV")
     _process(journal, 1)
     journal.close()
-    encoder = __import__("msgspec").msgpack.Encoder()
+    encoder = msgspec.msgpack.Encoder()
     row = ["DEV", "A", 2, "r", "s", "Measure", "", "SingleData", "", 2, 2, "Queued", ""]
     log_path(path).write_bytes(HEADER.pack(MAGIC, 12345)
                                + encode([(journal_log.PROCESS, row)], encoder))
@@ -335,3 +336,27 @@ def test_readers_see_exactly_what_was_committed(
     finally:
         tail.close()
         journal.close()
+
+
+def test_the_log_is_read_from_a_mark_on_and_a_stale_mark_is_told(tmp_path: Path) -> None:
+    """Readers read only the part after the database's mark; a mark of another
+    generation (the log restarted since) asks them to take a new snapshot."""
+    encoder = msgspec.msgpack.Encoder()
+    writer = journal_log.LogWriter(tmp_path / "DEV.sqlite.log", durable=False)
+    generation = writer.restart()
+    ends = [writer.append(encode([(journal_log.UPDATE, [f"row{i}"])], encoder))
+            for i in range(3)]
+    writer.close(delete=False)
+    whole = read_log(tmp_path / "DEV.sqlite.log")
+    assert whole is not None and [end for end, _ in whole.records] == ends
+    after_first = read_log(tmp_path / "DEV.sqlite.log", ends[0])
+    assert after_first is not None
+    assert after_first.rows == [(journal_log.UPDATE, ["row1"]), (journal_log.UPDATE, ["row2"])]
+    assert [end for end, _ in after_first.records] == ends[1:]
+    assert after_first.end == ends[-1] == whole.end
+    database = tmp_path / "DEV.sqlite"
+    assert journal_module.unmoved_rows(database, (generation, ends[1])) == [
+        (journal_log.UPDATE, ["row2"])]
+    assert journal_module.unmoved_rows(database, (generation + 1, ends[1])) is None
+    assert journal_module.unmoved_rows(database, None) == whole.rows
+    assert journal_module.unmoved_rows(tmp_path / "NONE.sqlite", None) == []

@@ -466,14 +466,12 @@ def _set_log_mark(db: sqlite3.Connection, generation: int, offset: int) -> None:
 def unmoved_rows(database: Path, mark: tuple[int, int] | None) -> list[Row] | None:
     """The rows of ``database``'s log that are not in it as of ``mark`` (read in the same
     snapshot); None when the log restarted after that snapshot (read again)."""
-    found = read_log(log_path(database))
+    found = read_log(log_path(database), mark[1] if mark is not None else None)
     if found is None:
         return []
-    if mark is None:
-        return found.rows
-    if mark[0] != found.generation:
-        return None
-    return [row for end, batch in found.records if end > mark[1] for row in batch]
+    if mark is not None and mark[0] != found.generation:
+        return None  # read from an offset of another generation: nothing of it counts
+    return found.rows
 
 
 def snapshot(

@@ -75,19 +75,23 @@ class Contents:
 
 
 def read_log(path: Path, start: int | None = None) -> Contents | None:
-    """The whole records of the log at ``path`` from offset ``start`` (the first record
-    when None or before it); None when there is no file or not yet a whole header."""
+    """The whole records of the log at ``path`` from offset ``start`` (a record boundary
+    of this generation, e.g. a mark; the first record when None or before it); None when
+    there is no file or not yet a whole header.  Only the part from ``start`` is read."""
     try:
         with open(path, "rb") as f:
+            header = f.read(HEADER.size)
+            if len(header) < HEADER.size:
+                return None
+            magic, generation = HEADER.unpack(header)
+            if magic != MAGIC:
+                raise ValueError(f"{path} is not a plugcell journal log")
+            first = HEADER.size if start is None or start < HEADER.size else start
+            f.seek(first)
             data = f.read()
     except FileNotFoundError:
         return None
-    if len(data) < HEADER.size:
-        return None
-    magic, generation = HEADER.unpack_from(data)
-    if magic != MAGIC:
-        raise ValueError(f"{path} is not a plugcell journal log")
-    pos = HEADER.size if start is None or start < HEADER.size else start
+    pos = 0
     rows: list[Row] = []
     records: list[tuple[int, list[Row]]] = []
     while pos + RECORD.size <= len(data):
@@ -101,8 +105,8 @@ def read_log(path: Path, start: int | None = None) -> Contents | None:
             break
         pos += RECORD.size + length
         rows.extend(batch)
-        records.append((pos, batch))
-    return Contents(generation, rows, min(pos, len(data)), records)
+        records.append((first + pos, batch))
+    return Contents(generation, rows, first + pos, records)
 
 
 class LogWriter:
