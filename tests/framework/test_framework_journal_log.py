@@ -360,3 +360,37 @@ def test_the_log_is_read_from_a_mark_on_and_a_stale_mark_is_told(tmp_path: Path)
     assert journal_module.unmoved_rows(database, (generation + 1, ends[1])) is None
     assert journal_module.unmoved_rows(database, None) == whole.rows
     assert journal_module.unmoved_rows(tmp_path / "NONE.sqlite", None) == []
+
+
+def test_a_full_disk_while_the_log_restarts_loses_nothing(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """The restart emptied the file and could not write its header: the next commit
+    starts the file itself, and readers still see every row once — the database's mark
+    names the old generation, so they take the whole new file as not moved."""
+    monkeypatch.setattr(journal_module, "LOG_RESTART_BYTES", 0)
+    path = tmp_path / "DEV.sqlite"
+    journal = Journal(path, "DEV")
+    _process(journal, 1)
+    journal.settle()
+    real_write = os.write
+
+    def disk_full(fd: int, data: bytes) -> int:
+        raise OSError(errno.ENOSPC, "No space left on device")
+
+    monkeypatch.setattr(journal_log.os, "write", disk_full)
+    with pytest.raises(OSError, match="No space left"):
+        journal._restart_log_if_long(journal._db)  # the background thread logs and retries
+    monkeypatch.setattr(journal_log.os, "write", real_write)
+    assert log_path(path).stat().st_size == 0
+    _process(journal, 2)
+    journal.commit()
+    found = read_log(log_path(path))
+    assert found is not None and [row[1][2] for row in found.rows] == [2]
+    assert [s[1] for s in _summary(path)] == [1, 2]
+    journal.settle()
+    assert [s[1] for s in _summary(path)] == [1, 2]
+    journal.close()
+    again = Journal(path, "DEV")
+    again.close()
+    assert [s[1] for s in _summary(path)] == [1, 2]

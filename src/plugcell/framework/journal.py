@@ -168,8 +168,9 @@ class Journal:
             raise
         self._rows: list[Row] = []
         """Recorded since the last :meth:`commit`."""
-        self._moving: deque[tuple[int, list[Row]]] = deque()
-        """Committed (in the log) and not yet in the database: (log offset after, rows)."""
+        self._moving: deque[tuple[int, int, list[Row]]] = deque()
+        """Committed (in the log), not yet in the database: (generation of the log, offset
+        after the record, its rows)."""
         self._highest: dict[str, int] = {}
         """The highest identifier journaled per sender (identifiers only grow)."""
         self._encoder = msgspec.msgpack.Encoder()
@@ -255,7 +256,7 @@ class Journal:
             except BaseException:  # a full disk: the rows wait for the next commit
                 self._rows[:0] = rows
                 raise
-            self._moving.append((end, rows))
+            self._moving.append((self._log.generation, end, rows))
         self._written.set()
 
     def settle(self) -> None:
@@ -310,8 +311,9 @@ class Journal:
             if not batch:
                 return
             try:
-                _insert(db, [row for _, rows in batch for row in rows])
-                _set_log_mark(db, self._log.generation, batch[-1][0])
+                _insert(db, [row for _, _, rows in batch for row in rows])
+                generation, end, _ = batch[-1]
+                _set_log_mark(db, generation, end)
                 db.commit()
             except BaseException:
                 db.rollback()
@@ -350,7 +352,7 @@ class Journal:
                     if time.monotonic() - checkpointed >= CHECKPOINT_PERIOD_S:
                         db.execute("PRAGMA wal_checkpoint(PASSIVE)")
                         checkpointed = time.monotonic()
-                except sqlite3.Error as exc:  # the rows stay in the log: retried next turn
+                except (sqlite3.Error, OSError) as exc:  # the rows stay in the log: retried
                     log.warning("journal %s: moving rows into the database: %s", self.path, exc)
                     self._written.set()
         finally:

@@ -122,22 +122,21 @@ class LogWriter:
 
     def restart(self) -> int:
         """Empty the file and start a new generation (after everything in it was moved
-        into the database); returns the new generation."""
+        into the database); returns the new generation.  Should writing the header fail
+        (a full disk), the file is left empty and the next :meth:`append` starts it."""
         os.ftruncate(self._fd, 0)
+        self.size = 0
         generation = secrets.randbits(63) + 1
         self._write(HEADER.pack(MAGIC, generation))
         self.generation = generation
         self.size = HEADER.size
         return generation
 
-    def truncate(self, end: int) -> None:
-        """Cut a torn tail off at ``end`` (at opening, before anything is appended)."""
-        os.ftruncate(self._fd, end)
-        self.size = end
-
     def append(self, record: bytes) -> int:
         """Append one record; returns the offset after it.  Durable when it returns; if
         it raises (a full disk), the file is as before (no torn record in the middle)."""
+        if self.size < HEADER.size:  # a restart that could not write its header
+            self.restart()
         try:
             self._write(record)
         except BaseException:
