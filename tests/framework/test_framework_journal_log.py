@@ -10,6 +10,7 @@ import signal
 import sqlite3
 import subprocess
 import sys
+import threading
 import time
 from pathlib import Path
 
@@ -394,3 +395,52 @@ def test_a_full_disk_while_the_log_restarts_loses_nothing(
     again = Journal(path, "DEV")
     again.close()
     assert [s[1] for s in _summary(path)] == [1, 2]
+
+
+def test_a_tail_in_another_thread_sees_every_row_once_while_the_log_moves_and_restarts(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """The controller polls from a worker thread while the service commits, the rows
+    move every millisecond and the log restarts every 2 KiB: whatever the interleaving,
+    each committed row is shown once and ``read_journal`` ends with all of them."""
+    monkeypatch.setattr(journal_module, "MOVE_PERIOD_S", 0.001)
+    monkeypatch.setattr(journal_module, "LOG_RESTART_BYTES", 2048)
+    monkeypatch.setattr(tail_module, "HISTORY", 10_000)
+    path = journal_dir("C", tmp_path) / "DEV.sqlite"
+    journal = Journal(path, "DEV")
+    tail = JournalTail("C", tmp_path)
+    shown: list[tuple[int, ...]] = []
+    done = threading.Event()
+    errors: list[BaseException] = []
+
+    def poll_until_done() -> None:
+        try:
+            while True:
+                last = done.is_set()
+                processes, updates = tail.poll()
+                shown.extend((p["identifier"],) for p in processes)
+                shown.extend((u["identifier"], u["seq"]) for u in updates)
+                if last:
+                    return
+        except BaseException as exc:  # reported below
+            errors.append(exc)
+
+    poller = threading.Thread(target=poll_until_done)
+    poller.start()
+    try:
+        for i in range(1, 801):
+            _process(journal, i)
+            journal.record_update("A", i, 1, "Completed", "", "")
+            journal.commit()
+            if i % 50 == 0:
+                time.sleep(0.002)
+        journal.settle()
+    finally:
+        done.set()
+        poller.join(30)
+        tail.close()
+        journal.close()
+    assert not errors
+    expected = [(i,) for i in range(1, 801)] + [(i, 1) for i in range(1, 801)]
+    assert sorted(shown) == sorted(expected)
+    assert [s[1] for s in _summary(path)] == list(range(1, 801))
