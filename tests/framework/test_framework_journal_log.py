@@ -51,6 +51,14 @@ def _in_database(path: Path, table: str) -> int:
         return db.execute(f"SELECT COUNT(*) FROM {table}").fetchone()[0]
 
 
+def _poll(tail: JournalTail) -> list[tuple[int, ...]]:
+    """What one poll of the tail shows: (identifier,) per process, (identifier, seq) per
+    update."""
+    processes, updates = tail.poll()
+    return [(p["identifier"],) for p in processes] + [
+        (u["identifier"], u["seq"]) for u in updates]
+
+
 def _summary(path: Path) -> list[tuple[str, int, list[int]]]:
     return [(p["sender"], p["identifier"], [u["seq"] for u in p["updates"]])
             for p in read_journal([path])]
@@ -251,16 +259,12 @@ def test_the_log_restarts_once_long_and_every_row_is_shown_once(
             journal.commit()
             if i % 7 == 0:
                 time.sleep(0.003)
-                processes, updates = tail.poll()
-                shown += [(p["identifier"],) for p in processes]
-                shown += [(u["identifier"], u["seq"]) for u in updates]
+                shown += _poll(tail)
                 found = read_log(log_path(path))
                 if found is not None:
                     generations.add(found.generation)
         journal.settle()
-        processes, updates = tail.poll()
-        shown += [(p["identifier"],) for p in processes]
-        shown += [(u["identifier"], u["seq"]) for u in updates]
+        shown += _poll(tail)
     finally:
         tail.close()
         journal.close()
@@ -322,17 +326,13 @@ def test_readers_see_exactly_what_was_committed(
                 recorded = []
                 journal = Journal(path, "DEV")
             elif op == "poll":
-                processes, updates = tail.poll()
-                shown += [(p["identifier"],) for p in processes]
-                shown += [(u["identifier"], u["seq"]) for u in updates]
+                shown += _poll(tail)
             in_journal = [((p["identifier"],), [(p["identifier"], u["seq"])
                                                 for u in p["updates"]])
                           for p in read_journal([path])]
             flat = [row for process, updates in in_journal for row in [process, *updates]]
             assert sorted(flat) == sorted(committed)
-        processes, updates = tail.poll()
-        shown += [(p["identifier"],) for p in processes]
-        shown += [(u["identifier"], u["seq"]) for u in updates]
+        shown += _poll(tail)
         assert sorted(shown) == sorted(committed)
     finally:
         tail.close()
@@ -417,9 +417,7 @@ def test_a_tail_in_another_thread_sees_every_row_once_while_the_log_moves_and_re
         try:
             while True:
                 last = done.is_set()
-                processes, updates = tail.poll()
-                shown.extend((p["identifier"],) for p in processes)
-                shown.extend((u["identifier"], u["seq"]) for u in updates)
+                shown.extend(_poll(tail))
                 if last:
                     return
         except BaseException as exc:  # reported below

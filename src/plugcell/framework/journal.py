@@ -289,13 +289,11 @@ class Journal:
         """At opening: move what the log holds beyond the database's mark (the rows of an
         incarnation that died), then start the log afresh."""
         mark = _log_mark(self._db)
-        found = read_log(self._log.path)
+        found = read_log(self._log.path, mark[1] if mark is not None else None)
+        if found is not None and mark is not None and found.generation != mark[0]:
+            found = read_log(self._log.path)  # restarted after the mark: all of it is new
         if found is not None:
-            if mark is not None and mark[0] == found.generation:
-                rows = [row for end, batch in found.records if end > mark[1] for row in batch]
-            else:  # no mark, or the log was restarted after the mark was written
-                rows = found.rows
-            _insert(self._db, rows)
+            _insert(self._db, found.rows)
             _set_log_mark(self._db, found.generation, found.end)
             self._db.commit()
         generation = self._log.restart()  # the file first: a crash here re-reads it
