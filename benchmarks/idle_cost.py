@@ -1,7 +1,7 @@
 """What an idle cell costs: N services, each its own process, doing nothing.
 
     .venv/bin/python benchmarks/idle_cost.py [--services 20] [--seconds 30]
-        [--settings default,no-shm,lean]
+        [--settings default,no-shm,lean] [--threads]
 
 Starts ``--services`` services (cameras, drills, benchmark publishers and compute
 services in turn, simulated, Zenoh peer mode on loopback, journals on) as
@@ -15,9 +15,13 @@ as a share of one core and per process.  Linux only (reads /proc).
 
 Each of ``--settings`` runs both, with the transport settings an idle cell's cost
 depends on (framework/transport.py): ``default`` (Zenoh's shared memory on, its 10 s
-lease), ``no-shm`` (``PLUGCELL_SHM=0``: no shared-memory watchdog waking every process
-ten times a second) and ``lean`` (``PLUGCELL_SHM=0 PLUGCELL_LEASE=60``: keep-alives on
+lease), ``no-shm`` (``PLUGCELL_SHM=0``: no shared-memory hand-off task waking every
+process ten times a second) and ``lean`` (``PLUGCELL_SHM=0 PLUGCELL_LEASE=60``: keep-alives on
 each link every 15 s instead of 2.5 s).
+
+``--threads`` also lists where that CPU time goes, summed over the processes by thread
+name (``/proc/PID/task/TID/stat``): Zenoh's runtime threads (``net-0``, ``tx-0``,
+``rx-0``…), the journal's mover, the interpreter's main thread (``python``).
 """
 
 from __future__ import annotations
@@ -47,16 +51,45 @@ SETTINGS: dict[str, dict[str, str]] = {
 }
 
 
-def cpu_seconds(pid: int) -> float:
-    """User + system CPU time of process ``pid`` (s)."""
-    fields = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()
+def _stat_cpu(stat: str) -> float:
+    """User + system CPU time (s) from a ``/proc/.../stat`` line."""
+    fields = stat.rsplit(")", 1)[1].split()
     return (int(fields[11]) + int(fields[12])) / TICK  # utime, stime (fields 14, 15)
 
 
+def cpu_seconds(pid: int) -> float:
+    """User + system CPU time of process ``pid`` (s)."""
+    return _stat_cpu(Path(f"/proc/{pid}/stat").read_text())
+
+
+def thread_seconds(pid: int) -> dict[tuple[int, str], float]:
+    """CPU time (s) of each live thread of process ``pid``, keyed by (thread id, name)."""
+    out: dict[tuple[int, str], float] = {}
+    for task in Path(f"/proc/{pid}/task").iterdir():
+        try:
+            stat = (task / "stat").read_text()
+        except OSError:  # the thread ended meanwhile
+            continue
+        out[(int(task.name), stat[stat.index("(") + 1:stat.rindex(")")])] = _stat_cpu(stat)
+    return out
+
+
+def by_thread_name(before: list[dict[tuple[int, str], float]],
+                   after: list[dict[tuple[int, str], float]]) -> dict[str, float]:
+    """CPU seconds between the two readings, summed over processes by thread name
+    (a thread started in between counts from zero)."""
+    total: dict[str, float] = {}
+    for b, a in zip(before, after, strict=True):
+        for key, seconds in a.items():
+            total[key[1]] = total.get(key[1], 0.0) + seconds - b.get(key, 0.0)
+    return total
+
+
 def measure(commands: list[list[str]], env: dict[str, str], seconds: float,
-            settle: float) -> tuple[float, float, list[float]]:
+            settle: float) -> tuple[float, float, list[float], dict[str, float]]:
     """Start the processes, wait until each says it is serving, settle, then their CPU
-    time over ``seconds``: (start-up s, measured wall s, CPU s of each process)."""
+    time over ``seconds``: (start-up s, measured wall s, CPU s of each process, CPU s
+    summed by thread name)."""
     procs: list[subprocess.Popen[str]] = []
     t0 = time.monotonic()
     try:
@@ -73,9 +106,11 @@ def measure(commands: list[list[str]], env: dict[str, str], seconds: float,
         started = time.monotonic() - t0
         time.sleep(settle)
         before = [cpu_seconds(p.pid) for p in procs]
+        threads_before = [thread_seconds(p.pid) for p in procs]
         t1 = time.monotonic()
         time.sleep(seconds)
         after = [cpu_seconds(p.pid) for p in procs]
+        threads_after = [thread_seconds(p.pid) for p in procs]
         wall = time.monotonic() - t1
     finally:
         for p in procs:
@@ -85,7 +120,8 @@ def measure(commands: list[list[str]], env: dict[str, str], seconds: float,
                 p.wait(10)
             except subprocess.TimeoutExpired:
                 p.kill()
-    return started, wall, [a - b for a, b in zip(after, before, strict=True)]
+    return (started, wall, [a - b for a, b in zip(after, before, strict=True)],
+            by_thread_name(threads_before, threads_after))
 
 
 def main() -> int:
@@ -96,6 +132,8 @@ def main() -> int:
                     help="seconds to wait after the last process is serving")
     ap.add_argument("--settings", default="default,no-shm,lean",
                     help=f"comma-separated, of {', '.join(SETTINGS)}")
+    ap.add_argument("--threads", action="store_true",
+                    help="also list the CPU by thread name (Zenoh's runtime threads, ...)")
     args = ap.parse_args()
     chosen = [x.strip() for x in args.settings.split(",") if x.strip()]
     unknown = [x for x in chosen if x not in SETTINGS]
@@ -118,11 +156,16 @@ def main() -> int:
             home = Path(tempfile.mkdtemp(prefix="plugcell-idle-"))
             env = {**base_env, **SETTINGS[setting], "PLUGCELL_HOME": str(home),
                    "PYTHONUNBUFFERED": "1"}
-            started, wall, used = measure(commands, env, args.seconds, args.settle)
+            started, wall, used, threads = measure(commands, env, args.seconds, args.settle)
             total = sum(used) / wall
             print(f"{setting:9s} {label:34s} {started:13.1f} {wall:11.1f} "
                   f"{100 * total:15.2f}% {100 * total / len(used):11.3f}% "
                   f"{100 * max(used) / wall:8.3f}%", flush=True)
+            if args.threads:
+                busy = sorted(threads.items(), key=lambda kv: -kv[1])
+                print("    by thread: " + ", ".join(
+                    f"{name} {100 * cpu / wall:.2f}%" for name, cpu in busy if cpu > 0),
+                    flush=True)
     return 0
 
 

@@ -18,8 +18,9 @@ endpoints), ``PLUGCELL_MULTICAST`` (``0`` to disable scouting), ``PLUGCELL_SHM``
 trusted; Zenoh's 10 s by default).
 
 What an idle cell costs is mostly these settings (docs/framework.md, "An idle cell"):
-shared memory wakes each process ten times a second (Zenoh's SHM watchdog), and each
-link sends keep-alives every quarter lease.
+shared memory wakes each process ten times a second (zenoh-transport's shared-memory
+hand-off task, once a link has negotiated it), and each link sends keep-alives every
+quarter lease.
 
 Security (docs/security.md): ``PLUGCELL_TLS_CA``, ``PLUGCELL_TLS_CERT``,
 ``PLUGCELL_TLS_KEY`` (PEM files from ``plugcell certs``) switch the links to TLS with
