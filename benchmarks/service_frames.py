@@ -4,9 +4,12 @@
 
 Drives the publisher of ``plugcell bench transport`` (:class:`BenchService`) the
 way its Push does — ``data_feedback.post`` of a frame, 64 per event-loop turn —
-through the real DataFeedback receiver, the ProcessUpdate, the journal (SQLite in
-a temporary folder) and the per-turn flush with its batching and encoding, but
-with the Zenoh publisher replaced by one that counts the samples.  So the table is the
+through the real DataFeedback receiver, the ProcessUpdate, the journal (in a
+temporary folder) and the per-turn flush with its batching and encoding, but
+with the Zenoh publisher replaced by one that counts the samples.  The service is
+started as any service is, on a Zenoh session of its own that reaches no other
+(no scouting, no listening); only its transport adapter's process publishers are
+swapped for the counting one.  So the table is the
 Python cost of the service's own path per frame, without the transport and
 without another process competing for the cores: the part of the transport
 benchmark's throughput that plugcell's code, not Zenoh, decides.  Best of
@@ -19,12 +22,15 @@ from __future__ import annotations
 
 import argparse
 import asyncio
+import contextlib
 import platform
 import sys
 import tempfile
-import threading
 import time
+import uuid
+from collections.abc import AsyncIterator
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -32,6 +38,7 @@ from plugcell.apps.bench.device import BURST, BenchService
 from plugcell.framework.journal import Journal
 from plugcell.framework.messages import Process, Tag
 from plugcell.framework.processqueue import Entry
+from plugcell.framework.transport import TransportConfig
 
 #: The payloads where per-frame work, not copying bytes, decides the rate (from 64 KiB
 #: on, the copy of each frame into its buffer — with the page faults of fresh
@@ -52,48 +59,100 @@ class _CountingPublisher:
     def put(self, payload: bytes) -> None:
         self.samples += 1
 
+    def undeclare(self) -> None:
+        """Nothing was declared (the service undeclares its publishers when it closes)."""
+
 
 class _CountingBus:
-    """Stands in for the service's transport adapter (framework/bus.py): always open,
-    every process publisher is the counting one."""
+    """The service's transport adapter (framework/bus.py) with every process publisher
+    replaced by the counting one; everything else goes to the real adapter."""
 
-    is_open = True
-
-    def __init__(self, publisher: _CountingPublisher) -> None:
+    def __init__(self, bus: Any, publisher: _CountingPublisher) -> None:
+        self.bus = bus
         self.publisher = publisher
 
     def process_publisher(self, name: str, sender: str, *, express: bool) -> _CountingPublisher:
         return self.publisher
 
+    def __getattr__(self, name: str) -> Any:
+        return getattr(self.bus, name)
 
-async def _per_frame_us(shape: tuple[int, ...], frames: int, folder: Path | None,
-                        read_only: bool = True) -> float:
-    service = BenchService("PUBLISHER", journal=False)
-    service._loop = asyncio.get_running_loop()
-    service._loop_thread = threading.get_ident()
+
+#: A Zenoh session that reaches nobody: no scouting, no listening, no peer to connect to.
+ALONE = TransportConfig(listen=(), multicast=False, shared_memory=False)
+
+
+@contextlib.asynccontextmanager
+async def _started_service() -> AsyncIterator[tuple[BenchService, _CountingPublisher]]:
+    """The benchmark's publisher, started alone in a cell of its own, its process
+    publishers counting (the journal is each measurement's own)."""
+    service = BenchService("PUBLISHER", cell=f"frames{uuid.uuid4().hex[:8]}",
+                           transport=ALONE, journal=False)
+    await service.start()
+    bus, publisher = service.bus, _CountingPublisher()
+    service.bus = _CountingBus(bus, publisher)  # type: ignore[assignment]
+    try:
+        yield service, publisher
+    finally:
+        service.bus = bus
+        await service.close()
+
+
+async def _frame_path_us(service: BenchService, publisher: _CountingPublisher,
+                         shape: tuple[int, ...], frames: int, folder: Path | None,
+                         read_only: bool = True) -> float:
+    """µs per frame of ``frames`` posted to the started ``service``'s DataFeedback port,
+    journaled into a new journal in ``folder`` (None: no journal)."""
+    no_journal = service.journal
     if folder is not None:
         service.journal = Journal(folder / f"frames-{time.time_ns()}.sqlite", "PUBLISHER")
-    publisher = _CountingPublisher()
-    service.bus = _CountingBus(publisher)  # type: ignore[assignment]
-    service.outbox.loop = service._loop
     push = service.device.command("Push")
     assert push is not None
     entry = Entry(process=Process(command=push, tag=Tag("CONSUMER", "PUBLISHER"),
                                   identifier=1), command=push)
-    service._measuring = entry
+    service.scheduler.measuring = entry  # the DataFeedback belongs to this Push
+    publisher.samples = 0
     frame = np.full(shape, 7, np.uint8)
     frame.flags.writeable = not read_only
-    started = time.perf_counter()
-    for i in range(frames):
-        service.data_feedback.post(frame)
-        if i % BURST == BURST - 1:
-            await asyncio.sleep(0)
-    await asyncio.sleep(0)
-    elapsed = time.perf_counter() - started
+    try:
+        started = time.perf_counter()
+        for i in range(frames):
+            service.data_feedback.post(frame)
+            if i % BURST == BURST - 1:
+                await asyncio.sleep(0)
+        await asyncio.sleep(0)
+        elapsed = time.perf_counter() - started
+    finally:
+        service.scheduler.measuring = None
+        if folder is not None:
+            service.journal.close()
+            service.journal = no_journal
     if entry.seq != frames or service.outbox or not publisher.samples:
         raise RuntimeError(f"{entry.seq} of {frames} frames made, {publisher.samples} samples")
-    service.journal.close()
     return elapsed / frames * 1e6
+
+
+async def _per_frame_us(shape: tuple[int, ...], frames: int, folder: Path | None,
+                        read_only: bool = True, repeat: int = 1) -> float:
+    """The best of ``repeat`` measurements of :func:`_frame_path_us` on a service of its own."""
+    async with _started_service() as (service, publisher):
+        return min([await _frame_path_us(service, publisher, shape, frames, folder, read_only)
+                    for _ in range(repeat)])
+
+
+async def _table(shapes: tuple[tuple[int, ...], ...], frames: int, repeat: int,
+                 folder: Path) -> list[tuple[int, float, float]]:
+    """Per shape: (bytes, µs per frame without the journal, with it), each the best of
+    ``repeat``, alternated so that both see the same machine."""
+    rows = []
+    async with _started_service() as (service, publisher):
+        for shape in shapes:
+            bare, kept = float("inf"), float("inf")
+            for _ in range(repeat):
+                bare = min(bare, await _frame_path_us(service, publisher, shape, frames, None))
+                kept = min(kept, await _frame_path_us(service, publisher, shape, frames, folder))
+            rows.append((shape[0], bare, kept))
+    return rows
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -111,13 +170,8 @@ def main(argv: list[str] | None = None) -> int:
     print(f"{'payload':>9} | {'no journal':>10} | {'journal':>8} | {'journal share':>13}")
     print("-" * 50)
     with tempfile.TemporaryDirectory(prefix="plugcell-frames-") as tmp:
-        for shape in SHAPES:
-            bare, kept = float("inf"), float("inf")
-            for _ in range(args.repeat):  # alternated, so both see the same machine
-                bare = min(bare, asyncio.run(_per_frame_us(shape, args.frames, None)))
-                kept = min(kept, asyncio.run(_per_frame_us(shape, args.frames, Path(tmp))))
-            print(f"{shape[0]:>7} B | {bare:>10.2f} | {kept:>8.2f} | "
-                  f"{(kept - bare) / kept:>12.0%}")
+        for n, bare, kept in asyncio.run(_table(SHAPES, args.frames, args.repeat, Path(tmp))):
+            print(f"{n:>7} B | {bare:>10.2f} | {kept:>8.2f} | {(kept - bare) / kept:>12.0%}")
     return 0
 
 
@@ -135,8 +189,8 @@ def _large(repeat: int) -> int:
     code = ("import asyncio, sys, tempfile; from pathlib import Path; sys.path.insert(0, {here!r});"
             "import service_frames as sf; from plugcell.framework.memory import tune_allocator;"
             "tune_allocator(); shape = ({n},);"
-            "print(min(asyncio.run(sf._per_frame_us(shape, 1000, Path(tempfile.mkdtemp()),"
-            " {read_only})) for _ in range({repeat})))")
+            "print(asyncio.run(sf._per_frame_us(shape, 1000, Path(tempfile.mkdtemp()),"
+            " {read_only}, {repeat})))")
     here = str(Path(__file__).resolve().parent)
     for (n,) in LARGE:
         row = []

@@ -213,15 +213,6 @@ class GenericDevice(Participant):
         """Data/command feedback that arrived when no process expected it."""
         return self.scheduler.stray_feedback
 
-    @property
-    def _measuring(self) -> Entry | None:
-        """The process the data feedback belongs to (the scheduler's; benchmarks set it)."""
-        return self.scheduler.measuring
-
-    @_measuring.setter
-    def _measuring(self, entry: Entry | None) -> None:
-        self.scheduler.measuring = entry
-
     def call_in_loop(self, fn: Callable[..., Any], *args: Any) -> bool:
         """Run ``fn(*args)`` on the service's event loop: at once when called there, else
         scheduled thread-safely (so device threads can feed the service).  False when the
