@@ -3,24 +3,24 @@
     .venv/bin/python benchmarks/round_trip_cpu.py [--cycles 4000] [--rounds 3] [--no-journal]
 
 ``plugcell bench transport``'s 4-byte latency test and two of its floors, run one after
-the other ``--rounds`` times between this process and a peer process (peer mode,
+the other ``--rounds`` times between a requester and an answering process (peer mode,
 loopback, journals on unless ``--no-journal``):
 
-* *raw*: plain Zenoh ping-pong, each callback handing the sample to a thread;
+* *raw*: plain Zenoh ping-pong, each callback handing the sample to a thread (both
+  ends processes of their own, as in ``bench transport``);
 * *event loops*: the same, each side's callback handing it to an event loop
   (``call_soon_threadsafe``) — the hops of any asyncio service, nothing more;
 * *plugcell*: ``create_process("PUBLISHER", "Echo", 4 bytes)`` until its update, as
-  the benchmark's requester does, against the benchmark's service.
+  the benchmark's requester does (in this process), against the benchmark's service.
 
 Around each run it reads every thread's time on the CPU from
 ``/proc/PID/task/TID/schedstat`` (nanoseconds) in both processes and prints, per round
 trip, its time (twice the run's average one-way latency, as ``bench transport`` reports
 it) and the CPU time of both processes together (warm-up and hand-shake included, when
-the threads are all but idle), split by process — the requester (this one) and the
-answering peer — into its Python threads (plugcell's event loop, the journal's mover;
+the threads are all but idle), split by process — the requester and the answering
+peer — into its Python threads (plugcell's event loop, the journal's mover;
 the floors' waiting threads) and Zenoh's own runtime threads (``rx-*``, ``tx-*``,
-``net-*``, ``acc-*``, ``app-*``).  A thread of this process that ends within a run
-(the event-loop floor's) is counted by its own clock when it ends.  On a machine with
+``net-*``, ``acc-*``, ``app-*``).  On a machine with
 few cores the CPU a round trip needs is what its latency follows: what a faster request
 path has to remove is read here.  Linux only (reads /proc).
 """
@@ -33,8 +33,6 @@ import os
 import platform
 import sys
 import tempfile
-import threading
-import time
 import uuid
 from collections.abc import Awaitable, Callable
 from pathlib import Path
@@ -56,30 +54,6 @@ def thread_cpu_ns(pid: int) -> dict[tuple[int, str], int]:
             continue
         out[(int(task.name), name)] = ns
     return out
-
-
-class EndedThreads:
-    """CPU ns of this process's Python threads that ended, each read by its own clock
-    (``time.thread_time_ns``) as it ends: /proc no longer lists them."""
-
-    def __init__(self) -> None:
-        self.ns = 0
-        self._lock = threading.Lock()
-        run = threading.Thread.run
-        ended = self
-
-        def counted(thread: threading.Thread) -> None:
-            try:
-                run(thread)
-            finally:
-                spent = time.thread_time_ns()
-                with ended._lock:
-                    ended.ns += spent
-
-        threading.Thread.run = counted  # type: ignore[method-assign]
-
-
-ENDED = EndedThreads()
 
 
 def part_of(process: int, name: str) -> str:
@@ -104,12 +78,10 @@ async def measure(pids: list[int], run: Callable[[], Awaitable[dict[str, float]]
     """µs per round trip of ``run`` (``trips`` round trips, warm-up included): its time
     (from the one-way latency in ms it returns) and the CPU of the threads of ``pids``
     (the requester's process, then the answerer's)."""
-    ended = ENDED.ns
     before = [thread_cpu_ns(p) for p in pids]
     latency_ms = await run()
     after = [thread_cpu_ns(p) for p in pids]
     parts = cpu_by_part(before, after)
-    parts[PARTS[0]] += ENDED.ns - ended
     row = {"round trip": 2e3 * latency_ms["avg"], "cpu": sum(parts.values()) / trips / 1e3}
     row.update({k: v / trips / 1e3 for k, v in parts.items()})
     return row
@@ -138,18 +110,18 @@ async def _main(args: argparse.Namespace) -> list[dict[str, list[dict[str, float
         if not await consumer.wait_for("PUBLISHER", 15):
             raise RuntimeError("the benchmark's service did not appear")
         await consumer.subscribe("PUBLISHER")
-        raw = await asyncio.to_thread(bench.RawFloor, cell, transport)
+        raw = await asyncio.to_thread(bench.RawRequester, cell, env, [])
         floor = raw
         await bench.our_latency(consumer, four, warmup, 0)  # warm both paths once
         await asyncio.to_thread(floor.latency, four.nbytes, warmup, 0)
         me = os.getpid()
         for _ in range(args.rounds):
             results["raw"].append(await measure(
-                [me, raw_peer.popen.pid],
+                [raw.popen.pid, raw_peer.popen.pid],
                 lambda: asyncio.to_thread(floor.latency, four.nbytes, cycles, warmup),
                 cycles + warmup))
             results["event loops"].append(await measure(
-                [me, raw_peer.popen.pid],
+                [raw.popen.pid, raw_peer.popen.pid],
                 lambda: asyncio.to_thread(floor.latency_in_loop, four.nbytes, cycles, warmup),
                 cycles + warmup))
             results["plugcell"].append(await measure(

@@ -25,9 +25,8 @@ SRC = Path(__file__).resolve().parents[2] / "src" / "plugcell"
 
 #: Modules outside the framework allowed to touch Zenoh or sessions, and why.
 RAW_ZENOH = {
-    "apps/bench/transport.py": "measures raw Zenoh between two processes: the floor plugcell is "
-                          "compared with (thesis 5.3)",
-    "apps/bench/peer.py": "the raw-Zenoh peer of that floor and of round_trip_trace",
+    "apps/bench/peer.py": "both ends of the raw-Zenoh floor plugcell is compared with (thesis "
+                          "5.3; `plugcell bench transport`, round_trip_trace)",
 }
 OPENS_A_BARE_SESSION = {
     "apps/commands/router.py": "a router declares nothing: it only routes, for every cell",

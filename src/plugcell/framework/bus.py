@@ -11,7 +11,10 @@ Zenoh calls its callbacks on its own threads and forbids blocking in them; a bus
 ``hand_off`` (a participant's :class:`~plugcell.framework.port.Port`) passes each
 ``(handler, item)`` to it, so every handler runs on the participant's event loop in
 arrival order.  A bus without one (the simulated world, ``sim/controller/reflector.py``)
-calls handlers on Zenoh's threads: they must be thread-safe and quick.
+calls handlers on Zenoh's threads: they must be thread-safe and quick.  Either way the
+callback first keeps the Python thread state of Zenoh's thread alive
+(:func:`~plugcell.framework.threadstate.pin`), so that a sample does not create and
+destroy one.
 
 Doors (docs/protocol.md, "Key space"): ``get``, ``subscribe`` and ``create`` are a
 service's queryables; a service also takes CreateProcess published on its request key
@@ -28,6 +31,7 @@ import zenoh
 from zenoh.handlers import Callback
 
 from plugcell.framework.keys import KeySpace, Presence, Role
+from plugcell.framework.threadstate import pin
 from plugcell.framework.transport import TransportConfig, open_session
 
 Handler = Callable[[Any], None]
@@ -106,17 +110,26 @@ class Bus:
         }
 
     def _callback(self, handler: Handler) -> Callback:
-        hand_off = self._hand_off
-        if hand_off is None:
-            return Callback(handler, indirect=False)
-        return Callback(lambda item: hand_off((handler, item)), indirect=False)
+        return Callback(self._on_zenoh_thread(handler), indirect=False)
 
     def _query_callback(self, on_reply: Handler, on_done: Handler) -> Callback:
+        done = self._on_zenoh_thread(on_done)
+        return Callback(self._on_zenoh_thread(on_reply), lambda: done(None), indirect=False)
+
+    def _on_zenoh_thread(self, handler: Handler) -> Handler:
+        """What Zenoh calls for each item: pin its thread's Python state, then hand the
+        item off to the owner's loop (or, without a hand-off, run ``handler`` here)."""
         hand_off = self._hand_off
         if hand_off is None:
-            return Callback(on_reply, lambda: on_done(None), indirect=False)
-        return Callback(lambda r: hand_off((on_reply, r)),
-                        lambda: hand_off((on_done, None)), indirect=False)
+            def run(item: Any) -> None:
+                pin()
+                handler(item)
+            return run
+
+        def post(item: Any) -> None:
+            pin()
+            hand_off((handler, item))
+        return post
 
     # -- presence (liveliness) -------------------------------------------------------------
 

@@ -18,11 +18,13 @@ and a *consumer* (a service in this process).
 * the floor: plain Zenoh pub/sub between two Python processes (ping-pong for
   latency, a burst of puts for throughput), measured in the same run, payload by
   payload, interleaved with ours; its callbacks hand each sample to a thread, as
-  plugcell's must.  For reference, the same ping-pong answered inside Zenoh's
-  callbacks themselves (``raw_zenoh_in_callback_latency_ms``): what Zenoh alone
-  costs on the machine; and the same ping-pong with each sample handed to an event
-  loop on each side (``raw_zenoh_event_loop_latency_ms``): the floor of any asyncio
-  service, plugcell's design, before plugcell does any work.
+  plugcell's must.  Both of its ends are processes of their own
+  (:class:`RawRequester`), plain Zenoh as a program using it alone gets it.  For
+  reference, the same ping-pong answered inside Zenoh's callbacks themselves
+  (``raw_zenoh_in_callback_latency_ms``): what Zenoh alone costs on the machine; and
+  the same ping-pong with each sample handed to an event loop on each side
+  (``raw_zenoh_event_loop_latency_ms``): the floor of any asyncio service, plugcell's
+  design, before plugcell does any work.
 """
 
 from __future__ import annotations
@@ -34,28 +36,21 @@ import json
 import math
 import os
 import platform
-import queue
 import shutil
-import statistics
-import struct
 import subprocess
 import sys
 import tempfile
-import threading
 import time
-from collections.abc import Callable
 from dataclasses import dataclass
 from importlib import metadata
 from typing import Any
 
 import numpy as np
-import zenoh
-from zenoh.handlers import Callback
 
-from plugcell.apps.bench.peer import raw_keys
+from plugcell.apps.bench.peer import stats_ms
 from plugcell.framework import eventloop
 from plugcell.framework.messages import ProcessStates
-from plugcell.framework.transport import TransportConfig, open_session
+from plugcell.framework.transport import TransportConfig
 
 
 @dataclass(frozen=True)
@@ -102,29 +97,18 @@ THESIS_NETWORKED: dict[int, tuple[str, float, tuple[float, float, float, float]]
 }
 
 
-def stats_ms(half_trips_ns: list[int]) -> dict[str, float]:
-    """avg/max/min/std (population, "jitter") and p99 of one-way latencies, in ms."""
-    ms = [t / 1e6 for t in half_trips_ns]
-    ordered = sorted(ms)
-    return {
-        "avg": statistics.fmean(ms),
-        "max": ordered[-1],
-        "min": ordered[0],
-        "std": statistics.pstdev(ms),
-        "p99": ordered[min(len(ordered) - 1, int(0.99 * len(ordered)))],
-    }
-
-
 class Child:
     """A benchmark peer process (``python -m plugcell.apps.bench.peer``)."""
 
     def __init__(
-        self, role: str, cell: str, env: dict[str, str], journal: bool, prefix: list[str]
+        self, role: str, cell: str, env: dict[str, str], journal: bool, prefix: list[str],
+        *, commands: bool = False,
     ) -> None:
         argv = [*prefix, sys.executable, "-m", "plugcell.apps.bench.peer", role, "--cell", cell]
         if not journal:
             argv.append("--no-journal")
-        self.popen = subprocess.Popen(argv, stdout=subprocess.PIPE, text=True, env=env)
+        self.popen = subprocess.Popen(argv, stdout=subprocess.PIPE, text=True, env=env,
+                                      stdin=subprocess.PIPE if commands else None)
         assert self.popen.stdout is not None
         line = self.popen.stdout.readline()
         if line.strip() != "ready":
@@ -132,6 +116,11 @@ class Child:
             raise RuntimeError(f"benchmark peer {role} did not start: {line!r}")
 
     def stop(self) -> None:
+        if self.popen.stdin is not None:  # a command pipe: its end is the peer's signal
+            with contextlib.suppress(OSError):
+                self.popen.stdin.close()
+            with contextlib.suppress(subprocess.TimeoutExpired):
+                self.popen.wait(15)
         if self.popen.poll() is None:
             self.popen.terminate()
             try:
@@ -143,187 +132,48 @@ class Child:
             self.popen.stdout.close()
 
 
-class RawFloor:
-    """Plain Zenoh pub/sub from this process to the raw peer."""
+class RawRequester(Child):
+    """The raw-Zenoh floor's requester (:class:`~plugcell.apps.bench.peer.RawFloor`) in a
+    process of its own, driven over its standard input and output one JSON line at a
+    time: the floor is plain Zenoh between two Python processes, as a program using
+    Zenoh alone gets it — not sharing this process's Zenoh threads, whose Python thread
+    states plugcell keeps (framework/threadstate.py), which would speed the floor up too.
+    """
 
-    # Zenoh itself, not plugcell's transport adapter (framework/bus.py): this is the
-    # raw-Zenoh floor plugcell is compared with, so it must not go through plugcell
-    # (tests/framework/test_transport_adapter.py lists it as the exception).
+    def __init__(self, cell: str, env: dict[str, str], prefix: list[str]) -> None:
+        super().__init__("raw-requester", cell, env, False, prefix, commands=True)
 
-    def __init__(self, cell: str, transport: TransportConfig) -> None:
-        self.keys = raw_keys(cell)
-        self.session = open_session(transport)
-        self._pongs: queue.SimpleQueue[bytes] = queue.SimpleQueue()
-        self._count = 0
-        self._target = 0
-        self._done = threading.Event()
-        self._subs = [
-            self.session.declare_subscriber(
-                self.keys["pong"],
-                Callback(lambda s: self._pongs.put(s.payload.to_bytes()), indirect=False),
-            ),
-            self.session.declare_subscriber(
-                self.keys["data"], Callback(self._on_data, indirect=False)
-            ),
-        ]
-        self._ping = self.session.declare_publisher(
-            self.keys["ping"], express=True, congestion_control=zenoh.CongestionControl.BLOCK
-        )
-        self._echo = self.session.declare_publisher(self.keys["echo"], express=True)
-        self._on_echoed: Callable[[], None] = lambda: None
-        self._subs.append(self.session.declare_subscriber(
-            self.keys["echoed"], Callback(lambda _: self._on_echoed(), indirect=False)
-        ))
-        self._push = self.session.declare_publisher(self.keys["push"])
-        self._aping = self.session.declare_publisher(
-            self.keys["aping"], express=True, congestion_control=zenoh.CongestionControl.BLOCK
-        )
-        self._on_apong: Callable[[bytes], None] = lambda _: None
-        self._subs.append(self.session.declare_subscriber(
-            self.keys["apong"],
-            Callback(lambda s: self._on_apong(s.payload.to_bytes()), indirect=False),
-        ))
-        # handshake: declarations propagate asynchronously, so ping until a pong comes
-        for _ in range(100):
-            self._ping.put(b"hello")
-            with contextlib.suppress(queue.Empty):
-                self._pongs.get(timeout=0.1)
-                break
-        else:
-            raise RuntimeError("raw peer not reachable")
-        with contextlib.suppress(queue.Empty):
-            while True:
-                self._pongs.get(timeout=0.2)  # late duplicates of the handshake
-
-    def _on_data(self, sample: zenoh.Sample) -> None:
-        sample.payload.to_bytes()  # receive it as a consumer would
-        self._count += 1
-        if self._count >= self._target:
-            self._done.set()
+    def _ask(self, op: str, *args: int) -> Any:
+        assert self.popen.stdin is not None and self.popen.stdout is not None
+        self.popen.stdin.write(json.dumps([op, *args]) + "\n")
+        self.popen.stdin.flush()
+        line = self.popen.stdout.readline()
+        if not line:
+            raise RuntimeError(f"the raw requester ended during {op} (exit {self.popen.poll()})")
+        answer = json.loads(line)
+        if "error" in answer:
+            raise RuntimeError(f"the raw requester failed in {op}: {answer['error']}")
+        return answer["result"]
 
     def latency(self, nbytes: int, cycles: int, warmup: int) -> dict[str, float]:
-        payload = bytes(nbytes)
-        trips = []
-        for i in range(warmup + cycles):
-            t0 = time.perf_counter_ns()
-            self._ping.put(payload)
-            self._pongs.get(timeout=10)
-            if i >= warmup:
-                trips.append((time.perf_counter_ns() - t0) // 2)
-        return stats_ms(trips)
+        """:meth:`RawFloor.latency <plugcell.apps.bench.peer.RawFloor.latency>`."""
+        return dict(self._ask("latency", nbytes, cycles, warmup))
 
     def latency_in_callback(self, nbytes: int, cycles: int, warmup: int) -> dict[str, float]:
-        """Ping-pong with both sides answering inside Zenoh's callbacks (no thread hop).
-
-        Each echo's callback sends the next one, so the cycles chain by themselves;
-        this thread only waits for the last.
-        """
-        payload, total = bytes(nbytes), warmup + cycles
-        trips: list[int] = []
-        done = threading.Event()
-        for _ in range(100):  # the peer's echo subscriber may not be matched yet
-            self._on_echoed = done.set
-            self._echo.put(payload)
-            if done.wait(0.1):
-                break
-        else:
-            raise RuntimeError("raw peer does not echo inside its callback")
-        time.sleep(0.2)  # late duplicates of the handshake
-        done.clear()
-        cycle = {"number": 1, "sent_ns": 0}
-
-        def on_echoed() -> None:
-            now = time.perf_counter_ns()
-            if cycle["number"] > warmup:
-                trips.append((now - cycle["sent_ns"]) // 2)
-            if cycle["number"] == total:
-                done.set()
-                return
-            cycle["number"] += 1
-            cycle["sent_ns"] = time.perf_counter_ns()
-            self._echo.put(payload)
-
-        self._on_echoed = on_echoed
-        cycle["sent_ns"] = time.perf_counter_ns()
-        self._echo.put(payload)
-        finished = done.wait(max(30.0, total * 0.01))
-        self._on_echoed = lambda: None
-        if not finished:
-            raise RuntimeError(f"in-callback ping-pong: {len(trips)}/{cycles} echoes arrived")
-        return stats_ms(trips)
+        """:meth:`RawFloor.latency_in_callback
+        <plugcell.apps.bench.peer.RawFloor.latency_in_callback>`."""
+        return dict(self._ask("latency_in_callback", nbytes, cycles, warmup))
 
     def latency_in_loop(self, nbytes: int, cycles: int, warmup: int) -> dict[str, float]:
-        """Ping-pong where each side's callback hands the sample to an event loop.
-
-        Both ends run plugcell's event loop (uvloop; here in a thread of its own) and
-        reach it by ``call_soon_threadsafe``; this side awaits a future per cycle (under
-        a 10 s timeout, as plugcell's calls wait under theirs), the peer puts the answer
-        from its loop — the hops of any asyncio service and
-        nothing of plugcell's own work: the floor of the event-loop design.
-        """
-        payload = bytes(nbytes)
-
-        async def ping_pong() -> list[int]:
-            loop = asyncio.get_running_loop()
-            waiting: list[asyncio.Future[bytes]] = []
-
-            def arrived(answer: bytes) -> None:
-                if waiting and not waiting[0].done():
-                    waiting[0].set_result(answer)
-
-            self._on_apong = lambda b: loop.call_soon_threadsafe(arrived, b)
-            for _ in range(100):  # the peer's subscriber may not be matched yet
-                waiting[:] = [loop.create_future()]
-                self._aping.put(payload)
-                with contextlib.suppress(TimeoutError):
-                    await asyncio.wait_for(waiting[0], 0.1)
-                    break
-            else:
-                raise RuntimeError("raw peer does not answer from its event loop")
-            await asyncio.sleep(0.2)  # late duplicates of the handshake
-            trips = []
-            for i in range(warmup + cycles):
-                waiting[:] = [loop.create_future()]
-                t0 = time.perf_counter_ns()
-                self._aping.put(payload)
-                await asyncio.wait_for(waiting[0], 10)
-                if i >= warmup:
-                    trips.append((time.perf_counter_ns() - t0) // 2)
-            return trips
-
-        result: list[list[int] | BaseException] = []
-
-        def run_loop() -> None:
-            try:
-                result.append(eventloop.run(ping_pong()))
-            except BaseException as exc:  # re-raised in the caller's thread
-                result.append(exc)
-
-        runner = threading.Thread(target=run_loop, name="asyncio floor")
-        runner.start()
-        runner.join()
-        self._on_apong = lambda _: None
-        if isinstance(result[0], BaseException):
-            raise result[0]
-        return stats_ms(result[0])
+        """:meth:`RawFloor.latency_in_loop <plugcell.apps.bench.peer.RawFloor.latency_in_loop>`."""
+        return dict(self._ask("latency_in_loop", nbytes, cycles, warmup))
 
     def throughput(self, nbytes: int, messages: int) -> float:
-        self._count, self._target = 0, messages
-        self._done.clear()
-        t0 = time.perf_counter()
-        self._push.put(struct.pack("<QQ", messages, nbytes))
-        if not self._done.wait(300):
-            raise RuntimeError(f"raw throughput: {self._count}/{messages} samples arrived")
-        return messages / (time.perf_counter() - t0)
+        """:meth:`RawFloor.throughput <plugcell.apps.bench.peer.RawFloor.throughput>`."""
+        return float(self._ask("throughput", nbytes, messages))
 
     def close(self) -> None:
-        for s in self._subs:
-            s.undeclare()
-        self._ping.undeclare()
-        self._echo.undeclare()
-        self._push.undeclare()
-        self._aping.undeclare()
-        self.session.close()
+        self.stop()
 
 
 async def our_latency(consumer: Any, payload: Payload, cycles: int, warmup: int) -> dict:
@@ -394,11 +244,12 @@ async def _measure(
     os.environ["PLUGCELL_HOME"] = env["PLUGCELL_HOME"]
     transport = TransportConfig.from_env()
     prefix: list[str] = []
+    peer_env = env
     if args.peer_netns:  # --networked, inside namespace A: the peers run in namespace B
         prefix = ["ip", "netns", "exec", args.peer_netns]
-        env = {**env, "PLUGCELL_LISTEN": args.peer_listen}
-    publisher = Child("service", cell, env, not args.no_journal, prefix)
-    raw_peer = Child("raw", cell, env, False, prefix)
+        peer_env = {**env, "PLUGCELL_LISTEN": args.peer_listen}
+    publisher = Child("service", cell, peer_env, not args.no_journal, prefix)
+    raw_peer = Child("raw", cell, peer_env, False, prefix)
     consumer = BenchService("CONSUMER", cell=cell, transport=transport, journal=not args.no_journal)
     raw = None
     rows = []
@@ -407,7 +258,7 @@ async def _measure(
         if not await consumer.wait_for("PUBLISHER", 15):
             raise RuntimeError("the publisher service did not appear")
         await consumer.subscribe("PUBLISHER")
-        raw = await asyncio.to_thread(RawFloor, cell, transport)
+        raw = await asyncio.to_thread(RawRequester, cell, env, [])  # here, beside us
         repeat = _repeat(args)
         for p in payloads:
             cycles, messages = _counts(args, p)
