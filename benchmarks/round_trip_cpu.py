@@ -87,54 +87,34 @@ async def measure(pids: list[int], run: Callable[[], Awaitable[dict[str, float]]
     return row
 
 
-async def _main(args: argparse.Namespace) -> list[dict[str, list[dict[str, float]]]]:
+async def _main(args: argparse.Namespace) -> dict[str, list[dict[str, float]]]:
     from plugcell.apps.bench import transport as bench
-    from plugcell.apps.bench.device import BenchService
     from plugcell.framework.transport import TransportConfig
 
     home = tempfile.mkdtemp(prefix="plugcell-rtcpu-")
     os.environ["PLUGCELL_HOME"] = home
     env = {**os.environ, "PYTHONUNBUFFERED": "1"}
     cell = f"rtcpu{uuid.uuid4().hex[:8]}"
-    journal = not args.no_journal
-    transport = TransportConfig.from_env()
-    service = bench.Child("service", cell, env, journal, [])
-    raw_peer = bench.Child("raw", cell, env, False, [])
-    consumer = BenchService("CONSUMER", cell=cell, transport=transport, journal=journal)
-    raw = None
     four = bench.PAYLOADS[0]
     warmup, cycles = 50, args.cycles
     results: dict[str, list[dict[str, float]]] = {"raw": [], "event loops": [], "plugcell": []}
-    try:
-        await consumer.start()
-        if not await consumer.wait_for("PUBLISHER", 15):
-            raise RuntimeError("the benchmark's service did not appear")
-        await consumer.subscribe("PUBLISHER")
-        raw = await asyncio.to_thread(bench.RawRequester, cell, env, [])
-        floor = raw
-        await bench.our_latency(consumer, four, warmup, 0)  # warm both paths once
-        await asyncio.to_thread(floor.latency, four.nbytes, warmup, 0)
-        me = os.getpid()
+    async with bench.parties(cell, env, TransportConfig.from_env(), not args.no_journal) as who:
+        floor = [who.raw.popen.pid, who.raw_peer.popen.pid]
+        ours = [os.getpid(), who.publisher.popen.pid]
+        await bench.our_latency(who.consumer, four, warmup, 0)  # warm both paths once
+        await asyncio.to_thread(who.raw.latency, four.nbytes, warmup, 0)
         for _ in range(args.rounds):
             results["raw"].append(await measure(
-                [raw.popen.pid, raw_peer.popen.pid],
-                lambda: asyncio.to_thread(floor.latency, four.nbytes, cycles, warmup),
+                floor, lambda: asyncio.to_thread(who.raw.latency, four.nbytes, cycles, warmup),
                 cycles + warmup))
             results["event loops"].append(await measure(
-                [raw.popen.pid, raw_peer.popen.pid],
-                lambda: asyncio.to_thread(floor.latency_in_loop, four.nbytes, cycles, warmup),
+                floor,
+                lambda: asyncio.to_thread(who.raw.latency_in_loop, four.nbytes, cycles, warmup),
                 cycles + warmup))
             results["plugcell"].append(await measure(
-                [me, service.popen.pid],
-                lambda: bench.our_latency(consumer, four, cycles, warmup),
+                ours, lambda: bench.our_latency(who.consumer, four, cycles, warmup),
                 cycles + warmup))
-    finally:
-        if raw is not None:
-            raw.close()
-        await consumer.close()
-        service.stop()
-        raw_peer.stop()
-    return [results]
+    return results
 
 
 def _median(values: list[float]) -> float:
@@ -156,7 +136,7 @@ def main() -> int:
         return 2
     from plugcell.framework import eventloop
 
-    results = eventloop.run(_main(args))[0]
+    results = eventloop.run(_main(args))
     print(f"4-byte round trips, {args.cycles} cycles (+50 warm-up) × {args.rounds} rounds, "
           f"journal {'off' if args.no_journal else 'on'}; {platform.machine()}, Python "
           f"{platform.python_version()}, {os.cpu_count()} cores, "

@@ -41,6 +41,7 @@ import subprocess
 import sys
 import tempfile
 import time
+from collections.abc import AsyncIterator, Sequence
 from dataclasses import dataclass
 from importlib import metadata
 from typing import Any
@@ -236,11 +237,63 @@ def machine() -> dict[str, Any]:
     }
 
 
+@dataclass
+class Parties:
+    """Who takes part in a run of the benchmark (:func:`parties`)."""
+
+    consumer: Any
+    """The requester and consumer: a :class:`~plugcell.apps.bench.device.BenchService`
+    in this process, subscribed to the publisher."""
+    publisher: Child
+    """The :class:`~plugcell.apps.bench.device.BenchService` it measures, its own process."""
+    raw_peer: Child
+    """The far end of the raw-Zenoh floor (:func:`~plugcell.apps.bench.peer.serve_raw`)."""
+    raw: RawRequester
+    """The near end of that floor, a process of its own beside this one."""
+
+
+@contextlib.asynccontextmanager
+async def parties(cell: str, env: dict[str, str], transport: TransportConfig, journal: bool,
+                  peer_env: dict[str, str] | None = None,
+                  prefix: Sequence[str] = ()) -> AsyncIterator[Parties]:
+    """Start everyone a run needs, in cell ``cell``, and stop them all afterwards.
+
+    Parameters
+    ----------
+    cell, env, transport
+        The cell, the environment of the processes beside this one, and this process's
+        transport.
+    journal
+        Whether the two services keep their journals.
+    peer_env, prefix
+        The environment of the far ends (default ``env``) and the command prefix that
+        starts them (``--networked``: in the other network namespace).
+    """
+    from plugcell.apps.bench.device import BenchService
+
+    far_env = env if peer_env is None else peer_env
+    publisher = Child("service", cell, far_env, journal, list(prefix))
+    raw_peer = Child("raw", cell, far_env, False, list(prefix))
+    consumer = BenchService("CONSUMER", cell=cell, transport=transport, journal=journal)
+    raw = None
+    try:
+        await consumer.start()
+        if not await consumer.wait_for("PUBLISHER", 15):
+            raise RuntimeError("the publisher service did not appear")
+        await consumer.subscribe("PUBLISHER")
+        raw = await asyncio.to_thread(RawRequester, cell, env, [])  # here, beside us
+        yield Parties(consumer, publisher, raw_peer, raw)
+    finally:
+        if raw is not None:
+            raw.close()
+        await consumer.close()
+        publisher.stop()
+        raw_peer.stop()
+
+
 async def _measure(
     args: argparse.Namespace, cell: str, env: dict[str, str], payloads: list[Payload], progress: Any
 ) -> list[dict[str, Any]]:
-    from plugcell.apps.bench.device import BenchService
-
     os.environ["PLUGCELL_HOME"] = env["PLUGCELL_HOME"]
     transport = TransportConfig.from_env()
     prefix: list[str] = []
@@ -248,17 +301,9 @@ async def _measure(
     if args.peer_netns:  # --networked, inside namespace A: the peers run in namespace B
         prefix = ["ip", "netns", "exec", args.peer_netns]
         peer_env = {**env, "PLUGCELL_LISTEN": args.peer_listen}
-    publisher = Child("service", cell, peer_env, not args.no_journal, prefix)
-    raw_peer = Child("raw", cell, peer_env, False, prefix)
-    consumer = BenchService("CONSUMER", cell=cell, transport=transport, journal=not args.no_journal)
-    raw = None
     rows = []
-    try:
-        await consumer.start()
-        if not await consumer.wait_for("PUBLISHER", 15):
-            raise RuntimeError("the publisher service did not appear")
-        await consumer.subscribe("PUBLISHER")
-        raw = await asyncio.to_thread(RawRequester, cell, env, [])  # here, beside us
+    async with parties(cell, env, transport, not args.no_journal, peer_env, prefix) as who:
+        consumer, raw = who.consumer, who.raw
         repeat = _repeat(args)
         for p in payloads:
             cycles, messages = _counts(args, p)
@@ -306,12 +351,6 @@ async def _measure(
                     },
                 }
             )
-    finally:
-        if raw is not None:
-            raw.close()
-        await consumer.close()
-        publisher.stop()
-        raw_peer.stop()
     return rows
 
 
