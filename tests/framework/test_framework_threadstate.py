@@ -166,3 +166,51 @@ def test_no_more_than_max_pinned_threads_are_pinned(monkeypatch: pytest.MonkeyPa
         worker.start()
         worker.join()
     assert threadstate.pinned() == before + 1
+
+
+#: A participant's bus following notifications that stream in, then exiting without
+#: closing its session: Zenoh's pinned threads keep calling back while Python finalizes.
+FOLLOWER = r"""
+import sys, time
+from plugcell.framework.bus import Bus
+from plugcell.framework.keys import KeySpace
+from plugcell.framework.threadstate import pinned
+from plugcell.framework.transport import TransportConfig
+heard = [0]
+bus = Bus.connect(TransportConfig.from_env(), KeySpace(sys.argv[1]),
+                  hand_off=lambda item: heard.__setitem__(0, heard[0] + 1))
+bus.follow_notifications("CAMERA", lambda sample: None)
+deadline = time.monotonic() + 20
+while heard[0] < 500 and time.monotonic() < deadline:
+    time.sleep(0.01)
+print(heard[0], pinned(), flush=True)
+sys.exit(0)
+"""
+STREAMER = r"""
+import sys, time
+from plugcell.framework.bus import Bus
+from plugcell.framework.keys import KeySpace
+from plugcell.framework.transport import TransportConfig
+bus = Bus.connect(TransportConfig.from_env(), KeySpace(sys.argv[1]))
+print("ready", flush=True)
+while True:
+    bus.notify("state", "CAMERA", b"Busy")
+"""
+
+
+@pytest.mark.slow
+def test_a_process_exits_cleanly_while_samples_still_reach_its_pinned_threads() -> None:
+    cell = f"pinexit{uuid.uuid4().hex[:8]}"
+    streamer = subprocess.Popen([sys.executable, "-c", STREAMER, cell],
+                                stdout=subprocess.PIPE, text=True)
+    try:
+        assert streamer.stdout is not None and streamer.stdout.readline().strip() == "ready"
+        for _ in range(3):
+            done = subprocess.run([sys.executable, "-c", FOLLOWER, cell], capture_output=True,
+                                  text=True, timeout=60)
+            assert done.returncode == 0, done.stderr[-2000:]
+            heard, pinned_threads = (int(x) for x in done.stdout.split())
+            assert heard >= 500 and pinned_threads >= 1
+    finally:
+        streamer.kill()
+        streamer.wait(10)
