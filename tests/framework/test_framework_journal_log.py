@@ -46,6 +46,13 @@ def _process(journal: Journal, identifier: int, sender: str = "A") -> None:
     )
 
 
+def _commit_completed(journal: Journal, identifier: int) -> None:
+    """Commit process ``identifier`` of A with its Completed update."""
+    _process(journal, identifier)
+    journal.record_update("A", identifier, 1, "Completed", "", "")
+    journal.commit()
+
+
 def _in_database(path: Path, table: str) -> int:
     with sqlite3.connect(path) as db:
         return db.execute(f"SELECT COUNT(*) FROM {table}").fetchone()[0]
@@ -254,9 +261,7 @@ def test_the_log_restarts_once_long_and_every_row_is_shown_once(
     generations = set()
     try:
         for i in range(1, 121):
-            _process(journal, i)
-            journal.record_update("A", i, 1, "Completed", "", "")
-            journal.commit()
+            _commit_completed(journal, i)
             if i % 7 == 0:
                 time.sleep(0.003)
                 shown += _poll(tail)
@@ -427,9 +432,7 @@ def test_a_tail_in_another_thread_sees_every_row_once_while_the_log_moves_and_re
     poller.start()
     try:
         for i in range(1, 801):
-            _process(journal, i)
-            journal.record_update("A", i, 1, "Completed", "", "")
-            journal.commit()
+            _commit_completed(journal, i)
             if i % 50 == 0:
                 time.sleep(0.002)
         journal.settle()
