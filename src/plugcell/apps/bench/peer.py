@@ -22,6 +22,7 @@ import sys
 import threading
 import time
 from collections.abc import Callable
+from typing import Any
 
 # Zenoh itself, not plugcell's transport adapter (framework/bus.py): the raw peer is
 # the far side of the raw-Zenoh floor of ``plugcell bench transport``.
@@ -241,30 +242,41 @@ class RawFloor:
 REQUESTER_OPERATIONS = ("latency", "latency_in_callback", "latency_in_loop", "throughput")
 
 
+def requester_answer(floor: Any, line: str) -> str:
+    """The answer line (JSON, no newline) of :func:`serve_raw_requester` to one command.
+
+    ``line`` must be ``[operation, *counts]``: an operation of
+    :data:`REQUESTER_OPERATIONS` and non-negative integers.  The answer is
+    ``{"result": ...}`` with what ``floor``'s method returned, or ``{"error": reason}``
+    for anything else — bad JSON, another shape, an unknown operation, a wrong count
+    or the measurement's own failure; it never raises.
+    """
+    try:
+        command = json.loads(line)
+        if not isinstance(command, list) or not command or not isinstance(command[0], str):
+            raise ValueError(f"a command is [operation, *counts], got {line.strip()[:80]!r}")
+        op, *args = command
+        if op not in REQUESTER_OPERATIONS:
+            raise ValueError(f"unknown operation {op!r} (known: {', '.join(REQUESTER_OPERATIONS)})")
+        if not all(type(a) is int and a >= 0 for a in args):
+            raise ValueError(f"arguments must be counts, got {args!r}")
+        result = getattr(floor, op)(*args)
+    except Exception as exc:  # answer every line: the caller waits for it
+        return json.dumps({"error": f"{type(exc).__name__}: {exc}"})
+    return json.dumps({"result": result})
+
+
 def serve_raw_requester(cell: str, transport: TransportConfig) -> None:
     """Run the floor's requester (:class:`RawFloor`) and its measurements on command.
 
-    Prints ``ready`` once the raw peer answers, then reads one JSON line per command from
-    standard input, ``[operation, *integer arguments]`` (an operation of
-    :data:`REQUESTER_OPERATIONS`), and answers each with one line, ``{"result": ...}`` or
-    ``{"error": reason}``; ends when standard input does.
+    Prints ``ready`` once the raw peer answers, then answers each line of standard input
+    with one line (:func:`requester_answer`); ends when standard input does.
     """
     floor = RawFloor(cell, transport)
     print("ready", flush=True)
     try:
         for line in sys.stdin:
-            try:
-                op, *args = json.loads(line)
-                if op not in REQUESTER_OPERATIONS:
-                    raise ValueError(f"unknown operation {op!r} "
-                                     f"(known: {', '.join(REQUESTER_OPERATIONS)})")
-                if not all(isinstance(a, int) and a >= 0 for a in args):
-                    raise ValueError(f"arguments must be counts, got {args!r}")
-                result = getattr(floor, op)(*args)
-            except Exception as exc:  # answer every line: the caller waits for it
-                print(json.dumps({"error": f"{type(exc).__name__}: {exc}"}), flush=True)
-            else:
-                print(json.dumps({"result": result}), flush=True)
+            print(requester_answer(floor, line), flush=True)
     finally:
         floor.close()
 
