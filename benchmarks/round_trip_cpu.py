@@ -1,6 +1,7 @@
 """What one small round trip costs in CPU, by process and thread: plugcell beside its floors.
 
     .venv/bin/python benchmarks/round_trip_cpu.py [--cycles 4000] [--rounds 3] [--no-journal]
+        [--switches]
 
 ``plugcell bench transport``'s 4-byte latency test and two of its floors, run one after
 the other ``--rounds`` times between a requester and an answering process (peer mode,
@@ -20,7 +21,8 @@ it) and the CPU time of both processes together (warm-up and hand-shake included
 the threads are all but idle), split by process — the requester and the answering
 peer — into its Python threads (plugcell's event loop, the journal's mover;
 the floors' waiting threads) and Zenoh's own runtime threads (``rx-*``, ``tx-*``,
-``net-*``, ``acc-*``, ``app-*``).  On a machine with
+``net-*``, ``acc-*``, ``app-*``); with ``--switches`` also their context switches
+(``/proc/PID/task/TID/status``), voluntary and forced.  On a machine with
 few cores the CPU a round trip needs is what its latency follows: what a faster request
 path has to remove is read here.  Linux only (reads /proc).
 """
@@ -43,16 +45,25 @@ ZENOH_THREADS = ("rx-", "tx-", "net-", "acc-", "app-")
 PARTS = ("requester: Python", "requester: Zenoh", "answerer: Python", "answerer: Zenoh")
 
 
-def thread_cpu_ns(pid: int) -> dict[tuple[int, str], int]:
-    """Time on the CPU (ns) of each live thread of ``pid``, keyed by (thread id, name)."""
-    out: dict[tuple[int, str], int] = {}
+#: What :func:`thread_readings` reads of each thread, in this order.
+READINGS = ("CPU ns", "voluntary switches", "forced switches")
+
+
+def thread_readings(pid: int) -> dict[tuple[int, str], tuple[int, ...]]:
+    """Of each live thread of ``pid``, keyed by (thread id, name): its time on the CPU
+    (ns, ``schedstat``) and its voluntary and forced context switches (``status``)."""
+    out: dict[tuple[int, str], tuple[int, ...]] = {}
     for task in Path(f"/proc/{pid}/task").iterdir():
         try:
             name = (task / "comm").read_text().strip()
             ns = int((task / "schedstat").read_text().split()[0])
-        except (OSError, ValueError, IndexError):  # the thread ended meanwhile
+            status = dict(line.split(":", 1) for line in
+                          (task / "status").read_text().splitlines() if ":" in line)
+            switches = (int(status["voluntary_ctxt_switches"]),
+                        int(status["nonvoluntary_ctxt_switches"]))
+        except (OSError, ValueError, IndexError, KeyError):  # the thread ended meanwhile
             continue
-        out[(int(task.name), name)] = ns
+        out[(int(task.name), name)] = (ns, *switches)
     return out
 
 
@@ -62,28 +73,32 @@ def part_of(process: int, name: str) -> str:
     return PARTS[2 * process + name.startswith(ZENOH_THREADS)]
 
 
-def cpu_by_part(before: list[dict[tuple[int, str], int]],
-                after: list[dict[tuple[int, str], int]]) -> dict[str, int]:
-    """CPU ns spent between two readings of the requester's and the answerer's threads,
-    by :data:`PARTS` (a thread started in between counts from 0)."""
+def by_part(before: list[dict[tuple[int, str], tuple[int, ...]]],
+            after: list[dict[tuple[int, str], tuple[int, ...]]], reading: int) -> dict[str, int]:
+    """How much of reading ``reading`` (an index of :data:`READINGS`) the requester's and the
+    answerer's threads added between two readings, by :data:`PARTS` (a thread started in
+    between counts from 0)."""
     total = dict.fromkeys(PARTS, 0)
     for process, (b, a) in enumerate(zip(before, after, strict=True)):
-        for (tid, name), ns in a.items():
-            total[part_of(process, name)] += ns - b.get((tid, name), 0)
+        for key, values in a.items():
+            total[part_of(process, key[1])] += values[reading] - b.get(key, (0,) * 3)[reading]
     return total
 
 
 async def measure(pids: list[int], run: Callable[[], Awaitable[dict[str, float]]],
                   trips: int) -> dict[str, float]:
     """µs per round trip of ``run`` (``trips`` round trips, warm-up included): its time
-    (from the one-way latency in ms it returns) and the CPU of the threads of ``pids``
-    (the requester's process, then the answerer's)."""
-    before = [thread_cpu_ns(p) for p in pids]
+    (from the one-way latency in ms it returns), and the CPU and context switches of
+    the threads of ``pids`` (the requester's process, then the answerer's)."""
+    before = [thread_readings(p) for p in pids]
     latency_ms = await run()
-    after = [thread_cpu_ns(p) for p in pids]
-    parts = cpu_by_part(before, after)
+    after = [thread_readings(p) for p in pids]
+    parts = by_part(before, after, 0)
     row = {"round trip": 2e3 * latency_ms["avg"], "cpu": sum(parts.values()) / trips / 1e3}
     row.update({k: v / trips / 1e3 for k, v in parts.items()})
+    for reading in (1, 2):  # context switches per round trip
+        row.update({f"{k}, {READINGS[reading]}": v / trips
+                    for k, v in by_part(before, after, reading).items()})
     return row
 
 
@@ -128,6 +143,8 @@ def main() -> int:
     ap.add_argument("--cycles", type=int, default=4000)
     ap.add_argument("--rounds", type=int, default=3)
     ap.add_argument("--no-journal", action="store_true")
+    ap.add_argument("--switches", action="store_true",
+                    help="also print the context switches per round trip, by part")
     args = ap.parse_args()
     if args.cycles < 1 or args.rounds < 1:
         ap.error("--cycles and --rounds must be at least 1")
@@ -152,6 +169,14 @@ def main() -> int:
             cells.append(f"{_median(values):6.1f} ({min(values):6.1f}–{max(values):6.1f})")
         ratio = _median([r["cpu"] for r in rows]) / raw_cpu
         print(f"{path:12s}" + "".join(f"{c:>24s}" for c in cells) + f"{ratio:10.2f}×")
+    if args.switches:
+        print("context switches per round trip, voluntary / forced, median of the rounds")
+        print(f"{'path':12s}" + "".join(f"{h:>24s}" for h in PARTS))
+        for path, rows in results.items():
+            cells = [f"{_median([r[f'{k}, voluntary switches'] for r in rows]):6.2f} / "
+                     f"{_median([r[f'{k}, forced switches'] for r in rows]):4.2f}"
+                     for k in PARTS]
+            print(f"{path:12s}" + "".join(f"{c:>24s}" for c in cells))
     return 0
 
 

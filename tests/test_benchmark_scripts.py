@@ -23,7 +23,7 @@ SCRIPTS = [
     ("round_trip_trace.py", ["--cycles", "30"], "round trip (sum of the medians)"),
     ("round_trip_trace.py", ["--cycles", "30", "--arrival"], "service: sample arrives"),
     ("round_trip_profile.py", ["--cycles", "30", "--top", "3"], "journal (its log, SQLite)"),
-    ("round_trip_cpu.py", ["--cycles", "30", "--rounds", "1"], "CPU ÷ raw"),
+    ("round_trip_cpu.py", ["--cycles", "30", "--rounds", "1", "--switches"], "voluntary / forced"),
     ("durability_floor.py", ["--cycles", "30", "--warmup", "5", "--repeat", "1"],
      "SQLite commit"),
 ]
