@@ -53,6 +53,16 @@ def _commit_completed(journal: Journal, identifier: int) -> None:
     journal.commit()
 
 
+def _churning(tmp_path: Path, monkeypatch: pytest.MonkeyPatch,
+              restart_bytes: int) -> tuple[Journal, JournalTail]:
+    """A journal whose rows move every millisecond and whose log restarts past
+    ``restart_bytes``, and a cell controller's tail of it."""
+    monkeypatch.setattr(journal_module, "MOVE_PERIOD_S", 0.001)
+    monkeypatch.setattr(journal_module, "LOG_RESTART_BYTES", restart_bytes)
+    return (Journal(journal_dir("C", tmp_path) / "DEV.sqlite", "DEV"),
+            JournalTail("C", tmp_path))
+
+
 def _in_database(path: Path, table: str) -> int:
     with sqlite3.connect(path) as db:
         return db.execute(f"SELECT COUNT(*) FROM {table}").fetchone()[0]
@@ -252,11 +262,8 @@ def test_the_log_restarts_once_long_and_every_row_is_shown_once(
     tmp_path: Path, monkeypatch: pytest.MonkeyPatch
 ) -> None:
     """With the background mover on, a tiny restart size and the tail polling all along."""
-    monkeypatch.setattr(journal_module, "MOVE_PERIOD_S", 0.001)
-    monkeypatch.setattr(journal_module, "LOG_RESTART_BYTES", 300)
-    path = journal_dir("C", tmp_path) / "DEV.sqlite"
-    journal = Journal(path, "DEV")
-    tail = JournalTail("C", tmp_path)
+    journal, tail = _churning(tmp_path, monkeypatch, 300)
+    path = journal.path
     shown: list[tuple[int, ...]] = []
     generations = set()
     try:
@@ -408,12 +415,9 @@ def test_a_tail_in_another_thread_sees_every_row_once_while_the_log_moves_and_re
     """The controller polls from a worker thread while the service commits, the rows
     move every millisecond and the log restarts every 2 KiB: whatever the interleaving,
     each committed row is shown once and ``read_journal`` ends with all of them."""
-    monkeypatch.setattr(journal_module, "MOVE_PERIOD_S", 0.001)
-    monkeypatch.setattr(journal_module, "LOG_RESTART_BYTES", 2048)
     monkeypatch.setattr(tail_module, "HISTORY", 10_000)
-    path = journal_dir("C", tmp_path) / "DEV.sqlite"
-    journal = Journal(path, "DEV")
-    tail = JournalTail("C", tmp_path)
+    journal, tail = _churning(tmp_path, monkeypatch, 2048)
+    path = journal.path
     shown: list[tuple[int, ...]] = []
     done = threading.Event()
     errors: list[BaseException] = []
