@@ -1,4 +1,5 @@
-"""What the journal's durability rule costs *any* implementation of the request path.
+"""What the journal's durability rule and the protocol's messages cost *any* implementation
+of the request path.
 
     .venv/bin/python benchmarks/durability_floor.py [--cycles 4000] [--repeat 3]
 
@@ -21,11 +22,26 @@ committed before its acknowledgement is sent; every update before it is publishe
   ``record_process``, two ``record_update`` and one ``commit``, as an ``Echo`` costs
   the service (a log append; its rows move into SQLite in the background).
 
-No decoding, admission, scheduling or outbox: whatever a native or Python framework
-adds comes on top, so the table bounds from below what the request path can reach with
-each way of keeping the rule.  The variants run interleaved, ``--repeat`` rounds; the
-table gives each one's median over the rounds of the average one-way latency
-(round trip ÷ 2) and what it adds to the floor.
+No decoding, admission, scheduling or outbox in these: whatever a native or Python
+framework adds comes on top, so they bound from below what the request path can reach
+with each way of keeping the rule.  Two more variants add the protocol's own work per
+message, done in Python with plugcell's own functions but without its framework (no
+scheduler, tasks, timeouts or outbox) — what a lean Python request path could reach:
+
+* ``protocol`` — the requester sends a real ``Echo`` CreateProcess (its input checked
+  and typed, :func:`~plugcell.framework.wire.encode`, the identifier attached) and waits
+  for the answer's final update, decoded and matched to the request; the answering
+  side admits it as a service does (:func:`~plugcell.framework.admission.decode_request`,
+  ``check_envelope``, ``check_process``, ``check_input``) and answers with the
+  acknowledgement and the ``Completed`` update carrying the data, in one
+  :class:`~plugcell.framework.messages.ProcessUpdateBatch` — the same bytes on the wire
+  as plugcell's;
+* ``protocol + Journal`` — the same, journaled as the service journals an ``Echo``
+  (the process row, its Running and Completed updates, one commit) before the answer.
+
+The variants run interleaved, ``--repeat`` rounds; the table gives each one's median
+over the rounds of the average one-way latency (round trip ÷ 2) and what it adds to the
+floor.
 """
 
 from __future__ import annotations
@@ -42,11 +58,121 @@ import tempfile
 import time
 from importlib import metadata
 from pathlib import Path
+from typing import Any
 
 import msgspec
 import zenoh
 
-VARIANTS = ("nothing", "log append", "SQLite commit", "Journal")
+VARIANTS = ("nothing", "log append", "SQLite commit", "Journal", "protocol",
+            "protocol + Journal")
+#: The variants whose messages are plugcell's CreateProcess and its answer.
+PROTOCOL = ("protocol", "protocol + Journal")
+REQUESTER, SERVICE = "REQUESTER", "SERVICE"
+
+
+def _echo() -> Any:
+    """The ``Echo`` command of the transport benchmark's service (its catalogue entry)."""
+    from plugcell.apps.bench.device import BenchService
+
+    return next(c for c in BenchService.commands if c.name == "Echo")
+
+
+class _LeanService:
+    """The answering side of :data:`PROTOCOL`: admit an ``Echo`` CreateProcess as a
+    service does, journal it (with ``journal``), answer with its acknowledgement and its
+    final update in one batch — without scheduler, tasks or outbox."""
+
+    def __init__(self, journal: Any) -> None:
+        from plugcell.framework.messages import Device
+
+        self.command = _echo()
+        self.device = Device(name=SERVICE, commands=(self.command,))
+        self.journal = journal
+        self.instance = "service-instance"
+
+    def answer(self, payload: Any) -> bytes:
+        from plugcell.framework import admission, wire
+        from plugcell.framework.data import summary, to_data
+        from plugcell.framework.messages import (
+            Acknowledgement,
+            ProcessStates,
+            ProcessUpdateBatch,
+            ProcessUpdateNotification,
+        )
+
+        received = time.time_ns()
+        decoded = admission.decode_request(payload, wire.DEFAULT_MAX_PAYLOAD, SERVICE)
+        if isinstance(decoded, str):
+            raise RuntimeError(decoded)
+        envelope, _ = decoded
+        process = envelope.body
+        reason = (admission.check_envelope(envelope, REQUESTER)
+                  or admission.check_process(SERVICE, self.device, envelope, process, set()))
+        array, reason = (None, reason) if reason else admission.check_input(
+            self.command, process)
+        if reason:
+            raise RuntimeError(reason)
+        output = to_data(array, self.command.output_data_type, self.command.output_data_size)
+        if self.journal is not None:
+            self.journal.record_process(
+                sender=REQUESTER, identifier=process.identifier,
+                sender_instance=envelope.instance, recipient_instance=self.instance,
+                command=self.command.name, option="", command_type=self.command.type.value,
+                input_summary=summary(process.data), received_ns=received,
+                state=ProcessStates.Queued.value,
+            )
+            self.journal.record_update(REQUESTER, process.identifier, 1, "Running", "", "")
+            self.journal.record_update(REQUESTER, process.identifier, 2, "Completed", "",
+                                       summary(output))
+            self.journal.commit()
+        return wire.encode(SERVICE, self.instance, ProcessUpdateBatch(
+            acks=[Acknowledgement(identifier=process.identifier, state=ProcessStates.Queued,
+                                  instance=self.instance)],
+            updates=[ProcessUpdateNotification(
+                tag=process.tag, identifier=process.identifier,
+                state=ProcessStates.Completed, data=output, seq=2)],
+        ))
+
+
+class _LeanRequester:
+    """The requesting side of :data:`PROTOCOL`: an ``Echo`` CreateProcess of 4 bytes out
+    (input checked and typed, identifier attached), its final update in."""
+
+    def __init__(self) -> None:
+        import numpy as np
+
+        self.command = _echo()
+        self.value = np.arange(4, dtype=np.uint8)
+        self.identifier = 0
+
+    def request(self) -> tuple[bytes, bytes]:
+        """The next request's payload and attachment."""
+        from plugcell.framework import wire
+        from plugcell.framework.data import to_data
+        from plugcell.framework.messages import Process, Tag
+
+        self.identifier += 1
+        data = to_data(self.value, self.command.input_data_type, self.command.input_data_size)
+        process = Process(command=self.command, tag=Tag(REQUESTER, SERVICE),
+                          identifier=self.identifier, data=data)
+        return (wire.encode(REQUESTER, "requester-instance", process),
+                wire.attach_identifier(self.identifier))
+
+    def final(self, payload: bytes) -> bool:
+        """Whether ``payload`` holds the final update of the last request (its data read)."""
+        from plugcell.framework import wire
+        from plugcell.framework.data import from_data
+        from plugcell.framework.messages import process_acks, process_updates
+
+        body = wire.decode(payload).body
+        for ack in process_acks(body):
+            if ack.identifier == self.identifier and ack.state.final:
+                raise RuntimeError(f"request {ack.identifier} refused: {ack.reason}")
+        for update in process_updates(body):
+            if update.identifier == self.identifier and update.state.final:
+                from_data(update.data)
+                return True
+        return False
 
 
 def _serve(variant: str, key: str, folder: str) -> None:
@@ -61,8 +187,10 @@ def _serve(variant: str, key: str, folder: str) -> None:
     )
     loop = eventloop.new_event_loop()
     journal = (
-        Journal(Path(folder) / "SERVICE.sqlite", "SERVICE") if variant == "Journal" else None
+        Journal(Path(folder) / "SERVICE.sqlite", SERVICE)
+        if variant in ("Journal", "protocol + Journal") else None
     )
+    lean = _LeanService(journal) if variant in PROTOCOL else None
     log = (
         os.open(Path(folder) / "SERVICE.log", os.O_WRONLY | os.O_CREAT | os.O_APPEND, 0o644)
         if variant == "log append"
@@ -77,9 +205,12 @@ def _serve(variant: str, key: str, folder: str) -> None:
     encoder = msgspec.msgpack.Encoder()
     count = 0
 
-    def answer(payload: bytes) -> None:
+    def answer(payload: Any) -> None:
         nonlocal count
         count += 1
+        if lean is not None:
+            pong.put(lean.answer(payload))
+            return
         if journal is not None:
             journal.record_process(
                 sender="REQUESTER", identifier=count, sender_instance="requester-instance",
@@ -112,24 +243,27 @@ def _serve(variant: str, key: str, folder: str) -> None:
             )))
         pong.put(payload)
 
-    session.declare_subscriber(
+    session.declare_subscriber(  # the protocol's answer reads the payload as a service does
         f"{key}/ping",
-        lambda sample: loop.call_soon_threadsafe(answer, sample.payload.to_bytes()),
+        (lambda sample: loop.call_soon_threadsafe(answer, sample.payload)) if lean else
+        (lambda sample: loop.call_soon_threadsafe(answer, sample.payload.to_bytes())),
     )
     print("ready", flush=True)
     loop.run_forever()
 
 
-async def _ping(key: str, cycles: int, warmup: int) -> float:
-    """Average one-way latency in ms of ``cycles`` 4-byte round trips to ``key``."""
+async def _ping(key: str, variant: str, cycles: int, warmup: int) -> float:
+    """Average one-way latency in ms of ``cycles`` 4-byte round trips to ``key`` (of
+    :data:`PROTOCOL` variants: ``Echo`` processes of 4 bytes)."""
     from plugcell.framework.transport import TransportConfig, open_session
 
     session = open_session(TransportConfig.from_env())
     loop = asyncio.get_running_loop()
     waiting: list[asyncio.Future[bytes]] = []
+    lean = _LeanRequester() if variant in PROTOCOL else None
 
     def arrived(answer: bytes) -> None:
-        if waiting and not waiting[0].done():
+        if waiting and not waiting[0].done() and (lean is None or lean.final(answer)):
             waiting[0].set_result(answer)
 
     session.declare_subscriber(
@@ -138,10 +272,18 @@ async def _ping(key: str, cycles: int, warmup: int) -> float:
     ping = session.declare_publisher(
         f"{key}/ping", express=True, congestion_control=zenoh.CongestionControl.BLOCK
     )
+
+    def put() -> None:
+        if lean is None:
+            ping.put(b"ping")
+        else:
+            payload, attachment = lean.request()
+            ping.put(payload, attachment=attachment)
+
     try:
         for _ in range(200):  # until the answering side's subscriber is matched
             waiting[:] = [loop.create_future()]
-            ping.put(b"ping")
+            put()
             try:
                 await asyncio.wait_for(waiting[0], 0.05)
                 break
@@ -153,7 +295,7 @@ async def _ping(key: str, cycles: int, warmup: int) -> float:
         for i in range(warmup + cycles):
             waiting[:] = [loop.create_future()]
             started = time.perf_counter_ns()
-            ping.put(b"ping")
+            put()
             await asyncio.wait_for(waiting[0], 5.0)
             if i >= warmup:
                 half_trips.append((time.perf_counter_ns() - started) / 2)
@@ -175,7 +317,7 @@ def _round(variant: str, cycles: int, warmup: int) -> float:
             assert server.stdout is not None
             if server.stdout.readline().strip() != "ready":
                 raise RuntimeError(f"the answering process for {variant!r} did not start")
-            return eventloop.run(_ping(key, cycles, warmup))
+            return eventloop.run(_ping(key, variant, cycles, warmup))
         finally:
             server.kill()
             server.wait()
