@@ -28,6 +28,8 @@ with each way of keeping the rule.  Two more variants add the protocol's own wor
 message, done in Python with plugcell's own functions but without its framework (no
 scheduler, tasks, timeouts or outbox) — what a lean Python request path could reach:
 
+* ``protocol's bytes`` — the floor with the requests and answers of ``protocol`` (below),
+  encoded once beforehand: what their size costs Zenoh;
 * ``protocol`` — the requester sends a real ``Echo`` CreateProcess (its input checked
   and typed, :func:`~plugcell.framework.wire.encode`, the identifier attached) and waits
   for the answer's final update, decoded and matched to the request; the answering
@@ -41,7 +43,9 @@ scheduler, tasks, timeouts or outbox) — what a lean Python request path could 
 
 The variants run interleaved, ``--repeat`` rounds; the table gives each one's median
 over the rounds of the average one-way latency (round trip ÷ 2) and what it adds to the
-floor.
+floor.  Last, the protocol's work of one round trip (both sides, no journal) is timed in
+a tight loop in this process: what the same Python costs with warm caches, beside what it
+adds between the two processes, where each side's caches go cold between messages.
 """
 
 from __future__ import annotations
@@ -63,8 +67,8 @@ from typing import Any
 import msgspec
 import zenoh
 
-VARIANTS = ("nothing", "log append", "SQLite commit", "Journal", "protocol",
-            "protocol + Journal")
+VARIANTS = ("nothing", "log append", "SQLite commit", "Journal", "protocol's bytes",
+            "protocol", "protocol + Journal")
 #: The variants whose messages are plugcell's CreateProcess and its answer.
 PROTOCOL = ("protocol", "protocol + Journal")
 REQUESTER, SERVICE = "REQUESTER", "SERVICE"
@@ -191,6 +195,7 @@ def _serve(variant: str, key: str, folder: str) -> None:
         if variant in ("Journal", "protocol + Journal") else None
     )
     lean = _LeanService(journal) if variant in PROTOCOL else None
+    canned = _canned()[1] if variant == "protocol's bytes" else None
     log = (
         os.open(Path(folder) / "SERVICE.log", os.O_WRONLY | os.O_CREAT | os.O_APPEND, 0o644)
         if variant == "log append"
@@ -210,6 +215,9 @@ def _serve(variant: str, key: str, folder: str) -> None:
         count += 1
         if lean is not None:
             pong.put(lean.answer(payload))
+            return
+        if canned is not None:
+            pong.put(canned)
             return
         if journal is not None:
             journal.record_process(
@@ -261,6 +269,7 @@ async def _ping(key: str, variant: str, cycles: int, warmup: int) -> float:
     loop = asyncio.get_running_loop()
     waiting: list[asyncio.Future[bytes]] = []
     lean = _LeanRequester() if variant in PROTOCOL else None
+    canned = _canned()[0] if variant == "protocol's bytes" else None
 
     def arrived(answer: bytes) -> None:
         if waiting and not waiting[0].done() and (lean is None or lean.final(answer)):
@@ -274,7 +283,9 @@ async def _ping(key: str, variant: str, cycles: int, warmup: int) -> float:
     )
 
     def put() -> None:
-        if lean is None:
+        if canned is not None:
+            ping.put(canned)
+        elif lean is None:
             ping.put(b"ping")
         else:
             payload, attachment = lean.request()
@@ -302,6 +313,41 @@ async def _ping(key: str, variant: str, cycles: int, warmup: int) -> float:
         return statistics.fmean(half_trips) / 1e6
     finally:
         session.close()
+
+
+class _Payload:
+    """A received payload as :func:`~plugcell.framework.admission.decode_request` reads
+    it (Zenoh's ``ZBytes``: a length and ``to_bytes()``)."""
+
+    def __init__(self, raw: bytes) -> None:
+        self.raw = raw
+
+    def __len__(self) -> int:
+        return len(self.raw)
+
+    def to_bytes(self) -> bytes:
+        return self.raw
+
+
+def _canned() -> tuple[bytes, bytes]:
+    """A request of :data:`PROTOCOL` and its answer, as bytes."""
+    request, _ = _LeanRequester().request()
+    return request, _LeanService(None).answer(_Payload(request))
+
+
+def _tight(cycles: int) -> float:
+    """µs of the protocol's work of one round trip (request, answer, final update; no
+    journal), the median of 5 tight loops of ``cycles`` round trips in this process."""
+    requester, service = _LeanRequester(), _LeanService(None)
+    runs = []
+    for _ in range(5):
+        started = time.perf_counter_ns()
+        for _ in range(cycles):
+            payload, _ = requester.request()
+            if not requester.final(service.answer(_Payload(payload))):
+                raise RuntimeError("the answer does not end the request")
+        runs.append((time.perf_counter_ns() - started) / cycles / 1e3)
+    return statistics.median(runs)
 
 
 def _round(variant: str, cycles: int, warmup: int) -> float:
@@ -351,6 +397,9 @@ def main(argv: list[str] | None = None) -> int:
         med = statistics.median(results[variant])
         rounds = " ".join(f"{x:.4f}" for x in results[variant])
         print(f"{variant:<20} {med:11.4f} {(med - floor) * 1e3:9.1f} {med / floor:8.2f}  {rounds}")
+    added = 2 * (statistics.median(results["protocol"]) - floor) * 1e3
+    print(f"the protocol's work of one round trip (both sides): {_tight(args.cycles):.1f} µs "
+          f"in a tight loop, {added:.1f} µs added to the round trip above")
     return 0
 
 
