@@ -1,7 +1,7 @@
 """What an idle cell costs: N services, each its own process, doing nothing.
 
     .venv/bin/python benchmarks/idle_cost.py [--services 20] [--seconds 30]
-        [--settings default,no-shm,lean] [--threads]
+        [--settings default,no-shm,lean] [--topology mesh,star] [--threads]
 
 Starts ``--services`` services (cameras, drills, benchmark publishers and compute
 services in turn, simulated, Zenoh peer mode on loopback, journals on) as
@@ -19,6 +19,10 @@ lease), ``no-shm`` (``PLUGCELL_SHM=0``: no shared-memory hand-off task waking ev
 process ten times a second) and ``lean`` (``PLUGCELL_SHM=0 PLUGCELL_LEASE=60``: keep-alives on
 each link every 15 s instead of 2.5 s).
 
+``--topology``: ``mesh`` (the default: every process a peer, linked to every other,
+N(N−1)/2 links) and ``star`` (every process a client of one ``plugcell router`` on
+loopback, ``PLUGCELL_MODE=client``: N links; the router's CPU counts, and is shown apart).
+
 ``--threads`` also lists where that CPU time goes, summed over the processes by thread
 name (``/proc/PID/task/TID/stat``): Zenoh's runtime threads (``net-0``, ``tx-0``,
 ``rx-0``…), the journal's mover, the interpreter's main thread (``python``).
@@ -29,6 +33,7 @@ from __future__ import annotations
 import argparse
 import os
 import platform
+import socket
 import subprocess
 import sys
 import tempfile
@@ -86,23 +91,37 @@ def by_thread_name(before: list[dict[tuple[int, str], float]],
 
 
 def measure(commands: list[list[str]], env: dict[str, str], seconds: float,
-            settle: float) -> tuple[float, float, list[float], dict[str, float]]:
-    """Start the processes, wait until each says it is serving, settle, then their CPU
-    time over ``seconds``: (start-up s, measured wall s, CPU s of each process, CPU s
-    summed by thread name)."""
+            settle: float, router: list[str] | None = None,
+            ) -> tuple[float, float, list[float], dict[str, float]]:
+    """Start the processes (after ``router``, when given, until it listens), wait until
+    each says it is serving, settle, then their CPU time over ``seconds``: (start-up s,
+    measured wall s, CPU s of each process — the router's last —, CPU s summed by thread
+    name)."""
     procs: list[subprocess.Popen[str]] = []
     t0 = time.monotonic()
     try:
+        if router is not None:
+            hub = subprocess.Popen(router, env=env, stdout=subprocess.PIPE,
+                                   stderr=subprocess.STDOUT, text=True)
+            assert hub.stdout is not None
+            for line in hub.stdout:
+                if "listening on" in line:
+                    break
+            else:
+                raise SystemExit(f"the router ended before listening (exit {hub.wait()})")
+            procs.append(hub)
         for argv in commands:
             procs.append(subprocess.Popen(argv, env=env, stdout=subprocess.PIPE,
                                           stderr=subprocess.STDOUT, text=True))
-        for p in procs:
+        for p in procs[1 if router is not None else 0:]:
             assert p.stdout is not None
             for line in p.stdout:
                 if "serving in cell" in line:
                     break
             else:
                 raise SystemExit(f"a process ended before serving (exit {p.wait()})")
+        if router is not None:  # measured last, as the caller reads it
+            procs.append(procs.pop(0))
         started = time.monotonic() - t0
         time.sleep(settle)
         before = [cpu_seconds(p.pid) for p in procs]
@@ -124,6 +143,13 @@ def measure(commands: list[list[str]], env: dict[str, str], seconds: float,
             by_thread_name(threads_before, threads_after))
 
 
+def _free_port() -> int:
+    """A TCP port of loopback nobody listens on now (for the star's router)."""
+    with socket.socket() as probe:
+        probe.bind(("127.0.0.1", 0))
+        return int(probe.getsockname()[1])
+
+
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--services", type=int, default=20)
@@ -132,6 +158,8 @@ def main() -> int:
                     help="seconds to wait after the last process is serving")
     ap.add_argument("--settings", default="default,no-shm,lean",
                     help=f"comma-separated, of {', '.join(SETTINGS)}")
+    ap.add_argument("--topology", default="mesh",
+                    help="comma-separated, of mesh, star (module doc)")
     ap.add_argument("--threads", action="store_true",
                     help="also list the CPU by thread name (Zenoh's runtime threads, ...)")
     args = ap.parse_args()
@@ -139,33 +167,47 @@ def main() -> int:
     unknown = [x for x in chosen if x not in SETTINGS]
     if unknown:
         ap.error(f"unknown settings {', '.join(unknown)} (known: {', '.join(SETTINGS)})")
+    topologies = [x.strip() for x in args.topology.split(",") if x.strip()]
+    if not topologies or set(topologies) - {"mesh", "star"}:
+        ap.error(f"--topology takes mesh and/or star, got {args.topology!r}")
     cell = f"idle{uuid.uuid4().hex[:8]}"
-    base_env = {k: v for k, v in os.environ.items() if k not in ("PLUGCELL_SHM", "PLUGCELL_LEASE")}
+    base_env = {k: v for k, v in os.environ.items()
+                if k not in ("PLUGCELL_SHM", "PLUGCELL_LEASE", "PLUGCELL_MODE", "PLUGCELL_CONNECT",
+                             "PLUGCELL_LISTEN", "PLUGCELL_MULTICAST")}
     services = [[sys.executable, "-m", "plugcell", "serve", KINDS[i % len(KINDS)], "--cell",
                  cell, "--name", f"{KINDS[i % len(KINDS)].upper()}{i}"]
                 for i in range(args.services)]
     bare = [[sys.executable, "-c", BARE]] * args.services
-    print(f"idle cell: {args.services} processes, Zenoh peer mode on loopback; "
+    print(f"idle cell: {args.services} processes, Zenoh on loopback; "
           f"{platform.machine()}, Python {platform.python_version()}, {os.cpu_count()} cores, "
           f"load {os.getloadavg()[0]:.1f}")
-    print(f"{'settings':9s} {'':34s} {'started in s':>13} {'measured s':>11} "
+    print(f"{'settings':9s} {'':5s} {'':34s} {'started in s':>13} {'measured s':>11} "
           f"{'CPU of one core':>16} {'per process':>12} {'busiest':>9}")
-    for setting in chosen:
-        for label, commands in ((f"plugcell services ({', '.join(KINDS)})", services),
-                                ("bare Zenoh sessions (the floor)", bare)):
-            home = Path(tempfile.mkdtemp(prefix="plugcell-idle-"))
-            env = {**base_env, **SETTINGS[setting], "PLUGCELL_HOME": str(home),
-                   "PYTHONUNBUFFERED": "1"}
-            started, wall, used, threads = measure(commands, env, args.seconds, args.settle)
-            total = sum(used) / wall
-            print(f"{setting:9s} {label:34s} {started:13.1f} {wall:11.1f} "
-                  f"{100 * total:15.2f}% {100 * total / len(used):11.3f}% "
-                  f"{100 * max(used) / wall:8.3f}%", flush=True)
-            if args.threads:
-                busy = sorted(threads.items(), key=lambda kv: -kv[1])
-                print("    by thread: " + ", ".join(
-                    f"{name} {100 * cpu / wall:.2f}%" for name, cpu in busy if cpu > 0),
-                    flush=True)
+    for topology in topologies:
+        star = topology == "star"
+        for setting in chosen:
+            for label, commands in ((f"plugcell services ({', '.join(KINDS)})", services),
+                                    ("bare Zenoh sessions (the floor)", bare)):
+                home = Path(tempfile.mkdtemp(prefix="plugcell-idle-"))
+                env = {**base_env, **SETTINGS[setting], "PLUGCELL_HOME": str(home),
+                       "PYTHONUNBUFFERED": "1"}
+                router = ([sys.executable, "-m", "plugcell", "router", "--listen",
+                           f"tcp/127.0.0.1:{_free_port()}"] if star else None)
+                if router is not None:
+                    env.update(PLUGCELL_MODE="client", PLUGCELL_MULTICAST="0",
+                               PLUGCELL_CONNECT=router[-1])
+                started, wall, used, threads = measure(commands, env, args.seconds,
+                                                       args.settle, router)
+                total = sum(used) / wall
+                hub = f" (router {100 * used[-1] / wall:.2f}%)" if star else ""
+                print(f"{setting:9s} {topology:5s} {label:34s} {started:13.1f} {wall:11.1f} "
+                      f"{100 * total:15.2f}% {100 * total / len(used):11.3f}% "
+                      f"{100 * max(used) / wall:8.3f}%{hub}", flush=True)
+                if args.threads:
+                    busy = sorted(threads.items(), key=lambda kv: -kv[1])
+                    print("    by thread: " + ", ".join(
+                        f"{name} {100 * cpu / wall:.2f}%" for name, cpu in busy if cpu > 0),
+                        flush=True)
     return 0
 
 

@@ -25,7 +25,9 @@ SCRIPTS = [
     ("round_trip_profile.py", ["--cycles", "30", "--top", "3"], "journal (its log, SQLite)"),
     ("round_trip_cpu.py", ["--cycles", "30", "--rounds", "1", "--switches"], "voluntary / forced"),
     ("durability_floor.py", ["--cycles", "30", "--warmup", "5", "--repeat", "1"],
-     "SQLite commit"),
+     "protocol's work of one round trip"),
+    ("idle_cost.py", ["--services", "2", "--seconds", "1", "--settle", "0.5", "--settings",
+                      "lean", "--topology", "star"], "(router "),
 ]
 
 

@@ -2,8 +2,11 @@
 
 from __future__ import annotations
 
+import contextlib
+import os
 import socket
 import time
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -96,6 +99,23 @@ def _free_port() -> int:
         return s.getsockname()[1]
 
 
+def tcp_sockets(pid: int) -> dict[str, int]:
+    """How many TCP sockets process ``pid`` has listening and established (from /proc)."""
+    inodes = set()
+    for fd in Path(f"/proc/{pid}/fd").iterdir():
+        with contextlib.suppress(OSError):  # closed meanwhile
+            target = os.readlink(fd)
+            if target.startswith("socket:["):
+                inodes.add(target[len("socket:["):-1])
+    count = {"listening": 0, "established": 0}
+    for table in ("tcp", "tcp6"):
+        for line in Path(f"/proc/{pid}/net/{table}").read_text().splitlines()[1:]:
+            fields = line.split()
+            if fields[9] in inodes and fields[3] in ("0A", "01"):
+                count["listening" if fields[3] == "0A" else "established"] += 1
+    return count
+
+
 def test_router_joins_participants_without_multicast(procs, cell):
     port = _free_port()
     router = procs.start(plugcell_argv("router", "--listen", f"tcp/127.0.0.1:{port}"))
@@ -107,3 +127,48 @@ def test_router_joins_participants_without_multicast(procs, cell):
         assert robot.wait_for("TOOL")
         call = robot.create_process("TOOL", "Drill", "", [550, 1100])
         assert [u.state for u in call] == [R, C]
+
+
+def test_clients_reach_each_other_through_the_router_alone(procs, cell):
+    """``PLUGCELL_MODE=client``: a client has one link, to the router (a star, not a
+    mesh), and the cell works as in peer mode, clients and peers together: discovery, a
+    service subscribing to another, processes, and a killed client seen leaving."""
+    port = _free_port()
+    router = procs.start(plugcell_argv("router", "--listen", f"tcp/127.0.0.1:{port}"))
+    router.wait_line(lambda line: "listening on" in line)
+    routed = {"PLUGCELL_MULTICAST": "0", "PLUGCELL_CONNECT": f"tcp/127.0.0.1:{port}"}
+    drill = procs.serve("drill", cell, "--param", "time_scale=0.001",
+                        env={**routed, "PLUGCELL_MODE": "client"})
+    camera = procs.serve("camera", cell, "--param", "time_scale=0.01",
+                         env={**routed, "PLUGCELL_MODE": "peer"})
+    transport = TransportConfig(mode="client", listen=(), connect=(f"tcp/127.0.0.1:{port}",),
+                                multicast=False)
+    with BlockingClient("ROBOT", cell=cell, transport=transport) as robot:
+        assert robot.wait_for("TOOL") and robot.wait_for("CAMERA")
+        assert robot.ask_subscribe("TOOL", "CAMERA").ok  # the client subscribes to a peer
+        assert partners_of(robot, "TOOL") == ["CAMERA"]
+        call = robot.create_process("TOOL", "Drill", "", [550, 1100])
+        assert [u.state for u in call] == [R, C]
+        snap = robot.create_process("CAMERA", "SnapShot", "", 1)
+        final = snap.result()
+        assert final.state is C and snap.array(final).shape == (480, 640)
+
+        assert tcp_sockets(drill.pid) == {"listening": 0, "established": 1}  # the router
+        assert tcp_sockets(camera.pid)["listening"] == 1  # a peer listens
+
+        drill.kill9()
+        until(lambda: "TOOL" not in robot.services())
+
+
+def test_a_bad_mode_or_a_listening_client_is_refused_with_the_reason(procs, cell):
+    for env, reason in (
+        ({"PLUGCELL_MODE": "mesh"}, "PLUGCELL_MODE must be peer or client, got 'mesh'"),
+        ({"PLUGCELL_MODE": "client", "PLUGCELL_MULTICAST": "0"},
+         "a client needs a router to reach: PLUGCELL_CONNECT (or --connect) or multicast "
+         "scouting"),
+        ({"PLUGCELL_MODE": "client", "PLUGCELL_LISTEN": "tcp/127.0.0.1:0"},
+         "a client listens on nothing"),
+    ):
+        proc = procs.start(plugcell_argv("serve", "drill", "--cell", cell), env)
+        assert proc.popen.wait(30) == 2
+        assert any(reason in line for line in proc.errors), proc.errors

@@ -16,6 +16,8 @@ from typing import Any
 
 import pytest
 from childproc import until
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from plugcell.framework.bus import Bus
 from plugcell.framework.keys import KeySpace, Presence
@@ -283,6 +285,67 @@ def test_a_bad_lease_is_refused_with_the_reason(
     with pytest.raises(ValueError) as caught:
         TransportConfig.from_env()
     assert str(caught.value) == reason
+
+
+def test_the_mode_comes_from_the_environment_and_a_client_listens_on_nothing(
+        monkeypatch: pytest.MonkeyPatch) -> None:
+    for name in ("PLUGCELL_MODE", "PLUGCELL_LISTEN", "PLUGCELL_CONNECT", "PLUGCELL_MULTICAST"):
+        monkeypatch.delenv(name, raising=False)
+    assert TransportConfig.from_env().mode == "peer"
+    monkeypatch.setenv("PLUGCELL_MODE", "client")
+    client = TransportConfig.from_env()  # finds a router on the host by scouting
+    assert client.mode == "client" and client.listen == () and client.multicast
+    conf = client.zenoh_config()
+    assert conf.get_json("mode") == '"client"' and conf.get_json("listen/endpoints") == "[]"
+    routed = TransportConfig.from_env(connect=["tcp/10.0.0.1:7447"])
+    assert routed.connect == ("tcp/10.0.0.1:7447",)
+    assert TransportConfig.from_env(mode="router").mode == "router"  # the router's own
+    assert TransportConfig.from_env(mode="router").listen == ("tcp/0.0.0.0:7447",)
+
+
+@pytest.mark.parametrize(("env", "listen", "reason"), [
+    ({"PLUGCELL_MODE": "router"}, None, "PLUGCELL_MODE must be peer or client, got 'router'"),
+    ({"PLUGCELL_MODE": "Client"}, None, "PLUGCELL_MODE must be peer or client, got 'Client'"),
+    ({"PLUGCELL_MODE": "client", "PLUGCELL_MULTICAST": "0"}, None,
+     "a client needs a router to reach: PLUGCELL_CONNECT (or --connect) or multicast scouting"),
+    ({"PLUGCELL_MODE": "client", "PLUGCELL_LISTEN": "tcp/127.0.0.1:0"}, None,
+     "a client listens on nothing: it reaches the cell through a router "
+     "(unset PLUGCELL_LISTEN and --listen)"),
+    ({"PLUGCELL_MODE": "client"}, ["tcp/127.0.0.1:0"],
+     "a client listens on nothing: it reaches the cell through a router "
+     "(unset PLUGCELL_LISTEN and --listen)"),
+])
+def test_a_bad_mode_is_refused_with_the_reason(
+        monkeypatch: pytest.MonkeyPatch, env: dict[str, str], listen: list[str] | None,
+        reason: str) -> None:
+    for name in ("PLUGCELL_MODE", "PLUGCELL_LISTEN", "PLUGCELL_CONNECT", "PLUGCELL_MULTICAST"):
+        monkeypatch.delenv(name, raising=False)
+    for name, value in env.items():
+        monkeypatch.setenv(name, value)
+    with pytest.raises(ValueError) as caught:
+        TransportConfig.from_env(listen=listen)
+    assert str(caught.value) == reason
+
+
+@settings(max_examples=200, deadline=None, derandomize=True)
+@given(text=st.text(st.characters(blacklist_categories=("Cs",), blacklist_characters="\x00")))
+def test_any_mode_text_is_a_mode_or_refused_with_the_reason(text: str) -> None:
+    import os
+
+    saved = {name: os.environ.pop(name, None)
+             for name in ("PLUGCELL_MODE", "PLUGCELL_LISTEN", "PLUGCELL_CONNECT")}
+    os.environ["PLUGCELL_MODE"] = text
+    try:
+        cfg = TransportConfig.from_env()
+    except ValueError as exc:
+        assert str(exc) == f"PLUGCELL_MODE must be peer or client, got {text.strip()!r}"
+    else:
+        assert cfg.mode == (text.strip() or "peer") and cfg.mode in ("peer", "client")
+    finally:
+        for name, value in saved.items():
+            os.environ.pop(name, None)
+            if value is not None:
+                os.environ[name] = value
 
 
 def test_a_lean_cell_still_sees_a_killed_peer_leave_at_once(

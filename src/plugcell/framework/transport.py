@@ -15,12 +15,14 @@ machines does anyway.
 Environment: ``PLUGCELL_CONNECT`` and ``PLUGCELL_LISTEN`` (comma-separated
 endpoints), ``PLUGCELL_MULTICAST`` (``0`` to disable scouting), ``PLUGCELL_SHM``
 (``0`` to disable shared memory), ``PLUGCELL_LEASE`` (seconds a silent link is
-trusted; Zenoh's 10 s by default).
+trusted; Zenoh's 10 s by default), ``PLUGCELL_MODE`` (``client``: one link to a
+router instead of one to every other process — a star instead of a mesh; the router is
+found by ``PLUGCELL_CONNECT`` or, on the host, by scouting).
 
 What an idle cell costs is mostly these settings (docs/framework.md, "An idle cell"):
 shared memory wakes each process ten times a second (zenoh-transport's shared-memory
 hand-off task, once a link has negotiated it), and each link sends keep-alives every
-quarter lease.
+quarter lease — in a mesh of N processes N(N−1)/2 links, through a router N.
 
 Security (docs/security.md): ``PLUGCELL_TLS_CA``, ``PLUGCELL_TLS_CERT``,
 ``PLUGCELL_TLS_KEY`` (PEM files from ``plugcell certs``) switch the links to TLS with
@@ -50,6 +52,9 @@ LOOPBACK_LISTEN = ("tcp/127.0.0.1:0",)
 #: Zenoh's own default lease (transport/link/tx/lease), seconds.
 ZENOH_LEASE_S = 10.0
 ROUTER_LISTEN = ("tcp/0.0.0.0:7447",)
+#: The modes a participant may join in (``PLUGCELL_MODE``); ``plugcell router`` runs
+#: the third, "router".
+PARTICIPANT_MODES = ("peer", "client")
 
 
 def parse_lease(text: str, what: str = "lease") -> float:
@@ -132,10 +137,21 @@ class TransportConfig:
         cls,
         connect: Sequence[str] | None = None,
         listen: Sequence[str] | None = None,
-        mode: str = "peer",
+        mode: str | None = None,
     ) -> TransportConfig:
-        """Defaults, then the ``PLUGCELL_*`` environment, then explicit arguments."""
-        cfg = cls(mode=mode, listen=ROUTER_LISTEN if mode == "router" else LOOPBACK_LISTEN)
+        """Defaults, then the ``PLUGCELL_*`` environment, then explicit arguments.
+
+        ``mode`` None takes ``PLUGCELL_MODE`` (``peer`` unless set).  A client listens on
+        nothing and needs a router to reach: ``connect`` endpoints or multicast scouting
+        (ValueError otherwise, and for a mode that is neither peer nor client, or a
+        client given endpoints to listen on).
+        """
+        if mode is None:
+            mode = os.environ.get("PLUGCELL_MODE", "").strip() or "peer"
+            if mode not in PARTICIPANT_MODES:
+                raise ValueError(f"PLUGCELL_MODE must be peer or client, got {mode!r}")
+        listen_default = {"router": ROUTER_LISTEN, "client": ()}.get(mode, LOOPBACK_LISTEN)
+        cfg = cls(mode=mode, listen=listen_default)
         env_connect = _split(os.environ.get("PLUGCELL_CONNECT"))
         env_listen = _split(os.environ.get("PLUGCELL_LISTEN"))
         if env_connect:
@@ -154,6 +170,13 @@ class TransportConfig:
             cfg = replace(cfg, connect=tuple(connect))
         if listen:
             cfg = replace(cfg, listen=tuple(listen))
+        if mode == "client":
+            if cfg.listen:
+                raise ValueError("a client listens on nothing: it reaches the cell through "
+                                 "a router (unset PLUGCELL_LISTEN and --listen)")
+            if not cfg.connect and not cfg.multicast:
+                raise ValueError("a client needs a router to reach: PLUGCELL_CONNECT (or "
+                                 "--connect) or multicast scouting")
         if cfg.tls_ca:  # a TLS cell listens on TLS only
             cfg = replace(cfg, listen=tuple(_to_tls(e) for e in cfg.listen))
         return cfg

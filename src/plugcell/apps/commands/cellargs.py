@@ -42,6 +42,12 @@ def cell_of(args: argparse.Namespace) -> str:
         raise CommandError(str(exc)) from None
 
 
-def transport_of(args: argparse.Namespace, mode: str = "peer") -> TransportConfig:
-    """The transport the options describe."""
-    return TransportConfig.from_env(connect=args.connect, listen=args.listen, mode=mode)
+def transport_of(args: argparse.Namespace, mode: str | None = None) -> TransportConfig:
+    """The transport the options and the ``PLUGCELL_*`` environment describe (CommandError
+    with the reason if they are invalid: a bad lease, mode, or a client that listens)."""
+    from plugcell.apps.cli import CommandError
+
+    try:
+        return TransportConfig.from_env(connect=args.connect, listen=args.listen, mode=mode)
+    except ValueError as exc:
+        raise CommandError(str(exc)) from None
