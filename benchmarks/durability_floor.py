@@ -315,24 +315,10 @@ async def _ping(key: str, variant: str, cycles: int, warmup: int) -> float:
         session.close()
 
 
-class _Payload:
-    """A received payload as :func:`~plugcell.framework.admission.decode_request` reads
-    it (Zenoh's ``ZBytes``: a length and ``to_bytes()``)."""
-
-    def __init__(self, raw: bytes) -> None:
-        self.raw = raw
-
-    def __len__(self) -> int:
-        return len(self.raw)
-
-    def to_bytes(self) -> bytes:
-        return self.raw
-
-
 def _canned() -> tuple[bytes, bytes]:
     """A request of :data:`PROTOCOL` and its answer, as bytes."""
     request, _ = _LeanRequester().request()
-    return request, _LeanService(None).answer(_Payload(request))
+    return request, _LeanService(None).answer(zenoh.ZBytes(request))
 
 
 def _tight(cycles: int) -> float:
@@ -344,7 +330,7 @@ def _tight(cycles: int) -> float:
         started = time.perf_counter_ns()
         for _ in range(cycles):
             payload, _ = requester.request()
-            if not requester.final(service.answer(_Payload(payload))):
+            if not requester.final(service.answer(zenoh.ZBytes(payload))):
                 raise RuntimeError("the answer does not end the request")
         runs.append((time.perf_counter_ns() - started) / cycles / 1e3)
     return statistics.median(runs)

@@ -90,6 +90,16 @@ def by_thread_name(before: list[dict[tuple[int, str], float]],
     return total
 
 
+def _wait_for(process: subprocess.Popen[str], marker: str) -> None:
+    """Read ``process``'s output until a line holds ``marker`` (SystemExit if it ends
+    first)."""
+    assert process.stdout is not None
+    for line in process.stdout:
+        if marker in line:
+            return
+    raise SystemExit(f"{process.args[:4]} ended before {marker!r} (exit {process.wait()})")
+
+
 def measure(commands: list[list[str]], env: dict[str, str], seconds: float,
             settle: float, router: list[str] | None = None,
             ) -> tuple[float, float, list[float], dict[str, float]]:
@@ -101,25 +111,14 @@ def measure(commands: list[list[str]], env: dict[str, str], seconds: float,
     t0 = time.monotonic()
     try:
         if router is not None:
-            hub = subprocess.Popen(router, env=env, stdout=subprocess.PIPE,
-                                   stderr=subprocess.STDOUT, text=True)
-            assert hub.stdout is not None
-            for line in hub.stdout:
-                if "listening on" in line:
-                    break
-            else:
-                raise SystemExit(f"the router ended before listening (exit {hub.wait()})")
-            procs.append(hub)
+            procs.append(subprocess.Popen(router, env=env, stdout=subprocess.PIPE,
+                                          stderr=subprocess.STDOUT, text=True))
+            _wait_for(procs[0], "listening on")
         for argv in commands:
             procs.append(subprocess.Popen(argv, env=env, stdout=subprocess.PIPE,
                                           stderr=subprocess.STDOUT, text=True))
         for p in procs[1 if router is not None else 0:]:
-            assert p.stdout is not None
-            for line in p.stdout:
-                if "serving in cell" in line:
-                    break
-            else:
-                raise SystemExit(f"a process ended before serving (exit {p.wait()})")
+            _wait_for(p, "serving in cell")
         if router is not None:  # measured last, as the caller reads it
             procs.append(procs.pop(0))
         started = time.monotonic() - t0
