@@ -4,7 +4,8 @@
         [--settings default,no-shm,lean] [--topology mesh,star] [--threads]
 
 Starts ``--services`` services (cameras, drills, benchmark publishers and compute
-services in turn, simulated, Zenoh peer mode on loopback, journals on) as
+services in turn, simulated, Zenoh on loopback — peers, or clients of a router with
+``--topology star`` —, journals on) as
 ``plugcell serve KIND`` processes in a fresh cell, waits until every one says it is
 serving and has settled, then reads the CPU time (user + system, from
 ``/proc/PID/stat``) of all of them over ``--seconds`` of idleness: presence, the
