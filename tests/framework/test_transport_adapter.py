@@ -384,3 +384,16 @@ def test_a_lean_cell_still_sees_a_killed_peer_leave_at_once(
         child.kill()
         child.wait()
         watcher.close()
+
+
+def test_the_transport_benchmark_names_how_its_processes_joined(
+        monkeypatch: pytest.MonkeyPatch) -> None:
+    from plugcell.apps.bench.transport import _mode
+
+    for name in ("PLUGCELL_MODE", "PLUGCELL_SHM", "PLUGCELL_LISTEN", "PLUGCELL_CONNECT"):
+        monkeypatch.delenv(name, raising=False)
+    assert "Zenoh peers on loopback; Zenoh's shared-memory" in _mode(False)
+    monkeypatch.setenv("PLUGCELL_MODE", "client")
+    monkeypatch.setenv("PLUGCELL_SHM", "0")
+    assert _mode(False) == ("local (two OS processes, Zenoh clients of a router "
+                            "(PLUGCELL_MODE=client), no shared memory)")

@@ -450,12 +450,15 @@ def _mode(networked: bool) -> str:
             f"networked (two network namespaces, veth shaped to {LINK_MBIT:g} Mbit/s, "
             "via plugcell router, no shared memory)"
         )
-    if TransportConfig.from_env().shared_memory:
+    transport = TransportConfig.from_env()
+    joined = ("Zenoh clients of a router (PLUGCELL_MODE=client)" if transport.mode == "client"
+              else "Zenoh peers on loopback")
+    if transport.shared_memory:
         return (
-            "local (two OS processes, Zenoh peers on loopback; Zenoh's shared-memory "
+            f"local (two OS processes, {joined}; Zenoh's shared-memory "
             "transport carries messages of 3 KiB and more)"
         )
-    return "local (two OS processes, Zenoh peers on loopback, no shared memory)"
+    return f"local (two OS processes, {joined}, no shared memory)"
 
 
 def _run_networked(args: argparse.Namespace) -> dict[str, Any]:
