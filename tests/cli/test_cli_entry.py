@@ -130,3 +130,34 @@ def test_a_broken_pipe_elsewhere_is_not_hidden():
                           timeout=60)
     assert proc.returncode == 1
     assert "BrokenPipeError: [Errno 32] Broken pipe: a socket" in proc.stderr
+
+
+def test_a_client_with_no_router_ends_with_where_it_looked(monkeypatch, capsys):
+    """A connection error plugcell raises with its reason is one error line (exit 2)."""
+    import socket
+
+    with socket.socket() as probe:  # a port nobody listens on
+        probe.bind(("127.0.0.1", 0))
+        port = probe.getsockname()[1]
+    monkeypatch.setenv("PLUGCELL_MODE", "client")
+    monkeypatch.setenv("PLUGCELL_CONNECT", f"tcp/127.0.0.1:{port}")
+    monkeypatch.setenv("PLUGCELL_MULTICAST", "0")
+    monkeypatch.delenv("PLUGCELL_LISTEN", raising=False)
+    assert main(["services", "--cell", "nowhere"]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith(f"plugcell: error: no router reached (tcp/127.0.0.1:{port}): a client "
+                          "(PLUGCELL_MODE=client) joins the cell through a running "
+                          "`plugcell router`; Zenoh: ")
+
+
+@pytest.mark.parametrize("error", [ConnectionRefusedError(111, "Connection refused"),
+                                   ConnectionResetError(104, "Connection reset by peer")])
+def test_the_operating_systems_connection_errors_keep_their_traceback(monkeypatch, error):
+    import plugcell.apps.commands.services as services
+
+    def fail(args):
+        raise error
+
+    monkeypatch.setattr(services, "run", fail)
+    with pytest.raises(type(error)):
+        main(["services"])

@@ -180,6 +180,11 @@ def _run(argv: list[str]) -> int:
     except CommandError as exc:
         print(f"plugcell: error: {exc}", file=sys.stderr)
         return 2
+    except ConnectionError as exc:
+        if exc.errno is not None:  # the OS's own (refused, reset …): keep the traceback
+            raise
+        print(f"plugcell: error: {exc}", file=sys.stderr)  # one plugcell raised with why
+        return 2
     except KeyboardInterrupt:
         print("plugcell: interrupted", file=sys.stderr)
         return 130

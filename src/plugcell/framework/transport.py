@@ -242,6 +242,24 @@ def _to_tls(endpoint: str) -> str:
     return "tls/" + endpoint[4:] if endpoint.startswith("tcp/") else endpoint
 
 
+class NoRouterError(ConnectionError):
+    """A client (``PLUGCELL_MODE=client``) reached no router; the message says where it
+    looked."""
+
+
 def open_session(config: TransportConfig | None = None) -> zenoh.Session:
-    """Open a Zenoh session (blocks up to Zenoh's scouting delay, ~0.5 s when alone)."""
-    return zenoh.open((config or TransportConfig.from_env()).zenoh_config())
+    """Open a Zenoh session (blocks up to Zenoh's scouting delay, ~0.5 s when alone).
+
+    Raises :class:`NoRouterError` when a client reaches no router (a peer needs nobody).
+    """
+    config = config or TransportConfig.from_env()
+    try:
+        return zenoh.open(config.zenoh_config())
+    except zenoh.ZError as exc:
+        if config.mode != "client":
+            raise
+        where = (", ".join(config.connect) if config.connect
+                 else f"scouting on {config.multicast_interface}")
+        raise NoRouterError(
+            f"no router reached ({where}): a client (PLUGCELL_MODE=client) joins the cell "
+            f"through a running `plugcell router`; Zenoh: {exc}") from None
