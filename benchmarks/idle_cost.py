@@ -108,28 +108,30 @@ def measure(commands: list[list[str]], env: dict[str, str], seconds: float,
     each says it is serving, settle, then their CPU time over ``seconds``: (start-up s,
     measured wall s, CPU s of each process — the router's last —, CPU s summed by thread
     name)."""
-    procs: list[subprocess.Popen[str]] = []
+    procs: list[subprocess.Popen[str]] = []  # every one started, stopped at the end
+
+    def start(argv: list[str]) -> subprocess.Popen[str]:
+        procs.append(subprocess.Popen(argv, env=env, stdout=subprocess.PIPE,
+                                      stderr=subprocess.STDOUT, text=True))
+        return procs[-1]
+
     t0 = time.monotonic()
     try:
-        if router is not None:
-            procs.append(subprocess.Popen(router, env=env, stdout=subprocess.PIPE,
-                                          stderr=subprocess.STDOUT, text=True))
-            _wait_for(procs[0], "listening on")
-        for argv in commands:
-            procs.append(subprocess.Popen(argv, env=env, stdout=subprocess.PIPE,
-                                          stderr=subprocess.STDOUT, text=True))
-        for p in procs[1 if router is not None else 0:]:
+        hub = [start(router)] if router is not None else []
+        for p in hub:
+            _wait_for(p, "listening on")
+        services = [start(argv) for argv in commands]
+        for p in services:
             _wait_for(p, "serving in cell")
-        if router is not None:  # measured last, as the caller reads it
-            procs.append(procs.pop(0))
+        measured = services + hub  # the router's last, as the caller reads it
         started = time.monotonic() - t0
         time.sleep(settle)
-        before = [cpu_seconds(p.pid) for p in procs]
-        threads_before = [thread_seconds(p.pid) for p in procs]
+        before = [cpu_seconds(p.pid) for p in measured]
+        threads_before = [thread_seconds(p.pid) for p in measured]
         t1 = time.monotonic()
         time.sleep(seconds)
-        after = [cpu_seconds(p.pid) for p in procs]
-        threads_after = [thread_seconds(p.pid) for p in procs]
+        after = [cpu_seconds(p.pid) for p in measured]
+        threads_after = [thread_seconds(p.pid) for p in measured]
         wall = time.monotonic() - t1
     finally:
         for p in procs:

@@ -10,6 +10,7 @@ import sys
 from pathlib import Path
 
 import pytest
+from childproc import free_port
 
 import plugcell.apps.commands
 from plugcell.apps.cli import COMMANDS, EXIT_BROKEN_PIPE, build_parser, chosen_command, main
@@ -134,11 +135,7 @@ def test_a_broken_pipe_elsewhere_is_not_hidden():
 
 def test_a_client_with_no_router_ends_with_where_it_looked(monkeypatch, capsys):
     """A connection error plugcell raises with its reason is one error line (exit 2)."""
-    import socket
-
-    with socket.socket() as probe:  # a port nobody listens on
-        probe.bind(("127.0.0.1", 0))
-        port = probe.getsockname()[1]
+    port = free_port()  # nobody listens on it
     monkeypatch.setenv("PLUGCELL_MODE", "client")
     monkeypatch.setenv("PLUGCELL_CONNECT", f"tcp/127.0.0.1:{port}")
     monkeypatch.setenv("PLUGCELL_MULTICAST", "0")

@@ -4,12 +4,12 @@ from __future__ import annotations
 
 import contextlib
 import os
-import socket
 import time
 from pathlib import Path
 
 import numpy as np
 import pytest
+from childproc import free_port
 from framework_testlib import plugcell_argv
 
 from plugcell.framework import BlockingClient, ProcessStates, TransportConfig
@@ -93,12 +93,6 @@ def test_killed_sender_frees_the_device_for_the_next_in_queue(procs, cell, home)
     assert movie["state"] == "Failed" and "sender STREAMER lost" in movie["reason"]
 
 
-def _free_port() -> int:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
-
-
 def tcp_sockets(pid: int) -> dict[str, int]:
     """How many TCP sockets process ``pid`` has listening and established (from /proc)."""
     inodes = set()
@@ -117,7 +111,7 @@ def tcp_sockets(pid: int) -> dict[str, int]:
 
 
 def test_router_joins_participants_without_multicast(procs, cell):
-    port = _free_port()
+    port = free_port()
     router = procs.start(plugcell_argv("router", "--listen", f"tcp/127.0.0.1:{port}"))
     router.wait_line(lambda line: "listening on" in line)
     env = {"PLUGCELL_MULTICAST": "0", "PLUGCELL_CONNECT": f"tcp/127.0.0.1:{port}"}
@@ -133,7 +127,7 @@ def test_clients_reach_each_other_through_the_router_alone(procs, cell):
     """``PLUGCELL_MODE=client``: a client has one link, to the router (a star, not a
     mesh), and the cell works as in peer mode, clients and peers together: discovery, a
     service subscribing to another, processes, and a killed client seen leaving."""
-    port = _free_port()
+    port = free_port()
     router = procs.start(plugcell_argv("router", "--listen", f"tcp/127.0.0.1:{port}"))
     router.wait_line(lambda line: "listening on" in line)
     routed = {"PLUGCELL_MULTICAST": "0", "PLUGCELL_CONNECT": f"tcp/127.0.0.1:{port}"}

@@ -4,27 +4,19 @@ from __future__ import annotations
 
 import json
 import shutil
-import socket
 import subprocess
 import uuid
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from childproc import Proc, plugcell_argv, until
+from childproc import Proc, free_port, plugcell_argv, until
 
 JS = Path(__file__).resolve().parent / "js"
 
 
 def unique_cell(prefix: str = "ua") -> str:
     return f"{prefix}-{uuid.uuid4().hex[:10]}"
-
-
-def free_port() -> int:
-    """A TCP port on 127.0.0.1 that was free a moment ago."""
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return int(s.getsockname()[1])
 
 
 @dataclass

@@ -13,7 +13,8 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from opcua_testlib import JS, Proc, free_port, plugcell_argv, run_js, unique_cell, until
+from childproc import free_port
+from opcua_testlib import JS, Proc, plugcell_argv, run_js, unique_cell, until
 
 from plugcell.devices.opcua.device import OpcUaDevice
 from plugcell.devices.opcua.device_map import parse_device_map

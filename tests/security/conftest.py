@@ -12,8 +12,9 @@ import pytest
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "framework"))
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
+from childproc import free_port
 from framework_testlib import Proc, plugcell_argv, unique_cell
-from sec_testlib import NAMES, POLICY, SecureCell, free_port, issue_cell_certificates
+from sec_testlib import NAMES, POLICY, SecureCell, issue_cell_certificates
 
 
 @pytest.fixture(scope="module")

@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import socket
 import sys
 from dataclasses import dataclass
 from pathlib import Path
@@ -51,12 +50,6 @@ def issue_cell_certificates(
     create_ca(rogue, "rogue")
     issue_certificate(rogue, "ROBOT1")
     return certs, rogue, home
-
-
-def free_port() -> int:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return int(s.getsockname()[1])
 
 
 @dataclass

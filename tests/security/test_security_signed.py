@@ -21,8 +21,9 @@ from pathlib import Path
 
 import pytest
 import zenoh
+from childproc import free_port
 from framework_testlib import Proc, plugcell_argv, run, unique_cell
-from sec_testlib import free_port, issue_cell_certificates
+from sec_testlib import issue_cell_certificates
 
 from plugcell.framework import Client, TransportConfig, wire
 from plugcell.framework.journal import journal_files, read_journal
