@@ -1,7 +1,8 @@
 """What the journal's durability rule and the protocol's messages cost *any* implementation
-of the request path.
+of the request path, beside raw Zenoh and plugcell itself.
 
     .venv/bin/python benchmarks/durability_floor.py [--cycles 4000] [--repeat 3]
+        [--output FILE.json] [--plot FILE.png]
 
 The event-loop floor of ``plugcell bench transport`` (raw Zenoh between two OS
 processes, each sample handed to an event loop by ``call_soon_threadsafe``, the answer
@@ -41,17 +42,32 @@ scheduler, tasks, timeouts or outbox) — what a lean Python request path could 
 * ``protocol + Journal`` — the same, journaled as the service journals an ``Echo``
   (the process row, its Running and Completed updates, one commit) before the answer.
 
+Two more rows put these on the scale of issue 20's target (4 B latency ≤ 1.5× raw
+Zenoh), measured in the same rounds:
+
+* ``raw Zenoh`` — plain Zenoh ping-pong between two Python processes, each callback
+  handing the sample to a thread (``plugcell bench transport``'s floor: the raw peer of
+  :mod:`plugcell.apps.bench.peer` and its :class:`~plugcell.apps.bench.peer.RawFloor`);
+* ``plugcell`` — ``plugcell bench transport``'s 4 B latency test itself: a requesting
+  service's ``create_process("PUBLISHER", "Echo", 4 bytes)`` until its update, against
+  the benchmark's service, both with their journals.
+
+Every round starts both ends afresh, each an OS process of its own (so that no variant
+shares Zenoh's runtime threads with another, see docs/framework.md on thread states).
 The variants run interleaved, ``--repeat`` rounds; the table gives each one's median
-over the rounds of the average one-way latency (round trip ÷ 2) and what it adds to the
-floor.  Last, the protocol's work of one round trip (both sides, no journal) is timed in
-a tight loop in this process: what the same Python costs with warm caches, beside what it
-adds between the two processes, where each side's caches go cold between messages.
+over the rounds of the average one-way latency (round trip ÷ 2), its ratio to raw Zenoh
+and what it adds to the event-loop floor.  ``--output`` writes every round to a JSON
+file, ``--plot`` draws the medians with the target (needs matplotlib).  Last, the
+protocol's work of one round trip (both sides, no journal) is timed in a tight loop in
+this process: what the same Python costs with warm caches, beside what it adds between
+the two processes, where each side's caches go cold between messages.
 """
 
 from __future__ import annotations
 
 import argparse
 import asyncio
+import json
 import os
 import platform
 import sqlite3
@@ -67,8 +83,24 @@ from typing import Any
 import msgspec
 import zenoh
 
-VARIANTS = ("nothing", "log append", "SQLite commit", "Journal", "protocol's bytes",
-            "protocol", "protocol + Journal")
+VARIANTS = ("raw Zenoh", "nothing", "log append", "SQLite commit", "Journal",
+            "protocol's bytes", "protocol", "protocol + Journal", "plugcell")
+#: What each variant's row says it is.
+LABELS = {
+    "raw Zenoh": "raw Zenoh (thread hop)",
+    "nothing": "event loops (their floor)",
+    "log append": "+ a log append",
+    "SQLite commit": "+ an SQLite commit",
+    "Journal": "+ plugcell's Journal",
+    "protocol's bytes": "+ the protocol's bytes",
+    "protocol": "+ the protocol's messages",
+    "protocol + Journal": "+ messages and Journal",
+    "plugcell": "plugcell (service, requester)",
+}
+#: The variants whose far end is a peer of ``plugcell bench transport`` (a cell, not a key).
+BENCH_PEER = {"raw Zenoh": "raw", "plugcell": "service"}
+#: Issue 20's latency target, in multiples of raw Zenoh's; the thesis's own 4 B latency.
+TARGET_VS_RAW, THESIS_MS = 1.5, 0.23
 #: The variants whose messages are plugcell's CreateProcess and its answer.
 PROTOCOL = ("protocol", "protocol + Journal")
 REQUESTER, SERVICE = "REQUESTER", "SERVICE"
@@ -336,23 +368,107 @@ def _tight(cycles: int) -> float:
     return statistics.median(runs)
 
 
-def _round(variant: str, cycles: int, warmup: int) -> float:
+async def _plugcell(cell: str, cycles: int, warmup: int) -> float:
+    """``plugcell bench transport``'s 4 B latency test against its service in ``cell``:
+    the average one-way latency in ms."""
+    from plugcell.apps.bench.device import BenchService
+    from plugcell.apps.bench.transport import PAYLOADS, our_latency
+    from plugcell.framework.transport import TransportConfig
+
+    consumer = BenchService("CONSUMER", cell=cell, transport=TransportConfig.from_env())
+    await consumer.start()
+    try:
+        if not await consumer.wait_for("PUBLISHER", 15):
+            raise RuntimeError("the benchmark's service did not appear")
+        await consumer.subscribe("PUBLISHER")
+        four = next(p for p in PAYLOADS if p.nbytes == 4)
+        return float((await our_latency(consumer, four, cycles, warmup))["avg"])
+    finally:
+        await consumer.close()
+
+
+def _ask(variant: str, where: str, cycles: int, warmup: int) -> float:
+    """The requesting end of one round, in a process of its own: the average one-way
+    latency in ms (``where``: the variant's key, or the cell of a bench peer)."""
     from plugcell.framework import eventloop
 
-    key = f"plugcell-bench/durability{os.getpid()}/{time.monotonic_ns()}"
+    if variant == "raw Zenoh":
+        from plugcell.apps.bench.peer import RawFloor
+        from plugcell.framework.transport import TransportConfig
+
+        floor = RawFloor(where, TransportConfig.from_env())
+        try:
+            return float(floor.latency(4, cycles, warmup)["avg"])
+        finally:
+            floor.close()
+    if variant == "plugcell":
+        return eventloop.run(_plugcell(where, cycles, warmup))
+    return eventloop.run(_ping(where, variant, cycles, warmup))
+
+
+def _round(variant: str, cycles: int, warmup: int) -> float:
+    """One round of ``variant``: both ends started afresh, the average one-way ms."""
+    tag = f"{os.getpid()}x{time.monotonic_ns()}"
     with tempfile.TemporaryDirectory(prefix="plugcell-durability-") as folder:
-        server = subprocess.Popen(
-            [sys.executable, __file__, "--serve", variant, key, folder],
-            stdout=subprocess.PIPE, text=True,
-        )
+        env = {**os.environ, "PLUGCELL_HOME": folder}
+        if variant in BENCH_PEER:
+            where = f"floor{tag}"
+            argv = [sys.executable, "-m", "plugcell.apps.bench.peer", BENCH_PEER[variant],
+                    "--cell", where]
+        else:
+            where = f"plugcell-bench/durability{tag}"
+            argv = [sys.executable, __file__, "--serve", variant, where, folder]
+        server = subprocess.Popen(argv, stdout=subprocess.PIPE, text=True, env=env)
         try:
             assert server.stdout is not None
             if server.stdout.readline().strip() != "ready":
                 raise RuntimeError(f"the answering process for {variant!r} did not start")
-            return eventloop.run(_ping(key, variant, cycles, warmup))
+            asked = subprocess.run(
+                [sys.executable, __file__, "--ask", variant, where, str(cycles), str(warmup)],
+                capture_output=True, text=True, env=env, timeout=600,
+            )
+            if asked.returncode != 0:
+                raise RuntimeError(f"the requesting process for {variant!r} failed:\n"
+                                   f"{asked.stderr.strip()}")
+            return float(asked.stdout.split()[-1])
         finally:
-            server.kill()
-            server.wait()
+            server.terminate()
+            try:
+                server.wait(15)
+            except subprocess.TimeoutExpired:
+                server.kill()
+                server.wait()
+
+
+def _plot(results: dict[str, list[float]], path: Path, title: str) -> None:
+    """The medians as horizontal bars (whiskers: the rounds' spread), with the target."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    names = list(reversed(VARIANTS))
+    med = [statistics.median(results[v]) for v in names]
+    low = [m - min(results[v]) for m, v in zip(med, names, strict=True)]
+    high = [max(results[v]) - m for m, v in zip(med, names, strict=True)]
+    colours = ["tab:orange" if v == "plugcell" else "tab:gray" if v in ("raw Zenoh", "nothing")
+               else "tab:blue" for v in names]
+    raw = statistics.median(results["raw Zenoh"])
+    fig, ax = plt.subplots(figsize=(8, 4.2))
+    ax.barh([LABELS[v] for v in names], med, xerr=[low, high], color=colours, capsize=3)
+    ax.axvline(TARGET_VS_RAW * raw, color="tab:red", linestyle="--",
+               label=f"issue 20's target: {TARGET_VS_RAW:g}× raw Zenoh")
+    ax.axvline(THESIS_MS, color="black", linestyle=":", label=f"the thesis's {THESIS_MS} ms")
+    for y, (m, v) in enumerate(zip(med, names, strict=True)):
+        ax.text(max(results[v]), y, f"  {m:.3f} ({m / raw:.2f}×)", va="center", fontsize=8)
+    ax.set_xlabel("one-way latency of a 4-byte round trip, ms (median of the rounds)")
+    longest = max(max(max(results[v]) for v in names), THESIS_MS, TARGET_VS_RAW * raw)
+    ax.set_xlim(0, longest * 1.3)
+    ax.set_title(title.replace("; ", ";\n", 1), fontsize=9)
+    ax.legend(loc="upper right", fontsize=8, framealpha=1)
+    fig.tight_layout()
+    fig.savefig(path, dpi=120)
+    plt.close(fig)
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -360,32 +476,75 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--cycles", type=int, default=4000)
     parser.add_argument("--warmup", type=int, default=500)
     parser.add_argument("--repeat", type=int, default=3)
+    parser.add_argument("--output", type=Path, help="write every round to this JSON file")
+    parser.add_argument("--plot", type=Path, help="draw the medians into this PNG")
+    parser.add_argument("--replot", type=Path, metavar="JSON",
+                        help="only draw --plot from the rounds an earlier --output saved")
     parser.add_argument("--serve", nargs=3, metavar=("VARIANT", "KEY", "FOLDER"),
+                        help=argparse.SUPPRESS)
+    parser.add_argument("--ask", nargs=4, metavar=("VARIANT", "WHERE", "CYCLES", "WARMUP"),
                         help=argparse.SUPPRESS)
     args = parser.parse_args(argv)
     if args.serve:
         _serve(*args.serve)
         return 0
+    if args.ask:
+        variant, where, cycles, warmup = args.ask
+        print(f"{_ask(variant, where, int(cycles), int(warmup)):.6f}")
+        return 0
     if args.cycles < 1 or args.repeat < 1 or args.warmup < 0:
         parser.error("--cycles and --repeat must be at least 1, --warmup at least 0")
+    for path in (args.output, args.plot):
+        if path is not None and not path.parent.is_dir():
+            parser.error(f"no folder {path.parent} for {path.name}")
+    if args.replot is not None:
+        if args.plot is None:
+            parser.error("--replot needs --plot FILE.png")
+        try:
+            saved = json.loads(args.replot.read_text())
+            rounds = {v: [float(x) for x in saved["one_way_ms"][v]] for v in VARIANTS}
+            title = str(saved["title"])
+        except (OSError, ValueError, KeyError, TypeError) as exc:
+            parser.error(f"{args.replot} is not a run of this script: {exc!r}")
+        _plot(rounds, args.plot, title)
+        print(f"wrote {args.plot}")
+        return 0
     results: dict[str, list[float]] = {v: [] for v in VARIANTS}
     for r in range(args.repeat):
         for variant in VARIANTS:
             results[variant].append(_round(variant, args.cycles, args.warmup))
             print(f"  … round {r + 1}/{args.repeat}: {variant}: "
                   f"{results[variant][-1]:.4f} ms", file=sys.stderr, flush=True)
-    print(f"4-byte round trips between two processes through an event loop on each side, "
-          f"{args.cycles} cycles × {args.repeat} rounds; {platform.machine()}, "
-          f"Python {platform.python_version()}, eclipse-zenoh {metadata.version('eclipse-zenoh')}")
-    floor = statistics.median(results[VARIANTS[0]])
-    print(f"{'before each answer':<20} {'one-way ms':>11} {'added µs':>9} {'× floor':>8}  rounds")
+    title = (f"4-byte round trips between two processes, {args.cycles} cycles × "
+             f"{args.repeat} rounds; {platform.machine()}, {os.cpu_count()} cores, "
+             f"Python {platform.python_version()}, "
+             f"eclipse-zenoh {metadata.version('eclipse-zenoh')}")
+    print(title)
+    raw = statistics.median(results["raw Zenoh"])
+    floor = statistics.median(results["nothing"])
+    print(f"{'path':<31} {'one-way ms':>10} {'× raw':>6} {'added µs':>9} {'× floor':>8}  rounds")
     for variant in VARIANTS:
         med = statistics.median(results[variant])
         rounds = " ".join(f"{x:.4f}" for x in results[variant])
-        print(f"{variant:<20} {med:11.4f} {(med - floor) * 1e3:9.1f} {med / floor:8.2f}  {rounds}")
+        print(f"{LABELS[variant]:<31} {med:10.4f} {med / raw:6.2f} "
+              f"{(med - floor) * 1e3:9.1f} {med / floor:8.2f}  {rounds}")
+    print(f"issue 20's target, {TARGET_VS_RAW:g}× raw Zenoh: {TARGET_VS_RAW * raw:.4f} ms; "
+          f"plugcell {statistics.median(results['plugcell']) / raw:.2f}×, the lean path "
+          f"with the Journal {statistics.median(results['protocol + Journal']) / raw:.2f}×")
+    tight = _tight(args.cycles)
     added = 2 * (statistics.median(results["protocol"]) - floor) * 1e3
-    print(f"the protocol's work of one round trip (both sides): {_tight(args.cycles):.1f} µs "
+    print(f"the protocol's work of one round trip (both sides): {tight:.1f} µs "
           f"in a tight loop, {added:.1f} µs added to the round trip above")
+    if args.output is not None:
+        args.output.write_text(json.dumps({
+            "title": title, "cycles": args.cycles, "warmup": args.warmup,
+            "one_way_ms": results, "tight_loop_us": tight,
+            "target_ms": TARGET_VS_RAW * raw,
+        }, indent=1) + "\n")
+        print(f"wrote {args.output}")
+    if args.plot is not None:
+        _plot(results, args.plot, title)
+        print(f"wrote {args.plot}")
     return 0
 
 

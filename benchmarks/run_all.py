@@ -43,7 +43,7 @@ def main(argv: list[str]) -> int:
         ("one round trip's CPU by process and thread, beside raw Zenoh's",
          [sys.executable, str(HERE / "round_trip_cpu.py"),
           *([] if full else ["--cycles", "2000"])]),
-        ("what the journal's rule and the messages cost any request path (event-loop floor +)",
+        ("a small request's latency part by part: raw Zenoh, event-loop floor +, plugcell",
          [sys.executable, str(HERE / "durability_floor.py"),
           *([] if full else ["--cycles", "2000"])]),
         ("compensation (thesis 6.5.1)", [*plugcell, "bench", "compensation"]),

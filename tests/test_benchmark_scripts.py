@@ -8,6 +8,7 @@ long after.  Each runs here in a tiny configuration and must print its table.
 
 from __future__ import annotations
 
+import json
 import os
 import subprocess
 import sys
@@ -24,8 +25,6 @@ SCRIPTS = [
     ("round_trip_trace.py", ["--cycles", "30", "--arrival"], "service: sample arrives"),
     ("round_trip_profile.py", ["--cycles", "30", "--top", "3"], "journal (its log, SQLite)"),
     ("round_trip_cpu.py", ["--cycles", "30", "--rounds", "1", "--switches"], "voluntary / forced"),
-    ("durability_floor.py", ["--cycles", "30", "--warmup", "5", "--repeat", "1"],
-     "protocol's work of one round trip"),
     ("idle_cost.py", ["--services", "2", "--seconds", "1", "--settle", "0.5", "--settings",
                       "lean", "--topology", "star"], "(router "),
 ]
@@ -41,3 +40,37 @@ def test_benchmark_script_runs(script: str, args: list[str], expected: str,
                           capture_output=True, text=True, timeout=120)
     assert done.returncode == 0, done.stderr[-2000:]
     assert expected in done.stdout, done.stdout[-2000:]
+
+
+@pytest.mark.slow
+def test_durability_floor_writes_its_rounds_and_plot(tmp_path: Path) -> None:
+    """durability_floor.py runs every variant, raw Zenoh and plugcell included, and
+    writes what it printed to JSON and a PNG; a missing folder is refused up front."""
+    env = {**os.environ, "PLUGCELL_HOME": str(tmp_path)}
+    script = str(BENCHMARKS / "durability_floor.py")
+    out, png = tmp_path / "floor.json", tmp_path / "floor.png"
+    done = subprocess.run([sys.executable, script, "--cycles", "30", "--warmup", "5",
+                           "--repeat", "1", "--output", str(out), "--plot", str(png)],
+                          env=env, capture_output=True, text=True, timeout=180)
+    assert done.returncode == 0, done.stderr[-2000:]
+    assert "protocol's work of one round trip" in done.stdout, done.stdout[-2000:]
+    assert "issue 20's target, 1.5× raw Zenoh" in done.stdout
+    rounds = json.loads(out.read_text())["one_way_ms"]
+    assert list(rounds) == ["raw Zenoh", "nothing", "log append", "SQLite commit", "Journal",
+                            "protocol's bytes", "protocol", "protocol + Journal", "plugcell"]
+    assert all(len(r) == 1 and 0 < r[0] < 1000 for r in rounds.values()), rounds
+    assert png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    again = tmp_path / "again.png"
+    redrawn = subprocess.run([sys.executable, script, "--replot", str(out), "--plot", str(again)],
+                             env=env, capture_output=True, text=True, timeout=60)
+    assert redrawn.returncode == 0 and again.read_bytes()[:8] == png.read_bytes()[:8]
+
+    refused = subprocess.run([sys.executable, script, "--output",
+                              str(tmp_path / "missing" / "floor.json")],
+                             env=env, capture_output=True, text=True, timeout=60)
+    assert refused.returncode == 2
+    assert "no folder" in refused.stderr and "floor.json" in refused.stderr
+    not_a_run = subprocess.run([sys.executable, script, "--replot", str(png), "--plot",
+                                str(tmp_path / "x.png")],
+                               env=env, capture_output=True, text=True, timeout=60)
+    assert not_a_run.returncode == 2 and "is not a run of this script" in not_a_run.stderr
