@@ -2,7 +2,7 @@
 of the request path, beside raw Zenoh and plugcell itself.
 
     .venv/bin/python benchmarks/durability_floor.py [--cycles 4000] [--repeat 3]
-        [--output FILE.json] [--plot FILE.png]
+        [--native] [--output FILE.json] [--plot FILE.png]
 
 The event-loop floor of ``plugcell bench transport`` (raw Zenoh between two OS
 processes, each sample handed to an event loop by ``call_soon_threadsafe``, the answer
@@ -52,6 +52,17 @@ Zenoh), measured in the same rounds:
   service's ``create_process("PUBLISHER", "Echo", 4 bytes)`` until its update, against
   the benchmark's service, both with their journals.
 
+With ``--native`` (Linux, needs cargo and crates.io or cargo's cache), two more rows do the
+protocol's per-message work in Rust instead — the measuring device
+``benchmarks/native_probe`` (PyO3, not part of plugcell), built first (≈ 15 s from
+nothing): the same request and answer, byte for byte apart from the timestamp, and the
+same checks, called from the Python callbacks of eclipse-zenoh's own session:
+
+* ``native protocol`` — the requester's request and its reading of the answer, the
+  service's decoding, checks and answer, each one call into Rust;
+* ``native protocol + log`` — the same, the service appending the process and its two
+  updates to a journal log as one record (the format of ``framework/journal_log.py``).
+
 Every round starts both ends afresh, each an OS process of its own (so that no variant
 shares Zenoh's runtime threads with another, see docs/framework.md on thread states).
 The variants run interleaved, ``--repeat`` rounds; the table gives each one's median
@@ -70,6 +81,7 @@ import asyncio
 import json
 import os
 import platform
+import shutil
 import sqlite3
 import statistics
 import subprocess
@@ -85,6 +97,8 @@ import zenoh
 
 VARIANTS = ("raw Zenoh", "nothing", "log append", "SQLite commit", "Journal",
             "protocol's bytes", "protocol", "protocol + Journal", "plugcell")
+#: ``--native``: the protocol's per-message work in Rust (benchmarks/native_probe).
+NATIVE = ("native protocol", "native protocol + log")
 #: What each variant's row says it is.
 LABELS = {
     "raw Zenoh": "raw Zenoh (thread hop)",
@@ -96,9 +110,14 @@ LABELS = {
     "protocol": "+ the protocol's messages",
     "protocol + Journal": "+ messages and Journal",
     "plugcell": "plugcell (service, requester)",
+    "native protocol": "+ the messages, in Rust",
+    "native protocol + log": "+ messages and log, in Rust",
 }
 #: The variants whose far end is a peer of ``plugcell bench transport`` (a cell, not a key).
 BENCH_PEER = {"raw Zenoh": "raw", "plugcell": "service"}
+#: The measuring device's crate, and the variable that tells a round's processes where
+#: its built module is.
+PROBE, PROBE_DIR = Path(__file__).with_name("native_probe"), "PLUGCELL_NATIVE_PROBE"
 #: Issue 20's latency target, in multiples of raw Zenoh's; the thesis's own 4 B latency.
 TARGET_VS_RAW, THESIS_MS = 1.5, 0.23
 #: The variants whose messages are plugcell's CreateProcess and its answer.
@@ -228,6 +247,14 @@ def _serve(variant: str, key: str, folder: str) -> None:
     )
     lean = _LeanService(journal) if variant in PROTOCOL else None
     canned = _canned()[1] if variant == "protocol's bytes" else None
+    native = None
+    if variant in NATIVE:
+        sys.path.insert(0, os.environ[PROBE_DIR])
+        from plugcell_native_probe import Service  # type: ignore[import-not-found]
+
+        native = Service(SERVICE, "service-instance",
+                         str(Path(folder) / "SERVICE.sqlite.log") if variant.endswith("log")
+                         else None)
     log = (
         os.open(Path(folder) / "SERVICE.log", os.O_WRONLY | os.O_CREAT | os.O_APPEND, 0o644)
         if variant == "log append"
@@ -247,6 +274,9 @@ def _serve(variant: str, key: str, folder: str) -> None:
         count += 1
         if lean is not None:
             pong.put(lean.answer(payload))
+            return
+        if native is not None:
+            pong.put(native.answer(payload.to_bytes(), REQUESTER))
             return
         if canned is not None:
             pong.put(canned)
@@ -285,7 +315,8 @@ def _serve(variant: str, key: str, folder: str) -> None:
 
     session.declare_subscriber(  # the protocol's answer reads the payload as a service does
         f"{key}/ping",
-        (lambda sample: loop.call_soon_threadsafe(answer, sample.payload)) if lean else
+        (lambda sample: loop.call_soon_threadsafe(answer, sample.payload))
+        if lean or native else
         (lambda sample: loop.call_soon_threadsafe(answer, sample.payload.to_bytes())),
     )
     print("ready", flush=True)
@@ -302,9 +333,18 @@ async def _ping(key: str, variant: str, cycles: int, warmup: int) -> float:
     waiting: list[asyncio.Future[bytes]] = []
     lean = _LeanRequester() if variant in PROTOCOL else None
     canned = _canned()[0] if variant == "protocol's bytes" else None
+    native = None
+    if variant in NATIVE:
+        sys.path.insert(0, os.environ[PROBE_DIR])
+        from plugcell_native_probe import Requester  # type: ignore[import-not-found]
+
+        native = Requester(REQUESTER, "requester-instance", SERVICE)
+    value = bytes(range(4))
 
     def arrived(answer: bytes) -> None:
-        if waiting and not waiting[0].done() and (lean is None or lean.final(answer)):
+        if (waiting and not waiting[0].done()
+                and (lean is None or lean.final(answer))
+                and (native is None or native.is_final(answer))):
             waiting[0].set_result(answer)
 
     session.declare_subscriber(
@@ -317,6 +357,9 @@ async def _ping(key: str, variant: str, cycles: int, warmup: int) -> float:
     def put() -> None:
         if canned is not None:
             ping.put(canned)
+        elif native is not None:
+            payload, attachment = native.request(value)
+            ping.put(payload, attachment=attachment)
         elif lean is None:
             ping.put(b"ping")
         else:
@@ -447,14 +490,14 @@ def _plot(results: dict[str, list[float]], path: Path, title: str) -> None:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    names = list(reversed(VARIANTS))
+    names = list(reversed(results))
     med = [statistics.median(results[v]) for v in names]
     low = [m - min(results[v]) for m, v in zip(med, names, strict=True)]
     high = [max(results[v]) - m for m, v in zip(med, names, strict=True)]
     colours = ["tab:orange" if v == "plugcell" else "tab:gray" if v in ("raw Zenoh", "nothing")
-               else "tab:blue" for v in names]
+               else "tab:green" if v in NATIVE else "tab:blue" for v in names]
     raw = statistics.median(results["raw Zenoh"])
-    fig, ax = plt.subplots(figsize=(8, 4.2))
+    fig, ax = plt.subplots(figsize=(8, 2.2 + 0.23 * len(names)))
     ax.barh([LABELS[v] for v in names], med, xerr=[low, high], color=colours, capsize=3)
     ax.axvline(TARGET_VS_RAW * raw, color="tab:red", linestyle="--",
                label=f"issue 20's target: {TARGET_VS_RAW:g}× raw Zenoh")
@@ -471,11 +514,32 @@ def _plot(results: dict[str, list[float]], path: Path, title: str) -> None:
     plt.close(fig)
 
 
+def _build_probe() -> Path:
+    """Build the measuring device ``benchmarks/native_probe`` (cargo, release) and return
+    a fresh folder holding its module; SystemExit with the reason if it cannot."""
+    cargo = shutil.which("cargo")
+    if cargo is None:
+        raise SystemExit("--native needs cargo (a Rust toolchain), and none is on PATH")
+    target = Path(tempfile.gettempdir()) / "plugcell-native-probe-target"
+    print(f"  … building {PROBE} (cargo build --release)", file=sys.stderr, flush=True)
+    done = subprocess.run([cargo, "build", "--release", "--quiet"], cwd=PROBE,
+                          env={**os.environ, "CARGO_TARGET_DIR": str(target)},
+                          capture_output=True, text=True)
+    built = target / "release" / "libplugcell_native_probe.so"
+    if done.returncode != 0 or not built.is_file():
+        raise SystemExit(f"building {PROBE} failed:\n{done.stderr[-3000:]}")
+    folder = Path(tempfile.mkdtemp(prefix="plugcell-native-probe-"))
+    shutil.copy(built, folder / "plugcell_native_probe.so")
+    return folder
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--cycles", type=int, default=4000)
     parser.add_argument("--warmup", type=int, default=500)
     parser.add_argument("--repeat", type=int, default=3)
+    parser.add_argument("--native", action="store_true",
+                        help="also the protocol's work in Rust (builds benchmarks/native_probe)")
     parser.add_argument("--output", type=Path, help="write every round to this JSON file")
     parser.add_argument("--plot", type=Path, help="draw the medians into this PNG")
     parser.add_argument("--replot", type=Path, metavar="JSON",
@@ -502,16 +566,24 @@ def main(argv: list[str] | None = None) -> int:
             parser.error("--replot needs --plot FILE.png")
         try:
             saved = json.loads(args.replot.read_text())
-            rounds = {v: [float(x) for x in saved["one_way_ms"][v]] for v in VARIANTS}
+            rounds = {str(v): [float(x) for x in saved["one_way_ms"][v]]
+                      for v in saved["one_way_ms"] if v in LABELS}
+            missing = [v for v in VARIANTS if v not in rounds]
+            if missing:
+                raise KeyError(", ".join(missing))
             title = str(saved["title"])
         except (OSError, ValueError, KeyError, TypeError) as exc:
             parser.error(f"{args.replot} is not a run of this script: {exc!r}")
         _plot(rounds, args.plot, title)
         print(f"wrote {args.plot}")
         return 0
-    results: dict[str, list[float]] = {v: [] for v in VARIANTS}
+    chosen = [*VARIANTS[:-1], *NATIVE, VARIANTS[-1]] if args.native else list(VARIANTS)
+    probe = _build_probe() if args.native else None
+    if probe is not None:
+        os.environ[PROBE_DIR] = str(probe)
+    results: dict[str, list[float]] = {v: [] for v in chosen}
     for r in range(args.repeat):
-        for variant in VARIANTS:
+        for variant in chosen:
             results[variant].append(_round(variant, args.cycles, args.warmup))
             print(f"  … round {r + 1}/{args.repeat}: {variant}: "
                   f"{results[variant][-1]:.4f} ms", file=sys.stderr, flush=True)
@@ -523,14 +595,17 @@ def main(argv: list[str] | None = None) -> int:
     raw = statistics.median(results["raw Zenoh"])
     floor = statistics.median(results["nothing"])
     print(f"{'path':<31} {'one-way ms':>10} {'× raw':>6} {'added µs':>9} {'× floor':>8}  rounds")
-    for variant in VARIANTS:
+    for variant in chosen:
         med = statistics.median(results[variant])
         rounds = " ".join(f"{x:.4f}" for x in results[variant])
         print(f"{LABELS[variant]:<31} {med:10.4f} {med / raw:6.2f} "
               f"{(med - floor) * 1e3:9.1f} {med / floor:8.2f}  {rounds}")
     print(f"issue 20's target, {TARGET_VS_RAW:g}× raw Zenoh: {TARGET_VS_RAW * raw:.4f} ms; "
           f"plugcell {statistics.median(results['plugcell']) / raw:.2f}×, the lean path "
-          f"with the Journal {statistics.median(results['protocol + Journal']) / raw:.2f}×")
+          f"with the Journal {statistics.median(results['protocol + Journal']) / raw:.2f}×"
+          + (f", in Rust with its log "
+             f"{statistics.median(results['native protocol + log']) / raw:.2f}×"
+             if args.native else ""))
     tight = _tight(args.cycles)
     added = 2 * (statistics.median(results["protocol"]) - floor) * 1e3
     print(f"the protocol's work of one round trip (both sides): {tight:.1f} µs "
@@ -545,6 +620,8 @@ def main(argv: list[str] | None = None) -> int:
     if args.plot is not None:
         _plot(results, args.plot, title)
         print(f"wrote {args.plot}")
+    if probe is not None:
+        shutil.rmtree(probe, ignore_errors=True)
     return 0
 
 

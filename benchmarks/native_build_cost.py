@@ -1,7 +1,8 @@
 """What a native hot path would add to a fresh machine's setup: build a minimal PyO3
 extension against the zenoh crate and time it.
 
-    .venv/bin/python benchmarks/native_build_cost.py [--zenoh 1.10.0] [--keep DIR]
+    .venv/bin/python benchmarks/native_build_cost.py [--zenoh 1.10.0 | --without-zenoh]
+        [--keep DIR]
 
 Issue 20 allows the request/acknowledge/update path in native code (a Rust extension
 built against the zenoh crate) on condition that ``make demo`` / ``make test`` on a fresh
@@ -11,6 +12,12 @@ plugcell uses) and one function that opens and closes a session, built with
 ``cargo build --release`` from an empty target directory (crates.io must be reachable,
 or its crates already in cargo's cache).  A real hot path would add its own code on top.
 Not part of ``make bench``: it downloads crates and keeps both cores busy for minutes.
+
+``--without-zenoh`` builds the other way to go native instead: the per-message work in
+Rust (PyO3 and a MessagePack codec, ``rmp-serde``), called from the Zenoh callbacks of
+eclipse-zenoh's own Python session — one function that decodes a map and encodes it
+again.  docs/framework.md ("In one picture") shows why that suffices: Python glue that
+only puts bytes prepared elsewhere stays within the target.
 """
 
 from __future__ import annotations
@@ -62,13 +69,53 @@ fn plugcell_native_probe(m: &Bound<'_, PyModule>) -> PyResult<()> {
 """
 
 
+CARGO_TOML_WITHOUT_ZENOH = """[package]
+name = "plugcell_native_probe"
+version = "0.1.0"
+edition = "2021"
+
+[lib]
+crate-type = ["cdylib"]
+
+[dependencies]
+pyo3 = { version = "0.25", features = ["extension-module"] }
+serde = { version = "1", features = ["derive"] }
+rmp-serde = "1"
+
+[profile.release]
+lto = "thin"
+"""
+
+LIB_RS_WITHOUT_ZENOH = """use pyo3::prelude::*;
+use std::collections::BTreeMap;
+
+/// Decode a MessagePack map of strings and encode it again (what the codec costs to build).
+#[pyfunction]
+fn round_trip(payload: &[u8]) -> PyResult<Vec<u8>> {
+    let err = |e: String| pyo3::exceptions::PyValueError::new_err(e);
+    let map: BTreeMap<String, String> =
+        rmp_serde::from_slice(payload).map_err(|e| err(e.to_string()))?;
+    rmp_serde::to_vec_named(&map).map_err(|e| err(e.to_string()))
+}
+
+#[pymodule]
+fn plugcell_native_probe(m: &Bound<'_, PyModule>) -> PyResult<()> {
+    m.add_function(wrap_pyfunction!(round_trip, m)?)?;
+    Ok(())
+}
+"""
+
+
 def _size(path: Path) -> int:
     return sum(f.stat().st_size for f in path.rglob("*") if f.is_file())
 
 
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--zenoh", default="1.10.0", help="zenoh crate version (exact)")
+    flavour = parser.add_mutually_exclusive_group()
+    flavour.add_argument("--zenoh", default="1.10.0", help="zenoh crate version (exact)")
+    flavour.add_argument("--without-zenoh", action="store_true",
+                         help="PyO3 and a MessagePack codec only (module docstring)")
     parser.add_argument("--keep", type=Path, help="build here and keep it (default: a "
                         "temporary folder, removed)")
     args = parser.parse_args(argv)
@@ -78,9 +125,15 @@ def main(argv: list[str] | None = None) -> int:
         return 0
     root = args.keep or Path(tempfile.mkdtemp(prefix="plugcell-native-"))
     (root / "src").mkdir(parents=True, exist_ok=True)
-    (root / "Cargo.toml").write_text(CARGO_TOML.format(zenoh=args.zenoh), encoding="utf-8")
-    (root / "src" / "lib.rs").write_text(LIB_RS, encoding="utf-8")
-    print(f"building a PyO3 + zenoh {args.zenoh} extension in {root} "
+    if args.without_zenoh:
+        what = "PyO3 + rmp-serde"
+        (root / "Cargo.toml").write_text(CARGO_TOML_WITHOUT_ZENOH, encoding="utf-8")
+        (root / "src" / "lib.rs").write_text(LIB_RS_WITHOUT_ZENOH, encoding="utf-8")
+    else:
+        what = f"PyO3 + zenoh {args.zenoh}"
+        (root / "Cargo.toml").write_text(CARGO_TOML.format(zenoh=args.zenoh), encoding="utf-8")
+        (root / "src" / "lib.rs").write_text(LIB_RS, encoding="utf-8")
+    print(f"building a {what} extension in {root} "
           f"({os.cpu_count()} cores, {platform.machine()}, load {os.getloadavg()[0]:.1f})",
           flush=True)
     started = time.perf_counter()
@@ -97,7 +150,8 @@ def main(argv: list[str] | None = None) -> int:
     cpu = (cpu1.children_user - cpu0.children_user) + (cpu1.children_system
                                                        - cpu0.children_system)
     print(f"crates locked:            {crates.group(1) if crates else '?'}")
-    print(f"cargo build --release:    {wall / 60:.1f} min wall, {cpu / 60:.1f} min CPU")
+    print(f"cargo build --release:    {wall / 60:.1f} min wall ({wall:.0f} s), "
+          f"{cpu / 60:.1f} min CPU ({cpu:.0f} s)")
     print(f"target directory:         {_size(root / 'target') / 1e6:.0f} MB")
     if library is not None:
         print(f"extension module:         {library.stat().st_size / 1e6:.1f} MB")

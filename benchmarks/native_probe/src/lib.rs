@@ -1,0 +1,420 @@
+//! The per-message work of plugcell's request path for one 4-byte `Echo`, in Rust: a
+//! measuring device of `benchmarks/durability_floor.py --native`, not part of plugcell.
+//!
+//! [`Service::answer`] does what a service does with a published CreateProcess before the
+//! device's handler (decode the envelope, check it as `framework/admission.py` does, journal
+//! the process and its two updates as one record of the journal's log) and encodes the
+//! acknowledgement and the `Completed` update in one `ProcessUpdateBatch`, the same map
+//! layout msgspec writes for plugcell.  [`Requester`] encodes the request and reads the
+//! answer's final update.  It covers the one command the benchmark sends; anything else
+//! is refused with the reason, as plugcell would.
+
+use std::fs::{File, OpenOptions};
+use std::io::Write;
+use std::time::{SystemTime, UNIX_EPOCH};
+
+use pyo3::exceptions::PyValueError;
+use pyo3::prelude::*;
+use pyo3::types::PyBytes;
+use rmp::encode as enc;
+use rmpv::ValueRef;
+
+type Pairs<'a> = [(ValueRef<'a>, ValueRef<'a>)];
+
+const VERSION: u64 = 1;
+const ECHO: &str = "Echo";
+
+fn now_ns() -> u64 {
+    SystemTime::now().duration_since(UNIX_EPOCH).map(|d| d.as_nanos() as u64).unwrap_or(0)
+}
+
+fn refuse(reason: impl Into<String>) -> PyErr {
+    PyValueError::new_err(reason.into())
+}
+
+fn field<'b, 'a>(map: &'b Pairs<'a>, key: &str) -> Option<&'b ValueRef<'a>> {
+    map.iter()
+        .find(|(k, _)| matches!(k, ValueRef::String(s) if s.as_str() == Some(key)))
+        .map(|(_, v)| v)
+}
+
+fn map<'b, 'a>(map: &'b Pairs<'a>, key: &str) -> PyResult<&'b Pairs<'a>> {
+    match field(map, key) {
+        Some(ValueRef::Map(m)) => Ok(m),
+        _ => Err(refuse(format!("invalid message: expected a map at `{key}`"))),
+    }
+}
+
+fn text<'b>(map: &'b Pairs<'_>, key: &str) -> PyResult<&'b str> {
+    match field(map, key) {
+        Some(ValueRef::String(s)) => {
+            s.as_str().ok_or_else(|| refuse(format!("invalid message: `{key}` is not UTF-8")))
+        }
+        _ => Err(refuse(format!("invalid message: expected a str at `{key}`"))),
+    }
+}
+
+fn uint(map: &Pairs<'_>, key: &str) -> PyResult<u64> {
+    match field(map, key) {
+        Some(ValueRef::Integer(i)) => {
+            i.as_u64().ok_or_else(|| refuse(format!("invalid message: `{key}` is negative")))
+        }
+        _ => Err(refuse(format!("invalid message: expected an int at `{key}`"))),
+    }
+}
+
+/// The `Data` of a Byte buffer: its size and bytes.
+fn byte_data<'b>(map: &'b Pairs<'_>, key: &str) -> PyResult<(Vec<u64>, &'b [u8])> {
+    let data = self::map(map, key)?;
+    if text(data, "Type")? != "Byte" {
+        return Err(refuse(format!("{ECHO} input: expected Byte data")));
+    }
+    let size = match field(data, "Size") {
+        Some(ValueRef::Array(dims)) => dims
+            .iter()
+            .map(|d| match d {
+                ValueRef::Integer(i) => i.as_u64().ok_or_else(|| refuse("negative size")),
+                _ => Err(refuse("invalid message: expected an int in `Size`")),
+            })
+            .collect::<PyResult<Vec<u64>>>()?,
+        _ => return Err(refuse("invalid message: expected an array at `Size`")),
+    };
+    let buffer = match field(data, "Buffer") {
+        Some(ValueRef::Binary(b)) => *b,
+        _ => return Err(refuse("invalid message: expected bytes at `Buffer`")),
+    };
+    if size.iter().product::<u64>() != buffer.len() as u64 {
+        return Err(refuse(format!("{ECHO} input: {} bytes for size {size:?}", buffer.len())));
+    }
+    Ok((size, buffer))
+}
+
+/// `Byte[4] [7, 7, 7, 7]`: the journal's summary of small data (`framework/data.py`).
+fn summary(size: &[u64], buffer: &[u8]) -> String {
+    let dims: Vec<String> = size.iter().map(u64::to_string).collect();
+    let head = format!("Byte[{}]", dims.join(", "));
+    if buffer.len() > 16 {
+        return head;
+    }
+    let values: Vec<String> = buffer.iter().map(u8::to_string).collect();
+    format!("{head} [{}]", values.join(", "))
+}
+
+fn write_str(out: &mut Vec<u8>, s: &str) {
+    enc::write_str(out, s).expect("writing to a Vec");
+}
+
+fn write_uint(out: &mut Vec<u8>, n: u64) {
+    enc::write_uint(out, n).expect("writing to a Vec");
+}
+
+fn write_map(out: &mut Vec<u8>, len: u32) {
+    enc::write_map_len(out, len).expect("writing to a Vec");
+}
+
+fn write_array(out: &mut Vec<u8>, len: u32) {
+    enc::write_array_len(out, len).expect("writing to a Vec");
+}
+
+fn write_tag(out: &mut Vec<u8>, sender: &str, recipient: &str) {
+    write_map(out, 2);
+    write_str(out, "Sender");
+    write_str(out, sender);
+    write_str(out, "Recipient");
+    write_str(out, recipient);
+}
+
+fn write_data(out: &mut Vec<u8>, size: &[u64], buffer: &[u8]) {
+    write_map(out, 3);
+    write_str(out, "Type");
+    write_str(out, "Byte");
+    write_str(out, "Size");
+    write_array(out, size.len() as u32);
+    for d in size {
+        write_uint(out, *d);
+    }
+    write_str(out, "Buffer");
+    enc::write_bin(out, buffer).expect("writing to a Vec");
+}
+
+/// The envelope's head; its `Body` value follows.
+fn write_envelope(out: &mut Vec<u8>, sender: &str, instance: &str) {
+    write_map(out, 5);
+    write_str(out, "V");
+    write_uint(out, VERSION);
+    write_str(out, "Sender");
+    write_str(out, sender);
+    write_str(out, "Instance");
+    write_str(out, instance);
+    write_str(out, "TimeNs");
+    write_uint(out, now_ns());
+    write_str(out, "Body");
+}
+
+/// The answering side: one service with the catalogue entry `Echo` (Byte in, Byte out).
+#[pyclass]
+struct Service {
+    owner: String,
+    instance: String,
+    log: Option<File>,
+}
+
+#[pymethods]
+impl Service {
+    /// `log`: the journal's log file to append each request's record to (None: none).
+    #[new]
+    #[pyo3(signature = (owner, instance, log=None))]
+    fn new(owner: String, instance: String, log: Option<String>) -> PyResult<Self> {
+        let log = match log {
+            Some(path) => {
+                let fail = |e: std::io::Error| refuse(format!("{path}: {e}"));
+                let mut file =
+                    OpenOptions::new().create(true).append(true).open(&path).map_err(fail)?;
+                if file.metadata().map_err(fail)?.len() == 0 {
+                    // the log's header (framework/journal_log.py): magic, generation
+                    let mut header = b"PCJLOG01".to_vec();
+                    header.extend_from_slice(&now_ns().to_le_bytes());
+                    file.write_all(&header).map_err(fail)?;
+                }
+                Some(file)
+            }
+            None => None,
+        };
+        Ok(Service { owner, instance, log })
+    }
+
+    /// Admit a CreateProcess published by `published_by`, journal it, and return the
+    /// batch that acknowledges and completes it; ValueError with the reason otherwise.
+    fn answer<'py>(
+        &mut self,
+        py: Python<'py>,
+        payload: &[u8],
+        published_by: &str,
+    ) -> PyResult<Bound<'py, PyBytes>> {
+        let received = now_ns();
+        let mut cursor = payload;
+        let value = rmpv::decode::read_value_ref(&mut cursor)
+            .map_err(|e| refuse(format!("malformed message: {e}")))?;
+        let envelope = match &value {
+            ValueRef::Map(m) => m.as_slice(),
+            _ => return Err(refuse("invalid message: expected a map")),
+        };
+        let version = uint(envelope, "V")?;
+        if version != VERSION {
+            return Err(refuse(format!("unsupported protocol version {version}")));
+        }
+        let sender = text(envelope, "Sender")?;
+        if sender != published_by {
+            return Err(refuse(format!(
+                "envelope sender {sender} differs from the sender {published_by} of the request key"
+            )));
+        }
+        let sender_instance = text(envelope, "Instance")?;
+        uint(envelope, "TimeNs")?;
+        let body = map(envelope, "Body")?;
+        let kind = text(body, "Kind")?;
+        if kind != "Process" {
+            return Err(refuse(format!("expected a Process, got {kind}")));
+        }
+        let tag = map(body, "Tag")?;
+        let (tag_sender, recipient) = (text(tag, "Sender")?, text(tag, "Recipient")?);
+        if recipient != self.owner {
+            return Err(refuse(format!("process addressed to {recipient}, this is {}", self.owner)));
+        }
+        if tag_sender != sender {
+            return Err(refuse(format!(
+                "tag sender {tag_sender} differs from the envelope sender {sender}"
+            )));
+        }
+        let command = map(body, "Command")?;
+        let name = text(command, "Name")?;
+        if name != ECHO {
+            return Err(refuse(format!(
+                "unknown command '{name}' for {} (commands: {ECHO})",
+                self.owner
+            )));
+        }
+        let option = text(command, "Option")?;
+        let identifier = uint(body, "Identifier")?;
+        if identifier == 0 {
+            return Err(refuse("invalid message: `Identifier` must be >= 1"));
+        }
+        let (size, buffer) = byte_data(body, "Data")?;
+        let described = summary(&size, buffer);
+
+        if let Some(log) = self.log.as_mut() {
+            let mut rows = Vec::with_capacity(256);
+            write_array(&mut rows, 3);
+            let now = now_ns();
+            write_array(&mut rows, 2); // [0, process row]
+            write_uint(&mut rows, 0);
+            write_array(&mut rows, 13);
+            for s in [self.owner.as_str(), sender] {
+                write_str(&mut rows, s);
+            }
+            write_uint(&mut rows, identifier);
+            for s in [self.instance.as_str(), sender_instance, ECHO, option, "SingleData"] {
+                write_str(&mut rows, s);
+            }
+            write_str(&mut rows, &described);
+            write_uint(&mut rows, received);
+            write_uint(&mut rows, now);
+            write_str(&mut rows, "Queued");
+            write_str(&mut rows, "");
+            for (seq, state, data) in [(1, "Running", ""), (2, "Completed", described.as_str())] {
+                write_array(&mut rows, 2); // [1, update row]
+                write_uint(&mut rows, 1);
+                write_array(&mut rows, 8);
+                write_str(&mut rows, &self.owner);
+                write_str(&mut rows, sender);
+                write_uint(&mut rows, identifier);
+                write_uint(&mut rows, seq);
+                write_uint(&mut rows, now);
+                write_str(&mut rows, state);
+                write_str(&mut rows, "");
+                write_str(&mut rows, data);
+            }
+            let mut record = Vec::with_capacity(rows.len() + 8);
+            record.extend_from_slice(&(rows.len() as u32).to_le_bytes());
+            record.extend_from_slice(&crc32fast::hash(&rows).to_le_bytes());
+            record.extend_from_slice(&rows);
+            log.write_all(&record).map_err(|e| refuse(format!("journal: {e}")))?;
+        }
+
+        let mut out = Vec::with_capacity(256 + buffer.len());
+        write_envelope(&mut out, &self.owner, &self.instance);
+        write_map(&mut out, 3);
+        write_str(&mut out, "Kind");
+        write_str(&mut out, "ProcessUpdateBatch");
+        write_str(&mut out, "Acks");
+        write_array(&mut out, 1);
+        write_map(&mut out, 5);
+        write_str(&mut out, "Kind");
+        write_str(&mut out, "Acknowledgement");
+        write_str(&mut out, "Identifier");
+        write_uint(&mut out, identifier);
+        write_str(&mut out, "State");
+        write_str(&mut out, "Queued");
+        write_str(&mut out, "Reason");
+        write_str(&mut out, "");
+        write_str(&mut out, "Instance");
+        write_str(&mut out, &self.instance);
+        write_str(&mut out, "Updates");
+        write_array(&mut out, 1);
+        write_map(&mut out, 7);
+        write_str(&mut out, "Kind");
+        write_str(&mut out, "ProcessUpdateNotification");
+        write_str(&mut out, "Tag");
+        write_tag(&mut out, sender, &self.owner);
+        write_str(&mut out, "Identifier");
+        write_uint(&mut out, identifier);
+        write_str(&mut out, "State");
+        write_str(&mut out, "Completed");
+        write_str(&mut out, "Data");
+        write_data(&mut out, &size, buffer);
+        write_str(&mut out, "Reason");
+        write_str(&mut out, "");
+        write_str(&mut out, "Seq");
+        write_uint(&mut out, 2);
+        Ok(PyBytes::new(py, &out))
+    }
+}
+
+/// The requesting side: `Echo` CreateProcesses to one service, one at a time.
+#[pyclass]
+struct Requester {
+    sender: String,
+    instance: String,
+    recipient: String,
+    identifier: u64,
+}
+
+#[pymethods]
+impl Requester {
+    #[new]
+    fn new(sender: String, instance: String, recipient: String) -> Self {
+        Requester { sender, instance, recipient, identifier: 0 }
+    }
+
+    /// The next request carrying `value` (Byte data): its payload and its attachment.
+    fn request<'py>(
+        &mut self,
+        py: Python<'py>,
+        value: &[u8],
+    ) -> (Bound<'py, PyBytes>, Bound<'py, PyBytes>) {
+        self.identifier += 1;
+        let mut out = Vec::with_capacity(384 + value.len());
+        write_envelope(&mut out, &self.sender, &self.instance);
+        write_map(&mut out, 6);
+        write_str(&mut out, "Kind");
+        write_str(&mut out, "Process");
+        write_str(&mut out, "Command");
+        write_map(&mut out, 10);
+        for (key, text) in [("Name", ECHO), ("Option", ""), ("SuccessCode", "OK"),
+                            ("Type", "SingleData"), ("InputDataType", "Byte")] {
+            write_str(&mut out, key);
+            write_str(&mut out, text);
+        }
+        write_str(&mut out, "InputDataSize");
+        write_array(&mut out, 0);
+        write_str(&mut out, "OutputDataType");
+        write_str(&mut out, "Byte");
+        write_str(&mut out, "OutputDataSize");
+        write_array(&mut out, 0);
+        write_str(&mut out, "Timeout");
+        enc::write_f64(&mut out, 10.0).expect("writing to a Vec");
+        write_str(&mut out, "Info");
+        write_str(&mut out, "return the input data");
+        write_str(&mut out, "Tag");
+        write_tag(&mut out, &self.sender, &self.recipient);
+        write_str(&mut out, "Identifier");
+        write_uint(&mut out, self.identifier);
+        write_str(&mut out, "State");
+        write_str(&mut out, "Queued");
+        write_str(&mut out, "Data");
+        write_data(&mut out, &[value.len() as u64], value);
+        (PyBytes::new(py, &out), PyBytes::new(py, &self.identifier.to_le_bytes()))
+    }
+
+    /// Whether `payload` holds the last request's final update (ValueError if it refused
+    /// the request or is not a message).
+    fn is_final(&self, payload: &[u8]) -> PyResult<bool> {
+        let mut cursor = payload;
+        let value = rmpv::decode::read_value_ref(&mut cursor)
+            .map_err(|e| refuse(format!("malformed message: {e}")))?;
+        let envelope = match &value {
+            ValueRef::Map(m) => m.as_slice(),
+            _ => return Err(refuse("invalid message: expected a map")),
+        };
+        let body = map(envelope, "Body")?;
+        let lists = |key: &str| match field(body, key) {
+            Some(ValueRef::Array(items)) => items.as_slice(),
+            _ => &[],
+        };
+        for ack in lists("Acks") {
+            if let ValueRef::Map(ack) = ack {
+                if uint(ack, "Identifier")? == self.identifier && text(ack, "State")? == "Failed" {
+                    return Err(refuse(format!("request refused: {}", text(ack, "Reason")?)));
+                }
+            }
+        }
+        for update in lists("Updates") {
+            if let ValueRef::Map(update) = update {
+                if uint(update, "Identifier")? == self.identifier
+                    && text(update, "State")? == "Completed"
+                {
+                    byte_data(update, "Data")?;
+                    return Ok(true);
+                }
+            }
+        }
+        Ok(false)
+    }
+}
+
+#[pymodule]
+fn plugcell_native_probe(m: &Bound<'_, PyModule>) -> PyResult<()> {
+    m.add_class::<Service>()?;
+    m.add_class::<Requester>()?;
+    Ok(())
+}

@@ -1,0 +1,138 @@
+"""The measuring device of ``durability_floor.py --native`` speaks plugcell's protocol.
+
+``benchmarks/native_probe`` does the per-message work of a 4-byte ``Echo`` in Rust; its
+rows in docs/framework.md ("In one picture") claim the same bytes on the wire and the
+same checks as plugcell's.  These tests hold it to that: its request and answer decode
+through plugcell's own decoder to the messages plugcell's functions make, byte for byte
+apart from the timestamp; its journal record reads back through the journal's log
+reader; what plugcell refuses it refuses with the same reason; and no input makes it do
+anything but answer or refuse.  Skipped where there is no cargo.
+"""
+
+from __future__ import annotations
+
+import importlib.util
+import shutil
+import sys
+from pathlib import Path
+from types import ModuleType
+from typing import Any
+
+import msgspec
+import pytest
+import zenoh
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from plugcell.framework import admission, wire
+from plugcell.framework.journal_log import PROCESS, UPDATE, read_log
+
+BENCHMARKS = Path(__file__).resolve().parents[1] / "benchmarks"
+
+pytestmark = [
+    pytest.mark.slow,
+    pytest.mark.skipif(shutil.which("cargo") is None, reason="needs cargo (a Rust toolchain)"),
+]
+
+
+@pytest.fixture(scope="module")
+def floor() -> Any:
+    sys.path.insert(0, str(BENCHMARKS))
+    try:
+        import durability_floor
+    finally:
+        sys.path.remove(str(BENCHMARKS))
+    return durability_floor
+
+
+@pytest.fixture(scope="module")
+def probe(floor: Any) -> ModuleType:
+    folder = floor._build_probe()
+    spec = importlib.util.spec_from_file_location(
+        "plugcell_native_probe", folder / "plugcell_native_probe.so")
+    assert spec is not None and spec.loader is not None
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
+
+
+def _without_time(payload: bytes) -> tuple[wire.Envelope, bytes]:
+    """The decoded message with its timestamp zeroed, and its bytes without the stamp."""
+    envelope = wire.decode(payload)
+    stamp = msgspec.msgpack.encode(envelope.time_ns)
+    return msgspec.structs.replace(envelope, time_ns=0), payload.replace(stamp, b"", 1)
+
+
+def test_request_and_answer_are_plugcells_bytes(floor: Any, probe: ModuleType,
+                                                tmp_path: Path) -> None:
+    lean_requester = floor._LeanRequester()
+    ours, our_attachment = lean_requester.request()
+    requester = probe.Requester(floor.REQUESTER, "requester-instance", floor.SERVICE)
+    theirs, their_attachment = requester.request(bytes(lean_requester.value))
+    assert _without_time(theirs) == _without_time(ours)
+    assert their_attachment == our_attachment == wire.attach_identifier(1)
+
+    service = probe.Service(floor.SERVICE, "service-instance", str(tmp_path / "j.log"))
+    answer = service.answer(theirs, floor.REQUESTER)
+    assert _without_time(answer) == _without_time(
+        floor._LeanService(None).answer(zenoh.ZBytes(theirs)))
+    assert requester.is_final(answer) and lean_requester.final(answer)
+
+    contents = read_log(tmp_path / "j.log")
+    assert contents is not None
+    kinds = [kind for kind, _ in contents.rows]
+    assert kinds == [PROCESS, UPDATE, UPDATE]
+    process, running, completed = (row for _, row in contents.rows)
+    assert process[:9] == [floor.SERVICE, floor.REQUESTER, 1, "service-instance",
+                           "requester-instance", "Echo", "", "SingleData", "Byte[4] [0, 1, 2, 3]"]
+    assert process[11:] == ["Queued", ""]
+    assert running[3] == 1 and running[5:] == ["Running", "", ""]
+    assert completed[3] == 2 and completed[5:] == ["Completed", "", "Byte[4] [0, 1, 2, 3]"]
+
+
+def test_it_refuses_what_plugcell_refuses_with_the_same_reason(floor: Any,
+                                                               probe: ModuleType) -> None:
+    requester = probe.Requester(floor.REQUESTER, "requester-instance", floor.SERVICE)
+    request, _ = requester.request(b"\x01\x02")
+    envelope = wire.decode(request)
+    service = probe.Service(floor.SERVICE, "service-instance")
+    with pytest.raises(ValueError) as refused:
+        service.answer(request, "SOMEONE")
+    assert str(refused.value) == admission.check_envelope(envelope, "SOMEONE")
+
+    elsewhere = probe.Service("ELSEWHERE", "service-instance")
+    with pytest.raises(ValueError) as refused:
+        elsewhere.answer(request, floor.REQUESTER)
+    assert str(refused.value) == f"process addressed to {floor.SERVICE}, this is ELSEWHERE"
+
+    other = probe.Requester(floor.REQUESTER, "requester-instance", floor.SERVICE)
+    unknown = other.request(b"\x01")[0].replace(b"\xa4Echo", b"\xa4Ecco", 1)
+    with pytest.raises(ValueError) as refused:
+        service.answer(unknown, floor.REQUESTER)
+    strange = wire.decode(unknown)
+    assert str(refused.value) == admission.check_process(
+        floor.SERVICE, floor._LeanService(None).device, strange, strange.body, set())
+    with pytest.raises(ValueError, match="malformed message"):
+        service.answer(b"", floor.REQUESTER)
+
+
+@settings(max_examples=300, deadline=None)
+@given(st.data())
+def test_no_input_makes_it_do_anything_but_answer_or_refuse(floor: Any, probe: ModuleType,
+                                                            data: st.DataObject) -> None:
+    """Random bytes, and a valid request with bytes changed, cut or appended: an answer
+    plugcell's decoder accepts, or a ValueError — never another error or a crash."""
+    request, _ = probe.Requester(floor.REQUESTER, "r", floor.SERVICE).request(b"\x07" * 4)
+    payload = data.draw(st.one_of(
+        st.binary(max_size=600),
+        st.builds(lambda at, new: request[:at] + new + request[at + len(new):],
+                  st.integers(0, len(request) - 1), st.binary(min_size=1, max_size=4)),
+        st.builds(lambda at: request[:at], st.integers(0, len(request))),
+        st.builds(lambda tail: request + tail, st.binary(min_size=1, max_size=8)),
+    ))
+    service = probe.Service(floor.SERVICE, "service-instance")
+    try:
+        answer = service.answer(payload, floor.REQUESTER)
+    except ValueError:
+        return
+    assert wire.decode(answer).sender == floor.SERVICE
