@@ -33,7 +33,7 @@ import tempfile
 import time
 from pathlib import Path
 
-CARGO_TOML = """[package]
+PACKAGE = """[package]
 name = "plugcell_native_probe"
 version = "0.1.0"
 edition = "2021"
@@ -42,11 +42,18 @@ edition = "2021"
 crate-type = ["cdylib"]
 
 [dependencies]
-pyo3 = {{ version = "0.25", features = ["extension-module"] }}
-zenoh = {{ version = "={zenoh}", default-features = false, features = [
-    "transport_tcp", "transport_udp", "shared-memory",
-] }}
+pyo3 = { version = "0.25", features = ["extension-module"] }
 """
+
+
+def cargo_toml(zenoh: str | None) -> str:
+    """The probe's Cargo.toml: PyO3 with the zenoh crate ``zenoh`` (exact version; the
+    transports plugcell uses), or with a MessagePack codec instead (None)."""
+    if zenoh is None:
+        return PACKAGE + 'serde = { version = "1", features = ["derive"] }\nrmp-serde = "1"\n'
+    return PACKAGE + (f'zenoh = {{ version = "={zenoh}", default-features = false, features = [\n'
+                      '    "transport_tcp", "transport_udp", "shared-memory",\n] }\n')
+
 
 LIB_RS = """use pyo3::prelude::*;
 use zenoh::Wait;
@@ -68,23 +75,6 @@ fn plugcell_native_probe(m: &Bound<'_, PyModule>) -> PyResult<()> {
 }
 """
 
-
-CARGO_TOML_WITHOUT_ZENOH = """[package]
-name = "plugcell_native_probe"
-version = "0.1.0"
-edition = "2021"
-
-[lib]
-crate-type = ["cdylib"]
-
-[dependencies]
-pyo3 = { version = "0.25", features = ["extension-module"] }
-serde = { version = "1", features = ["derive"] }
-rmp-serde = "1"
-
-[profile.release]
-lto = "thin"
-"""
 
 LIB_RS_WITHOUT_ZENOH = """use pyo3::prelude::*;
 use std::collections::BTreeMap;
@@ -127,11 +117,11 @@ def main(argv: list[str] | None = None) -> int:
     (root / "src").mkdir(parents=True, exist_ok=True)
     if args.without_zenoh:
         what = "PyO3 + rmp-serde"
-        (root / "Cargo.toml").write_text(CARGO_TOML_WITHOUT_ZENOH, encoding="utf-8")
+        (root / "Cargo.toml").write_text(cargo_toml(None), encoding="utf-8")
         (root / "src" / "lib.rs").write_text(LIB_RS_WITHOUT_ZENOH, encoding="utf-8")
     else:
         what = f"PyO3 + zenoh {args.zenoh}"
-        (root / "Cargo.toml").write_text(CARGO_TOML.format(zenoh=args.zenoh), encoding="utf-8")
+        (root / "Cargo.toml").write_text(cargo_toml(args.zenoh), encoding="utf-8")
         (root / "src" / "lib.rs").write_text(LIB_RS, encoding="utf-8")
     print(f"building a {what} extension in {root} "
           f"({os.cpu_count()} cores, {platform.machine()}, load {os.getloadavg()[0]:.1f})",

@@ -40,8 +40,17 @@ fn field<'b, 'a>(map: &'b Pairs<'a>, key: &str) -> Option<&'b ValueRef<'a>> {
 
 fn map<'b, 'a>(map: &'b Pairs<'a>, key: &str) -> PyResult<&'b Pairs<'a>> {
     match field(map, key) {
-        Some(ValueRef::Map(m)) => Ok(m),
+        Some(ValueRef::Map(m)) => struct_keys(m, key),
         _ => Err(refuse(format!("invalid message: expected a map at `{key}`"))),
+    }
+}
+
+/// A map that is a structure: every key a string (msgspec skips unknown ones unread).
+fn struct_keys<'b, 'a>(map: &'b Pairs<'a>, at: &str) -> PyResult<&'b Pairs<'a>> {
+    if map.iter().all(|(k, _)| matches!(k, ValueRef::String(_))) {
+        Ok(map)
+    } else {
+        Err(refuse(format!("invalid message: a key of `{at}` is not a str")))
     }
 }
 
@@ -63,22 +72,112 @@ fn uint(map: &Pairs<'_>, key: &str) -> PyResult<u64> {
     }
 }
 
+/// The message a payload holds: its envelope's keys and values, or why there is none.
+fn decode(payload: &[u8]) -> PyResult<Vec<(ValueRef<'_>, ValueRef<'_>)>> {
+    let mut cursor = payload;
+    let value = rmpv::decode::read_value_ref(&mut cursor)
+        .map_err(|e| refuse(format!("malformed message: {e}")))?;
+    if !cursor.is_empty() {
+        return Err(refuse("malformed message: trailing bytes"));
+    }
+    match value {
+        ValueRef::Map(m) => {
+            struct_keys(&m, "$")?;
+            Ok(m)
+        }
+        _ => Err(refuse("invalid message: expected a map")),
+    }
+}
+
+/// A service or cell name (`Name` of framework/messages.py).
+fn name<'b>(map: &'b Pairs<'_>, key: &str) -> PyResult<&'b str> {
+    let value = text(map, key)?;
+    let bytes = value.as_bytes();
+    let ok = !bytes.is_empty()
+        && bytes.len() <= 64
+        && bytes[0].is_ascii_alphanumeric()
+        && bytes.iter().all(|b| b.is_ascii_alphanumeric() || b"_.-".contains(b));
+    if ok { Ok(value) } else { Err(refuse(format!("invalid message: `{key}` is not a name"))) }
+}
+
+/// Absent (the default), or text of at most `longest` characters.
+fn optional_text(map: &Pairs<'_>, key: &str, longest: usize) -> PyResult<()> {
+    if field(map, key).is_some() && text(map, key)?.chars().count() > longest {
+        return Err(refuse(format!("invalid message: `{key}` is too long")));
+    }
+    Ok(())
+}
+
+/// Absent (the default, or None where `nil` is allowed), or one of `allowed`.
+fn optional_choice(map: &Pairs<'_>, key: &str, allowed: &[&str], nil: bool) -> PyResult<()> {
+    match field(map, key) {
+        None => Ok(()),
+        Some(ValueRef::Nil) if nil => Ok(()),
+        Some(_) if allowed.contains(&text(map, key)?) => Ok(()),
+        Some(_) => Err(refuse(format!("invalid message: `{key}` is not one of {allowed:?}"))),
+    }
+}
+
+/// Absent, or an array of at most 8 integers within `lowest ..= 2³¹ − 1`.
+fn optional_size(map: &Pairs<'_>, key: &str, lowest: i64) -> PyResult<Vec<u64>> {
+    let dims = match field(map, key) {
+        None => return Ok(vec![]),
+        Some(ValueRef::Array(dims)) if dims.len() <= 8 => dims,
+        _ => return Err(refuse(format!("invalid message: expected a size at `{key}`"))),
+    };
+    dims.iter()
+        .map(|d| match d {
+            ValueRef::Integer(i) => match i.as_i64() {
+                Some(n) if (lowest..=i64::from(i32::MAX)).contains(&n) => Ok(n.max(0) as u64),
+                _ => Err(refuse(format!("invalid message: a dimension of `{key}` is out of range"))),
+            },
+            _ => Err(refuse(format!("invalid message: expected an int in `{key}`"))),
+        })
+        .collect()
+}
+
+const DATA_TYPES: &[&str] = &["Boolean", "Byte", "Integer", "Double", "String"];
+
+/// A catalogue entry as a request carries it (`Command` of framework/messages.py).
+fn check_command(command: &Pairs<'_>) -> PyResult<()> {
+    let name = text(command, "Name")?;
+    if name.is_empty() || name.chars().count() > 64 {
+        return Err(refuse("invalid message: `Name` must have 1 to 64 characters"));
+    }
+    for key in ["Option", "SuccessCode", "Info"] {
+        optional_text(command, key, usize::MAX)?;
+    }
+    optional_choice(command, "Type", &["NoData", "SingleData", "MultipleData", "StopData"], false)?;
+    for key in ["InputDataType", "OutputDataType"] {
+        optional_choice(command, key, DATA_TYPES, true)?;
+    }
+    for key in ["InputDataSize", "OutputDataSize"] {
+        optional_size(command, key, -1)?;
+    }
+    let timeout = match field(command, "Timeout") {
+        None => 10.0,
+        Some(ValueRef::F64(t)) => *t,
+        Some(ValueRef::F32(t)) => f64::from(*t),
+        Some(ValueRef::Integer(i)) => i.as_f64().unwrap_or(f64::NAN),
+        _ => return Err(refuse("invalid message: expected a number at `Timeout`")),
+    };
+    if !(timeout > 0.0 && timeout <= 86400.0 * 365.0) {
+        return Err(refuse("invalid message: `Timeout` out of range"));
+    }
+    Ok(())
+}
+
 /// The `Data` of a Byte buffer: its size and bytes.
 fn byte_data<'b>(map: &'b Pairs<'_>, key: &str) -> PyResult<(Vec<u64>, &'b [u8])> {
     let data = self::map(map, key)?;
+    optional_choice(data, "Type", DATA_TYPES, false)?;
     if text(data, "Type")? != "Byte" {
         return Err(refuse(format!("{ECHO} input: expected Byte data")));
     }
-    let size = match field(data, "Size") {
-        Some(ValueRef::Array(dims)) => dims
-            .iter()
-            .map(|d| match d {
-                ValueRef::Integer(i) => i.as_u64().ok_or_else(|| refuse("negative size")),
-                _ => Err(refuse("invalid message: expected an int in `Size`")),
-            })
-            .collect::<PyResult<Vec<u64>>>()?,
-        _ => return Err(refuse("invalid message: expected an array at `Size`")),
-    };
+    if field(data, "Size").is_none() {
+        return Err(refuse("invalid message: expected a size at `Size`"));
+    }
+    let size = optional_size(data, "Size", 0)?;
     let buffer = match field(data, "Buffer") {
         Some(ValueRef::Binary(b)) => *b,
         _ => return Err(refuse("invalid message: expected bytes at `Buffer`")),
@@ -116,18 +215,22 @@ fn write_array(out: &mut Vec<u8>, len: u32) {
     enc::write_array_len(out, len).expect("writing to a Vec");
 }
 
+/// Keys with text values, in order (a part of a map whose length is written before).
+fn write_texts(out: &mut Vec<u8>, pairs: &[(&str, &str)]) {
+    for (key, value) in pairs {
+        write_str(out, key);
+        write_str(out, value);
+    }
+}
+
 fn write_tag(out: &mut Vec<u8>, sender: &str, recipient: &str) {
     write_map(out, 2);
-    write_str(out, "Sender");
-    write_str(out, sender);
-    write_str(out, "Recipient");
-    write_str(out, recipient);
+    write_texts(out, &[("Sender", sender), ("Recipient", recipient)]);
 }
 
 fn write_data(out: &mut Vec<u8>, size: &[u64], buffer: &[u8]) {
     write_map(out, 3);
-    write_str(out, "Type");
-    write_str(out, "Byte");
+    write_texts(out, &[("Type", "Byte")]);
     write_str(out, "Size");
     write_array(out, size.len() as u32);
     for d in size {
@@ -142,10 +245,7 @@ fn write_envelope(out: &mut Vec<u8>, sender: &str, instance: &str) {
     write_map(out, 5);
     write_str(out, "V");
     write_uint(out, VERSION);
-    write_str(out, "Sender");
-    write_str(out, sender);
-    write_str(out, "Instance");
-    write_str(out, instance);
+    write_texts(out, &[("Sender", sender), ("Instance", instance)]);
     write_str(out, "TimeNs");
     write_uint(out, now_ns());
     write_str(out, "Body");
@@ -192,32 +292,33 @@ impl Service {
         published_by: &str,
     ) -> PyResult<Bound<'py, PyBytes>> {
         let received = now_ns();
-        let mut cursor = payload;
-        let value = rmpv::decode::read_value_ref(&mut cursor)
-            .map_err(|e| refuse(format!("malformed message: {e}")))?;
-        let envelope = match &value {
-            ValueRef::Map(m) => m.as_slice(),
-            _ => return Err(refuse("invalid message: expected a map")),
-        };
+        let envelope = decode(payload)?;
+        let envelope = envelope.as_slice();
         let version = uint(envelope, "V")?;
         if version != VERSION {
             return Err(refuse(format!("unsupported protocol version {version}")));
         }
-        let sender = text(envelope, "Sender")?;
+        let sender = name(envelope, "Sender")?;
         if sender != published_by {
             return Err(refuse(format!(
                 "envelope sender {sender} differs from the sender {published_by} of the request key"
             )));
         }
         let sender_instance = text(envelope, "Instance")?;
-        uint(envelope, "TimeNs")?;
+        optional_text(envelope, "Instance", 64)?;
+        if !matches!(field(envelope, "TimeNs"), Some(ValueRef::Integer(_))) {
+            return Err(refuse("invalid message: expected an int at `TimeNs`"));
+        }
+        if !matches!(field(envelope, "Auth"), None | Some(ValueRef::Nil)) {
+            return Err(refuse("signed requests are not measured by this probe"));
+        }
         let body = map(envelope, "Body")?;
         let kind = text(body, "Kind")?;
         if kind != "Process" {
             return Err(refuse(format!("expected a Process, got {kind}")));
         }
         let tag = map(body, "Tag")?;
-        let (tag_sender, recipient) = (text(tag, "Sender")?, text(tag, "Recipient")?);
+        let (tag_sender, recipient) = (name(tag, "Sender")?, name(tag, "Recipient")?);
         if recipient != self.owner {
             return Err(refuse(format!("process addressed to {recipient}, this is {}", self.owner)));
         }
@@ -226,7 +327,9 @@ impl Service {
                 "tag sender {tag_sender} differs from the envelope sender {sender}"
             )));
         }
+        optional_choice(body, "State", &["Queued", "Running", "Completed", "Failed"], false)?;
         let command = map(body, "Command")?;
+        check_command(command)?;
         let name = text(command, "Name")?;
         if name != ECHO {
             return Err(refuse(format!(
@@ -234,10 +337,10 @@ impl Service {
                 self.owner
             )));
         }
-        let option = text(command, "Option")?;
+        let option = if field(command, "Option").is_some() { text(command, "Option")? } else { "" };
         let identifier = uint(body, "Identifier")?;
-        if identifier == 0 {
-            return Err(refuse("invalid message: `Identifier` must be >= 1"));
+        if identifier == 0 || identifier > i64::MAX as u64 {
+            return Err(refuse("invalid message: `Identifier` out of range"));
         }
         let (size, buffer) = byte_data(body, "Data")?;
         let described = summary(&size, buffer);
@@ -284,36 +387,26 @@ impl Service {
         let mut out = Vec::with_capacity(256 + buffer.len());
         write_envelope(&mut out, &self.owner, &self.instance);
         write_map(&mut out, 3);
-        write_str(&mut out, "Kind");
-        write_str(&mut out, "ProcessUpdateBatch");
+        write_texts(&mut out, &[("Kind", "ProcessUpdateBatch")]);
         write_str(&mut out, "Acks");
         write_array(&mut out, 1);
         write_map(&mut out, 5);
-        write_str(&mut out, "Kind");
-        write_str(&mut out, "Acknowledgement");
+        write_texts(&mut out, &[("Kind", "Acknowledgement")]);
         write_str(&mut out, "Identifier");
         write_uint(&mut out, identifier);
-        write_str(&mut out, "State");
-        write_str(&mut out, "Queued");
-        write_str(&mut out, "Reason");
-        write_str(&mut out, "");
-        write_str(&mut out, "Instance");
-        write_str(&mut out, &self.instance);
+        write_texts(&mut out, &[("State", "Queued"), ("Reason", ""), ("Instance", &self.instance)]);
         write_str(&mut out, "Updates");
         write_array(&mut out, 1);
         write_map(&mut out, 7);
-        write_str(&mut out, "Kind");
-        write_str(&mut out, "ProcessUpdateNotification");
+        write_texts(&mut out, &[("Kind", "ProcessUpdateNotification")]);
         write_str(&mut out, "Tag");
         write_tag(&mut out, sender, &self.owner);
         write_str(&mut out, "Identifier");
         write_uint(&mut out, identifier);
-        write_str(&mut out, "State");
-        write_str(&mut out, "Completed");
+        write_texts(&mut out, &[("State", "Completed")]);
         write_str(&mut out, "Data");
         write_data(&mut out, &size, buffer);
-        write_str(&mut out, "Reason");
-        write_str(&mut out, "");
+        write_texts(&mut out, &[("Reason", "")]);
         write_str(&mut out, "Seq");
         write_uint(&mut out, 2);
         Ok(PyBytes::new(py, &out))
@@ -346,31 +439,24 @@ impl Requester {
         let mut out = Vec::with_capacity(384 + value.len());
         write_envelope(&mut out, &self.sender, &self.instance);
         write_map(&mut out, 6);
-        write_str(&mut out, "Kind");
-        write_str(&mut out, "Process");
+        write_texts(&mut out, &[("Kind", "Process")]);
         write_str(&mut out, "Command");
         write_map(&mut out, 10);
-        for (key, text) in [("Name", ECHO), ("Option", ""), ("SuccessCode", "OK"),
-                            ("Type", "SingleData"), ("InputDataType", "Byte")] {
-            write_str(&mut out, key);
-            write_str(&mut out, text);
-        }
+        write_texts(&mut out, &[("Name", ECHO), ("Option", ""), ("SuccessCode", "OK"),
+                                ("Type", "SingleData"), ("InputDataType", "Byte")]);
         write_str(&mut out, "InputDataSize");
         write_array(&mut out, 0);
-        write_str(&mut out, "OutputDataType");
-        write_str(&mut out, "Byte");
+        write_texts(&mut out, &[("OutputDataType", "Byte")]);
         write_str(&mut out, "OutputDataSize");
         write_array(&mut out, 0);
         write_str(&mut out, "Timeout");
         enc::write_f64(&mut out, 10.0).expect("writing to a Vec");
-        write_str(&mut out, "Info");
-        write_str(&mut out, "return the input data");
+        write_texts(&mut out, &[("Info", "return the input data")]);
         write_str(&mut out, "Tag");
         write_tag(&mut out, &self.sender, &self.recipient);
         write_str(&mut out, "Identifier");
         write_uint(&mut out, self.identifier);
-        write_str(&mut out, "State");
-        write_str(&mut out, "Queued");
+        write_texts(&mut out, &[("State", "Queued")]);
         write_str(&mut out, "Data");
         write_data(&mut out, &[value.len() as u64], value);
         (PyBytes::new(py, &out), PyBytes::new(py, &self.identifier.to_le_bytes()))
@@ -379,14 +465,8 @@ impl Requester {
     /// Whether `payload` holds the last request's final update (ValueError if it refused
     /// the request or is not a message).
     fn is_final(&self, payload: &[u8]) -> PyResult<bool> {
-        let mut cursor = payload;
-        let value = rmpv::decode::read_value_ref(&mut cursor)
-            .map_err(|e| refuse(format!("malformed message: {e}")))?;
-        let envelope = match &value {
-            ValueRef::Map(m) => m.as_slice(),
-            _ => return Err(refuse("invalid message: expected a map")),
-        };
-        let body = map(envelope, "Body")?;
+        let envelope = decode(payload)?;
+        let body = map(&envelope, "Body")?;
         let lists = |key: &str| match field(body, key) {
             Some(ValueRef::Array(items)) => items.as_slice(),
             _ => &[],
