@@ -3,6 +3,7 @@ of the request path, beside raw Zenoh and plugcell itself.
 
     .venv/bin/python benchmarks/durability_floor.py [--cycles 4000] [--repeat 3]
         [--native] [--output FILE.json] [--plot FILE.png]
+    .venv/bin/python benchmarks/durability_floor.py --replot FILE.json --plot FILE.png
 
 The event-loop floor of ``plugcell bench transport`` (raw Zenoh between two OS
 processes, each sample handed to an event loop by ``call_soon_threadsafe``, the answer
@@ -68,7 +69,8 @@ shares Zenoh's runtime threads with another, see docs/framework.md on thread sta
 The variants run interleaved, ``--repeat`` rounds; the table gives each one's median
 over the rounds of the average one-way latency (round trip ÷ 2), its ratio to raw Zenoh
 and what it adds to the event-loop floor.  ``--output`` writes every round to a JSON
-file, ``--plot`` draws the medians with the target (needs matplotlib).  Last, the
+file, ``--plot`` draws the medians with the target (needs matplotlib), ``--replot``
+redraws a saved run.  Last, the
 protocol's work of one round trip (both sides, no journal) is timed in a tight loop in
 this process: what the same Python costs with warm caches, beside what it adds between
 the two processes, where each side's caches go cold between messages.
