@@ -80,6 +80,7 @@ from __future__ import annotations
 
 import argparse
 import asyncio
+import importlib.util
 import json
 import os
 import platform
@@ -92,6 +93,7 @@ import tempfile
 import time
 from importlib import metadata
 from pathlib import Path
+from types import ModuleType
 from typing import Any
 
 import msgspec
@@ -251,12 +253,9 @@ def _serve(variant: str, key: str, folder: str) -> None:
     canned = _canned()[1] if variant == "protocol's bytes" else None
     native = None
     if variant in NATIVE:
-        sys.path.insert(0, os.environ[PROBE_DIR])
-        from plugcell_native_probe import Service  # type: ignore[import-not-found]
-
-        native = Service(SERVICE, "service-instance",
-                         str(Path(folder) / "SERVICE.sqlite.log") if variant.endswith("log")
-                         else None)
+        log_path = Path(folder) / "SERVICE.sqlite.log" if variant.endswith("log") else None
+        native = _load_probe(Path(os.environ[PROBE_DIR])).Service(
+            SERVICE, "service-instance", None if log_path is None else str(log_path))
     log = (
         os.open(Path(folder) / "SERVICE.log", os.O_WRONLY | os.O_CREAT | os.O_APPEND, 0o644)
         if variant == "log append"
@@ -337,10 +336,8 @@ async def _ping(key: str, variant: str, cycles: int, warmup: int) -> float:
     canned = _canned()[0] if variant == "protocol's bytes" else None
     native = None
     if variant in NATIVE:
-        sys.path.insert(0, os.environ[PROBE_DIR])
-        from plugcell_native_probe import Requester  # type: ignore[import-not-found]
-
-        native = Requester(REQUESTER, "requester-instance", SERVICE)
+        native = _load_probe(Path(os.environ[PROBE_DIR])).Requester(
+            REQUESTER, "requester-instance", SERVICE)
     value = bytes(range(4))
 
     def arrived(answer: bytes) -> None:
@@ -514,6 +511,17 @@ def _plot(results: dict[str, list[float]], path: Path, title: str) -> None:
     fig.tight_layout()
     fig.savefig(path, dpi=120)
     plt.close(fig)
+
+
+def _load_probe(folder: Path) -> ModuleType:
+    """The measuring device's module that :func:`_build_probe` put in ``folder``."""
+    spec = importlib.util.spec_from_file_location(
+        "plugcell_native_probe", folder / "plugcell_native_probe.so")
+    if spec is None or spec.loader is None:
+        raise RuntimeError(f"no native probe in {folder}")
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
 
 
 def _build_probe() -> Path:

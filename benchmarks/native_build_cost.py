@@ -1,8 +1,8 @@
 """What a native hot path would add to a fresh machine's setup: build a minimal PyO3
 extension against the zenoh crate and time it.
 
-    .venv/bin/python benchmarks/native_build_cost.py [--zenoh 1.10.0 | --without-zenoh]
-        [--keep DIR]
+    .venv/bin/python benchmarks/native_build_cost.py [--zenoh 1.10.0 | --without-zenoh
+        | --probe] [--keep DIR]
 
 Issue 20 allows the request/acknowledge/update path in native code (a Rust extension
 built against the zenoh crate) on condition that ``make demo`` / ``make test`` on a fresh
@@ -17,7 +17,8 @@ Not part of ``make bench``: it downloads crates and keeps both cores busy for mi
 Rust (PyO3 and a MessagePack codec, ``rmp-serde``), called from the Zenoh callbacks of
 eclipse-zenoh's own Python session — one function that decodes a map and encodes it
 again.  docs/framework.md ("In one picture") shows why that suffices: Python glue that
-only puts bytes prepared elsewhere stays within the target.
+only puts bytes prepared elsewhere stays within the target.  ``--probe`` builds that
+measuring device itself, ``benchmarks/native_probe``, from its sources.
 """
 
 from __future__ import annotations
@@ -106,6 +107,8 @@ def main(argv: list[str] | None = None) -> int:
     flavour.add_argument("--zenoh", default="1.10.0", help="zenoh crate version (exact)")
     flavour.add_argument("--without-zenoh", action="store_true",
                          help="PyO3 and a MessagePack codec only (module docstring)")
+    flavour.add_argument("--probe", action="store_true",
+                         help="benchmarks/native_probe, durability_floor.py's measuring device")
     parser.add_argument("--keep", type=Path, help="build here and keep it (default: a "
                         "temporary folder, removed)")
     args = parser.parse_args(argv)
@@ -115,7 +118,12 @@ def main(argv: list[str] | None = None) -> int:
         return 0
     root = args.keep or Path(tempfile.mkdtemp(prefix="plugcell-native-"))
     (root / "src").mkdir(parents=True, exist_ok=True)
-    if args.without_zenoh:
+    if args.probe:
+        what = "benchmarks/native_probe"
+        probe = Path(__file__).with_name("native_probe")
+        for name in ("Cargo.toml", "Cargo.lock", "src/lib.rs"):
+            shutil.copy(probe / name, root / name)
+    elif args.without_zenoh:
         what = "PyO3 + rmp-serde"
         (root / "Cargo.toml").write_text(cargo_toml(None), encoding="utf-8")
         (root / "src" / "lib.rs").write_text(LIB_RS_WITHOUT_ZENOH, encoding="utf-8")
@@ -135,11 +143,14 @@ def main(argv: list[str] | None = None) -> int:
     if done.returncode != 0:
         print(done.stderr[-3000:])
         return 1
-    crates = re.search(r"Locking (\d+) packages", done.stderr)
+    locked = re.search(r"Locking (\d+) packages", done.stderr)
+    lock = root / "Cargo.lock"  # a crate that brings its lock file locks nothing anew
+    crates = locked.group(1) if locked else (
+        str(lock.read_text().count("[[package]]") - 1) if lock.is_file() else "?")
     library = next((root / "target" / "release").glob("*.so"), None)
     cpu = (cpu1.children_user - cpu0.children_user) + (cpu1.children_system
                                                        - cpu0.children_system)
-    print(f"crates locked:            {crates.group(1) if crates else '?'}")
+    print(f"crates locked:            {crates}")
     print(f"cargo build --release:    {wall / 60:.1f} min wall ({wall:.0f} s), "
           f"{cpu / 60:.1f} min CPU ({cpu:.0f} s)")
     print(f"target directory:         {_size(root / 'target') / 1e6:.0f} MB")

@@ -12,7 +12,6 @@ where there is no cargo.
 
 from __future__ import annotations
 
-import importlib.util
 import shutil
 import sys
 from pathlib import Path
@@ -48,13 +47,7 @@ def floor() -> Any:
 
 @pytest.fixture(scope="module")
 def probe(floor: Any) -> ModuleType:
-    folder = floor._build_probe()
-    spec = importlib.util.spec_from_file_location(
-        "plugcell_native_probe", folder / "plugcell_native_probe.so")
-    assert spec is not None and spec.loader is not None
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
+    return floor._load_probe(floor._build_probe())
 
 
 def _without_time(payload: bytes) -> tuple[wire.Envelope, bytes]:
