@@ -298,7 +298,17 @@ def test_beam_not_locked_fails_with_the_reason_and_the_service_carries_on(world_
                 # still serving: a new reflector, Move, measure
                 again = ReflectorPublisher(Bus(session, KeySpace(cell)), "TMAC2", "smr")
                 again.publish(reflector(BASE_A, POSE_A, PROBE_A))
-                await ok(robot, "Move", "", POSE_A)
+                # its queryable reaches the tracker's session asynchronously, as every
+                # Zenoh declaration does: Move until the tracker finds it (bounded)
+                deadline = time.monotonic() + 10
+                while True:
+                    call = await robot.create_process("TRACKER", "Move", "", POSE_A, timeout=30)
+                    final = await call.result()
+                    if (final.state is C or "no reflector in the cell" not in final.reason
+                            or time.monotonic() > deadline):
+                        break
+                    await asyncio.sleep(0.05)
+                assert final.state is C, f"Move: {final.reason}"
                 smr = await ok(robot, "Single Measurement", "tr2euler", 100)
                 # an SMR gives a position only (rotation identity in the tracker frame)
                 expected = pose(BASE_A) @ pose(POSE_A) @ pose(PROBE_A)
