@@ -53,7 +53,7 @@ Zenoh), measured in the same rounds:
   service's ``create_process("PUBLISHER", "Echo", 4 bytes)`` until its update, against
   the benchmark's service, both with their journals.
 
-With ``--native`` (Linux, needs cargo and crates.io or cargo's cache), two more rows do the
+With ``--native`` (Linux, needs cargo and crates.io or cargo's cache), three more rows do the
 protocol's per-message work in Rust instead — the measuring device
 ``benchmarks/native_probe`` (PyO3, not part of plugcell), built first (≈ 15 s from
 nothing): the same request and answer, byte for byte apart from the timestamp, and the
@@ -62,7 +62,18 @@ same checks, called from the Python callbacks of eclipse-zenoh's own session:
 * ``native protocol`` — the requester's request and its reading of the answer, the
   service's decoding, checks and answer, each one call into Rust;
 * ``native protocol + log`` — the same, the service appending the process and its two
-  updates to a journal log as one record (the format of ``framework/journal_log.py``).
+  updates to a journal log as one record (the format of ``framework/journal_log.py``);
+* ``native core`` — ``native protocol + log`` with the Python that a request path with
+  a Rust core still runs for every process: on the service, the device's handler —
+  ``BenchService``'s ``Echo``, an ``async def`` taking a numpy view of the input and
+  posting its output as data feedback — run to its end as the scheduler would run it
+  on an idle device (the coroutine driven without a task), its success code checked and
+  its output typed against the catalogue (:func:`~plugcell.framework.data.to_data`);
+  on the requester, the answer decoded into the
+  :class:`~plugcell.framework.messages.ProcessUpdateNotification` a caller is handed
+  (msgspec, :func:`~plugcell.framework.wire.decode`), routed to the waiting call's
+  future by sender and identifier, and its data read as a numpy view.  The best a
+  product with a native core and Python devices and callers could reach.
 
 Every round starts both ends afresh, each an OS process of its own (so that no variant
 shares Zenoh's runtime threads with another, see docs/framework.md on thread states).
@@ -102,7 +113,7 @@ import zenoh
 VARIANTS = ("raw Zenoh", "nothing", "log append", "SQLite commit", "Journal",
             "protocol's bytes", "protocol", "protocol + Journal", "plugcell")
 #: ``--native``: the protocol's per-message work in Rust (benchmarks/native_probe).
-NATIVE = ("native protocol", "native protocol + log")
+NATIVE = ("native protocol", "native protocol + log", "native core")
 #: What each variant's row says it is.
 LABELS = {
     "raw Zenoh": "raw Zenoh (thread hop)",
@@ -116,6 +127,7 @@ LABELS = {
     "plugcell": "plugcell (service, requester)",
     "native protocol": "+ the messages, in Rust",
     "native protocol + log": "+ messages and log, in Rust",
+    "native core": "+ Rust core, Python handler",
 }
 #: The variants whose far end is a peer of ``plugcell bench transport`` (a cell, not a key).
 BENCH_PEER = {"raw Zenoh": "raw", "plugcell": "service"}
@@ -234,6 +246,77 @@ class _LeanRequester:
         return False
 
 
+class _EchoDevice:
+    """The service's Python in ``native core``: the transport benchmark's ``Echo``
+    handler (as :class:`~plugcell.apps.bench.device.BenchService` has it: the input
+    posted as data feedback, success reported) run as a scheduler runs a SingleData
+    process on an idle device."""
+
+    def __init__(self) -> None:
+        self.command = _echo()
+        self.fed: list[Any] = []
+
+    async def dispatch(self, command: Any, option: str, data: Any) -> str:
+        self.fed.append(data)  # BenchService: self.data_feedback.post(data)
+        return "OK"
+
+    def run(self, input_bytes: bytes) -> bytes:
+        """The output of the process whose input is ``input_bytes`` (Byte elements)."""
+        import numpy as np
+
+        from plugcell.framework.data import to_data
+
+        command = self.command
+        steps = self.dispatch(command, "", np.frombuffer(input_bytes, np.uint8))
+        try:
+            steps.send(None)
+        except StopIteration as done:
+            code = done.value
+        else:  # a handler that waits would go through the scheduler's task instead
+            steps.close()
+            raise RuntimeError("the Echo handler waited")
+        if code != command.success_code or not self.fed:
+            raise RuntimeError(f"Echo failed: feedback {code!r}")
+        output = to_data(self.fed.pop(), command.output_data_type, command.output_data_size,
+                         f"{command.name} output")
+        return bytes(output.buffer)
+
+
+class _Calls:
+    """The requester's Python in ``native core``: each answer decoded into the messages a
+    caller is handed, routed to the waiting call by sender and identifier."""
+
+    def __init__(self) -> None:
+        self.waiting: dict[tuple[str, int], asyncio.Future[Any]] = {}
+
+    def expect(self, partner: str, identifier: int, future: asyncio.Future[Any]) -> None:
+        self.waiting[(partner, identifier)] = future
+
+    def arrived(self, payload: bytes) -> None:
+        from plugcell.framework import wire
+        from plugcell.framework.messages import process_acks, process_updates
+
+        envelope = wire.decode(payload)
+        for ack in process_acks(envelope.body):
+            future = self.waiting.get((envelope.sender, ack.identifier))
+            if future is not None and ack.state.final and not future.done():
+                future.set_exception(RuntimeError(f"request refused: {ack.reason}"))
+        for update in process_updates(envelope.body):
+            future = self.waiting.get((envelope.sender, update.identifier))
+            if future is not None and update.state.final and not future.done():
+                del self.waiting[(envelope.sender, update.identifier)]
+                future.set_result(update)
+
+    @staticmethod
+    def read(update: Any) -> Any:
+        """The final update's data as the caller reads it (a numpy view)."""
+        from plugcell.framework.data import from_data
+
+        if update.data is None:
+            raise RuntimeError(f"Echo failed: {update.reason}")
+        return from_data(update.data)
+
+
 def _serve(variant: str, key: str, folder: str) -> None:
     """Answer every ``key/ping`` on ``key/pong`` from an event loop, after ``variant``."""
     from plugcell.framework import eventloop
@@ -252,8 +335,10 @@ def _serve(variant: str, key: str, folder: str) -> None:
     lean = _LeanService(journal) if variant in PROTOCOL else None
     canned = _canned()[1] if variant == "protocol's bytes" else None
     native = None
+    device = _EchoDevice() if variant == "native core" else None
     if variant in NATIVE:
-        log_path = Path(folder) / "SERVICE.sqlite.log" if variant.endswith("log") else None
+        log_path = (Path(folder) / "SERVICE.sqlite.log"
+                    if variant in ("native protocol + log", "native core") else None)
         native = _load_probe(Path(os.environ[PROBE_DIR])).Service(
             SERVICE, "service-instance", None if log_path is None else str(log_path))
     log = (
@@ -275,6 +360,10 @@ def _serve(variant: str, key: str, folder: str) -> None:
         count += 1
         if lean is not None:
             pong.put(lean.answer(payload))
+            return
+        if device is not None:
+            admitted = native.admit(payload.to_bytes(), REQUESTER)
+            pong.put(native.complete(admitted, device.run(admitted.input)))
             return
         if native is not None:
             pong.put(native.answer(payload.to_bytes(), REQUESTER))
@@ -339,9 +428,12 @@ async def _ping(key: str, variant: str, cycles: int, warmup: int) -> float:
         native = _load_probe(Path(os.environ[PROBE_DIR])).Requester(
             REQUESTER, "requester-instance", SERVICE)
     value = bytes(range(4))
+    calls = _Calls() if variant == "native core" else None
 
     def arrived(answer: bytes) -> None:
-        if (waiting and not waiting[0].done()
+        if calls is not None:
+            calls.arrived(answer)
+        elif (waiting and not waiting[0].done()
                 and (lean is None or lean.final(answer))
                 and (native is None or native.is_final(answer))):
             waiting[0].set_result(answer)
@@ -358,6 +450,8 @@ async def _ping(key: str, variant: str, cycles: int, warmup: int) -> float:
             ping.put(canned)
         elif native is not None:
             payload, attachment = native.request(value)
+            if calls is not None:
+                calls.expect(SERVICE, int.from_bytes(attachment, "little"), waiting[0])
             ping.put(payload, attachment=attachment)
         elif lean is None:
             ping.put(b"ping")
@@ -381,7 +475,9 @@ async def _ping(key: str, variant: str, cycles: int, warmup: int) -> float:
             waiting[:] = [loop.create_future()]
             started = time.perf_counter_ns()
             put()
-            await asyncio.wait_for(waiting[0], 5.0)
+            answered = await asyncio.wait_for(waiting[0], 5.0)
+            if calls is not None:
+                calls.read(answered)
             if i >= warmup:
                 half_trips.append((time.perf_counter_ns() - started) / 2)
         return statistics.fmean(half_trips) / 1e6
@@ -614,7 +710,9 @@ def main(argv: list[str] | None = None) -> int:
           f"plugcell {statistics.median(results['plugcell']) / raw:.2f}×, the lean path "
           f"with the Journal {statistics.median(results['protocol + Journal']) / raw:.2f}×"
           + (f", in Rust with its log "
-             f"{statistics.median(results['native protocol + log']) / raw:.2f}×"
+             f"{statistics.median(results['native protocol + log']) / raw:.2f}×, "
+             f"a Rust core with the Python it keeps "
+             f"{statistics.median(results['native core']) / raw:.2f}×"
              if args.native else ""))
     tight = _tight(args.cycles)
     added = 2 * (statistics.median(results["protocol"]) - floor) * 1e3

@@ -12,6 +12,7 @@ where there is no cargo.
 
 from __future__ import annotations
 
+import asyncio
 import shutil
 import sys
 from pathlib import Path
@@ -26,6 +27,7 @@ from hypothesis import strategies as st
 
 from plugcell.framework import admission, wire
 from plugcell.framework.journal_log import PROCESS, UPDATE, read_log
+from plugcell.framework.messages import Acknowledgement, ProcessStates, ProcessUpdateBatch
 
 BENCHMARKS = Path(__file__).resolve().parents[1] / "benchmarks"
 
@@ -82,6 +84,51 @@ def test_request_and_answer_are_plugcells_bytes(floor: Any, probe: ModuleType,
     assert process[11:] == ["Queued", ""]
     assert running[3] == 1 and running[5:] == ["Running", "", ""]
     assert completed[3] == 2 and completed[5:] == ["Completed", "", "Byte[4] [0, 1, 2, 3]"]
+
+
+def test_the_native_core_runs_the_python_a_product_keeps(floor: Any, probe: ModuleType,
+                                                        tmp_path: Path) -> None:
+    """``native core``: admit, the device's handler in Python, complete — the answer
+    carries the handler's output, journaled; the requester's Python hands the caller the
+    final update and its data, and a refusal as an error."""
+    requester = probe.Requester(floor.REQUESTER, "requester-instance", floor.SERVICE)
+    request, attachment = requester.request(b"\x05\x06\x07")
+    service = probe.Service(floor.SERVICE, "service-instance", str(tmp_path / "j.log"))
+    admitted = service.admit(request, floor.REQUESTER)
+    assert (admitted.identifier, admitted.input) == (1, b"\x05\x06\x07")
+    device = floor._EchoDevice()
+    output = device.run(admitted.input)
+    assert output == b"\x05\x06\x07" and device.fed == []
+    answer = service.complete(admitted, b"\x09" * 5)  # any output: the answer carries it
+    update = wire.decode(answer).body.updates[0]
+    assert (update.identifier, update.state.value, update.seq) == (1, "Completed", 2)
+    assert bytes(update.data.buffer) == b"\x09" * 5 and update.data.size == (5,)
+    contents = read_log(tmp_path / "j.log")
+    assert contents is not None
+    assert [row[-1] for _, row in contents.rows] == ["", "", "Byte[5] [9, 9, 9, 9, 9]"]
+    assert contents.rows[0][1][8] == "Byte[3] [5, 6, 7]"  # the process row: its input
+
+    calls = floor._Calls()
+
+    async def route() -> Any:
+        waiting = asyncio.get_running_loop().create_future()
+        calls.expect(floor.SERVICE, int.from_bytes(attachment, "little"), waiting)
+        calls.arrived(service.answer(request.replace(b"\x05", b"\x04", 1), floor.REQUESTER))
+        return await waiting
+
+    final = asyncio.run(route())
+    assert list(calls.read(final)) == [4, 6, 7] and calls.waiting == {}
+
+    async def refused() -> None:
+        waiting = asyncio.get_running_loop().create_future()
+        calls.expect(floor.SERVICE, 7, waiting)
+        batch = ProcessUpdateBatch(acks=[Acknowledgement(
+            identifier=7, state=ProcessStates.Failed, reason="no such thing")])
+        calls.arrived(wire.encode(floor.SERVICE, "service-instance", batch))
+        await waiting
+
+    with pytest.raises(RuntimeError, match="request refused: no such thing"):
+        asyncio.run(refused())
 
 
 def test_it_refuses_what_plugcell_refuses_with_the_same_reason(floor: Any,

@@ -1,11 +1,12 @@
 //! The per-message work of plugcell's request path for one 4-byte `Echo`, in Rust: a
 //! measuring device of `benchmarks/durability_floor.py --native`, not part of plugcell.
 //!
-//! [`Service::answer`] does what a service does with a published CreateProcess before the
-//! device's handler (decode the envelope, check it as `framework/admission.py` does, journal
-//! the process and its two updates as one record of the journal's log) and encodes the
-//! acknowledgement and the `Completed` update in one `ProcessUpdateBatch`, the same map
-//! layout msgspec writes for plugcell.  [`Requester`] encodes the request and reads the
+//! [`Service::admit`] does what a service does with a published CreateProcess before the
+//! device's handler (decode the envelope, check it as `framework/admission.py` does);
+//! [`Service::complete`] what it does after (journal the process and its two updates as
+//! one record of the journal's log, encode the acknowledgement and the `Completed` update
+//! with the handler's output in one `ProcessUpdateBatch`, the same map layout msgspec
+//! writes for plugcell); [`Service::answer`] both, with the input as the output.  [`Requester`] encodes the request and reads the
 //! answer's final update.  It covers the one command the benchmark sends; anything else
 //! is refused with the reason, as plugcell would.
 
@@ -284,13 +285,23 @@ impl Service {
     }
 
     /// Admit a CreateProcess published by `published_by`, journal it, and return the
-    /// batch that acknowledges and completes it; ValueError with the reason otherwise.
+    /// batch that acknowledges and completes it with its own input as the output (what
+    /// `Echo` does); ValueError with the reason otherwise.
     fn answer<'py>(
         &mut self,
         py: Python<'py>,
         payload: &[u8],
         published_by: &str,
     ) -> PyResult<Bound<'py, PyBytes>> {
+        let admitted = self.admit(payload, published_by)?;
+        let output = admitted.input.clone();
+        self.complete(py, &admitted, &output)
+    }
+
+    /// Decode and check a CreateProcess published by `published_by` as plugcell's
+    /// admission does: the process, for [`Service::complete`] after the device's handler
+    /// ran; ValueError with the reason if it is refused.
+    fn admit(&self, payload: &[u8], published_by: &str) -> PyResult<Admitted> {
         let received = now_ns();
         let envelope = decode(payload)?;
         let envelope = envelope.as_slice();
@@ -343,9 +354,30 @@ impl Service {
             return Err(refuse("invalid message: `Identifier` out of range"));
         }
         let (size, buffer) = byte_data(body, "Data")?;
-        let described = summary(&size, buffer);
+        Ok(Admitted {
+            sender: sender.to_owned(),
+            sender_instance: sender_instance.to_owned(),
+            option: option.to_owned(),
+            identifier,
+            received,
+            summary: summary(&size, buffer),
+            input: buffer.to_vec(),
+        })
+    }
 
+    /// Journal `admitted` (its process row, Running and Completed updates: one record of
+    /// the log) and return the batch that acknowledges it and completes it with `output`
+    /// (Byte data of one dimension).
+    fn complete<'py>(
+        &mut self,
+        py: Python<'py>,
+        admitted: &Admitted,
+        output: &[u8],
+    ) -> PyResult<Bound<'py, PyBytes>> {
+        let (sender, identifier) = (admitted.sender.as_str(), admitted.identifier);
+        let size = [output.len() as u64];
         if let Some(log) = self.log.as_mut() {
+            let described = summary(&size, output);
             let mut rows = Vec::with_capacity(256);
             write_array(&mut rows, 3);
             let now = now_ns();
@@ -356,11 +388,12 @@ impl Service {
                 write_str(&mut rows, s);
             }
             write_uint(&mut rows, identifier);
-            for s in [self.instance.as_str(), sender_instance, ECHO, option, "SingleData"] {
+            for s in [self.instance.as_str(), &admitted.sender_instance, ECHO, &admitted.option,
+                      "SingleData"] {
                 write_str(&mut rows, s);
             }
-            write_str(&mut rows, &described);
-            write_uint(&mut rows, received);
+            write_str(&mut rows, &admitted.summary);
+            write_uint(&mut rows, admitted.received);
             write_uint(&mut rows, now);
             write_str(&mut rows, "Queued");
             write_str(&mut rows, "");
@@ -384,7 +417,7 @@ impl Service {
             log.write_all(&record).map_err(|e| refuse(format!("journal: {e}")))?;
         }
 
-        let mut out = Vec::with_capacity(256 + buffer.len());
+        let mut out = Vec::with_capacity(256 + output.len());
         write_envelope(&mut out, &self.owner, &self.instance);
         write_map(&mut out, 3);
         write_texts(&mut out, &[("Kind", "ProcessUpdateBatch")]);
@@ -405,11 +438,34 @@ impl Service {
         write_uint(&mut out, identifier);
         write_texts(&mut out, &[("State", "Completed")]);
         write_str(&mut out, "Data");
-        write_data(&mut out, &size, buffer);
+        write_data(&mut out, &size, output);
         write_texts(&mut out, &[("Reason", "")]);
         write_str(&mut out, "Seq");
         write_uint(&mut out, 2);
         Ok(PyBytes::new(py, &out))
+    }
+}
+
+/// A CreateProcess that [`Service::admit`] accepted: what its journal rows and its answer
+/// need, and its input for the device's handler.
+#[pyclass(frozen)]
+struct Admitted {
+    sender: String,
+    sender_instance: String,
+    option: String,
+    #[pyo3(get)]
+    identifier: u64,
+    received: u64,
+    summary: String,
+    input: Vec<u8>,
+}
+
+#[pymethods]
+impl Admitted {
+    /// The input data's bytes (Byte elements).
+    #[getter]
+    fn input<'py>(&self, py: Python<'py>) -> Bound<'py, PyBytes> {
+        PyBytes::new(py, &self.input)
     }
 }
 
@@ -496,5 +552,6 @@ impl Requester {
 fn plugcell_native_probe(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<Service>()?;
     m.add_class::<Requester>()?;
+    m.add_class::<Admitted>()?;
     Ok(())
 }
