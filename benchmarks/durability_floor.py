@@ -53,7 +53,7 @@ Zenoh), measured in the same rounds:
   service's ``create_process("PUBLISHER", "Echo", 4 bytes)`` until its update, against
   the benchmark's service, both with their journals.
 
-With ``--native`` (Linux, needs cargo and crates.io or cargo's cache), three more rows do the
+With ``--native`` (Linux, needs cargo and crates.io or cargo's cache), four more rows do the
 protocol's per-message work in Rust instead — the measuring device
 ``benchmarks/native_probe`` (PyO3, not part of plugcell), built first (≈ 15 s from
 nothing): the same request and answer, byte for byte apart from the timestamp, and the
@@ -63,17 +63,20 @@ same checks, called from the Python callbacks of eclipse-zenoh's own session:
   service's decoding, checks and answer, each one call into Rust;
 * ``native protocol + log`` — the same, the service appending the process and its two
   updates to a journal log as one record (the format of ``framework/journal_log.py``);
-* ``native core`` — ``native protocol + log`` with the Python that a request path with
-  a Rust core still runs for every process: on the service, the device's handler —
-  ``BenchService``'s ``Echo``, an ``async def`` taking a numpy view of the input and
-  posting its output as data feedback — run to its end as the scheduler would run it
-  on an idle device (the coroutine driven without a task), its success code checked and
-  its output typed against the catalogue (:func:`~plugcell.framework.data.to_data`);
-  on the requester, the answer decoded into the
+* ``native handler`` — ``native protocol + log`` with the device's handler in Python
+  between the service's two calls into Rust: ``BenchService``'s ``Echo``, an ``async
+  def`` taking a numpy view of the input and posting its output as data feedback, run to
+  its end as a scheduler could run it on an idle device (the coroutine driven without a
+  task), its success code checked — the least Python any framework with Python devices
+  runs per process;
+* ``native core`` — the same with the rest of the Python that plugcell's Python API
+  keeps for every process: on the service, the handler's output typed against the
+  catalogue (:func:`~plugcell.framework.data.to_data`); on the requester, the answer
+  decoded into the
   :class:`~plugcell.framework.messages.ProcessUpdateNotification` a caller is handed
   (msgspec, :func:`~plugcell.framework.wire.decode`), routed to the waiting call's
   future by sender and identifier, and its data read as a numpy view.  The best a
-  product with a native core and Python devices and callers could reach.
+  product with a native core behind today's API could reach.
 
 Every round starts both ends afresh, each an OS process of its own (so that no variant
 shares Zenoh's runtime threads with another, see docs/framework.md on thread states).
@@ -113,7 +116,7 @@ import zenoh
 VARIANTS = ("raw Zenoh", "nothing", "log append", "SQLite commit", "Journal",
             "protocol's bytes", "protocol", "protocol + Journal", "plugcell")
 #: ``--native``: the protocol's per-message work in Rust (benchmarks/native_probe).
-NATIVE = ("native protocol", "native protocol + log", "native core")
+NATIVE = ("native protocol", "native protocol + log", "native handler", "native core")
 #: What each variant's row says it is.
 LABELS = {
     "raw Zenoh": "raw Zenoh (thread hop)",
@@ -127,7 +130,8 @@ LABELS = {
     "plugcell": "plugcell (service, requester)",
     "native protocol": "+ the messages, in Rust",
     "native protocol + log": "+ messages and log, in Rust",
-    "native core": "+ Rust core, Python handler",
+    "native handler": "+ Rust core, Python handler",
+    "native core": "+ the same, Python API",
 }
 #: The variants whose far end is a peer of ``plugcell bench transport`` (a cell, not a key).
 BENCH_PEER = {"raw Zenoh": "raw", "plugcell": "service"}
@@ -260,8 +264,9 @@ class _EchoDevice:
         self.fed.append(data)  # BenchService: self.data_feedback.post(data)
         return "OK"
 
-    def run(self, input_bytes: bytes) -> bytes:
-        """The output of the process whose input is ``input_bytes`` (Byte elements)."""
+    def run(self, input_bytes: bytes, *, typed: bool = True) -> bytes:
+        """The output of the process whose input is ``input_bytes`` (Byte elements),
+        checked against the catalogue with ``to_data`` when ``typed``."""
         import numpy as np
 
         from plugcell.framework.data import to_data
@@ -277,6 +282,8 @@ class _EchoDevice:
             raise RuntimeError("the Echo handler waited")
         if code != command.success_code or not self.fed:
             raise RuntimeError(f"Echo failed: feedback {code!r}")
+        if not typed:
+            return self.fed.pop().tobytes()
         output = to_data(self.fed.pop(), command.output_data_type, command.output_data_size,
                          f"{command.name} output")
         return bytes(output.buffer)
@@ -335,10 +342,9 @@ def _serve(variant: str, key: str, folder: str) -> None:
     lean = _LeanService(journal) if variant in PROTOCOL else None
     canned = _canned()[1] if variant == "protocol's bytes" else None
     native = None
-    device = _EchoDevice() if variant == "native core" else None
+    device = _EchoDevice() if variant in ("native handler", "native core") else None
     if variant in NATIVE:
-        log_path = (Path(folder) / "SERVICE.sqlite.log"
-                    if variant in ("native protocol + log", "native core") else None)
+        log_path = Path(folder) / "SERVICE.sqlite.log" if variant != "native protocol" else None
         native = _load_probe(Path(os.environ[PROBE_DIR])).Service(
             SERVICE, "service-instance", None if log_path is None else str(log_path))
     log = (
@@ -363,7 +369,8 @@ def _serve(variant: str, key: str, folder: str) -> None:
             return
         if device is not None:
             admitted = native.admit(payload.to_bytes(), REQUESTER)
-            pong.put(native.complete(admitted, device.run(admitted.input)))
+            output = device.run(admitted.input, typed=variant == "native core")
+            pong.put(native.complete(admitted, output))
             return
         if native is not None:
             pong.put(native.answer(payload.to_bytes(), REQUESTER))
@@ -504,6 +511,48 @@ def _tight(cycles: int) -> float:
                 raise RuntimeError("the answer does not end the request")
         runs.append((time.perf_counter_ns() - started) / cycles / 1e3)
     return statistics.median(runs)
+
+
+def _tight_edges(cycles: int) -> dict[str, float]:
+    """µs of the Python of ``native handler`` and ``native core`` in one round trip (the
+    handler's run; with the output typed, the answer decoded and routed and its data
+    read), each the median of 5 tight loops of ``cycles`` round trips in this process."""
+    probe = _load_probe(Path(os.environ[PROBE_DIR]))
+    requester = probe.Requester(REQUESTER, "requester-instance", SERVICE)
+    service = probe.Service(SERVICE, "service-instance")
+    device, calls = _EchoDevice(), _Calls()
+    loop = asyncio.new_event_loop()
+
+    def handler_only(admitted: Any) -> None:
+        device.run(admitted.input, typed=False)
+
+    def python_api(admitted: Any) -> None:
+        answer = service.complete(admitted, device.run(admitted.input))
+        future = loop.create_future()
+        calls.expect(SERVICE, admitted.identifier, future)
+        calls.arrived(answer)
+        calls.read(future.result())
+
+    timed = {}
+    try:
+        for name, edges in (("handler", handler_only), ("Python API", python_api)):
+            runs = []
+            for _ in range(5):
+                admitted = [service.admit(requester.request(b"\x07" * 4)[0], REQUESTER)
+                            for _ in range(cycles)]
+                native = time.perf_counter_ns()
+                for one in admitted:  # what the Rust calls alone take, to subtract
+                    service.complete(one, b"\x07" * 4)
+                native = time.perf_counter_ns() - native
+                started = time.perf_counter_ns()
+                for one in admitted:
+                    edges(one)
+                spent = time.perf_counter_ns() - started
+                runs.append((spent - (native if edges is python_api else 0)) / cycles / 1e3)
+            timed[name] = statistics.median(runs)
+    finally:
+        loop.close()
+    return timed
 
 
 async def _plugcell(cell: str, cycles: int, warmup: int) -> float:
@@ -711,17 +760,28 @@ def main(argv: list[str] | None = None) -> int:
           f"with the Journal {statistics.median(results['protocol + Journal']) / raw:.2f}×"
           + (f", in Rust with its log "
              f"{statistics.median(results['native protocol + log']) / raw:.2f}×, "
-             f"a Rust core with the Python it keeps "
-             f"{statistics.median(results['native core']) / raw:.2f}×"
+             f"with the handler in Python "
+             f"{statistics.median(results['native handler']) / raw:.2f}×, behind the "
+             f"Python API {statistics.median(results['native core']) / raw:.2f}×"
              if args.native else ""))
     tight = _tight(args.cycles)
     added = 2 * (statistics.median(results["protocol"]) - floor) * 1e3
     print(f"the protocol's work of one round trip (both sides): {tight:.1f} µs "
           f"in a tight loop, {added:.1f} µs added to the round trip above")
+    edges = _tight_edges(args.cycles) if args.native else {}
+    if edges:
+        rust = statistics.median(results["native protocol + log"])
+        print("the Python around the Rust core in one round trip, in a tight loop and added "
+              "to the round trip above: " + ", ".join(
+                  f"{name} {edges[name]:.1f} µs and "
+                  f"{2 * (statistics.median(results[variant]) - rust) * 1e3:.1f} µs"
+                  for name, variant in (("handler", "native handler"),
+                                        ("Python API", "native core"))))
     if args.output is not None:
         args.output.write_text(json.dumps({
             "title": title, "cycles": args.cycles, "warmup": args.warmup,
             "one_way_ms": results, "tight_loop_us": tight,
+            **({"tight_python_around_rust_us": edges} if edges else {}),
             "target_ms": TARGET_VS_RAW * raw,
         }, indent=1) + "\n")
         print(f"wrote {args.output}")

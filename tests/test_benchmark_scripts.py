@@ -61,10 +61,13 @@ def test_durability_floor_writes_its_rounds_and_plot(tmp_path: Path) -> None:
     rounds = json.loads(out.read_text())["one_way_ms"]
     assert list(rounds) == ["raw Zenoh", "nothing", "log append", "SQLite commit", "Journal",
                             "protocol's bytes", "protocol", "protocol + Journal",
-                            *(["native protocol", "native protocol + log", "native core"]
-                               if native else []),
+                            *(["native protocol", "native protocol + log", "native handler",
+                               "native core"] if native else []),
                             "plugcell"]
     assert all(len(r) == 1 and 0 < r[0] < 1000 for r in rounds.values()), rounds
+    if native:  # the Python around the Rust core, timed in a tight loop
+        edges = json.loads(out.read_text())["tight_python_around_rust_us"]
+        assert set(edges) == {"handler", "Python API"} and 0 < edges["handler"] < 1000, edges
     assert png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
     again = tmp_path / "again.png"
     redrawn = subprocess.run([sys.executable, script, "--replot", str(out), "--plot", str(again)],

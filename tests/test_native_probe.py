@@ -99,6 +99,7 @@ def test_the_native_core_runs_the_python_a_product_keeps(floor: Any, probe: Modu
     device = floor._EchoDevice()
     output = device.run(admitted.input)
     assert output == b"\x05\x06\x07" and device.fed == []
+    assert device.run(admitted.input, typed=False) == output and device.fed == []
     answer = service.complete(admitted, b"\x09" * 5)  # any output: the answer carries it
     update = wire.decode(answer).body.updates[0]
     assert (update.identifier, update.state.value, update.seq) == (1, "Completed", 2)
