@@ -251,10 +251,10 @@ class _LeanRequester:
 
 
 class _EchoDevice:
-    """The service's Python in ``native core``: the transport benchmark's ``Echo``
-    handler (as :class:`~plugcell.apps.bench.device.BenchService` has it: the input
-    posted as data feedback, success reported) run as a scheduler runs a SingleData
-    process on an idle device."""
+    """The service's Python in ``native handler`` and ``native core``: the transport
+    benchmark's ``Echo`` handler (as :class:`~plugcell.apps.bench.device.BenchService` has
+    it: the input posted as data feedback, success reported) run as a scheduler could run
+    a SingleData process on an idle device."""
 
     def __init__(self) -> None:
         self.command = _echo()
