@@ -241,8 +241,9 @@ fn write_data(out: &mut Vec<u8>, size: &[u64], buffer: &[u8]) {
     enc::write_bin(out, buffer).expect("writing to a Vec");
 }
 
-/// The envelope's head; its `Body` value follows.
-fn write_envelope(out: &mut Vec<u8>, sender: &str, instance: &str) {
+/// The envelope's head and the start of its `Body`: a map of `fields` entries, the
+/// first `"Kind": kind`; the body's other entries follow.
+fn write_envelope(out: &mut Vec<u8>, sender: &str, instance: &str, kind: &str, fields: u32) {
     write_map(out, 5);
     write_str(out, "V");
     write_uint(out, VERSION);
@@ -250,6 +251,8 @@ fn write_envelope(out: &mut Vec<u8>, sender: &str, instance: &str) {
     write_str(out, "TimeNs");
     write_uint(out, now_ns());
     write_str(out, "Body");
+    write_map(out, fields);
+    write_texts(out, &[("Kind", kind)]);
 }
 
 /// The answering side: one service with the catalogue entry `Echo` (Byte in, Byte out).
@@ -294,8 +297,7 @@ impl Service {
         published_by: &str,
     ) -> PyResult<Bound<'py, PyBytes>> {
         let admitted = self.admit(payload, published_by)?;
-        let output = admitted.input.clone();
-        self.complete(py, &admitted, &output)
+        self.complete(py, &admitted, &admitted.input)
     }
 
     /// Decode and check a CreateProcess published by `published_by` as plugcell's
@@ -418,9 +420,7 @@ impl Service {
         }
 
         let mut out = Vec::with_capacity(256 + output.len());
-        write_envelope(&mut out, &self.owner, &self.instance);
-        write_map(&mut out, 3);
-        write_texts(&mut out, &[("Kind", "ProcessUpdateBatch")]);
+        write_envelope(&mut out, &self.owner, &self.instance, "ProcessUpdateBatch", 3);
         write_str(&mut out, "Acks");
         write_array(&mut out, 1);
         write_map(&mut out, 5);
@@ -493,9 +493,7 @@ impl Requester {
     ) -> (Bound<'py, PyBytes>, Bound<'py, PyBytes>) {
         self.identifier += 1;
         let mut out = Vec::with_capacity(384 + value.len());
-        write_envelope(&mut out, &self.sender, &self.instance);
-        write_map(&mut out, 6);
-        write_texts(&mut out, &[("Kind", "Process")]);
+        write_envelope(&mut out, &self.sender, &self.instance, "Process", 6);
         write_str(&mut out, "Command");
         write_map(&mut out, 10);
         write_texts(&mut out, &[("Name", ECHO), ("Option", ""), ("SuccessCode", "OK"),
