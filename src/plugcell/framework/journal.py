@@ -126,6 +126,62 @@ class DuplicateProcessError(ValueError):
     """A process whose (sender, identifier) the journal already holds."""
 
 
+class NullJournal:
+    """The journal of a service that keeps none (``journal=False``): records nothing.
+
+    It has exactly :class:`Journal`'s writing and life-cycle methods, each doing
+    nothing, so a misspelt call fails with ``AttributeError`` as it would on a real
+    journal (``tests/framework/test_null_journal.py`` holds the two to one interface).
+    """
+
+    enabled = False
+
+    def record_process(
+        self,
+        *,
+        sender: str,
+        identifier: int,
+        sender_instance: str,
+        recipient_instance: str,
+        command: str,
+        option: str,
+        command_type: str,
+        input_summary: str,
+        received_ns: int,
+        state: str,
+        reason: str = "",
+    ) -> None:
+        """Nothing recorded."""
+
+    def record_update(
+        self, sender: str, identifier: int, seq: int, state: str, reason: str, data: str
+    ) -> None:
+        """Nothing recorded."""
+
+    def record_rejection(
+        self,
+        sender: str | None,
+        identifier: int | None,
+        command: str | None,
+        size: int,
+        reason: str,
+    ) -> None:
+        """Nothing recorded."""
+
+    def commit(self) -> None:
+        """Nothing to make durable."""
+
+    def settle(self) -> None:
+        """Nothing to move."""
+
+    def recover(self, reason: str) -> int:
+        """No earlier incarnation's processes: none recovered."""
+        return 0
+
+    def close(self) -> None:
+        """Nothing to close."""
+
+
 class Journal:
     """The journal of one service (written from its event loop only).
 
@@ -138,7 +194,7 @@ class Journal:
     """
 
     enabled = True
-    """(A service without a journal has a stand-in whose ``enabled`` is False.)"""
+    """(A service without a journal has a :class:`NullJournal`, whose ``enabled`` is False.)"""
 
     def __init__(self, path: Path, owner: str, *, durable: bool = False) -> None:
         self.path = path

@@ -59,7 +59,7 @@ from plugcell.framework.admission import (
 )
 from plugcell.framework.bus import Notification
 from plugcell.framework.data import summary
-from plugcell.framework.journal import Journal, JournalInUseError, journal_dir
+from plugcell.framework.journal import Journal, JournalInUseError, NullJournal, journal_dir
 from plugcell.framework.keys import DEFAULT_CELL, Presence, check_name
 from plugcell.framework.messages import (
     Acknowledgement,
@@ -160,7 +160,7 @@ class GenericDevice(Participant):
         )
         self.max_payload = max_payload
         self._journal_setting = journal
-        self.journal: Journal | _NoJournal = _NoJournal()
+        self.journal: Journal | NullJournal = NullJournal()
         self.scheduler = ProcessScheduler(
             self.name, self.device, update=self._update, busy=self._busy,
             heartbeat=self._heartbeat,
@@ -686,15 +686,6 @@ class GenericDevice(Participant):
         """One sample for ``sender`` on its process key (the outbox's publish)."""
         with contextlib.suppress(zenoh.ZError):
             self._publisher(sender).put(self._encode(body))
-
-
-class _NoJournal:
-    """Stand-in when a service runs without a journal."""
-
-    enabled = False
-
-    def __getattr__(self, name: str) -> Callable[..., Any]:
-        return lambda *args, **kwargs: 0
 
 
 def _check_catalogue(owner: str, commands: tuple[Command, ...]) -> None:
