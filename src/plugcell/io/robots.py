@@ -24,6 +24,7 @@ from importlib import resources
 from pathlib import Path
 from typing import Any
 
+from plugcell.io.errors import RobotNotFoundError
 from plugcell.io.robot_schema import description_from_dict, description_to_dict
 from plugcell.kinematics.description import RobotDescription
 from plugcell.kinematics.errors import DescriptionError
@@ -40,19 +41,6 @@ __all__ = [
 ]
 
 SUFFIX = ".toml"
-
-
-class RobotNotFoundError(DescriptionError, LookupError):
-    """No shipped robot of that name, or no such file.
-
-    Parameters
-    ----------
-    message : str
-        The whole message (the error's location is empty).
-    """
-
-    def __init__(self, message: str) -> None:
-        super().__init__("", message)
 
 
 def _robots_dir() -> Path:

@@ -31,6 +31,7 @@ from xml.parsers.expat import ExpatError
 
 import numpy as np
 
+from plugcell.io.errors import RobotNotFoundError
 from plugcell.kinematics.description import RobotDescription
 from plugcell.kinematics.errors import DescriptionError
 from plugcell.kinematics.joint_chain import ChainJoint, JointChain, description_from_chain
@@ -631,8 +632,6 @@ def import_urdf(
     label = p.name
     args = dict(args or {})
     if not p.is_file():
-        from plugcell.io.robots import RobotNotFoundError
-
         raise RobotNotFoundError(f"robot description file not found: {p}")
     resolver = PackageResolver(tuple(Path(x) for x in package_paths), p)
     if p.name.lower().endswith(".xacro"):
