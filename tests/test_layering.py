@@ -15,6 +15,7 @@ apps                  apps (cli, commands, ui, demo, reproduce, bench), every ev
                       ``__main__`` module (a program, not a library)
 ====================  =====================================================  ===========
 
+A module named in a string (for importlib, or run as ``-m``) counts as an import.
 The math never reads a file, speaks Zenoh or knows a device; the framework knows no
 device; the robot language knows neither the framework nor a device; nothing below the
 apps calls a command line.  Devices and sim share a tier: a simulated instrument
@@ -25,6 +26,7 @@ the drill's, the tracker's ``sim``) is the simulated one.
 from __future__ import annotations
 
 import ast
+import re
 from pathlib import Path
 
 import pytest
@@ -61,14 +63,23 @@ def layer_of(module: str) -> str | None:
     raise AssertionError(f"{module}: no layer — add its package to tests/test_layering.py")
 
 
+#: A module named in a string: ``"plugcell.apps.bench.device:BenchService"`` for
+#: importlib, ``"-m", "plugcell.sim.controller.controller"`` for a child process.
+MODULE_TEXT = re.compile(r"plugcell(?:\.[A-Za-z_]\w*)+(?::[A-Za-z_]\w*)?")
+
+
 def imports(source: str) -> list[tuple[int, str]]:
-    """``(line, module)`` of every absolute import in ``source``, also inside functions."""
+    """``(line, module)`` of every absolute import in ``source``, also inside functions,
+    and of every module a string names whole (loaded by name, or run as a program)."""
     found = []
     for node in ast.walk(ast.parse(source)):
         if isinstance(node, ast.Import):
             found += [(node.lineno, a.name) for a in node.names]
         elif isinstance(node, ast.ImportFrom) and node.level == 0 and node.module:
             found.append((node.lineno, node.module))
+        elif (isinstance(node, ast.Constant) and isinstance(node.value, str)
+              and MODULE_TEXT.fullmatch(node.value)):
+            found.append((node.lineno, node.value.partition(":")[0]))
     return found
 
 
@@ -116,6 +127,8 @@ def test_every_package_has_a_layer() -> None:
      "plugcell.devices.robot.service:2 (devices) imports plugcell.apps.cli (apps)"),
     ("plugcell.sim.twin.robot", "from plugcell.apps.commands.twin import run\n",
      "plugcell.sim.twin.robot:1 (sim) imports plugcell.apps.commands.twin (apps)"),
+    ("plugcell.devices.kinds", 'KINDS = {\n    "bench": "plugcell.apps.bench.device:Bench"}\n',
+     "plugcell.devices.kinds:2 (devices) imports plugcell.apps.bench.device (apps)"),
 ])
 def test_a_wrong_import_is_reported(module: str, source: str, offence: str) -> None:
     assert upward_imports(source, module) == [offence]

@@ -1,6 +1,6 @@
 """One contract, run over every registered service kind (as scikit-learn's common
 estimator checks run over every estimator): what any device service promises whatever it
-drives.  A new kind in ``services/registry.py`` is checked here without a line more.
+drives.  A new kind in ``apps/kinds.py`` is checked here without a line more.
 
 Static, for every kind: the class declares its kind, a valid default name, vendor and
 info, a catalogue the framework accepts, and parameters ``plugcell serve`` can convert.
@@ -19,7 +19,7 @@ from typing import Any
 import numpy as np
 import pytest
 
-from plugcell.devices.registry import KINDS, load_kind
+from plugcell.apps.kinds import KINDS, load_kind
 from plugcell.framework import Client, ProcessStates
 from plugcell.framework.data import to_data
 from plugcell.framework.keys import check_name

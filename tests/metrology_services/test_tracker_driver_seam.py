@@ -7,7 +7,7 @@ import pytest
 from fake_tracker_driver import ScriptedDriver
 from metrology_testlib import pose, run, unique_cell
 
-from plugcell.devices.registry import load_kind
+from plugcell.apps.kinds import load_kind
 from plugcell.devices.tracker.driver import TrackerDriver
 from plugcell.devices.tracker.service import TrackerService, load_driver
 from plugcell.framework import Client, ProcessCall, ProcessStates

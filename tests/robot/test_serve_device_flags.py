@@ -8,7 +8,7 @@ import pytest
 
 from plugcell.apps.cli import CommandError, main
 from plugcell.apps.commands.serve import _device_options, _params
-from plugcell.devices.registry import load_kind
+from plugcell.apps.kinds import load_kind
 
 
 def _args(**kw):

@@ -18,7 +18,7 @@ from plugcell.framework import eventloop
 
 def configure(p: argparse.ArgumentParser) -> None:
     """Add the ``serve`` options to its parser (declared in :mod:`plugcell.apps.cli`)."""
-    from plugcell.devices.registry import KINDS
+    from plugcell.apps.kinds import KINDS
 
     p.description = (
         "Run one Plug-and-Produce service until SIGINT/SIGTERM, then shut it "
@@ -112,7 +112,7 @@ def _device_options(cls: type, args: argparse.Namespace) -> list[str]:
 
 def run(args: argparse.Namespace) -> int:
     from plugcell.apps.cli import CommandError
-    from plugcell.devices.registry import load_kind
+    from plugcell.apps.kinds import load_kind
     from plugcell.framework.participant import PartnerError
     from plugcell.framework.service import DeviceError
 
