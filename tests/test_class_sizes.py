@@ -1,0 +1,97 @@
+"""How big the device classes are: callables through each service kind's MRO, and the
+lines of every class in ``framework/`` and ``devices/`` (issue #33).
+
+The goal is composition — a device a small declaration plus a driver, hosted by one
+framework object — with no device class over :data:`GOAL_CALLABLES` callables through
+its MRO and no class over :data:`GOAL_LINES` lines.  Until then the ceilings below are a
+ratchet: a class may shrink (lower its ceiling in the same change), never grow.
+
+Print the table: ``.venv/bin/python tests/test_class_sizes.py``.
+"""
+
+from __future__ import annotations
+
+import ast
+from pathlib import Path
+
+import pytest
+
+from plugcell.apps.kinds import KINDS, load_kind
+
+SRC = Path(__file__).resolve().parents[1] / "src" / "plugcell"
+
+GOAL_CALLABLES = 40
+GOAL_LINES = 400
+
+#: kind → the most callables its service class may carry through its MRO today.
+CALLABLES_CEILING = {
+    "bench": 70, "camera": 72, "compute": 79, "controller": 105, "drill": 69,
+    "opcua-device": 77, "robot": 84, "tracker": 80,
+}
+#: "path:Class" → the most lines it may have today (only classes over GOAL_LINES).
+LINES_CEILING = {
+    "framework/service.py:GenericDevice": 574,
+    "framework/participant.py:Participant": 558,
+    "devices/cell/service.py:CellController": 542,
+}
+
+
+def callables_through_mro(cls: type) -> int:
+    """Distinct names of methods and properties ``cls`` has, its bases' included."""
+    return len({name for c in cls.__mro__ if c is not object for name, value in vars(c).items()
+                if callable(value) or isinstance(value, property | classmethod | staticmethod)})
+
+
+def class_lines() -> dict[str, int]:
+    """``"path:Class"`` (path under src/plugcell) → lines, for framework/ and devices/."""
+    out = {}
+    for package in ("framework", "devices"):
+        for path in sorted((SRC / package).rglob("*.py")):
+            for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"))):
+                if isinstance(node, ast.ClassDef):
+                    key = f"{path.relative_to(SRC).as_posix()}:{node.name}"
+                    out[key] = node.end_lineno - node.lineno + 1  # type: ignore[operator]
+    return out
+
+
+@pytest.mark.parametrize("kind", sorted(KINDS))
+def test_no_service_kind_grows_through_its_mro(kind: str) -> None:
+    n = callables_through_mro(load_kind(kind))
+    ceiling = CALLABLES_CEILING.get(kind, GOAL_CALLABLES)
+    assert n <= ceiling, f"{kind}: {n} callables through the MRO (ceiling {ceiling})"
+
+
+def test_no_class_in_framework_or_devices_grows_past_its_ceiling() -> None:
+    over = {k: n for k, n in class_lines().items() if n > LINES_CEILING.get(k, GOAL_LINES)}
+    assert over == {}
+
+
+def test_the_ceilings_are_not_stale() -> None:
+    """A ceiling names a class that exists and is still over the goal."""
+    lines = class_lines()
+    assert {k for k in LINES_CEILING if lines.get(k, 0) <= GOAL_LINES} == set()
+    assert set(CALLABLES_CEILING) <= set(KINDS)
+
+
+def test_the_count_sees_inherited_methods() -> None:
+    class Base:
+        def a(self) -> None: ...
+
+        @property
+        def b(self) -> int:
+            return 1
+
+    class Child(Base):
+        def c(self) -> None: ...
+
+    assert callables_through_mro(Child) == 3
+
+
+if __name__ == "__main__":
+    print(f"{'kind':14} {'class':18} callables-through-MRO (goal ≤ {GOAL_CALLABLES})")
+    for kind in sorted(KINDS):
+        cls = load_kind(kind)
+        print(f"{kind:14} {cls.__name__:18} {callables_through_mro(cls)}")
+    print(f"\nlargest classes in framework/ and devices/ (goal ≤ {GOAL_LINES} lines)")
+    for key, n in sorted(class_lines().items(), key=lambda kv: -kv[1])[:10]:
+        print(f"{n:5}  {key}")
