@@ -113,3 +113,23 @@ def test_the_feed_skips_history_and_other_services_and_shows_state_changes() -> 
     assert feed.ended == 1 and not feed.offer(r)
     unnamed = m.updated("TOOL", update("R3", "TOOL", 9, "Failed", 1, reason="x"), t_ns=9)
     assert feed.offer(unnamed) and feed.ended == 2  # nothing to wait for without journals
+
+
+def test_journal_rows_become_records_as_the_tail_reads_them() -> None:
+    """The rows of a journal tail's poll, as the controller and ``cell monitor`` apply them."""
+    m = ProcessMonitor()
+    processes = [{"recipient": "TOOL", "sender": "R1", "identifier": 3, "command": "Drill",
+                  "option": None, "command_type": "SingleData", "state": "Queued",
+                  "reason": None, "received_ns": 5}]
+    updates = [
+        {"recipient": "TOOL", "sender": "R1", "identifier": 3, "seq": 2, "state": "Failed",
+         "reason": "bit broke", "data": None, "t_ns": 9},
+        {"recipient": "TOOL", "sender": "X", "identifier": 1, "seq": 1, "state": "Running",
+         "reason": None, "data": None, "t_ns": 9},  # a process the journal never named
+    ]
+    touched = m.from_journal(processes, updates)
+    r = m.records[("TOOL", "R1", 3)]
+    assert touched == [r, r]
+    assert (r.command, r.option, r.state, r.reason, r.sources) == (
+        "Drill", "", "Failed", "bit broke", {"journal"})
+    assert m.from_journal([], []) == []

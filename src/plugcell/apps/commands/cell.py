@@ -448,20 +448,9 @@ async def _monitor(args: argparse.Namespace) -> None:
         while not stop.is_set() and (end is None or time.monotonic() < end):
             if tail is not None:
                 processes, updates = await asyncio.to_thread(tail.poll)
-                for p in processes:
-                    record = monitor.created(
-                        p["recipient"], p["sender"], p["identifier"], command=p["command"] or "",
-                        option=p["option"] or "", type=p["command_type"] or "",
-                        state=p["state"], reason=p["reason"] or "", t_ns=p["received_ns"],
-                        source="journal")
+                for record in monitor.from_journal(processes, updates):
                     if not first:
                         show(record)
-                for u in updates:
-                    found = monitor.journal_update(
-                        u["recipient"], u["sender"], u["identifier"], u["seq"], u["state"],
-                        u["reason"] or "", u["data"] or "", u["t_ns"])
-                    if found is not None and not first:
-                        show(found)
                 if first:  # history: read, not printed
                     feed.history(monitor.records.values())
             if first:

@@ -21,7 +21,7 @@ from __future__ import annotations
 
 import time
 from collections import OrderedDict
-from collections.abc import Callable, Iterable
+from collections.abc import Callable, Iterable, Mapping
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -221,6 +221,37 @@ class ProcessMonitor:
         if self._advance(record, state, t_ns) and reason:
             record.reason = reason
         return record
+
+    def from_journal(
+        self, processes: Iterable[Mapping[str, Any]], updates: Iterable[Mapping[str, Any]]
+    ) -> list[ProcessRecord]:
+        """The rows a :class:`~plugcell.devices.cell.journal_tail.JournalTail` poll read:
+        each process row is :meth:`created` (``source="journal"``), each update row a
+        :meth:`journal_update`.
+
+        Returns
+        -------
+        list of ProcessRecord
+            The records the rows touched, in row order (processes first); an update of
+            a process not known is left out.
+        """
+        touched = [
+            self.created(
+                p["recipient"], p["sender"], p["identifier"], command=p["command"] or "",
+                option=p["option"] or "", type=p["command_type"] or "",
+                state=p["state"], reason=p["reason"] or "", t_ns=p["received_ns"],
+                source="journal",
+            )
+            for p in processes
+        ]
+        for u in updates:
+            found = self.journal_update(
+                u["recipient"], u["sender"], u["identifier"], u["seq"], u["state"],
+                u["reason"] or "", u["data"] or "", u["t_ns"],
+            )
+            if found is not None:
+                touched.append(found)
+        return touched
 
     def service_lost(self, name: str, t_ns: int | None = None) -> list[ProcessRecord]:
         """``name`` left the cell: what it had not finished ends Failed (as its senders see)."""

@@ -601,21 +601,8 @@ class CellController(GenericDevice):
             except Exception:
                 log.exception("%s: reading the journals", self.name)
                 processes, updates = [], []
-            for p in processes:
-                record = self.monitor.created(
-                    p["recipient"], p["sender"], p["identifier"], command=p["command"] or "",
-                    option=p["option"] or "", type=p["command_type"] or "",
-                    state=p["state"], reason=p["reason"] or "", t_ns=p["received_ns"],
-                    source="journal",
-                )
+            for record in self.monitor.from_journal(processes, updates):
                 self.feed.process_changed(record.key)
-            for u in updates:
-                found = self.monitor.journal_update(
-                    u["recipient"], u["sender"], u["identifier"], u["seq"], u["state"],
-                    u["reason"] or "", u["data"] or "", u["t_ns"],
-                )
-                if found is not None:
-                    self.feed.process_changed(found.key)
             await asyncio.sleep(JOURNAL_PERIOD)
 
     # -- the controller's own commands -----------------------------------------------
