@@ -42,7 +42,7 @@ def test_cell_cli_discovers_wires_saves_loads_runs_and_monitors(
         r = cli(home, "cell", "wire", "R1", partner, "--cell", cell)
         assert r.returncode == 0 and f"R1 subscribed to {partner}" in r.stdout, r.stderr
     bad = cli(home, "cell", "wire", "R1", "GHOST", "--cell", cell, "--timeout", "2")
-    assert bad.returncode == 2 and "GHOST" in bad.stderr
+    assert bad.returncode == 1 and "GHOST" in bad.stderr
     text = cli(home, "cell", "ls", "--cell", cell).stdout
     assert "R1 → CAMERA, R1 → TOOL" in text
 
@@ -115,7 +115,7 @@ def test_controller_command_serves_the_ui_and_joins_the_cell(
     assert names["CONTROLLER"]["kind"] == "controller"
     assert "TOOL" in names["CONTROLLER"]["partners"]  # it subscribed to everyone
     r = cli(home, "cell", "wire", "CONTROLLER", "TOOL", "--via", "CONTROLLER", "--cell", cell)
-    assert r.returncode == 2 and "wire other services" in r.stderr
+    assert r.returncode == 1 and "wire other services" in r.stderr
     taken = cli(home, "controller", "--port", url.rsplit(":", 1)[1].strip("/"), "--cell", cell,
                 "--name", "CTL2", timeout=30)
     assert taken.returncode == 2 and "cannot serve" in taken.stderr

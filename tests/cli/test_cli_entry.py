@@ -158,3 +158,17 @@ def test_the_operating_systems_connection_errors_keep_their_traceback(monkeypatc
     monkeypatch.setattr(services, "run", fail)
     with pytest.raises(type(error)):
         main(["services"])
+
+
+@pytest.mark.parametrize(("alias", "action"), [("wire", "wire"), ("unwire", "unwire")])
+def test_wire_and_unwire_are_the_cell_actions_under_a_short_name(alias: str, action: str):
+    """``plugcell wire`` is ``plugcell cell wire``: one function, the same options and
+    defaults, so one JSON shape and one exit-code rule."""
+    from plugcell.apps.cli import build_parser
+
+    short = build_parser(alias).parse_args([alias, "A", "B", "--json", "--via", "CTRL"])
+    long = build_parser("cell").parse_args(["cell", action, "A", "B", "--json", "--via", "CTRL"])
+    assert short.func is long.func
+    mine = {k: v for k, v in vars(short).items() if k not in ("command", "cell_command")}
+    theirs = {k: v for k, v in vars(long).items() if k not in ("command", "cell_command")}
+    assert mine == theirs

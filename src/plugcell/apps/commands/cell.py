@@ -4,6 +4,7 @@
 
     plugcell cell ls [--json] [--commands]         services, state, partners (the wiring)
     plugcell cell wire A B | unwire A B            A subscribes to / drops partner B
+                                                   (also as ``plugcell wire``/``unwire``)
     plugcell cell save FILE                        the wiring of the cell to a file
     plugcell cell load FILE [--wait S] [--keep]    re-apply a saved wiring (and keep it)
     plugcell cell run ROBOT PROGRAM [ROBOT PROGRAM …] [--concurrent] [--value [ROBOT:]N=V …]
@@ -51,12 +52,9 @@ def configure(p: argparse.ArgumentParser) -> None:
     ls.set_defaults(func=run_ls)
 
     for name, subscribe in (("wire", True), ("unwire", False)):
-        w = sub.add_parser(name, help=f"service A {'subscribes to' if subscribe else 'drops'} B")
-        w.add_argument("service", metavar="A")
-        w.add_argument("partner", metavar="B")
-        w.add_argument("--json", action="store_true", help="print the result as JSON")
-        w.add_argument("--via", metavar="CONTROLLER", help="ask this cell controller service")
-        w.set_defaults(func=run_wire, subscribe=subscribe)
+        add_wire_options(
+            sub.add_parser(name, help=f"service A {'subscribes to' if subscribe else 'drops'} B"),
+            subscribe=subscribe, options=False)
 
     save = sub.add_parser("save", help="save the wiring of the cell to FILE")
     save.add_argument("file", type=Path)
@@ -178,9 +176,28 @@ def _wires(states: list[Any]) -> list[Any]:
 # -- wire / unwire ---------------------------------------------------------------------------
 
 
-def run_wire(args: argparse.Namespace) -> int:
-    from plugcell.apps.cli import CommandError
+def add_wire_options(p: argparse.ArgumentParser, *, subscribe: bool, options: bool = True) -> None:
+    """The options of ``cell wire``/``cell unwire`` and of their aliases ``plugcell
+    wire``/``plugcell unwire`` (``options``: also the cell and ``--timeout`` options, which
+    :func:`configure` adds to all its actions at once)."""
+    p.description = (
+        "Service A subscribes to partner B at run time (Get B's DeviceInfo, add it to A's "
+        "Partners)." if subscribe else "Service A drops partner B from its Partners at run "
+        "time.") + " Exit code 0 when done, 1 when the service refused, 2 for bad usage."
+    p.add_argument("service", metavar="A")
+    p.add_argument("partner", metavar="B")
+    p.add_argument("--json", action="store_true", help="print the result as JSON")
+    p.add_argument("--via", metavar="CONTROLLER", help="ask this cell controller service")
+    if options:
+        add_cell_args(p)
+        p.add_argument("--timeout", type=float, default=10.0,
+                       help="seconds to wait for a service or an answer (default 10)")
+    p.set_defaults(func=run_wire, subscribe=subscribe)
 
+
+def run_wire(args: argparse.Namespace) -> int:
+    """One JSON shape (``{"ok", "service", "partner", "reason"}``) and one exit-code rule
+    (1 when the wire failed) for ``cell wire`` and ``wire``, ``cell unwire`` and ``unwire``."""
     ok, reason = eventloop.run(_wire(args))
     if args.json:
         print(json.dumps({"ok": ok, "service": args.service, "partner": args.partner,
@@ -188,8 +205,8 @@ def run_wire(args: argparse.Namespace) -> int:
     elif ok:
         verb = "subscribed to" if args.subscribe else "dropped"
         print(f"{args.service} {verb} {args.partner}")
-    if not ok and not args.json:
-        raise CommandError(reason)
+    else:
+        print(f"plugcell: error: {reason}", file=sys.stderr)
     return 0 if ok else 1
 
 
