@@ -103,3 +103,28 @@ def test_keeper_reports_missing_wires_with_back_off() -> None:
     assert keeper.status({"ROBOT", "TRACKER"}, {"ROBOT": {"TRACKER"}})[0]["state"] == "in place"
     keeper.drop(w)
     assert keeper.missing({"ROBOT", "TRACKER"}, {}) == []
+
+
+def test_reapply_asks_for_each_missing_wire_and_notes_the_answers() -> None:
+    """The one re-apply of the controller and of ``cell load``: missing wires only, each
+    answer noted (a refusal backs off, so the next round does not ask again at once)."""
+    import asyncio
+
+    keeper = WiringKeeper({Wire("R1", "TOOL"), Wire("R1", "CAMERA"), Wire("R2", "TOOL")})
+    asked: list[Wire] = []
+
+    async def ask(wire: Wire) -> tuple[bool, str]:
+        asked.append(wire)
+        return (wire.partner == "TOOL", "" if wire.partner == "TOOL" else "no such partner")
+
+    alive = {"R1", "TOOL", "CAMERA"}  # R2 is absent: its wire waits
+    partners = {"R1": set(), "TOOL": set(), "CAMERA": set()}
+    results = asyncio.run(keeper.reapply(alive, partners, ask))
+    assert results == [(Wire("R1", "CAMERA"), False, "no such partner"),
+                       (Wire("R1", "TOOL"), True, "")]
+    assert sorted(asked) == [Wire("R1", "CAMERA"), Wire("R1", "TOOL")]
+    partners["R1"] = {"TOOL"}
+    assert asyncio.run(keeper.reapply(alive, partners, ask)) == []  # CAMERA backs off
+    status = {(s["service"], s["partner"]): s["state"] for s in keeper.status(alive, partners)}
+    assert status == {("R1", "CAMERA"): "failing", ("R1", "TOOL"): "in place",
+                      ("R2", "TOOL"): "waiting"}

@@ -305,15 +305,16 @@ async def _apply(client: Any, keeper: Any, done: dict[Any, tuple[bool, str]],
             state, _ = await client.get(name, min(args.timeout, 2.0))
             partners[name] = {p.name for p in state.partners}
     alive &= set(partners)
+
+    async def ask(wire: Any) -> tuple[bool, str]:
+        response = await client.ask_subscribe(wire.service, wire.partner, True, args.timeout)
+        return response.ok, response.reason
+
     applied = []
-    for w in keeper.missing(alive, partners):
-        response = await client.ask_subscribe(w.service, w.partner, True, args.timeout)
-        done[w] = (response.ok, response.reason)
-        if response.ok:
-            keeper.succeeded(w)
+    for w, ok, reason in await keeper.reapply(alive, partners, ask):
+        done[w] = (ok, reason)
+        if ok:
             applied.append(w)
-        else:
-            keeper.failed(w, response.reason)
     for w in keeper.wanted:
         if w.partner in partners.get(w.service, set()) and w not in done:
             done[w] = (True, "")

@@ -425,20 +425,15 @@ class CellController(GenericDevice):
 
     async def _reapply(self) -> None:
         async with self._reapplying:  # one round at a time: no wire is asked for twice
-            missing = self.keeper.missing(self._alive_set(), self._partner_sets())
-            if missing:
-                await self._reapply_wires(missing)
-
-    async def _reapply_wires(self, missing: list[Wire]) -> None:
-        results = await asyncio.gather(*(self._ask(w, True) for w in missing))
-        for w, (ok, reason) in zip(missing, results, strict=True):
-            if ok:
-                self.keeper.succeeded(w)
-                self._log("info", f"re-applied {w}")
-            else:
-                self.keeper.failed(w, reason)
-                self._log("error", f"cannot re-apply {w}: {reason}")
-        self.feed.cell_changed()
+            results = await self.keeper.reapply(
+                self._alive_set(), self._partner_sets(), lambda w: self._ask(w, True))
+            for w, ok, reason in results:
+                if ok:
+                    self._log("info", f"re-applied {w}")
+                else:
+                    self._log("error", f"cannot re-apply {w}: {reason}")
+            if results:
+                self.feed.cell_changed()
 
     def wiring_document(self) -> list[Wire]:
         """What :meth:`save` writes: the wires in place plus those wanted but waiting."""

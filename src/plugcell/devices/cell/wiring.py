@@ -16,8 +16,10 @@ re-applies those as services (re)appear.  Pure bookkeeping: no I/O but the file.
 
 from __future__ import annotations
 
+import asyncio
 import json
 import time
+from collections.abc import Awaitable, Callable
 from dataclasses import dataclass, field
 from datetime import UTC, datetime
 from pathlib import Path
@@ -207,6 +209,29 @@ class WiringKeeper:
 
     def succeeded(self, wire: Wire) -> None:
         self._attempts.pop(wire, None)
+
+    async def reapply(
+        self, alive: set[str], partners: dict[str, set[str]],
+        ask: Callable[[Wire], Awaitable[tuple[bool, str]]],
+    ) -> list[tuple[Wire, bool, str]]:
+        """Ask for every :meth:`missing` wire at once (``ask(wire)`` → ``(ok, reason)``)
+        and note each answer (:meth:`succeeded`, or :meth:`failed` with its back-off).
+
+        The one re-apply of the cell controller and of ``plugcell cell load``.
+
+        Returns
+        -------
+        list of (Wire, bool, str)
+            Each wire asked for, whether it is now in place, and the service's reason.
+        """
+        missing = self.missing(alive, partners)
+        answers = await asyncio.gather(*(ask(w) for w in missing))
+        for wire, (ok, reason) in zip(missing, answers, strict=True):
+            if ok:
+                self.succeeded(wire)
+            else:
+                self.failed(wire, reason)
+        return [(w, ok, reason) for w, (ok, reason) in zip(missing, answers, strict=True)]
 
     def reset_backoff(self, service: str) -> None:
         """A service (re)appeared: try its wires at once."""
