@@ -33,7 +33,7 @@ scheduler, tasks, timeouts or outbox) — what a lean Python request path could 
 * ``protocol's bytes`` — the floor with the requests and answers of ``protocol`` (below),
   encoded once beforehand: what their size costs Zenoh;
 * ``protocol`` — the requester sends a real ``Echo`` CreateProcess (its input checked
-  and typed, :func:`~plugcell.framework.wire.encode`, the identifier attached) and waits
+  and typed, :func:`~plugcell.framework.codec.encode`, the identifier attached) and waits
   for the answer's final update, decoded and matched to the request; the answering
   side admits it as a service does (:func:`~plugcell.framework.admission.decode_request`,
   ``check_envelope``, ``check_process``, ``check_input``) and answers with the
@@ -74,7 +74,7 @@ same checks, called from the Python callbacks of eclipse-zenoh's own session:
   catalogue (:func:`~plugcell.framework.data.to_data`); on the requester, the answer
   decoded into the
   :class:`~plugcell.framework.messages.ProcessUpdateNotification` a caller is handed
-  (msgspec, :func:`~plugcell.framework.wire.decode`), routed to the waiting call's
+  (msgspec, :func:`~plugcell.framework.codec.decode`), routed to the waiting call's
   future by sender and identifier, and its data read as a numpy view.  The best a
   product with a native core behind today's API could reach.
 
@@ -166,7 +166,7 @@ class _LeanService:
         self.instance = "service-instance"
 
     def answer(self, payload: Any) -> bytes:
-        from plugcell.framework import admission, wire
+        from plugcell.framework import admission, codec
         from plugcell.framework.data import summary, to_data
         from plugcell.framework.messages import (
             Acknowledgement,
@@ -176,7 +176,7 @@ class _LeanService:
         )
 
         received = time.time_ns()
-        decoded = admission.decode_request(payload, wire.DEFAULT_MAX_PAYLOAD, SERVICE)
+        decoded = admission.decode_request(payload, codec.DEFAULT_MAX_PAYLOAD, SERVICE)
         if isinstance(decoded, str):
             raise RuntimeError(decoded)
         envelope, _ = decoded
@@ -200,7 +200,7 @@ class _LeanService:
             self.journal.record_update(REQUESTER, process.identifier, 2, "Completed", "",
                                        summary(output))
             self.journal.commit()
-        return wire.encode(SERVICE, self.instance, ProcessUpdateBatch(
+        return codec.encode(SERVICE, self.instance, ProcessUpdateBatch(
             acks=[Acknowledgement(identifier=process.identifier, state=ProcessStates.Queued,
                                   instance=self.instance)],
             updates=[ProcessUpdateNotification(
@@ -222,7 +222,7 @@ class _LeanRequester:
 
     def request(self) -> tuple[bytes, bytes]:
         """The next request's payload and attachment."""
-        from plugcell.framework import wire
+        from plugcell.framework import codec
         from plugcell.framework.data import to_data
         from plugcell.framework.messages import Process, Tag
 
@@ -230,16 +230,16 @@ class _LeanRequester:
         data = to_data(self.value, self.command.input_data_type, self.command.input_data_size)
         process = Process(command=self.command, tag=Tag(REQUESTER, SERVICE),
                           identifier=self.identifier, data=data)
-        return (wire.encode(REQUESTER, "requester-instance", process),
-                wire.attach_identifier(self.identifier))
+        return (codec.encode(REQUESTER, "requester-instance", process),
+                codec.attach_identifier(self.identifier))
 
     def final(self, payload: bytes) -> bool:
         """Whether ``payload`` holds the final update of the last request (its data read)."""
-        from plugcell.framework import wire
+        from plugcell.framework import codec
         from plugcell.framework.data import from_data
         from plugcell.framework.messages import process_acks, process_updates
 
-        body = wire.decode(payload).body
+        body = codec.decode(payload).body
         for ack in process_acks(body):
             if ack.identifier == self.identifier and ack.state.final:
                 raise RuntimeError(f"request {ack.identifier} refused: {ack.reason}")
@@ -300,10 +300,10 @@ class _Calls:
         self.waiting[(partner, identifier)] = future
 
     def arrived(self, payload: bytes) -> None:
-        from plugcell.framework import wire
+        from plugcell.framework import codec
         from plugcell.framework.messages import process_acks, process_updates
 
-        envelope = wire.decode(payload)
+        envelope = codec.decode(payload)
         for ack in process_acks(envelope.body):
             future = self.waiting.get((envelope.sender, ack.identifier))
             if future is not None and ack.state.final and not future.done():

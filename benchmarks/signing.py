@@ -33,7 +33,7 @@ from cryptography.hazmat.primitives import hashes, serialization
 from cryptography.hazmat.primitives.asymmetric import ed25519, rsa
 from cryptography.x509.oid import NameOID
 
-from plugcell.framework import wire
+from plugcell.framework import codec
 from plugcell.framework.certificates import create_ca, issue_certificate
 from plugcell.framework.messages import Command, Data, DataTypes, Process, Tag
 from plugcell.framework.signing import RequestSigner, RequestVerifier
@@ -75,19 +75,19 @@ def micro(folder: Path, n: int) -> list[dict[str, Any]]:
     process = Process(command=Command(name="Move"), tag=Tag("ROBOT1", "TRACKER"),
                       identifier=1, data=Data(DataTypes.Double, (6,), b"\0" * 48))
     instance = f"{time.time_ns():016x}" + "ab" * 16
-    plain = wire.encode("ROBOT1", instance, process)
+    plain = codec.encode("ROBOT1", instance, process)
     rows = []
-    plain_encode = _per_call_us(lambda: wire.encode("ROBOT1", instance, process), n)
-    plain_decode = _per_call_us(lambda: wire.decode(plain), n)
+    plain_encode = _per_call_us(lambda: codec.encode("ROBOT1", instance, process), n)
+    plain_decode = _per_call_us(lambda: codec.decode(plain), n)
     for label, signer in signers.items():
         def sign(s: RequestSigner = signer) -> bytes:
             return s.encode("ROBOT1", instance, process, cell="bench", to="TRACKER")
 
         payload = sign()
-        envelope = wire.decode(payload)
+        envelope = codec.decode(payload)
         verifier = RequestVerifier.load(folder / "ca.pem")
 
-        def verify(v: RequestVerifier = verifier, e: wire.Envelope = envelope,
+        def verify(v: RequestVerifier = verifier, e: codec.Envelope = envelope,
                    p: bytes = payload) -> None:
             v._nonces.clear()  # the same request again: not a replay for this measurement
             reason = v.verify(e, p, cell="bench", recipient="TRACKER", recipient_instance="")
@@ -104,7 +104,7 @@ def micro(folder: Path, n: int) -> list[dict[str, Any]]:
             "encode_unsigned_us": round(plain_encode, 1),
             "encode_sign_us": round(_per_call_us(sign, n), 1),
             "decode_unsigned_us": round(plain_decode, 1),
-            "decode_signed_us": round(_per_call_us(lambda p=payload: wire.decode(p), n), 1),
+            "decode_signed_us": round(_per_call_us(lambda p=payload: codec.decode(p), n), 1),
             "verify_us": round(_per_call_us(verify, n), 1),
             "verify_first_us": round(_per_call_us(cold, max(n // 10, 10)), 1),
         })
@@ -195,8 +195,8 @@ def fuzz(folder: Path, cases: int, seed: int = 20261122) -> dict[str, Any]:
             counts["unchanged"] += 1
             continue
         try:
-            envelope = wire.decode(payload)
-        except wire.WireError:
+            envelope = codec.decode(payload)
+        except codec.WireError:
             counts["decoder"] += 1
             continue
         verifier = RequestVerifier.load(folder / "ca.pem")

@@ -119,8 +119,8 @@ def test_every_package_has_a_layer() -> None:
 @pytest.mark.parametrize(("module", "source", "offence"), [
     ("plugcell.calibration.fit", "from plugcell.io.robots import load_robot\n",
      "plugcell.calibration.fit:1 (math) imports plugcell.io.robots (io)"),
-    ("plugcell.kinematics.forward", "def f():\n    import plugcell.framework.wire\n",
-     "plugcell.kinematics.forward:2 (math) imports plugcell.framework.wire (framework)"),
+    ("plugcell.kinematics.forward", "def f():\n    import plugcell.framework.codec\n",
+     "plugcell.kinematics.forward:2 (math) imports plugcell.framework.codec (framework)"),
     ("plugcell.framework.service", "from plugcell.devices.camera import CameraService\n",
      "plugcell.framework.service:1 (framework) imports plugcell.devices.camera (devices)"),
     ("plugcell.devices.robot.service", "def main():\n    from plugcell.apps.cli import main\n",

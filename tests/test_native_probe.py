@@ -25,7 +25,7 @@ import zenoh
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from plugcell.framework import admission, wire
+from plugcell.framework import admission, codec
 from plugcell.framework.journal_log import PROCESS, UPDATE, read_log
 from plugcell.framework.messages import Acknowledgement, ProcessStates, ProcessUpdateBatch
 
@@ -52,9 +52,9 @@ def probe(floor: Any) -> ModuleType:
     return floor._load_probe(floor._build_probe())
 
 
-def _without_time(payload: bytes) -> tuple[wire.Envelope, bytes]:
+def _without_time(payload: bytes) -> tuple[codec.Envelope, bytes]:
     """The decoded message with its timestamp zeroed, and its bytes without the stamp."""
-    envelope = wire.decode(payload)
+    envelope = codec.decode(payload)
     stamp = msgspec.msgpack.encode(envelope.time_ns)
     return msgspec.structs.replace(envelope, time_ns=0), payload.replace(stamp, b"", 1)
 
@@ -66,7 +66,7 @@ def test_request_and_answer_are_plugcells_bytes(floor: Any, probe: ModuleType,
     requester = probe.Requester(floor.REQUESTER, "requester-instance", floor.SERVICE)
     theirs, their_attachment = requester.request(bytes(lean_requester.value))
     assert _without_time(theirs) == _without_time(ours)
-    assert their_attachment == our_attachment == wire.attach_identifier(1)
+    assert their_attachment == our_attachment == codec.attach_identifier(1)
 
     service = probe.Service(floor.SERVICE, "service-instance", str(tmp_path / "j.log"))
     answer = service.answer(theirs, floor.REQUESTER)
@@ -101,7 +101,7 @@ def test_the_native_core_runs_the_python_a_product_keeps(floor: Any, probe: Modu
     assert output == b"\x05\x06\x07" and device.fed == []
     assert device.run(admitted.input, typed=False) == output and device.fed == []
     answer = service.complete(admitted, b"\x09" * 5)  # any output: the answer carries it
-    update = wire.decode(answer).body.updates[0]
+    update = codec.decode(answer).body.updates[0]
     assert (update.identifier, update.state.value, update.seq) == (1, "Completed", 2)
     assert bytes(update.data.buffer) == b"\x09" * 5 and update.data.size == (5,)
     contents = read_log(tmp_path / "j.log")
@@ -125,7 +125,7 @@ def test_the_native_core_runs_the_python_a_product_keeps(floor: Any, probe: Modu
         calls.expect(floor.SERVICE, 7, waiting)
         batch = ProcessUpdateBatch(acks=[Acknowledgement(
             identifier=7, state=ProcessStates.Failed, reason="no such thing")])
-        calls.arrived(wire.encode(floor.SERVICE, "service-instance", batch))
+        calls.arrived(codec.encode(floor.SERVICE, "service-instance", batch))
         await waiting
 
     with pytest.raises(RuntimeError, match="request refused: no such thing"):
@@ -136,7 +136,7 @@ def test_it_refuses_what_plugcell_refuses_with_the_same_reason(floor: Any,
                                                                probe: ModuleType) -> None:
     requester = probe.Requester(floor.REQUESTER, "requester-instance", floor.SERVICE)
     request, _ = requester.request(b"\x01\x02")
-    envelope = wire.decode(request)
+    envelope = codec.decode(request)
     service = probe.Service(floor.SERVICE, "service-instance")
     with pytest.raises(ValueError) as refused:
         service.answer(request, "SOMEONE")
@@ -151,7 +151,7 @@ def test_it_refuses_what_plugcell_refuses_with_the_same_reason(floor: Any,
     unknown = other.request(b"\x01")[0].replace(b"\xa4Echo", b"\xa4Ecco", 1)
     with pytest.raises(ValueError) as refused:
         service.answer(unknown, floor.REQUESTER)
-    strange = wire.decode(unknown)
+    strange = codec.decode(unknown)
     assert str(refused.value) == admission.check_process(
         floor.SERVICE, floor._LeanService(None).device, strange, strange.body, set())
     with pytest.raises(ValueError, match="malformed message"):
@@ -161,7 +161,7 @@ def test_it_refuses_what_plugcell_refuses_with_the_same_reason(floor: Any,
 def _plugcell_admits(floor: Any, payload: bytes) -> bool:
     """Whether plugcell's admission (decode, envelope, process and input checks) takes a
     request published by the benchmark's requester to its service."""
-    decoded = admission.decode_request(zenoh.ZBytes(payload), wire.DEFAULT_MAX_PAYLOAD,
+    decoded = admission.decode_request(zenoh.ZBytes(payload), codec.DEFAULT_MAX_PAYLOAD,
                                        floor.SERVICE)
     if isinstance(decoded, str):
         return False

@@ -7,7 +7,7 @@ import numpy as np
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from plugcell.framework import wire
+from plugcell.framework import codec
 from plugcell.framework.admission import (
     check_envelope,
     check_input,
@@ -44,8 +44,8 @@ SET = Command(name="Set", type=CommandTypes.NoData, input_data_type=DataTypes.In
 DEVICE = Device(name="DEV", commands=[SET])
 
 
-def _envelope(body, sender="R1", instance="i1") -> wire.Envelope:
-    return wire.decode(wire.encode(sender, instance, body))
+def _envelope(body, sender="R1", instance="i1") -> codec.Envelope:
+    return codec.decode(codec.encode(sender, instance, body))
 
 
 @settings(max_examples=300, deadline=None)

@@ -17,8 +17,8 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from zenoh.handlers import Callback
 
+from plugcell.framework import codec
 from plugcell.framework import outbox as outbox_module
-from plugcell.framework import wire
 from plugcell.framework.journal import read_journal
 from plugcell.framework.messages import (
     Acknowledgement,
@@ -45,7 +45,7 @@ class Tap:
         self._sub = participant.session.declare_subscriber(key, Callback(self._on, indirect=False))
 
     def _on(self, sample) -> None:
-        body = wire.decode(sample.payload.to_bytes()).body
+        body = codec.decode(sample.payload.to_bytes()).body
         with self._lock:
             self.bodies.append(body)
 
@@ -118,7 +118,7 @@ def test_a_requester_reads_a_batch_it_did_not_expect_in_one_piece(tmp_path):
                 tag=tag, identifier=stream.identifier, state=R, seq=2,
                 data=Data(DataTypes.Double, (1,), b"\x00" * 8),
             )
-            payload = wire.encode("DEV", dev.instance, ProcessUpdateBatch(updates=[stray, frame]))
+            payload = codec.encode("DEV", dev.instance, ProcessUpdateBatch(updates=[stray, frame]))
             a.session.put(dev.keys.process("DEV", "A"), payload)  # as DEV would
             second = await anext(stream)
             assert (first.seq, second.seq) == (1, 2) and stream.array(second)[0] == 0.0
@@ -147,9 +147,9 @@ _updates = st.lists(
 @settings(max_examples=200, deadline=None)
 @given(_updates)
 def test_process_updates_reads_a_batch_as_its_updates_in_order(updates):
-    body = wire.decode(wire.encode("DEV", "i", ProcessUpdateBatch(updates=updates))).body
+    body = codec.decode(codec.encode("DEV", "i", ProcessUpdateBatch(updates=updates))).body
     assert process_updates(body) == updates
-    single = wire.decode(wire.encode("DEV", "i", updates[0])).body
+    single = codec.decode(codec.encode("DEV", "i", updates[0])).body
     assert process_updates(single) == [updates[0]]
     assert process_updates(Acknowledgement(identifier=1, state=ProcessStates.Queued)) == []
 
@@ -159,5 +159,5 @@ def test_a_batch_of_the_wrong_things_is_refused_with_the_reason():
         {"V": 1, "Sender": "DEV", "Instance": "i", "TimeNs": 1,
          "Body": {"Kind": "ProcessUpdateBatch", "Updates": [{"Kind": "GetRequest"}]}}
     )
-    with pytest.raises(wire.WireError, match="invalid message"):
-        wire.decode(raw)
+    with pytest.raises(codec.WireError, match="invalid message"):
+        codec.decode(raw)

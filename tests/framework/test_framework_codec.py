@@ -9,7 +9,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from plugcell.apps.bench.fuzz import fuzz_decoder
-from plugcell.framework import wire
+from plugcell.framework import codec
 from plugcell.framework.data import DTYPES, to_data
 from plugcell.framework.messages import (
     Acknowledgement,
@@ -123,8 +123,8 @@ messages = st.one_of(
 @settings(max_examples=300, deadline=None)
 @given(messages, names, st.text(max_size=32))
 def test_every_message_round_trips(body, sender, instance):
-    envelope = wire.decode(wire.encode(sender, instance, body))
-    assert envelope.v == wire.VERSION
+    envelope = codec.decode(codec.encode(sender, instance, body))
+    assert envelope.v == codec.VERSION
     assert envelope.sender == sender and envelope.instance == instance
     assert envelope.body == body
 
@@ -136,7 +136,7 @@ def test_wire_names_are_the_thesis_names():
         tag=Tag("ROBOT", "CAMERA"),
         identifier=7,
     )
-    raw = msgspec.msgpack.decode(wire.encode("ROBOT", "z1", process))
+    raw = msgspec.msgpack.decode(codec.encode("ROBOT", "z1", process))
     assert set(raw) == {"V", "Sender", "Instance", "TimeNs", "Body"}
     body = raw["Body"]
     assert body["Kind"] == "Process"
@@ -156,7 +156,7 @@ def test_wire_names_are_the_thesis_names():
 
 def _valid() -> bytes:
     data = to_data(np.arange(12, dtype=np.int32).reshape(3, 4), DataTypes.Integer, (3, 4))
-    return wire.encode(
+    return codec.encode(
         "ROBOT",
         "abc",
         Process(command=Command(name="Set"), tag=Tag("ROBOT", "DEV"), identifier=99, data=data),
@@ -196,27 +196,27 @@ def _valid() -> bytes:
     ],
 )
 def test_decoder_gives_precise_reasons(payload, reason):
-    with pytest.raises(wire.WireError, match=reason):
-        wire.decode(payload)
+    with pytest.raises(codec.WireError, match=reason):
+        codec.decode(payload)
 
 
 def test_every_truncation_is_rejected():
     payload = _valid()
     for cut in range(len(payload)):
-        with pytest.raises(wire.WireError):
-            wire.decode(payload[:cut])
+        with pytest.raises(codec.WireError):
+            codec.decode(payload[:cut])
 
 
 def test_oversized_payload_is_rejected_before_decoding():
-    with pytest.raises(wire.WireError, match="exceeds the limit of 100 bytes"):
-        wire.decode(_valid() + b"\0" * 200, max_size=100)
+    with pytest.raises(codec.WireError, match="exceeds the limit of 100 bytes"):
+        codec.decode(_valid() + b"\0" * 200, max_size=100)
 
 
 def test_identifier_out_of_range_is_invalid():
     raw = msgspec.msgpack.decode(_valid())
     raw["Body"]["Identifier"] = 2**63
-    with pytest.raises(wire.WireError, match="Identifier"):
-        wire.decode(msgspec.msgpack.encode(raw))
+    with pytest.raises(codec.WireError, match="Identifier"):
+        codec.decode(msgspec.msgpack.encode(raw))
 
 
 def test_decoder_fuzz_only_raises_wire_error():

@@ -21,7 +21,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from zenoh.handlers import Callback
 
-from plugcell.framework import wire
+from plugcell.framework import codec
 from plugcell.framework.journal import read_journal
 from plugcell.framework.messages import (
     Acknowledgement,
@@ -47,7 +47,7 @@ class AckTap:
         self._sub = participant.session.declare_subscriber(key, Callback(self._on, indirect=False))
 
     def _on(self, sample) -> None:
-        acks = process_acks(wire.decode(sample.payload.to_bytes()).body)
+        acks = process_acks(codec.decode(sample.payload.to_bytes()).body)
         with self._lock:
             self.acks.extend(acks)
 
@@ -75,7 +75,7 @@ def test_bad_published_requests_are_acknowledged_failed_to_the_right_process(tmp
 
             async def publish(payload: bytes, identifier: int | None) -> Acknowledgement:
                 seen = len(tap.acks)
-                attachment = wire.attach_identifier(identifier) if identifier else None
+                attachment = codec.attach_identifier(identifier) if identifier else None
                 a.session.put(door, payload, attachment=attachment)
                 return await tap.next(seen + 1)
 
@@ -87,7 +87,7 @@ def test_bad_published_requests_are_acknowledged_failed_to_the_right_process(tmp
             ack = await publish(b"\0" * 30_000, 78)
             assert (ack.identifier, ack.state) == (78, F)
             assert "exceeds the limit of 20000 bytes" in ack.reason
-            good = wire.encode("A", a.instance, _process(4242))
+            good = codec.encode("A", a.instance, _process(4242))
             ack = await publish(good, 4242)
             assert (ack.identifier, ack.state, ack.instance) == (4242, Q, dev.instance)
             dup = await publish(good, 4242)
@@ -108,9 +108,9 @@ def test_a_request_published_under_another_senders_key_is_refused(tmp_path):
     async def body():
         async with cell_with(tmp_path, "A", "B") as (dev, a, b):
             tap_b = AckTap(a, dev.keys.process("DEV", "B"))
-            forged = wire.encode("A", a.instance, _process(9))  # A's envelope, B's key
+            forged = codec.encode("A", a.instance, _process(9))  # A's envelope, B's key
             a.session.put(dev.keys.request("DEV", "B"), forged,
-                          attachment=wire.attach_identifier(9))
+                          attachment=codec.attach_identifier(9))
             ack = await tap_b.next(1)
             assert ack.state is F and "differs from the sender B of the request key" in ack.reason
             # a key whose last chunk cannot be a sender name: journaled, nobody answered
@@ -130,7 +130,7 @@ def test_the_acknowledgement_and_a_short_process_arrive_in_one_sample(tmp_path):
             samples: list = []
             sub = a.session.declare_subscriber(
                 dev.keys.process("DEV", "A"),
-                Callback(lambda s: samples.append(wire.decode(s.payload.to_bytes()).body),
+                Callback(lambda s: samples.append(codec.decode(s.payload.to_bytes()).body),
                          indirect=False))
             call = await a.create_process("DEV", "Measure")
             assert states(await collect(call)) == [C]
@@ -173,7 +173,7 @@ def test_updates_from_another_incarnation_of_the_name_are_not_ours(tmp_path):
                 tag=Tag("A", "DEV"), identifier=stream.identifier, state=F, seq=9,
                 reason="DEV: a service named DEV is already running")
             a.session.put(dev.keys.process("DEV", "A"),
-                          wire.encode("DEV", "f" * 16 + "other", impostor))
+                          codec.encode("DEV", "f" * 16 + "other", impostor))
             await asyncio.sleep(0.3)
             assert stream.final is None  # the other incarnation's Failed was not taken
             dev.emit(5.0)
@@ -220,8 +220,8 @@ class _Unreadable:
 @given(st.binary(max_size=16), st.integers(0, 2**64 - 1))
 def test_the_attached_identifier_reads_any_attachment(raw, identifier):
     """8 bytes little-endian is an identifier; anything else (or nothing) is 0."""
-    assert wire.attached_identifier(_Attachment(wire.attach_identifier(identifier))) == identifier
+    assert codec.attached_identifier(_Attachment(codec.attach_identifier(identifier))) == identifier
     expected = int.from_bytes(raw, "little") if len(raw) == 8 else 0
-    assert wire.attached_identifier(_Attachment(raw)) == expected
-    assert wire.attached_identifier(None) == 0
-    assert wire.attached_identifier(_Unreadable()) == 0
+    assert codec.attached_identifier(_Attachment(raw)) == expected
+    assert codec.attached_identifier(None) == 0
+    assert codec.attached_identifier(_Unreadable()) == 0

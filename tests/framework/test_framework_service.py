@@ -13,8 +13,8 @@ import numpy as np
 import pytest
 from framework_testlib import ScriptedDevice, cell_with, collect, run, states, unique_cell, until
 
+from plugcell.framework import codec
 from plugcell.framework import scheduler as scheduler_module
-from plugcell.framework import wire
 from plugcell.framework.journal import read_journal
 from plugcell.framework.messages import (
     Acknowledgement,
@@ -213,7 +213,7 @@ async def _raw_create(client: Participant, payload: bytes) -> Acknowledgement:
 
     replies = await asyncio.to_thread(ask)
     assert len(replies) == 1 and replies[0].ok is not None
-    body = wire.decode(replies[0].ok.payload.to_bytes()).body
+    body = codec.decode(replies[0].ok.payload.to_bytes()).body
     assert isinstance(body, Acknowledgement)
     return body
 
@@ -250,7 +250,7 @@ def test_bad_input_fails_with_a_precise_reason_and_the_service_keeps_serving(tmp
             unknown = await a.create_process("NOBODY", "Work")
             assert "unknown device 'NOBODY'" in unknown.final.reason
 
-            good = wire.encode(
+            good = codec.encode(
                 "A",
                 a.instance,
                 Process(command=Command(name="Measure"), tag=Tag("A", "DEV"), identifier=424242),
@@ -258,13 +258,13 @@ def test_bad_input_fails_with_a_precise_reason_and_the_service_keeps_serving(tmp
             assert (await _raw_create(a, b"\xc1\xc1")).reason.startswith("malformed message")
             assert (await _raw_create(a, good[:-3])).state is F
             assert "invalid message" in (await _raw_create(a, b"\x93\x01\x02\x03")).reason
-            wrong = wire.encode(
+            wrong = codec.encode(
                 "A",
                 a.instance,
                 Process(command=Command(name="Measure"), tag=Tag("A", "OTHER"), identifier=7),
             )
             assert "addressed to OTHER" in (await _raw_create(a, wrong)).reason
-            forged = wire.encode(
+            forged = codec.encode(
                 "A",
                 a.instance,
                 Process(command=Command(name="Measure"), tag=Tag("B", "DEV"), identifier=8),
@@ -273,7 +273,7 @@ def test_bad_input_fails_with_a_precise_reason_and_the_service_keeps_serving(tmp
             assert (await _raw_create(a, good)).state is Q
             dup = await _raw_create(a, good)
             assert dup.state is F and "424242" in dup.reason
-            not_a_process = wire.encode("A", a.instance, Acknowledgement(identifier=1, state=Q))
+            not_a_process = codec.encode("A", a.instance, Acknowledgement(identifier=1, state=Q))
             assert "expected a Process" in (await _raw_create(a, not_a_process)).reason
 
             final = await (await a.create_process("DEV", "Measure")).result()

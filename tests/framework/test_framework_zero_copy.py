@@ -23,7 +23,7 @@ from hypothesis import strategies as st
 from hypothesis.extra import numpy as hnp
 
 from plugcell.apps.bench.device import BenchService
-from plugcell.framework import wire
+from plugcell.framework import codec
 from plugcell.framework.data import (
     DTYPES,
     VIEW_MIN_BYTES,
@@ -80,11 +80,11 @@ def test_numbers_arrive_as_sent_as_views_into_the_payload(case, read_only):
         arr = _read_only(arr)
     declared = tuple(-1 for _ in arr.shape)
     data = to_data(arr, data_type, declared)
-    payload = wire.encode("DEV", "i", _update(data), time_ns=1)
+    payload = codec.encode("DEV", "i", _update(data), time_ns=1)
     reference = Data(data_type, arr.shape, np.ascontiguousarray(arr).tobytes())
-    assert payload == wire.encode("DEV", "i", _update(reference), time_ns=1)  # byte-identical
+    assert payload == codec.encode("DEV", "i", _update(reference), time_ns=1)  # byte-identical
 
-    received = wire.decode(payload).body.data
+    received = codec.decode(payload).body.data
     check_data(received, data_type, declared)
     back = from_data(received)
     assert back.dtype == DTYPES[data_type] and back.shape == arr.shape
@@ -100,7 +100,7 @@ def test_numbers_arrive_as_sent_as_views_into_the_payload(case, read_only):
 @given(st.lists(st.text(max_size=10), min_size=1, max_size=6))
 def test_strings_arrive_as_sent(items):
     data = to_data(items, DataTypes.String, (len(items),))
-    received = wire.decode(wire.encode("DEV", "i", _update(data))).body.data
+    received = codec.decode(codec.encode("DEV", "i", _update(data))).body.data
     check_data(received, DataTypes.String, (-1,))
     assert from_data(received).tolist() == items
 
@@ -133,20 +133,20 @@ def test_received_data_is_forwarded_without_a_copy():
     """What a service echoes or forwards (a received frame) is already read-only: the
     update it sends points into the payload it received."""
     sent = to_data(np.full(FRAME, 7, np.uint8), DataTypes.Byte, ())
-    payload = wire.encode("A", "i", _update(sent))
-    arr = from_data(wire.decode(payload).body.data)
+    payload = codec.encode("A", "i", _update(sent))
+    arr = from_data(codec.decode(payload).body.data)
     forwarded = to_data(arr, DataTypes.Byte, ())
     assert np.shares_memory(np.frombuffer(forwarded.buffer, np.uint8),
                             np.frombuffer(payload, np.uint8))
-    assert wire.encode("DEV", "i", _update(forwarded), time_ns=1) == wire.encode(
+    assert codec.encode("DEV", "i", _update(forwarded), time_ns=1) == codec.encode(
         "DEV", "i", _update(sent), time_ns=1
     )
 
 
 def test_a_mutable_payload_is_copied_before_views_are_taken():
-    payload = bytearray(wire.encode("A", "i", _update(to_data(
+    payload = bytearray(codec.encode("A", "i", _update(to_data(
         np.arange(8, dtype=np.uint8), DataTypes.Byte, ()))))
-    data = wire.decode(payload).body.data
+    data = codec.decode(payload).body.data
     payload[:] = bytes(len(payload))  # the caller's buffer changes afterwards
     assert from_data(data).tolist() == list(range(8))
 
@@ -183,8 +183,8 @@ def test_a_batch_decodes_every_frame_as_a_view():
     frames = [np.full(1000, i, np.uint8) for i in range(3)]
     batch = ProcessUpdateBatch(updates=[
         _update(to_data(f, DataTypes.Byte, ()), seq=i + 1) for i, f in enumerate(frames)])
-    payload = wire.encode("DEV", "i", batch)
-    for frame, update in zip(frames, process_updates(wire.decode(payload).body), strict=True):
+    payload = codec.encode("DEV", "i", batch)
+    for frame, update in zip(frames, process_updates(codec.decode(payload).body), strict=True):
         assert update.data.buffer.obj is payload
         np.testing.assert_array_equal(from_data(update.data), frame)
 
@@ -206,7 +206,7 @@ def test_sending_a_read_only_frame_copies_it_once_into_the_payload():
     writeable = np.full(FRAME, 7, np.uint8)
 
     def send(arr):
-        return lambda: wire.encode("DEV", "i", _update(to_data(arr, DataTypes.Byte, ())))
+        return lambda: codec.encode("DEV", "i", _update(to_data(arr, DataTypes.Byte, ())))
 
     viewed, copied = _peak_bytes(send(frame)), _peak_bytes(send(writeable))
     # the payload alone (msgspec's output buffer grows by half as it writes: < 2 frames)
@@ -215,11 +215,11 @@ def test_sending_a_read_only_frame_copies_it_once_into_the_payload():
 
 
 def test_receiving_a_frame_copies_nothing():
-    payload = wire.encode("DEV", "i", _update(to_data(
+    payload = codec.encode("DEV", "i", _update(to_data(
         np.full(FRAME, 7, np.uint8), DataTypes.Byte, ())))
 
     def receive():
-        arr = from_data(wire.decode(payload).body.data)
+        arr = from_data(codec.decode(payload).body.data)
         assert arr.shape == FRAME
 
     assert _peak_bytes(receive) < 64 * 1024

@@ -25,7 +25,7 @@ from childproc import free_port
 from framework_testlib import Proc, plugcell_argv, run, unique_cell
 from sec_testlib import issue_cell_certificates
 
-from plugcell.framework import Client, TransportConfig, wire
+from plugcell.framework import Client, TransportConfig, codec
 from plugcell.framework.journal import journal_files, read_journal
 from plugcell.framework.keys import KeySpace
 from plugcell.framework.messages import Acknowledgement, Command, Data, DataTypes, Process, Tag
@@ -136,7 +136,7 @@ def _send_raw(cell: RoutedCell, who: str, payload: bytes) -> Acknowledgement:
         while time.monotonic() < deadline:
             for reply in session.get(key, payload=payload, timeout=5.0):
                 if reply.ok is not None:
-                    body = wire.decode(reply.ok.payload.to_bytes()).body
+                    body = codec.decode(reply.ok.payload.to_bytes()).body
                     assert isinstance(body, Acknowledgement)
                     return body
             time.sleep(0.2)  # the route to the queryable is not known yet
@@ -218,7 +218,7 @@ def test_replayed_request_is_refused(routed: RoutedCell) -> None:
     captured: list[bytes] = []
     state, _ = run(_create(routed, "ROBOT1", routed.transport("ROBOT1"), spy=captured))
     assert state == "Completed" and len(captured) == 1
-    envelope = wire.decode(captured[0])
+    envelope = codec.decode(captured[0])
     assert envelope.auth is not None and envelope.auth.to == "TRACKER"
     ack = _send_raw(routed, "ROBOT2", captured[0])
     assert ack.state.value == "Failed"

@@ -26,7 +26,7 @@ from cryptography.x509.oid import NameOID
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from plugcell.framework import wire
+from plugcell.framework import codec
 from plugcell.framework.certificates import create_ca, issue_certificate
 from plugcell.framework.messages import (
     Command,
@@ -104,7 +104,7 @@ def signed(
 
 
 def verdict(verifier: RequestVerifier, payload: bytes, recipient: str = "TRACKER") -> str:
-    envelope = wire.decode(payload)
+    envelope = codec.decode(payload)
     return verifier.verify(
         envelope, payload, cell=CELL, recipient=recipient, recipient_instance=TO_INSTANCE
     )
@@ -115,9 +115,9 @@ def verdict(verifier: RequestVerifier, payload: bytes, recipient: str = "TRACKER
 
 def test_unsigned_envelopes_are_unchanged_and_old_decoders_read_signed_ones(pki: Pki) -> None:
     body = process()
-    plain = wire.encode("ROBOT1", INSTANCE, body, time_ns=NOW)
+    plain = codec.encode("ROBOT1", INSTANCE, body, time_ns=NOW)
     assert set(msgspec.msgpack.decode(plain)) == {"V", "Sender", "Instance", "TimeNs", "Body"}
-    assert wire.decode(plain).auth is None
+    assert codec.decode(plain).auth is None
 
     payload = signed(pki.signer("ROBOT1"), body)
     raw = msgspec.msgpack.decode(payload)
@@ -134,21 +134,21 @@ def test_unsigned_envelopes_are_unchanged_and_old_decoders_read_signed_ones(pki:
 
     old = msgspec.msgpack.decode(payload, type=OldEnvelope)
     assert old.body == body and old.sender == "ROBOT1"
-    decoded = wire.decode(payload)
+    decoded = codec.decode(payload)
     assert decoded.body == body and decoded.auth is not None
     assert decoded.auth.to == "TRACKER" and decoded.auth.to_instance == TO_INSTANCE
     assert x509.load_der_x509_certificate(decoded.auth.cert).subject.rfc4514_string() == (
         "CN=ROBOT1"
     )
     # the signature covers the Body bytes exactly as they are in the payload
-    assert bytes(wire.body_bytes(payload)) == msgspec.msgpack.encode(body)
+    assert bytes(codec.body_bytes(payload)) == msgspec.msgpack.encode(body)
 
 
 def test_signing_input_layout() -> None:
     """The bytes a signature covers (docs/protocol.md §3.1), field by field."""
-    auth = wire.Auth(cell="c", to="T", to_instance="", nonce=bytes(range(16)), cert=b"x",
+    auth = codec.Auth(cell="c", to="T", to_instance="", nonce=bytes(range(16)), cert=b"x",
                      sig=b"y")
-    got = wire.signing_input(auth, "R", "i1", 0x0102030405060708, b"\x80")
+    got = codec.signing_input(auth, "R", "i1", 0x0102030405060708, b"\x80")
     assert got == (
         b"plugcell-request/1\x00"
         + b"\x00\x01c" + b"\x00\x01T" + b"\x00\x00" + b"\x00\x01R" + b"\x00\x02i1"
@@ -156,7 +156,7 @@ def test_signing_input_layout() -> None:
         + hashlib.sha256(b"\x80").digest()
     )
     with pytest.raises(ValueError, match="timestamp"):
-        wire.signing_input(auth, "R", "i1", -1, b"")
+        codec.signing_input(auth, "R", "i1", -1, b"")
 
 
 def test_the_documented_signing_example_is_exact() -> None:
@@ -169,9 +169,9 @@ def test_the_documented_signing_example_is_exact() -> None:
     assert body_hex and input_hex
     body = bytes.fromhex(body_hex.group(1))
     assert msgspec.msgpack.decode(body) == {"Kind": "SubscribeRequest", "Partner": "TRACKER"}
-    auth = wire.Auth(cell="lab1", to="ROBOT1", to_instance="", nonce=bytes(range(16)),
+    auth = codec.Auth(cell="lab1", to="ROBOT1", to_instance="", nonce=bytes(range(16)),
                      cert=b"-", sig=b"-")
-    expected = wire.signing_input(auth, "CONTROLLER", "18a0c2f1d3e4b5a6", 1_800_000_000 * 10**9,
+    expected = codec.signing_input(auth, "CONTROLLER", "18a0c2f1d3e4b5a6", 1_800_000_000 * 10**9,
                                   body)
     assert bytes.fromhex(input_hex.group(1)) == expected
 
@@ -206,7 +206,7 @@ def test_a_signed_request_passes_once(pki: Pki) -> None:
 def test_refusals_are_precise(pki: Pki) -> None:
     v = pki.verifier()
     r1, r2 = pki.signer("ROBOT1"), pki.signer("ROBOT2")
-    unsigned = wire.encode("ROBOT1", INSTANCE, process(), time_ns=NOW)
+    unsigned = codec.encode("ROBOT1", INSTANCE, process(), time_ns=NOW)
     assert verdict(v, unsigned) == "access denied: request of ROBOT1 not signed"
     wrong_key = RequestSigner(r1.cert_der, r2.key, "ROBOT1")  # ROBOT1's certificate, ROBOT2's key
     assert verdict(v, signed(wrong_key)) == (
@@ -234,8 +234,8 @@ def test_refusals_are_precise(pki: Pki) -> None:
     assert verdict(v, signed(r1, to_instance="")) == ""  # not bound to an instance: any
     # the sender's own claims are covered: a body changed after signing does not verify
     payload = signed(r1)
-    envelope = wire.decode(payload)
-    other = wire.encode("ROBOT1", INSTANCE, process(identifier=8), time_ns=NOW)
+    envelope = codec.decode(payload)
+    other = codec.encode("ROBOT1", INSTANCE, process(identifier=8), time_ns=NOW)
     assert v.verify(envelope, other, cell=CELL, recipient="TRACKER",
                     recipient_instance=TO_INSTANCE) == (
         "access denied: request of ROBOT1: signature does not verify")
@@ -257,9 +257,9 @@ def test_certificate_validity_and_kind(pki: Pki, tmp_path: Path) -> None:
     assert verdict(pki.verifier(), signed(ca, sender="CA")).endswith(
         "certificate of plugcell cell lab1 CA is a CA certificate, not a participant's")
     # garbage in the certificate field
-    bad = wire.Auth(cell=CELL, to="TRACKER", to_instance="", nonce=b"\0" * 16,
+    bad = codec.Auth(cell=CELL, to="TRACKER", to_instance="", nonce=b"\0" * 16,
                     cert=b"\x30\x03\x02\x01\x01", sig=b"x")
-    envelope = wire.Envelope(v=1, sender="ROBOT1", instance=INSTANCE, time_ns=NOW,
+    envelope = codec.Envelope(v=1, sender="ROBOT1", instance=INSTANCE, time_ns=NOW,
                              body=process(), auth=bad)
     payload = msgspec.msgpack.encode(envelope)
     assert verdict(pki.verifier(), payload).startswith(
@@ -379,8 +379,8 @@ def test_tampering_with_any_byte_is_never_accepted(
             new ^= 0xFF
         tampered = original[:i] + bytes([new]) + original[i + 1:]
     try:
-        envelope = wire.decode(tampered)
-    except wire.WireError:
+        envelope = codec.decode(tampered)
+    except codec.WireError:
         return
     verifier = pki.verifier()  # fresh: the original was never seen
     recipient = "TRACKER"
@@ -399,8 +399,8 @@ def test_tampering_every_byte_exhaustively(pki: Pki) -> None:
     for i, mask in itertools.product(range(len(original)), (0x01, 0x80, 0xFF)):
         tampered = original[:i] + bytes([original[i] ^ mask]) + original[i + 1:]
         try:
-            envelope = wire.decode(tampered)
-        except wire.WireError:
+            envelope = codec.decode(tampered)
+        except codec.WireError:
             refused_by["decoder"] += 1
             continue
         reason = pki.verifier().verify(envelope, tampered, cell=CELL, recipient="TRACKER",

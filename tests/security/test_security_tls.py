@@ -153,7 +153,7 @@ def test_robot_refuses_an_unauthorised_peer(secure_cell: SecureCell) -> None:
 def test_the_publication_door_is_bound_to_the_certificate(secure_cell: SecureCell) -> None:
     """A certified peer publishing a request under another name's key never reaches
     the tracker (the Zenoh ACL drops it); under its own name it does (and is judged)."""
-    from plugcell.framework import wire
+    from plugcell.framework import codec
     from plugcell.framework.keys import KeySpace
     from plugcell.framework.messages import Command, Process, Tag
     from plugcell.framework.transport import open_session
@@ -163,7 +163,7 @@ def test_the_publication_door_is_bound_to_the_certificate(secure_cell: SecureCel
     def request(sender: str, identifier: int) -> bytes:
         body = Process(command=Command(name="Set Base"), tag=Tag(sender, "TRACKER"),
                        identifier=identifier)
-        return wire.encode(sender, "raw", body)
+        return codec.encode(sender, "raw", body)
 
     def rows() -> list[dict]:
         return [p for p in _journal(secure_cell) if p.get("identifier") in (71, 72)]
@@ -172,9 +172,9 @@ def test_the_publication_door_is_bound_to_the_certificate(secure_cell: SecureCel
     try:
         time.sleep(1.0)  # the link and the tracker's subscriber are known
         session.put(keys.request("TRACKER", "ROBOT1"), request("ROBOT1", 71),
-                    attachment=wire.attach_identifier(71))
+                    attachment=codec.attach_identifier(71))
         session.put(keys.request("TRACKER", "ROBOT2"), request("ROBOT2", 72),
-                    attachment=wire.attach_identifier(72))
+                    attachment=codec.attach_identifier(72))
         deadline = time.monotonic() + 10
         while not rows() and time.monotonic() < deadline:
             time.sleep(0.05)

@@ -4,7 +4,7 @@ Modules, one job each:
 
 * :mod:`.model` — the predefined classes and enumerations (appendix F);
 * :mod:`.data` — typed data buffers and their checks against a command (F.4, F.5);
-* :mod:`.wire` — the versioned MessagePack envelope (docs/protocol.md);
+* :mod:`.codec` — the versioned MessagePack envelope (docs/protocol.md);
 * :mod:`.keys` — the Zenoh key space of a cell;
 * :mod:`.transport` — Zenoh sessions (peer on loopback, or via a router);
 * :mod:`.port` — the CCR Port between Zenoh callbacks and the event loop (E.1);

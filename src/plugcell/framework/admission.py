@@ -22,13 +22,13 @@ from __future__ import annotations
 
 from typing import Any
 
-from plugcell.framework import wire
+from plugcell.framework import codec
 from plugcell.framework.data import DataError, check_data, from_data
 from plugcell.framework.messages import Command, Device, Process
 
 
 def decode_request(payload: Any, max_payload: int, owner: str
-                   ) -> tuple[wire.Envelope, bytes] | str:
+                   ) -> tuple[codec.Envelope, bytes] | str:
     """``(envelope, its bytes)`` of a request (a Zenoh payload, or None), or why not."""
     size = len(payload) if payload is not None else 0
     if size == 0:
@@ -37,12 +37,12 @@ def decode_request(payload: Any, max_payload: int, owner: str
         return f"payload of {size} bytes exceeds the limit of {max_payload} bytes of {owner}"
     raw = payload.to_bytes()
     try:
-        return wire.decode(raw, max_payload), raw
-    except wire.WireError as exc:
+        return codec.decode(raw, max_payload), raw
+    except codec.WireError as exc:
         return str(exc)
 
 
-def check_envelope(envelope: wire.Envelope, published_by: str | None) -> str:
+def check_envelope(envelope: codec.Envelope, published_by: str | None) -> str:
     """The envelope's sender is who published it (``published_by``: the sender named by
     the request key; None for a query), and it carries a Process."""
     if published_by is not None and envelope.sender != published_by:
@@ -53,7 +53,7 @@ def check_envelope(envelope: wire.Envelope, published_by: str | None) -> str:
     return ""
 
 
-def check_process(owner: str, device: Device, envelope: wire.Envelope, process: Process,
+def check_process(owner: str, device: Device, envelope: codec.Envelope, process: Process,
                   departed: set[str]) -> str:
     """Addressed to ``owner``, tagged by the envelope's sender, from an instance not
     known to have left (``departed``), a command of ``device``'s catalogue."""

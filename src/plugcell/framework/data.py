@@ -13,7 +13,7 @@ Here that conversion is explicit and checked:
 
 Large frames travel without copies in Python (issue 20, §2): a received message's
 buffers are read-only ``memoryview`` s into the payload Zenoh handed over
-(:func:`plugcell.framework.wire.decode`), :func:`from_data` a read-only numpy view of
+(:func:`plugcell.framework.codec.decode`), :func:`from_data` a read-only numpy view of
 one, and :func:`to_data` of a *read-only* array (from :data:`VIEW_MIN_BYTES` up) a view
 of that array — what a service forwards or streams is encoded straight from the array's
 memory.  A *writeable* array is copied (``tobytes``) when it is converted: its owner may

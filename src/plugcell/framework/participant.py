@@ -36,7 +36,7 @@ from typing import Any, ClassVar
 import msgspec
 import zenoh
 
-from plugcell.framework import wire
+from plugcell.framework import codec
 from plugcell.framework.bus import Bus, QueryDoor
 from plugcell.framework.data import DataError, to_data
 from plugcell.framework.keys import DEFAULT_CELL, KeySpace, Presence, Role, check_name
@@ -266,8 +266,8 @@ class Participant:
         participant has a :attr:`signer` (bound to ``to``'s instance when it is known)."""
         if to and self.signer is not None and is_request(body):
             sign = self.signer.signer(self.keys.cell, to, self._instance_of(to))
-            return wire.encode(self.name, self.instance, body, sign)
-        return wire.encode(self.name, self.instance, body)
+            return codec.encode(self.name, self.instance, body, sign)
+        return codec.encode(self.name, self.instance, body)
 
     def _instance_of(self, service: str) -> str:
         """The one live instance of ``service`` known here (else ``""``: any)."""
@@ -286,7 +286,7 @@ class Participant:
         *,
         everyone: bool = False,
         to: str = "",
-    ) -> list[wire.Envelope | str]:
+    ) -> list[codec.Envelope | str]:
         """Query service ``name``'s ``door``; each reply decoded, or the error text of a
         bad one."""
         assert self.bus is not None and self._loop is not None
@@ -300,14 +300,14 @@ class Participant:
                        pending.replies.append, done, timeout=timeout, everyone=everyone)
         with contextlib.suppress(TimeoutError):
             await asyncio.wait_for(asyncio.shield(pending.done), timeout + 1.0)  # type: ignore[arg-type]
-        out: list[wire.Envelope | str] = []
+        out: list[codec.Envelope | str] = []
         for reply in list(pending.replies):
             if reply.ok is None:
                 out.append(_text(reply.err.payload.to_bytes()) if reply.err else "error reply")
                 continue
             try:
-                out.append(wire.decode(reply.ok.payload.to_bytes()))
-            except wire.WireError as exc:
+                out.append(codec.decode(reply.ok.payload.to_bytes()))
+            except codec.WireError as exc:
                 out.append(str(exc))
         return out
 
@@ -402,7 +402,7 @@ class Participant:
         check_name(name, "service name")
         replies = await self._query("get", name, GetRequest(), timeout)
         for reply in replies:
-            if isinstance(reply, wire.Envelope) and isinstance(reply.body, GenericDeviceState):
+            if isinstance(reply, codec.Envelope) and isinstance(reply.body, GenericDeviceState):
                 return reply.body, reply.instance
         if replies:
             raise PartnerError(f"{name}: bad answer to Get: {replies[0]}")
@@ -414,7 +414,7 @@ class Participant:
         states = [
             r.body
             for r in replies
-            if isinstance(r, wire.Envelope) and isinstance(r.body, GenericDeviceState)
+            if isinstance(r, codec.Envelope) and isinstance(r.body, GenericDeviceState)
         ]
         return sorted(states, key=lambda s: s.device_info.name)
 
@@ -451,8 +451,8 @@ class Participant:
 
     def _on_notification(self, sample: zenoh.Sample) -> None:
         try:
-            envelope = wire.decode(sample.payload.to_bytes())
-        except wire.WireError as exc:
+            envelope = codec.decode(sample.payload.to_bytes())
+        except codec.WireError as exc:
             log.warning("%s: bad notification on %s: %s", self.name, sample.key_expr, exc)
             return
         body = envelope.body
@@ -486,7 +486,7 @@ class Participant:
         )
         replies = await self._query("subscribe", service, body, timeout, to=service)
         for reply in replies:
-            if isinstance(reply, wire.Envelope) and isinstance(reply.body, SubscribeResponse):
+            if isinstance(reply, codec.Envelope) and isinstance(reply.body, SubscribeResponse):
                 return reply.body
         if replies:
             return SubscribeResponse(ok=False, reason=f"bad answer from {service}: {replies[0]}")
@@ -532,7 +532,7 @@ class Participant:
         door = self._request_door(partner)
         if door is not None:  # the partner takes published requests: ack on the process key
             try:
-                door.put(payload, attachment=wire.attach_identifier(identifier))
+                door.put(payload, attachment=codec.attach_identifier(identifier))
             except zenoh.ZError as exc:
                 call._fail(f"cannot send CreateProcess to {partner}: {exc}")
         else:
@@ -613,8 +613,8 @@ class Participant:
                 call._fail(f"{call.partner} answered CreateProcess with an error: {text}")
                 return
             try:
-                envelope = wire.decode(r.ok.payload.to_bytes())
-            except wire.WireError as exc:
+                envelope = codec.decode(r.ok.payload.to_bytes())
+            except codec.WireError as exc:
                 call._fail(f"bad acknowledgement from {call.partner}: {exc}")
                 return
             if isinstance(envelope.body, Acknowledgement):
@@ -653,8 +653,8 @@ class Participant:
 
         def on_sample(service: str, sample: zenoh.Sample) -> None:
             try:
-                envelope = wire.decode(sample.payload.to_bytes())
-            except wire.WireError:
+                envelope = codec.decode(sample.payload.to_bytes())
+            except codec.WireError:
                 return
             for update in process_updates(envelope.body):
                 handler(service, update)
@@ -663,8 +663,8 @@ class Participant:
 
     def _on_process_update(self, sample: zenoh.Sample) -> None:
         try:
-            envelope = wire.decode(sample.payload.to_bytes())
-        except wire.WireError as exc:
+            envelope = codec.decode(sample.payload.to_bytes())
+        except codec.WireError as exc:
             log.warning("%s: bad ProcessUpdate on %s: %s", self.name, sample.key_expr, exc)
             return
         for ack in process_acks(envelope.body):

@@ -47,9 +47,9 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 if TYPE_CHECKING:  # pragma: no cover
+    from plugcell.framework.codec import Envelope
     from plugcell.framework.messages import Process
     from plugcell.framework.service import GenericDevice
-    from plugcell.framework.wire import Envelope
 
 ACTIONS = ("create", "wire")
 IDENTITIES = ("none", "tls", "signed")

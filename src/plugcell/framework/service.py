@@ -50,7 +50,7 @@ from typing import Any, ClassVar, Generic, TypeVar
 import msgspec
 import zenoh
 
-from plugcell.framework import wire
+from plugcell.framework import codec
 from plugcell.framework.admission import (
     check_envelope,
     check_input,
@@ -137,7 +137,7 @@ class GenericDevice(Participant):
         cell: str = DEFAULT_CELL,
         transport: TransportConfig | None = None,
         journal: bool | Path = True,
-        max_payload: int = wire.DEFAULT_MAX_PAYLOAD,
+        max_payload: int = codec.DEFAULT_MAX_PAYLOAD,
         access: AccessPolicy | None = None,
     ) -> None:
         super().__init__(
@@ -371,11 +371,11 @@ class GenericDevice(Participant):
     def _on_get(self, query: zenoh.Query) -> None:
         self._reply(query, self.generic_state())
 
-    def _decode_query(self, query: zenoh.Query) -> tuple[wire.Envelope, bytes] | str:
+    def _decode_query(self, query: zenoh.Query) -> tuple[codec.Envelope, bytes] | str:
         """The request of ``query`` and its bytes (a signature covers them), or why not."""
         return self._decode_request(query.payload)
 
-    def _decode_request(self, payload: zenoh.ZBytes | None) -> tuple[wire.Envelope, bytes] | str:
+    def _decode_request(self, payload: zenoh.ZBytes | None) -> tuple[codec.Envelope, bytes] | str:
         """A request's envelope and its bytes, or why not (admission step 1)."""
         return decode_request(payload, self.max_payload, self.name)
 
@@ -452,7 +452,7 @@ class GenericDevice(Participant):
                 self.journal.record_rejection(None, None, None, size, str(exc))
                 self.journal.commit()
             return
-        self._create(sample.payload, sender, wire.attached_identifier(sample.attachment))
+        self._create(sample.payload, sender, codec.attached_identifier(sample.attachment))
 
     def _create(self, payload: zenoh.ZBytes | None, answer: Answer, attached: int = 0) -> None:
         """CreateProcessHandler (5.2.3.4): admit (framework/admission.py: decode,

@@ -39,7 +39,7 @@ from cryptography.hazmat.primitives import hashes, serialization
 from cryptography.hazmat.primitives.asymmetric import ec, ed25519, padding, rsa
 from cryptography.x509.oid import ExtendedKeyUsageOID, NameOID
 
-from plugcell.framework import wire
+from plugcell.framework import codec
 from plugcell.framework.messages import Message, Process, SubscribeRequest, UnsubscribeRequest
 
 if TYPE_CHECKING:  # pragma: no cover
@@ -154,19 +154,19 @@ class RequestSigner:
         return cls.load(transport.tls_cert, transport.tls_key)
 
     def signer(self, cell: str, to: str, to_instance: str = "",
-               nonce: bytes | None = None) -> wire.Signer:
+               nonce: bytes | None = None) -> codec.Signer:
         """The ``sign`` callback of :func:`.wire.encode` for one request."""
 
-        def sign(sender: str, instance: str, time_ns: int, body: bytes) -> wire.Auth:
-            auth = wire.Auth(
+        def sign(sender: str, instance: str, time_ns: int, body: bytes) -> codec.Auth:
+            auth = codec.Auth(
                 cell=cell,
                 to=to,
                 to_instance=to_instance,
-                nonce=nonce if nonce is not None else os.urandom(wire.NONCE_SIZE),
+                nonce=nonce if nonce is not None else os.urandom(codec.NONCE_SIZE),
                 cert=self.cert_der,
                 sig=b"-",
             )
-            auth.sig = _sign(self.key, wire.signing_input(auth, sender, instance, time_ns, body))
+            auth.sig = _sign(self.key, codec.signing_input(auth, sender, instance, time_ns, body))
             return auth
 
         return sign
@@ -184,7 +184,7 @@ class RequestSigner:
         nonce: bytes | None = None,
     ) -> bytes:
         """A signed envelope of ``body`` (what a participant sends)."""
-        return wire.encode(
+        return codec.encode(
             sender, instance, body, self.signer(cell, to, to_instance, nonce), time_ns
         )
 
@@ -229,7 +229,7 @@ class RequestVerifier:
 
     def verify(
         self,
-        envelope: wire.Envelope,
+        envelope: codec.Envelope,
         payload: bytes | bytearray | memoryview | None,
         *,
         cell: str,
@@ -260,8 +260,8 @@ class RequestVerifier:
 
     def _verify(
         self,
-        envelope: wire.Envelope,
-        auth: wire.Auth,
+        envelope: codec.Envelope,
+        auth: codec.Auth,
         payload: bytes | bytearray | memoryview | None,
         recipient: str,
     ) -> str:
@@ -290,10 +290,10 @@ class RequestVerifier:
         if payload is None:
             return f"{who}: the request's bytes are not available to verify its signature"
         try:
-            data = wire.signing_input(
-                auth, sender, envelope.instance, envelope.time_ns, wire.body_bytes(payload)
+            data = codec.signing_input(
+                auth, sender, envelope.instance, envelope.time_ns, codec.body_bytes(payload)
             )
-        except (wire.WireError, ValueError) as exc:  # pragma: no cover - decode() passed
+        except (codec.WireError, ValueError) as exc:  # pragma: no cover - decode() passed
             return f"{who}: cannot verify: {exc}"
         if not _verify(info.key, auth.sig, data):
             return f"{who}: signature does not verify"

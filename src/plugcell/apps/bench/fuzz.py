@@ -1,6 +1,6 @@
 """Fuzzing of the wire decoder: random bytes and mutations of valid messages.
 
-Only :class:`~plugcell.framework.wire.WireError` may come out of the decoder,
+Only :class:`~plugcell.framework.codec.WireError` may come out of the decoder,
 and a decoded buffer is checked with :func:`check_data`, which may only raise
 :class:`DataError`.  Used by the tests (a few thousand cases) and by
 ``benchmarks/fuzz_wire.py`` (≥ 100 000 cases).
@@ -12,7 +12,7 @@ import random
 
 import numpy as np
 
-from plugcell.framework import wire
+from plugcell.framework import codec
 from plugcell.framework.data import DataError, check_data, from_data, to_data
 from plugcell.framework.messages import (
     Command,
@@ -31,15 +31,15 @@ def seed_messages() -> list[bytes]:
     """Valid messages of every shape worth mutating."""
     image = to_data(np.arange(12, dtype=np.int32).reshape(3, 4), DataTypes.Integer, (3, 4))
     return [
-        wire.encode(
+        codec.encode(
             "ROBOT",
             "abc",
             Process(
                 command=Command(name="Set"), tag=Tag("ROBOT", "DEV"), identifier=99, data=image
             ),
         ),
-        wire.encode("A", "i", GetRequest()),
-        wire.encode(
+        codec.encode("A", "i", GetRequest()),
+        codec.encode(
             "A",
             "i",
             ProcessUpdateNotification(
@@ -49,7 +49,7 @@ def seed_messages() -> list[bytes]:
                 data=to_data([1.0, 2.0], DataTypes.Double, (2,)),
             ),
         ),
-        wire.encode(
+        codec.encode(
             "A",
             "i",
             ProcessUpdateNotification(
@@ -59,7 +59,7 @@ def seed_messages() -> list[bytes]:
                 data=to_data(["a", "bc"], DataTypes.String, (2,)),
             ),
         ),
-        wire.encode(
+        codec.encode(
             "A",
             "i",
             GenericDeviceState(
@@ -98,8 +98,8 @@ def fuzz_decoder(cases: int, seed: int = 1234) -> dict[str, int]:
         else:
             payload = mutate(rng, rng.choice(seeds))
         try:
-            envelope = wire.decode(payload)
-        except wire.WireError:
+            envelope = codec.decode(payload)
+        except codec.WireError:
             counts["rejected"] += 1
             continue
         counts["decoded"] += 1

@@ -1,4 +1,5 @@
-"""The wire codec: a versioned MessagePack envelope around every message (docs/protocol.md).
+"""The codec of the wire format: a versioned MessagePack envelope around every message
+(docs/protocol.md).
 
 The thesis's DSS serialised messages to SOAP (5.3.2.2); here every Zenoh payload
 is one MessagePack map::
