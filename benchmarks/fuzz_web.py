@@ -62,6 +62,7 @@ from plugcell.apps.ui.guard import MAX_BODY
 from plugcell.apps.ui.reports import ReportFiles
 from plugcell.devices.cell.service import CellController
 from plugcell.devices.drill import DrillService
+from plugcell.sim.drivers.drill import SimulatedDrill
 
 HEADERS = {"X-Plugcell": "1", "Content-Type": "application/json"}
 #: With a port, as uvicorn serves it (the ASGI scope's port is None without one, and
@@ -575,7 +576,7 @@ async def web_app(workdir: Path) -> AsyncIterator[tuple[Any, httpx.AsyncClient]]
     os.chdir(workdir)
     try:
         controller = CellController(cell=cell, home=workdir)
-        drill = DrillService(cell=cell, time_scale=0.001)
+        drill = DrillService(cell=cell, driver=SimulatedDrill(time_scale=0.001))
         await controller.start()
         try:
             await drill.start()

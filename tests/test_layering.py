@@ -8,8 +8,8 @@ math                  kinematics, metrology, calibration, compensation       mat
 io                    io (file formats: robots, URDF, measurements, units)   math, io
 framework             framework (Zenoh, the service base, the journal)       framework
 pdl                   pdl (the robot language: parser, checker, interpreter)  math, io, pdl
-devices               devices (camera, drill, robot, tracker, compute,       all but apps
-                      cell, opcua)
+devices               devices (camera, drill, robot, tracker, compute,       all but sim
+                      cell, opcua)                                           and apps
 sim                   sim (twin, simulated controller, drivers, world)       all but apps
 apps                  apps (cli, commands, ui, demo, reproduce, bench), every everything
                       ``__main__`` module (a program, not a library)
@@ -18,9 +18,9 @@ apps                  apps (cli, commands, ui, demo, reproduce, bench), every ev
 A module named in a string (for importlib, or run as ``-m``) counts as an import.
 The math never reads a file, speaks Zenoh or knows a device; the framework knows no
 device; the robot language knows neither the framework nor a device; nothing below the
-apps calls a command line.  Devices and sim share a tier: a simulated instrument
-implements a device's driver interface, and a device's default driver (the camera's,
-the drill's, the tracker's ``sim``) is the simulated one.
+apps calls a command line.  A device declares its driver interface and never imports
+the simulator: a simulated instrument in ``sim`` implements that interface, and
+``plugcell serve`` (``apps/kinds.py``) hands a device its simulated driver.
 """
 
 from __future__ import annotations
@@ -41,7 +41,7 @@ FORBIDDEN = {
     "framework": {"math", "io", "pdl", "sim", "devices", "apps"},
     "pdl": {"framework", "sim", "devices", "apps"},
     "sim": {"apps"},
-    "devices": {"apps"},
+    "devices": {"sim", "apps"},
     "apps": set(),
 }
 
@@ -105,10 +105,27 @@ def modules() -> list[tuple[str, Path]]:
     return out
 
 
+#: Devices that still make their simulated driver themselves (issue #33: ``plugcell serve``
+#: is to inject it, as it does the camera's and the drill's): module → what it imports.
+DEVICES_NOT_YET_INJECTED = {
+    "plugcell.devices.robot.service": "plugcell.sim.controller.launcher",
+    "plugcell.devices.tracker.service": "plugcell.sim.drivers.tracker",
+}
+
+
+def _waiting(offence: str) -> bool:
+    module = offence.partition(":")[0]
+    target = DEVICES_NOT_YET_INJECTED.get(module)
+    return target is not None and f" imports {target} (sim)" in offence
+
+
 def test_no_module_imports_upward() -> None:
     offences = [o for module, path in modules()
                 for o in upward_imports(path.read_text(encoding="utf-8"), module)]
-    assert offences == []
+    assert [o for o in offences if not _waiting(o)] == []
+    waiting = {o.partition(":")[0] for o in offences if _waiting(o)}
+    assert waiting == set(DEVICES_NOT_YET_INJECTED), "a device no longer imports sim: " \
+        "take it off DEVICES_NOT_YET_INJECTED"
 
 
 def test_every_package_has_a_layer() -> None:
@@ -127,6 +144,8 @@ def test_every_package_has_a_layer() -> None:
      "plugcell.devices.robot.service:2 (devices) imports plugcell.apps.cli (apps)"),
     ("plugcell.sim.twin.robot", "from plugcell.apps.commands.twin import run\n",
      "plugcell.sim.twin.robot:1 (sim) imports plugcell.apps.commands.twin (apps)"),
+    ("plugcell.devices.camera", "from plugcell.sim.drivers.camera import SimulatedCamera\n",
+     "plugcell.devices.camera:1 (devices) imports plugcell.sim.drivers.camera (sim)"),
     ("plugcell.devices.kinds", 'KINDS = {\n    "bench": "plugcell.apps.bench.device:Bench"}\n',
      "plugcell.devices.kinds:2 (devices) imports plugcell.apps.bench.device (apps)"),
 ])

@@ -19,14 +19,15 @@ from typing import Any
 import numpy as np
 import pytest
 
-from plugcell.apps.kinds import KINDS, load_kind
+from plugcell.apps.kinds import KINDS, build, load_kind
 from plugcell.framework import Client, ProcessStates
 from plugcell.framework.data import to_data
 from plugcell.framework.keys import check_name
 from plugcell.framework.messages import Command, DataTypes
 from plugcell.framework.service import check_catalogue
 
-#: How each kind runs here without hardware: constructor keywords (simulated drivers).
+#: How each kind runs here without hardware: its parameters (as ``--param``; a kind with
+#: a driver interface gets its simulated driver from ``apps/kinds.build``, as served).
 #: A kind missing from this table fails test_every_kind_can_be_run_or_says_why.
 RUNNABLE: dict[str, dict[str, Any]] = {
     "camera": {"time_scale": 0.0},
@@ -78,8 +79,9 @@ _SAMPLE = {DataTypes.Double: 0.0, DataTypes.Integer: 0, DataTypes.Byte: 0,
            DataTypes.Boolean: False, DataTypes.String: "x"}
 
 
-async def _contract(cls: type, kwargs: dict[str, Any], cell: str, tmp_path) -> None:
-    service = cls(None, cell=cell, journal=tmp_path / "journal", **kwargs)
+async def _contract(kind: str, kwargs: dict[str, Any], cell: str, tmp_path) -> None:
+    cls = load_kind(kind)
+    service = build(kind, None, kwargs, cell=cell, journal=tmp_path / "journal")
     await service.start()
     name = service.name
     try:
@@ -119,5 +121,5 @@ async def _contract(cls: type, kwargs: dict[str, Any], cell: str, tmp_path) -> N
 def test_a_running_service_keeps_the_contract(kind, tmp_path, monkeypatch):
     monkeypatch.setenv("PLUGCELL_HOME", str(tmp_path / "home"))
     cell = f"conf{uuid.uuid4().hex[:10]}"
-    asyncio.run(asyncio.wait_for(_contract(load_kind(kind), RUNNABLE[kind], cell, tmp_path),
+    asyncio.run(asyncio.wait_for(_contract(kind, RUNNABLE[kind], cell, tmp_path),
                                  90))

@@ -8,7 +8,6 @@ import pytest
 
 from plugcell.apps.cli import CommandError, main
 from plugcell.apps.commands.serve import _device_options, _params
-from plugcell.apps.kinds import load_kind
 
 
 def _args(**kw):
@@ -18,22 +17,22 @@ def _args(**kw):
 
 
 def test_robot_flags_become_parameters():
-    cls = load_kind("robot")
-    pairs = _device_options(cls, _args(sim=True, robot="elbow6", payload_kg=36.0, speed=50.0,
+    kind = "robot"
+    pairs = _device_options(kind, _args(sim=True, robot="elbow6", payload_kg=36.0, speed=50.0,
                                        seed=3))
-    kw = _params(cls, pairs)
+    kw = _params(kind, pairs)
     assert kw == {"sim": True, "robot": "elbow6", "payload_kg": 36.0, "speed": 50.0, "seed": 3}
 
 
 def test_tracker_sim_selects_the_model_driver():
-    cls = load_kind("tracker")
-    assert _params(cls, _device_options(cls, _args(sim=True, seed=4))) == {
+    kind = "tracker"
+    assert _params(kind, _device_options(kind, _args(sim=True, seed=4))) == {
         "driver": "sim", "seed": 4}
 
 
 def test_flags_a_kind_does_not_have_are_refused(capsys):
     with pytest.raises(CommandError, match="--robot: not an option of TrackerService"):
-        _device_options(load_kind("tracker"), _args(robot="smart_h4"))
+        _device_options("tracker", _args(robot="smart_h4"))
     assert main(["serve", "camera", "--sim", "--cell", "flags-test"]) == 2
     assert "has no simulated mode" in capsys.readouterr().err
 
@@ -48,9 +47,9 @@ def test_a_serial_line_rate_that_is_not_a_rate_is_refused():
 
 
 def test_opcua_device_flags_become_parameters():
-    cls = load_kind("opcua-device")
-    pairs = _device_options(cls, _args(endpoint="opc.tcp://127.0.0.1:4840", map="gripper.toml"))
-    assert _params(cls, pairs) == {"endpoint": "opc.tcp://127.0.0.1:4840", "map": "gripper.toml"}
+    kind = "opcua-device"
+    pairs = _device_options(kind, _args(endpoint="opc.tcp://127.0.0.1:4840", map="gripper.toml"))
+    assert _params(kind, pairs) == {"endpoint": "opc.tcp://127.0.0.1:4840", "map": "gripper.toml"}
 
 
 def test_a_urdf_robot_reaches_the_robot_service_as_a_description_file(tmp_path, monkeypatch):
@@ -64,10 +63,10 @@ def test_a_urdf_robot_reaches_the_robot_service_as_a_description_file(tmp_path, 
     if not UR_XACRO.is_file():
         pytest.skip(f"the shared URDF data are not at {URDF_DIR}")
     monkeypatch.setenv("PLUGCELL_HOME", str(tmp_path))
-    cls = load_kind("robot")
+    kind = "robot"
     args = _args(sim=True, robot=str(UR_XACRO), robot_arg=["ur_type=ur10", "name=ur10"],
                  package_path=[str(URDF_DIR)], base_link=None, tip_link=None)
-    kw = _params(cls, _device_options(cls, args))
+    kw = _params(kind, _device_options(kind, args))
     path = kw["robot"]
     assert path.startswith(str(tmp_path / "robots" / "ur10-")) and path.endswith(".toml")
     imported = load_robot(UR_XACRO, args={"ur_type": "ur10", "name": "ur10"},
@@ -80,10 +79,28 @@ def test_a_urdf_robot_reaches_the_robot_service_as_a_description_file(tmp_path, 
     a = forward(imported, imported.nominal_parameters(), q).flange
     b = forward(again, again.nominal_parameters(), q).flange
     assert abs(a - b).max() < 1e-12
-    assert _params(cls, _device_options(cls, args))["robot"] == path  # the same file
+    assert _params(kind, _device_options(kind, args))["robot"] == path  # the same file
     assert len(list((tmp_path / "robots").iterdir())) == 1
 
 
 def test_urdf_options_without_a_robot_are_refused():
     with pytest.raises(CommandError, match="give it with --robot FILE"):
-        _device_options(load_kind("robot"), _args(robot_arg=["ur_type=ur10"]))
+        _device_options("robot", _args(robot_arg=["ur_type=ur10"]))
+
+
+def test_a_kind_with_a_driver_interface_is_served_with_its_simulated_driver():
+    """``plugcell serve drill``: the device never imports the simulator; the kinds registry
+    builds the simulated driver from the parameters it declares and hands it over."""
+    from plugcell.apps.kinds import build, kind_params
+    from plugcell.devices.drill import DrillDriver, DrillService
+    from plugcell.sim.drivers.drill import SimulatedDrill
+
+    assert kind_params("drill") == {"time_scale": float, "depth_mm": float}
+    params = _params("drill", ["depth_mm=5", "time_scale=0"])
+    service = build("drill", "T", params, cell="kinds-test", journal=False)
+    assert isinstance(service, DrillService) and service.name == "T"
+    assert isinstance(service.drill, SimulatedDrill) and isinstance(service.drill, DrillDriver)
+    assert (service.drill.depth_mm, service.drill.time_scale) == (5.0, 0.0)
+    with pytest.raises(CommandError, match=r"bad --param 'depth_mm=1' for CameraService "
+                                           r"\(parameters: time_scale\)"):
+        _params("camera", ["depth_mm=1"])

@@ -1,31 +1,78 @@
 """The one registry of service kinds: ``plugcell serve KIND`` looks them up here.
 
-Add a kind with one line (``"robot": "plugcell.devices.robot.service:RobotService"``) or,
-from outside the package, with :func:`register_kind`.  Targets are imported only
-when served, so a broken kind never breaks the others.
+A kind is a device service (a :class:`~plugcell.framework.service.GenericDevice`:
+its catalogue and ``dispatch``) and, for a device family with a driver interface
+(the camera's :class:`~plugcell.devices.camera.CameraDriver`, the drill's
+:class:`~plugcell.devices.drill.DrillDriver`), the driver it runs with by default —
+here the simulated one of ``plugcell.sim.drivers``.  The device never imports the
+simulator: :func:`build` makes the driver and hands it to the service (the kind's
+parameters ``--param K=V`` go to whichever of the two declares them).
+
+Add a kind with one line (``"laser": Kind("laser_point:LaserPointService")``) or, from
+outside the package, with :func:`register_kind`.  Targets are imported only when
+served, so a broken kind never breaks the others.
 """
 
 from __future__ import annotations
 
 import importlib
+from collections.abc import Mapping
+from dataclasses import dataclass
+from typing import Any
 
 from plugcell.framework.service import GenericDevice
 
-KINDS: dict[str, str] = {
-    "camera": "plugcell.devices.camera:CameraService",
-    "drill": "plugcell.devices.drill:DrillService",
-    "bench": "plugcell.apps.bench.device:BenchService",
-    "robot": "plugcell.devices.robot.service:RobotService",
-    "tracker": "plugcell.devices.tracker.service:TrackerService",
-    "compute": "plugcell.devices.compute.service:ComputeService",
-    "controller": "plugcell.devices.cell.service:CellController",
-    "opcua-device": "plugcell.devices.opcua.device:OpcUaDevice",
+
+@dataclass(frozen=True)
+class Kind:
+    """A service kind: its service class and its default driver, each ``"module:Class"``.
+
+    Parameters
+    ----------
+    service : str
+        The service class, a GenericDevice subclass.
+    driver : str or None
+        The driver class the service is given as ``driver=`` (None: the service needs
+        none, or makes its own).
+    """
+
+    service: str
+    driver: str | None = None
+
+
+KINDS: dict[str, Kind] = {
+    "camera": Kind("plugcell.devices.camera:CameraService",
+                   driver="plugcell.sim.drivers.camera:SimulatedCamera"),
+    "drill": Kind("plugcell.devices.drill:DrillService",
+                  driver="plugcell.sim.drivers.drill:SimulatedDrill"),
+    "bench": Kind("plugcell.apps.bench.device:BenchService"),
+    "robot": Kind("plugcell.devices.robot.service:RobotService"),
+    "tracker": Kind("plugcell.devices.tracker.service:TrackerService"),
+    "compute": Kind("plugcell.devices.compute.service:ComputeService"),
+    "controller": Kind("plugcell.devices.cell.service:CellController"),
+    "opcua-device": Kind("plugcell.devices.opcua.device:OpcUaDevice"),
 }
 
 
-def register_kind(kind: str, target: str) -> None:
-    """Register ``kind`` → ``"module:Class"`` (a GenericDevice subclass)."""
-    KINDS[kind] = target
+def register_kind(kind: str, target: str | Kind) -> None:
+    """Register ``kind`` → ``"module:Class"`` (a GenericDevice subclass) or a :class:`Kind`."""
+    KINDS[kind] = target if isinstance(target, Kind) else Kind(target)
+
+
+def _kind(kind: str) -> Kind:
+    found = KINDS.get(kind) or (Kind(kind) if ":" in kind else None)
+    if found is None:
+        known = ", ".join(sorted(KINDS))
+        raise KeyError(f"unknown service kind {kind!r} (known: {known}, or module:Class)")
+    return found
+
+
+def _load(kind: str, target: str) -> Any:
+    module_name, _, attr = target.partition(":")
+    try:
+        return getattr(importlib.import_module(module_name), attr)
+    except (ImportError, AttributeError) as exc:
+        raise KeyError(f"cannot load service kind {kind!r}: {exc}") from None
 
 
 def load_kind(kind: str) -> type[GenericDevice]:
@@ -33,15 +80,53 @@ def load_kind(kind: str) -> type[GenericDevice]:
 
     KeyError (with the known kinds) if it cannot be found.
     """
-    target = KINDS.get(kind, kind if ":" in kind else "")
-    if not target:
-        known = ", ".join(sorted(KINDS))
-        raise KeyError(f"unknown service kind {kind!r} (known: {known}, or module:Class)")
-    module_name, _, attr = target.partition(":")
-    try:
-        cls = getattr(importlib.import_module(module_name), attr)
-    except (ImportError, AttributeError) as exc:
-        raise KeyError(f"cannot load service kind {kind!r}: {exc}") from None
+    target = _kind(kind).service
+    cls = _load(kind, target)
     if not (isinstance(cls, type) and issubclass(cls, GenericDevice)):
         raise TypeError(f"{target} is not a GenericDevice subclass")
     return cls
+
+
+def load_driver(kind: str) -> type | None:
+    """The default driver class of ``kind`` (None: its service takes no driver)."""
+    target = _kind(kind).driver
+    return None if target is None else _load(kind, target)
+
+
+def kind_params(kind: str) -> dict[str, type]:
+    """The parameters ``--param K=V`` of ``kind``: its service's and its driver's
+    (each class's ``params``: name → the type that converts the text)."""
+    driver = load_driver(kind)
+    return {**getattr(load_kind(kind), "params", {}), **getattr(driver, "params", {})}
+
+
+def build(kind: str, name: str | None, params: Mapping[str, Any], **options: Any
+          ) -> GenericDevice:
+    """A service of ``kind`` named ``name`` with its default driver.
+
+    Parameters
+    ----------
+    kind : str
+        A registered kind or ``"module:Class"``.
+    name : str or None
+        The service's name (None: the kind's default name).
+    params : mapping of str to value
+        The kind's parameters (:func:`kind_params`), already converted: those the
+        driver declares build the driver, the others go to the service.
+    **options
+        The framework's keywords for the service (``cell``, ``transport``,
+        ``journal``, ``max_payload`` …).
+
+    Returns
+    -------
+    GenericDevice
+        The service, not started.
+    """
+    cls = load_kind(kind)
+    driver_cls = load_driver(kind)
+    if driver_cls is None:
+        return cls(name, **params, **options)
+    driver_keys = getattr(driver_cls, "params", {})
+    driver = driver_cls(**{k: v for k, v in params.items() if k in driver_keys})
+    service_params = {k: v for k, v in params.items() if k not in driver_keys}
+    return cls(name, driver=driver, **service_params, **options)

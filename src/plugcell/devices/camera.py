@@ -4,7 +4,10 @@ Commands (5.1.1.1, 5.2.3.3, Figure 5-3): ``Connect``/``Disconnect`` (NoData),
 ``SnapShot`` (SingleData: exposure time in ms → a 480×640 8-bit image),
 ``MovieShot`` (MultipleData: frame rate in frames/s → a stream of images) and
 ``StopMovie`` (StopData).  The device interface layer (Figure 5-10) is
-:meth:`CameraService.dispatch`; everything else is inherited.
+:meth:`CameraService.dispatch`; the camera itself is behind :class:`CameraDriver`
+(``plugcell serve camera`` gives it the simulated one,
+:class:`plugcell.sim.drivers.camera.SimulatedCamera`; a real camera's SDK is another
+class with these methods).
 
 The thesis listing declares the image as ``{640, 480}`` (width, height); by F.5
 (d) a matrix size is rows first, so the catalogue says ``(480, 640)``.
@@ -14,20 +17,51 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
-from typing import Any, ClassVar
+from typing import Any, Protocol, runtime_checkable
 
 import numpy as np
 
 from plugcell.framework.messages import Command, CommandTypes, ConnectionStates, DataTypes
 from plugcell.framework.service import DeviceError, GenericDevice
-from plugcell.sim.drivers.camera import HEIGHT, MAX_FPS, WIDTH, CameraError, SimulatedCamera
+
+WIDTH, HEIGHT = 640, 480
+MAX_FPS = 80
+#: The exposure times a camera takes (ms).
+EXPOSURE_MS = (1, 10_000)
 
 S = "S"  # the success code of the thesis's camera API
 IMAGE = (HEIGHT, WIDTH)
 
 
+class CameraError(RuntimeError):
+    """The camera refused a request (its reason is the message)."""
+
+
+@runtime_checkable
+class CameraDriver(Protocol):
+    """The seam between :class:`CameraService` and a camera (its SDK, or a model).
+
+    ``time_scale`` scales the driver's waits (1 for a real camera; the simulated one
+    runs faster for tests), ``connected`` says whether it is online.
+    """
+
+    time_scale: float
+    connected: bool
+
+    async def connect(self) -> None:
+        """Open the link to the camera."""
+
+    async def disconnect(self) -> None:
+        """Close it."""
+
+    async def grab(self, exposure_ms: int) -> np.ndarray:
+        """Expose for ``exposure_ms`` and return the image, ``uint8`` of shape
+        (:data:`HEIGHT`, :data:`WIDTH`); :class:`CameraError` if the camera refuses."""
+        ...
+
+
 class CameraService(GenericDevice):
-    """A 640×480 grayscale camera (simulated unless given another controller)."""
+    """A 640×480 grayscale camera behind a :class:`CameraDriver`."""
 
     kind = "camera"
     vendor = "plugcell (simulated)"
@@ -71,18 +105,9 @@ class CameraService(GenericDevice):
             name="StopMovie", type=CommandTypes.StopData, success_code=S, info="stop the movie"
         ),
     )
-    params: ClassVar[dict[str, type]] = {"time_scale": float}
-
-    def __init__(
-        self,
-        name: str | None = None,
-        *,
-        camera: SimulatedCamera | None = None,
-        time_scale: float = 1.0,
-        **kwargs: Any,
-    ) -> None:
+    def __init__(self, name: str | None = None, *, driver: CameraDriver, **kwargs: Any) -> None:
         super().__init__(name, **kwargs)
-        self.camera = camera or SimulatedCamera(time_scale=time_scale)
+        self.camera = driver
         self._movie: asyncio.Task[None] | None = None
 
     async def connect(self) -> None:

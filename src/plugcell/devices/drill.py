@@ -2,22 +2,41 @@
 
 One NoData command, ``Drill``: option ``"Air"`` (air blow-off on) or ``""``;
 input ``Integer[2]`` = feed (mm/min), spindle speed (rpm) — what the PDL routine
-sends as ``ACTIVATE TOOL #Drill#Air#550,1100``.
+sends as ``ACTIVATE TOOL #Drill#Air#550,1100``.  The drill itself is behind
+:class:`DrillDriver` (``plugcell serve drill`` gives it the simulated one,
+:class:`plugcell.sim.drivers.drill.SimulatedDrill`).
 """
 
 from __future__ import annotations
 
-from typing import Any, ClassVar
+from typing import Any, Protocol, runtime_checkable
 
 import numpy as np
 
 from plugcell.framework.messages import Command, CommandTypes, DataTypes
 from plugcell.framework.service import DeviceError, GenericDevice
-from plugcell.sim.drivers.drill import DrillError, SimulatedDrill
+
+#: The feeds (mm/min) and spindle speeds (rpm) the drill takes.
+FEED_MM_MIN = (10, 2000)
+SPEED_RPM = (100, 24000)
+
+
+class DrillError(RuntimeError):
+    """The drill refused or failed a request (its reason is the message)."""
+
+
+@runtime_checkable
+class DrillDriver(Protocol):
+    """The seam between :class:`DrillService` and a drilling end-effector."""
+
+    async def drill(self, air: bool, feed: int, speed: int) -> float:
+        """Drill one hole at ``feed`` mm/min and ``speed`` rpm (air blow-off on if
+        ``air``); return the drilling time in seconds, or raise :class:`DrillError`."""
+        ...
 
 
 class DrillService(GenericDevice):
-    """A drill (simulated unless given another controller)."""
+    """A drill behind a :class:`DrillDriver`."""
 
     kind = "drill"
     default_name = "TOOL"
@@ -34,19 +53,9 @@ class DrillService(GenericDevice):
             info="drill one hole; option 'Air' or ''; input: feed mm/min, speed rpm",
         ),
     )
-    params: ClassVar[dict[str, type]] = {"time_scale": float, "depth_mm": float}
-
-    def __init__(
-        self,
-        name: str | None = None,
-        *,
-        drill: SimulatedDrill | None = None,
-        time_scale: float = 1.0,
-        depth_mm: float = 10.0,
-        **kwargs: Any,
-    ) -> None:
+    def __init__(self, name: str | None = None, *, driver: DrillDriver, **kwargs: Any) -> None:
         super().__init__(name, **kwargs)
-        self.drill = drill or SimulatedDrill(depth_mm=depth_mm, time_scale=time_scale)
+        self.drill = driver
 
     async def dispatch(self, command: Command, option: str, data: np.ndarray | None) -> str:
         """CommandDispatcher of the drill interface."""

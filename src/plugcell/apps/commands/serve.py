@@ -60,10 +60,12 @@ def configure(p: argparse.ArgumentParser) -> None:
     p.set_defaults(func=run)
 
 
-def _params(cls: type, pairs: list[str]) -> dict[str, Any]:
+def _params(kind: str, pairs: list[str]) -> dict[str, Any]:
     from plugcell.apps.cli import CommandError
+    from plugcell.apps.kinds import kind_params, load_kind
 
-    known: dict[str, type] = getattr(cls, "params", {})
+    known = kind_params(kind)
+    cls = load_kind(kind)
     out: dict[str, Any] = {}
     for pair in pairs:
         key, sep, value = pair.partition("=")
@@ -77,12 +79,14 @@ def _params(cls: type, pairs: list[str]) -> dict[str, Any]:
     return out
 
 
-def _device_options(cls: type, args: argparse.Namespace) -> list[str]:
+def _device_options(kind: str, args: argparse.Namespace) -> list[str]:
     """The device flags that were given, as ``KEY=VALUE`` pairs for :func:`_params`."""
     from plugcell.apps.cli import CommandError
     from plugcell.apps.commands.robotargs import robot_file_of
+    from plugcell.apps.kinds import kind_params, load_kind
 
-    known: dict[str, Any] = getattr(cls, "params", {})
+    known = kind_params(kind)
+    cls = load_kind(kind)
     pairs = []
     urdf_options = [getattr(args, k, None) for k in ("robot_arg", "package_path", "base_link",
                                                      "tip_link")]
@@ -112,7 +116,7 @@ def _device_options(cls: type, args: argparse.Namespace) -> list[str]:
 
 def run(args: argparse.Namespace) -> int:
     from plugcell.apps.cli import CommandError
-    from plugcell.apps.kinds import load_kind
+    from plugcell.apps.kinds import build, load_kind
     from plugcell.framework.participant import PartnerError
     from plugcell.framework.service import DeviceError
 
@@ -122,17 +126,15 @@ def run(args: argparse.Namespace) -> int:
         format="%(asctime)s %(name)s %(levelname)s %(message)s",
     )
     try:
-        cls = load_kind(args.kind)
+        load_kind(args.kind)  # an unknown kind: one error line
     except KeyError as exc:
         raise CommandError(str(exc.args[0])) from None
-    kwargs = _params(cls, [*_device_options(cls, args), *args.param])
-    if args.max_payload:
-        kwargs["max_payload"] = args.max_payload
+    params = _params(args.kind, [*_device_options(args.kind, args), *args.param])
+    options: dict[str, Any] = {"max_payload": args.max_payload} if args.max_payload else {}
     journal: bool | Path = args.journal_dir or not args.no_journal
     try:
-        service = cls(
-            args.name, cell=cell_of(args), transport=transport_of(args), journal=journal, **kwargs
-        )
+        service = build(args.kind, args.name, params, cell=cell_of(args),
+                        transport=transport_of(args), journal=journal, **options)
     except (ValueError, TypeError) as exc:
         raise CommandError(str(exc)) from None
     try:

@@ -9,20 +9,19 @@ proportional to the exposure time, so tests can check what they receive.
 from __future__ import annotations
 
 import asyncio
+from typing import ClassVar
 
 import numpy as np
 
-WIDTH, HEIGHT = 640, 480
-MAX_FPS = 80
-EXPOSURE_MS = (1, 10_000)
-
-
-class CameraError(RuntimeError):
-    """The controller refused a request."""
+from plugcell.devices.camera import EXPOSURE_MS, HEIGHT, WIDTH, CameraError
 
 
 class SimulatedCamera:
-    """The camera controller: connect, grab a frame with an exposure time."""
+    """The camera controller: connect, grab a frame with an exposure time (a
+    :class:`~plugcell.devices.camera.CameraDriver`)."""
+
+    params: ClassVar[dict[str, type]] = {"time_scale": float}
+    """What ``plugcell serve camera --param K=V`` sets."""
 
     def __init__(self, time_scale: float = 1.0, shape: tuple[int, int] = (HEIGHT, WIDTH)) -> None:
         self.time_scale = time_scale

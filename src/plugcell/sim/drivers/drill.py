@@ -9,18 +9,18 @@ from __future__ import annotations
 
 import asyncio
 from dataclasses import dataclass, field
+from typing import ClassVar
 
-FEED_MM_MIN = (10, 2000)
-SPEED_RPM = (100, 24000)
-
-
-class DrillError(RuntimeError):
-    """The controller refused or failed a request."""
+from plugcell.devices.drill import FEED_MM_MIN, SPEED_RPM, DrillError
 
 
 @dataclass
 class SimulatedDrill:
-    """The drill controller: one hole at a time."""
+    """The drill controller: one hole at a time (a
+    :class:`~plugcell.devices.drill.DrillDriver`)."""
+
+    params: ClassVar[dict[str, type]] = {"time_scale": float, "depth_mm": float}
+    """What ``plugcell serve drill --param K=V`` sets."""
 
     depth_mm: float = 10.0
     time_scale: float = 1.0
