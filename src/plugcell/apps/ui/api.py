@@ -78,8 +78,17 @@ def _file(path: str) -> Path:
 
 
 def make_router(controller: CellController) -> APIRouter:
-    """The API routes, bound to ``controller``."""
+    """The API routes, bound to ``controller``: the cell and its wiring, tasks and runs,
+    the metrology tools."""
     router = APIRouter(prefix="/api")
+    _cell_routes(router, controller)
+    _task_routes(router, controller)
+    _metrology_routes(router, controller)
+    return router
+
+
+def _cell_routes(router: APIRouter, controller: CellController) -> None:
+    """The cell's snapshot, wire and unwire, the wiring file (download, save, load)."""
 
     @router.get("/snapshot")
     async def snapshot() -> JSONResponse:
@@ -95,6 +104,47 @@ def make_router(controller: CellController) -> APIRouter:
     async def unwire(request: Request) -> JSONResponse:
         service, partner = _names(await json_body(request))
         return _result(await controller.unwire(service, partner), "partner")
+
+    @router.get("/wiring")
+    async def wiring() -> Response:
+        doc = dump_wiring(controller.wiring_document(), controller.keys.cell)
+        return Response(
+            json.dumps(doc, indent=2) + "\n", media_type="application/json",
+            headers={"Content-Disposition":
+                     f'attachment; filename="{controller.keys.cell}-wiring.json"'},
+        )
+
+    @router.post("/wiring/save")
+    async def wiring_save(request: Request) -> JSONResponse:
+        body = await json_body(request)
+        path = body.get("path")
+        if not isinstance(path, str) or not path.strip():
+            raise RefusedError({"path": "a file name, e.g. cell-wiring.json"})
+        try:
+            doc = controller.save(_file(path))
+        except WiringError as exc:
+            raise RefusedError({"path": str(exc)}) from None
+        return JSONResponse({"ok": True, "path": path.strip(), "document": doc})
+
+    @router.post("/wiring/load")
+    async def wiring_load(request: Request) -> JSONResponse:
+        body = await json_body(request)
+        try:
+            if isinstance(body.get("document"), dict):
+                wires = controller.load(body["document"])
+            elif isinstance(body.get("path"), str) and body["path"].strip():
+                wires = controller.load(_file(body["path"]))
+            else:
+                raise RefusedError({"path": "a wiring file to load"})
+        except WiringError as exc:
+            raise RefusedError({"path": str(exc)}) from None
+        await controller.refresh()
+        return JSONResponse({"ok": True, "wires": [w.to_json() for w in wires],
+                             "wiring": controller.cell_json()["wiring"]})
+
+
+def _task_routes(router: APIRouter, controller: CellController) -> None:
+    """Tasks (one command at one service), runs of robot programs, the program library."""
 
     def _check(body: dict[str, Any]) -> Any:
         service = body.get("service")
@@ -145,42 +195,9 @@ def make_router(controller: CellController) -> APIRouter:
                 return PlainTextResponse(Path(p["path"]).read_text(encoding="utf-8"))
         return error_response({"name": f"no program {name!r} in the library"}, 404)
 
-    @router.get("/wiring")
-    async def wiring() -> Response:
-        doc = dump_wiring(controller.wiring_document(), controller.keys.cell)
-        return Response(
-            json.dumps(doc, indent=2) + "\n", media_type="application/json",
-            headers={"Content-Disposition":
-                     f'attachment; filename="{controller.keys.cell}-wiring.json"'},
-        )
 
-    @router.post("/wiring/save")
-    async def wiring_save(request: Request) -> JSONResponse:
-        body = await json_body(request)
-        path = body.get("path")
-        if not isinstance(path, str) or not path.strip():
-            raise RefusedError({"path": "a file name, e.g. cell-wiring.json"})
-        try:
-            doc = controller.save(_file(path))
-        except WiringError as exc:
-            raise RefusedError({"path": str(exc)}) from None
-        return JSONResponse({"ok": True, "path": path.strip(), "document": doc})
-
-    @router.post("/wiring/load")
-    async def wiring_load(request: Request) -> JSONResponse:
-        body = await json_body(request)
-        try:
-            if isinstance(body.get("document"), dict):
-                wires = controller.load(body["document"])
-            elif isinstance(body.get("path"), str) and body["path"].strip():
-                wires = controller.load(_file(body["path"]))
-            else:
-                raise RefusedError({"path": "a wiring file to load"})
-        except WiringError as exc:
-            raise RefusedError({"path": str(exc)}) from None
-        await controller.refresh()
-        return JSONResponse({"ok": True, "wires": [w.to_json() for w in wires],
-                             "wiring": controller.cell_json()["wiring"]})
+def _metrology_routes(router: APIRouter, controller: CellController) -> None:
+    """Fits, the BASE/PROBE wizards, residual and matrix views."""
 
     @router.post("/fit")
     async def fit(request: Request) -> JSONResponse:
@@ -220,8 +237,6 @@ def make_router(controller: CellController) -> APIRouter:
         arr, title = await fetch_matrix(controller, body)
         return JSONResponse({"ok": True, "title": title, "shape": list(arr.shape),
                              "rows": arr.tolist()})
-
-    return router
 
 
 def _result(result: dict[str, Any], field: str) -> JSONResponse:
