@@ -191,7 +191,8 @@ def add_wire_options(p: argparse.ArgumentParser, *, subscribe: bool, options: bo
     if options:
         add_cell_args(p)
         p.add_argument("--timeout", type=float, default=10.0,
-                       help="seconds to wait for a service or an answer (default 10)")
+                       help="seconds to wait for A and B to be in the cell, and for the answer "
+                            "(default 10)")
     p.set_defaults(func=run_wire, subscribe=subscribe)
 
 
@@ -216,7 +217,10 @@ async def _wire(args: argparse.Namespace) -> tuple[bool, str]:
         if args.via:
             command = "Wire" if args.subscribe else "Unwire"
             return await _via(client, args, command, "", [args.service, args.partner])
-        await client.wait_for(args.service, min(args.timeout, 3.0))
+        # both may still be starting (a robot service starts its controller first): wait
+        # for them as `plugcell call` waits for its service (`serve … &` then `wire`)
+        for name in (args.service, args.partner):
+            await client.wait_for(name, args.timeout)
         response = await client.ask_subscribe(args.service, args.partner, args.subscribe,
                                               args.timeout)
         return response.ok, response.reason
