@@ -79,6 +79,8 @@ Array = NDArray[np.float64]
 NULL_TOL = 1e-3
 #: Undetermined share above which a frame quantity or a parameter is named.
 SHARE = 0.3
+#: Orientations within the campaign's spread plus this (rad) count as the campaign's own.
+ORIENTATION_TOL = math.radians(0.1)
 #: Central-difference step of the frame gradients (parameter units: m or rad).
 FD_STEP = 1e-6
 
@@ -94,12 +96,14 @@ AXES = ("x", "y", "z")
 __all__ = [
     "COMPONENTS",
     "NULL_TOL",
+    "ORIENTATION_TOL",
     "SHARE",
     "Undetermined",
     "analyse_determinacy",
     "frame_gradients",
     "orientation_spread",
     "required_spread",
+    "with_probe",
 ]
 
 
@@ -179,6 +183,24 @@ class Undetermined:
         """
         R = np.asarray(flange_rotations, dtype=float).reshape(-1, 3, 3)
         return np.linalg.norm(so3_log(self.flange_orientation.T @ R), axis=-1)
+
+    def away(self, flange_rotations: Array) -> NDArray[np.bool_]:
+        """Flange orientations beyond the campaign's: farther from its mean than its own
+        spread plus :data:`ORIENTATION_TOL` — where what the poses did not determine
+        shows (a PROBE offset error δ moves the tool point by about ``|δ|·angle``).
+
+        Parameters
+        ----------
+        flange_rotations : (N, 3, 3) array
+            Flange orientations in the robot base frame.
+
+        Returns
+        -------
+        (N,) bool array
+            True where the orientation lies beyond the campaign's.
+        """
+        return self.orientation_offset(flange_rotations) > (self.orientation_spread_rad
+                                                             + ORIENTATION_TOL)
 
 
 def required_spread(n_poses: int) -> float:
@@ -344,7 +366,7 @@ def _messages(u: Undetermined, model: ErrorModel) -> tuple[str, ...]:
     out = []
     spread = math.degrees(u.orientation_spread_rad)
     need = math.degrees(u.required_spread_rad)
-    probe_t = fold_frames(model).probe_ref[:3, 3] * 1e3
+    probe_t = np.round(fold_frames(model).probe_ref[:3, 3] * 1e3, 1) + 0.0  # no "-0.0"
     comps = set(u.components)
     if "probe_position" in comps:
         along = "" if len(u.probe_axes) == 3 else (
@@ -353,7 +375,8 @@ def _messages(u: Undetermined, model: ErrorModel) -> tuple[str, ...]:
         kept = ("the --probe given" if "probe" in u.given
                 else "its initial value, the robot description's tool point")
         out.append(
-            f"PROBE position not determined{along}: the tool orientation varies by only "
+            f"PROBE position not determined{along}: the tool orientation (from the joint "
+            f"readings) varies by only "
             f"{spread:.2g}° over the campaign, so the target's offset on the flange cannot be "
             f"told apart from the BASE position; kept at {kept} "
             f"({probe_t[0]:.1f}, {probe_t[1]:.1f}, {probe_t[2]:.1f} mm), BASE with it. Vary "
@@ -376,3 +399,41 @@ def _messages(u: Undetermined, model: ErrorModel) -> tuple[str, ...]:
                    "wider")
     return tuple(out)
 
+
+
+def with_probe(model: ErrorModel, probe: Array, undetermined: Undetermined | None) -> ErrorModel:
+    """``model`` with a PROBE given by the user, BASE re-expressed when the campaign did not
+    determine the PROBE position.
+
+    The BASE and PROBE errors are folded (``BASE_ref = BASE``) or replaced
+    (``PROBE_ref = probe``, relative to the calibrated flange; the flange link's errors
+    stay in the chain).  When the PROBE position was undetermined, the campaign saw only
+    ``R_B R̄_F t_P + t_B`` (``R̄_F`` its flange orientation, module docstring); BASE then
+    moves by ``t_B' = t_B + R_B R̄_F (t_P − t_P')`` so that this stays as measured, with
+    ``t_P`` the kept and ``t_P'`` the given offset (calibrated flange frame).
+
+    Parameters
+    ----------
+    model : ErrorModel
+        The calibrated model.
+    probe : (4, 4) array, m
+        The target (tool point) in the flange frame.
+    undetermined : Undetermined or None
+        What the calibration did not determine.
+
+    Returns
+    -------
+    ErrorModel
+        The model with that PROBE (and BASE).
+    """
+    probe = np.asarray(probe, dtype=float)
+    v = np.array(model.values)
+    for j, prm in enumerate(model.space):
+        if prm.kind in ("base", "probe"):
+            v[j] = 0.0
+    base = model.base().copy()
+    if undetermined is not None and "probe_position" in undetermined.components:
+        shift = undetermined.flange_orientation @ (model.probe()[:3, 3] - probe[:3, 3])
+        base[:3, 3] += base[:3, :3] @ shift
+    # with zero PROBE errors, PROBE = PROBE_ref, relative to the calibrated flange
+    return model.with_values(v).with_references(base=base, probe=probe)
