@@ -32,7 +32,7 @@ from __future__ import annotations
 
 import time
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Any
 
 import numpy as np
@@ -40,7 +40,12 @@ from numpy.typing import ArrayLike, NDArray
 
 from plugcell.calibration.configs import ModelConfig, model_config
 from plugcell.calibration.data import CalibrationData
-from plugcell.calibration.determinacy import NULL_TOL, Undetermined, analyse_determinacy
+from plugcell.calibration.determinacy import (
+    NULL_TOL,
+    Undetermined,
+    analyse_determinacy,
+    orientation_spread,
+)
 from plugcell.calibration.identifiability import (
     Identifiability,
     analyse,
@@ -396,6 +401,10 @@ class Calibrator:
             jac = identification_jacobian(final, batch, keys)
         stats, residuals = self._diagnose(problem, nominal_poses, jac, weights, history,
                                           converged, warnings)
+        if undetermined is not None:  # the campaign's orientation of the calibrated flange
+            flange = np.linalg.inv(final.base()) @ jac.poses @ np.linalg.inv(final.probe())
+            undetermined = replace(undetermined,
+                                   flange_orientation=orientation_spread(flange[:, :3, :3])[0])
         result = CalibrationResult(
             config=self.config,
             robot=self.desc.name,
