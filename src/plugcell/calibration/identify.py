@@ -213,7 +213,7 @@ class Calibrator:
         Relative singular value of the scaled Jacobian below which a direction (a
         combination of parameters, e.g. PROBE position with BASE position) is not
         determined by the poses and kept at its initial value (:mod:`.determinacy`;
-        default 1e-3).
+        default 1e-4).
 
     Raises
     ------
