@@ -85,7 +85,7 @@ def main() -> None:
                 print(f"| {name} | {code} | {t[0]:.1f}, {t[1]:.1f}, {t[2]:.1f} | {berr:.1f} | "
                       f"{res.calibration.position.norm.mean * 1e3:.3f} | "
                       f"{res.validity.lever_m.max():.2f} | {res.validity.threshold_m * 1e3:.0f}"
-                      f" | {exported} | {dist:.2f} | {dt:.1f} |")
+                      f" | {exported} | {'—' if np.isnan(dist) else f'{dist:.2f}'} | {dt:.1f} |")
                 warnings[(name, code)] = res.warnings
                 if code == "after":
                     P = np.eye(4)

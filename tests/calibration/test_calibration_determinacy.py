@@ -361,3 +361,18 @@ def test_analysis_of_a_varied_campaign_finds_nothing(varied):
                                F[:, :3, :3]) is None
     _, spread = orientation_spread(F[:, :3, :3])
     assert math.degrees(spread) > 10
+
+
+def test_twin_measure_scan_command(tmp_path):
+    """``plugcell twin measure --scan N --mode 3dof``: N poses at one tool orientation,
+    positions only; a bad count is refused."""
+    from plugcell.io.measurements import read_measurements
+
+    out = tmp_path / "scan.csv"
+    assert main(["twin", "measure", "--robot", "fanuc_m20ia", "--seed", "3", "--scan", "12",
+                 "--mode", "3dof", "--out", str(out), "--quiet"]) == 0
+    ms = read_measurements(out, joint_scale=_twin().description.reading_scale())
+    assert len(ms) == 12 and ms.angles is None
+    assert "12 scan poses" in out.read_text().splitlines()[0]
+    assert main(["twin", "measure", "--robot", "fanuc_m20ia", "--scan", "0", "--out",
+                 str(out), "--quiet"]) != 0
