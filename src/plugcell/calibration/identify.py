@@ -32,7 +32,7 @@ from __future__ import annotations
 
 import time
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Any
 
 import numpy as np
@@ -40,6 +40,12 @@ from numpy.typing import ArrayLike, NDArray
 
 from plugcell.calibration.configs import ModelConfig, model_config
 from plugcell.calibration.data import CalibrationData
+from plugcell.calibration.determinacy import (
+    NULL_TOL,
+    Undetermined,
+    analyse_determinacy,
+    orientation_spread,
+)
 from plugcell.calibration.identifiability import (
     Identifiability,
     analyse,
@@ -51,7 +57,7 @@ from plugcell.calibration.initial import (
     estimate_base_probe_positions,
 )
 from plugcell.calibration.jacobian import JacobianResult, identification_jacobian
-from plugcell.calibration.linalg import least_squares
+from plugcell.calibration.linalg import least_squares, null_space, restricted_basis
 from plugcell.calibration.model import MIN_PAYLOAD_REF_KG, ErrorModel, PoseBatch, fold_frames
 from plugcell.calibration.result import CalibrationResult, IterationRecord
 from plugcell.calibration.statistics import (
@@ -203,6 +209,11 @@ class Calibrator:
     thermal : bool
         Add the thermal expansion κT of the chain's lengths about the calibration data's
         mean temperature (needs their ``temperature_c``).
+    null_tol : float
+        Relative singular value of the scaled Jacobian below which a direction (a
+        combination of parameters, e.g. PROBE position with BASE position) is not
+        determined by the poses and kept at its initial value (:mod:`.determinacy`;
+        default 1e-4).
 
     Raises
     ------
@@ -231,6 +242,7 @@ class Calibrator:
         progress: Progress | None = None,
         harmonics: int = 0,
         thermal: bool = False,
+        null_tol: float = NULL_TOL,
     ) -> None:
         try:
             self.config: ModelConfig = model_config(model)
@@ -242,6 +254,8 @@ class Calibrator:
             raise CalibrationError(f"loss must be one of {LOSSES}, got {loss!r}")
         if not (tol > 0 and max_iterations >= 1 and rotation_weight > 0 and loss_scale > 0):
             raise CalibrationError("tol, max_iterations, rotation_weight, loss_scale must be > 0")
+        if not 0 <= null_tol < 1:
+            raise CalibrationError(f"null_tol must be in [0, 1), got {null_tol!r}")
         if harmonics not in (0, 1, 2):
             raise CalibrationError(f"harmonics: order 0, 1 or 2, got {harmonics!r}")
         self.harmonics = int(harmonics)
@@ -259,6 +273,7 @@ class Calibrator:
         self.payload_ref_kg = payload_ref_kg
         self.parameters = None if parameters is None else tuple(parameters)
         self.rank_tol = float(rank_tol)
+        self.null_tol = float(null_tol)
         self.progress = progress
         self._cache: dict[Any, Identifiability] = {}
 
@@ -323,12 +338,18 @@ class Calibrator:
             pred = self.base @ flange @ self.probe
             rms = float(np.sqrt(np.mean(np.sum((pred[:, :3, 3] - data.positions) ** 2, 1))))
             return self.base, self.probe, rms
+        # where the target sits on the flange when the poses cannot tell (its offset along
+        # directions they do not determine, :mod:`.determinacy`): the given PROBE, else
+        # the description's tool point
+        prior = (self.desc.tool if self.probe is None else self.probe)[:3, 3]
         try:
             if data.six_dof:
-                est = estimate_base_probe_poses(flange, data.poses)
+                est = estimate_base_probe_poses(flange, data.poses, prior_offset=prior,
+                                                rel_tol=self.null_tol)
             else:
                 off = None if self.probe is None else self.probe[:3, 3]
-                est = estimate_base_probe_positions(flange, data.positions, probe_offset=off)
+                est = estimate_base_probe_positions(flange, data.positions, probe_offset=off,
+                                                    prior_offset=prior, rel_tol=self.null_tol)
         except (InitialEstimateError, ValueError) as exc:
             raise CalibrationError(f"cannot estimate BASE and PROBE from the data: {exc}") from None
         base = est.base if self.base is None else self.base
@@ -371,7 +392,7 @@ class Calibrator:
         nominal = self._nominal_fit(problem, model, warnings)
         nominal_poses = nominal.predict_batch(batch)
         before = self._check_nominal(data, nominal_poses)
-        structural, on_data, jac0 = self._identifiable(problem, nominal, warnings)
+        structural, on_data, jac0, undetermined = self._identifiable(problem, nominal, warnings)
         keys = list(jac0.keys)
         final, history, converged, weights, jac = self._iterate(
             problem, nominal, keys, "identify", warnings, loss=self.loss, jac=jac0
@@ -380,6 +401,10 @@ class Calibrator:
             jac = identification_jacobian(final, batch, keys)
         stats, residuals = self._diagnose(problem, nominal_poses, jac, weights, history,
                                           converged, warnings)
+        if undetermined is not None:  # the campaign's orientation of the calibrated flange
+            flange = np.linalg.inv(final.base()) @ jac.poses @ np.linalg.inv(final.probe())
+            undetermined = replace(undetermined,
+                                   flange_orientation=orientation_spread(flange[:, :3, :3])[0])
         result = CalibrationResult(
             config=self.config,
             robot=self.desc.name,
@@ -400,9 +425,8 @@ class Calibrator:
             pose_weights=weights,
             warnings=tuple(warnings),
             elapsed_s=time.perf_counter() - t0,
-            validity=ValidityRegion.from_poses(
-                final, data.q, data.payload_kg,
-                targets=(np.linalg.inv(final.base()) @ jac.poses)[:, :3, 3]),
+            validity=self._region(final, data, jac, undetermined),
+            undetermined=undetermined,
             settings={"method": self.method, "loss": self.loss, "loss_scale": self.loss_scale,
                       "tol": self.tol,
                       "rotation_weight": self.rotation_weight,
@@ -413,6 +437,19 @@ class Calibrator:
         if validation is not None:
             result = result.with_validation(self._coerce(validation))
         return result
+
+    def _region(self, final: ErrorModel, data: CalibrationData, jac: JacobianResult,
+                undetermined: Undetermined | None) -> ValidityRegion:
+        """The region of the calibration poses (:class:`ValidityRegion`): lever arms and
+        targets at the identified PROBE — or, when the poses did not determine its
+        position (and it was not given), at the robot description's tool point: an
+        undetermined PROBE is no measured lever."""
+        if undetermined is not None and undetermined.unknown("probe_position"):
+            tool = fold_frames(final).with_references(probe=self.desc.tool)
+            return ValidityRegion.from_poses(tool, data.q, data.payload_kg)
+        return ValidityRegion.from_poses(
+            final, data.q, data.payload_kg,
+            targets=(np.linalg.inv(final.base()) @ jac.poses)[:, :3, 3])
 
     def _references(self, data: CalibrationData, warnings: list[str]) -> tuple[float, float]:
         """The payload m_ref (kg) the payload constants refer to — the given one, else
@@ -499,14 +536,18 @@ class Calibrator:
 
     def _identifiable(
         self, problem: _Problem, nominal: ErrorModel, warnings: list[str]
-    ) -> tuple[Identifiability, Identifiability, JacobianResult]:
+    ) -> tuple[Identifiability, Identifiability, JacobianResult, Undetermined | None]:
         """Which parameters to identify: the structural analysis of the model (or the
         ``parameters`` asked for), then the analysis on these poses' weighted
         identification Jacobian H (rows: poses × 3 or 6, columns: parameters) — a column
         within ``rank_tol`` of the span of the others, or removed by the condition rule
-        κ(H) ≤ limit (eq. 4.10), is dropped with a warning.  Refuses fewer equations
-        than parameters.  Returns both analyses and the Jacobian of the kept columns at
-        the nominal model."""
+        κ(H) ≤ limit (eq. 4.10), is dropped with a warning.  Then the directions of H
+        (all its columns) the poses do not determine, in words
+        (:func:`~.determinacy.analyse_determinacy`): one warning per undetermined frame
+        quantity or group of parameters, instead of the column warnings of the
+        parameters they explain.  Refuses fewer equations than parameters.  Returns both
+        analyses, the Jacobian of the kept columns at the nominal model and what is
+        undetermined (``None``: nothing)."""
         data, model = problem.data, problem.model
         cfg = self.config
         structural = self._structural(nominal, data, len(np.unique(data.payload_kg)) > 1)
@@ -522,8 +563,23 @@ class Calibrator:
         Hd = _jacobian_rows(problem, jac.H).reshape(-1, len(keys))
         on_data = analyse(Hd, keys, rank_tol=self.rank_tol,
                           condition_limit=self.condition_limit)
+        flange = np.linalg.inv(nominal.base()) @ jac.poses @ np.linalg.inv(nominal.probe())
+        given = tuple(n for n, f in (("base", self.base), ("probe", self.probe)) if f is not None)
+        undetermined = None
+        if self.null_tol > 0:
+            undetermined = analyse_determinacy(nominal, Hd, keys, flange[:, :3, :3],
+                                               given=given, kept=on_data.kept,
+                                               tol=self.null_tol)
+        explained: set[str] = set()
+        if undetermined is not None:
+            warnings.extend(undetermined.messages)
+            explained = set(undetermined.parameters)
+            if undetermined.components:
+                fl = model.structure.desc.flange
+                explained |= {k for k in keys if model.space[k].kind in ("base", "probe")
+                              or model.space[k].link == fl}
         for k in keys:
-            if k not in on_data.kept:
+            if k not in on_data.kept and k not in explained:
                 how = "removed by the condition-number rule (4.10)" if k in on_data.eliminated \
                     else "these poses do not separate it from the others"
                 warnings.append(f"parameter {model.space[k].name} not identified: {how}")
@@ -540,7 +596,7 @@ class Calibrator:
             warnings.append(few_equations(len(data), data.rows, len(keys)))
         cols = [jac.keys.index(k) for k in keys]  # the kept columns of the data check
         return structural, on_data, JacobianResult(poses=jac.poses, H=jac.H[:, :, cols],
-                                                   keys=tuple(keys))
+                                                   keys=tuple(keys)), undetermined
 
     def _diagnose(
         self, problem: _Problem, nominal_poses: Array, jac: JacobianResult, weights: Array,
@@ -620,8 +676,13 @@ class Calibrator:
         raises the cost) or Levenberg–Marquardt's
         Δg = S⁻¹·(H_sᵀH_s + λ·diag(H_sᵀH_s))⁻¹·H_sᵀ·r_w, where r_w = √w·r and
         H_w = √w·H carry the robust per-pose weights w (:func:`_robust_weights`);
-        it stops when ‖Δg‖ < ``tol``.  ``method="least-squares"`` hands the same
-        problem to SciPy (:meth:`_iterate_scipy`)."""
+        it stops when ‖Δg‖ < ``tol``.  Directions the poses do not determine
+        (:meth:`_undetermined`, found at the first iteration) are kept where they start:
+        each step is solved on ``H_s Z`` and taken as ``x = Z y``, ``Z`` the orthonormal
+        basis of the scaled steps that leave them unchanged
+        (:func:`~.linalg.restricted_basis`) — the truncated-SVD (minimum-norm) step.
+        ``method="least-squares"`` hands the same problem to SciPy
+        (:meth:`_iterate_scipy`)."""
         weights = np.ones(len(p.data))
         history: list[IterationRecord] = []
         if not keys:
@@ -631,6 +692,7 @@ class Calibrator:
         lam = 1e-3
         best_cost = None
         converged = False
+        C: Array | None = None  # the undetermined combinations, fixed at the first iteration
         if jac is None or jac.keys != tuple(keys):
             jac = self._jac(model, p, keys)
         for it in range(1, self.max_iterations + 1):
@@ -653,8 +715,12 @@ class Calibrator:
             scale = np.linalg.norm(Hw, axis=0)
             scale = np.where(scale > 0, scale, 1.0)
             Hs = Hw / scale
+            if C is None:
+                C = self._undetermined(Hs, scale)
+            Z = restricted_basis(C, scale) if C.shape[1] else None
             if self.method == "gauss-newton":
-                step = least_squares(Hs, rw) / scale
+                step = (least_squares(Hs, rw) if Z is None
+                        else Z @ least_squares(Hs @ Z, rw)) / scale
                 # full Gauss-Newton step (Fig. 6-9); halved while it increases the cost
                 for _ in range(BACKTRACK_STEPS):
                     new = model.updated(keys=keys, step=step)
@@ -670,10 +736,12 @@ class Calibrator:
                     new = model.updated(keys=keys, step=step)
                     jac_new = self._jac(new, p, keys)
             else:
-                A = Hs.T @ Hs
-                g = Hs.T @ rw
+                Hr = Hs if Z is None else Hs @ Z
+                A = Hr.T @ Hr
+                g = Hr.T @ rw
                 for _ in range(30):
-                    step = np.linalg.solve(A + lam * np.diag(np.diag(A) + 1e-12), g) / scale
+                    y = np.linalg.solve(A + lam * np.diag(np.diag(A) + 1e-12), g)
+                    step = (y if Z is None else Z @ y) / scale
                     new = model.updated(keys=keys, step=step)
                     try:
                         jac_new = self._jac(new, p, keys)
@@ -721,12 +789,18 @@ class Calibrator:
 
         history: list[IterationRecord] = []
         cache: dict[bytes, JacobianResult] = {}
+        # the undetermined combinations are kept: unknowns y, increments Δg = Zg·y
+        H0 = _jacobian_rows(p, self._jac(model, p, keys).H).reshape(-1, len(keys))
+        s0 = np.linalg.norm(H0, axis=0)
+        s0 = np.where(s0 > 0, s0, 1.0)
+        C = self._undetermined(H0 / s0, s0)
+        Zg = restricted_basis(C, np.ones(len(keys))) if C.shape[1] else np.eye(len(keys))
 
-        def at(x: Array) -> JacobianResult:
-            key = x.tobytes()
+        def at(y: Array) -> JacobianResult:
+            key = y.tobytes()
             if key not in cache:
                 cache.clear()
-                cache[key] = self._jac(model.updated(keys=keys, step=x), p, keys)
+                cache[key] = self._jac(model.updated(keys=keys, step=Zg @ y), p, keys)
             return cache[key]
 
         def fun(x: Array) -> Array:
@@ -738,7 +812,7 @@ class Calibrator:
             r = _residual_rows(p, j.poses)
             pos = np.linalg.norm(r[:, :3], axis=1)
             # the step since the previous Jacobian (an accepted iteration of SciPy's)
-            step_norm = float(np.linalg.norm(x - history_x[-1])) if history_x else 0.0
+            step_norm = float(np.linalg.norm(Zg @ (x - history_x[-1]))) if history_x else 0.0
             history_x.append(x.copy())
             history.append(IterationRecord(len(history) + 1, step_norm, float(np.sum(r * r)),
                                            float(pos.mean() * 1e3),
@@ -746,7 +820,7 @@ class Calibrator:
             self._say(stage, len(history), self.max_iterations,
                       f"iteration {len(history)}: mean position residual "
                       f"{pos.mean() * 1e3:.4f} mm")
-            return -H
+            return -H @ Zg
 
         history_x: list[Array] = []
 
@@ -759,15 +833,22 @@ class Calibrator:
             except (ValueError, np.linalg.LinAlgError) as exc:
                 raise DivergenceError(f"{stage}: SciPy's least_squares failed: {exc}") from None
 
-        solution = solve(np.zeros(len(keys)), "linear", 1.0)
+        solution = solve(np.zeros(Zg.shape[1]), "linear", 1.0)
         if loss != "linear":  # the scale from the residuals at the plain solution
             r1 = _residual_rows(p, at(solution.x).poses)
             f_scale = self.loss_scale * max(float(np.median(np.linalg.norm(r1, axis=1))), 1e-15)
             solution = solve(solution.x, loss, f_scale)
-        final = model.updated(keys=keys, step=solution.x)
+        final = model.updated(keys=keys, step=Zg @ solution.x)
         jac_final = self._jac(final, p, keys)
         weights = _robust_weights(_residual_rows(p, jac_final.poses), loss, self.loss_scale)
         return final, history, bool(solution.status > 0), weights, jac_final
+
+    def _undetermined(self, Hs: Array, scale: Array) -> Array:
+        """The combinations ``Cᵀ g`` the poses do not determine: ``C = S V₀``, ``V₀`` the
+        right singular vectors of the column-scaled Jacobian ``H_s`` (scales ``S``) with
+        ``σ < null_tol · σ₁`` (:mod:`.determinacy`); ``(k, 0)`` when there are none."""
+        _, V0 = null_space(Hs, self.null_tol)
+        return V0 * scale[:, None]
 
     @staticmethod
     def _jac(model: ErrorModel, p: _Problem, keys: Sequence[str]):

@@ -25,6 +25,15 @@ tracker anywhere in the cell and the target mounted at any angle:
   target's orientation is not observed; PROBE's rotation is set to identity.
 
 Both are vectorised over poses and exact for noise-free data of a nominal robot.
+
+**Poses that hardly turn the flange** (a surface scan at constant tool orientation)
+do not determine the target offset ``t_X``: ``R_F,i t_X`` is then nearly the same for
+every pose and trades against ``t_Y``.  The linear solve for ``(t_X, t_Y)`` is then
+truncated — directions whose singular value is below ``rel_tol`` of the largest (the
+columns all have norm √N) keep ``t_X`` at ``prior_offset`` (minimum-norm deviation from
+it) — and the hand-eye estimate refuses (its ``(R_A − I)`` has singular values of the
+order of the pair rotations, below ``rel_tol·√pairs``), instead of returning an offset
+that wandered by metres along the undetermined direction (:mod:`.determinacy`).
 """
 
 from __future__ import annotations
@@ -35,6 +44,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from plugcell.calibration.linalg import least_squares, null_space, restricted_basis
 from plugcell.kinematics.transforms import invert, so3_log
 from plugcell.metrology import fit_rigid_transform
 
@@ -85,7 +95,8 @@ def _pairs(n: int) -> tuple[Array, Array]:
     return a[keep], b[keep]
 
 
-def estimate_base_probe(flange: ArrayLike, measured: ArrayLike) -> FrameEstimate:
+def estimate_base_probe(flange: ArrayLike, measured: ArrayLike, *,
+                        rel_tol: float = 0.0) -> FrameEstimate:
     """Closed-form BASE and PROBE from 6-DOF data (hand-eye ``A X = X B``, module docstring).
 
     With ``A_ij = F_i⁻¹F_j``, ``B_ij = T_i⁻¹T_j``: ``R_X = argmin Σ ‖log R_A − R_X log R_B‖²``
@@ -98,6 +109,10 @@ def estimate_base_probe(flange: ArrayLike, measured: ArrayLike) -> FrameEstimate
         Nominal flange poses in the robot base frame, ``N ≥ 3``.
     measured : (N, 4, 4) array_like, m
         Measured target poses in the tracker frame.
+    rel_tol : float
+        Refuse when the smallest singular value of the stacked ``(R_A − I)`` is below
+        ``rel_tol · √pairs`` (the pair rotations do not determine ``t_X``; default 0:
+        never).
 
     Returns
     -------
@@ -107,8 +122,9 @@ def estimate_base_probe(flange: ArrayLike, measured: ArrayLike) -> FrameEstimate
     Raises
     ------
     InitialEstimateError
-        Shape mismatch, fewer than 3 poses, or fewer than 2 pose pairs that rotate
-        the flange by more than 1e-3 rad (PROBE undetermined).
+        Shape mismatch, fewer than 3 poses, fewer than 2 pose pairs that rotate
+        the flange by more than 1e-3 rad, or pair rotations that do not determine the
+        PROBE position (``rel_tol``).
     """
     F = np.asarray(flange, dtype=float)
     T = np.asarray(measured, dtype=float)
@@ -134,6 +150,9 @@ def estimate_base_probe(flange: ArrayLike, measured: ArrayLike) -> FrameEstimate
     # (R_A − I) t_X = R_X t_B − t_A
     lhs = (A[:, :3, :3] - np.eye(3)).reshape(-1, 3)
     rhs = (B[:, :3, 3] @ RX.T - A[:, :3, 3]).reshape(-1)
+    if rel_tol > 0 and np.linalg.svd(lhs, compute_uv=False)[-1] < rel_tol * np.sqrt(len(A)):
+        raise InitialEstimateError("the poses hardly rotate the flange: the PROBE position "
+                                   "is undetermined")
     tX, *_ = np.linalg.lstsq(lhs, rhs, rcond=None)
     X = np.eye(4)
     X[:3, :3], X[:3, 3] = RX, tX
@@ -149,7 +168,7 @@ def estimate_base_probe(flange: ArrayLike, measured: ArrayLike) -> FrameEstimate
 
 def estimate_base_probe_positions(
     flange: ArrayLike, positions: ArrayLike, *, probe_offset: ArrayLike | None = None,
-    iterations: int = 20,
+    iterations: int = 20, prior_offset: ArrayLike | None = None, rel_tol: float = 0.0,
 ) -> FrameEstimate:
     """BASE and the target offset from target positions by alternating registration.
 
@@ -168,6 +187,12 @@ def estimate_base_probe_positions(
         Starting target offset ``t_X`` in the flange frame (default 0).
     iterations : int
         Most alternations (must be ≥ 1).
+    prior_offset : (3,) array_like, m, optional
+        The offset kept along directions the poses do not determine (default: the
+        starting offset).
+    rel_tol : float
+        Relative singular value of ``[R_Y R_F,i  I]`` (columns of norm √N) below which a
+        direction is undetermined (module docstring; default 0: plain least squares).
 
     Returns
     -------
@@ -193,6 +218,7 @@ def estimate_base_probe_positions(
         raise InitialEstimateError(
             f"need at least 4 poses to estimate BASE and the target, got {N}")
     tX = np.zeros(3) if probe_offset is None else np.asarray(probe_offset, dtype=float)
+    prior = tX.copy() if prior_offset is None else np.asarray(prior_offset, dtype=float)
     RF, pF = F[:, :3, :3], F[:, :3, 3]
     for _ in range(iterations):
         pts = pF + RF @ tX
@@ -201,7 +227,14 @@ def estimate_base_probe_positions(
         # P_i − R_Y p_F = R_Y R_F t_X + t_Y : linear in (t_X, t_Y)
         M = np.concatenate([RY @ RF, np.broadcast_to(np.eye(3), (N, 3, 3))], axis=2)
         rhs = P - pF @ RY.T
-        sol, *_ = np.linalg.lstsq(M.reshape(-1, 6), rhs.reshape(-1), rcond=None)
+        M2, b = M.reshape(-1, 6), rhs.reshape(-1)
+        _, V0 = null_space(M2, rel_tol) if rel_tol > 0 else (None, np.zeros((6, 0)))
+        if V0.shape[1] == 0:
+            sol, *_ = np.linalg.lstsq(M2, b, rcond=None)
+        else:  # t_X at the prior along what the poses do not see, t_Y its best match
+            x0 = np.concatenate([prior, np.mean(rhs - (RY @ RF) @ prior, axis=0)])
+            Z = restricted_basis(V0, np.ones(6))
+            sol = x0 + Z @ least_squares(M2 @ Z, b - M2 @ x0)
         step = np.linalg.norm(sol[:3] - tX)
         tX = sol[:3]
         tY = sol[3:]
@@ -221,7 +254,9 @@ def _rms(base: Array, F: Array, X: Array, P: Array) -> float:
     return float(np.sqrt(np.mean(np.sum((pred - P) ** 2, axis=1))))
 
 
-def estimate_base_probe_poses(flange: ArrayLike, measured: ArrayLike) -> FrameEstimate:
+def estimate_base_probe_poses(flange: ArrayLike, measured: ArrayLike, *,
+                              prior_offset: ArrayLike | None = None,
+                              rel_tol: float = 0.0) -> FrameEstimate:
     """6-DOF initial BASE/PROBE: the better of the hand-eye and registration estimates.
 
     Candidates: :func:`estimate_base_probe` (if the poses rotate enough) and
@@ -234,6 +269,10 @@ def estimate_base_probe_poses(flange: ArrayLike, measured: ArrayLike) -> FrameEs
         Nominal flange poses in the robot base frame, ``N ≥ 4``.
     measured : (N, 4, 4) array_like, m
         Measured target poses in the tracker frame.
+    prior_offset : (3,) array_like, m, optional
+        Target offset kept along directions the poses do not determine (default 0).
+    rel_tol : float
+        The relative singular value threshold of both estimates (default 0: none).
 
     Returns
     -------
@@ -249,8 +288,9 @@ def estimate_base_probe_poses(flange: ArrayLike, measured: ArrayLike) -> FrameEs
     T = np.asarray(measured, dtype=float)
     candidates = []
     with contextlib.suppress(InitialEstimateError):
-        candidates.append(estimate_base_probe(F, T))
-    reg = estimate_base_probe_positions(F, T[:, :3, 3])
+        candidates.append(estimate_base_probe(F, T, rel_tol=rel_tol))
+    reg = estimate_base_probe_positions(F, T[:, :3, 3], prior_offset=prior_offset,
+                                        rel_tol=rel_tol)
     RX = _project_rotation(np.sum(
         np.swapaxes(reg.base[:3, :3] @ F[:, :3, :3], -1, -2) @ T[:, :3, :3], axis=0))
     X = reg.probe.copy()

@@ -20,6 +20,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from plugcell.calibration.configs import ModelConfig
 from plugcell.calibration.data import CalibrationData
+from plugcell.calibration.determinacy import Undetermined
 from plugcell.calibration.identifiability import Identifiability
 from plugcell.calibration.model import ErrorModel
 from plugcell.calibration.residual_model import (
@@ -129,6 +130,10 @@ class CalibrationResult:
         Physical (``before``) vs hybrid (``after``) on the validation poses.
     hybrid_fallbacks : int
         Validation poses outside the layer's trained region (physical model used).
+    undetermined : Undetermined or None
+        What the calibration poses did not determine (kept at the initial values,
+        :mod:`~plugcell.calibration.determinacy`); ``None``: everything determined (or a
+        PARAMS.json written before it was recorded).
     """
 
     config: ModelConfig
@@ -160,6 +165,7 @@ class CalibrationResult:
     residual_model: LearnedResidual | None = None
     hybrid_validation_residuals: PoseResiduals | None = None
     hybrid_fallbacks: int = 0
+    undetermined: Undetermined | None = None
 
     # ------------------------------------------------------------------ prediction
     def predict(self, q: ArrayLike, payload_kg: ArrayLike | float | None = None,

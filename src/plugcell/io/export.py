@@ -28,11 +28,12 @@ import hashlib
 import json
 import math
 from collections.abc import Mapping
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Any
 
 import numpy as np
 
+from plugcell.calibration.determinacy import with_probe
 from plugcell.io.robots import RobotSource, description_to_toml
 from plugcell.kinematics.description import Link, RobotDescription
 from plugcell.kinematics.parameters import GeometricParameters
@@ -437,7 +438,8 @@ def _export_ur(result: Any, desc: RobotDescription, source: RobotSource | None,
 def export_calibration(result: Any, desc: RobotDescription, fmt: str, *,
                        source: RobotSource | None = None, params_path: str = "PARAMS.json",
                        include_base: bool = False, include_probe: bool = False,
-                       serial_equivalent: bool = False) -> Exported:
+                       serial_equivalent: bool = False,
+                       probe: np.ndarray | None = None) -> Exported:
     """Export a calibration of robot ``desc`` as ``fmt`` (one of :data:`FORMATS`).
 
     Parameters
@@ -457,6 +459,10 @@ def export_calibration(result: Any, desc: RobotDescription, fmt: str, *,
         URDF: add BASE (root link ``measurement``) and PROBE (link ``probe``).
     serial_equivalent : bool
         Allow exporting the serial-equivalent chain of a loop robot.
+    probe : (4, 4) ndarray, m, optional
+        The target (tool point) in the flange frame, replacing the calibration's PROBE
+        (:func:`~plugcell.calibration.determinacy.with_probe`: BASE re-expressed when the
+        calibration did not determine the PROBE position).
 
     Returns
     -------
@@ -471,10 +477,23 @@ def export_calibration(result: Any, desc: RobotDescription, fmt: str, *,
         unknown ``fmt``, a loop robot for URDF/UR without ``serial_equivalent``, a
         serial-equivalent chain not asked for, ``ur-kinematics`` for a robot not from
         ``ur_description``, a URDF source that changed since the calibration, BASE on
-        a chain that does not start at the URDF's root.
+        a chain that does not start at the URDF's root, a PROBE position the calibration
+        poses did not determine and no ``probe`` given (the exported tool would be a
+        value nobody measured).
     DescriptionError
         A URDF ``source`` that can no longer be imported.
     """
+    und = getattr(result, "undetermined", None)
+    if probe is not None:
+        result = replace(result, model=with_probe(result.model, probe, und))
+    elif und is not None and und.unknown("probe_position"):
+        raise ExportError(
+            "the calibration poses did not determine the PROBE position (the tool "
+            f"orientation varied by {math.degrees(und.orientation_spread_rad):.2g}° over the "
+            f"campaign; {math.degrees(und.required_spread_rad):.1f}° would have): the "
+            "exported tool and BASE would be values nobody measured; give the target in the "
+            "flange frame (--probe X,Y,Z,R,P,Y in mm and degrees, or a JSON file), or "
+            "calibrate with --probe")
     if fmt == "toml":
         return _export_toml(result, desc, params_path, serial_equivalent)
     if fmt == "urdf":

@@ -27,6 +27,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from plugcell.calibration.configs import model_config
+from plugcell.calibration.determinacy import COMPONENTS, Undetermined
 from plugcell.calibration.model import MIN_PAYLOAD_REF_KG, THERMAL_KEY, ErrorModel
 from plugcell.calibration.result import CalibrationResult, IterationRecord, harmonic_order
 from plugcell.calibration.statistics import PoseResiduals
@@ -58,6 +59,8 @@ __all__ = [
     "residuals_document",
     "residuals_json",
     "result_from_params",
+    "undetermined_document",
+    "undetermined_from_document",
     "validity_document",
     "validity_from_document",
 ]
@@ -281,6 +284,86 @@ def validity_from_document(d: dict[str, Any]) -> ValidityRegion:
         raise ParamsError(f"validity: {exc}") from None
 
 
+# ---------------------------------------------------------------------- undetermined
+
+
+def undetermined_document(u: Undetermined) -> dict[str, Any]:
+    """PARAMS.json's ``undetermined``: what the calibration poses did not determine.
+
+    Parameters
+    ----------
+    u : Undetermined
+        From the calibration (:mod:`plugcell.calibration.determinacy`).
+
+    Returns
+    -------
+    dict
+        ``components`` (of ``probe_position``, ``probe_orientation``, ``base_position``,
+        ``base_orientation``), ``probe_axes`` (flange-frame axes), ``parameters`` (keys),
+        ``given`` (frames the user gave), ``orientation_spread_deg``,
+        ``required_spread_deg``, ``flange_orientation`` (3 × 3, robot base frame),
+        ``poses``, ``directions``, ``tolerance``, ``messages``.
+    """
+    return {
+        "components": list(u.components), "probe_axes": list(u.probe_axes),
+        "parameters": list(u.parameters), "given": list(u.given),
+        "orientation_spread_deg": math.degrees(u.orientation_spread_rad),
+        "required_spread_deg": math.degrees(u.required_spread_rad),
+        "flange_orientation": np.asarray(u.flange_orientation).tolist(),
+        "poses": u.n_poses, "directions": u.n_directions, "tolerance": u.tolerance,
+        "messages": list(u.messages),
+    }
+
+
+def undetermined_from_document(d: dict[str, Any]) -> Undetermined:
+    """The record of an :func:`undetermined_document` (inverse).
+
+    Parameters
+    ----------
+    d : dict
+        PARAMS.json's ``undetermined``.
+
+    Returns
+    -------
+    Undetermined
+        The record.
+
+    Raises
+    ------
+    ParamsError
+        A missing key or a value of the wrong type, e.g. ``"undetermined.components:
+        unknown 'probe'"``.
+    """
+    doc = {"undetermined": d}
+
+    def names(key: str, allowed: tuple[str, ...] | None = None) -> tuple[str, ...]:
+        v = _at(doc, "undetermined", key, default=[])
+        if not isinstance(v, list) or not all(isinstance(x, str) for x in v):
+            raise ParamsError(f"undetermined.{key}: expected a list of names")
+        bad = [x for x in v if allowed is not None and x not in allowed]
+        if bad:
+            raise ParamsError(f"undetermined.{key}: unknown {', '.join(map(repr, bad))}; "
+                              f"known: {', '.join(allowed or ())}")
+        return tuple(v)
+
+    try:
+        R = np.asarray(_at(doc, "undetermined", "flange_orientation"), dtype=float)
+    except (TypeError, ValueError):
+        raise ParamsError("undetermined.flange_orientation: expected a 3x3 matrix") from None
+    if R.shape != (3, 3) or not np.all(np.isfinite(R)):
+        raise ParamsError("undetermined.flange_orientation: expected a finite 3x3 matrix")
+    return Undetermined(
+        components=names("components", COMPONENTS), probe_axes=names("probe_axes",
+                                                                     ("x", "y", "z")),
+        parameters=names("parameters"), given=names("given", ("base", "probe")),
+        orientation_spread_rad=math.radians(_number(doc, "undetermined", "orientation_spread_deg")),
+        required_spread_rad=math.radians(_number(doc, "undetermined", "required_spread_deg")),
+        flange_orientation=R, n_poses=_integer(doc, "undetermined", "poses"),
+        n_directions=_integer(doc, "undetermined", "directions"),
+        tolerance=_number(doc, "undetermined", "tolerance"),
+        messages=names("messages"))
+
+
 # ---------------------------------------------------------------------- PARAMS.json
 
 
@@ -308,7 +391,8 @@ def params_document(result: CalibrationResult,
         ``references``, ``nominal_frames``, ``iterations``, ``converged``,
         ``condition_number``, ``sigma2``, ``dof``, ``history``, ``calibration``,
         ``validation`` (accuracy summaries, mm/deg), ``warnings``, ``residual_model``,
-        ``validation_hybrid``, ``elapsed_s``, ``settings``, ``validity``.
+        ``validation_hybrid``, ``elapsed_s``, ``settings``, ``validity``,
+        ``undetermined`` (:func:`undetermined_document`; ``null``: everything determined).
     """
     model = result.model
     space = model.space
@@ -355,6 +439,8 @@ def params_document(result: CalibrationResult,
         "elapsed_s": result.elapsed_s,
         "settings": dict(result.settings),
         "validity": None if result.validity is None else validity_document(result.validity),
+        "undetermined": None if result.undetermined is None
+        else undetermined_document(result.undetermined),
     }
 
 
@@ -470,8 +556,8 @@ def result_from_params(document: dict[str, Any], description: RobotDescription, 
     ----------
     document : dict
         What :func:`params_document` wrote (as read from JSON).  ``model.harmonics``,
-        ``model.thermal``, ``model.temperature_ref_c``, ``warnings`` and ``validity``
-        may be absent (files written before they were recorded).
+        ``model.thermal``, ``model.temperature_ref_c``, ``warnings``, ``validity`` and
+        ``undetermined`` may be absent (files written before they were recorded).
     description : RobotDescription
         The robot the calibration was identified on (its ``name`` is the document's
         ``robot``).
@@ -562,12 +648,18 @@ def result_from_params(document: dict[str, Any], description: RobotDescription, 
         if not isinstance(v, dict):
             raise ParamsError(f"validity: expected an object, got {_typename(v)}")
         validity = validity_from_document(v)
+    undetermined = None
+    u = document.get("undetermined")
+    if u:  # absent in files written before it was recorded
+        if not isinstance(u, dict):
+            raise ParamsError(f"undetermined: expected an object, got {_typename(u)}")
+        undetermined = undetermined_from_document(u)
     return CalibrationResult(
         config=cfg, robot=robot, model=model, nominal=nominal, keys=tuple(keys),
         identifiability=None, data_identifiability=None, iterations=iterations,
         converged=converged, history=(), statistics=None, calibration=None,
         calibration_before=None, six_dof=six_dof, n_poses=n_poses,
-        warnings=tuple(warnings), validity=validity)
+        warnings=tuple(warnings), validity=validity, undetermined=undetermined)
 
 
 def rebase_document(document: dict[str, Any], result: CalibrationResult, base: ArrayLike,

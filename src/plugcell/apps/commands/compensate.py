@@ -192,6 +192,7 @@ def _run(args: argparse.Namespace) -> int:
         more = f"\n... and {bad.size - 5} more" if bad.size > 5 else ""
         raise CommandError(f"{bad.size} of {len(names)} targets cannot be compensated:\n"
                            + "\n".join(msgs) + more)
+    notes = _undetermined(args, result, res.q, payload, names, lines, tool)
     region = _region(result, res.q, payload)
     _write(args, result, names, res, payload, region)
     hybrid = ""
@@ -206,12 +207,63 @@ def _run(args: argparse.Namespace) -> int:
           f"{int(res.iterations.max())} iterations, residual ≤ {float(res.residual.max()):.1e}"
           + ("" if args.out is None else f"; wrote {args.out}"),
           file=sys.stderr if args.out is None else sys.stdout)
+    for n in notes:
+        print(f"warning: {n}", file=sys.stderr)
     if region is not None and region.count:
         print(f"warning: {region.message('targets')}", file=sys.stderr)
         for k in np.flatnonzero(region.outside)[:5]:
             print(f"  {args.targets}: line {lines[k]} ({names[k]}): {region.reasons(int(k))}",
                   file=sys.stderr)
     return 0
+
+
+def _undetermined(args: argparse.Namespace, result: Any, q: np.ndarray, payload: np.ndarray,
+                  names: list[str], lines: list[int], tool: np.ndarray | None) -> list[str]:
+    """What the calibration poses did not determine (PARAMS.json ``undetermined``) against
+    the compensated joints ``q``: with the PROBE position undetermined and no ``--tool``,
+    targets whose tool orientation lies beyond the campaign's are refused (the tool point
+    would be off by the unknown offset turned by that angle) and the rest get a warning;
+    undetermined model parameters give a warning for targets beyond it.  Returns the
+    warnings."""
+    import math
+
+    from plugcell.apps.cli import CommandError
+
+    und = result.undetermined
+    if und is None:
+        return []
+    m = result.model
+    flange = np.linalg.inv(m.base()) @ m.predict(q, payload) @ np.linalg.inv(m.probe())
+    angle = und.orientation_offset(flange[:, :3, :3])
+    away = und.away(flange[:, :3, :3])
+    held = f"the calibration held it within {math.degrees(und.orientation_spread_rad):.2g}°"
+    if und.unknown("probe_position") and tool is None:
+        if away.any():
+            bad = np.flatnonzero(away)
+            listed = "\n".join(f"{args.targets}: line {lines[k]} ({names[k]}): tool turned "
+                                f"{math.degrees(angle[k]):.2f}° from the calibration's"
+                                for k in bad[:5])
+            more = f"\n... and {bad.size - 5} more" if bad.size > 5 else ""
+            raise CommandError(
+                f"{args.params}: the calibration poses did not determine the PROBE position "
+                f"({held}); {bad.size} of {len(q)} targets turn the tool away from that "
+                "orientation, where the compensated point would be off by the unknown offset: "
+                "give the tool point with --tool X,Y,Z,A,B,C (or recalibrate with the "
+                f"orientation varied by at least {math.degrees(und.required_spread_rad):.1f}°)"
+                f":\n{listed}{more}")
+        t = m.probe()[:3, 3] * 1e3
+        return [f"the PROBE position was not determined by the calibration poses: the "
+                f"compensated point is the kept PROBE ({t[0]:.1f}, {t[1]:.1f}, {t[2]:.1f} mm "
+                "in the flange frame), right only for targets registered with the "
+                "calibration's BASE (e.g. measured by the tracker) at its tool orientation; "
+                "give --tool for any other"]
+    if und.parameters and away.any():
+        names_p = ", ".join(m.space[k].name for k in und.parameters)
+        return [f"{int(away.sum())} of {len(q)} targets turn the tool up to "
+                f"{math.degrees(float(angle.max())):.1f}° from the calibration's orientation "
+                f"({held}), where parameters the poses did not determine ({names_p}) are "
+                "not measured: the model extrapolates there"]
+    return []
 
 
 def _region(result: Any, q: np.ndarray, payload: np.ndarray) -> Any:

@@ -3,13 +3,16 @@
 ::
 
     plugcell export --params PARAMS.json --format urdf|ur-kinematics|toml --out FILE
-                    [--include-base] [--include-probe] [--serial-equivalent] [--json]
+                    [--include-base] [--include-probe] [--serial-equivalent]
+                    [--probe X,Y,Z,R,P,Y|FILE.json] [--json]
 
 The robot is the one PARAMS.json records (``robot_source``: the file and xacro
 arguments it was loaded from; ``description``: what was calibrated); ``--robot``
 (with the URDF options) overrides it.  What the format cannot carry goes into
 ``FILE.extra.json`` next to it, and the command says so (docs/robot-description.md,
-"Export").
+"Export").  A calibration whose poses did not determine the PROBE position (PARAMS.json
+``undetermined``, e.g. a scan at constant tool orientation) is refused unless ``--probe``
+gives the target in the flange frame (docs/calibration.md, *Identifiability*).
 """
 
 from __future__ import annotations
@@ -39,6 +42,10 @@ def configure(p: argparse.ArgumentParser) -> None:
                    help="urdf: add PROBE (the measured target) as a link 'probe' on the tip")
     p.add_argument("--serial-equivalent", action="store_true",
                    help="loop robot calibrated with --model serial: export its serial chain")
+    p.add_argument("--probe", metavar="X,Y,Z,R,P,Y|FILE.json",
+                   help="the target (tool point) in the flange frame (mm, fixed-axis degrees, or "
+                   "a JSON file as calibrate --probe) instead of the calibrated PROBE; needed "
+                   "when the calibration poses did not determine the PROBE position")
     p.add_argument("--json", action="store_true", help="print a JSON summary")
     add_robot_args(p, help="robot (name, .toml, .urdf, .xacro) instead of the one PARAMS.json "
                    "records")
@@ -47,6 +54,7 @@ def configure(p: argparse.ArgumentParser) -> None:
 
 def _run(args: argparse.Namespace) -> int:
     from plugcell.apps.cli import CommandError
+    from plugcell.apps.commands.calibrate import _frame
     from plugcell.apps.commands.files import read_calibration
     from plugcell.apps.commands.robotargs import robot_source_of
     from plugcell.io.export import ExportError, export_calibration
@@ -67,7 +75,8 @@ def _run(args: argparse.Namespace) -> int:
         out = export_calibration(result, desc, args.format, source=source,
                                  params_path=args.params.name, include_base=args.include_base,
                                  include_probe=args.include_probe,
-                                 serial_equivalent=args.serial_equivalent)
+                                 serial_equivalent=args.serial_equivalent,
+                                 probe=None if args.probe is None else _frame(args.probe, "probe"))
     except ExportError as exc:
         raise CommandError(f"{args.params}: cannot export as {args.format}: {exc}") from None
     except DescriptionError as exc:

@@ -51,6 +51,9 @@ def configure(p: argparse.ArgumentParser) -> None:
     common(m)
     which = m.add_mutually_exclusive_group(required=True)
     which.add_argument("--poses", type=int, help="number of random poses in the working volume")
+    which.add_argument("--scan", type=int, metavar="N",
+                       help="N poses of a surface scan: a horizontal patch of the working "
+                            "volume at one constant tool orientation")
     which.add_argument("--plan", type=Path, metavar="PLAN.csv",
                        help="measure the poses of a plan file (plugcell plan), each with its "
                             "payload; --payload is the payload of rows without one")
@@ -79,6 +82,9 @@ def configure(p: argparse.ArgumentParser) -> None:
         default="rpy",
         help="orientation convention of rx,ry,rz (default: rpy)",
     )
+    m.add_argument("--mode", choices=("6dof", "3dof"), default="6dof",
+                   help="measure the T-MAC pose (6dof, default) or the reflector's position "
+                        "(3dof)")
     m.add_argument("--out", type=Path, required=True, help="measurement CSV to write")
     m.add_argument("--quiet", action="store_true", help="no progress output")
     m.set_defaults(func=_measure)
@@ -149,13 +155,18 @@ def _report(args: argparse.Namespace) -> int:
 def _measure(args: argparse.Namespace) -> int:
     from plugcell.apps.cli import CommandError
     from plugcell.io.measurements import write_measurements
-    from plugcell.sim.twin.campaign import CampaignError, working_volume_joints
+    from plugcell.sim.twin.campaign import (
+        CampaignError,
+        surface_scan_joints,
+        working_volume_joints,
+    )
     from plugcell.sim.twin.robot import RobotTwin
     from plugcell.sim.twin.scenario import ScenarioError
     from plugcell.sim.twin.tracker import LaserTracker, TrackerError
 
-    if args.poses is not None and args.poses < 1:
-        raise CommandError(f"--poses must be positive, got {args.poses}")
+    for opt in ("poses", "scan"):
+        if getattr(args, opt) is not None and getattr(args, opt) < 1:
+            raise CommandError(f"--{opt} must be positive, got {getattr(args, opt)}")
     if not (np.isfinite(args.payload) and args.payload >= 0):
         raise CommandError(f"--payload must be a mass ≥ 0 kg, got {args.payload}")
     scenario = _scenario(args).with_payload(args.payload)
@@ -166,6 +177,10 @@ def _measure(args: argparse.Namespace) -> int:
         tracker = LaserTracker(seed=tracker_seed)
         if args.plan is not None:
             joints, payloads = _plan_joints(args.plan, robot.description, args.payload)
+        elif args.scan is not None:
+            joints = surface_scan_joints(robot.description, robot.reveal_truth().profile,
+                                         args.scan, np.random.default_rng(pose_seed))
+            payloads = np.full(len(joints), args.payload)
         else:
             joints = working_volume_joints(
                 robot.description,
@@ -179,7 +194,8 @@ def _measure(args: argparse.Namespace) -> int:
     except (ScenarioError, CampaignError, TrackerError, ValueError) as exc:
         raise CommandError(str(exc)) from None
     what = (f"{len(joints)} poses of plan {args.plan}" if args.plan is not None
-            else f"{args.poses} poses, payload {args.payload:g} kg, pose seed {pose_seed}")
+            else f"{len(joints)} {'scan ' if args.scan else ''}poses, payload "
+                 f"{args.payload:g} kg, pose seed {pose_seed}, {args.mode}")
     comments = [
         f"plugcell twin measure: robot {scenario.robot}, {what}",
         f"scenario: {scenario.to_json()}",
@@ -236,12 +252,14 @@ def _measure_groups(scenario: Any, robot: Any, tracker: Any, joints: np.ndarray,
                 bar(s + i, len(joints))
 
         data, sim_s = measure_poses(twin, tracker, joints[s:e], duration_s=args.duration,
-                                    rotation=args.rot, progress=progress)
+                                    rotation=args.rot, progress=progress,
+                                    mode=getattr(args, "mode", "6dof"))
         parts.append(data)
         sim_total += sim_s
     if len(parts) == 1:
         return parts[0], sim_total
     return MeasurementSet(
         np.concatenate([p.joints for p in parts]), np.concatenate([p.positions for p in parts]),
-        np.concatenate([p.angles for p in parts]), parts[0].rotation,
+        None if parts[0].angles is None else np.concatenate([p.angles for p in parts]),
+        parts[0].rotation,
         np.concatenate([p.payload_kg for p in parts])), sim_total

@@ -81,6 +81,68 @@ def working_volume_joints(desc: RobotDescription, profile: TwinProfile, n: int,
     return q[:n]
 
 
+def surface_scan_joints(desc: RobotDescription, profile: TwinProfile, n: int,
+                        rng: np.random.Generator, *, height: float = 0.5,
+                        extent: float = 0.8) -> Array:
+    """``n`` joint configurations of a surface scan: flange positions uniform on a
+    horizontal patch of the working volume (``extent`` of its x and y sides, at
+    ``height`` of its z range), all at the profile's reference orientation — the tool
+    orientation held constant, as when a probe follows a surface (the campaign whose
+    PROBE position cannot be told apart from BASE, :mod:`plugcell.calibration.determinacy`).
+
+    Parameters
+    ----------
+    desc : RobotDescription
+        The robot (its working volume and nominal geometry).
+    profile : TwinProfile
+        Its twin profile (the reference orientation).
+    n : int
+        Poses.
+    rng : numpy.random.Generator
+        Seeded generator of the positions.
+    height : float
+        Height of the patch as a fraction of the working volume's z range.
+    extent : float
+        Fraction of the working volume's x and y sides the patch covers.
+
+    Returns
+    -------
+    (n, n_act) array, rad
+        Joint targets (nominal IK within the joint limits).
+
+    Raises
+    ------
+    CampaignError
+        No working volume, or fewer than ``n`` reachable poses.
+    """
+    if desc.working_volume is None:
+        raise CampaignError(f"robot {desc.name!r} has no working_volume in its description")
+    lo, hi = np.asarray(desc.working_volume.lower), np.asarray(desc.working_volume.upper)
+    c, ext = 0.5 * (lo + hi), hi - lo
+    params = desc.nominal_parameters()
+    found: list[Array] = []
+    for _ in range(20):
+        need = n - sum(len(f) for f in found)
+        if need <= 0:
+            break
+        u = rng.uniform(-0.5, 0.5, size=(max(2 * need, 8), 2))
+        T = np.broadcast_to(np.eye(4), (len(u), 4, 4)).copy()
+        T[:, :3, :3] = zyz_to_matrix(*profile.reference_zyz)
+        T[:, 0, 3] = c[0] + extent * ext[0] * u[:, 0]
+        T[:, 1, 3] = c[1] + extent * ext[1] * u[:, 1]
+        T[:, 2, 3] = lo[2] + height * ext[2]
+        try:
+            res = inverse(desc, params, T, seed=desc.home, raise_errors=False)
+        except KinematicsError:
+            continue
+        ok = np.asarray(res.converged) & np.asarray(res.within_limits)
+        found.append(np.asarray(res.q)[ok][:need])
+    q = np.concatenate(found) if found else np.empty((0, desc.n_readings))
+    if len(q) < n:
+        raise CampaignError(f"found only {len(q)} of {n} reachable scan poses")
+    return q[:n]
+
+
 def move_time(q_from: Array, q_to: Array) -> float:
     """Simulated duration of a joint move plus settling (s)."""
     return float(np.max(np.abs(q_to - q_from)) / JOINT_SPEED + SETTLE_S)
@@ -88,13 +150,19 @@ def move_time(q_from: Array, q_to: Array) -> float:
 
 def measure_poses(robot: RobotTwin, tracker: LaserTracker, joints: Array, *,
                   duration_s: float = 1.0, rotation: str = "rpy",
-                  progress: Progress | None = None) -> tuple[MeasurementSet, float]:
+                  progress: Progress | None = None,
+                  mode: str = "6dof") -> tuple[MeasurementSet, float]:
     """Move through ``joints`` and take one tracker measurement at each pose.
+
+    ``mode``: ``"6dof"`` (T-MAC pose) or ``"3dof"`` (the reflector's position only; the
+    set then has no angles).
 
     The operator catches the beam on the T-MAC once at the start (as with a real
     tracker); from then on the tracker follows the reflector through each move.
     Returns the measurement set and the simulated time (s) the campaign took.
     """
+    if mode not in ("6dof", "3dof"):
+        raise ValueError(f"mode: '6dof' or '3dof', got {mode!r}")
     n = len(joints)
     readings = np.empty_like(joints)
     positions = np.empty((n, 3))
@@ -108,13 +176,16 @@ def measure_poses(robot: RobotTwin, tracker: LaserTracker, joints: Array, *,
             robot.move_joints(q)
         dt = move_time(q_prev, q)
         tracker.track(robot.true_reflector_in_tracker(), dt)
-        m = tracker.measure(robot.true_reflector_in_tracker(), duration_s, mode="6dof")
+        m = tracker.measure(robot.true_reflector_in_tracker(), duration_s,
+                            mode="3dof" if mode == "3dof" else "6dof")
         sim_time += dt + duration_s
         readings[i] = robot.joint_readings()
-        positions[i] = m.pose[:3, 3]
-        angles[i] = matrix_to_angles(m.pose[:3, :3], rotation)
+        positions[i] = m.position if m.pose is None else m.pose[:3, 3]
+        if m.pose is not None:
+            angles[i] = matrix_to_angles(m.pose[:3, :3], rotation)
         q_prev = readings[i]
         if progress is not None:
             progress(i + 1, n)
     payload = np.full(n, robot.payload.mass)
-    return MeasurementSet(readings, positions, angles, rotation, payload), sim_time
+    return MeasurementSet(readings, positions, None if mode == "3dof" else angles, rotation,
+                          payload), sim_time
