@@ -28,7 +28,7 @@ import hashlib
 import json
 import math
 from collections.abc import Mapping
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Any
 
 import numpy as np
@@ -108,19 +108,12 @@ def _geometry(result: Any, desc: RobotDescription, serial_equivalent: bool,
     same = (chain_desc.link_names == desc.link_names
             and structure.reading_map.shape == (desc.n_actuated, desc.n_actuated)
             and np.allclose(structure.reading_map, np.eye(desc.n_actuated)))
-    if desc.loops and fmt != "toml":
-        if not serial_equivalent:
-            raise ExportError(
-                f"{desc.name} has a closed loop (parallelogram {desc.loops[0].arm}/"
-                f"{desc.loops[0].crank}): a URDF describes a tree of joints and cannot carry "
-                "the loop or its calibrated parameters; export --format toml, or calibrate with "
-                "--model serial and export --serial-equivalent (the serial chain of eq. 6.3, "
-                "whose joints are a linear map of the readings)")
-        if same:
-            raise ExportError(
-                f"--serial-equivalent: this calibration (model {result.config.name}) identified "
-                "the loop itself; calibrate with --model serial (or serial+gravity) to export "
-                "the serial-equivalent chain")
+    if desc.loops and fmt != "toml" and serial_equivalent and same:
+        raise ExportError(
+            f"--serial-equivalent: this calibration (model {result.config.name}) identified "
+            "the loop itself; export it without --serial-equivalent (--format urdf: the "
+            "closest tree, with its error; --format toml: exact), or calibrate with --model "
+            "serial (or serial+gravity) to export the serial-equivalent chain")
     if not same and not serial_equivalent:
         raise ExportError("the calibrated chain is the serial equivalent of the robot "
                           "(its joints are not the readings); add --serial-equivalent")
@@ -155,7 +148,9 @@ def calibrated_description(desc: RobotDescription, gp: GeometricParameters, base
                            tool: np.ndarray, note: str) -> RobotDescription:
     """``desc`` with the calibrated rows of ``gp``, ``base`` = BASE and ``tool`` = PROBE.
 
-    A link gets ``hayati = true`` when its calibrated β is non-zero.
+    A link gets ``hayati = true`` when its calibrated β is non-zero; every loop becomes
+    ``kind = "fourbar"`` (its calibrated sides, twists and offsets are kept, the passive
+    angles are the exact four-bar closure's — what the calibration's model computes).
 
     Parameters
     ----------
@@ -191,7 +186,8 @@ def calibrated_description(desc: RobotDescription, gp: GeometricParameters, base
     notes = (desc.notes + "\n" if desc.notes else "") + note
     return RobotDescription(
         name=desc.name, links=tuple(links), actuated=desc.actuated, flange=desc.flange,
-        loops=desc.loops, base=base, tool=tool, joint_limits=desc.joint_limits,
+        loops=tuple(replace(lp, kind="fourbar") for lp in desc.loops), base=base, tool=tool,
+        joint_limits=desc.joint_limits,
         stiffness=desc.stiffness, notes=notes, coupled_limits=desc.coupled_limits,
         home=desc.home, point_masses=desc.point_masses, working_volume=desc.working_volume,
         coupling=desc.coupling)
@@ -271,12 +267,22 @@ def _unique(root: Any, name: str) -> str:
 
 def _export_urdf(result: Any, desc: RobotDescription, source: RobotSource | None,
                  params_path: str, include_base: bool, include_probe: bool,
-                 serial_equivalent: bool) -> Exported:
+                 serial_equivalent: bool, seed: int = 0) -> Exported:
     from lxml import etree
 
     from plugcell.kinematics.joint_chain import calibrated_origins
 
     chain_desc, gp, rmap = _geometry(result, desc, serial_equivalent, "urdf")
+    base_T, probe_T = result.model.base(), result.model.probe()
+    tree = None
+    if desc.loops and rmap is None:  # the calibrated loop: its closest tree, fitted
+        from plugcell.calibration.tree import closest_serial_tree
+
+        tree = closest_serial_tree(result.model, seed=seed)
+        fitted = tree.result.model
+        chain_desc, gp = fitted.structure.desc, fitted.geometric_parameters()
+        rmap = np.asarray(fitted.structure.reading_map)
+        base_T, probe_T = fitted.base(), fitted.probe()
     imp = _source_urdf(source, desc) if rmap is None else None
     notes: list[str] = []
     if imp is not None:
@@ -296,7 +302,9 @@ def _export_urdf(result: Any, desc: RobotDescription, source: RobotSource | None
             tip_link = new
         tip_from_flange = desc.tool
     else:
-        root, base_link, tip_link = _generic_urdf(chain_desc, gp, result.robot)
+        root, base_link, tip_link = _generic_urdf(
+            chain_desc, gp, result.robot, source=desc if desc.loops else None,
+            reading_map=rmap)
         tip_from_flange = chain_desc.tool
     reasons: list[str] = []
     extra: dict[str, Any] = {}
@@ -312,13 +320,12 @@ def _export_urdf(result: Any, desc: RobotDescription, source: RobotSource | None
             raise ExportError(f"--include-base: the chain starts at {base_link!r}, which is not "
                               "the URDF's root link (it would get two parents)")
         new = _unique(root, "measurement")
-        _add_fixed(root, _unique(root, f"{new}-{base_link}"), new, base_link,
-                   result.model.base())
+        _add_fixed(root, _unique(root, f"{new}-{base_link}"), new, base_link, base_T)
         root.insert(0, etree.Element("link", name=new))
     else:
         reasons.append("BASE (the robot base in the measurement frame): add --include-base")
-        extra["base"] = _frame(result.model.base())
-    probe_in_tip = np.linalg.inv(tip_from_flange) @ result.model.probe()
+        extra["base"] = _frame(base_T)
+    probe_in_tip = np.linalg.inv(tip_from_flange) @ probe_T
     if include_probe:
         new = _unique(root, "probe")
         _add_fixed(root, _unique(root, f"{tip_link}-{new}"), tip_link, new, probe_in_tip,
@@ -326,10 +333,21 @@ def _export_urdf(result: Any, desc: RobotDescription, source: RobotSource | None
     else:
         reasons.append(f"PROBE (the measured target in {tip_link!r}): add --include-probe")
         extra["probe_in_tip"] = _frame(probe_in_tip)
-    if rmap is not None:
+    if rmap is not None and not desc.loops:
         reasons.append("the serial-equivalent chain's joints are reading_map @ readings")
         extra["reading_map"] = rmap.tolist()
     extra["tip_link"] = tip_link
+    if tree is not None:
+        reasons.append(_TREE_REASON)
+        extra["tree_error"] = [e.as_dict() for e in tree.errors]
+        extra["tree_fit"] = {"poses": tree.fit_poses, "seed": tree.seed,
+                             "model": "serial (eq. 6.3)"}
+        for e in reversed(tree.errors):
+            root.insert(0, etree.Comment(f" error of this tree vs the calibrated loop: "
+                                         f"{e.line()} "))
+        root.insert(0, etree.Comment(f" {_TREE_REASON} "))
+        notes.extend(f"the tree's error vs the calibrated loop: {e.line()}"
+                     for e in tree.errors)
     root.insert(0, etree.Comment(
         f" calibrated by plugcell: {params_path} (model {result.config.name}) "))
     text = etree.tostring(root, pretty_print=True, xml_declaration=True,
@@ -337,12 +355,74 @@ def _export_urdf(result: Any, desc: RobotDescription, source: RobotSource | None
     return Exported(text, _side(result, params_path, "urdf", reasons, extra), tuple(notes))
 
 
-def _generic_urdf(desc: RobotDescription, gp: GeometricParameters,
-                  name: str) -> tuple[Any, str, str]:
+_TREE_REASON = (
+    "the closed loop: a URDF is a tree, so this is the closest tree — the serial equivalent "
+    "of eq. 6.3 fitted to the calibrated loop (the cut joint as a mimic of the arm's "
+    "reading with multiplier -1 plus the crank's reading; the crank, coupler and follower "
+    "as mimic joints, exact for the nominal parallelogram); the exact calibrated loop is "
+    "the toml export")
+
+
+def _dh(gp: GeometricParameters, name: str) -> np.ndarray:
+    """``M = Tz(d) Tx(a) Rx(α) Ry(β)`` of link ``name`` (identity for ``"base"``)."""
+    if name == "base":
+        return np.eye(4)
+    i = gp.index(name)
+    return np.asarray(dh_hayati(np.array(0.0), np.array(gp.d[i]), np.array(gp.a[i]),
+                                np.array(gp.alpha[i]), np.array(gp.beta[i])))
+
+
+def _urdf_link(root: Any, name: str, lk: Link, M: np.ndarray) -> None:
+    """A ``<link>`` with the lumped mass of ``lk`` (its com is in F_i: at ``M · com``)."""
+    from lxml import etree
+
+    link = etree.SubElement(root, "link", name=name)
+    if lk.mass > 0:
+        inert = etree.SubElement(link, "inertial")
+        com = M @ np.array([*lk.com, 1.0])
+        etree.SubElement(inert, "origin", xyz=" ".join(_fmt(x) for x in com[:3]), rpy="0 0 0")
+        etree.SubElement(inert, "mass", value=_fmt(lk.mass))
+        etree.SubElement(inert, "inertia", ixx="0", ixy="0", ixz="0", iyy="0", iyz="0",
+                         izz="0")
+
+
+def _urdf_joint(root: Any, name: str, kind: str, T: np.ndarray, parent: str, child: str,
+                limits: tuple[float, float] | None = None,
+                mimic: tuple[str, float, float] | None = None) -> None:
+    """A ``<joint>`` about its z axis; ``mimic = (joint, multiplier, offset)``."""
+    from lxml import etree
+
+    j = etree.SubElement(root, "joint", name=name, type=kind)
+    etree.SubElement(j, "origin", **_origin_attrs(T))
+    etree.SubElement(j, "parent", link=parent)
+    etree.SubElement(j, "child", link=child)
+    if kind != "fixed":
+        etree.SubElement(j, "axis", xyz="0 0 1")
+        lo, hi = limits if limits is not None else (-2.0 * math.pi, 2.0 * math.pi)
+        etree.SubElement(j, "limit", lower=_fmt(lo), upper=_fmt(hi), effort="0", velocity="0")
+    if mimic is not None:
+        etree.SubElement(j, "mimic", joint=mimic[0], multiplier=_fmt(mimic[1]),
+                         offset=_fmt(mimic[2]))
+
+
+def _generic_urdf(desc: RobotDescription, gp: GeometricParameters, name: str, *,
+                  source: RobotDescription | None = None,
+                  reading_map: np.ndarray | None = None) -> tuple[Any, str, str]:
     """A URDF of DH/Hayati rows: link *i*'s frame is ``F_{i−1} Rz(q_i + θ_i)``.
 
     Joint *i*'s origin is ``M_parent · Rz(θ_i)`` with ``M = Tz(d) Tx(a) Rx(α) Ry(β)``
     of the parent row; the ``flange`` link is F_n and ``tool0`` the description's tool.
+
+    With ``source`` (a loop robot) and ``desc`` its serial equivalent (eq. 6.3, joints
+    ``q_desc = reading_map · q``), the URDF's independent joints are the readings of
+    ``source``: a cut joint (row ``e_crank − e_arm``) becomes two coaxial joints — the
+    link's own, a ``mimic`` of the arm's reading with multiplier −1, then one named
+    after the crank's reading — so ``Rz(−q_arm) Rz(q_crank) = Rz(q_cut)`` exactly; and
+    each loop's crank, coupler and follower hang off the arm's parent as mimic joints
+    (the crank: ``q_crank``; the coupler ``θ_arm − θ_crank`` and the follower
+    ``π − θ_arm + θ_crank``, each as a mimic of the arm's reading then one of the
+    crank's), exact for the nominal parallelogram (eq. 6.10, ``source``'s nominal
+    rows).  They carry the loop links' masses; they do not move the TCP.
     """
     from lxml import etree
 
@@ -350,43 +430,83 @@ def _generic_urdf(desc: RobotDescription, gp: GeometricParameters,
     base = "base_link"
     root.append(etree.Element("link", name=base))
     chain = set(desc.chain)
+    readings = None if source is None else source.reading_names
 
     def M(name: str) -> np.ndarray:
-        if name == "base":
-            return np.eye(4)
-        i = gp.index(name)
-        return np.asarray(dh_hayati(np.array(0.0), np.array(gp.d[i]), np.array(gp.a[i]),
-                                    np.array(gp.alpha[i]), np.array(gp.beta[i])))
+        return _dh(gp, name)
 
     names = {lk.name: f"link_{lk.name}" for lk in desc.links}
     for i, lk in enumerate(desc.links):
         if i not in chain:
             continue
-        link = etree.SubElement(root, "link", name=names[lk.name])
-        if lk.mass > 0:
-            inert = etree.SubElement(link, "inertial")
-            com = M(lk.name) @ np.array([*lk.com, 1.0])
-            etree.SubElement(inert, "origin", xyz=" ".join(_fmt(x) for x in com[:3]),
-                             rpy="0 0 0")
-            etree.SubElement(inert, "mass", value=_fmt(lk.mass))
-            etree.SubElement(inert, "inertia", ixx="0", ixy="0", ixz="0", iyy="0", iyz="0",
-                             izz="0")
+        _urdf_link(root, names[lk.name], lk, M(lk.name))
         T = M(lk.parent) @ np.asarray(rot_z(gp.theta[gp.index(lk.name)]))
         kind = "prismatic" if lk.is_prismatic else ("revolute" if lk.is_actuated else "fixed")
-        j = etree.SubElement(root, "joint", name=lk.name, type=kind)
-        etree.SubElement(j, "origin", **_origin_attrs(T))
-        etree.SubElement(j, "parent", link=base if lk.parent == "base" else names[lk.parent])
-        etree.SubElement(j, "child", link=names[lk.name])
-        if lk.is_actuated:
-            etree.SubElement(j, "axis", xyz="0 0 1")
-            lo, hi = desc.joint_limits[desc.joint_index(lk.name)]
-            etree.SubElement(j, "limit", lower=_fmt(lo), upper=_fmt(hi), effort="0",
-                             velocity="0")
+        parent = base if lk.parent == "base" else names[lk.parent]
+        if not lk.is_actuated:
+            _urdf_joint(root, lk.name, kind, T, parent, names[lk.name])
+            continue
+        r = desc.actuated_index(lk.name)
+        lim = tuple(desc.joint_limits[desc.joint_index(lk.name)])
+        row = None if reading_map is None or readings is None else reading_map[r]
+        if row is None or np.count_nonzero(row) == 1:
+            jname = lk.name if row is None else readings[int(np.flatnonzero(row)[0])]  # type: ignore[index]
+            _urdf_joint(root, jname, kind, T, parent, names[lk.name], lim)  # type: ignore[arg-type]
+            continue
+        assert source is not None and readings is not None
+        arm, crank = int(np.argmin(row)), int(np.argmax(row))  # row = e_crank − e_arm
+        mid = f"{names[lk.name]}_cut"
+        root.append(etree.Element("link", name=mid))
+        a_lo, a_hi = source.joint_limits[arm]
+        _urdf_joint(root, lk.name, kind, T, parent, mid, (-a_hi, -a_lo),
+                    mimic=(readings[arm], -1.0, 0.0))
+        _urdf_joint(root, readings[crank], kind, np.eye(4), mid, names[lk.name],
+                    tuple(source.joint_limits[crank]))  # type: ignore[arg-type]
+    if source is not None:
+        _loop_branches(root, source, gp, names)
     root.append(etree.Element("link", name="flange"))
     _add_fixed(root, "flange_joint", names[desc.flange], "flange", M(desc.flange))
     root.append(etree.Element("link", name="tool0"))
     _add_fixed(root, "tool0_joint", "flange", "tool0", desc.tool)
     return root, base, "tool0"
+
+
+def _loop_branches(root: Any, source: RobotDescription, gp: GeometricParameters,
+                   names: dict[str, str]) -> None:
+    """Each loop's crank, coupler and follower as mimic joints off the arm's parent
+    (:func:`_generic_urdf`): nominal rows of ``source``, the arm's parent at its place in
+    the tree (``gp``)."""
+    from lxml import etree
+
+    nom = source.nominal_parameters()
+    rd = source.reading_names
+    for loop in source.loops:
+        arm, crank = source.link(loop.arm), source.link(loop.crank)
+        ra, rc = rd[source.actuated_index(arm.name)], rd[source.actuated_index(crank.name)]
+        c = arm.theta - crank.theta  # θ_arm − θ_crank = q_arm − q_crank + c
+        parent = "base_link" if crank.parent == "base" else names[crank.parent]
+        at = gp if crank.parent == "base" or crank.parent in gp.link_names else nom
+        steps = [  # (link, parent's M; the angle = ma·q_arm + mc·q_crank + off)
+            (crank, _dh(at, crank.parent), 0.0, 1.0, 0.0),
+            (source.link(loop.coupler), _dh(nom, crank.name), 1.0, -1.0, c),
+            (source.link(loop.follower), _dh(nom, loop.coupler), -1.0, 1.0, math.pi - c),
+        ]
+        par = parent
+        for lk, Mp, ma, mc, off in steps:
+            T = Mp @ np.asarray(rot_z(lk.theta))
+            child = f"link_{lk.name}"
+            if ma == 0.0:
+                _urdf_joint(root, f"{lk.name}_loop", "revolute", T, par, child,
+                            tuple(source.joint_limits[source.actuated_index(lk.name)]),
+                            mimic=(rc, mc, off))
+            else:
+                mid = f"{child}_{ra}"
+                root.append(etree.Element("link", name=mid))
+                _urdf_joint(root, lk.name, "revolute", T, par, mid, mimic=(ra, ma, off))
+                _urdf_joint(root, f"{lk.name}_{rc}", "revolute", np.eye(4), mid, child,
+                            mimic=(rc, mc, 0.0))
+            _urdf_link(root, child, lk, _dh(nom, lk.name))
+            par = child
 
 
 # =============================================================================== UR yaml
@@ -437,7 +557,7 @@ def _export_ur(result: Any, desc: RobotDescription, source: RobotSource | None,
 def export_calibration(result: Any, desc: RobotDescription, fmt: str, *,
                        source: RobotSource | None = None, params_path: str = "PARAMS.json",
                        include_base: bool = False, include_probe: bool = False,
-                       serial_equivalent: bool = False) -> Exported:
+                       serial_equivalent: bool = False, seed: int = 0) -> Exported:
     """Export a calibration of robot ``desc`` as ``fmt`` (one of :data:`FORMATS`).
 
     Parameters
@@ -457,6 +577,9 @@ def export_calibration(result: Any, desc: RobotDescription, fmt: str, *,
         URDF: add BASE (root link ``measurement``) and PROBE (link ``probe``).
     serial_equivalent : bool
         Allow exporting the serial-equivalent chain of a loop robot.
+    seed : int
+        URDF of a calibrated loop: seed of the configurations its closest tree is fitted
+        and checked on (:func:`~plugcell.calibration.tree.closest_serial_tree`).
 
     Returns
     -------
@@ -479,7 +602,7 @@ def export_calibration(result: Any, desc: RobotDescription, fmt: str, *,
         return _export_toml(result, desc, params_path, serial_equivalent)
     if fmt == "urdf":
         return _export_urdf(result, desc, source, params_path, include_base, include_probe,
-                            serial_equivalent)
+                            serial_equivalent, seed)
     if fmt == "ur-kinematics":
         return _export_ur(result, desc, source, params_path)
     raise ExportError(f"unknown format {fmt!r}; expected one of {', '.join(FORMATS)}")
