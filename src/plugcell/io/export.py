@@ -6,7 +6,9 @@ calibrated DH/Hayati chain ``F_n'`` (the *geometric* model), BASE and PROBE, and
 joint deflections Δq from compliance/payload terms.  The exports carry:
 
 * ``toml`` — plugcell's description with the calibrated rows, ``base`` = BASE and
-  ``tool`` = PROBE (``forward(...).world_tcp`` is the calibrated geometric model);
+  ``tool`` = PROBE (``forward(...).world_tcp`` is the calibrated geometric model); a
+  calibrated loop is a ``type = "fourbar"`` loop (its sides, twists and offsets kept,
+  the exact four-bar closure), so it is exact for loop robots too;
 * ``urdf`` — the source URDF (when the robot came from one; links, limits, inertias,
   meshes kept) with calibrated joint origins
   (:func:`~plugcell.kinematics.joint_chain.calibrated_origins`), else a URDF built
@@ -16,10 +18,20 @@ joint deflections Δq from compliance/payload terms.  The exports carry:
   description (x, y, z, roll, pitch, yaw of each joint origin) for a robot imported
   from ``ur_description``.
 
-What a format cannot carry (compliance and payload terms, BASE/PROBE when not
-included, the flange offset a UR kinematics file has no place for) is returned as
-the *side* dictionary, written next to the file.  Loop robots are refused for URDF
-(a URDF is a tree) unless the serial-equivalent chain (``--model serial``) is asked for.
+A URDF is a tree: for a calibration of a loop robot's loop family it is the
+*closest tree* — the serial equivalent of eq. 6.3 fitted to the calibrated loop
+(:func:`~plugcell.calibration.tree.closest_serial_tree`), its independent joints the
+robot's readings (the cut joint as a ``mimic`` of the arm's reading plus the crank's
+reading; crank, coupler and follower as mimic joints, exact for the nominal
+parallelogram) — and its worst error against the loop is written into the file and
+returned in ``notes``.  A ``--model serial`` calibration of a loop robot gives that
+tree exactly (``serial_equivalent``).  ``ur-kinematics`` is for Universal Robots'
+arms only.
+
+What a format cannot carry (compliance and payload terms, the thermal term, a learned
+residual layer, BASE/PROBE when not included, the flange offset a UR kinematics file
+has no place for, the loop of a URDF) is returned as the *side* dictionary, written
+next to the file.
 """
 
 from __future__ import annotations
@@ -33,6 +45,7 @@ from typing import Any
 
 import numpy as np
 
+from plugcell.calibration.model import THERMAL_KEY
 from plugcell.io.robots import RobotSource, description_to_toml
 from plugcell.kinematics.description import Link, RobotDescription
 from plugcell.kinematics.parameters import GeometricParameters
@@ -121,7 +134,8 @@ def _geometry(result: Any, desc: RobotDescription, serial_equivalent: bool,
 
 
 def _side(result: Any, params_path: str, fmt: str, reasons: list[str],
-          extra: Mapping[str, Any]) -> dict[str, Any] | None:
+          extra: Mapping[str, Any], residual: Mapping[str, Any] | None = None
+          ) -> dict[str, Any] | None:
     comp = []
     for key in result.model.compliance_keys:
         p = result.model.space[key]
@@ -130,6 +144,16 @@ def _side(result: Any, params_path: str, fmt: str, reasons: list[str],
     if comp:
         reasons.append("compliance/payload terms (joint deflections, docs/calibration.md) are "
                        "not geometry")
+    thermal = None
+    if THERMAL_KEY in result.model.space:
+        thermal = {"kT_per_K": result.model.value(THERMAL_KEY),
+                   "temperature_ref_c": result.model.temperature_ref_c}
+        reasons.append("the thermal expansion κT (every length scales by 1 + κT·(T − T_ref)): "
+                       "the file holds the geometry at T_ref")
+    if residual is not None:
+        reasons.append("the learned residual layer (PARAMS.json's residual_model"
+                       + (f", {residual['file']}" if residual.get("file") else "")
+                       + "): keep PARAMS.json with it for plugcell compensate")
     if not reasons:
         return None
     out: dict[str, Any] = {
@@ -140,6 +164,10 @@ def _side(result: Any, params_path: str, fmt: str, reasons: list[str],
     if comp:
         out["compliance"] = comp
         out["payload_ref_kg"] = result.model.payload_ref_kg
+    if thermal is not None:
+        out["thermal"] = thermal
+    if residual is not None:
+        out["residual_model"] = dict(residual)
     return out
 
 
@@ -194,7 +222,7 @@ def calibrated_description(desc: RobotDescription, gp: GeometricParameters, base
 
 
 def _export_toml(result: Any, desc: RobotDescription, params_path: str,
-                 serial_equivalent: bool) -> Exported:
+                 serial_equivalent: bool, residual: Mapping[str, Any] | None) -> Exported:
     from plugcell.kinematics.errors import DescriptionError
 
     chain_desc, gp, rmap = _geometry(result, desc, serial_equivalent, "toml")
@@ -215,7 +243,7 @@ def _export_toml(result: Any, desc: RobotDescription, params_path: str,
         extra["reading_map"] = rmap.tolist()
     header = f"{cal.name}, calibrated by plugcell ({params_path}, model {result.config.name})"
     return Exported(description_to_toml(cal, header=header),
-                    _side(result, params_path, "toml", reasons, extra))
+                    _side(result, params_path, "toml", reasons, extra, residual))
 
 
 # =============================================================================== urdf
@@ -267,7 +295,8 @@ def _unique(root: Any, name: str) -> str:
 
 def _export_urdf(result: Any, desc: RobotDescription, source: RobotSource | None,
                  params_path: str, include_base: bool, include_probe: bool,
-                 serial_equivalent: bool, seed: int = 0) -> Exported:
+                 serial_equivalent: bool, seed: int,
+                 residual: Mapping[str, Any] | None) -> Exported:
     from lxml import etree
 
     from plugcell.kinematics.joint_chain import calibrated_origins
@@ -352,7 +381,8 @@ def _export_urdf(result: Any, desc: RobotDescription, source: RobotSource | None
         f" calibrated by plugcell: {params_path} (model {result.config.name}) "))
     text = etree.tostring(root, pretty_print=True, xml_declaration=True,
                           encoding="utf-8").decode("utf-8")
-    return Exported(text, _side(result, params_path, "urdf", reasons, extra), tuple(notes))
+    return Exported(text, _side(result, params_path, "urdf", reasons, extra, residual),
+                    tuple(notes))
 
 
 _TREE_REASON = (
@@ -510,17 +540,27 @@ def _loop_branches(root: Any, source: RobotDescription, gp: GeometricParameters,
 
 
 # =============================================================================== UR yaml
+_OTHER_FORMATS = ("export --format urdf (its URDF with the calibrated joint origins) or "
+                  "--format toml (plugcell's description)")
+
+
 def _export_ur(result: Any, desc: RobotDescription, source: RobotSource | None,
-               params_path: str) -> Exported:
+               params_path: str, residual: Mapping[str, Any] | None) -> Exported:
     import yaml
 
     from plugcell.kinematics.joint_chain import calibrated_origins
 
-    _geometry(result, desc, False, "ur-kinematics")
     imp = _source_urdf(source, desc)
-    if imp is None:
-        raise ExportError("ur-kinematics needs a robot imported from Universal Robots' "
-                          "ur_description (--robot .../ur.urdf.xacro --robot-arg ur_type=...)")
+    if imp is None or desc.loops:
+        what = (f"{desc.name} has a closed loop" if desc.loops
+                else f"{desc.name} was not imported from a URDF")
+        raise ExportError(
+            "ur-kinematics is the default_kinematics.yaml of Universal Robots' ur_description "
+            f"(the six joint origins of a UR arm), and {what}; export --format urdf (a URDF "
+            "with the calibrated joints"
+            + (", the closest tree of the loop with its error" if desc.loops else "")
+            + ") or --format toml (plugcell's description, exact)")
+    _geometry(result, desc, False, "ur-kinematics")
     co = calibrated_origins(imp.chain, desc, result.model.geometric_parameters(),
                             fixed_tip=False)
     sections: dict[str, dict[str, float]] = {}
@@ -530,14 +570,16 @@ def _export_ur(result: Any, desc: RobotDescription, source: RobotSource | None,
         key = next((v for j, v in UR_KINEMATICS_KEYS.items() if jt.name.endswith(j)), None)
         if key is None:
             raise ExportError(f"joint {jt.name!r} is not a joint of ur_description "
-                              f"(expected {', '.join(UR_KINEMATICS_KEYS)})")
+                              f"(expected {', '.join(UR_KINEMATICS_KEYS)}): not a UR arm; "
+                              f"{_OTHER_FORMATS}")
         T = co.origins[k]
         r, p, y = matrix_to_rpy(T[:3, :3])
         sections[key] = {"x": float(T[0, 3]), "y": float(T[1, 3]), "z": float(T[2, 3]),
                          "roll": float(r), "pitch": float(p), "yaw": float(y)}
     missing = set(UR_KINEMATICS_KEYS.values()) - set(sections)
     if missing:
-        raise ExportError(f"the chain lacks ur_description joints for {sorted(missing)}")
+        raise ExportError(f"the chain lacks ur_description joints for {sorted(missing)}: "
+                          f"not a UR arm; {_OTHER_FORMATS}")
     digest = hashlib.sha256(json.dumps(sections, sort_keys=True).encode()).hexdigest()[:16]
     doc = {"kinematics": {**{k: sections[k] for k in UR_KINEMATICS_KEYS.values()},
                           "hash": f"plugcell_{digest}"}}
@@ -550,14 +592,15 @@ def _export_ur(result: Any, desc: RobotDescription, source: RobotSource | None,
     extra = {"base": _frame(result.model.base()),
              "tcp_in_tip": _frame(co.residual @ np.linalg.inv(desc.tool) @ result.model.probe()),
              "flange_correction": _frame(co.residual), "tip_link": tip}
-    return Exported(text, _side(result, params_path, "ur-kinematics", reasons, extra))
+    return Exported(text, _side(result, params_path, "ur-kinematics", reasons, extra, residual))
 
 
 # =============================================================================== entry
 def export_calibration(result: Any, desc: RobotDescription, fmt: str, *,
                        source: RobotSource | None = None, params_path: str = "PARAMS.json",
                        include_base: bool = False, include_probe: bool = False,
-                       serial_equivalent: bool = False, seed: int = 0) -> Exported:
+                       serial_equivalent: bool = False, seed: int = 0,
+                       residual_model: Mapping[str, Any] | None = None) -> Exported:
     """Export a calibration of robot ``desc`` as ``fmt`` (one of :data:`FORMATS`).
 
     Parameters
@@ -580,6 +623,9 @@ def export_calibration(result: Any, desc: RobotDescription, fmt: str, *,
     seed : int
         URDF of a calibrated loop: seed of the configurations its closest tree is fitted
         and checked on (:func:`~plugcell.calibration.tree.closest_serial_tree`).
+    residual_model : mapping, optional
+        PARAMS.json's ``residual_model`` entry (a learned residual layer): no format
+        carries it; the side dictionary names it.
 
     Returns
     -------
@@ -599,10 +645,10 @@ def export_calibration(result: Any, desc: RobotDescription, fmt: str, *,
         A URDF ``source`` that can no longer be imported.
     """
     if fmt == "toml":
-        return _export_toml(result, desc, params_path, serial_equivalent)
+        return _export_toml(result, desc, params_path, serial_equivalent, residual_model)
     if fmt == "urdf":
         return _export_urdf(result, desc, source, params_path, include_base, include_probe,
-                            serial_equivalent, seed)
+                            serial_equivalent, seed, residual_model)
     if fmt == "ur-kinematics":
-        return _export_ur(result, desc, source, params_path)
+        return _export_ur(result, desc, source, params_path, residual_model)
     raise ExportError(f"unknown format {fmt!r}; expected one of {', '.join(FORMATS)}")

@@ -67,7 +67,8 @@ def _run(args: argparse.Namespace) -> int:
         out = export_calibration(result, desc, args.format, source=source,
                                  params_path=args.params.name, include_base=args.include_base,
                                  include_probe=args.include_probe,
-                                 serial_equivalent=args.serial_equivalent)
+                                 serial_equivalent=args.serial_equivalent,
+                                 residual_model=d.get("residual_model") or None)
     except ExportError as exc:
         raise CommandError(f"{args.params}: cannot export as {args.format}: {exc}") from None
     except DescriptionError as exc:
