@@ -124,6 +124,15 @@ def test_model5_urdf_export_is_the_closest_tree_with_its_error(h4, capsys) -> No
     e = _dp(yourdfpy_tip_poses(text, desc.reading_names, "probe", fresh, root="measurement"),
             _loop_model(res, fresh))
     assert e.max() * 1e3 <= 1.25 * float(worst[0][0])
+    # plugcell reads the file back (the cut joint's mimic becomes a joint coupling) with
+    # the robot's readings, the same FK
+    from plugcell.io.urdf import import_urdf
+
+    again = import_urdf(out, base_link="measurement", tip_link="probe").description
+    assert again.reading_names == desc.reading_names
+    assert np.abs(forward(again, None, fresh[:50]).world_tcp
+                  - yourdfpy_tip_poses(text, desc.reading_names, "probe", fresh[:50],
+                                       root="measurement")).max() < 1e-9
     # the tree is worth having: well below the nominal robot's error
     nominal_err = _dp(res.model.base() @ forward(desc, None, fresh).flange @ res.model.probe(),
                       _loop_model(res, fresh))

@@ -319,3 +319,26 @@ def test_cli_export_source_gone(tmp_path: Path, arm: tuple[Path, RobotDescriptio
                  "--robot", str(f)]) == 0
     assert main(["export", "--params", str(params), "--format", "toml", "--out",
                  str(tmp_path / "cal.toml")]) == 0  # the embedded description suffices
+
+
+def test_side_file_names_the_thermal_term_and_a_learned_layer(
+        arm: tuple[Path, RobotDescription, CalibrationResult]) -> None:
+    """No format carries κT or a learned residual layer: the side file says so, with values."""
+    f, desc, _ = arm
+    rng = np.random.default_rng(4)
+    lim = desc.joint_limits
+    q = rng.uniform(np.maximum(lim[:, 0], -2.5), np.minimum(lim[:, 1], 2.5), size=(80, 6))
+    t = rng.uniform(15.0, 30.0, len(q))
+    T = forward(desc, None, q).flange
+    T[:, :3, 3] *= (1.0 + 2e-5 * (t - t.mean()))[:, None]  # lengths grow 20 µm/m/K
+    data = CalibrationData(q, T[:, :3, 3], T[:, :3, :3], temperature_c=t)
+    res = Calibrator(desc, "serial", thermal=True).fit(data)
+    layer = {"kind": "learned", "file": "params.residual.joblib"}
+    for fmt in ("toml", "urdf"):
+        out = export_calibration(res, desc, fmt, source=RobotSource(str(f)),
+                                 residual_model=layer)
+        reasons = " ".join(out.side["not_in_main_file"])
+        assert "thermal expansion κT" in reasons and "params.residual.joblib" in reasons
+        assert out.side["thermal"]["kT_per_K"] == pytest.approx(2e-5, rel=1e-3)
+        assert out.side["thermal"]["temperature_ref_c"] == pytest.approx(t.mean())
+        assert out.side["residual_model"] == layer

@@ -8,8 +8,9 @@
 The robot is the one PARAMS.json records (``robot_source``: the file and xacro
 arguments it was loaded from; ``description``: what was calibrated); ``--robot``
 (with the URDF options) overrides it.  What the format cannot carry goes into
-``FILE.extra.json`` next to it, and the command says so (docs/robot-description.md,
-"Export").
+``FILE.extra.json`` next to it, and the command says so (docs/urdf.md, "Export").  A
+loop robot (Smart H4) is exact as ``toml`` (a ``fourbar`` loop); its ``urdf`` is the
+closest tree, whose worst error the command prints.
 """
 
 from __future__ import annotations
@@ -27,9 +28,10 @@ def configure(p: argparse.ArgumentParser) -> None:
     p.description = (
         "Export a calibration (PARAMS.json of plugcell calibrate): 'urdf' (the "
         "source URDF with calibrated joint origins, links/meshes/limits kept), "
-        "'ur-kinematics' (default_kinematics.yaml of ur_description) or 'toml' (plugcell's "
-        "description with the calibrated values). What the format cannot carry goes into "
-        "OUT.extra.json.")
+        "'ur-kinematics' (default_kinematics.yaml of ur_description, UR arms only) or 'toml' "
+        "(plugcell's description with the calibrated values, exact also for a loop robot). "
+        "A loop robot's URDF is its closest tree, with its worst error printed and in the "
+        "file. What the format cannot carry goes into OUT.extra.json.")
     p.add_argument("--params", type=Path, required=True, help="PARAMS.json of plugcell calibrate")
     p.add_argument("--format", required=True, choices=("urdf", "ur-kinematics", "toml"))
     p.add_argument("--out", type=Path, required=True, help="file to write")
