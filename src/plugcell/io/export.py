@@ -444,9 +444,10 @@ def _generic_urdf(desc: RobotDescription, gp: GeometricParameters, name: str, *,
     of the parent row; the ``flange`` link is F_n and ``tool0`` the description's tool.
 
     With ``source`` (a loop robot) and ``desc`` its serial equivalent (eq. 6.3, joints
-    ``q_desc = reading_map · q``), the URDF's independent joints are the readings of
-    ``source``: a cut joint (row ``e_crank − e_arm``) becomes two coaxial joints — the
-    link's own, a ``mimic`` of the arm's reading with multiplier −1, then one named
+    ``q_desc = reading_map · θ_kin``), the URDF's independent joints are the kinematic
+    joints of ``source`` (its readings, unless it has a coupling): a cut joint (row
+    ``e_crank − e_arm``) becomes two coaxial joints — the link's own, a ``mimic`` of
+    the arm's reading with multiplier −1, then one named
     after the crank's reading — so ``Rz(−q_arm) Rz(q_crank) = Rz(q_cut)`` exactly; and
     each loop's crank, coupler and follower hang off the arm's parent as mimic joints
     (the crank: ``q_crank``; the coupler ``θ_arm − θ_crank`` and the follower
@@ -460,7 +461,10 @@ def _generic_urdf(desc: RobotDescription, gp: GeometricParameters, name: str, *,
     base = "base_link"
     root.append(etree.Element("link", name=base))
     chain = set(desc.chain)
-    readings = None if source is None else source.reading_names
+    # the URDF's joints are the source's kinematic joints (its readings unless it has
+    # a coupling, which then goes to the side file)
+    readings = None if source is None else source.actuated
+    klim = None if source is None else source.kinematic_limits()
 
     def M(name: str) -> np.ndarray:
         return _dh(gp, name)
@@ -483,15 +487,15 @@ def _generic_urdf(desc: RobotDescription, gp: GeometricParameters, name: str, *,
             jname = lk.name if row is None else readings[int(np.flatnonzero(row)[0])]  # type: ignore[index]
             _urdf_joint(root, jname, kind, T, parent, names[lk.name], lim)  # type: ignore[arg-type]
             continue
-        assert source is not None and readings is not None
+        assert source is not None and readings is not None and klim is not None
         arm, crank = int(np.argmin(row)), int(np.argmax(row))  # row = e_crank − e_arm
         mid = f"{names[lk.name]}_cut"
         root.append(etree.Element("link", name=mid))
-        a_lo, a_hi = source.joint_limits[arm]
+        a_lo, a_hi = klim[arm]
         _urdf_joint(root, lk.name, kind, T, parent, mid, (-a_hi, -a_lo),
                     mimic=(readings[arm], -1.0, 0.0))
         _urdf_joint(root, readings[crank], kind, np.eye(4), mid, names[lk.name],
-                    tuple(source.joint_limits[crank]))  # type: ignore[arg-type]
+                    tuple(klim[crank]))  # type: ignore[arg-type]
     if source is not None:
         _loop_branches(root, source, gp, names)
     root.append(etree.Element("link", name="flange"))
@@ -509,10 +513,10 @@ def _loop_branches(root: Any, source: RobotDescription, gp: GeometricParameters,
     from lxml import etree
 
     nom = source.nominal_parameters()
-    rd = source.reading_names
+    ra_lim = source.kinematic_limits()
     for loop in source.loops:
         arm, crank = source.link(loop.arm), source.link(loop.crank)
-        ra, rc = rd[source.actuated_index(arm.name)], rd[source.actuated_index(crank.name)]
+        ra, rc = arm.name, crank.name  # the kinematic joints (= readings without a coupling)
         c = arm.theta - crank.theta  # θ_arm − θ_crank = q_arm − q_crank + c
         parent = "base_link" if crank.parent == "base" else names[crank.parent]
         at = gp if crank.parent == "base" or crank.parent in gp.link_names else nom
@@ -527,7 +531,7 @@ def _loop_branches(root: Any, source: RobotDescription, gp: GeometricParameters,
             child = f"link_{lk.name}"
             if ma == 0.0:
                 _urdf_joint(root, f"{lk.name}_loop", "revolute", T, par, child,
-                            tuple(source.joint_limits[source.actuated_index(lk.name)]),
+                            tuple(ra_lim[source.actuated.index(lk.name)]),
                             mimic=(rc, mc, off))
             else:
                 mid = f"{child}_{ra}"
