@@ -6,18 +6,20 @@ from __future__ import annotations
 
 import json
 import math
+import tomllib
 from pathlib import Path
 
 import numpy as np
 import pytest
 from pinocchio_fk import pinocchio_tip_poses
 from shared_data import UR_XACRO, URDF_DIR
+from yourdfpy_fk import yourdfpy_tip_poses
 
 from plugcell.calibration import CalibrationData, Calibrator
 from plugcell.calibration.result import CalibrationResult
 from plugcell.io.export import ExportError, export_calibration
 from plugcell.io.params import params_document
-from plugcell.io.robot_schema import description_to_dict
+from plugcell.io.robot_schema import description_from_dict, description_to_dict
 from plugcell.io.robots import RobotSource, load_robot
 from plugcell.io.urdf import import_urdf
 from plugcell.kinematics import RobotDescription, forward
@@ -180,12 +182,12 @@ def h4_loop() -> tuple[RobotDescription, CalibrationResult]:
     return desc, _calibrate(desc, model="loop", seed=1, n=60)
 
 
-def test_loop_robot_is_refused_for_urdf(h4_loop: tuple[RobotDescription,
-                                                       CalibrationResult]) -> None:
+def test_loop_calibration_is_no_serial_equivalent(
+        h4_loop: tuple[RobotDescription, CalibrationResult]) -> None:
+    """--serial-equivalent asks for a serial calibration; the message names what works."""
     desc, res = h4_loop
-    with pytest.raises(ExportError, match=r"closed loop.*--serial-equivalent"):
-        export_calibration(res, desc, "urdf")
-    with pytest.raises(ExportError, match=r"identified the loop itself.*--model serial"):
+    with pytest.raises(ExportError, match=r"identified the loop itself; export it without "
+                       r"--serial-equivalent.*--format toml: exact.*--model serial"):
         export_calibration(res, desc, "urdf", serial_equivalent=True)
 
 
@@ -195,12 +197,11 @@ def test_loop_robot_serial_equivalent() -> None:
     res = _calibrate(desc, model="serial", seed=2, n=60)
     out = export_calibration(res, desc, "urdf", serial_equivalent=True, include_base=True,
                              include_probe=True)
-    rmap = np.array(out.side["reading_map"])
-    chain_desc = res.model.structure.desc
+    assert out.side is None  # BASE, PROBE in the file; the URDF's joints are the readings (mimics)
     q = np.radians([[0, -90, -187, 0, 90, 0], [10, -80, -190, 20, 60, -30]])
-    ref = pinocchio_tip_poses(out.text, chain_desc.actuated, "probe", q @ rmap.T)
+    ref = yourdfpy_tip_poses(out.text, desc.reading_names, "probe", q)
     model = res.model.predict(q)
-    assert _max_dp(ref, model) < 1e-9
+    assert _max_dp(ref, model) < 1e-9 and _max_dr(ref, model) < 1e-9
 
 
 @needs_urdf
@@ -284,12 +285,18 @@ def test_ipa_ur10_calibrates_alike_from_xacro_and_hand_dh(tmp_path: Path) -> Non
 
 
 @pytest.mark.slow
-def test_loop_robot_toml_export_is_refused_or_exact(
+def test_loop_robot_toml_export_is_exact(
         h4_loop: tuple[RobotDescription, CalibrationResult]) -> None:
-    """A calibrated parallelogram that is no longer exact cannot be a description file."""
+    """A calibrated parallelogram that is no longer one is a ``fourbar`` loop of the file."""
     desc, res = h4_loop
-    with pytest.raises(ExportError, match=r"not a valid description.*keep PARAMS.json"):
-        export_calibration(res, desc, "toml")
+    out = export_calibration(res, desc, "toml")
+    assert 'type = "fourbar"' in out.text
+    back = description_from_dict(tomllib.loads(out.text))
+    q = _q(desc, 2000)
+    q = q[desc.within_limits(q)]
+    got = forward(back, None, q).world_tcp
+    model = res.model.predict(q)  # model 2: geometry only
+    assert len(q) > 200 and _max_dp(got, model) < 1e-9 and _max_dr(got, model) < 1e-9
 
 
 def test_cli_export_source_gone(tmp_path: Path, arm: tuple[Path, RobotDescription,
@@ -312,3 +319,26 @@ def test_cli_export_source_gone(tmp_path: Path, arm: tuple[Path, RobotDescriptio
                  "--robot", str(f)]) == 0
     assert main(["export", "--params", str(params), "--format", "toml", "--out",
                  str(tmp_path / "cal.toml")]) == 0  # the embedded description suffices
+
+
+def test_side_file_names_the_thermal_term_and_a_learned_layer(
+        arm: tuple[Path, RobotDescription, CalibrationResult]) -> None:
+    """No format carries κT or a learned residual layer: the side file says so, with values."""
+    f, desc, _ = arm
+    rng = np.random.default_rng(4)
+    lim = desc.joint_limits
+    q = rng.uniform(np.maximum(lim[:, 0], -2.5), np.minimum(lim[:, 1], 2.5), size=(80, 6))
+    t = rng.uniform(15.0, 30.0, len(q))
+    T = forward(desc, None, q).flange
+    T[:, :3, 3] *= (1.0 + 2e-5 * (t - t.mean()))[:, None]  # lengths grow 20 µm/m/K
+    data = CalibrationData(q, T[:, :3, 3], T[:, :3, :3], temperature_c=t)
+    res = Calibrator(desc, "serial", thermal=True).fit(data)
+    layer = {"kind": "learned", "file": "params.residual.joblib"}
+    for fmt in ("toml", "urdf"):
+        out = export_calibration(res, desc, fmt, source=RobotSource(str(f)),
+                                 residual_model=layer)
+        reasons = " ".join(out.side["not_in_main_file"])
+        assert "thermal expansion κT" in reasons and "params.residual.joblib" in reasons
+        assert out.side["thermal"]["kT_per_K"] == pytest.approx(2e-5, rel=1e-3)
+        assert out.side["thermal"]["temperature_ref_c"] == pytest.approx(t.mean())
+        assert out.side["residual_model"] == layer

@@ -167,9 +167,10 @@ class LoopTable(_Table, kw_only=True):
     Attributes
     ----------
     type : str, optional
-        ``"parallelogram"`` (the documented default) or ``"fourbar"``; checked against
-        these two names but not otherwise read: every loop becomes the same
-        :class:`~plugcell.kinematics.description.FourBarLoop`.
+        ``"parallelogram"`` (the default: the nominal, planar parallelogram) or
+        ``"fourbar"`` (a calibrated loop: unequal sides, twists and offsets on its
+        links, the exact four-bar closure), the
+        :attr:`~plugcell.kinematics.description.FourBarLoop.kind`.
     arm, crank, coupler, follower : str
         Names of the loop's four links (``[[links]]`` names).
     """
@@ -585,7 +586,9 @@ def description_from_document(doc: RobotFile) -> RobotDescription:
             stiff[t.name] = t.stiffness
     actuated = tuple(doc.actuated)
 
-    loops = [FourBarLoop(t.arm, t.crank, t.coupler, t.follower) for t in doc.loops]
+    loops = [FourBarLoop(t.arm, t.crank, t.coupler, t.follower,
+                         "parallelogram" if isinstance(t.type, UnsetType) else t.type)
+             for t in doc.loops]
     coupled = []
     for k, t in enumerate(doc.coupled_limits):
         if not t.lower < t.upper:
@@ -730,7 +733,8 @@ def document_of(desc: RobotDescription) -> RobotFile:
         base=_transform_table(desc.base),
         tool=_transform_table(desc.tool),
         links=links,
-        loops=[LoopTable(arm=lp.arm, crank=lp.crank, coupler=lp.coupler, follower=lp.follower)
+        loops=[LoopTable(type=UNSET if lp.kind == "parallelogram" else lp.kind,  # type: ignore[arg-type]
+                         arm=lp.arm, crank=lp.crank, coupler=lp.coupler, follower=lp.follower)
                for lp in desc.loops],
         coupled_limits=[CoupledLimitTable(joints=c.joints, lower=math.degrees(c.lower),
                                           upper=math.degrees(c.upper))

@@ -42,12 +42,20 @@ ROOT = "base"
 #: Coupled limits of a loop must keep the arm–crank angle at least this far (rad)
 #: from a multiple of π, where the parallelogram collapses.
 LOOP_MARGIN = math.radians(1.0)
+#: Kinds of :class:`FourBarLoop`: the nominal parallelogram, or any four-bar that
+#: assembles (a calibrated loop: unequal sides, twists, offsets).
+LOOP_KINDS: tuple[str, ...] = ("parallelogram", "fourbar")
+#: A ``"fourbar"`` loop must assemble with ``|cos θ_fol|`` at most this over its range
+#: (the follower angle's sine stays ≥ ~0.045, far from the collapse of
+#: :data:`~plugcell.kinematics.closure.MIN_SIN`).
+FOURBAR_MAX_COS = 0.999
 #: A coupling matrix whose smallest singular value is below this (relative to the
 #: largest) is singular: readings could not be recovered from kinematic joints.
 COUPLING_RANK_TOL = 1e-9
 
 __all__ = [
     "JOINT_TYPES",
+    "LOOP_KINDS",
     "ROOT",
     "Box",
     "CoupledLimit",
@@ -156,14 +164,19 @@ class FourBarLoop:
 
     with θ_arm, θ_crank the DH angles of arm and crank (kinematic joint + ``theta``) and
     θ_cpl, θ_fol the closure angles (the coupler's and follower's DH angles are these
-    plus their ``theta``).  Only parallelograms are accepted
-    (a_coupler = a_arm, a_follower = a_crank, planar: α = β = 0, coupler and follower
-    d = 0), whose solution is eq. (6.10): θ_cpl = θ_arm − θ_crank,
-    θ_fol = π − θ_arm + θ_crank (:func:`~plugcell.kinematics.closure.nominal_closure`;
-    the exact four-bar for perturbed lengths is
-    :func:`~plugcell.kinematics.closure.fourbar_closure`).  The closure is defined
-    while ``sin(θ_arm − θ_crank) ≠ 0``, which a :class:`CoupledLimit` on the arm and
-    crank readings must guarantee (:data:`LOOP_MARGIN`).
+    plus their ``theta``).  A loop of ``kind`` ``"parallelogram"`` (a nominal
+    description) must be one (a_coupler = a_arm, a_follower = a_crank, planar: α = β = 0,
+    coupler and follower d = 0, arm and crank the same d), whose solution is eq. (6.10):
+    θ_cpl = θ_arm − θ_crank, θ_fol = π − θ_arm + θ_crank
+    (:func:`~plugcell.kinematics.closure.nominal_closure`).  A loop of ``kind``
+    ``"fourbar"`` (a calibrated or measured robot) keeps the geometry it is given —
+    unequal opposite sides, twists α, β and offsets d on its links: the passive angles
+    are those of the exact planar four-bar of its lengths a
+    (:func:`~plugcell.kinematics.closure.fourbar_closure`, the branch continuous with the
+    parallelogram), and α, β, d act on the open chain; it must assemble over the whole
+    range its coupled limit allows.  Either closure is defined while
+    ``sin(θ_arm − θ_crank) ≠ 0``, which a :class:`CoupledLimit` on the arm and crank
+    readings must guarantee (:data:`LOOP_MARGIN`).
 
     Attributes
     ----------
@@ -175,12 +188,16 @@ class FourBarLoop:
         Passive link, child of ``crank``.
     follower : str
         Passive link, child of ``coupler``, on the chain to the flange.
+    kind : str
+        One of :data:`LOOP_KINDS`: ``"parallelogram"`` (default; the nominal, planar
+        parallelogram is required) or ``"fourbar"`` (any geometry that assembles).
     """
 
     arm: str
     crank: str
     coupler: str
     follower: str
+    kind: str = "parallelogram"
 
     @property
     def driven(self) -> tuple[str, str]:
@@ -716,6 +733,9 @@ class RobotDescription:
         used: dict[str, str] = {}
         for k, loop in enumerate(self.loops):
             loc = f"loops[{k}]"
+            if loop.kind not in LOOP_KINDS:
+                raise DescriptionError(f"{loc}.type", f"unknown loop type {loop.kind!r} "
+                                       f"(expected one of {', '.join(LOOP_KINDS)})")
             for role in ("arm", "crank", "coupler", "follower"):
                 name = getattr(loop, role)
                 if name not in index:
@@ -768,12 +788,20 @@ class RobotDescription:
                     f"{loc}.follower",
                     f"the follower {L['follower'].name!r} must be on the chain to the flange",
                 )
+            for role in ("crank", "coupler", "follower", "arm"):
+                if not L[role].a > 0:
+                    raise DescriptionError(
+                        f"links[{index[L[role].name]}].a", "loop link lengths must be positive"
+                    )
+            if loop.kind == "fourbar":  # any geometry; assembly: _check_coupled
+                continue
             for role in ("arm", "crank", "coupler", "follower"):
                 lk = L[role]
                 if abs(lk.alpha) > 1e-12 or abs(lk.beta) > 1e-12:
                     raise DescriptionError(
                         f"links[{index[lk.name]}]",
-                        f"loop link {lk.name!r} must be planar nominally (alpha = beta = 0)",
+                        f"loop link {lk.name!r} must be planar nominally (alpha = beta = 0) "
+                        f"in a parallelogram; a calibrated loop is type = \"fourbar\"",
                     )
             for role in ("coupler", "follower"):
                 if abs(L[role].d) > 1e-12:
@@ -789,12 +817,8 @@ class RobotDescription:
                     raise DescriptionError(
                         f"links[{index[L[a_role].name]}].a",
                         f"only parallelogram loops are supported: the {a_role}'s a "
-                        f"({L[a_role].a:g} m) must equal the {b_role}'s ({L[b_role].a:g} m)",
-                    )
-            for role in ("crank", "coupler", "follower", "arm"):
-                if L[role].a <= 0:
-                    raise DescriptionError(
-                        f"links[{index[L[role].name]}].a", "loop link lengths must be positive"
+                        f"({L[a_role].a:g} m) must equal the {b_role}'s ({L[b_role].a:g} m) "
+                        "(a calibrated loop is type = \"fourbar\")",
                     )
         for i, lk in enumerate(self.links):
             if lk.is_passive and lk.name not in used:
@@ -849,11 +873,38 @@ class RobotDescription:
                         f"which must stay at least {math.degrees(LOOP_MARGIN):g}° inside "
                         f"(k·180°, (k+1)·180°)",
                     )
+                if loop.kind == "fourbar":
+                    self._check_assembly(k, m, lo, hi)
             if not found:
                 raise DescriptionError(
                     "coupled_limits",
                     f"loops[{k}] needs a coupled limit on {ri} − {rj} that keeps "
                     f"sin({loop.arm} − {loop.crank}) away from 0",
+                )
+
+    def _check_assembly(self, k: int, m: int, lo: float, hi: float) -> None:
+        """A ``"fourbar"`` loop ``k`` must assemble for every arm − crank angle in
+        ``[lo, hi]`` (rad), the range coupled limit ``m`` allows.
+
+        The closure depends on Δ = θ_arm − θ_crank only, through
+        ``|r|² = a_arm² + a_crank² − 2·a_arm·a_crank·cos Δ``, which is monotonic on
+        ``[lo, hi]`` (inside (k·π, (k+1)·π)), so ``cos θ_fol = (|r|² − a_cpl² −
+        a_fol²) / (2·a_cpl·a_fol)`` is extreme at the two ends: both must have
+        ``|cos θ_fol| ≤`` :data:`FOURBAR_MAX_COS`.
+        """
+        loop = self.loops[k]
+        la, lc, l3, l4 = (self.links[self._index[n]].a for n in loop.links)
+        for delta in (lo, hi):
+            r2 = la * la + lc * lc - 2.0 * la * lc * math.cos(delta)
+            c4 = (r2 - l3 * l3 - l4 * l4) / (2.0 * l3 * l4)
+            if not abs(c4) <= FOURBAR_MAX_COS:
+                raise DescriptionError(
+                    f"coupled_limits[{m}]",
+                    f"loops[{k}] (fourbar) cannot be assembled at arm − crank = "
+                    f"{math.degrees(delta):g}°, inside this limit: the gap between the crank "
+                    f"and arm ends is {math.sqrt(r2):.6g} m, the coupler ({l3:.6g} m) and "
+                    f"follower ({l4:.6g} m) close it only with cos θ_fol = {c4:.6g} "
+                    f"(|cos| must stay ≤ {FOURBAR_MAX_COS:g})",
                 )
 
     def loop_readings(self, k: int) -> tuple[int, int, float]:

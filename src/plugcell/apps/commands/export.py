@@ -9,10 +9,12 @@
 The robot is the one PARAMS.json records (``robot_source``: the file and xacro
 arguments it was loaded from; ``description``: what was calibrated); ``--robot``
 (with the URDF options) overrides it.  What the format cannot carry goes into
-``FILE.extra.json`` next to it, and the command says so (docs/robot-description.md,
-"Export").  A calibration whose poses did not determine the PROBE position (PARAMS.json
-``undetermined``, e.g. a scan at constant tool orientation) is refused unless ``--probe``
-gives the target in the flange frame (docs/calibration.md, *Identifiability*).
+``FILE.extra.json`` next to it, and the command says so (docs/urdf.md, "Export").  A
+loop robot (Smart H4) is exact as ``toml`` (a ``fourbar`` loop); its ``urdf`` is the
+closest tree, whose worst error the command prints.  A calibration whose poses did not
+determine the PROBE position (PARAMS.json ``undetermined``, e.g. a scan at constant tool
+orientation) is refused unless ``--probe`` gives the target in the flange frame
+(docs/calibration.md, *Identifiability*).
 """
 
 from __future__ import annotations
@@ -30,9 +32,10 @@ def configure(p: argparse.ArgumentParser) -> None:
     p.description = (
         "Export a calibration (PARAMS.json of plugcell calibrate): 'urdf' (the "
         "source URDF with calibrated joint origins, links/meshes/limits kept), "
-        "'ur-kinematics' (default_kinematics.yaml of ur_description) or 'toml' (plugcell's "
-        "description with the calibrated values). What the format cannot carry goes into "
-        "OUT.extra.json.")
+        "'ur-kinematics' (default_kinematics.yaml of ur_description, UR arms only) or 'toml' "
+        "(plugcell's description with the calibrated values, exact also for a loop robot). "
+        "A loop robot's URDF is its closest tree, with its worst error printed and in the "
+        "file. What the format cannot carry goes into OUT.extra.json.")
     p.add_argument("--params", type=Path, required=True, help="PARAMS.json of plugcell calibrate")
     p.add_argument("--format", required=True, choices=("urdf", "ur-kinematics", "toml"))
     p.add_argument("--out", type=Path, required=True, help="file to write")
@@ -76,6 +79,7 @@ def _run(args: argparse.Namespace) -> int:
                                  params_path=args.params.name, include_base=args.include_base,
                                  include_probe=args.include_probe,
                                  serial_equivalent=args.serial_equivalent,
+                                 residual_model=d.get("residual_model") or None,
                                  probe=None if args.probe is None else _frame(args.probe, "probe"))
     except ExportError as exc:
         raise CommandError(f"{args.params}: cannot export as {args.format}: {exc}") from None
