@@ -16,6 +16,7 @@ import pytest
 from childproc import free_port
 from opcua_testlib import JS, Proc, plugcell_argv, run_js, unique_cell, until
 
+from plugcell.devices.opcua.certificates import issue_application_certificate
 from plugcell.devices.opcua.device import OpcUaDevice
 from plugcell.devices.opcua.device_map import parse_device_map
 from plugcell.framework import BlockingClient, DeviceError, ProcessStates, from_data
@@ -68,7 +69,7 @@ def gripper_cell(tmp_path_factory, node_harness) -> Iterator[GripperCell]:
     try:
         cell.start_server()
         cell.serve("opcua-device", "--endpoint", cell.endpoint, "--map", str(MAP),
-                   "--param", "watch_s=0.3")
+                   "--param", "watch_s=0.3", "--insecure-accept-any")  # SecurityPolicy None
         cell.serve("robot", "--param", "sim=true", "--param", "speed=1000", "--param", "seed=3",
                    "--param", f"library={HERE / 'programs'}")
         gateway = Proc(plugcell_argv("opcua", "serve", "--cell", cell.name, "--port",
@@ -155,7 +156,8 @@ def _serve_with(cell: GripperCell, map_text: str, tmp_path: Path) -> subprocess.
     path.write_text(map_text)
     return subprocess.run(
         plugcell_argv("serve", "opcua-device", "--cell", unique_cell("bad"), "--no-journal",
-                      "--endpoint", cell.endpoint, "--map", str(path), "--name", "BROKEN"),
+                      "--endpoint", cell.endpoint, "--map", str(path), "--name", "BROKEN",
+                      "--insecure-accept-any"),
         capture_output=True, text=True, env=cell.env, timeout=60,
     )
 
@@ -165,7 +167,7 @@ async def _connect_with(cell: GripperCell, maps: list[str]) -> list[str]:
     reasons = []
     for text in maps:
         device = OpcUaDevice("BROKEN", endpoint=cell.endpoint, journal=False,
-                             map=parse_device_map(text, "device.toml"))
+                             map=parse_device_map(text, "device.toml"), insecure_accept_any=True)
         with pytest.raises(DeviceError) as err:
             await device.connect()
         assert str(err.value).startswith("device.toml: command ")
@@ -207,7 +209,7 @@ def test_a_map_naming_nodes_that_do_not_exist_stops_the_service_at_start(gripper
     nobody = subprocess.run(
         plugcell_argv("serve", "opcua-device", "--cell", unique_cell("bad"), "--no-journal",
                       "--endpoint", f"opc.tcp://127.0.0.1:{free_port()}/none", "--map",
-                      str(MAP)),
+                      str(MAP), "--insecure-accept-any"),
         capture_output=True, text=True, env=gripper_cell.env, timeout=60)
     assert nobody.returncode == 2 and "cannot connect to opc.tcp://127.0.0.1:" in nobody.stderr
 
@@ -215,13 +217,20 @@ def test_a_map_naming_nodes_that_do_not_exist_stops_the_service_at_start(gripper
 def test_a_secured_device_server_is_reached_with_the_cells_certificate_and_a_user(
         gripper_cell, cell_certs, monkeypatch):
     """Basic256Sha256 SignAndEncrypt, the cell's application certificate of the service,
-    the user plc (password from $PLUGCELL_OPCUA_PASSWORD); a wrong password is refused at
-    connection with the server's reason."""
+    the user plc (password from $PLUGCELL_OPCUA_PASSWORD), the server's certificate one of
+    the cell's (test_opcua_device_trust.py checks the others are refused); a wrong password
+    is refused at connection with the server's reason."""
+    from plugcell.devices.opcua.certificates import certificate_paths
+
     certs, _ = cell_certs
     port = free_port()
     endpoint = f"opc.tcp://127.0.0.1:{port}/gripper"
+    issue_application_certificate(certs, "GRIPPER_PLC")
+    cert, key = certificate_paths(certs, "GRIPPER_PLC")
+    own = {"certificate": str(cert), "privateKey": str(key),
+           "applicationUri": "urn:plugcell:opcua:GRIPPER_PLC"}
     server = Proc(["node", str(JS / "gripper_server.js"), str(port), str(certs / "opcua-ca.pem"),
-                   str(certs / "opcua-ca.crl")], gripper_cell.env)
+                   str(certs / "opcua-ca.crl"), json.dumps(own)], gripper_cell.env)
     gripper_cell.procs.append(server)
     server.wait_line(lambda line: '"listening"' in line, 30.0)
 

@@ -52,6 +52,7 @@ from typing import Any, ClassVar
 
 import numpy as np
 
+from plugcell.devices.params import flag as _flag
 from plugcell.devices.robot.bridge import (
     BridgeError,
     ControllerBridge,
@@ -95,16 +96,6 @@ RECONNECT_S = 1.0
 TEXT_MAX = 255
 
 _D, _S = DataTypes.Double, DataTypes.String
-
-
-def _flag(text: str) -> bool:
-    """``--param sim=true``: a boolean parameter."""
-    value = text.strip().lower()
-    if value in ("1", "true", "yes", "on"):
-        return True
-    if value in ("0", "false", "no", "off", ""):
-        return False
-    raise ValueError(f"expected true or false, not {text!r}")
 
 
 @dataclass
