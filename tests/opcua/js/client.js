@@ -104,6 +104,9 @@ async function call(session, objectId, methodId, inputArguments) {
     status: statusName(result.statusCode),
     inputResults: (result.inputArgumentResults || []).map(statusName),
     diagnostics: (result.inputArgumentDiagnosticInfos || []).map((d) => (d && d.additionalInfo) || ""),
+    // every method's last output: Reason (String), why the call failed ("" if it did not)
+    reason: (result.outputArguments || []).length
+      ? result.outputArguments[result.outputArguments.length - 1].value : null,
     outputs: (result.outputArguments || []).map((v) => ({
       dataType: DataType[v.dataType], arrayType: v.arrayType, dimensions: v.dimensions || null,
       value: v.value,
@@ -281,7 +284,8 @@ const scenarios = {
     await until(() => got.filter((e) => e.State === "Completed").length >= 1, 5000, "events");
     await item.terminate();
     await sub.terminate();
-    return { fail: fail.status, bad: bad.status, good: good.status, events: got };
+    return { fail: fail.status, failReason: fail.reason, bad: bad.status, badReason: bad.reason,
+             good: good.status, goodReason: good.reason, events: got };
   },
 
   // a tracker: Set Base/Set Probe/Move with Double[6], then a Continuous Measurement
@@ -321,7 +325,8 @@ const scenarios = {
   // security: who may log in, who may call
   async login(c) {
     const r = await call(c.session, c.id("CAMERA"), c.id("CAMERA/SnapShot"), [str(""), int32(1)]);
-    return { status: r.status, image: r.outputs.length ? summary(r.outputs[0]) : null };
+    return { status: r.status, reason: r.reason,
+             image: r.status === "Good" ? summary(r.outputs[0]) : null };
   },
 };
 
