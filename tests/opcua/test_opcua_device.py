@@ -100,9 +100,12 @@ def test_a_robot_program_drives_the_opc_ua_gripper_with_activate_strings(gripper
                                     {"called": "Close", "force": 500}, {"called": "Open"}]
 
 
-def test_the_robot_shows_its_joints_and_flange_pose_as_opc_40010_names_them(gripper_cell):
-    """Through the gateway (node-opcua reading): the robot's axes and flange pose are
-    what the robot service itself answers (ARM_JNTP, ARM_POS), the robot standing still."""
+def test_a_generic_client_finds_the_robot_by_its_opc_40010_type_and_reads_its_axes(
+        gripper_cell):
+    """node-opcua, knowing only DI and OPC 40010, browses the whole address space by type:
+    the robot is the one MotionDeviceType, its axes' ActualPosition are what the robot
+    service answers (ARM_JNTP), standing still (ActualSpeed 0 °/s); the gripper (an
+    opcua-device service) is a DI device; the flange pose is the service's ARM_POS."""
     with BlockingClient("direct", cell=gripper_cell.name) as client:
         assert client.wait_for("ROBOT", 10.0)
         joints = from_data(client.create_process("ROBOT", "ARM_JNTP").result().data)
@@ -111,14 +114,25 @@ def test_the_robot_shows_its_joints_and_flange_pose_as_opc_40010_names_them(grip
 
     def shown() -> bool:
         seen.clear()
-        seen.update(run_js("client.js", "robot", gripper_cell.gateway_url, gripper_cell.name))
-        return (len(seen["joints"]) == len(joints)
-                and np.allclose(seen["joints"], joints, atol=1e-9)
-                and np.allclose(seen["flange"], pose, atol=1e-9))
+        seen.update(run_js("client.js", "types", gripper_cell.gateway_url, gripper_cell.name,
+                           limit_s=60.0))
+        devices = seen["motionDevices"]
+        return (len(devices) == 1 and len(devices[0]["axes"]) == len(joints)
+                and all(a["position"]["status"] == "Good" and a["speed"]["status"] == "Good"
+                        for a in devices[0]["axes"])
+                and np.allclose([a["position"]["value"] for a in devices[0]["axes"]], joints,
+                                atol=1e-9))
 
-    until(shown, 30.0, "the robot's joints and flange pose in the address space")
-    assert seen["axes"] == [f"Axis{k}" for k in range(1, len(joints) + 1)]
-    assert len(joints) == 6 and len(seen["flange"]) == 6
+    until(shown, 60.0, "the robot's axes, by type, in the address space")
+    robot = seen["motionDevices"][0]
+    assert robot["name"] == "ROBOT" and robot["category"] == 1  # ARTICULATED_ROBOT
+    assert [a["name"] for a in robot["axes"]] == [f"Axis{k}" for k in range(1, 7)]
+    assert all(a["type"] and a["unit"] == "°" for a in robot["axes"])
+    assert [a["speed"]["value"] for a in robot["axes"]] == [0.0] * 6
+    assert robot["powerTrains"] == 6
+    assert seen["devices"] == ["GRIPPER"]
+    flange = run_js("client.js", "robot", gripper_cell.gateway_url, gripper_cell.name)["flange"]
+    np.testing.assert_allclose(flange, pose, atol=1e-9)
 
 
 def test_a_lost_connection_fails_the_stream_and_the_service_reconnects(gripper_cell):

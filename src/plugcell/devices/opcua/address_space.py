@@ -87,6 +87,8 @@ class ServiceNode:
     variables: dict[str, Node]
     processes: Node
     commands: dict[str, Command] = field(default_factory=dict)
+    device: Node | None = None
+    """Its typed object in DI's DeviceSet (:mod:`plugcell.devices.opcua.companion`)."""
 
     async def set(self, variable: str, value: Any, vtype: ua.VariantType) -> None:
         await self.variables[variable].write_value(ua.Variant(value, vtype))

@@ -48,6 +48,7 @@ from plugcell.devices.opcua.address_space import (
     output_argument,
 )
 from plugcell.devices.opcua.arguments import ArgumentError, data_variant, input_value, option_of
+from plugcell.devices.opcua.companion import Models, add_service_device, load_models
 from plugcell.devices.opcua.robots import RobotMirror, is_robot
 from plugcell.devices.opcua.server_security import GatewaySecurity, configure_security
 from plugcell.devices.opcua.sessions import caller_name, caller_session, capture_session_users
@@ -108,7 +109,8 @@ class CellGateway:
         Seconds a finished MultipleData process object stays in the address space.
     robot_poll
         Seconds between reads of each robot's joints and flange pose for the OPC 40010
-        variables (:mod:`plugcell.devices.opcua.robots`); 0 turns them off.
+        variables (:mod:`plugcell.devices.opcua.robots`); 0 turns the reads off (the
+        typed robot is still there).
     """
 
     def __init__(
@@ -173,6 +175,7 @@ class CellGateway:
         await configure_security(server, self.security, self.users.allow_anonymous)
         capture_session_users(server, self._session_closed)
         self.idx = await server.register_namespace(f"urn:plugcell:cell:{self.cell}")
+        self.models: Models = await load_models(server, self.idx)
         self.cell_node = await server.nodes.objects.add_folder(
             ua.NodeId("Cell", self.idx), ua.QualifiedName("Cell", self.idx)
         )
@@ -264,9 +267,14 @@ class CellGateway:
             self.cell_node, self.idx, state.device_info, instance, partners,
             lambda command: self._method(service, command),
         )
-        if self.robot_poll > 0 and is_robot(state.device_info):
-            mirror = RobotMirror(self.server, node, self.watcher, self.robot_poll)
+        device = state.device_info
+        if is_robot(device):  # a MotionDeviceSystem, built (and polled) by its own task
+            mirror = RobotMirror(self.server, self.models, node, device, self.watcher,
+                                 self.robot_poll)
             self._robots[service] = self._spawn(mirror.run())
+        else:
+            node.device = await add_service_device(self.models, service, device.vendor,
+                                                   device.kind, device.info)
         log.info("opcua: %s added", service)
 
     async def _forget(self, service: str, node: ServiceNode) -> None:
@@ -276,6 +284,9 @@ class CellGateway:
             with contextlib.suppress(asyncio.CancelledError, Exception):
                 await robot
         await node.delete()
+        with contextlib.suppress(ua.UaStatusCodeError):  # DeviceSet.<service>, even half-made
+            await self.server.get_node(ua.NodeId(f"DeviceSet.{service}", self.idx)).delete(
+                recursive=True)
 
     async def _remove(self, service: str) -> None:
         node = self.services.pop(service, None)
