@@ -126,6 +126,9 @@ def test_a_generic_client_finds_the_robot_by_its_opc_40010_type_and_reads_its_ax
     until(shown, 60.0, "the robot's axes, by type, in the address space")
     robot = seen["motionDevices"][0]
     assert robot["name"] == "ROBOT" and robot["category"] == 1  # ARTICULATED_ROBOT
+    # DI identification from the robot file (smart_h4.toml's [identification])
+    assert (robot["Manufacturer"], robot["Model"]) == ("Comau", "Smart H4")
+    assert (robot["SerialNumber"], robot["ProductCode"]) == ("", "")
     assert [a["name"] for a in robot["axes"]] == [f"Axis{k}" for k in range(1, 7)]
     assert all(a["type"] and a["unit"] == "°" for a in robot["axes"])
     assert [a["speed"]["value"] for a in robot["axes"]] == [0.0] * 6

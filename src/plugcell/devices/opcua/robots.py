@@ -34,7 +34,6 @@ from datetime import UTC, datetime
 
 from asyncua import Node, Server, ua
 
-import plugcell
 from plugcell.devices.opcua.address_space import ServiceNode
 from plugcell.devices.opcua.companion import (
     ARTICULATED_ROBOT,
@@ -58,6 +57,16 @@ REQUIRED = ("ARM_JNTP", "ARM_POS")
 #: The optional command of a robot service that names its robot (String[4]:
 #: manufacturer, model, serial number, product code).
 IDENTIFICATION = "IDENTIFICATION"
+
+
+def _version() -> str:
+    """plugcell's version, as installed ("" when run from a tree that is not)."""
+    from importlib.metadata import PackageNotFoundError, version
+
+    try:
+        return version("plugcell")
+    except PackageNotFoundError:
+        return ""
 
 
 def is_robot(device: Device) -> bool:
@@ -119,7 +128,7 @@ class RobotMirror:
         software = await add_instance(m, await child(controller, f"{rob}:Software"),
                                       "RobotService", "SoftwareType")
         await identify(m, software, "plugcell", "plugcell robot service")
-        await set_value(await child(software, f"{m.di}:SoftwareRevision"), plugcell.__version__,
+        await set_value(await child(software, f"{m.di}:SoftwareRevision"), _version(),
                         ua.VariantType.String)
         await add_instance(m, await child(controller, f"{rob}:TaskControls"), "Program",
                            "TaskControlType")
