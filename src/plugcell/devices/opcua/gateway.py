@@ -317,6 +317,9 @@ class CellGateway:
         """The participant that sends the current OPC UA user's processes."""
         user = caller_name()
         if user is None:
+            if not self.users.allow_anonymous:  # fail closed: never call as the gateway
+                raise ValueError("the OPC UA user of this call is unknown (anonymous "
+                                 "sessions are off)")
             return self.watcher
         async with self._caller_lock:
             caller = self._callers.get(user)
