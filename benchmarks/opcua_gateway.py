@@ -154,8 +154,8 @@ async def _stream(url: str, cell: str, frames: int) -> dict[str, float]:
             RequestedPublishingInterval=10, RequestedLifetimeCount=10_000,
             RequestedMaxKeepAliveCount=100, MaxNotificationsPerPublish=1000,
             PublishingEnabled=True), counter)
-        process = await obj.call_method(ua.NodeId("Cell/PUBLISHER/Push", idx), "",
-                                        ua.Variant([frames, 8], ua.VariantType.Int32))
+        process, _ = await obj.call_method(ua.NodeId("Cell/PUBLISHER/Push", idx), "",
+                                           ua.Variant([frames, 8], ua.VariantType.Int32))
         data = ua_client.get_node(ua.NodeId(process.Identifier + "/Data", idx))
         frames_node = ua_client.get_node(ua.NodeId(process.Identifier + "/Frames", idx))
         item = ua.MonitoredItemCreateRequest()  # every frame, equal values too

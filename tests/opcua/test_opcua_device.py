@@ -16,6 +16,7 @@ import pytest
 from childproc import free_port
 from opcua_testlib import JS, Proc, plugcell_argv, run_js, unique_cell, until
 
+from plugcell.devices.opcua.certificates import issue_application_certificate
 from plugcell.devices.opcua.device import OpcUaDevice
 from plugcell.devices.opcua.device_map import parse_device_map
 from plugcell.framework import BlockingClient, DeviceError, ProcessStates, from_data
@@ -68,7 +69,7 @@ def gripper_cell(tmp_path_factory, node_harness) -> Iterator[GripperCell]:
     try:
         cell.start_server()
         cell.serve("opcua-device", "--endpoint", cell.endpoint, "--map", str(MAP),
-                   "--param", "watch_s=0.3")
+                   "--param", "watch_s=0.3", "--insecure-accept-any")  # SecurityPolicy None
         cell.serve("robot", "--param", "sim=true", "--param", "speed=1000", "--param", "seed=3",
                    "--param", f"library={HERE / 'programs'}")
         gateway = Proc(plugcell_argv("opcua", "serve", "--cell", cell.name, "--port",
@@ -99,9 +100,12 @@ def test_a_robot_program_drives_the_opc_ua_gripper_with_activate_strings(gripper
                                     {"called": "Close", "force": 500}, {"called": "Open"}]
 
 
-def test_the_robot_shows_its_joints_and_flange_pose_as_opc_40010_names_them(gripper_cell):
-    """Through the gateway (node-opcua reading): the robot's axes and flange pose are
-    what the robot service itself answers (ARM_JNTP, ARM_POS), the robot standing still."""
+def test_a_generic_client_finds_the_robot_by_its_opc_40010_type_and_reads_its_axes(
+        gripper_cell):
+    """node-opcua, knowing only DI and OPC 40010, browses the whole address space by type:
+    the robot is the one MotionDeviceType, its axes' ActualPosition are what the robot
+    service answers (ARM_JNTP), standing still (ActualSpeed 0 °/s); the gripper (an
+    opcua-device service) is a DI device; the flange pose is the service's ARM_POS."""
     with BlockingClient("direct", cell=gripper_cell.name) as client:
         assert client.wait_for("ROBOT", 10.0)
         joints = from_data(client.create_process("ROBOT", "ARM_JNTP").result().data)
@@ -110,14 +114,28 @@ def test_the_robot_shows_its_joints_and_flange_pose_as_opc_40010_names_them(grip
 
     def shown() -> bool:
         seen.clear()
-        seen.update(run_js("client.js", "robot", gripper_cell.gateway_url, gripper_cell.name))
-        return (len(seen["joints"]) == len(joints)
-                and np.allclose(seen["joints"], joints, atol=1e-9)
-                and np.allclose(seen["flange"], pose, atol=1e-9))
+        seen.update(run_js("client.js", "types", gripper_cell.gateway_url, gripper_cell.name,
+                           limit_s=60.0))
+        devices = seen["motionDevices"]
+        return (len(devices) == 1 and len(devices[0]["axes"]) == len(joints)
+                and all(a["position"]["status"] == "Good" and a["speed"]["status"] == "Good"
+                        for a in devices[0]["axes"])
+                and np.allclose([a["position"]["value"] for a in devices[0]["axes"]], joints,
+                                atol=1e-9))
 
-    until(shown, 30.0, "the robot's joints and flange pose in the address space")
-    assert seen["axes"] == [f"Axis{k}" for k in range(1, len(joints) + 1)]
-    assert len(joints) == 6 and len(seen["flange"]) == 6
+    until(shown, 60.0, "the robot's axes, by type, in the address space")
+    robot = seen["motionDevices"][0]
+    assert robot["name"] == "ROBOT" and robot["category"] == 1  # ARTICULATED_ROBOT
+    # DI identification from the robot file (smart_h4.toml's [identification])
+    assert (robot["Manufacturer"], robot["Model"]) == ("Comau", "Smart H4")
+    assert (robot["SerialNumber"], robot["ProductCode"]) == ("", "")
+    assert [a["name"] for a in robot["axes"]] == [f"Axis{k}" for k in range(1, 7)]
+    assert all(a["type"] and a["unit"] == "°" for a in robot["axes"])
+    assert [a["speed"]["value"] for a in robot["axes"]] == [0.0] * 6
+    assert robot["powerTrains"] == 6
+    assert seen["devices"] == ["GRIPPER"]
+    flange = run_js("client.js", "robot", gripper_cell.gateway_url, gripper_cell.name)["flange"]
+    np.testing.assert_allclose(flange, pose, atol=1e-9)
 
 
 def test_a_lost_connection_fails_the_stream_and_the_service_reconnects(gripper_cell):
@@ -155,7 +173,8 @@ def _serve_with(cell: GripperCell, map_text: str, tmp_path: Path) -> subprocess.
     path.write_text(map_text)
     return subprocess.run(
         plugcell_argv("serve", "opcua-device", "--cell", unique_cell("bad"), "--no-journal",
-                      "--endpoint", cell.endpoint, "--map", str(path), "--name", "BROKEN"),
+                      "--endpoint", cell.endpoint, "--map", str(path), "--name", "BROKEN",
+                      "--insecure-accept-any"),
         capture_output=True, text=True, env=cell.env, timeout=60,
     )
 
@@ -165,7 +184,7 @@ async def _connect_with(cell: GripperCell, maps: list[str]) -> list[str]:
     reasons = []
     for text in maps:
         device = OpcUaDevice("BROKEN", endpoint=cell.endpoint, journal=False,
-                             map=parse_device_map(text, "device.toml"))
+                             map=parse_device_map(text, "device.toml"), insecure_accept_any=True)
         with pytest.raises(DeviceError) as err:
             await device.connect()
         assert str(err.value).startswith("device.toml: command ")
@@ -207,7 +226,7 @@ def test_a_map_naming_nodes_that_do_not_exist_stops_the_service_at_start(gripper
     nobody = subprocess.run(
         plugcell_argv("serve", "opcua-device", "--cell", unique_cell("bad"), "--no-journal",
                       "--endpoint", f"opc.tcp://127.0.0.1:{free_port()}/none", "--map",
-                      str(MAP)),
+                      str(MAP), "--insecure-accept-any"),
         capture_output=True, text=True, env=gripper_cell.env, timeout=60)
     assert nobody.returncode == 2 and "cannot connect to opc.tcp://127.0.0.1:" in nobody.stderr
 
@@ -215,13 +234,20 @@ def test_a_map_naming_nodes_that_do_not_exist_stops_the_service_at_start(gripper
 def test_a_secured_device_server_is_reached_with_the_cells_certificate_and_a_user(
         gripper_cell, cell_certs, monkeypatch):
     """Basic256Sha256 SignAndEncrypt, the cell's application certificate of the service,
-    the user plc (password from $PLUGCELL_OPCUA_PASSWORD); a wrong password is refused at
-    connection with the server's reason."""
+    the user plc (password from $PLUGCELL_OPCUA_PASSWORD), the server's certificate one of
+    the cell's (test_opcua_device_trust.py checks the others are refused); a wrong password
+    is refused at connection with the server's reason."""
+    from plugcell.devices.opcua.certificates import certificate_paths
+
     certs, _ = cell_certs
     port = free_port()
     endpoint = f"opc.tcp://127.0.0.1:{port}/gripper"
+    issue_application_certificate(certs, "GRIPPER_PLC")
+    cert, key = certificate_paths(certs, "GRIPPER_PLC")
+    own = {"certificate": str(cert), "privateKey": str(key),
+           "applicationUri": "urn:plugcell:opcua:GRIPPER_PLC"}
     server = Proc(["node", str(JS / "gripper_server.js"), str(port), str(certs / "opcua-ca.pem"),
-                   str(certs / "opcua-ca.crl")], gripper_cell.env)
+                   str(certs / "opcua-ca.crl"), json.dumps(own)], gripper_cell.env)
     gripper_cell.procs.append(server)
     server.wait_line(lambda line: '"listening"' in line, 30.0)
 

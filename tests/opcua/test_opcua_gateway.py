@@ -44,7 +44,8 @@ def test_browse_the_cell_and_read_a_cameras_device_info(ua_cell):
     assert [(a["name"], a["dataType"], a["valueRank"]) for a in seen["inputArguments"]] == [
         ("Option", 12, -1), ("Data", 6, -1)]
     assert seen["outputArguments"] == [
-        {"name": "Data", "dataType": 3, "valueRank": 2, "arrayDimensions": [480, 640]}]
+        {"name": "Data", "dataType": 3, "valueRank": 2, "arrayDimensions": [480, 640]},
+        {"name": "Reason", "dataType": 12, "valueRank": -1, "arrayDimensions": []}]
 
 
 def test_snapshot_returns_the_480_by_640_image(ua_cell):
@@ -72,6 +73,10 @@ def test_bad_arguments_and_an_unknown_method_are_refused_and_the_server_keeps_se
     assert got["missing"]["status"] == "BadInvalidArgument"
     assert "Integer[1] expected, got nothing" in got["missing"]["diagnostics"][1]
     assert got["tooMany"]["status"] == "BadTooManyArguments"
+    assert got["tooMany"]["reason"] == "SnapShot: 3 arguments, but it takes 2 (Option, Data)"
+    # the reason is the result's last output (Reason), beside the argument's diagnostics
+    assert got["double"]["reason"] == got["double"]["diagnostics"][1]
+    assert [o["dataType"] for o in got["double"]["outputs"]] == ["Null", "String"]
     assert got["unknown"]["status"] == "BadNodeIdInvalid"
     assert got["good"] == "Good"
 
@@ -103,11 +108,14 @@ def test_a_closed_session_stops_the_streams_it_started(ua_cell):
     assert got["status"] == "Good"
 
 
-def test_a_failed_process_is_a_bad_status_and_an_event_with_the_reason(ua_cell):
+def test_a_failed_process_is_a_bad_status_with_the_reason_in_the_result_and_an_event(ua_cell):
     wait_shown(ua_cell.url, ua_cell.name, {"CAMERA"})
     got = run_js("client.js", "events", ua_cell.url, ua_cell.name)
     assert got["fail"] == "BadDeviceFailure"
+    assert got["failReason"] == "MovieShot: frame rate 5000 outside 1…80 frames/s"
     assert got["bad"] == "BadInvalidArgument" and got["good"] == "Good"
+    assert got["badReason"].startswith("SnapShot: argument Data: Int32 expected")
+    assert got["goodReason"] == ""
     by_state = {}
     for event in got["events"]:
         assert event["SourceName"] == event["Service"] == "CAMERA"
@@ -167,3 +175,31 @@ def test_the_quick_start_of_the_docs_runs(ua_cell, capsys):
     wait_shown(ua_cell.url, ua_cell.name, {"CAMERA"})
     exec(compile(code, "docs/opcua.md", "exec"), {})
     assert capsys.readouterr().out.split()[-2:] == ["480", "640"]
+
+
+def test_the_reason_of_a_failed_call_read_with_asyncua_as_the_docs_show(ua_cell, capsys):
+    """docs/opcua.md's snippet reading a Bad call's Reason output with asyncua."""
+    import asyncio
+    import re
+    from pathlib import Path
+
+    from asyncua import Client, ua
+
+    doc = (Path(__file__).resolve().parents[2] / "docs" / "opcua.md").read_text()
+    snippet = re.search(r"returns the whole\nresult:\n\n```python\n(.*?)```", doc,
+                        re.S).group(1)
+    wait_shown(ua_cell.url, ua_cell.name, {"CAMERA"})
+
+    async def run() -> None:
+        async with Client(ua_cell.url) as client:
+            ns = await client.get_namespace_index(f"urn:plugcell:cell:{ua_cell.name}")
+            camera = client.get_node(ua.NodeId("Cell/CAMERA", ns))
+            body = "async def snippet(client, camera, ns):\n" + "".join(
+                f"    {line}\n" for line in snippet.splitlines())
+            scope: dict = {"ua": ua}
+            exec(compile(body, "docs/opcua.md", "exec"), scope)
+            await scope["snippet"](client, camera, ns)
+
+    asyncio.run(run())
+    assert capsys.readouterr().out.strip().splitlines()[-1] == (
+        "BadDeviceFailure MovieShot: frame rate 5000 outside 1…80 frames/s")

@@ -92,6 +92,7 @@ def test_the_services_access_policy_decides_on_the_opc_ua_user_and_the_journal_r
                                  "attempts": attempts})
     assert alice["status"] == "Good"
     assert bob["status"] == "BadUserAccessDenied"
+    assert bob["reason"].startswith("access denied: bob may not run SnapShot on CAMERA")
     out = subprocess.run(
         plugcell_argv("journal", "--json", "--cell", cell.name, "--service", "CAMERA"),
         capture_output=True, text=True, env=cell.env, timeout=60, check=True,

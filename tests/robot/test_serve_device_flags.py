@@ -50,6 +50,12 @@ def test_opcua_device_flags_become_parameters():
     kind = "opcua-device"
     pairs = _device_options(kind, _args(endpoint="opc.tcp://127.0.0.1:4840", map="gripper.toml"))
     assert _params(kind, pairs) == {"endpoint": "opc.tcp://127.0.0.1:4840", "map": "gripper.toml"}
+    pairs = _device_options(kind, _args(endpoint="opc.tcp://plc:4840", map="g.toml", trust="pki",
+                                        insecure_accept_any=True))
+    assert _params(kind, pairs) == {"endpoint": "opc.tcp://plc:4840", "map": "g.toml",
+                                    "trust": "pki", "insecure_accept_any": True}
+    with pytest.raises(CommandError, match="--insecure-accept-any: not an option of Camera"):
+        _device_options("camera", _args(insecure_accept_any=True))
 
 
 def test_a_urdf_robot_reaches_the_robot_service_as_a_description_file(tmp_path, monkeypatch):

@@ -256,6 +256,22 @@ class CouplingTable(_Table, kw_only=True):
     limits: list[Pair]
 
 
+class IdentificationTable(_Table, kw_only=True):
+    """``[identification]``: which robot this is (OPC UA DI/OPC 40010 identification;
+    not used by the kinematics).
+
+    Attributes
+    ----------
+    manufacturer, model, serial_number, product_code : str
+        As on the robot's nameplate; empty when unknown.
+    """
+
+    manufacturer: str = ""
+    model: str = ""
+    serial_number: str = ""
+    product_code: str = ""
+
+
 class RobotFile(_Table, kw_only=True):
     """A whole description file (the order of the fields is the order written).
 
@@ -291,6 +307,8 @@ class RobotFile(_Table, kw_only=True):
         A vendor joint convention: readings ≠ kinematic joints.
     working_volume : BoxTable, optional
         The box the robot works in.
+    identification : IdentificationTable, optional
+        Manufacturer, model, serial number and product code (OPC UA identification).
     """
 
     format_version: Literal[1] = FORMAT_VERSION
@@ -307,6 +325,7 @@ class RobotFile(_Table, kw_only=True):
     point_masses: list[PointMassTable] = []
     coupling: CouplingTable | UnsetType = UNSET
     working_volume: BoxTable | UnsetType = UNSET
+    identification: IdentificationTable | UnsetType = UNSET
 
 
 #: The table type at a key (for the keys an "unknown key" message lists).
@@ -320,6 +339,7 @@ _TABLES: dict[str, type[_Table]] = {
     "coupling": CouplingTable,
     "base": TransformTable,
     "tool": TransformTable,
+    "identification": IdentificationTable,
 }
 
 

@@ -148,6 +148,47 @@ def load_robot_file(path: str | os.PathLike[str]) -> RobotDescription:
         raise exc.with_prefix(label) from None
 
 
+def robot_identification(name_or_path: str | os.PathLike[str]) -> dict[str, str]:
+    """The ``[identification]`` table of a robot's description file.
+
+    Parameters
+    ----------
+    name_or_path : str or os.PathLike
+        A shipped robot's name or a ``.toml`` file (:func:`robot_path`).
+
+    Returns
+    -------
+    dict of str to str
+        ``manufacturer``, ``model``, ``serial_number``, ``product_code`` (``""`` where
+        the file does not say; all ``""`` for a URDF/xacro robot or a file without
+        the table).
+
+    Raises
+    ------
+    RobotNotFoundError
+        No such robot or file.
+    DescriptionError
+        The file does not read or does not follow the schema (located at the key).
+    """
+    from plugcell.io.robot_schema import IdentificationTable, document_from_dict
+
+    p = robot_path(name_or_path)
+    table = IdentificationTable()
+    if p.suffix == SUFFIX:
+        try:
+            with p.open("rb") as fh:
+                data = tomllib.load(fh)
+        except (OSError, tomllib.TOMLDecodeError, UnicodeDecodeError) as exc:
+            raise DescriptionError(p.name, f"cannot read the file: {exc}") from None
+        try:
+            found = document_from_dict(data).identification
+        except DescriptionError as exc:
+            raise exc.with_prefix(p.name) from None
+        if isinstance(found, IdentificationTable):
+            table = found
+    return {key: getattr(table, key) for key in IdentificationTable.__struct_fields__}
+
+
 def load_robot(
     name_or_path: str | os.PathLike[str],
     *,

@@ -104,6 +104,9 @@ async function call(session, objectId, methodId, inputArguments) {
     status: statusName(result.statusCode),
     inputResults: (result.inputArgumentResults || []).map(statusName),
     diagnostics: (result.inputArgumentDiagnosticInfos || []).map((d) => (d && d.additionalInfo) || ""),
+    // every method's last output: Reason (String), why the call failed ("" if it did not)
+    reason: (result.outputArguments || []).length
+      ? result.outputArguments[result.outputArguments.length - 1].value : null,
     outputs: (result.outputArguments || []).map((v) => ({
       dataType: DataType[v.dataType], arrayType: v.arrayType, dimensions: v.dimensions || null,
       value: v.value,
@@ -281,7 +284,8 @@ const scenarios = {
     await until(() => got.filter((e) => e.State === "Completed").length >= 1, 5000, "events");
     await item.terminate();
     await sub.terminate();
-    return { fail: fail.status, bad: bad.status, good: good.status, events: got };
+    return { fail: fail.status, failReason: fail.reason, bad: bad.status, badReason: bad.reason,
+             good: good.status, goodReason: good.reason, events: got };
   },
 
   // a tracker: Set Base/Set Probe/Move with Double[6], then a Continuous Measurement
@@ -306,22 +310,98 @@ const scenarios = {
              state: await read(session, `${process}/State`) };
   },
 
-  // a robot's OPC 40010 variables: Axes/AxisN/ParameterSet/ActualPosition, FlangePose
+  // a robot's flange pose (plugcell's variable on its OPC 40010 MotionDevice)
   async robot(c) {
-    const { session, id } = c;
-    const axes = (await session.browse(id("ROBOT/Axes"))).references
-      .map((r) => r.browseName.name).sort();
-    const joints = [];
-    for (const axis of axes) {
-      joints.push(await read(session, id(`ROBOT/Axes/${axis}/ParameterSet/ActualPosition`)));
+    const { session, ns } = c;
+    return { flange: plain(await read(session,
+      `ns=${ns};s=DeviceSet.ROBOT.MotionDevices.ROBOT.FlangePose`)) };
+  },
+
+  // a generic client that knows only the companion specifications: every object below
+  // Objects by its type (DI DeviceType and its subtypes, OPC 40010 MotionDeviceType),
+  // then each motion device's identification and axes' ActualPosition / ActualSpeed
+  async types(c) {
+    const { session } = c;
+    const namespaces = await session.readNamespaceArray();
+    const di = namespaces.indexOf("http://opcfoundation.org/UA/DI/");
+    const rob = namespaces.indexOf("http://opcfoundation.org/UA/Robotics/");
+    if (di < 0 || rob < 0) throw new Error(`no DI or Robotics namespace in ${namespaces}`);
+    const deviceType = `ns=${di};i=1002`, motionDeviceType = `ns=${rob};i=1004`;
+    const supertypes = new Map();
+    async function isA(typeId, wanted) {  // follow HasSubtype inverse up to BaseObjectType
+      let t = typeId;
+      for (let depth = 0; depth < 20 && t; depth += 1) {
+        if (t === wanted) return true;
+        if (!supertypes.has(t)) {
+          const up = await session.browse({ nodeId: t, browseDirection: 1 /* Inverse */,
+            referenceTypeId: "HasSubtype", includeSubtypes: false, resultMask: 63 });
+          supertypes.set(t, up.references.length ? up.references[0].nodeId.toString() : null);
+        }
+        t = supertypes.get(t);
+      }
+      return false;
     }
-    return { axes, joints, flange: plain(await read(session, id("ROBOT/FlangePose"))) };
+    const seen = new Set(), devices = [], motionDevices = [];
+    async function walk(nodeId, depth) {
+      if (seen.has(nodeId) || depth > 12) return;
+      seen.add(nodeId);
+      const r = await session.browse({ nodeId, browseDirection: 0 /* Forward */,
+        referenceTypeId: "HierarchicalReferences", includeSubtypes: true, nodeClassMask: 1,
+        resultMask: 63 });
+      for (const ref of r.references) {
+        const id = ref.nodeId.toString();
+        const type = ref.typeDefinition.toString();
+        if (!seen.has(id)) {
+          if (await isA(type, deviceType)) devices.push({ nodeId: id, name: ref.browseName.name });
+          if (type === motionDeviceType) motionDevices.push({ nodeId: id, name: ref.browseName.name });
+        }
+        await walk(id, depth + 1);
+      }
+    }
+    await walk("i=85", 0);
+    const qn = (ns, name) => ({ namespaceIndex: ns, name });
+    async function at(start, path) {
+      const r = await session.translateBrowsePath({ startingNode: start, relativePath: {
+        elements: path.map(([ns, name]) => ({ referenceTypeId: "i=33",
+          isInverse: false, includeSubtypes: true, targetName: qn(ns, name) })) } });
+      if (r.statusCode.isNotGood()) throw new Error(`${start} ${JSON.stringify(path)}: ${r.statusCode.name}`);
+      return r.targets[0].targetId.toString();
+    }
+    async function value(nodeId) {
+      const dv = await session.read({ nodeId, attributeId: AttributeIds.Value });
+      return { status: dv.statusCode.name, value: plain(dv.value.value) };
+    }
+    const text = (v) => (v && v.text !== undefined ? v.text : v);
+    for (const md of motionDevices) {
+      for (const key of ["Manufacturer", "Model", "SerialNumber", "ProductCode"]) {
+        md[key] = text((await value(await at(md.nodeId, [[di, key]]))).value);
+      }
+      md.category = (await value(await at(md.nodeId, [[rob, "MotionDeviceCategory"]]))).value;
+      const axes = await session.browse({ nodeId: await at(md.nodeId, [[rob, "Axes"]]),
+        referenceTypeId: "HierarchicalReferences", includeSubtypes: true, nodeClassMask: 1,
+        resultMask: 63 });
+      md.axes = [];
+      for (const ref of axes.references.sort((a, b) => a.browseName.name.localeCompare(b.browseName.name))) {
+        const axis = ref.nodeId.toString();
+        const pos = await at(axis, [[di, "ParameterSet"], [rob, "ActualPosition"]]);
+        const units = await value(await at(pos, [[0, "EngineeringUnits"]]));
+        md.axes.push({ name: ref.browseName.name, type: ref.typeDefinition.toString() === `ns=${rob};i=16601`,
+          position: await value(pos),
+          speed: await value(await at(axis, [[di, "ParameterSet"], [rob, "ActualSpeed"]])),
+          unit: units.value && units.value.displayName ? units.value.displayName.text : null });
+      }
+      md.powerTrains = (await session.browse({ nodeId: await at(md.nodeId, [[rob, "PowerTrains"]]),
+        referenceTypeId: "HierarchicalReferences", includeSubtypes: true, nodeClassMask: 1 }))
+        .references.length;
+    }
+    return { devices: devices.map((d) => d.name).sort(), motionDevices };
   },
 
   // security: who may log in, who may call
   async login(c) {
     const r = await call(c.session, c.id("CAMERA"), c.id("CAMERA/SnapShot"), [str(""), int32(1)]);
-    return { status: r.status, image: r.outputs.length ? summary(r.outputs[0]) : null };
+    return { status: r.status, reason: r.reason,
+             image: r.status === "Good" ? summary(r.outputs[0]) : null };
   },
 };
 

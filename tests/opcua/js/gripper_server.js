@@ -2,11 +2,14 @@
 // object Gripper with methods Open() and Close(force: Double) and variables Force
 // (Double, N) and Closed (Boolean), in namespace urn:plugcell:test:gripper.
 //
-//   node gripper_server.js PORT [CA_PEM CA_CRL]
+//   node gripper_server.js PORT [CA_PEM CA_CRL] [OPTIONS-JSON]
 //
 // With CA_PEM and CA_CRL (the cell's OPC UA authority and its revocation list) the server
 // offers only Basic256Sha256 SignAndEncrypt, trusts application certificates of that
 // authority and accepts the one user plc / gripper-pw (no anonymous sessions).
+// OPTIONS {certificate, privateKey, applicationUri}: the server's own application
+// certificate (PEM) and URI (default: node-opcua's self-signed certificate of its PKI
+// folder) — the tests' servers with a trusted, a rotated, an expired or a foreign one.
 //
 // prints {"listening": URL} when ready and one {"called": …} line per method call;
 // runs until killed.  Close ramps Force up to the asked force in 5 steps of 20 ms.
@@ -20,7 +23,9 @@ const os = require("os");
 const path = require("path");
 
 const port = Number(process.argv[2]);
-const [caPem, caCrl] = process.argv.slice(3);
+const rest = process.argv.slice(3);
+const own = rest.length && rest[rest.length - 1].startsWith("{") ? JSON.parse(rest.pop()) : {};
+const [caPem, caCrl] = rest;
 
 function say(obj) { process.stdout.write(JSON.stringify(obj) + "\n"); }
 
@@ -34,6 +39,12 @@ function say(obj) { process.stdout.write(JSON.stringify(obj) + "\n"); }
     port, hostname: "127.0.0.1", resourcePath: "/gripper", serverCertificateManager,
     buildInfo: { productName: "test gripper", manufacturerName: "plugcell tests" },
   };
+  if (own.certificate) {
+    Object.assign(options, {
+      certificateFile: own.certificate, privateKeyFile: own.privateKey,
+      serverInfo: { applicationUri: own.applicationUri },
+    });
+  }
   if (caPem) {
     await serverCertificateManager.initialize();
     const { readCertificate, readCertificateRevocationList } = require("node-opcua-crypto");

@@ -53,6 +53,12 @@ def configure(p: argparse.ArgumentParser) -> None:
                      help="opcua-device: the OPC UA server of the device")
     dev.add_argument("--map", metavar="FILE",
                      help="opcua-device: the device map (docs/opcua.md)")
+    dev.add_argument("--trust", metavar="DIR",
+                     help="opcua-device: trusted server certificates and authorities (beside "
+                     "the cell's OPC UA CA of --param certs=DIR)")
+    dev.add_argument("--insecure-accept-any", action="store_true",
+                     help="opcua-device: accept any server, its certificate unchecked "
+                     "(a test bench only; logged)")
     p.add_argument("--max-payload", type=int, default=None, help="largest accepted request, bytes")
     p.add_argument("--journal-dir", type=Path, help="where to keep the journal")
     p.add_argument("--no-journal", action="store_true", help="do not journal processes")
@@ -93,6 +99,10 @@ def _device_options(kind: str, args: argparse.Namespace) -> list[str]:
     if args.robot is None and any(urdf_options):
         raise CommandError("--robot-arg, --package-path, --base-link and --tip-link describe "
                            "a URDF robot: give it with --robot FILE")
+    if getattr(args, "insecure_accept_any", False):
+        if "insecure_accept_any" not in known:
+            raise CommandError(f"--insecure-accept-any: not an option of {cls.__name__}")
+        pairs.append("insecure_accept_any=true")
     if args.sim:
         if "sim" in known:
             pairs.append("sim=true")
@@ -102,7 +112,7 @@ def _device_options(kind: str, args: argparse.Namespace) -> list[str]:
             raise CommandError(f"--sim: {cls.__name__} has no simulated mode")
     for flag, key in (("controller", "controller"), ("robot", "robot"),
                       ("payload_kg", "payload_kg"), ("speed", "speed"), ("seed", "seed"),
-                      ("endpoint", "endpoint"), ("map", "map")):
+                      ("endpoint", "endpoint"), ("map", "map"), ("trust", "trust")):
         value = getattr(args, flag, None)
         if flag == "robot" and value is not None and key in known:
             value = robot_file_of(args)  # a URDF robot: imported, as a description file

@@ -17,7 +17,7 @@ Layout (namespace ``urn:plugcell:cell:<cell>``, string NodeIds = browse paths)::
             Command, Sender, State, Reason         String
             Frames                                 UInt32
             Data                                   the command's output type/size
-            Stop()                                 Method
+            Stop() -> Reason                       Method
 
 A robot service also gets ``Axes/AxisN/ParameterSet/ActualPosition`` and
 ``FlangePose`` (OPC 40010 names; :mod:`plugcell.devices.opcua.robots`).  The nodes of a service
@@ -37,6 +37,7 @@ from plugcell.devices.opcua.arguments import (
     data_argument,
     empty_variant,
     input_arguments,
+    string_argument,
     value_rank,
 )
 from plugcell.framework.messages import Command, CommandTypes, Device, DeviceStates
@@ -52,8 +53,15 @@ def node_id(idx: int, *path: str) -> ua.NodeId:
     return ua.NodeId("/".join(("Cell", *path)), idx)
 
 
+#: The last output argument of every method: why the call failed ("" when it did not).
+REASON_ARGUMENT = string_argument(
+    "Reason", "why the call failed (the service's reason, as in its journal); empty when it "
+    "succeeded")
+
+
 def output_argument(command: Command) -> list[ua.Argument]:
-    """``Data`` for SingleData with output, ``Process`` (a NodeId) for MultipleData."""
+    """``Data`` for SingleData with output, ``Process`` (a NodeId) for MultipleData; then
+    ``Reason`` (String) for every command."""
     if command.type is CommandTypes.MultipleData:
         arg = ua.Argument()
         arg.Name = "Process"
@@ -62,10 +70,11 @@ def output_argument(command: Command) -> list[ua.Argument]:
         arg.Description = ua.LocalizedText(
             "the process object: subscribe to its Data, call its Stop"
         )
-        return [arg]
+        return [arg, REASON_ARGUMENT]
     if command.gives_output:
-        return [data_argument("Data", command.output_data_type, command.output_data_size)]
-    return []
+        return [data_argument("Data", command.output_data_type, command.output_data_size),
+                REASON_ARGUMENT]
+    return [REASON_ARGUMENT]
 
 
 @dataclass
@@ -78,6 +87,8 @@ class ServiceNode:
     variables: dict[str, Node]
     processes: Node
     commands: dict[str, Command] = field(default_factory=dict)
+    device: Node | None = None
+    """Its typed object in DI's DeviceSet (:mod:`plugcell.devices.opcua.companion`)."""
 
     async def set(self, variable: str, value: Any, vtype: ua.VariantType) -> None:
         await self.variables[variable].write_value(ua.Variant(value, vtype))
@@ -201,5 +212,6 @@ async def add_process(
     if dims:
         await data.write_attribute(ua.AttributeIds.ArrayDimensions,
                                    ua.DataValue(ua.Variant(dims, ua.VariantType.UInt32)))
-    await node.add_method(nid("Stop"), ua.QualifiedName("Stop", idx), stop, [], [])
+    await node.add_method(nid("Stop"), ua.QualifiedName("Stop", idx), stop, [],
+                          [REASON_ARGUMENT])
     return ProcessNode(node, state, reason, frames, data)

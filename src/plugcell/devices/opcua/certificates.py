@@ -84,9 +84,10 @@ def ensure_authority(folder: Path, cell: str = "default", days: int = 3650) -> P
 
 def issue_application_certificate(
     folder: Path, name: str, hosts: list[str] | tuple[str, ...] = (), uri: str | None = None,
-    days: int = 825, cell: str = "default",
+    days: float = 825, cell: str = "default", start: dt.datetime | None = None,
 ) -> Path:
-    """Write ``NAME.opcua.pem``/``.key`` signed by the cell's OPC UA authority (module doc)."""
+    """Write ``NAME.opcua.pem``/``.key`` signed by the cell's OPC UA authority (module doc),
+    valid from ``start`` (default: 5 minutes ago) for ``days``."""
     from plugcell.framework.keys import check_name
 
     check_name(name, "participant name")
@@ -95,15 +96,14 @@ def issue_application_certificate(
     ca_cert = x509.load_pem_x509_certificate((folder / CA_CERT).read_bytes())
     key = rsa.generate_private_key(public_exponent=65537, key_size=2048)
     alt = [x509.UniformResourceIdentifier(uri or application_uri(name)), *host_names(hosts)]
-    now = dt.datetime.now(dt.UTC)
+    begin = start or dt.datetime.now(dt.UTC) - dt.timedelta(minutes=5)
     cert = (
         x509.CertificateBuilder()
         .subject_name(x509.Name([x509.NameAttribute(NameOID.COMMON_NAME, name),
                                  x509.NameAttribute(NameOID.ORGANIZATION_NAME, "plugcell")]))
         .issuer_name(ca_cert.subject).public_key(key.public_key())
         .serial_number(x509.random_serial_number())
-        .not_valid_before(now - dt.timedelta(minutes=5))
-        .not_valid_after(now + dt.timedelta(days=days))
+        .not_valid_before(begin).not_valid_after(begin + dt.timedelta(days=days))
         .add_extension(x509.SubjectAlternativeName(list(dict.fromkeys(alt))), critical=False)
         .add_extension(x509.BasicConstraints(ca=False, path_length=None), critical=True)
         .add_extension(x509.KeyUsage(

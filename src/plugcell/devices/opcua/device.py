@@ -35,6 +35,8 @@ from asyncua import Client, Node, ua
 
 from plugcell.devices.opcua.arguments import VARIANT_TYPES
 from plugcell.devices.opcua.device_map import DeviceMap, MappedCommand, load_device_map
+from plugcell.devices.opcua.server_trust import ServerTrust
+from plugcell.devices.params import flag
 from plugcell.framework.messages import Command, ConnectionStates, DataTypes
 from plugcell.framework.service import DeviceError, GenericDevice
 
@@ -62,8 +64,9 @@ class OpcUaDevice(GenericDevice):
     kind = "opcua-device"
     vendor = ""
     info = "an OPC UA device (plugcell serve opcua-device --endpoint … --map …)"
-    params: ClassVar[dict[str, type]] = {
+    params: ClassVar[dict[str, Any]] = {
         "endpoint": str, "map": str, "watch_s": float, "certs": str, "user": str,
+        "trust": str, "server_uri": str, "insecure_accept_any": flag,
     }
 
     def __init__(
@@ -75,12 +78,24 @@ class OpcUaDevice(GenericDevice):
         watch_s: float = 1.0,
         certs: str | Path = "",
         user: str = "",
+        trust: str | Path = "",
+        server_uri: str = "",
+        insecure_accept_any: bool = False,
         **kwargs: Any,
     ) -> None:
         if not endpoint:
             raise ValueError("opcua-device needs --endpoint opc.tcp://HOST:PORT")
         if not map:
             raise ValueError("opcua-device needs --map FILE (docs/opcua.md)")
+        if not certs and not insecure_accept_any:
+            raise ValueError(
+                f"opcua-device cannot authenticate the server of {endpoint} without a "
+                "certificate of its own: give --param certs=DIR (SecurityPolicy Basic256Sha256, "
+                "the server's certificate checked against the cell's CA and --trust DIR), or, "
+                "on a test bench only, --insecure-accept-any (SecurityPolicy None, any server)")
+        if (trust or server_uri) and not certs:
+            raise ValueError("--trust and server_uri check the server's certificate, which only "
+                             "a secured connection has: give --param certs=DIR too")
         self.map = map if isinstance(map, DeviceMap) else load_device_map(map)
         # the catalogue and identity come from the map (instance attributes shadow the
         # class's, before GenericDevice reads them)
@@ -96,6 +111,13 @@ class OpcUaDevice(GenericDevice):
         ``<certs>/<name>.opcua.pem`` (``plugcell certs opcua NAME``)."""
         self.user = user
         """OPC UA user name; its password is ``$PLUGCELL_OPCUA_PASSWORD``."""
+        self.trust = Path(trust) if trust else None
+        """A folder of trusted certificates (pinned servers, authorities) and revocation
+        lists, beside the cell's CA (:mod:`plugcell.devices.opcua.server_trust`)."""
+        self.server_uri = server_uri
+        """The application URI the server must have ("": the one it says it has)."""
+        self.insecure_accept_any = insecure_accept_any
+        """Accept any server, its certificate unchecked (a test bench only; logged)."""
         self.client: Client | None = None
         self._nodes: dict[str, _Resolved] = {}
         self._lost = ""
@@ -107,6 +129,10 @@ class OpcUaDevice(GenericDevice):
 
     async def connect(self) -> None:
         """Connect and resolve the map (DeviceError with the reason if either fails)."""
+        if self.insecure_accept_any:
+            log.warning("%s: --insecure-accept-any: accepting whatever server answers at %s, "
+                        "its certificate unchecked (a test bench only)", self.name,
+                        self.endpoint)
         await self._open()
         self.connection_state.post(ConnectionStates.Online)
         self._watch = asyncio.create_task(self._watch_connection(), name=f"{self.name}-watch")
@@ -120,6 +146,8 @@ class OpcUaDevice(GenericDevice):
             if self.certs is not None:
                 await self._secure(client, self.certs)
             await client.connect()
+        except DeviceError as exc:  # the server's certificate refused (server_trust)
+            raise DeviceError(f"cannot connect to {self.endpoint}: {exc}") from None
         except (TimeoutError, OSError, ValueError, ua.UaError) as exc:
             raise DeviceError(f"cannot connect to {self.endpoint}: {_why(exc)}") from None
         try:
@@ -144,6 +172,10 @@ class OpcUaDevice(GenericDevice):
             raise DeviceError(f"no OPC UA certificate {cert}: run `plugcell certs opcua "
                               f"{self.name} --dir {folder}`")
         client.application_uri = uri_of(cert) or application_uri(self.name)
+        if not self.insecure_accept_any:  # read again at each connection: rotations
+            client.certificate_validator = ServerTrust.load(
+                self.endpoint, cell_certs=folder, trust=self.trust,
+                expected_uri=self.server_uri)
         await client.set_security(
             SecurityPolicyBasic256Sha256, CertProperties(cert, "pem"), CertProperties(key, "pem"),
             mode=ua.MessageSecurityMode.SignAndEncrypt)

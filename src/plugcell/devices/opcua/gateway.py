@@ -12,10 +12,11 @@ and turns every OPC UA method call into a ``CreateProcess``
 * MultipleData: output ``Process``, the NodeId of a process object whose ``Data``
   variable follows the stream (subscribe to it), with ``State``/``Reason`` and a
   ``Stop`` method (the service's StopData, sent by the same sender);
+* every method's last output is ``Reason`` (String): empty on success;
 * a process that ends Failed: a Bad status — ``BadUserAccessDenied`` for an access
   refusal, ``BadTimeout`` when the service went silent, ``BadNoCommunication`` when
-  it is gone, ``BadDeviceFailure`` otherwise — and a ``ProcessEventType`` event whose
-  ``Reason`` (and ``Message``) is the service's reason text;
+  it is gone, ``BadDeviceFailure`` otherwise — with the service's reason text in the
+  result's ``Reason`` output, and a ``ProcessEventType`` event with the same ``Reason``;
 * an argument of the wrong type or size: ``BadInvalidArgument`` with the
   reason in the argument's diagnostic info (``AdditionalInfo``), and an event.
 
@@ -44,8 +45,10 @@ from plugcell.devices.opcua.address_space import (
     add_process,
     add_service,
     node_id,
+    output_argument,
 )
 from plugcell.devices.opcua.arguments import ArgumentError, data_variant, input_value, option_of
+from plugcell.devices.opcua.companion import Models, add_service_device, load_models
 from plugcell.devices.opcua.robots import RobotMirror, is_robot
 from plugcell.devices.opcua.server_security import GatewaySecurity, configure_security
 from plugcell.devices.opcua.sessions import caller_name, caller_session, capture_session_users
@@ -106,7 +109,8 @@ class CellGateway:
         Seconds a finished MultipleData process object stays in the address space.
     robot_poll
         Seconds between reads of each robot's joints and flange pose for the OPC 40010
-        variables (:mod:`plugcell.devices.opcua.robots`); 0 turns them off.
+        variables (:mod:`plugcell.devices.opcua.robots`); 0 turns the reads off (the
+        typed robot is still there).
     """
 
     def __init__(
@@ -171,6 +175,7 @@ class CellGateway:
         await configure_security(server, self.security, self.users.allow_anonymous)
         capture_session_users(server, self._session_closed)
         self.idx = await server.register_namespace(f"urn:plugcell:cell:{self.cell}")
+        self.models: Models = await load_models(server, self.idx)
         self.cell_node = await server.nodes.objects.add_folder(
             ua.NodeId("Cell", self.idx), ua.QualifiedName("Cell", self.idx)
         )
@@ -262,9 +267,14 @@ class CellGateway:
             self.cell_node, self.idx, state.device_info, instance, partners,
             lambda command: self._method(service, command),
         )
-        if self.robot_poll > 0 and is_robot(state.device_info):
-            mirror = RobotMirror(self.server, node, self.watcher, self.robot_poll)
+        device = state.device_info
+        if is_robot(device):  # a MotionDeviceSystem, built (and polled) by its own task
+            mirror = RobotMirror(self.server, self.models, node, device, self.watcher,
+                                 self.robot_poll)
             self._robots[service] = self._spawn(mirror.run())
+        else:
+            node.device = await add_service_device(self.models, service, device.vendor,
+                                                   device.kind, device.info)
         log.info("opcua: %s added", service)
 
     async def _forget(self, service: str, node: ServiceNode) -> None:
@@ -274,6 +284,9 @@ class CellGateway:
             with contextlib.suppress(asyncio.CancelledError, Exception):
                 await robot
         await node.delete()
+        with contextlib.suppress(ua.UaStatusCodeError):  # DeviceSet.<service>, even half-made
+            await self.server.get_node(ua.NodeId(f"DeviceSet.{service}", self.idx)).delete(
+                recursive=True)
 
     async def _remove(self, service: str) -> None:
         node = self.services.pop(service, None)
@@ -304,6 +317,9 @@ class CellGateway:
         """The participant that sends the current OPC UA user's processes."""
         user = caller_name()
         if user is None:
+            if not self.users.allow_anonymous:  # fail closed: never call as the gateway
+                raise ValueError("the OPC UA user of this call is unknown (anonymous "
+                                 "sessions are off)")
             return self.watcher
         async with self._caller_lock:
             caller = self._callers.get(user)
@@ -327,7 +343,11 @@ class CellGateway:
     ) -> ua.CallMethodResult:
         expected = 2 if command.takes_input else 1
         if len(args) > expected:
-            return _bad(ua.StatusCodes.BadTooManyArguments, len(args))
+            why = (f"{command.name}: {len(args)} arguments, but it takes {expected} "
+                   f"({'Option, Data' if command.takes_input else 'Option'})")
+            await self._emit(service, command.name, caller_name() or self.name, 0,
+                             "Refused", why)
+            return _failed(command, ua.StatusCodes.BadTooManyArguments, len(args), why)
         try:
             option = option_of(args[0] if args else None, command.name)
         except ArgumentError as exc:
@@ -341,7 +361,7 @@ class CellGateway:
         except ValueError as exc:  # a secure cell without this user's certificate
             await self._emit(service, command.name, caller_name() or self.name, 0,
                              "Refused", str(exc))
-            return _bad(ua.StatusCodes.BadUserAccessDenied, len(args))
+            return _failed(command, ua.StatusCodes.BadUserAccessDenied, len(args), str(exc))
         call = await caller.create_process(
             service, command.name, option, data, timeout=command.timeout + CALL_MARGIN
         )
@@ -351,19 +371,16 @@ class CellGateway:
         final = await call.result()
         await self._announce(service, command, call, final.state, final.reason)
         if final.state is ProcessStates.Failed:
-            return _bad(_failure_code(final.reason), len(args))
-        result = ua.CallMethodResult()
-        result.StatusCode = ua.StatusCode(ua.StatusCodes.Good)
-        if command.gives_output:
-            result.OutputArguments = [data_variant(final.data)]
-        result.InputArgumentResults = [ua.StatusCode() for _ in args]
-        return result
+            return _failed(command, _failure_code(final.reason), len(args), final.reason)
+        return _good(len(args), [data_variant(final.data)] if command.gives_output else [])
 
     async def _refuse(
         self, service: str, command: Command, index: int, count: int, reason: str
     ) -> ua.CallMethodResult:
-        """BadInvalidArgument with ``reason`` as the argument's diagnostic info."""
-        result = _bad(ua.StatusCodes.BadInvalidArgument, max(count, index + 1))
+        """BadInvalidArgument with ``reason`` as the argument's diagnostic info (and the
+        ``Reason`` output)."""
+        result = _failed(command, ua.StatusCodes.BadInvalidArgument, max(count, index + 1),
+                         reason)
         result.InputArgumentResults[index] = ua.StatusCode(ua.StatusCodes.BadInvalidArgument)
         infos = [ua.DiagnosticInfo() for _ in result.InputArgumentResults]
         infos[index] = ua.DiagnosticInfo(AdditionalInfo=reason)
@@ -379,22 +396,24 @@ class CellGateway:
         node = self.services.get(service)
         if call.done and call.final is not None and call.final.state is ProcessStates.Failed:
             await self._announce(service, command, call, ProcessStates.Failed, call.final.reason)
-            return _bad(_failure_code(call.final.reason), count)
+            return _failed(command, _failure_code(call.final.reason), count, call.final.reason)
         if node is None:  # the service left meanwhile
             with contextlib.suppress(Exception):
                 await caller.stop(call)
-            return _bad(ua.StatusCodes.BadNoCommunication, count)
+            return _failed(command, ua.StatusCodes.BadNoCommunication, count,
+                           f"{service} left the cell")
 
-        async def stop(parent: ua.NodeId) -> ua.StatusCode:
+        async def stop(parent: ua.NodeId) -> ua.CallMethodResult:
             if call.done:
-                return ua.StatusCode(ua.StatusCodes.BadInvalidState)
+                return _failed(None, ua.StatusCodes.BadInvalidState, 0,
+                               f"the process {call.identifier} has already ended")
             ended = await (await caller.stop(call)).result()
             if ended.state is ProcessStates.Failed:
                 await self._emit(service, ended.tag.recipient, caller.name, ended.identifier,
                                  "Failed", ended.reason)
-                return ua.StatusCode(_failure_code(ended.reason))
+                return _failed(None, _failure_code(ended.reason), 0, ended.reason)
             await finished.wait()  # State and Reason show the end when Stop returns
-            return ua.StatusCode(ua.StatusCodes.Good)
+            return _good(0, [])
 
         finished = asyncio.Event()
 
@@ -403,11 +422,7 @@ class CellGateway:
         self._streams.setdefault(session, {})[call.identifier] = (caller, call)
         await self._announce(service, command, call, ProcessStates.Running, "")
         self._spawn(self._pump(service, command, call, process, finished))
-        result = ua.CallMethodResult()
-        result.StatusCode = ua.StatusCode(ua.StatusCodes.Good)
-        result.OutputArguments = [ua.Variant(process.node.nodeid, ua.VariantType.NodeId)]
-        result.InputArgumentResults = [ua.StatusCode() for _ in range(count)]
-        return result
+        return _good(count, [ua.Variant(process.node.nodeid, ua.VariantType.NodeId)])
 
     async def _pump(
         self, service: str, command: Command, call: ProcessCall, process: ProcessNode,
@@ -477,10 +492,28 @@ class CellGateway:
             await event.trigger(message=text)
 
 
-def _bad(code: int, count: int) -> ua.CallMethodResult:
+def _good(count: int, outputs: list[ua.Variant]) -> ua.CallMethodResult:
+    """A Good result: ``outputs`` and an empty ``Reason``."""
+    result = ua.CallMethodResult()
+    result.StatusCode = ua.StatusCode(ua.StatusCodes.Good)
+    result.InputArgumentResults = [ua.StatusCode() for _ in range(count)]
+    result.OutputArguments = [*outputs, ua.Variant("", ua.VariantType.String)]
+    return result
+
+
+def _failed(command: Command | None, code: int, count: int, reason: str
+            ) -> ua.CallMethodResult:
+    """A Bad result whose ``Reason`` output says why (``command`` None: a process's Stop).
+
+    The status code is for every client; the reason text travels as the method's last
+    output argument (a status code has no text; asyncua's method callbacks cannot reach
+    the response's DiagnosticInfos), Null in the place of the other outputs."""
+    declared = len(output_argument(command)) if command is not None else 1
     result = ua.CallMethodResult()
     result.StatusCode = ua.StatusCode(code)
     result.InputArgumentResults = [ua.StatusCode() for _ in range(count)]
+    result.OutputArguments = [*(ua.Variant() for _ in range(declared - 1)),
+                              ua.Variant(reason, ua.VariantType.String)]
     return result
 
 

@@ -5,8 +5,13 @@ session that called lives on the session (``InternalSession.user``).
 :func:`capture_session_users` wraps each session the server creates so that, while one
 of its calls runs, :func:`caller_name` and :func:`caller_session` say who calls, and so
 that the gateway hears when the session closes.  This relies on asyncua's
-``InternalServer.create_session`` and ``InternalSession.call``/``close_session``
-(asyncua 2.1; docs/opcua.md, "Limits").
+``InternalServer.create_session`` and ``InternalSession.call``/``close_session``/``user``
+— asyncua's public API has no way for a method callback to learn its session
+(``Server.link_method`` callbacks get the object and the arguments; the server callbacks
+of ``subscribe_server_callback`` cover reads, writes and monitored items only) — so
+pyproject.toml pins asyncua to the tested minor version, :func:`capture_session_users`
+refuses to start if those internals are gone, and the gateway refuses a call whose user
+it cannot tell when anonymous sessions are off (docs/opcua.md, "Limits").
 """
 
 from __future__ import annotations
@@ -16,6 +21,19 @@ from collections.abc import Awaitable, Callable
 from typing import Any
 
 from asyncua import Server
+from asyncua.server.internal_session import InternalSession
+
+
+def _init_names() -> tuple[str, ...]:
+    import inspect
+
+    return tuple(inspect.signature(InternalSession.__init__).parameters)
+
+
+def _asyncua_version() -> str:
+    from importlib.metadata import version
+
+    return version("asyncua")
 
 #: The OPC UA user of the method call being served (None: anonymous).
 _caller_name: contextvars.ContextVar[str | None] = contextvars.ContextVar(
@@ -48,8 +66,15 @@ def capture_session_users(
     session this server creates gets its ``call`` wrapped to set the context
     variables for the duration of the call, and its ``close_session`` wrapped.
     """
-    iserver = server.iserver
-    create = iserver.create_session
+    iserver = getattr(server, "iserver", None)
+    create = getattr(iserver, "create_session", None)
+    if (create is None or not hasattr(InternalSession, "call")
+            or not hasattr(InternalSession, "close_session") or "user" not in _init_names()):
+        raise RuntimeError(
+            f"asyncua {_asyncua_version()} changed the internals the gateway relies on to "
+            "know who calls (InternalServer.create_session, InternalSession.call, "
+            "close_session, user; docs/opcua.md, 'Limits'): install the asyncua version "
+            "pyproject.toml names")
 
     def create_session(*args: Any, **kwargs: Any) -> Any:
         session = create(*args, **kwargs)

@@ -24,6 +24,8 @@ POS_TO_JNTP     SingleData  Double[6] → Double[*]  the controller's inverse ki
 JointIncrement  SingleData  Double[12] → Double[*] δθ = J⁻¹Δx, target and measured (8.3.2)
 PROGRAM_STATUS  SingleData  → String[*]            program, state, simulated s, message,
                                                    the last console lines
+IDENTIFICATION  SingleData  → String[4]            manufacturer, model, serial number,
+                                                   product code (the robot file's)
 ==============  ==========  =====================  ==========================================
 
 Positions are PDL's: mm and Comau ZYZ degrees.  The controller is reached over
@@ -52,6 +54,7 @@ from typing import Any, ClassVar
 
 import numpy as np
 
+from plugcell.devices.params import flag as _flag
 from plugcell.devices.robot.bridge import (
     BridgeError,
     ControllerBridge,
@@ -95,16 +98,6 @@ RECONNECT_S = 1.0
 TEXT_MAX = 255
 
 _D, _S = DataTypes.Double, DataTypes.String
-
-
-def _flag(text: str) -> bool:
-    """``--param sim=true``: a boolean parameter."""
-    value = text.strip().lower()
-    if value in ("1", "true", "yes", "on"):
-        return True
-    if value in ("0", "false", "no", "off", ""):
-        return False
-    raise ValueError(f"expected true or false, not {text!r}")
 
 
 @dataclass
@@ -152,6 +145,10 @@ class RobotService(GenericDevice):
         Command(name="PROGRAM_STATUS", type=CommandTypes.SingleData, output_data_type=_S,
                 output_data_size=(-1,),
                 info="[program, state, simulated s, message, console lines...]"),
+        Command(name="IDENTIFICATION", type=CommandTypes.SingleData, output_data_type=_S,
+                output_data_size=(4,),
+                info="[manufacturer, model, serial number, product code] of the robot "
+                     "(its description file's [identification]; model: its name if none)"),
     )
     params: ClassVar[dict[str, Any]] = {
         "sim": _flag,
@@ -371,11 +368,28 @@ class RobotService(GenericDevice):
                     return await self._joint_increment(option, data)
                 case "PROGRAM_STATUS":
                     return await self._program_status()
+                case "IDENTIFICATION":
+                    return self._identification()
         except ControllerError as exc:
             raise DeviceError(str(exc)) from None
         except BridgeError as exc:
             raise DeviceError(str(exc)) from None
         raise DeviceError(f"{command.name} is not implemented")  # pragma: no cover
+
+    def _identification(self) -> list[str]:
+        """[manufacturer, model, serial number, product code] of the robot file."""
+        from plugcell.io.robots import robot_identification
+
+        desc = self.robot_description
+        if desc is None:
+            raise DeviceError("the controller's robot is unknown here (no description)")
+        try:
+            ident = robot_identification(self.robot if self.sim_process is not None
+                                         else desc.name)
+        except Exception:  # an imported URDF, a robot file of the controller's only
+            ident = {}
+        return [ident.get("manufacturer", ""), ident.get("model", "") or desc.name,
+                ident.get("serial_number", ""), ident.get("product_code", "")]
 
     @staticmethod
     def _numbers(text: str, count: int | None = None) -> np.ndarray:
