@@ -182,7 +182,8 @@ def circle_through(a: Array, b: Array, c: Array) -> tuple[Array, float, Array, A
     return centre, rho, u, w, sweep
 
 
-def segment_profile(seg: Segment, limits: CartesianLimits) -> DoubleS:
+def segment_profile(seg: Segment, limits: CartesianLimits, soft_start: bool = False,
+                    soft_end: bool = False) -> DoubleS:
     """The time law ``σ`` of one segment within the limits (module docstring).
 
     Parameters
@@ -190,6 +191,10 @@ def segment_profile(seg: Segment, limits: CartesianLimits) -> DoubleS:
     seg : Segment
     limits : CartesianLimits
         With the move's overrides applied.
+    soft_start, soft_end : bool
+        Halve the acceleration and jerk limits of the acceleration (deceleration) phase,
+        the phase a blend overlaps (a circle: of the whole move, as its speed limit
+        depends on them).
 
     Returns
     -------
@@ -198,6 +203,9 @@ def segment_profile(seg: Segment, limits: CartesianLimits) -> DoubleS:
     """
     L, th = seg.length, seg.angle
     v, a, j = limits.velocity, limits.acceleration, limits.jerk
+    f1, f2 = (0.5 if soft_start else 1.0), (0.5 if soft_end else 1.0)
+    if seg.arc and (soft_start or soft_end):
+        a, j, f1, f2 = 0.5 * a, 0.5 * j, 1.0, 1.0
     if seg.arc:
         rho = seg.radius
         v = min(v, math.sqrt(rho * a / math.sqrt(2.0)), (rho * rho * j / 3.0) ** (1.0 / 3.0))
@@ -212,7 +220,7 @@ def segment_profile(seg: Segment, limits: CartesianLimits) -> DoubleS:
     if not cands:
         return DoubleS.plan(0.0, 1.0, 1.0, 1.0)
     vs, as_, js = (min(c[i] for c in cands) for i in range(3))
-    return DoubleS.plan(1.0, vs, as_, js)
+    return DoubleS.plan(1.0, vs, as_ * f1, js * f1, as_ * f2, js * f2)
 
 
 @dataclass(frozen=True)

@@ -12,7 +12,7 @@ which makes the move the fastest synchronised one within every joint's limits, t
 leading joint at its limit.  A chain of PTP moves is the superposition of the moves'
 displacements (:mod:`plugcell.motion.timing`): with ``k`` the last move started,
 
-    q(t) = q_end,k + Δq_k·(σ_k − 1) + Δq_{k−1}·(σ_{k−1} − 1)
+    q(t) = q_start,k + Δq_k·σ_k + Δq_{k−1}·(σ_{k−1} − 1)
 
 and the velocity, acceleration and jerk are the same sums of ``Δq·σ̇``, ``Δq·σ̈``,
 ``Δq·σ⃛``.
@@ -34,7 +34,8 @@ Array = NDArray[np.float64]
 __all__ = ["JointPath", "ptp_profile"]
 
 
-def ptp_profile(dq: Array, limits: JointLimits) -> DoubleS:
+def ptp_profile(dq: Array, limits: JointLimits, soft_start: bool = False,
+                soft_end: bool = False) -> DoubleS:
     """The synchronised time law ``σ`` of a PTP move by ``dq`` (module docstring).
 
     Parameters
@@ -43,6 +44,9 @@ def ptp_profile(dq: Array, limits: JointLimits) -> DoubleS:
         ``Δq = q_e − q_s``.
     limits : JointLimits
         With the move's overrides applied.
+    soft_start, soft_end : bool
+        Halve the acceleration and jerk limits of the acceleration (deceleration)
+        phase — the phase a blend overlaps with the neighbouring move.
 
     Returns
     -------
@@ -56,7 +60,8 @@ def ptp_profile(dq: Array, limits: JointLimits) -> DoubleS:
     v = float(np.min(limits.velocity[moving] / m[moving]))
     a = float(np.min(limits.acceleration[moving] / m[moving]))
     j = float(np.min(limits.jerk[moving] / m[moving]))
-    return DoubleS.plan(1.0, v, a, j)
+    f1, f2 = (0.5 if soft_start else 1.0), (0.5 if soft_end else 1.0)
+    return DoubleS.plan(1.0, v, a * f1, j * f1, a * f2, j * f2)
 
 
 @dataclass(frozen=True)
@@ -99,7 +104,9 @@ class JointPath:
         k = self.timing.last_started(t)
         d = self.deltas
         ps = self.timing.sample(t, k)
-        q = self.ends[k] + d[k] * (ps.s - self.timing.h[k])[:, None]
+        starts = np.vstack([self.q0, self.ends[:-1]])
+        done = (ps.s >= self.timing.h[k])[:, None]
+        q = np.where(done, self.ends[k], starts[k] + d[k] * ps.s[:, None])
         qd, qdd, qddd = (d[k] * x[:, None] for x in (ps.v, ps.a, ps.j))
         prev = k >= 1
         if np.any(prev):

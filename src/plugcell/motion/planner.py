@@ -11,15 +11,27 @@ the move, its program line, the time and path fraction, the joint, value and lim
 2. Moves grouped into sections (consecutive PTPs; consecutive LIN/CIRCs), each move's
    time law (:mod:`.joint_path`, :mod:`.cartesian_path`).
 3. Blends.  A blend radius ``r`` on move ``k`` lets move ``k+1`` start ``d`` before
-   move ``k`` ends (superposition, :mod:`.timing`), with
-   ``d = min(T_k − t_k(r/2), t_{k+1}(r/2), T_k/2, T_{k+1}/2)``: ``t_k(r/2)`` is when
-   move ``k`` comes within ``r/2`` of its end for good, ``t_{k+1}(r/2)`` when move
-   ``k+1`` first leaves ``r/2`` around its start.  During the overlap both offsets are
-   at most ``r/2``, so the path stays within ``r`` of the intermediate point (triangle
-   inequality).  The superposed rates are the *sums* of both moves' rates, so the
-   overlap is then checked on a dense grid (:data:`BLEND_SAMPLES`) against the limits
-   (joint ``v, a, jerk``; TCP linear and angular ``v, a, jerk``) and halved until it
-   keeps them (``d → 0`` is an exact stop).
+   move ``k`` ends (superposition, :mod:`.timing`).  The deceleration phase of move
+   ``k`` and the acceleration phase of move ``k+1`` are planned with *half* the
+   acceleration and jerk limits, so their sums in the overlap keep the limits; the
+   overlap ``d`` is the largest that
+
+   * keeps both moves near the point: ``d ≤ T_k − t_k(r/2)``, ``d ≤ t_{k+1}(r/2)``
+     (``t_k(r/2)``: when move ``k`` comes within ``r/2`` of its end for good;
+     ``t_{k+1}(r/2)``: when move ``k+1`` first leaves ``r/2`` around its start) — so
+     the path stays within ``r`` of the point (triangle inequality);
+   * lies in those two phases: ``d ≤ T_a2,k``, ``d ≤ T_a1,k+1`` (then move ``k``'s
+     speed only falls and move ``k+1``'s only rises in the overlap, and each
+     channel's speed is at most its value at the overlap's edges);
+   * keeps the speeds at the edges: ``w_k·σ̇_k(T_k − d) + w_{k+1}·σ̇_{k+1}(d) ≤ v``
+     per channel (``w = |Δq_j|`` per joint; the length and the angle of a Cartesian
+     move), by bisection — the left side grows with ``d``.
+
+   The overlap is then verified on a dense grid (:data:`BLEND_SAMPLES`) against all
+   limits (for Cartesian moves the angular acceleration has a cross term
+   ``ω_{k+1} × ω_k``), and if it fails the largest of :data:`BLEND_CANDIDATES`
+   shorter overlaps that passes is taken (0: an exact stop; :attr:`Trajectory.blends`
+   tells which overlap each blend got).
 4. Cartesian sections are followed in joint space every ``check_step`` seconds
    (:func:`~plugcell.motion.tracking.track`, falling back on
    :func:`plugcell.kinematics.inverse` seeded with the previous solution), and at
@@ -71,8 +83,8 @@ __all__ = ["BLEND_SAMPLES", "plan"]
 
 #: Samples of a blend's overlap checked against the limits.
 BLEND_SAMPLES = 400
-#: Halvings of a blend's overlap before giving up and stopping exactly.
-BLEND_HALVINGS = 30
+#: Overlaps tried per blend, from the largest down to 0 (exact stop).
+BLEND_CANDIDATES = 48
 #: Margin kept below each limit in a blend (the check is on a grid).
 BLEND_MARGIN = 1e-6
 #: Slack on position limits (rad or m).
@@ -123,21 +135,43 @@ def _sections(moves: Sequence[Move]) -> list[list[int]]:
     return groups
 
 
-def _overlap(pa: DoubleS, frac_a: float, pb: DoubleS, frac_b: float) -> float:
-    """``min(T_a − t_a(σ_a), t_b(σ_b), T_a/2, T_b/2)`` (module docstring, step 3)."""
-    Ta, Tb = pa.duration, pb.duration
-    return max(0.0, min(Ta - pa.time_at(frac_a), pb.time_at(frac_b), Ta / 2.0, Tb / 2.0))
+def _overlap(pa: DoubleS, frac_a: float, pb: DoubleS, frac_b: float, wa: Array, wb: Array,
+             vmax: Array) -> float:
+    """The overlap of a blend (module docstring, step 3).
+
+    ``min(T_a − t_a(σ_a), t_b(σ_b), T_a2,a, T_a1,b)``, then the largest ``d`` below it
+    with ``wa·σ̇_a(T_a − d) + wb·σ̇_b(d) ≤ vmax`` in every channel (bisection).
+    """
+    Ta = pa.duration
+    d = max(0.0, min(Ta - pa.time_at(frac_a), pb.time_at(frac_b), pa.t_a2, pb.t_a))
+
+    def fits(x: float) -> bool:
+        return bool(np.all(wa * pa.speed_at(Ta - x) + wb * pb.speed_at(x) <= vmax))
+
+    if fits(d):
+        return d
+    lo, hi = 0.0, d
+    for _ in range(60):
+        mid = 0.5 * (lo + hi)
+        lo, hi = (mid, hi) if fits(mid) else (lo, mid)
+    return lo
 
 
 def _shrink(
     profiles: list[DoubleS], d: Array, k: int,
     excess: Callable[[Timing, float, float], bool],
 ) -> float:
-    """The largest ``d[k]·2⁻ⁱ`` whose overlap window keeps the limits (0 if none)."""
-    dk = float(d[k])
-    for _ in range(BLEND_HALVINGS):
-        if dk <= 0.0:
-            return 0.0
+    """The largest overlap in ``d[k]·(1 − i/BLEND_CANDIDATES)`` whose window keeps the
+    limits (0 if none).
+
+    Not a bisection: the superposed jerk is the sum of both moves' jerks, and a
+    joint that keeps its direction doubles it where the end of one jerk phase meets
+    the start of the other — which only a *long* enough overlap avoids — while a
+    joint that reverses adds the accelerations, which only a *short* one keeps small.
+    """
+    d_max = float(d[k])
+    for i in range(BLEND_CANDIDATES):
+        dk = d_max * (1.0 - i / BLEND_CANDIDATES)
         trial = d.copy()
         trial[k] = dk
         trial[k + 1:] = 0.0
@@ -145,8 +179,40 @@ def _shrink(
         t0 = float(tm.start[k + 1])
         if not excess(tm, t0, t0 + dk):
             return dk
-        dk *= 0.5
     return 0.0
+
+
+def _best_blends(
+    radii: list[float],
+    make_profiles: Callable[[bool], list[DoubleS]],
+    bound: Callable[[list[DoubleS], int], float],
+    excess: Callable[[list[DoubleS], int, Timing, float, float], bool],
+) -> tuple[list[DoubleS], Array]:
+    """Profiles and overlaps of a section: the better of two plans (module docstring).
+
+    Plan 1 keeps every phase at the full limits and verifies each overlap; plan 2
+    halves the acceleration and jerk of the blended phases, which lets the overlap
+    reach its geometric bound.  The plan that flies by more of the requested blends
+    wins, then the faster one.
+    """
+    best: tuple[tuple[int, float], list[DoubleS], Array] | None = None
+    for soft in (False, True):
+        if soft and not any(r > 0.0 for r in radii[:-1]):
+            break
+        profiles = make_profiles(soft)
+        d = np.zeros(max(len(profiles) - 1, 0))
+        for i in range(len(profiles) - 1):
+            if radii[i] <= 0.0 or profiles[i].h == 0.0 or profiles[i + 1].h == 0.0:
+                continue
+            d[i] = bound(profiles, i)
+            d[i] = _shrink(profiles, d, i,
+                           lambda tm, lo, hi, p=profiles, i=i: excess(p, i, tm, lo, hi))
+        stops = sum(1 for i in range(d.size) if radii[i] > 0.0 and d[i] == 0.0)
+        key = (stops, Timing.chain(profiles, d).end)
+        if best is None or key < best[0]:
+            best = (key, profiles, d)
+    assert best is not None
+    return best[1], best[2]
 
 
 # ----------------------------------------------------------------------------- PTP
@@ -156,8 +222,7 @@ def _joint_section(
 ) -> JointSection:
     desc = robot.desc
     n = desc.n_readings
-    ends, profiles, scaled = [], [], []
-    prev = q0
+    ends, scaled = [], []
     for k in idx:
         m = moves[k]
         assert isinstance(m, PTP)
@@ -168,33 +233,36 @@ def _joint_section(
         if bad:
             raise _err(JointRangeError, "target: " + bad[0], moves, k, fraction=1.0,
                        joint=bad[1], value=bad[2], limit=bad[3])
-        lim = limits.scaled(m.speed, m.acceleration)
-        profiles.append(ptp_profile(m.target - prev, lim))
-        scaled.append(lim)
+        scaled.append(limits.scaled(m.speed, m.acceleration))
         ends.append(m.target)
-        prev = m.target
     ends_a = np.array(ends)
     deltas = np.diff(np.vstack([q0, ends_a]), axis=0)
-    d = np.zeros(max(len(idx) - 1, 0))
-    for i in range(len(idx) - 1):
-        r = moves[idx[i]].blend
+    radii = [moves[k].blend for k in idx]
+
+    def make_profiles(soft: bool) -> list[DoubleS]:
+        return [ptp_profile(deltas[i], scaled[i], soft and i > 0 and radii[i - 1] > 0.0,
+                            soft and i < len(idx) - 1 and radii[i] > 0.0)
+                for i in range(len(idx))]
+
+    def keep(i: int) -> tuple[Array, Array, Array]:
+        a, b = scaled[i], scaled[i + 1]
+        return tuple((1.0 - BLEND_MARGIN) * np.maximum(getattr(a, f), getattr(b, f))
+                     for f in ("velocity", "acceleration", "jerk"))  # type: ignore[return-value]
+
+    def bound(profiles: list[DoubleS], i: int) -> float:
+        r = radii[i]
         la, lb = float(np.linalg.norm(deltas[i])), float(np.linalg.norm(deltas[i + 1]))
-        if r <= 0.0 or la == 0.0 or lb == 0.0:
-            continue
-        d[i] = _overlap(profiles[i], max(0.0, 1.0 - 0.5 * r / la), profiles[i + 1],
-                        min(1.0, 0.5 * r / lb))
-        v = np.maximum(scaled[i].velocity, scaled[i + 1].velocity) * (1.0 - BLEND_MARGIN)
-        a = np.maximum(scaled[i].acceleration, scaled[i + 1].acceleration) * (1 - BLEND_MARGIN)
-        j = np.maximum(scaled[i].jerk, scaled[i + 1].jerk) * (1.0 - BLEND_MARGIN)
+        return _overlap(profiles[i], max(0.0, 1.0 - 0.5 * r / la), profiles[i + 1],
+                        min(1.0, 0.5 * r / lb), np.abs(deltas[i]), np.abs(deltas[i + 1]),
+                        keep(i)[0])
 
-        def excess(tm: Timing, lo: float, hi: float, v: Array = v, a: Array = a,
-                   j: Array = j) -> bool:
-            _, qd, qdd, qddd = JointPath(q0, ends_a, tm).sample(np.linspace(lo, hi,
-                                                                             BLEND_SAMPLES))
-            return bool(np.any(np.abs(qd) > v) or np.any(np.abs(qdd) > a)
-                        or np.any(np.abs(qddd) > j))
+    def excess(profiles: list[DoubleS], i: int, tm: Timing, lo: float, hi: float) -> bool:
+        v, a, j = keep(i)
+        _, qd, qdd, qddd = JointPath(q0, ends_a, tm).sample(np.linspace(lo, hi, BLEND_SAMPLES))
+        return bool(np.any(np.abs(qd) > v) or np.any(np.abs(qdd) > a)
+                    or np.any(np.abs(qddd) > j))
 
-        d[i] = _shrink(profiles, d, i, excess)
+    profiles, d = _best_blends(radii, make_profiles, bound, excess)
     path = JointPath(q0, ends_a, Timing.chain(profiles, d))
     section = JointSection(robot, path, tuple(idx))
     if np.any(d > 0.0):  # a blend may cut a corner outside the limits
@@ -229,7 +297,7 @@ def _cartesian_section(
                    moves, idx[0])
     T_prev = forward(desc, params, q0, closure).tcp
     q_prev = q0
-    segments, profiles, scaled = [], [], []
+    segments, scaled = [], []
     for k in idx:
         m = moves[k]
         try:
@@ -250,29 +318,32 @@ def _cartesian_section(
             raise _err(UnreachablePoseError, f"target unreachable: {exc}", moves, k,
                        fraction=1.0) from None
         q_prev = sol.q
-        lim = cart.scaled(m.speed, m.acceleration)
         segments.append(seg)
-        profiles.append(segment_profile(seg, lim))
-        scaled.append(lim)
+        scaled.append(cart.scaled(m.speed, m.acceleration))
         T_prev = m.target
-    d = np.zeros(max(len(idx) - 1, 0))
-    for i in range(len(idx) - 1):
-        r = moves[idx[i]].blend
-        sa, sb = segments[i], segments[i + 1]
-        if r <= 0.0 or profiles[i].h == 0.0 or profiles[i + 1].h == 0.0:
-            continue
-        d[i] = _overlap(profiles[i], sa.fraction_within(0.5 * r, True), profiles[i + 1],
-                        sb.fraction_within(0.5 * r, False))
-        la, lb = scaled[i], scaled[i + 1]
-        keep = (1.0 - BLEND_MARGIN) * np.array([
-            max(getattr(la, f), getattr(lb, f)) for f in (
-                "velocity", "acceleration", "jerk", "angular_velocity",
-                "angular_acceleration", "angular_jerk")])
+    radii = [moves[k].blend for k in idx]
 
-        def excess(tm: Timing, lo: float, hi: float, keep: Array = keep) -> bool:
-            return _cartesian_excess(CartesianPath(tuple(segments), tm), lo, hi, keep)
+    def make_profiles(soft: bool) -> list[DoubleS]:
+        return [segment_profile(segments[i], scaled[i], soft and i > 0 and radii[i - 1] > 0.0,
+                                soft and i < len(idx) - 1 and radii[i] > 0.0)
+                for i in range(len(idx))]
 
-        d[i] = _shrink(profiles, d, i, excess)
+    def keep(i: int) -> Array:
+        a, b = scaled[i], scaled[i + 1]
+        return (1.0 - BLEND_MARGIN) * np.array([max(getattr(a, f), getattr(b, f)) for f in (
+            "velocity", "acceleration", "jerk", "angular_velocity", "angular_acceleration",
+            "angular_jerk")])
+
+    def bound(profiles: list[DoubleS], i: int) -> float:
+        sa, sb, r = segments[i], segments[i + 1], radii[i]
+        return _overlap(profiles[i], sa.fraction_within(0.5 * r, True), profiles[i + 1],
+                        sb.fraction_within(0.5 * r, False), np.array([sa.length, sa.angle]),
+                        np.array([sb.length, sb.angle]), keep(i)[[0, 3]])
+
+    def excess(profiles: list[DoubleS], i: int, tm: Timing, lo: float, hi: float) -> bool:
+        return _cartesian_excess(CartesianPath(tuple(segments), tm), lo, hi, keep(i))
+
+    profiles, d = _best_blends(radii, make_profiles, bound, excess)
     path = CartesianPath(tuple(segments), Timing.chain(profiles, d))
     times = _grid(path.duration, check_step)
     q_table = _follow(robot, path, times, q0, idx, moves, t_offset)
@@ -407,7 +478,7 @@ def plan(
     params: GeometricParameters | None = None,
     closure: str = "nominal",
     check_step: float = 0.01,
-    min_inverse_condition: float = 0.01,
+    min_inverse_condition: float = 0.005,
     length_scale: float = 1.0,
 ) -> Trajectory:
     """Plan ``moves`` from ``q_start`` and check them before motion (module docstring).

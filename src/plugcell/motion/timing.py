@@ -33,7 +33,7 @@ class Timing:
     ----------
     start : (K,) array, s
         ``t0_k``, non-decreasing.
-    h, t_j, t_a, t_v, j_max : (K,) arrays
+    h, t_j, t_a, t_v, j_max, t_j2, t_a2, j_max2 : (K,) arrays
         The :class:`~plugcell.motion.profile.DoubleS` fields of each profile
         (``h`` = 1, or 0 for a move that goes nowhere).
     """
@@ -44,6 +44,9 @@ class Timing:
     t_a: Array
     t_v: Array
     j_max: Array
+    t_j2: Array
+    t_a2: Array
+    j_max2: Array
 
     @classmethod
     def chain(cls, profiles: list[DoubleS], overlaps: ArrayLike) -> Timing:
@@ -66,12 +69,13 @@ class Timing:
         for k in range(1, len(profiles)):
             start[k] = start[k - 1] + profiles[k - 1].duration - d[k - 1]
         return cls(start, *(np.array([getattr(p, f) for p in profiles], dtype=float)
-                            for f in ("h", "t_j", "t_a", "t_v", "j_max")))
+                            for f in ("h", "t_j", "t_a", "t_v", "j_max", "t_j2", "t_a2",
+                                      "j_max2")))
 
     @property
     def durations(self) -> Array:
-        """``T_k = 2·T_a + T_v`` per move (s)."""
-        return 2.0 * self.t_a + self.t_v
+        """``T_k = T_a1 + T_v + T_a2`` per move (s)."""
+        return self.t_a + self.t_v + self.t_a2
 
     @property
     def end(self) -> float:
@@ -80,8 +84,8 @@ class Timing:
 
     def profile(self, k: int) -> DoubleS:
         """Move ``k``'s profile."""
-        return DoubleS(float(self.h[k]), float(self.t_j[k]), float(self.t_a[k]),
-                       float(self.t_v[k]), float(self.j_max[k]))
+        return DoubleS(*(float(getattr(self, f)[k]) for f in (
+            "h", "t_j", "t_a", "t_v", "j_max", "t_j2", "t_a2", "j_max2")))
 
     def last_started(self, t: Array) -> NDArray[np.intp]:
         """Index of the last move started at each time (0 before the first)."""
@@ -91,7 +95,7 @@ class Timing:
     def sample(self, t: Array, k: NDArray[np.intp]) -> ProfileSample:
         """Profile ``k[i]`` at time ``t[i]`` (section time, s)."""
         return double_s(t - self.start[k], self.h[k], self.t_j[k], self.t_a[k], self.t_v[k],
-                        self.j_max[k])
+                        self.j_max[k], self.t_j2[k], self.t_a2[k], self.j_max2[k])
 
     def fraction(self, t: Array) -> tuple[NDArray[np.intp], Array]:
         """The last started move at each time and its path fraction ``σ ∈ [0, 1]``."""

@@ -136,6 +136,21 @@ class Trajectory:
         return self.sample(np.array([k * dt]), order)
 
     @property
+    def blends(self) -> dict[int, float]:
+        """Overlap (s) each move with a blend radius got with its successor; 0.0 where no
+        overlap keeps the limits and the move stops exactly at its target."""
+        out: dict[int, float] = {}
+        for sec in self.sections:
+            tm = sec.path.timing
+            for i, k in enumerate(sec.moves[:-1]):
+                if self.moves[k].blend > 0.0:
+                    out[k] = float(tm.start[i] + tm.durations[i] - tm.start[i + 1])
+        for k, m in enumerate(self.moves):
+            if m.blend > 0.0:
+                out.setdefault(k, 0.0)
+        return out
+
+    @property
     def cartesian(self) -> bool:
         """Whether any section is Cartesian (sampling then runs inverse kinematics)."""
         return any(isinstance(s, CartesianSection) for s in self.sections)
