@@ -1,4 +1,4 @@
-"""Fixtures of the motion tests: the robots, limits of a 200 kg-class arm, helpers."""
+"""Fixtures of the motion tests: the robots and the limits of a 200 kg-class arm."""
 
 from __future__ import annotations
 
@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from plugcell.io.robots import load_robot
-from plugcell.kinematics import RobotDescription, forward
+from plugcell.kinematics import RobotDescription
 from plugcell.motion import CartesianLimits, JointLimits
 
 
@@ -30,22 +30,3 @@ def jl() -> JointLimits:
 @pytest.fixture(scope="session")
 def cl() -> CartesianLimits:
     return CartesianLimits(1.0, 4.0, 40.0, 2.0, 8.0, 80.0)
-
-
-def tcp(desc: RobotDescription, q: np.ndarray) -> np.ndarray:
-    """TCP pose(s) by the controller's model (nominal closure)."""
-    return forward(desc, None, q, "nominal").tcp
-
-
-def moved(T: np.ndarray, dp: list[float], axis: list[float] | None = None,
-          angle: float = 0.0) -> np.ndarray:
-    """``T`` translated by ``dp`` (m, base frame) and turned by ``angle`` about ``axis``
-    (base frame, through the TCP)."""
-    from plugcell.kinematics import so3_exp
-
-    out = np.array(T, dtype=float)
-    out[:3, 3] += dp
-    if axis is not None:
-        k = np.asarray(axis, float) / np.linalg.norm(axis)
-        out[:3, :3] = so3_exp(k * angle) @ out[:3, :3]
-    return out
