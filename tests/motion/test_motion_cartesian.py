@@ -142,6 +142,7 @@ def _chain(desc: RobotDescription, blend: float) -> tuple[np.ndarray, list]:
                 CIRC(via=via, target=T3, line=12)]
 
 
+@pytest.mark.slow
 def test_cartesian_limits_and_analytic_derivatives(elbow: RobotDescription, jl: JointLimits,
                                                    cl: CartesianLimits) -> None:
     for blend in (0.0, 0.08):
