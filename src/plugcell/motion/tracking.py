@@ -100,16 +100,17 @@ def track(
     done = np.zeros(B, dtype=bool)
     active = np.arange(B)
     for _ in range(max_iterations + 1):
-        Tq, J = tcp_jacobian(desc, params, q[active], closure)
-        e = pose_error_exact(T[active], Tq)
+        fk = forward(desc, params, q[active], closure, raise_errors=False)
+        e = pose_error_exact(T[active], fk.tcp)
         ok = np.isfinite(e).all(axis=-1)
         conv = ok & (np.linalg.norm(e[:, :3], axis=-1) < tol) & \
             (np.linalg.norm(e[:, 3:], axis=-1) < tol)
         done[active[conv]] = True
         keep = ok & ~conv
-        active, J, e = active[keep], J[keep], e[keep]
-        if not active.size:
+        if not np.any(keep):
             break
+        J = jacobian_from_fk(desc, fk, "tcp")  # only when a step is needed
+        active, J, e = active[keep], J[keep], e[keep]
         q[active] += _step(J, e)
     return q, done
 
