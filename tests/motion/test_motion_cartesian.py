@@ -323,3 +323,27 @@ def test_random_lines_stay_straight_and_keep_the_limits(
         assert np.max(_line_distance(T[:, :3, 3], Ta[:3, 3], Tb[:3, 3])) <= 1e-9
     assert np.max(np.abs(T[-1] - Tb)) <= 1e-9
     _cart_fd_limits(tr.sections[0].path, cl.scaled(speed))
+
+
+@pytest.mark.slow
+@settings(max_examples=5, deadline=None)
+@given(r=st.floats(0.005, 0.2), turn=st.floats(-2.5, 2.5), ang=st.floats(-0.6, 0.6),
+       speed=st.floats(0.3, 1.0))
+def test_random_cartesian_blends_stay_within_the_radius_and_the_limits(
+        elbow: RobotDescription, jl: JointLimits, cl: CartesianLimits, r: float, turn: float,
+        ang: float, speed: float) -> None:
+    q0 = _start(elbow)
+    Ta = tcp(elbow, q0)
+    T1 = moved(Ta, [0.25, 0.0, 0.0], axis=[0, 0, 1], angle=ang)
+    T2 = moved(T1, [0.2 * np.cos(turn), 0.2 * np.sin(turn), 0.05], axis=[1, 0, 0], angle=ang)
+    tr = plan(elbow, q0, [LIN(target=T1, blend=r, speed=speed), LIN(target=T2, speed=speed)],
+              jl, cl)
+    path = tr.sections[0].path
+    p = path.sample(np.linspace(0.0, tr.duration, 4001)).T[:, :3, 3]
+    dist = np.linalg.norm(p - T1[:3, 3], axis=1)
+    assert np.min(dist) <= r + 1e-12
+    if tr.blends[0] > 0.0:  # while both moves run the TCP stays within r of the corner
+        tm = path.timing
+        t = np.linspace(tm.start[1], tm.start[0] + tm.durations[0], 501)
+        assert np.max(np.linalg.norm(path.sample(t).T[:, :3, 3] - T1[:3, 3], axis=1)) <= r
+    _cart_fd_limits(path, cl.scaled(speed))

@@ -218,7 +218,7 @@ def _best_blends(
 # ----------------------------------------------------------------------------- PTP
 def _joint_section(
     robot: _Robot, q0: Array, idx: list[int], moves: Sequence[Move], limits: JointLimits,
-    check_step: float,
+    check_step: float, t_offset: float,
 ) -> JointSection:
     desc = robot.desc
     n = desc.n_readings
@@ -275,8 +275,8 @@ def _joint_section(
             bad = _limit_problem(desc, q[i])
             assert bad is not None
             raise _err(JointRangeError, "the blended path: " + bad[0], moves, int(mv[0]),
-                       time=float(t[i]), fraction=float(fr[0]), joint=bad[1], value=bad[2],
-                       limit=bad[3])
+                       time=t_offset + float(t[i]), fraction=float(fr[0]), joint=bad[1],
+                       value=bad[2], limit=bad[3])
     return section
 
 
@@ -541,7 +541,7 @@ def plan(
     t, q = 0.0, q0
     for idx in _sections(moves):
         if isinstance(moves[idx[0]], PTP):
-            sec: Section = _joint_section(robot, q, idx, moves, joint_limits, check_step)
+            sec: Section = _joint_section(robot, q, idx, moves, joint_limits, check_step, t)
         else:
             sec = _cartesian_section(robot, q, idx, moves, joint_limits, cartesian_limits,
                                      check_step, min_inverse_condition, length_scale, t)
