@@ -1,8 +1,8 @@
 """The public API of the math packages and ``io`` has numpydoc ``Parameters``/``Returns`` (#21).
 
 For every public function and class of ``kinematics``, ``metrology``, ``calibration``,
-``compensation`` and ``io`` (the file formats) — the names of each module's ``__all__``,
-else the public functions and classes defined in the module — a function that takes
+``compensation``, ``motion`` and ``io`` (the file formats) — the names of each module's
+``__all__``, else the public functions and classes defined in the module — a function that takes
 arguments must have a ``Parameters`` section and one that returns something other than
 ``None`` a ``Returns`` (or ``Yields``) section; a class whose constructor takes arguments
 must document them in ``Parameters`` or, for a dataclass/record, ``Attributes``.  The
@@ -23,7 +23,7 @@ from typing import Any, Protocol
 
 import pytest
 
-PACKAGES = ("kinematics", "metrology", "calibration", "compensation", "io")
+PACKAGES = ("kinematics", "metrology", "calibration", "compensation", "motion", "io")
 
 #: Modules not checked, with the reason.
 SKIP_MODULES: dict[str, str] = {}

@@ -4,7 +4,8 @@ imported — so an import inside a function counts as much as one at the top).
 ====================  =====================================================  ===========
 layer                 packages                                               may import
 ====================  =====================================================  ===========
-math                  kinematics, metrology, calibration, compensation       math
+math                  kinematics, metrology, calibration, compensation,      math
+                      motion
 io                    io (file formats: robots, URDF, measurements, units)   math, io
 framework             framework (Zenoh, the service base, the journal)       framework
 pdl                   pdl (the robot language: parser, checker, interpreter)  math, io, pdl
@@ -33,7 +34,7 @@ import pytest
 
 SRC = Path(__file__).resolve().parents[1] / "src" / "plugcell"
 
-MATH = {"kinematics", "metrology", "calibration", "compensation"}
+MATH = {"kinematics", "metrology", "calibration", "compensation", "motion"}
 #: What each layer must not import.
 FORBIDDEN = {
     "math": {"io", "framework", "pdl", "sim", "devices", "apps"},

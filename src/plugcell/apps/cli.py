@@ -58,6 +58,8 @@ class Command:
 COMMANDS: tuple[Command, ...] = (
     Command("kin", "robot kinematics: forward/inverse kinematics, robot descriptions",
             "plugcell.apps.commands.kin:configure"),
+    Command("motion", "trajectories: plan PTP/LIN/CIRC moves with limits and blends, checked "
+            "before motion, sampled every cycle", "plugcell.apps.commands.motion:configure"),
     Command("twin", "the digital twin: error budget, simulated campaigns",
             "plugcell.apps.commands.twin:configure"),
     Command("demo", "run the thesis demonstration on simulated devices over services",
