@@ -150,16 +150,22 @@ class LinkStats:
     Attributes
     ----------
     received : int
-        Robot packets accepted.
+        Datagrams that were robot packets of the configured robot.  Every datagram is
+        either received or dropped for ``address``, ``oversized``, ``malformed`` or
+        ``foreign``; every received packet is answered, superseded or dropped as
+        ``stale`` (or its answer could not be sent: ``last_reason`` says so).
     answered : int
         Answers sent.
     late : int
         Answers sent more than one cycle after their packet arrived.
     missed : int
-        Cycles the link never answered: IPOC gaps and older packets skipped.
+        Cycles the link never answered, from the gaps of the IPOC (lost on the way or
+        superseded).
+    superseded : int
+        Packets not answered because a newer one was already queued behind them.
     dropped : dict of str to int
         Datagrams dropped, by reason: ``address``, ``oversized``, ``malformed``,
-        ``foreign``, ``stale`` (not newer than the last packet).
+        ``foreign``, ``stale`` (not newer than the last packet answered).
     clamped, refused : int
         Corrections cut to the limits, and refused.
     controller_late : int
@@ -178,6 +184,7 @@ class LinkStats:
     answered: int
     late: int
     missed: int
+    superseded: int
     dropped: dict[str, int]
     clamped: int
     refused: int
@@ -232,7 +239,7 @@ class RsiLink:
         self._thread: threading.Thread | None = None
         self._closing = False
         # counters (written by the link's thread only)
-        self._received = self._answered = self._late = self._missed = 0
+        self._received = self._answered = self._late = self._missed = self._superseded = 0
         self._clamped = self._refused = 0
         self._dropped = dict.fromkeys(
             ("address", "oversized", "malformed", "foreign", "stale"), 0)
@@ -341,7 +348,7 @@ class RsiLink:
             The counters now.
         """
         return LinkStats(self._received, self._answered, self._late, self._missed,
-                         dict(self._dropped), self._clamped, self._refused,
+                         self._superseded, dict(self._dropped), self._clamped, self._refused,
                          self._controller_late, self._sessions, self._streaming,
                          self._max_latency, self._last_reason)
 
@@ -387,7 +394,6 @@ class RsiLink:
                     self._end_session()
                 continue
             newest: tuple[RobotState, tuple[str, int], int] | None = None
-            skipped = 0
             while True:  # every queued datagram; the newest packet is answered
                 try:
                     data, addr = sock.recvfrom(bufsize)
@@ -401,10 +407,10 @@ class RsiLink:
                 state = self._accept(data, addr)
                 if state is not None:
                     if newest is not None:
-                        skipped += 1
+                        self._superseded += 1
                     newest = (state, addr, t_in)
             if newest is not None:
-                self._cycle_once(*newest, skipped)
+                self._cycle_once(*newest)
 
     def _accept(self, data: bytes, addr: tuple[str, int]) -> RobotState | None:
         cfg = self.config
@@ -413,13 +419,15 @@ class RsiLink:
             self._dropped["address"] += 1
             return None
         try:
-            return parse_rob(data, cfg.max_packet_bytes)
+            state = parse_rob(data, cfg.max_packet_bytes)
         except PacketError as exc:
             self._dropped[exc.kind] += 1
             return None
+        self._received += 1
+        return state
 
-    def _cycle_once(self, state: RobotState, addr: tuple[str, int], t_in: int,
-                    skipped: int) -> None:
+    def _cycle_once(self, state: RobotState, addr: tuple[str, int], t_in: int) -> None:
+        lost = 0
         if not self._streaming:
             self._begin_session(state)
         else:
@@ -427,10 +435,11 @@ class RsiLink:
             if gap <= 0:
                 self._dropped["stale"] += 1
                 return
-            lost = max(0, round(gap / self.config.ipoc_step) - 1) + skipped
+            # the cycles between the last answered packet and this one: lost on the way
+            # or superseded in the queue (the controller counts them late either way)
+            lost = max(0, round(gap / self.config.ipoc_step) - 1)
             self._missed += lost
             self._streak += lost
-        self._received += 1
         self._last_ipoc = state.ipoc
         self._last_rx = t_in
         if state.delay is not None:
@@ -454,7 +463,7 @@ class RsiLink:
             if latency > self._cycle_ns:
                 self._late += 1
                 self._streak += 1
-            elif skipped == 0:
+            elif lost == 0:
                 self._streak = 0
         self._cycle += 1
         timeout = self.config.timeout_packets
