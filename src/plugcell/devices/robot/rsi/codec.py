@@ -71,6 +71,8 @@ _STANDARD: dict[str, tuple[tuple[str, ...], Array | None]] = {
     "MECur": (EXTERNAL_AXES, None),
 }
 
+_AXIS_SETS = {tag: set(axes) for tag, (axes, _) in _STANDARD.items()}
+
 _PARSER = etree.XMLParser(resolve_entities=False, no_network=True, load_dtd=False,
                           huge_tree=False, remove_comments=True, remove_pis=True)
 
@@ -199,7 +201,9 @@ def parse_rob(data: bytes, max_bytes: int = 4096) -> RobotState:
         raise PacketError("foreign", "a robot packet has no DOCTYPE")
     if len(root) > MAX_ELEMENTS:
         raise PacketError("foreign", f"{len(root)} elements > {MAX_ELEMENTS}")
-    values: dict[str, Array | None] = {}
+    values: dict[str, Array] = {}
+    flat: list[float] = []  # the six values of each standard element, in ``order``
+    order: list[str] = []
     signals: dict[str, float | dict[str, float]] = {}
     ipoc: int | None = None
     delay: int | None = None
@@ -209,7 +213,7 @@ def parse_rob(data: bytes, max_bytes: int = 4096) -> RobotState:
             raise PacketError("malformed", "an entity reference in a robot packet")
         if len(el):
             raise PacketError("malformed", f"<{tag}> has child elements")
-        if tag in values or tag in signals or (tag == "IPOC" and ipoc is not None) \
+        if tag in order or tag in signals or (tag == "IPOC" and ipoc is not None) \
                 or (tag == "Delay" and delay is not None):
             raise PacketError("malformed", f"<{tag}> appears twice")
         if tag == "IPOC":
@@ -226,17 +230,31 @@ def parse_rob(data: bytes, max_bytes: int = 4096) -> RobotState:
             delay = int(d)
         elif tag in _STANDARD:
             axes, scale = _STANDARD[tag]
-            if set(el.keys()) != set(axes):
-                raise PacketError("malformed", f"<{tag}> has {sorted(el.keys())}, "
+            attrs = dict(el.items())
+            if attrs.keys() != _AXIS_SETS[tag]:
+                raise PacketError("malformed", f"<{tag}> has {sorted(attrs)}, "
                                   f"expected {list(axes)}")
-            v = np.array([_number(tag, a, el.get(a)) for a in axes])
-            values[tag] = v * scale if scale is not None else v
+            try:  # the fast path; finiteness is checked once for all elements below
+                flat.extend([float(attrs[a]) for a in axes])
+            except ValueError:
+                for a in axes:  # the slow path names the value
+                    _number(tag, a, attrs[a])
+            order.append(tag)
         elif len(el.attrib):
-            signals[tag] = {k: _number(tag, k, v) for k, v in el.attrib.items()}
+            signals[tag] = {k: _number(tag, k, v) for k, v in el.items()}
         else:
             signals[tag] = _number(tag, "text", (el.text or "").strip())
     if ipoc is None:
         raise PacketError("malformed", "no <IPOC>")
+    if order:
+        v = np.array(flat).reshape(len(order), 6)
+        if not np.isfinite(v).all():
+            i, j = (int(x[0]) for x in np.nonzero(~np.isfinite(v)))
+            raise PacketError("malformed", f"<{order[i]}> {_STANDARD[order[i]][0][j]}="
+                              f"{v[i, j]} is not finite")
+        for i, tag in enumerate(order):
+            scale = _STANDARD[tag][1]
+            values[tag] = v[i] * scale if scale is not None else v[i]
     return RobotState(ipoc=ipoc, joints=values.get("AIPos"),
                       joints_setpoint=values.get("ASPos"), tcp=values.get("RIst"),
                       tcp_setpoint=values.get("RSol"), motor_currents=values.get("MACur"),

@@ -75,6 +75,9 @@ class OffsetLimiter:
         self.speed_step = np.array(limits.max_speed) * cycle_s
         self.bound = np.array(limits.step_bound(cycle_s))
         self.max_offset = np.array(limits.max_offset)
+        # a request within a relative 1e-12 of a limit is at the limit, not beyond it
+        self._bound_tol = self.bound * (1 + 1e-12)
+        self._offset_tol = self.max_offset * (1 + 1e-12)
         self.axes = axes
         self.units = units
         self.offset = np.zeros(6)
@@ -118,13 +121,16 @@ class OffsetLimiter:
             return Limited(np.zeros(6), self.offset.copy(), refused=True,
                            reason=f"a correction must be finite, got {target.tolist()}")
         want = target - self.offset
-        step = np.clip(want, -self.bound, self.bound)
-        new = np.clip(self.offset + step, -self.max_offset, self.max_offset)
+        over_step = np.abs(want) > self._bound_tol
+        over_total = np.abs(target) > self._offset_tol
+        if not (over_step.any() or over_total.any()):  # the common case: as asked
+            self.offset = target.copy()
+            return Limited(want, target.copy())
+        step = np.minimum(np.maximum(want, -self.bound), self.bound)
+        new = np.minimum(np.maximum(self.offset + step, -self.max_offset), self.max_offset)
         step = new - self.offset
         # what was cut, in the units the user configured
         reasons = []
-        over_step = np.abs(want) > self.bound * (1 + 1e-12)
-        over_total = np.abs(target) > self.max_offset * (1 + 1e-12)
         for i in np.flatnonzero(over_step):
             if self.speed_step[i] < self.limits.max_step[i]:  # the speed limit binds
                 reasons.append(f"{self.axes[i]} speed {self._say(i, abs(want[i]) / self.T)}/s "
@@ -135,9 +141,6 @@ class OffsetLimiter:
         for i in np.flatnonzero(over_total):
             reasons.append(f"{self.axes[i]} offset {self._say(i, abs(target[i]))} > "
                            f"{self._say(i, self.max_offset[i])}")
-        if not reasons:
-            self.offset = new
-            return Limited(step, new.copy())
         reason = "; ".join(reasons)
         if self.limits.policy == "refuse":
             return Limited(np.zeros(6), self.offset.copy(), refused=True, reason=reason)
