@@ -59,7 +59,7 @@ def _report(latencies: list[int], cpu0: float, t0: float) -> None:
     print(json.dumps({"cpu_s": cpu, "wall_s": wall, "in_out_ns": latencies}), flush=True)
 
 
-def run_link(cycle_ms: float) -> None:
+def run_link(cycle_ms: float, rt: int | None) -> None:
     from plugcell.devices.robot.rsi import RsiConfig, RsiLink
     from plugcell.devices.robot.rsi.sources import SineOffset
     from plugcell.io.units import DEG
@@ -67,9 +67,10 @@ def run_link(cycle_ms: float) -> None:
     cfg = RsiConfig(robot_host="127.0.0.1", listen_host="127.0.0.1", listen_port=0,
                     mode="absolute", cycle="IPO_FAST" if cycle_ms == 4 else "IPO")
     link = RsiLink(cfg, SineOffset(axis=5, amplitude=2 * DEG, period=4.0, periods=10**6),
-                   record_latency=True)
+                   record_latency=True, rt_priority=rt)
     link.start()
-    print(f"READY {link.address[1]}", flush=True)
+    time.sleep(0.05)
+    print(f"READY {link.address[1]} {link.rt_note}", flush=True)
     sys.stdin.readline()  # the warm-up is over
     del link.latencies[:]
     cpu0, t0 = _cpu(), time.monotonic()
@@ -79,7 +80,7 @@ def run_link(cycle_ms: float) -> None:
     link.close()
 
 
-def run_echo() -> None:
+def run_echo(rt: int | None) -> None:
     import threading
 
     sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
@@ -87,6 +88,8 @@ def run_echo() -> None:
     latencies: list[int] = []
 
     def loop() -> None:
+        if rt is not None:  # the same scheduling as the link's thread
+            os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(rt))
         while True:
             data, addr = sock.recvfrom(65535)
             t_in = time.monotonic_ns()
@@ -108,20 +111,24 @@ def _ipoc_of(answer: bytes) -> int:
     return int(answer[start:answer.index(b"</IPOC>", start)])
 
 
-def _spawn(role: str, cycle_ms: float) -> tuple[subprocess.Popen, int]:
+def _spawn(role: str, cycle_ms: float, rt: int | None) -> tuple[subprocess.Popen, int, str]:
     proc = subprocess.Popen([sys.executable, __file__, "--role", role, "--cycle-ms",
-                             str(cycle_ms)], stdin=subprocess.PIPE, stdout=subprocess.PIPE,
+                             str(cycle_ms), *(["--rt-priority", str(rt)] if rt else [])],
+                            stdin=subprocess.PIPE, stdout=subprocess.PIPE,
                             text=True)
     line = proc.stdout.readline()
     if not line.startswith("READY "):
         raise RuntimeError(f"{role} did not start: {line!r}")
-    return proc, int(line.split()[1])
+    _, port, *note = line.split(maxsplit=2)
+    return proc, int(port), " ".join(note).strip()
 
 
-def robot(seconds: float, cycle_ms: float) -> dict:
+def robot(seconds: float, cycle_ms: float, rt: int | None) -> dict:
     cycle_ns = int(cycle_ms * 1e6)
-    link_proc, link_port = _spawn("link", cycle_ms)
-    echo_proc, echo_port = _spawn("echo", cycle_ms)
+    link_proc, link_port, link_note = _spawn("link", cycle_ms, rt)
+    echo_proc, echo_port, _ = _spawn("echo", cycle_ms, rt)
+    if rt is not None:  # the robot side too: it stands for the controller's real-time core
+        os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(rt))
     names = ("plugcell RSI link", "bare UDP echo")
     socks, sent, rtts, late = [], [{}, {}], [[], []], [0, 0]
     for port in (link_port, echo_port):
@@ -209,6 +216,7 @@ def robot(seconds: float, cycle_ms: float) -> dict:
             "cpu_pct": 100 * report["cpu_s"] / report["wall_s"],
         }
     results["plugcell RSI link"]["link_stats"] = link_stats
+    results["plugcell RSI link"]["scheduling"] = link_note
     return results
 
 
@@ -237,7 +245,8 @@ def table(results: dict, seconds: float, cycle_ms: float) -> str:
     lines += ["", f"link's own counters: answered {st.get('answered')}, late "
               f"{st.get('late')}, missed {st.get('missed')}, dropped "
               f"{sum((st.get('dropped') or {}).values())}, max in→out "
-              f"{(st.get('max_latency_ns') or 0) / 1e3:.0f} µs"]
+              f"{(st.get('max_latency_ns') or 0) / 1e3:.0f} µs; link thread: "
+              f"{link.get('scheduling')}"]
     return "\n".join(lines)
 
 
@@ -246,18 +255,24 @@ def main(argv: list[str]) -> int:
     ap.add_argument("--seconds", type=float, default=60.0, help="measured seconds (60)")
     ap.add_argument("--cycle-ms", type=float, default=4.0, choices=(4.0, 12.0))
     ap.add_argument("--json", type=Path, help="also write the figures as JSON")
+    ap.add_argument("--rt-priority", type=int, metavar="N",
+                    help="run the robot side, the link's thread and the echo's under "
+                    "SCHED_FIFO priority N (Linux, root or CAP_SYS_NICE)")
     ap.add_argument("--role", choices=("link", "echo"), help=argparse.SUPPRESS)
     args = ap.parse_args(argv)
     if args.role == "link":
-        run_link(args.cycle_ms)
+        run_link(args.cycle_ms, args.rt_priority)
         return 0
     if args.role == "echo":
-        run_echo()
+        run_echo(args.rt_priority)
         return 0
     print(f"machine: {os.cpu_count()} CPUs, load average {os.getloadavg()[0]:.2f} at start",
           flush=True)
-    results = robot(args.seconds, args.cycle_ms)
+    results = robot(args.seconds, args.cycle_ms, args.rt_priority)
     print(table(results, args.seconds, args.cycle_ms))
+    print("scheduling: " + (f"SCHED_FIFO priority {args.rt_priority} (robot side, link "
+                            "thread, echo thread)" if args.rt_priority else
+                            "normal (SCHED_OTHER)"))
     print(f"load average {os.getloadavg()[0]:.2f} at the end")
     if args.json:
         args.json.write_text(json.dumps(results, indent=1), encoding="utf-8")

@@ -72,6 +72,8 @@ _STANDARD: dict[str, tuple[tuple[str, ...], Array | None]] = {
 }
 
 _AXIS_SETS = {tag: set(axes) for tag, (axes, _) in _STANDARD.items()}
+#: SI-per-robot-unit rows of the standard elements, by the order a packet lists them.
+_SCALES: dict[tuple[str, ...], Array] = {}
 
 _PARSER = etree.XMLParser(resolve_entities=False, no_network=True, load_dtd=False,
                           huge_tree=False, remove_comments=True, remove_pis=True)
@@ -201,22 +203,34 @@ def parse_rob(data: bytes, max_bytes: int = 4096) -> RobotState:
         raise PacketError("foreign", "a robot packet has no DOCTYPE")
     if len(root) > MAX_ELEMENTS:
         raise PacketError("foreign", f"{len(root)} elements > {MAX_ELEMENTS}")
-    values: dict[str, Array] = {}
     flat: list[float] = []  # the six values of each standard element, in ``order``
     order: list[str] = []
     signals: dict[str, float | dict[str, float]] = {}
+    seen: set[str] = set()
     ipoc: int | None = None
     delay: int | None = None
     for el in root:
         tag = el.tag
-        if not isinstance(tag, str):  # an entity reference left unresolved
-            raise PacketError("malformed", "an entity reference in a robot packet")
+        if type(tag) is not str:  # an entity reference or a processing instruction
+            raise PacketError("malformed", "a robot packet holds elements only")
+        if tag in seen:
+            raise PacketError("malformed", f"<{tag}> appears twice")
+        seen.add(tag)
         if len(el):
             raise PacketError("malformed", f"<{tag}> has child elements")
-        if tag in order or tag in signals or (tag == "IPOC" and ipoc is not None) \
-                or (tag == "Delay" and delay is not None):
-            raise PacketError("malformed", f"<{tag}> appears twice")
-        if tag == "IPOC":
+        standard = _STANDARD.get(tag)
+        if standard is not None:
+            attrs = dict(el.items())
+            if attrs.keys() != _AXIS_SETS[tag]:
+                raise PacketError("malformed", f"<{tag}> has {sorted(attrs)}, "
+                                  f"expected {list(standard[0])}")
+            try:  # the fast path; finiteness is checked once for all elements below
+                flat.extend([float(attrs[a]) for a in standard[0]])
+            except ValueError:
+                for a in standard[0]:  # the slow path names the value
+                    _number(tag, a, attrs[a])
+            order.append(tag)
+        elif tag == "IPOC":
             text = (el.text or "").strip()
             if not text.isdigit() or not text.isascii():
                 raise PacketError("malformed", f"<IPOC> {text[:32]!r} is not a counter")
@@ -228,33 +242,28 @@ def parse_rob(data: bytes, max_bytes: int = 4096) -> RobotState:
             if d < 0 or d != int(d):
                 raise PacketError("malformed", f"<Delay> D={d} is no count")
             delay = int(d)
-        elif tag in _STANDARD:
-            axes, scale = _STANDARD[tag]
-            attrs = dict(el.items())
-            if attrs.keys() != _AXIS_SETS[tag]:
-                raise PacketError("malformed", f"<{tag}> has {sorted(attrs)}, "
-                                  f"expected {list(axes)}")
-            try:  # the fast path; finiteness is checked once for all elements below
-                flat.extend([float(attrs[a]) for a in axes])
-            except ValueError:
-                for a in axes:  # the slow path names the value
-                    _number(tag, a, attrs[a])
-            order.append(tag)
         elif len(el.attrib):
             signals[tag] = {k: _number(tag, k, v) for k, v in el.items()}
         else:
             signals[tag] = _number(tag, "text", (el.text or "").strip())
     if ipoc is None:
         raise PacketError("malformed", "no <IPOC>")
+    values: dict[str, Array] = {}
     if order:
         v = np.array(flat).reshape(len(order), 6)
         if not np.isfinite(v).all():
             i, j = (int(x[0]) for x in np.nonzero(~np.isfinite(v)))
             raise PacketError("malformed", f"<{order[i]}> {_STANDARD[order[i]][0][j]}="
                               f"{v[i, j]} is not finite")
-        for i, tag in enumerate(order):
-            scale = _STANDARD[tag][1]
-            values[tag] = v[i] * scale if scale is not None else v[i]
+        key = tuple(order)
+        scale = _SCALES.get(key)
+        if scale is None:
+            scale = np.array([_STANDARD[t][1] if _STANDARD[t][1] is not None
+                                             else np.ones(6) for t in order])
+            if len(_SCALES) < 64:  # the orders a controller uses: one, in practice
+                _SCALES[key] = scale
+        v *= scale
+        values = dict(zip(order, v, strict=True))
     return RobotState(ipoc=ipoc, joints=values.get("AIPos"),
                       joints_setpoint=values.get("ASPos"), tcp=values.get("RIst"),
                       tcp_setpoint=values.get("RSol"), motor_currents=values.get("MACur"),

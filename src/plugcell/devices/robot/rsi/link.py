@@ -29,6 +29,7 @@ its own (the robot service's event loop would otherwise share the GIL with it) â
 
 from __future__ import annotations
 
+import os
 import select
 import socket
 import threading
@@ -218,10 +219,19 @@ class RsiLink:
         :meth:`set_source`.
     record_latency : bool
         Keep every packet-in â†’ answer-out time (ns) in :attr:`latencies` (benchmarks).
+    rt_priority : int, optional
+        Run the link's thread under ``SCHED_FIFO`` at this priority (1..99; Linux, needs
+        ``CAP_SYS_NICE``): the kernel then runs it as soon as a packet arrives, ahead of
+        every ordinary process.  What happened is in :attr:`rt_note`; without the right
+        the link runs at normal priority.
     """
 
     def __init__(self, config: RsiConfig, source: SourceLike | None = None,
-                 record_latency: bool = False) -> None:
+                 record_latency: bool = False, rt_priority: int | None = None) -> None:
+        if rt_priority is not None and not 1 <= rt_priority <= 99:
+            raise ValueError(f"rt_priority {rt_priority}: expected 1..99 (SCHED_FIFO)")
+        self.rt_priority = rt_priority
+        self.rt_note = "normal priority"
         self.config = config
         self._source = _as_source(source)
         self._kind = config.correction
@@ -377,9 +387,21 @@ class RsiLink:
 
     # ------------------------------------------------------------------ the loop
 
+    def _realtime(self) -> None:
+        """Put the calling thread (the link's) under SCHED_FIFO, if asked and allowed."""
+        if self.rt_priority is None:
+            return
+        try:
+            os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(self.rt_priority))
+        except (AttributeError, OSError) as exc:  # not Linux, or no CAP_SYS_NICE
+            self.rt_note = f"SCHED_FIFO refused ({exc}); normal priority"
+        else:
+            self.rt_note = f"SCHED_FIFO priority {self.rt_priority}"
+
     def _run(self) -> None:
         sock = self._sock
         assert sock is not None
+        self._realtime()
         poller = select.poll()
         poller.register(sock, select.POLLIN)
         bufsize = self.config.max_packet_bytes + 1
