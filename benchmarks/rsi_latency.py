@@ -146,6 +146,7 @@ def robot(seconds: float, cycle_ms: float, rt: int | None) -> dict:
     measuring_from = start + int(WARMUP_S * 1e9)
     end = measuring_from + int(seconds * 1e9)
     measuring = False
+    worst = [(0, 0.0), (0, 0.0)]  # the longest round trip and when its packet left (s)
     # slot j: stream j % 2 sends at start + j · cycle/2
     while True:
         slot_t = start + k * cycle_ns // 2
@@ -157,6 +158,7 @@ def robot(seconds: float, cycle_ms: float, rt: int | None) -> dict:
                 p.stdin.write("go\n")
                 p.stdin.flush()
             sent, rtts, late = [{}, {}], [[], []], [0, 0]
+            worst = [(0, 0.0), (0, 0.0)]
         # wait for the slot, taking answers as they come
         while True:
             now = time.monotonic_ns()
@@ -175,6 +177,8 @@ def robot(seconds: float, cycle_ms: float, rt: int | None) -> dict:
                         rtt = t - sent_at
                         rtts[i].append(rtt)
                         late[i] += rtt > cycle_ns
+                        if measuring and rtt > worst[i][0]:
+                            worst[i] = (rtt, (sent_at - measuring_from) / 1e9)
         i = k % 2
         if i == 0:
             ipoc += int(cycle_ms)
@@ -214,6 +218,7 @@ def robot(seconds: float, cycle_ms: float, rt: int | None) -> dict:
                           (("p50", 50), ("p99", 99), ("p99.9", 99.9))} | {"max": float(io.max())},
             "missed": late[i] + never,
             "cpu_pct": 100 * report["cpu_s"] / report["wall_s"],
+            "max_at_s": worst[i][1],
         }
     results["plugcell RSI link"]["link_stats"] = link_stats
     results["plugcell RSI link"]["scheduling"] = link_note
@@ -233,6 +238,9 @@ def table(results: dict, seconds: float, cycle_ms: float) -> str:
         lines.append(f"| {name} | {r['cycles']} | {rt['p50']:.0f} / {rt['p99']:.0f} / "
                      f"{rt['p99.9']:.0f} / {rt['max']:.0f} | {io['p50']:.0f} / {io['p99']:.0f} / "
                      f"{io['p99.9']:.0f} / {io['max']:.0f} | {r['missed']} | {r['cpu_pct']:.1f} |")
+    lines.append("")
+    lines.append("longest round trips at " + ", ".join(
+        f"{name}: {r['max_at_s']:.1f} s" for name, r in results.items()) + " into the run")
     ratio = link["rtt_us"]["p99.9"] / echo["rtt_us"]["p99.9"]
     goals = [("p99.9 round trip ≤ 1 ms", link["rtt_us"]["p99.9"] <= 1000,
               f"{link['rtt_us']['p99.9']:.0f} µs"),

@@ -26,6 +26,7 @@ SCRIPTS = [
     ("round_trip_trace.py", ["--cycles", "30", "--arrival"], "service: sample arrives"),
     ("round_trip_profile.py", ["--cycles", "30", "--top", "3"], "journal (its log, SQLite)"),
     ("round_trip_cpu.py", ["--cycles", "30", "--rounds", "1", "--switches"], "voluntary / forced"),
+    ("rsi_latency.py", ["--seconds", "1"], "| goal (issue 37) | this run | met |"),
     ("idle_cost.py", ["--services", "2", "--seconds", "1", "--settle", "0.5", "--settings",
                       "lean", "--topology", "star"], "(router "),
 ]
