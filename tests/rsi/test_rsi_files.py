@@ -144,4 +144,4 @@ def test_plugcell_rsi_run_swings_one_axis(capsys) -> None:
     lines = [json.loads(x) for x in capsys.readouterr().out.splitlines() if x.startswith("{")]
     assert lines and lines[-1]["answered"] > 0
     # the robot stopped before the command's end: the silence is how the stream ended
-    assert lines[-1]["failure"] in ("", ) or "no packet" in lines[-1]["failure"]
+    assert lines[-1]["failure"] == "" or "no packet" in lines[-1]["failure"]

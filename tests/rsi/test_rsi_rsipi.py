@@ -22,10 +22,11 @@ pytest.importorskip("RSIPI", reason="rsipi is a test dependency: pip install -e 
 from rsi_testlib import local_config
 
 from plugcell.devices.robot.rsi import (
+    ControllerStoppedError,
     Correction,
     CycleState,
     RsiLink,
-    RsiLinkError,
+    StreamStoppedError,
 )
 from plugcell.devices.robot.rsi.controller_files import (
     ETHERNET_FILE,
@@ -176,7 +177,7 @@ def test_a_late_answer_is_counted_by_both_sides(linked) -> None:
     assert link.failure is None  # far below Timeout: the stream goes on
 
 
-def test_past_the_timeout_rsipi_breaks_off_and_the_link_reports_it(linked) -> None:
+def test_late_answers_up_to_the_timeout_stop_the_stream(linked) -> None:
     def source(state: CycleState) -> None:
         if state.cycle >= 30:
             time.sleep(0.012)  # every answer late from here on
@@ -184,10 +185,30 @@ def test_past_the_timeout_rsipi_breaks_off_and_the_link_reports_it(linked) -> No
     link, robot = linked(local_config(mode="relative", timeout_packets=25), source,
                          timeout=25)
     assert link.wait(lambda lk: lk.failure is not None, timeout=20.0), link.stats()
-    assert isinstance(link.failure, RsiLinkError)
-    assert "Timeout is 25" in str(link.failure) or "no packet" in str(link.failure)
-    # rsipi broke off: it stopped sending, and the link saw the silence
-    assert link.wait(lambda lk: not lk.streaming, timeout=20.0), link.stats()
+    # the link stops at the controller's Timeout (its own count, or rsipi's <Delay>)
+    assert isinstance(link.failure, (StreamStoppedError, ControllerStoppedError))
+    assert "Timeout is 25" in str(link.failure)
+    assert robot.stop()["faulty_packets"] > 0
+
+
+def test_rsipi_breaks_off_the_link_sees_the_silence_and_recovers(linked, tmp_path) -> None:
+    def source(state: CycleState) -> None:
+        if state.session == 1 and 30 <= state.cycle < 50:
+            time.sleep(0.012)  # twenty late answers: past rsipi's Timeout of 10
+
+    link, robot = linked(local_config(mode="relative", timeout_packets=100), source,
+                         timeout=10)
+    assert link.wait(lambda lk: lk.failure is not None, timeout=20.0), link.stats()
+    silence = link.failure
+    assert isinstance(silence, StreamStoppedError)
+    assert "no packet from the controller for 0.4" in str(silence)  # one timeout: 100 × 4 ms
     result = robot.stop()
-    assert result["running"] is False
-    assert result["faulty_packets"] > 25
+    assert result["running"] is False and result["faulty_packets"] > 10  # rsipi broke off
+    # the controller comes back (RSI_ON again): a new session, no failure
+    again = RsipiRobot(link, "relative", 10, tmp_path)
+    try:
+        assert link.wait(lambda lk: lk.stats().sessions == 2 and lk.stats().answered > 0
+                         and lk.streaming, timeout=20.0), link.stats()
+        assert link.failure is None and link.last_failure is silence
+    finally:
+        again.stop()
