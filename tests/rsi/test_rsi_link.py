@@ -332,3 +332,22 @@ def test_a_busy_port_is_an_error_naming_it() -> None:
     with holder, pytest.raises(OSError, match=f"cannot listen on 127.0.0.1:{port}"):
         RsiLink(RsiConfig(robot_host="127.0.0.1", listen_host="127.0.0.1",
                           listen_port=port)).start()
+
+
+def test_an_internal_error_is_reported_not_swallowed(robot_and, monkeypatch) -> None:
+    from plugcell.devices.robot.rsi import RsiLinkError
+    from plugcell.devices.robot.rsi import link as link_module
+
+    link, robot = robot_and()
+    robot.cycle()
+
+    def broken(*args, **kwargs):
+        raise RuntimeError("encoder broke")
+
+    monkeypatch.setattr(link_module, "encode_sen", broken)
+    robot.ipoc += 4
+    robot.send(rob_packet(robot.ipoc))
+    err = failed(link)
+    assert type(err) is RsiLinkError
+    assert "internal error at IPOC" in str(err) and "RuntimeError: encoder broke" in str(err)
+    assert link._thread.is_alive()  # the link goes on listening

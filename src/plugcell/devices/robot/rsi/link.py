@@ -45,7 +45,7 @@ from plugcell.io.units import DEG, M_PER_MM
 
 from .codec import CARTESIAN_AXES, JOINT_AXES, PacketError, RobotState, encode_sen, parse_rob
 from .config import RsiConfig
-from .limits import OffsetLimiter
+from .limits import Limited, OffsetLimiter
 
 Array = NDArray[np.float64]
 
@@ -432,7 +432,11 @@ class RsiLink:
                         self._superseded += 1
                     newest = (state, addr, t_in)
             if newest is not None:
-                self._cycle_once(*newest)
+                try:
+                    self._cycle_once(*newest)
+                except Exception as exc:  # a bug must not end the thread silently
+                    self._fail(RsiLinkError(f"RSI link internal error at IPOC "
+                                            f"{newest[0].ipoc}: {type(exc).__name__}: {exc}"))
 
     def _accept(self, data: bytes, addr: tuple[str, int]) -> RobotState | None:
         cfg = self.config
@@ -501,7 +505,7 @@ class RsiLink:
         with self._cond:
             self._cond.notify_all()
 
-    def _ask(self, state: RobotState):  # -> Limited
+    def _ask(self, state: RobotState) -> Limited:
         cstate = CycleState(robot=state, offset=self._limiter.offset.copy(),
                             session=self._sessions, cycle=self._cycle,
                             t=(state.ipoc - self._ipoc0) / 1000.0)
