@@ -13,6 +13,11 @@ cycle* is an answer that arrived more than one cycle after its packet left, or n
 CPU is each sensor process's user + system time over the measured seconds (% of one
 core).  The first two seconds are warm-up, not counted.
 
+``--cell N`` first starts N plugcell services in a fresh cell (``plugcell serve`` of the
+kinds idle_cost.py uses: cameras, drills, benchmark publishers, compute services — Zenoh
+on loopback, journals on), waits until each serves, and measures beside them: the
+issue's "with the cell's other services running".
+
 Goal (issue 37): p99.9 ≤ 1 ms, ≤ 3× the bare echo, zero missed cycles, ≤ 10 % of one
 core.  Nothing is asserted; the table says which goals the run met.
 """
@@ -20,6 +25,7 @@ core.  Nothing is asserted; the table says which goals the run met.
 from __future__ import annotations
 
 import argparse
+import contextlib
 import json
 import os
 import resource
@@ -27,7 +33,10 @@ import select
 import socket
 import subprocess
 import sys
+import tempfile
 import time
+import uuid
+from collections.abc import Iterator
 from pathlib import Path
 
 import numpy as np
@@ -258,6 +267,36 @@ def table(results: dict, seconds: float, cycle_ms: float) -> str:
     return "\n".join(lines)
 
 
+@contextlib.contextmanager
+def cell_services(n: int) -> Iterator[None]:
+    """``n`` plugcell services serving in a fresh cell while the block runs."""
+    from idle_cost import KINDS, _wait_for  # the idle cell's kinds and start-up wait
+
+    home = Path(tempfile.mkdtemp(prefix="plugcell-rsi-cell-"))
+    env = {**os.environ, "PLUGCELL_HOME": str(home), "PYTHONUNBUFFERED": "1"}
+    cell = f"rsi{uuid.uuid4().hex[:8]}"
+    procs = []
+    try:
+        for i in range(n):
+            kind = KINDS[i % len(KINDS)]
+            procs.append(subprocess.Popen(
+                [sys.executable, "-m", "plugcell", "serve", kind, "--cell", cell, "--name",
+                 f"{kind.upper()}{i}"], env=env, stdout=subprocess.PIPE,
+                stderr=subprocess.STDOUT, text=True))
+        for p in procs:
+            _wait_for(p, "serving in cell")
+        print(f"{n} plugcell services serving in cell {cell}", flush=True)
+        yield
+    finally:
+        for p in procs:
+            p.terminate()
+        for p in procs:
+            try:
+                p.wait(10)
+            except subprocess.TimeoutExpired:
+                p.kill()
+
+
 def main(argv: list[str]) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--seconds", type=float, default=60.0, help="measured seconds (60)")
@@ -266,6 +305,8 @@ def main(argv: list[str]) -> int:
     ap.add_argument("--rt-priority", type=int, metavar="N",
                     help="run the robot side, the link's thread and the echo's under "
                     "SCHED_FIFO priority N (Linux, root or CAP_SYS_NICE)")
+    ap.add_argument("--cell", type=int, default=0, metavar="N",
+                    help="measure beside N plugcell services serving in a cell")
     ap.add_argument("--role", choices=("link", "echo"), help=argparse.SUPPRESS)
     args = ap.parse_args(argv)
     if args.role == "link":
@@ -276,8 +317,11 @@ def main(argv: list[str]) -> int:
         return 0
     print(f"machine: {os.cpu_count()} CPUs, load average {os.getloadavg()[0]:.2f} at start",
           flush=True)
-    results = robot(args.seconds, args.cycle_ms, args.rt_priority)
+    with cell_services(args.cell) if args.cell else contextlib.nullcontext():
+        results = robot(args.seconds, args.cycle_ms, args.rt_priority)
     print(table(results, args.seconds, args.cycle_ms))
+    if args.cell:
+        print(f"beside {args.cell} plugcell services serving in a cell")
     print("scheduling: " + (f"SCHED_FIFO priority {args.rt_priority} (robot side, link "
                             "thread, echo thread)" if args.rt_priority else
                             "normal (SCHED_OTHER)"))
