@@ -351,3 +351,28 @@ def test_an_internal_error_is_reported_not_swallowed(robot_and, monkeypatch) -> 
     assert type(err) is RsiLinkError
     assert "internal error at IPOC" in str(err) and "RuntimeError: encoder broke" in str(err)
     assert link._thread.is_alive()  # the link goes on listening
+
+
+def test_a_cycle_leaves_nothing_for_the_garbage_collector(robot_and) -> None:
+    """A cycle frees what it allocates, so the cyclic collector (whose full passes stall a
+    process for milliseconds) never runs in a stream (docs/kuka-rsi.md, Performance)."""
+    import gc
+
+    link, robot = robot_and(local_config(mode="absolute"),
+                            lambda s: Correction(offset=np.full(6, 1e-4 * s.cycle)))
+    robot.cycle()
+    collections: list[int] = []
+
+    def count(phase, info) -> None:
+        if phase == "start":
+            collections.append(info["generation"])
+
+    gc.collect()
+    gc.callbacks.append(count)
+    try:
+        for _ in range(3000):
+            robot.cycle()
+    finally:
+        gc.callbacks.remove(count)
+    assert settled(link, 3001).answered == 3001
+    assert collections == []
