@@ -376,3 +376,15 @@ def test_a_cycle_leaves_nothing_for_the_garbage_collector(robot_and) -> None:
         gc.callbacks.remove(count)
     assert settled(link, 3001).answered == 3001
     assert collections == []
+
+
+def test_real_time_priority_is_asked_for_and_reported(robot_and) -> None:
+    from plugcell.devices.robot.rsi import RsiLink
+
+    with pytest.raises(ValueError, match=r"rt_priority 0: expected 1\.\.99"):
+        RsiLink(local_config(), rt_priority=0)
+    link, robot = robot_and(rt_priority=1)
+    robot.cycle()  # the thread has run: its scheduling is settled
+    # granted (root or CAP_SYS_NICE) or refused with the reason, never silent
+    assert link.rt_note == "SCHED_FIFO priority 1" or link.rt_note.startswith(
+        "SCHED_FIFO refused (")

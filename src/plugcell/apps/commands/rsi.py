@@ -7,7 +7,7 @@
                        [--max-step V,…] [--max-offset V,…] [--max-speed V,…] [--dio OUT]
                        [--dil IN]
     plugcell rsi run --robot-ip IP [--listen IP] [--port 49152] [same stream options]
-                     [--sine AXIS:AMPLITUDE:PERIOD] [--duration S]
+                     [--sine AXIS:AMPLITUDE:PERIOD] [--duration S] [--rt-priority N]
 
 ``files`` writes what the user copies to the controller (KRL program, ethernet
 configuration, signal flow, the diagram's description); ``run`` answers the robot —
@@ -68,6 +68,9 @@ def configure(p: argparse.ArgumentParser) -> None:
                    help="swing one axis once: e.g. A6:2:4 (2° over 4 s) or Z:5:4 (5 mm)")
     r.add_argument("--duration", type=float, default=0.0,
                    help="seconds to run (default: until interrupted)")
+    r.add_argument("--rt-priority", type=int, metavar="N",
+                   help="run the link's thread under SCHED_FIFO priority N (1-99; Linux, "
+                   "root or CAP_SYS_NICE)")
     r.add_argument("--json", action="store_true", help="print the counters as JSON lines")
     r.set_defaults(func=_run)
 
@@ -164,13 +167,18 @@ def _source(args: argparse.Namespace):
 
 
 def _run(args: argparse.Namespace) -> int:
+    from plugcell.apps.cli import CommandError
     from plugcell.devices.robot.rsi import RsiLink, StreamStoppedError
 
     config = _config(args, args.robot_ip, args.listen)
-    link = RsiLink(config, _source(args))
+    try:
+        link = RsiLink(config, _source(args), rt_priority=args.rt_priority)
+    except ValueError as exc:
+        raise CommandError(str(exc)) from None
     host, port = link.start()
+    time.sleep(0.01)  # the thread has set its scheduling
     print(f"listening on {host}:{port} for the robot at {args.robot_ip} "
-          f"({config.correction}, {config.mode}, {config.cycle})", flush=True)
+          f"({config.correction}, {config.mode}, {config.cycle}; {link.rt_note})", flush=True)
     end = time.monotonic() + args.duration if args.duration > 0 else None
     failed = None
     try:
