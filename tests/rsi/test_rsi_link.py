@@ -388,3 +388,54 @@ def test_real_time_priority_is_asked_for_and_reported(robot_and) -> None:
     # granted (root or CAP_SYS_NICE) or refused with the reason, never silent
     assert link.rt_note == "SCHED_FIFO priority 1" or link.rt_note.startswith(
         "SCHED_FIFO refused (")
+
+
+def test_follow_runs_a_motion_to_its_end_then_holds(robot_and) -> None:
+    import threading
+
+    link, robot = robot_and(local_config(mode="absolute"))
+    robot.cycle()
+    result: dict = {}
+    motion = threading.Thread(target=lambda: result.setdefault("end", link.follow(
+        lambda s: Correction(offset=np.full(6, 0.01 * DEG) * min(s.cycle, 3)),
+        done=lambda s: s.cycle >= 3, timeout=10.0)))
+    motion.start()
+    time.sleep(0.05)  # the motion's source is set
+    got = [values(robot.cycle())[0] for _ in range(6)]
+    motion.join(10)
+    assert result["end"].cycle == 3
+    # offsets until the last cycle of the motion, then held
+    assert got[-1] == pytest.approx(0.03, abs=1e-6) and got[-2] == pytest.approx(0.03, abs=1e-6)
+
+
+def test_follow_raises_the_streams_failure(robot_and) -> None:
+    import threading
+
+    link, robot = robot_and(local_config(timeout_packets=25, cycle="IPO"))
+    robot.cycle()
+    outcome: dict = {}
+
+    def run() -> None:
+        try:
+            link.follow(lambda s: Correction(step=np.full(6, 1e-5)), lambda s: False, 10.0)
+        except Exception as exc:  # the test looks at what it is
+            outcome["error"] = exc
+
+    motion = threading.Thread(target=run)
+    motion.start()
+    robot.cycle()
+    t0 = time.monotonic()  # the controller goes silent
+    motion.join(10)
+    assert isinstance(outcome["error"], StreamStoppedError)
+    assert "no packet from the controller" in str(outcome["error"])
+    assert time.monotonic() - t0 >= 0.3 * 0.99  # one controller timeout, 25 × 12 ms
+    with pytest.raises(StreamStoppedError):  # the held session is over
+        link.follow(lambda s: None, lambda s: True, 1.0)
+
+
+def test_follow_times_out_without_a_controller() -> None:
+    from plugcell.devices.robot.rsi import RsiLink
+
+    with RsiLink(local_config()) as link, pytest.raises(
+            TimeoutError, match="no stream from the controller"):
+        link.follow(lambda s: None, lambda s: True, 0.2)

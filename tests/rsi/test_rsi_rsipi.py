@@ -212,3 +212,16 @@ def test_rsipi_breaks_off_the_link_sees_the_silence_and_recovers(linked, tmp_pat
         assert link.failure is None and link.last_failure is silence
     finally:
         again.stop()
+
+
+def test_a_motion_followed_to_its_end_on_rsipis_robot(linked) -> None:
+    """``RsiLink.follow``, as a robot service runs one motion: to its end, then held."""
+    link, robot = linked(local_config(mode="absolute"), None)
+    end = link.follow(lambda s: Correction(offset=joint_path(s.t)),
+                      done=lambda s: s.t >= 0.8, timeout=30.0)
+    time.sleep(0.1)  # held: rsipi's robot stays where the motion ended
+    result = robot.stop()
+    assert link.failure is None
+    final = np.array([result["state"]["AIPos"][f"A{i}"] for i in range(1, 7)])
+    np.testing.assert_allclose(final, joint_path(end.t) / DEG, atol=1e-6)
+    np.testing.assert_allclose(final, TARGET / DEG, atol=1e-6)
