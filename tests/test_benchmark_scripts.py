@@ -27,6 +27,7 @@ SCRIPTS = [
     ("round_trip_profile.py", ["--cycles", "30", "--top", "3"], "journal (its log, SQLite)"),
     ("round_trip_cpu.py", ["--cycles", "30", "--rounds", "1", "--switches"], "voluntary / forced"),
     ("motion_sampling.py", ["--cycles", "5", "--robots", "elbow6"], "LIN (IK per sample)"),
+    ("rsi_latency.py", ["--seconds", "1"], "| goal (issue 37) | this run | met |"),
     ("idle_cost.py", ["--services", "2", "--seconds", "1", "--settle", "0.5", "--settings",
                       "lean", "--topology", "star"], "(router "),
 ]

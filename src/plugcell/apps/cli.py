@@ -101,6 +101,8 @@ COMMANDS: tuple[Command, ...] = (
             "plugcell.apps.commands.certs:configure"),
     Command("opcua", "the cell as an OPC UA server (for MES, SCADA, HMI)",
             "plugcell.apps.commands.opcua:configure"),
+    Command("rsi", "KUKA RSI with plugcell as the sensor: controller files, streaming",
+            "plugcell.apps.commands.rsi:configure"),
 )
 
 

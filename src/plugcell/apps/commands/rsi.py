@@ -1,0 +1,204 @@
+"""``plugcell rsi`` — KUKA RSI, plugcell as the sensor (docs/kuka-rsi.md).
+
+::
+
+    plugcell rsi files --out DIR --ip PC_IP [--port 49152] [--correction joint|cartesian]
+                       [--mode relative|absolute] [--cycle IPO_FAST|IPO] [--timeout 100]
+                       [--max-step V,…] [--max-offset V,…] [--max-speed V,…] [--dio OUT]
+                       [--dil IN]
+    plugcell rsi run --robot-ip IP [--listen IP] [--port 49152] [same stream options]
+                     [--sine AXIS:AMPLITUDE:PERIOD] [--duration S] [--rt-priority N]
+
+``files`` writes what the user copies to the controller (KRL program, ethernet
+configuration, signal flow, the diagram's description); ``run`` answers the robot —
+holding it, or swinging one axis — and prints the link's counters every second.
+Limits are given in the robot's units: degrees (joint) or mm and degrees (X, Y, Z then
+A, B, C), per cycle for the step and per second for the speed; one number is for all six
+axes.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import time
+from pathlib import Path
+
+
+def _stream_args(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--port", type=int, default=49152, help="the PC's UDP port (PORT)")
+    p.add_argument("--correction", choices=("joint", "cartesian"), default="joint",
+                   help="AKorr A1..A6 or RKorr X Y Z A B C (default joint)")
+    p.add_argument("--mode", choices=("relative", "absolute"), default="relative",
+                   help="RSI_ON(#RELATIVE) or #ABSOLUTE (default relative)")
+    p.add_argument("--cycle", choices=("IPO_FAST", "IPO"), default="IPO_FAST",
+                   help="4 ms or 12 ms (default IPO_FAST)")
+    p.add_argument("--timeout", type=int, default=100,
+                   help="the ETHERNET object's Timeout: late packets before RSI stops")
+    p.add_argument("--sentype", default="ImFree", help="SENTYPE (default ImFree)")
+    for name, what in (("step", "per cycle"), ("offset", "in total"), ("speed", "per second")):
+        p.add_argument(f"--max-{name}", metavar="V[,V…]",
+                       help=f"largest correction {what}: deg (joint) or mm,…,deg (Cartesian)")
+    p.add_argument("--refuse", action="store_true",
+                   help="refuse (hold and fail) a correction beyond the limits instead of "
+                   "clamping it")
+    p.add_argument("--dio", type=int, metavar="OUT",
+                   help="route a 16-bit output word DiO to $OUT[OUT…OUT+15]")
+
+
+def configure(p: argparse.ArgumentParser) -> None:
+    """Add the ``rsi`` actions to its parser (declared in :mod:`plugcell.apps.cli`)."""
+    p.description = ("KUKA RSI with plugcell as the sensor: write the controller's files, "
+                     "or stream to a robot.")
+    sub = p.add_subparsers(dest="rsi_command", metavar="ACTION", required=True)
+    f = sub.add_parser("files", help="write the KRL program, ethernet configuration and "
+                       "signal flow for the controller")
+    f.add_argument("--out", type=Path, required=True, help="folder to write into")
+    f.add_argument("--ip", required=True, help="the PC's address on the RSI network "
+                   "(IP_NUMBER)")
+    _stream_args(f)
+    f.add_argument("--dil", type=int, metavar="IN",
+                   help="report a 16-bit input word DiL from $IN[IN…IN+15]")
+    f.set_defaults(func=_files)
+    r = sub.add_parser("run", help="answer the robot: hold it, or swing one axis")
+    r.add_argument("--robot-ip", required=True, help="the controller's RSI address")
+    r.add_argument("--listen", default="0.0.0.0", help="address to listen on")
+    _stream_args(r)
+    r.add_argument("--sine", metavar="AXIS:AMPLITUDE:PERIOD",
+                   help="swing one axis once: e.g. A6:2:4 (2° over 4 s) or Z:5:4 (5 mm)")
+    r.add_argument("--duration", type=float, default=0.0,
+                   help="seconds to run (default: until interrupted)")
+    r.add_argument("--rt-priority", type=int, metavar="N",
+                   help="run the link's thread under SCHED_FIFO priority N (1-99; Linux, "
+                   "root or CAP_SYS_NICE)")
+    r.add_argument("--json", action="store_true", help="print the counters as JSON lines")
+    r.set_defaults(func=_run)
+
+
+def _six(text: str | None, what: str) -> tuple[float, ...] | None:
+    from plugcell.apps.cli import CommandError
+
+    if text is None:
+        return None
+    try:
+        vals = tuple(float(v) for v in text.split(","))
+    except ValueError:
+        raise CommandError(f"--max-{what} {text!r}: expected numbers separated by commas") \
+            from None
+    if len(vals) == 1:
+        vals *= 6
+    if len(vals) != 6:
+        raise CommandError(f"--max-{what} {text!r}: expected 1 or 6 numbers, got {len(vals)}")
+    return vals
+
+
+def _config(args: argparse.Namespace, robot_host: str, listen: str):
+    """The RsiConfig the options describe (limits converted to SI)."""
+    from plugcell.apps.cli import CommandError
+    from plugcell.devices.robot.rsi import (
+        CorrectionLimits,
+        OutputSignal,
+        RsiConfig,
+        RsiConfigError,
+        default_limits,
+    )
+    from plugcell.io.units import DEG, M_PER_MM
+
+    scale = (DEG,) * 6 if args.correction == "joint" else (M_PER_MM,) * 3 + (DEG,) * 3
+    base = default_limits(args.correction)
+    given = {}
+    for name in ("step", "offset", "speed"):
+        vals = _six(getattr(args, f"max_{name}"), name)
+        given[name] = (tuple(v * s for v, s in zip(vals, scale, strict=True)) if vals
+                       else getattr(base, f"max_{name}"))
+    try:
+        limits = CorrectionLimits(given["step"], given["offset"], given["speed"],
+                                  "refuse" if args.refuse else "clamp")
+        return RsiConfig(robot_host=robot_host, listen_host=listen, listen_port=args.port,
+                         correction=args.correction, mode=args.mode, cycle=args.cycle,
+                         timeout_packets=args.timeout, limits=limits, sentype=args.sentype,
+                         outputs=(OutputSignal("DiO", 16),) if args.dio else ())
+    except RsiConfigError as exc:
+        raise CommandError(str(exc)) from None
+
+
+def _files(args: argparse.Namespace) -> int:
+    from plugcell.apps.cli import CommandError
+    from plugcell.devices.robot.rsi.controller_files import IoRouting, write_controller_files
+
+    config = _config(args, "0.0.0.0", "0.0.0.0")
+    io = IoRouting(outputs={"DiO": args.dio} if args.dio else None,
+                   input_tag="DiL" if args.dil else None, input_index=args.dil or 1)
+    try:
+        paths = write_controller_files(args.out, config, args.ip, io)
+    except ValueError as exc:
+        raise CommandError(str(exc)) from None
+    except OSError as exc:
+        raise CommandError(f"{args.out}: cannot write: {exc.strerror or exc}") from None
+    for path in paths:
+        print(path)
+    print(f"then on the PC: plugcell rsi run --robot-ip CONTROLLER_IP --port {args.port} "
+          f"--correction {args.correction} --mode {args.mode} --cycle {args.cycle} "
+          f"--timeout {args.timeout}")
+    return 0
+
+
+def _source(args: argparse.Namespace):
+    from plugcell.apps.cli import CommandError
+    from plugcell.devices.robot.rsi.codec import CARTESIAN_AXES, JOINT_AXES
+    from plugcell.devices.robot.rsi.sources import Hold, SineOffset
+    from plugcell.io.units import DEG, M_PER_MM
+
+    if not args.sine:
+        return Hold()
+    try:
+        axis, amplitude, period = args.sine.split(":")
+        amplitude_v, period_v = float(amplitude), float(period)
+    except ValueError:
+        raise CommandError(f"--sine {args.sine!r}: expected AXIS:AMPLITUDE:PERIOD") from None
+    axes = JOINT_AXES if args.correction == "joint" else CARTESIAN_AXES
+    if axis not in axes:
+        raise CommandError(f"--sine: axis {axis!r} is not one of {', '.join(axes)}")
+    i = axes.index(axis)
+    unit = M_PER_MM if args.correction == "cartesian" and i < 3 else DEG
+    if period_v <= 0:
+        raise CommandError(f"--sine: the period must be > 0, got {period_v}")
+    return SineOffset(i, amplitude_v * unit, period_v)
+
+
+def _run(args: argparse.Namespace) -> int:
+    from plugcell.apps.cli import CommandError
+    from plugcell.devices.robot.rsi import RsiLink, StreamStoppedError
+
+    config = _config(args, args.robot_ip, args.listen)
+    try:
+        link = RsiLink(config, _source(args), rt_priority=args.rt_priority)
+    except ValueError as exc:
+        raise CommandError(str(exc)) from None
+    host, port = link.start()
+    time.sleep(0.01)  # the thread has set its scheduling
+    print(f"listening on {host}:{port} for the robot at {args.robot_ip} "
+          f"({config.correction}, {config.mode}, {config.cycle}; {link.rt_note})", flush=True)
+    end = time.monotonic() + args.duration if args.duration > 0 else None
+    failed = None
+    try:
+        while end is None or time.monotonic() < end:
+            time.sleep(1.0)
+            st = link.stats()
+            if args.json:
+                print(json.dumps({**st.__dict__, "failure": str(link.failure or "")}),
+                      flush=True)
+            else:
+                print(f"received {st.received} answered {st.answered} late {st.late} "
+                      f"missed {st.missed} dropped {sum(st.dropped.values())} clamped "
+                      f"{st.clamped} controller Delay {st.controller_late} max latency "
+                      f"{st.max_latency_ns / 1e6:.3f} ms", flush=True)
+            if link.failure is not None and link.failure is not failed:
+                failed = link.failure
+                print(f"stream failed: {failed}", flush=True)
+    finally:
+        link.close()
+    # the controller ending the stream (program stopped: silence) is how a run ends; a
+    # late PC, a refused correction or the controller's Timeout is a failure
+    silent = isinstance(failed, StreamStoppedError) and "no packet" in str(failed)
+    return 1 if failed is not None and not silent else 0

@@ -1,0 +1,56 @@
+"""KUKA RSI, plugcell as the sensor: the robot's state in, corrections out, every 4 ms.
+
+* :mod:`.config` — :class:`RsiConfig`, the one validated value of a stream;
+* :mod:`.codec` — ``<Rob>`` packets → :class:`RobotState` (SI), ``<Sen>`` answers;
+* :mod:`.limits` — every correction held to the per-cycle step, speed and total offset;
+* :mod:`.link` — :class:`RsiLink`, the UDP loop, its counters and failures;
+* :mod:`.controller_files` — the KRL program, ethernet configuration and RSI diagram
+  the user copies to the controller (``plugcell rsi files``).
+
+docs/kuka-rsi.md takes a user from an empty controller to plugcell streaming to it.
+"""
+
+from .codec import PacketError, RobotState, encode_sen, parse_rob
+from .config import (
+    CYCLES,
+    CorrectionLimits,
+    OutputSignal,
+    RsiConfig,
+    RsiConfigError,
+    default_limits,
+)
+from .link import (
+    ControllerStoppedError,
+    Correction,
+    CorrectionRefusedError,
+    CorrectionSource,
+    CycleState,
+    LinkStats,
+    RsiLink,
+    RsiLinkError,
+    SourceFailedError,
+    StreamStoppedError,
+)
+
+__all__ = [
+    "CYCLES",
+    "ControllerStoppedError",
+    "Correction",
+    "CorrectionLimits",
+    "CorrectionRefusedError",
+    "CorrectionSource",
+    "CycleState",
+    "LinkStats",
+    "OutputSignal",
+    "PacketError",
+    "RobotState",
+    "RsiConfig",
+    "RsiConfigError",
+    "RsiLink",
+    "RsiLinkError",
+    "SourceFailedError",
+    "StreamStoppedError",
+    "default_limits",
+    "encode_sen",
+    "parse_rob",
+]

@@ -1,0 +1,147 @@
+"""The files the user copies to the controller, read back by rsipi's own parsers (an
+independent reader of the ethernet configuration and the signal flow), and the
+``plugcell rsi`` command that writes them and streams."""
+
+from __future__ import annotations
+
+import json
+import threading
+import xml.etree.ElementTree as ET
+
+import numpy as np
+import pytest
+from rsi_testlib import BareRobot, free_udp_port
+
+from plugcell.apps.cli import main
+from plugcell.devices.robot.rsi import CorrectionLimits, OutputSignal, RsiConfig
+from plugcell.devices.robot.rsi.controller_files import (
+    IoRouting,
+    controller_files,
+    write_controller_files,
+)
+from plugcell.io.units import DEG
+
+config_parser = pytest.importorskip("RSIPI.config_parser")
+limit_parser = pytest.importorskip("RSIPI.rsi_limit_parser")
+
+
+def written(tmp_path, **kw):
+    config = RsiConfig(robot_host="192.168.1.147", listen_port=49200,
+                       outputs=(OutputSignal("DiO", 16),), **kw)
+    paths = write_controller_files(tmp_path, config, "192.168.1.100",
+                                   IoRouting(outputs={"DiO": 33}, input_tag="DiL"))
+    return {p.name: p for p in paths}
+
+
+@pytest.mark.parametrize(("mode", "hold"), [("relative", 0), ("absolute", 1)])
+def test_rsipi_reads_the_ethernet_configuration(tmp_path, mode, hold) -> None:
+    files = written(tmp_path, mode=mode)
+    parsed = config_parser.ConfigParser(str(files["plugcell_rsi_ethernet.xml"]))
+    assert parsed.get_network_settings() == {"ip": "192.168.1.100", "port": 49200,
+                                             "sentype": "ImFree", "onlysend": False}
+    assert {"RIst", "RSol", "AIPos", "ASPos", "MACur", "Delay", "DiL"} <= set(
+        parsed.send_variables)
+    assert set(parsed.receive_variables) == {"AKorr", "DiO"}
+    # HOLDON by mode: relative 0 (no drift while the PC is silent), absolute 1 (no jump)
+    assert {parsed.holdon_map[f"AKorr.A{i}"] for i in range(1, 7)} == {hold}
+    assert parsed.holdon_map["DiO"] == 1
+
+
+def test_cartesian_streams_receive_rkorr(tmp_path) -> None:
+    files = written(tmp_path, correction="cartesian")
+    parsed = config_parser.ConfigParser(str(files["plugcell_rsi_ethernet.xml"]))
+    assert set(parsed.receive_variables) == {"RKorr", "DiO"}
+    limits = limit_parser.parse_rsi_limits(str(files["plugcell_rsi.rsi.xml"]))
+    assert limits["RKorr.X"] == pytest.approx((-50.0, 50.0))  # the default box, in mm
+    assert limits["RKorr.C"] == pytest.approx((-5.0, 5.0))  # MaxRotAngle, degrees
+
+
+def test_the_signal_flow_carries_the_timeout_and_the_pcs_limits(tmp_path) -> None:
+    lim = CorrectionLimits((0.1 * DEG,) * 6, tuple(np.array([5, 6, 7, 8, 9, 10]) * DEG),
+                           (20 * DEG,) * 6)
+    files = written(tmp_path, timeout_packets=60, limits=lim)
+    flow = str(files["plugcell_rsi.rsi.xml"])
+    assert limit_parser.parse_ethernet_timeout(flow) == 60
+    limits = limit_parser.parse_rsi_limits(flow)
+    for i, v in enumerate([5, 6, 7, 8, 9, 10], start=1):
+        assert limits[f"AKorr.A{i}"] == pytest.approx((-v, v))
+    root = ET.parse(flow).getroot()
+    objs = {o.get("ObjID"): o for o in root.iter("RSIObject")}
+    assert set(objs) == {"ETHERNET1", "AXISCORR1", "AXISCORRMON1", "MAP2DIGOUT1", "DIGIN1"}
+    dio = objs["MAP2DIGOUT1"]
+    assert dio.find("Inputs/Input").get("OutIdx") == "7"  # RECEIVE INDX 7 = DiO
+    assert dio.find("Parameters/Parameter[@Name='Index']").get("ParamValue") == "33"
+
+
+def test_the_krl_program_starts_rsi_as_configured(tmp_path) -> None:
+    files = written(tmp_path, mode="absolute", cycle="IPO")
+    raw = files["plugcell_rsi.src"].read_bytes()
+    assert b"\r\n" in raw and b"\n" not in raw.replace(b"\r\n", b"")  # CRLF, as KRL files
+    src = raw.decode()
+    assert 'RSI_CREATE("plugcell_rsi.rsi", CONTID, TRUE)' in src
+    assert "RSI_ON(#ABSOLUTE, #IPO)" in src
+    assert "RSI_MOVECORR()" in src and "RSI_OFF()" in src
+    assert "$STOPMESS" in src and "{{" not in src
+    readme = files["README.md"].read_text()
+    assert "HOLDON of the correction elements is 1" in readme
+
+
+def test_the_controller_needs_a_real_address_and_port() -> None:
+    config = RsiConfig(robot_host="192.168.1.147")
+    with pytest.raises(ValueError, match=r"IP_NUMBER '0\.0\.0\.0'"):
+        controller_files(config, "0.0.0.0")
+    with pytest.raises(ValueError, match="PORT 0"):
+        controller_files(RsiConfig(robot_host="192.168.1.147", listen_port=0), "10.0.0.1")
+
+
+def test_plugcell_rsi_files(tmp_path, capsys) -> None:
+    out = tmp_path / "kuka"
+    code = main(["rsi", "files", "--out", str(out), "--ip", "192.168.1.100", "--port",
+                 "49300", "--correction", "cartesian", "--max-offset", "20,20,20,2,2,2",
+                 "--dio", "17"])
+    assert code == 0
+    printed = capsys.readouterr().out
+    assert "plugcell rsi run --robot-ip CONTROLLER_IP --port 49300" in printed
+    limits = limit_parser.parse_rsi_limits(str(out / "plugcell_rsi.rsi.xml"))
+    assert limits["RKorr.Y"] == pytest.approx((-20.0, 20.0))
+    assert "<PORT>49300</PORT>" in (out / "plugcell_rsi_ethernet.xml").read_text()
+
+
+@pytest.mark.parametrize(("argv", "message"), [
+    (["--ip", "kuka"], "does not appear to be an IPv4 or IPv6 address"),
+    (["--ip", "10.0.0.1", "--max-step", "1,2"], "--max-step '1,2': expected 1 or 6"),
+    (["--ip", "10.0.0.1", "--max-speed", "fast"], "--max-speed 'fast': expected numbers"),
+    (["--ip", "10.0.0.1", "--max-offset", "-1"], "max_offset[0] = -0.0174"),
+    (["--ip", "10.0.0.1", "--timeout", "0"], "timeout_packets 0"),
+])
+def test_plugcell_rsi_files_errors(tmp_path, capsys, argv, message) -> None:
+    assert main(["rsi", "files", "--out", str(tmp_path), *argv]) == 2
+    assert message in capsys.readouterr().err
+
+
+def test_plugcell_rsi_run_swings_one_axis(capsys) -> None:
+    port = free_udp_port()
+    done: dict[str, int] = {}
+    cmd = threading.Thread(target=lambda: done.setdefault("code", main(
+        ["rsi", "run", "--robot-ip", "127.0.0.1", "--listen", "127.0.0.1", "--port",
+         str(port), "--mode", "absolute", "--sine", "A6:0.5:0.2", "--duration", "1.2",
+         "--json"])))
+    cmd.start()
+    robot = BareRobot(("127.0.0.1", port))
+    peak = 0.0
+    try:
+        for _ in range(200):
+            try:
+                answer = robot.cycle()
+            except (TimeoutError, ConnectionRefusedError):
+                continue  # the command is still starting
+            peak = max(peak, float(ET.fromstring(answer).find("AKorr").get("A6")))
+    finally:
+        robot.close()
+        cmd.join(timeout=10)
+    assert done["code"] == 0
+    assert peak == pytest.approx(0.5, abs=0.01)  # the swing's top, degrees
+    lines = [json.loads(x) for x in capsys.readouterr().out.splitlines() if x.startswith("{")]
+    assert lines and lines[-1]["answered"] > 0
+    # the robot stopped before the command's end: the silence is how the stream ended
+    assert lines[-1]["failure"] == "" or "no packet" in lines[-1]["failure"]
