@@ -188,7 +188,7 @@ async def _stream(url: str, cell: str, frames: int) -> dict[str, float]:
                 last = now
                 got += 1
                 if got == frames:
-                    await client.stop(call)
+                    await client.stop_process(call)
         out.update(plugcell_frames=got,
                    plugcell_frames_per_s=got / max(last - first, 1e-9))
     return out

@@ -62,7 +62,7 @@ def test_the_documented_service_works(laser_module, tmp_path):
                         continue
                     values.append(robot_value(update))
                     if len(values) == 3:
-                        stop = await (await robot.stop(track)).result()
+                        stop = await (await robot.stop_process(track)).result()
                         assert stop.state is ProcessStates.Completed
                 assert track.final.state is ProcessStates.Completed
                 assert all(abs(v) < 1.0 for v in values)  # zeroed

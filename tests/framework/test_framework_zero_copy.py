@@ -258,7 +258,7 @@ async def _streamed_frames(tmp_path, count: int) -> list[ProcessUpdateNotificati
                 frames.append(update)
                 if len(frames) == count:
                     break
-        await (await consumer.stop(call)).result()
+        await (await consumer.stop_process(call)).result()
         await call.result()
         return frames
     finally:

@@ -59,7 +59,7 @@ def test_single_and_continuous_measurements_are_appended_into_the_robots_mT(cell
                     streamed.append(ProcessCall.array(update))
                     if len(streamed) == 5:
                         break
-            stop = await robot.stop(stream)
+            stop = await robot.stop_process(stream)
             assert (await stop.result()).state is C
             async for update in stream:  # whatever came before the stop
                 if update.data is not None:

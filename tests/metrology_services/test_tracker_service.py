@@ -88,7 +88,7 @@ def test_set_base_probe_move_and_measurements_in_the_robot_frame(cell, world):
                     samples.append(ProcessCall.array(update))
                     if len(samples) == 3:
                         break
-            stop = await robot.stop(stream)
+            stop = await robot.stop_process(stream)
             assert (await stop.result()).state is C
             assert (await stream.result()).state is C
             for s in samples:
@@ -206,7 +206,7 @@ def test_the_second_robot_waits_for_the_first_robots_stop_measurement(cell, worl
                 if frames == 8:
                     break
             assert not waiting.done()  # queued behind the Comau's stream (8.4.3)
-            stop = await comau.stop(stream)
+            stop = await comau.stop_process(stream)
             assert (await stop.result()).state is C
             stopped_at = time.monotonic()
             assert (await stream.result()).state is C

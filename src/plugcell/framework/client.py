@@ -160,9 +160,11 @@ class BlockingClient:
         )
         return BlockingProcessCall(self, call)
 
-    def stop(self, call: BlockingProcessCall, command: str | None = None) -> BlockingProcessCall:
+    def stop_process(
+        self, call: BlockingProcessCall, command: str | None = None
+    ) -> BlockingProcessCall:
         """Send the StopData command ending a MultipleData process."""
-        stop = self._run(self.participant.stop(call.call, command), 2 * call.call.timeout)
+        stop = self._run(self.participant.stop_process(call.call, command), 2 * call.call.timeout)
         return BlockingProcessCall(self, stop)
 
     def close(self) -> None:

@@ -683,7 +683,7 @@ class Participant:
             if call.final is not None:
                 self._calls.pop((envelope.sender, update.identifier), None)
 
-    async def stop(
+    async def stop_process(
         self, call: ProcessCall, command: str | None = None, timeout: float | None = None
     ) -> ProcessCall:
         """Send the StopData command that ends ``call`` (a MultipleData process).

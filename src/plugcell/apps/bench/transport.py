@@ -212,7 +212,7 @@ async def our_throughput(consumer: Any, payload: Payload, messages: int) -> floa
                 if received == messages:
                     break
     rate = messages / (time.perf_counter() - t0)
-    stop = await consumer.stop(call)
+    stop = await consumer.stop_process(call)
     await stop.result()
     await call.result()
     return rate

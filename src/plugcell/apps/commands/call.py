@@ -135,7 +135,7 @@ async def _call(args: argparse.Namespace, data: Any) -> int:
             )
             if multiple and not stopping and not update.state.final and due:
                 stopping = True
-                stop = await client.stop(call, args.stop)
+                stop = await client.stop_process(call, args.stop)
                 final = await stop.result()
                 _emit(
                     {

@@ -541,7 +541,7 @@ class CellController(GenericDevice):
         if call is None:
             return {"ok": False, "reason": f"no running task {task_id}"}
         try:
-            stop = await self.stop(call)
+            stop = await self.stop_process(call)
         except PartnerError as exc:
             return {"ok": False, "reason": str(exc)}
         final = await stop.result()

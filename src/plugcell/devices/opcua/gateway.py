@@ -399,7 +399,7 @@ class CellGateway:
             return _failed(command, _failure_code(call.final.reason), count, call.final.reason)
         if node is None:  # the service left meanwhile
             with contextlib.suppress(Exception):
-                await caller.stop(call)
+                await caller.stop_process(call)
             return _failed(command, ua.StatusCodes.BadNoCommunication, count,
                            f"{service} left the cell")
 
@@ -407,7 +407,7 @@ class CellGateway:
             if call.done:
                 return _failed(None, ua.StatusCodes.BadInvalidState, 0,
                                f"the process {call.identifier} has already ended")
-            ended = await (await caller.stop(call)).result()
+            ended = await (await caller.stop_process(call)).result()
             if ended.state is ProcessStates.Failed:
                 await self._emit(service, ended.tag.recipient, caller.name, ended.identifier,
                                  "Failed", ended.reason)
@@ -463,7 +463,7 @@ class CellGateway:
         for caller, call in list(self._streams.pop(session, {}).values()):
             if not call.done:
                 with contextlib.suppress(Exception):
-                    await caller.stop(call)
+                    await caller.stop_process(call)
 
     async def _announce(
         self, service: str, command: Command, call: ProcessCall, state: ProcessStates,
