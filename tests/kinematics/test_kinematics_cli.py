@@ -50,10 +50,15 @@ def test_ik_round_trip_with_seed(capsys):
     x, y, z = T[:3, 3] * 1e3
     pose = ",".join(f"{v:.12f}" for v in (x, y, z, a, b, c))
     rc, out, _ = _run(
-        capsys, "ik", "--robot", "smart_h4", "--pose", pose, "--seed", "10,-70,-175,15,65,-25"
+        capsys, "ik", "--robot", "smart_h4", "--pose", pose, "--start", "10,-70,-175,15,65,-25"
     )
     assert rc == 0
     np.testing.assert_allclose(out["joints"], q, atol=1e-6)
+    rc, old, err = _run(  # --start's old name still works, and says it is old
+        capsys, "ik", "--robot", "smart_h4", "--pose", pose, "--seed", "10,-70,-175,15,65,-25"
+    )
+    assert rc == 0 and old == out
+    assert "plugcell: warning: --seed is deprecated: use --start" in err
     rc2, out2, _ = _run(capsys, "ik", "--robot", "smart_h4", "--pose", pose)  # default seed
     assert rc2 == 0
     T2 = forward(desc, None, np.radians(out2["joints"])).flange
@@ -107,8 +112,8 @@ def test_robot_file_path_and_listing(capsys, tmp_path: Path):
             "smart_h4: pose is out of reach",
         ),
         (
-            ["ik", "--robot", "smart_h4", "--pose", "1500,0,1000,0,90,0", "--seed", "1,2"],
-            "--seed: expected 6",
+            ["ik", "--robot", "smart_h4", "--pose", "1500,0,1000,0,90,0", "--start", "1,2"],
+            "--start: expected 6",
         ),
         (
             [

@@ -213,7 +213,7 @@ def test_cli_fk_takes_millimetres(tmp_path: Path, track: tuple[RobotDescription,
     np.testing.assert_allclose(out["T"], forward(desc, None, q).flange, atol=1e-11)
     assert main(["kin", "ik", "--robot", str(f), "--pose",
                  ",".join(str(v) for v in out["pose_mm_zyz"]),
-                 "--seed", "1400,0,-90,90,0,90,0"]) == 0
+                 "--start", "1400,0,-90,90,0,90,0"]) == 0
     sol = json.loads(capsys.readouterr().out)
     assert sol["position_error_mm"] < 1e-3
     assert 0 <= sol["joints"][0] <= 3000

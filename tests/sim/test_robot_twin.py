@@ -132,18 +132,25 @@ def test_cli_twin_report_json(capsys):
 
 def test_cli_twin_measure_writes_a_measurement_file(tmp_path, capsys):
     out = tmp_path / "cal.csv"
-    assert main(["twin", "measure", "--poses", "5", "--payload", "18", "--seed", "2",
+    assert main(["twin", "measure", "--poses", "5", "--payload-kg", "18", "--seed", "2",
                  "--out", str(out), "--quiet"]) == 0
     m = read_measurements(out, n_joints=6)
     assert len(m) == 5 and m.has_orientation
     np.testing.assert_allclose(m.payload_kg, 18.0)
+    capsys.readouterr()
+    old = tmp_path / "old.csv"  # --payload-kg's old name still works, and says it is old
+    assert main(["twin", "measure", "--poses", "5", "--payload", "18", "--seed", "2",
+                 "--out", str(old), "--quiet"]) == 0
+    assert old.read_bytes() == out.read_bytes()
+    assert "plugcell: warning: --payload is deprecated: use --payload-kg" in capsys.readouterr().err
 
 
 @pytest.mark.parametrize(
     ("argv", "message"),
     [
         (["twin", "measure", "--poses", "0", "--out", "x.csv"], "--poses must be positive"),
-        (["twin", "measure", "--poses", "3", "--payload", "-2", "--out", "x.csv"], "--payload"),
+        (["twin", "measure", "--poses", "3", "--payload-kg", "-2", "--out", "x.csv"],
+         "--payload-kg must be a mass"),
         (["twin", "measure", "--robot", "nope", "--poses", "3", "--out", "x.csv"], "nope"),
         (["twin", "report", "--poses", "3"], "--poses must be at least 10"),
     ],

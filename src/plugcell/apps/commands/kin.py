@@ -27,6 +27,7 @@ from typing import Any
 
 import numpy as np
 
+from plugcell.apps.commands.deprecated import DeprecatedName
 from plugcell.apps.commands.robotargs import add_robot_args, load_robot_of
 from plugcell.io.robot_schema import description_to_dict
 from plugcell.io.robots import available_robots
@@ -88,8 +89,9 @@ def configure(kin: argparse.ArgumentParser) -> None:
     )
     add_robot_args(ik, required=True)
     ik.add_argument("--pose", required=True, help="x,y,z (mm),A,B,C (Comau ZYZ, degrees)")
-    ik.add_argument("--seed",
-                    help="j1,...,jn in degrees (prismatic: mm; default: the robot's home pose)")
+    ik.add_argument("--start", "--seed", dest="start", action=DeprecatedName, old=("--seed",),
+                    help="joints to start the search from: j1,...,jn in degrees (prismatic: "
+                         "mm; default: the robot's home pose); --seed is its old name")
     ik.add_argument("--closure", choices=("fourbar", "nominal"), default="fourbar")
     ik.set_defaults(func=_cmd_ik)
 
@@ -201,8 +203,8 @@ def _cmd_ik(args: argparse.Namespace) -> int:
     desc = _robot(args)
     pose = _floats(args.pose, 6, "--pose", "x,y,z in mm and A,B,C Comau ZYZ in degrees")
     seed = None
-    if args.seed is not None:
-        seed = (_floats(args.seed, desc.n_readings, "--seed", _joint_names(desc))
+    if args.start is not None:
+        seed = (_floats(args.start, desc.n_readings, "--start", _joint_names(desc))
                 * desc.reading_scale())
     T = pose_to_matrix(pose[:3] * 1e-3, np.radians(pose[3:]), "zyz")
     try:

@@ -10,6 +10,7 @@ from typing import Any
 
 import numpy as np
 
+from plugcell.apps.commands.deprecated import DeprecatedName
 from plugcell.apps.commands.progress import ProgressBar
 from plugcell.apps.commands.robotargs import add_robot_args
 
@@ -56,13 +57,18 @@ def configure(p: argparse.ArgumentParser) -> None:
                             "volume at one constant tool orientation")
     which.add_argument("--plan", type=Path, metavar="PLAN.csv",
                        help="measure the poses of a plan file (plugcell plan), each with its "
-                            "payload; --payload is the payload of rows without one")
+                            "payload; --payload-kg is the payload of rows without one")
     m.add_argument(
+        "--payload-kg",
         "--payload",
+        dest="payload",
+        action=DeprecatedName,
+        old=("--payload",),
         type=float,
         default=0.0,
         metavar="KG",
-        help="payload mass in kg (default: 0), mounted off the flange centre",
+        help="payload mass in kg (default: 0), mounted off the flange centre (as calibrate's "
+             "and compensate's --payload-kg; --payload is its old name)",
     )
     m.add_argument(
         "--pose-seed",
@@ -168,7 +174,7 @@ def _measure(args: argparse.Namespace) -> int:
         if getattr(args, opt) is not None and getattr(args, opt) < 1:
             raise CommandError(f"--{opt} must be positive, got {getattr(args, opt)}")
     if not (np.isfinite(args.payload) and args.payload >= 0):
-        raise CommandError(f"--payload must be a mass ≥ 0 kg, got {args.payload}")
+        raise CommandError(f"--payload-kg must be a mass ≥ 0 kg, got {args.payload}")
     scenario = _scenario(args).with_payload(args.payload)
     pose_seed = scenario.seed + 1 if args.pose_seed is None else args.pose_seed
     try:
