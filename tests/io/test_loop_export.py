@@ -48,7 +48,7 @@ def h4(tmp_path_factory: pytest.TempPathFactory):
     """PARAMS.json of the README's model-5 calibration, on a 40-pose twin campaign."""
     d = tmp_path_factory.mktemp("h4")
     cal, params = d / "cal.csv", d / "params.json"
-    assert main([("twin", "measure", "--poses", "40", "--payload-kg", "36", "--out", str(cal),
+    assert main(["twin", "measure", "--poses", "40", "--payload-kg", "36", "--out", str(cal),
                  "--quiet"]) == 0
     assert main(["calibrate", "--robot", "smart_h4", "--model", "5", "--data", str(cal),
                  "--out", str(params), "--quiet"]) == 0
