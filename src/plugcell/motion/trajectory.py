@@ -117,7 +117,15 @@ class Trajectory:
             frac.reshape(shape))
 
     def tcp(self, t: ArrayLike) -> Array:
-        """TCP poses at times ``t`` (..., 4, 4), m, robot base frame."""
+        """TCP poses at times ``t`` (..., 4, 4), m, robot base frame.
+
+        Raises
+        ------
+        ValueError
+            The trajectory has no moves (the poses need a section's robot model).
+        """
+        if not self.sections:
+            raise ValueError("a trajectory without moves has no TCP path; plan a move")
         t, sec, local = self._split(t)
         out = np.zeros((local.size, 4, 4))
         for s in np.unique(sec):
