@@ -75,6 +75,8 @@ class Trajectory:
     def _split(self, t: Array) -> tuple[Array, NDArray[np.intp], Array]:
         t = np.asarray(t, dtype=float)
         flat = np.clip(t.reshape(-1), 0.0, self.duration)
+        if not self.sections:
+            return t, np.zeros(flat.size, dtype=np.intp), flat
         i = np.clip(np.searchsorted(self.starts, flat, side="right") - 1, 0,
                     len(self.sections) - 1)
         return t, i, flat - self.starts[i]
@@ -100,7 +102,7 @@ class Trajectory:
         qdd = np.zeros((B, n)) if order >= 2 else None
         move = np.zeros(B, dtype=np.intp)
         frac = np.zeros(B)
-        for s in np.unique(sec) if self.sections else ():
+        for s in np.unique(sec) if self.sections else np.array([], dtype=np.intp):
             rows = np.flatnonzero(sec == s)
             section = self.sections[s]
             a, b, c = section.joints(local[rows], order)
