@@ -39,6 +39,7 @@ def test_the_python_examples_run_in_order() -> None:
             exec(compile(code, str(DOC), "exec"), ns)
     text = out.getvalue()
     assert "s stopping" in text and "s flying by" in text
+    assert "FAILED line 7:" in text and "LIN: target unreachable" in text  # the PDL example
     # the printed errors match the page's "prints" block (… stands for any text)
     printed = next(b for b in _blocks("") if b.startswith("UnreachablePoseError"))
     for expected in printed.strip().splitlines():

@@ -123,6 +123,12 @@ def test_sampling_shapes_cycles_and_outside_times(elbow: RobotDescription,
     assert np.allclose(tr.at_cycle(len(cyc) - 1, 0.004).q[0], q0 + 0.2)
     assert np.array_equal(tr.sample(-1.0).q, q0) and np.allclose(tr.sample(99.0).q, q0 + 0.2)
     assert tr.tcp(0.0).shape == (4, 4)
+    ts, qs = tr.setpoints(0.004)
+    assert np.array_equal(ts, cyc) and np.array_equal(qs[7], tr.at_cycle(7, 0.004).q[0])
+    empty = plan(elbow, q0, [], jl)
+    assert empty.duration == 0.0 and np.array_equal(empty.sample([0.0, 1.0]).q, [q0, q0])
+    with pytest.raises(ValueError, match="without moves"):
+        empty.tcp(0.0)
 
 
 def test_a_target_outside_the_limits_names_move_line_joint_value_limit(

@@ -48,6 +48,7 @@ the move, its program line, the time and path fraction, the joint, value and lim
 
 from __future__ import annotations
 
+import itertools
 import math
 from collections.abc import Callable, Sequence
 
@@ -87,6 +88,8 @@ BLEND_SAMPLES = 400
 BLEND_CANDIDATES = 48
 #: Margin kept below each limit in a blend (the check is on a grid).
 BLEND_MARGIN = 1e-6
+#: Every how many check points a Cartesian path is tracked sequentially (the rest at once).
+FOLLOW_STRIDE = 5
 #: Slack on position limits (rad or m).
 LIMIT_TOL = 1e-9
 
@@ -356,35 +359,59 @@ def _cartesian_section(
 
 
 def _cartesian_excess(path: CartesianPath, lo: float, hi: float, keep: Array) -> bool:
-    """Whether the TCP's rates on ``[lo, hi]`` exceed ``keep`` (v, a, j, ω, α, ω⃛)."""
+    """Whether the TCP's rates on ``[lo, hi]`` exceed ``keep`` (v, a, j, ω, α, ω⃛); the
+    angular jerk (central differences of α) only when the rest keep their limits."""
     t = np.linspace(lo, hi, BLEND_SAMPLES)
     st = path.sample(t)
+    norms = [np.linalg.norm(x, axis=-1).max() for x in
+             (st.v, st.a, st.jerk, st.omega, st.alpha)]
+    if np.any(np.array(norms) > keep[:5]):
+        return True
     h = 1e-6
     ang_jerk = (path.sample(t + h).alpha - path.sample(t - h).alpha) / (2.0 * h)
-    norms = [np.linalg.norm(x, axis=-1).max() for x in
-             (st.v, st.a, st.jerk, st.omega, st.alpha, ang_jerk)]
-    return bool(np.any(np.array(norms) > keep))
+    return bool(np.linalg.norm(ang_jerk, axis=-1).max() > keep[5])
 
 
 def _follow(robot: _Robot, path: CartesianPath, times: Array, q0: Array, idx: list[int],
             moves: Sequence[Move], t_offset: float) -> Array:
-    """Joint solutions along the path at ``times``, each tracked from the previous one."""
+    """Joint solutions along the path at ``times``, on the start's branch.
+
+    Every :data:`FOLLOW_STRIDE`-th point is tracked from the previous one of them
+    (sequentially, so on one branch); the points between are then solved at once,
+    seeded by linear interpolation between their tracked neighbours — a point that does
+    not converge so is tracked from its predecessor.  The table's jump check
+    (:func:`_check_table`) catches a branch change between tracked points.
+    """
     desc, params, closure = robot.desc, robot.params, robot.closure
     T = path.sample(times).T
-    table = np.empty((times.size, q0.size))
+    n = times.size
+    table = np.full((n, q0.size), np.nan)
     table[0] = q0
-    for i in range(1, times.size):
-        q, ok = track(desc, params, T[i:i + 1], table[i - 1:i], closure)
+
+    def solve(i: int, seed: Array) -> None:
+        q, ok = track(desc, params, T[i:i + 1], seed[None], closure)
         if not ok[0]:
             try:
-                q = inverse(desc, params, T[i], seed=table[i - 1], target="tcp",
-                            closure=closure, enforce_limits=False).q[None]
+                q = inverse(desc, params, T[i], seed=seed, target="tcp", closure=closure,
+                            enforce_limits=False).q[None]
             except KinematicsError as exc:
                 k, frac = path.timing.fraction(times[i:i + 1])
                 raise _err(UnreachablePoseError, f"no joint solution on the path: {exc}", moves,
                            idx[int(k[0])], time=t_offset + float(times[i]),
                            fraction=float(frac[0])) from None
         table[i] = q[0]
+
+    coarse = np.unique(np.r_[np.arange(0, n, FOLLOW_STRIDE), n - 1])
+    for a, b in itertools.pairwise(coarse):
+        solve(int(b), table[a])
+    fine = np.setdiff1d(np.arange(n), coarse)
+    if fine.size:
+        seeds = np.stack([np.interp(times[fine], times[coarse], table[coarse, j])
+                          for j in range(q0.size)], axis=1)
+        q, ok = track(desc, params, T[fine], seeds, closure)
+        table[fine[ok]] = q[ok]
+        for i in fine[~ok]:
+            solve(int(i), table[i - 1])
     return table
 
 

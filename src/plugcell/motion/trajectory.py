@@ -75,6 +75,8 @@ class Trajectory:
     def _split(self, t: Array) -> tuple[Array, NDArray[np.intp], Array]:
         t = np.asarray(t, dtype=float)
         flat = np.clip(t.reshape(-1), 0.0, self.duration)
+        if not self.sections:
+            return t, np.zeros(flat.size, dtype=np.intp), flat
         i = np.clip(np.searchsorted(self.starts, flat, side="right") - 1, 0,
                     len(self.sections) - 1)
         return t, i, flat - self.starts[i]
@@ -100,7 +102,7 @@ class Trajectory:
         qdd = np.zeros((B, n)) if order >= 2 else None
         move = np.zeros(B, dtype=np.intp)
         frac = np.zeros(B)
-        for s in np.unique(sec) if self.sections else ():
+        for s in np.unique(sec) if self.sections else np.array([], dtype=np.intp):
             rows = np.flatnonzero(sec == s)
             section = self.sections[s]
             a, b, c = section.joints(local[rows], order)
@@ -117,7 +119,15 @@ class Trajectory:
             frac.reshape(shape))
 
     def tcp(self, t: ArrayLike) -> Array:
-        """TCP poses at times ``t`` (..., 4, 4), m, robot base frame."""
+        """TCP poses at times ``t`` (..., 4, 4), m, robot base frame.
+
+        Raises
+        ------
+        ValueError
+            The trajectory has no moves (the poses need a section's robot model).
+        """
+        if not self.sections:
+            raise ValueError("a trajectory without moves has no TCP path; plan a move")
         t, sec, local = self._split(t)
         out = np.zeros((local.size, 4, 4))
         for s in np.unique(sec):
@@ -130,6 +140,26 @@ class Trajectory:
         if not dt > 0.0:
             raise ValueError(f"cycle time must be positive, got {dt}")
         return np.arange(int(np.ceil(self.duration / dt - 1e-9)) + 1) * dt
+
+    def setpoints(self, dt: float) -> tuple[Array, Array]:
+        """Every cycle's joint setpoint at once: ``(cycle_times(dt), q)``, q (K, n) rad.
+
+        One vectorised call — far cheaper per cycle than :meth:`at_cycle` in a loop —
+        for a real-time link to compute before the move starts and then send one row
+        per cycle.
+
+        Parameters
+        ----------
+        dt : float, s
+            The interpolation cycle.
+
+        Returns
+        -------
+        t : (K,) array, s
+        q : (K, n) array, rad
+        """
+        t = self.cycle_times(dt)
+        return t, self.sample(t, 0).q
 
     def at_cycle(self, k: int, dt: float, order: int = 0) -> JointSample:
         """The setpoint of interpolation cycle ``k``: :meth:`sample` at ``t = k·Δt``."""

@@ -1,7 +1,9 @@
 """plugcell.sim.controller — the simulated robot controller.
 
 It runs programs in the robot language (:mod:`plugcell.pdl`; the program library is
-``plugcell/pdl/programs``) on a simulated arm (:mod:`.arm`, moving the twin), speaks the
+``plugcell/pdl/programs``) with the program runner
+(:mod:`plugcell.devices.robot.runner`, the same one a PC uses for a real robot) on a
+simulated arm (:mod:`.arm`, moving the twin), speaks the
 robot service's controller protocol (:mod:`plugcell.devices.robot.protocol`) over TCP or
 a serial line, and publishes its T-MAC's true pose for the simulated tracker
 (:mod:`.reflector`).

@@ -6,38 +6,37 @@ What a real controller does with its arm (thesis 2.2.2), and only that:
   pose carries the twin's geometric errors, deflections and noise; a move takes
   the time of its largest joint travel at :data:`JOINT_SPEED_DEG_S` plus
   :data:`RAMP_S` for acceleration and deceleration (simulated seconds);
-* Cartesian targets (``MOVE TO``) go through the controller's *nominal* inverse
-  kinematics, POS_TO_JNTP (:func:`plugcell.kinematics.inverse`, seeded with the
-  current joints, inside the description's joint limits);
-* ARM_POS is the nominal forward kinematics of the joint *readings* — what a
-  real controller reports, not where the arm truly is.
+* Cartesian targets, ARM_POS and MOVE RELATIVE are the controller's nominal model,
+  common to every arm (:class:`plugcell.devices.robot.arm_model.ControllerArm`).
 
-Poses are PDL POSITIONs of the TCP in the robot base frame: millimetres and Comau
-ZYZ degrees.  After every move the true T-MAC pose in the tracker frame is handed
-to ``on_move(pose, duration_s)`` — the simulated controller publishes it to the
+After every move the true T-MAC pose in the tracker frame is handed to
+``on_move(pose, duration_s)`` — the simulated controller publishes it to the
 sim-only world (``plugcell.sim.world``); nothing else reads it.
 Thread-safe: the program thread and the service's requests share one arm.
 """
 
 from __future__ import annotations
 
-import math
-import threading
 from collections.abc import Callable, Sequence
 
 import numpy as np
 
-from plugcell.devices.robot.poses import pose_matrix, pose_values
-from plugcell.kinematics import forward, inverse
-from plugcell.kinematics.errors import KinematicsError
-from plugcell.pdl.interfaces import MotionError
-from plugcell.pdl.values import JointPos, Position
+from plugcell.devices.robot.arm_model import (
+    IK_TOL,
+    ControllerArm,
+    matrix_from_position,
+    position_from_tcp,
+)
+from plugcell.motion import Trajectory
+from plugcell.pdl.values import Position
 from plugcell.sim.twin.robot import RobotTwin
 
 __all__ = [
+    "IK_TOL",
     "JOINT_SPEED_DEG_S",
     "RAMP_S",
     "TwinArm",
+    "TwinDrive",
     "matrix_from_position",
     "position_from_tcp",
 ]
@@ -46,79 +45,22 @@ __all__ = [
 JOINT_SPEED_DEG_S = 40.0
 #: Time added to every move for acceleration and deceleration (simulated seconds).
 RAMP_S = 0.25
-#: Convergence tolerance of POS_TO_JNTP (m and rad).
-IK_TOL = 1e-9
 
 MoveListener = Callable[[np.ndarray, float], None]
 
 
-def matrix_from_position(pose: Position) -> np.ndarray:
-    """A POSITION (mm, ZYZ degrees) → 4×4 homogeneous transform in metres."""
-    try:
-        return pose_matrix(pose.as_tuple())
-    except ValueError as exc:
-        raise MotionError(str(exc)) from None
-
-
-def position_from_tcp(T: np.ndarray) -> Position:
-    """4×4 homogeneous transform in metres → POSITION (mm, ZYZ degrees)."""
-    return Position(*pose_values(T))
-
-
-class TwinArm:
+class TwinArm(ControllerArm):
     """A :class:`~plugcell.pdl.interfaces.Motion` driving a RobotTwin."""
 
     def __init__(self, twin: RobotTwin, on_move: MoveListener | None = None) -> None:
+        super().__init__(twin.description)
         self.twin = twin
-        self.description = twin.description
         self.on_move = on_move
-        self._lock = threading.RLock()
         self.moves = 0
 
-    # ------------------------------------------------------------------ kinematics
-    @property
-    def axes(self) -> int:
-        return int(self.description.n_readings)
-
-    def _joints_rad(self, joints: Sequence[float]) -> np.ndarray:
-        q = np.radians(np.asarray([float(v) for v in joints], dtype=float))
-        if q.shape != (self.axes,):
-            raise MotionError(f"{self.description.name} has {self.axes} axes, got {q.size} angles")
-        if not np.all(np.isfinite(q)):
-            raise MotionError("joint angles must be finite")
-        return q
-
-    def _check_limits(self, q: np.ndarray) -> None:
-        problems = self.description.limit_violations(q, tol=1e-9)
-        if problems:
-            raise MotionError("outside the joint limits: " + "; ".join(problems))
-
-    def jntp_to_pos(self, joints: JointPos) -> Position:
-        """JNTP_TO_POS: nominal forward kinematics of ``joints`` (degrees)."""
-        q = self._joints_rad(joints.joints)
-        return position_from_tcp(forward(self.description, None, q, closure="nominal").tcp)
-
-    def pos_to_jntp(self, pose: Position) -> JointPos:
-        """POS_TO_JNTP: nominal inverse kinematics, the solution nearest the current joints."""
-        T = matrix_from_position(pose)
-        with self._lock:
-            seed = self.twin.joint_readings()
-        try:
-            result = inverse(self.description, None, T, seed=seed, target="tcp",
-                             closure="nominal", tol=IK_TOL)
-        except KinematicsError as exc:
-            raise MotionError(f"POS_TO_JNTP{_short(pose)}: {exc}") from None
-        return JointPos(tuple(float(v) for v in np.degrees(result.q)))
-
-    def arm_jntp(self) -> JointPos:
-        """ARM_JNTP: the joint readings (encoder counts), degrees."""
-        with self._lock:
-            q = self.twin.joint_readings()
-        return JointPos(tuple(float(v) for v in np.degrees(q)))
-
-    def arm_pos(self) -> Position:
-        """ARM_POS: nominal forward kinematics of the readings."""
-        return self.jntp_to_pos(self.arm_jntp())
+    def joint_readings(self) -> np.ndarray:
+        """The twin's joint readings (rad, encoder-quantised)."""
+        return self.twin.joint_readings()
 
     # ------------------------------------------------------------------ moves
     def move_joints(self, q_deg: Sequence[float]) -> float:
@@ -144,21 +86,30 @@ class TwinArm:
         """
         return self.move_joints(self.pos_to_jntp(pose).joints)
 
-    def move_relative(self, offset_mm: Sequence[float], frame: str) -> float:
-        """MOVE RELATIVE: translate the TCP in the BASE or TOOL frame."""
-        offset = np.asarray([float(v) for v in offset_mm], dtype=float) / 1000.0
-        if offset.shape != (3,) or not np.all(np.isfinite(offset)):
-            raise MotionError(f"MOVE RELATIVE needs 3 finite offsets, got {offset_mm!r}")
-        T = matrix_from_position(self.arm_pos())
-        if frame.upper() == "TOOL":
-            T[:3, 3] += T[:3, :3] @ offset
-        elif frame.upper() == "BASE":
-            T[:3, 3] += offset
-        else:
-            raise MotionError(f"unknown frame {frame!r} (BASE or TOOL)")
-        return self.move_to(position_from_tcp(T))
 
+class TwinDrive:
+    """A :class:`~plugcell.devices.robot.planned_motion.Drive` on the twin: what a
+    program planned on the PC moves when it runs on the twin.
 
-def _short(pose: Position) -> str:
-    vals = ", ".join(f"{v:g}" for v in pose.as_tuple())
-    return f"({vals})" if all(math.isfinite(v) for v in pose.as_tuple()) else ""
+    The twin does not move in time yet (issue 37, section 2): following a trajectory
+    puts it at the trajectory's end pose — with its geometric errors, deflections and
+    noise, as :meth:`RobotTwin.move_joints` — and reports the true T-MAC pose to
+    ``on_move(pose, duration_s)``.
+    """
+
+    def __init__(self, twin: RobotTwin, on_move: MoveListener | None = None) -> None:
+        self.twin = twin
+        self.on_move = on_move
+        self.followed = 0
+
+    def joint_readings(self) -> np.ndarray:
+        """The twin's joint readings (rad, encoder-quantised)."""
+        return self.twin.joint_readings()
+
+    def follow(self, trajectory: Trajectory) -> None:
+        """Put the twin at the trajectory's end."""
+        q_end = trajectory.sample(trajectory.duration, 0).q
+        self.twin.move_joints(q_end)
+        self.followed += 1
+        if self.on_move is not None:
+            self.on_move(self.twin.true_reflector_in_tracker(), trajectory.duration)

@@ -64,12 +64,12 @@ from plugcell.devices.robot.protocol import (
     format_number,
     format_numbers,
 )
+from plugcell.devices.robot.runner import TEXT_MAX, ProgramRunner, RunError
 from plugcell.devices.robot.serial_line import SerialLine
 from plugcell.pdl import MotionError, SimClock
 from plugcell.pdl.predefined import EXT_DATA_MAX
 from plugcell.pdl.values import JointPos, Position
 from plugcell.sim.controller.arm import TwinArm
-from plugcell.sim.controller.runner import TEXT_MAX, ProgramRunner, RunError
 
 __all__ = ["SimController", "main"]
 

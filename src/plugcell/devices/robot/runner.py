@@ -1,7 +1,11 @@
-"""Running robot programs in the simulated controller (thesis 4.1.3.2, 7.2).
+"""Running robot programs on the PC or in the simulated controller (thesis 4.1.3.2, 7.2).
 
-:class:`ProgramRunner` is the controller's program side, apart from any socket:
-it finds a program (by name in the program library, or by path), loads it with
+:class:`ProgramRunner` is a controller's program side, apart from any socket and any
+arm: it runs on whatever :class:`~plugcell.pdl.interfaces.Motion` it is given — the
+simulated controller's twin (:class:`plugcell.sim.controller.arm.TwinArm`) or a robot
+moved from the PC through planned trajectories
+(:class:`plugcell.devices.robot.planned_motion.PlannedMotion`), so the same program runs
+unchanged on both.  It finds a program (by name in the program library, or by path), loads it with
 the language runtime (errors carry file and line), presets its variables, runs
 it in a thread on the controller's :class:`SimClock`, and hands the robot
 service's answers to it — the handshake of 4.1.3.2 (``RESULT`` →
@@ -46,7 +50,7 @@ from plugcell.pdl.predefined import EXT_DATA_MAX
 
 __all__ = ["TEXT_MAX", "ProgramRunner", "RunError", "RunInfo", "resolve_program"]
 
-log = logging.getLogger("plugcell.sim.controller")
+log = logging.getLogger("plugcell.devices.robot.runner")
 
 #: Capacity of ext_cmd_message and ext_cmd_text (STRING[255]).
 TEXT_MAX = 255
