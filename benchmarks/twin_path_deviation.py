@@ -16,8 +16,8 @@ the straight line through the TCP's true rest positions at the start and at the 
 that mean, ``mean + 3σ``) — and along it: the TCP's position along the line minus the
 commanded one at the same time (the following error, dead time included): max of its
 magnitude, its mean (the lag) and 3σ about the mean.  ``dynamic`` is the perpendicular
-deviation from the path the same robot takes quasi-statically (the static twin at the commanded joints),
-i.e. what the motion adds.  Deterministic: any machine prints the same figures.
+deviation from the path the same robot takes quasi-statically (the static twin at the
+commanded joints), i.e. what the motion adds.  Deterministic: any machine prints the same figures.
 """
 
 from __future__ import annotations
