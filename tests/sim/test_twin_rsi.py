@@ -11,6 +11,8 @@ import time
 
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from plugcell.devices.robot.rsi import (
     ControllerStoppedError,
@@ -169,3 +171,19 @@ def test_the_robot_packet_reads_back_and_answers_are_checked() -> None:
                      (b"<Sen", "not well-formed")]:
         with pytest.raises(PacketError, match=why):
             parse_sen(bad, "joint")
+
+
+@settings(max_examples=300, deadline=None)
+@given(st.one_of(st.binary(max_size=300),
+                 st.builds(lambda a, i: (f'<Sen Type="ImFree"><AKorr A1="{a}" A2="0" A3="0" '
+                                         f'A4="0" A5="0" A6="0"/><IPOC>{i}</IPOC></Sen>'
+                                         ).encode(), st.text(max_size=6), st.text(max_size=6))),
+       st.sampled_from(["joint", "cartesian"]))
+def test_parse_sen_reads_or_refuses_anything(data: bytes, kind: str) -> None:
+    """Whatever arrives at the controller's port: an answer or a PacketError, nothing else."""
+    try:
+        ans = parse_sen(data, kind)
+    except PacketError as exc:
+        assert exc.kind in ("malformed", "oversized", "foreign")
+        return
+    assert ans.correction.shape == (6,) and np.all(np.isfinite(ans.correction))
