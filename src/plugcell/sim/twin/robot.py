@@ -172,6 +172,13 @@ class RobotTwin:
         self.moves += 1
         return self.joint_readings()
 
+    def follow(self, readings: ArrayLike, reached: ArrayLike) -> None:
+        """Take the state of an arm that moves in time (:mod:`plugcell.sim.twin.dynamics`):
+        the encoder ``readings`` the controller reports and the link-side angles
+        ``reached`` (rad) that :meth:`true_flange` puts through the static physics."""
+        self._motor = np.array(readings, dtype=float)
+        self._reached = np.array(reached, dtype=float)
+
     def joint_readings(self) -> Array:
         """The encoder readings the controller reports (rad)."""
         return self._motor.copy()

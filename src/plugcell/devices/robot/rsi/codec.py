@@ -305,3 +305,103 @@ def encode_sen(ipoc: int, kind: str, values: Array, outputs: dict[str, int] | No
                "C=\"{:.6f}\"/>".format(*v.tolist())
     words = "".join(f"<{k}>{int(w)}</{k}>" for k, w in outputs.items()) if outputs else ""
     return f"<Sen Type=\"{sentype}\">{body}{words}<IPOC>{int(ipoc)}</IPOC></Sen>".encode()
+
+
+# ------------------------------------------------------------------ the robot's side
+# The simulated controller (plugcell.sim.controller.rsi_robot) speaks the other
+# direction with the same parser and units: <Rob> out, <Sen> in.
+
+
+def encode_rob(ipoc: int, joints: Array, tcp: Array, *, joints_setpoint: Array | None = None,
+               tcp_setpoint: Array | None = None, delay: int = 0,
+               signals: dict[str, float] | None = None) -> bytes:
+    """A robot packet ``<Rob Type="KUKA">`` from SI values (what a controller sends).
+
+    Parameters
+    ----------
+    ipoc : int
+        The cycle's stamp.
+    joints, joints_setpoint : ndarray, shape (6,)
+        ``AIPos``/``ASPos`` (rad → deg); the set-point defaults to ``joints``.
+    tcp, tcp_setpoint : ndarray, shape (6,)
+        ``RIst``/``RSol``: x, y, z (m → mm), A, B, C (rad → deg).
+    delay : int
+        ``<Delay D>``: late sensor packets counted so far.
+    signals : dict of str to float, optional
+        Further elements with a text value (``{"DiL": 5}`` → ``<DiL>5</DiL>``).
+
+    Returns
+    -------
+    bytes
+        The datagram; :func:`parse_rob` reads it back.
+    """
+    def six(tag: str, axes: tuple[str, ...], v: Array) -> str:
+        return f"<{tag} " + " ".join(f'{a}="{x:.4f}"' for a, x in zip(axes, v.tolist(),
+                                                                       strict=True)) + "/>"
+
+    def cart(v: Array) -> Array:
+        return np.concatenate([np.asarray(v[:3]) * MM_PER_M, np.asarray(v[3:]) * (1.0 / DEG)])
+
+    q = np.asarray(joints, dtype=float) * (1.0 / DEG)
+    qs = q if joints_setpoint is None else np.asarray(joints_setpoint, float) * (1.0 / DEG)
+    x = cart(np.asarray(tcp, dtype=float))
+    xs = x if tcp_setpoint is None else cart(np.asarray(tcp_setpoint, dtype=float))
+    extra = "".join(f"<{k}>{v:g}</{k}>" for k, v in (signals or {}).items())
+    return (f'<Rob Type="KUKA">{six("RIst", CARTESIAN_AXES, x)}{six("RSol", CARTESIAN_AXES, xs)}'
+            f'{six("AIPos", JOINT_AXES, q)}{six("ASPos", JOINT_AXES, qs)}'
+            f'<Delay D="{int(delay)}"/>{extra}<IPOC>{int(ipoc)}</IPOC></Rob>').encode()
+
+
+@dataclass(frozen=True)
+class SensorAnswer:
+    """One ``<Sen>`` answer, in SI: ``ipoc`` echoed, ``correction`` (6,) — AKorr (rad) or
+    RKorr (m, rad) — and the other elements' values (``{"DiO": 5.0}``)."""
+
+    ipoc: int
+    correction: Array
+    signals: dict[str, float]
+
+
+def parse_sen(data: bytes, kind: str, max_bytes: int = 4096) -> SensorAnswer:
+    """A sensor's answer → :class:`SensorAnswer`, or :class:`PacketError` saying why.
+
+    ``kind`` is the correction the controller's configuration expects: ``"joint"``
+    (``AKorr A1..A6``, deg → rad) or ``"cartesian"`` (``RKorr X..C``, mm → m, deg → rad).
+    Same parser as :func:`parse_rob` (no DTD, no entities); an answer without the
+    correction, with a wrong or non-finite value, or without IPOC is refused.
+    """
+    if len(data) > max_bytes:
+        raise PacketError("oversized", f"{len(data)} bytes > {max_bytes}")
+    try:
+        root = etree.fromstring(data, _PARSER)
+    except etree.XMLSyntaxError as exc:
+        raise PacketError("malformed", f"not well-formed XML: {exc}") from None
+    if root.tag != "Sen" or root.getroottree().docinfo.doctype:
+        raise PacketError("foreign", f"root <{root.tag}>, expected <Sen Type=…>")
+    tag, axes = ("AKorr", JOINT_AXES) if kind == "joint" else ("RKorr", CARTESIAN_AXES)
+    ipoc: int | None = None
+    corr: Array | None = None
+    signals: dict[str, float] = {}
+    for el in root:
+        if type(el.tag) is not str or len(el):
+            raise PacketError("malformed", "a sensor packet holds flat elements only")
+        if el.tag == "IPOC":
+            text = (el.text or "").strip()
+            if not text.isdigit() or not text.isascii() or int(text) > IPOC_MAX:
+                raise PacketError("malformed", f"<IPOC> {text[:32]!r} is not a counter")
+            ipoc = int(text)
+        elif el.tag == tag:
+            if set(el.keys()) != set(axes):
+                raise PacketError("malformed", f"<{tag}> has {sorted(el.keys())}, "
+                                  f"expected {list(axes)}")
+            corr = np.array([_number(tag, a, el.get(a)) for a in axes])
+        elif el.tag in ("AKorr", "RKorr"):
+            raise PacketError("foreign", f"<{el.tag}>, the controller expects <{tag}>")
+        else:
+            signals[el.tag] = _number(el.tag, "text", (el.text or "").strip())
+    if ipoc is None:
+        raise PacketError("malformed", "no <IPOC>")
+    if corr is None:
+        raise PacketError("malformed", f"no <{tag}>")
+    scale = _JOINT_SCALE if kind == "joint" else _CART_SCALE
+    return SensorAnswer(ipoc, corr * scale, signals)

@@ -1,0 +1,255 @@
+"""The twin's robot side of KUKA RSI: a simulated controller that owns the IPOC clock.
+
+:class:`RsiRobot` runs one thread that, every cycle ``T`` (4 ms ``#IPO_FAST``):
+
+1. sends ``<Rob Type="KUKA">`` (:func:`~plugcell.devices.robot.rsi.codec.encode_rob`) to
+   the sensor's address: ``AIPos`` the dynamic twin's encoder readings, ``ASPos`` the
+   commanded joints, ``RIst``/``RSol`` the controller's *nominal* forward kinematics of
+   them (a real controller reports its model, not the true TCP), ``<Delay D>`` the late
+   answers counted so far, and the IPOC (ms, advancing by ``T``);
+2. waits until the cycle ends for the answer echoing that IPOC
+   (:func:`~plugcell.devices.robot.rsi.codec.parse_sen`); an answer that is missing,
+   late, wrong or for another IPOC counts as late (``Delay`` + 1) and, as ``HOLDON``
+   says (plugcell's controller files: 0 for relative, 1 for absolute), adds nothing or
+   repeats the last correction;
+3. applies the correction to its commanded position — ``AKorr`` to the joints at
+   ``RSI_ON``, relative (summed) or absolute (the offset); ``RKorr`` to the TCP at
+   ``RSI_ON`` in the base frame (position added, ``Rz(A)·Ry(B)·Rx(C)`` applied before
+   the start orientation), followed in joints by one Newton step of the nominal model
+   per cycle;
+4. advances the dynamic twin by one cycle (:class:`~plugcell.sim.twin.dynamics.DynamicTwin`).
+
+After ``Timeout`` late answers RSI stops: no more packets, :attr:`RsiRobot.stopped` says
+why — as a real controller breaks off.  The configuration is the sensor side's own
+:class:`~plugcell.devices.robot.rsi.config.RsiConfig` (the one plugcell writes the
+controller's files from): ``listen_host``/``listen_port`` is where the robot sends.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import socket
+import threading
+import time
+from dataclasses import dataclass, field
+
+import numpy as np
+from numpy.typing import NDArray
+
+from plugcell.devices.robot.rsi.codec import PacketError, encode_rob, parse_sen
+from plugcell.devices.robot.rsi.config import RsiConfig
+from plugcell.kinematics import forward
+from plugcell.kinematics.jacobian import manipulator_jacobian
+from plugcell.kinematics.rotations import matrix_to_rpy, rpy_to_matrix
+from plugcell.kinematics.transforms import so3_log
+from plugcell.sim.twin.dynamics import DynamicTwin
+
+Array = NDArray[np.float64]
+
+__all__ = ["RsiRobot", "RsiRobotStats"]
+
+
+@dataclass
+class RsiRobotStats:
+    """What the simulated controller counted (``delay`` is what it reports in ``<Delay>``)."""
+
+    cycles: int = 0
+    answered: int = 0
+    delay: int = 0
+    malformed: int = 0
+    log: list[tuple[int, Array, Array]] = field(default_factory=list)  # ipoc, command, link
+
+
+def _kuka_abc(T: Array) -> Array:
+    """x, y, z (m) and KUKA's A, B, C (rad) of a pose: ``R = Rz(A)·Ry(B)·Rx(C)``."""
+    roll, pitch, yaw = matrix_to_rpy(T[:3, :3])
+    return np.array([*T[:3, 3], yaw, pitch, roll])
+
+
+class RsiRobot:
+    """A simulated KUKA controller streaming RSI with the dynamic twin (module docstring).
+
+    Parameters
+    ----------
+    arm : DynamicTwin
+        The arm; its cycle must be the configuration's.
+    config : RsiConfig
+        The stream: where to send (``listen_host``, ``listen_port`` of the sensor),
+        correction kind and mode, cycle, ``Timeout``.
+    bind : tuple, optional
+        Where the controller's socket binds (default: an ephemeral port on loopback).
+    ipoc0 : int
+        The first IPOC.
+    holdon : bool, optional
+        The ethernet configuration's ``HOLDON`` (default: as plugcell's files — 0 for
+        relative, 1 for absolute corrections).
+    record : bool
+        Keep every cycle's IPOC, command and link angles in ``stats().log``.
+    """
+
+    def __init__(self, arm: DynamicTwin, config: RsiConfig, *,
+                 bind: tuple[str, int] = ("127.0.0.1", 0), ipoc0: int = 1_000_000,
+                 holdon: bool | None = None, record: bool = False) -> None:
+        if abs(arm.params.cycle - config.cycle_s) > 1e-12:
+            raise ValueError(f"the arm's cycle {arm.params.cycle} s is not the stream's "
+                             f"{config.cycle_s} s ({config.cycle})")
+        if arm.twin.description.n_readings != 6:
+            raise ValueError("RSI streams six axes; the arm has "
+                             f"{arm.twin.description.n_readings}")
+        self.arm, self.config = arm, config
+        self.holdon = (config.mode == "absolute") if holdon is None else holdon
+        self._sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+        self._sock.bind(bind)
+        self._sensor = (config.listen_host, config.listen_port)
+        self._ipoc = ipoc0
+        self._record = record
+        self._stats = RsiRobotStats()
+        self._lock = threading.Lock()
+        self._stop = threading.Event()
+        self._thread: threading.Thread | None = None
+        self.stopped: str | None = None
+        desc = arm.twin.description
+        self._desc = desc
+        self._q_start = arm.measured.copy()
+        self._command = self._q_start.copy()
+        self._T_start = forward(desc, None, self._q_start, "nominal").tcp
+        self._offset = np.zeros(6)
+        self._last = np.zeros(6)
+
+    @property
+    def address(self) -> tuple[str, int]:
+        """The controller's own address (where the sensor's answers go)."""
+        return self._sock.getsockname()
+
+    def start(self) -> RsiRobot:
+        """``RSI_ON``: start sending, one packet per cycle."""
+        self._thread = threading.Thread(target=self._run, name="rsi-robot", daemon=True)
+        self._thread.start()
+        return self
+
+    def stop(self) -> None:
+        """``RSI_OFF`` (or the program ends): stop sending and close the socket."""
+        self._stop.set()
+        if self._thread is not None:
+            self._thread.join(timeout=5.0)
+        self._sock.close()
+
+    def __enter__(self) -> RsiRobot:
+        return self.start()
+
+    def __exit__(self, *exc: object) -> None:
+        self.stop()
+
+    @property
+    def running(self) -> bool:
+        return self._thread is not None and self._thread.is_alive()
+
+    def stats(self) -> RsiRobotStats:
+        with self._lock:
+            s = self._stats
+            return RsiRobotStats(s.cycles, s.answered, s.delay, s.malformed, list(s.log))
+
+    @property
+    def command(self) -> Array:
+        """The commanded joints now (rad)."""
+        return self._command.copy()
+
+    # ------------------------------------------------------------------ the cycle
+    def _run(self) -> None:
+        T = self.config.cycle_s
+        step = self.config.ipoc_step
+        next_t = time.monotonic()
+        while not self._stop.is_set():
+            arm = self.arm
+            q = arm.measured
+            tcp = _kuka_abc(forward(self._desc, None, q, "nominal").tcp)
+            tcp_set = _kuka_abc(forward(self._desc, None, self._command, "nominal").tcp)
+            with self._lock:
+                delay = self._stats.delay
+            packet = encode_rob(self._ipoc, q, tcp, joints_setpoint=self._command,
+                                tcp_setpoint=tcp_set, delay=delay)
+            with contextlib.suppress(OSError):  # unreachable: its answer will be missing
+                self._sock.sendto(packet, self._sensor)
+            next_t += T
+            answer = self._await(self._ipoc, next_t)
+            self._apply(answer)
+            state = arm.step(self._command)
+            with self._lock:
+                st = self._stats
+                st.cycles += 1
+                if answer is None:
+                    st.delay += 1
+                else:
+                    st.answered += 1
+                if self._record:
+                    st.log.append((self._ipoc, state.command, state.link))
+                late = st.delay
+            self._ipoc += step
+            if late >= self.config.timeout_packets:
+                self.stopped = (f"RSI stopped: {late} late sensor packets reached the "
+                                f"Timeout of {self.config.timeout_packets}")
+                return
+            pause = next_t - time.monotonic()
+            if pause > 0:
+                self._stop.wait(pause)
+            else:
+                next_t = time.monotonic()  # the controller's own clock slipped: resync
+
+    def _await(self, ipoc: int, deadline: float) -> Array | None:
+        """The correction answering ``ipoc`` if it arrives before ``deadline``."""
+        while True:
+            left = deadline - time.monotonic()
+            if left <= 0:
+                return None
+            self._sock.settimeout(left)
+            try:
+                data, _ = self._sock.recvfrom(65535)
+            except (TimeoutError, OSError):
+                return None
+            try:
+                ans = parse_sen(data, self.config.correction, self.config.max_packet_bytes)
+            except PacketError:
+                with self._lock:
+                    self._stats.malformed += 1
+                continue
+            if ans.ipoc == ipoc:
+                return ans.correction
+            # an answer to an older packet arrives too late: ignored (counted as late then)
+
+    def _apply(self, correction: Array | None) -> Array:
+        """The commanded position after this cycle's correction (module docstring, 2–3)."""
+        relative = self.config.mode == "relative"
+        if correction is None:
+            # HOLDON 1 repeats the last correction; 0 adds nothing (relative) or drops
+            # the offset (absolute)
+            correction = self._last if self.holdon else (np.zeros(6) if relative else None)
+        if correction is None:  # absolute, HOLDON 0: back to the start
+            self._offset = np.zeros(6)
+        elif relative:
+            self._offset = self._offset + correction
+        else:
+            self._offset = np.array(correction, dtype=float)
+        if correction is not None:
+            self._last = np.array(correction, dtype=float)
+        if self.config.correction == "joint":
+            self._command = self._q_start + self._offset
+        else:
+            self._command = self._follow_pose(self._target_pose())
+        return self._offset
+
+    def _target_pose(self) -> Array:
+        o = self._offset
+        T = self._T_start.copy()
+        T[:3, 3] += o[:3]
+        T[:3, :3] = rpy_to_matrix(o[5], o[4], o[3]) @ self._T_start[:3, :3]
+        return T
+
+    def _follow_pose(self, T: Array) -> Array:
+        """One damped Newton step of the nominal model from the current command."""
+        q = self._command
+        fk = forward(self._desc, None, q, "nominal")
+        err = np.concatenate([T[:3, 3] - fk.tcp[:3, 3],
+                              so3_log(T[:3, :3] @ fk.tcp[:3, :3].T)])
+        J = manipulator_jacobian(self._desc, None, q, "tcp", "nominal")
+        return q + J.T @ np.linalg.solve(J @ J.T + 1e-12 * np.eye(6), err)
+
