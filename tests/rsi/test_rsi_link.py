@@ -439,3 +439,16 @@ def test_follow_times_out_without_a_controller() -> None:
     with RsiLink(local_config()) as link, pytest.raises(
             TimeoutError, match="no stream from the controller"):
         link.follow(lambda s: None, lambda s: True, 0.2)
+
+
+def test_a_flood_of_garbage_does_not_keep_the_link_from_answering(robot_and) -> None:
+    from plugcell.devices.robot.rsi.link import DRAIN
+
+    link, robot = robot_and()
+    robot.cycle()
+    for _ in range(3 * DRAIN):
+        robot.send(b"<Rob Type='KUKA'><junk")
+    robot.ipoc += 4
+    robot.send(rob_packet(robot.ipoc))
+    assert ipoc(robot.sock.recv(1000)) == robot.ipoc
+    assert settled(link, 2).dropped["malformed"] == 3 * DRAIN

@@ -49,6 +49,9 @@ from .limits import Limited, OffsetLimiter
 
 Array = NDArray[np.float64]
 
+#: Datagrams read per wake-up before the newest packet among them is answered.
+DRAIN = 64
+
 __all__ = [
     "ControllerStoppedError",
     "Correction",
@@ -487,7 +490,9 @@ class RsiLink:
                     self._end_session()
                 continue
             newest: tuple[RobotState, tuple[str, int], int] | None = None
-            while True:  # every queued datagram; the newest packet is answered
+            # the queued datagrams (at most DRAIN: a flood cannot keep the loop from
+            # answering); the newest packet is answered
+            for _ in range(DRAIN):
                 try:
                     data, addr = sock.recvfrom(bufsize)
                 except (BlockingIOError, InterruptedError):
