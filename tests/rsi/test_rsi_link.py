@@ -189,7 +189,7 @@ def test_garbage_is_dropped_counted_and_never_answered(robot_and) -> None:
     assert robot.no_answer()
     st = link.stats()
     assert st.dropped == {"address": 0, "oversized": 1, "malformed": 4, "foreign": 1,
-                          "stale": 1}
+                          "stale": 1, "inconsistent": 0}
     assert st.answered == 1 and link.failure is None
     assert ipoc(robot.cycle()) == robot.ipoc  # the stream goes on
 
@@ -269,10 +269,22 @@ def test_an_answer_in_time_resets_the_run_of_misses(robot_and) -> None:
     if st.late:
         pytest.skip("an answer took longer than 12 ms: the machine is too loaded to tell")
     assert link.failure is None  # two in a row at most, never four
-    robot.ipoc += 5 * 12
-    robot.send(rob_packet(robot.ipoc))
-    robot.sock.recv(1000)
+    for jump in (4, 2):  # three lost, then one more: four in a row
+        robot.ipoc += jump * 12
+        robot.send(rob_packet(robot.ipoc))
+        robot.sock.recv(1000)
     assert "4 cycles in a row" in str(failed(link))
+
+
+def test_an_ipoc_beyond_the_timeout_within_a_session_is_inconsistent(robot_and) -> None:
+    """No controller sends an IPOC a Timeout ahead while it streams (it would have been
+    silent that long): such a packet is dropped, and the stream goes on."""
+    link, robot = robot_and(local_config(timeout_packets=50))
+    robot.cycle()
+    robot.send(rob_packet(robot.ipoc + 51 * 4))  # fifty cycles lost: Timeout
+    assert robot.no_answer()
+    assert link.stats().dropped["inconsistent"] == 1
+    assert ipoc(robot.cycle()) == robot.ipoc and link.failure is None
 
 
 def test_the_controllers_own_count_stops_the_stream(robot_and) -> None:
@@ -439,3 +451,16 @@ def test_follow_times_out_without_a_controller() -> None:
     with RsiLink(local_config()) as link, pytest.raises(
             TimeoutError, match="no stream from the controller"):
         link.follow(lambda s: None, lambda s: True, 0.2)
+
+
+def test_a_flood_of_garbage_does_not_keep_the_link_from_answering(robot_and) -> None:
+    from plugcell.devices.robot.rsi.link import DRAIN
+
+    link, robot = robot_and()
+    robot.cycle()
+    for _ in range(3 * DRAIN):
+        robot.send(b"<Rob Type='KUKA'><junk")
+    robot.ipoc += 4
+    robot.send(rob_packet(robot.ipoc))
+    assert ipoc(robot.sock.recv(1000)) == robot.ipoc
+    assert settled(link, 2).dropped["malformed"] == 3 * DRAIN

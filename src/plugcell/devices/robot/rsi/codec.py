@@ -54,6 +54,8 @@ JOINT_AXES = ("A1", "A2", "A3", "A4", "A5", "A6")
 EXTERNAL_AXES = ("E1", "E2", "E3", "E4", "E5", "E6")
 #: The largest IPOC accepted (the controller's is an unsigned 32- or 64-bit counter).
 IPOC_MAX = (1 << 63) - 1
+#: The largest late-packet count accepted (the controller's is a 32-bit integer).
+DELAY_MAX = (1 << 31) - 1
 #: A robot packet with more elements than this is foreign (RSI allows 64 channels).
 MAX_ELEMENTS = 128
 
@@ -213,6 +215,8 @@ def parse_rob(data: bytes, max_bytes: int = 4096) -> RobotState:
         tag = el.tag
         if type(tag) is not str:  # an entity reference or a processing instruction
             raise PacketError("malformed", "a robot packet holds elements only")
+        if not (tag.isascii() and tag.isidentifier()):  # RSI's tags are ASCII names
+            raise PacketError("foreign", f"element {tag[:32]!r} is no RSI tag")
         if tag in seen:
             raise PacketError("malformed", f"<{tag}> appears twice")
         seen.add(tag)
@@ -239,11 +243,14 @@ def parse_rob(data: bytes, max_bytes: int = 4096) -> RobotState:
                 raise PacketError("malformed", f"<IPOC> {text[:32]} out of range")
         elif tag == "Delay":
             d = _number(tag, "D", el.get("D"))
-            if d < 0 or d != int(d):
+            if not 0 <= d <= DELAY_MAX or d != int(d):
                 raise PacketError("malformed", f"<Delay> D={d} is no count")
             delay = int(d)
         elif len(el.attrib):
-            signals[tag] = {k: _number(tag, k, v) for k, v in el.items()}
+            attrs = dict(el.items())
+            if not all(k.isascii() and k.isidentifier() for k in attrs):
+                raise PacketError("foreign", f"<{tag}> has an attribute that is no RSI name")
+            signals[tag] = {k: _number(tag, k, v) for k, v in attrs.items()}
         else:
             signals[tag] = _number(tag, "text", (el.text or "").strip())
     if ipoc is None:

@@ -49,6 +49,9 @@ from .limits import Limited, OffsetLimiter
 
 Array = NDArray[np.float64]
 
+#: Datagrams read per wake-up before the newest packet among them is answered.
+DRAIN = 64
+
 __all__ = [
     "ControllerStoppedError",
     "Correction",
@@ -154,7 +157,8 @@ class LinkStats:
         Datagrams that were robot packets of the configured robot.  Every datagram is
         either received or dropped for ``address``, ``oversized``, ``malformed`` or
         ``foreign``; every received packet is answered, superseded or dropped as
-        ``stale`` (or its answer could not be sent: ``last_reason`` says so).
+        ``stale`` or ``inconsistent`` (or its answer could not be sent: ``last_reason``
+        says so).
     answered : int
         Answers sent.
     late : int
@@ -166,7 +170,9 @@ class LinkStats:
         Packets not answered because a newer one was already queued behind them.
     dropped : dict of str to int
         Datagrams dropped, by reason: ``address``, ``oversized``, ``malformed``,
-        ``foreign``, ``stale`` (not newer than the last packet answered).
+        ``foreign``, ``stale`` (not newer than the last packet answered),
+        ``inconsistent`` (within a session, an IPOC ``Timeout`` cycles or more ahead of
+        the last: the stream would have been silent that long, and the session ended).
     clamped, refused : int
         Corrections cut to the limits, and refused.
     controller_late : int
@@ -252,7 +258,7 @@ class RsiLink:
         self._received = self._answered = self._late = self._missed = self._superseded = 0
         self._clamped = self._refused = 0
         self._dropped = dict.fromkeys(
-            ("address", "oversized", "malformed", "foreign", "stale"), 0)
+            ("address", "oversized", "malformed", "foreign", "stale", "inconsistent"), 0)
         self._max_latency = 0
         self._last_reason = ""
         # the session
@@ -487,7 +493,9 @@ class RsiLink:
                     self._end_session()
                 continue
             newest: tuple[RobotState, tuple[str, int], int] | None = None
-            while True:  # every queued datagram; the newest packet is answered
+            # the queued datagrams (at most DRAIN: a flood cannot keep the loop from
+            # answering); the newest packet is answered
+            for _ in range(DRAIN):
                 try:
                     data, addr = sock.recvfrom(bufsize)
                 except (BlockingIOError, InterruptedError):
@@ -535,6 +543,9 @@ class RsiLink:
             # the cycles between the last answered packet and this one: lost on the way
             # or superseded in the queue (the controller counts them late either way)
             lost = max(0, round(gap / self.config.ipoc_step) - 1)
+            if lost >= self.config.timeout_packets:
+                self._dropped["inconsistent"] += 1
+                return
             self._missed += lost
             self._streak += lost
         self._last_ipoc = state.ipoc
