@@ -62,22 +62,38 @@ def working_volume_joints(desc: RobotDescription, profile: TwinProfile, n: int,
     """``n`` joint configurations (n, n_act) whose nominal flange lies in the working
     volume, found by nominal IK within the joint limits (unreachable draws are
     replaced by new ones)."""
+    return _reachable_joints(
+        desc, n, lambda k: random_flange_targets(desc, profile, k, rng),
+        "poses in the working volume", max_rounds)
+
+
+def _reachable_joints(desc: RobotDescription, n: int, draw: Callable[[int], Array],
+                      what: str, max_rounds: int = 20) -> Array:
+    """``n`` joint configurations (n, n_act) reaching flange poses ``draw(k)`` gives
+    ((k, 4, 4), k ≥ twice what is missing) by nominal IK within the joint limits; the
+    unreachable draws are replaced by new ones, for at most ``max_rounds`` rounds.
+
+    Raises
+    ------
+    CampaignError
+        Fewer than ``n`` reachable poses after ``max_rounds`` rounds (``what`` names them).
+    """
     params = desc.nominal_parameters()
     found: list[Array] = []
     for _ in range(max_rounds):
         need = n - sum(len(f) for f in found)
         if need <= 0:
             break
-        T = random_flange_targets(desc, profile, max(2 * need, 8), rng)
         try:
-            res = inverse(desc, params, T, seed=desc.home, raise_errors=False)
+            res = inverse(desc, params, draw(max(2 * need, 8)), seed=desc.home,
+                          raise_errors=False)
         except KinematicsError:
             continue
         ok = np.asarray(res.converged) & np.asarray(res.within_limits)
         found.append(np.asarray(res.q)[ok][:need])
     q = np.concatenate(found) if found else np.empty((0, desc.n_readings))
     if len(q) < n:
-        raise CampaignError(f"found only {len(q)} of {n} reachable poses in the working volume")
+        raise CampaignError(f"found only {len(q)} of {n} reachable {what}")
     return q[:n]
 
 
@@ -119,28 +135,17 @@ def surface_scan_joints(desc: RobotDescription, profile: TwinProfile, n: int,
         raise CampaignError(f"robot {desc.name!r} has no working_volume in its description")
     lo, hi = np.asarray(desc.working_volume.lower), np.asarray(desc.working_volume.upper)
     c, ext = 0.5 * (lo + hi), hi - lo
-    params = desc.nominal_parameters()
-    found: list[Array] = []
-    for _ in range(20):
-        need = n - sum(len(f) for f in found)
-        if need <= 0:
-            break
-        u = rng.uniform(-0.5, 0.5, size=(max(2 * need, 8), 2))
-        T = np.broadcast_to(np.eye(4), (len(u), 4, 4)).copy()
+
+    def patch(k: int) -> Array:
+        u = rng.uniform(-0.5, 0.5, size=(k, 2))
+        T = np.broadcast_to(np.eye(4), (k, 4, 4)).copy()
         T[:, :3, :3] = zyz_to_matrix(*profile.reference_zyz)
         T[:, 0, 3] = c[0] + extent * ext[0] * u[:, 0]
         T[:, 1, 3] = c[1] + extent * ext[1] * u[:, 1]
         T[:, 2, 3] = lo[2] + height * ext[2]
-        try:
-            res = inverse(desc, params, T, seed=desc.home, raise_errors=False)
-        except KinematicsError:
-            continue
-        ok = np.asarray(res.converged) & np.asarray(res.within_limits)
-        found.append(np.asarray(res.q)[ok][:need])
-    q = np.concatenate(found) if found else np.empty((0, desc.n_readings))
-    if len(q) < n:
-        raise CampaignError(f"found only {len(q)} of {n} reachable scan poses")
-    return q[:n]
+        return T
+
+    return _reachable_joints(desc, n, patch, "scan poses")
 
 
 def move_time(q_from: Array, q_to: Array) -> float:
