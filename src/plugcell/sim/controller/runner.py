@@ -35,6 +35,7 @@ from plugcell.pdl import (
     BUILTIN_LIBRARY,
     Execution,
     ExecutionState,
+    Location,
     Motion,
     Program,
     ProgramError,
@@ -70,6 +71,9 @@ class RunInfo:
     message: str = ""
     ended: threading.Event = field(default_factory=threading.Event)
     """Set once the ENDED event has been emitted."""
+    said: list[str] = field(default_factory=list)
+    """The program's last non-blank console line (at most one item): why a program that
+    deactivated itself did so — the shipped programs write it before their DEACTIVATE."""
 
 
 def resolve_program(ref: str, library: Sequence[Path] = ()) -> Path:
@@ -90,6 +94,34 @@ def resolve_program(ref: str, library: Sequence[Path] = ()) -> Path:
                 return candidate
     looked = ", ".join(str(d) for d in dirs)
     raise RunError(f"no program {ref!r} in the program library (looked in {looked})")
+
+
+def _failed_answer(execution: Execution) -> str:
+    """``ext_cmd_message`` if the program's last request failed (``ext_cmd_result`` FALSE)."""
+    try:
+        ok = execution.get_variable("ext_cmd_result")
+        message = execution.get_variable("ext_cmd_message")
+    except KeyError:  # pragma: no cover - predefined in every program
+        return ""
+    return str(message) if ok is False and message else ""
+
+
+def _deactivated(said: Sequence[str], answer: str, where: Location | None) -> str:
+    """Why a program ended before its END, and where: ENDED's text for ``DEACTIVATED``.
+
+    A program's own ``DEACTIVATE`` is how PDL programs give up — the shipped ones after a
+    failed step, the reason written to the console first; the thesis's EXAMPLE after a
+    failed answer, silently.  So the text is what the program said last, else the failed
+    answer it got last, then the statement's place: ``calibration: Move failed: TRACKER
+    Move: beam not locked (DEACTIVATE at …/calibration.pdl:35:5)``, ``after the failed
+    answer 'TOOL Drill: the drill broke' (DEACTIVATE at …/example.pdl:42:5)``.
+    """
+    place = f"DEACTIVATE at {where}" if where is not None else "DEACTIVATE"
+    if said:
+        return f"{said[-1]} ({place})"
+    if answer:
+        return f"after the failed answer {answer!r} ({place})"
+    return place
 
 
 def _clip(text: str) -> str:
@@ -148,6 +180,13 @@ class ProgramRunner:
             raise RunError(str(exc)) from None
         except OSError as exc:
             raise RunError(f"cannot read {path}: {exc.strerror or exc}") from None
+        said: list[str] = []  # the last console line, kept for a DEACTIVATE's message
+
+        def console(line: str) -> None:
+            if line.strip():
+                said[:] = [line.strip()]
+            self.events(Console(run, line))
+
         presets: dict[str, Any] = {}
         for name, text in (values or {}).items():
             try:
@@ -165,11 +204,11 @@ class ProgramRunner:
                 channel=self.channel,
                 clock=self.clock,
                 values=presets,
-                console=lambda line: self.events(Console(run, line)),
+                console=console,
             )
         except ProgramError as exc:
             raise RunError(str(exc)) from None
-        info = RunInfo(run, program.name, execution)
+        info = RunInfo(run, program.name, execution, said=said)
         with self._lock:
             if self._current is not None:  # raced with another start
                 raise RunError(f"program {self._current.program} is already running")
@@ -184,8 +223,12 @@ class ProgramRunner:
     def _watch(self, info: RunInfo) -> None:
         result = info.execution.join()
         assert result is not None
-        if result.state is ExecutionState.FINISHED:
-            info.state = "DEACTIVATED" if result.deactivated else "FINISHED"
+        if result.state is ExecutionState.FINISHED and result.deactivated:
+            info.state = "DEACTIVATED"
+            info.message = _deactivated(info.said, _failed_answer(info.execution),
+                                        result.location)
+        elif result.state is ExecutionState.FINISHED:
+            info.state = "FINISHED"
         elif result.state is ExecutionState.FAILED:
             info.state, info.message = "FAILED", str(result.error or "failed")
         else:
