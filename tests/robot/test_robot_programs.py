@@ -176,6 +176,10 @@ def test_malformed_programs_come_back_with_file_and_line(robot_cell: RobotCell,
     # and what is not a program at all
     final = robot_cell.activate("nosuch")
     assert final.state is F and "no program 'nosuch' in the program library" in final.reason
+    final = robot_cell.activate("progs/nosuch.pdl")  # relative: the controller's folder
+    assert final.state is F
+    assert "no such program file: progs/nosuch.pdl (looked for /" in final.reason, final.reason
+    assert "taken from the robot controller's folder /" in final.reason, final.reason
     final = robot_cell.activate("example", "pnt0001=1,2")
     assert final.state is F
     assert final.reason.endswith("example.pdl:14:5: cannot set pnt0001 (POSITION): list [1.0, "

@@ -45,7 +45,8 @@ from plugcell.pdl.conversion import data_updates
 from plugcell.pdl.interfaces import Channel
 from plugcell.pdl.predefined import EXT_DATA_MAX
 
-__all__ = ["TEXT_MAX", "ProgramRunner", "RunError", "RunInfo", "resolve_program"]
+__all__ = ["TEXT_MAX", "ProgramRunner", "RunError", "RunInfo", "is_program_name",
+           "resolve_program"]
 
 log = logging.getLogger("plugcell.sim.controller")
 
@@ -76,15 +77,20 @@ class RunInfo:
     deactivated itself did so — the shipped programs write it before their DEACTIVATE."""
 
 
+def is_program_name(ref: str) -> bool:
+    """True for a program's name in the library (``calibration``), False for a path."""
+    return bool(_PROGRAM_NAME.match(ref.strip()))
+
+
 def resolve_program(ref: str, library: Sequence[Path] = ()) -> Path:
     """The file of ``ref``: a name in the program library, or a path."""
     ref = ref.strip()
     if not ref:
         raise RunError("no program given")
-    if not _PROGRAM_NAME.match(ref):
+    if not is_program_name(ref):
         path = Path(ref).expanduser()
         if not path.is_file():
-            raise RunError(f"no such program file: {ref}")
+            raise RunError(_missing_file(ref, path))
         return path
     dirs = [*library, BUILTIN_LIBRARY]
     for folder in dirs:
@@ -104,6 +110,17 @@ def _failed_answer(execution: Execution) -> str:
     except KeyError:  # pragma: no cover - predefined in every program
         return ""
     return str(message) if ok is False and message else ""
+
+
+def _missing_file(ref: str, path: Path) -> str:
+    """Why ``ref`` is no program file, saying where the controller looked."""
+    where = path.absolute()
+    if path.is_absolute():
+        what = "no such file" if not path.exists() else "not a file"
+        return f"no such program file: {ref} ({what})"
+    return (f"no such program file: {ref} (looked for {where}: a relative path is taken from "
+            f"the robot controller's folder {Path.cwd()}, not the caller's; give an absolute "
+            "path, or put the program in the program library (library=DIR) and give its name)")
 
 
 def _deactivated(said: Sequence[str], answer: str, where: Location | None) -> str:
