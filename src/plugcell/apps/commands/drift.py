@@ -88,11 +88,9 @@ def _registered(path: Path) -> bool:
 
 
 def _register(args: argparse.Namespace) -> int:
-    from plugcell.io.nests import format_nests
-    from plugcell.metrology.drift import nests_in_base
-
     from plugcell.apps.cli import CommandError
-    from plugcell.metrology.drift import too_close
+    from plugcell.io.nests import format_nests
+    from plugcell.metrology.drift import nests_in_base, too_close
 
     _, result = _params(args.params)
     names, measured = _nests(args.measured)
