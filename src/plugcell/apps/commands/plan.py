@@ -122,6 +122,32 @@ def _say(args: argparse.Namespace, text: str) -> None:
         print(f"plan: {text}", file=sys.stderr, flush=True)
 
 
+#: Rms misfit (mm) of measurements to the robot's nominal kinematics above which ``--from``
+#: data are taken for another robot's: an uncalibrated robot is off by a few mm.
+MISFIT_LIMIT_MM = 25.0
+
+
+def _check_dropped(args: argparse.Namespace, robot: str, dropped: dict[str, int],
+                   measured: bool) -> None:
+    """Say how many configurations of ``--from`` were left out and why; refuse when most
+    are outside the robot's joint limits (another robot's file)."""
+    from plugcell.apps.cli import CommandError
+
+    given = dropped.get("given", 0)
+    left_out = {k: v for k, v in dropped.items() if k != "given"}
+    if not given or not left_out:
+        return
+    why = ", ".join(f"{v} outside the {k}" for k, v in left_out.items())
+    total = sum(left_out.values())
+    what = "measured poses" if measured else "configurations"
+    if 2 * left_out.get("limits", 0) > given:
+        raise CommandError(f"--from {args.from_file}: {left_out['limits']} of its {given} "
+                           f"{what} are outside the joint limits of robot {robot!r} — a file "
+                           "of another robot? give its --robot")
+    print(f"plan: warning: {total} of the {given} {what} of {args.from_file} left out ({why})",
+          file=sys.stderr, flush=True)
+
+
 def _twin_cell(robot: str) -> tuple[np.ndarray, np.ndarray] | None:
     """The twin's tracker position (m, robot frame) and T-MAC (PROBE) when it has one."""
     from plugcell.kinematics.rotations import rpy_to_matrix
@@ -227,6 +253,12 @@ def _run(args: argparse.Namespace) -> int:
         if measured is not None:
             # poses already measured: BASE and PROBE from their measurements
             base, probe, rms = Calibrator(desc, 1).initial_frames(measured)
+            if rms * 1e3 > MISFIT_LIMIT_MM:
+                raise CommandError(
+                    f"--from {args.from_file}: the measurements do not fit robot {desc.name!r}: "
+                    f"with its nominal kinematics and the best BASE and PROBE they are "
+                    f"{rms * 1e3:.0f} mm rms off (an uncalibrated robot: a few mm; refused above "
+                    f"{MISFIT_LIMIT_MM:g} mm) — measured on another robot? give its --robot")
             _say(args, f"BASE and PROBE estimated from {len(measured)} measured poses "
                        f"(rms misfit {rms * 1e3:.2f} mm)")
         model = ErrorModel.create(desc, cfg.family, gravity=cfg.gravity, payload=cfg.payload,
@@ -256,6 +288,7 @@ def _run(args: argparse.Namespace) -> int:
                 model, q_from, payloads=payloads, payload_kg=own,
                 volume=volume if args.volume is not None else None,
                 visibility=vis if args.tracker is not None else None)
+            _check_dropped(args, desc.name, cands.dropped, measured is not None)
             what = f"{len(cands)} candidates from {args.from_file}"
         else:
             _say(args, f"drawing {args.candidates} candidates"
