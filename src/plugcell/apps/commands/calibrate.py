@@ -185,10 +185,23 @@ class _Progress:
             print(f"calibrate [{stage}] {message}", file=sys.stderr, flush=True)
 
 
+def _counted(d: dict[str, Any]) -> str:
+    """``50 of its 72 parameters identified (13 stand for others, 9 not identifiable)``:
+    the model's parameters are the identified, the dependent ones (identified through
+    another, ``dependent``) and those these data cannot determine (``unidentifiable``)."""
+    n, dep, zero = (len(d.get(k) or []) for k in ("parameters", "dependent", "unidentifiable"))
+    if not dep and not zero:
+        return f"{n} parameters identified"
+    parts = [f"{dep} stand for others" if dep else "",
+             f"{zero} not identifiable from these data" if zero else ""]
+    return (f"{n} of its {n + dep + zero} parameters identified "
+            f"({', '.join(p for p in parts if p)})")
+
+
 def _summary(d: dict[str, Any]) -> str:
     m = d["model"]
     lines = [f"robot {d['robot']}, model {m['number']} ({m['name']}): "
-             f"{len(d['parameters'])} parameters from {d['data']['poses']} poses, "
+             f"{_counted(d)} from {d['data']['poses']} poses, "
              f"{d['iterations']} iterations, κ = {d['condition_number']:.1f}"]
     for key in ("calibration", "validation"):
         s = d.get(key)

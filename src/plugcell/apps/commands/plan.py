@@ -301,8 +301,9 @@ def _run(args: argparse.Namespace) -> int:
                              position_only=args.position_only)
         planner = PosePlanner(model, keys, criterion=args.criterion,
                               position_only=args.position_only, noise_m=args.noise_mm / 1e3)
-        _say(args, f"choosing {args.poses} of {what} for {len(keys)} parameters "
-                   f"(model {cfg.number}, criterion {planner.criterion})")
+        _say(args, f"choosing {args.poses} of {what} for the {len(keys)} identifiable of "
+                   f"the {len(model.space)} parameters of model {cfg.number} (the rest "
+                   f"depend on them or on nothing measured; criterion {planner.criterion})")
         plan = planner.plan(cands, args.poses)
     except PlanningError as exc:
         raise CommandError(str(exc)) from None
@@ -335,7 +336,9 @@ def _summary(plan: Any, model: Any, robot: str, cfg: Any, what: str,
     groups = [{"payload_kg": float(m), "poses": int(np.count_nonzero(plan.payload_kg == m))}
               for m in np.unique(plan.payload_kg)]
     return {
-        "robot": robot, "model": {"number": cfg.number, "name": cfg.name},
+        "robot": robot, "model": {"number": cfg.number, "name": cfg.name,
+                                  "parameters": len(model.space),
+                                  "identifiable": len(plan.keys)},
         "poses": len(plan), "candidates": plan.n_candidates, "source": what,
         "criterion": plan.criterion, "value": plan.value,
         "condition_number": plan.condition_number, "exchanges": plan.exchanges,
@@ -349,8 +352,9 @@ def _text(d: dict[str, Any]) -> str:
     groups = ", ".join(f"{g['poses']} at {g['payload_kg']:g} kg" for g in d["payload_groups"])
     worst = sorted(d["predicted_sigma"], key=lambda p: -p["sigma"] if p["unit"] == "mm" else 0)
     lines = [
-        f"robot {d['robot']}, model {d['model']['number']} ({d['model']['name']}): "
-        f"{d['poses']} poses of {d['candidates']} candidates ({groups})",
+        f"robot {d['robot']}, model {d['model']['number']} ({d['model']['name']}, "
+        f"{d['model']['identifiable']} identifiable of its {d['model']['parameters']} "
+        f"parameters): {d['poses']} poses of {d['candidates']} candidates ({groups})",
         f"  criterion {d['criterion']} = {d['value']:.6g} after {d['exchanges']} exchanges; "
         f"predicted κ = {d['condition_number']:.1f}; {d['elapsed_s']:.1f} s",
         f"  predicted σ for {d['noise_mm']:g} mm noise, largest lengths: " + ", ".join(
