@@ -334,3 +334,20 @@ def test_cli_calibrate_on_a_prior_arm_shape_stage_and_its_refusals(tmp_path, cap
     assert main(other) == 2
     err = capsys.readouterr().err
     assert "a.json" in err and "ur10-test" in err and "ur10-other" in err, err
+
+
+def test_cli_refuses_too_few_poses_for_the_layer_before_identifying(tmp_path, capsys):
+    """Issue 39 §8: the pose count is checked first, not after the whole identification."""
+    _, cal = harmonic_campaign(150, seed=1)
+    (tmp_path / "ur10.toml").write_text(ur10_toml())
+    _write_set(tmp_path / "cal.csv", cal)
+    out = tmp_path / "params.json"
+    rc = main(["calibrate", "--robot", str(tmp_path / "ur10.toml"), "--model", "serial",
+               "--data", str(tmp_path / "cal.csv"), "--residual-model", "learned",
+               "--out", str(out)])
+    err = capsys.readouterr().err
+    assert rc == 2
+    assert (f"--residual-model learned: too few poses to learn the residual from: 150, at least "
+            f"{MIN_POSES}") in err, err
+    assert "initial BASE/PROBE" not in err  # the identification never started
+    assert not out.exists()

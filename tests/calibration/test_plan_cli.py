@@ -120,3 +120,43 @@ def test_bad_plan_file_for_the_twin(planned, capsys):
     bad.write_text("j1,j2,j3\n0,0,0\n")
     assert main(["twin", "measure", "--plan", str(bad), "--out", str(planned / "x.csv")]) == 2
     assert "3 joint columns, the robot has 6" in capsys.readouterr().err
+
+
+def test_another_robots_data_are_refused_and_dropped_poses_reported(planned, capsys, tmp_path):
+    """Issue 39 §7: the Smart H4's measurements planned as another robot are refused with
+    the misfit named; configurations left out are counted with the reason; a file mostly
+    outside the robot's joint limits is refused."""
+    out = ["--out", str(tmp_path / "x.csv"), "--poses", "12", "--model", "1"]
+    assert main(["plan", "--robot", "fanuc_m20ia", "--from", str(planned / "cal.csv"),
+                 *out]) == 2
+    err = capsys.readouterr().err
+    assert "the measurements do not fit robot 'fanuc_m20ia'" in err, err
+    assert "measured on another robot? give its --robot" in err
+    assert not (tmp_path / "x.csv").exists()
+    # a file of configurations: those outside the limits or the volume are counted
+    plan = read_plan(planned / "plan.csv", n_joints=6)
+    q = np.degrees(plan.joints)
+    bad = q.copy()
+    bad[:4, 1] = -170.0  # joint 2 outside [-165°, -15°]
+    rows = "\n".join(",".join(f"{v:.6f}" for v in r) for r in bad)
+    (tmp_path / "some.csv").write_text("j1,j2,j3,j4,j5,j6\n" + rows + "\n")
+    assert main(["plan", "--robot", "smart_h4", "--from", str(tmp_path / "some.csv"),
+                 *out]) == 0
+    err = capsys.readouterr().err
+    assert f"warning: 4 of the {len(q)} configurations of {tmp_path / 'some.csv'} left out " \
+           "(4 outside the limits)" in err, err
+    bad[:, 1] = -170.0
+    rows = "\n".join(",".join(f"{v:.6f}" for v in r) for r in bad)
+    (tmp_path / "all.csv").write_text("j1,j2,j3,j4,j5,j6\n" + rows + "\n")
+    assert main(["plan", "--robot", "smart_h4", "--from", str(tmp_path / "all.csv"),
+                 *out, "--quiet"]) == 2
+    assert "none of the" in capsys.readouterr().err
+    bad[: len(q) // 2 + 1, 1] = -170.0
+    bad[len(q) // 2 + 1:, 1] = q[len(q) // 2 + 1:, 1]
+    rows = "\n".join(",".join(f"{v:.6f}" for v in r) for r in bad)
+    (tmp_path / "most.csv").write_text("j1,j2,j3,j4,j5,j6\n" + rows + "\n")
+    assert main(["plan", "--robot", "smart_h4", "--from", str(tmp_path / "most.csv"),
+                 *out, "--quiet"]) == 2
+    err = capsys.readouterr().err
+    assert f"{len(q) // 2 + 1} of its {len(q)} configurations are outside the joint limits " \
+           "of robot 'smart_h4' — a file of another robot? give its --robot" in err, err

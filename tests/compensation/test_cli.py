@@ -153,3 +153,19 @@ def test_bad_options(params_file, tmp_path, capsys):
     assert "--user-frame" in capsys.readouterr().err
     assert main(["compensate", "--params", str(params_file), "--targets", str(t), "--out",
                  str(tmp_path / "o.csv"), "--payload-kg", "-1"]) == 2
+
+
+def test_a_temperature_without_a_thermal_term_is_refused(params_file, tmp_path, capsys):
+    """Issue 39 §8: --temperature-c could change nothing for these parameters (no κT, no
+    temperature-aware residual layer): refused with the reason, nothing written."""
+    t = _write(tmp_path / "t.csv", ["x", "y", "z", "rx", "ry", "rz"],
+               [[1500, 0, 1000, 0, 90, 0]])
+    out = tmp_path / "o.csv"
+    assert main(["compensate", "--params", str(params_file), "--targets", str(t), "--out",
+                 str(out), "--temperature-c", "25"]) == 2
+    err = capsys.readouterr().err
+    assert f"--temperature-c 25: {params_file} has no thermal term" in err, err
+    assert "leave it out" in err and not out.exists()
+    assert main(["compensate", "--params", str(params_file), "--targets", str(t), "--out",
+                 str(out), "--temperature-c", "nan"]) == 2
+    assert "must be a temperature" in capsys.readouterr().err

@@ -18,7 +18,7 @@ from plugcell.io.params import params_json
 from plugcell.io.robots import load_robot
 from plugcell.kinematics.transforms import so3_exp
 from plugcell.metrology import MetrologyError
-from plugcell.metrology.drift import estimate_base_drift, nests_in_base
+from plugcell.metrology.drift import estimate_base_drift, likely_mix_up, nests_in_base
 
 NESTS = np.array([[1.2, -0.8, 0.0], [1.9, 0.7, 0.02], [0.4, 1.5, -0.01], [-0.6, -1.4, 0.3]])
 
@@ -141,3 +141,68 @@ def test_cli_register_check_alarm_and_rebase_in_place(params, tmp_path, capsys):
     (tmp_path / "few.csv").write_text("name,x,y,z\nA,1,2,3\n")
     assert main([*args[:-1], str(tmp_path / "few.csv")]) == 2
     assert "few.csv: 1 nest(s)" in capsys.readouterr().err
+
+
+def test_unit_mistakes_and_swapped_files_are_named_not_taken_for_a_drift():
+    """Issue 39 §7: metres for mm, inches, swapped files — each named; a real drift not."""
+    rng = np.random.default_rng(4)
+    B = _frame(rng, 1.0, 3.0)
+    then = NESTS @ B[:3, :3].T + B[:3, 3]
+    ref = nests_in_base(B, then)
+    D = _frame(rng, 2e-5, 40e-6)
+    now = NESTS @ (D @ B)[:3, :3].T + (D @ B)[:3, 3]
+    assert likely_mix_up(B, ref, now) == ""  # a real drift
+    assert likely_mix_up(B, ref, now / 1000).startswith(  # measured file in metres
+        "units: the measured nests are 1000× closer together than the registered ones")
+    assert likely_mix_up(B, ref / 1000, now).startswith(  # registered from metres
+        "units: the registered nests are 1000× closer together")
+    assert "in inches?" in likely_mix_up(B, ref, now * 25.4)
+    assert likely_mix_up(B, ref / 1000, now / 1000).startswith(  # both: nests mm apart
+        "units: the registered nests are only")
+    swapped = likely_mix_up(B, now, ref)
+    assert swapped.startswith("swapped: the measured file fits as the registration"), swapped
+    assert swapped.endswith("--nests and --measured swapped?")
+
+
+@given(st.integers(0, 2**32 - 1), st.floats(0.0, 2e-4))
+@settings(max_examples=60, deadline=None)
+def test_no_mix_up_is_claimed_for_a_genuine_drift(seed, size):
+    rng = np.random.default_rng(seed)
+    B = _frame(rng, 1.0, 3.0)
+    nests = rng.uniform(-2.0, 2.0, size=(int(rng.integers(3, 8)), 3))
+    if np.median(np.linalg.norm(nests[:, None] - nests[None], axis=2)) < 0.05:
+        return
+    D = _frame(rng, size, size)
+    B_now = D @ B
+    assert likely_mix_up(B, nests, nests @ B_now[:3, :3].T + B_now[:3, 3]) == ""
+
+
+def test_cli_refuses_metres_and_swapped_files_with_the_cause(params, tmp_path, capsys):
+    path, res = params
+    p = tmp_path / "params.json"
+    p.write_text(path.read_text())
+    B = res.model.base()
+    then = NESTS @ B[:3, :3].T + B[:3, 3]
+    (tmp_path / "then.csv").write_text(format_nests(["A", "B", "C", "D"], then))
+    (tmp_path / "then_m.csv").write_text(format_nests(["A", "B", "C", "D"], then / 1000))
+    reg = ["drift", "register", "--params", str(p), "--out", str(tmp_path / "ref.csv")]
+    assert main([*reg, "--measured", str(tmp_path / "then_m.csv")]) == 2
+    err = capsys.readouterr().err
+    assert "then_m.csv: the nests are only" in err and "a file in metres?" in err
+    assert not (tmp_path / "ref.csv").exists()
+    assert main([*reg, "--measured", str(tmp_path / "then.csv")]) == 0
+    capsys.readouterr()
+    before = p.read_text()
+    check = ["drift", "check", "--params", str(p), "--update"]
+    # the measurement in metres
+    assert main([*check, "--nests", str(tmp_path / "ref.csv"), "--measured",
+                 str(tmp_path / "then_m.csv")]) == 2
+    out = capsys.readouterr()
+    assert out.out == "" and out.err.count("\n") == 1, out
+    assert "drift of BASE not estimated" in out.err and "the measured file in metres?" in out.err
+    # the files swapped
+    assert main([*check, "--nests", str(tmp_path / "then.csv"), "--measured",
+                 str(tmp_path / "ref.csv")]) == 2
+    err = capsys.readouterr().err
+    assert "--nests and --measured swapped?" in err, err
+    assert p.read_text() == before  # nothing re-registered

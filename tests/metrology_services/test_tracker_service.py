@@ -295,6 +295,12 @@ def test_beam_not_locked_fails_with_the_reason_and_the_service_carries_on(world_
                 assert reason == "Single Measurement: duration 0 ms outside 1…60000 ms"
                 reason = await failed("Set Base", "quaternion2tr", BASE_A)
                 assert "unknown option 'quaternion2tr'" in reason
+                # nothing in the cell to lock on: the reason says what is missing (issue 39)
+                reason = await failed("Move", "", POSE_A)
+                assert reason == ("Move: beam not locked: no reflector in the cell to lock on — "
+                                  "the simulated reflectors are the simulated robots' T-MACs: "
+                                  "start a robot in this cell first (plugcell serve robot "
+                                  "--param sim=true)")
                 # still serving: a new reflector, Move, measure
                 again = ReflectorPublisher(Bus(session, KeySpace(cell)), "TMAC2", "smr")
                 again.publish(reflector(BASE_A, POSE_A, PROBE_A))

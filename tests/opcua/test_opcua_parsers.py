@@ -15,6 +15,7 @@ from hypothesis import strategies as st
 
 from plugcell.devices.opcua.arguments import ArgumentError, data_variant, input_value, option_of
 from plugcell.devices.opcua.device_map import DeviceMapError, load_device_map, parse_device_map
+from plugcell.devices.opcua.listen import bind_error, listen_url
 from plugcell.devices.opcua.users import UserBook, UsersFileError, hash_password
 from plugcell.framework.data import to_data
 from plugcell.framework.messages import Command, CommandTypes, DataTypes
@@ -229,3 +230,65 @@ def test_strings_go_out_and_come_back_unchanged(texts):
     wire = ua.ua_binary.variant_from_binary(ua.utils.Buffer(ua.ua_binary.variant_to_binary(
         data_variant(data))))
     assert input_value(wire, command) == data
+
+
+@pytest.mark.parametrize(("host", "port", "url"), [
+    ("127.0.0.1", 4840, "opc.tcp://127.0.0.1:4840/plugcell"),
+    (" 0.0.0.0 ", 1, "opc.tcp://0.0.0.0:1/plugcell"),
+    ("localhost", 65535, "opc.tcp://localhost:65535/plugcell"),
+    ("cell-7.example.org.", 4840, "opc.tcp://cell-7.example.org.:4840/plugcell"),
+    ("::1", 4840, "opc.tcp://[::1]:4840/plugcell"),
+    ("[::1]", 4840, "opc.tcp://[::1]:4840/plugcell"),
+])
+def test_the_gateway_listens_where_host_and_port_say(host, port, url):
+    assert listen_url(host, port) == url
+
+
+@pytest.mark.parametrize(("host", "port", "reason"), [
+    ("127.0.0.1:4850", 4840, "--host '127.0.0.1:4850' holds a port: --host takes a host name "
+                             "or address; give the port with --port (--host 127.0.0.1 --port "
+                             "4850)"),
+    ("localhost:4850", 4840, "(--host localhost --port 4850)"),
+    (":4850", 4840, "(--host 127.0.0.1 --port 4850)"),
+    ("[::1]:4850", 4840, "(--host [::1] --port 4850)"),
+    ("opc.tcp://127.0.0.1:4850/plugcell", 4840, "is a URL: --host takes a host name"),
+    ("localhost/plugcell", 4840, "holds a path"),
+    ("", 4840, "--host is empty"),
+    ("two words", 4840, "is not a host name or an IP address"),
+    ("-bad-", 4840, "is not a host name or an IP address"),
+    ("127.0.0.1", 0, "--port 0: a TCP port is 1…65535"),
+    ("127.0.0.1", 70000, "--port 70000: a TCP port is 1…65535"),
+])
+def test_a_host_or_port_mistake_is_named(host, port, reason):
+    with pytest.raises(ValueError) as caught:
+        listen_url(host, port)
+    assert reason in str(caught.value) and "\n" not in str(caught.value)
+
+
+@given(st.text(max_size=80), st.integers(-10, 70000))
+@settings(max_examples=300, deadline=None)
+def test_any_host_is_a_url_asyncua_can_read_or_one_line_why_not(host, port):
+    from urllib.parse import urlparse
+
+    try:
+        url = listen_url(host, port)
+    except ValueError as exc:
+        assert str(exc) and "\n" not in str(exc)
+        return
+    parsed = urlparse(url)  # what asyncua does with the endpoint: it must not fail
+    assert parsed.scheme == "opc.tcp" and parsed.port == port and parsed.path == "/plugcell"
+    assert parsed.hostname and listen_url(parsed.hostname, port) == url.lower()
+
+
+def test_a_bind_failure_is_one_line_naming_the_cause():
+    import errno
+    import socket
+
+    busy = OSError(errno.EADDRINUSE, "address already in use")
+    assert bind_error(busy, "127.0.0.1", 4840) == (
+        "port 4840 on 127.0.0.1 is in use (another OPC UA server or gateway?): stop it, or "
+        "choose another port with --port")
+    assert "not an address of this machine" in bind_error(
+        OSError(errno.EADDRNOTAVAIL, "cannot assign"), "10.9.9.9", 4840)
+    assert bind_error(socket.gaierror(-2, "Name or service not known"), "nohost", 4840) == (
+        "unknown host 'nohost' (Name or service not known): give a name this machine resolves")

@@ -118,6 +118,15 @@ def test_a_gateway_that_cannot_start_says_why(tmp_path):
     proc = subprocess.run(plugcell_argv("opcua", "serve"), capture_output=True, text=True,
                           timeout=60)
     assert proc.returncode == 2 and "no way to log in" in proc.stderr
+    assert "(--allow-anonymous)" in proc.stderr and "--users FILE" in proc.stderr
+    # a port in the host (issue 39 §5): one line naming it, no traceback
+    proc = subprocess.run(plugcell_argv("opcua", "serve", "--host", "127.0.0.1:4850",
+                                        "--allow-anonymous"), capture_output=True, text=True,
+                          timeout=60)
+    assert proc.returncode == 2 and "Traceback" not in proc.stderr, proc.stderr
+    assert proc.stderr.strip() == (
+        "plugcell: error: --host '127.0.0.1:4850' holds a port: --host takes a host name or "
+        "address; give the port with --port (--host 127.0.0.1 --port 4850)")
     with socket.socket() as taken:
         taken.bind(("127.0.0.1", 0))
         taken.listen()
@@ -127,7 +136,10 @@ def test_a_gateway_that_cannot_start_says_why(tmp_path):
                           unique_cell("taken")), capture_output=True, text=True, timeout=60,
             env={**os.environ, "PLUGCELL_HOME": str(tmp_path)})
     assert proc.returncode == 2
-    assert f"plugcell: error: cannot serve at opc.tcp://127.0.0.1:{port}/plugcell" in proc.stderr
+    assert proc.stderr.strip() == (  # one line: asyncua's traceback of the bind is not shown
+        f"plugcell: error: cannot serve at opc.tcp://127.0.0.1:{port}/plugcell: port {port} on "
+        "127.0.0.1 is in use (another OPC UA server or gateway?): stop it, or choose another "
+        "port with --port"), proc.stderr
 
 
 def test_a_client_without_security_cannot_even_browse(secure_cell):

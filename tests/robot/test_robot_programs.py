@@ -7,12 +7,14 @@ running services, with no restart and no code change.
 
 from __future__ import annotations
 
+import json
+import subprocess
 import time
 from pathlib import Path
 
 import pytest
 from robot_cell import PNT0001, PNT0002, RobotCell
-from robot_testlib import until
+from robot_testlib import plugcell_argv, until
 
 from plugcell.framework import KeySpace, ProcessStates, ProcessUpdateNotification, from_data
 from plugcell.framework.journal import journal_files, read_journal
@@ -174,10 +176,53 @@ def test_malformed_programs_come_back_with_file_and_line(robot_cell: RobotCell,
     # and what is not a program at all
     final = robot_cell.activate("nosuch")
     assert final.state is F and "no program 'nosuch' in the program library" in final.reason
+    final = robot_cell.activate("progs/nosuch.pdl")  # relative: the controller's folder
+    assert final.state is F
+    assert "no such program file: progs/nosuch.pdl (looked for /" in final.reason, final.reason
+    assert "taken from the robot controller's folder /" in final.reason, final.reason
     final = robot_cell.activate("example", "pnt0001=1,2")
     assert final.state is F
     assert final.reason.endswith("example.pdl:14:5: cannot set pnt0001 (POSITION): list [1.0, "
                                  "2.0] is not a POSITION (6 or 7 values, or a 4×4 matrix)")
+
+
+def test_a_program_that_deactivates_itself_fails_the_wait(robot_cell: RobotCell,
+                                                          tmp_path: Path) -> None:
+    """Issue 39 §1: a program's own DEACTIVATE (the shipped programs' REQUIRE after a
+    failed step) ends it before its END — ACTIVATE Wait is Failed with what the program
+    said last and where it stopped, never Completed; without Wait it is Completed at start."""
+    program = tmp_path / "gives_up.pdl"
+    program.write_text(
+        "PROGRAM gives_up\n"
+        "BEGIN\n"
+        "  WRITE LUN_CRT ('gives_up: starting')\n"
+        "  WRITE LUN_CRT ('gives_up: Move failed: TRACKER Move: beam not locked')\n"
+        "  DEACTIVATE\n"
+        "  WRITE LUN_CRT ('gives_up: not reached')\n"
+        "END gives_up\n"
+    )
+    final = robot_cell.activate(program)
+    assert final.state is F, final.reason
+    assert final.reason.startswith("ACTIVATE: program gives_up deactivated itself: gives_up: "
+                                   "Move failed: TRACKER Move: beam not locked"), final.reason
+    assert final.reason.endswith("gives_up.pdl:5:3)"), final.reason
+    program_name, state, _, message, *console = robot_cell.status()
+    assert (program_name, state) == ("gives_up", "DEACTIVATED")
+    assert message.startswith("gives_up: Move failed"), message
+    assert "gives_up: not reached" not in console
+    # without Wait: Completed once it runs, as before
+    started = robot_cell.activate(program, wait=False)
+    assert started.state is C, started.reason
+    until(lambda: robot_cell.status()[1] != "RUNNING", 10.0, "gives_up ended")
+    # and as a user sees it: `plugcell call … --option Wait` prints Failed and exits 1
+    argv = plugcell_argv("call", "ROBOT", "ACTIVATE", "--option", "Wait", "--data",
+                         json.dumps([str(program)]), "--cell", robot_cell.cell)
+    done = subprocess.run(argv, env=robot_cell.launcher.env, capture_output=True, text=True,
+                          timeout=60)
+    assert done.returncode == 1, (done.stdout, done.stderr)
+    final = json.loads(done.stdout.strip().splitlines()[-1])
+    assert final["state"] == "Failed", final
+    assert "deactivated itself: gives_up: Move failed" in final["reason"], final
 
 
 def test_deactivate_stops_a_running_program(robot_cell: RobotCell) -> None:

@@ -17,6 +17,7 @@ import numpy as np
 import pytest
 
 from plugcell.devices.robot.framing import LineBuffer
+from plugcell.pdl import BUILTIN_LIBRARY
 from plugcell.sim.controller.arm import JOINT_SPEED_DEG_S, RAMP_S, TwinArm
 from plugcell.sim.controller.controller import SimController
 from plugcell.sim.twin.robot import RobotTwin
@@ -155,6 +156,9 @@ def test_a_program_with_the_handshake(link: Line) -> None:
     link.send("RESULT FALSE TOOL Drill: the drill broke")
     ended, _ = link.until("EVENT ENDED 8 ")
     assert ended.startswith("EVENT ENDED 8 EXAMPLE DEACTIVATED ")  # IF DRILL(…) = FALSE
+    # why and where: the failed answer it got last, the DEACTIVATE's place (issue 39 §1)
+    assert ended.endswith(" after the failed answer 'TOOL Drill: the drill broke' "
+                          "(DEACTIVATE at " + str(BUILTIN_LIBRARY / "example.pdl") + ":42:5)")
     assert float(ended.split(" ")[5]) > 1.0  # simulated seconds: two moves
     status = link.ask("STATUS 9")
     assert status.startswith("OK 9 state=IDLE run=0 program= sim=0 line= last_run=8 "

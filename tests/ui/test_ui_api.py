@@ -139,6 +139,33 @@ def test_a_robot_program_runs_and_its_processes_are_monitored(client: TestClient
     assert client.get("/api/programs/nothing").status_code == 404
 
 
+def test_a_program_that_deactivates_itself_fails_its_run(client: TestClient,
+                                                         tmp_path: Path) -> None:
+    """Issue 39 §1: a program's own DEACTIVATE fails the run (the next one is skipped) and
+    the run shows how it ended; a program that never started shows no earlier status."""
+    program = tmp_path / "quits.pdl"
+    program.write_text("PROGRAM quits\nBEGIN\n  WRITE LUN_CRT ('quits: no beam')\n"
+                       "  DEACTIVATE\nEND quits\n")
+
+    def ended(items: list[Any]) -> dict[str, Any]:
+        run = client.post("/api/runs", headers=HEADERS, json={"items": items}).json()["run"]
+        snap = until(lambda: client.get("/api/snapshot").json(), lambda s: any(
+            r["id"] == run["id"] and r["state"] != "Running" for r in s["runs"]))
+        return next(r for r in snap["runs"] if r["id"] == run["id"])
+
+    done = ended([{"robot": "R1", "program": str(program)},
+                  {"robot": "R1", "program": str(PROGRAMS / "cellcheck.pdl")}])
+    assert done["state"] == "Failed", done
+    first, second = done["items"]
+    assert first["state"] == "Failed" and "deactivated itself: quits: no beam" in first["reason"]
+    assert first["programState"] == "DEACTIVATED", first
+    assert first["message"].startswith("quits: no beam (DEACTIVATE at "), first
+    assert second["state"] == "Skipped", second
+    missing = ended([{"robot": "R1", "program": str(tmp_path / "quits_not.pdl")}])["items"][0]
+    assert missing["state"] == "Failed" and "no such program file" in missing["reason"]
+    assert missing["programState"] == "", missing  # not the status of quits' run
+
+
 def test_a_program_gets_its_values(client: TestClient) -> None:
     """The EXAMPLE's taught points come with the ACTIVATE (docs/robot-programs.md)."""
     post = lambda items: client.post("/api/runs", headers=HEADERS, json={"items": items}).json()  # noqa: E731

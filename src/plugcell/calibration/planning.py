@@ -203,12 +203,17 @@ class Candidates:
         Nominal target positions in the robot base frame.
     source : (C,) int array
         The row of the configuration each came from (for ``--from``).
+    dropped : dict of str to int
+        How many given configurations each test left out (:func:`filter_candidates`:
+        ``limits``, ``volume``, ``line of sight``; 0s omitted), and ``given``: how many
+        there were.  Empty for drawn candidates.
     """
 
     q: Array
     payload_kg: Array
     targets: Array
     source: NDArray[np.int64]
+    dropped: dict[str, int] = field(default_factory=dict)
 
     def __len__(self) -> int:
         return int(self.q.shape[0])
@@ -324,8 +329,11 @@ def filter_candidates(model: ErrorModel, q: ArrayLike, *, payloads: Sequence[flo
         m = np.asarray(payload_kg, dtype=float)
         if m.shape != (len(q),):
             raise PlanningError(f"payload_kg must be ({len(q)},), got {m.shape}")
-        return Candidates(q[idx], m[idx], T[idx, :3, 3], idx.astype(np.int64))
-    return _crossed(q[idx], _payload_list(payloads), T[idx, :3, 3], idx)
+        return Candidates(q[idx], m[idx], T[idx, :3, 3], idx.astype(np.int64),
+                          dropped={"given": len(q), **{k: v for k, v in counts.items() if v}})
+    crossed = _crossed(q[idx], _payload_list(payloads), T[idx, :3, 3], idx)
+    crossed.dropped.update({"given": len(q), **{k: v for k, v in counts.items() if v}})
+    return crossed
 
 
 def sample_candidates(model: ErrorModel, count: int, *, payloads: Sequence[float] = (0.0,),

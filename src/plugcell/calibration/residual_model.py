@@ -879,6 +879,24 @@ class ResidualLearner:
         with threadpool_limits(self.n_threads):
             return self._fit(model, data, robot, prior)
 
+    def check_poses(self, n: int) -> None:
+        """Refuse ``n`` calibration poses if too few to learn from (before any work).
+
+        Parameters
+        ----------
+        n : int
+            Number of calibration poses.
+
+        Raises
+        ------
+        ResidualModelError
+            ``n < min_poses``, with the numbers.
+        """
+        if n < self.min_poses:
+            raise ResidualModelError(
+                f"too few poses to learn the residual from: {n}, at least {self.min_poses} "
+                f"needed (spread over at least {self.n_splits} cells of {self.cell_size_m:g} m)")
+
     def _fit(self, model: ErrorModel, data: CalibrationData, robot: str,
              prior: ShapeStage | None = None) -> LearnedResidual:
         import sklearn
@@ -886,10 +904,7 @@ class ResidualLearner:
         from sklearn.neighbors import NearestNeighbors
 
         n = len(data)
-        if n < self.min_poses:
-            raise ResidualModelError(
-                f"too few poses to learn the residual from: {n}, at least {self.min_poses} "
-                f"needed (spread over at least {self.n_splits} cells of {self.cell_size_m:g} m)")
+        self.check_poses(n)
         temp = data.temperature_c is not None if self.use_temperature is None \
             else self.use_temperature
         if temp and data.temperature_c is None:

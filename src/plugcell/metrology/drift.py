@@ -29,7 +29,14 @@ from plugcell.metrology.frames import fit_rigid_transform
 
 Array = NDArray[np.float64]
 
-__all__ = ["DriftEstimate", "estimate_base_drift", "nests_in_base"]
+__all__ = ["MIN_NEST_SPACING_M", "DriftEstimate", "estimate_base_drift", "likely_mix_up",
+           "nests_in_base", "too_close"]
+
+#: Factors between the nests' mutual distances in the two files that name a unit mistake.
+_UNIT_FACTORS = ((1000.0, "metres"), (25.4, "inches"))
+#: Nests closer together than this (median of their mutual distances) are a unit mistake:
+#: nests fixed to a robot's foundation are decimetres apart.
+MIN_NEST_SPACING_M = 0.01
 
 
 def nests_in_base(base: ArrayLike, measured: ArrayLike) -> Array:
@@ -164,3 +171,81 @@ def estimate_base_drift(base: ArrayLike, nests: ArrayLike, measured: ArrayLike, 
                          rotation_rad=so3_log(D[:3, :3]), displacement_m=disp,
                          rms_m=float(fit.rms), threshold_m=float(threshold_m),
                          alarm=disp > threshold_m, consistent=float(fit.rms) <= fit_tolerance_m)
+
+
+def _pair_distances(p: Array) -> Array:
+    i, j = np.triu_indices(len(p), 1)
+    return np.linalg.norm(p[i] - p[j], axis=1)
+
+
+def too_close(points: ArrayLike, which: str = "") -> str:
+    """``"units: …"`` if the nests' median mutual distance is below
+    :data:`MIN_NEST_SPACING_M` (a file in metres read as mm), else ""."""
+    p = as_points(points, "nests", 2)
+    spacing = float(np.median(_pair_distances(p)))
+    if spacing >= MIN_NEST_SPACING_M:
+        return ""
+    nests = f"the {which} nests" if which else "the nests"
+    return (f"units: {nests} are only {spacing * 1e3:.3g} mm apart (median) — a file in "
+            "metres? (nest files are in mm)")
+
+
+def likely_mix_up(base: ArrayLike, nests: ArrayLike, measured: ArrayLike, *,
+                  tolerance_m: float = 5e-3) -> str:
+    """The likely input mistake behind a drift far larger than a real one, or "".
+
+    Two checks, both independent of the drift itself:
+
+    * **Units.**  Nests less than :data:`MIN_NEST_SPACING_M` apart were metres read as
+      mm (:func:`too_close`).  The nests' mutual distances ``‖n_i − n_j‖`` are frame-invariant, so
+      ``r = median_ij(‖m_i − m_j‖ / ‖n_i − n_j‖)`` is 1 for any drift.  ``r ≈ 1/1000``
+      (``1000``) means the measured (registered) positions were metres read as mm; 25.4
+      inches.  Within 5 % of the factor.
+    * **Swapped files.**  The registration holds ``n = BASE⁻¹ m``.  If the registered
+      file holds tracker measurements and the measured file robot-frame positions,
+      ``max_k ‖BASE n_k − m_k‖`` is BASE-sized while ``max_k ‖BASE m_k − n_k‖`` is
+      within ``tolerance_m`` and 100 times less (the files fit the other way round).
+
+    Parameters
+    ----------
+    base : (4, 4) array_like, m
+        BASE in use (robot base in the tracker frame).
+    nests : (K, 3) array_like, m
+        The registered nests (robot base frame), as read.
+    measured : (K, 3) array_like, m
+        The nests measured now (tracker frame), as read, in the same order.
+    tolerance_m : float
+        How close the swapped reading must fit to be called a swap (m).
+
+    Returns
+    -------
+    str
+        ``"units: …"`` or ``"swapped: …"`` naming the cause, or "" when neither fits.
+    """
+    B = np.asarray(base, float)
+    n = as_points(nests, "nests", 3)
+    m = as_points(measured, "measured nests", 3)
+    if n.shape != m.shape:
+        return ""
+    dn, dm = _pair_distances(n), _pair_distances(m)
+    ok = dn > 0
+    if np.any(ok) and np.all(dm[ok] > 0):
+        ratio = float(np.median(dm[ok] / dn[ok]))
+        for factor, unit in _UNIT_FACTORS:
+            if abs(ratio * factor - 1.0) < 0.05:  # the measured nests too close together
+                return (f"units: the measured nests are {factor:g}× closer together than the "
+                        f"registered ones — the measured file in {unit}? (nest files are in mm)")
+            if abs(ratio / factor - 1.0) < 0.05:  # the registered nests too close together
+                return (f"units: the registered nests are {factor:g}× closer together than "
+                        f"the measured ones — registered from a file in {unit}? (nest files "
+                        "are in mm)")
+    close = too_close(n, "registered") or too_close(m, "measured")
+    if close:
+        return close
+    forward = float(np.max(np.linalg.norm(n @ B[:3, :3].T + B[:3, 3] - m, axis=1)))
+    backward = float(np.max(np.linalg.norm(m @ B[:3, :3].T + B[:3, 3] - n, axis=1)))
+    if backward <= tolerance_m and forward > 100 * backward:
+        return ("swapped: the measured file fits as the registration and the registration as "
+                f"the measurement (within {backward * 1e3:.3f} mm; {forward * 1e3:.0f} mm "
+                "the other way) — --nests and --measured swapped?")
+    return ""

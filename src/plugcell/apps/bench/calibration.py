@@ -89,11 +89,13 @@ def measure(repeat: int = 7, max_poses: int = 100_000, seed: int = 0) -> dict[st
         "benchmark": "calibration",
         "model": 5,
         "parameters": len(res.keys),
+        "model_parameters": len(res.model.space),
         "iterations_150": res.iterations,
         "t150_s": statistics.median(times),
         "t150_all_s": times,
         "thesis_t150_s": 5.0,
         "target_t150_s": 0.05,
+        "target_met": statistics.median(times) < 0.05,
         "scaling": scaling,
     }
 
@@ -103,9 +105,11 @@ def run(args: argparse.Namespace) -> int:
     if args.json:
         print(json.dumps(d, indent=2))
         return 0
-    print(f"model 5 ({d['parameters']} parameters), 150 poses: median {d['t150_s'] * 1e3:.1f} ms "
+    met = "met" if d["t150_s"] < d["target_t150_s"] else "NOT met"
+    print(f"model 5 ({d['parameters']} identified of its {d['model_parameters']} parameters, "
+          "one payload), 150 poses: median {d['t150_s'] * 1e3:.1f} ms "
           f"over {len(d['t150_all_s'])} runs, {d['iterations_150']} iterations "
-          f"(thesis: 5 s in Matlab; target < 50 ms)")
+          f"(thesis: 5 s in Matlab; target < {d['target_t150_s'] * 1e3:.0f} ms: {met})")
     for s in d["scaling"]:
         print(f"  {s['poses']:>7d} poses: {s['seconds']:8.3f} s  "
               f"({s['seconds_per_pose'] * 1e6:6.1f} µs/pose, {s['iterations']} iterations)")

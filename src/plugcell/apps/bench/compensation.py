@@ -123,7 +123,8 @@ def format_report(r: dict[str, Any]) -> str:
         ("whole 6.5.1 incl. nominal IK", r["with_nominal_ik"]),
     ]
     out = [f"model-based compensation, {r['robot']}, model {r['model']}, "
-           f"{r['parameters']} parameters, {r['payload_kg']:g} kg, {r['n']} targets",
+           f"all {r['parameters']} of its parameters set (a calibration identifies those its "
+           f"data determine), {r['payload_kg']:g} kg, {r['n']} targets",
            f"{'':48s} {'targets':>8s} {'seconds':>8s} {'targets/s':>10s}"]
     for label, d in rows:
         out.append(f"{label:48s} {d['targets']:8d} {d['seconds']:8.3f} {d['targets_per_s']:10.0f}")

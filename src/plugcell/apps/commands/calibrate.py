@@ -185,10 +185,23 @@ class _Progress:
             print(f"calibrate [{stage}] {message}", file=sys.stderr, flush=True)
 
 
+def _counted(d: dict[str, Any]) -> str:
+    """``50 of its 72 parameters identified (13 stand for others, 9 not identifiable)``:
+    the model's parameters are the identified, the dependent ones (identified through
+    another, ``dependent``) and those these data cannot determine (``unidentifiable``)."""
+    n, dep, zero = (len(d.get(k) or []) for k in ("parameters", "dependent", "unidentifiable"))
+    if not dep and not zero:
+        return f"{n} parameters identified"
+    parts = [f"{dep} stand for others" if dep else "",
+             f"{zero} not identifiable from these data" if zero else ""]
+    return (f"{n} of its {n + dep + zero} parameters identified "
+            f"({', '.join(p for p in parts if p)})")
+
+
 def _summary(d: dict[str, Any]) -> str:
     m = d["model"]
     lines = [f"robot {d['robot']}, model {m['number']} ({m['name']}): "
-             f"{len(d['parameters'])} parameters from {d['data']['poses']} poses, "
+             f"{_counted(d)} from {d['data']['poses']} poses, "
              f"{d['iterations']} iterations, κ = {d['condition_number']:.1f}"]
     for key in ("calibration", "validation"):
         s = d.get(key)
@@ -289,10 +302,20 @@ def _run(args: argparse.Namespace) -> int:
         if args.refit_positions_only and not val.six_dof:
             raise CommandError(f"--refit-positions-only: {args.validate} measures positions "
                                "only; the refit uses them without the option")
+    progress = _Progress(args.quiet)
+    learner = None
+    if args.residual_model == "learned":  # refused before the identification, not after
+        from plugcell.calibration.residual_model import ResidualLearner
+
+        learner = ResidualLearner(cell_size_m=args.residual_cell_m, trees=args.residual_trees,
+                                  progress=lambda t: progress("residual", 0, 0, t))
+        try:
+            learner.check_poses(len(data))
+        except ResidualModelError as exc:
+            raise CommandError(f"--residual-model learned: {exc}") from None
     prior = None if args.residual_prior is None else _prior_stage(args.residual_prior, args)
     base = None if args.base is None else _frame(args.base, "base")
     probe = None if args.probe is None else _frame(args.probe, "probe")
-    progress = _Progress(args.quiet)
     try:
         cal = Calibrator(desc, args.model, base=base, probe=probe, method=args.method,
                          loss=args.loss, max_iterations=args.max_iterations,
@@ -301,12 +324,7 @@ def _run(args: argparse.Namespace) -> int:
                          condition_limit=args.condition_limit, progress=progress,
                          harmonics=args.harmonics, thermal=args.thermal)
         result = cal.fit(data)
-        if args.residual_model == "learned":
-            from plugcell.calibration.residual_model import ResidualLearner
-
-            learner = ResidualLearner(
-                cell_size_m=args.residual_cell_m, trees=args.residual_trees,
-                progress=lambda t: progress("residual", 0, 0, t))
+        if learner is not None:
             result = result.with_residual_model(learner.fit(result.model, data,
                                                             robot=result.robot, prior=prior))
         if val is not None:

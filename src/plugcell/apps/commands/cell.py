@@ -356,10 +356,26 @@ def run_run(args: argparse.Namespace) -> int:
 
     if len(args.pairs) % 2:
         raise CommandError("give ROBOT PROGRAM pairs, e.g. cell run R1 example R2 example")
-    pairs = list(zip(args.pairs[::2], args.pairs[1::2], strict=True))
+    pairs = [(r, program_ref(p)) for r, p in zip(args.pairs[::2], args.pairs[1::2],
+                                                  strict=True)]
     mode = "concurrent" if args.concurrent else "sequential"
     args.values_of = _values_of(args.value, [r for r, _ in pairs])
     return eventloop.run(_run(args, pairs, mode))
+
+
+def program_ref(program: str) -> str:
+    """PROGRAM as the robot is to find it: a name of the program library unchanged; a
+    relative path to a file in this folder made absolute — the robot service (and its
+    controller) may run in another folder, where the relative path would not be found;
+    anything else unchanged (the controller's error says where it looked)."""
+    from plugcell.devices.robot.runner import is_program_name
+
+    if is_program_name(program):
+        return program
+    path = Path(program).expanduser()
+    if not path.is_absolute() and path.is_file():
+        return str(path.resolve())
+    return program
 
 
 def _values_of(values: list[str], robots: list[str]) -> dict[str, list[str]]:

@@ -168,6 +168,19 @@ def _run(args: argparse.Namespace) -> int:
     if layer is not None and layer.uses_temperature and args.temperature_c is None:
         raise CommandError(f"{args.params}: its residual model uses the temperature: give "
                            "--temperature-c (or --physical-only)")
+    if args.temperature_c is not None:
+        from plugcell.calibration.model import THERMAL_KEY
+
+        if not math.isfinite(args.temperature_c):
+            raise CommandError(f"--temperature-c must be a temperature in °C, got "
+                               f"{args.temperature_c}")
+        if THERMAL_KEY not in result.model.space and not (layer is not None
+                                                         and layer.uses_temperature):
+            raise CommandError(
+                f"--temperature-c {args.temperature_c:g}: {args.params} has no thermal term "
+                "(calibrate with --thermal and a temperature_c column) and no residual model "
+                "that uses the temperature, so it cannot change the compensation; leave it "
+                "out")
     try:
         text = args.targets.read_text()
     except OSError as exc:

@@ -73,15 +73,33 @@ def _nests(path: Path) -> tuple[list[str], np.ndarray]:
 
 
 
+#: The first comment line of a registration file (written by ``drift register``).
+REGISTERED = "plugcell drift register:"
+
+
+def _registered(path: Path) -> bool:
+    """Whether ``path`` is a registration file written by ``drift register``."""
+    try:
+        with path.open(encoding="utf-8", errors="replace") as f:
+            head = [f.readline() for _ in range(5)]
+    except OSError:
+        return False
+    return any(line.lstrip("# ").startswith(REGISTERED) for line in head)
+
+
 def _register(args: argparse.Namespace) -> int:
+    from plugcell.apps.cli import CommandError
     from plugcell.io.nests import format_nests
-    from plugcell.metrology.drift import nests_in_base
+    from plugcell.metrology.drift import nests_in_base, too_close
 
     _, result = _params(args.params)
     names, measured = _nests(args.measured)
+    close = too_close(measured)
+    if close:
+        raise CommandError(f"{args.measured}: {close.removeprefix('units: ')}")
     base = result.model.base()
     write_text(args.out, format_nests(names, nests_in_base(base, measured), (
-        f"plugcell drift register: {len(names)} nests in the robot base frame (mm), from "
+        f"{REGISTERED} {len(names)} nests in the robot base frame (mm), from "
         f"{args.measured.name} with the BASE of {args.params.name}",)))
     print(f"registered {len(names)} nests in the robot base frame; wrote {args.out}")
     return 0
@@ -90,7 +108,7 @@ def _register(args: argparse.Namespace) -> int:
 def _check(args: argparse.Namespace) -> int:
     from plugcell.apps.cli import CommandError
     from plugcell.metrology import MetrologyError
-    from plugcell.metrology.drift import estimate_base_drift
+    from plugcell.metrology.drift import estimate_base_drift, likely_mix_up
 
     for opt in ("threshold_mm", "fit_tolerance_mm"):
         v = getattr(args, opt)
@@ -107,8 +125,15 @@ def _check(args: argparse.Namespace) -> int:
         est = estimate_base_drift(result.model.base(), ref, measured[order],
                                   threshold_m=args.threshold_mm * 1e-3,
                                   fit_tolerance_m=args.fit_tolerance_mm * 1e-3)
+        mix_up = likely_mix_up(result.model.base(), ref, measured[order])
     except MetrologyError as exc:
         raise CommandError(f"{args.nests}: {exc}") from None
+    if not mix_up and _registered(args.measured) and not _registered(args.nests):
+        mix_up = (f"swapped: {args.measured.name} was written by plugcell drift register and "
+                  f"{args.nests.name} was not — --nests and --measured swapped?")
+    if mix_up:  # not a drift: no alarm, nothing re-registered (exit 2)
+        raise CommandError(f"drift of BASE not estimated ({est.displacement_m * 1e3:.1f} mm at "
+                           f"the nests is no drift): {mix_up}")
     updated = False
     if est.alarm and args.update and est.consistent:
         from plugcell.io.params import rebase_document

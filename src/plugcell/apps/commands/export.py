@@ -21,6 +21,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import sys
 from pathlib import Path
 
 from plugcell.apps.commands.files import write_text
@@ -55,6 +56,27 @@ def configure(p: argparse.ArgumentParser) -> None:
     p.set_defaults(func=_run)
 
 
+#: The file name endings of each format (the first is the one to suggest).
+EXTENSIONS = {"urdf": (".urdf", ".xml"), "ur-kinematics": (".yaml", ".yml"),
+              "toml": (".toml",)}
+
+
+def _check_extension(out: Path, fmt: str) -> None:
+    """Refuse ``--out`` named for another format (``x.yaml`` with ``--format urdf``)."""
+    from plugcell.apps.cli import CommandError
+
+    suffix = out.suffix.lower()
+    if suffix in EXTENSIONS[fmt]:
+        return
+    other = next((f for f, ends in EXTENSIONS.items() if suffix in ends), None)
+    if other is not None:
+        raise CommandError(f"--out {out}: a {suffix} file is --format {other}, not {fmt}: "
+                           f"name it {out.with_suffix(EXTENSIONS[fmt][0]).name} or give "
+                           f"--format {other}")
+    print(f"warning: --out {out}: a {fmt} file usually ends in {EXTENSIONS[fmt][0]}",
+          file=sys.stderr)
+
+
 def _run(args: argparse.Namespace) -> int:
     from plugcell.apps.cli import CommandError
     from plugcell.apps.commands.calibrate import _frame
@@ -64,6 +86,7 @@ def _run(args: argparse.Namespace) -> int:
     from plugcell.io.robots import RobotSource
     from plugcell.kinematics.errors import DescriptionError
 
+    _check_extension(args.out, args.format)
     d, result = read_calibration(args.params, args)
     if args.robot is not None:
         source: RobotSource | None = robot_source_of(args)

@@ -9,10 +9,8 @@ in a users file.
 from __future__ import annotations
 
 import argparse
-import asyncio
 import getpass
 import logging
-import signal
 import sys
 from pathlib import Path
 from typing import Any
@@ -87,6 +85,7 @@ def run_hash(args: argparse.Namespace) -> int:
 def run_serve(args: argparse.Namespace) -> int:
     from plugcell.apps.cli import CommandError
     from plugcell.devices.opcua.gateway import CellGateway
+    from plugcell.devices.opcua.listen import bind_error
     from plugcell.devices.opcua.server_security import GatewaySecurity
     from plugcell.devices.opcua.users import UserBook, UsersFileError
 
@@ -94,6 +93,8 @@ def run_serve(args: argparse.Namespace) -> int:
                         format="%(asctime)s %(name)s %(levelname)s %(message)s")
     if args.log_level.upper() != "DEBUG":
         logging.getLogger("asyncua").setLevel(logging.ERROR)
+        # a port in use: asyncua logs its traceback, then re-raises — said below in one line
+        logging.getLogger("asyncua.server.server").addFilter(_not_a_start_error)
     if args.certs is not None:
         from plugcell.devices.opcua.certificates import CA_CERT, certificate_paths
 
@@ -126,16 +127,23 @@ def run_serve(args: argparse.Namespace) -> int:
     try:
         eventloop.run(_serve(gateway))
     except OSError as exc:
-        raise CommandError(f"cannot serve at {gateway.url}: {exc}") from None
+        why = bind_error(exc, gateway.host, gateway.port)
+        raise CommandError(f"cannot serve at {gateway.url}: {why}") from None
     return 0
 
 
+def _not_a_start_error(record: logging.LogRecord) -> bool:
+    """False for asyncua's "error starting server" with an OSError (the command says why)."""
+    info = record.exc_info
+    return not (info and isinstance(info[1], OSError))
+
+
 async def _serve(gateway: Any) -> None:
-    stop = asyncio.Event()
-    loop = asyncio.get_running_loop()
-    for sig in (signal.SIGINT, signal.SIGTERM):
-        loop.add_signal_handler(sig, stop.set)
-    await gateway.start()
+    from plugcell.apps.commands.serve import start_unless_stopped, stop_on_signals
+
+    stop = stop_on_signals()
+    if not await start_unless_stopped(gateway.start(), stop):
+        return
     try:
         policy = "Basic256Sha256 SignAndEncrypt" if gateway.security.certificate else "None"
         print(f"plugcell: OPC UA gateway of cell {gateway.cell!r} at {gateway.url} "

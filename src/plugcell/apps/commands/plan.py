@@ -122,6 +122,32 @@ def _say(args: argparse.Namespace, text: str) -> None:
         print(f"plan: {text}", file=sys.stderr, flush=True)
 
 
+#: Rms misfit (mm) of measurements to the robot's nominal kinematics above which ``--from``
+#: data are taken for another robot's: an uncalibrated robot is off by a few mm.
+MISFIT_LIMIT_MM = 25.0
+
+
+def _check_dropped(args: argparse.Namespace, robot: str, dropped: dict[str, int],
+                   measured: bool) -> None:
+    """Say how many configurations of ``--from`` were left out and why; refuse when most
+    are outside the robot's joint limits (another robot's file)."""
+    from plugcell.apps.cli import CommandError
+
+    given = dropped.get("given", 0)
+    left_out = {k: v for k, v in dropped.items() if k != "given"}
+    if not given or not left_out:
+        return
+    why = ", ".join(f"{v} outside the {k}" for k, v in left_out.items())
+    total = sum(left_out.values())
+    what = "measured poses" if measured else "configurations"
+    if 2 * left_out.get("limits", 0) > given:
+        raise CommandError(f"--from {args.from_file}: {left_out['limits']} of its {given} "
+                           f"{what} are outside the joint limits of robot {robot!r} — a file "
+                           "of another robot? give its --robot")
+    print(f"plan: warning: {total} of the {given} {what} of {args.from_file} left out ({why})",
+          file=sys.stderr, flush=True)
+
+
 def _twin_cell(robot: str) -> tuple[np.ndarray, np.ndarray] | None:
     """The twin's tracker position (m, robot frame) and T-MAC (PROBE) when it has one."""
     from plugcell.kinematics.rotations import rpy_to_matrix
@@ -227,6 +253,12 @@ def _run(args: argparse.Namespace) -> int:
         if measured is not None:
             # poses already measured: BASE and PROBE from their measurements
             base, probe, rms = Calibrator(desc, 1).initial_frames(measured)
+            if rms * 1e3 > MISFIT_LIMIT_MM:
+                raise CommandError(
+                    f"--from {args.from_file}: the measurements do not fit robot {desc.name!r}: "
+                    f"with its nominal kinematics and the best BASE and PROBE they are "
+                    f"{rms * 1e3:.0f} mm rms off (an uncalibrated robot: a few mm; refused above "
+                    f"{MISFIT_LIMIT_MM:g} mm) — measured on another robot? give its --robot")
             _say(args, f"BASE and PROBE estimated from {len(measured)} measured poses "
                        f"(rms misfit {rms * 1e3:.2f} mm)")
         model = ErrorModel.create(desc, cfg.family, gravity=cfg.gravity, payload=cfg.payload,
@@ -256,6 +288,7 @@ def _run(args: argparse.Namespace) -> int:
                 model, q_from, payloads=payloads, payload_kg=own,
                 volume=volume if args.volume is not None else None,
                 visibility=vis if args.tracker is not None else None)
+            _check_dropped(args, desc.name, cands.dropped, measured is not None)
             what = f"{len(cands)} candidates from {args.from_file}"
         else:
             _say(args, f"drawing {args.candidates} candidates"
@@ -268,8 +301,9 @@ def _run(args: argparse.Namespace) -> int:
                              position_only=args.position_only)
         planner = PosePlanner(model, keys, criterion=args.criterion,
                               position_only=args.position_only, noise_m=args.noise_mm / 1e3)
-        _say(args, f"choosing {args.poses} of {what} for {len(keys)} parameters "
-                   f"(model {cfg.number}, criterion {planner.criterion})")
+        _say(args, f"choosing {args.poses} of {what} for the {len(keys)} identifiable of "
+                   f"the {len(model.space)} parameters of model {cfg.number} (the rest "
+                   f"depend on them or on nothing measured; criterion {planner.criterion})")
         plan = planner.plan(cands, args.poses)
     except PlanningError as exc:
         raise CommandError(str(exc)) from None
@@ -302,7 +336,9 @@ def _summary(plan: Any, model: Any, robot: str, cfg: Any, what: str,
     groups = [{"payload_kg": float(m), "poses": int(np.count_nonzero(plan.payload_kg == m))}
               for m in np.unique(plan.payload_kg)]
     return {
-        "robot": robot, "model": {"number": cfg.number, "name": cfg.name},
+        "robot": robot, "model": {"number": cfg.number, "name": cfg.name,
+                                  "parameters": len(model.space),
+                                  "identifiable": len(plan.keys)},
         "poses": len(plan), "candidates": plan.n_candidates, "source": what,
         "criterion": plan.criterion, "value": plan.value,
         "condition_number": plan.condition_number, "exchanges": plan.exchanges,
@@ -316,8 +352,9 @@ def _text(d: dict[str, Any]) -> str:
     groups = ", ".join(f"{g['poses']} at {g['payload_kg']:g} kg" for g in d["payload_groups"])
     worst = sorted(d["predicted_sigma"], key=lambda p: -p["sigma"] if p["unit"] == "mm" else 0)
     lines = [
-        f"robot {d['robot']}, model {d['model']['number']} ({d['model']['name']}): "
-        f"{d['poses']} poses of {d['candidates']} candidates ({groups})",
+        f"robot {d['robot']}, model {d['model']['number']} ({d['model']['name']}, "
+        f"{d['model']['identifiable']} identifiable of its {d['model']['parameters']} "
+        f"parameters): {d['poses']} poses of {d['candidates']} candidates ({groups})",
         f"  criterion {d['criterion']} = {d['value']:.6g} after {d['exchanges']} exchanges; "
         f"predicted κ = {d['condition_number']:.1f}; {d['elapsed_s']:.1f} s",
         f"  predicted σ for {d['noise_mm']:g} mm noise, largest lengths: " + ", ".join(

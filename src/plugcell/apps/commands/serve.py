@@ -8,6 +8,7 @@ import contextlib
 import logging
 import signal
 import sys
+from collections.abc import Awaitable
 from pathlib import Path
 from typing import Any
 
@@ -154,14 +155,44 @@ def run(args: argparse.Namespace) -> int:
     return 0
 
 
-async def _serve(service: Any) -> None:
-    from plugcell.framework.participant import PartnerError
-
+def stop_on_signals() -> asyncio.Event:
+    """An event set by SIGINT or SIGTERM (handlers on the running loop)."""
     stop = asyncio.Event()
     loop = asyncio.get_running_loop()
     for sig in (signal.SIGINT, signal.SIGTERM):
         loop.add_signal_handler(sig, stop.set)
-    await service.start()
+    return stop
+
+
+async def start_unless_stopped(start: Awaitable[None], stop: asyncio.Event) -> bool:
+    """Await ``start`` unless ``stop`` is set first: then cancel it (its own clean-up runs,
+    e.g. ``Service.start`` closes what it opened) and return False.
+
+    A service connecting to a device that does not answer would otherwise ignore
+    SIGTERM until the connection's timeout (60 s for an OPC UA device with
+    ``watch_s=30``).  ``start``'s own error propagates.
+    """
+    starting = asyncio.ensure_future(start)
+    stopping = asyncio.ensure_future(stop.wait())
+    try:
+        await asyncio.wait({starting, stopping}, return_when=asyncio.FIRST_COMPLETED)
+    finally:
+        stopping.cancel()
+    if starting.done():
+        starting.result()
+        return True
+    starting.cancel()
+    with contextlib.suppress(asyncio.CancelledError):
+        await starting
+    return False
+
+
+async def _serve(service: Any) -> None:
+    from plugcell.framework.participant import PartnerError
+
+    stop = stop_on_signals()
+    if not await start_unless_stopped(service.start(), stop):
+        return
     print(
         f"plugcell: {service.name} ({service.kind}) serving in cell {service.keys.cell!r} "
         f"as instance {service.instance}",

@@ -239,7 +239,7 @@ async def measure_live(controller: Any, body: dict[str, Any]) -> dict[str, Any]:
         raise FitInputError({"timeout": f"{run.id}: {robot} still measuring after "
                                         f"{step.timeout:g} s (see Robot programs)"})
     item = run.items[0]
-    if item.state != "Completed":
+    if item.state != "Completed" and not item.program_state:
         raise FitInputError({"_": f"{robot} {PROGRAM}: {item.reason or item.state}"})
     if item.program_state not in ("", "FINISHED"):
         said = [line for line in item.console if line.startswith(f"{PROGRAM}:")]

@@ -13,8 +13,9 @@ another (``sequential``: the next starts when the previous one Completed, and a
 failure stops the rest) or all at once (``concurrent``).  An item may carry the
 program's *values* (``"name=value"`` strings, docs/robot-programs.md): they follow the
 program name in the ACTIVATE data.  When a program has ended, the robot's
-``PROGRAM_STATUS`` (if it has one) tells how: ``FINISHED``, ``DEACTIVATED`` by its own
-checks, …, with the simulated time and the last console line.  The program library
+``PROGRAM_STATUS`` (if it has one) tells how: ``FINISHED`` (Completed), or — Failed —
+``DEACTIVATED`` by its own checks, ``FAILED``, ``STOPPED``, with the simulated time, the
+message and the last console lines.  The program library
 is listed from the files shipped with plugcell.
 """
 
@@ -291,16 +292,22 @@ async def _run_item(
             changed()
     final = call.final
     assert final is not None
-    if option == "Wait" and final.state is ProcessStates.Completed:
-        await _program_status(participant, item, partner.device)
+    if option == "Wait" and final.state in (ProcessStates.Completed, ProcessStates.Failed):
+        await _program_status(participant, item, partner.device, final.state, final.reason)
     item.state, item.reason, item.ended_ns = final.state.value, final.reason, time.time_ns()
     changed()
     return final.state is ProcessStates.Completed
 
 
-async def _program_status(participant: Participant, item: RunItem, device: Device) -> None:
+async def _program_status(participant: Participant, item: RunItem, device: Device,
+                          state: ProcessStates, reason: str) -> None:
     """How the program ended, by the robot's PROGRAM_STATUS (nothing if it has none):
-    ``[program, state, simulated s, message, console lines…]``."""
+    ``[program, state, simulated s, message, console lines…]``.
+
+    After a Failed ACTIVATE the status is this run's only if the failure's ``reason``
+    quotes its message (a program that failed, stopped or deactivated itself); a program
+    that could not start leaves the status of an earlier run, which is not shown.
+    """
     if device.command(STATUS) is None:
         return
     try:
@@ -318,10 +325,13 @@ async def _program_status(participant: Participant, item: RunItem, device: Devic
     if len(fields) < 2 or fields[0].lower() not in (item.program.lower(),
                                                      Path(item.program).stem.lower()):
         return  # another program's status (one started meanwhile)
+    message = fields[3] if len(fields) > 3 else ""
+    if state is ProcessStates.Failed and (not message or message not in reason):
+        return  # an earlier run's status: this one did not start
     item.program_state = fields[1]
     with contextlib.suppress(ValueError, IndexError):
         item.sim_s = float(fields[2])
-    item.message = fields[3] if len(fields) > 3 else ""
+    item.message = message
     item.console = [f for f in fields[4:] if f.strip()][-CONSOLE_LINES:]
 
 

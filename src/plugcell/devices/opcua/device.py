@@ -26,6 +26,7 @@ import asyncio
 import contextlib
 import logging
 import os
+from collections.abc import Coroutine
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, ClassVar
@@ -138,6 +139,7 @@ class OpcUaDevice(GenericDevice):
         self._watch = asyncio.create_task(self._watch_connection(), name=f"{self.name}-watch")
 
     async def _open(self) -> None:
+        log.info("%s: connecting to %s", self.name, self.endpoint)
         client = Client(self.endpoint, timeout=max(2.0, self.watch_s * 2))
         if self.user:
             client.set_user(self.user)
@@ -145,7 +147,7 @@ class OpcUaDevice(GenericDevice):
         try:
             if self.certs is not None:
                 await self._secure(client, self.certs)
-            await client.connect()
+            await _cancellable(client.connect())
         except DeviceError as exc:  # the server's certificate refused (server_trust)
             raise DeviceError(f"cannot connect to {self.endpoint}: {exc}") from None
         except (TimeoutError, OSError, ValueError, ua.UaError) as exc:
@@ -338,6 +340,25 @@ def _variant(data: Any, data_type: DataTypes | None, size: tuple[int, ...]) -> u
         return ua.Variant(value if data_type is DataTypes.String else value.item(), vtype)
     dims = list(arr.shape) if arr.ndim > 1 else None
     return ua.Variant(arr.reshape(-1).tolist(), vtype, dims, is_array=True)
+
+
+async def _cancellable(connect: Coroutine[Any, Any, None]) -> None:
+    """Await ``connect`` so that cancelling the caller always works.
+
+    asyncua opens the socket with ``asyncio.wait_for``, which before Python 3.12 swallows
+    a cancellation that comes as the connection opens (cpython #86296): the connect then
+    goes on to wait for the server's answer until its timeout — SIGTERM to a device
+    service connecting to a silent server waited that long.  Here the caller waits on
+    its own; on cancellation the connect is cancelled and left to end by itself.
+    """
+    task = asyncio.ensure_future(connect)
+    try:
+        await asyncio.wait({task})
+    except asyncio.CancelledError:
+        task.cancel()
+        task.add_done_callback(lambda t: t.cancelled() or t.exception())
+        raise
+    task.result()
 
 
 def _why(exc: BaseException) -> str:

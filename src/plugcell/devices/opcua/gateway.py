@@ -49,6 +49,7 @@ from plugcell.devices.opcua.address_space import (
 )
 from plugcell.devices.opcua.arguments import ArgumentError, data_variant, input_value, option_of
 from plugcell.devices.opcua.companion import Models, add_service_device, load_models
+from plugcell.devices.opcua.listen import listen_url
 from plugcell.devices.opcua.robots import RobotMirror, is_robot
 from plugcell.devices.opcua.server_security import GatewaySecurity, configure_security
 from plugcell.devices.opcua.sessions import caller_name, caller_session, capture_session_users
@@ -128,11 +129,14 @@ class CellGateway:
         linger: float = 30.0,
         robot_poll: float = 1.0,
     ) -> None:
+        self.url = listen_url(host, port)
         if users is None and not allow_anonymous:
-            raise ValueError("no way to log in: give users (--users FILE) or allow anonymous")
+            raise ValueError("no way to log in: give a users file (--users FILE, its lines "
+                             "from plugcell opcua hash-password) or accept anonymous sessions "
+                             "(--allow-anonymous)")
         self.cell = cell
         self.transport = transport or TransportConfig.from_env()
-        self.url = f"opc.tcp://{host}:{port}/plugcell"
+        self.host, self.port = host.strip(), port
         self.name = name
         self.users = GatewayUsers(users, allow_anonymous)
         self.security = security or GatewaySecurity()
@@ -202,11 +206,24 @@ class CellGateway:
             with contextlib.suppress(asyncio.CancelledError, Exception):
                 await task
         with contextlib.suppress(Exception):
-            await self.server.stop()
+            await self._stop_server()
         for caller in self._callers.values():
             with contextlib.suppress(Exception):
                 await caller.close()
         await self.watcher.close()
+
+    async def _stop_server(self) -> None:
+        """``Server.stop`` without waiting out asyncua's status clock: its loop writes
+        ServerStatus.CurrentTime and sleeps 1 s, and ``stop`` awaits the loop's end — up
+        to a second of every SIGTERM.  Cancelled first, the rest of ``stop`` is quick."""
+        iserver = self.server.iserver
+        clock = getattr(iserver, "time_task", None)
+        if clock is not None and not clock.done():
+            clock.cancel()
+            with contextlib.suppress(asyncio.CancelledError):
+                await clock
+        iserver.time_task = None
+        await self.server.stop()
 
     async def __aenter__(self) -> CellGateway:
         await self.start()

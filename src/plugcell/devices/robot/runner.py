@@ -39,6 +39,7 @@ from plugcell.pdl import (
     BUILTIN_LIBRARY,
     Execution,
     ExecutionState,
+    Location,
     Motion,
     Program,
     ProgramError,
@@ -48,7 +49,8 @@ from plugcell.pdl.conversion import data_updates
 from plugcell.pdl.interfaces import Channel
 from plugcell.pdl.predefined import EXT_DATA_MAX
 
-__all__ = ["TEXT_MAX", "ProgramRunner", "RunError", "RunInfo", "resolve_program"]
+__all__ = ["TEXT_MAX", "ProgramRunner", "RunError", "RunInfo", "is_program_name",
+           "resolve_program"]
 
 log = logging.getLogger("plugcell.devices.robot.runner")
 
@@ -74,6 +76,14 @@ class RunInfo:
     message: str = ""
     ended: threading.Event = field(default_factory=threading.Event)
     """Set once the ENDED event has been emitted."""
+    said: list[str] = field(default_factory=list)
+    """The program's last non-blank console line (at most one item): why a program that
+    deactivated itself did so — the shipped programs write it before their DEACTIVATE."""
+
+
+def is_program_name(ref: str) -> bool:
+    """True for a program's name in the library (``calibration``), False for a path."""
+    return bool(_PROGRAM_NAME.match(ref.strip()))
 
 
 def resolve_program(ref: str, library: Sequence[Path] = ()) -> Path:
@@ -81,10 +91,10 @@ def resolve_program(ref: str, library: Sequence[Path] = ()) -> Path:
     ref = ref.strip()
     if not ref:
         raise RunError("no program given")
-    if not _PROGRAM_NAME.match(ref):
+    if not is_program_name(ref):
         path = Path(ref).expanduser()
         if not path.is_file():
-            raise RunError(f"no such program file: {ref}")
+            raise RunError(_missing_file(ref, path))
         return path
     dirs = [*library, BUILTIN_LIBRARY]
     for folder in dirs:
@@ -94,6 +104,45 @@ def resolve_program(ref: str, library: Sequence[Path] = ()) -> Path:
                 return candidate
     looked = ", ".join(str(d) for d in dirs)
     raise RunError(f"no program {ref!r} in the program library (looked in {looked})")
+
+
+def _failed_answer(execution: Execution) -> str:
+    """``ext_cmd_message`` if the program's last request failed (``ext_cmd_result`` FALSE)."""
+    try:
+        ok = execution.get_variable("ext_cmd_result")
+        message = execution.get_variable("ext_cmd_message")
+    except KeyError:  # pragma: no cover - predefined in every program
+        return ""
+    return str(message) if ok is False and message else ""
+
+
+def _missing_file(ref: str, path: Path) -> str:
+    """Why ``ref`` is no program file, saying where the controller looked."""
+    where = path.absolute()
+    if path.is_absolute():
+        what = "no such file" if not path.exists() else "not a file"
+        return f"no such program file: {ref} ({what})"
+    return (f"no such program file: {ref} (looked for {where}: a relative path is taken from "
+            f"the robot controller's folder {Path.cwd()}, not the caller's; give an absolute "
+            "path, or put the program in the program library (library=DIR) and give its name)")
+
+
+def _deactivated(said: Sequence[str], answer: str, where: Location | None) -> str:
+    """Why a program ended before its END, and where: ENDED's text for ``DEACTIVATED``.
+
+    A program's own ``DEACTIVATE`` is how PDL programs give up — the shipped ones after a
+    failed step, the reason written to the console first; the thesis's EXAMPLE after a
+    failed answer, silently.  So the text is what the program said last, else the failed
+    answer it got last, then the statement's place: ``calibration: Move failed: TRACKER
+    Move: beam not locked (DEACTIVATE at …/calibration.pdl:35:5)``, ``after the failed
+    answer 'TOOL Drill: the drill broke' (DEACTIVATE at …/example.pdl:42:5)``.
+    """
+    place = f"DEACTIVATE at {where}" if where is not None else "DEACTIVATE"
+    if said:
+        return f"{said[-1]} ({place})"
+    if answer:
+        return f"after the failed answer {answer!r} ({place})"
+    return place
 
 
 def _clip(text: str) -> str:
@@ -152,6 +201,13 @@ class ProgramRunner:
             raise RunError(str(exc)) from None
         except OSError as exc:
             raise RunError(f"cannot read {path}: {exc.strerror or exc}") from None
+        said: list[str] = []  # the last console line, kept for a DEACTIVATE's message
+
+        def console(line: str) -> None:
+            if line.strip():
+                said[:] = [line.strip()]
+            self.events(Console(run, line))
+
         presets: dict[str, Any] = {}
         for name, text in (values or {}).items():
             try:
@@ -169,11 +225,11 @@ class ProgramRunner:
                 channel=self.channel,
                 clock=self.clock,
                 values=presets,
-                console=lambda line: self.events(Console(run, line)),
+                console=console,
             )
         except ProgramError as exc:
             raise RunError(str(exc)) from None
-        info = RunInfo(run, program.name, execution)
+        info = RunInfo(run, program.name, execution, said=said)
         with self._lock:
             if self._current is not None:  # raced with another start
                 raise RunError(f"program {self._current.program} is already running")
@@ -188,8 +244,12 @@ class ProgramRunner:
     def _watch(self, info: RunInfo) -> None:
         result = info.execution.join()
         assert result is not None
-        if result.state is ExecutionState.FINISHED:
-            info.state = "DEACTIVATED" if result.deactivated else "FINISHED"
+        if result.state is ExecutionState.FINISHED and result.deactivated:
+            info.state = "DEACTIVATED"
+            info.message = _deactivated(info.said, _failed_answer(info.execution),
+                                        result.location)
+        elif result.state is ExecutionState.FINISHED:
+            info.state = "FINISHED"
         elif result.state is ExecutionState.FAILED:
             info.state, info.message = "FAILED", str(result.error or "failed")
         else:

@@ -15,7 +15,8 @@ command         type        input → output         does
 ==============  ==========  =====================  ==========================================
 ACTIVATE        NoData      String[*]              run a program: ``[name or path,
                                                    "var=value", …]``; option ``Wait``: until
-                                                   it ends (Failed with its error)
+                                                   its END (Failed with its error, or
+                                                   why it stopped or deactivated itself)
 DEACTIVATE      NoData      String[1]              stop the program (``""``: whichever runs)
 ARM_POS         SingleData  → Double[6]            the controller's current position
 ARM_JNTP        SingleData  → Double[*]            the joint readings (degrees)
@@ -422,8 +423,23 @@ class RobotService(GenericDevice):
         finally:
             if self._run_waiters.get(run) is waiter:
                 del self._run_waiters[run]
-        if ended.state in ("FINISHED", "DEACTIVATED"):
-            return None
+        return self._outcome(ended)
+
+    @staticmethod
+    def _outcome(ended: ProgramEnded) -> None:
+        """Completed (None) only for a program that ran to its END; DeviceError says why not.
+
+        A program's own ``DEACTIVATE`` ends it before its END — PDL programs give up that
+        way (the shipped ones after a failed step, the reason on the console), so it is a
+        failure: ``program CALIBRATION deactivated itself: calibration: Move failed: …
+        (DEACTIVATE at …/calibration.pdl:35:5)``.
+        """
+        match ended.state:
+            case "FINISHED":
+                return None
+            case "DEACTIVATED":
+                raise DeviceError(f"program {ended.program} deactivated itself: "
+                                  f"{ended.message or 'DEACTIVATE before its END'}")
         raise DeviceError(f"program {ended.program} {ended.state.lower()}: {ended.message}")
 
     async def _joint_increment(self, option: str, data: Any) -> np.ndarray:

@@ -60,6 +60,12 @@ def _beam_message(exc: twin.BeamNotLockedError) -> str:
         .replace("; call point_at", "; send Move first")
     )
 
+#: Move or a measurement with nothing to lock on: the simulated world's reflectors are
+#: the T-MACs of the simulated robots (their robot services publish them), so say so.
+NO_REFLECTOR = ("beam not locked: no reflector in the cell to lock on — the simulated "
+                "reflectors are the simulated robots' T-MACs: start a robot in this cell "
+                "first (plugcell serve robot --param sim=true)")
+
 
 class SimulatedTrackerDriver:
     """The tracker model behind the TrackerDriver seam (module docstring).
@@ -115,9 +121,7 @@ class SimulatedTrackerDriver:
             nearest = self._nearest(world)
             radius = self.model.spec.capture_radius_m
             if nearest is None:
-                raise BeamNotLockedError(
-                    "beam not locked: no reflector in the cell to lock on", reason="capture"
-                )
+                raise BeamNotLockedError(NO_REFLECTOR, reason="capture")
             offset, state = nearest
             if offset > radius:
                 raise BeamNotLockedError(
@@ -153,9 +157,7 @@ class SimulatedTrackerDriver:
                 )
             nearest = self._nearest(world)
             if nearest is None:
-                raise BeamNotLockedError(
-                    "beam not locked: no reflector in the cell to lock on", reason="capture"
-                )
+                raise BeamNotLockedError(NO_REFLECTOR, reason="capture")
             state = nearest[1]
             six_dof = state.kind == "tmac"
             pose = state.matrix()
