@@ -231,6 +231,14 @@ def _summary(d: dict[str, Any]) -> str:
             lines.append(f"  arm-shape stage (joint-1 frame, {', '.join(sh['features'])}): "
                          f"{sh['physical_mm']:.3f} -> {sh['cv_mm']:.3f} mm, applied where the "
                          "first stage is not")
+    pri = d.get("settings", {}).get("prior")
+    if pri:
+        lines.append(f"  prior: the earlier calibration of {pri['robot']}, BASE + PROBE "
+                     f"re-identified ('before' above), {len(pri['regularised'])} parameters "
+                     f"pulled toward it with its σ × τ = {pri['scale']:g} "
+                     f"({pri['scale_chosen_by']})"
+                     + ("; its learned layer kept (its correction an offset of the fit)"
+                        if pri["layer_offset"] else ""))
     if hv:
         lines.append(f"  validation  physical {hv['physical']['mean_mm']:7.3f} mm, hybrid "
                      f"{hv['hybrid']['mean_mm']:7.3f} mm ({hv['fallbacks']} of {hv['poses']} "
