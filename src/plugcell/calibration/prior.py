@@ -158,7 +158,18 @@ class Prior:
 
 def frame_keys(model: ErrorModel) -> list[str]:
     """The keys of BASE and PROBE (with the flange link's, which PROBE absorbs): the
-    parameters a new set-up re-identifies freely (as :func:`~.identify.refit_base`)."""
+    parameters a new set-up re-identifies freely (as :func:`~.identify.refit_base`).
+
+    Parameters
+    ----------
+    model : ErrorModel
+        The model.
+
+    Returns
+    -------
+    list of str
+        Its frame keys (a0, b0, α0, β0, θ0, d0; the flange's θ, d, a, α; PROBE's θ, d).
+    """
     s = model.structure
     fl = s.desc.flange
     keys = [f"{f}{s.base_name}" for f in ("a", "b", "alpha", "beta", "theta", "d")]
