@@ -194,6 +194,29 @@ def goal(d: dict[str, Any]) -> list[str]:
     return out
 
 
+def verdict(d: dict[str, Any]) -> str:
+    """The goal, judged from the table: met where (iii) is ≥ 20 % below both (i) and (ii)
+    at some n ≤ 100 on B and D, and never above the better of them on C."""
+    rows = d["result"]["series"]
+    small = [n for n in d["sizes"] if n <= 100]
+    parts = []
+    for key in ("B", "D"):
+        if key in rows:
+            r = rows[key]
+            ok = [n for n in small if r["prior"][str(n)]
+                  <= 0.8 * min(r["alone"][str(n)], r["moved"][str(n)])]
+            parts.append(f"{key}: " + (f"met at n = {', '.join(map(str, ok))}" if ok
+                                       else "not met at any n ≤ 100"))
+    if "C" in rows:
+        r = rows["C"]
+        worse = [n for n in d["sizes"] if r["prior"][str(n)]
+                 > min(r["alone"][str(n)], r["moved"][str(n)])]
+        parts.append("C: " + ("never worse than (i) or (ii)" if not worse else
+                              "worse than the better of (i) and (ii) at n = "
+                              + ", ".join(map(str, worse))))
+    return "; ".join(parts) + "."
+
+
 def plot(d: dict[str, Any], path: Path) -> None:
     import matplotlib
 
@@ -209,6 +232,7 @@ def plot(d: dict[str, Any], path: Path) -> None:
             ax.plot(d["sizes"], [row[m][str(n)] for n in d["sizes"]], style, label=LABELS[m])
         ax.set_xscale("log")
         ax.set_xticks(d["sizes"], [str(n) for n in d["sizes"]])
+        ax.minorticks_off()
         ax.set_title(f"series {key} (held-out cells)")
         ax.set_xlabel("new poses n")
         ax.set_ylabel("mean position error (mm)")
@@ -255,7 +279,7 @@ campaign's cell). Mean position error over all held-out poses, mm.
 
 ## The goal (≥ 20 % lower than (i) and (ii) with ≤ 100 new poses on B and D; never worse on C)
 
-""" + "\n".join(f"* {g}" for g in goal(d)) + "\n"
+""" + "\n".join(f"* {g}" for g in goal(d)) + f"\n\n**Verdict**: {verdict(d)}\n"
     path.write_text(text, encoding="utf-8")
 
 
@@ -270,7 +294,17 @@ def main() -> int:
                     help="A's layer: one hyper-parameter candidate, 100 trees")
     ap.add_argument("--out", type=Path,
                     default=ROOT / "docs" / "results" / "short-campaign-ur10.md")
+    ap.add_argument("--from-json", type=Path, metavar="FILE",
+                    help="re-render the page from the JSON a previous run wrote (no "
+                         "computation; the plot is redrawn)")
     args = ap.parse_args()
+    if args.from_json is not None:
+        d = json.loads(args.from_json.read_text(encoding="utf-8"))
+        plot(d, args.out.with_suffix(".png"))
+        write_page(d, args.out, args.out.with_suffix(".png").name)
+        print(table(d))
+        print(verdict(d))
+        return 0
     data = args.data or find_data()
     if data is None or not data.is_dir():
         print("IPA robot-accuracy data not found (../shared/data/ipa-robot-accuracy): skipped")
@@ -299,6 +333,7 @@ def main() -> int:
          "result": result}
     print(table(d))
     print("\n".join(goal(d)))
+    print(verdict(d))
     args.out.parent.mkdir(parents=True, exist_ok=True)
     image = args.out.with_suffix(".png")
     plot(d, image)
