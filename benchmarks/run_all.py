@@ -75,6 +75,9 @@ def main(argv: list[str]) -> int:
         ("learned residual layer on the IPA UR10 (skipped without the data)",
          [sys.executable, str(HERE / "residual_ur10.py"),
           *([] if full else ["--quick", "--out", str(scratch / "ur10-residual.md")])]),
+        *([("a robot moved: short campaign with a prior, IPA UR10 (issue 36; skipped "
+             "without the data)", [sys.executable, str(HERE / "short_campaign_ur10.py")])]
+          if full else []),
         ("KUKA RSI: answer latency at 250 Hz beside a bare UDP echo (issue 37)",
          [sys.executable, str(HERE / "rsi_latency.py"),
           "--seconds", "600" if full else "20"]),

@@ -86,3 +86,32 @@ def test_durability_floor_writes_its_rounds_and_plot(tmp_path: Path) -> None:
                                 str(tmp_path / "x.png")],
                                env=env, capture_output=True, text=True, timeout=60)
     assert not_a_run.returncode == 2 and "is not a run of this script" in not_a_run.stderr
+
+
+IPA_DATA = next((p / "shared" / "data" / "ipa-robot-accuracy" for p in BENCHMARKS.parents[1:3]
+                 if (p / "shared" / "data" / "ipa-robot-accuracy").is_dir()), BENCHMARKS / "none")
+
+
+def test_short_campaign_skips_cleanly_without_the_data(tmp_path: Path) -> None:
+    """short_campaign_ur10.py (issue 36) says so and exits 0 where the data are absent."""
+    done = subprocess.run([sys.executable, str(BENCHMARKS / "short_campaign_ur10.py"),
+                           "--data", str(tmp_path / "none"), "--out", str(tmp_path / "x.md")],
+                          capture_output=True, text=True, timeout=120)
+    assert done.returncode == 0, done.stderr[-2000:]
+    assert "data not found" in done.stdout and not (tmp_path / "x.md").exists()
+
+
+@pytest.mark.slow
+@pytest.mark.skipif(not IPA_DATA.is_dir(), reason="IPA robot-accuracy data not present")
+def test_short_campaign_runs_on_the_ipa_data(tmp_path: Path) -> None:
+    """One series, one campaign size, two folds: the table, the goal lines, the page and
+    the plot."""
+    out = tmp_path / "sc.md"
+    done = subprocess.run([sys.executable, str(BENCHMARKS / "short_campaign_ur10.py"),
+                           "--quick", "--series", "D", "--sizes", "25", "--folds", "2",
+                           "--selection", "random", "--out", str(out)],
+                          capture_output=True, text=True, timeout=900)
+    assert done.returncode == 0, done.stderr[-2000:]
+    assert "| D | (iii) --prior A" in done.stdout and "D, n = 25: prior" in done.stdout
+    assert "## The goal" in out.read_text()
+    assert out.with_suffix(".png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"

@@ -17,7 +17,8 @@ Pure math (numpy, SI units), no I/O, no framework imports; files go through
   :mod:`plugcell.io.calibration_report`;
 * :mod:`.configs` — the five models of 8.2.3; :mod:`.simulation` — the check of 8.1;
 * :mod:`.planning` — choosing the poses of a campaign (I/D/A/E/O-optimal, visible);
-* :mod:`.validity` — the region a calibration was identified on, and checks against it.
+* :mod:`.validity` — the region a calibration was identified on, and checks against it;
+* :mod:`.prior` — a short campaign in a new set-up with an earlier calibration as prior (MAP).
 """
 
 from plugcell.calibration.configs import MODELS, ModelConfig, model_config

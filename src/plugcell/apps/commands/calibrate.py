@@ -3,7 +3,7 @@
     plugcell calibrate --robot NAME|FILE --model 1..5|NAME --data CAL.csv
                        [--validate VAL.csv] [--rot rpy|zyz|xyz] [--payload-kg M]
                        [--out PARAMS.json] [--json] [--report REPORT.html]
-                       [--residuals RES.json]
+                       [--residuals RES.json] [--prior EARLIER.json [--prior-scale TAU]]
 
 A file of joint readings and tracker measurements is all it needs: BASE and
 PROBE are estimated from the data unless given (``--base``/``--probe``, e.g. from
@@ -12,6 +12,12 @@ the appendix-D procedures).  ``--residuals`` writes the residual of every pose
 the 3-D view of the controller UI.  Progress goes to stderr; ``--json`` prints the
 PARAMS.json object to stdout.  Bad files, unknown robots, too few poses for the
 model and a diverging fit end with a clear message and exit code 2.
+
+``--prior EARLIER.json``: the robot was calibrated before (another set-up) and moved; a
+short campaign here identifies BASE and PROBE freely and the earlier calibration's other
+parameters with regularisation toward it (MAP, :mod:`plugcell.calibration.prior`), the
+earlier learned layer kept as an offset.  ``--residual-prior`` is a different thing (a new
+learned layer on top of the earlier layer's arm-shape stage, ≥ 200 poses): kept as it is.
 """
 
 from __future__ import annotations
@@ -99,6 +105,14 @@ def configure(p: argparse.ArgumentParser) -> None:
                         "calibration of this robot with a learned layer (its PARAMS.json "
                         "and side file), e.g. one made in another set-up: a short campaign "
                         "here then adds to what that one taught (docs/calibration.md)")
+    p.add_argument("--prior", type=Path, metavar="EARLIER.json",
+                   help="the robot moved to a new set-up: identify this (short) campaign with "
+                        "an earlier calibration of it (its PARAMS.json, with its learned layer "
+                        "if it has one) as a prior — BASE and PROBE free, the other parameters "
+                        "pulled toward the earlier values by their σ (docs/calibration.md)")
+    p.add_argument("--prior-scale", type=float, metavar="TAU",
+                   help="with --prior: inflate the earlier σ by TAU ≥ 1 (default: chosen by "
+                        "grouped cross-validation over the campaign's workspace cells)")
     p.add_argument("--quiet", action="store_true", help="no progress on stderr")
     p.set_defaults(func=_run)
 
@@ -230,6 +244,14 @@ def _summary(d: dict[str, Any]) -> str:
             lines.append(f"  arm-shape stage (joint-1 frame, {', '.join(sh['features'])}): "
                          f"{sh['physical_mm']:.3f} -> {sh['cv_mm']:.3f} mm, applied where the "
                          "first stage is not")
+    pri = d.get("settings", {}).get("prior")
+    if pri:
+        lines.append(f"  prior: the earlier calibration of {pri['robot']}, BASE + PROBE "
+                     f"re-identified ('before' above), {len(pri['regularised'])} parameters "
+                     f"pulled toward it with its σ × τ = {pri['scale']:g} "
+                     f"({pri['scale_chosen_by']})"
+                     + ("; its learned layer kept (its correction an offset of the fit)"
+                        if pri["layer_offset"] else ""))
     if hv:
         lines.append(f"  validation  physical {hv['physical']['mean_mm']:7.3f} mm, hybrid "
                      f"{hv['hybrid']['mean_mm']:7.3f} mm ({hv['fallbacks']} of {hv['poses']} "
@@ -260,13 +282,78 @@ def _prior_stage(path: Path, args: argparse.Namespace) -> Any:
     return layer.shape
 
 
+def _prior(path: Path, args: argparse.Namespace) -> Any:
+    """The earlier calibration ``path`` (--prior) as a :class:`~plugcell.calibration.prior.Prior`,
+    read with this command's robot: another robot, another model, a file without the
+    earlier σ or a layer that does not load are refused, naming the mismatch."""
+    import numpy as np
+
+    from plugcell.apps.cli import CommandError
+    from plugcell.apps.commands.files import read_calibration
+    from plugcell.calibration import CalibrationError, model_config
+    from plugcell.calibration.prior import Prior
+    from plugcell.io.residual_models import ResidualFileError, load_residual
+
+    d, result = read_calibration(path, args)
+    try:
+        cfg = model_config(args.model)
+    except ValueError as exc:
+        raise CommandError(str(exc)) from None
+    if cfg.number != result.config.number:
+        raise CommandError(f"--prior {path}: a calibration with model {result.config.number} "
+                           f"({result.config.name}), not model {cfg.number} ({cfg.name}); give "
+                           f"--model {result.config.number}")
+    rows = {r.get("key"): r for r in d.get("parameters", []) if isinstance(r, dict)}
+    try:
+        sigma = np.array([float(rows[k]["sigma"]) for k in result.keys])
+        sigma2 = float(d["sigma2"])
+    except (KeyError, TypeError, ValueError) as exc:
+        raise CommandError(f"--prior {path}: the earlier σ are missing ({exc}); calibrate "
+                           "it again with this plugcell") from None
+    layer = None
+    entry = d.get("residual_model")
+    if entry:
+        try:
+            layer = load_residual(entry, path, robot=result.robot, model=result.model)
+        except ResidualFileError as exc:
+            raise CommandError(f"--prior: {exc}") from None
+    try:
+        return Prior(result.robot, result.config, result.model, tuple(result.keys), sigma,
+                     math.sqrt(sigma2) if sigma2 > 0 else math.nan, layer)
+    except CalibrationError as exc:
+        raise CommandError(f"--prior {path}: {exc}") from None
+
+
+def _prior_conflicts(args: argparse.Namespace) -> None:
+    """Refuse options that mean nothing with --prior (the earlier model decides them)."""
+    from plugcell.apps.cli import CommandError
+
+    if args.prior is None:
+        if args.prior_scale is not None:
+            raise CommandError("--prior-scale needs --prior EARLIER.json")
+        return
+    given = [o for o, on in (("--residual-model learned", args.residual_model != "none"),
+                             ("--residual-prior", args.residual_prior is not None),
+                             ("--base", args.base is not None),
+                             ("--probe", args.probe is not None),
+                             ("--harmonics", args.harmonics != 0),
+                             ("--thermal", args.thermal),
+                             ("--loss", args.loss != "linear"),
+                             ("--method", args.method != "gauss-newton")) if on]
+    if given:
+        raise CommandError(f"--prior: {', '.join(given)} cannot be combined with it (the "
+                           "earlier calibration decides the model and keeps its layer; "
+                           "BASE and PROBE are re-identified from the campaign)")
+    if args.prior_scale is not None and not (math.isfinite(args.prior_scale)
+                                             and args.prior_scale >= 1):
+        raise CommandError(f"--prior-scale must be a number ≥ 1, got {args.prior_scale}")
+
+
 def _run(args: argparse.Namespace) -> int:
     from plugcell.apps.cli import CommandError
-    from plugcell.apps.commands.robotargs import load_robot_of, robot_source_of
-    from plugcell.calibration import CalibrationError, Calibrator
+    from plugcell.apps.commands.robotargs import load_robot_of
+    from plugcell.calibration import CalibrationError
     from plugcell.calibration.residual_model import ResidualModelError
-    from plugcell.io.params import params_json, residuals_json
-    from plugcell.io.robot_schema import description_to_dict
 
     desc = load_robot_of(args)
     if args.payload_kg is not None and not (math.isfinite(args.payload_kg)
@@ -288,6 +375,7 @@ def _run(args: argparse.Namespace) -> int:
         raise CommandError(f"--residual-cell-m must be > 0, got {args.residual_cell_m}")
     if args.residual_prior is not None and args.residual_model != "learned":
         raise CommandError("--residual-prior needs --residual-model learned")
+    _prior_conflicts(args)
     if args.residual_model == "learned" and args.out is None:
         raise CommandError("--residual-model learned needs --out PARAMS.json: the layer is "
                            "saved beside it (PARAMS.residual.skops)")
@@ -314,19 +402,23 @@ def _run(args: argparse.Namespace) -> int:
         except ResidualModelError as exc:
             raise CommandError(f"--residual-model learned: {exc}") from None
     prior = None if args.residual_prior is None else _prior_stage(args.residual_prior, args)
+    earlier = None if args.prior is None else _prior(args.prior, args)
+    if earlier is not None and earlier.layer is not None and args.out is None:
+        raise CommandError("--prior with a learned layer needs --out PARAMS.json: the layer "
+                           "is saved beside it (PARAMS.residual.skops)")
     base = None if args.base is None else _frame(args.base, "base")
     probe = None if args.probe is None else _frame(args.probe, "probe")
     try:
-        cal = Calibrator(desc, args.model, base=base, probe=probe, method=args.method,
-                         loss=args.loss, max_iterations=args.max_iterations,
-                         **({} if args.loss_scale is None else {"loss_scale": args.loss_scale}),
-                         rotation_weight=args.rotation_weight,
-                         condition_limit=args.condition_limit, progress=progress,
-                         harmonics=args.harmonics, thermal=args.thermal)
-        result = cal.fit(data)
-        if learner is not None:
-            result = result.with_residual_model(learner.fit(result.model, data,
-                                                            robot=result.robot, prior=prior))
+        if earlier is not None:
+            from plugcell.calibration.prior import PriorCalibrator
+
+            result = PriorCalibrator(earlier, scale=args.prior_scale,
+                                     rotation_weight=args.rotation_weight,
+                                     max_iterations=args.max_iterations,
+                                     cell_size_m=args.residual_cell_m,
+                                     progress=progress).fit(data)
+        else:
+            result = _fit(args, desc, data, base, probe, prior, learner, progress)
         if val is not None:
             result = result.with_validation(
                 val, refit_base=args.validate_refit != "none",
@@ -335,6 +427,35 @@ def _run(args: argparse.Namespace) -> int:
                 refit_positions_only=args.refit_positions_only)
     except (CalibrationError, ResidualModelError) as exc:
         raise CommandError(str(exc)) from None
+    return _write(args, desc, data, val, result)
+
+
+def _fit(args: argparse.Namespace, desc: Any, data: Any, base: Any, probe: Any, prior: Any,
+         learner: Any, progress: Any) -> Any:
+    """The plain calibration (no --prior): the physical fit and, with ``learner`` (checked
+    against the poses before), its learned layer."""
+    from plugcell.calibration import Calibrator
+
+    cal = Calibrator(desc, args.model, base=base, probe=probe, method=args.method,
+                     loss=args.loss, max_iterations=args.max_iterations,
+                     **({} if args.loss_scale is None else {"loss_scale": args.loss_scale}),
+                     rotation_weight=args.rotation_weight,
+                     condition_limit=args.condition_limit, progress=progress,
+                     harmonics=args.harmonics, thermal=args.thermal)
+    result = cal.fit(data)
+    if learner is not None:
+        result = result.with_residual_model(learner.fit(result.model, data,
+                                                        robot=result.robot, prior=prior))
+    return result
+
+
+def _write(args: argparse.Namespace, desc: Any, data: Any, val: Any, result: Any) -> int:
+    """Write PARAMS.json, its layer, the report and the residuals; print the summary."""
+    from plugcell.apps.cli import CommandError
+    from plugcell.apps.commands.robotargs import robot_source_of
+    from plugcell.io.params import params_json, residuals_json
+    from plugcell.io.robot_schema import description_to_dict
+
     written = []
     side = None
     if result.residual_model is not None:

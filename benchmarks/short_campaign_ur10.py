@@ -1,0 +1,347 @@
+"""A robot moved to a new set-up: a short campaign with the earlier calibration as a prior
+(issue 36 part 2; IPA UR10 robot-accuracy data set, series A as the earlier set-up).
+
+Earlier set-up: series A, all 11 911 poses — thesis model 3 (serial + joint compliance from
+the published link masses) with its learned residual layer (``plugcell calibrate
+--residual-model learned``).  New set-ups: series B, D (the goal) and C (never worse).
+
+Protocol, for each of B, C, D: grouped 5-fold over the series' 0.4 m workspace cells
+(target position in the robot base frame).  In each fold a campaign of n poses is chosen
+among the training cells' poses — as ``plugcell plan --from`` chooses among poses already
+measured (I-optimal for model 3, :class:`~plugcell.calibration.planning.PosePlanner`), or
+with ``--selection random`` a seeded draw — and three methods identify on it:
+
+(i)   **alone**: model 3 calibrated on the campaign alone (``plugcell calibrate``);
+(ii)  **A moved**: A's physical model with BASE + PROBE re-identified on the campaign
+      (and, for the record, A's hybrid model moved the same way);
+(iii) **prior**: ``plugcell calibrate --prior A.json``
+      (:class:`~plugcell.calibration.prior.PriorCalibrator`: MAP toward A with A's layer's
+      correction as an offset, τ by grouped CV over the campaign's own cells).
+
+Each is scored on the held-out cells (never a campaign pose nor a neighbour in its cell):
+mean position error, mm.  Nothing is tuned on the held-out cells.
+
+    .venv/bin/python benchmarks/short_campaign_ur10.py [--data DIR] [--sizes 25,50,...]
+        [--series B,C,D] [--selection planned|random] [--quick]
+        [--out docs/results/short-campaign-ur10.md]
+
+Single-threaded (threadpoolctl).  Without the data folder it says so and exits 0.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import platform
+import sys
+import time
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from calibration_ur10 import ur10_toml
+from plugcell.calibration import CalibrationData, CalibrationError, Calibrator
+from plugcell.calibration.identify import refit_base
+from plugcell.calibration.planning import (
+    PosePlanner,
+    filter_candidates,
+    planning_keys,
+)
+from plugcell.calibration.prior import Prior, PriorCalibrator
+from plugcell.calibration.residual_model import (
+    DEFAULT_GRID,
+    ResidualLearner,
+    workspace_cells,
+)
+from plugcell.io.robots import load_robot
+from residual_ur10 import _without_temperature, find_data, load_sets
+
+ROOT = Path(__file__).resolve().parents[1]
+SIZES = (25, 50, 100, 200, 400)
+MODEL = "serial+gravity"
+METHODS = ("alone", "moved", "moved_hybrid", "prior")
+LABELS = {"alone": "(i) model 3 on the campaign alone",
+          "moved": "(ii) A's model, BASE + PROBE re-identified",
+          "moved_hybrid": "A's hybrid model, BASE + PROBE re-identified",
+          "prior": "(iii) --prior A (MAP + A's layer as offset)"}
+
+
+def _errors(d: CalibrationData, P: np.ndarray) -> np.ndarray:
+    return np.linalg.norm(d.positions - P[:, :3, 3], axis=1)
+
+
+def choose(model: Any, d: CalibrationData, pool: np.ndarray, n: int, selection: str,
+           rng: np.random.Generator) -> np.ndarray:
+    """``n`` of the poses ``pool`` of ``d``: as ``plan --from`` (I-optimal for model 3 at
+    A's geometry re-registered on the pool) or a seeded random draw."""
+    if n >= len(pool):
+        return pool
+    if selection == "random":
+        return rng.choice(pool, size=n, replace=False)
+    cands = filter_candidates(model, d.q[pool])
+    keys = planning_keys(model, np.unique(cands.payload_kg))
+    plan = PosePlanner(model, keys, criterion="I").plan(cands, n)
+    return pool[cands.source[plan.index]]
+
+
+def run(desc: Any, sets: dict[str, CalibrationData], series: str, sizes: tuple[int, ...],
+        selection: str, learner: ResidualLearner, folds: int = 5) -> dict[str, Any]:
+    from sklearn.model_selection import GroupKFold
+
+    t0 = time.perf_counter()
+    A = sets["A"]
+    resA = Calibrator(desc, MODEL).fit(A)
+    layer = learner.fit(resA.model, A, robot=desc.name)
+    resA = resA.with_residual_model(layer)
+    prior = Prior.from_result(resA)
+    print(f"A: model 3 {resA.calibration.position.norm.mean * 1e3:.3f} mm on its "
+          f"{len(A)} poses; layer CV {layer.cv.physical_mm:.3f} -> {layer.cv.hybrid_mm:.3f} mm "
+          f"({time.perf_counter() - t0:.0f} s)", flush=True)
+    out: dict[str, Any] = {"A": {"poses": len(A), "physical_mm": resA.calibration.position.norm
+                                 .mean * 1e3, "layer_cv_mm": [layer.cv.physical_mm,
+                                                              layer.cv.hybrid_mm]},
+                           "series": {}}
+    for s_no, key in enumerate(series):
+        d = sets[key]
+        moved_all = refit_base(resA.model, d, probe=True)
+        targets = (np.linalg.inv(moved_all.base()) @ moved_all.predict(d.q))[:, :3, 3]
+        groups = workspace_cells(targets, 0.4)
+        err = {m: {n: np.full(len(d), np.nan) for n in sizes} for m in METHODS}
+        taus: dict[int, list[float]] = {n: [] for n in sizes}
+        split = list(GroupKFold(n_splits=folds).split(targets, groups=groups))
+        for f_no, (tr, te) in enumerate(split):
+            test = d.subset(te)
+            rng_model = refit_base(resA.model, d.subset(tr), probe=True).with_references(
+                base=np.eye(4))
+            for n in sizes:
+                t1 = time.perf_counter()
+                rng = np.random.default_rng([s_no, f_no, n])
+                pick = choose(rng_model, d, tr, n, selection, rng)
+                camp = d.subset(pick)
+                try:
+                    alone = Calibrator(desc, MODEL).fit(camp)
+                    err["alone"][n][te] = _errors(test, alone.predict(test.q))
+                except CalibrationError as exc:
+                    print(f"    alone, n = {n}: {exc}", flush=True)
+                moved = refit_base(resA.model, camp, probe=True)
+                err["moved"][n][te] = _errors(test, moved.predict(test.q))
+                # A's hybrid moved: BASE + PROBE re-identified on the campaign with the
+                # layer's correction taken out, the layer's correction on the test poses
+                err["moved_hybrid"][n][te] = _hybrid_moved(resA, camp, test)
+                res = PriorCalibrator(prior).fit(camp)
+                taus[n].append(res.settings["prior"]["scale"])
+                P, _ = res.predict_hybrid(test.q)
+                err["prior"][n][te] = _errors(test, P)
+                print(f"  {key} fold {f_no + 1}, n = {n}: " + ", ".join(
+                    f"{m} {np.nanmean(err[m][n][te]) * 1e3:.3f}" for m in METHODS)
+                    + f" mm (τ = {taus[n][-1]:g}; {time.perf_counter() - t1:.0f} s)",
+                    flush=True)
+        row = {m: {str(n): float(np.nanmean(err[m][n]) * 1e3) for n in sizes}
+               for m in METHODS}
+        row["tau"] = {str(n): taus[n] for n in sizes}
+        row["cells"] = int(groups.max()) + 1
+        row["poses"] = len(d)
+        row["physical_all_mm"] = float(_errors(d, moved_all.predict(d.q)).mean() * 1e3)
+        out["series"][key] = row
+    out["elapsed_s"] = time.perf_counter() - t0
+    return out
+
+
+def _hybrid_moved(resA: Any, camp: CalibrationData, test: CalibrationData) -> np.ndarray:
+    """A's hybrid model with BASE + PROBE re-identified on the campaign (with the layer's
+    correction taken out, as :func:`hybrid_residuals`): its position errors on ``test``."""
+    from plugcell.calibration.residual_model import _remove_correction, hybrid_poses
+
+    layer = resA.residual_model
+    pred_c = layer.predict(camp.q)
+    phys = refit_base(resA.model, camp, probe=True)
+    hyb = refit_base(resA.model, _remove_correction(camp, phys.base()[:3, :3],
+                                                     pred_c.correction), probe=True)
+    pred = layer.predict(test.q)
+    return _errors(test, hybrid_poses(hyb.predict(test.q), hyb.base()[:3, :3],
+                                      pred.correction))
+
+
+def table(d: dict[str, Any]) -> str:
+    sizes = d["sizes"]
+    lines = ["| series | method | " + " | ".join(f"n = {n}" for n in sizes) + " |",
+             "|---|---|" + "---|" * len(sizes)]
+    for key, row in d["result"]["series"].items():
+        for m in METHODS:
+            cells = []
+            for n in sizes:
+                v = row[m][str(n)]
+                if m == "prior":
+                    best = min(row["alone"][str(n)], row["moved"][str(n)])
+                    cells.append(f"**{v:.3f}** ({(v / best - 1) * 100:+.0f}%)")
+                else:
+                    cells.append(f"{v:.3f}")
+            lines.append(f"| {key} | {LABELS[m]} | " + " | ".join(cells) + " |")
+    return "\n".join(lines)
+
+
+def goal(d: dict[str, Any]) -> list[str]:
+    out = []
+    for key, row in d["result"]["series"].items():
+        for n in d["sizes"]:
+            if n > 100:
+                continue
+            p, a, m = (row[x][str(n)] for x in ("prior", "alone", "moved"))
+            out.append(f"{key}, n = {n}: prior {p:.3f} mm, {(1 - p / a) * 100:.0f}% lower than "
+                       f"(i) {a:.3f}, {(1 - p / m) * 100:.0f}% lower than (ii) {m:.3f}")
+    return out
+
+
+def verdict(d: dict[str, Any]) -> str:
+    """The goal, judged from the table: met where (iii) is ≥ 20 % below both (i) and (ii)
+    at some n ≤ 100 on B and D, and never above the better of them on C."""
+    rows = d["result"]["series"]
+    small = [n for n in d["sizes"] if n <= 100]
+    parts = []
+    for key in ("B", "D"):
+        if key in rows:
+            r = rows[key]
+            ok = [n for n in small if r["prior"][str(n)]
+                  <= 0.8 * min(r["alone"][str(n)], r["moved"][str(n)])]
+            parts.append(f"{key}: " + (f"met at n = {', '.join(map(str, ok))}" if ok
+                                       else "not met at any n ≤ 100"))
+    if "C" in rows:
+        r = rows["C"]
+        worse = [n for n in d["sizes"] if r["prior"][str(n)]
+                 > min(r["alone"][str(n)], r["moved"][str(n)])]
+        parts.append("C: " + ("never worse than (i) or (ii)" if not worse else
+                              "worse than the better of (i) and (ii) at n = "
+                              + ", ".join(map(str, worse))))
+    return "; ".join(parts) + "."
+
+
+def plot(d: dict[str, Any], path: Path) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    series = list(d["result"]["series"])
+    fig, axes = plt.subplots(1, len(series), figsize=(4.2 * len(series), 3.6), squeeze=False)
+    for ax, key in zip(axes[0], series, strict=True):
+        row = d["result"]["series"][key]
+        for m, style in (("alone", "s--"), ("moved", "o:"), ("moved_hybrid", "x:"),
+                         ("prior", "D-")):
+            ax.plot(d["sizes"], [row[m][str(n)] for n in d["sizes"]], style, label=LABELS[m])
+        ax.set_xscale("log")
+        ax.set_xticks(d["sizes"], [str(n) for n in d["sizes"]])
+        ax.minorticks_off()
+        ax.set_title(f"series {key} (held-out cells)")
+        ax.set_xlabel("new poses n")
+        ax.set_ylabel("mean position error (mm)")
+        ax.grid(alpha=0.3)
+    axes[0][0].legend(fontsize=7)
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+
+
+def write_page(d: dict[str, Any], path: Path, image: str | None) -> None:
+    r = d["result"]
+    text = f"""# A robot moved to a new set-up: a short campaign with a prior (UR10, IPA data)
+
+Generated by `benchmarks/short_campaign_ur10.py {' '.join(d['argv'])}` (do not edit by hand);
+{d['machine']}, shared 2-core AMD EPYC VM, single-threaded, {r['elapsed_s']:.0f} s.
+
+Earlier set-up: series A ({r['A']['poses']} poses), model 3 (serial + joint compliance from the
+published link masses): {r['A']['physical_mm']:.3f} mm on its own poses; its learned layer
+(grouped CV on A: {r['A']['layer_cv_mm'][0]:.3f} → {r['A']['layer_cv_mm'][1]:.3f} mm).
+New set-ups: series {', '.join(r['series'])}.
+
+## Protocol
+
+Grouped 5-fold over each series' 0.4 m workspace cells. In each fold a campaign of n poses is
+chosen among the training cells' poses ({d['selection_text']}); the three methods identify
+on it and the held-out cells are predicted (never a campaign pose, never a pose in a
+campaign's cell). Mean position error over all held-out poses, mm.
+
+* (i) model 3 calibrated on the campaign alone (`plugcell calibrate --model 3`);
+* (ii) A's model with BASE + PROBE re-identified on the campaign (and A's hybrid model,
+  moved the same way, for the record);
+* (iii) `plugcell calibrate --prior A.json`: BASE and PROBE free, A's other 34-parameter
+  values pulled toward A by λ_k = σ̂_A / (τ σ_k) (MAP, docs/calibration.md), A's learned
+  layer kept and its correction taken out of the campaign before the fit; τ chosen by
+  grouped CV over the campaign's own cells (never the held-out cells). In brackets: the
+  change against the better of (i) and (ii).
+
+{table(d)}
+
+{'![error against the number of new poses](' + image + ')' if image else ''}
+
+τ chosen per fold: {json.dumps({k: v['tau'] for k, v in r['series'].items()})}
+
+## The goal (≥ 20 % lower than (i) and (ii) with ≤ 100 new poses on B and D; never worse on C)
+
+""" + "\n".join(f"* {g}" for g in goal(d)) + f"\n\n**Verdict**: {verdict(d)}\n"
+    path.write_text(text, encoding="utf-8")
+
+
+def main() -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--data", type=Path, default=None)
+    ap.add_argument("--sizes", default=",".join(str(n) for n in SIZES))
+    ap.add_argument("--series", default="BCD")
+    ap.add_argument("--selection", choices=("planned", "random"), default="planned")
+    ap.add_argument("--folds", type=int, default=5)
+    ap.add_argument("--quick", action="store_true",
+                    help="A's layer: one hyper-parameter candidate, 100 trees")
+    ap.add_argument("--out", type=Path,
+                    default=ROOT / "docs" / "results" / "short-campaign-ur10.md")
+    ap.add_argument("--from-json", type=Path, metavar="FILE",
+                    help="re-render the page from the JSON a previous run wrote (no "
+                         "computation; the plot is redrawn)")
+    args = ap.parse_args()
+    if args.from_json is not None:
+        d = json.loads(args.from_json.read_text(encoding="utf-8"))
+        plot(d, args.out.with_suffix(".png"))
+        write_page(d, args.out, args.out.with_suffix(".png").name)
+        print(table(d))
+        print(verdict(d))
+        return 0
+    data = args.data or find_data()
+    if data is None or not data.is_dir():
+        print("IPA robot-accuracy data not found (../shared/data/ipa-robot-accuracy): skipped")
+        return 0
+    import scipy.linalg  # noqa: F401
+    import sklearn.ensemble  # noqa: F401
+    from threadpoolctl import threadpool_limits
+
+    sizes = tuple(int(x) for x in args.sizes.split(","))
+    series = [s for s in args.series.replace(",", "") if s in "BCD"]
+    kw: dict[str, Any] = ({"grid": DEFAULT_GRID[1:2], "trees": 100} if args.quick
+                          else {"grid": (DEFAULT_GRID[1], DEFAULT_GRID[2]), "trees": 200})
+    work = Path("/tmp/plugcell-short-campaign")
+    work.mkdir(parents=True, exist_ok=True)
+    (work / "ur10_masses.toml").write_text(ur10_toml(masses=True), encoding="utf-8")
+    desc = load_robot(work / "ur10_masses.toml")
+    sets = {k: _without_temperature(v) for k, v in load_sets(data).items()}
+    with threadpool_limits(1):
+        result = run(desc, sets, "".join(series), sizes, args.selection,
+                     ResidualLearner(**kw), folds=args.folds)
+    d = {"argv": sys.argv[1:], "sizes": list(sizes), "selection": args.selection,
+         "selection_text": "I-optimal for model 3, as `plugcell plan --from` chooses among "
+                           "poses already measured" if args.selection == "planned"
+                           else "a seeded random draw",
+         "machine": f"{platform.machine()}, Python {platform.python_version()}",
+         "result": result}
+    print(table(d))
+    print("\n".join(goal(d)))
+    print(verdict(d))
+    args.out.parent.mkdir(parents=True, exist_ok=True)
+    image = args.out.with_suffix(".png")
+    plot(d, image)
+    write_page(d, args.out, image.name)
+    args.out.with_suffix(".json").write_text(json.dumps(d, indent=1), encoding="utf-8")
+    print(f"wrote {args.out}, {image.name}")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

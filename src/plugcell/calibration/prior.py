@@ -1,0 +1,488 @@
+"""A robot moved to a new set-up: a short campaign identified with the earlier calibration as
+a prior (maximum a posteriori, Tikhonov regularisation toward the prior).
+
+The earlier calibration (set-up A: geometry, compliance, its learned layer) is a prior for
+the robot in the new set-up.  A short campaign there identifies what it can determine:
+
+* BASE and PROBE (the tracker and the target moved): free, no prior;
+* every other parameter the earlier calibration identified, pulled toward its earlier
+  value by its earlier uncertainty;
+* the learned layer: the earlier layer is kept and its correction taken out of the new
+  measurements *before* the physical fit (an offset), so the physical parameters absorb
+  what differs in the new set-up and the layer what the physics cannot express.  A
+  short campaign (≤ 100 poses, a few workspace cells) is too small to fit trees of its
+  own; re-learning the layer needs a larger campaign (``plugcell calibrate
+  --residual-model learned``, docs/results/ur10-residual.md (g)).
+
+The problem (MAP with Gaussian measurement noise ``σ_y`` per residual row and a Gaussian
+prior ``N(x_p, (τ σ_k)²)`` on each regularised parameter)::
+
+    x̂ = argmin_x  ‖W (y − f(x))‖² + ‖Λ (x − x_p)‖²,    Λ = diag(λ_k),
+    λ_k = σ_y / (τ σ_k)   for the regularised parameters,   λ_k = 0 for BASE and PROBE,
+
+``y − f(x)`` the pose residuals (eq. 6.23; metres and radians, orientation rows weighed
+by ``W = diag(1, 1, 1, w, w, w)``), ``σ_k`` the earlier calibration's standard deviation
+of parameter ``k`` (eq. 8.5), ``σ_y = √σ̂²`` its residual standard deviation (eq. 8.3),
+and ``τ ≥ 1`` an inflation: eq. 8.5 assumes independent pose errors, which the residuals
+of a real robot are not (the σ are optimistic), and a robot moved to another set-up
+differs from the earlier one by more than the earlier fit's noise.  ``τ`` is chosen by
+grouped cross-validation over the campaign's own workspace cells (the held-out cells'
+mean position error; never a pose outside the campaign) among :data:`SCALES`, or given.
+
+Gauss–Newton on the augmented system: with the stacked residual
+``F(x) = [W (y − f(x)); Λ (x_p − x)]`` and its Jacobian ``∂F/∂x = −[W H; Λ]``
+(``H = ∂f/∂x``, the analytic identification Jacobian), each step is
+``Δx = argmin ‖[W H; Λ] Δx − F(x)‖`` (eq. 4.8 on the augmented rows), halved while it
+raises the cost.  The posterior covariance reported is ``σ̂² (HᵀWᵀWH + ΛᵀΛ)⁻¹``.
+
+Limits: without the earlier layer the result is the physical MAP alone; directions of
+the frames the campaign does not determine stay where the re-registration left them
+(:mod:`.determinacy`).
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, replace
+
+import numpy as np
+from numpy.typing import NDArray
+
+from plugcell.calibration.configs import ModelConfig
+from plugcell.calibration.data import CalibrationData
+from plugcell.calibration.identifiability import analyse
+from plugcell.calibration.identify import (
+    BACKTRACK_STEPS,
+    CalibrationError,
+    DivergenceError,
+    _jacobian_rows,
+    _Problem,
+    _residual_rows,
+    refit_base,
+)
+from plugcell.calibration.jacobian import identification_jacobian
+from plugcell.calibration.linalg import least_squares
+from plugcell.calibration.model import ErrorModel
+from plugcell.calibration.residual_model import (
+    LearnedResidual,
+    _remove_correction,
+    calibration_fingerprint,
+    workspace_cells,
+)
+from plugcell.calibration.result import CalibrationResult, IterationRecord
+from plugcell.calibration.statistics import PoseResiduals, parameter_statistics
+from plugcell.calibration.validity import ValidityRegion
+
+Array = NDArray[np.float64]
+
+#: Candidate inflations τ of the prior's σ, chosen by grouped CV over the campaign's cells.
+SCALES: tuple[float, ...] = (1.0, 3.0, 10.0, 30.0, 100.0, 300.0, 1000.0)
+#: τ used when the campaign covers fewer than 2 workspace cells (no CV possible).
+DEFAULT_SCALE = 10.0
+#: Workspace cell edge (m) grouping the campaign's poses for the choice of τ.
+CELL_SIZE_M = 0.4
+
+__all__ = ["CELL_SIZE_M", "DEFAULT_SCALE", "SCALES", "Prior", "PriorCalibrator",
+           "augmented_residual", "frame_keys"]
+
+
+@dataclass(frozen=True, eq=False)
+class Prior:
+    """The earlier calibration used as a prior.
+
+    Attributes
+    ----------
+    robot : str
+        Robot name of the earlier calibration.
+    config : ModelConfig
+        Its model (one of the five, :mod:`.configs`).
+    model : ErrorModel
+        Its identified model (values in each parameter's unit, frames in m).
+    keys : tuple of str
+        The parameters it identified.
+    sigma : (k,) array
+        Their standard deviations σ_k (eq. 8.5), in each parameter's unit, ``keys`` order.
+    sigma_y : float, m
+        Its residual standard deviation per residual row, ``√σ̂²`` (eq. 8.3).
+    layer : LearnedResidual or None
+        Its learned residual layer, if any.
+    """
+
+    robot: str
+    config: ModelConfig
+    model: ErrorModel
+    keys: tuple[str, ...]
+    sigma: Array
+    sigma_y: float
+    layer: LearnedResidual | None = None
+
+    def __post_init__(self) -> None:
+        s = np.asarray(self.sigma, float)
+        if s.shape != (len(self.keys),):
+            raise CalibrationError(f"prior: {s.size} σ for {len(self.keys)} parameters")
+        if not (math.isfinite(self.sigma_y) and self.sigma_y > 0):
+            raise CalibrationError(f"prior: the residual σ̂ must be a number > 0, got "
+                                   f"{self.sigma_y!r} (a PARAMS.json without 'sigma2'?)")
+
+    @classmethod
+    def from_result(cls, result: CalibrationResult,
+                    layer: LearnedResidual | None = None) -> Prior:
+        """The prior of a calibration result that carries its statistics.
+
+        Parameters
+        ----------
+        result : CalibrationResult
+            The earlier calibration (with ``statistics``).
+        layer : LearnedResidual, optional
+            Its learned layer (default: ``result.residual_model``).
+
+        Returns
+        -------
+        Prior
+            The prior.
+
+        Raises
+        ------
+        CalibrationError
+            The result has no statistics (σ).
+        """
+        if result.statistics is None:
+            raise CalibrationError("prior: the earlier calibration has no statistics (σ)")
+        return cls(result.robot, result.config, result.model, tuple(result.keys),
+                   np.asarray(result.statistics.sigma, float),
+                   float(np.sqrt(result.statistics.sigma2)),
+                   result.residual_model if layer is None else layer)
+
+
+def frame_keys(model: ErrorModel) -> list[str]:
+    """The keys of BASE and PROBE (with the flange link's, which PROBE absorbs): the
+    parameters a new set-up re-identifies freely (as :func:`~.identify.refit_base`).
+
+    Parameters
+    ----------
+    model : ErrorModel
+        The model.
+
+    Returns
+    -------
+    list of str
+        Its frame keys (a0, b0, α0, β0, θ0, d0; the flange's θ, d, a, α; PROBE's θ, d).
+    """
+    s = model.structure
+    fl = s.desc.flange
+    keys = [f"{f}{s.base_name}" for f in ("a", "b", "alpha", "beta", "theta", "d")]
+    keys += [f"theta{fl}", f"d{fl}", f"a{fl}", f"alpha{fl}", f"theta{s.probe_name}",
+             f"d{s.probe_name}"]
+    return [k for k in keys if k in model.space]
+
+
+def augmented_residual(model: ErrorModel, problem: _Problem, keys: Sequence[str],
+                       x_prior: Array, lam: Array) -> tuple[Array, Array]:
+    """The stacked residual ``F = [W (y − f(x)); Λ (x_p − x)]`` and its Jacobian
+    ``∂F/∂x = −[W H; Λ]`` at ``model`` (module docstring).
+
+    Parameters
+    ----------
+    model : ErrorModel
+        The model at ``x`` (the values of ``keys``).
+    problem : _Problem
+        The campaign (data, pose batch, rotation weight ``w``).
+    keys : sequence of str
+        The unknowns ``x`` (k).
+    x_prior : (k,) array
+        ``x_p`` (each in its parameter's unit; any value where ``λ = 0``).
+    lam : (k,) array
+        ``λ_k`` (1 / parameter unit × m).
+
+    Returns
+    -------
+    F : (N·rows + k,) array
+        Residuals: m and (weighted) rad, then the prior rows (m).
+    J : (N·rows + k, k) array
+        ``∂F/∂x``.
+    """
+    jac = identification_jacobian(model, problem.batch, keys)
+    x = np.array([model.value(k) for k in keys])
+    r = _residual_rows(problem, jac.poses).reshape(-1)
+    H = _jacobian_rows(problem, jac.H).reshape(-1, len(keys))
+    F = np.concatenate([r, lam * (x_prior - x)])
+    J = -np.vstack([H, np.diag(lam)])
+    return F, J
+
+
+class PriorCalibrator:
+    """Identify a short campaign in a new set-up with an earlier calibration as prior
+    (module docstring: the equation, the choice of τ, the layer as an offset).
+
+    Parameters
+    ----------
+    prior : Prior
+        The earlier calibration.
+    scale : float, optional
+        The inflation τ ≥ 1 of the prior's σ (default: chosen by grouped CV over the
+        campaign's workspace cells among :data:`SCALES`).
+    rotation_weight : float, m/rad
+        Weight ``w`` of the orientation rows.
+    tol : float
+        Stop when ‖Δx‖ < tol.
+    max_iterations : int
+        Iteration bound.
+    cell_size_m : float, m
+        Workspace cell edge of the CV's groups.
+    progress : callable, optional
+        ``(stage, i, n, message)``.
+
+    Raises
+    ------
+    CalibrationError
+        τ < 1 or not finite, non-positive tolerances or weights.
+    """
+
+    def __init__(self, prior: Prior, *, scale: float | None = None,
+                 rotation_weight: float = 1.0, tol: float = 1e-7, max_iterations: int = 30,
+                 cell_size_m: float = CELL_SIZE_M,
+                 progress: Callable[[str, int, int, str], None] | None = None) -> None:
+        if scale is not None and not (math.isfinite(scale) and scale >= 1.0):
+            raise CalibrationError(f"the prior's σ inflation τ must be a number ≥ 1, got {scale}")
+        if not (tol > 0 and max_iterations >= 1 and rotation_weight > 0 and cell_size_m > 0):
+            raise CalibrationError("tol, max_iterations, rotation_weight, cell_size_m must be > 0")
+        self.prior = prior
+        self.scale = scale
+        self.rotation_weight = float(rotation_weight)
+        self.tol = float(tol)
+        self.max_iterations = int(max_iterations)
+        self.cell_size_m = float(cell_size_m)
+        self.progress = progress
+
+    def _say(self, stage: str, i: int, n: int, msg: str) -> None:
+        if self.progress is not None:
+            self.progress(stage, i, n, msg)
+
+    # ------------------------------------------------------------------ pieces
+    def _check(self, data: CalibrationData) -> None:
+        desc = self.prior.model.structure.desc
+        if data.q.shape[1] != desc.n_readings:
+            raise CalibrationError(
+                f"the data have {data.q.shape[1]} joint columns, the prior's robot "
+                f"{self.prior.robot!r} has {desc.n_readings}")
+
+    def offset_data(self, data: CalibrationData) -> tuple[CalibrationData, Array | None]:
+        """The campaign with the prior layer's correction taken out (``p_M − R_B e``,
+        ``Exp(−R_B φ) R_M``; ``R_B`` of the prior re-registered on the raw campaign), and
+        the layer's in-domain mask (``None`` without a layer)."""
+        layer = self.prior.layer
+        if layer is None:
+            return data, None
+        pred = layer.predict(data.q, data.payload_kg, data.temperature_c)
+        if not pred.in_domain.any():
+            return data, pred.in_domain
+        moved = refit_base(self.prior.model, data, probe=True,
+                           rotation_weight=self.rotation_weight)
+        return _remove_correction(data, moved.base()[:3, :3], pred.correction), pred.in_domain
+
+    def _start(self, data: CalibrationData) -> tuple[ErrorModel, list[str], list[str]]:
+        """The prior re-registered on ``data`` (BASE + PROBE), the frame keys these poses
+        determine and the regularised keys."""
+        start = refit_base(self.prior.model, data, probe=True,
+                           rotation_weight=self.rotation_weight)
+        frames = frame_keys(start)
+        problem = _Problem(start, data, start.batch(data.q, data.payload_kg, data.temperature_c),
+                           self.rotation_weight)
+        jac = identification_jacobian(start, problem.batch, frames)
+        kept = list(analyse(_jacobian_rows(problem, jac.H).reshape(-1, len(frames)),
+                            frames).kept)
+        regular = [k for k in self.prior.keys if k not in frames and k in start.space]
+        return start, kept, regular
+
+    def _lambda(self, keys: Sequence[str], regular: Sequence[str], tau: float) -> Array:
+        sig = dict(zip(self.prior.keys, np.asarray(self.prior.sigma, float), strict=True))
+        lam = np.zeros(len(keys))
+        for i, k in enumerate(keys):
+            if k in regular:
+                s = sig[k]
+                if not (math.isfinite(s) and s > 0):
+                    raise CalibrationError(f"prior: parameter {k} has no usable σ ({s})")
+                lam[i] = self.prior.sigma_y / (tau * s)
+        return lam
+
+    def solve(self, data: CalibrationData, tau: float
+              ) -> tuple[ErrorModel, ErrorModel, list[str], Array, list[IterationRecord], bool]:
+        """Gauss–Newton on the augmented problem (module docstring) for one ``τ``.
+
+        Parameters
+        ----------
+        data : CalibrationData
+            The campaign (already offset by the prior layer, :meth:`offset_data`).
+        tau : float
+            The inflation τ of the prior's σ.
+
+        Returns
+        -------
+        model : ErrorModel
+            The MAP estimate.
+        start : ErrorModel
+            The prior re-registered on the campaign (BASE + PROBE only).
+        keys : list of str
+            The unknowns (determined frame keys, then the regularised keys).
+        lam : (k,) array
+            ``λ_k``.
+        history : list of IterationRecord
+            One per iteration.
+        converged : bool
+            ‖Δx‖ < tol reached.
+        """
+        start, frames, regular = self._start(data)
+        keys = frames + regular
+        lam = self._lambda(keys, regular, tau)
+        x_prior = np.array([start.value(k) for k in keys])
+        problem = _Problem(start, data, start.batch(data.q, data.payload_kg, data.temperature_c),
+                           self.rotation_weight)
+        model = start
+        history: list[IterationRecord] = []
+        converged = False
+        F, J = augmented_residual(model, problem, keys, x_prior, lam)
+        for it in range(1, self.max_iterations + 1):
+            cost = float(F @ F)
+            s = np.linalg.norm(J, axis=0)
+            s = np.where(s > 0, s, 1.0)
+            step = least_squares(-J / s, F) / s
+            for _ in range(BACKTRACK_STEPS):
+                new = model.updated(keys=keys, step=step)
+                Fn, Jn = augmented_residual(new, problem, keys, x_prior, lam)
+                if float(Fn @ Fn) <= cost * (1.0 + 1e-12) + 1e-30:
+                    break
+                step = 0.5 * step
+            if not np.all(np.isfinite(Fn)):
+                raise DivergenceError("the prior fit diverged: non-finite residuals")
+            n_rows = len(data) * data.rows
+            pos = np.linalg.norm(Fn[:n_rows].reshape(len(data), data.rows)[:, :3], axis=1)
+            step_norm = float(np.linalg.norm(step))
+            history.append(IterationRecord(it, step_norm, float(Fn @ Fn),
+                                           float(pos.mean() * 1e3),
+                                           float(np.sqrt(np.mean(pos**2)) * 1e3)))
+            model, F, J = new, Fn, Jn
+            if step_norm < self.tol:
+                converged = True
+                break
+        return model, start, keys, lam, history, converged
+
+    def choose_scale(self, data: CalibrationData) -> tuple[float, dict[float, float]]:
+        """τ by grouped K-fold CV over the campaign's workspace cells (K = min(5, cells)):
+        for each candidate of :data:`SCALES`, the mean held-out position error (m) of the
+        MAP fitted on the other cells; the smallest τ within 1 % of the best wins (the
+        strongest prior the data do not reject).  Fewer than 2 cells: :data:`DEFAULT_SCALE`.
+
+        Parameters
+        ----------
+        data : CalibrationData
+            The campaign (offset by the prior layer).
+
+        Returns
+        -------
+        tau : float
+            The chosen τ.
+        scores : dict of float to float
+            The CV score (m) of each candidate (empty without CV).
+        """
+        from sklearn.model_selection import GroupKFold
+
+        start = refit_base(self.prior.model, data, probe=True,
+                           rotation_weight=self.rotation_weight)
+        targets = (np.linalg.inv(start.base()) @ start.predict(
+            data.q, data.payload_kg, data.temperature_c))[:, :3, 3]
+        groups = workspace_cells(targets, self.cell_size_m)
+        cells = int(groups.max()) + 1
+        if cells < 2:
+            return DEFAULT_SCALE, {}
+        folds = list(GroupKFold(n_splits=min(5, cells)).split(targets, groups=groups))
+        scores: dict[float, float] = {}
+        for tau in SCALES:
+            err = np.empty(len(data))
+            for tr, te in folds:
+                m, *_ = self.solve(data.subset(tr), tau)
+                test = data.subset(te)
+                P = m.predict(test.q, test.payload_kg, test.temperature_c)
+                err[te] = np.linalg.norm(test.positions - P[:, :3, 3], axis=1)
+            scores[tau] = float(err.mean())
+            self._say("prior", 0, 0, f"τ = {tau:g}: held-out cells {scores[tau] * 1e3:.4f} mm")
+        best = min(scores.values())
+        tau = min(t for t, v in scores.items() if v <= best * 1.01)
+        return tau, scores
+
+    # ------------------------------------------------------------------ fit
+    def fit(self, data: CalibrationData) -> CalibrationResult:
+        """Identify the campaign ``data`` with the prior (module docstring).
+
+        Parameters
+        ----------
+        data : CalibrationData
+            The short campaign in the new set-up: readings ``(N, n)`` rad, measured
+            positions ``(N, 3)`` or poses, m.
+
+        Returns
+        -------
+        CalibrationResult
+            The MAP model; ``nominal`` is the prior re-registered on the campaign (BASE +
+            PROBE: the "before"); the prior's layer kept (rebound to the new model: its
+            correction was the offset the physical fit saw); ``settings["prior"]`` records
+            τ, its CV scores and the regularised keys.
+
+        Raises
+        ------
+        CalibrationError
+            Data of another robot (joint count), a prior without usable σ.
+        """
+        t0 = time.perf_counter()
+        self._check(data)
+        offset, in_domain = self.offset_data(data)
+        scores: dict[float, float] = {}
+        tau = self.scale
+        if tau is None:
+            tau, scores = self.choose_scale(offset)
+        final, start, keys, lam, history, converged = self.solve(offset, tau)
+        self._say("prior", 1, 1, f"τ = {tau:g}: mean residual "
+                  f"{history[-1].mean_position_mm if history else float('nan'):.4f} mm")
+        problem = _Problem(final, offset,
+                           final.batch(offset.q, offset.payload_kg, offset.temperature_c),
+                           self.rotation_weight)
+        x_prior = np.array([start.value(k) for k in keys])
+        F, J = augmented_residual(final, problem, keys, x_prior, lam)
+        stats = parameter_statistics(-J, F)
+        P_start = start.predict(offset.q, offset.payload_kg, offset.temperature_c)
+        P_final = final.predict(offset.q, offset.payload_kg, offset.temperature_c)
+        residuals = PoseResiduals.from_poses(offset, P_start, P_final)
+        layer = self.prior.layer
+        if layer is not None:
+            layer = replace(layer, fingerprint=calibration_fingerprint(final))
+        regular = [k for k, v in zip(keys, lam, strict=True) if v > 0]
+        warnings: list[str] = []
+        if in_domain is not None and not in_domain.all():
+            warnings.append(f"{int((~in_domain).sum())} of {len(data)} campaign poses lie "
+                            "outside the prior layer's region: its correction is not applied "
+                            "there")
+        targets = (np.linalg.inv(final.base()) @ P_final)[:, :3, 3]
+        return CalibrationResult(
+            config=self.prior.config, robot=self.prior.robot, model=final,
+            nominal=start, keys=tuple(keys), identifiability=None,
+            data_identifiability=None, iterations=len(history), converged=converged,
+            history=tuple(history), statistics=stats,
+            calibration=residuals.accuracy("after"),
+            calibration_before=residuals.accuracy("before"),
+            six_dof=data.six_dof, n_poses=len(data), warnings=tuple(warnings),
+            elapsed_s=time.perf_counter() - t0, calibration_residuals=residuals,
+            validity=ValidityRegion.from_poses(final, data.q, data.payload_kg,
+                                               targets=targets),
+            residual_model=layer,
+            settings={"method": "gauss-newton", "loss": "linear",
+                      "rotation_weight": self.rotation_weight, "tol": self.tol,
+                      "max_iterations": self.max_iterations,
+                      "prior": {"robot": self.prior.robot, "scale": tau,
+                                "scale_chosen_by": "given" if self.scale is not None
+                                else ("grouped CV" if scores else "default"),
+                                "cv_mm": {f"{t:g}": v * 1e3 for t, v in scores.items()},
+                                "regularised": regular,
+                                "sigma_y_m": self.prior.sigma_y,
+                                "layer_offset": self.prior.layer is not None}})
+

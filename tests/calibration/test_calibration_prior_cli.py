@@ -1,0 +1,87 @@
+"""``plugcell calibrate --prior EARLIER.json`` (issue 36 part 2): the command around
+:class:`~plugcell.calibration.prior.PriorCalibrator`, and its bad input."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import pytest
+from calibration_testlib import ur10_toml
+
+from plugcell.apps.cli import main
+
+
+@pytest.fixture(scope="module")
+def files(tmp_path_factory) -> Path:
+    d = tmp_path_factory.mktemp("prior")
+    for name, n, seed in (("a", 80, 1), ("b", 25, 2), ("v", 40, 3)):
+        assert main(["twin", "measure", "--poses", str(n), "--pose-seed", str(seed),
+                     "--out", str(d / f"{name}.csv"), "--quiet"]) == 0
+    assert main(["calibrate", "--robot", "smart_h4", "--model", "2", "--data", str(d / "a.csv"),
+                 "--out", str(d / "a.json"), "--quiet"]) == 0
+    return d
+
+
+def _on_b(d: Path, *extra: str) -> list[str]:
+    return ["calibrate", "--robot", "smart_h4", "--model", "2", "--data", str(d / "b.csv"),
+            "--quiet", *extra]
+
+
+def test_prior_writes_a_calibration_that_says_what_it_did(files, capsys):
+    capsys.readouterr()
+    assert main(_on_b(files, "--prior", str(files / "a.json"), "--prior-scale", "10",
+                      "--validate", str(files / "v.csv"), "--out", str(files / "b.json"))) == 0
+    out = capsys.readouterr().out
+    assert "prior: the earlier calibration of smart_h4, BASE + PROBE re-identified" in out
+    assert "× τ = 10 (given)" in out
+    d = json.loads((files / "b.json").read_text())
+    pri = d["settings"]["prior"]
+    assert pri["scale"] == 10 and pri["regularised"] and not pri["layer_offset"]
+    assert d["validation"]["mean_mm"] < 0.5
+    # what it wrote is a calibration the other commands read
+    assert main(["export", "--params", str(files / "b.json"), "--format", "toml",
+                 "--out", str(files / "b.toml")]) == 0
+
+
+@pytest.mark.parametrize(("extra", "message"), [
+    (["--prior-scale", "3"], "--prior-scale needs --prior EARLIER.json"),
+    (["--prior", "A", "--prior-scale", "0.5"], "--prior-scale must be a number ≥ 1"),
+    (["--prior", "A", "--thermal"], "--prior: --thermal cannot be combined with it"),
+    (["--prior", "A", "--probe", "0,0,90,0,0,0"], "--prior: --probe cannot be combined"),
+    (["--prior", "A", "--residual-model", "learned", "--out", "x.json"],
+     "--residual-model learned cannot be combined"),
+])
+def test_options_that_mean_nothing_with_a_prior_are_refused(files, capsys, extra, message):
+    extra = [str(files / "a.json") if x == "A" else x for x in extra]
+    assert main(_on_b(files, *extra)) == 2
+    assert message in capsys.readouterr().err
+
+
+def test_a_prior_of_another_robot_or_model_or_no_calibration_is_refused(files, capsys,
+                                                                         tmp_path):
+    capsys.readouterr()
+    # another model: names both
+    other = _on_b(files, "--prior", str(files / "a.json"))
+    other[other.index("--model") + 1] = "1"
+    assert main(other) == 2
+    err = capsys.readouterr().err
+    assert "a calibration with model 2 (loop), not model 1 (serial); give --model 2" in err
+    # another robot: names both
+    (tmp_path / "ur.toml").write_text(ur10_toml())
+    assert main(["calibrate", "--robot", str(tmp_path / "ur.toml"), "--model", "1",
+                 "--data", str(files / "b.csv"), "--prior", str(files / "a.json")]) == 2
+    err = capsys.readouterr().err
+    assert "a.json" in err and "'smart_h4'" in err and "'ur10-test'" in err, err
+    # a file that is not PARAMS.json
+    assert main(_on_b(files, "--prior", str(files / "b.csv"))) == 2
+    assert "b.csv: not valid JSON" in capsys.readouterr().err
+    (tmp_path / "x.json").write_text('{"robot": "smart_h4"}')
+    assert main(_on_b(files, "--prior", str(tmp_path / "x.json"))) == 2
+    assert "not a plugcell calibration" in capsys.readouterr().err
+    # a PARAMS.json without the earlier σ
+    d = json.loads((files / "a.json").read_text())
+    del d["sigma2"]
+    (tmp_path / "nosigma.json").write_text(json.dumps(d))
+    assert main(_on_b(files, "--prior", str(tmp_path / "nosigma.json"))) == 2
+    assert "the earlier σ are missing" in capsys.readouterr().err
