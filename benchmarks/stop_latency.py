@@ -164,7 +164,8 @@ def main(argv: list[str]) -> int:
         def device() -> tuple[float, int]:
             with gripper_server() as endpoint:
                 return stop_time(plugcell("serve", "opcua-device", "--cell", cell(),
-                                          "--endpoint", endpoint, "--map", str(MAP)),
+                                          "--endpoint", endpoint, "--map", str(MAP),
+                                          "--insecure-accept-any"),
                                  env, serving)
         rows.append(("serve opcua-device (connected)", device))
     else:
@@ -175,7 +176,8 @@ def main(argv: list[str]) -> int:
         with silent_server() as endpoint:
             return stop_time(plugcell("serve", "opcua-device", "--cell", cell(), "--endpoint",
                                       endpoint, "--map", str(MAP), "--param", "watch_s=30",
-                                      "--log-level", "INFO"), env, connecting)
+                                      "--insecure-accept-any", "--log-level", "INFO"), env,
+                             connecting)
     rows.append(("serve opcua-device (while starting)", starting))
 
     print(f"SIGTERM → exit, {args.repeat} runs each; {platform.processor() or platform.machine()}"

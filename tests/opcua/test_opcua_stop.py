@@ -38,7 +38,7 @@ def test_sigterm_while_connecting_to_a_silent_server_ends_the_device_service(tmp
         proc = subprocess.Popen(
             plugcell_argv("serve", "opcua-device", "--cell", unique_cell("stop"), "--endpoint",
                           endpoint, "--map", str(MAP), "--param", "watch_s=100",
-                          "--log-level", "INFO"),
+                          "--insecure-accept-any", "--log-level", "INFO"),
             env={**os.environ, "PLUGCELL_HOME": str(tmp_path), "PYTHONUNBUFFERED": "1"},
             stderr=subprocess.PIPE, stdout=subprocess.DEVNULL, text=True,
             start_new_session=True)
