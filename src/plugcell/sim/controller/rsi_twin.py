@@ -16,11 +16,58 @@ from __future__ import annotations
 
 import argparse
 import signal
+import subprocess
 import sys
 import threading
 from collections.abc import Sequence
 
-__all__ = ["main"]
+__all__ = ["RsiTwinProcess", "main"]
+
+
+class RsiTwinProcess:
+    """The twin's RSI side in a process of its own (tests, demos): start, kill, start again.
+
+    Parameters
+    ----------
+    sensor : str
+        ``HOST:PORT`` where plugcell listens.
+    *options : str
+        More options of the command line (``--timeout``, ``--robot`` …).
+    """
+
+    def __init__(self, sensor: str, *options: str) -> None:
+        self.argv = [sys.executable, "-m", "plugcell.sim.controller.rsi_twin",
+                     "--sensor", sensor, *options]
+        self.proc: subprocess.Popen[str] | None = None
+        self.banner = ""
+
+    def start(self, timeout: float = 30.0) -> RsiTwinProcess:
+        """Start it and wait for its first line; RuntimeError with its output if it fails."""
+        self.proc = subprocess.Popen(self.argv, stdout=subprocess.PIPE,
+                                     stderr=subprocess.PIPE, text=True)
+        got: list[str] = []
+        reader = threading.Thread(target=lambda: got.append(self.proc.stdout.readline()),
+                                  daemon=True)  # type: ignore[union-attr]
+        reader.start()
+        reader.join(timeout)
+        if not got or not got[0].startswith("rsi-twin:"):
+            self.kill()
+            err = self.proc.stderr.read() if self.proc.stderr else ""
+            raise RuntimeError(f"the twin's RSI side did not start: {got} {err}")
+        self.banner = got[0].strip()
+        return self
+
+    def kill(self) -> None:
+        """Kill it at once (a pulled cable, a controller gone)."""
+        if self.proc is not None and self.proc.poll() is None:
+            self.proc.kill()
+            self.proc.wait(10)
+
+    def __enter__(self) -> RsiTwinProcess:
+        return self.start()
+
+    def __exit__(self, *exc: object) -> None:
+        self.kill()
 
 
 def main(argv: Sequence[str] | None = None) -> int:

@@ -12,10 +12,18 @@ controller's program only starts RSI where the robot stands and follows the sens
    controller started RSI — from the robot's packet: ``q_base = ASPos − o`` (the set-point
    joints minus the offset commanded so far; ``AIPos`` if the controller sends no
    ``ASPos``);
-3. answers cycle ``k`` (counted on the controller's IPOC clock from the motion's first
-   packet, so a missed cycle skips its sample as the controller skipped it) with the
-   absolute correction ``o_k = q(k T) − q_base`` (rad), and ends with the last sample —
-   the link then holds the robot there (absolute: the offset kept).
+3. answers the motion's ``k``-th answered packet (of ``K + 1``) with the absolute correction
+
+       o_k = q(k T) − q_base + (1 − k/K) · (q_set,0 − q(0))   (rad)
+
+   — the move is planned from the actual joints ``q(0)`` (AIPos), the command stands at
+   the set-point ``q_set,0`` (ASPos): their difference (the following error at the
+   start) fades out along the move, so the command neither jumps at the start nor misses
+   the target at the end — and ends with the last sample; the link then holds the robot
+   there (absolute: the offset kept).  A missed cycle (a packet lost or answered late)
+   delays the rest of the move by one cycle instead of skipping a sample: the command never
+   steps by more than one cycle of the planned motion, so the link's limits
+   (:func:`~plugcell.devices.robot.rsi_controller.streaming_limits`) hold even on a busy PC.
 
 Joint feedback is the newest packet's ``AIPos``.  A failed stream (silence, missed
 cycles, a refused correction) or a motion that does not end in time is a
@@ -93,10 +101,13 @@ class RsiDrive:
                     else robot.joints
                 if ref is None:
                     raise MotionError("the controller's RSI packets carry no joints")
-                motion.update(base=ref - state.offset, ipoc0=robot.ipoc)
-            k = min((state.robot.ipoc - motion["ipoc0"]) // cfg.ipoc_step, last)
-            motion["k"] = k
-            return Correction(offset=q[k] - motion["base"])
+                # the move was planned from AIPos; the command stands at ASPos: fade the
+                # difference out along the move, so it starts without a jump and ends on
+                # the target
+                motion.update(base=ref - state.offset, gap=ref - q[0], k=-1)
+            k = motion["k"] = min(motion["k"] + 1, last)
+            fade = 1.0 - k / last if last else 0.0
+            return Correction(offset=q[k] - motion["base"] + fade * motion["gap"])
 
         def done(state: CycleState) -> bool:
             return motion.get("k", -1) >= last
