@@ -32,7 +32,11 @@ Positions are PDL's: mm and Comau ZYZ degrees.  The controller is reached over
 the line protocol (:mod:`plugcell.devices.robot.bridge`): with ``sim`` the service
 starts its own simulated controller process (:mod:`plugcell.sim.controller.launcher`),
 otherwise it connects to ``controller = HOST:PORT`` — a real controller speaking
-docs/controller-protocol.md.  The program's ACTIVATE strings are handled by the
+docs/controller-protocol.md — or, with ``rsi = HOST:PORT``, runs the programs on the PC
+and streams each move to a KUKA robot over RSI
+(:mod:`plugcell.devices.robot.rsi_controller`); either is a
+:class:`~plugcell.devices.robot.link.RobotLink` chosen at construction.  The
+program's ACTIVATE strings are handled by the
 :class:`~plugcell.devices.robot.outbound.ExternalProcessHandler`.
 
 ``plugcell serve robot --name R1 --param sim=true [--param robot=smart_h4]
