@@ -123,3 +123,20 @@ def test_a_running_service_keeps_the_contract(kind, tmp_path, monkeypatch):
     cell = f"conf{uuid.uuid4().hex[:10]}"
     asyncio.run(asyncio.wait_for(_contract(kind, RUNNABLE[kind], cell, tmp_path),
                                  90))
+
+
+@pytest.mark.slow
+def test_the_robot_over_rsi_keeps_the_contract(tmp_path, monkeypatch):
+    """The robot kind with its programs on the PC and the twin's RSI side as the robot."""
+    import socket
+
+    from plugcell.sim.controller.rsi_twin import RsiTwinProcess
+
+    monkeypatch.setenv("PLUGCELL_HOME", str(tmp_path / "home"))
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
+        s.bind(("127.0.0.1", 0))
+        port = s.getsockname()[1]
+    cell = f"conf{uuid.uuid4().hex[:10]}"
+    with RsiTwinProcess(f"127.0.0.1:{port}", "--timeout", "1000"):
+        asyncio.run(asyncio.wait_for(_contract(
+            "robot", {"rsi": f"127.0.0.1:{port}", "rsi_timeout": 1000}, cell, tmp_path), 90))

@@ -110,3 +110,13 @@ def test_a_kind_with_a_driver_interface_is_served_with_its_simulated_driver():
     with pytest.raises(CommandError, match=r"bad --param 'depth_mm=1' for CameraService "
                                            r"\(parameters: time_scale\)"):
         _params("camera", ["depth_mm=1"])
+
+
+def test_rsi_flags_become_robot_parameters():
+    kind = "robot"
+    pairs = _device_options(kind, _args(rsi="192.168.1.100:49152", rsi_robot="192.168.1.147",
+                                        rsi_timeout=100, robot="smart_h4"))
+    assert _params(kind, pairs) == {"rsi": "192.168.1.100:49152", "rsi_robot": "192.168.1.147",
+                                    "rsi_timeout": 100, "robot": "smart_h4"}
+    with pytest.raises(CommandError, match="--rsi: not an option of TrackerService"):
+        _device_options("tracker", _args(rsi="127.0.0.1:49152"))

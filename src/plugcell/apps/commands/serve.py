@@ -44,6 +44,14 @@ def configure(p: argparse.ArgumentParser) -> None:
                      help="drive the simulated device (robot: its simulated controller; "
                      "tracker: the tracker model)")
     dev.add_argument("--controller", metavar="HOST:PORT", help="robot: a real controller")
+    dev.add_argument("--rsi", metavar="HOST:PORT",
+                     help="robot: a KUKA robot over RSI, the program on the PC (the PC drives); "
+                     "where plugcell listens for the controller's packets (docs/kuka-rsi.md)")
+    dev.add_argument("--rsi-robot", metavar="HOST[:PORT]",
+                     help="robot: the controller's address on the RSI network (default: the "
+                     "--rsi host)")
+    dev.add_argument("--rsi-timeout", type=int, metavar="N",
+                     help="robot: the RSI ETHERNET object's Timeout (late packets; default 100)")
     add_robot_args(dev, help="robot: shipped name (default smart_h4), description file "
                    "(.toml) or URDF/xacro file (with --robot-arg, --package-path, --base-link, "
                    "--tip-link)")
@@ -111,7 +119,8 @@ def _device_options(kind: str, args: argparse.Namespace) -> list[str]:
             pairs.append("driver=sim")
         else:
             raise CommandError(f"--sim: {cls.__name__} has no simulated mode")
-    for flag, key in (("controller", "controller"), ("robot", "robot"),
+    for flag, key in (("controller", "controller"), ("rsi", "rsi"), ("rsi_robot", "rsi_robot"),
+                      ("rsi_timeout", "rsi_timeout"), ("robot", "robot"),
                       ("payload_kg", "payload_kg"), ("speed", "speed"), ("seed", "seed"),
                       ("endpoint", "endpoint"), ("map", "map"), ("trust", "trust")):
         value = getattr(args, flag, None)

@@ -33,7 +33,11 @@ Positions are PDL's: mm and Comau ZYZ degrees.  The controller is reached over
 the line protocol (:mod:`plugcell.devices.robot.bridge`): with ``sim`` the service
 starts its own simulated controller process (:mod:`plugcell.sim.controller.launcher`),
 otherwise it connects to ``controller = HOST:PORT`` — a real controller speaking
-docs/controller-protocol.md.  The program's ACTIVATE strings are handled by the
+docs/controller-protocol.md — or, with ``rsi = HOST:PORT``, runs the programs on the PC
+and streams each move to a KUKA robot over RSI
+(:mod:`plugcell.devices.robot.rsi_controller`); either is a
+:class:`~plugcell.devices.robot.link.RobotLink` chosen at construction.  The
+program's ACTIVATE strings are handled by the
 :class:`~plugcell.devices.robot.outbound.ExternalProcessHandler`.
 
 ``plugcell serve robot --name R1 --param sim=true [--param robot=smart_h4]
@@ -63,6 +67,7 @@ from plugcell.devices.robot.bridge import (
     parse_address,
 )
 from plugcell.devices.robot.increment import joint_increment, pose_error_sizes
+from plugcell.devices.robot.link import RobotLink
 from plugcell.devices.robot.outbound import ExternalProcessHandler
 from plugcell.devices.robot.protocol import (
     ActivateLine,
@@ -79,6 +84,7 @@ from plugcell.devices.robot.protocol import (
     parse_fields,
     parse_numbers,
 )
+from plugcell.devices.robot.rsi_controller import rsi_controller
 from plugcell.framework.messages import Command, CommandTypes, ConnectionStates, DataTypes
 from plugcell.framework.participant import PartnerError
 from plugcell.framework.service import DeviceError, GenericDevice
@@ -160,6 +166,11 @@ class RobotService(GenericDevice):
         "seed": int,
         "library": str,
         "link_baud": float,
+        "rsi": str,
+        "rsi_robot": str,
+        "rsi_timeout": int,
+        "joint_speed": float,
+        "tcp_speed": float,
     }
 
     def __init__(
@@ -174,14 +185,22 @@ class RobotService(GenericDevice):
         seed: int = 0,
         library: str = "",
         link_baud: float = 0.0,
+        rsi: str = "",
+        rsi_robot: str = "",
+        rsi_timeout: int = 100,
+        joint_speed: float = 20.0,
+        tcp_speed: float = 100.0,
         connect_timeout: float = 30.0,
         **kwargs: Any,
     ) -> None:
-        if sim and controller:
-            raise ValueError("give either sim or controller=HOST:PORT, not both")
-        if not sim and not controller:
-            raise ValueError("the robot service needs a controller: sim=true (a simulated one) "
-                             "or controller=HOST:PORT")
+        if sum(map(bool, (sim, controller, rsi))) > 1:
+            raise ValueError("give one of sim, controller=HOST:PORT or rsi=HOST:PORT, not "
+                             "several")
+        if not sim and not controller and not rsi:
+            raise ValueError("the robot service needs a controller: sim=true (a simulated one), "
+                             "controller=HOST:PORT or rsi=HOST:PORT (a KUKA robot over RSI)")
+        if rsi_robot and not rsi:
+            raise ValueError("rsi_robot names the controller of an RSI stream: give rsi too")
         if not (speed > 0):
             raise ValueError(f"speed must be positive, not {speed}")
         if not (math.isfinite(payload_kg) and payload_kg >= 0):
@@ -191,14 +210,22 @@ class RobotService(GenericDevice):
         super().__init__(name, **kwargs)
         self.sim = sim
         self.link_baud = link_baud
-        self.endpoint: tuple[str, int] | None = parse_address(controller) if controller else None
+        self.endpoint: tuple[str, int] | None = (parse_address(controller or rsi)
+                                                 if controller or rsi else None)
         self.robot = robot
         self.payload_kg = payload_kg
         self.speed = speed
         self.seed = seed
         self.library = [Path(p) for p in library.split(",") if p.strip()] if library else []
         self.connect_timeout = connect_timeout
-        self.bridge = ControllerBridge(self)
+        # the link to the robot (plugcell.devices.robot.link): a controller that runs the
+        # programs (line protocol), or the programs on the PC streaming over KUKA RSI
+        self.bridge: RobotLink = ControllerBridge(self)
+        if rsi:
+            self.bridge = rsi_controller(
+                self, listen=rsi, robot_address=rsi_robot, robot=robot,
+                timeout_packets=rsi_timeout, joint_speed_deg_s=joint_speed,
+                tcp_speed_mm_s=tcp_speed, library=self.library, name=self.name)
         self.outbound = ExternalProcessHandler(self)
         self.sim_process: SimControllerProcess | None = None
         self.program = ProgramStatus()

@@ -273,6 +273,7 @@ class RsiLink:
         self._delay0 = 0
         self._controller_late = 0
         self._last_rx = 0
+        self._latest: RobotState | None = None
 
     # ------------------------------------------------------------------ public
 
@@ -354,6 +355,12 @@ class RsiLink:
     def streaming(self) -> bool:
         """A session is running."""
         return self._streaming
+
+    @property
+    def latest(self) -> RobotState | None:
+        """The robot's state in the newest packet answered (``None`` before the first):
+        the joint feedback of a robot service, between motions too."""
+        return self._latest
 
     def stats(self) -> LinkStats:
         """A snapshot of the counters.
@@ -550,6 +557,7 @@ class RsiLink:
             self._streak += lost
         self._last_ipoc = state.ipoc
         self._last_rx = t_in
+        self._latest = state
         if state.delay is not None:
             self._controller_late = max(0, state.delay - self._delay0)
         limited = self._limiter.hold() if self._failure is not None else self._ask(state)

@@ -1,0 +1,221 @@
+"""The robot service over KUKA RSI (issue 37 §1, §5, §6): the program runs on the PC, each
+move streams to the twin's RSI robot side (its own process, a KUKA controller over UDP)
+as absolute joint corrections; joint feedback is the RSI packets' AIPos.
+
+* two PTPs and a LIN end Completed with the twin at the last move's end (within the
+  following error);
+* an unreachable move and one beyond the joint limits end Failed naming the program line,
+  the move and why — and the robot is still there;
+* killing the twin's RSI side fails the running process within one controller timeout,
+  and the service comes back Online (and runs programs again) when the robot streams again;
+* bad options are refused with the reason.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import socket
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+from robot_testlib import unique_cell
+
+from plugcell.apps.kinds import build
+from plugcell.devices.robot.service import RobotService
+from plugcell.framework import Client, ProcessStates
+from plugcell.framework.data import from_data
+from plugcell.framework.messages import ConnectionStates
+from plugcell.sim.controller.rsi_twin import RsiTwinProcess
+
+#: The ETHERNET object's Timeout of these tests (packets of 4 ms): the twin counts every
+#: late answer, and this machine is shared — 1000 leaves room, one timeout is 4 s.
+TIMEOUT = 1000
+TIMEOUT_S = TIMEOUT * 0.004
+
+MOVES = """\
+PROGRAM rsimoves
+VAR p : POSITION
+BEGIN
+  MOVE TO JNTP(5, -85, -185, 0, 85, 5)
+  MOVE TO JNTP(10, -80, -182, 5, 80, 10)
+  p := ARM_POS
+  p := POS(p.x + 50, p.y, p.z - 30, p.a, p.b, p.c)
+  MOVE LINEAR TO p
+  WRITE LUN_CRT ('done')
+END rsimoves
+"""
+
+REFUSED = """\
+PROGRAM {name}
+BEGIN
+  MOVE TO JNTP(2, -88, -186, 0, 88, 2)
+  MOVE TO {target}
+END {name}
+"""
+
+SWING = """\
+PROGRAM swing
+BEGIN
+  WHILE TRUE DO
+    MOVE TO JNTP(8, -85, -185, 0, 85, 5)
+    MOVE TO JNTP(-8, -90, -187, 0, 90, 0)
+  ENDWHILE
+END swing
+"""
+
+F, C = ProcessStates.Failed, ProcessStates.Completed
+
+
+def _free_udp_port() -> int:
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
+        s.bind(("127.0.0.1", 0))
+        return int(s.getsockname()[1])
+
+
+@pytest.fixture
+def library(tmp_path: Path) -> Path:
+    lib = tmp_path / "programs"
+    lib.mkdir()
+    (lib / "rsimoves.pdl").write_text(MOVES)
+    (lib / "unreachable.pdl").write_text(REFUSED.format(
+        name="unreachable", target="POS(4000, 0, 1000, 0, 90, 0)"))
+    (lib / "beyond.pdl").write_text(REFUSED.format(
+        name="beyond", target="JNTP(0, -90, -187, 0, 90, 400)"))
+    (lib / "swing.pdl").write_text(SWING)
+    return lib
+
+
+def _service(port: int, library: Path, cell: str, tmp_path: Path) -> RobotService:
+    service = build("robot", None, {"rsi": f"127.0.0.1:{port}", "rsi_timeout": TIMEOUT,
+                                    "library": str(library)},
+                    cell=cell, journal=tmp_path / "journal")
+    assert isinstance(service, RobotService)
+    return service
+
+
+async def _run(client: Client, name: str, program: str, timeout: float = 60.0):
+    call = await client.create_process(name, "ACTIVATE", "Wait", [program], timeout=timeout)
+    return await call.result()
+
+
+async def _get(client: Client, name: str, command: str) -> np.ndarray:
+    final = await (await client.create_process(name, command, check=False)).result()
+    assert final.state is C, final.reason
+    return np.asarray(from_data(final.data), dtype=float).reshape(-1)
+
+
+@pytest.mark.slow
+def test_a_program_on_the_pc_moves_the_twin_over_rsi(library, tmp_path, monkeypatch):
+    monkeypatch.setenv("PLUGCELL_HOME", str(tmp_path / "home"))
+    port = _free_udp_port()
+
+    async def scenario() -> None:
+        with RsiTwinProcess(f"127.0.0.1:{port}", "--timeout", str(TIMEOUT)):
+            service = _service(port, library, unique_cell(), tmp_path)
+            await service.start()
+            try:
+                async with Client("RSITEST", cell=service.keys.cell) as client:
+                    assert await client.wait_for(service.name, 20)
+                    home = await _get(client, service.name, "ARM_JNTP")
+                    np.testing.assert_allclose(home, [0, -90, -187, 0, 90, 0], atol=0.01)
+
+                    final = await _run(client, service.name, "rsimoves")
+                    assert final.state is C, final.reason
+                    motion = service.bridge.motion  # type: ignore[attr-defined]
+                    assert service.bridge.drive.followed == 3  # type: ignore[attr-defined]
+                    end = np.degrees(motion.last.sample(motion.last.duration, 0).q)
+                    await asyncio.sleep(0.5)  # the servo settles
+                    joints = await _get(client, service.name, "ARM_JNTP")
+                    # at the LIN's end within the twin's following error at rest
+                    np.testing.assert_allclose(joints, end.reshape(-1), atol=0.05)
+                    status = await _get_status(client, service.name)
+                    assert status[1] == "FINISHED" and "done" in status[4:]
+
+                    # refused before motion: the line, the move and why; the robot stays
+                    for program, why in (("unreachable", "POS_TO_JNTP"),
+                                         ("beyond", "outside the joint limits")):
+                        final = await _run(client, service.name, program)
+                        assert final.state is F
+                        assert f"{program}.pdl:4:" in final.reason, final.reason
+                        assert "MOVE TO" in final.reason and why in final.reason, final.reason
+                    before = await _get(client, service.name, "ARM_JNTP")
+                    np.testing.assert_allclose(before, [2, -88, -186, 0, 88, 2], atol=0.05)
+            finally:
+                await service.close()
+
+    asyncio.run(asyncio.wait_for(scenario(), 180))
+
+
+async def _get_status(client: Client, name: str) -> list[str]:
+    final = await (await client.create_process(name, "PROGRAM_STATUS", check=False)).result()
+    assert final.state is C, final.reason
+    return [str(s) for s in from_data(final.data).reshape(-1)]
+
+
+async def _state(service: RobotService, state: ConnectionStates, within: float) -> bool:
+    end = time.monotonic() + within
+    while service.device.connection is not state and time.monotonic() < end:
+        await asyncio.sleep(0.05)
+    return service.device.connection is state
+
+
+@pytest.mark.slow
+def test_a_stopped_stream_fails_the_process_and_the_service_recovers(library, tmp_path,
+                                                                     monkeypatch):
+    monkeypatch.setenv("PLUGCELL_HOME", str(tmp_path / "home"))
+    port = _free_udp_port()
+    twin = RsiTwinProcess(f"127.0.0.1:{port}", "--timeout", str(TIMEOUT))
+
+    async def scenario() -> None:
+        twin.start()
+        service = _service(port, library, unique_cell(), tmp_path)
+        await service.start()
+        try:
+            async with Client("RSITEST", cell=service.keys.cell) as client:
+                assert await client.wait_for(service.name, 20)
+                call = await client.create_process(service.name, "ACTIVATE", "Wait",
+                                                   ["swing"], timeout=120)
+                await asyncio.sleep(1.5)  # swinging
+                twin.kill()
+                t_kill = time.monotonic()
+                final = await call.result()
+                took = time.monotonic() - t_kill
+                assert final.state is F
+                assert "RSI stream stopped" in final.reason, final.reason
+                # within one controller timeout (plus the service's own bookkeeping)
+                assert took < TIMEOUT_S + 3.0, took
+                assert await _state(service, ConnectionStates.Error, 2.0)
+                refused = await (await client.create_process(service.name, "ARM_JNTP",
+                                                             check=False)).result()
+                assert refused.state is F and "RSI stream stopped" in refused.reason
+
+                twin.start()  # the robot comes back: a new RSI session
+                assert await _state(service, ConnectionStates.Online, 20.0)
+                final = await _run(client, service.name, "rsimoves")
+                assert final.state is C, final.reason
+        finally:
+            await service.close()
+            twin.kill()
+
+    asyncio.run(asyncio.wait_for(scenario(), 180))
+
+
+def test_bad_rsi_options_are_refused_with_the_reason():
+    with pytest.raises(ValueError, match=r"give one of sim, controller=HOST:PORT or rsi"):
+        RobotService("R1", sim=True, rsi="127.0.0.1:49152")
+    with pytest.raises(ValueError, match="rsi_robot names the controller of an RSI stream"):
+        RobotService("R1", sim=True, rsi_robot="10.0.0.1")
+    with pytest.raises(ValueError, match="listens on every address: give the controller's"):
+        RobotService("R1", rsi="0.0.0.0:49152")
+    with pytest.raises(ValueError, match="bad controller address"):
+        RobotService("R1", rsi="localhost")
+    with pytest.raises(ValueError, match="bad RSI robot address"):
+        RobotService("R1", rsi="0.0.0.0:49152", rsi_robot="10.0.0.1:http")
+    with pytest.raises(ValueError, match="joint_speed must be a positive number"):
+        RobotService("R1", rsi="127.0.0.1:49152", joint_speed=0.0)
+    with pytest.raises(ValueError, match="timeout_packets"):
+        RobotService("R1", rsi="127.0.0.1:49152", rsi_timeout=0)
+    with pytest.raises(ValueError, match="unknown robot 'scara4'"):
+        RobotService("R1", rsi="127.0.0.1:49152", robot="scara4")
