@@ -70,7 +70,7 @@ def _report(latencies: list[int], cpu0: float, t0: float) -> None:
 
 def run_link(cycle_ms: float, rt: int | None) -> None:
     from plugcell.devices.robot.rsi import RsiConfig, RsiLink
-    from plugcell.devices.robot.rsi.sources import SineOffset
+    from plugcell.devices.robot.stream.source import SineOffset
     from plugcell.io.units import DEG
 
     cfg = RsiConfig(robot_host="127.0.0.1", listen_host="127.0.0.1", listen_port=0,

@@ -34,7 +34,6 @@ LINES_CEILING = {
     "framework/participant.py:Participant": 558,
     "devices/cell/service.py:CellController": 542,
     "devices/opcua/gateway.py:CellGateway": 405,
-    "devices/robot/rsi/link.py:RsiLink": 446,  # new with RSI: its session and cycle to split
 }
 
 
