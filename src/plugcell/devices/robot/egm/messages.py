@@ -64,6 +64,9 @@ _RAPID_RUNNING = egm_pb2.EgmRapidCtrlExecState.RAPID_RUNNING
 _MCI_RUNNING = egm_pb2.EgmMCIState.MCI_RUNNING
 #: A unit quaternion's norm may be off by this much (the controller sends 6-8 digits).
 QUAT_TOL = 1e-3
+#: Larger joint values (deg) or coordinates (mm) are no robot's: a corrupted number.
+MAX_JOINT_DEG = 3600.0
+MAX_COORD_MM = 1e6
 
 
 @dataclass(frozen=True)
@@ -115,11 +118,13 @@ class EgmState:
     utilization: float | None = None
 
 
-def _finite(where: str, values) -> list[float]:
+def _finite(where: str, values, bound: float = math.inf) -> list[float]:
     vals = list(values)
     for v in vals:
         if not math.isfinite(v):
             raise PacketError("malformed", f"{where}: {v!r} is not a finite number")
+        if abs(v) > bound:
+            raise PacketError("malformed", f"{where}: {v:.6g} is beyond ±{bound:g}")
     return vals
 
 
@@ -127,8 +132,8 @@ def _pose(where: str, pose) -> tuple[Array | None, Array | None]:
     if not pose.HasField("pos") or not pose.HasField("orient"):
         return None, None
     p, o = pose.pos, pose.orient
-    pos = np.array(_finite(f"{where}.pos", (p.x, p.y, p.z))) * M_PER_MM
-    q = np.array(_finite(f"{where}.orient", (o.u0, o.u1, o.u2, o.u3)))
+    pos = np.array(_finite(f"{where}.pos", (p.x, p.y, p.z), MAX_COORD_MM)) * M_PER_MM
+    q = np.array(_finite(f"{where}.orient", (o.u0, o.u1, o.u2, o.u3), 1.5))
     norm = float(np.sqrt(q @ q))
     if abs(norm - 1.0) > QUAT_TOL:
         raise PacketError("malformed", f"{where}.orient: |q| = {norm:.6g}, not a unit "
@@ -176,7 +181,7 @@ def parse_egm_robot(data: bytes, max_bytes: int = 1400) -> EgmState:
     fb = msg.feedBack
     if not (msg.HasField("feedBack") and fb.HasField("joints")):
         raise PacketError("foreign", "no feedback joints")
-    joints = _finite("feedBack.joints", fb.joints.joints)
+    joints = _finite("feedBack.joints", fb.joints.joints, MAX_JOINT_DEG)
     if len(joints) not in (6, 7):
         raise PacketError("foreign", f"{len(joints)} feedback joints, expected 6 or 7")
     position, quaternion = _pose("feedBack.cartesian", fb.cartesian) \
@@ -185,7 +190,8 @@ def parse_egm_robot(data: bytes, max_bytes: int = 1400) -> EgmState:
     planned_joints = planned_position = planned_quaternion = None
     if msg.HasField("planned"):
         if pl.HasField("joints"):
-            planned_joints = np.array(_finite("planned.joints", pl.joints.joints)) * DEG
+            planned_joints = np.array(_finite("planned.joints", pl.joints.joints,
+                                              MAX_JOINT_DEG)) * DEG
         if pl.HasField("cartesian"):
             planned_position, planned_quaternion = _pose("planned.cartesian", pl.cartesian)
     ext = (np.array(_finite("feedBack.externalJoints", fb.externalJoints.joints))
