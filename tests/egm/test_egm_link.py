@@ -161,6 +161,25 @@ def test_strangers_and_garbage_are_dropped_and_counted() -> None:
         link.close()
 
 
+def test_a_stream_restarted_by_the_controller_is_a_new_session() -> None:
+    link = started(local_config(), lambda s: Correction(offset=np.full(6, 0.01 * DEG)))
+    robot = BareRobot(link.address)
+    try:
+        robot.seqno = 1000
+        for _ in range(3):
+            robot.cycle()
+        robot.send(robot_message(999))  # one message late on the way: stale
+        assert robot.no_answer()
+        robot.seqno = 0  # EGMReset and a new EGMRunJoint: seqno counts from 1 again
+        answer = joints_of(robot.cycle(joints_deg=(1, 2, 3, 4, 5, 6)))
+        np.testing.assert_allclose(answer, np.arange(1, 7) + 0.01)  # from the new start
+        assert link.stats().sessions == 2 and link.stats().dropped["stale"] == 1
+        assert link.failure is None
+    finally:
+        robot.close()
+        link.close()
+
+
 def test_lost_cycles_are_counted_and_too_many_fail_the_stream() -> None:
     link = started(local_config(comm_timeout_s=0.02))  # 5 cycles
     robot = BareRobot(link.address)

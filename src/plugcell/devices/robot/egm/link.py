@@ -92,6 +92,11 @@ class EgmLink(StreamLink):
     def _seq(self, state: EgmState) -> int:
         return state.seqno
 
+    def _restarted(self, seq: int) -> bool:
+        # a new EGMRun… counts from the start again: more than one CommTimeout of cycles
+        # behind is no reordered message but a new stream
+        return self._last_seq - seq > self.config.timeout_packets
+
     def _clock_ms(self, state: EgmState) -> int:
         return state.tm
 

@@ -192,6 +192,11 @@ class StreamLink(Following):
         """The controller's clock of the packet, in milliseconds."""
         raise NotImplementedError
 
+    def _restarted(self, seq: int) -> bool:
+        """A sequence number this far behind the last means the controller restarted its
+        stream (EGM counts from 0 again after ``EGMReset``); RSI's IPOC never restarts."""
+        return False
+
     def _delay(self, state: Any) -> int | None:
         """The controller's own count of late packets, where it reports one."""
         return None
@@ -372,15 +377,16 @@ class StreamLink(Following):
     def _cycle_once(self, state: Any, addr: tuple[str, int], t_in: int) -> None:
         lost = 0
         seq = self._seq(state)
+        gap = seq - self._last_seq
+        if self._streaming and gap <= 0 and self._restarted(seq):
+            self._streaming = False  # the controller began a new stream at once
         if not self._streaming:
             self._begin_session(state)
+        elif gap <= 0:
+            self._dropped["stale"] += 1
+            return
         else:
-            gap = seq - self._last_seq
-            if gap <= 0:
-                self._dropped["stale"] += 1
-                return
-            # the cycles between the last answered packet and this one: lost on the way
-            # or superseded in the queue (the controller counts them late either way)
+            # cycles between the last answered packet and this one: lost or superseded
             lost = max(0, self._lost(gap))
             self._missed += lost
             self._streak += lost
