@@ -36,7 +36,8 @@ import sys
 import tempfile
 import time
 import uuid
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
@@ -52,6 +53,44 @@ def rob_packet(ipoc: int, q: float) -> bytes:
             f'A="180.0000" B="0.0000" C="180.0000"/><AIPos {ax}/><ASPos {ax}/>'
             f'<MACur A1="1.0" A2="2.0" A3="3.0" A4="4.0" A5="5.0" A6="6.0"/><Delay D="0"/>'
             f'<DiL>0</DiL><IPOC>{ipoc}</IPOC></Rob>').encode()
+
+
+@dataclass(frozen=True)
+class Vendor:
+    """What the harness needs of one interface (this file: RSI; egm_latency.py: EGM).
+
+    Attributes
+    ----------
+    name : str
+        The interface ("RSI"); the link's row is "plugcell NAME link".
+    script : str
+        The file whose ``--role link`` / ``--role echo`` runs the sensors.
+    packet : callable
+        ``packet(seq, q)``: the robot's datagram of sequence number ``seq``.
+    seq_of : callable
+        The sequence number an answer (the link's or the echo's) carries.
+    seq_step : callable
+        ``seq_step(cycle_ms)``: the sequence's advance per cycle.
+    echo_part : callable
+        What the bare echo sends back of a datagram (the part carrying the sequence).
+    run_link : callable
+        ``run_link(cycle_ms, rt)``: the link's process.
+    first_seq : int
+        The sequence number before the first datagram's.
+    """
+
+    name: str
+    script: str
+    packet: Callable[[int, float], bytes]
+    seq_of: Callable[[bytes], int]
+    seq_step: Callable[[float], int]
+    echo_part: Callable[[bytes], bytes]
+    run_link: Callable[[float, int | None], None]
+    first_seq: int = 4_000_000_000
+
+    @property
+    def link(self) -> str:
+        return f"plugcell {self.name} link"
 
 
 # ---------------------------------------------------------------- the sensors (children)
@@ -70,7 +109,7 @@ def _report(latencies: list[int], cpu0: float, t0: float) -> None:
 
 def run_link(cycle_ms: float, rt: int | None) -> None:
     from plugcell.devices.robot.rsi import RsiConfig, RsiLink
-    from plugcell.devices.robot.rsi.sources import SineOffset
+    from plugcell.devices.robot.stream.source import SineOffset
     from plugcell.io.units import DEG
 
     cfg = RsiConfig(robot_host="127.0.0.1", listen_host="127.0.0.1", listen_port=0,
@@ -89,7 +128,7 @@ def run_link(cycle_ms: float, rt: int | None) -> None:
     link.close()
 
 
-def run_echo(rt: int | None) -> None:
+def run_echo(rt: int | None, echo_part: Callable[[bytes], bytes]) -> None:
     import threading
 
     sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
@@ -102,7 +141,7 @@ def run_echo(rt: int | None) -> None:
         while True:
             data, addr = sock.recvfrom(65535)
             t_in = time.monotonic_ns()
-            sock.sendto(data[-64:], addr)  # the tail carries the IPOC
+            sock.sendto(echo_part(data), addr)  # the part that carries the sequence
             latencies.append(time.monotonic_ns() - t_in)
 
     threading.Thread(target=loop, daemon=True).start()
@@ -120,8 +159,9 @@ def _ipoc_of(answer: bytes) -> int:
     return int(answer[start:answer.index(b"</IPOC>", start)])
 
 
-def _spawn(role: str, cycle_ms: float, rt: int | None) -> tuple[subprocess.Popen, int, str]:
-    proc = subprocess.Popen([sys.executable, __file__, "--role", role, "--cycle-ms",
+def _spawn(vendor: Vendor, role: str, cycle_ms: float,
+           rt: int | None) -> tuple[subprocess.Popen, int, str]:
+    proc = subprocess.Popen([sys.executable, vendor.script, "--role", role, "--cycle-ms",
                              str(cycle_ms), *(["--rt-priority", str(rt)] if rt else [])],
                             stdin=subprocess.PIPE, stdout=subprocess.PIPE,
                             text=True)
@@ -132,13 +172,13 @@ def _spawn(role: str, cycle_ms: float, rt: int | None) -> tuple[subprocess.Popen
     return proc, int(port), " ".join(note).strip()
 
 
-def robot(seconds: float, cycle_ms: float, rt: int | None) -> dict:
+def robot(vendor: Vendor, seconds: float, cycle_ms: float, rt: int | None) -> dict:
     cycle_ns = int(cycle_ms * 1e6)
-    link_proc, link_port, link_note = _spawn("link", cycle_ms, rt)
-    echo_proc, echo_port, _ = _spawn("echo", cycle_ms, rt)
+    link_proc, link_port, link_note = _spawn(vendor, "link", cycle_ms, rt)
+    echo_proc, echo_port, _ = _spawn(vendor, "echo", cycle_ms, rt)
     if rt is not None:  # the robot side too: it stands for the controller's real-time core
         os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(rt))
-    names = ("plugcell RSI link", "bare UDP echo")
+    names = (vendor.link, "bare UDP echo")
     socks, sent, rtts, late = [], [{}, {}], [[], []], [0, 0]
     for port in (link_port, echo_port):
         s = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
@@ -150,7 +190,7 @@ def robot(seconds: float, cycle_ms: float, rt: int | None) -> dict:
     for s in socks:
         poller.register(s, select.POLLIN)
     fd_index = {s.fileno(): i for i, s in enumerate(socks)}
-    ipoc, k = 4_000_000_000, 0
+    ipoc, k = vendor.first_seq, 0
     start = time.monotonic_ns()
     measuring_from = start + int(WARMUP_S * 1e9)
     end = measuring_from + int(seconds * 1e9)
@@ -181,7 +221,7 @@ def robot(seconds: float, cycle_ms: float, rt: int | None) -> dict:
                     except BlockingIOError:
                         break
                     t = time.monotonic_ns()
-                    sent_at = sent[i].pop(_ipoc_of(answer), None)
+                    sent_at = sent[i].pop(vendor.seq_of(answer), None)
                     if sent_at is not None:
                         rtt = t - sent_at
                         rtts[i].append(rtt)
@@ -190,8 +230,8 @@ def robot(seconds: float, cycle_ms: float, rt: int | None) -> dict:
                             worst[i] = (rtt, (sent_at - measuring_from) / 1e9)
         i = k % 2
         if i == 0:
-            ipoc += int(cycle_ms)
-        packet = rob_packet(ipoc, (k % 1000) * 1e-3)
+            ipoc += vendor.seq_step(cycle_ms)
+        packet = vendor.packet(ipoc, (k % 1000) * 1e-3)
         sent[i][ipoc] = time.monotonic_ns()
         socks[i].send(packet)
         k += 1
@@ -202,7 +242,7 @@ def robot(seconds: float, cycle_ms: float, rt: int | None) -> dict:
                 answer = s.recv(65535)
             except BlockingIOError:
                 break
-            sent_at = sent[i].pop(_ipoc_of(answer), None)
+            sent_at = sent[i].pop(vendor.seq_of(answer), None)
             if sent_at is not None:
                 rtts[i].append(time.monotonic_ns() - sent_at)
                 late[i] += rtts[i][-1] > cycle_ns
@@ -229,14 +269,14 @@ def robot(seconds: float, cycle_ms: float, rt: int | None) -> dict:
             "cpu_pct": 100 * report["cpu_s"] / report["wall_s"],
             "max_at_s": worst[i][1],
         }
-    results["plugcell RSI link"]["link_stats"] = link_stats
-    results["plugcell RSI link"]["scheduling"] = link_note
+    results[vendor.link]["link_stats"] = link_stats
+    results[vendor.link]["scheduling"] = link_note
     return results
 
 
-def table(results: dict, seconds: float, cycle_ms: float) -> str:
-    link, echo = results["plugcell RSI link"], results["bare UDP echo"]
-    lines = [f"RSI answer latency, {1000 / cycle_ms:.0f} Hz, {seconds:.0f} s measured "
+def table(vendor: Vendor, results: dict, seconds: float, cycle_ms: float) -> str:
+    link, echo = results[vendor.link], results["bare UDP echo"]
+    lines = [f"{vendor.name} answer latency, {1000 / cycle_ms:.0f} Hz, {seconds:.0f} s measured "
              f"(+{WARMUP_S:.0f} s warm-up), two streams interleaved half a cycle apart",
              "",
              "| sensor | cycles | round trip p50 / p99 / p99.9 / max (µs) | in→out p50 / p99 / "
@@ -272,7 +312,7 @@ def cell_services(n: int) -> Iterator[None]:
     """``n`` plugcell services serving in a fresh cell while the block runs."""
     from idle_cost import KINDS, _wait_for  # the idle cell's kinds and start-up wait
 
-    home = Path(tempfile.mkdtemp(prefix="plugcell-rsi-cell-"))
+    home = Path(tempfile.mkdtemp(prefix="plugcell-stream-cell-"))
     env = {**os.environ, "PLUGCELL_HOME": str(home), "PYTHONUNBUFFERED": "1"}
     cell = f"rsi{uuid.uuid4().hex[:8]}"
     procs = []
@@ -297,8 +337,9 @@ def cell_services(n: int) -> Iterator[None]:
                 p.kill()
 
 
-def main(argv: list[str]) -> int:
-    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+def main(argv: list[str], vendor: Vendor | None = None, doc: str | None = None) -> int:
+    vendor = vendor or RSI
+    ap = argparse.ArgumentParser(description=(doc or __doc__).split("\n\n")[0])
     ap.add_argument("--seconds", type=float, default=60.0, help="measured seconds (60)")
     ap.add_argument("--cycle-ms", type=float, default=4.0, choices=(4.0, 12.0))
     ap.add_argument("--json", type=Path, help="also write the figures as JSON")
@@ -310,16 +351,16 @@ def main(argv: list[str]) -> int:
     ap.add_argument("--role", choices=("link", "echo"), help=argparse.SUPPRESS)
     args = ap.parse_args(argv)
     if args.role == "link":
-        run_link(args.cycle_ms, args.rt_priority)
+        vendor.run_link(args.cycle_ms, args.rt_priority)
         return 0
     if args.role == "echo":
-        run_echo(args.rt_priority)
+        run_echo(args.rt_priority, vendor.echo_part)
         return 0
     print(f"machine: {os.cpu_count()} CPUs, load average {os.getloadavg()[0]:.2f} at start",
           flush=True)
     with cell_services(args.cell) if args.cell else contextlib.nullcontext():
-        results = robot(args.seconds, args.cycle_ms, args.rt_priority)
-    print(table(results, args.seconds, args.cycle_ms))
+        results = robot(vendor, args.seconds, args.cycle_ms, args.rt_priority)
+    print(table(vendor, results, args.seconds, args.cycle_ms))
     if args.cell:
         print(f"beside {args.cell} plugcell services serving in a cell")
     print("scheduling: " + (f"SCHED_FIFO priority {args.rt_priority} (robot side, link "
@@ -329,6 +370,11 @@ def main(argv: list[str]) -> int:
     if args.json:
         args.json.write_text(json.dumps(results, indent=1), encoding="utf-8")
     return 0
+
+
+RSI = Vendor("RSI", __file__, rob_packet, _ipoc_of, lambda cycle_ms: int(cycle_ms),
+             lambda data: data[-64:],  # the tail carries the IPOC
+             run_link)
 
 
 if __name__ == "__main__":

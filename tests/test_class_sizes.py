@@ -34,7 +34,6 @@ LINES_CEILING = {
     "framework/participant.py:Participant": 558,
     "devices/cell/service.py:CellController": 542,
     "devices/opcua/gateway.py:CellGateway": 421,
-    "devices/robot/rsi/link.py:RsiLink": 451,  # new with RSI: its session and cycle to split
 }
 
 

@@ -9,7 +9,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from plugcell.devices.robot.rsi import CorrectionLimits, RsiConfig, RsiConfigError
-from plugcell.devices.robot.rsi.limits import OffsetLimiter
+from plugcell.devices.robot.stream.limits import OffsetLimiter
 from plugcell.io.units import DEG
 
 JOINTS = ("A1", "A2", "A3", "A4", "A5", "A6")

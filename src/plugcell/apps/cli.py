@@ -103,6 +103,8 @@ COMMANDS: tuple[Command, ...] = (
             "plugcell.apps.commands.opcua:configure"),
     Command("rsi", "KUKA RSI with plugcell as the sensor: controller files, streaming",
             "plugcell.apps.commands.rsi:configure"),
+    Command("egm", "ABB EGM with plugcell as the sensor: controller files, streaming",
+            "plugcell.apps.commands.egm:configure"),
 )
 
 

@@ -146,7 +146,7 @@ def _files(args: argparse.Namespace) -> int:
 def _source(args: argparse.Namespace):
     from plugcell.apps.cli import CommandError
     from plugcell.devices.robot.rsi.codec import CARTESIAN_AXES, JOINT_AXES
-    from plugcell.devices.robot.rsi.sources import Hold, SineOffset
+    from plugcell.devices.robot.stream.source import Hold, SineOffset
     from plugcell.io.units import DEG, M_PER_MM
 
     if not args.sine:

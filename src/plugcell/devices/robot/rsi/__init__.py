@@ -2,8 +2,8 @@
 
 * :mod:`.config` — :class:`RsiConfig`, the one validated value of a stream;
 * :mod:`.codec` — ``<Rob>`` packets → :class:`RobotState` (SI), ``<Sen>`` answers;
-* :mod:`.limits` — every correction held to the per-cycle step, speed and total offset;
-* :mod:`.link` — :class:`RsiLink`, the UDP loop, its counters and failures;
+* :mod:`.link` — :class:`RsiLink`, the UDP loop (:mod:`..stream`: every vendor's cycle
+  loop, limits, correction sources, counters and failures);
 * :mod:`.controller_files` — the KRL program, ethernet configuration and RSI diagram
   the user copies to the controller (``plugcell rsi files``).
 

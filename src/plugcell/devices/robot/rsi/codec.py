@@ -37,6 +37,8 @@ from numpy.typing import NDArray
 from plugcell.io.units import DEG, M_PER_MM, MM_PER_M
 from plugcell.kinematics.rotations import rpy_to_matrix
 
+from ..stream.errors import PacketError
+
 Array = NDArray[np.float64]
 
 __all__ = [
@@ -79,21 +81,6 @@ _SCALES: dict[tuple[str, ...], Array] = {}
 
 _PARSER = etree.XMLParser(resolve_entities=False, no_network=True, load_dtd=False,
                           huge_tree=False, remove_comments=True, remove_pis=True)
-
-
-class PacketError(ValueError):
-    """A datagram that is no usable robot packet.
-
-    Attributes
-    ----------
-    kind : str
-        ``"malformed"`` (not well-formed XML, a missing or unreadable value),
-        ``"oversized"`` or ``"foreign"`` (XML, but not a KUKA robot packet).
-    """
-
-    def __init__(self, kind: str, message: str) -> None:
-        super().__init__(message)
-        self.kind = kind
 
 
 @dataclass(frozen=True)

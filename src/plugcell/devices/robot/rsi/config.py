@@ -14,13 +14,12 @@ files (:mod:`.controller_files`), through :mod:`plugcell.io.units`.
 
 from __future__ import annotations
 
-import ipaddress
-import math
 import re
 from dataclasses import dataclass, field
 from typing import Literal
 
-from plugcell.io.units import DEG, M_PER_MM
+from ..stream.config import StreamConfigError, check_host, check_port
+from ..stream.limits import CorrectionLimits, default_limits
 
 __all__ = [
     "CYCLES",
@@ -42,95 +41,8 @@ Policy = Literal["clamp", "refuse"]
 _TAG = re.compile(r"^[A-Za-z_][A-Za-z0-9_]{0,31}$")
 
 
-class RsiConfigError(ValueError):
-    """An RSI configuration that cannot be used; the message names the field and why."""
-
-
-def _six(name: str, values: tuple[float, ...], positive: bool = True) -> tuple[float, ...]:
-    vals = tuple(float(v) for v in values)
-    if len(vals) != 6:
-        raise RsiConfigError(f"{name}: expected 6 values (one per axis), got {len(vals)}")
-    for i, v in enumerate(vals):
-        if not math.isfinite(v) or (positive and v <= 0):
-            raise RsiConfigError(f"{name}[{i}] = {v!r}: must be a finite number > 0")
-    return vals
-
-
-@dataclass(frozen=True)
-class CorrectionLimits:
-    """What a correction may do, per axis, in SI.
-
-    For joint corrections the six axes are A1..A6 (rad); for Cartesian corrections
-    X, Y, Z (m) then A, B, C (rad, KUKA's rotations about Z, Y, X).
-
-    Attributes
-    ----------
-    max_step : tuple of 6 float
-        Largest change of the offset in one cycle (rad or m per cycle).
-    max_offset : tuple of 6 float
-        Largest total offset from where the stream started, ``|offset_i| ≤ max_offset_i``.
-    max_speed : tuple of 6 float
-        Largest speed of the offset (rad/s or m/s); with the cycle ``T`` it caps the step
-        at ``max_speed_i · T``.  For joint corrections this is the joint speed limit.
-    policy : {"clamp", "refuse"}
-        ``"clamp"``: a correction beyond a limit is cut to the limit (counted, the reason
-        kept); ``"refuse"``: it is not sent — the link holds the robot (zero step) and
-        fails the stream with the reason.
-    """
-
-    max_step: tuple[float, ...]
-    max_offset: tuple[float, ...]
-    max_speed: tuple[float, ...]
-    policy: Policy = "clamp"
-
-    def __post_init__(self) -> None:
-        object.__setattr__(self, "max_step", _six("max_step", self.max_step))
-        object.__setattr__(self, "max_offset", _six("max_offset", self.max_offset))
-        object.__setattr__(self, "max_speed", _six("max_speed", self.max_speed))
-        if self.policy not in ("clamp", "refuse"):
-            raise RsiConfigError(f"policy {self.policy!r}: expected 'clamp' or 'refuse'")
-
-    def step_bound(self, cycle_s: float) -> tuple[float, ...]:
-        """The per-cycle bound ``min(max_step_i, max_speed_i · T)``.
-
-        Parameters
-        ----------
-        cycle_s : float
-            The controller's cycle ``T`` (s).
-
-        Returns
-        -------
-        tuple of 6 float
-            The largest step per cycle of each axis (rad or m).
-        """
-        return tuple(min(s, v * cycle_s) for s, v in zip(self.max_step, self.max_speed,
-                                                         strict=True))
-
-
-def default_limits(kind: Kind, policy: Policy = "clamp") -> CorrectionLimits:
-    """Conservative limits for a first test on a real robot.
-
-    Joint: 0.1° a cycle, 20°/s, 10° in total.  Cartesian: 0.2 mm and 0.02° a cycle,
-    50 mm/s and 5°/s, 50 mm and 5° in total (POSCORR's default box is ±50 mm).
-
-    Parameters
-    ----------
-    kind : {"joint", "cartesian"}
-        Which correction the limits are for.
-    policy : {"clamp", "refuse"}
-        What happens beyond them (:class:`CorrectionLimits`).
-
-    Returns
-    -------
-    CorrectionLimits
-        The limits in SI.
-    """
-    if kind == "joint":
-        return CorrectionLimits((0.1 * DEG,) * 6, (10 * DEG,) * 6, (20 * DEG,) * 6, policy)
-    mm = M_PER_MM
-    return CorrectionLimits((0.2 * mm,) * 3 + (0.02 * DEG,) * 3,
-                            (50 * mm,) * 3 + (5 * DEG,) * 3,
-                            (50 * mm,) * 3 + (5 * DEG,) * 3, policy)
+#: A configuration that cannot be used: the one error of every streaming interface.
+RsiConfigError = StreamConfigError
 
 
 @dataclass(frozen=True)
@@ -169,19 +81,7 @@ class OutputSignal:
 
 
 def _check_host(what: str, host: str) -> str:
-    try:
-        ipaddress.ip_address(host)
-    except ValueError:
-        raise RsiConfigError(f"{what} {host!r}: expected an IP address "
-                             "(RSI's IP_NUMBER is numeric)") from None
-    return host
-
-
-def _check_port(what: str, port: int, allow_zero: bool) -> int:
-    if isinstance(port, bool) or not isinstance(port, int) or not (
-            (0 if allow_zero else 1) <= port <= 65535):
-        raise RsiConfigError(f"{what} {port!r}: expected a UDP port 1..65535")
-    return port
+    return check_host(what, host, "RSI's IP_NUMBER is numeric")
 
 
 @dataclass(frozen=True)
@@ -236,9 +136,9 @@ class RsiConfig:
     def __post_init__(self) -> None:
         _check_host("robot_host", self.robot_host)
         _check_host("listen_host", self.listen_host)
-        _check_port("listen_port", self.listen_port, allow_zero=True)
+        check_port("listen_port", self.listen_port, allow_zero=True)
         if self.robot_port is not None:
-            _check_port("robot_port", self.robot_port, allow_zero=False)
+            check_port("robot_port", self.robot_port, allow_zero=False)
         if self.correction not in ("joint", "cartesian"):
             raise RsiConfigError(f"correction {self.correction!r}: expected 'joint' or "
                                  "'cartesian'")

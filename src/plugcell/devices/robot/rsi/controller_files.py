@@ -31,13 +31,13 @@ the same box the PC does, as a second line.
 from __future__ import annotations
 
 from dataclasses import dataclass
-from importlib import resources
 from pathlib import Path
 
 from lxml import etree
 
 from plugcell.io.units import DEG, M_PER_MM
 
+from ..stream.files import fill_template, write_files
 from .config import RsiConfig
 
 __all__ = ["IoRouting", "controller_files", "write_controller_files"]
@@ -68,16 +68,8 @@ class IoRouting:
 
 
 def _fill(name: str, **values: object) -> str:
-    """The template ``controller/name`` with each ``{{key}}`` replaced (KRL's own ``$``
-    variables stay as they are)."""
-    text = resources.files(__package__).joinpath("controller", name).read_text(
-        encoding="utf-8")
-    for key, value in values.items():
-        text = text.replace("{{" + key + "}}", str(value))
-    if "{{" in text:
-        raise KeyError(f"{name}: a placeholder is not filled: "
-                       f"{text[text.index('{{'):text.index('{{') + 30]!r}")
-    return text
+    """The template ``controller/name`` filled (KRL's own ``$`` variables stay)."""
+    return fill_template(__package__, name, **values)
 
 
 def _el(parent: etree._Element, tag: str, **attrib: str) -> etree._Element:
@@ -292,12 +284,5 @@ def write_controller_files(out: Path, config: RsiConfig, sensor_ip: str,
     list of Path
         The files written.
     """
-    files = controller_files(config, sensor_ip, io)
-    out.mkdir(parents=True, exist_ok=True)
-    written = []
-    for name, text in files.items():
-        path = out / name
-        # KRL and the controller's Windows side expect CRLF line ends
-        path.write_bytes(text.replace("\n", "\r\n").encode("utf-8"))
-        written.append(path)
-    return written
+    # KRL and the controller's Windows side expect CRLF line ends
+    return write_files(out, controller_files(config, sensor_ip, io))

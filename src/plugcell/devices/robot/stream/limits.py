@@ -17,15 +17,98 @@ A non-finite request is always refused.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Literal
 
 import numpy as np
 from numpy.typing import NDArray
 
-from .config import CorrectionLimits
+from plugcell.io.units import DEG, M_PER_MM
+
+from .config import StreamConfigError, six_values
 
 Array = NDArray[np.float64]
 
-__all__ = ["Limited", "OffsetLimiter"]
+__all__ = ["CorrectionLimits", "Limited", "OffsetLimiter", "default_limits"]
+
+Kind = Literal["joint", "cartesian"]
+Policy = Literal["clamp", "refuse"]
+
+
+@dataclass(frozen=True)
+class CorrectionLimits:
+    """What a correction may do, per axis, in SI.
+
+    For joint corrections the six axes are the joints (rad); for Cartesian corrections
+    X, Y, Z (m) then three rotations (rad: KUKA's A, B, C; EGM's rotation vector).
+
+    Attributes
+    ----------
+    max_step : tuple of 6 float
+        Largest change of the offset in one cycle (rad or m per cycle).
+    max_offset : tuple of 6 float
+        Largest total offset from where the stream started, ``|offset_i| ≤ max_offset_i``.
+    max_speed : tuple of 6 float
+        Largest speed of the offset (rad/s or m/s); with the cycle ``T`` it caps the step
+        at ``max_speed_i · T``.  For joint corrections this is the joint speed limit.
+    policy : {"clamp", "refuse"}
+        ``"clamp"``: a correction beyond a limit is cut to the limit (counted, the reason
+        kept); ``"refuse"``: it is not sent — the link holds the robot (zero step) and
+        fails the stream with the reason.
+    """
+
+    max_step: tuple[float, ...]
+    max_offset: tuple[float, ...]
+    max_speed: tuple[float, ...]
+    policy: Policy = "clamp"
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "max_step", six_values("max_step", self.max_step))
+        object.__setattr__(self, "max_offset", six_values("max_offset", self.max_offset))
+        object.__setattr__(self, "max_speed", six_values("max_speed", self.max_speed))
+        if self.policy not in ("clamp", "refuse"):
+            raise StreamConfigError(f"policy {self.policy!r}: expected 'clamp' or 'refuse'")
+
+    def step_bound(self, cycle_s: float) -> tuple[float, ...]:
+        """The per-cycle bound ``min(max_step_i, max_speed_i · T)``.
+
+        Parameters
+        ----------
+        cycle_s : float
+            The controller's cycle ``T`` (s).
+
+        Returns
+        -------
+        tuple of 6 float
+            The largest step per cycle of each axis (rad or m).
+        """
+        return tuple(min(s, v * cycle_s) for s, v in zip(self.max_step, self.max_speed,
+                                                         strict=True))
+
+
+def default_limits(kind: Kind, policy: Policy = "clamp") -> CorrectionLimits:
+    """Conservative limits for a first test on a real robot.
+
+    Joint: 0.1° a cycle, 20°/s, 10° in total.  Cartesian: 0.2 mm and 0.02° a cycle,
+    50 mm/s and 5°/s, 50 mm and 5° in total (POSCORR's default box is ±50 mm).
+
+    Parameters
+    ----------
+    kind : {"joint", "cartesian"}
+        Which correction the limits are for.
+    policy : {"clamp", "refuse"}
+        What happens beyond them (:class:`CorrectionLimits`).
+
+    Returns
+    -------
+    CorrectionLimits
+        The limits in SI.
+    """
+    if kind == "joint":
+        return CorrectionLimits((0.1 * DEG,) * 6, (10 * DEG,) * 6, (20 * DEG,) * 6, policy)
+    mm = M_PER_MM
+    return CorrectionLimits((0.2 * mm,) * 3 + (0.02 * DEG,) * 3,
+                            (50 * mm,) * 3 + (5 * DEG,) * 3,
+                            (50 * mm,) * 3 + (5 * DEG,) * 3, policy)
 
 
 @dataclass(frozen=True)

@@ -1,0 +1,180 @@
+"""``plugcell egm`` — ABB EGM, plugcell as the sensor (docs/abb-egm.md).
+
+::
+
+    plugcell egm files --out DIR --ip PC_IP [--port 6510] [--mode joint|pose|pathcorr]
+                       [--sample-ms 4] [--timeout S] [--max-step V,…] [--max-offset V,…]
+                       [--max-speed V,…] [--device NAME]
+    plugcell egm run --robot-ip IP [--listen IP] [--port 6510] [same stream options]
+                     [--sine AXIS:AMPLITUDE:PERIOD] [--duration S] [--rt-priority N]
+
+``files`` writes what the user loads into the controller (RAPID module, the UDP unit
+device's configuration); ``run`` answers the robot — holding it where EGM started, or
+swinging one axis — and prints the link's counters every second.  Limits are given in
+the robot's units: degrees (joint) or mm and degrees (X, Y, Z then the rotation vector),
+per cycle for the step and per second for the speed; one number is for all six axes.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import time
+from pathlib import Path
+
+from .rsi import _six
+
+AXES = {"joint": ("A1", "A2", "A3", "A4", "A5", "A6"),
+        "cartesian": ("X", "Y", "Z", "RX", "RY", "RZ")}
+
+
+def _stream_args(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--port", type=int, default=6510,
+                   help="the PC's UDP port (the UDP unit device's remote port)")
+    p.add_argument("--mode", choices=("joint", "pose", "pathcorr"), default="joint",
+                   help="EGMRunJoint, EGMRunPose or EGMMoveL path corrections (joint)")
+    p.add_argument("--sample-ms", type=int, default=4, help="\\SampleRate in ms (4)")
+    p.add_argument("--timeout", type=float, default=1.0,
+                   help="EGMSetupUC's \\CommTimeout in seconds (1)")
+    for name, what in (("step", "per cycle"), ("offset", "in total"), ("speed", "per second")):
+        p.add_argument(f"--max-{name}", metavar="V[,V…]",
+                       help=f"largest offset change {what}: deg (joint) or mm,…,deg (pose)")
+    p.add_argument("--refuse", action="store_true",
+                   help="refuse (hold and fail) a target beyond the limits instead of "
+                   "clamping it")
+
+
+def configure(p: argparse.ArgumentParser) -> None:
+    """Add the ``egm`` actions to its parser (declared in :mod:`plugcell.apps.cli`)."""
+    p.description = ("ABB EGM with plugcell as the sensor: write the controller's files, "
+                     "or stream to a robot.")
+    sub = p.add_subparsers(dest="egm_command", metavar="ACTION", required=True)
+    f = sub.add_parser("files", help="write the RAPID module and the UDP unit device's "
+                       "configuration for the controller")
+    f.add_argument("--out", type=Path, required=True, help="folder to write into")
+    f.add_argument("--ip", required=True, help="the PC's address on the controller's "
+                   "network (RemoteAdress)")
+    f.add_argument("--device", default="plugcellUC", help="the UDP unit device's name")
+    _stream_args(f)
+    f.set_defaults(func=_files)
+    r = sub.add_parser("run", help="answer the robot: hold it, or swing one axis")
+    r.add_argument("--robot-ip", required=True, help="the controller's address")
+    r.add_argument("--listen", default="0.0.0.0", help="address to listen on")
+    _stream_args(r)
+    r.add_argument("--sine", metavar="AXIS:AMPLITUDE:PERIOD",
+                   help="swing one axis once: e.g. A6:2:4 (2° over 4 s) or Z:5:4 (5 mm)")
+    r.add_argument("--duration", type=float, default=0.0,
+                   help="seconds to run (default: until interrupted)")
+    r.add_argument("--rt-priority", type=int, metavar="N",
+                   help="run the link's thread under SCHED_FIFO priority N (1-99; Linux, "
+                   "root or CAP_SYS_NICE)")
+    r.add_argument("--json", action="store_true", help="print the counters as JSON lines")
+    r.set_defaults(func=_run)
+
+
+def _config(args: argparse.Namespace, robot_host: str, listen: str):
+    """The EgmConfig the options describe (limits converted to SI)."""
+    from plugcell.apps.cli import CommandError
+    from plugcell.devices.robot.egm import (
+        CorrectionLimits,
+        EgmConfig,
+        EgmConfigError,
+        default_limits,
+    )
+    from plugcell.io.units import DEG, M_PER_MM
+
+    kind = "joint" if args.mode == "joint" else "cartesian"
+    scale = (DEG,) * 6 if kind == "joint" else (M_PER_MM,) * 3 + (DEG,) * 3
+    base = default_limits(kind)
+    given = {}
+    for name in ("step", "offset", "speed"):
+        vals = _six(getattr(args, f"max_{name}"), name)
+        given[name] = (tuple(v * s for v, s in zip(vals, scale, strict=True)) if vals
+                       else getattr(base, f"max_{name}"))
+    try:
+        limits = CorrectionLimits(given["step"], given["offset"], given["speed"],
+                                  "refuse" if args.refuse else "clamp")
+        return EgmConfig(robot_host=robot_host, listen_host=listen, listen_port=args.port,
+                         mode=args.mode, sample_rate_ms=args.sample_ms,
+                         comm_timeout_s=args.timeout, limits=limits)
+    except EgmConfigError as exc:
+        raise CommandError(str(exc)) from None
+
+
+def _files(args: argparse.Namespace) -> int:
+    from plugcell.apps.cli import CommandError
+    from plugcell.devices.robot.egm.controller_files import write_controller_files
+
+    config = _config(args, "0.0.0.0", "0.0.0.0")
+    try:
+        paths = write_controller_files(args.out, config, args.ip, args.device)
+    except ValueError as exc:
+        raise CommandError(str(exc)) from None
+    except OSError as exc:
+        raise CommandError(f"{args.out}: cannot write: {exc.strerror or exc}") from None
+    for path in paths:
+        print(path)
+    print(f"then on the PC: plugcell egm run --robot-ip CONTROLLER_IP --port {args.port} "
+          f"--mode {args.mode} --sample-ms {args.sample_ms} --timeout {args.timeout:g}")
+    return 0
+
+
+def _source(args: argparse.Namespace):
+    from plugcell.apps.cli import CommandError
+    from plugcell.devices.robot.stream.source import Hold, SineOffset
+    from plugcell.io.units import DEG, M_PER_MM
+
+    if not args.sine:
+        return Hold()
+    try:
+        axis, amplitude, period = args.sine.split(":")
+        amplitude_v, period_v = float(amplitude), float(period)
+    except ValueError:
+        raise CommandError(f"--sine {args.sine!r}: expected AXIS:AMPLITUDE:PERIOD") from None
+    axes = AXES["joint" if args.mode == "joint" else "cartesian"]
+    if axis not in axes:
+        raise CommandError(f"--sine: axis {axis!r} is not one of {', '.join(axes)}")
+    i = axes.index(axis)
+    if args.mode == "pathcorr" and i >= 3:
+        raise CommandError("--sine: a path correction has no rotation (X, Y or Z)")
+    unit = M_PER_MM if args.mode != "joint" and i < 3 else DEG
+    if period_v <= 0:
+        raise CommandError(f"--sine: the period must be > 0, got {period_v}")
+    return SineOffset(i, amplitude_v * unit, period_v)
+
+
+def _run(args: argparse.Namespace) -> int:
+    from plugcell.apps.cli import CommandError
+    from plugcell.devices.robot.egm import EgmLink, StreamStoppedError
+
+    config = _config(args, args.robot_ip, args.listen)
+    try:
+        link = EgmLink(config, _source(args), rt_priority=args.rt_priority)
+    except ValueError as exc:
+        raise CommandError(str(exc)) from None
+    host, port = link.start()
+    time.sleep(0.01)  # the thread has set its scheduling
+    print(f"listening on {host}:{port} for the robot at {args.robot_ip} ({config.mode}, "
+          f"{config.sample_rate_ms} ms; {link.rt_note})", flush=True)
+    end = time.monotonic() + args.duration if args.duration > 0 else None
+    failed = None
+    try:
+        while end is None or time.monotonic() < end:
+            time.sleep(1.0)
+            st = link.stats()
+            if args.json:
+                print(json.dumps({**st.__dict__, "failure": str(link.failure or "")}),
+                      flush=True)
+            else:
+                print(f"received {st.received} answered {st.answered} late {st.late} "
+                      f"missed {st.missed} dropped {sum(st.dropped.values())} clamped "
+                      f"{st.clamped} max latency {st.max_latency_ns / 1e6:.3f} ms",
+                      flush=True)
+            if link.failure is not None and link.failure is not failed:
+                failed = link.failure
+                print(f"stream failed: {failed}", flush=True)
+    finally:
+        link.close()
+    # the controller ending the stream (program stopped: silence) is how a run ends
+    silent = isinstance(failed, StreamStoppedError) and "no packet" in str(failed)
+    return 1 if failed is not None and not silent else 0
