@@ -188,11 +188,27 @@ def test_lost_cycles_are_counted_and_too_many_fail_the_stream() -> None:
         robot.seqno += 3  # three messages lost on the way
         robot.cycle()
         assert wait_until(lambda: link.stats().missed == 3) and link.failure is None
-        robot.seqno += 5
+        robot.seqno += 3
         robot.cycle()
         assert link.wait(lambda lk: lk.failure is not None, 1.0)  # set after the answer
         assert isinstance(link.failure, StreamStoppedError)
-        assert "8 cycles in a row missed or late" in str(link.failure)
+        assert "6 cycles in a row missed or late" in str(link.failure)
+    finally:
+        robot.close()
+        link.close()
+
+
+def test_a_sequence_number_a_timeout_ahead_is_dropped_as_inconsistent() -> None:
+    """One message whose seqno jumps a whole controller timeout ahead (a corrupted number:
+    the stream would have been silent that long) is dropped; the stream goes on."""
+    link = started(local_config(comm_timeout_s=0.02))  # 5 cycles
+    robot = BareRobot(link.address)
+    try:
+        robot.cycle()
+        robot.send(robot_message(robot.seqno + 6))  # no answer: dropped
+        assert wait_until(lambda: link.stats().dropped["inconsistent"] == 1)
+        robot.cycle()  # the next genuine message
+        assert wait_until(lambda: link.stats().answered == 2) and link.failure is None
     finally:
         robot.close()
         link.close()

@@ -454,7 +454,7 @@ def test_follow_times_out_without_a_controller() -> None:
 
 
 def test_a_flood_of_garbage_does_not_keep_the_link_from_answering(robot_and) -> None:
-    from plugcell.devices.robot.rsi.link import DRAIN
+    from plugcell.devices.robot.stream.link import DRAIN
 
     link, robot = robot_and()
     robot.cycle()

@@ -179,8 +179,21 @@ def _pair_distances(p: Array) -> Array:
 
 
 def too_close(points: ArrayLike, which: str = "") -> str:
-    """``"units: …"`` if the nests' median mutual distance is below
-    :data:`MIN_NEST_SPACING_M` (a file in metres read as mm), else ""."""
+    """Whether nests are too close together to be nests in mm (a file in metres).
+
+    Parameters
+    ----------
+    points : (N, 3) array_like, m
+        The nests' positions as read.
+    which : str
+        Which file's nests, for the message (e.g. ``"measured"``).
+
+    Returns
+    -------
+    str
+        ``"units: …"`` naming the spacing if the nests' median mutual distance is below
+        :data:`MIN_NEST_SPACING_M`, else ``""``.
+    """
     p = as_points(points, "nests", 2)
     spacing = float(np.median(_pair_distances(p)))
     if spacing >= MIN_NEST_SPACING_M:
