@@ -62,6 +62,7 @@ from plugcell.devices.robot.bridge import (
     parse_address,
 )
 from plugcell.devices.robot.increment import joint_increment, pose_error_sizes
+from plugcell.devices.robot.joint_state import DEFAULT_RATE_HZ, JointStatePublisher
 from plugcell.devices.robot.outbound import ExternalProcessHandler
 from plugcell.devices.robot.protocol import (
     ActivateLine,
@@ -81,6 +82,7 @@ from plugcell.devices.robot.protocol import (
 from plugcell.framework.messages import Command, CommandTypes, ConnectionStates, DataTypes
 from plugcell.framework.participant import PartnerError
 from plugcell.framework.service import DeviceError, GenericDevice
+from plugcell.io.units import joints_to_si
 from plugcell.kinematics import RobotDescription
 from plugcell.pdl.predefined import EXT_DATA_MAX
 from plugcell.sim.controller.launcher import SimControllerError, SimControllerProcess
@@ -159,6 +161,7 @@ class RobotService(GenericDevice):
         "seed": int,
         "library": str,
         "link_baud": float,
+        "joint_rate": float,
     }
 
     def __init__(
@@ -173,6 +176,7 @@ class RobotService(GenericDevice):
         seed: int = 0,
         library: str = "",
         link_baud: float = 0.0,
+        joint_rate: float = DEFAULT_RATE_HZ,
         connect_timeout: float = 30.0,
         **kwargs: Any,
     ) -> None:
@@ -204,6 +208,8 @@ class RobotService(GenericDevice):
         self._run_waiters: dict[int, asyncio.Future[ProgramEnded]] = {}
         self._reconnect: asyncio.Task[None] | None = None
         self.robot_description: RobotDescription | None = None
+        self.joint_rate = joint_rate
+        self.joint_state: JointStatePublisher | None = None
 
     # ------------------------------------------------------------------ connection
     async def connect(self) -> None:
@@ -222,7 +228,26 @@ class RobotService(GenericDevice):
         except (BridgeError, SimControllerError) as exc:
             raise PartnerError(f"{self.name}: {exc}") from None
         self.outbound.start()
+        self._publish_joint_state()
         self.connection_state.post(ConnectionStates.Online)
+
+    def _publish_joint_state(self) -> None:
+        """The joint state for the cell's 3-D view (joint_state.py), ``joint_rate`` per s."""
+        if self.joint_rate <= 0 or self.bus is None:
+            return
+        publisher = self.bus.joint_state_publisher(self.name)
+        self._entities.append(publisher)
+
+        async def read() -> np.ndarray | None:
+            desc = self.robot_description
+            if not self.bridge.connected or desc is None:
+                return None
+            text = await self.bridge.request(ArmJntp(self.bridge.new_id()))
+            return joints_to_si(self._numbers(text), desc.reading_scale())
+
+        self.joint_state = JointStatePublisher(read, lambda: self.robot_description,
+                                               publisher.put, self.joint_rate)
+        self.joint_state.start()
 
     async def _connect_bridge(self, timeout: float | None = None) -> None:
         assert self.endpoint is not None
@@ -249,6 +274,8 @@ class RobotService(GenericDevice):
             reconnect.cancel()
             with contextlib.suppress(asyncio.CancelledError):
                 await reconnect
+        if self.joint_state is not None:
+            await self.joint_state.close()
         await self.outbound.close()
         await self.bridge.close()
         self._fail_waiters("the robot service is shutting down")
