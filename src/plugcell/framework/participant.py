@@ -661,12 +661,6 @@ class Participant:
 
         return self.bus.watch_processes(on_sample)
 
-    def watch_joint_states(self, handler: Callable[[str, bytes], None]) -> Any:
-        """Follow every robot's joint state (``keys.joints``): ``handler(robot, payload)``
-        runs on the event loop for each one.  Returns the Zenoh subscriber."""
-        assert self.bus is not None, "watch_joint_states before start()"
-        return self.bus.watch_joint_states(handler)
-
     def _on_process_update(self, sample: zenoh.Sample) -> None:
         try:
             envelope = codec.decode(sample.payload.to_bytes())

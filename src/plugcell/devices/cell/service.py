@@ -37,11 +37,10 @@ from collections.abc import AsyncIterator, Iterable
 from pathlib import Path
 from typing import Any, ClassVar
 
-import msgspec
-
 from plugcell.devices.cell.feed import UiFeed
 from plugcell.devices.cell.journal_tail import JournalTail
 from plugcell.devices.cell.monitor import ProcessMonitor, data_view
+from plugcell.devices.cell.robot_states import RobotStates
 from plugcell.devices.cell.runs import (
     MODES,
     ProgramRun,
@@ -58,7 +57,6 @@ from plugcell.devices.cell.wiring import (
     parse_wiring,
     save_wiring,
 )
-from plugcell.devices.robot.joint_state import decode_joint_state
 from plugcell.framework.keys import Presence
 from plugcell.framework.messages import (
     Command,
@@ -174,10 +172,8 @@ class CellController(GenericDevice):
         self._background: set[asyncio.Task[Any]] = set()
         self._loops: list[asyncio.Task[Any]] = []
         self._refresh_now = asyncio.Event()
-        self.robot_states: dict[str, dict[str, Any]] = {}
-        """The latest ``robot`` event of each robot service (its joint state)."""
-        self.bad_joint_states = 0
-        """Joint-state payloads that could not be read (dropped)."""
+        self.robots = RobotStates(self.feed)
+        """The latest joint state of each robot (robot_states.py)."""
         self._reapplying = asyncio.Lock()
 
     # -- life cycle ----------------------------------------------------------------------
@@ -185,7 +181,8 @@ class CellController(GenericDevice):
     async def _declare(self) -> None:
         await super()._declare()
         self._entities.append(self.watch_processes(self._on_any_process))
-        self._entities.append(self.watch_joint_states(self._on_joint_state))
+        assert self.bus is not None
+        self._entities.append(self.bus.watch_joint_states(self.robots.on_payload))
 
     async def start(self) -> None:
         await super().start()
@@ -271,20 +268,8 @@ class CellController(GenericDevice):
             "runs": [r.to_json() for r in self.runs.values()],
             "log": list(self.activity),
             "journals": self.journal_tail is not None,
-            "robots": list(self.robot_states.values()),
+            "robots": self.robots.snapshot(),
         }
-
-    def _on_joint_state(self, service: str, payload: bytes) -> None:
-        """A robot's joint state (devices/robot/joint_state.py) → a ``robot`` event to
-        every listener at once (not batched: the 3-D view follows it live)."""
-        try:
-            state = decode_joint_state(payload)
-        except ValueError:  # msgspec.DecodeError: not a joint state
-            self.bad_joint_states += 1
-            return
-        event = {"type": "robot", "service": service, **msgspec.to_builtins(state)}
-        self.robot_states[service] = event
-        self.feed.emit(event)
 
     def _processes_event(self, keys: Iterable[tuple[str, str, int]]) -> dict[str, Any]:
         now = time.time_ns()
@@ -327,7 +312,7 @@ class CellController(GenericDevice):
             for other in self.records.values():
                 if presence.name in other.partners:
                     other.partners.remove(presence.name)
-            self.robot_states.pop(presence.name, None)
+            self.robots.forget(presence.name)
             self._log("warning", f"{presence.name} left the cell")
         self.feed.cell_changed()
 

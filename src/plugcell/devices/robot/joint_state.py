@@ -38,6 +38,8 @@ from typing import Any
 import msgspec
 import numpy as np
 
+from plugcell.devices.robot.protocol import ArmJntp, ProtocolError, parse_numbers
+from plugcell.io.units import joints_to_si
 from plugcell.kinematics import RobotDescription, forward
 
 __all__ = [
@@ -47,6 +49,7 @@ __all__ = [
     "LinkInfo",
     "decode_joint_state",
     "joint_state",
+    "publish_joint_state",
 ]
 
 log = logging.getLogger(__name__)
@@ -205,3 +208,39 @@ class JointStatePublisher:
             if delay < 0:  # fell behind (a slow controller): no burst to catch up
                 next_at, delay = loop.time(), 0.0
             await asyncio.sleep(delay)
+
+
+def publish_joint_state(service: Any, rate_hz: float) -> JointStatePublisher | None:
+    """Start publishing a robot service's joint state (None if ``rate_hz`` ≤ 0).
+
+    The readings are its controller's ``ARM_JNTP`` (degrees, mm) in SI; its description
+    is the one the service loaded for its controller (``service.robot_description``).
+
+    Parameters
+    ----------
+    service : plugcell.devices.robot.service.RobotService
+        A started robot service (its bus, bridge and description).
+    rate_hz
+        States per second.
+    """
+    if rate_hz <= 0 or service.bus is None:
+        return None
+    publisher = service.bus.joint_state_publisher(service.name)
+    service._entities.append(publisher)  # undeclared when the service closes
+    bridge = service.bridge
+
+    async def read() -> np.ndarray | None:
+        desc = service.robot_description
+        if not bridge.connected or desc is None:
+            return None
+        text = await bridge.request(ArmJntp(bridge.new_id()))
+        try:
+            degrees = parse_numbers(text, desc.n_readings, "ARM_JNTP answer")
+        except ProtocolError as exc:
+            raise ValueError(str(exc)) from None
+        return joints_to_si(np.asarray(degrees, dtype=float), desc.reading_scale())
+
+    states = JointStatePublisher(read, lambda: service.robot_description, publisher.put,
+                                 rate_hz)
+    states.start()
+    return states

@@ -62,7 +62,11 @@ from plugcell.devices.robot.bridge import (
     parse_address,
 )
 from plugcell.devices.robot.increment import joint_increment, pose_error_sizes
-from plugcell.devices.robot.joint_state import DEFAULT_RATE_HZ, JointStatePublisher
+from plugcell.devices.robot.joint_state import (
+    DEFAULT_RATE_HZ,
+    JointStatePublisher,
+    publish_joint_state,
+)
 from plugcell.devices.robot.outbound import ExternalProcessHandler
 from plugcell.devices.robot.protocol import (
     ActivateLine,
@@ -82,7 +86,6 @@ from plugcell.devices.robot.protocol import (
 from plugcell.framework.messages import Command, CommandTypes, ConnectionStates, DataTypes
 from plugcell.framework.participant import PartnerError
 from plugcell.framework.service import DeviceError, GenericDevice
-from plugcell.io.units import joints_to_si
 from plugcell.kinematics import RobotDescription
 from plugcell.pdl.predefined import EXT_DATA_MAX
 from plugcell.sim.controller.launcher import SimControllerError, SimControllerProcess
@@ -228,26 +231,8 @@ class RobotService(GenericDevice):
         except (BridgeError, SimControllerError) as exc:
             raise PartnerError(f"{self.name}: {exc}") from None
         self.outbound.start()
-        self._publish_joint_state()
+        self.joint_state = publish_joint_state(self, self.joint_rate)
         self.connection_state.post(ConnectionStates.Online)
-
-    def _publish_joint_state(self) -> None:
-        """The joint state for the cell's 3-D view (joint_state.py), ``joint_rate`` per s."""
-        if self.joint_rate <= 0 or self.bus is None:
-            return
-        publisher = self.bus.joint_state_publisher(self.name)
-        self._entities.append(publisher)
-
-        async def read() -> np.ndarray | None:
-            desc = self.robot_description
-            if not self.bridge.connected or desc is None:
-                return None
-            text = await self.bridge.request(ArmJntp(self.bridge.new_id()))
-            return joints_to_si(self._numbers(text), desc.reading_scale())
-
-        self.joint_state = JointStatePublisher(read, lambda: self.robot_description,
-                                               publisher.put, self.joint_rate)
-        self.joint_state.start()
 
     async def _connect_bridge(self, timeout: float | None = None) -> None:
         assert self.endpoint is not None
