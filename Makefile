@@ -4,9 +4,10 @@ PYTHON ?= python3
 VENV   ?= .venv
 BIN     = $(VENV)/bin
 
-.PHONY: demo test test-fast lint bench clean
+.PHONY: demo test test-fast lint bench clean ui-bundle
 
 OPCUA_JS = tests/opcua/js
+UI_WEB   = src/plugcell/apps/ui/web
 
 $(BIN)/.plugcell-installed: pyproject.toml
 	$(PYTHON) -m venv $(VENV)
@@ -20,10 +21,21 @@ $(OPCUA_JS)/node_modules/.installed: $(OPCUA_JS)/package.json $(OPCUA_JS)/packag
 	cd $(OPCUA_JS) && npm ci --no-audit --no-fund --silent
 	touch $@
 
+# three.js and esbuild for the UI's 3-D view: the bundle they make is committed
+# (src/plugcell/apps/ui/static/vendor); the tests rebuild it and compare (`make ui-bundle`
+# rebuilds it after a change of package.json / package-lock.json)
+$(UI_WEB)/node_modules/.installed: $(UI_WEB)/package.json $(UI_WEB)/package-lock.json
+	cd $(UI_WEB) && npm ci --no-audit --no-fund --silent
+	touch $@
+
+ui-bundle: $(UI_WEB)/node_modules/.installed
+	cd $(UI_WEB) && npm run --silent build
+
 demo: $(BIN)/.plugcell-installed
 	$(BIN)/plugcell demo
 
-test: $(BIN)/.plugcell-installed $(OPCUA_JS)/node_modules/.installed
+test: $(BIN)/.plugcell-installed $(OPCUA_JS)/node_modules/.installed \
+      $(UI_WEB)/node_modules/.installed
 	$(BIN)/ruff check src tests benchmarks
 	$(BIN)/python -m pytest -q
 
@@ -37,4 +49,4 @@ bench: $(BIN)/.plugcell-installed
 	$(BIN)/python benchmarks/run_all.py
 
 clean:
-	rm -rf $(VENV) .pytest_cache .ruff_cache .hypothesis $(OPCUA_JS)/node_modules
+	rm -rf $(VENV) .pytest_cache .ruff_cache .hypothesis $(OPCUA_JS)/node_modules $(UI_WEB)/node_modules

@@ -245,6 +245,25 @@ class Bus:
             congestion_control=zenoh.CongestionControl.BLOCK,
         )
 
+    # -- a robot's joint state (devices/robot/joint_state.py) ----------------------------
+
+    def joint_state_publisher(self, name: str) -> Entity:
+        """Robot service ``name``'s publisher of its joint state (drops rather than blocks:
+        a display stream, the next state replaces a lost one)."""
+        return self.session.declare_publisher(
+            self.keys.joints(name), congestion_control=zenoh.CongestionControl.DROP)
+
+    def watch_joint_states(self, handler: Callable[[str, bytes], None]) -> Entity:
+        """``handler(robot service, payload)`` for every joint state of the cell."""
+        keys = self.keys
+
+        def on_sample(sample: zenoh.Sample) -> None:
+            name = keys.parse_joints(str(sample.key_expr))
+            if name is not None:
+                handler(name, sample.payload.to_bytes())
+
+        return self.session.declare_subscriber(keys.joints(), self._callback(on_sample))
+
     # -- the simulated world's reflectors (sim/world.py) ---------------------------
 
     def reflector(self, name: str, latest: Callable[[], bytes | None]) -> tuple[Entity, Entity]:

@@ -17,6 +17,8 @@ key                                    Zenoh       message
 ``svc/<name>/state``                   pub/sub     StateUpdate
 ``svc/<name>/connection``              pub/sub     ConnectionUpdate
 ``svc/<name>/shutdown``                pub/sub     Shutdown
+``joints/<name>``                      pub/sub     a robot service's joint state (a display
+                                                   stream, several times a second)
 =====================================  ==========  ==========================================
 """
 
@@ -123,6 +125,19 @@ class KeySpace:
     def reflector(self, name: str = "*") -> str:
         """Pub/sub and queryable of reflector ``name``'s true pose (``*``: every one)."""
         return f"{self.prefix}/sim/reflector/{name}"
+
+    # a robot's joint state (devices/robot/joint_state.py): outside ``svc/<name>/*`` so
+    # that a partner following a robot's notifications does not hear it
+    def joints(self, name: str = "*") -> str:
+        """Pub/sub of robot service ``name``'s joint state (``*``: every robot)."""
+        return f"{self.prefix}/joints/{name}"
+
+    def parse_joints(self, key: str) -> str | None:
+        """The robot service a :meth:`joints` key of this cell names, else None."""
+        parts = key.split("/")
+        if len(parts) != 4 or parts[:3] != [ROOT, self.cell, "joints"]:
+            return None
+        return parts[3]
 
     def parse_process(self, key: str) -> tuple[str, str] | None:
         """``(service, sender)`` of a :meth:`process` key of this cell, else None."""

@@ -104,8 +104,9 @@ def zenoh_acl(names: Iterable[str]) -> dict[str, object]:
 
     ``names`` are the certificate CNs of the cell (its participants).  Every node
     accepts from a peer whose CN is N only the publications, queryables and
-    liveliness tokens of N (``plugcell/*/svc/N/**``, ``plugcell/*/live/*/N/*``) and
-    N's own published requests (``plugcell/*/svc/*/create/N``):
+    liveliness tokens of N (``plugcell/*/svc/N/**``, ``plugcell/*/live/*/N/*``),
+    N's own published requests (``plugcell/*/svc/*/create/N``) and, of a robot service,
+    its joint state (``plugcell/*/joints/N``):
     nobody can publish a forged Shutdown or StateUpdate of another service, answer its
     queries, or declare its presence (which would make the real one withdraw).
     Subscriptions, queries and replies are open to every certified peer; who may
@@ -132,7 +133,8 @@ def zenoh_acl(names: Iterable[str]) -> dict[str, object]:
         rules.append({"id": f"as{i}", "permission": "allow", "flows": ["ingress"],
                       "messages": writes,
                       "key_exprs": [f"plugcell/*/svc/{name}/**", f"plugcell/*/live/*/{name}/*",
-                                    f"plugcell/*/svc/*/create/{name}"]})
+                                    f"plugcell/*/svc/*/create/{name}",
+                                    f"plugcell/*/joints/{name}"]})
         subjects.append({"id": f"cn{i}", "cert_common_names": [name]})
         policies.append({"id": f"as{i}", "rules": [f"as{i}"], "subjects": [f"cn{i}"]})
     return {"enabled": True, "default_permission": "deny", "rules": rules,

@@ -40,6 +40,7 @@ from typing import Any, ClassVar
 from plugcell.devices.cell.feed import UiFeed
 from plugcell.devices.cell.journal_tail import JournalTail
 from plugcell.devices.cell.monitor import ProcessMonitor, data_view
+from plugcell.devices.cell.robot_states import RobotStates
 from plugcell.devices.cell.runs import (
     MODES,
     ProgramRun,
@@ -171,6 +172,8 @@ class CellController(GenericDevice):
         self._background: set[asyncio.Task[Any]] = set()
         self._loops: list[asyncio.Task[Any]] = []
         self._refresh_now = asyncio.Event()
+        self.robots = RobotStates(self.feed)
+        """The latest joint state of each robot (robot_states.py)."""
         self._reapplying = asyncio.Lock()
 
     # -- life cycle ----------------------------------------------------------------------
@@ -178,6 +181,8 @@ class CellController(GenericDevice):
     async def _declare(self) -> None:
         await super()._declare()
         self._entities.append(self.watch_processes(self._on_any_process))
+        assert self.bus is not None
+        self._entities.append(self.bus.watch_joint_states(self.robots.on_payload))
 
     async def start(self) -> None:
         await super().start()
@@ -263,6 +268,7 @@ class CellController(GenericDevice):
             "runs": [r.to_json() for r in self.runs.values()],
             "log": list(self.activity),
             "journals": self.journal_tail is not None,
+            "robots": self.robots.snapshot(),
         }
 
     def _processes_event(self, keys: Iterable[tuple[str, str, int]]) -> dict[str, Any]:
@@ -306,6 +312,7 @@ class CellController(GenericDevice):
             for other in self.records.values():
                 if presence.name in other.partners:
                     other.partners.remove(presence.name)
+            self.robots.forget(presence.name)
             self._log("warning", f"{presence.name} left the cell")
         self.feed.cell_changed()
 

@@ -67,6 +67,11 @@ from plugcell.devices.robot.bridge import (
     parse_address,
 )
 from plugcell.devices.robot.increment import joint_increment, pose_error_sizes
+from plugcell.devices.robot.joint_state import (
+    DEFAULT_RATE_HZ,
+    JointStatePublisher,
+    publish_joint_state,
+)
 from plugcell.devices.robot.link import RobotLink
 from plugcell.devices.robot.outbound import ExternalProcessHandler
 from plugcell.devices.robot.protocol import (
@@ -171,6 +176,7 @@ class RobotService(GenericDevice):
         "rsi_timeout": int,
         "joint_speed": float,
         "tcp_speed": float,
+        "joint_rate": float,
     }
 
     def __init__(
@@ -190,6 +196,7 @@ class RobotService(GenericDevice):
         rsi_timeout: int = 100,
         joint_speed: float = 20.0,
         tcp_speed: float = 100.0,
+        joint_rate: float = DEFAULT_RATE_HZ,
         connect_timeout: float = 30.0,
         **kwargs: Any,
     ) -> None:
@@ -232,6 +239,8 @@ class RobotService(GenericDevice):
         self._run_waiters: dict[int, asyncio.Future[ProgramEnded]] = {}
         self._reconnect: asyncio.Task[None] | None = None
         self.robot_description: RobotDescription | None = None
+        self.joint_rate = joint_rate
+        self.joint_state: JointStatePublisher | None = None
 
     # ------------------------------------------------------------------ connection
     async def connect(self) -> None:
@@ -250,6 +259,7 @@ class RobotService(GenericDevice):
         except (BridgeError, SimControllerError) as exc:
             raise PartnerError(f"{self.name}: {exc}") from None
         self.outbound.start()
+        self.joint_state = publish_joint_state(self, self.joint_rate)
         self.connection_state.post(ConnectionStates.Online)
 
     async def _connect_bridge(self, timeout: float | None = None) -> None:
@@ -277,6 +287,8 @@ class RobotService(GenericDevice):
             reconnect.cancel()
             with contextlib.suppress(asyncio.CancelledError):
                 await reconnect
+        if self.joint_state is not None:
+            await self.joint_state.close()
         await self.outbound.close()
         await self.bridge.close()
         self._fail_waiters("the robot service is shutting down")
