@@ -127,7 +127,7 @@ class StreamSample:
     ``available_s``: true time it leaves the tracker; ``status``: ``ok`` or the reason
     it holds no measurement (then ``pose`` is None); ``pose``: 4×4 (identity rotation
     for 3-DOF); ``lateral_offset_m``: the reflector's largest distance off the beam
-    during the window (the servo's lag).
+    during the window (the servo's lag); ``seq``: the sample's number from 0.
     """
 
     true_time_s: float
@@ -137,6 +137,7 @@ class StreamSample:
     pose: Array | None
     six_dof: bool
     lateral_offset_m: float
+    seq: int = 0
 
 
 def _angles(p: Array) -> tuple[float, float, float]:
@@ -279,7 +280,7 @@ class TrackerStream:
         t_mid = start + 0.5 / self.rate_hz
         common = dict(true_time_s=t_mid, tracker_time_s=spec.tracker_clock(t_mid),
                       available_s=start + 1.0 / self.rate_hz + spec.latency_s,
-                      six_dof=self.six_dof, lateral_offset_m=worst)
+                      six_dof=self.six_dof, lateral_offset_m=worst, seq=self._k - 1)
         if not ok or mid_pose is None:
             status = self._reason or "line_of_sight"
             return StreamSample(status=status, pose=None, **common)
