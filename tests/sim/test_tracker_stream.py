@@ -145,3 +145,33 @@ def test_out_of_range_samples_say_so():
     s = _stream(lambda t: _pose(np.add(far, [0.2 * t, 0, 0])), 100.0)
     statuses = [x.status for x in s.advance(1.0)]
     assert statuses[0] == "ok" and statuses[-1] == "out_of_range"  # beyond 15 m (6-DOF)
+
+
+def test_the_clocks_are_aligned_from_the_stream_itself_and_the_error_reported():
+    """Tracker clock (offset, 20 ppm) → PC clock by the one-way envelope, then the constant
+    latency by comparing with the robot's record of the same motion: the samples'
+    acquisition times on the PC's clock come out within a tenth of a sample."""
+    from plugcell.metrology.timing import estimate_delay, fit_clock_map
+
+    def target(t):
+        return _pose(np.add(CENTRE, [0.0, 0.2 * math.sin(2 * math.pi * 0.5 * t),
+                                     0.05 * math.sin(2 * math.pi * 1.7 * t)]))
+
+    spec = StreamSpec(clock_offset_s=5000.0, clock_drift_ppm=20.0, latency_s=0.002)
+    samples = [x for x in _stream(target, 1000.0, spec=spec).advance(6.0) if x.status == "ok"]
+    assert len(samples) > 5000  # (the start at 0.63 m/s is a velocity step: lock re-found)
+    rng = np.random.default_rng(0)
+    arrival = np.array([x.available_s for x in samples]) + rng.exponential(4e-4, len(samples))
+    tracker_t = np.array([x.tracker_time_s for x in samples])
+    clock = fit_clock_map(tracker_t, arrival)
+    assert abs(clock.skew_ppm + 20.0) < 1.0  # the tracker's clock runs 20 ppm fast
+    on_pc = clock(tracker_t)  # still late by the latency + half a window (+ least jitter)
+    robot_t = np.arange(0.0, 6.0, 0.004)  # the robot's own cycle stamps (true time here)
+    robot = np.array([target(t)[:3, 3] for t in robot_t])
+    measured = np.array([x.pose[:3, 3] for x in samples])
+    est = estimate_delay(robot_t, robot, on_pc, measured, max_delay_s=0.02)
+    acquired = on_pc - est.delay_s
+    truth = np.array([x.true_time_s for x in samples])
+    error = np.abs(acquired - truth).max()
+    assert est.delay_s == pytest.approx(0.0025, abs=2e-4)
+    assert error < 1e-4 and est.std_s < 1e-4

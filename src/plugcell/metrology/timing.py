@@ -9,7 +9,7 @@ them on one time axis, each from data the cell produces anyway — the latency i
   (e.g. the tracker's reflector position and the robot's joint feedback put through
   the model), by least squares, searched on a grid and refined to a fraction of a sample::
 
-      d̂ = argmin_d  Σ_t ‖ b(t) − a(t − d) ‖²        (a, b: mean-free, on a common grid)
+      d̂ = argmin_d  Σ_t ‖ b(t) − a(t − d) ‖²        (residual mean-free; t: b's own sample times)
 
   with the Gauss–Newton standard error ``σ_d = σ_r / √(Σ_t ‖ȧ(t − d̂)‖²)``.
 * :func:`fit_clock_map` — the map from a device clock ``x`` to the PC clock ``y`` from
@@ -53,7 +53,7 @@ class DelayEstimate:
     residual_rms : float
         RMS of ``b(t) − a(t − d̂)`` per channel, in the signals' unit.
     grid_s : float
-        Step of the common grid the signals were compared on (s).
+        Step of the coarse search (s).
     samples : int
         Grid points in the overlap used.
     """
@@ -72,7 +72,7 @@ class ClockMap:
     Attributes
     ----------
     offset_s, rate : float
-        The map; ``rate − 1`` is the device clock's relative drift (``skew_ppm`` · 1e-6).
+        The map (``rate``: PC seconds per device second; ``skew_ppm``).
     jitter_s : ndarray, shape (N,)
         Each stamp's height above the envelope: its transport delay minus the smallest.
     """
@@ -83,7 +83,8 @@ class ClockMap:
 
     @property
     def skew_ppm(self) -> float:
-        """The device clock's drift against the PC's, parts per million."""
+        """``(rate − 1)·10⁶``: PC seconds per device second, minus one, in ppm — a device
+        clock that runs 20 ppm fast gives ≈ −20."""
         return (self.rate - 1.0) * 1e6
 
     def __call__(self, device_s: ArrayLike) -> Array:
@@ -129,7 +130,7 @@ def estimate_delay(
     max_delay_s : float
         The search range ``|d| ≤ max_delay_s`` (s).
     grid_s : float, optional
-        Step of the common grid (default: the finer median spacing of the two).
+        Step of the coarse search (default: the finer median spacing of the two).
 
     Returns
     -------
@@ -156,29 +157,28 @@ def estimate_delay(
         raise MetrologyError(
             f"the records overlap for {max(hi - lo, 0.0):.4g} s, not enough for a search "
             f"over ±{max_delay_s:g} s")
-    grid = np.arange(lo, hi, h)
+    # b is compared at its own sample times (it may have gaps: lost samples, beam
+    # breaks), a is interpolated (it must be gap-free over the overlap)
+    keep = (tb - ta[0] >= max_delay_s + h) & (ta[-1] - tb >= max_delay_s + h)
+    inner, xb_in = tb[keep], xb[keep]
+    if inner.size < 8:
+        raise MetrologyError("too little overlap left inside the search range")
+    if not (np.ptp(xa, axis=0).max() > 0 and np.ptp(xb_in, axis=0).max() > 0):
+        raise MetrologyError("a or b does not vary over the overlap: no motion to time")
 
     def on(t: Array, x: Array, at: Array) -> Array:
         return np.column_stack([np.interp(at, t, x[:, j]) for j in range(x.shape[1])])
 
-    ga, gb = on(ta, xa, grid), on(tb, xb, grid)
-    if not (np.ptp(ga, axis=0).max() > 0 and np.ptp(gb, axis=0).max() > 0):
-        raise MetrologyError("a or b does not vary over the overlap: no motion to time")
     # coarse: the least-squares cost at every whole grid step of the search range
     m = int(np.ceil(max_delay_s / h))
-    n = ga.shape[0]
     costs = []
     for k in range(-m, m + 1):
-        r = gb[m: n - m] - ga[m - k: n - m - k]
+        r = xb_in - on(ta, xa, inner - k * h)
         costs.append(float(np.sum(np.var(r, axis=0))))
     d0 = (int(np.argmin(costs)) - m) * h
 
-    # least-squares refinement on the interior (both shifted records defined), with a
-    # cubic spline of a (a linear one biases the delay where a is sampled coarsely)
-    inner = grid[(grid - lo >= max_delay_s + h) & (hi - grid >= max_delay_s + h)]
-    if inner.size < 8:
-        raise MetrologyError("too little overlap left inside the search range")
-    xb_in = on(tb, xb, inner)
+    # refinement with a cubic spline of a (a linear one biases the delay where a is
+    # sampled coarsely)
     spline = CubicSpline(ta, xa, axis=0)
     coarse = float(max(np.median(np.diff(ta)), np.median(np.diff(tb)), h))
 
