@@ -28,6 +28,7 @@ SCRIPTS = [
     ("round_trip_cpu.py", ["--cycles", "30", "--rounds", "1", "--switches"], "voluntary / forced"),
     ("motion_sampling.py", ["--cycles", "5", "--robots", "elbow6"], "LIN (IK per sample)"),
     ("rsi_latency.py", ["--seconds", "1"], "| goal (issue 37) | this run | met |"),
+    ("tracker_stream.py", ["--seconds", "0.5"], "| rate Hz | samples/message |"),
     ("twin_path_deviation.py", ["--speeds", "250"], "| speed mm/s | duration s |"),
     ("idle_cost.py", ["--services", "2", "--seconds", "1", "--settle", "0.5", "--settings",
                       "lean", "--topology", "star"], "(router "),

@@ -2,7 +2,8 @@
 
 Best-fit line/plane/circle, frames from features, BASE/PROBE estimation by the
 procedures of thesis Appendix D, rigid registration, accuracy statistics of
-eqs. 8.1–8.2, straightness (8.3.1) and ISO 9283 pose accuracy/repeatability.
+eqs. 8.1–8.2, straightness (8.3.1), ISO 9283 pose accuracy/repeatability, and the alignment
+of sensor clocks (delay between two records of a motion, clock maps).
 
 Inputs are numpy arrays in metres and radians; nothing here does I/O or imports
 the framework. Degenerate input raises :class:`MetrologyError` (a ``ValueError``).
@@ -38,6 +39,7 @@ from .frames import (
     invert_transform,
     probe_from_flange_features,
 )
+from .timing import ClockMap, DelayEstimate, estimate_delay, fit_clock_map
 
 __all__ = [
     "SMR_RADIUS_HALF_INCH",
@@ -45,7 +47,9 @@ __all__ = [
     "BaseEstimate",
     "BaseParameters",
     "CircleFit",
+    "ClockMap",
     "ComponentStats",
+    "DelayEstimate",
     "ErrorStats",
     "Iso9283Result",
     "LineFit",
@@ -59,7 +63,9 @@ __all__ = [
     "base_from_features",
     "base_matrix_from_parameters",
     "base_parameters_from_matrix",
+    "estimate_delay",
     "fit_circle",
+    "fit_clock_map",
     "fit_line",
     "fit_plane",
     "fit_rigid_transform",

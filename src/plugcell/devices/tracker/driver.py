@@ -9,7 +9,10 @@ three things only the instrument can do, in the *tracker* frame and SI units:
   with :class:`BeamNotLockedError` and the reason;
 * :meth:`TrackerDriver.measure` — one measurement of the locked reflector averaged
   over a duration (a T-MAC gives a pose, an SMR a position);
-* :meth:`TrackerDriver.state` — what the instrument says about itself.
+* :meth:`TrackerDriver.state` — what the instrument says about itself;
+* :meth:`StreamingTrackerDriver.stream` (optional) — the locked reflector's
+  measurements at up to 1 kHz as they leave the instrument, each with the instrument's
+  acquisition time and the PC's arrival time (:class:`TrackerSample`).
 
 ``plugcell serve tracker`` uses the simulated driver
 (:class:`plugcell.sim.drivers.tracker.SimulatedTrackerDriver`: the tracker
@@ -20,6 +23,7 @@ with these methods, ``--param driver=module:Class``; the service does not change
 
 from __future__ import annotations
 
+from collections.abc import AsyncIterator
 from dataclasses import dataclass
 from typing import Protocol, runtime_checkable
 
@@ -29,10 +33,13 @@ from numpy.typing import NDArray
 Array = NDArray[np.float64]
 
 __all__ = [
+    "SAMPLE_STATUSES",
     "BeamNotLockedError",
+    "StreamingTrackerDriver",
     "TrackerDriver",
     "TrackerDriverError",
     "TrackerReading",
+    "TrackerSample",
     "TrackerStatus",
 ]
 
@@ -107,3 +114,42 @@ class TrackerDriver(Protocol):
 
     def state(self) -> TrackerStatus:
         """The instrument's current status (cheap, never blocks)."""
+
+
+#: A streamed sample's status: ``ok``, or why it holds no measurement (the index is the
+#: status code of the service's rows, docs/tracker-service.md).
+SAMPLE_STATUSES = ("ok", "line_of_sight", "tracking_speed", "out_of_range", "device")
+
+
+@dataclass(frozen=True)
+class TrackerSample:
+    """One streamed measurement in the tracker frame (SI).
+
+    ``pose``: 4×4 (identity rotation for a 3-DOF reflector), None unless ``status`` is
+    ``ok``; ``tracker_time_s``: the instrument's clock at the middle of the sample's
+    integration (its acquisition time); ``pc_time_s``: the PC's clock (``time.time()``)
+    when the driver received it; ``seq``: the instrument's sample counter (a gap is a
+    lost sample).
+    """
+
+    pose: Array | None
+    six_dof: bool
+    tracker_time_s: float
+    pc_time_s: float
+    status: str
+    seq: int
+
+
+@runtime_checkable
+class StreamingTrackerDriver(TrackerDriver, Protocol):
+    """A driver that can also stream (real time output of the instrument)."""
+
+    max_stream_rate_hz: float
+
+    def stream(self, rate_hz: float) -> AsyncIterator[TrackerSample]:
+        """Samples of the locked reflector at ``rate_hz`` (1…``max_stream_rate_hz``) as
+        they arrive, until the iterator is closed.  A beam break does not end it: the
+        samples say so in ``status`` and the stream carries on (the instrument
+        re-acquires, or the caller Moves again).  Raises :class:`BeamNotLockedError`
+        before the first sample if the beam is not locked, ValueError for a bad rate."""
+        ...

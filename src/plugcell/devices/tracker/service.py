@@ -12,6 +12,7 @@ Move                      (rpy2tr/euler2tr/prj2tr) Double[6]       —          
 Single Measurement        tr2rpy/tr2euler/tr2prj   Integer[1]      Double[6]    SingleData
 Continuous Measurement    tr2rpy/tr2euler/tr2prj   Integer[1]      Double[6]    MultipleData
 Stop Measurement          —                        —               —            StopData
+Stream Measurement        tr2rpy/tr2euler/tr2prj   Integer[2]      Double[n,11] MultipleData
 ========================  =======================  ==============  ===========  ============
 
 * **Per robot.**  BASE, PROBE and the angle convention belong to the requester (the
@@ -26,6 +27,12 @@ Stop Measurement          —                        —               —      
   Continuous Measurement keeps it until its Stop Measurement; the others' processes
   wait their turn in the FIFO queue (the framework's re-scheduling, 5.2.3.5).  A
   holder that dies is stopped by the framework and the queue moves on.
+* **Stream Measurement** (issue 38): the instrument's real-time output, RATE samples a
+  second (≤ 1 kHz), PER_MESSAGE of them in each data update (``n`` rows of
+  :data:`STREAM_COLUMNS`: each sample's own acquisition time on the tracker's clock and
+  arrival time on the PC's, pose, status, number), straight to the requester — a
+  correction loop in another process subscribes to it; a beam break does not end it
+  (rows say so); Stop Measurement or the requester's disappearance does.
 * **Routing** (9.3): option clauses ``; to=SERVICE:Command:Option`` send every
   measurement on to another service as well (``devices/tracker/routing.py``).
 
@@ -47,6 +54,7 @@ import numpy as np
 from plugcell.devices.tracker.driver import TrackerDriver, TrackerDriverError, TrackerStatus
 from plugcell.devices.tracker.frames import FrameError, RequesterFrames
 from plugcell.devices.tracker.routing import RoutedDevice
+from plugcell.devices.tracker.streaming import STREAM_COLUMNS, stream_request, stream_samples
 from plugcell.framework.messages import Command, CommandTypes, ConnectionStates, DataTypes
 from plugcell.framework.service import DeviceError
 
@@ -60,7 +68,7 @@ MIN_INTERVAL_MS = 1
 SIX = (6,)
 _VECTOR = "x, y, z mm; 3 angles deg"
 
-__all__ = ["TrackerService", "load_driver"]
+__all__ = ["STREAM_COLUMNS", "TrackerService", "load_driver"]
 
 
 def load_driver(spec: str, **kwargs: Any) -> TrackerDriver:
@@ -124,7 +132,18 @@ class TrackerService(RoutedDevice):
                  "Stop Measurement; options as Single Measurement",
         ),
         Command(name="Stop Measurement", type=CommandTypes.StopData,
-                info="end this requester's Continuous Measurement and release the tracker"),
+                info="end this requester's Continuous or Stream Measurement and release the "
+                     "tracker"),
+        Command(
+            name="Stream Measurement", type=CommandTypes.MultipleData,
+            input_data_type=DataTypes.Integer, input_data_size=(2,),
+            output_data_type=DataTypes.Double, output_data_size=(-1, len(STREAM_COLUMNS)),
+            timeout=3600.0,
+            info="the real-time output: [RATE Hz (1-1000), PER_MESSAGE (1-100)]; rows "
+                 + ", ".join(STREAM_COLUMNS) + " (times s, mm, deg; status 0 ok, 1 line of "
+                 "sight, 2 tracking speed, 3 out of range, 4 device) until Stop Measurement; "
+                 "option tr2rpy | tr2euler | tr2prj",
+        ),
     )
     params: ClassVar[dict[str, type]] = {"driver": str, "seed": int, "time_scale": float}
 
@@ -214,6 +233,16 @@ class TrackerService(RoutedDevice):
                     self._stream = asyncio.create_task(
                         self._measure_continuously(frames, option, interval),
                         name=f"{self.name}-continuous",
+                    )
+                case "Stream Measurement":
+                    await self._reaim()
+                    rate, per_message = stream_request(self.driver, data)
+                    frames = self.frames_of(self.requester)
+                    frames.output_convention(option)
+                    self._stream = asyncio.create_task(
+                        stream_samples(self.driver, frames, option, rate, per_message,
+                                       self.data_feedback.post, self.cmd_feedback.post),
+                        name=f"{self.name}-stream",
                     )
                 case "Stop Measurement":
                     await self._stop_stream()

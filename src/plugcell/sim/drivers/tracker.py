@@ -15,6 +15,12 @@ controllers publish their T-MAC's true pose, fixed SMRs are published once).
   (its robot moved) was followed continuously, as a tracker follows a moving target
   (2.3.1.1: up to 5 m/s) — the model is told with ``track``.
 
+* ``stream(f)`` — the real-time output: :class:`~plugcell.sim.twin.tracker_stream.TrackerStream`
+  (beam servo, noise at rate, latency, breaks) follows the locked reflector as the
+  world publishes it (a robot that publishes its pose every interface cycle is seen
+  moving), paced by the PC's clock; ``blocked`` (a callable of the stream's time)
+  injects line-of-sight breaks.
+
 The world is *asked* (a Zenoh query of every reflector's queryable) at each Move and
 each measurement, so the instrument sees it as it is at that instant: a robot that
 publishes its pose and then asks for a measurement is always measured where it is,
@@ -26,6 +32,8 @@ from __future__ import annotations
 
 import asyncio
 import threading
+import time
+from collections.abc import AsyncIterator, Callable
 
 import msgspec
 import numpy as np
@@ -35,12 +43,14 @@ from plugcell.devices.tracker.driver import (
     BeamNotLockedError,
     TrackerDriverError,
     TrackerReading,
+    TrackerSample,
     TrackerStatus,
 )
 from plugcell.framework.bus import Bus
 from plugcell.sim.twin import tracker as twin
 from plugcell.sim.twin.tracker import LaserTracker
-from plugcell.sim.world import ReflectorState
+from plugcell.sim.twin.tracker_stream import StreamSpec, TrackerStream
+from plugcell.sim.world import ReflectorState, WorldView
 
 __all__ = ["SimulatedTrackerDriver"]
 
@@ -86,6 +96,8 @@ class SimulatedTrackerDriver:
         seed: int = 0,
         time_scale: float = 0.0,
         query_timeout_s: float = 2.0,
+        stream_spec: StreamSpec | None = None,
+        blocked: Callable[[float], bool] | None = None,
     ) -> None:
         if not (time_scale >= 0 and np.isfinite(time_scale)):
             raise ValueError(f"time_scale must be >= 0, got {time_scale}")
@@ -100,6 +112,15 @@ class SimulatedTrackerDriver:
         """The reflector the lock was lost on when it vanished ("" if none): until the
         next Move, measurements fail with its name."""
         self._busy_s = 0.0
+        self.stream_spec = stream_spec if stream_spec is not None else StreamSpec(
+            clock_drift_ppm=20.0)  # a crystal's ±20 ppm (estimate)
+        self.blocked = blocked
+        """Line-of-sight breaks of streams, ``blocked(t)`` with ``t`` the stream's time (s)."""
+        self._streams = 0
+
+    @property
+    def max_stream_rate_hz(self) -> float:
+        return self.stream_spec.max_rate_hz
 
     # -- TrackerDriver --------------------------------------------------------------------
 
@@ -181,6 +202,53 @@ class SimulatedTrackerDriver:
         await self._sleep(m.elapsed_s)
         return TrackerReading(pose=measured, six_dof=six_dof, duration_s=m.duration_s,
                               elapsed_s=m.elapsed_s, timestamp_s=m.timestamp_s)
+
+    async def stream(self, rate_hz: float) -> AsyncIterator[TrackerSample]:
+        spec = self.stream_spec
+        if not (np.isfinite(rate_hz) and 1.0 <= rate_hz <= spec.max_rate_hz):
+            raise ValueError(f"stream rate {rate_hz} Hz outside 1…{spec.max_rate_hz:g} Hz")
+        world = await self._world()
+        with self._lock:
+            self._follow(world)
+            name = self._target
+            if name is None or name not in world:
+                raise BeamNotLockedError("beam not locked: send Move first",
+                                         reason="not_pointed")
+            six_dof = world[name].kind == "tmac"
+        view = WorldView(self.bus.direct())
+        latest = {name: world[name]}
+
+        def target(_t: float) -> np.ndarray | None:
+            state = view.all().get(name) or latest.get(name)
+            return None if state is None else state.matrix()
+
+        origin = time.monotonic()
+        with self._lock:
+            self._streams += 1
+            clock = self.model.clock_s
+            try:
+                stream = TrackerStream(
+                    self.model, target, rate_hz, six_dof=six_dof, seed=self._streams,
+                    spec=StreamSpec(**{**spec.__dict__, "clock_offset_s": clock}),
+                    blocked=self.blocked)
+            except twin.BeamNotLockedError as exc:
+                view.close()
+                raise BeamNotLockedError(_beam_message(exc), reason=exc.reason) from None
+        try:
+            while True:
+                for sample in stream.advance(time.monotonic() - origin):
+                    yield TrackerSample(pose=sample.pose, six_dof=sample.six_dof,
+                                        tracker_time_s=sample.tracker_time_s,
+                                        pc_time_s=time.time(), status=sample.status,
+                                        seq=sample.seq)
+                await asyncio.sleep(max(0.0, stream.next_time() - (time.monotonic() - origin)))
+        finally:
+            view.close()
+            last = target(0.0)
+            with self._lock:  # the beam stays on the reflector it streamed, if still locked
+                locked = stream.locked and last is not None
+                self._target = name if locked else None
+                self._target_position = last[:3, 3] if locked and last is not None else None
 
     def state(self) -> TrackerStatus:
         with self._lock:

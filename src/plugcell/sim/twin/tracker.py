@@ -422,7 +422,7 @@ class LaserTracker:
             )
         T = _pose_of(true_pose, "true_pose") if mode == "6dof" else None
         p = T[:3, 3] if T is not None else _position_of(true_pose, "true_pose")
-        self._check_range(p, T)
+        self.check_range(p, T)
 
         if self._blocked:
             self._locked = False
@@ -508,6 +508,14 @@ class LaserTracker:
             return float(np.linalg.norm(p))
         return float(np.linalg.norm(p - along * u))
 
+    def systematic_unit(self, position: ArrayLike) -> FloatArray:
+        """The unit-variance systematic field at the direction of ``position``, ``(6,)``:
+        beam-frame position channels (radial, azimuth, elevation) then orientation —
+        scaled by the spec's σ and √share_systematic it is the fixed error there (for
+        the streaming model, :mod:`plugcell.sim.twin.tracker_stream`)."""
+        _, az, el, _ = _beam_frame(_position_of(position, "position"))
+        return self._field(az, el)
+
     def systematic_error(self, position: ArrayLike) -> FloatArray:
         """The tracker's fixed position error at ``position`` (m, tracker frame).
 
@@ -520,7 +528,9 @@ class LaserTracker:
         e = np.array([sr, sl, sl]) * np.sqrt(self.spec.share_systematic) * self._field(az, el)[:3]
         return e @ axes
 
-    def _check_range(self, p: FloatArray, T: FloatArray | None) -> None:
+    def check_range(self, p: FloatArray, T: FloatArray | None) -> None:
+        """Raise :class:`TargetOutOfRangeError` if position ``p`` (and a T-MAC pose ``T``)
+        lies outside the working range."""
         spec = self.spec
         r = float(np.linalg.norm(p))
         max_r = spec.max_range_6dof_m if T is not None else spec.max_range_m
