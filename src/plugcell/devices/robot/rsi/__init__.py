@@ -4,6 +4,8 @@
 * :mod:`.codec` — ``<Rob>`` packets → :class:`RobotState` (SI), ``<Sen>`` answers;
 * :mod:`.limits` — every correction held to the per-cycle step, speed and total offset;
 * :mod:`.link` — :class:`RsiLink`, the UDP loop, its counters and failures;
+* :mod:`.sources` — correction sources: :class:`PathOffset` superimposes an offset on
+  the robot's own path (the robot drives, plugcell corrects);
 * :mod:`.controller_files` — the KRL program, ethernet configuration and RSI diagram
   the user copies to the controller (``plugcell rsi files``).
 
@@ -31,6 +33,7 @@ from .link import (
     SourceFailedError,
     StreamStoppedError,
 )
+from .sources import Hold, PathOffset, SineOffset
 
 __all__ = [
     "CYCLES",
@@ -40,14 +43,17 @@ __all__ = [
     "CorrectionRefusedError",
     "CorrectionSource",
     "CycleState",
+    "Hold",
     "LinkStats",
     "OutputSignal",
     "PacketError",
+    "PathOffset",
     "RobotState",
     "RsiConfig",
     "RsiConfigError",
     "RsiLink",
     "RsiLinkError",
+    "SineOffset",
     "SourceFailedError",
     "StreamStoppedError",
     "default_limits",
