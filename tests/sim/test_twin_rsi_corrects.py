@@ -114,9 +114,11 @@ def test_the_twin_runs_a_1m_line_and_plugcell_shifts_it_by_half_a_millimetre(mod
         assert offsets[-1, 2] == pytest.approx(0.0, abs=1e-12)  # ramped out to zero
     else:
         assert 0.5 * MM - st_.delay * 0.0081 * MM - 1e-12 <= top <= 0.5 * MM + 1e-12
-        # relative steps: none larger than the per-cycle limit, none clamped
+        # relative steps: none larger than the per-cycle limit; the ramp itself is
+        # within it — only a cycle the link missed (its IPOC skipped, so the ramp's
+        # next value is two cycles on) can ask for more and be clamped
         assert np.max(np.abs(np.diff(offsets[:, 2]))) <= 0.01 * MM * (1 + 1e-9)
-        assert link.stats().clamped == 0
+        assert link.stats().clamped <= link.stats().missed
     # the twin's actual TCP is its own uncorrected run shifted by the applied offset
     # (the same arm, same path, offline), within the following error of the correction
     # and the few percent by which the true arm maps the offset differently from the
