@@ -12,12 +12,29 @@
    late, wrong or for another IPOC counts as late (``Delay`` + 1) and, as ``HOLDON``
    says (plugcell's controller files: 0 for relative, 1 for absolute), adds nothing or
    repeats the last correction;
-3. applies the correction to its commanded position — ``AKorr`` to the joints at
-   ``RSI_ON``, relative (summed) or absolute (the offset); ``RKorr`` to the TCP at
-   ``RSI_ON`` in the base frame (position added, ``Rz(A)·Ry(B)·Rx(C)`` applied before
-   the start orientation), followed in joints by one Newton step of the nominal model
-   per cycle;
+3. applies the correction to its commanded position — relative (summed into the offset
+   ``o``) or absolute (the offset ``o``) — on top of the controller's own path
+   ``q_p(k)``: without a path (a program holding still at ``RSI_ON``) ``q_p(k) = q_0``;
+   with one (``path=``, a :class:`~plugcell.motion.Trajectory` sampled at the cycle,
+   standing in for the LIN/PTP motions a KRL program runs with ``RSI_MOVECORR``)
+   cycle ``k``'s setpoint, held at its end.  ``AKorr``: ``q = q_p(k) + o``.  ``RKorr``:
+   the nominal TCP pose of the path ``T_p = (R_p, p_p)`` corrected in the configured
+   frame, with ``R_o = Rz(A)·Ry(B)·Rx(C)``::
+
+       base:  p = p_p + o_xyz,        R = R_o · R_p
+       tool:  p = p_p + R_p · o_xyz,  R = R_p · R_o
+
+   followed in joints by one Newton step of the nominal model per cycle from
+   ``q_p(k)`` plus the joint correction of the cycle before, ``q ← q + J⁺ e`` with
+   ``e`` the exact pose error at ``q`` and ``J`` the Jacobian at ``q_p(k)`` (computed
+   with the path's poses for the whole path at once: a chord step, whose fixed point
+   is the exact pose);
 4. advances the dynamic twin by one cycle (:class:`~plugcell.sim.twin.dynamics.DynamicTwin`).
+
+``<Rob>`` reports, as KUKA's controller does, the commanded position *with* the
+correction (``ASPos``; ``RSol`` the corrected Cartesian setpoint ``T`` for ``RKorr``,
+the nominal pose of ``ASPos`` for ``AKorr``) and the actual one (``AIPos``, ``RIst``).  While the
+sensor is silent the path goes on (with ``HOLDON`` as above) until ``Timeout``.
 
 After ``Timeout`` late answers RSI stops: no more packets, :attr:`RsiRobot.stopped` says
 why — as a real controller breaks off.  The configuration is the sensor side's own
@@ -42,6 +59,7 @@ from plugcell.kinematics import forward
 from plugcell.kinematics.jacobian import manipulator_jacobian
 from plugcell.kinematics.rotations import matrix_to_rpy, rpy_to_matrix
 from plugcell.kinematics.transforms import so3_log
+from plugcell.motion import Trajectory
 from plugcell.sim.twin.dynamics import DynamicTwin
 
 Array = NDArray[np.float64]
@@ -57,7 +75,8 @@ class RsiRobotStats:
     answered: int = 0
     delay: int = 0
     malformed: int = 0
-    log: list[tuple[int, Array, Array]] = field(default_factory=list)  # ipoc, command, link
+    #: per cycle: IPOC, command, link angles, the correction offset applied (SI)
+    log: list[tuple[int, Array, Array, Array]] = field(default_factory=list)
 
 
 def _kuka_abc(T: Array) -> Array:
@@ -84,12 +103,23 @@ class RsiRobot:
         The ethernet configuration's ``HOLDON`` (default: as plugcell's files — 0 for
         relative, 1 for absolute corrections).
     record : bool
-        Keep every cycle's IPOC, command and link angles in ``stats().log``.
+        Keep every cycle's IPOC, command, link angles and offset in ``stats().log``.
+    path : Trajectory, optional
+        The controller's own motion (the KRL program's LIN/PTP moves): cycle ``k``'s
+        setpoint is ``path.setpoints(T)[k]``; it must start where the arm stands.
+        Default: the arm holds still and only the corrections move it.
+
+    Raises
+    ------
+    ValueError
+        A cycle other than the arm's, an arm without six axes, or a path that does not
+        start where the arm stands (to 1e-3 rad).
     """
 
     def __init__(self, arm: DynamicTwin, config: RsiConfig, *,
                  bind: tuple[str, int] = ("127.0.0.1", 0), ipoc0: int = 1_000_000,
-                 holdon: bool | None = None, record: bool = False) -> None:
+                 holdon: bool | None = None, record: bool = False,
+                 path: Trajectory | None = None) -> None:
         if abs(arm.params.cycle - config.cycle_s) > 1e-12:
             raise ValueError(f"the arm's cycle {arm.params.cycle} s is not the stream's "
                              f"{config.cycle_s} s ({config.cycle})")
@@ -111,8 +141,22 @@ class RsiRobot:
         desc = arm.twin.description
         self._desc = desc
         self._q_start = arm.measured.copy()
+        if path is None:
+            self._path = self._q_start[None].copy()
+        else:
+            self._path = path.setpoints(config.cycle_s)[1]
+            gap = float(np.max(np.abs(self._path[0] - self._q_start)))
+            if gap > 1e-3:
+                raise ValueError(f"the path starts {np.degrees(gap):.3g}° from where the "
+                                 "arm stands; start it at the arm's joints")
+        # the path's nominal poses and Jacobians, all at once (cheap in a batch, a
+        # millisecond each per cycle)
+        self._T_path = forward(desc, None, self._path, "nominal").tcp
+        self._J_path = (manipulator_jacobian(desc, None, self._path, "tcp", "nominal")
+                        if config.correction == "cartesian" else None)
+        self._T_set = self._T_path[0]
+        self._k = 0  # the path's cycle
         self._command = self._q_start.copy()
-        self._T_start = forward(desc, None, self._q_start, "nominal").tcp
         self._offset = np.zeros(6)
         self._last = np.zeros(6)
 
@@ -154,6 +198,16 @@ class RsiRobot:
         """The commanded joints now (rad)."""
         return self._command.copy()
 
+    @property
+    def offset(self) -> Array:
+        """The correction offset applied now (SI: rad, or m and rad)."""
+        return self._offset.copy()
+
+    @property
+    def path_done(self) -> bool:
+        """The controller's own path has reached its end (always, without a path)."""
+        return self._k >= len(self._path) - 1
+
     # ------------------------------------------------------------------ the cycle
     def _run(self) -> None:
         T = self.config.cycle_s
@@ -163,7 +217,8 @@ class RsiRobot:
             arm = self.arm
             q = arm.measured
             tcp = _kuka_abc(forward(self._desc, None, q, "nominal").tcp)
-            tcp_set = _kuka_abc(forward(self._desc, None, self._command, "nominal").tcp)
+            tcp_set = _kuka_abc(self._T_set if self.config.correction == "cartesian" else
+                                forward(self._desc, None, self._command, "nominal").tcp)
             with self._lock:
                 delay = self._stats.delay
             packet = encode_rob(self._ipoc, q, tcp, joints_setpoint=self._command,
@@ -172,7 +227,8 @@ class RsiRobot:
                 self._sock.sendto(packet, self._sensor)
             next_t += T
             answer = self._await(self._ipoc, next_t)
-            self._apply(answer)
+            self._k = min(self._k + 1, len(self._path) - 1)  # the program's motion goes on
+            offset = self._apply(answer)
             state = arm.step(self._command)
             with self._lock:
                 st = self._stats
@@ -182,7 +238,7 @@ class RsiRobot:
                 else:
                     st.answered += 1
                 if self._record:
-                    st.log.append((self._ipoc, state.command, state.link))
+                    st.log.append((self._ipoc, state.command, state.link, offset.copy()))
                 late = st.delay
             self._ipoc += step
             if late >= self.config.timeout_packets:
@@ -231,25 +287,38 @@ class RsiRobot:
             self._offset = np.array(correction, dtype=float)
         if correction is not None:
             self._last = np.array(correction, dtype=float)
+        q_path = self._path[self._k]
         if self.config.correction == "joint":
-            self._command = self._q_start + self._offset
+            self._command = q_path + self._offset
         else:
-            self._command = self._follow_pose(self._target_pose())
+            # the joint correction of the last cycle carried onto this cycle's setpoint
+            guess = q_path + (self._command - self._q_prev_path())
+            self._T_set = self._target_pose()
+            self._command = self._follow_pose(self._T_set, guess)
         return self._offset
 
+    def _q_prev_path(self) -> Array:
+        return self._path[max(self._k - 1, 0)]
+
     def _target_pose(self) -> Array:
+        """The path's pose corrected by the offset in the configured frame (module doc)."""
         o = self._offset
-        T = self._T_start.copy()
-        T[:3, 3] += o[:3]
-        T[:3, :3] = rpy_to_matrix(o[5], o[4], o[3]) @ self._T_start[:3, :3]
+        Tp = self._T_path[self._k]
+        Ro = rpy_to_matrix(o[5], o[4], o[3])
+        T = Tp.copy()
+        if self.config.frame == "tool":
+            T[:3, 3] += Tp[:3, :3] @ o[:3]
+            T[:3, :3] = Tp[:3, :3] @ Ro
+        else:
+            T[:3, 3] += o[:3]
+            T[:3, :3] = Ro @ Tp[:3, :3]
         return T
 
-    def _follow_pose(self, T: Array) -> Array:
-        """One damped Newton step of the nominal model from the current command."""
-        q = self._command
+    def _follow_pose(self, T: Array, q: Array) -> Array:
+        """One chord Newton step of the nominal model from ``q`` towards ``T``."""
         fk = forward(self._desc, None, q, "nominal")
         err = np.concatenate([T[:3, 3] - fk.tcp[:3, 3],
                               so3_log(T[:3, :3] @ fk.tcp[:3, :3].T)])
-        J = manipulator_jacobian(self._desc, None, q, "tcp", "nominal")
+        J = self._J_path[self._k]
         return q + J.T @ np.linalg.solve(J @ J.T + 1e-12 * np.eye(6), err)
 

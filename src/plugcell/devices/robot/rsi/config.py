@@ -35,6 +35,7 @@ CYCLES = {"IPO_FAST": 0.004, "IPO": 0.012}
 
 Kind = Literal["joint", "cartesian"]
 Mode = Literal["relative", "absolute"]
+Frame = Literal["base", "tool"]
 Policy = Literal["clamp", "refuse"]
 
 #: An XML name as RSI's ethernet configuration accepts it for a RECEIVE tag.
@@ -104,6 +105,11 @@ class RsiConfig:
     mode : {"relative", "absolute"}
         ``RSI_ON(#RELATIVE)``: each packet carries the step of this cycle;
         ``#ABSOLUTE``: each packet carries the whole offset from the start.
+    frame : {"base", "tool"}
+        The frame a Cartesian correction is expressed in (POSCORR's ``RefCorrSys``):
+        ``"base"`` — X, Y, Z along the base frame's axes, A, B, C rotating about them;
+        ``"tool"`` — along and about the axes of the TCP of the robot's path.  Unused for
+        joint corrections.
     cycle : {"IPO_FAST", "IPO"}
         The controller's cycle: 4 ms or 12 ms (:data:`CYCLES`).
     timeout_packets : int
@@ -126,6 +132,7 @@ class RsiConfig:
     robot_port: int | None = None
     correction: Kind = "joint"
     mode: Mode = "relative"
+    frame: Frame = "base"
     cycle: Literal["IPO_FAST", "IPO"] = "IPO_FAST"
     timeout_packets: int = 100
     limits: CorrectionLimits | None = None
@@ -144,6 +151,8 @@ class RsiConfig:
                                  "'cartesian'")
         if self.mode not in ("relative", "absolute"):
             raise RsiConfigError(f"mode {self.mode!r}: expected 'relative' or 'absolute'")
+        if self.frame not in ("base", "tool"):
+            raise RsiConfigError(f"frame {self.frame!r}: expected 'base' or 'tool'")
         if self.cycle not in CYCLES:
             raise RsiConfigError(f"cycle {self.cycle!r}: expected one of {sorted(CYCLES)}")
         if isinstance(self.timeout_packets, bool) or not isinstance(self.timeout_packets, int) \

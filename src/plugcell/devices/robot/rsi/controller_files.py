@@ -183,7 +183,9 @@ def signal_flow(config: RsiConfig, io: IoRouting) -> str:
         for i, a in enumerate("XYZ"):
             _param(p, f"UpperLim{a}", 4 + i, f"{lim.max_offset[i] / M_PER_MM:.3f}")
         _param(p, "MaxRotAngle", 7, f"{max(lim.max_offset[3:]) / DEG:.4f}")
-        _el(p, "Parameter", Name="RefCorrSys", ParamID="1", ParamValue="1", IsRuntime="false")
+        # RefCorrSys: 1 the base frame, 2 the TCP (tool) frame
+        _el(p, "Parameter", Name="RefCorrSys", ParamID="1",
+            ParamValue="1" if config.frame == "base" else "2", IsRuntime="false")
     outputs = io.outputs or {}
     for j, out in enumerate(config.outputs, start=7):
         if out.tag not in outputs:
