@@ -29,7 +29,6 @@ LINES_CEILING = {
     "compensation/model_based.py:compensate_joints": 116,
     "apps/commands/calibrate.py:_run": 113,
     "io/urdf.py:chain_from_urdf": 109,
-    "calibration/jacobian.py:identification_jacobian": 108,
     "kinematics/joint_chain.py:description_from_chain": 108,
     "devices/robot/rsi/codec.py:parse_rob": 107,
     "apps/reproduce/models_8_2.py:reproduce_8_2": 105,
