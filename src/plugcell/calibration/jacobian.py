@@ -42,7 +42,8 @@ import numpy as np
 from numpy.typing import NDArray
 
 from plugcell.calibration.model import ErrorModel, PoseBatch
-from plugcell.kinematics import forward
+from plugcell.kinematics import GeometricParameters, RobotDescription, forward
+from plugcell.kinematics.forward import FKResult
 from plugcell.kinematics.transforms import dh_hayati, rot_x, rot_y, translation
 
 Array = NDArray[np.float64]
@@ -114,55 +115,17 @@ def identification_jacobian(
         frames = frames.copy()
         frames[..., :3, 3] *= scale[:, None, None]
     W = B @ frames  # (N, L, 4, 4) world frames
-    N, L = W.shape[:2]
+    N = W.shape[0]
     i_fl = desc.index(desc.flange)
     T_fl = W[:, i_fl]
     T = T_fl @ model.probe()
     p = T[:, :3, 3]
 
-    # ---- open-chain columns of every link, (N, L, 6) per field
-    parent = np.array(
-        [desc.index(lk.parent) if lk.parent != "base" else L for lk in desc.links], dtype=np.intp
-    )
-    W_ext = np.concatenate([W, np.broadcast_to(B, (N, 1, 4, 4))], axis=1)
-    Pf = W_ext[:, parent]
-    z, op = Pf[..., :3, 2], Pf[..., :3, 3]
-    o = W[..., :3, 3]
-    cb, sb = np.cos(params.beta)[:, None], np.sin(params.beta)[:, None]
-    xt = W[..., :3, 0] * cb + W[..., :3, 2] * sb
-    y = W[..., :3, 1]
-    pp = p[:, None, :]
-    on_chain = np.zeros(L, dtype=bool)
-    on_chain[list(desc.chain)] = True
-    m = on_chain[None, :, None]
-    cols = {
-        "theta": _cat(np.cross(z, pp - op), z) * m,
-        "d": _cat(z, None) * m * (1.0 if scale is None else scale[:, None, None]),
-        "a": _cat(xt, None) * m * (1.0 if scale is None else scale[:, None, None]),
-        "alpha": _cat(np.cross(xt, pp - o), xt) * m,
-        "beta": _cat(np.cross(y, pp - o), y) * m,
-    }
-    # ---- closure: parameters acting on the passive angles (6.20-6.22, exact)
+    cols = _link_columns(desc, params, W, B, p, scale)
     if desc.loops:
-        pidx = [desc.index(n) for n in fk.passive_names]
-        Hp = cols["theta"][:, pidx]  # (N, n_p, 6)
-        act = [desc.index(n) for n in desc.actuated]
-        cols["theta"][:, act] += np.einsum("npj,npk->njk", fk.passive_jacobian, Hp)
-        cols["a"] += np.einsum("npl,npk->nlk", fk.passive_d_a, Hp)
-
+        _add_closure_terms(desc, fk, cols)
     H = np.empty((N, 6, len(keys)))
-    comp = model.compliance_keys
-    want_comp = [k for k in keys if k in comp]
-    if want_comp:
-        act = [desc.index(n) for n in desc.actuated]
-        # a joint's column: θ of a revolute link, d of a prismatic one
-        Hj = np.where(desc.prismatic_links[None, :, None], cols["d"][:, act],
-                      cols["theta"][:, act])
-        Hq = np.swapaxes(Hj, 1, 2) @ s.reading_map  # (N, 6, n_read)
-        ci = [comp.index(k) for k in want_comp]
-        Hc = Hq @ batch.regressors[:, :, ci]  # (N, 6, n_c)
-        comp_col = dict(zip(want_comp, np.moveaxis(Hc, -1, 0), strict=True))
-
+    comp_col = _compliance_columns(model, batch, cols, keys)
     base_cols = probe_cols = None
     for c, key in enumerate(keys):
         prm = model.space[key]
@@ -184,6 +147,114 @@ def identification_jacobian(
         else:
             H[:, :, c] = comp_col[key]
     return JacobianResult(poses=T, H=H, keys=keys)
+
+
+def _link_columns(
+    desc: RobotDescription,
+    params: GeometricParameters,
+    W: Array,
+    B: Array,
+    p: Array,
+    scale: Array | None,
+) -> dict[str, Array]:
+    """Open-chain columns of every link's five parameters (eqs. 6.12, B.13).
+
+    With ``z_{i−1}``, ``p_{i−1}`` the axis and origin of link i's parent frame, ``x̃_i =
+    cos β_i x_i + sin β_i z_i``, ``y_i`` and ``p_i`` of its own frame (world frames)::
+
+        H_θ = [z_{i−1} × (p − p_{i−1}); z_{i−1}]   H_d = [z_{i−1}; 0]   H_a = [x̃_i; 0]
+        H_α = [x̃_i × (p − p_i); x̃_i]             H_β = [y_i × (p − p_i); y_i]
+
+    zero for links off the chain to the flange; ``H_d`` and ``H_a`` scaled by the
+    thermal ``scale`` (every length is).
+
+    Parameters
+    ----------
+    desc, params
+        The robot and its geometric parameters.
+    W : (N, L, 4, 4) array, m
+        World frames of the links.
+    B : (4, 4) array, m
+        The BASE frame (parent of the root links).
+    p : (N, 3) array, m
+        The probe's world position.
+    scale : (N,) array or None
+        Thermal length scale ``1 + κT·ΔT`` per pose.
+
+    Returns
+    -------
+    dict
+        Field (``"theta"``, ``"d"``, ``"a"``, ``"alpha"``, ``"beta"``) → ``(N, L, 6)``
+        columns (position rows m per unit, rotation rows rad per unit).
+    """
+    N, L = W.shape[:2]
+    parent = np.array(
+        [desc.index(lk.parent) if lk.parent != "base" else L for lk in desc.links], dtype=np.intp
+    )
+    W_ext = np.concatenate([W, np.broadcast_to(B, (N, 1, 4, 4))], axis=1)
+    Pf = W_ext[:, parent]
+    z, op = Pf[..., :3, 2], Pf[..., :3, 3]
+    o = W[..., :3, 3]
+    cb, sb = np.cos(params.beta)[:, None], np.sin(params.beta)[:, None]
+    xt = W[..., :3, 0] * cb + W[..., :3, 2] * sb
+    y = W[..., :3, 1]
+    pp = p[:, None, :]
+    on_chain = np.zeros(L, dtype=bool)
+    on_chain[list(desc.chain)] = True
+    m = on_chain[None, :, None]
+    cols = {
+        "theta": _cat(np.cross(z, pp - op), z) * m,
+        "d": _cat(z, None) * m * (1.0 if scale is None else scale[:, None, None]),
+        "a": _cat(xt, None) * m * (1.0 if scale is None else scale[:, None, None]),
+        "alpha": _cat(np.cross(xt, pp - o), xt) * m,
+        "beta": _cat(np.cross(y, pp - o), y) * m,
+    }
+    return cols
+
+
+def _add_closure_terms(desc: RobotDescription, fk: FKResult, cols: dict[str, Array]) -> None:
+    """Add to ``cols`` the parameters' action through the loops' passive angles (6.20–6.22).
+
+    A passive angle θ_k moves with the driven joints and the loop lengths:
+    ``H_θ,j += Σ_k (∂θ_k/∂θ_j) H_θk`` for the actuated links j and ``H_a,l += Σ_k
+    (∂θ_k/∂a_l) H_θk`` for every link l (exact four-bar derivatives of ``fk``).
+    ``cols``: as :func:`_link_columns` returns, ``(N, L, 6)`` per field, updated in place.
+    """
+    pidx = [desc.index(n) for n in fk.passive_names]
+    Hp = cols["theta"][:, pidx]  # (N, n_p, 6)
+    act = [desc.index(n) for n in desc.actuated]
+    cols["theta"][:, act] += np.einsum("npj,npk->njk", fk.passive_jacobian, Hp)
+    cols["a"] += np.einsum("npl,npk->nlk", fk.passive_d_a, Hp)
+
+
+def _compliance_columns(
+    model: ErrorModel, batch: PoseBatch, cols: dict[str, Array], keys: Sequence[str]
+) -> dict[str, Array]:
+    """Columns of the joint compliances among ``keys`` (eqs. 6.32, 6.42).
+
+    ``H_c = Σ_j H_qj R_jc(q)``: the column ``H_qj`` of each joint reading (θ of a revolute
+    link, d of a prismatic one, through the reading map of a coupling) weighted by the
+    compliance regressors ``R`` (N·m per joint and compliance) of ``batch``.
+
+    Returns
+    -------
+    dict
+        Compliance key → its ``(N, 6)`` column (m, rad per rad/(N·m)); empty when
+        ``keys`` holds none.
+    """
+    desc = model.structure.desc
+    comp = model.compliance_keys
+    want_comp = [k for k in keys if k in comp]
+    if not want_comp:
+        return {}
+    act = [desc.index(n) for n in desc.actuated]
+    # a joint's column: θ of a revolute link, d of a prismatic one
+    Hj = np.where(desc.prismatic_links[None, :, None], cols["d"][:, act],
+                  cols["theta"][:, act])
+    Hq = np.swapaxes(Hj, 1, 2) @ model.structure.reading_map  # (N, 6, n_read)
+    ci = [comp.index(k) for k in want_comp]
+    Hc = Hq @ batch.regressors[:, :, ci]  # (N, 6, n_c)
+    return dict(zip(want_comp, np.moveaxis(Hc, -1, 0), strict=True))
 
 
 def _base_columns(model: ErrorModel, p: Array) -> dict[str, Array]:

@@ -170,6 +170,49 @@ def _parse_header(name: str, header: list[str]) -> tuple[int, dict[str, int]]:
     return len(joint_numbers), index
 
 
+def _data_values(name: str, header: list[str], data: list[tuple[int, list[str]]]) -> np.ndarray:
+    """Read the data rows' cells as numbers, in the file's units (degrees, mm, kg, °C).
+
+    Parameters
+    ----------
+    name : str
+        The file's name, for error messages.
+    header : list of str
+        The header's column names (``ncol`` of them).
+    data : list of (int, list of str)
+        ``(line number, cells)`` of each data row.
+
+    Returns
+    -------
+    (N, ncol) array
+        ``values[r, c]``: row ``r``'s cell in column ``c``, finite.
+
+    Raises
+    ------
+    MeasurementFileError
+        No data rows; a row of the wrong length; a cell that is not a finite number (an
+        empty ``temperature_c`` cell included), naming the line and the column.
+    """
+    if not data:
+        raise MeasurementFileError(f"{name}: the file has a header but no data rows")
+    ncol = len(header)
+    values = np.empty((len(data), ncol))
+    cols = [h.strip() for h in header]
+    for r, (line_no, row) in enumerate(data):
+        if len(row) != ncol:
+            raise MeasurementFileError(
+                f"{name}: line {line_no}: expected {ncol} values, got {len(row)}"
+            )
+        for c, cell in enumerate(row):
+            if not cell.strip() and cols[c] == "temperature_c":
+                raise MeasurementFileError(
+                    f"{name}: line {line_no}, column 'temperature_c': missing value (a "
+                    "temperature column must be complete; drop the column or the row)"
+                )
+            values[r, c] = table_number(cell, name, line_no, cols[c], MeasurementFileError)
+    return values
+
+
 def parse_measurements(
     text: str,
     *,
@@ -228,23 +271,7 @@ def parse_measurements(
             f"{name}: line {header_line}: the file has {nj} joint columns, the robot has {n_joints}"
         )
     data = rows[1:]
-    if not data:
-        raise MeasurementFileError(f"{name}: the file has a header but no data rows")
-    ncol = len(header)
-    values = np.empty((len(data), ncol))
-    cols = [h.strip() for h in header]
-    for r, (line_no, row) in enumerate(data):
-        if len(row) != ncol:
-            raise MeasurementFileError(
-                f"{name}: line {line_no}: expected {ncol} values, got {len(row)}"
-            )
-        for c, cell in enumerate(row):
-            if not cell.strip() and cols[c] == "temperature_c":
-                raise MeasurementFileError(
-                    f"{name}: line {line_no}, column 'temperature_c': missing value (a "
-                    "temperature column must be complete; drop the column or the row)"
-                )
-            values[r, c] = table_number(cell, name, line_no, cols[c], MeasurementFileError)
+    values = _data_values(name, header, data)
     try:
         joints = joints_to_si(values[:, [index[f"j{k}"] for k in range(1, nj + 1)]],
                               joint_scale)

@@ -209,23 +209,7 @@ def fourbar_closure(
     collapsed = ~cannot & ((np.abs(sdiff) < min_sin) | (np.abs(s4) < min_sin))
     bad = cannot | collapsed
     if raise_errors and np.any(bad):
-        idx = _first_bad(bad)
-        pick = (lambda x: float(x[idx])) if idx is not None else float
-        if bool(cannot[idx] if idx is not None else cannot):
-            gap = np.sqrt(pick(r2))
-            msg = (
-                f"the four-bar loop cannot be assembled: the gap between the crank and arm "
-                f"ends is {gap:.6g} m but coupler ({pick(l3):.6g} m) and follower "
-                f"({pick(l4):.6g} m) span [{abs(pick(l3) - pick(l4)):.6g}, "
-                f"{pick(l3) + pick(l4):.6g}] m{_where(idx)}"
-            )
-        else:
-            msg = (
-                f"the four-bar loop collapses: arm − crank angle = "
-                f"{np.degrees(pick(ta - tc)):.6g}°, follower angle θ4' = "
-                f"{np.degrees(pick(t4)):.6g}° (sin ≈ 0){_where(idx)}"
-            )
-        raise LoopClosureError(msg, idx)
+        raise _closure_error(bad, cannot, r2, l3, l4, ta - tc, t4)
     phi3 = np.arctan2(ry, rx) - np.arctan2(l4 * s4, l3 + l4 * np.cos(t4))
     t3 = phi3 - tc
     diff = ta - tc
@@ -234,7 +218,101 @@ def fourbar_closure(
     phi3 = tc + t3
     phi4 = phi3 + t4
 
-    # Implicit-function derivatives of F(φ3, φ4; θa, θc, a) = 0 (2 equations).
+    Dq, Da = _implicit_derivatives(ta, tc, la, lc, l3, l4, phi3, phi4, bad)
+    nan = np.nan
+    t3 = np.where(bad, nan, t3)
+    t4 = np.where(bad, nan, t4)
+    Dq = np.where(bad[..., None, None], nan, Dq)
+    Da = np.where(bad[..., None, None], nan, Da)
+    return ClosureResult(t3, t4, Dq, Da, ~bad)
+
+
+def _closure_error(
+    bad: NDArray[np.bool_],
+    cannot: NDArray[np.bool_],
+    r2: Array,
+    l3: Array,
+    l4: Array,
+    diff: Array,
+    t4: Array,
+) -> LoopClosureError:
+    """The error naming why the first ``bad`` configuration's loop fails.
+
+    Either it cannot be assembled (``cannot``: the gap ``|r| = √r2`` between the crank
+    and arm ends lies outside ``[|a_cpl − a_fol|, a_cpl + a_fol]``) or it collapses
+    (``sin(θ_arm − θ_crank) ≈ 0`` or ``sin θ4' ≈ 0``).
+
+    Parameters
+    ----------
+    bad, cannot : (...) bool arrays
+        Failing configurations; those that cannot be assembled.
+    r2 : (...) array, m²
+        ``|r|²``.
+    l3, l4 : (...) arrays, m
+        Coupler and follower lengths.
+    diff, t4 : (...) arrays, rad
+        ``θ_arm − θ_crank`` and θ4'.
+
+    Returns
+    -------
+    LoopClosureError
+        With the lengths (m) or angles (degrees) and the configuration's index.
+    """
+    idx = _first_bad(bad)
+    pick = (lambda x: float(x[idx])) if idx is not None else float
+    if bool(cannot[idx] if idx is not None else cannot):
+        gap = np.sqrt(pick(r2))
+        msg = (
+            f"the four-bar loop cannot be assembled: the gap between the crank and arm "
+            f"ends is {gap:.6g} m but coupler ({pick(l3):.6g} m) and follower "
+            f"({pick(l4):.6g} m) span [{abs(pick(l3) - pick(l4)):.6g}, "
+            f"{pick(l3) + pick(l4):.6g}] m{_where(idx)}"
+        )
+    else:
+        msg = (
+            f"the four-bar loop collapses: arm − crank angle = "
+            f"{np.degrees(pick(diff)):.6g}°, follower angle θ4' = "
+            f"{np.degrees(pick(t4)):.6g}° (sin ≈ 0){_where(idx)}"
+        )
+    return LoopClosureError(msg, idx)
+
+
+def _implicit_derivatives(
+    ta: Array,
+    tc: Array,
+    la: Array,
+    lc: Array,
+    l3: Array,
+    l4: Array,
+    phi3: Array,
+    phi4: Array,
+    bad: NDArray[np.bool_],
+) -> tuple[Array, Array]:
+    """Derivatives of θ3', θ4' by the implicit-function theorem on the closure.
+
+    ``F(φ3, φ4; θa, θc, a) = a_crank·e(θc) + a_cpl·e(φ3) + a_fol·e(φ4) − a_arm·e(θa) = 0``
+    (two equations) gives ``∂φ/∂x = −(∂F/∂φ)⁻¹ ∂F/∂x``, ``∂F/∂φ = [a_cpl·e⊥(φ3),
+    a_fol·e⊥(φ4)]`` with determinant ``a_cpl·a_fol·sin(φ4 − φ3)``; then
+    ``θ3' = φ3 − θc`` and ``θ4' = φ4 − φ3``.
+
+    Parameters
+    ----------
+    ta, tc : (...) arrays, rad
+        Arm and crank angles θa, θc.
+    la, lc, l3, l4 : (...) arrays, m
+        Arm, crank, coupler and follower lengths.
+    phi3, phi4 : (...) arrays, rad
+        Absolute coupler and follower angles φ3 = θc + θ3', φ4 = φ3 + θ4'.
+    bad : (...) bool array
+        Failing configurations (their determinant is replaced by 1; callers mask them).
+
+    Returns
+    -------
+    d_angles : (..., 2, 2) array, rad/rad
+        Rows (θ3', θ4'), columns (θa, θc).
+    d_lengths : (..., 2, 4) array, rad/m
+        Rows (θ3', θ4'), columns (a_arm, a_crank, a_cpl, a_fol).
+    """
     def perp(phi: Array) -> Array:
         return np.stack([-np.sin(phi), np.cos(phi)], axis=-1)
 
@@ -263,9 +341,4 @@ def fourbar_closure(
     Da = np.empty_like(dphi_da)
     Da[..., 0, :] = dphi_da[..., 0, :]
     Da[..., 1, :] = dphi_da[..., 1, :] - dphi_da[..., 0, :]
-    nan = np.nan
-    t3 = np.where(bad, nan, t3)
-    t4 = np.where(bad, nan, t4)
-    Dq = np.where(bad[..., None, None], nan, Dq)
-    Da = np.where(bad[..., None, None], nan, Da)
-    return ClosureResult(t3, t4, Dq, Da, ~bad)
+    return Dq, Da

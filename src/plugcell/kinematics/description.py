@@ -733,93 +733,11 @@ class RobotDescription:
         used: dict[str, str] = {}
         for k, loop in enumerate(self.loops):
             loc = f"loops[{k}]"
-            if loop.kind not in LOOP_KINDS:
-                raise DescriptionError(f"{loc}.type", f"unknown loop type {loop.kind!r} "
-                                       f"(expected one of {', '.join(LOOP_KINDS)})")
-            for role in ("arm", "crank", "coupler", "follower"):
-                name = getattr(loop, role)
-                if name not in index:
-                    raise DescriptionError(f"{loc}.{role}", f"unknown link {name!r}")
-                if name in used:
-                    raise DescriptionError(
-                        f"{loc}.{role}", f"link {name!r} is already used in {used[name]}"
-                    )
-                used[name] = f"{loc}.{role}"
-            L = {
-                r: self.links[index[getattr(loop, r)]]
-                for r in ("arm", "crank", "coupler", "follower")
-            }
-            for role in ("arm", "crank"):
-                if L[role].is_prismatic:
-                    raise DescriptionError(
-                        f"{loc}.{role}", f"link {L[role].name!r} must be revolute, not prismatic"
-                    )
-                if not L[role].is_actuated:
-                    raise DescriptionError(
-                        f"{loc}.{role}", f"link {L[role].name!r} must be actuated"
-                    )
-            for role in ("coupler", "follower"):
-                if not L[role].is_passive:
-                    raise DescriptionError(
-                        f"{loc}.{role}", f"link {L[role].name!r} must be passive"
-                    )
-            if L["arm"].parent != L["crank"].parent:
-                raise DescriptionError(
-                    f"{loc}.arm",
-                    f"arm {L['arm'].name!r} and crank {L['crank'].name!r} must share a parent "
-                    f"(coaxial driven joints); parents are {L['arm'].parent!r}, "
-                    f"{L['crank'].parent!r}",
-                )
-            if L["coupler"].parent != L["crank"].name:
-                raise DescriptionError(
-                    f"{loc}.coupler", f"the coupler's parent must be the crank {L['crank'].name!r}"
-                )
-            if L["follower"].parent != L["coupler"].name:
-                raise DescriptionError(
-                    f"{loc}.follower",
-                    f"the follower's parent must be the coupler {L['coupler'].name!r}",
-                )
-            if index[L["arm"].name] in on_chain:
-                raise DescriptionError(
-                    f"{loc}.arm", f"the arm {L['arm'].name!r} must be off the flange chain"
-                )
-            if index[L["follower"].name] not in on_chain:
-                raise DescriptionError(
-                    f"{loc}.follower",
-                    f"the follower {L['follower'].name!r} must be on the chain to the flange",
-                )
-            for role in ("crank", "coupler", "follower", "arm"):
-                if not L[role].a > 0:
-                    raise DescriptionError(
-                        f"links[{index[L[role].name]}].a", "loop link lengths must be positive"
-                    )
+            L = _loop_roles(loc, loop, self.links, index, used)
+            _check_loop_topology(loc, L, index, on_chain)
             if loop.kind == "fourbar":  # any geometry; assembly: _check_coupled
                 continue
-            for role in ("arm", "crank", "coupler", "follower"):
-                lk = L[role]
-                if abs(lk.alpha) > 1e-12 or abs(lk.beta) > 1e-12:
-                    raise DescriptionError(
-                        f"links[{index[lk.name]}]",
-                        f"loop link {lk.name!r} must be planar nominally (alpha = beta = 0) "
-                        f"in a parallelogram; a calibrated loop is type = \"fourbar\"",
-                    )
-            for role in ("coupler", "follower"):
-                if abs(L[role].d) > 1e-12:
-                    raise DescriptionError(
-                        f"links[{index[L[role].name]}].d", f"loop {role} must have d = 0 nominally"
-                    )
-            if abs(L["arm"].d - L["crank"].d) > 1e-12:
-                raise DescriptionError(
-                    f"links[{index[L['arm'].name]}].d", "arm and crank must have the same d"
-                )
-            for a_role, b_role in (("coupler", "arm"), ("follower", "crank")):
-                if abs(L[a_role].a - L[b_role].a) > 1e-9:
-                    raise DescriptionError(
-                        f"links[{index[L[a_role].name]}].a",
-                        f"only parallelogram loops are supported: the {a_role}'s a "
-                        f"({L[a_role].a:g} m) must equal the {b_role}'s ({L[b_role].a:g} m) "
-                        "(a calibrated loop is type = \"fourbar\")",
-                    )
+            _check_parallelogram(L, index)
         for i, lk in enumerate(self.links):
             if lk.is_passive and lk.name not in used:
                 raise DescriptionError(
@@ -1384,6 +1302,149 @@ class RobotDescription:
             v = q[..., self.joint_index(cl.joints[0])] - q[..., self.joint_index(cl.joints[1])]
             ok &= (v >= cl.lower - tol) & (v <= cl.upper + tol)
         return ok
+
+
+def _loop_roles(
+    loc: str,
+    loop: FourBarLoop,
+    links: tuple[Link, ...],
+    index: dict[str, int],
+    used: dict[str, str],
+) -> dict[str, Link]:
+    """The links playing the loop's four roles, each checked for its kind of joint.
+
+    A loop's type is one of :data:`LOOP_KINDS`; each role names a known link not used by
+    another loop (``used``, link name → ``loops[k].role``, is updated); the arm and the
+    crank are revolute and actuated, the coupler and the follower passive.
+
+    Returns
+    -------
+    dict
+        Role (``"arm"``, ``"crank"``, ``"coupler"``, ``"follower"``) → its link.
+
+    Raises
+    ------
+    DescriptionError
+        Located at ``loc`` (``loops[k]``) and the role.
+    """
+    if loop.kind not in LOOP_KINDS:
+        raise DescriptionError(f"{loc}.type", f"unknown loop type {loop.kind!r} "
+                               f"(expected one of {', '.join(LOOP_KINDS)})")
+    for role in ("arm", "crank", "coupler", "follower"):
+        name = getattr(loop, role)
+        if name not in index:
+            raise DescriptionError(f"{loc}.{role}", f"unknown link {name!r}")
+        if name in used:
+            raise DescriptionError(
+                f"{loc}.{role}", f"link {name!r} is already used in {used[name]}"
+            )
+        used[name] = f"{loc}.{role}"
+    L = {
+        r: links[index[getattr(loop, r)]]
+        for r in ("arm", "crank", "coupler", "follower")
+    }
+    for role in ("arm", "crank"):
+        if L[role].is_prismatic:
+            raise DescriptionError(
+                f"{loc}.{role}", f"link {L[role].name!r} must be revolute, not prismatic"
+            )
+        if not L[role].is_actuated:
+            raise DescriptionError(
+                f"{loc}.{role}", f"link {L[role].name!r} must be actuated"
+            )
+    for role in ("coupler", "follower"):
+        if not L[role].is_passive:
+            raise DescriptionError(
+                f"{loc}.{role}", f"link {L[role].name!r} must be passive"
+            )
+    return L
+
+
+def _check_loop_topology(
+    loc: str, L: dict[str, Link], index: dict[str, int], on_chain: set[int]
+) -> None:
+    """Check how a loop's links hang together and on the chain to the flange.
+
+    Arm and crank share a parent (coaxial driven joints); the coupler hangs on the
+    crank and the follower on the coupler; the arm is off the flange chain
+    (``on_chain``, link indices), the follower on it; the four lengths ``a`` (m) are
+    positive.  ``L``: role → link, as :func:`_loop_roles` returns.
+
+    Raises
+    ------
+    DescriptionError
+        Located at ``loc`` (``loops[k]``) and the role, or at the link's ``a``.
+    """
+    if L["arm"].parent != L["crank"].parent:
+        raise DescriptionError(
+            f"{loc}.arm",
+            f"arm {L['arm'].name!r} and crank {L['crank'].name!r} must share a parent "
+            f"(coaxial driven joints); parents are {L['arm'].parent!r}, "
+            f"{L['crank'].parent!r}",
+        )
+    if L["coupler"].parent != L["crank"].name:
+        raise DescriptionError(
+            f"{loc}.coupler", f"the coupler's parent must be the crank {L['crank'].name!r}"
+        )
+    if L["follower"].parent != L["coupler"].name:
+        raise DescriptionError(
+            f"{loc}.follower",
+            f"the follower's parent must be the coupler {L['coupler'].name!r}",
+        )
+    if index[L["arm"].name] in on_chain:
+        raise DescriptionError(
+            f"{loc}.arm", f"the arm {L['arm'].name!r} must be off the flange chain"
+        )
+    if index[L["follower"].name] not in on_chain:
+        raise DescriptionError(
+            f"{loc}.follower",
+            f"the follower {L['follower'].name!r} must be on the chain to the flange",
+        )
+    for role in ("crank", "coupler", "follower", "arm"):
+        if not L[role].a > 0:
+            raise DescriptionError(
+                f"links[{index[L[role].name]}].a", "loop link lengths must be positive"
+            )
+
+
+def _check_parallelogram(L: dict[str, Link], index: dict[str, int]) -> None:
+    """Check a parallelogram loop's nominal geometry (thesis eq. 6.10 holds exactly).
+
+    All four links planar (``α = β = 0``), ``d = 0`` on the coupler and the follower,
+    ``d_arm = d_crank``, and opposite sides equal: ``a_coupler = a_arm``,
+    ``a_follower = a_crank`` (to 1e-9 m).  ``L``: role → link.
+
+    Raises
+    ------
+    DescriptionError
+        Located at the offending link's field; a calibrated (non-parallel) loop is
+        ``type = "fourbar"``.
+    """
+    for role in ("arm", "crank", "coupler", "follower"):
+        lk = L[role]
+        if abs(lk.alpha) > 1e-12 or abs(lk.beta) > 1e-12:
+            raise DescriptionError(
+                f"links[{index[lk.name]}]",
+                f"loop link {lk.name!r} must be planar nominally (alpha = beta = 0) "
+                f"in a parallelogram; a calibrated loop is type = \"fourbar\"",
+            )
+    for role in ("coupler", "follower"):
+        if abs(L[role].d) > 1e-12:
+            raise DescriptionError(
+                f"links[{index[L[role].name]}].d", f"loop {role} must have d = 0 nominally"
+            )
+    if abs(L["arm"].d - L["crank"].d) > 1e-12:
+        raise DescriptionError(
+            f"links[{index[L['arm'].name]}].d", "arm and crank must have the same d"
+        )
+    for a_role, b_role in (("coupler", "arm"), ("follower", "crank")):
+        if abs(L[a_role].a - L[b_role].a) > 1e-9:
+            raise DescriptionError(
+                f"links[{index[L[a_role].name]}].a",
+                f"only parallelogram loops are supported: the {a_role}'s a "
+                f"({L[a_role].a:g} m) must equal the {b_role}'s ({L[b_role].a:g} m) "
+                "(a calibrated loop is type = \"fourbar\")",
+            )
 
 
 def check_rigid(T: Array, loc: str) -> None:

@@ -38,7 +38,7 @@ would report it, inside the limits on the readings.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -427,6 +427,59 @@ def inverse(
     params = desc.nominal_parameters() if params is None else params
     if target not in ("flange", "tcp"):
         raise ValueError(f"target must be 'flange' or 'tcp', got {target!r}")
+    Tf, s, batch = _flat_targets_and_seeds(desc, T_target, seed)
+    far, failures = _out_of_reach(desc, params, Tf, target)
+    todo = ~far
+    search = _Search(desc, params, Tf, s, closure, target, tol, max_iterations, enforce_limits)
+    starts = [s[:, None, :], *_restart_seeds(desc, params, Tf, s, closure, target)]
+    outside_q, outside_d = search.free_stage(starts, todo)
+    rows = np.flatnonzero(todo & ~search.ok)
+    if rows.size and enforce_limits:
+        search.limited_stage(starts, rows)
+        for k in rows:
+            if not search.ok[k] and np.isfinite(outside_d[k]):
+                failures[int(k)] = _limit_failure(desc, outside_q[k])
+    for k in np.flatnonzero(todo & ~search.ok):
+        failures.setdefault(int(k), search.no_convergence(int(k)))
+    reason = np.full(Tf.shape[0], "", dtype=object)
+    for k, f in failures.items():
+        reason[k] = f.message
+    if failures and raise_errors:
+        k = min(failures)
+        idx = tuple(int(i) for i in np.unravel_index(k, batch)) if batch else None
+        raise failures[k].exception(idx)
+    return search.result(batch, reason)
+
+
+def _flat_targets_and_seeds(
+    desc: RobotDescription, T_target: ArrayLike, seed: ArrayLike | None
+) -> tuple[Array, Array, tuple[int, ...]]:
+    """Check the targets and the seed and flatten them to one batch axis.
+
+    Parameters
+    ----------
+    desc
+        The robot.
+    T_target
+        Pose(s), shape ``(..., 4, 4)``, metres; finite.
+    seed
+        Joint readings ``(n_readings,)`` or ``(..., n_readings)``, radians, broadcast
+        against the targets' batch; ``None``: ``desc.home``.
+
+    Returns
+    -------
+    T : (B, 4, 4) array, m
+        The targets, ``B`` the product of the batch shape.
+    seed : (B, n_readings) array, rad
+        One seed per target (a copy).
+    batch : tuple of int
+        The batch shape ``(...)`` of ``T_target``.
+
+    Raises
+    ------
+    ValueError
+        A wrong shape or a non-finite value, naming the argument.
+    """
     T = np.asarray(T_target, dtype=float)
     if T.shape[-2:] != (4, 4):
         raise ValueError(f"T_target: expected shape (..., 4, 4), got {T.shape}")
@@ -443,118 +496,206 @@ def inverse(
         )
     if not np.all(np.isfinite(s)):
         raise ValueError("seed: values must be finite")
-    s = np.broadcast_to(s, (*batch, n)).reshape(B, n).copy()
+    return Tf, np.broadcast_to(s, (*batch, n)).reshape(B, n).copy(), batch
 
-    best_q = s.copy()
-    best_ep = np.full(B, np.inf)
-    best_er = np.full(B, np.inf)
-    ok = np.zeros(B, dtype=bool)
-    iters = np.zeros(B, dtype=int)
-    reason = np.full(B, "", dtype=object)
-    failures: dict[int, _Failure] = {}
 
-    # A pose farther from the shoulder than the stretched arm is refused at once (only
-    # where the first link turns about the base z: not on a track, nor after a mount).
+def _out_of_reach(
+    desc: RobotDescription, params: GeometricParameters, T: Array, point: str
+) -> tuple[NDArray[np.bool_], dict[int, _Failure]]:
+    """The targets farther from the shoulder than the stretched arm, refused at once.
+
+    A target is out of reach when ``_shoulder_distance(T) > _reach(desc)``: its distance
+    from the circle swept by the first link's origin exceeds the sum of the link lengths.
+    The test applies only where the first link turns about the base z (not on a track,
+    nor with a prismatic joint further on); elsewhere no target is refused.
+
+    Parameters
+    ----------
+    desc, params
+        The robot and its geometric parameters.
+    T : (B, 4, 4) array, m
+        The targets, of the flange or of the TCP (``point``).
+    point
+        ``"flange"`` or ``"tcp"``.
+
+    Returns
+    -------
+    far : (B,) bool array
+        Which targets are out of reach.
+    failures : dict
+        Target index → its "out of reach" failure, for the ``far`` targets.
+    """
     first = desc.links[0]
     simple = first.is_actuated and not first.is_prismatic and not desc.prismatic_links.any()
-    reach = _reach(desc, params, target) if simple else math.inf
-    dist = _shoulder_distance(params, Tf)
+    reach = _reach(desc, params, point) if simple else math.inf
+    dist = _shoulder_distance(params, T)
     far = dist > reach
+    failures = {}
     for k in np.flatnonzero(far):
         failures[int(k)] = _Failure(
             f"pose is out of reach: {dist[k]:.4f} m from the shoulder, the arm reaches at "
             f"most {reach:.4f} m",
             reach_reason="out of reach",
         )
-    todo = ~far
+    return far, failures
 
-    def run(group: Array, lim: _Limits, rows: NDArray[np.intp]) -> tuple[Array, ...]:
-        """Solve the targets ``rows`` from each start of ``group`` (B, S, n)."""
+
+@dataclass
+class _Search:
+    """The multi-start search over a batch of targets, and per target its best start.
+
+    The problem (robot, targets ``T`` (B, 4, 4) m, seeds (B, n) rad, tolerances) is fixed;
+    ``q``, ``ep``, ``er`` and ``ok`` hold per target the best result so far: the
+    solution nearest the seed (``ok``) or, while none is found, the closest approach
+    (smallest ``‖Δp‖ + ‖φ‖``); ``iters`` counts the iterations of all its starts.
+    """
+
+    desc: RobotDescription
+    params: GeometricParameters
+    T: Array
+    seed: Array
+    closure: str
+    point: str
+    tol: float
+    max_iterations: int
+    enforce: bool
+    q: Array = field(init=False)
+    ep: Array = field(init=False)
+    er: Array = field(init=False)
+    ok: NDArray[np.bool_] = field(init=False)
+    iters: NDArray[np.int_] = field(init=False)
+
+    def __post_init__(self) -> None:
+        B = self.T.shape[0]
+        self.q = self.seed.copy()
+        self.ep = np.full(B, np.inf)
+        self.er = np.full(B, np.inf)
+        self.ok = np.zeros(B, dtype=bool)
+        self.iters = np.zeros(B, dtype=int)
+
+    def solve(self, group: Array, lim: _Limits, rows: NDArray[np.intp]) -> tuple[Array, ...]:
+        """Iterate from each start of ``group`` for the targets ``rows``.
+
+        Parameters
+        ----------
+        group : (B, S, n) array, rad
+            ``S`` starts per target.
+        lim
+            The limits the iterates are projected onto.
+        rows : (R,) int array
+            The targets to solve.
+
+        Returns
+        -------
+        q : (R, S, n) array, rad
+            The end points, each angle moved to its 2π-representative nearest the seed.
+        converged : (R, S) bool array
+        position_error : (R, S) array, m
+        orientation_error : (R, S) array, rad
+        """
+        n = self.desc.n_readings
         S = group.shape[1]
-        Tr = np.repeat(Tf[rows], S, axis=0)
-        sr = np.repeat(s[rows], S, axis=0)
+        Tr = np.repeat(self.T[rows], S, axis=0)
+        sr = np.repeat(self.seed[rows], S, axis=0)
         qr, cr, epr, err_r, itr = _solve(
-            desc, params, Tr, group[rows].reshape(-1, n), lim, closure, target, tol, max_iterations
+            self.desc, self.params, Tr, group[rows].reshape(-1, n), lim, self.closure,
+            self.point, self.tol, self.max_iterations,
         )
-        qr = _wrap_to_seed(qr, sr, desc, enforce_limits)
-        iters[rows] += itr.reshape(-1, S).sum(axis=1)
+        qr = _wrap_to_seed(qr, sr, self.desc, self.enforce)
+        self.iters[rows] += itr.reshape(-1, S).sum(axis=1)
         return qr.reshape(-1, S, n), cr.reshape(-1, S), epr.reshape(-1, S), err_r.reshape(-1, S)
 
-    def keep(rows: NDArray[np.intp], qr: Array, good: Array, epr: Array, err_r: Array) -> None:
-        """Record, per target, the good start nearest the seed (else the closest approach)."""
-        dist2 = np.sum((qr - s[rows, None, :]) ** 2, axis=-1)
+    def keep(
+        self, rows: NDArray[np.intp], qr: Array, good: Array, epr: Array, err_r: Array
+    ) -> None:
+        """Record per target the good start nearest the seed, else the closest approach.
+
+        Nearest: least ``‖q − seed‖²`` among the ``good`` starts; a target without one
+        keeps the start of least ``‖Δp‖ + ‖φ‖`` if that beats its best so far.
+        Shapes as returned by :meth:`solve`; ``good`` (R, S) bool.
+        """
+        dist2 = np.sum((qr - self.seed[rows, None, :]) ** 2, axis=-1)
         score = np.where(good, dist2, np.inf)
         pick = np.argmin(score, axis=1)
         r = np.arange(rows.size)
         found = np.isfinite(score[r, pick])
         resid = epr + err_r
         pick = np.where(found, pick, np.argmin(resid, axis=1))
-        better = found | (resid[r, pick] < best_ep[rows] + best_er[rows])
+        better = found | (resid[r, pick] < self.ep[rows] + self.er[rows])
         upd = rows[better]
-        best_q[upd] = qr[r, pick][better]
-        best_ep[upd] = epr[r, pick][better]
-        best_er[upd] = err_r[r, pick][better]
-        ok[rows[found]] = True
+        self.q[upd] = qr[r, pick][better]
+        self.ep[upd] = epr[r, pick][better]
+        self.er[upd] = err_r[r, pick][better]
+        self.ok[rows[found]] = True
 
-    # Stage 1: every start solved with the joint limits relaxed (loops kept in a
-    # safe band), then each angle moved to its 2π-representative nearest the seed;
-    # a solution inside the limits counts.  Free iterations find far more
-    # solutions than iterations clamped at the limits.
-    lim_free = _limits(desc, False)
-    starts = [s[:, None, :], *_restart_seeds(desc, params, Tf, s, closure, target)]
-    outside_q = np.full((B, n), np.nan)  # nearest converged solution, limits ignored
-    outside_d = np.full(B, np.inf)
-    for group in starts:
-        rows = np.flatnonzero(todo & ~ok)
-        if not rows.size:
-            break
-        qr, cr, epr, err_r = run(group, lim_free, rows)
-        good = cr & (desc.within_limits(qr) if enforce_limits else True)
-        keep(rows, qr, good, epr, err_r)
-        d2 = np.where(cr, np.sum((qr - s[rows, None, :]) ** 2, axis=-1), np.inf)
-        pick = np.argmin(d2, axis=1)
-        r = np.arange(rows.size)
-        closer = d2[r, pick] < outside_d[rows]
-        outside_d[rows[closer]] = d2[r, pick][closer]
-        outside_q[rows[closer]] = qr[r, pick][closer]
+    def free_stage(self, starts: list[Array], todo: NDArray[np.bool_]) -> tuple[Array, Array]:
+        """Stage 1: every group of starts iterated with the joint limits relaxed.
 
-    rows = np.flatnonzero(todo & ~ok)
-    if rows.size and enforce_limits:
-        # Stage 2: the same starts with iterates projected onto the limits — finds
-        # solutions that only a path along a limit leads to.
-        qr, cr, epr, err_r = run(np.concatenate(starts, axis=1), _limits(desc, True), rows)
-        keep(rows, qr, cr & desc.within_limits(qr), epr, err_r)
-        for k in rows:
-            if not ok[k] and np.isfinite(outside_d[k]):
-                failures[int(k)] = _limit_failure(desc, outside_q[k])
-    for k in np.flatnonzero(todo & ~ok):
-        failures.setdefault(
-            int(k),
-            _Failure(
-                f"no joint solution found (no convergence from the seed and the restarts; "
-                f"closest approach {best_ep[k] * 1e3:.3f} mm, {math.degrees(best_er[k]):.3f}°); "
-                f"the pose is probably outside the workspace"
-            ),
+        Loops are kept in their safe band (:func:`_limits` with ``enforce=False``); each
+        angle is then moved to its 2π-representative nearest the seed and a converged
+        solution counts if it is inside the limits (when enforced).  Free iterations
+        find far more solutions than iterations clamped at the limits.  Groups are run
+        in order, each only for the ``todo`` targets still unsolved.
+
+        Returns
+        -------
+        outside_q : (B, n) array, rad
+            Per target the converged solution nearest the seed, limits ignored (NaN if
+            none converged).
+        outside_d : (B,) array, rad²
+            Its ``‖q − seed‖²`` (∞ if none).
+        """
+        lim_free = _limits(self.desc, False)
+        B, n = self.seed.shape
+        outside_q = np.full((B, n), np.nan)
+        outside_d = np.full(B, np.inf)
+        for group in starts:
+            rows = np.flatnonzero(todo & ~self.ok)
+            if not rows.size:
+                break
+            qr, cr, epr, err_r = self.solve(group, lim_free, rows)
+            good = cr & (self.desc.within_limits(qr) if self.enforce else True)
+            self.keep(rows, qr, good, epr, err_r)
+            d2 = np.where(cr, np.sum((qr - self.seed[rows, None, :]) ** 2, axis=-1), np.inf)
+            pick = np.argmin(d2, axis=1)
+            r = np.arange(rows.size)
+            closer = d2[r, pick] < outside_d[rows]
+            outside_d[rows[closer]] = d2[r, pick][closer]
+            outside_q[rows[closer]] = qr[r, pick][closer]
+        return outside_q, outside_d
+
+    def limited_stage(self, starts: list[Array], rows: NDArray[np.intp]) -> None:
+        """Stage 2: all starts at once with iterates projected onto the joint limits.
+
+        Finds the solutions that only a path along a limit leads to; run for the
+        targets ``rows`` the free stage left unsolved.
+        """
+        qr, cr, epr, err_r = self.solve(
+            np.concatenate(starts, axis=1), _limits(self.desc, True), rows
         )
-    for k, f in failures.items():
-        reason[k] = f.message
-    if failures and raise_errors:
-        k = min(failures)
-        idx = tuple(int(i) for i in np.unravel_index(k, batch)) if batch else None
-        raise failures[k].exception(idx)
+        self.keep(rows, qr, cr & self.desc.within_limits(qr), epr, err_r)
 
-    conv_final = (best_ep < tol) & (best_er < tol)
-    within = desc.within_limits(best_q)
-    shape_n = (*batch, n)
-    return IKResult(
-        q=best_q.reshape(shape_n),
-        converged=conv_final.reshape(batch),
-        position_error=best_ep.reshape(batch),
-        orientation_error=best_er.reshape(batch),
-        iterations=iters.reshape(batch),
-        within_limits=within.reshape(batch),
-        reason=reason.reshape(batch),
-    )
+    def no_convergence(self, k: int) -> _Failure:
+        """The failure of target ``k`` that no start solved: its closest approach."""
+        return _Failure(
+            f"no joint solution found (no convergence from the seed and the restarts; "
+            f"closest approach {self.ep[k] * 1e3:.3f} mm, {math.degrees(self.er[k]):.3f}°); "
+            f"the pose is probably outside the workspace"
+        )
+
+    def result(self, batch: tuple[int, ...], reason: NDArray[np.object_]) -> IKResult:
+        """The best result per target, reshaped to the targets' ``batch`` shape."""
+        conv_final = (self.ep < self.tol) & (self.er < self.tol)
+        within = self.desc.within_limits(self.q)
+        return IKResult(
+            q=self.q.reshape((*batch, self.desc.n_readings)),
+            converged=conv_final.reshape(batch),
+            position_error=self.ep.reshape(batch),
+            orientation_error=self.er.reshape(batch),
+            iterations=self.iters.reshape(batch),
+            within_limits=within.reshape(batch),
+            reason=reason.reshape(batch),
+        )
 
 
 @dataclass

@@ -1,0 +1,108 @@
+"""How long the functions in ``src/plugcell`` are (issue #33).
+
+A function is split where the split names a concept: a step of the algorithm with its
+own equation, or a named stage (parse the header, check the coupled limits).  The goal
+is no function over :data:`GOAL_LINES` lines (``end_lineno − lineno + 1`` by ``ast``,
+docstring included).  Until then the ceilings below are a ratchet: a listed function may
+shrink (lower its ceiling in the same change), never grow, and no other function may
+pass the goal.
+
+Print the table: ``.venv/bin/python tests/test_function_sizes.py``.
+"""
+
+from __future__ import annotations
+
+import ast
+from pathlib import Path
+
+SRC = Path(__file__).resolve().parents[1] / "src" / "plugcell"
+
+GOAL_LINES = 80
+
+#: "path:function" (path under src/plugcell; methods as "Class.method") → the most lines
+#: it may have today (only functions over GOAL_LINES).
+LINES_CEILING = {
+    "apps/commands/plan.py:_run": 159,
+    "calibration/identifiability.py:analyse": 120,
+    "apps/reproduce/models_8_2.py:write_page": 119,
+    "io/params.py:result_from_params": 118,
+    "compensation/model_based.py:compensate_joints": 116,
+    "apps/commands/calibrate.py:_run": 113,
+    "io/urdf.py:chain_from_urdf": 109,
+    "kinematics/joint_chain.py:description_from_chain": 108,
+    "devices/robot/rsi/codec.py:parse_rob": 107,
+    "apps/reproduce/models_8_2.py:reproduce_8_2": 105,
+    "calibration/identify.py:Calibrator._iterate": 104,
+    "io/robot_schema.py:description_from_document": 103,
+    "apps/reproduce/compensation_8_3.py:run": 101,
+    "apps/ui/app.py:create_app": 96,
+    "sim/twin/tracker.py:LaserTracker.measure": 96,
+    "io/residual_models.py:load_residual": 95,
+    "framework/service.py:GenericDevice._create": 91,
+    "io/export.py:_export_urdf": 90,
+    "kinematics/forward.py:joint_angles": 88,
+    "calibration/simulation.py:simulated_identification": 86,
+    "apps/demo/services.py:_demonstrate": 85,
+    "metrology/fitting.py:fit_circle": 85,
+    "kinematics/closure.py:fourbar_closure": 83,
+    "motion/planner.py:plan": 82,
+    "calibration/compliance.py:compliance_regressors": 81,
+    "calibration/initial.py:estimate_base_probe_positions": 81,
+    "kinematics/inverse.py:inverse": 81,
+}
+
+
+def function_lines(root: Path = SRC) -> dict[str, int]:
+    """``"path:name"`` → lines of every function under ``root`` (path relative to it).
+
+    Methods are named ``Class.method``, nested functions ``outer.inner``.
+    """
+    out: dict[str, int] = {}
+    for path in sorted(root.rglob("*.py")):
+        tree = ast.parse(path.read_text(encoding="utf-8"))
+        _count(tree, f"{path.relative_to(root).as_posix()}:", out)
+    return out
+
+
+def _count(node: ast.AST, prefix: str, out: dict[str, int]) -> None:
+    """Add the lines of the functions inside ``node`` to ``out``, named ``prefix + name``."""
+    for child in ast.iter_child_nodes(node):
+        if isinstance(child, ast.FunctionDef | ast.AsyncFunctionDef):
+            name = f"{prefix}{child.name}"
+            out[name] = child.end_lineno - child.lineno + 1  # type: ignore[operator]
+            _count(child, f"{name}.", out)
+        elif isinstance(child, ast.ClassDef):
+            _count(child, f"{prefix}{child.name}.", out)
+        else:
+            _count(child, prefix, out)
+
+
+def test_no_function_grows_past_its_ceiling() -> None:
+    over = {k: n for k, n in function_lines().items() if n > LINES_CEILING.get(k, GOAL_LINES)}
+    assert over == {}, "split these where the split names a concept (or they grew): " + str(over)
+
+
+def test_the_ceilings_are_not_stale() -> None:
+    """A ceiling names a function that exists, is still over the goal and is not loose."""
+    lines = function_lines()
+    assert {k for k in LINES_CEILING if lines.get(k, 0) <= GOAL_LINES} == set()
+    shrunk = {k: (lines[k], c) for k, c in LINES_CEILING.items() if lines.get(k, c) < c}
+    assert shrunk == {}, "lower these ceilings to the (lines, ceiling) now measured: " + str(shrunk)
+
+
+def test_the_count_sees_methods_and_nested_functions(tmp_path: Path) -> None:
+    (tmp_path / "pkg").mkdir()
+    (tmp_path / "pkg" / "m.py").write_text(
+        "def f():\n    pass\n\n\nclass A:\n    def m(self):\n"
+        "        def inner():\n            pass\n\n        return inner\n"
+    )
+    assert function_lines(tmp_path) == {"pkg/m.py:f": 2, "pkg/m.py:A.m": 5,
+                                        "pkg/m.py:A.m.inner": 2}
+
+
+if __name__ == "__main__":
+    lines = function_lines()
+    print(f"functions in src/plugcell over {GOAL_LINES} lines (ceiling: the ratchet)")
+    for key, n in sorted(lines.items(), key=lambda kv: -kv[1]):
+        if n > GOAL_LINES or key in LINES_CEILING:
+            print(f"{n:5}  {LINES_CEILING.get(key, '-'):>5}  {key}")
