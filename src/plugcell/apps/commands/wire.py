@@ -35,7 +35,9 @@ def _arguments(p: argparse.ArgumentParser, subscribe: bool) -> None:
     p.add_argument("service", metavar="A")
     p.add_argument("partner", metavar="B")
     add_cell_args(p)
-    p.add_argument("--timeout", type=float, default=10.0)
+    p.add_argument("--timeout", type=float, default=10.0,
+                   help="seconds to wait for A and B to be in the cell, and for the answer "
+                        "(default 10)")
     p.add_argument("--json", action="store_true", help="print the response as JSON")
     p.set_defaults(func=run, subscribe=subscribe)
 
@@ -60,5 +62,9 @@ async def _ask(args: argparse.Namespace) -> Any:
     async with Participant(
         default_client_name("wire"), cell=cell_of(args), transport=transport_of(args)
     ) as client:
-        await client.wait_for(args.service, min(args.timeout, 3.0))
+        # both may still be starting (a robot service starts its controller first): wait
+        # for them as `plugcell call` waits for its service (issue 39: `serve … &` then
+        # `wire` failed with "no such service")
+        for name in (args.service, args.partner):
+            await client.wait_for(name, args.timeout)
         return await client.ask_subscribe(args.service, args.partner, args.subscribe, args.timeout)
