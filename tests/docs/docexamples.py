@@ -15,7 +15,11 @@ Markers
 
     ``skip`` with its ``reason`` (listed by the test), ``timeout`` (s, the block; default
     :data:`DEFAULT_TIMEOUT_S`) and ``rel`` (relative tolerance of the decimal numbers a
-    page shows; default :data:`DEFAULT_REL`).
+    page shows; default :data:`DEFAULT_REL`).  Before a block of any other kind (a
+    ``python`` module, a ``toml`` map), ``file=NAME`` makes the block the file ``NAME`` of
+    the page's folder, as the page asks the reader to save it::
+
+        <!-- docs-test: file=laser_point.py -->
 
 What a ``console`` page shows, and how it is compared
     Each line a page shows must match the line the command printed (stdout and stderr
@@ -78,6 +82,7 @@ class Block:
     timeout_s: float = DEFAULT_TIMEOUT_S
     rel: float = DEFAULT_REL
     commands: list[Command] = field(default_factory=list)
+    file: str | None = None
 
     @property
     def where(self) -> str:
@@ -92,9 +97,9 @@ def _options(text: str, where: str) -> dict[str, str]:
     out: dict[str, str] = {}
     for word in words:
         key, eq, value = word.partition("=")
-        if key not in ("skip", "reason", "timeout", "rel"):
+        if key not in ("skip", "reason", "timeout", "rel", "file"):
             raise DocsMarkupError(f"{where}: docs-test marker: unknown option {key!r} "
-                                  "(skip, reason=, timeout=, rel=)")
+                                  "(skip, reason=, timeout=, rel=, file=)")
         out[key] = value if eq else ""
     if "skip" in out and not out.get("reason"):
         raise DocsMarkupError(f"{where}: docs-test marker: skip needs reason=\"…\"")
@@ -130,7 +135,8 @@ def parse_console(text: str, where: str, first_line: int) -> list[Command]:
 
 
 def read_blocks(path: Path, page: str | None = None) -> list[Block]:
-    """The ``sh`` and ``console`` blocks of a markdown file, in order, with their markers."""
+    """The ``sh`` and ``console`` blocks of a markdown file, in order, with their markers,
+    and the blocks marked ``file=`` (kind ``file``)."""
     page = page or path.name
     lines = path.read_text(encoding="utf-8").split("\n")
     blocks: list[Block] = []
@@ -163,12 +169,17 @@ def read_blocks(path: Path, page: str | None = None) -> list[Block]:
         for marker in _MARKER.findall(pending):
             opts.update(_options(marker, where))
         pending = ""
-        if lang not in ("sh", "console"):
-            if opts:
-                raise DocsMarkupError(f"{where}: a docs-test marker before a {lang or 'plain'} "
-                                      "block (only sh and console blocks run)")
-            continue
         text = "\n".join(body)
+        if lang not in ("sh", "console"):
+            if set(opts) == {"file"} and re.fullmatch(r"[\w.-]+", opts["file"]):
+                blocks.append(Block(page, start + 1, "file", text + "\n", file=opts["file"]))
+            elif opts:
+                raise DocsMarkupError(f"{where}: a docs-test marker before a {lang or 'plain'} "
+                                      "block (only sh and console blocks run; file=NAME "
+                                      "saves another block)")
+            continue
+        if "file" in opts:
+            raise DocsMarkupError(f"{where}: file= is for a block that does not run")
         block = Block(page, start + 1, lang, text, skip=opts.get("reason") if "skip" in opts
                       else None)
         if "timeout" in opts:

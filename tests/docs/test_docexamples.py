@@ -62,6 +62,8 @@ def test_blocks_kinds_markers_and_commands(tmp_path: Path) -> None:
     ('<!-- docs-test: sometimes -->\n```sh\nls\n```\n', "unknown option 'sometimes'"),
     ('<!-- docs-test: timeout=3 -->\n```text\nls\n```\n', "only sh and console blocks run"),
     ('```console\nls\n```\n', r"starts with a '\$ ' command"),
+    ('<!-- docs-test: file=x.sh -->\n```sh\nls\n```\n', "file= is for a block that does"),
+    ('<!-- docs-test: file=../x -->\n```toml\nx = 1\n```\n', "file=NAME saves"),
 ])
 def test_bad_markup_is_refused_with_page_and_line(tmp_path: Path, text: str, message: str):
     page = tmp_path / "p.md"
@@ -69,6 +71,13 @@ def test_bad_markup_is_refused_with_page_and_line(tmp_path: Path, text: str, mes
     with pytest.raises(DocsMarkupError, match=message) as err:
         read_blocks(page)
     assert "p.md:" in str(err.value)
+
+
+def test_file_blocks_are_saved_not_run(tmp_path: Path) -> None:
+    page = tmp_path / "p.md"
+    page.write_text('<!-- docs-test: file=laser_point.py -->\n```python\nX = 1\n```\n')
+    (block,) = read_blocks(page)
+    assert (block.kind, block.file, block.text) == ("file", "laser_point.py", "X = 1\n")
 
 
 def test_a_marker_belongs_to_the_next_block_only(tmp_path: Path) -> None:

@@ -40,7 +40,7 @@ BACKGROUND_WAIT_S = 60.0
 
 
 def _pages() -> list[Path]:
-    return [p for p in PAGES if read_blocks(p, _name(p))]
+    return [p for p in PAGES if any(b.kind != "file" for b in read_blocks(p, _name(p)))]
 
 
 def _name(path: Path) -> str:
@@ -128,6 +128,9 @@ def _tail(out: Path, n: int = 40) -> str:
 
 
 def _run_block(page: _Page, block: Block) -> None:
+    if block.kind == "file":
+        (page.folder / str(block.file)).write_text(block.text, encoding="utf-8")
+        return
     if block.kind == "sh":
         status, out = page.run("set -e\n" + block.text, block.timeout_s)
         assert status == 0, (f"{block.where}: the example ended with status {status}:\n"
@@ -168,6 +171,9 @@ def test_page_examples(path: Path, tmp_path: Path) -> None:
     page = _Page(folder, env, logs)
     try:
         for block in read_blocks(path, name):
+            if block.kind == "file":
+                _run_block(page, block)
+                continue
             reason = block.skip
             if reason is None and "PLUGCELL_DATA" in block.text and "PLUGCELL_DATA" not in env:
                 reason = "needs the reference data (shared/data, $PLUGCELL_DATA): absent here"
