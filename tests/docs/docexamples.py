@@ -66,8 +66,13 @@ class Command:
 
     @property
     def background(self) -> bool:
-        """Whether the command line ends in ``&`` (it starts something in the background)."""
-        return self.text.rstrip().endswith("&")
+        """Whether the command line ends in ``&`` before any comment (it starts something in
+        the background)."""
+        try:
+            words = shlex.split(self.text.replace("\\\n", " "), comments=True)
+        except ValueError:
+            return self.text.rstrip().endswith("&")
+        return bool(words) and words[-1].endswith("&") and not words[-1].endswith("&&")
 
 
 @dataclass

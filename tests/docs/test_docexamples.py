@@ -118,6 +118,18 @@ def test_console_continuation_and_output() -> None:
     assert cmds[0].expected == ["out 1"] and cmds[1].expected == []
 
 
+@pytest.mark.parametrize(("text", "background"), [
+    ("plugcell serve camera &", True),
+    ("plugcell serve camera &    # a service", True),
+    ("plugcell serve camera & plugcell serve drill &", True),
+    ("plugcell wire A B && plugcell wire A C", False),
+    ("plugcell services    # what & who", False),
+])
+def test_background(text: str, background: bool) -> None:
+    (cmd,) = parse_console(f"$ {text}\n", "p:1", 1)
+    assert cmd.background is background
+
+
 def test_shows_error() -> None:
     assert shows_error(["plugcell: error: --poses must be positive"])
     assert shows_error(['{"state": "Failed", "reason": "x"}'])
