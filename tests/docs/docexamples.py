@@ -32,7 +32,8 @@ What a ``console`` page shows, and how it is compared
       digit, whichever is larger; an integer matches exactly.
 
     A command may end with a non-zero exit status only if what the page shows of it
-    names an error (``error``, ``Error``, ``Failed``); its status is otherwise 0.
+    names an error or an alarm (``error``, ``Failed``, ``ALARM``); its status is
+    otherwise 0.
 """
 
 from __future__ import annotations
@@ -257,8 +258,9 @@ def output_matches(expected: list[str], actual: list[str], rel: float = DEFAULT_
 
 
 def shows_error(expected: list[str]) -> bool:
-    """Whether what a page shows of a command names an error (then it may exit non-zero)."""
-    return any(re.search(r"\berror\b|\bFailed\b", e, re.I) for e in expected)
+    """Whether what a page shows of a command names an error or an alarm (then it may exit
+    non-zero)."""
+    return any(re.search(r"\berror\b|\bFailed\b|\bALARM\b", e, re.I) for e in expected)
 
 
 #: What the page tests did, for the summary: (page:line, passed|failed|skipped, reason, s).

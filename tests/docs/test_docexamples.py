@@ -133,6 +133,7 @@ def test_background(text: str, background: bool) -> None:
 def test_shows_error() -> None:
     assert shows_error(["plugcell: error: --poses must be positive"])
     assert shows_error(['{"state": "Failed", "reason": "x"}'])
+    assert shows_error(["drift of BASE: 0.189 mm at the nests …: ALARM (> 0.05 mm)"])
     assert not shows_error(["wrote cal.csv"])
 
 
