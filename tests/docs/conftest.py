@@ -23,6 +23,8 @@ def pytest_terminal_summary(terminalreporter, exitstatus, config) -> None:
     tr.write_sep("-", "docs examples")
     tr.write_line(f"docs examples: {len(passed) + len(failed)} run ({len(passed)} passed, "
                   f"{len(failed)} failed) in {seconds:.0f} s, {len(skipped)} skipped")
+    for where, _, _, s in sorted(passed, key=lambda r: -r[3]):
+        tr.write_line(f"  ran     {where} ({s:.1f} s)")
     for where, _, reason, _ in skipped:
         tr.write_line(f"  skipped {where}: {reason}")
     for where, _, _, s in failed:
