@@ -64,7 +64,11 @@ async def _ask(args: argparse.Namespace) -> Any:
     ) as client:
         # both may still be starting (a robot service starts its controller first): wait
         # for them as `plugcell call` waits for its service (issue 39: `serve … &` then
-        # `wire` failed with "no such service")
-        for name in (args.service, args.partner):
-            await client.wait_for(name, args.timeout)
+        # `wire` failed with "no such service"); a partner to drop may have left the cell
+        await client.wait_for(args.service, args.timeout)
+        if args.subscribe and not await client.wait_for(args.partner, args.timeout):
+            from plugcell.apps.cli import CommandError
+
+            raise CommandError(f"unknown device {args.partner!r}: no such service in cell "
+                               f"{cell_of(args)!r} (waited {args.timeout:g} s)")
         return await client.ask_subscribe(args.service, args.partner, args.subscribe, args.timeout)
