@@ -160,6 +160,7 @@ def _run_block(page: _Page, block: Block) -> None:
 
 
 @pytest.mark.slow
+@pytest.mark.timeout(900)  # a page's blocks have timeouts of their own (docexamples)
 @pytest.mark.parametrize("path", _pages(), ids=_name)
 def test_page_examples(path: Path, tmp_path: Path) -> None:
     """Every example of one page runs and prints what the page shows."""
