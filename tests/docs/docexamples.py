@@ -31,6 +31,10 @@ What a ``console`` page shows, and how it is compared
     * a number with decimals matches within ``rel`` of it or one unit of its last shown
       digit, whichever is larger; an integer matches exactly.
 
+    Each ``$`` command runs in a fresh ``bash`` in the page's folder: shell variables,
+    functions and ``cd`` do not carry over to the next one (an example that needs them is
+    an ``sh`` block, run as one script with ``set -e``).
+
     A command may end with a non-zero exit status only if what the page shows of it
     names an error or an alarm (``error``, ``Failed``, ``ALARM``); its status is
     otherwise 0.
