@@ -32,25 +32,14 @@ import numpy as np
 
 from plugcell.calibration import CalibrationData, Calibrator
 from plugcell.metrology.drift import estimate_base_drift, nests_in_base
-from plugcell.sim.twin.campaign import measure_poses, working_volume_joints
+from plugcell.sim.twin.campaign import measure_nests, measure_poses, working_volume_joints
 from plugcell.sim.twin.robot import RobotTwin
 from plugcell.sim.twin.scenario import TwinScenario
 from plugcell.sim.twin.thermal import ThermalDrift, shift_temperature
 from plugcell.sim.twin.tracker import LaserTracker
 
 ROOT = Path(__file__).resolve().parents[1]
-#: Reference nests on the foundation around the robot (robot base frame, m).
-NESTS = np.array([[1.0, -1.3, 0.0], [2.4, 0.2, 0.05], [1.2, 1.5, 0.0], [0.3, -0.2, 0.4]])
 THRESHOLD_M = 0.05e-3
-
-
-def measure_nests(robot: RobotTwin, tracker: LaserTracker) -> np.ndarray:
-    out = []
-    for p in NESTS:
-        true = robot.true_point_in_tracker(p)
-        tracker.point_at(true)
-        out.append(tracker.measure(true, 1.0, mode="3dof").position)
-    return np.array(out)
 
 
 def with_base(model: Any, base: np.ndarray) -> Any:

@@ -98,6 +98,7 @@ def test_plan_from_measured_poses(planned, capsys):
     (["--line-of-sight-deg", "0"], "--line-of-sight-deg"),
     (["--model", "9"], "--model"),
     (["--from", "/nonexistent/q.csv"], "cannot read"),
+    (["--program-value", "base_est=1,2,3,4,5,6"], "give --program FILE too"),
 ])
 def test_bad_input_is_a_clear_error(planned, capsys, argv, message):
     base = {"--poses": "20", "--candidates": "300"}
@@ -110,6 +111,24 @@ def test_bad_input_is_a_clear_error(planned, capsys, argv, message):
     assert main(args) == 2
     err = capsys.readouterr().err
     assert err.startswith("plugcell: error:") and message in err, err
+
+
+def test_program_values_are_appended_to_the_activate_data(planned, capsys):
+    """--program-value: what the program needs beyond the poses (BASE and PROBE estimates,
+    the identification) in the file, so that `call … ACTIVATE --data "$(cat FILE)"` runs
+    it (docs/robot-programs.md; issue 39)."""
+    out = planned / "values.json"
+    identify = "identify=params = calibrate(mJ, mT, model=5, payload=36); s = summary(params)"
+    assert main(["plan", "--robot", "smart_h4", "--poses", "20", "--candidates", "300",
+                 "--payloads", "36", "--model", "4", "--out", str(planned / "v.csv"),
+                 "--program", str(out), "--program-value", "base_est=4720.6,-293,-350,163,0,0",
+                 "--program-value", identify, "--quiet"]) == 0
+    values = json.loads(out.read_text())
+    assert values[0] == "calibration" and values[-2:] == ["base_est=4720.6,-293,-350,163,0,0",
+                                                           identify]
+    assert main(["plan", "--robot", "smart_h4", "--poses", "20", "--out", str(out),
+                 "--program", str(out), "--program-value", "=3", "--quiet"]) == 2
+    assert "--program-value must be NAME=VALUE" in capsys.readouterr().err
 
 
 def test_bad_plan_file_for_the_twin(planned, capsys):

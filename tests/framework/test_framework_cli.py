@@ -162,3 +162,25 @@ def test_bench_transport_smoke(procs):
     assert table[-1].startswith("  answered from an event loop on each side (")
     refused = cli(procs, "bench", "transport", "--repeat", "0", check=False)
     assert refused.returncode == 2 and "--repeat: must be at least 1" in refused.stderr
+
+
+def test_wire_waits_for_services_still_starting(procs, cell):
+    """`serve … &` then `wire` at once: wire waits (up to --timeout) for both ends to be
+    in the cell, as `call` waits for its service (issue 39: docs/robot-programs.md's
+    `serve robot … &` then `wire H4 TRACKER` failed with 'no such service')."""
+    wire = subprocess.Popen(plugcell_argv("wire", "TOOL", "CAMERA", "--cell", cell,
+                                          "--timeout", "40"),
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                            env=procs.env)
+    try:
+        procs.serve("drill", cell, name="TOOL")
+        procs.serve("camera", cell)
+        out, err = wire.communicate(timeout=60)
+    finally:
+        wire.kill()
+    assert wire.returncode == 0, err
+    assert "TOOL subscribed to CAMERA" in out
+    nobody = cli(procs, "wire", "TOOL", "NOBODY", "--timeout", "1", "--cell", cell,
+                 check=False)
+    assert nobody.returncode == 2
+    assert "unknown device 'NOBODY': no such service in cell" in nobody.stderr

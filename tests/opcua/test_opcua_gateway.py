@@ -168,10 +168,12 @@ def test_the_quick_start_of_the_docs_runs(ua_cell, capsys):
     from pathlib import Path
 
     doc = (Path(__file__).resolve().parents[2] / "docs" / "opcua.md").read_text()
-    code = re.search(r"\(asyncua\), for instance:\n\n```python\n(.*?)```", doc,
-                     re.S).group(1)
+    code = re.search(r"\(asyncua\), for instance `snapshot.py`:\n\n<!--.*?-->\n```python\n"
+                     r"(.*?)```", doc, re.S).group(1)
+    cell = 'os.environ.get("PLUGCELL_CELL", "default")'
+    assert cell in code
     code = code.replace("opc.tcp://127.0.0.1:4840/plugcell", ua_cell.url).replace(
-        "urn:plugcell:cell:default", f"urn:plugcell:cell:{ua_cell.name}")
+        cell, repr(ua_cell.name))
     wait_shown(ua_cell.url, ua_cell.name, {"CAMERA"})
     exec(compile(code, "docs/opcua.md", "exec"), {})
     assert capsys.readouterr().out.split()[-2:] == ["480", "640"]

@@ -145,6 +145,46 @@ def test_cli_twin_measure_writes_a_measurement_file(tmp_path, capsys):
     assert "plugcell: warning: --payload is deprecated: use --payload-kg" in capsys.readouterr().err
 
 
+def test_cli_twin_measure_temperature_sweep_writes_the_column_the_thermal_term_needs(tmp_path):
+    """--temperature-c FROM:TO: the hall warms linearly over the campaign, the twin's arm
+    lengthens with it (κ = 12e-6/K: 12 µm per metre and kelvin) and the file says the
+    temperature of each pose (issue 39: calibrate --thermal had no command writing it)."""
+    hot, cold = tmp_path / "hot.csv", tmp_path / "cold.csv"
+    base = ["twin", "measure", "--poses", "4", "--quiet", "--seed", "1"]
+    assert main([*base, "--temperature-c", "18:30", "--out", str(hot)]) == 0
+    assert main([*base, "--out", str(cold)]) == 0
+    h, c = read_measurements(hot, n_joints=6), read_measurements(cold, n_joints=6)
+    np.testing.assert_allclose(h.temperature_c, [18.0, 22.0, 26.0, 30.0])
+    assert c.temperature_c is None
+    np.testing.assert_allclose(h.joints, c.joints)
+    # the same poses further out when hotter: up to ~0.1 mm at 10 K for a 3 m reach
+    d = np.linalg.norm(h.positions - c.positions, axis=1)
+    assert d[0] < d[-1] and 0.05e-3 < d[-1] < 0.5e-3
+
+
+def test_cli_twin_nests_drift_with_the_hall_temperature(tmp_path, capsys):
+    """twin nests → drift register → drift check: no drift at the reference temperature,
+    an alarm (exit 1) when the hall is 6 K warmer (BASE moved ~0.1 mm)."""
+    params = tmp_path / "params.json"
+    cal = tmp_path / "cal.csv"
+    assert main(["twin", "measure", "--poses", "40", "--out", str(cal), "--quiet"]) == 0
+    assert main(["calibrate", "--robot", "smart_h4", "--model", "1", "--data", str(cal),
+                 "--out", str(params), "--quiet"]) == 0
+    ref, at20, at26 = (tmp_path / f for f in ("ref.csv", "n20.csv", "n26.csv"))
+    assert main(["twin", "nests", "--out", str(tmp_path / "n.csv")]) == 0
+    assert main(["drift", "register", "--params", str(params), "--measured",
+                 str(tmp_path / "n.csv"), "--out", str(ref)]) == 0
+    assert main(["twin", "nests", "--temperature-c", "20", "--out", str(at20)]) == 0
+    assert main(["twin", "nests", "--temperature-c", "26", "--out", str(at26)]) == 0
+    capsys.readouterr()
+    assert main(["drift", "check", "--params", str(params), "--nests", str(ref),
+                 "--measured", str(at20)]) == 0
+    assert ": ok" in capsys.readouterr().out
+    assert main(["drift", "check", "--params", str(params), "--nests", str(ref),
+                 "--measured", str(at26)]) == 1
+    assert "ALARM" in capsys.readouterr().out
+
+
 @pytest.mark.parametrize(
     ("argv", "message"),
     [
@@ -153,6 +193,12 @@ def test_cli_twin_measure_writes_a_measurement_file(tmp_path, capsys):
          "--payload-kg must be a mass"),
         (["twin", "measure", "--robot", "nope", "--poses", "3", "--out", "x.csv"], "nope"),
         (["twin", "report", "--poses", "3"], "--poses must be at least 10"),
+        (["twin", "measure", "--poses", "3", "--temperature-c", "293", "--out", "x.csv"],
+         "a value in kelvin?"),
+        (["twin", "measure", "--poses", "3", "--temperature-c", "20:x", "--out", "x.csv"],
+         "--temperature-c must be T or FROM:TO"),
+        (["twin", "nests", "--temperature-c", "nan", "--out", "x.csv"],
+         "--temperature-c must be T or FROM:TO"),
     ],
 )
 def test_cli_twin_errors(argv, message, capsys, tmp_path, monkeypatch):

@@ -22,6 +22,7 @@ from __future__ import annotations
 import argparse
 import json
 import math
+import re
 import sys
 import time
 from pathlib import Path
@@ -83,6 +84,9 @@ def configure(p: argparse.ArgumentParser) -> None:
     p.add_argument("--program", type=Path, metavar="FILE",
                    help="also write the calibration program's values (JSON ACTIVATE data; "
                         "one file per payload)")
+    p.add_argument("--program-value", action="append", default=[], metavar="NAME=VALUE",
+                   help="one more value of the program's ACTIVATE data, e.g. base_est=x,y,z,"
+                        "a,b,c or identify=… (repeatable; docs/robot-programs.md)")
     p.add_argument("--json", action="store_true", help="print the plan summary as JSON")
     p.add_argument("--quiet", action="store_true", help="no progress on stderr")
     p.set_defaults(func=_run)
@@ -190,6 +194,13 @@ def _run(args: argparse.Namespace) -> int:
         raise CommandError(f"--model: {exc}") from None
     if args.poses < 1:
         raise CommandError(f"--poses must be positive, got {args.poses}")
+    if args.program_value and args.program is None:
+        raise CommandError("--program-value is a value of the program --program writes: "
+                           "give --program FILE too")
+    for v in args.program_value:
+        if not re.fullmatch(r"[A-Za-z_]\w*=.*", v, re.S):
+            raise CommandError(f"--program-value must be NAME=VALUE (a program variable), "
+                               f"got {v!r}")
     if args.from_file is None and args.candidates < 1:
         raise CommandError(f"--candidates must be positive, got {args.candidates}")
     if not (args.noise_mm > 0 and math.isfinite(args.noise_mm)):
@@ -316,7 +327,7 @@ def _run(args: argparse.Namespace) -> int:
         _write_plan(args.out, plan, summary, scale)
     written = [str(args.out)]
     if args.program is not None:
-        written += _write_program(args.program, plan, scale)
+        written += _write_program(args.program, plan, scale, args.program_value)
     if args.json:
         print(json.dumps(summary, indent=2))
     else:
@@ -400,9 +411,10 @@ def _write_measured(path: Path, m: Any, rows: np.ndarray, d: dict[str, Any],
                                          joint_scale=scale))
 
 
-def _write_program(path: Path, plan: Any, scale: np.ndarray) -> list[str]:
+def _write_program(path: Path, plan: Any, scale: np.ndarray, extra: list[str]) -> list[str]:
     """The calibration program's values, one JSON ACTIVATE-data file per payload (and per
-    200 configurations): ``["calibration", "configs=…", "n_configs=N", …]``."""
+    200 configurations): ``["calibration", "configs=…", "n_configs=N", …]`` and then the
+    ``extra`` values (``NAME=VALUE``)."""
     from plugcell.devices.robot.value_text import rows_text
 
     groups = []
@@ -415,7 +427,7 @@ def _write_program(path: Path, plan: Any, scale: np.ndarray) -> list[str]:
         target = path if len(groups) == 1 else path.with_name(
             f"{path.stem}-{g + 1}-{m:g}kg{path.suffix}")
         values = ["calibration", f"configs={rows_text(q)}", f"n_configs={len(q)}",
-                  "duration_ms=1000", "route=TRUE"]
+                  "duration_ms=1000", "route=TRUE", *extra]
         write_text(target, json.dumps(values) + "\n")
         written.append(f"{target} ({len(q)} poses, {m:g} kg)")
     return written

@@ -91,9 +91,29 @@ def configure(p: argparse.ArgumentParser) -> None:
     m.add_argument("--mode", choices=("6dof", "3dof"), default="6dof",
                    help="measure the T-MAC pose (6dof, default) or the reflector's position "
                         "(3dof)")
+    m.add_argument(
+        "--temperature-c",
+        metavar="T|FROM:TO",
+        help="the hall's temperature (°C) during the campaign, one value or a linear sweep "
+        "FROM:TO over the poses: the twin's cell drifts with it (arm lengths, BASE; "
+        "docs/twin.md) and the file gets a temperature_c column (calibrate --thermal)",
+    )
     m.add_argument("--out", type=Path, required=True, help="measurement CSV to write")
     m.add_argument("--quiet", action="store_true", help="no progress output")
     m.set_defaults(func=_measure)
+
+    n = tw.add_parser(
+        "nests",
+        help="measure the cell's reference nests (drift register / drift check)",
+        description="Measure the reference nests fixed to the twin's foundation with the "
+        "simulated tracker (3-DOF, tracker frame): the file drift register and drift check "
+        "read.  At another --temperature-c the twin's BASE has drifted.",
+    )
+    common(n)
+    n.add_argument("--temperature-c", type=float, default=None, metavar="T",
+                   help="the hall's temperature (°C; default: the reference 20 °C, no drift)")
+    n.add_argument("--out", type=Path, required=True, help="nest file to write: name,x,y,z (mm)")
+    n.set_defaults(func=_nests)
 
 
 def _scenario(args: argparse.Namespace):
@@ -178,6 +198,7 @@ def _measure(args: argparse.Namespace) -> int:
     )
     from plugcell.sim.twin.robot import RobotTwin
     from plugcell.sim.twin.scenario import ScenarioError
+    from plugcell.sim.twin.thermal import ThermalDrift
     from plugcell.sim.twin.tracker import LaserTracker, TrackerError
 
     for opt in ("poses", "scan"):
@@ -205,13 +226,19 @@ def _measure(args: argparse.Namespace) -> int:
                 np.random.default_rng(pose_seed),
             )
             payloads = np.full(len(joints), args.payload)
+        temperatures = _temperatures(args.temperature_c, len(joints))
+        if temperatures is not None:
+            robot.set_thermal_drift(ThermalDrift())
         bar = None if args.quiet else ProgressBar("measuring", stream=sys.stderr)
-        data, sim_s = _measure_groups(scenario, robot, tracker, joints, payloads, args, bar)
+        data, sim_s = _measure_groups(scenario, robot, tracker, joints, payloads, args, bar,
+                                      temperatures)
     except (ScenarioError, CampaignError, TrackerError, ValueError) as exc:
         raise CommandError(str(exc)) from None
     what = (f"{len(joints)} poses of plan {args.plan}" if args.plan is not None
             else f"{len(joints)} {'scan ' if args.scan else ''}poses, payload "
                  f"{args.payload:g} kg, pose seed {pose_seed}, {args.mode}")
+    if temperatures is not None:
+        what += f", hall at {args.temperature_c} °C"
     comments = [
         f"plugcell twin measure: robot {scenario.robot}, {what}",
         f"scenario: {scenario.to_json()}",
@@ -247,8 +274,58 @@ def _plan_joints(path: Path, desc: Any, default_payload: float) -> tuple[np.ndar
     return plan.joints, m
 
 
+def _temperatures(text: str | None, n: int) -> np.ndarray | None:
+    """``--temperature-c``: ``T`` or ``FROM:TO`` → the (n,) temperatures (°C), linear over
+    the poses; ``None`` without the option."""
+    from plugcell.apps.cli import CommandError
+
+    if text is None:
+        return None
+    parts = text.split(":")
+    try:
+        values = [float(p) for p in parts]
+    except ValueError:
+        values = []
+    if len(values) not in (1, 2) or not all(np.isfinite(values)):
+        raise CommandError(f"--temperature-c must be T or FROM:TO in °C, got {text!r}")
+    if any(not -50.0 <= v <= 100.0 for v in values):
+        raise CommandError(f"--temperature-c {text}: a hall temperature in °C is within "
+                           "-50…100 (a value in kelvin?)")
+    return np.linspace(values[0], values[-1], n)
+
+
+def _nests(args: argparse.Namespace) -> int:
+    from plugcell.apps.cli import CommandError
+    from plugcell.apps.commands.files import write_text
+    from plugcell.io.nests import format_nests
+    from plugcell.sim.twin.campaign import REFERENCE_NESTS, measure_nests
+    from plugcell.sim.twin.robot import RobotTwin
+    from plugcell.sim.twin.scenario import ScenarioError
+    from plugcell.sim.twin.thermal import ThermalDrift
+    from plugcell.sim.twin.tracker import LaserTracker
+
+    scenario = _scenario(args)
+    try:
+        robot = RobotTwin(scenario)
+    except ScenarioError as exc:
+        raise CommandError(str(exc)) from None
+    drift = ThermalDrift()
+    t = drift.reference_c if args.temperature_c is None else args.temperature_c
+    _temperatures(str(t), 1)  # the same check as twin measure's
+    robot.set_thermal_drift(drift, t)
+    tracker_seed = scenario.tracker_seed if scenario.tracker_seed is not None else scenario.seed
+    measured = measure_nests(robot, LaserTracker(seed=tracker_seed))
+    names = [f"N{k + 1}" for k in range(len(REFERENCE_NESTS))]
+    write_text(args.out, format_nests(names, measured, (
+        f"plugcell twin nests: robot {scenario.robot}, seed {scenario.seed}, hall at "
+        f"{t:g} °C; tracker frame (mm)",)))
+    print(f"wrote {len(names)} nests to {args.out} (hall at {t:g} °C)", file=sys.stderr)
+    return 0
+
+
 def _measure_groups(scenario: Any, robot: Any, tracker: Any, joints: np.ndarray,
-                    payloads: np.ndarray, args: argparse.Namespace, bar: Any):
+                    payloads: np.ndarray, args: argparse.Namespace, bar: Any,
+                    temperatures: np.ndarray | None = None):
     """Measure ``joints`` in order, changing the payload between runs of equal payload
     (the same robot — its hidden errors — carrying another mass)."""
     from plugcell.io.measurements import MeasurementSet
@@ -262,6 +339,10 @@ def _measure_groups(scenario: Any, robot: Any, tracker: Any, joints: np.ndarray,
     for s, e in zip(starts, ends, strict=True):
         m = float(payloads[s])
         twin = robot if m == robot.payload.mass else RobotTwin(scenario.with_payload(m))
+        if twin is not robot and temperatures is not None:
+            from plugcell.sim.twin.thermal import ThermalDrift
+
+            twin.set_thermal_drift(ThermalDrift())
 
         def progress(i: int, n: int, s: int = int(s)) -> None:
             if bar is not None:
@@ -269,7 +350,9 @@ def _measure_groups(scenario: Any, robot: Any, tracker: Any, joints: np.ndarray,
 
         data, sim_s = measure_poses(twin, tracker, joints[s:e], duration_s=args.duration,
                                     rotation=args.rot, progress=progress,
-                                    mode=getattr(args, "mode", "6dof"))
+                                    mode=getattr(args, "mode", "6dof"),
+                                    temperatures_c=None if temperatures is None
+                                    else temperatures[s:e])
         parts.append(data)
         sim_total += sim_s
     if len(parts) == 1:
@@ -278,4 +361,5 @@ def _measure_groups(scenario: Any, robot: Any, tracker: Any, joints: np.ndarray,
         np.concatenate([p.joints for p in parts]), np.concatenate([p.positions for p in parts]),
         None if parts[0].angles is None else np.concatenate([p.angles for p in parts]),
         parts[0].rotation,
-        np.concatenate([p.payload_kg for p in parts])), sim_total
+        np.concatenate([p.payload_kg for p in parts]),
+        None if temperatures is None else np.asarray(temperatures, dtype=float)), sim_total

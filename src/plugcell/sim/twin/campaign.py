@@ -156,7 +156,8 @@ def move_time(q_from: Array, q_to: Array) -> float:
 def measure_poses(robot: RobotTwin, tracker: LaserTracker, joints: Array, *,
                   duration_s: float = 1.0, rotation: str = "rpy",
                   progress: Progress | None = None,
-                  mode: str = "6dof") -> tuple[MeasurementSet, float]:
+                  mode: str = "6dof",
+                  temperatures_c: Array | None = None) -> tuple[MeasurementSet, float]:
     """Move through ``joints`` and take one tracker measurement at each pose.
 
     ``mode``: ``"6dof"`` (T-MAC pose) or ``"3dof"`` (the reflector's position only; the
@@ -164,19 +165,39 @@ def measure_poses(robot: RobotTwin, tracker: LaserTracker, joints: Array, *,
 
     The operator catches the beam on the T-MAC once at the start (as with a real
     tracker); from then on the tracker follows the reflector through each move.
-    Returns the measurement set and the simulated time (s) the campaign took.
+
+    Parameters
+    ----------
+    temperatures_c : (N,) ndarray, °C, optional
+        The hall's temperature at each pose: set on the twin before it moves there (its
+        thermal drift, :meth:`RobotTwin.set_thermal_drift`, scales the arm and moves
+        BASE) and written as the set's ``temperature_c`` — what the cell's temperature
+        sensor read.  ``None``: no temperature column, the twin's temperature untouched.
+
+    Returns
+    -------
+    MeasurementSet, float
+        The measurement set and the simulated time (s) the campaign took.
     """
     if mode not in ("6dof", "3dof"):
         raise ValueError(f"mode: '6dof' or '3dof', got {mode!r}")
     n = len(joints)
+    if temperatures_c is not None:
+        temperatures_c = np.asarray(temperatures_c, dtype=float)
+        if temperatures_c.shape != (n,):
+            raise ValueError(f"temperatures_c must be ({n},), got {temperatures_c.shape}")
     readings = np.empty_like(joints)
     positions = np.empty((n, 3))
     angles = np.empty((n, 3))
     sim_time = 0.0
     q_prev = robot.joint_readings()
+    if temperatures_c is not None:
+        robot.set_temperature(float(temperatures_c[0]))
     robot.move_joints(joints[0])
     tracker.point_at(robot.true_reflector_in_tracker()[:3, 3])  # operator catches the beam
     for i, q in enumerate(joints):
+        if temperatures_c is not None:
+            robot.set_temperature(float(temperatures_c[i]))
         if i > 0:
             robot.move_joints(q)
         dt = move_time(q_prev, q)
@@ -193,4 +214,36 @@ def measure_poses(robot: RobotTwin, tracker: LaserTracker, joints: Array, *,
             progress(i + 1, n)
     payload = np.full(n, robot.payload.mass)
     return MeasurementSet(readings, positions, None if mode == "3dof" else angles, rotation,
-                          payload), sim_time
+                          payload,
+                          None if temperatures_c is None else temperatures_c.copy()), sim_time
+
+
+#: Reference nests fixed to the foundation around the robot (robot base frame, m): what
+#: the drift watch re-measures (docs/metrology.md); not on one line, not in one plane.
+REFERENCE_NESTS = np.array([[1.0, -1.3, 0.0], [2.4, 0.2, 0.05], [1.2, 1.5, 0.0],
+                            [0.3, -0.2, 0.4]])
+
+
+def measure_nests(robot: RobotTwin, tracker: LaserTracker, nests: Array = REFERENCE_NESTS,
+                  *, duration_s: float = 1.0) -> Array:
+    """The tracker's 3-DOF measurement of reference nests (tracker frame, m).
+
+    Parameters
+    ----------
+    nests : (K, 3) ndarray, m
+        Nest positions in the robot base frame (fixed to the foundation); where they are in
+        the tracker frame now is ``BASE(T) · n_k`` with the twin's true, drifting BASE.
+    duration_s : float
+        Measuring time per nest (s).
+
+    Returns
+    -------
+    (K, 3) ndarray, m
+        The measured positions, tracker noise included.
+    """
+    out = []
+    for p in np.asarray(nests, dtype=float):
+        true = robot.true_point_in_tracker(p)
+        tracker.point_at(true)
+        out.append(tracker.measure(true, duration_s, mode="3dof").position)
+    return np.array(out)

@@ -1,0 +1,31 @@
+"""The count of the docs' examples (run, skipped with their reasons) in pytest's summary,
+so that CI shows it (``tests/docs/test_examples.py``)."""
+
+from __future__ import annotations
+
+import sys
+from pathlib import Path
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+
+from docexamples import RESULTS
+
+
+def pytest_terminal_summary(terminalreporter, exitstatus, config) -> None:
+    """One line with the counts, then each skipped example and its reason."""
+    if not RESULTS:
+        return
+    tr = terminalreporter
+    passed = [r for r in RESULTS if r[1] == "passed"]
+    failed = [r for r in RESULTS if r[1] == "failed"]
+    skipped = [r for r in RESULTS if r[1] == "skipped"]
+    seconds = sum(r[3] for r in RESULTS)
+    tr.write_sep("-", "docs examples")
+    tr.write_line(f"docs examples: {len(passed) + len(failed)} run ({len(passed)} passed, "
+                  f"{len(failed)} failed) in {seconds:.0f} s, {len(skipped)} skipped")
+    for where, _, _, s in sorted(passed, key=lambda r: -r[3]):
+        tr.write_line(f"  ran     {where} ({s:.1f} s)")
+    for where, _, reason, _ in skipped:
+        tr.write_line(f"  skipped {where}: {reason}")
+    for where, _, _, s in failed:
+        tr.write_line(f"  FAILED  {where} ({s:.1f} s)")
