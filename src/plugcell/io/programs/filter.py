@@ -1,0 +1,242 @@
+"""Compensate a program's targets: frames composed, the model inverted, numbers rewritten.
+
+For a Cartesian target written ``P`` in its program's frame ``BASE`` with tool
+``TOOL`` (flange → TCP) the robot-base-frame target is ``T = BASE · P``; it is
+compensated as ``plugcell compensate --user-frame BASE --tool TOOL`` does
+(:func:`plugcell.compensation.program.commanded_poses`), and written back in the
+program's own frame, ``P' = BASE⁻¹ · T_nominal(q) · TOOL``, in the program's own
+notation, nearest its old numbers (:func:`plugcell.io.units.notation_from_pose`).
+Joint targets are kept, or — ``joints="compensate"`` — replaced by the compensated
+joints of the pose the controller's nominal model puts them at, ``T = T_nominal(q) ·
+TOOL``.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from plugcell.compensation.pose_model import NominalModel, PoseModel
+from plugcell.compensation.program import commanded_poses
+from plugcell.io.programs.core import Program, ProgramError, Target, new_text
+from plugcell.io.units import NOTATIONS, notation_from_pose, pose_from_notation
+from plugcell.kinematics.transforms import invert, so3_log
+
+__all__ = ["FilterResult", "MissingFramesError", "TargetReport", "filter_targets",
+           "missing_frames"]
+
+
+class MissingFramesError(ProgramError):
+    """Frames or tools the targets use that neither the program nor the caller define.
+
+    Attributes
+    ----------
+    bases, tools : list of str
+        The missing names, in the order first used.
+    """
+
+    def __init__(self, path: str, bases: list[str], tools: list[str]) -> None:
+        self.bases, self.tools = bases, tools
+        parts = [f"base {b!r} (--base '{b}=…')" for b in bases]
+        parts += [f"tool {t!r} (--tool '{t}=…')" for t in tools]
+        super().__init__(path, 0, 0, "frames used by its targets are neither in the program "
+                         "nor on the command line: " + ", ".join(parts))
+
+
+@dataclass
+class TargetReport:
+    """What happened to one target.
+
+    Attributes
+    ----------
+    target : Target
+        The target.
+    where : str
+        ``path:line:column``.
+    ok : bool
+        Compensated (or, joints kept, nothing to do).
+    reason : str
+        Why not, or a note (``not used by a motion``).
+    before, after : (k,) ndarray
+        The numbers as written and as written now (notation units; joints in degrees).
+    dp_mm : float
+        How far the commanded TCP moved, mm (0 for joints kept).
+    dr_deg : float
+        How far it turned, degrees.
+    q : (n,) ndarray or None
+        Joints the robot reaches the target with, rad (``None`` if not compensated).
+    """
+
+    target: Target
+    where: str
+    ok: bool
+    reason: str
+    before: np.ndarray
+    after: np.ndarray
+    dp_mm: float = 0.0
+    dr_deg: float = 0.0
+    q: np.ndarray | None = None
+    payload_kg: float = 0.0
+    compensated: bool = False
+
+
+@dataclass
+class FilterResult:
+    """Per-target reports and the edits that rewrite the program.
+
+    Attributes
+    ----------
+    reports : list of TargetReport
+        In program order.
+    edits : dict of (int, int) to str
+        ``(file, offset) → text`` for :meth:`Program.render`.
+    """
+
+    reports: list[TargetReport] = field(default_factory=list)
+    edits: dict[tuple[int, int], str] = field(default_factory=dict)
+
+    @property
+    def failed(self) -> list[TargetReport]:
+        """Targets that could not be compensated."""
+        return [r for r in self.reports if not r.ok]
+
+
+def missing_frames(program: Program, bases: Mapping[str, np.ndarray],
+                   tools: Mapping[str, np.ndarray]) -> tuple[list[str], list[str]]:
+    """Names of the frames and tools the used targets need and nobody defines."""
+    mb: list[str] = []
+    mt: list[str] = []
+    for t in program.targets:
+        if not t.used:
+            continue
+        if t.base is not None and t.base not in program.frames and t.base not in bases \
+                and t.base not in mb:
+            mb.append(t.base)
+        name = t.tool if t.tool is not None else "<tool>"
+        if name not in program.tools and name not in tools and name not in mt:
+            mt.append(name)
+    return mb, mt
+
+
+def filter_targets(program: Program, model_for_tool: Callable[[np.ndarray], PoseModel],
+                   *, bases: Mapping[str, np.ndarray] | None = None,
+                   tools: Mapping[str, np.ndarray] | None = None,
+                   payload_kg: float = 0.0, joints: str = "keep",
+                   tol: float = 1e-6) -> FilterResult:
+    """Compensate every used target of ``program`` (module docstring).
+
+    Parameters
+    ----------
+    program : Program
+        A program read by a dialect's reader.
+    model_for_tool : callable
+        ``TOOL → PoseModel``: the identified model with that tool point.
+    bases, tools : mapping of str to (4, 4) ndarray, m
+        Frames and tools given by the caller (command line), over the program's own.
+    payload_kg : float
+        Payload carried.
+    joints : {"keep", "compensate"}
+        What to do with joint targets.
+    tol : float
+        Convergence of the compensation (m and rad).
+
+    Returns
+    -------
+    FilterResult
+
+    Raises
+    ------
+    MissingFramesError
+        A used target's frame or tool is not defined.
+    """
+    bases = {**program.frames, **(bases or {})}
+    tools = {**program.tools, **(tools or {})}
+    mb, mt = missing_frames(program, bases, tools)
+    if mb or mt:
+        raise MissingFramesError(str(program.files[0].path), mb, mt)
+    out = FilterResult()
+    used = [t for t in program.targets if t.used and (t.kind == "pose" or joints != "keep")]
+    tool_names = sorted({t.tool if t.tool is not None else "<tool>" for t in used})
+    tool_of = {n: i for i, n in enumerate(tool_names)}
+    tool_mats = np.array([tools[n] for n in tool_names]).reshape(-1, 4, 4)
+    N = len(used)
+    P = np.empty((N, 4, 4))
+    B = np.tile(np.eye(4), (N, 1, 1))
+    for i, t in enumerate(used):
+        if t.base is not None:
+            B[i] = bases[t.base]
+    # poses: grouped by notation; joints: the nominal model's pose
+    for notation in {t.notation for t in used if t.kind == "pose"}:
+        sel = [i for i, t in enumerate(used) if t.kind == "pose" and t.notation == notation]
+        P[sel] = pose_from_notation(np.array([used[i].values for i in sel]), notation)
+    jsel = [i for i, t in enumerate(used) if t.kind == "joints"]
+    if jsel:
+        m0 = model_for_tool(tool_mats[0])
+        desc = m0.description
+        scale = desc.reading_scale("file")
+        for i in jsel:
+            q = used[i].values * scale
+            if q.shape != (desc.n_readings,):
+                raise program.files[used[i].file].error(
+                    used[i].offset, f"{used[i].name}: {q.size} joints for a robot with "
+                    f"{desc.n_readings}")
+            P[i] = NominalModel(desc, tool_mats[tool_of[_tool(used[i])]]).pose(q)[0]
+    T = B @ P
+    idx = np.array([tool_of[_tool(t)] for t in used], dtype=int)
+    cmd = commanded_poses(model_for_tool, T, idx, tool_mats, payload_kg, tol=tol) if N else None
+    reports: dict[int, TargetReport] = {}
+    for i, t in enumerate(used):
+        assert cmd is not None
+        res = cmd.result
+        ok = bool(res.ok[i])
+        before = t.values
+        after = before.copy()
+        dp = dr = 0.0
+        if ok:
+            if t.kind == "pose":
+                Pc = invert(B[i]) @ cmd.T_command[i]
+                after = notation_from_pose(Pc, t.notation, before)
+                dp = float(np.linalg.norm(Pc[:3, 3] - P[i][:3, 3]) * 1e3)
+                dr = float(np.degrees(np.linalg.norm(so3_log(Pc[:3, :3] @ P[i][:3, :3].T))))
+                _edits(program, t, after, out.edits)
+            else:
+                desc = model_for_tool(tool_mats[idx[i]]).description
+                after = res.q[i] / desc.reading_scale("file")
+                dp = float(np.linalg.norm(cmd.T_command[i][:3, 3] - T[i][:3, 3]) * 1e3)
+                _edits(program, t, after, out.edits, joint=True)
+            if t.config is not None:
+                out.edits.update(t.config.edits(res.q_start[i], res.q[i]))  # type: ignore[attr-defined]
+        reports[id(t)] = TargetReport(t, program.where(t.file, t.offset), ok,
+                                      "" if ok else str(res.reason[i]), before, after, dp, dr,
+                                      res.q[i] if ok else None, payload_kg, True)
+    for t in program.targets:
+        r = reports.get(id(t))
+        if r is None:
+            note = ("not used by a motion: left as it is" if not t.used
+                    else "joint target: kept")
+            r = TargetReport(t, program.where(t.file, t.offset), True, note, t.values,
+                             t.values)
+        out.reports.append(r)
+    return out
+
+
+def _tool(t: Target) -> str:
+    return t.tool if t.tool is not None else "<tool>"
+
+
+def _edits(program: Program, t: Target, values: np.ndarray,
+           edits: dict[tuple[int, int], str], joint: bool = False) -> None:
+    """The new texts of a target's numbers (unchanged ones are left out)."""
+    if joint:
+        res = [program.resolution[1]] * len(t.nums)
+    else:
+        n_len = 3
+        ang = program.resolution[2] if NOTATIONS[t.notation][2] == "quat" else \
+            program.resolution[1]
+        res = [program.resolution[0]] * n_len + [ang] * (len(t.nums) - n_len)
+    for n, v, r in zip(t.nums, values, res, strict=True):
+        txt = new_text(n, float(v), r)
+        if txt is not None:
+            edits[(t.file, n.start)] = txt
