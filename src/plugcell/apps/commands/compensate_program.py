@@ -215,7 +215,9 @@ def _write_plan(path: Path, result: Any, fr: Any, payload: float, program: Path)
         elif r.target.kind == "joints" and r.target.used and r.ok and \
                 r.target.values.size == desc.n_readings:
             first = min(r.target.uses) if r.target.uses else (r.target.file, r.target.offset)
-            visits.append((first, r.target.values * desc.reading_scale("file")))
+            unit = r.target.unit
+            visits.append((first, r.target.values * (desc.reading_scale("file") if unit is None
+                                                     else unit)))
     if not visits:
         raise CommandError(f"{program}: no target to measure (--measure-order)")
     visits.sort(key=lambda v: v[0])

@@ -267,6 +267,9 @@ class Target:
         as it is).
     extra : list of Num
         Other numbers the dialect may rewrite (status and turn, confdata), in this file.
+    unit : float or None
+        Joints: SI per written unit (URScript: 1, radians); ``None``: the robot
+        description's file units (degrees, mm).
     """
 
     name: str
@@ -281,6 +284,7 @@ class Target:
     uses: list[tuple[int, int]] = field(default_factory=list)
     used: bool = True
     extra: list[Num] = field(default_factory=list)
+    unit: float | None = None
 
     @property
     def values(self) -> np.ndarray:

@@ -175,9 +175,8 @@ def filter_targets(program: Program, model_for_tool: Callable[[np.ndarray], Pose
     if jsel:
         m0 = model_for_tool(tool_mats[0])
         desc = m0.description
-        scale = desc.reading_scale("file")
         for i in jsel:
-            q = used[i].values * scale
+            q = used[i].values * _unit(used[i], desc)
             if q.shape != (desc.n_readings,):
                 raise program.files[used[i].file].error(
                     used[i].offset, f"{used[i].name}: {q.size} joints for a robot with "
@@ -203,7 +202,7 @@ def filter_targets(program: Program, model_for_tool: Callable[[np.ndarray], Pose
                 _edits(program, t, after, out.edits)
             else:
                 desc = model_for_tool(tool_mats[idx[i]]).description
-                after = res.q[i] / desc.reading_scale("file")
+                after = res.q[i] / _unit(t, desc)
                 dp = float(np.linalg.norm(cmd.T_command[i][:3, 3] - T[i][:3, 3]) * 1e3)
                 _edits(program, t, after, out.edits, joint=True)
             if t.config is not None:
@@ -220,6 +219,12 @@ def filter_targets(program: Program, model_for_tool: Callable[[np.ndarray], Pose
                              t.values)
         out.reports.append(r)
     return out
+
+
+def _unit(t: Target, desc: object) -> np.ndarray:
+    """SI per written unit of a joint target's numbers."""
+    return desc.reading_scale("file") if t.unit is None else np.full(  # type: ignore[attr-defined]
+        len(t.nums), t.unit)
 
 
 def _tool(t: Target) -> str:
