@@ -375,5 +375,14 @@ def new_text(num: Num, value: float, resolution: float) -> str | None:
     """
     if abs(value - num.value) < resolution / 2:
         return None
-    txt = NumberStyle.of(num.text).format(value, min_frac(resolution))
+    t = num.text
+    dot = t.find(".")
+    ip = t[:dot].lstrip("-") if dot > 0 else ""
+    if ip and t[0] != "+" and "e" not in t and "E" not in t and (ip == "0" or ip[0] != "0"):
+        # the common style, -12.345: fixed point, no sign for positives, no leading zeros
+        txt = f"{value:.{max(len(t) - dot - 1, min_frac(resolution))}f}"
+        if float(txt) == 0.0:
+            txt = txt.lstrip("-")
+        return None if txt == t else txt
+    txt = NumberStyle.of(t).format(value, min_frac(resolution))
     return None if txt == num.text else txt

@@ -185,31 +185,44 @@ def filter_targets(program: Program, model_for_tool: Callable[[np.ndarray], Pose
     T = B @ P
     idx = np.array([tool_of[_tool(t)] for t in used], dtype=int)
     cmd = commanded_poses(model_for_tool, T, idx, tool_mats, payload_kg, tol=tol) if N else None
+    # (dp, dr: how far the commanded pose moved from the target, in the robot base frame —
+    # the same rigid motion as in the program's frame for the position, and the same angle)
     reports: dict[int, TargetReport] = {}
-    for i, t in enumerate(used):
+    if N:
         assert cmd is not None
         res = cmd.result
-        ok = bool(res.ok[i])
-        before = t.values
-        after = before.copy()
-        dp = dr = 0.0
-        if ok:
-            if t.kind == "pose":
-                Pc = invert(B[i]) @ cmd.T_command[i]
-                after = notation_from_pose(Pc, t.notation, before)
-                dp = float(np.linalg.norm(Pc[:3, 3] - P[i][:3, 3]) * 1e3)
-                dr = float(np.degrees(np.linalg.norm(so3_log(Pc[:3, :3] @ P[i][:3, :3].T))))
-                _edits(program, t, after, out.edits)
-            else:
-                desc = model_for_tool(tool_mats[idx[i]]).description
-                after = res.q[i] / _unit(t, desc)
-                dp = float(np.linalg.norm(cmd.T_command[i][:3, 3] - T[i][:3, 3]) * 1e3)
-                _edits(program, t, after, out.edits, joint=True)
-            if t.config is not None:
-                out.edits.update(t.config.edits(res.q_start[i], res.q[i]))  # type: ignore[attr-defined]
-        reports[id(t)] = TargetReport(t, program.where(t.file, t.offset), ok,
-                                      "" if ok else str(res.reason[i]), before, after, dp, dr,
-                                      res.q[i] if ok else None, payload_kg, True)
+        ok = res.ok
+        # everything per target at once: poses back in their frames, their numbers, moves
+        Pc = invert(B) @ cmd.T_command
+        after_all: list[np.ndarray | None] = [None] * N
+        for notation in {t.notation for t in used if t.kind == "pose"}:
+            sel = [i for i, t in enumerate(used) if t.kind == "pose" and t.notation == notation]
+            ref = np.array([used[i].values for i in sel])
+            vals = notation_from_pose(Pc[sel], notation, ref)
+            for k, i in enumerate(sel):
+                after_all[i] = vals[k]
+        dp_all = np.linalg.norm(cmd.T_command[:, :3, 3] - T[:, :3, 3], axis=-1) * 1e3
+        dr_all = np.degrees(np.linalg.norm(so3_log(
+            cmd.T_command[:, :3, :3] @ np.swapaxes(T[:, :3, :3], -1, -2)), axis=-1))
+        for i, t in enumerate(used):
+            good = bool(ok[i])
+            before = t.values
+            after = before
+            if good:
+                if t.kind == "pose":
+                    after = after_all[i]
+                    _edits(program, t, after, out.edits)
+                else:
+                    desc = model_for_tool(tool_mats[idx[i]]).description
+                    after = res.q[i] / _unit(t, desc)
+                    _edits(program, t, after, out.edits, joint=True)
+                if t.config is not None:
+                    out.edits.update(t.config.edits(res.q_start[i], res.q[i]))  # type: ignore[attr-defined]
+            reports[id(t)] = TargetReport(
+                t, program.where(t.file, t.offset), good, "" if good else str(res.reason[i]),
+                before, after, float(dp_all[i]) if good else 0.0,
+                float(dr_all[i]) if good else 0.0, res.q[i] if good else None, payload_kg,
+                True)
     for t in program.targets:
         r = reports.get(id(t))
         if r is None:

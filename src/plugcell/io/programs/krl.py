@@ -39,17 +39,16 @@ POSITION_TYPES = {"E6POS", "POS", "FRAME", "E6AXIS", "AXIS"}
 MOTIONS = {"PTP", "LIN", "CIRC", "SPTP", "SLIN", "SCIRC", "SPL"}
 RELATIVE = {"PTP_REL", "LIN_REL", "CIRC_REL", "SPTP_REL", "SLIN_REL", "SCIRC_REL"}
 
-_TOKEN = re.compile(r"""
-    (?P<ws>[ \t\f\v]+)
-  | (?P<num>[+-]?(?:\d+\.?\d*|\.\d+)(?:[eE][+-]?\d+)?)
+_TOKEN = re.compile(r"""[ \t\f\v]*(?:
+    (?P<num>[+-]?(?:\d+\.?\d*|\.\d+)(?:[eE][+-]?\d+)?)
   | (?P<name>[A-Za-z_$][A-Za-z0-9_$]*)
   | (?P<str>"[^"\r\n]*"|'[^'\r\n]*')
   | (?P<op>[{}\[\]():,#=.+\-*/<>])
-  | (?P<bad>.)
-""", re.VERBOSE)
+  | (?P<bad>\S)
+)""", re.VERBOSE)
 
 
-@dataclass
+@dataclass(slots=True)
 class _Tok:
     kind: str
     text: str
@@ -64,14 +63,19 @@ def _code_lines(f: SourceFile) -> list[tuple[int, str]]:
     text = f.text
     for line in text.splitlines(keepends=True):
         body = line.rstrip("\r\n")
-        cut = len(body)
-        in_str = False
-        for k, ch in enumerate(body):
-            if ch == '"':
-                in_str = not in_str
-            elif ch == ";" and not in_str:
-                cut = k
-                break
+        cut = body.find(";")
+        if cut < 0:
+            cut = len(body)
+        elif '"' in body[:cut]:  # a ';' inside a string does not start the comment
+            in_str = False
+            for k, ch in enumerate(body):
+                if ch == '"':
+                    in_str = not in_str
+                elif ch == ";" and not in_str:
+                    cut = k
+                    break
+            else:
+                cut = len(body)
         out.append((pos, body[:cut]))
         pos += len(line)
     return out
@@ -80,10 +84,11 @@ def _code_lines(f: SourceFile) -> list[tuple[int, str]]:
 def _tokens(f: SourceFile, offset: int, code: str) -> list[_Tok]:
     toks = []
     for m in _TOKEN.finditer(code):
-        kind = m.lastgroup or "bad"
-        if kind == "ws":
+        kind = m.lastgroup
+        if kind is None:  # trailing blanks
             continue
-        toks.append(_Tok(kind, m.group(), offset + m.start(), offset + m.end()))
+        a, b = m.span(kind)
+        toks.append(_Tok(kind, code[a:b], offset + a, offset + b))
     return toks
 
 

@@ -36,18 +36,19 @@ __all__ = ["read_rapid"]
 
 TYPES = {"robtarget", "jointtarget", "tooldata", "wobjdata"}
 
-_TOKEN = re.compile(r"""
-    (?P<ws>\s+)
-  | (?P<comment>![^\r\n]*|%%%[\s\S]*?%%%)
+_TOKEN = re.compile(r"""\s*(?:
+    (?P<comment>![^\r\n]*|%%%[\s\S]*?%%%)
   | (?P<num>(?:\d+\.?\d*|\.\d+)(?:[eE][+-]?\d+)?)
   | (?P<name>[A-Za-z_][A-Za-z0-9_]*)
   | (?P<str>"(?:[^"\r\n]|"")*")
   | (?P<op>:=|<>|<=|>=|[\[\](){},;:=+\-*/<>\\.%])
-  | (?P<bad>.)
-""", re.VERBOSE)
+  | (?P<bad>\S)
+)""", re.VERBOSE)
+_BLOCK = {"MODULE", "PROC", "ENDPROC", "ENDMODULE", "FUNC", "ENDFUNC", "TRAP", "ENDTRAP", "IF",
+          "ELSE", "ENDIF", "WHILE", "ENDWHILE", "FOR", "ENDFOR"}
 
 
-@dataclass
+@dataclass(slots=True)
 class _Tok:
     kind: str
     text: str
@@ -59,22 +60,27 @@ def _statements(f: SourceFile) -> list[list[_Tok]]:
     """The file's statements (``;`` ends one; ``PROC …``/``ENDPROC`` lines end one too)."""
     out: list[list[_Tok]] = []
     cur: list[_Tok] = []
-    for m in _TOKEN.finditer(f.text):
-        kind = m.lastgroup or "bad"
-        if kind in ("ws", "comment"):
-            if kind == "ws" and "\n" in m.group() and cur and cur[0].text.upper() in (
-                    "MODULE", "PROC", "ENDPROC", "ENDMODULE", "FUNC", "ENDFUNC", "TRAP",
-                    "ENDTRAP", "IF", "ELSE", "ENDIF", "WHILE", "ENDWHILE", "FOR", "ENDFOR"):
-                out.append(cur)
-                cur = []
+    block = False  # the statement opens with a keyword a line end closes
+    text = f.text
+    for m in _TOKEN.finditer(text):
+        kind = m.lastgroup
+        if kind is None:  # trailing white space
             continue
+        if kind == "comment":
+            continue
+        a, b = m.span(kind)
         if kind == "bad":
-            raise f.error(m.start(), f"unexpected character {m.group()!r}")
-        t = _Tok(kind, m.group(), m.start(), m.end())
+            raise f.error(a, f"unexpected character {text[a:b]!r}")
+        if block and "\n" in text[cur[-1].end:a]:
+            out.append(cur)
+            cur, block = [], False
+        t = _Tok(kind, text[a:b], a, b)
         if t.text == ";":
             out.append(cur)
-            cur = []
+            cur, block = [], False
         else:
+            if not cur:
+                block = t.text.upper() in _BLOCK
             cur.append(t)
     if cur:
         out.append(cur)
@@ -109,9 +115,9 @@ class _Value:
         if t.text in "+-" and i + 1 < len(toks) and toks[i + 1].kind == "num":
             if toks[i + 1].start != t.end:
                 raise self.f.error(t.start, "a space between the sign and the number")
-            return self.f.number(t.start, toks[i + 1].end), i + 2
+            return _Tok("num", "", t.start, toks[i + 1].end), i + 2
         if t.kind == "num":
-            return self.f.number(t.start, t.end), i + 1
+            return t, i + 1
         if t.kind in ("name", "str"):
             return t, i + 1
         raise self.f.error(t.start, f"unexpected {t.text!r} in a value")
@@ -128,11 +134,13 @@ def _list(f: SourceFile, v: object, n: int | None, what: str, at: int) -> list[o
 
 def _nums(f: SourceFile, v: object, n: int, what: str, at: int) -> list[Num]:
     items = _list(f, v, n, what, at)
+    out = []
     for it in items:
-        if not isinstance(it, Num):
+        if not (isinstance(it, _Tok) and it.kind == "num"):
             raise f.error(it[0].start if isinstance(it, tuple) else it.start,  # type: ignore[union-attr]
                           f"{what}: expected a number")
-    return items  # type: ignore[return-value]
+        out.append(f.number(it.start, it.end))
+    return out
 
 
 def _bool(f: SourceFile, v: object, what: str, at: int) -> bool:

@@ -31,17 +31,16 @@ __all__ = ["read_urscript"]
 
 MOTIONS = {"movel": 1, "movej": 1, "movep": 1, "movec": 2}
 
-_TOKEN = re.compile(r"""
-    (?P<ws>[ \t\f\v]+)
-  | (?P<num>(?:\d+\.?\d*|\.\d+)(?:[eE][+-]?\d+)?)
+_TOKEN = re.compile(r"""[ \t\f\v]*(?:
+    (?P<num>(?:\d+\.?\d*|\.\d+)(?:[eE][+-]?\d+)?)
   | (?P<name>[A-Za-z_][A-Za-z0-9_]*)
   | (?P<str>"[^"\r\n]*"|'[^'\r\n]*')
   | (?P<op>==|!=|<=|>=|[()\[\],=+\-*/:<>.%])
-  | (?P<bad>.)
-""", re.VERBOSE)
+  | (?P<bad>\S)
+)""", re.VERBOSE)
 
 
-@dataclass
+@dataclass(slots=True)
 class _Tok:
     kind: str
     text: str
@@ -57,11 +56,13 @@ def _lines(f: SourceFile) -> list[list[_Tok]]:
         body = line.rstrip("\r\n")
         toks = []
         for m in _TOKEN.finditer(body):
-            if m.lastgroup == "ws":
+            kind = m.lastgroup
+            if kind is None:  # trailing blanks
                 continue
-            if m.group() == "#" or (m.lastgroup == "bad" and m.group() == "#"):
+            a, b = m.span(kind)
+            if body[a] == "#":
                 break
-            toks.append(_Tok(m.lastgroup or "bad", m.group(), pos + m.start(), pos + m.end()))
+            toks.append(_Tok(kind, body[a:b], pos + a, pos + b))
         out.append(toks)
         pos += len(line)
     return out
@@ -74,6 +75,7 @@ class _Reader:
         self.vars: dict[str, Target] = {}
         self.notes: list[str] = []
         self.tool = "TCP"
+        self.listed: set[int] = set()
 
     def literal(self, toks: list[_Tok], i: int, joints: bool = False) -> tuple[list[Num], int]:
         """``p[…]`` (or ``[…]``) at ``toks[i]`` → its six numbers and the index after it."""
@@ -147,6 +149,7 @@ class _Reader:
             raise self.f.error(toks[i].start, f"{name} is assigned a position twice: the "
                                "reader cannot tell which one each motion uses")
         self.vars[name] = tg
+        self.listed.add(id(tg))
         self.program.targets.append(tg)
 
     def statement(self, toks: list[_Tok]) -> None:
@@ -238,7 +241,8 @@ class _Reader:
         return j
 
     def use(self, tg: Target, base: str | None, tok: _Tok) -> None:
-        if tg not in self.program.targets:
+        if id(tg) not in self.listed:
+            self.listed.add(id(tg))
             self.program.targets.append(tg)
         if tg.uses and (tg.base, tg.tool) != (base, self.tool):
             raise self.f.error(tok.start, f"{tg.name} is used with frame {base} and tool "
