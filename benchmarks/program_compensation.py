@@ -68,7 +68,6 @@ def _programs(tmp: Path, n: int, dialects: list[str]) -> dict[str, Path]:
     from plugcell.compensation import NominalModel
     from plugcell.io.robots import load_robot
     from plugcell.io.units import notation_from_pose, pose_from_notation
-
     from plugcell.sim.twin.campaign import working_volume_joints
     from plugcell.sim.twin.profile import TwinProfile
 
