@@ -26,6 +26,8 @@ SCRIPTS = [
     ("round_trip_trace.py", ["--cycles", "30", "--arrival"], "service: sample arrives"),
     ("round_trip_profile.py", ["--cycles", "30", "--top", "3"], "journal (its log, SQLite)"),
     ("round_trip_cpu.py", ["--cycles", "30", "--rounds", "1", "--switches"], "voluntary / forced"),
+    ("program_compensation.py", ["--targets", "40", "--repeat", "1", "--dialects",
+                                 "krl,rapid,urscript"], "| urscript | 40 |"),
     ("idle_cost.py", ["--services", "2", "--seconds", "1", "--settle", "0.5", "--settings",
                       "lean", "--topology", "star"], "(router "),
 ]

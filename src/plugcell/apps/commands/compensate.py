@@ -2,6 +2,8 @@
 
     plugcell compensate --params PARAMS.json --targets TARGETS.csv [--out JOINTS.csv]
                         [--payload-kg M] [--rot zyz|rpy] [--user-frame X,Y,Z,A,B,C]
+    plugcell compensate --params PARAMS.json --program IN --out OUT …   (a robot program:
+                        :mod:`plugcell.apps.commands.compensate_program`)
 
 ``PARAMS.json`` is what ``plugcell calibrate`` writes
 (:func:`plugcell.io.params.params_document`).  ``TARGETS.csv``: a

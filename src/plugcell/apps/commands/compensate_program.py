@@ -195,8 +195,8 @@ def _write_report(path: Path, fr: Any, comp: list[Any], region: Any) -> None:
         status = ("failed" if not r.ok else "compensated" if r.compensated else "kept")
         w.writerow([r.target.name, r.where, r.target.kind, status, f"{r.dp_mm:.4f}",
                     f"{r.dr_deg:.5f}", out_r, dist,
-                    " ".join(f"{v:.6g}" for v in r.before),
-                    " ".join(f"{v:.6g}" for v in r.after), r.reason])
+                    " ".join(f"{v:.10g}" for v in r.before),
+                    " ".join(f"{v:.10g}" for v in r.after), r.reason])
     write_text(path, buf.getvalue())
 
 
