@@ -28,6 +28,7 @@ SCRIPTS = [
     ("round_trip_cpu.py", ["--cycles", "30", "--rounds", "1", "--switches"], "voluntary / forced"),
     ("program_compensation.py", ["--targets", "40", "--repeat", "1", "--dialects",
                                  "krl,rapid,urscript"], "| urscript | 40 |"),
+    ("program_twin.py", [], "Milling contour, ABB RAPID"),
     ("idle_cost.py", ["--services", "2", "--seconds", "1", "--settle", "0.5", "--settings",
                       "lean", "--topology", "star"], "(router "),
 ]
