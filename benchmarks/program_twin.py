@@ -9,7 +9,8 @@ a work object with a spindle tool) — then compensated with ``plugcell compensa
 --program`` and both versions "executed" on the twin: each target's pose, as the file
 says it, goes through the controller's nominal inverse kinematics to joints, the twin
 moves there, and its true TCP (true flange · the program's tool), as the tracker sees
-it through the identified BASE, is compared with the target the program meant.  Prints (and with ``--out`` writes) the per-target table.
+it through the identified BASE, is compared with the target the program meant.
+Prints (and with ``--out`` writes) the per-target table.
 
     .venv/bin/python benchmarks/program_twin.py [--out docs/results/program-twin.md]
 """
@@ -25,7 +26,7 @@ from pathlib import Path
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from program_compensation import _params  # noqa: E402  (the same fast calibration)
+from program_compensation import _params  # the same fast calibration
 
 KRL_BASE = [1200.0, -150.0, 300.0, 90.0, 0.0, 0.0]
 KRL_TOOL = [12.5, -3.0, 215.0, 0.0, -30.0, 0.0]
@@ -43,6 +44,10 @@ def _centre(tool):
     return NominalModel(h4, tool).pose(q[4])[0]
 
 
+def _agg(v: list[float]) -> str:
+    return ", ".join(f"{k} {x:.1f}" for k, x in zip("XYZABC", v, strict=True))
+
+
 def _krl(tmp: Path) -> Path:
     from plugcell.io.units import notation_from_pose, pose_from_notation
 
@@ -50,8 +55,7 @@ def _krl(tmp: Path) -> Path:
     tool = pose_from_notation(np.array(KRL_TOOL), "kuka")
     C = np.linalg.inv(B) @ _centre(tool)
     src = ["DEF drill( )", ";FOLD INI;%{PE}", ";ENDFOLD (INI)",
-           "$BASE = {FRAME: X %.1f, Y %.1f, Z %.1f, A %.1f, B %.1f, C %.1f}" % tuple(KRL_BASE),
-           "$TOOL = {X %.1f, Y %.1f, Z %.1f, A %.1f, B %.1f, C %.1f}" % tuple(KRL_TOOL)]
+           "$BASE = {FRAME: " + _agg(KRL_BASE) + "}", "$TOOL = {" + _agg(KRL_TOOL) + "}"]
     dat = ["DEFDAT drill"]
     k = 0
     for r in range(4):
