@@ -36,8 +36,11 @@ __all__ = ["read_rapid"]
 
 TYPES = {"robtarget", "jointtarget", "tooldata", "wobjdata"}
 
+_NUM = r"[+-]?(?:\d+\.?\d*|\.\d+)(?:[eE][+-]?\d+)?"
+_NUM_RE = re.compile(_NUM)
 _TOKEN = re.compile(r"""\s*(?:
-    (?P<comment>![^\r\n]*|%%%[\s\S]*?%%%)
+    (?P<nums>\[[ \t]*""" + _NUM + r"""(?:[ \t]*,[ \t]*""" + _NUM + r""")*[ \t]*\])
+  | (?P<comment>![^\r\n]*|%%%[\s\S]*?%%%)
   | (?P<num>(?:\d+\.?\d*|\.\d+)(?:[eE][+-]?\d+)?)
   | (?P<name>[A-Za-z_][A-Za-z0-9_]*)
   | (?P<str>"(?:[^"\r\n]|"")*")
@@ -99,6 +102,10 @@ class _Value:
         if i >= len(toks):
             raise self.f.error(toks[-1].end, "expected a value")
         t = toks[i]
+        if t.kind == "nums":  # a flat list of numbers, one token: its numbers' spans
+            a = t.start
+            return (t, [_Tok("num", m.group(), a + m.start(), a + m.end())
+                        for m in _NUM_RE.finditer(t.text)]), i + 1
         if t.text == "[":
             items = []
             i += 1
@@ -139,7 +146,9 @@ def _nums(f: SourceFile, v: object, n: int, what: str, at: int) -> list[Num]:
         if not (isinstance(it, _Tok) and it.kind == "num"):
             raise f.error(it[0].start if isinstance(it, tuple) else it.start,  # type: ignore[union-attr]
                           f"{what}: expected a number")
-        out.append(f.number(it.start, it.end))
+        v = float(it.text) if it.text else math.inf
+        out.append(Num(it.start, it.end, it.text, v) if math.isfinite(v)
+                   else f.number(it.start, it.end))  # (f.number says what is wrong)
     return out
 
 
