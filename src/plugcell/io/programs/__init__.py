@@ -13,6 +13,7 @@ dialect     files                                  module
 ``krl``     KUKA ``.src`` (+ its ``.dat``)           :mod:`plugcell.io.programs.krl`
 ``urscript`` Universal Robots ``.script``           :mod:`plugcell.io.programs.urscript`
 ``rapid``   ABB ``.mod``, ``.prg``, ``.modx``        :mod:`plugcell.io.programs.rapid`
+``fanuc``   Fanuc TP ASCII ``.ls``                  :mod:`plugcell.io.programs.fanuc`
 ==========  =====================================  ===========================================
 """
 
@@ -38,6 +39,12 @@ def _urscript(path: Path) -> tuple[Program, list[str]]:
     return read_urscript(path)
 
 
+def _fanuc(path: Path) -> tuple[Program, list[str]]:
+    from plugcell.io.programs.fanuc import read_fanuc
+
+    return read_fanuc(path)
+
+
 def _rapid(path: Path) -> tuple[Program, list[str]]:
     from plugcell.io.programs.rapid import read_rapid
 
@@ -46,12 +53,12 @@ def _rapid(path: Path) -> tuple[Program, list[str]]:
 
 #: dialect → reader
 DIALECTS: dict[str, Callable[[Path], tuple[Program, list[str]]]] = {
-    "krl": _krl, "urscript": _urscript, "rapid": _rapid,
+    "krl": _krl, "urscript": _urscript, "rapid": _rapid, "fanuc": _fanuc,
 }
 #: dialect → the pose notation of its frames given on the command line
-NOTATION = {"krl": "kuka", "urscript": "ur", "rapid": "abb"}
+NOTATION = {"krl": "kuka", "urscript": "ur", "rapid": "abb", "fanuc": "fanuc"}
 _SUFFIX = {".src": "krl", ".dat": "krl", ".script": "urscript", ".urscript": "urscript",
-           ".mod": "rapid", ".prg": "rapid", ".modx": "rapid", ".sys": "rapid"}
+           ".mod": "rapid", ".prg": "rapid", ".modx": "rapid", ".sys": "rapid", ".ls": "fanuc"}
 
 
 def dialect_of(path: Path, dialect: str | None = None) -> str:
