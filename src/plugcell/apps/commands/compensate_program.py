@@ -29,13 +29,14 @@ import numpy as np
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
     """The program options of ``plugcell compensate``."""
-    p.add_argument("--dialect", choices=("krl", "urscript", "rapid", "fanuc"), default=None,
+    p.add_argument("--dialect", choices=("krl", "urscript", "rapid", "fanuc", "pdl2"), default=None,
                    help="program dialect (default: from the suffix: .src .script .mod/.prg "
-                        ".ls)")
+                        ".ls .pdl)")
     p.add_argument("--base", action="append", default=[], metavar="NAME=VALUES",
                    help="a frame the program uses but does not define (repeatable), in the "
                         "dialect's notation: KRL X,Y,Z,A,B,C (mm, deg); RAPID x,y,z,q1,q2,q3,"
-                        "q4; URScript x,y,z,rx,ry,rz (m, rad); Fanuc X,Y,Z,W,P,R (mm, deg)")
+                        "q4; URScript x,y,z,rx,ry,rz (m, rad); Fanuc X,Y,Z,W,P,R (mm, deg); "
+                        "PDL2 X,Y,Z,A,B,C (mm, deg, ZYZ)")
     p.add_argument("--partial", action="store_true",
                    help="write the program even if targets fail (they keep their numbers)")
     p.add_argument("--report", type=Path, default=None,

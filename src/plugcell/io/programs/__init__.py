@@ -14,6 +14,7 @@ dialect     files                                  module
 ``urscript`` Universal Robots ``.script``           :mod:`plugcell.io.programs.urscript`
 ``rapid``   ABB ``.mod``, ``.prg``, ``.modx``        :mod:`plugcell.io.programs.rapid`
 ``fanuc``   Fanuc TP ASCII ``.ls``                  :mod:`plugcell.io.programs.fanuc`
+``pdl2``    Comau PDL2 ``.pdl``                     :mod:`plugcell.io.programs.pdl2`
 ==========  =====================================  ===========================================
 """
 
@@ -45,6 +46,12 @@ def _fanuc(path: Path) -> tuple[Program, list[str]]:
     return read_fanuc(path)
 
 
+def _pdl2(path: Path) -> tuple[Program, list[str]]:
+    from plugcell.io.programs.pdl2 import read_pdl2
+
+    return read_pdl2(path)
+
+
 def _rapid(path: Path) -> tuple[Program, list[str]]:
     from plugcell.io.programs.rapid import read_rapid
 
@@ -54,11 +61,14 @@ def _rapid(path: Path) -> tuple[Program, list[str]]:
 #: dialect → reader
 DIALECTS: dict[str, Callable[[Path], tuple[Program, list[str]]]] = {
     "krl": _krl, "urscript": _urscript, "rapid": _rapid, "fanuc": _fanuc,
+    "pdl2": _pdl2,
 }
 #: dialect → the pose notation of its frames given on the command line
-NOTATION = {"krl": "kuka", "urscript": "ur", "rapid": "abb", "fanuc": "fanuc"}
+NOTATION = {"krl": "kuka", "urscript": "ur", "rapid": "abb", "fanuc": "fanuc",
+            "pdl2": "comau"}
 _SUFFIX = {".src": "krl", ".dat": "krl", ".script": "urscript", ".urscript": "urscript",
-           ".mod": "rapid", ".prg": "rapid", ".modx": "rapid", ".sys": "rapid", ".ls": "fanuc"}
+           ".mod": "rapid", ".prg": "rapid", ".modx": "rapid", ".sys": "rapid", ".ls": "fanuc",
+           ".pdl": "pdl2"}
 
 
 def dialect_of(path: Path, dialect: str | None = None) -> str:

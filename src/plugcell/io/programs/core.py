@@ -308,6 +308,9 @@ class Program:
         Frames (bases, work objects, user frames) defined by the program, m.
     tools : dict of str to (4, 4) ndarray
         Tools (flange → TCP) defined by the program, m.
+    composites : dict of str to list of (str, bool)
+        Frames that are products of others, ``name → [(part, inverted), …]`` (PDL2's
+        ``$BASE⁻¹ · $UFRAME``): resolved when every part is known.
     resolution : tuple of float
         Smallest change written (length unit, angle unit, quaternion component) in the
         notation's units: below half of it a number is left as it was.
@@ -319,6 +322,7 @@ class Program:
     frames: dict[str, np.ndarray] = field(default_factory=dict)
     tools: dict[str, np.ndarray] = field(default_factory=dict)
     resolution: tuple[float, float, float] = (1e-3, 1e-3, 1e-6)
+    composites: dict[str, list[tuple[str, bool]]] = field(default_factory=dict)
 
     def where(self, file: int, offset: int) -> str:
         """``path:line:column`` of an offset."""

@@ -111,9 +111,11 @@ def missing_frames(program: Program, bases: Mapping[str, np.ndarray],
     for t in program.targets:
         if not t.used:
             continue
-        if t.base is not None and t.base not in program.frames and t.base not in bases \
-                and t.base not in mb:
-            mb.append(t.base)
+        parts = [t.base] if t.base is None or t.base not in program.composites else \
+            [p for p, _ in program.composites[t.base]]
+        for b in parts:
+            if b is not None and b not in program.frames and b not in bases and b not in mb:
+                mb.append(b)
         name = t.tool if t.tool is not None else "<tool>"
         if name not in program.tools and name not in tools and name not in mt:
             mt.append(name)
@@ -156,6 +158,11 @@ def filter_targets(program: Program, model_for_tool: Callable[[np.ndarray], Pose
     mb, mt = missing_frames(program, bases, tools)
     if mb or mt:
         raise MissingFramesError(str(program.files[0].path), mb, mt)
+    for name, parts in program.composites.items():
+        M = np.eye(4)
+        for part, inverted in parts:
+            M = M @ (invert(bases[part]) if inverted else bases[part])
+        bases[name] = M
     out = FilterResult()
     used = [t for t in program.targets if t.used and (t.kind == "pose" or joints != "keep")]
     tool_names = sorted({t.tool if t.tool is not None else "<tool>" for t in used})
