@@ -52,8 +52,9 @@ def configure(p: argparse.ArgumentParser) -> None:
     src.add_argument("--targets", type=Path,
                      help="CSV: [name,]x,y,z,rx,ry,rz[,payload_kg] (mm, degrees)")
     src.add_argument("--program", type=Path,
-                     help="a robot program (KRL .src+.dat, URScript .script, RAPID .mod/.prg, Fanuc .ls, PDL2 .pdl) "
-                          "to compensate: docs/robot-program-compensation.md")
+                     help="a robot program (KRL .src+.dat, URScript .script, RAPID .mod/.prg, "
+                          "Fanuc .ls, PDL2 .pdl) to compensate: "
+                          "docs/robot-program-compensation.md")
     p.add_argument("--out", type=Path,
                    help="CSV of compensated joints to write (default: print it to stdout); "
                         "with --program: the compensated program (a folder: same names)")
