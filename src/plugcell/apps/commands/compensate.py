@@ -175,9 +175,10 @@ def _run(args: argparse.Namespace) -> int:
 
         return run(args)
     extra = [o for o in ("base", "report", "measure_order") if getattr(args, o)]
-    if extra or args.partial or args.dialect or args.joint_targets != "keep":
-        raise CommandError("--base, --report, --measure-order, --partial, --dialect and "
-                           "--joint-targets go with --program")
+    if extra or args.partial or args.dialect or args.joint_targets != "keep" \
+            or args.angles != "kuka":
+        raise CommandError("--base, --report, --measure-order, --partial, --dialect, "
+                           "--joint-targets and --angles go with --program")
     if args.tool is not None and len(args.tool) > 1:
         raise CommandError("--tool: one tool for --targets")
     args.tool = None if args.tool is None else args.tool[0]

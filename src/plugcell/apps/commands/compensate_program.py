@@ -29,14 +29,20 @@ import numpy as np
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
     """The program options of ``plugcell compensate``."""
-    p.add_argument("--dialect", choices=("krl", "urscript", "rapid", "fanuc", "pdl2"), default=None,
+    p.add_argument("--dialect", choices=("krl", "urscript", "rapid", "fanuc", "pdl2", "gcode"),
+                   default=None,
                    help="program dialect (default: from the suffix: .src .script .mod/.prg "
-                        ".ls .pdl)")
+                        ".ls .pdl .nc/.ngc/.gcode/.tap)")
+    p.add_argument("--angles", choices=("kuka", "fanuc", "comau"), default="kuka",
+                   help="G-code: how A, B, C turn the tool (kuka: Rz(A)Ry(B)Rx(C), default; "
+                        "fanuc: W, P, R about fixed X, Y, Z; comau: ZYZ); also the notation "
+                        "of its --base/--tool")
     p.add_argument("--base", action="append", default=[], metavar="NAME=VALUES",
                    help="a frame the program uses but does not define (repeatable), in the "
                         "dialect's notation: KRL X,Y,Z,A,B,C (mm, deg); RAPID x,y,z,q1,q2,q3,"
                         "q4; URScript x,y,z,rx,ry,rz (m, rad); Fanuc X,Y,Z,W,P,R (mm, deg); "
-                        "PDL2 X,Y,Z,A,B,C (mm, deg, ZYZ)")
+                        "PDL2 X,Y,Z,A,B,C (mm, deg, ZYZ); G-code: a work offset G54…, "
+                        "X,Y,Z,A,B,C in --angles")
     p.add_argument("--partial", action="store_true",
                    help="write the program even if targets fail (they keep their numbers)")
     p.add_argument("--report", type=Path, default=None,
@@ -101,10 +107,10 @@ def run(args: argparse.Namespace) -> int:
                            "--temperature-c (or --physical-only)")
     try:
         dialect = dialect_of(args.program, args.dialect)
-        program, notes = read_program(args.program, dialect)
+        program, notes = read_program(args.program, dialect, angles=args.angles)
     except ProgramError as exc:
         raise CommandError(f"{exc}; nothing written") from None
-    notation = NOTATION[dialect]
+    notation = args.angles if dialect == "gcode" else NOTATION[dialect]
     bases = _named(args.base, "--base", notation)
     tools = _named(args.tool or [], "--tool", notation)
     if args.payload_kg is not None and not (math.isfinite(args.payload_kg)

@@ -15,6 +15,7 @@ dialect     files                                  module
 ``rapid``   ABB ``.mod``, ``.prg``, ``.modx``        :mod:`plugcell.io.programs.rapid`
 ``fanuc``   Fanuc TP ASCII ``.ls``                  :mod:`plugcell.io.programs.fanuc`
 ``pdl2``    Comau PDL2 ``.pdl``                     :mod:`plugcell.io.programs.pdl2`
+``gcode``   G-code ``.nc``, ``.ngc``, ``.gcode``, …   :mod:`plugcell.io.programs.gcode`
 ==========  =====================================  ===========================================
 """
 
@@ -52,6 +53,12 @@ def _pdl2(path: Path) -> tuple[Program, list[str]]:
     return read_pdl2(path)
 
 
+def _gcode(path: Path, notation: str = "kuka") -> tuple[Program, list[str]]:
+    from plugcell.io.programs.gcode import read_gcode
+
+    return read_gcode(path, notation)
+
+
 def _rapid(path: Path) -> tuple[Program, list[str]]:
     from plugcell.io.programs.rapid import read_rapid
 
@@ -61,14 +68,15 @@ def _rapid(path: Path) -> tuple[Program, list[str]]:
 #: dialect → reader
 DIALECTS: dict[str, Callable[[Path], tuple[Program, list[str]]]] = {
     "krl": _krl, "urscript": _urscript, "rapid": _rapid, "fanuc": _fanuc,
-    "pdl2": _pdl2,
+    "pdl2": _pdl2, "gcode": _gcode,
 }
 #: dialect → the pose notation of its frames given on the command line
 NOTATION = {"krl": "kuka", "urscript": "ur", "rapid": "abb", "fanuc": "fanuc",
-            "pdl2": "comau"}
+            "pdl2": "comau", "gcode": "kuka"}
 _SUFFIX = {".src": "krl", ".dat": "krl", ".script": "urscript", ".urscript": "urscript",
            ".mod": "rapid", ".prg": "rapid", ".modx": "rapid", ".sys": "rapid", ".ls": "fanuc",
-           ".pdl": "pdl2"}
+           ".pdl": "pdl2", ".nc": "gcode", ".ngc": "gcode", ".gcode": "gcode",
+           ".tap": "gcode", ".cnc": "gcode"}
 
 
 def dialect_of(path: Path, dialect: str | None = None) -> str:
@@ -92,7 +100,8 @@ def dialect_of(path: Path, dialect: str | None = None) -> str:
     return d
 
 
-def read_program(path: str | Path, dialect: str | None = None) -> tuple[Program, list[str]]:
+def read_program(path: str | Path, dialect: str | None = None, *, angles: str = "kuka"
+                 ) -> tuple[Program, list[str]]:
     """Read a robot program (module docstring).
 
     Parameters
@@ -101,6 +110,8 @@ def read_program(path: str | Path, dialect: str | None = None) -> tuple[Program,
         The program file (KRL: the ``.src``; its ``.dat`` is read too).
     dialect : str, optional
         A key of :data:`DIALECTS`; default from the suffix.
+    angles : str
+        G-code only: the notation of its ``A, B, C`` (``kuka``, ``fanuc``, ``comau``).
 
     Returns
     -------
@@ -116,4 +127,7 @@ def read_program(path: str | Path, dialect: str | None = None) -> tuple[Program,
         target, a motion or a frame (file:line:column).
     """
     p = Path(path)
-    return DIALECTS[dialect_of(p, dialect)](p)
+    d = dialect_of(p, dialect)
+    if d == "gcode":
+        return _gcode(p, angles)
+    return DIALECTS[d](p)

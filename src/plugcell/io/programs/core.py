@@ -153,6 +153,9 @@ class Num:
     pad : int
         Spaces before it that belong to a fixed-width field (Fanuc ``X =  1234.5``): a
         longer new number takes them, a shorter one leaves more.
+    virtual : bool
+        Not written in the file: a modal value a G-code line inherits (its ``value``);
+        never rewritten in place (the dialect inserts a word when it must change).
     """
 
     start: int
@@ -160,6 +163,7 @@ class Num:
     text: str
     value: float
     pad: int = 0
+    virtual: bool = False
 
 
 @dataclass
@@ -311,6 +315,9 @@ class Program:
     composites : dict of str to list of (str, bool)
         Frames that are products of others, ``name → [(part, inverted), …]`` (PDL2's
         ``$BASE⁻¹ · $UFRAME``): resolved when every part is known.
+    post : callable or None
+        ``post(program, reports, edits)``: the dialect's last pass over the edits
+        (G-code: modal words inserted where a line inherits a value that must change).
     resolution : tuple of float
         Smallest change written (length unit, angle unit, quaternion component) in the
         notation's units: below half of it a number is left as it was.
@@ -323,6 +330,7 @@ class Program:
     tools: dict[str, np.ndarray] = field(default_factory=dict)
     resolution: tuple[float, float, float] = (1e-3, 1e-3, 1e-6)
     composites: dict[str, list[tuple[str, bool]]] = field(default_factory=dict)
+    post: object | None = None
 
     def where(self, file: int, offset: int) -> str:
         """``path:line:column`` of an offset."""
@@ -347,7 +355,8 @@ class Program:
         list of str
             One text per file (encode with Latin-1 to get the bytes).
         """
-        nums = {(t.file, n.start): n for t in self.targets for n in (*t.nums, *t.extra)}
+        nums = {(t.file, n.start): n for t in self.targets for n in (*t.nums, *t.extra)
+                if not n.virtual}
         out = []
         for i, f in enumerate(self.files):
             mine = sorted((s, txt) for (fi, s), txt in edits.items() if fi == i)

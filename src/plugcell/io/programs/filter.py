@@ -238,6 +238,8 @@ def filter_targets(program: Program, model_for_tool: Callable[[np.ndarray], Pose
             r = TargetReport(t, program.where(t.file, t.offset), True, note, t.values,
                              t.values)
         out.reports.append(r)
+    if program.post is not None:
+        program.post(program, out.reports, out.edits)  # type: ignore[operator]
     return out
 
 
@@ -262,6 +264,8 @@ def _edits(program: Program, t: Target, values: np.ndarray,
             program.resolution[1]
         res = [program.resolution[0]] * n_len + [ang] * (len(t.nums) - n_len)
     for n, v, r in zip(t.nums, values, res, strict=True):
+        if n.virtual:
+            continue
         txt = new_text(n, float(v), r)
         if txt is not None:
             edits[(t.file, n.start)] = txt
