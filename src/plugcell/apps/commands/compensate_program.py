@@ -118,7 +118,7 @@ def run(args: argparse.Namespace) -> int:
         raise CommandError(f"--payload-kg must be a mass ≥ 0 kg, got {args.payload_kg}")
     payload = result.model.payload_ref_kg if args.payload_kg is None else args.payload_kg
     outs = _outputs(program, args.out) if args.out is not None else []
-    for o, f in zip(outs, program.files, strict=True):
+    for o, f in zip(outs, program.files, strict=False):
         if o.resolve() == f.path.resolve():
             raise CommandError(f"{o}: --out would overwrite the program read: choose "
                                "another file")
@@ -163,7 +163,7 @@ def run(args: argparse.Namespace) -> int:
                   f"{region.reasons(int(k))}", file=sys.stderr)
     texts = program.render(fr.edits)
     written = []
-    for o, txt in zip(outs, texts, strict=True):
+    for o, txt in zip(outs, texts, strict=False):  # (no --out: nothing to write)
         try:
             o.parent.mkdir(parents=True, exist_ok=True)
             o.write_bytes(txt.encode("latin-1"))
