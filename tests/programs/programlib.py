@@ -38,8 +38,9 @@ def poses_in(notation: str, base_values, tool_values, k: np.ndarray) -> np.ndarr
 def assert_equals_plugcell_compensate(program, fr, result, bases=None, tools=None,
                                       payload_kg=36.0):
     """Every compensated pose target's joints give, on the identified model, the pose
-    ``plugcell compensate``'s path (filter_program with --user-frame and --tool) gives, to
-    1e-9 mm; and the model reaches the program's target there (1e-6 m)."""
+    ``plugcell compensate``'s path (filter_program with --user-frame and --tool, and the IK
+    seed of the program's arm configuration when it is not home's) gives, to 1e-9 mm; and
+    the model reaches the program's target there (1e-6 m)."""
     from plugcell.compensation import filter_program
     from plugcell.kinematics.rotations import matrix_to_angles
 
@@ -54,7 +55,8 @@ def assert_equals_plugcell_compensate(program, fr, result, bases=None, tools=Non
         U = frames[t.base] if t.base is not None else np.eye(4)
         model = IdentifiedModel(result.model, tls[t.tool])
         ref = filter_program(model, P[None, :3, 3], matrix_to_angles(P[None, :3, :3], "zyz"),
-                             "zyz", user_frame=U, payload_kg=payload_kg)
+                             "zyz", user_frame=U, payload_kg=payload_kg,
+                             seed=None if r.seed is None else r.seed[None])
         got = model.pose(r.q[None], payload_kg)
         want = model.pose(ref.q, payload_kg)
         assert np.abs(got[:, :3, 3] - want[:, :3, 3]).max() * 1e3 < 1e-9, t.name

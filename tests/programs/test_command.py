@@ -48,6 +48,8 @@ def test_report_has_a_row_a_target(params_file, tmp_path):
     assert st["Unused"]["status"] == "kept" and "not used" in st["Unused"]["reason"]
     assert st["Target_10"]["where"].endswith("Module1.mod:11:32")
     assert st["Target_10"]["outside_region"] in ("0", "1")
+    assert st["Target_10"]["ik_seed_deg"] == "home"
+    assert len(st["MoveL line 28"]["ik_seed_deg"].split()) == 6  # the flipped wrist
 
 
 def test_output_paths_and_option_errors(params_file, tmp_path, capsys):

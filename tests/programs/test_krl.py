@@ -42,7 +42,7 @@ def test_fixture_targets_frames_and_notes():
     assert by["XP1"].base == "BASE_DATA[1]" and by["XP1"].tool == "TOOL_DATA[1]"
     assert by["LIN line 44"].base == "$BASE (line 42)"
     assert by["PTP line 46"].kind == "joints" and not by["XUNUSED"].used
-    assert [n.text for n in by["PTP line 45"].extra] == ["'B010'", "'B100011'"]
+    assert [n.text for n in by["PTP line 45"].extra] == ["'B010'", "'B000110'"]
     assert any("XHOME is not declared" in n for n in notes)
     assert prog.files[0].text.count("\r\n") == prog.files[0].text.count("\n")  # CRLF kept
 

@@ -66,7 +66,7 @@ def test_missing_tool_and_wobj_are_listed(params_file, tmp_path, capsys):
 
 
 @pytest.mark.parametrize(("old", "new", "message"), [
-    ("[0,0,-1,0],[9E+09", "[0,0,-1],[9E+09", "robconf: expected 4 items, got 3"),
+    ("[0,0,1,0],[9E+09", "[0,0,1],[9E+09", "robconf: expected 4 items, got 3"),
     ("[[-268.33,-281.12,1247.74]", "[[-268.33,-281.12,abc]", "trans: expected a number"),
     ("tSpindle:=[TRUE", "tSpindle:=[FALSE", "a stationary tool"),
     ("MoveJ Target_10, v1000, z50, tSpindle\\WObj:=wFixture;",
@@ -83,6 +83,20 @@ def test_unknown_syntax_is_named(tmp_path, old, new, message):
     assert "m.mod:" in str(ei.value) and message in str(ei.value)
     line, col = str(ei.value).split("m.mod:")[1].split(":")[:2]
     assert int(line) > 0 and int(col) > 0
+
+
+def test_the_programs_arm_configuration_is_the_one_compensated(calibrated_result):
+    """MoveL line 28 names the flipped wrist (cf4 = -2, cf6 = -1): the nominal inverse
+    kinematics from home finds the other one, so it is solved again from the flipped seed
+    and compensated there; the others keep home's solution (seed None)."""
+    prog, _ = read_program(FIX)
+    fr = filter_targets(prog, model_for(calibrated_result), payload_kg=36.0)
+    by = {r.target.name: r for r in fr.reports}
+    r28 = by["MoveL line 28"]
+    assert r28.seed is not None and r28.q[4] < 0 and not r28.reason
+    assert r28.target.config.mismatch(r28.q) == ""
+    assert all(r.seed is None for n, r in by.items() if n != "MoveL line 28")
+    assert not any(r.reason.startswith("configuration") for r in fr.reports)
 
 
 def test_confdata_follows_quarters():

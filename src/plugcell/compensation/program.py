@@ -199,6 +199,7 @@ def commanded_poses(
     tools: ArrayLike,
     payload_kg: ArrayLike | float = 0.0,
     *,
+    seed: ArrayLike | None = None,
     tol: float = TOLERANCE,
     max_iterations: int = MAX_ITERATIONS,
 ) -> CommandedPoses:
@@ -223,6 +224,9 @@ def commanded_poses(
         Tools: the TCP in the flange frame.
     payload_kg : float or (N,) array_like, kg
         Payload.
+    seed : (N, n) array_like, rad, optional
+        Seeds of the nominal inverse kinematics (default: the description's home, as
+        ``plugcell compensate``), e.g. to take the arm configuration a program names.
     tol, max_iterations
         As :func:`compensate`.
 
@@ -247,8 +251,9 @@ def commanded_poses(
     for k in np.unique(idx):
         sel = np.flatnonzero(idx == k)
         model = model_for_tool(tl[k])
-        res = compensate(model, T[sel], m[sel], tol=tol, max_iterations=max_iterations,
-                         raise_errors=False)
+        sd = None if seed is None else np.asarray(seed, dtype=float)[sel]
+        res = compensate(model, T[sel], m[sel], seed=sd, tol=tol,
+                         max_iterations=max_iterations, raise_errors=False)
         Tc = NominalModel(model.description, tl[k]).pose(res.q)
         Tc[~res.ok] = T[sel][~res.ok]
         parts.append((sel, res, Tc))

@@ -155,6 +155,14 @@ def run(args: argparse.Namespace) -> int:
         if not args.partial:
             raise CommandError(msg + "\nnothing written (--partial writes the others)")
         print(f"warning: {msg}\n(--partial: they keep their numbers)", file=sys.stderr)
+    mism = [r for r in comp if r.reason.startswith("configuration")]
+    if mism:
+        print(f"warning: {len(mism)} targets: the program's configuration (status/turn, "
+              "confdata, CONFIG) is not the one of the joints the compensation solved for "
+              "(the nominal inverse kinematics from the home configuration):", file=sys.stderr)
+        for r in mism[:10]:
+            print(f"  {r.where} ({r.target.name}): {r.reason.split('(', 1)[1].rsplit(')', 1)[0]}",
+                  file=sys.stderr)
     if region is not None and region.count:
         print(f"warning: {region.message('targets')}", file=sys.stderr)
         for k in np.flatnonzero(region.outside)[:10]:
@@ -191,10 +199,11 @@ def _write_report(path: Path, fr: Any, comp: list[Any], region: Any) -> None:
     buf = io.StringIO()
     buf.write("# plugcell compensate --program: one row a target; before/after: the numbers "
               "as written (the program's notation); dp_mm, dr_deg: how far the commanded "
-              "pose moved and turned\n")
+              "pose moved and turned; ik_seed_deg: where the nominal inverse kinematics "
+              "started (home, or a seed of the program's arm configuration)\n")
     w = csv.writer(buf, lineterminator="\n")
     w.writerow(["name", "where", "kind", "status", "dp_mm", "dr_deg", "outside_region",
-                "region_distance_mm", "before", "after", "reason"])
+                "region_distance_mm", "before", "after", "ik_seed_deg", "reason"])
     for r in fr.reports:
         k = idx.get(id(r))
         out_r = dist = ""
@@ -204,7 +213,10 @@ def _write_report(path: Path, fr: Any, comp: list[Any], region: Any) -> None:
         w.writerow([r.target.name, r.where, r.target.kind, status, f"{r.dp_mm:.4f}",
                     f"{r.dr_deg:.5f}", out_r, dist,
                     " ".join(f"{v:.10g}" for v in r.before),
-                    " ".join(f"{v:.10g}" for v in r.after), r.reason])
+                    " ".join(f"{v:.10g}" for v in r.after),
+                    "home" if r.seed is None else " ".join(f"{v:.3f}"
+                                                           for v in np.degrees(r.seed)),
+                    r.reason])
     write_text(path, buf.getvalue())
 
 

@@ -52,6 +52,14 @@ class FanucConfig:
     file: int
     turns: list[Num]
 
+    def mismatch(self, q: np.ndarray) -> str:
+        """Where the turn numbers name other turns than the joints ``q`` (``""``: none)."""
+        bad = [f"turn of J{j + 1} = {num.text} (joint in turn "
+               f"{math.floor((q[j] + math.pi) / (2 * math.pi))})"
+               for num, j in zip(self.turns, (0, 3, 5), strict=False)
+               if j < q.size and int(num.value) != math.floor((q[j] + math.pi) / (2 * math.pi))]
+        return "; ".join(bad)
+
     def edits(self, q_nominal: np.ndarray, q: np.ndarray) -> dict[tuple[int, int], str]:
         """Turns changed by the ±180° + k·360° boundaries the joints crossed."""
         out: dict[tuple[int, int], str] = {}

@@ -18,8 +18,9 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from plugcell.compensation.model_based import CompensationResult, nominal_joints
 from plugcell.compensation.pose_model import NominalModel, PoseModel
-from plugcell.compensation.program import commanded_poses
+from plugcell.compensation.program import CommandedPoses, commanded_poses
 from plugcell.io.programs.core import Program, ProgramError, Target, new_text
 from plugcell.io.units import NOTATIONS, notation_from_pose, pose_from_notation
 from plugcell.kinematics.transforms import invert, so3_log
@@ -58,7 +59,9 @@ class TargetReport:
     ok : bool
         Compensated (or, joints kept, nothing to do).
     reason : str
-        Why not, or a note (``not used by a motion``).
+        Why not, or a note (``not used by a motion``; ``configuration: …`` when the
+        program's status/turn, confdata or CONFIG name another arm configuration than the
+        joints the compensation solved for).
     before, after : (k,) ndarray
         The numbers as written and as written now (notation units; joints in degrees).
     dp_mm : float
@@ -67,6 +70,13 @@ class TargetReport:
         How far it turned, degrees.
     q : (n,) ndarray or None
         Joints the robot reaches the target with, rad (``None`` if not compensated).
+    payload_kg : float
+        Payload it was compensated for.
+    compensated : bool
+        It went through the compensation (failed or not).
+    seed : (n,) ndarray or None
+        The seed of the nominal inverse kinematics that gave the program's configuration
+        (``None``: the home configuration, as ``plugcell compensate``).
     """
 
     target: Target
@@ -80,6 +90,7 @@ class TargetReport:
     q: np.ndarray | None = None
     payload_kg: float = 0.0
     compensated: bool = False
+    seed: np.ndarray | None = None
 
 
 @dataclass
@@ -192,6 +203,9 @@ def filter_targets(program: Program, model_for_tool: Callable[[np.ndarray], Pose
     T = B @ P
     idx = np.array([tool_of[_tool(t)] for t in used], dtype=int)
     cmd = commanded_poses(model_for_tool, T, idx, tool_mats, payload_kg, tol=tol) if N else None
+    seeds: dict[int, np.ndarray] = {}
+    if cmd is not None:
+        cmd, seeds = _configured(used, model_for_tool, T, idx, tool_mats, payload_kg, tol, cmd)
     # (dp, dr: how far the commanded pose moved from the target, in the robot base frame —
     # the same rigid motion as in the program's frame for the position, and the same angle)
     reports: dict[int, TargetReport] = {}
@@ -223,13 +237,19 @@ def filter_targets(program: Program, model_for_tool: Callable[[np.ndarray], Pose
                     desc = model_for_tool(tool_mats[idx[i]]).description
                     after = res.q[i] / _unit(t, desc)
                     _edits(program, t, after, out.edits, joint=True)
+                note = ""
                 if t.config is not None:
                     out.edits.update(t.config.edits(res.q_start[i], res.q[i]))  # type: ignore[attr-defined]
+                    bad = t.config.mismatch(res.q_start[i])  # type: ignore[attr-defined]
+                    if bad:
+                        note = ("configuration: no solution of the nominal inverse kinematics "
+                                f"has the program's arm configuration ({bad}); compensated "
+                                "for the one from the home configuration")
             reports[id(t)] = TargetReport(
-                t, program.where(t.file, t.offset), good, "" if good else str(res.reason[i]),
+                t, program.where(t.file, t.offset), good, note if good else str(res.reason[i]),
                 before, after, float(dp_all[i]) if good else 0.0,
                 float(dr_all[i]) if good else 0.0, res.q[i] if good else None, payload_kg,
-                True)
+                True, seeds.get(i))
     for t in program.targets:
         r = reports.get(id(t))
         if r is None:
@@ -241,6 +261,82 @@ def filter_targets(program: Program, model_for_tool: Callable[[np.ndarray], Pose
     if program.post is not None:
         program.post(program, out.reports, out.edits)  # type: ignore[operator]
     return out
+
+
+def _seeds(q: np.ndarray, desc: object) -> list[np.ndarray]:
+    """Seeds for another arm configuration near ``q``: the wrist flipped
+    (``q4 + π, −q5, q6 + π``) and turns of joints 1, 4, 6 (``± 2π``), inside the limits."""
+    lim = np.asarray(desc.joint_limits)  # type: ignore[attr-defined]
+    out = []
+    flip = q.copy()
+    if q.size >= 6:
+        flip[3] += np.pi
+        flip[4] = -flip[4]
+        flip[5] += np.pi
+    for base in (flip, q):
+        for k1 in (0, -1, 1):
+            for k4 in (0, -1, 1):
+                for k6 in (0, -1, 1):
+                    c = base.copy()
+                    for j, k in ((0, k1), (3, k4), (5, k6)):
+                        if j < c.size:
+                            c[j] += 2 * np.pi * k
+                    if q.size >= 6:  # the flip may have left a joint a turn outside
+                        for j in (3, 5):
+                            while c[j] > lim[j, 1]:
+                                c[j] -= 2 * np.pi
+                            while c[j] < lim[j, 0]:
+                                c[j] += 2 * np.pi
+                    if np.all((c >= lim[:, 0]) & (c <= lim[:, 1])) and not np.allclose(c, q):
+                        out.append(c)
+    return out
+
+
+def _configured(used: list[Target], model_for_tool: Callable[[np.ndarray], PoseModel],
+                T: np.ndarray, idx: np.ndarray, tool_mats: np.ndarray, payload_kg: float,
+                tol: float, cmd: CommandedPoses) -> tuple[CommandedPoses, dict[int, np.ndarray]]:
+    """Targets whose program names another arm configuration than the one the nominal
+    inverse kinematics found from home (status/turn, confdata, CONFIG): tried again from
+    seeds of other configurations (:func:`_seeds`); the first whose solution the
+    program's configuration describes is compensated from it.  Others stay (warned)."""
+    res = cmd.result
+    redo: dict[int, np.ndarray] = {}
+    for i, t in enumerate(used):
+        cfg = t.config
+        if cfg is None or t.kind != "pose" or not res.ok[i] or \
+                not cfg.mismatch(res.q_start[i]):  # type: ignore[attr-defined]
+            continue
+        model = model_for_tool(tool_mats[idx[i]])
+        cands = _seeds(res.q_start[i], model.description)
+        if not cands:
+            continue
+        qs, ok, _ = nominal_joints(model, np.repeat(T[i][None], len(cands), axis=0),
+                                   np.array(cands))
+        for c, qk, okk in zip(cands, qs, ok, strict=True):
+            if okk and not cfg.mismatch(qk):  # type: ignore[attr-defined]
+                redo[i] = c
+                break
+    if not redo:
+        return cmd, {}
+    sel = np.array(sorted(redo))
+    again = commanded_poses(model_for_tool, T[sel], idx[sel], tool_mats, payload_kg,
+                            seed=np.array([redo[i] for i in sel]), tol=tol)
+    keep = again.result.ok
+    sel, chosen = sel[keep], {int(i): redo[int(i)] for i in sel[keep]}
+    if not sel.size:
+        return cmd, {}
+    fields = ("q", "q_start", "converged", "within_limits", "iterations", "residual",
+              "position_error", "orientation_error", "reason", "kind")
+    merged = {f: getattr(res, f).copy() for f in fields}
+    for f in fields:
+        merged[f][sel] = getattr(again.result, f)[keep]
+    hf = res.hybrid_fallback
+    if hf is not None and again.result.hybrid_fallback is not None:
+        hf = hf.copy()
+        hf[sel] = again.result.hybrid_fallback[keep]
+    T_cmd = cmd.T_command.copy()
+    T_cmd[sel] = again.T_command[keep]
+    return CommandedPoses(CompensationResult(**merged, hybrid_fallback=hf), T_cmd), chosen
 
 
 def _unit(t: Target, desc: object) -> np.ndarray:

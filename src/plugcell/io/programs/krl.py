@@ -199,6 +199,19 @@ class KrlConfig:
     s: Num | None
     t: Num | None
 
+    def mismatch(self, q: np.ndarray) -> str:
+        """Where the program's S/T describe another configuration than the joints ``q``
+        the compensation solved for (``""`` if they agree)."""
+        out = []
+        if self.t is not None:
+            bits = int(self.t.value)
+            bad = [f"A{i + 1}" for i in range(min(6, q.size)) if bool(bits >> i & 1) != (q[i] < 0)]
+            if bad:
+                out.append(f"T {self.t.text} says another sign of {', '.join(bad)}")
+        if self.s is not None and q.size >= 5 and bool(int(self.s.value) & 4) != (q[4] <= 0):
+            out.append(f"S {self.s.text} says another sign of A5")
+        return "; ".join(out)
+
     def edits(self, q_nominal: np.ndarray, q: np.ndarray) -> dict[tuple[int, int], str]:
         """Bits flipped where the compensated joints changed side of zero (module doc)."""
         out: dict[tuple[int, int], str] = {}

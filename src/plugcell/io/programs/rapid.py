@@ -173,6 +173,14 @@ class RapidConfig:
     file: int
     cf: list[Num]
 
+    def mismatch(self, q: np.ndarray) -> str:
+        """Where cf1, cf4, cf6 name other quarters than the joints ``q`` (``""``: none)."""
+        bad = [f"cf{j + 1} = {num.text} (axis {j + 1} in quarter "
+               f"{math.floor(q[j] / (math.pi / 2))})"
+               for num, j in zip(self.cf[:3], (0, 3, 5), strict=True)
+               if j < q.size and int(num.value) != math.floor(q[j] / (math.pi / 2))]
+        return "; ".join(bad)
+
     def edits(self, q_nominal: np.ndarray, q: np.ndarray) -> dict[tuple[int, int], str]:
         """cf1, cf4, cf6 moved by the quarters the compensated joints crossed."""
         out: dict[tuple[int, int], str] = {}
