@@ -41,7 +41,17 @@ def _centre(tool):
 
     h4 = load_robot("smart_h4")
     q = working_volume_joints(h4, TwinProfile.load("smart_h4"), 40, np.random.default_rng(7))
-    return NominalModel(h4, tool).pose(q[4])[0]
+    return NominalModel(h4, tool).pose(q[4])[0], q[4]
+
+
+def _joints(T: np.ndarray, tool: np.ndarray) -> np.ndarray:
+    """The nominal inverse kinematics of a pose: the configuration the program names."""
+    from plugcell.compensation import NominalModel, nominal_joints
+    from plugcell.io.robots import load_robot
+
+    q, ok, why = nominal_joints(NominalModel(load_robot("smart_h4"), tool), T[None])
+    assert ok[0], why[0]
+    return q[0]
 
 
 def _agg(v: list[float]) -> str:
@@ -53,7 +63,8 @@ def _krl(tmp: Path) -> Path:
 
     B = pose_from_notation(np.array(KRL_BASE), "kuka")
     tool = pose_from_notation(np.array(KRL_TOOL), "kuka")
-    C = np.linalg.inv(B) @ _centre(tool)
+    Tc, _ = _centre(tool)
+    C = np.linalg.inv(B) @ Tc
     src = ["DEF drill( )", ";FOLD INI;%{PE}", ";ENDFOLD (INI)",
            "$BASE = {FRAME: " + _agg(KRL_BASE) + "}", "$TOOL = {" + _agg(KRL_TOOL) + "}"]
     dat = ["DEFDAT drill"]
@@ -65,8 +76,12 @@ def _krl(tmp: Path) -> Path:
                 T[:3, 3] = C[:3, 3] + C[:3, :3] @ np.array([(c - 2) * 60e-3, (r - 1.5) * 60e-3,
                                                             dz])
                 v = notation_from_pose(T, "kuka", np.zeros(6))
+                q = _joints(B @ T, tool)          # the arm configuration an OLP tool writes
+                turn = sum(1 << i for i in range(6) if q[i] < 0)   # T: the joints' signs
+                status = 2 | (4 if q[4] <= 0 else 0)
                 dat.append(f"DECL E6POS {name}={{X {v[0]:.3f},Y {v[1]:.3f},Z {v[2]:.3f},"
-                           f"A {v[3]:.3f},B {v[4]:.3f},C {v[5]:.3f},S 2,T 35,E1 0.0,E2 0.0,"
+                           f"A {v[3]:.3f},B {v[4]:.3f},C {v[5]:.3f},S {status},T {turn},"
+                           "E1 0.0,E2 0.0,"
                            "E3 0.0,E4 0.0,E5 0.0,E6 0.0}")
             src += [f"LIN XA{k} C_DIS ; approach hole {k}", f"LIN XH{k}", f"LIN XA{k} C_DIS"]
             k += 1
@@ -84,7 +99,7 @@ def _rapid(tmp: Path) -> Path:
     tq = [12.5, -3, 215, 0.965926, 0, -0.258819, 0]
     B = pose_from_notation(np.array(wobj, float), "abb")
     tool = pose_from_notation(np.array(tq, float), "abb")
-    C = np.linalg.inv(B) @ _centre(tool)
+    C = np.linalg.inv(B) @ _centre(tool)[0]
     pts = []
     a, b, r = 150e-3, 100e-3, 40e-3
     for cx, cy, a0 in ((a - r, b - r, 0), (-(a - r), b - r, 90), (-(a - r), -(b - r), 180),
@@ -101,8 +116,10 @@ def _rapid(tmp: Path) -> Path:
         T = C.copy()
         T[:3, 3] = C[:3, 3] + C[:3, :3] @ np.array([x, y, 0.0])
         v = notation_from_pose(T, "abb", np.array([0, 0, 0, 1, 0, 0, 0.0]))
+        q = _joints(B @ T, tool)
+        cf = ",".join(str(int(np.floor(q[j] / (np.pi / 2)))) for j in (0, 3, 5))
         lines.append(f"        MoveL [[{v[0]:.3f},{v[1]:.3f},{v[2]:.3f}],[{v[3]:.6f},"
-                     f"{v[4]:.6f},{v[5]:.6f},{v[6]:.6f}],[0,0,0,0],[9E9,9E9,9E9,9E9,9E9,9E9]],"
+                     f"{v[4]:.6f},{v[5]:.6f},{v[6]:.6f}],[{cf},0],[9E9,9E9,9E9,9E9,9E9,9E9]],"
                      "v200, z1, tSpindle\\WObj:=wFixture;")
     lines += ["    ENDPROC", "ENDMODULE"]
     (tmp / "Contour.mod").write_text("\n".join(lines) + "\n")

@@ -157,9 +157,9 @@ def run(args: argparse.Namespace) -> int:
         print(f"warning: {msg}\n(--partial: they keep their numbers)", file=sys.stderr)
     mism = [r for r in comp if r.reason.startswith("configuration")]
     if mism:
-        print(f"warning: {len(mism)} targets: the program's configuration (status/turn, "
-              "confdata, CONFIG) is not the one of the joints the compensation solved for "
-              "(the nominal inverse kinematics from the home configuration):", file=sys.stderr)
+        print(f"warning: {len(mism)} targets: no solution of the nominal inverse kinematics "
+              "has the arm configuration the program names (status/turn, confdata, CONFIG); "
+              "compensated for the one from the home configuration:", file=sys.stderr)
         for r in mism[:10]:
             print(f"  {r.where} ({r.target.name}): {r.reason.split('(', 1)[1].rsplit(')', 1)[0]}",
                   file=sys.stderr)
