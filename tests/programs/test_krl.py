@@ -47,11 +47,12 @@ def test_fixture_targets_frames_and_notes():
     assert prog.files[0].text.count("\r\n") == prog.files[0].text.count("\n")  # CRLF kept
 
 
-def test_nominal_round_trip_is_byte_identical(nominal_params, tmp_path, capsys):
+@pytest.mark.parametrize("joints", ["keep", "compensate"])
+def test_nominal_round_trip_is_byte_identical(nominal_params, tmp_path, capsys, joints):
     src = _copy(tmp_path)
     out = tmp_path / "out"
     assert main(["compensate", "--params", str(nominal_params), "--program", str(src),
-                 "--out", str(out), *FRAMES]) == 0
+                 "--out", str(out), "--joint-targets", joints, *FRAMES]) == 0
     for f in ("drill_plate.src", "drill_plate.dat"):
         assert (out / f).read_bytes() == (FIXTURES / f).read_bytes()
     assert "0 numbers changed" in capsys.readouterr().out
@@ -96,6 +97,25 @@ def test_equals_plugcell_compensate(calibrated_result, params_file, tmp_path):
     for r in poses:
         np.testing.assert_allclose(new[r.target.name], r.after, atol=5.01e-4)
         assert np.abs(r.after - r.before).max() > 1e-3  # the calibration moved them
+
+
+def test_a_joint_target_is_compensated_in_its_own_configuration(calibrated_result):
+    prog, _ = read_program(FIXTURES / "drill_plate.src")
+    b, t = _frames()
+    fr = filter_targets(prog, model_for(calibrated_result), bases=b, tools=t, payload_kg=36.0,
+                        joints="compensate")
+    r = next(r for r in fr.reports if r.target.name == "PTP line 46")
+    assert r.compensated and r.ok and r.seed is not None
+    d = np.abs(r.after - r.before)
+    assert 1e-3 < d.max() < 0.5   # a correction, not another configuration
+    # the identified model at the new joints is where the nominal one was at the old ones
+    from plugcell.compensation import NominalModel
+
+    tool = t["TOOL_DATA[1]"]
+    want = NominalModel(IdentifiedModel(calibrated_result.model).description, tool).pose(
+        np.radians(r.before))
+    got = IdentifiedModel(calibrated_result.model, tool).pose(np.radians(r.after)[None], 36.0)
+    assert np.abs(got[0, :3, 3] - want[0, :3, 3]).max() < 3e-5  # (joints printed to 0.001°)
 
 
 def test_missing_frames_are_listed_and_nothing_written(params_file, tmp_path, capsys):

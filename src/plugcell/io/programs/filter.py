@@ -115,15 +115,17 @@ class FilterResult:
 
 
 def missing_frames(program: Program, bases: Mapping[str, np.ndarray],
-                   tools: Mapping[str, np.ndarray]) -> tuple[list[str], list[str]]:
-    """Names of the frames and tools the used targets need and nobody defines."""
+                   tools: Mapping[str, np.ndarray], joints: str = "keep"
+                   ) -> tuple[list[str], list[str]]:
+    """Names of the frames and tools the targets to compensate need and nobody defines
+    (a joint target needs its tool only when it is compensated, never a frame)."""
     mb: list[str] = []
     mt: list[str] = []
     for t in program.targets:
-        if not t.used:
+        if not t.used or (t.kind == "joints" and joints == "keep"):
             continue
-        parts = [t.base] if t.base is None or t.base not in program.composites else \
-            [p for p, _ in program.composites[t.base]]
+        parts = [] if t.kind == "joints" else [t.base] if t.base is None or \
+            t.base not in program.composites else [p for p, _ in program.composites[t.base]]
         for b in parts:
             if b is not None and b not in program.frames and b not in bases and b not in mb:
                 mb.append(b)
@@ -166,7 +168,7 @@ def filter_targets(program: Program, model_for_tool: Callable[[np.ndarray], Pose
     """
     bases = {**program.frames, **(bases or {})}
     tools = {**program.tools, **(tools or {})}
-    mb, mt = missing_frames(program, bases, tools)
+    mb, mt = missing_frames(program, bases, tools, joints)
     if mb or mt:
         raise MissingFramesError(str(program.files[0].path), mb, mt)
     for name, parts in program.composites.items():
@@ -183,13 +185,14 @@ def filter_targets(program: Program, model_for_tool: Callable[[np.ndarray], Pose
     P = np.empty((N, 4, 4))
     B = np.tile(np.eye(4), (N, 1, 1))
     for i, t in enumerate(used):
-        if t.base is not None:
+        if t.base is not None and t.kind == "pose":  # joints are in no frame
             B[i] = bases[t.base]
     # poses: grouped by notation; joints: the nominal model's pose
     for notation in {t.notation for t in used if t.kind == "pose"}:
         sel = [i for i, t in enumerate(used) if t.kind == "pose" and t.notation == notation]
         P[sel] = pose_from_notation(np.array([used[i].values for i in sel]), notation)
     jsel = [i for i, t in enumerate(used) if t.kind == "joints"]
+    desc = None
     if jsel:
         m0 = model_for_tool(tool_mats[0])
         desc = m0.description
@@ -204,8 +207,16 @@ def filter_targets(program: Program, model_for_tool: Callable[[np.ndarray], Pose
     idx = np.array([tool_of[_tool(t)] for t in used], dtype=int)
     cmd = commanded_poses(model_for_tool, T, idx, tool_mats, payload_kg, tol=tol) if N else None
     seeds: dict[int, np.ndarray] = {}
+    if cmd is not None and jsel:  # a joint target's configuration is its own joints
+        js = np.array(jsel)
+        jq = np.array([used[i].values * _unit(used[i], desc) for i in jsel])
+        again = commanded_poses(model_for_tool, T[js], idx[js], tool_mats, payload_kg,
+                                seed=jq, tol=tol)
+        cmd = _replace(cmd, js, again)
+        seeds.update({int(i): q for i, q in zip(js, jq, strict=True)})
     if cmd is not None:
-        cmd, seeds = _configured(used, model_for_tool, T, idx, tool_mats, payload_kg, tol, cmd)
+        cmd, more = _configured(used, model_for_tool, T, idx, tool_mats, payload_kg, tol, cmd)
+        seeds.update(more)
     # (dp, dr: how far the commanded pose moved from the target, in the robot base frame —
     # the same rigid motion as in the program's frame for the position, and the same angle)
     reports: dict[int, TargetReport] = {}
@@ -322,9 +333,19 @@ def _configured(used: list[Target], model_for_tool: Callable[[np.ndarray], PoseM
     again = commanded_poses(model_for_tool, T[sel], idx[sel], tool_mats, payload_kg,
                             seed=np.array([redo[i] for i in sel]), tol=tol)
     keep = again.result.ok
-    sel, chosen = sel[keep], {int(i): redo[int(i)] for i in sel[keep]}
+    chosen = {int(i): redo[int(i)] for i in sel[keep]}
+    return _replace(cmd, sel, again, keep), chosen
+
+
+def _replace(cmd: CommandedPoses, sel: np.ndarray, again: CommandedPoses,
+             keep: np.ndarray | None = None) -> CommandedPoses:
+    """``cmd`` with the targets ``sel`` (those of them ``keep`` says) taken from ``again``
+    (their compensation from other seeds)."""
+    keep = np.ones(len(sel), dtype=bool) if keep is None else keep
+    sel = sel[keep]
     if not sel.size:
-        return cmd, {}
+        return cmd
+    res = cmd.result
     fields = ("q", "q_start", "converged", "within_limits", "iterations", "residual",
               "position_error", "orientation_error", "reason", "kind")
     merged = {f: getattr(res, f).copy() for f in fields}
@@ -336,7 +357,7 @@ def _configured(used: list[Target], model_for_tool: Callable[[np.ndarray], PoseM
         hf[sel] = again.result.hybrid_fallback[keep]
     T_cmd = cmd.T_command.copy()
     T_cmd[sel] = again.T_command[keep]
-    return CommandedPoses(CompensationResult(**merged, hybrid_fallback=hf), T_cmd), chosen
+    return CommandedPoses(CompensationResult(**merged, hybrid_fallback=hf), T_cmd)
 
 
 def _unit(t: Target, desc: object) -> np.ndarray:
