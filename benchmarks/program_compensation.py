@@ -65,7 +65,7 @@ def _pocket(n: int, T0: np.ndarray) -> np.ndarray:
 
 
 def _programs(tmp: Path, n: int, dialects: list[str]) -> dict[str, Path]:
-    from plugcell.compensation import NominalModel
+    from plugcell.compensation import NominalModel, nominal_joints
     from plugcell.io.robots import load_robot
     from plugcell.io.units import notation_from_pose, pose_from_notation
     from plugcell.sim.twin.campaign import working_volume_joints
@@ -104,9 +104,12 @@ def _programs(tmp: Path, n: int, dialects: list[str]) -> dict[str, Path]:
                      "-0.258819,0]],[8,[0,0,90],[1,0,0,0],0,0,0]];",
                      "  TASK PERS wobjdata wF:=[FALSE,TRUE,\"\",[[1200,-150,300],[0.707107,0,0,"
                      "0.707107]],[[0,0,0],[1,0,0,0]]];", "  PROC main()"]
+            # confdata as a post-processor writes it: the quarters of axes 1, 4, 6
+            q, _, _ = nominal_joints(NominalModel(h4, tool), B @ T)
+            cf = np.floor(q[:, [0, 3, 5]] / (np.pi / 2)).astype(int)
             lines += [f"    MoveL [[{x:.3f},{y:.3f},{z:.3f}],[{a:.6f},{b:.6f},{c:.6f},{e:.6f}],"
-                      "[0,0,0,0],[9E9,9E9,9E9,9E9,9E9,9E9]],v100,z1,tS\\WObj:=wF;"
-                      for x, y, z, a, b, c, e in v]
+                      f"[{c1},{c4},{c6},0],[9E9,9E9,9E9,9E9,9E9,9E9]],v100,z1,tS\\WObj:=wF;"
+                      for (x, y, z, a, b, c, e), (c1, c4, c6) in zip(v, cf, strict=True)]
             lines += ["  ENDPROC", "ENDMODULE"]
             path = tmp / "Mill.mod"
         else:

@@ -274,59 +274,75 @@ def filter_targets(program: Program, model_for_tool: Callable[[np.ndarray], Pose
     return out
 
 
-def _seeds(q: np.ndarray, desc: object) -> list[np.ndarray]:
-    """Seeds for another arm configuration near ``q``: the wrist flipped
-    (``q4 + π, −q5, q6 + π``) and turns of joints 1, 4, 6 (``± 2π``), inside the limits."""
-    lim = np.asarray(desc.joint_limits)  # type: ignore[attr-defined]
+def _turns(q: np.ndarray, lim: np.ndarray) -> list[np.ndarray]:
+    """``q`` with joints 1, 4, 6 turned by ``0, ±2π`` — the same pose, other turn numbers —
+    inside the limits (``q`` itself first)."""
     out = []
-    flip = q.copy()
-    if q.size >= 6:
-        flip[3] += np.pi
-        flip[4] = -flip[4]
-        flip[5] += np.pi
-    for base in (flip, q):
-        for k1 in (0, -1, 1):
-            for k4 in (0, -1, 1):
-                for k6 in (0, -1, 1):
-                    c = base.copy()
-                    for j, k in ((0, k1), (3, k4), (5, k6)):
-                        if j < c.size:
-                            c[j] += 2 * np.pi * k
-                    if q.size >= 6:  # the flip may have left a joint a turn outside
-                        for j in (3, 5):
-                            while c[j] > lim[j, 1]:
-                                c[j] -= 2 * np.pi
-                            while c[j] < lim[j, 0]:
-                                c[j] += 2 * np.pi
-                    if np.all((c >= lim[:, 0]) & (c <= lim[:, 1])) and not np.allclose(c, q):
-                        out.append(c)
+    for k1 in (0, -1, 1):
+        for k4 in (0, -1, 1):
+            for k6 in (0, -1, 1):
+                c = q.copy()
+                for j, k in ((0, k1), (3, k4), (5, k6)):
+                    if j < c.size:
+                        c[j] += 2 * np.pi * k
+                if np.all((c >= lim[:, 0] - 1e-12) & (c <= lim[:, 1] + 1e-12)):
+                    out.append(c)
     return out
+
+
+def _flip(q: np.ndarray, lim: np.ndarray) -> np.ndarray:
+    """The wrist flipped, ``q4 + π, −q5, q6 + π`` (joints 4, 6 brought back inside their
+    limits by a turn): a seed of the other wrist configuration."""
+    c = q.copy()
+    if c.size >= 6:
+        c[3] += np.pi
+        c[4] = -c[4]
+        c[5] += np.pi
+        for j in (3, 5):
+            if c[j] > lim[j, 1]:
+                c[j] -= 2 * np.pi
+            if c[j] < lim[j, 0]:
+                c[j] += 2 * np.pi
+    return c
 
 
 def _configured(used: list[Target], model_for_tool: Callable[[np.ndarray], PoseModel],
                 T: np.ndarray, idx: np.ndarray, tool_mats: np.ndarray, payload_kg: float,
                 tol: float, cmd: CommandedPoses) -> tuple[CommandedPoses, dict[int, np.ndarray]]:
     """Targets whose program names another arm configuration than the one the nominal
-    inverse kinematics found from home (status/turn, confdata, CONFIG): tried again from
-    seeds of other configurations (:func:`_seeds`); the first whose solution the
+    inverse kinematics found from home (status/turn, confdata, CONFIG): the other turns of
+    that solution (exact: joints 1, 4, 6 ± 2π) and the solution from the flipped wrist (one
+    batched inverse kinematics for all of them) and its turns are tried; the first the
     program's configuration describes is compensated from it.  Others stay (warned)."""
     res = cmd.result
+    bad = [i for i, t in enumerate(used) if t.config is not None and t.kind == "pose"
+           and res.ok[i] and t.config.mismatch(res.q_start[i])]  # type: ignore[attr-defined]
+    if not bad:
+        return cmd, {}
     redo: dict[int, np.ndarray] = {}
-    for i, t in enumerate(used):
-        cfg = t.config
-        if cfg is None or t.kind != "pose" or not res.ok[i] or \
-                not cfg.mismatch(res.q_start[i]):  # type: ignore[attr-defined]
-            continue
+    flips: dict[int, list[int]] = {}
+    for i in bad:
+        cfg = used[i].config
         model = model_for_tool(tool_mats[idx[i]])
-        cands = _seeds(res.q_start[i], model.description)
-        if not cands:
-            continue
-        qs, ok, _ = nominal_joints(model, np.repeat(T[i][None], len(cands), axis=0),
-                                   np.array(cands))
-        for c, qk, okk in zip(cands, qs, ok, strict=True):
-            if okk and not cfg.mismatch(qk):  # type: ignore[attr-defined]
-                redo[i] = c
-                break
+        lim = np.asarray(model.description.joint_limits)
+        hit = next((c for c in _turns(res.q_start[i], lim)[1:]
+                    if not cfg.mismatch(c)), None)  # type: ignore[attr-defined]
+        if hit is not None:
+            redo[i] = hit
+        else:
+            flips.setdefault(int(idx[i]), []).append(i)
+    for k, members in flips.items():  # one inverse kinematics per tool for the flips
+        model = model_for_tool(tool_mats[k])
+        lim = np.asarray(model.description.joint_limits)
+        seeds = np.array([_flip(res.q_start[i], lim) for i in members])
+        qs, ok, _ = nominal_joints(model, T[members], seeds)
+        for i, qk, okk in zip(members, qs, ok, strict=True):
+            if not okk:
+                continue
+            hit = next((c for c in _turns(qk, lim)
+                        if not used[i].config.mismatch(c)), None)  # type: ignore[union-attr]
+            if hit is not None:
+                redo[i] = hit
     if not redo:
         return cmd, {}
     sel = np.array(sorted(redo))
