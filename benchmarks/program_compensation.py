@@ -2,6 +2,7 @@
 
     .venv/bin/python benchmarks/program_compensation.py [--targets N] [--repeat R]
                                                          [--dialects krl,rapid,urscript]
+                                                         [--wrong-confdata]
 
 Builds PARAMS.json from a fast twin calibration (Smart H4, 36 kg, model 5, 60 poses),
 writes a milling-like program per dialect — ``N`` inline Cartesian targets along a path
@@ -64,7 +65,8 @@ def _pocket(n: int, T0: np.ndarray) -> np.ndarray:
     return T
 
 
-def _programs(tmp: Path, n: int, dialects: list[str]) -> dict[str, Path]:
+def _programs(tmp: Path, n: int, dialects: list[str], wrong_confdata: bool = False
+              ) -> dict[str, Path]:
     from plugcell.compensation import NominalModel, nominal_joints
     from plugcell.io.robots import load_robot
     from plugcell.io.units import notation_from_pose, pose_from_notation
@@ -107,6 +109,8 @@ def _programs(tmp: Path, n: int, dialects: list[str]) -> dict[str, Path]:
             # confdata as a post-processor writes it: the quarters of axes 1, 4, 6
             q, _, _ = nominal_joints(NominalModel(h4, tool), B @ T)
             cf = np.floor(q[:, [0, 3, 5]] / (np.pi / 2)).astype(int)
+            if wrong_confdata:  # a post that writes [0,0,0,0]: every target searched
+                cf[:] = 0
             lines += [f"    MoveL [[{x:.3f},{y:.3f},{z:.3f}],[{a:.6f},{b:.6f},{c:.6f},{e:.6f}],"
                       f"[{c1},{c4},{c6},0],[9E9,9E9,9E9,9E9,9E9,9E9]],v100,z1,tS\\WObj:=wF;"
                       for (x, y, z, a, b, c, e), (c1, c4, c6) in zip(v, cf, strict=True)]
@@ -146,6 +150,10 @@ def _run_once(params: Path, program: Path, out: Path) -> dict[str, float]:
     out.write_bytes(texts[0].encode("latin-1"))
     t4 = time.perf_counter()
     assert not fr.failed, fr.failed[0].reason
+    warned = sum(r.reason.startswith("configuration") for r in fr.reports)
+    if warned:
+        print(f"({program.name}: {warned} targets without a solution in the program's arm "
+              "configuration)")
     return {"params": t1 - t0, "read": t2 - t1, "compensate": t3 - t2, "write": t4 - t3,
             "total": t4 - t0, "n": len([r for r in fr.reports if r.compensated])}
 
@@ -155,13 +163,15 @@ def main(argv: list[str]) -> int:
     ap.add_argument("--targets", type=int, default=10_000)
     ap.add_argument("--repeat", type=int, default=3)
     ap.add_argument("--dialects", default="krl,rapid,urscript")
+    ap.add_argument("--wrong-confdata", action="store_true",
+                    help="RAPID: confdata [0,0,0,0] everywhere (the configuration search's cost)")
     a = ap.parse_args(argv)
     dialects = a.dialects.split(",")
     with tempfile.TemporaryDirectory() as d:
         tmp = Path(d)
         t0 = time.perf_counter()
         params, _ = _params(tmp)
-        progs = _programs(tmp, a.targets, dialects)
+        progs = _programs(tmp, a.targets, dialects, a.wrong_confdata)
         print(f"set-up (twin calibration, {a.targets}-target programs): "
               f"{time.perf_counter() - t0:.1f} s; load average {os.getloadavg()[0]:.1f} on "
               f"{os.cpu_count()} cores")

@@ -80,3 +80,25 @@ def test_output_paths_and_option_errors(params_file, tmp_path, capsys):
     assert main(["compensate", "--params", str(params_file), "--program", str(src),
                  "--out", str(out)]) == 0
     assert (out / "Module1.mod").exists()
+
+
+def test_each_configuration_agrees_exactly_when_it_has_no_mismatch():
+    """``agrees`` (vectorised, used to search) and ``mismatch`` (the message) say the same,
+    for KRL S/T, RAPID confdata and Fanuc turns, on random joints."""
+    from plugcell.io.programs.core import Num
+    from plugcell.io.programs.fanuc import FanucConfig
+    from plugcell.io.programs.krl import KrlConfig
+    from plugcell.io.programs.rapid import RapidConfig
+
+    rng = np.random.default_rng(5)
+    Q = rng.uniform(-4.5, 4.5, (4000, 6))
+    Q[::7, 4] = 0.0
+    cfgs = [KrlConfig(0, Num(0, 1, "6", 6.0), Num(2, 4, "35", 35.0)),
+            KrlConfig(0, None, Num(2, 4, "'B000110'", 6.0)),
+            RapidConfig(0, [Num(0, 1, "0", 0.0), Num(2, 4, "-1", -1.0), Num(5, 6, "1", 1.0),
+                            Num(7, 8, "0", 0.0)]),
+            FanucConfig(0, [Num(0, 1, "0", 0.0), Num(2, 4, "-1", -1.0), Num(5, 6, "1", 1.0)])]
+    for cfg in cfgs:
+        want = np.array([cfg.mismatch(q) == "" for q in Q])
+        np.testing.assert_array_equal(cfg.agrees(Q), want)
+        assert 0 < want.sum() < len(want)   # both cases met

@@ -60,6 +60,14 @@ class FanucConfig:
                if j < q.size and int(num.value) != math.floor((q[j] + math.pi) / (2 * math.pi))]
         return "; ".join(bad)
 
+    def agrees(self, Q: np.ndarray) -> np.ndarray:
+        """``(K,)``: which joint vectors ``Q (K, n)`` the turn numbers describe."""
+        ok = np.ones(len(Q), dtype=bool)
+        for num, j in zip(self.turns, (0, 3, 5), strict=False):
+            if j < Q.shape[1]:
+                ok &= np.floor((Q[:, j] + np.pi) / (2 * np.pi)) == int(num.value)
+        return ok
+
     def edits(self, q_nominal: np.ndarray, q: np.ndarray) -> dict[tuple[int, int], str]:
         """Turns changed by the ±180° + k·360° boundaries the joints crossed."""
         out: dict[tuple[int, int], str] = {}

@@ -274,20 +274,19 @@ def filter_targets(program: Program, model_for_tool: Callable[[np.ndarray], Pose
     return out
 
 
-def _turns(q: np.ndarray, lim: np.ndarray) -> list[np.ndarray]:
+#: joints 1, 4, 6 turned by 0, ±2π: 27 shifts (the first none)
+_SHIFTS = np.array([(k1, k4, k6) for k1 in (0, -1, 1) for k4 in (0, -1, 1)
+                    for k6 in (0, -1, 1)], dtype=float) * 2 * np.pi
+
+
+def _turns(q: np.ndarray, lim: np.ndarray) -> np.ndarray:
     """``q`` with joints 1, 4, 6 turned by ``0, ±2π`` — the same pose, other turn numbers —
-    inside the limits (``q`` itself first)."""
-    out = []
-    for k1 in (0, -1, 1):
-        for k4 in (0, -1, 1):
-            for k6 in (0, -1, 1):
-                c = q.copy()
-                for j, k in ((0, k1), (3, k4), (5, k6)):
-                    if j < c.size:
-                        c[j] += 2 * np.pi * k
-                if np.all((c >= lim[:, 0] - 1e-12) & (c <= lim[:, 1] + 1e-12)):
-                    out.append(c)
-    return out
+    inside the limits (``q`` itself first), ``(K, n)``."""
+    Q = np.repeat(q[None], len(_SHIFTS), axis=0)
+    cols = [j for j in (0, 3, 5) if j < q.size]
+    Q[:, cols] += _SHIFTS[:, :len(cols)]
+    inside = np.all((lim[:, 0] - 1e-12 <= Q) & (lim[:, 1] + 1e-12 >= Q), axis=1)
+    return Q[inside]
 
 
 def _flip(q: np.ndarray, lim: np.ndarray) -> np.ndarray:
@@ -316,7 +315,7 @@ def _configured(used: list[Target], model_for_tool: Callable[[np.ndarray], PoseM
     program's configuration describes is compensated from it.  Others stay (warned)."""
     res = cmd.result
     bad = [i for i, t in enumerate(used) if t.config is not None and t.kind == "pose"
-           and res.ok[i] and t.config.mismatch(res.q_start[i])]  # type: ignore[attr-defined]
+           and res.ok[i] and not t.config.agrees(res.q_start[i][None])[0]]  # type: ignore[attr-defined]
     if not bad:
         return cmd, {}
     redo: dict[int, np.ndarray] = {}
@@ -325,10 +324,10 @@ def _configured(used: list[Target], model_for_tool: Callable[[np.ndarray], PoseM
         cfg = used[i].config
         model = model_for_tool(tool_mats[idx[i]])
         lim = np.asarray(model.description.joint_limits)
-        hit = next((c for c in _turns(res.q_start[i], lim)[1:]
-                    if not cfg.mismatch(c)), None)  # type: ignore[attr-defined]
-        if hit is not None:
-            redo[i] = hit
+        Q = _turns(res.q_start[i], lim)[1:]
+        fit = np.flatnonzero(cfg.agrees(Q)) if len(Q) else []  # type: ignore[attr-defined]
+        if len(fit):
+            redo[i] = Q[fit[0]]
         else:
             flips.setdefault(int(idx[i]), []).append(i)
     for k, members in flips.items():  # one inverse kinematics per tool for the flips
@@ -339,10 +338,10 @@ def _configured(used: list[Target], model_for_tool: Callable[[np.ndarray], PoseM
         for i, qk, okk in zip(members, qs, ok, strict=True):
             if not okk:
                 continue
-            hit = next((c for c in _turns(qk, lim)
-                        if not used[i].config.mismatch(c)), None)  # type: ignore[union-attr]
-            if hit is not None:
-                redo[i] = hit
+            Q = _turns(qk, lim)
+            fit = np.flatnonzero(used[i].config.agrees(Q)) if len(Q) else []  # type: ignore[union-attr]
+            if len(fit):
+                redo[i] = Q[fit[0]]
     if not redo:
         return cmd, {}
     sel = np.array(sorted(redo))

@@ -212,6 +212,17 @@ class KrlConfig:
             out.append(f"S {self.s.text} says another sign of A5")
         return "; ".join(out)
 
+    def agrees(self, Q: np.ndarray) -> np.ndarray:
+        """``(K,)``: which joint vectors ``Q (K, n)`` the S/T numbers describe."""
+        ok = np.ones(len(Q), dtype=bool)
+        if self.t is not None:
+            m = min(6, Q.shape[1])
+            bits = (int(self.t.value) >> np.arange(m)) & 1
+            ok &= np.all((Q[:, :m] < 0) == bits.astype(bool), axis=1)
+        if self.s is not None and Q.shape[1] >= 5:
+            ok &= (Q[:, 4] <= 0) == bool(int(self.s.value) & 4)
+        return ok
+
     def edits(self, q_nominal: np.ndarray, q: np.ndarray) -> dict[tuple[int, int], str]:
         """Bits flipped where the compensated joints changed side of zero (module doc)."""
         out: dict[tuple[int, int], str] = {}

@@ -181,6 +181,14 @@ class RapidConfig:
                if j < q.size and int(num.value) != math.floor(q[j] / (math.pi / 2))]
         return "; ".join(bad)
 
+    def agrees(self, Q: np.ndarray) -> np.ndarray:
+        """``(K,)``: which joint vectors ``Q (K, n)`` cf1, cf4, cf6 describe."""
+        ok = np.ones(len(Q), dtype=bool)
+        for num, j in zip(self.cf[:3], (0, 3, 5), strict=True):
+            if j < Q.shape[1]:
+                ok &= np.floor(Q[:, j] / (np.pi / 2)) == int(num.value)
+        return ok
+
     def edits(self, q_nominal: np.ndarray, q: np.ndarray) -> dict[tuple[int, int], str]:
         """cf1, cf4, cf6 moved by the quarters the compensated joints crossed."""
         out: dict[tuple[int, int], str] = {}
