@@ -155,6 +155,22 @@ def test_unknown_syntax_is_named_and_nothing_written(params_file, tmp_path, caps
     assert "nothing written" in err and not out.exists()
 
 
+def test_a_frame_variable_as_base(tmp_path):
+    """``$BASE=MYBASE`` with ``DECL FRAME MYBASE={…}`` in the .dat: a frame, not a target."""
+    src = _copy(tmp_path)
+    dat = tmp_path / "drill_plate.dat"
+    dat.write_bytes(dat.read_bytes().replace(
+        b"ENDDAT", b"DECL FRAME MYBASE={X 1200.0,Y -150.0,Z 300.0,A 90.0,B 0.0,C 0.0}\r\nENDDAT"))
+    src.write_bytes(src.read_bytes().replace(
+        b"$BASE = {FRAME: X 1200.0, Y -150.0, Z 300.0, A 90.0, B 0.0, C 0.0}",
+        b"$BASE=MYBASE"))
+    prog, _ = read_program(src)
+    assert "MYBASE" in prog.frames and "MYBASE" not in [t.name for t in prog.targets]
+    lin = next(t for t in prog.targets if t.name == "LIN line 44")
+    assert lin.base == "MYBASE"
+    np.testing.assert_allclose(prog.frames["MYBASE"][:3, 3], [1.2, -0.15, 0.3])
+
+
 def test_a_point_used_with_two_frames_is_refused(tmp_path):
     src = _copy(tmp_path)
     src.write_bytes(src.read_bytes().replace(b"\r\nEND\r\n", b"\r\nPTP XP1\r\nEND\r\n"))

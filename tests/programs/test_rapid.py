@@ -99,6 +99,19 @@ def test_the_programs_arm_configuration_is_the_one_compensated(calibrated_result
     assert not any(r.reason.startswith("configuration") for r in fr.reports)
 
 
+def test_optional_arguments_anywhere(tmp_path):
+    """``\\Conc`` before the target, ``\\T:=`` in the speed, ``\\WObj`` after the tool."""
+    src = tmp_path / "m.mod"
+    text = FIX.read_text().replace("MoveJ Target_10, v1000, z50, tSpindle\\WObj:=wFixture;",
+                                   "MoveJ \\Conc, Target_10, v1000\\T:=5, z50 \\Inpos:=inpos50, "
+                                   "tSpindle \\WObj:=wFixture;")
+    assert "\\Conc" in text
+    src.write_text(text)
+    prog, _ = read_program(src)
+    t = next(x for x in prog.targets if x.name == "Target_10")
+    assert t.used and (t.base, t.tool) == ("wFixture", "tSpindle")
+
+
 def test_confdata_follows_quarters():
     cf = [Num(0, 1, "0", 0.0), Num(2, 3, "-1", -1.0), Num(4, 5, "2", 2.0), Num(6, 7, "0", 0.0)]
     c = RapidConfig(0, cf)

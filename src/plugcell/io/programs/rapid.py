@@ -294,6 +294,7 @@ class _Reader:
         opts: dict[str, list[_Tok]] = {}
         depth = 0
         i = 1
+        after_opt = False  # "MoveL \Conc, p10, …": a switch before the first argument
         while i < len(st):
             t = st[i]
             if t.text in "[(":
@@ -301,7 +302,9 @@ class _Reader:
             elif t.text in "])":
                 depth -= 1
             if depth == 0 and t.text == ",":
-                args.append([])
+                if not (after_opt and not args[-1]):
+                    args.append([])
+                after_opt = False
             elif depth == 0 and t.text == "\\" and i + 1 < len(st):
                 key = st[i + 1].text.lower()
                 i += 2
@@ -314,9 +317,11 @@ class _Reader:
                         val.append(st[i])
                         i += 1
                 opts[key] = val
+                after_opt = True
                 continue
             else:
                 args[-1].append(t)
+                after_opt = False
             i += 1
         absj = head.lower().startswith("moveabsj")
         tool_pos = n_pts + 2
