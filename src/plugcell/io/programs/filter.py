@@ -8,7 +8,15 @@ program's own frame, ``P' = BASE⁻¹ · T_nominal(q) · TOOL``, in the program'
 notation, nearest its old numbers (:func:`plugcell.io.units.notation_from_pose`).
 Joint targets are kept, or — ``joints="compensate"`` — replaced by the compensated
 joints of the pose the controller's nominal model puts them at, ``T = T_nominal(q) ·
-TOOL``.
+TOOL``, solved from their own joints.
+
+The arm configuration compensated is the program's: the nominal inverse kinematics
+starts from home (as ``plugcell compensate``); a target whose configuration numbers
+(KRL status/turn, RAPID confdata, Fanuc CONFIG turns: the dialect's ``config.agrees``)
+describe another solution is solved again from that solution's other turns (joints 1,
+4, 6 ± 2π, exact) and from the flipped wrist (one batched inverse kinematics), and
+compensated from the first that fits (``TargetReport.seed``); none fitting, it keeps
+home's and the report says so.
 """
 
 from __future__ import annotations
