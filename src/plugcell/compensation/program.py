@@ -16,6 +16,10 @@ eq. A.4) or roll-pitch-yaw ``"rpy"`` — expressed in the robot base frame or in
 
 from __future__ import annotations
 
+from collections.abc import Callable
+from dataclasses import dataclass
+from typing import Any
+
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
@@ -25,13 +29,14 @@ from plugcell.compensation.model_based import (
     CompensationResult,
     compensate,
 )
-from plugcell.compensation.pose_model import PoseModel
+from plugcell.compensation.pose_model import NominalModel, PoseModel
 from plugcell.kinematics.description import RobotDescription
 from plugcell.kinematics.rotations import matrix_to_angles, pose_to_matrix
 
 Array = NDArray[np.float64]
 
-__all__ = ["filter_program", "frame_matrix", "joint_program", "target_poses"]
+__all__ = ["CommandedPoses", "commanded_poses", "filter_program", "frame_matrix",
+           "joint_program", "target_poses"]
 
 
 def frame_matrix(xyz: ArrayLike, angles: ArrayLike, convention: str = "zyz") -> Array:
@@ -166,6 +171,127 @@ def filter_program(
     T = target_poses(positions, angles, convention, user_frame)
     return compensate(model, T, payload_kg, seed=seed, tol=tol, max_iterations=max_iterations,
                       raise_errors=raise_errors)
+
+
+@dataclass(frozen=True, eq=False)
+class CommandedPoses:
+    """Compensated targets of a Cartesian program, as poses to give the controller.
+
+    Attributes
+    ----------
+    result : CompensationResult
+        The compensation of every target (``q``: the joints the robot must reach).
+    T_command : (N, 4, 4) array, m
+        The pose to command in the robot base frame: the controller's nominal model at
+        the compensated joints, ``T_cmd = T_nominal(q) · TOOL`` — its own inverse
+        kinematics of ``T_cmd`` gives back ``q``, where the identified model reaches the
+        target.
+    """
+
+    result: CompensationResult
+    T_command: Array
+
+
+def commanded_poses(
+    model_for_tool: Callable[[Array], PoseModel],
+    T_target: ArrayLike,
+    tool_index: ArrayLike,
+    tools: ArrayLike,
+    payload_kg: ArrayLike | float = 0.0,
+    *,
+    seed: ArrayLike | None = None,
+    tol: float = TOLERANCE,
+    max_iterations: int = MAX_ITERATIONS,
+) -> CommandedPoses:
+    """Compensate Cartesian targets with their tools and turn them back into poses.
+
+    Per tool ``k`` the targets ``i`` with ``tool_index[i] = k`` are compensated as
+    ``plugcell compensate --tool`` does — :func:`compensate` on ``model_for_tool(TOOL_k)``
+    — and the commanded pose is the nominal model at the compensated joints,
+    ``T_cmd = T_nominal(q) · TOOL_k`` (:class:`~plugcell.compensation.pose_model.NominalModel`,
+    the controller's own model, whose inverse kinematics started
+    the compensation).  Failing targets keep ``T_cmd = T_target``.
+
+    Parameters
+    ----------
+    model_for_tool : callable
+        ``TOOL (4, 4) m → PoseModel`` (the identified model with that tool point).
+    T_target : (N, 4, 4) array_like, m
+        Target tool poses in the robot base frame.
+    tool_index : (N,) array_like of int
+        Each target's tool, an index into ``tools``.
+    tools : (K, 4, 4) array_like, m
+        Tools: the TCP in the flange frame.
+    payload_kg : float or (N,) array_like, kg
+        Payload.
+    seed : (N, n) array_like, rad, optional
+        Seeds of the nominal inverse kinematics (default: the description's home, as
+        ``plugcell compensate``), e.g. to take the arm configuration a program names.
+    tol, max_iterations
+        As :func:`compensate`.
+
+    Returns
+    -------
+    CommandedPoses
+        Result and commanded poses, in the targets' order.
+
+    Raises
+    ------
+    ValueError
+        Malformed targets, tools or indices.
+    """
+    T = np.asarray(T_target, dtype=float).reshape(-1, 4, 4)
+    N = T.shape[0]
+    idx = np.asarray(tool_index, dtype=int).reshape(-1)
+    tl = np.asarray(tools, dtype=float).reshape(-1, 4, 4)
+    if idx.shape != (N,) or (N and (idx.min() < 0 or idx.max() >= tl.shape[0])):
+        raise ValueError(f"tool_index: expected {N} indices into {tl.shape[0]} tools")
+    m = np.broadcast_to(np.asarray(payload_kg, dtype=float), (N,))
+    parts: list[tuple[Array, CompensationResult, Array]] = []
+    for k in np.unique(idx):
+        sel = np.flatnonzero(idx == k)
+        model = model_for_tool(tl[k])
+        sd = None if seed is None else np.asarray(seed, dtype=float)[sel]
+        res = compensate(model, T[sel], m[sel], seed=sd, tol=tol,
+                         max_iterations=max_iterations, raise_errors=False)
+        Tc = NominalModel(model.description, tl[k]).pose(res.q)
+        Tc[~res.ok] = T[sel][~res.ok]
+        parts.append((sel, res, Tc))
+    return CommandedPoses(_merge(parts, N), _stack(parts, N))
+
+
+def _stack(parts: list[tuple[Array, CompensationResult, Array]], N: int) -> Array:
+    out = np.empty((N, 4, 4))
+    for sel, _, Tc in parts:
+        out[sel] = Tc
+    return out
+
+
+def _merge(parts: list[tuple[Array, CompensationResult, Array]], N: int) -> CompensationResult:
+    """One :class:`CompensationResult` in target order from the per-tool ones."""
+    if not parts:
+        e = np.empty((0, 0))
+        return CompensationResult(q=e, q_start=e, converged=np.zeros(0, bool),
+                                  within_limits=np.zeros(0, bool), iterations=np.zeros(0, int),
+                                  residual=np.zeros(0), position_error=np.zeros(0),
+                                  orientation_error=np.zeros(0),
+                                  reason=np.zeros(0, object), kind=np.zeros(0, object))
+    fields = ("q", "q_start", "converged", "within_limits", "iterations", "residual",
+              "position_error", "orientation_error", "reason", "kind")
+    out: dict[str, Any] = {}
+    for f in fields:
+        first = getattr(parts[0][1], f)
+        arr = np.empty((N, *first.shape[1:]), dtype=first.dtype)
+        for sel, res, _ in parts:
+            arr[sel] = getattr(res, f)
+        out[f] = arr
+    hf = [r.hybrid_fallback for _, r, _ in parts]
+    if all(h is not None for h in hf):
+        h = np.zeros(N, bool)
+        for (sel, _, _), x in zip(parts, hf, strict=True):
+            h[sel] = x
+        out["hybrid_fallback"] = h
+    return CompensationResult(**out)
 
 
 def joint_program(

@@ -19,6 +19,20 @@ name       R(a, b, c)                                          used by
 ``prj``    projective angles (rotations.py)                    the tracker's ``prj2tr``
 =========  ==================================================  ===========================
 
+Robot *programs* (``plugcell compensate --program``, :mod:`plugcell.io.programs`) write a
+pose in their vendor's own notation — :data:`NOTATIONS`, converted by
+:func:`pose_from_notation` and :func:`notation_from_pose`:
+
+=============  =========================================  =================================
+notation       numbers                                    R
+=============  =========================================  =================================
+``kuka``       X, Y, Z mm; A, B, C deg                    Rz(A)·Ry(B)·Rx(C) (ZYX intrinsic)
+``abb``        x, y, z mm; q1, q2, q3, q4                 unit quaternion q1 + q2 i + q3 j + q4 k
+``ur``         x, y, z **m**; rx, ry, rz **rad**          rotation vector: exp([r]×)
+``fanuc``      X, Y, Z mm; W, P, R deg                    Rz(R)·Ry(P)·Rx(W) (XYZ fixed)
+``comau``      X, Y, Z mm; A, B, C deg                    Rz(A)·Ry(B)·Rz(C) (ZYZ Euler)
+=============  =========================================  =================================
+
 The robot service, the simulated controller, the tracker service, the compute service
 and the web UI all convert here (``devices/robot/poses.py``, ``devices/tracker/frames.py``
 and ``pdl/conversion.py`` only add their own checks and errors).
@@ -29,7 +43,16 @@ from __future__ import annotations
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from plugcell.kinematics.rotations import matrix_to_pose, pose_to_matrix
+from plugcell.kinematics.rotations import (
+    angles_to_matrix,
+    matrix_to_pose,
+    nearest_angles,
+    nearest_quat,
+    nearest_rotvec,
+    pose_to_matrix,
+    quat_to_matrix,
+)
+from plugcell.kinematics.transforms import so3_exp
 
 Array = NDArray[np.float64]
 
@@ -43,15 +66,29 @@ CONVENTIONS = {"rpy": "rpy", "euler": "zyz", "prj": "prj"}
 #: A Comau robot's convention: PDL's POSITION (thesis A.4).
 ROBOT_CONVENTION = "euler"
 
+#: A vendor's pose notation (module table): (numbers, metres per length unit, angle
+#: convention of rotations.py or ``"quat"``/``"rotvec"``, order of the angles in R's
+#: convention's triple, radians per angle unit).
+NOTATIONS: dict[str, tuple[int, float, str, tuple[int, ...], float]] = {
+    "kuka": (6, M_PER_MM, "rpy", (2, 1, 0), DEG),  # (A, B, C) = (yaw, pitch, roll)
+    "abb": (7, M_PER_MM, "quat", (0, 1, 2, 3), 1.0),
+    "ur": (6, 1.0, "rotvec", (0, 1, 2), 1.0),
+    "fanuc": (6, M_PER_MM, "rpy", (0, 1, 2), DEG),
+    "comau": (6, M_PER_MM, "zyz", (0, 1, 2), DEG),
+}
+
 __all__ = [
     "CONVENTIONS",
     "DEG",
     "MM_PER_M",
     "M_PER_MM",
+    "NOTATIONS",
     "ROBOT_CONVENTION",
     "UnitsError",
     "joints_from_si",
     "joints_to_si",
+    "notation_from_pose",
+    "pose_from_notation",
     "pose_from_robot",
     "robot_from_pose",
 ]
@@ -111,6 +148,103 @@ def robot_from_pose(T: ArrayLike, convention: str = ROBOT_CONVENTION) -> Array:
     return np.concatenate([np.asarray(xyz) * MM_PER_M, np.rad2deg(angles)])
 
 
+
+def pose_from_notation(values: ArrayLike, notation: str) -> Array:
+    """Poses written in a vendor's notation (module table) → 4×4 transforms (m).
+
+    ``T = [R(angles) s·(x, y, z); 0 0 0 1]`` with the notation's length scale ``s`` and
+    rotation ``R``; a quaternion is normalised first (files round it).
+
+    Parameters
+    ----------
+    values : (..., k) array_like
+        ``k`` = 6 (7 for ``abb``) numbers per pose, in the notation's units.
+    notation : str
+        A key of :data:`NOTATIONS`.
+
+    Returns
+    -------
+    (..., 4, 4) ndarray
+        Homogeneous transforms, translation in metres.
+
+    Raises
+    ------
+    UnitsError
+        Unknown notation, the wrong count of numbers, non-finite values or a zero
+        quaternion.
+    """
+    k, length, conv, order, angle = _notation(notation)
+    v = np.asarray(values, dtype=float)
+    if v.shape[-1:] != (k,):
+        raise UnitsError(f"{notation}: expected {k} numbers a pose, got shape {v.shape}")
+    if not np.all(np.isfinite(v)):
+        raise UnitsError("values must be finite")
+    rot = v[..., 3:][..., list(order)] * angle
+    if conv == "quat":
+        try:
+            R = quat_to_matrix(rot)
+        except ValueError as exc:
+            raise UnitsError(str(exc)) from None
+    elif conv == "rotvec":
+        R = so3_exp(rot)
+    else:
+        R = angles_to_matrix(rot, conv)
+    T = np.zeros((*v.shape[:-1], 4, 4))
+    T[..., :3, :3] = R
+    T[..., :3, 3] = v[..., :3] * length
+    T[..., 3, 3] = 1.0
+    return T
+
+
+def notation_from_pose(T: ArrayLike, notation: str, reference: ArrayLike) -> Array:
+    """4×4 transforms (m) → a vendor's notation, the representation nearest ``reference``.
+
+    The inverse of :func:`pose_from_notation`.  A rotation has several triples (and a
+    quaternion two signs): the one nearest the pose's previous numbers is written
+    (:func:`~plugcell.kinematics.rotations.nearest_angles`, ``nearest_quat``,
+    ``nearest_rotvec``), so a program's angles change only as much as its rotation does.
+
+    Parameters
+    ----------
+    T : (..., 4, 4) array_like, m
+        Poses.
+    notation : str
+        A key of :data:`NOTATIONS`.
+    reference : (..., k) array_like
+        The previous numbers of each pose, in the notation (only the angles are used).
+
+    Returns
+    -------
+    (..., k) ndarray
+        The numbers, in the notation's units.
+
+    Raises
+    ------
+    UnitsError
+        Unknown notation.
+    """
+    k, length, conv, order, angle = _notation(notation)
+    T = np.asarray(T, dtype=float)
+    ref = np.asarray(reference, dtype=float)[..., 3:][..., list(order)] * angle
+    R = T[..., :3, :3]
+    if conv == "quat":
+        rot = nearest_quat(R, ref)
+    elif conv == "rotvec":
+        rot = nearest_rotvec(R, ref)
+    else:
+        rot = nearest_angles(R, conv, ref)
+    out = np.empty((*T.shape[:-2], k))
+    out[..., :3] = T[..., :3, 3] / length
+    out[..., 3:][..., list(order)] = rot / angle
+    return out
+
+
+def _notation(notation: str) -> tuple[int, float, str, tuple[int, ...], float]:
+    try:
+        return NOTATIONS[notation]
+    except KeyError:
+        raise UnitsError(f"unknown pose notation {notation!r}; expected one of "
+                         f"{sorted(NOTATIONS)}") from None
 
 
 def _scale(joint_scale: np.ndarray | None, n: int) -> float | np.ndarray:

@@ -42,7 +42,7 @@ from __future__ import annotations
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from plugcell.kinematics.transforms import identity
+from plugcell.kinematics.transforms import _matrix_to_quat, identity, so3_log
 
 Array = NDArray[np.float64]
 
@@ -58,11 +58,16 @@ __all__ = [
     "matrix_to_angles",
     "matrix_to_pose",
     "matrix_to_prj",
+    "matrix_to_quat",
     "matrix_to_rpy",
     "matrix_to_xyz",
     "matrix_to_zyz",
+    "nearest_angles",
+    "nearest_quat",
+    "nearest_rotvec",
     "pose_to_matrix",
     "prj_to_matrix",
+    "quat_to_matrix",
     "rpy_to_matrix",
     "xyz_to_matrix",
     "zyz_to_matrix",
@@ -451,3 +456,203 @@ def matrix_to_pose(T: ArrayLike, convention: str = "zyz") -> tuple[Array, Array]
     """
     T = _f(T)
     return T[..., :3, 3].copy(), matrix_to_angles(T[..., :3, :3], convention)
+
+
+# --------------------------------------------------------------------------- quaternions
+def quat_to_matrix(q: ArrayLike) -> Array:
+    """Unit quaternions ``(w, x, y, z)`` (ABB's q1..q4) → rotation matrices.
+
+    ``R = I + 2w[v]× + 2[v]×²`` for the normalised ``q = (w, v)`` (a quaternion read
+    from a file, rounded to a few digits, is normalised first).
+
+    Parameters
+    ----------
+    q : (..., 4) array_like
+        Quaternions, scalar first; any non-zero norm.
+
+    Returns
+    -------
+    R : (..., 3, 3) array
+        Rotation matrices.
+
+    Raises
+    ------
+    ValueError
+        Last axis not 4, or a quaternion of (near) zero norm.
+    """
+    q = _f(q)
+    if q.shape[-1:] != (4,):
+        raise ValueError(f"expected quaternions of shape (..., 4), got {q.shape}")
+    n = np.linalg.norm(q, axis=-1, keepdims=True)
+    if np.any(n < 1e-6):
+        raise ValueError("a quaternion of zero norm is no rotation")
+    w, x, y, z = np.moveaxis(q / n, -1, 0)
+    R = np.empty((*q.shape[:-1], 3, 3))
+    R[..., 0, 0] = 1 - 2 * (y * y + z * z)
+    R[..., 0, 1] = 2 * (x * y - w * z)
+    R[..., 0, 2] = 2 * (x * z + w * y)
+    R[..., 1, 0] = 2 * (x * y + w * z)
+    R[..., 1, 1] = 1 - 2 * (x * x + z * z)
+    R[..., 1, 2] = 2 * (y * z - w * x)
+    R[..., 2, 0] = 2 * (x * z - w * y)
+    R[..., 2, 1] = 2 * (y * z + w * x)
+    R[..., 2, 2] = 1 - 2 * (x * x + y * y)
+    return R
+
+
+def matrix_to_quat(R: ArrayLike) -> Array:
+    """Rotation matrices → unit quaternions ``(w, x, y, z)`` with ``w ≥ 0`` (Shepperd).
+
+    Parameters
+    ----------
+    R : (..., 3, 3) array_like
+        Rotation matrices.
+
+    Returns
+    -------
+    q : (..., 4) array
+        Unit quaternions, scalar first; the inverse of :func:`quat_to_matrix`.
+    """
+    return _matrix_to_quat(_f(R))
+
+
+# --------------------------------------------------------------------------- continuity
+#: Per convention: which angle of the triple turns about the first, middle and last axis
+#: applied, ``R = R_a(θ[i0]) · R_b(θ[i1]) · R_c(θ[i2])`` (``zyz``: z, y, z; ``rpy``: z, y, x
+#: with ``(r, p, y)`` stored; ``xyz``: x, y, z); and the other triple of the same rotation
+#: ``θ[i0] + π, s·θ[i1] + c, θ[i2] + π``.
+_SEQUENCES = {
+    "zyz": ((0, 1, 2), (-1.0, 0.0)),
+    "rpy": ((2, 1, 0), (-1.0, np.pi)),
+    "xyz": ((0, 1, 2), (-1.0, np.pi)),
+}
+#: Below this distance of the middle angle from its singular value, only the sum (or
+#: difference) of the outer angles is defined: it is shared out as in the reference.
+GIMBAL_NEAR = 1e-9
+
+
+def _wrap_to(theta: Array, ref: Array) -> Array:
+    """``θ + 2πk`` nearest ``ref`` (elementwise), then back into (−π − ε, π + ε]."""
+    t = theta + 2 * np.pi * np.round((ref - theta) / (2 * np.pi))
+    t = np.where(t > np.pi + 1e-12, t - 2 * np.pi, t)
+    return np.where(t < -np.pi - 1e-12, t + 2 * np.pi, t)
+
+
+def nearest_angles(R: ArrayLike, convention: str, reference: ArrayLike) -> Array:
+    """The angle triple of ``R`` nearest a reference triple (a program's angles stay
+    continuous).
+
+    Every rotation has two triples in a three-angle convention (``(θ0, θ1, θ2)`` and
+    ``(θ0 + π, −θ1 (+π), θ2 + π)``, module table) and each angle is defined modulo 2π;
+    of these the one nearest ``reference`` (max-norm) is returned, each angle within
+    [−π, π] (to 1e-12).  At gimbal lock (the middle angle within :data:`GIMBAL_NEAR`
+    of its singular value) only ``θ0 ± θ2`` is defined: the change of it from the
+    reference's is shared equally between θ0 and θ2.  So a rotation equal to the
+    reference's gives back the reference's angles (to rounding), the triple a
+    controller interpolates from does not jump, and ``C −180°`` does not become
+    ``C +180°``.
+
+    Parameters
+    ----------
+    R : (..., 3, 3) array_like
+        Rotation matrices.
+    convention : {"zyz", "rpy", "xyz"}
+        Angle convention (module docstring).
+    reference : (..., 3) array_like, rad
+        Triples to stay near (broadcast with ``R``).
+
+    Returns
+    -------
+    (..., 3) array, rad
+        ``θ`` with ``angles_to_matrix(θ, convention) = R``.
+
+    Raises
+    ------
+    ValueError
+        A convention without the two-triple structure (``prj``).
+    """
+    if convention not in _SEQUENCES:
+        raise ValueError(f"nearest_angles: convention {convention!r} not in {tuple(_SEQUENCES)}")
+    R = _f(R)
+    (i0, i1, i2), (s, c) = _SEQUENCES[convention]
+    ref = np.broadcast_to(_f(reference), (*R.shape[:-2], 3))
+    a = matrix_to_angles(R, convention)
+    b = a.copy()
+    b[..., i0] = a[..., i0] + np.pi
+    b[..., i1] = s * a[..., i1] + c
+    b[..., i2] = a[..., i2] + np.pi
+    a, b = _wrap_to(a, ref), _wrap_to(b, ref)
+    da = np.max(np.abs(a - ref), axis=-1)
+    db = np.max(np.abs(b - ref), axis=-1)
+    out = np.where((db < da)[..., None], b, a)
+    # gimbal lock: middle angle at its singular value, only θ0 + σ θ2 is defined
+    mid = out[..., i1]
+    if convention == "zyz":
+        lock_plus = np.abs(np.sin(mid)) < GIMBAL_NEAR
+        sigma = np.where(np.cos(mid) > 0, 1.0, -1.0)  # B = 0: A + C; B = π: A − C
+    else:
+        lock_plus = np.abs(np.cos(mid)) < GIMBAL_NEAR
+        # rpy p = +π/2: y − r; p = −π/2: y + r.  xyz b = ±π/2: a ± c (same algebra)
+        sigma = np.where(np.sin(mid) > 0, -1.0, 1.0)
+        if convention == "xyz":
+            sigma = -sigma
+    if np.any(lock_plus):
+        comb_new = out[..., i0] + sigma * out[..., i2]
+        comb_ref = ref[..., i0] + sigma * ref[..., i2]
+        d = np.angle(np.exp(1j * (comb_new - comb_ref)))  # wrapped to (−π, π]
+        locked = out.copy()
+        locked[..., i0] = ref[..., i0] + d / 2
+        locked[..., i2] = ref[..., i2] + sigma * d / 2
+        locked[..., i1] = mid
+        out = np.where(lock_plus[..., None], locked, out)
+    return out
+
+
+def nearest_rotvec(R: ArrayLike, reference: ArrayLike) -> Array:
+    """The rotation vector of ``R`` nearest a reference one (Universal Robots' rx, ry, rz).
+
+    ``log R = θu`` with θ ∈ [0, π]; ``(θ − 2π)u`` is the same rotation; the one
+    nearer ``reference`` (Euclidean) is returned — a pose written as ``[…, 0, 3.1416, 0]``
+    keeps that sign rather than flipping to ``−3.1416``.
+
+    Parameters
+    ----------
+    R : (..., 3, 3) array_like
+        Rotation matrices.
+    reference : (..., 3) array_like, rad
+        Rotation vectors to stay near.
+
+    Returns
+    -------
+    (..., 3) array, rad
+        Rotation vectors ``w`` with ``so3_exp(w) = R``.
+    """
+    w = so3_log(_f(R))
+    ref = np.broadcast_to(_f(reference), w.shape)
+    th = np.linalg.norm(w, axis=-1, keepdims=True)
+    u = w / np.where(th > 0, th, 1.0)
+    alt = w - 2 * np.pi * u
+    pick = np.linalg.norm(alt - ref, axis=-1) < np.linalg.norm(w - ref, axis=-1)
+    return np.where((pick & (th[..., 0] > 0))[..., None], alt, w)
+
+
+def nearest_quat(R: ArrayLike, reference: ArrayLike) -> Array:
+    """The unit quaternion of ``R`` with the sign of a reference one (``q`` and ``−q`` are
+    the same rotation): ``q · sign(q·q_ref)``.
+
+    Parameters
+    ----------
+    R : (..., 3, 3) array_like
+        Rotation matrices.
+    reference : (..., 4) array_like
+        Quaternions ``(w, x, y, z)`` to stay near.
+
+    Returns
+    -------
+    (..., 4) array
+        Unit quaternions ``(w, x, y, z)``.
+    """
+    q = matrix_to_quat(R)
+    ref = np.broadcast_to(_f(reference), q.shape)
+    flip = np.sum(q * ref, axis=-1) < 0
+    return np.where(flip[..., None], -q, q)

@@ -2,6 +2,8 @@
 
     plugcell compensate --params PARAMS.json --targets TARGETS.csv [--out JOINTS.csv]
                         [--payload-kg M] [--rot zyz|rpy] [--user-frame X,Y,Z,A,B,C]
+    plugcell compensate --params PARAMS.json --program IN --out OUT …   (a robot program:
+                        :mod:`plugcell.apps.commands.compensate_program`)
 
 ``PARAMS.json`` is what ``plugcell calibrate`` writes
 (:func:`plugcell.io.params.params_document`).  ``TARGETS.csv``: a
@@ -46,10 +48,16 @@ def configure(p: argparse.ArgumentParser) -> None:
     )
     p.add_argument("--params", type=Path, required=True,
                    help="identified parameters (PARAMS.json from plugcell calibrate)")
-    p.add_argument("--targets", type=Path, required=True,
-                   help="CSV: [name,]x,y,z,rx,ry,rz[,payload_kg] (mm, degrees)")
+    src = p.add_mutually_exclusive_group(required=True)
+    src.add_argument("--targets", type=Path,
+                     help="CSV: [name,]x,y,z,rx,ry,rz[,payload_kg] (mm, degrees)")
+    src.add_argument("--program", type=Path,
+                     help="a robot program (KRL .src+.dat, URScript .script, RAPID .mod/.prg, "
+                          "Fanuc .ls, PDL2 .pdl) to compensate: "
+                          "docs/robot-program-compensation.md")
     p.add_argument("--out", type=Path,
-                   help="CSV of compensated joints to write (default: print it to stdout)")
+                   help="CSV of compensated joints to write (default: print it to stdout); "
+                        "with --program: the compensated program (a folder: same names)")
     p.add_argument("--payload-kg", type=float, default=None, metavar="M",
                    help="payload carried (kg) for rows without a payload_kg column "
                         "(default: the payload the parameters were identified with)")
@@ -59,9 +67,10 @@ def configure(p: argparse.ArgumentParser) -> None:
     p.add_argument("--user-frame", default=None, metavar="X,Y,Z,A,B,C",
                    help="the targets are in this user frame (its pose in the robot base frame, "
                         "mm and degrees)")
-    p.add_argument("--tool", default=None, metavar="X,Y,Z,A,B,C",
+    p.add_argument("--tool", action="append", default=None, metavar="X,Y,Z,A,B,C",
                    help="compensated tool point in the flange frame (mm, degrees; default: the "
-                        "identified PROBE, i.e. the T-MAC)")
+                        "identified PROBE, i.e. the T-MAC); with --program: NAME=VALUES, a "
+                        "tool the program uses but does not define (repeatable)")
     add_robot_args(p, help="robot description (name, .toml, .urdf or .xacro) instead of the "
                    "one recorded in PARAMS")
     p.add_argument("--tol", type=float, default=1e-6, help="‖Δx‖ threshold (default 1e-6)")
@@ -71,6 +80,9 @@ def configure(p: argparse.ArgumentParser) -> None:
     p.add_argument("--temperature-c", type=float, default=None, metavar="T",
                    help="cell temperature (°C): for a residual model that uses it and a "
                         "model with the thermal term (default: its reference temperature)")
+    from plugcell.apps.commands.compensate_program import add_arguments
+
+    add_arguments(p)
     p.set_defaults(func=_run)
 
 
@@ -158,6 +170,18 @@ def _run(args: argparse.Namespace) -> int:
     from plugcell.apps.cli import CommandError
     from plugcell.compensation import IdentifiedModel, filter_program
 
+    if args.program is not None:
+        from plugcell.apps.commands.compensate_program import run
+
+        return run(args)
+    extra = [o for o in ("base", "report", "measure_order") if getattr(args, o)]
+    if extra or args.partial or args.dialect or args.joint_targets != "keep" \
+            or args.angles != "kuka":
+        raise CommandError("--base, --report, --measure-order, --partial, --dialect, "
+                           "--joint-targets and --angles go with --program")
+    if args.tool is not None and len(args.tool) > 1:
+        raise CommandError("--tool: one tool for --targets")
+    args.tool = None if args.tool is None else args.tool[0]
     if args.payload_kg is not None and not (math.isfinite(args.payload_kg)
                                             and args.payload_kg >= 0):
         raise CommandError(f"--payload-kg must be a mass ≥ 0 kg, got {args.payload_kg}")
