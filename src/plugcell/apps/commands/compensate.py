@@ -34,6 +34,7 @@ from typing import Any
 
 import numpy as np
 
+from plugcell.apps.commands.files import check_region_of, read_compensation_model
 from plugcell.apps.commands.robotargs import add_robot_args
 
 COLUMNS = ("x", "y", "z", "rx", "ry", "rz")
@@ -148,23 +149,6 @@ def parse_targets(text: str, name: str) -> tuple[list[str], np.ndarray, np.ndarr
     return names, vals[:, :3] / 1e3, np.radians(vals[:, 3:]), pay, lines
 
 
-def _load_params(path: Path, args: argparse.Namespace, residual: bool = True) -> Any:
-    from plugcell.apps.cli import CommandError
-    from plugcell.apps.commands.files import read_calibration
-
-    d, result = read_calibration(path, args)
-    entry = d.get("residual_model")
-    if residual and entry:
-        from plugcell.io.residual_models import ResidualFileError, load_residual
-
-        try:
-            layer = load_residual(entry, path, robot=result.robot, model=result.model)
-        except ResidualFileError as exc:
-            raise CommandError(f"{exc} (--physical-only ignores it)") from None
-        result = result.with_residual_model(layer)
-    return result
-
-
 # ----------------------------------------------------------------------------- run
 def _run(args: argparse.Namespace) -> int:
     from plugcell.apps.cli import CommandError
@@ -187,7 +171,7 @@ def _run(args: argparse.Namespace) -> int:
         raise CommandError(f"--payload-kg must be a mass ≥ 0 kg, got {args.payload_kg}")
     if not args.tol > 0:
         raise CommandError(f"--tol must be > 0, got {args.tol}")
-    result = _load_params(args.params, args, not args.physical_only)
+    result = read_compensation_model(args.params, args, not args.physical_only)
     layer = result.residual_model
     if layer is not None and layer.uses_temperature and args.temperature_c is None:
         raise CommandError(f"{args.params}: its residual model uses the temperature: give "
@@ -230,7 +214,7 @@ def _run(args: argparse.Namespace) -> int:
         raise CommandError(f"{bad.size} of {len(names)} targets cannot be compensated:\n"
                            + "\n".join(msgs) + more)
     notes = _undetermined(args, result, res.q, payload, names, lines, tool)
-    region = _region(result, res.q, payload)
+    region = check_region_of(result, res.q, payload)
     _write(args, result, names, res, payload, region)
     hybrid = ""
     if layer is not None:
@@ -301,16 +285,6 @@ def _undetermined(args: argparse.Namespace, result: Any, q: np.ndarray, payload:
                 f"({held}), where parameters the poses did not determine ({names_p}) are "
                 "not measured: the model extrapolates there"]
     return []
-
-
-def _region(result: Any, q: np.ndarray, payload: np.ndarray) -> Any:
-    """The compensated joints (and their T-MAC positions in the robot base frame) checked
-    against the region the parameters were identified on; ``None`` for old PARAMS.json."""
-    if result.validity is None:
-        return None
-    m = result.model
-    targets = (np.linalg.inv(m.base()) @ m.predict(q, payload))[:, :3, 3]
-    return result.check_region(q, payload, targets)
 
 
 def _write(args: argparse.Namespace, result: Any, names: list[str], res: Any,

@@ -90,7 +90,7 @@ def _outputs(program: Any, out: Path) -> list[Path]:
 def run(args: argparse.Namespace) -> int:
     """``plugcell compensate --program`` (module docstring)."""
     from plugcell.apps.cli import CommandError
-    from plugcell.apps.commands.compensate import _load_params, _region
+    from plugcell.apps.commands.files import check_region_of, read_compensation_model
     from plugcell.compensation import IdentifiedModel
     from plugcell.io.programs import NOTATION, ProgramError, dialect_of, read_program
     from plugcell.io.programs.filter import filter_targets
@@ -100,7 +100,7 @@ def run(args: argparse.Namespace) -> int:
     if args.out is None and args.measure_order is None and args.report is None:
         raise CommandError("--program: give --out (the compensated program), --report or "
                            "--measure-order")
-    result = _load_params(args.params, args, not args.physical_only)
+    result = read_compensation_model(args.params, args, not args.physical_only)
     layer = result.residual_model
     if layer is not None and layer.uses_temperature and args.temperature_c is None:
         raise CommandError(f"{args.params}: its residual model uses the temperature: give "
@@ -138,7 +138,7 @@ def run(args: argparse.Namespace) -> int:
     region = None
     if comp:
         q = np.array([r.q for r in comp])
-        region = _region(result, q, np.full(len(comp), payload))
+        region = check_region_of(result, q, np.full(len(comp), payload))
     outside = set()
     if region is not None:
         outside = {id(comp[k]) for k in np.flatnonzero(region.outside)}

@@ -91,3 +91,36 @@ def read_calibration(path: Path, args: argparse.Namespace | None = None
     except (KeyError, TypeError, ValueError) as exc:
         what = f"missing key {exc}" if isinstance(exc, KeyError) else str(exc)
         raise CommandError(f"{path}: not a plugcell calibration: {what}") from None
+
+
+def read_compensation_model(path: Path, args: argparse.Namespace, residual: bool = True
+                            ) -> Any:
+    """The calibration of PARAMS.json ``path`` as ``plugcell compensate`` uses it: with its
+    learned residual layer when ``residual`` and the file has one (``--physical-only``:
+    without)."""
+    from plugcell.apps.cli import CommandError
+
+    d, result = read_calibration(path, args)
+    entry = d.get("residual_model")
+    if residual and entry:
+        from plugcell.io.residual_models import ResidualFileError, load_residual
+
+        try:
+            layer = load_residual(entry, path, robot=result.robot, model=result.model)
+        except ResidualFileError as exc:
+            raise CommandError(f"{exc} (--physical-only ignores it)") from None
+        result = result.with_residual_model(layer)
+    return result
+
+
+def check_region_of(result: Any, q: Any, payload: Any) -> Any:
+    """The compensated joints ``q`` ((N, n), rad) with their payloads ((N,), kg), and
+    their T-MAC positions in the robot base frame, checked against the region the
+    parameters were identified on; ``None`` for a PARAMS.json without one."""
+    if result.validity is None:
+        return None
+    import numpy as np
+
+    m = result.model
+    targets = (np.linalg.inv(m.base()) @ m.predict(q, payload))[:, :3, 3]
+    return result.check_region(q, payload, targets)
