@@ -130,7 +130,7 @@ def _programs(tmp: Path, n: int, dialects: list[str], wrong_confdata: bool = Fal
 
 def _run_once(params: Path, program: Path, out: Path) -> dict[str, float]:
     """The command's stages, timed: read, compensate, render + write."""
-    from plugcell.apps.commands.compensate import _load_params
+    from plugcell.apps.commands.files import read_compensation_model
     from plugcell.compensation import IdentifiedModel
     from plugcell.io.programs import read_program
     from plugcell.io.programs.filter import filter_targets
@@ -139,7 +139,7 @@ def _run_once(params: Path, program: Path, out: Path) -> dict[str, float]:
         robot = None
 
     t0 = time.perf_counter()
-    result = _load_params(params, _A(), True)
+    result = read_compensation_model(params, _A(), True)
     t1 = time.perf_counter()
     prog, _ = read_program(program)
     t2 = time.perf_counter()

@@ -114,7 +114,11 @@ def test_the_native_core_runs_the_python_a_product_keeps(floor: Any, probe: Modu
     async def route() -> Any:
         waiting = asyncio.get_running_loop().create_future()
         calls.expect(floor.SERVICE, int.from_bytes(attachment, "little"), waiting)
-        calls.arrived(service.answer(request.replace(b"\x05", b"\x04", 1), floor.REQUESTER))
+        # the input's first byte made 4 (the input ends the request; an earlier 5 in the
+        # envelope, e.g. in its time stamp, stays as it is)
+        at = request.rindex(b"\x05\x06\x07")
+        changed = request[:at] + b"\x04" + request[at + 1:]
+        calls.arrived(service.answer(changed, floor.REQUESTER))
         return await waiting
 
     final = asyncio.run(route())

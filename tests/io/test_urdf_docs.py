@@ -17,16 +17,15 @@ def test_import_examples_run(capsys: pytest.CaptureFixture[str]) -> None:
     from plugcell.apps.cli import main
 
     block = re.findall(r"```sh\n(.*?)```", DOC.read_text(encoding="utf-8"), flags=re.S)[0]
-    env: dict[str, str] = {}
+    env: dict[str, str] = {"PLUGCELL_DATA": str(shared_dir() / "data")}
     ran = 0
     for line in block.splitlines():
-        line = line.replace("../shared", str(shared_dir()))
+        for k, v in env.items():
+            line = line.replace(f"${k}", v)
         if "=" in line.split()[0] and not line.startswith("plugcell"):
             k, v = line.split("=", 1)
             env[k] = v
             continue
-        for k, v in env.items():
-            line = line.replace(f"${k}", v)
         argv = shlex.split(line)
         assert argv[0] == "plugcell"
         assert main(argv[1:]) == 0, line

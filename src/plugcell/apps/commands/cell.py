@@ -218,9 +218,12 @@ async def _wire(args: argparse.Namespace) -> tuple[bool, str]:
             command = "Wire" if args.subscribe else "Unwire"
             return await _via(client, args, command, "", [args.service, args.partner])
         # both may still be starting (a robot service starts its controller first): wait
-        # for them as `plugcell call` waits for its service (`serve … &` then `wire`)
-        for name in (args.service, args.partner):
-            await client.wait_for(name, args.timeout)
+        # for them as `plugcell call` waits for its service (`serve … &` then `wire`); a
+        # partner to drop may have left the cell
+        await client.wait_for(args.service, args.timeout)
+        if args.subscribe and not await client.wait_for(args.partner, args.timeout):
+            return False, (f"unknown device {args.partner!r}: no such service in cell "
+                           f"{cell_of(args)!r} (waited {args.timeout:g} s)")
         response = await client.ask_subscribe(args.service, args.partner, args.subscribe,
                                               args.timeout)
         return response.ok, response.reason
