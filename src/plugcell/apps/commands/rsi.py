@@ -20,9 +20,9 @@ axes.
 from __future__ import annotations
 
 import argparse
-import json
-import time
 from pathlib import Path
+
+from .streaming import run_link, sine_or_hold
 
 
 def _stream_args(p: argparse.ArgumentParser) -> None:
@@ -144,61 +144,24 @@ def _files(args: argparse.Namespace) -> int:
 
 
 def _source(args: argparse.Namespace):
-    from plugcell.apps.cli import CommandError
     from plugcell.devices.robot.rsi.codec import CARTESIAN_AXES, JOINT_AXES
-    from plugcell.devices.robot.stream.source import Hold, SineOffset
     from plugcell.io.units import DEG, M_PER_MM
 
-    if not args.sine:
-        return Hold()
-    try:
-        axis, amplitude, period = args.sine.split(":")
-        amplitude_v, period_v = float(amplitude), float(period)
-    except ValueError:
-        raise CommandError(f"--sine {args.sine!r}: expected AXIS:AMPLITUDE:PERIOD") from None
-    axes = JOINT_AXES if args.correction == "joint" else CARTESIAN_AXES
-    if axis not in axes:
-        raise CommandError(f"--sine: axis {axis!r} is not one of {', '.join(axes)}")
-    i = axes.index(axis)
-    unit = M_PER_MM if args.correction == "cartesian" and i < 3 else DEG
-    if period_v <= 0:
-        raise CommandError(f"--sine: the period must be > 0, got {period_v}")
-    return SineOffset(i, amplitude_v * unit, period_v)
+    def unit(i: int) -> float:
+        return M_PER_MM if args.correction == "cartesian" and i < 3 else DEG
+
+    return sine_or_hold(args.sine, JOINT_AXES if args.correction == "joint"
+                        else CARTESIAN_AXES, unit)
 
 
 def _run(args: argparse.Namespace) -> int:
     from plugcell.apps.cli import CommandError
-    from plugcell.devices.robot.rsi import RsiLink, StreamStoppedError
+    from plugcell.devices.robot.rsi import RsiLink
 
     config = _config(args, args.robot_ip, args.listen)
     try:
         link = RsiLink(config, _source(args), rt_priority=args.rt_priority)
     except ValueError as exc:
         raise CommandError(str(exc)) from None
-    host, port = link.start()
-    time.sleep(0.01)  # the thread has set its scheduling
-    print(f"listening on {host}:{port} for the robot at {args.robot_ip} "
-          f"({config.correction}, {config.mode}, {config.cycle}; {link.rt_note})", flush=True)
-    end = time.monotonic() + args.duration if args.duration > 0 else None
-    failed = None
-    try:
-        while end is None or time.monotonic() < end:
-            time.sleep(1.0)
-            st = link.stats()
-            if args.json:
-                print(json.dumps({**st.__dict__, "failure": str(link.failure or "")}),
-                      flush=True)
-            else:
-                print(f"received {st.received} answered {st.answered} late {st.late} "
-                      f"missed {st.missed} dropped {sum(st.dropped.values())} clamped "
-                      f"{st.clamped} controller Delay {st.controller_late} max latency "
-                      f"{st.max_latency_ns / 1e6:.3f} ms", flush=True)
-            if link.failure is not None and link.failure is not failed:
-                failed = link.failure
-                print(f"stream failed: {failed}", flush=True)
-    finally:
-        link.close()
-    # the controller ending the stream (program stopped: silence) is how a run ends; a
-    # late PC, a refused correction or the controller's Timeout is a failure
-    silent = isinstance(failed, StreamStoppedError) and "no packet" in str(failed)
-    return 1 if failed is not None and not silent else 0
+    return run_link(link, args, f"{config.correction}, {config.mode}, {config.cycle}",
+                    controller_delay=True)

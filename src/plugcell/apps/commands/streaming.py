@@ -1,0 +1,110 @@
+"""What ``plugcell rsi run`` and ``plugcell egm run`` share: the first-contact correction
+source (``--sine AXIS:AMPLITUDE:PERIOD``, else hold) and the run itself (start the link,
+print its counters every second, end on ``--duration`` or a failure)."""
+
+from __future__ import annotations
+
+import argparse
+import json
+import time
+from collections.abc import Callable, Sequence
+from typing import Any
+
+
+def sine_or_hold(sine: str | None, axes: Sequence[str], unit: Callable[[int], float],
+                 allowed: Callable[[int], str] = lambda i: "") -> Any:
+    """``Hold()``, or a ``SineOffset`` for ``--sine AXIS:AMPLITUDE:PERIOD``.
+
+    Parameters
+    ----------
+    sine : str or None
+        The option's text (None or empty: hold).
+    axes : sequence of str
+        The axis names of the stream's mode (``A1``…``A6`` or ``X``…``C``).
+    unit : callable
+        SI per unit of the amplitude of axis ``i`` (m per mm, rad per degree).
+    allowed : callable
+        Why axis ``i`` cannot swing in this mode ("" if it can).
+
+    Returns
+    -------
+    CorrectionSource
+        The source the link asks each cycle.
+
+    Raises
+    ------
+    CommandError
+        A malformed option, an unknown axis, a period ≤ 0 (one line naming it).
+    """
+    from plugcell.apps.cli import CommandError
+    from plugcell.devices.robot.stream.source import Hold, SineOffset
+
+    if not sine:
+        return Hold()
+    try:
+        axis, amplitude, period = sine.split(":")
+        amplitude_v, period_v = float(amplitude), float(period)
+    except ValueError:
+        raise CommandError(f"--sine {sine!r}: expected AXIS:AMPLITUDE:PERIOD") from None
+    if axis not in axes:
+        raise CommandError(f"--sine: axis {axis!r} is not one of {', '.join(axes)}")
+    i = list(axes).index(axis)
+    if why := allowed(i):
+        raise CommandError(f"--sine: {why}")
+    if period_v <= 0:
+        raise CommandError(f"--sine: the period must be > 0, got {period_v}")
+    return SineOffset(i, amplitude_v * unit(i), period_v)
+
+
+def run_link(link: Any, args: argparse.Namespace, what: str, *,
+             controller_delay: bool = False) -> int:
+    """Start ``link``, print its counters each second until ``--duration`` (0: until
+    Ctrl-C), then close it.
+
+    Parameters
+    ----------
+    link : StreamLink
+        An RSI or EGM link, not started.
+    args : argparse.Namespace
+        ``robot_ip``, ``duration`` (s) and ``json``.
+    what : str
+        The stream's settings for the first line (mode, cycle …).
+    controller_delay : bool
+        Print the controller's own count of late answers (RSI's ``<Delay>``).
+
+    Returns
+    -------
+    int
+        0, or 1 if the stream failed other than by the controller going silent (its
+        program stopped: how a run ends).
+    """
+    from plugcell.devices.robot.stream.errors import StreamStoppedError
+
+    host, port = link.start()
+    time.sleep(0.01)  # the thread has set its scheduling
+    print(f"listening on {host}:{port} for the robot at {args.robot_ip} ({what}; "
+          f"{link.rt_note})", flush=True)
+    end = time.monotonic() + args.duration if args.duration > 0 else None
+    failed = None
+    try:
+        while end is None or time.monotonic() < end:
+            time.sleep(1.0)
+            st = link.stats()
+            if args.json:
+                print(json.dumps({**st.__dict__, "failure": str(link.failure or "")}),
+                      flush=True)
+            else:
+                delay = f" controller Delay {st.controller_late}" if controller_delay else ""
+                print(f"received {st.received} answered {st.answered} late {st.late} "
+                      f"missed {st.missed} dropped {sum(st.dropped.values())} clamped "
+                      f"{st.clamped}{delay} max latency {st.max_latency_ns / 1e6:.3f} ms",
+                      flush=True)
+            if link.failure is not None and link.failure is not failed:
+                failed = link.failure
+                print(f"stream failed: {failed}", flush=True)
+    finally:
+        link.close()
+    # the controller ending the stream (program stopped: silence) is how a run ends; a
+    # late PC, a refused correction or the controller's Timeout is a failure
+    silent = isinstance(failed, StreamStoppedError) and "no packet" in str(failed)
+    return 1 if failed is not None and not silent else 0
