@@ -89,8 +89,10 @@ def test_a_pinned_zenoh_thread_keeps_its_state_from_one_callback_to_the_next() -
         counts = [count for t, count in pinned if t == tid]
         assert counts == list(range(len(counts)))
     assert max(count for _, count in pinned) >= 1
-    # and it stays: later callbacks on a pinned thread, pinning or not, find the state
-    assert any(count > 0 for tid, count in again if tid in pinned_threads)
+    # and it stays: every later callback on a pinned thread, pinning or not, finds the
+    # state (which of Zenoh's threads run the later phase is Zenoh's choice: it failed
+    # ~1 run in 3 when the test asked that at least one did)
+    assert all(count > 0 for tid, count in again if tid in pinned_threads)
 
 
 def _record_pins(monkeypatch: pytest.MonkeyPatch) -> list[int]:
