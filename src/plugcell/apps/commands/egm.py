@@ -21,7 +21,13 @@ import argparse
 from pathlib import Path
 
 from .rsi import _six
-from .streaming import run_link, sine_or_hold
+from .streaming import (
+    add_limit_options,
+    add_run_controls,
+    add_run_options,
+    run_link,
+    sine_or_hold,
+)
 
 AXES = {"joint": ("A1", "A2", "A3", "A4", "A5", "A6"),
         "cartesian": ("X", "Y", "Z", "RX", "RY", "RZ")}
@@ -35,12 +41,7 @@ def _stream_args(p: argparse.ArgumentParser) -> None:
     p.add_argument("--sample-ms", type=int, default=4, help="\\SampleRate in ms (4)")
     p.add_argument("--timeout", type=float, default=1.0,
                    help="EGMSetupUC's \\CommTimeout in seconds (1)")
-    for name, what in (("step", "per cycle"), ("offset", "in total"), ("speed", "per second")):
-        p.add_argument(f"--max-{name}", metavar="V[,V…]",
-                       help=f"largest offset change {what}: deg (joint) or mm,…,deg (pose)")
-    p.add_argument("--refuse", action="store_true",
-                   help="refuse (hold and fail) a target beyond the limits instead of "
-                   "clamping it")
+    add_limit_options(p, "offset change", "deg (joint) or mm,…,deg (pose)")
 
 
 def configure(p: argparse.ArgumentParser) -> None:
@@ -57,17 +58,9 @@ def configure(p: argparse.ArgumentParser) -> None:
     _stream_args(f)
     f.set_defaults(func=_files)
     r = sub.add_parser("run", help="answer the robot: hold it, or swing one axis")
-    r.add_argument("--robot-ip", required=True, help="the controller's address")
-    r.add_argument("--listen", default="0.0.0.0", help="address to listen on")
+    add_run_options(r, "the controller's address")
     _stream_args(r)
-    r.add_argument("--sine", metavar="AXIS:AMPLITUDE:PERIOD",
-                   help="swing one axis once: e.g. A6:2:4 (2° over 4 s) or Z:5:4 (5 mm)")
-    r.add_argument("--duration", type=float, default=0.0,
-                   help="seconds to run (default: until interrupted)")
-    r.add_argument("--rt-priority", type=int, metavar="N",
-                   help="run the link's thread under SCHED_FIFO priority N (1-99; Linux, "
-                   "root or CAP_SYS_NICE)")
-    r.add_argument("--json", action="store_true", help="print the counters as JSON lines")
+    add_run_controls(r)
     r.set_defaults(func=_run)
 
 

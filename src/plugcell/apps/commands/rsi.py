@@ -22,7 +22,13 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from .streaming import run_link, sine_or_hold
+from .streaming import (
+    add_limit_options,
+    add_run_controls,
+    add_run_options,
+    run_link,
+    sine_or_hold,
+)
 
 
 def _stream_args(p: argparse.ArgumentParser) -> None:
@@ -36,12 +42,7 @@ def _stream_args(p: argparse.ArgumentParser) -> None:
     p.add_argument("--timeout", type=int, default=100,
                    help="the ETHERNET object's Timeout: late packets before RSI stops")
     p.add_argument("--sentype", default="ImFree", help="SENTYPE (default ImFree)")
-    for name, what in (("step", "per cycle"), ("offset", "in total"), ("speed", "per second")):
-        p.add_argument(f"--max-{name}", metavar="V[,V…]",
-                       help=f"largest correction {what}: deg (joint) or mm,…,deg (Cartesian)")
-    p.add_argument("--refuse", action="store_true",
-                   help="refuse (hold and fail) a correction beyond the limits instead of "
-                   "clamping it")
+    add_limit_options(p, "correction", "deg (joint) or mm,…,deg (Cartesian)")
     p.add_argument("--dio", type=int, metavar="OUT",
                    help="route a 16-bit output word DiO to $OUT[OUT…OUT+15]")
 
@@ -61,17 +62,9 @@ def configure(p: argparse.ArgumentParser) -> None:
                    help="report a 16-bit input word DiL from $IN[IN…IN+15]")
     f.set_defaults(func=_files)
     r = sub.add_parser("run", help="answer the robot: hold it, or swing one axis")
-    r.add_argument("--robot-ip", required=True, help="the controller's RSI address")
-    r.add_argument("--listen", default="0.0.0.0", help="address to listen on")
+    add_run_options(r, "the controller's RSI address")
     _stream_args(r)
-    r.add_argument("--sine", metavar="AXIS:AMPLITUDE:PERIOD",
-                   help="swing one axis once: e.g. A6:2:4 (2° over 4 s) or Z:5:4 (5 mm)")
-    r.add_argument("--duration", type=float, default=0.0,
-                   help="seconds to run (default: until interrupted)")
-    r.add_argument("--rt-priority", type=int, metavar="N",
-                   help="run the link's thread under SCHED_FIFO priority N (1-99; Linux, "
-                   "root or CAP_SYS_NICE)")
-    r.add_argument("--json", action="store_true", help="print the counters as JSON lines")
+    add_run_controls(r)
     r.set_defaults(func=_run)
 
 

@@ -11,6 +11,37 @@ from collections.abc import Callable, Sequence
 from typing import Any
 
 
+def add_limit_options(p: argparse.ArgumentParser, what: str, units: str) -> None:
+    """``--max-step``, ``--max-offset``, ``--max-speed`` (one number or six, in ``units``)
+    and ``--refuse``: the limits every correction of a stream is held to."""
+    for name, when in (("step", "per cycle"), ("offset", "in total"), ("speed", "per second")):
+        p.add_argument(f"--max-{name}", metavar="V[,V…]",
+                       help=f"largest {what} {when}: {units}")
+    p.add_argument("--refuse", action="store_true",
+                   help=f"refuse (hold and fail) any {what} beyond the limits instead of "
+                   "clamping it")
+
+
+def add_run_options(p: argparse.ArgumentParser, robot: str) -> None:
+    """The options of ``run`` before the stream's own: the robot's address
+    (``robot``: what to call it) and where to listen."""
+    p.add_argument("--robot-ip", required=True, help=robot)
+    p.add_argument("--listen", default="0.0.0.0", help="address to listen on")
+
+
+def add_run_controls(p: argparse.ArgumentParser) -> None:
+    """The options of ``run`` after the stream's own: what to send (``--sine``), for how
+    long, at which priority, and how to print the counters."""
+    p.add_argument("--sine", metavar="AXIS:AMPLITUDE:PERIOD",
+                   help="swing one axis once: e.g. A6:2:4 (2° over 4 s) or Z:5:4 (5 mm)")
+    p.add_argument("--duration", type=float, default=0.0,
+                   help="seconds to run (default: until interrupted)")
+    p.add_argument("--rt-priority", type=int, metavar="N",
+                   help="run the link's thread under SCHED_FIFO priority N (1-99; Linux, "
+                   "root or CAP_SYS_NICE)")
+    p.add_argument("--json", action="store_true", help="print the counters as JSON lines")
+
+
 def sine_or_hold(sine: str | None, axes: Sequence[str], unit: Callable[[int], float],
                  allowed: Callable[[int], str] = lambda i: "") -> Any:
     """``Hold()``, or a ``SineOffset`` for ``--sine AXIS:AMPLITUDE:PERIOD``.
