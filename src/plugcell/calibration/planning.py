@@ -105,6 +105,7 @@ __all__ = [
     "Visibility",
     "criterion_value",
     "filter_candidates",
+    "joint_tour",
     "planning_keys",
     "sample_candidates",
 ]
@@ -895,23 +896,41 @@ def _outer(A: Array, B: Array) -> Array:
     return np.einsum("cik,cjk->cij", A, B, optimize=True)
 
 
+def joint_tour(q: ArrayLike) -> NDArray[np.int64]:
+    """A measuring order of joint configurations: a nearest-neighbour tour in joint
+    space, the distance of two poses their largest joint move (the move's time at one
+    joint speed), from the pose nearest the mean.
+
+    Parameters
+    ----------
+    q : array_like, shape (C, n)
+        Joint configurations (rad).
+
+    Returns
+    -------
+    ndarray of int, shape (C,)
+        The indices of ``q`` in measuring order.
+    """
+    q = np.asarray(q, dtype=float)
+    if len(q) == 0:
+        return np.zeros(0, dtype=np.int64)
+    cur = int(np.argmin(np.max(np.abs(q - q.mean(axis=0)), axis=1)))
+    left = set(range(len(q)))
+    left.remove(cur)
+    order = [cur]
+    while left:
+        rest = np.array(sorted(left))
+        cur = int(rest[np.argmin(np.max(np.abs(q[rest] - q[cur]), axis=1))])
+        left.remove(cur)
+        order.append(cur)
+    return np.asarray(order, dtype=np.int64)
+
+
 def _measuring_order(candidates: Candidates, sel: Array) -> NDArray[np.int64]:
     """``sel`` ordered for measuring: grouped by payload (ascending: one payload change
-    per group), inside a group a nearest-neighbour tour in joint space (largest joint
-    move, as the move time) from the pose nearest the group's mean."""
+    per group), inside a group a :func:`joint_tour`."""
     out: list[int] = []
     for m in np.unique(candidates.payload_kg[sel]):
         group = [int(i) for i in sel if candidates.payload_kg[i] == m]
-        q = candidates.q[group]
-        start = int(np.argmin(np.max(np.abs(q - q.mean(axis=0)), axis=1)))
-        left = set(range(len(group)))
-        cur = start
-        left.remove(cur)
-        order = [cur]
-        while left:
-            rest = np.array(sorted(left))
-            cur = int(rest[np.argmin(np.max(np.abs(q[rest] - q[cur]), axis=1))])
-            left.remove(cur)
-            order.append(cur)
-        out += [group[o] for o in order]
+        out += [group[o] for o in joint_tour(candidates.q[group])]
     return np.asarray(out, dtype=np.int64)

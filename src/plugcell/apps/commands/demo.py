@@ -32,6 +32,10 @@ def configure(p: argparse.ArgumentParser) -> None:
     p.add_argument("--seed", type=int, default=0, help="seed of the twins (default: 0)")
     p.add_argument("--speed", type=float, default=None,
                    help="simulated seconds per real second (default 20; --fast 50)")
+    p.add_argument("--link", choices=("serial", "rsi"), default="serial",
+                   help="how H4's programs reach the arm: serial (the simulated controller "
+                   "runs them, default) or rsi (they run on the PC and every move streams "
+                   "over KUKA RSI to the twin, in real time: step 1 only)")
     p.add_argument("--json", action="store_true", help="print the final table as JSON")
     p.set_defaults(func=_demo)
 
@@ -41,13 +45,17 @@ def _demo(args: argparse.Namespace) -> int:
 
     from plugcell.apps.cli import CommandError
     from plugcell.apps.commands.progress import ProgressBar
+    from plugcell.apps.demo.processes import ServiceStartError
     from plugcell.apps.demo.services import DemoConfig, DemoError, run_demo
 
-    cfg = DemoConfig.fast(args.seed) if args.fast else DemoConfig(seed=args.seed)
+    cfg = (DemoConfig.fast if args.fast else DemoConfig.full)(args.seed, args.link)
     if args.speed is not None:
         if not args.speed > 0:
             raise CommandError(f"--speed must be positive, not {args.speed}")
-        cfg = replace(cfg, speed=args.speed)
+        try:
+            cfg = replace(cfg, speed=args.speed)
+        except ValueError as exc:
+            raise CommandError(f"--speed: {exc}") from None
 
     def say(text: str) -> None:
         if not args.json:
@@ -59,7 +67,7 @@ def _demo(args: argparse.Namespace) -> int:
         stream = sys.stderr if args.json else sys.stdout
         result = run_demo(cfg, args.out.resolve(), say,
                           progress=lambda label: ProgressBar(f"   {label}", stream=stream))
-    except DemoError as exc:
+    except (DemoError, ServiceStartError) as exc:
         raise CommandError(f"demo: {exc}") from None
     report = args.out / "report.html"
     report.write_text(_html(result, _plot(result, args.out / "errors.png")))
@@ -73,12 +81,18 @@ def _demo(args: argparse.Namespace) -> int:
 
 
 def _rows(r: dict[str, Any]) -> list[tuple[str, str, str]]:
-    c, k, d = r["calibration"], r["compensation"], r["demonstration"]
-    return [
+    c = r["calibration"]
+    rows = [
         ("calibration: validation mean (mm), model 5, 36 kg", f"{c['validation']['mean_mm']:.3f}",
          "0.363 (Table 8-3)"),
         ("calibration: validation max (mm)", f"{c['validation']['max_mm']:.3f}", "—"),
         ("identification time (s)", f"{c['identification_s']:.2f}", "minutes (Matlab)"),
+    ]
+    if "compensation" not in r:  # over RSI: step 1 only
+        return [*rows, ("calibration: campaign wall time (s)", f"{c['wall_s']:.1f}", "—")]
+    k, d = r["compensation"], r["demonstration"]
+    return [
+        *rows,
         ("8.3: 3σ position after model (mm)", f"{k['sigma3_position_mm']['model']:.3f}",
          "0.87 (Table 8-5)"),
         ("8.3: 3σ position after sensor (mm)", f"{k['sigma3_position_mm']['sensor']:.3f}",
@@ -111,6 +125,8 @@ def _plot(result: dict[str, Any], path: Path) -> str | None:
         import matplotlib.pyplot as plt
     except ImportError:
         return None
+    if "compensation" not in result:  # over RSI: no per-target errors
+        return None
     fig, axes = plt.subplots(2, 1, figsize=(9, 6.5))
     for ax, (key, title) in zip(axes, (("compensation", "8.3: line test"),
                                        ("demonstration", "8.4: stabiliser holes")),
@@ -140,6 +156,7 @@ def _html(result: dict[str, Any], plot: str | None = None) -> str:
             f"{body}</table>"
             + (f"<h2>Position error per target</h2><img src='{html.escape(plot)}' "
                "alt='position error per target, each stage'>" if plot else
-               "<p>(pip install plugcell[plots] for the plots)</p>")
+               "<p>(pip install plugcell[plots] for the plots)</p>" if "compensation" in result
+               else "")
             + "<h2>Everything</h2><pre>"
             f"{html.escape(json.dumps(result, indent=2, default=float))}</pre>")

@@ -13,6 +13,7 @@ import numpy as np
 from plugcell.apps.commands.deprecated import DeprecatedName
 from plugcell.apps.commands.progress import ProgressBar
 from plugcell.apps.commands.robotargs import add_robot_args
+from plugcell.apps.commands.twin_robot import configure_rsi
 
 
 def configure(p: argparse.ArgumentParser) -> None:
@@ -25,9 +26,8 @@ def configure(p: argparse.ArgumentParser) -> None:
                        help="shipped robot name (default: smart_h4), a description file "
                        "(.toml) or a URDF/xacro file; a robot without a twin profile of its "
                        "own gets an estimated one (docs/twin.md)")
-        q.add_argument(
-            "--seed", type=int, default=0, help="seed of the twin's hidden errors (default: 0)"
-        )
+        q.add_argument("--seed", type=int, default=0,
+                       help="seed of the twin's hidden errors (default: 0)")
         q.add_argument(
             "--scenario", type=Path, help="scenario JSON file (overrides --robot/--seed)"
         )
@@ -114,6 +114,7 @@ def configure(p: argparse.ArgumentParser) -> None:
                    help="the hall's temperature (°C; default: the reference 20 °C, no drift)")
     n.add_argument("--out", type=Path, required=True, help="nest file to write: name,x,y,z (mm)")
     n.set_defaults(func=_nests)
+    configure_rsi(tw, common, _rsi)
 
 
 def _scenario(args: argparse.Namespace):
@@ -139,6 +140,12 @@ def _scenario(args: argparse.Namespace):
         return TwinScenario(robot=args.robot, seed=args.seed)
     except (ScenarioError, DescriptionError) as exc:
         raise CommandError(str(exc)) from None
+
+
+def _rsi(args: argparse.Namespace) -> int:
+    from plugcell.apps.commands.twin_robot import run_rsi
+
+    return run_rsi(args, _scenario(args))
 
 
 #: The robot the thesis's figures (4.03 mm, 0.5/1.0 mm deflection, …) were measured on.

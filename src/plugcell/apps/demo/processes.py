@@ -27,20 +27,25 @@ class ServiceStartError(RuntimeError):
 
 
 class _Service:
-    def __init__(self, name: str, argv: list[str], env: dict[str, str]) -> None:
+    def __init__(self, name: str, argv: list[str], env: dict[str, str],
+                 ready: str = READY) -> None:
         self.name = name
+        self.marker = ready
         self.popen = subprocess.Popen(argv, stdin=subprocess.DEVNULL, stdout=subprocess.PIPE,
                                       stderr=subprocess.PIPE, text=True, env=env,
                                       start_new_session=True)
         self.ready = threading.Event()
         self.errors: list[str] = []
-        threading.Thread(target=self._read_stdout, daemon=True).start()
+        self.output: list[str] = []  # the last lines it printed
+        self.reader = threading.Thread(target=self._read_stdout, daemon=True)
+        self.reader.start()
         threading.Thread(target=self._read_stderr, daemon=True).start()
 
     def _read_stdout(self) -> None:
         assert self.popen.stdout is not None
         for line in self.popen.stdout:
-            if READY in line:
+            self.output = [*self.output[-30:], line.rstrip()]
+            if self.marker in line:
                 self.ready.set()
 
     def _read_stderr(self) -> None:
@@ -79,6 +84,12 @@ class CellProcesses:
             argv += ["--param", f"{key}={value}"]
         self.services.append(_Service(name, argv, self.env))
 
+    def run(self, name: str, args: list[str], ready: str) -> None:
+        """Start ``plugcell ARGS…`` (a simulated device that is no service, e.g. the twin's
+        RSI side), ready when it prints ``ready`` (not waited for)."""
+        self.services.append(_Service(name, [sys.executable, "-m", "plugcell", *args],
+                                      self.env, ready))
+
     def wait_ready(self, timeout: float = 60.0) -> None:
         """Until every service serves; ServiceStartError with the reason otherwise."""
         deadline = time.monotonic() + timeout
@@ -94,6 +105,15 @@ class CellProcesses:
     def stop_all(self) -> None:
         for service in reversed(self.services):
             service.stop()
+
+    def stop(self, name: str) -> list[str]:
+        """Stop one process; the last lines it printed."""
+        for service in self.services:
+            if service.name == name:
+                service.stop()
+                service.reader.join(5.0)  # its last lines
+                return list(service.output)
+        raise KeyError(name)
 
     def __enter__(self) -> CellProcesses:
         return self

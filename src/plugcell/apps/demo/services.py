@@ -24,12 +24,19 @@ What the simulation knows and the programs do not: the twins' hidden geometry. T
 BASE and PROBE *estimates* the calibration program starts from are the truth
 disturbed as appendix D's procedures leave them (about 1 mm, 0.02°); the part is
 placed 2 mm and 0.2° off its CAD position.
+
+With ``link="rsi"`` (``plugcell demo --link rsi``) step 1 runs with the program on the
+PC: H4's robot service streams every move over KUKA RSI (``rsi=HOST:PORT``, the PC
+drives) to the twin's RSI robot side in a process of its own (``plugcell twin rsi``:
+the dynamic twin, moving in real time), which publishes its T-MAC as it moves; the
+tracker measures it as before.  Real time, one robot, calibration and validation only.
 """
 
 from __future__ import annotations
 
 import json
 import os
+import socket
 import time
 from collections.abc import Callable
 from dataclasses import asdict, dataclass, field
@@ -40,6 +47,7 @@ import numpy as np
 
 from plugcell.apps.demo.processes import CellProcesses
 from plugcell.apps.reproduce.compensation_8_3 import ExperimentConfig, line_targets
+from plugcell.calibration.planning import joint_tour
 from plugcell.devices.robot.value_text import numbers_text, rows_text
 from plugcell.devices.tracker.frames import matrix_from_vector, vector_from_matrix
 from plugcell.framework import BlockingClient, ProcessStates, from_data
@@ -47,6 +55,7 @@ from plugcell.framework.journal import journal_files, read_journal
 from plugcell.kinematics.pose_error import pose_error_exact
 from plugcell.kinematics.rotations import zyz_to_matrix
 from plugcell.metrology import accuracy_statistics
+from plugcell.sim.controller.rsi_twin import BANNER as RSI_TWIN_READY
 from plugcell.sim.twin.campaign import working_volume_joints
 from plugcell.sim.twin.robot import RobotTwin
 from plugcell.sim.twin.scenario import TwinScenario
@@ -69,13 +78,32 @@ THESIS = {
 }
 
 
+#: How H4's programs reach the arm: the simulated controller over a serial line, or the
+#: program on the PC streaming over KUKA RSI to the twin's RSI side.
+LINKS = ("serial", "rsi")
+#: How long the twin's RSI side waits for each answer in the demo (``plugcell twin rsi
+#: --lockstep``): a shared machine that is not real-time answers late often (docs/kuka-rsi.md,
+#: Performance), and every late answer shakes the arm — the controller holds the last
+#: correction for that cycle, a velocity impulse that rings the arm's modes by
+#: millimetres.  The demo shows the cell with a real-time PC.
+RSI_LOCKSTEP_S = 1.0
+#: The RSI ``Timeout`` of the twin and the service in the demo: a shared, loaded machine
+#: answers late often (docs/kuka-rsi.md, Performance); the demo must not stop for it
+#: (10 000, the largest the ETHERNET object takes: 40 s of late answers).
+RSI_TIMEOUT = 10_000
+
+
 class DemoError(RuntimeError):
     """A step of the demonstration failed; the message says which and why."""
 
 
 @dataclass(frozen=True)
 class DemoConfig:
-    """Sizes and speed (defaults: the full run of issue 9; :meth:`fast` for CI)."""
+    """Sizes and speed (defaults: the full run of issue 9; :meth:`fast` for CI).
+
+    ``link="rsi"``: H4 over RSI in real time (``speed`` 1), calibration and validation
+    only, measuring ``measure_ms`` at each pose; ``joint_speed`` (°/s) is the PC's
+    planner's joint speed limit."""
 
     seed: int = 0
     speed: float = 20.0
@@ -85,11 +113,30 @@ class DemoConfig:
     bars: int = 4
     holes_per_bar: int = 6
     watch_period_ms: int = 3000
+    link: str = "serial"
+    measure_ms: int = 1000
+    joint_speed: float = 40.0
+
+    def __post_init__(self) -> None:
+        if self.link not in LINKS:
+            raise ValueError(f"link {self.link!r}: expected one of {', '.join(LINKS)}")
+        if self.link == "rsi" and self.speed != 1.0:
+            raise ValueError(f"over RSI the twin moves in real time: speed must be 1, not "
+                             f"{self.speed:g}")
 
     @classmethod
-    def fast(cls, seed: int = 0) -> DemoConfig:
+    def fast(cls, seed: int = 0, link: str = "serial") -> DemoConfig:
+        if link == "rsi":
+            return cls(seed=seed, speed=1.0, link=link, calibration_poses=12,
+                       validation_poses=6, measure_ms=200, joint_speed=60.0)
         return cls(seed=seed, speed=50.0, calibration_poses=50, validation_poses=20,
                    line_test=ExperimentConfig.fast(), bars=2)
+
+    @classmethod
+    def full(cls, seed: int = 0, link: str = "serial") -> DemoConfig:
+        if link == "rsi":
+            return cls(seed=seed, speed=1.0, link=link)
+        return cls(seed=seed)
 
 
 class _Cell:
@@ -198,7 +245,8 @@ def _stabiliser(desc_probe: np.ndarray, bars: int, per_bar: int,
 
 def run_demo(cfg: DemoConfig, out: Path, say: Callable[[str], None],
              progress: ProgressFactory | None = None) -> dict[str, Any]:
-    """Run the three steps over service processes; the result table (also in out/)."""
+    """Run the three steps over service processes (over RSI: step 1); the result table
+    (also in out/)."""
     out.mkdir(parents=True, exist_ok=True)
     home = out / "home"
     cell_name = f"demo{os.getpid()}"
@@ -209,39 +257,69 @@ def run_demo(cfg: DemoConfig, out: Path, say: Callable[[str], None],
     h4_truth, kuka_truth = h4.reveal_truth(), kuka.reveal_truth()
     result: dict[str, Any] = {"config": {**asdict(cfg), "line_test": cfg.line_test.as_dict()},
                               "cell": cell_name, "thesis": THESIS}
-
+    robots = ("H4",) if cfg.link == "rsi" else ("H4", "KUKA")
     wiring = out / "cell.json"
     wiring.write_text(json.dumps({
         "format": "plugcell-cell-wiring", "version": 1, "cell": cell_name,
-        "wires": [{"service": r, "partner": p} for r in ("H4", "KUKA")
+        "wires": [{"service": r, "partner": p} for r in robots
                   for p in ("TRACKER", "COMPUTE")]}, indent=2))
-    say(f"== cell {cell_name}: TRACKER, COMPUTE, H4 (Smart H4, 36 kg), KUKA (elbow), "
-        f"CONTROLLER (wiring {wiring}) — each its own process ==")
     with CellProcesses(cell_name, home) as procs:
-        procs.serve("tracker", "TRACKER", seed=cfg.seed + 7, time_scale=1.0 / cfg.speed)
-        procs.serve("compute", "COMPUTE")
-        for name, robot, seed, payload in (("H4", "smart_h4", cfg.seed, PAYLOAD_KG),
-                                           ("KUKA", "elbow6", cfg.seed + 1, 0.0)):
-            procs.serve("robot", name, sim="true", robot=robot, seed=seed,
-                        payload_kg=payload, speed=cfg.speed, link_baud=19200)
-        procs.serve("controller", "CONTROLLER", wiring=wiring)
-        procs.wait_ready()
+        _start_cell(procs, cfg, wiring, say)
         with BlockingClient("DEMO", cell=cell_name) as client:
             cell = _Cell(client, procs, progress)
-            _wait_wired(client)
-            say("   wired by the controller from the cell file: H4, KUKA → TRACKER, COMPUTE")
+            _wait_wired(client, robots)
+            say(f"   wired by the controller from the cell file: {', '.join(robots)} → "
+                "TRACKER, COMPUTE")
             _calibrate(cell, cfg, h4, rng, result, say)
-            _compensate(cell, cfg, h4_truth.probe, result, say)
-            _demonstrate(cell, cfg, h4_truth, kuka_truth, rng, result, say, client)
+            if cfg.link == "serial":
+                _compensate(cell, cfg, h4_truth.probe, result, say)
+                _demonstrate(cell, cfg, h4_truth, kuka_truth, rng, result, say, client)
             result["journal"] = [str(p) for p in journal_files(cell_name, home)]
     result["wall_time_s"] = time.monotonic() - wall0
     (out / "demo.json").write_text(json.dumps(result, indent=2, default=float))
     return result
 
 
-def _wait_wired(client: BlockingClient, timeout: float = 30.0) -> None:
+def _free_udp_port() -> int:
+    """A UDP port on loopback that is free now (where H4's service receives RSI)."""
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as sock:
+        sock.bind(("127.0.0.1", 0))
+        return int(sock.getsockname()[1])
+
+
+def _start_cell(procs: CellProcesses, cfg: DemoConfig, wiring: Path,
+                say: Callable[[str], None]) -> None:
+    """Start the cell's processes and wait until each serves."""
+    procs.serve("tracker", "TRACKER", seed=cfg.seed + 7, time_scale=1.0 / cfg.speed)
+    procs.serve("compute", "COMPUTE")
+    if cfg.link == "rsi":
+        port = _free_udp_port()
+        say(f"== cell {procs.cell}: TRACKER, COMPUTE, H4 (Smart H4, 36 kg: the program on "
+            f"the PC, every move streamed over KUKA RSI to 127.0.0.1:{port}), the twin's RSI "
+            f"side (plugcell twin rsi), CONTROLLER (wiring {wiring}) — each its own "
+            "process ==")
+        procs.run("H4-TWIN", ["twin", "rsi", "--port", str(port), "--robot", "smart_h4",
+                              "--seed", str(cfg.seed), "--payload-kg", f"{PAYLOAD_KG:g}",
+                              "--timeout", str(RSI_TIMEOUT), "--lockstep",
+                              f"{RSI_LOCKSTEP_S:g}", "--reflector", "H4",
+                              "--cell", procs.cell], RSI_TWIN_READY)
+        procs.serve("robot", "H4", rsi=f"127.0.0.1:{port}", robot="smart_h4",
+                    rsi_timeout=RSI_TIMEOUT, joint_speed=cfg.joint_speed)
+    else:
+        say(f"== cell {procs.cell}: TRACKER, COMPUTE, H4 (Smart H4, 36 kg), KUKA (elbow), "
+            f"CONTROLLER (wiring {wiring}) — each its own process ==")
+        for name, robot, seed, payload in (("H4", "smart_h4", cfg.seed, PAYLOAD_KG),
+                                           ("KUKA", "elbow6", cfg.seed + 1, 0.0)):
+            procs.serve("robot", name, sim="true", robot=robot, seed=seed,
+                        payload_kg=payload, speed=cfg.speed, link_baud=19200)
+    procs.serve("controller", "CONTROLLER", wiring=wiring)
+    procs.wait_ready()
+
+
+def _wait_wired(client: BlockingClient, robots: tuple[str, ...],
+                timeout: float = 30.0) -> None:
     deadline = time.monotonic() + timeout
-    for robot in ("H4", "KUKA"):
+    for robot in robots:
         while True:
             if client.wait_for(robot, 5.0):
                 partners = {p.name for p in client.get(robot).partners}
@@ -269,13 +347,16 @@ def _calibrate(cell: _Cell, cfg: DemoConfig, h4: RobotTwin, rng: np.random.Gener
     ):
         q = working_volume_joints(h4.description, truth.profile, n,
                                   np.random.default_rng(1000 * cfg.seed + pose_seed))
+        if cfg.link == "rsi":  # moves take their time: measure along a short tour
+            q = q[joint_tour(q)]
         say(f"== {'1. Calibration (8.2)' if step == 'calibration' else '   validation'}: "
-            f"calibration.pdl on H4, {n} poses, 1 s measurements routed to COMPUTE ==")
+            f"calibration.pdl on H4, {n} poses, {cfg.measure_ms / 1000:g} s measurements "
+            f"routed to COMPUTE{' (over RSI, real time)' if cfg.link == 'rsi' else ''} ==")
         t0 = time.monotonic()
         runs[step] = cell.run("H4", "calibration", {
             "configs": rows_text(np.rad2deg(q)), "n_configs": str(n),
             "base_est": numbers_text(base), "probe_est": numbers_text(probe),
-            "duration_ms": "1000", "route": "TRUE",
+            "duration_ms": str(cfg.measure_ms), "route": "TRUE",
             "identify": identify}, timeout=600 + 10 * n, counted=("mJ@H4", n))
         runs[step]["wall_s"] = time.monotonic() - t0
         say(f"   {runs[step]['sim_s']:.0f} s simulated in {runs[step]['wall_s']:.1f} s wall; "

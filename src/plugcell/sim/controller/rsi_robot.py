@@ -108,6 +108,13 @@ class RsiRobot:
         The controller's own motion (the KRL program's LIN/PTP moves): cycle ``k``'s
         setpoint is ``path.setpoints(T)[k]``; it must start where the arm stands.
         Default: the arm holds still and only the corrections move it.
+    lockstep_s : float
+        0 (default): the controller's deadline, the end of the cycle.  > 0: *lockstep*,
+        a simulation of a sensor that always answers in time on a machine that cannot —
+        each cycle waits up to ``lockstep_s`` seconds for its answer (only a longer
+        silence counts as late), and the cycles keep at most real-time pace.  The arm
+        moves as with a real-time PC; the IPOC clock runs slower than the wall clock
+        while answers take longer than a cycle.
 
     Raises
     ------
@@ -119,7 +126,10 @@ class RsiRobot:
     def __init__(self, arm: DynamicTwin, config: RsiConfig, *,
                  bind: tuple[str, int] = ("127.0.0.1", 0), ipoc0: int = 1_000_000,
                  holdon: bool | None = None, record: bool = False,
-                 path: Trajectory | None = None) -> None:
+                 path: Trajectory | None = None, lockstep_s: float = 0.0) -> None:
+        if not (lockstep_s >= 0 and lockstep_s < float("inf")):
+            raise ValueError(f"lockstep_s must be 0 or a positive number of seconds, not "
+                             f"{lockstep_s}")
         if abs(arm.params.cycle - config.cycle_s) > 1e-12:
             raise ValueError(f"the arm's cycle {arm.params.cycle} s is not the stream's "
                              f"{config.cycle_s} s ({config.cycle})")
@@ -133,6 +143,7 @@ class RsiRobot:
         self._sensor = (config.listen_host, config.listen_port)
         self._ipoc = ipoc0
         self._record = record
+        self.lockstep_s = float(lockstep_s)
         self._stats = RsiRobotStats()
         self._lock = threading.Lock()
         self._stop = threading.Event()
@@ -212,24 +223,16 @@ class RsiRobot:
     def _run(self) -> None:
         T = self.config.cycle_s
         step = self.config.ipoc_step
+        packet = self._packet()
         next_t = time.monotonic()
         while not self._stop.is_set():
-            arm = self.arm
-            q = arm.measured
-            tcp = _kuka_abc(forward(self._desc, None, q, "nominal").tcp)
-            tcp_set = _kuka_abc(self._T_set if self.config.correction == "cartesian" else
-                                forward(self._desc, None, self._command, "nominal").tcp)
-            with self._lock:
-                delay = self._stats.delay
-            packet = encode_rob(self._ipoc, q, tcp, joints_setpoint=self._command,
-                                tcp_setpoint=tcp_set, delay=delay)
             with contextlib.suppress(OSError):  # unreachable: its answer will be missing
                 self._sock.sendto(packet, self._sensor)
             next_t += T
-            answer = self._await(self._ipoc, next_t)
+            answer = self._await(self._ipoc, max(next_t, time.monotonic() + self.lockstep_s))
             self._k = min(self._k + 1, len(self._path) - 1)  # the program's motion goes on
             offset = self._apply(answer)
-            state = arm.step(self._command)
+            state = self.arm.step(self._command)
             with self._lock:
                 st = self._stats
                 st.cycles += 1
@@ -245,11 +248,23 @@ class RsiRobot:
                 self.stopped = (f"RSI stopped: {late} late sensor packets reached the "
                                 f"Timeout of {self.config.timeout_packets}")
                 return
-            pause = next_t - time.monotonic()
+            packet = self._packet()  # ready when the next cycle starts: the sensor gets
+            pause = next_t - time.monotonic()  # the whole cycle to answer
             if pause > 0:
                 self._stop.wait(pause)
             else:
                 next_t = time.monotonic()  # the controller's own clock slipped: resync
+
+    def _packet(self) -> bytes:
+        """This cycle's ``<Rob>``: the state after the last cycle's step."""
+        q = self.arm.measured
+        tcp = _kuka_abc(forward(self._desc, None, q, "nominal").tcp)
+        tcp_set = _kuka_abc(self._T_set if self.config.correction == "cartesian" else
+                            forward(self._desc, None, self._command, "nominal").tcp)
+        with self._lock:
+            delay = self._stats.delay
+        return encode_rob(self._ipoc, q, tcp, joints_setpoint=self._command,
+                          tcp_setpoint=tcp_set, delay=delay)
 
     def _await(self, ipoc: int, deadline: float) -> Array | None:
         """The correction answering ``ipoc`` if it arrives before ``deadline``."""

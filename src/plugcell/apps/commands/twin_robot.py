@@ -1,0 +1,158 @@
+"""``plugcell twin rsi``: the dynamic twin as a KUKA controller streaming RSI, standalone.
+
+::
+
+    plugcell twin rsi --port P [--ip 127.0.0.1] [--mode absolute|relative]
+                      [--correction joint|cartesian] [--cycle IPO_FAST|IPO] [--timeout 100]
+                      [--bind HOST[:PORT]] [--robot R] [--seed S] [--payload-kg M]
+                      [--joints Q1,…,Q6] [--lockstep S] [--reflector NAME [--cell C]]
+                      [--duration S]
+
+It stands where a KUKA controller running plugcell's KRL program (``plugcell rsi
+files``) stands: from ``RSI_ON`` on it sends ``<Rob>`` every cycle to the PC's ``--ip``
+and ``--port`` (the ethernet file's ``IP_NUMBER`` and ``PORT``) and applies the answers
+to the dynamic twin (:class:`~plugcell.sim.controller.rsi_robot.RsiRobot` on a
+:class:`~plugcell.sim.twin.dynamics.DynamicTwin`), so that ``plugcell rsi run`` and
+``plugcell serve robot --rsi`` can be tried without a controller.  It prints one line
+with its own address when it streams, one summary line when it ends, and exits 0 at
+``--duration`` or SIGTERM/SIGINT, 3 when RSI stopped at ``Timeout`` (the reason on
+stderr), 2 for bad options.  ``--lockstep S`` waits up to S seconds for each answer: the
+arm then moves as with a real-time PC on a machine that is not one (``plugcell demo
+--link rsi``).  ``--reflector NAME`` publishes the arm's true T-MAC pose to
+the cell's simulated world as it moves, for a simulated tracker
+(:class:`~plugcell.sim.controller.reflector.ReflectorFeed`).
+"""
+
+from __future__ import annotations
+
+import argparse
+import signal
+import sys
+import threading
+import time
+
+from plugcell.apps.commands.cellargs import add_cell_args
+
+#: Python's thread switch interval in the twin's process (s): the reflector feed computes
+#: for milliseconds, and the cycle thread must get the interpreter back within a fraction
+#: of a 4 ms cycle (the default is 5 ms).
+SWITCH_INTERVAL_S = 0.0005
+
+
+def configure_rsi(tw: argparse._SubParsersAction, common, func) -> None:
+    """Add ``twin rsi`` to the ``twin`` subcommands (``common`` adds robot and seed;
+    ``func(args)`` runs it: :func:`run_rsi` with the scenario the options name)."""
+    r = tw.add_parser(
+        "rsi", help="run the twin as a KUKA controller streaming RSI (no controller needed)",
+        description="The dynamic twin behind a simulated KUKA controller's RSI: sends <Rob> "
+        "every cycle to the PC's --ip:--port and applies the <Sen> answers, as the "
+        "controller running plugcell's KRL program does (docs/kuka-rsi.md).")
+    common(r)
+    r.add_argument("--port", type=int, required=True,
+                   help="the PC's UDP port, where plugcell listens (the ethernet file's PORT)")
+    r.add_argument("--ip", default="127.0.0.1",
+                   help="the PC's address (IP_NUMBER; default 127.0.0.1)")
+    r.add_argument("--bind", default="127.0.0.1:0", metavar="HOST[:PORT]",
+                   help="the controller's own address (default 127.0.0.1, any port)")
+    r.add_argument("--correction", choices=("joint", "cartesian"), default="joint",
+                   help="AKorr A1..A6 or RKorr X Y Z A B C (default joint)")
+    r.add_argument("--mode", choices=("absolute", "relative"), default="absolute",
+                   help="RSI_ON(#ABSOLUTE) or #RELATIVE (default absolute, what "
+                   "plugcell serve robot --rsi streams)")
+    r.add_argument("--cycle", choices=("IPO_FAST", "IPO"), default="IPO_FAST",
+                   help="4 ms or 12 ms (default IPO_FAST)")
+    r.add_argument("--timeout", type=int, default=100,
+                   help="the ETHERNET object's Timeout: late answers before RSI stops "
+                   "(default 100)")
+    r.add_argument("--lockstep", type=float, default=0.0, metavar="S",
+                   help="simulate a sensor that always answers in time on a machine that "
+                   "cannot: wait up to S seconds for each answer before counting it late "
+                   "(default 0: the controller's deadline, the end of the cycle)")
+    r.add_argument("--payload-kg", type=float, default=0.0, metavar="KG",
+                   help="payload on the flange (default 0)")
+    r.add_argument("--joints", metavar="Q1,…,Q6",
+                   help="where the arm stands at RSI_ON, degrees (default: the robot's home)")
+    r.add_argument("--reflector", metavar="NAME",
+                   help="publish the T-MAC's true pose as it moves to the simulated world of "
+                   "--cell under NAME, for a simulated tracker")
+    r.add_argument("--reflector-rate", type=float, default=25.0, metavar="HZ",
+                   help="largest rate of those publications while the arm moves (default 25)")
+    add_cell_args(r)
+    r.add_argument("--duration", type=float, default=0.0,
+                   help="seconds to stream, then RSI_OFF (default: until interrupted)")
+    r.set_defaults(func=func)
+
+
+def _robot_side(args: argparse.Namespace, scenario):
+    """The arm and its RSI side the options describe (CommandError on bad ones)."""
+    import numpy as np
+
+    from plugcell.apps.cli import CommandError
+    from plugcell.devices.robot.bridge import parse_address
+    from plugcell.devices.robot.rsi.config import CorrectionLimits, RsiConfig, RsiConfigError
+    from plugcell.sim.controller.rsi_robot import RsiRobot
+    from plugcell.sim.twin.dynamics import DynamicParameters, DynamicTwin
+
+    try:
+        host, port = parse_address(f"{args.ip}:{args.port}")
+        bhost, sep, bport = args.bind.rpartition(":")
+        bind = (bhost, int(bport)) if sep and bport.isdigit() else (args.bind, 0)
+        big = (1e3,) * 6  # the controller's AXISCORR/POSCORR limits are the sensor's here
+        config = RsiConfig(robot_host=bind[0], listen_host=host, listen_port=port,
+                           correction=args.correction, mode=args.mode, cycle=args.cycle,
+                           timeout_packets=args.timeout, limits=CorrectionLimits(big, big, big))
+        q0 = None
+        if args.joints:
+            q0 = np.radians([float(v) for v in args.joints.split(",")])
+        arm = DynamicTwin(scenario, DynamicParameters(cycle=config.cycle_s), q0=q0)
+        return arm, RsiRobot(arm, config, bind=bind, lockstep_s=args.lockstep), config
+    except (ValueError, RsiConfigError, OSError) as exc:
+        raise CommandError(f"twin rsi: {exc}") from None
+
+
+def run_rsi(args: argparse.Namespace, scenario) -> int:
+    """Run ``twin rsi`` (module docstring) for the twin ``scenario`` (a TwinScenario)."""
+    from plugcell.apps.cli import CommandError
+    from plugcell.apps.commands.cellargs import cell_of, transport_of
+
+    if not (args.duration >= 0):
+        raise CommandError(f"--duration must be 0 or positive, not {args.duration}")
+    try:
+        scenario = scenario.with_payload(args.payload_kg)
+    except ValueError as exc:
+        raise CommandError(f"twin rsi: {exc}") from None
+    arm, robot, config = _robot_side(args, scenario)
+    feed = world = None
+    if args.reflector:
+        from plugcell.sim.controller.reflector import ReflectorFeed, ReflectorTruth
+
+        try:
+            world = ReflectorTruth(args.reflector, cell_of(args), 1.0, transport_of(args))
+            feed = ReflectorFeed(world, arm, rate_hz=args.reflector_rate)
+        except ValueError as exc:
+            raise CommandError(f"twin rsi: {exc}") from None
+    sys.setswitchinterval(SWITCH_INTERVAL_S)
+    done = threading.Event()
+    for sig in (signal.SIGTERM, signal.SIGINT):
+        signal.signal(sig, lambda *_: done.set())
+    if feed is not None:
+        feed.start()
+    robot.start()
+    h, pt = robot.address
+    print(f"twin rsi: {arm.twin.description.name} streaming RSI ({config.correction}, "
+          f"{config.mode}, {config.cycle}) from {h}:{pt} to {config.listen_host}:"
+          f"{config.listen_port}", flush=True)
+    end = time.monotonic() + args.duration if args.duration else float("inf")
+    while not done.wait(0.05) and robot.running and time.monotonic() < end:
+        pass
+    robot.stop()
+    if feed is not None:
+        feed.stop()
+    if world is not None:
+        world.close()
+    st = robot.stats()
+    print(f"twin rsi: {st.cycles} cycles, {st.answered} answered, Delay {st.delay}", flush=True)
+    if robot.stopped:
+        print(f"twin rsi: {robot.stopped}", file=sys.stderr, flush=True)
+        return 3
+    return 0
