@@ -370,8 +370,7 @@ class RsiController:
 
 
 def rsi_controller(handler: BridgeHandler, *, listen: str, robot_address: str, robot: str,
-                   timeout_packets: int = 100, cycle: str = "IPO_FAST",
-                   joint_speed_deg_s: float = 20.0,
+                   timeout_packets: int = 100, joint_speed_deg_s: float = 20.0,
                    tcp_speed_mm_s: float = 100.0, library: Sequence[Path] = (),
                    name: str = "ROBOT") -> RsiController:
     """An :class:`RsiController` from the robot service's options.
@@ -390,8 +389,6 @@ def rsi_controller(handler: BridgeHandler, *, listen: str, robot_address: str, r
         The robot: a shipped name or a description file.
     timeout_packets : int
         The ETHERNET object's ``Timeout`` (late cycles before the controller breaks off).
-    cycle : str
-        ``"IPO_FAST"`` (4 ms) or ``"IPO"`` (12 ms): the controller's RSI cycle.
     joint_speed_deg_s : float
         Every joint's speed limit (°/s); acceleration 3× and jerk 30× it per second.
     tcp_speed_mm_s : float
@@ -435,6 +432,6 @@ def rsi_controller(handler: BridgeHandler, *, listen: str, robot_address: str, r
                            math.radians(1200))
     base = RsiConfig(robot_host=rhost.strip("[]"), listen_host=host, listen_port=port,
                      robot_port=robot_port, correction="joint", mode="absolute",
-                     timeout_packets=timeout_packets, cycle=cycle)
+                     timeout_packets=timeout_packets)
     config = dataclasses.replace(base, limits=streaming_limits(joint, base.cycle_s))
     return RsiController(handler, config, load_robot(robot), robot, joint, cart, library, name)

@@ -174,7 +174,6 @@ class RobotService(GenericDevice):
         "rsi": str,
         "rsi_robot": str,
         "rsi_timeout": int,
-        "rsi_cycle": str,
         "joint_speed": float,
         "tcp_speed": float,
         "joint_rate": float,
@@ -195,7 +194,6 @@ class RobotService(GenericDevice):
         rsi: str = "",
         rsi_robot: str = "",
         rsi_timeout: int = 100,
-        rsi_cycle: str = "IPO_FAST",
         joint_speed: float = 20.0,
         tcp_speed: float = 100.0,
         joint_rate: float = DEFAULT_RATE_HZ,
@@ -233,7 +231,7 @@ class RobotService(GenericDevice):
         if rsi:
             self.bridge = rsi_controller(
                 self, listen=rsi, robot_address=rsi_robot, robot=robot,
-                timeout_packets=rsi_timeout, cycle=rsi_cycle, joint_speed_deg_s=joint_speed,
+                timeout_packets=rsi_timeout, joint_speed_deg_s=joint_speed,
                 tcp_speed_mm_s=tcp_speed, library=self.library, name=self.name)
         self.outbound = ExternalProcessHandler(self)
         self.sim_process: SimControllerProcess | None = None
