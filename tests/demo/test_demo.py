@@ -58,3 +58,41 @@ def test_demo_refuses_a_speed_that_is_not_one(tmp_path: Path, capsys) -> None:
     assert main(["demo", "--fast", "--speed", "0", "--out", str(tmp_path)]) == 2
     assert "--speed must be positive, not 0.0" in capsys.readouterr().err
     assert not (tmp_path / "demo.json").exists()  # refused before anything started
+
+
+def test_demo_fast_over_rsi_calibrates_with_the_program_on_the_pc(tmp_path: Path) -> None:
+    """``plugcell demo --fast --link rsi``: H4's calibration program runs on the PC, every
+    move streams over KUKA RSI to the twin's RSI side (its own process, the dynamic twin),
+    the tracker measures the T-MAC the twin publishes as it moves, COMPUTE identifies."""
+    env = {**os.environ, "PYTHONUNBUFFERED": "1"}
+    proc = subprocess.run(
+        [sys.executable, "-m", "plugcell", "demo", "--fast", "--link", "rsi", "--json",
+         "--out", str(tmp_path)],
+        capture_output=True, text=True, timeout=400, env=env, start_new_session=True)
+    assert proc.returncode == 0, proc.stderr[-3000:]
+    r = json.loads(proc.stdout)
+    assert "over RSI" in proc.stderr and "the twin's RSI side" in proc.stderr
+    c = r["calibration"]
+    print(json.dumps({"calibration": c, "rsi": r["rsi"]}, indent=1, default=float))
+    assert r["config"]["link"] == "rsi" and c["poses"] == r["config"]["calibration_poses"]
+    # model 5 from measurements of the moving twin, checked on other poses
+    assert c["validation"]["before_mean_mm"] > 1.0
+    assert c["validation"]["mean_mm"] < 0.5
+    assert c["validation"]["poses"] == r["config"]["validation_poses"]
+    # the moves went over RSI: thousands of 4 ms cycles, every one answered (lockstep)
+    rsi = r["rsi"]
+    assert rsi["cycles"] > 2000 and rsi["answered"] >= rsi["cycles"] - 10
+    assert "compensation" not in r and "demonstration" not in r  # step 1 only
+    names = {Path(p).stem for p in r["journal"]}
+    assert {"TRACKER", "COMPUTE", "H4", "CONTROLLER"} <= names and "KUKA" not in names
+    assert "calibration: campaign wall time" in (tmp_path / "report.html").read_text()
+
+
+def test_demo_over_rsi_refuses_a_simulated_speed(tmp_path: Path, capsys) -> None:
+    from plugcell.apps.cli import main
+
+    assert main(["demo", "--fast", "--link", "rsi", "--speed", "20", "--out",
+                 str(tmp_path)]) == 2
+    assert "over RSI the twin moves in real time: speed must be 1, not 20" in \
+        capsys.readouterr().err
+    assert not (tmp_path / "demo.json").exists()

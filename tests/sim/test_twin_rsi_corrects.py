@@ -201,7 +201,8 @@ def test_the_robots_own_motion_goes_on_while_the_sensor_is_silent_until_timeout(
         assert link.wait(lambda lk: source.blend == 1.0 and lk.stats().answered > 100,
                          timeout=20)
         link.close()  # the sensor goes silent
-        silent_from = robot.stats().cycles
+        before = robot.stats()
+        silent_from = before.cycles
         deadline = time.monotonic() + 10
         while robot.running and time.monotonic() < deadline:
             time.sleep(0.01)
@@ -211,7 +212,8 @@ def test_the_robots_own_motion_goes_on_while_the_sensor_is_silent_until_timeout(
         robot.stop()
     commands, _, offsets = _log(robot)
     after = np.arange(silent_from + 2, len(commands))  # the last answers in flight
-    assert len(after) >= 40
+    # Timeout counts every late answer, also those of a loaded machine before the silence
+    assert len(after) >= min(40, 48 - before.delay)
     # HOLDON 0 (relative): the offset stays as it was, the path goes on under it
     np.testing.assert_array_equal(offsets[after], np.tile(offsets[after[0]], (len(after), 1)))
     desc = arm.twin.description

@@ -53,33 +53,47 @@ _DECODER = msgspec.msgpack.Decoder(ReflectorState)
 class ReflectorPublisher:
     """Publishes one reflector's true pose on ``bus``'s cell; answers queries with the
     latest one.  ``bus``: a :class:`~plugcell.framework.bus.Bus` whose handlers run on
-    Zenoh's threads (no hand-off; of a participant's bus, its ``direct()`` view)."""
+    Zenoh's threads (no hand-off; of a participant's bus, its ``direct()`` view).
 
-    def __init__(self, bus: Bus, name: str, kind: str = "tmac") -> None:
+    ``current``: for a reflector that moves in time, a callable giving its true pose
+    *now*: a query (a tracker's look at the world) is then answered with the pose at that
+    instant — the pose a physical tracker would see — instead of the latest one published
+    (flagged moving as the latest was)."""
+
+    def __init__(self, bus: Bus, name: str, kind: str = "tmac",
+                 current: Callable[[], np.ndarray] | None = None) -> None:
         check_name(name, "reflector name")
         if kind not in ("tmac", "smr"):
             raise ValueError(f"reflector kind must be 'tmac' or 'smr', got {kind!r}")
         self.name, self.kind = name, kind
         self._lock = threading.Lock()
         self._last: bytes | None = None
+        self._moving = False
         self._seq = 0
         self._closed = False
+        self._current = current
         self._publisher, self._queryable = bus.reflector(name, self._latest)
 
     def _latest(self) -> bytes | None:
+        if self._current is not None:
+            return self._encode(self._current(), None)
         with self._lock:
             return self._last
 
-    def publish(self, pose: np.ndarray, moving: bool = False) -> None:
+    def _encode(self, pose: np.ndarray, moving: bool | None) -> bytes:
         pose = np.asarray(pose, dtype=float)
         if pose.shape != (4, 4) or not np.all(np.isfinite(pose)):
             raise ValueError(f"reflector pose must be a finite 4x4 matrix, got shape {pose.shape}")
         with self._lock:
             self._seq += 1
-            state = ReflectorState(self.name, self.kind, pose.ravel().tolist(), moving, self._seq)
+            self._moving = self._moving if moving is None else moving
+            state = ReflectorState(self.name, self.kind, pose.ravel().tolist(), self._moving,
+                                   self._seq)
             self._last = _ENCODER.encode(state)
-            payload = self._last
-        self._publisher.put(payload)
+            return self._last
+
+    def publish(self, pose: np.ndarray, moving: bool = False) -> None:
+        self._publisher.put(self._encode(pose, moving))
 
     def close(self) -> None:
         """Withdraw the reflector (idempotent)."""

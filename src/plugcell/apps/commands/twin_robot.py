@@ -16,7 +16,8 @@ to the dynamic twin (:class:`~plugcell.sim.controller.rsi_robot.RsiRobot` on a
 ``plugcell serve robot --rsi`` can be tried without a controller.  It prints one line
 with its own address when it streams, one summary line when it ends, and exits 0 at
 ``--duration`` or SIGTERM/SIGINT, 3 when RSI stopped at ``Timeout`` (the reason on
-stderr), 2 for bad options.  ``--lockstep S`` waits up to S seconds for each answer: the
+stderr), 2 for bad options.  A tracker's look at that world (a query) gets the pose at
+that instant.  ``--lockstep S`` waits up to S seconds for each answer: the
 arm then moves as with a real-time PC on a machine that is not one (``plugcell demo
 --link rsi``).  ``--reflector NAME`` publishes the arm's true T-MAC pose to
 the cell's simulated world as it moves, for a simulated tracker
@@ -30,6 +31,8 @@ import signal
 import sys
 import threading
 import time
+
+import numpy as np
 
 from plugcell.apps.commands.cellargs import add_cell_args
 
@@ -85,8 +88,6 @@ def configure_rsi(tw: argparse._SubParsersAction, common, func) -> None:
 
 def _robot_side(args: argparse.Namespace, scenario):
     """The arm and its RSI side the options describe (CommandError on bad ones)."""
-    import numpy as np
-
     from plugcell.apps.cli import CommandError
     from plugcell.devices.robot.bridge import parse_address
     from plugcell.devices.robot.rsi.config import CorrectionLimits, RsiConfig, RsiConfigError
@@ -110,6 +111,19 @@ def _robot_side(args: argparse.Namespace, scenario):
         raise CommandError(f"twin rsi: {exc}") from None
 
 
+def _largest(peak, correction: str) -> str:
+    """``largest correction A1 2.00°`` (or ``Z 5.00 mm``) of the per-axis peaks (SI)."""
+    from plugcell.devices.robot.rsi.codec import CARTESIAN_AXES, JOINT_AXES
+    from plugcell.io.units import DEG, M_PER_MM
+
+    i = int(np.argmax(peak / np.array([M_PER_MM] * 3 + [DEG] * 3)
+                      if correction == "cartesian" else peak))
+    if correction == "cartesian" and i < 3:
+        return f"largest correction {CARTESIAN_AXES[i]} {peak[i] / M_PER_MM:.2f} mm"
+    axes = JOINT_AXES if correction == "joint" else CARTESIAN_AXES
+    return f"largest correction {axes[i]} {peak[i] / DEG:.2f}°"
+
+
 def run_rsi(args: argparse.Namespace, scenario) -> int:
     """Run ``twin rsi`` (module docstring) for the twin ``scenario`` (a TwinScenario)."""
     from plugcell.apps.cli import CommandError
@@ -127,7 +141,8 @@ def run_rsi(args: argparse.Namespace, scenario) -> int:
         from plugcell.sim.controller.reflector import ReflectorFeed, ReflectorTruth
 
         try:
-            world = ReflectorTruth(args.reflector, cell_of(args), 1.0, transport_of(args))
+            world = ReflectorTruth(args.reflector, cell_of(args), 1.0, transport_of(args),
+                                   current=arm.twin.true_reflector_in_tracker)
             feed = ReflectorFeed(world, arm, rate_hz=args.reflector_rate)
         except ValueError as exc:
             raise CommandError(f"twin rsi: {exc}") from None
@@ -143,15 +158,17 @@ def run_rsi(args: argparse.Namespace, scenario) -> int:
           f"{config.mode}, {config.cycle}) from {h}:{pt} to {config.listen_host}:"
           f"{config.listen_port}", flush=True)
     end = time.monotonic() + args.duration if args.duration else float("inf")
+    peak = np.zeros(6)  # the largest correction of each axis, looked at every 50 ms
     while not done.wait(0.05) and robot.running and time.monotonic() < end:
-        pass
+        peak = np.maximum(peak, np.abs(robot.offset))
     robot.stop()
     if feed is not None:
         feed.stop()
     if world is not None:
         world.close()
     st = robot.stats()
-    print(f"twin rsi: {st.cycles} cycles, {st.answered} answered, Delay {st.delay}", flush=True)
+    print(f"twin rsi: {st.cycles} cycles, {st.answered} answered, Delay {st.delay}, "
+          f"{_largest(peak, config.correction)}", flush=True)
     if robot.stopped:
         print(f"twin rsi: {robot.stopped}", file=sys.stderr, flush=True)
         return 3

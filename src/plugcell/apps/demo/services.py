@@ -36,6 +36,7 @@ from __future__ import annotations
 
 import json
 import os
+import re
 import socket
 import time
 from collections.abc import Callable
@@ -87,6 +88,8 @@ LINKS = ("serial", "rsi")
 #: correction for that cycle, a velocity impulse that rings the arm's modes by
 #: millimetres.  The demo shows the cell with a real-time PC.
 RSI_LOCKSTEP_S = 1.0
+#: The twin's RSI cycle (``#IPO_FAST``).
+RSI_CYCLE_S = 0.004
 #: The RSI ``Timeout`` of the twin and the service in the demo: a shared, loaded machine
 #: answers late often (docs/kuka-rsi.md, Performance); the demo must not stop for it
 #: (10 000, the largest the ETHERNET object takes: 40 s of late answers).
@@ -127,8 +130,8 @@ class DemoConfig:
     @classmethod
     def fast(cls, seed: int = 0, link: str = "serial") -> DemoConfig:
         if link == "rsi":
-            return cls(seed=seed, speed=1.0, link=link, calibration_poses=12,
-                       validation_poses=6, measure_ms=200, joint_speed=60.0)
+            return cls(seed=seed, speed=1.0, link=link, calibration_poses=15,
+                       validation_poses=5, measure_ms=200, joint_speed=90.0)
         return cls(seed=seed, speed=50.0, calibration_poses=50, validation_poses=20,
                    line_test=ExperimentConfig.fast(), bars=2)
 
@@ -271,13 +274,28 @@ def run_demo(cfg: DemoConfig, out: Path, say: Callable[[str], None],
             say(f"   wired by the controller from the cell file: {', '.join(robots)} → "
                 "TRACKER, COMPUTE")
             _calibrate(cell, cfg, h4, rng, result, say)
-            if cfg.link == "serial":
+            if cfg.link == "rsi":
+                result["rsi"] = _twin_counts(procs.stop("H4-TWIN"))
+                say(f"   the twin's RSI side: {result['rsi']['cycles']} cycles of "
+                    f"{RSI_CYCLE_S * 1e3:g} ms, {result['rsi']['answered']} answered, "
+                    f"Delay {result['rsi']['delay']}")
+            else:
                 _compensate(cell, cfg, h4_truth.probe, result, say)
                 _demonstrate(cell, cfg, h4_truth, kuka_truth, rng, result, say, client)
             result["journal"] = [str(p) for p in journal_files(cell_name, home)]
     result["wall_time_s"] = time.monotonic() - wall0
     (out / "demo.json").write_text(json.dumps(result, indent=2, default=float))
     return result
+
+
+def _twin_counts(lines: list[str]) -> dict[str, int]:
+    """The counts of ``plugcell twin rsi``'s last line (``… N cycles, A answered,
+    Delay D``); DemoError if it did not print it."""
+    for line in reversed(lines):
+        m = re.search(r"(\d+) cycles, (\d+) answered, Delay (\d+)", line)
+        if m:
+            return {"cycles": int(m[1]), "answered": int(m[2]), "delay": int(m[3])}
+    raise DemoError("the twin's RSI side ended without its counts: " + " / ".join(lines[-3:]))
 
 
 def _free_udp_port() -> int:

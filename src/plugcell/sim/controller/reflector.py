@@ -8,7 +8,8 @@ simulated duration divided by the speed factor, in real time), then the same pos
 with ``moving=False``.  An arm that moves in time (:class:`~plugcell.sim.twin.dynamics.
 DynamicTwin`) is published *as it moves* by a :class:`ReflectorFeed`: its true pose at
 most ``rate_hz`` times a second while its link angles change, then once at rest.  Service
-logic never reads it.
+logic never reads it.  Such an arm's truth also answers every look at the world
+(``current``): a tracker's query gets the pose at that instant.
 """
 
 from __future__ import annotations
@@ -17,6 +18,7 @@ import contextlib
 import logging
 import math
 import threading
+from collections.abc import Callable
 
 import numpy as np
 
@@ -35,10 +37,11 @@ class ReflectorTruth:
     """Publishes one robot's T-MAC truth; ``on_move`` is a TwinArm move listener."""
 
     def __init__(self, name: str, cell: str, speed: float,
-                 transport: TransportConfig | None = None) -> None:
+                 transport: TransportConfig | None = None,
+                 current: Callable[[], np.ndarray] | None = None) -> None:
         self.speed = speed
         self._bus = Bus.connect(transport or TransportConfig.from_env(), KeySpace(cell))
-        self._publisher = ReflectorPublisher(self._bus, name=name, kind="tmac")
+        self._publisher = ReflectorPublisher(self._bus, name=name, kind="tmac", current=current)
         self._lock = threading.Lock()
         self._timer: threading.Timer | None = None
         self._closed = False
