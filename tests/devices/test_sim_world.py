@@ -58,3 +58,24 @@ def test_bad_poses_are_refused(sessions):
         pub.publish(np.full((4, 4), np.nan))
     with pytest.raises(ValueError, match="kind"):
         ReflectorPublisher(Bus(a, KeySpace("world-test2")), "r2", "laser")
+
+
+def test_a_reflector_that_moves_in_time_answers_a_look_with_its_pose_now(sessions):
+    a, b = sessions
+    cell = "world-test3"
+    now = {"x": 1.0}
+
+    def current() -> np.ndarray:
+        pose = np.eye(4)
+        pose[0, 3] = now["x"]
+        return pose
+
+    pub = ReflectorPublisher(Bus(a, KeySpace(cell)), "arm", "tmac", current=current)
+    pub.publish(current(), moving=True)
+    look = Bus(b, KeySpace(cell))
+    assert _wait(lambda: any(look.query_reflectors(1.0)))
+    now["x"] = 2.5  # the arm moved on; nothing was published
+    view = WorldView(look)
+    state = view.get("arm")
+    assert state.matrix()[0, 3] == 2.5 and state.moving  # moving, as published last
+    pub.close()

@@ -171,6 +171,7 @@ class RobotService(GenericDevice):
         "seed": int,
         "library": str,
         "link_baud": float,
+        "dynamics": _flag,
         "rsi": str,
         "rsi_robot": str,
         "rsi_timeout": int,
@@ -191,6 +192,7 @@ class RobotService(GenericDevice):
         seed: int = 0,
         library: str = "",
         link_baud: float = 0.0,
+        dynamics: bool = False,
         rsi: str = "",
         rsi_robot: str = "",
         rsi_timeout: int = 100,
@@ -206,6 +208,9 @@ class RobotService(GenericDevice):
         if not sim and not controller and not rsi:
             raise ValueError("the robot service needs a controller: sim=true (a simulated one), "
                              "controller=HOST:PORT or rsi=HOST:PORT (a KUKA robot over RSI)")
+        if dynamics and not sim:
+            raise ValueError("dynamics moves the simulated controller's twin in time: give "
+                             "sim=true too")
         if rsi_robot and not rsi:
             raise ValueError("rsi_robot names the controller of an RSI stream: give rsi too")
         if not (speed > 0):
@@ -217,6 +222,7 @@ class RobotService(GenericDevice):
         super().__init__(name, **kwargs)
         self.sim = sim
         self.link_baud = link_baud
+        self.dynamics = dynamics
         self.endpoint: tuple[str, int] | None = (parse_address(controller or rsi)
                                                  if controller or rsi else None)
         self.robot = robot
@@ -251,7 +257,7 @@ class RobotService(GenericDevice):
                     name=self.name, cell=self.keys.cell, robot=self.robot,
                     payload_kg=self.payload_kg, speed=self.speed, seed=self.seed,
                     library=self.library, transport=self.transport,
-                    link_baud=self.link_baud,
+                    link_baud=self.link_baud, dynamics=self.dynamics,
                 )
                 self.endpoint = await self.sim_process.start(self.connect_timeout)
             assert self.endpoint is not None

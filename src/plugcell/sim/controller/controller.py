@@ -5,7 +5,9 @@
 
 It stands where the thesis's Comau C3G stood (7.2): it owns the arm — a
 :class:`~plugcell.sim.twin.robot.RobotTwin` driven through
-:class:`~plugcell.sim.controller.arm.TwinArm` — runs robot programs with the
+:class:`~plugcell.sim.controller.arm.TwinArm`, which teleports, or with ``--dynamics``
+the dynamic twin driven through :class:`~plugcell.sim.controller.arm.DynamicArm`, whose
+moves take their time and whose T-MAC is published as it moves — runs robot programs with the
 language runtime on a :class:`SimClock` with a speed factor (reporting simulated
 time), publishes its T-MAC's true pose to the sim-only world after every move,
 and talks to the robot service over TCP with the protocol of
@@ -33,6 +35,7 @@ import threading
 import time
 from collections.abc import Callable, Sequence
 from pathlib import Path
+from typing import TYPE_CHECKING, Any
 
 from plugcell.devices.robot.framing import FramingError, LineBuffer, frame_line
 from plugcell.devices.robot.protocol import (
@@ -69,7 +72,10 @@ from plugcell.devices.robot.serial_line import SerialLine
 from plugcell.pdl import MotionError, SimClock
 from plugcell.pdl.predefined import EXT_DATA_MAX
 from plugcell.pdl.values import JointPos, Position
-from plugcell.sim.controller.arm import TwinArm
+from plugcell.sim.controller.arm import DynamicArm, TwinArm
+
+if TYPE_CHECKING:
+    from plugcell.sim.twin.robot import RobotTwin
 
 __all__ = ["SimController", "main"]
 
@@ -119,9 +125,10 @@ class SimController:
 
     def __init__(
         self,
-        arm: TwinArm,
+        arm: TwinArm | DynamicArm,
         *,
         speed: float = 1.0,
+        clock: SimClock | None = None,
         name: str = "ROBOT",
         library: Sequence[Path] = (),
         extra_hello: dict[str, str] | None = None,
@@ -130,7 +137,7 @@ class SimController:
         self.arm = arm
         #: the robot ↔ PC serial line in simulated time (None: a network link, free)
         self.serial = SerialLine(link_baud) if link_baud > 0 else None
-        self.clock = SimClock(speed=speed)
+        self.clock = clock if clock is not None else SimClock(speed=speed)
         self.name = name
         self.extra_hello = dict(extra_hello or {})
         self.runner = ProgramRunner(arm, self.clock, _ProgramChannel(self), self._event, library)
@@ -247,6 +254,7 @@ class SimController:
     def _lost(self, reason: str) -> None:
         """The service is gone: a running program stops safely, a move stops."""
         self._move_stop.set()
+        self._halt()
         if self.runner.current is not None:
             with contextlib.suppress(RunError):
                 self.runner.stop(reason)
@@ -362,9 +370,15 @@ class SimController:
             info = self.runner.start(req.id, req.program, values)
         return info.program
 
+    def _halt(self) -> None:
+        """An arm that moves in time stops its move now."""
+        if isinstance(self.arm, DynamicArm):
+            self.arm.halt()
+
     def _stop(self, req: Stop) -> str:
         if self.runner.current is None and self._moving:
             self._move_stop.set()
+            self._halt()
             return "MOVE stopped"
         info = self.runner.stop("stopped by the robot service", req.program)
         return info.state
@@ -379,10 +393,13 @@ class SimController:
             self._moving = True
             self._move_stop.clear()
         try:
+            t0 = self.clock.now()
             if req.kind == "TO":
                 duration = self.arm.move_to(Position(*req.values))
             else:
                 duration = self.arm.move_joints(req.values)
+            if duration is None:  # the arm moved in time: the clock has advanced
+                return format_number(self.clock.now() - t0)
             speed = self.clock.speed
             real = duration / speed if math.isfinite(speed) else 0.0
             t0 = time.monotonic()
@@ -439,6 +456,11 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--link-baud", type=float, default=0.0,
                    help="simulate the serial line to the PC at this bit rate (thesis: "
                    "19200; 0: a network link that costs no simulated time)")
+    p.add_argument("--dynamics", action="store_true",
+                   help="the arm moves in time: every move planned and followed by the "
+                   "dynamic twin cycle by cycle (4 ms), paced by --speed, its T-MAC published "
+                   "as it moves (default: it is at the target at once, the move's time passes "
+                   "on the clock only)")
     p.add_argument("--no-world", action="store_true",
                    help="do not publish the reflector truth to the sim world")
     p.add_argument("--parent-watch", action="store_true",
@@ -467,16 +489,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     except Exception as exc:
         print(f"plugcell-controller: error: {exc}", file=sys.stderr)
         return 2
-    world = None
-    if not args.no_world:
-        from plugcell.sim.controller.reflector import ReflectorTruth
-
-        world = ReflectorTruth(args.name, args.cell, args.speed)
-    arm = TwinArm(twin, on_move=world.on_move if world else None)
-    if world is not None:
-        world.publish(twin.true_reflector_in_tracker(), moving=False)
-    controller = SimController(arm, speed=args.speed, name=args.name, library=args.library,
-                               link_baud=args.link_baud)
+    arm, clock, world, feed = _arm(args, twin)
+    controller = SimController(arm, speed=args.speed, clock=clock, name=args.name,
+                               library=args.library, link_baud=args.link_baud)
     listener = socket.create_server((args.host, args.port))
     host, port = listener.getsockname()[:2]
     parent = os.getppid()
@@ -500,9 +515,33 @@ def main(argv: Sequence[str] | None = None) -> int:
     finally:
         controller.shutdown()
         listener.close()
+        if feed is not None:
+            feed.stop()
         if world is not None:
             world.close()
     return 0
+
+
+def _arm(args: argparse.Namespace, twin: RobotTwin) -> tuple[TwinArm | DynamicArm,
+                                                            SimClock | None, Any, Any]:
+    """The arm the options ask for, its clock (None: the controller's own), and the
+    reflector truth and feed (None with ``--no-world``; the feed only ``--dynamics``)."""
+    from plugcell.sim.controller.reflector import ReflectorFeed, ReflectorTruth
+    from plugcell.sim.twin.dynamics import DynamicTwin
+
+    if not args.dynamics:
+        world = None if args.no_world else ReflectorTruth(args.name, args.cell, args.speed)
+        if world is not None:
+            world.publish(twin.true_reflector_in_tracker(), moving=False)
+        return TwinArm(twin, on_move=world.on_move if world else None), None, world, None
+    dynamic = DynamicTwin(twin)
+    clock = SimClock(speed=args.speed)
+    world = feed = None
+    if not args.no_world:
+        world = ReflectorTruth(args.name, args.cell, args.speed,
+                               current=twin.true_reflector_in_tracker)
+        feed = ReflectorFeed(world, dynamic).start()
+    return DynamicArm(dynamic, clock), clock, world, feed
 
 
 if __name__ == "__main__":  # pragma: no cover

@@ -44,6 +44,7 @@ class SimControllerProcess:
         transport: TransportConfig | None = None,
         log_level: str = "WARNING",
         link_baud: float = 0.0,
+        dynamics: bool = False,
     ) -> None:
         self.argv = [
             sys.executable, "-m", "plugcell.sim.controller.controller",
@@ -52,7 +53,7 @@ class SimControllerProcess:
             "--speed", "inf" if math.isinf(speed) else repr(float(speed)),
             "--seed", str(int(seed)), "--parent-watch", "--log-level", log_level,
             "--link-baud", repr(float(link_baud)),
-        ]
+        ] + (["--dynamics"] if dynamics else [])
         for folder in library or []:
             self.argv += ["--library", str(folder)]
         self.env = dict(os.environ)
