@@ -36,6 +36,9 @@ def configure(p: argparse.ArgumentParser) -> None:
                    help="how H4's programs reach the arm: serial (the simulated controller "
                    "runs them, default) or rsi (they run on the PC and every move streams "
                    "over KUKA RSI to the twin, in real time: step 1 only)")
+    p.add_argument("--dynamics", action="store_true",
+                   help="serial link: the simulated controllers' arms move in time on the "
+                   "dynamic twin (slower; default: at the target at once)")
     p.add_argument("--json", action="store_true", help="print the final table as JSON")
     p.set_defaults(func=_demo)
 
@@ -49,6 +52,11 @@ def _demo(args: argparse.Namespace) -> int:
     from plugcell.apps.demo.services import DemoConfig, DemoError, run_demo
 
     cfg = (DemoConfig.fast if args.fast else DemoConfig.full)(args.seed, args.link)
+    if args.dynamics:
+        try:
+            cfg = replace(cfg, dynamics=True)
+        except ValueError as exc:
+            raise CommandError(f"--dynamics: {exc}") from None
     if args.speed is not None:
         if not args.speed > 0:
             raise CommandError(f"--speed must be positive, not {args.speed}")

@@ -106,7 +106,8 @@ class DemoConfig:
 
     ``link="rsi"``: H4 over RSI in real time (``speed`` 1), calibration and validation
     only, measuring ``measure_ms`` at each pose; ``joint_speed`` (°/s) is the PC's
-    planner's joint speed limit."""
+    planner's joint speed limit.  ``dynamics``: the simulated controllers' arms move in
+    time (``dynamics=true`` of the robot services)."""
 
     seed: int = 0
     speed: float = 20.0
@@ -119,10 +120,14 @@ class DemoConfig:
     link: str = "serial"
     measure_ms: int = 1000
     joint_speed: float = 40.0
+    dynamics: bool = False
 
     def __post_init__(self) -> None:
         if self.link not in LINKS:
             raise ValueError(f"link {self.link!r}: expected one of {', '.join(LINKS)}")
+        if self.dynamics and self.link != "serial":
+            raise ValueError("dynamics is the simulated controllers' option: over RSI the "
+                             "twin moves in time anyway")
         if self.link == "rsi" and self.speed != 1.0:
             raise ValueError(f"over RSI the twin moves in real time: speed must be 1, not "
                              f"{self.speed:g}")
@@ -329,7 +334,8 @@ def _start_cell(procs: CellProcesses, cfg: DemoConfig, wiring: Path,
         for name, robot, seed, payload in (("H4", "smart_h4", cfg.seed, PAYLOAD_KG),
                                            ("KUKA", "elbow6", cfg.seed + 1, 0.0)):
             procs.serve("robot", name, sim="true", robot=robot, seed=seed,
-                        payload_kg=payload, speed=cfg.speed, link_baud=19200)
+                        payload_kg=payload, speed=cfg.speed, link_baud=19200,
+                        **({"dynamics": "true"} if cfg.dynamics else {}))
     procs.serve("controller", "CONTROLLER", wiring=wiring)
     procs.wait_ready()
 
