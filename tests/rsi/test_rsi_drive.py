@@ -37,6 +37,17 @@ class _PlayedLink:
         q_set = self.base + self.offset
         return RobotState(self.ipoc, joints=q_set - self.lag, joints_setpoint=q_set)
 
+    def wait(self, predicate, timeout):
+        """The held robot settles: the lag decays by half a cycle until the predicate holds
+        (the cycles it took in ``settled``), or ``timeout`` worth of cycles pass."""
+        self.settled = 0
+        while not predicate(self):
+            if self.settled * CONFIG.cycle_s >= timeout:
+                return False
+            self.lag = self.lag / 2
+            self.settled += 1
+        return True
+
     def follow(self, source, done, timeout):
         if self.fail is not None:
             raise self.fail
@@ -99,3 +110,18 @@ def test_only_absolute_joint_corrections_drive_the_robot():
         link.config = dataclasses.replace(CONFIG, **kw, limits=None)
         with pytest.raises(ValueError, match="absolute joint corrections"):
             RsiDrive(link)  # type: ignore[arg-type]
+
+
+def test_a_move_ends_with_the_exact_stop():
+    """The move returns once the actual joints are within the positioning window of its
+    end (as a controller's exact stop), not when the last setpoint left."""
+    from plugcell.devices.robot.rsi.drive import IN_POSITION_RAD
+
+    base = np.radians([0.0, -90.0, -187.0, 0.0, 90.0, 0.0])
+    link = _PlayedLink(base, np.zeros(6), np.radians([0.05, 0.0, 0.0, 0.0, 0.0, 0.0]))
+    drive = RsiDrive(link)  # type: ignore[arg-type]
+    traj = _trajectory(drive.joint_readings())
+    drive.follow(traj)
+    assert link.settled > 0  # it waited, holding
+    assert np.max(np.abs(drive.joint_readings() - traj.setpoints(CONFIG.cycle_s)[1][-1])) \
+        <= IN_POSITION_RAD

@@ -25,6 +25,11 @@ controller's program only starts RSI where the robot stands and follows the sens
    steps by more than one cycle of the planned motion, so the link's limits
    (:func:`~plugcell.devices.robot.rsi_controller.streaming_limits`) hold even on a busy PC.
 
+4. waits, holding, for the exact stop: every ``AIPos`` within :data:`IN_POSITION_RAD` of
+   the end (the servos' dead time and lag, as a controller's exact stop waits for its
+   positioning window), at most :data:`SETTLE_S` — the program's next statement (a
+   measurement) then sees the arm arrived.
+
 Joint feedback is the newest packet's ``AIPos``.  A failed stream (silence, missed
 cycles, a refused correction) or a motion that does not end in time is a
 :class:`~plugcell.pdl.interfaces.MotionError` with the link's reason: the program fails at
@@ -49,6 +54,10 @@ Array = NDArray[np.float64]
 
 #: Seconds a motion may take beyond its duration and two controller timeouts.
 SLACK_S = 2.0
+#: The exact stop: every actual joint within this of the motion's end (rad) …
+IN_POSITION_RAD = np.radians(0.001)
+#: … waited for at most this long (s); then the move ends anyway.
+SETTLE_S = 1.0
 
 
 class RsiDrive:
@@ -119,4 +128,11 @@ class RsiDrive:
             raise MotionError(str(exc)) from None
         except TimeoutError as exc:
             raise MotionError(str(exc)) from None
+        self.link.wait(lambda link: _arrived(link.latest, q[-1]), SETTLE_S)
         self.followed += 1
+
+
+def _arrived(state: Any, end: Array) -> bool:
+    """Whether the robot's actual joints (AIPos) are within the exact stop of ``end``."""
+    joints = getattr(state, "joints", None)
+    return joints is not None and float(np.max(np.abs(joints - end))) <= IN_POSITION_RAD
