@@ -13,7 +13,7 @@ import numpy as np
 from plugcell.apps.commands.deprecated import DeprecatedName
 from plugcell.apps.commands.progress import ProgressBar
 from plugcell.apps.commands.robotargs import add_robot_args
-from plugcell.apps.commands.twin_robot import configure_rsi
+from plugcell.apps.commands.twin_robot import configure_robot_sides
 
 
 def configure(p: argparse.ArgumentParser) -> None:
@@ -114,7 +114,7 @@ def configure(p: argparse.ArgumentParser) -> None:
                    help="the hall's temperature (°C; default: the reference 20 °C, no drift)")
     n.add_argument("--out", type=Path, required=True, help="nest file to write: name,x,y,z (mm)")
     n.set_defaults(func=_nests)
-    configure_rsi(tw, common, _rsi)
+    configure_robot_sides(tw, common, _rsi, _egm)
 
 
 def _scenario(args: argparse.Namespace):
@@ -146,6 +146,12 @@ def _rsi(args: argparse.Namespace) -> int:
     from plugcell.apps.commands.twin_robot import run_rsi
 
     return run_rsi(args, _scenario(args))
+
+
+def _egm(args: argparse.Namespace) -> int:
+    from plugcell.apps.commands.twin_robot import run_egm
+
+    return run_egm(args, _scenario(args))
 
 
 #: The robot the thesis's figures (4.03 mm, 0.5/1.0 mm deflection, …) were measured on.

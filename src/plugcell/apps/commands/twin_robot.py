@@ -1,4 +1,5 @@
-"""``plugcell twin rsi``: the dynamic twin as a KUKA controller streaming RSI, standalone.
+"""``plugcell twin rsi`` / ``twin egm``: the dynamic twin as a KUKA controller streaming
+RSI, or an ABB controller's EGM loop, standalone.
 
 ::
 
@@ -42,21 +43,39 @@ from plugcell.apps.commands.cellargs import add_cell_args
 SWITCH_INTERVAL_S = 0.0005
 
 
-def configure_rsi(tw: argparse._SubParsersAction, common, func) -> None:
-    """Add ``twin rsi`` to the ``twin`` subcommands (``common`` adds robot and seed;
-    ``func(args)`` runs it: :func:`run_rsi` with the scenario the options name)."""
+def _side_options(r: argparse.ArgumentParser, common, what: str, default_port: int | None,
+                  start: str) -> None:
+    """The options every robot side has: the PC's address, the twin, the world, how long."""
+    common(r)
+    r.add_argument("--port", type=int, required=default_port is None, default=default_port,
+                   help=f"the PC's UDP port, where plugcell listens ({what})")
+    r.add_argument("--ip", default="127.0.0.1", help="the PC's address (default 127.0.0.1)")
+    r.add_argument("--bind", default="127.0.0.1:0", metavar="HOST[:PORT]",
+                   help="the controller's own address (default 127.0.0.1, any port)")
+    r.add_argument("--payload-kg", type=float, default=0.0, metavar="KG",
+                   help="payload on the flange (default 0)")
+    r.add_argument("--joints", metavar="Q1,…,Q6",
+                   help=f"where the arm stands at {start}, degrees (default: the robot's home)")
+    r.add_argument("--reflector", metavar="NAME",
+                   help="publish the T-MAC's true pose as it moves to the simulated world of "
+                   "--cell under NAME, for a simulated tracker")
+    r.add_argument("--reflector-rate", type=float, default=25.0, metavar="HZ",
+                   help="largest rate of those publications while the arm moves (default 25)")
+    add_cell_args(r)
+    r.add_argument("--duration", type=float, default=0.0,
+                   help="seconds to stream, then stop (default: until interrupted)")
+
+
+def configure_robot_sides(tw: argparse._SubParsersAction, common, rsi, egm) -> None:
+    """Add ``twin rsi`` and ``twin egm`` to the ``twin`` subcommands (``common`` adds
+    robot and seed; ``rsi(args)``/``egm(args)`` run them: :func:`run_rsi`/:func:`run_egm`
+    with the scenario the options name)."""
     r = tw.add_parser(
         "rsi", help="run the twin as a KUKA controller streaming RSI (no controller needed)",
         description="The dynamic twin behind a simulated KUKA controller's RSI: sends <Rob> "
         "every cycle to the PC's --ip:--port and applies the <Sen> answers, as the "
         "controller running plugcell's KRL program does (docs/kuka-rsi.md).")
-    common(r)
-    r.add_argument("--port", type=int, required=True,
-                   help="the PC's UDP port, where plugcell listens (the ethernet file's PORT)")
-    r.add_argument("--ip", default="127.0.0.1",
-                   help="the PC's address (IP_NUMBER; default 127.0.0.1)")
-    r.add_argument("--bind", default="127.0.0.1:0", metavar="HOST[:PORT]",
-                   help="the controller's own address (default 127.0.0.1, any port)")
+    _side_options(r, common, "the ethernet file's IP_NUMBER and PORT", None, "RSI_ON")
     r.add_argument("--correction", choices=("joint", "cartesian"), default="joint",
                    help="AKorr A1..A6 or RKorr X Y Z A B C (default joint)")
     r.add_argument("--mode", choices=("absolute", "relative"), default="absolute",
@@ -71,40 +90,44 @@ def configure_rsi(tw: argparse._SubParsersAction, common, func) -> None:
                    help="simulate a sensor that always answers in time on a machine that "
                    "cannot: wait up to S seconds for each answer before counting it late "
                    "(default 0: the controller's deadline, the end of the cycle)")
-    r.add_argument("--payload-kg", type=float, default=0.0, metavar="KG",
-                   help="payload on the flange (default 0)")
-    r.add_argument("--joints", metavar="Q1,…,Q6",
-                   help="where the arm stands at RSI_ON, degrees (default: the robot's home)")
-    r.add_argument("--reflector", metavar="NAME",
-                   help="publish the T-MAC's true pose as it moves to the simulated world of "
-                   "--cell under NAME, for a simulated tracker")
-    r.add_argument("--reflector-rate", type=float, default=25.0, metavar="HZ",
-                   help="largest rate of those publications while the arm moves (default 25)")
-    add_cell_args(r)
-    r.add_argument("--duration", type=float, default=0.0,
-                   help="seconds to stream, then RSI_OFF (default: until interrupted)")
-    r.set_defaults(func=func)
+    r.set_defaults(func=rsi)
+    e = tw.add_parser(
+        "egm", help="run the twin as an ABB controller's EGM loop (joint mode)",
+        description="The dynamic twin behind a simulated ABB controller's EGM loop "
+        "(EGMRunJoint): sends EgmRobot every 4 ms to the PC's --ip:--port and follows the "
+        "joint targets of the EgmSensor answers (docs/abb-egm.md).")
+    _side_options(e, common, "the UDP unit device's remote port; default 6510", 6510,
+                  "EGMRunJoint")
+    e.add_argument("--timeout", type=float, default=1.0, metavar="S",
+                   help="\\CommTimeout: seconds without a sensor message before EGM stops "
+                   "(default 1)")
+    e.set_defaults(func=egm)
 
 
-def _robot_side(args: argparse.Namespace, scenario):
+def _parse_side(args: argparse.Namespace):
+    """(sensor address, bind address, start joints or None) of the options."""
+    from plugcell.devices.robot.bridge import parse_address
+
+    sensor = parse_address(f"{args.ip}:{args.port}")
+    bhost, sep, bport = args.bind.rpartition(":")
+    bind = (bhost, int(bport)) if sep and bport.isdigit() else (args.bind, 0)
+    q0 = np.radians([float(v) for v in args.joints.split(",")]) if args.joints else None
+    return sensor, bind, q0
+
+
+def _rsi_side(args: argparse.Namespace, scenario):
     """The arm and its RSI side the options describe (CommandError on bad ones)."""
     from plugcell.apps.cli import CommandError
-    from plugcell.devices.robot.bridge import parse_address
     from plugcell.devices.robot.rsi.config import CorrectionLimits, RsiConfig, RsiConfigError
     from plugcell.sim.controller.rsi_robot import RsiRobot
     from plugcell.sim.twin.dynamics import DynamicParameters, DynamicTwin
 
     try:
-        host, port = parse_address(f"{args.ip}:{args.port}")
-        bhost, sep, bport = args.bind.rpartition(":")
-        bind = (bhost, int(bport)) if sep and bport.isdigit() else (args.bind, 0)
+        (host, port), bind, q0 = _parse_side(args)
         big = (1e3,) * 6  # the controller's AXISCORR/POSCORR limits are the sensor's here
         config = RsiConfig(robot_host=bind[0], listen_host=host, listen_port=port,
                            correction=args.correction, mode=args.mode, cycle=args.cycle,
                            timeout_packets=args.timeout, limits=CorrectionLimits(big, big, big))
-        q0 = None
-        if args.joints:
-            q0 = np.radians([float(v) for v in args.joints.split(",")])
         arm = DynamicTwin(scenario, DynamicParameters(cycle=config.cycle_s), q0=q0)
         return arm, RsiRobot(arm, config, bind=bind, lockstep_s=args.lockstep), config
     except (ValueError, RsiConfigError, OSError) as exc:
@@ -124,52 +147,114 @@ def _largest(peak, correction: str) -> str:
     return f"largest correction {axes[i]} {peak[i] / DEG:.2f}°"
 
 
-def run_rsi(args: argparse.Namespace, scenario) -> int:
-    """Run ``twin rsi`` (module docstring) for the twin ``scenario`` (a TwinScenario)."""
-    from plugcell.apps.cli import CommandError
-    from plugcell.apps.commands.cellargs import cell_of, transport_of
+class _World:
+    """The twin's T-MAC in the cell's simulated world (``--reflector``), or nothing."""
 
-    if not (args.duration >= 0):
-        raise CommandError(f"--duration must be 0 or positive, not {args.duration}")
-    try:
-        scenario = scenario.with_payload(args.payload_kg)
-    except ValueError as exc:
-        raise CommandError(f"twin rsi: {exc}") from None
-    arm, robot, config = _robot_side(args, scenario)
-    feed = world = None
-    if args.reflector:
-        from plugcell.sim.controller.reflector import ReflectorFeed, ReflectorTruth
+    def __init__(self, args: argparse.Namespace, arm, what: str) -> None:
+        from plugcell.apps.cli import CommandError
+        from plugcell.apps.commands.cellargs import cell_of, transport_of
 
-        try:
-            world = ReflectorTruth(args.reflector, cell_of(args), 1.0, transport_of(args),
-                                   current=arm.twin.true_reflector_in_tracker)
-            feed = ReflectorFeed(world, arm, rate_hz=args.reflector_rate)
-        except ValueError as exc:
-            raise CommandError(f"twin rsi: {exc}") from None
+        self.truth = self.feed = None
+        if args.reflector:
+            from plugcell.sim.controller.reflector import ReflectorFeed, ReflectorTruth
+
+            try:
+                self.truth = ReflectorTruth(args.reflector, cell_of(args), 1.0,
+                                            transport_of(args),
+                                            current=arm.twin.true_reflector_in_tracker)
+                self.feed = ReflectorFeed(self.truth, arm, rate_hz=args.reflector_rate)
+            except ValueError as exc:
+                raise CommandError(f"twin {what}: {exc}") from None
+
+    def start(self) -> None:
+        if self.feed is not None:
+            self.feed.start()
+
+    def close(self) -> None:
+        if self.feed is not None:
+            self.feed.stop()
+        if self.truth is not None:
+            self.truth.close()
+
+
+def _until_stopped(args: argparse.Namespace, running, offset) -> np.ndarray:
+    """Run until ``--duration``, SIGTERM/SIGINT or ``running()`` turns false; the largest
+    ``|offset()|`` of each axis, looked at every 50 ms."""
     sys.setswitchinterval(SWITCH_INTERVAL_S)
     done = threading.Event()
     for sig in (signal.SIGTERM, signal.SIGINT):
         signal.signal(sig, lambda *_: done.set())
-    if feed is not None:
-        feed.start()
+    end = time.monotonic() + args.duration if args.duration else float("inf")
+    peak = np.zeros(6)
+    while not done.wait(0.05) and running() and time.monotonic() < end:
+        peak = np.maximum(peak, np.abs(offset()))
+    return peak
+
+
+def _scenario_of(args: argparse.Namespace, scenario, what: str):
+    from plugcell.apps.cli import CommandError
+
+    if not (args.duration >= 0):
+        raise CommandError(f"--duration must be 0 or positive, not {args.duration}")
+    try:
+        return scenario.with_payload(args.payload_kg)
+    except ValueError as exc:
+        raise CommandError(f"twin {what}: {exc}") from None
+
+
+def run_rsi(args: argparse.Namespace, scenario) -> int:
+    """Run ``twin rsi`` (module docstring) for the twin ``scenario`` (a TwinScenario)."""
+    arm, robot, config = _rsi_side(args, _scenario_of(args, scenario, "rsi"))
+    world = _World(args, arm, "rsi")
+    world.start()
     robot.start()
     h, pt = robot.address
     print(f"twin rsi: {arm.twin.description.name} streaming RSI ({config.correction}, "
           f"{config.mode}, {config.cycle}) from {h}:{pt} to {config.listen_host}:"
           f"{config.listen_port}", flush=True)
-    end = time.monotonic() + args.duration if args.duration else float("inf")
-    peak = np.zeros(6)  # the largest correction of each axis, looked at every 50 ms
-    while not done.wait(0.05) and robot.running and time.monotonic() < end:
-        peak = np.maximum(peak, np.abs(robot.offset))
+    peak = _until_stopped(args, lambda: robot.running, lambda: robot.offset)
     robot.stop()
-    if feed is not None:
-        feed.stop()
-    if world is not None:
-        world.close()
+    world.close()
     st = robot.stats()
     print(f"twin rsi: {st.cycles} cycles, {st.answered} answered, Delay {st.delay}, "
           f"{_largest(peak, config.correction)}", flush=True)
     if robot.stopped:
         print(f"twin rsi: {robot.stopped}", file=sys.stderr, flush=True)
+        return 3
+    return 0
+
+
+def run_egm(args: argparse.Namespace, scenario) -> int:
+    """Run ``twin egm`` (module docstring) for the twin ``scenario`` (a TwinScenario)."""
+    from plugcell.apps.cli import CommandError
+    from plugcell.sim.controller.egm_robot import DynamicFollower, EgmRobotSim
+    from plugcell.sim.twin.dynamics import DynamicTwin
+
+    scenario = _scenario_of(args, scenario, "egm")
+    try:
+        sensor, bind, q0 = _parse_side(args)
+        if not (args.timeout > 0):
+            raise ValueError(f"--timeout must be positive seconds, not {args.timeout}")
+        arm = DynamicTwin(scenario, q0=q0)
+        start = arm.measured.copy()
+        robot = EgmRobotSim(sensor, mode="joint", joints=start,
+                            sample_s=arm.params.cycle, comm_timeout_s=args.timeout,
+                            follower=DynamicFollower(arm), bind=bind)
+    except (ValueError, OSError) as exc:
+        raise CommandError(f"twin egm: {exc}") from None
+    world = _World(args, arm, "egm")
+    world.start()
+    robot.start()
+    h, pt = robot.address
+    print(f"twin egm: {arm.twin.description.name} streaming EGM (joint) from {h}:{pt} to "
+          f"{sensor[0]}:{sensor[1]}", flush=True)
+    peak = _until_stopped(args, lambda: robot.stopped is None,
+                          lambda: robot.state()["joints"] - start)
+    robot.stop()
+    world.close()
+    print(f"twin egm: {robot.sent} samples, {robot.answers} answers, {robot.unanswered} "
+          f"unanswered, {_largest(peak, 'joint').replace('correction', 'move')}", flush=True)
+    if robot.stopped:
+        print(f"twin egm: {robot.stopped}", file=sys.stderr, flush=True)
         return 3
     return 0

@@ -20,8 +20,9 @@ What is modelled, and what is not:
   ``path_speed`` (path frame = work object frame), and the correction is added to it.
 
 The follower is the simple servo ``x ← x + (1 − e^(−T/τ)) (x* − x)`` with the speed
-capped; the twin's dynamics model (servo loops, structural modes, friction) replaces it
-behind the same :class:`Follower` interface.
+capped; in joint mode the twin's dynamics model (servo loops, structural modes, friction)
+replaces it behind the same :class:`Follower` interface (:class:`DynamicFollower`,
+``plugcell twin egm``).
 """
 
 from __future__ import annotations
@@ -40,10 +41,11 @@ from numpy.typing import ArrayLike, NDArray
 
 from plugcell.devices.robot.egm.messages import egm_pb2
 from plugcell.io.units import DEG, M_PER_MM, MM_PER_M
+from plugcell.sim.twin.dynamics import DynamicTwin
 
 Array = NDArray[np.float64]
 
-__all__ = ["EgmRobotSim", "FirstOrderFollower", "Follower"]
+__all__ = ["DynamicFollower", "EgmRobotSim", "FirstOrderFollower", "Follower"]
 
 
 class Follower(Protocol):
@@ -73,6 +75,24 @@ class FirstOrderFollower:
         move = (1.0 - math.exp(-dt / self.tau)) * (target - x)
         cap = self.max_speed * dt
         return x + np.clip(move, -cap, cap)
+
+
+class DynamicFollower:
+    """The dynamic twin (:class:`~plugcell.sim.twin.dynamics.DynamicTwin`) as the
+    follower of joint targets (``EGMRunJoint``): each sample is one cycle of its servos,
+    backlash and modes with the target as the command, and the axes are its encoder
+    readings.  The sample must be the twin's cycle."""
+
+    def __init__(self, arm: DynamicTwin) -> None:
+        self.arm = arm
+
+    def step(self, x: Array, target: Array, dt: float) -> Array:
+        """The readings after one cycle toward ``target`` (``x``: the arm's own state)."""
+        if abs(dt - self.arm.params.cycle) > 1e-12:
+            raise ValueError(f"the EGM sample {dt} s is not the twin's cycle "
+                             f"{self.arm.params.cycle} s")
+        self.arm.step(target)
+        return self.arm.measured
 
 
 def _slerp_toward(q: Array, target: Array, fraction: float) -> Array:
