@@ -115,6 +115,14 @@ def _parse_side(args: argparse.Namespace):
     return sensor, bind, q0
 
 
+def _within_limits(arm):
+    """The arm, if it stands within its joint limits (ValueError naming them otherwise)."""
+    problems = arm.twin.description.limit_violations(arm.measured, tol=1e-6)
+    if problems:
+        raise ValueError("--joints outside the joint limits: " + "; ".join(problems))
+    return arm
+
+
 def _rsi_side(args: argparse.Namespace, scenario):
     """The arm and its RSI side the options describe (CommandError on bad ones)."""
     from plugcell.apps.cli import CommandError
@@ -128,7 +136,8 @@ def _rsi_side(args: argparse.Namespace, scenario):
         config = RsiConfig(robot_host=bind[0], listen_host=host, listen_port=port,
                            correction=args.correction, mode=args.mode, cycle=args.cycle,
                            timeout_packets=args.timeout, limits=CorrectionLimits(big, big, big))
-        arm = DynamicTwin(scenario, DynamicParameters(cycle=config.cycle_s), q0=q0)
+        arm = _within_limits(DynamicTwin(scenario, DynamicParameters(cycle=config.cycle_s),
+                                         q0=q0))
         return arm, RsiRobot(arm, config, bind=bind, lockstep_s=args.lockstep), config
     except (ValueError, RsiConfigError, OSError) as exc:
         raise CommandError(f"twin rsi: {exc}") from None
@@ -235,7 +244,7 @@ def run_egm(args: argparse.Namespace, scenario) -> int:
         sensor, bind, q0 = _parse_side(args)
         if not (args.timeout > 0):
             raise ValueError(f"--timeout must be positive seconds, not {args.timeout}")
-        arm = DynamicTwin(scenario, q0=q0)
+        arm = _within_limits(DynamicTwin(scenario, q0=q0))
         start = arm.measured.copy()
         robot = EgmRobotSim(sensor, mode="joint", joints=start,
                             sample_s=arm.params.cycle, comm_timeout_s=args.timeout,

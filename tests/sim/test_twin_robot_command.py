@@ -1,0 +1,143 @@
+"""``plugcell twin rsi`` / ``twin egm``: the twin's robot side as a command — it streams to
+the PC's port and reports what it counted; bad options are refused with the reason."""
+
+from __future__ import annotations
+
+import argparse
+import re
+import socket
+import threading
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from plugcell.apps.cli import CommandError, main
+from plugcell.apps.commands.twin_robot import _rsi_side
+from plugcell.devices.robot.rsi.codec import encode_sen
+from plugcell.io.units import DEG
+from plugcell.sim.twin.scenario import TwinScenario
+
+pytestmark = pytest.mark.timeout(60)
+
+
+class _Sensor:
+    """A bare RSI sensor on loopback: answers every <Rob> with an absolute A1 offset."""
+
+    def __init__(self, a1_deg: float) -> None:
+        self.sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+        self.sock.bind(("127.0.0.1", 0))
+        self.sock.settimeout(0.2)
+        self.port = self.sock.getsockname()[1]
+        self.offset = np.array([a1_deg * DEG, 0, 0, 0, 0, 0])
+        self.answered = 0
+        self._stop = threading.Event()
+        self._thread = threading.Thread(target=self._run, daemon=True)
+        self._thread.start()
+
+    def _run(self) -> None:
+        while not self._stop.is_set():
+            try:
+                data, peer = self.sock.recvfrom(65535)
+            except (TimeoutError, OSError):
+                continue
+            ipoc = int(re.search(rb"<IPOC>(\d+)</IPOC>", data).group(1))
+            self.sock.sendto(encode_sen(ipoc, "joint", self.offset), peer)
+            self.answered += 1
+
+    def close(self) -> None:
+        self._stop.set()
+        self._thread.join(2)
+        self.sock.close()
+
+
+def test_twin_rsi_streams_to_the_pc_and_reports_its_counts(capsys) -> None:
+    sensor = _Sensor(0.5)
+    try:
+        status = main(["twin", "rsi", "--port", str(sensor.port), "--timeout", "10000",
+                       "--lockstep", "1", "--duration", "0.6"])
+    finally:
+        sensor.close()
+    out = capsys.readouterr().out.splitlines()
+    assert status == 0
+    assert out[0].startswith("twin rsi: smart_h4 streaming RSI (joint, absolute, IPO_FAST) "
+                             "from 127.0.0.1:") and out[0].endswith(f"127.0.0.1:{sensor.port}")
+    m = re.fullmatch(r"twin rsi: (\d+) cycles, (\d+) answered, Delay (\d+), "
+                     r"largest correction A1 (\S+)°", out[-1])
+    assert m, out[-1]
+    cycles, answered = int(m[1]), int(m[2])
+    assert cycles > 10 and answered >= cycles - 2 and answered <= sensor.answered
+    assert float(m[4]) == pytest.approx(0.5)  # the sensor's absolute A1 offset, applied
+
+
+def test_twin_rsi_stops_at_timeout_with_the_reason(capsys) -> None:
+    silent = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    silent.bind(("127.0.0.1", 0))
+    try:
+        status = main(["twin", "rsi", "--port", str(silent.getsockname()[1]), "--timeout", "5",
+                       "--duration", "10"])
+    finally:
+        silent.close()
+    captured = capsys.readouterr()
+    assert status == 3
+    assert "RSI stopped: 5 late sensor packets reached the Timeout of 5" in captured.err
+    assert "5 cycles, 0 answered, Delay 5" in captured.out
+
+
+def test_twin_egm_stops_after_its_comm_timeout(capsys) -> None:
+    silent = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    silent.bind(("127.0.0.1", 0))
+    try:
+        status = main(["twin", "egm", "--port", str(silent.getsockname()[1]), "--timeout",
+                       "0.2", "--duration", "10"])
+        got = silent.recv(65535)  # an EgmRobot came
+    finally:
+        silent.close()
+    captured = capsys.readouterr()
+    assert status == 3 and got
+    assert "EGM communication timeout: no message from the sensor" in captured.err
+    assert captured.out.startswith("twin egm: smart_h4 streaming EGM (joint)")
+    assert ", 0 answers, " in captured.out
+
+
+@pytest.mark.parametrize("argv, message", [
+    (["rsi", "--port", "49152", "--joints", "1,2,3"], "twin rsi: q0: expected 6"),
+    (["rsi", "--port", "49152", "--joints", "a,b,c,d,e,f"], "twin rsi: could not convert"),
+    (["rsi", "--port", "70000"], "twin rsi: "),
+    (["rsi", "--port", "49152", "--joints", "0,-170,-187,0,90,0"],
+     "twin rsi: --joints outside the joint limits: joint 2 = -170.0000° outside"),
+    (["egm", "--joints", "0,-170,-187,0,90,0"], "twin egm: --joints outside the joint limits"),
+    (["rsi", "--port", "49152", "--timeout", "0"], "twin rsi: timeout_packets 0"),
+    (["rsi", "--port", "49152", "--lockstep", "-1"], "twin rsi: lockstep_s must be 0"),
+    (["rsi", "--port", "49152", "--duration", "-1"], "--duration must be 0 or positive"),
+    (["rsi", "--port", "49152", "--payload-kg", "-3"], "twin rsi: payload_kg must be ≥ 0"),
+    (["egm", "--timeout", "0"], "twin egm: --timeout must be positive seconds, not 0.0"),
+])
+def test_bad_options_are_refused_with_the_reason(argv, message, capsys) -> None:
+    assert main(["twin", *argv]) == 2
+    assert message in capsys.readouterr().err
+
+
+def _args(joints: str) -> argparse.Namespace:
+    return argparse.Namespace(ip="127.0.0.1", port=49152, bind="127.0.0.1:0", joints=joints,
+                              correction="joint", mode="absolute", cycle="IPO_FAST",
+                              timeout=100, lockstep=0.0)
+
+
+@settings(max_examples=60, deadline=None)
+@given(st.one_of(
+    st.text(alphabet="0123456789.,-e+ naN", max_size=40),
+    st.lists(st.floats(-200, 200), min_size=5, max_size=7).map(
+        lambda q: ",".join(f"{v:.3f}" for v in q))))
+def test_any_joints_text_starts_the_arm_there_or_is_refused(text: str) -> None:
+    try:
+        arm, robot, _ = _rsi_side(_args(text), TwinScenario())
+    except CommandError as exc:
+        assert str(exc).startswith("twin rsi: ")
+        return
+    robot.stop()
+    q = np.array([float(v) for v in text.split(",")]) if text else None
+    if q is not None:
+        assert np.allclose(np.degrees(arm.measured), q, atol=0.001)
+        assert not arm.twin.description.limit_violations(arm.measured, tol=1e-6)
