@@ -153,3 +153,42 @@ def test_a_program_runs_as_on_the_teleporting_arm_and_its_time_is_the_moves() ->
     # the clock advanced once per move, by the move and its exact stop
     assert runs[0].sim_time == pytest.approx(clock.now())
     assert clock.now() > dynamic.last.duration
+
+
+class _Truth:
+    """A ReflectorTruth that keeps what it was given."""
+
+    def __init__(self) -> None:
+        self.published: list[tuple[np.ndarray, bool]] = []
+
+    def publish(self, pose: np.ndarray, moving: bool = False) -> None:
+        self.published.append((pose, moving))
+
+
+def test_the_reflector_feed_publishes_the_arm_as_it_moves_then_once_at_rest() -> None:
+    from plugcell.sim.controller.reflector import ReflectorFeed
+
+    arm = DynamicTwin(SCENARIO)
+    truth = _Truth()
+    feed = ReflectorFeed(truth, arm, rate_hz=200.0).start()  # type: ignore[arg-type]
+    try:
+        deadline = time.monotonic() + 5
+        while not truth.published and time.monotonic() < deadline:
+            time.sleep(0.01)
+        assert truth.published[0][1] is False  # where it stands, at rest
+        q = arm.measured
+        for k in range(150):  # A1 turns 3° in 0.6 s, 2 ms of wall time a cycle
+            arm.step(q + np.radians([min(k, 100) * 0.03, 0, 0, 0, 0, 0]))
+            time.sleep(0.002)
+        moving = [p for p, m in truth.published if m]
+        assert len(moving) >= 5
+        start = truth.published[0][0][:3, 3]
+        went = max(float(np.linalg.norm(p[:3, 3] - start)) for p in moving)
+        assert went > 0.05  # the T-MAC went round with A1 (metres)
+        n = len(truth.published)
+        time.sleep(0.3)  # the arm stands (its command held): one more, at rest, then none
+        assert truth.published[-1][1] is False
+        assert len(truth.published) <= n + 1
+    finally:
+        feed.stop()
+    np.testing.assert_allclose(truth.published[-1][0], arm.twin.true_reflector_in_tracker())
