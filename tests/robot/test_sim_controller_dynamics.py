@@ -192,3 +192,16 @@ def test_the_reflector_feed_publishes_the_arm_as_it_moves_then_once_at_rest() ->
     finally:
         feed.stop()
     np.testing.assert_allclose(truth.published[-1][0], arm.twin.true_reflector_in_tracker())
+
+
+def test_dynamics_is_the_simulated_controllers_option() -> None:
+    from plugcell.devices.robot.service import RobotService
+
+    with pytest.raises(ValueError, match="dynamics moves the simulated controller's twin in "
+                                         "time: give sim=true too"):
+        RobotService("R1", controller="127.0.0.1:7000", dynamics=True)
+    assert RobotService("R1", sim=True, dynamics=True).dynamics
+    from plugcell.sim.controller.launcher import SimControllerProcess
+
+    assert "--dynamics" in SimControllerProcess(name="R1", cell="c", dynamics=True).argv
+    assert "--dynamics" not in SimControllerProcess(name="R1", cell="c").argv
