@@ -489,6 +489,42 @@ def _joint_step(model: PoseModel, q: Array, dx: Array, payload_kg: float) -> Arr
         return np.linalg.pinv(J) @ dx
 
 
+def _check_noise(run: _Run, est: RestEstimate, now: float, q: Array) -> None:
+    """``noisy``: the window cannot grow any more and its noise alone is above ``ū``."""
+    s = run.s
+    if est.window_s >= s.window_max_s - 2 * s.poll_s and (
+            est.noise_position_m > s.max_uncertainty_m
+            or est.noise_orientation_rad > s.max_uncertainty_rad):
+        raise run.fail(
+            f"the samples are too noisy: {est.noise_position_m * 1e3:.4f} mm / "
+            f"{math.degrees(est.noise_orientation_rad):.4f}° over {est.window_s:.2f} s "
+            f"({est.samples} samples), above the accepted {s.max_uncertainty_m * 1e3:.4f} mm"
+            f" / {math.degrees(s.max_uncertainty_rad):.4f}°", "noisy", now, q)
+
+
+def _correction(run: _Run, model: PoseModel, q: Array, est: RestEstimate, now: float,
+                payload_kg: float) -> Array | None:
+    """On an accepted estimate: ``None`` when it is within the tolerances (recorded),
+    else the bounded step ``δθ = J⁻¹ α Δx̂``; ``max_corrections`` and ``joint_limit``
+    raise."""
+    s = run.s
+    ep, er = float(np.linalg.norm(est.error[:3])), float(np.linalg.norm(est.error[3:]))
+    if ep < s.position_tol_m and er < s.orientation_tol_rad:
+        run.record(now, q, est, None, math.nan)
+        return None
+    if s.max_corrections <= sum(1 for st in run.steps if st.move is not None):
+        run.record(now, q, est, None, math.nan)
+        raise run.fail(f"tolerance not met after {s.max_corrections} corrections: "
+                       f"‖Δp̂‖ = {ep * 1e3:.4f} mm, ‖Δφ̂‖ = {math.degrees(er):.4f}°",
+                       "max_corrections", now, q)
+    dq = _joint_step(model, q, bounded_step(est.error, s.max_step_m, s.max_step_rad),
+                     payload_kg)
+    if s.check_limits and not bool(model.description.within_limits(q + dq)):
+        run.record(now, q, est, None, math.nan)
+        raise run.fail("the correction would leave the joint limits", "joint_limit", now, q)
+    return dq
+
+
 def correct_while_settling(
     robot: MovingRobot,
     stream: PoseStream,
@@ -546,31 +582,11 @@ def correct_while_settling(
         if est is None:
             continue
         if not _accepted(est, s):
-            if est.window_s >= s.window_max_s - 2 * s.poll_s and (
-                    est.noise_position_m > s.max_uncertainty_m
-                    or est.noise_orientation_rad > s.max_uncertainty_rad):
-                raise run.fail(
-                    f"the samples are too noisy: {est.noise_position_m * 1e3:.4f} mm / "
-                    f"{math.degrees(est.noise_orientation_rad):.4f}° over {est.window_s:.2f} "
-                    f"s ({est.samples} samples), above the accepted "
-                    f"{s.max_uncertainty_m * 1e3:.4f} mm / "
-                    f"{math.degrees(s.max_uncertainty_rad):.4f}°", "noisy", now, qc)
+            _check_noise(run, est, now, qc)
             continue
-        ep, er = float(np.linalg.norm(est.error[:3])), float(np.linalg.norm(est.error[3:]))
-        if ep < s.position_tol_m and er < s.orientation_tol_rad:
-            run.record(now, qc, est, None, math.nan)
+        dq = _correction(run, model, qc, est, now, payload_kg)
+        if dq is None:
             return run.result(True, "", now, qc)
-        if run.s.max_corrections <= sum(1 for st in run.steps if st.move is not None):
-            run.record(now, qc, est, None, math.nan)
-            raise run.fail(f"tolerance not met after {s.max_corrections} corrections: "
-                           f"‖Δp̂‖ = {ep * 1e3:.4f} mm, ‖Δφ̂‖ = {math.degrees(er):.4f}°",
-                           "max_corrections", now, qc)
-        dq = _joint_step(model, qc, bounded_step(est.error, s.max_step_m, s.max_step_rad),
-                         payload_kg)
-        if s.check_limits and not bool(model.description.within_limits(qc + dq)):
-            run.record(now, qc, est, None, math.nan)
-            raise run.fail("the correction would leave the joint limits", "joint_limit", now,
-                           qc)
         end = run.command(robot, qc + dq, now, qc)
         run.record(now, qc, est, dq, end)
         qc = qc + dq

@@ -128,7 +128,7 @@ class DynamicCell:
         """True reflector poses (tracker frame) for link angles ``(m, n)``: exact
         (:meth:`DynamicTwin.true_flanges`), or — while the arm stays within
         :data:`LINEAR_RAD` of where it last rested — to first order about that point,
-        ``p = p₀ + J_p δ``, ``R = exp(J_φ δ) R₀`` (second-order error < 0.1 µm)."""
+        ``p = p₀ + J_p δ``, ``R = exp(J_φ δ) R₀`` (second-order error < 0.1 µm, 0.1 µrad)."""
         if self._lin is not None:
             q0, T0, Jp, Jr = self._lin
             d = link - q0
