@@ -44,8 +44,10 @@ def test_white_noise_uncertainty_is_calibrated():
 
 
 def test_correlated_noise_uncertainty_is_calibrated():
-    """A Gauss–Markov series (τ = 50 ms, the tracker's floor): the batch means see the
-    correlation that a white-noise formula would miss (it would claim ~4× too little)."""
+    """White noise per sample plus a Gauss–Markov floor (τ = 50 ms, the tracker's) that
+    makes about half of the mean's variance (more than in the stream model, where it is
+    about a third, docs/tracker-model.md).  The batch means see the correlation that a
+    white-noise formula misses."""
     rng = np.random.default_rng(1)
     t = np.arange(500) / 1000.0
     rho = math.exp(-1e-3 / 0.05)
@@ -55,12 +57,13 @@ def test_correlated_noise_uncertainty_is_calibrated():
         x[0] = rng.standard_normal()
         for i in range(1, t.size):
             x[i] = rho * x[i - 1] + math.sqrt(1 - rho * rho) * rng.standard_normal()
-        e = estimate_rest_pose(t, 1e-5 * x[:, None])
+        e_i = 1e-5 * (5.5 * rng.standard_normal(t.size) + 0.6 * x)
+        e = estimate_rest_pose(t, e_i[:, None])
         errs.append(e.error[0])
         us.append(e.noise[0])
-        naive.append(1e-5 * np.std(x) * math.sqrt(1.5 / t.size))
-    assert 0.6 < np.mean(us) / np.std(errs) < 1.6
-    assert np.mean(naive) < 0.5 * np.std(errs)
+        naive.append(np.std(e_i) * math.sqrt(1.5 / t.size))
+    assert 0.7 < np.mean(us) / np.std(errs) < 1.4
+    assert np.mean(naive) < 0.8 * np.std(errs)
 
 
 @settings(max_examples=60, deadline=None)
@@ -92,7 +95,7 @@ def test_a_drift_counts_in_the_uncertainty():
     (np.arange(10.0), np.zeros((9, 3)), "expected"),
     (np.arange(40.0), np.full((40, 3), np.nan), "finite"),
     (np.r_[np.arange(20.0), np.arange(20.0)], np.zeros((40, 3)), "increasing"),
-    (np.arange(10.0), np.zeros((10, 3)), "≥ 16 samples"),
+    (np.arange(10.0), np.zeros((10, 3)), "≥ 32 samples"),
     (np.r_[np.arange(30.0), 1000.0 + np.arange(10.0)], np.zeros((40, 3)), "too sparse"),
 ])
 def test_estimate_rejects_bad_input(times, errors, match):
@@ -170,13 +173,13 @@ class FakeArm:
     def read_joints(self):
         return self.q.copy()
 
-    def command_joints(self, q):
+    def command_joints(self, q, duration_s=0.0):
         if self.refuse_after is not None and len(self.commands) >= self.refuse_after:
             raise RuntimeError("servo fault")
         self.commands.append(np.asarray(q, dtype=float).copy())
         self.T_from, self.T_to = self._pose(self.t), self._rest(np.asarray(q))
         self.q = np.asarray(q, dtype=float).copy()
-        self.t_cmd, self.t_end = self.t, self.t + self.move_s
+        self.t_cmd, self.t_end = self.t, self.t + max(self.move_s, duration_s)
         return self.t_end
 
     def _pose(self, t):

@@ -87,6 +87,22 @@ def test_stream_samples_the_arm_at_rest_within_the_tracker_noise(calibrated):
     assert 20e-6 < P.std(axis=0).max() < 0.3e-3
 
 
+def test_uncertainty_matches_the_stream_at_rest(calibrated):
+    """The tracker stream's own noise (white, Gauss–Markov floor): over 16 windows of
+    0.25 s at rest the stated uncertainty matches the scatter of the estimates."""
+    from plugcell.compensation import estimate_rest_pose
+
+    cell, _, target, _ = _setup(calibrated)
+    got = cell.advance(4.05)
+    t = np.array([s.time_s for s in got])
+    E = pose_error_exact(target, np.array([s.pose for s in got]))
+    est = [estimate_rest_pose(t[m], E[m]) for m in
+           ((t >= t[0] + 0.25 * k) & (t < t[0] + 0.25 * (k + 1)) for k in range(16))]
+    spread = np.linalg.norm(np.std([e.error[:3] for e in est], axis=0))
+    stated = np.mean([e.position_uncertainty_m for e in est])
+    assert 0.6 < stated / spread < 1.6
+
+
 def test_converges_within_tolerance_on_the_twin(calibrated):
     """One point of the 8.3 layout, 150 mm from the last: moved, estimated while
     settling, corrected, confirmed — the true rest pose (after a further second) is

@@ -201,13 +201,17 @@ class MovingRobot(Protocol):
         """The robot's current joint readings, (n_readings,) rad."""
         ...
 
-    def command_joints(self, q: Array) -> float:
+    def command_joints(self, q: Array, duration_s: float = 0.0) -> float:
         """Start a move from the last commanded joints to ``q`` and return at once.
 
         Parameters
         ----------
         q : (n_readings,) array, rad (m for prismatic)
             Target readings.
+        duration_s : float, s
+            The shortest time the move may take: the controller stretches a shorter
+            move (smoothly, rest to rest) to it — a small correction made slowly enough
+            not to ring the structure.
 
         Returns
         -------

@@ -103,6 +103,9 @@ class SettlingSettings:
         ``B`` of the batch-means noise estimate.
     max_step_m, max_step_rad : float, m and rad
         ``s_p``, ``s_φ``: the largest correction commanded at once.
+    correction_duration_s : float, s
+        The shortest time a correction may take (``MovingRobot.command_joints``): about
+        one period of the lowest structural mode, so that it does not ring it.
     max_corrections : int
         Corrective commands before giving up.
     max_time_s : float, s
@@ -115,7 +118,7 @@ class SettlingSettings:
     Raises
     ------
     ValueError
-        A non-positive value, ``window_min_s > window_max_s`` or fewer than 3 batches.
+        A non-positive value, ``window_min_s > window_max_s`` or fewer than 11 batches.
     """
 
     position_tol_m: float = 0.05e-3
@@ -126,9 +129,10 @@ class SettlingSettings:
     window_max_s: float = 1.0
     guard_s: float = 0.02
     poll_s: float = 0.02
-    batches: int = 8
+    batches: int = 16
     max_step_m: float = 1.0e-3
     max_step_rad: float = math.radians(0.2)
+    correction_duration_s: float = 0.1
     max_corrections: int = 10
     max_time_s: float = 10.0
     max_gap_s: float = 1.0
@@ -142,13 +146,17 @@ class SettlingSettings:
             if not (math.isfinite(v) and v > 0):
                 raise ValueError(f"SettlingSettings.{name} must be a finite number > 0, "
                                  f"got {v!r}")
-        if not (math.isfinite(self.guard_s) and self.guard_s >= 0):
-            raise ValueError(f"SettlingSettings.guard_s must be ≥ 0, got {self.guard_s!r}")
+        for name in ("guard_s", "correction_duration_s"):
+            v = getattr(self, name)
+            if not (math.isfinite(v) and v >= 0):
+                raise ValueError(f"SettlingSettings.{name} must be ≥ 0, got {v!r}")
         if self.window_min_s > self.window_max_s:
             raise ValueError(f"SettlingSettings: window_min_s {self.window_min_s} s > "
                              f"window_max_s {self.window_max_s} s")
-        if self.batches < 3:
-            raise ValueError(f"SettlingSettings.batches must be ≥ 3, got {self.batches}")
+        if self.batches < 3 + 4 * MAX_MODES:
+            raise ValueError(f"SettlingSettings.batches must be ≥ {3 + 4 * MAX_MODES} (the "
+                             f"line and {MAX_MODES} modes leave one degree of freedom), got "
+                             f"{self.batches}")
         if self.max_corrections < 0:
             raise ValueError("SettlingSettings.max_corrections must be ≥ 0, got "
                              f"{self.max_corrections}")
@@ -198,7 +206,52 @@ class RestEstimate:
         return float(np.linalg.norm(self.noise[3:]))
 
 
-def estimate_rest_pose(times: ArrayLike, errors: ArrayLike, batches: int = 8
+#: The band searched for ringing modes (Hz): from the window's main lobe ``2/W`` up to
+#: this, and how many modes are taken out of the residual at most.
+MODE_BAND_MAX_HZ, MAX_MODES = 60.0, 2
+#: A periodogram peak counts as a mode above this multiple of the median level.
+MODE_SIGNIFICANCE = 6.0
+
+
+def _remove_modes(t: Array, R: Array, w: Array, W: float
+                  ) -> tuple[Array, list[tuple[float, Array]]]:
+    """Take up to :data:`MAX_MODES` ringing modes out of the residual ``R`` (N, k): the
+    peak of the Hann-weighted periodogram ``P(f) = Σ_k |Σ_i w_i r_ik e^{−i2πft_i}|² / σ_k²``
+    over ``2/W ≤ f ≤ MODE_BAND_MAX_HZ`` (step ``1/(4W)``), if it stands
+    :data:`MODE_SIGNIFICANCE` × above the median, is fitted per component as a mode whose
+    amplitude changes linearly over the window (it decays),
+    ``r ≈ (α + α' τ) cos 2πft + (β + β' τ) sin 2πft``, ``τ = t − t_c`` (weighted least
+    squares), and subtracted.
+
+    Returns the cleaned residual and, per mode, ``(f, leak)``: its frequency and its
+    Hann-weighted mean ``Σ w_i m_i / Σ w_i`` per component — what the fitted mode ``m``
+    leaves in ``ê``.
+    """
+    f_hi = min(MODE_BAND_MAX_HZ, 0.25 / float(np.median(np.diff(t))))
+    freqs = np.arange(2.0 / W, f_hi, 0.25 / W)
+    modes: list[tuple[float, Array]] = []
+    if freqs.size < 4:
+        return R, modes
+    sw = float(w.sum())
+    tau = t - float(w @ t) / sw
+    ph = 2 * np.pi * np.outer(freqs, t - t[0])
+    C, S = np.cos(ph) * w, np.sin(ph) * w
+    for _ in range(MAX_MODES):
+        scale = np.maximum(np.sqrt((w @ R ** 2) / sw), 1e-300)
+        P = ((C @ (R / scale)) ** 2 + (S @ (R / scale)) ** 2).sum(axis=1)
+        j = int(np.argmax(P))
+        if P[j] < MODE_SIGNIFICANCE * float(np.median(P)):
+            break
+        c, s_ = np.cos(ph[j]), np.sin(ph[j])
+        X = np.stack([c, s_, tau * c, tau * s_], axis=1)
+        coef = np.linalg.lstsq(X * np.sqrt(w)[:, None], R * np.sqrt(w)[:, None], rcond=None)[0]
+        fit = X @ coef
+        R = R - fit
+        modes.append((float(freqs[j]), w @ fit / sw))
+    return R, modes
+
+
+def estimate_rest_pose(times: ArrayLike, errors: ArrayLike, batches: int = 16
                        ) -> RestEstimate:
     """The Hann-weighted rest-pose estimate and its uncertainty (module docstring).
 
@@ -209,7 +262,7 @@ def estimate_rest_pose(times: ArrayLike, errors: ArrayLike, batches: int = 8
     errors : (N, k) array_like
         ``e_i`` (m and rad).
     batches : int
-        ``B`` (≥ 3); every batch must hold at least two samples.
+        ``B`` (≥ 11); every batch must hold at least two samples.
 
     Returns
     -------
@@ -245,9 +298,10 @@ def estimate_rest_pose(times: ArrayLike, errors: ArrayLike, batches: int = 8
     if np.any(counts < 2):
         raise ValueError(f"a batch holds fewer than 2 samples ({counts.min()}): the samples "
                          "are too sparse for the window")
-    resid = E - est - np.outer(dt, b)
+    resid, modes = _remove_modes(t, E - est - np.outer(dt, b), w, W)
     means = np.stack([resid[idx == k].mean(axis=0) for k in range(batches)])
-    s2 = (means ** 2).sum(axis=0) / (batches - 2)
+    dof = batches - 2 - 4 * len(modes)
+    s2 = (means ** 2).sum(axis=0) / max(dof, 1)
     kappa = t.size * float(w @ w) / sw ** 2
     noise = np.sqrt(kappa * s2 / batches)
     # the slope's own variance, from the batches (weights ω_k, centres τ_k)
@@ -256,7 +310,8 @@ def estimate_rest_pose(times: ArrayLike, errors: ArrayLike, batches: int = 8
     d = tau - float(om @ tau / om.sum())
     var_b = s2 * float((om * d) @ (om * d)) / float(om @ d ** 2) ** 2
     bias = 0.5 * W * np.sqrt(np.maximum(b ** 2 - 4.0 * var_b, 0.0))
-    u = np.hypot(noise, bias)
+    leak = np.abs(sum(m for _, m in modes)) if modes else np.zeros_like(est)
+    u = np.sqrt(noise ** 2 + bias ** 2 + leak ** 2)
     return RestEstimate(est, u, noise, b, W, int(t.size))
 
 
@@ -447,9 +502,10 @@ class _Run:
         return CorrectionError(message, reason=reason,
                                result=self.result(False, reason, now, q))
 
-    def command(self, robot: MovingRobot, q: Array, now: float, q_old: Array) -> float:
+    def command(self, robot: MovingRobot, q: Array, now: float, q_old: Array,
+                duration_s: float = 0.0) -> float:
         try:
-            return float(robot.command_joints(q))
+            return float(robot.command_joints(q, duration_s))
         except Exception as exc:
             raise self.fail(f"the robot refused the command: {exc}", "robot", now,
                             q_old) from exc
@@ -587,7 +643,7 @@ def correct_while_settling(
         dq = _correction(run, model, qc, est, now, payload_kg)
         if dq is None:
             return run.result(True, "", now, qc)
-        end = run.command(robot, qc + dq, now, qc)
+        end = run.command(robot, qc + dq, now, qc, s.correction_duration_s)
         run.record(now, qc, est, dq, end)
         qc = qc + dq
         run.restart(end + s.guard_s)

@@ -220,9 +220,11 @@ class DynamicCell:
         return StreamReading(time_s=s.tracker_time_s, pose=T,
                              position=None if T is None else T[:3, 3].copy(), status=s.status)
 
-    def command_joints(self, q: ArrayLike) -> float:
+    def command_joints(self, q: ArrayLike, duration_s: float = 0.0) -> float:
         """Start a synchronised PTP from the last command to ``q`` (readings, rad); the
-        cell time at which the interpolation ends."""
+        cell time at which the interpolation ends.  A PTP shorter than ``duration_s``
+        runs as the quintic ``s(τ) = 10τ³ − 15τ⁴ + 6τ⁵`` over ``duration_s`` instead (rest
+        to rest, continuous acceleration: slower than the limits allow)."""
         q = np.asarray(q, dtype=float)
         desc = self.arm.twin.description
         if q.shape != self._command.shape or not np.all(np.isfinite(q)):
@@ -233,8 +235,14 @@ class DynamicCell:
         if float(np.max(np.abs(q - start))) < 1e-12:
             return self.now + len(self._queue) * self.cycle_s
         traj = plan(desc, start, [PTP(target=q)], self.joint_limits)
-        pts = traj.sample(traj.cycle_times(self.cycle_s)[1:], 0).q
-        self._queue.extend(np.asarray(pts))
+        if traj.duration >= duration_s:
+            pts = np.asarray(traj.sample(traj.cycle_times(self.cycle_s)[1:], 0).q)
+        else:
+            tau = np.arange(1, math.ceil(duration_s / self.cycle_s) + 1) * self.cycle_s \
+                / duration_s
+            sig = np.clip(tau, 0.0, 1.0) ** 3 * (10 - 15 * tau + 6 * tau ** 2)
+            pts = start + np.outer(sig, q - start)
+        self._queue.extend(pts)
         self._queue.append(q.copy())
         self._command = q.copy()
         return self.now + len(self._queue) * self.cycle_s
@@ -255,8 +263,8 @@ class StreamingRobot:
     def read_joints(self) -> Array:
         return self.cell.arm.measured
 
-    def command_joints(self, q: Array) -> float:
-        return self.cell.command_joints(q)
+    def command_joints(self, q: Array, duration_s: float = 0.0) -> float:
+        return self.cell.command_joints(q, duration_s)
 
 
 class RobotFrameStream:
