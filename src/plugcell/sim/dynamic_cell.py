@@ -175,6 +175,11 @@ class DynamicCell:
         (what a perfect tracker would report) — simulators only."""
         return self.frames.pose_to_robot(self._poses[-1])
 
+    def true_tool_at(self, t: float) -> Array:
+        """The tool's true pose at cell time ``t`` (within the last 0.5 s), as
+        :meth:`true_tool` — simulators only."""
+        return self.frames.pose_to_robot(self._target(t))
+
     def static_reading(self, duration_s: float = 1.0) -> Array:
         """A static tracker reading (the thesis's 1 s verification, the static
         :class:`LaserTracker` model) of the tool now, robot base frame; ``duration_s``
@@ -290,6 +295,7 @@ class StopAndGoRobot:
         self.cell = cell
         self.settle_s, self.small_settle_s, self.small_move_rad = settle_s, small_settle_s, \
             small_move_rad
+        self.last_interpolation_s = 0.0
 
     def read_joints(self) -> Array:
         return self.cell.arm.measured
@@ -298,6 +304,7 @@ class StopAndGoRobot:
         t0 = self.cell.now
         travel = float(np.max(np.abs(np.asarray(q) - self.cell.command)))
         end = self.cell.command_joints(q)
+        self.last_interpolation_s = end - t0
         settle = self.small_settle_s if travel < self.small_move_rad else self.settle_s
         self.cell.advance(end + settle - self.cell.now, sample=False)
         return self.cell.now - t0
