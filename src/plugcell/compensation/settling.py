@@ -16,22 +16,31 @@ the last commanded motion ended (plus a guard), of which the last ``W`` seconds
 
     w_i  = sin²(π (t_i − t₀)/W)                       (Hann window over [t₀, t₀ + W])
     ê    = Σ w_i e_i / Σ w_i                          (the rest pose's error)
-    e_i ≈ a + b (t_i − t_c)                           (weighted least squares, t_c the
-                                                       window's weighted centre)
-    u²   = κ s²_B / B + (W/2)² max(0, b² − 4 σ_b²)    (per component)
+    e_i ≈ ê + b (t_i − t_c) + Σ_m m_m(t_i)            (weighted least squares: a drift,
+                                                       t_c the window's weighted centre,
+                                                       and ringing modes, below)
+    u²   = κ s²_B / B + (W/2)² max(0, b² − 4 σ_b²) + (Σ_m m̄_m)²     (per component)
 
 The Hann window's sidelobes lie 31 dB below its main lobe, whose half-width is
 ``2/W``: an oscillation above ``2/W`` Hz (the robot's first modes, 9–25 Hz on the
-Smart H4 twin; ``W ≥ 0.25 s``) leaves ≲ 3 % of its amplitude in ``ê``.  ``s²_B`` is
-the variance of ``B`` consecutive batch means about the fitted line (the batch-means
-estimate of a correlated series' mean variance: the tracker's floor noise is
-correlated over tens of ms), ``κ = N Σw²/(Σw)²`` the window's variance inflation
-(1.5 for Hann), ``σ_b²`` the slope's variance from the same batches; ``b W/2`` is the
-bias of a mean that still drifts (the arm still creeping to rest: the window's centre
-lags its end by ``W/2``), counted where the slope exceeds twice its standard error, so a
-transient that has not decayed is *waited out*: the estimate
-is accepted only when ``‖u_p‖ ≤ ū_p`` and ``‖u_φ‖ ≤ ū_φ`` (the norms over the three
-components).
+Smart H4 twin; ``W ≥ 0.25 s``) leaves ≤ 2.7 % of its amplitude in ``ê``.  Up to two
+ringing modes ``m_m(t) = (α + α'τ) cos 2πf_m t + (β + β'τ) sin 2πf_m t`` (decaying:
+the amplitude changes linearly over the window) are found as peaks of the residual's
+periodogram between ``2/W`` and 60 Hz and taken out of it (:func:`_remove_modes`);
+``m̄_m``, their Hann-weighted mean, is what they leave in ``ê``.  ``s²_B`` is the
+variance of ``B`` consecutive batch means of what remains, with ``B − 2 − 4M`` degrees
+of freedom (the batch-means estimate of a correlated series' mean variance: the
+tracker's floor noise is correlated over tens of ms — without the modes taken out, a
+ringing arm's oscillation would count as noise), ``κ = N Σw²/(Σw)²`` the window's
+variance inflation (1.5 for Hann), ``σ_b²`` the slope's variance from the same batches;
+``b W/2`` is the bias of a mean that still drifts (the arm still creeping to rest: the
+window's centre lags its end by ``W/2``), counted where the slope exceeds twice its
+standard error, so a transient that has not decayed is *waited out*: the estimate is
+accepted only when ``‖u_p‖ ≤ ū_p`` and ``‖u_φ‖ ≤ ū_φ`` (the norms over the three
+components).  Limit: a noise without a white part whose spectrum rises steeply below
+60 Hz would be taken for a mode and its uncertainty underestimated; the tracker's
+samples are white-dominated at their rate (tests compare the stated uncertainty with the
+scatter of the estimates on the stream model).
 
 **The loop** (:func:`correct_while_settling`): command the model-compensated joints
 ``θ_c``; stream; when the estimate is accepted,
@@ -39,7 +48,8 @@ components).
 * stop when ``‖Δp̂‖ < tol_p`` and ``‖Δφ̂‖ < tol_φ`` (converged);
 * else a bounded step ``α = min(1, s_p/‖Δp̂‖, s_φ/‖Δφ̂‖)``,
   ``δθ = J(θ_c)⁻¹ α Δx̂`` (the identified model's Jacobian at the commanded joints;
-  pseudo-inverse where singular), ``θ_c ← θ_c + δθ``, commanded at once; the window
+  pseudo-inverse where singular), ``θ_c ← θ_c + δθ``, commanded at once but over at
+  least ``correction_duration_s`` (so that it does not ring the structure); the window
   restarts after the new motion ends.
 
 It fails with :class:`~plugcell.compensation.errors.CorrectionError` (and the record
