@@ -284,6 +284,8 @@ def main(argv: list[str]) -> int:
     ap.add_argument("--plot", type=Path, default=None)
     ap.add_argument("--json", type=Path, default=None)
     args = ap.parse_args(argv)
+    if args.points is not None and args.points < 2:
+        ap.error(f"--points {args.points}: the statistics need at least 2 points")
     methods = [m.strip() for m in args.methods.split(",") if m.strip()]
     bad = [m for m in methods if m not in METHODS]
     if bad:
