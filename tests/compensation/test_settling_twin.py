@@ -122,6 +122,29 @@ def test_converges_within_tolerance_on_the_twin(calibrated):
     assert np.array_equal(cell.command, res.q_final)
 
 
+def test_a_small_move_is_stretched_to_its_duration_and_rings_less(calibrated):
+    """``command_joints(q, duration_s)``: a 0.2 mm correction as a 0.2 s quintic ramp
+    ends 0.2 s later and rings the tool far less than the same step at the limits."""
+    ring = {}
+    for duration in (0.0, 0.2):
+        cell, model, *_ = _setup(calibrated)
+        cell.advance(1.0, sample=False)
+        J = model.evaluate(cell.command, 36.0)[1][0]
+        dq = np.linalg.solve(J, np.r_[0.0, 0.2e-3, 0.0, 0.0, 0.0, 0.0])
+        t0 = cell.now
+        end = cell.command_joints(cell.command + dq, duration)
+        if duration:
+            assert end - t0 == pytest.approx(duration, abs=cell.cycle_s)
+        cell.advance(end - cell.now, sample=False)
+        p = []
+        for _ in range(100):  # 0.4 s after the move
+            cell.advance(cell.cycle_s, sample=False)
+            p.append(cell.true_tool()[:3, 3])
+        p = np.array(p)
+        ring[duration] = float(np.max(np.linalg.norm(p - p[-25:].mean(axis=0), axis=1)))
+    assert ring[0.2] < 0.3 * ring[0.0]
+
+
 def test_a_beam_broken_for_good_on_the_twin(calibrated):
     spec = StreamSpec(auto_reacquire=False)
     cell, model, target, q = _setup(calibrated, spec=spec, blocked=lambda t: t > 0.3)
