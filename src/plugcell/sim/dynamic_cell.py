@@ -8,10 +8,11 @@ samples, output up to 1 kHz, latency, noise at rate, beam breaks), on one simula
 clock ``now`` (s, true time).  It hands out:
 
 * :class:`StreamingRobot` — a :class:`~plugcell.compensation.protocols.MovingRobot`:
-  ``command_joints(q)`` plans a synchronised PTP (``plugcell.motion``, double-S, the
-  joint limits below) from the last command and streams its setpoints, one per 4 ms
-  cycle, as the controller's interpolator does; it returns at once with the time the
-  interpolation ends;
+  ``command_joints(q, duration_s)`` plans a synchronised PTP (``plugcell.motion``,
+  double-S, the joint limits below) from the last command — or, when that would be
+  shorter than ``duration_s``, a quintic ramp over ``duration_s`` — and streams its
+  setpoints, one per 4 ms cycle, as the controller's interpolator does; it returns at
+  once with the time the interpolation ends;
 * :class:`RobotFrameStream` — a :class:`~plugcell.compensation.protocols.PoseStream`:
   ``receive(wait_s)`` lets ``wait_s`` of simulated time pass (the arm steps, the
   tracker samples the moving reflector) and returns the samples that left the tracker
@@ -30,7 +31,11 @@ clock ``now`` (s, true time).  It hands out:
 The true reflector pose between two cycles (the tracker samples at 3 kHz) is the
 linear interpolation of the positions at the cycle ends (the rotation of the later
 one); the poses are computed per cycle in batches (the static physics of the twin,
-:meth:`~plugcell.sim.twin.dynamics.DynamicTwin.true_flanges`).
+:meth:`~plugcell.sim.twin.dynamics.DynamicTwin.true_flanges`), and while the arm stays
+within :data:`LINEAR_RAD` of where it last rested, to first order about that point (the
+physics costs milliseconds a call; the linearisation's error is below 0.1 µm, tested).
+Where nobody reads the stream (``advance(..., sample=False)``: the stop-and-go waits)
+it is not simulated; the next read restarts it with the beam re-pointed.
 """
 
 from __future__ import annotations
