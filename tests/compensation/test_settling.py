@@ -285,6 +285,16 @@ def test_too_noisy_samples_are_refused(nominal):
     assert ei.value.result is not None and not ei.value.result.converged
 
 
+def test_a_stream_too_sparse_for_an_estimate_is_refused(nominal):
+    """20 Hz: 20 samples in the longest window, fewer than 2B = 32 — ``sparse`` as soon
+    as a full window has passed, not a time-out."""
+    arm = FakeArm(nominal, Q0, [0.2e-3, 0, 0, 0, 0, 0], rate=20.0)
+    with pytest.raises(CorrectionError) as ei:
+        correct_while_settling(arm, arm, nominal, _target(nominal), Q0)
+    assert ei.value.reason == "sparse" and "raise its rate" in str(ei.value)
+    assert ei.value.result.time_s < 1.5
+
+
 def test_an_arm_that_never_settles_is_flagged(nominal):
     arm = FakeArm(nominal, Q0, [0.2e-3, 0, 0, 0, 0, 0], creep=1e-3)
     s = SettlingSettings(max_time_s=3.0)

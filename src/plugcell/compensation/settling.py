@@ -54,7 +54,8 @@ scatter of the estimates on the stream model).
 
 It fails with :class:`~plugcell.compensation.errors.CorrectionError` (and the record
 so far) — ``noisy``: even the longest window leaves the uncertainty above ``ū`` (the
-samples are too noisy to decide at the tolerance); ``not_settled``: no accepted
+samples are too noisy to decide at the tolerance); ``sparse``: a full window holds too
+few samples for the batches (a stream too slow); ``not_settled``: no accepted
 estimate within ``max_time_s`` (the transient never died out); ``sensor:<status>``:
 no valid sample for ``max_gap_s`` (the beam broke and did not come back; a shorter
 break only restarts the window); ``max_corrections``; ``joint_limit`` (nothing moved);
@@ -503,6 +504,18 @@ class _Run:
         except ValueError:  # samples too sparse for the batches: wait for more
             return None
 
+    def check_sparse(self, now: float, q: Array) -> None:
+        """``sparse``: a full window (``W_max`` since the samples became valid) holds fewer
+        than the ``2B`` samples an estimate needs."""
+        s = self.s
+        if now - self.valid_from < s.window_max_s:
+            return
+        n = int(np.count_nonzero(np.asarray(self.times) >= now - s.window_max_s))
+        if n < 2 * s.batches:
+            raise self.fail(f"only {n} valid samples in {s.window_max_s:g} s: the stream is "
+                            f"too sparse for an estimate (≥ {2 * s.batches} a window, "
+                            f"{s.batches} batches); raise its rate", "sparse", now, q)
+
     def result(self, converged: bool, reason: str, now: float, q: Array) -> SettlingResult:
         breaks = list(self.breaks)
         if self.open_break is not None:
@@ -629,7 +642,7 @@ def correct_while_settling(
     Raises
     ------
     CorrectionError
-        ``noisy``, ``not_settled``, ``sensor:<status>``, ``max_corrections``,
+        ``noisy``, ``sparse``, ``not_settled``, ``sensor:<status>``, ``max_corrections``,
         ``joint_limit``, ``robot`` — with the record so far (module docstring).
     ValueError
         A malformed target or joints.
@@ -648,6 +661,7 @@ def correct_while_settling(
         _check_time(run, now, qc)
         est = run.estimate(now)
         if est is None:
+            run.check_sparse(now, qc)
             continue
         if not _accepted(est, s):
             _check_noise(run, est, now, qc)
