@@ -30,6 +30,8 @@ SCRIPTS = [
     ("rsi_latency.py", ["--seconds", "1"], "| goal (issue 37) | this run | met |"),
     ("tracker_stream.py", ["--seconds", "0.5"], "| rate Hz | samples/message |"),
     ("twin_path_deviation.py", ["--speeds", "250"], "| speed mm/s | duration s |"),
+    ("static_correction.py", ["--fast", "--points", "2", "--methods", "settling,iterative"],
+     "| settling | 2/2 |"),
     ("program_compensation.py", ["--targets", "40", "--repeat", "1", "--dialects",
                                  "krl,rapid,urscript"], "| urscript | 40 |"),
     ("program_twin.py", [], "Milling contour, ABB RAPID"),

@@ -8,7 +8,9 @@
 2. **Sensor-based** (6.5.2): the tracker-guided 6-DOF loop δθ = J⁻¹Δx
    (:func:`correct_6dof`) and the 3-DOF loop of relative moves (:func:`correct_3dof`)
    against small device protocols (:mod:`.protocols`), measurements brought into the
-   robot base frame with the identified BASE and PROBE (:mod:`.frames`).
+   robot base frame with the identified BASE and PROBE (:mod:`.frames`); and the same
+   correction converging while the robot settles, from a streaming tracker
+   (:func:`correct_while_settling`, :mod:`.settling`, issue 38 §3).
 
 Targets are **tool-point poses in the robot base frame**; by default the tool point
 is the T-MAC (the identified PROBE), as in thesis 8.3.  No I/O, no framework or
@@ -28,9 +30,12 @@ from plugcell.compensation.program import filter_program, frame_matrix, target_p
 from plugcell.compensation.protocols import (
     CartesianRobot,
     JointRobot,
+    MovingRobot,
     PoseSensor,
+    PoseStream,
     PositionSensor,
     Reading,
+    StreamReading,
 )
 from plugcell.compensation.sensor_based import (
     CorrectionResult,
@@ -38,6 +43,15 @@ from plugcell.compensation.sensor_based import (
     CorrectionStep,
     correct_3dof,
     correct_6dof,
+)
+from plugcell.compensation.settling import (
+    RestEstimate,
+    SettlingResult,
+    SettlingSettings,
+    SettlingStep,
+    bounded_step,
+    correct_while_settling,
+    estimate_rest_pose,
 )
 
 __all__ = [
@@ -51,17 +65,27 @@ __all__ = [
     "IdentifiedModel",
     "JointRobot",
     "MetrologyFrames",
+    "MovingRobot",
     "NominalModel",
     "PoseModel",
     "PoseSensor",
+    "PoseStream",
     "PositionSensor",
     "Reading",
+    "RestEstimate",
     "RobotFrameSensor",
     "SensorError",
+    "SettlingResult",
+    "SettlingSettings",
+    "SettlingStep",
+    "StreamReading",
+    "bounded_step",
     "compensate",
     "compensate_joints",
     "correct_3dof",
     "correct_6dof",
+    "correct_while_settling",
+    "estimate_rest_pose",
     "filter_program",
     "frame_matrix",
     "nominal_joints",

@@ -9,7 +9,8 @@
   adapters; ``reason`` is a short machine-readable word.
 * :class:`CorrectionError` — the sensor-based correction loop (thesis 6.5.2) had to
   stop before the thresholds were met.  ``reason`` says why (``"sensor:<reason>"``,
-  ``"max_iterations"``, ``"joint_limit"``, ``"singular"``, ``"robot"``) and
+  ``"max_iterations"``, ``"joint_limit"``, ``"singular"``, ``"robot"``; the settling
+  loop also ``"noisy"``, ``"not_settled"``, ``"max_corrections"``) and
   ``result`` carries every iteration recorded up to that point, so the caller can
   decide (re-point the tracker, accept the residual, abort the program).
 """
@@ -20,6 +21,7 @@ from typing import TYPE_CHECKING, Any
 
 if TYPE_CHECKING:  # pragma: no cover
     from plugcell.compensation.sensor_based import CorrectionResult
+    from plugcell.compensation.settling import SettlingResult
 
 __all__ = ["CompensationError", "CorrectionError", "SensorError"]
 
@@ -68,8 +70,8 @@ class SensorError(RuntimeError):
 class CorrectionError(RuntimeError):
     """The sensor-based correction stopped early (module docstring)."""
 
-    def __init__(self, message: str, *, reason: str, result: CorrectionResult | None = None
-                 ) -> None:
+    def __init__(self, message: str, *, reason: str,
+                 result: CorrectionResult | SettlingResult | None = None) -> None:
         self.reason = reason
         self.result = result
         super().__init__(message)

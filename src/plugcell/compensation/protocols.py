@@ -21,6 +21,12 @@ twin, wall-clock for a real device), so the loop can account for the cycle time
 per point without a clock of its own.  A device that cannot deliver raises
 :class:`~plugcell.compensation.errors.SensorError` (sensor) or any exception
 (robot); the loop turns both into a ``CorrectionError`` with the reason.
+
+The correction *while the robot settles* (:mod:`.settling`, issue 38 §3) needs two
+more: :class:`MovingRobot` — a joint command that returns at once with the time its
+interpolation will end (the robot keeps moving and settling in the background) — and
+:class:`PoseStream` — a tracker streaming stamped samples (:class:`StreamReading`) of
+the tool pose in the robot base frame, with the clock both share (``now()``).
 """
 
 from __future__ import annotations
@@ -33,7 +39,8 @@ from numpy.typing import NDArray
 
 Array = NDArray[np.float64]
 
-__all__ = ["CartesianRobot", "JointRobot", "PoseSensor", "PositionSensor", "Reading"]
+__all__ = ["CartesianRobot", "JointRobot", "MovingRobot", "PoseSensor", "PoseStream",
+           "PositionSensor", "Reading", "StreamReading"]
 
 
 @dataclass(frozen=True, eq=False)
@@ -159,5 +166,81 @@ class PositionSensor(Protocol):
         ------
         SensorError
             The device cannot deliver (target lost, out of range…).
+        """
+        ...
+
+
+@dataclass(frozen=True, eq=False)
+class StreamReading:
+    """One streamed sample of the tool in the robot base frame.
+
+    Attributes
+    ----------
+    time_s : float, s
+        Acquisition time (the middle of the sample's integration) on the loop's clock.
+    pose : (4, 4) array, m, or None
+        The tool pose; ``None`` when the sample holds no measurement.
+    position : (3,) array, m, or None
+        Its position.
+    status : str
+        ``"ok"`` or why the sample is empty (``line_of_sight``, ``tracking_speed``,
+        ``out_of_range``, ``reacquiring``…).
+    """
+
+    time_s: float
+    pose: Array | None
+    position: Array | None
+    status: str = "ok"
+
+
+@runtime_checkable
+class MovingRobot(Protocol):
+    """A robot whose moves run in the background (a controller's interpolator)."""
+
+    def read_joints(self) -> Array:
+        """The robot's current joint readings, (n_readings,) rad."""
+        ...
+
+    def command_joints(self, q: Array, duration_s: float = 0.0) -> float:
+        """Start a move from the last commanded joints to ``q`` and return at once.
+
+        Parameters
+        ----------
+        q : (n_readings,) array, rad (m for prismatic)
+            Target readings.
+        duration_s : float, s
+            The shortest time the move may take: the controller stretches a shorter
+            move (smoothly, rest to rest) to it — a small correction made slowly enough
+            not to ring the structure.
+
+        Returns
+        -------
+        float, s
+            The loop clock's time at which the commanded motion (the interpolation)
+            ends; the arm still settles after it.
+        """
+        ...
+
+
+@runtime_checkable
+class PoseStream(Protocol):
+    """A metrology system streaming the tool pose (a tracker's real-time output)."""
+
+    def now(self) -> float:
+        """The loop's clock (s), shared with the samples' time stamps."""
+        ...
+
+    def receive(self, wait_s: float) -> list[StreamReading]:
+        """Wait ``wait_s`` seconds; the samples that arrived meanwhile, oldest first.
+
+        Parameters
+        ----------
+        wait_s : float, s
+            How long to wait.
+
+        Returns
+        -------
+        list of StreamReading
+            In order of acquisition; empty ones carry their ``status``.
         """
         ...

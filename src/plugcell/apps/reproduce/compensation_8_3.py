@@ -114,6 +114,7 @@ __all__ = [
     "STAGES",
     "THESIS",
     "ExperimentConfig",
+    "calibrate",
     "format_table",
     "line_targets",
     "run",
@@ -172,8 +173,9 @@ def line_targets(cfg: ExperimentConfig, probe: Array) -> Array:
     return T
 
 
-def _calibrate(cell: TwinCell, cfg: ExperimentConfig, seed: int) -> tuple[CalibrationResult, float]:
-    """Campaign + identification (8.2), then independent validation poses (another draw)."""
+def calibrate(cell: TwinCell, cfg: ExperimentConfig, seed: int) -> tuple[CalibrationResult, float]:
+    """Campaign + identification (8.2), then independent validation poses (another draw);
+    the result and the campaign's simulated time (s)."""
     robot = cell.robot
     profile = robot.reveal_truth().profile
     rng = np.random.default_rng(seed + 1)
@@ -351,7 +353,7 @@ def run(fast: bool = False, seed: int = 0, progress: Progress | None = None,
         if progress is not None:
             progress(done, total)
 
-    cal, cal_time = _calibrate(cell, cfg, seed)
+    cal, cal_time = calibrate(cell, cfg, seed)
     tick()
     model = IdentifiedModel(cal.model, residual=cal.residual_model)
     frames = MetrologyFrames(model.base, model.probe)
