@@ -59,7 +59,7 @@ def test_a_program_outlives_a_restart_of_the_tracker(fault_cell: FaultCell,
     fault_cell.serve("compute")
     fault_cell.serve("robot", "--name", "H4", "--param", "sim=true", "--param", "speed=100",
                      "--param", f"library={PROGRAMS}")
-    fault_cell.serve("controller", "--param", f"wiring={wiring}")
+    fault_cell.serve("cell-controller", "--param", f"wiring={wiring}")
     session = open_session(TransportConfig.from_env())
     smr = ReflectorPublisher(Bus(session, KeySpace(fault_cell.name)), "FIXED_SMR", "smr")
     smr.publish(truth.base @ np.r_[np.c_[np.eye(3), SMR_MM / 1e3], [[0, 0, 0, 1]]])

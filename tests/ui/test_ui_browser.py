@@ -78,9 +78,9 @@ def residual_file(n: int = 24) -> bytes:
 
 
 def _controller_ui(launcher: Any, cell: str) -> str:
-    """``plugcell controller`` on a free port for ``cell``; its URL."""
+    """``plugcell cell serve`` on a free port for ``cell``; its URL."""
     docs = Path(__file__).resolve().parents[2] / "docs"
-    ui = launcher.start(plugcell_argv("controller", "--port", "0", "--cell", cell,
+    ui = launcher.start(plugcell_argv("cell", "serve", "--port", "0", "--cell", cell,
                                       "--docs", str(docs)))
     return ui.wait_line(lambda x: "controller UI on" in x, 30.0).split(" on ", 1)[1].split()[0]
 

@@ -1,7 +1,7 @@
 """``plugcell plan``: choose the poses of a calibration campaign (docs/planning.md).
 
     plugcell plan --robot R --poses N --out PLAN.csv [--candidates M | --from FILE]
-                  [--criterion I|D|A|E|O] [--model 1-5] [--payloads 0,18,36]
+                  [--criterion I|D|A|E|O] [--model 1-5] [--payloads-kg 0,18,36]
                   [--tracker x,y,z] [--line-of-sight-deg A] [--volume cx,cy,cz,sx,sy,sz]
                   [--probe x,y,z,r,p,y] [--program FILE] [--json]
 
@@ -30,6 +30,7 @@ from typing import Any
 
 import numpy as np
 
+from plugcell.apps.commands.deprecated import DeprecatedName
 from plugcell.apps.commands.files import write_text
 from plugcell.apps.commands.robotargs import add_robot_args, load_robot_of
 
@@ -60,8 +61,10 @@ def configure(p: argparse.ArgumentParser) -> None:
                    help="I (default: mean prediction variance over the candidates), D, A, E "
                         "or O (noise amplification index)")
     p.add_argument("--model", default="5", help="1-5 or a model name (default 5, full)")
-    p.add_argument("--payloads", metavar="KG,KG,…",
-                   help="payloads of the campaign (default: 0,18,36 for model 5, else 0)")
+    p.add_argument("--payloads-kg", "--payloads", dest="payloads", action=DeprecatedName,
+                   old=("--payloads",), metavar="KG,KG,…",
+                   help="payload masses of the campaign, kg (default: 0,18,36 for model 5, "
+                        "else 0; --payloads is its old name)")
     p.add_argument("--tracker", metavar="X,Y,Z",
                    help="tracker position in the robot base frame, mm (default: the twin's "
                         "cell for a robot with a twin; else no line-of-sight test)")
@@ -114,9 +117,9 @@ def _payloads(text: str | None, payload_model: bool) -> list[float]:
         return [0.0, 18.0, 36.0] if payload_model else [0.0]
     vals = _numbers(text, "payloads", tuple(range(1, 33)))
     if any(v < 0 for v in vals):
-        raise CommandError(f"--payloads: masses must be ≥ 0 kg, got {text!r}")
+        raise CommandError(f"--payloads-kg: masses must be ≥ 0 kg, got {text!r}")
     if payload_model and max(vals) <= 0:
-        raise CommandError("--payloads: model 5 identifies payload compliance; give at least "
+        raise CommandError("--payloads-kg: model 5 identifies payload compliance; give at least "
                            "one payload > 0 kg (the thesis: 0,18,36)")
     return sorted(set(vals))
 
@@ -289,12 +292,12 @@ def _run(args: argparse.Namespace) -> int:
             own = m_from if (m_from is not None and args.payloads is None) else None
             if measured is not None:
                 if args.payloads is not None:
-                    raise PlanningError(f"--payloads: the poses of {args.from_file} were "
+                    raise PlanningError(f"--payloads-kg: the poses of {args.from_file} were "
                                         "measured with their own payloads")
                 own = measured.payload_kg
             if cfg.payload and own is not None and np.max(own) <= 0:
                 raise PlanningError(f"--from {args.from_file}: every pose has payload 0; "
-                                    "model 5 needs payloads (give --payloads)")
+                                    "model 5 needs payloads (give --payloads-kg)")
             cands = filter_candidates(
                 model, q_from, payloads=payloads, payload_kg=own,
                 volume=volume if args.volume is not None else None,

@@ -224,7 +224,7 @@ def run_demo(cfg: DemoConfig, out: Path, say: Callable[[str], None],
                                            ("KUKA", "elbow6", cfg.seed + 1, 0.0)):
             procs.serve("robot", name, sim="true", robot=robot, seed=seed,
                         payload_kg=payload, speed=cfg.speed, link_baud=19200)
-        procs.serve("controller", "CONTROLLER", wiring=wiring)
+        procs.serve("cell-controller", "CONTROLLER", wiring=wiring)
         procs.wait_ready()
         with BlockingClient("DEMO", cell=cell_name) as client:
             cell = _Cell(client, procs, progress)

@@ -117,7 +117,7 @@ class ServiceRecord:
 class CellController(GenericDevice):
     """The cell controller service (module docstring)."""
 
-    kind = "controller"
+    kind = "cell-controller"
     default_name = "CONTROLLER"
     vendor = "plugcell"
     info = "Cell controller (thesis 7.6): discovery, wiring, tasks, program runs, monitor"
