@@ -165,7 +165,7 @@ def run_ls(args: argparse.Namespace) -> int:
     if not states:
         print(f"no services in cell {args.cell!r}")
         return 0
-    width = max(len(s.device_info.name) for s in states)
+    width = max(len("SERVICE"), *(len(s.device_info.name) for s in states))
     kinds = max(10, *(len(s.device_info.kind) for s in states))
     print(f"{'SERVICE':<{width}}  {'KIND':<{kinds}} {'STATE':<6} {'CONNECTION':<10} PARTNERS")
     for s in states:
