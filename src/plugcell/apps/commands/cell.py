@@ -198,15 +198,10 @@ async def _states(args: argparse.Namespace, settle: float) -> list[Any]:
 def _wires(states: list[Any]) -> list[Any]:
     """The wires between services; a cell controller's own subscriptions left out (its kind
     ``cell-controller``, or ``controller`` as a cell controller before issue #33 says)."""
-    from plugcell.devices.cell.wiring import Wire
+    from plugcell.devices.cell.wiring import wires_in_place
 
-    out = []
-    for s in states:
-        if s.device_info.kind in CELL_CONTROLLER_KINDS:
-            continue
-        out.extend(Wire(s.device_info.name, p.name) for p in s.partners
-                   if p.name != s.device_info.name)
-    return sorted(set(out))
+    return wires_in_place({s.device_info.name: [p.name for p in s.partners] for s in states
+                           if s.device_info.kind not in CELL_CONTROLLER_KINDS})
 
 
 # -- wire / unwire ---------------------------------------------------------------------------
