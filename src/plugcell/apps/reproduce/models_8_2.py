@@ -211,49 +211,15 @@ def print_table(d: dict[str, Any]) -> None:
           f"{tw['deflection_36kg_mm']:.2f} mm (36 kg); thesis 0.5 / 1.0 mm")
 
 
+#: The rows of Table 8-2 (unloaded) and of Table 8-3 (loaded).
+UNLOADED_MODELS = ("nominal", "nominal_fitted_frames", "model1", "model2", "model3", "model4")
+LOADED_MODELS = ("nominal", "nominal_fitted_frames", "model4", "model5")
+
+
 def write_page(d: dict[str, Any], out: Path) -> None:
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
+    """docs/results/8.2.md and its figure from the results of :func:`reproduce_8_2`."""
     out.mkdir(parents=True, exist_ok=True)
-    fig, axes = plt.subplots(1, 3, figsize=(12, 3.6))
-    for ax, (case, models) in zip(axes, (
-            ("unloaded", ("nominal", "model1", "model2", "model3", "model4")),
-            ("loaded_18kg", ("nominal", "model4", "model5")),
-            ("loaded_36kg", ("nominal", "model4", "model5"))), strict=True):
-        x = np.arange(len(models))
-        cal = [d[case][m]["calibration"]["mean_mm"] for m in models]
-        val = [d[case][m]["validation"]["mean_mm"] for m in models]
-        th = [(d["thesis"][case].get(m) or (None,))[0] for m in models]
-        ax.bar(x - 0.27, cal, 0.27, label="twin, calibration poses")
-        ax.bar(x, val, 0.27, label="twin, validation poses")
-        ax.bar(x + 0.27, [t if t is not None else 0 for t in th], 0.27, label="thesis (real H4)",
-               color="gray")
-        ax.set_xticks(x, models, rotation=20)
-        ax.set_yscale("log")
-        ax.set_title(case)
-        ax.set_ylabel("mean position error (mm)")
-    axes[0].legend(fontsize=7)
-    fig.tight_layout()
-    fig.savefig(out / "8.2-models.png", dpi=100)
-    plt.close(fig)
-
-    def table(case: str, models: tuple[str, ...], which: str) -> list[str]:
-        rows = ["| model | Δp̄ (mm) | σΔp | Δφx̄ (°) | σ | Δφȳ | σ | Δφz̄ | σ | thesis Δp̄ / σ |",
-                "|---|---|---|---|---|---|---|---|---|---|"]
-        for m in models:
-            s = d[case][m][which]
-            o = s.get("orientation", {}).get("components_deg")
-            oc = " | ".join(f"{o['mean'][i]:.4f} | {o['std'][i]:.4f}" for i in range(3)) \
-                if o else " | " * 5
-            th = d["thesis"].get(case, {}).get(m) if which == "calibration" else None
-            ths = "" if not th or th[0] is None else (
-                f"{th[0]:.2f}" + ("" if th[1] is None else f" / {th[1]:.2f}"))
-            rows.append(f"| {m} | {s['mean_mm']:.3f} | {s['std_mm']:.3f} | {oc} | {ths} |")
-        return rows
-
+    _plot_models(d, out)
     nu, nl = d["poses"]["unloaded"], d["poses"]["loaded"]
     tw = d["twin"]
     lines = [
@@ -293,24 +259,75 @@ def write_page(d: dict[str, Any], out: Path) -> None:
         "",
         f"## Table 8-2 — unloaded, {nu} calibration poses",
         "",
-        *table("unloaded", ("nominal", "nominal_fitted_frames", "model1", "model2", "model3",
-                            "model4"), "calibration"),
+        *_table(d, "unloaded", UNLOADED_MODELS, "calibration"),
         "",
         f"Independent validation poses ({nu}):",
         "",
-        *table("unloaded", ("nominal", "nominal_fitted_frames", "model1", "model2", "model3",
-                            "model4"), "validation"),
+        *_table(d, "unloaded", UNLOADED_MODELS, "validation"),
     ]
     for kg in ("18", "36"):
         case = f"loaded_{kg}kg"
         lines += ["", f"## Table 8-3 — {kg} kg, {nl} calibration poses", "",
-                  *table(case, ("nominal", "nominal_fitted_frames", "model4", "model5"),
-                         "calibration"),
+                  *_table(d, case, LOADED_MODELS, "calibration"),
                   "", f"Independent validation poses ({nl}):", "",
-                  *table(case, ("nominal", "nominal_fitted_frames", "model4", "model5"),
-                         "validation")]
-    lines += ["", "Fit details:", "", "| case | model | parameters | iterations | κ | time (s) |",
-              "|---|---|---|---|---|---|"]
+                  *_table(d, case, LOADED_MODELS, "validation")]
+    lines += _fit_details(d)
+    (out / "8.2.md").write_text("\n".join(lines) + "\n", encoding="utf-8")
+
+
+def _plot_models(d: dict[str, Any], out: Path) -> None:
+    """8.2-models.png: mean position error of each model, twin (calibration and
+    validation poses) beside the thesis's real H4, for each load case."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, axes = plt.subplots(1, 3, figsize=(12, 3.6))
+    for ax, (case, models) in zip(axes, (
+            ("unloaded", ("nominal", "model1", "model2", "model3", "model4")),
+            ("loaded_18kg", ("nominal", "model4", "model5")),
+            ("loaded_36kg", ("nominal", "model4", "model5"))), strict=True):
+        x = np.arange(len(models))
+        cal = [d[case][m]["calibration"]["mean_mm"] for m in models]
+        val = [d[case][m]["validation"]["mean_mm"] for m in models]
+        th = [(d["thesis"][case].get(m) or (None,))[0] for m in models]
+        ax.bar(x - 0.27, cal, 0.27, label="twin, calibration poses")
+        ax.bar(x, val, 0.27, label="twin, validation poses")
+        ax.bar(x + 0.27, [t if t is not None else 0 for t in th], 0.27, label="thesis (real H4)",
+               color="gray")
+        ax.set_xticks(x, models, rotation=20)
+        ax.set_yscale("log")
+        ax.set_title(case)
+        ax.set_ylabel("mean position error (mm)")
+    axes[0].legend(fontsize=7)
+    fig.tight_layout()
+    fig.savefig(out / "8.2-models.png", dpi=100)
+    plt.close(fig)
+
+
+def _table(d: dict[str, Any], case: str, models: tuple[str, ...], which: str) -> list[str]:
+    """One accuracy table (Tables 8-2, 8-3): each model's mean and σ of the position
+    error, the orientation components' and the thesis's figures (calibration poses)."""
+    rows = ["| model | Δp̄ (mm) | σΔp | Δφx̄ (°) | σ | Δφȳ | σ | Δφz̄ | σ | thesis Δp̄ / σ |",
+            "|---|---|---|---|---|---|---|---|---|---|"]
+    for m in models:
+        s = d[case][m][which]
+        o = s.get("orientation", {}).get("components_deg")
+        oc = " | ".join(f"{o['mean'][i]:.4f} | {o['std'][i]:.4f}" for i in range(3)) \
+            if o else " | " * 5
+        th = d["thesis"].get(case, {}).get(m) if which == "calibration" else None
+        ths = "" if not th or th[0] is None else (
+            f"{th[0]:.2f}" + ("" if th[1] is None else f" / {th[1]:.2f}"))
+        rows.append(f"| {m} | {s['mean_mm']:.3f} | {s['std_mm']:.3f} | {oc} | {ths} |")
+    return rows
+
+
+def _fit_details(d: dict[str, Any]) -> list[str]:
+    """The fit of each model (parameters, iterations, κ, time) and Table 8-4: the
+    parameters identified at 36 kg with model 5 beside the twin's truth and the thesis's."""
+    lines = ["", "Fit details:", "", "| case | model | parameters | iterations | κ | time (s) |",
+             "|---|---|---|---|---|---|"]
     for case in ("unloaded", "loaded_18kg", "loaded_36kg"):
         for m in ("model1", "model2", "model3", "model4", "model5"):
             if m in d[case]:
@@ -329,6 +346,6 @@ def write_page(d: dict[str, Any], out: Path) -> None:
         th = "" if r["thesis_mu"] is None else f"{r['thesis_mu']:.4g}"
         lines.append(f"| {r['name']} | {r['unit']} | {r['mu']:.4g} | {r['sigma']:.2g} | {tt} | "
                      f"{th} | {r['stands_for']} |")
-    (out / "8.2.md").write_text("\n".join(lines) + "\n", encoding="utf-8")
+    return lines
 
 
