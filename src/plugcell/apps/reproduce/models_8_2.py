@@ -144,7 +144,20 @@ def reproduce_8_2(seed: int = 0, quick: bool = False, progress: Any = None) -> d
         out[key], fits = block(kg, n_loaded, (4, 5), (201 + int(kg), 301 + int(kg)))
         if kg == 36.0:
             fits36 = fits
-    r5 = fits36[5]
+    out["table_8_4"] = _table_8_4(fits36[5], truth)
+    out["noise_free_floor_mm"] = _noise_free_floor(desc, truth, n_unloaded)
+    budget = error_budget(scenario, poses=100 if quick else 300)
+    out["twin"] = {"nominal_mean_mm": budget.nominal_mean_mm,
+                   "deflection_18kg_mm": budget.deflection_18kg_mm,
+                   "deflection_36kg_mm": budget.deflection_36kg_mm,
+                   "bending_share_36kg": budget.bending_share_36kg}
+    return out
+
+
+def _table_8_4(r5: Any, truth: Any) -> list[dict[str, Any]]:
+    """Table 8-4: each parameter identified with model 5 at 36 kg, μ and σ in mm or
+    degrees (geometric) or their own unit, beside the twin's truth combined as the
+    parameter stands for and the thesis's μ."""
     truth_comb = _truth_combination(r5, truth)
     table = []
     for row in r5.parameter_table():
@@ -159,27 +172,25 @@ def reproduce_8_2(seed: int = 0, quick: bool = False, progress: Any = None) -> d
             "twin_truth": None if k not in truth_comb else truth_comb[k] * scale,
             "thesis_mu": THESIS_8_4.get(k), "stands_for": row["stands_for"],
         })
-    out["table_8_4"] = table
-    # What the models could reach on this twin with a perfect tracker and perfect
-    # repeatability: fits to the twin's deterministic physics (noise-free poses).
-    from plugcell.calibration import CalibrationData
+    return table
+
+
+def _noise_free_floor(desc: Any, truth: Any, n: int) -> dict[str, float]:
+    """What the models could reach on this twin with a perfect tracker and perfect
+    repeatability: the mean position error (mm) of model 2 without gravity and model 4
+    fitted to ``n`` noise-free poses of the twin's deterministic physics."""
+    from plugcell.calibration import CalibrationData, Calibrator
     from plugcell.sim.twin.campaign import working_volume_joints
     from plugcell.sim.twin.physics import Payload
     from plugcell.sim.twin.robot import true_flange_poses
 
-    qf = working_volume_joints(desc, truth.profile, n_unloaded, np.random.default_rng(401))
+    qf = working_volume_joints(desc, truth.profile, n, np.random.default_rng(401))
     floor = {}
     for label, number, gravity in (("model2_no_gravity", 2, False), ("model4", 4, True)):
         T = truth.base @ true_flange_poses(truth, qf, Payload(), gravity=gravity) @ truth.probe
         r = Calibrator(desc, number).fit(CalibrationData.from_poses(qf, T))
         floor[label] = float(r.calibration.position.norm.mean * 1e3)
-    out["noise_free_floor_mm"] = floor
-    budget = error_budget(scenario, poses=100 if quick else 300)
-    out["twin"] = {"nominal_mean_mm": budget.nominal_mean_mm,
-                   "deflection_18kg_mm": budget.deflection_18kg_mm,
-                   "deflection_36kg_mm": budget.deflection_36kg_mm,
-                   "bending_share_36kg": budget.bending_share_36kg}
-    return out
+    return floor
 
 
 def _fmt_row(label: str, r: dict[str, Any], which: str, thesis: tuple[Any, Any] | None) -> str:
