@@ -24,7 +24,6 @@ GOAL_LINES = 80
 LINES_CEILING = {
     "compensation/model_based.py:compensate_joints": 116,
     "devices/robot/rsi/codec.py:parse_rob": 107,
-    "apps/reproduce/compensation_8_3.py:run": 101,
     "apps/commands/twin.py:configure": 99,
     "sim/twin/tracker.py:LaserTracker.measure": 96,
     "framework/service.py:GenericDevice._create": 91,
