@@ -28,7 +28,6 @@ LINES_CEILING = {
     "sim/twin/tracker.py:LaserTracker.measure": 96,
     "framework/service.py:GenericDevice._create": 91,
     "kinematics/forward.py:joint_angles": 88,
-    "calibration/simulation.py:simulated_identification": 86,
     "apps/demo/services.py:_demonstrate": 85,
     "kinematics/closure.py:fourbar_closure": 83,
     "motion/planner.py:plan": 82,
