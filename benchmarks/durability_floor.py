@@ -79,7 +79,8 @@ same checks, called from the Python callbacks of eclipse-zenoh's own session:
   product with a native core behind today's API could reach.
 
 Every round starts both ends afresh, each an OS process of its own (so that no variant
-shares Zenoh's runtime threads with another, see docs/framework.md on thread states).
+shares Zenoh's runtime threads with another, see docs/results/framework-performance.md on
+thread states).
 The variants run interleaved, ``--repeat`` rounds; the table gives each one's median
 over the rounds of the average one-way latency (round trip ÷ 2), its ratio to raw Zenoh
 and what it adds to the event-loop floor.  ``--output`` writes every round to a JSON

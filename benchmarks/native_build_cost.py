@@ -16,9 +16,9 @@ Not part of ``make bench``: it downloads crates and keeps both cores busy for mi
 ``--without-zenoh`` builds the other way to go native instead: the per-message work in
 Rust (PyO3 and a MessagePack codec, ``rmp-serde``), called from the Zenoh callbacks of
 eclipse-zenoh's own Python session — one function that decodes a map and encodes it
-again.  docs/framework.md ("In one picture") shows why that suffices: Python glue that
-only puts bytes prepared elsewhere stays within the target.  ``--probe`` builds that
-measuring device itself, ``benchmarks/native_probe``, from its sources.
+again.  docs/results/framework-performance.md ("In one picture") shows why that suffices:
+Python glue that only puts bytes prepared elsewhere stays within the target.  ``--probe``
+builds that measuring device itself, ``benchmarks/native_probe``, from its sources.
 """
 
 from __future__ import annotations

@@ -26,12 +26,12 @@ import uuid
 
 import numpy as np
 
-from plugcell.devices.tracker.frames import matrix_from_vector
 from plugcell.devices.tracker.service import STREAM_COLUMNS
 from plugcell.framework import Client, ProcessCall, ProcessStates
 from plugcell.framework.bus import Bus
 from plugcell.framework.keys import KeySpace
 from plugcell.framework.transport import TransportConfig, open_session
+from plugcell.io.units import pose_from_robot
 from plugcell.sim.world import ReflectorPublisher
 
 SEQ, PC = STREAM_COLUMNS.index("seq"), STREAM_COLUMNS.index("pc_time_s")
@@ -70,7 +70,7 @@ async def main_async(seconds: float) -> list[dict]:
                              "--no-journal", "--log-level", "WARNING"], env=env)
     session = open_session(TransportConfig.from_env())
     tmac = ReflectorPublisher(Bus(session, KeySpace(cell)), "TMAC", "tmac")
-    tmac.publish(matrix_from_vector(TARGET, "euler"))
+    tmac.publish(pose_from_robot(TARGET, "zyz"))
     try:
         async with Client("BENCH", cell=cell) as client:
             assert await client.wait_for("TRACKER", 30), "the tracker service did not start"

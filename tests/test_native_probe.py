@@ -1,8 +1,8 @@
 """The measuring device of ``durability_floor.py --native`` speaks plugcell's protocol.
 
 ``benchmarks/native_probe`` does the per-message work of a 4-byte ``Echo`` in Rust; its
-rows in docs/framework.md ("In one picture") claim the same bytes on the wire and the
-same checks as plugcell's.  These tests hold it to that: its request and answer decode
+rows in docs/results/framework-performance.md ("In one picture") claim the same bytes on the
+wire and the same checks as plugcell's.  These tests hold it to that: its request and answer decode
 through plugcell's own decoder to the messages plugcell's functions make, byte for byte
 apart from the timestamp; its journal record reads back through the journal's log
 reader; what plugcell refuses it refuses with the same reason; no input makes it do anything

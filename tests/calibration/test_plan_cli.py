@@ -82,7 +82,7 @@ def test_plan_from_measured_poses(planned, capsys):
     # measured poses keep their payloads
     assert main(["plan", "--robot", "smart_h4", "--poses", "12", "--from",
                  str(planned / "cal.csv"), "--out", str(planned / "x.csv"),
-                 "--payloads", "0,36", "--quiet"]) == 2
+                 "--payloads-kg", "0,36", "--quiet"]) == 2
     assert "measured with their own payloads" in capsys.readouterr().err
 
 
@@ -91,8 +91,8 @@ def test_plan_from_measured_poses(planned, capsys):
     (["--poses", "5000"], "only"),
     (["--criterion", "X"], "unknown criterion 'X'"),
     (["--poses", "2"], "equations for"),
-    (["--payloads", "0,-3"], "--payloads"),
-    (["--payloads", "0"], "model 5 identifies payload"),
+    (["--payloads-kg", "0,-3"], "--payloads-kg"),
+    (["--payloads-kg", "0"], "model 5 identifies payload"),
     (["--volume", "1,2,3"], "--volume"),
     (["--tracker", "a,b,c"], "--tracker"),
     (["--line-of-sight-deg", "0"], "--line-of-sight-deg"),
@@ -120,7 +120,7 @@ def test_program_values_are_appended_to_the_activate_data(planned, capsys):
     out = planned / "values.json"
     identify = "identify=params = calibrate(mJ, mT, model=5, payload=36); s = summary(params)"
     assert main(["plan", "--robot", "smart_h4", "--poses", "20", "--candidates", "300",
-                 "--payloads", "36", "--model", "4", "--out", str(planned / "v.csv"),
+                 "--payloads-kg", "36", "--model", "4", "--out", str(planned / "v.csv"),
                  "--program", str(out), "--program-value", "base_est=4720.6,-293,-350,163,0,0",
                  "--program-value", identify, "--quiet"]) == 0
     values = json.loads(out.read_text())

@@ -101,10 +101,10 @@ def test_cell_cli_discovers_wires_saves_loads_runs_and_monitors(
     assert r.returncode == 2 and "ROBOT PROGRAM pairs" in r.stderr
 
 
-def test_controller_command_serves_the_ui_and_joins_the_cell(
+def test_cell_serve_serves_the_ui_and_joins_the_cell(
         cell: str, home: Path, procs: Any, tmp_path: Path) -> None:
     procs.serve("drill", cell, "--param", "time_scale=0.001")
-    ui = procs.start(plugcell_argv("controller", "--port", "0", "--cell", cell,
+    ui = procs.start(plugcell_argv("cell", "serve", "--port", "0", "--cell", cell,
                                    "--docs", str(tmp_path)))
     line = ui.wait_line(lambda x: "controller UI on" in x, 30.0)
     url = line.split(" on ", 1)[1].split(" ", 1)[0]
@@ -112,10 +112,13 @@ def test_controller_command_serves_the_ui_and_joins_the_cell(
         assert b"cell controller" in page.read()
     ls = cli(home, "cell", "ls", "--json", "--cell", cell)
     names = {s["name"]: s for s in json.loads(ls.stdout)["services"]}
-    assert names["CONTROLLER"]["kind"] == "controller"
+    assert names["CONTROLLER"]["kind"] == "cell-controller"
     assert "TOOL" in names["CONTROLLER"]["partners"]  # it subscribed to everyone
     r = cli(home, "cell", "wire", "CONTROLLER", "TOOL", "--via", "CONTROLLER", "--cell", cell)
     assert r.returncode == 1 and "wire other services" in r.stderr
+    # the old name of `cell serve` still works, with a warning
     taken = cli(home, "controller", "--port", url.rsplit(":", 1)[1].strip("/"), "--cell", cell,
                 "--name", "CTL2", timeout=30)
     assert taken.returncode == 2 and "cannot serve" in taken.stderr
+    assert ("plugcell: warning: plugcell controller is deprecated: use plugcell cell serve"
+            in taken.stderr)

@@ -18,6 +18,7 @@ from plugcell.devices.cell.wiring import (
     parse_wiring,
     read_wiring,
     save_wiring,
+    wires_in_place,
 )
 
 
@@ -128,3 +129,11 @@ def test_reapply_asks_for_each_missing_wire_and_notes_the_answers() -> None:
     status = {(s["service"], s["partner"]): s["state"] for s in keeper.status(alive, partners)}
     assert status == {("R1", "CAMERA"): "failing", ("R1", "TOOL"): "in place",
                       ("R2", "TOOL"): "waiting"}
+
+
+def test_the_wires_in_place_are_each_partner_of_each_service_but_itself():
+    """One reading of the wiring for the controller and `cell ls`/`save`."""
+    partners = {"ROBOT": ["TRACKER", "COMPUTE", "ROBOT"], "TRACKER": [], "COMPUTE": ("TRACKER",)}
+    assert wires_in_place(partners) == [Wire("COMPUTE", "TRACKER"), Wire("ROBOT", "COMPUTE"),
+                                        Wire("ROBOT", "TRACKER")]
+    assert wires_in_place({}) == []

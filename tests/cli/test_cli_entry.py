@@ -150,12 +150,12 @@ def test_a_client_with_no_router_ends_with_where_it_looked(monkeypatch, capsys):
 @pytest.mark.parametrize("error", [ConnectionRefusedError(111, "Connection refused"),
                                    ConnectionResetError(104, "Connection reset by peer")])
 def test_the_operating_systems_connection_errors_keep_their_traceback(monkeypatch, error):
-    import plugcell.apps.commands.services as services
+    import plugcell.apps.commands.cell as cell
 
     def fail(args):
         raise error
 
-    monkeypatch.setattr(services, "run", fail)
+    monkeypatch.setattr(cell, "run_ls", fail)
     with pytest.raises(type(error)):
         main(["services"])
 
@@ -168,6 +168,19 @@ def test_wire_and_unwire_are_the_cell_actions_under_a_short_name(alias: str, act
 
     short = build_parser(alias).parse_args([alias, "A", "B", "--json", "--via", "CTRL"])
     long = build_parser("cell").parse_args(["cell", action, "A", "B", "--json", "--via", "CTRL"])
+    assert short.func is long.func
+    mine = {k: v for k, v in vars(short).items() if k not in ("command", "cell_command")}
+    theirs = {k: v for k, v in vars(long).items() if k not in ("command", "cell_command")}
+    assert mine == theirs
+
+
+def test_services_is_cell_ls_under_a_short_name():
+    """``plugcell services`` is ``plugcell cell ls``: one function, the same options and
+    defaults, so one JSON shape and one exit-code rule."""
+    from plugcell.apps.cli import build_parser
+
+    short = build_parser("services").parse_args(["services", "--json", "--commands"])
+    long = build_parser("cell").parse_args(["cell", "ls", "--json", "--commands"])
     assert short.func is long.func
     mine = {k: v for k, v in vars(short).items() if k not in ("command", "cell_command")}
     theirs = {k: v for k, v in vars(long).items() if k not in ("command", "cell_command")}

@@ -35,7 +35,7 @@ RUNNABLE: dict[str, dict[str, Any]] = {
     "bench": {},
     "tracker": {"driver": "sim"},
     "compute": {},
-    "controller": {"journals": 0},
+    "cell-controller": {"journals": 0},
     "robot": {"sim": True, "speed": 100.0},
 }
 #: Kinds that need a partner outside plugcell to start (tested with one elsewhere).

@@ -36,9 +36,9 @@ POSE = [1200.0, 100.0, 900.0, 10.0, 150.0, -20.0]
 
 
 def _pose(v: list[float]) -> np.ndarray:
-    from plugcell.devices.tracker.frames import matrix_from_vector
+    from plugcell.io.units import pose_from_robot
 
-    return matrix_from_vector(v, "euler")  # mm, deg (ZYZ) → 4×4 in metres
+    return pose_from_robot(v, "zyz")  # mm, deg (ZYZ) → 4×4 in metres
 
 
 def reflector() -> np.ndarray:

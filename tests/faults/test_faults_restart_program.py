@@ -19,11 +19,11 @@ import pytest
 from childproc import until
 from faults_testlib import FaultCell
 
-from plugcell.devices.tracker.frames import vector_from_matrix
 from plugcell.framework import BlockingClient, ProcessStates, from_data
 from plugcell.framework.bus import Bus
 from plugcell.framework.keys import KeySpace
 from plugcell.framework.transport import TransportConfig, open_session
+from plugcell.io.units import robot_from_pose
 from plugcell.sim.twin.scenario import TwinScenario, make_truth
 from plugcell.sim.world import ReflectorPublisher
 
@@ -59,7 +59,7 @@ def test_a_program_outlives_a_restart_of_the_tracker(fault_cell: FaultCell,
     fault_cell.serve("compute")
     fault_cell.serve("robot", "--name", "H4", "--param", "sim=true", "--param", "speed=100",
                      "--param", f"library={PROGRAMS}")
-    fault_cell.serve("controller", "--param", f"wiring={wiring}")
+    fault_cell.serve("cell-controller", "--param", f"wiring={wiring}")
     session = open_session(TransportConfig.from_env())
     smr = ReflectorPublisher(Bus(session, KeySpace(fault_cell.name)), "FIXED_SMR", "smr")
     smr.publish(truth.base @ np.r_[np.c_[np.eye(3), SMR_MM / 1e3], [[0, 0, 0, 1]]])
@@ -73,8 +73,8 @@ def test_a_program_outlives_a_restart_of_the_tracker(fault_cell: FaultCell,
             # answer PROGRAM_STATUS meanwhile (its queue is free)
             run = client.create_process("H4", "ACTIVATE", "", [
                 "watch_restart", f"smr={','.join(f'{v:g}' for v in SMR_MM)},0,0,0",
-                "base_est=" + ",".join(f"{v:.6f}" for v in vector_from_matrix(truth.base,
-                                                                              "euler")),
+                "base_est=" + ",".join(f"{v:.6f}" for v in robot_from_pose(truth.base,
+                                                                              "zyz")),
                 f"want={WANT}", "max_attempts=20000", "period_ms=2000"], timeout=30)
             assert run.result().state is ProcessStates.Completed, run.result().reason
             until(lambda: len(_measured(client)) >= 3, 60, "three measurements")

@@ -31,23 +31,27 @@ def test_services_call_wire_journal(procs, cell):
     procs.serve("drill", cell, "--param", "time_scale=0.001", name="TOOL")
 
     listed = json.loads(cli(procs, "services", "--json", "--cell", cell).stdout)
-    by_name = {s["DeviceInfo"]["Name"]: s["DeviceInfo"] for s in listed}
+    assert listed["cell"] == cell and listed["wires"] == []
+    by_name = {s["name"]: s for s in listed["services"]}
     assert set(by_name) == {"CAMERA", "TOOL"}
-    assert [c["Name"] for c in by_name["CAMERA"]["Commands"]] == [
+    assert by_name["TOOL"]["kind"] == "drill"
+    assert [c["name"] for c in by_name["CAMERA"]["commands"]] == [
         "Connect",
         "Disconnect",
         "SnapShot",
         "MovieShot",
         "StopMovie",
     ]
-    snap = next(c for c in by_name["CAMERA"]["Commands"] if c["Name"] == "SnapShot")
-    assert (snap["Type"], snap["OutputDataType"], snap["OutputDataSize"]) == (
+    snap = next(c for c in by_name["CAMERA"]["commands"] if c["name"] == "SnapShot")
+    assert (snap["type"], snap["output"]["type"], snap["output"]["size"]) == (
         "SingleData",
         "Byte",
         [480, 640],
     )
-    text = cli(procs, "services", "--cell", cell).stdout
-    assert "CAMERA  kind=camera" in text and "Drill" in text
+    # `services` is `cell ls`: the same JSON, the same text
+    assert json.loads(cli(procs, "cell", "ls", "--json", "--cell", cell).stdout) == listed
+    text = cli(procs, "services", "--commands", "--cell", cell).stdout
+    assert "CAMERA" in text and "camera" in text and "Drill" in text
 
     out = lines(cli(procs, "call", "CAMERA", "SnapShot", "--data", "5", "--cell", cell))
     assert [o["event"] for o in out] == ["ack", "update", "update"]
@@ -92,8 +96,9 @@ def test_services_call_wire_journal(procs, cell):
         "TOOL subscribed to CAMERA" in cli(procs, "wire", "TOOL", "CAMERA", "--cell", cell).stdout
     )
     listed = json.loads(cli(procs, "services", "--json", "--cell", cell).stdout)
-    tool = next(s for s in listed if s["DeviceInfo"]["Name"] == "TOOL")
-    assert [p["Name"] for p in tool["Partners"]] == ["CAMERA"]
+    tool = next(s for s in listed["services"] if s["name"] == "TOOL")
+    assert tool["partners"] == ["CAMERA"]
+    assert listed["wires"] == [{"service": "TOOL", "partner": "CAMERA"}]
     cli(procs, "unwire", "TOOL", "CAMERA", "--cell", cell)
     again = cli(procs, "unwire", "TOOL", "CAMERA", "--cell", cell, check=False)
     assert again.returncode == 1 and "was not a partner" in again.stderr
@@ -108,7 +113,8 @@ def test_services_call_wire_journal(procs, cell):
     assert "PDL -> TOOL  Drill#Air" in cli(procs, "journal", "--cell", cell).stdout
 
     # another cell on the same network sees none of it
-    assert json.loads(cli(procs, "services", "--json", "--cell", unique_cell()).stdout) == []
+    assert json.loads(cli(procs, "services", "--json", "--cell", unique_cell()).stdout)[
+        "services"] == []
 
 
 def test_user_errors(procs, cell):
@@ -130,7 +136,7 @@ def test_bench_transport_smoke(procs):
         "bench",
         "transport",
         "--json",
-        "--payloads",
+        "--payload-bytes",
         "4,65536",
         "--cycles",
         "20",

@@ -7,7 +7,13 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from plugcell.io.units import CONVENTIONS, UnitsError, pose_from_robot, robot_from_pose
+from plugcell.io.units import (
+    CONVENTIONS,
+    UnitsError,
+    convention_name,
+    pose_from_robot,
+    robot_from_pose,
+)
 
 MM = st.floats(-5000, 5000, allow_nan=False)
 DEG = st.floats(-179.0, 179.0, allow_nan=False)
@@ -48,6 +54,25 @@ def test_every_convention_gives_back_the_same_transform(xyz, a, b, c, convention
         return
     np.testing.assert_allclose(pose_from_robot(robot_from_pose(T, convention), convention), T,
                                atol=1e-9)
+
+
+def test_the_old_name_euler_is_zyz_with_a_deprecation_warning() -> None:
+    v = [100.0, -20.0, 300.0, 30.0, 40.0, 50.0]
+    with pytest.warns(DeprecationWarning, match="'euler' is deprecated: use 'zyz'"):
+        T = pose_from_robot(v, "euler")
+    np.testing.assert_array_equal(T, pose_from_robot(v, "zyz"))
+    with pytest.warns(DeprecationWarning):
+        np.testing.assert_array_equal(robot_from_pose(T, "euler"), robot_from_pose(T, "zyz"))
+    assert convention_name("rpy") == "rpy"
+
+
+@pytest.mark.parametrize("name", ["ZYZ", "zyx", "", "quat"])
+def test_an_unknown_convention_is_refused_naming_the_known(name: str) -> None:
+    with pytest.raises(UnitsError, match=f"unknown angle convention {name!r}; expected one of "
+                                         "zyz, rpy, xyz, prj"):
+        pose_from_robot([0.0] * 6, name)
+    with pytest.raises(UnitsError, match="unknown angle convention"):
+        robot_from_pose(np.eye(4), name)
 
 
 @pytest.mark.parametrize(("values", "reason"), [

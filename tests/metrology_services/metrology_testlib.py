@@ -11,7 +11,7 @@ from typing import Any
 import numpy as np
 from childproc import Proc, plugcell_argv  # noqa: F401  (re-exported for the tests)
 
-from plugcell.devices.tracker.frames import matrix_from_vector
+from plugcell.io.units import pose_from_robot
 
 
 def unique_cell(prefix: str = "m") -> str:
@@ -34,6 +34,6 @@ def until(predicate: Callable[[], bool], timeout: float = 15.0) -> None:
 
 def pose(v: list[float]) -> np.ndarray:
     """A 6-vector (mm, deg, Euler ZYZ) as a 4×4 matrix in metres."""
-    return matrix_from_vector(v, "euler")
+    return pose_from_robot(v, "zyz")
 
 

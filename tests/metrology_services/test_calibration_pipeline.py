@@ -15,8 +15,8 @@ import pytest
 from metrology_testlib import run
 
 from plugcell.calibration import CalibrationData, Calibrator
-from plugcell.devices.tracker.frames import vector_from_matrix
 from plugcell.framework import Client, ProcessCall, ProcessStates
+from plugcell.io.units import robot_from_pose
 from plugcell.kinematics import forward
 from plugcell.sim.twin.campaign import measure_poses, working_volume_joints
 from plugcell.sim.twin.robot import RobotTwin
@@ -46,8 +46,8 @@ def test_calibration_program_with_routed_measurements_matches_the_engine(cell, w
     # appendix-D estimates of BASE and PROBE: good to a millimetre and a few hundredths of °
     off_base = np.array([1.0, -0.8, 0.5, 0.02, 0.0, -0.03])
     off_probe = np.array([0.5, 0.5, -0.5, 0.0, 0.02, 0.0])
-    base_estimate = vector_from_matrix(truth.base, "euler") + off_base
-    probe_estimate = vector_from_matrix(truth.probe, "euler") + off_probe
+    base_estimate = robot_from_pose(truth.base, "zyz") + off_base
+    probe_estimate = robot_from_pose(truth.probe, "zyz") + off_probe
 
     async def body():
         async with Client("H4", cell=cell.name) as robot:
@@ -58,7 +58,7 @@ def test_calibration_program_with_routed_measurements_matches_the_engine(cell, w
             flange = forward(desc, None, twin.joint_readings()).flange  # the controller's idea
             await ok(robot, "TRACKER", "Set Base", "euler2tr", base_estimate)
             await ok(robot, "TRACKER", "Set Probe", "euler2tr", probe_estimate)
-            await ok(robot, "TRACKER", "Move", "", vector_from_matrix(flange, "euler"))
+            await ok(robot, "TRACKER", "Move", "", robot_from_pose(flange, "zyz"))
             await ok(robot, "TRACKER", "Set Base", "euler2tr", np.zeros(6))
             await ok(robot, "TRACKER", "Set Probe", "euler2tr", np.zeros(6))
             for joints, mj, mt in ((q_cal, "mJ", "mT"), (q_val, "vJ", "vT")):

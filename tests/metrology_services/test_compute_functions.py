@@ -12,8 +12,8 @@ from plugcell.compensation import IdentifiedModel
 from plugcell.devices.compute.expr import EvaluationError, evaluate
 from plugcell.devices.compute.functions import FUNCTIONS, FunctionContext, Parameters
 from plugcell.devices.compute.workspace import Workspace
-from plugcell.devices.tracker.frames import matrix_from_vector, vector_from_matrix
 from plugcell.io.robots import load_robot
+from plugcell.io.units import pose_from_robot, robot_from_pose
 from plugcell.sim.twin.campaign import measure_poses, working_volume_joints
 from plugcell.sim.twin.robot import RobotTwin
 from plugcell.sim.twin.scenario import TwinScenario
@@ -111,9 +111,9 @@ def test_parameters_saved_and_loaded_predict_the_same(identified, tmp_path):
     np.testing.assert_allclose(ws.get("s1"), ws.get("s2"))
     ev(ws, "b = frame(again, 'base'); p = frame(again, 'probe', angles='rpy')")
     T = ws.get("params").result.model.base()
-    np.testing.assert_allclose(matrix_from_vector(ws.get("b")[0], "euler"), T, atol=1e-12)
+    np.testing.assert_allclose(pose_from_robot(ws.get("b")[0], "zyz"), T, atol=1e-12)
     P = ws.get("params").result.model.probe()
-    np.testing.assert_allclose(matrix_from_vector(ws.get("p")[0], "rpy"), P, atol=1e-12)
+    np.testing.assert_allclose(pose_from_robot(ws.get("p")[0], "rpy"), P, atol=1e-12)
 
 
 @pytest.mark.parametrize(
@@ -128,7 +128,8 @@ def test_parameters_saved_and_loaded_predict_the_same(identified, tmp_path):
         ("calibrate(size(mJ), mT)", "mJ: 6 columns expected, got 1×2"),
         ("calibrate(mJ, vT)", "mJ has 60 rows but mT has 30"),
         ("calibrate(mJ, mT, model=5)", "carry no payload"),
-        ("calibrate(mJ, mT, angles='xyz')", "angles: 'xyz' unknown"),
+        ("calibrate(mJ, mT, angles='zyx')", "angles: unknown angle convention 'zyx'; "
+         "expected one of zyz, rpy, xyz, prj"),
         ("frame(mJ, 'base')", "identified parameters expected"),
     ],
 )
@@ -146,7 +147,7 @@ def test_model_based_compensation_reaches_the_targets_on_the_identified_model(id
     ev(ws, "q = compensate(params, targets, payload=36)")
     reached = model.pose(np.deg2rad(ws.get("q")), 36.0)
     for T, v in zip(reached, targets, strict=True):
-        np.testing.assert_allclose(T, matrix_from_vector(v, "euler"), atol=1e-6)
+        np.testing.assert_allclose(T, pose_from_robot(v, "zyz"), atol=1e-6)
     # H4Compensation: from the nominal joints of the targets to the compensated ones
     ev(ws, "qc = compensate_joints(params, q, payload=36)")
     assert ws.get("qc").shape == (2, 6)
@@ -158,7 +159,7 @@ def test_model_based_compensation_reaches_the_targets_on_the_identified_model(id
 def test_calc_targets_builds_the_frames_of_8_4_1_in_the_robot_frame(tmp_path):
     """Four bars of six holes on a tilted part: origins, common z, each bar's y (8.4.1)."""
     rng = np.random.default_rng(5)
-    part = matrix_from_vector([2500, 300, -400, 20, 30, 10], "euler")  # the part in the tracker
+    part = pose_from_robot([2500, 300, -400, 20, 30, 10], "zyz")  # the part in the tracker
     local = []
     for bar in range(4):
         for k in range(6):
@@ -175,8 +176,8 @@ def test_calc_targets_builds_the_frames_of_8_4_1_in_the_robot_frame(tmp_path):
              context=FunctionContext(ws, params_dir=tmp_path))
     targets = ws.get("t")
     assert targets.shape == (24, 6)
-    B = matrix_from_vector(base, "euler")
-    tracker_frames = np.stack([B @ matrix_from_vector(t, "euler") for t in targets])
+    B = pose_from_robot(base, "zyz")
+    tracker_frames = np.stack([B @ pose_from_robot(t, "zyz") for t in targets])
     np.testing.assert_allclose(tracker_frames[:, :3, 3], holes, atol=1e-9)  # origins: the holes
     z = tracker_frames[:, :3, 2]
     np.testing.assert_allclose(np.abs(z @ part[:3, 2]), 1.0, atol=1e-6)  # common z: the normal
@@ -203,14 +204,14 @@ def test_housekeeping_functions(ws):
     assert "r" in ws  # a refused clear removes nothing
     ev(ws, "clear()")
     assert ws.names() == []
-    np.testing.assert_allclose(vector_from_matrix(np.eye(4), "euler"), np.zeros(6), atol=1e-12)
+    np.testing.assert_allclose(robot_from_pose(np.eye(4), "zyz"), np.zeros(6), atol=1e-12)
 
 
 def test_appendix_d_estimates_base_and_probe_from_smr_features(tmp_path):
     """The wizards of the visualisation service (7.5, App. D) as functions."""
-    B = matrix_from_vector([2800, -400, -300, 12, 3, -25], "euler")
-    F = matrix_from_vector([900, 150, 1100, 40, 120, 10], "euler")  # flange, robot frame
-    P = matrix_from_vector([5, -20, 95, 0, 8, 90], "euler")
+    B = pose_from_robot([2800, -400, -300, 12, 3, -25], "zyz")
+    F = pose_from_robot([900, 150, 1100, 40, 120, 10], "zyz")  # flange, robot frame
+    P = pose_from_robot([5, -20, 95, 0, 8, 90], "zyz")
     h = 6.35  # mm, SMR centre above the surface it sits on
 
     def pts(T, local):  # local points (mm) → tracker frame (mm)
@@ -221,11 +222,11 @@ def test_appendix_d_estimates_base_and_probe_from_smr_features(tmp_path):
     ws = Workspace("ROBOT")
     ws.set("fc", pts(B @ F, np.c_[40 * np.cos(t), 40 * np.sin(t), np.full_like(t, h)]))
     ws.set("fh", pts(B @ F, [[0, -25, h], [0, 25, h]]))
-    ws.set("tmac", vector_from_matrix(B @ F @ P, "euler"))
+    ws.set("tmac", robot_from_pose(B @ F @ P, "zyz"))
     ws.set("bc", pts(B, np.c_[300 * np.cos(t), 300 * np.sin(t), np.full_like(t, 450)]))
     ws.set("bp", pts(B, [[500, 0, h], [0, 500, h], [-400, -300, h], [300, -450, h]]))
     ws.set("bl", pts(B, [[x, 200, 900] for x in (700, 900, 1100, 1300)]))
     evaluate("probe = probe_from_features(fc, fh, tmac); base = base_from_features(bc, bp, bl)",
              ws, FUNCTIONS, context=FunctionContext(ws, params_dir=tmp_path))
-    np.testing.assert_allclose(matrix_from_vector(ws.get("probe")[0], "euler"), P, atol=1e-9)
-    np.testing.assert_allclose(matrix_from_vector(ws.get("base")[0], "euler"), B, atol=1e-9)
+    np.testing.assert_allclose(pose_from_robot(ws.get("probe")[0], "zyz"), P, atol=1e-9)
+    np.testing.assert_allclose(pose_from_robot(ws.get("base")[0], "zyz"), B, atol=1e-9)

@@ -13,12 +13,12 @@ import numpy as np
 import pytest
 from metrology_testlib import pose, run, unique_cell
 
-from plugcell.devices.tracker.frames import matrix_from_vector
 from plugcell.devices.tracker.service import TrackerService
 from plugcell.framework import Client, ProcessCall, ProcessStates
 from plugcell.framework.bus import Bus
 from plugcell.framework.keys import KeySpace
 from plugcell.framework.transport import TransportConfig, open_session
+from plugcell.io.units import pose_from_robot
 from plugcell.sim.world import ReflectorPublisher
 
 pytestmark = pytest.mark.timeout(90)
@@ -37,10 +37,10 @@ def reflector(base, robot_pose, probe) -> np.ndarray:
     return pose(base) @ pose(robot_pose) @ pose(probe)
 
 
-def assert_pose(measured, expected, convention: str = "euler") -> None:
+def assert_pose(measured, expected, convention: str = "zyz") -> None:
     """Within the tracker's accuracy: 0.15 mm and 0.03° (thesis 8.2.1: 0.05 mm, 0.01°)."""
-    M = matrix_from_vector(measured, convention)
-    E = matrix_from_vector(expected, convention)
+    M = pose_from_robot(measured, convention)
+    E = pose_from_robot(expected, convention)
     assert np.linalg.norm(M[:3, 3] - E[:3, 3]) < 0.15e-3, (measured, expected)
     cos = np.clip((np.trace(M[:3, :3].T @ E[:3, :3]) - 1) / 2, -1, 1)
     assert np.rad2deg(np.arccos(cos)) < 0.03, (measured, expected)
@@ -72,9 +72,9 @@ def test_set_base_probe_move_and_measurements_in_the_robot_frame(cell, world):
             assert_pose(await ok(robot, "Single Measurement", "tr2euler", 1000), POSE_A)
             assert_pose(await ok(robot, "Single Measurement", "", 50), POSE_A)  # its convention
             rpy = await ok(robot, "Single Measurement", "tr2rpy", 1000)
-            np.testing.assert_allclose(matrix_from_vector(rpy, "rpy"), pose(POSE_A), atol=2e-4)
+            np.testing.assert_allclose(pose_from_robot(rpy, "rpy"), pose(POSE_A), atol=2e-4)
             prj = await ok(robot, "Single Measurement", "tr2prj", 1000)
-            np.testing.assert_allclose(matrix_from_vector(prj, "prj"), pose(POSE_A), atol=2e-4)
+            np.testing.assert_allclose(pose_from_robot(prj, "prj"), pose(POSE_A), atol=2e-4)
             # the robot moves; the locked beam follows its T-MAC (no Move needed)
             moved = [*POSE_A[:2], POSE_A[2] - 150.0, *POSE_A[3:]]
             tmac.publish(reflector(BASE_A, moved, PROBE_A))
@@ -318,7 +318,7 @@ def test_beam_not_locked_fails_with_the_reason_and_the_service_carries_on(world_
                 smr = await ok(robot, "Single Measurement", "tr2euler", 100)
                 # an SMR gives a position only (rotation identity in the tracker frame)
                 expected = pose(BASE_A) @ pose(POSE_A) @ pose(PROBE_A)
-                got = pose(BASE_A) @ matrix_from_vector(smr, "euler") @ pose(PROBE_A)
+                got = pose(BASE_A) @ pose_from_robot(smr, "zyz") @ pose(PROBE_A)
                 np.testing.assert_allclose(got[:3, 3], expected[:3, 3], atol=1.5e-4)
                 again.close()
                 status = tracker.status()

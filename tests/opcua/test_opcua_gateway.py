@@ -10,10 +10,10 @@ import numpy as np
 import pytest
 from opcua_testlib import run_js, wait_shown
 
-from plugcell.devices.tracker.frames import matrix_from_vector
 from plugcell.framework.bus import Bus
 from plugcell.framework.keys import KeySpace
 from plugcell.framework.transport import TransportConfig, open_session
+from plugcell.io.units import pose_from_robot
 from plugcell.sim.world import ReflectorPublisher
 
 pytestmark = pytest.mark.slow
@@ -134,8 +134,8 @@ def test_a_trackers_measurements_arrive_by_subscription(ua_cell):
     session = open_session(TransportConfig.from_env())
     try:
         tmac = ReflectorPublisher(Bus(session, KeySpace(ua_cell.name)), "TMAC_UA", "tmac")
-        truth = (matrix_from_vector(BASE, "euler") @ matrix_from_vector(POSE, "euler")
-                 @ matrix_from_vector(PROBE, "euler"))
+        truth = (pose_from_robot(BASE, "zyz") @ pose_from_robot(POSE, "zyz")
+                 @ pose_from_robot(PROBE, "zyz"))
         tmac.publish(truth)
         got = run_js("client.js", "track", ua_cell.url, ua_cell.name, limit_s=45.0,
                      options={"tracker": {"base": BASE, "probe": PROBE, "pose": POSE}})

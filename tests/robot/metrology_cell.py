@@ -15,8 +15,8 @@ import numpy as np
 from robot_cell import Launcher
 
 from plugcell.devices.robot.value_text import numbers_text
-from plugcell.devices.tracker.frames import vector_from_matrix
 from plugcell.framework import BlockingClient, ProcessStates, from_data
+from plugcell.io.units import robot_from_pose
 from plugcell.sim.twin.robot import RobotTwin
 from plugcell.sim.twin.scenario import TwinScenario
 
@@ -42,9 +42,9 @@ class RobotInCell:
     def estimates(self, rng: np.random.Generator) -> tuple[str, str]:
         """BASE and PROBE as appendix D would give them: the truth within ~1 mm, 0.03°."""
         truth = self.twin.reveal_truth()
-        base = vector_from_matrix(truth.base, "euler") + np.r_[rng.normal(0, 0.7, 3),
+        base = robot_from_pose(truth.base, "zyz") + np.r_[rng.normal(0, 0.7, 3),
                                                               rng.normal(0, 0.02, 3)]
-        probe = vector_from_matrix(truth.probe, "euler") + np.r_[rng.normal(0, 0.4, 3),
+        probe = robot_from_pose(truth.probe, "zyz") + np.r_[rng.normal(0, 0.4, 3),
                                                                 rng.normal(0, 0.02, 3)]
         return numbers_text(base), numbers_text(probe)
 

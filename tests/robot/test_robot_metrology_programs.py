@@ -18,8 +18,8 @@ from robot_cell import PNT0001, PNT0002
 from plugcell.apps.reproduce.compensation_8_3 import ExperimentConfig, line_targets
 from plugcell.calibration import CalibrationData, Calibrator
 from plugcell.devices.robot.value_text import rows_text
-from plugcell.devices.tracker.frames import vector_from_matrix
 from plugcell.framework import ProcessStates
+from plugcell.io.units import robot_from_pose
 from plugcell.sim.twin.campaign import measure_poses, working_volume_joints
 from plugcell.sim.twin.robot import RobotTwin
 from plugcell.sim.twin.scenario import TwinScenario
@@ -95,7 +95,7 @@ def test_example_calibration_and_compensation_on_one_set_of_services(
 
     # 3. the compensation test of 8.3 on the parameters the program saved
     targets = line_targets(ExperimentConfig.fast(), truth.probe).reshape(-1, 4, 4)
-    vectors = np.array([vector_from_matrix(T, "euler") for T in targets])
+    vectors = np.array([robot_from_pose(T, "zyz") for T in targets])
     final = cell.activate("H4", "comp_test", f"targets={rows_text(vectors)}",
                           f"n_targets={len(vectors)}", "params_name=h4", "payload_kg=36",
                           "sensor=TRUE", "nominal=FALSE", timeout=240)

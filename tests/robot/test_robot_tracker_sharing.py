@@ -30,9 +30,9 @@ from metrology_cell import H4, KUKA, SPEED, MetrologyCell
 from robot_testlib import Proc, until
 
 from plugcell.devices.robot.value_text import numbers_text
-from plugcell.devices.tracker.frames import matrix_from_vector, vector_from_matrix
 from plugcell.framework import ProcessStates
 from plugcell.framework.journal import journal_files, read_journal
+from plugcell.io.units import pose_from_robot, robot_from_pose
 from plugcell.metrology import invert_transform
 from plugcell.sim.twin.campaign import working_volume_joints
 from plugcell.sim.twin.robot import RobotTwin
@@ -173,16 +173,16 @@ def check_measurement(robot: Robot, measured: Measured, home: np.ndarray) -> Non
     np.testing.assert_allclose(measured.joints_deg, np.rad2deg(replica.joint_readings()),
                                atol=1e-5)
     np.testing.assert_allclose(measured.joints_deg, np.rad2deg(home), atol=1e-3)
-    base = matrix_from_vector([float(v) for v in robot.base.split(",")], "euler")
-    probe = matrix_from_vector([float(v) for v in robot.probe.split(",")], "euler")
+    base = pose_from_robot([float(v) for v in robot.base.split(",")], "zyz")
+    probe = pose_from_robot([float(v) for v in robot.probe.split(",")], "zyz")
     expected = (invert_transform(base) @ replica.true_reflector_in_tracker()
                 @ invert_transform(probe))
-    got = matrix_from_vector(measured.pose, "euler")
+    got = pose_from_robot(measured.pose, "zyz")
     position_mm = float(np.linalg.norm(got[:3, 3] - expected[:3, 3]) * 1e3)
     dR = got[:3, :3] @ expected[:3, :3].T
     rotation_deg = float(np.rad2deg(np.arccos(np.clip((np.trace(dR) - 1) / 2, -1, 1))))
     print(f"{robot.name}: measured {numbers_text(measured.pose)}; expected "
-          f"{numbers_text(vector_from_matrix(expected, 'euler'))}; off by {position_mm:.4f} mm, "
+          f"{numbers_text(robot_from_pose(expected, 'zyz'))}; off by {position_mm:.4f} mm, "
           f"{rotation_deg:.4f}°")
     assert position_mm < POSITION_TOL_MM, (robot.name, position_mm)
     assert rotation_deg < ROTATION_TOL_DEG, (robot.name, rotation_deg)

@@ -203,7 +203,7 @@ def test_a_stopped_stream_fails_the_process_and_the_service_recovers(library, tm
 
 
 def test_bad_rsi_options_are_refused_with_the_reason():
-    with pytest.raises(ValueError, match=r"give one of sim, controller=HOST:PORT or rsi"):
+    with pytest.raises(ValueError, match=r"give one of sim, line=HOST:PORT or rsi"):
         RobotService("R1", sim=True, rsi="127.0.0.1:49152")
     with pytest.raises(ValueError, match="rsi_robot names the controller of an RSI stream"):
         RobotService("R1", sim=True, rsi_robot="10.0.0.1")

@@ -39,7 +39,7 @@ from cell_testlib import PROGRAMS, plugcell_argv, unique_cell
 from flange_smr import FlangeSMRs
 
 from plugcell.devices.robot.value_text import numbers_text, rows_text
-from plugcell.devices.tracker.frames import matrix_from_vector, vector_from_matrix
+from plugcell.io.units import pose_from_robot, robot_from_pose
 from plugcell.kinematics import so3_log
 from plugcell.sim.twin.campaign import working_volume_joints
 from plugcell.sim.twin.robot import RobotTwin
@@ -78,9 +78,9 @@ def residual_file(n: int = 24) -> bytes:
 
 
 def _controller_ui(launcher: Any, cell: str) -> str:
-    """``plugcell controller`` on a free port for ``cell``; its URL."""
+    """``plugcell cell serve`` on a free port for ``cell``; its URL."""
     docs = Path(__file__).resolve().parents[2] / "docs"
-    ui = launcher.start(plugcell_argv("controller", "--port", "0", "--cell", cell,
+    ui = launcher.start(plugcell_argv("cell", "serve", "--port", "0", "--cell", cell,
                                       "--docs", str(docs)))
     return ui.wait_line(lambda x: "controller UI on" in x, 30.0).split(" on ", 1)[1].split()[0]
 
@@ -296,9 +296,9 @@ def _calibration_values(truth: Any, twin: RobotTwin) -> str:
     rng = np.random.default_rng(21)
     q = np.rad2deg(working_volume_joints(twin.description, truth.profile, N_POSES,
                                          np.random.default_rng(11)))
-    base = vector_from_matrix(truth.base, "euler") + np.r_[rng.normal(0, 0.7, 3),
+    base = robot_from_pose(truth.base, "zyz") + np.r_[rng.normal(0, 0.7, 3),
                                                           rng.normal(0, 0.02, 3)]
-    probe = vector_from_matrix(truth.probe, "euler") + np.r_[rng.normal(0, 0.4, 3),
+    probe = robot_from_pose(truth.probe, "zyz") + np.r_[rng.normal(0, 0.4, 3),
                                                             rng.normal(0, 0.02, 3)]
     return "\n".join([
         "-- calibration.pdl: Fig. 8-4 of the thesis",
@@ -420,9 +420,9 @@ def test_the_metrology_cell_calibrated_in_the_browser(launcher: Any, tmp_path: P
         try:
             t = time.monotonic()
             rng = np.random.default_rng(5)
-            base_est = vector_from_matrix(truth.base, "rpy") + np.r_[rng.normal(0, 1.5, 3),
+            base_est = robot_from_pose(truth.base, "rpy") + np.r_[rng.normal(0, 1.5, 3),
                                                                     rng.normal(0, .05, 3)]
-            tmac_est = vector_from_matrix(truth.probe, "rpy") + np.r_[rng.normal(0, 1.5, 3),
+            tmac_est = robot_from_pose(truth.probe, "rpy") + np.r_[rng.normal(0, 1.5, 3),
                                                                      rng.normal(0, .3, 3)]
             q0 = np.rad2deg(working_volume_joints(twin.description, truth.profile, 1,
                                                   np.random.default_rng(0))[0])
@@ -452,7 +452,7 @@ def test_the_metrology_cell_calibrated_in_the_browser(launcher: Any, tmp_path: P
             expect(result).to_contain_text("rpy2tr vector:")
             times["live PROBE"] = time.monotonic() - t
             vector = [float(v) for v in result.inner_text().split(":", 1)[1].split(",")]
-            P = matrix_from_vector(np.array(vector), "rpy")
+            P = pose_from_robot(np.array(vector), "rpy")
             dp = float(np.linalg.norm(P[:3, 3] - truth.probe[:3, 3]) * 1e3)
             dr = float(np.degrees(np.linalg.norm(so3_log(P[:3, :3] @ truth.probe[:3, :3].T))))
             assert dp < 0.5 and dr < 0.1, (dp, dr)

@@ -20,9 +20,9 @@ from fastapi.testclient import TestClient
 from flange_smr import FlangeSMRs
 from ui_testlib import HEADERS, make_client, services, until
 
-from plugcell.devices.tracker.frames import matrix_from_vector, vector_from_matrix
 from plugcell.framework.bus import Bus
 from plugcell.framework.keys import KeySpace
+from plugcell.io.units import pose_from_robot, robot_from_pose
 from plugcell.kinematics import so3_log
 from plugcell.metrology import SMR_RADIUS_HALF_INCH
 from plugcell.sim.twin.campaign import working_volume_joints
@@ -44,7 +44,7 @@ def _errors(A: np.ndarray, B: np.ndarray) -> tuple[float, float]:
 
 
 def _rpy_mm(T: np.ndarray) -> list[float]:
-    return [float(v) for v in vector_from_matrix(T, "rpy")]
+    return [float(v) for v in robot_from_pose(T, "rpy")]
 
 
 @pytest.fixture(scope="module")
@@ -125,7 +125,7 @@ def test_the_live_probe_wizard_finds_the_probe(cell: dict[str, Any]) -> None:
         "circle": circle["points"], "holes": holes["points"], "tmac": tmac["points"][0]})
     assert probe["ok"], probe
     assert probe["circle"]["radius"] == pytest.approx(50.0, abs=0.5)
-    P = matrix_from_vector(np.array(probe["probe"]["vector"]), "rpy")
+    P = pose_from_robot(np.array(probe["probe"]["vector"]), "rpy")
     dp, dr = _errors(P, truth.probe)
     print(f"live PROBE: {dp:.3f} mm, {dr:.4f}° from the truth; circle rms "
           f"{probe['circle']['rms'] * 1e3:.1f} µm; circle {t_circle:.2f} s, all three "
@@ -201,7 +201,7 @@ def test_the_live_base_wizard_on_the_same_cell(cell: dict[str, Any]) -> None:
     base = _post(client, "/api/wizard/base", {
         "circle": circle["points"], "plane": plane, "line": line["points"]})
     assert base["ok"], base
-    B = matrix_from_vector(np.array(base["base"]["vector"]), "rpy")
+    B = pose_from_robot(np.array(base["base"]["vector"]), "rpy")
     dp, dr = _errors(B, truth.base)
     print(f"live BASE: {dp:.3f} mm, {dr:.4f}° from the truth "
           f"(line tilt {base['line_tilt_deg']:.3f}°)")

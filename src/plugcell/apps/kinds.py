@@ -49,9 +49,40 @@ KINDS: dict[str, Kind] = {
     "robot": Kind("plugcell.devices.robot.service:RobotService"),
     "tracker": Kind("plugcell.devices.tracker.service:TrackerService"),
     "compute": Kind("plugcell.devices.compute.service:ComputeService"),
-    "controller": Kind("plugcell.devices.cell.service:CellController"),
+    "cell-controller": Kind("plugcell.devices.cell.service:CellController"),
     "opcua-device": Kind("plugcell.devices.opcua.device:OpcUaDevice"),
 }
+
+#: Old kind names (issue #33) → the kind: ``plugcell serve controller`` still serves the
+#: cell controller, with a deprecation warning (:func:`current_kind`).
+DEPRECATED_KINDS: dict[str, str] = {"controller": "cell-controller"}
+#: Old parameter names of a kind → the parameter: ``--param controller=HOST:PORT`` of
+#: the robot is its line-protocol link, ``line`` (beside ``rsi``, ``egm``).
+DEPRECATED_PARAMS: dict[str, dict[str, str]] = {"robot": {"controller": "line"}}
+
+
+def current_kind(kind: str) -> str:
+    """``kind``, or the kind an old name of :data:`DEPRECATED_KINDS` became (with the
+    warning line of :func:`~plugcell.apps.commands.deprecated.warn_renamed`)."""
+    from plugcell.apps.commands.deprecated import warn_renamed
+
+    new = DEPRECATED_KINDS.get(kind)
+    if new is None:
+        return kind
+    warn_renamed(f"service kind {kind!r}", repr(new))
+    return new
+
+
+def current_param(kind: str, key: str) -> str:
+    """``key``, or the parameter of ``kind`` an old name of :data:`DEPRECATED_PARAMS`
+    became (with a warning line)."""
+    from plugcell.apps.commands.deprecated import warn_renamed
+
+    new = DEPRECATED_PARAMS.get(kind, {}).get(key)
+    if new is None:
+        return key
+    warn_renamed(f"parameter {key!r} of {kind}", repr(new))
+    return new
 
 
 def register_kind(kind: str, target: str | Kind) -> None:

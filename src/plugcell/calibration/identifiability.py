@@ -181,6 +181,33 @@ def analyse(
     if Hs.shape[0] > 2 * Hs.shape[1]:
         # Same column geometry (HᵀH = RᵀR), k×k instead of rows×k: fast for many poses.
         Hs = r_factor(Hs)
+    idx = {k: i for i, k in enumerate(keys)}
+    kept, dropped = _independent_columns(Hs, keys, zero, rank_tol)
+    eliminated, kappa, sv = _condition_rule(Hs, idx, kept, condition_limit, protect)
+    combinations, via = _combinations(H, norms, idx, kept, dropped)
+    return Identifiability(
+        kept=tuple(kept),
+        dropped=tuple(dropped),
+        zero=zero,
+        eliminated=tuple(eliminated),
+        combinations={k: tuple(v) for k, v in combinations.items()},
+        via=via,
+        condition_number=kappa,
+        singular_values=sv,
+    )
+
+
+def _independent_columns(Hs: Array, keys: tuple[str, ...], zero: tuple[str, ...],
+                         rank_tol: float) -> tuple[list[str], list[str]]:
+    """Gram–Schmidt QR in priority order: the unit column ``ĥ_j`` is kept when
+    ``‖(I − QQᵀ) ĥ_j‖ > rank_tol`` (twice orthogonalised), else dropped.
+
+    Returns
+    -------
+    kept, dropped : list of str
+        Keys of the independent columns and of those that depend on them (the ``zero``
+        ones in neither).
+    """
     Q = np.zeros((Hs.shape[0], 0))
     kept: list[str] = []
     dropped: list[str] = []
@@ -196,55 +223,76 @@ def analyse(
             kept.append(k)
         else:
             dropped.append(k)
-    # condition-number rule (4.10)
+    return kept, dropped
+
+
+def _condition_rule(Hs: Array, idx: dict[str, int], kept: list[str],
+                    condition_limit: float | None, protect: Sequence[str]
+                    ) -> tuple[list[str], float, Array]:
+    """Rule 4.10: while ``κ = σ₁/σ_r`` of the kept unit columns exceeds
+    ``condition_limit``, remove (from ``kept``, in place) the unprotected parameter with
+    the largest ``|v_r|`` entry of the last right singular vector.
+
+    Returns
+    -------
+    eliminated : list of str
+        The removed keys, in order.
+    kappa : float
+        κ of the columns left (``inf`` when singular or none).
+    sv : (r,) array
+        Their singular values.
+    """
     eliminated: list[str] = []
-    idx = {k: i for i, k in enumerate(keys)}
     while True:
         cols = [idx[k] for k in kept]
         sv = np.linalg.svd(Hs[:, cols], compute_uv=False) if cols else np.zeros(0)
         kappa = float(sv[0] / sv[-1]) if sv.size and sv[-1] > 0 else float("inf")
         if condition_limit is None or kappa <= condition_limit or len(kept) <= 1:
-            break
+            return eliminated, kappa, sv
         _, _, Vt = np.linalg.svd(Hs[:, cols], full_matrices=False)
         order = np.argsort(-np.abs(Vt[-1]))
         cand = [kept[i] for i in order if kept[i] not in protect]
         if not cand:
-            break
+            return eliminated, kappa, sv
         kept.remove(cand[0])
         eliminated.append(cand[0])
-    # combinations: dropped columns as combinations of kept columns (unscaled)
+
+
+def _combinations(H: Array, norms: Array, idx: dict[str, int], kept: list[str],
+                  dropped: list[str]
+                  ) -> tuple[dict[str, list[tuple[str, float]]], dict[str, tuple[str, ...]]]:
+    """Each dropped column as a combination of the kept ones, ``h_j = Σ_k c_jk h_k``
+    (least squares on the unscaled columns); a coefficient counts when its scale-free
+    size ``|c_jk|·‖h_k‖/‖h_j‖`` exceeds ``COEF_TOL`` (near-integers rounded).
+
+    Returns
+    -------
+    combinations : dict of str to list of (str, float)
+        Each kept key → itself with 1, then the dropped keys it stands for, with c.
+    via : dict of str to tuple of str
+        Each dropped key → the kept keys it is a combination of.
+    """
     combinations: dict[str, list[tuple[str, float]]] = {k: [(k, 1.0)] for k in kept}
     via: dict[str, tuple[str, ...]] = {}
-    if dropped and kept:
-        cols_kd = [idx[k] for k in kept] + [idx[k] for k in dropped]
-        Hkd = H[:, cols_kd]
-        if Hkd.shape[0] > 2 * Hkd.shape[1]:
-            Hkd = r_factor(Hkd)  # R keeps every linear relation of the columns
-        Hk, Hd = Hkd[:, : len(kept)], Hkd[:, len(kept):]
-        C, *_ = np.linalg.lstsq(Hk, Hd, rcond=None)
-        nk = norms[[idx[k] for k in kept]]
-        for jd, kd in enumerate(dropped):
-            # scale-free size of each coefficient: c·|h_k| / |h_j|
-            rel = np.abs(C[:, jd]) * nk / norms[idx[kd]]
-            used = []
-            for ik, kk in enumerate(kept):
-                if rel[ik] > COEF_TOL:
-                    c = float(C[ik, jd])
-                    r = round(c)
-                    c = float(r) if abs(c - r) < 1e-9 else c
-                    combinations[kk].append((kd, c))
-                    used.append(kk)
-            via[kd] = tuple(used)
-    return Identifiability(
-        kept=tuple(kept),
-        dropped=tuple(dropped),
-        zero=zero,
-        eliminated=tuple(eliminated),
-        combinations={k: tuple(v) for k, v in combinations.items()},
-        via=via,
-        condition_number=kappa,
-        singular_values=sv,
-    )
+    if not (dropped and kept):
+        return combinations, via
+    Hkd = H[:, [idx[k] for k in kept] + [idx[k] for k in dropped]]
+    if Hkd.shape[0] > 2 * Hkd.shape[1]:
+        Hkd = r_factor(Hkd)  # R keeps every linear relation of the columns
+    C, *_ = np.linalg.lstsq(Hkd[:, : len(kept)], Hkd[:, len(kept):], rcond=None)
+    nk = norms[[idx[k] for k in kept]]
+    for jd, kd in enumerate(dropped):
+        rel = np.abs(C[:, jd]) * nk / norms[idx[kd]]
+        used = []
+        for ik, kk in enumerate(kept):
+            if rel[ik] > COEF_TOL:
+                c = float(C[ik, jd])
+                r = round(c)
+                c = float(r) if abs(c - r) < 1e-9 else c
+                combinations[kk].append((kd, c))
+                used.append(kk)
+        via[kd] = tuple(used)
+    return combinations, via
 
 
 def random_configurations(model: ErrorModel, n: int, seed: int = 0) -> Array:

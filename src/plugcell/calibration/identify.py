@@ -719,42 +719,11 @@ class Calibrator:
                 C = self._undetermined(Hs, scale)
             Z = restricted_basis(C, scale) if C.shape[1] else None
             if self.method == "gauss-newton":
-                step = (least_squares(Hs, rw) if Z is None
-                        else Z @ least_squares(Hs @ Z, rw)) / scale
-                # full Gauss-Newton step (Fig. 6-9); halved while it increases the cost
-                for _ in range(BACKTRACK_STEPS):
-                    new = model.updated(keys=keys, step=step)
-                    try:
-                        jac_new = self._jac(new, p, keys)
-                        rn = (_residual_rows(p, jac_new.poses) * sw[:, None]).reshape(-1)
-                        if float(rn @ rn) <= cost * (1.0 + 1e-9) + 1e-30:
-                            break
-                    except DivergenceError:
-                        pass
-                    step = 0.5 * step
-                else:
-                    new = model.updated(keys=keys, step=step)
-                    jac_new = self._jac(new, p, keys)
+                new, jac_new, step = self._gauss_newton_step(p, model, keys, Hs, rw, Z, scale,
+                                                             sw, cost)
             else:
-                Hr = Hs if Z is None else Hs @ Z
-                A = Hr.T @ Hr
-                g = Hr.T @ rw
-                for _ in range(30):
-                    y = np.linalg.solve(A + lam * np.diag(np.diag(A) + 1e-12), g)
-                    step = (y if Z is None else Z @ y) / scale
-                    new = model.updated(keys=keys, step=step)
-                    try:
-                        jac_new = self._jac(new, p, keys)
-                        rn = (_residual_rows(p, jac_new.poses) * sw[:, None]).reshape(-1)
-                        ok = float(rn @ rn) <= cost
-                    except DivergenceError:
-                        ok = False
-                    if ok:
-                        lam = max(lam / 10.0, 1e-12)
-                        break
-                    lam *= 10.0
-                else:
-                    raise DivergenceError(f"{stage}: Levenberg–Marquardt found no descent step")
+                new, jac_new, step, lam = self._lm_step(p, model, keys, Hs, rw, Z, scale, sw,
+                                                        cost, lam, stage)
             step_norm = float(np.linalg.norm(step))
             pos = np.linalg.norm(r[:, :3], axis=1)
             history.append(IterationRecord(it, step_norm, cost, float(pos.mean() * 1e3),
@@ -768,6 +737,59 @@ class Calibrator:
                 converged = True
                 break
         return model, history, converged, weights, jac
+
+    def _weighted_cost(self, p: _Problem, model: ErrorModel, keys: list[str], sw: Array
+                       ) -> tuple[float, JacobianResult]:
+        """The weighted cost ``‖√w · r‖²`` at ``model`` and its Jacobian (DivergenceError
+        when the model cannot be evaluated)."""
+        jac = self._jac(model, p, keys)
+        rn = (_residual_rows(p, jac.poses) * sw[:, None]).reshape(-1)
+        return float(rn @ rn), jac
+
+    def _gauss_newton_step(
+        self, p: _Problem, model: ErrorModel, keys: list[str], Hs: Array, rw: Array,
+        Z: Array | None, scale: Array, sw: Array, cost: float,
+    ) -> tuple[ErrorModel, JacobianResult, Array]:
+        """Gauss–Newton's step (Fig. 6-9), ``Δg = S⁻¹·argmin ‖H_s·x − r_w‖`` (``x = Z y``
+        with undetermined directions), halved up to ``BACKTRACK_STEPS`` times while it
+        raises the cost; returns the new model, its Jacobian and the step taken."""
+        step = (least_squares(Hs, rw) if Z is None else Z @ least_squares(Hs @ Z, rw)) / scale
+        for _ in range(BACKTRACK_STEPS):
+            new = model.updated(keys=keys, step=step)
+            try:
+                new_cost, jac_new = self._weighted_cost(p, new, keys, sw)
+                if new_cost <= cost * (1.0 + 1e-9) + 1e-30:
+                    return new, jac_new, step
+            except DivergenceError:
+                pass
+            step = 0.5 * step
+        new = model.updated(keys=keys, step=step)
+        return new, self._jac(new, p, keys), step
+
+    def _lm_step(
+        self, p: _Problem, model: ErrorModel, keys: list[str], Hs: Array, rw: Array,
+        Z: Array | None, scale: Array, sw: Array, cost: float, lam: float, stage: str,
+    ) -> tuple[ErrorModel, JacobianResult, Array, float]:
+        """Levenberg–Marquardt's step ``Δg = S⁻¹·(H_rᵀH_r + λ·diag(H_rᵀH_r))⁻¹·H_rᵀ·r_w``
+        (``H_r = H_s Z``, ``Δg = S⁻¹ Z y`` with undetermined directions): λ ×10 until the
+        cost does not rise, then ÷10 for the next; returns the new model, its Jacobian,
+        the step and λ.  DivergenceError after 30 tries."""
+        Hr = Hs if Z is None else Hs @ Z
+        A = Hr.T @ Hr
+        g = Hr.T @ rw
+        for _ in range(30):
+            y = np.linalg.solve(A + lam * np.diag(np.diag(A) + 1e-12), g)
+            step = (y if Z is None else Z @ y) / scale
+            new = model.updated(keys=keys, step=step)
+            try:
+                new_cost, jac_new = self._weighted_cost(p, new, keys, sw)
+                ok = new_cost <= cost
+            except DivergenceError:
+                ok = False
+            if ok:
+                return new, jac_new, step, max(lam / 10.0, 1e-12)
+            lam *= 10.0
+        raise DivergenceError(f"{stage}: Levenberg–Marquardt found no descent step")
 
     def _iterate_scipy(
         self, p: _Problem, model: ErrorModel, keys: list[str], stage: str, *, loss: str,

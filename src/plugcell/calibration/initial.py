@@ -224,17 +224,7 @@ def estimate_base_probe_positions(
         pts = pF + RF @ tX
         fit = fit_rigid_transform(pts, P)
         RY = fit.rotation
-        # P_i − R_Y p_F = R_Y R_F t_X + t_Y : linear in (t_X, t_Y)
-        M = np.concatenate([RY @ RF, np.broadcast_to(np.eye(3), (N, 3, 3))], axis=2)
-        rhs = P - pF @ RY.T
-        M2, b = M.reshape(-1, 6), rhs.reshape(-1)
-        _, V0 = null_space(M2, rel_tol) if rel_tol > 0 else (None, np.zeros((6, 0)))
-        if V0.shape[1] == 0:
-            sol, *_ = np.linalg.lstsq(M2, b, rcond=None)
-        else:  # t_X at the prior along what the poses do not see, t_Y its best match
-            x0 = np.concatenate([prior, np.mean(rhs - (RY @ RF) @ prior, axis=0)])
-            Z = restricted_basis(V0, np.ones(6))
-            sol = x0 + Z @ least_squares(M2 @ Z, b - M2 @ x0)
+        sol = _translations(RY, RF, pF, P, prior, rel_tol)
         step = np.linalg.norm(sol[:3] - tX)
         tX = sol[:3]
         tY = sol[3:]
@@ -244,9 +234,26 @@ def estimate_base_probe_positions(
     base[:3, :3], base[:3, 3] = RY, tY
     X = np.eye(4)
     X[:3, 3] = tX
-    pred = (base @ F @ X)[:, :3, 3]
-    rms = float(np.sqrt(np.mean(np.sum((pred - P) ** 2, axis=1))))
-    return FrameEstimate(base=base, probe=X, rms=rms)
+    return FrameEstimate(base=base, probe=X, rms=_rms(base, F, X, P))
+
+
+def _translations(RY: Array, RF: Array, pF: Array, P: Array, prior: Array,
+                  rel_tol: float) -> Array:
+    """``(t_X, t_Y)`` (6,) m for a fixed BASE rotation ``R_Y``: least squares of the
+    linear ``P_i − R_Y p_F,i = R_Y R_F,i t_X + t_Y``; directions the poses do not see
+    (relative singular value below ``rel_tol``) keep ``t_X`` at ``prior``, ``t_Y`` its
+    best match."""
+    N = len(P)
+    M = np.concatenate([RY @ RF, np.broadcast_to(np.eye(3), (N, 3, 3))], axis=2)
+    rhs = P - pF @ RY.T
+    M2, b = M.reshape(-1, 6), rhs.reshape(-1)
+    _, V0 = null_space(M2, rel_tol) if rel_tol > 0 else (None, np.zeros((6, 0)))
+    if V0.shape[1] == 0:
+        sol, *_ = np.linalg.lstsq(M2, b, rcond=None)
+        return sol
+    x0 = np.concatenate([prior, np.mean(rhs - (RY @ RF) @ prior, axis=0)])
+    Z = restricted_basis(V0, np.ones(6))
+    return x0 + Z @ least_squares(M2 @ Z, b - M2 @ x0)
 
 
 def _rms(base: Array, F: Array, X: Array, P: Array) -> float:

@@ -18,7 +18,7 @@ which the thesis's own table shows at half that size (Δa2', Δa3' errors of
 
 from __future__ import annotations
 
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 from typing import Any
 
@@ -88,6 +88,35 @@ class SimulationReport:
         }
 
 
+def _compared(result: Any, combos: Mapping[str, Any], values: Mapping[str, float],
+              truth_of: Callable[[str], float]) -> tuple[list[dict[str, Any]], float, str]:
+    """Each identified parameter against what it should be: the combination it stands
+    for, ``Σ c·Δg_true``, beside ``Σ c·g_identified``.
+
+    Returns
+    -------
+    rows : list of dict
+        Per kept key: input, identified, expected, error = identified − expected.
+    worst, worst_key : float, str
+        The largest ``|error|`` and its key.
+    """
+    space = result.model.space
+    rows = []
+    worst, worst_key = 0.0, ""
+    for k in result.keys:
+        comb = combos[k]
+        expected = sum(c * truth_of(kk) for kk, c in comb)
+        got = sum(c * values[kk] for kk, c in comb)
+        err = got - expected
+        if abs(err) > worst:
+            worst, worst_key = abs(err), k
+        rows.append({"key": k, "name": space[k].name, "unit": space[k].unit,
+                     "input": truth_of(k), "identified": values[k],
+                     "stands_for": result.stands_for(k), "expected": expected,
+                     "error": err})
+    return rows, worst, worst_key
+
+
 def simulated_identification(
     desc: RobotDescription,
     errors: Mapping[tuple[str, str], float],
@@ -139,25 +168,12 @@ def simulated_identification(
             "the fit returned no identifiability analysis (result.identifiability is None)")
     dropped = [k for k in ident.dropped if space[k].is_geometric]
     combos = combinations_at(fin, result.keys, dropped)
-    values = fin.as_dict()
 
     def truth_of(key: str) -> float:
         p = space[key]
         return float(errors.get((p.link, p.field), 0.0)) if p.kind == "link" else 0.0  # type: ignore[arg-type]
 
-    rows = []
-    worst, worst_key = 0.0, ""
-    for k in result.keys:
-        comb = combos[k]
-        expected = sum(c * truth_of(kk) for kk, c in comb)
-        got = sum(c * values[kk] for kk, c in comb)
-        err = got - expected
-        if abs(err) > worst:
-            worst, worst_key = abs(err), k
-        rows.append({"key": k, "name": space[k].name, "unit": space[k].unit,
-                     "input": truth_of(k), "identified": values[k],
-                     "stands_for": result.stands_for(k), "expected": expected,
-                     "error": err})
+    rows, worst, worst_key = _compared(result, combos, fin.as_dict(), truth_of)
     dependent = [{"key": k, "name": space[k].name, "input": truth_of(k),
                   "identified_via": [space[v].name for v in ident.via.get(k, ())]}
                  for k in ident.dropped if space[k].is_geometric]

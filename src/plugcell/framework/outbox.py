@@ -36,7 +36,7 @@ log = logging.getLogger("plugcell.framework.outbox")
 #: Largest data (bytes) one :class:`ProcessUpdateBatch` carries; a frame larger than
 #: this travels alone.  1 MiB lets a burst of 64 KiB – 0.3 MB frames share a sample
 #: (64 KiB was the limit before: each 64 KiB frame then paid a put, a hop and a decode
-#: of its own — docs/framework.md, "Batches of large frames").
+#: of its own — docs/results/framework-performance.md, "Batches of large frames").
 BATCH_BYTES = 1024 * 1024
 
 

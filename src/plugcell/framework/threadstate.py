@@ -19,7 +19,7 @@ created it changes nothing (Python deletes such a thread's state when the thread
 whatever the count).  Zenoh's runtime threads last as long as the process; should a
 foreign thread end, its pinned state stays allocated, so at most :data:`MAX_PINNED`
 threads are pinned.  What it saves is measured by ``benchmarks/round_trip_cpu.py``
-(docs/framework.md, "Performance").
+(docs/results/framework-performance.md).
 """
 
 from __future__ import annotations

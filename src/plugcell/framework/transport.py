@@ -19,9 +19,9 @@ trusted; Zenoh's 10 s by default), ``PLUGCELL_MODE`` (``client``: one link to a
 router instead of one to every other process — a star instead of a mesh; the router is
 found by ``PLUGCELL_CONNECT`` or, on the host, by scouting).
 
-What an idle cell costs is mostly these settings (docs/framework.md, "An idle cell"):
-shared memory wakes each process ten times a second (zenoh-transport's shared-memory
-hand-off task, once a link has negotiated it), and each link sends keep-alives every
+What an idle cell costs is mostly these settings (docs/results/framework-performance.md,
+"An idle cell"): shared memory wakes each process ten times a second (zenoh-transport's
+shared-memory hand-off task, once a link has negotiated it), and each link sends keep-alives every
 quarter lease — in a mesh of N processes N(N−1)/2 links, through a router N.
 
 Security (docs/security.md): ``PLUGCELL_TLS_CA``, ``PLUGCELL_TLS_CERT``,
@@ -84,8 +84,8 @@ class TransportConfig:
     shared_memory: bool = True
     lease_s: float = ZENOH_LEASE_S
     """How long a link may stay silent before Zenoh declares its peer gone; keep-alives
-    go every quarter of it on every link (an idle cost — docs/framework.md, "An idle
-    cell").  A process that dies closes its links at once whatever the lease; the lease
+    go every quarter of it on every link (an idle cost — docs/results/framework-performance.md,
+    "An idle cell").  A process that dies closes its links at once whatever the lease; the lease
     bounds the detection of a peer that hangs or a network that breaks."""
     extra: dict[str, object] = field(default_factory=dict)
     """Further Zenoh configuration, ``{"json/path": value}`` (inserted as JSON5)."""

@@ -300,8 +300,6 @@ def _export_urdf(result: Any, desc: RobotDescription, source: RobotSource | None
                  residual: Mapping[str, Any] | None) -> Exported:
     from lxml import etree
 
-    from plugcell.kinematics.joint_chain import calibrated_origins
-
     chain_desc, gp, rmap = _geometry(result, desc, serial_equivalent, "urdf")
     base_T, probe_T = result.model.base(), result.model.probe()
     tree = None
@@ -316,20 +314,7 @@ def _export_urdf(result: Any, desc: RobotDescription, source: RobotSource | None
     imp = _source_urdf(source, desc) if rmap is None else None
     notes: list[str] = []
     if imp is not None:
-        root = etree.fromstring(imp.urdf.encode("utf-8"))
-        co = calibrated_origins(imp.chain, desc, gp)
-        joints = {el.get("name"): el for el in root.findall("joint")}
-        for k, jt in enumerate(imp.chain.joints):
-            if not np.allclose(co.origins[k], jt.origin, atol=0, rtol=0):
-                _set_origin(joints[jt.name], co.origins[k])
-        base_link, tip_link = imp.base_link, imp.tip_link
-        if co.tip_joint is None and not np.allclose(co.residual, np.eye(4), atol=1e-15):
-            new = _unique(root, f"{tip_link}_calibrated")
-            _add_fixed(root, _unique(root, f"{tip_link}-{new}"), tip_link, new, co.residual,
-                       new_link=new)
-            notes.append(f"the calibrated tip is the new link {new!r} ({tip_link!r} has no "
-                         "fixed joint to take up the flange's calibrated offset)")
-            tip_link = new
+        root, base_link, tip_link = _calibrated_source(imp, desc, gp, notes)
         tip_from_flange = desc.tool
     else:
         root, base_link, tip_link = _generic_urdf(
@@ -344,25 +329,9 @@ def _export_urdf(result: Any, desc: RobotDescription, source: RobotSource | None
         extra["coupling"] = {"readings": list(desc.coupling.readings),
                              "matrix": desc.coupling.matrix.tolist(),
                              "offset": desc.coupling.offset.tolist()}
-    if include_base:
-        if any(el.find("child") is not None and el.find("child").get("link") == base_link
-               for el in root.findall("joint")):
-            raise ExportError(f"--include-base: the chain starts at {base_link!r}, which is not "
-                              "the URDF's root link (it would get two parents)")
-        new = _unique(root, "measurement")
-        _add_fixed(root, _unique(root, f"{new}-{base_link}"), new, base_link, base_T)
-        root.insert(0, etree.Element("link", name=new))
-    else:
-        reasons.append("BASE (the robot base in the measurement frame): add --include-base")
-        extra["base"] = _frame(base_T)
-    probe_in_tip = np.linalg.inv(tip_from_flange) @ probe_T
-    if include_probe:
-        new = _unique(root, "probe")
-        _add_fixed(root, _unique(root, f"{tip_link}-{new}"), tip_link, new, probe_in_tip,
-                   new_link=new)
-    else:
-        reasons.append(f"PROBE (the measured target in {tip_link!r}): add --include-probe")
-        extra["probe_in_tip"] = _frame(probe_in_tip)
+    _add_base_and_probe(root, base_link, tip_link, base_T,
+                        np.linalg.inv(tip_from_flange) @ probe_T, include_base, include_probe,
+                        reasons, extra)
     if rmap is not None and not desc.loops:
         reasons.append("the serial-equivalent chain's joints are reading_map @ readings")
         extra["reading_map"] = rmap.tolist()
@@ -384,6 +353,61 @@ def _export_urdf(result: Any, desc: RobotDescription, source: RobotSource | None
                           encoding="utf-8").decode("utf-8")
     return Exported(text, _side(result, params_path, "urdf", reasons, extra, residual),
                     tuple(notes))
+
+
+def _calibrated_source(imp: Any, desc: RobotDescription, gp: GeometricParameters,
+                       notes: list[str]) -> tuple[Any, str, str]:
+    """The robot's own URDF with each joint origin the calibration changed rewritten
+    (:func:`~plugcell.kinematics.joint_chain.calibrated_origins`); a flange offset no
+    fixed joint can take up goes to a new tip link (noted).  Returns the XML root and the
+    chain's base and tip links."""
+    from lxml import etree
+
+    from plugcell.kinematics.joint_chain import calibrated_origins
+
+    root = etree.fromstring(imp.urdf.encode("utf-8"))
+    co = calibrated_origins(imp.chain, desc, gp)
+    joints = {el.get("name"): el for el in root.findall("joint")}
+    for k, jt in enumerate(imp.chain.joints):
+        if not np.allclose(co.origins[k], jt.origin, atol=0, rtol=0):
+            _set_origin(joints[jt.name], co.origins[k])
+    base_link, tip_link = imp.base_link, imp.tip_link
+    if co.tip_joint is None and not np.allclose(co.residual, np.eye(4), atol=1e-15):
+        new = _unique(root, f"{tip_link}_calibrated")
+        _add_fixed(root, _unique(root, f"{tip_link}-{new}"), tip_link, new, co.residual,
+                   new_link=new)
+        notes.append(f"the calibrated tip is the new link {new!r} ({tip_link!r} has no "
+                     "fixed joint to take up the flange's calibrated offset)")
+        tip_link = new
+    return root, base_link, tip_link
+
+
+def _add_base_and_probe(root: Any, base_link: str, tip_link: str, base_T: np.ndarray,
+                        probe_in_tip: np.ndarray, include_base: bool, include_probe: bool,
+                        reasons: list[str], extra: dict[str, Any]) -> None:
+    """BASE as a fixed joint from a new root ``measurement`` link (``include_base``) and
+    PROBE as one to a new ``probe`` link below the tip (``include_probe``); a frame left
+    out goes to the side file (``extra``) with the reason."""
+    from lxml import etree
+
+    if include_base:
+        if any(el.find("child") is not None and el.find("child").get("link") == base_link
+               for el in root.findall("joint")):
+            raise ExportError(f"--include-base: the chain starts at {base_link!r}, which is not "
+                              "the URDF's root link (it would get two parents)")
+        new = _unique(root, "measurement")
+        _add_fixed(root, _unique(root, f"{new}-{base_link}"), new, base_link, base_T)
+        root.insert(0, etree.Element("link", name=new))
+    else:
+        reasons.append("BASE (the robot base in the measurement frame): add --include-base")
+        extra["base"] = _frame(base_T)
+    if include_probe:
+        new = _unique(root, "probe")
+        _add_fixed(root, _unique(root, f"{tip_link}-{new}"), tip_link, new, probe_in_tip,
+                   new_link=new)
+    else:
+        reasons.append(f"PROBE (the measured target in {tip_link!r}): add --include-probe")
+        extra["probe_in_tip"] = _frame(probe_in_tip)
 
 
 _TREE_REASON = (

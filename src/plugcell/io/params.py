@@ -579,6 +579,40 @@ def result_from_params(document: dict[str, Any], description: RobotDescription, 
         calibration of another robot (``check_robot``), or identified parameters the
         model does not have.
     """
+    robot = _robot_of(document, description, check_robot)
+    cfg, options = _model_options(document)
+    values = _values(document, "values")
+    nominal_values = _values(document, "nominal_frames", "values")
+    keys = _parameter_keys(document)
+    iterations = _integer(document, "iterations")
+    converged = _flag(document, "converged")
+    six_dof = _flag(document, "data", "six_dof")
+    n_poses = _integer(document, "data", "poses")
+    warnings = _at(document, "warnings", default=[])
+    if not isinstance(warnings, list) or not all(isinstance(w, str) for w in warnings):
+        raise ParamsError("warnings: expected a list of strings")
+    try:
+        model = _model(description, cfg, options, values)
+        nominal = _model(description, cfg, options, nominal_values)
+    except ValueError as exc:  # the model cannot be built on this robot
+        raise ParamsError(f"model {cfg.number} ({cfg.name}) on {description.name!r}: "
+                          f"{exc}") from None
+    unknown = [k for k in keys if k not in model.space.keys]
+    if unknown:
+        raise ParamsError(f"parameters: {', '.join(map(repr, unknown))} not in model "
+                          f"{cfg.number} ({cfg.name}) of {description.name!r}")
+    return CalibrationResult(
+        config=cfg, robot=robot, model=model, nominal=nominal, keys=tuple(keys),
+        identifiability=None, data_identifiability=None, iterations=iterations,
+        converged=converged, history=(), statistics=None, calibration=None,
+        calibration_before=None, six_dof=six_dof, n_poses=n_poses,
+        warnings=tuple(warnings), validity=_section(document, "validity",
+                                                    validity_from_document),
+        undetermined=_section(document, "undetermined", undetermined_from_document))
+
+
+def _robot_of(document: Any, description: RobotDescription, check_robot: bool) -> str:
+    """The document's robot, once it is a plugcell calibration this plugcell reads."""
     if not isinstance(document, dict) or document.get("format") != FORMAT:
         raise ParamsError("not a plugcell calibration (missing 'format')")
     version = document.get("format_version", FORMAT_VERSION)
@@ -590,6 +624,13 @@ def result_from_params(document: dict[str, Any], description: RobotDescription, 
         raise ParamsError(f"robot: expected a name, got {_typename(robot)}")
     if check_robot and robot != description.name:
         raise ParamsError(f"a calibration of robot {robot!r}, not of {description.name!r}")
+    return robot
+
+
+def _model_options(document: dict[str, Any]) -> tuple[Any, dict[str, Any]]:
+    """The model's configuration and the options of :meth:`ErrorModel.create` it was
+    identified with: BASE/PROBE references, payload and temperature references,
+    harmonics, thermal expansion (absent ones: their defaults of older files)."""
     number = _at(document, "model", "number")
     try:
         cfg = model_config(number)
@@ -606,8 +647,20 @@ def result_from_params(document: dict[str, Any], description: RobotDescription, 
         raise ParamsError(f"model.harmonics: 0, 1 or 2, got {harmonics}")
     thermal = _flag(document, "model", "thermal", default=False)
     t_ref = _number(document, "model", "temperature_ref_c", default=0.0)
-    values = _values(document, "values")
-    nominal_values = _values(document, "nominal_frames", "values")
+    return cfg, {"gravity": cfg.gravity, "payload": cfg.payload, "base": base_ref,
+                 "probe": probe_ref, "payload_ref_kg": m_ref, "harmonics": harmonics,
+                 "thermal": thermal, "temperature_ref_c": t_ref}
+
+
+def _model(description: RobotDescription, cfg: Any, options: dict[str, Any],
+           values: dict[str, float]) -> ErrorModel:
+    """The model of ``cfg`` on ``description`` with ``values`` (absent keys: 0)."""
+    m = ErrorModel.create(description, cfg.family, **options)
+    return m.with_values([float(values.get(k, 0.0)) for k in m.space.keys])
+
+
+def _parameter_keys(document: dict[str, Any]) -> list[str]:
+    """The keys of the identified parameters (``parameters[i].key``)."""
     rows = _at(document, "parameters")
     if not isinstance(rows, list):
         raise ParamsError(f"parameters: expected a list, got {_typename(rows)}")
@@ -617,49 +670,18 @@ def result_from_params(document: dict[str, Any], description: RobotDescription, 
         if not isinstance(key, str):
             raise ParamsError(f"parameters[{i}]: expected an object with a 'key' name")
         keys.append(key)
-    iterations = _integer(document, "iterations")
-    converged = _flag(document, "converged")
-    six_dof = _flag(document, "data", "six_dof")
-    n_poses = _integer(document, "data", "poses")
-    warnings = _at(document, "warnings", default=[])
-    if not isinstance(warnings, list) or not all(isinstance(w, str) for w in warnings):
-        raise ParamsError("warnings: expected a list of strings")
+    return keys
 
-    def build(v: dict[str, float]) -> ErrorModel:
-        m = ErrorModel.create(description, cfg.family, gravity=cfg.gravity,
-                              payload=cfg.payload, base=base_ref, probe=probe_ref,
-                              payload_ref_kg=m_ref, harmonics=harmonics, thermal=thermal,
-                              temperature_ref_c=t_ref)
-        return m.with_values([float(v.get(k, 0.0)) for k in m.space.keys])
 
-    try:
-        model = build(values)
-        nominal = build(nominal_values)
-    except ValueError as exc:  # the model cannot be built on this robot
-        raise ParamsError(f"model {cfg.number} ({cfg.name}) on {description.name!r}: "
-                          f"{exc}") from None
-    unknown = [k for k in keys if k not in model.space.keys]
-    if unknown:
-        raise ParamsError(f"parameters: {', '.join(map(repr, unknown))} not in model "
-                          f"{cfg.number} ({cfg.name}) of {description.name!r}")
-    validity = None
-    v = document.get("validity")
-    if v:  # absent in files written before the region was recorded
-        if not isinstance(v, dict):
-            raise ParamsError(f"validity: expected an object, got {_typename(v)}")
-        validity = validity_from_document(v)
-    undetermined = None
-    u = document.get("undetermined")
-    if u:  # absent in files written before it was recorded
-        if not isinstance(u, dict):
-            raise ParamsError(f"undetermined: expected an object, got {_typename(u)}")
-        undetermined = undetermined_from_document(u)
-    return CalibrationResult(
-        config=cfg, robot=robot, model=model, nominal=nominal, keys=tuple(keys),
-        identifiability=None, data_identifiability=None, iterations=iterations,
-        converged=converged, history=(), statistics=None, calibration=None,
-        calibration_before=None, six_dof=six_dof, n_poses=n_poses,
-        warnings=tuple(warnings), validity=validity, undetermined=undetermined)
+def _section(document: dict[str, Any], name: str, read: Any) -> Any:
+    """``read(document[name])`` — None when the section is absent or empty (files written
+    before it was recorded); ParamsError when it is not an object."""
+    v = document.get(name)
+    if not v:
+        return None
+    if not isinstance(v, dict):
+        raise ParamsError(f"{name}: expected an object, got {_typename(v)}")
+    return read(v)
 
 
 def rebase_document(document: dict[str, Any], result: CalibrationResult, base: ArrayLike,

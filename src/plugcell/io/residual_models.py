@@ -170,7 +170,6 @@ def load_residual(entry: dict[str, Any], params_path: str | Path, *, robot: str,
         calibration, or was written by another scikit-learn major.minor version.
     """
     import sklearn
-    import skops.io as sio
 
     try:
         p = Path(params_path).parent / str(entry["file"])
@@ -178,6 +177,40 @@ def load_residual(entry: dict[str, Any], params_path: str | Path, *, robot: str,
     except (KeyError, TypeError):
         raise ResidualFileError(f"{params_path}: 'residual_model' lacks 'file' or "
                                 "'sha256'") from None
+    obj = _trusted_document(p, want, params_path)
+    meta = obj["meta"]
+    if meta.get("robot") != robot:
+        raise ResidualFileError(f"{p}: residual model of robot {meta.get('robot')!r}, the "
+                                f"calibration is of {robot!r}")
+    fp = calibration_fingerprint(model)
+    if meta.get("fingerprint") != fp:
+        raise ResidualFileError(f"{p}: trained on top of another calibration (fingerprint "
+                                f"{meta.get('fingerprint')}, this one {fp}): re-run calibrate")
+    if _minor(str(meta.get("sklearn_version", ""))) != _minor(sklearn.__version__):
+        raise ResidualFileError(
+            f"{p}: written with scikit-learn {meta.get('sklearn_version')}, this is "
+            f"{sklearn.__version__}: re-run plugcell calibrate --residual-model learned")
+    cvd = dict(obj["cv"])
+    cvd["scores"] = tuple((dict(s), float(v)) for s, v in cvd["scores"])
+    features = list(meta["features"])
+    shape = _stage(meta.get("shape_stage"), obj.get("shape"), p, "shape")
+    prior = _stage(meta.get("prior_stage"), obj.get("prior"), p, "prior")
+    return LearnedResidual(
+        robot=robot, fingerprint=fp, estimators=tuple(obj["estimators"]),
+        neighbours=obj["neighbours"], threshold=float(meta["threshold"]),
+        uses_temperature=any(f.startswith("temperature") for f in features),
+        uses_payload=any(f.startswith("payload") for f in features),
+        orientation=bool(meta["orientation"]), params=dict(meta["params"]),
+        cv=CrossValidation(**cvd), useful=bool(meta["useful"]), n_poses=int(meta["poses"]),
+        sklearn_version=str(meta["sklearn_version"]), shape=shape, prior=prior)
+
+
+def _trusted_document(p: Path, want: str, params_path: str | Path) -> dict[str, Any]:
+    """The side file's document, loaded only once it is trusted: ``SHA-256(file) =
+    want``, nothing but :data:`TRUSTED_TYPES` in it, a plugcell residual model of a
+    readable format version (ResidualFileError saying which failed)."""
+    import skops.io as sio
+
     try:
         blob = p.read_bytes()
     except OSError as exc:
@@ -204,31 +237,7 @@ def load_residual(entry: dict[str, Any], params_path: str | Path, *, robot: str,
         raise ResidualFileError(f"{p}: residual model format version {version!r}, this "
                                 f"plugcell reads {', '.join(map(str, READABLE_VERSIONS))}: "
                                 "re-run plugcell calibrate --residual-model learned")
-    meta = obj["meta"]
-    if meta.get("robot") != robot:
-        raise ResidualFileError(f"{p}: residual model of robot {meta.get('robot')!r}, the "
-                                f"calibration is of {robot!r}")
-    fp = calibration_fingerprint(model)
-    if meta.get("fingerprint") != fp:
-        raise ResidualFileError(f"{p}: trained on top of another calibration (fingerprint "
-                                f"{meta.get('fingerprint')}, this one {fp}): re-run calibrate")
-    if _minor(str(meta.get("sklearn_version", ""))) != _minor(sklearn.__version__):
-        raise ResidualFileError(
-            f"{p}: written with scikit-learn {meta.get('sklearn_version')}, this is "
-            f"{sklearn.__version__}: re-run plugcell calibrate --residual-model learned")
-    cvd = dict(obj["cv"])
-    cvd["scores"] = tuple((dict(s), float(v)) for s, v in cvd["scores"])
-    features = list(meta["features"])
-    shape = _stage(meta.get("shape_stage"), obj.get("shape"), p, "shape")
-    prior = _stage(meta.get("prior_stage"), obj.get("prior"), p, "prior")
-    return LearnedResidual(
-        robot=robot, fingerprint=fp, estimators=tuple(obj["estimators"]),
-        neighbours=obj["neighbours"], threshold=float(meta["threshold"]),
-        uses_temperature=any(f.startswith("temperature") for f in features),
-        uses_payload=any(f.startswith("payload") for f in features),
-        orientation=bool(meta["orientation"]), params=dict(meta["params"]),
-        cv=CrossValidation(**cvd), useful=bool(meta["useful"]), n_poses=int(meta["poses"]),
-        sklearn_version=str(meta["sklearn_version"]), shape=shape, prior=prior)
+    return obj
 
 
 def _stage(summary: dict[str, Any] | None, fitted: Any, p: Path, what: str

@@ -609,54 +609,17 @@ def description_from_document(doc: RobotFile) -> RobotDescription:
     loops = [FourBarLoop(t.arm, t.crank, t.coupler, t.follower,
                          "parallelogram" if isinstance(t.type, UnsetType) else t.type)
              for t in doc.loops]
-    coupled = []
-    for k, t in enumerate(doc.coupled_limits):
-        if not t.lower < t.upper:
-            raise DescriptionError(f"coupled_limits[{k}]",
-                                   f"min {t.lower:g} must be below max {t.upper:g}")
-        coupled.append(CoupledLimit(t.joints, t.lower * _DEG, t.upper * _DEG))
-    pms = []
-    for k, p in enumerate(doc.point_masses):
-        if p.mass < 0:
-            raise DescriptionError(f"point_masses[{k}].mass", f"must be ≥ 0, got {p.mass:g}")
-        pms.append(PointMass(p.name, p.link, p.mass, p.com))
-    box = None
-    if not isinstance(doc.working_volume, UnsetType):
-        for i, x in enumerate(doc.working_volume.size):
-            if x <= 0:
-                raise DescriptionError(f"working_volume.size[{i}]", f"must be positive, got {x:g}")
-        box = Box(doc.working_volume.center, doc.working_volume.size)
+    coupled = _coupled_limits(doc)
+    pms = _point_masses(doc)
+    box = _working_volume(doc)
     base = np.eye(4) if isinstance(doc.base, UnsetType) else _transform(doc.base, "base")
     tool = np.eye(4) if isinstance(doc.tool, UnsetType) else _transform(doc.tool, "tool")
-
     # limits in `actuated` order (unknown names are reported by the model)
     if reading_limits is not None:
         jl = reading_limits
     else:
         jl = np.array([limits.get(nm, (-math.pi, math.pi)) for nm in actuated],
                       dtype=float).reshape(len(actuated), 2)
-    stiffness = None
-    if stiff:
-        declared = {lk.name for lk in links if lk.joint == "actuated"}
-        missing = [nm for nm in actuated if nm in declared and nm not in stiff]
-        if missing:
-            i = next(i for i, lk in enumerate(links) if lk.name == missing[0])
-            raise DescriptionError(
-                f"links[{i}].stiffness",
-                "missing: give a stiffness for every actuated joint or for none",
-            )
-        stiffness = np.array([stiff.get(nm, 1.0) for nm in actuated])
-
-    home = None
-    if not isinstance(doc.home, UnsetType):  # its length is checked by the model
-        home = np.array(doc.home, dtype=float)
-        if coupling is None:  # prismatic readings in metres, the others in degrees
-            kinds = {lk.name: lk.joint for lk in links}
-            unit = [1.0 if kinds.get(nm) == "prismatic" else _DEG for nm in actuated]
-            home = home * (np.array(unit) if len(unit) == len(home) else _DEG)
-        else:
-            home = home * _DEG
-
     return RobotDescription(
         name=doc.name,
         links=tuple(links),
@@ -666,14 +629,75 @@ def description_from_document(doc: RobotFile) -> RobotDescription:
         base=base,
         tool=tool,
         joint_limits=jl,
-        stiffness=stiffness,
+        stiffness=_stiffness(links, stiff, actuated),
         notes=notes,
         coupled_limits=tuple(coupled),
-        home=home,
+        home=_home(doc, links, actuated, coupling),
         point_masses=tuple(pms),
         working_volume=box,
         coupling=coupling,
     )
+
+
+def _coupled_limits(doc: RobotFile) -> list[CoupledLimit]:
+    """``[[coupled_limits]]``: ``lower < Σ joints < upper``, degrees → radians."""
+    coupled = []
+    for k, t in enumerate(doc.coupled_limits):
+        if not t.lower < t.upper:
+            raise DescriptionError(f"coupled_limits[{k}]",
+                                   f"min {t.lower:g} must be below max {t.upper:g}")
+        coupled.append(CoupledLimit(t.joints, t.lower * _DEG, t.upper * _DEG))
+    return coupled
+
+
+def _point_masses(doc: RobotFile) -> list[PointMass]:
+    """``[[point_masses]]``, each mass ≥ 0 kg."""
+    pms = []
+    for k, p in enumerate(doc.point_masses):
+        if p.mass < 0:
+            raise DescriptionError(f"point_masses[{k}].mass", f"must be ≥ 0, got {p.mass:g}")
+        pms.append(PointMass(p.name, p.link, p.mass, p.com))
+    return pms
+
+
+def _working_volume(doc: RobotFile) -> Box | None:
+    """``[working_volume]``: a box of positive sizes (None: not given)."""
+    if isinstance(doc.working_volume, UnsetType):
+        return None
+    for i, x in enumerate(doc.working_volume.size):
+        if x <= 0:
+            raise DescriptionError(f"working_volume.size[{i}]", f"must be positive, got {x:g}")
+    return Box(doc.working_volume.center, doc.working_volume.size)
+
+
+def _stiffness(links: list[Link], stiff: dict[str, float], actuated: tuple[str, ...]
+               ) -> np.ndarray | None:
+    """The joint stiffnesses in ``actuated`` order: for every actuated joint or none."""
+    if not stiff:
+        return None
+    declared = {lk.name for lk in links if lk.joint == "actuated"}
+    missing = [nm for nm in actuated if nm in declared and nm not in stiff]
+    if missing:
+        i = next(i for i, lk in enumerate(links) if lk.name == missing[0])
+        raise DescriptionError(
+            f"links[{i}].stiffness",
+            "missing: give a stiffness for every actuated joint or for none",
+        )
+    return np.array([stiff.get(nm, 1.0) for nm in actuated])
+
+
+def _home(doc: RobotFile, links: list[Link], actuated: tuple[str, ...], coupling: Any
+          ) -> np.ndarray | None:
+    """``home`` in SI: prismatic readings in metres, the others degrees → radians (with a
+    coupling, every reading in degrees); its length is checked by the model."""
+    if isinstance(doc.home, UnsetType):
+        return None
+    home = np.array(doc.home, dtype=float)
+    if coupling is not None:
+        return home * _DEG
+    kinds = {lk.name: lk.joint for lk in links}
+    unit = [1.0 if kinds.get(nm) == "prismatic" else _DEG for nm in actuated]
+    return home * (np.array(unit) if len(unit) == len(home) else _DEG)
 
 
 def description_from_dict(data: Any) -> RobotDescription:

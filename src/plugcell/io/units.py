@@ -13,11 +13,18 @@ with the rotation ``R`` of the convention (:mod:`plugcell.kinematics.rotations`)
 =========  ==================================================  ===========================
 name       R(a, b, c)                                          used by
 =========  ==================================================  ===========================
-``euler``  Z-Y-Z Euler angles: Rz(a)·Ry(b)·Rz(c)               Comau PDL POSITION (A.4),
+``zyz``    Z-Y-Z Euler angles: Rz(a)·Ry(b)·Rz(c)               Comau PDL POSITION (A.4),
                                                                the tracker's ``euler2tr``
 ``rpy``    roll-pitch-yaw about fixed X, Y, Z: Rz(c)·Ry(b)·Rx(a)  the tracker's ``rpy2tr``
+``xyz``    intrinsic X-Y-Z: Rx(a)·Ry(b)·Rz(c)
 ``prj``    projective angles (rotations.py)                    the tracker's ``prj2tr``
 =========  ==================================================  ===========================
+
+The names are those of :data:`plugcell.kinematics.rotations.CONVENTIONS`, which
+implements each convention once.  ``"euler"``, the name this module used for ``zyz``
+before issue #33, is still accepted with a :class:`DeprecationWarning`
+(:func:`convention_name`); the tracker's option words ``euler2tr``/``tr2euler``
+(thesis Table 7-3, on the wire) are unchanged.
 
 Robot *programs* (``plugcell compensate --program``, :mod:`plugcell.io.programs`) write a
 pose in their vendor's own notation — :data:`NOTATIONS`, converted by
@@ -40,10 +47,13 @@ and ``pdl/conversion.py`` only add their own checks and errors).
 
 from __future__ import annotations
 
+import warnings
+
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from plugcell.kinematics.rotations import (
+    CONVENTIONS,
     angles_to_matrix,
     matrix_to_pose,
     nearest_angles,
@@ -61,10 +71,10 @@ M_PER_MM = 1e-3
 MM_PER_M = 1e3
 #: Radians per degree: a revolute joint's reading scale.
 DEG = np.pi / 180.0
-#: Convention name (as robots and the tracker's options say it) → rotations.py's name.
-CONVENTIONS = {"rpy": "rpy", "euler": "zyz", "prj": "prj"}
 #: A Comau robot's convention: PDL's POSITION (thesis A.4).
-ROBOT_CONVENTION = "euler"
+ROBOT_CONVENTION = "zyz"
+#: Old convention names still accepted (with a DeprecationWarning) → the name to use.
+DEPRECATED_CONVENTIONS = {"euler": "zyz"}
 
 #: A vendor's pose notation (module table): (numbers, metres per length unit, angle
 #: convention of rotations.py or ``"quat"``/``"rotvec"``, order of the angles in R's
@@ -80,11 +90,13 @@ NOTATIONS: dict[str, tuple[int, float, str, tuple[int, ...], float]] = {
 __all__ = [
     "CONVENTIONS",
     "DEG",
+    "DEPRECATED_CONVENTIONS",
     "MM_PER_M",
     "M_PER_MM",
     "NOTATIONS",
     "ROBOT_CONVENTION",
     "UnitsError",
+    "convention_name",
     "joints_from_si",
     "joints_to_si",
     "notation_from_pose",
@@ -98,6 +110,37 @@ class UnitsError(ValueError):
     """Six numbers that are no pose (the message says why)."""
 
 
+def convention_name(name: str) -> str:
+    """The name of an angle convention in :data:`CONVENTIONS`, from what a user wrote.
+
+    Parameters
+    ----------
+    name : str
+        ``"zyz"``, ``"rpy"``, ``"xyz"``, ``"prj"``, or an old name of
+        :data:`DEPRECATED_CONVENTIONS` (``"euler"``: ``"zyz"``, with a
+        :class:`DeprecationWarning`).
+
+    Returns
+    -------
+    str
+        The name rotations.py knows.
+
+    Raises
+    ------
+    UnitsError
+        An unknown name (the known ones listed).
+    """
+    if name in CONVENTIONS:
+        return name
+    if name in DEPRECATED_CONVENTIONS:
+        new = DEPRECATED_CONVENTIONS[name]
+        warnings.warn(f"angle convention {name!r} is deprecated: use {new!r}",
+                      DeprecationWarning, stacklevel=3)
+        return new
+    raise UnitsError(f"unknown angle convention {name!r}; expected one of "
+                     f"{', '.join(CONVENTIONS)}")
+
+
 def pose_from_robot(values: ArrayLike, convention: str = ROBOT_CONVENTION) -> Array:
     """``x, y, z`` (mm), three angles (deg) in ``convention`` → 4×4 transform (m).
 
@@ -106,7 +149,7 @@ def pose_from_robot(values: ArrayLike, convention: str = ROBOT_CONVENTION) -> Ar
     values
         Six numbers, shape ``(6,)`` (any shape of six elements is flattened).
     convention
-        ``"euler"`` (Z-Y-Z), ``"rpy"`` or ``"prj"`` (module doc).
+        ``"zyz"``, ``"rpy"``, ``"xyz"`` or ``"prj"`` (module doc; :func:`convention_name`).
 
     Returns
     -------
@@ -118,13 +161,14 @@ def pose_from_robot(values: ArrayLike, convention: str = ROBOT_CONVENTION) -> Ar
     UnitsError
         Not six finite numbers, or angles outside the convention's domain.
     """
+    name = convention_name(convention)
     a = np.asarray(values, dtype=float).reshape(-1)
     if a.shape != (6,):
         raise UnitsError(f"expected 6 numbers (x, y, z mm, 3 angles deg), got {a.size}")
     if not np.all(np.isfinite(a)):
         raise UnitsError("values must be finite")
     try:
-        return pose_to_matrix(a[:3] * M_PER_MM, np.deg2rad(a[3:]), CONVENTIONS[convention])
+        return pose_to_matrix(a[:3] * M_PER_MM, np.deg2rad(a[3:]), name)
     except ValueError as exc:  # projective angles outside their domain
         raise UnitsError(str(exc)) from None
 
@@ -137,14 +181,19 @@ def robot_from_pose(T: ArrayLike, convention: str = ROBOT_CONVENTION) -> Array:
     T
         Homogeneous transform, shape ``(4, 4)``, translation in metres.
     convention
-        ``"euler"`` (Z-Y-Z), ``"rpy"`` or ``"prj"`` (module doc).
+        ``"zyz"``, ``"rpy"``, ``"xyz"`` or ``"prj"`` (module doc; :func:`convention_name`).
 
     Returns
     -------
     ndarray, shape (6,)
         ``x, y, z`` in millimetres, then the three angles in degrees.
+
+    Raises
+    ------
+    UnitsError
+        An unknown convention.
     """
-    xyz, angles = matrix_to_pose(np.asarray(T, dtype=float), CONVENTIONS[convention])
+    xyz, angles = matrix_to_pose(np.asarray(T, dtype=float), convention_name(convention))
     return np.concatenate([np.asarray(xyz) * MM_PER_M, np.rad2deg(angles)])
 
 

@@ -516,6 +516,18 @@ def chain_from_urdf(urdf: Any, label: str, base_link: str | None = None,
         chain, missing or empty limits, a zero axis, non-finite mimic numbers.
     """
     parent, children, roots = _tree(urdf, label)
+    base_link, tip_link, path = _chain_path(parent, children, roots, label, base_link,
+                                            tip_link)
+    on_chain = {base_link, *(j.child for j in path)}
+    joints = tuple(_chain_joint(urdf, children, jt, on_chain, label) for jt in path)
+    return JointChain(name=str(urdf.robot.name or "robot"), joints=joints), base_link, tip_link
+
+
+def _chain_path(parent: dict[str, Any], children: dict[str, list[Any]], roots: list[str],
+                label: str, base_link: str | None, tip_link: str | None
+                ) -> tuple[str, str, list[Any]]:
+    """The chain's ends (given, or the defaults of :func:`chain_from_urdf`) and the URDF
+    joints from base to tip, walked up from the tip through each link's parent joint."""
     links = set(children)
     for opt, v in (("--base-link", base_link), ("--tip-link", tip_link)):
         if v is not None and v not in links:
@@ -542,54 +554,56 @@ def chain_from_urdf(urdf: Any, label: str, base_link: str | None = None,
         path.append(parent[lk])
         lk = parent[lk].parent
     path.reverse()
-    on_chain = {base_link, *(j.child for j in path)}
-    joints: list[ChainJoint] = []
-    for jt in path:
-        loc = f"{label}: joint {jt.name!r}"
-        kind = jt.type
-        if kind in ("floating", "planar"):
+    return base_link, tip_link, path
+
+
+def _chain_joint(urdf: Any, children: dict[str, list[Any]], jt: Any, on_chain: set[str],
+                 label: str) -> ChainJoint:
+    """One URDF joint of the chain as a :class:`ChainJoint`: its kind, origin, axis,
+    limits (none for continuous and mimic joints), mimic and the mass lumped into its
+    child link (:func:`_lumped`)."""
+    loc = f"{label}: joint {jt.name!r}"
+    kind = jt.type
+    if kind in ("floating", "planar"):
+        raise DescriptionError(
+            loc, f"{kind} joints cannot be part of a robot's chain (choose --base-link "
+            "below it)"
+        )
+    if kind not in ("revolute", "continuous", "prismatic", "fixed"):
+        raise DescriptionError(loc, f"unknown joint type {kind!r}")
+    mimic = None
+    if jt.mimic is not None:
+        mult = 1.0 if jt.mimic.multiplier is None else float(jt.mimic.multiplier)
+        off = 0.0 if jt.mimic.offset is None else float(jt.mimic.offset)
+        if not (math.isfinite(mult) and math.isfinite(off)):
+            raise DescriptionError(f"{loc}: <mimic>", "multiplier and offset must be finite")
+        mimic = (str(jt.mimic.joint), mult, off)
+    limits = None
+    if kind in ("revolute", "prismatic") and mimic is None:
+        lim = jt.limit
+        if lim is None or lim.lower is None or lim.upper is None:
+            raise DescriptionError(loc, f"a {kind} joint needs <limit lower= upper=>")
+        if not float(lim.lower) < float(lim.upper):
             raise DescriptionError(
-                loc, f"{kind} joints cannot be part of a robot's chain (choose --base-link "
-                "below it)"
+                f"{loc}: <limit>",
+                f"lower {lim.lower} must be below upper {lim.upper} (a joint that cannot "
+                "move is a fixed joint)",
             )
-        if kind not in ("revolute", "continuous", "prismatic", "fixed"):
-            raise DescriptionError(loc, f"unknown joint type {kind!r}")
-        mimic = None
-        if jt.mimic is not None:
-            mult = 1.0 if jt.mimic.multiplier is None else float(jt.mimic.multiplier)
-            off = 0.0 if jt.mimic.offset is None else float(jt.mimic.offset)
-            if not (math.isfinite(mult) and math.isfinite(off)):
-                raise DescriptionError(f"{loc}: <mimic>", "multiplier and offset must be finite")
-            mimic = (str(jt.mimic.joint), mult, off)
-        limits = None
-        if kind in ("revolute", "prismatic") and mimic is None:
-            lim = jt.limit
-            if lim is None or lim.lower is None or lim.upper is None:
-                raise DescriptionError(loc, f"a {kind} joint needs <limit lower= upper=>")
-            if not float(lim.lower) < float(lim.upper):
-                raise DescriptionError(
-                    f"{loc}: <limit>",
-                    f"lower {lim.lower} must be below upper {lim.upper} (a joint that cannot "
-                    "move is a fixed joint)",
-                )
-            limits = (float(lim.lower), float(lim.upper))
-        mass, com = _lumped(urdf, children, jt.child, on_chain)
-        axis = np.array([1.0, 0.0, 0.0]) if jt.axis is None else np.asarray(jt.axis, dtype=float)
-        if kind != "fixed" and not np.linalg.norm(axis) > 1e-12:
-            raise DescriptionError(f"{loc}: <axis>", "must be a non-zero vector")
-        joints.append(ChainJoint(
-            name=jt.name,
-            kind={"fixed": "fixed", "prismatic": "prismatic"}.get(kind, "revolute"),
-            origin=_origin(jt),
-            axis=axis,
-            limits=limits,
-            mass=mass,
-            com=(float(com[0]), float(com[1]), float(com[2])),
-            mimic=mimic,
-        ))
-    name = str(urdf.robot.name or "robot")
-    chain = JointChain(name=name, joints=tuple(joints))
-    return chain, base_link, tip_link
+        limits = (float(lim.lower), float(lim.upper))
+    mass, com = _lumped(urdf, children, jt.child, on_chain)
+    axis = np.array([1.0, 0.0, 0.0]) if jt.axis is None else np.asarray(jt.axis, dtype=float)
+    if kind != "fixed" and not np.linalg.norm(axis) > 1e-12:
+        raise DescriptionError(f"{loc}: <axis>", "must be a non-zero vector")
+    return ChainJoint(
+        name=jt.name,
+        kind={"fixed": "fixed", "prismatic": "prismatic"}.get(kind, "revolute"),
+        origin=_origin(jt),
+        axis=axis,
+        limits=limits,
+        mass=mass,
+        com=(float(com[0]), float(com[1]), float(com[2])),
+        mimic=mimic,
+    )
 
 
 def import_urdf(

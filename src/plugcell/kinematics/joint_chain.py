@@ -274,10 +274,61 @@ def description_from_chain(chain: JointChain, unlimited: float = 2 * math.pi) ->
         No moving joint, an unsupported joint kind or a zero axis (location
         ``joints[k]``).
     """
+    frames, axes, bodies, tip = _joint_lines(chain)
+    moving = chain.moving
+    mount, rows, dh_frames = _dh_rows(frames, axes, tip)
+    links: list[Link] = []
+    parent = "base"
+    if mount is not None:
+        links.append(Link(MOUNT, parent, "fixed", mount.theta, mount.d, mount.a, mount.alpha,
+                          mount.beta, mount.hayati))
+        parent = MOUNT
+    for i, (jt, row) in enumerate(zip(moving, rows, strict=True)):
+        mass, com = _lumped_body([b[1:] for b in bodies if b[0] == i], dh_frames[i])
+        kind = "prismatic" if jt.kind == "prismatic" else "actuated"
+        links.append(Link(jt.name, parent, kind, row.theta, row.d, row.a, row.alpha,
+                          row.beta, row.hayati, mass, com))
+        parent = jt.name
+    tool = np.linalg.inv(dh_frames[-1]) @ tip
+    tool[3] = [0.0, 0.0, 0.0, 1.0]
+    readings = [jt for jt in moving if jt.mimic is None]
+    limits = np.array([jt.limits if jt.limits is not None else (-unlimited, unlimited)
+                       for jt in readings], dtype=float)
+    return RobotDescription(
+        name=chain.name,
+        links=tuple(links),
+        actuated=tuple(jt.name for jt in moving),
+        flange=moving[-1].name,
+        loops=(),
+        base=np.eye(4),
+        tool=tool,
+        joint_limits=limits,
+        notes=chain.notes,
+        home=np.clip(np.zeros(len(readings)), limits[:, 0], limits[:, 1]),
+        coupling=_mimic_coupling(chain),
+    )
+
+
+def _joint_lines(chain: JointChain
+                 ) -> tuple[list[Array], list[Array], list[tuple[int, float, Array]], Array]:
+    """Walk the chain at q = 0: ``T ← T · origin_k``.
+
+    Returns
+    -------
+    frames : list of (4, 4) array
+        The frame of each moving joint, in the base frame.
+    axes : list of (3,) array
+        Its unit axis in the base frame, ``R · a/‖a‖``.
+    bodies : list of (int, float, (3,) array)
+        Each mass: the moving joint whose link carries it, kg, centre of mass in the
+        base frame.
+    tip : (4, 4) array
+        The tip frame (the TCP).
+    """
     T = np.eye(4)
-    frames: list[Array] = []  # joint frames (at q = 0) of the moving joints
+    frames: list[Array] = []
     axes: list[Array] = []
-    bodies: list[tuple[int, float, Array]] = []  # (moving index, mass, com in base)
+    bodies: list[tuple[int, float, Array]] = []
     m = -1
     for k, jt in enumerate(chain.joints):
         if jt.kind not in JOINT_KINDS:
@@ -296,23 +347,35 @@ def description_from_chain(chain: JointChain, unlimited: float = 2 * math.pi) ->
             m += 1
         if jt.mass > 0 and m >= 0:
             bodies.append((m, jt.mass, T[:3, :3] @ np.asarray(jt.com) + T[:3, 3]))
-    tip = T
     if not frames:
         raise DescriptionError("joints", "the chain has no moving joint")
-    moving = chain.moving
-    n = len(moving)
+    return frames, axes, bodies, T
 
-    links: list[Link] = []
+
+def _dh_rows(frames: list[Array], axes: list[Array], tip: Array
+             ) -> tuple[_Row | None, list[_Row], list[Array]]:
+    """The DH/Hayati rows that put each joint's z on the next joint's axis line
+    (:func:`line_step`), the last one's on the tip (its ``θ`` turns x towards the tip's
+    x, its ``d`` reaches the tip's plane).
+
+    Returns
+    -------
+    mount : _Row or None
+        The fixed row from the base frame to the first joint's line (None: none needed).
+    rows : list of _Row
+        One per moving joint.
+    dh_frames : list of (4, 4) array
+        The frame after each row, in the base frame.
+    """
     F = np.eye(4)
-    first = line_step(F, frames[0][:3, 3], axes[0])
-    parent = "base"
-    if any((first.theta, first.d, first.a, first.alpha, first.beta)):
-        links.append(Link(MOUNT, parent, "fixed", first.theta, first.d, first.a, first.alpha,
-                          first.beta, first.hayati))
-        F = F @ _row_transform(first)
-        parent = MOUNT
+    mount: _Row | None = line_step(F, frames[0][:3, 3], axes[0])
+    if any((mount.theta, mount.d, mount.a, mount.alpha, mount.beta)):
+        F = F @ _row_transform(mount)
+    else:
+        mount = None
     dh_frames: list[Array] = []
     rows: list[_Row] = []
+    n = len(frames)
     for i in range(n):
         if i + 1 < n:
             row = line_step(F, frames[i + 1][:3, 3], axes[i + 1])
@@ -325,38 +388,19 @@ def description_from_chain(chain: JointChain, unlimited: float = 2 * math.pi) ->
         F = F @ _row_transform(row)
         dh_frames.append(F.copy())
         rows.append(row)
-    for i, (jt, row) in enumerate(zip(moving, rows, strict=True)):
-        mass = sum(b[1] for b in bodies if b[0] == i)
-        com = np.zeros(3)
-        if mass > 0:
-            pw = sum(b[1] * b[2] for b in bodies if b[0] == i) / mass
-            Fi = dh_frames[i]
-            com = Fi[:3, :3].T @ (pw - Fi[:3, 3])
-        kind = "prismatic" if jt.kind == "prismatic" else "actuated"
-        links.append(Link(jt.name, parent, kind, row.theta, row.d, row.a, row.alpha,
-                          row.beta, row.hayati, float(mass),
-                          (float(com[0]), float(com[1]), float(com[2]))))
-        parent = jt.name
-    tool = np.linalg.inv(dh_frames[-1]) @ tip
-    tool[3] = [0.0, 0.0, 0.0, 1.0]
-    coupling = _mimic_coupling(chain)
-    readings = [jt for jt in moving if jt.mimic is None]
-    limits = np.array([jt.limits if jt.limits is not None else (-unlimited, unlimited)
-                       for jt in readings], dtype=float)
-    home = np.clip(np.zeros(len(readings)), limits[:, 0], limits[:, 1])
-    return RobotDescription(
-        name=chain.name,
-        links=tuple(links),
-        actuated=tuple(jt.name for jt in moving),
-        flange=moving[-1].name,
-        loops=(),
-        base=np.eye(4),
-        tool=tool,
-        joint_limits=limits,
-        notes=chain.notes,
-        home=home,
-        coupling=coupling,
-    )
+    return mount, rows, dh_frames
+
+
+def _lumped_body(bodies: list[tuple[float, Array]], frame: Array
+                 ) -> tuple[float, tuple[float, float, float]]:
+    """The masses a link carries as one: ``m = Σ mᵢ``, centre of mass ``Σ mᵢ pᵢ / m``
+    (base frame) expressed in the link's DH ``frame``, ``Rᵀ (p − o)``."""
+    mass = sum(b[0] for b in bodies)
+    com = np.zeros(3)
+    if mass > 0:
+        pw = sum(b[0] * b[1] for b in bodies) / mass
+        com = frame[:3, :3].T @ (pw - frame[:3, 3])
+    return float(mass), (float(com[0]), float(com[1]), float(com[2]))
 
 
 def _mimic_coupling(chain: JointChain) -> JointCoupling | None:

@@ -458,6 +458,33 @@ def _kasa(x: FloatArray, y: FloatArray) -> tuple[float, float, float]:
     return float(xc), float(yc), float(np.sqrt(r2))
 
 
+def _geometric_circle(x: FloatArray, y: FloatArray, xc: float, yc: float, r: float
+                      ) -> tuple[float, float, float]:
+    """The geometric circle fit ``min Σ (‖(xᵢ, yᵢ) − (x_c, y_c)‖ − r)²`` by
+    Levenberg–Marquardt from ``(xc, yc, r)`` (the Kåsa fit), with the analytic Jacobian
+    ``∂/∂(x_c, y_c, r) = (−(xᵢ − x_c)/ρᵢ, −(yᵢ − y_c)/ρᵢ, −1)``.
+
+    Raises
+    ------
+    MetrologyError
+        The fit did not converge (non-finite or non-positive radius).
+    """
+    def resid(q: FloatArray) -> FloatArray:
+        return np.hypot(x - q[0], y - q[1]) - q[2]
+
+    def jac(q: FloatArray) -> FloatArray:
+        rho = np.maximum(np.hypot(x - q[0], y - q[1]), 1e-300)
+        return np.column_stack([-(x - q[0]) / rho, -(y - q[1]) / rho, -np.ones_like(x)])
+
+    sol = least_squares(
+        resid, np.array([xc, yc, r]), jac=jac, method="lm", xtol=1e-15, ftol=1e-15, gtol=1e-15
+    )
+    xc, yc, r = (float(t) for t in sol.x)
+    if not np.isfinite([xc, yc, r]).all() or r <= 0.0:
+        raise MetrologyError("fit_circle points: geometric circle fit did not converge")
+    return xc, yc, r
+
+
 def fit_circle(
     points: ArrayLike,
     *,
@@ -506,22 +533,7 @@ def fit_circle(
     u, v = _plane_basis(n)
     d = p - plane.centroid
     x, y = d @ u, d @ v
-    xc, yc, r = _kasa(x, y)
-
-    def resid(q: FloatArray) -> FloatArray:
-        return np.hypot(x - q[0], y - q[1]) - q[2]
-
-    def jac(q: FloatArray) -> FloatArray:
-        rho = np.maximum(np.hypot(x - q[0], y - q[1]), 1e-300)
-        return np.column_stack([-(x - q[0]) / rho, -(y - q[1]) / rho, -np.ones_like(x)])
-
-    sol = least_squares(
-        resid, np.array([xc, yc, r]), jac=jac, method="lm", xtol=1e-15, ftol=1e-15, gtol=1e-15
-    )
-    xc, yc, r = (float(t) for t in sol.x)
-    if not np.isfinite([xc, yc, r]).all() or r <= 0.0:
-        raise MetrologyError("fit_circle points: geometric circle fit did not converge")
-
+    xc, yc, r = _geometric_circle(x, y, *_kasa(x, y))
     # Orientation by the right-hand rule along the point order.
     ang = np.unwrap(np.arctan2(y - yc, x - xc))
     sweep = float(ang[-1] - ang[0])

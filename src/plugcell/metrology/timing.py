@@ -115,6 +115,20 @@ def _series(t: ArrayLike, x: ArrayLike, name: str) -> tuple[Array, Array]:
     return tt, xx
 
 
+def _coarse_delay(ta: Array, xa: Array, inner: Array, xb_in: Array, max_delay_s: float,
+                  h: float) -> float:
+    """The coarse delay: the whole grid step ``d = k·h``, ``|k| ≤ ⌈max_delay_s/h⌉``, of
+    least cost ``Σⱼ var(b_j(t) − a_j(t − d))`` (``a`` interpolated linearly at ``b``'s
+    sample times ``inner``)."""
+    m = int(np.ceil(max_delay_s / h))
+    costs = []
+    for k in range(-m, m + 1):
+        at = inner - k * h
+        a_at = np.column_stack([np.interp(at, ta, xa[:, j]) for j in range(xa.shape[1])])
+        costs.append(float(np.sum(np.var(xb_in - a_at, axis=0))))
+    return (int(np.argmin(costs)) - m) * h
+
+
 def estimate_delay(
     t_a: ArrayLike, a: ArrayLike, t_b: ArrayLike, b: ArrayLike, *, max_delay_s: float,
     grid_s: float | None = None,
@@ -166,17 +180,7 @@ def estimate_delay(
     if not (np.ptp(xa, axis=0).max() > 0 and np.ptp(xb_in, axis=0).max() > 0):
         raise MetrologyError("a or b does not vary over the overlap: no motion to time")
 
-    def on(t: Array, x: Array, at: Array) -> Array:
-        return np.column_stack([np.interp(at, t, x[:, j]) for j in range(x.shape[1])])
-
-    # coarse: the least-squares cost at every whole grid step of the search range
-    m = int(np.ceil(max_delay_s / h))
-    costs = []
-    for k in range(-m, m + 1):
-        r = xb_in - on(ta, xa, inner - k * h)
-        costs.append(float(np.sum(np.var(r, axis=0))))
-    d0 = (int(np.argmin(costs)) - m) * h
-
+    d0 = _coarse_delay(ta, xa, inner, xb_in, max_delay_s, h)
     # refinement with a cubic spline of a (a linear one biases the delay where a is
     # sampled coarsely)
     spline = CubicSpline(ta, xa, axis=0)

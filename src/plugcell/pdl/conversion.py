@@ -142,7 +142,7 @@ def position_from_matrix(T: Any, unit_mm: float = MATRIX_UNIT_MM) -> Position:
     R = M[:3, :3]
     if not np.allclose(R.T @ R, np.eye(3), atol=1e-6) or np.linalg.det(R) < 0:
         raise ConversionError("the rotation part of the pose matrix is not a rotation")
-    x, y, z, a, b, c = robot_from_pose(M, "euler")
+    x, y, z, a, b, c = robot_from_pose(M, "zyz")
     scale = unit_mm / MM_PER_M  # robot_from_pose reads the translation as metres
     return Position(float(x * scale), float(y * scale), float(z * scale),
                     float(a), float(b), float(c))

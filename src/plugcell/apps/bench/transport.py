@@ -49,6 +49,7 @@ from typing import Any
 import numpy as np
 
 from plugcell.apps.bench.peer import stats_ms
+from plugcell.apps.commands.deprecated import DeprecatedName
 from plugcell.framework import eventloop
 from plugcell.framework.messages import ProcessStates
 from plugcell.framework.transport import TransportConfig
@@ -503,9 +504,11 @@ def _run_networked(args: argparse.Namespace) -> dict[str, Any]:
             for flag in ("quick", "no_journal"):
                 if getattr(args, flag):
                     argv.append("--" + flag.replace("_", "-"))
-            for opt in ("payloads", "cycles", "messages", "repeat", "cell"):
+            for opt, flag in (("payloads", "--payload-bytes"), ("cycles", "--cycles"),
+                              ("messages", "--messages"), ("repeat", "--repeat"),
+                              ("cell", "--cell")):
                 if getattr(args, opt):
-                    argv += ["--" + opt, str(getattr(args, opt))]
+                    argv += [flag, str(getattr(args, opt))]
             subprocess.run(pair.argv(pair.a, argv), check=True, env=env, stdout=subprocess.DEVNULL)
             with open(out, encoding="utf-8") as f:
                 return json.load(f)
@@ -577,7 +580,10 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
         action="store_true",
         help="fewer cycles/messages (200 cycles; 1000 messages, 200 for big payloads)",
     )
-    p.add_argument("--payloads", help="comma-separated payload sizes in bytes (default: all)")
+    p.add_argument("--payload-bytes", "--payloads", dest="payloads", action=DeprecatedName,
+                   old=("--payloads",), metavar="B,B,…",
+                   help="comma-separated message payload sizes, bytes (default: all; "
+                        "--payloads is its old name)")
     p.add_argument("--cycles", type=int, help="latency cycles per payload (default 2000)")
     p.add_argument("--messages", type=int, help="throughput messages per payload (default 10000)")
     p.add_argument(

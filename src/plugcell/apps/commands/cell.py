@@ -3,14 +3,18 @@
 ::
 
     plugcell cell ls [--json] [--commands]         services, state, partners (the wiring)
+                                                   (also as ``plugcell services``)
     plugcell cell wire A B | unwire A B            A subscribes to / drops partner B
                                                    (also as ``plugcell wire``/``unwire``)
     plugcell cell save FILE                        the wiring of the cell to a file
     plugcell cell load FILE [--wait S] [--keep]    re-apply a saved wiring (and keep it)
     plugcell cell run ROBOT PROGRAM [ROBOT PROGRAM …] [--concurrent] [--value [ROBOT:]N=V …]
     plugcell cell monitor [--json] [--duration S] [--count N] [--service NAME]
+    plugcell cell serve [--port 8765] [--wiring FILE] …   the cell controller and its web UI
 
-The same functions as the web UI (``plugcell controller``), scriptable: ``--json``
+``plugcell services`` is ``plugcell cell ls`` (:mod:`plugcell.apps.commands.services`);
+``plugcell controller`` the deprecated name of ``plugcell cell serve``.
+The same functions as the web UI (``plugcell cell serve``), scriptable: ``--json``
 output, exit code 0 on success, 1 when a wire, program or process failed, 2 for
 bad usage.  ``--via CONTROLLER`` sends wire/unwire/load/run to a running cell
 controller service instead, which then keeps the wiring and shows the run.
@@ -31,6 +35,9 @@ from typing import Any
 from plugcell.apps.commands.cellargs import add_cell_args, cell_of, transport_of
 from plugcell.framework import eventloop
 
+#: The kind a cell controller announces, and its name before issue #33.
+CELL_CONTROLLER_KINDS = ("cell-controller", "controller")
+
 
 def _emit(obj: dict[str, Any]) -> None:
     sys.stdout.write(json.dumps(obj) + "\n")
@@ -46,10 +53,7 @@ def configure(p: argparse.ArgumentParser) -> None:
     sub = p.add_subparsers(dest="cell_command", metavar="ACTION", required=True)
 
     ls = sub.add_parser("ls", help="the services of the cell and their partners")
-    ls.add_argument("--json", action="store_true", help="print JSON")
-    ls.add_argument("--commands", action="store_true", help="list each command catalogue")
-    ls.add_argument("--settle", type=float, default=0.3, help="discovery time, s (default 0.3)")
-    ls.set_defaults(func=run_ls)
+    add_ls_options(ls, options=False)
 
     for name, subscribe in (("wire", True), ("unwire", False)):
         add_wire_options(
@@ -94,9 +98,19 @@ def configure(p: argparse.ArgumentParser) -> None:
     mon.set_defaults(func=run_monitor)
 
     for s in (ls, *[sub.choices[n] for n in ("wire", "unwire")], save, load, run, mon):
-        add_cell_args(s)
-        s.add_argument("--timeout", type=float, default=10.0,
-                       help="seconds to wait for a service or an answer (default 10)")
+        _add_common_options(s)
+
+    from plugcell.apps.commands.controller import add_serve_options
+
+    add_serve_options(sub.add_parser("serve", help="run the cell controller service and its web "
+                                                 "UI (docs/cell-controller.md)"))
+
+
+def _add_common_options(p: argparse.ArgumentParser) -> None:
+    """The cell options and ``--timeout`` of every action (and of their aliases)."""
+    add_cell_args(p)
+    p.add_argument("--timeout", type=float, default=10.0,
+                   help="seconds to wait for a service or an answer (default 10)")
 
 
 async def _participant(args: argparse.Namespace, prefix: str) -> Any:
@@ -111,7 +125,25 @@ async def _participant(args: argparse.Namespace, prefix: str) -> Any:
 # -- ls ------------------------------------------------------------------------------------
 
 
+def add_ls_options(p: argparse.ArgumentParser, *, options: bool = True) -> None:
+    """The options of ``cell ls`` and of its alias ``plugcell services`` (``options``: also
+    the cell and ``--timeout`` options, which :func:`configure` adds to all its actions)."""
+    p.description = (
+        "Discover the services of the cell (liveliness + Get) and print their DeviceInfo: "
+        "kind, state, connection, partners (the wiring); --commands: each command catalogue. "
+        "Exit code 0 (also for an empty cell), 2 for bad usage.")
+    p.add_argument("--json", action="store_true", help="print JSON")
+    p.add_argument("--commands", action="store_true",
+                   help="list each service's description and command catalogue")
+    p.add_argument("--settle", type=float, default=0.3, help="discovery time, s (default 0.3)")
+    if options:
+        _add_common_options(p)
+    p.set_defaults(func=run_ls)
+
+
 def run_ls(args: argparse.Namespace) -> int:
+    """One JSON shape (``{"cell", "services", "wires"}``) and one exit-code rule for
+    ``cell ls`` and ``services``."""
     from plugcell.devices.cell.tasks import describe_command
 
     states = eventloop.run(_states(args, args.settle))
@@ -133,16 +165,19 @@ def run_ls(args: argparse.Namespace) -> int:
     if not states:
         print(f"no services in cell {args.cell!r}")
         return 0
-    width = max(len(s.device_info.name) for s in states)
-    print(f"{'SERVICE':<{width}}  {'KIND':<10} {'STATE':<6} {'CONNECTION':<10} PARTNERS")
+    width = max(len("SERVICE"), *(len(s.device_info.name) for s in states))
+    kinds = max(10, *(len(s.device_info.kind) for s in states))
+    print(f"{'SERVICE':<{width}}  {'KIND':<{kinds}} {'STATE':<6} {'CONNECTION':<10} PARTNERS")
     for s in states:
         d = s.device_info
         partners = ", ".join(sorted(p.name for p in s.partners)) or "-"
-        print(f"{d.name:<{width}}  {d.kind or '?':<10} {d.state.value:<6} "
+        print(f"{d.name:<{width}}  {d.kind or '?':<{kinds}} {d.state.value:<6} "
               f"{d.connection.value:<10} {partners}")
         if args.commands:
             from plugcell.framework.data import describe
 
+            if d.info:
+                print(f"{'':<{width}}    {d.info}")
             for c in d.commands:
                 print(f"{'':<{width}}    {c.name:<24} {c.type.value:<13} "
                       f"in: {describe(c.input_data_type, c.input_data_size):<16} "
@@ -161,16 +196,12 @@ async def _states(args: argparse.Namespace, settle: float) -> list[Any]:
 
 
 def _wires(states: list[Any]) -> list[Any]:
-    """The wires between services; a cell controller's own subscriptions left out."""
-    from plugcell.devices.cell.wiring import Wire
+    """The wires between services; a cell controller's own subscriptions left out (its kind
+    ``cell-controller``, or ``controller`` as a cell controller before issue #33 says)."""
+    from plugcell.devices.cell.wiring import wires_in_place
 
-    out = []
-    for s in states:
-        if s.device_info.kind == "controller":
-            continue
-        out.extend(Wire(s.device_info.name, p.name) for p in s.partners
-                   if p.name != s.device_info.name)
-    return sorted(set(out))
+    return wires_in_place({s.device_info.name: [p.name for p in s.partners] for s in states
+                           if s.device_info.kind not in CELL_CONTROLLER_KINDS})
 
 
 # -- wire / unwire ---------------------------------------------------------------------------

@@ -173,22 +173,7 @@ def _run(args: argparse.Namespace) -> int:
         raise CommandError(f"--tol must be > 0, got {args.tol}")
     result = read_compensation_model(args.params, args, not args.physical_only)
     layer = result.residual_model
-    if layer is not None and layer.uses_temperature and args.temperature_c is None:
-        raise CommandError(f"{args.params}: its residual model uses the temperature: give "
-                           "--temperature-c (or --physical-only)")
-    if args.temperature_c is not None:
-        from plugcell.calibration.model import THERMAL_KEY
-
-        if not math.isfinite(args.temperature_c):
-            raise CommandError(f"--temperature-c must be a temperature in °C, got "
-                               f"{args.temperature_c}")
-        if THERMAL_KEY not in result.model.space and not (layer is not None
-                                                         and layer.uses_temperature):
-            raise CommandError(
-                f"--temperature-c {args.temperature_c:g}: {args.params} has no thermal term "
-                "(calibrate with --thermal and a temperature_c column) and no residual model "
-                "that uses the temperature, so it cannot change the compensation; leave it "
-                "out")
+    _check_temperature(args, result)
     try:
         text = args.targets.read_text()
     except OSError as exc:
@@ -236,6 +221,30 @@ def _run(args: argparse.Namespace) -> int:
             print(f"  {args.targets}: line {lines[k]} ({names[k]}): {region.reasons(int(k))}",
                   file=sys.stderr)
     return 0
+
+
+def _check_temperature(args: argparse.Namespace, result: Any) -> None:
+    """``--temperature-c`` is needed when the residual model uses the temperature, and
+    refused when nothing of the calibration (thermal term, residual model) uses it."""
+    from plugcell.apps.cli import CommandError
+    from plugcell.calibration.model import THERMAL_KEY
+
+    layer = result.residual_model
+    if layer is not None and layer.uses_temperature and args.temperature_c is None:
+        raise CommandError(f"{args.params}: its residual model uses the temperature: give "
+                           "--temperature-c (or --physical-only)")
+    if args.temperature_c is None:
+        return
+    if not math.isfinite(args.temperature_c):
+        raise CommandError(f"--temperature-c must be a temperature in °C, got "
+                           f"{args.temperature_c}")
+    if THERMAL_KEY not in result.model.space and not (layer is not None
+                                                     and layer.uses_temperature):
+        raise CommandError(
+            f"--temperature-c {args.temperature_c:g}: {args.params} has no thermal term "
+            "(calibrate with --thermal and a temperature_c column) and no residual model "
+            "that uses the temperature, so it cannot change the compensation; leave it "
+            "out")
 
 
 def _undetermined(args: argparse.Namespace, result: Any, q: np.ndarray, payload: np.ndarray,

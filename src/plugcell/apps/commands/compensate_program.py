@@ -139,14 +139,41 @@ def run(args: argparse.Namespace) -> int:
     if comp:
         q = np.array([r.q for r in comp])
         region = check_region_of(result, q, np.full(len(comp), payload))
-    outside = set()
-    if region is not None:
-        outside = {id(comp[k]) for k in np.flatnonzero(region.outside)}
+    outside = set() if region is None else {id(comp[k]) for k in np.flatnonzero(region.outside)}
     if args.report is not None:
         _write_report(args.report, fr, comp, region)
     failed = fr.failed
     for n in notes:
         print(f"note: {n}", file=sys.stderr)
+    _warn(args, failed, comp, region)
+    written = []
+    for o, txt in zip(outs, program.render(fr.edits), strict=False):  # (no --out: none)
+        try:
+            o.parent.mkdir(parents=True, exist_ok=True)
+            o.write_bytes(txt.encode("latin-1"))
+        except OSError as exc:
+            raise CommandError(f"{o}: cannot write: {exc.strerror or exc}") from None
+        written.append(str(o))
+    if args.measure_order is not None:
+        _write_plan(args.measure_order, result, fr, payload, args.program)
+        written.append(str(args.measure_order))
+    dp = [r.dp_mm for r in comp]
+    print(f"{args.program}: {len(comp)} targets compensated with model {result.config.number} "
+          f"({result.config.name}) in {dt:.2f} s"
+          + (f": moved by {min(dp):.3f}…{max(dp):.3f} mm" if dp else "")
+          + (f", {len(failed)} failed" if failed else "")
+          + (f", {len(outside)} outside the calibrated region" if outside else "")
+          + (f"; {len(fr.edits)} numbers changed" if outs else "")
+          + (f"; wrote {', '.join(written)}" if written else ""))
+    return 0
+
+
+def _warn(args: argparse.Namespace, failed: list[Any], comp: list[Any], region: Any) -> None:
+    """What the user must know before anything is written, on stderr: the targets that
+    cannot be compensated (refused unless ``--partial``), those compensated for another
+    arm configuration than the program names, those outside the calibrated region."""
+    from plugcell.apps.cli import CommandError
+
     if failed:
         lines = [f"{r.where} ({r.target.name}): {r.reason}" for r in failed[:10]]
         more = f"\n... and {len(failed) - 10} more" if len(failed) > 10 else ""
@@ -169,27 +196,6 @@ def run(args: argparse.Namespace) -> int:
             r = comp[int(k)]
             print(f"  {r.where} ({r.target.name}): outside the calibrated region: "
                   f"{region.reasons(int(k))}", file=sys.stderr)
-    texts = program.render(fr.edits)
-    written = []
-    for o, txt in zip(outs, texts, strict=False):  # (no --out: nothing to write)
-        try:
-            o.parent.mkdir(parents=True, exist_ok=True)
-            o.write_bytes(txt.encode("latin-1"))
-        except OSError as exc:
-            raise CommandError(f"{o}: cannot write: {exc.strerror or exc}") from None
-        written.append(str(o))
-    if args.measure_order is not None:
-        _write_plan(args.measure_order, result, fr, payload, args.program)
-        written.append(str(args.measure_order))
-    dp = [r.dp_mm for r in comp]
-    print(f"{args.program}: {len(comp)} targets compensated with model {result.config.number} "
-          f"({result.config.name}) in {dt:.2f} s"
-          + (f": moved by {min(dp):.3f}…{max(dp):.3f} mm" if dp else "")
-          + (f", {len(failed)} failed" if failed else "")
-          + (f", {len(outside)} outside the calibrated region" if outside else "")
-          + (f"; {len(fr.edits)} numbers changed" if outs else "")
-          + (f"; wrote {', '.join(written)}" if written else ""))
-    return 0
 
 
 def _write_report(path: Path, fr: Any, comp: list[Any], region: Any) -> None:

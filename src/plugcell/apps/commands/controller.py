@@ -1,10 +1,13 @@
-"""``plugcell controller``: the cell controller service with its web UI (thesis 7.6).
+"""``plugcell cell serve``: the cell controller service with its web UI (thesis 7.6).
 
 Starts the cell controller service (it discovers and subscribes to every service
 of the cell) and serves its page on ``http://127.0.0.1:PORT/``: services and their
 command catalogues, the wiring graph, task forms, robot programs, the live process
 monitor with its timeline and queues, the 3-D view and the BASE/PROBE wizards of
 appendix D, and the reports.  Local use only; everything is served from plugcell.
+
+``plugcell controller`` is its old name (issue #33: "controller" was also the robot's),
+kept working with a deprecation warning (:func:`configure_deprecated`).
 """
 
 from __future__ import annotations
@@ -18,8 +21,8 @@ from plugcell.apps.commands.cellargs import add_cell_args, cell_of, transport_of
 from plugcell.framework import eventloop
 
 
-def configure(p: argparse.ArgumentParser) -> None:
-    """Add the ``controller`` options to its parser (declared in :mod:`plugcell.apps.cli`)."""
+def add_serve_options(p: argparse.ArgumentParser) -> None:
+    """Add the ``cell serve`` options to its parser (:mod:`plugcell.apps.commands.cell`)."""
     p.description = (
         "Run the cell controller service (discover, wire, save/load, assign "
         "tasks, run robot programs, monitor) and serve its web UI on localhost."
@@ -37,6 +40,21 @@ def configure(p: argparse.ArgumentParser) -> None:
     p.add_argument("--log-level", default="WARNING", help="logging level (default WARNING)")
     add_cell_args(p)
     p.set_defaults(func=run)
+
+
+def configure_deprecated(p: argparse.ArgumentParser) -> None:
+    """``plugcell controller``: ``plugcell cell serve`` under its old name, with a warning
+    (declared in :mod:`plugcell.apps.cli`)."""
+    add_serve_options(p)
+    p.description = "Deprecated: use plugcell cell serve. " + (p.description or "")
+    p.set_defaults(func=_run_deprecated)
+
+
+def _run_deprecated(args: argparse.Namespace) -> int:
+    from plugcell.apps.commands.deprecated import warn_renamed
+
+    warn_renamed("plugcell controller", "plugcell cell serve")
+    return run(args)
 
 
 def run(args: argparse.Namespace) -> int:

@@ -1,5 +1,6 @@
-"""Old option names kept working: an option renamed to end a clash of meanings (issue #33)
-still parses under its old name, with one warning line naming the new one."""
+"""Old names kept working: an option, a command or a service kind renamed to end a clash
+of meanings (issue #33) still works under its old name, with one warning line naming the
+new one (the list of renames: docs/framework.md, "Renamed in issue #33")."""
 
 from __future__ import annotations
 
@@ -7,6 +8,12 @@ import argparse
 import sys
 from collections.abc import Sequence
 from typing import Any
+
+
+def warn_renamed(old: str, new: str) -> None:
+    """The one warning line of a deprecated name: ``plugcell: warning: OLD is deprecated:
+    use NEW`` on stderr."""
+    print(f"plugcell: warning: {old} is deprecated: use {new}", file=sys.stderr)
 
 
 class DeprecatedName(argparse.Action):
@@ -25,6 +32,5 @@ class DeprecatedName(argparse.Action):
     def __call__(self, parser: argparse.ArgumentParser, namespace: argparse.Namespace,
                  values: Any, option_string: str | None = None) -> None:
         if option_string in self.old:
-            print(f"plugcell: warning: {option_string} is deprecated: use {self.new}",
-                  file=sys.stderr)
+            warn_renamed(option_string, self.new)
         setattr(namespace, self.dest, values)

@@ -1,7 +1,7 @@
 """``plugcell plan``: choose the poses of a calibration campaign (docs/planning.md).
 
     plugcell plan --robot R --poses N --out PLAN.csv [--candidates M | --from FILE]
-                  [--criterion I|D|A|E|O] [--model 1-5] [--payloads 0,18,36]
+                  [--criterion I|D|A|E|O] [--model 1-5] [--payloads-kg 0,18,36]
                   [--tracker x,y,z] [--line-of-sight-deg A] [--volume cx,cy,cz,sx,sy,sz]
                   [--probe x,y,z,r,p,y] [--program FILE] [--json]
 
@@ -30,6 +30,7 @@ from typing import Any
 
 import numpy as np
 
+from plugcell.apps.commands.deprecated import DeprecatedName
 from plugcell.apps.commands.files import write_text
 from plugcell.apps.commands.robotargs import add_robot_args, load_robot_of
 
@@ -60,8 +61,10 @@ def configure(p: argparse.ArgumentParser) -> None:
                    help="I (default: mean prediction variance over the candidates), D, A, E "
                         "or O (noise amplification index)")
     p.add_argument("--model", default="5", help="1-5 or a model name (default 5, full)")
-    p.add_argument("--payloads", metavar="KG,KG,…",
-                   help="payloads of the campaign (default: 0,18,36 for model 5, else 0)")
+    p.add_argument("--payloads-kg", "--payloads", dest="payloads", action=DeprecatedName,
+                   old=("--payloads",), metavar="KG,KG,…",
+                   help="payload masses of the campaign, kg (default: 0,18,36 for model 5, "
+                        "else 0; --payloads is its old name)")
     p.add_argument("--tracker", metavar="X,Y,Z",
                    help="tracker position in the robot base frame, mm (default: the twin's "
                         "cell for a robot with a twin; else no line-of-sight test)")
@@ -114,9 +117,9 @@ def _payloads(text: str | None, payload_model: bool) -> list[float]:
         return [0.0, 18.0, 36.0] if payload_model else [0.0]
     vals = _numbers(text, "payloads", tuple(range(1, 33)))
     if any(v < 0 for v in vals):
-        raise CommandError(f"--payloads: masses must be ≥ 0 kg, got {text!r}")
+        raise CommandError(f"--payloads-kg: masses must be ≥ 0 kg, got {text!r}")
     if payload_model and max(vals) <= 0:
-        raise CommandError("--payloads: model 5 identifies payload compliance; give at least "
+        raise CommandError("--payloads-kg: model 5 identifies payload compliance; give at least "
                            "one payload > 0 kg (the thesis: 0,18,36)")
     return sorted(set(vals))
 
@@ -170,20 +173,8 @@ def _twin_cell(robot: str) -> tuple[np.ndarray, np.ndarray] | None:
 # ---------------------------------------------------------------------- the command
 def _run(args: argparse.Namespace) -> int:
     from plugcell.apps.cli import CommandError
-    from plugcell.calibration import CalibrationData, CalibrationError, Calibrator, ErrorModel
     from plugcell.calibration.configs import model_config
-    from plugcell.calibration.planning import (
-        PlanningError,
-        PosePlanner,
-        Visibility,
-        filter_candidates,
-        planning_keys,
-        sample_candidates,
-    )
-    from plugcell.io.measurements import MeasurementFileError, read_measurements
-    from plugcell.io.plans import PlanFileError, read_plan
-    from plugcell.kinematics import Box
-    from plugcell.kinematics.rotations import rpy_to_matrix
+    from plugcell.calibration.planning import PlanningError, PosePlanner, planning_keys
 
     t0 = time.perf_counter()
     desc = load_robot_of(args)
@@ -192,6 +183,46 @@ def _run(args: argparse.Namespace) -> int:
         cfg = model_config(args.model)
     except ValueError as exc:
         raise CommandError(f"--model: {exc}") from None
+    _check_options(args)
+    payloads = _payloads(args.payloads, cfg.payload)
+    volume = _volume(args, desc)
+    base, probe, tracker = _frames(args, desc)
+    source = _read_from(args, desc, scale)
+    model = _model(args, desc, cfg, payloads, source, base, probe)
+    try:
+        cands, what = _candidates(args, desc.name, model, cfg, payloads, source, volume,
+                                  tracker)
+        keys = planning_keys(model, np.unique(cands.payload_kg),
+                             position_only=args.position_only)
+        planner = PosePlanner(model, keys, criterion=args.criterion,
+                              position_only=args.position_only, noise_m=args.noise_mm / 1e3)
+        _say(args, f"choosing {args.poses} of {what} for the {len(keys)} identifiable of "
+                   f"the {len(model.space)} parameters of model {cfg.number} (the rest "
+                   f"depend on them or on nothing measured; criterion {planner.criterion})")
+        plan = planner.plan(cands, args.poses)
+    except PlanningError as exc:
+        raise CommandError(str(exc)) from None
+    summary = _summary(plan, model, desc.name, cfg, what, time.perf_counter() - t0)
+    if source.measured is not None:
+        _write_measured(args.out, source.mset, cands.source[plan.index], summary,
+                        args.from_file, scale)
+    else:
+        _write_plan(args.out, plan, summary, scale)
+    written = [str(args.out)]
+    if args.program is not None:
+        written += _write_program(args.program, plan, scale, args.program_value)
+    if args.json:
+        print(json.dumps(summary, indent=2))
+    else:
+        print(_text(summary))
+        print("wrote " + ", ".join(written))
+    return 0
+
+
+def _check_options(args: argparse.Namespace) -> None:
+    """The options' own ranges and pairings (CommandError naming the option)."""
+    from plugcell.apps.cli import CommandError
+
     if args.poses < 1:
         raise CommandError(f"--poses must be positive, got {args.poses}")
     if args.program_value and args.program is None:
@@ -208,21 +239,30 @@ def _run(args: argparse.Namespace) -> int:
     if not (0 < args.line_of_sight_deg <= 180):
         raise CommandError(f"--line-of-sight-deg must be in (0, 180], got "
                            f"{args.line_of_sight_deg}")
-    payloads = _payloads(args.payloads, cfg.payload)
+
+
+def _volume(args: argparse.Namespace, desc: Any) -> Any:
+    """The working volume the poses keep to: the robot's, ``--volume`` or none."""
+    from plugcell.apps.cli import CommandError
+    from plugcell.kinematics import Box
+
+    if args.volume is None:
+        return desc.working_volume
+    if args.volume.strip().lower() == "none":
+        return None
+    v = _numbers(args.volume, "volume", (6,))
+    if min(v[3:]) <= 0:
+        raise CommandError(f"--volume: the sizes must be positive, got {args.volume!r}")
+    return Box(tuple(x / 1e3 for x in v[:3]), tuple(x / 1e3 for x in v[3:]))
+
+
+def _frames(args: argparse.Namespace, desc: Any
+            ) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
+    """BASE (the tracker frame parallel to the robot's, at the tracker), PROBE and the
+    tracker position (m, robot frame; None: unknown): the options', else the twin's."""
+    from plugcell.kinematics.rotations import rpy_to_matrix
+
     twin = _twin_cell(desc.name)
-
-    # the working volume
-    volume = desc.working_volume
-    if args.volume is not None:
-        if args.volume.strip().lower() == "none":
-            volume = None
-        else:
-            v = _numbers(args.volume, "volume", (6,))
-            if min(v[3:]) <= 0:
-                raise CommandError(f"--volume: the sizes must be positive, got {args.volume!r}")
-            volume = Box(tuple(x / 1e3 for x in v[:3]), tuple(x / 1e3 for x in v[3:]))
-
-    # PROBE and the tracker (BASE)
     probe = twin[1] if twin is not None else np.asarray(desc.tool, float)
     if args.probe is not None:
         v = _numbers(args.probe, "probe", (6,))
@@ -236,41 +276,64 @@ def _run(args: argparse.Namespace) -> int:
         tracker = twin[0]
     base = np.eye(4)
     if tracker is not None:
-        base[:3, 3] = -tracker  # the tracker frame parallel to the robot's
+        base[:3, 3] = -tracker
+    return base, probe, tracker
 
-    # candidates
-    measured = None
+
+class _Source:
+    """The configurations of ``--from``: a plan file's or a measurement file's (then
+    ``measured`` and ``mset`` too); all None without ``--from``."""
+
+    def __init__(self, q: Any = None, payload_kg: Any = None, measured: Any = None,
+                 mset: Any = None) -> None:
+        self.q, self.payload_kg, self.measured, self.mset = q, payload_kg, measured, mset
+
+
+def _read_from(args: argparse.Namespace, desc: Any, scale: Any) -> _Source:
+    """Read ``--from``: a measurement file (it has x, y, z columns) or a plan file."""
+    from plugcell.apps.cli import CommandError
+    from plugcell.calibration import CalibrationData
+    from plugcell.io.measurements import MeasurementFileError, read_measurements
+    from plugcell.io.plans import PlanFileError, read_plan
+
+    if args.from_file is None:
+        return _Source()
     try:
-        if args.from_file is not None:
-            try:
-                text = args.from_file.read_text(encoding="utf-8")
-            except OSError as exc:
-                raise CommandError(f"--from {args.from_file}: cannot read: "
-                                   f"{exc.strerror or exc}") from None
-            header = next((ln for ln in text.splitlines()
-                           if ln.strip() and not ln.lstrip().startswith("#")), "")
-            has_xyz = {"x", "y", "z"} <= {c.strip() for c in header.split(",")}
-            if has_xyz:
-                mset = read_measurements(args.from_file, rotation=args.rot,
-                                         n_joints=desc.n_actuated, joint_scale=scale)
-                measured = CalibrationData.from_measurements(mset)
-                q_from, m_from = mset.joints, mset.payload_kg
-            else:
-                pf = read_plan(args.from_file, n_joints=desc.n_actuated, joint_scale=scale)
-                q_from, m_from = pf.joints, pf.payload_kg
+        text = args.from_file.read_text(encoding="utf-8")
+    except OSError as exc:
+        raise CommandError(f"--from {args.from_file}: cannot read: "
+                           f"{exc.strerror or exc}") from None
+    header = next((ln for ln in text.splitlines()
+                   if ln.strip() and not ln.lstrip().startswith("#")), "")
+    try:
+        if {"x", "y", "z"} <= {c.strip() for c in header.split(",")}:
+            mset = read_measurements(args.from_file, rotation=args.rot,
+                                     n_joints=desc.n_actuated, joint_scale=scale)
+            return _Source(mset.joints, mset.payload_kg,
+                           CalibrationData.from_measurements(mset), mset)
+        pf = read_plan(args.from_file, n_joints=desc.n_actuated, joint_scale=scale)
+        return _Source(pf.joints, pf.payload_kg)
     except (MeasurementFileError, PlanFileError) as exc:
         raise CommandError(str(exc)) from None
+
+
+def _model(args: argparse.Namespace, desc: Any, cfg: Any, payloads: list[float],
+           source: _Source, base: np.ndarray, probe: np.ndarray) -> Any:
+    """The error model to plan for; with measured poses, BASE and PROBE estimated from
+    them (refused when they do not fit the robot)."""
+    from plugcell.apps.cli import CommandError
+    from plugcell.calibration import CalibrationError, Calibrator, ErrorModel
+
     try:
-        if measured is not None:
-            # poses already measured: BASE and PROBE from their measurements
-            base, probe, rms = Calibrator(desc, 1).initial_frames(measured)
+        if source.measured is not None:
+            base, probe, rms = Calibrator(desc, 1).initial_frames(source.measured)
             if rms * 1e3 > MISFIT_LIMIT_MM:
                 raise CommandError(
                     f"--from {args.from_file}: the measurements do not fit robot {desc.name!r}: "
                     f"with its nominal kinematics and the best BASE and PROBE they are "
                     f"{rms * 1e3:.0f} mm rms off (an uncalibrated robot: a few mm; refused above "
                     f"{MISFIT_LIMIT_MM:g} mm) — measured on another robot? give its --robot")
-            _say(args, f"BASE and PROBE estimated from {len(measured)} measured poses "
+            _say(args, f"BASE and PROBE estimated from {len(source.measured)} measured poses "
                        f"(rms misfit {rms * 1e3:.2f} mm)")
         model = ErrorModel.create(desc, cfg.family, gravity=cfg.gravity, payload=cfg.payload,
                                   base=base, probe=probe,
@@ -281,59 +344,46 @@ def _run(args: argparse.Namespace) -> int:
         raise CommandError(f"model {cfg.number} ({cfg.name}) needs gravity deflection, but robot "
                            f"{desc.name!r} has neither a parallelogram nor link masses; "
                            "choose --model 1 or 2")
-    try:
-        vis = None
-        if tracker is not None:
-            vis = Visibility(tuple(tracker), math.radians(args.line_of_sight_deg))
-        if args.from_file is not None:
-            own = m_from if (m_from is not None and args.payloads is None) else None
-            if measured is not None:
-                if args.payloads is not None:
-                    raise PlanningError(f"--payloads: the poses of {args.from_file} were "
-                                        "measured with their own payloads")
-                own = measured.payload_kg
-            if cfg.payload and own is not None and np.max(own) <= 0:
-                raise PlanningError(f"--from {args.from_file}: every pose has payload 0; "
-                                    "model 5 needs payloads (give --payloads)")
-            cands = filter_candidates(
-                model, q_from, payloads=payloads, payload_kg=own,
-                volume=volume if args.volume is not None else None,
-                visibility=vis if args.tracker is not None else None)
-            _check_dropped(args, desc.name, cands.dropped, measured is not None)
-            what = f"{len(cands)} candidates from {args.from_file}"
-        else:
-            _say(args, f"drawing {args.candidates} candidates"
-                       + (f" visible within {args.line_of_sight_deg:g}° from the tracker at "
-                          f"{np.round(tracker * 1e3, 1).tolist()} mm" if vis else ""))
-            cands = sample_candidates(model, args.candidates, payloads=payloads, volume=volume,
-                                      visibility=vis, seed=args.seed)
-            what = f"{len(cands)} candidates"
-        keys = planning_keys(model, np.unique(cands.payload_kg),
-                             position_only=args.position_only)
-        planner = PosePlanner(model, keys, criterion=args.criterion,
-                              position_only=args.position_only, noise_m=args.noise_mm / 1e3)
-        _say(args, f"choosing {args.poses} of {what} for the {len(keys)} identifiable of "
-                   f"the {len(model.space)} parameters of model {cfg.number} (the rest "
-                   f"depend on them or on nothing measured; criterion {planner.criterion})")
-        plan = planner.plan(cands, args.poses)
-    except PlanningError as exc:
-        raise CommandError(str(exc)) from None
-    elapsed = time.perf_counter() - t0
-    summary = _summary(plan, model, desc.name, cfg, what, elapsed)
-    if measured is not None:
-        _write_measured(args.out, mset, cands.source[plan.index], summary, args.from_file,
-                        scale)
-    else:
-        _write_plan(args.out, plan, summary, scale)
-    written = [str(args.out)]
-    if args.program is not None:
-        written += _write_program(args.program, plan, scale, args.program_value)
-    if args.json:
-        print(json.dumps(summary, indent=2))
-    else:
-        print(_text(summary))
-        print("wrote " + ", ".join(written))
-    return 0
+    return model
+
+
+def _candidates(args: argparse.Namespace, robot: str, model: Any, cfg: Any,
+                payloads: list[float], source: _Source, volume: Any,
+                tracker: np.ndarray | None) -> tuple[Any, str]:
+    """The candidate configurations: those of ``--from`` that pass the limits (and the
+    options given), or ``--candidates`` drawn at random; and how to name them."""
+    from plugcell.calibration.planning import (
+        PlanningError,
+        Visibility,
+        filter_candidates,
+        sample_candidates,
+    )
+
+    vis = None
+    if tracker is not None:
+        vis = Visibility(tuple(tracker), math.radians(args.line_of_sight_deg))
+    if args.from_file is None:
+        _say(args, f"drawing {args.candidates} candidates"
+                   + (f" visible within {args.line_of_sight_deg:g}° from the tracker at "
+                      f"{np.round(tracker * 1e3, 1).tolist()} mm" if vis else ""))
+        cands = sample_candidates(model, args.candidates, payloads=payloads, volume=volume,
+                                  visibility=vis, seed=args.seed)
+        return cands, f"{len(cands)} candidates"
+    own = source.payload_kg if args.payloads is None else None
+    if source.measured is not None:
+        if args.payloads is not None:
+            raise PlanningError(f"--payloads-kg: the poses of {args.from_file} were "
+                                "measured with their own payloads")
+        own = source.measured.payload_kg
+    if cfg.payload and own is not None and np.max(own) <= 0:
+        raise PlanningError(f"--from {args.from_file}: every pose has payload 0; "
+                            "model 5 needs payloads (give --payloads-kg)")
+    cands = filter_candidates(
+        model, source.q, payloads=payloads, payload_kg=own,
+        volume=volume if args.volume is not None else None,
+        visibility=vis if args.tracker is not None else None)
+    _check_dropped(args, robot, cands.dropped, source.measured is not None)
+    return cands, f"{len(cands)} candidates from {args.from_file}"
 
 
 def _summary(plan: Any, model: Any, robot: str, cfg: Any, what: str,

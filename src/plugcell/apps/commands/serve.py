@@ -13,6 +13,7 @@ from pathlib import Path
 from typing import Any
 
 from plugcell.apps.commands.cellargs import add_cell_args, cell_of, transport_of
+from plugcell.apps.commands.deprecated import DeprecatedName
 from plugcell.apps.commands.robotargs import add_robot_args
 from plugcell.framework import eventloop
 
@@ -43,7 +44,10 @@ def configure(p: argparse.ArgumentParser) -> None:
     dev.add_argument("--sim", action="store_true",
                      help="drive the simulated device (robot: its simulated controller; "
                      "tracker: the tracker model)")
-    dev.add_argument("--controller", metavar="HOST:PORT", help="robot: a real controller")
+    dev.add_argument("--line", "--controller", dest="line", action=DeprecatedName,
+                     old=("--controller",), metavar="HOST:PORT",
+                     help="robot: a real controller over the line protocol "
+                     "(docs/controller-protocol.md; --controller is its old name)")
     dev.add_argument("--rsi", metavar="HOST:PORT",
                      help="robot: a KUKA robot over RSI, the program on the PC (the PC drives); "
                      "where plugcell listens for the controller's packets (docs/kuka-rsi.md)")
@@ -77,13 +81,14 @@ def configure(p: argparse.ArgumentParser) -> None:
 
 def _params(kind: str, pairs: list[str]) -> dict[str, Any]:
     from plugcell.apps.cli import CommandError
-    from plugcell.apps.kinds import kind_params, load_kind
+    from plugcell.apps.kinds import current_param, kind_params, load_kind
 
     known = kind_params(kind)
     cls = load_kind(kind)
     out: dict[str, Any] = {}
     for pair in pairs:
         key, sep, value = pair.partition("=")
+        key = current_param(kind, key)
         if not sep or key not in known:
             names = ", ".join(sorted(known)) or "none"
             raise CommandError(f"bad --param {pair!r} for {cls.__name__} (parameters: {names})")
@@ -119,7 +124,7 @@ def _device_options(kind: str, args: argparse.Namespace) -> list[str]:
             pairs.append("driver=sim")
         else:
             raise CommandError(f"--sim: {cls.__name__} has no simulated mode")
-    for flag, key in (("controller", "controller"), ("rsi", "rsi"), ("rsi_robot", "rsi_robot"),
+    for flag, key in (("line", "line"), ("rsi", "rsi"), ("rsi_robot", "rsi_robot"),
                       ("rsi_timeout", "rsi_timeout"), ("robot", "robot"),
                       ("payload_kg", "payload_kg"), ("speed", "speed"), ("seed", "seed"),
                       ("endpoint", "endpoint"), ("map", "map"), ("trust", "trust")):
@@ -136,7 +141,7 @@ def _device_options(kind: str, args: argparse.Namespace) -> list[str]:
 
 def run(args: argparse.Namespace) -> int:
     from plugcell.apps.cli import CommandError
-    from plugcell.apps.kinds import build, load_kind
+    from plugcell.apps.kinds import build, current_kind, load_kind
     from plugcell.framework.participant import PartnerError
     from plugcell.framework.service import DeviceError
 
@@ -145,6 +150,7 @@ def run(args: argparse.Namespace) -> int:
         stream=sys.stderr,
         format="%(asctime)s %(name)s %(levelname)s %(message)s",
     )
+    args.kind = current_kind(args.kind)  # an old name: its new one, with a warning
     try:
         load_kind(args.kind)  # an unknown kind: one error line
     except KeyError as exc:

@@ -50,9 +50,9 @@ from plugcell.apps.demo.processes import CellProcesses
 from plugcell.apps.reproduce.compensation_8_3 import ExperimentConfig, line_targets
 from plugcell.calibration.planning import joint_tour
 from plugcell.devices.robot.value_text import numbers_text, rows_text
-from plugcell.devices.tracker.frames import matrix_from_vector, vector_from_matrix
 from plugcell.framework import BlockingClient, ProcessStates, from_data
 from plugcell.framework.journal import journal_files, read_journal
+from plugcell.io.units import pose_from_robot, robot_from_pose
 from plugcell.kinematics.pose_error import pose_error_exact
 from plugcell.kinematics.rotations import zyz_to_matrix
 from plugcell.metrology import accuracy_statistics
@@ -224,8 +224,8 @@ def _pose_stats(rows: np.ndarray, targets: np.ndarray) -> dict[str, float]:
     if len(rows) == 0:
         return {"mean_mm": float("nan"), "sigma3_mm": float("nan"), "max_mm": float("nan"),
                 "poses": 0}
-    M = np.stack([matrix_from_vector(r, "euler") for r in rows])
-    T = np.stack([matrix_from_vector(t, "euler") for t in targets])
+    M = np.stack([pose_from_robot(r, "zyz") for r in rows])
+    T = np.stack([pose_from_robot(t, "zyz") for t in targets])
     e = pose_error_exact(M, T)
     d = accuracy_statistics(e[:, :3], e[:, 3:]).as_dict("mm", "deg")
     pos = d["position"]
@@ -339,7 +339,7 @@ def _start_cell(procs: CellProcesses, cfg: DemoConfig, wiring: Path,
             procs.serve("robot", name, sim="true", robot=robot, seed=seed,
                         payload_kg=payload, speed=cfg.speed, link_baud=19200,
                         **({"dynamics": "true"} if cfg.dynamics else {}))
-    procs.serve("controller", "CONTROLLER", wiring=wiring)
+    procs.serve("cell-controller", "CONTROLLER", wiring=wiring)
     procs.wait_ready()
 
 
@@ -360,9 +360,9 @@ def _wait_wired(client: BlockingClient, robots: tuple[str, ...],
 def _calibrate(cell: _Cell, cfg: DemoConfig, h4: RobotTwin, rng: np.random.Generator,
                result: dict[str, Any], say: Callable[[str], None]) -> None:
     truth = h4.reveal_truth()
-    base = vector_from_matrix(truth.base, "euler") + np.r_[rng.normal(0, 0.7, 3),
+    base = robot_from_pose(truth.base, "zyz") + np.r_[rng.normal(0, 0.7, 3),
                                                           rng.normal(0, 0.02, 3)]
-    probe = vector_from_matrix(truth.probe, "euler") + np.r_[rng.normal(0, 0.4, 3),
+    probe = robot_from_pose(truth.probe, "zyz") + np.r_[rng.normal(0, 0.4, 3),
                                                             rng.normal(0, 0.02, 3)]
     runs = {}
     for step, n, pose_seed, identify in (
@@ -409,7 +409,7 @@ def _calibrate(cell: _Cell, cfg: DemoConfig, h4: RobotTwin, rng: np.random.Gener
 
 def _compensate(cell: _Cell, cfg: DemoConfig, probe: np.ndarray, result: dict[str, Any],
                 say: Callable[[str], None]) -> None:
-    targets = np.array([vector_from_matrix(T, "euler")
+    targets = np.array([robot_from_pose(T, "zyz")
                         for T in line_targets(cfg.line_test, probe).reshape(-1, 4, 4)])
     say(f"== 2. Two-stage compensation (8.3): comp_test.pdl on H4, {len(targets)} targets ==")
     t0 = time.monotonic()
@@ -473,17 +473,17 @@ def _demonstrate(cell: _Cell, cfg: DemoConfig, h4_truth: Any, kuka_truth: Any,
                   f"[0, 0, 0, 0, 0, 0], per_bar={cfg.holes_per_bar}, "
                   f"normal=[{numbers_text(normal)}])")
         targets = cell.matrix("targets")
-        probe = matrix_from_vector(cell.matrix("pr")[0], "euler")
+        probe = pose_from_robot(cell.matrix("pr")[0], "zyz")
     finally:
         for pub in smrs:  # the SMRs come out of the holes
             pub.close()
-    flange = np.array([vector_from_matrix(matrix_from_vector(t, "euler") @ np.linalg.inv(probe),
-                                          "euler") for t in targets])
+    flange = np.array([robot_from_pose(pose_from_robot(t, "zyz") @ np.linalg.inv(probe),
+                                          "zyz") for t in targets])
     say(f"   {n} holes measured, {n} target frames by CalcTarget (COMPUTE)")
     t_start = time.time_ns()
     kuka_call = client.create_process("KUKA", "ACTIVATE", "", [
         "smr_watch", f"smr={numbers_text(np.r_[kuka_smr * 1e3, 0, 0, 0])}",
-        f"base_est={numbers_text(vector_from_matrix(kuka_truth.base, 'euler'))}", "count=10000",
+        f"base_est={numbers_text(robot_from_pose(kuka_truth.base, 'zyz'))}", "count=10000",
         f"period_ms={cfg.watch_period_ms}", "duration_ms=200"], timeout=60)
     if kuka_call.result().state is not C:
         raise DemoError(f"KUKA smr_watch: {kuka_call.result().reason}")

@@ -144,7 +144,20 @@ def reproduce_8_2(seed: int = 0, quick: bool = False, progress: Any = None) -> d
         out[key], fits = block(kg, n_loaded, (4, 5), (201 + int(kg), 301 + int(kg)))
         if kg == 36.0:
             fits36 = fits
-    r5 = fits36[5]
+    out["table_8_4"] = _table_8_4(fits36[5], truth)
+    out["noise_free_floor_mm"] = _noise_free_floor(desc, truth, n_unloaded)
+    budget = error_budget(scenario, poses=100 if quick else 300)
+    out["twin"] = {"nominal_mean_mm": budget.nominal_mean_mm,
+                   "deflection_18kg_mm": budget.deflection_18kg_mm,
+                   "deflection_36kg_mm": budget.deflection_36kg_mm,
+                   "bending_share_36kg": budget.bending_share_36kg}
+    return out
+
+
+def _table_8_4(r5: Any, truth: Any) -> list[dict[str, Any]]:
+    """Table 8-4: each parameter identified with model 5 at 36 kg, μ and σ in mm or
+    degrees (geometric) or their own unit, beside the twin's truth combined as the
+    parameter stands for and the thesis's μ."""
     truth_comb = _truth_combination(r5, truth)
     table = []
     for row in r5.parameter_table():
@@ -159,27 +172,25 @@ def reproduce_8_2(seed: int = 0, quick: bool = False, progress: Any = None) -> d
             "twin_truth": None if k not in truth_comb else truth_comb[k] * scale,
             "thesis_mu": THESIS_8_4.get(k), "stands_for": row["stands_for"],
         })
-    out["table_8_4"] = table
-    # What the models could reach on this twin with a perfect tracker and perfect
-    # repeatability: fits to the twin's deterministic physics (noise-free poses).
-    from plugcell.calibration import CalibrationData
+    return table
+
+
+def _noise_free_floor(desc: Any, truth: Any, n: int) -> dict[str, float]:
+    """What the models could reach on this twin with a perfect tracker and perfect
+    repeatability: the mean position error (mm) of model 2 without gravity and model 4
+    fitted to ``n`` noise-free poses of the twin's deterministic physics."""
+    from plugcell.calibration import CalibrationData, Calibrator
     from plugcell.sim.twin.campaign import working_volume_joints
     from plugcell.sim.twin.physics import Payload
     from plugcell.sim.twin.robot import true_flange_poses
 
-    qf = working_volume_joints(desc, truth.profile, n_unloaded, np.random.default_rng(401))
+    qf = working_volume_joints(desc, truth.profile, n, np.random.default_rng(401))
     floor = {}
     for label, number, gravity in (("model2_no_gravity", 2, False), ("model4", 4, True)):
         T = truth.base @ true_flange_poses(truth, qf, Payload(), gravity=gravity) @ truth.probe
         r = Calibrator(desc, number).fit(CalibrationData.from_poses(qf, T))
         floor[label] = float(r.calibration.position.norm.mean * 1e3)
-    out["noise_free_floor_mm"] = floor
-    budget = error_budget(scenario, poses=100 if quick else 300)
-    out["twin"] = {"nominal_mean_mm": budget.nominal_mean_mm,
-                   "deflection_18kg_mm": budget.deflection_18kg_mm,
-                   "deflection_36kg_mm": budget.deflection_36kg_mm,
-                   "bending_share_36kg": budget.bending_share_36kg}
-    return out
+    return floor
 
 
 def _fmt_row(label: str, r: dict[str, Any], which: str, thesis: tuple[Any, Any] | None) -> str:
@@ -211,49 +222,15 @@ def print_table(d: dict[str, Any]) -> None:
           f"{tw['deflection_36kg_mm']:.2f} mm (36 kg); thesis 0.5 / 1.0 mm")
 
 
+#: The rows of Table 8-2 (unloaded) and of Table 8-3 (loaded).
+UNLOADED_MODELS = ("nominal", "nominal_fitted_frames", "model1", "model2", "model3", "model4")
+LOADED_MODELS = ("nominal", "nominal_fitted_frames", "model4", "model5")
+
+
 def write_page(d: dict[str, Any], out: Path) -> None:
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
+    """docs/results/8.2.md and its figure from the results of :func:`reproduce_8_2`."""
     out.mkdir(parents=True, exist_ok=True)
-    fig, axes = plt.subplots(1, 3, figsize=(12, 3.6))
-    for ax, (case, models) in zip(axes, (
-            ("unloaded", ("nominal", "model1", "model2", "model3", "model4")),
-            ("loaded_18kg", ("nominal", "model4", "model5")),
-            ("loaded_36kg", ("nominal", "model4", "model5"))), strict=True):
-        x = np.arange(len(models))
-        cal = [d[case][m]["calibration"]["mean_mm"] for m in models]
-        val = [d[case][m]["validation"]["mean_mm"] for m in models]
-        th = [(d["thesis"][case].get(m) or (None,))[0] for m in models]
-        ax.bar(x - 0.27, cal, 0.27, label="twin, calibration poses")
-        ax.bar(x, val, 0.27, label="twin, validation poses")
-        ax.bar(x + 0.27, [t if t is not None else 0 for t in th], 0.27, label="thesis (real H4)",
-               color="gray")
-        ax.set_xticks(x, models, rotation=20)
-        ax.set_yscale("log")
-        ax.set_title(case)
-        ax.set_ylabel("mean position error (mm)")
-    axes[0].legend(fontsize=7)
-    fig.tight_layout()
-    fig.savefig(out / "8.2-models.png", dpi=100)
-    plt.close(fig)
-
-    def table(case: str, models: tuple[str, ...], which: str) -> list[str]:
-        rows = ["| model | Δp̄ (mm) | σΔp | Δφx̄ (°) | σ | Δφȳ | σ | Δφz̄ | σ | thesis Δp̄ / σ |",
-                "|---|---|---|---|---|---|---|---|---|---|"]
-        for m in models:
-            s = d[case][m][which]
-            o = s.get("orientation", {}).get("components_deg")
-            oc = " | ".join(f"{o['mean'][i]:.4f} | {o['std'][i]:.4f}" for i in range(3)) \
-                if o else " | " * 5
-            th = d["thesis"].get(case, {}).get(m) if which == "calibration" else None
-            ths = "" if not th or th[0] is None else (
-                f"{th[0]:.2f}" + ("" if th[1] is None else f" / {th[1]:.2f}"))
-            rows.append(f"| {m} | {s['mean_mm']:.3f} | {s['std_mm']:.3f} | {oc} | {ths} |")
-        return rows
-
+    _plot_models(d, out)
     nu, nl = d["poses"]["unloaded"], d["poses"]["loaded"]
     tw = d["twin"]
     lines = [
@@ -293,24 +270,75 @@ def write_page(d: dict[str, Any], out: Path) -> None:
         "",
         f"## Table 8-2 — unloaded, {nu} calibration poses",
         "",
-        *table("unloaded", ("nominal", "nominal_fitted_frames", "model1", "model2", "model3",
-                            "model4"), "calibration"),
+        *_table(d, "unloaded", UNLOADED_MODELS, "calibration"),
         "",
         f"Independent validation poses ({nu}):",
         "",
-        *table("unloaded", ("nominal", "nominal_fitted_frames", "model1", "model2", "model3",
-                            "model4"), "validation"),
+        *_table(d, "unloaded", UNLOADED_MODELS, "validation"),
     ]
     for kg in ("18", "36"):
         case = f"loaded_{kg}kg"
         lines += ["", f"## Table 8-3 — {kg} kg, {nl} calibration poses", "",
-                  *table(case, ("nominal", "nominal_fitted_frames", "model4", "model5"),
-                         "calibration"),
+                  *_table(d, case, LOADED_MODELS, "calibration"),
                   "", f"Independent validation poses ({nl}):", "",
-                  *table(case, ("nominal", "nominal_fitted_frames", "model4", "model5"),
-                         "validation")]
-    lines += ["", "Fit details:", "", "| case | model | parameters | iterations | κ | time (s) |",
-              "|---|---|---|---|---|---|"]
+                  *_table(d, case, LOADED_MODELS, "validation")]
+    lines += _fit_details(d)
+    (out / "8.2.md").write_text("\n".join(lines) + "\n", encoding="utf-8")
+
+
+def _plot_models(d: dict[str, Any], out: Path) -> None:
+    """8.2-models.png: mean position error of each model, twin (calibration and
+    validation poses) beside the thesis's real H4, for each load case."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, axes = plt.subplots(1, 3, figsize=(12, 3.6))
+    for ax, (case, models) in zip(axes, (
+            ("unloaded", ("nominal", "model1", "model2", "model3", "model4")),
+            ("loaded_18kg", ("nominal", "model4", "model5")),
+            ("loaded_36kg", ("nominal", "model4", "model5"))), strict=True):
+        x = np.arange(len(models))
+        cal = [d[case][m]["calibration"]["mean_mm"] for m in models]
+        val = [d[case][m]["validation"]["mean_mm"] for m in models]
+        th = [(d["thesis"][case].get(m) or (None,))[0] for m in models]
+        ax.bar(x - 0.27, cal, 0.27, label="twin, calibration poses")
+        ax.bar(x, val, 0.27, label="twin, validation poses")
+        ax.bar(x + 0.27, [t if t is not None else 0 for t in th], 0.27, label="thesis (real H4)",
+               color="gray")
+        ax.set_xticks(x, models, rotation=20)
+        ax.set_yscale("log")
+        ax.set_title(case)
+        ax.set_ylabel("mean position error (mm)")
+    axes[0].legend(fontsize=7)
+    fig.tight_layout()
+    fig.savefig(out / "8.2-models.png", dpi=100)
+    plt.close(fig)
+
+
+def _table(d: dict[str, Any], case: str, models: tuple[str, ...], which: str) -> list[str]:
+    """One accuracy table (Tables 8-2, 8-3): each model's mean and σ of the position
+    error, the orientation components' and the thesis's figures (calibration poses)."""
+    rows = ["| model | Δp̄ (mm) | σΔp | Δφx̄ (°) | σ | Δφȳ | σ | Δφz̄ | σ | thesis Δp̄ / σ |",
+            "|---|---|---|---|---|---|---|---|---|---|"]
+    for m in models:
+        s = d[case][m][which]
+        o = s.get("orientation", {}).get("components_deg")
+        oc = " | ".join(f"{o['mean'][i]:.4f} | {o['std'][i]:.4f}" for i in range(3)) \
+            if o else " | " * 5
+        th = d["thesis"].get(case, {}).get(m) if which == "calibration" else None
+        ths = "" if not th or th[0] is None else (
+            f"{th[0]:.2f}" + ("" if th[1] is None else f" / {th[1]:.2f}"))
+        rows.append(f"| {m} | {s['mean_mm']:.3f} | {s['std_mm']:.3f} | {oc} | {ths} |")
+    return rows
+
+
+def _fit_details(d: dict[str, Any]) -> list[str]:
+    """The fit of each model (parameters, iterations, κ, time) and Table 8-4: the
+    parameters identified at 36 kg with model 5 beside the twin's truth and the thesis's."""
+    lines = ["", "Fit details:", "", "| case | model | parameters | iterations | κ | time (s) |",
+             "|---|---|---|---|---|---|"]
     for case in ("unloaded", "loaded_18kg", "loaded_36kg"):
         for m in ("model1", "model2", "model3", "model4", "model5"):
             if m in d[case]:
@@ -329,6 +357,6 @@ def write_page(d: dict[str, Any], out: Path) -> None:
         th = "" if r["thesis_mu"] is None else f"{r['thesis_mu']:.4g}"
         lines.append(f"| {r['name']} | {r['unit']} | {r['mu']:.4g} | {r['sigma']:.2g} | {tt} | "
                      f"{th} | {r['stands_for']} |")
-    (out / "8.2.md").write_text("\n".join(lines) + "\n", encoding="utf-8")
+    return lines
 
 

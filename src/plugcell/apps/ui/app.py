@@ -63,22 +63,7 @@ def create_app(
     app = FastAPI(title="plugcell cell controller", lifespan=lifespan, docs_url=None,
                   redoc_url=None, openapi_url=None)
 
-    class Guard(BaseHTTPMiddleware):
-        async def dispatch(self, request: Request, call_next: RequestResponseEndpoint
-                           ) -> Response:
-            reason = check_connection(request, hosts)
-            if reason:
-                return error_response({"_": reason}, 403)
-            response = await call_next(request)
-            response.headers.setdefault("Cache-Control", "no-store")
-            response.headers["X-Content-Type-Options"] = "nosniff"
-            response.headers.setdefault("Content-Security-Policy", (
-                "default-src 'self'; img-src 'self' data:; style-src 'self'; "
-                "script-src 'self'; connect-src 'self'; frame-ancestors 'self'"
-            ))
-            return response
-
-    app.add_middleware(Guard)
+    app.add_middleware(_Guard, hosts=hosts)
 
     @app.exception_handler(BadRequestError)
     async def bad_request(request: Request, exc: BadRequestError) -> JSONResponse:
@@ -101,23 +86,7 @@ def create_app(
     async def favicon() -> FileResponse:
         return FileResponse(STATIC / "favicon.svg", media_type="image/svg+xml")
 
-    @app.get("/api/reports")
-    async def report_list() -> JSONResponse:
-        return JSONResponse({"reports": files.listing()})
-
-    @app.get("/reports/results/{name}")
-    async def result_file(name: str) -> Response:
-        path = files.result(name)
-        if path is None:
-            return error_response({"name": f"no result {name!r}"}, 404)
-        return _file(path)
-
-    @app.get("/reports/calibration/{index}")
-    async def calibration_file(index: int) -> Response:
-        path = files.calibration(index)
-        if path is None:
-            return error_response({"index": "no such calibration report"}, 404)
-        return _file(path)
+    _add_report_routes(app, files)
 
     @app.websocket("/ws")
     async def events(ws: WebSocket) -> None:
@@ -135,6 +104,53 @@ def create_app(
             controller.unlisten(queue)
 
     return app
+
+
+class _Guard(BaseHTTPMiddleware):
+    """Every request: refused (403) unless its host and origin are this UI's
+    (:func:`check_connection`); every answer: not cached, not sniffed, and allowed to load
+    only this server's own scripts, styles and images (Content-Security-Policy)."""
+
+    def __init__(self, app: Any, hosts: frozenset[str]) -> None:
+        super().__init__(app)
+        self.hosts = hosts
+
+    async def dispatch(self, request: Request, call_next: RequestResponseEndpoint
+                       ) -> Response:
+        reason = check_connection(request, self.hosts)
+        if reason:
+            return error_response({"_": reason}, 403)
+        response = await call_next(request)
+        response.headers.setdefault("Cache-Control", "no-store")
+        response.headers["X-Content-Type-Options"] = "nosniff"
+        response.headers.setdefault("Content-Security-Policy", (
+            "default-src 'self'; img-src 'self' data:; style-src 'self'; "
+            "script-src 'self'; connect-src 'self'; frame-ancestors 'self'"
+        ))
+        return response
+
+
+def _add_report_routes(app: FastAPI, files: ReportFiles) -> None:
+    """The reports' list and files: the results pages of docs/results and the
+    calibration reports given (``--report``)."""
+
+    @app.get("/api/reports")
+    async def report_list() -> JSONResponse:
+        return JSONResponse({"reports": files.listing()})
+
+    @app.get("/reports/results/{name}")
+    async def result_file(name: str) -> Response:
+        path = files.result(name)
+        if path is None:
+            return error_response({"name": f"no result {name!r}"}, 404)
+        return _file(path)
+
+    @app.get("/reports/calibration/{index}")
+    async def calibration_file(index: int) -> Response:
+        path = files.calibration(index)
+        if path is None:
+            return error_response({"index": "no such calibration report"}, 404)
+        return _file(path)
 
 
 async def _pump(ws: WebSocket, queue: asyncio.Queue[dict[str, Any]],

@@ -18,7 +18,7 @@ from typing import Any
 
 import numpy as np
 
-from plugcell.devices.tracker.frames import FrameError, matrix_from_vector, vector_from_matrix
+from plugcell.io.units import UnitsError, pose_from_robot, robot_from_pose
 from plugcell.metrology import (
     MetrologyError,
     base_from_features,
@@ -76,7 +76,7 @@ def _mm(v: np.ndarray) -> list[float]:
 def _transform_json(T: np.ndarray) -> dict[str, Any]:
     """A 4×4 (m) as the matrix (translation mm) and the tracker's rpy 6-vector (mm, deg)."""
     M = np.array(T, dtype=float)
-    vector = [float(x) for x in vector_from_matrix(M, "rpy")]
+    vector = [float(x) for x in robot_from_pose(M, "rpy")]
     return {
         "matrix": [[float(M[i, j]) if j < 3 else float(M[i, j] / MM) for j in range(4)]
                    for i in range(4)],
@@ -154,8 +154,8 @@ def _pose(value: Any, field: str) -> np.ndarray:
         return T
     if arr.shape == (6,):
         try:
-            return matrix_from_vector(arr, "rpy")
-        except FrameError as exc:
+            return pose_from_robot(arr, "rpy")
+        except UnitsError as exc:
             raise FitInputError({field: str(exc)}) from None
     raise FitInputError({field: "a 6-vector [x, y, z mm, roll, pitch, yaw deg] or 4×4"})
 

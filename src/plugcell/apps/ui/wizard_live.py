@@ -41,8 +41,8 @@ from plugcell.apps.ui.metrology import FitInputError
 from plugcell.devices.cell.runs import RunError
 from plugcell.devices.compute.workspace import NAME as MATRIX_NAME
 from plugcell.devices.robot.value_text import numbers_text, rows_text
-from plugcell.devices.tracker.frames import FrameError, matrix_from_vector, vector_from_matrix
 from plugcell.framework.data import from_data
+from plugcell.io.units import UnitsError, pose_from_robot, robot_from_pose
 
 #: The robot program that moves and measures (src/plugcell/pdl/programs).
 PROGRAM = "frame_points"
@@ -79,8 +79,8 @@ def _zyz(vector: list[float], field: str) -> np.ndarray:
     """[x, y, z mm(, roll, pitch, yaw deg)] → the robot's x, y, z, a, b, c (ZYZ deg)."""
     v = np.r_[vector, [0.0] * (6 - len(vector))]
     try:
-        return vector_from_matrix(matrix_from_vector(v, "rpy"), "euler")
-    except FrameError as exc:
+        return robot_from_pose(pose_from_robot(v, "rpy"), "zyz")
+    except UnitsError as exc:
         raise FitInputError({field: str(exc)}) from None
 
 

@@ -56,6 +56,7 @@ from plugcell.devices.cell.wiring import (
     load_wiring,
     parse_wiring,
     save_wiring,
+    wires_in_place,
 )
 from plugcell.framework.keys import Presence
 from plugcell.framework.messages import (
@@ -117,7 +118,7 @@ class ServiceRecord:
 class CellController(GenericDevice):
     """The cell controller service (module docstring)."""
 
-    kind = "controller"
+    kind = "cell-controller"
     default_name = "CONTROLLER"
     vendor = "plugcell"
     info = "Cell controller (thesis 7.6): discovery, wiring, tasks, program runs, monitor"
@@ -382,12 +383,8 @@ class CellController(GenericDevice):
 
     def wiring_now(self) -> list[Wire]:
         """The wires in place between the services of the cell (the controller's own left out)."""
-        out = []
-        for name, record in self.records.items():
-            if not record.alive or name == self.name:
-                continue
-            out.extend(Wire(name, p) for p in record.partners if p != name)
-        return sorted(out)
+        return wires_in_place({name: record.partners for name, record in self.records.items()
+                               if record.alive and name != self.name})
 
     async def _ask(self, wire: Wire, subscribe: bool) -> tuple[bool, str]:
         if wire.service == self.name:

@@ -19,7 +19,7 @@ from __future__ import annotations
 import asyncio
 import json
 import time
-from collections.abc import Awaitable, Callable
+from collections.abc import Awaitable, Callable, Iterable, Mapping
 from dataclasses import dataclass, field
 from datetime import UTC, datetime
 from pathlib import Path
@@ -46,6 +46,7 @@ __all__ = [
     "parse_wiring",
     "read_wiring",
     "save_wiring",
+    "wires_in_place",
 ]
 
 
@@ -74,6 +75,17 @@ class Wire:
 
     def __str__(self) -> str:
         return f"{self.service} → {self.partner}"
+
+
+def wires_in_place(partners: Mapping[str, Iterable[str]]) -> list[Wire]:
+    """The wires in place: ``A → B`` for each partner B of each service A (a service's
+    own name among its partners left out), sorted.
+
+    The one reading of the wiring of the cell controller (:meth:`CellController.wiring_now`)
+    and of ``plugcell cell ls``/``save``; each leaves the cell controllers out of
+    ``partners`` first (their subscriptions are how they watch, not wiring).
+    """
+    return sorted({Wire(a, b) for a, bs in partners.items() for b in bs if b != a})
 
 
 def dump_wiring(wires: list[Wire] | set[Wire], cell: str) -> dict[str, Any]:

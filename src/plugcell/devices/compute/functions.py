@@ -12,7 +12,7 @@ function                                               thesis
 ``residuals(params, mJ, mT, payload=0, …)``             each pose's residual (3-D view, 7.5)
 ``summary(params)``                                     the figures H4Calibration shows
 ``save_params(params, 'name')``, ``load_params('name')``  saving; LoadParams (8.3.2)
-``frame(params, 'base'|'probe', angles='euler')``       BASE/PROBE for Set Base/Set Probe
+``frame(params, 'base'|'probe', angles='zyz')``       BASE/PROBE for Set Base/Set Probe
 ``compensate(params, targets, payload=0, …)``           model-based compensation (6.5.1)
 ``compensate_joints(params, joints, payload=0, …)``     H4Compensation (8.3.2)
 ``calc_targets(holes, corners, base, per_bar=6, …)``    CalcTarget (8.4.1)
@@ -23,7 +23,8 @@ function                                               thesis
 Robot units throughout, converted to SI by :mod:`plugcell.io.units`: lengths in mm,
 angles in degrees, joint readings in degrees (a prismatic joint: mm; what ARM_JNTP
 gives); a pose 6-vector is ``x, y, z, a, b, c`` with the angles in the
-``angles`` convention: ``'euler'`` (Comau Z-Y-Z, the default), ``'rpy'`` or ``'prj'``.
+``angles`` convention: ``'zyz'`` (Comau Z-Y-Z, the default), ``'rpy'``, ``'xyz'`` or ``'prj'``
+(:mod:`plugcell.io.units`; ``'euler'``, the old name of ``'zyz'``, still works).
 Parameters are saved as PARAMS.json (docs/calibration.md) under the service's data
 directory, by bare name only.
 """
@@ -47,11 +48,19 @@ from plugcell.compensation import compensate as _compensate
 from plugcell.compensation import compensate_joints as _compensate_joints
 from plugcell.devices.compute.expr import EvaluationError
 from plugcell.devices.compute.workspace import Workspace, WorkspaceError, as_matrix
-from plugcell.devices.tracker.frames import CONVENTIONS, matrix_from_vector, vector_from_matrix
 from plugcell.framework.keys import check_name as _check_file_name
 from plugcell.io.params import params_json, rebase_document, result_from_params
 from plugcell.io.robots import available_robots, load_robot
-from plugcell.io.units import M_PER_MM, MM_PER_M, joints_from_si, joints_to_si
+from plugcell.io.units import (
+    M_PER_MM,
+    MM_PER_M,
+    UnitsError,
+    convention_name,
+    joints_from_si,
+    joints_to_si,
+    pose_from_robot,
+    robot_from_pose,
+)
 from plugcell.kinematics import RobotDescription
 from plugcell.kinematics.rotations import angles_to_matrix
 from plugcell.metrology import (
@@ -153,10 +162,11 @@ def _integer(x: Any, what: str) -> int:
 
 
 def _convention(angles: Any) -> str:
-    name = _text(angles, "angles")
-    if name not in CONVENTIONS:
-        raise FunctionError(f"angles: {name!r} unknown; use {', '.join(CONVENTIONS)}")
-    return name
+    """The convention ``angles`` names (io.units; ``'euler'``: the old name of ``'zyz'``)."""
+    try:
+        return convention_name(_text(angles, "angles"))
+    except UnitsError as exc:
+        raise FunctionError(f"angles: {exc}") from None
 
 
 def _payload(x: Any, n: int) -> np.ndarray:
@@ -188,7 +198,7 @@ def _description(ctx: FunctionContext, robot: Any) -> RobotDescription:
 
 def _poses(rows: np.ndarray, convention: str) -> np.ndarray:
     """N×6 rows (mm, deg) → (N, 4, 4) in metres."""
-    return np.stack([matrix_from_vector(r, convention) for r in rows]) if len(rows) else (
+    return np.stack([pose_from_robot(r, convention) for r in rows]) if len(rows) else (
         np.empty((0, 4, 4)))
 
 
@@ -201,7 +211,7 @@ def _data(desc: RobotDescription, mJ: Any, mT: Any, payload: Any, angles: Any,
     m = _payload(payload, len(J))
     rotations = None
     if T.shape[1] == 6:
-        rotations = angles_to_matrix(np.deg2rad(T[:, 3:]), CONVENTIONS[_convention(angles)])
+        rotations = angles_to_matrix(np.deg2rad(T[:, 3:]), _convention(angles))
     try:
         return CalibrationData(q=joints_to_si(J, desc.reading_scale()),
                                positions=T[:, :3] * M_PER_MM,
@@ -215,7 +225,7 @@ def _data(desc: RobotDescription, mJ: Any, mT: Any, payload: Any, angles: Any,
 
 @register
 def calibrate(ctx: FunctionContext, mJ: Any, mT: Any, model: Any = 5.0, payload: Any = 0.0,
-              angles: Any = "euler", robot: Any = None) -> Parameters:
+              angles: Any = "zyz", robot: Any = None) -> Parameters:
     """Identify the error parameters from joint readings ``mJ`` (N×n, deg) and tracker
     measurements ``mT`` (N×6 poses mm/deg, or N×3 positions mm) — H4Calibration."""
     desc = _description(ctx, robot)
@@ -238,7 +248,7 @@ def _stats_row(before: Any, after: Any, poses: int) -> np.ndarray:
 
 @register
 def validate(ctx: FunctionContext, params: Any, vJ: Any, vT: Any, payload: Any = 0.0,
-             angles: Any = "euler") -> np.ndarray:
+             angles: Any = "zyz") -> np.ndarray:
     """Accuracy on other poses: 1×6 ``[poses, mean before, mean after, σ after, max after
     (mm), mean orientation after (deg)]`` (eqs. 8.1–8.2)."""
     p = _params(params)
@@ -249,7 +259,7 @@ def validate(ctx: FunctionContext, params: Any, vJ: Any, vT: Any, payload: Any =
 
 @register
 def residuals(ctx: FunctionContext, params: Any, mJ: Any, mT: Any, payload: Any = 0.0,
-              angles: Any = "euler") -> np.ndarray:
+              angles: Any = "zyz") -> np.ndarray:
     """The residual of every pose: N×6 ``[x, y, z, dx, dy, dz]`` (mm) — the measured
     position and measured − calibrated model, in the tracker frame (what the 3-D view of
     the visualisation service shows, 7.5)."""
@@ -334,14 +344,14 @@ def load_params(ctx: FunctionContext, name: Any) -> Parameters:
 
 
 @register
-def frame(ctx: FunctionContext, params: Any, which: Any, angles: Any = "euler") -> np.ndarray:
+def frame(ctx: FunctionContext, params: Any, which: Any, angles: Any = "zyz") -> np.ndarray:
     """The identified BASE or PROBE as a 1×6 row (mm, deg) for Set Base / Set Probe."""
     p = _params(params)
     name = _text(which, "which")
     if name not in ("base", "probe"):
         raise FunctionError(f"which: 'base' or 'probe', got {name!r}")
     T = p.result.model.base() if name == "base" else p.result.model.probe()
-    return vector_from_matrix(T, _convention(angles)).reshape(1, 6)
+    return robot_from_pose(T, _convention(angles)).reshape(1, 6)
 
 
 # -- drift watch (issue 19) -------------------------------------------------------------------
@@ -401,7 +411,7 @@ def rebase(ctx: FunctionContext, params: Any, drift: Any) -> Parameters:
 def _tool(p: Parameters, tool: Any, convention: str) -> np.ndarray | None:
     if tool is None:
         return None
-    return matrix_from_vector(_matrix(tool, "tool", (6,)).reshape(-1), convention)
+    return pose_from_robot(_matrix(tool, "tool", (6,)).reshape(-1), convention)
 
 
 def _note_region(ctx: FunctionContext, p: Parameters, function: str, q: np.ndarray,
@@ -427,7 +437,7 @@ def _joints_or_fail(result: Any, desc: RobotDescription) -> np.ndarray:
 
 @register
 def compensate(ctx: FunctionContext, params: Any, targets: Any, payload: Any = 0.0,
-               angles: Any = "euler", tool: Any = None) -> np.ndarray:
+               angles: Any = "zyz", tool: Any = None) -> np.ndarray:
     """Model-based compensation (6.5.1): target poses N×6 (robot base frame, mm/deg) →
     the joints (N×n, deg) that reach them on the identified model.  ``tool``: the
     compensated point in the flange frame (6-vector; default the identified PROBE)."""
@@ -448,7 +458,7 @@ def compensate(ctx: FunctionContext, params: Any, targets: Any, payload: Any = 0
 
 @register
 def compensate_joints(ctx: FunctionContext, params: Any, joints: Any, payload: Any = 0.0,
-                      angles: Any = "euler", tool: Any = None) -> np.ndarray:
+                      angles: Any = "zyz", tool: Any = None) -> np.ndarray:
     """H4Compensation (8.3.2): the nominal joints of a target (POS_TO_JNTP, N×n deg) →
     the compensated joints (N×n, deg) that put the tool where the nominal robot would."""
     p = _params(params)
@@ -489,7 +499,7 @@ def region(ctx: FunctionContext, params: Any, joints: Any, payload: Any = 0.0) -
 
 @register
 def calc_targets(ctx: FunctionContext, holes: Any, corners: Any, base: Any,
-                 per_bar: Any = 6.0, angles: Any = "euler", normal: Any = None) -> np.ndarray:
+                 per_bar: Any = 6.0, angles: Any = "zyz", normal: Any = None) -> np.ndarray:
     """CalcTarget (8.4.1): target frames from holes measured with an SMR (tracker frame).
 
     ``holes``: (k·per_bar)×3 (or ×6: the first three columns) positions in mm, bar by
@@ -511,7 +521,7 @@ def calc_targets(ctx: FunctionContext, holes: Any, corners: Any, base: Any,
     if isinstance(base, Parameters):
         B = base.result.model.base()
     else:
-        B = matrix_from_vector(_matrix(base, "base", (6,)).reshape(-1), convention)
+        B = pose_from_robot(_matrix(base, "base", (6,)).reshape(-1), convention)
     hint = (-C.mean(axis=0) if normal is None
             else _matrix(normal, "normal", (3,)).reshape(-1))
     try:
@@ -524,7 +534,7 @@ def calc_targets(ctx: FunctionContext, holes: Any, corners: Any, base: Any,
                 frames.append(_inv(B) @ frame_from_axes(origin, z=z, y=y))
     except MetrologyError as exc:
         raise FunctionError(str(exc)) from None
-    return np.stack([vector_from_matrix(T, convention) for T in frames])
+    return np.stack([robot_from_pose(T, convention) for T in frames])
 
 
 # -- appendix D: initial BASE and PROBE (the visualisation service's wizards, 7.5) -----------
@@ -536,23 +546,23 @@ def _points(x: Any, what: str) -> np.ndarray:
 
 @register
 def probe_from_features(ctx: FunctionContext, circle: Any, holes: Any, tmac: Any,
-                        angles: Any = "euler", smr_offset: Any = 6.35) -> np.ndarray:
+                        angles: Any = "zyz", smr_offset: Any = 6.35) -> np.ndarray:
     """App. D.1: PROBE (1×6, mm/deg) from SMR positions while the last joint turns
     (``circle``, N×3 mm), the two dowel holes from −y to +y (``holes``), and the T-MAC
     pose measured without moving (``tmac``, 1×6); ``smr_offset``: SMR centre height (mm)."""
     convention = _convention(angles)
-    T = matrix_from_vector(_matrix(tmac, "tmac", (6,)).reshape(-1), convention)
+    T = pose_from_robot(_matrix(tmac, "tmac", (6,)).reshape(-1), convention)
     try:
         est = probe_from_flange_features(_points(circle, "circle"), _points(holes, "holes"), T,
                                          smr_offset=_number(smr_offset, "smr_offset") * M_PER_MM)
     except MetrologyError as exc:
         raise FunctionError(str(exc)) from None
-    return vector_from_matrix(est.probe, convention).reshape(1, 6)
+    return robot_from_pose(est.probe, convention).reshape(1, 6)
 
 
 @register
 def base_from_features(ctx: FunctionContext, circle: Any, plane: Any, line: Any,
-                        angles: Any = "euler", smr_offset: Any = 6.35) -> np.ndarray:
+                        angles: Any = "zyz", smr_offset: Any = 6.35) -> np.ndarray:
     """App. D.2: BASE (1×6, mm/deg) from SMR positions on joint 1 while it turns
     (``circle``), on the base surface (``plane``), and T-MAC positions while the robot
     moves along its +x (``line``), all N×3 mm in the tracker frame."""
@@ -562,7 +572,7 @@ def base_from_features(ctx: FunctionContext, circle: Any, plane: Any, line: Any,
                                  smr_offset=_number(smr_offset, "smr_offset") * M_PER_MM)
     except MetrologyError as exc:
         raise FunctionError(str(exc)) from None
-    return vector_from_matrix(est.base, _convention(angles)).reshape(1, 6)
+    return robot_from_pose(est.base, _convention(angles)).reshape(1, 6)
 
 
 # -- housekeeping ---------------------------------------------------------------------------

@@ -1,7 +1,7 @@
 """``python -m plugcell.devices.robot``: the robot service's legacy command line.
 
 A program, not a library: ``plugcell serve robot`` with the flags of issue 6
-(``--sim``/``--controller``, ``--robot``, ``--payload-kg``, ``--speed``, ...),
+(``--sim``/``--line``, ``--robot``, ``--payload-kg``, ``--speed``, ...),
 translated into its ``--param`` options and run by the ``plugcell`` command line.
 """
 
@@ -11,6 +11,7 @@ import argparse
 import sys
 from collections.abc import Sequence
 
+from plugcell.apps.commands.deprecated import DeprecatedName
 from plugcell.apps.commands.robotargs import add_robot_args, robot_source_of
 
 
@@ -24,7 +25,10 @@ def main(argv: Sequence[str] | None = None) -> int:
     p.add_argument("--name", default=None, help="service name (default ROBOT)")
     how = p.add_mutually_exclusive_group(required=True)
     how.add_argument("--sim", action="store_true", help="start a simulated controller (twin)")
-    how.add_argument("--controller", metavar="HOST:PORT", help="connect to a real controller")
+    how.add_argument("--line", "--controller", dest="line", action=DeprecatedName,
+                     old=("--controller",), metavar="HOST:PORT",
+                     help="connect to a real controller over the line protocol "
+                     "(--controller is its old name)")
     add_robot_args(p, default="smart_h4",
                    help="robot of the simulated controller: name, .toml or URDF/xacro file")
     p.add_argument("--payload-kg", type=float, default=0.0)
@@ -42,7 +46,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         forward += ["--cell", args.cell]
     if args.no_journal:
         forward.append("--no-journal")
-    params = {"sim": "true"} if args.sim else {"controller": args.controller}
+    params = {"sim": "true"} if args.sim else {"line": args.line}
     if args.sim:
         forward += robot_source_of(args).argv()  # --robot and its URDF options, as given
         params.update(payload_kg=repr(args.payload_kg), speed=repr(args.speed),

@@ -26,10 +26,10 @@ def pose_matrix(values: Sequence[float]) -> np.ndarray:
     v = np.asarray([float(x) for x in values], dtype=float)
     if v.shape != (6,) or not np.all(np.isfinite(v)):
         raise ValueError(f"a position needs 6 finite numbers x, y, z, a, b, c; got {list(values)}")
-    return pose_from_robot(v, "euler")
+    return pose_from_robot(v, "zyz")
 
 
 def pose_values(T: np.ndarray) -> tuple[float, float, float, float, float, float]:
     """4×4 transform in metres → ``(x, y, z, a, b, c)`` (mm, ZYZ degrees)."""
-    x, y, z, a, b, c = (float(v) for v in robot_from_pose(T, "euler"))
+    x, y, z, a, b, c = (float(v) for v in robot_from_pose(T, "zyz"))
     return (x, y, z, a, b, c)

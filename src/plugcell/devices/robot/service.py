@@ -32,7 +32,7 @@ IDENTIFICATION  SingleData  → String[4]            manufacturer, model, serial
 Positions are PDL's: mm and Comau ZYZ degrees.  The controller is reached over
 the line protocol (:mod:`plugcell.devices.robot.bridge`): with ``sim`` the service
 starts its own simulated controller process (:mod:`plugcell.sim.controller.launcher`),
-otherwise it connects to ``controller = HOST:PORT`` — a real controller speaking
+otherwise it connects to ``line = HOST:PORT`` — a real controller speaking
 docs/controller-protocol.md — or, with ``rsi = HOST:PORT``, runs the programs on the PC
 and streams each move to a KUKA robot over RSI
 (:mod:`plugcell.devices.robot.rsi_controller`); either is a
@@ -43,7 +43,7 @@ program's ACTIVATE strings are handled by the
 ``plugcell serve robot --name R1 --param sim=true [--param robot=smart_h4]
 [--param payload_kg=36] [--param speed=100]``, or with the issue's flags
 ``python -m plugcell.devices.robot --name R1 --sim [--robot smart_h4]
-[--payload-kg M] [--speed X] [--cell C]`` (``--controller HOST:PORT`` for a real one).
+[--payload-kg M] [--speed X] [--cell C]`` (``--line HOST:PORT`` for a real one).
 """
 
 from __future__ import annotations
@@ -164,7 +164,7 @@ class RobotService(GenericDevice):
     )
     params: ClassVar[dict[str, Any]] = {
         "sim": _flag,
-        "controller": str,
+        "line": str,
         "robot": str,
         "payload_kg": float,
         "speed": float,
@@ -185,7 +185,7 @@ class RobotService(GenericDevice):
         name: str | None = None,
         *,
         sim: bool = False,
-        controller: str = "",
+        line: str = "",
         robot: str = "smart_h4",
         payload_kg: float = 0.0,
         speed: float = 1.0,
@@ -202,12 +202,12 @@ class RobotService(GenericDevice):
         connect_timeout: float = 30.0,
         **kwargs: Any,
     ) -> None:
-        if sum(map(bool, (sim, controller, rsi))) > 1:
-            raise ValueError("give one of sim, controller=HOST:PORT or rsi=HOST:PORT, not "
+        if sum(map(bool, (sim, line, rsi))) > 1:
+            raise ValueError("give one of sim, line=HOST:PORT or rsi=HOST:PORT, not "
                              "several")
-        if not sim and not controller and not rsi:
+        if not sim and not line and not rsi:
             raise ValueError("the robot service needs a controller: sim=true (a simulated one), "
-                             "controller=HOST:PORT or rsi=HOST:PORT (a KUKA robot over RSI)")
+                             "line=HOST:PORT or rsi=HOST:PORT (a KUKA robot over RSI)")
         if dynamics and not sim:
             raise ValueError("dynamics moves the simulated controller's twin in time: give "
                              "sim=true too")
@@ -223,8 +223,8 @@ class RobotService(GenericDevice):
         self.sim = sim
         self.link_baud = link_baud
         self.dynamics = dynamics
-        self.endpoint: tuple[str, int] | None = (parse_address(controller or rsi)
-                                                 if controller or rsi else None)
+        self.endpoint: tuple[str, int] | None = (parse_address(line or rsi)
+                                                 if line or rsi else None)
         self.robot = robot
         self.payload_kg = payload_kg
         self.speed = speed

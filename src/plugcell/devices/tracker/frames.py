@@ -8,17 +8,18 @@ Thesis 7.4, eqs. (7.1)–(7.2)::
 and Table 7-3's conversions between a 4×4 matrix and the robot's 6-vector
 ``x, y, z`` (mm), three angles (degrees):
 
-========  ========  ===================================================
-option    option    angles (plugcell.kinematics.rotations)
-========  ========  ===================================================
-rpy2tr    tr2rpy    roll-pitch-yaw about fixed X, Y, Z: Rz(y)·Ry(p)·Rx(r)
-euler2tr  tr2euler  Euler Z-Y-Z (Comau): Rz(A)·Ry(B)·Rz(C)
-prj2tr    tr2prj    projective angles (defined in rotations.py)
-========  ========  ===================================================
+========  ========  ===========  ======================================================
+option    option    convention   angles (plugcell.kinematics.rotations)
+========  ========  ===========  ======================================================
+rpy2tr    tr2rpy    ``rpy``      roll-pitch-yaw about fixed X, Y, Z: Rz(y)·Ry(p)·Rx(r)
+euler2tr  tr2euler  ``zyz``      Euler Z-Y-Z (Comau): Rz(A)·Ry(B)·Rz(C)
+prj2tr    tr2prj    ``prj``      projective angles (defined in rotations.py)
+========  ========  ===========  ======================================================
 
-Pure functions on numpy arrays; inside they work in metres and radians.  The
-conversions themselves are :mod:`plugcell.io.units` (the one units boundary); this module
-names them as the tracker's options do and raises :class:`FrameError`.
+The option words are the tracker's (thesis Table 7-3, on the wire); this module maps
+them to the convention names of :mod:`plugcell.kinematics.rotations` and converts with
+:func:`plugcell.io.units.pose_from_robot` / :func:`~plugcell.io.units.robot_from_pose`
+(the one units boundary), raising :class:`FrameError`.
 """
 
 from __future__ import annotations
@@ -28,25 +29,25 @@ from dataclasses import dataclass, field
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from plugcell.io.units import CONVENTIONS, UnitsError, pose_from_robot, robot_from_pose
+from plugcell.io.units import ROBOT_CONVENTION, UnitsError, pose_from_robot, robot_from_pose
 from plugcell.metrology import invert_transform
 
 Array = NDArray[np.float64]
 
 #: The convention of a requester that has not said otherwise: Comau's (thesis 7.4).
-DEFAULT_CONVENTION = "euler"
-TO_MATRIX = {f"{k}2tr": k for k in CONVENTIONS}
-FROM_MATRIX = {f"tr2{k}": k for k in CONVENTIONS}
+DEFAULT_CONVENTION = ROBOT_CONVENTION
+#: The tracker's option word for each convention (Table 7-3).
+OPTION_WORDS = {"rpy": "rpy", "zyz": "euler", "prj": "prj"}
+TO_MATRIX = {f"{word}2tr": c for c, word in OPTION_WORDS.items()}
+FROM_MATRIX = {f"tr2{word}": c for c, word in OPTION_WORDS.items()}
 
 __all__ = [
-    "CONVENTIONS",
     "DEFAULT_CONVENTION",
     "FROM_MATRIX",
+    "OPTION_WORDS",
     "TO_MATRIX",
     "FrameError",
     "RequesterFrames",
-    "matrix_from_vector",
-    "vector_from_matrix",
 ]
 
 
@@ -65,17 +66,12 @@ def _convention(option: str, table: dict[str, str], default: str) -> str:
         ) from None
 
 
-def matrix_from_vector(v: ArrayLike, convention: str) -> Array:
-    """``x, y, z`` (mm), three angles (deg) → 4×4 (metres): rpy2tr / euler2tr / prj2tr."""
+def _pose(v: ArrayLike, convention: str) -> Array:
+    """:func:`~plugcell.io.units.pose_from_robot`, its error a :class:`FrameError`."""
     try:
         return pose_from_robot(v, convention)
     except UnitsError as exc:
         raise FrameError(str(exc)) from None
-
-
-def vector_from_matrix(T: ArrayLike, convention: str) -> Array:
-    """4×4 (metres) → ``x, y, z`` (mm), three angles (deg): tr2rpy / tr2euler / tr2prj."""
-    return robot_from_pose(T, convention)
 
 
 @dataclass
@@ -102,18 +98,18 @@ class RequesterFrames:
     def set_base(self, v: ArrayLike, option: str) -> None:
         """Set Base: the robot base frame F0 in the tracker frame."""
         convention = self.input_convention(option)
-        self.base = matrix_from_vector(v, convention)
+        self.base = _pose(v, convention)
         self.convention = convention
 
     def set_probe(self, v: ArrayLike, option: str) -> None:
         """Set Probe: the reflector (T-MAC) frame in the flange frame F_n."""
         convention = self.input_convention(option)
-        self.probe = matrix_from_vector(v, convention)
+        self.probe = _pose(v, convention)
         self.convention = convention
 
     def reflector(self, robot_pose: ArrayLike, option: str = "") -> Array:
         """Eq. (7.1): where the reflector is (tracker frame, 4×4 m) for a robot pose 6-vector."""
-        T = matrix_from_vector(robot_pose, self.input_convention(option))
+        T = _pose(robot_pose, self.input_convention(option))
         return self.base @ T @ self.probe
 
     def to_robot(self, measured: ArrayLike) -> Array:
@@ -123,4 +119,4 @@ class RequesterFrames:
 
     def measurement(self, measured: ArrayLike, option: str = "") -> Array:
         """Eq. (7.2) then the conversion of Table 7-3: the 6-vector the robot receives."""
-        return vector_from_matrix(self.to_robot(measured), self.output_convention(option))
+        return robot_from_pose(self.to_robot(measured), self.output_convention(option))

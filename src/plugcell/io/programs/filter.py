@@ -174,101 +174,21 @@ def filter_targets(program: Program, model_for_tool: Callable[[np.ndarray], Pose
     MissingFramesError
         A used target's frame or tool is not defined.
     """
-    bases = {**program.frames, **(bases or {})}
-    tools = {**program.tools, **(tools or {})}
-    mb, mt = missing_frames(program, bases, tools, joints)
-    if mb or mt:
-        raise MissingFramesError(str(program.files[0].path), mb, mt)
-    for name, parts in program.composites.items():
-        M = np.eye(4)
-        for part, inverted in parts:
-            M = M @ (invert(bases[part]) if inverted else bases[part])
-        bases[name] = M
+    bases, tools = _resolved_frames(program, bases, tools, joints)
     out = FilterResult()
     used = [t for t in program.targets if t.used and (t.kind == "pose" or joints != "keep")]
-    tool_names = sorted({t.tool if t.tool is not None else "<tool>" for t in used})
+    tool_names = sorted({_tool(t) for t in used})
     tool_of = {n: i for i, n in enumerate(tool_names)}
     tool_mats = np.array([tools[n] for n in tool_names]).reshape(-1, 4, 4)
-    N = len(used)
-    P = np.empty((N, 4, 4))
-    B = np.tile(np.eye(4), (N, 1, 1))
-    for i, t in enumerate(used):
-        if t.base is not None and t.kind == "pose":  # joints are in no frame
-            B[i] = bases[t.base]
-    # poses: grouped by notation; joints: the nominal model's pose
-    for notation in {t.notation for t in used if t.kind == "pose"}:
-        sel = [i for i, t in enumerate(used) if t.kind == "pose" and t.notation == notation]
-        P[sel] = pose_from_notation(np.array([used[i].values for i in sel]), notation)
-    jsel = [i for i, t in enumerate(used) if t.kind == "joints"]
-    desc = None
-    if jsel:
-        m0 = model_for_tool(tool_mats[0])
-        desc = m0.description
-        for i in jsel:
-            q = used[i].values * _unit(used[i], desc)
-            if q.shape != (desc.n_readings,):
-                raise program.files[used[i].file].error(
-                    used[i].offset, f"{used[i].name}: {q.size} joints for a robot with "
-                    f"{desc.n_readings}")
-            P[i] = NominalModel(desc, tool_mats[tool_of[_tool(used[i])]]).pose(q)[0]
-    T = B @ P
     idx = np.array([tool_of[_tool(t)] for t in used], dtype=int)
-    cmd = commanded_poses(model_for_tool, T, idx, tool_mats, payload_kg, tol=tol) if N else None
-    seeds: dict[int, np.ndarray] = {}
-    if cmd is not None and jsel:  # a joint target's configuration is its own joints
-        js = np.array(jsel)
-        jq = np.array([used[i].values * _unit(used[i], desc) for i in jsel])
-        again = commanded_poses(model_for_tool, T[js], idx[js], tool_mats, payload_kg,
-                                seed=jq, tol=tol)
-        cmd = _replace(cmd, js, again)
-        seeds.update({int(i): q for i, q in zip(js, jq, strict=True)})
-    if cmd is not None:
-        cmd, more = _configured(used, model_for_tool, T, idx, tool_mats, payload_kg, tol, cmd)
-        seeds.update(more)
-    # (dp, dr: how far the commanded pose moved from the target, in the robot base frame —
-    # the same rigid motion as in the program's frame for the position, and the same angle)
+    B, P, desc = _targets(program, used, bases, model_for_tool, tool_mats, idx)
+    T = B @ P
     reports: dict[int, TargetReport] = {}
-    if N:
-        assert cmd is not None
-        res = cmd.result
-        ok = res.ok
-        # everything per target at once: poses back in their frames, their numbers, moves
-        Pc = invert(B) @ cmd.T_command
-        after_all: list[np.ndarray | None] = [None] * N
-        for notation in {t.notation for t in used if t.kind == "pose"}:
-            sel = [i for i, t in enumerate(used) if t.kind == "pose" and t.notation == notation]
-            ref = np.array([used[i].values for i in sel])
-            vals = notation_from_pose(Pc[sel], notation, ref)
-            for k, i in enumerate(sel):
-                after_all[i] = vals[k]
-        dp_all = np.linalg.norm(cmd.T_command[:, :3, 3] - T[:, :3, 3], axis=-1) * 1e3
-        dr_all = np.degrees(np.linalg.norm(so3_log(
-            cmd.T_command[:, :3, :3] @ np.swapaxes(T[:, :3, :3], -1, -2)), axis=-1))
-        for i, t in enumerate(used):
-            good = bool(ok[i])
-            before = t.values
-            after = before
-            if good:
-                if t.kind == "pose":
-                    after = after_all[i]
-                    _edits(program, t, after, out.edits)
-                else:
-                    desc = model_for_tool(tool_mats[idx[i]]).description
-                    after = res.q[i] / _unit(t, desc)
-                    _edits(program, t, after, out.edits, joint=True)
-                note = ""
-                if t.config is not None:
-                    out.edits.update(t.config.edits(res.q_start[i], res.q[i]))  # type: ignore[attr-defined]
-                    bad = t.config.mismatch(res.q_start[i])  # type: ignore[attr-defined]
-                    if bad:
-                        note = ("configuration: no solution of the nominal inverse kinematics "
-                                f"has the program's arm configuration ({bad}); compensated "
-                                "for the one from the home configuration")
-            reports[id(t)] = TargetReport(
-                t, program.where(t.file, t.offset), good, note if good else str(res.reason[i]),
-                before, after, float(dp_all[i]) if good else 0.0,
-                float(dr_all[i]) if good else 0.0, res.q[i] if good else None, payload_kg,
-                True, seeds.get(i))
+    if used:
+        cmd, seeds = _commanded(used, model_for_tool, T, idx, tool_mats, payload_kg, tol, desc)
+        for i, report in enumerate(_reports(program, used, B, T, cmd, seeds, model_for_tool,
+                                            tool_mats, idx, payload_kg, out.edits)):
+            reports[id(used[i])] = report
     for t in program.targets:
         r = reports.get(id(t))
         if r is None:
@@ -279,6 +199,120 @@ def filter_targets(program: Program, model_for_tool: Callable[[np.ndarray], Pose
         out.reports.append(r)
     if program.post is not None:
         program.post(program, out.reports, out.edits)  # type: ignore[operator]
+    return out
+
+
+def _resolved_frames(program: Program, bases: Mapping[str, np.ndarray] | None,
+                     tools: Mapping[str, np.ndarray] | None, joints: str
+                     ) -> tuple[dict[str, np.ndarray], dict[str, np.ndarray]]:
+    """Every frame and tool by name: the caller's over the program's, and each composite
+    frame ``A:B⁻¹…`` multiplied out (MissingFramesError if a used one is defined nowhere)."""
+    bases = {**program.frames, **(bases or {})}
+    tools = {**program.tools, **(tools or {})}
+    mb, mt = missing_frames(program, bases, tools, joints)
+    if mb or mt:
+        raise MissingFramesError(str(program.files[0].path), mb, mt)
+    for name, parts in program.composites.items():
+        M = np.eye(4)
+        for part, inverted in parts:
+            M = M @ (invert(bases[part]) if inverted else bases[part])
+        bases[name] = M
+    return bases, tools
+
+
+def _targets(program: Program, used: list[Target], bases: Mapping[str, np.ndarray],
+             model_for_tool: Callable[[np.ndarray], PoseModel], tool_mats: np.ndarray,
+             idx: np.ndarray) -> tuple[np.ndarray, np.ndarray, object]:
+    """Each target's frame ``B`` and pose in it ``P`` (``(N, 4, 4)``, m): a pose read in
+    its notation, a joint target the nominal model's pose (``B = I``: joints are in no
+    frame); and the robot description (None without joint targets)."""
+    N = len(used)
+    P = np.empty((N, 4, 4))
+    B = np.tile(np.eye(4), (N, 1, 1))
+    for i, t in enumerate(used):
+        if t.base is not None and t.kind == "pose":
+            B[i] = bases[t.base]
+    for notation in {t.notation for t in used if t.kind == "pose"}:
+        sel = [i for i, t in enumerate(used) if t.kind == "pose" and t.notation == notation]
+        P[sel] = pose_from_notation(np.array([used[i].values for i in sel]), notation)
+    jsel = [i for i, t in enumerate(used) if t.kind == "joints"]
+    desc = None
+    if jsel:
+        desc = model_for_tool(tool_mats[0]).description
+        for i in jsel:
+            q = used[i].values * _unit(used[i], desc)
+            if q.shape != (desc.n_readings,):
+                raise program.files[used[i].file].error(
+                    used[i].offset, f"{used[i].name}: {q.size} joints for a robot with "
+                    f"{desc.n_readings}")
+            P[i] = NominalModel(desc, tool_mats[idx[i]]).pose(q)[0]
+    return B, P, desc
+
+
+def _commanded(used: list[Target], model_for_tool: Callable[[np.ndarray], PoseModel],
+               T: np.ndarray, idx: np.ndarray, tool_mats: np.ndarray, payload_kg: float,
+               tol: float, desc: object) -> tuple[CommandedPoses, dict[int, np.ndarray]]:
+    """The compensated commands of the targets ``T`` (robot base frame), each in the
+    program's arm configuration: a joint target's is its own joints, a pose's the one its
+    configuration numbers name (:func:`_configured`); and the seeds that gave them."""
+    cmd = commanded_poses(model_for_tool, T, idx, tool_mats, payload_kg, tol=tol)
+    seeds: dict[int, np.ndarray] = {}
+    jsel = [i for i, t in enumerate(used) if t.kind == "joints"]
+    if jsel:
+        js = np.array(jsel)
+        jq = np.array([used[i].values * _unit(used[i], desc) for i in jsel])
+        again = commanded_poses(model_for_tool, T[js], idx[js], tool_mats, payload_kg,
+                                seed=jq, tol=tol)
+        cmd = _replace(cmd, js, again)
+        seeds.update({int(i): q for i, q in zip(js, jq, strict=True)})
+    cmd, more = _configured(used, model_for_tool, T, idx, tool_mats, payload_kg, tol, cmd)
+    seeds.update(more)
+    return cmd, seeds
+
+
+def _reports(program: Program, used: list[Target], B: np.ndarray, T: np.ndarray,
+             cmd: CommandedPoses, seeds: dict[int, np.ndarray],
+             model_for_tool: Callable[[np.ndarray], PoseModel], tool_mats: np.ndarray,
+             idx: np.ndarray, payload_kg: float, edits: dict[tuple[int, int], str]
+             ) -> list[TargetReport]:
+    """Each used target's report, its new numbers added to ``edits``: a pose back in its
+    frame, ``P' = B⁻¹ · T_command``, in its notation nearest its old numbers; a joint
+    target the compensated joints.  ``dp``, ``dr``: how far the command moved from the
+    target in the robot base frame (the same rigid motion as in the program's frame)."""
+    res = cmd.result
+    Pc = invert(B) @ cmd.T_command
+    after_all: list[np.ndarray | None] = [None] * len(used)
+    for notation in {t.notation for t in used if t.kind == "pose"}:
+        sel = [i for i, t in enumerate(used) if t.kind == "pose" and t.notation == notation]
+        vals = notation_from_pose(Pc[sel], notation, np.array([used[i].values for i in sel]))
+        for k, i in enumerate(sel):
+            after_all[i] = vals[k]
+    dp_all = np.linalg.norm(cmd.T_command[:, :3, 3] - T[:, :3, 3], axis=-1) * 1e3
+    dr_all = np.degrees(np.linalg.norm(so3_log(
+        cmd.T_command[:, :3, :3] @ np.swapaxes(T[:, :3, :3], -1, -2)), axis=-1))
+    out = []
+    for i, t in enumerate(used):
+        good = bool(res.ok[i])
+        after, note = t.values, ""
+        if good:
+            if t.kind == "pose":
+                after = after_all[i]
+                _edits(program, t, after, edits)
+            else:
+                after = res.q[i] / _unit(t, model_for_tool(tool_mats[idx[i]]).description)
+                _edits(program, t, after, edits, joint=True)
+            if t.config is not None:
+                edits.update(t.config.edits(res.q_start[i], res.q[i]))  # type: ignore[attr-defined]
+                bad = t.config.mismatch(res.q_start[i])  # type: ignore[attr-defined]
+                if bad:
+                    note = ("configuration: no solution of the nominal inverse kinematics "
+                            f"has the program's arm configuration ({bad}); compensated "
+                            "for the one from the home configuration")
+        out.append(TargetReport(
+            t, program.where(t.file, t.offset), good, note if good else str(res.reason[i]),
+            t.values, after, float(dp_all[i]) if good else 0.0,
+            float(dr_all[i]) if good else 0.0, res.q[i] if good else None, payload_kg,
+            True, seeds.get(i)))
     return out
 
 

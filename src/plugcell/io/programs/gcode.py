@@ -121,29 +121,8 @@ def read_gcode(path: str | Path, notation: str = "kuka") -> tuple[Program, list[
         words, end = _words(f, start, line)
         if not words:
             continue
-        gs = [(n, w) for w, n in words if w == "G"]
-        motion_now = None
-        for n, _ in gs:
-            g = n.text.lstrip("+0") or "0"
-            gv = float(n.text)
-            if gv in (0, 1, 2, 3):
-                motion_now = int(gv)
-            elif gv == 20:
-                raise f.error(n.start - 1, "G20: inches are not supported (G21, mm)")
-            elif gv == 91:
-                raise f.error(n.start - 1, "G91: incremental coordinates are not supported")
-            elif gv == 53:
-                raise f.error(n.start - 1, "G53: machine coordinates are not supported")
-            elif 81 <= gv <= 89:
-                raise f.error(n.start - 1, f"G{g}: canned cycles are not supported")
-            elif 54 <= gv <= 59.9:
-                offset = "G" + g
-                if g == "54.1":
-                    p = next((m for w, m in words if w == "P"), None)
-                    offset += f"P{p.text}" if p is not None else ""
-        for w, n in words:
-            if w == "T":
-                tool = "T" + n.text
+        motion_now, offset = _g_codes(f, words, offset)
+        tool = next(("T" + n.text for w, n in reversed(words) if w == "T"), tool)
         if motion_now is not None:
             mode = motion_now
         axis_words = {w: n for w, n in words if w in AXES}
@@ -155,29 +134,15 @@ def read_gcode(path: str | Path, notation: str = "kuka") -> tuple[Program, list[
         if mode in (2, 3) and any(w == "R" for w, _ in words):
             raise f.error(next(n for w, n in words if w == "R").start - 1,
                           "an arc by radius (R) is not supported: give its centre (I J K)")
-        for w, n in axis_words.items():
-            modal[w] = n
+        modal.update(axis_words)
         missing = [k for k in AXES if modal[k] is None]
         if missing:
             notes.append(f"{prog.where(0, start)}: {', '.join(missing)} not known yet (the "
                          "machine's start position): left as it is")
             continue
-        nums = []
-        for k in AXES:
-            if k in axis_words:
-                nums.append(axis_words[k])
-            else:
-                m = modal[k]
-                assert m is not None
-                nums.append(Num(end, end, "", m.value, virtual=True))
-        anchor = Num(end, end, "", 0.0)
         ijk_words = {w: n for w, n in words if w in ("I", "J", "K")}
-        extra = [anchor, *ijk_words.values()]
-        line_no = f.position(start)[0]
-        t = Target(f"line {line_no}", 0, start + (len(line) - len(line.lstrip())), "pose",
-                   nums, notation, base=offset, tool=tool, extra=extra)
-        t.uses.append((0, t.offset))
-        st.anchor[id(t)] = anchor
+        t = _motion(f, line, start, end, axis_words, modal, ijk_words, notation, offset, tool)
+        st.anchor[id(t)] = t.extra[0]
         if mode in (2, 3):
             if not ijk_words:
                 raise f.error(t.offset, "an arc without its centre (I J K)")
@@ -186,6 +151,57 @@ def read_gcode(path: str | Path, notation: str = "kuka") -> tuple[Program, list[
         prev = t
     prog.post = lambda p, reports, edits: _post(p, reports, edits, st)
     return prog, notes
+
+
+def _g_codes(f: SourceFile, words: list[tuple[str, Num]], offset: str
+             ) -> tuple[int | None, str]:
+    """The G words of a line: the motion mode it sets (G0–G3, None: none) and the work
+    offset in force (G54…G59.9, G54.1 Pn); refused: G20 inches, G91 incremental, G53
+    machine coordinates, G81–G89 canned cycles (file:line:column)."""
+    motion_now = None
+    for w, n in words:
+        if w != "G":
+            continue
+        g = n.text.lstrip("+0") or "0"
+        gv = float(n.text)
+        if gv in (0, 1, 2, 3):
+            motion_now = int(gv)
+        elif gv == 20:
+            raise f.error(n.start - 1, "G20: inches are not supported (G21, mm)")
+        elif gv == 91:
+            raise f.error(n.start - 1, "G91: incremental coordinates are not supported")
+        elif gv == 53:
+            raise f.error(n.start - 1, "G53: machine coordinates are not supported")
+        elif 81 <= gv <= 89:
+            raise f.error(n.start - 1, f"G{g}: canned cycles are not supported")
+        elif 54 <= gv <= 59.9:
+            offset = "G" + g
+            if g == "54.1":
+                p = next((m for v, m in words if v == "P"), None)
+                offset += f"P{p.text}" if p is not None else ""
+    return motion_now, offset
+
+
+def _motion(f: SourceFile, line: str, start: int, end: int, axis_words: dict[str, Num],
+            modal: dict[str, Num | None], ijk_words: dict[str, Num], notation: str,
+            offset: str, tool: str) -> Target:
+    """The target of a motion line: the axes it writes, the others at their modal values
+    (virtual numbers, written at the line's end if they change); ``extra``: the line's
+    end anchor, then its I J K."""
+    nums = []
+    for k in AXES:
+        if k in axis_words:
+            nums.append(axis_words[k])
+        else:
+            m = modal[k]
+            assert m is not None
+            nums.append(Num(end, end, "", m.value, virtual=True))
+    anchor = Num(end, end, "", 0.0)
+    t = Target(f"line {f.position(start)[0]}", 0, start + (len(line) - len(line.lstrip())),
+               "pose", nums, notation, base=offset, tool=tool,
+               extra=[anchor, *ijk_words.values()])
+    t.uses.append((0, t.offset))
+    return t
 
 
 def _post(prog: Program, reports: list, edits: dict[tuple[int, int], str], st: _State) -> None:
