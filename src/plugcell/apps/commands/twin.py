@@ -13,7 +13,7 @@ import numpy as np
 from plugcell.apps.commands.deprecated import DeprecatedName
 from plugcell.apps.commands.progress import ProgressBar
 from plugcell.apps.commands.robotargs import add_robot_args
-from plugcell.apps.commands.twin_robot import configure_robot_sides
+from plugcell.apps.commands.twin_robot import add_robot_sides
 
 
 def configure(p: argparse.ArgumentParser) -> None:
@@ -114,7 +114,7 @@ def configure(p: argparse.ArgumentParser) -> None:
                    help="the hall's temperature (°C; default: the reference 20 °C, no drift)")
     n.add_argument("--out", type=Path, required=True, help="nest file to write: name,x,y,z (mm)")
     n.set_defaults(func=_nests)
-    configure_robot_sides(tw, common, _rsi, _egm)
+    add_robot_sides(tw, common, _rsi, _egm)
 
 
 def _scenario(args: argparse.Namespace):

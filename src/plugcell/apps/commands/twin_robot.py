@@ -66,7 +66,7 @@ def _side_options(r: argparse.ArgumentParser, common, what: str, default_port: i
                    help="seconds to stream, then stop (default: until interrupted)")
 
 
-def configure_robot_sides(tw: argparse._SubParsersAction, common, rsi, egm) -> None:
+def add_robot_sides(tw: argparse._SubParsersAction, common, rsi, egm) -> None:
     """Add ``twin rsi`` and ``twin egm`` to the ``twin`` subcommands (``common`` adds
     robot and seed; ``rsi(args)``/``egm(args)`` run them: :func:`run_rsi`/:func:`run_egm`
     with the scenario the options name)."""
