@@ -235,6 +235,11 @@ class EgmRobotSim:
             self._thread.join(2.0)
         self.sock.close()
 
+    @property
+    def running(self) -> bool:
+        """The loop runs (started, not stopped by :meth:`stop` or the timeout)."""
+        return self._thread is not None and self._thread.is_alive()
+
     def wait_stopped(self, timeout: float) -> bool:
         """Wait until the loop stopped by itself (communication timeout)."""
         end = time.monotonic() + timeout
