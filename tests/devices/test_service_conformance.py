@@ -79,10 +79,13 @@ _SAMPLE = {DataTypes.Double: 0.0, DataTypes.Integer: 0, DataTypes.Byte: 0,
            DataTypes.Boolean: False, DataTypes.String: "x"}
 
 
-async def _contract(kind: str, kwargs: dict[str, Any], cell: str, tmp_path) -> None:
+async def _contract(kind: str, kwargs: dict[str, Any], cell: str, tmp_path,
+                    device: Any = None) -> None:
+    """The contract of a running service; ``device()``, if given, starts the device it
+    drives while the service starts (a robot streaming to it)."""
     cls = load_kind(kind)
     service = build(kind, None, kwargs, cell=cell, journal=tmp_path / "journal")
-    await service.start()
+    await asyncio.gather(service.start(), *([asyncio.to_thread(device)] if device else []))
     name = service.name
     try:
         async with Client("CONFORMANCE", cell=cell) as client:
@@ -142,6 +145,10 @@ def test_the_robot_streamed_from_the_pc_keeps_the_contract(vendor, tmp_path, mon
     cell = f"conf{uuid.uuid4().hex[:10]}"
     twin, timeout = ((RsiTwinProcess, {"rsi_timeout": 1000}) if vendor == "rsi" else
                      (EgmTwinProcess, {"egm_timeout": 4.0}))
-    with twin(f"127.0.0.1:{port}", "--timeout", str(next(iter(timeout.values())))):
+    robot = twin(f"127.0.0.1:{port}", "--timeout", str(next(iter(timeout.values()))))
+    try:
         asyncio.run(asyncio.wait_for(_contract(
-            "robot", {vendor: f"127.0.0.1:{port}", **timeout}, cell, tmp_path), 90))
+            "robot", {vendor: f"127.0.0.1:{port}", **timeout}, cell, tmp_path, robot.start),
+            90))
+    finally:
+        robot.kill()

@@ -140,9 +140,10 @@ def test_a_program_on_the_pc_moves_the_twin(vendor, library, tmp_path, monkeypat
     port = _free_udp_port()
 
     async def scenario() -> None:
-        with vendor.robot(port):
+        twin = vendor.robot(port)
+        try:
             service = _service(vendor, port, library, unique_cell(), tmp_path)
-            await service.start()
+            await _start(service, twin)
             try:
                 async with Client("STREAMTEST", cell=service.keys.cell) as client:
                     assert await client.wait_for(service.name, 20)
@@ -172,8 +173,16 @@ def test_a_program_on_the_pc_moves_the_twin(vendor, library, tmp_path, monkeypat
                     np.testing.assert_allclose(before, [2, -88, -186, 0, 88, 2], atol=0.05)
             finally:
                 await service.close()
+        finally:
+            twin.kill()
 
     asyncio.run(asyncio.wait_for(scenario(), 180))
+
+
+async def _start(service: RobotService, twin) -> None:
+    """The service and the robot together: the service waits for the robot's stream, the
+    robot (as a controller whose timeout counts from its first packet) for answers."""
+    await asyncio.gather(service.start(), asyncio.to_thread(twin.start))
 
 
 async def _get_status(client: Client, name: str) -> list[str]:
@@ -198,9 +207,8 @@ def test_a_stopped_stream_fails_the_process_and_the_service_recovers(vendor, lib
     twin = vendor.robot(port)
 
     async def scenario() -> None:
-        twin.start()
         service = _service(vendor, port, library, unique_cell(), tmp_path)
-        await service.start()
+        await _start(service, twin)
         try:
             async with Client("STREAMTEST", cell=service.keys.cell) as client:
                 assert await client.wait_for(service.name, 20)

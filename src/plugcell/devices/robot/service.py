@@ -178,6 +178,7 @@ class RobotService(GenericDevice):
         "egm": str,
         "egm_robot": str,
         "egm_timeout": float,
+        "stream_process": _flag,
         "joint_speed": float,
         "tcp_speed": float,
         "joint_rate": float,
@@ -201,6 +202,7 @@ class RobotService(GenericDevice):
         egm: str = "",
         egm_robot: str = "",
         egm_timeout: float = 1.0,
+        stream_process: bool = True,
         joint_speed: float = 20.0,
         tcp_speed: float = 100.0,
         joint_rate: float = DEFAULT_RATE_HZ,
@@ -237,7 +239,7 @@ class RobotService(GenericDevice):
             self, robot=robot, library=self.library, name=self.name, rsi=rsi,
             rsi_robot=rsi_robot, rsi_timeout=rsi_timeout, egm=egm, egm_robot=egm_robot,
             egm_timeout=egm_timeout, joint_speed=joint_speed, tcp_speed=tcp_speed,
-        ) or ControllerBridge(self)
+            process=stream_process) or ControllerBridge(self)
         if isinstance(self.bridge, StreamController):  # the UI's device panel shows it
             self.device.info = f"{self.info} Robot link: {self.bridge.describe()}."
         self.outbound = ExternalProcessHandler(self)

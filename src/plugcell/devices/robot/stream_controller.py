@@ -7,7 +7,9 @@ every move on the PC (:class:`~plugcell.devices.robot.planned_motion.PlannedMoti
 streams it to the robot as whole joint commands through a vendor's real-time link
 (:class:`~plugcell.devices.robot.stream.drive.StreamDrive`) — issue 37's mode *the PC
 drives*: the controller's program only starts the interface where the robot stands and
-follows.  One controller, one vendor's link each (:mod:`.streamed` makes it from the
+follows.  The link's cycle loop runs in a child process of its own
+(:class:`~plugcell.devices.robot.stream.process.LinkProcess`), so that nothing the service
+does delays an answer.  One controller, one vendor's link each (:mod:`.streamed` makes it from the
 service's options): KUKA RSI's absolute joint corrections (``AKorr``), joint feedback
 ``AIPos``; ABB EGM's joint targets (``EGMRunJoint``), joint feedback ``feedBack.joints``.
 
@@ -29,7 +31,6 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
-import importlib
 import itertools
 import logging
 import math
@@ -59,13 +60,14 @@ from plugcell.devices.robot.requests import Staged, answer, check_line, deliver,
 from plugcell.devices.robot.runner import TEXT_MAX, ProgramRunner, RunError
 from plugcell.devices.robot.stream.drive import StreamDrive
 from plugcell.devices.robot.stream.limits import CorrectionLimits
+from plugcell.devices.robot.stream.process import LinkProcess, link_class
 from plugcell.kinematics import RobotDescription
 from plugcell.motion import CartesianLimits, JointLimits
 from plugcell.pdl import MotionError, SimClock
 from plugcell.pdl.predefined import EXT_DATA_MAX
 from plugcell.pdl.values import Position
 
-__all__ = ["LINKS", "StreamController", "StreamedMotion", "planner_limits", "robot_endpoint",
+__all__ = ["StreamController", "StreamedMotion", "planner_limits", "robot_endpoint",
            "streaming_limits"]
 
 log = logging.getLogger("plugcell.devices.robot.stream_controller")
@@ -75,17 +77,6 @@ WATCH_S = 0.05
 #: Margin of the link's speed limit over the planner's joint speed limit: the planner
 #: keeps every move within the joint limits, the link refuses what would exceed them by more.
 SPEED_MARGIN = 1.5
-#: Each vendor's link class (``module:Class``), by the configuration's ``vendor``.
-LINKS = {"RSI": "plugcell.devices.robot.rsi.link:RsiLink",
-         "EGM": "plugcell.devices.robot.egm.link:EgmLink"}
-
-
-def link_class(vendor: str) -> Any:
-    """The link class of ``vendor`` (``"RSI"``, ``"EGM"``)."""
-    module, _, name = LINKS[vendor].partition(":")
-    return getattr(importlib.import_module(module), name)
-
-
 def streaming_limits(joint: JointLimits, cycle_s: float) -> CorrectionLimits:
     """The link's limits when the PC streams whole moves (policy ``"refuse"``).
 
@@ -230,11 +221,17 @@ class StreamController:
         Folders of robot programs.
     name : str
         The service's name (HELLO ``name``).
+    process : bool
+        Run the link's cycle loop in a child process
+        (:class:`~plugcell.devices.robot.stream.process.LinkProcess`, the default), or in
+        a thread of this process (measurements: ``benchmarks/rsi_latency.py
+        --in-service``).
     """
 
     def __init__(self, handler: BridgeHandler, config: Any, description: RobotDescription,
                  robot: str, joint_limits: JointLimits, cartesian_limits: CartesianLimits,
-                 library: Sequence[Path] = (), name: str = "ROBOT") -> None:
+                 library: Sequence[Path] = (), name: str = "ROBOT",
+                 process: bool = True) -> None:
         self.vendor = config.vendor
         if description.n_readings != 6:
             raise ValueError(f"{self.vendor} streams six axes; {description.name} has "
@@ -245,8 +242,11 @@ class StreamController:
         self.robot = robot
         self.name = name
         self.address = f"{config.listen_host}:{config.listen_port}"
-        self.link = link_class(self.vendor)(config)
-        self.drive = StreamDrive(self.link)
+        if process:
+            self.link = self.drive = LinkProcess(config)
+        else:
+            self.link = link_class(self.vendor)(config)
+            self.drive = StreamDrive(self.link)
         self.clock = SimClock(speed=1.0)
         self.motion = StreamedMotion(description, self.drive, joint_limits, cartesian_limits,
                                      clock=self.clock)

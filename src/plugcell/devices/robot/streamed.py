@@ -38,7 +38,7 @@ __all__ = ["streamed_link"]
 def streamed_link(handler: BridgeHandler, *, robot: str, library: Sequence[Path], name: str,
                   rsi: str = "", rsi_robot: str = "", rsi_timeout: int = 100, egm: str = "",
                   egm_robot: str = "", egm_timeout: float = 1.0, joint_speed: float = 20.0,
-                  tcp_speed: float = 100.0) -> StreamController | None:
+                  tcp_speed: float = 100.0, process: bool = True) -> StreamController | None:
     """The streamed robot's controller the options ask for, or ``None`` (none asked).
 
     Parameters
@@ -62,6 +62,8 @@ def streamed_link(handler: BridgeHandler, *, robot: str, library: Sequence[Path]
     joint_speed, tcp_speed : float
         The planner's limits, °/s of every joint and mm/s of linear moves
         (:func:`~.stream_controller.planner_limits`).
+    process : bool
+        The link's cycle loop in a child process (default) or a thread of the service's.
 
     Returns
     -------
@@ -93,4 +95,4 @@ def streamed_link(handler: BridgeHandler, *, robot: str, library: Sequence[Path]
         if rsi else EgmConfig(**where, mode="joint", comm_timeout_s=egm_timeout))
     config = dataclasses.replace(config, limits=streaming_limits(joint, config.cycle_s))
     return StreamController(handler, config, load_robot(robot), robot, joint, cart, library,
-                            name)
+                            name, process)

@@ -122,7 +122,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     args = p.parse_args(argv)
     return run_twin(args, lambda sensor, bind: egm_twin(
         sensor, args.robot, args.seed, args.payload_kg, args.timeout, bind),
-        "EGM (joint)", PREFIX)
+        "EGM (joint)", PREFIX, lambda r: {
+            "cycles": r.sent, "answered": r.answers, "late": r.unanswered,  # type: ignore
+            "rtt_ns": list(r.rtts)})  # type: ignore[attr-defined]
 
 
 if __name__ == "__main__":  # pragma: no cover

@@ -56,7 +56,12 @@ def main(argv: Sequence[str] | None = None) -> int:
                                        payload_kg=args.payload_kg))
         return RsiRobot(arm, config, bind=bind)
 
-    return run_twin(args, make, f"RSI ({args.mode})", PREFIX)
+    def stats(robot: object) -> dict:
+        st = robot.stats()  # type: ignore[attr-defined]
+        return {"cycles": st.cycles, "answered": st.answered, "late": st.delay,
+                "rtt_ns": list(robot.rtts)}  # type: ignore[attr-defined]
+
+    return run_twin(args, make, f"RSI ({args.mode})", PREFIX, stats)
 
 
 if __name__ == "__main__":  # pragma: no cover

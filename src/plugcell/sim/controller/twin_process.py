@@ -81,13 +81,17 @@ def twin_parser(prog: str, description: str) -> argparse.ArgumentParser:
     p.add_argument("--robot", default="smart_h4", help="robot of the twin (name or file)")
     p.add_argument("--payload-kg", type=float, default=0.0)
     p.add_argument("--seed", type=int, default=0, help="twin scenario seed")
+    p.add_argument("--stats", metavar="FILE",
+                   help="at the end, write the robot side's counts and every answer's round "
+                   "trip (ns) to FILE as JSON (benchmarks)")
     return p
 
 
-def serve(robot: object, banner: Callable[[tuple[str, int]], str], prefix: str) -> int:
+def serve(robot: object, banner: Callable[[tuple[str, int]], str], prefix: str,
+          stats: Callable[[], dict] | None = None, stats_file: str | None = None) -> int:
     """Run ``robot`` (``start``, ``stop``, ``running``, ``stopped``, ``address``) until a
     signal or until it stops by itself; the exit status (3: it stopped, the reason on
-    stderr)."""
+    stderr).  ``stats()`` is written to ``stats_file`` as JSON at the end."""
     done = threading.Event()
     for sig in (signal.SIGTERM, signal.SIGINT):
         signal.signal(sig, lambda *_: done.set())
@@ -97,6 +101,11 @@ def serve(robot: object, banner: Callable[[tuple[str, int]], str], prefix: str) 
         if not robot.running:  # type: ignore[attr-defined]
             break
     robot.stop()  # type: ignore[attr-defined]
+    if stats is not None and stats_file:
+        import json
+        from pathlib import Path
+
+        Path(stats_file).write_text(json.dumps({**stats(), "stopped": robot.stopped}))
     if robot.stopped:  # type: ignore[attr-defined]
         print(f"{prefix} {robot.stopped}", file=sys.stderr, flush=True)  # type: ignore
         return 3
@@ -104,7 +113,7 @@ def serve(robot: object, banner: Callable[[tuple[str, int]], str], prefix: str) 
 
 
 def run_twin(args: argparse.Namespace, make: Callable[[tuple[str, int], tuple[str, int]], object],
-             what: str, prefix: str) -> int:
+             what: str, prefix: str, stats: Callable[[object], dict] | None = None) -> int:
     """Make the robot side from the parsed options and :func:`serve` it.
 
     Parameters
@@ -117,6 +126,8 @@ def run_twin(args: argparse.Namespace, make: Callable[[tuple[str, int], tuple[st
         What it streams, for its first line (``"RSI (absolute)"``).
     prefix : str
         Its lines' prefix.
+    stats : callable, optional
+        ``stats(robot)``: its counts for ``--stats`` (``cycles``, ``late``, ``rtt_ns`` …).
 
     Returns
     -------
@@ -134,4 +145,5 @@ def run_twin(args: argparse.Namespace, make: Callable[[tuple[str, int], tuple[st
         print(f"{prefix} error: {exc}", file=sys.stderr)
         return 2
     return serve(robot, lambda a: f"{args.robot} streaming {what} from {a[0]}:{a[1]} to "
-                 f"{sensor[0]}:{sensor[1]}", prefix)
+                 f"{sensor[0]}:{sensor[1]}", prefix,
+                 (lambda: stats(robot)) if stats is not None else None, args.stats)
