@@ -32,14 +32,14 @@ V = 20 * DEG
 LIMITS = JointLimits.uniform(6, V, 3 * V, 30 * V)
 
 
-def _config(**kw) -> EgmConfig:
-    base = EgmConfig(robot_host="127.0.0.1", listen_host="127.0.0.1", listen_port=0,
-                     mode="joint", comm_timeout_s=2.0, **kw)
+def _config(listen_port: int = 0) -> EgmConfig:
+    base = EgmConfig(robot_host="127.0.0.1", listen_host="127.0.0.1", listen_port=listen_port,
+                     mode="joint", comm_timeout_s=2.0)
     return dataclasses.replace(base, limits=streaming_limits(LIMITS, base.cycle_s))
 
 
-def _robot(address) -> EgmRobotSim:
-    return EgmRobotSim(address, "joint", joints=Q0, comm_timeout_s=2.0).start()
+def _robot(address, comm_timeout_s: float = 2.0) -> EgmRobotSim:
+    return EgmRobotSim(address, "joint", joints=Q0, comm_timeout_s=comm_timeout_s).start()
 
 
 @pytest.mark.slow
@@ -104,6 +104,33 @@ def test_a_stopped_stream_fails_with_its_reason_and_a_new_session_recovers():
             robot.stop()
     finally:
         link.close()
+
+
+@pytest.mark.slow
+def test_a_crashed_link_process_says_so_and_starts_again():
+    link = LinkProcess(_config(listen_port=_free_udp_port()))
+    address = link.start()
+    robot = _robot(address, 30.0)  # waits for the new child's answers
+    try:
+        assert link.wait(lambda lk: lk.streaming, 20)
+        os.kill(link._proc.pid, signal.SIGKILL)  # the child dies (a bug, the OOM killer)
+        assert link.wait(lambda lk: not lk.streaming, 5)
+        assert "the EGM link process has exited (exit code -9)" in str(link.failure)
+        with pytest.raises(MotionError, match="link process has exited"):
+            link.joint_readings()
+        assert link.start() == address  # the controller's connect starts it again
+        assert link.wait(lambda lk: lk.streaming and lk.failure is None, 20)
+    finally:
+        robot.stop()
+        link.close()
+
+
+def _free_udp_port() -> int:
+    import socket
+
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
+        s.bind(("127.0.0.1", 0))
+        return int(s.getsockname()[1])
 
 
 def test_the_publisher_writes_a_consistent_state():

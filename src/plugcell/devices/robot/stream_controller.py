@@ -288,7 +288,7 @@ class StreamController:
     async def connect(self, host: str, port: int, timeout: float = 10.0) -> Hello:
         """Listen (once) and wait for the controller's stream; BridgeError if none comes."""
         self._loop = asyncio.get_running_loop()
-        if not self._started:
+        if not self._started or not getattr(self.link, "alive", True):  # or it crashed
             try:
                 host, port = await asyncio.to_thread(self.link.start)
             except OSError as exc:

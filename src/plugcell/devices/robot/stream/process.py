@@ -120,6 +120,9 @@ class Publisher:
 def _child(conn: Any, values: Any, text: Any, vendor: str, config: Any,
            rt_priority: int | None) -> None:
     """The child process: the link, its drive, and the motions from the pipe."""
+    import signal
+
+    signal.signal(signal.SIGINT, signal.SIG_IGN)  # Ctrl-C is the service's to handle
     link = link_class(vendor)(config, rt_priority=rt_priority)
     link.observer = Publisher(values, text)
     try:
@@ -185,15 +188,19 @@ class LinkProcess:
 
     # ------------------------------------------------------------------ the process
     def start(self, timeout: float = 60.0) -> tuple[str, int]:
-        """Start the child and its link; the address it listens on.
+        """Start the child and its link (again, if it ended); the address it listens on.
 
         Raises
         ------
         OSError
             The link cannot listen, or the child did not start within ``timeout`` s.
         """
-        if self._proc is not None:
+        if self.alive:
             raise RuntimeError(f"the {self.vendor} link process is already started")
+        if self._proc is not None:  # it ended (a crash): a new one, with a clean slate
+            self.close()
+            self._v[:] = 0
+            self._failure = None
         self._conn, child_end = self._ctx.Pipe()
         self._proc = self._ctx.Process(
             target=_child, name=f"plugcell-{self.vendor.lower()}-link", daemon=True,
