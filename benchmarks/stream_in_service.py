@@ -30,6 +30,7 @@ from __future__ import annotations
 import json
 import os
 import select
+import shutil
 import socket
 import subprocess
 import sys
@@ -207,6 +208,7 @@ def measure(vendor: str, seconds: float, cycle_ms: float = 4.0, thread: bool = F
             service.kill()
         echo.close()
     stats = json.loads(stats_file.read_text())
+    shutil.rmtree(home, ignore_errors=True)
     window = [rtt for sent, rtt in stats["rtt_ns"] if t0 <= sent < t1]
     late_flags = np.array([rtt < 0 or rtt > cycle_ms * 1e6 for rtt in window])
     rtts = np.array([rtt for rtt in window if rtt >= 0], dtype=float) / 1e3
