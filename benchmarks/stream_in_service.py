@@ -53,8 +53,9 @@ BEGIN
 END benchswing
 """
 #: vendor → the twin's command (``plugcell twin …``), the service's flag of the stream,
-#: the twin's timeout option and the service's (both far out: the run measures on whatever happens), and the
-#: controller's default timeout in cycles (RSI Timeout 100; EGM \CommTimeout 1 s)
+#: the twin's timeout option and the service's (both far out: the run measures on whatever
+#: happens), and the controller's default timeout in cycles (RSI Timeout 100; EGM
+#: \CommTimeout 1 s)
 TWINS = {"RSI": ("rsi", "--rsi", "10000", "10000", 100),
          "EGM": ("egm", "--egm", "3600", "60", 250)}
 
