@@ -348,6 +348,12 @@ def main(argv: list[str], vendor: Vendor | None = None, doc: str | None = None) 
                     "SCHED_FIFO priority N (Linux, root or CAP_SYS_NICE)")
     ap.add_argument("--cell", type=int, default=0, metavar="N",
                     help="measure beside N plugcell services serving in a cell")
+    ap.add_argument("--in-service", action="store_true",
+                    help=f"measure plugcell serve robot --{vendor.name.lower()} running a "
+                    "program against the twin's robot side instead (stream_in_service.py)")
+    ap.add_argument("--link-thread", action="store_true",
+                    help="with --in-service: the link in a thread of the service's process, "
+                    "not its own")
     ap.add_argument("--role", choices=("link", "echo"), help=argparse.SUPPRESS)
     args = ap.parse_args(argv)
     if args.role == "link":
@@ -356,6 +362,12 @@ def main(argv: list[str], vendor: Vendor | None = None, doc: str | None = None) 
     if args.role == "echo":
         run_echo(args.rt_priority, vendor.echo_part)
         return 0
+    if args.in_service:
+        import stream_in_service
+
+        with cell_services(args.cell) if args.cell else contextlib.nullcontext():
+            return stream_in_service.main(vendor.name, args.seconds, args.json,
+                                          args.link_thread)
     print(f"machine: {os.cpu_count()} CPUs, load average {os.getloadavg()[0]:.2f} at start",
           flush=True)
     with cell_services(args.cell) if args.cell else contextlib.nullcontext():

@@ -87,6 +87,14 @@ def main(argv: list[str]) -> int:
         ("KUKA RSI: answer latency at 250 Hz beside a bare UDP echo (issue 37)",
          [sys.executable, str(HERE / "rsi_latency.py"),
           "--seconds", "600" if full else "20"]),
+        ("the robot service over RSI running a program: the twin's round trips beside a "
+         "bare UDP echo (issue 37)",
+         [sys.executable, str(HERE / "rsi_latency.py"), "--in-service",
+          "--seconds", "600" if full else "20"]),
+        ("the robot service over EGM running a program: the twin's round trips beside a "
+         "bare UDP echo (issue 37)",
+         [sys.executable, str(HERE / "egm_latency.py"), "--in-service",
+          "--seconds", "600" if full else "20"]),
         ("tracker stream at 1 kHz: sample → subscriber latency, share delivered (issue 38)",
          [sys.executable, str(HERE / "tracker_stream.py"), "--seconds", "10" if full else "3"]),
         ("twin path deviation at speed: 1 m LIN at 50/100/250 mm/s (issue 37)",

@@ -79,10 +79,13 @@ _SAMPLE = {DataTypes.Double: 0.0, DataTypes.Integer: 0, DataTypes.Byte: 0,
            DataTypes.Boolean: False, DataTypes.String: "x"}
 
 
-async def _contract(kind: str, kwargs: dict[str, Any], cell: str, tmp_path) -> None:
+async def _contract(kind: str, kwargs: dict[str, Any], cell: str, tmp_path,
+                    device: Any = None) -> None:
+    """The contract of a running service; ``device()``, if given, starts the device it
+    drives while the service starts (a robot streaming to it)."""
     cls = load_kind(kind)
     service = build(kind, None, kwargs, cell=cell, journal=tmp_path / "journal")
-    await service.start()
+    await asyncio.gather(service.start(), *([asyncio.to_thread(device)] if device else []))
     name = service.name
     try:
         async with Client("CONFORMANCE", cell=cell) as client:
@@ -126,10 +129,13 @@ def test_a_running_service_keeps_the_contract(kind, tmp_path, monkeypatch):
 
 
 @pytest.mark.slow
-def test_the_robot_over_rsi_keeps_the_contract(tmp_path, monkeypatch):
-    """The robot kind with its programs on the PC and the twin's RSI side as the robot."""
+@pytest.mark.parametrize("vendor", ["rsi", "egm"])
+def test_the_robot_streamed_from_the_pc_keeps_the_contract(vendor, tmp_path, monkeypatch):
+    """The robot kind with its programs on the PC and the twin's RSI or EGM side as the
+    robot (a controller timeout of 4 s each: this machine is shared)."""
     import socket
 
+    from plugcell.sim.controller.egm_twin import EgmTwinProcess
     from plugcell.sim.controller.rsi_twin import RsiTwinProcess
 
     monkeypatch.setenv("PLUGCELL_HOME", str(tmp_path / "home"))
@@ -137,6 +143,12 @@ def test_the_robot_over_rsi_keeps_the_contract(tmp_path, monkeypatch):
         s.bind(("127.0.0.1", 0))
         port = s.getsockname()[1]
     cell = f"conf{uuid.uuid4().hex[:10]}"
-    with RsiTwinProcess(f"127.0.0.1:{port}", "--timeout", "1000"):
+    twin, timeout = ((RsiTwinProcess, {"rsi_timeout": 1000}) if vendor == "rsi" else
+                     (EgmTwinProcess, {"egm_timeout": 4.0}))
+    robot = twin(f"127.0.0.1:{port}", "--timeout", str(next(iter(timeout.values()))))
+    try:
         asyncio.run(asyncio.wait_for(_contract(
-            "robot", {"rsi": f"127.0.0.1:{port}", "rsi_timeout": 1000}, cell, tmp_path), 90))
+            "robot", {vendor: f"127.0.0.1:{port}", **timeout}, cell, tmp_path, robot.start),
+            90))
+    finally:
+        robot.kill()

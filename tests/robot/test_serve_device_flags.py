@@ -120,3 +120,14 @@ def test_rsi_flags_become_robot_parameters():
                                     "rsi_timeout": 100, "robot": "smart_h4"}
     with pytest.raises(CommandError, match="--rsi: not an option of TrackerService"):
         _device_options("tracker", _args(rsi="127.0.0.1:49152"))
+
+
+def test_egm_flags_become_robot_parameters():
+    kind = "robot"
+    pairs = _device_options(kind, _args(egm="192.168.125.100:6510", egm_robot="192.168.125.1",
+                                        egm_timeout=2.5, robot="smart_h4"))
+    assert _params(kind, pairs) == {"egm": "192.168.125.100:6510",
+                                    "egm_robot": "192.168.125.1", "egm_timeout": 2.5,
+                                    "robot": "smart_h4"}
+    with pytest.raises(CommandError, match="--egm: not an option of TrackerService"):
+        _device_options("tracker", _args(egm="127.0.0.1:6510"))

@@ -56,6 +56,14 @@ def configure(p: argparse.ArgumentParser) -> None:
                      "--rsi host)")
     dev.add_argument("--rsi-timeout", type=int, metavar="N",
                      help="robot: the RSI ETHERNET object's Timeout (late packets; default 100)")
+    dev.add_argument("--egm", metavar="HOST:PORT",
+                     help="robot: an ABB robot over EGM, the program on the PC (the PC drives); "
+                     "where plugcell listens for the controller's EgmRobot messages "
+                     "(docs/abb-egm.md)")
+    dev.add_argument("--egm-robot", metavar="HOST[:PORT]",
+                     help="robot: the controller's address (default: the --egm host)")
+    dev.add_argument("--egm-timeout", type=float, metavar="S",
+                     help="robot: EGMSetupUC's \\CommTimeout (s; default 1)")
     add_robot_args(dev, help="robot: shipped name (default smart_h4), description file "
                    "(.toml) or URDF/xacro file (with --robot-arg, --package-path, --base-link, "
                    "--tip-link)")
@@ -125,7 +133,8 @@ def _device_options(kind: str, args: argparse.Namespace) -> list[str]:
         else:
             raise CommandError(f"--sim: {cls.__name__} has no simulated mode")
     for flag, key in (("line", "line"), ("rsi", "rsi"), ("rsi_robot", "rsi_robot"),
-                      ("rsi_timeout", "rsi_timeout"), ("robot", "robot"),
+                      ("rsi_timeout", "rsi_timeout"), ("egm", "egm"), ("egm_robot", "egm_robot"),
+                      ("egm_timeout", "egm_timeout"), ("robot", "robot"),
                       ("payload_kg", "payload_kg"), ("speed", "speed"), ("seed", "seed"),
                       ("endpoint", "endpoint"), ("map", "map"), ("trust", "trust")):
         value = getattr(args, flag, None)

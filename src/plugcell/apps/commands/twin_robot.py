@@ -7,7 +7,10 @@ RSI, or an ABB controller's EGM loop, standalone.
                       [--correction joint|cartesian] [--cycle IPO_FAST|IPO] [--timeout 100]
                       [--bind HOST[:PORT]] [--robot R] [--seed S] [--payload-kg M]
                       [--joints Q1,…,Q6] [--lockstep S] [--reflector NAME [--cell C]]
-                      [--duration S]
+                      [--duration S] [--stats FILE]
+    plugcell twin egm [--port 6510] [--ip 127.0.0.1] [--timeout 1.0] [--bind HOST[:PORT]]
+                      [--robot R] [--seed S] [--payload-kg M] [--joints Q1,…,Q6]
+                      [--reflector NAME [--cell C]] [--duration S] [--stats FILE]
 
 It stands where a KUKA controller running plugcell's KRL program (``plugcell rsi
 files``) stands: from ``RSI_ON`` on it sends ``<Rob>`` every cycle to the PC's ``--ip``
@@ -22,7 +25,13 @@ that instant.  ``--lockstep S`` waits up to S seconds for each answer: the
 arm then moves as with a real-time PC on a machine that is not one (``plugcell demo
 --link rsi``).  ``--reflector NAME`` publishes the arm's true T-MAC pose to
 the cell's simulated world as it moves, for a simulated tracker
-(:class:`~plugcell.sim.controller.reflector.ReflectorFeed`).
+(:class:`~plugcell.sim.controller.reflector.ReflectorFeed`).  ``--stats FILE`` writes, at
+the end, the robot side's counts and every packet's round trip (its send to the first
+answer, ns; −1: unanswered) as JSON, for ``benchmarks/stream_in_service.py``.
+
+``twin egm`` is the same twin behind an ABB controller's EGM loop in joint mode
+(:class:`~plugcell.sim.controller.egm_twin.TwinEgmRobot`: the feedback pose the nominal
+model's forward kinematics of the joints); ``--timeout`` is its ``\\CommTimeout`` (s).
 """
 
 from __future__ import annotations
@@ -64,6 +73,9 @@ def _side_options(r: argparse.ArgumentParser, common, what: str, default_port: i
     add_cell_args(r)
     r.add_argument("--duration", type=float, default=0.0,
                    help="seconds to stream, then stop (default: until interrupted)")
+    r.add_argument("--stats", metavar="FILE",
+                   help="at the end, write the robot side's counts and every answer's round "
+                   "trip (ns) to FILE as JSON (benchmarks)")
 
 
 def add_robot_sides(tw: argparse._SubParsersAction, common, rsi, egm) -> None:
@@ -200,6 +212,19 @@ def _until_stopped(args: argparse.Namespace, running, offset) -> np.ndarray:
     return peak
 
 
+def _write_stats(path: str | None, cycles: int, answered: int, late: int,
+                 rtts: list, stopped: str | None) -> None:
+    """``--stats FILE``: the counts, every packet's ``(sent, round trip)`` (ns; −1: no
+    answer) and why the robot side stopped (``null``: it did not), as JSON."""
+    if path:
+        import json
+        from pathlib import Path
+
+        Path(path).write_text(json.dumps({"cycles": cycles, "answered": answered,
+                                          "late": late, "rtt_ns": list(rtts),
+                                          "stopped": stopped}))
+
+
 def _scenario_of(args: argparse.Namespace, scenario, what: str):
     from plugcell.apps.cli import CommandError
 
@@ -225,6 +250,7 @@ def run_rsi(args: argparse.Namespace, scenario) -> int:
     robot.stop()
     world.close()
     st = robot.stats()
+    _write_stats(args.stats, st.cycles, st.answered, st.delay, robot.rtts, robot.stopped)
     print(f"twin rsi: {st.cycles} cycles, {st.answered} answered, Delay {st.delay}, "
           f"{_largest(peak, config.correction)}", flush=True)
     if robot.stopped:
@@ -236,7 +262,7 @@ def run_rsi(args: argparse.Namespace, scenario) -> int:
 def run_egm(args: argparse.Namespace, scenario) -> int:
     """Run ``twin egm`` (module docstring) for the twin ``scenario`` (a TwinScenario)."""
     from plugcell.apps.cli import CommandError
-    from plugcell.sim.controller.egm_robot import DynamicFollower, EgmRobotSim
+    from plugcell.sim.controller.egm_twin import TwinEgmRobot
     from plugcell.sim.twin.dynamics import DynamicTwin
 
     scenario = _scenario_of(args, scenario, "egm")
@@ -246,9 +272,7 @@ def run_egm(args: argparse.Namespace, scenario) -> int:
             raise ValueError(f"--timeout must be positive seconds, not {args.timeout}")
         arm = _within_limits(DynamicTwin(scenario, q0=q0))
         start = arm.measured.copy()
-        robot = EgmRobotSim(sensor, mode="joint", joints=start,
-                            sample_s=arm.params.cycle, comm_timeout_s=args.timeout,
-                            follower=DynamicFollower(arm), bind=bind)
+        robot = TwinEgmRobot(arm, sensor, comm_timeout_s=args.timeout, bind=bind)
     except (ValueError, OSError) as exc:
         raise CommandError(f"twin egm: {exc}") from None
     world = _World(args, arm, "egm")
@@ -261,6 +285,8 @@ def run_egm(args: argparse.Namespace, scenario) -> int:
                           lambda: robot.state()["joints"] - start)
     robot.stop()
     world.close()
+    _write_stats(args.stats, robot.sent, robot.answers, robot.unanswered, robot.rtts,
+                 robot.stopped)
     print(f"twin egm: {robot.sent} samples, {robot.answers} answers, {robot.unanswered} "
           f"unanswered, {_largest(peak, 'joint').replace('correction', 'move')}", flush=True)
     if robot.stopped:

@@ -7,8 +7,9 @@ strings — as the line protocol's messages (docs/controller-protocol.md) to a
 
 * :class:`~plugcell.devices.robot.bridge.ControllerBridge` — a controller that runs the
   programs itself, real or simulated, over TCP;
-* :class:`~plugcell.devices.robot.rsi_controller.RsiController` — the program runs on the
-  PC and each move streams to a KUKA robot over RSI (the PC drives).
+* :class:`~plugcell.devices.robot.stream_controller.StreamController` — the program runs
+  on the PC and each move streams to the robot: a KUKA robot over RSI, an ABB robot over
+  EGM (the PC drives).
 
 Either calls back the service (a :class:`~plugcell.devices.robot.bridge.BridgeHandler`)
 with what the robot says unasked — program started, console lines, ACTIVATE strings,

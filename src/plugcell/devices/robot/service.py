@@ -33,9 +33,9 @@ Positions are PDL's: mm and Comau ZYZ degrees.  The controller is reached over
 the line protocol (:mod:`plugcell.devices.robot.bridge`): with ``sim`` the service
 starts its own simulated controller process (:mod:`plugcell.sim.controller.launcher`),
 otherwise it connects to ``line = HOST:PORT`` — a real controller speaking
-docs/controller-protocol.md — or, with ``rsi = HOST:PORT``, runs the programs on the PC
-and streams each move to a KUKA robot over RSI
-(:mod:`plugcell.devices.robot.rsi_controller`); either is a
+docs/controller-protocol.md — or, with ``rsi = HOST:PORT`` / ``egm = HOST:PORT``, runs
+the programs on the PC and streams each move to a KUKA robot over RSI or an ABB robot over
+EGM (:mod:`plugcell.devices.robot.stream_controller`); either is a
 :class:`~plugcell.devices.robot.link.RobotLink` chosen at construction.  The
 program's ACTIVATE strings are handled by the
 :class:`~plugcell.devices.robot.outbound.ExternalProcessHandler`.
@@ -89,7 +89,8 @@ from plugcell.devices.robot.protocol import (
     parse_fields,
     parse_numbers,
 )
-from plugcell.devices.robot.rsi_controller import rsi_controller
+from plugcell.devices.robot.stream_controller import StreamController
+from plugcell.devices.robot.streamed import streamed_link
 from plugcell.framework.messages import Command, CommandTypes, ConnectionStates, DataTypes
 from plugcell.framework.participant import PartnerError
 from plugcell.framework.service import DeviceError, GenericDevice
@@ -175,6 +176,10 @@ class RobotService(GenericDevice):
         "rsi": str,
         "rsi_robot": str,
         "rsi_timeout": int,
+        "egm": str,
+        "egm_robot": str,
+        "egm_timeout": float,
+        "stream_process": _flag,
         "joint_speed": float,
         "tcp_speed": float,
         "joint_rate": float,
@@ -196,23 +201,26 @@ class RobotService(GenericDevice):
         rsi: str = "",
         rsi_robot: str = "",
         rsi_timeout: int = 100,
+        egm: str = "",
+        egm_robot: str = "",
+        egm_timeout: float = 1.0,
+        stream_process: bool = True,
         joint_speed: float = 20.0,
         tcp_speed: float = 100.0,
         joint_rate: float = DEFAULT_RATE_HZ,
         connect_timeout: float = 30.0,
         **kwargs: Any,
     ) -> None:
-        if sum(map(bool, (sim, line, rsi))) > 1:
-            raise ValueError("give one of sim, line=HOST:PORT or rsi=HOST:PORT, not "
-                             "several")
-        if not sim and not line and not rsi:
+        if sum(map(bool, (sim, line, rsi, egm))) > 1:
+            raise ValueError("give one of sim, line=HOST:PORT, rsi=HOST:PORT or "
+                             "egm=HOST:PORT, not several")
+        if not sim and not line and not rsi and not egm:
             raise ValueError("the robot service needs a controller: sim=true (a simulated one), "
-                             "line=HOST:PORT or rsi=HOST:PORT (a KUKA robot over RSI)")
+                             "line=HOST:PORT, rsi=HOST:PORT (a KUKA robot over RSI) or "
+                             "egm=HOST:PORT (an ABB robot over EGM)")
         if dynamics and not sim:
             raise ValueError("dynamics moves the simulated controller's twin in time: give "
                              "sim=true too")
-        if rsi_robot and not rsi:
-            raise ValueError("rsi_robot names the controller of an RSI stream: give rsi too")
         if not (speed > 0):
             raise ValueError(f"speed must be positive, not {speed}")
         if not (math.isfinite(payload_kg) and payload_kg >= 0):
@@ -223,8 +231,8 @@ class RobotService(GenericDevice):
         self.sim = sim
         self.link_baud = link_baud
         self.dynamics = dynamics
-        self.endpoint: tuple[str, int] | None = (parse_address(line or rsi)
-                                                 if line or rsi else None)
+        self.endpoint: tuple[str, int] | None = (parse_address(line or rsi or egm)
+                                                 if line or rsi or egm else None)
         self.robot = robot
         self.payload_kg = payload_kg
         self.speed = speed
@@ -232,13 +240,14 @@ class RobotService(GenericDevice):
         self.library = [Path(p) for p in library.split(",") if p.strip()] if library else []
         self.connect_timeout = connect_timeout
         # the link to the robot (plugcell.devices.robot.link): a controller that runs the
-        # programs (line protocol), or the programs on the PC streaming over KUKA RSI
-        self.bridge: RobotLink = ControllerBridge(self)
-        if rsi:
-            self.bridge = rsi_controller(
-                self, listen=rsi, robot_address=rsi_robot, robot=robot,
-                timeout_packets=rsi_timeout, joint_speed_deg_s=joint_speed,
-                tcp_speed_mm_s=tcp_speed, library=self.library, name=self.name)
+        # programs (line protocol), or the programs on the PC streaming over RSI or EGM
+        self.bridge: RobotLink = streamed_link(
+            self, robot=robot, library=self.library, name=self.name, rsi=rsi,
+            rsi_robot=rsi_robot, rsi_timeout=rsi_timeout, egm=egm, egm_robot=egm_robot,
+            egm_timeout=egm_timeout, joint_speed=joint_speed, tcp_speed=tcp_speed,
+            process=stream_process) or ControllerBridge(self)
+        if isinstance(self.bridge, StreamController):  # the UI's device panel shows it
+            self.device.info = f"{self.info} Robot link: {self.bridge.describe()}."
         self.outbound = ExternalProcessHandler(self)
         self.sim_process: SimControllerProcess | None = None
         self.program = ProgramStatus()

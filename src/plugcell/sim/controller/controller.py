@@ -41,15 +41,10 @@ from plugcell.devices.robot.framing import FramingError, LineBuffer, frame_line
 from plugcell.devices.robot.protocol import (
     PROTOCOL,
     VERSION,
-    ArmJntp,
-    ArmPos,
     Console,
     Hello,
-    JntpToPos,
     Message,
     Move,
-    Ping,
-    PosToJntp,
     ProgramEnded,
     ProgramStarted,
     ProtocolError,
@@ -58,20 +53,19 @@ from plugcell.devices.robot.protocol import (
     Result,
     ResultData,
     Run,
-    Status,
     Stop,
     StreamEnd,
     Value,
     decode,
     encode,
     format_number,
-    format_numbers,
 )
+from plugcell.devices.robot.requests import Staged, answer, check_line, deliver, status_text
 from plugcell.devices.robot.runner import TEXT_MAX, ProgramRunner, RunError
 from plugcell.devices.robot.serial_line import SerialLine
 from plugcell.pdl import MotionError, SimClock
 from plugcell.pdl.predefined import EXT_DATA_MAX
-from plugcell.pdl.values import JointPos, Position
+from plugcell.pdl.values import Position
 from plugcell.sim.controller.arm import DynamicArm, TwinArm
 
 if TYPE_CHECKING:
@@ -81,9 +75,6 @@ __all__ = ["SimController", "main"]
 
 log = logging.getLogger("plugcell.sim.controller")
 
-#: Staged VALUE lines: at most this many RUN ids and values per id.
-MAX_STAGED_RUNS = 8
-MAX_VALUES_PER_RUN = 1000
 LOST = "connection to the robot service lost"
 #: How long a new connection waits for the previous one to finish closing.
 HANDOVER_S = 1.0
@@ -143,7 +134,7 @@ class SimController:
         self.runner = ProgramRunner(arm, self.clock, _ProgramChannel(self), self._event, library)
         self._link: Link | None = None
         self._link_lock = threading.Lock()
-        self._staged: dict[int, dict[str, str]] = {}
+        self._staged = Staged()
         self._move_lock = threading.Lock()
         self._moving = False
         self._move_stop = threading.Event()
@@ -272,28 +263,15 @@ class SimController:
             return
         if isinstance(message, ResultData | Result | StreamEnd):
             self.carry(line, outbound=False)
-        if isinstance(message, ResultData):
-            if message.frame:
-                self.runner.frame(message)
-            else:
-                self.runner.stage_data(message)
-        elif isinstance(message, Result):
-            self.runner.result(message.ok, message.message)
-        elif isinstance(message, StreamEnd):
-            self.runner.stream_end(message.ok, message.message)
-        elif isinstance(message, Request):
+        if not deliver(self.runner, message) and isinstance(message, Request):
             self._request(link, message)
 
     def _request(self, link: Link, req: Request) -> None:
         if isinstance(req, Value):
-            staged = self._staged.setdefault(req.id, {})
-            if len(self._staged) > MAX_STAGED_RUNS:
-                self._staged.pop(next(iter(self._staged)))
-            if len(staged) < MAX_VALUES_PER_RUN:
-                staged[req.name] = req.text
+            self._staged.add(req.id, req.name, req.text)
             return
         if isinstance(req, Run):
-            values = self._staged.pop(req.id, {})
+            values = self._staged.take(req.id)
             self._in_thread(link, req.id, lambda: self._run(req, values))
             return
         if isinstance(req, Stop):
@@ -327,41 +305,11 @@ class SimController:
         threading.Thread(target=run, name=f"request-{ident}", daemon=True).start()
 
     def _answer(self, req: Request) -> str:
-        arm = self.arm
-        if isinstance(req, Ping):
-            return ""
-        if isinstance(req, Status):
-            return self.status()
-        if isinstance(req, ArmPos):
-            return format_numbers(arm.arm_pos().as_tuple())
-        if isinstance(req, ArmJntp):
-            return format_numbers(arm.arm_jntp().joints)
-        if isinstance(req, PosToJntp):
-            return format_numbers(arm.pos_to_jntp(Position(*req.values)).joints)
-        if isinstance(req, JntpToPos):
-            return format_numbers(arm.jntp_to_pos(JointPos(req.values)).as_tuple())
-        raise ValueError(f"unsupported request {type(req).__name__}")  # pragma: no cover
+        return answer(self.arm, req, self.status)
 
     def status(self) -> str:
-        """``state=… run=… program=… sim=… clock=… line=…`` of the status reply."""
-        cur = self.runner.current
-        fields = {"state": "IDLE", "run": "0", "program": "", "sim": "0", "line": ""}
-        if cur is not None:
-            loc = cur.execution.location
-            fields.update(
-                state="RUNNING",
-                run=str(cur.run),
-                program=cur.program,
-                sim=format_number(round(cur.execution.sim_time, 6)),
-                line=f"{Path(loc.file).name}:{loc.line}" if loc else "",
-            )
-        elif self._moving:
-            fields["state"] = "MOVING"
-        last = self.runner.last
-        if last is not None:
-            fields.update(last_run=str(last.run), last_program=last.program, last_state=last.state)
-        fields["clock"] = format_number(round(self.clock.now(), 6))
-        return " ".join(f"{k}={v.replace(' ', '_')}" for k, v in fields.items())
+        """``state=… run=… program=… sim=… line=… clock=…`` of the status reply."""
+        return status_text(self.runner, self.clock, self._moving)
 
     def _run(self, req: Run, values: dict[str, str]) -> str:
         with self._move_lock:  # the arm has one owner: a program or a MOVE
@@ -419,8 +367,7 @@ class _ProgramChannel:
         self.controller = controller
 
     def write(self, line: str) -> None:
-        if "\n" in line or "\r" in line:
-            raise ValueError("a pc_client line cannot contain a line break")
+        check_line(line)
         link = self.controller.link
         if link is None:
             raise ConnectionError("no connection to the robot service")

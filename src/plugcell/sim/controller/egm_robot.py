@@ -92,7 +92,7 @@ class DynamicFollower:
             raise ValueError(f"the EGM sample {dt} s is not the twin's cycle "
                              f"{self.arm.params.cycle} s")
         self.arm.step(target)
-        return self.arm.measured
+        return np.array(self.arm.measured, dtype=float)
 
 
 def _slerp_toward(q: Array, target: Array, fraction: float) -> Array:
@@ -160,6 +160,9 @@ class EgmRobotSim:
         self.unanswered = 0  # samples that went out with no answer before the next one
         self.rejected = 0  # datagrams that were no sensor message of the mode
         self.stopped: str | None = None
+        #: every sample's (message sent, round trip until the first answer) in ns; −1: no
+        #: answer before the next sample
+        self.rtts: list[tuple[int, int]] = []
         self.test_signals = (0.0,) * 6
         self._stop = threading.Event()
         self._lock = threading.Lock()
@@ -255,6 +258,11 @@ class EgmRobotSim:
             self._thread.join(2.0)
         self.sock.close()
 
+    @property
+    def running(self) -> bool:
+        """The loop runs (started, not stopped by :meth:`stop` or the timeout)."""
+        return self._thread is not None and self._thread.is_alive()
+
     def wait_stopped(self, timeout: float) -> bool:
         """Wait until the loop stopped by itself (communication timeout)."""
         end = time.monotonic() + timeout
@@ -268,11 +276,13 @@ class EgmRobotSim:
         next_t = time.monotonic()
         last_answer = next_t
         answered_this = True
+        t_sent = 0
         while not self._stop.is_set():
             now = time.monotonic()
             if now >= next_t:
                 if not answered_this and self.sent:
                     self.unanswered += 1
+                    self.rtts.append((t_sent, -1))
                 if now - last_answer >= self.comm_timeout_s:
                     self.stopped = (f"EGM communication timeout: no message from the sensor "
                                     f"for {now - last_answer:.3f} s (\\CommTimeout "
@@ -284,6 +294,7 @@ class EgmRobotSim:
                     # the sensor's host unreachable: the timeout decides
                     with contextlib.suppress(OSError):
                         self.sock.sendto(self.robot_message(), self.sensor)
+                    t_sent = time.monotonic_ns()
                 self.sent += 1
                 answered_this = False
                 next_t += self.T
@@ -302,6 +313,8 @@ class EgmRobotSim:
                         ok = self.take(data)
                     if ok:
                         self.answers += 1
+                        if not answered_this:  # the first answer to this sample
+                            self.rtts.append((t_sent, time.monotonic_ns() - t_sent))
                         answered_this = True
                         last_answer = time.monotonic()
                     else:

@@ -170,6 +170,10 @@ class RsiRobot:
         self._command = self._q_start.copy()
         self._offset = np.zeros(6)
         self._last = np.zeros(6)
+        #: every cycle's (packet sent, round trip until its answer arrived) in ns; −1: no
+        #: answer in the cycle (late)
+        self.rtts: list[tuple[int, int]] = []
+        self._t_sent = 0
 
     @property
     def address(self) -> tuple[str, int]:
@@ -228,8 +232,11 @@ class RsiRobot:
         while not self._stop.is_set():
             with contextlib.suppress(OSError):  # unreachable: its answer will be missing
                 self._sock.sendto(packet, self._sensor)
+            self._t_sent = time.monotonic_ns()
             next_t += T
             answer = self._await(self._ipoc, max(next_t, time.monotonic() + self.lockstep_s))
+            self.rtts.append((self._t_sent, time.monotonic_ns() - self._t_sent
+                              if answer is not None else -1))
             self._k = min(self._k + 1, len(self._path) - 1)  # the program's motion goes on
             offset = self._apply(answer)
             state = self.arm.step(self._command)

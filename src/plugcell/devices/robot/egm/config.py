@@ -111,6 +111,17 @@ class EgmConfig:
         return self.sample_rate_ms / 1000
 
     @property
+    def vendor(self) -> str:
+        """The interface's name in messages."""
+        return "EGM"
+
+    @property
+    def joint_targets(self) -> bool:
+        """Each answer carries the whole joint command (``EGMRunJoint``): what the PC needs
+        to drive the robot along a planned trajectory."""
+        return self.mode == "joint"
+
+    @property
     def timeout_s(self) -> float:
         """One controller timeout (s): silence this long stops the stream."""
         return float(self.comm_timeout_s)

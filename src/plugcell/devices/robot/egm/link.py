@@ -100,6 +100,11 @@ class EgmLink(StreamLink):
     def _clock_ms(self, state: EgmState) -> int:
         return state.tm
 
+    def joint_base(self, state: object) -> np.ndarray:
+        """Where the session's joint offsets start: ``q₀``, the feedback joints of its first
+        message (every joint target sent is ``q₀ + o``)."""
+        return self._q0.copy()
+
     def _on_begin(self, state: EgmState) -> None:
         self._q0 = state.joints.copy()
         if state.position is not None and state.quaternion is not None:

@@ -117,6 +117,11 @@ class EgmState:
     test_signals: tuple[float, ...] = ()
     utilization: float | None = None
 
+    @property
+    def joints_setpoint(self) -> Array | None:
+        """``planned.joints``: the joints the controller commands (rad), as RSI's ``ASPos``."""
+        return self.planned_joints
+
 
 def _finite(where: str, values, bound: float = math.inf) -> list[float]:
     vals = list(values)

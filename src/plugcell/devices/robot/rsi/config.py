@@ -180,6 +180,17 @@ class RsiConfig:
         return CYCLES[self.cycle]
 
     @property
+    def vendor(self) -> str:
+        """The interface's name in messages."""
+        return "RSI"
+
+    @property
+    def joint_targets(self) -> bool:
+        """Each answer carries the whole joint command (absolute ``AKorr``): what the PC
+        needs to drive the robot along a planned trajectory."""
+        return self.correction == "joint" and self.mode == "absolute"
+
+    @property
     def ipoc_step(self) -> int:
         """IPOC advance per cycle: the controller's IPOC counts milliseconds."""
         return round(self.cycle_s * 1000)

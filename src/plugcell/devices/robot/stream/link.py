@@ -36,6 +36,7 @@ import select
 import socket
 import threading
 import time
+from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any
 
@@ -115,6 +116,16 @@ class LinkStats:
     last_reason: str
 
 
+def realtime(priority: int) -> str:
+    """Put the calling thread under ``SCHED_FIFO`` at ``priority``, if allowed; what
+    happened, as a note."""
+    try:
+        os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(priority))
+    except (AttributeError, OSError) as exc:  # not Linux, or no CAP_SYS_NICE
+        return f"SCHED_FIFO refused ({exc}); normal priority"
+    return f"SCHED_FIFO priority {priority}"
+
+
 class StreamLink(Following):
     """The sensor side of one stream (module doc); subclassed per vendor.
 
@@ -180,6 +191,9 @@ class StreamLink(Following):
         self._controller_late = 0
         self._last_rx = 0
         self._latest: Any = None
+        #: called with the link by its thread after every cycle and session event (the
+        #: link process publishes its state so: :mod:`.process`); ``None``: nobody
+        self.observer: Callable[[StreamLink], None] | None = None
 
     # ------------------------------------------------------------ the vendor's codec
 
@@ -321,21 +335,11 @@ class StreamLink(Following):
 
     # ------------------------------------------------------------------ the loop
 
-    def _realtime(self) -> None:
-        """Put the calling thread (the link's) under SCHED_FIFO, if asked and allowed."""
-        if self.rt_priority is None:
-            return
-        try:
-            os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(self.rt_priority))
-        except (AttributeError, OSError) as exc:  # not Linux, or no CAP_SYS_NICE
-            self.rt_note = f"SCHED_FIFO refused ({exc}); normal priority"
-        else:
-            self.rt_note = f"SCHED_FIFO priority {self.rt_priority}"
-
     def _run(self) -> None:
         sock = self._sock
         assert sock is not None
-        self._realtime()
+        if self.rt_priority is not None:
+            self.rt_note = realtime(self.rt_priority)
         poller = select.poll()
         poller.register(sock, select.POLLIN)
         bufsize = self.config.max_packet_bytes + 1
@@ -435,8 +439,7 @@ class StreamLink(Following):
                 self._streak = 0
         self._cycle += 1
         self._check_limits(state)
-        with self._cond:
-            self._cond.notify_all()
+        self._notify()
 
     def _check_limits(self, state: Any) -> None:
         timeout = self.config.timeout_packets
@@ -516,8 +519,15 @@ class StreamLink(Following):
                 f"{self.VENDOR} stream stopped: no packet from the controller for "
                 f"{silent:.3f} s (one controller timeout: {self.config.timeout_packets} × "
                 f"{self.config.cycle_s * 1000:g} ms); last {self._where_last()}"))
+        self._streaming = False
+        self._notify()
+
+    def _notify(self) -> None:
+        """Tell the observer, then the waiters (in that order: a waiter woken by a failure
+        finds it published)."""
         with self._cond:
-            self._streaming = False
+            if self.observer is not None:
+                self.observer(self)
             self._cond.notify_all()
 
     def _where_last(self) -> str:
@@ -527,4 +537,4 @@ class StreamLink(Following):
         with self._cond:
             self._failure = self._last_failure = error
             self._last_reason = str(error)
-            self._cond.notify_all()
+            self._notify()

@@ -1,96 +1,84 @@
-"""The robot service's link to a KUKA robot over RSI: the program runs on the PC.
+"""The robot service's link to a robot streamed from the PC: the program runs on the PC.
 
-:class:`RsiController` is a :class:`~plugcell.devices.robot.link.RobotLink` that is the
+:class:`StreamController` is a :class:`~plugcell.devices.robot.link.RobotLink` that is the
 controller itself, in the service's process: it runs the robot programs with the
 language runtime (:class:`~plugcell.devices.robot.runner.ProgramRunner`), plans and checks
 every move on the PC (:class:`~plugcell.devices.robot.planned_motion.PlannedMotion`) and
-streams it to the robot as absolute joint corrections through an
-:class:`~plugcell.devices.robot.rsi.link.RsiLink`
-(:class:`~plugcell.devices.robot.rsi.drive.RsiDrive`) — issue 37's mode *the PC drives*:
-the controller's KRL program only starts RSI where the robot stands and follows
-(``plugcell rsi files --mode absolute``).  Joint feedback (ARM_JNTP, ARM_POS and every
-move's start) is the RSI packets' ``AIPos``.
+streams it to the robot as whole joint commands through a vendor's real-time link
+(:class:`~plugcell.devices.robot.stream.drive.StreamDrive`) — issue 37's mode *the PC
+drives*: the controller's program only starts the interface where the robot stands and
+follows.  The link's cycle loop runs in a child process of its own
+(:class:`~plugcell.devices.robot.stream.process.LinkProcess`), so that nothing the service
+does delays an answer.  One controller, one vendor's link each (:mod:`.streamed` makes it from the
+service's options): KUKA RSI's absolute joint corrections (``AKorr``), joint feedback
+``AIPos``; ABB EGM's joint targets (``EGMRunJoint``), joint feedback ``feedBack.joints``.
 
 It answers the service's requests as a line-protocol controller would (the same
-messages, the same replies, ``ERR`` reasons as :class:`ControllerError`), so the robot
-service, its commands and the programs behave as with the simulated controller.  The
-program's time is real time: a move lasts its trajectory's duration.
+messages, the same replies, ``ERR`` reasons as :class:`ControllerError`; the shared part
+is :mod:`plugcell.devices.robot.requests`), so the robot service, its commands and the
+programs behave as with the simulated controller.  The program's time is real time: a
+move lasts its trajectory's duration.
 
-*Connected* means the robot is streaming: :meth:`connect` binds the link (once) and waits
-for the controller's packets; when the stream stops — the controller silent for one
-controller timeout, ``Timeout`` missed cycles, a refused correction — the running program
-stops and the service hears ``on_lost`` with the link's reason; its reconnection loop
-then calls :meth:`connect` again, which returns as soon as the controller streams again.
+*Connected* means the robot is streaming: :meth:`StreamController.connect` binds the link
+(once) and waits for the controller's packets; when the stream stops — the controller
+silent for one controller timeout, its limit of missed cycles, a refused correction — the
+running program stops and the service hears ``on_lost`` with the link's reason; its
+reconnection loop then calls :meth:`~StreamController.connect` again, which returns as
+soon as the controller streams again.
 """
 
 from __future__ import annotations
 
 import asyncio
 import contextlib
-import dataclasses
 import itertools
 import logging
 import math
 from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
+from typing import Any
 
-from plugcell.devices.robot.bridge import (
-    BridgeError,
-    BridgeHandler,
-    ControllerError,
-    parse_address,
-)
+from plugcell.devices.robot.bridge import BridgeError, BridgeHandler, ControllerError
 from plugcell.devices.robot.planned_motion import PlannedMotion
 from plugcell.devices.robot.protocol import (
     VERSION,
     ActivateLine,
-    ArmJntp,
-    ArmPos,
     Console,
     Hello,
-    JntpToPos,
     Message,
     Move,
-    Ping,
-    PosToJntp,
     ProgramEnded,
     ProgramStarted,
     ProtocolError,
     Request,
-    Result,
-    ResultData,
-    Status,
     Stop,
-    StreamEnd,
     Value,
     decode,
     format_number,
-    format_numbers,
 )
-from plugcell.devices.robot.rsi.config import CorrectionLimits, RsiConfig
-from plugcell.devices.robot.rsi.drive import RsiDrive
-from plugcell.devices.robot.rsi.link import RsiLink
+from plugcell.devices.robot.requests import Staged, answer, check_line, deliver, status_text
 from plugcell.devices.robot.runner import TEXT_MAX, ProgramRunner, RunError
-from plugcell.io.robots import load_robot
+from plugcell.devices.robot.stream.drive import StreamDrive
+from plugcell.devices.robot.stream.limits import CorrectionLimits
+from plugcell.devices.robot.stream.process import LinkProcess, link_class
 from plugcell.kinematics import RobotDescription
 from plugcell.motion import CartesianLimits, JointLimits
 from plugcell.pdl import MotionError, SimClock
 from plugcell.pdl.predefined import EXT_DATA_MAX
-from plugcell.pdl.values import JointPos, Position
+from plugcell.pdl.values import Position
 
-__all__ = ["RsiController", "StreamedMotion", "rsi_controller", "streaming_limits"]
+__all__ = ["StreamController", "StreamedMotion", "planner_limits", "robot_endpoint",
+           "streaming_limits"]
 
-log = logging.getLogger("plugcell.devices.robot.rsi_controller")
+log = logging.getLogger("plugcell.devices.robot.stream_controller")
 
 #: How often the stream's state is looked at (s).
 WATCH_S = 0.05
-#: Margin of the RSI link's speed limit over the planner's joint speed limit: the planner
+#: Margin of the link's speed limit over the planner's joint speed limit: the planner
 #: keeps every move within the joint limits, the link refuses what would exceed them by more.
 SPEED_MARGIN = 1.5
-
-
 def streaming_limits(joint: JointLimits, cycle_s: float) -> CorrectionLimits:
-    """The RSI link's limits when the PC streams whole moves (policy ``"refuse"``).
+    """The link's limits when the PC streams whole moves (policy ``"refuse"``).
 
     ``max_speed_i = 1.5 · v_i`` and ``max_step_i = 1.5 · v_i · T``: a planned move never
     reaches them, a correction that would is refused and fails the stream.  The total
@@ -113,6 +101,75 @@ def streaming_limits(joint: JointLimits, cycle_s: float) -> CorrectionLimits:
                             tuple(v), "refuse")
 
 
+def planner_limits(joint_speed_deg_s: float, tcp_speed_mm_s: float
+                   ) -> tuple[JointLimits, CartesianLimits]:
+    """The planner's limits from the service's options.
+
+    Parameters
+    ----------
+    joint_speed_deg_s : float
+        Every joint's speed limit (°/s); acceleration 3× and jerk 30× it per second.
+    tcp_speed_mm_s : float
+        The TCP's speed limit of linear moves (mm/s); acceleration 5× and jerk 50× it;
+        the orientation's 30 °/s, 120 °/s², 1200 °/s³.
+
+    Returns
+    -------
+    tuple of (JointLimits, CartesianLimits)
+        In SI.
+
+    Raises
+    ------
+    ValueError
+        A limit that is not a positive number.
+    """
+    for what, v in (("joint_speed", joint_speed_deg_s), ("tcp_speed", tcp_speed_mm_s)):
+        if not (math.isfinite(v) and v > 0):
+            raise ValueError(f"{what} must be a positive number, not {v}")
+    v = math.radians(joint_speed_deg_s)
+    joint = JointLimits.uniform(6, v, 3 * v, 30 * v)
+    s = tcp_speed_mm_s / 1000.0
+    cart = CartesianLimits(s, 5 * s, 50 * s, math.radians(30), math.radians(120),
+                           math.radians(1200))
+    return joint, cart
+
+
+def robot_endpoint(option: str, listen_host: str, robot_address: str) -> tuple[str, int | None]:
+    """The controller's host and (fixed source) port from ``HOST`` or ``HOST:PORT``.
+
+    Parameters
+    ----------
+    option : str
+        The service's option of the stream (``"rsi"``, ``"egm"``), for messages.
+    listen_host : str
+        Where plugcell listens: the controller's host when ``robot_address`` is empty.
+    robot_address : str
+        ``HOST`` or ``HOST:PORT``; empty: the listen host, unless that is a wildcard.
+
+    Returns
+    -------
+    tuple of (str, int or None)
+        Host, and port (``None``: any).
+
+    Raises
+    ------
+    ValueError
+        A bad address, or a wildcard listen address without the controller's.
+    """
+    if not robot_address:
+        if listen_host in ("0.0.0.0", "::"):
+            raise ValueError(f"{option}={listen_host}:… listens on every address: give the "
+                             f"controller's address with {option}_robot=HOST[:PORT]")
+        return listen_host, None
+    rhost, sep, rport = robot_address.strip().rpartition(":")
+    if not sep:
+        rhost, rport = rport, ""
+    if rport and not (rport.isdigit() and 0 < int(rport) < 65536):
+        raise ValueError(f"bad {option.upper()} robot address {robot_address!r}: expected "
+                         "HOST or HOST:PORT")
+    return rhost.strip("[]"), int(rport) if rport else None
+
+
 class StreamedMotion(PlannedMotion):
     """PlannedMotion on a drive that moves in real time: when ``follow`` returns, the move's
     time has passed; the clock is advanced by it and the interpreter is told ``None`` (it
@@ -131,27 +188,27 @@ class StreamedMotion(PlannedMotion):
 class _Channel:
     """``WRITE pc_client``: the program's line goes to the service (in its event loop)."""
 
-    def __init__(self, controller: RsiController) -> None:
+    def __init__(self, controller: StreamController) -> None:
         self.controller = controller
 
     def write(self, line: str) -> None:
-        if "\n" in line or "\r" in line:
-            raise ValueError("a pc_client line cannot contain a line break")
         c = self.controller
+        check_line(line)
         if not c.connected:
             raise ConnectionError(f"no connection to the robot service ({c.lost_reason})")
         c.in_loop(c.program_line, line)
 
 
-class RsiController:
-    """The programs on the PC, the moves over RSI (module docstring).
+class StreamController:
+    """The programs on the PC, the moves streamed to the robot (module docstring).
 
     Parameters
     ----------
     handler : BridgeHandler
         The robot service: told of program events, ACTIVATE strings and a lost stream.
-    config : RsiConfig
-        The stream (joint corrections, absolute mode).
+    config : RsiConfig or EgmConfig
+        The stream; its ``joint_targets`` must hold (RSI: absolute joint corrections;
+        EGM: joint mode).
     description : RobotDescription
         The robot (the controller's nominal model).
     robot : str
@@ -164,13 +221,20 @@ class RsiController:
         Folders of robot programs.
     name : str
         The service's name (HELLO ``name``).
+    process : bool
+        Run the link's cycle loop in a child process
+        (:class:`~plugcell.devices.robot.stream.process.LinkProcess`, the default), or in
+        a thread of this process (measurements: ``benchmarks/rsi_latency.py
+        --in-service``).
     """
 
-    def __init__(self, handler: BridgeHandler, config: RsiConfig, description: RobotDescription,
+    def __init__(self, handler: BridgeHandler, config: Any, description: RobotDescription,
                  robot: str, joint_limits: JointLimits, cartesian_limits: CartesianLimits,
-                 library: Sequence[Path] = (), name: str = "ROBOT") -> None:
+                 library: Sequence[Path] = (), name: str = "ROBOT",
+                 process: bool = True) -> None:
+        self.vendor = config.vendor
         if description.n_readings != 6:
-            raise ValueError(f"RSI streams six axes; {description.name} has "
+            raise ValueError(f"{self.vendor} streams six axes; {description.name} has "
                              f"{description.n_readings}")
         self.handler = handler
         self.config = config
@@ -178,8 +242,11 @@ class RsiController:
         self.robot = robot
         self.name = name
         self.address = f"{config.listen_host}:{config.listen_port}"
-        self.link = RsiLink(config)
-        self.drive = RsiDrive(self.link)
+        if process:
+            self.link = self.drive = LinkProcess(config)
+        else:
+            self.link = link_class(self.vendor)(config)
+            self.drive = StreamDrive(self.link)
         self.clock = SimClock(speed=1.0)
         self.motion = StreamedMotion(description, self.drive, joint_limits, cartesian_limits,
                                      clock=self.clock)
@@ -190,9 +257,18 @@ class RsiController:
         self._connected = False
         self._lost_reason = "not connected"
         self._ids = itertools.count(1)
-        self._staged: dict[int, dict[str, str]] = {}
+        self._staged = Staged()
         self._loop: asyncio.AbstractEventLoop | None = None
         self._watch: asyncio.Task[None] | None = None
+
+    def describe(self) -> str:
+        """The link in a sentence (the service's info in the UI's device panel)."""
+        name = {"RSI": "KUKA RSI", "EGM": "ABB EGM"}.get(self.vendor, self.vendor)
+        port = f":{self.config.robot_port}" if self.config.robot_port else ""
+        return (f"{name}, listening on {self.address} for the controller at "
+                f"{self.config.robot_host}{port}; the PC drives (the program runs on the "
+                f"PC, every move streamed as joint commands every "
+                f"{self.config.cycle_s * 1000:g} ms)")
 
     # ------------------------------------------------------------------ RobotLink
     @property
@@ -212,26 +288,28 @@ class RsiController:
     async def connect(self, host: str, port: int, timeout: float = 10.0) -> Hello:
         """Listen (once) and wait for the controller's stream; BridgeError if none comes."""
         self._loop = asyncio.get_running_loop()
-        if not self._started:
+        if not self._started or not getattr(self.link, "alive", True):  # or it crashed
             try:
-                host, port = self.link.start()
+                host, port = await asyncio.to_thread(self.link.start)
             except OSError as exc:
                 raise BridgeError(str(exc)) from None
             self._started = True
             self.address = f"{host}:{port}"
 
-        def ready(link: RsiLink) -> bool:
+        def ready(link: Any) -> bool:
             return link.streaming and link.failure is None and link.latest is not None
 
         if not await asyncio.to_thread(self.link.wait, ready, timeout):
             why = f" (last: {self.link.failure})" if self.link.failure is not None else ""
-            raise BridgeError(f"no RSI stream from the controller at {self.config.robot_host} "
-                              f"to {self.address} within {timeout:g} s{why}")
+            raise BridgeError(f"no {self.vendor} stream from the controller at "
+                              f"{self.config.robot_host} to {self.address} within "
+                              f"{timeout:g} s{why}")
         self.hello = Hello(VERSION, {
             "robot": self.robot, "axes": "6", "data": str(EXT_DATA_MAX), "text": str(TEXT_MAX),
-            "name": self.name, "rsi": self.address, "mode": "pc-drives"})
+            "name": self.name, self.vendor.lower(): self.address, "mode": "pc-drives"})
         self._connected, self._lost_reason = True, ""
-        self._watch = asyncio.create_task(self._watch_stream(), name="rsi-watch")
+        self._watch = asyncio.create_task(self._watch_stream(),
+                                          name=f"{self.vendor.lower()}-watch")
         return self.hello
 
     async def close(self) -> None:
@@ -250,14 +328,8 @@ class RsiController:
         if not self._connected:
             raise BridgeError(self._lost_reason)
         for m in messages:
-            if isinstance(m, ResultData):
-                (self.runner.frame if m.frame else self.runner.stage_data)(m)
-            elif isinstance(m, Result):
-                self.runner.result(m.ok, m.message)
-            elif isinstance(m, StreamEnd):
-                self.runner.stream_end(m.ok, m.message)
-            elif isinstance(m, Value):
-                self._staged.setdefault(m.id, {})[m.name] = m.text
+            if not deliver(self.runner, m) and isinstance(m, Value):
+                self._staged.add(m.id, m.name, m.text)
 
     async def request(self, request: Request, *, before: tuple[Message, ...] = (),
                       timeout: float | None = None) -> str:
@@ -273,7 +345,7 @@ class RsiController:
         """Start ``program`` as run ``run_id``; its name (ControllerError: why not)."""
         if not self._connected:
             raise BridgeError(self._lost_reason)
-        presets = {**self._staged.pop(run_id, {}), **(values or {})}
+        presets = {**self._staged.take(run_id), **(values or {})}
         try:
             info = await asyncio.to_thread(self.runner.start, run_id, program, presets)
         except RunError as exc:
@@ -282,19 +354,6 @@ class RsiController:
 
     # ------------------------------------------------------------------ requests
     def _answer(self, req: Request) -> str:
-        m = self.motion
-        if isinstance(req, Ping):
-            return ""
-        if isinstance(req, Status):
-            return self._status()
-        if isinstance(req, ArmPos):
-            return format_numbers(m.arm_pos().as_tuple())
-        if isinstance(req, ArmJntp):
-            return format_numbers(m.arm_jntp().joints)
-        if isinstance(req, PosToJntp):
-            return format_numbers(m.pos_to_jntp(Position(*req.values)).joints)
-        if isinstance(req, JntpToPos):
-            return format_numbers(m.jntp_to_pos(JointPos(req.values)).as_tuple())
         if isinstance(req, Stop):
             return self.runner.stop("stopped by the robot service", req.program).state
         if isinstance(req, Move):
@@ -303,20 +362,11 @@ class RsiController:
                 raise RunError(busy)
             t0 = self.clock.now()
             if req.kind == "TO":
-                m.move_to(Position(*req.values))
+                self.motion.move_to(Position(*req.values))
             else:
-                m.move_joints(req.values)
+                self.motion.move_joints(req.values)
             return format_number(self.clock.now() - t0)
-        raise ValueError(f"unsupported request {type(req).__name__}")
-
-    def _status(self) -> str:
-        cur = self.runner.current
-        fields = {"state": "IDLE", "run": "0", "program": "", "sim": "0"}
-        if cur is not None:
-            fields.update(state="RUNNING", run=str(cur.run), program=cur.program,
-                          sim=format_number(round(cur.execution.sim_time, 6)))
-        fields["clock"] = format_number(round(self.clock.now(), 6))
-        return " ".join(f"{k}={v.replace(' ', '_')}" for k, v in fields.items())
+        return answer(self.motion, req, lambda: status_text(self.runner, self.clock))
 
     # ------------------------------------------------------------------ the stream
     async def _watch_stream(self) -> None:
@@ -325,7 +375,8 @@ class RsiController:
             await asyncio.sleep(WATCH_S)
             if link.streaming and link.failure is None:
                 continue
-            reason = str(link.failure) if link.failure is not None else "RSI stream stopped"
+            reason = (str(link.failure) if link.failure is not None
+                      else f"{self.vendor} stream stopped")
             self._connected, self._lost_reason = False, reason
             await asyncio.to_thread(self._stop_program, reason)
             self.handler.on_lost(reason)
@@ -367,71 +418,3 @@ class RsiController:
             self.handler.on_activate(message)
         else:
             self.handler.on_garbled(line, "a program line that is not an ACTIVATE string")
-
-
-def rsi_controller(handler: BridgeHandler, *, listen: str, robot_address: str, robot: str,
-                   timeout_packets: int = 100, joint_speed_deg_s: float = 20.0,
-                   tcp_speed_mm_s: float = 100.0, library: Sequence[Path] = (),
-                   name: str = "ROBOT") -> RsiController:
-    """An :class:`RsiController` from the robot service's options.
-
-    Parameters
-    ----------
-    handler : BridgeHandler
-        The robot service.
-    listen : str
-        ``HOST:PORT`` where plugcell receives the robot's packets (the ethernet
-        configuration's ``IP_NUMBER`` and ``PORT``).
-    robot_address : str
-        The controller's ``HOST`` or ``HOST:PORT`` (packets from elsewhere are dropped);
-        empty: the listen host, unless that is a wildcard.
-    robot : str
-        The robot: a shipped name or a description file.
-    timeout_packets : int
-        The ETHERNET object's ``Timeout`` (late cycles before the controller breaks off).
-    joint_speed_deg_s : float
-        Every joint's speed limit (°/s); acceleration 3× and jerk 30× it per second.
-    tcp_speed_mm_s : float
-        The TCP's speed limit of linear moves (mm/s); acceleration 5× and jerk 50× it.
-    library : sequence of Path
-        Folders of robot programs.
-    name : str
-        The service's name.
-
-    Returns
-    -------
-    RsiController
-        Not yet connected.
-
-    Raises
-    ------
-    ValueError
-        A bad address, limit or robot, with the reason.
-    """
-    host, port = parse_address(listen)
-    if robot_address:
-        rhost, sep, rport = robot_address.strip().rpartition(":")
-        if not sep:
-            rhost, rport = rport, ""
-        if rport and not (rport.isdigit() and 0 < int(rport) < 65536):
-            raise ValueError(f"bad RSI robot address {robot_address!r}: expected HOST or "
-                             "HOST:PORT")
-        robot_port = int(rport) if rport else None
-    elif host in ("0.0.0.0", "::"):
-        raise ValueError(f"rsi={listen} listens on every address: give the controller's "
-                         "address with rsi_robot=HOST[:PORT]")
-    else:
-        rhost, robot_port = host, None
-    for what, v in (("joint_speed", joint_speed_deg_s), ("tcp_speed", tcp_speed_mm_s)):
-        if not (math.isfinite(v) and v > 0):
-            raise ValueError(f"{what} must be a positive number, not {v}")
-    v = math.radians(joint_speed_deg_s)
-    joint = JointLimits.uniform(6, v, 3 * v, 30 * v)
-    s = tcp_speed_mm_s / 1000.0
-    cart = CartesianLimits(s, 5 * s, 50 * s, math.radians(30), math.radians(120),
-                           math.radians(1200))
-    base = RsiConfig(robot_host=rhost.strip("[]"), listen_host=host, listen_port=port,
-                     robot_port=robot_port, correction="joint", mode="absolute",
-                     timeout_packets=timeout_packets)
-    config = dataclasses.replace(base, limits=streaming_limits(joint, base.cycle_s))
-    return RsiController(handler, config, load_robot(robot), robot, joint, cart, library, name)

@@ -1,12 +1,14 @@
-"""The robot service over KUKA RSI (issue 37 §1, §5, §6): the program runs on the PC, each
-move streams to the twin's RSI robot side (its own process, a KUKA controller over UDP)
-as absolute joint corrections; joint feedback is the RSI packets' AIPos.
+"""The robot service over KUKA RSI and ABB EGM (issue 37 §1, §5, §6): the program runs on
+the PC, each move streams to the twin's robot side (its own process, a KUKA controller
+over UDP as absolute joint corrections, or an ABB controller's EGMRunJoint as joint
+targets); joint feedback is the packets' actual joints (AIPos, feedBack.joints).  Each
+test runs over both.
 
 * two PTPs and a LIN end Completed with the twin at the last move's end (within the
   following error);
 * an unreachable move and one beyond the joint limits end Failed naming the program line,
   the move and why — and the robot is still there;
-* killing the twin's RSI side fails the running process within one controller timeout,
+* killing the twin's robot side fails the running process within one controller timeout,
   and the service comes back Online (and runs programs again) when the robot streams again;
 * bad options are refused with the reason.
 """
@@ -14,6 +16,7 @@ as absolute joint corrections; joint feedback is the RSI packets' AIPos.
 from __future__ import annotations
 
 import asyncio
+import dataclasses
 import socket
 import time
 from pathlib import Path
@@ -27,12 +30,36 @@ from plugcell.devices.robot.service import RobotService
 from plugcell.framework import Client, ProcessStates
 from plugcell.framework.data import from_data
 from plugcell.framework.messages import ConnectionStates
+from plugcell.sim.controller.egm_twin import EgmTwinProcess
 from plugcell.sim.controller.rsi_twin import RsiTwinProcess
 
-#: The ETHERNET object's Timeout of these tests (packets of 4 ms): the twin counts every
-#: late answer, and this machine is shared — 1000 leaves room, one timeout is 4 s.
+#: The controller timeout of these tests: RSI's ETHERNET Timeout (packets of 4 ms; the twin
+#: counts every late answer, and this machine is shared — 1000 leaves room) and EGM's
+#: \CommTimeout, both 4 s.
 TIMEOUT = 1000
 TIMEOUT_S = TIMEOUT * 0.004
+
+
+@dataclasses.dataclass(frozen=True)
+class Vendor:
+    """How a test reaches the robot over one interface."""
+
+    name: str
+    twin: type
+    twin_options: tuple[str, ...]
+    timeout: dict
+
+    def service_params(self, port: int) -> dict:
+        return {self.name.lower(): f"127.0.0.1:{port}", **self.timeout}
+
+    def robot(self, port: int):
+        return self.twin(f"127.0.0.1:{port}", *self.twin_options)
+
+
+VENDORS = [Vendor("RSI", RsiTwinProcess, ("--timeout", str(TIMEOUT)),
+                  {"rsi_timeout": TIMEOUT}),
+           Vendor("EGM", EgmTwinProcess, ("--timeout", str(TIMEOUT_S)),
+                  {"egm_timeout": TIMEOUT_S})]
 
 MOVES = """\
 PROGRAM rsimoves
@@ -87,9 +114,9 @@ def library(tmp_path: Path) -> Path:
     return lib
 
 
-def _service(port: int, library: Path, cell: str, tmp_path: Path) -> RobotService:
-    service = build("robot", None, {"rsi": f"127.0.0.1:{port}", "rsi_timeout": TIMEOUT,
-                                    "library": str(library)},
+def _service(vendor: Vendor, port: int, library: Path, cell: str,
+             tmp_path: Path) -> RobotService:
+    service = build("robot", None, {**vendor.service_params(port), "library": str(library)},
                     cell=cell, journal=tmp_path / "journal")
     assert isinstance(service, RobotService)
     return service
@@ -107,16 +134,18 @@ async def _get(client: Client, name: str, command: str) -> np.ndarray:
 
 
 @pytest.mark.slow
-def test_a_program_on_the_pc_moves_the_twin_over_rsi(library, tmp_path, monkeypatch):
+@pytest.mark.parametrize("vendor", VENDORS, ids=lambda v: v.name)
+def test_a_program_on_the_pc_moves_the_twin(vendor, library, tmp_path, monkeypatch):
     monkeypatch.setenv("PLUGCELL_HOME", str(tmp_path / "home"))
     port = _free_udp_port()
 
     async def scenario() -> None:
-        with RsiTwinProcess(f"127.0.0.1:{port}", "--timeout", str(TIMEOUT)):
-            service = _service(port, library, unique_cell(), tmp_path)
-            await service.start()
+        twin = vendor.robot(port)
+        try:
+            service = _service(vendor, port, library, unique_cell(), tmp_path)
+            await _start(service, twin)
             try:
-                async with Client("RSITEST", cell=service.keys.cell) as client:
+                async with Client("STREAMTEST", cell=service.keys.cell) as client:
                     assert await client.wait_for(service.name, 20)
                     home = await _get(client, service.name, "ARM_JNTP")
                     np.testing.assert_allclose(home, [0, -90, -187, 0, 90, 0], atol=0.01)
@@ -144,8 +173,16 @@ def test_a_program_on_the_pc_moves_the_twin_over_rsi(library, tmp_path, monkeypa
                     np.testing.assert_allclose(before, [2, -88, -186, 0, 88, 2], atol=0.05)
             finally:
                 await service.close()
+        finally:
+            twin.kill()
 
     asyncio.run(asyncio.wait_for(scenario(), 180))
+
+
+async def _start(service: RobotService, twin) -> None:
+    """The service and the robot together: the service waits for the robot's stream, the
+    robot (as a controller whose timeout counts from its first packet) for answers."""
+    await asyncio.gather(service.start(), asyncio.to_thread(twin.start))
 
 
 async def _get_status(client: Client, name: str) -> list[str]:
@@ -162,18 +199,18 @@ async def _state(service: RobotService, state: ConnectionStates, within: float) 
 
 
 @pytest.mark.slow
-def test_a_stopped_stream_fails_the_process_and_the_service_recovers(library, tmp_path,
-                                                                     monkeypatch):
+@pytest.mark.parametrize("vendor", VENDORS, ids=lambda v: v.name)
+def test_a_stopped_stream_fails_the_process_and_the_service_recovers(vendor, library,
+                                                                     tmp_path, monkeypatch):
     monkeypatch.setenv("PLUGCELL_HOME", str(tmp_path / "home"))
     port = _free_udp_port()
-    twin = RsiTwinProcess(f"127.0.0.1:{port}", "--timeout", str(TIMEOUT))
+    twin = vendor.robot(port)
 
     async def scenario() -> None:
-        twin.start()
-        service = _service(port, library, unique_cell(), tmp_path)
-        await service.start()
+        service = _service(vendor, port, library, unique_cell(), tmp_path)
+        await _start(service, twin)
         try:
-            async with Client("RSITEST", cell=service.keys.cell) as client:
+            async with Client("STREAMTEST", cell=service.keys.cell) as client:
                 assert await client.wait_for(service.name, 20)
                 call = await client.create_process(service.name, "ACTIVATE", "Wait",
                                                    ["swing"], timeout=120)
@@ -183,15 +220,16 @@ def test_a_stopped_stream_fails_the_process_and_the_service_recovers(library, tm
                 final = await call.result()
                 took = time.monotonic() - t_kill
                 assert final.state is F
-                assert "RSI stream stopped" in final.reason, final.reason
+                assert f"{vendor.name} stream stopped" in final.reason, final.reason
                 # within one controller timeout (plus the service's own bookkeeping)
                 assert took < TIMEOUT_S + 3.0, took
                 assert await _state(service, ConnectionStates.Error, 2.0)
                 refused = await (await client.create_process(service.name, "ARM_JNTP",
                                                              check=False)).result()
-                assert refused.state is F and "RSI stream stopped" in refused.reason
+                assert refused.state is F
+                assert f"{vendor.name} stream stopped" in refused.reason, refused.reason
 
-                twin.start()  # the robot comes back: a new RSI session
+                twin.start()  # the robot comes back: a new session
                 assert await _state(service, ConnectionStates.Online, 20.0)
                 final = await _run(client, service.name, "rsimoves")
                 assert final.state is C, final.reason
@@ -203,7 +241,7 @@ def test_a_stopped_stream_fails_the_process_and_the_service_recovers(library, tm
 
 
 def test_bad_rsi_options_are_refused_with_the_reason():
-    with pytest.raises(ValueError, match=r"give one of sim, line=HOST:PORT or rsi"):
+    with pytest.raises(ValueError, match=r"give one of sim, line=HOST:PORT, rsi"):
         RobotService("R1", sim=True, rsi="127.0.0.1:49152")
     with pytest.raises(ValueError, match="rsi_robot names the controller of an RSI stream"):
         RobotService("R1", sim=True, rsi_robot="10.0.0.1")
@@ -219,3 +257,24 @@ def test_bad_rsi_options_are_refused_with_the_reason():
         RobotService("R1", rsi="127.0.0.1:49152", rsi_timeout=0)
     with pytest.raises(ValueError, match="unknown robot 'scara4'"):
         RobotService("R1", rsi="127.0.0.1:49152", robot="scara4")
+
+
+def test_bad_egm_options_are_refused_with_the_reason():
+    with pytest.raises(ValueError, match=r"give one of sim, line=HOST:PORT, rsi=HOST:PORT "
+                       r"or egm=HOST:PORT, not several"):
+        RobotService("R1", rsi="127.0.0.1:49152", egm="127.0.0.1:6510")
+    with pytest.raises(ValueError, match="egm_robot names the controller of an EGM stream"):
+        RobotService("R1", sim=True, egm_robot="10.0.0.1")
+    with pytest.raises(ValueError, match=r"egm=0\.0\.0\.0:… listens on every address: give the "
+                       r"controller's address with egm_robot"):
+        RobotService("R1", egm="0.0.0.0:6510")
+    with pytest.raises(ValueError, match="bad EGM robot address"):
+        RobotService("R1", egm="0.0.0.0:6510", egm_robot="10.0.0.1:http")
+    with pytest.raises(ValueError, match="comm_timeout_s"):
+        RobotService("R1", egm="127.0.0.1:6510", egm_timeout=0.001)
+    with pytest.raises(ValueError, match="tcp_speed must be a positive number"):
+        RobotService("R1", egm="127.0.0.1:6510", tcp_speed=-1.0)
+    service = RobotService("R1", egm="127.0.0.1:6510", egm_robot="127.0.0.2")
+    # the UI's device panel shows the link
+    assert "ABB EGM, listening on 127.0.0.1:6510 for the controller at 127.0.0.2" in \
+        service.device.info

@@ -1,0 +1,98 @@
+"""The robot service's options of a robot streamed from the PC: which link, if any.
+
+``rsi=HOST:PORT`` or ``egm=HOST:PORT`` make the service's link a
+:class:`~.stream_controller.StreamController`: the programs run on the PC and each move
+streams to the robot — issue 37's mode *the PC drives*, the controller's program only
+starting the interface where the robot stands and following:
+
+* a KUKA robot over RSI: absolute joint corrections (``AKorr``; the controller's files
+  from ``plugcell rsi files --mode absolute``), joint feedback the packets' ``AIPos``;
+* an ABB robot over EGM: joint targets (``EGMRunJoint``; ``plugcell egm files --mode
+  joint``), joint feedback the ``EgmRobot`` messages' ``feedBack.joints``.
+
+Without either, the service talks to a controller that runs the programs itself
+(:class:`~.bridge.ControllerBridge`).  The link's limits follow the planner's
+(:func:`~.stream_controller.streaming_limits`, policy *refuse*).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from collections.abc import Sequence
+from pathlib import Path
+
+from plugcell.devices.robot.bridge import BridgeHandler, parse_address
+from plugcell.devices.robot.egm.config import EgmConfig
+from plugcell.devices.robot.rsi.config import RsiConfig
+from plugcell.devices.robot.stream_controller import (
+    StreamController,
+    planner_limits,
+    robot_endpoint,
+    streaming_limits,
+)
+from plugcell.io.robots import load_robot
+
+__all__ = ["streamed_link"]
+
+
+def streamed_link(handler: BridgeHandler, *, robot: str, library: Sequence[Path], name: str,
+                  rsi: str = "", rsi_robot: str = "", rsi_timeout: int = 100, egm: str = "",
+                  egm_robot: str = "", egm_timeout: float = 1.0, joint_speed: float = 20.0,
+                  tcp_speed: float = 100.0, process: bool = True) -> StreamController | None:
+    """The streamed robot's controller the options ask for, or ``None`` (none asked).
+
+    Parameters
+    ----------
+    handler : BridgeHandler
+        The robot service.
+    robot : str
+        The robot (a shipped name or a description file): its nominal model plans.
+    library : sequence of Path
+        Folders of robot programs.
+    name : str
+        The service's name.
+    rsi, rsi_robot, rsi_timeout
+        RSI: ``HOST:PORT`` where plugcell receives the controller's packets (the ethernet
+        file's ``IP_NUMBER:PORT``), the controller's ``HOST[:PORT]`` (empty: the ``rsi``
+        host unless a wildcard), the ETHERNET object's ``Timeout`` (cycles).
+    egm, egm_robot, egm_timeout
+        EGM: ``HOST:PORT`` where plugcell receives ``EgmRobot`` (the UDP unit device's
+        remote address), the controller's ``HOST[:PORT]``, ``EGMSetupUC``'s
+        ``\\CommTimeout`` (s).
+    joint_speed, tcp_speed : float
+        The planner's limits, °/s of every joint and mm/s of linear moves
+        (:func:`~.stream_controller.planner_limits`).
+    process : bool
+        The link's cycle loop in a child process (default) or a thread of the service's.
+
+    Returns
+    -------
+    StreamController or None
+        Not yet connected.
+
+    Raises
+    ------
+    ValueError
+        Both streams, a controller address without its stream, a bad address, limit,
+        timeout or robot: the reason.
+    """
+    if rsi and egm:
+        raise ValueError("give rsi=HOST:PORT or egm=HOST:PORT, not both")
+    for option, address, stream in (("rsi", rsi_robot, rsi), ("egm", egm_robot, egm)):
+        if address and not stream:
+            raise ValueError(f"{option}_robot names the controller of an {option.upper()} "
+                             f"stream: give {option} too")
+    if not (rsi or egm):
+        return None
+    option, listen, address = ("rsi", rsi, rsi_robot) if rsi else ("egm", egm, egm_robot)
+    host, port = parse_address(listen)
+    rhost, robot_port = robot_endpoint(option, host, address)
+    joint, cart = planner_limits(joint_speed, tcp_speed)
+    where = {"robot_host": rhost, "listen_host": host, "listen_port": port,
+             "robot_port": robot_port}
+    config: RsiConfig | EgmConfig = (
+        RsiConfig(**where, correction="joint", mode="absolute", timeout_packets=rsi_timeout)
+        if rsi else EgmConfig(**where, mode="joint", comm_timeout_s=egm_timeout))
+    config = dataclasses.replace(config, limits=streaming_limits(joint, config.cycle_s))
+    return StreamController(handler, config, load_robot(robot), robot, joint, cart, library,
+                            name, process)

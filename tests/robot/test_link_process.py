@@ -1,0 +1,210 @@
+"""The cycle loop in a process of its own (LinkProcess, issue 37 §7): a motion goes to the
+child over the pipe and moves the robot; the feedback, the stream's state and a failure's
+reason come back through shared memory; a stopped stream fails a motion with the link's
+reason and a robot coming back starts a new session; closing (or losing) the parent ends
+the child.  The robot is the simulated ABB controller's EGM loop (EgmRobotSim, joint
+mode) in this process."""
+
+from __future__ import annotations
+
+import dataclasses
+import os
+import signal
+import subprocess
+import sys
+import time
+
+import numpy as np
+import pytest
+
+from plugcell.devices.robot.egm import EgmConfig
+from plugcell.devices.robot.rsi import RsiConfig
+from plugcell.devices.robot.stream.process import LinkProcess, Publisher
+from plugcell.devices.robot.stream_controller import streaming_limits
+from plugcell.io.robots import load_robot
+from plugcell.io.units import DEG
+from plugcell.motion import PTP, JointLimits, plan
+from plugcell.pdl.interfaces import MotionError
+from plugcell.sim.controller.egm_robot import EgmRobotSim
+
+Q0 = np.radians([0.0, -90.0, -187.0, 0.0, 90.0, 0.0])
+V = 20 * DEG
+LIMITS = JointLimits.uniform(6, V, 3 * V, 30 * V)
+
+
+def _config(listen_port: int = 0) -> EgmConfig:
+    base = EgmConfig(robot_host="127.0.0.1", listen_host="127.0.0.1", listen_port=listen_port,
+                     mode="joint", comm_timeout_s=2.0)
+    return dataclasses.replace(base, limits=streaming_limits(LIMITS, base.cycle_s))
+
+
+def _robot(address, comm_timeout_s: float = 2.0) -> EgmRobotSim:
+    return EgmRobotSim(address, "joint", joints=Q0, comm_timeout_s=comm_timeout_s).start()
+
+
+@pytest.mark.slow
+def test_a_motion_in_the_child_moves_the_robot_and_the_feedback_comes_back():
+    link = LinkProcess(_config())
+    address = link.start()
+    robot = _robot(address)
+    try:
+        assert link.wait(lambda lk: lk.streaming and lk.latest is not None, 20)
+        assert link.failure is None
+        np.testing.assert_allclose(link.joint_readings(), Q0, atol=1e-9)
+        target = Q0 + np.radians([3.0, -2.0, 1.0, 0.0, 2.0, -3.0])
+        traj = plan(load_robot("smart_h4"), link.joint_readings(), [PTP(target=target)],
+                    LIMITS)
+        link.follow(traj)
+        assert link.followed == 1
+        time.sleep(0.2)  # the follower settles
+        np.testing.assert_allclose(robot.state()["joints"], target, atol=1e-4)
+        np.testing.assert_allclose(link.joint_readings(), robot.state()["joints"],
+                                   atol=2e-3)  # a cycle or two behind
+        counters = link.counters()
+        assert counters["answered"] >= int(traj.duration / 0.004) and \
+            counters["sessions"] == 1
+
+        # a move faster than the link's limits (planned with 4× the speed) is refused by
+        # the child's link: the reason reaches the program, the robot holds
+        fast = JointLimits.uniform(6, 4 * V, 12 * V, 120 * V)
+        rush = plan(load_robot("smart_h4"), target,
+                    [PTP(target=target + np.radians([20, 0, 0, 0, 0, 0]))], fast)
+        with pytest.raises(MotionError, match=r"correction refused at seqno \d+: A1 (speed|step)"):
+            link.follow(rush)
+        assert "correction refused" in str(link.failure)
+        held = robot.state()["joint_targets"]
+        time.sleep(0.1)
+        np.testing.assert_array_equal(robot.state()["joint_targets"], held)
+    finally:
+        robot.stop()
+        link.close()
+    assert not link.alive
+
+
+@pytest.mark.slow
+def test_a_stopped_stream_fails_with_its_reason_and_a_new_session_recovers():
+    link = LinkProcess(_config())
+    address = link.start()
+    try:
+        robot = _robot(address)
+        assert link.wait(lambda lk: lk.streaming, 20)
+        robot.stop()  # the controller gone
+        t0 = time.monotonic()
+        assert link.wait(lambda lk: not lk.streaming, 10)
+        assert time.monotonic() - t0 < 2.0 + 1.0  # one \CommTimeout, and the poll
+        assert str(link.failure).startswith("EGM stream stopped: no packet from the "
+                                            "controller for 2.0")
+        with pytest.raises(MotionError, match="EGM stream stopped: no packet"):
+            link.joint_readings()
+        robot = _robot(address)  # back: a new session, the failure gone
+        try:
+            assert link.wait(lambda lk: lk.streaming and lk.failure is None, 20)
+            assert link.counters()["sessions"] == 2
+        finally:
+            robot.stop()
+    finally:
+        link.close()
+
+
+@pytest.mark.slow
+def test_a_crashed_link_process_says_so_and_starts_again():
+    link = LinkProcess(_config(listen_port=_free_udp_port()))
+    address = link.start()
+    robot = _robot(address, 30.0)  # waits for the new child's answers
+    try:
+        assert link.wait(lambda lk: lk.streaming, 20)
+        os.kill(link._proc.pid, signal.SIGKILL)  # the child dies (a bug, the OOM killer)
+        assert link.wait(lambda lk: not lk.streaming, 5)
+        assert "the EGM link process has exited (exit code -9)" in str(link.failure)
+        with pytest.raises(MotionError, match="link process has exited"):
+            link.joint_readings()
+        assert link.start() == address  # the controller's connect starts it again
+        assert link.wait(lambda lk: lk.streaming and lk.failure is None, 20)
+    finally:
+        robot.stop()
+        link.close()
+
+
+def _free_udp_port() -> int:
+    import socket
+
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
+        s.bind(("127.0.0.1", 0))
+        return int(s.getsockname()[1])
+
+
+def test_the_publisher_writes_a_consistent_state():
+    """The seqlock: even after a write, the values of the link, the failure's text once per
+    failure."""
+    import multiprocessing
+
+    from plugcell.devices.robot.stream.errors import StreamStoppedError
+    from plugcell.devices.robot.stream.process import FAILURES, JOINTS, SEQ, SLOTS, TEXT_BYTES
+
+    ctx = multiprocessing.get_context("spawn")
+    values, text = ctx.RawArray("d", SLOTS), ctx.RawArray("c", TEXT_BYTES)
+    publish = Publisher(values, text)
+
+    class _Link:
+        failure = None
+        streaming = True
+        latest = type("S", (), {"joints": Q0})()
+        _sessions, _received, _answered, _late, _missed = 1, 5, 5, 0, 0
+
+    link = _Link()
+    publish(link)
+    v = np.frombuffer(values)
+    assert v[SEQ] == 2 and v[FAILURES] == 0
+    np.testing.assert_array_equal(v[JOINTS], Q0)
+    link.failure = StreamStoppedError("x" * 5000)  # longer than the text: cut, not broken
+    publish(link)
+    publish(link)
+    assert v[SEQ] == 6 and v[FAILURES] == 1
+    assert text.value == b"x" * (TEXT_BYTES - 1)
+
+
+def test_only_whole_joint_commands_are_streamed_from_the_pc():
+    with pytest.raises(ValueError, match="not configured for them"):
+        LinkProcess(EgmConfig(robot_host="127.0.0.1", mode="pose"))
+    with pytest.raises(ValueError, match="not configured for them"):
+        LinkProcess(RsiConfig(robot_host="127.0.0.1", mode="relative"))
+
+
+@pytest.mark.slow
+def test_the_child_ends_when_its_parent_is_killed(tmp_path):
+    """A parent killed outright (no close) leaves no link process behind: the pipe's end of
+    file ends the child."""
+    script = tmp_path / "parent.py"
+    script.write_text(
+        "from plugcell.devices.robot.egm import EgmConfig\n"
+        "from plugcell.devices.robot.stream.process import LinkProcess\n"
+        "import time\n"
+        "if __name__ == '__main__':\n"
+        "    link = LinkProcess(EgmConfig(robot_host='127.0.0.1', listen_host='127.0.0.1',\n"
+        "                                 listen_port=0))\n"
+        "    link.start()\n"
+        "    print(link._proc.pid, flush=True)\n"
+        "    time.sleep(60)\n")
+    parent = subprocess.Popen([sys.executable, str(script)], stdout=subprocess.PIPE, text=True)
+    try:
+        child = int(parent.stdout.readline())  # type: ignore[union-attr]
+        parent.send_signal(signal.SIGKILL)
+        parent.wait(10)
+        end = time.monotonic() + 10
+        while time.monotonic() < end and _alive(child):
+            time.sleep(0.05)
+        assert not _alive(child)
+    finally:
+        if parent.poll() is None:
+            parent.kill()
+
+
+def _alive(pid: int) -> bool:
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    from pathlib import Path
+
+    stat = Path(f"/proc/{pid}/stat").read_text()  # a zombie (not yet reaped) is gone
+    return stat.rsplit(")", 1)[1].split()[0] != "Z"
