@@ -109,6 +109,13 @@ def configure(p: argparse.ArgumentParser) -> None:
                         "calibration of this robot with a learned layer (its PARAMS.json "
                         "and side file), e.g. one made in another set-up: a short campaign "
                         "here then adds to what that one taught (docs/calibration.md)")
+    _add_prior_args(p)
+    p.add_argument("--quiet", action="store_true", help="no progress on stderr")
+    p.set_defaults(func=_run)
+
+
+def _add_prior_args(p: argparse.ArgumentParser) -> None:
+    """The options of a short campaign with an earlier calibration as prior (--prior…)."""
     p.add_argument("--prior", type=Path, metavar="EARLIER.json",
                    help="the robot moved to a new set-up: identify this (short) campaign with "
                         "an earlier calibration of it (its PARAMS.json, with its learned layer "
@@ -122,8 +129,6 @@ def configure(p: argparse.ArgumentParser) -> None:
                    help="with --prior: learn the campaign's own stage on what the fit leaves "
                         "and keep it when its grouped CV over the campaign's cells beats the "
                         "fit without it (learned, the default), or never (none)")
-    p.add_argument("--quiet", action="store_true", help="no progress on stderr")
-    p.set_defaults(func=_run)
 
 
 def _frame(text: str, what: str) -> np.ndarray:
@@ -422,8 +427,8 @@ def _run(args: argparse.Namespace) -> int:
             raise CommandError(f"--residual-model learned: {exc}") from None
     prior = None if args.residual_prior is None else _prior_stage(args.residual_prior, args)
     earlier = None if args.prior is None else _prior(args.prior, args)
-    stage = args.prior_stage != "none"
-    if earlier is not None and (earlier.layer is not None or stage) and args.out is None:
+    if earlier is not None and (earlier.layer is not None or args.prior_stage != "none") \
+            and args.out is None:
         raise CommandError("--prior needs --out PARAMS.json: the learned layer (the earlier "
                            "one, or the campaign's own stage) is saved beside it "
                            "(PARAMS.residual.skops); --prior-stage none with an earlier "
@@ -432,13 +437,7 @@ def _run(args: argparse.Namespace) -> int:
     probe = None if args.probe is None else _frame(args.probe, "probe")
     try:
         if earlier is not None:
-            from plugcell.calibration.prior import PriorCalibrator
-
-            result = PriorCalibrator(earlier, scale=args.prior_scale, stage=stage,
-                                     rotation_weight=args.rotation_weight,
-                                     max_iterations=args.max_iterations,
-                                     cell_size_m=args.residual_cell_m,
-                                     progress=progress).fit(data)
+            result = _fit_prior(args, earlier, data, progress)
         else:
             result = _fit(args, desc, data, base, probe, prior, learner, progress)
         if val is not None:
@@ -450,6 +449,16 @@ def _run(args: argparse.Namespace) -> int:
     except (CalibrationError, ResidualModelError) as exc:
         raise CommandError(str(exc)) from None
     return _write(args, desc, data, val, result)
+
+
+def _fit_prior(args: argparse.Namespace, earlier: Any, data: Any, progress: Any) -> Any:
+    """The short campaign with the earlier calibration as prior (--prior)."""
+    from plugcell.calibration.prior import PriorCalibrator
+
+    return PriorCalibrator(earlier, scale=args.prior_scale, stage=args.prior_stage != "none",
+                           rotation_weight=args.rotation_weight,
+                           max_iterations=args.max_iterations, cell_size_m=args.residual_cell_m,
+                           progress=progress).fit(data)
 
 
 def _fit(args: argparse.Namespace, desc: Any, data: Any, base: Any, probe: Any, prior: Any,
