@@ -9,10 +9,10 @@ the robot in the new set-up.  A short campaign there identifies what it can dete
   value by its earlier uncertainty;
 * the learned layer: the earlier layer is kept and its correction taken out of the new
   measurements *before* the physical fit (an offset), so the physical parameters absorb
-  what differs in the new set-up and the layer what the physics cannot express.  A
-  short campaign (≤ 100 poses, a few workspace cells) is too small to fit trees of its
-  own; re-learning the layer needs a larger campaign (``plugcell calibrate
-  --residual-model learned``, docs/results/ur10-residual.md (g)).
+  what differs in the new set-up and the layer what the physics cannot express;
+* the campaign's own stage (:mod:`.campaign_stage`, ``stage=True``): small trees on what
+  the fit leaves, on top of the earlier layer's arm-shape stage, adopted only when their
+  grouped CV over the campaign's cells beats the fit without them.
 
 The problem (MAP with Gaussian measurement noise ``σ_y`` per residual row and a Gaussian
 prior ``N(x_p, (τ σ_k)²)`` on each regularised parameter)::
@@ -28,6 +28,9 @@ of a real robot are not (the σ are optimistic), and a robot moved to another se
 differs from the earlier one by more than the earlier fit's noise.  ``τ`` is chosen by
 grouped cross-validation over the campaign's own workspace cells (the held-out cells'
 mean position error; never a pose outside the campaign) among :data:`SCALES`, or given.
+``τ = 0`` (:data:`FRAMES_ONLY`) is the prior held exactly — only BASE and PROBE
+re-identified, the earlier model moved; as the first candidate it makes the choice a
+shrinkage estimator: where the campaign's cells cannot show a gain, the CV keeps it.
 
 Gauss–Newton on the augmented system: with the stacked residual
 ``F(x) = [W (y − f(x)); Λ (x_p − x)]`` and its Jacobian ``∂F/∂x = −[W H; Λ]``
