@@ -9,20 +9,23 @@ Protocol, for each of B, C, D: grouped 5-fold over the series' 0.4 m workspace c
 (target position in the robot base frame).  In each fold a campaign of n poses is chosen
 among the training cells' poses — as ``plugcell plan --from`` chooses among poses already
 measured (I-optimal for model 3, :class:`~plugcell.calibration.planning.PosePlanner`), or
-with ``--selection random`` a seeded draw — and three methods identify on it:
+by default a seeded random draw (``--selection planned``: I-optimal, written to
+short-campaign-ur10-planned.md) — and three methods identify on it:
 
 (i)   **alone**: model 3 calibrated on the campaign alone (``plugcell calibrate``);
 (ii)  **A moved**: A's physical model with BASE + PROBE re-identified on the campaign
       (and, for the record, A's hybrid model moved the same way);
 (iii) **prior**: ``plugcell calibrate --prior A.json``
       (:class:`~plugcell.calibration.prior.PriorCalibrator`: MAP toward A with A's layer's
-      correction as an offset, τ by grouped CV over the campaign's own cells).
+      correction as an offset, τ — 0 = BASE + PROBE only included — by grouped CV over the
+      campaign's own cells, then the campaign's own stage when its CV adopts it,
+      :mod:`plugcell.calibration.campaign_stage`); and the same without the stage.
 
 Each is scored on the held-out cells (never a campaign pose nor a neighbour in its cell):
 mean position error, mm.  Nothing is tuned on the held-out cells.
 
     .venv/bin/python benchmarks/short_campaign_ur10.py [--data DIR] [--sizes 25,50,...]
-        [--series B,C,D] [--selection planned|random] [--quick]
+        [--series B,C,D] [--selection random|planned] [--quick]
         [--out docs/results/short-campaign-ur10.md]
 
 Single-threaded (threadpoolctl).  Without the data folder it says so and exits 0.
@@ -34,7 +37,9 @@ import argparse
 import json
 import platform
 import sys
+import tempfile
 import time
+from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
@@ -53,6 +58,7 @@ from plugcell.calibration.prior import Prior, PriorCalibrator
 from plugcell.calibration.residual_model import (
     DEFAULT_GRID,
     ResidualLearner,
+    calibration_fingerprint,
     workspace_cells,
 )
 from plugcell.io.robots import load_robot
@@ -61,11 +67,12 @@ from residual_ur10 import _without_temperature, find_data, load_sets
 ROOT = Path(__file__).resolve().parents[1]
 SIZES = (25, 50, 100, 200, 400)
 MODEL = "serial+gravity"
-METHODS = ("alone", "moved", "moved_hybrid", "prior")
+METHODS = ("alone", "moved", "moved_hybrid", "prior_map", "prior")
 LABELS = {"alone": "(i) model 3 on the campaign alone",
           "moved": "(ii) A's model, BASE + PROBE re-identified",
           "moved_hybrid": "A's hybrid model, BASE + PROBE re-identified",
-          "prior": "(iii) --prior A (MAP + A's layer as offset)"}
+          "prior_map": "--prior A --prior-stage none (MAP + A's layer)",
+          "prior": "(iii) --prior A (MAP + A's layer + campaign stage)"}
 
 
 def _errors(d: CalibrationData, P: np.ndarray) -> np.ndarray:
@@ -86,15 +93,33 @@ def choose(model: Any, d: CalibrationData, pool: np.ndarray, n: int, selection: 
     return pool[cands.source[plan.index]]
 
 
+def earlier(desc: Any, A: CalibrationData, learner: ResidualLearner,
+            cache: Path | None) -> Any:
+    """Set-up A: model 3 and its learned layer fitted on all of A — or, with ``cache``,
+    read from the pickle an earlier run of this script wrote there (runs side by side,
+    one per series, then fit A once)."""
+    import pickle
+
+    if cache is not None and cache.is_file():
+        with cache.open("rb") as f:
+            return pickle.load(f)  # this script's own file
+    resA = Calibrator(desc, MODEL).fit(A)
+    resA = resA.with_residual_model(learner.fit(resA.model, A, robot=desc.name))
+    if cache is not None:
+        with cache.open("wb") as f:
+            pickle.dump(resA, f)
+    return resA
+
+
 def run(desc: Any, sets: dict[str, CalibrationData], series: str, sizes: tuple[int, ...],
-        selection: str, learner: ResidualLearner, folds: int = 5) -> dict[str, Any]:
+        selection: str, learner: ResidualLearner, folds: int = 5,
+        cache: Path | None = None) -> dict[str, Any]:
     from sklearn.model_selection import GroupKFold
 
     t0 = time.perf_counter()
     A = sets["A"]
-    resA = Calibrator(desc, MODEL).fit(A)
-    layer = learner.fit(resA.model, A, robot=desc.name)
-    resA = resA.with_residual_model(layer)
+    resA = earlier(desc, A, learner, cache)
+    layer = resA.residual_model
     prior = Prior.from_result(resA)
     print(f"A: model 3 {resA.calibration.position.norm.mean * 1e3:.3f} mm on its "
           f"{len(A)} poses; layer CV {layer.cv.physical_mm:.3f} -> {layer.cv.hybrid_mm:.3f} mm "
@@ -110,6 +135,7 @@ def run(desc: Any, sets: dict[str, CalibrationData], series: str, sizes: tuple[i
         groups = workspace_cells(targets, 0.4)
         err = {m: {n: np.full(len(d), np.nan) for n in sizes} for m in METHODS}
         taus: dict[int, list[float]] = {n: [] for n in sizes}
+        stages: dict[int, list[bool]] = {n: [] for n in sizes}
         split = list(GroupKFold(n_splits=folds).split(targets, groups=groups))
         for f_no, (tr, te) in enumerate(split):
             test = d.subset(te)
@@ -132,15 +158,23 @@ def run(desc: Any, sets: dict[str, CalibrationData], series: str, sizes: tuple[i
                 err["moved_hybrid"][n][te] = _hybrid_moved(resA, camp, test)
                 res = PriorCalibrator(prior).fit(camp)
                 taus[n].append(res.settings["prior"]["scale"])
+                stages[n].append(bool(res.settings["prior"]["stage"]["adopted"]))
                 P, _ = res.predict_hybrid(test.q)
                 err["prior"][n][te] = _errors(test, P)
+                # the same MAP with A's layer only (--prior-stage none): no second fit
+                P, _ = res.with_residual_model(replace(
+                    prior.layer, fingerprint=calibration_fingerprint(res.model))
+                ).predict_hybrid(test.q)
+                err["prior_map"][n][te] = _errors(test, P)
                 print(f"  {key} fold {f_no + 1}, n = {n}: " + ", ".join(
                     f"{m} {np.nanmean(err[m][n][te]) * 1e3:.3f}" for m in METHODS)
-                    + f" mm (τ = {taus[n][-1]:g}; {time.perf_counter() - t1:.0f} s)",
+                    + f" mm (τ = {taus[n][-1]:g}, stage {stages[n][-1]}; "
+                    f"{time.perf_counter() - t1:.0f} s)",
                     flush=True)
         row = {m: {str(n): float(np.nanmean(err[m][n]) * 1e3) for n in sizes}
                for m in METHODS}
         row["tau"] = {str(n): taus[n] for n in sizes}
+        row["stage"] = {str(n): stages[n] for n in sizes}
         row["cells"] = int(groups.max()) + 1
         row["poses"] = len(d)
         row["physical_all_mm"] = float(_errors(d, moved_all.predict(d.q)).mean() * 1e3)
@@ -173,7 +207,7 @@ def table(d: dict[str, Any]) -> str:
             cells = []
             for n in sizes:
                 v = row[m][str(n)]
-                if m == "prior":
+                if m in ("prior", "prior_map"):
                     best = min(row["alone"][str(n)], row["moved"][str(n)])
                     cells.append(f"**{v:.3f}** ({(v / best - 1) * 100:+.0f}%)")
                 else:
@@ -228,7 +262,7 @@ def plot(d: dict[str, Any], path: Path) -> None:
     for ax, key in zip(axes[0], series, strict=True):
         row = d["result"]["series"][key]
         for m, style in (("alone", "s--"), ("moved", "o:"), ("moved_hybrid", "x:"),
-                         ("prior", "D-")):
+                         ("prior_map", "v-."), ("prior", "D-")):
             ax.plot(d["sizes"], [row[m][str(n)] for n in d["sizes"]], style, label=LABELS[m])
         ax.set_xscale("log")
         ax.set_xticks(d["sizes"], [str(n) for n in d["sizes"]])
@@ -243,12 +277,35 @@ def plot(d: dict[str, Any], path: Path) -> None:
     plt.close(fig)
 
 
+def _commands(argv: list[str]) -> str:
+    """The command line(s) of a run (without ``--out``), merged runs joined."""
+    runs: list[list[str]] = [[]]
+    for a in argv:
+        if a == "+":
+            runs.append([])
+        else:
+            runs[-1].append(a)
+    cmds = []
+    for r in runs:
+        keep = [a for i, a in enumerate(r) if a != "--out" and (i == 0 or r[i - 1] != "--out")]
+        cmds.append("`" + " ".join(["benchmarks/short_campaign_ur10.py", *keep]) + "`")
+    if len(cmds) == 1:
+        return cmds[0]
+    return (", ".join(cmds) + " side by side, merged with `--from-json` "
+            "(each run's JSON in turn)")
+
+
+def _per_fold(r: dict[str, Any], what: str) -> dict[str, Any]:
+    return {k: v.get(what) for k, v in r["series"].items()}
+
+
 def write_page(d: dict[str, Any], path: Path, image: str | None) -> None:
     r = d["result"]
     text = f"""# A robot moved to a new set-up: a short campaign with a prior (UR10, IPA data)
 
-Generated by `benchmarks/short_campaign_ur10.py {' '.join(d['argv'])}` (do not edit by hand);
-{d['machine']}, shared 2-core AMD EPYC VM, single-threaded, {r['elapsed_s']:.0f} s.
+Generated by {_commands(d['argv'])} (do not edit by hand);
+{d['machine']}, shared 2-core AMD EPYC VM, single-threaded, {r['elapsed_s']:.0f} s{
+    ' (summed over the runs)' if '+' in d['argv'] else ''}.
 
 Earlier set-up: series A ({r['A']['poses']} poses), model 3 (serial + joint compliance from the
 published link masses): {r['A']['physical_mm']:.3f} mm on its own poses; its learned layer
@@ -265,17 +322,23 @@ campaign's cell). Mean position error over all held-out poses, mm.
 * (i) model 3 calibrated on the campaign alone (`plugcell calibrate --model 3`);
 * (ii) A's model with BASE + PROBE re-identified on the campaign (and A's hybrid model,
   moved the same way, for the record);
-* (iii) `plugcell calibrate --prior A.json`: BASE and PROBE free, A's other 34-parameter
-  values pulled toward A by λ_k = σ̂_A / (τ σ_k) (MAP, docs/calibration.md), A's learned
-  layer kept and its correction taken out of the campaign before the fit; τ chosen by
-  grouped CV over the campaign's own cells (never the held-out cells). In brackets: the
-  change against the better of (i) and (ii).
+* (iii) `plugcell calibrate --prior A.json` (its default): BASE and PROBE free, A's other
+  parameters pulled toward A by λ_k = σ̂_A / (τ σ_k) (MAP, docs/calibration.md), A's learned
+  layer's correction taken out of the campaign before the fit; τ ∈ {{0 (BASE + PROBE
+  only: the shrinkage to (ii) with A's layer), 1, 3, 10, …, 1000}} chosen by grouped CV
+  over the campaign's own cells (never the held-out cells); then the campaign's own stage
+  (trees on sin/cos q of what the fit leaves, on top of A's arm-shape stage) adopted only
+  when its grouped CV over the campaign's cells beats the fit without it. The row
+  *--prior-stage none* is the same fit with A's layer only. In brackets: the change
+  against the better of (i) and (ii).
 
 {table(d)}
 
 {'![error against the number of new poses](' + image + ')' if image else ''}
 
-τ chosen per fold: {json.dumps({k: v['tau'] for k, v in r['series'].items()})}
+τ chosen per fold (0: BASE + PROBE only): {json.dumps(_per_fold(r, 'tau'))}
+
+Campaign stage adopted per fold: {json.dumps(_per_fold(r, 'stage'))}
 
 ## The goal (≥ 20 % lower than (i) and (ii) with ≤ 100 new poses on B and D; never worse on C)
 
@@ -283,23 +346,57 @@ campaign's cell). Mean position error over all held-out poses, mm.
     path.write_text(text, encoding="utf-8")
 
 
+def merge(runs: list[dict[str, Any]]) -> dict[str, Any]:
+    """One record of several runs of one selection (e.g. one per series or per group of
+    sizes, run side by side): series in order, each size's figures from the run that
+    computed it, the elapsed times summed, the command lines joined."""
+    d = json.loads(json.dumps(runs[0]))
+    for r in runs[1:]:
+        if r["selection"] != d["selection"]:
+            raise SystemExit("--from-json: runs of different selections")
+        for key, row in r["result"]["series"].items():
+            into = d["result"]["series"].setdefault(key, {})
+            for k, v in row.items():
+                if isinstance(v, dict):
+                    into.setdefault(k, {}).update(v)
+                else:
+                    into[k] = v
+        d["sizes"] = sorted(set(d["sizes"]) | set(r["sizes"]))
+        d["result"]["elapsed_s"] += r["result"]["elapsed_s"]
+        d["argv"] = d["argv"] + ["+"] + r["argv"]
+    return d
+
+
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--data", type=Path, default=None)
     ap.add_argument("--sizes", default=",".join(str(n) for n in SIZES))
     ap.add_argument("--series", default="BCD")
-    ap.add_argument("--selection", choices=("planned", "random"), default="planned")
+    ap.add_argument("--selection", choices=("planned", "random"), default="random",
+                    help="how the campaign is chosen among the training cells' poses "
+                         "(default random; planned writes short-campaign-ur10-planned.md)")
     ap.add_argument("--folds", type=int, default=5)
+    ap.add_argument("--cache", type=Path, metavar="FILE",
+                    help="pickle of set-up A's fit: read if present, else written (for runs "
+                         "side by side; delete it when the code or the data change)")
     ap.add_argument("--quick", action="store_true",
                     help="A's layer: one hyper-parameter candidate, 100 trees")
-    ap.add_argument("--out", type=Path,
-                    default=ROOT / "docs" / "results" / "short-campaign-ur10.md")
-    ap.add_argument("--from-json", type=Path, metavar="FILE",
-                    help="re-render the page from the JSON a previous run wrote (no "
-                         "computation; the plot is redrawn)")
+    ap.add_argument("--out", type=Path, default=None,
+                    help="page to write (default docs/results/short-campaign-ur10.md, "
+                         "-planned.md with --selection planned)")
+    ap.add_argument("--from-json", metavar="FILE[,FILE…]",
+                    help="re-render the page from the JSON previous runs wrote (no "
+                         "computation; the plot is redrawn); several files (e.g. one run "
+                         "per --series, run side by side) are merged in order")
     args = ap.parse_args()
+    if args.out is None:
+        args.out = ROOT / "docs" / "results" / ("short-campaign-ur10.md" if args.selection
+                                                == "random" else
+                                                "short-campaign-ur10-planned.md")
     if args.from_json is not None:
-        d = json.loads(args.from_json.read_text(encoding="utf-8"))
+        d = merge([json.loads(Path(f).read_text(encoding="utf-8"))
+                   for f in args.from_json.split(",")])
+        args.out.with_suffix(".json").write_text(json.dumps(d, indent=1), encoding="utf-8")
         plot(d, args.out.with_suffix(".png"))
         write_page(d, args.out, args.out.with_suffix(".png").name)
         print(table(d))
@@ -317,14 +414,13 @@ def main() -> int:
     series = [s for s in args.series.replace(",", "") if s in "BCD"]
     kw: dict[str, Any] = ({"grid": DEFAULT_GRID[1:2], "trees": 100} if args.quick
                           else {"grid": (DEFAULT_GRID[1], DEFAULT_GRID[2]), "trees": 200})
-    work = Path("/tmp/plugcell-short-campaign")
-    work.mkdir(parents=True, exist_ok=True)
-    (work / "ur10_masses.toml").write_text(ur10_toml(masses=True), encoding="utf-8")
-    desc = load_robot(work / "ur10_masses.toml")
+    with tempfile.TemporaryDirectory() as work:  # one per run: runs side by side
+        (Path(work) / "ur10_masses.toml").write_text(ur10_toml(masses=True), encoding="utf-8")
+        desc = load_robot(Path(work) / "ur10_masses.toml")
     sets = {k: _without_temperature(v) for k, v in load_sets(data).items()}
     with threadpool_limits(1):
         result = run(desc, sets, "".join(series), sizes, args.selection,
-                     ResidualLearner(**kw), folds=args.folds)
+                     ResidualLearner(**kw), folds=args.folds, cache=args.cache)
     d = {"argv": sys.argv[1:], "sizes": list(sizes), "selection": args.selection,
          "selection_text": "I-optimal for model 3, as `plugcell plan --from` chooses among "
                            "poses already measured" if args.selection == "planned"

@@ -170,7 +170,8 @@ def test_bad_input_is_refused(desc, earlier, truth_a):
     wrong = CalibrationData(data.q[:, :5], data.positions, data.rotations)
     with pytest.raises(CalibrationError, match=r"5 joint columns.*'ur10-test' has 6"):
         PriorCalibrator(prior).fit(wrong)
-    with pytest.raises(CalibrationError, match="τ must be a number ≥ 1"):
+    with pytest.raises(CalibrationError,
+                       match=r"τ must be 0 \(BASE \+ PROBE only\) or a number ≥ 1"):
         PriorCalibrator(prior, scale=0.5)
     with pytest.raises(CalibrationError, match="residual σ̂"):
         Prior(prior.robot, prior.config, prior.model, prior.keys, prior.sigma, float("nan"))

@@ -38,6 +38,8 @@ def test_prior_writes_a_calibration_that_says_what_it_did(files, capsys):
     d = json.loads((files / "b.json").read_text())
     pri = d["settings"]["prior"]
     assert pri["scale"] == 10 and pri["regularised"] and not pri["layer_offset"]
+    # the campaign's own stage was tried (25 poses) and its verdict printed
+    assert "campaign stage: " in out and "adopted" in pri["stage"]
     assert d["validation"]["mean_mm"] < 0.5
     # what it wrote is a calibration the other commands read
     assert main(["export", "--params", str(files / "b.json"), "--format", "toml",
@@ -46,7 +48,10 @@ def test_prior_writes_a_calibration_that_says_what_it_did(files, capsys):
 
 @pytest.mark.parametrize(("extra", "message"), [
     (["--prior-scale", "3"], "--prior-scale needs --prior EARLIER.json"),
-    (["--prior", "A", "--prior-scale", "0.5"], "--prior-scale must be a number ≥ 1"),
+    (["--prior", "A", "--prior-scale", "0.5"],
+     "--prior-scale must be 0 (BASE + PROBE only) or a number ≥ 1"),
+    (["--prior-stage", "none"], "--prior-stage needs --prior EARLIER.json"),
+    (["--prior", "A"], "--prior needs --out PARAMS.json"),
     (["--prior", "A", "--thermal"], "--prior: --thermal cannot be combined with it"),
     (["--prior", "A", "--probe", "0,0,90,0,0,0"], "--prior: --probe cannot be combined"),
     (["--prior", "A", "--residual-model", "learned", "--out", "x.json"],

@@ -9,10 +9,10 @@ the robot in the new set-up.  A short campaign there identifies what it can dete
   value by its earlier uncertainty;
 * the learned layer: the earlier layer is kept and its correction taken out of the new
   measurements *before* the physical fit (an offset), so the physical parameters absorb
-  what differs in the new set-up and the layer what the physics cannot express.  A
-  short campaign (≤ 100 poses, a few workspace cells) is too small to fit trees of its
-  own; re-learning the layer needs a larger campaign (``plugcell calibrate
-  --residual-model learned``, docs/results/ur10-residual.md (g)).
+  what differs in the new set-up and the layer what the physics cannot express;
+* the campaign's own stage (:mod:`.campaign_stage`, ``stage=True``): small trees on what
+  the fit leaves, on top of the earlier layer's arm-shape stage, adopted only when their
+  grouped CV over the campaign's cells beats the fit without them.
 
 The problem (MAP with Gaussian measurement noise ``σ_y`` per residual row and a Gaussian
 prior ``N(x_p, (τ σ_k)²)`` on each regularised parameter)::
@@ -28,6 +28,9 @@ of a real robot are not (the σ are optimistic), and a robot moved to another se
 differs from the earlier one by more than the earlier fit's noise.  ``τ`` is chosen by
 grouped cross-validation over the campaign's own workspace cells (the held-out cells'
 mean position error; never a pose outside the campaign) among :data:`SCALES`, or given.
+``τ = 0`` (:data:`FRAMES_ONLY`) is the prior held exactly — only BASE and PROBE
+re-identified, the earlier model moved; as the first candidate it makes the choice a
+shrinkage estimator: where the campaign's cells cannot show a gain, the CV keeps it.
 
 Gauss–Newton on the augmented system: with the stacked residual
 ``F(x) = [W (y − f(x)); Λ (x_p − x)]`` and its Jacobian ``∂F/∂x = −[W H; Λ]``
@@ -77,14 +80,17 @@ from plugcell.calibration.validity import ValidityRegion
 
 Array = NDArray[np.float64]
 
-#: Candidate inflations τ of the prior's σ, chosen by grouped CV over the campaign's cells.
-SCALES: tuple[float, ...] = (1.0, 3.0, 10.0, 30.0, 100.0, 300.0, 1000.0)
+#: τ = 0: the prior held exactly — only BASE and PROBE re-identified (the earlier model moved).
+FRAMES_ONLY = 0.0
+#: Candidate inflations τ of the prior's σ, chosen by grouped CV over the campaign's cells
+#: (:data:`FRAMES_ONLY` first: the shrinkage to the earlier model when the CV cannot tell).
+SCALES: tuple[float, ...] = (FRAMES_ONLY, 1.0, 3.0, 10.0, 30.0, 100.0, 300.0, 1000.0)
 #: τ used when the campaign covers fewer than 2 workspace cells (no CV possible).
 DEFAULT_SCALE = 10.0
 #: Workspace cell edge (m) grouping the campaign's poses for the choice of τ.
 CELL_SIZE_M = 0.4
 
-__all__ = ["CELL_SIZE_M", "DEFAULT_SCALE", "SCALES", "Prior", "PriorCalibrator",
+__all__ = ["CELL_SIZE_M", "DEFAULT_SCALE", "FRAMES_ONLY", "SCALES", "Prior", "PriorCalibrator",
            "augmented_residual", "frame_keys"]
 
 
@@ -221,8 +227,12 @@ class PriorCalibrator:
     prior : Prior
         The earlier calibration.
     scale : float, optional
-        The inflation τ ≥ 1 of the prior's σ (default: chosen by grouped CV over the
-        campaign's workspace cells among :data:`SCALES`).
+        The inflation τ ≥ 1 of the prior's σ, or 0 (:data:`FRAMES_ONLY`: the prior held
+        exactly, BASE and PROBE alone re-identified); default: chosen by grouped CV over
+        the campaign's workspace cells among :data:`SCALES`.
+    stage : bool
+        Learn the campaign's own stage on what the physical fit leaves and adopt it when
+        its grouped CV says it helps (:mod:`.campaign_stage`); default True.
     rotation_weight : float, m/rad
         Weight ``w`` of the orientation rows.
     tol : float
@@ -237,19 +247,22 @@ class PriorCalibrator:
     Raises
     ------
     CalibrationError
-        τ < 1 or not finite, non-positive tolerances or weights.
+        τ neither 0 nor a number ≥ 1, non-positive tolerances or weights.
     """
 
-    def __init__(self, prior: Prior, *, scale: float | None = None,
+    def __init__(self, prior: Prior, *, scale: float | None = None, stage: bool = True,
                  rotation_weight: float = 1.0, tol: float = 1e-7, max_iterations: int = 30,
                  cell_size_m: float = CELL_SIZE_M,
                  progress: Callable[[str, int, int, str], None] | None = None) -> None:
-        if scale is not None and not (math.isfinite(scale) and scale >= 1.0):
-            raise CalibrationError(f"the prior's σ inflation τ must be a number ≥ 1, got {scale}")
+        if scale is not None and not (scale == FRAMES_ONLY
+                                      or (math.isfinite(scale) and scale >= 1.0)):
+            raise CalibrationError(f"the prior's σ inflation τ must be 0 (BASE + PROBE only) "
+                                   f"or a number ≥ 1, got {scale}")
         if not (tol > 0 and max_iterations >= 1 and rotation_weight > 0 and cell_size_m > 0):
             raise CalibrationError("tol, max_iterations, rotation_weight, cell_size_m must be > 0")
         self.prior = prior
         self.scale = scale
+        self.stage = bool(stage)
         self.rotation_weight = float(rotation_weight)
         self.tol = float(tol)
         self.max_iterations = int(max_iterations)
@@ -316,7 +329,7 @@ class PriorCalibrator:
         data : CalibrationData
             The campaign (already offset by the prior layer, :meth:`offset_data`).
         tau : float
-            The inflation τ of the prior's σ.
+            The inflation τ of the prior's σ (:data:`FRAMES_ONLY`: no regularised key).
 
         Returns
         -------
@@ -334,6 +347,8 @@ class PriorCalibrator:
             ‖Δx‖ < tol reached.
         """
         start, frames, regular = self._start(data)
+        if tau == FRAMES_ONLY:  # the prior held exactly: the earlier model moved
+            regular = []
         keys = frames + regular
         lam = self._lambda(keys, regular, tau)
         x_prior = np.array([start.value(k) for k in keys])
@@ -425,9 +440,11 @@ class PriorCalibrator:
         -------
         CalibrationResult
             The MAP model; ``nominal`` is the prior re-registered on the campaign (BASE +
-            PROBE: the "before"); the prior's layer kept (rebound to the new model: its
-            correction was the offset the physical fit saw); ``settings["prior"]`` records
-            τ, its CV scores and the regularised keys.
+            PROBE: the "before"); its learned layer: the campaign's own stage on top of the
+            prior layer's arm-shape stage when adopted (:mod:`.campaign_stage`), else the
+            prior's layer (rebound to the new model: its correction was the offset the
+            physical fit saw); ``settings["prior"]`` records τ, its CV scores, the
+            regularised keys and the stage.
 
         Raises
         ------
@@ -444,6 +461,44 @@ class PriorCalibrator:
         final, start, keys, lam, history, converged = self.solve(offset, tau)
         self._say("prior", 1, 1, f"τ = {tau:g}: mean residual "
                   f"{history[-1].mean_position_mm if history else float('nan'):.4f} mm")
+        stage = None
+        if self.stage:
+            from plugcell.calibration.campaign_stage import fit_campaign_stage
+
+            stage = fit_campaign_stage(final, data, self.prior.layer, robot=self.prior.robot,
+                                       cell_size_m=self.cell_size_m)
+            self._say("prior", 1, 1, "campaign stage: " + (
+                "adopted" if stage.adopted else "not used") + (
+                f" ({stage.reason})" if stage.reason else ""))
+        layer = self.prior.layer
+        if stage is not None and stage.adopted:
+            layer = stage.layer
+        elif layer is not None:
+            layer = replace(layer, fingerprint=calibration_fingerprint(final))
+        warnings: list[str] = []
+        if in_domain is not None and not in_domain.all():
+            warnings.append(f"{int((~in_domain).sum())} of {len(data)} campaign poses lie "
+                            "outside the prior layer's region: its correction is not applied "
+                            "there")
+        settings = {"robot": self.prior.robot, "scale": tau,
+                    "scale_chosen_by": "given" if self.scale is not None
+                    else ("grouped CV" if scores else "default"),
+                    "cv_mm": {f"{t:g}": v * 1e3 for t, v in scores.items()},
+                    "regularised": [k for k, v in zip(keys, lam, strict=True) if v > 0],
+                    "sigma_y_m": self.prior.sigma_y,
+                    "layer_offset": self.prior.layer is not None,
+                    "stage": None if stage is None else stage.summary()}
+        return self._result(data, offset, final, start, keys, lam, history, converged,
+                            layer, warnings, settings, t0)
+
+    def _result(self, data: CalibrationData, offset: CalibrationData, final: ErrorModel,
+                start: ErrorModel, keys: list[str], lam: Array,
+                history: list[IterationRecord], converged: bool,
+                layer: LearnedResidual | None, warnings: list[str],
+                prior_settings: dict[str, object], t0: float) -> CalibrationResult:
+        """The :class:`CalibrationResult` of a fit: posterior statistics
+        ``σ̂² (HᵀWᵀWH + ΛᵀΛ)⁻¹`` at the MAP, residuals before (the prior moved) and after
+        on the offset campaign, the validity region of the campaign's poses."""
         problem = _Problem(final, offset,
                            final.batch(offset.q, offset.payload_kg, offset.temperature_c),
                            self.rotation_weight)
@@ -453,15 +508,6 @@ class PriorCalibrator:
         P_start = start.predict(offset.q, offset.payload_kg, offset.temperature_c)
         P_final = final.predict(offset.q, offset.payload_kg, offset.temperature_c)
         residuals = PoseResiduals.from_poses(offset, P_start, P_final)
-        layer = self.prior.layer
-        if layer is not None:
-            layer = replace(layer, fingerprint=calibration_fingerprint(final))
-        regular = [k for k, v in zip(keys, lam, strict=True) if v > 0]
-        warnings: list[str] = []
-        if in_domain is not None and not in_domain.all():
-            warnings.append(f"{int((~in_domain).sum())} of {len(data)} campaign poses lie "
-                            "outside the prior layer's region: its correction is not applied "
-                            "there")
         targets = (np.linalg.inv(final.base()) @ P_final)[:, :3, 3]
         return CalibrationResult(
             config=self.prior.config, robot=self.prior.robot, model=final,
@@ -477,12 +523,4 @@ class PriorCalibrator:
             residual_model=layer,
             settings={"method": "gauss-newton", "loss": "linear",
                       "rotation_weight": self.rotation_weight, "tol": self.tol,
-                      "max_iterations": self.max_iterations,
-                      "prior": {"robot": self.prior.robot, "scale": tau,
-                                "scale_chosen_by": "given" if self.scale is not None
-                                else ("grouped CV" if scores else "default"),
-                                "cv_mm": {f"{t:g}": v * 1e3 for t, v in scores.items()},
-                                "regularised": regular,
-                                "sigma_y_m": self.prior.sigma_y,
-                                "layer_offset": self.prior.layer is not None}})
-
+                      "max_iterations": self.max_iterations, "prior": prior_settings})

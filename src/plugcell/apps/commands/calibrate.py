@@ -3,7 +3,8 @@
     plugcell calibrate --robot NAME|FILE --model 1..5|NAME --data CAL.csv
                        [--validate VAL.csv] [--rot rpy|zyz|xyz] [--payload-kg M]
                        [--out PARAMS.json] [--json] [--report REPORT.html]
-                       [--residuals RES.json] [--prior EARLIER.json [--prior-scale TAU]]
+                       [--residuals RES.json] [--prior EARLIER.json [--prior-scale TAU]
+                       [--prior-stage learned|none]]
 
 A file of joint readings and tracker measurements is all it needs: BASE and
 PROBE are estimated from the data unless given (``--base``/``--probe``, e.g. from
@@ -15,9 +16,12 @@ model and a diverging fit end with a clear message and exit code 2.
 
 ``--prior EARLIER.json``: the robot was calibrated before (another set-up) and moved; a
 short campaign here identifies BASE and PROBE freely and the earlier calibration's other
-parameters with regularisation toward it (MAP, :mod:`plugcell.calibration.prior`), the
-earlier learned layer kept as an offset.  ``--residual-prior`` is a different thing (a new
-learned layer on top of the earlier layer's arm-shape stage, ≥ 200 poses): kept as it is.
+parameters with regularisation toward it (MAP, :mod:`plugcell.calibration.prior`; τ = 0
+among the CV's candidates: BASE and PROBE only), the earlier learned layer kept as an
+offset, and the campaign's own learned stage on top when its grouped CV adopts it
+(:mod:`plugcell.calibration.campaign_stage`; ``--prior-stage none``: never).
+``--residual-prior`` is a different thing (a new learned layer on top of the earlier
+layer's arm-shape stage, ≥ 200 poses): kept as it is.
 """
 
 from __future__ import annotations
@@ -105,16 +109,26 @@ def configure(p: argparse.ArgumentParser) -> None:
                         "calibration of this robot with a learned layer (its PARAMS.json "
                         "and side file), e.g. one made in another set-up: a short campaign "
                         "here then adds to what that one taught (docs/calibration.md)")
+    _add_prior_args(p)
+    p.add_argument("--quiet", action="store_true", help="no progress on stderr")
+    p.set_defaults(func=_run)
+
+
+def _add_prior_args(p: argparse.ArgumentParser) -> None:
+    """The options of a short campaign with an earlier calibration as prior (--prior…)."""
     p.add_argument("--prior", type=Path, metavar="EARLIER.json",
                    help="the robot moved to a new set-up: identify this (short) campaign with "
                         "an earlier calibration of it (its PARAMS.json, with its learned layer "
                         "if it has one) as a prior — BASE and PROBE free, the other parameters "
                         "pulled toward the earlier values by their σ (docs/calibration.md)")
     p.add_argument("--prior-scale", type=float, metavar="TAU",
-                   help="with --prior: inflate the earlier σ by TAU ≥ 1 (default: chosen by "
-                        "grouped cross-validation over the campaign's workspace cells)")
-    p.add_argument("--quiet", action="store_true", help="no progress on stderr")
-    p.set_defaults(func=_run)
+                   help="with --prior: inflate the earlier σ by TAU ≥ 1, or 0: BASE and PROBE "
+                        "only (default: chosen by grouped cross-validation over the "
+                        "campaign's workspace cells, 0 among the candidates)")
+    p.add_argument("--prior-stage", choices=("learned", "none"), default=None,
+                   help="with --prior: learn the campaign's own stage on what the fit leaves "
+                        "and keep it when its grouped CV over the campaign's cells beats the "
+                        "fit without it (learned, the default), or never (none)")
 
 
 def _frame(text: str, what: str) -> np.ndarray:
@@ -246,12 +260,19 @@ def _summary(d: dict[str, Any]) -> str:
                          "first stage is not")
     pri = d.get("settings", {}).get("prior")
     if pri:
+        held = (f"its other parameters held (τ = 0, {pri['scale_chosen_by']})"
+                if pri["scale"] == 0 else
+                f"{len(pri['regularised'])} parameters pulled toward it with its σ × τ = "
+                f"{pri['scale']:g} ({pri['scale_chosen_by']})")
         lines.append(f"  prior: the earlier calibration of {pri['robot']}, BASE + PROBE "
-                     f"re-identified ('before' above), {len(pri['regularised'])} parameters "
-                     f"pulled toward it with its σ × τ = {pri['scale']:g} "
-                     f"({pri['scale_chosen_by']})"
+                     f"re-identified ('before' above), {held}"
                      + ("; its learned layer kept (its correction an offset of the fit)"
                         if pri["layer_offset"] else ""))
+        st = pri.get("stage")
+        if st:
+            lines.append("  campaign stage: " + (
+                f"adopted (grouped CV over {st['cells']} cells: {st['physical_mm']:.3f} -> "
+                f"{st['hybrid_mm']:.3f} mm)" if st["adopted"] else f"not used: {st['reason']}"))
     if hv:
         lines.append(f"  validation  physical {hv['physical']['mean_mm']:7.3f} mm, hybrid "
                      f"{hv['hybrid']['mean_mm']:7.3f} mm ({hv['fallbacks']} of {hv['poses']} "
@@ -331,6 +352,8 @@ def _prior_conflicts(args: argparse.Namespace) -> None:
     if args.prior is None:
         if args.prior_scale is not None:
             raise CommandError("--prior-scale needs --prior EARLIER.json")
+        if args.prior_stage is not None:
+            raise CommandError("--prior-stage needs --prior EARLIER.json")
         return
     given = [o for o, on in (("--residual-model learned", args.residual_model != "none"),
                              ("--residual-prior", args.residual_prior is not None),
@@ -344,9 +367,10 @@ def _prior_conflicts(args: argparse.Namespace) -> None:
         raise CommandError(f"--prior: {', '.join(given)} cannot be combined with it (the "
                            "earlier calibration decides the model and keeps its layer; "
                            "BASE and PROBE are re-identified from the campaign)")
-    if args.prior_scale is not None and not (math.isfinite(args.prior_scale)
-                                             and args.prior_scale >= 1):
-        raise CommandError(f"--prior-scale must be a number ≥ 1, got {args.prior_scale}")
+    if args.prior_scale is not None and not (args.prior_scale == 0 or (
+            math.isfinite(args.prior_scale) and args.prior_scale >= 1)):
+        raise CommandError(f"--prior-scale must be 0 (BASE + PROBE only) or a number ≥ 1, "
+                           f"got {args.prior_scale}")
 
 
 def _run(args: argparse.Namespace) -> int:
@@ -403,20 +427,17 @@ def _run(args: argparse.Namespace) -> int:
             raise CommandError(f"--residual-model learned: {exc}") from None
     prior = None if args.residual_prior is None else _prior_stage(args.residual_prior, args)
     earlier = None if args.prior is None else _prior(args.prior, args)
-    if earlier is not None and earlier.layer is not None and args.out is None:
-        raise CommandError("--prior with a learned layer needs --out PARAMS.json: the layer "
-                           "is saved beside it (PARAMS.residual.skops)")
+    if earlier is not None and (earlier.layer is not None or args.prior_stage != "none") \
+            and args.out is None:
+        raise CommandError("--prior needs --out PARAMS.json: the learned layer (the earlier "
+                           "one, or the campaign's own stage) is saved beside it "
+                           "(PARAMS.residual.skops); --prior-stage none with an earlier "
+                           "calibration without a layer writes none")
     base = None if args.base is None else _frame(args.base, "base")
     probe = None if args.probe is None else _frame(args.probe, "probe")
     try:
         if earlier is not None:
-            from plugcell.calibration.prior import PriorCalibrator
-
-            result = PriorCalibrator(earlier, scale=args.prior_scale,
-                                     rotation_weight=args.rotation_weight,
-                                     max_iterations=args.max_iterations,
-                                     cell_size_m=args.residual_cell_m,
-                                     progress=progress).fit(data)
+            result = _fit_prior(args, earlier, data, progress)
         else:
             result = _fit(args, desc, data, base, probe, prior, learner, progress)
         if val is not None:
@@ -428,6 +449,16 @@ def _run(args: argparse.Namespace) -> int:
     except (CalibrationError, ResidualModelError) as exc:
         raise CommandError(str(exc)) from None
     return _write(args, desc, data, val, result)
+
+
+def _fit_prior(args: argparse.Namespace, earlier: Any, data: Any, progress: Any) -> Any:
+    """The short campaign with the earlier calibration as prior (--prior)."""
+    from plugcell.calibration.prior import PriorCalibrator
+
+    return PriorCalibrator(earlier, scale=args.prior_scale, stage=args.prior_stage != "none",
+                           rotation_weight=args.rotation_weight,
+                           max_iterations=args.max_iterations, cell_size_m=args.residual_cell_m,
+                           progress=progress).fit(data)
 
 
 def _fit(args: argparse.Namespace, desc: Any, data: Any, base: Any, probe: Any, prior: Any,
