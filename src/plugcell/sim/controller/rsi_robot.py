@@ -108,6 +108,14 @@ class RsiRobot:
         The controller's own motion (the KRL program's LIN/PTP moves): cycle ``k``'s
         setpoint is ``path.setpoints(T)[k]``; it must start where the arm stands.
         Default: the arm holds still and only the corrections move it.
+    realtime : bool
+        True (default): one cycle every ``T`` of real time, as a controller.  False:
+        *simulated time* — the controller waits up to ``answer_timeout_s`` for each
+        answer and sends the next packet as soon as it has one, so the simulation runs
+        as fast as the sensor answers and no answer is late because the PC was busy
+        (a run that must not depend on the machine's load: ``plugcell path run``).
+    answer_timeout_s : float
+        How long a simulated-time controller waits for an answer before counting it late.
 
     Raises
     ------
@@ -119,7 +127,8 @@ class RsiRobot:
     def __init__(self, arm: DynamicTwin, config: RsiConfig, *,
                  bind: tuple[str, int] = ("127.0.0.1", 0), ipoc0: int = 1_000_000,
                  holdon: bool | None = None, record: bool = False,
-                 path: Trajectory | None = None) -> None:
+                 path: Trajectory | None = None, realtime: bool = True,
+                 answer_timeout_s: float = 1.0) -> None:
         if abs(arm.params.cycle - config.cycle_s) > 1e-12:
             raise ValueError(f"the arm's cycle {arm.params.cycle} s is not the stream's "
                              f"{config.cycle_s} s ({config.cycle})")
@@ -128,6 +137,7 @@ class RsiRobot:
                              f"{arm.twin.description.n_readings}")
         self.arm, self.config = arm, config
         self.holdon = (config.mode == "absolute") if holdon is None else holdon
+        self.realtime, self.answer_timeout_s = realtime, float(answer_timeout_s)
         self._sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
         self._sock.bind(bind)
         self._sensor = (config.listen_host, config.listen_port)
@@ -225,7 +235,7 @@ class RsiRobot:
                                 tcp_setpoint=tcp_set, delay=delay)
             with contextlib.suppress(OSError):  # unreachable: its answer will be missing
                 self._sock.sendto(packet, self._sensor)
-            next_t += T
+            next_t = next_t + T if self.realtime else time.monotonic() + self.answer_timeout_s
             answer = self._await(self._ipoc, next_t)
             self._k = min(self._k + 1, len(self._path) - 1)  # the program's motion goes on
             offset = self._apply(answer)
@@ -246,6 +256,8 @@ class RsiRobot:
                                 f"Timeout of {self.config.timeout_packets}")
                 return
             pause = next_t - time.monotonic()
+            if not self.realtime:
+                continue
             if pause > 0:
                 self._stop.wait(pause)
             else:

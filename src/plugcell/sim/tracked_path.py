@@ -1,0 +1,411 @@
+"""A path run on the twin with the laser tracker in the loop (``plugcell path run``).
+
+The pieces are the ones a real cell has, over the same seams:
+
+* the **robot** is the twin's KUKA RSI side (:class:`~.controller.rsi_robot.RsiRobot`):
+  a simulated controller that runs the path by itself — the path file's points as LIN
+  moves (:mod:`plugcell.motion`, the robot's nominal model) — and takes relative-to-path
+  Cartesian corrections (``RKorr``, absolute mode, base frame) from plugcell's
+  :class:`~plugcell.devices.robot.rsi.link.RsiLink` over UDP on the loopback, every 4 ms;
+* the **tracker** is the streaming model (:class:`~.twin.tracker_stream.TrackerStream`,
+  1 kHz, latency, noise, servo lag, beam breaks) aimed at the twin's T-MAC — its *true*
+  pose, from the dynamic twin's link angles through the static physics;
+* the **loop** is :class:`~plugcell.devices.robot.tracking.TrackingLoop` with a corrector
+  (default :class:`~plugcell.devices.robot.tracking.ModelErrorCorrector`), its offset
+  blended in and out by :class:`~plugcell.devices.robot.stream.source.PathOffset` and
+  held to the link's limits (clamped: the robot never jumps).
+
+The robot's clock is the controller's IPOC (``t = k·T``); the tracker's clock is the
+simulation's (no offset, no drift: the alignment of clocks is measured elsewhere,
+:mod:`plugcell.metrology.timing`).  BASE and PROBE are the twin's true ones (a cell whose
+frames are calibrated).  Accuracy is judged against the twin's true TCP
+(:func:`plugcell.metrology.path_accuracy.segment_accuracy`).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import threading
+from collections.abc import Callable
+from dataclasses import dataclass, field
+
+import numpy as np
+from numpy.typing import NDArray
+
+from plugcell.devices.robot.rsi import PathOffset, RsiConfig, RsiLink
+from plugcell.devices.robot.rsi.config import CorrectionLimits
+from plugcell.devices.robot.stream.source import CycleState
+from plugcell.devices.robot.tracking import (
+    Corrector,
+    ModelErrorCorrector,
+    TrackedSample,
+    TrackingLoop,
+    Window,
+    kuka_offset,
+)
+from plugcell.io.path_files import PathFile
+from plugcell.kinematics import RobotDescription, forward, inverse
+from plugcell.metrology.path_accuracy import PathAccuracy, segment_accuracy
+from plugcell.motion import LIN, CartesianLimits, JointLimits, Trajectory, plan
+from plugcell.sim.controller.rsi_robot import RsiRobot
+from plugcell.sim.twin.dynamics import DynamicTwin
+from plugcell.sim.twin.scenario import TwinScenario
+from plugcell.sim.twin.tracker import LaserTracker
+from plugcell.sim.twin.tracker_stream import StreamSpec, TrackerStream
+
+Array = NDArray[np.float64]
+
+__all__ = ["PathRun", "PathRunOptions", "plan_path", "run_path"]
+
+#: Joint limits of a 200 kg-class robot (benchmarks/twin_path_deviation.py).
+JOINTS = JointLimits(np.radians([100, 90, 90, 170, 120, 190]),
+                     np.radians([300, 250, 300, 500, 500, 700]),
+                     np.radians([2000, 1500, 2000, 4000, 4000, 5000]))
+#: TCP acceleration (m/s²) and jerk (m/s³) of the LIN moves.
+ACCELERATION, JERK = 2.0, 20.0
+
+
+@dataclass(frozen=True)
+class PathRunOptions:
+    """How a path is run on the twin.
+
+    Attributes
+    ----------
+    robot, payload_kg, seed : the twin (:class:`~.twin.scenario.TwinScenario`).
+    tracking : bool
+        The tracker corrects (False: it only measures, for comparison).
+    rate_hz : float
+        The tracker's output rate.
+    six_dof : bool
+        T-MAC (position and orientation) or SMR (position).
+    beam_breaks : sequence of (start s, duration s)
+        The line of sight is interrupted then (times from the path's start).
+    tracker_lost_at : float, optional
+        The tracker stops sending at this time from the path's start (a tracker gone).
+    silence_s : float
+        After this long without any sample the tracker is taken as gone: the correction
+        ramps out and the run ends with the reason.
+    settle_s, rest_s : float
+        The robot stands still before the path (the loop converges) and after it.
+    ramp_s : float
+        Blend in and out of the correction.
+    max_offset_mm, max_speed_mm_s : float
+        The link's limits of the correction (clamped).
+    timeout_packets : int
+        The controller's ``Timeout`` (late answers before RSI stops).
+    corrector : callable, optional
+        ``corrector(description) -> Corrector`` (default ModelErrorCorrector).
+    """
+
+    robot: str = "smart_h4"
+    payload_kg: float = 36.0
+    seed: int = 0
+    tracking: bool = True
+    rate_hz: float = 1000.0
+    six_dof: bool = True
+    beam_breaks: tuple[tuple[float, float], ...] = ()
+    tracker_lost_at: float | None = None
+    silence_s: float = 0.5
+    settle_s: float = 0.5
+    rest_s: float = 0.3
+    ramp_s: float = 0.2
+    max_offset_mm: float = 5.0
+    max_speed_mm_s: float = 50.0
+    timeout_packets: int = 1000
+    corrector: Callable[[RobotDescription], Corrector] | None = None
+
+
+@dataclass
+class PathRun:
+    """What a run gave: accuracy, windows, traces (robot clock, path start at 0)."""
+
+    accuracy: PathAccuracy
+    windows: list[Window]
+    ended: str
+    duration_s: float
+    cycles: int
+    late: int
+    clamped: int
+    samples_ok: int
+    samples_lost: int
+    traces: dict[str, Array] = field(repr=False, default_factory=dict)
+
+
+def plan_path(desc: RobotDescription, path: PathFile) -> tuple[Array, Trajectory]:
+    """The start joints (nominal IK of the first point) and the LIN moves through the rest.
+
+    Without angles in the file every point keeps the start's orientation, which is the
+    TCP's at the robot's home pose.  Each segment's speed is a fraction of the fastest.
+
+    Raises
+    ------
+    ValueError
+        The first point out of reach, or a move the planner refuses (with its reason).
+    """
+    home = np.asarray(desc.home, dtype=float)
+    poses = np.array(path.poses, copy=True)
+    if not path.oriented:
+        poses[:, :3, :3] = forward(desc, None, home, "nominal").tcp[:3, :3]
+    ik = inverse(desc, None, poses[0], seed=home, target="tcp", raise_errors=False)
+    if not ik.converged:
+        raise ValueError(f"line {path.lines[0]}: the first point is out of the robot's reach")
+    top = float(np.max(path.speeds))
+    moves = [LIN(target=poses[i + 1], speed=float(path.speeds[i] / top),
+                 line=int(path.lines[i + 1])) for i in range(path.n_segments)]
+    cart = CartesianLimits(top, ACCELERATION, JERK, 1.0, 4.0, 40.0)
+    return ik.q, plan(desc, ik.q, moves, JOINTS, cart)
+
+
+class _Padded:
+    """The controller's program: stand ``before`` s, run the trajectory, stand ``after`` s
+    (what :class:`RsiRobot` asks of a path: its setpoints at the cycle)."""
+
+    def __init__(self, trajectory: Trajectory, before: float, after: float) -> None:
+        self.trajectory, self.before, self.after = trajectory, before, after
+
+    def setpoints(self, dt: float) -> tuple[Array, Array]:
+        _, q = self.trajectory.setpoints(dt)
+        pre, post = round(self.before / dt), round(self.after / dt)
+        q = np.vstack([np.repeat(q[:1], pre, 0), q, np.repeat(q[-1:], post, 0)])
+        return np.arange(len(q)) * dt, q
+
+
+class _TruthTwin(DynamicTwin):
+    """The dynamic twin that keeps its T-MAC's true pose (tracker frame) after every cycle
+    for the tracker model to see — simulators only.
+
+    The static physics costs ~9 ms a pose, too much for every 4 ms cycle; the model's
+    error ``E(q) = F_true(q) · F_nom(q)⁻¹`` varies slowly with the pose, so it is computed
+    in one batch at every ``every``-th cycle of the program and the flange taken as
+    ``E(q_k) · F_nom(link)`` of the link angles now (µm off for the millimetres a
+    correction moves the arm).  :meth:`true_tcp` gives the exact poses afterwards.
+    """
+
+    def __init__(self, scenario: TwinScenario, q0: Array, program: Array,
+                 every: int = 10) -> None:
+        super().__init__(scenario, q0=q0)
+        truth = self.twin.reveal_truth()
+        self.base, self.probe = truth.base, truth.probe
+        self._desc = self.twin.description
+        ref = program[::every]
+        self._every = every
+        self._E = self.true_flanges(ref) @ np.linalg.inv(
+            forward(self._desc, None, ref, "nominal").flange)
+        self.links: list[Array] = [self.link]
+        self.truth: list[Array] = [self._reflector(self.link, 0)]
+
+    def _reflector(self, link: Array, k: int) -> Array:
+        E = self._E[min(round(k / self._every), len(self._E) - 1)]
+        flange = E @ forward(self._desc, None, link, "nominal").flange
+        return self.base @ flange @ self.probe
+
+    def step(self, command: object):  # type: ignore[override]
+        state = super().step(command)  # type: ignore[arg-type]
+        self.links.append(state.link)
+        self.truth.append(self._reflector(state.link, self.cycle))
+        return state
+
+    def true_tcp(self, tool: Array, n: int) -> Array:
+        """The exact true TCP poses (base frame) after cycles ``1…n`` (n, 4, 4)."""
+        return self.true_flanges(np.array(self.links[1:n + 1])) @ tool
+
+    def reflector_at(self, t: float, cycle_s: float) -> Array:
+        """The T-MAC's true pose at ``t`` (s, robot clock), linear between cycles."""
+        truth = self.truth
+        x = min(max(t / cycle_s, 0.0), len(truth) - 1.0)
+        i = min(int(x), len(truth) - 2) if len(truth) > 1 else 0
+        w = x - i
+        if len(truth) == 1 or w <= 0.0:
+            return truth[i]
+        T = truth[i].copy()
+        T[:3, 3] = (1 - w) * truth[i][:3, 3] + w * truth[i + 1][:3, 3]
+        return T
+
+
+class _Cycle:
+    """The correction source's ``g(state)``: tracker samples in, the loop's offset out."""
+
+    def __init__(self, arm: _TruthTwin, robot_T: float, ipoc0: int, ipoc_step: int,
+                 stream: TrackerStream, loop: TrackingLoop, tool: Array,
+                 tracked: NDArray[np.bool_], options: PathRunOptions, t_end: float) -> None:
+        self.arm, self.T, self.ipoc0, self.ipoc_step = arm, robot_T, ipoc0, ipoc_step
+        self.stream, self.loop, self.tool, self.tracked = stream, loop, tool, tracked
+        self.options, self.t_end = options, t_end
+        self.base_inv, self.probe_inv = np.linalg.inv(arm.base), np.linalg.inv(arm.probe)
+        self.shift: PathOffset | None = None
+        self.ended = ""
+        self.measured: list[tuple[float, Array]] = []
+        self._lock = threading.Lock()
+
+    def _samples(self, t: float) -> list[TrackedSample]:
+        lost = self.options.tracker_lost_at
+        if lost is not None and t >= self.options.settle_s + lost:
+            return []  # the tracker is gone: nothing arrives
+        out = []
+        for s in self.stream.advance(t):
+            tcp = None if s.pose is None else self.base_inv @ s.pose @ self.probe_inv @ self.tool
+            if tcp is not None:
+                self.measured.append((s.true_time_s, tcp[:3, 3].copy()))
+            out.append(TrackedSample(s.true_time_s, tcp, s.status, s.six_dof))
+        return out
+
+    def __call__(self, state: CycleState) -> Array:
+        k = (state.robot.ipoc - self.ipoc0) // self.ipoc_step
+        t = k * self.T
+        loop = self.loop
+        loop.feed(self._samples(t))
+        loop.enabled = self.options.tracking and bool(self.tracked[min(k, len(self.tracked) - 1)])
+        g = loop.cycle(t, np.asarray(state.robot.joints, dtype=float))
+        assert self.shift is not None
+        silent = t - loop.t_heard
+        if not self.ended and silent > self.options.silence_s:
+            self.ended = (f"tracker silent for {silent:.3f} s (more than "
+                          f"{self.options.silence_s:g} s): the correction ramped out, the "
+                          "path went on with the model alone")
+            self.shift.finish()
+        if t >= self.t_end:
+            self.shift.finish()
+        return kuka_offset(g)
+
+
+def _setup(path: PathFile, options: PathRunOptions, T: float
+           ) -> tuple[_TruthTwin, Trajectory, _Padded, Array]:
+    scenario = TwinScenario(robot=options.robot, seed=options.seed,
+                            payload_kg=options.payload_kg)
+    desc = DynamicTwin(scenario).twin.description
+    q0, trajectory = plan_path(desc, path)
+    program = _Padded(trajectory, options.settle_s, options.rest_s)
+    arm = _TruthTwin(scenario, q0, program.setpoints(T)[1])
+    fk = forward(desc, None, q0, "nominal")
+    return arm, trajectory, program, np.linalg.inv(fk.flange) @ fk.tcp
+
+
+def _link_config(options: PathRunOptions) -> RsiConfig:
+    mm = 1e-3
+    deg = np.pi / 180
+    limits = CorrectionLimits((options.max_speed_mm_s * mm * 0.004,) * 3 + (0.02 * deg,) * 3,
+                              (options.max_offset_mm * mm,) * 3 + (1.0 * deg,) * 3,
+                              (options.max_speed_mm_s * mm,) * 3 + (5.0 * deg,) * 3, "clamp")
+    return RsiConfig(robot_host="127.0.0.1", listen_host="127.0.0.1", listen_port=0,
+                     correction="cartesian", mode="absolute", frame="base",
+                     timeout_packets=options.timeout_packets, limits=limits)
+
+
+def _blocked(options: PathRunOptions) -> Callable[[float], bool]:
+    breaks = [(options.settle_s + t0, options.settle_s + t0 + d)
+              for t0, d in options.beam_breaks]
+    return lambda t: any(a <= t < b for a, b in breaks)
+
+
+def run_path(path: PathFile, options: PathRunOptions | None = None,
+             progress: Callable[[float], None] | None = None) -> PathRun:
+    """Run ``path`` on the twin with the tracker in the loop (module docstring).
+
+    Parameters
+    ----------
+    path : PathFile
+        The path (``plugcell.io.path_files``).
+    options : PathRunOptions, optional
+    progress : callable, optional
+        Called with the fraction of the run done (0…1), about every 0.1 s.
+
+    Returns
+    -------
+    PathRun
+        Accuracy per segment and window, the windows, the traces (path start at 0 s).
+
+    Raises
+    ------
+    ValueError
+        A path the planner refuses, with the reason.
+    """
+    o = options or PathRunOptions()
+    config = _link_config(o)
+    T = config.cycle_s
+    arm, trajectory, program, tool = _setup(path, o, T)
+    times, q_prog = program.setpoints(T)
+    moves = trajectory.sample(np.clip(times - o.settle_s, 0.0, None), 0).move
+    on_path = (times >= o.settle_s) & (times <= o.settle_s + trajectory.duration)
+    tracked = np.where(on_path, path.tracking[np.clip(moves, 0, path.n_segments - 1)], False)
+    tracked[times < o.settle_s] = True  # converge before the path starts
+    tracker = LaserTracker(seed=o.seed)
+    tracker.point_at(arm.reflector_at(0.0, T)[:3, 3])
+    stream = TrackerStream(tracker, lambda t: arm.reflector_at(t, T), o.rate_hz,
+                           spec=StreamSpec(), blocked=_blocked(o), seed=o.seed)
+    corrector = (o.corrector or ModelErrorCorrector)(arm.twin.description)
+    loop = TrackingLoop(corrector)
+    t_end = o.settle_s + trajectory.duration
+    with RsiLink(config) as link:
+        robot = RsiRobot(arm, dataclasses.replace(config, listen_port=link.address[1]),
+                         path=program, record=True, realtime=False)  # type: ignore[arg-type]
+        cycle = _Cycle(arm, T, 1_000_000, config.ipoc_step, stream, loop, tool, tracked, o,
+                       t_end)
+        cycle.shift = shift = PathOffset(cycle, ramp=o.ramp_s)
+        robot.start()
+        ended = _follow(link, robot, shift, times[-1], progress)
+        robot.stop()
+        stats = link.stats()
+    return _result(path, o, arm, robot, loop, cycle, q_prog, tracked, moves, on_path, tool,
+                   ended or cycle.ended, stats)
+
+
+def _follow(link: RsiLink, robot: RsiRobot, shift: PathOffset, total_s: float,
+            progress: Callable[[float], None] | None) -> str:
+    """Stream the offset until it has ramped out and the robot's program has ended; the
+    reason if the stream failed ('' otherwise)."""
+    import concurrent.futures
+
+    timeout = total_s * 3.0 + 30.0
+    with concurrent.futures.ThreadPoolExecutor(1) as pool:
+        done = pool.submit(link.follow, shift, shift.ended, timeout)
+        while not done.done():
+            if progress is not None:
+                progress(min(robot.stats().cycles * link.config.cycle_s / total_s, 1.0))
+            concurrent.futures.wait([done], timeout=0.1)
+        try:
+            done.result()
+        except (TimeoutError, RuntimeError) as exc:
+            return str(exc)
+    if not link.wait(lambda lk: robot.path_done or robot.stopped is not None, timeout):
+        return f"the robot's program did not end within {timeout:g} s"
+    if progress is not None:
+        progress(1.0)
+    return robot.stopped or ""
+
+
+def _states(loop: TrackingLoop, n: int, T: float) -> NDArray[np.str_]:
+    states = np.full(n, "off", dtype=object)
+    for r in loop.records:
+        k = round(r.t / T)
+        if 0 <= k < n:
+            states[k] = r.state
+    return states.astype(str)
+
+
+def _result(path: PathFile, o: PathRunOptions, arm: _TruthTwin, robot: RsiRobot,
+            loop: TrackingLoop, cycle: _Cycle, q_prog: Array, tracked: NDArray[np.bool_],
+            moves: NDArray[np.intp], on_path: NDArray[np.bool_], tool: Array, ended: str,
+            stats: object) -> PathRun:
+    T = robot.config.cycle_s
+    log = robot.stats().log
+    n = min(len(log), len(q_prog), len(arm.truth) - 1)
+    desc = arm.twin.description
+    actual = arm.true_tcp(tool, n)[:, :3, 3]
+    commanded = forward(desc, None, q_prog[:n], "nominal").tcp[:, :3, 3]
+    offsets = np.array([entry[3] for entry in log[:n]])
+    segment = np.where(on_path[:n], moves[:n], -1)
+    states = _states(loop, n, T)
+    points = path.poses[:, :3, 3]
+    accuracy = segment_accuracy(actual, commanded, points, segment, states, T)
+    t = np.arange(n) * T - o.settle_s
+    measured = np.array([[ts - o.settle_s, *x] for ts, x in cycle.measured]) \
+        if cycle.measured else np.zeros((0, 4))
+    traces = {"t": t, "commanded": commanded, "corrected": commanded + offsets[:, :3],
+              "actual": actual, "measured": measured, "segment": segment,
+              "state": states}
+    windows = [dataclasses.replace(w, t0=w.t0 - o.settle_s, t1=w.t1 - o.settle_s)
+               for w in loop.windows()]
+    return PathRun(accuracy, windows, ended, float(n * T), n, robot.stats().delay,
+                   int(getattr(stats, "clamped", 0)), loop.samples_ok, loop.samples_lost,
+                   traces)
+
