@@ -45,13 +45,14 @@ controller's files from): ``listen_host``/``listen_port`` is where the robot sen
 from __future__ import annotations
 
 import contextlib
+import dataclasses
 import socket
 import threading
 import time
 from dataclasses import dataclass, field
 
 import numpy as np
-from numpy.typing import NDArray
+from numpy.typing import ArrayLike, NDArray
 
 from plugcell.devices.robot.rsi.codec import PacketError, encode_rob, parse_sen
 from plugcell.devices.robot.rsi.config import RsiConfig
@@ -116,6 +117,11 @@ class RsiRobot:
         (a run that must not depend on the machine's load: ``plugcell path run``).
     answer_timeout_s : float
         How long a simulated-time controller waits for an answer before counting it late.
+    tool : (4, 4) array_like, optional
+        The controller's TCP in the flange frame (KUKA's ``$TOOL``; default the
+        description's tool): ``RIst``/``RSol`` and Cartesian corrections refer to it.
+    path_delay_s : float
+        The program waits this long at ``RSI_ON`` before its path starts (s).
 
     Raises
     ------
@@ -127,7 +133,8 @@ class RsiRobot:
     def __init__(self, arm: DynamicTwin, config: RsiConfig, *,
                  bind: tuple[str, int] = ("127.0.0.1", 0), ipoc0: int = 1_000_000,
                  holdon: bool | None = None, record: bool = False,
-                 path: Trajectory | None = None, realtime: bool = True,
+                 path: Trajectory | None = None, tool: ArrayLike | None = None,
+                 path_delay_s: float = 0.0, realtime: bool = True,
                  answer_timeout_s: float = 1.0) -> None:
         if abs(arm.params.cycle - config.cycle_s) > 1e-12:
             raise ValueError(f"the arm's cycle {arm.params.cycle} s is not the stream's "
@@ -149,6 +156,8 @@ class RsiRobot:
         self._thread: threading.Thread | None = None
         self.stopped: str | None = None
         desc = arm.twin.description
+        if tool is not None:
+            desc = dataclasses.replace(desc, tool=np.array(tool, dtype=float))
         self._desc = desc
         self._q_start = arm.measured.copy()
         if path is None:
@@ -159,6 +168,10 @@ class RsiRobot:
             if gap > 1e-3:
                 raise ValueError(f"the path starts {np.degrees(gap):.3g}° from where the "
                                  "arm stands; start it at the arm's joints")
+        if not (np.isfinite(path_delay_s) and path_delay_s >= 0):
+            raise ValueError(f"path_delay_s must be ≥ 0 seconds, got {path_delay_s!r}")
+        wait = round(path_delay_s / config.cycle_s)
+        self._path = np.vstack([np.repeat(self._path[:1], wait, 0), self._path])
         # the path's nominal poses and Jacobians, all at once (cheap in a batch, a
         # millisecond each per cycle)
         self._T_path = forward(desc, None, self._path, "nominal").tcp
@@ -219,41 +232,69 @@ class RsiRobot:
         return self._k >= len(self._path) - 1
 
     # ------------------------------------------------------------------ the cycle
+    def packet(self) -> bytes:
+        """This cycle's ``<Rob>`` (module docstring, 1): what :meth:`start`'s thread sends.
+
+        With :meth:`advance`, the controller runs in the caller's process and time (a
+        simulation without sockets: the same packets, corrections and arm).
+
+        Returns
+        -------
+        bytes
+            The XML packet for the current IPOC.
+        """
+        q = self.arm.measured
+        tcp = _kuka_abc(forward(self._desc, None, q, "nominal").tcp)
+        tcp_set = _kuka_abc(self._T_set if self.config.correction == "cartesian" else
+                            forward(self._desc, None, self._command, "nominal").tcp)
+        with self._lock:
+            delay = self._stats.delay
+        return encode_rob(self._ipoc, q, tcp, joints_setpoint=self._command,
+                          tcp_setpoint=tcp_set, delay=delay)
+
+    def advance(self, answer: Array | None) -> str | None:
+        """End this cycle with the sensor's correction (module docstring, 2–4).
+
+        Parameters
+        ----------
+        answer : (6,) array or None
+            The correction echoing this cycle's IPOC (SI, as ``parse_sen`` gives it), or
+            ``None`` when it was missing or late (counted in ``<Delay>``).
+
+        Returns
+        -------
+        str or None
+            Why RSI stopped (``Timeout`` reached), else ``None``.
+        """
+        self._k = min(self._k + 1, len(self._path) - 1)  # the program's motion goes on
+        offset = self._apply(answer)
+        state = self.arm.step(self._command)
+        with self._lock:
+            st = self._stats
+            st.cycles += 1
+            if answer is None:
+                st.delay += 1
+            else:
+                st.answered += 1
+            if self._record:
+                st.log.append((self._ipoc, state.command, state.link, offset.copy()))
+            late = st.delay
+        self._ipoc += self.config.ipoc_step
+        if late >= self.config.timeout_packets:
+            self.stopped = (f"RSI stopped: {late} late sensor packets reached the "
+                            f"Timeout of {self.config.timeout_packets}")
+        return self.stopped
+
     def _run(self) -> None:
         T = self.config.cycle_s
-        step = self.config.ipoc_step
         next_t = time.monotonic()
         while not self._stop.is_set():
-            arm = self.arm
-            q = arm.measured
-            tcp = _kuka_abc(forward(self._desc, None, q, "nominal").tcp)
-            tcp_set = _kuka_abc(self._T_set if self.config.correction == "cartesian" else
-                                forward(self._desc, None, self._command, "nominal").tcp)
-            with self._lock:
-                delay = self._stats.delay
-            packet = encode_rob(self._ipoc, q, tcp, joints_setpoint=self._command,
-                                tcp_setpoint=tcp_set, delay=delay)
+            packet = self.packet()
             with contextlib.suppress(OSError):  # unreachable: its answer will be missing
                 self._sock.sendto(packet, self._sensor)
             next_t = next_t + T if self.realtime else time.monotonic() + self.answer_timeout_s
             answer = self._await(self._ipoc, next_t)
-            self._k = min(self._k + 1, len(self._path) - 1)  # the program's motion goes on
-            offset = self._apply(answer)
-            state = arm.step(self._command)
-            with self._lock:
-                st = self._stats
-                st.cycles += 1
-                if answer is None:
-                    st.delay += 1
-                else:
-                    st.answered += 1
-                if self._record:
-                    st.log.append((self._ipoc, state.command, state.link, offset.copy()))
-                late = st.delay
-            self._ipoc += step
-            if late >= self.config.timeout_packets:
-                self.stopped = (f"RSI stopped: {late} late sensor packets reached the "
-                                f"Timeout of {self.config.timeout_packets}")
+            if self.advance(answer) is not None:
                 return
             pause = next_t - time.monotonic()
             if not self.realtime:
