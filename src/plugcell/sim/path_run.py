@@ -10,10 +10,13 @@ The pieces are the ones a real cell has, over the same seams:
 * the **tracker** is the streaming model (:class:`~.twin.tracker_stream.TrackerStream`,
   1 kHz, latency, noise, servo lag, beam breaks) aimed at the twin's T-MAC — its *true*
   pose, from the dynamic twin's link angles through the static physics;
-* the **loop** is :class:`~plugcell.devices.robot.tracking.TrackingLoop` with a corrector
-  (default :class:`~plugcell.devices.robot.tracking.ModelErrorCorrector`), its offset
-  blended in and out by :class:`~plugcell.devices.robot.stream.source.PathOffset` and
-  held to the link's limits (clamped: the robot never jumps).
+* the **loop** is :class:`~plugcell.compensation.tracking.TrackingLoop` (the estimator
+  and the law: model feed-forward, tracker term, fades at beam breaks, hold windows) as
+  the link's correction source (:class:`~plugcell.devices.robot.rsi.tracking.
+  TrackingSource`: blended in and out at the path's ends), held to the link's limits
+  (clamped: the robot never jumps).  A segment whose ``tracking`` is 0 runs with the
+  model alone (the tracker term fades out), as does the whole path with
+  ``tracking=False`` — the comparison.
 
 The robot's clock is the controller's IPOC (``t = k·T``); the tracker's clock is the
 simulation's (no offset, no drift: the alignment of clocks is measured elsewhere,
@@ -25,28 +28,27 @@ frames are calibrated).  Accuracy is judged against the twin's true TCP
 from __future__ import annotations
 
 import dataclasses
-import threading
 from collections.abc import Callable
 from dataclasses import dataclass, field
 
 import numpy as np
 from numpy.typing import NDArray
 
-from plugcell.devices.robot.rsi import PathOffset, RsiConfig, RsiLink
-from plugcell.devices.robot.rsi.config import CorrectionLimits
-from plugcell.devices.robot.stream.source import CycleState
-from plugcell.devices.robot.tracking import (
-    Corrector,
-    ModelErrorCorrector,
-    TrackedSample,
+from plugcell.compensation.pose_model import NominalModel
+from plugcell.compensation.tracking import (
+    HoldWindow,
+    TrackerMeasurement,
     TrackingLoop,
-    Window,
-    kuka_offset,
+    TrackingSettings,
 )
+from plugcell.devices.robot.rsi import RsiConfig, RsiLink
+from plugcell.devices.robot.rsi.config import CorrectionLimits
+from plugcell.devices.robot.rsi.tracking import TrackingSource
+from plugcell.devices.robot.stream.source import Correction, CycleState
 from plugcell.io.path_files import PathFile
 from plugcell.kinematics import RobotDescription, forward, inverse
 from plugcell.metrology.path_accuracy import PathAccuracy, segment_accuracy
-from plugcell.motion import LIN, CartesianLimits, JointLimits, Trajectory, plan
+from plugcell.motion import LIN, CartesianLimits, JointLimits, Trajectory, TrajectoryError, plan
 from plugcell.sim.controller.rsi_robot import RsiRobot
 from plugcell.sim.twin.dynamics import DynamicTwin
 from plugcell.sim.twin.scenario import TwinScenario
@@ -93,8 +95,8 @@ class PathRunOptions:
         The link's limits of the correction (clamped).
     timeout_packets : int
         The controller's ``Timeout`` (late answers before RSI stops).
-    corrector : callable, optional
-        ``corrector(description) -> Corrector`` (default ModelErrorCorrector).
+    settings : TrackingSettings, optional
+        The loop's settings (default: :class:`TrackingSettings` at the stream's cycle).
     """
 
     robot: str = "smart_h4"
@@ -112,7 +114,18 @@ class PathRunOptions:
     max_offset_mm: float = 5.0
     max_speed_mm_s: float = 50.0
     timeout_packets: int = 1000
-    corrector: Callable[[RobotDescription], Corrector] | None = None
+    settings: TrackingSettings | None = None
+
+    def __post_init__(self) -> None:
+        if not (np.isfinite(self.rate_hz) and 1.0 <= self.rate_hz <= 1000.0):
+            raise ValueError(f"rate {self.rate_hz:g} Hz outside 1…1000 Hz (the tracker's "
+                             "output rate)")
+        if not (np.isfinite(self.payload_kg) and self.payload_kg >= 0):
+            raise ValueError(f"payload must be ≥ 0 kg, got {self.payload_kg:g}")
+        if self.tracker_lost_at is not None and not (np.isfinite(self.tracker_lost_at)
+                                                     and self.tracker_lost_at >= 0):
+            raise ValueError(f"tracker lost at {self.tracker_lost_at:g} s: expected a time "
+                             "≥ 0 s after the path's start")
 
 
 @dataclass
@@ -120,7 +133,7 @@ class PathRun:
     """What a run gave: accuracy, windows, traces (robot clock, path start at 0)."""
 
     accuracy: PathAccuracy
-    windows: list[Window]
+    windows: list[HoldWindow]
     ended: str
     duration_s: float
     cycles: int
@@ -153,7 +166,11 @@ def plan_path(desc: RobotDescription, path: PathFile) -> tuple[Array, Trajectory
     moves = [LIN(target=poses[i + 1], speed=float(path.speeds[i] / top),
                  line=int(path.lines[i + 1])) for i in range(path.n_segments)]
     cart = CartesianLimits(top, ACCELERATION, JERK, 1.0, 4.0, 40.0)
-    return ik.q, plan(desc, ik.q, moves, JOINTS, cart)
+    try:
+        return ik.q, plan(desc, ik.q, moves, JOINTS, cart)
+    except TrajectoryError as exc:
+        raise ValueError(f"line {path.lines[0]}: {exc}" if "the start" in str(exc)
+                         else str(exc)) from None
 
 
 class _Padded:
@@ -223,21 +240,21 @@ class _TruthTwin(DynamicTwin):
 
 
 class _Cycle:
-    """The correction source's ``g(state)``: tracker samples in, the loop's offset out."""
+    """The link's source each cycle: new tracker samples into the loop, then its offset."""
 
     def __init__(self, arm: _TruthTwin, robot_T: float, ipoc0: int, ipoc_step: int,
-                 stream: TrackerStream, loop: TrackingLoop, tool: Array,
+                 stream: TrackerStream, source: TrackingSource, tool: Array,
                  tracked: NDArray[np.bool_], options: PathRunOptions, t_end: float) -> None:
         self.arm, self.T, self.ipoc0, self.ipoc_step = arm, robot_T, ipoc0, ipoc_step
-        self.stream, self.loop, self.tool, self.tracked = stream, loop, tool, tracked
+        self.stream, self.source, self.tool, self.tracked = stream, source, tool, tracked
         self.options, self.t_end = options, t_end
         self.base_inv, self.probe_inv = np.linalg.inv(arm.base), np.linalg.inv(arm.probe)
-        self.shift: PathOffset | None = None
         self.ended = ""
+        self.t_heard = -np.inf
         self.measured: list[tuple[float, Array]] = []
-        self._lock = threading.Lock()
+        self.states: dict[int, str] = {}
 
-    def _samples(self, t: float) -> list[TrackedSample]:
+    def _samples(self, t: float) -> list[TrackerMeasurement]:
         lost = self.options.tracker_lost_at
         if lost is not None and t >= self.options.settle_s + lost:
             return []  # the tracker is gone: nothing arrives
@@ -246,26 +263,29 @@ class _Cycle:
             tcp = None if s.pose is None else self.base_inv @ s.pose @ self.probe_inv @ self.tool
             if tcp is not None:
                 self.measured.append((s.true_time_s, tcp[:3, 3].copy()))
-            out.append(TrackedSample(s.true_time_s, tcp, s.status, s.six_dof))
+            out.append(TrackerMeasurement(s.true_time_s, tcp, s.six_dof, s.status))
         return out
 
-    def __call__(self, state: CycleState) -> Array:
+    def correction(self, state: CycleState) -> Correction:
         k = (state.robot.ipoc - self.ipoc0) // self.ipoc_step
         t = k * self.T
-        loop = self.loop
-        loop.feed(self._samples(t))
-        loop.enabled = self.options.tracking and bool(self.tracked[min(k, len(self.tracked) - 1)])
-        g = loop.cycle(t, np.asarray(state.robot.joints, dtype=float))
-        assert self.shift is not None
-        silent = t - loop.t_heard
+        samples = self._samples(t)
+        if samples or self.t_heard == -np.inf:  # silence counts from the first cycle
+            self.t_heard = t
+        self.source.add(samples)
+        loop = self.source.loop
+        loop.tracking = self.options.tracking and bool(self.tracked[min(k, len(self.tracked) - 1)])
+        silent = t - self.t_heard
         if not self.ended and silent > self.options.silence_s:
             self.ended = (f"tracker silent for {silent:.3f} s (more than "
-                          f"{self.options.silence_s:g} s): the correction ramped out, the "
-                          "path went on with the model alone")
-            self.shift.finish()
+                          f"{self.options.silence_s:g} s): the path went on with the model "
+                          "alone")
+            self.source.hold("tracker silent")
         if t >= self.t_end:
-            self.shift.finish()
-        return kuka_offset(g)
+            self.source.finish()
+        corr = self.source.correction(state)
+        self.states[k] = loop.state if loop.tracking else "off"
+        return corr
 
 
 def _setup(path: PathFile, options: PathRunOptions, T: float
@@ -332,24 +352,25 @@ def run_path(path: PathFile, options: PathRunOptions | None = None,
     tracker.point_at(arm.reflector_at(0.0, T)[:3, 3])
     stream = TrackerStream(tracker, lambda t: arm.reflector_at(t, T), o.rate_hz,
                            spec=StreamSpec(), blocked=_blocked(o), seed=o.seed)
-    corrector = (o.corrector or ModelErrorCorrector)(arm.twin.description)
-    loop = TrackingLoop(corrector)
+    settings = o.settings or TrackingSettings(cycle_s=T, max_correction_m=o.max_offset_mm * 1e-3)
+    loop = TrackingLoop(NominalModel(arm.twin.description, tool), settings,
+                        payload_kg=o.payload_kg, tracking=o.tracking)
+    source = TrackingSource(loop, ramp=o.ramp_s)
     t_end = o.settle_s + trajectory.duration
     with RsiLink(config) as link:
         robot = RsiRobot(arm, dataclasses.replace(config, listen_port=link.address[1]),
                          path=program, record=True, realtime=False)  # type: ignore[arg-type]
-        cycle = _Cycle(arm, T, 1_000_000, config.ipoc_step, stream, loop, tool, tracked, o,
+        cycle = _Cycle(arm, T, 1_000_000, config.ipoc_step, stream, source, tool, tracked, o,
                        t_end)
-        cycle.shift = shift = PathOffset(cycle, ramp=o.ramp_s)
         robot.start()
-        ended = _follow(link, robot, shift, times[-1], progress)
+        ended = _follow(link, robot, cycle, times[-1], progress)
         robot.stop()
         stats = link.stats()
     return _result(path, o, arm, robot, loop, cycle, q_prog, tracked, moves, on_path, tool,
                    ended or cycle.ended, stats)
 
 
-def _follow(link: RsiLink, robot: RsiRobot, shift: PathOffset, total_s: float,
+def _follow(link: RsiLink, robot: RsiRobot, cycle: _Cycle, total_s: float,
             progress: Callable[[float], None] | None) -> str:
     """Stream the offset until it has ramped out and the robot's program has ended; the
     reason if the stream failed ('' otherwise)."""
@@ -357,7 +378,7 @@ def _follow(link: RsiLink, robot: RsiRobot, shift: PathOffset, total_s: float,
 
     timeout = total_s * 3.0 + 30.0
     with concurrent.futures.ThreadPoolExecutor(1) as pool:
-        done = pool.submit(link.follow, shift, shift.ended, timeout)
+        done = pool.submit(link.follow, cycle.correction, cycle.source.ended, timeout)
         while not done.done():
             if progress is not None:
                 progress(min(robot.stats().cycles * link.config.cycle_s / total_s, 1.0))
@@ -373,13 +394,10 @@ def _follow(link: RsiLink, robot: RsiRobot, shift: PathOffset, total_s: float,
     return robot.stopped or ""
 
 
-def _states(loop: TrackingLoop, n: int, T: float) -> NDArray[np.str_]:
-    states = np.full(n, "off", dtype=object)
-    for r in loop.records:
-        k = round(r.t / T)
-        if 0 <= k < n:
-            states[k] = r.state
-    return states.astype(str)
+def _states(cycle: _Cycle, n: int) -> NDArray[np.str_]:
+    """Each cycle's state: the loop's (``tracking``, ``holding``, ``acquiring``,
+    ``model``), ``off`` where the segment asks for no tracking or no correction ran."""
+    return np.array([cycle.states.get(k, "off") for k in range(n)], dtype=str)
 
 
 def _result(path: PathFile, o: PathRunOptions, arm: _TruthTwin, robot: RsiRobot,
@@ -394,7 +412,7 @@ def _result(path: PathFile, o: PathRunOptions, arm: _TruthTwin, robot: RsiRobot,
     commanded = forward(desc, None, q_prog[:n], "nominal").tcp[:, :3, 3]
     offsets = np.array([entry[3] for entry in log[:n]])
     segment = np.where(on_path[:n], moves[:n], -1)
-    states = _states(loop, n, T)
+    states = _states(cycle, n)
     points = path.poses[:, :3, 3]
     accuracy = segment_accuracy(actual, commanded, points, segment, states, T)
     t = np.arange(n) * T - o.settle_s
@@ -403,9 +421,10 @@ def _result(path: PathFile, o: PathRunOptions, arm: _TruthTwin, robot: RsiRobot,
     traces = {"t": t, "commanded": commanded, "corrected": commanded + offsets[:, :3],
               "actual": actual, "measured": measured, "segment": segment,
               "state": states}
-    windows = [dataclasses.replace(w, t0=w.t0 - o.settle_s, t1=w.t1 - o.settle_s)
-               for w in loop.windows()]
+    windows = [HoldWindow(w.start_s - o.settle_s,
+                          None if w.end_s is None else w.end_s - o.settle_s, w.reason)
+               for w in loop.windows]
     return PathRun(accuracy, windows, ended, float(n * T), n, robot.stats().delay,
-                   int(getattr(stats, "clamped", 0)), loop.samples_ok, loop.samples_lost,
-                   traces)
+                   int(getattr(stats, "clamped", 0)), loop.stats.samples_used,
+                   loop.stats.samples_bad, traces)
 
