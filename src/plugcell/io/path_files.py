@@ -189,7 +189,24 @@ def _check_segment(T0: Array, T1: Array, name: str, line: int) -> None:
 
 
 def read_path(path: str | Path, **kwargs: object) -> PathFile:
-    """:func:`parse_path` of a file (its name in the messages); PathFileError if unreadable."""
+    """:func:`parse_path` of a file (its name in the messages).
+
+    Parameters
+    ----------
+    path : str or Path
+        The file.
+    **kwargs
+        ``speed_mm_s``, ``convention`` (:func:`parse_path`).
+
+    Returns
+    -------
+    PathFile
+
+    Raises
+    ------
+    PathFileError
+        The file cannot be read, or is malformed (file, line and column named).
+    """
     p = Path(path)
     try:
         text = p.read_text(encoding="utf-8")

@@ -27,10 +27,20 @@ __all__ = ["PathAccuracy", "SegmentAccuracy", "perpendicular", "segment_accuracy
 
 @dataclass(frozen=True)
 class SegmentAccuracy:
-    """The accuracy of one set of cycles (module docstring), lengths in m.
+    """The accuracy of one set of cycles (module docstring).
 
-    ``segment`` is the segment's index (-1: the whole path), ``state`` the window state
-    (``"all"`` for every cycle), ``n`` the cycles, ``duration_s`` their time.
+    Attributes
+    ----------
+    segment : int
+        The segment's index (-1: the whole path).
+    state : str
+        The window state (``"all"`` for every cycle).
+    n : int
+        The cycles.
+    duration_s : float
+        Their time (s).
+    perpendicular_max, perpendicular_3sigma, along_max : float
+        ``max d``, ``mean(d) + 3 std(d)``, ``max |a|`` (m).
     """
 
     segment: int
@@ -44,7 +54,13 @@ class SegmentAccuracy:
 
 @dataclass(frozen=True)
 class PathAccuracy:
-    """Per segment and state, and for the whole path (``segment == -1``)."""
+    """Per segment and state, and for the whole path.
+
+    Attributes
+    ----------
+    rows : tuple of SegmentAccuracy
+        Each segment's rows (state ``"all"`` first), then the path's (``segment == -1``).
+    """
 
     rows: tuple[SegmentAccuracy, ...]
 
@@ -57,7 +73,18 @@ class PathAccuracy:
 
 
 def perpendicular(x: ArrayLike, p0: ArrayLike, p1: ArrayLike) -> Array:
-    """``d_k``: distances of points ``x`` (K, 3) from the line through ``p0``, ``p1`` (m)."""
+    """``d_k``: distances of points from the line through two points.
+
+    Parameters
+    ----------
+    x : (K, 3) array_like, m
+    p0, p1 : (3,) array_like, m
+        Two distinct points of the line.
+
+    Returns
+    -------
+    (K,) array, m
+    """
     x, p0, p1 = (np.asarray(v, dtype=float) for v in (x, p0, p1))
     u = p1 - p0
     norm = float(np.linalg.norm(u))

@@ -376,7 +376,8 @@ def _follow(link: RsiLink, robot: RsiRobot, cycle: _Cycle, total_s: float,
     reason if the stream failed ('' otherwise)."""
     import concurrent.futures
 
-    timeout = total_s * 3.0 + 30.0
+    # simulated time: the run takes as long as the machine needs; this only catches a hang
+    timeout = 60.0 + 0.25 * total_s / link.config.cycle_s
     with concurrent.futures.ThreadPoolExecutor(1) as pool:
         done = pool.submit(link.follow, cycle.correction, cycle.source.ended, timeout)
         while not done.done():
