@@ -27,8 +27,15 @@ PATH = """x,y,z,a,b,c,speed,tracking
 """
 
 
-def _run(**kw):
-    return run_path(parse_path(PATH, "p.csv"), PathRunOptions(**kw))
+#: 100 mm tracked: long enough for a break, the re-acquisition and the resumption.
+LONG = """x,y,z,a,b,c,speed
+1473.3,-231.7,2488.4,-60,30,-90,
+1473.3,-131.7,2488.4,-60,30,-90,100
+"""
+
+
+def _run(text=PATH, **kw):
+    return run_path(parse_path(text, "p.csv"), PathRunOptions(**kw))
 
 
 @pytest.fixture(scope="module")
@@ -63,11 +70,11 @@ def test_the_corrected_path_never_jumps(tracked):
 
 @pytest.mark.slow
 def test_a_beam_break_is_a_window_and_tracking_resumes_by_itself():
-    run = _run(beam_breaks=((0.1, 0.3),), settle_s=0.5)
+    run = _run(LONG, beam_breaks=((0.05, 0.1),))
     assert run.ended == ""
     [w] = run.windows
-    assert w.reason == "line_of_sight" and 0.1 <= w.start_s <= 0.2
-    assert w.end_s is not None and w.end_s > 0.4  # resumed: the window closed
+    assert w.reason == "line_of_sight" and 0.05 <= w.start_s <= 0.15
+    assert w.end_s is not None and w.end_s > 0.45  # re-acquired (0.3 s), resumed
     states = set(run.traces["state"][run.traces["segment"] == 0].tolist())
     assert {"tracking", "holding"} <= states
     assert run.samples_lost > 0
@@ -77,7 +84,9 @@ def test_a_beam_break_is_a_window_and_tracking_resumes_by_itself():
 def test_a_tracker_gone_ends_the_run_with_the_reason_and_no_jump():
     run = _run(tracker_lost_at=0.2, silence_s=0.1)
     assert run.ended.startswith("tracker silent for")
-    assert run.windows and run.windows[-1].reason == "tracker silent"
+    # the loop holds as soon as samples are late; the run ends when the silence lasts
+    assert run.windows and run.windows[-1].reason in ("late", "tracker silent")
+    assert run.windows[-1].end_s is None
     offset = run.traces["corrected"] - run.traces["commanded"]
     assert np.abs(np.diff(offset, axis=0)).max() <= 50e-3 * 0.004 + 1e-9
 
