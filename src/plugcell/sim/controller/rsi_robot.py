@@ -227,6 +227,16 @@ class RsiRobot:
         return self._offset.copy()
 
     @property
+    def path_poses(self) -> Array:
+        """The path's nominal TCP poses, one per cycle (F0, (K, 4, 4)), without correction."""
+        return self._T_path
+
+    @property
+    def path_index(self) -> int:
+        """The path's cycle whose setpoint is commanded now."""
+        return self._k
+
+    @property
     def path_done(self) -> bool:
         """The controller's own path has reached its end (always, without a path)."""
         return self._k >= len(self._path) - 1
