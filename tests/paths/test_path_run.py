@@ -34,8 +34,24 @@ LONG = """x,y,z,a,b,c,speed
 """
 
 
-def _run(text=PATH, **kw):
-    return run_path(parse_path(text, "p.csv"), PathRunOptions(**kw))
+def _run(text=PATH, calibration=None, **kw):
+    return run_path(parse_path(text, "p.csv"), PathRunOptions(**kw), calibration=calibration)
+
+
+@pytest.fixture(scope="module")
+def calibration():
+    """Model 5 of the path's twin (seed 0, 36 kg) from its own 90-pose campaign."""
+    from plugcell.calibration.identify import Calibrator
+    from plugcell.sim.twin.campaign import measure_poses, working_volume_joints
+    from plugcell.sim.twin.robot import RobotTwin
+    from plugcell.sim.twin.scenario import TwinScenario
+    from plugcell.sim.twin.tracker import LaserTracker
+
+    twin = RobotTwin(TwinScenario(robot="smart_h4", seed=0, payload_kg=36.0))
+    q = working_volume_joints(twin.description, twin.reveal_truth().profile, 90,
+                              np.random.default_rng(1))
+    ms, _ = measure_poses(twin, LaserTracker(seed=0), q)
+    return Calibrator(twin.description, 5).fit(ms)
 
 
 @pytest.fixture(scope="module")
@@ -89,6 +105,34 @@ def test_a_tracker_gone_ends_the_run_with_the_reason_and_no_jump():
     assert run.windows[-1].end_s is None
     offset = run.traces["corrected"] - run.traces["commanded"]
     assert np.abs(np.diff(offset, axis=0)).max() <= 50e-3 * 0.004 + 1e-9
+
+
+@pytest.mark.slow
+def test_a_calibrated_model_compensates_the_path_without_the_tracker(untracked, calibration):
+    run = _run(calibration=calibration, tracking=False)
+    nominal = untracked.accuracy.of(-1, "all")
+    model = run.accuracy.of(-1, "all")
+    assert nominal.perpendicular_max > 1.5e-3  # the nominal model: millimetres
+    assert model.perpendicular_max < 0.4 * nominal.perpendicular_max
+    assert model.along_max < 0.5 * nominal.along_max
+    assert set(run.traces["state"][run.traces["segment"] >= 0].tolist()) == {"model"}
+
+
+@pytest.mark.slow
+def test_a_3dof_reflector_corrects_the_position_with_the_models_orientation(untracked):
+    run = _run(six_dof=False)
+    assert run.ended == "" and run.samples_ok > 100
+    with_t = run.accuracy.of(0, "all")
+    assert with_t.perpendicular_max < 0.5 * untracked.accuracy.of(0, "all").perpendicular_max
+
+
+def test_a_calibration_of_another_robot_is_refused():
+    from types import SimpleNamespace as Ns
+
+    other = Ns(model=Ns(structure=Ns(source=Ns(name="kr16"))), residual_model=None)
+    with pytest.raises(ValueError, match="the calibration is of the robot 'kr16', the path "
+                       "runs on 'smart_h4'"):
+        _run(calibration=other)
 
 
 def _cli(*args, cwd):

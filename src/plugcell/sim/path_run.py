@@ -34,7 +34,8 @@ from dataclasses import dataclass, field
 import numpy as np
 from numpy.typing import NDArray
 
-from plugcell.compensation.pose_model import NominalModel
+from plugcell.calibration.result import CalibrationResult
+from plugcell.compensation.pose_model import IdentifiedModel, NominalModel, PoseModel
 from plugcell.compensation.tracking import (
     HoldWindow,
     TrackerMeasurement,
@@ -79,7 +80,8 @@ class PathRunOptions:
     rate_hz : float
         The tracker's output rate.
     six_dof : bool
-        T-MAC (position and orientation) or SMR (position).
+        T-MAC (position and orientation) or SMR (position only: the measured TCP takes
+        the orientation the loop's model predicts at the joint feedback).
     beam_breaks : sequence of (start s, duration s)
         The line of sight is interrupted then (times from the path's start).
     tracker_lost_at : float, optional
@@ -239,28 +241,61 @@ class _TruthTwin(DynamicTwin):
         return T
 
 
+class _Frames:
+    """A tracker sample (reflector pose, tracker frame) as the TCP's pose in F0, eq. (7.2)
+    with the tool: ``T_tcp = BASE⁻¹ · T · PROBE⁻¹ · tool``.
+
+    A 3-DoF sample (SMR: a position, its rotation the identity) takes the reflector's
+    orientation the loop's model predicts at the joint feedback ``q``:
+    ``R = rot(model(q) · tool⁻¹ · PROBE)`` — the tracker sees no rotation, so the TCP's
+    position is the reflector's moved by the lever arm turned as the model says.
+    """
+
+    def __init__(self, base: Array, probe: Array, tool: Array, model: PoseModel,
+                 payload_kg: float) -> None:
+        self.base_inv = np.linalg.inv(base)
+        self.to_tcp = np.linalg.inv(probe) @ tool
+        self.tool_to_probe = np.linalg.inv(tool) @ probe
+        self.model, self.payload_kg = model, payload_kg
+        self._q: Array | None = None
+        self._R = np.eye(3)
+
+    def tcp(self, pose: Array, six_dof: bool, q: Array | None) -> Array | None:
+        """The TCP (4×4, F0, m) of a sample's ``pose``; None for a 3-DoF sample before any
+        joint feedback."""
+        T = self.base_inv @ pose
+        if not six_dof:
+            if q is None:
+                return None
+            if self._q is None or not np.array_equal(q, self._q):
+                self._q = q.copy()
+                T_model = self.model.evaluate(q, self.payload_kg)[0][0]
+                self._R = (T_model @ self.tool_to_probe)[:3, :3]
+            T[:3, :3] = self._R
+        return T @ self.to_tcp
+
+
 class _Cycle:
     """The link's source each cycle: new tracker samples into the loop, then its offset."""
 
     def __init__(self, arm: _TruthTwin, robot_T: float, ipoc0: int, ipoc_step: int,
-                 stream: TrackerStream, source: TrackingSource, tool: Array,
+                 stream: TrackerStream, source: TrackingSource, frames: _Frames,
                  tracked: NDArray[np.bool_], options: PathRunOptions, t_end: float) -> None:
         self.arm, self.T, self.ipoc0, self.ipoc_step = arm, robot_T, ipoc0, ipoc_step
-        self.stream, self.source, self.tool, self.tracked = stream, source, tool, tracked
+        self.stream, self.source, self.frames, self.tracked = stream, source, frames, tracked
         self.options, self.t_end = options, t_end
-        self.base_inv, self.probe_inv = np.linalg.inv(arm.base), np.linalg.inv(arm.probe)
         self.ended = ""
         self.t_heard = -np.inf
         self.measured: list[tuple[float, Array]] = []
         self.states: dict[int, str] = {}
 
-    def _samples(self, t: float) -> list[TrackerMeasurement]:
+    def _samples(self, t: float, q: Array | None) -> list[TrackerMeasurement]:
         lost = self.options.tracker_lost_at
         if lost is not None and t >= self.options.settle_s + lost:
             return []  # the tracker is gone: nothing arrives
         out = []
         for s in self.stream.advance(t):
-            tcp = None if s.pose is None else self.base_inv @ s.pose @ self.probe_inv @ self.tool
+            tcp = None if s.pose is None else self.frames.tcp(s.pose, s.six_dof, q)
             if tcp is not None:
                 self.measured.append((s.true_time_s, tcp[:3, 3].copy()))
             out.append(TrackerMeasurement(s.true_time_s, tcp, s.six_dof, s.status))
@@ -269,7 +304,8 @@ class _Cycle:
     def correction(self, state: CycleState) -> Correction:
         k = (state.robot.ipoc - self.ipoc0) // self.ipoc_step
         t = k * self.T
-        samples = self._samples(t)
+        joints = state.robot.joints
+        samples = self._samples(t, None if joints is None else np.asarray(joints, float))
         if samples or self.t_heard == -np.inf:  # silence counts from the first cycle
             self.t_heard = t
         self.source.add(samples)
@@ -284,7 +320,8 @@ class _Cycle:
         if t >= self.t_end:
             self.source.finish()
         corr = self.source.correction(state)
-        self.states[k] = loop.state if loop.tracking else "off"
+        self.states[k] = loop.state if loop.tracking else \
+            "model" if not self.options.tracking else "off"
         return corr
 
 
@@ -318,7 +355,8 @@ def _blocked(options: PathRunOptions) -> Callable[[float], bool]:
 
 
 def run_path(path: PathFile, options: PathRunOptions | None = None,
-             progress: Callable[[float], None] | None = None) -> PathRun:
+             progress: Callable[[float], None] | None = None,
+             calibration: CalibrationResult | None = None) -> PathRun:
     """Run ``path`` on the twin with the tracker in the loop (module docstring).
 
     Parameters
@@ -328,6 +366,13 @@ def run_path(path: PathFile, options: PathRunOptions | None = None,
     options : PathRunOptions, optional
     progress : callable, optional
         Called with the fraction of the run done (0…1), about every 0.1 s.
+    calibration : CalibrationResult, optional
+        The robot's calibration (``plugcell calibrate``'s PARAMS.json): the loop's model
+        is :class:`~plugcell.compensation.pose_model.IdentifiedModel` (with its residual
+        layer if any) at the path's TCP, and the tracker's samples come into F0 through
+        its identified BASE and PROBE.  Without: the controller's nominal model and the
+        twin's true BASE and PROBE (the tracker term then corrects all of the model's
+        millimetres).
 
     Returns
     -------
@@ -337,7 +382,7 @@ def run_path(path: PathFile, options: PathRunOptions | None = None,
     Raises
     ------
     ValueError
-        A path the planner refuses, with the reason.
+        A path the planner refuses, or a calibration of another robot, with the reason.
     """
     o = options or PathRunOptions()
     config = _link_config(o)
@@ -351,16 +396,18 @@ def run_path(path: PathFile, options: PathRunOptions | None = None,
     tracker = LaserTracker(seed=o.seed)
     tracker.point_at(arm.reflector_at(0.0, T)[:3, 3])
     stream = TrackerStream(tracker, lambda t: arm.reflector_at(t, T), o.rate_hz,
-                           spec=StreamSpec(), blocked=_blocked(o), seed=o.seed)
+                           six_dof=o.six_dof, spec=StreamSpec(), blocked=_blocked(o),
+                           seed=o.seed)
+    model, frames = _model(arm, tool, o, calibration)
     settings = o.settings or TrackingSettings(cycle_s=T, max_correction_m=o.max_offset_mm * 1e-3)
-    loop = TrackingLoop(NominalModel(arm.twin.description, tool), settings,
-                        payload_kg=o.payload_kg, tracking=o.tracking)
+    loop = TrackingLoop(model, settings, payload_kg=o.payload_kg, tracking=o.tracking,
+                        controller=NominalModel(arm.twin.description, tool))  # its $TOOL
     source = TrackingSource(loop, ramp=o.ramp_s)
     t_end = o.settle_s + trajectory.duration
     with RsiLink(config) as link:
         robot = RsiRobot(arm, dataclasses.replace(config, listen_port=link.address[1]),
                          path=program, record=True, realtime=False)  # type: ignore[arg-type]
-        cycle = _Cycle(arm, T, 1_000_000, config.ipoc_step, stream, source, tool, tracked, o,
+        cycle = _Cycle(arm, T, 1_000_000, config.ipoc_step, stream, source, frames, tracked, o,
                        t_end)
         robot.start()
         ended = _follow(link, robot, cycle, times[-1], progress)
@@ -368,6 +415,26 @@ def run_path(path: PathFile, options: PathRunOptions | None = None,
         stats = link.stats()
     return _result(path, o, arm, robot, loop, cycle, q_prog, tracked, moves, on_path, tool,
                    ended or cycle.ended, stats)
+
+
+def _model(arm: _TruthTwin, tool: Array, o: PathRunOptions,
+           calibration: CalibrationResult | None) -> tuple[PoseModel, _Frames]:
+    """The loop's model and the tracker's frames: the calibration's, or the nominal model
+    with the twin's true BASE and PROBE."""
+    if calibration is None:
+        model: PoseModel = NominalModel(arm.twin.description, tool)
+        return model, _Frames(arm.base, arm.probe, tool, model, o.payload_kg)
+    em = calibration.model
+    robot = em.structure.source.name
+    if robot != arm.twin.description.name:
+        raise ValueError(f"the calibration is of the robot {robot!r}, the path runs on "
+                         f"{arm.twin.description.name!r}")
+    # the TCP in the identified flange frame: placed by its offset from the T-MAC (a
+    # property of the end effector, measured on it; the twin's is exact), as the flange
+    # frame itself is only known up to what the identified PROBE absorbed
+    tool_id = em.probe() @ np.linalg.inv(arm.probe) @ tool
+    model = IdentifiedModel(em, tool_id, residual=calibration.residual_model)
+    return model, _Frames(model.base, model.probe, tool_id, model, o.payload_kg)
 
 
 def _follow(link: RsiLink, robot: RsiRobot, cycle: _Cycle, total_s: float,
@@ -409,7 +476,10 @@ def _result(path: PathFile, o: PathRunOptions, arm: _TruthTwin, robot: RsiRobot,
     log = robot.stats().log
     n = min(len(log), len(q_prog), len(arm.truth) - 1)
     desc = arm.twin.description
-    actual = arm.true_tcp(tool, n)[:, :3, 3]
+    # the true TCP in the cell's F0: the robot base frame as the cell knows it, through
+    # the BASE it measures with (the identified one with a calibration: the paths are
+    # where the tracker puts them)
+    actual = (cycle.frames.base_inv @ arm.base @ arm.true_tcp(tool, n))[:, :3, 3]
     commanded = forward(desc, None, q_prog[:n], "nominal").tcp[:, :3, 3]
     offsets = np.array([entry[3] for entry in log[:n]])
     segment = np.where(on_path[:n], moves[:n], -1)

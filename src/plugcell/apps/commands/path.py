@@ -2,14 +2,16 @@
 
 ::
 
-    plugcell path run --path path.csv [--no-tracking] [--beam-break START:DURATION …]
+    plugcell path run --path path.csv [--params PARAMS.json [--physical-only]]
+        [--mode 6dof|3dof] [--no-tracking] [--beam-break START:DURATION …]
         [--tracker-lost-at S] [--rate HZ] [--payload KG] [--seed N] [--out result.json]
         [--json]
 
 The path file (:mod:`plugcell.io.path_files`): ``x, y, z`` mm, optionally ``a, b, c``
 degrees, ``speed`` mm/s and ``tracking`` 1/0 per segment.  The robot is the twin's KUKA
 RSI side running the path by itself; plugcell superimposes the tracker loop's
-corrections over RSI (:mod:`plugcell.sim.path_run`).  It prints each segment's accuracy
+corrections over RSI (:mod:`plugcell.sim.path_run`), its model-based part from the
+calibration ``--params`` (default: the nominal model).  It prints each segment's accuracy
 (perpendicular max and 3σ, along max, mm), split by what the loop did on it, the windows
 without tracking, and writes the whole result (and the traces) as JSON with ``--out``.
 Exit status 0, or 1 with the reason when the run ended early (the tracker silent, RSI
@@ -52,6 +54,15 @@ def configure(parser: argparse.ArgumentParser) -> None:
         "tracking 1/0) on the twin's RSI robot with the tracker in the loop; print the "
         "accuracy of each segment and the windows without tracking.")
     p.add_argument("--path", required=True, metavar="FILE", help="the path file (CSV)")
+    p.add_argument("--params", type=Path, metavar="PARAMS.json",
+                   help="the robot's calibration (plugcell calibrate): the model-based part of "
+                   "the correction and the identified BASE and PROBE (default: the nominal "
+                   "model, the cell's true frames)")
+    p.add_argument("--physical-only", action="store_true",
+                   help="ignore a learned residual model recorded in PARAMS")
+    p.add_argument("--mode", choices=("6dof", "3dof"), default="6dof",
+                   help="the tracker measures the T-MAC's pose (6dof, default) or the "
+                   "reflector's position (3dof: the orientation from the model)")
     p.add_argument("--no-tracking", action="store_true",
                    help="the tracker only measures: the model alone corrects (comparison)")
     p.add_argument("--beam-break", action="append", default=[], metavar="START:DURATION",
@@ -136,9 +147,16 @@ def _cmd_run(args: argparse.Namespace) -> int:
         path = read_path(args.path, speed_mm_s=args.speed)
     except PathFileError as exc:
         raise _error(str(exc)) from None
+    calibration = None
+    if args.params is not None:
+        from plugcell.apps.commands.files import read_compensation_model
+
+        args.robot = None  # the robot the file records
+        calibration = read_compensation_model(args.params, args, not args.physical_only)
     try:
         options = PathRunOptions(payload_kg=args.payload, seed=args.seed,
                                  tracking=not args.no_tracking, rate_hz=args.rate,
+                                 six_dof=args.mode == "6dof",
                                  beam_breaks=_breaks(args.beam_break),
                                  tracker_lost_at=args.tracker_lost_at)
     except ValueError as exc:
@@ -151,9 +169,10 @@ def _cmd_run(args: argparse.Namespace) -> int:
             bar(round(100 * fraction), 100)
 
     try:
-        run = run_path(path, options, progress)
+        run = run_path(path, options, progress, calibration)
     except ValueError as exc:
-        raise _error(f"{args.path}: {exc}") from None
+        where = args.params if "calibration" in str(exc) else args.path
+        raise _error(f"{where}: {exc}") from None
     result = result_dict(run, Path(args.path).name)
     if args.out:
         Path(args.out).write_text(json.dumps({**result, "traces": _traces(run)}) + "\n")
