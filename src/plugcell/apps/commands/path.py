@@ -2,7 +2,8 @@
 
 ::
 
-    plugcell path run --path path.csv [--params PARAMS.json [--physical-only]]
+    plugcell path run (--path path.csv | --program FILE.pdl [--library DIR …])
+        [--params PARAMS.json [--physical-only]]
         [--mode 6dof|3dof] [--no-tracking] [--beam-break START:DURATION …]
         [--tracker-lost-at S] [--rate HZ] [--payload KG] [--seed N] [--out result.json]
         [--json]
@@ -53,7 +54,13 @@ def configure(parser: argparse.ArgumentParser) -> None:
         description="Run the path of a path file (x,y,z[,a,b,c] mm/deg, speed mm/s, "
         "tracking 1/0) on the twin's RSI robot with the tracker in the loop; print the "
         "accuracy of each segment and the windows without tracking.")
-    p.add_argument("--path", required=True, metavar="FILE", help="the path file (CSV)")
+    source = p.add_mutually_exclusive_group(required=True)
+    source.add_argument("--path", metavar="FILE", help="the path file (CSV)")
+    source.add_argument("--program", metavar="FILE.pdl",
+                        help="a robot program: its MOVE LINEAR moves are the path, those "
+                        "WITH TRACKING tracked (docs/robot-language.md)")
+    p.add_argument("--library", action="append", default=[], metavar="DIR",
+                   help="a folder of the program's libraries (repeatable)")
     p.add_argument("--params", type=Path, metavar="PARAMS.json",
                    help="the robot's calibration (plugcell calibrate): the model-based part of "
                    "the correction and the identified BASE and PROBE (default: the nominal "
@@ -138,15 +145,35 @@ def _print_table(result: dict[str, Any]) -> None:
         print(f"without tracking: {w['start_s']:.3f} s – {end} ({w['reason']})")
 
 
+def _read(args: argparse.Namespace) -> Any:
+    """The path of ``--path`` or of ``--program`` (its straight moves)."""
+    if args.path is not None:
+        if args.library:
+            raise _error("--library goes with --program")
+        try:
+            return read_path(args.path, speed_mm_s=args.speed)
+        except PathFileError as exc:
+            raise _error(str(exc)) from None
+    from plugcell.io.robots import load_robot
+    from plugcell.sim.path_program import path_of_program
+
+    try:
+        path, trackers = path_of_program(args.program, load_robot("smart_h4"), args.speed,
+                                         args.library)
+    except (OSError, ValueError) as exc:
+        raise _error(str(exc)) from None
+    if len(trackers) > 1:
+        raise _error(f"{args.program}: its moves name {len(trackers)} trackers "
+                     f"({', '.join(sorted(trackers))}); the twin has one")
+    return path
+
+
 def _cmd_run(args: argparse.Namespace) -> int:
     from plugcell.sim.path_run import PathRunOptions, run_path  # late: the twin is heavy
 
     if not (np.isfinite(args.speed) and args.speed > 0):
         raise _error(f"--speed must be > 0 mm/s, got {args.speed}")
-    try:
-        path = read_path(args.path, speed_mm_s=args.speed)
-    except PathFileError as exc:
-        raise _error(str(exc)) from None
+    path = _read(args)
     calibration = None
     if args.params is not None:
         from plugcell.apps.commands.files import read_compensation_model
@@ -162,7 +189,8 @@ def _cmd_run(args: argparse.Namespace) -> int:
     except ValueError as exc:
         raise _error(str(exc)) from None
 
-    bar = ProgressBar(f"running {Path(args.path).name}")
+    name = Path(args.path or args.program).name
+    bar = ProgressBar(f"running {name}")
 
     def progress(fraction: float) -> None:
         if not args.json:
@@ -171,9 +199,9 @@ def _cmd_run(args: argparse.Namespace) -> int:
     try:
         run = run_path(path, options, progress, calibration)
     except ValueError as exc:
-        where = args.params if "calibration" in str(exc) else args.path
+        where = args.params if "calibration" in str(exc) else args.path or args.program
         raise _error(f"{where}: {exc}") from None
-    result = result_dict(run, Path(args.path).name)
+    result = result_dict(run, name)
     if args.out:
         Path(args.out).write_text(json.dumps({**result, "traces": _traces(run)}) + "\n")
     if args.json:
