@@ -71,6 +71,7 @@ from plugcell.devices.robot.rsi.config import CorrectionLimits, RsiConfig
 from plugcell.devices.robot.rsi.drive import RsiDrive
 from plugcell.devices.robot.rsi.link import RsiLink
 from plugcell.devices.robot.runner import TEXT_MAX, ProgramRunner, RunError
+from plugcell.devices.robot.tracked_moves import tracked_moves_for
 from plugcell.io.robots import load_robot
 from plugcell.kinematics import RobotDescription
 from plugcell.motion import CartesianLimits, JointLimits
@@ -183,6 +184,7 @@ class RsiController:
         self.clock = SimClock(speed=1.0)
         self.motion = StreamedMotion(description, self.drive, joint_limits, cartesian_limits,
                                      clock=self.clock)
+        self.motion.move_tracked = tracked_moves_for(self)  # type: ignore[attr-defined]
         self.runner = ProgramRunner(self.motion, self.clock, _Channel(self), self._event,
                                     library)
         self.hello: Hello | None = None

@@ -33,6 +33,7 @@ the move's line.
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from typing import Any
 
 import numpy as np
@@ -78,8 +79,12 @@ class RsiDrive:
             raise MotionError("the controller's RSI packets carry no AIPos (joint feedback)")
         return np.array(state.joints, dtype=float)
 
-    def follow(self, trajectory: Trajectory) -> None:
+    def follow(self, trajectory: Trajectory,
+               adjust: Callable[[CycleState, int, Array], Array] | None = None) -> None:
         """Stream ``trajectory`` from its start to its end (blocks for its duration).
+
+        ``adjust(state, k, q_k)``, if given, is added to sample ``k``'s joints each cycle
+        (rad, (6,)): a tracked move's correction (:mod:`~..tracked_moves`).
 
         Raises
         ------
@@ -107,7 +112,8 @@ class RsiDrive:
                 motion.update(base=ref - state.offset, gap=ref - q[0], k=-1)
             k = motion["k"] = min(motion["k"] + 1, last)
             fade = 1.0 - k / last if last else 0.0
-            return Correction(offset=q[k] - motion["base"] + fade * motion["gap"])
+            extra = 0.0 if adjust is None else adjust(state, k, q[k])
+            return Correction(offset=q[k] - motion["base"] + fade * motion["gap"] + extra)
 
         def done(state: CycleState) -> bool:
             return motion.get("k", -1) >= last
