@@ -121,9 +121,11 @@ class PathRun:
     clamped: int = 0
 
 
-def path_moves(T0: Array, shape: str, speed_m_s: float) -> tuple[list, CartesianLimits]:
-    """The program's moves from ``T0``: a 1 m line along y, or a circle of 300 mm diameter
-    in the horizontal plane (two CIRCs blended), at ``speed_m_s``."""
+def path_moves(T0: Array, shape: str, speed_m_s: float,
+               size_m: float | None = None) -> tuple[list, CartesianLimits]:
+    """The program's moves from ``T0``: a line along y (``size_m`` long, default 1 m), or a
+    circle in the horizontal plane (two CIRCs blended; diameter ``size_m``, default
+    0.3 m) through ``T0`` with its centre on +y, at ``speed_m_s``."""
     cart = CartesianLimits(speed_m_s, ACCELERATION, JERK, 1.0, 4.0, 40.0)
     p0 = T0[:3, 3]
 
@@ -133,9 +135,9 @@ def path_moves(T0: Array, shape: str, speed_m_s: float) -> tuple[list, Cartesian
         return T
 
     if shape == "line":
-        return [LIN(target=at(np.array([0.0, 1.0, 0.0])))], cart
+        return [LIN(target=at(np.array([0.0, size_m or 1.0, 0.0])))], cart
     if shape == "circle":
-        r = 0.15
+        r = (size_m or 0.3) / 2
         return [CIRC(via=at(np.array([r, r, 0.0]))[:3, 3], target=at(np.array([0.0, 2 * r, 0.0])),
                      blend=0.02),
                 CIRC(via=at(np.array([-r, r, 0.0]))[:3, 3], target=T0.copy())], cart
@@ -177,10 +179,11 @@ class TrackedCell:
             raise ValueError(f"the paths' start is out of reach: {why[0]}")
         self.q0 = q[0]
 
-    def plan(self, shape: str, speed_mm_s: float) -> Trajectory:
-        """The controller's program: the path planned on its nominal model (tool = PROBE)."""
+    def plan(self, shape: str, speed_mm_s: float, size_m: float | None = None) -> Trajectory:
+        """The controller's program (:func:`path_moves`), planned on its nominal model
+        (tool = the identified PROBE)."""
         T0 = forward(self.desc_tool, None, self.q0, "nominal").tcp
-        moves, cart = path_moves(T0, shape, speed_mm_s * 1e-3)
+        moves, cart = path_moves(T0, shape, speed_mm_s * 1e-3, size_m)
         return plan(self.desc_tool, self.q0, moves, JOINTS, cart)
 
     def run(self, trajectory: Trajectory, mode: str, *,
