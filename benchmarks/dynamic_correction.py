@@ -29,6 +29,7 @@ depends on the machine.
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import math
 import sys
 import time
@@ -36,11 +37,15 @@ from pathlib import Path
 
 import numpy as np
 
-from plugcell.compensation.tracking import TrackingSettings
+from plugcell.compensation.tracking import TrackingLoop, TrackingSettings
+from plugcell.devices.robot.rsi import RsiConfig, RsiLink
+from plugcell.devices.robot.rsi.tracking import TrackingSource
 from plugcell.kinematics import forward
 from plugcell.kinematics.transforms import so3_log
 from plugcell.metrology.timing import estimate_delay
-from plugcell.sim.tracked_path import CYCLE, Fault, PathRun, TrackedCell
+from plugcell.sim.controller.rsi_robot import RsiRobot
+from plugcell.sim.tracked_path import CYCLE, Fault, LogFeed, PathRun, TrackedCell
+from plugcell.sim.twin.dynamics import DynamicTwin
 
 PUBLISHED = [
     ("Nikon Adaptive Robot Control (commercial), robot accuracy", "0.1 mm"),
@@ -96,6 +101,7 @@ def rates(run: PathRun) -> tuple[float, float]:
 
 
 def case(cell: TrackedCell, shape: str, speed: float) -> dict:
+    print(f"running {shape} at {speed:g} mm/s …", file=sys.stderr, flush=True)
     traj = cell.plan(shape, speed)
     nominal = cell.run(traj, "nominal")
     tau = lead_from(cell, nominal)
@@ -119,6 +125,39 @@ def faults(cell: TrackedCell, traj, tau: float) -> list[tuple[str, PathRun]]:
              ("late tracker (+80 ms for 0.5 s at 3 s)", Fault("late", 3.0, 0.5, 0.08)),
              ("tracker killed at 6 s", Fault("killed", 6.0, delay_s=0.1))]
     return [(name, cell.run(traj, "tracking", settings=s, faults=(f,))) for name, f in cases]
+
+
+def udp_timing(cell: TrackedCell, tau: float) -> dict:
+    """The loop through the real seam: RsiRobot in its thread, RsiLink over UDP on
+    loopback, the TrackingSource fed the twin's reflector each cycle (``LogFeed``); a
+    0.2 m line at 100 mm/s in real time.  Packet in → answer out (the link's own record),
+    the source's compute time, the share of cycles the controller got its answer in time."""
+    traj = cell.plan("line", 100.0, size_m=0.2)
+    arm = DynamicTwin(cell.twin, q0=cell.q0)
+    config = RsiConfig(robot_host="127.0.0.1", listen_host="127.0.0.1", listen_port=0,
+                       correction="cartesian", mode="absolute", frame="base",
+                       timeout_packets=10_000)
+    loop = TrackingLoop(cell.model, TrackingSettings(lead_s=tau), payload_kg=cell.payload_kg)
+    source = TrackingSource(loop, ramp=0.3)
+    feed = LogFeed(source, arm)
+    with RsiLink(config, feed, record_latency=True) as link:
+        robot = RsiRobot(arm, dataclasses.replace(config, listen_port=link.address[1]),
+                         record=True, path=traj, tool=cell.model.tool, path_delay_s=0.5)
+        feed.robot = robot
+        robot.start()
+        try:
+            link.wait(lambda lk: robot.path_done or not robot.running,
+                      timeout=traj.duration + 120)
+            source.finish()
+            link.wait(lambda lk: source.ended(), timeout=60)
+        finally:
+            robot.stop()
+    lat = np.array(link.latencies) * 1e-6
+    comp = np.array(feed.compute_s) * 1e3
+    st = robot.stats()
+    return {"wire_ms": np.percentile(lat, [50, 99, 100]), "compute_ms":
+            np.percentile(comp, [50, 99, 100]), "in_time": st.answered / max(st.cycles, 1),
+            "fresh": loop.stats.fresh_cycles / max(loop.stats.cycles, 1), "cycles": st.cycles}
 
 
 def print_table(results: list[dict]) -> None:
@@ -190,6 +229,8 @@ def main(argv: list[str]) -> int:
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--calibration-poses", type=int, default=150)
     ap.add_argument("--faults", action="store_true", help="the fault runs (line, 100 mm/s)")
+    ap.add_argument("--udp", action="store_true",
+                    help="also time the loop through the real RSI link over UDP")
     ap.add_argument("--plot", type=Path)
     args = ap.parse_args(argv)
     t0 = time.time()
@@ -204,6 +245,15 @@ def main(argv: list[str]) -> int:
         tau = next((r["tau"] for r in results if r["shape"] == "line" and r["speed"] == 100),
                    lead_from(cell, cell.run(traj, "nominal")))
         print_faults("line", faults(cell, traj, tau))
+    if args.udp:
+        tau = results[0]["tau"] if results else 0.012
+        u = udp_timing(cell, tau)
+        w, c = u["wire_ms"], u["compute_ms"]
+        print(f"\nthrough UDP on loopback, real time ({u['cycles']} cycles): tracker sample "
+              f"handed in → answer on the wire p50/p99/max {w[0]:.2f} / {w[1]:.2f} / "
+              f"{w[2]:.2f} ms (of which the loop {c[0]:.2f} / {c[1]:.2f} / {c[2]:.2f} ms); "
+              f"answers in time {u['in_time'] * 100:.1f} %, cycles with a fresh estimate "
+              f"{u['fresh'] * 100:.1f} %")
     print("\npublished:")
     for what, value in PUBLISHED:
         print(f"  {what}: {value}")

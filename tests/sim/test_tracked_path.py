@@ -4,12 +4,11 @@
 from __future__ import annotations
 
 import dataclasses
-import threading
 
 import numpy as np
 import pytest
 
-from plugcell.compensation.tracking import TrackerMeasurement, TrackingLoop, TrackingSettings
+from plugcell.compensation.tracking import TrackingLoop, TrackingSettings
 from plugcell.devices.robot.rsi import RsiConfig, RsiLink
 from plugcell.devices.robot.rsi.tracking import (
     TrackingSource,
@@ -19,7 +18,7 @@ from plugcell.devices.robot.rsi.tracking import (
 )
 from plugcell.kinematics.rotations import matrix_to_rpy
 from plugcell.sim.controller.rsi_robot import RsiRobot
-from plugcell.sim.tracked_path import CYCLE, Fault, TrackedCell
+from plugcell.sim.tracked_path import CYCLE, Fault, LogFeed, TrackedCell
 from plugcell.sim.twin.dynamics import DynamicTwin
 
 pytestmark = pytest.mark.slow
@@ -97,29 +96,12 @@ def test_the_same_source_corrects_the_twin_through_the_rsi_link_over_udp(cell):
     loop = TrackingLoop(cell.model, TrackingSettings(lead_s=0.012),
                         payload_kg=cell.payload_kg)
     source = TrackingSource(loop, ramp=0.3)
-    truth = cell.twin.reveal_truth()
-    seen = {"n": 0}
-    lock = threading.Lock()
-    holder: dict[str, RsiRobot] = {}
-
-    def fed(state):
-        robot = holder.get("robot")
-        if robot is not None:
-            with lock:
-                log = robot.stats().log[seen["n"]:]
-                seen["n"] += len(log)
-            ipoc0 = robot.stats().log[0][0] if robot.stats().log else 0
-            ms = []
-            for ipoc, _cmd, link_angles, _off in log:
-                T = arm.true_flanges(link_angles) @ truth.probe
-                ms.append(TrackerMeasurement((ipoc - ipoc0) / 1000.0 + CYCLE, T))
-            source.add(ms)
-        return source.correction(state)
+    fed = LogFeed(source, arm)
 
     with RsiLink(config, fed) as link:
         robot = RsiRobot(arm, dataclasses.replace(config, listen_port=link.address[1]),
                          record=True, path=traj, tool=cell.model.tool, path_delay_s=0.5)
-        holder["robot"] = robot
+        fed.robot = robot
         robot.start()
         try:
             link.wait(lambda lk: robot.path_done or not robot.running,
@@ -130,6 +112,6 @@ def test_the_same_source_corrects_the_twin_through_the_rsi_link_over_udp(cell):
             robot.stop()
     assert robot.path_done and robot.stopped is None
     assert loop.stats.samples_used > 0 and loop.stats.fresh_cycles > 0
-    assert "tracking" in {out.state for _, out, _ in source.records} or \
-        source.last is not None
+    assert source.last is not None and source.last.state == "tracking"
+    assert loop.windows == []  # a sample every cycle: never stale
     assert link.stats().clamped == 0

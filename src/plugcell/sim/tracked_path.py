@@ -28,6 +28,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
+import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
 
@@ -47,7 +48,7 @@ from plugcell.devices.robot.rsi.codec import encode_sen, parse_rob, parse_sen
 from plugcell.devices.robot.rsi.config import RsiConfig
 from plugcell.devices.robot.rsi.tracking import TrackingSource
 from plugcell.devices.robot.stream.limits import OffsetLimiter
-from plugcell.devices.robot.stream.source import CycleState
+from plugcell.devices.robot.stream.source import Correction, CycleState
 from plugcell.kinematics import forward
 from plugcell.kinematics.rotations import zyz_to_matrix
 from plugcell.kinematics.transforms import invert
@@ -62,7 +63,7 @@ from plugcell.sim.twin.tracker_stream import StreamSample, StreamSpec, TrackerSt
 
 Array = NDArray[np.float64]
 
-__all__ = ["Fault", "PathRun", "TrackedCell", "path_moves"]
+__all__ = ["Fault", "LogFeed", "PathRun", "TrackedCell", "path_moves"]
 
 CYCLE = 0.004
 #: Start of the paths: the tool point (the T-MAC) at x, y, z (m) in the volume of the
@@ -336,3 +337,44 @@ class _Simulation:
                     t >= self.t_start + f.start_s + f.delay_s:
                 self.source.hold("tracker stopped: the tracker service ended mid-path")
                 self.killed_noticed = True
+
+
+class LogFeed:
+    """A correction source for :class:`~plugcell.devices.robot.rsi.link.RsiLink` that feeds
+    a :class:`~plugcell.devices.robot.rsi.tracking.TrackingSource` with the twin's true
+    reflector before each answer — a perfect tracker with one cycle of age, for runs over
+    the real UDP seam in real time (the robot's thread steps the arm; the reflector comes
+    from its log, ``RsiRobot(record=True)``, so no state is shared between the threads).
+
+    Parameters
+    ----------
+    source : TrackingSource
+        What answers.
+    arm : DynamicTwin
+        The robot's arm (its static physics turns logged link angles into poses).
+    """
+
+    def __init__(self, source: TrackingSource, arm: DynamicTwin) -> None:
+        self.source, self.arm = source, arm
+        self.robot: RsiRobot | None = None
+        self._probe = arm.twin.reveal_truth().probe
+        self._seen = 0
+        self._ipoc0: int | None = None
+        #: per answered cycle: wall seconds from the samples' hand-over to the answer
+        self.compute_s: list[float] = []
+
+    def __call__(self, state: CycleState) -> Correction:
+        t0 = time.perf_counter()
+        if self.robot is not None:
+            log = self.robot.stats().log
+            new, self._seen = log[self._seen:], len(log)
+            if log and self._ipoc0 is None:
+                self._ipoc0 = log[0][0]
+            if new:
+                links = np.array([entry[2] for entry in new])
+                T = self.arm.true_flanges(links) @ self._probe
+                self.source.add(TrackerMeasurement((entry[0] - self._ipoc0) / 1000.0 + CYCLE,
+                                                   Ti) for entry, Ti in zip(new, T, strict=True))
+        corr = self.source.correction(state)
+        self.compute_s.append(time.perf_counter() - t0)
+        return corr
