@@ -19,7 +19,9 @@ path, cycle by cycle, through the same pieces a real cell uses:
   into F0 with the identified BASE and PROBE.
 
 Time: the robot's clock is ``t = k T`` (IPOC); the twin's true time is the same. The
-result (:class:`PathRun`) holds per cycle the true reflector pose (F0) and the commanded
+result (:class:`PathRun`) holds per cycle the true reflector pose (in F0 as identified:
+``BASE_id⁻¹ · T_true,tracker``, the frame the taught path and the tracker's corrections
+live in) and the commanded
 path's pose at the same time, the offset sent and the loop's state, and the tracker's
 samples (for clock alignment).  Deterministic for a given seed.
 """
@@ -228,6 +230,10 @@ class _Simulation:
         truth = cell.twin.reveal_truth()
         self.true_probe = truth.probe
         self.true_base = cell.twin.true_base()
+        # F0 is the robot base frame *as identified*: the cell's one physical frame is the
+        # tracker's, and the identified BASE maps it to the robot (the true base frame
+        # differs from it by what the calibration cannot tell apart from BASE)
+        self.to_f0 = invert(cell.model.base) @ self.true_base
         self.base_inv = invert(cell.model.base)
         self.probe_inv = invert(cell.model.probe)
         self._times = [0.0]
@@ -315,7 +321,7 @@ class _Simulation:
             self._poses.append(self.true_base @ flange @ self.true_probe)
             out = self.source.last
             rec["t"].append(k * CYCLE)
-            rec["true"].append(flange @ self.true_probe)
+            rec["true"].append(self.to_f0 @ flange @ self.true_probe)
             rec["path"].append(path_k)
             rec["off"].append(lim.offset)
             rec["w"].append(0.0 if out is None else out.weight)
