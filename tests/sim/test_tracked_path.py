@@ -21,7 +21,8 @@ from plugcell.sim.controller.rsi_robot import RsiRobot
 from plugcell.sim.tracked_path import CYCLE, Fault, LogFeed, TrackedCell
 from plugcell.sim.twin.dynamics import DynamicTwin
 
-pytestmark = pytest.mark.slow
+#: simulated cycles in Python: minutes on a loaded 2-core machine
+pytestmark = [pytest.mark.slow, pytest.mark.timeout(1500)]
 
 
 @pytest.fixture(scope="module")
