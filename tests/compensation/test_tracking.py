@@ -195,17 +195,23 @@ def test_a_silent_tracker_is_late_and_hold_names_the_reason(robot):
     assert loop2.windows[-1].reason == "tracker stopped"
 
 
-def test_the_lead_extrapolates_the_path_by_tau(robot):
+def test_the_lead_extrapolates_the_path_by_tau_within_its_bounds(robot):
     model, q0 = robot
-    loop = TrackingLoop(model, TrackingSettings(lead_s=0.01), tracking=False)
+    s = TrackingSettings(lead_s=0.01)
+    loop = TrackingLoop(model, s, tracking=False)
     Tp0 = model.evaluate(q0)[0][0]
     v = np.array([0.1, 0.0, 0.0])
-    for k in range(5):
+    leads = []
+    for k in range(80):
         Tp = Tp0.copy()
         Tp[:3, 3] += v * k * T
-        q = q0  # the feed-forward of the nominal model is zero wherever the joints are
-        out = loop.cycle(k * T, q, Tp)
-    np.testing.assert_allclose(out.lead, v * 0.01, atol=1e-12)
+        if k == 60:
+            Tp[:3, 3] += [0.0, 0.05, 0.0]  # a wrongly recovered path pose (late answer)
+        leads.append(loop.cycle(k * T, q0, Tp).lead)
+    leads = np.array(leads)
+    np.testing.assert_allclose(leads[59], v * 0.01, atol=1e-12)
+    assert np.abs(leads).max() <= s.max_lead_m
+    assert np.abs(np.diff(leads, axis=0)).max() <= s.max_lead_speed_m_s * T * (1 + 1e-9)
 
 
 def test_the_loop_is_deterministic(robot):

@@ -19,7 +19,9 @@ path, cycle by cycle, through the same pieces a real cell uses:
   into F0 with the identified BASE and PROBE.
 
 Time: the robot's clock is ``t = k T`` (IPOC); the twin's true time is the same. The
-result (:class:`PathRun`) holds per cycle the true reflector pose (F0) and the commanded
+result (:class:`PathRun`) holds per cycle the true reflector pose (in F0 as identified:
+``BASE_id⁻¹ · T_true,tracker``, the frame the taught path and the tracker's corrections
+live in) and the commanded
 path's pose at the same time, the offset sent and the loop's state, and the tracker's
 samples (for clock alignment).  Deterministic for a given seed.
 """
@@ -28,6 +30,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
+import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
 
@@ -47,7 +50,7 @@ from plugcell.devices.robot.rsi.codec import encode_sen, parse_rob, parse_sen
 from plugcell.devices.robot.rsi.config import RsiConfig
 from plugcell.devices.robot.rsi.tracking import TrackingSource
 from plugcell.devices.robot.stream.limits import OffsetLimiter
-from plugcell.devices.robot.stream.source import CycleState
+from plugcell.devices.robot.stream.source import Correction, CycleState
 from plugcell.kinematics import forward
 from plugcell.kinematics.rotations import zyz_to_matrix
 from plugcell.kinematics.transforms import invert
@@ -62,7 +65,7 @@ from plugcell.sim.twin.tracker_stream import StreamSample, StreamSpec, TrackerSt
 
 Array = NDArray[np.float64]
 
-__all__ = ["Fault", "PathRun", "TrackedCell", "path_moves"]
+__all__ = ["Fault", "LogFeed", "PathRun", "TrackedCell", "path_moves"]
 
 CYCLE = 0.004
 #: Start of the paths: the tool point (the T-MAC) at x, y, z (m) in the volume of the
@@ -121,9 +124,11 @@ class PathRun:
     clamped: int = 0
 
 
-def path_moves(T0: Array, shape: str, speed_m_s: float) -> tuple[list, CartesianLimits]:
-    """The program's moves from ``T0``: a 1 m line along y, or a circle of 300 mm diameter
-    in the horizontal plane (two CIRCs blended), at ``speed_m_s``."""
+def path_moves(T0: Array, shape: str, speed_m_s: float,
+               size_m: float | None = None) -> tuple[list, CartesianLimits]:
+    """The program's moves from ``T0``: a line along y (``size_m`` long, default 1 m), or a
+    circle in the horizontal plane (two CIRCs blended; diameter ``size_m``, default
+    0.3 m) through ``T0`` with its centre on +y, at ``speed_m_s``."""
     cart = CartesianLimits(speed_m_s, ACCELERATION, JERK, 1.0, 4.0, 40.0)
     p0 = T0[:3, 3]
 
@@ -133,9 +138,9 @@ def path_moves(T0: Array, shape: str, speed_m_s: float) -> tuple[list, Cartesian
         return T
 
     if shape == "line":
-        return [LIN(target=at(np.array([0.0, 1.0, 0.0])))], cart
+        return [LIN(target=at(np.array([0.0, size_m or 1.0, 0.0])))], cart
     if shape == "circle":
-        r = 0.15
+        r = (size_m or 0.3) / 2
         return [CIRC(via=at(np.array([r, r, 0.0]))[:3, 3], target=at(np.array([0.0, 2 * r, 0.0])),
                      blend=0.02),
                 CIRC(via=at(np.array([-r, r, 0.0]))[:3, 3], target=T0.copy())], cart
@@ -177,10 +182,11 @@ class TrackedCell:
             raise ValueError(f"the paths' start is out of reach: {why[0]}")
         self.q0 = q[0]
 
-    def plan(self, shape: str, speed_mm_s: float) -> Trajectory:
-        """The controller's program: the path planned on its nominal model (tool = PROBE)."""
+    def plan(self, shape: str, speed_mm_s: float, size_m: float | None = None) -> Trajectory:
+        """The controller's program (:func:`path_moves`), planned on its nominal model
+        (tool = the identified PROBE)."""
         T0 = forward(self.desc_tool, None, self.q0, "nominal").tcp
-        moves, cart = path_moves(T0, shape, speed_mm_s * 1e-3)
+        moves, cart = path_moves(T0, shape, speed_mm_s * 1e-3, size_m)
         return plan(self.desc_tool, self.q0, moves, JOINTS, cart)
 
     def run(self, trajectory: Trajectory, mode: str, *,
@@ -224,6 +230,10 @@ class _Simulation:
         truth = cell.twin.reveal_truth()
         self.true_probe = truth.probe
         self.true_base = cell.twin.true_base()
+        # F0 is the robot base frame *as identified*: the cell's one physical frame is the
+        # tracker's, and the identified BASE maps it to the robot (the true base frame
+        # differs from it by what the calibration cannot tell apart from BASE)
+        self.to_f0 = invert(cell.model.base) @ self.true_base
         self.base_inv = invert(cell.model.base)
         self.probe_inv = invert(cell.model.probe)
         self._times = [0.0]
@@ -311,7 +321,7 @@ class _Simulation:
             self._poses.append(self.true_base @ flange @ self.true_probe)
             out = self.source.last
             rec["t"].append(k * CYCLE)
-            rec["true"].append(flange @ self.true_probe)
+            rec["true"].append(self.to_f0 @ flange @ self.true_probe)
             rec["path"].append(path_k)
             rec["off"].append(lim.offset)
             rec["w"].append(0.0 if out is None else out.weight)
@@ -333,3 +343,44 @@ class _Simulation:
                     t >= self.t_start + f.start_s + f.delay_s:
                 self.source.hold("tracker stopped: the tracker service ended mid-path")
                 self.killed_noticed = True
+
+
+class LogFeed:
+    """A correction source for :class:`~plugcell.devices.robot.rsi.link.RsiLink` that feeds
+    a :class:`~plugcell.devices.robot.rsi.tracking.TrackingSource` with the twin's true
+    reflector before each answer — a perfect tracker with one cycle of age, for runs over
+    the real UDP seam in real time (the robot's thread steps the arm; the reflector comes
+    from its log, ``RsiRobot(record=True)``, so no state is shared between the threads).
+
+    Parameters
+    ----------
+    source : TrackingSource
+        What answers.
+    arm : DynamicTwin
+        The robot's arm (its static physics turns logged link angles into poses).
+    """
+
+    def __init__(self, source: TrackingSource, arm: DynamicTwin) -> None:
+        self.source, self.arm = source, arm
+        self.robot: RsiRobot | None = None
+        self._probe = arm.twin.reveal_truth().probe
+        self._seen = 0
+        self._ipoc0: int | None = None
+        #: per answered cycle: wall seconds from the samples' hand-over to the answer
+        self.compute_s: list[float] = []
+
+    def __call__(self, state: CycleState) -> Correction:
+        t0 = time.perf_counter()
+        if self.robot is not None:
+            log = self.robot.stats().log
+            new, self._seen = log[self._seen:], len(log)
+            if log and self._ipoc0 is None:
+                self._ipoc0 = log[0][0]
+            if new:
+                links = np.array([entry[2] for entry in new])
+                T = self.arm.true_flanges(links) @ self._probe
+                self.source.add(TrackerMeasurement((entry[0] - self._ipoc0) / 1000.0 + CYCLE,
+                                                   Ti) for entry, Ti in zip(new, T, strict=True))
+        corr = self.source.correction(state)
+        self.compute_s.append(time.perf_counter() - t0)
+        return corr

@@ -108,6 +108,11 @@ class TrackingSettings:
         Correct the orientation too when samples carry it (T-MAC).
     history_s : float
         Joint feedback kept (s): older samples cannot be used.
+    max_lead_m, max_lead_speed_m_s, max_lead_accel_m_s2 : float
+        Bounds on the lead (per axis): far above a planned path's (at 250 mm/s and
+        2 m/s², 20 m/s³ the lead of 10 ms moves at ≤ 20 mm/s and 0.2 m/s²), they keep a
+        path pose recovered wrongly — the controller applied another offset than the
+        one sent, after a late answer — from throwing the lead.
     feedforward_step_m : float
         The model-based feed-forward is solved anew when the target has moved this far
         from where it was last solved (m); in between it is extrapolated linearly from
@@ -134,6 +139,9 @@ class TrackingSettings:
     correct_orientation: bool = True
     history_s: float = 1.0
     feedforward_step_m: float = 0.002
+    max_lead_m: float = 0.01
+    max_lead_speed_m_s: float = 0.05
+    max_lead_accel_m_s2: float = 2.0
 
     def __post_init__(self) -> None:
         for f in fields(self):
@@ -269,6 +277,9 @@ class TrackingLoop:
         self._lock = threading.Lock()
         self._pending: deque[TrackerMeasurement] = deque()
         self._paths: deque[Array] = deque(maxlen=3)
+        self._lead_limiter = RateLimiter(s.cycle_s, [s.max_lead_speed_m_s] * 3,
+                                         [s.max_lead_accel_m_s2] * 3,
+                                         [s.max_lead_m] * 3)
         self._q_ff: Array | None = None
         self._ff = np.zeros(6)
         self._anchors: deque[tuple[Array, Array]] = deque(maxlen=2)
@@ -437,16 +448,16 @@ class TrackingLoop:
         return self._w
 
     def _lead(self, Tp: Array) -> Array:
-        """``Δp_lead = v̂ τ + â τ²/2`` from the last three path positions."""
+        """``Δp_lead = v̂ τ + â τ²/2`` from the last three path positions, bounded."""
         self._paths.append(Tp[:3, 3].copy())
         tau = self.settings.lead_s
         if tau == 0.0 or len(self._paths) < 3:
-            return np.zeros(3)
+            return self._lead_limiter.apply(np.zeros(3))
         T = self.settings.cycle_s
         p0, p1, p2 = self._paths
         v = (p2 - p1) / T
         a = (p2 - 2.0 * p1 + p0) / T ** 2
-        return v * tau + 0.5 * a * tau ** 2
+        return self._lead_limiter.apply(v * tau + 0.5 * a * tau ** 2)
 
     def _feedforward(self, T_tgt: Array, q: Array) -> Array:
         """``e(T_nominal(q*), T_tgt)`` with ``q*`` the calibrated model's inverse, solved at
