@@ -32,6 +32,9 @@ import numpy as np
 from plugcell.apps.commands.progress import ProgressBar
 from plugcell.io.path_files import PathFileError, read_path
 
+#: The ``format`` of the result file (``--out``): what the web UI's tracked-path view reads.
+RESULT_FORMAT = "plugcell-tracked-path"
+
 
 def _error(msg: str) -> Exception:
     from plugcell.apps.cli import CommandError  # late: plugcell.apps.cli imports this module
@@ -134,6 +137,12 @@ def _traces(run: Any) -> dict[str, Any]:
             "segment": tr["segment"].tolist(), "state": tr["state"].tolist()}
 
 
+def result_document(run: Any, path_name: str) -> dict[str, Any]:
+    """The result file of ``--out``: :func:`result_dict` with its format and the traces."""
+    return {"format": RESULT_FORMAT, "format_version": 1, **result_dict(run, path_name),
+            "traces": _traces(run)}
+
+
 def _print_table(result: dict[str, Any]) -> None:
     print("segment  state      cycles  perp max mm  perp 3σ mm  along max mm")
     for r in result["accuracy"]:
@@ -203,7 +212,7 @@ def _cmd_run(args: argparse.Namespace) -> int:
         raise _error(f"{where}: {exc}") from None
     result = result_dict(run, name)
     if args.out:
-        Path(args.out).write_text(json.dumps({**result, "traces": _traces(run)}) + "\n")
+        Path(args.out).write_text(json.dumps(result_document(run, name)) + "\n")
     if args.json:
         print(json.dumps(result))
     else:
