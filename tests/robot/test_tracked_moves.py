@@ -109,7 +109,7 @@ def cell():
     assert link.wait(lambda lk: lk.streaming and lk.latest is not None, 30)
     motion = PlannedMotion(arm.twin.description, RsiDrive(link), joint, cart)
     feed = ModelFeed(arm)
-    tracked = TrackedMoves(motion, lambda name: feed, settle_s=0.5)
+    tracked = TrackedMoves(motion, lambda name: feed, settle_s=0.5, realtime=False)
     yield arm, robot, motion, tracked, feed
     robot.stop()
     link.close()

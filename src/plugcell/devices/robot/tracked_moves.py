@@ -22,6 +22,12 @@ the laser tracker's correction added every cycle (the drive's ``adjust`` hook):
    the robot stays where the correction put it (absolute mode holds the offset); the
    next move is planned from the actual joints, so nothing jumps there either.
 
+In real time the loop runs in a thread of its own beside the link (``_Worker``): each
+cycle hands it the newest state and takes the newest offset it has computed, so the
+loop's cost (milliseconds) never makes the link's answer late; its rate bounds, which
+count one step a call, are then the more conservative.  In simulated time
+(``realtime=False``) each cycle runs the loop.
+
 The stream holds the shared tracker for the move's duration: another robot's requests
 wait in the tracker's queue until its Stop Measurement (docs/tracker-service.md).  The
 tracker's term fades out where its samples stop (a beam break) and the move goes on
@@ -226,15 +232,20 @@ class TrackedMoves:
     settle_s : float
         The robot stands at the start this long with the correction blending in (s).
     payload_kg : float
+    realtime : bool
+        True: the loop runs in a thread of its own and each cycle takes the newest offset
+        it has (a real controller does not wait: the loop's cost must not make answers
+        late); False: each cycle runs the loop (a controller in simulated time).
     """
 
     def __init__(self, motion: Any, feeds: Callable[[str], TrackerFeed], *,
                  after: Callable[[float], None] | None = None,
                  settings: TrackingSettings | None = None, ramp_s: float = 0.2,
-                 settle_s: float = 0.5, payload_kg: float = 0.0) -> None:
+                 settle_s: float = 0.5, payload_kg: float = 0.0,
+                 realtime: bool = True) -> None:
         self.motion, self.feeds, self.after = motion, feeds, after
         self.settings, self.ramp_s, self.payload_kg = settings, ramp_s, payload_kg
-        self.settle_s = settle_s
+        self.settle_s, self.realtime = settle_s, realtime
         self.last_loop: TrackingLoop | None = None
 
     def move_tracked(self, pose: Position, tracker: str) -> float | None:
@@ -254,9 +265,12 @@ class TrackedMoves:
             feed = self.feeds(tracker)
             feed.start()
             padded = _Settled(traj, self.settle_s)
+            adjust, worker = self._adjust(loop, feed, cycle_s)
             try:
-                m.drive.follow(padded, adjust=self._adjust(loop, feed, cycle_s))
+                m.drive.follow(padded, adjust=adjust)
             finally:
+                if worker is not None:
+                    worker.close()
                 feed.stop()
             m.last = traj
         if self.after is None:
@@ -265,20 +279,76 @@ class TrackedMoves:
         return None
 
     def _adjust(self, loop: TrackingLoop, feed: TrackerFeed, cycle_s: float
-                ) -> Callable[[CycleState, int, Array], Array]:
+                ) -> tuple[Callable[[CycleState, int, Array], Array], _Worker | None]:
+        """The drive's hook: the loop's offset of the cycle as joints (``realtime``: the
+        newest the worker has, the link's thread never waits for the loop)."""
         desc = self.motion.description
         ramp = unit_ramp(max(self.ramp_s, cycle_s))
 
-        def adjust(state: CycleState, k: int, q_k: Array) -> Array:
+        def offset(state: CycleState, k: int, q_k: Array) -> Array:
             loop.add(feed.poll(state.t, time.time()))
-            fk = forward(desc, None, q_k, "nominal")
+            T_path = forward(desc, None, q_k, "nominal").tcp
             q_fb = state.robot.joints if state.robot.joints is not None else q_k
-            out = loop.cycle(state.t, q_fb, fk.tcp)
-            w = float(ramp.sample(k * cycle_s).s)
-            J = jacobian_from_fk(desc, fk, "tcp")
-            return np.linalg.lstsq(J, w * out.offset, rcond=None)[0]
+            return float(ramp.sample(k * cycle_s).s) * loop.cycle(state.t, q_fb, T_path).offset
 
-        return adjust
+        worker = _Worker(offset) if self.realtime else None
+
+        def adjust(state: CycleState, k: int, q_k: Array) -> Array:
+            o = worker.offer(state, k, q_k) if worker is not None else offset(state, k, q_k)
+            if not np.any(o):
+                return np.zeros(len(q_k))
+            J = jacobian_from_fk(desc, forward(desc, None, q_k, "nominal"), "tcp")
+            return np.linalg.lstsq(J, o, rcond=None)[0]
+
+        return adjust, worker
+
+
+class _Worker:
+    """Runs the loop beside the link (real time): :meth:`offer` hands it the newest cycle
+    and returns the newest offset it has computed (zeros before the first), at once."""
+
+    def __init__(self, offset: Callable[[CycleState, int, Array], Array]) -> None:
+        self.offset = offset
+        self._latest: tuple[CycleState, int, Array] | None = None
+        self._result = np.zeros(6)
+        self._cond = threading.Condition()
+        self._stop = False
+        self.failure: BaseException | None = None
+        self.cycles = 0
+        self._thread = threading.Thread(target=self._run, name="tracking-loop", daemon=True)
+        self._thread.start()
+
+    def offer(self, state: CycleState, k: int, q_k: Array) -> Array:
+        with self._cond:
+            if self.failure is not None:
+                raise MotionError(f"the tracking loop failed: {self.failure}")
+            self._latest = (state, k, q_k)
+            self._cond.notify()
+            return self._result
+
+    def _run(self) -> None:
+        while True:
+            with self._cond:
+                while self._latest is None and not self._stop:
+                    self._cond.wait()
+                if self._stop:
+                    return
+                job, self._latest = self._latest, None
+            try:
+                out = self.offset(*job)
+            except Exception as exc:  # the next offer fails the move with it
+                with self._cond:
+                    self.failure = exc
+                return
+            with self._cond:
+                self._result = out
+                self.cycles += 1
+
+    def close(self) -> None:
+        with self._cond:
+            self._stop = True
+            self._cond.notify()
+        self._thread.join(5.0)
 
 
 def tracked_moves_for(controller: Any) -> Callable[[Position, str], float | None]:

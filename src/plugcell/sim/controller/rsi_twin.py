@@ -9,7 +9,9 @@ RSI stops (``Timeout`` late answers: exit status 3 with the reason, as the real 
 breaks off).
 
 ``python -m plugcell.sim.controller.rsi_twin --sensor 127.0.0.1:49152 [--robot smart_h4]
-[--payload-kg M] [--seed S] [--mode absolute] [--timeout 100] [--bind HOST:PORT]``
+[--payload-kg M] [--seed S] [--mode absolute] [--timeout 100] [--bind HOST:PORT]
+[--cell CELL [--name ROBOT]]`` — with ``--cell`` its moving T-MAC is published on that
+cell's simulated world (:mod:`.moving_reflector`), for the simulated tracker.
 """
 
 from __future__ import annotations
@@ -86,6 +88,10 @@ def main(argv: Sequence[str] | None = None) -> int:
                    help="RSI_ON(#ABSOLUTE) or #RELATIVE joint corrections (default absolute)")
     p.add_argument("--timeout", type=int, default=100,
                    help="the ETHERNET object's Timeout (late packets)")
+    p.add_argument("--cell", default="", help="publish the twin's moving T-MAC in this cell's "
+                   "simulated world (for the simulated tracker)")
+    p.add_argument("--name", default="ROBOT", help="the T-MAC's name there: the robot "
+                   "service's (default ROBOT)")
     args = p.parse_args(argv)
     from plugcell.devices.robot.bridge import parse_address
     from plugcell.devices.robot.rsi.config import CorrectionLimits, RsiConfig
@@ -111,6 +117,11 @@ def main(argv: Sequence[str] | None = None) -> int:
     for sig in (signal.SIGTERM, signal.SIGINT):
         signal.signal(sig, lambda *_: done.set())
     robot.start()
+    reflector = None
+    if args.cell:
+        from plugcell.sim.controller.moving_reflector import MovingReflector
+
+        reflector = MovingReflector(arm, args.name, args.cell).start()
     h, pt = robot.address
     print(f"rsi-twin: {args.robot} streaming RSI ({args.mode}) from {h}:{pt} to "
           f"{host}:{port}", flush=True)
@@ -118,6 +129,8 @@ def main(argv: Sequence[str] | None = None) -> int:
         if not robot.running:
             break
     robot.stop()
+    if reflector is not None:
+        reflector.close()
     if robot.stopped:
         print(f"rsi-twin: {robot.stopped}", file=sys.stderr, flush=True)
         return 3
