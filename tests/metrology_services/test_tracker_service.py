@@ -217,6 +217,56 @@ def test_the_second_robot_waits_for_the_first_robots_stop_measurement(cell, worl
     run(body())
 
 
+def test_a_tracked_path_holds_the_tracker_the_other_robot_is_served_after(cell, world):
+    """Issue 38: a Stream Measurement (a tracked path) holds the shared tracker until its
+    Stop Measurement, as Continuous Measurement does (8.4.3); the other robot's Move and
+    measurement wait in the queue and are served after, each in its own frame."""
+    world(cell.name, "TMAC_A").publish(reflector(BASE_A, POSE_A, PROBE_A))
+    world(cell.name, "TMAC_B").publish(reflector(BASE_B, POSE_B, PROBE_B))
+
+    async def body():
+        async with Client("COMAU", cell=cell.name) as comau, \
+                Client("KUKA", cell=cell.name) as kuka:
+            assert await comau.wait_for("TRACKER") and await kuka.wait_for("TRACKER")
+            await ok(kuka, "Set Base", "euler2tr", BASE_B)
+            await ok(kuka, "Set Probe", "euler2tr", PROBE_B)
+            await setup_robot(comau, BASE_A, PROBE_A, POSE_A)
+            stream = await comau.create_process("TRACKER", "Stream Measurement", "tr2euler",
+                                                [1000, 10], timeout=30)
+            rows = []
+            updates = aiter(stream)
+            while not rows:  # Running with data: the Comau's tracked path holds the tracker
+                update = await anext(updates)
+                assert update.state is R
+                if update.data is not None:
+                    rows.append(ProcessCall.array(update))
+
+            async def kuka_program() -> tuple[np.ndarray, float]:
+                await ok(kuka, "Move", "", POSE_B)
+                return await ok(kuka, "Single Measurement", "tr2euler", 100), time.monotonic()
+
+            waiting = asyncio.create_task(kuka_program())
+            async for update in updates:  # the path goes on, its samples keep coming
+                if update.data is not None:
+                    rows.append(ProcessCall.array(update))
+                if len(rows) == 20:
+                    break
+            assert not waiting.done()  # queued behind the stream
+            stop = await comau.stop_process(stream)
+            assert (await stop.result()).state is C
+            stopped_at = time.monotonic()
+            assert (await stream.result()).state is C
+            measured, finished_at = await asyncio.wait_for(waiting, 20)
+            assert_pose(measured, POSE_B)  # the Kuka's own reflector, in its own frame
+            assert finished_at >= stopped_at - 0.05
+        samples = np.vstack(rows)
+        assert samples.shape == (200, 11)
+        np.testing.assert_array_equal(np.diff(samples[:, -1]), 1)  # seq: no sample lost
+        assert np.abs(np.median(samples[:, 2:5], axis=0) - POSE_A[:3]).max() < 0.15
+
+    run(body())
+
+
 def test_a_robot_that_dies_holding_the_tracker_does_not_block_the_other(cell, world):
     world(cell.name, "TMAC_A").publish(reflector(BASE_A, POSE_A, PROBE_A))
     world(cell.name, "TMAC_B").publish(reflector(BASE_B, POSE_B, PROBE_B))

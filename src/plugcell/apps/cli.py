@@ -60,6 +60,8 @@ COMMANDS: tuple[Command, ...] = (
             "plugcell.apps.commands.kin:configure"),
     Command("motion", "trajectories: plan PTP/LIN/CIRC moves with limits and blends, checked "
             "before motion, sampled every cycle", "plugcell.apps.commands.motion:configure"),
+    Command("path", "run a path file with the laser tracker correcting it while the robot "
+            "moves", "plugcell.apps.commands.path:configure"),
     Command("twin", "the digital twin: error budget, simulated campaigns",
             "plugcell.apps.commands.twin:configure"),
     Command("demo", "run the thesis demonstration on simulated devices over services",

@@ -47,7 +47,7 @@ from numpy.typing import ArrayLike, NDArray
 
 Array = NDArray[np.float64]
 
-__all__ = ["DoubleS", "ProfileSample", "double_s"]
+__all__ = ["DoubleS", "ProfileSample", "double_s", "unit_ramp"]
 
 
 @dataclass(frozen=True)
@@ -289,3 +289,27 @@ def double_s(
     moving = ~(before | after)
     return ProfileSample(s, np.where(moving, v, 0.0), np.where(moving, a, 0.0),
                          np.where(moving, j, 0.0))
+
+
+def unit_ramp(duration: float) -> DoubleS:
+    """The jerk-limited ramp of a blend factor from 0 to 1 in ``duration`` seconds.
+
+    A double-S (:mod:`plugcell.motion.profile`) over ``h = 1`` made of jerk phases only
+    (``T_j = T_a/2``, no constant acceleration, no cruise): with ``D`` the duration,
+    ``v = 2/D``, ``a = 8/D²``, ``j = 32/D³`` — the least peak jerk of a double-S of that
+    duration.  Its peak rate is ``2/D`` (1/s).
+
+    Parameters
+    ----------
+    duration : float
+        ``D`` (s), > 0.
+
+    Returns
+    -------
+    DoubleS
+        The ramp; ``sample(t).s`` is the blend factor.
+    """
+    if not (np.isfinite(duration) and duration > 0):
+        raise ValueError(f"ramp duration must be a finite number of seconds > 0, "
+                         f"got {duration!r}")
+    return DoubleS.plan(1.0, 2.0 / duration, 8.0 / duration**2, 32.0 / duration**3)

@@ -43,7 +43,7 @@ from plugcell.pdl.errors import (
     WaitTimeoutError,
 )
 from plugcell.pdl.formatting import format_value
-from plugcell.pdl.interfaces import Channel, Clock, Motion, MotionError, SimClock
+from plugcell.pdl.interfaces import Channel, Clock, Motion, MotionError, SimClock, TrackedMotion
 from plugcell.pdl.interpreter import Execution, ExecutionResult, ExecutionState
 from plugcell.pdl.library import BUILTIN_LIBRARY
 from plugcell.pdl.parser import parse_module
@@ -101,6 +101,7 @@ __all__ = [
     "SimClock",
     "StackOverflowError",
     "StringType",
+    "TrackedMotion",
     "TypeMismatchError",
     "UninitializedError",
     "ValueConversionError",

@@ -332,12 +332,7 @@ class _ModuleChecker:
         elif isinstance(s, n.Delay):
             self._numeric(s.duration, ctx, "the DELAY (ms)")
         elif isinstance(s, n.Move):
-            t = self.type_of(s.target, ctx)
-            allowed = (POSITION,) if s.kind == "LINEAR" else (POSITION, JOINTPOS)
-            if t not in allowed:
-                kind = "MOVE" if s.kind == "TO" else f"MOVE {s.kind}"
-                want = " or ".join(str(a) for a in allowed)
-                raise TypeMismatchError.at(s.target.loc, f"{kind} TO needs a {want}, not {t}")
+            self._move(s, ctx)
         elif isinstance(s, n.MoveRelative):
             t = self.type_of(s.vector, ctx)
             if t != VECTOR:
@@ -364,6 +359,20 @@ class _ModuleChecker:
             pass
         else:  # pragma: no cover
             raise TypeError(s)
+
+    def _move(self, s: n.Move, ctx: _Ctx) -> None:
+        """``MOVE [JOINT|LINEAR] TO x [WITH TRACKING T]``: the target's type, and tracking
+        only on a straight move."""
+        kind = "MOVE" if s.kind == "TO" else f"MOVE {s.kind}"
+        t = self.type_of(s.target, ctx)
+        allowed = (POSITION,) if s.kind == "LINEAR" else (POSITION, JOINTPOS)
+        if t not in allowed:
+            want = " or ".join(str(a) for a in allowed)
+            raise TypeMismatchError.at(s.target.loc, f"{kind} TO needs a {want}, not {t}")
+        if s.tracking is not None and s.kind != "LINEAR":
+            raise TypeMismatchError.at(
+                s.loc, f"{kind} TO … WITH TRACKING: only a MOVE LINEAR has a path for the "
+                "tracker to correct (the joints' path of a MOVE TO is the controller's)")
 
     def _return(self, s: n.Return, ctx: _Ctx) -> None:
         r = ctx.routine

@@ -68,9 +68,10 @@ block: stmt*
 
 assign: designator ":=" expr
 call_stmt: NAME ("(" args? ")")?
-move_to: "MOVE"i "TO"i expr
-move_joint: "MOVE"i "JOINT"i "TO"i expr
-move_linear: "MOVE"i "LINEAR"i "TO"i expr
+move_to: "MOVE"i "TO"i expr tracking?
+move_joint: "MOVE"i "JOINT"i "TO"i expr tracking?
+move_linear: "MOVE"i "LINEAR"i "TO"i expr tracking?
+tracking: "WITH"i "TRACKING"i NAME?
 move_relative: "MOVE"i "RELATIVE"i expr "IN"i NAME
 write_stmt: "WRITE"i NAME "(" (write_item ("," write_item)*)? ")"
 write_item: expr ("::" expr ("::" expr)?)?

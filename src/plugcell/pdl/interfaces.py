@@ -17,7 +17,7 @@ from typing import Protocol, runtime_checkable
 
 from plugcell.pdl.values import JointPos, Position
 
-__all__ = ["Channel", "Clock", "Motion", "MotionError", "SimClock"]
+__all__ = ["Channel", "Clock", "Motion", "MotionError", "SimClock", "TrackedMotion"]
 
 
 class MotionError(Exception):
@@ -63,6 +63,18 @@ class Motion(Protocol):
 
     def jntp_to_pos(self, joints: JointPos) -> Position:
         """Forward kinematics (the controller's model)."""
+        ...
+
+
+@runtime_checkable
+class TrackedMotion(Motion, Protocol):
+    """An arm whose moves a laser tracker can correct while they run (issue 38): one
+    moved over a streaming link (KUKA RSI, ABB EGM), where each cycle's command can take
+    a correction.  ``MOVE LINEAR TO p WITH TRACKING T`` calls :meth:`move_tracked`; an
+    arm without it (a controller that runs its moves by itself) fails the move."""
+
+    def move_tracked(self, pose: Position, tracker: str) -> float | None:
+        """Straight move to ``pose`` with the tracker service ``tracker`` correcting it."""
         ...
 
 

@@ -634,7 +634,9 @@ class Execution:
         target = self._eval(s.target, frame)
         motion = self._motion(s.loc)
         text = f"MOVE {'' if s.kind == 'TO' else s.kind + ' '}TO {format_expr(s.target)}"
-        if isinstance(target, JointPos):
+        if s.tracking is not None:
+            self._move_tracked(f"{text} WITH TRACKING {s.tracking}", s, target, motion)
+        elif isinstance(target, JointPos):
             self._move(text, s.loc, lambda: motion.move_joints(list(target.joints)))
         elif s.kind == "JOINT":
             self._move(
@@ -646,6 +648,16 @@ class Execution:
             )
         else:
             self._move(text, s.loc, lambda: motion.move_to(target, linear=s.kind == "LINEAR"))
+
+    def _move_tracked(self, text: str, s: n.Move, target: Position, motion: Motion) -> None:
+        """``MOVE LINEAR TO p WITH TRACKING T``: the arm's ``move_tracked(pose, tracker)``
+        (:class:`~.interfaces.TrackedMotion`) — an arm moved over a streaming link."""
+        tracked = getattr(motion, "move_tracked", None)
+        if tracked is None:
+            raise MotionFailedError.at(
+                s.loc, f"{text}: tracking needs a streaming link (--rsi/--egm): this "
+                "controller runs its moves by itself, no correction reaches them while they run")
+        self._move(text, s.loc, lambda: tracked(target, s.tracking))
 
     def _exec_move_relative(self, s: n.MoveRelative, frame: _Frame) -> None:
         v: Vector = self._eval(s.vector, frame)

@@ -223,11 +223,14 @@ class Delay:
 
 @dataclass(frozen=True, slots=True)
 class Move:
-    """``MOVE TO x`` (kind ``TO``), ``MOVE JOINT TO x``, ``MOVE LINEAR TO x``."""
+    """``MOVE TO x`` (kind ``TO``), ``MOVE JOINT TO x``, ``MOVE LINEAR TO x``; with
+    ``WITH TRACKING [service]`` ``tracking`` is the tracker service's name (default
+    ``TRACKER``): the laser tracker corrects the move while it runs (issue 38)."""
 
     kind: str
     target: Expr
     loc: Location = field(default=_NOWHERE, compare=False, repr=False)
+    tracking: str | None = None
 
 
 @dataclass(frozen=True, slots=True)

@@ -387,13 +387,17 @@ class _ToAst(Transformer):
         return n.CallStmt(str(name), args, self._tok(name))
 
     def move_to(self, meta, children):
-        return n.Move("TO", children[0], self._loc(meta))
+        return n.Move("TO", children[0], self._loc(meta), *children[1:])
 
     def move_joint(self, meta, children):
-        return n.Move("JOINT", children[0], self._loc(meta))
+        return n.Move("JOINT", children[0], self._loc(meta), *children[1:])
 
     def move_linear(self, meta, children):
-        return n.Move("LINEAR", children[0], self._loc(meta))
+        return n.Move("LINEAR", children[0], self._loc(meta), *children[1:])
+
+    def tracking(self, meta, children):
+        """``WITH TRACKING [NAME]``: the tracker service's name (upper case)."""
+        return str(children[0]).upper() if children else "TRACKER"
 
     def move_relative(self, meta, children):
         return n.MoveRelative(children[0], str(children[1]).upper(), self._loc(meta))

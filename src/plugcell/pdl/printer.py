@@ -123,7 +123,8 @@ def format_stmt(s: n.Stmt, depth: int = 0) -> list[str]:
         return [f"{pad}DELAY {format_expr(s.duration)}"]
     if isinstance(s, n.Move):
         kind = "" if s.kind == "TO" else f"{s.kind} "
-        return [f"{pad}MOVE {kind}TO {format_expr(s.target)}"]
+        tracking = "" if s.tracking is None else f" WITH TRACKING {s.tracking}"
+        return [f"{pad}MOVE {kind}TO {format_expr(s.target)}{tracking}"]
     if isinstance(s, n.MoveRelative):
         return [f"{pad}MOVE RELATIVE {format_expr(s.vector)} IN {s.frame}"]
     if isinstance(s, n.Write):

@@ -20,6 +20,8 @@
                             ``plugcell calibrate --residuals`` file), ``{matrix}`` (N×6
                             mm) or ``{service, name, workspace}`` (Get Matrix)
 ``POST /api/matrix``        a compute service's matrix: ``{service, name, workspace}``
+``POST /api/tracked-path``  a tracked path's result (``plugcell path run --out``):
+                            ``{document}`` → deviations from the commanded path
 ==========================  =====================================================
 
 Refused input (a field that does not fit, a wire a service refuses) is answered
@@ -44,6 +46,7 @@ from plugcell.apps.ui.residuals import (
     residuals_from_document,
     residuals_from_matrix,
 )
+from plugcell.apps.ui.tracked import tracked_path_view
 from plugcell.apps.ui.wizard_live import measure_live
 from plugcell.devices.cell.runs import RunError, list_programs
 from plugcell.devices.cell.service import CellController
@@ -230,6 +233,11 @@ def _metrology_routes(router: APIRouter, controller: CellController) -> None:
             raise RefusedError({"_": "a residual file (document), an N×6 matrix or a "
                                      "compute service's matrix (service, name)"})
         return JSONResponse({"ok": True, **view})
+
+    @router.post("/tracked-path")
+    async def tracked_path(request: Request) -> JSONResponse:
+        body = await json_body(request)
+        return JSONResponse({"ok": True, **tracked_path_view(body.get("document"))})
 
     @router.post("/matrix")
     async def matrix(request: Request) -> JSONResponse:

@@ -81,16 +81,19 @@ class PlannedMotion(ControllerArm):
         """The drive's joint readings (rad)."""
         return np.asarray(self.drive.joint_readings(), dtype=float)
 
+    def plan_move(self, move: Move) -> Trajectory:
+        """``move`` planned and checked from the joint readings now (MotionError: why not)."""
+        q0 = self.joint_readings()
+        try:
+            return plan(self.description, q0, [move], self.joint_limits, self.cartesian_limits)
+        except TrajectoryError as exc:  # the program line is the interpreter's to add
+            where = (f" at {100.0 * exc.fraction:.1f} % of the {move.kind}"
+                     if exc.fraction is not None and 0.0 < exc.fraction < 1.0 else "")
+            raise MotionError(f"{move.kind}{where}: {exc.reason}") from None
+
     def _run(self, move: Move) -> float:
         with self._lock:
-            q0 = self.joint_readings()
-            try:
-                traj = plan(self.description, q0, [move], self.joint_limits,
-                            self.cartesian_limits)
-            except TrajectoryError as exc:  # the program line is the interpreter's to add
-                where = (f" at {100.0 * exc.fraction:.1f} % of the {move.kind}"
-                         if exc.fraction is not None and 0.0 < exc.fraction < 1.0 else "")
-                raise MotionError(f"{move.kind}{where}: {exc.reason}") from None
+            traj = self.plan_move(move)
             self.drive.follow(traj)
             self.last = traj
             return traj.duration

@@ -61,6 +61,7 @@ from plugcell.devices.robot.runner import TEXT_MAX, ProgramRunner, RunError
 from plugcell.devices.robot.stream.drive import StreamDrive
 from plugcell.devices.robot.stream.limits import CorrectionLimits
 from plugcell.devices.robot.stream.process import LinkProcess, link_class
+from plugcell.devices.robot.tracked_moves import tracked_moves_for
 from plugcell.kinematics import RobotDescription
 from plugcell.motion import CartesianLimits, JointLimits
 from plugcell.pdl import MotionError, SimClock
@@ -250,6 +251,7 @@ class StreamController:
         self.clock = SimClock(speed=1.0)
         self.motion = StreamedMotion(description, self.drive, joint_limits, cartesian_limits,
                                      clock=self.clock)
+        self.motion.move_tracked = tracked_moves_for(self)  # type: ignore[attr-defined]
         self.runner = ProgramRunner(self.motion, self.clock, _Channel(self), self._event,
                                     library)
         self.hello: Hello | None = None

@@ -45,13 +45,14 @@ controller's files from): ``listen_host``/``listen_port`` is where the robot sen
 from __future__ import annotations
 
 import contextlib
+import dataclasses
 import socket
 import threading
 import time
 from dataclasses import dataclass, field
 
 import numpy as np
-from numpy.typing import NDArray
+from numpy.typing import ArrayLike, NDArray
 
 from plugcell.devices.robot.rsi.codec import PacketError, encode_rob, parse_sen
 from plugcell.devices.robot.rsi.config import RsiConfig
@@ -114,7 +115,13 @@ class RsiRobot:
         each cycle waits up to ``lockstep_s`` seconds for its answer (only a longer
         silence counts as late), and the cycles keep at most real-time pace.  The arm
         moves as with a real-time PC; the IPOC clock runs slower than the wall clock
-        while answers take longer than a cycle.
+        while answers take longer than a cycle: a run that must not depend on the machine's
+        load (``plugcell path run``, a simulated-time test).
+    tool : (4, 4) array_like, optional
+        The controller's TCP in the flange frame (KUKA's ``$TOOL``; default the
+        description's tool): ``RIst``/``RSol`` and Cartesian corrections refer to it.
+    path_delay_s : float
+        The program waits this long at ``RSI_ON`` before its path starts (s).
 
     Raises
     ------
@@ -126,7 +133,8 @@ class RsiRobot:
     def __init__(self, arm: DynamicTwin, config: RsiConfig, *,
                  bind: tuple[str, int] = ("127.0.0.1", 0), ipoc0: int = 1_000_000,
                  holdon: bool | None = None, record: bool = False,
-                 path: Trajectory | None = None, lockstep_s: float = 0.0) -> None:
+                 path: Trajectory | None = None, tool: ArrayLike | None = None,
+                 path_delay_s: float = 0.0, lockstep_s: float = 0.0) -> None:
         if not (lockstep_s >= 0 and lockstep_s < float("inf")):
             raise ValueError(f"lockstep_s must be 0 or a positive number of seconds, not "
                              f"{lockstep_s}")
@@ -150,6 +158,8 @@ class RsiRobot:
         self._thread: threading.Thread | None = None
         self.stopped: str | None = None
         desc = arm.twin.description
+        if tool is not None:
+            desc = dataclasses.replace(desc, tool=np.array(tool, dtype=float))
         self._desc = desc
         self._q_start = arm.measured.copy()
         if path is None:
@@ -160,6 +170,10 @@ class RsiRobot:
             if gap > 1e-3:
                 raise ValueError(f"the path starts {np.degrees(gap):.3g}° from where the "
                                  "arm stands; start it at the arm's joints")
+        if not (np.isfinite(path_delay_s) and path_delay_s >= 0):
+            raise ValueError(f"path_delay_s must be ≥ 0 seconds, got {path_delay_s!r}")
+        wait = round(path_delay_s / config.cycle_s)
+        self._path = np.vstack([np.repeat(self._path[:1], wait, 0), self._path])
         # the path's nominal poses and Jacobians, all at once (cheap in a batch, a
         # millisecond each per cycle)
         self._T_path = forward(desc, None, self._path, "nominal").tcp
@@ -219,51 +233,32 @@ class RsiRobot:
         return self._offset.copy()
 
     @property
+    def path_poses(self) -> Array:
+        """The path's nominal TCP poses, one per cycle (F0, (K, 4, 4)), without correction."""
+        return self._T_path
+
+    @property
+    def path_index(self) -> int:
+        """The path's cycle whose setpoint is commanded now."""
+        return self._k
+
+    @property
     def path_done(self) -> bool:
         """The controller's own path has reached its end (always, without a path)."""
         return self._k >= len(self._path) - 1
 
     # ------------------------------------------------------------------ the cycle
-    def _run(self) -> None:
-        T = self.config.cycle_s
-        step = self.config.ipoc_step
-        packet = self._packet()
-        next_t = time.monotonic()
-        while not self._stop.is_set():
-            with contextlib.suppress(OSError):  # unreachable: its answer will be missing
-                self._sock.sendto(packet, self._sensor)
-            self._t_sent = time.monotonic_ns()
-            next_t += T
-            answer = self._await(self._ipoc, max(next_t, time.monotonic() + self.lockstep_s))
-            self.rtts.append((self._t_sent, time.monotonic_ns() - self._t_sent
-                              if answer is not None else -1))
-            self._k = min(self._k + 1, len(self._path) - 1)  # the program's motion goes on
-            offset = self._apply(answer)
-            state = self.arm.step(self._command)
-            with self._lock:
-                st = self._stats
-                st.cycles += 1
-                if answer is None:
-                    st.delay += 1
-                else:
-                    st.answered += 1
-                if self._record:
-                    st.log.append((self._ipoc, state.command, state.link, offset.copy()))
-                late = st.delay
-            self._ipoc += step
-            if late >= self.config.timeout_packets:
-                self.stopped = (f"RSI stopped: {late} late sensor packets reached the "
-                                f"Timeout of {self.config.timeout_packets}")
-                return
-            packet = self._packet()  # ready when the next cycle starts: the sensor gets
-            pause = next_t - time.monotonic()  # the whole cycle to answer
-            if pause > 0:
-                self._stop.wait(pause)
-            else:
-                next_t = time.monotonic()  # the controller's own clock slipped: resync
+    def packet(self) -> bytes:
+        """This cycle's ``<Rob>`` (module docstring, 1): what :meth:`start`'s thread sends.
 
-    def _packet(self) -> bytes:
-        """This cycle's ``<Rob>``: the state after the last cycle's step."""
+        With :meth:`advance`, the controller runs in the caller's process and time (a
+        simulation without sockets: the same packets, corrections and arm).
+
+        Returns
+        -------
+        bytes
+            The XML packet for the current IPOC.
+        """
         q = self.arm.measured
         tcp = _kuka_abc(forward(self._desc, None, q, "nominal").tcp)
         tcp_set = _kuka_abc(self._T_set if self.config.correction == "cartesian" else
@@ -272,6 +267,60 @@ class RsiRobot:
             delay = self._stats.delay
         return encode_rob(self._ipoc, q, tcp, joints_setpoint=self._command,
                           tcp_setpoint=tcp_set, delay=delay)
+
+    def advance(self, answer: Array | None) -> str | None:
+        """End this cycle with the sensor's correction (module docstring, 2–4).
+
+        Parameters
+        ----------
+        answer : (6,) array or None
+            The correction echoing this cycle's IPOC (SI, as ``parse_sen`` gives it), or
+            ``None`` when it was missing or late (counted in ``<Delay>``).
+
+        Returns
+        -------
+        str or None
+            Why RSI stopped (``Timeout`` reached), else ``None``.
+        """
+        self._k = min(self._k + 1, len(self._path) - 1)  # the program's motion goes on
+        offset = self._apply(answer)
+        state = self.arm.step(self._command)
+        with self._lock:
+            st = self._stats
+            st.cycles += 1
+            if answer is None:
+                st.delay += 1
+            else:
+                st.answered += 1
+            if self._record:
+                st.log.append((self._ipoc, state.command, state.link, offset.copy()))
+            late = st.delay
+        self._ipoc += self.config.ipoc_step
+        if late >= self.config.timeout_packets:
+            self.stopped = (f"RSI stopped: {late} late sensor packets reached the "
+                            f"Timeout of {self.config.timeout_packets}")
+        return self.stopped
+
+    def _run(self) -> None:
+        T = self.config.cycle_s
+        next_t = time.monotonic()
+        packet = self.packet()
+        while not self._stop.is_set():
+            with contextlib.suppress(OSError):  # unreachable: its answer will be missing
+                self._sock.sendto(packet, self._sensor)
+            self._t_sent = time.monotonic_ns()
+            next_t += T
+            answer = self._await(self._ipoc, max(next_t, time.monotonic() + self.lockstep_s))
+            self.rtts.append((self._t_sent, time.monotonic_ns() - self._t_sent
+                              if answer is not None else -1))
+            if self.advance(answer) is not None:
+                return
+            packet = self.packet()  # ready when the next cycle starts: the sensor gets
+            pause = next_t - time.monotonic()  # the whole cycle to answer
+            if pause > 0:
+                self._stop.wait(pause)
+            else:
+                next_t = time.monotonic()  # the controller's own clock slipped: resync
 
     def _await(self, ipoc: int, deadline: float) -> Array | None:
         """The correction answering ``ipoc`` if it arrives before ``deadline``."""

@@ -41,6 +41,7 @@ the move's line.
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from typing import Any
 
 import numpy as np
@@ -57,6 +58,8 @@ __all__ = ["IN_POSITION_RAD", "SETTLE_S", "StreamDrive", "motion_timeout", "samp
            "setpoint_base"]
 
 Array = NDArray[np.float64]
+#: A per-cycle joint adjustment: ``adjust(state, k, q_k) -> Δq`` (rad, (6,)).
+Adjust = Callable[[CycleState, int, Array], Array]
 
 #: Seconds a motion may take beyond its duration and two controller timeouts.
 SLACK_S = 2.0
@@ -127,8 +130,11 @@ class StreamDrive:
             raise MotionError(f"the controller's {vendor} packets carry no joint feedback")
         return np.array(state.joints, dtype=float)
 
-    def follow(self, trajectory: Trajectory) -> None:
+    def follow(self, trajectory: Trajectory, adjust: Adjust | None = None) -> None:
         """Stream ``trajectory`` from its start to its end (blocks for its duration).
+
+        ``adjust(state, k, q_k)``, if given, is added to sample ``k``'s joints each cycle
+        (rad, (6,)): a tracked move's correction (:mod:`~..tracked_moves`).
 
         Raises
         ------
@@ -136,9 +142,9 @@ class StreamDrive:
             The stream failed or the motion did not end in time: the link's reason.
         """
         q = samples(trajectory, self.link.config.cycle_s)
-        self.follow_samples(q, motion_timeout(trajectory.duration, self.link.config))
+        self.follow_samples(q, motion_timeout(trajectory.duration, self.link.config), adjust)
 
-    def follow_samples(self, q: Array, timeout: float) -> None:
+    def follow_samples(self, q: Array, timeout: float, adjust: Adjust | None = None) -> None:
         """Stream the set-points ``q`` (rad, shape (K+1, 6)), one per answered packet.
 
         Parameters
@@ -147,6 +153,9 @@ class StreamDrive:
             The motion's joints at every cycle (:func:`samples`).
         timeout : float
             Seconds it may take (:func:`motion_timeout`).
+        adjust : callable, optional
+            ``adjust(state, k, q_k) -> Δq`` (rad, (6,)) added to sample ``k``'s joints in
+            its cycle; the exact stop then waits for the last command, ``q_K + Δq_K``.
 
         Raises
         ------
@@ -169,7 +178,9 @@ class StreamDrive:
                 motion.update(base=base, gap=base + state.offset - q[0], k=-1)
             k = motion["k"] = min(motion["k"] + 1, last)
             fade = 1.0 - k / last if last else 0.0
-            return Correction(offset=q[k] - motion["base"] + fade * motion["gap"])
+            target = q[k] if adjust is None else q[k] + adjust(state, k, q[k])
+            motion["end"] = target
+            return Correction(offset=target - motion["base"] + fade * motion["gap"])
 
         def done(state: CycleState) -> bool:
             return motion.get("k", -1) >= last
@@ -178,7 +189,8 @@ class StreamDrive:
             self.link.follow(source, done, timeout)
         except (StreamLinkError, TimeoutError) as exc:
             raise MotionError(str(exc)) from None
-        self.link.wait(lambda link: _arrived(link.latest, q[-1]), SETTLE_S)
+        end = motion.get("end", q[-1])
+        self.link.wait(lambda link: _arrived(link.latest, end), SETTLE_S)
         self.followed += 1
 
 

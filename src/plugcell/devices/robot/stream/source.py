@@ -16,7 +16,7 @@ from typing import Any, Protocol, runtime_checkable
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from plugcell.motion.profile import DoubleS
+from plugcell.motion.profile import unit_ramp
 
 Array = NDArray[np.float64]
 
@@ -175,30 +175,6 @@ class SineOffset:
             ``offset(state.t)``.
         """
         return Correction(offset=self.offset(state.t))
-
-
-def unit_ramp(duration: float) -> DoubleS:
-    """The jerk-limited ramp of a blend factor from 0 to 1 in ``duration`` seconds.
-
-    A double-S (:mod:`plugcell.motion.profile`) over ``h = 1`` made of jerk phases only
-    (``T_j = T_a/2``, no constant acceleration, no cruise): with ``D`` the duration,
-    ``v = 2/D``, ``a = 8/D²``, ``j = 32/D³`` — the least peak jerk of a double-S of that
-    duration.  Its peak rate is ``2/D`` (1/s).
-
-    Parameters
-    ----------
-    duration : float
-        ``D`` (s), > 0.
-
-    Returns
-    -------
-    DoubleS
-        The ramp; ``sample(t).s`` is the blend factor.
-    """
-    if not (np.isfinite(duration) and duration > 0):
-        raise ValueError(f"ramp duration must be a finite number of seconds > 0, "
-                         f"got {duration!r}")
-    return DoubleS.plan(1.0, 2.0 / duration, 8.0 / duration**2, 32.0 / duration**3)
 
 
 OffsetLike = ArrayLike | Callable[[CycleState], ArrayLike]

@@ -9,6 +9,7 @@ import { liveServices, on, state } from "./store.js";
 import { runTask, stopTask } from "./tasks.js";
 import { setFits } from "./view3d.js";
 import { renderResiduals } from "./residuals.js";
+import { renderTracked } from "./tracked.js";
 
 const WIZARDS = {
   probe: {
@@ -321,9 +322,10 @@ function matrixTable(m) {
 function render() {
   const box = clear($("#wizard"));
   const slot = stepState[current] = {};
-  $("#wizard-panel .source-row").style.display = current === "residuals" ? "none" : "";
+  $("#wizard-panel .source-row").style.display = ["residuals", "tracked"].includes(current) ? "none" : "";
   if (current === "fit") { renderFit(box, slot); return; }
   if (current === "residuals") { renderResiduals(box); return; }
+  if (current === "tracked") { renderTracked(box); return; }
   const wiz = WIZARDS[current];
   box.append(h("p", { class: "hint", text: wiz.title }), liveSettings());
   wiz.steps.forEach((step, i) => box.append(stepBox(i + 1, step, slot)));

@@ -1,0 +1,270 @@
+"""The tracker's view of the robot, made current: joint history and the residual filter.
+
+A tracker sample is old when it is used — its acquisition time ``t_s`` lies a few
+milliseconds (instrument latency, transport, batching; tens on a loaded PC) before the
+robot cycle that uses it.  Instead of the pose itself the loop estimates what changes
+slowly: the **residual** of the calibrated model at the joints the robot had at ``t_s``,
+
+    z(t_s) = e(T_meas(t_s), T_model(q(t_s)))      e(T_t, T_a) = [p_t − p_a; vee(R_t R_aᵀ − I)]
+
+(:func:`plugcell.kinematics.pose_error`, base frame F0, the tool point), with ``q(t_s)``
+the joint feedback interpolated linearly between the robot cycles around ``t_s``
+(:class:`JointHistory`).  Everything the joints already show — the path's motion, the
+controller's following error — is in ``T_model(q)``; ``z`` is what the model misses
+(its residual error, link deflections, structural vibration, backlash) and the
+tracker's noise.  The TCP *now* is then ``T_model(q_now) ⊕ x̂``: the sample's age is
+compensated by the joints and the model, not by extrapolating the measurement.
+
+:class:`ResidualFilter` is a Kalman filter on ``x``, one independent local-level
+(random-walk) model per axis ``i``::
+
+    x_i(t + Δ) = x_i(t) + w,   w ~ N(0, q_i² Δ)         (process: the residual drifts)
+    z_i        = x_i + v,      v ~ N(0, r_i²)           (measurement: one tracker sample)
+
+    predict:  P_i ← P_i + q_i² (t_s − t_prev)
+    update:   S_i = P_i + r_i²,  K_i = P_i / S_i,  x_i ← x_i + K_i (z_i − x_i),
+              P_i ← (1 − K_i) P_i
+
+with a diffuse start (the first accepted sample sets ``x = z``, ``P = r²``) and an
+innovation gate: a sample with ``|z_i − x_i| > g √S_i`` on any axis is rejected and
+counted (an outlier, or a beam that re-locked on a wrong reflector).  At a constant rate
+``1/Δ`` the gain tends to ``K∞ = (−λ + √(λ² + 4λ))/2``, ``λ = q² Δ / r²``: the filter
+is an exponential smoother of time constant ``≈ Δ/K∞``.  The axes are independent
+because the tracker's noise is nearly so in F0 at the cell's distances and the
+residual's axes are driven by different effects; a full covariance would add
+nothing the gate and the gains do not already give.  Pure math, SI units, no I/O.
+"""
+
+from __future__ import annotations
+
+import math
+from collections import deque
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+Array = NDArray[np.float64]
+
+__all__ = ["JointHistory", "ResidualFilter", "TrackerMeasurement", "steady_state_gain"]
+
+
+@dataclass(frozen=True)
+class TrackerMeasurement:
+    """One tracker sample, as the loop takes it.
+
+    Attributes
+    ----------
+    time_s : float
+        Acquisition time on the *robot's* clock (s): the middle of the sample's
+        integration window, mapped from the tracker's clock (e.g. with
+        :func:`plugcell.metrology.timing.fit_clock_map` and
+        :func:`~plugcell.metrology.timing.estimate_delay`).
+    pose : (4, 4) array or None, m
+        The tool point's pose in the robot base frame F0 (a tracker reading brought into
+        F0 with the identified BASE and PROBE, ``BASE⁻¹ · T_meas · PROBE⁻¹ · tool``);
+        for a 3-DoF reflector only the position is used.  ``None`` when ``status`` is
+        not ``"ok"``.
+    six_dof : bool
+        The sample has an orientation (T-MAC) or only a position (SMR).
+    status : str
+        ``"ok"`` or why the sample holds no measurement (``"line_of_sight"``,
+        ``"tracking_speed"``, ``"out_of_range"``, ``"reacquiring"``, …).
+    """
+
+    time_s: float
+    pose: Array | None
+    six_dof: bool = True
+    status: str = "ok"
+
+    @property
+    def ok(self) -> bool:
+        """The sample holds a finite pose."""
+        return self.status == "ok" and self.pose is not None and \
+            bool(np.all(np.isfinite(self.pose)))
+
+
+class JointHistory:
+    """The robot's joint feedback of the last ``span_s`` seconds, for ``q(t)``.
+
+    Parameters
+    ----------
+    span_s : float
+        How long samples are kept (s); a tracker sample older than this cannot be used.
+    """
+
+    def __init__(self, span_s: float = 1.0) -> None:
+        if not (math.isfinite(span_s) and span_s > 0):
+            raise ValueError(f"span_s must be > 0 seconds, got {span_s!r}")
+        self.span_s = float(span_s)
+        self._t: deque[float] = deque()
+        self._q: deque[Array] = deque()
+
+    def __len__(self) -> int:
+        return len(self._t)
+
+    @property
+    def latest_time(self) -> float | None:
+        """Time of the newest feedback (s), ``None`` when empty."""
+        return self._t[-1] if self._t else None
+
+    @property
+    def earliest_time(self) -> float | None:
+        """Time of the oldest feedback kept (s), ``None`` when empty."""
+        return self._t[0] if self._t else None
+
+    def add(self, t: float, q: ArrayLike) -> None:
+        """Record the joints ``q`` (rad) read at robot time ``t`` (s).
+
+        Raises
+        ------
+        ValueError
+            ``t`` not after the previous one, or ``q`` not finite or of another size.
+        """
+        qa = np.array(q, dtype=float).reshape(-1)
+        if not np.all(np.isfinite(qa)) or (self._q and qa.shape != self._q[-1].shape):
+            raise ValueError(f"joint feedback must be finite and of one size, got {q!r}")
+        if self._t and not t > self._t[-1]:
+            raise ValueError(f"joint feedback at {t} s is not after the last one "
+                             f"({self._t[-1]} s)")
+        self._t.append(float(t))
+        self._q.append(qa)
+        while self._t[-1] - self._t[0] > self.span_s:
+            self._t.popleft()
+            self._q.popleft()
+
+    def at(self, t: ArrayLike) -> Array:
+        """Joints at times ``t``, linear between the recorded cycles.
+
+        ``q(t) = q_k + (t − t_k)/(t_{k+1} − t_k) · (q_{k+1} − q_k)`` for
+        ``t_k ≤ t ≤ t_{k+1}``.
+
+        Parameters
+        ----------
+        t : float or (M,) array_like, s
+
+        Returns
+        -------
+        (n,) or (M, n) array, rad
+
+        Raises
+        ------
+        ValueError
+            A time outside the recorded span (the caller keeps such a sample for later,
+            or drops it as too old).
+        """
+        ts = np.atleast_1d(np.asarray(t, dtype=float))
+        if not self._t:
+            raise ValueError("no joint feedback recorded yet")
+        lo, hi = self._t[0], self._t[-1]
+        if np.any(ts < lo) or np.any(ts > hi) or not np.all(np.isfinite(ts)):
+            raise ValueError(f"time outside the joint feedback's span [{lo}, {hi}] s")
+        tt = np.fromiter(self._t, float, len(self._t))
+        Q = np.stack(self._q)
+        out = np.stack([np.interp(ts, tt, Q[:, j]) for j in range(Q.shape[1])], axis=-1)
+        return out[0] if np.ndim(t) == 0 else out
+
+
+def steady_state_gain(q: float, r: float, dt: float) -> float:
+    """``K∞`` of the local-level filter sampled every ``dt`` (module docstring).
+
+    Parameters
+    ----------
+    q : float
+        Process noise intensity (unit/√s).
+    r : float
+        Measurement noise (unit), > 0.
+    dt : float
+        Sample spacing (s).
+
+    Returns
+    -------
+    float
+        ``(−λ + √(λ² + 4λ))/2`` with ``λ = q² dt / r²``.
+    """
+    lam = q * q * dt / (r * r)
+    return (-lam + math.sqrt(lam * lam + 4.0 * lam)) / 2.0
+
+
+class ResidualFilter:
+    """Independent local-level Kalman filters on the residual's axes (module docstring).
+
+    Parameters
+    ----------
+    process : (d,) array_like
+        ``q_i``: how fast the residual may drift (m/√s, rad/√s).
+    noise : (d,) array_like
+        ``r_i``: one sample's measurement noise (m, rad), > 0.
+    gate : float
+        Innovation gate ``g`` in standard deviations (``inf``: none).
+    """
+
+    def __init__(self, process: ArrayLike, noise: ArrayLike, gate: float = 8.0) -> None:
+        self.q = np.array(process, dtype=float).reshape(-1)
+        self.r = np.array(noise, dtype=float).reshape(-1)
+        if self.q.shape != self.r.shape or not np.all(self.q >= 0) or \
+                not np.all(self.r > 0) or not np.all(np.isfinite(self.q)):
+            raise ValueError(f"process ≥ 0 and noise > 0 per axis, of one size; got "
+                             f"{process!r}, {noise!r}")
+        if not gate > 0:
+            raise ValueError(f"gate must be > 0 standard deviations, got {gate!r}")
+        self.gate = float(gate)
+        self.x = np.zeros_like(self.r)
+        self.P = np.full_like(self.r, np.inf)
+        self.t: float | None = None
+        self.accepted = 0
+        self.rejected = 0
+
+    @property
+    def initialised(self) -> bool:
+        """At least one sample has been accepted since the last reset."""
+        return self.t is not None
+
+    def reset(self) -> None:
+        """Forget the estimate (diffuse again): after a break the residual may have moved."""
+        self.x = np.zeros_like(self.r)
+        self.P = np.full_like(self.r, np.inf)
+        self.t = None
+
+    def variance(self, t: float) -> Array:
+        """``P`` predicted to time ``t`` (s), per axis (``inf`` before the first sample)."""
+        if self.t is None:
+            return self.P.copy()
+        return self.P + self.q ** 2 * max(0.0, t - self.t)
+
+    def update(self, t: float, z: ArrayLike) -> bool:
+        """Predict to ``t`` and take the measurement ``z`` (module docstring).
+
+        Parameters
+        ----------
+        t : float
+            The sample's time (s); a sample older than the last one is rejected.
+        z : (d,) array_like
+            The measured residual.
+
+        Returns
+        -------
+        bool
+            Accepted (False: gated, out of order or not finite; counted in ``rejected``).
+        """
+        zz = np.asarray(z, dtype=float).reshape(-1)
+        if zz.shape != self.r.shape or not np.all(np.isfinite(zz)) or \
+                (self.t is not None and t < self.t):
+            self.rejected += 1
+            return False
+        if self.t is None:
+            self.x, self.P, self.t = zz.copy(), self.r ** 2, float(t)
+            self.accepted += 1
+            return True
+        P = self.variance(t)
+        S = P + self.r ** 2
+        innov = zz - self.x
+        if np.any(np.abs(innov) > self.gate * np.sqrt(S)):
+            self.rejected += 1
+            return False
+        K = P / S
+        self.x = self.x + K * innov
+        self.P = (1.0 - K) * P
+        self.t = float(t)
+        self.accepted += 1
+        return True

@@ -1,0 +1,379 @@
+"""Tracked moves of a program streamed from the PC (``MOVE LINEAR TO p WITH TRACKING``).
+
+The robot service's streaming link (:class:`~.stream_controller.StreamController`: the PC
+plans every move and streams it as whole joint commands, RSI or EGM) gives a program's
+:class:`~plugcell.pdl.interfaces.TrackedMotion`: :class:`TrackedMoves` plans the straight
+move as any other (:meth:`~.planned_motion.PlannedMotion.plan_move`) and streams it with
+the laser tracker's correction added every cycle (the drive's ``adjust`` hook):
+
+1. the tracker's samples come straight from the tracker service's ``Stream Measurement``
+   (:class:`ServiceTrackerFeed`: a process of the robot service on the tracker, whose
+   data updates arrive in this process — not relayed by anyone) in the requester's robot
+   frame (the BASE and PROBE the program set, eq. 7.2: the flange pose), each with its
+   acquisition time, mapped to the robot's clock (:class:`OneWayClock`);
+2. :class:`~plugcell.compensation.tracking.TrackingLoop` (the controller's nominal
+   model: its tracker term corrects the model's error) answers the Cartesian offset
+   ``o = [Δp; φ]`` (F0) on the planned TCP pose ``T_p(k)`` of the cycle;
+3. the offset, blended in (``w = unit_ramp`` over ``ramp_s``) while the robot still
+   stands at the move's start for ``settle_s`` (the loop converges before the path
+   begins, and the start does not jump), becomes joints through the controller's
+   Jacobian at the planned joints, ``Δq = J(q_p(k))⁻¹ · w·o`` — first order, exact to µm
+   for the millimetres a correction is — added to the streamed ``q_p(k)``.  At the end
+   the robot stays where the correction put it (absolute mode holds the offset); the
+   next move is planned from the actual joints, so nothing jumps there either.
+
+In real time the loop runs in a thread of its own beside the link (``_Worker``): each
+cycle hands it the newest state and takes the newest offset it has computed, so the
+loop's cost (milliseconds) never makes the link's answer late; its rate bounds, which
+count one step a call, are then the more conservative.  In simulated time
+(``realtime=False``) each cycle runs the loop.
+
+The stream holds the shared tracker for the move's duration: another robot's requests
+wait in the tracker's queue until its Stop Measurement (docs/tracker-service.md).  The
+tracker's term fades out where its samples stop (a beam break) and the move goes on
+with the model; a move whose stream cannot start fails with the tracker's reason.
+
+The correction is computed in the service's process, beside the link: a tracked move
+needs the link's cycle loop in a thread of the service (``--param stream_process=false``);
+with the link in its child process (:class:`~.stream.process.LinkProcess`, the default)
+the move fails with that reason.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import threading
+import time
+from collections import deque
+from collections.abc import Callable
+from typing import Any, Protocol
+
+import numpy as np
+from numpy.typing import NDArray
+
+from plugcell.compensation.pose_model import NominalModel
+from plugcell.compensation.tracking import TrackerMeasurement, TrackingLoop, TrackingSettings
+from plugcell.devices.robot.arm_model import matrix_from_position
+from plugcell.devices.robot.poses import pose_matrix
+from plugcell.devices.robot.stream.process import LinkProcess
+from plugcell.devices.robot.stream.source import CycleState
+from plugcell.kinematics import forward
+from plugcell.kinematics.jacobian import jacobian_from_fk
+from plugcell.motion import LIN
+from plugcell.motion.profile import unit_ramp
+from plugcell.pdl.interfaces import MotionError
+from plugcell.pdl.values import Position
+
+Array = NDArray[np.float64]
+
+__all__ = ["OneWayClock", "ServiceTrackerFeed", "TrackedMoves", "TrackerFeed"]
+
+#: Stream Measurement's request: 1 kHz, 10 samples a message.
+STREAM_RATE_HZ, STREAM_BATCH = 1000, 10
+#: How long a tracked move waits for the tracker (its queue: another robot may hold it).
+START_TIMEOUT_S = 60.0
+_STATUS = {0: "ok", 1: "line_of_sight", 2: "tracking_speed", 3: "out_of_range", 4: "device"}
+
+
+class TrackerFeed(Protocol):
+    """The tracker's samples for one tracked move."""
+
+    def start(self) -> None:
+        """Subscribe; return when the samples flow (raise MotionError: why not)."""
+        ...
+
+    def poll(self, t_robot: float, pc_time: float) -> list[TrackerMeasurement]:
+        """The samples that arrived since the last poll, on the robot's clock (its time
+        ``t_robot`` now, at PC time ``pc_time``), TCP poses in F0."""
+        ...
+
+    def stop(self) -> None:
+        """Unsubscribe (frees the tracker)."""
+        ...
+
+
+class OneWayClock:
+    """Device time → PC time from one-way stamps: ``pc = device + min_i(pc_i − device_i)``
+    (the lower envelope at rate 1 — :func:`plugcell.metrology.timing.fit_clock_map` with
+    the rate fixed, online; over one move a clock's drift is negligible).  The smallest
+    transport delay is in the offset: the time is that much early."""
+
+    def __init__(self) -> None:
+        self.offset = np.inf
+
+    def see(self, device_s: float, pc_s: float) -> None:
+        """One stamp: the event of device time ``device_s`` arrived at PC time ``pc_s``."""
+        self.offset = min(self.offset, pc_s - device_s)
+
+    def pc(self, device_s: float) -> float:
+        """PC time of device time ``device_s``."""
+        return device_s + self.offset
+
+
+class ServiceTrackerFeed:
+    """``Stream Measurement`` of a tracker service, opened by the robot service itself.
+
+    Parameters
+    ----------
+    service : participant
+        The robot service (its ``create_process``/``stop_process``; BASE and PROBE are
+        the ones its program set: it is the requester).
+    loop : asyncio.AbstractEventLoop
+        The service's event loop (the feed is used from the program's thread).
+    tracker : str
+        The tracker service's name.
+    tool : (4, 4) array
+        The TCP in the flange frame (the controller's).
+    """
+
+    def __init__(self, service: Any, loop: asyncio.AbstractEventLoop, tracker: str,
+                 tool: Array) -> None:
+        self.service, self.loop, self.tracker, self.tool = service, loop, tracker, tool
+        self._rows: deque[Array] = deque()
+        self._lock = threading.Lock()
+        self._call: Any = None
+        self._task: asyncio.Task[None] | None = None
+        self.tracker_clock, self.robot_clock = OneWayClock(), OneWayClock()
+        self.failure = ""
+
+    def _run(self, coro: Any, timeout: float) -> Any:
+        try:
+            return asyncio.run_coroutine_threadsafe(coro, self.loop).result(timeout)
+        except TimeoutError:
+            raise MotionError(f"{self.tracker} Stream Measurement: no samples within "
+                              f"{timeout:g} s (the tracker held by another robot?)") from None
+
+    def start(self) -> None:
+        self._run(self._start(), START_TIMEOUT_S)
+
+    async def _start(self) -> None:
+        call = await self.service.create_process(
+            self.tracker, "Stream Measurement", "tr2euler", [STREAM_RATE_HZ, STREAM_BATCH],
+            timeout=3600.0)
+        self._call = call
+        first: asyncio.Future[None] = asyncio.get_running_loop().create_future()
+        self._task = asyncio.create_task(self._collect(call, first))
+        await first
+
+    async def _collect(self, call: Any, first: asyncio.Future[None]) -> None:
+        from plugcell.framework import ProcessCall
+
+        try:
+            async for update in call:
+                if update.data is None:
+                    continue
+                rows = np.atleast_2d(ProcessCall.array(update))
+                with self._lock:
+                    self._rows.extend(rows)
+                if not first.done():
+                    first.set_result(None)
+            final = await call.result()
+            self.failure = final.reason or f"the stream ended ({final.state.name})"
+        except Exception as exc:  # the reason goes to the move
+            self.failure = str(exc) or type(exc).__name__
+        if not first.done():
+            first.set_exception(MotionError(f"{self.tracker} Stream Measurement: "
+                                            f"{self.failure}"))
+
+    def poll(self, t_robot: float, pc_time: float) -> list[TrackerMeasurement]:
+        self.robot_clock.see(t_robot, pc_time)
+        with self._lock:
+            rows, self._rows = list(self._rows), deque()
+        out = []
+        for r in rows:
+            self.tracker_clock.see(float(r[0]), float(r[1]))
+        for r in rows:
+            t = self.tracker_clock.pc(float(r[0])) - self.robot_clock.offset
+            status = _STATUS.get(int(r[9]), "device")
+            if status != "ok" or int(r[8]) != 1:
+                out.append(TrackerMeasurement(t, None, bool(r[8]), status if status != "ok"
+                                              else "no_orientation"))
+                continue
+            out.append(TrackerMeasurement(t, pose_matrix(r[2:8]) @ self.tool, True, "ok"))
+        return out
+
+    def stop(self) -> None:
+        if self._call is not None:
+            self._run(self._stop(), 30.0)
+
+    async def _stop(self) -> None:
+        call, self._call = self._call, None
+        if not call.done:
+            stop = await self.service.stop_process(call)
+            await stop.result()
+        if self._task is not None:
+            await self._task
+
+
+class _Settled:
+    """A trajectory preceded by ``before`` s of standing at its start (what the drive
+    asks of it: ``setpoints``, ``duration``)."""
+
+    def __init__(self, trajectory: Any, before: float) -> None:
+        self.trajectory, self.before = trajectory, before
+        self.duration = float(trajectory.duration) + before
+
+    def setpoints(self, dt: float) -> tuple[Array, Array]:
+        _, q = self.trajectory.setpoints(dt)
+        q = np.vstack([np.repeat(q[:1], round(self.before / dt), 0), q])
+        return np.arange(len(q)) * dt, q
+
+
+class TrackedMoves:
+    """``move_tracked`` for a :class:`~.planned_motion.PlannedMotion` whose drive streams
+    (module docstring).
+
+    Parameters
+    ----------
+    motion : PlannedMotion
+        The program's arm (plans the move; its drive's ``follow`` takes ``adjust``).
+    feeds : callable
+        ``feeds(tracker) -> TrackerFeed`` for the tracker service named by the move.
+    after : callable, optional
+        Called with the move's duration when it has run (e.g. the clock's advance).
+    settings : TrackingSettings, optional
+        The loop's (default at the drive's cycle).
+    ramp_s : float
+        Blend of the correction in at the move's start (s).
+    settle_s : float
+        The robot stands at the start this long with the correction blending in (s).
+    payload_kg : float
+    realtime : bool
+        True: the loop runs in a thread of its own and each cycle takes the newest offset
+        it has (a real controller does not wait: the loop's cost must not make answers
+        late); False: each cycle runs the loop (a controller in simulated time).
+    """
+
+    def __init__(self, motion: Any, feeds: Callable[[str], TrackerFeed], *,
+                 after: Callable[[float], None] | None = None,
+                 settings: TrackingSettings | None = None, ramp_s: float = 0.2,
+                 settle_s: float = 0.5, payload_kg: float = 0.0,
+                 realtime: bool = True) -> None:
+        self.motion, self.feeds, self.after = motion, feeds, after
+        self.settings, self.ramp_s, self.payload_kg = settings, ramp_s, payload_kg
+        self.settle_s, self.realtime = settle_s, realtime
+        self.last_loop: TrackingLoop | None = None
+
+    def move_tracked(self, pose: Position, tracker: str) -> float | None:
+        """``MOVE LINEAR TO pose WITH TRACKING tracker``: plan, subscribe, stream with
+        the correction, unsubscribe.  Returns None when ``after`` accounted for the
+        move's time, else its duration (s)."""
+        m = self.motion
+        if isinstance(m.drive, LinkProcess):
+            raise MotionError("MOVE ... WITH TRACKING needs the link's cycle loop in the "
+                              "service's process: serve the robot with --param "
+                              "stream_process=false (the link runs in a child process)")
+        desc = m.description
+        fk0 = forward(desc, None, np.asarray(desc.home, float), "nominal")
+        tool = np.linalg.inv(fk0.flange) @ fk0.tcp
+        with m._lock:
+            traj = m.plan_move(LIN(target=matrix_from_position(pose), speed=m.speed))
+            cycle_s = m.drive.link.config.cycle_s
+            settings = self.settings or TrackingSettings(cycle_s=cycle_s)
+            model = NominalModel(desc, tool)
+            loop = self.last_loop = TrackingLoop(model, settings, payload_kg=self.payload_kg)
+            feed = self.feeds(tracker)
+            feed.start()
+            padded = _Settled(traj, self.settle_s)
+            adjust, worker = self._adjust(loop, feed, cycle_s)
+            try:
+                m.drive.follow(padded, adjust=adjust)
+            finally:
+                if worker is not None:
+                    worker.close()
+                feed.stop()
+            m.last = traj
+        if self.after is None:
+            return padded.duration
+        self.after(padded.duration)
+        return None
+
+    def _adjust(self, loop: TrackingLoop, feed: TrackerFeed, cycle_s: float
+                ) -> tuple[Callable[[CycleState, int, Array], Array], _Worker | None]:
+        """The drive's hook: the loop's offset of the cycle as joints (``realtime``: the
+        newest the worker has, the link's thread never waits for the loop)."""
+        desc = self.motion.description
+        ramp = unit_ramp(max(self.ramp_s, cycle_s))
+
+        def offset(state: CycleState, k: int, q_k: Array) -> Array:
+            loop.add(feed.poll(state.t, time.time()))
+            T_path = forward(desc, None, q_k, "nominal").tcp
+            q_fb = state.robot.joints if state.robot.joints is not None else q_k
+            return float(ramp.sample(k * cycle_s).s) * loop.cycle(state.t, q_fb, T_path).offset
+
+        worker = _Worker(offset) if self.realtime else None
+
+        def adjust(state: CycleState, k: int, q_k: Array) -> Array:
+            o = worker.offer(state, k, q_k) if worker is not None else offset(state, k, q_k)
+            if not np.any(o):
+                return np.zeros(len(q_k))
+            J = jacobian_from_fk(desc, forward(desc, None, q_k, "nominal"), "tcp")
+            return np.linalg.lstsq(J, o, rcond=None)[0]
+
+        return adjust, worker
+
+
+class _Worker:
+    """Runs the loop beside the link (real time): :meth:`offer` hands it the newest cycle
+    and returns the newest offset it has computed (zeros before the first), at once."""
+
+    def __init__(self, offset: Callable[[CycleState, int, Array], Array]) -> None:
+        self.offset = offset
+        self._latest: tuple[CycleState, int, Array] | None = None
+        self._result = np.zeros(6)
+        self._cond = threading.Condition()
+        self._stop = False
+        self.failure: BaseException | None = None
+        self.cycles = 0
+        self._thread = threading.Thread(target=self._run, name="tracking-loop", daemon=True)
+        self._thread.start()
+
+    def offer(self, state: CycleState, k: int, q_k: Array) -> Array:
+        with self._cond:
+            if self.failure is not None:
+                raise MotionError(f"the tracking loop failed: {self.failure}")
+            self._latest = (state, k, q_k)
+            self._cond.notify()
+            return self._result
+
+    def _run(self) -> None:
+        while True:
+            with self._cond:
+                while self._latest is None and not self._stop:
+                    self._cond.wait()
+                if self._stop:
+                    return
+                job, self._latest = self._latest, None
+            try:
+                out = self.offset(*job)
+            except Exception as exc:  # the next offer fails the move with it
+                with self._cond:
+                    self.failure = exc
+                return
+            with self._cond:
+                self._result = out
+                self.cycles += 1
+
+    def close(self) -> None:
+        with self._cond:
+            self._stop = True
+            self._cond.notify()
+        self._thread.join(5.0)
+
+
+def tracked_moves_for(controller: Any) -> Callable[[Position, str], float | None]:
+    """The ``move_tracked`` of a streaming robot link (the hook of
+    :class:`~.stream_controller.StreamController`): the tracker's samples through the link's
+    robot service (``controller.handler``, in its event loop), the move's time on the
+    program's clock."""
+
+    def feeds(tracker: str) -> TrackerFeed:
+        loop = controller._loop
+        if loop is None:
+            raise MotionError("not connected")
+        desc = controller.description
+        fk = forward(desc, None, np.asarray(desc.home, float), "nominal")
+        return ServiceTrackerFeed(controller.handler, loop, tracker,
+                                  np.linalg.inv(fk.flange) @ fk.tcp)
+
+    return TrackedMoves(controller.motion, feeds, after=controller.clock.advance).move_tracked

@@ -1,0 +1,251 @@
+"""Dynamic path correction's math (plugcell.compensation.tracking): the residual filter's
+equations, the joint history, the rate limiter's bounds (hypothesis), the loop's law,
+beam breaks and hold windows, determinism."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from plugcell.compensation import NominalModel
+from plugcell.compensation.tracking import (
+    JointHistory,
+    RateLimiter,
+    ResidualFilter,
+    TrackerMeasurement,
+    TrackingLoop,
+    TrackingSettings,
+    steady_state_gain,
+)
+from plugcell.io.robots import load_robot
+from plugcell.kinematics import forward
+
+T = 0.004
+
+
+# -- the residual filter --------------------------------------------------------------
+
+def test_without_process_noise_the_filter_is_the_running_mean():
+    rng = np.random.default_rng(1)
+    z = 0.3e-3 + 60e-6 * rng.standard_normal((200, 3))
+    f = ResidualFilter([0.0] * 3, [60e-6] * 3, gate=np.inf)
+    for k, zk in enumerate(z):
+        assert f.update(k * 1e-3, zk)
+        np.testing.assert_allclose(f.x, z[: k + 1].mean(axis=0), rtol=0, atol=1e-15)
+        np.testing.assert_allclose(f.P, (60e-6) ** 2 / (k + 1), rtol=1e-9)
+
+
+def test_the_gain_tends_to_the_closed_form_steady_state():
+    q, r, dt = 2e-3, 60e-6, 1e-3
+    f = ResidualFilter([q], [r], gate=np.inf)
+    for k in range(2000):
+        f.update(k * dt, [0.0])
+    P_pred = f.P[0] + q * q * dt
+    assert P_pred / (P_pred + r * r) == pytest.approx(steady_state_gain(q, r, dt), rel=1e-9)
+
+
+def test_the_gate_rejects_an_outlier_and_counts_it():
+    f = ResidualFilter([1e-3] * 3, [50e-6] * 3, gate=6.0)
+    for k in range(50):
+        f.update(k * 1e-3, [0.0, 0.0, 0.0])
+    x = f.x.copy()
+    assert not f.update(0.05, [5e-3, 0.0, 0.0])
+    assert f.rejected == 1 and np.array_equal(f.x, x)
+    assert not f.update(0.01, [0.0, 0.0, 0.0])  # out of order
+    assert not f.update(0.06, [np.nan, 0.0, 0.0])
+    assert f.rejected == 3
+
+
+def test_bad_filter_parameters_are_named():
+    with pytest.raises(ValueError, match="noise > 0"):
+        ResidualFilter([1.0], [0.0])
+    with pytest.raises(ValueError, match="gate"):
+        ResidualFilter([1.0], [1.0], gate=0.0)
+
+
+# -- the joint history -----------------------------------------------------------------
+
+def test_joint_history_interpolates_linearly_and_refuses_outside_its_span():
+    h = JointHistory(span_s=0.1)
+    for k in range(40):
+        h.add(k * T, np.full(6, k * 0.01))
+    assert h.earliest_time == pytest.approx(39 * T - 0.1, abs=T)
+    np.testing.assert_allclose(h.at(30.25 * T), np.full(6, 0.3025))
+    np.testing.assert_allclose(h.at([30 * T, 31 * T])[:, 0], [0.30, 0.31])
+    with pytest.raises(ValueError, match="span"):
+        h.at(0.0)
+    with pytest.raises(ValueError, match="not after"):
+        h.add(39 * T, np.zeros(6))
+
+
+# -- the rate limiter -------------------------------------------------------------------
+
+@settings(max_examples=60, deadline=None)
+@given(targets=st.lists(st.floats(-5e-3, 5e-3, allow_nan=False), min_size=1, max_size=200),
+       v=st.floats(1e-3, 0.05), a=st.floats(0.05, 5.0), c=st.floats(0.0, 3e-3))
+def test_the_limiter_never_exceeds_its_bounds(targets, v, a, c):
+    lim = RateLimiter(T, [v], [a], [c])
+    prev_value, prev_step = 0.0, 0.0
+    for x in targets:
+        value = lim.apply([x])[0]
+        step = value - prev_value
+        assert abs(step) <= v * T * (1 + 1e-9) + 1e-18
+        assert abs(step - prev_step) <= a * T * T * (1 + 1e-9) + 1e-18
+        assert abs(value) <= c * (1 + 1e-9) + 1e-18
+        prev_value, prev_step = value, step
+
+
+def test_the_limiter_reaches_a_constant_target_without_overshoot():
+    lim = RateLimiter(T, [0.01], [0.5], [2e-3])
+    values = [lim.apply([1e-3])[0] for _ in range(500)]
+    assert max(values) <= 1e-3 + 1e-15
+    assert values[-1] == pytest.approx(1e-3, abs=1e-12)
+
+
+# -- the loop ---------------------------------------------------------------------------
+
+@pytest.fixture(scope="module")
+def robot():
+    desc = load_robot("smart_h4")
+    tool = np.eye(4)
+    tool[:3, 3] = [0.0, 0.05, 0.2]
+    model = NominalModel(desc, tool)
+    q0 = np.radians([0.0, -20.0, -100.0, 0.0, 30.0, 0.0])
+    return model, q0
+
+
+def _run(model, q0, residual, *, blocked=lambda t: False, cycles=300, tracking=True,
+         seed=0, s=None):
+    """The robot stands at q0 (the path holds still); the true tool is the model's
+    shifted by ``residual(t)``; a 1 kHz tracker sees it with 60 µm noise, 3 ms late."""
+    rng = np.random.default_rng(seed)
+    s = s or TrackingSettings()
+    loop = TrackingLoop(model, s, tracking=tracking)
+    Tp = model.evaluate(q0)[0][0]
+    outs, sample_t = [], 0.0
+    for k in range(cycles):
+        t = k * T
+        ms = []
+        while sample_t + 0.003 <= t:
+            if blocked(sample_t):
+                ms.append(TrackerMeasurement(sample_t, None, True, "line_of_sight"))
+            else:
+                P = Tp.copy()
+                P[:3, 3] += residual(sample_t) + 60e-6 * rng.standard_normal(3)
+                ms.append(TrackerMeasurement(sample_t, P, True, "ok"))
+            sample_t += 1e-3
+        loop.add(ms)
+        outs.append(loop.cycle(t, q0, Tp))
+    return loop, outs
+
+
+def test_the_model_feedforward_is_zero_for_the_controllers_own_model(robot):
+    model, q0 = robot
+    _, outs = _run(model, q0, lambda t: np.zeros(3), tracking=False, cycles=5)
+    assert np.abs(outs[-1].offset).max() < 1e-9
+    assert outs[-1].state == "model"
+
+
+def test_a_constant_residual_is_corrected_by_the_tracker_term(robot):
+    model, q0 = robot
+    e = np.array([0.2e-3, -0.1e-3, 0.05e-3])
+    loop, outs = _run(model, q0, lambda t: e)
+    assert outs[-1].state == "tracking"
+    np.testing.assert_allclose(outs[-1].offset[:3], -e, atol=25e-6)
+    assert loop.stats.fresh_cycles >= 295 and loop.stats.samples_bad == 0
+    ages = np.array(loop.stats.ages_s)
+    assert ages.min() >= 0.003 - 1e-9 and ages.max() <= 0.003 + T + 1e-9
+
+
+def test_a_beam_break_holds_the_model_records_the_window_and_resumes(robot):
+    model, q0 = robot
+    e = np.array([0.3e-3, 0.0, 0.0])
+    loop, outs = _run(model, q0, lambda t: e, blocked=lambda t: 0.4 <= t < 0.7, cycles=500)
+    assert len(loop.windows) == 1
+    w = loop.windows[0]
+    assert w.reason == "line_of_sight"
+    assert 0.4 <= w.start_s <= 0.4 + 0.06 and 0.7 < w.end_s < 0.8
+    held = [o for k, o in enumerate(outs) if 0.7 <= k * T < w.end_s]
+    assert all(o.state == "holding" for o in held)
+    assert held[-1].weight < 1e-9 and abs(held[-1].offset[0]) < 1e-9  # the model alone
+    assert outs[-1].state == "tracking"
+    np.testing.assert_allclose(outs[-1].offset[:3], -e, atol=30e-6)
+    # the correction never jumps: its rate stays inside the limits throughout
+    x = np.array([o.tracker[0] for o in outs])
+    s = TrackingSettings()
+    assert np.abs(np.diff(x)).max() <= s.max_speed_m_s * T * (1 + 1e-9)
+    assert np.abs(np.diff(x, 2)).max() <= s.max_accel_m_s2 * T * T * (1 + 1e-9)
+
+
+def test_a_silent_tracker_is_late_and_hold_names_the_reason(robot):
+    model, q0 = robot
+    loop, _ = _run(model, q0, lambda t: np.zeros(3), cycles=100)
+    for k in range(100, 140):  # no more samples
+        out = loop.cycle(k * T, q0, model.evaluate(q0)[0][0])
+    assert loop.windows[-1].reason == "late" and out.state == "holding"
+    loop.hold("tracker stopped")
+    assert loop.windows[-1].reason == "late"  # already holding: one window
+    loop2, _ = _run(model, q0, lambda t: np.zeros(3), cycles=100)
+    loop2.hold("tracker stopped")
+    loop2.cycle(100 * T, q0, model.evaluate(q0)[0][0])
+    assert loop2.windows[-1].reason == "tracker stopped"
+
+
+def test_the_lead_extrapolates_the_path_by_tau_within_its_bounds(robot):
+    model, q0 = robot
+    s = TrackingSettings(lead_s=0.01)
+    loop = TrackingLoop(model, s, tracking=False)
+    Tp0 = model.evaluate(q0)[0][0]
+    v = np.array([0.1, 0.0, 0.0])
+    leads = []
+    for k in range(80):
+        Tp = Tp0.copy()
+        Tp[:3, 3] += v * k * T
+        if k == 60:
+            Tp[:3, 3] += [0.0, 0.05, 0.0]  # a wrongly recovered path pose (late answer)
+        leads.append(loop.cycle(k * T, q0, Tp).lead)
+    leads = np.array(leads)
+    np.testing.assert_allclose(leads[59], v * 0.01, atol=1e-12)
+    assert np.abs(leads).max() <= s.max_lead_m
+    assert np.abs(np.diff(leads, axis=0)).max() <= s.max_lead_speed_m_s * T * (1 + 1e-9)
+
+
+def test_the_loop_is_deterministic(robot):
+    model, q0 = robot
+    a = _run(model, q0, lambda t: np.array([1e-4, 0, 0]), cycles=120, seed=3)[1]
+    b = _run(model, q0, lambda t: np.array([1e-4, 0, 0]), cycles=120, seed=3)[1]
+    assert all(np.array_equal(x.offset, y.offset) for x, y in zip(a, b, strict=True))
+
+
+def test_bad_settings_are_named():
+    with pytest.raises(ValueError, match="max_age_s"):
+        TrackingSettings(max_age_s=0.0)
+    with pytest.raises(ValueError, match="lead_s"):
+        TrackingSettings(lead_s=-1.0)
+    assert math.isfinite(TrackingSettings().fade_s)
+
+
+def test_the_residual_is_measured_against_the_model_at_the_samples_joints(robot):
+    """Age compensation: the robot moves, the samples are 3 ms old — the residual is
+    still the constant offset, not the motion over the sample's age."""
+    model, q0 = robot
+    loop = TrackingLoop(model, TrackingSettings(position_drift=0.0), tracking=True)
+    e = np.array([0.1e-3, 0.2e-3, -0.1e-3])
+    rate = np.array([0.2, 0.0, 0.0, 0.0, 0.0, 0.0])  # rad/s on A1
+    for k in range(60):
+        t = k * T
+        ms = []
+        for j in range(4):
+            ts = t - 0.003 - j * 1e-3
+            if ts > 0:
+                P = model.evaluate(q0 + rate * ts)[0][0]
+                P[:3, 3] += e
+                ms.append(TrackerMeasurement(ts, P))
+        loop.add(sorted(ms, key=lambda m: m.time_s))
+        out = loop.cycle(t, q0 + rate * t, forward(model.desc, None, q0 + rate * t,
+                                                   "nominal").flange @ model.tool)
+    np.testing.assert_allclose(out.residual[:3], e, atol=1e-9)

@@ -1,0 +1,76 @@
+"""The robot service's tracker feed of a tracked move (issue 38): ``Stream Measurement``
+opened by the robot's own participant, its samples straight to the correction loop as
+TCP poses in the robot's frame on the robot's clock; the stream holds the shared tracker
+until the move ends, and another robot's request is served after."""
+
+from __future__ import annotations
+
+import asyncio
+import time
+
+import numpy as np
+import pytest
+from metrology_testlib import pose, run, unique_cell
+
+from plugcell.devices.robot.tracked_moves import ServiceTrackerFeed
+from plugcell.devices.tracker.service import TrackerService
+from plugcell.framework import Client, ProcessStates
+from plugcell.framework.bus import Bus
+from plugcell.framework.keys import KeySpace
+from plugcell.sim.world import ReflectorPublisher
+
+pytestmark = [pytest.mark.timeout(90), pytest.mark.slow]
+
+BASE, PROBE = [2500.0, -800.0, -600.0, 30.0, 2.0, -20.0], [0.0, 0.0, 120.0, 0.0, 0.0, 0.0]
+POSE = [1200.0, 100.0, 900.0, 10.0, 150.0, -20.0]
+TOOL = np.eye(4)
+TOOL[:3, 3] = [0.0, 0.0, 0.2]  # the TCP 200 mm along the flange's z
+
+
+async def _ok(client, command, option="", data=None):
+    final = await (await client.create_process("TRACKER", command, option, data,
+                                               timeout=30)).result()
+    assert final.state is ProcessStates.Completed, f"{command}: {final.reason}"
+    return final
+
+
+def test_the_feed_gives_tcp_poses_on_the_robots_clock_and_holds_the_tracker(world_session):
+    cell = unique_cell()
+
+    async def body():
+        tracker = TrackerService(cell=cell, journal=False, seed=5)
+        tmac = ReflectorPublisher(Bus(world_session, KeySpace(cell)), "TMAC", "tmac")
+        tmac.publish(pose(BASE) @ pose(POSE) @ pose(PROBE))
+        await tracker.start()
+        try:
+            async with Client("ROBOT", cell=cell) as robot, Client("KUKA", cell=cell) as kuka:
+                assert await robot.wait_for("TRACKER") and await kuka.wait_for("TRACKER")
+                for command, data in (("Set Base", BASE), ("Set Probe", PROBE)):
+                    await _ok(robot, command, "euler2tr", data)
+                await _ok(robot, "Move", "", POSE)
+                feed = ServiceTrackerFeed(robot, asyncio.get_running_loop(), "TRACKER", TOOL)
+                await asyncio.to_thread(feed.start)
+                other = asyncio.create_task(_ok(kuka, "Set Base", "euler2tr", BASE))
+                samples, t0 = [], time.monotonic() - 7.0  # the robot's clock: its own zero
+                for _ in range(100):  # robot cycles
+                    await asyncio.sleep(0.004)
+                    t_robot = time.monotonic() - t0
+                    samples += feed.poll(t_robot, time.time())
+                assert not other.done()  # the tracked move holds the tracker
+                await asyncio.to_thread(feed.stop)
+                await asyncio.wait_for(other, 20)  # served after the move
+        finally:
+            tmac.close()
+            await tracker.close()
+        assert len(samples) > 100 and all(s.ok and s.six_dof for s in samples)
+        want = (pose(POSE) @ TOOL)[:3, 3]
+        got = np.array([s.pose[:3, 3] for s in samples])
+        assert np.abs(np.median(got, axis=0) - want).max() < 0.1e-3  # the TCP, F0 (m)
+        t = np.array([s.time_s for s in samples])
+        assert np.all(np.diff(t) > 0)
+        # acquisition times on the robot's clock: before the cycle that saw them, within
+        # the stream's latency and batching (10 samples a message at 1 kHz) and the
+        # machine's delays (a loaded 2-core machine: generous)
+        assert t[0] > 7.0 - 0.05 and t[-1] <= t_robot and t[-1] > t_robot - 0.5
+
+    run(body())

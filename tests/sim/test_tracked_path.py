@@ -1,0 +1,121 @@
+"""Dynamic path correction on the twin (issue 38): the closed loop in one process
+(sim/tracked_path.py) and the same correction source through the real RSI link over UDP."""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+import pytest
+
+from plugcell.compensation.tracking import TrackingLoop, TrackingSettings
+from plugcell.devices.robot.rsi import RsiConfig, RsiLink
+from plugcell.devices.robot.rsi.tracking import (
+    TrackingSource,
+    check_tracking_config,
+    kuka_pose,
+    path_pose,
+)
+from plugcell.kinematics.rotations import matrix_to_rpy
+from plugcell.sim.controller.rsi_robot import RsiRobot
+from plugcell.sim.tracked_path import CYCLE, Fault, LogFeed, TrackedCell
+from plugcell.sim.twin.dynamics import DynamicTwin
+
+#: simulated cycles in Python: minutes on a loaded 2-core machine
+pytestmark = [pytest.mark.slow, pytest.mark.timeout(1500)]
+
+
+@pytest.fixture(scope="module")
+def cell():
+    return TrackedCell(seed=0, calibration_poses=60)
+
+
+def _perp(run):
+    w = (run.t >= run.motion[0]) & (run.t <= run.motion[1] + 0.2)
+    rel = run.true_pose[w, :3, 3] - run.path_pose[0, :3, 3]
+    return np.hypot(rel[:, 0], rel[:, 2])  # the line runs along y
+
+
+def test_path_pose_removes_the_offset_the_setpoint_carries():
+    rng = np.random.default_rng(0)
+    for _ in range(5):
+        p = np.r_[rng.normal(size=3), rng.uniform(-0.5, 0.5, 3)]
+        o = np.r_[1e-3 * rng.normal(size=3), 1e-3 * rng.normal(size=3)]
+        Tp = kuka_pose(p)
+        Ro = kuka_pose(np.r_[0, 0, 0, o[3:]])[:3, :3]
+        Tset = Tp.copy()
+        Tset[:3, 3] += o[:3]
+        Tset[:3, :3] = Ro @ Tp[:3, :3]
+        roll, pitch, yaw = matrix_to_rpy(Tset[:3, :3])
+        back = path_pose(np.r_[Tset[:3, 3], yaw, pitch, roll], o)
+        np.testing.assert_allclose(back, Tp, atol=1e-12)
+
+
+def test_the_source_refuses_a_link_it_cannot_drive():
+    cfg = RsiConfig(robot_host="127.0.0.1", correction="cartesian", mode="relative")
+    with pytest.raises(ValueError, match="absolute Cartesian"):
+        check_tracking_config(cfg)
+
+
+def test_on_the_twin_the_tracker_removes_most_of_what_the_model_leaves(cell):
+    traj = cell.plan("line", 250.0, size_m=0.3)
+    s = TrackingSettings(lead_s=0.012)
+    model = cell.run(traj, "model", settings=s)
+    tracked = cell.run(traj, "tracking", settings=s)
+    pm, pt = _perp(model), _perp(tracked)
+    assert pt.mean() + 3 * pt.std() < 0.5 * (pm.mean() + 3 * pm.std())
+    assert tracked.windows == [] and tracked.clamped == 0
+    st = tracked.stats
+    assert st.samples_bad == 0 and st.fresh_cycles > 0.9 * st.cycles
+
+
+def test_a_beam_break_on_the_twin_holds_the_model_and_the_robot_never_jumps(cell):
+    traj = cell.plan("line", 250.0, size_m=0.3)
+    s = TrackingSettings(lead_s=0.012)
+    run = cell.run(traj, "tracking", settings=s, faults=(Fault("beam_break", 0.3, 0.4),))
+    assert len(run.windows) == 1
+    w = run.windows[0]
+    assert w.reason == "line_of_sight" and w.end_s is not None
+    assert run.motion[0] + 0.3 <= w.start_s <= run.motion[0] + 0.3 + s.max_age_s + 2 * CYCLE
+    # the offset sent moves at a bounded rate throughout (the model's ramp and lead plus
+    # the tracker term's bounds), far below a jump
+    step = np.abs(np.diff(run.offset[:, :3], axis=0)).max()
+    assert step < 0.2e-3  # the link's 0.2 mm per cycle never reached
+    held = np.array(run.state) == "holding"
+    assert held.any() and run.weight[held].min() == 0.0
+
+
+def test_the_same_source_corrects_the_twin_through_the_rsi_link_over_udp(cell):
+    """Real sockets and real time: RsiRobot runs the path in its thread, RsiLink asks the
+    TrackingSource every cycle; the tracker here is the twin's true reflector (noise-free,
+    from the controller's own log), added in the link's thread before each answer."""
+    traj = cell.plan("line", 100.0, size_m=0.1)
+    arm = DynamicTwin(cell.twin, q0=cell.q0)
+    config = RsiConfig(robot_host="127.0.0.1", listen_host="127.0.0.1", listen_port=0,
+                       correction="cartesian", mode="absolute", frame="base",
+                       timeout_packets=10_000)
+    loop = TrackingLoop(cell.model, TrackingSettings(lead_s=0.012),
+                        payload_kg=cell.payload_kg)
+    source = TrackingSource(loop, ramp=0.3)
+    fed = LogFeed(source, arm)
+
+    with RsiLink(config, fed) as link:
+        robot = RsiRobot(arm, dataclasses.replace(config, listen_port=link.address[1]),
+                         record=True, path=traj, tool=cell.model.tool, path_delay_s=0.5)
+        fed.robot = robot
+        robot.start()
+        try:
+            link.wait(lambda lk: robot.path_done or not robot.running,
+                      timeout=traj.duration + 60)
+            source.finish()
+            link.wait(lambda lk: source.ended(), timeout=30)
+        finally:
+            robot.stop()
+    assert robot.path_done and robot.stopped is None
+    assert loop.stats.samples_used > 0 and loop.stats.fresh_cycles > 0
+    assert source.last is not None and source.last.state == "tracking"
+    assert loop.windows == []  # a sample every cycle: never stale
+    # the controller's offset never stepped beyond the link's bound, whatever the load
+    applied = np.array([entry[3] for entry in robot.stats().log])
+    bound = np.array(config.limits.step_bound(CYCLE))
+    assert np.all(np.abs(np.diff(applied, axis=0)) <= bound * (1 + 1e-9) + 1e-9)
