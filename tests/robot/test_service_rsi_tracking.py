@@ -84,7 +84,7 @@ def test_a_programs_tracked_move_streams_with_the_tracker(tmp_path: Path, monkey
             try:
                 service = build("robot", None, {"rsi": f"127.0.0.1:{port}",
                                                 "rsi_timeout": TIMEOUT, "library": str(lib),
-                                                "stream_process": "false"},
+                                                "stream_process": False},
                                 cell=cell, journal=tmp_path / "journal")
                 assert isinstance(service, RobotService)
                 await _start(service, robot)
