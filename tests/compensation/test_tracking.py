@@ -60,6 +60,15 @@ def test_the_gate_rejects_an_outlier_and_counts_it():
     assert f.rejected == 3
 
 
+def test_a_lasting_step_restarts_the_filter_after_max_rejections():
+    f = ResidualFilter([1e-5], [50e-6], gate=6.0, max_rejections=10)
+    for k in range(100):
+        f.update(k * 1e-3, [0.0])
+    for k in range(100, 111):
+        f.update(k * 1e-3, [2e-3])
+    assert f.x[0] == pytest.approx(2e-3) and f.rejected == 10
+
+
 def test_bad_filter_parameters_are_named():
     with pytest.raises(ValueError, match="noise > 0"):
         ResidualFilter([1.0], [0.0])

@@ -27,7 +27,9 @@ compensated by the joints and the model, not by extrapolating the measurement.
 
 with a diffuse start (the first accepted sample sets ``x = z``, ``P = r²``) and an
 innovation gate: a sample with ``|z_i − x_i| > g √S_i`` on any axis is rejected and
-counted (an outlier, or a beam that re-locked on a wrong reflector).  At a constant rate
+counted (an outlier, or a beam that re-locked on a wrong reflector); after
+``max_rejections`` rejections in a row the residual has really moved, and the filter
+starts again, diffusely, from the sample.  At a constant rate
 ``1/Δ`` the gain tends to ``K∞ = (−λ + √(λ² + 4λ))/2``, ``λ = q² Δ / r²``: the filter
 is an exponential smoother of time constant ``≈ Δ/K∞``.  The axes are independent
 because the tracker's noise is nearly so in F0 at the cell's distances and the
@@ -197,9 +199,12 @@ class ResidualFilter:
         ``r_i``: one sample's measurement noise (m, rad), > 0.
     gate : float
         Innovation gate ``g`` in standard deviations (``inf``: none).
+    max_rejections : int
+        Gated samples in a row after which the filter restarts from the next one.
     """
 
-    def __init__(self, process: ArrayLike, noise: ArrayLike, gate: float = 8.0) -> None:
+    def __init__(self, process: ArrayLike, noise: ArrayLike, gate: float = 8.0,
+                 max_rejections: int = 50) -> None:
         self.q = np.array(process, dtype=float).reshape(-1)
         self.r = np.array(noise, dtype=float).reshape(-1)
         if self.q.shape != self.r.shape or not np.all(self.q >= 0) or \
@@ -209,6 +214,8 @@ class ResidualFilter:
         if not gate > 0:
             raise ValueError(f"gate must be > 0 standard deviations, got {gate!r}")
         self.gate = float(gate)
+        self.max_rejections = int(max_rejections)
+        self._in_a_row = 0
         self.x = np.zeros_like(self.r)
         self.P = np.full_like(self.r, np.inf)
         self.t: float | None = None
@@ -261,7 +268,12 @@ class ResidualFilter:
         innov = zz - self.x
         if np.any(np.abs(innov) > self.gate * np.sqrt(S)):
             self.rejected += 1
+            self._in_a_row += 1
+            if self._in_a_row >= self.max_rejections:  # not an outlier: the residual moved
+                self.reset()
+                self._in_a_row = 0
             return False
+        self._in_a_row = 0
         K = P / S
         self.x = self.x + K * innov
         self.P = (1.0 - K) * P
