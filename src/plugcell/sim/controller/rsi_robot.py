@@ -77,7 +77,7 @@ class RsiRobotStats:
     delay: int = 0
     malformed: int = 0
     #: per cycle: IPOC, command, link angles, the correction offset applied (SI)
-    log: list[tuple[int, Array, Array, Array]] = field(default_factory=list)
+    log: list[tuple[int, Array, Array, Array, bool]] = field(default_factory=list)
 
 
 def _kuka_abc(T: Array) -> Array:
@@ -104,7 +104,8 @@ class RsiRobot:
         The ethernet configuration's ``HOLDON`` (default: as plugcell's files — 0 for
         relative, 1 for absolute corrections).
     record : bool
-        Keep every cycle's IPOC, command, link angles and offset in ``stats().log``.
+        Keep every cycle's IPOC, command, link angles, offset and whether the sensor answered
+        in time in ``stats().log``.
     path : Trajectory, optional
         The controller's own motion (the KRL program's LIN/PTP moves): cycle ``k``'s
         setpoint is ``path.setpoints(T)[k]``; it must start where the arm stands.
@@ -293,7 +294,8 @@ class RsiRobot:
             else:
                 st.answered += 1
             if self._record:
-                st.log.append((self._ipoc, state.command, state.link, offset.copy()))
+                st.log.append((self._ipoc, state.command, state.link, offset.copy(),
+                               answer is not None))
             late = st.delay
         self._ipoc += self.config.ipoc_step
         if late >= self.config.timeout_packets:
