@@ -62,6 +62,7 @@ from plugcell.apps.ui.guard import MAX_BODY
 from plugcell.apps.ui.reports import ReportFiles
 from plugcell.devices.cell.service import CellController
 from plugcell.devices.drill import DrillService
+from plugcell.framework import GenericDevice
 from plugcell.sim.drivers.drill import SimulatedDrill
 
 HEADERS = {"X-Plugcell": "1", "Content-Type": "application/json"}
@@ -576,7 +577,7 @@ async def web_app(workdir: Path) -> AsyncIterator[tuple[Any, httpx.AsyncClient]]
     os.chdir(workdir)
     try:
         controller = CellController(cell=cell, home=workdir)
-        drill = DrillService(cell=cell, driver=SimulatedDrill(time_scale=0.001))
+        drill = GenericDevice(DrillService(SimulatedDrill(time_scale=0.001)), cell=cell)
         await controller.start()
         try:
             await drill.start()

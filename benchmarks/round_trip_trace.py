@@ -139,14 +139,14 @@ class _ProbedDoor:
 
 async def _requester(cell: str, journal: bool, cycles: int, trace: Trace,
                      arrival: bool = False) -> None:
-    from plugcell.apps.bench.device import BenchService
+    from plugcell.apps.bench.device import bench_service
     from plugcell.framework.transport import TransportConfig
 
     if arrival:  # before start: the transport adapter keeps the bound hand-off it gets
         from plugcell.framework import port
 
         _probe(trace, port.Port, "post", "Zenoh callback")
-    consumer = BenchService("CONSUMER", cell=cell, transport=TransportConfig.from_env(),
+    consumer = bench_service("CONSUMER", cell=cell, transport=TransportConfig.from_env(),
                             journal=journal)
     await consumer.start()
     try:

@@ -21,7 +21,7 @@ from plugcell.devices.cell.service import CellController
 from plugcell.devices.cell.tasks import check_task
 from plugcell.devices.cell.wiring import load_wiring
 from plugcell.devices.drill import DrillService
-from plugcell.framework import Client
+from plugcell.framework import Client, GenericDevice
 from plugcell.sim.drivers.camera import SimulatedCamera
 from plugcell.sim.drivers.drill import SimulatedDrill
 
@@ -41,8 +41,8 @@ def partners(c: CellController, name: str) -> set[str]:
 def test_controller_discovers_wires_saves_loads_and_reapplies(cell: str, home: Path,
                                                               tmp_path: Path) -> None:
     async def body() -> None:
-        camera = CameraService(cell=cell, driver=SimulatedCamera(time_scale=0.001))
-        tool = DrillService(cell=cell, driver=SimulatedDrill(time_scale=0.001))
+        camera = GenericDevice(CameraService(SimulatedCamera(time_scale=0.001)), cell=cell)
+        tool = GenericDevice(DrillService(SimulatedDrill(time_scale=0.001)), cell=cell)
         robot = FakeRobot(cell=cell)
         for s in (camera, tool, robot):
             await s.start()
@@ -79,7 +79,7 @@ def test_controller_discovers_wires_saves_loads_and_reapplies(cell: str, home: P
             await tool.close()
             await eventually(lambda: not ctl.records["TOOL"].alive)
             assert "TOOL" not in robot.partners
-            tool = DrillService(cell=cell, driver=SimulatedDrill(time_scale=0.001))
+            tool = GenericDevice(DrillService(SimulatedDrill(time_scale=0.001)), cell=cell)
             await tool.start()
             await eventually(lambda: "TOOL" in robot.partners)
             assert any("re-applied ROBOT → TOOL" in line["text"] for line in ctl.activity)
@@ -97,8 +97,8 @@ def test_controller_discovers_wires_saves_loads_and_reapplies(cell: str, home: P
 
 def test_tasks_runs_and_the_monitor(cell: str, home: Path) -> None:
     async def body() -> None:
-        tool = DrillService(cell=cell, driver=SimulatedDrill(time_scale=0.001))
-        camera = CameraService(cell=cell, driver=SimulatedCamera(time_scale=0.001))
+        tool = GenericDevice(DrillService(SimulatedDrill(time_scale=0.001)), cell=cell)
+        camera = GenericDevice(CameraService(SimulatedCamera(time_scale=0.001)), cell=cell)
         slow = SlowDevice("SLOW", cell=cell)
         r1, r2 = FakeRobot("R1", cell=cell), FakeRobot("R2", cell=cell)
         services = [tool, camera, slow, r1, r2]

@@ -176,7 +176,7 @@ def test_updates_from_another_incarnation_of_the_name_are_not_ours(tmp_path):
                           codec.encode("DEV", "f" * 16 + "other", impostor))
             await asyncio.sleep(0.3)
             assert stream.final is None  # the other incarnation's Failed was not taken
-            dev.emit(5.0)
+            dev.interface.emit(5.0)
             frame = await anext(stream)
             assert (first.seq, frame.seq, stream.array(frame)[0]) == (1, 2, 5.0)
             stop = await a.create_process("DEV", "Stop")

@@ -16,7 +16,9 @@ from plugcell.framework import Command, CommandTypes, DataTypes
 
 
 def command(service: type, name: str) -> Command:
-    return next(c for c in service.commands if c.name == name)
+    declaration = getattr(service, "declaration", None)  # RobotService: not yet hosted
+    commands = declaration.commands if declaration is not None else service.commands
+    return next(c for c in commands if c.name == name)
 
 
 SNAP = command(CameraService, "SnapShot")

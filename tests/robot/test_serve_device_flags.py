@@ -104,9 +104,10 @@ def test_a_kind_with_a_driver_interface_is_served_with_its_simulated_driver():
     assert kind_params("drill") == {"time_scale": float, "depth_mm": float}
     params = _params("drill", ["depth_mm=5", "time_scale=0"])
     service = build("drill", "T", params, cell="kinds-test", journal=False)
-    assert isinstance(service, DrillService) and service.name == "T"
-    assert isinstance(service.drill, SimulatedDrill) and isinstance(service.drill, DrillDriver)
-    assert (service.drill.depth_mm, service.drill.time_scale) == (5.0, 0.0)
+    assert isinstance(service.interface, DrillService) and service.name == "T"
+    drill = service.interface.drill
+    assert isinstance(drill, SimulatedDrill) and isinstance(drill, DrillDriver)
+    assert (drill.depth_mm, drill.time_scale) == (5.0, 0.0)
     with pytest.raises(CommandError, match=r"bad --param 'depth_mm=1' for CameraService "
                                            r"\(parameters: time_scale\)"):
         _params("camera", ["depth_mm=1"])

@@ -247,13 +247,13 @@ def test_wiring_is_signed_too(routed: RoutedCell) -> None:
 
 
 def test_a_service_checking_signatures_needs_the_cells_ca() -> None:
-    from framework_testlib import ScriptedDevice
+    from framework_testlib import scripted
 
     from plugcell.framework.security import AccessPolicy
     from plugcell.framework.signing import SigningError
 
     async def body() -> None:
-        dev = ScriptedDevice(cell=unique_cell(), journal=False,
+        dev = scripted(cell=unique_cell(), journal=False,
                              transport=TransportConfig(multicast=False),
                              access=AccessPolicy(identity="signed"))
         with pytest.raises(SigningError, match="identity = 'signed' needs the cell's CA"):

@@ -1,4 +1,4 @@
-"""The GenericDevice service: the generic state and interface every service inherits.
+"""The GenericDevice service: the framework object that hosts one device.
 
 Thesis 4.1.3.1 and 5.2.2–5.2.3.  A service is a :class:`Participant` (partners,
 outbound processes) plus the *female adapter*, the Generic Interface (Table 5-2):
@@ -8,13 +8,15 @@ outbound processes) plus the *female adapter*, the Generic Interface (Table 5-2)
 * ``CreateProcess`` → acknowledgement, after the process is checked and journaled;
 * the notifications ``ProcessUpdate``, ``StateUpdate``, ``ConnectionUpdate``, ``Shutdown``.
 
-A device service is a small subclass following the CameraService template of
-5.2.3: it declares ``commands`` (its catalogue, as ``StateInitialize`` does) and
-implements the device interface layer of Figure 5-10 — the CommandDispatcher
-(:meth:`GenericDevice.dispatch`) and the FeedbackReceiver, which reports through
-the ports of Table 5-3: ``data_feedback``, ``cmd_feedback``, ``device_state`` and
-``connection_state``.  Queueing, re-scheduling, notifications, partners,
-discovery and the journal are inherited.
+A device is *composed* into a service, not derived from it: it is a
+:class:`DeviceInterface` — a :class:`~plugcell.framework.declaration.Declaration`
+(kind, names, catalogue: what ``StateInitialize`` declares) and the device interface
+layer of Figure 5-10, the CommandDispatcher (``dispatch``), usually in front of a
+driver of its device family.  ``GenericDevice(device, name, cell=…)`` hosts it: the
+device reports through the service's ports of Table 5-3 (``data_feedback``,
+``cmd_feedback``, ``device_state``, ``connection_state``), which :meth:`bind` hands
+it; queueing, re-scheduling, notifications, partners, discovery, the journal and the
+access policy are the service's.
 
 The ProcessHandler (5.2.3.4, Figure 5-12; :mod:`plugcell.framework.scheduler`) takes
 one process at a time from the
@@ -45,7 +47,7 @@ import time
 from collections.abc import Callable
 from datetime import UTC, datetime
 from pathlib import Path
-from typing import Any, ClassVar, Generic, TypeVar
+from typing import Any, Generic, Protocol, TypeVar
 
 import msgspec
 import zenoh
@@ -59,12 +61,12 @@ from plugcell.framework.admission import (
 )
 from plugcell.framework.bus import Notification
 from plugcell.framework.data import summary
+from plugcell.framework.declaration import Declaration, check_catalogue
 from plugcell.framework.journal import Journal, JournalInUseError, NullJournal, journal_dir
 from plugcell.framework.keys import DEFAULT_CELL, Presence, check_name
 from plugcell.framework.messages import (
     Acknowledgement,
     Command,
-    CommandTypes,
     ConnectionStates,
     ConnectionUpdateNotification,
     Data,
@@ -112,26 +114,52 @@ class FeedbackPort(Generic[T]):
             raise RuntimeError(f"{self.name}.post before the service started")
 
 
+class DeviceInterface(Protocol):
+    """The device side of a service (Figure 5-10, the "Camera Interface"): what a device
+    family implements and the framework hosts — a :class:`Declaration` and the
+    CommandDispatcher.  A device does not subclass the framework: a
+    :class:`GenericDevice` is made *with* one and hands itself to :meth:`bind`.
+
+    Optional methods (looked up when present): ``async connect()`` and
+    ``async disconnect()`` — open and close the link to the device at start and
+    shutdown (the service then reports Online, Offline), and
+    ``on_partner_notification(partner, body)`` — a partner's StateUpdate or
+    ConnectionUpdate (after the service has recorded it).
+    """
+
+    declaration: Declaration
+
+    def bind(self, service: GenericDevice) -> None:
+        """Take the service that hosts this device: its feedback ports (``data_feedback``,
+        ``cmd_feedback``, ``device_state``, ``connection_state``), ``sender``, ``note``
+        and, for a device that creates processes itself, its participant side."""
+
+    async def dispatch(self, command: Command, option: str, data: Any) -> str | None:
+        """CommandDispatcher: send ``command`` to the device.
+
+        ``data`` is the checked input (an n-D numpy array of the declared type and
+        size, or None).  Return the device's command feedback code (compared with
+        ``command.success_code``), or None if the device will post it later on the
+        service's ``cmd_feedback``.  Report data on its ``data_feedback``.  Raise
+        :class:`DeviceError` to fail the process with a reason.  For a MultipleData
+        command, start the stream and return; the StopData command stops it.
+        """
+        ...
+
+
 class GenericDevice(Participant):
-    """Base of every service.  Subclass, declare ``commands``, implement :meth:`dispatch`."""
+    """The service that hosts one device (module docstring): ``GenericDevice(device)``.
+
+    It owns the participant side (session, presence, partners), the scheduler, the
+    outbox, the journal and the access policy; the device (a :class:`DeviceInterface`)
+    brings its declaration and its dispatcher.  Not meant to be subclassed.
+    """
 
     role = "service"
-    kind: ClassVar[str] = ""
-    """Registry name of the service kind (``plugcell serve KIND``)."""
-    default_name: ClassVar[str] = ""
-    """Device name when none is given (default: ``kind`` in capitals)."""
-    vendor: ClassVar[str] = ""
-    info: ClassVar[str] = ""
-    commands: ClassVar[tuple[Command, ...]] = ()
-    """The command catalogue (``state.DeviceInfo.Commands`` of StateInitialize, 5.2.3.3)."""
-    express_updates: ClassVar[bool] = True
-    """Publish process notifications with Zenoh's ``express`` flag (sent at once, not held
-    for Zenoh's own batching): the service already sends one sample per sender per
-    loop turn (:class:`~plugcell.framework.outbox.Outbox`), so holding it only adds
-    latency."""
 
     def __init__(
         self,
+        interface: DeviceInterface,
         name: str | None = None,
         *,
         cell: str = DEFAULT_CELL,
@@ -140,21 +168,28 @@ class GenericDevice(Participant):
         max_payload: int = codec.DEFAULT_MAX_PAYLOAD,
         access: AccessPolicy | None = None,
     ) -> None:
-        super().__init__(
-            name or self.default_name or (self.kind or type(self).__name__).upper(),
-            cell=cell,
-            transport=transport,
-        )
+        if type(self) is not GenericDevice:  # transitional, until every device is hosted
+            name, interface = interface, self  # type: ignore[assignment]
+            self.declaration = Declaration(
+                kind=getattr(self, "kind", ""), commands=getattr(self, "commands", ()),
+                default_name=getattr(self, "default_name", ""),
+                vendor=getattr(self, "vendor", ""), info=getattr(self, "info", ""))
+        declaration = interface.declaration
+        if not isinstance(declaration, Declaration):
+            raise TypeError(f"{type(interface).__name__}.declaration is not a Declaration")
+        super().__init__(declaration.name(name), cell=cell, transport=transport)
+        self.interface = interface
+        """The device this service hosts (its declaration and dispatcher)."""
+        self.declaration = declaration
         self.transport = self.transport.for_participant(self.name)
         self.access = access if access is not None else AccessPolicy.from_env()
         """Who may create processes here and wire this service (docs/security.md)."""
-        _check_catalogue(type(self).__name__, self.commands)
         self.device = Device(
             name=self.name,
-            vendor=self.vendor,
-            info=self.info,
-            commands=tuple(self.commands),
-            kind=self.kind,
+            vendor=declaration.vendor,
+            info=declaration.info,
+            commands=declaration.commands,
+            kind=declaration.kind,
             connection=ConnectionStates.Offline,
             state=DeviceStates.Ready,
         )
@@ -164,8 +199,9 @@ class GenericDevice(Participant):
         self.scheduler = ProcessScheduler(
             self.name, self.device, update=self._update, busy=self._busy,
             heartbeat=self._heartbeat,
-            # looked up per call: a subclass or a test may replace dispatch on the instance
-            dispatch=lambda command, option, data: self.dispatch(command, option, data))
+            # looked up per call: a test may replace dispatch on the device
+            dispatch=lambda command, option, data: self.interface.dispatch(
+                command, option, data))
         """Queue, holds, heartbeats and timeouts of the processes (framework/scheduler.py)."""
         # the ports of Table 5-3
         self.data_feedback: FeedbackPort[Any] = FeedbackPort(
@@ -194,16 +230,18 @@ class GenericDevice(Participant):
         """Why this service withdrew because another one has its name (else empty)."""
         self.stopped = asyncio.Event()
         """Set once the service has shut down (by :meth:`close` or a name conflict)."""
+        if interface is not self:
+            interface.bind(self)
 
-    # -- the device interface: override these (Figure 5-10, "Camera Interface") ---------
+    # -- what the device uses ---------------------------------------------------------------
 
     @property
     def sender(self) -> str:
         """Who asked for the process being dispatched (its sender's participant name).
 
-        Set while :meth:`dispatch` runs a process from the queue; ``""`` when the
-        framework itself calls ``dispatch`` (e.g. to stop the stream of a sender that
-        disappeared).  Services that keep per-requester state (the tracker's BASE and
+        Set while the device's ``dispatch`` runs a process from the queue; ``""`` when
+        the framework itself calls it (e.g. to stop the stream of a sender that
+        disappeared).  Devices that keep per-requester state (the tracker's BASE and
         PROBE, the compute service's workspaces) key it by this name.
         """
         return self.scheduler.sender
@@ -236,26 +274,6 @@ class GenericDevice(Participant):
         its own reason."""
         self.scheduler.note(text)
 
-    async def dispatch(self, command: Command, option: str, data: Any) -> str | None:
-        """CommandDispatcher: send ``command`` to the device.
-
-        ``data`` is the checked input (an n-D numpy array of the declared type and
-        size, or None).  Return the device's command feedback code (compared with
-        ``command.success_code``), or None if the device will post it later on
-        ``self.cmd_feedback``.  Report data on ``self.data_feedback``.  Raise
-        :class:`DeviceError` to fail the process with a reason.  For a MultipleData
-        command, start the stream and return; the StopData command stops it.
-        """
-        raise DeviceError(f"{type(self).__name__} does not implement {command.name}")
-
-    async def connect(self) -> None:
-        """Connect to the device controller at start-up (default: just report Online)."""
-        self.connection_state.post(ConnectionStates.Online)
-
-    async def disconnect(self) -> None:
-        """Disconnect at shutdown (default: report Offline)."""
-        self.connection_state.post(ConnectionStates.Offline)
-
     # -- life cycle ----------------------------------------------------------------------
 
     async def start(self) -> None:
@@ -264,7 +282,10 @@ class GenericDevice(Participant):
         self.outbox.loop = asyncio.get_running_loop()
         try:
             await super().start()
-            await self.connect()
+            connect = getattr(self.interface, "connect", None)
+            if connect is not None:
+                await connect()
+            self.connection_state.post(ConnectionStates.Online)
         except BaseException:
             await self.close()
             raise
@@ -342,7 +363,10 @@ class GenericDevice(Participant):
         await self.scheduler.stop()  # after the current process (bounded by its timeout)
         if self.bus is not None and self._started:
             with contextlib.suppress(Exception):
-                await self.disconnect()
+                disconnect = getattr(self.interface, "disconnect", None)
+                if disconnect is not None:
+                    await disconnect()
+                self.connection_state.post(ConnectionStates.Offline)
             self._publish("shutdown", ShutdownNotification(name=self.name, reason=reason))
         self.outbox.flush()
         for publisher in self._publishers.values():
@@ -591,6 +615,14 @@ class GenericDevice(Participant):
             with contextlib.suppress(zenoh.ZError):
                 self._publishers.pop(presence.name).undeclare()
 
+    def on_partner_notification(self, partner: str, body: Message) -> None:
+        """A partner's StateUpdate/ConnectionUpdate: kept in Partners, then told to the
+        device if it listens (its ``on_partner_notification``)."""
+        super().on_partner_notification(partner, body)
+        listener = getattr(self.interface, "on_partner_notification", None)
+        if listener is not None:
+            listener(partner, body)
+
     # -- receivers of the device state ports (5.2.3.2); the data and command feedback
     # go to the ProcessScheduler ----------------------------------------------------
 
@@ -644,7 +676,7 @@ class GenericDevice(Participant):
         if publisher is None:
             assert self.bus is not None
             publisher = self.bus.process_publisher(self.name, sender,
-                                                   express=self.express_updates)
+                                                   express=self.declaration.express_updates)
             self._publishers[sender] = publisher
         return publisher
 
@@ -688,29 +720,7 @@ class GenericDevice(Participant):
             self._publisher(sender).put(self._encode(body))
 
 
-def _check_catalogue(owner: str, commands: tuple[Command, ...]) -> None:
-    names = [c.name for c in commands]
-    if len(set(names)) != len(names):
-        raise TypeError(f"{owner}: duplicate command names in {names}")
-    types = {c.type for c in commands}
-    if CommandTypes.MultipleData in types and CommandTypes.StopData not in types:
-        raise TypeError(f"{owner}: a MultipleData command needs a StopData command to stop it")
-    for c in commands:
-        if (
-            c.type in (CommandTypes.SingleData, CommandTypes.MultipleData)
-            and c.output_data_type is None
-            and c.output_data_size != (0,)
-        ):
-            raise TypeError(f"{owner}: {c.name} declares an output size without a type")
-        if c.input_data_size != (0,) and c.input_data_type is None:
-            raise TypeError(f"{owner}: {c.name} declares an input size without a type")
-
-
-def check_catalogue(owner: str, commands: tuple[Command, ...]) -> None:
-    """Check a command catalogue as a service does at construction: unique names, a
-    StopData for any MultipleData, a type wherever a size is declared (TypeError naming
-    ``owner`` and the command).  For catalogues read from files (a device map)."""
-    _check_catalogue(owner, commands)
-
-
-__all__ = ["DeviceError", "FeedbackPort", "GenericDevice", "check_catalogue"]
+__all__ = [
+    "Declaration", "DeviceError", "DeviceInterface", "FeedbackPort", "GenericDevice",
+    "check_catalogue",
+]
