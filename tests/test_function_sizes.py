@@ -41,7 +41,6 @@ LINES_CEILING = {
     "apps/ui/app.py:create_app": 96,
     "sim/twin/tracker.py:LaserTracker.measure": 96,
     "io/residual_models.py:load_residual": 95,
-    "framework/service.py:GenericDevice._create": 91,
     "io/export.py:_export_urdf": 90,
     "kinematics/forward.py:joint_angles": 88,
     "apps/commands/compensate.py:_run": 86,

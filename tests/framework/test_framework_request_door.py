@@ -155,7 +155,7 @@ def test_a_recipient_with_only_the_queryable_is_served_through_it(tmp_path):
             call = await a.create_process("DEV", "Measure")
             assert call.ack.state is Q and call.ack.instance == dev.instance
             assert (await call.result()).state is C
-            assert not a._request_door("DEV")  # no subscriber matches: the query was used
+            assert not a.calls.request_door("DEV")  # no subscriber matches: the query was used
 
     run(body())
 
@@ -195,7 +195,7 @@ def test_every_waiter_of_an_acknowledgement_is_woken_by_it():
         waiters = [asyncio.create_task(call.acknowledged()) for _ in range(3)]
         await asyncio.sleep(0)
         started = loop.time()
-        call._on_ack(Acknowledgement(identifier=5, state=Q, instance="i"), "i")
+        call.acknowledge(Acknowledgement(identifier=5, state=Q, instance="i"), "i")
         acks = await asyncio.wait_for(asyncio.gather(*waiters), 2.0)
         assert [a.state for a in acks] == [Q, Q, Q] and loop.time() - started < 1.0
         assert call._ack_waiters == []

@@ -16,9 +16,7 @@ from plugcell.framework import Command, CommandTypes, DataTypes
 
 
 def command(service: type, name: str) -> Command:
-    declaration = getattr(service, "declaration", None)  # RobotService: not yet hosted
-    commands = declaration.commands if declaration is not None else service.commands
-    return next(c for c in commands if c.name == name)
+    return next(c for c in service.declaration.commands if c.name == name)
 
 
 SNAP = command(CameraService, "SnapShot")

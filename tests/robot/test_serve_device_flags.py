@@ -42,7 +42,7 @@ def test_a_serial_line_rate_that_is_not_a_rate_is_refused():
     from plugcell.sim.controller.controller import main as controller_main
 
     with pytest.raises(ValueError, match=r"link_baud must be 0 \(no serial line\) or positive"):
-        RobotService("R1", sim=True, link_baud=-1.0)
+        RobotService(sim=True, link_baud=-1.0)
     assert controller_main(["--link-baud", "-5", "--no-world"]) == 2
 
 

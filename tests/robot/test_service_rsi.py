@@ -24,7 +24,7 @@ from robot_testlib import unique_cell
 
 from plugcell.apps.kinds import build
 from plugcell.devices.robot.service import RobotService
-from plugcell.framework import Client, ProcessStates
+from plugcell.framework import Client, GenericDevice, ProcessStates
 from plugcell.framework.data import from_data
 from plugcell.framework.messages import ConnectionStates
 from plugcell.sim.controller.rsi_twin import RsiTwinProcess
@@ -87,11 +87,11 @@ def library(tmp_path: Path) -> Path:
     return lib
 
 
-def _service(port: int, library: Path, cell: str, tmp_path: Path) -> RobotService:
+def _service(port: int, library: Path, cell: str, tmp_path: Path) -> GenericDevice:
     service = build("robot", None, {"rsi": f"127.0.0.1:{port}", "rsi_timeout": TIMEOUT,
                                     "library": str(library)},
                     cell=cell, journal=tmp_path / "journal")
-    assert isinstance(service, RobotService)
+    assert isinstance(service.interface, RobotService)
     return service
 
 
@@ -123,8 +123,8 @@ def test_a_program_on_the_pc_moves_the_twin_over_rsi(library, tmp_path, monkeypa
 
                     final = await _run(client, service.name, "rsimoves")
                     assert final.state is C, final.reason
-                    motion = service.bridge.motion  # type: ignore[attr-defined]
-                    assert service.bridge.drive.followed == 3  # type: ignore[attr-defined]
+                    motion = service.interface.bridge.motion  # type: ignore[attr-defined]
+                    assert service.interface.bridge.drive.followed == 3  # type: ignore[attr-defined]
                     end = np.degrees(motion.last.sample(motion.last.duration, 0).q)
                     await asyncio.sleep(0.5)  # the servo settles
                     joints = await _get(client, service.name, "ARM_JNTP")
@@ -154,7 +154,7 @@ async def _get_status(client: Client, name: str) -> list[str]:
     return [str(s) for s in from_data(final.data).reshape(-1)]
 
 
-async def _state(service: RobotService, state: ConnectionStates, within: float) -> bool:
+async def _state(service: GenericDevice, state: ConnectionStates, within: float) -> bool:
     end = time.monotonic() + within
     while service.device.connection is not state and time.monotonic() < end:
         await asyncio.sleep(0.05)
@@ -204,18 +204,18 @@ def test_a_stopped_stream_fails_the_process_and_the_service_recovers(library, tm
 
 def test_bad_rsi_options_are_refused_with_the_reason():
     with pytest.raises(ValueError, match=r"give one of sim, controller=HOST:PORT or rsi"):
-        RobotService("R1", sim=True, rsi="127.0.0.1:49152")
+        RobotService(sim=True, rsi="127.0.0.1:49152")
     with pytest.raises(ValueError, match="rsi_robot names the controller of an RSI stream"):
-        RobotService("R1", sim=True, rsi_robot="10.0.0.1")
+        RobotService(sim=True, rsi_robot="10.0.0.1")
     with pytest.raises(ValueError, match="listens on every address: give the controller's"):
-        RobotService("R1", rsi="0.0.0.0:49152")
+        RobotService(rsi="0.0.0.0:49152")
     with pytest.raises(ValueError, match="bad controller address"):
-        RobotService("R1", rsi="localhost")
+        RobotService(rsi="localhost")
     with pytest.raises(ValueError, match="bad RSI robot address"):
-        RobotService("R1", rsi="0.0.0.0:49152", rsi_robot="10.0.0.1:http")
+        RobotService(rsi="0.0.0.0:49152", rsi_robot="10.0.0.1:http")
     with pytest.raises(ValueError, match="joint_speed must be a positive number"):
-        RobotService("R1", rsi="127.0.0.1:49152", joint_speed=0.0)
+        RobotService(rsi="127.0.0.1:49152", joint_speed=0.0)
     with pytest.raises(ValueError, match="timeout_packets"):
-        RobotService("R1", rsi="127.0.0.1:49152", rsi_timeout=0)
+        RobotService(rsi="127.0.0.1:49152", rsi_timeout=0)
     with pytest.raises(ValueError, match="unknown robot 'scara4'"):
-        RobotService("R1", rsi="127.0.0.1:49152", robot="scara4")
+        RobotService(rsi="127.0.0.1:49152", robot="scara4")

@@ -24,6 +24,10 @@ from typing import Any
 from plugcell.framework.declaration import Declaration
 from plugcell.framework.service import GenericDevice
 
+#: ``--param driver=sim``: the kind's default driver (a device declaring a ``driver``
+#: parameter takes another by name, ``module:Class``).
+SIMULATED = "sim"
+
 
 @dataclass(frozen=True)
 class Kind:
@@ -37,10 +41,15 @@ class Kind:
     driver : str or None
         The driver class the device is given as ``driver=`` (None: the device needs
         none).
+    launcher : str or None
+        What starts the device's own controller process, given (not called) as
+        ``launcher=`` — the robot's simulated controller for ``sim=true``, which needs
+        the service's name and cell.
     """
 
     service: str
     driver: str | None = None
+    launcher: str | None = None
 
 
 KINDS: dict[str, Kind] = {
@@ -49,8 +58,10 @@ KINDS: dict[str, Kind] = {
     "drill": Kind("plugcell.devices.drill:DrillService",
                   driver="plugcell.sim.drivers.drill:SimulatedDrill"),
     "bench": Kind("plugcell.apps.bench.device:BenchService"),
-    "robot": Kind("plugcell.devices.robot.service:RobotService"),
-    "tracker": Kind("plugcell.devices.tracker.service:TrackerService"),
+    "robot": Kind("plugcell.devices.robot.service:RobotService",
+                  launcher="plugcell.sim.controller.launcher:SimControllerProcess"),
+    "tracker": Kind("plugcell.devices.tracker.service:TrackerService",
+                    driver="plugcell.sim.drivers.tracker:SimulatedTrackerDriver"),
     "compute": Kind("plugcell.devices.compute.service:ComputeService"),
     "controller": Kind("plugcell.devices.cell.service:CellController"),
     "opcua-device": Kind("plugcell.devices.opcua.device:OpcUaDevice"),
@@ -86,8 +97,6 @@ def load_kind(kind: str) -> type:
     """
     target = _kind(kind).service
     cls = _load(kind, target)
-    if isinstance(cls, type) and issubclass(cls, GenericDevice):  # transitional
-        return cls
     if not (isinstance(cls, type) and isinstance(getattr(cls, "declaration", None),
                                                   Declaration)):
         raise TypeError(f"{target} is not a device class (no Declaration 'declaration')")
@@ -131,11 +140,15 @@ def build(kind: str, name: str | None, params: Mapping[str, Any], **options: Any
     """
     cls = load_kind(kind)
     driver_cls = load_driver(kind)
+    launcher = _kind(kind).launcher
+    if launcher is not None:
+        params = {**params, "launcher": _load(kind, launcher)}
     if driver_cls is None:
-        if issubclass(cls, GenericDevice):  # transitional
-            return cls(name, **params, **options)
         return GenericDevice(cls(**params), name, **options)
     driver_keys = getattr(driver_cls, "params", {})
-    driver = driver_cls(**{k: v for k, v in params.items() if k in driver_keys})
     device_params = {k: v for k, v in params.items() if k not in driver_keys}
+    chosen = device_params.pop("driver", SIMULATED)
+    if chosen != SIMULATED:  # ``--param driver=module:Class``: the device loads another
+        return GenericDevice(cls(driver=chosen, **device_params), name, **options)
+    driver = driver_cls(**{k: v for k, v in params.items() if k in driver_keys})
     return GenericDevice(cls(driver=driver, **device_params), name, **options)

@@ -43,29 +43,21 @@ import asyncio
 import contextlib
 import logging
 import threading
-import time
 from collections.abc import Callable
 from datetime import UTC, datetime
 from pathlib import Path
 from typing import Any, Generic, Protocol, TypeVar
 
-import msgspec
 import zenoh
 
 from plugcell.framework import codec
-from plugcell.framework.admission import (
-    check_envelope,
-    check_input,
-    check_process,
-    decode_request,
-)
 from plugcell.framework.bus import Notification
 from plugcell.framework.data import summary
 from plugcell.framework.declaration import Declaration, check_catalogue
+from plugcell.framework.inbound import Inbound
 from plugcell.framework.journal import Journal, JournalInUseError, NullJournal, journal_dir
-from plugcell.framework.keys import DEFAULT_CELL, Presence, check_name
+from plugcell.framework.keys import DEFAULT_CELL, Presence
 from plugcell.framework.messages import (
-    Acknowledgement,
     Command,
     ConnectionStates,
     ConnectionUpdateNotification,
@@ -74,29 +66,22 @@ from plugcell.framework.messages import (
     DeviceStates,
     GenericDeviceState,
     Message,
-    Process,
     ProcessStates,
     ProcessUpdateNotification,
     ShutdownNotification,
     StateUpdateNotification,
-    SubscribeRequest,
-    SubscribeResponse,
-    UnsubscribeRequest,
 )
 from plugcell.framework.outbox import Outbox
 from plugcell.framework.participant import Participant, PartnerError
 from plugcell.framework.processqueue import Entry
 from plugcell.framework.scheduler import DeviceError, ProcessScheduler
-from plugcell.framework.security import AccessPolicy
-from plugcell.framework.signing import RequestVerifier, SigningError
+from plugcell.framework.security import AccessPolicy, Recipient
 from plugcell.framework.transport import TransportConfig
 
 log = logging.getLogger("plugcell.framework.service")
 
 T = TypeVar("T")
 
-Answer = zenoh.Query | str
-"""Where a CreateProcess is acknowledged: its query, or the sender that published it."""
 
 
 
@@ -121,8 +106,10 @@ class DeviceInterface(Protocol):
     :class:`GenericDevice` is made *with* one and hands itself to :meth:`bind`.
 
     Optional methods (looked up when present): ``async connect()`` and
-    ``async disconnect()`` — open and close the link to the device at start and
-    shutdown (the service then reports Online, Offline), and
+    ``async disconnect()`` — open and close the link to the device at start (once the
+    service is live in the cell) and at shutdown (after the last process), the service
+    then reporting Online, Offline; ``async prepare_close()`` — end what the device runs
+    on its own before the service stops taking and running processes; and
     ``on_partner_notification(partner, body)`` — a partner's StateUpdate or
     ConnectionUpdate (after the service has recorded it).
     """
@@ -168,12 +155,6 @@ class GenericDevice(Participant):
         max_payload: int = codec.DEFAULT_MAX_PAYLOAD,
         access: AccessPolicy | None = None,
     ) -> None:
-        if type(self) is not GenericDevice:  # transitional, until every device is hosted
-            name, interface = interface, self  # type: ignore[assignment]
-            self.declaration = Declaration(
-                kind=getattr(self, "kind", ""), commands=getattr(self, "commands", ()),
-                default_name=getattr(self, "default_name", ""),
-                vendor=getattr(self, "vendor", ""), info=getattr(self, "info", ""))
         declaration = interface.declaration
         if not isinstance(declaration, Declaration):
             raise TypeError(f"{type(interface).__name__}.declaration is not a Declaration")
@@ -215,11 +196,12 @@ class GenericDevice(Participant):
             self, self._on_connection_state, "ConnectionState"
         )
         self._loop_thread = 0
-        self._departed: set[str] = set()
+        self.departed: set[str] = set()
+        """Incarnations of senders that have left (their late requests are refused)."""
         self._publishers: dict[str, Any] = {}
         self._closing = False
         self.outbox = Outbox(self.name, commit=lambda: self.journal.commit(),
-                             reply=self._reply, publish=self._send_to,
+                             reply=self.reply, publish=self._send_to,
                              is_open=self._session_open)
         """Acknowledgements and updates of this turn of the loop (framework/outbox.py)."""
         self._notify_scheduled = False
@@ -230,8 +212,14 @@ class GenericDevice(Participant):
         """Why this service withdrew because another one has its name (else empty)."""
         self.stopped = asyncio.Event()
         """Set once the service has shut down (by :meth:`close` or a name conflict)."""
-        if interface is not self:
-            interface.bind(self)
+        self.recipient = Recipient(self.name, self.keys.cell)
+        """This service as its access policy sees it (complete once it has started)."""
+        self.inbound = Inbound(self)
+        """Its doors Subscribe and CreateProcess, and the admission of each request."""
+        listener = getattr(interface, "on_partner_notification", None)
+        if listener is not None:  # the device shows its partners' states
+            self.partner_listeners.append(listener)
+        interface.bind(self)
 
     # -- what the device uses ---------------------------------------------------------------
 
@@ -245,6 +233,11 @@ class GenericDevice(Participant):
         PROBE, the compute service's workspaces) key it by this name.
         """
         return self.scheduler.sender
+
+    @property
+    def closing(self) -> bool:
+        """Whether the service is shutting down (or has shut down)."""
+        return self._closing
 
     @property
     def stray_feedback(self) -> int:
@@ -274,6 +267,12 @@ class GenericDevice(Participant):
         its own reason."""
         self.scheduler.note(text)
 
+    def own(self, entity: Any) -> Any:
+        """Keep a Zenoh declaration of the device (a publisher, a subscriber) until the
+        service closes, which undeclares it; returns ``entity``."""
+        self._entities.append(entity)
+        return entity
+
     # -- life cycle ----------------------------------------------------------------------
 
     async def start(self) -> None:
@@ -296,17 +295,22 @@ class GenericDevice(Participant):
         bus = self.bus
         assert bus is not None
         if self.access.identity == "signed":
-            self.request_verifier()  # no CA: refuse to start, with the reason
+            self.inbound.request_verifier()  # no CA: refuse to start, with the reason
         if await self._query_live_instances() or self.alive.get(("service", self.name)):
             raise PartnerError(
                 f"a service named {self.name} is already running in cell {self.keys.cell!r}"
             )
         self._open_journal()
+        self.recipient = Recipient(
+            name=self.name, cell=self.keys.cell, instance=self.instance,
+            identities=bus.link_identities, role_of=self.inbound.role_of,
+            verifier=self.inbound.request_verifier)
+        """This service as its access policy sees it (framework/security.py)."""
         self._entities.append(bus.serve("get", self.name, self._on_get))
-        self._entities.append(bus.serve("subscribe", self.name, self._on_subscribe))
+        self._entities.append(bus.serve("subscribe", self.name, self.inbound.on_subscribe))
         self._create_doors = [
-            bus.serve("create", self.name, self._on_create),
-            bus.take_requests(self.name, self._on_request),
+            bus.serve("create", self.name, self.inbound.on_create),
+            bus.take_requests(self.name, self.inbound.on_request),
         ]
         self._entities.extend(self._create_doors)
 
@@ -354,6 +358,10 @@ class GenericDevice(Participant):
             await self.stopped.wait()
             return
         self._closing = True
+        prepare = getattr(self.interface, "prepare_close", None)
+        if prepare is not None:  # the device ends what it runs on its own first
+            with contextlib.suppress(Exception):
+                await prepare()
         for door in self._create_doors:
             with contextlib.suppress(zenoh.ZError):
                 door.undeclare()
@@ -381,9 +389,10 @@ class GenericDevice(Participant):
 
     # -- inbound: Get, Subscribe, CreateProcess (Table 5-2) ----------------------------
 
-    def _reply(self, query: zenoh.Query, body: Message) -> None:
+    def reply(self, query: zenoh.Query, body: Message) -> None:
+        """Answer ``query`` with ``body`` (then drop it)."""
         with contextlib.suppress(zenoh.ZError):
-            query.reply(query.key_expr, self._encode(body))
+            query.reply(query.key_expr, self.encode(body))
         query.drop()
 
     def generic_state(self) -> GenericDeviceState:
@@ -393,201 +402,7 @@ class GenericDevice(Participant):
         )
 
     def _on_get(self, query: zenoh.Query) -> None:
-        self._reply(query, self.generic_state())
-
-    def _decode_query(self, query: zenoh.Query) -> tuple[codec.Envelope, bytes] | str:
-        """The request of ``query`` and its bytes (a signature covers them), or why not."""
-        return self._decode_request(query.payload)
-
-    def _decode_request(self, payload: zenoh.ZBytes | None) -> tuple[codec.Envelope, bytes] | str:
-        """A request's envelope and its bytes, or why not (admission step 1)."""
-        return decode_request(payload, self.max_payload, self.name)
-
-    def request_verifier(self) -> RequestVerifier:
-        """The checker of signed requests (``identity = "signed"``), from the cell's CA
-        of this service's transport (``PLUGCELL_TLS_CA``/``PLUGCELL_TLS_DIR``)."""
-        window = self.access.signature_window
-        verifier = getattr(self, "_request_verifier", None)
-        if verifier is None or verifier.window_s != window:
-            if not self.transport.tls_ca:
-                raise SigningError(
-                    f"{self.name}: identity = 'signed' needs the cell's CA "
-                    "(PLUGCELL_TLS_CA or PLUGCELL_TLS_DIR)"
-                )
-            verifier = RequestVerifier.load(self.transport.tls_ca, window)
-            self._request_verifier = verifier
-        return verifier
-
-    def _on_subscribe(self, query: zenoh.Query) -> None:
-        decoded = self._decode_query(query)
-        if isinstance(decoded, str):
-            self._reply(query, SubscribeResponse(ok=False, reason=decoded))
-            return
-        envelope, raw = decoded
-        body = envelope.body
-        if not isinstance(body, SubscribeRequest | UnsubscribeRequest):
-            self._reply(
-                query,
-                SubscribeResponse(
-                    ok=False, reason=f"expected SubscribeRequest, got {type(body).__name__}"
-                ),
-            )
-            return
-        refused = self.access.check_wire(self, envelope, body.partner, raw)  # journaled below
-        if refused:
-            with contextlib.suppress(Exception):
-                what = type(body).__name__
-                self.journal.record_rejection(envelope.sender, None, what, 0, refused)
-                self.journal.commit()
-            self._reply(query, SubscribeResponse(ok=False, reason=refused))
-            return
-        asyncio.get_running_loop().create_task(self._subscribe_for(query, body))
-
-    async def _subscribe_for(
-        self, query: zenoh.Query, body: SubscribeRequest | UnsubscribeRequest
-    ) -> None:
-        if isinstance(body, UnsubscribeRequest):
-            found = await self.unsubscribe(body.partner)
-            reason = "" if found else f"{body.partner} was not a partner of {self.name}"
-            self._reply(query, SubscribeResponse(ok=found, reason=reason))
-            return
-        try:
-            device = await self.subscribe(body.partner)
-        except PartnerError as exc:
-            self._reply(query, SubscribeResponse(ok=False, reason=str(exc)))
-        except Exception as exc:  # always answer: the asker waits for it
-            log.exception("%s: subscribing to %s", self.name, body.partner)
-            self._reply(query, SubscribeResponse(ok=False, reason=f"{body.partner}: {exc!r}"))
-        else:
-            self._reply(query, SubscribeResponse(ok=True, partner=device))
-
-    def _on_create(self, query: zenoh.Query) -> None:
-        """CreateProcess through the queryable: the acknowledgement is the reply."""
-        self._create(query.payload, query)
-
-    def _on_request(self, sender: str, sample: zenoh.Sample) -> None:
-        """CreateProcess published on ``svc/<name>/create/<sender>``: the acknowledgement
-        goes to ``<sender>`` on its process key, in one sample with the first updates."""
-        try:
-            check_name(sender, "sender name")
-        except ValueError as exc:  # nobody to answer: journal it only
-            size = len(sample.payload) if sample.payload is not None else 0
-            with contextlib.suppress(Exception):
-                self.journal.record_rejection(None, None, None, size, str(exc))
-                self.journal.commit()
-            return
-        self._create(sample.payload, sender, codec.attached_identifier(sample.attachment))
-
-    def _create(self, payload: zenoh.ZBytes | None, answer: Answer, attached: int = 0) -> None:
-        """CreateProcessHandler (5.2.3.4): admit (framework/admission.py: decode,
-        authenticate, check, authorise, journal), acknowledge, enqueue.
-
-        ``answer`` is where the acknowledgement goes: the query (queryable door) or
-        the name of the sender that published the request (publication door, whose
-        ``attached`` identifier acknowledges even a request that cannot be read).
-        """
-        received = time.time_ns()
-        size = len(payload) if payload is not None else 0
-        decoded = (
-            self._decode_request(payload)
-            if not self._closing
-            else f"{self.name}: service shutting down"
-        )
-        if isinstance(decoded, str):
-            sender = answer if isinstance(answer, str) else None
-            self._reject(answer, decoded, size, sender, attached or None)
-            return
-        envelope, raw = decoded
-        published_by = answer if isinstance(answer, str) else None
-        invalid = check_envelope(envelope, published_by)
-        if invalid:
-            self._reject(answer, invalid, size, published_by or envelope.sender)
-            return
-        process = envelope.body
-        assert isinstance(process, Process)
-        sender, identifier = process.tag.sender, process.identifier
-        unauthenticated = self.access.authenticate(self, envelope, raw)
-        if unauthenticated:  # a rejection: nothing is recorded under the claimed name
-            self._reject(answer, unauthenticated, size, sender, identifier, process.command.name)
-            return
-        reason = check_process(self.name, self.device, envelope, process, self._departed)
-        if not reason:  # access control: refusals are journaled below with the reason
-            reason = self.access.authorize_create(self, envelope, process)
-        command = self.device.command(process.command.name)
-        array = None
-        if not reason and command is not None:
-            array, reason = check_input(command, process)
-        if self.scheduler.knows(sender, identifier):
-            self._reject(
-                answer,
-                f"duplicate identifier {identifier} from {sender}",
-                size,
-                sender,
-                identifier,
-                process.command.name,
-            )
-            return
-        state = ProcessStates.Failed if reason else ProcessStates.Queued
-        try:
-            self.journal.record_process(
-                sender=sender,
-                identifier=identifier,
-                sender_instance=envelope.instance,
-                recipient_instance=self.instance,
-                command=process.command.name,
-                option=process.command.option,
-                command_type=command.type.value if command else "",
-                input_summary=summary(process.data),
-                received_ns=received,
-                state=state.value,
-                reason=reason,
-            )
-        except Exception as exc:  # DuplicateProcessError: an identifier reused
-            self.journal.commit()
-            self._reject(
-                answer,
-                f"cannot journal process {identifier} from {sender}: {exc}",
-                size,
-                sender,
-                identifier,
-                process.command.name,
-            )
-            return
-        ack = Acknowledgement(identifier=identifier, state=state, reason=reason,
-                              instance=self.instance)
-        if not reason:
-            assert command is not None
-            command = msgspec.structs.replace(command, option=process.command.option)
-            entry = Entry(
-                process=msgspec.structs.replace(process, command=command),
-                command=command,
-                instance=envelope.instance,
-                received_ns=received,
-                input=array,
-            )
-            self.scheduler.post(entry)
-        # after the post: a process the handler starts (or ends) in this turn of the
-        # loop shares the acknowledgement's commit and sample
-        self.outbox.acknowledge(answer, ack)
-
-    def _reject(
-        self,
-        answer: Answer,
-        reason: str,
-        size: int,
-        sender: str | None = None,
-        identifier: int | None = None,
-        command: str | None = None,
-    ) -> None:
-        """Journal a refused request; acknowledge it Failed with the reason (at the flush)."""
-        with contextlib.suppress(Exception):
-            self.journal.record_rejection(sender, identifier, command, size, reason)
-        self.outbox.acknowledge(answer, Acknowledgement(
-            identifier=identifier or 0,
-            state=ProcessStates.Failed,
-            reason=reason,
-            instance=self.instance,
-        ))
+        self.reply(query, self.generic_state())
 
     # -- presence of senders -------------------------------------------------------------
 
@@ -609,19 +424,11 @@ class GenericDevice(Participant):
 
     def _on_left(self, presence: Presence) -> None:
         super()._on_left(presence)
-        self._departed.add(presence.instance)
+        self.departed.add(presence.instance)
         self.scheduler.sender_lost(presence.name, presence.instance)
         if not self.is_alive(presence.name, presence.role) and presence.name in self._publishers:
             with contextlib.suppress(zenoh.ZError):
                 self._publishers.pop(presence.name).undeclare()
-
-    def on_partner_notification(self, partner: str, body: Message) -> None:
-        """A partner's StateUpdate/ConnectionUpdate: kept in Partners, then told to the
-        device if it listens (its ``on_partner_notification``)."""
-        super().on_partner_notification(partner, body)
-        listener = getattr(self.interface, "on_partner_notification", None)
-        if listener is not None:
-            listener(partner, body)
 
     # -- receivers of the device state ports (5.2.3.2); the data and command feedback
     # go to the ProcessScheduler ----------------------------------------------------
@@ -669,7 +476,7 @@ class GenericDevice(Participant):
             return
         assert self.bus is not None
         with contextlib.suppress(zenoh.ZError):
-            self.bus.notify(kind, self.name, self._encode(body))
+            self.bus.notify(kind, self.name, self.encode(body))
 
     def _publisher(self, sender: str) -> Any:
         publisher = self._publishers.get(sender)
@@ -692,7 +499,7 @@ class GenericDevice(Participant):
         no batch)."""
         if self._session_open():
             with contextlib.suppress(zenoh.ZError):
-                self._publisher(entry.sender).put(self._encode(update))
+                self._publisher(entry.sender).put(self.encode(update))
 
     def _update(self, entry: Entry, state: ProcessStates, reason: str, data: Data | None) -> None:
         """ProcessStateHandler: journal the ProcessUpdate, then send it (the outbox)."""
@@ -717,7 +524,7 @@ class GenericDevice(Participant):
     def _send_to(self, sender: str, body: Message) -> None:
         """One sample for ``sender`` on its process key (the outbox's publish)."""
         with contextlib.suppress(zenoh.ZError):
-            self._publisher(sender).put(self._encode(body))
+            self._publisher(sender).put(self.encode(body))
 
 
 __all__ = [
