@@ -14,9 +14,9 @@ A device is *composed* into a service, not derived from it: it is a
 layer of Figure 5-10, the CommandDispatcher (``dispatch``), usually in front of a
 driver of its device family.  ``GenericDevice(device, name, cell=…)`` hosts it: the
 device reports through the service's ports of Table 5-3 (``data_feedback``,
-``cmd_feedback``, ``device_state``, ``connection_state``), which :meth:`bind` hands
-it; queueing, re-scheduling, notifications, partners, discovery, the journal and the
-access policy are the service's.
+``cmd_feedback``, ``device_state``, ``connection_state``), which the service hands it
+once through the device's ``bind``; queueing, re-scheduling, notifications, partners,
+discovery, the journal and the access policy are the service's.
 
 The ProcessHandler (5.2.3.4, Figure 5-12; :mod:`plugcell.framework.scheduler`) takes
 one process at a time from the
@@ -137,9 +137,11 @@ class DeviceInterface(Protocol):
 class GenericDevice(Participant):
     """The service that hosts one device (module docstring): ``GenericDevice(device)``.
 
-    It owns the participant side (session, presence, partners), the scheduler, the
-    outbox, the journal and the access policy; the device (a :class:`DeviceInterface`)
-    brings its declaration and its dispatcher.  Not meant to be subclassed.
+    It is the participant (session, presence, partners, outbound processes) and owns the
+    scheduler, the outbox, the journal, the access policy and the inbound doors
+    (:class:`~plugcell.framework.inbound.Inbound`); the device (a
+    :class:`DeviceInterface`) brings its declaration and its dispatcher.  Not meant to
+    be subclassed.
     """
 
     role = "service"
