@@ -157,8 +157,8 @@ async def _requester(cell: str, journal: bool, cycles: int, trace: Trace,
         for i in range(200 + cycles):
             if i == 200:  # warmed up: probe from here on
                 _probe_framework(trace)
-                door = consumer._doors["PUBLISHER"]
-                consumer._doors["PUBLISHER"] = _ProbedDoor(door, trace)
+                door = consumer.calls._doors["PUBLISHER"]
+                consumer.calls._doors["PUBLISHER"] = _ProbedDoor(door, trace)
             probed = i >= 200
             if probed:
                 trace.append(("create_process", time.perf_counter_ns()))
@@ -168,7 +168,7 @@ async def _requester(cell: str, journal: bool, cycles: int, trace: Trace,
             async for update in call:
                 if update.state.final:
                     break
-        consumer._doors["PUBLISHER"] = door
+        consumer.calls._doors["PUBLISHER"] = door
     finally:
         await consumer.close()
 
