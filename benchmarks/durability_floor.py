@@ -150,7 +150,7 @@ def _echo() -> Any:
     """The ``Echo`` command of the transport benchmark's service (its catalogue entry)."""
     from plugcell.apps.bench.device import BenchService
 
-    return next(c for c in BenchService.commands if c.name == "Echo")
+    return next(c for c in BenchService.declaration.commands if c.name == "Echo")
 
 
 class _LeanService:
@@ -559,11 +559,11 @@ def _tight_edges(cycles: int) -> dict[str, float]:
 async def _plugcell(cell: str, cycles: int, warmup: int) -> float:
     """``plugcell bench transport``'s 4 B latency test against its service in ``cell``:
     the average one-way latency in ms."""
-    from plugcell.apps.bench.device import BenchService
+    from plugcell.apps.bench.device import bench_service
     from plugcell.apps.bench.transport import PAYLOADS, our_latency
     from plugcell.framework.transport import TransportConfig
 
-    consumer = BenchService("CONSUMER", cell=cell, transport=TransportConfig.from_env())
+    consumer = bench_service("CONSUMER", cell=cell, transport=TransportConfig.from_env())
     await consumer.start()
     try:
         if not await consumer.wait_for("PUBLISHER", 15):

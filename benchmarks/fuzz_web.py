@@ -60,8 +60,9 @@ from starlette.routing import Mount, Route
 from plugcell.apps.ui.app import create_app
 from plugcell.apps.ui.guard import MAX_BODY
 from plugcell.apps.ui.reports import ReportFiles
-from plugcell.devices.cell.service import CellController
+from plugcell.devices.cell.service import cell_controller
 from plugcell.devices.drill import DrillService
+from plugcell.framework import GenericDevice
 from plugcell.sim.drivers.drill import SimulatedDrill
 
 HEADERS = {"X-Plugcell": "1", "Content-Type": "application/json"}
@@ -575,9 +576,9 @@ async def web_app(workdir: Path) -> AsyncIterator[tuple[Any, httpx.AsyncClient]]
     os.environ["PLUGCELL_HOME"] = str(workdir)
     os.chdir(workdir)
     try:
-        controller = CellController(cell=cell, home=workdir)
-        drill = DrillService(cell=cell, driver=SimulatedDrill(time_scale=0.001))
-        await controller.start()
+        controller = cell_controller(cell=cell, home=workdir)
+        drill = GenericDevice(DrillService(SimulatedDrill(time_scale=0.001)), cell=cell)
+        await controller.host.start()
         try:
             await drill.start()
             try:
@@ -592,7 +593,7 @@ async def web_app(workdir: Path) -> AsyncIterator[tuple[Any, httpx.AsyncClient]]
             finally:
                 await drill.close()
         finally:
-            await controller.close()
+            await controller.host.close()
     finally:
         os.chdir(old_cwd)
         if old_home is None:

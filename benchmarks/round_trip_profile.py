@@ -41,12 +41,12 @@ def _kind(func: tuple[str, int, str]) -> str:
 
 
 async def _round_trips(cycles: int, profile: cProfile.Profile | None) -> float:
-    from plugcell.apps.bench.device import BenchService
+    from plugcell.apps.bench.device import bench_service
     from plugcell.framework.transport import TransportConfig
 
     cell = f"profile{os.getpid()}"
-    publisher = BenchService("PUBLISHER", cell=cell, transport=TransportConfig.from_env())
-    requester = BenchService("CONSUMER", cell=cell, transport=TransportConfig.from_env())
+    publisher = bench_service("PUBLISHER", cell=cell, transport=TransportConfig.from_env())
+    requester = bench_service("CONSUMER", cell=cell, transport=TransportConfig.from_env())
     await publisher.start()
     await requester.start()
     try:

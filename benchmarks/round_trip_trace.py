@@ -51,19 +51,19 @@ def _probe(trace: Trace, owner: Any, name: str, before: str, after: str = "") ->
 
 
 def _probe_framework(trace: Trace, arrival: bool = False) -> None:
-    from plugcell.framework import journal, outbox, port, service
+    from plugcell.framework import inbound, journal, outbox, port
 
     _probe(trace, port.Port, "_drain", "loop wakes")
     if arrival:  # the Zenoh callback's hand-off, on Zenoh's thread
         _probe(trace, port.Port, "post", "Zenoh callback")
-    _probe(trace, service.GenericDevice, "_create", "check+journal", "checked")
+    _probe(trace, inbound.Inbound, "create", "check+journal", "checked")
     _probe(trace, outbox.Outbox, "flush", "flush")
     _probe(trace, journal.Journal, "commit", "commit", "committed")
     _probe(trace, outbox.Outbox, "_send", "put", "sent")
 
 
 #: Steps of the service whose CPU time is compared with their wall time.
-CPU_STEPS = (("service", "_create"), ("journal", "commit"), ("outbox", "_send"))
+CPU_STEPS = (("inbound", "create"), ("journal", "commit"), ("outbox", "_send"))
 
 
 def _probe_cpu(spent: list[tuple[str, int, int]], owner: Any, name: str) -> None:
@@ -106,8 +106,8 @@ def serve(cell: str, journal: bool, out: str, arrival: bool = False) -> None:
     import atexit
 
     from plugcell.apps.bench import peer
+    from plugcell.framework import inbound, outbox
     from plugcell.framework import journal as journal_module
-    from plugcell.framework import outbox, service
 
     trace: Trace = []
     spent: list[tuple[str, int, int]] = []
@@ -116,7 +116,7 @@ def serve(cell: str, journal: bool, out: str, arrival: bool = False) -> None:
         _spy_on_requests(trace)
     # inside the step probes, so they time just what those enclose
     for owner, step in CPU_STEPS:
-        _probe_cpu(spent, {"service": service.GenericDevice, "outbox": outbox.Outbox,
+        _probe_cpu(spent, {"inbound": inbound.Inbound, "outbox": outbox.Outbox,
                            "journal": journal_module.Journal}[owner], step)
     atexit.register(lambda: Path(out).write_text(json.dumps({"trace": trace, "cpu": spent})))
     peer.main(["service", "--cell", cell, *([] if journal else ["--no-journal"])])
@@ -139,14 +139,14 @@ class _ProbedDoor:
 
 async def _requester(cell: str, journal: bool, cycles: int, trace: Trace,
                      arrival: bool = False) -> None:
-    from plugcell.apps.bench.device import BenchService
+    from plugcell.apps.bench.device import bench_service
     from plugcell.framework.transport import TransportConfig
 
     if arrival:  # before start: the transport adapter keeps the bound hand-off it gets
         from plugcell.framework import port
 
         _probe(trace, port.Port, "post", "Zenoh callback")
-    consumer = BenchService("CONSUMER", cell=cell, transport=TransportConfig.from_env(),
+    consumer = bench_service("CONSUMER", cell=cell, transport=TransportConfig.from_env(),
                             journal=journal)
     await consumer.start()
     try:
@@ -157,8 +157,8 @@ async def _requester(cell: str, journal: bool, cycles: int, trace: Trace,
         for i in range(200 + cycles):
             if i == 200:  # warmed up: probe from here on
                 _probe_framework(trace)
-                door = consumer._doors["PUBLISHER"]
-                consumer._doors["PUBLISHER"] = _ProbedDoor(door, trace)
+                door = consumer.calls._doors["PUBLISHER"]
+                consumer.calls._doors["PUBLISHER"] = _ProbedDoor(door, trace)
             probed = i >= 200
             if probed:
                 trace.append(("create_process", time.perf_counter_ns()))
@@ -168,7 +168,7 @@ async def _requester(cell: str, journal: bool, cycles: int, trace: Trace,
             async for update in call:
                 if update.state.final:
                     break
-        consumer._doors["PUBLISHER"] = door
+        consumer.calls._doors["PUBLISHER"] = door
     finally:
         await consumer.close()
 

@@ -34,10 +34,11 @@ from typing import Any
 
 import numpy as np
 
-from plugcell.apps.bench.device import BURST, BenchService
+from plugcell.apps.bench.device import BURST, bench_service
 from plugcell.framework.journal import Journal
 from plugcell.framework.messages import Process, Tag
 from plugcell.framework.processqueue import Entry
+from plugcell.framework.service import GenericDevice
 from plugcell.framework.transport import TransportConfig
 
 #: The payloads where per-frame work, not copying bytes, decides the rate (from 64 KiB
@@ -83,11 +84,11 @@ ALONE = TransportConfig(listen=(), multicast=False, shared_memory=False)
 
 
 @contextlib.asynccontextmanager
-async def _started_service() -> AsyncIterator[tuple[BenchService, _CountingPublisher]]:
+async def _started_service() -> AsyncIterator[tuple[GenericDevice, _CountingPublisher]]:
     """The benchmark's publisher, started alone in a cell of its own, its process
     publishers counting (the journal is each measurement's own)."""
-    service = BenchService("PUBLISHER", cell=f"frames{uuid.uuid4().hex[:8]}",
-                           transport=ALONE, journal=False)
+    service = bench_service("PUBLISHER", cell=f"frames{uuid.uuid4().hex[:8]}",
+                            transport=ALONE, journal=False)
     await service.start()
     bus, publisher = service.bus, _CountingPublisher()
     service.bus = _CountingBus(bus, publisher)  # type: ignore[assignment]
@@ -98,7 +99,7 @@ async def _started_service() -> AsyncIterator[tuple[BenchService, _CountingPubli
         await service.close()
 
 
-async def _frame_path_us(service: BenchService, publisher: _CountingPublisher,
+async def _frame_path_us(service: GenericDevice, publisher: _CountingPublisher,
                          shape: tuple[int, ...], frames: int, folder: Path | None,
                          read_only: bool = True) -> float:
     """µs per frame of ``frames`` posted to the started ``service``'s DataFeedback port,

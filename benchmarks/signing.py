@@ -119,11 +119,15 @@ def _free_port() -> int:
 
 async def _round_trips(folder: Path, identity: str, n: int) -> list[float]:
     from plugcell.framework import Client, CommandTypes, GenericDevice, TransportConfig
+    from plugcell.framework.declaration import Declaration
     from plugcell.framework.security import AccessPolicy
 
-    class Echo(GenericDevice):
-        kind = "echo"
-        commands = (Command(name="Ping", type=CommandTypes.NoData),)
+    class Echo:
+        declaration = Declaration(kind="echo", commands=(
+            Command(name="Ping", type=CommandTypes.NoData),))
+
+        def bind(self, service: GenericDevice) -> None:
+            """Ping answers with its code only."""
 
         async def dispatch(self, command: Command, option: str, data: Any) -> str:
             return command.success_code
@@ -137,8 +141,8 @@ async def _round_trips(folder: Path, identity: str, n: int) -> list[float]:
                                 tls_key=str(folder / "ROBOT1.key"),
                                 sign_requests=identity == "signed", **tls)  # type: ignore[arg-type]
     cell = f"bench{time.time_ns() % 10**9}"
-    service = Echo("TRACKER", cell=cell, transport=service_tp, journal=False,
-                   access=AccessPolicy(identity=identity))
+    service = GenericDevice(Echo(), "TRACKER", cell=cell, transport=service_tp, journal=False,
+                            access=AccessPolicy(identity=identity))
     await service.start()
     try:
         async with Client("ROBOT1", cell=cell, transport=client_tp) as client:

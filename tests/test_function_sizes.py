@@ -26,7 +26,6 @@ LINES_CEILING = {
     "devices/robot/rsi/codec.py:parse_rob": 107,
     "apps/commands/twin.py:configure": 99,
     "sim/twin/tracker.py:LaserTracker.measure": 96,
-    "framework/service.py:GenericDevice._create": 91,
     "kinematics/forward.py:joint_angles": 88,
     "apps/demo/services.py:_demonstrate": 85,
     "kinematics/closure.py:fourbar_closure": 83,

@@ -21,7 +21,8 @@ The math never reads a file, speaks Zenoh or knows a device; the framework knows
 device; the robot language knows neither the framework nor a device; nothing below the
 apps calls a command line.  A device declares its driver interface and never imports
 the simulator: a simulated instrument in ``sim`` implements that interface, and
-``plugcell serve`` (``apps/kinds.py``) hands a device its simulated driver.
+``plugcell serve`` (``apps/kinds.py``) hands a device its simulated driver (the robot:
+the launcher of its simulated controller).
 """
 
 from __future__ import annotations
@@ -106,27 +107,10 @@ def modules() -> list[tuple[str, Path]]:
     return out
 
 
-#: Devices that still make their simulated driver themselves (issue #33: ``plugcell serve``
-#: is to inject it, as it does the camera's and the drill's): module → what it imports.
-DEVICES_NOT_YET_INJECTED = {
-    "plugcell.devices.robot.service": "plugcell.sim.controller.launcher",
-    "plugcell.devices.tracker.service": "plugcell.sim.drivers.tracker",
-}
-
-
-def _waiting(offence: str) -> bool:
-    module = offence.partition(":")[0]
-    target = DEVICES_NOT_YET_INJECTED.get(module)
-    return target is not None and f" imports {target} (sim)" in offence
-
-
 def test_no_module_imports_upward() -> None:
     offences = [o for module, path in modules()
                 for o in upward_imports(path.read_text(encoding="utf-8"), module)]
-    assert [o for o in offences if not _waiting(o)] == []
-    waiting = {o.partition(":")[0] for o in offences if _waiting(o)}
-    assert waiting == set(DEVICES_NOT_YET_INJECTED), "a device no longer imports sim: " \
-        "take it off DEVICES_NOT_YET_INJECTED"
+    assert offences == []
 
 
 def test_every_package_has_a_layer() -> None:

@@ -16,13 +16,19 @@ sys.path.insert(0, str(HERE.parent / "framework"))
 from framework_testlib import Proc, plugcell_argv, run, unique_cell  # noqa: E402
 
 from plugcell.framework import Command, CommandTypes, DataTypes, DeviceError, GenericDevice  # noqa: E402
+from plugcell.framework.declaration import Declaration  # noqa: E402
 
 PROGRAMS = HERE / "programs"
 
 __all__ = ["PROGRAMS", "FakeRobot", "Proc", "SlowDevice", "plugcell_argv", "run", "unique_cell"]
 
 
-class FakeRobot(GenericDevice):
+def hosted(device: Any, name: str | None = None, **options: Any) -> GenericDevice:
+    """A service hosting ``device`` (its test object is ``.interface``)."""
+    return GenericDevice(device, name, **options)
+
+
+class FakeRobot:
     """A robot service in miniature: ACTIVATE runs a 'program' that drives its partners.
 
     Programs: ``drill`` (TOOL Drill, then done), ``snap`` (CAMERA SnapShot), ``wait``
@@ -30,33 +36,37 @@ class FakeRobot(GenericDevice):
     completes when the program ends only with the option ``Wait``.
     """
 
-    kind = "robot"
-    vendor = "tests"
-    commands = (
+    declaration = Declaration(kind="robot", vendor="tests", commands=(
         Command(name="ACTIVATE", type=CommandTypes.NoData, input_data_type=DataTypes.String,
                 input_data_size=(-1,), timeout=30.0,
                 info="run a program: [name]; option 'Wait': until it ends"),
         Command(name="ARM_POS", type=CommandTypes.SingleData, output_data_type=DataTypes.Double,
                 output_data_size=(6,)),
-    )
+    ))
 
-    def __init__(self, name: str | None = "ROBOT", **kwargs: Any) -> None:
-        super().__init__(name, **kwargs)
+    def __init__(self) -> None:
         self.ran: list[tuple[str, float, float]] = []
+        self.service: GenericDevice | None = None
+
+    def bind(self, service: GenericDevice) -> None:
+        self.service = service
 
     async def dispatch(self, command: Command, option: str, data: Any) -> str:
+        service = self.service
+        assert service is not None
         if command.name == "ARM_POS":
-            self.data_feedback.post([1000.0, 0.0, 800.0, 0.0, 90.0, 0.0])
+            service.data_feedback.post([1000.0, 0.0, 800.0, 0.0, 90.0, 0.0])
             return "OK"
         program = str(data[0])
         loop = asyncio.get_running_loop()
         start = loop.time()
         if program == "drill":
-            final = await (await self.create_process("TOOL", "Drill", "Air", [550, 1100])).result()
+            call = await service.create_process("TOOL", "Drill", "Air", [550, 1100])
+            final = await call.result()
             if final.state.value != "Completed":
                 raise DeviceError(f"TOOL: {final.reason}")
         elif program == "snap":
-            final = await (await self.create_process("CAMERA", "SnapShot", "", 5)).result()
+            final = await (await service.create_process("CAMERA", "SnapShot", "", 5)).result()
             if final.state.value != "Completed":
                 raise DeviceError(f"CAMERA: {final.reason}")
         elif program == "wait":
@@ -69,16 +79,17 @@ class FakeRobot(GenericDevice):
         return "OK"
 
 
-class SlowDevice(GenericDevice):
+class SlowDevice:
     """A shared device whose ``Work`` takes ``seconds`` (to see its queue grow)."""
 
-    kind = "slow"
-    vendor = "tests"
-    commands = (
+    declaration = Declaration(kind="slow", vendor="tests", commands=(
         Command(name="Work", type=CommandTypes.NoData, input_data_type=DataTypes.Double,
                 input_data_size=(1,), timeout=10.0,
                 info="work for DATA seconds (0: done at once, within the acknowledgement's turn)"),
-    )
+    ))
+
+    def bind(self, service: GenericDevice) -> None:
+        """The device only answers its command feedback."""
 
     async def dispatch(self, command: Command, option: str, data: Any) -> str:
         if float(data[0]) > 0:

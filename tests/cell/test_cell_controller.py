@@ -14,14 +14,14 @@ import time
 from collections.abc import Callable
 from pathlib import Path
 
-from cell_testlib import FakeRobot, SlowDevice, run
+from cell_testlib import FakeRobot, SlowDevice, hosted, run
 
 from plugcell.devices.camera import CameraService
-from plugcell.devices.cell.service import CellController
+from plugcell.devices.cell.service import CellController, cell_controller
 from plugcell.devices.cell.tasks import check_task
 from plugcell.devices.cell.wiring import load_wiring
 from plugcell.devices.drill import DrillService
-from plugcell.framework import Client
+from plugcell.framework import Client, GenericDevice
 from plugcell.sim.drivers.camera import SimulatedCamera
 from plugcell.sim.drivers.drill import SimulatedDrill
 
@@ -41,18 +41,18 @@ def partners(c: CellController, name: str) -> set[str]:
 def test_controller_discovers_wires_saves_loads_and_reapplies(cell: str, home: Path,
                                                               tmp_path: Path) -> None:
     async def body() -> None:
-        camera = CameraService(cell=cell, driver=SimulatedCamera(time_scale=0.001))
-        tool = DrillService(cell=cell, driver=SimulatedDrill(time_scale=0.001))
-        robot = FakeRobot(cell=cell)
+        camera = GenericDevice(CameraService(SimulatedCamera(time_scale=0.001)), cell=cell)
+        tool = GenericDevice(DrillService(SimulatedDrill(time_scale=0.001)), cell=cell)
+        robot = hosted(FakeRobot(), "ROBOT", cell=cell)
         for s in (camera, tool, robot):
             await s.start()
-        ctl = CellController(cell=cell)
-        await ctl.start()
+        ctl = cell_controller(cell=cell)
+        await ctl.host.start()
         events = ctl.listen()
         try:
             await eventually(lambda: all(
                 ctl.device_of(n) is not None for n in ("CAMERA", "TOOL", "ROBOT")))
-            await eventually(lambda: {"CAMERA", "TOOL", "ROBOT"} <= set(ctl.partners))
+            await eventually(lambda: {"CAMERA", "TOOL", "ROBOT"} <= set(ctl.host.partners))
             assert ctl.records["CONTROLLER"].device is not None  # itself, as a service
 
             assert (await ctl.wire("ROBOT", "TOOL"))["ok"]
@@ -79,7 +79,7 @@ def test_controller_discovers_wires_saves_loads_and_reapplies(cell: str, home: P
             await tool.close()
             await eventually(lambda: not ctl.records["TOOL"].alive)
             assert "TOOL" not in robot.partners
-            tool = DrillService(cell=cell, driver=SimulatedDrill(time_scale=0.001))
+            tool = GenericDevice(DrillService(SimulatedDrill(time_scale=0.001)), cell=cell)
             await tool.start()
             await eventually(lambda: "TOOL" in robot.partners)
             assert any("re-applied ROBOT → TOOL" in line["text"] for line in ctl.activity)
@@ -88,7 +88,7 @@ def test_controller_discovers_wires_saves_loads_and_reapplies(cell: str, home: P
                 kinds.add(events.get_nowait()["type"])
             assert {"cell", "log"} <= kinds
         finally:
-            await ctl.close()
+            await ctl.host.close()
             for s in (camera, tool, robot):
                 await s.close()
 
@@ -97,15 +97,15 @@ def test_controller_discovers_wires_saves_loads_and_reapplies(cell: str, home: P
 
 def test_tasks_runs_and_the_monitor(cell: str, home: Path) -> None:
     async def body() -> None:
-        tool = DrillService(cell=cell, driver=SimulatedDrill(time_scale=0.001))
-        camera = CameraService(cell=cell, driver=SimulatedCamera(time_scale=0.001))
-        slow = SlowDevice("SLOW", cell=cell)
-        r1, r2 = FakeRobot("R1", cell=cell), FakeRobot("R2", cell=cell)
+        tool = GenericDevice(DrillService(SimulatedDrill(time_scale=0.001)), cell=cell)
+        camera = GenericDevice(CameraService(SimulatedCamera(time_scale=0.001)), cell=cell)
+        slow = hosted(SlowDevice(), "SLOW", cell=cell)
+        r1, r2 = hosted(FakeRobot(), "R1", cell=cell), hosted(FakeRobot(), "R2", cell=cell)
         services = [tool, camera, slow, r1, r2]
         for s in services:
             await s.start()
-        ctl = CellController(cell=cell)
-        await ctl.start()
+        ctl = cell_controller(cell=cell)
+        await ctl.host.start()
         try:
             await eventually(lambda: all(ctl.device_of(s.name) for s in services))
             for robot in ("R1", "R2"):
@@ -154,11 +154,11 @@ def test_tasks_runs_and_the_monitor(cell: str, home: Path) -> None:
 
             seq = ctl.start_run(["R1:wait", "R2:wait"], "sequential")
             await eventually(lambda: seq.state != "Running")
-            (_, s1, e1), (_, s2, e2) = r1.ran[-1], r2.ran[-1]
+            (_, s1, e1), (_, s2, e2) = r1.interface.ran[-1], r2.interface.ran[-1]
             assert s2 >= e1  # one after the other
             con = ctl.start_run(["R1:wait", "R2:wait"], "concurrent")
             await eventually(lambda: con.state != "Running")
-            (_, s1, e1), (_, s2, e2) = r1.ran[-1], r2.ran[-1]
+            (_, s1, e1), (_, s2, e2) = r1.interface.ran[-1], r2.interface.ran[-1]
             assert con.state == "Completed" and s2 < e1 and s1 < e2  # together
 
             bad = ctl.start_run(["R1:fail", "R2:wait"], "sequential")
@@ -199,7 +199,7 @@ def test_tasks_runs_and_the_monitor(cell: str, home: Path) -> None:
                     timeout=20)).result()
                 assert final.state.value == "Failed" and "R2:fail" in final.reason
         finally:
-            await ctl.close()
+            await ctl.host.close()
             for s in services:
                 await s.close()
 

@@ -18,9 +18,9 @@ from plugcell.framework.data import from_data, size_matches
 from plugcell.framework.messages import Device
 
 DEVICES = {
-    cls.default_name or cls.kind.upper(): Device(name=cls.default_name or cls.kind.upper(),
-                                                 commands=cls.commands)
-    for cls in (CameraService, DrillService, TrackerService, ComputeService)
+    d.name(): Device(name=d.name(), commands=d.commands)
+    for d in (cls.declaration for cls in (CameraService, DrillService, TrackerService,
+                                          ComputeService))
 }
 TOOL, CAMERA, TRACKER, COMPUTE = (DEVICES[n] for n in ("TOOL", "CAMERA", "TRACKER", "COMPUTE"))
 

@@ -2,8 +2,10 @@
 estimator checks run over every estimator): what any device service promises whatever it
 drives.  A new kind in ``apps/kinds.py`` is checked here without a line more.
 
-Static, for every kind: the class declares its kind, a valid default name, vendor and
-info, a catalogue the framework accepts, and parameters ``plugcell serve`` can convert.
+Static, for every kind: the device class is no framework subclass and declares (a
+:class:`~plugcell.framework.declaration.Declaration`) its kind, a valid default name,
+vendor and info, a catalogue the framework accepts, and parameters ``plugcell serve``
+can convert.
 Running, for every kind that runs without outside hardware (simulated drivers): ``Get``
 answers the declared catalogue; an unknown command, data of the wrong size and a
 malformed request each end Failed with a precise reason — or are dropped — and the
@@ -20,8 +22,9 @@ import numpy as np
 import pytest
 
 from plugcell.apps.kinds import KINDS, build, load_kind
-from plugcell.framework import Client, ProcessStates
+from plugcell.framework import Client, Participant, ProcessStates
 from plugcell.framework.data import to_data
+from plugcell.framework.declaration import Declaration
 from plugcell.framework.keys import check_name
 from plugcell.framework.messages import Command, DataTypes
 from plugcell.framework.service import check_catalogue
@@ -53,13 +56,16 @@ def test_every_kind_can_be_run_or_says_why():
 @pytest.mark.parametrize("kind", sorted(KINDS))
 def test_the_class_declares_what_every_service_has(kind):
     cls = load_kind(kind)
-    assert cls.kind == kind
-    check_name(cls.default_name or kind.upper(), "default name")
-    assert isinstance(cls.info, str) and cls.info
-    assert isinstance(cls.vendor, str) and (cls.vendor or kind in PER_INSTANCE)
-    assert cls.commands or kind in PER_INSTANCE, f"{kind}: no commands"
-    check_catalogue(cls.__name__, tuple(cls.commands))  # raises with the reason
-    for c in cls.commands:
+    assert not issubclass(cls, Participant), f"{kind}: a device is hosted, not derived"
+    declared = cls.declaration
+    assert isinstance(declared, Declaration)
+    assert declared.kind == kind
+    check_name(declared.name(), "default name")
+    assert isinstance(declared.info, str) and declared.info
+    assert isinstance(declared.vendor, str) and (declared.vendor or kind in PER_INSTANCE)
+    assert declared.commands or kind in PER_INSTANCE, f"{kind}: no commands"
+    check_catalogue(cls.__name__, declared.commands)  # raises with the reason
+    for c in declared.commands:
         assert isinstance(c, Command) and c.timeout > 0, c
     for key, convert in getattr(cls, "params", {}).items():
         assert key.isidentifier() and callable(convert), (kind, key)
@@ -83,7 +89,6 @@ async def _contract(kind: str, kwargs: dict[str, Any], cell: str, tmp_path,
                     device: Any = None) -> None:
     """The contract of a running service; ``device()``, if given, starts the device it
     drives while the service starts (a robot streaming to it)."""
-    cls = load_kind(kind)
     service = build(kind, None, kwargs, cell=cell, journal=tmp_path / "journal")
     await asyncio.gather(service.start(), *([asyncio.to_thread(device)] if device else []))
     name = service.name
@@ -92,7 +97,7 @@ async def _contract(kind: str, kwargs: dict[str, Any], cell: str, tmp_path,
             assert await client.wait_for(name, 20)
             state, instance = await client.get(name)
             assert instance == service.instance
-            declared = {c.name for c in cls.commands}
+            declared = {c.name for c in service.declaration.commands}
             assert {c.name for c in state.device_info.commands} == declared
 
             # an unknown command: Failed, naming it; the service carries on
@@ -101,7 +106,7 @@ async def _contract(kind: str, kwargs: dict[str, Any], cell: str, tmp_path,
             assert final.state is F and "NoSuchCommand" in final.reason
 
             # data of the wrong size for a command that declares its input
-            c = _fixed_input(tuple(cls.commands))
+            c = _fixed_input(service.declaration.commands)
             if c is not None:
                 n = int(np.prod(c.input_data_size)) + 1
                 wrong = to_data([_SAMPLE[c.input_data_type]] * n, c.input_data_type, (n,))

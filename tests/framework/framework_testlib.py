@@ -14,6 +14,7 @@ import numpy as np
 from childproc import Proc, plugcell_argv  # noqa: F401  (re-exported for the tests)
 
 from plugcell.framework import Command, CommandTypes, DataTypes, DeviceError, GenericDevice
+from plugcell.framework.declaration import Declaration
 from plugcell.framework.messages import ProcessStates
 from plugcell.framework.participant import Participant
 
@@ -28,20 +29,19 @@ def run(coro: Coroutine[Any, Any, Any], timeout: float = 45.0) -> Any:
     return asyncio.run(asyncio.wait_for(coro, timeout))
 
 
-class ScriptedDevice(GenericDevice):
+class ScriptedDevice:
     """A device whose every step the test controls (for the queue semantics).
 
     ``Work`` (NoData): logs its option, then waits for ``gates[option]`` if set; an
-    option ``note:TEXT`` notes TEXT on the process (:meth:`GenericDevice.note`).
+    option ``note:TEXT`` notes TEXT on the process (:meth:`GenericDevice.note`);
+    hosted by :func:`scripted`.
     ``Measure`` (SingleData): returns ``[1, 2, 3]``.  ``Stream`` (MultipleData):
     posts one value per ``emit()``.  ``Stop`` (StopData).  ``Slow`` never answers
     (timeout 0.3 s).  ``Hold`` is a MultipleData with a 0.5 s timeout.
     ``Flaky`` (SingleData) returns the wrong shape.  ``Fail`` answers "E42".
     """
 
-    kind = "scripted"
-    vendor = "tests"
-    commands = (
+    declaration = Declaration(kind="scripted", vendor="tests", commands=(
         Command(name="Work", type=CommandTypes.NoData, timeout=20.0),
         Command(
             name="Measure",
@@ -78,30 +78,33 @@ class ScriptedDevice(GenericDevice):
             input_data_type=DataTypes.Integer,
             input_data_size=(2,),
         ),
-    )
+    ))
 
-    def __init__(self, name: str | None = "DEV", **kwargs: Any) -> None:
-        super().__init__(name, **kwargs)
+    def __init__(self) -> None:
+        self.service: GenericDevice | None = None
         self.log: list[str] = []
         self.gates: dict[str, asyncio.Event] = {}
         self.streaming = False
         self.started = asyncio.Event()
 
+    def bind(self, service: GenericDevice) -> None:
+        self.service = service
+
     def emit(self, value: float) -> None:
-        self.data_feedback.post(np.array([value]))
+        self.service.data_feedback.post(np.array([value]))
 
     async def dispatch(self, command: Command, option: str, data: Any) -> str | None:
         self.log.append(f"{command.name}:{option}" if option else command.name)
         match command.name:
             case "Work":
                 if option.startswith("note:"):
-                    self.note(option.removeprefix("note:"))
+                    self.service.note(option.removeprefix("note:"))
                 self.started.set()
                 gate = self.gates.get(option)
                 if gate is not None:
                     await gate.wait()
             case "Measure":
-                self.data_feedback.post([1.0, 2.0, 3.0])
+                self.service.data_feedback.post([1.0, 2.0, 3.0])
             case "Stream" | "Hold":
                 self.streaming = True
                 self.started.set()
@@ -110,13 +113,18 @@ class ScriptedDevice(GenericDevice):
             case "Slow":
                 await asyncio.Event().wait()
             case "Flaky":
-                self.data_feedback.post([1.0, 2.0])
+                self.service.data_feedback.post([1.0, 2.0])
             case "Fail":
                 return "E42"
             case "Set":
                 if int(data[0]) < 0:
                     raise DeviceError("negative values are not allowed")
         return "OK"
+
+
+def scripted(name: str | None = "DEV", **kwargs: Any) -> GenericDevice:
+    """A service hosting a :class:`ScriptedDevice` (``.interface``)."""
+    return GenericDevice(ScriptedDevice(), name, **kwargs)
 
 
 # -- one cell in this process (async tests) ---------------------------------------------
@@ -134,7 +142,7 @@ async def until(predicate: Any, timeout: float = 10.0) -> None:
 async def cell_with(tmp_path: Path, *clients: str, **device_kwargs: Any) -> AsyncIterator[Any]:
     """A ScriptedDevice "DEV" and the named clients, all in a fresh cell."""
     cell = unique_cell()
-    dev = ScriptedDevice(cell=cell, journal=tmp_path / "journal", **device_kwargs)
+    dev = scripted(cell=cell, journal=tmp_path / "journal", **device_kwargs)
     await dev.start()
     parts = [Participant(name, cell=cell) for name in clients]
     try:

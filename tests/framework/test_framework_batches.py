@@ -58,9 +58,9 @@ async def _stream_burst(tmp_path, frames: int):
     async with cell_with(tmp_path, "A") as (dev, a):
         tap = Tap(a, dev.keys.process("DEV", "A"))
         stream = await a.create_process("DEV", "Stream")
-        await dev.started.wait()
+        await dev.interface.started.wait()
         for i in range(frames):  # one event-loop turn: one flush
-            dev.emit(float(i))
+            dev.interface.emit(float(i))
         stop = await a.create_process("DEV", "Stop")
         assert (await stop.result()).state is C
         updates = await collect(stream)

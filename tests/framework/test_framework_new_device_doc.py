@@ -13,7 +13,7 @@ from pathlib import Path
 import pytest
 from framework_testlib import plugcell_argv, run, unique_cell
 
-from plugcell.framework import Client, ProcessStates
+from plugcell.framework import Client, GenericDevice, ProcessStates
 
 pytestmark = pytest.mark.timeout(90)
 
@@ -42,10 +42,17 @@ def test_the_documented_service_is_under_100_lines():
     assert len(doc_blocks()[0].strip().splitlines()) < 100
 
 
+def test_the_documented_device_is_composed_not_derived(laser_module):
+    from plugcell.framework.participant import Participant
+
+    assert not issubclass(laser_module.LaserPointService, Participant)
+
+
 def test_the_documented_service_works(laser_module, tmp_path):
     async def body():
         cell = unique_cell()
-        laser = laser_module.LaserPointService(cell=cell, journal=tmp_path / "j")
+        laser = GenericDevice(laser_module.LaserPointService(), cell=cell,
+                              journal=tmp_path / "j")
         await laser.start()
         try:
             async with Client("ROBOT", cell=cell) as robot:

@@ -155,7 +155,7 @@ def test_a_recipient_with_only_the_queryable_is_served_through_it(tmp_path):
             call = await a.create_process("DEV", "Measure")
             assert call.ack.state is Q and call.ack.instance == dev.instance
             assert (await call.result()).state is C
-            assert not a._request_door("DEV")  # no subscriber matches: the query was used
+            assert not a.calls.request_door("DEV")  # no subscriber matches: the query was used
 
     run(body())
 
@@ -176,7 +176,7 @@ def test_updates_from_another_incarnation_of_the_name_are_not_ours(tmp_path):
                           codec.encode("DEV", "f" * 16 + "other", impostor))
             await asyncio.sleep(0.3)
             assert stream.final is None  # the other incarnation's Failed was not taken
-            dev.emit(5.0)
+            dev.interface.emit(5.0)
             frame = await anext(stream)
             assert (first.seq, frame.seq, stream.array(frame)[0]) == (1, 2, 5.0)
             stop = await a.create_process("DEV", "Stop")
@@ -195,7 +195,7 @@ def test_every_waiter_of_an_acknowledgement_is_woken_by_it():
         waiters = [asyncio.create_task(call.acknowledged()) for _ in range(3)]
         await asyncio.sleep(0)
         started = loop.time()
-        call._on_ack(Acknowledgement(identifier=5, state=Q, instance="i"), "i")
+        call.acknowledge(Acknowledgement(identifier=5, state=Q, instance="i"), "i")
         acks = await asyncio.wait_for(asyncio.gather(*waiters), 2.0)
         assert [a.state for a in acks] == [Q, Q, Q] and loop.time() - started < 1.0
         assert call._ack_waiters == []

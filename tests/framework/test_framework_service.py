@@ -11,7 +11,7 @@ import asyncio
 import msgspec
 import numpy as np
 import pytest
-from framework_testlib import ScriptedDevice, cell_with, collect, run, states, unique_cell, until
+from framework_testlib import cell_with, collect, run, scripted, states, unique_cell, until
 
 from plugcell.framework import codec
 from plugcell.framework import scheduler as scheduler_module
@@ -41,12 +41,12 @@ Q, R, C, F = (
 def test_create_acknowledge_update_complete(tmp_path):
     async def body():
         async with cell_with(tmp_path, "ROBOT") as (dev, robot):
-            dev.gates["g"] = asyncio.Event()
+            dev.interface.gates["g"] = asyncio.Event()
             work = await robot.create_process("DEV", "Work", "g")
             assert work.ack.state is Q and work.ack.instance == dev.instance
             running = await anext(work)
             assert (running.state, running.seq) == (R, 1)
-            dev.gates["g"].set()
+            dev.interface.gates["g"].set()
             assert [(u.state, u.seq) for u in await collect(work)] == [(C, 2)]
             # a process that ends within one event-loop turn: its data-less Running
             # update is journaled but superseded by the final one (seq 1 not sent)
@@ -75,19 +75,19 @@ def test_a_device_note_is_the_reason_of_the_completed_update(tmp_path):
 def test_fifo_one_at_a_time_and_get_while_busy(tmp_path):
     async def body():
         async with cell_with(tmp_path, "A", "B") as (dev, a, b):
-            dev.gates["g"] = asyncio.Event()
+            dev.interface.gates["g"] = asyncio.Event()
             first = await a.create_process("DEV", "Work", "g")
-            await dev.started.wait()
+            await dev.interface.started.wait()
             second = await b.create_process("DEV", "Work", "b")
             third = await a.create_process("DEV", "Work", "a2")
             assert second.ack.state is Q and third.ack.state is Q
             state, _ = await b.get("DEV")  # Get is served while a process runs
             assert state.device_info.state is DeviceStates.Busy
-            assert dev.log == ["Work:g"]
-            dev.gates["g"].set()
+            assert dev.interface.log == ["Work:g"]
+            dev.interface.gates["g"].set()
             for call in (first, second, third):
                 assert (await call.result()).state is C
-            assert dev.log == ["Work:g", "Work:b", "Work:a2"]
+            assert dev.interface.log == ["Work:g", "Work:b", "Work:a2"]
 
     run(body())
 
@@ -96,12 +96,12 @@ def test_multiple_data_holds_the_device_until_the_same_senders_stop(tmp_path):
     async def body():
         async with cell_with(tmp_path, "A", "B") as (dev, a, b):
             stream = await a.create_process("DEV", "Stream")
-            await dev.started.wait()
+            await dev.interface.started.wait()
             b_work = await b.create_process("DEV", "Work", "b")
             b_stop = await b.create_process("DEV", "Stop")  # not B's stream: must wait
             a_work = await a.create_process("DEV", "Work", "a")
-            dev.emit(1.0)
-            dev.emit(2.0)
+            dev.interface.emit(1.0)
+            dev.interface.emit(2.0)
             a_stop = await a.create_process("DEV", "Stop")
             assert (await a_stop.result()).state is C
             updates = await collect(stream)
@@ -111,7 +111,8 @@ def test_multiple_data_holds_the_device_until_the_same_senders_stop(tmp_path):
             final = await b_stop.result()
             assert final.state is F and "no MultipleData process of B is running" in final.reason
             assert (await a_work.result()).state is C
-            assert dev.log == ["Stream", "Stop", "Work:b", "Work:a"]  # B's Stop never dispatched
+            # B's Stop never dispatched
+            assert dev.interface.log == ["Stream", "Stop", "Work:b", "Work:a"]
 
     run(body())
 
@@ -125,7 +126,7 @@ def test_a_process_queued_behind_a_long_hold_outwaits_its_timeout(tmp_path, monk
     async def body():
         async with cell_with(tmp_path, "A", "B") as (dev, a, b):
             stream = await a.create_process("DEV", "Stream")
-            await dev.started.wait()
+            await dev.interface.started.wait()
             queued = await b.create_process("DEV", "Work", "b", timeout=0.5)
             await asyncio.sleep(1.5)  # three times B's timeout
             assert not queued.done
@@ -145,7 +146,7 @@ def test_stop_data_with_nothing_running_fails(tmp_path):
             final = await (await a.create_process("DEV", "Stop")).result()
             assert final.state is F
             assert final.reason == "Stop: no MultipleData process of A is running"
-            assert dev.log == []
+            assert dev.interface.log == []
 
     run(body())
 
@@ -154,11 +155,12 @@ def test_lost_sender_frees_the_device(tmp_path):
     async def body():
         async with cell_with(tmp_path, "A", "B") as (dev, a, b):
             stream = await a.create_process("DEV", "Stream")
-            await dev.started.wait()
+            await dev.interface.started.wait()
             queued = await b.create_process("DEV", "Work", "b")
             await a.close()  # A's liveliness token disappears
             assert (await queued.result()).state is C
-            assert dev.log == ["Stream", "Stop", "Work:b"]  # the service stopped the stream
+            # the service stopped the stream
+            assert dev.interface.log == ["Stream", "Stop", "Work:b"]
             rows = {r["command"]: r for r in read_journal([dev.journal.path])}
             assert rows["Stream"]["state"] == "Failed"
             assert "sender A lost" in rows["Stream"]["reason"]
@@ -177,12 +179,12 @@ def test_every_wait_has_a_timeout(tmp_path):
             assert hold.state is F and "held the device longer than its timeout" in hold.reason
             assert (await (await a.create_process("DEV", "Measure")).result()).state is C
             # the requester's own timeout: a Work that never finishes
-            dev.gates["never"] = asyncio.Event()
+            dev.interface.gates["never"] = asyncio.Event()
             call = await a.create_process("DEV", "Work", "never", timeout=0.3)
             final = await call.result()
             assert final.state is F and final.seq == 0
             assert "no update from DEV within 0.3 s" in final.reason
-            dev.gates["never"].set()
+            dev.interface.gates["never"].set()
 
     run(body())
 
@@ -288,7 +290,7 @@ def test_requester_of_a_service_that_shuts_down_gets_failed(tmp_path):
     async def body():
         async with cell_with(tmp_path, "A") as (dev, a):
             stream = await a.create_process("DEV", "Stream")
-            await dev.started.wait()
+            await dev.interface.started.wait()
             await dev.close()
             final = await stream.result()
             assert final.state is F
@@ -301,8 +303,8 @@ def test_requester_of_a_service_that_shuts_down_gets_failed(tmp_path):
 def test_partners_wire_unwire_and_resubscribe_after_restart(tmp_path):
     async def body():
         cell = unique_cell()
-        dev = ScriptedDevice(cell=cell, journal=tmp_path / "j1")
-        robot = ScriptedDevice("ROBOT", cell=cell, journal=tmp_path / "j2")
+        dev = scripted(cell=cell, journal=tmp_path / "j1")
+        robot = scripted("ROBOT", cell=cell, journal=tmp_path / "j2")
         ctl = Participant("CONTROLLER", cell=cell)
         await dev.start()
         await robot.start()
@@ -324,7 +326,7 @@ def test_partners_wire_unwire_and_resubscribe_after_restart(tmp_path):
 
             await dev.close()  # partner shuts down: removed from ROBOT's Partners
             await until(lambda: "DEV" not in robot.partners)
-            dev2 = ScriptedDevice(cell=cell, journal=tmp_path / "j1")
+            dev2 = scripted(cell=cell, journal=tmp_path / "j1")
             await dev2.start()
             try:
                 assert await ctl.wait_for("DEV")
@@ -445,10 +447,10 @@ def test_a_second_service_of_one_name_on_this_host_is_refused_by_the_journal(tmp
     another process holds does not start, and the first keeps serving."""
 
     async def body():
-        first = ScriptedDevice(cell=unique_cell(), journal=tmp_path)
+        first = scripted(cell=unique_cell(), journal=tmp_path)
         await first.start()
         try:
-            second = ScriptedDevice(cell=unique_cell(), journal=tmp_path)
+            second = scripted(cell=unique_cell(), journal=tmp_path)
             with pytest.raises(PartnerError, match="already running on this host"):
                 await second.start()
             client = Participant("A", cell=first.keys.cell)
@@ -467,8 +469,8 @@ def test_a_second_service_of_one_name_on_this_host_is_refused_by_the_journal(tmp
 def test_two_services_with_one_name_leave_exactly_one(tmp_path):
     async def body():
         cell = unique_cell()
-        one = ScriptedDevice(cell=cell, journal=tmp_path / "j1")
-        two = ScriptedDevice(cell=cell, journal=tmp_path / "j2")
+        one = scripted(cell=cell, journal=tmp_path / "j1")
+        two = scripted(cell=cell, journal=tmp_path / "j2")
         results = await asyncio.gather(one.start(), two.start(), return_exceptions=True)
         try:
             refused = [r for r in results if isinstance(r, Exception)]

@@ -22,7 +22,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from hypothesis.extra import numpy as hnp
 
-from plugcell.apps.bench.device import BenchService
+from plugcell.apps.bench.device import bench_service
 from plugcell.framework import codec
 from plugcell.framework.data import (
     DTYPES,
@@ -245,7 +245,7 @@ def test_the_journal_keeps_a_summary_of_a_frame_not_its_bytes(tmp_path):
 
 async def _streamed_frames(tmp_path, count: int) -> list[ProcessUpdateNotification]:
     cell = unique_cell()
-    publisher = BenchService("PUBLISHER", cell=cell, journal=tmp_path / "journal")
+    publisher = bench_service("PUBLISHER", cell=cell, journal=tmp_path / "journal")
     consumer = Participant("CONSUMER", cell=cell)
     await publisher.start()
     try:

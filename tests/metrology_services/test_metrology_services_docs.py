@@ -20,8 +20,8 @@ def _table_commands(text: str) -> list[str]:
 def test_the_command_tables_list_the_catalogues():
     tracker = (DOCS / "tracker-service.md").read_text()
     compute = (DOCS / "compute-service.md").read_text()
-    assert _table_commands(tracker) == [c.name for c in TrackerService.commands]
-    assert _table_commands(compute) == [c.name for c in ComputeService.commands]
+    assert _table_commands(tracker) == [c.name for c in TrackerService.declaration.commands]
+    assert _table_commands(compute) == [c.name for c in ComputeService.declaration.commands]
 
 
 def test_every_registered_function_is_documented_and_the_examples_parse():

@@ -10,7 +10,7 @@ from metrology_testlib import pose, run, unique_cell
 from plugcell.apps.kinds import load_kind
 from plugcell.devices.tracker.driver import TrackerDriver
 from plugcell.devices.tracker.service import TrackerService, load_driver
-from plugcell.framework import Client, ProcessCall, ProcessStates
+from plugcell.framework import Client, GenericDevice, ProcessCall, ProcessStates
 
 BASE, PROBE, ROBOT = [3000, 0, 0, 90, 0, 0], [0, 0, 100, 0, 0, 0], [1000, 200, 500, 0, 180, 0]
 
@@ -34,7 +34,7 @@ def test_the_service_does_eq_7_1_and_7_2_and_the_driver_only_points_and_measures
     driver.reflector = pose(BASE) @ pose(ROBOT) @ pose(PROBE)
 
     async def body():
-        tracker = TrackerService(cell=cell, journal=False, driver=driver)
+        tracker = GenericDevice(TrackerService(driver), cell=cell, journal=False)
         await tracker.start()
         try:
             assert driver.connected and tracker.device.vendor == "scripted tracker (tests)"

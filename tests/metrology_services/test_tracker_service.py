@@ -13,7 +13,7 @@ import numpy as np
 import pytest
 from metrology_testlib import pose, run, unique_cell
 
-from plugcell.devices.tracker.service import TrackerService
+from plugcell.apps.kinds import build
 from plugcell.framework import Client, ProcessCall, ProcessStates
 from plugcell.framework.bus import Bus
 from plugcell.framework.keys import KeySpace
@@ -303,7 +303,7 @@ def test_beam_not_locked_fails_with_the_reason_and_the_service_carries_on(world_
     cell = unique_cell()
 
     async def body():
-        tracker = TrackerService(cell=cell, journal=False, seed=3)
+        tracker = build("tracker", None, {"seed": 3}, cell=cell, journal=False)
         await tracker.start()
         session = open_session(TransportConfig.from_env())
         tmac = ReflectorPublisher(Bus(session, KeySpace(cell)), "TMAC", "tmac")
@@ -371,7 +371,7 @@ def test_beam_not_locked_fails_with_the_reason_and_the_service_carries_on(world_
                 got = pose(BASE_A) @ pose_from_robot(smr, "zyz") @ pose(PROBE_A)
                 np.testing.assert_allclose(got[:3, 3], expected[:3, 3], atol=1.5e-4)
                 again.close()
-                status = tracker.status()
+                status = tracker.interface.status()
                 assert status is not None and status.busy_s > 0
         finally:
             await tracker.close()

@@ -8,7 +8,8 @@ import numpy as np
 import pytest
 from metrology_testlib import pose, run, unique_cell
 
-from plugcell.devices.tracker.service import STREAM_COLUMNS, TrackerService
+from plugcell.apps.kinds import build
+from plugcell.devices.tracker.service import STREAM_COLUMNS
 from plugcell.framework import Client, ProcessCall, ProcessStates
 from plugcell.framework.bus import Bus
 from plugcell.framework.keys import KeySpace
@@ -44,7 +45,7 @@ async def _rows(call, seconds):
 
 
 def _tracker_and_world(cell, world_session, **kw):
-    tracker = TrackerService(cell=cell, journal=False, seed=5, **kw)
+    tracker = build("tracker", None, {"seed": 5, **kw}, cell=cell, journal=False)
     tmac = ReflectorPublisher(Bus(world_session, KeySpace(cell)), "TMAC", "tmac")
     tmac.publish(pose(BASE) @ pose(POSE) @ pose(PROBE))
     return tracker, tmac
@@ -92,7 +93,7 @@ def test_a_line_of_sight_break_is_flagged_and_the_stream_recovers(world_session)
     async def body():
         tracker, tmac = _tracker_and_world(cell, world_session)
         await tracker.start()
-        tracker.driver.blocked = lambda t: 0.2 <= t < 0.4
+        tracker.interface.driver.blocked = lambda t: 0.2 <= t < 0.4
         try:
             async with Client("ROBOT", cell=cell) as robot:
                 assert await robot.wait_for("TRACKER")
@@ -147,7 +148,8 @@ def test_bad_requests_are_refused_and_a_vanished_subscriber_frees_the_tracker(wo
                 assert await other.wait_for("TRACKER")
                 await _ok(other, "Move", "", [*(target[:3, 3] * 1e3), 0, 0, 0])
                 await _ok(other, "Single Measurement", "", 10)  # the tracker was freed
-                assert tracker._stream is None or tracker._stream.done()
+                stream = tracker.interface._stream
+                assert stream is None or stream.done()
         finally:
             tmac.close()
             await tracker.close()

@@ -19,7 +19,7 @@ from opcua_testlib import JS, Proc, plugcell_argv, run_js, unique_cell, until
 from plugcell.devices.opcua.certificates import issue_application_certificate
 from plugcell.devices.opcua.device import OpcUaDevice
 from plugcell.devices.opcua.device_map import parse_device_map
-from plugcell.framework import BlockingClient, DeviceError, ProcessStates, from_data
+from plugcell.framework import BlockingClient, DeviceError, GenericDevice, ProcessStates, from_data
 
 pytestmark = pytest.mark.slow
 
@@ -183,8 +183,9 @@ async def _connect_with(cell: GripperCell, maps: list[str]) -> list[str]:
     """Why the device interface refuses each map (its DeviceError at connect)."""
     reasons = []
     for text in maps:
-        device = OpcUaDevice("BROKEN", endpoint=cell.endpoint, journal=False,
-                             map=parse_device_map(text, "device.toml"), insecure_accept_any=True)
+        device = GenericDevice(OpcUaDevice(
+            endpoint=cell.endpoint, map=parse_device_map(text, "device.toml"),
+            insecure_accept_any=True), "BROKEN", journal=False).interface
         with pytest.raises(DeviceError) as err:
             await device.connect()
         assert str(err.value).startswith("device.toml: command ")
@@ -252,8 +253,8 @@ def test_a_secured_device_server_is_reached_with_the_cells_certificate_and_a_use
     server.wait_line(lambda line: '"listening"' in line, 30.0)
 
     async def refused() -> str:
-        device = OpcUaDevice("SECURE_GRIPPER", endpoint=endpoint, map=MAP, certs=certs,
-                             user="plc", journal=False)
+        device = GenericDevice(OpcUaDevice(endpoint=endpoint, map=MAP, certs=certs, user="plc"),
+                               "SECURE_GRIPPER", journal=False).interface
         with pytest.raises(DeviceError) as err:
             await device.connect()
         return str(err.value)

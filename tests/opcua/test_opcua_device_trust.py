@@ -20,7 +20,7 @@ from opcua_testlib import JS, plugcell_argv, unique_cell
 
 from plugcell.devices.opcua.certificates import certificate_paths, issue_application_certificate
 from plugcell.devices.opcua.device import OpcUaDevice
-from plugcell.framework import DeviceError
+from plugcell.framework import DeviceError, GenericDevice
 
 pytestmark = pytest.mark.slow
 
@@ -81,8 +81,8 @@ def plc_certificate(certs: Path, folder: Path, **kw) -> tuple[Path, Path]:
 
 async def connect(endpoint: str, certs: Path, **kw) -> str:
     """Connect SECURE_GRIPPER as user plc; "" when connected, else the refusal."""
-    device = OpcUaDevice("SECURE_GRIPPER", endpoint=endpoint, map=MAP, certs=certs,
-                         user="plc", journal=False, **kw)
+    device = GenericDevice(OpcUaDevice(endpoint=endpoint, map=MAP, certs=certs, user="plc",
+                                       **kw), "SECURE_GRIPPER", journal=False).interface
     try:
         await device._open()  # connect() without the service's state reports
     except DeviceError as exc:
@@ -182,7 +182,6 @@ def test_accepting_any_server_is_explicit_and_logged(servers, tmp_path, password
         proc.stop()
     with pytest.raises(ValueError, match=r"cannot authenticate the server of .* without a "
                        r"certificate of its own"):
-        OpcUaDevice("G", endpoint=impostor, map=MAP, journal=False)
+        OpcUaDevice(endpoint=impostor, map=MAP)
     with pytest.raises(ValueError, match="only a secured connection has"):
-        OpcUaDevice("G", endpoint=impostor, map=MAP, trust=tmp_path, insecure_accept_any=True,
-                    journal=False)
+        OpcUaDevice(endpoint=impostor, map=MAP, trust=tmp_path, insecure_accept_any=True)

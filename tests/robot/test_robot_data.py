@@ -16,7 +16,7 @@ from plugcell.framework import Command, CommandTypes, DataTypes
 
 
 def command(service: type, name: str) -> Command:
-    return next(c for c in service.commands if c.name == name)
+    return next(c for c in service.declaration.commands if c.name == name)
 
 
 SNAP = command(CameraService, "SnapShot")

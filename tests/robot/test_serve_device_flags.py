@@ -42,7 +42,7 @@ def test_a_serial_line_rate_that_is_not_a_rate_is_refused():
     from plugcell.sim.controller.controller import main as controller_main
 
     with pytest.raises(ValueError, match=r"link_baud must be 0 \(no serial line\) or positive"):
-        RobotService("R1", sim=True, link_baud=-1.0)
+        RobotService(sim=True, link_baud=-1.0)
     assert controller_main(["--link-baud", "-5", "--no-world"]) == 2
 
 
@@ -104,9 +104,10 @@ def test_a_kind_with_a_driver_interface_is_served_with_its_simulated_driver():
     assert kind_params("drill") == {"time_scale": float, "depth_mm": float}
     params = _params("drill", ["depth_mm=5", "time_scale=0"])
     service = build("drill", "T", params, cell="kinds-test", journal=False)
-    assert isinstance(service, DrillService) and service.name == "T"
-    assert isinstance(service.drill, SimulatedDrill) and isinstance(service.drill, DrillDriver)
-    assert (service.drill.depth_mm, service.drill.time_scale) == (5.0, 0.0)
+    assert isinstance(service.interface, DrillService) and service.name == "T"
+    drill = service.interface.drill
+    assert isinstance(drill, SimulatedDrill) and isinstance(drill, DrillDriver)
+    assert (drill.depth_mm, drill.time_scale) == (5.0, 0.0)
     with pytest.raises(CommandError, match=r"bad --param 'depth_mm=1' for CameraService "
                                            r"\(parameters: time_scale\)"):
         _params("camera", ["depth_mm=1"])

@@ -27,7 +27,7 @@ from robot_testlib import unique_cell
 
 from plugcell.apps.kinds import build
 from plugcell.devices.robot.service import RobotService
-from plugcell.framework import Client, ProcessStates
+from plugcell.framework import Client, GenericDevice, ProcessStates
 from plugcell.framework.data import from_data
 from plugcell.framework.messages import ConnectionStates
 from plugcell.sim.controller.egm_twin import EgmTwinProcess
@@ -115,10 +115,10 @@ def library(tmp_path: Path) -> Path:
 
 
 def _service(vendor: Vendor, port: int, library: Path, cell: str,
-             tmp_path: Path) -> RobotService:
+             tmp_path: Path) -> GenericDevice:
     service = build("robot", None, {**vendor.service_params(port), "library": str(library)},
                     cell=cell, journal=tmp_path / "journal")
-    assert isinstance(service, RobotService)
+    assert isinstance(service.interface, RobotService)
     return service
 
 
@@ -152,8 +152,8 @@ def test_a_program_on_the_pc_moves_the_twin(vendor, library, tmp_path, monkeypat
 
                     final = await _run(client, service.name, "rsimoves")
                     assert final.state is C, final.reason
-                    motion = service.bridge.motion  # type: ignore[attr-defined]
-                    assert service.bridge.drive.followed == 3  # type: ignore[attr-defined]
+                    motion = service.interface.bridge.motion  # type: ignore[attr-defined]
+                    assert service.interface.bridge.drive.followed == 3  # type: ignore[attr-defined]
                     end = np.degrees(motion.last.sample(motion.last.duration, 0).q)
                     await asyncio.sleep(0.5)  # the servo settles
                     joints = await _get(client, service.name, "ARM_JNTP")
@@ -191,7 +191,7 @@ async def _get_status(client: Client, name: str) -> list[str]:
     return [str(s) for s in from_data(final.data).reshape(-1)]
 
 
-async def _state(service: RobotService, state: ConnectionStates, within: float) -> bool:
+async def _state(service: GenericDevice, state: ConnectionStates, within: float) -> bool:
     end = time.monotonic() + within
     while service.device.connection is not state and time.monotonic() < end:
         await asyncio.sleep(0.05)
@@ -242,39 +242,40 @@ def test_a_stopped_stream_fails_the_process_and_the_service_recovers(vendor, lib
 
 def test_bad_rsi_options_are_refused_with_the_reason():
     with pytest.raises(ValueError, match=r"give one of sim, line=HOST:PORT, rsi"):
-        RobotService("R1", sim=True, rsi="127.0.0.1:49152")
+        RobotService(sim=True, rsi="127.0.0.1:49152")
     with pytest.raises(ValueError, match="rsi_robot names the controller of an RSI stream"):
-        RobotService("R1", sim=True, rsi_robot="10.0.0.1")
+        RobotService(sim=True, rsi_robot="10.0.0.1")
     with pytest.raises(ValueError, match="listens on every address: give the controller's"):
-        RobotService("R1", rsi="0.0.0.0:49152")
+        RobotService(rsi="0.0.0.0:49152")
     with pytest.raises(ValueError, match="bad controller address"):
-        RobotService("R1", rsi="localhost")
+        RobotService(rsi="localhost")
     with pytest.raises(ValueError, match="bad RSI robot address"):
-        RobotService("R1", rsi="0.0.0.0:49152", rsi_robot="10.0.0.1:http")
+        RobotService(rsi="0.0.0.0:49152", rsi_robot="10.0.0.1:http")
     with pytest.raises(ValueError, match="joint_speed must be a positive number"):
-        RobotService("R1", rsi="127.0.0.1:49152", joint_speed=0.0)
+        RobotService(rsi="127.0.0.1:49152", joint_speed=0.0)
     with pytest.raises(ValueError, match="timeout_packets"):
-        RobotService("R1", rsi="127.0.0.1:49152", rsi_timeout=0)
+        RobotService(rsi="127.0.0.1:49152", rsi_timeout=0)
     with pytest.raises(ValueError, match="unknown robot 'scara4'"):
-        RobotService("R1", rsi="127.0.0.1:49152", robot="scara4")
+        RobotService(rsi="127.0.0.1:49152", robot="scara4")
 
 
 def test_bad_egm_options_are_refused_with_the_reason():
     with pytest.raises(ValueError, match=r"give one of sim, line=HOST:PORT, rsi=HOST:PORT "
                        r"or egm=HOST:PORT, not several"):
-        RobotService("R1", rsi="127.0.0.1:49152", egm="127.0.0.1:6510")
+        RobotService(rsi="127.0.0.1:49152", egm="127.0.0.1:6510")
     with pytest.raises(ValueError, match="egm_robot names the controller of an EGM stream"):
-        RobotService("R1", sim=True, egm_robot="10.0.0.1")
+        RobotService(sim=True, egm_robot="10.0.0.1")
     with pytest.raises(ValueError, match=r"egm=0\.0\.0\.0:… listens on every address: give the "
                        r"controller's address with egm_robot"):
-        RobotService("R1", egm="0.0.0.0:6510")
+        RobotService(egm="0.0.0.0:6510")
     with pytest.raises(ValueError, match="bad EGM robot address"):
-        RobotService("R1", egm="0.0.0.0:6510", egm_robot="10.0.0.1:http")
+        RobotService(egm="0.0.0.0:6510", egm_robot="10.0.0.1:http")
     with pytest.raises(ValueError, match="comm_timeout_s"):
-        RobotService("R1", egm="127.0.0.1:6510", egm_timeout=0.001)
+        RobotService(egm="127.0.0.1:6510", egm_timeout=0.001)
     with pytest.raises(ValueError, match="tcp_speed must be a positive number"):
-        RobotService("R1", egm="127.0.0.1:6510", tcp_speed=-1.0)
-    service = RobotService("R1", egm="127.0.0.1:6510", egm_robot="127.0.0.2")
+        RobotService(egm="127.0.0.1:6510", tcp_speed=-1.0)
+    service = GenericDevice(RobotService(egm="127.0.0.1:6510", egm_robot="127.0.0.2"), "R1",
+                            journal=False)
     # the UI's device panel shows the link
     assert "ABB EGM, listening on 127.0.0.1:6510 for the controller at 127.0.0.2" in \
         service.device.info

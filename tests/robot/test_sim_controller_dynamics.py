@@ -199,12 +199,12 @@ def test_the_reflector_feed_publishes_the_arm_as_it_moves_then_once_at_rest() ->
 
 def test_dynamics_is_the_simulated_controllers_option() -> None:
     from plugcell.devices.robot.service import RobotService
+    from plugcell.sim.controller.launcher import SimControllerProcess
 
     with pytest.raises(ValueError, match="dynamics moves the simulated controller's twin in "
                                          "time: give sim=true too"):
-        RobotService("R1", line="127.0.0.1:7000", dynamics=True)
-    assert RobotService("R1", sim=True, dynamics=True).dynamics
-    from plugcell.sim.controller.launcher import SimControllerProcess
+        RobotService(line="127.0.0.1:7000", dynamics=True)
+    assert RobotService(sim=True, launcher=SimControllerProcess, dynamics=True).dynamics
 
     assert "--dynamics" in SimControllerProcess(name="R1", cell="c", dynamics=True).argv
     assert "--dynamics" not in SimControllerProcess(name="R1", cell="c").argv

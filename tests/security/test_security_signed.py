@@ -112,7 +112,7 @@ async def _create(cell: RoutedCell, name: str, transport: TransportConfig,
         if signer is not None:
             client.signer = signer
         if spy is not None:
-            encode = client._encode
+            encode = client.encode
 
             def recording(body: object, to: str = "") -> bytes:
                 out = encode(body, to)  # type: ignore[arg-type]
@@ -120,7 +120,7 @@ async def _create(cell: RoutedCell, name: str, transport: TransportConfig,
                     spy.append(out)
                 return out
 
-            client._encode = recording  # type: ignore[method-assign]
+            client.encode = recording  # type: ignore[method-assign]
         assert await client.wait_for(service, 10.0)
         call = await client.create_process(service, "Set Base", data=BASE, timeout=10.0)
         final = call.final or await asyncio.wait_for(call.result(), 10.0)
@@ -247,13 +247,13 @@ def test_wiring_is_signed_too(routed: RoutedCell) -> None:
 
 
 def test_a_service_checking_signatures_needs_the_cells_ca() -> None:
-    from framework_testlib import ScriptedDevice
+    from framework_testlib import scripted
 
     from plugcell.framework.security import AccessPolicy
     from plugcell.framework.signing import SigningError
 
     async def body() -> None:
-        dev = ScriptedDevice(cell=unique_cell(), journal=False,
+        dev = scripted(cell=unique_cell(), journal=False,
                              transport=TransportConfig(multicast=False),
                              access=AccessPolicy(identity="signed"))
         with pytest.raises(SigningError, match="identity = 'signed' needs the cell's CA"):

@@ -18,7 +18,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[2] / "benchmarks"))
 from fuzz_web import fuzz_web, judge
 from plugcell.apps.ui.app import create_app
 from plugcell.apps.ui.reports import ReportFiles
-from plugcell.devices.cell.service import CellController
+from plugcell.devices.cell.service import cell_controller
 
 pytestmark = [pytest.mark.slow, pytest.mark.timeout(120)]
 
@@ -40,7 +40,7 @@ def client(tmp_path_factory: pytest.TempPathFactory) -> Iterator[TestClient]:
     """The app on a controller that is not started: these inputs are refused before it."""
     docs = tmp_path_factory.mktemp("docs")
     (docs / "results").mkdir()
-    controller = CellController(cell=f"f{uuid.uuid4().hex[:12]}", journals=False)
+    controller = cell_controller(cell=f"f{uuid.uuid4().hex[:12]}", journals=False)
     app = create_app(controller, reports=ReportFiles(docs, []), manage=False)
     yield TestClient(app, base_url="http://127.0.0.1")
 

@@ -11,14 +11,14 @@ from fastapi.testclient import TestClient
 
 from plugcell.apps.ui.app import create_app
 from plugcell.apps.ui.reports import ReportFiles
-from plugcell.devices.cell.service import CellController
+from plugcell.devices.cell.service import cell_controller
 
 HEADERS = {"X-Plugcell": "1"}
 
 
 def make_client(cell: str, docs: Path | None = None, reports: list[Path] | None = None
                 ) -> TestClient:
-    controller = CellController(cell=cell)
+    controller = cell_controller(cell=cell)
     app = create_app(controller, reports=ReportFiles(docs, reports or []))
     return TestClient(app, base_url="http://127.0.0.1")
 

@@ -1,11 +1,12 @@
 """The one registry of service kinds: ``plugcell serve KIND`` looks them up here.
 
-A kind is a device service (a :class:`~plugcell.framework.service.GenericDevice`:
-its catalogue and ``dispatch``) and, for a device family with a driver interface
+A kind is a device (a :class:`~plugcell.framework.service.DeviceInterface`: its
+declaration and ``dispatch``) and, for a device family with a driver interface
 (the camera's :class:`~plugcell.devices.camera.CameraDriver`, the drill's
-:class:`~plugcell.devices.drill.DrillDriver`), the driver it runs with by default —
-here the simulated one of ``plugcell.sim.drivers``.  The device never imports the
-simulator: :func:`build` makes the driver and hands it to the service (the kind's
+:class:`~plugcell.devices.drill.DrillDriver` …), the driver it runs with by default —
+here the simulated one of ``plugcell.sim``.  The device never imports the simulator:
+:func:`build` makes the driver, hands it to the device and the device to the
+:class:`~plugcell.framework.service.GenericDevice` that hosts it (the kind's
 parameters ``--param K=V`` go to whichever of the two declares them).
 
 Add a kind with one line (``"laser": Kind("laser_point:LaserPointService")``) or, from
@@ -20,7 +21,12 @@ from collections.abc import Mapping
 from dataclasses import dataclass
 from typing import Any
 
+from plugcell.framework.declaration import Declaration
 from plugcell.framework.service import GenericDevice
+
+#: ``--param driver=sim``: the kind's default driver (a device declaring a ``driver``
+#: parameter takes another by name, ``module:Class``).
+SIMULATED = "sim"
 
 
 @dataclass(frozen=True)
@@ -30,14 +36,20 @@ class Kind:
     Parameters
     ----------
     service : str
-        The service class, a GenericDevice subclass.
+        The device class (a :class:`~plugcell.framework.service.DeviceInterface`: its
+        ``declaration``, ``bind`` and ``dispatch``).
     driver : str or None
-        The driver class the service is given as ``driver=`` (None: the service needs
-        none, or makes its own).
+        The driver class the device is given as ``driver=`` (None: the device needs
+        none).
+    launcher : str or None
+        What starts the device's own controller process, given (not called) as
+        ``launcher=`` — the robot's simulated controller for ``sim=true``, which needs
+        the service's name and cell.
     """
 
     service: str
     driver: str | None = None
+    launcher: str | None = None
 
 
 KINDS: dict[str, Kind] = {
@@ -46,8 +58,10 @@ KINDS: dict[str, Kind] = {
     "drill": Kind("plugcell.devices.drill:DrillService",
                   driver="plugcell.sim.drivers.drill:SimulatedDrill"),
     "bench": Kind("plugcell.apps.bench.device:BenchService"),
-    "robot": Kind("plugcell.devices.robot.service:RobotService"),
-    "tracker": Kind("plugcell.devices.tracker.service:TrackerService"),
+    "robot": Kind("plugcell.devices.robot.service:RobotService",
+                  launcher="plugcell.sim.controller.launcher:SimControllerProcess"),
+    "tracker": Kind("plugcell.devices.tracker.service:TrackerService",
+                    driver="plugcell.sim.drivers.tracker:SimulatedTrackerDriver"),
     "compute": Kind("plugcell.devices.compute.service:ComputeService"),
     "cell-controller": Kind("plugcell.devices.cell.service:CellController"),
     "opcua-device": Kind("plugcell.devices.opcua.device:OpcUaDevice"),
@@ -86,7 +100,7 @@ def current_param(kind: str, key: str) -> str:
 
 
 def register_kind(kind: str, target: str | Kind) -> None:
-    """Register ``kind`` → ``"module:Class"`` (a GenericDevice subclass) or a :class:`Kind`."""
+    """Register ``kind`` → ``"module:Class"`` (a device class) or a :class:`Kind`."""
     KINDS[kind] = target if isinstance(target, Kind) else Kind(target)
 
 
@@ -106,15 +120,17 @@ def _load(kind: str, target: str) -> Any:
         raise KeyError(f"cannot load service kind {kind!r}: {exc}") from None
 
 
-def load_kind(kind: str) -> type[GenericDevice]:
-    """The service class of ``kind`` — a registered kind or ``"module:Class"``.
+def load_kind(kind: str) -> type:
+    """The device class of ``kind`` — a registered kind or ``"module:Class"``.
 
-    KeyError (with the known kinds) if it cannot be found.
+    KeyError (with the known kinds) if it cannot be found; TypeError if it is not a
+    device class (a class with a :class:`~plugcell.framework.declaration.Declaration`).
     """
     target = _kind(kind).service
     cls = _load(kind, target)
-    if not (isinstance(cls, type) and issubclass(cls, GenericDevice)):
-        raise TypeError(f"{target} is not a GenericDevice subclass")
+    if not (isinstance(cls, type) and isinstance(getattr(cls, "declaration", None),
+                                                  Declaration)):
+        raise TypeError(f"{target} is not a device class (no Declaration 'declaration')")
     return cls
 
 
@@ -125,7 +141,7 @@ def load_driver(kind: str) -> type | None:
 
 
 def kind_params(kind: str) -> dict[str, type]:
-    """The parameters ``--param K=V`` of ``kind``: its service's and its driver's
+    """The parameters ``--param K=V`` of ``kind``: its device's and its driver's
     (each class's ``params``: name → the type that converts the text)."""
     driver = load_driver(kind)
     return {**getattr(load_kind(kind), "params", {}), **getattr(driver, "params", {})}
@@ -133,7 +149,7 @@ def kind_params(kind: str) -> dict[str, type]:
 
 def build(kind: str, name: str | None, params: Mapping[str, Any], **options: Any
           ) -> GenericDevice:
-    """A service of ``kind`` named ``name`` with its default driver.
+    """A service of ``kind`` named ``name``: its device with its default driver, hosted.
 
     Parameters
     ----------
@@ -143,7 +159,7 @@ def build(kind: str, name: str | None, params: Mapping[str, Any], **options: Any
         The service's name (None: the kind's default name).
     params : mapping of str to value
         The kind's parameters (:func:`kind_params`), already converted: those the
-        driver declares build the driver, the others go to the service.
+        driver declares build the driver, the others go to the device.
     **options
         The framework's keywords for the service (``cell``, ``transport``,
         ``journal``, ``max_payload`` …).
@@ -155,9 +171,15 @@ def build(kind: str, name: str | None, params: Mapping[str, Any], **options: Any
     """
     cls = load_kind(kind)
     driver_cls = load_driver(kind)
+    launcher = _kind(kind).launcher
+    if launcher is not None:
+        params = {**params, "launcher": _load(kind, launcher)}
     if driver_cls is None:
-        return cls(name, **params, **options)
+        return GenericDevice(cls(**params), name, **options)
     driver_keys = getattr(driver_cls, "params", {})
+    device_params = {k: v for k, v in params.items() if k not in driver_keys}
+    chosen = device_params.pop("driver", SIMULATED)
+    if chosen != SIMULATED:  # ``--param driver=module:Class``: the device loads another
+        return GenericDevice(cls(driver=chosen, **device_params), name, **options)
     driver = driver_cls(**{k: v for k, v in params.items() if k in driver_keys})
-    service_params = {k: v for k, v in params.items() if k not in driver_keys}
-    return cls(name, driver=driver, **service_params, **options)
+    return GenericDevice(cls(driver=driver, **device_params), name, **options)

@@ -6,8 +6,9 @@
 * :mod:`.compute` — the compute service (workspace, expressions, functions);
 * :mod:`.cell` — the cell controller (wiring, tasks, runs, monitor, UI feed);
 * :mod:`.opcua` — the OPC UA gateway and the OPC UA device service;
-* :mod:`.registry` — the kinds ``plugcell serve KIND`` knows.
+* the kinds ``plugcell serve KIND`` knows are in :mod:`plugcell.apps.kinds`.
 
-Each is a small declaration (catalogue and ``dispatch``) on
-:class:`plugcell.framework.service.GenericDevice`.
+Each is a device class — a :class:`~plugcell.framework.declaration.Declaration` and a
+``dispatch`` in front of the driver of its family — which a
+:class:`plugcell.framework.service.GenericDevice` hosts (composed, not derived).
 """

@@ -17,10 +17,11 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
-from typing import Any, Protocol, runtime_checkable
+from typing import Protocol, runtime_checkable
 
 import numpy as np
 
+from plugcell.framework.declaration import Declaration
 from plugcell.framework.messages import Command, CommandTypes, ConnectionStates, DataTypes
 from plugcell.framework.service import DeviceError, GenericDevice
 
@@ -60,13 +61,15 @@ class CameraDriver(Protocol):
         ...
 
 
-class CameraService(GenericDevice):
-    """A 640×480 grayscale camera behind a :class:`CameraDriver`."""
+class CameraService:
+    """A 640×480 grayscale camera behind a :class:`CameraDriver` (the device a
+    :class:`~plugcell.framework.service.GenericDevice` hosts)."""
 
-    kind = "camera"
-    vendor = "plugcell (simulated)"
-    info = "Specs: 640x480, 8bit Grayscale, Framerate: 80fps"
-    commands = (
+    declaration = Declaration(
+        kind="camera",
+        vendor="plugcell (simulated)",
+        info="Specs: 640x480, 8bit Grayscale, Framerate: 80fps",
+        commands=(
         Command(
             name="Connect",
             type=CommandTypes.NoData,
@@ -104,20 +107,26 @@ class CameraService(GenericDevice):
         Command(
             name="StopMovie", type=CommandTypes.StopData, success_code=S, info="stop the movie"
         ),
-    )
-    def __init__(self, name: str | None = None, *, driver: CameraDriver, **kwargs: Any) -> None:
-        super().__init__(name, **kwargs)
+    ))
+
+    def __init__(self, driver: CameraDriver) -> None:
         self.camera = driver
+        self.service: GenericDevice | None = None
         self._movie: asyncio.Task[None] | None = None
+
+    def bind(self, service: GenericDevice) -> None:
+        self.service = service
 
     async def connect(self) -> None:
         await self.camera.connect()
-        self.connection_state.post(ConnectionStates.Online)
+        if self.service is not None:
+            self.service.connection_state.post(ConnectionStates.Online)
 
     async def disconnect(self) -> None:
         await self._stop_movie()
         await self.camera.disconnect()
-        self.connection_state.post(ConnectionStates.Offline)
+        if self.service is not None:
+            self.service.connection_state.post(ConnectionStates.Offline)
 
     async def dispatch(self, command: Command, option: str, data: np.ndarray | None) -> str:
         """CommandDispatcher of the camera interface."""
@@ -128,8 +137,8 @@ class CameraService(GenericDevice):
                 case "Disconnect":
                     await self.disconnect()
                 case "SnapShot":
-                    assert data is not None
-                    self.data_feedback.post(await self.camera.grab(int(data[0])))
+                    assert data is not None and self.service is not None
+                    self.service.data_feedback.post(await self.camera.grab(int(data[0])))
                 case "MovieShot":
                     assert data is not None
                     self._start_movie(int(data[0]))
@@ -148,11 +157,12 @@ class CameraService(GenericDevice):
 
     async def _film(self, fps: int) -> None:
         """The FeedbackReceiver of a movie: one DataFeedback per frame."""
+        assert self.service is not None
         period = 1.0 / fps
         loop = asyncio.get_running_loop()
         next_frame = loop.time()
         while True:
-            self.data_feedback.post(await self.camera.grab(1))
+            self.service.data_feedback.post(await self.camera.grab(1))
             next_frame += period
             await asyncio.sleep(max(0.0, next_frame - loop.time()) * self.camera.time_scale)
 

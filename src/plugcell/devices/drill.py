@@ -9,10 +9,11 @@ sends as ``ACTIVATE TOOL #Drill#Air#550,1100``.  The drill itself is behind
 
 from __future__ import annotations
 
-from typing import Any, Protocol, runtime_checkable
+from typing import Protocol, runtime_checkable
 
 import numpy as np
 
+from plugcell.framework.declaration import Declaration
 from plugcell.framework.messages import Command, CommandTypes, DataTypes
 from plugcell.framework.service import DeviceError, GenericDevice
 
@@ -35,14 +36,17 @@ class DrillDriver(Protocol):
         ...
 
 
-class DrillService(GenericDevice):
-    """A drill behind a :class:`DrillDriver`."""
+class DrillService:
+    """A drill behind a :class:`DrillDriver` (the device a
+    :class:`~plugcell.framework.service.GenericDevice` hosts)."""
 
-    kind = "drill"
-    default_name = "TOOL"
-    vendor = "plugcell (simulated)"
-    info = "Drilling end-effector with air blow-off; feed 10-2000 mm/min, speed 100-24000 rpm"
-    commands = (
+    declaration = Declaration(
+        kind="drill",
+        default_name="TOOL",
+        vendor="plugcell (simulated)",
+        info="Drilling end-effector with air blow-off; feed 10-2000 mm/min, speed 100-24000 "
+             "rpm",
+        commands=(
         Command(
             name="Drill",
             type=CommandTypes.NoData,
@@ -52,10 +56,13 @@ class DrillService(GenericDevice):
             timeout=120.0,
             info="drill one hole; option 'Air' or ''; input: feed mm/min, speed rpm",
         ),
-    )
-    def __init__(self, name: str | None = None, *, driver: DrillDriver, **kwargs: Any) -> None:
-        super().__init__(name, **kwargs)
+    ))
+
+    def __init__(self, driver: DrillDriver) -> None:
         self.drill = driver
+
+    def bind(self, service: GenericDevice) -> None:
+        """The drill reports only its command feedback (the code it returns)."""
 
     async def dispatch(self, command: Command, option: str, data: np.ndarray | None) -> str:
         """CommandDispatcher of the drill interface."""

@@ -11,9 +11,12 @@ Modules, one job each:
 * :mod:`.processqueue` — the FIFO process queue with re-scheduling (5.2.3.5);
 * :mod:`.journal` — the journal of every process and update (SQLite, fed by
   :mod:`.journal_log`, the append-only log each commit writes);
-* :mod:`.participant` — presence, partners, outbound processes (5.2.3.6);
+* :mod:`.participant` — presence, partners; :mod:`.calls` — its outbound processes
+  (5.2.3.6);
 * :mod:`.process_call` — a process as its sender sees it;
-* :mod:`.service` — the GenericDevice base of every service (5.2.2–5.2.3);
+* :mod:`.declaration` — what a device declares (kind, names, command catalogue);
+* :mod:`.service` — GenericDevice, the service that hosts one device (5.2.2–5.2.3), with
+  :mod:`.inbound` (its doors Subscribe and CreateProcess, admitted);
 * :mod:`.client` — the async and blocking client API.
 """
 

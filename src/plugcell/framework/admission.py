@@ -1,7 +1,8 @@
 """Admission of a request: small checks, each returning the reason it fails ("" passes).
 
 A CreateProcess reaching a service goes through, in this order (the
-CreateProcessHandler of thesis 5.2.3.4, :meth:`GenericDevice._create`):
+CreateProcessHandler of thesis 5.2.3.4,
+:meth:`Inbound.create <plugcell.framework.inbound.Inbound.create>`):
 
 1. :func:`decode_request` — present, within the size limit, a valid envelope;
 2. :func:`check_envelope` — sent by the participant whose key it came on, a Process;

@@ -5,7 +5,8 @@ the dynamic array of partners (``genericPort``/``genericNotify`` of 5.2.3.3) and
 the outbound message handling of 5.2.3.6 — subscribing to a partner fetches its
 DeviceInfo with ``Get``, ``create_process`` looks the command up in the partner's
 catalogue, converts the data to the declared type and size, sends
-``CreateProcess`` and returns a :class:`ProcessCall`.  A plain client (the CLI, a
+``CreateProcess`` and returns a :class:`ProcessCall` (:mod:`plugcell.framework.calls`
+keeps those calls).  A plain client (the CLI, a
 script, a test) is a participant without the inbound side; a service
 (:class:`~plugcell.framework.service.GenericDevice`) adds it.
 
@@ -33,31 +34,23 @@ from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any, ClassVar
 
-import msgspec
 import zenoh
 
 from plugcell.framework import codec
 from plugcell.framework.bus import Bus, QueryDoor
-from plugcell.framework.data import DataError, to_data
+from plugcell.framework.calls import Calls, PartnerError
 from plugcell.framework.keys import DEFAULT_CELL, KeySpace, Presence, Role, check_name
 from plugcell.framework.memory import tune_allocator
 from plugcell.framework.messages import (
-    Acknowledgement,
-    Command,
-    CommandTypes,
-    Data,
     Device,
     GenericDeviceState,
     GetRequest,
     Message,
-    Process,
     ProcessUpdateNotification,
     ShutdownNotification,
     SubscribeRequest,
     SubscribeResponse,
-    Tag,
     UnsubscribeRequest,
-    process_acks,
     process_updates,
 )
 from plugcell.framework.port import Port
@@ -69,10 +62,6 @@ log = logging.getLogger("plugcell.framework")
 
 #: How long ``create_process`` waits for an unknown partner to appear before failing.
 DISCOVERY_GRACE = 1.0
-
-
-class PartnerError(RuntimeError):
-    """A partner could not be reached or refused; the message is the reason."""
 
 
 @dataclass
@@ -170,11 +159,11 @@ class Participant:
         self._port: Port[tuple[Callable[[Any], None], Any]] | None = None
         self._entities: list[Any] = []
         self._token: Any = None
-        self._calls: dict[tuple[str, int], ProcessCall] = {}
-        self._publishes_requests = True
-        self._doors: dict[str, Any] = {}
-        """Publishers of CreateProcess requests, per partner (:meth:`_request_door`)."""
-        self._last_id = 0
+        self.calls = Calls(self)
+        """The processes this participant created and waits on (framework/calls.py)."""
+        self.partner_listeners: list[Callable[[str, Message], None]] = []
+        """Told ``(partner, body)`` of each partner's StateUpdate/ConnectionUpdate, once
+        Partners is current (a cell controller or gateway showing the cell)."""
         self._presence_changed = asyncio.Event()
         self._watchers: weakref.WeakSet[PresenceEvents] = weakref.WeakSet()
         self._closed = False
@@ -199,12 +188,12 @@ class Participant:
                     self.name, self.signer.name, self.signer.name,
                 )
         cert = self.transport.tls_cert
-        self._publishes_requests = not cert or certificate_name(cert) == self.name
+        self.calls.publishes_requests = not cert or certificate_name(cert) == self.name
         self.bus = bus = await asyncio.to_thread(
             Bus.connect, self.transport, self.keys, self._port.post)
         # incarnation id: start time first, so instances of one name order by age
         self.instance = f"{time.time_ns():016x}{bus.zid}"
-        self._entities.append(bus.follow_processes(self.name, self._on_process_update))
+        self._entities.append(bus.follow_processes(self.name, self.calls.on_process_update))
         self._entities.append(bus.watch_presence(self._on_presence))
         await self._declare()
         self._token = bus.announce(self.role, self.name, self.instance)
@@ -224,9 +213,7 @@ class Participant:
         if self._closed:
             return
         self._closed = True
-        for call in list(self._calls.values()):
-            call._fail(f"{self.name} is closing")
-        self._calls.clear()
+        self.calls.fail_all(f"{self.name} is closing")
         bus = self.bus
         if bus is not None:
             with contextlib.suppress(zenoh.ZError):
@@ -235,8 +222,7 @@ class Participant:
                 for partner in self.partners.values():
                     if partner.subscriber is not None:
                         partner.subscriber.undeclare()
-                for door in self._doors.values():
-                    door.undeclare()
+                self.calls.close_doors()
                 for entity in reversed(self._entities):
                     entity.undeclare()
             await asyncio.to_thread(bus.close)
@@ -261,7 +247,7 @@ class Participant:
             except Exception:  # a bad message must not stop the participant
                 log.exception("%s: error handling %s", self.name, handler.__name__)
 
-    def _encode(self, body: Message, to: str = "") -> bytes:
+    def encode(self, body: Message, to: str = "") -> bytes:
         """The envelope of ``body``; a request to service ``to`` is signed when this
         participant has a :attr:`signer` (bound to ``to``'s instance when it is known)."""
         if to and self.signer is not None and is_request(body):
@@ -296,7 +282,7 @@ class Participant:
             if pending.done is not None and not pending.done.done():
                 pending.done.set_result(None)
 
-        self.bus.query(door, name, self._encode(body, to) if body is not None else None,
+        self.bus.query(door, name, self.encode(body, to) if body is not None else None,
                        pending.replies.append, done, timeout=timeout, everyone=everyone)
         with contextlib.suppress(TimeoutError):
             await asyncio.wait_for(asyncio.shield(pending.done), timeout + 1.0)  # type: ignore[arg-type]
@@ -310,10 +296,6 @@ class Participant:
             except codec.WireError as exc:
                 out.append(str(exc))
         return out
-
-    def _next_identifier(self) -> int:
-        self._last_id = max(self._last_id + 1, time.time_ns())
-        return self._last_id
 
     # -- presence ------------------------------------------------------------------------
 
@@ -345,13 +327,7 @@ class Participant:
         reason = f"service {presence.name} lost (liveliness token withdrawn)"
         if partner is not None and partner.instance == presence.instance:
             self._drop_partner(presence.name)
-        self._fail_calls(presence.name, presence.instance, reason)
-
-    def _fail_calls(self, partner: str, instance: str | None, reason: str) -> None:
-        for key, call in list(self._calls.items()):
-            if call.partner == partner and (instance is None or call.instance in ("", instance)):
-                call._fail(reason)
-                self._calls.pop(key, None)
+        self.calls.fail_partner(presence.name, presence.instance, reason)
 
     def services(self) -> list[str]:
         """Names of the services currently alive in the cell."""
@@ -437,7 +413,7 @@ class Participant:
     async def unsubscribe(self, partner: str) -> bool:
         """Drop ``partner`` from Partners; its pending processes end Failed."""
         found = self._drop_partner(partner)
-        self._fail_calls(partner, None, f"{self.name} unsubscribed from {partner}")
+        self.calls.fail_partner(partner, None, f"{self.name} unsubscribed from {partner}")
         return found
 
     def _drop_partner(self, name: str) -> bool:
@@ -461,12 +437,13 @@ class Participant:
             reason = f"service {body.name} shut down" + (f": {body.reason}" if body.reason else "")
             if partner is not None and partner.instance == envelope.instance:
                 self._drop_partner(envelope.sender)
-            self._fail_calls(envelope.sender, envelope.instance, reason)
+            self.calls.fail_partner(envelope.sender, envelope.instance, reason)
         elif partner is not None:
             self.on_partner_notification(envelope.sender, body)
 
     def on_partner_notification(self, partner: str, body: Message) -> None:
-        """Hook: a StateUpdate/ConnectionUpdate of a partner (default: keep DeviceInfo current)."""
+        """A StateUpdate/ConnectionUpdate of a partner: keep its DeviceInfo current, then
+        tell each of :attr:`partner_listeners`."""
         p = self.partners.get(partner)
         if p is None:
             return
@@ -476,6 +453,8 @@ class Participant:
             p.device.state = state
         if connection is not None:
             p.device.connection = connection
+        for listener in self.partner_listeners:
+            listener(partner, body)
 
     async def ask_subscribe(
         self, service: str, partner: str, subscribe: bool = True, timeout: float = 10.0
@@ -495,7 +474,7 @@ class Participant:
             reason=f"unknown device {service!r}: no such service in cell {self.keys.cell!r}",
         )
 
-    # -- outbound processes (5.2.3.6) ----------------------------------------------------
+    # -- outbound processes (5.2.3.6; framework/calls.py) ---------------------------------
 
     async def create_process(
         self,
@@ -507,140 +486,20 @@ class Participant:
         timeout: float = 10.0,
         check: bool = True,
     ) -> ProcessCall:
-        """Create a process at ``partner`` and return it once acknowledged.
+        """Create a process at ``partner`` and return it once acknowledged
+        (:meth:`Calls.create <plugcell.framework.calls.Calls.create>`)."""
+        return await self.calls.create(partner, command, option, data, timeout=timeout,
+                                       check=check)
 
-        Subscribes to ``partner`` first if needed.  With ``check`` (default) the
-        command and data are checked against the partner's catalogue here, with
-        the same reasons the recipient would give; ``check=False`` sends as-is
-        (``data`` must then be a :class:`Data` or None) and lets the recipient judge.
-        A process that cannot be created is returned already Failed — this
-        method does not raise for bad input or a missing partner.
+    async def stop_process(
+        self, call: ProcessCall, command: str | None = None, timeout: float | None = None
+    ) -> ProcessCall:
+        """Send the StopData command that ends ``call`` (a MultipleData process).
+
+        ``command`` defaults to the first StopData command of the partner's catalogue.
         """
-        assert self._loop is not None and self.bus is not None
-        identifier = self._next_identifier()
-        call = ProcessCall(self.name, partner, command, identifier, timeout, self._loop)
-        try:
-            process = await self._make_process(
-                partner, command, option, data, identifier, check, timeout
-            )
-        except (PartnerError, DataError, ValueError) as exc:
-            call._fail(str(exc))
-            return call
-        self._calls[(partner, identifier)] = call
-        call.sent_ns = time.perf_counter_ns()
-        payload = self._encode(process, to=partner)
-        door = self._request_door(partner)
-        if door is not None:  # the partner takes published requests: ack on the process key
-            try:
-                door.put(payload, attachment=codec.attach_identifier(identifier))
-            except zenoh.ZError as exc:
-                call._fail(f"cannot send CreateProcess to {partner}: {exc}")
-        else:
-            self.bus.query("create", partner, payload, *self._ack_handlers(call),
-                           timeout=timeout)
-        await call.acknowledged()
-        if call.final is not None:
-            self._calls.pop((partner, identifier), None)
-        return call
+        return await self.calls.stop(call, command, timeout)
 
-    async def _make_process(
-        self,
-        partner: str,
-        command: str,
-        option: str,
-        data: Any,
-        identifier: int,
-        check: bool,
-        timeout: float,
-    ) -> Process:
-        check_name(partner, "service name")
-        if not check:
-            known = self.partners.get(partner)
-            cmd = (known.device.command(command) if known else None) or Command(name=command)
-            if data is not None and not isinstance(data, Data):
-                raise DataError("check=False needs data as a Data buffer or None")
-            return Process(
-                command=msgspec.structs.replace(cmd, option=option),
-                tag=Tag(self.name, partner),
-                identifier=identifier,
-                data=data,
-            )
-        if partner not in self.partners:
-            await self.subscribe(partner, timeout)
-        device = self.partners[partner].device
-        cmd = device.command(command)
-        if cmd is None:
-            known = ", ".join(c.name for c in device.commands) or "none"
-            raise PartnerError(f"unknown command {command!r} for {partner} (commands: {known})")
-        typed = to_data(data, cmd.input_data_type, cmd.input_data_size, f"{cmd.name} input")
-        return Process(
-            command=msgspec.structs.replace(cmd, option=option),
-            tag=Tag(self.name, partner),
-            identifier=identifier,
-            data=typed,
-        )
-
-    def _request_door(self, partner: str) -> Any:
-        """The publisher of requests to ``partner`` if ``partner`` subscribes to them
-        (Zenoh's matching status, known locally), else None: use the queryable.
-
-        Also None for a participant whose certificate has another name: a secure
-        cell's Zenoh ACL drops such publications silently, while the queryable door
-        brings back the service's precise refusal.
-        """
-        if not self._publishes_requests:  # the cell's ACL would drop them unanswered
-            return None
-        door = self._doors.get(partner)
-        if door is None:
-            assert self.bus is not None
-            door = self.bus.request_door(partner, self.name)
-            self._doors[partner] = door
-        return door if door.matching_status.matching else None
-
-    def _on_ack(self, call: ProcessCall, ack: Acknowledgement, instance: str) -> None:
-        call._on_ack(ack, instance)
-        if call.final is not None:
-            self._calls.pop((call.partner, call.identifier), None)
-
-    def _ack_handlers(
-        self, call: ProcessCall
-    ) -> tuple[Callable[[Any], None], Callable[[Any], None]]:
-        """The reply and done handlers of a CreateProcess sent through the queryable."""
-
-        def reply(r: Any) -> None:
-            if r.ok is None:
-                text = _text(r.err.payload.to_bytes()) if r.err else "error reply"
-                call._fail(f"{call.partner} answered CreateProcess with an error: {text}")
-                return
-            try:
-                envelope = codec.decode(r.ok.payload.to_bytes())
-            except codec.WireError as exc:
-                call._fail(f"bad acknowledgement from {call.partner}: {exc}")
-                return
-            if isinstance(envelope.body, Acknowledgement):
-                self._on_ack(call, envelope.body, envelope.instance)
-            else:
-                call._fail(
-                    f"bad acknowledgement from {call.partner}: {type(envelope.body).__name__}"
-                )
-
-        asked = time.monotonic()
-
-        def done(_: Any) -> None:
-            if call.ack is None:
-                waited = time.monotonic() - asked
-                if not self.is_alive(call.partner):
-                    reason = (f"unknown device {call.partner!r}: no service answered in cell "
-                              f"{self.keys.cell!r}")
-                elif waited < call.timeout - 0.5:  # the query ended early: no one replied
-                    reason = (f"{call.partner} did not answer CreateProcess (no reply after "
-                              f"{waited * 1e3:.0f} ms; the service may be stopping)")
-                else:
-                    reason = f"no acknowledgement from {call.partner} within {call.timeout:g} s"
-                call._fail(reason)
-                self._calls.pop((call.partner, call.identifier), None)
-
-        return reply, done
 
     def watch_processes(
         self, handler: Callable[[str, ProcessUpdateNotification], None]
@@ -661,48 +520,6 @@ class Participant:
 
         return self.bus.watch_processes(on_sample)
 
-    def _on_process_update(self, sample: zenoh.Sample) -> None:
-        try:
-            envelope = codec.decode(sample.payload.to_bytes())
-        except codec.WireError as exc:
-            log.warning("%s: bad ProcessUpdate on %s: %s", self.name, sample.key_expr, exc)
-            return
-        for ack in process_acks(envelope.body):
-            call = self._calls.get((envelope.sender, ack.identifier))
-            if call is not None:
-                self._on_ack(call, ack, envelope.instance)
-        for update in process_updates(envelope.body):
-            call = self._calls.get((envelope.sender, update.identifier))
-            if call is None:
-                continue
-            if call.instance and envelope.instance and envelope.instance != call.instance:
-                # another incarnation of the name (two at once, briefly, until the
-                # younger withdraws — both hear a published request): not our process
-                continue
-            call._on_update(update, envelope.instance)
-            if call.final is not None:
-                self._calls.pop((envelope.sender, update.identifier), None)
-
-    async def stop_process(
-        self, call: ProcessCall, command: str | None = None, timeout: float | None = None
-    ) -> ProcessCall:
-        """Send the StopData command that ends ``call`` (a MultipleData process).
-
-        ``command`` defaults to the first StopData command of the partner's catalogue.
-        """
-        if command is None:
-            partner = self.partners.get(call.partner)
-            stops = [
-                c.name
-                for c in (partner.device.commands if partner else ())
-                if c.type is CommandTypes.StopData
-            ]
-            if not stops:
-                raise PartnerError(f"{call.partner} has no StopData command")
-            command = stops[0]
-        return await self.create_process(
-            call.partner, command, timeout=timeout if timeout is not None else call.timeout
-        )
 
 
 def _text(raw: bytes) -> str:

@@ -66,7 +66,8 @@ class ProcessCall:
 
     # -- fed by the participant (event-loop thread) -------------------------------------
 
-    def _on_ack(self, ack: Acknowledgement, instance: str) -> None:
+    def acknowledge(self, ack: Acknowledgement, instance: str) -> None:
+        """The recipient's acknowledgement arrived (from its incarnation ``instance``)."""
         if self._acked.done():
             # the real acknowledgement after an update overtook it: keep the real one
             if self._synthetic_ack and ack.state is not ProcessStates.Failed:
@@ -82,14 +83,16 @@ class ProcessCall:
         if ack.state is ProcessStates.Failed:
             self._push(self._local(ack.reason or "rejected"))
 
-    def _on_update(self, update: ProcessUpdateNotification, instance: str = "") -> None:
+    def receive(self, update: ProcessUpdateNotification, instance: str = "") -> None:
+        """A ProcessUpdate of the recipient arrived (a Queued one is a heartbeat; one that
+        overtook the acknowledgement acknowledges Queued)."""
         if self.final is not None or update.seq <= self._last_seq:
             return
         self._last_seq = update.seq
         if update.state is ProcessStates.Queued:  # still waiting in the queue: heartbeat
             self._heard = self._loop.time()
             if not self._acked.done():
-                self._on_ack(Acknowledgement(identifier=self.identifier,
+                self.acknowledge(Acknowledgement(identifier=self.identifier,
                                              state=ProcessStates.Queued, instance=instance),
                              instance)
                 self._synthetic_ack = True
@@ -98,7 +101,7 @@ class ProcessCall:
                 waiter.set_result(None)  # re-arm the inactivity timer
             return
         if not self._acked.done():  # the update overtook the acknowledgement
-            self._on_ack(
+            self.acknowledge(
                 Acknowledgement(
                     identifier=self.identifier, state=ProcessStates.Queued, instance=instance
                 ),
@@ -107,12 +110,13 @@ class ProcessCall:
             self._synthetic_ack = True
         self._push(update)
 
-    def _fail(self, reason: str) -> None:
-        """End the process locally (recipient lost, shut down, timed out …)."""
+    def fail(self, reason: str) -> None:
+        """End the process locally (recipient lost, shut down, timed out …): a Failed
+        acknowledgement if none came yet, else a local Failed update (``seq == 0``)."""
         if self.final is not None:
             return
         if not self._acked.done():
-            self._on_ack(
+            self.acknowledge(
                 Acknowledgement(
                     identifier=self.identifier, state=ProcessStates.Failed, reason=reason
                 ),
@@ -159,7 +163,7 @@ class ProcessCall:
                 handle.cancel()
                 self._ack_waiters.remove(waiter)
             if not self._acked.done():
-                self._fail(f"no acknowledgement from {self.partner} within {self.timeout:g} s")
+                self.fail(f"no acknowledgement from {self.partner} within {self.timeout:g} s")
         return self._acked.result()
 
     def __aiter__(self) -> ProcessCall:
@@ -172,7 +176,7 @@ class ProcessCall:
         while not self._updates:
             left = self._heard + self.timeout - self._loop.time()
             if left <= 0:
-                self._fail(f"no update from {self.partner} within {self.timeout:g} s")
+                self.fail(f"no update from {self.partner} within {self.timeout:g} s")
                 break
             waiter = self._waiter = self._loop.create_future()
             handle = self._loop.call_later(left, _wake, waiter)

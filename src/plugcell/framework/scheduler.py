@@ -12,7 +12,7 @@ It knows nothing of Zenoh, the journal or the wire: a :class:`ProcessScheduler` 
 given four seams by its service —
 
 * ``dispatch(command, option, data)`` — the device's CommandDispatcher
-  (:meth:`GenericDevice.dispatch <plugcell.framework.service.GenericDevice.dispatch>`);
+  (:meth:`DeviceInterface.dispatch <plugcell.framework.service.DeviceInterface.dispatch>`);
 * ``update(entry, state, reason, data)`` — journal a ProcessUpdate, then send it
   (the service's outbox);
 * ``busy(flag)`` — the device is Busy (True) / free again (False: Ready if it was Busy);

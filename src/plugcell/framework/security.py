@@ -41,7 +41,7 @@ from __future__ import annotations
 import fnmatch
 import os
 import tomllib
-from collections.abc import Iterable, Mapping
+from collections.abc import Callable, Iterable, Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -49,11 +49,42 @@ from typing import TYPE_CHECKING, Any
 if TYPE_CHECKING:  # pragma: no cover
     from plugcell.framework.codec import Envelope
     from plugcell.framework.messages import Process
-    from plugcell.framework.service import GenericDevice
+    from plugcell.framework.signing import RequestVerifier
 
 ACTIONS = ("create", "wire")
 IDENTITIES = ("none", "tls", "signed")
 ENV_ACL = "PLUGCELL_ACL"
+
+
+def _nobody(_: str) -> Any:
+    return None
+
+
+@dataclass(frozen=True)
+class Recipient:
+    """What the access policy knows of the service it guards — a value, not the service.
+
+    Parameters
+    ----------
+    name, cell, instance : str
+        The service's name, its cell and its incarnation (a signature is bound to them).
+    identities : callable
+        ``identities(zid)``: the certificate names of the links to Zenoh session ``zid``
+        (``identity = "tls"``); default none.
+    role_of : callable
+        ``role_of(sender)``: ``"service"``, ``"client"`` or None (not live), for rules
+        with ``roles``; default None.
+    verifier : callable or None
+        Returns the checker of signed requests (``identity = "signed"``); it may raise
+        ValueError (no CA configured).
+    """
+
+    name: str
+    cell: str
+    instance: str = ""
+    identities: Callable[[str], set[str] | None] = _nobody
+    role_of: Callable[[str], str | None] = _nobody
+    verifier: Callable[[], RequestVerifier] | None = None
 
 
 class PolicyError(ValueError):
@@ -296,7 +327,7 @@ class AccessPolicy:
 
     def authenticate(
         self,
-        service: GenericDevice,
+        service: Recipient,
         envelope: Envelope,
         payload: bytes | bytearray | memoryview | None = None,
     ) -> str:
@@ -306,21 +337,21 @@ class AccessPolicy:
         refusal as a rejection (nothing is recorded under the claimed sender's name)."""
         return self.check_identity(service, envelope.sender, envelope.instance, envelope, payload)
 
-    def authorize_create(self, service: GenericDevice, envelope: Envelope,
+    def authorize_create(self, service: Recipient, envelope: Envelope,
                          process: Process) -> str:
         """May the (authenticated) sender run this process here?  ``""`` or the reason."""
         sender = process.tag.sender
         return self.decide("create", sender, service.name, process.command.name,
-                           _role(service, sender))
+                           service.role_of(sender))
 
-    def authorize_wire(self, service: GenericDevice, envelope: Envelope, partner: str) -> str:
+    def authorize_wire(self, service: Recipient, envelope: Envelope, partner: str) -> str:
         """May the (authenticated) sender wire this service to ``partner``?"""
         sender = envelope.sender
-        return self.decide("wire", sender, service.name, partner, _role(service, sender))
+        return self.decide("wire", sender, service.name, partner, service.role_of(sender))
 
     def check_create(
         self,
-        service: GenericDevice,
+        service: Recipient,
         envelope: Envelope,
         process: Process,
         payload: bytes | bytearray | memoryview | None = None,
@@ -332,7 +363,7 @@ class AccessPolicy:
 
     def check_wire(
         self,
-        service: GenericDevice,
+        service: Recipient,
         envelope: Envelope,
         partner: str,
         payload: bytes | bytearray | memoryview | None = None,
@@ -344,7 +375,7 @@ class AccessPolicy:
 
     def check_identity(
         self,
-        service: GenericDevice,
+        service: Recipient,
         sender: str,
         instance: str,
         envelope: Envelope | None = None,
@@ -361,20 +392,22 @@ class AccessPolicy:
             if envelope is None:
                 return f"access denied: request of {sender} not signed"
             try:
-                verifier = service.request_verifier()
+                if service.verifier is None:
+                    raise ValueError(f"{service.name} has no checker of signed requests")
+                verifier = service.verifier()
             except ValueError as exc:  # no CA configured (SigningError)
                 return f"access denied: cannot verify signed requests: {exc}"
             return verifier.verify(
                 envelope,
                 payload,
-                cell=service.keys.cell,
+                cell=service.cell,
                 recipient=service.name,
                 recipient_instance=service.instance,
             )
         if self.identity != "tls":
             return ""
         zid = instance[16:] if len(instance) > 16 else ""
-        ids = service.bus.link_identities(zid) if service.bus is not None and zid else set()
+        ids = (service.identities(zid) or set()) if zid else set()
         if sender in ids:
             return ""
         seen = ", ".join(sorted(i for i in ids if i)) or "no authenticated link"
@@ -388,14 +421,6 @@ def _raise(message: str) -> Rule:
     raise PolicyError(message)
 
 
-def _role(service: GenericDevice, sender: str) -> str | None:
-    if service.is_alive(sender, "service"):
-        return "service"
-    if service.is_alive(sender, "client"):
-        return "client"
-    return None
-
-
 def _denied(action: str, sender: str, service: str, command: str, why: str) -> str:
     what = f"{command} on {service}" if action == "create" else f"wiring {service} to {command}"
     return f"access denied: {sender} may not {'run' if action == 'create' else 'do'} {what} ({why})"
@@ -406,6 +431,7 @@ __all__ = [
     "IDENTITIES",
     "AccessPolicy",
     "PolicyError",
+    "Recipient",
     "Rule",
     "tls_settings",
     "usrpwd_settings",

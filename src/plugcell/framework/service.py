@@ -1,4 +1,4 @@
-"""The GenericDevice service: the generic state and interface every service inherits.
+"""The GenericDevice service: the framework object that hosts one device.
 
 Thesis 4.1.3.1 and 5.2.2–5.2.3.  A service is a :class:`Participant` (partners,
 outbound processes) plus the *female adapter*, the Generic Interface (Table 5-2):
@@ -8,13 +8,15 @@ outbound processes) plus the *female adapter*, the Generic Interface (Table 5-2)
 * ``CreateProcess`` → acknowledgement, after the process is checked and journaled;
 * the notifications ``ProcessUpdate``, ``StateUpdate``, ``ConnectionUpdate``, ``Shutdown``.
 
-A device service is a small subclass following the CameraService template of
-5.2.3: it declares ``commands`` (its catalogue, as ``StateInitialize`` does) and
-implements the device interface layer of Figure 5-10 — the CommandDispatcher
-(:meth:`GenericDevice.dispatch`) and the FeedbackReceiver, which reports through
-the ports of Table 5-3: ``data_feedback``, ``cmd_feedback``, ``device_state`` and
-``connection_state``.  Queueing, re-scheduling, notifications, partners,
-discovery and the journal are inherited.
+A device is *composed* into a service, not derived from it: it is a
+:class:`DeviceInterface` — a :class:`~plugcell.framework.declaration.Declaration`
+(kind, names, catalogue: what ``StateInitialize`` declares) and the device interface
+layer of Figure 5-10, the CommandDispatcher (``dispatch``), usually in front of a
+driver of its device family.  ``GenericDevice(device, name, cell=…)`` hosts it: the
+device reports through the service's ports of Table 5-3 (``data_feedback``,
+``cmd_feedback``, ``device_state``, ``connection_state``), which the service hands it
+once through the device's ``bind``; queueing, re-scheduling, notifications, partners,
+discovery, the journal and the access policy are the service's.
 
 The ProcessHandler (5.2.3.4, Figure 5-12; :mod:`plugcell.framework.scheduler`) takes
 one process at a time from the
@@ -41,30 +43,22 @@ import asyncio
 import contextlib
 import logging
 import threading
-import time
 from collections.abc import Callable
 from datetime import UTC, datetime
 from pathlib import Path
-from typing import Any, ClassVar, Generic, TypeVar
+from typing import Any, Generic, Protocol, TypeVar
 
-import msgspec
 import zenoh
 
 from plugcell.framework import codec
-from plugcell.framework.admission import (
-    check_envelope,
-    check_input,
-    check_process,
-    decode_request,
-)
 from plugcell.framework.bus import Notification
 from plugcell.framework.data import summary
+from plugcell.framework.declaration import Declaration, check_catalogue
+from plugcell.framework.inbound import Inbound
 from plugcell.framework.journal import Journal, JournalInUseError, NullJournal, journal_dir
-from plugcell.framework.keys import DEFAULT_CELL, Presence, check_name
+from plugcell.framework.keys import DEFAULT_CELL, Presence
 from plugcell.framework.messages import (
-    Acknowledgement,
     Command,
-    CommandTypes,
     ConnectionStates,
     ConnectionUpdateNotification,
     Data,
@@ -72,29 +66,22 @@ from plugcell.framework.messages import (
     DeviceStates,
     GenericDeviceState,
     Message,
-    Process,
     ProcessStates,
     ProcessUpdateNotification,
     ShutdownNotification,
     StateUpdateNotification,
-    SubscribeRequest,
-    SubscribeResponse,
-    UnsubscribeRequest,
 )
 from plugcell.framework.outbox import Outbox
 from plugcell.framework.participant import Participant, PartnerError
 from plugcell.framework.processqueue import Entry
 from plugcell.framework.scheduler import DeviceError, ProcessScheduler
-from plugcell.framework.security import AccessPolicy
-from plugcell.framework.signing import RequestVerifier, SigningError
+from plugcell.framework.security import AccessPolicy, Recipient
 from plugcell.framework.transport import TransportConfig
 
 log = logging.getLogger("plugcell.framework.service")
 
 T = TypeVar("T")
 
-Answer = zenoh.Query | str
-"""Where a CreateProcess is acknowledged: its query, or the sender that published it."""
 
 
 
@@ -112,26 +99,56 @@ class FeedbackPort(Generic[T]):
             raise RuntimeError(f"{self.name}.post before the service started")
 
 
+class DeviceInterface(Protocol):
+    """The device side of a service (Figure 5-10, the "Camera Interface"): what a device
+    family implements and the framework hosts — a :class:`Declaration` and the
+    CommandDispatcher.  A device does not subclass the framework: a
+    :class:`GenericDevice` is made *with* one and hands itself to :meth:`bind`.
+
+    Optional methods (looked up when present): ``async connect()`` and
+    ``async disconnect()`` — open and close the link to the device at start (once the
+    service is live in the cell) and at shutdown (after the last process), the service
+    then reporting Online, Offline; ``async prepare_close()`` — end what the device runs
+    on its own before the service stops taking and running processes; and
+    ``on_partner_notification(partner, body)`` — a partner's StateUpdate or
+    ConnectionUpdate (after the service has recorded it).
+    """
+
+    declaration: Declaration
+
+    def bind(self, service: GenericDevice) -> None:
+        """Take the service that hosts this device: its feedback ports (``data_feedback``,
+        ``cmd_feedback``, ``device_state``, ``connection_state``), ``sender``, ``note``
+        and, for a device that creates processes itself, its participant side."""
+
+    async def dispatch(self, command: Command, option: str, data: Any) -> str | None:
+        """CommandDispatcher: send ``command`` to the device.
+
+        ``data`` is the checked input (an n-D numpy array of the declared type and
+        size, or None).  Return the device's command feedback code (compared with
+        ``command.success_code``), or None if the device will post it later on the
+        service's ``cmd_feedback``.  Report data on its ``data_feedback``.  Raise
+        :class:`DeviceError` to fail the process with a reason.  For a MultipleData
+        command, start the stream and return; the StopData command stops it.
+        """
+        ...
+
+
 class GenericDevice(Participant):
-    """Base of every service.  Subclass, declare ``commands``, implement :meth:`dispatch`."""
+    """The service that hosts one device (module docstring): ``GenericDevice(device)``.
+
+    It is the participant (session, presence, partners, outbound processes) and owns the
+    scheduler, the outbox, the journal, the access policy and the inbound doors
+    (:class:`~plugcell.framework.inbound.Inbound`); the device (a
+    :class:`DeviceInterface`) brings its declaration and its dispatcher.  Not meant to
+    be subclassed.
+    """
 
     role = "service"
-    kind: ClassVar[str] = ""
-    """Registry name of the service kind (``plugcell serve KIND``)."""
-    default_name: ClassVar[str] = ""
-    """Device name when none is given (default: ``kind`` in capitals)."""
-    vendor: ClassVar[str] = ""
-    info: ClassVar[str] = ""
-    commands: ClassVar[tuple[Command, ...]] = ()
-    """The command catalogue (``state.DeviceInfo.Commands`` of StateInitialize, 5.2.3.3)."""
-    express_updates: ClassVar[bool] = True
-    """Publish process notifications with Zenoh's ``express`` flag (sent at once, not held
-    for Zenoh's own batching): the service already sends one sample per sender per
-    loop turn (:class:`~plugcell.framework.outbox.Outbox`), so holding it only adds
-    latency."""
 
     def __init__(
         self,
+        interface: DeviceInterface,
         name: str | None = None,
         *,
         cell: str = DEFAULT_CELL,
@@ -140,21 +157,22 @@ class GenericDevice(Participant):
         max_payload: int = codec.DEFAULT_MAX_PAYLOAD,
         access: AccessPolicy | None = None,
     ) -> None:
-        super().__init__(
-            name or self.default_name or (self.kind or type(self).__name__).upper(),
-            cell=cell,
-            transport=transport,
-        )
+        declaration = interface.declaration
+        if not isinstance(declaration, Declaration):
+            raise TypeError(f"{type(interface).__name__}.declaration is not a Declaration")
+        super().__init__(declaration.name(name), cell=cell, transport=transport)
+        self.interface = interface
+        """The device this service hosts (its declaration and dispatcher)."""
+        self.declaration = declaration
         self.transport = self.transport.for_participant(self.name)
         self.access = access if access is not None else AccessPolicy.from_env()
         """Who may create processes here and wire this service (docs/security.md)."""
-        _check_catalogue(type(self).__name__, self.commands)
         self.device = Device(
             name=self.name,
-            vendor=self.vendor,
-            info=self.info,
-            commands=tuple(self.commands),
-            kind=self.kind,
+            vendor=declaration.vendor,
+            info=declaration.info,
+            commands=declaration.commands,
+            kind=declaration.kind,
             connection=ConnectionStates.Offline,
             state=DeviceStates.Ready,
         )
@@ -164,8 +182,9 @@ class GenericDevice(Participant):
         self.scheduler = ProcessScheduler(
             self.name, self.device, update=self._update, busy=self._busy,
             heartbeat=self._heartbeat,
-            # looked up per call: a subclass or a test may replace dispatch on the instance
-            dispatch=lambda command, option, data: self.dispatch(command, option, data))
+            # looked up per call: a test may replace dispatch on the device
+            dispatch=lambda command, option, data: self.interface.dispatch(
+                command, option, data))
         """Queue, holds, heartbeats and timeouts of the processes (framework/scheduler.py)."""
         # the ports of Table 5-3
         self.data_feedback: FeedbackPort[Any] = FeedbackPort(
@@ -179,11 +198,12 @@ class GenericDevice(Participant):
             self, self._on_connection_state, "ConnectionState"
         )
         self._loop_thread = 0
-        self._departed: set[str] = set()
+        self.departed: set[str] = set()
+        """Incarnations of senders that have left (their late requests are refused)."""
         self._publishers: dict[str, Any] = {}
         self._closing = False
         self.outbox = Outbox(self.name, commit=lambda: self.journal.commit(),
-                             reply=self._reply, publish=self._send_to,
+                             reply=self.reply, publish=self._send_to,
                              is_open=self._session_open)
         """Acknowledgements and updates of this turn of the loop (framework/outbox.py)."""
         self._notify_scheduled = False
@@ -194,19 +214,32 @@ class GenericDevice(Participant):
         """Why this service withdrew because another one has its name (else empty)."""
         self.stopped = asyncio.Event()
         """Set once the service has shut down (by :meth:`close` or a name conflict)."""
+        self.recipient = Recipient(self.name, self.keys.cell)
+        """This service as its access policy sees it (complete once it has started)."""
+        self.inbound = Inbound(self)
+        """Its doors Subscribe and CreateProcess, and the admission of each request."""
+        listener = getattr(interface, "on_partner_notification", None)
+        if listener is not None:  # the device shows its partners' states
+            self.partner_listeners.append(listener)
+        interface.bind(self)
 
-    # -- the device interface: override these (Figure 5-10, "Camera Interface") ---------
+    # -- what the device uses ---------------------------------------------------------------
 
     @property
     def sender(self) -> str:
         """Who asked for the process being dispatched (its sender's participant name).
 
-        Set while :meth:`dispatch` runs a process from the queue; ``""`` when the
-        framework itself calls ``dispatch`` (e.g. to stop the stream of a sender that
-        disappeared).  Services that keep per-requester state (the tracker's BASE and
+        Set while the device's ``dispatch`` runs a process from the queue; ``""`` when
+        the framework itself calls it (e.g. to stop the stream of a sender that
+        disappeared).  Devices that keep per-requester state (the tracker's BASE and
         PROBE, the compute service's workspaces) key it by this name.
         """
         return self.scheduler.sender
+
+    @property
+    def closing(self) -> bool:
+        """Whether the service is shutting down (or has shut down)."""
+        return self._closing
 
     @property
     def stray_feedback(self) -> int:
@@ -236,25 +269,11 @@ class GenericDevice(Participant):
         its own reason."""
         self.scheduler.note(text)
 
-    async def dispatch(self, command: Command, option: str, data: Any) -> str | None:
-        """CommandDispatcher: send ``command`` to the device.
-
-        ``data`` is the checked input (an n-D numpy array of the declared type and
-        size, or None).  Return the device's command feedback code (compared with
-        ``command.success_code``), or None if the device will post it later on
-        ``self.cmd_feedback``.  Report data on ``self.data_feedback``.  Raise
-        :class:`DeviceError` to fail the process with a reason.  For a MultipleData
-        command, start the stream and return; the StopData command stops it.
-        """
-        raise DeviceError(f"{type(self).__name__} does not implement {command.name}")
-
-    async def connect(self) -> None:
-        """Connect to the device controller at start-up (default: just report Online)."""
-        self.connection_state.post(ConnectionStates.Online)
-
-    async def disconnect(self) -> None:
-        """Disconnect at shutdown (default: report Offline)."""
-        self.connection_state.post(ConnectionStates.Offline)
+    def own(self, entity: Any) -> Any:
+        """Keep a Zenoh declaration of the device (a publisher, a subscriber) until the
+        service closes, which undeclares it; returns ``entity``."""
+        self._entities.append(entity)
+        return entity
 
     # -- life cycle ----------------------------------------------------------------------
 
@@ -264,7 +283,10 @@ class GenericDevice(Participant):
         self.outbox.loop = asyncio.get_running_loop()
         try:
             await super().start()
-            await self.connect()
+            connect = getattr(self.interface, "connect", None)
+            if connect is not None:
+                await connect()
+            self.connection_state.post(ConnectionStates.Online)
         except BaseException:
             await self.close()
             raise
@@ -275,17 +297,22 @@ class GenericDevice(Participant):
         bus = self.bus
         assert bus is not None
         if self.access.identity == "signed":
-            self.request_verifier()  # no CA: refuse to start, with the reason
+            self.inbound.request_verifier()  # no CA: refuse to start, with the reason
         if await self._query_live_instances() or self.alive.get(("service", self.name)):
             raise PartnerError(
                 f"a service named {self.name} is already running in cell {self.keys.cell!r}"
             )
         self._open_journal()
+        self.recipient = Recipient(
+            name=self.name, cell=self.keys.cell, instance=self.instance,
+            identities=bus.link_identities, role_of=self.inbound.role_of,
+            verifier=self.inbound.request_verifier)
+        """This service as its access policy sees it (framework/security.py)."""
         self._entities.append(bus.serve("get", self.name, self._on_get))
-        self._entities.append(bus.serve("subscribe", self.name, self._on_subscribe))
+        self._entities.append(bus.serve("subscribe", self.name, self.inbound.on_subscribe))
         self._create_doors = [
-            bus.serve("create", self.name, self._on_create),
-            bus.take_requests(self.name, self._on_request),
+            bus.serve("create", self.name, self.inbound.on_create),
+            bus.take_requests(self.name, self.inbound.on_request),
         ]
         self._entities.extend(self._create_doors)
 
@@ -333,6 +360,10 @@ class GenericDevice(Participant):
             await self.stopped.wait()
             return
         self._closing = True
+        prepare = getattr(self.interface, "prepare_close", None)
+        if prepare is not None:  # the device ends what it runs on its own first
+            with contextlib.suppress(Exception):
+                await prepare()
         for door in self._create_doors:
             with contextlib.suppress(zenoh.ZError):
                 door.undeclare()
@@ -342,7 +373,10 @@ class GenericDevice(Participant):
         await self.scheduler.stop()  # after the current process (bounded by its timeout)
         if self.bus is not None and self._started:
             with contextlib.suppress(Exception):
-                await self.disconnect()
+                disconnect = getattr(self.interface, "disconnect", None)
+                if disconnect is not None:
+                    await disconnect()
+                self.connection_state.post(ConnectionStates.Offline)
             self._publish("shutdown", ShutdownNotification(name=self.name, reason=reason))
         self.outbox.flush()
         for publisher in self._publishers.values():
@@ -357,9 +391,10 @@ class GenericDevice(Participant):
 
     # -- inbound: Get, Subscribe, CreateProcess (Table 5-2) ----------------------------
 
-    def _reply(self, query: zenoh.Query, body: Message) -> None:
+    def reply(self, query: zenoh.Query, body: Message) -> None:
+        """Answer ``query`` with ``body`` (then drop it)."""
         with contextlib.suppress(zenoh.ZError):
-            query.reply(query.key_expr, self._encode(body))
+            query.reply(query.key_expr, self.encode(body))
         query.drop()
 
     def generic_state(self) -> GenericDeviceState:
@@ -369,201 +404,7 @@ class GenericDevice(Participant):
         )
 
     def _on_get(self, query: zenoh.Query) -> None:
-        self._reply(query, self.generic_state())
-
-    def _decode_query(self, query: zenoh.Query) -> tuple[codec.Envelope, bytes] | str:
-        """The request of ``query`` and its bytes (a signature covers them), or why not."""
-        return self._decode_request(query.payload)
-
-    def _decode_request(self, payload: zenoh.ZBytes | None) -> tuple[codec.Envelope, bytes] | str:
-        """A request's envelope and its bytes, or why not (admission step 1)."""
-        return decode_request(payload, self.max_payload, self.name)
-
-    def request_verifier(self) -> RequestVerifier:
-        """The checker of signed requests (``identity = "signed"``), from the cell's CA
-        of this service's transport (``PLUGCELL_TLS_CA``/``PLUGCELL_TLS_DIR``)."""
-        window = self.access.signature_window
-        verifier = getattr(self, "_request_verifier", None)
-        if verifier is None or verifier.window_s != window:
-            if not self.transport.tls_ca:
-                raise SigningError(
-                    f"{self.name}: identity = 'signed' needs the cell's CA "
-                    "(PLUGCELL_TLS_CA or PLUGCELL_TLS_DIR)"
-                )
-            verifier = RequestVerifier.load(self.transport.tls_ca, window)
-            self._request_verifier = verifier
-        return verifier
-
-    def _on_subscribe(self, query: zenoh.Query) -> None:
-        decoded = self._decode_query(query)
-        if isinstance(decoded, str):
-            self._reply(query, SubscribeResponse(ok=False, reason=decoded))
-            return
-        envelope, raw = decoded
-        body = envelope.body
-        if not isinstance(body, SubscribeRequest | UnsubscribeRequest):
-            self._reply(
-                query,
-                SubscribeResponse(
-                    ok=False, reason=f"expected SubscribeRequest, got {type(body).__name__}"
-                ),
-            )
-            return
-        refused = self.access.check_wire(self, envelope, body.partner, raw)  # journaled below
-        if refused:
-            with contextlib.suppress(Exception):
-                what = type(body).__name__
-                self.journal.record_rejection(envelope.sender, None, what, 0, refused)
-                self.journal.commit()
-            self._reply(query, SubscribeResponse(ok=False, reason=refused))
-            return
-        asyncio.get_running_loop().create_task(self._subscribe_for(query, body))
-
-    async def _subscribe_for(
-        self, query: zenoh.Query, body: SubscribeRequest | UnsubscribeRequest
-    ) -> None:
-        if isinstance(body, UnsubscribeRequest):
-            found = await self.unsubscribe(body.partner)
-            reason = "" if found else f"{body.partner} was not a partner of {self.name}"
-            self._reply(query, SubscribeResponse(ok=found, reason=reason))
-            return
-        try:
-            device = await self.subscribe(body.partner)
-        except PartnerError as exc:
-            self._reply(query, SubscribeResponse(ok=False, reason=str(exc)))
-        except Exception as exc:  # always answer: the asker waits for it
-            log.exception("%s: subscribing to %s", self.name, body.partner)
-            self._reply(query, SubscribeResponse(ok=False, reason=f"{body.partner}: {exc!r}"))
-        else:
-            self._reply(query, SubscribeResponse(ok=True, partner=device))
-
-    def _on_create(self, query: zenoh.Query) -> None:
-        """CreateProcess through the queryable: the acknowledgement is the reply."""
-        self._create(query.payload, query)
-
-    def _on_request(self, sender: str, sample: zenoh.Sample) -> None:
-        """CreateProcess published on ``svc/<name>/create/<sender>``: the acknowledgement
-        goes to ``<sender>`` on its process key, in one sample with the first updates."""
-        try:
-            check_name(sender, "sender name")
-        except ValueError as exc:  # nobody to answer: journal it only
-            size = len(sample.payload) if sample.payload is not None else 0
-            with contextlib.suppress(Exception):
-                self.journal.record_rejection(None, None, None, size, str(exc))
-                self.journal.commit()
-            return
-        self._create(sample.payload, sender, codec.attached_identifier(sample.attachment))
-
-    def _create(self, payload: zenoh.ZBytes | None, answer: Answer, attached: int = 0) -> None:
-        """CreateProcessHandler (5.2.3.4): admit (framework/admission.py: decode,
-        authenticate, check, authorise, journal), acknowledge, enqueue.
-
-        ``answer`` is where the acknowledgement goes: the query (queryable door) or
-        the name of the sender that published the request (publication door, whose
-        ``attached`` identifier acknowledges even a request that cannot be read).
-        """
-        received = time.time_ns()
-        size = len(payload) if payload is not None else 0
-        decoded = (
-            self._decode_request(payload)
-            if not self._closing
-            else f"{self.name}: service shutting down"
-        )
-        if isinstance(decoded, str):
-            sender = answer if isinstance(answer, str) else None
-            self._reject(answer, decoded, size, sender, attached or None)
-            return
-        envelope, raw = decoded
-        published_by = answer if isinstance(answer, str) else None
-        invalid = check_envelope(envelope, published_by)
-        if invalid:
-            self._reject(answer, invalid, size, published_by or envelope.sender)
-            return
-        process = envelope.body
-        assert isinstance(process, Process)
-        sender, identifier = process.tag.sender, process.identifier
-        unauthenticated = self.access.authenticate(self, envelope, raw)
-        if unauthenticated:  # a rejection: nothing is recorded under the claimed name
-            self._reject(answer, unauthenticated, size, sender, identifier, process.command.name)
-            return
-        reason = check_process(self.name, self.device, envelope, process, self._departed)
-        if not reason:  # access control: refusals are journaled below with the reason
-            reason = self.access.authorize_create(self, envelope, process)
-        command = self.device.command(process.command.name)
-        array = None
-        if not reason and command is not None:
-            array, reason = check_input(command, process)
-        if self.scheduler.knows(sender, identifier):
-            self._reject(
-                answer,
-                f"duplicate identifier {identifier} from {sender}",
-                size,
-                sender,
-                identifier,
-                process.command.name,
-            )
-            return
-        state = ProcessStates.Failed if reason else ProcessStates.Queued
-        try:
-            self.journal.record_process(
-                sender=sender,
-                identifier=identifier,
-                sender_instance=envelope.instance,
-                recipient_instance=self.instance,
-                command=process.command.name,
-                option=process.command.option,
-                command_type=command.type.value if command else "",
-                input_summary=summary(process.data),
-                received_ns=received,
-                state=state.value,
-                reason=reason,
-            )
-        except Exception as exc:  # DuplicateProcessError: an identifier reused
-            self.journal.commit()
-            self._reject(
-                answer,
-                f"cannot journal process {identifier} from {sender}: {exc}",
-                size,
-                sender,
-                identifier,
-                process.command.name,
-            )
-            return
-        ack = Acknowledgement(identifier=identifier, state=state, reason=reason,
-                              instance=self.instance)
-        if not reason:
-            assert command is not None
-            command = msgspec.structs.replace(command, option=process.command.option)
-            entry = Entry(
-                process=msgspec.structs.replace(process, command=command),
-                command=command,
-                instance=envelope.instance,
-                received_ns=received,
-                input=array,
-            )
-            self.scheduler.post(entry)
-        # after the post: a process the handler starts (or ends) in this turn of the
-        # loop shares the acknowledgement's commit and sample
-        self.outbox.acknowledge(answer, ack)
-
-    def _reject(
-        self,
-        answer: Answer,
-        reason: str,
-        size: int,
-        sender: str | None = None,
-        identifier: int | None = None,
-        command: str | None = None,
-    ) -> None:
-        """Journal a refused request; acknowledge it Failed with the reason (at the flush)."""
-        with contextlib.suppress(Exception):
-            self.journal.record_rejection(sender, identifier, command, size, reason)
-        self.outbox.acknowledge(answer, Acknowledgement(
-            identifier=identifier or 0,
-            state=ProcessStates.Failed,
-            reason=reason,
-            instance=self.instance,
-        ))
+        self.reply(query, self.generic_state())
 
     # -- presence of senders -------------------------------------------------------------
 
@@ -585,7 +426,7 @@ class GenericDevice(Participant):
 
     def _on_left(self, presence: Presence) -> None:
         super()._on_left(presence)
-        self._departed.add(presence.instance)
+        self.departed.add(presence.instance)
         self.scheduler.sender_lost(presence.name, presence.instance)
         if not self.is_alive(presence.name, presence.role) and presence.name in self._publishers:
             with contextlib.suppress(zenoh.ZError):
@@ -637,14 +478,14 @@ class GenericDevice(Participant):
             return
         assert self.bus is not None
         with contextlib.suppress(zenoh.ZError):
-            self.bus.notify(kind, self.name, self._encode(body))
+            self.bus.notify(kind, self.name, self.encode(body))
 
     def _publisher(self, sender: str) -> Any:
         publisher = self._publishers.get(sender)
         if publisher is None:
             assert self.bus is not None
             publisher = self.bus.process_publisher(self.name, sender,
-                                                   express=self.express_updates)
+                                                   express=self.declaration.express_updates)
             self._publishers[sender] = publisher
         return publisher
 
@@ -660,7 +501,7 @@ class GenericDevice(Participant):
         no batch)."""
         if self._session_open():
             with contextlib.suppress(zenoh.ZError):
-                self._publisher(entry.sender).put(self._encode(update))
+                self._publisher(entry.sender).put(self.encode(update))
 
     def _update(self, entry: Entry, state: ProcessStates, reason: str, data: Data | None) -> None:
         """ProcessStateHandler: journal the ProcessUpdate, then send it (the outbox)."""
@@ -685,32 +526,10 @@ class GenericDevice(Participant):
     def _send_to(self, sender: str, body: Message) -> None:
         """One sample for ``sender`` on its process key (the outbox's publish)."""
         with contextlib.suppress(zenoh.ZError):
-            self._publisher(sender).put(self._encode(body))
+            self._publisher(sender).put(self.encode(body))
 
 
-def _check_catalogue(owner: str, commands: tuple[Command, ...]) -> None:
-    names = [c.name for c in commands]
-    if len(set(names)) != len(names):
-        raise TypeError(f"{owner}: duplicate command names in {names}")
-    types = {c.type for c in commands}
-    if CommandTypes.MultipleData in types and CommandTypes.StopData not in types:
-        raise TypeError(f"{owner}: a MultipleData command needs a StopData command to stop it")
-    for c in commands:
-        if (
-            c.type in (CommandTypes.SingleData, CommandTypes.MultipleData)
-            and c.output_data_type is None
-            and c.output_data_size != (0,)
-        ):
-            raise TypeError(f"{owner}: {c.name} declares an output size without a type")
-        if c.input_data_size != (0,) and c.input_data_type is None:
-            raise TypeError(f"{owner}: {c.name} declares an input size without a type")
-
-
-def check_catalogue(owner: str, commands: tuple[Command, ...]) -> None:
-    """Check a command catalogue as a service does at construction: unique names, a
-    StopData for any MultipleData, a type wherever a size is declared (TypeError naming
-    ``owner`` and the command).  For catalogues read from files (a device map)."""
-    _check_catalogue(owner, commands)
-
-
-__all__ = ["DeviceError", "FeedbackPort", "GenericDevice", "check_catalogue"]
+__all__ = [
+    "Declaration", "DeviceError", "DeviceInterface", "FeedbackPort", "GenericDevice",
+    "check_catalogue",
+]

@@ -13,6 +13,7 @@ from typing import Any
 
 import numpy as np
 
+from plugcell.framework.declaration import Declaration
 from plugcell.framework.messages import Command, CommandTypes, DataTypes
 from plugcell.framework.service import DeviceError, GenericDevice
 
@@ -20,14 +21,16 @@ from plugcell.framework.service import DeviceError, GenericDevice
 BURST = 64
 
 
-class BenchService(GenericDevice):
-    """Publisher for ``plugcell bench transport`` (also servable: ``plugcell serve bench``)."""
+class BenchService:
+    """Publisher for ``plugcell bench transport`` (also servable: ``plugcell serve bench``);
+    a :class:`~plugcell.framework.service.GenericDevice` hosts it (:func:`bench_service`)."""
 
-    kind = "bench"
-    default_name = "PUBLISHER"
-    vendor = "plugcell"
-    info = "transport benchmark publisher (thesis 5.3)"
-    commands = (
+    declaration = Declaration(
+        kind="bench",
+        default_name="PUBLISHER",
+        vendor="plugcell",
+        info="transport benchmark publisher (thesis 5.3)",
+        commands=(
         Command(
             name="Echo",
             type=CommandTypes.SingleData,
@@ -48,16 +51,20 @@ class BenchService(GenericDevice):
             info="input [count, *shape]: push count arrays of that shape",
         ),
         Command(name="StopPush", type=CommandTypes.StopData),
-    )
+    ))
 
-    def __init__(self, name: str | None = None, **kwargs: Any) -> None:
-        super().__init__(name, **kwargs)
+    def __init__(self) -> None:
+        self.service: GenericDevice | None = None
         self._pusher: asyncio.Task[None] | None = None
 
+    def bind(self, service: GenericDevice) -> None:
+        self.service = service
+
     async def dispatch(self, command: Command, option: str, data: Any) -> str:
+        assert self.service is not None
         match command.name:
             case "Echo":
-                self.data_feedback.post(data)
+                self.service.data_feedback.post(data)
             case "Push":
                 if data is None or len(data) < 2 or int(data[0]) < 0:
                     raise DeviceError("Push needs [count, *shape] with count >= 0")
@@ -70,7 +77,15 @@ class BenchService(GenericDevice):
         return "OK"
 
     async def _push(self, count: int, frame: np.ndarray) -> None:
+        assert self.service is not None
+        post = self.service.data_feedback.post
         for i in range(count):
-            self.data_feedback.post(frame)
+            post(frame)
             if i % BURST == BURST - 1:
                 await asyncio.sleep(0)
+
+
+def bench_service(name: str | None = None, **options: Any) -> GenericDevice:
+    """A service hosting a :class:`BenchService` (``options``: the framework's keywords,
+    ``cell``, ``transport``, ``journal`` …)."""
+    return GenericDevice(BenchService(), name, **options)

@@ -349,9 +349,9 @@ def serve_raw(cell: str, transport: TransportConfig) -> None:
 
 
 async def serve_service(cell: str, transport: TransportConfig, journal: bool) -> None:
-    from plugcell.apps.bench.device import BenchService
+    from plugcell.apps.bench.device import bench_service
 
-    service = BenchService(cell=cell, transport=transport, journal=journal)
+    service = bench_service(cell=cell, transport=transport, journal=journal)
     stop = asyncio.Event()
     asyncio.get_running_loop().add_signal_handler(signal.SIGTERM, stop.set)
     await service.start()

@@ -270,12 +270,12 @@ async def parties(cell: str, env: dict[str, str], transport: TransportConfig, jo
         The environment of the far ends (default ``env``) and the command prefix that
         starts them (``--networked``: in the other network namespace).
     """
-    from plugcell.apps.bench.device import BenchService
+    from plugcell.apps.bench.device import bench_service
 
     far_env = env if peer_env is None else peer_env
     publisher = Child("service", cell, far_env, journal, list(prefix))
     raw_peer = Child("raw", cell, far_env, False, list(prefix))
-    consumer = BenchService("CONSUMER", cell=cell, transport=transport, journal=journal)
+    consumer = bench_service("CONSUMER", cell=cell, transport=transport, journal=journal)
     raw = None
     try:
         await consumer.start()

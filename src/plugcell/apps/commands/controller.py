@@ -61,7 +61,7 @@ def run(args: argparse.Namespace) -> int:
     from plugcell.apps.cli import CommandError
     from plugcell.apps.ui.reports import ReportFiles, default_docs_dir
     from plugcell.apps.ui.server import serve
-    from plugcell.devices.cell.service import CellController
+    from plugcell.devices.cell.service import cell_controller
     from plugcell.framework.participant import PartnerError
 
     logging.basicConfig(level=args.log_level.upper(), stream=sys.stderr,
@@ -71,7 +71,7 @@ def run(args: argparse.Namespace) -> int:
     if args.docs is not None and not args.docs.is_dir():
         raise CommandError(f"--docs {args.docs}: no such folder")
     try:
-        controller = CellController(
+        controller = cell_controller(
             args.name, cell=cell_of(args), transport=transport_of(args),
             wiring=args.wiring, journals=not args.no_journals,
         )

@@ -218,7 +218,8 @@ async def _serve(service: Any) -> None:
     if not await start_unless_stopped(service.start(), stop):
         return
     print(
-        f"plugcell: {service.name} ({service.kind}) serving in cell {service.keys.cell!r} "
+        f"plugcell: {service.name} ({service.declaration.kind}) serving in cell "
+        f"{service.keys.cell!r} "
         f"as instance {service.instance}",
         flush=True,
     )

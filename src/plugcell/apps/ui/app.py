@@ -53,12 +53,12 @@ def create_app(
     @contextlib.asynccontextmanager
     async def lifespan(app: FastAPI) -> AsyncIterator[None]:
         if manage:
-            await controller.start()
+            await controller.host.start()
         try:
             yield
         finally:
             if manage:
-                await controller.close()
+                await controller.host.close()
 
     app = FastAPI(title="plugcell cell controller", lifespan=lifespan, docs_url=None,
                   redoc_url=None, openapi_url=None)

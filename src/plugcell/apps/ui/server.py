@@ -41,7 +41,7 @@ async def serve(
     except OSError:
         sock.close()
         raise
-    await controller.start()
+    await controller.host.start()
     app = create_app(controller, reports=reports, manage=False,
                      allowed_hosts={host} if host not in ("0.0.0.0", "::") else None)
     config = uvicorn.Config(app, host=host, port=port, log_level=log_level, lifespan="off",
@@ -61,10 +61,10 @@ async def serve(
         bound = int(sock.getsockname()[1])
         shown = "127.0.0.1" if host in ("0.0.0.0", "::") else host
         print(f"plugcell: controller UI on http://{shown}:{bound}/ "
-              f"(service {controller.name} in cell {controller.keys.cell!r})", flush=True)
+              f"(service {controller.host.name} in cell {controller.host.keys.cell!r})", flush=True)
         await task
     finally:
         server.should_exit = True
         with contextlib.suppress(BaseException):
             await asyncio.wait_for(task, 10.0)
-        await controller.close()
+        await controller.host.close()

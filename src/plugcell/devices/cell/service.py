@@ -1,8 +1,9 @@
 """The cell controller service (thesis 7.6, Figures 7-3, 7-9 … 7-12).
 
 "The cell controller service is responsible for the overall management of services
-in the work-cell."  Like every device it is a service (a :class:`GenericDevice`):
-it has a name in the cell, a command catalogue and a journal.  It
+in the work-cell."  Like every device it is hosted by a service (a
+:class:`~plugcell.framework.service.GenericDevice`, :func:`cell_controller`): it has a
+name in the cell, a command catalogue and a journal.  It
 
 * **discovers** the services of the cell (liveliness) and **subscribes to all** of
   them, so it sees their state and connection changes; a service that leaves is
@@ -22,7 +23,8 @@ it has a name in the cell, a command catalogue and a journal.  It
 
 Its own commands make all of that available to any participant (a script, a
 robot program through its robot service, ``plugcell call CONTROLLER …``); the web
-UI (``plugcell controller``) and ``plugcell cell`` use the same methods.
+UI (``plugcell controller``) and ``plugcell cell`` use the same methods (on the
+:class:`CellController`; its service is ``controller.host``).
 """
 
 from __future__ import annotations
@@ -33,10 +35,11 @@ import json
 import logging
 import time
 from collections import deque
-from collections.abc import AsyncIterator, Iterable
+from collections.abc import Iterable
 from pathlib import Path
 from typing import Any, ClassVar
 
+from plugcell.devices.cell.directory import CellDirectory
 from plugcell.devices.cell.feed import UiFeed
 from plugcell.devices.cell.journal_tail import JournalTail
 from plugcell.devices.cell.monitor import ProcessMonitor, data_view
@@ -48,7 +51,7 @@ from plugcell.devices.cell.runs import (
     parse_runs,
     run_programs,
 )
-from plugcell.devices.cell.tasks import CheckedTask, describe_command
+from plugcell.devices.cell.tasks import CheckedTask
 from plugcell.devices.cell.wiring import (
     Wire,
     WiringError,
@@ -56,73 +59,73 @@ from plugcell.devices.cell.wiring import (
     load_wiring,
     parse_wiring,
     save_wiring,
-    wires_in_place,
 )
-from plugcell.framework.keys import Presence
+from plugcell.framework.declaration import Declaration
 from plugcell.framework.messages import (
     Command,
     CommandTypes,
     DataTypes,
     Device,
-    GenericDeviceState,
     Message,
     ProcessStates,
     ProcessUpdateNotification,
 )
-from plugcell.framework.participant import PartnerError, PresenceEvent
+from plugcell.framework.participant import Partner, PartnerError
 from plugcell.framework.process_call import ProcessCall
 from plugcell.framework.service import DeviceError, GenericDevice
 
 log = logging.getLogger("plugcell.devices.cell.service")
 
-#: Seconds between two rounds of Get to every service (partners, i.e. the wiring).
-REFRESH_PERIOD = 1.5
 #: Seconds between two reads of the journals (queued processes).
 JOURNAL_PERIOD = 0.5
 
-__all__ = ["CellController"]
+__all__ = ["CellController", "cell_controller"]
 
 
-class ServiceRecord:
-    """A service as the controller knows it (alive or not)."""
+class MonitoredProcesses:
+    """The controller's participant side as its tasks and runs use it: every process it
+    creates (tasks, fetches, the ACTIVATE of runs) is also put in its monitor."""
 
-    def __init__(self, name: str) -> None:
-        self.name = name
-        self.alive = False
-        self.instance = ""
-        self.device: Device | None = None
-        self.partners: list[str] = []
-        self.first_seen = time.time_ns()
-        self.joined_ns = 0
-        self.left_ns = 0
+    def __init__(self, host: GenericDevice, monitor: ProcessMonitor, feed: UiFeed) -> None:
+        self.host = host
+        self.monitor = monitor
+        self.feed = feed
 
-    def to_json(self, controller: str) -> dict[str, Any]:
-        d = self.device
-        return {
-            "name": self.name,
-            "alive": self.alive,
-            "controller": self.name == controller,
-            "instance": self.instance,
-            "kind": d.kind if d else "",
-            "vendor": d.vendor if d else "",
-            "info": d.info if d else "",
-            "state": d.state.value if d else "Unknown",
-            "connection": d.connection.value if d else "Unknown",
-            "commands": [describe_command(c) for c in d.commands] if d else [],
-            "partners": list(self.partners),
-            "joinedNs": self.joined_ns,
-            "leftNs": self.left_ns,
-        }
+    @property
+    def partners(self) -> dict[str, Partner]:
+        return self.host.partners
+
+    async def subscribe(self, partner: str, timeout: float = 5.0) -> Device:
+        return await self.host.subscribe(partner, timeout)
+
+    async def create_process(
+        self, partner: str, command: str, option: str = "", data: Any = None, **kwargs: Any
+    ) -> ProcessCall:
+        """:meth:`Participant.create_process`, monitored."""
+        host = self.host
+        call = await host.create_process(partner, command, option, data, **kwargs)
+        known = host.partners.get(partner)
+        declared = known.device.command(command) if known else None
+        ack = call.ack
+        record = self.monitor.created(
+            partner, host.name, call.identifier, command=command, option=option,
+            type=declared.type.value if declared else "",
+            state=ack.state.value if ack else "Queued", reason=ack.reason if ack else "",
+        )
+        self.feed.process_changed(record.key)
+        return call
 
 
-class CellController(GenericDevice):
-    """The cell controller service (module docstring)."""
+class CellController:
+    """The cell controller (module docstring): the device a
+    :class:`~plugcell.framework.service.GenericDevice` hosts (:func:`cell_controller`)."""
 
-    kind = "cell-controller"
-    default_name = "CONTROLLER"
-    vendor = "plugcell"
-    info = "Cell controller (thesis 7.6): discovery, wiring, tasks, program runs, monitor"
-    commands = (
+    declaration = Declaration(
+        kind="cell-controller",
+        default_name="CONTROLLER",
+        vendor="plugcell",
+        info="Cell controller (thesis 7.6): discovery, wiring, tasks, program runs, monitor",
+        commands=(
         Command(name="Wire", type=CommandTypes.NoData,
                 input_data_type=DataTypes.String, input_data_size=(2,),
                 info="make SERVICE subscribe to PARTNER: input [SERVICE, PARTNER]"),
@@ -145,69 +148,80 @@ class CellController(GenericDevice):
         Command(name="Processes", type=CommandTypes.SingleData,
                 output_data_type=DataTypes.String, output_data_size=(1,),
                 info="the monitored processes and the queues, as JSON"),
-    )
+    ))
     params: ClassVar[dict[str, type]] = {"wiring": str, "journals": int}
 
     def __init__(
         self,
-        name: str | None = None,
         *,
         wiring: str | Path | None = None,
         journals: bool | int = True,
         home: Path | None = None,
-        **kwargs: Any,
     ) -> None:
-        super().__init__(name, **kwargs)
-        self.records: dict[str, ServiceRecord] = {}
-        self.clients: set[str] = set()
         self.keeper = WiringKeeper()
         self.monitor = ProcessMonitor()
-        self.journal_tail = JournalTail(self.keys.cell, home) if journals else None
+        self._journals = (bool(journals), home)
+        self.journal_tail: JournalTail | None = None
         self.runs: dict[str, ProgramRun] = {}
         self.tasks: dict[str, ProcessCall] = {}
         self._run_tasks: dict[str, asyncio.Task[Any]] = {}
         self.wiring_file = Path(wiring) if wiring else None
-        self.feed = UiFeed(self.name, cell=self.cell_json, processes=self._processes_event,
-                           log=log)
-        """What the web UI hears (cell/feed.py)."""
+        self.service: GenericDevice | None = None
         self._background: set[asyncio.Task[Any]] = set()
         self._loops: list[asyncio.Task[Any]] = []
-        self._refresh_now = asyncio.Event()
+
+    def bind(self, service: GenericDevice) -> None:
+        self.service = service
+        journals, home = self._journals
+        self.journal_tail = JournalTail(service.keys.cell, home) if journals else None
+        self.feed = UiFeed(service.name, cell=self.cell_json, processes=self._processes_event,
+                           log=log)
+        """What the web UI hears (cell/feed.py)."""
         self.robots = RobotStates(self.feed)
         """The latest joint state of each robot (robot_states.py)."""
-        self._reapplying = asyncio.Lock()
+        self.processes = MonitoredProcesses(service, self.monitor, self.feed)
+        """Creates the controller's processes, each monitored."""
+        self.directory = CellDirectory(service, feed=self.feed, keeper=self.keeper,
+                                       monitor=self.monitor, robots=self.robots,
+                                       log=self._log, spawn=self._spawn)
+        """The services and clients of the cell, and the wires asked for (directory.py)."""
+        self.records = self.directory.records
+        self.clients = self.directory.clients
+
+    @property
+    def host(self) -> GenericDevice:
+        """The service hosting the controller (``start()``, ``close()``, its name, cell …)."""
+        assert self.service is not None, "CellController used before a service hosts it"
+        return self.service
 
     # -- life cycle ----------------------------------------------------------------------
 
-    async def _declare(self) -> None:
-        await super()._declare()
-        self._entities.append(self.watch_processes(self._on_any_process))
-        assert self.bus is not None
-        self._entities.append(self.bus.watch_joint_states(self.robots.on_payload))
-
-    async def start(self) -> None:
-        await super().start()
+    async def connect(self) -> None:
+        """Once live in the cell: follow every process and joint state, load the wiring,
+        start discovery, refresh, the UI feed and the journal reader."""
+        host = self.host
+        assert host.bus is not None
+        host.own(host.watch_processes(self._on_any_process))
+        host.own(host.bus.watch_joint_states(self.robots.on_payload))
         if self.wiring_file is not None:
             try:
                 self.load(self.wiring_file)
             except WiringError as exc:
                 self._log("error", str(exc))
         self._loops = [
-            asyncio.create_task(self._discovery_loop(self.events()),
-                                name=f"{self.name}-discovery"),
-            asyncio.create_task(self._refresh_loop(), name=f"{self.name}-refresh"),
-            asyncio.create_task(self.feed.run(), name=f"{self.name}-flush"),
+            asyncio.create_task(self.directory.follow(host.events()),
+                                name=f"{host.name}-discovery"),
+            asyncio.create_task(self.directory.refresh_loop(), name=f"{host.name}-refresh"),
+            asyncio.create_task(self.feed.run(), name=f"{host.name}-flush"),
         ]
         if self.journal_tail is not None:
             self._loops.append(
-                asyncio.create_task(self._journal_loop(), name=f"{self.name}-journal")
+                asyncio.create_task(self._journal_loop(), name=f"{host.name}-journal")
             )
-        for presence_key, instances in list(self.alive.items()):
-            role, name = presence_key
-            for instance in instances:
-                self._presence(Presence(role, name, instance), joined=True)  # type: ignore[arg-type]
+        self.directory.seen()
 
-    async def close(self, reason: str = "service shutting down") -> None:
+    async def prepare_close(self) -> None:
+        """Before the service closes: stop the loops, the runs and the tasks it follows."""
         for task in [*self._loops, *self._background]:
             task.cancel()
         for task in [*self._loops, *self._background]:
@@ -217,7 +231,6 @@ class CellController(GenericDevice):
         self._background.clear()
         if self.journal_tail is not None:
             self.journal_tail.close()
-        await super().close(reason)
 
     def _spawn(self, coro: Any) -> asyncio.Task[Any]:
         task = asyncio.get_running_loop().create_task(coro)
@@ -250,12 +263,12 @@ class CellController(GenericDevice):
     def cell_json(self) -> dict[str, Any]:
         """Services (alive and dead), clients, and the wanted wiring with its status."""
         return {
-            "cell": self.keys.cell,
-            "controller": self.name,
-            "services": [r.to_json(self.name) for r in sorted(
+            "cell": self.host.keys.cell,
+            "controller": self.host.name,
+            "services": [r.to_json(self.host.name) for r in sorted(
                 self.records.values(), key=lambda r: r.name)],
             "clients": sorted(self.clients),
-            "wiring": self.keeper.status(self._alive_set(), self._partner_sets()),
+            "wiring": self.keeper.status(self.directory.alive_set(), self.directory.partner_sets()),
             "wiringFile": str(self.wiring_file) if self.wiring_file else "",
         }
 
@@ -277,127 +290,17 @@ class CellController(GenericDevice):
         records = [self.monitor.records[k] for k in keys if k in self.monitor.records]
         return {"processes": [r.to_json(now) for r in records], "queues": self.monitor.queues()}
 
-    # -- discovery (Figure 7-9) ---------------------------------------------------------
-
-    async def _discovery_loop(self, events: AsyncIterator[PresenceEvent]) -> None:
-        """Presence events from before :meth:`start` listed ``alive`` on."""
-        async for event in events:
-            self._presence(event.presence, joined=event.kind == "join")
-
-    def _presence(self, presence: Presence, *, joined: bool) -> None:
-        if presence.role == "client":
-            if joined:
-                self.clients.add(presence.name)
-            elif not self.is_alive(presence.name, "client"):
-                self.clients.discard(presence.name)
-            self.feed.cell_changed()
-            return
-        record = self.records.get(presence.name)
-        if record is None:
-            record = self.records[presence.name] = ServiceRecord(presence.name)
-        if joined:
-            if record.alive and record.instance == presence.instance:
-                return
-            record.alive, record.instance = True, presence.instance
-            record.joined_ns, record.left_ns = time.time_ns(), 0
-            if presence.name != self.name:
-                self._log("info", f"{presence.name} joined the cell")
-            self.keeper.reset_backoff(presence.name)
-            self._spawn(self._adopt(presence.name))
-        elif not self.is_alive(presence.name):
-            record.alive = False
-            record.left_ns = time.time_ns()
-            record.partners = []
-            for lost in self.monitor.service_lost(presence.name):
-                self.feed.process_changed(lost.key)
-            for other in self.records.values():
-                if presence.name in other.partners:
-                    other.partners.remove(presence.name)
-            self.robots.forget(presence.name)
-            self._log("warning", f"{presence.name} left the cell")
-        self.feed.cell_changed()
-
-    async def _adopt(self, name: str) -> None:
-        """A service appeared: fetch its state, subscribe to it, re-apply its wires."""
-        try:
-            state, _ = await self.get(name, 3.0)
-        except PartnerError as exc:
-            self._log("error", f"{name}: {exc}")
-            return
-        self._update_record(state)
-        if name != self.name:
-            try:
-                await self.subscribe(name, 3.0)
-            except PartnerError as exc:
-                self._log("error", f"cannot subscribe to {name}: {exc}")
-        await self._reapply()
-        self.feed.cell_changed()
-
-    def _update_record(self, state: GenericDeviceState) -> None:
-        info = state.device_info
-        record = self.records.get(info.name)
-        if record is None or not self.is_alive(info.name):
-            return
-        partners = sorted(p.name for p in state.partners)
-        if record.device is None or record.partners != partners or _differs(record.device, info):
-            self.feed.cell_changed()
-        record.device, record.partners = info, partners
+    # -- discovery (Figure 7-9; cell/directory.py) -------------------------------------
 
     def on_partner_notification(self, partner: str, body: Message) -> None:
-        super().on_partner_notification(partner, body)
-        record = self.records.get(partner)
-        p = self.partners.get(partner)
-        if record is not None and p is not None:
-            record.device = p.device
-            self.feed.cell_changed()
-
-    async def _refresh_loop(self) -> None:
-        while True:
-            with contextlib.suppress(TimeoutError):
-                await asyncio.wait_for(self._refresh_now.wait(), REFRESH_PERIOD)
-            self._refresh_now.clear()
-            try:
-                await self.refresh()
-            except Exception:  # never let the loop die
-                log.exception("%s: refresh failed", self.name)
+        """A partner's state changed (the service has recorded it): show it."""
+        self.directory.partner_changed(partner)
 
     async def refresh(self) -> None:
         """Get every service (partners = the wiring), then re-apply missing wires."""
-        for (role, name), instances in list(self.alive.items()):  # events missed at start
-            for instance in instances:
-                self._presence(Presence(role, name, instance), joined=True)  # type: ignore[arg-type]
-        for name, record in list(self.records.items()):
-            if record.alive and not self.is_alive(name):
-                self._presence(Presence("service", name, record.instance), joined=False)
-        for state in await self.list_services(1.0):
-            self._update_record(state)
-        await self._reapply()
+        await self.directory.refresh()
 
     # -- wiring (Figures 7-3, 7-9) -------------------------------------------------------
-
-    def _alive_set(self) -> set[str]:
-        return {n for n, r in self.records.items() if r.alive and r.device is not None}
-
-    def _partner_sets(self) -> dict[str, set[str]]:
-        return {n: set(r.partners) for n, r in self.records.items() if r.alive}
-
-    def wiring_now(self) -> list[Wire]:
-        """The wires in place between the services of the cell (the controller's own left out)."""
-        return wires_in_place({name: record.partners for name, record in self.records.items()
-                               if record.alive and name != self.name})
-
-    async def _ask(self, wire: Wire, subscribe: bool) -> tuple[bool, str]:
-        if wire.service == self.name:
-            return False, f"{self.name} is the cell controller; wire other services"
-        response = await self.ask_subscribe(wire.service, wire.partner, subscribe, 5.0)
-        record = self.records.get(wire.service)
-        if response.ok and record is not None:
-            if subscribe and wire.partner not in record.partners:
-                record.partners = sorted([*record.partners, wire.partner])
-            if not subscribe and wire.partner in record.partners:
-                record.partners = [p for p in record.partners if p != wire.partner]
-            self.feed.cell_changed()
-        return response.ok, response.reason
 
     async def wire(self, service: str, partner: str) -> dict[str, Any]:
         """Make ``service`` subscribe to ``partner``; the wire is kept (re-applied later)."""
@@ -406,7 +309,7 @@ class CellController(GenericDevice):
         except WiringError as exc:
             return {"ok": False, "reason": str(exc)}
         self.keeper.want(w)
-        ok, reason = await self._ask(w, True)
+        ok, reason = await self.directory.ask(w, True)
         if ok:
             self._log("info", f"wired {w}")
         else:
@@ -422,30 +325,18 @@ class CellController(GenericDevice):
         except WiringError as exc:
             return {"ok": False, "reason": str(exc)}
         self.keeper.drop(w)
-        ok, reason = await self._ask(w, False)
+        ok, reason = await self.directory.ask(w, False)
         self._log("info" if ok else "error", f"unwired {w}" if ok else f"unwire {w}: {reason}")
         self.feed.cell_changed()
         return {"ok": ok, "reason": reason}
 
-    async def _reapply(self) -> None:
-        async with self._reapplying:  # one round at a time: no wire is asked for twice
-            results = await self.keeper.reapply(
-                self._alive_set(), self._partner_sets(), lambda w: self._ask(w, True))
-            for w, ok, reason in results:
-                if ok:
-                    self._log("info", f"re-applied {w}")
-                else:
-                    self._log("error", f"cannot re-apply {w}: {reason}")
-            if results:
-                self.feed.cell_changed()
-
     def wiring_document(self) -> list[Wire]:
         """What :meth:`save` writes: the wires in place plus those wanted but waiting."""
-        return sorted(set(self.wiring_now()) | self.keeper.wanted)
+        return sorted(set(self.directory.wiring_now()) | self.keeper.wanted)
 
     def save(self, path: Path) -> dict[str, Any]:
         """Save the wiring of the cell (WiringError if the file cannot be written)."""
-        doc = save_wiring(self.wiring_document(), self.keys.cell, Path(path))
+        doc = save_wiring(self.wiring_document(), self.host.keys.cell, Path(path))
         self.wiring_file = Path(path)
         self._log("info", f"saved {len(doc['wires'])} wires to {path}")
         self.feed.cell_changed()
@@ -462,11 +353,11 @@ class CellController(GenericDevice):
             where = str(source)
         for w in wires:
             self.keeper.want(w)
-        if cell and cell != self.keys.cell:
+        if cell and cell != self.host.keys.cell:
             self._log("warning", f"{where} was saved in cell {cell!r}; applying to "
-                                 f"{self.keys.cell!r}")
+                                 f"{self.host.keys.cell!r}")
         self._log("info", f"loaded {len(wires)} wires from {where}")
-        self._refresh_now.set()
+        self.directory.refresh_now.set()
         self.feed.cell_changed()
         return wires
 
@@ -479,12 +370,12 @@ class CellController(GenericDevice):
 
     async def assign(self, task: CheckedTask) -> dict[str, Any]:
         """Create the process of ``task``; returns its acknowledgement (updates follow)."""
-        call = await self.create_process(
+        call = await self.processes.create_process(
             task.service, task.command.name, task.option, task.data, timeout=task.timeout
         )
         ack = call.ack
         assert ack is not None
-        task_id = f"{task.service}/{self.name}/{call.identifier}"
+        task_id = f"{task.service}/{self.host.name}/{call.identifier}"
         refused = ack.state is ProcessStates.Failed
         self._log("error" if refused else "info",
                   f"task {task.service}.{task.command.name} "
@@ -494,22 +385,6 @@ class CellController(GenericDevice):
             self._spawn(self._follow(task_id, call))
         return {"id": task_id, "state": ack.state.value, "reason": ack.reason,
                 "identifier": str(call.identifier)}
-
-    async def create_process(
-        self, partner: str, command: str, option: str = "", data: Any = None, **kwargs: Any
-    ) -> ProcessCall:
-        """Every process the controller creates (tasks, ACTIVATE of runs) is monitored."""
-        call = await super().create_process(partner, command, option, data, **kwargs)
-        known = self.partners.get(partner)
-        declared = known.device.command(command) if known else None
-        ack = call.ack
-        record = self.monitor.created(
-            partner, self.name, call.identifier, command=command, option=option,
-            type=declared.type.value if declared else "",
-            state=ack.state.value if ack else "Queued", reason=ack.reason if ack else "",
-        )
-        self.feed.process_changed(record.key)
-        return call
 
     async def _follow(self, task_id: str, call: ProcessCall) -> None:
         try:
@@ -529,7 +404,7 @@ class CellController(GenericDevice):
         with ``data`` as its input, monitored like a task, awaited — each wait bounded
         by ``timeout`` — and returned as the final update with the last data any update
         carried, in full (a task's events carry only a summary of large data)."""
-        call = await self.create_process(partner, command, option, data, timeout=timeout)
+        call = await self.processes.create_process(partner, command, option, data, timeout=timeout)
         out = None
         async for update in call:
             record = self.monitor.updated(call.partner, update, source="controller")
@@ -545,7 +420,7 @@ class CellController(GenericDevice):
         if call is None:
             return {"ok": False, "reason": f"no running task {task_id}"}
         try:
-            stop = await self.stop_process(call)
+            stop = await self.host.stop_process(call)
         except PartnerError as exc:
             return {"ok": False, "reason": str(exc)}
         final = await stop.result()
@@ -567,7 +442,7 @@ class CellController(GenericDevice):
         text = ", ".join(f"{i.robot}:{i.program}" + (f" ({len(i.values)} values)" if i.values
                                                      else "") for i in run.items)
         self._log("info", f"{run.id} ({mode}): {text}")
-        run_task = self._spawn(run_programs(self, run, lambda: self._run_changed(run)))
+        run_task = self._spawn(run_programs(self.processes, run, lambda: self._run_changed(run)))
         self._run_tasks[run.id] = run_task
         run_task.add_done_callback(lambda _: self._run_tasks.pop(run.id, None))
         run_task.add_done_callback(lambda _: self._log(
@@ -598,7 +473,7 @@ class CellController(GenericDevice):
             try:
                 processes, updates = await asyncio.to_thread(self.journal_tail.poll)
             except Exception:
-                log.exception("%s: reading the journals", self.name)
+                log.exception("%s: reading the journals", self.host.name)
                 processes, updates = [], []
             for record in self.monitor.from_journal(processes, updates):
                 self.feed.process_changed(record.key)
@@ -636,13 +511,18 @@ class CellController(GenericDevice):
                               if i.state not in ("Completed", "Skipped")]
                     raise DeviceError("; ".join(failed) or "run failed")
             case "Cell":
-                self.data_feedback.post([json.dumps(self.cell_json())])
+                self.host.data_feedback.post([json.dumps(self.cell_json())])
             case "Processes":
-                self.data_feedback.post([json.dumps({
+                self.host.data_feedback.post([json.dumps({
                     "processes": self.monitor.snapshot(), "queues": self.monitor.queues()})])
         return "OK"
 
 
-def _differs(a: Device, b: Device) -> bool:
-    return (a.state, a.connection, a.commands, a.info) != (b.state, b.connection, b.commands,
-                                                           b.info)
+def cell_controller(name: str | None = None, *, wiring: str | Path | None = None,
+                    journals: bool | int = True, home: Path | None = None,
+                    **options: Any) -> CellController:
+    """A cell controller hosted by its service (``controller.host``; ``options``: the
+    framework's keywords, ``cell``, ``transport``, ``journal`` …), not started."""
+    controller = CellController(wiring=wiring, journals=journals, home=home)
+    GenericDevice(controller, name, **options)
+    return controller

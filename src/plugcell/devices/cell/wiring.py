@@ -81,9 +81,10 @@ def wires_in_place(partners: Mapping[str, Iterable[str]]) -> list[Wire]:
     """The wires in place: ``A → B`` for each partner B of each service A (a service's
     own name among its partners left out), sorted.
 
-    The one reading of the wiring of the cell controller (:meth:`CellController.wiring_now`)
-    and of ``plugcell cell ls``/``save``; each leaves the cell controllers out of
-    ``partners`` first (their subscriptions are how they watch, not wiring).
+    The one reading of the wiring of the cell controller
+    (:meth:`~plugcell.devices.cell.directory.CellDirectory.wiring_now`) and of
+    ``plugcell cell ls``/``save``; each leaves the cell controllers out of ``partners`` first
+    (their subscriptions are how they watch, not wiring).
     """
     return sorted({Wire(a, b) for a, bs in partners.items() for b in bs if b != a})
 

@@ -43,10 +43,11 @@ import numpy as np
 from plugcell.devices.compute.expr import EvaluationError, evaluate
 from plugcell.devices.compute.functions import FUNCTIONS, FunctionContext
 from plugcell.devices.compute.workspace import DEFAULT_MAX_ELEMENTS, Workspace, WorkspaceError
-from plugcell.devices.tracker.routing import RoutedDevice
+from plugcell.devices.tracker.routing import Routing
+from plugcell.framework.declaration import Declaration
 from plugcell.framework.journal import plugcell_home
 from plugcell.framework.messages import Command, CommandTypes, DataTypes
-from plugcell.framework.service import DeviceError
+from plugcell.framework.service import DeviceError, GenericDevice
 
 log = logging.getLogger("plugcell.devices.compute.service")
 
@@ -55,14 +56,16 @@ APPEND = ":append"
 __all__ = ["ComputeService"]
 
 
-class ComputeService(RoutedDevice):
-    """Set Matrix, Get Matrix, Evaluate on per-requester workspaces (module docstring)."""
+class ComputeService:
+    """Set Matrix, Get Matrix, Evaluate on per-requester workspaces (module docstring);
+    the device a :class:`~plugcell.framework.service.GenericDevice` hosts."""
 
-    kind = "compute"
-    default_name = "COMPUTE"
-    vendor = "plugcell"
-    info = "Computing service (thesis Table 7-2): workspaces per robot, registered functions"
-    commands = (
+    declaration = Declaration(
+        kind="compute",
+        default_name="COMPUTE",
+        vendor="plugcell",
+        info="Computing service (thesis Table 7-2): workspaces per robot, registered functions",
+        commands=(
         Command(
             name="Set Matrix", type=CommandTypes.NoData,
             input_data_type=DataTypes.Double, input_data_size=(),
@@ -81,19 +84,16 @@ class ComputeService(RoutedDevice):
             info="run 'name = function(args…)'; registered functions only (docs/"
                  "compute-service.md)",
         ),
-    )
+    ))
     params: ClassVar[dict[str, type]] = {"robot": str, "data_dir": str, "max_elements": int}
 
     def __init__(
         self,
-        name: str | None = None,
         *,
         robot: str = "smart_h4",
         data_dir: str | Path | None = None,
         max_elements: int = DEFAULT_MAX_ELEMENTS,
-        **kwargs: Any,
     ) -> None:
-        super().__init__(name, **kwargs)
         if max_elements < 1:
             raise ValueError(f"max_elements must be positive, got {max_elements}")
         self.robot = robot
@@ -101,13 +101,25 @@ class ComputeService(RoutedDevice):
         self.max_elements = max_elements
         self.workspaces: dict[str, Workspace] = {}
         """The workspace of each requester, by name."""
+        self.routing = Routing(self.handle)
+        """Who each process is for, and where its output goes (tracker/routing.py)."""
+        self.service: GenericDevice | None = None
+
+    def bind(self, service: GenericDevice) -> None:
+        self.service = service
+        self.routing.bind(service)
+
+    async def dispatch(self, command: Command, option: str, data: Any) -> str | None:
+        """Through the routing: the requester, then :meth:`handle`, then the routes."""
+        return await self.routing.dispatch(command, option, data)
 
     @property
     def data_dir(self) -> Path:
         """Where parameter sets are saved: ``<home>/cells/<cell>/compute/<name>``."""
         if self._data_dir is not None:
             return self._data_dir
-        return plugcell_home() / "cells" / self.keys.cell / "compute" / self.name
+        assert self.service is not None
+        return plugcell_home() / "cells" / self.service.keys.cell / "compute" / self.service.name
 
     def workspace(self, requester: str) -> Workspace:
         """The workspace of ``requester`` (created empty on first use)."""
@@ -117,8 +129,10 @@ class ComputeService(RoutedDevice):
         return ws
 
     async def handle(self, command: Command, option: str, data: Any) -> str:
-        """CommandDispatcher of Table 7-2, in the workspace of ``self.requester``."""
-        ws = self.workspace(self.requester)
+        """CommandDispatcher of Table 7-2, in the workspace of the process's requester."""
+        service = self.service
+        assert service is not None
+        ws = self.workspace(self.routing.requester)
         try:
             match command.name:
                 case "Set Matrix":
@@ -128,14 +142,14 @@ class ComputeService(RoutedDevice):
                     else:
                         ws.set(name, np.asarray(data, dtype=float))
                 case "Get Matrix":
-                    self.data_feedback.post(self._readable(ws, option.strip()))
+                    self.routing.data_feedback.post(self._readable(ws, option.strip()))
                 case "Evaluate":
                     text = str(np.asarray(data, dtype=object).reshape(-1)[0])
                     names, warnings = await asyncio.to_thread(self._evaluate, ws, text)
-                    log.info("%s: %s evaluated %r → %s", self.name, ws.owner, text, names)
+                    log.info("%s: %s evaluated %r → %s", service.name, ws.owner, text, names)
                     for w in warnings:
-                        log.warning("%s: %s: %s", self.name, ws.owner, w)
-                        self.note(w)
+                        log.warning("%s: %s: %s", service.name, ws.owner, w)
+                        service.note(w)
                 case _:
                     raise DeviceError(f"unknown command {command.name}")
         except (WorkspaceError, EvaluationError) as exc:

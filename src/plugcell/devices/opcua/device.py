@@ -38,6 +38,7 @@ from plugcell.devices.opcua.arguments import VARIANT_TYPES
 from plugcell.devices.opcua.device_map import DeviceMap, MappedCommand, load_device_map
 from plugcell.devices.opcua.server_trust import ServerTrust
 from plugcell.devices.params import flag
+from plugcell.framework.declaration import Declaration
 from plugcell.framework.messages import Command, ConnectionStates, DataTypes
 from plugcell.framework.service import DeviceError, GenericDevice
 
@@ -59,12 +60,14 @@ class _Resolved:
     object: Node | None = None
 
 
-class OpcUaDevice(GenericDevice):
-    """A device behind an OPC UA server, mapped to a catalogue by a device map."""
+class OpcUaDevice:
+    """A device behind an OPC UA server, mapped to a catalogue by a device map (the device
+    a :class:`~plugcell.framework.service.GenericDevice` hosts)."""
 
-    kind = "opcua-device"
-    vendor = ""
-    info = "an OPC UA device (plugcell serve opcua-device --endpoint … --map …)"
+    declaration = Declaration(
+        kind="opcua-device",
+        info="an OPC UA device (plugcell serve opcua-device --endpoint … --map …)")
+    """The kind's; each instance declares its map's catalogue, vendor and name."""
     params: ClassVar[dict[str, Any]] = {
         "endpoint": str, "map": str, "watch_s": float, "certs": str, "user": str,
         "trust": str, "server_uri": str, "insecure_accept_any": flag,
@@ -72,7 +75,6 @@ class OpcUaDevice(GenericDevice):
 
     def __init__(
         self,
-        name: str | None = None,
         *,
         endpoint: str = "",
         map: str | Path | DeviceMap = "",
@@ -82,7 +84,6 @@ class OpcUaDevice(GenericDevice):
         trust: str | Path = "",
         server_uri: str = "",
         insecure_accept_any: bool = False,
-        **kwargs: Any,
     ) -> None:
         if not endpoint:
             raise ValueError("opcua-device needs --endpoint opc.tcp://HOST:PORT")
@@ -98,13 +99,12 @@ class OpcUaDevice(GenericDevice):
             raise ValueError("--trust and server_uri check the server's certificate, which only "
                              "a secured connection has: give --param certs=DIR too")
         self.map = map if isinstance(map, DeviceMap) else load_device_map(map)
-        # the catalogue and identity come from the map (instance attributes shadow the
-        # class's, before GenericDevice reads them)
-        self.commands = tuple(c.command for c in self.map.commands)
-        self.vendor = self.map.vendor
-        self.info = self.map.info or f"OPC UA device at {endpoint}"
-        self.default_name = self.map.name
-        super().__init__(name, **kwargs)
+        # the catalogue and identity come from the map
+        self.declaration = Declaration(
+            kind=self.declaration.kind, commands=tuple(c.command for c in self.map.commands),
+            default_name=self.map.name, vendor=self.map.vendor,
+            info=self.map.info or f"OPC UA device at {endpoint}")
+        self.service: GenericDevice | None = None
         self.endpoint = endpoint
         self.watch_s = watch_s
         self.certs = Path(certs) if certs else None
@@ -126,6 +126,20 @@ class OpcUaDevice(GenericDevice):
         self._watch: asyncio.Task[None] | None = None
         self._subscription: Any = None
 
+    def bind(self, service: GenericDevice) -> None:
+        self.service = service
+
+    @property
+    def host(self) -> GenericDevice:
+        """The service hosting this device."""
+        assert self.service is not None, "OpcUaDevice used before a service hosts it"
+        return self.service
+
+    @property
+    def name(self) -> str:
+        """The service's name (the map's before a service hosts the device)."""
+        return self.service.name if self.service is not None else self.declaration.name()
+
     # -- connection --------------------------------------------------------------------
 
     async def connect(self) -> None:
@@ -135,7 +149,7 @@ class OpcUaDevice(GenericDevice):
                         "its certificate unchecked (a test bench only)", self.name,
                         self.endpoint)
         await self._open()
-        self.connection_state.post(ConnectionStates.Online)
+        self.host.connection_state.post(ConnectionStates.Online)
         self._watch = asyncio.create_task(self._watch_connection(), name=f"{self.name}-watch")
 
     async def _open(self) -> None:
@@ -188,7 +202,7 @@ class OpcUaDevice(GenericDevice):
             with contextlib.suppress(asyncio.CancelledError):
                 await self._watch
         await self._close_client()
-        self.connection_state.post(ConnectionStates.Offline)
+        self.host.connection_state.post(ConnectionStates.Offline)
 
     async def _close_client(self) -> None:
         client, self.client, self._subscription = self.client, None, None
@@ -215,14 +229,14 @@ class OpcUaDevice(GenericDevice):
                 self._lost = f"connection to {self.endpoint} lost: {_why(exc)} (reconnecting)"
                 continue
             log.warning("%s: reconnected to %s", self.name, self.endpoint)
-            self.connection_state.post(ConnectionStates.Online)
+            self.host.connection_state.post(ConnectionStates.Online)
 
     def _connection_lost(self, why: str) -> None:
         self._lost = f"connection to {self.endpoint} lost: {why}"
         log.warning("%s: %s", self.name, self._lost)
-        self.connection_state.post(ConnectionStates.Error)
+        self.host.connection_state.post(ConnectionStates.Error)
         if self._subscription is not None:  # a stream is running: it ends Failed
-            self.cmd_feedback.post(self._lost)
+            self.host.cmd_feedback.post(self._lost)
 
     # -- the map on the server ---------------------------------------------------------
 
@@ -289,7 +303,7 @@ class OpcUaDevice(GenericDevice):
                             for a in mapped.arguments]
                     result = await nodes.object.call_method(nodes.node, *args)
                     if command.gives_output:
-                        self.data_feedback.post(result[0] if isinstance(result, list)
+                        self.host.data_feedback.post(result[0] if isinstance(result, list)
                                                 else result)
                 case "write":
                     assert nodes.node is not None
@@ -297,7 +311,7 @@ class OpcUaDevice(GenericDevice):
                         _variant(data, command.input_data_type, command.input_data_size))
                 case "read":
                     assert nodes.node is not None
-                    self.data_feedback.post(await nodes.node.read_value())
+                    self.host.data_feedback.post(await nodes.node.read_value())
                 case "subscribe":
                     assert nodes.node is not None
                     await self._stop_stream()
@@ -327,7 +341,7 @@ class _Stream:
 
     def datachange_notification(self, node: Node, value: Any, data: Any) -> None:
         if self.device._subscription is not None:
-            self.device.data_feedback.post(value)
+            self.device.host.data_feedback.post(value)
 
 
 def _variant(data: Any, data_type: DataTypes | None, size: tuple[int, ...]) -> ua.Variant:

@@ -73,19 +73,6 @@ log = logging.getLogger("plugcell.devices.opcua")
 CALL_MARGIN = 5.0
 
 
-class _CellWatcher(Participant):
-    """The gateway's own participant: passes partners' state notifications on."""
-
-    def __init__(self, gateway: CellGateway, name: str, **kwargs: Any) -> None:
-        super().__init__(name, **kwargs)
-        self._gateway = gateway
-
-    def on_partner_notification(self, partner: str, body: Message) -> None:
-        super().on_partner_notification(partner, body)
-        if isinstance(body, StateUpdateNotification | ConnectionUpdateNotification):
-            self._gateway._state_changed(partner)
-
-
 class CellGateway:
     """An OPC UA server mirroring cell ``cell`` (see the module docstring).
 
@@ -140,11 +127,10 @@ class CellGateway:
         self.name = name
         self.users = GatewayUsers(users, allow_anonymous)
         self.security = security or GatewaySecurity()
-        self.refresh = refresh
-        self.linger = linger
-        self.robot_poll = robot_poll
+        self.refresh, self.linger, self.robot_poll = refresh, linger, robot_poll
         self._robots: dict[str, asyncio.Task[None]] = {}
-        self.watcher = _CellWatcher(self, name, cell=cell, transport=self.transport)
+        self.watcher = Participant(name, cell=cell, transport=self.transport)
+        self.watcher.partner_listeners.append(self._partner_notified)
         self.server = Server(user_manager=self.users)  # type: ignore[arg-type]
         self.idx = 0
         self.services: dict[str, ServiceNode] = {}
@@ -245,8 +231,9 @@ class CellGateway:
             if event.presence.role == "service":
                 self._changes.put_nowait((event.kind, event.presence.name))
 
-    def _state_changed(self, service: str) -> None:
-        self._changes.put_nowait(("state", service))
+    def _partner_notified(self, partner: str, body: Message) -> None:
+        if isinstance(body, StateUpdateNotification | ConnectionUpdateNotification):
+            self._changes.put_nowait(("state", partner))
 
     async def _apply_changes(self) -> None:
         """Apply joins, leaves and state changes one at a time, in order."""

@@ -219,14 +219,14 @@ def publish_joint_state(service: Any, rate_hz: float) -> JointStatePublisher | N
     Parameters
     ----------
     service : plugcell.devices.robot.service.RobotService
-        A started robot service (its bus, bridge and description).
+        A robot whose service has started (its host's bus; its bridge and description).
     rate_hz
         States per second.
     """
-    if rate_hz <= 0 or service.bus is None:
+    host = service.host
+    if rate_hz <= 0 or host.bus is None:
         return None
-    publisher = service.bus.joint_state_publisher(service.name)
-    service._entities.append(publisher)  # undeclared when the service closes
+    publisher = host.own(host.bus.joint_state_publisher(host.name))  # closed with it
     bridge = service.bridge
 
     async def read() -> np.ndarray | None:

@@ -31,7 +31,9 @@ IDENTIFICATION  SingleData  → String[4]            manufacturer, model, serial
 
 Positions are PDL's: mm and Comau ZYZ degrees.  The controller is reached over
 the line protocol (:mod:`plugcell.devices.robot.bridge`): with ``sim`` the service
-starts its own simulated controller process (:mod:`plugcell.sim.controller.launcher`),
+starts its own controller process with the
+:class:`~plugcell.devices.robot.controller_process.ControllerLauncher` it is given
+(``plugcell serve robot``: the simulated controller, :mod:`plugcell.sim.controller.launcher`),
 otherwise it connects to ``line = HOST:PORT`` — a real controller speaking
 docs/controller-protocol.md — or, with ``rsi = HOST:PORT`` / ``egm = HOST:PORT``, runs
 the programs on the PC and streams each move to a KUKA robot over RSI or an ABB robot over
@@ -66,6 +68,11 @@ from plugcell.devices.robot.bridge import (
     ControllerError,
     parse_address,
 )
+from plugcell.devices.robot.controller_process import (
+    ControllerLauncher,
+    ControllerProcess,
+    ControllerStartError,
+)
 from plugcell.devices.robot.increment import joint_increment, pose_error_sizes
 from plugcell.devices.robot.joint_state import (
     DEFAULT_RATE_HZ,
@@ -91,12 +98,12 @@ from plugcell.devices.robot.protocol import (
 )
 from plugcell.devices.robot.stream_controller import StreamController
 from plugcell.devices.robot.streamed import streamed_link
+from plugcell.framework.declaration import Declaration
 from plugcell.framework.messages import Command, CommandTypes, ConnectionStates, DataTypes
 from plugcell.framework.participant import PartnerError
 from plugcell.framework.service import DeviceError, GenericDevice
 from plugcell.kinematics import RobotDescription
 from plugcell.pdl.predefined import EXT_DATA_MAX
-from plugcell.sim.controller.launcher import SimControllerError, SimControllerProcess
 
 __all__ = ["ProgramStatus", "RobotService"]
 
@@ -125,15 +132,17 @@ class ProgramStatus:
     console: deque[str] = field(default_factory=lambda: deque(maxlen=CONSOLE_LINES))
 
 
-class RobotService(GenericDevice):
-    """A robot: its controller's programs and arm, as a Plug-and-Produce service."""
+class RobotService:
+    """A robot: its controller's programs and arm, as a Plug-and-Produce device (which a
+    :class:`~plugcell.framework.service.GenericDevice` hosts)."""
 
-    kind = "robot"
-    default_name = "ROBOT"
-    vendor = "plugcell"
-    info = ("Robot service (thesis 7.2): runs robot programs on the controller and carries "
-            "their ACTIVATE strings to the partners")
-    commands = (
+    declaration = Declaration(
+        kind="robot",
+        default_name="ROBOT",
+        vendor="plugcell",
+        info=("Robot service (thesis 7.2): runs robot programs on the controller and carries "
+              "their ACTIVATE strings to the partners"),
+        commands=(
         Command(name="ACTIVATE", type=CommandTypes.NoData, input_data_type=_S,
                 input_data_size=(-1,), timeout=3600.0,
                 info="run a robot program: [name or path, 'var=value', ...]; "
@@ -162,7 +171,7 @@ class RobotService(GenericDevice):
                 output_data_size=(4,),
                 info="[manufacturer, model, serial number, product code] of the robot "
                      "(its description file's [identification]; model: its name if none)"),
-    )
+    ))
     params: ClassVar[dict[str, Any]] = {
         "sim": _flag,
         "line": str,
@@ -187,9 +196,9 @@ class RobotService(GenericDevice):
 
     def __init__(
         self,
-        name: str | None = None,
         *,
         sim: bool = False,
+        launcher: ControllerLauncher | None = None,
         line: str = "",
         robot: str = "smart_h4",
         payload_kg: float = 0.0,
@@ -209,7 +218,6 @@ class RobotService(GenericDevice):
         tcp_speed: float = 100.0,
         joint_rate: float = DEFAULT_RATE_HZ,
         connect_timeout: float = 30.0,
-        **kwargs: Any,
     ) -> None:
         if sum(map(bool, (sim, line, rsi, egm))) > 1:
             raise ValueError("give one of sim, line=HOST:PORT, rsi=HOST:PORT or "
@@ -227,8 +235,9 @@ class RobotService(GenericDevice):
             raise ValueError(f"payload_kg must be ≥ 0, not {payload_kg}")
         if not (link_baud >= 0):
             raise ValueError(f"link_baud must be 0 (no serial line) or positive, not {link_baud}")
-        super().__init__(name, **kwargs)
         self.sim = sim
+        self.launcher = launcher
+        self.service: GenericDevice | None = None
         self.link_baud = link_baud
         self.dynamics = dynamics
         self.endpoint: tuple[str, int] | None = (parse_address(line or rsi or egm)
@@ -242,14 +251,15 @@ class RobotService(GenericDevice):
         # the link to the robot (plugcell.devices.robot.link): a controller that runs the
         # programs (line protocol), or the programs on the PC streaming over RSI or EGM
         self.bridge: RobotLink = streamed_link(
-            self, robot=robot, library=self.library, name=self.name, rsi=rsi,
+            self, robot=robot, library=self.library, name=self.declaration.name(), rsi=rsi,
             rsi_robot=rsi_robot, rsi_timeout=rsi_timeout, egm=egm, egm_robot=egm_robot,
             egm_timeout=egm_timeout, joint_speed=joint_speed, tcp_speed=tcp_speed,
             process=stream_process) or ControllerBridge(self)
-        if isinstance(self.bridge, StreamController):  # the UI's device panel shows it
-            self.device.info = f"{self.info} Robot link: {self.bridge.describe()}."
+        if sim and launcher is None:
+            raise ValueError("sim=true needs a controller launcher (plugcell serve robot gives "
+                             "the simulated controller)")
         self.outbound = ExternalProcessHandler(self)
-        self.sim_process: SimControllerProcess | None = None
+        self.sim_process: ControllerProcess | None = None
         self.program = ProgramStatus()
         self._run_waiters: dict[int, asyncio.Future[ProgramEnded]] = {}
         self._reconnect: asyncio.Task[None] | None = None
@@ -257,25 +267,45 @@ class RobotService(GenericDevice):
         self.joint_rate = joint_rate
         self.joint_state: JointStatePublisher | None = None
 
+    def bind(self, service: GenericDevice) -> None:
+        self.service = service
+        if isinstance(self.bridge, StreamController):  # the UI's device panel shows it
+            self.bridge.name = service.name
+            service.device.info = (f"{service.declaration.info} Robot link: "
+                                   f"{self.bridge.describe()}.")
+
+    @property
+    def host(self) -> GenericDevice:
+        """The service hosting this robot."""
+        assert self.service is not None, "RobotService used before a service hosts it"
+        return self.service
+
+    @property
+    def name(self) -> str:
+        """The service's name."""
+        return self.host.name
+
     # ------------------------------------------------------------------ connection
     async def connect(self) -> None:
-        """Start the simulated controller (``sim``) and connect to the controller."""
+        """Start the robot's own controller (``sim``) and connect to the controller."""
+        host = self.host
         try:
             if self.sim:
-                self.sim_process = SimControllerProcess(
-                    name=self.name, cell=self.keys.cell, robot=self.robot,
+                assert self.launcher is not None
+                self.sim_process = self.launcher(
+                    name=host.name, cell=host.keys.cell, robot=self.robot,
                     payload_kg=self.payload_kg, speed=self.speed, seed=self.seed,
-                    library=self.library, transport=self.transport,
+                    library=self.library, transport=host.transport,
                     link_baud=self.link_baud, dynamics=self.dynamics,
                 )
                 self.endpoint = await self.sim_process.start(self.connect_timeout)
             assert self.endpoint is not None
             await self._connect_bridge()
-        except (BridgeError, SimControllerError) as exc:
-            raise PartnerError(f"{self.name}: {exc}") from None
+        except (BridgeError, ControllerStartError) as exc:
+            raise PartnerError(f"{host.name}: {exc}") from None
         self.outbound.start()
         self.joint_state = publish_joint_state(self, self.joint_rate)
-        self.connection_state.post(ConnectionStates.Online)
+        host.connection_state.post(ConnectionStates.Online)
 
     async def _connect_bridge(self, timeout: float | None = None) -> None:
         assert self.endpoint is not None
@@ -309,11 +339,11 @@ class RobotService(GenericDevice):
         self._fail_waiters("the robot service is shutting down")
         if self.sim_process is not None:
             await self.sim_process.stop()
-        self.connection_state.post(ConnectionStates.Offline)
+        self.host.connection_state.post(ConnectionStates.Offline)
 
     async def _reconnect_loop(self) -> None:
         """Reach the controller again after a dropped connection (until shutdown)."""
-        while not self._closing:
+        while not self.host.closing:
             await asyncio.sleep(RECONNECT_S)
             if self.sim_process is not None and not self.sim_process.alive:
                 log.error("%s: the simulated controller has exited", self.name)
@@ -325,7 +355,7 @@ class RobotService(GenericDevice):
                 continue
             log.warning("%s: reconnected to the controller at %s", self.name,
                         self.bridge.address)
-            self.connection_state.post(ConnectionStates.Online)
+            self.host.connection_state.post(ConnectionStates.Online)
             return
 
     def capacities(self) -> tuple[int, int]:
@@ -371,8 +401,8 @@ class RobotService(GenericDevice):
         if self.program.state == "RUNNING":
             self.program.state, self.program.message = "STOPPED", reason
         self._fail_waiters(reason)
-        if not self._closing:
-            self.connection_state.post(ConnectionStates.Error)
+        if not self.host.closing:
+            self.host.connection_state.post(ConnectionStates.Error)
             if self._reconnect is None or self._reconnect.done():
                 self._reconnect = asyncio.get_running_loop().create_task(self._reconnect_loop())
 
@@ -387,7 +417,7 @@ class RobotService(GenericDevice):
         """CommandDispatcher: the commands of Table 7-1 (see :meth:`perform`)."""
         output = await self.perform(command, option, data)
         if output is not None:
-            self.data_feedback.post(output)
+            self.host.data_feedback.post(output)
         return "OK"
 
     async def perform(self, command: Command, option: str, data: Any) -> Any:
@@ -408,17 +438,17 @@ class RobotService(GenericDevice):
                     await b.request(Stop(b.new_id(), name), timeout=command.timeout - 1)
                     return None
                 case "ARM_POS":
-                    return self._numbers(await b.request(ArmPos(b.new_id())), 6)
+                    return _numbers(await b.request(ArmPos(b.new_id())), 6)
                 case "ARM_JNTP":
-                    return self._numbers(await b.request(ArmJntp(b.new_id())))
+                    return _numbers(await b.request(ArmJntp(b.new_id())))
                 case "JNTP_TO_POS":
                     values = tuple(float(v) for v in np.asarray(data).reshape(-1))
-                    return self._numbers(await b.request(JntpToPos(b.new_id(), values)), 6)
+                    return _numbers(await b.request(JntpToPos(b.new_id(), values)), 6)
                 case "POS_TO_JNTP":
                     values = tuple(float(v) for v in np.asarray(data).reshape(-1))
                     text = await b.request(PosToJntp(b.new_id(), values),
                                            timeout=command.timeout - 1)
-                    return self._numbers(text)
+                    return _numbers(text)
                 case "JointIncrement":
                     return await self._joint_increment(option, data)
                 case "PROGRAM_STATUS":
@@ -446,13 +476,6 @@ class RobotService(GenericDevice):
         return [ident.get("manufacturer", ""), ident.get("model", "") or desc.name,
                 ident.get("serial_number", ""), ident.get("product_code", "")]
 
-    @staticmethod
-    def _numbers(text: str, count: int | None = None) -> np.ndarray:
-        try:
-            return np.asarray(parse_numbers(text, count, "controller answer"), dtype=float)
-        except ProtocolError as exc:
-            raise DeviceError(f"bad answer from the controller: {exc}") from None
-
     async def _activate(self, option: str, data: Any) -> None:
         if option not in ("", "Wait"):
             raise DeviceError(f"unknown option {option!r}: '' (start the program) or 'Wait' "
@@ -477,24 +500,7 @@ class RobotService(GenericDevice):
         finally:
             if self._run_waiters.get(run) is waiter:
                 del self._run_waiters[run]
-        return self._outcome(ended)
-
-    @staticmethod
-    def _outcome(ended: ProgramEnded) -> None:
-        """Completed (None) only for a program that ran to its END; DeviceError says why not.
-
-        A program's own ``DEACTIVATE`` ends it before its END — PDL programs give up that
-        way (the shipped ones after a failed step, the reason on the console), so it is a
-        failure: ``program CALIBRATION deactivated itself: calibration: Move failed: …
-        (DEACTIVATE at …/calibration.pdl:35:5)``.
-        """
-        match ended.state:
-            case "FINISHED":
-                return None
-            case "DEACTIVATED":
-                raise DeviceError(f"program {ended.program} deactivated itself: "
-                                  f"{ended.message or 'DEACTIVATE before its END'}")
-        raise DeviceError(f"program {ended.program} {ended.state.lower()}: {ended.message}")
+        return _outcome(ended)
 
     async def _joint_increment(self, option: str, data: Any) -> np.ndarray:
         """δθ; with option ``errors``: [‖Δp‖ mm, ∠ΔR °, δθ…] (SENSOR_COM's test, 8.3.2)."""
@@ -506,7 +512,7 @@ class RobotService(GenericDevice):
             raise DeviceError(f"the controller's robot {robot!r} has no description here: "
                               "the joint increment needs its kinematics")
         values = [float(v) for v in np.asarray(data).reshape(-1)]
-        joints = self._numbers(await self.bridge.request(ArmJntp(self.bridge.new_id())))
+        joints = _numbers(await self.bridge.request(ArmJntp(self.bridge.new_id())))
         try:
             dq = joint_increment(self.robot_description, joints, values[:6], values[6:])
         except ValueError as exc:
@@ -525,3 +531,27 @@ class RobotService(GenericDevice):
                 if fields.get("run") == str(p.run):
                     sim_time = float(fields.get("sim", "0"))
         return [p.program, p.state, f"{sim_time:.3f}", p.message, *p.console]
+
+
+def _numbers(text: str, count: int | None = None) -> np.ndarray:
+    try:
+        return np.asarray(parse_numbers(text, count, "controller answer"), dtype=float)
+    except ProtocolError as exc:
+        raise DeviceError(f"bad answer from the controller: {exc}") from None
+
+
+def _outcome(ended: ProgramEnded) -> None:
+    """Completed (None) only for a program that ran to its END; DeviceError says why not.
+
+    A program's own ``DEACTIVATE`` ends it before its END — PDL programs give up that
+    way (the shipped ones after a failed step, the reason on the console), so it is a
+    failure: ``program CALIBRATION deactivated itself: calibration: Move failed: …
+    (DEACTIVATE at …/calibration.pdl:35:5)``.
+    """
+    match ended.state:
+        case "FINISHED":
+            return None
+        case "DEACTIVATED":
+            raise DeviceError(f"program {ended.program} deactivated itself: "
+                              f"{ended.message or 'DEACTIVATE before its END'}")
+    raise DeviceError(f"program {ended.program} {ended.state.lower()}: {ended.message}")

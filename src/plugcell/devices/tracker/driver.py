@@ -94,7 +94,12 @@ class TrackerStatus:
 
 @runtime_checkable
 class TrackerDriver(Protocol):
-    """A laser tracker as the service needs it (module docstring)."""
+    """A laser tracker as the service needs it (module docstring).
+
+    A driver that looks at the cell through the hosting service's transport (the
+    simulated one: its reflectors are the simulated robots') also has ``attach(bus)``,
+    which the tracker calls with the service's bus before :meth:`connect`.
+    """
 
     info: str
     """Vendor and model, shown in the service's DeviceInfo."""

@@ -26,10 +26,11 @@ The option grammar (docs/tracker-service.md, "Routing output data")::
 e.g. ``tr2euler; to=COMPUTE:Set Matrix:mT:append``.  ``device-option`` is the
 command's own option of Tables 7-2/7-3 and never contains ``;``.
 
-:class:`RoutedDevice` implements both for any :class:`GenericDevice`: subclass it
-instead, and implement :meth:`RoutedDevice.handle` (the device-option only, and
-``self.requester``) instead of ``dispatch``.  Nothing here is specific to the
-tracker; it lives beside it until the framework adopts it (issue 7, section 4).
+:class:`Routing` implements both for any device: a device holds one, made with its
+own handler (``handle(command, device_option, data)``, which reads
+``routing.requester``), dispatches through :meth:`Routing.dispatch` and posts its output
+data on :attr:`Routing.data_feedback`.  Nothing here is specific to the tracker; it lives
+beside it until the framework adopts it (issue 7, section 4).
 """
 
 from __future__ import annotations
@@ -37,15 +38,18 @@ from __future__ import annotations
 import asyncio
 import contextlib
 import logging
-from collections.abc import Callable
+from collections.abc import Awaitable, Callable
 from dataclasses import dataclass
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
 from plugcell.framework.keys import check_name
 from plugcell.framework.messages import Command, CommandTypes, ProcessStates
-from plugcell.framework.service import DeviceError, GenericDevice
+from plugcell.framework.service import DeviceError
+
+if TYPE_CHECKING:
+    from plugcell.framework.service import GenericDevice
 
 log = logging.getLogger(__name__)
 
@@ -64,7 +68,7 @@ __all__ = [
     "OptionError",
     "ProcessOption",
     "Route",
-    "RoutedDevice",
+    "Routing",
     "fit_to_declaration",
     "format_option",
     "parse_option",
@@ -174,7 +178,7 @@ def fit_to_declaration(value: Any, declared: tuple[int, ...]) -> Any:
 
 @dataclass(frozen=True)
 class RequestContext:
-    """What :meth:`RoutedDevice.handle` may know about the process it runs."""
+    """What a routed device's handler may know about the process it runs."""
 
     sender: str
     requester: str
@@ -184,7 +188,7 @@ class RequestContext:
 class _Delivery:
     """Delivers the output values of one process to its routes, in order, one at a time."""
 
-    def __init__(self, device: RoutedDevice, command: Command, context: RequestContext,
+    def __init__(self, device: GenericDevice, command: Command, context: RequestContext,
                  on_failure: Callable[[_Delivery, str], None]) -> None:
         self.device = device
         self._on_failure = on_failure
@@ -290,22 +294,29 @@ class _RoutingPort:
         self._inner.post(value)
 
 
-class RoutedDevice(GenericDevice):
-    """A GenericDevice that knows its requester and routes its output data (module doc)."""
+#: A routed device's handler: ``handle(command, device_option, data)`` → feedback code.
+Handler = Callable[[Command, str, Any], Awaitable[str | None]]
 
-    def __init__(self, name: str | None = None, **kwargs: Any) -> None:
-        super().__init__(name, **kwargs)
-        self.data_feedback = _RoutingPort(  # type: ignore[assignment]
-            self.data_feedback, lambda value: self.call_in_loop(self._submit, value))
+
+class Routing:
+    """The requester and the routes of a device's processes (module doc), for the device
+    that holds it: ``Routing(handle)``, bound to the hosting service with the device."""
+
+    def __init__(self, handle: Handler) -> None:
+        self.handle = handle
+        self.service: GenericDevice | None = None
+        self.data_feedback: Any = None
+        """The DataFeedback port the device posts its output on: each value also goes
+        to the process's routes."""
         self._context: RequestContext | None = None
         self._delivery: _Delivery | None = None
         self._stream_delivery: _Delivery | None = None
 
-    # -- what a subclass implements and uses --------------------------------------------
-
-    async def handle(self, command: Command, option: str, data: Any) -> str | None:
-        """The device interface (as ``dispatch``), with the device-option only."""
-        raise DeviceError(f"{type(self).__name__} does not implement {command.name}")
+    def bind(self, service: GenericDevice) -> None:
+        """Route the output the device posts to ``service``'s DataFeedback port."""
+        self.service = service
+        self.data_feedback = _RoutingPort(
+            service.data_feedback, lambda value: service.call_in_loop(self._submit, value))
 
     @property
     def requester(self) -> str:
@@ -320,28 +331,30 @@ class RoutedDevice(GenericDevice):
     # -- the framework side ---------------------------------------------------------------
 
     async def dispatch(self, command: Command, option: str, data: Any) -> str | None:
-        """Split the option, establish the requester, run :meth:`handle`, deliver."""
-        if not self.sender:  # the framework stops the stream of a lost sender itself
+        """Split the option, establish the requester, run the handler, deliver."""
+        service = self.service
+        assert service is not None, "Routing.dispatch before bind"
+        if not service.sender:  # the framework stops the stream of a lost sender itself
             return await self._stop_routed(command, data, lost=True)
         try:
             parsed = parse_option(option)
         except OptionError as exc:
             raise DeviceError(str(exc)) from None
-        requester = self.sender
+        requester = service.sender
         if parsed.on_behalf_of:
-            if not self.is_alive(self.sender, "service"):
+            if not service.is_alive(service.sender, "service"):
                 raise DeviceError(
                     f"for={parsed.on_behalf_of}: only a service may act on behalf of another "
-                    f"participant ({self.sender} is not a live service)"
+                    f"participant ({service.sender} is not a live service)"
                 )
             requester = parsed.on_behalf_of
         if parsed.routes and not command.gives_output:
             raise DeviceError("no output data to route (to=)")
-        self._context = RequestContext(self.sender, requester, parsed.routes)
+        self._context = RequestContext(service.sender, requester, parsed.routes)
         try:
             if command.type is CommandTypes.StopData:
                 return await self._stop_routed(command, data, lost=False, option=parsed.device)
-            delivery = (_Delivery(self, command, self._context, self._delivery_failed)
+            delivery = (_Delivery(service, command, self._context, self._delivery_failed)
                         if parsed.routes else None)
             if delivery is not None:
                 try:
@@ -395,6 +408,6 @@ class RoutedDevice(GenericDevice):
 
     def _delivery_failed(self, delivery: _Delivery, reason: str) -> None:
         """A routed stream could not deliver: end it (the reason reaches the requester)."""
-        if delivery is self._stream_delivery:
-            log.warning("%s: %s", self.name, reason)
-            self.cmd_feedback.post(reason)
+        if delivery is self._stream_delivery and self.service is not None:
+            log.warning("%s: %s", self.service.name, reason)
+            self.service.cmd_feedback.post(reason)

@@ -36,8 +36,9 @@ Stream Measurement        tr2rpy/tr2euler/tr2prj   Integer[2]      Double[n,11] 
 * **Routing** (9.3): option clauses ``; to=SERVICE:Command:Option`` send every
   measurement on to another service as well (``devices/tracker/routing.py``).
 
-The instrument is behind :class:`~plugcell.devices.tracker.driver.TrackerDriver`;
-``plugcell serve tracker`` uses the simulated one (``--param seed=S``,
+The instrument is behind :class:`~plugcell.devices.tracker.driver.TrackerDriver`, given
+to the device: ``plugcell serve tracker`` hands it the simulated one
+(:class:`plugcell.sim.drivers.tracker.SimulatedTrackerDriver`, ``--param seed=S``,
 ``--param time_scale=X``); ``--param driver=module:Class`` plugs in another.
 """
 
@@ -53,10 +54,11 @@ import numpy as np
 
 from plugcell.devices.tracker.driver import TrackerDriver, TrackerDriverError, TrackerStatus
 from plugcell.devices.tracker.frames import FrameError, RequesterFrames
-from plugcell.devices.tracker.routing import RoutedDevice
+from plugcell.devices.tracker.routing import Routing
 from plugcell.devices.tracker.streaming import STREAM_COLUMNS, stream_request, stream_samples
-from plugcell.framework.messages import Command, CommandTypes, ConnectionStates, DataTypes
-from plugcell.framework.service import DeviceError
+from plugcell.framework.declaration import Declaration
+from plugcell.framework.messages import Command, CommandTypes, DataTypes
+from plugcell.framework.service import DeviceError, GenericDevice
 
 log = logging.getLogger("plugcell.devices.tracker.service")
 
@@ -91,14 +93,17 @@ def load_driver(spec: str, **kwargs: Any) -> TrackerDriver:
     return driver
 
 
-class TrackerService(RoutedDevice):
-    """The laser tracker of Table 7-3, shared by many robots (module docstring)."""
+class TrackerService:
+    """The laser tracker of Table 7-3, shared by many robots (module docstring); the
+    device a :class:`~plugcell.framework.service.GenericDevice` hosts, in front of a
+    :class:`~plugcell.devices.tracker.driver.TrackerDriver`."""
 
-    kind = "tracker"
-    default_name = "TRACKER"
-    vendor = "plugcell"
-    info = "Laser tracker (thesis Table 7-3): per-robot BASE/PROBE, Move, measurements"
-    commands = (
+    declaration = Declaration(
+        kind="tracker",
+        default_name="TRACKER",
+        vendor="plugcell",
+        info="Laser tracker (thesis Table 7-3): per-robot BASE/PROBE, Move, measurements",
+        commands=(
         Command(
             name="Set Base", type=CommandTypes.NoData,
             input_data_type=DataTypes.Double, input_data_size=SIX,
@@ -144,27 +149,17 @@ class TrackerService(RoutedDevice):
                  "sight, 2 tracking speed, 3 out of range, 4 device) until Stop Measurement; "
                  "option tr2rpy | tr2euler | tr2prj",
         ),
-    )
-    params: ClassVar[dict[str, type]] = {"driver": str, "seed": int, "time_scale": float}
+    ))
+    params: ClassVar[dict[str, type]] = {"driver": str}
+    """``driver=module:Class``: another driver than the one ``plugcell serve`` gives."""
 
-    def __init__(
-        self,
-        name: str | None = None,
-        *,
-        driver: TrackerDriver | str = "sim",
-        seed: int = 0,
-        time_scale: float = 0.0,
-        **kwargs: Any,
-    ) -> None:
-        super().__init__(name, **kwargs)
-        if isinstance(driver, str) and driver != "sim":
+    def __init__(self, driver: TrackerDriver | str) -> None:
+        if isinstance(driver, str):
             driver = load_driver(driver)
-        if not (np.isfinite(time_scale) and time_scale >= 0):
-            raise ValueError(f"time_scale must be >= 0, got {time_scale}")
-        self._driver_spec = driver
-        self.driver: TrackerDriver | None = None if isinstance(driver, str) else driver
-        self.seed = seed
-        self.time_scale = time_scale
+        self.driver: TrackerDriver = driver
+        self.service: GenericDevice | None = None
+        self.routing = Routing(self.handle)
+        """Who each process is for, and where its measurements go (tracker/routing.py)."""
         self.frames: dict[str, RequesterFrames] = {}
         """BASE, PROBE and angle convention of each requester (robot) by name."""
         self.beam_for: str | None = None
@@ -173,28 +168,36 @@ class TrackerService(RoutedDevice):
         """Where each requester's last successful Move aimed the beam (tracker frame, m)."""
         self._stream: asyncio.Task[None] | None = None
 
+    def bind(self, service: GenericDevice) -> None:
+        self.service = service
+        self.routing.bind(service)
+
+    @property
+    def requester(self) -> str:
+        """The participant the running process is for (tracker/routing.py)."""
+        return self.routing.requester
+
     # -- connection -----------------------------------------------------------------------
 
     async def connect(self) -> None:
-        if self.driver is None:  # the simulated instrument sees the world through our bus
-            from plugcell.sim.drivers.tracker import SimulatedTrackerDriver
-
-            assert self.bus is not None
-            self.driver = SimulatedTrackerDriver(self.bus, seed=self.seed,
-                                                 time_scale=self.time_scale)
+        assert self.service is not None
+        attach = getattr(self.driver, "attach", None)
+        if attach is not None:  # a driver that sees the cell through the service's bus
+            attach(self.service.bus)
         await self.driver.connect()
-        self.device.vendor = self.driver.info
-        self.connection_state.post(ConnectionStates.Online)
+        self.service.device.vendor = self.driver.info
 
     async def disconnect(self) -> None:
         await self._stop_stream()
-        if self.driver is not None:
-            await self.driver.disconnect()
-        self.connection_state.post(ConnectionStates.Offline)
+        await self.driver.disconnect()
 
-    def status(self) -> TrackerStatus | None:
-        """The instrument's status (None before it is connected)."""
-        return None if self.driver is None else self.driver.state()
+    def status(self) -> TrackerStatus:
+        """The instrument's status."""
+        return self.driver.state()
+
+    async def dispatch(self, command: Command, option: str, data: Any) -> str | None:
+        """Through the routing: the requester, then :meth:`handle`, then the routes."""
+        return await self.routing.dispatch(command, option, data)
 
     # -- the device interface (Figure 5-10) -----------------------------------------------
 
@@ -203,8 +206,9 @@ class TrackerService(RoutedDevice):
         return self.frames.setdefault(requester, RequesterFrames())
 
     async def handle(self, command: Command, option: str, data: Any) -> str:
-        """CommandDispatcher of Table 7-3, for ``self.requester``."""
-        assert self.driver is not None
+        """CommandDispatcher of Table 7-3, for :attr:`requester`."""
+        assert self.service is not None
+        name, output = self.service.name, self.routing.data_feedback
         try:
             match command.name:
                 case "Set Base":
@@ -224,7 +228,7 @@ class TrackerService(RoutedDevice):
                     frames = self.frames_of(self.requester)
                     frames.output_convention(option)  # refuse a bad option before measuring
                     reading = await self.driver.measure(duration)
-                    self.data_feedback.post(frames.measurement(reading.pose, option))
+                    output.post(frames.measurement(reading.pose, option))
                 case "Continuous Measurement":
                     await self._reaim()
                     interval = _milliseconds(data, "interval", MIN_INTERVAL_MS)
@@ -232,7 +236,7 @@ class TrackerService(RoutedDevice):
                     frames.output_convention(option)
                     self._stream = asyncio.create_task(
                         self._measure_continuously(frames, option, interval),
-                        name=f"{self.name}-continuous",
+                        name=f"{name}-continuous",
                     )
                 case "Stream Measurement":
                     await self._reaim()
@@ -241,8 +245,8 @@ class TrackerService(RoutedDevice):
                     frames.output_convention(option)
                     self._stream = asyncio.create_task(
                         stream_samples(self.driver, frames, option, rate, per_message,
-                                       self.data_feedback.post, self.cmd_feedback.post),
-                        name=f"{self.name}-stream",
+                                       output.post, self.service.cmd_feedback.post),
+                        name=f"{name}-stream",
                     )
                 case "Stop Measurement":
                     await self._stop_stream()
@@ -276,17 +280,19 @@ class TrackerService(RoutedDevice):
         Each measurement integrates over the interval (the 50 ms readings of the
         correction loop, 8.3.2); a lost beam ends the stream with the reason.
         """
-        assert self.driver is not None
+        assert self.service is not None
+        output, cmd_feedback = self.routing.data_feedback, self.service.cmd_feedback
+        time_scale = getattr(self.driver, "time_scale", 0.0)  # a model's; real time: 0
         loop = asyncio.get_running_loop()
         next_time = loop.time()
         while True:
             try:
                 reading = await self.driver.measure(interval_s)
             except TrackerDriverError as exc:
-                self.cmd_feedback.post(str(exc))  # ends the process with this reason
+                cmd_feedback.post(str(exc))  # ends the process with this reason
                 return
-            self.data_feedback.post(frames.measurement(reading.pose, option))
-            next_time += max(interval_s * self.time_scale, 0.002)
+            output.post(frames.measurement(reading.pose, option))
+            next_time += max(interval_s * time_scale, 0.002)
             await asyncio.sleep(max(0.0, next_time - loop.time()))
 
     async def _stop_stream(self) -> None:

@@ -17,6 +17,7 @@ import re
 import sys
 from pathlib import Path
 
+from plugcell.devices.robot.controller_process import ControllerStartError
 from plugcell.framework.transport import TransportConfig
 
 __all__ = ["SimControllerError", "SimControllerProcess"]
@@ -24,12 +25,15 @@ __all__ = ["SimControllerError", "SimControllerProcess"]
 _LISTENING = re.compile(r"listening on (\S+):(\d+)\s*$")
 
 
-class SimControllerError(RuntimeError):
+class SimControllerError(ControllerStartError):
     """The simulated controller could not be started."""
 
 
 class SimControllerProcess:
-    """One simulated controller child process."""
+    """One simulated controller child process (a
+    :class:`~plugcell.devices.robot.controller_process.ControllerProcess`; the class is the
+    :class:`~plugcell.devices.robot.controller_process.ControllerLauncher` that
+    ``plugcell serve robot`` gives the robot service)."""
 
     def __init__(
         self,

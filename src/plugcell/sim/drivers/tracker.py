@@ -34,6 +34,7 @@ import asyncio
 import threading
 import time
 from collections.abc import AsyncIterator, Callable
+from typing import ClassVar
 
 import msgspec
 import numpy as np
@@ -80,17 +81,21 @@ NO_REFLECTOR = ("beam not locked: no reflector in the cell to lock on — the si
 class SimulatedTrackerDriver:
     """The tracker model behind the TrackerDriver seam (module docstring).
 
-    ``bus``: the service's transport (its cell's world is looked at through it);
+    ``bus``: the service's transport (its cell's world is looked at through it), given
+    here or by :meth:`attach` before :meth:`connect` (``plugcell serve tracker`` makes the
+    driver before the service: the tracker attaches the bus of the service it runs in);
     ``tracker``: the instrument model (default ``LaserTracker(seed=seed)``);
     ``time_scale``: real seconds slept per simulated second (0: none);
     ``query_timeout_s``: bound of one look at the world.
     """
 
     info = "simulated Leica AT901-MR with T-MAC (plugcell.sim.twin.tracker model)"
+    params: ClassVar[dict[str, type]] = {"seed": int, "time_scale": float}
+    """What ``plugcell serve tracker --param K=V`` sets."""
 
     def __init__(
         self,
-        bus: Bus,
+        bus: Bus | None = None,
         *,
         tracker: LaserTracker | None = None,
         seed: int = 0,
@@ -117,6 +122,17 @@ class SimulatedTrackerDriver:
         self.blocked = blocked
         """Line-of-sight breaks of streams, ``blocked(t)`` with ``t`` the stream's time (s)."""
         self._streams = 0
+
+    def attach(self, bus: Bus) -> None:
+        """Look at the cell's world through ``bus`` (the tracker service's)."""
+        self.bus = bus
+
+    @property
+    def _world_bus(self) -> Bus:
+        if self.bus is None:
+            raise TrackerDriverError("the simulated tracker sees no cell: attach a bus first",
+                                     "device")
+        return self.bus
 
     @property
     def max_stream_rate_hz(self) -> float:
@@ -215,7 +231,7 @@ class SimulatedTrackerDriver:
                 raise BeamNotLockedError("beam not locked: send Move first",
                                          reason="not_pointed")
             six_dof = world[name].kind == "tmac"
-        view = WorldView(self.bus.direct())
+        view = WorldView(self._world_bus.direct())
         latest = {name: world[name]}
 
         def target(_t: float) -> np.ndarray | None:
@@ -268,7 +284,7 @@ class SimulatedTrackerDriver:
 
     def _query(self) -> dict[str, ReflectorState]:
         found: dict[str, ReflectorState] = {}
-        for payload in self.bus.query_reflectors(self.query_timeout_s):
+        for payload in self._world_bus.query_reflectors(self.query_timeout_s):
             try:
                 state = _DECODER.decode(payload)
             except msgspec.DecodeError:
