@@ -8,7 +8,17 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
-from docexamples import RESULTS
+#: Every page's examples as its test report carries them (``user_properties``), so that
+#: the counts are whole when the pages run in pytest-xdist's workers.
+RESULTS: list[tuple[str, str, str, float]] = []
+
+
+def pytest_runtest_logreport(report) -> None:
+    """Collect the examples' results a page's report carries."""
+    if report.when == "call":
+        for key, value in report.user_properties:
+            if key == "docs_examples":
+                RESULTS.extend(tuple(r) for r in value)
 
 
 def pytest_terminal_summary(terminalreporter, exitstatus, config) -> None:

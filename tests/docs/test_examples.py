@@ -162,9 +162,10 @@ def _run_block(page: _Page, block: Block) -> None:
 @pytest.mark.slow
 @pytest.mark.timeout(900)  # a page's blocks have timeouts of their own (docexamples)
 @pytest.mark.parametrize("path", _pages(), ids=_name)
-def test_page_examples(path: Path, tmp_path: Path) -> None:
+def test_page_examples(path: Path, tmp_path: Path, request: pytest.FixtureRequest) -> None:
     """Every example of one page runs and prints what the page shows."""
     name = _name(path)
+    first = len(RESULTS)
     folder, logs = tmp_path / "work", tmp_path / "logs"
     folder.mkdir()
     logs.mkdir()
@@ -190,3 +191,5 @@ def test_page_examples(path: Path, tmp_path: Path) -> None:
             RESULTS.append((block.where, "passed", "", time.monotonic() - t0))
     finally:
         page.stop()
+        # the page's counts travel with its report (to the summary, from any xdist worker)
+        request.node.user_properties.append(("docs_examples", RESULTS[first:]))
