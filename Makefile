@@ -34,10 +34,13 @@ ui-bundle: $(UI_WEB)/node_modules/.installed
 demo: $(BIN)/.plugcell-installed
 	$(BIN)/plugcell demo
 
+# two pytest workers, each test file whole in one (its module fixtures and order kept; the
+# docs' examples, which use fixed ports, are one file): most tests wait on service
+# processes, so two workers cut the wall time even on two cores
 test: $(BIN)/.plugcell-installed $(OPCUA_JS)/node_modules/.installed \
       $(UI_WEB)/node_modules/.installed
 	$(BIN)/ruff check src tests benchmarks
-	$(BIN)/python -m pytest -q
+	$(BIN)/python -m pytest -q -n 2 --dist loadfile
 
 # the inner loop while developing: lint and every test not marked slow (the slow ones
 # start services as processes, a browser or node-opcua); CI runs `make test`, all of them
