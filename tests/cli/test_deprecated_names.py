@@ -62,7 +62,7 @@ def test_the_old_kind_controller_is_the_cell_controller(capsys):
     assert ("plugcell: warning: service kind 'controller' is deprecated: use 'cell-controller'"
             in capsys.readouterr().err)
     assert "controller" not in KINDS
-    assert load_kind("cell-controller").kind == "cell-controller"
+    assert load_kind("cell-controller").declaration.kind == "cell-controller"
 
 
 def test_the_robots_old_parameter_controller_is_line(capsys):

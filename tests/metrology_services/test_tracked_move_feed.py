@@ -12,8 +12,8 @@ import numpy as np
 import pytest
 from metrology_testlib import pose, run, unique_cell
 
+from plugcell.apps.kinds import build
 from plugcell.devices.robot.tracked_moves import ServiceTrackerFeed
-from plugcell.devices.tracker.service import TrackerService
 from plugcell.framework import Client, ProcessStates
 from plugcell.framework.bus import Bus
 from plugcell.framework.keys import KeySpace
@@ -38,7 +38,7 @@ def test_the_feed_gives_tcp_poses_on_the_robots_clock_and_holds_the_tracker(worl
     cell = unique_cell()
 
     async def body():
-        tracker = TrackerService(cell=cell, journal=False, seed=5)
+        tracker = build("tracker", None, {"seed": 5}, cell=cell, journal=False)
         tmac = ReflectorPublisher(Bus(world_session, KeySpace(cell)), "TMAC", "tmac")
         tmac.publish(pose(BASE) @ pose(POSE) @ pose(PROBE))
         await tracker.start()

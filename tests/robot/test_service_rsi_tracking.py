@@ -25,7 +25,6 @@ from test_service_streamed import TIMEOUT, _free_udp_port, _get_status, _run, _s
 import plugcell.pdl
 from plugcell.apps.kinds import build
 from plugcell.devices.robot.service import RobotService
-from plugcell.devices.tracker.service import TrackerService
 from plugcell.framework import Client, ProcessStates
 from plugcell.io.units import robot_from_pose
 from plugcell.sim.controller.rsi_twin import RsiTwinProcess
@@ -76,7 +75,7 @@ def test_a_programs_tracked_move_streams_with_the_tracker(tmp_path: Path, monkey
     port, cell = _free_udp_port(), unique_cell()
 
     async def scenario() -> None:
-        tracker = TrackerService(cell=cell, journal=False, seed=5)
+        tracker = build("tracker", None, {"seed": 5}, cell=cell, journal=False)
         await tracker.start()
         try:
             robot = RsiTwinProcess(f"127.0.0.1:{port}", "--timeout", str(TIMEOUT),
@@ -86,7 +85,7 @@ def test_a_programs_tracked_move_streams_with_the_tracker(tmp_path: Path, monkey
                                                 "rsi_timeout": TIMEOUT, "library": str(lib),
                                                 "stream_process": False},
                                 cell=cell, journal=tmp_path / "journal")
-                assert isinstance(service, RobotService)
+                assert isinstance(service.interface, RobotService)
                 await _start(service, robot)
                 try:
                     async with Client("RSITEST", cell=cell) as client:
@@ -98,7 +97,7 @@ def test_a_programs_tracked_move_streams_with_the_tracker(tmp_path: Path, monkey
                         status = await _get_status(client, service.name)
                         assert final.state is ProcessStates.Completed, (final.reason, status)
                         assert status[1] == "FINISHED" and "tracked" in status[4:], status
-                        moves = service.bridge.motion.move_tracked.__self__  # type: ignore
+                        moves = service.interface.bridge.motion.move_tracked.__self__  # type: ignore
                         stats = moves.last_loop.stats
                         assert stats.samples_used > 200, stats
                         # the tracker is free again: another requester is served at once

@@ -390,6 +390,11 @@ class StreamController:
                 self.runner.stop(reason)
 
     # ------------------------------------------------------------------ events
+    @property
+    def event_loop(self) -> asyncio.AbstractEventLoop | None:
+        """The service's event loop, once connected (``None`` before)."""
+        return self._loop
+
     def in_loop(self, call: Callable[..., None], *args: object) -> None:
         """Run ``call(*args)`` in the service's event loop (from any thread), in order."""
         loop = self._loop

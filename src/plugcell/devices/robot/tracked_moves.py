@@ -364,16 +364,17 @@ class _Worker:
 def tracked_moves_for(controller: Any) -> Callable[[Position, str], float | None]:
     """The ``move_tracked`` of a streaming robot link (the hook of
     :class:`~.stream_controller.StreamController`): the tracker's samples through the link's
-    robot service (``controller.handler``, in its event loop), the move's time on the
+    robot service (``controller.handler.host``, in its event loop), the move's time on the
     program's clock."""
 
     def feeds(tracker: str) -> TrackerFeed:
-        loop = controller._loop
+        loop = controller.event_loop
         if loop is None:
             raise MotionError("not connected")
         desc = controller.description
         fk = forward(desc, None, np.asarray(desc.home, float), "nominal")
-        return ServiceTrackerFeed(controller.handler, loop, tracker,
+        # the robot device's host is the participant that opens the tracker's stream
+        return ServiceTrackerFeed(controller.handler.host, loop, tracker,
                                   np.linalg.inv(fk.flange) @ fk.tcp)
 
     return TrackedMoves(controller.motion, feeds, after=controller.clock.advance).move_tracked
