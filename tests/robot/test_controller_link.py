@@ -109,7 +109,10 @@ def test_a_real_controller_can_take_the_simulated_ones_place(launcher: Launcher)
         ctl.kill9()  # the controller dies under a running program
         final = run.result()
         assert final.state is ProcessStates.Failed
-        assert final.reason == "ACTIVATE: connection to the controller lost"
+        # a killed process's socket ends with FIN or, with unread bytes, RST: the reason
+        # may carry the OS's words after the colon
+        assert re.fullmatch(r"ACTIVATE: connection to the controller lost(: .+)?",
+                            final.reason), final.reason
         lost = client.create_process("R5", "ARM_POS").result()
         assert lost.state is ProcessStates.Failed
         assert lost.reason == ("ARM_POS: controller not connected (connection to the "
