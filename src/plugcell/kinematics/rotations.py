@@ -538,19 +538,24 @@ def _wrap_to(theta: Array, ref: Array) -> Array:
     return np.where(t < -np.pi - 1e-12, t + 2 * np.pi, t)
 
 
+def _angle_diff(theta: Array, ref: Array) -> Array:
+    """``θ − ref`` wrapped into (−π, π]."""
+    return np.angle(np.exp(1j * (theta - ref)))
+
+
 def nearest_angles(R: ArrayLike, convention: str, reference: ArrayLike) -> Array:
     """The angle triple of ``R`` nearest a reference triple (a program's angles stay
     continuous).
 
     Every rotation has two triples in a three-angle convention (``(θ0, θ1, θ2)`` and
     ``(θ0 + π, −θ1 (+π), θ2 + π)``, module table) and each angle is defined modulo 2π;
-    of these the one nearest ``reference`` (max-norm) is returned, each angle within
-    [−π, π] (to 1e-12).  At gimbal lock (the middle angle within :data:`GIMBAL_NEAR`
-    of its singular value) only ``θ0 ± θ2`` is defined: the change of it from the
-    reference's is shared equally between θ0 and θ2.  So a rotation equal to the
-    reference's gives back the reference's angles (to rounding), the triple a
-    controller interpolates from does not jump, and ``C −180°`` does not become
-    ``C +180°``.
+    of these the one nearest ``reference`` (max-norm of the differences wrapped into
+    (−π, π]) is returned, each angle within [−π, π] (to 1e-12).  At gimbal lock (the
+    middle angle within :data:`GIMBAL_NEAR` of its singular value) only ``θ0 ± θ2`` is
+    defined: the change of it from the reference's is shared equally between θ0 and θ2.
+    So a rotation equal to the reference's gives back the reference's angles (to
+    rounding), the triple a controller interpolates from does not jump, and ``C −180°``
+    does not become ``C +180°``.
 
     Parameters
     ----------
@@ -582,8 +587,10 @@ def nearest_angles(R: ArrayLike, convention: str, reference: ArrayLike) -> Array
     b[..., i1] = s * a[..., i1] + c
     b[..., i2] = a[..., i2] + np.pi
     a, b = _wrap_to(a, ref), _wrap_to(b, ref)
-    da = np.max(np.abs(a - ref), axis=-1)
-    db = np.max(np.abs(b - ref), axis=-1)
+    # distance on the circle: a reference of 179.9° is 0.2° from −179.9°, which is
+    # written as such (angles stay within [−π, π]) rather than as the other triple
+    da = np.max(np.abs(_angle_diff(a, ref)), axis=-1)
+    db = np.max(np.abs(_angle_diff(b, ref)), axis=-1)
     out = np.where((db < da)[..., None], b, a)
     # gimbal lock: middle angle at its singular value, only θ0 + σ θ2 is defined
     mid = out[..., i1]
@@ -599,7 +606,7 @@ def nearest_angles(R: ArrayLike, convention: str, reference: ArrayLike) -> Array
     if np.any(lock_plus):
         comb_new = out[..., i0] + sigma * out[..., i2]
         comb_ref = ref[..., i0] + sigma * ref[..., i2]
-        d = np.angle(np.exp(1j * (comb_new - comb_ref)))  # wrapped to (−π, π]
+        d = _angle_diff(comb_new, comb_ref)
         locked = out.copy()
         locked[..., i0] = ref[..., i0] + d / 2
         locked[..., i2] = ref[..., i2] + sigma * d / 2
