@@ -66,7 +66,7 @@ def layer_of(module: str) -> str | None:
 
 
 #: A module named in a string: ``"plugcell.apps.bench.device:BenchService"`` for
-#: importlib, ``"-m", "plugcell.sim.controller.controller"`` for a child process.
+#: importlib, ``"-m", "plugcell.sim.controller"`` for a child process.
 MODULE_TEXT = re.compile(r"plugcell(?:\.[A-Za-z_]\w*)+(?::[A-Za-z_]\w*)?")
 
 
@@ -165,3 +165,51 @@ def test_the_math_parses_no_file_format() -> None:
     assert file_format_imports("def f():\n    from msgspec import convert\n",
                                "plugcell.kinematics.description") == [
         "plugcell.kinematics.description:2 imports msgspec"]
+
+
+#: Modules outside the apps layer allowed to define a top-level ``main`` (module → why).
+#: None: a program is the apps' (``apps/commands/…``, or a ``__main__`` module that calls
+#: one), a library below it is imported, never run.
+MAIN_ALLOWED: dict[str, str] = {}
+
+
+def programs(source: str) -> list[str]:
+    """What makes ``source`` a program: a top-level ``main`` function, or an
+    ``if __name__ == "__main__":`` block."""
+    found = []
+    for node in ast.parse(source).body:
+        if isinstance(node, ast.FunctionDef | ast.AsyncFunctionDef) and node.name == "main":
+            found.append(f"def main (line {node.lineno})")
+        elif (isinstance(node, ast.If) and isinstance(node.test, ast.Compare)
+              and isinstance(node.test.left, ast.Name) and node.test.left.id == "__name__"):
+            found.append(f"if __name__ … (line {node.lineno})")
+    return found
+
+
+def test_programs_live_only_in_apps() -> None:
+    """No module below the apps defines ``main`` or runs as a program (issue 33): the
+    simulated controller's program is ``apps/commands/sim_controller.py``, run by
+    ``python -m plugcell.sim.controller`` (a ``__main__`` module, an app)."""
+    offences = [f"{module}: {what}" for module, path in modules()
+                if layer_of(module) != "apps" and module not in MAIN_ALLOWED
+                for what in programs(path.read_text(encoding="utf-8"))]
+    assert offences == []
+    assert programs("import sys\ndef main():\n    pass\nif __name__ == '__main__':\n"
+                    "    sys.exit(main())\n") == ["def main (line 2)", "if __name__ … (line 4)"]
+    assert programs("def f():\n    def main():\n        pass\n") == []
+
+
+@pytest.mark.slow
+def test_the_simulated_controller_runs_by_both_program_names() -> None:
+    """``python -m plugcell.sim.controller`` and its old name
+    ``python -m plugcell.sim.controller.controller`` run the same program (a bad option:
+    exit code 2 and the reason)."""
+    import subprocess
+    import sys
+
+    for module in ("plugcell.sim.controller", "plugcell.sim.controller.controller"):
+        run = subprocess.run([sys.executable, "-m", module, "--link-baud", "-5", "--no-world"],
+                             capture_output=True, text=True, timeout=60)
+        assert run.returncode == 2, (module, run.stderr)
+        assert run.stderr.strip() == ("plugcell-controller: error: --link-baud must be 0 or "
+                                      "positive, not -5.0")

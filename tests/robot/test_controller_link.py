@@ -36,7 +36,7 @@ pytestmark = [pytest.mark.slow, pytest.mark.timeout(120)]
 
 
 def controller_argv(*args: str) -> list[str]:
-    return [sys.executable, "-m", "plugcell.sim.controller.controller", *args]
+    return [sys.executable, "-m", "plugcell.sim.controller", *args]
 
 
 def listening_port(proc: Proc) -> int:
@@ -136,7 +136,7 @@ def test_the_issue_command_line_and_no_leftover_process(launcher: Launcher) -> N
     children = Path(f"/proc/{service.pid}/task/{service.pid}/children").read_text().split()
     assert len(children) == 1  # its simulated controller
     controller = int(children[0])
-    assert "plugcell.sim.controller.controller" in Path(f"/proc/{controller}/cmdline").read_text()
+    assert "plugcell.sim.controller" in Path(f"/proc/{controller}/cmdline").read_text()
     with BlockingClient("cli-tester", cell=launcher.cell) as client:
         assert client.wait_for("R7")
         pos = client.create_process("R7", "POS_TO_JNTP", "", [1500, 0, 1300, 0, 90, 0]).result()

@@ -38,8 +38,8 @@ def test_flags_a_kind_does_not_have_are_refused(capsys):
 
 
 def test_a_serial_line_rate_that_is_not_a_rate_is_refused():
+    from plugcell.apps.commands.sim_controller import main as controller_main
     from plugcell.devices.robot.service import RobotService
-    from plugcell.sim.controller.controller import main as controller_main
 
     with pytest.raises(ValueError, match=r"link_baud must be 0 \(no serial line\) or positive"):
         RobotService(sim=True, link_baud=-1.0)

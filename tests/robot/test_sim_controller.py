@@ -19,7 +19,7 @@ import pytest
 from plugcell.devices.robot.framing import LineBuffer
 from plugcell.pdl import BUILTIN_LIBRARY
 from plugcell.sim.controller.arm import JOINT_SPEED_DEG_S, RAMP_S, TwinArm
-from plugcell.sim.controller.controller import SimController
+from plugcell.sim.controller.line_controller import SimController
 from plugcell.sim.twin.robot import RobotTwin
 from plugcell.sim.twin.scenario import TwinScenario
 

@@ -16,7 +16,7 @@ from test_sim_controller import Line, numbers
 
 from plugcell.pdl import Execution, ExecutionState, Program, SimClock
 from plugcell.sim.controller.arm import IN_POSITION_RAD, SETTLE_MAX_S, DynamicArm, TwinArm
-from plugcell.sim.controller.controller import SimController
+from plugcell.sim.controller.line_controller import SimController
 from plugcell.sim.twin.dynamics import DynamicTwin
 from plugcell.sim.twin.robot import RobotTwin
 from plugcell.sim.twin.scenario import TwinScenario

@@ -3,7 +3,7 @@
 What every controller that runs robot programs with a
 :class:`~plugcell.devices.robot.runner.ProgramRunner` does with the line protocol's
 messages (docs/controller-protocol.md) the same way — the simulated controller
-(:mod:`plugcell.sim.controller.controller`, over TCP) and the programs on the PC
+(:mod:`plugcell.sim.controller.line_controller`, over TCP) and the programs on the PC
 streaming to a real robot (:mod:`plugcell.devices.robot.stream_controller`, in the
 service's process):
 

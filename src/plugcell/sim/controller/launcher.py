@@ -2,7 +2,7 @@
 
 ``plugcell serve robot --sim`` runs two OS processes, as a real cell would have a
 PC and a robot controller: the service, and
-``python -m plugcell.sim.controller.controller`` listening on a free loopback port
+``python -m plugcell.sim.controller`` listening on a free loopback port
 that it prints on its first line.  The controller watches its parent and exits
 when the service is gone; the service stops it on shutdown (SIGTERM, then SIGKILL).
 """
@@ -51,7 +51,7 @@ class SimControllerProcess:
         dynamics: bool = False,
     ) -> None:
         self.argv = [
-            sys.executable, "-m", "plugcell.sim.controller.controller",
+            sys.executable, "-m", "plugcell.sim.controller",
             "--robot", robot, "--port", "0", "--cell", cell, "--name", name,
             "--payload-kg", repr(float(payload_kg)),
             "--speed", "inf" if math.isinf(speed) else repr(float(speed)),
