@@ -27,21 +27,22 @@ Evaluate        —                            expression: String[1]  —       
   ``frame(params, 'base')`` etc.).  Its output can be routed (``; to=…``) like any
   other, e.g. straight into the tracker's Set Base.
 
-Heavy functions run in a worker thread, one process at a time (the queue), so the
-service keeps answering Get and notifications while it computes.
+An Evaluate runs in the service's engine (:class:`~plugcell.devices.compute.engine.ComputeEngine`;
+``plugcell serve compute`` gives it :class:`~plugcell.devices.compute.engine.FunctionEngine`,
+``--param robot=…``): heavy functions in a worker thread, one process at a time (the queue),
+so the service keeps answering Get and notifications while it computes.
 """
 
 from __future__ import annotations
 
-import asyncio
 import logging
 from pathlib import Path
 from typing import Any, ClassVar
 
 import numpy as np
 
-from plugcell.devices.compute.expr import EvaluationError, evaluate
-from plugcell.devices.compute.functions import FUNCTIONS, FunctionContext
+from plugcell.devices.compute.engine import ComputeEngine
+from plugcell.devices.compute.expr import EvaluationError
 from plugcell.devices.compute.workspace import DEFAULT_MAX_ELEMENTS, Workspace, WorkspaceError
 from plugcell.devices.tracker.routing import Routing
 from plugcell.framework.declaration import Declaration
@@ -85,18 +86,22 @@ class ComputeService:
                  "compute-service.md)",
         ),
     ))
-    params: ClassVar[dict[str, type]] = {"robot": str, "data_dir": str, "max_elements": int}
+    params: ClassVar[dict[str, type]] = {"data_dir": str, "max_elements": int}
 
     def __init__(
         self,
+        driver: ComputeEngine,
         *,
-        robot: str = "smart_h4",
         data_dir: str | Path | None = None,
         max_elements: int = DEFAULT_MAX_ELEMENTS,
     ) -> None:
+        """``driver``: the engine that runs Evaluate (``plugcell serve compute``: the
+        registered functions, :class:`~plugcell.devices.compute.engine.FunctionEngine`);
+        ``data_dir``: where parameter sets are saved (:attr:`data_dir`);
+        ``max_elements``: the most matrix elements a workspace holds."""
         if max_elements < 1:
             raise ValueError(f"max_elements must be positive, got {max_elements}")
-        self.robot = robot
+        self.engine = driver
         self._data_dir = Path(data_dir) if data_dir is not None else None
         self.max_elements = max_elements
         self.workspaces: dict[str, Workspace] = {}
@@ -145,9 +150,10 @@ class ComputeService:
                     self.routing.data_feedback.post(self._readable(ws, option.strip()))
                 case "Evaluate":
                     text = str(np.asarray(data, dtype=object).reshape(-1)[0])
-                    names, warnings = await asyncio.to_thread(self._evaluate, ws, text)
-                    log.info("%s: %s evaluated %r → %s", service.name, ws.owner, text, names)
-                    for w in warnings:
+                    done = await self.engine.evaluate(text, ws, self.data_dir / "params")
+                    log.info("%s: %s evaluated %r → %s", service.name, ws.owner, text,
+                             done.names)
+                    for w in done.warnings:
                         log.warning("%s: %s: %s", service.name, ws.owner, w)
                         service.note(w)
                 case _:
@@ -169,12 +175,6 @@ class ComputeService:
             known = ", ".join(sorted(self.workspaces)) or "none"
             raise WorkspaceError(f"no workspace of {owner!r} (workspaces: {known})")
         return other.matrix(name.strip())
-
-    def _evaluate(self, ws: Workspace, text: str) -> tuple[list[str], list[str]]:
-        """The names assigned by ``text`` and the warnings of its functions."""
-        context = FunctionContext(workspace=ws, robot=self.robot,
-                                  params_dir=self.data_dir / "params")
-        return evaluate(text, ws, FUNCTIONS, context=context), context.warnings
 
 
 def _target(option: str) -> tuple[str, bool]:
