@@ -17,6 +17,7 @@ from childproc import free_port
 from opcua_testlib import JS, Proc, plugcell_argv, run_js, unique_cell, until
 
 from plugcell.devices.opcua.certificates import issue_application_certificate
+from plugcell.devices.opcua.client import AsyncuaDriver
 from plugcell.devices.opcua.device import OpcUaDevice
 from plugcell.devices.opcua.device_map import parse_device_map
 from plugcell.framework import BlockingClient, DeviceError, GenericDevice, ProcessStates, from_data
@@ -184,8 +185,8 @@ async def _connect_with(cell: GripperCell, maps: list[str]) -> list[str]:
     reasons = []
     for text in maps:
         device = GenericDevice(OpcUaDevice(
-            endpoint=cell.endpoint, map=parse_device_map(text, "device.toml"),
-            insecure_accept_any=True), "BROKEN", journal=False).interface
+            AsyncuaDriver(endpoint=cell.endpoint, insecure_accept_any=True),
+            map=parse_device_map(text, "device.toml")), "BROKEN", journal=False).interface
         with pytest.raises(DeviceError) as err:
             await device.connect()
         assert str(err.value).startswith("device.toml: command ")
@@ -253,7 +254,8 @@ def test_a_secured_device_server_is_reached_with_the_cells_certificate_and_a_use
     server.wait_line(lambda line: '"listening"' in line, 30.0)
 
     async def refused() -> str:
-        device = GenericDevice(OpcUaDevice(endpoint=endpoint, map=MAP, certs=certs, user="plc"),
+        device = GenericDevice(OpcUaDevice(AsyncuaDriver(endpoint=endpoint, certs=certs,
+                                                         user="plc"), map=MAP),
                                "SECURE_GRIPPER", journal=False).interface
         with pytest.raises(DeviceError) as err:
             await device.connect()

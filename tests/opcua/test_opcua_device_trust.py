@@ -19,6 +19,7 @@ from childproc import Proc, free_port
 from opcua_testlib import JS, plugcell_argv, unique_cell
 
 from plugcell.devices.opcua.certificates import certificate_paths, issue_application_certificate
+from plugcell.devices.opcua.client import AsyncuaDriver
 from plugcell.devices.opcua.device import OpcUaDevice
 from plugcell.framework import DeviceError, GenericDevice
 
@@ -81,8 +82,9 @@ def plc_certificate(certs: Path, folder: Path, **kw) -> tuple[Path, Path]:
 
 async def connect(endpoint: str, certs: Path, **kw) -> str:
     """Connect SECURE_GRIPPER as user plc; "" when connected, else the refusal."""
-    device = GenericDevice(OpcUaDevice(endpoint=endpoint, map=MAP, certs=certs, user="plc",
-                                       **kw), "SECURE_GRIPPER", journal=False).interface
+    device = GenericDevice(OpcUaDevice(AsyncuaDriver(endpoint=endpoint, certs=certs, user="plc",
+                                                     **kw), map=MAP),
+                           "SECURE_GRIPPER", journal=False).interface
     try:
         await device._open()  # connect() without the service's state reports
     except DeviceError as exc:
@@ -182,6 +184,6 @@ def test_accepting_any_server_is_explicit_and_logged(servers, tmp_path, password
         proc.stop()
     with pytest.raises(ValueError, match=r"cannot authenticate the server of .* without a "
                        r"certificate of its own"):
-        OpcUaDevice(endpoint=impostor, map=MAP)
+        AsyncuaDriver(endpoint=impostor)
     with pytest.raises(ValueError, match="only a secured connection has"):
-        OpcUaDevice(endpoint=impostor, map=MAP, trust=tmp_path, insecure_accept_any=True)
+        AsyncuaDriver(endpoint=impostor, trust=tmp_path, insecure_accept_any=True)

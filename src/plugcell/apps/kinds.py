@@ -4,7 +4,9 @@ A kind is a device (a :class:`~plugcell.framework.service.DeviceInterface`: its
 declaration and ``dispatch``) and, for a device family with a driver interface
 (the camera's :class:`~plugcell.devices.camera.CameraDriver`, the drill's
 :class:`~plugcell.devices.drill.DrillDriver` …), the driver it runs with by default —
-here the simulated one of ``plugcell.sim``.  The device never imports the simulator:
+the simulated one of ``plugcell.sim`` for an instrument; for the OPC UA device the
+asyncua client of its server, for the compute service its engine of registered
+functions, each a real implementation in ``devices``.  The device never imports the simulator:
 :func:`build` makes the driver, hands it to the device and the device to the
 :class:`~plugcell.framework.service.GenericDevice` that hosts it (the kind's
 parameters ``--param K=V`` go to whichever of the two declares them).
@@ -62,9 +64,11 @@ KINDS: dict[str, Kind] = {
                   launcher="plugcell.sim.controller.launcher:SimControllerProcess"),
     "tracker": Kind("plugcell.devices.tracker.service:TrackerService",
                     driver="plugcell.sim.drivers.tracker:SimulatedTrackerDriver"),
-    "compute": Kind("plugcell.devices.compute.service:ComputeService"),
+    "compute": Kind("plugcell.devices.compute.service:ComputeService",
+                    driver="plugcell.devices.compute.engine:FunctionEngine"),
     "cell-controller": Kind("plugcell.devices.cell.service:CellController"),
-    "opcua-device": Kind("plugcell.devices.opcua.device:OpcUaDevice"),
+    "opcua-device": Kind("plugcell.devices.opcua.device:OpcUaDevice",
+                         driver="plugcell.devices.opcua.client:AsyncuaDriver"),
 }
 
 #: Old kind names (issue #33) → the kind: ``plugcell serve controller`` still serves the

@@ -28,17 +28,14 @@ from typing import Any
 import numpy as np
 from asyncua import ua
 
+from plugcell.devices.opcua.driver import DATA_TYPE_IDS
 from plugcell.framework.data import DataError, describe, from_data, to_data
 from plugcell.framework.messages import Command, Data, DataTypes
 
-#: The variant type of each plugcell data type.
+#: The variant type of each plugcell data type (Boolean, Byte, Int32, Double, String: the
+#: built-in types of :data:`~plugcell.devices.opcua.driver.DATA_TYPE_IDS`).
 VARIANT_TYPES: dict[DataTypes, ua.VariantType] = {
-    DataTypes.Boolean: ua.VariantType.Boolean,
-    DataTypes.Byte: ua.VariantType.Byte,
-    DataTypes.Integer: ua.VariantType.Int32,
-    DataTypes.Double: ua.VariantType.Double,
-    DataTypes.String: ua.VariantType.String,
-}
+    data_type: ua.VariantType(number) for data_type, number in DATA_TYPE_IDS.items()}
 
 
 class ArgumentError(ValueError):
