@@ -29,8 +29,9 @@ Evaluate        —                            expression: String[1]  —       
 
 An Evaluate runs in the service's engine (:class:`~plugcell.devices.compute.engine.ComputeEngine`;
 ``plugcell serve compute`` gives it :class:`~plugcell.devices.compute.engine.FunctionEngine`,
-``--param robot=…``): heavy functions in a worker thread, one process at a time (the queue),
-so the service keeps answering Get and notifications while it computes.
+``--param robot=…``): heavy functions in a worker thread (``--param worker=process``: a
+worker process), one process at a time (the queue), so the service keeps answering Get and
+notifications while it computes.
 """
 
 from __future__ import annotations
@@ -113,6 +114,10 @@ class ComputeService:
     def bind(self, service: GenericDevice) -> None:
         self.service = service
         self.routing.bind(service)
+
+    async def disconnect(self) -> None:
+        """The service stops: so does its engine."""
+        await self.engine.close()
 
     async def dispatch(self, command: Command, option: str, data: Any) -> str | None:
         """Through the routing: the requester, then :meth:`handle`, then the routes."""

@@ -139,6 +139,17 @@ class Workspace(Scope):
             check_name(n)
         return [n for n in names if self._values.pop(n, None) is not None]
 
+    def snapshot(self) -> dict[str, Any]:
+        """The values by name (a new dict; matrices are read-only, so shared)."""
+        return dict(self._values)
+
+    def restore(self, values: dict[str, Any]) -> None:
+        """Hold exactly ``values`` (a :meth:`snapshot`, e.g. of a copy of this workspace
+        an engine evaluated in another process), each checked as :meth:`set` checks it."""
+        self._values.clear()
+        for name, value in values.items():
+            self.set(name, value)
+
     def _check_room(self, name: str, size: int) -> None:
         old = self._values.get(name)
         freed = old.size if isinstance(old, np.ndarray) else 0
