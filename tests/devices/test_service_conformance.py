@@ -41,8 +41,10 @@ RUNNABLE: dict[str, dict[str, Any]] = {
     "cell-controller": {"journals": 0},
     "robot": {"sim": True, "speed": 100.0},
 }
-#: Kinds that need a partner outside plugcell to start (tested with one elsewhere).
-NEEDS_OUTSIDE = {"opcua-device": "an OPC UA server (tests/opcua run it against node-opcua)"}
+#: Kinds whose default driver needs a partner outside plugcell: each runs here with
+#: another implementation of its driver interface (test_opcua_device_keeps_the_contract;
+#: tests/opcua run the default one against node-opcua).
+NEEDS_OUTSIDE = {"opcua-device": "an OPC UA server (here: sim/drivers/opcua.py's model)"}
 #: Kinds whose catalogue, vendor and info each instance declares (from its device map).
 PER_INSTANCE = {"opcua-device"}
 
@@ -86,10 +88,12 @@ _SAMPLE = {DataTypes.Double: 0.0, DataTypes.Integer: 0, DataTypes.Byte: 0,
 
 
 async def _contract(kind: str, kwargs: dict[str, Any], cell: str, tmp_path,
-                    device: Any = None) -> None:
+                    device: Any = None, service: Any = None) -> None:
     """The contract of a running service; ``device()``, if given, starts the device it
-    drives while the service starts (a robot streaming to it)."""
-    service = build(kind, None, kwargs, cell=cell, journal=tmp_path / "journal")
+    drives while the service starts (a robot streaming to it); ``service``: the service
+    (default: ``kind`` built as ``plugcell serve`` builds it)."""
+    if service is None:
+        service = build(kind, None, kwargs, cell=cell, journal=tmp_path / "journal")
     await asyncio.gather(service.start(), *([asyncio.to_thread(device)] if device else []))
     name = service.name
     try:
@@ -131,6 +135,27 @@ def test_a_running_service_keeps_the_contract(kind, tmp_path, monkeypatch):
     cell = f"conf{uuid.uuid4().hex[:10]}"
     asyncio.run(asyncio.wait_for(_contract(kind, RUNNABLE[kind], cell, tmp_path),
                                  90))
+
+
+@pytest.mark.slow
+def test_opcua_device_keeps_the_contract(tmp_path, monkeypatch):
+    """The OPC UA device with the gripper of the tests behind the in-memory server model
+    (its other driver, sim/drivers/opcua.py), hosted as ``plugcell serve`` hosts it."""
+    from pathlib import Path
+
+    from plugcell.devices.opcua.device import OpcUaDevice
+    from plugcell.framework import GenericDevice
+    from plugcell.sim.drivers.opcua import OpcUaServerModel, SimulatedGripper, SimulatedOpcUaDriver
+
+    monkeypatch.setenv("PLUGCELL_HOME", str(tmp_path / "home"))
+    cell = f"conf{uuid.uuid4().hex[:10]}"
+    server = OpcUaServerModel()
+    SimulatedGripper(server)
+    gripper_map = Path(__file__).resolve().parents[1] / "opcua" / "gripper.toml"
+    service = GenericDevice(OpcUaDevice(SimulatedOpcUaDriver(server), map=gripper_map),
+                            cell=cell, journal=tmp_path / "journal")
+    asyncio.run(asyncio.wait_for(_contract("opcua-device", {}, cell, tmp_path,
+                                           service=service), 90))
 
 
 @pytest.mark.slow

@@ -23,62 +23,24 @@ from plugcell.devices.opcua.device_map import parse_device_map
 from plugcell.devices.opcua.driver import OpcUaDriver, OpcUaStatusError, OpcUaValue
 from plugcell.framework import Client, DeviceError, GenericDevice, ProcessStates
 from plugcell.framework.messages import DataTypes
-from plugcell.sim.drivers.opcua import OpcUaServerModel, SimulatedOpcUaDriver
+from plugcell.sim.drivers.opcua import (
+    GRIPPER_NAMESPACE,
+    OpcUaServerModel,
+    SimulatedGripper,
+    SimulatedOpcUaDriver,
+)
 
 HERE = Path(__file__).resolve().parent
+NS = GRIPPER_NAMESPACE
 MAP = HERE / "gripper.toml"
-NS = "urn:plugcell:test:gripper"
 C, F = ProcessStates.Completed, ProcessStates.Failed
-
-
-class Gripper:
-    """gripper_server.js in the model: object Gripper with Open(), Close(force: Double) →
-    Reached: Double (0 < force ≤ 100 N, else BadOutOfRange; the force ramps up in 5 steps
-    of 20 ms), variables Force (Double, N) and Closed (Boolean); a closed jaw creeps."""
-
-    def __init__(self, server: OpcUaServerModel) -> None:
-        server.register_namespace("urn:plugcell:test:other")  # so the gripper's is ns=2
-        ns = server.register_namespace(NS)
-        self.server = server
-        obj = server.add_object(f"ns={ns};s=Gripper", "Gripper")
-        self.force = server.add_variable(f"ns={ns};s=Gripper.Force", "Force", obj,
-                                         DataTypes.Double, 0.0)
-        self.closed = server.add_variable(f"ns={ns};s=Gripper.Closed", "Closed", obj,
-                                          DataTypes.Boolean, False)
-        self.limit = server.add_variable(f"ns={ns};s=Gripper.Limits", "Limits", obj,
-                                         DataTypes.Double, [0.0, 100.0], is_array=True)
-        server.add_method(f"ns={ns};s=Gripper.Open", "Open", obj, self.open)
-        server.add_method(f"ns={ns};s=Gripper.Close", "Close", obj, self.close,
-                          [DataTypes.Double])
-
-    async def open(self, args: list[Any]) -> list[Any]:
-        self.server.set_value(self.force, 0.0)
-        self.server.set_value(self.closed, False)
-        return []
-
-    async def close(self, args: list[Any]) -> list[Any]:
-        target = args[0]
-        if not 0 < target <= 100:
-            raise OpcUaStatusError(f"force {target} N outside (0, 100] (BadOutOfRange)",
-                                   "BadOutOfRange")
-        for step in range(1, 6):
-            self.server.set_value(self.force, target * step / 5)
-            await asyncio.sleep(0.02)
-        self.server.set_value(self.closed, True)
-        return [self.force.value]
-
-    async def creep(self) -> None:
-        while True:
-            await asyncio.sleep(0.05)
-            if self.closed.value:
-                self.server.set_value(self.force, self.force.value + 0.001)
 
 
 def _device(text: str | None = None, server: OpcUaServerModel | None = None,
             watch_s: float = 1.0) -> tuple[OpcUaDevice, OpcUaServerModel]:
     server = server or OpcUaServerModel("opc.tcp://gripper.sim:4840/gripper")
     if not server.namespaces[1:]:
-        Gripper(server)
+        SimulatedGripper(server)
     device_map = (parse_device_map(text, "device.toml") if text is not None else MAP)
     device = GenericDevice(OpcUaDevice(SimulatedOpcUaDriver(server), map=device_map,
                                        watch_s=watch_s), "GRIPPER", journal=False).interface
@@ -161,7 +123,7 @@ def test_the_map_is_resolved_and_each_bad_map_refused_with_the_reason():
 def test_the_server_model_refuses_as_a_server_does():
     async def body() -> None:
         server = OpcUaServerModel()
-        gripper = Gripper(server)
+        gripper = SimulatedGripper(server)
         driver = SimulatedOpcUaDriver(server)
         with pytest.raises(ConnectionError, match="no session"):
             await driver.read(gripper.force)
@@ -233,7 +195,7 @@ def test_the_service_drives_the_gripper_through_the_second_driver():
     async def body() -> None:
         cell = f"uadrv{uuid.uuid4().hex[:8]}"
         server = OpcUaServerModel("opc.tcp://gripper.sim:4840/gripper")
-        gripper = Gripper(server)
+        gripper = SimulatedGripper(server)
         creep = asyncio.create_task(gripper.creep())
         services = [GenericDevice(OpcUaDevice(SimulatedOpcUaDriver(server), map=m),
                                   name, cell=cell, journal=False)
@@ -288,7 +250,7 @@ def test_a_lost_server_fails_the_stream_and_the_service_reconnects():
         cell = f"uadrv{uuid.uuid4().hex[:8]}"
         endpoint = "opc.tcp://gripper.sim:4840/gripper"
         server = OpcUaServerModel(endpoint)
-        gripper = Gripper(server)
+        gripper = SimulatedGripper(server)
         creep = asyncio.create_task(gripper.creep())
         service = GenericDevice(OpcUaDevice(SimulatedOpcUaDriver(server), map=MAP,
                                             watch_s=0.2), "GRIPPER", cell=cell, journal=False)

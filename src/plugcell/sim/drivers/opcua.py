@@ -37,8 +37,16 @@ from plugcell.devices.opcua.driver import (
 )
 from plugcell.framework.messages import DataTypes
 
-__all__ = ["OpcUaServerModel", "SimNode", "SimulatedOpcUaDriver"]
+__all__ = [
+    "GRIPPER_NAMESPACE",
+    "OpcUaServerModel",
+    "SimNode",
+    "SimulatedGripper",
+    "SimulatedOpcUaDriver",
+]
 
+#: The namespace of :class:`SimulatedGripper`'s nodes.
+GRIPPER_NAMESPACE = "urn:plugcell:test:gripper"
 #: The standard namespace (index 0) and the ``Objects`` folder (ns=0;i=85).
 UA_NAMESPACE = "http://opcfoundation.org/UA/"
 OBJECTS_FOLDER = "i=85"
@@ -321,3 +329,53 @@ class _Subscription:
         with contextlib.suppress(asyncio.CancelledError):
             await self._task
         self.driver._session()  # DeleteSubscriptions needs the session
+
+
+class SimulatedGripper:
+    """A gripper behind an OPC UA server — the one of the tests'
+    ``tests/opcua/js/gripper_server.js`` (node-opcua), in the model: in namespace
+    :data:`GRIPPER_NAMESPACE` (index 2), object ``Gripper`` with methods ``Open()`` and
+    ``Close(Force: Double) → Reached: Double`` (0 < force ≤ 100 N, else
+    ``BadOutOfRange``; the force ramps up in 5 steps of 20 ms), variables ``Force``
+    (Double, N), ``Closed`` (Boolean) and ``Limits`` (Double array); :meth:`creep` is the
+    closed jaw's creeping force (a live value), run as a task beside the service."""
+
+    def __init__(self, server: OpcUaServerModel) -> None:
+        server.register_namespace("urn:plugcell:sim:other")  # so the gripper's is ns=2
+        ns = server.register_namespace(GRIPPER_NAMESPACE)
+        self.server = server
+        obj = server.add_object(f"ns={ns};s=Gripper", "Gripper")
+        self.force = server.add_variable(f"ns={ns};s=Gripper.Force", "Force", obj,
+                                         DataTypes.Double, 0.0)
+        self.closed = server.add_variable(f"ns={ns};s=Gripper.Closed", "Closed", obj,
+                                          DataTypes.Boolean, False)
+        self.limit = server.add_variable(f"ns={ns};s=Gripper.Limits", "Limits", obj,
+                                         DataTypes.Double, [0.0, 100.0], is_array=True)
+        server.add_method(f"ns={ns};s=Gripper.Open", "Open", obj, self.open)
+        server.add_method(f"ns={ns};s=Gripper.Close", "Close", obj, self.close,
+                          [DataTypes.Double])
+
+    async def open(self, args: list[Any]) -> list[Any]:
+        """``Open()``: force 0, not closed."""
+        self.server.set_value(self.force, 0.0)
+        self.server.set_value(self.closed, False)
+        return []
+
+    async def close(self, args: list[Any]) -> list[Any]:
+        """``Close(Force)``: ramp up to it; the force reached."""
+        target = args[0]
+        if not 0 < target <= 100:
+            raise OpcUaStatusError(f"force {target} N outside (0, 100] (BadOutOfRange)",
+                                   "BadOutOfRange")
+        for step in range(1, 6):
+            self.server.set_value(self.force, target * step / 5)
+            await asyncio.sleep(0.02)
+        self.server.set_value(self.closed, True)
+        return [self.force.value]
+
+    async def creep(self) -> None:
+        """Forever: every 50 ms a closed jaw's force grows by 1 mN."""
+        while True:
+            await asyncio.sleep(0.05)
+            if self.closed.value:
+                self.server.set_value(self.force, self.force.value + 0.001)
