@@ -20,8 +20,9 @@ A module named in a string (for importlib, or run as ``-m``) counts as an import
 The math never reads a file, speaks Zenoh or knows a device; the framework knows no
 device; the robot language knows neither the framework nor a device; nothing below the
 apps calls a command line or is one (no ``main``, no ``if __name__ == "__main__"``: a
-program lives in ``apps``, run by ``python -m`` of a ``__main__`` module).  A device declares its driver interface and never imports
-the simulator: a simulated instrument in ``sim`` implements that interface, and
+program lives in ``apps``, run by ``python -m`` of a ``__main__`` module).  A device
+declares its driver interface and never imports the simulator: a simulated instrument in
+``sim`` implements that interface, and
 ``plugcell serve`` (``apps/kinds.py``) hands a device its simulated driver (the robot:
 the launcher of its simulated controller).
 """
