@@ -129,58 +129,174 @@ class OpcUaDriver(Protocol):
     """The server's endpoint URL (``opc.tcp://HOST:PORT/PATH``), for messages."""
 
     async def connect(self, client_name: str, timeout_s: float) -> None:
-        """Open a session with the server, as the application named ``client_name``
-        (its certificate, if the driver secures the channel), each request bounded by
-        ``timeout_s`` seconds.  Raises :class:`OpcUaDriverError` with the reason."""
+        """Open a session with the server (SecureChannel, CreateSession, ActivateSession).
+
+        Parameters
+        ----------
+        client_name : str
+            The application it connects as: the plugcell service's name (its application
+            certificate, if the driver secures the channel).
+        timeout_s : float
+            The bound of each request of the session (s).
+
+        Raises
+        ------
+        OpcUaDriverError
+            The session cannot be opened; the message says why (the server's status
+            code, a certificate refused or missing …).
+        ConnectionError, OSError, TimeoutError
+            The server cannot be reached.
+        """
         ...
 
     async def disconnect(self) -> None:
-        """Close the session (never raises; a link already gone is closed)."""
+        """Close the session (never raises; a link already gone counts as closed)."""
         ...
 
     async def server_state(self) -> int:
-        """The server's ``ServerStatus.State`` (:data:`SERVER_STATE_RUNNING` at work)."""
+        """Read ``Server.ServerStatus.State`` (ns=0;i=2259), the connection watch's probe.
+
+        Returns
+        -------
+        int
+            The ServerState (:data:`SERVER_STATE_RUNNING` for a server at work).
+        """
         ...
 
     async def namespace_index(self, uri: str) -> int:
-        """The index of namespace ``uri`` on the server; KeyError if it has none."""
+        """The index of a namespace in the server's ``NamespaceArray``.
+
+        Parameters
+        ----------
+        uri : str
+            The namespace URI (of a map's ``nsu=`` node id).
+
+        Returns
+        -------
+        int
+            Its index on this server (indexes may change when the server restarts).
+
+        Raises
+        ------
+        KeyError
+            The server has no such namespace.
+        """
         ...
 
     async def find(self, node_id: str) -> Any:
-        """The node of ``node_id`` (OPC UA's text form with a namespace index,
-        ``ns=2;s=Gripper.Close``) once its BrowseName reads; :class:`OpcUaStatusError`
-        (``BadNodeIdUnknown``…) if the server has no such node."""
+        """The node of a node id, once its BrowseName reads.
+
+        Parameters
+        ----------
+        node_id : str
+            OPC UA's text form with a namespace index, e.g. ``ns=2;s=Gripper.Close``.
+
+        Returns
+        -------
+        object
+            The driver's handle of the node.
+
+        Raises
+        ------
+        OpcUaStatusError
+            The server has no such node (``BadNodeIdUnknown``) or the id is not one
+            (``BadNodeIdInvalid``).
+        """
         ...
 
     async def node_class(self, node: Any) -> str:
-        """The NodeClass of ``node``: ``"Object"``, ``"Variable"``, ``"Method"``, …"""
+        """The NodeClass attribute of ``node``.
+
+        Returns
+        -------
+        str
+            The class's name: ``"Object"``, ``"Variable"``, ``"Method"``, …
+        """
         ...
 
     async def data_type(self, node: Any) -> str:
-        """The DataType of variable ``node`` as NodeId text (``"i=11"``)."""
+        """The DataType attribute of variable ``node``.
+
+        Returns
+        -------
+        str
+            Its NodeId text, ``"i=11"`` for Double (compare :func:`data_type_id`).
+
+        Raises
+        ------
+        OpcUaStatusError
+            ``node`` has no DataType (``BadAttributeIdInvalid``: not a variable).
+        """
         ...
 
     async def parent(self, node: Any) -> Any | None:
-        """The node that holds ``node`` (its inverse hierarchical reference), or None."""
+        """The node that holds ``node`` (the source of its inverse hierarchical
+        reference), or None if it has none."""
         ...
 
     async def call(self, obj: Any, method: Any, arguments: Sequence[OpcUaValue]
                    ) -> list[Any]:
-        """Call ``method`` on ``obj`` with ``arguments``; its output arguments, in order
-        (an empty list for none).  :class:`OpcUaStatusError` if the server refuses."""
+        """Call a method (the Call service).
+
+        Parameters
+        ----------
+        obj : object
+            The object the method is called on (a handle of :meth:`find`).
+        method : object
+            The method (a handle of :meth:`find`).
+        arguments : sequence of OpcUaValue
+            Its input arguments, in order.
+
+        Returns
+        -------
+        list
+            Its output arguments' values, in order (empty for none).
+
+        Raises
+        ------
+        OpcUaStatusError
+            The server refuses (``BadMethodInvalid``, ``BadArgumentsMissing``,
+            ``BadTypeMismatch``, the method's own status such as ``BadOutOfRange``).
+        """
         ...
 
     async def read(self, node: Any) -> Any:
-        """The Value of variable ``node``."""
+        """The Value attribute of variable ``node`` (a scalar, or a list for an array).
+
+        Raises
+        ------
+        OpcUaStatusError
+            The server refuses (``BadAttributeIdInvalid``, ``BadNotReadable`` …).
+        """
         ...
 
     async def write(self, node: Any, value: OpcUaValue) -> None:
-        """Write ``value`` to the Value of variable ``node``."""
+        """Write the Value attribute of variable ``node``.
+
+        Raises
+        ------
+        OpcUaStatusError
+            The server refuses (``BadTypeMismatch``, ``BadNotWritable`` …).
+        """
         ...
 
     async def subscribe(self, node: Any, interval_ms: float,
                         on_value: Callable[[Any], None]) -> OpcUaSubscription:
-        """Call ``on_value(value)`` (on the caller's event loop) with the Value of
-        variable ``node`` at once and then at each change the server publishes, at a
-        publishing interval of ``interval_ms``, until the subscription is deleted."""
+        """Follow the Value of variable ``node`` (CreateSubscription, CreateMonitoredItems).
+
+        Parameters
+        ----------
+        node : object
+            The variable (a handle of :meth:`find`).
+        interval_ms : float
+            The publishing interval asked of the server (ms).
+        on_value : callable
+            Called with the value at once and then with each change the server
+            publishes, on the caller's event loop, until the subscription is deleted.
+
+        Returns
+        -------
+        OpcUaSubscription
+            The subscription, to :meth:`~OpcUaSubscription.delete`.
+        """
         ...
