@@ -14,6 +14,8 @@ from typing import Any
 
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from plugcell.apps.kinds import build
 from plugcell.devices.opcua.arguments import VARIANT_TYPES
@@ -293,3 +295,56 @@ def _array(update: Any) -> np.ndarray:
     from plugcell.framework import ProcessCall
 
     return np.asarray(ProcessCall.array(update)).reshape(-1)
+
+
+@settings(max_examples=200, deadline=None)
+@given(st.text(max_size=40))
+def test_any_node_id_text_is_found_or_refused_with_a_status(text):
+    """The model parses a node id as a server does: a node, or BadNodeIdInvalid /
+    BadNodeIdUnknown — never another error."""
+    server = OpcUaServerModel()
+    SimulatedGripper(server)
+    try:
+        node = server.node(text)
+    except OpcUaStatusError as exc:
+        assert exc.status in ("BadNodeIdInvalid", "BadNodeIdUnknown")
+    else:
+        assert node.node_id in (text, text.removeprefix("ns=0;"))
+
+
+_ELEMENTS = {
+    DataTypes.Double: st.floats(allow_nan=False, width=64),
+    DataTypes.Integer: st.integers(-2**31, 2**31 - 1),
+    DataTypes.Boolean: st.booleans(),
+    DataTypes.Byte: st.integers(0, 255),
+    DataTypes.String: st.text(max_size=8),
+}
+
+
+@settings(max_examples=100, deadline=None)
+@given(st.sampled_from(sorted(_ELEMENTS, key=lambda t: t.value)).flatmap(
+    lambda t: st.tuples(st.just(t), st.lists(_ELEMENTS[t], min_size=1, max_size=6))))
+def test_input_data_reaches_the_server_as_sent(case):
+    """The device's input data (numpy, as the framework hands it) written through the
+    driver and read back: the same values, a scalar for size (1,), a list for an array
+    (size (-1,): any length)."""
+    from plugcell.devices.opcua.device import _value
+
+    data_type, values = case
+    dtype = {DataTypes.Double: float, DataTypes.Integer: np.int32, DataTypes.Boolean: bool,
+             DataTypes.Byte: np.uint8, DataTypes.String: object}[data_type]
+    server = OpcUaServerModel()
+    obj = server.add_object("ns=0;s=Box", "Box")
+    scalar = server.add_variable("ns=0;s=Box.One", "One", obj, data_type, values[0])
+    array = server.add_variable("ns=0;s=Box.Many", "Many", obj, data_type, values,
+                                is_array=True)
+
+    async def body() -> None:
+        driver = SimulatedOpcUaDriver(server)
+        await driver.connect("T", 1.0)
+        await driver.write(scalar, _value(np.array(values[:1], dtype=dtype), data_type, (1,)))
+        await driver.write(array, _value(np.array(values, dtype=dtype), data_type, (-1,)))
+        assert await driver.read(scalar) == values[0]
+        assert await driver.read(array) == values
+
+    asyncio.run(body())
