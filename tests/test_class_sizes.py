@@ -18,6 +18,8 @@ from pathlib import Path
 import pytest
 
 from plugcell.apps.kinds import KINDS, load_kind
+from plugcell.framework.participant import Participant
+from plugcell.framework.service import GenericDevice
 
 SRC = Path(__file__).resolve().parents[1] / "src" / "plugcell"
 
@@ -54,6 +56,13 @@ def test_no_device_kind_carries_more_than_the_goal_through_its_mro(kind: str) ->
     assert n <= GOAL_CALLABLES, f"{kind}: {n} callables through the MRO"
 
 
+def test_the_host_holds_its_participant_and_carries_no_more_than_the_goal() -> None:
+    """The framework object that hosts a device is composed too: it holds a Participant
+    (``service.participant``) instead of deriving from one."""
+    assert not issubclass(GenericDevice, Participant)
+    assert callables_through_mro(GenericDevice) <= GOAL_CALLABLES
+
+
 def test_no_class_in_framework_or_devices_grows_past_its_ceiling() -> None:
     over = {k: n for k, n in class_lines().items() if n > LINES_CEILING.get(k, GOAL_LINES)}
     assert over == {}
@@ -84,6 +93,8 @@ if __name__ == "__main__":
     for kind in sorted(KINDS):
         cls = load_kind(kind)
         print(f"{kind:14} {cls.__name__:18} {callables_through_mro(cls)}")
+    for cls in (GenericDevice, Participant):
+        print(f"{'(framework)':14} {cls.__name__:18} {callables_through_mro(cls)}")
     print(f"\nlargest classes in framework/ and devices/ (goal ≤ {GOAL_LINES} lines)")
     for key, n in sorted(class_lines().items(), key=lambda kv: -kv[1])[:10]:
         print(f"{n:5}  {key}")
