@@ -566,11 +566,11 @@ async def _plugcell(cell: str, cycles: int, warmup: int) -> float:
     consumer = bench_service("CONSUMER", cell=cell, transport=TransportConfig.from_env())
     await consumer.start()
     try:
-        if not await consumer.wait_for("PUBLISHER", 15):
+        if not await consumer.participant.wait_for("PUBLISHER", 15):
             raise RuntimeError("the benchmark's service did not appear")
-        await consumer.subscribe("PUBLISHER")
+        await consumer.participant.subscribe("PUBLISHER")
         four = next(p for p in PAYLOADS if p.nbytes == 4)
-        return float((await our_latency(consumer, four, cycles, warmup))["avg"])
+        return float((await our_latency(consumer.participant, four, cycles, warmup))["avg"])
     finally:
         await consumer.close()
 

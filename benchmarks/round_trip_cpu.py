@@ -116,7 +116,7 @@ async def _main(args: argparse.Namespace) -> dict[str, list[dict[str, float]]]:
     async with bench.parties(cell, env, TransportConfig.from_env(), not args.no_journal) as who:
         floor = [who.raw.popen.pid, who.raw_peer.popen.pid]
         ours = [os.getpid(), who.publisher.popen.pid]
-        await bench.our_latency(who.consumer, four, warmup, 0)  # warm both paths once
+        await bench.our_latency(who.consumer.participant, four, warmup, 0)  # warm both paths once
         await asyncio.to_thread(who.raw.latency, four.nbytes, warmup, 0)
         for _ in range(args.rounds):
             results["raw"].append(await measure(
@@ -127,7 +127,7 @@ async def _main(args: argparse.Namespace) -> dict[str, list[dict[str, float]]]:
                 lambda: asyncio.to_thread(who.raw.latency_in_loop, four.nbytes, cycles, warmup),
                 cycles + warmup))
             results["plugcell"].append(await measure(
-                ours, lambda: bench.our_latency(who.consumer, four, cycles, warmup),
+                ours, lambda: bench.our_latency(who.consumer.participant, four, cycles, warmup),
                 cycles + warmup))
     return results
 

@@ -50,14 +50,14 @@ async def _round_trips(cycles: int, profile: cProfile.Profile | None) -> float:
     await publisher.start()
     await requester.start()
     try:
-        if not await requester.wait_for("PUBLISHER", 15):
+        if not await requester.participant.wait_for("PUBLISHER", 15):
             raise RuntimeError("the publisher did not appear")
-        await requester.subscribe("PUBLISHER")
+        await requester.participant.subscribe("PUBLISHER")
         data = np.full((4,), 7, np.uint8)
         data.flags.writeable = False
 
         async def once() -> None:
-            call = await requester.create_process("PUBLISHER", "Echo", data=data)
+            call = await requester.participant.create_process("PUBLISHER", "Echo", data=data)
             async for update in call:
                 if update.data is not None or update.state.final:
                     break

@@ -150,25 +150,25 @@ async def _requester(cell: str, journal: bool, cycles: int, trace: Trace,
                             journal=journal)
     await consumer.start()
     try:
-        if not await consumer.wait_for("PUBLISHER", 15):
+        if not await consumer.participant.wait_for("PUBLISHER", 15):
             raise RuntimeError("the publisher did not appear")
-        await consumer.subscribe("PUBLISHER")
+        await consumer.participant.subscribe("PUBLISHER")
         data = np.full((4,), 7, np.uint8)
         for i in range(200 + cycles):
             if i == 200:  # warmed up: probe from here on
                 _probe_framework(trace)
-                door = consumer.calls._doors["PUBLISHER"]
-                consumer.calls._doors["PUBLISHER"] = _ProbedDoor(door, trace)
+                door = consumer.participant.calls._doors["PUBLISHER"]
+                consumer.participant.calls._doors["PUBLISHER"] = _ProbedDoor(door, trace)
             probed = i >= 200
             if probed:
                 trace.append(("create_process", time.perf_counter_ns()))
-            call = await consumer.create_process("PUBLISHER", "Echo", data=data)
+            call = await consumer.participant.create_process("PUBLISHER", "Echo", data=data)
             if probed:
                 trace.append(("resumed", time.perf_counter_ns()))
             async for update in call:
                 if update.state.final:
                     break
-        consumer.calls._doors["PUBLISHER"] = door
+        consumer.participant.calls._doors["PUBLISHER"] = door
     finally:
         await consumer.close()
 

@@ -90,12 +90,12 @@ async def _started_service() -> AsyncIterator[tuple[GenericDevice, _CountingPubl
     service = bench_service("PUBLISHER", cell=f"frames{uuid.uuid4().hex[:8]}",
                             transport=ALONE, journal=False)
     await service.start()
-    bus, publisher = service.bus, _CountingPublisher()
-    service.bus = _CountingBus(bus, publisher)  # type: ignore[assignment]
+    bus, publisher = service.participant.bus, _CountingPublisher()
+    service.participant.bus = _CountingBus(bus, publisher)  # type: ignore[assignment]
     try:
         yield service, publisher
     finally:
-        service.bus = bus
+        service.participant.bus = bus
         await service.close()
 
 

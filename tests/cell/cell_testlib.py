@@ -61,12 +61,13 @@ class FakeRobot:
         loop = asyncio.get_running_loop()
         start = loop.time()
         if program == "drill":
-            call = await service.create_process("TOOL", "Drill", "Air", [550, 1100])
+            call = await service.participant.create_process("TOOL", "Drill", "Air", [550, 1100])
             final = await call.result()
             if final.state.value != "Completed":
                 raise DeviceError(f"TOOL: {final.reason}")
         elif program == "snap":
-            final = await (await service.create_process("CAMERA", "SnapShot", "", 5)).result()
+            call = await service.participant.create_process("CAMERA", "SnapShot", "", 5)
+            final = await call.result()
             if final.state.value != "Completed":
                 raise DeviceError(f"CAMERA: {final.reason}")
         elif program == "wait":

@@ -52,13 +52,14 @@ def test_controller_discovers_wires_saves_loads_and_reapplies(cell: str, home: P
         try:
             await eventually(lambda: all(
                 ctl.device_of(n) is not None for n in ("CAMERA", "TOOL", "ROBOT")))
-            await eventually(lambda: {"CAMERA", "TOOL", "ROBOT"} <= set(ctl.host.partners))
+            await eventually(
+                lambda: {"CAMERA", "TOOL", "ROBOT"} <= set(ctl.host.participant.partners))
             assert ctl.records["CONTROLLER"].device is not None  # itself, as a service
 
             assert (await ctl.wire("ROBOT", "TOOL"))["ok"]
             assert (await ctl.wire("ROBOT", "CAMERA"))["ok"]
             assert partners(ctl, "ROBOT") == {"TOOL", "CAMERA"}
-            assert set(robot.partners) == {"TOOL", "CAMERA"}
+            assert set(robot.participant.partners) == {"TOOL", "CAMERA"}
             bad = await ctl.wire("ROBOT", "GHOST")
             assert not bad["ok"] and "GHOST" in bad["reason"]
             assert not (await ctl.wire("ROBOT", "ROBOT"))["ok"]
@@ -73,15 +74,15 @@ def test_controller_discovers_wires_saves_loads_and_reapplies(cell: str, home: P
             assert (await ctl.unwire("ROBOT", "CAMERA"))["ok"]
             assert partners(ctl, "ROBOT") == {"TOOL"}
             ctl.load(tmp_path / "cell.json")
-            await eventually(lambda: "CAMERA" in robot.partners)
+            await eventually(lambda: "CAMERA" in robot.participant.partners)
 
             # the tool goes away and comes back: its wire is re-applied
             await tool.close()
             await eventually(lambda: not ctl.records["TOOL"].alive)
-            assert "TOOL" not in robot.partners
+            assert "TOOL" not in robot.participant.partners
             tool = GenericDevice(DrillService(SimulatedDrill(time_scale=0.001)), cell=cell)
             await tool.start()
-            await eventually(lambda: "TOOL" in robot.partners)
+            await eventually(lambda: "TOOL" in robot.participant.partners)
             assert any("re-applied ROBOT → TOOL" in line["text"] for line in ctl.activity)
             kinds = set()
             while not events.empty():
@@ -193,7 +194,7 @@ def test_tasks_runs_and_the_monitor(cell: str, home: Path) -> None:
                 final = await (await client.create_process(
                     "CONTROLLER", "Unwire", "", ["R2", "CAMERA"])).result()
                 assert final.state.value == "Completed"
-                assert "CAMERA" not in r2.partners
+                assert "CAMERA" not in r2.participant.partners
                 final = await (await client.create_process(
                     "CONTROLLER", "Run", "concurrent", ["R1:wait", "R2:fail"],
                     timeout=20)).result()

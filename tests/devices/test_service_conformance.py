@@ -100,7 +100,7 @@ async def _contract(kind: str, kwargs: dict[str, Any], cell: str, tmp_path,
         async with Client("CONFORMANCE", cell=cell) as client:
             assert await client.wait_for(name, 20)
             state, instance = await client.get(name)
-            assert instance == service.instance
+            assert instance == service.participant.instance
             declared = {c.name for c in service.declaration.commands}
             assert {c.name for c in state.device_info.commands} == declared
 

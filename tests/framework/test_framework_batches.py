@@ -56,7 +56,7 @@ class Tap:
 async def _stream_burst(tmp_path, frames: int):
     """``frames`` values emitted in one turn by DEV's stream for A; what A and a tap saw."""
     async with cell_with(tmp_path, "A") as (dev, a):
-        tap = Tap(a, dev.keys.process("DEV", "A"))
+        tap = Tap(a, dev.participant.keys.process("DEV", "A"))
         stream = await a.create_process("DEV", "Stream")
         await dev.interface.started.wait()
         for i in range(frames):  # one event-loop turn: one flush
@@ -118,8 +118,9 @@ def test_a_requester_reads_a_batch_it_did_not_expect_in_one_piece(tmp_path):
                 tag=tag, identifier=stream.identifier, state=R, seq=2,
                 data=Data(DataTypes.Double, (1,), b"\x00" * 8),
             )
-            payload = codec.encode("DEV", dev.instance, ProcessUpdateBatch(updates=[stray, frame]))
-            a.session.put(dev.keys.process("DEV", "A"), payload)  # as DEV would
+            payload = codec.encode("DEV", dev.participant.instance,
+                                   ProcessUpdateBatch(updates=[stray, frame]))
+            a.session.put(dev.participant.keys.process("DEV", "A"), payload)  # as DEV would
             second = await anext(stream)
             assert (first.seq, second.seq) == (1, 2) and stream.array(second)[0] == 0.0
             stop = await a.create_process("DEV", "Stop")

@@ -70,8 +70,8 @@ def _process(identifier: int, sender: str = "A", recipient: str = "DEV") -> Proc
 def test_bad_published_requests_are_acknowledged_failed_to_the_right_process(tmp_path):
     async def body():
         async with cell_with(tmp_path, "A", max_payload=20_000) as (dev, a):
-            tap = AckTap(a, dev.keys.process("DEV", "A"))
-            door = dev.keys.request("DEV", "A")
+            tap = AckTap(a, dev.participant.keys.process("DEV", "A"))
+            door = dev.participant.keys.request("DEV", "A")
 
             async def publish(payload: bytes, identifier: int | None) -> Acknowledgement:
                 seen = len(tap.acks)
@@ -89,7 +89,7 @@ def test_bad_published_requests_are_acknowledged_failed_to_the_right_process(tmp
             assert "exceeds the limit of 20000 bytes" in ack.reason
             good = codec.encode("A", a.instance, _process(4242))
             ack = await publish(good, 4242)
-            assert (ack.identifier, ack.state, ack.instance) == (4242, Q, dev.instance)
+            assert (ack.identifier, ack.state, ack.instance) == (4242, Q, dev.participant.instance)
             dup = await publish(good, 4242)
             assert dup.state is F and "4242" in dup.reason  # reused: refused, with the id
             # seeded garbage: always a Failed acknowledgement, with a reason, to its id
@@ -107,14 +107,14 @@ def test_bad_published_requests_are_acknowledged_failed_to_the_right_process(tmp
 def test_a_request_published_under_another_senders_key_is_refused(tmp_path):
     async def body():
         async with cell_with(tmp_path, "A", "B") as (dev, a, b):
-            tap_b = AckTap(a, dev.keys.process("DEV", "B"))
+            tap_b = AckTap(a, dev.participant.keys.process("DEV", "B"))
             forged = codec.encode("A", a.instance, _process(9))  # A's envelope, B's key
-            a.session.put(dev.keys.request("DEV", "B"), forged,
+            a.session.put(dev.participant.keys.request("DEV", "B"), forged,
                           attachment=codec.attach_identifier(9))
             ack = await tap_b.next(1)
             assert ack.state is F and "differs from the sender B of the request key" in ack.reason
             # a key whose last chunk cannot be a sender name: journaled, nobody answered
-            a.session.put(dev.keys.request("DEV", "-x"), forged)
+            a.session.put(dev.participant.keys.request("DEV", "-x"), forged)
             await asyncio.sleep(0.3)
             rejected = [r for r in read_journal([dev.journal.path]) if r.get("rejected")]
             assert any("invalid sender name '-x'" in r["reason"] for r in rejected)
@@ -129,7 +129,7 @@ def test_the_acknowledgement_and_a_short_process_arrive_in_one_sample(tmp_path):
         async with cell_with(tmp_path, "A") as (dev, a):
             samples: list = []
             sub = a.session.declare_subscriber(
-                dev.keys.process("DEV", "A"),
+                dev.participant.keys.process("DEV", "A"),
                 Callback(lambda s: samples.append(codec.decode(s.payload.to_bytes()).body),
                          indirect=False))
             call = await a.create_process("DEV", "Measure")
@@ -153,7 +153,7 @@ def test_a_recipient_with_only_the_queryable_is_served_through_it(tmp_path):
             subscriber.undeclare()  # what a queryable-only implementation looks like
             await asyncio.sleep(0.3)
             call = await a.create_process("DEV", "Measure")
-            assert call.ack.state is Q and call.ack.instance == dev.instance
+            assert call.ack.state is Q and call.ack.instance == dev.participant.instance
             assert (await call.result()).state is C
             assert not a.calls.request_door("DEV")  # no subscriber matches: the query was used
 
@@ -168,11 +168,11 @@ def test_updates_from_another_incarnation_of_the_name_are_not_ours(tmp_path):
         async with cell_with(tmp_path, "A") as (dev, a):
             stream = await a.create_process("DEV", "Stream")
             first = await anext(stream)
-            assert stream.instance == dev.instance
+            assert stream.instance == dev.participant.instance
             impostor = ProcessUpdateNotification(
                 tag=Tag("A", "DEV"), identifier=stream.identifier, state=F, seq=9,
                 reason="DEV: a service named DEV is already running")
-            a.session.put(dev.keys.process("DEV", "A"),
+            a.session.put(dev.participant.keys.process("DEV", "A"),
                           codec.encode("DEV", "f" * 16 + "other", impostor))
             await asyncio.sleep(0.3)
             assert stream.final is None  # the other incarnation's Failed was not taken

@@ -43,7 +43,7 @@ def test_create_acknowledge_update_complete(tmp_path):
         async with cell_with(tmp_path, "ROBOT") as (dev, robot):
             dev.interface.gates["g"] = asyncio.Event()
             work = await robot.create_process("DEV", "Work", "g")
-            assert work.ack.state is Q and work.ack.instance == dev.instance
+            assert work.ack.state is Q and work.ack.instance == dev.participant.instance
             running = await anext(work)
             assert (running.state, running.seq) == (R, 1)
             dev.interface.gates["g"].set()
@@ -317,7 +317,7 @@ def test_partners_wire_unwire_and_resubscribe_after_restart(tmp_path):
             state, _ = await ctl.get("ROBOT")
             assert [p.name for p in state.partners] == ["DEV"]
             # the service uses its partner like any client (5.2.3.6)
-            final = await (await robot.create_process("DEV", "Measure")).result()
+            final = await (await robot.participant.create_process("DEV", "Measure")).result()
             assert final.state is C
             self_wire = await ctl.ask_subscribe("ROBOT", "ROBOT")
             assert not self_wire.ok and "itself" in self_wire.reason
@@ -325,19 +325,48 @@ def test_partners_wire_unwire_and_resubscribe_after_restart(tmp_path):
             assert not missing.ok and "unknown device 'NOBODY'" in missing.reason
 
             await dev.close()  # partner shuts down: removed from ROBOT's Partners
-            await until(lambda: "DEV" not in robot.partners)
+            await until(lambda: "DEV" not in robot.participant.partners)
             dev2 = scripted(cell=cell, journal=tmp_path / "j1")
             await dev2.start()
             try:
                 assert await ctl.wait_for("DEV")
                 again = await ctl.ask_subscribe("ROBOT", "DEV")
-                assert again.ok and robot.partners["DEV"].instance == dev2.instance
+                assert again.ok
+                assert robot.participant.partners["DEV"].instance == dev2.participant.instance
                 gone = await ctl.ask_subscribe("ROBOT", "DEV", subscribe=False)
-                assert gone.ok and "DEV" not in robot.partners
+                assert gone.ok and "DEV" not in robot.participant.partners
             finally:
                 await dev2.close()
         finally:
             await ctl.close()
+            await robot.close()
+            await dev.close()
+
+    run(body())
+
+
+def test_a_service_holds_its_participant_and_the_old_process_calls_warn(tmp_path):
+    """Composition (issue #33): the host is no Participant; its participant (role
+    "service") sends its processes; ``service.create_process``/``stop_process``, which a
+    device's code may still call, forward to it with a DeprecationWarning."""
+    async def body():
+        cell = unique_cell()
+        dev = scripted(cell=cell, journal=False)
+        robot = scripted("ROBOT", cell=cell, journal=False)
+        assert not isinstance(robot, Participant) and robot.participant.role == "service"
+        await dev.start()
+        await robot.start()
+        try:
+            assert await robot.participant.wait_for("DEV", 10)
+            with pytest.warns(DeprecationWarning, match=r"service\.participant\.create_process"):
+                call = await robot.create_process("DEV", "Stream")
+            assert call.ack is not None and call.ack.state is Q
+            with pytest.warns(DeprecationWarning, match=r"service\.participant\.stop_process"):
+                stop = await robot.stop_process(call)
+            assert (await stop.result()).state is C
+            assert (await call.result()).state is C
+            assert dev.participant.is_alive("ROBOT")  # presence seen by the host's participant
+        finally:
             await robot.close()
             await dev.close()
 
@@ -453,7 +482,7 @@ def test_a_second_service_of_one_name_on_this_host_is_refused_by_the_journal(tmp
             second = scripted(cell=unique_cell(), journal=tmp_path)
             with pytest.raises(PartnerError, match="already running on this host"):
                 await second.start()
-            client = Participant("A", cell=first.keys.cell)
+            client = Participant("A", cell=first.cell)
             await client.start()
             try:
                 done = await (await client.create_process("DEV", "Measure")).result()

@@ -27,7 +27,7 @@ def test_an_asyncua_without_the_session_internals_stops_the_gateway_at_start():
 
 def test_a_call_of_an_unknown_user_is_refused_when_anonymous_is_off():
     async def caller_of(gateway: CellGateway) -> object:
-        return await gateway._caller()
+        return await gateway.calls.caller()
 
     assert caller_name() is None  # outside any session's call
     closed = CellGateway(cell="sessions-test", users=UserBook({}), allow_anonymous=False)

@@ -145,7 +145,7 @@ def test_a_program_on_the_pc_moves_the_twin(vendor, library, tmp_path, monkeypat
             service = _service(vendor, port, library, unique_cell(), tmp_path)
             await _start(service, twin)
             try:
-                async with Client("STREAMTEST", cell=service.keys.cell) as client:
+                async with Client("STREAMTEST", cell=service.cell) as client:
                     assert await client.wait_for(service.name, 20)
                     home = await _get(client, service.name, "ARM_JNTP")
                     np.testing.assert_allclose(home, [0, -90, -187, 0, 90, 0], atol=0.01)
@@ -210,7 +210,7 @@ def test_a_stopped_stream_fails_the_process_and_the_service_recovers(vendor, lib
         service = _service(vendor, port, library, unique_cell(), tmp_path)
         await _start(service, twin)
         try:
-            async with Client("STREAMTEST", cell=service.keys.cell) as client:
+            async with Client("STREAMTEST", cell=service.cell) as client:
                 assert await client.wait_for(service.name, 20)
                 call = await client.create_process(service.name, "ACTIVATE", "Wait",
                                                    ["swing"], timeout=120)

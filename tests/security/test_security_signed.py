@@ -258,6 +258,6 @@ def test_a_service_checking_signatures_needs_the_cells_ca() -> None:
                              access=AccessPolicy(identity="signed"))
         with pytest.raises(SigningError, match="identity = 'signed' needs the cell's CA"):
             await dev.start()
-        assert dev.session is None or dev.session.is_closed()
+        assert dev.participant.session is None or dev.participant.session.is_closed()
 
     run(body())

@@ -11,7 +11,13 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-from plugcell.framework.messages import Command, CommandTypes
+from plugcell.framework.messages import (
+    Command,
+    CommandTypes,
+    ConnectionStates,
+    Device,
+    DeviceStates,
+)
 
 
 @dataclass(frozen=True)
@@ -51,6 +57,13 @@ class Declaration:
     def name(self, given: str | None = None) -> str:
         """The service's name: ``given``, else the default name, else ``KIND``."""
         return given or self.default_name or (self.kind or "device").upper()
+
+    def device_info(self, name: str) -> Device:
+        """The DeviceInfo (Table 5-1) of a service named ``name`` that hosts such a
+        device, as it starts: Ready, Offline."""
+        return Device(name=name, vendor=self.vendor, info=self.info, commands=self.commands,
+                      kind=self.kind, connection=ConnectionStates.Offline,
+                      state=DeviceStates.Ready)
 
 
 def check_catalogue(owner: str, commands: tuple[Command, ...]) -> None:

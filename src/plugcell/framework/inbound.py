@@ -75,19 +75,19 @@ class Inbound:
         window = service.access.signature_window
         verifier = self._verifier
         if verifier is None or verifier.window_s != window:
-            if not service.transport.tls_ca:
+            if not service.participant.transport.tls_ca:
                 raise SigningError(
                     f"{service.name}: identity = 'signed' needs the cell's CA "
                     "(PLUGCELL_TLS_CA or PLUGCELL_TLS_DIR)"
                 )
-            verifier = RequestVerifier.load(service.transport.tls_ca, window)
+            verifier = RequestVerifier.load(service.participant.transport.tls_ca, window)
             self._verifier = verifier
         return verifier
 
     def role_of(self, sender: str) -> str | None:
         """``"service"`` or ``"client"`` if ``sender`` is live as one, else None."""
         for role in ("service", "client"):
-            if self.service.is_alive(sender, role):  # type: ignore[arg-type]
+            if self.service.participant.is_alive(sender, role):  # type: ignore[arg-type]
                 return role
         return None
 
@@ -123,12 +123,12 @@ class Inbound:
     ) -> None:
         service = self.service
         if isinstance(body, UnsubscribeRequest):
-            found = await service.unsubscribe(body.partner)
+            found = await service.participant.unsubscribe(body.partner)
             reason = "" if found else f"{body.partner} was not a partner of {service.name}"
             service.reply(query, SubscribeResponse(ok=found, reason=reason))
             return
         try:
-            device = await service.subscribe(body.partner)
+            device = await service.participant.subscribe(body.partner)
         except PartnerError as exc:
             service.reply(query, SubscribeResponse(ok=False, reason=str(exc)))
         except Exception as exc:  # always answer: the asker waits for it
@@ -199,7 +199,7 @@ class Inbound:
                 sender=sender,
                 identifier=identifier,
                 sender_instance=envelope.instance,
-                recipient_instance=service.instance,
+                recipient_instance=service.participant.instance,
                 command=process.command.name,
                 option=process.command.option,
                 command_type=command.type.value if command else "",
@@ -214,7 +214,7 @@ class Inbound:
                          size, sender, identifier, process.command.name)
             return
         ack = Acknowledgement(identifier=identifier, state=state, reason=reason,
-                              instance=service.instance)
+                              instance=service.participant.instance)
         if not reason:
             assert command is not None
             command = msgspec.structs.replace(command, option=process.command.option)
@@ -262,5 +262,5 @@ class Inbound:
             identifier=identifier or 0,
             state=ProcessStates.Failed,
             reason=reason,
-            instance=service.instance,
+            instance=service.participant.instance,
         ))

@@ -8,7 +8,9 @@ catalogue, converts the data to the declared type and size, sends
 ``CreateProcess`` and returns a :class:`ProcessCall` (:mod:`plugcell.framework.calls`
 keeps those calls).  A plain client (the CLI, a
 script, a test) is a participant without the inbound side; a service
-(:class:`~plugcell.framework.service.GenericDevice`) adds it.
+(:class:`~plugcell.framework.service.GenericDevice`) *holds* one (its ``participant``)
+and adds the inbound side through two seams: ``declare``, run before the token goes
+live, and :attr:`Participant.presence_listeners`.
 
 Presence uses Zenoh liveliness tokens: a participant that dies without a
 ``Shutdown`` is noticed (its token disappears), its partners are removed and the
@@ -30,9 +32,9 @@ import re
 import socket
 import time
 import weakref
-from collections.abc import Callable
+from collections.abc import Awaitable, Callable
 from dataclasses import dataclass, field
-from typing import Any, ClassVar
+from typing import Any
 
 import zenoh
 
@@ -135,9 +137,10 @@ def default_client_name(prefix: str = "client") -> str:
 
 
 class Participant:
-    """Everything that takes part in a cell (clients and, by subclassing, services)."""
-
-    role: ClassVar[Role] = "client"
+    """Everything that takes part in a cell: a client, or the participant a service
+    (:class:`~plugcell.framework.service.GenericDevice`) holds — then with ``role``
+    ``"service"`` (its presence token says so) and ``declare``, awaited by :meth:`start`
+    once the session is open and presence followed, before the token goes live."""
 
     def __init__(
         self,
@@ -145,8 +148,12 @@ class Participant:
         *,
         cell: str = DEFAULT_CELL,
         transport: TransportConfig | None = None,
+        role: Role = "client",
+        declare: Callable[[], Awaitable[None]] | None = None,
     ) -> None:
         self.name = check_name(name or default_client_name(), "participant name")
+        self.role: Role = role
+        self._declare = declare
         self.keys = KeySpace(cell)
         self.transport = transport or TransportConfig.from_env()
         self.instance = ""
@@ -164,6 +171,10 @@ class Participant:
         self.partner_listeners: list[Callable[[str, Message], None]] = []
         """Told ``(partner, body)`` of each partner's StateUpdate/ConnectionUpdate, once
         Partners is current (a cell controller or gateway showing the cell)."""
+        self.presence_listeners: list[Callable[[Presence, bool], None]] = []
+        """Told ``(presence, joined)`` of each join and leave of the cell, once
+        :attr:`alive` (and, on a leave, Partners and the waiting processes) are current
+        (a service refuses a second one of its name, forgets a sender that left)."""
         self._presence_changed = asyncio.Event()
         self._watchers: weakref.WeakSet[PresenceEvents] = weakref.WeakSet()
         self._closed = False
@@ -175,7 +186,7 @@ class Participant:
     # -- life cycle ----------------------------------------------------------------------
 
     async def start(self) -> None:
-        """Open the session, watch presence, declare what a subclass needs, then go live."""
+        """Open the session, watch presence, run ``declare`` (if given), then go live."""
         tune_allocator()  # large frames reuse memory instead of faulting in fresh pages
         self._loop = asyncio.get_running_loop()
         self._port = Port(self._loop, self._handle)
@@ -195,7 +206,8 @@ class Participant:
         self.instance = f"{time.time_ns():016x}{bus.zid}"
         self._entities.append(bus.follow_processes(self.name, self.calls.on_process_update))
         self._entities.append(bus.watch_presence(self._on_presence))
-        await self._declare()
+        if self._declare is not None:
+            await self._declare()
         self._token = bus.announce(self.role, self.name, self.instance)
         self._started = True
 
@@ -205,8 +217,20 @@ class Participant:
         what no participant would send; plugcell itself goes through :attr:`bus`."""
         return self.bus.session if self.bus is not None else None
 
-    async def _declare(self) -> None:
-        """Hook: a service declares its queryables here, before its token goes live."""
+    @property
+    def loop(self) -> asyncio.AbstractEventLoop | None:
+        """The event loop this participant lives on (None before :meth:`start`)."""
+        return self._loop
+
+    @property
+    def started(self) -> bool:
+        """Whether :meth:`start` went through (its token went live)."""
+        return self._started
+
+    def own(self, entity: Any) -> Any:
+        """Keep a Zenoh declaration until :meth:`close` undeclares it; return it."""
+        self._entities.append(entity)
+        return entity
 
     async def close(self) -> None:
         """Fail what still waits, withdraw the token and close the session."""
@@ -304,7 +328,6 @@ class Participant:
         if joined:
             self.alive.setdefault(key, set()).add(presence.instance)
             event = PresenceEvent("join", presence)
-            self._on_joined(presence)
         else:
             instances = self.alive.get(key, set())
             instances.discard(presence.instance)
@@ -312,12 +335,11 @@ class Participant:
                 self.alive.pop(key, None)
             event = PresenceEvent("leave", presence)
             self._on_left(presence)
+        for listener in self.presence_listeners:
+            listener(presence, joined)
         self._presence_changed.set()
         for watcher in list(self._watchers):
             watcher._put(event)
-
-    def _on_joined(self, presence: Presence) -> None:
-        """Hook: a participant's token appeared (a service checks for a name conflict)."""
 
     def _on_left(self, presence: Presence) -> None:
         """A participant's token disappeared: drop it as a partner, fail what waits on it."""
@@ -338,20 +360,15 @@ class Participant:
 
     async def wait_for(self, name: str, timeout: float = 10.0, role: Role = "service") -> bool:
         """Wait until ``name`` is alive in the cell; False after ``timeout`` seconds."""
-        deadline = time.monotonic() + timeout
-        while not self.is_alive(name, role):
-            remaining = deadline - time.monotonic()
-            if remaining <= 0:
-                return False
-            self._presence_changed.clear()
-            with contextlib.suppress(TimeoutError):
-                await asyncio.wait_for(self._presence_changed.wait(), remaining)
-        return True
+        return await self._wait_presence(name, role, True, timeout)
 
     async def wait_gone(self, name: str, timeout: float = 10.0, role: Role = "service") -> bool:
         """Wait until no instance of ``name`` is alive; False after ``timeout`` seconds."""
+        return await self._wait_presence(name, role, False, timeout)
+
+    async def _wait_presence(self, name: str, role: Role, alive: bool, timeout: float) -> bool:
         deadline = time.monotonic() + timeout
-        while self.is_alive(name, role):
+        while self.is_alive(name, role) is not alive:
             remaining = deadline - time.monotonic()
             if remaining <= 0:
                 return False

@@ -1,7 +1,8 @@
 """The GenericDevice service: the framework object that hosts one device.
 
-Thesis 4.1.3.1 and 5.2.2–5.2.3.  A service is a :class:`Participant` (partners,
-outbound processes) plus the *female adapter*, the Generic Interface (Table 5-2):
+Thesis 4.1.3.1 and 5.2.2–5.2.3.  A service holds a :class:`Participant` (its
+``participant``: session, presence, partners, outbound processes) and adds the *female
+adapter*, the Generic Interface (Table 5-2):
 
 * ``Get`` → the generic state: DeviceInfo with its command catalogue, Partners;
 * ``Subscribe``/``Unsubscribe`` a partner at run time (``plugcell wire``);
@@ -43,15 +44,14 @@ import asyncio
 import contextlib
 import logging
 import threading
+import warnings
 from collections.abc import Callable
-from datetime import UTC, datetime
 from pathlib import Path
 from typing import Any, Generic, Protocol, TypeVar
 
 import zenoh
 
 from plugcell.framework import codec
-from plugcell.framework.bus import Notification
 from plugcell.framework.data import summary
 from plugcell.framework.declaration import Declaration, check_catalogue
 from plugcell.framework.inbound import Inbound
@@ -60,19 +60,18 @@ from plugcell.framework.keys import DEFAULT_CELL, Presence
 from plugcell.framework.messages import (
     Command,
     ConnectionStates,
-    ConnectionUpdateNotification,
     Data,
-    Device,
     DeviceStates,
     GenericDeviceState,
     Message,
     ProcessStates,
     ProcessUpdateNotification,
     ShutdownNotification,
-    StateUpdateNotification,
 )
+from plugcell.framework.notifications import Notifications
 from plugcell.framework.outbox import Outbox
 from plugcell.framework.participant import Participant, PartnerError
+from plugcell.framework.process_call import ProcessCall
 from plugcell.framework.processqueue import Entry
 from plugcell.framework.scheduler import DeviceError, ProcessScheduler
 from plugcell.framework.security import AccessPolicy, Recipient
@@ -83,6 +82,10 @@ log = logging.getLogger("plugcell.framework.service")
 T = TypeVar("T")
 
 
+def _deprecated(method: str) -> None:
+    warnings.warn(f"GenericDevice.{method} is deprecated: use service.participant.{method} "
+                  "(the participant the service holds, issue #33)", DeprecationWarning,
+                  stacklevel=3)
 
 
 class FeedbackPort(Generic[T]):
@@ -119,7 +122,7 @@ class DeviceInterface(Protocol):
     def bind(self, service: GenericDevice) -> None:
         """Take the service that hosts this device: its feedback ports (``data_feedback``,
         ``cmd_feedback``, ``device_state``, ``connection_state``), ``sender``, ``note``
-        and, for a device that creates processes itself, its participant side."""
+        and, for a device that creates processes itself, its ``participant``."""
 
     async def dispatch(self, command: Command, option: str, data: Any) -> str | None:
         """CommandDispatcher: send ``command`` to the device.
@@ -134,17 +137,15 @@ class DeviceInterface(Protocol):
         ...
 
 
-class GenericDevice(Participant):
+class GenericDevice:
     """The service that hosts one device (module docstring): ``GenericDevice(device)``.
 
-    It is the participant (session, presence, partners, outbound processes) and owns the
-    scheduler, the outbox, the journal, the access policy and the inbound doors
-    (:class:`~plugcell.framework.inbound.Inbound`); the device (a
+    It owns the participant (:attr:`participant`: session, presence, partners, outbound
+    processes), the scheduler, the outbox, the journal, the access policy and the
+    inbound doors (:class:`~plugcell.framework.inbound.Inbound`); the device (a
     :class:`DeviceInterface`) brings its declaration and its dispatcher.  Not meant to
     be subclassed.
     """
-
-    role = "service"
 
     def __init__(
         self,
@@ -160,22 +161,26 @@ class GenericDevice(Participant):
         declaration = interface.declaration
         if not isinstance(declaration, Declaration):
             raise TypeError(f"{type(interface).__name__}.declaration is not a Declaration")
-        super().__init__(declaration.name(name), cell=cell, transport=transport)
+        participant = Participant(declaration.name(name), cell=cell, transport=transport,
+                                  role="service", declare=self._declare)
+        participant.transport = participant.transport.for_participant(participant.name)
+        participant.presence_listeners.append(self._on_presence)
+        self.participant = participant
+        """This service as a participant of the cell: session (``bus``), presence
+        (``alive``, ``events()``, ``wait_for``), ``partners``, and the processes it creates
+        itself (``create_process``, ``stop_process``) — what a device that sends processes
+        (the robot, the cell controller) uses."""
+        self.name = participant.name
+        """The service's name in the cell."""
+        self.cell = participant.keys.cell
+        """The cell it serves in."""
         self.interface = interface
         """The device this service hosts (its declaration and dispatcher)."""
         self.declaration = declaration
-        self.transport = self.transport.for_participant(self.name)
         self.access = access if access is not None else AccessPolicy.from_env()
         """Who may create processes here and wire this service (docs/security.md)."""
-        self.device = Device(
-            name=self.name,
-            vendor=declaration.vendor,
-            info=declaration.info,
-            commands=declaration.commands,
-            kind=declaration.kind,
-            connection=ConnectionStates.Offline,
-            state=DeviceStates.Ready,
-        )
+        self.device = declaration.device_info(self.name)
+        """Its DeviceInfo (Table 5-1), with the current state and connection."""
         self.max_payload = max_payload
         self._journal_setting = journal
         self.journal: Journal | NullJournal = NullJournal()
@@ -191,36 +196,34 @@ class GenericDevice(Participant):
             self, self.scheduler.on_data, "DataFeedback")
         self.cmd_feedback: FeedbackPort[str] = FeedbackPort(
             self, self.scheduler.on_cmd, "CmdFeedback")
+        self.notifications = Notifications(participant, self.device,
+                                           express_updates=declaration.express_updates)
+        """StateUpdate, ConnectionUpdate, Shutdown; each sender's process samples."""
         self.device_state: FeedbackPort[DeviceStates] = FeedbackPort(
-            self, self._on_device_state, "DeviceState"
-        )
+            self, self.notifications.device_state, "DeviceState")
         self.connection_state: FeedbackPort[ConnectionStates] = FeedbackPort(
-            self, self._on_connection_state, "ConnectionState"
-        )
+            self, self.notifications.connection_state, "ConnectionState")
         self._loop_thread = 0
         self.departed: set[str] = set()
         """Incarnations of senders that have left (their late requests are refused)."""
-        self._publishers: dict[str, Any] = {}
         self._closing = False
         self.outbox = Outbox(self.name, commit=lambda: self.journal.commit(),
-                             reply=self.reply, publish=self._send_to,
-                             is_open=self._session_open)
+                             reply=self.reply, publish=self.notifications.to_sender,
+                             is_open=lambda: self.notifications.is_open)
         """Acknowledgements and updates of this turn of the loop (framework/outbox.py)."""
-        self._notify_scheduled = False
-        self._notified = (DeviceStates.Ready, ConnectionStates.Offline)
         self._create_doors: list[Any] = []
         """The queryable ``svc/<name>/create`` and the subscriber ``svc/<name>/create/*``."""
         self.conflict = ""
         """Why this service withdrew because another one has its name (else empty)."""
         self.stopped = asyncio.Event()
         """Set once the service has shut down (by :meth:`close` or a name conflict)."""
-        self.recipient = Recipient(self.name, self.keys.cell)
+        self.recipient = Recipient(self.name, self.cell)
         """This service as its access policy sees it (complete once it has started)."""
         self.inbound = Inbound(self)
         """Its doors Subscribe and CreateProcess, and the admission of each request."""
         listener = getattr(interface, "on_partner_notification", None)
         if listener is not None:  # the device shows its partners' states
-            self.partner_listeners.append(listener)
+            participant.partner_listeners.append(listener)
         interface.bind(self)
 
     # -- what the device uses ---------------------------------------------------------------
@@ -251,7 +254,7 @@ class GenericDevice(Participant):
         scheduled thread-safely (so device threads can feed the service).  False when the
         service has not started; a call after the loop closed is dropped (the service is
         gone)."""
-        loop = self._loop
+        loop = self.participant.loop
         if loop is None:
             return False
         if threading.get_ident() == self._loop_thread:
@@ -272,8 +275,20 @@ class GenericDevice(Participant):
     def own(self, entity: Any) -> Any:
         """Keep a Zenoh declaration of the device (a publisher, a subscriber) until the
         service closes, which undeclares it; returns ``entity``."""
-        self._entities.append(entity)
-        return entity
+        return self.participant.own(entity)
+
+    async def create_process(self, partner: str, command: str, option: str = "",
+                             data: Any = None, **options: Any) -> ProcessCall:
+        """Deprecated: ``service.participant.create_process`` (issue #33)."""
+        _deprecated("create_process")
+        return await self.participant.create_process(partner, command, option, data,
+                                                     **options)
+
+    async def stop_process(self, call: ProcessCall, command: str | None = None,
+                           timeout: float | None = None) -> ProcessCall:
+        """Deprecated: ``service.participant.stop_process`` (issue #33)."""
+        _deprecated("stop_process")
+        return await self.participant.stop_process(call, command, timeout)
 
     # -- life cycle ----------------------------------------------------------------------
 
@@ -282,7 +297,7 @@ class GenericDevice(Participant):
         self._loop_thread = threading.get_ident()
         self.outbox.loop = asyncio.get_running_loop()
         try:
-            await super().start()
+            await self.participant.start()
             connect = getattr(self.interface, "connect", None)
             if connect is not None:
                 await connect()
@@ -294,27 +309,29 @@ class GenericDevice(Participant):
 
     async def _declare(self) -> None:
         """Refuse a duplicate name, open the journal, declare the Generic Interface."""
-        bus = self.bus
+        participant = self.participant
+        bus = participant.bus
         assert bus is not None
         if self.access.identity == "signed":
             self.inbound.request_verifier()  # no CA: refuse to start, with the reason
-        if await self._query_live_instances() or self.alive.get(("service", self.name)):
+        if (await self._query_live_instances()
+                or participant.alive.get(("service", self.name))):
             raise PartnerError(
-                f"a service named {self.name} is already running in cell {self.keys.cell!r}"
+                f"a service named {self.name} is already running in cell {self.cell!r}"
             )
         self._open_journal()
         self.recipient = Recipient(
-            name=self.name, cell=self.keys.cell, instance=self.instance,
+            name=self.name, cell=self.cell, instance=participant.instance,
             identities=bus.link_identities, role_of=self.inbound.role_of,
             verifier=self.inbound.request_verifier)
         """This service as its access policy sees it (framework/security.py)."""
-        self._entities.append(bus.serve("get", self.name, self._on_get))
-        self._entities.append(bus.serve("subscribe", self.name, self.inbound.on_subscribe))
+        participant.own(bus.serve("get", self.name, self._on_get))
+        participant.own(bus.serve("subscribe", self.name, self.inbound.on_subscribe))
+        # undeclared first when the service closes (no new process), not with the rest
         self._create_doors = [
             bus.serve("create", self.name, self.inbound.on_create),
             bus.take_requests(self.name, self.inbound.on_request),
         ]
-        self._entities.extend(self._create_doors)
 
     def _open_journal(self) -> None:
         if not self._journal_setting:
@@ -322,7 +339,7 @@ class GenericDevice(Participant):
         folder = (
             self._journal_setting
             if isinstance(self._journal_setting, Path)
-            else journal_dir(self.keys.cell)
+            else journal_dir(self.cell)
         )
         try:
             self.journal = Journal(folder / f"{self.name}.sqlite", self.name)
@@ -340,15 +357,16 @@ class GenericDevice(Participant):
 
     async def _query_live_instances(self) -> list[Presence]:
         """The live instances of this service's name (another one already running?)."""
-        assert self.bus is not None and self._loop is not None
-        done = self._loop.create_future()
+        bus, loop = self.participant.bus, self.participant.loop
+        assert bus is not None and loop is not None
+        done = loop.create_future()
         found: list[Presence] = []
 
         def on_done(_: Any) -> None:
             if not done.done():
                 done.set_result(None)
 
-        self.bus.find_service(self.name, found.append, on_done, timeout=1.0)
+        bus.find_service(self.name, found.append, on_done, timeout=1.0)
         with contextlib.suppress(TimeoutError):
             await asyncio.wait_for(done, 3.0)
         return found
@@ -367,40 +385,45 @@ class GenericDevice(Participant):
         for door in self._create_doors:
             with contextlib.suppress(zenoh.ZError):
                 door.undeclare()
-            self._entities.remove(door)
         self._create_doors = []
         self.scheduler.shut(f"{self.name}: {reason}")
         await self.scheduler.stop()  # after the current process (bounded by its timeout)
-        if self.bus is not None and self._started:
+        if self.participant.bus is not None and self.participant.started:
             with contextlib.suppress(Exception):
                 disconnect = getattr(self.interface, "disconnect", None)
                 if disconnect is not None:
                     await disconnect()
                 self.connection_state.post(ConnectionStates.Offline)
-            self._publish("shutdown", ShutdownNotification(name=self.name, reason=reason))
+            self.notifications.publish(
+                "shutdown", ShutdownNotification(name=self.name, reason=reason))
         self.outbox.flush()
-        for publisher in self._publishers.values():
-            with contextlib.suppress(zenoh.ZError):
-                publisher.undeclare()
-        self._publishers.clear()
+        self.notifications.close()
         # nothing is journaled after the last flush: release the journal (and its
         # lock) before the token goes, so a successor started on our leave can open it
         self.journal.close()
-        await super().close()
+        await self.participant.close()
         self.stopped.set()
+
+    async def __aenter__(self) -> GenericDevice:
+        await self.start()
+        return self
+
+    async def __aexit__(self, *exc: object) -> None:
+        await self.close()
 
     # -- inbound: Get, Subscribe, CreateProcess (Table 5-2) ----------------------------
 
     def reply(self, query: zenoh.Query, body: Message) -> None:
         """Answer ``query`` with ``body`` (then drop it)."""
         with contextlib.suppress(zenoh.ZError):
-            query.reply(query.key_expr, self.encode(body))
+            query.reply(query.key_expr, self.participant.encode(body))
         query.drop()
 
     def generic_state(self) -> GenericDeviceState:
         """The generic state (Table 5-1): DeviceInfo and Partners."""
         return GenericDeviceState(
-            device_info=self.device, partners=[p.device for p in self.partners.values()]
+            device_info=self.device,
+            partners=[p.device for p in self.participant.partners.values()],
         )
 
     def _on_get(self, query: zenoh.Query) -> None:
@@ -408,100 +431,53 @@ class GenericDevice(Participant):
 
     # -- presence of senders -------------------------------------------------------------
 
+    def _on_presence(self, presence: Presence, joined: bool) -> None:
+        """The participant's presence listener: a name conflict on a join, a departed
+        sender on a leave."""
+        if joined:
+            self._on_joined(presence)
+        else:
+            self._on_left(presence)
+
     def _on_joined(self, presence: Presence) -> None:
         """Two live services with one name: the younger withdraws (the older keeps serving)."""
+        instance = self.participant.instance
         if (
             presence.role == "service"
             and presence.name == self.name
-            and presence.instance != self.instance
-            and presence.instance < self.instance
-            and self._started  # before that, _declare refuses to start instead
+            and presence.instance != instance
+            and presence.instance < instance
+            and self.participant.started  # before that, _declare refuses to start instead
             and not self._closing
         ):
             self.conflict = (
-                f"a service named {self.name} is already running in cell {self.keys.cell!r}"
+                f"a service named {self.name} is already running in cell {self.cell!r}"
             )
             log.error("%s: %s; withdrawing", self.name, self.conflict)
             asyncio.get_running_loop().create_task(self.close(self.conflict))
 
     def _on_left(self, presence: Presence) -> None:
-        super()._on_left(presence)
+        """A sender left (after the participant dropped it as a partner): refuse its late
+        requests, end its MultipleData hold, drop its publisher."""
         self.departed.add(presence.instance)
         self.scheduler.sender_lost(presence.name, presence.instance)
-        if not self.is_alive(presence.name, presence.role) and presence.name in self._publishers:
-            with contextlib.suppress(zenoh.ZError):
-                self._publishers.pop(presence.name).undeclare()
+        if not self.participant.is_alive(presence.name, presence.role):
+            self.notifications.sender_left(presence.name)
 
-    # -- receivers of the device state ports (5.2.3.2); the data and command feedback
-    # go to the ProcessScheduler ----------------------------------------------------
-
-    def _on_device_state(self, state: DeviceStates) -> None:
-        """DeviceStateHandler (5.2.3.2): write the state, notify StateUpdate.
-
-        The notification goes out at the end of the event-loop turn and only if the
-        state then differs from the last one notified: a process that runs within
-        one turn (Busy → Ready) notifies nothing, as no observer could have seen it.
-        """
-        if state is not self.device.state:
-            self.device.state = state
-            self._notify_soon()
-
-    def _on_connection_state(self, connection: ConnectionStates) -> None:
-        """ConnectionStateHandler: write the connection state, notify ConnectionUpdate."""
-        if connection is not self.device.connection:
-            self.device.connection = connection
-            self._notify_soon()
-
-    def _notify_soon(self) -> None:
-        if not self._notify_scheduled and self._loop is not None:
-            self._notify_scheduled = True
-            self._loop.call_soon(self._notify_states)
-
-    def _notify_states(self) -> None:
-        self._notify_scheduled = False
-        state, connection = self.device.state, self.device.connection
-        if state is not self._notified[0] or connection is not self._notified[1]:
-            self.device.last_updated = datetime.now(UTC)
-        if state is not self._notified[0]:
-            self._publish("state", StateUpdateNotification(name=self.name, state=state))
-        if connection is not self._notified[1]:
-            self._publish(
-                "connection", ConnectionUpdateNotification(name=self.name, connection=connection)
-            )
-        self._notified = (state, connection)
-
-    # -- outbound notifications ------------------------------------------------------
-
-    def _publish(self, kind: Notification, body: Message) -> None:
-        """A state, connection or shutdown notification to the subscribed partners."""
-        if not self._session_open():
-            return
-        assert self.bus is not None
-        with contextlib.suppress(zenoh.ZError):
-            self.bus.notify(kind, self.name, self.encode(body))
-
-    def _publisher(self, sender: str) -> Any:
-        publisher = self._publishers.get(sender)
-        if publisher is None:
-            assert self.bus is not None
-            publisher = self.bus.process_publisher(self.name, sender,
-                                                   express=self.declaration.express_updates)
-            self._publishers[sender] = publisher
-        return publisher
+    # -- the scheduler's seams (framework/scheduler.py) ----------------------------------
 
     def _busy(self, busy: bool) -> None:
         """The scheduler's seam: Busy while a process runs, Ready after (if it was Busy)."""
         if busy:
-            self._on_device_state(DeviceStates.Busy)
+            self.notifications.device_state(DeviceStates.Busy)
         elif self.device.state is DeviceStates.Busy:
-            self._on_device_state(DeviceStates.Ready)
+            self.notifications.device_state(DeviceStates.Ready)
 
     def _heartbeat(self, entry: Entry, update: ProcessUpdateNotification) -> None:
         """The scheduler's seam: a Queued update straight to its sender (no journal,
         no batch)."""
-        if self._session_open():
-            with contextlib.suppress(zenoh.ZError):
-                self._publisher(entry.sender).put(self.encode(update))
+        if self.notifications.is_open:
+            self.notifications.to_sender(entry.sender, update)
 
     def _update(self, entry: Entry, state: ProcessStates, reason: str, data: Data | None) -> None:
         """ProcessStateHandler: journal the ProcessUpdate, then send it (the outbox)."""
@@ -519,14 +495,6 @@ class GenericDevice(Participant):
                 entry.sender, entry.identifier, entry.seq, state.value, reason, summary(data)
             )
         self.outbox.update(entry, update)
-
-    def _session_open(self) -> bool:
-        return self.bus is not None and self.bus.is_open
-
-    def _send_to(self, sender: str, body: Message) -> None:
-        """One sample for ``sender`` on its process key (the outbox's publish)."""
-        with contextlib.suppress(zenoh.ZError):
-            self._publisher(sender).put(self.encode(body))
 
 
 __all__ = [

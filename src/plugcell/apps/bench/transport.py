@@ -52,6 +52,7 @@ from plugcell.apps.bench.peer import stats_ms
 from plugcell.apps.commands.deprecated import DeprecatedName
 from plugcell.framework import eventloop
 from plugcell.framework.messages import ProcessStates
+from plugcell.framework.participant import Participant
 from plugcell.framework.transport import TransportConfig
 
 
@@ -178,8 +179,9 @@ class RawRequester(Child):
         self.stop()
 
 
-async def our_latency(consumer: Any, payload: Payload, cycles: int, warmup: int) -> dict:
-    """CreateProcess(Echo, data) → the ProcessUpdate with the same data; half the round trip."""
+async def our_latency(consumer: Participant, payload: Payload, cycles: int, warmup: int) -> dict:
+    """CreateProcess(Echo, data) → the ProcessUpdate with the same data; half the round trip
+    (``consumer``: the consumer service's participant)."""
     data = np.full(payload.shape, 7, np.uint8)
     data.flags.writeable = False  # never changes: sent without a copy
     trips = []
@@ -197,7 +199,7 @@ async def our_latency(consumer: Any, payload: Payload, cycles: int, warmup: int)
     return stats_ms(trips)
 
 
-async def our_throughput(consumer: Any, payload: Payload, messages: int) -> float:
+async def our_throughput(consumer: Participant, payload: Payload, messages: int) -> float:
     """Push ``messages`` ProcessUpdates with the payload; r = messages / t_total (eq. 5.1)."""
     t0 = time.perf_counter()
     call = await consumer.create_process(
@@ -279,9 +281,9 @@ async def parties(cell: str, env: dict[str, str], transport: TransportConfig, jo
     raw = None
     try:
         await consumer.start()
-        if not await consumer.wait_for("PUBLISHER", 15):
+        if not await consumer.participant.wait_for("PUBLISHER", 15):
             raise RuntimeError("the publisher service did not appear")
-        await consumer.subscribe("PUBLISHER")
+        await consumer.participant.subscribe("PUBLISHER")
         raw = await asyncio.to_thread(RawRequester, cell, env, [])  # here, beside us
         yield Parties(consumer, publisher, raw_peer, raw)
     finally:
@@ -316,14 +318,14 @@ async def _measure(
             progress(f"{p.label}: raw latency through event loops")
             raw_loop = raw.latency_in_loop(p.nbytes, cycles, warmup)
             progress(f"{p.label}: latency ({cycles} cycles)")
-            lat = await our_latency(consumer, p, cycles, warmup)
+            lat = await our_latency(consumer.participant, p, cycles, warmup)
             raw_runs, runs = [], []
             for i in range(repeat):
                 run_no = f", run {i + 1} of {repeat}" if repeat > 1 else ""
                 progress(f"{p.label}: raw throughput{run_no}")
                 raw_runs.append(raw.throughput(p.nbytes, messages))
                 progress(f"{p.label}: throughput ({messages} messages{run_no})")
-                runs.append(await our_throughput(consumer, p, messages))
+                runs.append(await our_throughput(consumer.participant, p, messages))
             thr, raw_thr = max(runs), max(raw_runs)
             table = THESIS_NETWORKED if args.peer_netns else THESIS_LOCAL
             thesis_r, thesis_r_num, thesis_lat = table[p.nbytes]

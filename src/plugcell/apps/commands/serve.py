@@ -219,8 +219,8 @@ async def _serve(service: Any) -> None:
         return
     print(
         f"plugcell: {service.name} ({service.declaration.kind}) serving in cell "
-        f"{service.keys.cell!r} "
-        f"as instance {service.instance}",
+        f"{service.cell!r} "
+        f"as instance {service.participant.instance}",
         flush=True,
     )
     stopping = asyncio.create_task(stop.wait())

@@ -110,11 +110,11 @@ def _cell_routes(router: APIRouter, controller: CellController) -> None:
 
     @router.get("/wiring")
     async def wiring() -> Response:
-        doc = dump_wiring(controller.wiring_document(), controller.host.keys.cell)
+        doc = dump_wiring(controller.wiring_document(), controller.host.cell)
         return Response(
             json.dumps(doc, indent=2) + "\n", media_type="application/json",
             headers={"Content-Disposition":
-                     f'attachment; filename="{controller.host.keys.cell}-wiring.json"'},
+                     f'attachment; filename="{controller.host.cell}-wiring.json"'},
         )
 
     @router.post("/wiring/save")

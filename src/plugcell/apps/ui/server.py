@@ -61,7 +61,7 @@ async def serve(
         bound = int(sock.getsockname()[1])
         shown = "127.0.0.1" if host in ("0.0.0.0", "::") else host
         print(f"plugcell: controller UI on http://{shown}:{bound}/ "
-              f"(service {controller.host.name} in cell {controller.host.keys.cell!r})", flush=True)
+              f"(service {controller.host.name} in cell {controller.host.cell!r})", flush=True)
         await task
     finally:
         server.should_exit = True

@@ -15,7 +15,7 @@ import contextlib
 import logging
 import time
 from collections.abc import AsyncIterator, Callable
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 from plugcell.devices.cell.feed import UiFeed
 from plugcell.devices.cell.monitor import ProcessMonitor
@@ -24,10 +24,7 @@ from plugcell.devices.cell.tasks import describe_command
 from plugcell.devices.cell.wiring import Wire, WiringKeeper, wires_in_place
 from plugcell.framework.keys import Presence
 from plugcell.framework.messages import Device, GenericDeviceState
-from plugcell.framework.participant import PartnerError, PresenceEvent
-
-if TYPE_CHECKING:
-    from plugcell.framework.service import GenericDevice
+from plugcell.framework.participant import Participant, PartnerError, PresenceEvent
 
 log = logging.getLogger("plugcell.devices.cell.service")
 
@@ -72,13 +69,14 @@ class ServiceRecord:
 
 class CellDirectory:
     """The records of the cell's services and clients, kept current, and the wires asked
-    for (module docstring).  ``log(level, text)`` writes the controller's activity log;
-    ``spawn(coro)`` runs a task the controller cancels when it closes."""
+    for (module docstring), through the controller's ``participant`` (presence, Get,
+    partners, wiring requests).  ``log(level, text)`` writes the controller's activity
+    log; ``spawn(coro)`` runs a task the controller cancels when it closes."""
 
-    def __init__(self, host: GenericDevice, *, feed: UiFeed, keeper: WiringKeeper,
+    def __init__(self, participant: Participant, *, feed: UiFeed, keeper: WiringKeeper,
                  monitor: ProcessMonitor, robots: RobotStates,
                  log: Callable[[str, str], None], spawn: Callable[[Any], Any]) -> None:
-        self.host = host
+        self.participant = participant
         self.feed = feed
         self.keeper = keeper
         self.monitor = monitor
@@ -100,11 +98,11 @@ class CellDirectory:
 
     def presence(self, presence: Presence, *, joined: bool) -> None:
         """A participant joined or left the cell."""
-        host = self.host
+        participant = self.participant
         if presence.role == "client":
             if joined:
                 self.clients.add(presence.name)
-            elif not host.is_alive(presence.name, "client"):
+            elif not participant.is_alive(presence.name, "client"):
                 self.clients.discard(presence.name)
             self.feed.cell_changed()
             return
@@ -116,11 +114,11 @@ class CellDirectory:
                 return
             record.alive, record.instance = True, presence.instance
             record.joined_ns, record.left_ns = time.time_ns(), 0
-            if presence.name != host.name:
+            if presence.name != participant.name:
                 self._log("info", f"{presence.name} joined the cell")
             self.keeper.reset_backoff(presence.name)
             self._spawn(self._adopt(presence.name))
-        elif not host.is_alive(presence.name):
+        elif not participant.is_alive(presence.name):
             record.alive = False
             record.left_ns = time.time_ns()
             record.partners = []
@@ -136,14 +134,14 @@ class CellDirectory:
     async def _adopt(self, name: str) -> None:
         """A service appeared: fetch its state, subscribe to it, re-apply its wires."""
         try:
-            state, _ = await self.host.get(name, 3.0)
+            state, _ = await self.participant.get(name, 3.0)
         except PartnerError as exc:
             self._log("error", f"{name}: {exc}")
             return
         self._update_record(state)
-        if name != self.host.name:
+        if name != self.participant.name:
             try:
-                await self.host.subscribe(name, 3.0)
+                await self.participant.subscribe(name, 3.0)
             except PartnerError as exc:
                 self._log("error", f"cannot subscribe to {name}: {exc}")
         await self.reapply()
@@ -152,7 +150,7 @@ class CellDirectory:
     def _update_record(self, state: GenericDeviceState) -> None:
         info = state.device_info
         record = self.records.get(info.name)
-        if record is None or not self.host.is_alive(info.name):
+        if record is None or not self.participant.is_alive(info.name):
             return
         partners = sorted(p.name for p in state.partners)
         if record.device is None or record.partners != partners or _differs(record.device, info):
@@ -162,7 +160,7 @@ class CellDirectory:
     def partner_changed(self, partner: str) -> None:
         """A partner's StateUpdate/ConnectionUpdate (recorded in the service's Partners)."""
         record = self.records.get(partner)
-        p = self.host.partners.get(partner)
+        p = self.participant.partners.get(partner)
         if record is not None and p is not None:
             record.device = p.device
             self.feed.cell_changed()
@@ -176,11 +174,11 @@ class CellDirectory:
             try:
                 await self.refresh()
             except Exception:  # never let the loop die
-                log.exception("%s: refresh failed", self.host.name)
+                log.exception("%s: refresh failed", self.participant.name)
 
     def seen(self) -> None:
         """Take every participant the service knows to be alive (events missed)."""
-        for (role, name), instances in list(self.host.alive.items()):
+        for (role, name), instances in list(self.participant.alive.items()):
             for instance in instances:
                 self.presence(Presence(role, name, instance), joined=True)  # type: ignore[arg-type]
 
@@ -188,9 +186,9 @@ class CellDirectory:
         """Get every service (partners = the wiring), then re-apply missing wires."""
         self.seen()
         for name, record in list(self.records.items()):
-            if record.alive and not self.host.is_alive(name):
+            if record.alive and not self.participant.is_alive(name):
                 self.presence(Presence("service", name, record.instance), joined=False)
-        for state in await self.host.list_services(1.0):
+        for state in await self.participant.list_services(1.0):
             self._update_record(state)
         await self.reapply()
 
@@ -207,14 +205,14 @@ class CellDirectory:
     def wiring_now(self) -> list[Wire]:
         """The wires in place between the services of the cell (the controller's own left out)."""
         return wires_in_place({name: record.partners for name, record in self.records.items()
-                               if record.alive and name != self.host.name})
+                               if record.alive and name != self.participant.name})
 
     async def ask(self, wire: Wire, subscribe: bool) -> tuple[bool, str]:
         """Ask ``wire``'s service to subscribe to (or drop) its partner: (ok, reason)."""
-        host = self.host
-        if wire.service == host.name:
-            return False, f"{host.name} is the cell controller; wire other services"
-        response = await host.ask_subscribe(wire.service, wire.partner, subscribe, 5.0)
+        participant = self.participant
+        if wire.service == participant.name:
+            return False, f"{participant.name} is the cell controller; wire other services"
+        response = await participant.ask_subscribe(wire.service, wire.partner, subscribe, 5.0)
         record = self.records.get(wire.service)
         if response.ok and record is not None:
             if subscribe and wire.partner not in record.partners:

@@ -93,18 +93,18 @@ class MonitoredProcesses:
 
     @property
     def partners(self) -> dict[str, Partner]:
-        return self.host.partners
+        return self.host.participant.partners
 
     async def subscribe(self, partner: str, timeout: float = 5.0) -> Device:
-        return await self.host.subscribe(partner, timeout)
+        return await self.host.participant.subscribe(partner, timeout)
 
     async def create_process(
         self, partner: str, command: str, option: str = "", data: Any = None, **kwargs: Any
     ) -> ProcessCall:
         """:meth:`Participant.create_process`, monitored."""
         host = self.host
-        call = await host.create_process(partner, command, option, data, **kwargs)
-        known = host.partners.get(partner)
+        call = await host.participant.create_process(partner, command, option, data, **kwargs)
+        known = host.participant.partners.get(partner)
         declared = known.device.command(command) if known else None
         ack = call.ack
         record = self.monitor.created(
@@ -173,7 +173,7 @@ class CellController:
     def bind(self, service: GenericDevice) -> None:
         self.service = service
         journals, home = self._journals
-        self.journal_tail = JournalTail(service.keys.cell, home) if journals else None
+        self.journal_tail = JournalTail(service.cell, home) if journals else None
         self.feed = UiFeed(service.name, cell=self.cell_json, processes=self._processes_event,
                            log=log)
         """What the web UI hears (cell/feed.py)."""
@@ -181,7 +181,7 @@ class CellController:
         """The latest joint state of each robot (robot_states.py)."""
         self.processes = MonitoredProcesses(service, self.monitor, self.feed)
         """Creates the controller's processes, each monitored."""
-        self.directory = CellDirectory(service, feed=self.feed, keeper=self.keeper,
+        self.directory = CellDirectory(service.participant, feed=self.feed, keeper=self.keeper,
                                        monitor=self.monitor, robots=self.robots,
                                        log=self._log, spawn=self._spawn)
         """The services and clients of the cell, and the wires asked for (directory.py)."""
@@ -199,17 +199,17 @@ class CellController:
     async def connect(self) -> None:
         """Once live in the cell: follow every process and joint state, load the wiring,
         start discovery, refresh, the UI feed and the journal reader."""
-        host = self.host
-        assert host.bus is not None
-        host.own(host.watch_processes(self._on_any_process))
-        host.own(host.bus.watch_joint_states(self.robots.on_payload))
+        host, participant = self.host, self.host.participant
+        assert participant.bus is not None
+        host.own(participant.watch_processes(self._on_any_process))
+        host.own(participant.bus.watch_joint_states(self.robots.on_payload))
         if self.wiring_file is not None:
             try:
                 self.load(self.wiring_file)
             except WiringError as exc:
                 self._log("error", str(exc))
         self._loops = [
-            asyncio.create_task(self.directory.follow(host.events()),
+            asyncio.create_task(self.directory.follow(participant.events()),
                                 name=f"{host.name}-discovery"),
             asyncio.create_task(self.directory.refresh_loop(), name=f"{host.name}-refresh"),
             asyncio.create_task(self.feed.run(), name=f"{host.name}-flush"),
@@ -263,7 +263,7 @@ class CellController:
     def cell_json(self) -> dict[str, Any]:
         """Services (alive and dead), clients, and the wanted wiring with its status."""
         return {
-            "cell": self.host.keys.cell,
+            "cell": self.host.cell,
             "controller": self.host.name,
             "services": [r.to_json(self.host.name) for r in sorted(
                 self.records.values(), key=lambda r: r.name)],
@@ -336,7 +336,7 @@ class CellController:
 
     def save(self, path: Path) -> dict[str, Any]:
         """Save the wiring of the cell (WiringError if the file cannot be written)."""
-        doc = save_wiring(self.wiring_document(), self.host.keys.cell, Path(path))
+        doc = save_wiring(self.wiring_document(), self.host.cell, Path(path))
         self.wiring_file = Path(path)
         self._log("info", f"saved {len(doc['wires'])} wires to {path}")
         self.feed.cell_changed()
@@ -353,9 +353,9 @@ class CellController:
             where = str(source)
         for w in wires:
             self.keeper.want(w)
-        if cell and cell != self.host.keys.cell:
+        if cell and cell != self.host.cell:
             self._log("warning", f"{where} was saved in cell {cell!r}; applying to "
-                                 f"{self.host.keys.cell!r}")
+                                 f"{self.host.cell!r}")
         self._log("info", f"loaded {len(wires)} wires from {where}")
         self.directory.refresh_now.set()
         self.feed.cell_changed()
@@ -420,7 +420,7 @@ class CellController:
         if call is None:
             return {"ok": False, "reason": f"no running task {task_id}"}
         try:
-            stop = await self.host.stop_process(call)
+            stop = await self.host.participant.stop_process(call)
         except PartnerError as exc:
             return {"ok": False, "reason": str(exc)}
         final = await stop.result()

@@ -129,7 +129,7 @@ class ComputeService:
         if self._data_dir is not None:
             return self._data_dir
         assert self.service is not None
-        return plugcell_home() / "cells" / self.service.keys.cell / "compute" / self.service.name
+        return plugcell_home() / "cells" / self.service.cell / "compute" / self.service.name
 
     def workspace(self, requester: str) -> Workspace:
         """The workspace of ``requester`` (created empty on first use)."""

@@ -2,6 +2,7 @@
 
 * :mod:`.gateway` — ``plugcell opcua serve``: an OPC UA server mirroring the cell
   (services as objects, commands as methods, processes as objects and events);
+  :mod:`.method_calls` — its method calls, each a process sent as the OPC UA user;
 * :mod:`.address_space` — the nodes of that server; :mod:`.companion` — the DI and OPC
   40010 NodeSets (``nodesets/``) and the services as typed devices in ``DeviceSet``;
   :mod:`.robots` — robots as OPC 40010 ``MotionDeviceSystemType``;

@@ -224,9 +224,10 @@ def publish_joint_state(service: Any, rate_hz: float) -> JointStatePublisher | N
         States per second.
     """
     host = service.host
-    if rate_hz <= 0 or host.bus is None:
+    bus = host.participant.bus
+    if rate_hz <= 0 or bus is None:
         return None
-    publisher = host.own(host.bus.joint_state_publisher(host.name))  # closed with it
+    publisher = host.own(bus.joint_state_publisher(host.name))  # closed with it
     bridge = service.bridge
 
     async def read() -> np.ndarray | None:

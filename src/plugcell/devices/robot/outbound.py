@@ -204,9 +204,9 @@ class ExternalProcessHandler:
         service = self.service
         if a.device in (service.name, SELF_ALIAS):
             return await self._own(a)
-        partner = service.host.partners.get(a.device)
+        partner = service.host.participant.partners.get(a.device)
         if partner is None:
-            wired = ", ".join(sorted(service.host.partners)) or "none"
+            wired = ", ".join(sorted(service.host.participant.partners)) or "none"
             return False, None, (f"{a.device} is not a partner of {service.name} "
                                  f"(partners: {wired}); wire it: plugcell wire "
                                  f"{service.name} {a.device}")
@@ -224,8 +224,8 @@ class ExternalProcessHandler:
         if command.type is CommandTypes.MultipleData and stream is not None:
             return False, None, (f"{a.device} {stream.command} is still streaming to this robot: "
                                  f"stop it first")
-        call = await service.host.create_process(a.device, command.name, a.option, data,
-                                            timeout=command.timeout + CALL_MARGIN_S)
+        call = await service.host.participant.create_process(
+            a.device, command.name, a.option, data, timeout=command.timeout + CALL_MARGIN_S)
         if command.type is CommandTypes.MultipleData:
             return await self._start_stream(request, a, command, call)
         final = await call.result()
@@ -301,13 +301,13 @@ class ExternalProcessHandler:
 
     async def _stop_partner(self, stream: _Stream) -> None:
         """Send the partner's StopData for a stream whose program is gone."""
-        partner = self.service.host.partners.get(stream.device)
+        partner = self.service.host.participant.partners.get(stream.device)
         stops = [c.name for c in (partner.device.commands if partner else ())
                  if c.type is CommandTypes.StopData]
         if not stops:
             return
         with contextlib.suppress(Exception):
-            call = await self.service.host.create_process(stream.device, stops[0],
+            call = await self.service.host.participant.create_process(stream.device, stops[0],
                                                      timeout=STOP_TIMEOUT_S)
             await call.result()
 

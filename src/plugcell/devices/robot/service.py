@@ -293,9 +293,9 @@ class RobotService:
             if self.sim:
                 assert self.launcher is not None
                 self.sim_process = self.launcher(
-                    name=host.name, cell=host.keys.cell, robot=self.robot,
+                    name=host.name, cell=host.cell, robot=self.robot,
                     payload_kg=self.payload_kg, speed=self.speed, seed=self.seed,
-                    library=self.library, transport=host.transport,
+                    library=self.library, transport=host.participant.transport,
                     link_baud=self.link_baud, dynamics=self.dynamics,
                 )
                 self.endpoint = await self.sim_process.start(self.connect_timeout)

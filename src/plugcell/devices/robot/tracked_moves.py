@@ -373,8 +373,8 @@ def tracked_moves_for(controller: Any) -> Callable[[Position, str], float | None
             raise MotionError("not connected")
         desc = controller.description
         fk = forward(desc, None, np.asarray(desc.home, float), "nominal")
-        # the robot device's host is the participant that opens the tracker's stream
-        return ServiceTrackerFeed(controller.handler.host, loop, tracker,
+        # the robot device's host holds the participant that opens the tracker's stream
+        return ServiceTrackerFeed(controller.handler.host.participant, loop, tracker,
                                   np.linalg.inv(fk.flange) @ fk.tcp)
 
     return TrackedMoves(controller.motion, feeds, after=controller.clock.advance).move_tracked

@@ -237,9 +237,9 @@ class _Delivery:
         device = self.device
         what = f"delivery of {self.command.name} data to {route.service}:{route.command}"
         try:
-            if route.service not in device.partners:
-                await device.subscribe(route.service, DELIVERY_TIMEOUT_S)
-            catalogue = device.partners[route.service].device
+            if route.service not in device.participant.partners:
+                await device.participant.subscribe(route.service, DELIVERY_TIMEOUT_S)
+            catalogue = device.participant.partners[route.service].device
         except Exception as exc:  # PartnerError, timeouts: the reason is in the message
             raise DeliveryError(f"{what} failed: {exc}") from None
         target = catalogue.command(route.command)
@@ -254,7 +254,7 @@ class _Delivery:
         device = self.device
         value = fit_to_declaration(value, (await self._target(route)).input_data_size)
         option = format_option(route.option, on_behalf_of=self.context.requester)
-        call = await device.create_process(
+        call = await device.participant.create_process(
             route.service, route.command, option, value, timeout=DELIVERY_TIMEOUT_S
         )
         final = await call.result()
@@ -342,7 +342,7 @@ class Routing:
             raise DeviceError(str(exc)) from None
         requester = service.sender
         if parsed.on_behalf_of:
-            if not service.is_alive(service.sender, "service"):
+            if not service.participant.is_alive(service.sender, "service"):
                 raise DeviceError(
                     f"for={parsed.on_behalf_of}: only a service may act on behalf of another "
                     f"participant ({service.sender} is not a live service)"

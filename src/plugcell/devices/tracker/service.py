@@ -183,7 +183,7 @@ class TrackerService:
         assert self.service is not None
         attach = getattr(self.driver, "attach", None)
         if attach is not None:  # a driver that sees the cell through the service's bus
-            attach(self.service.bus)
+            attach(self.service.participant.bus)
         await self.driver.connect()
         self.service.device.vendor = self.driver.info
 
