@@ -144,9 +144,10 @@ class _InSpace:
             self.convert = None
             return
         if space != "joints" or frame not in ("base", "tool"):
+            frames = "the base, tool or joints" if space == "joints" else f"the {space}"
             raise ValueError(f"an offset in the {frame} frame cannot be sent as this "
-                             f"stream's corrections ({_space_text(space)}): give it in the "
-                             f"{'joints' if space == 'joints' else space} frame")
+                             f"stream's corrections ({_space_text(space)}): give it in "
+                             f"{frames} frame")
         from plugcell.io.robots import load_robot
 
         self.desc = load_robot(robot)
