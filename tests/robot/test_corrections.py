@@ -9,6 +9,7 @@ No sockets here: the corrections over UDP, against the twin running its own prog
 from __future__ import annotations
 
 import asyncio
+import time
 import types
 
 import numpy as np
@@ -137,10 +138,10 @@ def test_a_cartesian_offset_on_a_joint_stream_moves_the_tcp_by_it(frame):
     errors = []
     for size in (1.0, 0.1):
         o = size * np.array([0.3e-3, -0.2e-3, 0.5e-3, 0, 0, 0])
-        source = make_source(CorrectionSpec("offset", tuple(o), frame=frame, ramp_s=0.004,
-                                            robot="smart_h4"), RSI_JOINT).source
-        source.correction(_state(Q, np.zeros(6), 0.0))  # the first cycle: b = 0
-        dq = np.asarray(source.correction(_state(Q, np.zeros(6), 1.0)).offset)
+        running = make_source(CorrectionSpec("offset", tuple(o), frame=frame,
+                                             robot="smart_h4"), RSI_JOINT)
+        running.close()
+        dq = running.goal_now(_state(Q, np.zeros(6)))
         T1 = forward(desc, None, Q + dq, "nominal").tcp
         want = o[:3] if frame == "base" else T0[:3, :3] @ o[:3]
         errors.append(np.linalg.norm(T1[:3, 3] - T0[:3, 3] - want))
@@ -164,24 +165,49 @@ def calibration(tmp_path_factory):
 
 
 def test_the_compensation_follows_the_path_to_the_thesis_compensation(calibration):
-    """Cycle by cycle on a moving path, one Newton step each: once ramped in, the offset is
-    the model's compensation of the path's joints (eq. 4.11, as compensate_joints)."""
+    """Cycle by cycle on a moving path, one Newton step each: the offset becomes the model's
+    compensation of the path's joints (eq. 4.11, as compensate_joints)."""
     result, path = calibration
     spec = _corrections(RSI_JOINT, max_deg=1.0).spec(["compensation", f"calibration={path}",
                                                       "ramp=0.1"])
-    source = make_source(spec, RSI_JOINT).source
+    running = make_source(spec, RSI_JOINT)
+    running.close()  # g computed here, cycle by cycle (the link's cycle takes it from a thread)
     model = IdentifiedModel(result.model)
     nominal = NominalModel(model.description, tool=model.tool)
     offset = np.zeros(6)
     for k in range(150):  # 0.6 s at 4 ms; the path turns A1 at 10 °/s
         q_path = Q + np.radians([10.0 * 0.004 * k, 0, 0, 0, 0, 0])
-        offset = np.asarray(source.correction(_state(q_path, offset, 0.004 * k)).offset)
+        offset = running.goal_now(_state(q_path, offset, 0.004 * k))
     want = compensate_joints(model, nominal.evaluate(q_path)[0], q_path,
                              result.model.payload_ref_kg).q.reshape(-1) - q_path
     assert np.max(np.abs(want)) > np.radians(0.005)  # a real correction
     np.testing.assert_allclose(offset, want, atol=np.radians(2e-5))
     T = model.evaluate(q_path + offset, result.model.payload_ref_kg)[0][0]
     np.testing.assert_allclose(T[:3, 3], nominal.evaluate(q_path)[0][0][:3, 3], atol=2e-6)
+
+
+def test_the_link_takes_the_newest_goal_computed_beside_it():
+    """A conversion costs milliseconds: the cycle gets the newest g at once (zeros before
+    the first), blended in; a failing g fails the next cycle with its reason."""
+    spec = CorrectionSpec("offset", (0, 0, 0.5e-3, 0, 0, 0), frame="base", ramp_s=0.004,
+                          max_offset=(np.radians(1),) * 6)
+    running = make_source(spec, RSI_JOINT)
+    try:
+        want = running.goal_now(_state(Q, np.zeros(6)))
+        got = np.zeros(6)
+        for k in range(2000):
+            got = np.asarray(running.source.correction(_state(Q, np.zeros(6), 1 + k)).offset)
+            if np.any(got):
+                break
+            time.sleep(0.005)
+        np.testing.assert_allclose(got, want, atol=1e-12)
+        running.set(np.array([0, 0, 1.0, 0, 0, 0]))  # 1 m: beyond 1° on some joint
+        with pytest.raises(ValueError, match="beyond the largest correction 1 °"):
+            for k in range(2000):
+                running.source.correction(_state(Q, np.zeros(6), 100 + k))
+                time.sleep(0.005)
+    finally:
+        running.close()
 
 
 def test_a_calibration_that_does_not_read_is_refused(tmp_path):

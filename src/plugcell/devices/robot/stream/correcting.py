@@ -34,6 +34,7 @@ to the link's limits.
 from __future__ import annotations
 
 import threading
+from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any
 
@@ -221,6 +222,66 @@ class _Compensation:
         return self.dq
 
 
+#: The interpreter's thread switch interval while ``g`` is computed beside the link (s):
+#: the link's thread must get the interpreter back within a fraction of a 4 ms cycle (the
+#: default is 5 ms).
+SWITCH_INTERVAL_S = 0.0005
+
+
+class _Beside:
+    """Computes ``g(state)`` in a thread of its own, beside the link: :meth:`offer` hands
+    it the newest cycle and returns, at once, the newest ``g`` it has (zeros before the
+    first) — a compensation takes milliseconds, more than the cycle allows; ``g`` follows
+    the path a few cycles late (its change over them is the path's over them: small).  A
+    failure of ``g`` is raised by the next :meth:`offer`."""
+
+    def __init__(self, g: Callable[[CycleState], Array]) -> None:
+        import sys
+
+        self.g = g
+        self._cond = threading.Condition()
+        self._job: CycleState | None = None
+        self._result = np.zeros(6)
+        self._failure: Exception | None = None
+        self._stop = False
+        self._switch = sys.getswitchinterval()
+        sys.setswitchinterval(min(self._switch, SWITCH_INTERVAL_S))
+        threading.Thread(target=self._run, name="correction-goal", daemon=True).start()
+
+    def offer(self, state: CycleState) -> Array:
+        with self._cond:
+            if self._failure is not None:
+                raise self._failure
+            self._job = state
+            self._cond.notify()
+            return self._result
+
+    def _run(self) -> None:
+        while True:
+            with self._cond:
+                while self._job is None and not self._stop:
+                    self._cond.wait()
+                if self._stop:
+                    return
+                job, self._job = self._job, None
+            try:
+                out = self.g(job)
+            except Exception as exc:  # the next offer fails the correction with it
+                with self._cond:
+                    self._failure = exc
+                return
+            with self._cond:
+                self._result = out
+
+    def close(self) -> None:
+        import sys
+
+        with self._cond:
+            self._stop = True
+            self._cond.notify()
+        sys.setswitchinterval(self._switch)
+
+
 class Superimposed:
     """A correction as the link runs it: the :class:`~.source.PathOffset` asking for
     ``b(t) · g(t)``, ``g`` from the spec's source in the stream's space (:func:`make_source`).
@@ -241,10 +302,14 @@ class Superimposed:
         self._limit = np.asarray(spec.max_offset, dtype=float)
         self._lock = threading.Lock()
         self.offset = np.zeros(6)
+        # g is computed beside the link when it costs more than a few microseconds
+        self._beside = (_Beside(self.goal_now) if wanted is not None
+                        or in_space.convert is not None else None)
         self.source = PathOffset(self._goal, ramp=spec.ramp_s, finish_at=spec.duration_s)
 
-    def _goal(self, state: CycleState) -> Array:
-        self.offset = state.offset
+    def goal_now(self, state: CycleState) -> Array:
+        """``g`` of ``state``, computed now (SI, the stream's space); ``ValueError`` beyond
+        ``max_offset``.  The link's cycle takes the newest one computed beside it."""
         if self._wanted is not None:
             g = self._wanted(state)
         else:
@@ -252,6 +317,15 @@ class Superimposed:
                 value = self._value
             g = self._in_space(value, state)
         return _check(g, self._limit, self.space)
+
+    def _goal(self, state: CycleState) -> Array:
+        self.offset = state.offset
+        return self.goal_now(state) if self._beside is None else self._beside.offer(state)
+
+    def close(self) -> None:
+        """Stop computing ``g`` (the correction ended)."""
+        if self._beside is not None:
+            self._beside.close()
 
     def set(self, g: Array) -> None:
         """``g`` of an ``offset`` or ``external`` correction from the next cycle (SI, the
@@ -337,17 +411,20 @@ class Corrector:
                 raise RuntimeError(f"cannot correct: {why}")
             running = make_source(spec, self.link.config)
             self._running, self._outcome = running, None
-            self._thread = threading.Thread(target=self._run, args=(running.source, spec),
+            self._thread = threading.Thread(target=self._run, args=(running, spec),
                                             name="correction", daemon=True)
             self._thread.start()
 
-    def _run(self, source: PathOffset, spec: CorrectionSpec) -> None:
+    def _run(self, running: Superimposed, spec: CorrectionSpec) -> None:
+        source = running.source
         try:
             self.link.follow(source, done=source.ended, timeout=spec.timeout_s)
         except (StreamLinkError, TimeoutError) as exc:
             self._outcome = f"the correction failed: {exc}"
         else:
             self._outcome = ""
+        finally:
+            running.close()
 
     def set_offset(self, g: Array) -> None:
         """The running ``external`` or ``offset`` correction's ``g`` from the next cycle (SI,
