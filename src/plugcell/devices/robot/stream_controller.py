@@ -59,7 +59,7 @@ from plugcell.devices.robot.protocol import (
 from plugcell.devices.robot.requests import Staged, answer, check_line, deliver, status_text
 from plugcell.devices.robot.runner import TEXT_MAX, ProgramRunner, RunError
 from plugcell.devices.robot.stream.correcting import Corrector
-from plugcell.devices.robot.stream.drive import StreamDrive
+from plugcell.devices.robot.stream.drive import StreamDrive, drive_refusal
 from plugcell.devices.robot.stream.limits import CorrectionLimits
 from plugcell.devices.robot.stream.process import BUSY, CorrectorClient, LinkProcess, link_class
 from plugcell.devices.robot.tracked_moves import tracked_moves_for
@@ -175,13 +175,19 @@ def robot_endpoint(option: str, listen_host: str, robot_address: str) -> tuple[s
 class StreamedMotion(PlannedMotion):
     """PlannedMotion on a drive that moves in real time: when ``follow`` returns, the move's
     time has passed; the clock is advanced by it and the interpreter is told ``None`` (it
-    must not wait a second time)."""
+    must not wait a second time).  ``refusal``: why the stream cannot carry the PC's moves
+    (:func:`~plugcell.devices.robot.stream.drive.drive_refusal`; ``""``: it can), said
+    before a move is planned."""
 
-    def __init__(self, *args: object, clock: SimClock, **kwargs: object) -> None:
+    def __init__(self, *args: object, clock: SimClock, refusal: str = "",
+                 **kwargs: object) -> None:
         super().__init__(*args, **kwargs)  # type: ignore[arg-type]
         self.clock = clock
+        self.refusal = refusal
 
     def _run(self, move: object) -> float:
+        if self.refusal:
+            raise MotionError(self.refusal)
         duration = super()._run(move)  # type: ignore[arg-type]
         self.clock.advance(duration)
         return None  # type: ignore[return-value]
@@ -258,7 +264,7 @@ class StreamController:
             self.corrector = Corrector(self.link)
         self.clock = SimClock(speed=1.0)
         self.motion = StreamedMotion(description, self.drive, joint_limits, cartesian_limits,
-                                     clock=self.clock)
+                                     clock=self.clock, refusal=drive_refusal(config))
         self.motion.move_tracked = tracked_moves_for(self)  # type: ignore[attr-defined]
         self.runner = ProgramRunner(self.motion, self.clock, _Channel(self), self._event,
                                     library)
