@@ -10,6 +10,7 @@ RSI, or an ABB controller's EGM loop, standalone.
                       [--lin DX,DY,DZ … [--speed MM_S] [--path-delay S]]
                       [--duration S] [--stats FILE]
     plugcell twin egm [--port 6510] [--ip 127.0.0.1] [--timeout 1.0] [--bind HOST[:PORT]]
+                      [--mode joint|pathcorr [--path-speed MM_S]]
                       [--robot R] [--seed S] [--payload-kg M] [--joints Q1,…,Q6]
                       [--reflector NAME [--cell C]] [--duration S] [--stats FILE]
 
@@ -37,6 +38,9 @@ answer, ns; −1: unanswered) as JSON, for ``benchmarks/stream_in_service.py``.
 ``twin egm`` is the same twin behind an ABB controller's EGM loop in joint mode
 (:class:`~plugcell.sim.controller.egm_twin.TwinEgmRobot`: the feedback pose the nominal
 model's forward kinematics of the joints); ``--timeout`` is its ``\\CommTimeout`` (s).
+``--mode pathcorr`` is a controller running its own ``EGMMoveL`` path (mode (b)) with the
+PC's path corrections added: the simulated EGM loop from the twin's nominal TCP, without
+the twin's dynamics.
 """
 
 from __future__ import annotations
@@ -126,6 +130,14 @@ def add_robot_sides(tw: argparse._SubParsersAction, common, rsi, egm) -> None:
     e.add_argument("--timeout", type=float, default=1.0, metavar="S",
                    help="\\CommTimeout: seconds without a sensor message before EGM stops "
                    "(default 1)")
+    e.add_argument("--mode", choices=("joint", "pathcorr"), default="joint",
+                   help="joint: EGMRunJoint on the dynamic twin (the PC drives); pathcorr: "
+                   "the controller runs its own EGMMoveL path and adds the PC's path "
+                   "corrections (the robot drives; the simulated EGM loop without the "
+                   "twin's dynamics) (default joint)")
+    e.add_argument("--path-speed", type=float, default=50.0, metavar="MM_S",
+                   help="--mode pathcorr: the EGMMoveL path's speed along the work object's "
+                   "x, mm/s (default 50)")
     e.set_defaults(func=egm)
 
 
@@ -293,6 +305,22 @@ def run_rsi(args: argparse.Namespace, scenario) -> int:
     return 0
 
 
+def _path_robot(arm, sensor, args: argparse.Namespace, bind):
+    """``--mode pathcorr``: the ABB controller's EGM loop running ``EGMMoveL`` along the
+    work object's x at ``--path-speed`` from the arm's nominal TCP, the PC's path
+    corrections added (:class:`~plugcell.sim.controller.egm_robot.EgmRobotSim`: a
+    first-order follower, not the twin's dynamics)."""
+    from plugcell.kinematics import forward
+    from plugcell.kinematics.rotations import matrix_to_quat
+    from plugcell.sim.controller.egm_robot import EgmRobotSim
+
+    T = forward(arm.twin.description, None, arm.measured, "nominal").tcp
+    return EgmRobotSim(sensor, "pathcorr", joints=arm.measured, position=T[:3, 3],
+                       quaternion=matrix_to_quat(T[:3, :3]), sample_s=arm.params.cycle,
+                       comm_timeout_s=args.timeout, path_speed=args.path_speed * 1e-3,
+                       bind=bind)
+
+
 def run_egm(args: argparse.Namespace, scenario) -> int:
     """Run ``twin egm`` (module docstring) for the twin ``scenario`` (a TwinScenario)."""
     from plugcell.apps.cli import CommandError
@@ -306,23 +334,32 @@ def run_egm(args: argparse.Namespace, scenario) -> int:
             raise ValueError(f"--timeout must be positive seconds, not {args.timeout}")
         arm = _within_limits(DynamicTwin(scenario, q0=q0))
         start = arm.measured.copy()
-        robot = TwinEgmRobot(arm, sensor, comm_timeout_s=args.timeout, bind=bind)
+        if args.mode == "pathcorr":
+            if not (args.path_speed >= 0):
+                raise ValueError(f"--path-speed must be ≥ 0 mm/s, not {args.path_speed}")
+            robot = _path_robot(arm, sensor, args, bind)
+        else:
+            robot = TwinEgmRobot(arm, sensor, comm_timeout_s=args.timeout, bind=bind)
     except (ValueError, OSError) as exc:
         raise CommandError(f"twin egm: {exc}") from None
     world = _World(args, arm, "egm")
     world.start()
     robot.start()
     h, pt = robot.address
-    print(f"twin egm: {arm.twin.description.name} streaming EGM (joint) from {h}:{pt} to "
-          f"{sensor[0]}:{sensor[1]}", flush=True)
-    peak = _until_stopped(args, lambda: robot.stopped is None,
-                          lambda: robot.state()["joints"] - start)
+    print(f"twin egm: {arm.twin.description.name} streaming EGM ({args.mode}) from {h}:{pt} "
+          f"to {sensor[0]}:{sensor[1]}", flush=True)
+    moved = ((lambda: np.concatenate([robot.state()["correction"], np.zeros(3)]))
+             if args.mode == "pathcorr" else (lambda: robot.state()["joints"] - start))
+    peak = _until_stopped(args, lambda: robot.stopped is None, moved)
     robot.stop()
     world.close()
     _write_stats(args.stats, robot.sent, robot.answers, robot.unanswered, robot.rtts,
                  robot.stopped)
+    largest = (_largest(peak, "cartesian").replace("correction", "path correction")
+               if args.mode == "pathcorr" else
+               _largest(peak, "joint").replace("correction", "move"))
     print(f"twin egm: {robot.sent} samples, {robot.answers} answers, {robot.unanswered} "
-          f"unanswered, {_largest(peak, 'joint').replace('correction', 'move')}", flush=True)
+          f"unanswered, {largest}", flush=True)
     if robot.stopped:
         print(f"twin egm: {robot.stopped}", file=sys.stderr, flush=True)
         return 3

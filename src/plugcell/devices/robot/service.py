@@ -29,6 +29,10 @@ IDENTIFICATION  SingleData  → String[4]            manufacturer, model, serial
                                                    product code (the robot file's)
 ==============  ==========  =====================  ==========================================
 
+A robot streamed over RSI or EGM also lets the robot drive while the PC corrects (issue
+37's mode (b)): ``CORRECT``, ``CORRECT_SET``, ``CORRECT_END``, ``CORRECT_STATUS``
+(:mod:`plugcell.devices.robot.corrections`), declared beside these and dispatched to it.
+
 Positions are PDL's: mm and Comau ZYZ degrees.  The controller is reached over
 the line protocol (:mod:`plugcell.devices.robot.bridge`): with ``sim`` the service
 starts its own controller process with the
