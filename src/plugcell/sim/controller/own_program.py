@@ -17,7 +17,14 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from plugcell.kinematics import RobotDescription, forward
-from plugcell.motion import LIN, CartesianLimits, JointLimits, Trajectory, plan
+from plugcell.motion import (
+    LIN,
+    CartesianLimits,
+    JointLimits,
+    Trajectory,
+    TrajectoryError,
+    plan,
+)
 
 __all__ = ["linear_program", "parse_lins", "path_shift"]
 
@@ -70,7 +77,10 @@ def linear_program(desc: RobotDescription, q0: ArrayLike, lines: Sequence[ArrayL
         moves.append(LIN(target=T))
     joint = JointLimits(*np.radians([[100.0] * 6, [300.0] * 6, [2000.0] * 6]))
     cart = CartesianLimits(speed, 20 * speed, 200 * speed, 1.0, 4.0, 40.0)
-    return plan(desc, np.asarray(q0, dtype=float), moves, joint, cart)
+    try:
+        return plan(desc, np.asarray(q0, dtype=float), moves, joint, cart)
+    except TrajectoryError as exc:
+        raise ValueError(f"the controller's program: {exc}") from None
 
 
 def parse_lins(texts: Sequence[str]) -> list[Array]:

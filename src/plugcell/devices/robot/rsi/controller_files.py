@@ -210,6 +210,29 @@ def signal_flow(config: RsiConfig, io: IoRouting) -> str:
             + etree.tostring(root, encoding="unicode") + "\n")
 
 
+def krl_program(config: RsiConfig, drives: str = "pc", settle_s: float = 1.0) -> str:
+    """The KRL program ``plugcell_rsi.src`` for ``config``: the PC drives (``RSI_MOVECORR``)
+    or the robot drives (its own moves between ``RSI_ON`` and ``RSI_OFF``, then a wait of
+    ``settle_s`` s) — :func:`controller_files`, whose checks it relies on."""
+    relative = config.mode == "relative"
+    return _fill("plugcell_rsi.src" if drives == "pc" else "plugcell_rsi_path.src",
+        cycle_ms=f"{config.cycle_s * 1000:g}",
+        correction_text=("joint corrections AKorr A1..A6 in degrees"
+                         if config.correction == "joint"
+                         else "Cartesian corrections RKorr X Y Z (mm) A B C (deg)"),
+        mode_text="#RELATIVE" if relative else "#ABSOLUTE",
+        mode_note=("each packet carries this cycle's step; HOLDON=0 in the ethernet file, "
+                   "so a late packet adds nothing" if relative else
+                   "each packet carries the whole offset from the start; HOLDON=1, so a "
+                   "late packet keeps it"),
+        mode_krl="RELATIVE" if relative else "ABSOLUTE",
+        cycle=config.cycle, context=f"{CONTEXT}.rsi", ethernet_file=ETHERNET_FILE,
+        end_note=("plugcell's last steps sum its correction back to zero (relative)"
+                  if relative else "plugcell ramps the offset it sends back to zero "
+                  "(absolute)"),
+        settle_s=f"{settle_s:g}")
+
+
 def controller_files(config: RsiConfig, sensor_ip: str, io: IoRouting | None = None,
                      drives: str = "pc", settle_s: float = 1.0) -> dict[str, str]:
     """The controller's files for ``config``, by file name (module doc).
@@ -259,22 +282,7 @@ def controller_files(config: RsiConfig, sensor_ip: str, io: IoRouting | None = N
         raise ValueError("PORT 0: the controller needs a fixed port")
     io = io or IoRouting(outputs={o.tag: 1 + 16 * k for k, o in enumerate(config.outputs)})
     relative = config.mode == "relative"
-    src = _fill("plugcell_rsi.src" if drives == "pc" else "plugcell_rsi_path.src",
-        cycle_ms=f"{config.cycle_s * 1000:g}",
-        correction_text=("joint corrections AKorr A1..A6 in degrees"
-                         if config.correction == "joint"
-                         else "Cartesian corrections RKorr X Y Z (mm) A B C (deg)"),
-        mode_text="#RELATIVE" if relative else "#ABSOLUTE",
-        mode_note=("each packet carries this cycle's step; HOLDON=0 in the ethernet file, "
-                   "so a late packet adds nothing" if relative else
-                   "each packet carries the whole offset from the start; HOLDON=1, so a "
-                   "late packet keeps it"),
-        mode_krl="RELATIVE" if relative else "ABSOLUTE",
-        cycle=config.cycle, context=f"{CONTEXT}.rsi", ethernet_file=ETHERNET_FILE,
-        end_note=("plugcell's last steps sum its correction back to zero (relative)"
-                  if relative else "plugcell ramps the offset it sends back to zero "
-                  "(absolute)"),
-        settle_s=f"{settle_s:g}")
+    src = krl_program(config, drives, settle_s)
     readme = _fill("README.md",
         program=("the KRL program: BCO run where the robot stands, `RSI_CREATE`, `RSI_ON`, "
                  "`RSI_MOVECORR()` (the PC drives), `RSI_OFF`" if drives == "pc" else
