@@ -218,3 +218,46 @@ def test_a_calibration_that_does_not_read_is_refused(tmp_path):
         spec = _corrections(RSI_JOINT).spec(["compensation", f"calibration={path}"])
         with pytest.raises(ValueError, match=f"calibration .*{why}"):
             make_source(spec, RSI_JOINT)
+
+
+@pytest.mark.slow
+def test_the_corrector_superimposes_and_ends_ramped_out_on_the_twins_path():
+    """In one process (the service's link in a thread): a Corrector on an RsiLink lifts the
+    twin controller's own LIN by 0.5 mm in the base frame and puts it back."""
+    import dataclasses
+
+    from plugcell.devices.robot.rsi import RsiLink
+    from plugcell.devices.robot.stream.correcting import Corrector
+    from plugcell.sim.controller.own_program import linear_program, path_shift
+    from plugcell.sim.controller.rsi_robot import RsiRobot
+    from plugcell.sim.twin.dynamics import DynamicTwin
+
+    arm = DynamicTwin(TwinScenario(robot="smart_h4", payload_kg=36.0), q0=Q)
+    desc = arm.twin.description
+    program = linear_program(desc, Q, [[0.0, 0.2, 0.0]], 0.1)
+    config = RsiConfig(robot_host="127.0.0.1", listen_host="127.0.0.1", listen_port=0,
+                       correction="joint", mode="absolute", timeout_packets=5000)
+    shifts = []
+    with RsiLink(config) as link:
+        robot = RsiRobot(arm, dataclasses.replace(config, listen_port=link.address[1]),
+                         path=program, path_delay_s=0.2, lockstep_s=0.5).start()
+        try:
+            assert link.wait(lambda lk: lk.streaming, 10)
+            corrector = Corrector(link)
+            corrector.start(CorrectionSpec("offset", (0, 0, 0.5e-3, 0, 0, 0), frame="base",
+                                           ramp_s=0.3, duration_s=0.8))
+            with pytest.raises(RuntimeError, match=r"a correction \(offset\) runs already"):
+                corrector.start(CorrectionSpec("offset"))
+            deadline = time.monotonic() + 60
+            while corrector.poll() is None and time.monotonic() < deadline:
+                k, q = robot.setpoint
+                shifts.append(path_shift(desc, q, robot.path_poses[k]))
+                time.sleep(0.01)
+            assert corrector.poll() == "", corrector.poll()
+            k, q = robot.setpoint
+            np.testing.assert_allclose(path_shift(desc, q, robot.path_poses[k]), 0, atol=1e-9)
+        finally:
+            robot.stop()
+    shifts = np.array(shifts)
+    top = shifts[np.argmax(shifts[:, 2])]
+    np.testing.assert_allclose(top, [0, 0, 0.5e-3], atol=2e-6)
