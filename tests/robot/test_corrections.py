@@ -261,3 +261,13 @@ def test_the_corrector_superimposes_and_ends_ramped_out_on_the_twins_path():
     shifts = np.array(shifts)
     top = shifts[np.argmax(shifts[:, 2])]
     np.testing.assert_allclose(top, [0, 0, 0.5e-3], atol=2e-6)
+
+
+def test_the_hooks_offset_beyond_the_limit_is_refused_before_it_reaches_the_stream():
+    corrections = _corrections(RSI_JOINT)
+    corrections.frame = "base"
+    corrections.controller.corrector = types.SimpleNamespace(
+        set_offset=lambda g: pytest.fail("an offset beyond the limit reached the corrector"))
+    with pytest.raises(DeviceError, match="offset X 7 mm beyond the largest correction 5 mm"):
+        asyncio.run(corrections.perform(COMMANDS["CORRECT_SET"], "", np.array([7.0, 0, 0, 0,
+                                                                                 0, 0])))

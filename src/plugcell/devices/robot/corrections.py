@@ -111,8 +111,8 @@ class PathCorrections:
                     return await self._start(option, data)
                 case "CORRECT_SET":
                     frame = self.frame or "base"
-                    g = np.asarray(data, dtype=float).reshape(-1) * _scale(frame)
-                    await asyncio.to_thread(corrector.set_offset, g)
+                    values = self._within(np.asarray(data, dtype=float).reshape(-1), frame)
+                    await asyncio.to_thread(corrector.set_offset, values * _scale(frame))
                     return None
                 case "CORRECT_END":
                     last = await asyncio.to_thread(corrector.poll)
@@ -153,19 +153,9 @@ class PathCorrections:
             keys[key] = text.strip()
         space = correction_space(self.controller.config)
         frame = keys.get("frame", space if space != "joints" else "base")
-        values = _numbers(keys.get("offset", "0,0,0,0,0,0"), "offset", 6)
-        mm, deg = self.controller.correct_max
-        limit = np.array([mm] * 3 + [deg] * 3) if frame != "joints" else np.full(6, deg)
-        over = np.flatnonzero(np.abs(values) > limit)
-        if len(over):
-            i = int(over[0])
-            unit = "mm" if frame != "joints" and i < 3 else "°"
-            axis = (f"A{i + 1}" if frame == "joints" else "XYZABC"[i])
-            raise ValueError(f"offset {axis} {values[i]:g} {unit} beyond the largest "
-                             f"correction {limit[i]:g} {unit} (correct_max_mm, "
-                             f"correct_max_deg)")
-        space_limit = (np.full(6, deg) if space == "joints"
-                       else np.array([mm] * 3 + [deg] * 3)) * _scale(space)
+        values = self._within(_numbers(keys.get("offset", "0,0,0,0,0,0"), "offset", 6),
+                              frame)
+        space_limit = self._limit(space) * _scale(space)
         return CorrectionSpec(
             source, offset=tuple(values * _scale(frame)),
             frame=frame, ramp_s=_number(keys.get("ramp", "0.5"), "ramp"),
@@ -175,6 +165,25 @@ class PathCorrections:
             calibration=keys.get("calibration", ""),
             payload_kg=(_number(keys["payload_kg"], "payload_kg") if "payload_kg" in keys
                         else None))
+
+    def _limit(self, frame: str) -> np.ndarray:
+        """The largest correction per axis in ``frame``'s robot units (mm, °)."""
+        mm, deg = self.controller.correct_max
+        return np.full(6, deg) if frame == "joints" else np.array([mm] * 3 + [deg] * 3)
+
+    def _within(self, values: np.ndarray, frame: str) -> np.ndarray:
+        """``values`` (robot units, in ``frame``), or ``ValueError`` naming the axis beyond
+        the service's largest correction."""
+        limit = self._limit(frame)
+        over = np.flatnonzero(np.abs(values) > limit)
+        if len(over):
+            i = int(over[0])
+            unit = "mm" if frame != "joints" and i < 3 else "°"
+            axis = (f"A{i + 1}" if frame == "joints" else "XYZABC"[i])
+            raise ValueError(f"offset {axis} {values[i]:g} {unit} beyond the largest "
+                             f"correction {limit[i]:g} {unit} (correct_max_mm, "
+                             f"correct_max_deg)")
+        return values
 
     async def _start(self, option: str, data: Any) -> None:
         if option not in ("", "Wait"):

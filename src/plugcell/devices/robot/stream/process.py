@@ -201,7 +201,7 @@ class CorrectorClient:
         self._lock = threading.Lock()
 
     def _call(self, name: str, *args: Any) -> Any:
-        conn = self.process._corrections_end()
+        conn = self.process.corrections_pipe()
         with self._lock:
             try:
                 conn.send((name, *args))
@@ -324,7 +324,7 @@ class LinkProcess:
                 proc.kill()
                 proc.join(5.0)
 
-    def _corrections_end(self) -> Any:
+    def corrections_pipe(self) -> Any:
         """The parent's end of the corrections' pipe (``OSError``: no child)."""
         if self._corr is None or not self.alive:
             raise OSError("no link process")
