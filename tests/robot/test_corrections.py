@@ -14,10 +14,10 @@ import types
 
 import numpy as np
 import pytest
+from calibrated import calibrated
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from plugcell.calibration.identify import Calibrator
 from plugcell.compensation import IdentifiedModel, NominalModel, compensate_joints
 from plugcell.devices.robot.corrections import CORRECT_COMMANDS, PathCorrections
 from plugcell.devices.robot.egm import EgmConfig
@@ -29,14 +29,10 @@ from plugcell.devices.robot.stream.correcting import (
 )
 from plugcell.devices.robot.stream.source import CycleState
 from plugcell.framework.service import DeviceError
-from plugcell.io.params import params_json
 from plugcell.io.robots import load_robot
 from plugcell.kinematics import forward
 from plugcell.kinematics.transforms import so3_log
-from plugcell.sim.twin.campaign import measure_poses, working_volume_joints
-from plugcell.sim.twin.robot import RobotTwin
 from plugcell.sim.twin.scenario import TwinScenario
-from plugcell.sim.twin.tracker import LaserTracker
 
 Q = np.radians([-15.0, -75.0, -190.0, 0.0, 75.0, 0.0])
 RSI_JOINT = RsiConfig(robot_host="127.0.0.1", correction="joint", mode="absolute")
@@ -152,16 +148,7 @@ def test_a_cartesian_offset_on_a_joint_stream_moves_the_tcp_by_it(frame):
 
 @pytest.fixture(scope="module")
 def calibration(tmp_path_factory):
-    """The 36 kg twin (seed 3) calibrated with model 5 from 60 simulated poses."""
-    sc = TwinScenario(seed=3, payload_kg=36.0)
-    robot = RobotTwin(sc)
-    q = working_volume_joints(robot.description, robot.reveal_truth().profile, 60,
-                              np.random.default_rng(4))
-    ms, _ = measure_poses(robot, LaserTracker(seed=3), q)
-    result = Calibrator(robot.description, 5).fit(ms)
-    path = tmp_path_factory.mktemp("params") / "params.json"
-    path.write_text(params_json(result))
-    return result, path
+    return calibrated(tmp_path_factory.mktemp("params"))
 
 
 def test_the_compensation_follows_the_path_to_the_thesis_compensation(calibration):

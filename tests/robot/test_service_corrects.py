@@ -5,8 +5,10 @@
   with absolute joint corrections.  ``CORRECT offset`` lifts the twin's path by 0.5 mm and
   puts it back — the twin's commanded TCP minus its program's is (0, 0, 0.5) mm on the
   plateau and zero at the end; ``CORRECT external`` follows ``CORRECT_SET`` (the hook of a
-  tracker loop) and ends on ``CORRECT_END``; while a correction runs the PC's programs are
-  refused, and bad requests fail with the reason while the service stays Online.
+  tracker loop) and ends on ``CORRECT_END``; ``CORRECT compensation`` (a calibration's,
+  computed in the link's process) moves it and puts it back; while a correction runs the
+  PC's programs are refused, and bad requests fail with the reason while the service
+  stays Online.
 * EGM: the service with ``egm_mode=pathcorr`` against the simulated ABB controller running
   ``EGMMoveL``: the path correction reaches the controller and ramps back; the PC's moves
   are refused, saying the stream corrects the controller's own path.
@@ -20,6 +22,7 @@ import socket
 
 import numpy as np
 import pytest
+from calibrated import calibrated
 from robot_testlib import unique_cell
 
 from plugcell.apps.kinds import build
@@ -62,6 +65,7 @@ def test_rsi_corrections_shift_the_twins_own_path(tmp_path, monkeypatch):
     lib = tmp_path / "programs"
     lib.mkdir()
     (lib / "onemove.pdl").write_text(MOVE)
+    _, params = calibrated(tmp_path)
     twin = RsiTwinProcess(f"127.0.0.1:{port}", "--timeout", str(TIMEOUT), "--lin", "0,300,0",
                           "--speed", "100", "--path-delay", "0.5", "--stats", str(stats))
 
@@ -97,6 +101,11 @@ def test_rsi_corrections_shift_the_twins_own_path(tmp_path, monkeypatch):
                 assert 0 < blend <= 1 and any(offset), (blend, offset)  # joints, degrees
                 final = await _call(client, name, "CORRECT_END")
                 assert final.state is C, final.reason
+                # a calibration's compensation, computed in the link's process
+                final = await _call(client, name, "CORRECT", "Wait",
+                                    ["compensation", f"calibration={params}", "ramp=0.2",
+                                     "duration=0.6"])
+                assert final.state is C, final.reason
                 # bad requests: the reason, and the service keeps running
                 for items, why in ((["tracker"], "unknown correction source 'tracker'"),
                                    (["offset", "offset=0,0,9,0,0,0"],
@@ -121,6 +130,8 @@ def test_rsi_corrections_shift_the_twins_own_path(tmp_path, monkeypatch):
     assert len(plateau) >= 3
     np.testing.assert_allclose(plateau[:, :2], 0.0, atol=0.01)  # … and only lifted
     assert np.any(np.abs(z - 0.3) < 0.002)  # the hook's 0.3 mm
+    # the compensation moved the TCP too (its own size: not 0.5 or 0.3 mm in z alone)
+    assert np.any(np.linalg.norm(shift[:, :2], axis=1) > 0.05)
     np.testing.assert_allclose(shift[-1], 0.0, atol=1e-6)  # put back: zero in the end
 
 
