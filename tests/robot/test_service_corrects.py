@@ -31,6 +31,7 @@ from plugcell.framework.data import from_data
 from plugcell.framework.messages import ConnectionStates
 from plugcell.io.units import M_PER_MM
 from plugcell.sim.controller.egm_robot import EgmRobotSim
+from plugcell.sim.controller.egm_twin import EgmTwinProcess
 from plugcell.sim.controller.rsi_twin import RsiTwinProcess
 
 F, C = ProcessStates.Failed, ProcessStates.Completed
@@ -176,6 +177,39 @@ def test_egm_path_corrections_reach_the_controllers_own_path(tmp_path, monkeypat
         np.testing.assert_allclose(top, [0.0, 0.4 * M_PER_MM, -0.2 * M_PER_MM], atol=1e-9)
 
     asyncio.run(asyncio.wait_for(scenario(), 120))
+
+
+@pytest.mark.slow
+def test_twin_egm_runs_its_own_path_under_the_services_corrections(tmp_path, monkeypatch):
+    """``plugcell twin egm --mode pathcorr`` in its own process: the service's path
+    correction reaches it over UDP, and its summary says how large."""
+    monkeypatch.setenv("PLUGCELL_HOME", str(tmp_path / "home"))
+    port = _free_udp_port()
+    twin = EgmTwinProcess(f"127.0.0.1:{port}", "--timeout", "20", "--mode", "pathcorr",
+                          "--path-speed", "50")
+
+    async def scenario() -> None:
+        service = build("robot", None, {"egm": f"127.0.0.1:{port}", "egm_timeout": 20.0,
+                                        "egm_mode": "pathcorr"},
+                        cell=unique_cell(), journal=tmp_path / "journal")
+        await asyncio.gather(service.start(), asyncio.to_thread(twin.start))
+        try:
+            async with Client("CORRECTTEST", cell=service.keys.cell) as client:
+                assert await client.wait_for(service.name, 20)
+                final = await _call(client, service.name, "CORRECT", "Wait",
+                                    ["offset", "offset=0,0,-0.7,0,0,0", "duration=0.5"])
+                assert final.state is C, final.reason
+        finally:
+            await service.close()
+
+    try:
+        asyncio.run(asyncio.wait_for(scenario(), 120))
+        assert "streaming EGM (pathcorr)" in twin.banner
+    finally:
+        twin.proc.terminate()
+        out, _ = twin.proc.communicate(timeout=30)
+    # the largest |correction| of an axis (the requested -0.7 mm in z)
+    assert out.strip().splitlines()[-1].endswith("largest path correction Z 0.70 mm"), out
 
 
 def test_streams_for_the_controllers_own_path_are_options_of_the_service():
