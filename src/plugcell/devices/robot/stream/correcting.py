@@ -33,6 +33,7 @@ to the link's limits.
 
 from __future__ import annotations
 
+import sys
 import threading
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -222,9 +223,9 @@ class _Compensation:
         return self.dq
 
 
-#: The interpreter's thread switch interval while ``g`` is computed beside the link (s):
-#: the link's thread must get the interpreter back within a fraction of a 4 ms cycle (the
-#: default is 5 ms).
+#: The interpreter's thread switch interval while a correction runs (s): the link's thread
+#: must get the interpreter back from a computation beside it within a fraction of a 4 ms
+#: cycle (the default is 5 ms).
 SWITCH_INTERVAL_S = 0.0005
 
 
@@ -236,16 +237,12 @@ class _Beside:
     failure of ``g`` is raised by the next :meth:`offer`."""
 
     def __init__(self, g: Callable[[CycleState], Array]) -> None:
-        import sys
-
         self.g = g
         self._cond = threading.Condition()
         self._job: CycleState | None = None
         self._result = np.zeros(6)
         self._failure: Exception | None = None
         self._stop = False
-        self._switch = sys.getswitchinterval()
-        sys.setswitchinterval(min(self._switch, SWITCH_INTERVAL_S))
         threading.Thread(target=self._run, name="correction-goal", daemon=True).start()
 
     def offer(self, state: CycleState) -> Array:
@@ -274,12 +271,9 @@ class _Beside:
                 self._result = out
 
     def close(self) -> None:
-        import sys
-
         with self._cond:
             self._stop = True
             self._cond.notify()
-        sys.setswitchinterval(self._switch)
 
 
 class Superimposed:
@@ -385,6 +379,7 @@ class Corrector:
         self._thread: threading.Thread | None = None
         self._outcome: str | None = None  # "" ended well, else why not; None: running
         self._lock = threading.Lock()
+        self._switch = sys.getswitchinterval()
 
     @property
     def active(self) -> bool:
@@ -409,7 +404,17 @@ class Corrector:
             if not self.link.streaming or self.link.failure is not None:
                 why = self.link.failure or f"no {self.link.config.vendor} stream"
                 raise RuntimeError(f"cannot correct: {why}")
-            running = make_source(spec, self.link.config)
+            # from here to the correction's end the link's thread shares the interpreter
+            # with computations of milliseconds (a calibration read, g beside the link):
+            # it must get it back within a fraction of a cycle
+            switch = sys.getswitchinterval()
+            sys.setswitchinterval(min(switch, SWITCH_INTERVAL_S))
+            try:
+                running = make_source(spec, self.link.config)
+            except BaseException:
+                sys.setswitchinterval(switch)
+                raise
+            self._switch = switch
             self._running, self._outcome = running, None
             self._thread = threading.Thread(target=self._run, args=(running, spec),
                                             name="correction", daemon=True)
@@ -425,6 +430,7 @@ class Corrector:
             self._outcome = ""
         finally:
             running.close()
+            sys.setswitchinterval(self._switch)
 
     def set_offset(self, g: Array) -> None:
         """The running ``external`` or ``offset`` correction's ``g`` from the next cycle (SI,
