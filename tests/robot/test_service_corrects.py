@@ -181,12 +181,15 @@ def test_egm_path_corrections_reach_the_controllers_own_path(tmp_path, monkeypat
 
 @pytest.mark.slow
 def test_twin_egm_runs_its_own_path_under_the_services_corrections(tmp_path, monkeypatch):
-    """``plugcell twin egm --mode pathcorr`` in its own process: the service's path
-    correction reaches it over UDP, and its summary says how large."""
+    """``plugcell twin egm --mode pathcorr --lin …`` in its own process (the dynamic twin
+    running its own LIN with EGMMoveL): the service's path correction shifts its commanded
+    TCP by the requested -0.7 mm in z over UDP, and back to zero."""
     monkeypatch.setenv("PLUGCELL_HOME", str(tmp_path / "home"))
     port = _free_udp_port()
+    stats = tmp_path / "twin.json"
     twin = EgmTwinProcess(f"127.0.0.1:{port}", "--timeout", "20", "--mode", "pathcorr",
-                          "--path-speed", "50")
+                          "--lin", "300,0,0", "--speed", "50", "--path-delay", "0.5",
+                          "--stats", str(stats))
 
     async def scenario() -> None:
         service = build("robot", None, {"egm": f"127.0.0.1:{port}", "egm_timeout": 20.0,
@@ -209,7 +212,11 @@ def test_twin_egm_runs_its_own_path_under_the_services_corrections(tmp_path, mon
         twin.proc.terminate()
         out, _ = twin.proc.communicate(timeout=30)
     # the largest |correction| of an axis (the requested -0.7 mm in z)
-    assert out.strip().splitlines()[-1].endswith("largest path correction Z 0.70 mm"), out
+    assert "largest path correction Z 0.70 mm, path " in out.strip().splitlines()[-1], out
+    shift = np.array(json.loads(stats.read_text())["shift_mm"])
+    low = shift[np.argmin(shift[:, 2])]  # the twin's commanded TCP lowered by 0.7 mm
+    np.testing.assert_allclose(low, [0, 0, -0.7], atol=2e-3)
+    np.testing.assert_allclose(shift[-1], 0.0, atol=1e-6)
 
 
 def test_streams_for_the_controllers_own_path_are_options_of_the_service():

@@ -138,7 +138,12 @@ def test_twin_egm_stops_after_its_comm_timeout(capsys) -> None:
      "twin rsi: the controller's program: move 0 (LIN): target unreachable"),
     (["rsi", "--port", "49152", "--lin", "0,30,0", "--speed", "0"],
      "twin rsi: the TCP speed must be positive"),
-    (["egm", "--mode", "pathcorr", "--path-speed", "-1"], "twin egm: --path-speed must be"),
+    (["egm", "--mode", "pathcorr"], "twin egm: --mode pathcorr runs the controller's own "
+                                    "program: give it with --lin DX,DY,DZ"),
+    (["egm", "--lin", "0,30,0"], "twin egm: --lin is the controller's own program of --mode "
+                                 "pathcorr"),
+    (["egm", "--mode", "pathcorr", "--lin", "0,30,0", "--path-delay", "-1"],
+     "twin egm: path_delay_s must be ≥ 0"),
 ])
 def test_bad_options_are_refused_with_the_reason(argv, message, capsys) -> None:
     assert main(["twin", *argv]) == 2

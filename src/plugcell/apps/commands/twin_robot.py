@@ -10,7 +10,8 @@ RSI, or an ABB controller's EGM loop, standalone.
                       [--lin DX,DY,DZ … [--speed MM_S] [--path-delay S]]
                       [--duration S] [--stats FILE]
     plugcell twin egm [--port 6510] [--ip 127.0.0.1] [--timeout 1.0] [--bind HOST[:PORT]]
-                      [--mode joint|pathcorr [--path-speed MM_S]]
+                      [--mode joint|pathcorr --lin DX,DY,DZ … [--speed MM_S]
+                      [--path-delay S]]
                       [--robot R] [--seed S] [--payload-kg M] [--joints Q1,…,Q6]
                       [--reflector NAME [--cell C]] [--duration S] [--stats FILE]
 
@@ -38,9 +39,9 @@ answer, ns; −1: unanswered) as JSON, for ``benchmarks/stream_in_service.py``.
 ``twin egm`` is the same twin behind an ABB controller's EGM loop in joint mode
 (:class:`~plugcell.sim.controller.egm_twin.TwinEgmRobot`: the feedback pose the nominal
 model's forward kinematics of the joints); ``--timeout`` is its ``\\CommTimeout`` (s).
-``--mode pathcorr`` is a controller running its own ``EGMMoveL`` path (mode (b)) with the
-PC's path corrections added: the simulated EGM loop from the twin's nominal TCP, without
-the twin's dynamics.
+``--mode pathcorr --lin …`` is a controller running its own program with ``EGMMoveL``
+(mode (b)) and the PC's path corrections added, on the dynamic twin
+(:class:`~plugcell.sim.controller.egm_twin.TwinEgmPathRobot`).
 """
 
 from __future__ import annotations
@@ -79,6 +80,14 @@ def _side_options(r: argparse.ArgumentParser, common, what: str, default_port: i
                    "--cell under NAME, for a simulated tracker")
     r.add_argument("--reflector-rate", type=float, default=25.0, metavar="HZ",
                    help="largest rate of those publications while the arm moves (default 25)")
+    r.add_argument("--lin", action="append", default=[], metavar="DX,DY,DZ",
+                   help="the controller's own program (mode (b), the robot drives): a LIN "
+                   "moving the TCP by DX,DY,DZ mm in the base frame; repeat for more moves "
+                   "(default: it holds still and follows the PC)")
+    r.add_argument("--speed", type=float, default=100.0, metavar="MM_S",
+                   help="the LINs' TCP speed, mm/s (default 100)")
+    r.add_argument("--path-delay", type=float, default=1.0, metavar="S",
+                   help=f"seconds the program waits at {start} before its LINs (default 1)")
     add_cell_args(r)
     r.add_argument("--duration", type=float, default=0.0,
                    help="seconds to stream, then stop (default: until interrupted)")
@@ -107,14 +116,6 @@ def add_robot_sides(tw: argparse._SubParsersAction, common, rsi, egm) -> None:
     r.add_argument("--timeout", type=int, default=100,
                    help="the ETHERNET object's Timeout: late answers before RSI stops "
                    "(default 100)")
-    r.add_argument("--lin", action="append", default=[], metavar="DX,DY,DZ",
-                   help="the controller's own program (mode (b), the robot drives): a LIN "
-                   "moving the TCP by DX,DY,DZ mm in the base frame; repeat for more moves "
-                   "(default: it holds still and follows the corrections)")
-    r.add_argument("--speed", type=float, default=100.0, metavar="MM_S",
-                   help="the LINs' TCP speed, mm/s (default 100)")
-    r.add_argument("--path-delay", type=float, default=1.0, metavar="S",
-                   help="seconds the program waits at RSI_ON before its LINs (default 1)")
     r.add_argument("--lockstep", type=float, default=0.0, metavar="S",
                    help="simulate a sensor that always answers in time on a machine that "
                    "cannot: wait up to S seconds for each answer before counting it late "
@@ -131,13 +132,9 @@ def add_robot_sides(tw: argparse._SubParsersAction, common, rsi, egm) -> None:
                    help="\\CommTimeout: seconds without a sensor message before EGM stops "
                    "(default 1)")
     e.add_argument("--mode", choices=("joint", "pathcorr"), default="joint",
-                   help="joint: EGMRunJoint on the dynamic twin (the PC drives); pathcorr: "
-                   "the controller runs its own EGMMoveL path and adds the PC's path "
-                   "corrections (the robot drives; the simulated EGM loop without the "
-                   "twin's dynamics) (default joint)")
-    e.add_argument("--path-speed", type=float, default=50.0, metavar="MM_S",
-                   help="--mode pathcorr: the EGMMoveL path's speed along the work object's "
-                   "x, mm/s (default 50)")
+                   help="joint: EGMRunJoint (the PC drives); pathcorr: the controller runs "
+                   "its own program (--lin) with EGMMoveL and adds the PC's path "
+                   "corrections (the robot drives) (default joint)")
     e.set_defaults(func=egm)
 
 
@@ -305,26 +302,11 @@ def run_rsi(args: argparse.Namespace, scenario) -> int:
     return 0
 
 
-def _path_robot(arm, sensor, args: argparse.Namespace, bind):
-    """``--mode pathcorr``: the ABB controller's EGM loop running ``EGMMoveL`` along the
-    work object's x at ``--path-speed`` from the arm's nominal TCP, the PC's path
-    corrections added (:class:`~plugcell.sim.controller.egm_robot.EgmRobotSim`: a
-    first-order follower, not the twin's dynamics)."""
-    from plugcell.kinematics import forward
-    from plugcell.kinematics.rotations import matrix_to_quat
-    from plugcell.sim.controller.egm_robot import EgmRobotSim
-
-    T = forward(arm.twin.description, None, arm.measured, "nominal").tcp
-    return EgmRobotSim(sensor, "pathcorr", joints=arm.measured, position=T[:3, 3],
-                       quaternion=matrix_to_quat(T[:3, :3]), sample_s=arm.params.cycle,
-                       comm_timeout_s=args.timeout, path_speed=args.path_speed * 1e-3,
-                       bind=bind)
-
-
 def run_egm(args: argparse.Namespace, scenario) -> int:
     """Run ``twin egm`` (module docstring) for the twin ``scenario`` (a TwinScenario)."""
     from plugcell.apps.cli import CommandError
-    from plugcell.sim.controller.egm_twin import TwinEgmRobot
+    from plugcell.sim.controller.egm_twin import TwinEgmPathRobot, TwinEgmRobot
+    from plugcell.sim.controller.own_program import linear_program, parse_lins
     from plugcell.sim.twin.dynamics import DynamicTwin
 
     scenario = _scenario_of(args, scenario, "egm")
@@ -335,9 +317,16 @@ def run_egm(args: argparse.Namespace, scenario) -> int:
         arm = _within_limits(DynamicTwin(scenario, q0=q0))
         start = arm.measured.copy()
         if args.mode == "pathcorr":
-            if not (args.path_speed >= 0):
-                raise ValueError(f"--path-speed must be ≥ 0 mm/s, not {args.path_speed}")
-            robot = _path_robot(arm, sensor, args, bind)
+            if not args.lin:
+                raise ValueError("--mode pathcorr runs the controller's own program: give "
+                                 "it with --lin DX,DY,DZ")
+            path = linear_program(arm.twin.description, arm.measured, parse_lins(args.lin),
+                                  args.speed * 1e-3)
+            robot = TwinEgmPathRobot(arm, sensor, path, path_delay_s=args.path_delay,
+                                     comm_timeout_s=args.timeout, bind=bind)
+        elif args.lin:
+            raise ValueError("--lin is the controller's own program of --mode pathcorr "
+                             "(EGMRunJoint follows the PC)")
         else:
             robot = TwinEgmRobot(arm, sensor, comm_timeout_s=args.timeout, bind=bind)
     except (ValueError, OSError) as exc:
@@ -348,14 +337,22 @@ def run_egm(args: argparse.Namespace, scenario) -> int:
     h, pt = robot.address
     print(f"twin egm: {arm.twin.description.name} streaming EGM ({args.mode}) from {h}:{pt} "
           f"to {sensor[0]}:{sensor[1]}", flush=True)
-    moved = ((lambda: np.concatenate([robot.state()["correction"], np.zeros(3)]))
-             if args.mode == "pathcorr" else (lambda: robot.state()["joints"] - start))
+    shifts: list[list[float]] = []
+
+    def moved() -> np.ndarray:
+        if args.mode != "pathcorr":
+            return robot.state()["joints"] - start
+        shifts.append([float(v) for v in robot.shift() * 1e3])
+        return np.concatenate([robot.state()["correction"], np.zeros(3)])
+
     peak = _until_stopped(args, lambda: robot.stopped is None, moved)
     robot.stop()
     world.close()
     _write_stats(args.stats, robot.sent, robot.answers, robot.unanswered, robot.rtts,
-                 robot.stopped)
+                 robot.stopped, **({"shift_mm": shifts} if shifts else {}))
     largest = (_largest(peak, "cartesian").replace("correction", "path correction")
+               + f", path {'done' if robot.path_done else 'not done'}, largest shift "
+               f"{max((np.linalg.norm(s) for s in shifts), default=0.0):.3f} mm"
                if args.mode == "pathcorr" else
                _largest(peak, "joint").replace("correction", "move"))
     print(f"twin egm: {robot.sent} samples, {robot.answers} answers, {robot.unanswered} "
