@@ -28,7 +28,6 @@ GOAL_LINES = 400
 
 #: "path:Class" → the most lines it may have today (only classes over GOAL_LINES).
 LINES_CEILING = {
-    "devices/robot/stream/link.py:StreamLink": 412,  # RSI's and EGM's cycle loop: to split
 }
 
 

@@ -30,12 +30,36 @@ def test_the_rapid_module_of_each_mode(mode, act, run) -> None:
     assert mod.startswith("MODULE PlugcellEGM") and mod.rstrip().endswith("ENDMODULE")
     assert act in mod and run in mod and "EGMReset egm_id;" in mod
     assert '"pcUC"' in mod and "\\SampleRate:=8" in mod
-    if mode != "pathcorr":
-        assert "\\CommTimeout:=2.5" in mod
+    assert "\\CommTimeout:=2.5" in mod
     assert "{{" not in mod
     sioc = files["SIOC_plugcell.cfg"]
     assert '-Name "pcUC" -Type "UDPUC" -RemoteAdress "192.168.125.100"' in sioc
     assert "-RemotePortNumber 6511" in sioc
+
+
+def test_the_path_correction_module_corrects_the_robots_own_moves() -> None:
+    """Mode (b): EGMSetupUC with \\PathCorr, EGMActMove with the sensor frame (a pose) and
+    the sample rate, the user's EGMMoveL moves after it, EGMReset at the end and on a lost
+    PC; the UDP unit device the module names is the one configured."""
+    cfg = EgmConfig(robot_host="192.168.125.1", listen_port=6512, mode="pathcorr",
+                    sample_rate_ms=4, comm_timeout_s=1.5)
+    files = controller_files(cfg, "192.168.125.100")
+    lines = [ln.strip() for ln in files["PlugcellEGM.mod"].splitlines()
+             if ln.strip() and not ln.strip().startswith("!")]
+    setup = lines.index('EGMSetupUC ROB_1, egm_id, "pathCorr", "plugcellUC" \\PathCorr '
+                        '\\APTR \\CommTimeout:=1.5;')
+    act = lines.index("EGMActMove egm_id, egm_sensor_frame \\SampleRate:=4;")
+    reset = lines.index("EGMReset egm_id;")
+    moves = [ln for ln in lines[act:reset] if ln.startswith("EGMMoveL egm_id,")]
+    assert setup < act < reset and len(moves) == 2
+    assert "CONST pose egm_sensor_frame := [[0, 0, 0], [1, 0, 0, 0]];" in lines
+    assert lines[lines.index("ERROR"):].count("EGMReset egm_id;") == 1
+    assert "--param egm_mode=pathcorr" in files["PlugcellEGM.mod"]
+    sioc = files["SIOC_plugcell.cfg"]
+    assert sioc.startswith("SIOC:CFG_1.0:") and "COM_TRP:" in sioc
+    assert '-Name "plugcellUC" -Type "UDPUC" -RemoteAdress "192.168.125.100"' in sioc
+    assert "-RemotePortNumber 6512 -LocalPortNumber 0" in sioc
+    assert "`EGMActMove`, `EGMMoveL`" in files["README.md"]
 
 
 def test_plugcell_egm_files_writes_them(tmp_path, capsys) -> None:

@@ -19,6 +19,7 @@ import pytest
 
 from plugcell.devices.robot.egm import EgmConfig
 from plugcell.devices.robot.rsi import RsiConfig
+from plugcell.devices.robot.stream.drive import drive_refusal
 from plugcell.devices.robot.stream.process import LinkProcess, Publisher
 from plugcell.devices.robot.stream_controller import streaming_limits
 from plugcell.io.robots import load_robot
@@ -164,10 +165,11 @@ def test_the_publisher_writes_a_consistent_state():
 
 
 def test_only_whole_joint_commands_are_streamed_from_the_pc():
-    with pytest.raises(ValueError, match="not configured for them"):
-        LinkProcess(EgmConfig(robot_host="127.0.0.1", mode="pose"))
-    with pytest.raises(ValueError, match="not configured for them"):
-        LinkProcess(RsiConfig(robot_host="127.0.0.1", mode="relative"))
+    assert "EGM link is configured for pose" in drive_refusal(
+        EgmConfig(robot_host="127.0.0.1", mode="pose"))
+    assert "RSI link is configured for relative joint" in drive_refusal(
+        RsiConfig(robot_host="127.0.0.1", mode="relative"))
+    assert drive_refusal(RsiConfig(robot_host="127.0.0.1", mode="absolute")) == ""
 
 
 @pytest.mark.slow

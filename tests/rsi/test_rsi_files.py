@@ -86,6 +86,52 @@ def test_the_krl_program_starts_rsi_as_configured(tmp_path) -> None:
     assert "HOLDON of the correction elements is 1" in readme
 
 
+@pytest.mark.parametrize(("mode", "hold"), [("relative", 0), ("absolute", 1)])
+def test_when_the_robot_drives_its_own_moves_run_between_rsi_on_and_off(tmp_path, mode,
+                                                                        hold) -> None:
+    """Mode (b): the user's moves between RSI_ON and RSI_OFF (no RSI_MOVECORR), a wait
+    for the PC to end its correction, and the HOLDON of the mode in a well-formed file."""
+    config = RsiConfig(robot_host="192.168.1.147", listen_port=49200, mode=mode,
+                       correction="cartesian", frame="tool")
+    paths = {p.name: p for p in write_controller_files(tmp_path, config, "192.168.1.100",
+                                                       drives="robot", settle_s=1.5)}
+    raw = paths["plugcell_rsi.src"].read_bytes()
+    assert b"\n" not in raw.replace(b"\r\n", b"")  # CRLF, as KRL files
+    lines = [ln.strip() for ln in raw.decode().splitlines()
+             if ln.strip() and not ln.strip().startswith(";")]
+    on = lines.index(f"ret = RSI_ON(#{mode.upper()}, #IPO_FAST)")
+    off = lines.index("ret = RSI_OFF()")
+    inside = lines[on:off]
+    assert [ln for ln in inside if ln.startswith(("LIN", "PTP", "CIRC"))] == [
+        "LIN_REL {Y 200.0}", "LIN_REL {Y -200.0}"]
+    assert inside[-1] == "WAIT SEC 1.5"  # the PC ends its correction before RSI_OFF
+    assert "RSI_MOVECORR()" not in raw.decode() and "{{" not in raw.decode()
+    assert lines.index('ret = RSI_CREATE("plugcell_rsi.rsi", CONTID, TRUE)') < on
+    assert lines.index("PTP $AXIS_ACT") < on
+    root = ET.parse(paths["plugcell_rsi_ethernet.xml"]).getroot()  # well-formed
+    assert {e.get("HOLDON") for e in root.iter("ELEMENT")
+            if e.get("TAG", "").startswith("RKorr.")} == {str(hold)}
+    parsed = config_parser.ConfigParser(str(paths["plugcell_rsi_ethernet.xml"]))
+    assert {parsed.holdon_map[f"RKorr.{a}"] for a in "XYZABC"} == {hold}
+    ET.parse(paths["plugcell_rsi.rsi.xml"])
+    assert "your own moves (the robot drives, the PC corrects)" in \
+        paths["README.md"].read_text()
+    with pytest.raises(ValueError, match="drives 'both'"):
+        controller_files(config, "192.168.1.100", drives="both")
+    with pytest.raises(ValueError, match="settle -1"):
+        controller_files(config, "192.168.1.100", drives="robot", settle_s=-1)
+
+
+def test_plugcell_rsi_files_for_the_robot_driving(tmp_path, capsys) -> None:
+    out = tmp_path / "kuka"
+    assert main(["rsi", "files", "--out", str(out), "--ip", "192.168.1.100", "--mode",
+                 "absolute", "--drives", "robot", "--settle", "2"]) == 0
+    printed = capsys.readouterr().out
+    assert "plugcell serve robot --rsi 192.168.1.100:49152 --rsi-robot CONTROLLER_IP" in printed
+    assert "--param rsi_mode=absolute" in printed and "CORRECT" in printed
+    assert "WAIT SEC 2\r\n" in (out / "plugcell_rsi.src").read_bytes().decode()
+
+
 def test_the_controller_needs_a_real_address_and_port() -> None:
     config = RsiConfig(robot_host="192.168.1.147")
     with pytest.raises(ValueError, match=r"IP_NUMBER '0\.0\.0\.0'"):

@@ -71,6 +71,25 @@ def test_twin_rsi_streams_to_the_pc_and_reports_its_counts(capsys) -> None:
     assert float(m[4]) == pytest.approx(0.5)  # the sensor's absolute A1 offset, applied
 
 
+def test_twin_rsi_runs_its_own_program_under_the_pcs_corrections(capsys) -> None:
+    """--lin: the controller's own LIN (mode (b)); the sensor's absolute A1 offset shifts
+    its TCP, and the summary says so."""
+    sensor = _Sensor(0.01)
+    try:
+        status = main(["twin", "rsi", "--port", str(sensor.port), "--timeout", "10000",
+                       "--lockstep", "1", "--lin", "0,2,0", "--speed", "100", "--path-delay",
+                       "0", "--duration", "1.0"])
+    finally:
+        sensor.close()
+    out = capsys.readouterr().out.splitlines()
+    assert status == 0
+    m = re.fullmatch(r"twin rsi: \d+ cycles, \d+ answered, Delay \d+, largest correction A1 "
+                     r"0\.01°, path (done|not done), largest shift (\S+) mm", out[-1])
+    assert m, out[-1]
+    # 0.01° of A1 at the TCP's distance from the A1 axis (about 1.7 m here): ≈ 0.3 mm
+    assert 0.2 < float(m[2]) < 0.4, out[-1]
+
+
 def test_twin_rsi_stops_at_timeout_with_the_reason(capsys) -> None:
     silent = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
     silent.bind(("127.0.0.1", 0))
@@ -113,6 +132,18 @@ def test_twin_egm_stops_after_its_comm_timeout(capsys) -> None:
     (["rsi", "--port", "49152", "--duration", "-1"], "--duration must be 0 or positive"),
     (["rsi", "--port", "49152", "--payload-kg", "-3"], "twin rsi: payload_kg must be ≥ 0"),
     (["egm", "--timeout", "0"], "twin egm: --timeout must be positive seconds, not 0.0"),
+    (["rsi", "--port", "49152", "--lin", "0,300"], "twin rsi: --lin '0,300': expected "
+                                                   "DX,DY,DZ in mm"),
+    (["rsi", "--port", "49152", "--lin", "0,3000,0"],
+     "twin rsi: the controller's program: move 0 (LIN): target unreachable"),
+    (["rsi", "--port", "49152", "--lin", "0,30,0", "--speed", "0"],
+     "twin rsi: the TCP speed must be positive"),
+    (["egm", "--mode", "pathcorr"], "twin egm: --mode pathcorr runs the controller's own "
+                                    "program: give it with --lin DX,DY,DZ"),
+    (["egm", "--lin", "0,30,0"], "twin egm: --lin is the controller's own program of --mode "
+                                 "pathcorr"),
+    (["egm", "--mode", "pathcorr", "--lin", "0,30,0", "--path-delay", "-1"],
+     "twin egm: path_delay_s must be ≥ 0"),
 ])
 def test_bad_options_are_refused_with_the_reason(argv, message, capsys) -> None:
     assert main(["twin", *argv]) == 2
@@ -122,7 +153,7 @@ def test_bad_options_are_refused_with_the_reason(argv, message, capsys) -> None:
 def _args(joints: str) -> argparse.Namespace:
     return argparse.Namespace(ip="127.0.0.1", port=49152, bind="127.0.0.1:0", joints=joints,
                               correction="joint", mode="absolute", cycle="IPO_FAST",
-                              timeout=100, lockstep=0.0)
+                              timeout=100, lockstep=0.0, lin=[], speed=100.0, path_delay=1.0)
 
 
 @settings(max_examples=60, deadline=None)

@@ -5,12 +5,14 @@
     plugcell rsi files --out DIR --ip PC_IP [--port 49152] [--correction joint|cartesian]
                        [--mode relative|absolute] [--cycle IPO_FAST|IPO] [--timeout 100]
                        [--max-step V,…] [--max-offset V,…] [--max-speed V,…] [--dio OUT]
-                       [--dil IN]
+                       [--dil IN] [--drives pc|robot] [--settle S]
     plugcell rsi run --robot-ip IP [--listen IP] [--port 49152] [same stream options]
                      [--sine AXIS:AMPLITUDE:PERIOD] [--duration S] [--rt-priority N]
 
 ``files`` writes what the user copies to the controller (KRL program, ethernet
-configuration, signal flow, the diagram's description); ``run`` answers the robot —
+configuration, signal flow, the diagram's description) — the KRL program where the PC
+drives (``--drives pc``) or where the robot runs its own moves and the PC corrects them
+(``--drives robot``, issue 37's mode (b)); ``run`` answers the robot —
 holding it, or swinging one axis — and prints the link's counters every second.
 Limits are given in the robot's units: degrees (joint) or mm and degrees (X, Y, Z then
 A, B, C), per cycle for the step and per second for the speed; one number is for all six
@@ -60,6 +62,13 @@ def configure(p: argparse.ArgumentParser) -> None:
     _stream_args(f)
     f.add_argument("--dil", type=int, metavar="IN",
                    help="report a 16-bit input word DiL from $IN[IN…IN+15]")
+    f.add_argument("--drives", choices=("pc", "robot"), default="pc",
+                   help="pc: the KRL program holds the robot and follows the PC "
+                   "(RSI_MOVECORR); robot: your own moves run between RSI_ON and RSI_OFF and "
+                   "the PC corrects them (the robot service's CORRECT) (default pc)")
+    f.add_argument("--settle", type=float, default=1.0, metavar="S",
+                   help="--drives robot: seconds the program waits after your moves for the "
+                   "PC to end its correction, before RSI_OFF (default 1)")
     f.set_defaults(func=_files)
     r = sub.add_parser("run", help="answer the robot: hold it, or swing one axis")
     add_run_options(r, "the controller's RSI address")
@@ -123,13 +132,20 @@ def _files(args: argparse.Namespace) -> int:
     io = IoRouting(outputs={"DiO": args.dio} if args.dio else None,
                    input_tag="DiL" if args.dil else None, input_index=args.dil or 1)
     try:
-        paths = write_controller_files(args.out, config, args.ip, io)
+        paths = write_controller_files(args.out, config, args.ip, io, args.drives,
+                                       args.settle)
     except ValueError as exc:
         raise CommandError(str(exc)) from None
     except OSError as exc:
         raise CommandError(f"{args.out}: cannot write: {exc.strerror or exc}") from None
     for path in paths:
         print(path)
+    if args.drives == "robot":
+        print(f"then on the PC: plugcell serve robot --rsi {args.ip}:{args.port} --rsi-robot "
+              f"CONTROLLER_IP --rsi-timeout {args.timeout} --param rsi_correction="
+              f"{args.correction} --param rsi_mode={args.mode}, and once RSI is on: "
+              f"plugcell call ROBOT CORRECT --data '[\"offset\", \"offset=X,Y,Z,A,B,C\"]'")
+        return 0
     print(f"then on the PC: plugcell rsi run --robot-ip CONTROLLER_IP --port {args.port} "
           f"--correction {args.correction} --mode {args.mode} --cycle {args.cycle} "
           f"--timeout {args.timeout}")

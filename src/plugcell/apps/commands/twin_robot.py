@@ -7,8 +7,11 @@ RSI, or an ABB controller's EGM loop, standalone.
                       [--correction joint|cartesian] [--cycle IPO_FAST|IPO] [--timeout 100]
                       [--bind HOST[:PORT]] [--robot R] [--seed S] [--payload-kg M]
                       [--joints Q1,…,Q6] [--lockstep S] [--reflector NAME [--cell C]]
+                      [--lin DX,DY,DZ … [--speed MM_S] [--path-delay S]]
                       [--duration S] [--stats FILE]
     plugcell twin egm [--port 6510] [--ip 127.0.0.1] [--timeout 1.0] [--bind HOST[:PORT]]
+                      [--mode joint|pathcorr --lin DX,DY,DZ … [--speed MM_S]
+                      [--path-delay S]]
                       [--robot R] [--seed S] [--payload-kg M] [--joints Q1,…,Q6]
                       [--reflector NAME [--cell C]] [--duration S] [--stats FILE]
 
@@ -20,7 +23,11 @@ to the dynamic twin (:class:`~plugcell.sim.controller.rsi_robot.RsiRobot` on a
 ``plugcell serve robot --rsi`` can be tried without a controller.  It prints one line
 with its own address when it streams, one summary line when it ends, and exits 0 at
 ``--duration`` or SIGTERM/SIGINT, 3 when RSI stopped at ``Timeout`` (the reason on
-stderr), 2 for bad options.  A tracker's look at that world (a query) gets the pose at
+stderr), 2 for bad options.  ``--lin`` gives the controller a program of its own (issue
+37's mode (b), *the robot drives, the PC corrects*: LIN moves between ``RSI_ON`` and
+``RSI_OFF``, :mod:`~plugcell.sim.controller.own_program`), on which the answers'
+corrections are superimposed; the summary then says whether the program ended and the
+largest shift of its TCP.  A tracker's look at that world (a query) gets the pose at
 that instant.  ``--lockstep S`` waits up to S seconds for each answer: the
 arm then moves as with a real-time PC on a machine that is not one (``plugcell demo
 --link rsi``).  ``--reflector NAME`` publishes the arm's true T-MAC pose to
@@ -32,6 +39,9 @@ answer, ns; −1: unanswered) as JSON, for ``benchmarks/stream_in_service.py``.
 ``twin egm`` is the same twin behind an ABB controller's EGM loop in joint mode
 (:class:`~plugcell.sim.controller.egm_twin.TwinEgmRobot`: the feedback pose the nominal
 model's forward kinematics of the joints); ``--timeout`` is its ``\\CommTimeout`` (s).
+``--mode pathcorr --lin …`` is a controller running its own program with ``EGMMoveL``
+(mode (b)) and the PC's path corrections added, on the dynamic twin
+(:class:`~plugcell.sim.controller.egm_twin.TwinEgmPathRobot`).
 """
 
 from __future__ import annotations
@@ -70,6 +80,14 @@ def _side_options(r: argparse.ArgumentParser, common, what: str, default_port: i
                    "--cell under NAME, for a simulated tracker")
     r.add_argument("--reflector-rate", type=float, default=25.0, metavar="HZ",
                    help="largest rate of those publications while the arm moves (default 25)")
+    r.add_argument("--lin", action="append", default=[], metavar="DX,DY,DZ",
+                   help="the controller's own program (mode (b), the robot drives): a LIN "
+                   "moving the TCP by DX,DY,DZ mm in the base frame; repeat for more moves "
+                   "(default: it holds still and follows the PC)")
+    r.add_argument("--speed", type=float, default=100.0, metavar="MM_S",
+                   help="the LINs' TCP speed, mm/s (default 100)")
+    r.add_argument("--path-delay", type=float, default=1.0, metavar="S",
+                   help=f"seconds the program waits at {start} before its LINs (default 1)")
     add_cell_args(r)
     r.add_argument("--duration", type=float, default=0.0,
                    help="seconds to stream, then stop (default: until interrupted)")
@@ -113,6 +131,10 @@ def add_robot_sides(tw: argparse._SubParsersAction, common, rsi, egm) -> None:
     e.add_argument("--timeout", type=float, default=1.0, metavar="S",
                    help="\\CommTimeout: seconds without a sensor message before EGM stops "
                    "(default 1)")
+    e.add_argument("--mode", choices=("joint", "pathcorr"), default="joint",
+                   help="joint: EGMRunJoint (the PC drives); pathcorr: the controller runs "
+                   "its own program (--lin) with EGMMoveL and adds the PC's path "
+                   "corrections (the robot drives) (default joint)")
     e.set_defaults(func=egm)
 
 
@@ -139,6 +161,7 @@ def _rsi_side(args: argparse.Namespace, scenario):
     """The arm and its RSI side the options describe (CommandError on bad ones)."""
     from plugcell.apps.cli import CommandError
     from plugcell.devices.robot.rsi.config import CorrectionLimits, RsiConfig, RsiConfigError
+    from plugcell.sim.controller.own_program import linear_program, parse_lins
     from plugcell.sim.controller.rsi_robot import RsiRobot
     from plugcell.sim.twin.dynamics import DynamicParameters, DynamicTwin
 
@@ -150,7 +173,10 @@ def _rsi_side(args: argparse.Namespace, scenario):
                            timeout_packets=args.timeout, limits=CorrectionLimits(big, big, big))
         arm = _within_limits(DynamicTwin(scenario, DynamicParameters(cycle=config.cycle_s),
                                          q0=q0))
-        return arm, RsiRobot(arm, config, bind=bind, lockstep_s=args.lockstep), config
+        path = (linear_program(arm.twin.description, arm.measured, parse_lins(args.lin),
+                               args.speed * 1e-3) if args.lin else None)
+        return arm, RsiRobot(arm, config, bind=bind, lockstep_s=args.lockstep, path=path,
+                             path_delay_s=args.path_delay if path else 0.0), config
     except (ValueError, RsiConfigError, OSError) as exc:
         raise CommandError(f"twin rsi: {exc}") from None
 
@@ -213,16 +239,18 @@ def _until_stopped(args: argparse.Namespace, running, offset) -> np.ndarray:
 
 
 def _write_stats(path: str | None, cycles: int, answered: int, late: int,
-                 rtts: list, stopped: str | None) -> None:
+                 rtts: list, stopped: str | None, **more: object) -> None:
     """``--stats FILE``: the counts, every packet's ``(sent, round trip)`` (ns; −1: no
-    answer) and why the robot side stopped (``null``: it did not), as JSON."""
+    answer), why the robot side stopped (``null``: it did not) and ``more`` (``twin rsi
+    --lin``: ``shift_mm``, the corrections' shift of the program's TCP every 50 ms), as
+    JSON."""
     if path:
         import json
         from pathlib import Path
 
         Path(path).write_text(json.dumps({"cycles": cycles, "answered": answered,
                                           "late": late, "rtt_ns": list(rtts),
-                                          "stopped": stopped}))
+                                          "stopped": stopped, **more}))
 
 
 def _scenario_of(args: argparse.Namespace, scenario, what: str):
@@ -238,6 +266,8 @@ def _scenario_of(args: argparse.Namespace, scenario, what: str):
 
 def run_rsi(args: argparse.Namespace, scenario) -> int:
     """Run ``twin rsi`` (module docstring) for the twin ``scenario`` (a TwinScenario)."""
+    from plugcell.sim.controller.own_program import path_shift
+
     arm, robot, config = _rsi_side(args, _scenario_of(args, scenario, "rsi"))
     world = _World(args, arm, "rsi")
     world.start()
@@ -246,13 +276,26 @@ def run_rsi(args: argparse.Namespace, scenario) -> int:
     print(f"twin rsi: {arm.twin.description.name} streaming RSI ({config.correction}, "
           f"{config.mode}, {config.cycle}) from {h}:{pt} to {config.listen_host}:"
           f"{config.listen_port}", flush=True)
-    peak = _until_stopped(args, lambda: robot.running, lambda: robot.offset)
+    shifts: list[list[float]] = []
+
+    def offset() -> np.ndarray:
+        if args.lin:  # the program's own path: how far the corrections moved its TCP
+            k, q = robot.setpoint
+            shifts.append([float(v) for v in path_shift(arm.twin.description, q,
+                                                        robot.path_poses[k]) * 1e3])
+        return robot.offset
+
+    peak = _until_stopped(args, lambda: robot.running, offset)
     robot.stop()
     world.close()
     st = robot.stats()
-    _write_stats(args.stats, st.cycles, st.answered, st.delay, robot.rtts, robot.stopped)
+    _write_stats(args.stats, st.cycles, st.answered, st.delay, robot.rtts, robot.stopped,
+                 shift_mm=shifts)
+    path = (f", path {'done' if robot.path_done else 'not done'}, largest shift "
+            f"{max((np.linalg.norm(s) for s in shifts), default=0.0):.3f} mm"
+            if args.lin else "")
     print(f"twin rsi: {st.cycles} cycles, {st.answered} answered, Delay {st.delay}, "
-          f"{_largest(peak, config.correction)}", flush=True)
+          f"{_largest(peak, config.correction)}{path}", flush=True)
     if robot.stopped:
         print(f"twin rsi: {robot.stopped}", file=sys.stderr, flush=True)
         return 3
@@ -262,7 +305,8 @@ def run_rsi(args: argparse.Namespace, scenario) -> int:
 def run_egm(args: argparse.Namespace, scenario) -> int:
     """Run ``twin egm`` (module docstring) for the twin ``scenario`` (a TwinScenario)."""
     from plugcell.apps.cli import CommandError
-    from plugcell.sim.controller.egm_twin import TwinEgmRobot
+    from plugcell.sim.controller.egm_twin import TwinEgmPathRobot, TwinEgmRobot
+    from plugcell.sim.controller.own_program import linear_program, parse_lins
     from plugcell.sim.twin.dynamics import DynamicTwin
 
     scenario = _scenario_of(args, scenario, "egm")
@@ -272,23 +316,47 @@ def run_egm(args: argparse.Namespace, scenario) -> int:
             raise ValueError(f"--timeout must be positive seconds, not {args.timeout}")
         arm = _within_limits(DynamicTwin(scenario, q0=q0))
         start = arm.measured.copy()
-        robot = TwinEgmRobot(arm, sensor, comm_timeout_s=args.timeout, bind=bind)
+        if args.mode == "pathcorr":
+            if not args.lin:
+                raise ValueError("--mode pathcorr runs the controller's own program: give "
+                                 "it with --lin DX,DY,DZ")
+            path = linear_program(arm.twin.description, arm.measured, parse_lins(args.lin),
+                                  args.speed * 1e-3)
+            robot = TwinEgmPathRobot(arm, sensor, path, path_delay_s=args.path_delay,
+                                     comm_timeout_s=args.timeout, bind=bind)
+        elif args.lin:
+            raise ValueError("--lin is the controller's own program of --mode pathcorr "
+                             "(EGMRunJoint follows the PC)")
+        else:
+            robot = TwinEgmRobot(arm, sensor, comm_timeout_s=args.timeout, bind=bind)
     except (ValueError, OSError) as exc:
         raise CommandError(f"twin egm: {exc}") from None
     world = _World(args, arm, "egm")
     world.start()
     robot.start()
     h, pt = robot.address
-    print(f"twin egm: {arm.twin.description.name} streaming EGM (joint) from {h}:{pt} to "
-          f"{sensor[0]}:{sensor[1]}", flush=True)
-    peak = _until_stopped(args, lambda: robot.stopped is None,
-                          lambda: robot.state()["joints"] - start)
+    print(f"twin egm: {arm.twin.description.name} streaming EGM ({args.mode}) from {h}:{pt} "
+          f"to {sensor[0]}:{sensor[1]}", flush=True)
+    shifts: list[list[float]] = []
+
+    def moved() -> np.ndarray:
+        if args.mode != "pathcorr":
+            return robot.state()["joints"] - start
+        shifts.append([float(v) for v in robot.shift() * 1e3])
+        return np.concatenate([robot.state()["correction"], np.zeros(3)])
+
+    peak = _until_stopped(args, lambda: robot.stopped is None, moved)
     robot.stop()
     world.close()
     _write_stats(args.stats, robot.sent, robot.answers, robot.unanswered, robot.rtts,
-                 robot.stopped)
+                 robot.stopped, **({"shift_mm": shifts} if shifts else {}))
+    largest = (_largest(peak, "cartesian").replace("correction", "path correction")
+               + f", path {'done' if robot.path_done else 'not done'}, largest shift "
+               f"{max((np.linalg.norm(s) for s in shifts), default=0.0):.3f} mm"
+               if args.mode == "pathcorr" else
+               _largest(peak, "joint").replace("correction", "move"))
     print(f"twin egm: {robot.sent} samples, {robot.answers} answers, {robot.unanswered} "
-          f"unanswered, {_largest(peak, 'joint').replace('correction', 'move')}", flush=True)
+          f"unanswered, {largest}", flush=True)
     if robot.stopped:
         print(f"twin egm: {robot.stopped}", file=sys.stderr, flush=True)
         return 3

@@ -29,6 +29,10 @@ IDENTIFICATION  SingleData  → String[4]            manufacturer, model, serial
                                                    product code (the robot file's)
 ==============  ==========  =====================  ==========================================
 
+A robot streamed over RSI or EGM also lets the robot drive while the PC corrects (issue
+37's mode (b)): ``CORRECT``, ``CORRECT_SET``, ``CORRECT_END``, ``CORRECT_STATUS``
+(:mod:`plugcell.devices.robot.corrections`), declared beside these and dispatched to it.
+
 Positions are PDL's: mm and Comau ZYZ degrees.  The controller is reached over
 the line protocol (:mod:`plugcell.devices.robot.bridge`): with ``sim`` the service
 starts its own controller process with the
@@ -73,6 +77,7 @@ from plugcell.devices.robot.controller_process import (
     ControllerProcess,
     ControllerStartError,
 )
+from plugcell.devices.robot.corrections import CORRECT_COMMANDS, PathCorrections
 from plugcell.devices.robot.increment import joint_increment, pose_error_sizes
 from plugcell.devices.robot.joint_state import (
     DEFAULT_RATE_HZ,
@@ -97,7 +102,7 @@ from plugcell.devices.robot.protocol import (
     parse_numbers,
 )
 from plugcell.devices.robot.stream_controller import StreamController
-from plugcell.devices.robot.streamed import streamed_link
+from plugcell.devices.robot.streamed import STREAM_PARAMS, streamed_link
 from plugcell.framework.declaration import Declaration
 from plugcell.framework.messages import Command, CommandTypes, ConnectionStates, DataTypes
 from plugcell.framework.participant import PartnerError
@@ -171,6 +176,7 @@ class RobotService:
                 output_data_size=(4,),
                 info="[manufacturer, model, serial number, product code] of the robot "
                      "(its description file's [identification]; model: its name if none)"),
+        *CORRECT_COMMANDS,
     ))
     params: ClassVar[dict[str, Any]] = {
         "sim": _flag,
@@ -182,16 +188,8 @@ class RobotService:
         "library": str,
         "link_baud": float,
         "dynamics": _flag,
-        "rsi": str,
-        "rsi_robot": str,
-        "rsi_timeout": int,
-        "egm": str,
-        "egm_robot": str,
-        "egm_timeout": float,
-        "stream_process": _flag,
-        "joint_speed": float,
-        "tcp_speed": float,
         "joint_rate": float,
+        **STREAM_PARAMS,  # rsi=, egm= … (devices/robot/streamed.py)
     }
 
     def __init__(
@@ -207,18 +205,11 @@ class RobotService:
         library: str = "",
         link_baud: float = 0.0,
         dynamics: bool = False,
-        rsi: str = "",
-        rsi_robot: str = "",
-        rsi_timeout: int = 100,
-        egm: str = "",
-        egm_robot: str = "",
-        egm_timeout: float = 1.0,
-        stream_process: bool = True,
-        joint_speed: float = 20.0,
-        tcp_speed: float = 100.0,
         joint_rate: float = DEFAULT_RATE_HZ,
         connect_timeout: float = 30.0,
+        **stream: Any,
     ) -> None:
+        rsi, egm = stream.get("rsi", ""), stream.get("egm", "")
         if sum(map(bool, (sim, line, rsi, egm))) > 1:
             raise ValueError("give one of sim, line=HOST:PORT, rsi=HOST:PORT or "
                              "egm=HOST:PORT, not several")
@@ -250,11 +241,10 @@ class RobotService:
         self.connect_timeout = connect_timeout
         # the link to the robot (plugcell.devices.robot.link): a controller that runs the
         # programs (line protocol), or the programs on the PC streaming over RSI or EGM
-        self.bridge: RobotLink = streamed_link(
-            self, robot=robot, library=self.library, name=self.declaration.name(), rsi=rsi,
-            rsi_robot=rsi_robot, rsi_timeout=rsi_timeout, egm=egm, egm_robot=egm_robot,
-            egm_timeout=egm_timeout, joint_speed=joint_speed, tcp_speed=tcp_speed,
-            process=stream_process) or ControllerBridge(self)
+        streamed = streamed_link(self, robot=robot, library=self.library,
+                                 name=self.declaration.name(), **stream)
+        self.bridge: RobotLink = streamed or ControllerBridge(self)
+        self.corrections = PathCorrections(streamed, robot)  # mode (b): CORRECT …
         if sim and launcher is None:
             raise ValueError("sim=true needs a controller launcher (plugcell serve robot gives "
                              "the simulated controller)")
@@ -455,6 +445,8 @@ class RobotService:
                     return await self._program_status()
                 case "IDENTIFICATION":
                     return self._identification()
+                case name if name.startswith("CORRECT"):
+                    return await self.corrections.perform(command, option, data)
         except ControllerError as exc:
             raise DeviceError(str(exc)) from None
         except BridgeError as exc:

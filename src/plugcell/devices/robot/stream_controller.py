@@ -58,9 +58,10 @@ from plugcell.devices.robot.protocol import (
 )
 from plugcell.devices.robot.requests import Staged, answer, check_line, deliver, status_text
 from plugcell.devices.robot.runner import TEXT_MAX, ProgramRunner, RunError
-from plugcell.devices.robot.stream.drive import StreamDrive
+from plugcell.devices.robot.stream.correcting import Corrector
+from plugcell.devices.robot.stream.drive import StreamDrive, drive_refusal
 from plugcell.devices.robot.stream.limits import CorrectionLimits
-from plugcell.devices.robot.stream.process import LinkProcess, link_class
+from plugcell.devices.robot.stream.process import BUSY, CorrectorClient, LinkProcess, link_class
 from plugcell.devices.robot.tracked_moves import tracked_moves_for
 from plugcell.kinematics import RobotDescription
 from plugcell.motion import CartesianLimits, JointLimits
@@ -174,13 +175,19 @@ def robot_endpoint(option: str, listen_host: str, robot_address: str) -> tuple[s
 class StreamedMotion(PlannedMotion):
     """PlannedMotion on a drive that moves in real time: when ``follow`` returns, the move's
     time has passed; the clock is advanced by it and the interpreter is told ``None`` (it
-    must not wait a second time)."""
+    must not wait a second time).  ``refusal``: why the stream cannot carry the PC's moves
+    (:func:`~plugcell.devices.robot.stream.drive.drive_refusal`; ``""``: it can), said
+    before a move is planned."""
 
-    def __init__(self, *args: object, clock: SimClock, **kwargs: object) -> None:
+    def __init__(self, *args: object, clock: SimClock, refusal: str = "",
+                 **kwargs: object) -> None:
         super().__init__(*args, **kwargs)  # type: ignore[arg-type]
         self.clock = clock
+        self.refusal = refusal
 
     def _run(self, move: object) -> float:
+        if self.refusal:
+            raise MotionError(self.refusal)
         duration = super()._run(move)  # type: ignore[arg-type]
         self.clock.advance(duration)
         return None  # type: ignore[return-value]
@@ -227,12 +234,15 @@ class StreamController:
         (:class:`~plugcell.devices.robot.stream.process.LinkProcess`, the default), or in
         a thread of this process (measurements: ``benchmarks/rsi_latency.py
         --in-service``).
+    correct_max : tuple of (float, float)
+        The largest correction of mode (b) (``CORRECT``, :attr:`corrector`), mm and
+        degrees per axis.
     """
 
     def __init__(self, handler: BridgeHandler, config: Any, description: RobotDescription,
                  robot: str, joint_limits: JointLimits, cartesian_limits: CartesianLimits,
                  library: Sequence[Path] = (), name: str = "ROBOT",
-                 process: bool = True) -> None:
+                 process: bool = True, correct_max: tuple[float, float] = (5.0, 1.0)) -> None:
         self.vendor = config.vendor
         if description.n_readings != 6:
             raise ValueError(f"{self.vendor} streams six axes; {description.name} has "
@@ -243,14 +253,18 @@ class StreamController:
         self.robot = robot
         self.name = name
         self.address = f"{config.listen_host}:{config.listen_port}"
+        self.correct_max = correct_max
+        self.corrector: Corrector | CorrectorClient
         if process:
             self.link = self.drive = LinkProcess(config)
+            self.corrector = self.link.corrector
         else:
             self.link = link_class(self.vendor)(config)
-            self.drive = StreamDrive(self.link)
+            self.drive = StreamDrive(self.link, feedback_only=True)
+            self.corrector = Corrector(self.link)
         self.clock = SimClock(speed=1.0)
         self.motion = StreamedMotion(description, self.drive, joint_limits, cartesian_limits,
-                                     clock=self.clock)
+                                     clock=self.clock, refusal=drive_refusal(config))
         self.motion.move_tracked = tracked_moves_for(self)  # type: ignore[attr-defined]
         self.runner = ProgramRunner(self.motion, self.clock, _Channel(self), self._event,
                                     library)
@@ -267,10 +281,15 @@ class StreamController:
         """The link in a sentence (the service's info in the UI's device panel)."""
         name = {"RSI": "KUKA RSI", "EGM": "ABB EGM"}.get(self.vendor, self.vendor)
         port = f":{self.config.robot_port}" if self.config.robot_port else ""
-        return (f"{name}, listening on {self.address} for the controller at "
-                f"{self.config.robot_host}{port}; the PC drives (the program runs on the "
-                f"PC, every move streamed as joint commands every "
-                f"{self.config.cycle_s * 1000:g} ms)")
+        where = (f"{name}, listening on {self.address} for the controller at "
+                 f"{self.config.robot_host}{port}; ")
+        if not self.config.joint_targets:
+            return where + (f"the robot drives, the PC corrects (CORRECT: corrections on "
+                            f"the controller's own path every {self.config.cycle_s * 1000:g} "
+                            f"ms)")
+        return where + (f"the PC drives (the program runs on the PC, every move streamed as "
+                        f"joint commands every {self.config.cycle_s * 1000:g} ms), or the "
+                        f"robot drives and the PC corrects (CORRECT)")
 
     # ------------------------------------------------------------------ RobotLink
     @property
@@ -308,7 +327,8 @@ class StreamController:
                               f"{timeout:g} s{why}")
         self.hello = Hello(VERSION, {
             "robot": self.robot, "axes": "6", "data": str(EXT_DATA_MAX), "text": str(TEXT_MAX),
-            "name": self.name, self.vendor.lower(): self.address, "mode": "pc-drives"})
+            "name": self.name, self.vendor.lower(): self.address,
+            "mode": "pc-drives" if self.config.joint_targets else "robot-drives"})
         self._connected, self._lost_reason = True, ""
         self._watch = asyncio.create_task(self._watch_stream(),
                                           name=f"{self.vendor.lower()}-watch")
@@ -348,6 +368,8 @@ class StreamController:
         if not self._connected:
             raise BridgeError(self._lost_reason)
         presets = {**self._staged.take(run_id), **(values or {})}
+        if await asyncio.to_thread(lambda: self.corrector.active):
+            raise ControllerError(BUSY)
         try:
             info = await asyncio.to_thread(self.runner.start, run_id, program, presets)
         except RunError as exc:
@@ -359,7 +381,7 @@ class StreamController:
         if isinstance(req, Stop):
             return self.runner.stop("stopped by the robot service", req.program).state
         if isinstance(req, Move):
-            busy = self.runner.busy_reason()
+            busy = self.runner.busy_reason() or (BUSY if self.corrector.active else "")
             if busy:
                 raise RunError(busy)
             t0 = self.clock.now()

@@ -13,14 +13,24 @@ starting the interface where the robot stands and following:
 Without either, the service talks to a controller that runs the programs itself
 (:class:`~.bridge.ControllerBridge`).  The link's limits follow the planner's
 (:func:`~.stream_controller.streaming_limits`, policy *refuse*).
+
+The same stream carries issue 37's mode (b), *the robot drives, the PC corrects*
+(``CORRECT``, :mod:`.corrections`): the controller runs its own program and the service
+superimposes corrections.  With the defaults above that is absolute joint corrections
+(RSI) — and the PC's moves as well; ``rsi_correction=cartesian``, ``rsi_mode=relative``
+or ``egm_mode=pathcorr`` (``EGMMoveL`` with path corrections) configure a stream for the
+controller's own path only, the PC's moves then refused with the reason.  Such a stream's
+limits are the vendor's correction limits (:func:`~.stream.limits.default_limits`).
 """
 
 from __future__ import annotations
 
 import dataclasses
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from pathlib import Path
+from typing import Any
 
+from plugcell.devices.params import flag
 from plugcell.devices.robot.bridge import BridgeHandler, parse_address
 from plugcell.devices.robot.egm.config import EgmConfig
 from plugcell.devices.robot.rsi.config import RsiConfig
@@ -32,13 +42,23 @@ from plugcell.devices.robot.stream_controller import (
 )
 from plugcell.io.robots import load_robot
 
-__all__ = ["streamed_link"]
+__all__ = ["STREAM_PARAMS", "streamed_link"]
+
+#: The robot service's options of a streamed robot (``--param KEY=VALUE``): name → parser.
+STREAM_PARAMS: dict[str, Callable[[str], Any]] = {
+    "rsi": str, "rsi_robot": str, "rsi_timeout": int, "rsi_correction": str, "rsi_mode": str,
+    "egm": str, "egm_robot": str, "egm_timeout": float, "egm_mode": str,
+    "stream_process": flag, "joint_speed": float, "tcp_speed": float,
+    "correct_max_mm": float, "correct_max_deg": float}
 
 
 def streamed_link(handler: BridgeHandler, *, robot: str, library: Sequence[Path], name: str,
-                  rsi: str = "", rsi_robot: str = "", rsi_timeout: int = 100, egm: str = "",
-                  egm_robot: str = "", egm_timeout: float = 1.0, joint_speed: float = 20.0,
-                  tcp_speed: float = 100.0, process: bool = True) -> StreamController | None:
+                  rsi: str = "", rsi_robot: str = "", rsi_timeout: int = 100,
+                  rsi_correction: str = "joint", rsi_mode: str = "absolute", egm: str = "",
+                  egm_robot: str = "", egm_timeout: float = 1.0, egm_mode: str = "joint",
+                  joint_speed: float = 20.0, tcp_speed: float = 100.0,
+                  stream_process: bool = True, correct_max_mm: float = 5.0,
+                  correct_max_deg: float = 1.0) -> StreamController | None:
     """The streamed robot's controller the options ask for, or ``None`` (none asked).
 
     Parameters
@@ -51,19 +71,23 @@ def streamed_link(handler: BridgeHandler, *, robot: str, library: Sequence[Path]
         Folders of robot programs.
     name : str
         The service's name.
-    rsi, rsi_robot, rsi_timeout
+    rsi, rsi_robot, rsi_timeout, rsi_correction, rsi_mode
         RSI: ``HOST:PORT`` where plugcell receives the controller's packets (the ethernet
         file's ``IP_NUMBER:PORT``), the controller's ``HOST[:PORT]`` (empty: the ``rsi``
-        host unless a wildcard), the ETHERNET object's ``Timeout`` (cycles).
-    egm, egm_robot, egm_timeout
+        host unless a wildcard), the ETHERNET object's ``Timeout`` (cycles), ``joint`` or
+        ``cartesian`` corrections, ``absolute`` or ``relative`` (the controller's files).
+    egm, egm_robot, egm_timeout, egm_mode
         EGM: ``HOST:PORT`` where plugcell receives ``EgmRobot`` (the UDP unit device's
         remote address), the controller's ``HOST[:PORT]``, ``EGMSetupUC``'s
-        ``\\CommTimeout`` (s).
+        ``\\CommTimeout`` (s), ``joint`` (``EGMRunJoint``) or ``pathcorr`` (``EGMMoveL``).
     joint_speed, tcp_speed : float
         The planner's limits, °/s of every joint and mm/s of linear moves
         (:func:`~.stream_controller.planner_limits`).
-    process : bool
+    stream_process : bool
         The link's cycle loop in a child process (default) or a thread of the service's.
+    correct_max_mm, correct_max_deg : float
+        The largest correction ``CORRECT`` superimposes, per axis (mm; degrees of a
+        rotation or a joint).
 
     Returns
     -------
@@ -91,8 +115,14 @@ def streamed_link(handler: BridgeHandler, *, robot: str, library: Sequence[Path]
     where = {"robot_host": rhost, "listen_host": host, "listen_port": port,
              "robot_port": robot_port}
     config: RsiConfig | EgmConfig = (
-        RsiConfig(**where, correction="joint", mode="absolute", timeout_packets=rsi_timeout)
-        if rsi else EgmConfig(**where, mode="joint", comm_timeout_s=egm_timeout))
-    config = dataclasses.replace(config, limits=streaming_limits(joint, config.cycle_s))
+        RsiConfig(**where, correction=rsi_correction, mode=rsi_mode,  # type: ignore[arg-type]
+                  timeout_packets=rsi_timeout)
+        if rsi else EgmConfig(**where, mode=egm_mode,  # type: ignore[arg-type]
+                              comm_timeout_s=egm_timeout))
+    if config.joint_targets:
+        config = dataclasses.replace(config, limits=streaming_limits(joint, config.cycle_s))
+    for what, v in (("correct_max_mm", correct_max_mm), ("correct_max_deg", correct_max_deg)):
+        if not (v > 0 and v < float("inf")):
+            raise ValueError(f"{what} must be a positive number, not {v}")
     return StreamController(handler, config, load_robot(robot), robot, joint, cart, library,
-                            name, process)
+                            name, stream_process, (correct_max_mm, correct_max_deg))

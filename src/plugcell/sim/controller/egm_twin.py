@@ -10,6 +10,8 @@ the feedback joints are its encoder readings, and the feedback pose is the contr
 *nominal* forward kinematics of them (a real controller reports its model, not the true
 TCP).  ``plugcell twin egm`` (:mod:`plugcell.apps.commands.twin_robot`) runs it;
 :class:`EgmTwinProcess` runs that command for tests and benchmarks.
+:class:`TwinEgmPathRobot` is the controller running its own program with ``EGMMoveL``
+and path corrections (``plugcell twin egm --mode pathcorr --lin …``).
 """
 
 from __future__ import annotations
@@ -22,7 +24,7 @@ from numpy.typing import NDArray
 from plugcell.sim.controller.egm_robot import DynamicFollower, EgmRobotSim
 from plugcell.sim.controller.twin_process import TwinProcess
 
-__all__ = ["BANNER", "EgmTwinProcess", "TwinEgmRobot"]
+__all__ = ["BANNER", "EgmTwinProcess", "TwinEgmPathRobot", "TwinEgmRobot"]
 
 Array = NDArray[np.float64]
 
@@ -63,6 +65,72 @@ class TwinEgmRobot(EgmRobotSim):
     def advance(self, dt: float) -> None:
         super().advance(dt)
         self.p, self.quat = self._pose(self.q)
+
+
+class TwinEgmPathRobot(TwinEgmRobot):
+    """``EGMMoveL`` on the dynamic twin (issue 37's mode (b)): the controller runs its own
+    program and adds the PC's path corrections (``EgmSensorPathCorr``).
+
+    Each sample ``k`` the program's joints ``q_p(k)`` (``path``, sampled at the sample)
+    and the correction ``c`` (m; its axes the base frame's, as
+    :class:`~.egm_robot.EgmRobotSim` takes the path frame to be the work object's) give
+    the joint command ``q_p + J(q_p)⁺ · [c; 0]`` (the nominal model's Jacobian at the
+    program's joints, computed for the whole path at once): the TCP moves by ``c`` to first
+    order, its orientation kept; the dynamic twin follows the command.
+
+    Parameters
+    ----------
+    arm : DynamicTwin
+        The arm; it stands where ``path`` starts.
+    sensor : tuple of (str, int)
+        Where plugcell listens.
+    path : Trajectory
+        The program (:func:`~.own_program.linear_program`).
+    path_delay_s : float
+        The program waits this long after ``EGMActMove`` before it moves (s).
+    **kwargs
+        More of :class:`TwinEgmRobot`.
+    """
+
+    def __init__(self, arm: Any, sensor: tuple[str, int], path: Any,
+                 path_delay_s: float = 0.0, **kwargs: Any) -> None:
+        from plugcell.kinematics.jacobian import manipulator_jacobian
+
+        super().__init__(arm, sensor, **kwargs)
+        self.mode = "pathcorr"
+        q = np.asarray(path.setpoints(self.T)[1], dtype=float)
+        if not (np.isfinite(path_delay_s) and path_delay_s >= 0):
+            raise ValueError(f"path_delay_s must be ≥ 0 seconds, got {path_delay_s!r}")
+        self._path = np.vstack([np.repeat(q[:1], round(path_delay_s / self.T), 0), q])
+        self._J = manipulator_jacobian(self.description, None, self._path, "tcp", "nominal")
+        self.path_index = 0
+
+    @property
+    def path_done(self) -> bool:
+        """The program has reached its end."""
+        return self.path_index >= len(self._path) - 1
+
+    def advance(self, dt: float) -> None:
+        k = self.path_index = min(self.path_index + 1, len(self._path) - 1)
+        o = np.concatenate([self.correction, np.zeros(3)])
+        self.q_target = self._path[k] + np.linalg.lstsq(self._J[k], o, rcond=None)[0]
+        self.q = self.follower.step(self.q, self.q_target, dt)
+        self.p, self.quat = self._pose(self.q)
+
+    def shift(self) -> Array:
+        """The corrections' shift of the commanded TCP now: the nominal TCP of the joint
+        command minus the program's (m, (3,))."""
+        from plugcell.sim.controller.own_program import path_shift
+
+        with self._lock:
+            k, q = self.path_index, self.q_target.copy()
+        T_p = self._pose_matrix(self._path[k])
+        return path_shift(self.description, q, T_p)
+
+    def _pose_matrix(self, q: Array) -> Array:
+        from plugcell.kinematics import forward
+
+        return forward(self.description, None, q, "nominal").tcp
 
 
 class EgmTwinProcess(TwinProcess):

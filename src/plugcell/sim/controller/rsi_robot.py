@@ -183,6 +183,7 @@ class RsiRobot:
         self._T_set = self._T_path[0]
         self._k = 0  # the path's cycle
         self._command = self._q_start.copy()
+        self._setpoint = (0, self._command.copy())
         self._offset = np.zeros(6)
         self._last = np.zeros(6)
         #: every cycle's (packet sent, round trip until its answer arrived) in ns; −1: no
@@ -244,6 +245,12 @@ class RsiRobot:
         return self._k
 
     @property
+    def setpoint(self) -> tuple[int, Array]:
+        """The path's cycle and the joints commanded in it (rad), of the same cycle (read
+        from another thread while the controller runs)."""
+        return self._setpoint
+
+    @property
     def path_done(self) -> bool:
         """The controller's own path has reached its end (always, without a path)."""
         return self._k >= len(self._path) - 1
@@ -285,6 +292,7 @@ class RsiRobot:
         """
         self._k = min(self._k + 1, len(self._path) - 1)  # the program's motion goes on
         offset = self._apply(answer)
+        self._setpoint = (self._k, self._command.copy())  # one assignment: read whole
         state = self.arm.step(self._command)
         with self._lock:
             st = self._stats

@@ -5,7 +5,10 @@
 ``plugcell_rsi.src``
     The KRL program (``KRC:\\R1\\Program``): a BCO run where the robot stands,
     ``RSI_CREATE`` of the context, ``RSI_ON(#RELATIVE|#ABSOLUTE, #IPO_FAST|#IPO)``,
-    ``RSI_MOVECORR()``, ``RSI_OFF()`` — from the template in ``controller/``.
+    ``RSI_MOVECORR()``, ``RSI_OFF()`` — the PC drives; or, for issue 37's mode (b) (the
+    robot drives, the PC corrects: ``drives="robot"``), the user's own ``LIN``/``CIRC``/
+    ``PTP`` moves between ``RSI_ON`` and ``RSI_OFF`` and a wait for the PC to end its
+    correction — from the templates in ``controller/``.
 ``plugcell_rsi_ethernet.xml``
     The ETHERNET object's configuration (``…\\Config\\User\\Common\\SensorInterface``):
     ``<CONFIG>`` with the PC's ``IP_NUMBER``, ``PORT``, ``SENTYPE`` and ``ONLYSEND``,
@@ -207,8 +210,31 @@ def signal_flow(config: RsiConfig, io: IoRouting) -> str:
             + etree.tostring(root, encoding="unicode") + "\n")
 
 
-def controller_files(config: RsiConfig, sensor_ip: str,
-                     io: IoRouting | None = None) -> dict[str, str]:
+def krl_program(config: RsiConfig, drives: str = "pc", settle_s: float = 1.0) -> str:
+    """The KRL program ``plugcell_rsi.src`` for ``config``: the PC drives (``RSI_MOVECORR``)
+    or the robot drives (its own moves between ``RSI_ON`` and ``RSI_OFF``, then a wait of
+    ``settle_s`` s) — :func:`controller_files`, whose checks it relies on."""
+    relative = config.mode == "relative"
+    return _fill("plugcell_rsi.src" if drives == "pc" else "plugcell_rsi_path.src",
+        cycle_ms=f"{config.cycle_s * 1000:g}",
+        correction_text=("joint corrections AKorr A1..A6 in degrees"
+                         if config.correction == "joint"
+                         else "Cartesian corrections RKorr X Y Z (mm) A B C (deg)"),
+        mode_text="#RELATIVE" if relative else "#ABSOLUTE",
+        mode_note=("each packet carries this cycle's step; HOLDON=0 in the ethernet file, "
+                   "so a late packet adds nothing" if relative else
+                   "each packet carries the whole offset from the start; HOLDON=1, so a "
+                   "late packet keeps it"),
+        mode_krl="RELATIVE" if relative else "ABSOLUTE",
+        cycle=config.cycle, context=f"{CONTEXT}.rsi", ethernet_file=ETHERNET_FILE,
+        end_note=("plugcell's last steps sum its correction back to zero (relative)"
+                  if relative else "plugcell ramps the offset it sends back to zero "
+                  "(absolute)"),
+        settle_s=f"{settle_s:g}")
+
+
+def controller_files(config: RsiConfig, sensor_ip: str, io: IoRouting | None = None,
+                     drives: str = "pc", settle_s: float = 1.0) -> dict[str, str]:
     """The controller's files for ``config``, by file name (module doc).
 
     Parameters
@@ -221,6 +247,14 @@ def controller_files(config: RsiConfig, sensor_ip: str,
     io : IoRouting, optional
         Where the output words and the input word are wired (default: outputs at
         ``$OUT[1…]``, no input word).
+    drives : {"pc", "robot"}
+        Who drives (issue 37 §1): ``"pc"`` — the KRL program holds the robot where it
+        stands and follows the PC (``RSI_MOVECORR()``); ``"robot"`` — the program runs its
+        own moves between ``RSI_ON`` and ``RSI_OFF`` and the PC superimposes corrections
+        (the robot service's ``CORRECT``), then waits ``settle_s`` seconds for the PC to
+        end its correction before ``RSI_OFF``.
+    settle_s : float
+        ``drives="robot"``: that wait (s).
 
     Returns
     -------
@@ -230,9 +264,15 @@ def controller_files(config: RsiConfig, sensor_ip: str,
     Raises
     ------
     ValueError
-        ``sensor_ip`` is no address the controller can send to, or the port is 0.
+        ``sensor_ip`` is no address the controller can send to, the port is 0, or
+        ``drives``/``settle_s`` is not one of the above.
     """
     import ipaddress
+
+    if drives not in ("pc", "robot"):
+        raise ValueError(f"drives {drives!r}: expected 'pc' or 'robot'")
+    if not (0 <= settle_s <= 60):
+        raise ValueError(f"settle {settle_s!r}: expected 0..60 seconds")
 
     ip = ipaddress.ip_address(sensor_ip)
     if ip.is_unspecified or ip.version != 4:
@@ -242,19 +282,13 @@ def controller_files(config: RsiConfig, sensor_ip: str,
         raise ValueError("PORT 0: the controller needs a fixed port")
     io = io or IoRouting(outputs={o.tag: 1 + 16 * k for k, o in enumerate(config.outputs)})
     relative = config.mode == "relative"
-    src = _fill("plugcell_rsi.src",
-        cycle_ms=f"{config.cycle_s * 1000:g}",
-        correction_text=("joint corrections AKorr A1..A6 in degrees"
-                         if config.correction == "joint"
-                         else "Cartesian corrections RKorr X Y Z (mm) A B C (deg)"),
-        mode_text="#RELATIVE" if relative else "#ABSOLUTE",
-        mode_note=("each packet carries this cycle's step; HOLDON=0 in the ethernet file, "
-                   "so a late packet adds nothing" if relative else
-                   "each packet carries the whole offset from the start; HOLDON=1, so a "
-                   "late packet keeps it"),
-        mode_krl="RELATIVE" if relative else "ABSOLUTE",
-        cycle=config.cycle, context=f"{CONTEXT}.rsi", ethernet_file=ETHERNET_FILE)
+    src = krl_program(config, drives, settle_s)
     readme = _fill("README.md",
+        program=("the KRL program: BCO run where the robot stands, `RSI_CREATE`, `RSI_ON`, "
+                 "`RSI_MOVECORR()` (the PC drives), `RSI_OFF`" if drives == "pc" else
+                 "the KRL program: your start pose, `RSI_CREATE`, `RSI_ON`, your own moves "
+                 "(the robot drives, the PC corrects), a wait for the PC to end its "
+                 "correction, `RSI_OFF`"),
         sensor_ip=sensor_ip, port=config.listen_port, sentype=config.sentype,
         correction=config.correction, mode=config.mode, cycle=config.cycle,
         cycle_ms=f"{config.cycle_s * 1000:g}", timeout=config.timeout_packets,
@@ -271,14 +305,15 @@ def controller_files(config: RsiConfig, sensor_ip: str,
 
 
 def write_controller_files(out: Path, config: RsiConfig, sensor_ip: str,
-                           io: IoRouting | None = None) -> list[Path]:
+                           io: IoRouting | None = None, drives: str = "pc",
+                           settle_s: float = 1.0) -> list[Path]:
     """Write :func:`controller_files` into the folder ``out`` (made if missing).
 
     Parameters
     ----------
     out : Path
         The folder.
-    config, sensor_ip, io
+    config, sensor_ip, io, drives, settle_s
         As :func:`controller_files`.
 
     Returns
@@ -287,4 +322,4 @@ def write_controller_files(out: Path, config: RsiConfig, sensor_ip: str,
         The files written.
     """
     # KRL and the controller's Windows side expect CRLF line ends
-    return write_files(out, controller_files(config, sensor_ip, io))
+    return write_files(out, controller_files(config, sensor_ip, io, drives, settle_s))

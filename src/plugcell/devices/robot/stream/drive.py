@@ -54,8 +54,8 @@ from .errors import StreamLinkError
 from .link import StreamLink
 from .source import Correction, CycleState
 
-__all__ = ["IN_POSITION_RAD", "SETTLE_S", "StreamDrive", "motion_timeout", "samples",
-           "setpoint_base"]
+__all__ = ["IN_POSITION_RAD", "SETTLE_S", "StreamDrive", "drive_refusal", "motion_timeout",
+           "samples", "setpoint_base"]
 
 Array = NDArray[np.float64]
 #: A per-cycle joint adjustment: ``adjust(state, k, q_k) -> Δq`` (rad, (6,)).
@@ -92,6 +92,18 @@ def setpoint_base(state: CycleState) -> Array | None:
     return None if ref is None else np.asarray(ref, dtype=float) - state.offset
 
 
+def drive_refusal(config: Any) -> str:
+    """Why the PC cannot drive a robot over a stream of ``config`` (``""``: it can) — it
+    needs whole joint commands (``config.joint_targets``)."""
+    if config.joint_targets:
+        return ""
+    kind = " ".join(str(getattr(config, k)) for k in ("mode", "correction")
+                    if hasattr(config, k))
+    return (f"the PC drives the robot with absolute joint corrections (RSI AKorr #ABSOLUTE, "
+            f"EGM joint targets); the {config.vendor} link is configured for {kind}: it "
+            f"corrects the controller's own path (CORRECT)")
+
+
 def motion_timeout(duration: float, config: Any) -> float:
     """Seconds a motion of ``duration`` s may take: two controller timeouts and
     :data:`SLACK_S` more."""
@@ -106,16 +118,15 @@ class StreamDrive:
     link : StreamLink
         A started link whose configuration sends whole joint commands
         (``config.joint_targets``: RSI absolute joint corrections, EGM joint mode).
+    feedback_only : bool
+        Take a link of another configuration too (one that corrects the controller's own
+        path): the joints are read, every motion is refused with :func:`drive_refusal`.
     """
 
-    def __init__(self, link: StreamLink) -> None:
-        cfg = link.config
-        if not cfg.joint_targets:
-            kind = " ".join(str(getattr(cfg, k)) for k in ("mode", "correction")
-                            if hasattr(cfg, k))
-            raise ValueError(f"the PC drives the robot with absolute joint corrections (RSI "
-                             f"AKorr #ABSOLUTE, EGM joint targets); the {cfg.vendor} link is "
-                             f"configured for {kind}")
+    def __init__(self, link: StreamLink, feedback_only: bool = False) -> None:
+        self.refusal = drive_refusal(link.config)
+        if self.refusal and not feedback_only:
+            raise ValueError(self.refusal)
         self.link = link
         self.followed = 0
 
@@ -162,6 +173,8 @@ class StreamDrive:
         MotionError
             The stream failed or the motion did not end in time: the link's reason.
         """
+        if self.refusal:
+            raise MotionError(self.refusal)
         last = len(q) - 1
         motion: dict[str, Any] = {}
         base_of = getattr(self.link, "joint_base", None) or setpoint_base

@@ -1,4 +1,5 @@
-"""Waiting on a link, and one motion streamed to its end (:class:`Following`)."""
+"""Watching a link's session, waiting on it, and one motion streamed to its end
+(:class:`Following`)."""
 
 from __future__ import annotations
 
@@ -13,15 +14,33 @@ __all__ = ["Following"]
 
 
 class Following:
-    """What a robot service does with a link: wait on it, and stream one motion.
+    """What a robot service does with a link: watch its session (streaming, failure), wait
+    on it, and stream one motion.
 
     Mixed into :class:`~.link.StreamLink`, which keeps ``_cond`` (notified at every cycle
-    and session event), ``_failure``, ``_streaming`` and :meth:`set_source`.
+    and session event), ``_failure``, ``_last_failure``, ``_streaming`` and
+    :meth:`set_source`.
     """
 
     _cond: threading.Condition
     _failure: StreamLinkError | None
+    _last_failure: StreamLinkError | None
     _streaming: bool
+
+    @property
+    def failure(self) -> StreamLinkError | None:
+        """Why the current or last session failed (``None``: it did not)."""
+        return self._failure
+
+    @property
+    def last_failure(self) -> StreamLinkError | None:
+        """The failure of the latest session that failed (kept across sessions)."""
+        return self._last_failure
+
+    @property
+    def streaming(self) -> bool:
+        """A session is running."""
+        return self._streaming
 
     def set_source(self, source: SourceLike | None) -> None:  # the link has it
         raise NotImplementedError

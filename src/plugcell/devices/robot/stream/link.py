@@ -40,8 +40,6 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any
 
-import numpy as np
-
 from .errors import (
     ControllerStoppedError,
     CorrectionRefusedError,
@@ -300,21 +298,6 @@ class StreamLink(Following):
         self._source = as_source(source)
 
     @property
-    def failure(self) -> StreamLinkError | None:
-        """Why the current or last session failed (``None``: it did not)."""
-        return self._failure
-
-    @property
-    def last_failure(self) -> StreamLinkError | None:
-        """The failure of the latest session that failed (kept across sessions)."""
-        return self._last_failure
-
-    @property
-    def streaming(self) -> bool:
-        """A session is running."""
-        return self._streaming
-
-    @property
     def latest(self) -> Any:
         """The robot's state in the newest packet answered (``None`` before the first):
         the joint feedback of a robot service, between motions too."""
@@ -472,16 +455,12 @@ class StreamLink(Following):
             self._take_outputs(corr)
         except ValueError as exc:
             return self._refuse(f"correction refused: {exc}")
-        if corr.offset is not None and corr.step is not None:
-            return self._refuse("correction refused: give an offset or a step, not both")
-        if corr.offset is None and corr.step is None:
+        try:
+            target = corr.target(self._limiter.offset)
+        except ValueError as exc:
+            return self._refuse(f"correction refused: {exc}")
+        if target is None:
             return self._limiter.hold()
-        if corr.offset is not None:
-            target = np.asarray(corr.offset, dtype=float).reshape(-1)
-        else:
-            step = np.asarray(corr.step, dtype=float).reshape(-1)
-            # a step of the wrong size is passed on as is: the limiter refuses it
-            target = self._limiter.offset + step if step.shape == (6,) else step
         limited = self._limiter.apply(target)
         if limited.refused:
             self._refused += 1

@@ -11,6 +11,10 @@ it through two channels:
 * a pipe for the motions: ``("follow", n, q, timeout)`` — the planned trajectory sampled
   at the cycle, ``q`` of shape (K+1, 6) rad — answered ``("followed", n, reason)`` when
   the motion ended (``reason`` empty) or failed; a motion is a few kilobytes once per move;
+* a second pipe for the corrections of mode (b), *the robot drives, the PC corrects*
+  (:mod:`.correcting`): the child's :class:`~.correcting.Corrector` called through
+  :class:`CorrectorClient` (start, set the offset, finish, poll), while a correction
+  runs the PC's moves are refused;
 * shared memory for the feedback, written by the link's thread after every cycle
   (:class:`Publisher`, the link's ``observer``) and read by the service whenever it
   wants (ARM_JNTP, every move's start, the stream's watch) without asking the child
@@ -42,10 +46,12 @@ from numpy.typing import NDArray
 from plugcell.motion import Trajectory
 from plugcell.pdl.interfaces import MotionError
 
-from .drive import StreamDrive, motion_timeout, samples
+from .correcting import CorrectionSpec, Corrector
+from .drive import StreamDrive, drive_refusal, motion_timeout, samples
 from .errors import StreamLinkError
 
-__all__ = ["LINKS", "Feedback", "LinkProcess", "Publisher", "link_class"]
+__all__ = ["BUSY", "LINKS", "CorrectorClient", "Feedback", "LinkProcess", "Publisher",
+           "link_class", "serve_corrections"]
 
 Array = NDArray[np.float64]
 
@@ -117,9 +123,10 @@ class Publisher:
         v[SEQ] += 1  # even: consistent
 
 
-def _child(conn: Any, values: Any, text: Any, vendor: str, config: Any,
+def _child(conn: Any, corrections: Any, values: Any, text: Any, vendor: str, config: Any,
            rt_priority: int | None) -> None:
-    """The child process: the link, its drive, and the motions from the pipe."""
+    """The child process: the link, its drive, the motions from the pipe and the
+    corrections of mode (b) from the other (:func:`serve_corrections`)."""
     import signal
 
     signal.signal(signal.SIGINT, signal.SIG_IGN)  # Ctrl-C is the service's to handle
@@ -131,7 +138,11 @@ def _child(conn: Any, values: Any, text: Any, vendor: str, config: Any,
         conn.send(("error", str(exc)))
         return
     conn.send(("started", host, port, link.rt_note))
-    drive = StreamDrive(link)
+    refusal = drive_refusal(config)
+    drive = None if refusal else StreamDrive(link)
+    corrector = Corrector(link)
+    threading.Thread(target=serve_corrections, args=(corrections, corrector),
+                     name="corrections", daemon=True).start()
     try:
         while True:
             try:
@@ -141,6 +152,9 @@ def _child(conn: Any, values: Any, text: Any, vendor: str, config: Any,
             if message[0] != "follow":
                 break
             _, motion, q, timeout = message
+            if drive is None or corrector.active:
+                conn.send(("followed", motion, refusal or BUSY))
+                continue
             try:
                 drive.follow_samples(q, timeout)
             except MotionError as exc:
@@ -154,22 +168,94 @@ def _child(conn: Any, values: Any, text: Any, vendor: str, config: Any,
         link.close()
 
 
+#: Why the PC cannot move the robot now.
+BUSY = ("a correction runs on the controller's own path (CORRECT): the controller drives; "
+        "end the correction first")
+
+
+def serve_corrections(conn: Any, corrector: Corrector) -> None:
+    """The child's end of the corrections' pipe: each request ``(name, *args)`` to the
+    :class:`~.correcting.Corrector` answered ``("ok", result)`` or ``("error", kind, text)``
+    (``ValueError``/``RuntimeError``), until the pipe closes."""
+    calls: dict[str, Callable[..., Any]] = {
+        "start": corrector.start, "set_offset": corrector.set_offset,
+        "finish": corrector.finish, "poll": corrector.poll, "status": corrector.status,
+        "active": lambda: corrector.active}
+    while True:
+        try:
+            name, *args = conn.recv()
+        except (EOFError, OSError):
+            return
+        try:
+            conn.send(("ok", calls[name](*args)))
+        except (ValueError, RuntimeError) as exc:
+            conn.send(("error", type(exc).__name__, str(exc)))
+
+
+class CorrectorClient:
+    """The service's end of the corrections' pipe: a :class:`~.correcting.Corrector` in
+    the link's process, called as if it were here (the same methods and errors)."""
+
+    def __init__(self, process: LinkProcess) -> None:
+        self.process = process
+        self._lock = threading.Lock()
+
+    def _call(self, name: str, *args: Any) -> Any:
+        conn = self.process.corrections_pipe()
+        with self._lock:
+            try:
+                conn.send((name, *args))
+                if not conn.poll(10.0):
+                    raise RuntimeError(f"the {self.process.vendor} link process did not "
+                                       "answer")
+                answer = conn.recv()
+            except (OSError, EOFError):
+                raise RuntimeError(f"the {self.process.vendor} link process is not "
+                                   "running") from None
+        if answer[0] == "error":
+            raise (ValueError if answer[1] == "ValueError" else RuntimeError)(answer[2])
+        return answer[1]
+
+    @property
+    def active(self) -> bool:
+        """A correction runs."""
+        return bool(self._call("active"))
+
+    def start(self, spec: CorrectionSpec) -> None:
+        """:meth:`~.correcting.Corrector.start` in the link's process."""
+        self._call("start", spec)
+
+    def set_offset(self, g: Array) -> None:
+        """:meth:`~.correcting.Corrector.set_offset` in the link's process."""
+        self._call("set_offset", np.asarray(g, dtype=float))
+
+    def finish(self) -> None:
+        """:meth:`~.correcting.Corrector.finish` in the link's process."""
+        self._call("finish")
+
+    def poll(self) -> str | None:
+        """:meth:`~.correcting.Corrector.poll` in the link's process."""
+        return self._call("poll")  # type: ignore[no-any-return]
+
+    def status(self) -> tuple[float, Array]:
+        """:meth:`~.correcting.Corrector.status` in the link's process."""
+        return self._call("status")  # type: ignore[no-any-return]
+
+
 class LinkProcess:
     """A vendor's link and drive in a child process; the service's end (module docstring).
 
     Parameters
     ----------
     config : RsiConfig or EgmConfig
-        The stream (``joint_targets`` must hold).
+        The stream (the PC's moves need ``joint_targets``; corrections of mode (b) need
+        a stream that corrects the controller's own path).
     rt_priority : int, optional
         The child's link thread under ``SCHED_FIFO`` at this priority (Linux,
         ``CAP_SYS_NICE``).
     """
 
     def __init__(self, config: Any, rt_priority: int | None = None) -> None:
-        if not config.joint_targets:
-            raise ValueError(f"the PC drives the robot with whole joint commands; the "
-                             f"{config.vendor} link is not configured for them")
         self.config = config
         self.vendor = config.vendor
         self.rt_priority = rt_priority
@@ -181,7 +267,10 @@ class LinkProcess:
         self._v = np.frombuffer(self._values, dtype=np.float64)
         self._ctx = ctx
         self._conn: Any = None
+        self._corr: Any = None
         self._proc: Any = None
+        #: the corrections of mode (b), run in the child
+        self.corrector = CorrectorClient(self)
         self._lock = threading.Lock()  # one motion at a time on the pipe
         self._motions = 0
         self._failure: tuple[int, StreamLinkError] | None = None
@@ -202,12 +291,14 @@ class LinkProcess:
             self._v[:] = 0
             self._failure = None
         self._conn, child_end = self._ctx.Pipe()
+        self._corr, child_corr = self._ctx.Pipe()
         self._proc = self._ctx.Process(
             target=_child, name=f"plugcell-{self.vendor.lower()}-link", daemon=True,
-            args=(child_end, self._values, self._text, self.vendor, self.config,
+            args=(child_end, child_corr, self._values, self._text, self.vendor, self.config,
                   self.rt_priority))
         self._proc.start()
         child_end.close()
+        child_corr.close()
         if not self._conn.poll(timeout):
             self.close()
             raise OSError(f"the {self.vendor} link process did not start within {timeout:g} s")
@@ -225,11 +316,19 @@ class LinkProcess:
             with contextlib.suppress(OSError):
                 conn.send(("close",))
             conn.close()
+        if self._corr is not None:
+            self._corr.close()
         if proc is not None:
             proc.join(5.0)
             if proc.is_alive():
                 proc.kill()
                 proc.join(5.0)
+
+    def corrections_pipe(self) -> Any:
+        """The parent's end of the corrections' pipe (``OSError``: no child)."""
+        if self._corr is None or not self.alive:
+            raise OSError("no link process")
+        return self._corr
 
     @property
     def alive(self) -> bool:

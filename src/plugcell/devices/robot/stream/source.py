@@ -49,6 +49,36 @@ class Correction:
     step: ArrayLike | None = None
     outputs: Mapping[str, int] = field(default_factory=dict)
 
+    def target(self, current: Array) -> Array | None:
+        """The whole offset this correction asks for, given the offset so far.
+
+        ``offset`` as it is, or ``current + step``; a step of the wrong size is passed on
+        as is (the limiter refuses it with the reason).
+
+        Parameters
+        ----------
+        current : ndarray, shape (6,)
+            The offset commanded so far (SI).
+
+        Returns
+        -------
+        ndarray or None
+            The wanted offset (SI); ``None``: no motion asked.
+
+        Raises
+        ------
+        ValueError
+            Both an offset and a step.
+        """
+        if self.offset is not None and self.step is not None:
+            raise ValueError("give an offset or a step, not both")
+        if self.offset is not None:
+            return np.asarray(self.offset, dtype=float).reshape(-1)
+        if self.step is None:
+            return None
+        step = np.asarray(self.step, dtype=float).reshape(-1)
+        return current + step if step.shape == (6,) else step
+
 
 @dataclass(frozen=True)
 class CycleState:

@@ -1,0 +1,476 @@
+"""The robot drives, the PC corrects (issue 37 §1, mode (b)): one correction at a time.
+
+The controller runs its own program — KRL moves between ``RSI_ON`` and ``RSI_OFF``,
+RAPID's ``EGMMoveL`` — and the link superimposes an offset on that path, blended in and
+out by :class:`~.source.PathOffset`.  What is superimposed is a :class:`CorrectionSpec`, a
+value that crosses a process boundary (the link may run in a child process,
+:mod:`.process`), with one of three sources:
+
+``offset``
+    a constant ``g`` — a seam offset, a measured shift;
+``compensation``
+    a calibration's compensation, as the thesis's (6.5.1) but continuously: at every
+    cycle the joints ``q`` of the controller's own path (``q = q_set − o``, the packet's
+    set-point joints less the offset commanded so far), the nominal pose ``T_n(q)`` the
+    controller meant, and one Newton step of eq. 4.11 on the identified model from the
+    last cycle's answer, ``Δq ← Δq + J_id(q + Δq)⁺ · e(T_n(q), T_id(q + Δq))`` — so
+    ``T_id(q + Δq) → T_n(q)``: the arm is where the program says (the step converges in a
+    few cycles and follows the path after, its change per cycle being the path's);
+``external``
+    ``g`` is whatever was last given to :meth:`Corrector.set_offset` — the hook of a
+    tracker's correction loop or any other sensor, from any thread.
+
+Every ``g`` is in the stream's *space* (:func:`correction_space`): joints (RSI
+``AKorr``), Cartesian in the base or the tool frame (RSI ``RKorr``, ``RefCorrSys``), or
+EGM's path coordinates (``EgmSensorPathCorr``).  A Cartesian offset asked of a joint stream
+becomes joints each cycle through the nominal model at the path's joints:
+``Δq = J_n(q)⁺ · o`` (base frame; a tool-frame offset is first turned into the base frame
+by the TCP's rotation ``R(q)``), A, B, C taken as small rotations about Z, Y, X (KUKA's).
+Every ``g`` is held to the spec's ``max_offset`` (the biggest correction the service
+superimposes; beyond it the correction fails with the reason) and then, as any request,
+to the link's limits.
+"""
+
+from __future__ import annotations
+
+import sys
+import threading
+from collections.abc import Callable
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from .drive import setpoint_base
+from .errors import StreamLinkError
+from .source import CycleState, PathOffset
+
+__all__ = ["SOURCES", "CorrectionSpec", "Corrector", "Superimposed", "correction_space",
+           "make_source"]
+
+Array = NDArray[np.float64]
+
+#: The sources of a correction (module docstring).
+SOURCES = ("offset", "compensation", "external")
+#: The frames an offset may be given in.
+FRAMES = ("joints", "base", "tool", "path")
+
+
+@dataclass(frozen=True)
+class CorrectionSpec:
+    """One correction superimposed on the controller's own path (module docstring).
+
+    Attributes
+    ----------
+    source : {"offset", "compensation", "external"}
+        Where ``g`` comes from.
+    offset : tuple of 6 float
+        ``g`` of ``offset`` and the first ``g`` of ``external``, SI (rad; or m, m, m,
+        rad, rad, rad) in ``frame``.
+    frame : {"joints", "base", "tool", "path"}
+        The frame of ``offset``.
+    ramp_s : float
+        The ramp in and the ramp out (s, :func:`~plugcell.motion.profile.unit_ramp`).
+    duration_s : float or None
+        Start the ramp out this long after the first cycle; ``None``: when asked
+        (:meth:`Corrector.finish`).
+    max_offset : tuple of 6 float
+        The largest ``|g_i|`` in the stream's space (SI); beyond it the correction fails.
+    robot : str
+        The robot (a shipped name or a description file): the nominal model.
+    calibration : str
+        ``compensation``: a PARAMS.json written by ``plugcell calibrate``.
+    payload_kg : float or None
+        ``compensation``: the payload (default the calibration's reference payload).
+    timeout_s : float
+        The longest a correction may run (s).
+    """
+
+    source: str
+    offset: tuple[float, ...] = (0.0,) * 6
+    frame: str = "base"
+    ramp_s: float = 0.5
+    duration_s: float | None = None
+    max_offset: tuple[float, ...] = (np.inf,) * 6
+    robot: str = "smart_h4"
+    calibration: str = ""
+    payload_kg: float | None = None
+    timeout_s: float = 24 * 3600.0
+
+    def __post_init__(self) -> None:
+        if self.source not in SOURCES:
+            raise ValueError(f"unknown correction source {self.source!r}: one of "
+                             f"{', '.join(SOURCES)}")
+        if self.frame not in FRAMES:
+            raise ValueError(f"unknown frame {self.frame!r}: one of {', '.join(FRAMES)}")
+        for name in ("offset", "max_offset"):
+            v = np.asarray(getattr(self, name), dtype=float).reshape(-1)
+            if v.shape != (6,) or np.isnan(v).any() or (name == "offset"
+                                                        and not np.isfinite(v).all()):
+                raise ValueError(f"{name}: six finite numbers, got {getattr(self, name)!r}")
+            object.__setattr__(self, name, tuple(float(x) for x in v))
+        if not (np.isfinite(self.ramp_s) and self.ramp_s > 0):
+            raise ValueError(f"ramp: a positive duration in seconds, got {self.ramp_s!r}")
+        if self.duration_s is not None and not (np.isfinite(self.duration_s)
+                                                and self.duration_s >= 0):
+            raise ValueError(f"duration: seconds ≥ 0, got {self.duration_s!r}")
+        if self.source == "compensation" and not self.calibration:
+            raise ValueError("a compensation needs its calibration (a PARAMS.json)")
+
+
+def correction_space(config: Any) -> str:
+    """The space a stream's corrections are in: ``"joints"``, ``"base"``, ``"tool"`` or
+    ``"path"``.
+
+    Raises
+    ------
+    ValueError
+        A stream that cannot correct the controller's own path (EGM joint or pose
+        targets: there the PC drives).
+    """
+    if config.vendor == "EGM":
+        if config.mode != "pathcorr":
+            raise ValueError(f"EGM corrects the controller's own path with path corrections "
+                             f"(EGMMoveL): the stream is in {config.mode} mode, where the PC "
+                             f"drives (egm_mode=pathcorr, plugcell egm files --mode pathcorr)")
+        return "path"
+    return "joints" if config.correction == "joint" else str(config.frame)
+
+
+class _InSpace:
+    """``g`` of a frame brought into the stream's space, at the cycle's path joints."""
+
+    def __init__(self, frame: str, space: str, robot: str) -> None:
+        if frame == space:
+            self.convert = None
+            return
+        if space != "joints" or frame not in ("base", "tool"):
+            frames = "the base, tool or joints" if space == "joints" else f"the {space}"
+            raise ValueError(f"an offset in the {frame} frame cannot be sent as this "
+                             f"stream's corrections ({_space_text(space)}): give it in "
+                             f"{frames} frame")
+        from plugcell.io.robots import load_robot
+
+        self.desc = load_robot(robot)
+        self.tool = frame == "tool"
+        self.convert = self._joints
+
+    def _joints(self, g: Array, state: CycleState) -> Array:
+        from plugcell.kinematics import forward
+        from plugcell.kinematics.jacobian import jacobian_from_fk
+
+        q = _path_joints(state)
+        fk = forward(self.desc, None, q, "nominal")
+        o = np.concatenate([g[:3], g[5:2:-1]])  # X Y Z, then ω = (C, B, A) about X, Y, Z
+        if self.tool:
+            R = fk.tcp[:3, :3]
+            o = np.concatenate([R @ o[:3], R @ o[3:]])
+        J = jacobian_from_fk(self.desc, fk, "tcp")
+        return np.linalg.lstsq(J, o, rcond=None)[0]
+
+    def __call__(self, g: Array, state: CycleState) -> Array:
+        return g if self.convert is None else self.convert(g, state)
+
+
+def _space_text(space: str) -> str:
+    return {"joints": "joint corrections", "base": "Cartesian corrections in the base frame",
+            "tool": "Cartesian corrections in the tool frame",
+            "path": "EGM path corrections"}[space]
+
+
+def _path_joints(state: CycleState) -> Array:
+    q = setpoint_base(state)
+    if q is None:
+        raise ValueError("the controller's packets carry no joints")
+    return q
+
+
+class _Compensation:
+    """``g(state)`` of a calibration's compensation (module docstring), joints (rad)."""
+
+    def __init__(self, spec: CorrectionSpec) -> None:
+        import json
+
+        from plugcell.compensation import IdentifiedModel, NominalModel
+        from plugcell.io.params import result_from_params
+        from plugcell.io.robots import description_of_params
+
+        path = spec.calibration
+        try:
+            with open(path, encoding="utf-8") as f:
+                d = json.load(f)
+            result = result_from_params(d, description_of_params(d, path), check_robot=False)
+        except OSError as exc:
+            raise ValueError(f"calibration {path}: cannot read: {exc.strerror or exc}") from None
+        except Exception as exc:  # not JSON, not a plugcell calibration: say which
+            raise ValueError(f"calibration {path}: not a plugcell calibration: "
+                             f"{type(exc).__name__}: {exc}") from None
+        self.model = IdentifiedModel(result.model)
+        self.nominal = NominalModel(self.model.description, tool=self.model.tool)
+        self.payload = (result.model.payload_ref_kg if spec.payload_kg is None
+                        else spec.payload_kg)
+        self.dq = np.zeros(6)
+
+    def __call__(self, state: CycleState) -> Array:
+        from plugcell.compensation import compensate_joints
+
+        q = _path_joints(state)
+        T_n = self.nominal.evaluate(q)[0]
+        step = compensate_joints(self.model, T_n, q + self.dq, self.payload, max_iterations=1,
+                                 check_limits=False, raise_errors=False)
+        self.dq = np.asarray(step.q, dtype=float).reshape(-1) - q
+        return self.dq
+
+
+#: The interpreter's thread switch interval while a correction runs (s): the link's thread
+#: must get the interpreter back from a computation beside it within a fraction of a 4 ms
+#: cycle (the default is 5 ms).
+SWITCH_INTERVAL_S = 0.0005
+
+
+class _Beside:
+    """Computes ``g(state)`` in a thread of its own, beside the link: :meth:`offer` hands
+    it the newest cycle and returns, at once, the newest ``g`` it has (zeros before the
+    first) — a compensation takes milliseconds, more than the cycle allows; ``g`` follows
+    the path a few cycles late (its change over them is the path's over them: small).  A
+    failure of ``g`` is raised by the next :meth:`offer`."""
+
+    def __init__(self, g: Callable[[CycleState], Array]) -> None:
+        self.g = g
+        self._cond = threading.Condition()
+        self._job: CycleState | None = None
+        self._result = np.zeros(6)
+        self._failure: Exception | None = None
+        self._stop = False
+        threading.Thread(target=self._run, name="correction-goal", daemon=True).start()
+
+    def offer(self, state: CycleState) -> Array:
+        with self._cond:
+            if self._failure is not None:
+                raise self._failure
+            self._job = state
+            self._cond.notify()
+            return self._result
+
+    def _run(self) -> None:
+        while True:
+            with self._cond:
+                while self._job is None and not self._stop:
+                    self._cond.wait()
+                if self._stop:
+                    return
+                job, self._job = self._job, None
+            try:
+                out = self.g(job)
+            except Exception as exc:  # the next offer fails the correction with it
+                with self._cond:
+                    self._failure = exc
+                return
+            with self._cond:
+                self._result = out
+
+    def close(self) -> None:
+        with self._cond:
+            self._stop = True
+            self._cond.notify()
+
+
+class Superimposed:
+    """A correction as the link runs it: the :class:`~.source.PathOffset` asking for
+    ``b(t) · g(t)``, ``g`` from the spec's source in the stream's space (:func:`make_source`).
+
+    Attributes
+    ----------
+    source : PathOffset
+        What the link follows.
+    offset : ndarray, shape (6,)
+        The offset the link had commanded at the last cycle (SI, the stream's space).
+    """
+
+    def __init__(self, spec: CorrectionSpec, space: str,
+                 wanted: Any, in_space: _InSpace) -> None:
+        self.spec, self.space = spec, space
+        self._wanted, self._in_space = wanted, in_space
+        self._value = np.asarray(spec.offset, dtype=float)
+        self._limit = np.asarray(spec.max_offset, dtype=float)
+        self._lock = threading.Lock()
+        self.offset = np.zeros(6)
+        # g is computed beside the link when it costs more than a few microseconds
+        self._beside = (_Beside(self.goal_now) if wanted is not None
+                        or in_space.convert is not None else None)
+        self.source = PathOffset(self._goal, ramp=spec.ramp_s, finish_at=spec.duration_s)
+
+    def goal_now(self, state: CycleState) -> Array:
+        """``g`` of ``state``, computed now (SI, the stream's space); ``ValueError`` beyond
+        ``max_offset``.  The link's cycle takes the newest one computed beside it."""
+        if self._wanted is not None:
+            g = self._wanted(state)
+        else:
+            with self._lock:
+                value = self._value
+            g = self._in_space(value, state)
+        return _check(g, self._limit, self.space)
+
+    def _goal(self, state: CycleState) -> Array:
+        self.offset = state.offset
+        return self.goal_now(state) if self._beside is None else self._beside.offer(state)
+
+    def close(self) -> None:
+        """Stop computing ``g`` (the correction ended)."""
+        if self._beside is not None:
+            self._beside.close()
+
+    def set(self, g: Array) -> None:
+        """``g`` of an ``offset`` or ``external`` correction from the next cycle (SI, the
+        spec's frame; thread-safe)."""
+        with self._lock:
+            self._value = g
+
+
+def make_source(spec: CorrectionSpec, config: Any) -> Superimposed:
+    """``spec`` as a link of ``config`` runs it (:class:`Superimposed`).
+
+    Raises
+    ------
+    ValueError
+        A source or frame the stream cannot send, an offset beyond ``max_offset``, or a
+        calibration that cannot be read: the reason.
+    """
+    space = correction_space(config)
+    if spec.source == "compensation":
+        if space != "joints":
+            raise ValueError(f"a compensation corrects joints; the stream sends "
+                             f"{_space_text(space)} (configure joint corrections: RSI "
+                             f"AKorr, rsi_correction=joint)")
+        return Superimposed(spec, space, _Compensation(spec), _InSpace("joints", space, ""))
+    in_space = _InSpace(spec.frame, space, spec.robot)
+    if space == "path" and any(spec.offset[3:]):
+        raise ValueError("EGM path corrections carry a position only: A, B, C must be 0")
+    if spec.frame == space:
+        _check(np.asarray(spec.offset), np.asarray(spec.max_offset), space)
+    return Superimposed(spec, space, None, in_space)
+
+
+def _check(g: Array, limit: Array, space: str) -> Array:
+    over = np.flatnonzero(np.abs(g) > limit)
+    if len(over):
+        i = int(over[0])
+        names = ("A1", "A2", "A3", "A4", "A5", "A6") if space == "joints" else \
+            ("X", "Y", "Z", "A", "B", "C")
+        unit, scale = ("°", 180 / np.pi) if space == "joints" or i >= 3 else ("mm", 1000.0)
+        raise ValueError(f"correction {names[i]} {g[i] * scale:.4g} {unit} beyond the "
+                         f"largest correction {limit[i] * scale:.4g} {unit}")
+    return g
+
+
+class Corrector:
+    """Runs one correction (:class:`CorrectionSpec`) at a time on a link (module docstring).
+
+    Parameters
+    ----------
+    link : StreamLink
+        A started link (its :meth:`~.follow.Following.follow` runs the correction).
+    """
+
+    def __init__(self, link: Any) -> None:
+        self.link = link
+        self._running: Superimposed | None = None
+        self._thread: threading.Thread | None = None
+        self._outcome: str | None = None  # "" ended well, else why not; None: running
+        self._lock = threading.Lock()
+        self._switch = sys.getswitchinterval()
+
+    @property
+    def active(self) -> bool:
+        """A correction runs (not yet ramped out or failed)."""
+        thread = self._thread
+        return thread is not None and thread.is_alive()
+
+    def start(self, spec: CorrectionSpec) -> None:
+        """Start superimposing ``spec`` (returns at once; :meth:`poll` for the end).
+
+        Raises
+        ------
+        ValueError
+            The stream cannot send it, or an offset beyond the limits: the reason.
+        RuntimeError
+            A correction runs already, or the controller is not streaming.
+        """
+        with self._lock:
+            if self.active:
+                raise RuntimeError(f"a correction ({self._running.spec.source}) runs "
+                                   f"already: end it first")  # type: ignore[union-attr]
+            if not self.link.streaming or self.link.failure is not None:
+                why = self.link.failure or f"no {self.link.config.vendor} stream"
+                raise RuntimeError(f"cannot correct: {why}")
+            # from here to the correction's end the link's thread shares the interpreter
+            # with computations of milliseconds (a calibration read, g beside the link):
+            # it must get it back within a fraction of a cycle
+            switch = sys.getswitchinterval()
+            sys.setswitchinterval(min(switch, SWITCH_INTERVAL_S))
+            try:
+                running = make_source(spec, self.link.config)
+            except BaseException:
+                sys.setswitchinterval(switch)
+                raise
+            self._switch = switch
+            self._running, self._outcome = running, None
+            self._thread = threading.Thread(target=self._run, args=(running, spec),
+                                            name="correction", daemon=True)
+            self._thread.start()
+
+    def _run(self, running: Superimposed, spec: CorrectionSpec) -> None:
+        source = running.source
+        try:
+            self.link.follow(source, done=source.ended, timeout=spec.timeout_s)
+        except (StreamLinkError, TimeoutError) as exc:
+            self._outcome = f"the correction failed: {exc}"
+        else:
+            self._outcome = ""
+        finally:
+            running.close()
+            sys.setswitchinterval(self._switch)
+
+    def set_offset(self, g: Array) -> None:
+        """The running ``external`` or ``offset`` correction's ``g`` from the next cycle (SI,
+        in the spec's frame).
+
+        Raises
+        ------
+        RuntimeError
+            No correction runs, or it is a compensation.
+        ValueError
+            ``g`` is not six finite numbers, or beyond ``max_offset``.
+        """
+        running = self._running
+        if not self.active or running is None:
+            raise RuntimeError("no correction runs: start one (CORRECT) first")
+        spec = running.spec
+        if spec.source == "compensation":
+            raise RuntimeError("the running correction is a compensation: its offset comes "
+                               "from the calibration")
+        g = np.asarray(g, dtype=float).reshape(-1)
+        if g.shape != (6,) or not np.isfinite(g).all():
+            raise ValueError(f"an offset is six finite numbers, got {g!r}")
+        if spec.frame == running.space:
+            _check(g, np.asarray(spec.max_offset), spec.frame)
+        running.set(g)
+
+    def finish(self) -> None:
+        """Ramp the running correction out (nothing if none runs)."""
+        if self._running is not None and self.active:
+            self._running.source.finish()
+
+    def poll(self) -> str | None:
+        """``None`` while a correction runs; then ``""`` (it ramped out) or why it failed."""
+        if self.active:
+            return None
+        return "" if self._outcome is None else self._outcome
+
+    def status(self) -> tuple[float, Array]:
+        """The blend factor ``b`` of the last cycle, and the link's offset so far (SI)."""
+        running = self._running
+        if running is None:
+            return 0.0, np.zeros(6)
+        return running.source.blend, np.array(running.offset, dtype=float)
