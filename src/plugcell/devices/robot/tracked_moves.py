@@ -33,15 +33,27 @@ wait in the tracker's queue until its Stop Measurement (docs/tracker-service.md)
 tracker's term fades out where its samples stop (a beam break) and the move goes on
 with the model; a move whose stream cannot start fails with the tracker's reason.
 
-The correction is computed in the service's process, beside the link: a tracked move
-needs the link's cycle loop in a thread of the service (``--param stream_process=false``);
-with the link in its child process (:class:`~.stream.process.LinkProcess`, the default)
-the move fails with that reason.
+The correction is computed in the service's process, where the tracker's samples arrive.
+With the link's cycle loop in a thread of the service (``--param stream_process=false``)
+the drive's hook runs in the link's thread and takes the worker's newest offset; with the
+link in its child process (:class:`~.stream.process.LinkProcess`, the default) the same
+hook runs in a thread of the service on each cycle the child publishes, and the child
+adds the newest joint correction it was handed through shared memory
+(:mod:`~.stream.adjusting`) — the same semantics across the process boundary.
+
+Faults: a beam break or a late tracker fades the tracker's term out (the loop's
+``HoldWindow``, logged at the move's end) and the move goes on with the model; a
+tracker whose stream *ends* during the move (the service killed: ``TRACKER lost``, or
+its process failed) holds the loop for good with that reason, the move finishes on the
+model — the term fades out at its bounded rate, the robot never jumps — and then fails
+with the reason (the program stops at the move's line).  :attr:`TrackedMoves.last_record`
+keeps every cycle's applied Cartesian offset for the figures (its speed and acceleration).
 """
 
 from __future__ import annotations
 
 import asyncio
+import logging
 import threading
 import time
 from collections import deque
@@ -68,6 +80,8 @@ Array = NDArray[np.float64]
 
 __all__ = ["OneWayClock", "ServiceTrackerFeed", "TrackedMoves", "TrackerFeed"]
 
+log = logging.getLogger("plugcell.devices.robot.tracked_moves")
+
 #: Stream Measurement's request: 1 kHz, 10 samples a message.
 STREAM_RATE_HZ, STREAM_BATCH = 1000, 10
 #: How long a tracked move waits for the tracker (its queue: another robot may hold it).
@@ -77,6 +91,9 @@ _STATUS = {0: "ok", 1: "line_of_sight", 2: "tracking_speed", 3: "out_of_range", 
 
 class TrackerFeed(Protocol):
     """The tracker's samples for one tracked move."""
+
+    #: Why the samples stopped for good ("" while they flow): the stream ended.
+    failure: str
 
     def start(self) -> None:
         """Subscribe; return when the samples flow (raise MotionError: why not)."""
@@ -253,22 +270,21 @@ class TrackedMoves:
         self.settings, self.ramp_s, self.payload_kg = settings, ramp_s, payload_kg
         self.settle_s, self.realtime = settle_s, realtime
         self.last_loop: TrackingLoop | None = None
+        #: the last move's cycles: ``(t s, offset applied [Δp m; φ rad], loop state)``
+        self.last_record: list[tuple[float, Array, str]] = []
 
     def move_tracked(self, pose: Position, tracker: str) -> float | None:
         """``MOVE LINEAR TO pose WITH TRACKING tracker``: plan, subscribe, stream with
         the correction, unsubscribe.  Returns None when ``after`` accounted for the
         move's time, else its duration (s)."""
         m = self.motion
-        if isinstance(m.drive, LinkProcess):
-            raise MotionError("MOVE ... WITH TRACKING needs the link's cycle loop in the "
-                              "service's process: serve the robot with --param "
-                              "stream_process=false (the link runs in a child process)")
         desc = m.description
         fk0 = forward(desc, None, np.asarray(desc.home, float), "nominal")
         tool = np.linalg.inv(fk0.flange) @ fk0.tcp
         with m._lock:
             traj = m.plan_move(LIN(target=matrix_from_position(pose), speed=m.speed))
-            cycle_s = m.drive.link.config.cycle_s
+            config = m.drive.config if isinstance(m.drive, LinkProcess) else m.drive.link.config
+            cycle_s = config.cycle_s
             settings = self.settings or TrackingSettings(cycle_s=cycle_s)
             model = NominalModel(desc, tool)
             loop = self.last_loop = TrackingLoop(model, settings, payload_kg=self.payload_kg)
@@ -281,8 +297,16 @@ class TrackedMoves:
             finally:
                 if worker is not None:
                     worker.close()
+                failure = feed.failure  # before stop(): ending the stream is ours then
                 feed.stop()
             m.last = traj
+        for w in loop.windows:
+            log.warning("MOVE WITH TRACKING to %s: the model alone from %.3f s to %s (%s)",
+                        tracker, w.start_s, "the end" if w.end_s is None else
+                        f"{w.end_s:.3f} s", w.reason)
+        if failure:
+            raise MotionError(f"{tracker} stopped during the tracked move ({failure}): "
+                              "the move finished with the model alone")
         if self.after is None:
             return padded.duration
         self.after(padded.duration)
@@ -294,14 +318,25 @@ class TrackedMoves:
         newest the worker has, the link's thread never waits for the loop)."""
         desc = self.motion.description
         ramp = unit_ramp(max(self.ramp_s, cycle_s))
+        record = self.last_record = []
 
         def offset(state: CycleState, k: int, q_k: Array) -> Array:
             loop.add(feed.poll(state.t, time.time()))
+            if feed.failure and not record_held:
+                loop.hold(f"tracker stopped: {feed.failure}")
+                record_held.append(state.t)
             T_path = forward(desc, None, q_k, "nominal").tcp
             q_fb = state.robot.joints if state.robot.joints is not None else q_k
-            return float(ramp.sample(k * cycle_s).s) * loop.cycle(state.t, q_fb, T_path).offset
+            out = loop.cycle(state.t, q_fb, T_path)
+            o = float(ramp.sample(k * cycle_s).s) * out.offset
+            record.append((state.t, o, out.state))
+            return o
 
-        worker = _Worker(offset) if self.realtime else None
+        record_held: list[float] = []
+        # in-process real time: a worker beside the link's thread; a link process has
+        # its own (the pump thread of LinkProcess.follow)
+        threaded = self.realtime and not isinstance(self.motion.drive, LinkProcess)
+        worker = _Worker(offset) if threaded else None
 
         def adjust(state: CycleState, k: int, q_k: Array) -> Array:
             o = worker.offer(state, k, q_k) if worker is not None else offset(state, k, q_k)
