@@ -22,6 +22,8 @@ import math
 
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from plugcell.compensation.tracking import TrackerMeasurement
 from plugcell.devices.robot.arm_model import position_from_tcp
@@ -30,7 +32,7 @@ from plugcell.devices.robot.rsi import RsiConfig, RsiLink
 from plugcell.devices.robot.rsi.drive import RsiDrive
 from plugcell.devices.robot.stream.process import LinkProcess
 from plugcell.devices.robot.stream_controller import streaming_limits
-from plugcell.devices.robot.tracked_moves import OneWayClock, TrackedMoves
+from plugcell.devices.robot.tracked_moves import CycleClock, OneWayClock, TrackedMoves
 from plugcell.kinematics import forward
 from plugcell.motion import CartesianLimits, JointLimits
 from plugcell.pdl import MotionError
@@ -119,8 +121,9 @@ class ModelFeed:
 
 #: The controller's Timeout: in simulated time no answer is late; it bounds the drive's
 #: wait for a move (duration + 2 timeouts), which a loaded machine may need (a 1.3 s
-#: tracked move took 45 s of wall time at a load of 12 on the 2-core VM).
-TIMEOUT_PACKETS = 25000
+#: tracked move took 45 s of wall time at a load of 12 on the 2-core VM; 10000 is
+#: RSI's largest).
+TIMEOUT_PACKETS = 10000
 
 
 @pytest.fixture(scope="module", params=["thread", "process"])
@@ -190,6 +193,39 @@ def test_the_tracked_line_stays_on_the_line(cell):
     assert np.all(step <= limit), (step, limit)
 
 
+def test_cycle_clock_follows_a_robot_clock_that_slips():
+    """A controller whose cycle clock stood still for 0.3 s of PC time (its process not
+    scheduled, as the twin's on a loaded PC): a sample taken during the stall maps to the
+    robot time of the stall, later ones continue from there — where an envelope would put
+    them 0.3 s into the robot's future."""
+    clock = CycleClock(span_s=2.0)
+    for k in range(500):  # cycles at 4 ms; after cycle 250 the PC's time jumps 0.3 s
+        clock.see(k * 0.004, 100.0 + k * 0.004 + (0.3 if k > 250 else 0.0) + 1e-4)
+    assert clock.robot(100.0 + 0.5 + 1e-4) == pytest.approx(0.5)
+    assert 1.0 <= clock.robot(100.0 + 1.15) <= 1.004  # in the stall
+    assert clock.robot(100.0 + 1.5 + 0.3 + 1e-4) == pytest.approx(1.5)
+    assert clock.robot(100.0 + 1.996 + 0.3 + 1e-4 + 0.01) == pytest.approx(2.006)  # rate 1
+    clock.see(1.0, 200.0)  # out of order in robot time: ignored
+    assert clock.robot(100.0 + 1.5 + 0.3 + 1e-4) == pytest.approx(1.5)
+    assert np.isnan(CycleClock().robot(1.0))
+    with pytest.raises(ValueError, match="span_s must be > 0 s, got 0"):
+        CycleClock(span_s=0)
+
+
+@given(st.lists(st.tuples(st.floats(0, 0.01), st.floats(0, 0.05)), min_size=2, max_size=60),
+       st.floats(-1, 5))
+@settings(max_examples=60, deadline=None)
+def test_cycle_clock_maps_monotonically(steps, probe):
+    """Whatever the stamps, the map never runs backwards (samples keep their order)."""
+    clock, t, pc = CycleClock(span_s=10.0), 0.0, 0.0
+    for dt, dpc in steps:
+        t, pc = t + dt, pc + dpc
+        clock.see(t, pc)
+    grid = np.sort(np.r_[np.linspace(-1, pc + 1, 50), probe])
+    mapped = [clock.robot(p) for p in grid]
+    assert np.all(np.diff(mapped) >= -1e-12)
+
+
 def test_one_way_clock_takes_the_lower_envelope():
     clock = OneWayClock()
     rng = np.random.default_rng(0)
@@ -200,12 +236,12 @@ def test_one_way_clock_takes_the_lower_envelope():
     assert clock.pc(0.5) == pytest.approx(100.5 + 0.002, abs=2e-5)
 
 
-def _offset_rates(record, after_s: float) -> tuple[float, float]:
-    """Largest speed (m/s) and acceleration (m/s²) per axis of the applied position offset,
-    per computed cycle (``record``: TrackedMoves.last_record), from ``after_s`` into the
-    move on (the start's blend-in ramp is over)."""
+def _offset_rates(record, after_s: float, part: int = 1) -> tuple[float, float]:
+    """Largest speed (m/s) and acceleration (m/s²) per axis of the applied position offset
+    (``part`` 1; 3: its tracker term), per computed cycle (``record``:
+    TrackedMoves.last_record), from ``after_s`` into the move on (the blend-in is over)."""
     t = np.array([r[0] for r in record])
-    o = np.array([r[1][:3] for r in record])[t - t[0] >= after_s]
+    o = np.array([r[part][:3] for r in record])[t - t[0] >= after_s]
     return (float(np.abs(np.diff(o, axis=0)).max() / 0.004),
             float(np.abs(np.diff(o, 2, axis=0)).max() / 0.004 ** 2))
 
@@ -243,8 +279,9 @@ def test_a_fault_mid_line_never_makes_the_robot_jump(cell, fault):
     loop = tracked.last_loop
     assert loop is not None
     settings = loop.settings
-    windows = [(w.start_s - tracked.last_record[0][0], w.end_s, w.reason)
-               for w in loop.windows]
+    t0 = tracked.last_record[0][0]
+    windows = [(round(w.start_s - t0, 3), None if w.end_s is None else round(w.end_s - t0, 3),
+                w.reason) for w in loop.windows]
     if fault == "beam_break":
         assert [w[2] for w in windows] == ["line_of_sight"], windows
         assert 0.7 <= windows[0][0] <= 0.7 + settings.max_age_s + 0.02
@@ -256,10 +293,14 @@ def test_a_fault_mid_line_never_makes_the_robot_jump(cell, fault):
         assert [w[2] for w in windows] == ["tracker stopped: TRACKER lost (its service "
                                            "ended)"], windows
         assert windows[0][1] is None and loop.state == "holding"
-    # bounded: after the blend-in the applied offset is the loop's, within its limiter
+    # bounded: after the blend-in the tracker's term moves within its limiter's bounds;
+    # the whole offset adds the model's part (zero for the controller's own model but for
+    # its solver's tolerance: reported)
+    v_c, a_c = _offset_rates(tracked.last_record, tracked.ramp_s + 0.01, part=3)
+    assert v_c <= settings.max_speed_m_s * (1 + 1e-9), v_c
+    assert a_c <= settings.max_accel_m_s2 * (1 + 1e-9), a_c
     speed, accel = _offset_rates(tracked.last_record, tracked.ramp_s + 0.01)
-    assert speed <= settings.max_speed_m_s * (1 + 1e-9), speed
-    assert accel <= 2 * settings.max_accel_m_s2 * (1 + 1e-9), accel
+    assert speed <= 2 * settings.max_speed_m_s, speed
     commands = np.array([e[1] for e in robot.stats().log[k0:]])
     step = np.abs(np.diff(commands, axis=0)).max(axis=0)
     assert np.all(step <= np.array(robot.config.limits.max_step)), step

@@ -10,7 +10,9 @@ the laser tracker's correction added every cycle (the drive's ``adjust`` hook):
    (:class:`ServiceTrackerFeed`: a process of the robot service on the tracker, whose
    data updates arrive in this process — not relayed by anyone) in the requester's robot
    frame (the BASE and PROBE the program set, eq. 7.2: the flange pose), each with its
-   acquisition time, mapped to the robot's clock (:class:`OneWayClock`);
+   acquisition time, mapped to the PC's clock (:class:`~.tracking_clocks.OneWayClock`)
+   and from it to the robot's (:class:`~.tracking_clocks.CycleClock`: the PC times the
+   robot's cycles were handled);
 2. :class:`~plugcell.compensation.tracking.TrackingLoop` (the controller's nominal
    model: its tracker term corrects the model's error) answers the Cartesian offset
    ``o = [Δp; φ]`` (F0) on the planned TCP pose ``T_p(k)`` of the cycle;
@@ -69,6 +71,7 @@ from plugcell.devices.robot.arm_model import matrix_from_position
 from plugcell.devices.robot.poses import pose_matrix
 from plugcell.devices.robot.stream.process import LinkProcess
 from plugcell.devices.robot.stream.source import CycleState
+from plugcell.devices.robot.tracking_clocks import CycleClock, OneWayClock
 from plugcell.kinematics import forward
 from plugcell.kinematics.jacobian import jacobian_from_fk
 from plugcell.motion import LIN
@@ -78,7 +81,7 @@ from plugcell.pdl.values import Position
 
 Array = NDArray[np.float64]
 
-__all__ = ["OneWayClock", "ServiceTrackerFeed", "TrackedMoves", "TrackerFeed"]
+__all__ = ["CycleClock", "OneWayClock", "ServiceTrackerFeed", "TrackedMoves", "TrackerFeed"]
 
 log = logging.getLogger("plugcell.devices.robot.tracked_moves")
 
@@ -109,24 +112,6 @@ class TrackerFeed(Protocol):
         ...
 
 
-class OneWayClock:
-    """Device time → PC time from one-way stamps: ``pc = device + min_i(pc_i − device_i)``
-    (the lower envelope at rate 1 — :func:`plugcell.metrology.timing.fit_clock_map` with
-    the rate fixed, online; over one move a clock's drift is negligible).  The smallest
-    transport delay is in the offset: the time is that much early."""
-
-    def __init__(self) -> None:
-        self.offset = np.inf
-
-    def see(self, device_s: float, pc_s: float) -> None:
-        """One stamp: the event of device time ``device_s`` arrived at PC time ``pc_s``."""
-        self.offset = min(self.offset, pc_s - device_s)
-
-    def pc(self, device_s: float) -> float:
-        """PC time of device time ``device_s``."""
-        return device_s + self.offset
-
-
 class ServiceTrackerFeed:
     """``Stream Measurement`` of a tracker service, opened by the robot service itself.
 
@@ -150,8 +135,10 @@ class ServiceTrackerFeed:
         self._lock = threading.Lock()
         self._call: Any = None
         self._task: asyncio.Task[None] | None = None
-        self.tracker_clock, self.robot_clock = OneWayClock(), OneWayClock()
+        self.tracker_clock, self.robot_clock = OneWayClock(), CycleClock()
         self.failure = ""
+        #: the ``seq`` of every data update received (each is in the tracker's journal)
+        self.update_seqs: list[int] = []
 
     def _run(self, coro: Any, timeout: float) -> Any:
         try:
@@ -182,6 +169,7 @@ class ServiceTrackerFeed:
                 rows = np.atleast_2d(ProcessCall.array(update))
                 with self._lock:
                     self._rows.extend(rows)
+                    self.update_seqs.append(update.seq)
                 if not first.done():
                     first.set_result(None)
             final = await call.result()
@@ -200,7 +188,7 @@ class ServiceTrackerFeed:
         for r in rows:
             self.tracker_clock.see(float(r[0]), float(r[1]))
         for r in rows:
-            t = self.tracker_clock.pc(float(r[0])) - self.robot_clock.offset
+            t = self.robot_clock.robot(self.tracker_clock.pc(float(r[0])))
             status = _STATUS.get(int(r[9]), "device")
             if status != "ok" or int(r[8]) != 1:
                 out.append(TrackerMeasurement(t, None, bool(r[8]), status if status != "ok"
@@ -270,8 +258,11 @@ class TrackedMoves:
         self.settings, self.ramp_s, self.payload_kg = settings, ramp_s, payload_kg
         self.settle_s, self.realtime = settle_s, realtime
         self.last_loop: TrackingLoop | None = None
-        #: the last move's cycles: ``(t s, offset applied [Δp m; φ rad], loop state)``
-        self.last_record: list[tuple[float, Array, str]] = []
+        self.last_feed: TrackerFeed | None = None
+        #: the last move's computed cycles: ``(t s, offset applied [Δp m; φ rad], loop
+        #: state, its tracker term)`` (the rest is the model's part, zero for the nominal
+        #: model but for its solver's tolerance)
+        self.last_record: list[tuple[float, Array, str, Array]] = []
 
     def move_tracked(self, pose: Position, tracker: str) -> float | None:
         """``MOVE LINEAR TO pose WITH TRACKING tracker``: plan, subscribe, stream with
@@ -288,7 +279,7 @@ class TrackedMoves:
             settings = self.settings or TrackingSettings(cycle_s=cycle_s)
             model = NominalModel(desc, tool)
             loop = self.last_loop = TrackingLoop(model, settings, payload_kg=self.payload_kg)
-            feed = self.feeds(tracker)
+            feed = self.last_feed = self.feeds(tracker)
             feed.start()
             padded = _Settled(traj, self.settle_s)
             adjust, worker = self._adjust(loop, feed, cycle_s)
@@ -320,16 +311,17 @@ class TrackedMoves:
         ramp = unit_ramp(max(self.ramp_s, cycle_s))
         record = self.last_record = []
 
-        def offset(state: CycleState, k: int, q_k: Array) -> Array:
-            loop.add(feed.poll(state.t, time.time()))
+        def offset(state: CycleState, k: int, q_k: Array, pc: float) -> Array:
+            loop.add(feed.poll(state.t, pc))
             if feed.failure and not record_held:
                 loop.hold(f"tracker stopped: {feed.failure}")
                 record_held.append(state.t)
             T_path = forward(desc, None, q_k, "nominal").tcp
             q_fb = state.robot.joints if state.robot.joints is not None else q_k
             out = loop.cycle(state.t, q_fb, T_path)
-            o = float(ramp.sample(k * cycle_s).s) * out.offset
-            record.append((state.t, o, out.state))
+            blend = float(ramp.sample(k * cycle_s).s)
+            o = blend * out.offset
+            record.append((state.t, o, out.state, blend * out.tracker))
             return o
 
         record_held: list[float] = []
@@ -339,7 +331,11 @@ class TrackedMoves:
         worker = _Worker(offset) if threaded else None
 
         def adjust(state: CycleState, k: int, q_k: Array) -> Array:
-            o = worker.offer(state, k, q_k) if worker is not None else offset(state, k, q_k)
+            # when the packet was handled: the link process's stamp, or now (this is the
+            # link's thread), for the robot's clock map
+            pc = getattr(state.robot, "pc_time_s", None) or time.time()
+            o = worker.offer(state, k, q_k, pc) if worker is not None else \
+                offset(state, k, q_k, pc)
             if not np.any(o):
                 return np.zeros(len(q_k))
             J = jacobian_from_fk(desc, forward(desc, None, q_k, "nominal"), "tcp")
@@ -352,9 +348,9 @@ class _Worker:
     """Runs the loop beside the link (real time): :meth:`offer` hands it the newest cycle
     and returns the newest offset it has computed (zeros before the first), at once."""
 
-    def __init__(self, offset: Callable[[CycleState, int, Array], Array]) -> None:
+    def __init__(self, offset: Callable[[CycleState, int, Array, float], Array]) -> None:
         self.offset = offset
-        self._latest: tuple[CycleState, int, Array] | None = None
+        self._latest: tuple[CycleState, int, Array, float] | None = None
         self._result = np.zeros(6)
         self._cond = threading.Condition()
         self._stop = False
@@ -363,11 +359,11 @@ class _Worker:
         self._thread = threading.Thread(target=self._run, name="tracking-loop", daemon=True)
         self._thread.start()
 
-    def offer(self, state: CycleState, k: int, q_k: Array) -> Array:
+    def offer(self, state: CycleState, k: int, q_k: Array, pc: float) -> Array:
         with self._cond:
             if self.failure is not None:
                 raise MotionError(f"the tracking loop failed: {self.failure}")
-            self._latest = (state, k, q_k)
+            self._latest = (state, k, q_k, pc)
             self._cond.notify()
             return self._result
 

@@ -9,8 +9,9 @@ process boundary through two small blocks of shared memory, each a seqlock
 
 * **the cycle** — written by the child in the link's thread, each cycle of an adjusted
   motion, before the answer: the motion's number, the sample index ``k``, the robot's time
-  ``t`` (s, the session's clock) and the actual joints ``q`` (rad; NaN if the packet had
-  none) — what the in-process hook is given;
+  ``t`` (s, the session's clock), the PC time it was handled (``time.time()``: a tracked
+  move maps its tracker's samples onto the robot's clock with it) and the actual joints
+  ``q`` (rad; NaN if the packet had none) — what the in-process hook is given;
 * **the adjustment** — written by the service's :class:`AdjustPump` (a thread) whenever it
   has computed one for a newer cycle: the motion's number and ``Δq`` (rad, (6,)).
 
@@ -39,8 +40,8 @@ __all__ = ["CYCLE_SLOTS", "OFFSET_SLOTS", "AdjustPump", "ChildAdjust", "SeqVecto
 
 Array = NDArray[np.float64]
 
-#: The cycle block: [seq, motion, k, t, q × 6].
-CYCLE_SLOTS = 10
+#: The cycle block: [seq, motion, k, t, pc, q × 6].
+CYCLE_SLOTS = 11
 #: The adjustment block: [seq, motion, Δq × 6].
 OFFSET_SLOTS = 8
 
@@ -86,9 +87,11 @@ class SeqVector:
 
 @dataclass(frozen=True)
 class PumpedRobot:
-    """The part of a cycle's packet the service's hook is given: the actual joints."""
+    """The part of a cycle's packet the service's hook is given: the actual joints (rad)
+    and the PC time the child handled the packet (``time.time()``, s)."""
 
     joints: Array | None
+    pc_time_s: float
 
 
 class ChildAdjust:
@@ -108,7 +111,7 @@ class ChildAdjust:
     def __call__(self, state: CycleState, k: int, q_k: Array) -> Array:
         joints = state.robot.joints
         q = np.full(6, np.nan) if joints is None else np.asarray(joints, dtype=float)
-        self.cycle.write(np.array([self.motion, k, state.t, *q]))
+        self.cycle.write(np.array([self.motion, k, state.t, time.time(), *q]))
         newest = self.offset.read()
         return newest[1:7] if newest[0] == self.motion else np.zeros(6)
 
@@ -121,7 +124,7 @@ class AdjustPump:
     ----------
     adjust : callable
         ``adjust(state, k, q_k) -> Δq`` (rad, (6,)), as for an in-process drive; ``state``
-        carries ``robot.joints``, ``t`` and ``cycle = k``.
+        carries ``robot.joints``, ``robot.pc_time_s``, ``t`` and ``cycle = k``.
     q : ndarray, shape (K+1, 6)
         The motion's samples (``q_k`` is ``q[k]``).
     cycle, offset : SeqVector
@@ -152,8 +155,9 @@ class AdjustPump:
                 self._stop.wait(self.period_s)
                 continue
             last = k
-            q = c[3:9]
-            state = CycleState(robot=PumpedRobot(None if np.isnan(q).any() else q),
+            q = c[4:10]
+            state = CycleState(robot=PumpedRobot(None if np.isnan(q).any() else q,
+                                                 float(c[3])),
                                offset=np.zeros(6), session=0, cycle=k, t=float(c[2]))
             try:
                 dq = np.asarray(self.adjust(state, k, self.q[min(k, len(self.q) - 1)]),
