@@ -64,11 +64,14 @@ def _three_sigma(x: np.ndarray) -> float:
     return float(x.mean() + 3 * x.std())
 
 
-def errors(run: PathRun, shape: str) -> dict[str, float]:
-    """The run's error statistics (module docstring), metres and radians."""
+def errors(run: PathRun, shape: str, mask: np.ndarray | None = None) -> dict[str, float]:
+    """The run's error statistics (module docstring), metres and radians (over the cycles
+    of ``mask`` too, if given)."""
     w = (run.t >= run.motion[0]) & (run.t <= run.motion[1] + 0.2)
+    if mask is not None:
+        w &= mask
     p, c = run.true_pose[w, :3, 3], run.path_pose[w, :3, 3]
-    p0 = run.path_pose[0, :3, 3]
+    p0 = run.path_pose[0, :3, 3]  # the path's start (before the mask)
     if shape == "line":
         u = np.array([0.0, 1.0, 0.0])
         rel = p - p0
@@ -188,17 +191,35 @@ def print_table(results: list[dict]) -> None:
               f"{r['rates'][0] * 1e3:.2f} | {r['rates'][1]:.3f} |")
 
 
+def _perp_3s_where(run: PathRun, shape: str, held: bool) -> float:
+    """Perpendicular 3σ (m) over the motion's cycles in which the loop held (model alone,
+    ``held``) or tracked (NaN if none)."""
+    w = (run.t >= run.motion[0]) & (run.t <= run.motion[1] + 0.2)
+    states = np.array(run.state)
+    pick = (states == "holding") if held else (states == "tracking")
+    if not (w & pick).any():
+        return math.nan
+    return errors(run, shape, pick)["perp_3s"]
+
+
 def print_faults(shape: str, runs: list[tuple[str, PathRun]]) -> None:
     print(f"\nfaults ({shape}, 100 mm/s, tracking):")
-    print("| fault | windows (start–end s, reason) | perp 3σ mm | offset speed max mm/s | "
-          "accel max m/s² |")
-    print("|---|---|---:|---:|---:|")
+    print("| fault | windows (start–end s, reason) | model alone s | perp 3σ mm all / "
+          "held / tracked | offset step max µm | offset speed max mm/s | accel max m/s² |")
+    print("|---|---|---:|---|---:|---:|---:|")
     for name, run in runs:
+        end = run.motion[1] + 0.2
         wins = "; ".join(f"{w.start_s - run.motion[0]:.2f}–"
                          f"{'end' if w.end_s is None else f'{w.end_s - run.motion[0]:.2f}'} "
                          f"{w.reason}" for w in run.windows) or "none"
+        alone = sum(min(end if w.end_s is None else w.end_s, end) - w.start_s
+                    for w in run.windows)
         v, a = rates(run)
-        print(f"| {name} | {wins} | {errors(run, shape)['perp_3s'] * 1e3:.3f} | "
+        step = float(np.abs(np.diff(run.offset[:, :3], axis=0)).max())
+        parts = " / ".join(f"{x * 1e3:.3f}" for x in (
+            errors(run, shape)["perp_3s"], _perp_3s_where(run, shape, True),
+            _perp_3s_where(run, shape, False)))
+        print(f"| {name} | {wins} | {alone:.2f} | {parts} | {step * 1e6:.1f} | "
               f"{v * 1e3:.2f} | {a:.3f} |")
 
 

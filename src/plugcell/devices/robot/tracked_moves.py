@@ -181,20 +181,30 @@ class ServiceTrackerFeed:
                                             f"{self.failure}"))
 
     def poll(self, t_robot: float, pc_time: float) -> list[TrackerMeasurement]:
+        """The samples taken before the cycle of robot time ``t_robot`` was handled at PC
+        time ``pc_time``, on the robot's clock; later ones wait for a later cycle (placed
+        between two cycles, a sample keeps its order whatever the robot's clock does)."""
         self.robot_clock.see(t_robot, pc_time)
         with self._lock:
             rows, self._rows = list(self._rows), deque()
-        out = []
+        out, later = [], []
         for r in rows:
             self.tracker_clock.see(float(r[0]), float(r[1]))
         for r in rows:
-            t = self.robot_clock.robot(self.tracker_clock.pc(float(r[0])))
+            pc = self.tracker_clock.pc(float(r[0]))
+            if pc > pc_time:
+                later.append(r)
+                continue
+            t = self.robot_clock.robot(pc)
             status = _STATUS.get(int(r[9]), "device")
             if status != "ok" or int(r[8]) != 1:
                 out.append(TrackerMeasurement(t, None, bool(r[8]), status if status != "ok"
                                               else "no_orientation"))
                 continue
             out.append(TrackerMeasurement(t, pose_matrix(r[2:8]) @ self.tool, True, "ok"))
+        if later:
+            with self._lock:
+                self._rows.extendleft(reversed(later))
         return out
 
     def stop(self) -> None:
