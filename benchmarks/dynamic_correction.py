@@ -36,6 +36,7 @@ import argparse
 import dataclasses
 import math
 import sys
+import threading
 import time
 from pathlib import Path
 
@@ -44,6 +45,7 @@ import numpy as np
 from plugcell.compensation.tracking import TrackingLoop, TrackingSettings
 from plugcell.devices.robot.rsi import RsiConfig, RsiLink
 from plugcell.devices.robot.rsi.tracking import TrackingSource
+from plugcell.devices.robot.stream.source import Correction, CycleState
 from plugcell.kinematics import forward
 from plugcell.kinematics.transforms import so3_log
 from plugcell.metrology.timing import estimate_delay
@@ -134,11 +136,77 @@ def faults(cell: TrackedCell, traj, tau: float) -> list[tuple[str, PathRun]]:
     return [(name, cell.run(traj, "tracking", settings=s, faults=(f,))) for name, f in cases]
 
 
-def udp_timing(cell: TrackedCell, tau: float) -> dict:
+class Beside:
+    """The loop beside the link, as the robot service runs it (``tracked_moves._Worker``,
+    the link process's pump): each answer offers its cycle to the loop's thread and
+    carries, at once, the newest correction that thread has made (none before the first:
+    hold).  Records, per correction, the time from its samples' hand-over to the first
+    answer that carried it (``wire_s``), and per answer whether it carried a new one.
+
+    Parameters
+    ----------
+    feed : LogFeed
+        The samples' hand-over and the loop (``feed(state)``), run in the thread.
+    """
+
+    def __init__(self, feed: LogFeed) -> None:
+        self.feed = feed
+        self._cond = threading.Condition()
+        self._job: CycleState | None = None
+        self._made: tuple[Correction, int, float] | None = None  # (it, version, handed)
+        self._sent = 0
+        self.wire_s: list[float] = []
+        self.fresh: list[bool] = []
+        self._stop = False
+        self._thread = threading.Thread(target=self._run, daemon=True)
+        self._thread.start()
+
+    def __call__(self, state: CycleState) -> Correction:
+        with self._cond:
+            self._job = state
+            self._cond.notify()
+            made = self._made
+        now = time.perf_counter()
+        if made is None:
+            self.fresh.append(False)
+            return Correction(offset=state.offset)  # hold where the stream stands
+        corr, version, handed = made
+        self.fresh.append(version != self._sent)
+        if version != self._sent:
+            self._sent = version
+            self.wire_s.append(now - handed)
+        return corr
+
+    def _run(self) -> None:
+        version = 0
+        while True:
+            with self._cond:
+                while self._job is None and not self._stop:
+                    self._cond.wait()
+                if self._stop:
+                    return
+                job, self._job = self._job, None
+            handed = time.perf_counter()
+            corr = self.feed(job)
+            version += 1
+            with self._cond:
+                self._made = (corr, version, handed)
+
+    def close(self) -> None:
+        with self._cond:
+            self._stop = True
+            self._cond.notify()
+        self._thread.join(5.0)
+
+
+def udp_timing(cell: TrackedCell, tau: float, beside: bool = False) -> dict:
     """The loop through the real seam: RsiRobot in its thread, RsiLink over UDP on
     loopback, the TrackingSource fed the twin's reflector each cycle (``LogFeed``); a
-    0.2 m line at 100 mm/s in real time.  Packet in → answer out (the link's own record),
-    the source's compute time, the share of cycles the controller got its answer in time."""
+    0.2 m line at 100 mm/s in real time.  ``beside``: the loop in a thread beside the
+    link (:class:`Beside`), else in the answer.  The tracker sample's hand-over → the
+    answer carrying its correction on the wire (in the answer: the link's own packet in
+    → answer out), the loop's compute time, the share of cycles the controller got its
+    answer in time, and the share of answers that carried a new correction."""
     traj = cell.plan("line", 100.0, size_m=0.2)
     arm = DynamicTwin(cell.twin, q0=cell.q0)
     config = RsiConfig(robot_host="127.0.0.1", listen_host="127.0.0.1", listen_port=0,
@@ -147,7 +215,8 @@ def udp_timing(cell: TrackedCell, tau: float) -> dict:
     loop = TrackingLoop(cell.model, TrackingSettings(lead_s=tau), payload_kg=cell.payload_kg)
     source = TrackingSource(loop, ramp=0.3)
     feed = LogFeed(source, arm)
-    with RsiLink(config, feed, record_latency=True) as link:
+    answer = Beside(feed) if beside else feed
+    with RsiLink(config, answer, record_latency=True) as link:
         robot = RsiRobot(arm, dataclasses.replace(config, listen_port=link.address[1]),
                          record=True, path=traj, tool=cell.model.tool, path_delay_s=0.5)
         feed.robot = robot
@@ -159,12 +228,33 @@ def udp_timing(cell: TrackedCell, tau: float) -> dict:
             link.wait(lambda lk: source.ended(), timeout=60)
         finally:
             robot.stop()
-    lat = np.array(link.latencies) * 1e-6
+            if isinstance(answer, Beside):
+                answer.close()
+    out = np.array(link.latencies) * 1e-6
     comp = np.array(feed.compute_s) * 1e3
     st = robot.stats()
-    return {"wire_ms": np.percentile(lat, [50, 99, 100]), "compute_ms":
-            np.percentile(comp, [50, 99, 100]), "in_time": st.answered / max(st.cycles, 1),
+    if isinstance(answer, Beside):
+        wire, fresh_answers = np.array(answer.wire_s) * 1e3, float(np.mean(answer.fresh))
+    else:
+        wire, fresh_answers = out, 1.0
+    in_time = st.answered / max(st.cycles, 1)
+    return {"wire_ms": np.percentile(wire, [50, 99, 100]), "out_ms":
+            np.percentile(out, [50, 99, 100]), "compute_ms": np.percentile(comp, [50, 99, 100]),
+            "in_time": in_time, "fresh_robot": in_time * fresh_answers,
             "fresh": loop.stats.fresh_cycles / max(loop.stats.cycles, 1), "cycles": st.cycles}
+
+
+def print_udp(runs: list[tuple[str, dict]]) -> None:
+    print("\nthrough UDP on loopback, real time (a 0.2 m line at 100 mm/s):")
+    print("| loop | cycles | sample → correction on the wire p50/p99/max ms | packet in → "
+          "answer out p50/p99/max ms | loop p50/p99/max ms | answers in time | robot cycles "
+          "with a fresh correction | loop cycles with a fresh estimate |")
+    print("|---|---:|---|---|---|---:|---:|---:|")
+    for name, u in runs:
+        w, o, c = (" / ".join(f"{x:.2f}" for x in u[k]) for k in ("wire_ms", "out_ms",
+                                                                   "compute_ms"))
+        print(f"| {name} | {u['cycles']} | {w} | {o} | {c} | {u['in_time'] * 100:.1f} % | "
+              f"{u['fresh_robot'] * 100:.1f} % | {u['fresh'] * 100:.1f} % |")
 
 
 def print_table(results: list[dict]) -> None:
@@ -277,13 +367,8 @@ def main(argv: list[str]) -> int:
         print_faults("line", faults(cell, traj, tau))
     if args.udp:
         tau = results[0]["tau"] if results else args.lead_ms * 1e-3
-        u = udp_timing(cell, tau)
-        w, c = u["wire_ms"], u["compute_ms"]
-        print(f"\nthrough UDP on loopback, real time ({u['cycles']} cycles): tracker sample "
-              f"handed in → answer on the wire p50/p99/max {w[0]:.2f} / {w[1]:.2f} / "
-              f"{w[2]:.2f} ms (of which the loop {c[0]:.2f} / {c[1]:.2f} / {c[2]:.2f} ms); "
-              f"answers in time {u['in_time'] * 100:.1f} %, cycles with a fresh estimate "
-              f"{u['fresh'] * 100:.1f} %")
+        print_udp([("in the answer", udp_timing(cell, tau)),
+                   ("beside the link (the service's)", udp_timing(cell, tau, beside=True))])
     print("\npublished:")
     for what, value in PUBLISHED:
         print(f"  {what}: {value}")

@@ -89,6 +89,13 @@ log = logging.getLogger("plugcell.devices.robot.tracked_moves")
 STREAM_RATE_HZ, STREAM_BATCH = 1000, 10
 #: How long a tracked move waits for the tracker (its queue: another robot may hold it).
 START_TIMEOUT_S = 60.0
+#: In simulated time, how long the link's child waits for a cycle's correction (s).
+SIMULATED_WAIT_S = 5.0
+#: Samples the loop takes in one cycle at most, the newest (a 1 kHz stream brings 4–14 a
+#: 4 ms cycle): a loop that fell behind — a loaded PC — skips to the present instead of
+#: working through a backlog that costs more each cycle (the estimator's update is per
+#: sample) and that is too old to correct anything (it would hold on it anyway).
+MAX_SAMPLES_PER_CYCLE = 50
 _STATUS = {0: "ok", 1: "line_of_sight", 2: "tracking_speed", 3: "out_of_range", 4: "device"}
 
 
@@ -269,10 +276,12 @@ class TrackedMoves:
         self.settle_s, self.realtime = settle_s, realtime
         self.last_loop: TrackingLoop | None = None
         self.last_feed: TrackerFeed | None = None
+        #: samples of the last move skipped by a loop that fell behind
+        self.last_dropped = 0
         #: the last move's computed cycles: ``(t s, offset applied [Δp m; φ rad], loop
-        #: state, its tracker term)`` (the rest is the model's part, zero for the nominal
-        #: model but for its solver's tolerance)
-        self.last_record: list[tuple[float, Array, str, Array]] = []
+        #: state, its tracker term, the start's blend)`` (the rest of the offset is the
+        #: model's part, zero for the nominal model but for its solver's tolerance)
+        self.last_record: list[tuple[float, Array, str, Array, float]] = []
 
     def move_tracked(self, pose: Position, tracker: str) -> float | None:
         """``MOVE LINEAR TO pose WITH TRACKING tracker``: plan, subscribe, stream with
@@ -293,8 +302,12 @@ class TrackedMoves:
             feed.start()
             padded = _Settled(traj, self.settle_s)
             adjust, worker = self._adjust(loop, feed, cycle_s)
+            # simulated time across the process boundary: the link's child waits for each
+            # cycle's correction (as the in-process hook computes it in the cycle)
+            wait = {} if self.realtime or not isinstance(m.drive, LinkProcess) else \
+                {"wait_s": SIMULATED_WAIT_S}
             try:
-                m.drive.follow(padded, adjust=adjust)
+                m.drive.follow(padded, adjust=adjust, **wait)
             finally:
                 if worker is not None:
                     worker.close()
@@ -320,9 +333,14 @@ class TrackedMoves:
         desc = self.motion.description
         ramp = unit_ramp(max(self.ramp_s, cycle_s))
         record = self.last_record = []
+        self.last_dropped = 0
 
         def offset(state: CycleState, k: int, q_k: Array, pc: float) -> Array:
-            loop.add(feed.poll(state.t, pc))
+            samples = feed.poll(state.t, pc)
+            if len(samples) > MAX_SAMPLES_PER_CYCLE:  # behind: the newest only (below)
+                self.last_dropped += len(samples) - MAX_SAMPLES_PER_CYCLE
+                samples = samples[-MAX_SAMPLES_PER_CYCLE:]
+            loop.add(samples)
             if feed.failure and not record_held:
                 loop.hold(f"tracker stopped: {feed.failure}")
                 record_held.append(state.t)
@@ -331,7 +349,7 @@ class TrackedMoves:
             out = loop.cycle(state.t, q_fb, T_path)
             blend = float(ramp.sample(k * cycle_s).s)
             o = blend * out.offset
-            record.append((state.t, o, out.state, blend * out.tracker))
+            record.append((state.t, o, out.state, blend * out.tracker, blend))
             return o
 
         record_held: list[float] = []

@@ -13,7 +13,8 @@ process boundary through two small blocks of shared memory, each a seqlock
   move maps its tracker's samples onto the robot's clock with it) and the actual joints
   ``q`` (rad; NaN if the packet had none) — what the in-process hook is given;
 * **the adjustment** — written by the service's :class:`AdjustPump` (a thread) whenever it
-  has computed one for a newer cycle: the motion's number and ``Δq`` (rad, (6,)).
+  has computed one for a newer cycle: the motion's number, the cycle's ``k`` and ``Δq``
+  (rad, (6,)).
 
 The child adds the newest ``Δq`` of its motion each cycle (zeros before the first) and
 never waits for it, exactly as the in-process link takes the newest offset of its worker
@@ -21,6 +22,11 @@ thread (``tracked_moves._Worker``): the loop's cost and the service's interprete
 make an answer late; an adjustment reaches the wire one or two cycles after the cycle it
 was computed for (the loop's rate bounds count steps per computed cycle, so they hold).
 Nothing but floats crosses: no pickling, no lock shared between the processes.
+
+In *simulated time* (a controller that waits for each answer: a test, ``plugcell path
+run``) the child may wait instead (``wait_s``): for the adjustment of the very cycle it
+answers, at most that long — each cycle then runs the loop, as an in-process link's
+hook does, and the result does not depend on how the two processes were scheduled.
 """
 
 from __future__ import annotations
@@ -42,8 +48,8 @@ Array = NDArray[np.float64]
 
 #: The cycle block: [seq, motion, k, t, pc, q × 6].
 CYCLE_SLOTS = 11
-#: The adjustment block: [seq, motion, Δq × 6].
-OFFSET_SLOTS = 8
+#: The adjustment block: [seq, motion, k, Δq × 6].
+OFFSET_SLOTS = 9
 
 
 class SeqVector:
@@ -103,17 +109,27 @@ class ChildAdjust:
         The cycle block (written here) and the adjustment block (read here).
     motion : int
         The motion's number (an adjustment of another motion is not used).
+    wait_s : float
+        0: take the newest adjustment at once (real time); > 0: wait for this cycle's, at
+        most this long (s; simulated time), then take the newest.
     """
 
-    def __init__(self, cycle: SeqVector, offset: SeqVector, motion: int) -> None:
-        self.cycle, self.offset, self.motion = cycle, offset, motion
+    def __init__(self, cycle: SeqVector, offset: SeqVector, motion: int,
+                 wait_s: float = 0.0) -> None:
+        self.cycle, self.offset, self.motion, self.wait_s = cycle, offset, motion, wait_s
 
     def __call__(self, state: CycleState, k: int, q_k: Array) -> Array:
         joints = state.robot.joints
         q = np.full(6, np.nan) if joints is None else np.asarray(joints, dtype=float)
         self.cycle.write(np.array([self.motion, k, state.t, time.time(), *q]))
         newest = self.offset.read()
-        return newest[1:7] if newest[0] == self.motion else np.zeros(6)
+        if self.wait_s > 0:
+            end = time.monotonic() + self.wait_s
+            while not (newest[0] == self.motion and newest[1] >= k) and \
+                    time.monotonic() < end:
+                time.sleep(5e-5)
+                newest = self.offset.read()
+        return newest[2:8] if newest[0] == self.motion else np.zeros(6)
 
 
 class AdjustPump:
@@ -139,7 +155,7 @@ class AdjustPump:
                  cycle: SeqVector, offset: SeqVector, motion: int, period_s: float) -> None:
         self.adjust, self.q = adjust, q
         self.cycle, self.offset, self.motion, self.period_s = cycle, offset, motion, period_s
-        self.offset.write(np.array([motion, *np.zeros(6)]))
+        self.offset.write(np.array([motion, -1, *np.zeros(6)]))
         self.failure: BaseException | None = None
         self.cycles = 0
         self._stop = threading.Event()
@@ -165,7 +181,7 @@ class AdjustPump:
             except Exception as exc:  # the motion fails with it when it ends
                 self.failure = exc
                 return
-            self.offset.write(np.array([self.motion, *dq]))
+            self.offset.write(np.array([self.motion, k, *dq]))
             self.cycles += 1
 
     def close(self) -> None:

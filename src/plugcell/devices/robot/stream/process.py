@@ -146,9 +146,9 @@ def _child(conn: Any, values: Any, text: Any, vendor: str, config: Any,
                 break
             if message[0] != "follow":
                 break
-            _, motion, q, timeout, adjusted = message
-            adjust = ChildAdjust(SeqVector(cycle), SeqVector(offset), motion) \
-                if adjusted else None
+            _, motion, q, timeout, wait_s = message
+            adjust = ChildAdjust(SeqVector(cycle), SeqVector(offset), motion, wait_s) \
+                if wait_s is not None else None
             try:
                 drive.follow_samples(q, timeout, adjust)
             except MotionError as exc:
@@ -306,12 +306,14 @@ class LinkProcess:
                               "feedback")
         return latest.joints
 
-    def follow(self, trajectory: Trajectory, adjust: Adjust | None = None) -> None:
+    def follow(self, trajectory: Trajectory, adjust: Adjust | None = None,
+               wait_s: float = 0.0) -> None:
         """Stream ``trajectory`` in the child (blocks for its duration).
 
         ``adjust(state, k, q_k)``, if given, runs here, in a thread of this process
         (:class:`~.adjusting.AdjustPump`), on each cycle the child answers; the child
-        adds the newest result to its samples' joints (module docstring).
+        adds the newest result to its samples' joints (module docstring) — or, with
+        ``wait_s`` > 0 (simulated time), waits up to that long for its cycle's.
 
         Raises
         ------
@@ -327,7 +329,7 @@ class LinkProcess:
                 adjust, q, SeqVector(self._cycle), SeqVector(self._offset), self._motions,
                 self.config.cycle_s / 4)
             try:
-                reason = self._follow(q, timeout, adjust is not None)
+                reason = self._follow(q, timeout, None if adjust is None else wait_s)
             finally:
                 if pump is not None:
                     pump.close()
@@ -338,11 +340,11 @@ class LinkProcess:
                               f"{type(pump.failure).__name__}: {pump.failure}")
         self.followed += 1
 
-    def _follow(self, q: Array, timeout: float, adjusted: bool) -> str:
-        """Send motion ``self._motions`` and wait for its answer: the failure's reason
-        (empty: it ended)."""
+    def _follow(self, q: Array, timeout: float, wait_s: float | None) -> str:
+        """Send motion ``self._motions`` (adjusted unless ``wait_s`` is None) and wait for
+        its answer: the failure's reason (empty: it ended)."""
         try:
-            self._conn.send(("follow", self._motions, q, timeout, adjusted))
+            self._conn.send(("follow", self._motions, q, timeout, wait_s))
         except (OSError, AttributeError):
             raise MotionError(f"the {self.vendor} link process is not running") from None
         end = time.monotonic() + timeout + 10.0
