@@ -90,7 +90,7 @@ async def _along(motion: Any, start: np.ndarray, mm: float, run: asyncio.Task,
 
 
 async def _start_of_move(moves: Any, motion: Any, run: asyncio.Task,
-                         timeout: float = 120.0) -> np.ndarray:
+                         timeout: float = 240.0) -> np.ndarray:
     """Wait for the tracked move's first cycle; the TCP where it starts (m)."""
     loop = asyncio.get_running_loop()
     end = loop.time() + timeout

@@ -27,8 +27,10 @@ the laser tracker's correction added every cycle (the drive's ``adjust`` hook):
 In real time the loop runs in a thread of its own beside the link (``_Worker``): each
 cycle hands it the newest state and takes the newest offset it has computed, so the
 loop's cost (milliseconds) never makes the link's answer late; its rate bounds, which
-count one step a call, are then the more conservative.  In simulated time
-(``realtime=False``) each cycle runs the loop.
+count one step a call, are then the more conservative.  A loop that fell behind (a
+loaded PC) takes only the newest :data:`MAX_SAMPLES_PER_CYCLE` samples of a cycle.  In
+simulated time (``realtime=False``) each cycle runs the loop (with the link in its child
+process, the child waits for each cycle's correction).
 
 The stream holds the shared tracker for the move's duration: another robot's requests
 wait in the tracker's queue until its Stop Measurement (docs/tracker-service.md).  The
