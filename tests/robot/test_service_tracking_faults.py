@@ -13,9 +13,9 @@ its moving T-MAC), the tracker's ``Stream Measurement`` in the loop.
   data update the robot received are in the killed tracker's journal; the program's
   process, Failed with the same reason, in the robot service's.  With the link in its
   child process (the default) and in a thread (``stream_process=false``).
-* **A beam break of 0.5 s** mid-line (the simulated tracker's line of sight blocked: its
-  rows say ``line_of_sight``): the move goes on with the model, the window is recorded
-  with its reason and ends by itself, the program ends FINISHED.
+* **A beam break of 0.5 s** mid-line (the simulated tracker service, a process of its own,
+  with ``--param beam_breaks=0.8:0.5``: its rows say ``line_of_sight``): the move goes on
+  with the model and the program ends FINISHED; the windows say why.
 """
 
 from __future__ import annotations
@@ -24,7 +24,6 @@ import asyncio
 import os
 import shutil
 import signal
-import threading
 from pathlib import Path
 from typing import Any
 
@@ -234,7 +233,7 @@ def test_a_late_then_killed_tracker_mid_line(tmp_path: Path, monkeypatch,
     stream = to_tracker["Stream Measurement"]
     journaled = {u["seq"] for u in stream["updates"]}
     received = set(moves.last_feed.update_seqs)
-    assert len(received) > 50 and received <= journaled, sorted(received - journaled)[:10]
+    assert received and received <= journaled, sorted(received - journaled)[:10]
     program = [p for p in journal if p["recipient"] == name and p["sender"] == "RSITEST"
                and p["command"] == "ACTIVATE"]
     assert len(program) == 1 and program[0]["state"] == "Failed"
@@ -245,14 +244,15 @@ def test_a_beam_break_mid_line_goes_on_with_the_model(tmp_path: Path, monkeypatc
     home = tmp_path / "home"
     monkeypatch.setenv("PLUGCELL_HOME", str(home))
     lib, port, cell = _library(tmp_path), _free_udp_port(), unique_cell()
-    blocked = threading.Event()
+    launcher = Launcher(home, cell)
     got: dict[str, Any] = {}
+    try:
+        # the stream starts with the move: 0.5 s standing, then the line; blocked 0.3 s in
+        tracker = launcher.serve("tracker", "--param", "seed=5", "--param",
+                                 "beam_breaks=0.8:0.5")
+        launcher.ready(tracker)
 
-    async def scenario() -> None:
-        tracker = build("tracker", None, {"seed": 5}, cell=cell, journal=False)
-        tracker.interface.driver.blocked = lambda t: blocked.is_set()
-        await tracker.start()
-        try:
+        async def scenario() -> None:
             robot = RsiTwinProcess(f"127.0.0.1:{port}", "--timeout", str(TIMEOUT),
                                    "--reflector", "ROBOT", "--cell", cell)
             try:
@@ -261,27 +261,18 @@ def test_a_beam_break_mid_line_goes_on_with_the_model(tmp_path: Path, monkeypatc
                 try:
                     async with Client("RSITEST", cell=cell) as client:
                         moves = await _wire(client, service)
-                        motion = service.interface.bridge.motion
-                        run = asyncio.create_task(_run(client, service.name, "tracked",
-                                                       timeout=240))
-                        await _along(motion, await _start_of_move(moves, motion, run), 30.0,
-                                     run)
-                        got["blocked"] = moves.last_record[-1][0] - moves.last_record[0][0]
-                        blocked.set()
-                        await asyncio.sleep(0.5)
-                        blocked.clear()
-                        got["cleared"] = moves.last_record[-1][0] - moves.last_record[0][0]
-                        got["final"] = await run
+                        got["final"] = await _run(client, service.name, "tracked",
+                                                  timeout=240)
                         got["status"] = await _get_status(client, service.name)
                         got["moves"] = moves
                 finally:
                     await service.close()
             finally:
                 robot.kill()
-        finally:
-            await tracker.close()
 
-    asyncio.run(asyncio.wait_for(scenario(), 360))
+        asyncio.run(asyncio.wait_for(scenario(), 360))
+    finally:
+        launcher.stop_all()
     final, moves = got["final"], got["moves"]
     assert final.state is ProcessStates.Completed, final.reason
     assert got["status"][1] == "FINISHED" and "tracked" in got["status"][4:], got["status"]
@@ -289,15 +280,15 @@ def test_a_beam_break_mid_line_goes_on_with_the_model(tmp_path: Path, monkeypatc
     t0 = moves.last_record[0][0]
     windows = [(round(w.start_s - t0, 3), None if w.end_s is None else round(w.end_s - t0, 3),
                 w.reason) for w in loop.windows]
-    print(f"\nblocked {got['blocked']:.3f}–{got['cleared']:.3f} s of the move; windows "
-          f"{windows}; {loop.stats.samples_bad} samples line_of_sight, ages p50/max "
+    print(f"\nwindows {windows}; {loop.stats.samples_bad} samples line_of_sight, "
+          f"{moves.last_dropped} skipped, ages p50/max "
           f"{np.median(loop.stats.ages_s) * 1e3:.1f}/{np.max(loop.stats.ages_s) * 1e3:.1f} ms")
     # the break's rows reached the loop, and the move went on to its end: with the model
     # alone where the loop held.  On a loaded PC the samples may reach the loop too old
     # to be used at all (it then never leaves "acquiring", and opens no window): which
     # windows there are depends on the load; their reasons do not.  The window's timing
     # and the resumption are asserted in simulated time (tests/robot/test_tracked_moves.py).
-    assert loop.stats.samples_bad >= 100, loop.stats
+    assert loop.stats.samples_bad >= 50, loop.stats
     assert {w[2] for w in windows} <= {"line_of_sight", "late"}, windows
     step_c = _rates(moves.last_record, part=3)[0]  # the tracker term: its limiter's bound
     assert step_c <= loop.settings.max_speed_m_s * loop.settings.cycle_s * (1 + 1e-9), step_c

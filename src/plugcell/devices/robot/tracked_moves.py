@@ -149,15 +149,15 @@ class ServiceTrackerFeed:
         #: the ``seq`` of every data update received (each is in the tracker's journal)
         self.update_seqs: list[int] = []
 
-    def _run(self, coro: Any, timeout: float) -> Any:
+    def _run(self, coro: Any, timeout: float, why: str) -> Any:
         try:
             return asyncio.run_coroutine_threadsafe(coro, self.loop).result(timeout)
         except TimeoutError:
-            raise MotionError(f"{self.tracker} Stream Measurement: no samples within "
-                              f"{timeout:g} s (the tracker held by another robot?)") from None
+            raise MotionError(f"{self.tracker} {why} within {timeout:g} s") from None
 
     def start(self) -> None:
-        self._run(self._start(), START_TIMEOUT_S)
+        self._run(self._start(), START_TIMEOUT_S,
+                  "Stream Measurement: no samples (the tracker held by another robot?)")
 
     async def _start(self) -> None:
         call = await self.service.create_process(
@@ -218,7 +218,7 @@ class ServiceTrackerFeed:
 
     def stop(self) -> None:
         if self._call is not None:
-            self._run(self._stop(), 30.0)
+            self._run(self._stop(), 30.0, "Stop Measurement: the stream did not end")
 
     async def _stop(self) -> None:
         call, self._call = self._call, None
