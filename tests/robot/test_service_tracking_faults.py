@@ -116,6 +116,12 @@ def _rates(record: list, part: int = 1) -> tuple[float, float, float]:
             float(np.abs(a).max()))
 
 
+def _ages(loop: Any) -> str:
+    """The loop's sample ages at use, p50/max (ms), or why there are none."""
+    ages = np.array(loop.stats.ages_s) * 1e3
+    return f"{np.median(ages):.1f}/{ages.max():.1f} ms" if ages.size else "(no fresh cycle)"
+
+
 async def _robot_service(cell: str, lib: Path, port: int, stream_process: bool,
                          home: Path) -> Any:
     service = build("robot", None, {"rsi": f"127.0.0.1:{port}", "rsi_timeout": TIMEOUT,
@@ -193,9 +199,8 @@ def test_a_late_then_killed_tracker_mid_line(tmp_path: Path, monkeypatch,
     changes = [(round(r[0] - record[0][0], 3), r[2]) for i, r in enumerate(record)
                if i == 0 or r[2] != record[i - 1][2]]
     print(f"states {changes}; {moves.last_loop.stats.samples_used} samples used, "
-          f"{moves.last_loop.stats.samples_stale} stale, ages p50/max "
-          f"{np.median(moves.last_loop.stats.ages_s) * 1e3:.1f}/"
-          f"{np.max(moves.last_loop.stats.ages_s) * 1e3:.1f} ms")
+          f"{moves.last_loop.stats.samples_stale} stale, {moves.last_dropped} skipped, "
+          f"ages p50/max {_ages(moves.last_loop)}")
     assert final.state is ProcessStates.Failed, final.reason
     assert "tracked.pdl:" in final.reason and "MOVE LINEAR" in final.reason, final.reason
     assert "TRACKER stopped during the tracked move (" in final.reason, final.reason
@@ -281,8 +286,7 @@ def test_a_beam_break_mid_line_goes_on_with_the_model(tmp_path: Path, monkeypatc
     windows = [(round(w.start_s - t0, 3), None if w.end_s is None else round(w.end_s - t0, 3),
                 w.reason) for w in loop.windows]
     print(f"\nwindows {windows}; {loop.stats.samples_bad} samples line_of_sight, "
-          f"{moves.last_dropped} skipped, ages p50/max "
-          f"{np.median(loop.stats.ages_s) * 1e3:.1f}/{np.max(loop.stats.ages_s) * 1e3:.1f} ms")
+          f"{moves.last_dropped} skipped, ages p50/max {_ages(loop)}")
     # the break's rows reached the loop, and the move went on to its end: with the model
     # alone where the loop held.  On a loaded PC the samples may reach the loop too old
     # to be used at all (it then never leaves "acquiring", and opens no window): which
