@@ -37,6 +37,7 @@ from test_service_streamed import _free_udp_port, _get_status, _run, _start
 import plugcell.pdl
 from plugcell.apps.kinds import build
 from plugcell.devices.robot.service import RobotService
+from plugcell.devices.tracker.driver import SAMPLE_STATUSES
 from plugcell.framework import Client, ProcessStates
 from plugcell.framework.journal import journal_dir, journal_files, read_journal
 from plugcell.kinematics import forward
@@ -293,7 +294,9 @@ def test_a_beam_break_mid_line_goes_on_with_the_model(tmp_path: Path, monkeypatc
     # windows there are depends on the load; their reasons do not.  The window's timing
     # and the resumption are asserted in simulated time (tests/robot/test_tracked_moves.py).
     assert loop.stats.samples_bad >= 50, loop.stats
-    assert {w[2] for w in windows} <= {"line_of_sight", "late"}, windows
+    # a window's reason is the samples' status or their lateness (the simulated tracker
+    # may also lose the T-MAC for its speed when the loaded twin publishes it in jumps)
+    assert {w[2] for w in windows} <= {"late", *SAMPLE_STATUSES} - {"ok"}, windows
     step_c = _rates(moves.last_record, part=3)[0]  # the tracker term: its limiter's bound
     assert step_c <= loop.settings.max_speed_m_s * loop.settings.cycle_s * (1 + 1e-9), step_c
     step, speed, accel = _rates(moves.last_record)  # the whole offset: reported
