@@ -1,7 +1,11 @@
 """Dynamic path correction on the twin: nominal, model-based, model + tracker (issue 38 §4).
 
     .venv/bin/python benchmarks/dynamic_correction.py [--shapes line,circle]
-        [--speeds 50,100,250] [--faults] [--seed 0] [--plot docs/results/dynamic-correction.png]
+        [--speeds 50,100,250] [--faults] [--udp] [--lead-ms MS] [--seed 0]
+        [--plot docs/results/dynamic-correction.png]
+
+``--shapes ''`` skips the main table (``--faults``/``--udp`` alone; their lead ``τ`` is
+then ``--lead-ms``, default the 8.0 ms the line at 100 mm/s measures).
 
 The Smart H4 twin with 36 kg is calibrated from its own campaign (model 5,
 :class:`plugcell.sim.tracked_path.TrackedCell`); each path (a 1 m line along y, a circle
@@ -32,6 +36,7 @@ import argparse
 import dataclasses
 import math
 import sys
+import threading
 import time
 from pathlib import Path
 
@@ -40,6 +45,7 @@ import numpy as np
 from plugcell.compensation.tracking import TrackingLoop, TrackingSettings
 from plugcell.devices.robot.rsi import RsiConfig, RsiLink
 from plugcell.devices.robot.rsi.tracking import TrackingSource
+from plugcell.devices.robot.stream.source import Correction, CycleState
 from plugcell.kinematics import forward
 from plugcell.kinematics.transforms import so3_log
 from plugcell.metrology.timing import estimate_delay
@@ -60,11 +66,14 @@ def _three_sigma(x: np.ndarray) -> float:
     return float(x.mean() + 3 * x.std())
 
 
-def errors(run: PathRun, shape: str) -> dict[str, float]:
-    """The run's error statistics (module docstring), metres and radians."""
+def errors(run: PathRun, shape: str, mask: np.ndarray | None = None) -> dict[str, float]:
+    """The run's error statistics (module docstring), metres and radians (over the cycles
+    of ``mask`` too, if given)."""
     w = (run.t >= run.motion[0]) & (run.t <= run.motion[1] + 0.2)
+    if mask is not None:
+        w &= mask
     p, c = run.true_pose[w, :3, 3], run.path_pose[w, :3, 3]
-    p0 = run.path_pose[0, :3, 3]
+    p0 = run.path_pose[0, :3, 3]  # the path's start (before the mask)
     if shape == "line":
         u = np.array([0.0, 1.0, 0.0])
         rel = p - p0
@@ -127,11 +136,77 @@ def faults(cell: TrackedCell, traj, tau: float) -> list[tuple[str, PathRun]]:
     return [(name, cell.run(traj, "tracking", settings=s, faults=(f,))) for name, f in cases]
 
 
-def udp_timing(cell: TrackedCell, tau: float) -> dict:
+class Beside:
+    """The loop beside the link, as the robot service runs it (``tracked_moves._Worker``,
+    the link process's pump): each answer offers its cycle to the loop's thread and
+    carries, at once, the newest correction that thread has made (none before the first:
+    hold).  Records, per correction, the time from its samples' hand-over to the first
+    answer that carried it (``wire_s``), and per answer whether it carried a new one.
+
+    Parameters
+    ----------
+    feed : LogFeed
+        The samples' hand-over and the loop (``feed(state)``), run in the thread.
+    """
+
+    def __init__(self, feed: LogFeed) -> None:
+        self.feed = feed
+        self._cond = threading.Condition()
+        self._job: CycleState | None = None
+        self._made: tuple[Correction, int, float] | None = None  # (it, version, handed)
+        self._sent = 0
+        self.wire_s: list[float] = []
+        self.fresh: list[bool] = []
+        self._stop = False
+        self._thread = threading.Thread(target=self._run, daemon=True)
+        self._thread.start()
+
+    def __call__(self, state: CycleState) -> Correction:
+        with self._cond:
+            self._job = state
+            self._cond.notify()
+            made = self._made
+        now = time.perf_counter()
+        if made is None:
+            self.fresh.append(False)
+            return Correction(offset=state.offset)  # hold where the stream stands
+        corr, version, handed = made
+        self.fresh.append(version != self._sent)
+        if version != self._sent:
+            self._sent = version
+            self.wire_s.append(now - handed)
+        return corr
+
+    def _run(self) -> None:
+        version = 0
+        while True:
+            with self._cond:
+                while self._job is None and not self._stop:
+                    self._cond.wait()
+                if self._stop:
+                    return
+                job, self._job = self._job, None
+            handed = time.perf_counter()
+            corr = self.feed(job)
+            version += 1
+            with self._cond:
+                self._made = (corr, version, handed)
+
+    def close(self) -> None:
+        with self._cond:
+            self._stop = True
+            self._cond.notify()
+        self._thread.join(5.0)
+
+
+def udp_timing(cell: TrackedCell, tau: float, beside: bool = False) -> dict:
     """The loop through the real seam: RsiRobot in its thread, RsiLink over UDP on
     loopback, the TrackingSource fed the twin's reflector each cycle (``LogFeed``); a
-    0.2 m line at 100 mm/s in real time.  Packet in → answer out (the link's own record),
-    the source's compute time, the share of cycles the controller got its answer in time."""
+    0.2 m line at 100 mm/s in real time.  ``beside``: the loop in a thread beside the
+    link (:class:`Beside`), else in the answer.  The tracker sample's hand-over → the
+    answer carrying its correction on the wire (in the answer: the link's own packet in
+    → answer out), the loop's compute time, the share of cycles the controller got its
+    answer in time, and the share of answers that carried a new correction."""
     traj = cell.plan("line", 100.0, size_m=0.2)
     arm = DynamicTwin(cell.twin, q0=cell.q0)
     config = RsiConfig(robot_host="127.0.0.1", listen_host="127.0.0.1", listen_port=0,
@@ -140,7 +215,8 @@ def udp_timing(cell: TrackedCell, tau: float) -> dict:
     loop = TrackingLoop(cell.model, TrackingSettings(lead_s=tau), payload_kg=cell.payload_kg)
     source = TrackingSource(loop, ramp=0.3)
     feed = LogFeed(source, arm)
-    with RsiLink(config, feed, record_latency=True) as link:
+    answer = Beside(feed) if beside else feed
+    with RsiLink(config, answer, record_latency=True) as link:
         robot = RsiRobot(arm, dataclasses.replace(config, listen_port=link.address[1]),
                          record=True, path=traj, tool=cell.model.tool, path_delay_s=0.5)
         feed.robot = robot
@@ -152,12 +228,33 @@ def udp_timing(cell: TrackedCell, tau: float) -> dict:
             link.wait(lambda lk: source.ended(), timeout=60)
         finally:
             robot.stop()
-    lat = np.array(link.latencies) * 1e-6
+            if isinstance(answer, Beside):
+                answer.close()
+    out = np.array(link.latencies) * 1e-6
     comp = np.array(feed.compute_s) * 1e3
     st = robot.stats()
-    return {"wire_ms": np.percentile(lat, [50, 99, 100]), "compute_ms":
-            np.percentile(comp, [50, 99, 100]), "in_time": st.answered / max(st.cycles, 1),
+    if isinstance(answer, Beside):
+        wire, fresh_answers = np.array(answer.wire_s) * 1e3, float(np.mean(answer.fresh))
+    else:
+        wire, fresh_answers = out, 1.0
+    in_time = st.answered / max(st.cycles, 1)
+    return {"wire_ms": np.percentile(wire, [50, 99, 100]), "out_ms":
+            np.percentile(out, [50, 99, 100]), "compute_ms": np.percentile(comp, [50, 99, 100]),
+            "in_time": in_time, "fresh_robot": in_time * fresh_answers,
             "fresh": loop.stats.fresh_cycles / max(loop.stats.cycles, 1), "cycles": st.cycles}
+
+
+def print_udp(runs: list[tuple[str, dict]]) -> None:
+    print("\nthrough UDP on loopback, real time (a 0.2 m line at 100 mm/s):")
+    print("| loop | cycles | sample → correction on the wire p50/p99/max ms | packet in → "
+          "answer out p50/p99/max ms | loop p50/p99/max ms | answers in time | robot cycles "
+          "with a fresh correction | loop cycles with a fresh estimate |")
+    print("|---|---:|---|---|---|---:|---:|---:|")
+    for name, u in runs:
+        w, o, c = (" / ".join(f"{x:.2f}" for x in u[k]) for k in ("wire_ms", "out_ms",
+                                                                   "compute_ms"))
+        print(f"| {name} | {u['cycles']} | {w} | {o} | {c} | {u['in_time'] * 100:.1f} % | "
+              f"{u['fresh_robot'] * 100:.1f} % | {u['fresh'] * 100:.1f} % |")
 
 
 def print_table(results: list[dict]) -> None:
@@ -184,17 +281,35 @@ def print_table(results: list[dict]) -> None:
               f"{r['rates'][0] * 1e3:.2f} | {r['rates'][1]:.3f} |")
 
 
+def _perp_3s_where(run: PathRun, shape: str, held: bool) -> float:
+    """Perpendicular 3σ (m) over the motion's cycles in which the loop held (model alone,
+    ``held``) or tracked (NaN if none)."""
+    w = (run.t >= run.motion[0]) & (run.t <= run.motion[1] + 0.2)
+    states = np.array(run.state)
+    pick = (states == "holding") if held else (states == "tracking")
+    if not (w & pick).any():
+        return math.nan
+    return errors(run, shape, pick)["perp_3s"]
+
+
 def print_faults(shape: str, runs: list[tuple[str, PathRun]]) -> None:
     print(f"\nfaults ({shape}, 100 mm/s, tracking):")
-    print("| fault | windows (start–end s, reason) | perp 3σ mm | offset speed max mm/s | "
-          "accel max m/s² |")
-    print("|---|---|---:|---:|---:|")
+    print("| fault | windows (start–end s, reason) | model alone s | perp 3σ mm all / "
+          "held / tracked | offset step max µm | offset speed max mm/s | accel max m/s² |")
+    print("|---|---|---:|---|---:|---:|---:|")
     for name, run in runs:
+        end = run.motion[1] + 0.2
         wins = "; ".join(f"{w.start_s - run.motion[0]:.2f}–"
                          f"{'end' if w.end_s is None else f'{w.end_s - run.motion[0]:.2f}'} "
                          f"{w.reason}" for w in run.windows) or "none"
+        alone = sum(min(end if w.end_s is None else w.end_s, end) - w.start_s
+                    for w in run.windows)
         v, a = rates(run)
-        print(f"| {name} | {wins} | {errors(run, shape)['perp_3s'] * 1e3:.3f} | "
+        step = float(np.abs(np.diff(run.offset[:, :3], axis=0)).max())
+        parts = " / ".join(f"{x * 1e3:.3f}" for x in (
+            errors(run, shape)["perp_3s"], _perp_3s_where(run, shape, True),
+            _perp_3s_where(run, shape, False)))
+        print(f"| {name} | {wins} | {alone:.2f} | {parts} | {step * 1e6:.1f} | "
               f"{v * 1e3:.2f} | {a:.3f} |")
 
 
@@ -231,33 +346,33 @@ def main(argv: list[str]) -> int:
     ap.add_argument("--faults", action="store_true", help="the fault runs (line, 100 mm/s)")
     ap.add_argument("--udp", action="store_true",
                     help="also time the loop through the real RSI link over UDP")
+    ap.add_argument("--lead-ms", type=float, default=8.0,
+                    help="the lead τ of --faults/--udp without the main table (ms)")
     ap.add_argument("--plot", type=Path)
     args = ap.parse_args(argv)
+    if not (math.isfinite(args.lead_ms) and 0 <= args.lead_ms <= 100):
+        ap.error(f"--lead-ms must be 0…100 ms, got {args.lead_ms}")
     t0 = time.time()
     cell = TrackedCell(seed=args.seed, calibration_poses=args.calibration_poses)
-    results = [case(cell, shape, float(v)) for shape in args.shapes.split(",")
+    results = [case(cell, shape, float(v)) for shape in filter(None, args.shapes.split(","))
                for v in args.speeds.split(",")]
     print(f"Smart H4 twin (seed {args.seed}, 36 kg), model 5 from {args.calibration_poses} "
           f"poses, RSI mode (b) at {CYCLE * 1e3:g} ms, T-MAC stream 1 kHz")
-    print_table(results)
+    if results:
+        print_table(results)
     if args.faults:
         traj = cell.plan("line", 100.0)
         tau = next((r["tau"] for r in results if r["shape"] == "line" and r["speed"] == 100),
-                   lead_from(cell, cell.run(traj, "nominal")))
+                   args.lead_ms * 1e-3)
         print_faults("line", faults(cell, traj, tau))
     if args.udp:
-        tau = results[0]["tau"] if results else 0.012
-        u = udp_timing(cell, tau)
-        w, c = u["wire_ms"], u["compute_ms"]
-        print(f"\nthrough UDP on loopback, real time ({u['cycles']} cycles): tracker sample "
-              f"handed in → answer on the wire p50/p99/max {w[0]:.2f} / {w[1]:.2f} / "
-              f"{w[2]:.2f} ms (of which the loop {c[0]:.2f} / {c[1]:.2f} / {c[2]:.2f} ms); "
-              f"answers in time {u['in_time'] * 100:.1f} %, cycles with a fresh estimate "
-              f"{u['fresh'] * 100:.1f} %")
+        tau = results[0]["tau"] if results else args.lead_ms * 1e-3
+        print_udp([("in the answer", udp_timing(cell, tau)),
+                   ("beside the link (the service's)", udp_timing(cell, tau, beside=True))])
     print("\npublished:")
     for what, value in PUBLISHED:
         print(f"  {what}: {value}")
-    if args.plot:
+    if args.plot and results:
         pick = next((r for r in results if r["speed"] == 100.0), results[0])
         print(f"plot: {args.plot}" if plot(pick, args.plot) else "plot: no matplotlib")
     print(f"wall time {time.time() - t0:.0f} s")

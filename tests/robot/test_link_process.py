@@ -83,6 +83,68 @@ def test_a_motion_in_the_child_moves_the_robot_and_the_feedback_comes_back():
 
 
 @pytest.mark.slow
+def test_an_adjusted_motion_adds_what_the_service_computes_each_cycle():
+    """A tracked move's hook with the link in its child: the hook runs here, in the
+    service's process, on each cycle the child published (its index, the robot's time and
+    joints); the child adds the newest result — the robot ends on target + Δq; a hook that
+    raises fails the motion with its reason after the motion, which kept the last Δq."""
+    link = LinkProcess(_config())
+    address = link.start()
+    robot = _robot(address)
+    dq = np.radians([0.2, -0.1, 0.05, 0.0, 0.1, -0.2])
+    seen: list[tuple[int, float, np.ndarray]] = []
+
+    def adjust(state, k, q_k):
+        seen.append((k, state.t, np.array(state.robot.joints)))
+        return dq * min(1.0, k / 75)  # ramped in over 0.3 s: the link's limits hold
+
+    try:
+        assert link.wait(lambda lk: lk.streaming and lk.latest is not None, 20)
+        target = Q0 + np.radians([3.0, -2.0, 1.0, 0.0, 2.0, -3.0])
+        traj = plan(load_robot("smart_h4"), link.joint_readings(), [PTP(target=target)],
+                    LIMITS)
+        assert traj.duration > 0.5  # longer than the ramp
+        link.follow(traj, adjust=adjust)
+        time.sleep(0.2)  # the follower settles
+        np.testing.assert_allclose(robot.state()["joints"], target + dq, atol=1e-4)
+        ks = np.array([k for k, _, _ in seen])
+        ts = np.array([t for _, t, _ in seen])
+        assert len(seen) > 0.5 * traj.duration / 0.004  # most cycles (a loaded PC skips)
+        assert np.all(np.diff(ks) > 0) and np.all(np.diff(ts) > 0)
+        assert ks[-1] >= round(traj.duration / 0.004) - 5  # … up to the motion's end
+        assert all(np.all(np.isfinite(q)) for _, _, q in seen)  # the actual joints
+
+        def broken(state, k, q_k):
+            if k > 20:
+                raise ZeroDivisionError("the loop's bug")
+            return np.zeros(6)
+
+        back = plan(load_robot("smart_h4"), link.joint_readings(), [PTP(target=Q0)], LIMITS)
+        with pytest.raises(MotionError, match="ZeroDivisionError: the loop's bug"):
+            link.follow(back, adjust=broken)
+        assert link.failure is None  # the stream itself is fine
+        link.follow(back)  # and the next motion runs unadjusted (Δq of another motion)
+        time.sleep(0.2)
+        np.testing.assert_allclose(robot.state()["joints"], Q0, atol=1e-4)
+    finally:
+        robot.stop()
+        link.close()
+
+
+def test_the_seqvector_reads_what_was_written_whole():
+    import multiprocessing
+
+    from plugcell.devices.robot.stream.adjusting import SeqVector
+
+    raw = multiprocessing.get_context("spawn").RawArray("d", 4)
+    vec = SeqVector(raw)
+    vec.write(np.array([1.0, 2.0, 3.0]))
+    vec.write(np.array([4.0, 5.0]))  # a shorter write leaves the rest
+    assert vec.snapshot()[0] == 4  # two writes: even
+    np.testing.assert_array_equal(vec.read(), [4.0, 5.0, 3.0])
+
+
+@pytest.mark.slow
 def test_a_stopped_stream_fails_with_its_reason_and_a_new_session_recovers():
     link = LinkProcess(_config())
     address = link.start()

@@ -93,18 +93,12 @@ def configure(parser: argparse.ArgumentParser) -> None:
 
 
 def _breaks(texts: list[str]) -> tuple[tuple[float, float], ...]:
-    out = []
-    for text in texts:
-        start, sep, duration = text.partition(":")
-        try:
-            pair = (float(start), float(duration))
-        except ValueError:
-            pair = (float("nan"), float("nan"))
-        if not sep or not all(np.isfinite(pair)) or pair[0] < 0 or pair[1] <= 0:
-            raise _error(f"--beam-break {text!r}: expected START:DURATION in seconds "
-                         "(START ≥ 0, DURATION > 0)")
-        out.append(pair)
-    return tuple(out)
+    from plugcell.sim.beam_breaks import parse_beam_breaks
+
+    try:
+        return parse_beam_breaks(texts)
+    except ValueError as exc:
+        raise _error(f"--beam-break {exc}") from None
 
 
 def _mm(x: float) -> float:

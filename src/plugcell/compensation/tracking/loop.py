@@ -179,7 +179,8 @@ class HoldWindow:
         Robot time it began to fade back in (``None``: not resumed).
     reason : str
         Why: the samples' status (``"line_of_sight"``, …) or ``"late"`` (no sample
-        within ``max_age_s``), or what the caller gave :meth:`TrackingLoop.hold`.
+        within ``max_age_s``), or what the caller gave :meth:`TrackingLoop.hold` —
+        appended (``"late, then tracker stopped: …"``) when it came during a hold.
     """
 
     start_s: float
@@ -428,6 +429,9 @@ class TrackingLoop:
         if held is not None:
             if self._state != "holding":
                 self._open_window(t, held)
+            elif self.windows[-1].end_s is None and \
+                    not self.windows[-1].reason.endswith(held):  # silent first, then gone
+                self.windows[-1].reason += f", then {held}"
             self._state = "holding"
             return 0.0
         if self._state == "acquiring":

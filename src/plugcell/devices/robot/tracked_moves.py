@@ -10,7 +10,9 @@ the laser tracker's correction added every cycle (the drive's ``adjust`` hook):
    (:class:`ServiceTrackerFeed`: a process of the robot service on the tracker, whose
    data updates arrive in this process — not relayed by anyone) in the requester's robot
    frame (the BASE and PROBE the program set, eq. 7.2: the flange pose), each with its
-   acquisition time, mapped to the robot's clock (:class:`OneWayClock`);
+   acquisition time, mapped to the PC's clock (:class:`~.tracking_clocks.OneWayClock`)
+   and from it to the robot's (:class:`~.tracking_clocks.CycleClock`: the PC times the
+   robot's cycles were handled);
 2. :class:`~plugcell.compensation.tracking.TrackingLoop` (the controller's nominal
    model: its tracker term corrects the model's error) answers the Cartesian offset
    ``o = [Δp; φ]`` (F0) on the planned TCP pose ``T_p(k)`` of the cycle;
@@ -25,23 +27,37 @@ the laser tracker's correction added every cycle (the drive's ``adjust`` hook):
 In real time the loop runs in a thread of its own beside the link (``_Worker``): each
 cycle hands it the newest state and takes the newest offset it has computed, so the
 loop's cost (milliseconds) never makes the link's answer late; its rate bounds, which
-count one step a call, are then the more conservative.  In simulated time
-(``realtime=False``) each cycle runs the loop.
+count one step a call, are then the more conservative.  A loop that fell behind (a
+loaded PC) takes only the newest :data:`MAX_SAMPLES_PER_CYCLE` samples of a cycle.  In
+simulated time (``realtime=False``) each cycle runs the loop (with the link in its child
+process, the child waits for each cycle's correction).
 
 The stream holds the shared tracker for the move's duration: another robot's requests
 wait in the tracker's queue until its Stop Measurement (docs/tracker-service.md).  The
 tracker's term fades out where its samples stop (a beam break) and the move goes on
 with the model; a move whose stream cannot start fails with the tracker's reason.
 
-The correction is computed in the service's process, beside the link: a tracked move
-needs the link's cycle loop in a thread of the service (``--param stream_process=false``);
-with the link in its child process (:class:`~.stream.process.LinkProcess`, the default)
-the move fails with that reason.
+The correction is computed in the service's process, where the tracker's samples arrive.
+With the link's cycle loop in a thread of the service (``--param stream_process=false``)
+the drive's hook runs in the link's thread and takes the worker's newest offset; with the
+link in its child process (:class:`~.stream.process.LinkProcess`, the default) the same
+hook runs in a thread of the service on each cycle the child publishes, and the child
+adds the newest joint correction it was handed through shared memory
+(:mod:`~.stream.adjusting`) — the same semantics across the process boundary.
+
+Faults: a beam break or a late tracker fades the tracker's term out (the loop's
+``HoldWindow``, logged at the move's end) and the move goes on with the model; a
+tracker whose stream *ends* during the move (the service killed: ``TRACKER lost``, or
+its process failed) holds the loop for good with that reason, the move finishes on the
+model — the term fades out at its bounded rate, the robot never jumps — and then fails
+with the reason (the program stops at the move's line).  :attr:`TrackedMoves.last_record`
+keeps every cycle's applied Cartesian offset for the figures (its speed and acceleration).
 """
 
 from __future__ import annotations
 
 import asyncio
+import logging
 import threading
 import time
 from collections import deque
@@ -57,6 +73,7 @@ from plugcell.devices.robot.arm_model import matrix_from_position
 from plugcell.devices.robot.poses import pose_matrix
 from plugcell.devices.robot.stream.process import LinkProcess
 from plugcell.devices.robot.stream.source import CycleState
+from plugcell.devices.robot.tracking_clocks import CycleClock, OneWayClock
 from plugcell.kinematics import forward
 from plugcell.kinematics.jacobian import jacobian_from_fk
 from plugcell.motion import LIN
@@ -66,17 +83,29 @@ from plugcell.pdl.values import Position
 
 Array = NDArray[np.float64]
 
-__all__ = ["OneWayClock", "ServiceTrackerFeed", "TrackedMoves", "TrackerFeed"]
+__all__ = ["CycleClock", "OneWayClock", "ServiceTrackerFeed", "TrackedMoves", "TrackerFeed"]
+
+log = logging.getLogger("plugcell.devices.robot.tracked_moves")
 
 #: Stream Measurement's request: 1 kHz, 10 samples a message.
 STREAM_RATE_HZ, STREAM_BATCH = 1000, 10
 #: How long a tracked move waits for the tracker (its queue: another robot may hold it).
 START_TIMEOUT_S = 60.0
+#: In simulated time, how long the link's child waits for a cycle's correction (s).
+SIMULATED_WAIT_S = 5.0
+#: Samples the loop takes in one cycle at most, the newest (a 1 kHz stream brings 4–14 a
+#: 4 ms cycle): a loop that fell behind — a loaded PC — skips to the present instead of
+#: working through a backlog that costs more each cycle (the estimator's update is per
+#: sample) and that is too old to correct anything (it would hold on it anyway).
+MAX_SAMPLES_PER_CYCLE = 50
 _STATUS = {0: "ok", 1: "line_of_sight", 2: "tracking_speed", 3: "out_of_range", 4: "device"}
 
 
 class TrackerFeed(Protocol):
     """The tracker's samples for one tracked move."""
+
+    #: Why the samples stopped for good ("" while they flow): the stream ended.
+    failure: str
 
     def start(self) -> None:
         """Subscribe; return when the samples flow (raise MotionError: why not)."""
@@ -90,24 +119,6 @@ class TrackerFeed(Protocol):
     def stop(self) -> None:
         """Unsubscribe (frees the tracker)."""
         ...
-
-
-class OneWayClock:
-    """Device time → PC time from one-way stamps: ``pc = device + min_i(pc_i − device_i)``
-    (the lower envelope at rate 1 — :func:`plugcell.metrology.timing.fit_clock_map` with
-    the rate fixed, online; over one move a clock's drift is negligible).  The smallest
-    transport delay is in the offset: the time is that much early."""
-
-    def __init__(self) -> None:
-        self.offset = np.inf
-
-    def see(self, device_s: float, pc_s: float) -> None:
-        """One stamp: the event of device time ``device_s`` arrived at PC time ``pc_s``."""
-        self.offset = min(self.offset, pc_s - device_s)
-
-    def pc(self, device_s: float) -> float:
-        """PC time of device time ``device_s``."""
-        return device_s + self.offset
 
 
 class ServiceTrackerFeed:
@@ -133,18 +144,20 @@ class ServiceTrackerFeed:
         self._lock = threading.Lock()
         self._call: Any = None
         self._task: asyncio.Task[None] | None = None
-        self.tracker_clock, self.robot_clock = OneWayClock(), OneWayClock()
+        self.tracker_clock, self.robot_clock = OneWayClock(), CycleClock()
         self.failure = ""
+        #: the ``seq`` of every data update received (each is in the tracker's journal)
+        self.update_seqs: list[int] = []
 
-    def _run(self, coro: Any, timeout: float) -> Any:
+    def _run(self, coro: Any, timeout: float, why: str) -> Any:
         try:
             return asyncio.run_coroutine_threadsafe(coro, self.loop).result(timeout)
         except TimeoutError:
-            raise MotionError(f"{self.tracker} Stream Measurement: no samples within "
-                              f"{timeout:g} s (the tracker held by another robot?)") from None
+            raise MotionError(f"{self.tracker} {why} within {timeout:g} s") from None
 
     def start(self) -> None:
-        self._run(self._start(), START_TIMEOUT_S)
+        self._run(self._start(), START_TIMEOUT_S,
+                  "Stream Measurement: no samples (the tracker held by another robot?)")
 
     async def _start(self) -> None:
         call = await self.service.create_process(
@@ -165,6 +178,7 @@ class ServiceTrackerFeed:
                 rows = np.atleast_2d(ProcessCall.array(update))
                 with self._lock:
                     self._rows.extend(rows)
+                    self.update_seqs.append(update.seq)
                 if not first.done():
                     first.set_result(None)
             final = await call.result()
@@ -176,25 +190,35 @@ class ServiceTrackerFeed:
                                             f"{self.failure}"))
 
     def poll(self, t_robot: float, pc_time: float) -> list[TrackerMeasurement]:
+        """The samples taken before the cycle of robot time ``t_robot`` was handled at PC
+        time ``pc_time``, on the robot's clock; later ones wait for a later cycle (placed
+        between two cycles, a sample keeps its order whatever the robot's clock does)."""
         self.robot_clock.see(t_robot, pc_time)
         with self._lock:
             rows, self._rows = list(self._rows), deque()
-        out = []
+        out, later = [], []
         for r in rows:
             self.tracker_clock.see(float(r[0]), float(r[1]))
         for r in rows:
-            t = self.tracker_clock.pc(float(r[0])) - self.robot_clock.offset
+            pc = self.tracker_clock.pc(float(r[0]))
+            if pc > pc_time:
+                later.append(r)
+                continue
+            t = self.robot_clock.robot(pc)
             status = _STATUS.get(int(r[9]), "device")
             if status != "ok" or int(r[8]) != 1:
                 out.append(TrackerMeasurement(t, None, bool(r[8]), status if status != "ok"
                                               else "no_orientation"))
                 continue
             out.append(TrackerMeasurement(t, pose_matrix(r[2:8]) @ self.tool, True, "ok"))
+        if later:
+            with self._lock:
+                self._rows.extendleft(reversed(later))
         return out
 
     def stop(self) -> None:
         if self._call is not None:
-            self._run(self._stop(), 30.0)
+            self._run(self._stop(), 30.0, "Stop Measurement: the stream did not end")
 
     async def _stop(self) -> None:
         call, self._call = self._call, None
@@ -253,36 +277,52 @@ class TrackedMoves:
         self.settings, self.ramp_s, self.payload_kg = settings, ramp_s, payload_kg
         self.settle_s, self.realtime = settle_s, realtime
         self.last_loop: TrackingLoop | None = None
+        self.last_feed: TrackerFeed | None = None
+        #: samples of the last move skipped by a loop that fell behind
+        self.last_dropped = 0
+        #: the last move's computed cycles: ``(t s, offset applied [Δp m; φ rad], loop
+        #: state, its tracker term, the start's blend)`` (the rest of the offset is the
+        #: model's part, zero for the nominal model but for its solver's tolerance)
+        self.last_record: list[tuple[float, Array, str, Array, float]] = []
 
     def move_tracked(self, pose: Position, tracker: str) -> float | None:
         """``MOVE LINEAR TO pose WITH TRACKING tracker``: plan, subscribe, stream with
         the correction, unsubscribe.  Returns None when ``after`` accounted for the
         move's time, else its duration (s)."""
         m = self.motion
-        if isinstance(m.drive, LinkProcess):
-            raise MotionError("MOVE ... WITH TRACKING needs the link's cycle loop in the "
-                              "service's process: serve the robot with --param "
-                              "stream_process=false (the link runs in a child process)")
         desc = m.description
         fk0 = forward(desc, None, np.asarray(desc.home, float), "nominal")
         tool = np.linalg.inv(fk0.flange) @ fk0.tcp
         with m._lock:
             traj = m.plan_move(LIN(target=matrix_from_position(pose), speed=m.speed))
-            cycle_s = m.drive.link.config.cycle_s
+            config = m.drive.config if isinstance(m.drive, LinkProcess) else m.drive.link.config
+            cycle_s = config.cycle_s
             settings = self.settings or TrackingSettings(cycle_s=cycle_s)
             model = NominalModel(desc, tool)
             loop = self.last_loop = TrackingLoop(model, settings, payload_kg=self.payload_kg)
-            feed = self.feeds(tracker)
+            feed = self.last_feed = self.feeds(tracker)
             feed.start()
             padded = _Settled(traj, self.settle_s)
             adjust, worker = self._adjust(loop, feed, cycle_s)
+            # simulated time across the process boundary: the link's child waits for each
+            # cycle's correction (as the in-process hook computes it in the cycle)
+            wait = {} if self.realtime or not isinstance(m.drive, LinkProcess) else \
+                {"wait_s": SIMULATED_WAIT_S}
             try:
-                m.drive.follow(padded, adjust=adjust)
+                m.drive.follow(padded, adjust=adjust, **wait)
             finally:
                 if worker is not None:
                     worker.close()
+                failure = feed.failure  # before stop(): ending the stream is ours then
                 feed.stop()
             m.last = traj
+        for w in loop.windows:
+            log.warning("MOVE WITH TRACKING to %s: the model alone from %.3f s to %s (%s)",
+                        tracker, w.start_s, "the end" if w.end_s is None else
+                        f"{w.end_s:.3f} s", w.reason)
+        if failure:
+            raise MotionError(f"{tracker} stopped during the tracked move ({failure}): "
+                              "the move finished with the model alone")
         if self.after is None:
             return padded.duration
         self.after(padded.duration)
@@ -294,17 +334,38 @@ class TrackedMoves:
         newest the worker has, the link's thread never waits for the loop)."""
         desc = self.motion.description
         ramp = unit_ramp(max(self.ramp_s, cycle_s))
+        record = self.last_record = []
+        self.last_dropped = 0
 
-        def offset(state: CycleState, k: int, q_k: Array) -> Array:
-            loop.add(feed.poll(state.t, time.time()))
+        def offset(state: CycleState, k: int, q_k: Array, pc: float) -> Array:
+            samples = feed.poll(state.t, pc)
+            if len(samples) > MAX_SAMPLES_PER_CYCLE:  # behind: the newest only (below)
+                self.last_dropped += len(samples) - MAX_SAMPLES_PER_CYCLE
+                samples = samples[-MAX_SAMPLES_PER_CYCLE:]
+            loop.add(samples)
+            if feed.failure and not record_held:
+                loop.hold(f"tracker stopped: {feed.failure}")
+                record_held.append(state.t)
             T_path = forward(desc, None, q_k, "nominal").tcp
             q_fb = state.robot.joints if state.robot.joints is not None else q_k
-            return float(ramp.sample(k * cycle_s).s) * loop.cycle(state.t, q_fb, T_path).offset
+            out = loop.cycle(state.t, q_fb, T_path)
+            blend = float(ramp.sample(k * cycle_s).s)
+            o = blend * out.offset
+            record.append((state.t, o, out.state, blend * out.tracker, blend))
+            return o
 
-        worker = _Worker(offset) if self.realtime else None
+        record_held: list[float] = []
+        # in-process real time: a worker beside the link's thread; a link process has
+        # its own (the pump thread of LinkProcess.follow)
+        threaded = self.realtime and not isinstance(self.motion.drive, LinkProcess)
+        worker = _Worker(offset) if threaded else None
 
         def adjust(state: CycleState, k: int, q_k: Array) -> Array:
-            o = worker.offer(state, k, q_k) if worker is not None else offset(state, k, q_k)
+            # when the packet was handled: the link process's stamp, or now (this is the
+            # link's thread), for the robot's clock map
+            pc = getattr(state.robot, "pc_time_s", None) or time.time()
+            o = worker.offer(state, k, q_k, pc) if worker is not None else \
+                offset(state, k, q_k, pc)
             if not np.any(o):
                 return np.zeros(len(q_k))
             J = jacobian_from_fk(desc, forward(desc, None, q_k, "nominal"), "tcp")
@@ -317,9 +378,9 @@ class _Worker:
     """Runs the loop beside the link (real time): :meth:`offer` hands it the newest cycle
     and returns the newest offset it has computed (zeros before the first), at once."""
 
-    def __init__(self, offset: Callable[[CycleState, int, Array], Array]) -> None:
+    def __init__(self, offset: Callable[[CycleState, int, Array, float], Array]) -> None:
         self.offset = offset
-        self._latest: tuple[CycleState, int, Array] | None = None
+        self._latest: tuple[CycleState, int, Array, float] | None = None
         self._result = np.zeros(6)
         self._cond = threading.Condition()
         self._stop = False
@@ -328,11 +389,11 @@ class _Worker:
         self._thread = threading.Thread(target=self._run, name="tracking-loop", daemon=True)
         self._thread.start()
 
-    def offer(self, state: CycleState, k: int, q_k: Array) -> Array:
+    def offer(self, state: CycleState, k: int, q_k: Array, pc: float) -> Array:
         with self._cond:
             if self.failure is not None:
                 raise MotionError(f"the tracking loop failed: {self.failure}")
-            self._latest = (state, k, q_k)
+            self._latest = (state, k, q_k, pc)
             self._cond.notify()
             return self._result
 

@@ -48,6 +48,8 @@ from plugcell.devices.tracker.driver import (
     TrackerStatus,
 )
 from plugcell.framework.bus import Bus
+from plugcell.sim.beam_breaks import blocked as stream_blocked
+from plugcell.sim.beam_breaks import parse_beam_breaks
 from plugcell.sim.twin import tracker as twin
 from plugcell.sim.twin.tracker import LaserTracker
 from plugcell.sim.twin.tracker_stream import StreamSpec, TrackerStream
@@ -86,11 +88,15 @@ class SimulatedTrackerDriver:
     driver before the service: the tracker attaches the bus of the service it runs in);
     ``tracker``: the instrument model (default ``LaserTracker(seed=seed)``);
     ``time_scale``: real seconds slept per simulated second (0: none);
-    ``query_timeout_s``: bound of one look at the world.
+    ``query_timeout_s``: bound of one look at the world;
+    ``beam_breaks``: line-of-sight breaks of every stream, ``START:DURATION[,…]`` in
+    seconds from the stream's start (:mod:`plugcell.sim.beam_breaks`; a fault to inject:
+    ``plugcell serve tracker --param beam_breaks=1.0:0.5``), unless ``blocked`` is given.
     """
 
     info = "simulated Leica AT901-MR with T-MAC (plugcell.sim.twin.tracker model)"
-    params: ClassVar[dict[str, type]] = {"seed": int, "time_scale": float}
+    params: ClassVar[dict[str, type]] = {"seed": int, "time_scale": float,
+                                         "beam_breaks": str}
     """What ``plugcell serve tracker --param K=V`` sets."""
 
     def __init__(
@@ -103,9 +109,16 @@ class SimulatedTrackerDriver:
         query_timeout_s: float = 2.0,
         stream_spec: StreamSpec | None = None,
         blocked: Callable[[float], bool] | None = None,
+        beam_breaks: str = "",
     ) -> None:
         if not (time_scale >= 0 and np.isfinite(time_scale)):
             raise ValueError(f"time_scale must be >= 0, got {time_scale}")
+        if beam_breaks and blocked is None:
+            try:
+                breaks = parse_beam_breaks(beam_breaks.split(","))
+            except ValueError as exc:
+                raise ValueError(f"beam_breaks {exc}") from None
+            blocked = stream_blocked(breaks)
         self.bus = bus
         self.model = tracker if tracker is not None else LaserTracker(seed=seed)
         self.time_scale = float(time_scale)

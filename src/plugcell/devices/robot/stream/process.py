@@ -8,9 +8,10 @@ vendor's :class:`~.link.StreamLink` and its :class:`~.drive.StreamDrive` — int
 process (``multiprocessing``, *spawn*), which does nothing but the cycle loop, and talks to
 it through two channels:
 
-* a pipe for the motions: ``("follow", n, q, timeout)`` — the planned trajectory sampled
-  at the cycle, ``q`` of shape (K+1, 6) rad — answered ``("followed", n, reason)`` when
-  the motion ended (``reason`` empty) or failed; a motion is a few kilobytes once per move;
+* a pipe for the motions: ``("follow", n, q, timeout, adjusted)`` — the planned
+  trajectory sampled at the cycle, ``q`` of shape (K+1, 6) rad — answered ``("followed",
+  n, reason)`` when the motion ended (``reason`` empty) or failed; a motion is a few
+  kilobytes once per move;
 * a second pipe for the corrections of mode (b), *the robot drives, the PC corrects*
   (:mod:`.correcting`): the child's :class:`~.correcting.Corrector` called through
   :class:`CorrectorClient` (start, set the offset, finish, poll), while a correction
@@ -21,7 +22,11 @@ it through two channels:
   anything: whether a session streams, the session count, the newest actual joints, the
   counters, and the current failure's text.  A sequence number makes each read
   consistent (a *seqlock*: the writer makes it odd while writing; a reader retries a
-  read that saw it odd or changed).
+  read that saw it odd or changed);
+* for an *adjusted* motion (a tracked move: a correction added to each cycle's joints,
+  computed in the service from the tracker's samples), two more seqlocked blocks: the
+  cycle the child is answering, and the newest adjustment the service computed for it
+  (:mod:`.adjusting`).
 
 The parent end is a :class:`~plugcell.devices.robot.planned_motion.Drive` with the link's
 ``start``/``wait``/``streaming``/``failure``/``latest``/``close``, so the controller uses it
@@ -46,8 +51,9 @@ from numpy.typing import NDArray
 from plugcell.motion import Trajectory
 from plugcell.pdl.interfaces import MotionError
 
+from .adjusting import CYCLE_SLOTS, OFFSET_SLOTS, AdjustPump, ChildAdjust, SeqVector
 from .correcting import CorrectionSpec, Corrector
-from .drive import StreamDrive, drive_refusal, motion_timeout, samples
+from .drive import Adjust, StreamDrive, drive_refusal, motion_timeout, samples
 from .errors import StreamLinkError
 
 __all__ = ["BUSY", "LINKS", "CorrectorClient", "Feedback", "LinkProcess", "Publisher",
@@ -124,7 +130,7 @@ class Publisher:
 
 
 def _child(conn: Any, corrections: Any, values: Any, text: Any, vendor: str, config: Any,
-           rt_priority: int | None) -> None:
+           rt_priority: int | None, cycle: Any = None, offset: Any = None) -> None:
     """The child process: the link, its drive, the motions from the pipe and the
     corrections of mode (b) from the other (:func:`serve_corrections`)."""
     import signal
@@ -151,12 +157,14 @@ def _child(conn: Any, corrections: Any, values: Any, text: Any, vendor: str, con
                 break
             if message[0] != "follow":
                 break
-            _, motion, q, timeout = message
+            _, motion, q, timeout, wait_s = message
             if drive is None or corrector.active:
                 conn.send(("followed", motion, refusal or BUSY))
                 continue
+            adjust = ChildAdjust(SeqVector(cycle), SeqVector(offset), motion, wait_s) \
+                if wait_s is not None else None
             try:
-                drive.follow_samples(q, timeout)
+                drive.follow_samples(q, timeout, adjust)
             except MotionError as exc:
                 conn.send(("followed", motion, str(exc) or "the motion failed"))
             except Exception as exc:  # a bug must reach the program, not end the child
@@ -264,6 +272,8 @@ class LinkProcess:
         ctx = multiprocessing.get_context("spawn")
         self._values = ctx.RawArray("d", SLOTS)
         self._text = ctx.RawArray("c", TEXT_BYTES)
+        self._cycle = ctx.RawArray("d", CYCLE_SLOTS)
+        self._offset = ctx.RawArray("d", OFFSET_SLOTS)
         self._v = np.frombuffer(self._values, dtype=np.float64)
         self._ctx = ctx
         self._conn: Any = None
@@ -295,7 +305,7 @@ class LinkProcess:
         self._proc = self._ctx.Process(
             target=_child, name=f"plugcell-{self.vendor.lower()}-link", daemon=True,
             args=(child_end, child_corr, self._values, self._text, self.vendor, self.config,
-                  self.rt_priority))
+                  self.rt_priority, self._cycle, self._offset))
         self._proc.start()
         child_end.close()
         child_corr.close()
@@ -338,14 +348,7 @@ class LinkProcess:
     # ------------------------------------------------------------------ the feedback
     def snapshot(self) -> Array:
         """A consistent copy of the shared values (module docstring)."""
-        v = self._v
-        while True:
-            seq = v[SEQ]
-            if seq % 2 == 0:
-                values = v.copy()
-                if v[SEQ] == seq:
-                    return values
-            time.sleep(0)
+        return SeqVector(self._values).snapshot()
 
     @property
     def streaming(self) -> bool:
@@ -402,31 +405,53 @@ class LinkProcess:
                               "feedback")
         return latest.joints
 
-    def follow(self, trajectory: Trajectory) -> None:
+    def follow(self, trajectory: Trajectory, adjust: Adjust | None = None,
+               wait_s: float = 0.0) -> None:
         """Stream ``trajectory`` in the child (blocks for its duration).
+
+        ``adjust(state, k, q_k)``, if given, runs here, in a thread of this process
+        (:class:`~.adjusting.AdjustPump`), on each cycle the child answers; the child
+        adds the newest result to its samples' joints (module docstring) — or, with
+        ``wait_s`` > 0 (simulated time), waits up to that long for its cycle's.
 
         Raises
         ------
         MotionError
-            The stream failed, the motion did not end in time, or the child is gone.
+            The stream failed, the motion did not end in time, the child is gone, or
+            ``adjust`` raised (after the motion, which kept its last adjustment).
         """
         q = samples(trajectory, self.config.cycle_s)
         timeout = motion_timeout(trajectory.duration, self.config)
         with self._lock:
             self._motions += 1
+            pump = None if adjust is None else AdjustPump(
+                adjust, q, SeqVector(self._cycle), SeqVector(self._offset), self._motions,
+                self.config.cycle_s / 4)
             try:
-                self._conn.send(("follow", self._motions, q, timeout))
-            except (OSError, AttributeError):
-                raise MotionError(f"the {self.vendor} link process is not running") from None
-            end = time.monotonic() + timeout + 10.0
-            while True:  # the answer to this motion (an earlier one's, given up on, is old)
-                while not self._conn.poll(0.1):
-                    if not self.alive or time.monotonic() > end:
-                        raise MotionError(str(self.failure or f"the {self.vendor} link "
-                                              "process did not answer"))
-                _, motion, reason = self._conn.recv()
-                if motion == self._motions:
-                    break
+                reason = self._follow(q, timeout, None if adjust is None else wait_s)
+            finally:
+                if pump is not None:
+                    pump.close()
         if reason:
             raise MotionError(reason)
+        if pump is not None and pump.failure is not None:
+            raise MotionError(f"the correction of the motion failed: "
+                              f"{type(pump.failure).__name__}: {pump.failure}")
         self.followed += 1
+
+    def _follow(self, q: Array, timeout: float, wait_s: float | None) -> str:
+        """Send motion ``self._motions`` (adjusted unless ``wait_s`` is None) and wait for
+        its answer: the failure's reason (empty: it ended)."""
+        try:
+            self._conn.send(("follow", self._motions, q, timeout, wait_s))
+        except (OSError, AttributeError):
+            raise MotionError(f"the {self.vendor} link process is not running") from None
+        end = time.monotonic() + timeout + 10.0
+        while True:  # the answer to this motion (an earlier one's, given up on, is old)
+            while not self._conn.poll(0.1):
+                if not self.alive or time.monotonic() > end:
+                    raise MotionError(str(self.failure or f"the {self.vendor} link "
+                                          "process did not answer"))
+            _, motion, reason = self._conn.recv()
+            if motion == self._motions:
+                return str(reason)
