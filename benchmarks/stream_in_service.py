@@ -42,6 +42,8 @@ from pathlib import Path
 
 import numpy as np
 
+from plugcell.sim.ports import free_port
+
 WARMUP_S = 2.0
 SWING = """\
 PROGRAM benchswing
@@ -58,12 +60,6 @@ END benchswing
 #: \CommTimeout 1 s)
 TWINS = {"RSI": ("rsi", "--rsi", "10000", "10000", 100),
          "EGM": ("egm", "--egm", "3600", "60", 250)}
-
-
-def _free_udp_port() -> int:
-    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
-        s.bind(("127.0.0.1", 0))
-        return int(s.getsockname()[1])
 
 
 def _tree_cpu_s(pid: int) -> float:
@@ -171,7 +167,7 @@ def measure(vendor: str, seconds: float, cycle_ms: float = 4.0, thread: bool = F
     (home / "programs" / "benchswing.pdl").write_text(SWING)
     env = {**os.environ, "PLUGCELL_HOME": str(home), "PYTHONUNBUFFERED": "1"}
     cell = f"ins{uuid.uuid4().hex[:8]}"
-    port = _free_udp_port()
+    port = free_port("udp")
     stats_file = home / "twin.json"
     echo = EchoPinger(cycle_ms)
     twin = subprocess.Popen([sys.executable, "-m", "plugcell", "twin", side, "--ip",

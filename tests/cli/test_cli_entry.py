@@ -10,10 +10,10 @@ import sys
 from pathlib import Path
 
 import pytest
-from childproc import free_port
 
 import plugcell.apps.commands
 from plugcell.apps.cli import COMMANDS, EXIT_BROKEN_PIPE, build_parser, chosen_command, main
+from plugcell.sim.ports import free_port
 
 #: Modules a parser must not need: the service stack, the web server, scipy.
 HEAVY = ("zenoh", "fastapi", "uvicorn", "starlette", "scipy", "plugcell.framework",

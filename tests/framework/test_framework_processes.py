@@ -9,11 +9,11 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from childproc import free_port
 from framework_testlib import plugcell_argv
 
 from plugcell.framework import BlockingClient, ProcessStates, TransportConfig
 from plugcell.framework.journal import journal_files, read_journal
+from plugcell.sim.ports import free_port
 
 pytestmark = [pytest.mark.slow, pytest.mark.timeout(90)]
 

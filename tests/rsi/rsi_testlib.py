@@ -58,13 +58,6 @@ class BareRobot:
         self.sock.close()
 
 
-def free_udp_port() -> int:
-    """A UDP port on 127.0.0.1 that was free a moment ago."""
-    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
-        s.bind(("127.0.0.1", 0))
-        return int(s.getsockname()[1])
-
-
 def local_config(**kw) -> RsiConfig:
     """A link on an ephemeral loopback port that accepts a robot on loopback."""
     return RsiConfig(robot_host="127.0.0.1", listen_host="127.0.0.1", listen_port=0, **kw)

@@ -11,7 +11,6 @@ from __future__ import annotations
 import contextlib
 import os
 import signal
-import socket
 import subprocess
 import sys
 import threading
@@ -30,13 +29,6 @@ def until(predicate: Callable[[], object], timeout: float = 15.0,
             return value
         assert time.monotonic() < deadline, f"{what} not reached within {timeout:g} s"
         time.sleep(0.02)
-
-
-def free_port() -> int:
-    """A TCP port on 127.0.0.1 that was free a moment ago."""
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return int(s.getsockname()[1])
 
 
 def plugcell_argv(*args: str) -> list[str]:
