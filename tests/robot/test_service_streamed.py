@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import asyncio
 import dataclasses
+import shutil
 import time
 from pathlib import Path
 
@@ -82,16 +83,6 @@ BEGIN
 END {name}
 """
 
-SWING = """\
-PROGRAM swing
-BEGIN
-  WHILE TRUE DO
-    MOVE TO JNTP(8, -85, -185, 0, 85, 5)
-    MOVE TO JNTP(-8, -90, -187, 0, 90, 0)
-  ENDWHILE
-END swing
-"""
-
 F, C = ProcessStates.Failed, ProcessStates.Completed
 
 
@@ -104,7 +95,7 @@ def library(tmp_path: Path) -> Path:
         name="unreachable", target="POS(4000, 0, 1000, 0, 90, 0)"))
     (lib / "beyond.pdl").write_text(REFUSED.format(
         name="beyond", target="JNTP(0, -90, -187, 0, 90, 400)"))
-    (lib / "swing.pdl").write_text(SWING)
+    shutil.copy(Path(__file__).parent / "programs" / "swing.pdl", lib)
     return lib
 
 
