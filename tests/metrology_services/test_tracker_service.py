@@ -60,6 +60,25 @@ async def setup_robot(client: Client, base, probe, robot_pose) -> None:
     await ok(client, "Move", "", robot_pose)
 
 
+async def move_and_measure(client: Client, robot_pose) -> tuple[np.ndarray, float]:
+    """A robot's program (8.4.2): Move, then a Single Measurement; the pose and when it came."""
+    await ok(client, "Move", "", robot_pose)
+    return await ok(client, "Single Measurement", "tr2euler", 100), time.monotonic()
+
+
+async def served_after_stop(holder: Client, stream: ProcessCall, waiting: asyncio.Task,
+                            robot_pose) -> None:
+    """``holder`` stops its ``stream``; only then is the robot ``waiting`` (queued behind
+    it, :func:`move_and_measure`) served — with its own reflector, in its own frame."""
+    stop = await holder.stop_process(stream)
+    assert (await stop.result()).state is C
+    stopped_at = time.monotonic()
+    assert (await stream.result()).state is C
+    measured, finished_at = await asyncio.wait_for(waiting, 20)
+    assert_pose(measured, robot_pose)
+    assert finished_at >= stopped_at - 0.05
+
+
 def test_set_base_probe_move_and_measurements_in_the_robot_frame(cell, world):
     tmac = world(cell.name, "TMAC_A")
     tmac.publish(reflector(BASE_A, POSE_A, PROBE_A))
@@ -194,25 +213,14 @@ def test_the_second_robot_waits_for_the_first_robots_stop_measurement(cell, worl
                                                 timeout=30)
             first = await anext(aiter(stream))  # Running: the Comau holds the tracker
             assert first.state is R
-
-            async def kuka_program() -> tuple[np.ndarray, float]:  # Move, then measure (8.4.2)
-                await ok(kuka, "Move", "", POSE_B)
-                return await ok(kuka, "Single Measurement", "tr2euler", 100), time.monotonic()
-
-            waiting = asyncio.create_task(kuka_program())
+            waiting = asyncio.create_task(move_and_measure(kuka, POSE_B))
             frames = 0
             async for update in stream:  # the Comau corrects its position meanwhile (8.3.2)
                 frames += update.data is not None
                 if frames == 8:
                     break
             assert not waiting.done()  # queued behind the Comau's stream (8.4.3)
-            stop = await comau.stop_process(stream)
-            assert (await stop.result()).state is C
-            stopped_at = time.monotonic()
-            assert (await stream.result()).state is C
-            measured, finished_at = await asyncio.wait_for(waiting, 20)
-            assert_pose(measured, POSE_B)
-            assert finished_at >= stopped_at - 0.05
+            await served_after_stop(comau, stream, waiting, POSE_B)
 
     run(body())
 
@@ -241,24 +249,14 @@ def test_a_tracked_path_holds_the_tracker_the_other_robot_is_served_after(cell, 
                 if update.data is not None:
                     rows.append(ProcessCall.array(update))
 
-            async def kuka_program() -> tuple[np.ndarray, float]:
-                await ok(kuka, "Move", "", POSE_B)
-                return await ok(kuka, "Single Measurement", "tr2euler", 100), time.monotonic()
-
-            waiting = asyncio.create_task(kuka_program())
+            waiting = asyncio.create_task(move_and_measure(kuka, POSE_B))
             async for update in updates:  # the path goes on, its samples keep coming
                 if update.data is not None:
                     rows.append(ProcessCall.array(update))
                 if len(rows) == 20:
                     break
             assert not waiting.done()  # queued behind the stream
-            stop = await comau.stop_process(stream)
-            assert (await stop.result()).state is C
-            stopped_at = time.monotonic()
-            assert (await stream.result()).state is C
-            measured, finished_at = await asyncio.wait_for(waiting, 20)
-            assert_pose(measured, POSE_B)  # the Kuka's own reflector, in its own frame
-            assert finished_at >= stopped_at - 0.05
+            await served_after_stop(comau, stream, waiting, POSE_B)
         samples = np.vstack(rows)
         assert samples.shape == (200, 11)
         np.testing.assert_array_equal(np.diff(samples[:, -1]), 1)  # seq: no sample lost
