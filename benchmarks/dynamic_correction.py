@@ -29,7 +29,6 @@ depends on the machine.
 from __future__ import annotations
 
 import argparse
-import dataclasses
 import math
 import sys
 import time
@@ -37,15 +36,12 @@ from pathlib import Path
 
 import numpy as np
 
-from plugcell.compensation.tracking import TrackingLoop, TrackingSettings
-from plugcell.devices.robot.rsi import RsiConfig, RsiLink
-from plugcell.devices.robot.rsi.tracking import TrackingSource
+from plugcell.compensation.tracking import TrackingSettings
 from plugcell.kinematics import forward
 from plugcell.kinematics.transforms import so3_log
 from plugcell.metrology.timing import estimate_delay
-from plugcell.sim.controller.rsi_robot import RsiRobot
-from plugcell.sim.tracked_path import CYCLE, Fault, LogFeed, PathRun, TrackedCell
-from plugcell.sim.twin.dynamics import DynamicTwin
+from plugcell.sim.tracked_path import CYCLE, Fault, PathRun, TrackedCell
+from plugcell.sim.tracked_udp import run_over_udp
 
 PUBLISHED = [
     ("Nikon Adaptive Robot Control (commercial), robot accuracy", "0.1 mm"),
@@ -133,25 +129,9 @@ def udp_timing(cell: TrackedCell, tau: float) -> dict:
     0.2 m line at 100 mm/s in real time.  Packet in → answer out (the link's own record),
     the source's compute time, the share of cycles the controller got its answer in time."""
     traj = cell.plan("line", 100.0, size_m=0.2)
-    arm = DynamicTwin(cell.twin, q0=cell.q0)
-    config = RsiConfig(robot_host="127.0.0.1", listen_host="127.0.0.1", listen_port=0,
-                       correction="cartesian", mode="absolute", frame="base",
-                       timeout_packets=10_000)
-    loop = TrackingLoop(cell.model, TrackingSettings(lead_s=tau), payload_kg=cell.payload_kg)
-    source = TrackingSource(loop, ramp=0.3)
-    feed = LogFeed(source, arm)
-    with RsiLink(config, feed, record_latency=True) as link:
-        robot = RsiRobot(arm, dataclasses.replace(config, listen_port=link.address[1]),
-                         record=True, path=traj, tool=cell.model.tool, path_delay_s=0.5)
-        feed.robot = robot
-        robot.start()
-        try:
-            link.wait(lambda lk: robot.path_done or not robot.running,
-                      timeout=traj.duration + 120)
-            source.finish()
-            link.wait(lambda lk: source.ended(), timeout=60)
-        finally:
-            robot.stop()
+    udp = run_over_udp(cell, traj, tau, record_latency=True, path_slack_s=120.0,
+                       end_timeout_s=60.0)
+    link, feed, loop, robot = udp.link, udp.feed, udp.loop, udp.robot
     lat = np.array(link.latencies) * 1e-6
     comp = np.array(feed.compute_s) * 1e3
     st = robot.stats()
