@@ -4,7 +4,8 @@ robot socket, and the seeded mutator of the fuzz."""
 from __future__ import annotations
 
 import socket
-import time
+
+from childproc import wait_until  # noqa: F401  (re-exported for the link tests)
 
 from plugcell.devices.robot.egm import EgmConfig, EgmLink
 from plugcell.devices.robot.egm.messages import egm_pb2
@@ -71,15 +72,6 @@ def started(config: EgmConfig, source=None, **kw) -> EgmLink:
     link = EgmLink(config, source, **kw)
     link.start()
     return link
-
-
-def wait_until(predicate, timeout: float = 2.0) -> bool:
-    end = time.monotonic() + timeout
-    while time.monotonic() < end:
-        if predicate():
-            return True
-        time.sleep(0.002)
-    return predicate()
 
 
 def mutate(rng, packet: bytes) -> bytes:

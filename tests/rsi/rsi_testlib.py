@@ -5,7 +5,8 @@ rsipi's EchoServer: test_rsi_rsipi.py)."""
 from __future__ import annotations
 
 import socket
-import time
+
+from childproc import wait_until  # noqa: F401  (re-exported for the link tests)
 
 from plugcell.devices.robot.rsi import RsiConfig, RsiLink
 
@@ -67,15 +68,6 @@ def started(config: RsiConfig, source=None, **kw) -> RsiLink:
     link = RsiLink(config, source, **kw)
     link.start()
     return link
-
-
-def wait_until(predicate, timeout: float = 2.0) -> bool:
-    end = time.monotonic() + timeout
-    while time.monotonic() < end:
-        if predicate():
-            return True
-        time.sleep(0.002)
-    return predicate()
 
 
 #: Replacements the mutator puts where a number was.

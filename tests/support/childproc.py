@@ -31,6 +31,17 @@ def until(predicate: Callable[[], object], timeout: float = 15.0,
         time.sleep(0.02)
 
 
+def wait_until(predicate: Callable[[], object], timeout: float = 2.0) -> bool:
+    """Whether ``predicate()`` holds within ``timeout`` s, polled every 2 ms (a link's
+    cycle is 4 ms): for ``assert wait_until(…)`` and ``assert not wait_until(…)``."""
+    end = time.monotonic() + timeout
+    while time.monotonic() < end:
+        if predicate():
+            return True
+        time.sleep(0.002)
+    return bool(predicate())
+
+
 def plugcell_argv(*args: str) -> list[str]:
     """Command line of the real CLI: ``python -m plugcell …``."""
     return [sys.executable, "-m", "plugcell", *args]
