@@ -3,9 +3,8 @@
 from __future__ import annotations
 
 import asyncio
-import time
 import uuid
-from collections.abc import Callable, Coroutine
+from collections.abc import Coroutine
 from typing import Any
 
 import numpy as np
@@ -22,14 +21,6 @@ def unique_cell(prefix: str = "m") -> str:
 def run(coro: Coroutine[Any, Any, Any], timeout: float = 45.0) -> Any:
     """Run an async test body with a hard timeout."""
     return asyncio.run(asyncio.wait_for(coro, timeout))
-
-
-def until(predicate: Callable[[], bool], timeout: float = 15.0) -> None:
-    """Poll (bounded) for a condition another process makes true."""
-    deadline = time.monotonic() + timeout
-    while not predicate():
-        assert time.monotonic() < deadline, "condition not reached in time"
-        time.sleep(0.02)
 
 
 def pose(v: list[float]) -> np.ndarray:
