@@ -6,7 +6,14 @@ import numpy as np
 import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
-from programlib import FIXTURES, assert_equals_plugcell_compensate, model_for, poses_in
+from programlib import (
+    FIXTURES,
+    assert_equals_plugcell_compensate,
+    assert_generated_round_trip,
+    assert_nominal_round_trip,
+    model_for,
+    poses_in,
+)
 
 from plugcell.apps.cli import main
 from plugcell.io.programs import ProgramError, read_program
@@ -38,11 +45,7 @@ def test_fixture_points_and_notes():
 
 
 def test_nominal_round_trip_is_byte_identical(nominal_params, tmp_path):
-    out = tmp_path / "o.ls"
-    for mode in ("keep", "compensate"):
-        assert main(["compensate", "--params", str(nominal_params), "--program", str(FIX),
-                     "--out", str(out), "--joint-targets", mode, *FRAMES]) == 0
-        assert out.read_bytes() == FIX.read_bytes()
+    assert_nominal_round_trip(nominal_params, FIX, tmp_path / "o.ls", *FRAMES)
 
 
 def test_equals_plugcell_compensate_and_keeps_columns(calibrated_result, params_file, tmp_path):
@@ -139,9 +142,5 @@ def tp_programs(draw):
     HealthCheck.too_slow, HealthCheck.function_scoped_fixture])
 @given(text=tp_programs())
 def test_generated_programs_round_trip(nominal_result, tmp_path, text):
-    (tmp_path / "g.ls").write_bytes(text.encode())
-    p, _ = read_program(tmp_path / "g.ls")
     tool = {"UTOOL[2]": pose_from_notation(np.array([0, 0, 200, 0, 0, 0.]), "fanuc")}
-    fr = filter_targets(p, model_for(nominal_result), tools=tool, payload_kg=36.0)
-    assert all(r.ok for r in fr.reports)
-    assert p.render(fr.edits) == [text]
+    assert_generated_round_trip(nominal_result, tmp_path, {"g.ls": text}, tools=tool)

@@ -6,7 +6,13 @@ import numpy as np
 import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
-from programlib import FIXTURES, assert_equals_plugcell_compensate, model_for, poses_in
+from programlib import (
+    FIXTURES,
+    assert_equals_plugcell_compensate,
+    assert_generated_round_trip,
+    model_for,
+    poses_in,
+)
 
 from plugcell.apps.cli import main
 from plugcell.io.programs import ProgramError, read_program
@@ -128,10 +134,6 @@ def gcode_programs(draw):
     HealthCheck.too_slow, HealthCheck.function_scoped_fixture])
 @given(text=gcode_programs())
 def test_generated_programs_round_trip(nominal_result, tmp_path, text):
-    (tmp_path / "g.nc").write_bytes(text.encode())
-    p, _ = read_program(tmp_path / "g.nc")
     tools = {"T2": pose_from_notation(np.array([0, 0, 200, 0, 0, 0.]), "kuka")}
-    fr = filter_targets(p, model_for(nominal_result), bases={"G54": np.eye(4)}, tools=tools,
-                        payload_kg=36.0)
-    assert all(r.ok for r in fr.reports)
-    assert p.render(fr.edits) == [text]
+    assert_generated_round_trip(nominal_result, tmp_path, {"g.nc": text},
+                                bases={"G54": np.eye(4)}, tools=tools)
