@@ -1,5 +1,5 @@
 """Helpers of the robot-program tests: models from PARAMS results, reachable poses, the
-round trips every dialect passes."""
+round trips every dialect passes, a refused edit named where it stands."""
 
 from __future__ import annotations
 
@@ -92,3 +92,21 @@ def assert_generated_round_trip(result, folder: Path, files: dict[str, str], **f
     assert all(r.ok for r in fr.reports)
     assert program.render(fr.edits) == list(files.values())
     return fr
+
+
+def assert_edit_refused(program: Path, copy: Path, old: str, new: str, message: str) -> None:
+    """``program`` with its first ``old`` replaced by ``new``, written to ``copy``, is
+    refused: a ProgramError with ``message`` at ``<copy's name>:<line>:<column>``."""
+    import pytest
+
+    from plugcell.io.programs import ProgramError, read_program
+
+    text = program.read_bytes().decode()
+    assert old in text
+    copy.write_bytes(text.replace(old, new, 1).encode())
+    with pytest.raises(ProgramError) as ei:
+        read_program(copy)
+    s = str(ei.value)
+    assert f"{copy.name}:" in s and message in s, s
+    line, col = s.split(f"{copy.name}:")[1].split(":")[:2]
+    assert int(line) > 0 and int(col) > 0

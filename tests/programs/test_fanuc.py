@@ -8,6 +8,7 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 from programlib import (
     FIXTURES,
+    assert_edit_refused,
     assert_equals_plugcell_compensate,
     assert_generated_round_trip,
     assert_nominal_round_trip,
@@ -16,7 +17,7 @@ from programlib import (
 )
 
 from plugcell.apps.cli import main
-from plugcell.io.programs import ProgramError, read_program
+from plugcell.io.programs import read_program
 from plugcell.io.programs.core import Num, Program, SourceFile, Target
 from plugcell.io.programs.fanuc import FanucConfig
 from plugcell.io.programs.filter import filter_targets
@@ -86,16 +87,7 @@ def test_missing_frames_listed(params_file, tmp_path, capsys):
     ("   4:J P[1] 100%", "   4:J P[9] 100%", "P[9] is not in /POS"),
 ])
 def test_unknown_syntax_is_named(tmp_path, old, new, message):
-    src = tmp_path / "d.ls"
-    text = FIX.read_bytes().decode()
-    assert old in text
-    src.write_bytes(text.replace(old, new, 1).encode())
-    with pytest.raises(ProgramError) as ei:
-        read_program(src)
-    s = str(ei.value)
-    assert "d.ls:" in s and message in s, s
-    line, col = s.split("d.ls:")[1].split(":")[:2]
-    assert int(line) > 0 and int(col) > 0
+    assert_edit_refused(FIX, tmp_path / "d.ls", old, new, message)
 
 
 def test_turns_follow_the_joints():

@@ -8,6 +8,7 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 from programlib import (
     FIXTURES,
+    assert_edit_refused,
     assert_equals_plugcell_compensate,
     assert_generated_round_trip,
     model_for,
@@ -15,7 +16,7 @@ from programlib import (
 )
 
 from plugcell.apps.cli import main
-from plugcell.io.programs import ProgramError, read_program
+from plugcell.io.programs import read_program
 from plugcell.io.programs.filter import filter_targets
 from plugcell.io.units import pose_from_notation
 
@@ -95,16 +96,7 @@ def test_arc_centre_follows_the_corrections_on_one_circle(calibrated_result):
     ("N70 Y-261.089", "N70 Y-261.089 X=3", "expected a word"),
 ])
 def test_refused_constructs_are_named(tmp_path, old, new, message):
-    src = tmp_path / "p.nc"
-    text = FIX.read_text()
-    assert old in text
-    src.write_text(text.replace(old, new, 1))
-    with pytest.raises(ProgramError) as ei:
-        read_program(src)
-    s = str(ei.value)
-    assert "p.nc:" in s and message in s, s
-    line, col = s.split("p.nc:")[1].split(":")[:2]
-    assert int(line) > 0 and int(col) > 0
+    assert_edit_refused(FIX, tmp_path / "p.nc", old, new, message)
 
 
 def test_work_offset_and_tool_are_asked_for(params_file, tmp_path, capsys):

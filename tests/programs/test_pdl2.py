@@ -8,6 +8,7 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 from programlib import (
     FIXTURES,
+    assert_edit_refused,
     assert_equals_plugcell_compensate,
     assert_generated_round_trip,
     assert_nominal_round_trip,
@@ -16,7 +17,7 @@ from programlib import (
 )
 
 from plugcell.apps.cli import main
-from plugcell.io.programs import ProgramError, read_program
+from plugcell.io.programs import read_program
 from plugcell.io.programs.filter import filter_targets
 
 FIX = FIXTURES / "glue.pdl"
@@ -76,16 +77,7 @@ def test_frames_not_set_are_asked_for(params_file, tmp_path, capsys):
     ("MOVE LINEAR TO POS(30.531", "MOVE LINEAR TO POS(x0", "a number expected, got 'x0'"),
 ])
 def test_unknown_syntax_is_named(tmp_path, old, new, message):
-    src = tmp_path / "g.pdl"
-    text = FIX.read_text()
-    assert old in text
-    src.write_text(text.replace(old, new, 1))
-    with pytest.raises(ProgramError) as ei:
-        read_program(src)
-    s = str(ei.value)
-    assert "g.pdl:" in s and message in s, s
-    line, col = s.split("g.pdl:")[1].split(":")[:2]
-    assert int(line) > 0 and int(col) > 0
+    assert_edit_refused(FIX, tmp_path / "g.pdl", old, new, message)
 
 
 @st.composite

@@ -8,6 +8,7 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 from programlib import (
     FIXTURES,
+    assert_edit_refused,
     assert_equals_plugcell_compensate,
     assert_generated_round_trip,
     assert_nominal_round_trip,
@@ -16,7 +17,7 @@ from programlib import (
 )
 
 from plugcell.apps.cli import main
-from plugcell.io.programs import ProgramError, read_program
+from plugcell.io.programs import read_program
 from plugcell.io.programs.core import Num
 from plugcell.io.programs.filter import filter_targets
 from plugcell.io.programs.rapid import RapidConfig
@@ -77,15 +78,7 @@ def test_missing_tool_and_wobj_are_listed(params_file, tmp_path, capsys):
      "tool0;", "Target_10 is used with tool tool0"),
 ])
 def test_unknown_syntax_is_named(tmp_path, old, new, message):
-    src = tmp_path / "m.mod"
-    text = FIX.read_text()
-    assert old in text
-    src.write_text(text.replace(old, new, 1))
-    with pytest.raises(ProgramError) as ei:
-        read_program(src)
-    assert "m.mod:" in str(ei.value) and message in str(ei.value)
-    line, col = str(ei.value).split("m.mod:")[1].split(":")[:2]
-    assert int(line) > 0 and int(col) > 0
+    assert_edit_refused(FIX, tmp_path / "m.mod", old, new, message)
 
 
 def test_the_programs_arm_configuration_is_the_one_compensated(calibrated_result):
