@@ -75,6 +75,11 @@ def test_frames_not_set_are_asked_for(params_file, tmp_path, capsys):
     ("  MOVE TO pnt0001P\n", "  MOVE TO pnt0001P\n  pnt0001P := POS(1,2,3,4,5,6,'')\n",
      "assigned a position twice"),
     ("MOVE LINEAR TO POS(30.531", "MOVE LINEAR TO POS(x0", "a number expected, got 'x0'"),
+    ("  MOVE LINEAR TO pnt0002P ADVANCE\n", "  MOVE LINEAR TO pnt0002P ADVANCE\n"
+     "  $TOOL := POS(0, 0, 100, 0, 0, 0, '')\n  MOVE TO pnt0001P\n",
+     "pnt0001P is used with $BASE (line 9)⁻¹ · $UFRAME (line 8) and $TOOL (line 19) here, "
+     "with $BASE (line 9)⁻¹ · $UFRAME (line 8) and $TOOL (line 7) before: one set of numbers "
+     "cannot be compensated for both"),
 ])
 def test_unknown_syntax_is_named(tmp_path, old, new, message):
     assert_edit_refused(FIX, tmp_path / "g.pdl", old, new, message)

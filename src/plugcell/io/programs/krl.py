@@ -535,12 +535,8 @@ class _Reader:
     def use(self, tg: Target, fi: int, offset: int) -> None:
         base = self.base if self.base_set else "$BASE"
         tool = self.tool if self.tool_set else "$TOOL"
-        if tg.uses and tg.kind == "pose" and (tg.base, tg.tool) != (base, tool):
-            raise self.files[fi].error(offset, f"{tg.name} is used with base {base} and tool "
-                                       f"{tool} here, with {tg.base} and {tg.tool} before: "
-                                       "one set of numbers cannot be compensated for both")
-        tg.base, tg.tool, tg.used = base, tool, True
-        tg.uses.append((fi, offset))
+        tg.use(base, tool, self.files[fi], fi, offset, lambda b, t: f"base {b} and tool {t}",
+               frames_matter=tg.kind == "pose")
 
 
 def _data(what: str, n: int) -> str:

@@ -234,11 +234,7 @@ class _Reader:
             base = f"{b}⁻¹ · {u}"
             self.program.composites[base] = [(b, True), (u, False)]
         tool = self.frame["$TOOL"] or "$TOOL"
-        if tg.uses and (tg.base, tg.tool) != (base, tool):
-            raise self.f.error(tok.start, f"{tg.name} is used with {base} and {tool} here, "
-                               f"with {tg.base} and {tg.tool} before")
-        tg.base, tg.tool, tg.used = base, tool, True
-        tg.uses.append((0, tok.start))
+        tg.use(base, tool, self.f, 0, tok.start, lambda b, t: f"{b} and {t}")
 
 
 def read_pdl2(path: str | Path) -> tuple[Program, list[str]]:

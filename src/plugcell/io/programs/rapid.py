@@ -380,12 +380,7 @@ class _Reader:
                           f"({a[0].text}…): left as it is")
 
     def use(self, tg: Target, tool: str, wobj: str | None, tok: _Tok) -> None:
-        if tg.uses and (tg.base, tg.tool) != (wobj, tool):
-            raise self.f.error(tok.start, f"{tg.name} is used with tool {tool} and work "
-                               f"object {wobj} here, with {tg.tool} and {tg.base} before: one "
-                               "set of numbers cannot be compensated for both")
-        tg.base, tg.tool, tg.used = wobj, tool, True
-        tg.uses.append((0, tok.start))
+        tg.use(wobj, tool, self.f, 0, tok.start, lambda b, t: f"tool {t} and work object {b}")
 
 
 def read_rapid(path: str | Path) -> tuple[Program, list[str]]:

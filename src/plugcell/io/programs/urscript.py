@@ -244,11 +244,7 @@ class _Reader:
         if id(tg) not in self.listed:
             self.listed.add(id(tg))
             self.program.targets.append(tg)
-        if tg.uses and (tg.base, tg.tool) != (base, self.tool):
-            raise self.f.error(tok.start, f"{tg.name} is used with frame {base} and tool "
-                               f"{self.tool} here, with {tg.base} and {tg.tool} before")
-        tg.base, tg.tool, tg.used = base, self.tool, True
-        tg.uses.append((0, tok.start))
+        tg.use(base, self.tool, self.f, 0, tok.start, lambda b, t: f"frame {b} and tool {t}")
 
 
 def read_urscript(path: str | Path) -> tuple[Program, list[str]]:
