@@ -331,6 +331,26 @@ class Target:
         self.uses.append((file, offset))
 
 
+@dataclass(slots=True)
+class Token:
+    """A token of a program's text, as the dialects' readers cut it.
+
+    Attributes
+    ----------
+    kind : str
+        The reader's class of it (``num``, ``name``, ``str``, ``op`` …).
+    text : str
+        Its text.
+    start, end : int
+        Where it stands in its file (``text == file.text[start:end]``).
+    """
+
+    kind: str
+    text: str
+    start: int
+    end: int
+
+
 @dataclass
 class Program:
     """A program: files, targets and the frames it defines (module docstring).
