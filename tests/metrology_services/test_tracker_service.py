@@ -60,6 +60,21 @@ async def setup_robot(client: Client, base, probe, robot_pose) -> None:
     await ok(client, "Move", "", robot_pose)
 
 
+def both_tmacs(cell, world) -> None:
+    """Robot A's and robot B's T-MACs published where their robots hold them (eq. 7.1)."""
+    world(cell.name, "TMAC_A").publish(reflector(BASE_A, POSE_A, PROBE_A))
+    world(cell.name, "TMAC_B").publish(reflector(BASE_B, POSE_B, PROBE_B))
+
+
+async def comau_aimed_kuka_framed(comau: Client, kuka: Client) -> None:
+    """Both see the tracker; the Kuka has given its BASE and PROBE (robot B's) but not
+    moved the beam, the Comau is set up as robot A and holds the beam on its T-MAC."""
+    assert await comau.wait_for("TRACKER") and await kuka.wait_for("TRACKER")
+    await ok(kuka, "Set Base", "euler2tr", BASE_B)
+    await ok(kuka, "Set Probe", "euler2tr", PROBE_B)
+    await setup_robot(comau, BASE_A, PROBE_A, POSE_A)
+
+
 async def move_and_measure(client: Client, robot_pose) -> tuple[np.ndarray, float]:
     """A robot's program (8.4.2): Move, then a Single Measurement; the pose and when it came."""
     await ok(client, "Move", "", robot_pose)
@@ -117,8 +132,7 @@ def test_set_base_probe_move_and_measurements_in_the_robot_frame(cell, world):
 
 
 def test_two_robots_with_their_own_base_and_probe_get_their_own_measurements(cell, world):
-    world(cell.name, "TMAC_A").publish(reflector(BASE_A, POSE_A, PROBE_A))
-    world(cell.name, "TMAC_B").publish(reflector(BASE_B, POSE_B, PROBE_B))
+    both_tmacs(cell, world)
 
     async def body():
         async with Client("KUKA_A", cell=cell.name) as a, Client("COMAU_B", cell=cell.name) as b:
@@ -143,8 +157,7 @@ def test_a_robot_whose_beam_another_robot_took_is_measured_not_the_other(cell, w
     robot aims the beam back where that robot's own last Move put it, so it measures
     its own reflector — never the other robot's — and two robots taking turns cannot
     starve each other by stealing the beam (7.4, 8.4.3)."""
-    world(cell.name, "TMAC_A").publish(reflector(BASE_A, POSE_A, PROBE_A))
-    world(cell.name, "TMAC_B").publish(reflector(BASE_B, POSE_B, PROBE_B))
+    both_tmacs(cell, world)
 
     async def body():
         async with Client("KUKA_A", cell=cell.name) as a, Client("COMAU_B", cell=cell.name) as b, \
@@ -199,16 +212,12 @@ def test_a_reflector_that_vanishes_ends_the_lock_with_its_name(cell, world):
 
 
 def test_the_second_robot_waits_for_the_first_robots_stop_measurement(cell, world):
-    world(cell.name, "TMAC_A").publish(reflector(BASE_A, POSE_A, PROBE_A))
-    world(cell.name, "TMAC_B").publish(reflector(BASE_B, POSE_B, PROBE_B))
+    both_tmacs(cell, world)
 
     async def body():
         async with Client("COMAU", cell=cell.name) as comau, \
                 Client("KUKA", cell=cell.name) as kuka:
-            assert await comau.wait_for("TRACKER") and await kuka.wait_for("TRACKER")
-            await ok(kuka, "Set Base", "euler2tr", BASE_B)
-            await ok(kuka, "Set Probe", "euler2tr", PROBE_B)
-            await setup_robot(comau, BASE_A, PROBE_A, POSE_A)
+            await comau_aimed_kuka_framed(comau, kuka)
             stream = await comau.create_process("TRACKER", "Continuous Measurement", "", 50,
                                                 timeout=30)
             first = await anext(aiter(stream))  # Running: the Comau holds the tracker
@@ -229,16 +238,12 @@ def test_a_tracked_path_holds_the_tracker_the_other_robot_is_served_after(cell, 
     """Issue 38: a Stream Measurement (a tracked path) holds the shared tracker until its
     Stop Measurement, as Continuous Measurement does (8.4.3); the other robot's Move and
     measurement wait in the queue and are served after, each in its own frame."""
-    world(cell.name, "TMAC_A").publish(reflector(BASE_A, POSE_A, PROBE_A))
-    world(cell.name, "TMAC_B").publish(reflector(BASE_B, POSE_B, PROBE_B))
+    both_tmacs(cell, world)
 
     async def body():
         async with Client("COMAU", cell=cell.name) as comau, \
                 Client("KUKA", cell=cell.name) as kuka:
-            assert await comau.wait_for("TRACKER") and await kuka.wait_for("TRACKER")
-            await ok(kuka, "Set Base", "euler2tr", BASE_B)
-            await ok(kuka, "Set Probe", "euler2tr", PROBE_B)
-            await setup_robot(comau, BASE_A, PROBE_A, POSE_A)
+            await comau_aimed_kuka_framed(comau, kuka)
             stream = await comau.create_process("TRACKER", "Stream Measurement", "tr2euler",
                                                 [1000, 10], timeout=30)
             rows = []
@@ -266,8 +271,7 @@ def test_a_tracked_path_holds_the_tracker_the_other_robot_is_served_after(cell, 
 
 
 def test_a_robot_that_dies_holding_the_tracker_does_not_block_the_other(cell, world):
-    world(cell.name, "TMAC_A").publish(reflector(BASE_A, POSE_A, PROBE_A))
-    world(cell.name, "TMAC_B").publish(reflector(BASE_B, POSE_B, PROBE_B))
+    both_tmacs(cell, world)
 
     async def prepare():
         async with Client("HOLDER", cell=cell.name) as holder:
