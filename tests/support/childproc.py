@@ -119,3 +119,43 @@ def group_alive(pgid: int) -> bool:
     except PermissionError:  # pragma: no cover
         return True
     return True
+
+
+class Launcher:
+    """Child processes started with one ``PLUGCELL_HOME``; :meth:`stop` stops them all.
+
+    Parameters
+    ----------
+    home : str or Path
+        The services' home (keys, journals, programs).
+    env : dict, optional
+        More environment of every child.
+    """
+
+    def __init__(self, home: str | os.PathLike[str], env: dict[str, str] | None = None) -> None:
+        self.env = {**os.environ, "PLUGCELL_HOME": str(home), "PYTHONUNBUFFERED": "1",
+                    **(env or {})}
+        self.started: list[Proc] = []
+
+    def start(self, argv: list[str], env: dict[str, str] | None = None) -> Proc:
+        """Start ``argv`` (``env``: this child's own additions)."""
+        proc = Proc(argv, {**self.env, **(env or {})})
+        self.started.append(proc)
+        return proc
+
+    def serve(self, kind: str, cell: str, *extra: str, name: str | None = None,
+              env: dict[str, str] | None = None, wait: bool = True) -> Proc:
+        """``plugcell serve KIND --cell CELL …`` (``--name NAME``), waited for until it
+        serves unless ``wait`` is False."""
+        argv = plugcell_argv("serve", kind, "--cell", cell, *extra)
+        if name:
+            argv += ["--name", name]
+        proc = self.start(argv, env)
+        if wait:
+            proc.wait_line(lambda line: "serving in cell" in line, 30.0)
+        return proc
+
+    def stop(self) -> None:
+        """Stop every child started (its whole process group)."""
+        for proc in self.started:
+            proc.stop()
