@@ -16,6 +16,7 @@ import sys
 import threading
 import time
 from collections.abc import Callable
+from pathlib import Path
 from typing import IO
 
 
@@ -159,3 +160,39 @@ class Launcher:
         """Stop every child started (its whole process group)."""
         for proc in self.started:
             proc.stop()
+
+
+class CellProcesses:
+    """The services of one cell run as OS processes, through a :class:`Launcher`
+    (``stop()`` ends them all).
+
+    Parameters
+    ----------
+    name : str
+        The cell.
+    home : str or Path
+        Its services' home.
+    """
+
+    def __init__(self, name: str, home: str | os.PathLike[str]) -> None:
+        self.name = name
+        self.home = Path(home)
+        self.launcher = Launcher(home)
+
+    def start(self, *args: str) -> Proc:
+        """Start ``plugcell ARGS…``."""
+        return self.launcher.start(plugcell_argv(*args))
+
+    def serve(self, kind: str, *extra: str) -> Proc:
+        """``plugcell serve KIND`` in this cell, waited for until it serves."""
+        return self.launcher.serve(kind, self.name, *extra)
+
+    def cli(self, *args: str, timeout: float = 30.0) -> Proc:
+        """Run a ``plugcell`` command in this cell to its end (bounded)."""
+        proc = self.start(*args, "--cell", self.name)
+        proc.popen.wait(timeout)
+        return proc
+
+    def stop(self) -> None:
+        """Stop every child started."""
+        self.launcher.stop()
