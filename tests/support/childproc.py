@@ -3,7 +3,9 @@
 Shared by the test folders (the root ``tests/conftest.py`` puts this folder on
 ``sys.path``): a :class:`Proc` collects stdout lines on a thread, waits for a line,
 and is stopped or killed with its whole process group, so no test leaves a child
-behind.
+behind; a :class:`Launcher` starts them with one home and stops them all,
+:class:`CellProcesses` the services of one cell; :func:`until` and :func:`wait_until`
+poll for what another process or thread makes true.
 """
 
 from __future__ import annotations
