@@ -18,7 +18,6 @@ from plugcell.calibration import CalibrationData, Calibrator, ErrorModel
 from plugcell.calibration.identifiability import random_configurations, structural_identifiability
 from plugcell.compensation import IdentifiedModel, compensate, compensate_joints, nominal_joints
 from plugcell.io.params import params_document, result_from_params
-from plugcell.io.robots import load_robot
 from plugcell.kinematics import forward, pose_error
 from plugcell.kinematics.transforms import so3_exp
 
@@ -27,11 +26,6 @@ TRACKER[:3, :3] = so3_exp([0.2, -0.1, 2.0])
 TRACKER[:3, 3] = [2.5, -1.0, 0.3]
 TMAC = np.eye(4)
 TMAC[:3, 3] = [0.02, -0.05, 0.12]
-
-
-@pytest.fixture(scope="module")
-def fanuc():
-    return load_robot("fanuc_m20ia")
 
 
 @pytest.fixture(scope="module")

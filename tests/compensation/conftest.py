@@ -1,4 +1,5 @@
-"""Shared fixtures: the Smart H4, a perturbed model 5, a calibrated twin (seeded)."""
+"""Shared fixtures: a perturbed model 5 of the Smart H4 (``h4``: tests/conftest.py), a
+calibrated twin (seeded)."""
 
 from __future__ import annotations
 
@@ -11,17 +12,11 @@ from compensation_testlib import perturbed_error_model
 from plugcell.calibration.identify import Calibrator
 from plugcell.calibration.result import CalibrationResult
 from plugcell.compensation import IdentifiedModel
-from plugcell.io.robots import load_robot
 from plugcell.kinematics import RobotDescription
 from plugcell.sim.twin.campaign import measure_poses, working_volume_joints
 from plugcell.sim.twin.robot import RobotTwin
 from plugcell.sim.twin.scenario import TwinScenario
 from plugcell.sim.twin.tracker import LaserTracker
-
-
-@pytest.fixture(scope="session")
-def h4() -> RobotDescription:
-    return load_robot("smart_h4")
 
 
 @pytest.fixture(scope="session")
