@@ -4,12 +4,13 @@ from __future__ import annotations
 
 import asyncio
 import uuid
-from collections.abc import Coroutine
+from collections.abc import AsyncIterable, Coroutine
 from typing import Any
 
 import numpy as np
 from childproc import Proc, plugcell_argv  # noqa: F401  (re-exported for the tests)
 
+from plugcell.framework import ProcessCall
 from plugcell.io.units import pose_from_robot
 
 
@@ -28,3 +29,16 @@ def pose(v: list[float]) -> np.ndarray:
     return pose_from_robot(v, "zyz")
 
 
+
+
+async def take_rows(updates: AsyncIterable[Any], count: int,
+                    rows: list[np.ndarray] | None = None) -> list[np.ndarray]:
+    """The data rows of a stream's ``updates`` appended to ``rows`` until it holds
+    ``count`` (the updates without data passed over); ``rows``."""
+    rows = [] if rows is None else rows
+    async for update in updates:
+        if update.data is not None:
+            rows.append(ProcessCall.array(update))
+            if len(rows) >= count:
+                break
+    return rows

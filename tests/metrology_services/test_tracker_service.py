@@ -11,7 +11,7 @@ import time
 
 import numpy as np
 import pytest
-from metrology_testlib import pose, run, unique_cell
+from metrology_testlib import pose, run, take_rows, unique_cell
 
 from plugcell.apps.kinds import build
 from plugcell.framework import Client, ProcessCall, ProcessStates
@@ -116,12 +116,7 @@ def test_set_base_probe_move_and_measurements_in_the_robot_frame(cell, world):
             # Continuous Measurement: a stream until Stop Measurement releases the tracker
             stream = await robot.create_process("TRACKER", "Continuous Measurement", "tr2euler",
                                                 20, timeout=30)
-            samples = []
-            async for update in stream:
-                if update.data is not None:
-                    samples.append(ProcessCall.array(update))
-                    if len(samples) == 3:
-                        break
+            samples = await take_rows(stream, 3)
             stop = await robot.stop_process(stream)
             assert (await stop.result()).state is C
             assert (await stream.result()).state is C
@@ -255,11 +250,7 @@ def test_a_tracked_path_holds_the_tracker_the_other_robot_is_served_after(cell, 
                     rows.append(ProcessCall.array(update))
 
             waiting = asyncio.create_task(move_and_measure(kuka, POSE_B))
-            async for update in updates:  # the path goes on, its samples keep coming
-                if update.data is not None:
-                    rows.append(ProcessCall.array(update))
-                if len(rows) == 20:
-                    break
+            await take_rows(updates, 20, rows)  # the path goes on, its samples keep coming
             assert not waiting.done()  # queued behind the stream
             await served_after_stop(comau, stream, waiting, POSE_B)
         samples = np.vstack(rows)
