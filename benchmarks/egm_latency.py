@@ -16,9 +16,7 @@ core.  Nothing is asserted; the table says which goals the run met.
 
 from __future__ import annotations
 
-import json
 import sys
-import time
 
 from plugcell.devices.robot.egm.messages import egm_pb2
 from rsi_latency import Vendor, main
@@ -58,22 +56,12 @@ def run_link(cycle_ms: float, rt: int | None) -> None:
     from plugcell.devices.robot.egm import EgmConfig, EgmLink
     from plugcell.devices.robot.stream.source import SineOffset
     from plugcell.io.units import DEG
-    from rsi_latency import _cpu, _report
+    from rsi_latency import serve_link
 
     cfg = EgmConfig(robot_host="127.0.0.1", listen_host="127.0.0.1", listen_port=0,
                     mode="joint", sample_rate_ms=int(cycle_ms))
-    link = EgmLink(cfg, SineOffset(axis=5, amplitude=2 * DEG, period=4.0, periods=10**6),
-                   record_latency=True, rt_priority=rt)
-    link.start()
-    time.sleep(0.05)
-    print(f"READY {link.address[1]} {link.rt_note}", flush=True)
-    sys.stdin.readline()  # the warm-up is over
-    del link.latencies[:]
-    cpu0, t0 = _cpu(), time.monotonic()
-    _report(link.latencies, cpu0, t0)
-    st = link.stats()
-    print(json.dumps({"stats": dict(st.__dict__.items())}), flush=True)
-    link.close()
+    serve_link(EgmLink(cfg, SineOffset(axis=5, amplitude=2 * DEG, period=4.0, periods=10**6),
+                       record_latency=True, rt_priority=rt))
 
 
 EGM = Vendor("EGM", __file__, egm_message, seqno_of, lambda cycle_ms: 1, header_part,

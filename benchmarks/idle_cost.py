@@ -34,13 +34,14 @@ from __future__ import annotations
 import argparse
 import os
 import platform
-import socket
 import subprocess
 import sys
 import tempfile
 import time
 import uuid
 from pathlib import Path
+
+from plugcell.sim.ports import free_port
 
 KINDS = ("camera", "drill", "bench", "compute")
 #: A bare Zenoh session with plugcell's transport configuration, announcing itself.
@@ -145,13 +146,6 @@ def measure(commands: list[list[str]], env: dict[str, str], seconds: float,
             by_thread_name(threads_before, threads_after))
 
 
-def _free_port() -> int:
-    """A TCP port of loopback nobody listens on now (for the star's router)."""
-    with socket.socket() as probe:
-        probe.bind(("127.0.0.1", 0))
-        return int(probe.getsockname()[1])
-
-
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--services", type=int, default=20)
@@ -194,7 +188,7 @@ def main() -> int:
                 env = {**base_env, **SETTINGS[setting], "PLUGCELL_HOME": str(home),
                        "PYTHONUNBUFFERED": "1"}
                 router = ([sys.executable, "-m", "plugcell", "router", "--listen",
-                           f"tcp/127.0.0.1:{_free_port()}"] if star else None)
+                           f"tcp/127.0.0.1:{free_port()}"] if star else None)
                 if router is not None:
                     env.update(PLUGCELL_MODE="client", PLUGCELL_MULTICAST="0",
                                PLUGCELL_CONNECT=router[-1])

@@ -29,7 +29,6 @@ import asyncio
 import json
 import os
 import platform
-import socket
 import statistics
 import subprocess
 import sys
@@ -41,14 +40,9 @@ from asyncua import Client as UaClient
 from asyncua import ua
 
 from plugcell.framework import Client
+from plugcell.sim.ports import free_port
 
 PLUGCELL = [sys.executable, "-m", "plugcell"]
-
-
-def _free_port() -> int:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return int(s.getsockname()[1])
 
 
 def _start(argv: list[str], ready: str, env: dict[str, str]) -> subprocess.Popen[str]:
@@ -202,7 +196,7 @@ def main(argv: list[str]) -> int:
     parser.add_argument("--json", help="write the results to this file")
     args = parser.parse_args(argv)
     cell = f"bench-ua-{uuid.uuid4().hex[:8]}"
-    port = _free_port()
+    port = free_port()
     url = f"opc.tcp://127.0.0.1:{port}/plugcell"
     with tempfile.TemporaryDirectory() as home:
         env = {**os.environ, "PLUGCELL_HOME": home, "PYTHONUNBUFFERED": "1"}

@@ -27,19 +27,13 @@ import numpy as np
 
 
 def _params(tmp: Path) -> tuple[Path, object]:
-    from plugcell.calibration.identify import Calibrator
     from plugcell.io.params import params_json
-    from plugcell.sim.twin.campaign import measure_poses, working_volume_joints
+    from plugcell.sim.twin.calibrated import calibrate_twin
     from plugcell.sim.twin.robot import RobotTwin
     from plugcell.sim.twin.scenario import TwinScenario
-    from plugcell.sim.twin.tracker import LaserTracker
 
-    sc = TwinScenario(seed=3, payload_kg=36.0)
-    robot = RobotTwin(sc)
-    q = working_volume_joints(robot.description, robot.reveal_truth().profile, 60,
-                              np.random.default_rng(4))
-    ms, _ = measure_poses(robot, LaserTracker(seed=3), q)
-    result = Calibrator(robot.description, 5).fit(ms)
+    result = calibrate_twin(RobotTwin(TwinScenario(seed=3, payload_kg=36.0)), 60,
+                            joints_seed=4, tracker_seed=3)
     p = tmp / "params.json"
     p.write_text(params_json(result))
     return p, result

@@ -114,8 +114,14 @@ def run_link(cycle_ms: float, rt: int | None) -> None:
 
     cfg = RsiConfig(robot_host="127.0.0.1", listen_host="127.0.0.1", listen_port=0,
                     mode="absolute", cycle="IPO_FAST" if cycle_ms == 4 else "IPO")
-    link = RsiLink(cfg, SineOffset(axis=5, amplitude=2 * DEG, period=4.0, periods=10**6),
-                   record_latency=True, rt_priority=rt)
+    serve_link(RsiLink(cfg, SineOffset(axis=5, amplitude=2 * DEG, period=4.0, periods=10**6),
+                       record_latency=True, rt_priority=rt))
+
+
+def serve_link(link) -> None:
+    """The link role of a run (RSI's or EGM's link, recording latencies): start it, say
+    ``READY <port>``, forget the warm-up when told (a line on stdin), report the measured
+    seconds and the link's counters, close it."""
     link.start()
     time.sleep(0.05)
     print(f"READY {link.address[1]} {link.rt_note}", flush=True)
@@ -123,8 +129,7 @@ def run_link(cycle_ms: float, rt: int | None) -> None:
     del link.latencies[:]
     cpu0, t0 = _cpu(), time.monotonic()
     _report(link.latencies, cpu0, t0)
-    st = link.stats()
-    print(json.dumps({"stats": {k: v for k, v in st.__dict__.items()}}), flush=True)
+    print(json.dumps({"stats": dict(link.stats().__dict__)}), flush=True)
     link.close()
 
 

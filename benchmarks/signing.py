@@ -20,7 +20,6 @@ import asyncio
 import datetime as dt
 import json
 import random
-import socket
 import statistics
 import sys
 import tempfile
@@ -37,6 +36,7 @@ from plugcell.framework import codec
 from plugcell.framework.certificates import create_ca, issue_certificate
 from plugcell.framework.messages import Command, Data, DataTypes, Process, Tag
 from plugcell.framework.signing import RequestSigner, RequestVerifier
+from plugcell.sim.ports import free_port
 
 
 def _leaf(folder: Path, name: str, key: Any) -> x509.Certificate:
@@ -111,12 +111,6 @@ def micro(folder: Path, n: int) -> list[dict[str, Any]]:
     return rows
 
 
-def _free_port() -> int:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return int(s.getsockname()[1])
-
-
 async def _round_trips(folder: Path, identity: str, n: int) -> list[float]:
     from plugcell.framework import Client, CommandTypes, GenericDevice, TransportConfig
     from plugcell.framework.declaration import Declaration
@@ -132,7 +126,7 @@ async def _round_trips(folder: Path, identity: str, n: int) -> list[float]:
         async def dispatch(self, command: Command, option: str, data: Any) -> str:
             return command.success_code
 
-    endpoint = f"tls/127.0.0.1:{_free_port()}"
+    endpoint = f"tls/127.0.0.1:{free_port()}"
     tls = {"multicast": False, "tls_ca": str(folder / "ca.pem")}
     service_tp = TransportConfig(listen=(endpoint,), tls_cert=str(folder / "TRACKER.pem"),
                                  tls_key=str(folder / "TRACKER.key"), **tls)  # type: ignore[arg-type]

@@ -39,18 +39,13 @@ from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 from pathlib import Path
 
+from plugcell.sim.ports import free_port
+
 ROOT = Path(__file__).resolve().parents[1]
 JS = ROOT / "tests" / "opcua" / "js"
 MAP = ROOT / "tests" / "opcua" / "gripper.toml"
 #: Seconds a process gets to exit after SIGTERM before it is killed (shown as "> 45").
 STOP_LIMIT_S = 45.0
-
-
-def free_port() -> int:
-    """A TCP port on 127.0.0.1 that was free a moment ago."""
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return int(s.getsockname()[1])
 
 
 def plugcell(*args: str) -> list[str]:

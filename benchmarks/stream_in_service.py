@@ -42,28 +42,17 @@ from pathlib import Path
 
 import numpy as np
 
+from plugcell.sim.ports import free_port
+
 WARMUP_S = 2.0
-SWING = """\
-PROGRAM benchswing
-BEGIN
-  WHILE TRUE DO
-    MOVE TO JNTP(8, -85, -185, 0, 85, 5)
-    MOVE TO JNTP(-8, -90, -187, 0, 90, 0)
-  ENDWHILE
-END benchswing
-"""
+#: the program the service runs: it swings two axes, a PTP a second, until stopped
+SWING = Path(__file__).resolve().parents[1] / "tests" / "robot" / "programs" / "swing.pdl"
 #: vendor → the twin's command (``plugcell twin …``), the service's flag of the stream,
 #: the twin's timeout option and the service's (both far out: the run measures on whatever
 #: happens), and the controller's default timeout in cycles (RSI Timeout 100; EGM
 #: \CommTimeout 1 s)
 TWINS = {"RSI": ("rsi", "--rsi", "10000", "10000", 100),
          "EGM": ("egm", "--egm", "3600", "60", 250)}
-
-
-def _free_udp_port() -> int:
-    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
-        s.bind(("127.0.0.1", 0))
-        return int(s.getsockname()[1])
 
 
 def _tree_cpu_s(pid: int) -> float:
@@ -168,10 +157,10 @@ def measure(vendor: str, seconds: float, cycle_ms: float = 4.0, thread: bool = F
     side, flag, twin_timeout, service_timeout, _ = TWINS[vendor]
     home = Path(tempfile.mkdtemp(prefix="plugcell-in-service-"))
     (home / "programs").mkdir()
-    (home / "programs" / "benchswing.pdl").write_text(SWING)
+    shutil.copy(SWING, home / "programs")
     env = {**os.environ, "PLUGCELL_HOME": str(home), "PYTHONUNBUFFERED": "1"}
     cell = f"ins{uuid.uuid4().hex[:8]}"
-    port = _free_udp_port()
+    port = free_port("udp")
     stats_file = home / "twin.json"
     echo = EchoPinger(cycle_ms)
     twin = subprocess.Popen([sys.executable, "-m", "plugcell", "twin", side, "--ip",
@@ -187,7 +176,7 @@ def measure(vendor: str, seconds: float, cycle_ms: float = 4.0, thread: bool = F
     try:
         _wait_line(twin, "streaming", 60)
         _wait_line(service, "serving in cell", 60)
-        started = _plugcell(env, "call", "ROBOT", "ACTIVATE", "--data", '["benchswing"]',
+        started = _plugcell(env, "call", "ROBOT", "ACTIVATE", "--data", '["swing"]',
                             "--cell", cell)
         if '"Completed"' not in started:
             raise RuntimeError(f"the program did not start: {started}")

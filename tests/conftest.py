@@ -1,4 +1,5 @@
 """Test-suite wide setup: the shared helpers of ``tests/support`` are importable by name,
+the shipped robots most tests use are session fixtures (``h4``, ``elbow``, ``fanuc``),
 every property-based test is deterministic (hypothesis draws from a fixed seed per
 test and keeps no example database: the same examples on every machine and run), and the
 count of the docs' examples (run, skipped with their reasons; ``tests/docs``) is in
@@ -9,12 +10,34 @@ pytest-xdist only this conftest's hooks run in the controller, which writes the 
 import sys
 from pathlib import Path
 
+import pytest
 from hypothesis import settings
+
+from plugcell.io.robots import load_robot
+from plugcell.kinematics import RobotDescription
 
 sys.path.insert(0, str(Path(__file__).resolve().parent / "support"))
 
 settings.register_profile("plugcell", derandomize=True, database=None)
 settings.load_profile("plugcell")
+
+
+@pytest.fixture(scope="session")
+def h4() -> RobotDescription:
+    """The Comau Smart H4 (a parallelogram loop), as shipped."""
+    return load_robot("smart_h4")
+
+
+@pytest.fixture(scope="session")
+def elbow() -> RobotDescription:
+    """The serial six-axis elbow6, as shipped."""
+    return load_robot("elbow6")
+
+
+@pytest.fixture(scope="session")
+def fanuc() -> RobotDescription:
+    """Fanuc M-20iA with Fanuc's joint readings (a [coupling])."""
+    return load_robot("fanuc_m20ia")
 
 
 #: Every page's examples as its test report carries them (``user_properties``), so that

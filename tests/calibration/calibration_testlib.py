@@ -4,8 +4,9 @@ from __future__ import annotations
 
 import numpy as np
 
+from plugcell.calibration.model import ErrorModel
 from plugcell.io.robot_schema import description_from_dict
-from plugcell.kinematics import RobotDescription
+from plugcell.kinematics import RobotDescription, pose_error
 from plugcell.kinematics.transforms import so3_exp
 
 _UR10_A = [0.0, -0.612, -0.5723, 0.0, 0.0, 0.0]
@@ -76,3 +77,39 @@ def harmonic_campaign(n: int, seed: int = 0, amplitude_rad: float = 4e-4,
     T = m.predict(q + dq)
     T[:, :3, 3] += rng.normal(scale=noise_m, size=(n, 3))
     return desc, CalibrationData.from_poses(q, T)
+
+
+#: Step of the central differences of the identification Jacobian (m, rad).
+H_FD = 1e-6
+
+
+def fd_columns(model: ErrorModel, batch, keys) -> np.ndarray:
+    """Central differences of the predicted poses along the parameters ``keys``: the
+    columns the identification Jacobian is checked against (pose error, m and rad)."""
+    T0 = model.predict_batch(batch)
+    cols = []
+    for k in keys:
+        # a joint compliance c_j (rad/(N·m)) multiplies torques of up to ~1e4 N·m: its
+        # step is scaled so that it moves the joints by ~1e-6 rad like the others
+        h = H_FD
+        if k in model.compliance_keys:
+            reg = batch.regressors[:, :, model.compliance_keys.index(k)]
+            h = H_FD / max(1.0, float(np.abs(reg).max()))
+        Tp = model.updated({k: h}).predict_batch(batch)
+        Tm = model.updated({k: -h}).predict_batch(batch)
+        cols.append((pose_error(Tp, T0) - pose_error(Tm, T0)) / (2 * h))
+    return np.stack(cols, axis=-1)
+
+
+def perturbed_model(desc: RobotDescription, family: str, rng: np.random.Generator, *,
+                    scale: float = 2e-3, **create) -> ErrorModel:
+    """An error model (``ErrorModel.create(desc, family, **create)``) with random BASE
+    and PROBE and random values: ``scale`` for every parameter, 1e-4 of it for the joint
+    compliances (rad/(N·m): against torques of ~1e3 N·m)."""
+    m = ErrorModel.create(desc, family, **create)
+    m = m.with_references(random_frame(rng, 1.0, 2.0), random_frame(rng, 0.5, 0.1))
+    v = rng.normal(size=len(m.space)) * scale
+    for i, p in enumerate(m.space):
+        if p.unit == "rad/(N·m)":
+            v[i] *= 1e-4
+    return m.with_values(v)

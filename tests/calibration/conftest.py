@@ -11,19 +11,8 @@ from plugcell.kinematics import RobotDescription
 
 
 @pytest.fixture(scope="session")
-def h4() -> RobotDescription:
-    return load_robot("smart_h4")
-
-
-@pytest.fixture(scope="session")
 def ur10() -> RobotDescription:
     return ur10_description()
-
-
-@pytest.fixture(scope="session")
-def fanuc() -> RobotDescription:
-    """Fanuc M-20iA with Fanuc's joint readings (a [coupling])."""
-    return load_robot("fanuc_m20ia")
 
 
 @pytest.fixture(scope="session")

@@ -5,8 +5,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from calibration_testlib import harmonic_campaign, random_frame
-from test_calibration_jacobian import _fd_columns
+from calibration_testlib import fd_columns, harmonic_campaign, perturbed_model
 
 from plugcell.calibration import CalibrationError, Calibrator, ErrorModel
 from plugcell.calibration.identifiability import random_configurations, structural_identifiability
@@ -18,19 +17,13 @@ from plugcell.io.params import params_document, result_from_params
 def test_harmonic_columns_match_central_differences(robot, family, request):
     desc = request.getfixturevalue(robot)
     rng = np.random.default_rng(11)
-    m = ErrorModel.create(desc, family, gravity=True, harmonics=2)
-    m = m.with_references(random_frame(rng, 1.0, 2.0), random_frame(rng, 0.5, 0.1))
-    v = rng.normal(size=len(m.space)) * 2e-3
-    for i, p in enumerate(m.space):
-        if p.unit == "rad/(N·m)":
-            v[i] *= 1e-4
-    m = m.with_values(v)
+    m = perturbed_model(desc, family, rng, gravity=True, harmonics=2)
     keys = [p.key for p in m.space if p.kind == "harmonic"]
     assert len(keys) == 4 * desc.n_actuated
     q = random_configurations(m, 6, seed=4)
     batch = m.batch(q)
     an = identification_jacobian(m, batch, keys).H
-    fd = _fd_columns(m, batch, keys)
+    fd = fd_columns(m, batch, keys)
     for c, k in enumerate(keys):
         scale = max(np.abs(an[:, :, c]).max(), np.abs(fd[:, :, c]).max())
         err = np.abs(an[:, :, c] - fd[:, :, c]).max()

@@ -12,41 +12,12 @@ import math
 
 import numpy as np
 import pytest
-from calibration_testlib import random_frame
+from calibration_testlib import fd_columns, perturbed_model, random_frame
 
 from plugcell.calibration.identifiability import random_configurations
 from plugcell.calibration.jacobian import identification_jacobian
 from plugcell.calibration.model import ErrorModel
-from plugcell.kinematics import forward, manipulator_jacobian, pose_error
-
-H_FD = 1e-6
-
-
-def _fd_columns(model: ErrorModel, batch, keys) -> np.ndarray:
-    T0 = model.predict_batch(batch)
-    cols = []
-    for k in keys:
-        # a joint compliance c_j (rad/(N·m)) multiplies torques of up to ~1e4 N·m: its
-        # step is scaled so that it moves the joints by ~1e-6 rad like the others
-        h = H_FD
-        if k in model.compliance_keys:
-            reg = batch.regressors[:, :, model.compliance_keys.index(k)]
-            h = H_FD / max(1.0, float(np.abs(reg).max()))
-        Tp = model.updated({k: h}).predict_batch(batch)
-        Tm = model.updated({k: -h}).predict_batch(batch)
-        cols.append((pose_error(Tp, T0) - pose_error(Tm, T0)) / (2 * h))
-    return np.stack(cols, axis=-1)
-
-
-def _perturbed_model(desc, family, rng, *, scale=2e-3, gravity=True, payload=True):
-    m = ErrorModel.create(desc, family, gravity=gravity, payload=payload, payload_ref_kg=36.0)
-    m = m.with_references(random_frame(rng, 1.0, 2.0), random_frame(rng, 0.5, 0.1))
-    v = rng.normal(size=len(m.space)) * scale
-    for i, p in enumerate(m.space):
-        if p.unit == "rad/(N·m)":
-            v[i] *= 1e-4  # compliance of ~1e-7 rad/(N·m) against torques of ~1e3 N·m
-    return m.with_values(v)
-
+from plugcell.kinematics import forward, manipulator_jacobian
 
 CASES = [("h4", "loop"), ("h4", "serial"), ("ur10", "serial"),
          # robots with a joint coupling (readings ≠ kinematic joints)
@@ -58,13 +29,13 @@ CASES = [("h4", "loop"), ("h4", "serial"), ("ur10", "serial"),
 def test_every_analytic_column_matches_central_differences(robot, family, request):
     desc = request.getfixturevalue(robot)
     rng = np.random.default_rng(7)
-    model = _perturbed_model(desc, family, rng)
+    model = perturbed_model(desc, family, rng, gravity=True, payload=True, payload_ref_kg=36.0)
     q = random_configurations(model, 6, seed=3)
     batch = model.batch(q, rng.uniform(0.0, 40.0, len(q)))
     keys = model.space.keys
     jac = identification_jacobian(model, batch)
     np.testing.assert_allclose(jac.poses, model.predict_batch(batch), atol=1e-14)
-    fd = _fd_columns(model, batch, keys)
+    fd = fd_columns(model, batch, keys)
     for c, k in enumerate(keys):
         an = jac.H[:, :, c]
         scale = max(np.abs(an).max(), np.abs(fd[:, :, c]).max())
@@ -77,7 +48,7 @@ def test_columns_exact_at_nominal_and_vectorised_over_poses(h4):
     q = random_configurations(model, 5, seed=11)
     batch = model.batch(q, 18.0)
     H = identification_jacobian(model, batch).H
-    fd = _fd_columns(model, batch, model.space.keys)
+    fd = fd_columns(model, batch, model.space.keys)
     assert np.abs(H - fd).max() <= 1e-7 * np.abs(H).max()
     for i in range(len(q)):
         Hi = identification_jacobian(model, model.batch(q[i:i + 1], 18.0)).H
@@ -224,7 +195,7 @@ def test_folding_the_frames_into_the_references_keeps_the_prediction(h4):
     from plugcell.calibration.model import fold_frames
 
     rng = np.random.default_rng(12)
-    m = _perturbed_model(h4, "loop", rng, gravity=False, payload=False)
+    m = perturbed_model(h4, "loop", rng, gravity=False, payload=False, payload_ref_kg=36.0)
     q = random_configurations(m, 8, seed=13)
     f = fold_frames(m)
     np.testing.assert_allclose(f.predict(q), m.predict(q), atol=1e-12)

@@ -2,21 +2,15 @@
 
 from __future__ import annotations
 
-import subprocess
-import sys
+from loaded_modules import modules_loaded_by
 
 
 def test_calibration_imports_no_twin_framework_or_io():
-    code = (
-        "import sys, plugcell.calibration, "
-        "plugcell.calibration.planning, "
-        "plugcell.calibration.simulation\n"
-        "bad = [m for m in sys.modules if m.startswith(('plugcell.sim.twin', 'plugcell.framework', "
-        "'plugcell.devices', 'plugcell.io', 'plugcell.apps.commands', 'zenoh', 'matplotlib'))]\n"
-        "print(','.join(bad))"
-    )
-    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
-    assert out.stdout.strip() == ""
+    assert modules_loaded_by(
+        "import plugcell.calibration, plugcell.calibration.planning, "
+        "plugcell.calibration.simulation",
+        ["plugcell.sim.twin", "plugcell.framework", "plugcell.devices", "plugcell.io",
+         "plugcell.apps.commands", "zenoh", "matplotlib"]) == []
 
 
 def test_bench_calibration_reports_t150():

@@ -5,8 +5,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from calibration_testlib import harmonic_campaign, random_frame
-from test_calibration_jacobian import _fd_columns
+from calibration_testlib import fd_columns, harmonic_campaign, perturbed_model
 
 from plugcell.calibration import (
     CalibrationData,
@@ -27,20 +26,14 @@ def test_every_column_with_the_thermal_term_matches_central_differences(robot, f
     scaled): all of them, κT's own included, against central differences."""
     desc = request.getfixturevalue(robot)
     rng = np.random.default_rng(3)
-    m = ErrorModel.create(desc, family, gravity=True, harmonics=1, thermal=True,
-                          temperature_ref_c=20.0)
-    m = m.with_references(random_frame(rng, 1.0, 2.0), random_frame(rng, 0.5, 0.1))
-    v = rng.normal(size=len(m.space)) * 2e-3
-    for i, p in enumerate(m.space):
-        if p.unit == "rad/(N·m)":
-            v[i] *= 1e-4
-    m = m.with_values(v)
+    m = perturbed_model(desc, family, rng, gravity=True, harmonics=1, thermal=True,
+                        temperature_ref_c=20.0)
     q = random_configurations(m, 6, seed=5)
     batch = m.batch(q, None, rng.uniform(15.0, 30.0, len(q)))
     keys = m.space.keys
     jac = identification_jacobian(m, batch, keys)
     np.testing.assert_allclose(jac.poses, m.predict_batch(batch), atol=1e-14)
-    fd = _fd_columns(m, batch, keys)
+    fd = fd_columns(m, batch, keys)
     for c, k in enumerate(keys):
         scale = max(np.abs(jac.H[:, :, c]).max(), np.abs(fd[:, :, c]).max())
         err = np.abs(jac.H[:, :, c] - fd[:, :, c]).max()

@@ -3,17 +3,17 @@
 from __future__ import annotations
 
 import ast
-import json
 import os
 import subprocess
 import sys
 from pathlib import Path
 
 import pytest
-from childproc import free_port
+from loaded_modules import modules_loaded_by
 
 import plugcell.apps.commands
 from plugcell.apps.cli import COMMANDS, EXIT_BROKEN_PIPE, build_parser, chosen_command, main
+from plugcell.sim.ports import free_port
 
 #: Modules a parser must not need: the service stack, the web server, scipy.
 HEAVY = ("zenoh", "fastapi", "uvicorn", "starlette", "scipy", "plugcell.framework",
@@ -23,17 +23,8 @@ HEAVY = ("zenoh", "fastapi", "uvicorn", "starlette", "scipy", "plugcell.framewor
 def _imported_after_parser(command: str | None, heavy: tuple[str, ...] = HEAVY) -> list[str]:
     """Modules (of ``heavy``) loaded by ``import plugcell.apps.cli`` + ``build_parser(command)``,
     in a fresh interpreter."""
-    code = (
-        "import json, sys\n"
-        "import plugcell.apps.cli as cli\n"
-        f"cli.build_parser({command!r})\n"
-        f"heavy = {heavy!r}\n"
-        "print(json.dumps(sorted(m for m in sys.modules\n"
-        "                        if any(m == h or m.startswith(h + '.') for h in heavy))))\n"
-    )
-    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
-                         check=True, timeout=60)
-    return json.loads(out.stdout)
+    return modules_loaded_by(
+        f"import plugcell.apps.cli as cli\ncli.build_parser({command!r})", heavy)
 
 
 @pytest.mark.parametrize("command", [None, "kin", "calibrate", "compensate", "reproduce"])
@@ -47,11 +38,9 @@ def test_help_needs_no_numpy(command):
 
 
 def test_top_level_parser_imports_no_command_module():
-    code = ("import sys, plugcell.apps.cli as cli; cli.build_parser()\n"
-            "print([m for m in sys.modules if m.startswith('plugcell.apps.commands.')])")
-    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
-                         check=True, timeout=60)
-    assert out.stdout.strip() == "[]"
+    loaded = modules_loaded_by("import plugcell.apps.cli as cli; cli.build_parser()",
+                               ["plugcell.apps.commands"])
+    assert [m for m in loaded if m != "plugcell.apps.commands"] == []
 
 
 def test_chosen_command_is_the_first_word():

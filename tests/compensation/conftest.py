@@ -1,4 +1,5 @@
-"""Shared fixtures: the Smart H4, a perturbed model 5, a calibrated twin (seeded)."""
+"""Shared fixtures: a perturbed model 5 of the Smart H4 (``h4``: tests/conftest.py), a
+calibrated twin (seeded)."""
 
 from __future__ import annotations
 
@@ -8,20 +9,13 @@ import numpy as np
 import pytest
 from compensation_testlib import perturbed_error_model
 
-from plugcell.calibration.identify import Calibrator
 from plugcell.calibration.result import CalibrationResult
 from plugcell.compensation import IdentifiedModel
-from plugcell.io.robots import load_robot
 from plugcell.kinematics import RobotDescription
-from plugcell.sim.twin.campaign import measure_poses, working_volume_joints
+from plugcell.sim.twin.calibrated import calibrate_twin
+from plugcell.sim.twin.campaign import working_volume_joints
 from plugcell.sim.twin.robot import RobotTwin
 from plugcell.sim.twin.scenario import TwinScenario
-from plugcell.sim.twin.tracker import LaserTracker
-
-
-@pytest.fixture(scope="session")
-def h4() -> RobotDescription:
-    return load_robot("smart_h4")
 
 
 @pytest.fixture(scope="session")
@@ -48,8 +42,4 @@ class Calibrated:
 def calibrated() -> Calibrated:
     """The 36 kg twin (seed 3) calibrated with model 5 from 60 simulated poses."""
     sc = TwinScenario(seed=3, payload_kg=36.0)
-    robot = RobotTwin(sc)
-    q = working_volume_joints(robot.description, robot.reveal_truth().profile, 60,
-                              np.random.default_rng(4))
-    ms, _ = measure_poses(robot, LaserTracker(seed=3), q)
-    return Calibrated(sc, Calibrator(robot.description, 5).fit(ms))
+    return Calibrated(sc, calibrate_twin(RobotTwin(sc), 60, joints_seed=4, tracker_seed=3))

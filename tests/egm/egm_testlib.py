@@ -3,8 +3,8 @@ robot socket, and the seeded mutator of the fuzz."""
 
 from __future__ import annotations
 
-import socket
-import time
+from childproc import wait_until  # noqa: F401  (re-exported for the link tests)
+from udp_robot import UdpRobot
 
 from plugcell.devices.robot.egm import EgmConfig, EgmLink
 from plugcell.devices.robot.egm.messages import egm_pb2
@@ -30,37 +30,18 @@ def robot_message(seqno: int, tm: int | None = None,
     return msg.SerializeToString()
 
 
-class BareRobot:
+class BareRobot(UdpRobot):
     """A UDP socket on loopback playing the controller, message by message."""
 
     def __init__(self, link_address: tuple[str, int]) -> None:
-        self.sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
-        self.sock.bind(("127.0.0.1", 0))
-        self.sock.settimeout(1.0)
-        self.target = link_address
+        super().__init__(link_address)
         self.seqno = 0
-
-    def send(self, data: bytes) -> None:
-        self.sock.sendto(data, self.target)
 
     def cycle(self, **kw) -> bytes:
         """Send the next message (seqno + 1) and return the answer."""
         self.seqno += 1
         self.send(robot_message(self.seqno, **kw))
-        return self.sock.recv(65535)
-
-    def no_answer(self, wait: float = 0.05) -> bool:
-        self.sock.settimeout(wait)
-        try:
-            self.sock.recv(65535)
-        except TimeoutError:
-            return True
-        finally:
-            self.sock.settimeout(1.0)
-        return False
-
-    def close(self) -> None:
-        self.sock.close()
+        return self.receive()
 
 
 def local_config(**kw) -> EgmConfig:
@@ -71,15 +52,6 @@ def started(config: EgmConfig, source=None, **kw) -> EgmLink:
     link = EgmLink(config, source, **kw)
     link.start()
     return link
-
-
-def wait_until(predicate, timeout: float = 2.0) -> bool:
-    end = time.monotonic() + timeout
-    while time.monotonic() < end:
-        if predicate():
-            return True
-        time.sleep(0.002)
-    return predicate()
 
 
 def mutate(rng, packet: bytes) -> bytes:

@@ -10,11 +10,11 @@ echo the seqno of such a datagram."""
 from __future__ import annotations
 
 import random
-import socket
 
 import numpy as np
 import pytest
 from egm_testlib import local_config, mutate, robot_message, started, wait_until
+from link_fuzz import arrived, assert_every_datagram_accounted, drain, fuzz_socket
 
 from plugcell.devices.robot.egm import Correction
 from plugcell.devices.robot.egm.messages import egm_pb2
@@ -36,31 +36,16 @@ def robot_seqno(data: bytes) -> tuple[int, list[float]] | None:
     return msg.header.seqno, list(msg.feedBack.joints.joints)
 
 
-#: Drops of messages already counted as received (the others are datagrams that never were).
-RECEIVED_DROPS = ("stale", "inconsistent")
-
-
 @pytest.mark.slow
 def test_a_hundred_thousand_mutated_messages() -> None:
     # a short CommTimeout: between bursts the session ends, so a mutant's huge seqno
     # does not leave the rest stale
     link = started(local_config(comm_timeout_s=0.02),
                    lambda s: Correction(step=np.full(6, 1e-5)))
-    sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
-    sock.bind(("127.0.0.1", 0))
-    sock.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, 1 << 20)
+    sock = fuzz_socket()
     rng = random.Random(37)
     valid: dict[int, list[float]] = {}
     answers: list[bytes] = []
-
-    def drain() -> None:
-        sock.setblocking(False)
-        while True:
-            try:
-                answers.append(sock.recv(65535))
-            except BlockingIOError:
-                break
-        sock.setblocking(True)
 
     try:
         seqno = 0
@@ -73,23 +58,17 @@ def test_a_hundred_thousand_mutated_messages() -> None:
                     valid.setdefault(seen[0], seen[1])
                 sock.sendto(data, link.address)
             sent = start + min(BURST, PACKETS - start)
-            assert wait_until(lambda s=sent: (lambda x: x.received + sum(
-                v for k, v in x.dropped.items() if k not in RECEIVED_DROPS) >= s
-                )(link.stats()), 10.0), \
+            assert wait_until(lambda s=sent: arrived(link.stats()) >= s, 10.0), \
                 f"{sent} sent, {link.stats()}"
             if sent % SESSION == 0:
                 assert link.wait(lambda lk: not lk.streaming, 2.0)  # the session ended
-            drain()
-        drain()
+            drain(sock, answers)
+        drain(sock, answers)
     finally:
         sock.close()
         link.close()
     st = link.stats()
-    dropped = sum(v for k, v in st.dropped.items() if k not in RECEIVED_DROPS)
-    assert st.received + dropped == PACKETS  # every datagram accounted for
-    assert st.received == (st.answered + st.superseded + st.dropped["stale"]
-                           + st.dropped["inconsistent"])
-    assert len(answers) == st.answered
+    assert_every_datagram_accounted(st, PACKETS, answers)
     assert st.dropped["malformed"] > 10_000 and st.dropped["oversized"] > 50
     assert st.dropped["foreign"] > 100
     for a in answers:

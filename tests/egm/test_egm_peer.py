@@ -4,7 +4,6 @@ feedback and drives it with joint targets, pose targets and path corrections."""
 
 from __future__ import annotations
 
-import socket
 import time
 
 import numpy as np
@@ -12,18 +11,13 @@ import pytest
 
 from plugcell.io.units import DEG
 from plugcell.sim.controller.egm_robot import EgmRobotSim
+from plugcell.sim.ports import free_port
 
 egm_client = pytest.importorskip("abb_robot_client.egm")
 
 
-def free_port() -> int:
-    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
-        s.bind(("127.0.0.1", 0))
-        return int(s.getsockname()[1])
-
-
 def drive(mode: str, command, until, seconds: float = 3.0):
-    port = free_port()
+    port = free_port("udp")
     client = egm_client.EGM(port=port)
     robot = EgmRobotSim(("127.0.0.1", port), mode=mode).start()
     try:

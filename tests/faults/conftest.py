@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import os
 import sys
 from collections.abc import Iterator
 from pathlib import Path
@@ -18,10 +17,8 @@ from framework_testlib import unique_cell
 
 @pytest.fixture
 def fault_cell(tmp_path: Path) -> Iterator[FaultCell]:
-    env = {**os.environ, "PLUGCELL_HOME": str(tmp_path / "home"), "PYTHONUNBUFFERED": "1"}
-    cell = FaultCell(unique_cell("f"), tmp_path / "home", env)
+    cell = FaultCell(unique_cell("f"), tmp_path / "home")
     try:
         yield cell
     finally:
-        for proc in cell.procs:
-            proc.stop()
+        cell.stop()

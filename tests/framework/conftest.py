@@ -2,13 +2,12 @@
 
 from __future__ import annotations
 
-import os
 from collections.abc import Iterator
 from pathlib import Path
-from typing import Any
 
 import pytest
-from framework_testlib import Proc, plugcell_argv, unique_cell
+from childproc import Launcher
+from framework_testlib import unique_cell
 
 
 @pytest.fixture
@@ -24,34 +23,8 @@ def home(tmp_path: Path) -> Path:
 
 
 @pytest.fixture
-def procs(home: Path) -> Iterator[Any]:
+def procs(home: Path) -> Iterator[Launcher]:
     """Start child processes (``procs.serve(...)``, ``procs.start(argv)``); all stopped after."""
-    started: list[Proc] = []
-
-    class Launcher:
-        def __init__(self) -> None:
-            self.env = {**os.environ, "PLUGCELL_HOME": str(home), "PYTHONUNBUFFERED": "1"}
-
-        def start(self, argv: list[str], env: dict[str, str] | None = None) -> Proc:
-            proc = Proc(argv, {**self.env, **(env or {})})
-            started.append(proc)
-            return proc
-
-        def serve(
-            self,
-            kind: str,
-            cell: str,
-            *extra: str,
-            name: str | None = None,
-            env: dict[str, str] | None = None,
-        ) -> Proc:
-            argv = plugcell_argv("serve", kind, "--cell", cell, *extra)
-            if name:
-                argv += ["--name", name]
-            proc = self.start(argv, env)
-            proc.wait_line(lambda line: "serving in cell" in line, 30.0)
-            return proc
-
-    yield Launcher()
-    for proc in started:
-        proc.stop()
+    launcher = Launcher(home)
+    yield launcher
+    launcher.stop()

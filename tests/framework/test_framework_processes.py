@@ -4,28 +4,20 @@ from __future__ import annotations
 
 import contextlib
 import os
-import time
 from pathlib import Path
 
 import numpy as np
 import pytest
-from childproc import free_port
+from childproc import until
 from framework_testlib import plugcell_argv
 
 from plugcell.framework import BlockingClient, ProcessStates, TransportConfig
 from plugcell.framework.journal import journal_files, read_journal
+from plugcell.sim.ports import free_port
 
 pytestmark = [pytest.mark.slow, pytest.mark.timeout(90)]
 
 C, F, R = ProcessStates.Completed, ProcessStates.Failed, ProcessStates.Running
-
-
-def until(predicate, timeout: float = 15.0) -> None:
-    """Poll (bounded) for a condition another process makes true."""
-    deadline = time.monotonic() + timeout
-    while not predicate():
-        assert time.monotonic() < deadline, "condition not reached in time"
-        time.sleep(0.02)
 
 
 def partners_of(client: BlockingClient, name: str) -> list[str]:

@@ -41,11 +41,6 @@ from plugcell.kinematics import (
 DEG = math.pi / 180.0
 
 
-@pytest.fixture(scope="module")
-def fanuc() -> RobotDescription:
-    return load_robot("fanuc_m20ia")
-
-
 # ----------------------------------------------------------------------------- Fanuc
 _URDF_ORIGINS = [
     (0, 0, 0.525), (0.15, 0, 0), (0, 0, 0.79), (0, 0, 0.25), (0.835, 0, 0), (0.1, 0, 0)

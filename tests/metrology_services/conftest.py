@@ -3,13 +3,11 @@ OS processes per module, a Zenoh session for the simulated world, child processe
 
 from __future__ import annotations
 
-import os
 from collections.abc import Iterator
-from dataclasses import dataclass
-from pathlib import Path
 
 import pytest
-from metrology_testlib import Proc, plugcell_argv, unique_cell
+from childproc import CellProcesses
+from metrology_testlib import unique_cell
 
 from plugcell.framework.bus import Bus
 from plugcell.framework.keys import KeySpace
@@ -17,39 +15,17 @@ from plugcell.framework.transport import TransportConfig, open_session
 from plugcell.sim.world import ReflectorPublisher
 
 
-@dataclass
-class Cell:
-    """A cell with its tracker and compute services running as OS processes."""
-
-    name: str
-    home: Path
-    env: dict[str, str]
-    procs: list[Proc]
-
-    def start(self, *args: str) -> Proc:
-        proc = Proc(plugcell_argv(*args), self.env)
-        self.procs.append(proc)
-        return proc
-
-    def serve(self, kind: str, *extra: str) -> Proc:
-        proc = self.start("serve", kind, "--cell", self.name, *extra)
-        proc.wait_line(lambda line: "serving in cell" in line, 30.0)
-        return proc
-
-
 @pytest.fixture(scope="module")
-def cell(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Cell]:
+def cell(tmp_path_factory: pytest.TempPathFactory) -> Iterator[CellProcesses]:
     """TRACKER (simulated, seed 7) and COMPUTE (data in the module's home) as processes."""
     home = tmp_path_factory.mktemp("home")
-    env = {**os.environ, "PLUGCELL_HOME": str(home), "PYTHONUNBUFFERED": "1"}
-    c = Cell(unique_cell(), home, env, [])
+    c = CellProcesses(unique_cell(), home)
     try:
         c.serve("tracker", "--param", "seed=7")
         c.serve("compute", "--param", f"data_dir={home / 'compute'}")
         yield c
     finally:
-        for proc in c.procs:
-            proc.stop()
+        c.stop()
 
 
 @pytest.fixture(scope="module")

@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from metrology_testlib import pose, run
+from metrology_testlib import pose, run, take_rows
 
 from plugcell.framework import Client, ProcessCall, ProcessStates
 
@@ -53,12 +53,7 @@ def test_single_and_continuous_measurements_are_appended_into_the_robots_mT(cell
             stream = await robot.create_process(
                 "TRACKER", "Continuous Measurement", "tr2euler; to=COMPUTE:Set Matrix:mC:append",
                 20, timeout=30)
-            streamed = []
-            async for update in stream:
-                if update.data is not None:
-                    streamed.append(ProcessCall.array(update))
-                    if len(streamed) == 5:
-                        break
+            streamed = await take_rows(stream, 5)
             stop = await robot.stop_process(stream)
             assert (await stop.result()).state is C
             async for update in stream:  # whatever came before the stop

@@ -11,7 +11,7 @@ import time
 
 import numpy as np
 import pytest
-from metrology_testlib import pose, run, unique_cell
+from metrology_testlib import pose, run, take_rows, unique_cell
 
 from plugcell.apps.kinds import build
 from plugcell.framework import Client, ProcessCall, ProcessStates
@@ -60,6 +60,40 @@ async def setup_robot(client: Client, base, probe, robot_pose) -> None:
     await ok(client, "Move", "", robot_pose)
 
 
+def both_tmacs(cell, world) -> None:
+    """Robot A's and robot B's T-MACs published where their robots hold them (eq. 7.1)."""
+    world(cell.name, "TMAC_A").publish(reflector(BASE_A, POSE_A, PROBE_A))
+    world(cell.name, "TMAC_B").publish(reflector(BASE_B, POSE_B, PROBE_B))
+
+
+async def comau_aimed_kuka_framed(comau: Client, kuka: Client) -> None:
+    """Both see the tracker; the Kuka has given its BASE and PROBE (robot B's) but not
+    moved the beam, the Comau is set up as robot A and holds the beam on its T-MAC."""
+    assert await comau.wait_for("TRACKER") and await kuka.wait_for("TRACKER")
+    await ok(kuka, "Set Base", "euler2tr", BASE_B)
+    await ok(kuka, "Set Probe", "euler2tr", PROBE_B)
+    await setup_robot(comau, BASE_A, PROBE_A, POSE_A)
+
+
+async def move_and_measure(client: Client, robot_pose) -> tuple[np.ndarray, float]:
+    """A robot's program (8.4.2): Move, then a Single Measurement; the pose and when it came."""
+    await ok(client, "Move", "", robot_pose)
+    return await ok(client, "Single Measurement", "tr2euler", 100), time.monotonic()
+
+
+async def served_after_stop(holder: Client, stream: ProcessCall, waiting: asyncio.Task,
+                            robot_pose) -> None:
+    """``holder`` stops its ``stream``; only then is the robot ``waiting`` (queued behind
+    it, :func:`move_and_measure`) served — with its own reflector, in its own frame."""
+    stop = await holder.stop_process(stream)
+    assert (await stop.result()).state is C
+    stopped_at = time.monotonic()
+    assert (await stream.result()).state is C
+    measured, finished_at = await asyncio.wait_for(waiting, 20)
+    assert_pose(measured, robot_pose)
+    assert finished_at >= stopped_at - 0.05
+
+
 def test_set_base_probe_move_and_measurements_in_the_robot_frame(cell, world):
     tmac = world(cell.name, "TMAC_A")
     tmac.publish(reflector(BASE_A, POSE_A, PROBE_A))
@@ -82,12 +116,7 @@ def test_set_base_probe_move_and_measurements_in_the_robot_frame(cell, world):
             # Continuous Measurement: a stream until Stop Measurement releases the tracker
             stream = await robot.create_process("TRACKER", "Continuous Measurement", "tr2euler",
                                                 20, timeout=30)
-            samples = []
-            async for update in stream:
-                if update.data is not None:
-                    samples.append(ProcessCall.array(update))
-                    if len(samples) == 3:
-                        break
+            samples = await take_rows(stream, 3)
             stop = await robot.stop_process(stream)
             assert (await stop.result()).state is C
             assert (await stream.result()).state is C
@@ -98,8 +127,7 @@ def test_set_base_probe_move_and_measurements_in_the_robot_frame(cell, world):
 
 
 def test_two_robots_with_their_own_base_and_probe_get_their_own_measurements(cell, world):
-    world(cell.name, "TMAC_A").publish(reflector(BASE_A, POSE_A, PROBE_A))
-    world(cell.name, "TMAC_B").publish(reflector(BASE_B, POSE_B, PROBE_B))
+    both_tmacs(cell, world)
 
     async def body():
         async with Client("KUKA_A", cell=cell.name) as a, Client("COMAU_B", cell=cell.name) as b:
@@ -124,8 +152,7 @@ def test_a_robot_whose_beam_another_robot_took_is_measured_not_the_other(cell, w
     robot aims the beam back where that robot's own last Move put it, so it measures
     its own reflector — never the other robot's — and two robots taking turns cannot
     starve each other by stealing the beam (7.4, 8.4.3)."""
-    world(cell.name, "TMAC_A").publish(reflector(BASE_A, POSE_A, PROBE_A))
-    world(cell.name, "TMAC_B").publish(reflector(BASE_B, POSE_B, PROBE_B))
+    both_tmacs(cell, world)
 
     async def body():
         async with Client("KUKA_A", cell=cell.name) as a, Client("COMAU_B", cell=cell.name) as b, \
@@ -180,39 +207,24 @@ def test_a_reflector_that_vanishes_ends_the_lock_with_its_name(cell, world):
 
 
 def test_the_second_robot_waits_for_the_first_robots_stop_measurement(cell, world):
-    world(cell.name, "TMAC_A").publish(reflector(BASE_A, POSE_A, PROBE_A))
-    world(cell.name, "TMAC_B").publish(reflector(BASE_B, POSE_B, PROBE_B))
+    both_tmacs(cell, world)
 
     async def body():
         async with Client("COMAU", cell=cell.name) as comau, \
                 Client("KUKA", cell=cell.name) as kuka:
-            assert await comau.wait_for("TRACKER") and await kuka.wait_for("TRACKER")
-            await ok(kuka, "Set Base", "euler2tr", BASE_B)
-            await ok(kuka, "Set Probe", "euler2tr", PROBE_B)
-            await setup_robot(comau, BASE_A, PROBE_A, POSE_A)
+            await comau_aimed_kuka_framed(comau, kuka)
             stream = await comau.create_process("TRACKER", "Continuous Measurement", "", 50,
                                                 timeout=30)
             first = await anext(aiter(stream))  # Running: the Comau holds the tracker
             assert first.state is R
-
-            async def kuka_program() -> tuple[np.ndarray, float]:  # Move, then measure (8.4.2)
-                await ok(kuka, "Move", "", POSE_B)
-                return await ok(kuka, "Single Measurement", "tr2euler", 100), time.monotonic()
-
-            waiting = asyncio.create_task(kuka_program())
+            waiting = asyncio.create_task(move_and_measure(kuka, POSE_B))
             frames = 0
             async for update in stream:  # the Comau corrects its position meanwhile (8.3.2)
                 frames += update.data is not None
                 if frames == 8:
                     break
             assert not waiting.done()  # queued behind the Comau's stream (8.4.3)
-            stop = await comau.stop_process(stream)
-            assert (await stop.result()).state is C
-            stopped_at = time.monotonic()
-            assert (await stream.result()).state is C
-            measured, finished_at = await asyncio.wait_for(waiting, 20)
-            assert_pose(measured, POSE_B)
-            assert finished_at >= stopped_at - 0.05
+            await served_after_stop(comau, stream, waiting, POSE_B)
 
     run(body())
 
@@ -221,16 +233,12 @@ def test_a_tracked_path_holds_the_tracker_the_other_robot_is_served_after(cell, 
     """Issue 38: a Stream Measurement (a tracked path) holds the shared tracker until its
     Stop Measurement, as Continuous Measurement does (8.4.3); the other robot's Move and
     measurement wait in the queue and are served after, each in its own frame."""
-    world(cell.name, "TMAC_A").publish(reflector(BASE_A, POSE_A, PROBE_A))
-    world(cell.name, "TMAC_B").publish(reflector(BASE_B, POSE_B, PROBE_B))
+    both_tmacs(cell, world)
 
     async def body():
         async with Client("COMAU", cell=cell.name) as comau, \
                 Client("KUKA", cell=cell.name) as kuka:
-            assert await comau.wait_for("TRACKER") and await kuka.wait_for("TRACKER")
-            await ok(kuka, "Set Base", "euler2tr", BASE_B)
-            await ok(kuka, "Set Probe", "euler2tr", PROBE_B)
-            await setup_robot(comau, BASE_A, PROBE_A, POSE_A)
+            await comau_aimed_kuka_framed(comau, kuka)
             stream = await comau.create_process("TRACKER", "Stream Measurement", "tr2euler",
                                                 [1000, 10], timeout=30)
             rows = []
@@ -241,24 +249,10 @@ def test_a_tracked_path_holds_the_tracker_the_other_robot_is_served_after(cell, 
                 if update.data is not None:
                     rows.append(ProcessCall.array(update))
 
-            async def kuka_program() -> tuple[np.ndarray, float]:
-                await ok(kuka, "Move", "", POSE_B)
-                return await ok(kuka, "Single Measurement", "tr2euler", 100), time.monotonic()
-
-            waiting = asyncio.create_task(kuka_program())
-            async for update in updates:  # the path goes on, its samples keep coming
-                if update.data is not None:
-                    rows.append(ProcessCall.array(update))
-                if len(rows) == 20:
-                    break
+            waiting = asyncio.create_task(move_and_measure(kuka, POSE_B))
+            await take_rows(updates, 20, rows)  # the path goes on, its samples keep coming
             assert not waiting.done()  # queued behind the stream
-            stop = await comau.stop_process(stream)
-            assert (await stop.result()).state is C
-            stopped_at = time.monotonic()
-            assert (await stream.result()).state is C
-            measured, finished_at = await asyncio.wait_for(waiting, 20)
-            assert_pose(measured, POSE_B)  # the Kuka's own reflector, in its own frame
-            assert finished_at >= stopped_at - 0.05
+            await served_after_stop(comau, stream, waiting, POSE_B)
         samples = np.vstack(rows)
         assert samples.shape == (200, 11)
         np.testing.assert_array_equal(np.diff(samples[:, -1]), 1)  # seq: no sample lost
@@ -268,8 +262,7 @@ def test_a_tracked_path_holds_the_tracker_the_other_robot_is_served_after(cell, 
 
 
 def test_a_robot_that_dies_holding_the_tracker_does_not_block_the_other(cell, world):
-    world(cell.name, "TMAC_A").publish(reflector(BASE_A, POSE_A, PROBE_A))
-    world(cell.name, "TMAC_B").publish(reflector(BASE_B, POSE_B, PROBE_B))
+    both_tmacs(cell, world)
 
     async def prepare():
         async with Client("HOLDER", cell=cell.name) as holder:

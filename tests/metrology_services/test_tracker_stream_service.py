@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import asyncio
+import contextlib
 
 import numpy as np
 import pytest
@@ -44,33 +45,40 @@ async def _rows(call, seconds):
     return out
 
 
-def _tracker_and_world(cell, world_session, **kw):
-    tracker = build("tracker", None, {"seed": 5, **kw}, cell=cell, journal=False)
+@contextlib.asynccontextmanager
+async def _tracker_in(cell, world_session):
+    """The tracker service started in ``cell``, the T-MAC published at BASE·POSE·PROBE
+    (eq. 7.1); both closed after."""
+    tracker = build("tracker", None, {"seed": 5}, cell=cell, journal=False)
     tmac = ReflectorPublisher(Bus(world_session, KeySpace(cell)), "TMAC", "tmac")
     tmac.publish(pose(BASE) @ pose(POSE) @ pose(PROBE))
-    return tracker, tmac
+    await tracker.start()
+    try:
+        yield tracker
+    finally:
+        tmac.close()
+        await tracker.close()
+
+
+async def _aimed(robot):
+    """The robot's BASE and PROBE given, the beam moved to its T-MAC at POSE."""
+    assert await robot.wait_for("TRACKER")
+    await _ok(robot, "Set Base", "euler2tr", BASE)
+    await _ok(robot, "Set Probe", "euler2tr", PROBE)
+    await _ok(robot, "Move", "", POSE)
 
 
 def test_a_1khz_stream_in_batches_with_each_samples_own_times(world_session):
     cell = unique_cell()
 
     async def body():
-        tracker, tmac = _tracker_and_world(cell, world_session)
-        await tracker.start()
-        try:
-            async with Client("ROBOT", cell=cell) as robot:
-                assert await robot.wait_for("TRACKER")
-                await _ok(robot, "Set Base", "euler2tr", BASE)
-                await _ok(robot, "Set Probe", "euler2tr", PROBE)
-                await _ok(robot, "Move", "", POSE)
-                call = await robot.create_process("TRACKER", "Stream Measurement", "tr2euler",
-                                                  [1000, 8])
-                messages = await _rows(call, 1.0)
-                await _ok(robot, "Stop Measurement")
-                assert (await call.result()).state is C
-        finally:
-            tmac.close()
-            await tracker.close()
+        async with _tracker_in(cell, world_session), Client("ROBOT", cell=cell) as robot:
+            await _aimed(robot)
+            call = await robot.create_process("TRACKER", "Stream Measurement", "tr2euler",
+                                              [1000, 8])
+            messages = await _rows(call, 1.0)
+            await _ok(robot, "Stop Measurement")
+            assert (await call.result()).state is C
         assert messages and all(m.shape == (8, len(STREAM_COLUMNS)) for m in messages)
         rows = np.vstack(messages)
         assert len(rows) > 400  # most of a second at 1 kHz, on a loaded 2-core machine too
@@ -91,22 +99,14 @@ def test_a_line_of_sight_break_is_flagged_and_the_stream_recovers(world_session)
     cell = unique_cell()
 
     async def body():
-        tracker, tmac = _tracker_and_world(cell, world_session)
-        await tracker.start()
-        tracker.interface.driver.blocked = lambda t: 0.2 <= t < 0.4
-        try:
+        async with _tracker_in(cell, world_session) as tracker:
+            tracker.interface.driver.blocked = lambda t: 0.2 <= t < 0.4
             async with Client("ROBOT", cell=cell) as robot:
-                assert await robot.wait_for("TRACKER")
-                await _ok(robot, "Set Base", "euler2tr", BASE)
-                await _ok(robot, "Set Probe", "euler2tr", PROBE)
-                await _ok(robot, "Move", "", POSE)
+                await _aimed(robot)
                 call = await robot.create_process("TRACKER", "Stream Measurement", "tr2euler",
                                                   [500, 10])
                 rows = np.vstack(await _rows(call, 1.5))
                 await _ok(robot, "Stop Measurement")
-        finally:
-            tmac.close()
-            await tracker.close()
         status = rows[:, COL["status"]]
         t = rows[:, COL["tracker_time_s"]] - rows[0, COL["tracker_time_s"]]
         broken = t[status == 1]  # line of sight
@@ -122,9 +122,7 @@ def test_bad_requests_are_refused_and_a_vanished_subscriber_frees_the_tracker(wo
     cell = unique_cell()
 
     async def body():
-        tracker, tmac = _tracker_and_world(cell, world_session)
-        await tracker.start()
-        try:
+        async with _tracker_in(cell, world_session) as tracker:
             async with Client("ROBOT", cell=cell) as robot:
                 assert await robot.wait_for("TRACKER")
                 target = pose(BASE) @ pose(POSE) @ pose(PROBE)
@@ -150,8 +148,5 @@ def test_bad_requests_are_refused_and_a_vanished_subscriber_frees_the_tracker(wo
                 await _ok(other, "Single Measurement", "", 10)  # the tracker was freed
                 stream = tracker.interface._stream
                 assert stream is None or stream.done()
-        finally:
-            tmac.close()
-            await tracker.close()
 
     run(body())

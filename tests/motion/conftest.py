@@ -5,19 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from plugcell.io.robots import load_robot
-from plugcell.kinematics import RobotDescription
 from plugcell.motion import CartesianLimits, JointLimits
-
-
-@pytest.fixture(scope="session")
-def h4() -> RobotDescription:
-    return load_robot("smart_h4")
-
-
-@pytest.fixture(scope="session")
-def elbow() -> RobotDescription:
-    return load_robot("elbow6")
 
 
 @pytest.fixture(scope="session")

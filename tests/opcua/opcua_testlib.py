@@ -10,7 +10,9 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from childproc import Proc, free_port, plugcell_argv, until
+from childproc import Proc, plugcell_argv, until
+
+from plugcell.sim.ports import free_port
 
 JS = Path(__file__).resolve().parent / "js"
 

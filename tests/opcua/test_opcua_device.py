@@ -13,7 +13,6 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from childproc import free_port
 from opcua_testlib import JS, Proc, plugcell_argv, run_js, unique_cell, until
 
 from plugcell.devices.opcua.certificates import issue_application_certificate
@@ -21,6 +20,7 @@ from plugcell.devices.opcua.client import AsyncuaDriver
 from plugcell.devices.opcua.device import OpcUaDevice
 from plugcell.devices.opcua.device_map import parse_device_map
 from plugcell.framework import BlockingClient, DeviceError, GenericDevice, ProcessStates, from_data
+from plugcell.sim.ports import free_port
 
 pytestmark = pytest.mark.slow
 

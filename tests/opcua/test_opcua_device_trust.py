@@ -15,13 +15,14 @@ from collections.abc import Iterator
 from pathlib import Path
 
 import pytest
-from childproc import Proc, free_port
+from childproc import Proc
 from opcua_testlib import JS, plugcell_argv, unique_cell
 
 from plugcell.devices.opcua.certificates import certificate_paths, issue_application_certificate
 from plugcell.devices.opcua.client import AsyncuaDriver
 from plugcell.devices.opcua.device import OpcUaDevice
 from plugcell.framework import DeviceError, GenericDevice
+from plugcell.sim.ports import free_port
 
 pytestmark = pytest.mark.slow
 

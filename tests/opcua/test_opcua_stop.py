@@ -13,11 +13,11 @@ import threading
 from pathlib import Path
 
 import pytest
-from childproc import free_port
 from opcua_testlib import plugcell_argv, unique_cell
 
 from plugcell.devices.opcua.gateway import CellGateway
 from plugcell.framework import eventloop
+from plugcell.sim.ports import free_port
 
 pytestmark = pytest.mark.slow
 

@@ -41,17 +41,12 @@ def _run(text=PATH, calibration=None, **kw):
 @pytest.fixture(scope="module")
 def calibration():
     """Model 5 of the path's twin (seed 0, 36 kg) from its own 90-pose campaign."""
-    from plugcell.calibration.identify import Calibrator
-    from plugcell.sim.twin.campaign import measure_poses, working_volume_joints
+    from plugcell.sim.twin.calibrated import calibrate_twin
     from plugcell.sim.twin.robot import RobotTwin
     from plugcell.sim.twin.scenario import TwinScenario
-    from plugcell.sim.twin.tracker import LaserTracker
 
     twin = RobotTwin(TwinScenario(robot="smart_h4", seed=0, payload_kg=36.0))
-    q = working_volume_joints(twin.description, twin.reveal_truth().profile, 90,
-                              np.random.default_rng(1))
-    ms, _ = measure_poses(twin, LaserTracker(seed=0), q)
-    return Calibrator(twin.description, 5).fit(ms)
+    return calibrate_twin(twin, 90, joints_seed=1, tracker_seed=0)
 
 
 @pytest.fixture(scope="module")

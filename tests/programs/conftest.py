@@ -8,24 +8,18 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from plugcell.calibration.identify import Calibrator
 from plugcell.calibration.result import CalibrationResult
 from plugcell.io.params import params_json
-from plugcell.sim.twin.campaign import measure_poses, working_volume_joints
+from plugcell.sim.twin.calibrated import calibrate_twin
 from plugcell.sim.twin.robot import RobotTwin
 from plugcell.sim.twin.scenario import TwinScenario
-from plugcell.sim.twin.tracker import LaserTracker
 
 
 @pytest.fixture(scope="session")
 def calibrated_result() -> CalibrationResult:
     """The 36 kg twin (seed 3) calibrated with model 5 from 60 simulated poses."""
-    sc = TwinScenario(seed=3, payload_kg=36.0)
-    robot = RobotTwin(sc)
-    q = working_volume_joints(robot.description, robot.reveal_truth().profile, 60,
-                              np.random.default_rng(4))
-    ms, _ = measure_poses(robot, LaserTracker(seed=3), q)
-    return Calibrator(robot.description, 5).fit(ms)
+    twin = RobotTwin(TwinScenario(seed=3, payload_kg=36.0))
+    return calibrate_twin(twin, 60, joints_seed=4, tracker_seed=3)
 
 
 @pytest.fixture(scope="session")

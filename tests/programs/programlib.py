@@ -1,4 +1,5 @@
-"""Helpers of the robot-program tests: models from PARAMS results, reachable poses."""
+"""Helpers of the robot-program tests: models from PARAMS results, reachable poses, the
+round trips every dialect passes, a refused edit named where it stands."""
 
 from __future__ import annotations
 
@@ -63,3 +64,49 @@ def assert_equals_plugcell_compensate(program, fr, result, bases=None, tools=Non
         assert np.abs((U @ P)[:3, 3] - got[0, :3, 3]).max() < 1e-6, t.name
         n += 1
     return n
+
+
+def assert_nominal_round_trip(params: Path, program: Path, out: Path, *options: str) -> None:
+    """``plugcell compensate`` with a nominal model writes ``program`` back byte for byte,
+    its joint targets kept or compensated (``options``: the frames it needs)."""
+    from plugcell.apps.cli import main
+
+    for mode in ("keep", "compensate"):
+        assert main(["compensate", "--params", str(params), "--program", str(program),
+                     "--out", str(out), "--joint-targets", mode, *options]) == 0
+        assert out.read_bytes() == program.read_bytes()
+
+
+def assert_generated_round_trip(result, folder: Path, files: dict[str, str], **frames):
+    """A generated program (``files``: name → text, the main file first) written to
+    ``folder``, read and filtered on ``result``'s (nominal) model: every target ok, and
+    the rendered files are the texts byte for byte.  ``frames``: ``bases``, ``tools`` of
+    :func:`~plugcell.io.programs.filter.filter_targets`.  The FilterResult."""
+    from plugcell.io.programs import read_program
+    from plugcell.io.programs.filter import filter_targets
+
+    for name, text in files.items():
+        (folder / name).write_bytes(text.encode())
+    program, _ = read_program(folder / next(iter(files)))
+    fr = filter_targets(program, model_for(result), payload_kg=36.0, **frames)
+    assert all(r.ok for r in fr.reports)
+    assert program.render(fr.edits) == list(files.values())
+    return fr
+
+
+def assert_edit_refused(program: Path, copy: Path, old: str, new: str, message: str) -> None:
+    """``program`` with its first ``old`` replaced by ``new``, written to ``copy``, is
+    refused: a ProgramError with ``message`` at ``<copy's name>:<line>:<column>``."""
+    import pytest
+
+    from plugcell.io.programs import ProgramError, read_program
+
+    text = program.read_bytes().decode()
+    assert old in text
+    copy.write_bytes(text.replace(old, new, 1).encode())
+    with pytest.raises(ProgramError) as ei:
+        read_program(copy)
+    s = str(ei.value)
+    assert f"{copy.name}:" in s and message in s, s
+    line, col = s.split(f"{copy.name}:")[1].split(":")[:2]
+    assert int(line) > 0 and int(col) > 0

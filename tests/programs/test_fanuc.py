@@ -6,10 +6,18 @@ import numpy as np
 import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
-from programlib import FIXTURES, assert_equals_plugcell_compensate, model_for, poses_in
+from programlib import (
+    FIXTURES,
+    assert_edit_refused,
+    assert_equals_plugcell_compensate,
+    assert_generated_round_trip,
+    assert_nominal_round_trip,
+    model_for,
+    poses_in,
+)
 
 from plugcell.apps.cli import main
-from plugcell.io.programs import ProgramError, read_program
+from plugcell.io.programs import read_program
 from plugcell.io.programs.core import Num, Program, SourceFile, Target
 from plugcell.io.programs.fanuc import FanucConfig
 from plugcell.io.programs.filter import filter_targets
@@ -38,11 +46,7 @@ def test_fixture_points_and_notes():
 
 
 def test_nominal_round_trip_is_byte_identical(nominal_params, tmp_path):
-    out = tmp_path / "o.ls"
-    for mode in ("keep", "compensate"):
-        assert main(["compensate", "--params", str(nominal_params), "--program", str(FIX),
-                     "--out", str(out), "--joint-targets", mode, *FRAMES]) == 0
-        assert out.read_bytes() == FIX.read_bytes()
+    assert_nominal_round_trip(nominal_params, FIX, tmp_path / "o.ls", *FRAMES)
 
 
 def test_equals_plugcell_compensate_and_keeps_columns(calibrated_result, params_file, tmp_path):
@@ -83,16 +87,7 @@ def test_missing_frames_listed(params_file, tmp_path, capsys):
     ("   4:J P[1] 100%", "   4:J P[9] 100%", "P[9] is not in /POS"),
 ])
 def test_unknown_syntax_is_named(tmp_path, old, new, message):
-    src = tmp_path / "d.ls"
-    text = FIX.read_bytes().decode()
-    assert old in text
-    src.write_bytes(text.replace(old, new, 1).encode())
-    with pytest.raises(ProgramError) as ei:
-        read_program(src)
-    s = str(ei.value)
-    assert "d.ls:" in s and message in s, s
-    line, col = s.split("d.ls:")[1].split(":")[:2]
-    assert int(line) > 0 and int(col) > 0
+    assert_edit_refused(FIX, tmp_path / "d.ls", old, new, message)
 
 
 def test_turns_follow_the_joints():
@@ -139,9 +134,5 @@ def tp_programs(draw):
     HealthCheck.too_slow, HealthCheck.function_scoped_fixture])
 @given(text=tp_programs())
 def test_generated_programs_round_trip(nominal_result, tmp_path, text):
-    (tmp_path / "g.ls").write_bytes(text.encode())
-    p, _ = read_program(tmp_path / "g.ls")
     tool = {"UTOOL[2]": pose_from_notation(np.array([0, 0, 200, 0, 0, 0.]), "fanuc")}
-    fr = filter_targets(p, model_for(nominal_result), tools=tool, payload_kg=36.0)
-    assert all(r.ok for r in fr.reports)
-    assert p.render(fr.edits) == [text]
+    assert_generated_round_trip(nominal_result, tmp_path, {"g.ls": text}, tools=tool)

@@ -6,10 +6,17 @@ import numpy as np
 import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
-from programlib import FIXTURES, assert_equals_plugcell_compensate, model_for, poses_in
+from programlib import (
+    FIXTURES,
+    assert_edit_refused,
+    assert_equals_plugcell_compensate,
+    assert_generated_round_trip,
+    model_for,
+    poses_in,
+)
 
 from plugcell.apps.cli import main
-from plugcell.io.programs import ProgramError, read_program
+from plugcell.io.programs import read_program
 from plugcell.io.programs.filter import filter_targets
 from plugcell.io.units import pose_from_notation
 
@@ -89,16 +96,7 @@ def test_arc_centre_follows_the_corrections_on_one_circle(calibrated_result):
     ("N70 Y-261.089", "N70 Y-261.089 X=3", "expected a word"),
 ])
 def test_refused_constructs_are_named(tmp_path, old, new, message):
-    src = tmp_path / "p.nc"
-    text = FIX.read_text()
-    assert old in text
-    src.write_text(text.replace(old, new, 1))
-    with pytest.raises(ProgramError) as ei:
-        read_program(src)
-    s = str(ei.value)
-    assert "p.nc:" in s and message in s, s
-    line, col = s.split("p.nc:")[1].split(":")[:2]
-    assert int(line) > 0 and int(col) > 0
+    assert_edit_refused(FIX, tmp_path / "p.nc", old, new, message)
 
 
 def test_work_offset_and_tool_are_asked_for(params_file, tmp_path, capsys):
@@ -128,10 +126,6 @@ def gcode_programs(draw):
     HealthCheck.too_slow, HealthCheck.function_scoped_fixture])
 @given(text=gcode_programs())
 def test_generated_programs_round_trip(nominal_result, tmp_path, text):
-    (tmp_path / "g.nc").write_bytes(text.encode())
-    p, _ = read_program(tmp_path / "g.nc")
     tools = {"T2": pose_from_notation(np.array([0, 0, 200, 0, 0, 0.]), "kuka")}
-    fr = filter_targets(p, model_for(nominal_result), bases={"G54": np.eye(4)}, tools=tools,
-                        payload_kg=36.0)
-    assert all(r.ok for r in fr.reports)
-    assert p.render(fr.edits) == [text]
+    assert_generated_round_trip(nominal_result, tmp_path, {"g.nc": text},
+                                bases={"G54": np.eye(4)}, tools=tools)

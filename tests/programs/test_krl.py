@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
-from programlib import FIXTURES, model_for, poses_in
+from programlib import FIXTURES, assert_generated_round_trip, model_for, poses_in
 
 from plugcell.apps.cli import main
 from plugcell.compensation import IdentifiedModel, filter_program
@@ -254,11 +254,6 @@ def krl_programs(draw):
 @given(prog=krl_programs())
 def test_generated_programs_round_trip(nominal_result, tmp_path, prog):
     src, dat = prog
-    (tmp_path / "gen.src").write_bytes(src.encode())
-    (tmp_path / "gen.dat").write_bytes(dat.encode())
-    p, _ = read_program(tmp_path / "gen.src")
-    fr = filter_targets(p, model_for(nominal_result), payload_kg=36.0)
-    assert all(r.ok for r in fr.reports)
-    assert p.render(fr.edits) == [src, dat]
+    fr = assert_generated_round_trip(nominal_result, tmp_path, {"gen.src": src, "gen.dat": dat})
     for r in fr.reports:
         np.testing.assert_allclose(r.after, r.before, atol=1e-7)

@@ -6,10 +6,18 @@ import numpy as np
 import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
-from programlib import FIXTURES, assert_equals_plugcell_compensate, model_for, poses_in
+from programlib import (
+    FIXTURES,
+    assert_edit_refused,
+    assert_equals_plugcell_compensate,
+    assert_generated_round_trip,
+    assert_nominal_round_trip,
+    model_for,
+    poses_in,
+)
 
 from plugcell.apps.cli import main
-from plugcell.io.programs import ProgramError, read_program
+from plugcell.io.programs import read_program
 from plugcell.io.programs.filter import filter_targets
 
 FIX = FIXTURES / "glue.pdl"
@@ -25,11 +33,7 @@ def test_fixture_targets():
 
 
 def test_nominal_round_trip_is_byte_identical(nominal_params, tmp_path):
-    out = tmp_path / "o.pdl"
-    for mode in ("keep", "compensate"):
-        assert main(["compensate", "--params", str(nominal_params), "--program", str(FIX),
-                     "--out", str(out), "--joint-targets", mode]) == 0
-        assert out.read_bytes() == FIX.read_bytes()
+    assert_nominal_round_trip(nominal_params, FIX, tmp_path / "o.pdl")
 
 
 def test_equals_plugcell_compensate(calibrated_result, params_file, tmp_path):
@@ -71,18 +75,14 @@ def test_frames_not_set_are_asked_for(params_file, tmp_path, capsys):
     ("  MOVE TO pnt0001P\n", "  MOVE TO pnt0001P\n  pnt0001P := POS(1,2,3,4,5,6,'')\n",
      "assigned a position twice"),
     ("MOVE LINEAR TO POS(30.531", "MOVE LINEAR TO POS(x0", "a number expected, got 'x0'"),
+    ("  MOVE LINEAR TO pnt0002P ADVANCE\n", "  MOVE LINEAR TO pnt0002P ADVANCE\n"
+     "  $TOOL := POS(0, 0, 100, 0, 0, 0, '')\n  MOVE TO pnt0001P\n",
+     "pnt0001P is used with $BASE (line 9)⁻¹ · $UFRAME (line 8) and $TOOL (line 19) here, "
+     "with $BASE (line 9)⁻¹ · $UFRAME (line 8) and $TOOL (line 7) before: one set of numbers "
+     "cannot be compensated for both"),
 ])
 def test_unknown_syntax_is_named(tmp_path, old, new, message):
-    src = tmp_path / "g.pdl"
-    text = FIX.read_text()
-    assert old in text
-    src.write_text(text.replace(old, new, 1))
-    with pytest.raises(ProgramError) as ei:
-        read_program(src)
-    s = str(ei.value)
-    assert "g.pdl:" in s and message in s, s
-    line, col = s.split("g.pdl:")[1].split(":")[:2]
-    assert int(line) > 0 and int(col) > 0
+    assert_edit_refused(FIX, tmp_path / "g.pdl", old, new, message)
 
 
 @st.composite
@@ -110,8 +110,4 @@ def pdl_programs(draw):
     HealthCheck.too_slow, HealthCheck.function_scoped_fixture])
 @given(text=pdl_programs())
 def test_generated_programs_round_trip(nominal_result, tmp_path, text):
-    (tmp_path / "g.pdl").write_bytes(text.encode())
-    p, _ = read_program(tmp_path / "g.pdl")
-    fr = filter_targets(p, model_for(nominal_result), payload_kg=36.0)
-    assert all(r.ok for r in fr.reports)
-    assert p.render(fr.edits) == [text]
+    assert_generated_round_trip(nominal_result, tmp_path, {"g.pdl": text})

@@ -6,10 +6,18 @@ import numpy as np
 import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
-from programlib import FIXTURES, assert_equals_plugcell_compensate, model_for, poses_in
+from programlib import (
+    FIXTURES,
+    assert_edit_refused,
+    assert_equals_plugcell_compensate,
+    assert_generated_round_trip,
+    assert_nominal_round_trip,
+    model_for,
+    poses_in,
+)
 
 from plugcell.apps.cli import main
-from plugcell.io.programs import ProgramError, read_program
+from plugcell.io.programs import read_program
 from plugcell.io.programs.core import Num
 from plugcell.io.programs.filter import filter_targets
 from plugcell.io.programs.rapid import RapidConfig
@@ -30,11 +38,7 @@ def test_fixture_targets():
 
 
 def test_nominal_round_trip_is_byte_identical(nominal_params, tmp_path):
-    out = tmp_path / "o.mod"
-    for mode in ("keep", "compensate"):
-        assert main(["compensate", "--params", str(nominal_params), "--program", str(FIX),
-                     "--out", str(out), "--joint-targets", mode]) == 0
-        assert out.read_bytes() == FIX.read_bytes()
+    assert_nominal_round_trip(nominal_params, FIX, tmp_path / "o.mod")
 
 
 def test_equals_plugcell_compensate(calibrated_result, params_file, tmp_path):
@@ -74,15 +78,7 @@ def test_missing_tool_and_wobj_are_listed(params_file, tmp_path, capsys):
      "tool0;", "Target_10 is used with tool tool0"),
 ])
 def test_unknown_syntax_is_named(tmp_path, old, new, message):
-    src = tmp_path / "m.mod"
-    text = FIX.read_text()
-    assert old in text
-    src.write_text(text.replace(old, new, 1))
-    with pytest.raises(ProgramError) as ei:
-        read_program(src)
-    assert "m.mod:" in str(ei.value) and message in str(ei.value)
-    line, col = str(ei.value).split("m.mod:")[1].split(":")[:2]
-    assert int(line) > 0 and int(col) > 0
+    assert_edit_refused(FIX, tmp_path / "m.mod", old, new, message)
 
 
 def test_the_programs_arm_configuration_is_the_one_compensated(calibrated_result):
@@ -150,8 +146,4 @@ def modules(draw):
     HealthCheck.too_slow, HealthCheck.function_scoped_fixture])
 @given(text=modules())
 def test_generated_modules_round_trip(nominal_result, tmp_path, text):
-    (tmp_path / "g.mod").write_bytes(text.encode())
-    p, _ = read_program(tmp_path / "g.mod")
-    fr = filter_targets(p, model_for(nominal_result), payload_kg=36.0)
-    assert all(r.ok for r in fr.reports)
-    assert p.render(fr.edits) == [text]
+    assert_generated_round_trip(nominal_result, tmp_path, {"g.mod": text})

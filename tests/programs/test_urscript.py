@@ -6,7 +6,14 @@ import numpy as np
 import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
-from programlib import FIXTURES, assert_equals_plugcell_compensate, model_for, poses_in
+from programlib import (
+    FIXTURES,
+    assert_equals_plugcell_compensate,
+    assert_generated_round_trip,
+    assert_nominal_round_trip,
+    model_for,
+    poses_in,
+)
 
 from plugcell.apps.cli import main
 from plugcell.io.programs import ProgramError, read_program
@@ -25,11 +32,7 @@ def test_fixture_targets():
 
 
 def test_nominal_round_trip_is_byte_identical(nominal_params, tmp_path):
-    out = tmp_path / "o.script"
-    for mode in ("keep", "compensate"):
-        assert main(["compensate", "--params", str(nominal_params), "--program", str(FIX),
-                     "--out", str(out), "--joint-targets", mode]) == 0
-        assert out.read_bytes() == FIX.read_bytes()
+    assert_nominal_round_trip(nominal_params, FIX, tmp_path / "o.script")
 
 
 def test_equals_plugcell_compensate(calibrated_result, params_file, tmp_path):
@@ -103,10 +106,6 @@ def scripts(draw):
     HealthCheck.too_slow, HealthCheck.function_scoped_fixture])
 @given(text=scripts())
 def test_generated_scripts_round_trip(nominal_result, tmp_path, text):
-    (tmp_path / "g.script").write_bytes(text.encode())
-    p, _ = read_program(tmp_path / "g.script")
-    fr = filter_targets(p, model_for(nominal_result), payload_kg=36.0)
-    assert all(r.ok for r in fr.reports)
-    assert p.render(fr.edits) == [text]
+    fr = assert_generated_round_trip(nominal_result, tmp_path, {"g.script": text})
     for r in fr.reports:
         np.testing.assert_allclose(r.after, r.before, atol=1e-9)

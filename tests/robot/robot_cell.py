@@ -6,7 +6,8 @@ import os
 from pathlib import Path
 from typing import Any
 
-from robot_testlib import Proc, group_alive, plugcell_argv, until
+from childproc import Launcher as ChildLauncher
+from robot_testlib import Proc, group_alive, until
 
 from plugcell.framework import BlockingClient, ProcessStates, from_data
 
@@ -16,33 +17,19 @@ PNT0001 = "1500,0,1300,0,90,0"
 PNT0002 = "1500,200,1000,0,90,0"
 
 
-class Launcher:
-    """Starts child processes in one cell and home; all stopped (and checked gone) after."""
+class Launcher(ChildLauncher):
+    """Starts child processes in one cell and home (this folder importable in them); all
+    stopped (and checked gone) after."""
 
     def __init__(self, home: Path, cell: str) -> None:
+        super().__init__(home, {"PYTHONPATH": os.pathsep.join(
+            [str(HERE), *filter(None, [os.environ.get("PYTHONPATH")])])})
         self.home = home
         self.cell = cell
-        self.env = {
-            **os.environ,
-            "PLUGCELL_HOME": str(home),
-            "PYTHONUNBUFFERED": "1",
-            "PYTHONPATH": os.pathsep.join(
-                [str(HERE), *filter(None, [os.environ.get("PYTHONPATH")])]
-            ),
-        }
-        self.started: list[Proc] = []
 
-    def start(self, argv: list[str]) -> Proc:
-        proc = Proc(argv, self.env)
-        self.started.append(proc)
-        return proc
-
-    def serve(self, kind: str, *extra: str, name: str | None = None) -> Proc:
+    def serve(self, kind: str, *extra: str, name: str | None = None) -> Proc:  # type: ignore[override]
         """``plugcell serve KIND`` in this cell (not waited for: see :meth:`ready`)."""
-        argv = plugcell_argv("serve", kind, "--cell", self.cell, *extra)
-        if name:
-            argv += ["--name", name]
-        return self.start(argv)
+        return super().serve(kind, self.cell, *extra, name=name, wait=False)
 
     @staticmethod
     def ready(*procs: Proc, timeout: float = 30.0) -> None:
@@ -50,8 +37,7 @@ class Launcher:
             proc.wait_line(lambda line: "serving in cell" in line, timeout)
 
     def stop_all(self) -> None:
-        for proc in self.started:
-            proc.stop()
+        self.stop()
         for proc in self.started:  # the simulated controllers went with their services
             until(lambda p=proc: not group_alive(p.pid), 10.0, f"end of {proc.argv[3:5]}")
 

@@ -27,6 +27,7 @@ from plugcell.io.units import DEG
 from plugcell.motion import PTP, JointLimits, plan
 from plugcell.pdl.interfaces import MotionError
 from plugcell.sim.controller.egm_robot import EgmRobotSim
+from plugcell.sim.ports import free_port
 
 Q0 = np.radians([0.0, -90.0, -187.0, 0.0, 90.0, 0.0])
 V = 20 * DEG
@@ -171,7 +172,7 @@ def test_a_stopped_stream_fails_with_its_reason_and_a_new_session_recovers():
 
 @pytest.mark.slow
 def test_a_crashed_link_process_says_so_and_starts_again():
-    link = LinkProcess(_config(listen_port=_free_udp_port()))
+    link = LinkProcess(_config(listen_port=free_port("udp")))
     address = link.start()
     robot = _robot(address, 30.0)  # waits for the new child's answers
     try:
@@ -186,14 +187,6 @@ def test_a_crashed_link_process_says_so_and_starts_again():
     finally:
         robot.stop()
         link.close()
-
-
-def _free_udp_port() -> int:
-    import socket
-
-    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
-        s.bind(("127.0.0.1", 0))
-        return int(s.getsockname()[1])
 
 
 def test_the_publisher_writes_a_consistent_state():

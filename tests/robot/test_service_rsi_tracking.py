@@ -20,7 +20,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 from robot_testlib import unique_cell
-from test_service_streamed import TIMEOUT, _free_udp_port, _get_status, _run, _start
+from test_service_streamed import TIMEOUT, _get_status, _run, _start
 
 import plugcell.pdl
 from plugcell.apps.kinds import build
@@ -28,6 +28,7 @@ from plugcell.devices.robot.service import RobotService
 from plugcell.framework import Client, ProcessStates
 from plugcell.io.units import robot_from_pose
 from plugcell.sim.controller.rsi_twin import RsiTwinProcess
+from plugcell.sim.ports import free_port
 from plugcell.sim.twin.robot import RobotTwin
 from plugcell.sim.twin.scenario import TwinScenario
 
@@ -72,7 +73,7 @@ def test_a_programs_tracked_move_streams_with_the_tracker(tmp_path: Path, monkey
     shutil.copy(Path(plugcell.pdl.__file__).parent / "programs" / "services.pdl", lib)
     (lib / "tracked.pdl").write_text(PROGRAM.format(base=_vector(twin.true_base()),
                                                     probe=_vector(twin.reveal_truth().probe)))
-    port, cell = _free_udp_port(), unique_cell()
+    port, cell = free_port("udp"), unique_cell()
 
     async def scenario() -> None:
         tracker = build("tracker", None, {"seed": 5}, cell=cell, journal=False)

@@ -17,7 +17,7 @@ from __future__ import annotations
 
 import asyncio
 import dataclasses
-import socket
+import shutil
 import time
 from pathlib import Path
 
@@ -32,6 +32,7 @@ from plugcell.framework.data import from_data
 from plugcell.framework.messages import ConnectionStates
 from plugcell.sim.controller.egm_twin import EgmTwinProcess
 from plugcell.sim.controller.rsi_twin import RsiTwinProcess
+from plugcell.sim.ports import free_port
 
 #: The controller timeout of these tests: RSI's ETHERNET Timeout (packets of 4 ms; the twin
 #: counts every late answer, and this machine is shared — 1000 leaves room) and EGM's
@@ -82,23 +83,7 @@ BEGIN
 END {name}
 """
 
-SWING = """\
-PROGRAM swing
-BEGIN
-  WHILE TRUE DO
-    MOVE TO JNTP(8, -85, -185, 0, 85, 5)
-    MOVE TO JNTP(-8, -90, -187, 0, 90, 0)
-  ENDWHILE
-END swing
-"""
-
 F, C = ProcessStates.Failed, ProcessStates.Completed
-
-
-def _free_udp_port() -> int:
-    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
-        s.bind(("127.0.0.1", 0))
-        return int(s.getsockname()[1])
 
 
 @pytest.fixture
@@ -110,7 +95,7 @@ def library(tmp_path: Path) -> Path:
         name="unreachable", target="POS(4000, 0, 1000, 0, 90, 0)"))
     (lib / "beyond.pdl").write_text(REFUSED.format(
         name="beyond", target="JNTP(0, -90, -187, 0, 90, 400)"))
-    (lib / "swing.pdl").write_text(SWING)
+    shutil.copy(Path(__file__).parent / "programs" / "swing.pdl", lib)
     return lib
 
 
@@ -137,7 +122,7 @@ async def _get(client: Client, name: str, command: str) -> np.ndarray:
 @pytest.mark.parametrize("vendor", VENDORS, ids=lambda v: v.name)
 def test_a_program_on_the_pc_moves_the_twin(vendor, library, tmp_path, monkeypatch):
     monkeypatch.setenv("PLUGCELL_HOME", str(tmp_path / "home"))
-    port = _free_udp_port()
+    port = free_port("udp")
 
     async def scenario() -> None:
         twin = vendor.robot(port)
@@ -203,7 +188,7 @@ async def _state(service: GenericDevice, state: ConnectionStates, within: float)
 def test_a_stopped_stream_fails_the_process_and_the_service_recovers(vendor, library,
                                                                      tmp_path, monkeypatch):
     monkeypatch.setenv("PLUGCELL_HOME", str(tmp_path / "home"))
-    port = _free_udp_port()
+    port = free_port("udp")
     twin = vendor.robot(port)
 
     async def scenario() -> None:

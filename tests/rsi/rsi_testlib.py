@@ -4,8 +4,8 @@ rsipi's EchoServer: test_rsi_rsipi.py)."""
 
 from __future__ import annotations
 
-import socket
-import time
+from childproc import wait_until  # noqa: F401  (re-exported for the link tests)
+from udp_robot import UdpRobot
 
 from plugcell.devices.robot.rsi import RsiConfig, RsiLink
 
@@ -23,46 +23,19 @@ def rob_packet(ipoc: int, joints_deg=(0.0, -90.0, 90.0, 0.0, 45.0, 0.0), delay: 
             f'<IPOC>{ipoc}</IPOC></Rob>').encode()
 
 
-class BareRobot:
+class BareRobot(UdpRobot):
     """A UDP socket on loopback playing the controller, packet by packet."""
 
     def __init__(self, link_address: tuple[str, int], step: int = 4) -> None:
-        self.sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
-        self.sock.bind(("127.0.0.1", 0))
-        self.sock.settimeout(1.0)
-        self.target = link_address
+        super().__init__(link_address)
         self.ipoc = 1_000_000
         self.step = step  # the IPOC's advance per cycle (ms)
-
-    def send(self, data: bytes) -> None:
-        self.sock.sendto(data, self.target)
 
     def cycle(self, **kw) -> bytes:
         """Send the next packet (IPOC + one cycle) and return the answer."""
         self.ipoc += self.step
         self.send(rob_packet(self.ipoc, **kw))
-        return self.sock.recv(65535)
-
-    def no_answer(self, wait: float = 0.05) -> bool:
-        """Nothing arrives within ``wait`` seconds."""
-        self.sock.settimeout(wait)
-        try:
-            self.sock.recv(65535)
-        except TimeoutError:
-            return True
-        finally:
-            self.sock.settimeout(1.0)
-        return False
-
-    def close(self) -> None:
-        self.sock.close()
-
-
-def free_udp_port() -> int:
-    """A UDP port on 127.0.0.1 that was free a moment ago."""
-    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
-        s.bind(("127.0.0.1", 0))
-        return int(s.getsockname()[1])
+        return self.receive()
 
 
 def local_config(**kw) -> RsiConfig:
@@ -74,15 +47,6 @@ def started(config: RsiConfig, source=None, **kw) -> RsiLink:
     link = RsiLink(config, source, **kw)
     link.start()
     return link
-
-
-def wait_until(predicate, timeout: float = 2.0) -> bool:
-    end = time.monotonic() + timeout
-    while time.monotonic() < end:
-        if predicate():
-            return True
-        time.sleep(0.002)
-    return predicate()
 
 
 #: Replacements the mutator puts where a number was.

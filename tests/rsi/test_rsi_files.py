@@ -10,7 +10,7 @@ import xml.etree.ElementTree as ET
 
 import numpy as np
 import pytest
-from rsi_testlib import BareRobot, free_udp_port
+from rsi_testlib import BareRobot
 
 from plugcell.apps.cli import main
 from plugcell.devices.robot.rsi import CorrectionLimits, OutputSignal, RsiConfig
@@ -20,6 +20,7 @@ from plugcell.devices.robot.rsi.controller_files import (
     write_controller_files,
 )
 from plugcell.io.units import DEG
+from plugcell.sim.ports import free_port
 
 config_parser = pytest.importorskip("RSIPI.config_parser")
 limit_parser = pytest.importorskip("RSIPI.rsi_limit_parser")
@@ -166,7 +167,7 @@ def test_plugcell_rsi_files_errors(tmp_path, capsys, argv, message) -> None:
 
 
 def test_plugcell_rsi_run_swings_one_axis(capsys) -> None:
-    port = free_udp_port()
+    port = free_port("udp")
     done: dict[str, int] = {}
     cmd = threading.Thread(target=lambda: done.setdefault("code", main(
         ["rsi", "run", "--robot-ip", "127.0.0.1", "--listen", "127.0.0.1", "--port",

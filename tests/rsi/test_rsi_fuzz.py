@@ -11,11 +11,11 @@ a ``<Rob Type="KUKA">`` root and that IPOC."""
 from __future__ import annotations
 
 import random
-import socket
 import xml.etree.ElementTree as ET
 
 import numpy as np
 import pytest
+from link_fuzz import arrived, assert_every_datagram_accounted, drain, fuzz_socket
 from rsi_testlib import local_config, mutate, rob_packet, started, wait_until
 
 from plugcell.devices.robot.rsi import Correction
@@ -41,9 +41,7 @@ def robot_packet_ipoc(data: bytes) -> int | None:
 def test_a_hundred_thousand_mutated_packets(tmp_path) -> None:
     link = started(local_config(),
                    lambda s: Correction(step=np.full(6, 1e-6)))
-    sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
-    sock.bind(("127.0.0.1", 0))
-    sock.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, 1 << 20)
+    sock = fuzz_socket()
     rng = random.Random(37)
     sent_ok: set[int] = set()
     answers: list[bytes] = []
@@ -58,36 +56,19 @@ def test_a_hundred_thousand_mutated_packets(tmp_path) -> None:
                     sent_ok.add(seen)
                 sock.sendto(data, link.address)
             sent = start + min(BURST, PACKETS - start)
-            assert wait_until(lambda s=sent: (lambda x: x.received + sum(
-                v for k, v in x.dropped.items() if k not in ("stale", "inconsistent"))
-                >= s)(link.stats()), 30.0), \
+            assert wait_until(lambda s=sent: arrived(link.stats()) >= s, 30.0), \
                 f"{sent} sent, {link.stats()}"
-            sock.setblocking(False)
-            while True:
-                try:
-                    answers.append(sock.recv(65535))
-                except BlockingIOError:
-                    break
-            sock.setblocking(True)
+            drain(sock, answers)
         # every packet received is answered, superseded or stale before the last drain
         assert wait_until(lambda: (lambda x: x.answered + x.superseded + x.dropped["stale"]
                                    + x.dropped["inconsistent"] >= x.received)(link.stats()),
                           10.0), link.stats()
-        sock.setblocking(False)
-        while True:
-            try:
-                answers.append(sock.recv(65535))
-            except BlockingIOError:
-                break
+        drain(sock, answers)
     finally:
         sock.close()
         link.close()
     st = link.stats()
-    dropped = sum(v for k, v in st.dropped.items() if k not in ("stale", "inconsistent"))
-    assert st.received + dropped == PACKETS  # every datagram accounted for
-    assert st.received == (st.answered + st.superseded + st.dropped["stale"]
-                           + st.dropped["inconsistent"])
-    assert len(answers) == st.answered
+    assert_every_datagram_accounted(st, PACKETS, answers)
     assert st.dropped["malformed"] > 50_000 and st.dropped["oversized"] > 500
     assert st.dropped["foreign"] > 50
     echoed = [int(ET.fromstring(a).find("IPOC").text) for a in answers]

@@ -12,9 +12,10 @@ import pytest
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "framework"))
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
-from childproc import free_port
 from framework_testlib import Proc, plugcell_argv, unique_cell
 from sec_testlib import NAMES, POLICY, SecureCell, issue_cell_certificates
+
+from plugcell.sim.ports import free_port
 
 
 @pytest.fixture(scope="module")

@@ -113,7 +113,7 @@ def test_settings_helpers() -> None:
 
 def test_usrpwd_wrong_password_gets_no_link(tmp_path: Path) -> None:
     """Zenoh user/password authentication on loopback: a wrong password never links."""
-    from childproc import free_port
+    from plugcell.sim.ports import free_port
 
     users = tmp_path / "users.txt"
     users.write_text("cell:secret\n")

@@ -21,7 +21,6 @@ from pathlib import Path
 
 import pytest
 import zenoh
-from childproc import free_port
 from framework_testlib import Proc, plugcell_argv, run, unique_cell
 from sec_testlib import issue_cell_certificates
 
@@ -30,6 +29,7 @@ from plugcell.framework.journal import journal_files, read_journal
 from plugcell.framework.keys import KeySpace
 from plugcell.framework.messages import Acknowledgement, Command, Data, DataTypes, Process, Tag
 from plugcell.framework.signing import RequestSigner
+from plugcell.sim.ports import free_port
 
 pytestmark = pytest.mark.timeout(240)
 

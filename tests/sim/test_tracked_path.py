@@ -3,23 +3,19 @@
 
 from __future__ import annotations
 
-import dataclasses
-
 import numpy as np
 import pytest
 
-from plugcell.compensation.tracking import TrackingLoop, TrackingSettings
-from plugcell.devices.robot.rsi import RsiConfig, RsiLink
+from plugcell.compensation.tracking import TrackingSettings
+from plugcell.devices.robot.rsi import RsiConfig
 from plugcell.devices.robot.rsi.tracking import (
-    TrackingSource,
     check_tracking_config,
     kuka_pose,
     path_pose,
 )
 from plugcell.kinematics.rotations import matrix_to_rpy
-from plugcell.sim.controller.rsi_robot import RsiRobot
-from plugcell.sim.tracked_path import CYCLE, Fault, LogFeed, TrackedCell
-from plugcell.sim.twin.dynamics import DynamicTwin
+from plugcell.sim.tracked_path import CYCLE, Fault, TrackedCell
+from plugcell.sim.tracked_udp import run_over_udp
 
 #: simulated cycles in Python: minutes on a loaded 2-core machine
 pytestmark = [pytest.mark.slow, pytest.mark.timeout(1500)]
@@ -90,27 +86,8 @@ def test_the_same_source_corrects_the_twin_through_the_rsi_link_over_udp(cell):
     TrackingSource every cycle; the tracker here is the twin's true reflector (noise-free,
     from the controller's own log), added in the link's thread before each answer."""
     traj = cell.plan("line", 100.0, size_m=0.1)
-    arm = DynamicTwin(cell.twin, q0=cell.q0)
-    config = RsiConfig(robot_host="127.0.0.1", listen_host="127.0.0.1", listen_port=0,
-                       correction="cartesian", mode="absolute", frame="base",
-                       timeout_packets=10_000)
-    loop = TrackingLoop(cell.model, TrackingSettings(lead_s=0.012),
-                        payload_kg=cell.payload_kg)
-    source = TrackingSource(loop, ramp=0.3)
-    fed = LogFeed(source, arm)
-
-    with RsiLink(config, fed) as link:
-        robot = RsiRobot(arm, dataclasses.replace(config, listen_port=link.address[1]),
-                         record=True, path=traj, tool=cell.model.tool, path_delay_s=0.5)
-        fed.robot = robot
-        robot.start()
-        try:
-            link.wait(lambda lk: robot.path_done or not robot.running,
-                      timeout=traj.duration + 60)
-            source.finish()
-            link.wait(lambda lk: source.ended(), timeout=30)
-        finally:
-            robot.stop()
+    udp = run_over_udp(cell, traj, lead_s=0.012)
+    robot, loop, source, config = udp.robot, udp.loop, udp.source, udp.config
     assert robot.path_done and robot.stopped is None
     assert loop.stats.samples_used > 0 and loop.stats.fresh_cycles > 0
     assert source.last is not None and source.last.state == "tracking"

@@ -3,7 +3,9 @@
 Shared by the test folders (the root ``tests/conftest.py`` puts this folder on
 ``sys.path``): a :class:`Proc` collects stdout lines on a thread, waits for a line,
 and is stopped or killed with its whole process group, so no test leaves a child
-behind.
+behind; a :class:`Launcher` starts them with one home and stops them all,
+:class:`CellProcesses` the services of one cell; :func:`until` and :func:`wait_until`
+poll for what another process or thread makes true.
 """
 
 from __future__ import annotations
@@ -11,12 +13,12 @@ from __future__ import annotations
 import contextlib
 import os
 import signal
-import socket
 import subprocess
 import sys
 import threading
 import time
 from collections.abc import Callable
+from pathlib import Path
 from typing import IO
 
 
@@ -32,11 +34,15 @@ def until(predicate: Callable[[], object], timeout: float = 15.0,
         time.sleep(0.02)
 
 
-def free_port() -> int:
-    """A TCP port on 127.0.0.1 that was free a moment ago."""
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return int(s.getsockname()[1])
+def wait_until(predicate: Callable[[], object], timeout: float = 2.0) -> bool:
+    """Whether ``predicate()`` holds within ``timeout`` s, polled every 2 ms (a link's
+    cycle is 4 ms): for ``assert wait_until(…)`` and ``assert not wait_until(…)``."""
+    end = time.monotonic() + timeout
+    while time.monotonic() < end:
+        if predicate():
+            return True
+        time.sleep(0.002)
+    return bool(predicate())
 
 
 def plugcell_argv(*args: str) -> list[str]:
@@ -116,3 +122,79 @@ def group_alive(pgid: int) -> bool:
     except PermissionError:  # pragma: no cover
         return True
     return True
+
+
+class Launcher:
+    """Child processes started with one ``PLUGCELL_HOME``; :meth:`stop` stops them all.
+
+    Parameters
+    ----------
+    home : str or Path
+        The services' home (keys, journals, programs).
+    env : dict, optional
+        More environment of every child.
+    """
+
+    def __init__(self, home: str | os.PathLike[str], env: dict[str, str] | None = None) -> None:
+        self.env = {**os.environ, "PLUGCELL_HOME": str(home), "PYTHONUNBUFFERED": "1",
+                    **(env or {})}
+        self.started: list[Proc] = []
+
+    def start(self, argv: list[str], env: dict[str, str] | None = None) -> Proc:
+        """Start ``argv`` (``env``: this child's own additions)."""
+        proc = Proc(argv, {**self.env, **(env or {})})
+        self.started.append(proc)
+        return proc
+
+    def serve(self, kind: str, cell: str, *extra: str, name: str | None = None,
+              env: dict[str, str] | None = None, wait: bool = True) -> Proc:
+        """``plugcell serve KIND --cell CELL …`` (``--name NAME``), waited for until it
+        serves unless ``wait`` is False."""
+        argv = plugcell_argv("serve", kind, "--cell", cell, *extra)
+        if name:
+            argv += ["--name", name]
+        proc = self.start(argv, env)
+        if wait:
+            proc.wait_line(lambda line: "serving in cell" in line, 30.0)
+        return proc
+
+    def stop(self) -> None:
+        """Stop every child started (its whole process group)."""
+        for proc in self.started:
+            proc.stop()
+
+
+class CellProcesses:
+    """The services of one cell run as OS processes, through a :class:`Launcher`
+    (``stop()`` ends them all).
+
+    Parameters
+    ----------
+    name : str
+        The cell.
+    home : str or Path
+        Its services' home.
+    """
+
+    def __init__(self, name: str, home: str | os.PathLike[str]) -> None:
+        self.name = name
+        self.home = Path(home)
+        self.launcher = Launcher(home)
+
+    def start(self, *args: str) -> Proc:
+        """Start ``plugcell ARGS…``."""
+        return self.launcher.start(plugcell_argv(*args))
+
+    def serve(self, kind: str, *extra: str) -> Proc:
+        """``plugcell serve KIND`` in this cell, waited for until it serves."""
+        return self.launcher.serve(kind, self.name, *extra)
+
+    def cli(self, *args: str, timeout: float = 30.0) -> Proc:
+        """Run a ``plugcell`` command in this cell to its end (bounded)."""
+        proc = self.start(*args, "--cell", self.name)
+        proc.popen.wait(timeout)
+        return proc
+
+    def stop(self) -> None:
+        """Stop every child started."""
+        self.launcher.stop()

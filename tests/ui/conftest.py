@@ -12,7 +12,8 @@ import pytest
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent / "cell"))
 
-from cell_testlib import Proc, plugcell_argv, unique_cell
+from cell_testlib import unique_cell
+from childproc import Launcher
 
 
 @pytest.fixture(scope="module")
@@ -25,31 +26,6 @@ def ui_home(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Path]:
         os.environ.pop("PLUGCELL_HOME", None)
     else:
         os.environ["PLUGCELL_HOME"] = old
-
-
-class Launcher:
-    """Child processes of a test module, all stopped at its end."""
-
-    def __init__(self, home: Path) -> None:
-        self.env = {**os.environ, "PLUGCELL_HOME": str(home), "PYTHONUNBUFFERED": "1"}
-        self.started: list[Proc] = []
-
-    def start(self, argv: list[str]) -> Proc:
-        proc = Proc(argv, self.env)
-        self.started.append(proc)
-        return proc
-
-    def serve(self, kind: str, cell: str, *extra: str, name: str | None = None) -> Proc:
-        argv = plugcell_argv("serve", kind, "--cell", cell, *extra)
-        if name:
-            argv += ["--name", name]
-        proc = self.start(argv)
-        proc.wait_line(lambda line: "serving in cell" in line, 30.0)
-        return proc
-
-    def stop(self) -> None:
-        for proc in self.started:
-            proc.stop()
 
 
 @pytest.fixture(scope="module")

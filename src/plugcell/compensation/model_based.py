@@ -146,14 +146,29 @@ def _payload(payload_kg: ArrayLike | float, N: int) -> Array:
     return m
 
 
-def _step(J: Array, dx: Array) -> Array:
-    """``δθ = J⁻¹ Δx`` (4.11), batched; pseudo-inverse for non-square or singular J."""
+def joint_step(J: Array, dx: Array) -> Array:
+    """The joint step that makes the pose error ``Δx``: ``δθ = J⁻¹ Δx`` (4.11).
+
+    The pseudo-inverse ``δθ = J⁺ Δx`` (least squares, minimum norm) where ``J`` is not
+    square or (any in a batch) singular.
+
+    Parameters
+    ----------
+    J : (..., 6, n) array
+        Jacobians, ``[v; ω]`` per unit joint rate (m/rad, rad/rad).
+    dx : (..., 6) array
+        Pose errors ``[Δp (m); φ (rad)]``.
+
+    Returns
+    -------
+    (..., n) array, rad
+    """
     if J.shape[-1] == 6:
         try:
             return np.linalg.solve(J, dx[..., None])[..., 0]
         except np.linalg.LinAlgError:
             pass
-    return np.einsum("bij,bj->bi", np.linalg.pinv(J), dx)
+    return np.einsum("...ij,...j->...i", np.linalg.pinv(J), dx)
 
 
 def _limit_reason(desc: RobotDescription, q: Array) -> tuple[str, str, float, tuple[float, float]]:
@@ -258,7 +273,7 @@ def compensate_joints(
         active = active[keep]
         if not active.size:
             break
-        dq = _step(J[keep], dx[keep])
+        dq = joint_step(J[keep], dx[keep])
         big = ~np.all(np.isfinite(dq), axis=-1) | (np.max(np.abs(dq), axis=-1) > MAX_STEP)
         diverged[active[big]] = True
         active = active[~big]

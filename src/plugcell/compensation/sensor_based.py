@@ -39,6 +39,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from plugcell.compensation.errors import CorrectionError, SensorError
+from plugcell.compensation.model_based import joint_step
 from plugcell.compensation.pose_model import PoseModel
 from plugcell.compensation.protocols import (
     CartesianRobot,
@@ -344,11 +345,7 @@ def correct_6dof(
             raise loop.fail(
                 f"thresholds not met after {k} corrective moves: ‖Δp‖ = {ep * 1e3:.3f} mm, "
                 f"‖Δφ‖ = {math.degrees(er):.4f}°", "max_iterations", q)
-        J = model.evaluate(q, payload_kg)[1][0]
-        try:
-            dq = np.linalg.solve(J, dx) if J.shape[1] == 6 else np.linalg.pinv(J) @ dx
-        except np.linalg.LinAlgError:
-            dq = np.linalg.pinv(J) @ dx
+        dq = joint_step(model.evaluate(q, payload_kg)[1][0], dx)
         q_new = q + dq
         if s.check_limits and not bool(desc.within_limits(q_new)):
             loop.record(q, r, dx, ep, er, None, 0.0)

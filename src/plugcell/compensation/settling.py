@@ -74,6 +74,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from plugcell.compensation.errors import CorrectionError
+from plugcell.compensation.model_based import joint_step
 from plugcell.compensation.pose_model import PoseModel
 from plugcell.compensation.protocols import MovingRobot, PoseStream, StreamReading
 from plugcell.compensation.sensor_based import _target_pose
@@ -560,16 +561,6 @@ def _check_time(run: _Run, now: float, q: Array) -> None:
                        "the arm did not settle", "not_settled", now, q)
 
 
-def _joint_step(model: PoseModel, q: Array, dx: Array, payload_kg: float) -> Array:
-    """``δθ = J(θ)⁻¹ Δx`` with the identified model's Jacobian (pseudo-inverse where
-    ``J`` is not square or singular)."""
-    J = model.evaluate(q, payload_kg)[1][0]
-    try:
-        return np.linalg.solve(J, dx) if J.shape[1] == 6 else np.linalg.pinv(J) @ dx
-    except np.linalg.LinAlgError:
-        return np.linalg.pinv(J) @ dx
-
-
 def _check_noise(run: _Run, est: RestEstimate, now: float, q: Array) -> None:
     """``noisy``: the window cannot grow any more and its noise alone is above ``ū``."""
     s = run.s
@@ -598,8 +589,8 @@ def _correction(run: _Run, model: PoseModel, q: Array, est: RestEstimate, now: f
         raise run.fail(f"tolerance not met after {s.max_corrections} corrections: "
                        f"‖Δp̂‖ = {ep * 1e3:.4f} mm, ‖Δφ̂‖ = {math.degrees(er):.4f}°",
                        "max_corrections", now, q)
-    dq = _joint_step(model, q, bounded_step(est.error, s.max_step_m, s.max_step_rad),
-                     payload_kg)
+    dq = joint_step(model.evaluate(q, payload_kg)[1][0],
+                    bounded_step(est.error, s.max_step_m, s.max_step_rad))
     if s.check_limits and not bool(model.description.within_limits(q + dq)):
         run.record(now, q, est, None, math.nan)
         raise run.fail("the correction would leave the joint limits", "joint_limit", now, q)

@@ -34,6 +34,7 @@ from pathlib import Path
 import numpy as np
 
 from plugcell.io.csvtable import table_number, table_rows
+from plugcell.io.text_files import read_text
 from plugcell.io.units import MM_PER_M, joints_from_si, joints_to_si
 
 ROTATION_CONVENTIONS = ("rpy", "zyz", "xyz")
@@ -322,16 +323,8 @@ def read_measurements(
         No such file, not UTF-8, unreadable, or any error of
         :func:`parse_measurements`.
     """
-    p = Path(path)
-    try:
-        text = p.read_text(encoding="utf-8")
-    except FileNotFoundError:
-        raise MeasurementFileError(f"{p}: no such file") from None
-    except UnicodeDecodeError as exc:
-        raise MeasurementFileError(f"{p}: not a UTF-8 text file ({exc.reason})") from None
-    except OSError as exc:
-        raise MeasurementFileError(f"{p}: cannot read: {exc.strerror}") from None
-    return parse_measurements(text, rotation=rotation, name=str(p), n_joints=n_joints,
+    text = read_text(path, MeasurementFileError)
+    return parse_measurements(text, rotation=rotation, name=str(Path(path)), n_joints=n_joints,
                               joint_scale=joint_scale)
 
 

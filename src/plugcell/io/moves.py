@@ -29,6 +29,7 @@ from pathlib import Path
 
 import numpy as np
 
+from plugcell.io.text_files import read_text
 from plugcell.io.units import UnitsError, joints_to_si, pose_from_robot
 from plugcell.kinematics.description import RobotDescription
 from plugcell.motion.moves import CIRC, LIN, PTP, Move
@@ -195,9 +196,4 @@ def read_moves(path: str | Path, desc: RobotDescription) -> list[Move]:
     MovesFileError
         A malformed line, or a file that cannot be read.
     """
-    p = Path(path)
-    try:
-        text = p.read_text(encoding="utf-8")
-    except (OSError, UnicodeDecodeError) as exc:
-        raise MovesFileError(f"{p}: cannot read: {exc}") from None
-    return parse_moves(text, str(p), desc)
+    return parse_moves(read_text(path, MovesFileError), str(Path(path)), desc)

@@ -23,6 +23,7 @@ from pathlib import Path
 import numpy as np
 
 from plugcell.io.csvtable import table_number, table_rows
+from plugcell.io.text_files import read_text
 from plugcell.io.units import MM_PER_M
 
 __all__ = ["NestFileError", "format_nests", "parse_nests", "read_nests"]
@@ -108,14 +109,7 @@ def read_nests(path: str | Path) -> tuple[list[str], np.ndarray]:
         No such file, an unreadable or non-UTF-8 file, or any error of
         :func:`parse_nests`.
     """
-    p = Path(path)
-    try:
-        text = p.read_text(encoding="utf-8")
-    except FileNotFoundError:
-        raise NestFileError(f"{p}: no such file") from None
-    except (OSError, UnicodeDecodeError) as exc:
-        raise NestFileError(f"{p}: cannot read: {exc}") from None
-    return parse_nests(text, str(p))
+    return parse_nests(read_text(path, NestFileError), str(Path(path)))
 
 
 def format_nests(names: list[str], positions: np.ndarray, comments: tuple[str, ...] = ()) -> str:

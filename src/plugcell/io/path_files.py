@@ -34,6 +34,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from plugcell.io.csvtable import table_number, table_rows
+from plugcell.io.text_files import read_text
 from plugcell.io.units import M_PER_MM, ROBOT_CONVENTION, UnitsError, pose_from_robot
 
 Array = NDArray[np.float64]
@@ -207,9 +208,5 @@ def read_path(path: str | Path, **kwargs: object) -> PathFile:
     PathFileError
         The file cannot be read, or is malformed (file, line and column named).
     """
-    p = Path(path)
-    try:
-        text = p.read_text(encoding="utf-8")
-    except (OSError, UnicodeDecodeError) as exc:
-        raise PathFileError(f"{p.name}: cannot read: {exc}") from None
-    return parse_path(text, p.name, **kwargs)  # type: ignore[arg-type]
+    name = Path(path).name
+    return parse_path(read_text(path, PathFileError, name), name, **kwargs)  # type: ignore[arg-type]

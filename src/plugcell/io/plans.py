@@ -33,6 +33,7 @@ import numpy as np
 
 from plugcell.io.csvtable import table_number, table_rows
 from plugcell.io.measurements import MEASUREMENT_COLUMNS
+from plugcell.io.text_files import read_text
 from plugcell.io.units import joints_from_si, joints_to_si
 
 _JOINT_COLUMN = re.compile(r"^j([1-9][0-9]*)$")
@@ -194,16 +195,8 @@ def read_plan(path: str | Path, *, n_joints: int | None = None,
     PlanFileError
         No such file, not UTF-8, unreadable, or any error of :func:`parse_plan`.
     """
-    p = Path(path)
-    try:
-        text = p.read_text(encoding="utf-8")
-    except FileNotFoundError:
-        raise PlanFileError(f"{p}: no such file") from None
-    except UnicodeDecodeError as exc:
-        raise PlanFileError(f"{p}: not a UTF-8 text file ({exc.reason})") from None
-    except OSError as exc:
-        raise PlanFileError(f"{p}: cannot read: {exc.strerror}") from None
-    return parse_plan(text, name=str(p), n_joints=n_joints, joint_scale=joint_scale)
+    text = read_text(path, PlanFileError)
+    return parse_plan(text, name=str(Path(path)), n_joints=n_joints, joint_scale=joint_scale)
 
 
 def format_plan(plan: MeasurementPlan, *, comments: Iterable[str] = (),

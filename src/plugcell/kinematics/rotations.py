@@ -42,7 +42,7 @@ from __future__ import annotations
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from plugcell.kinematics.transforms import _matrix_to_quat, identity, so3_log
+from plugcell.kinematics.transforms import _matrix_to_quat, _rot, identity, so3_log
 
 Array = NDArray[np.float64]
 
@@ -78,28 +78,19 @@ def _f(x: ArrayLike) -> Array:
     return np.asarray(x, dtype=float)
 
 
-def _rz(t: Array) -> Array:
-    c, s = np.cos(t), np.sin(t)
-    z, o = np.zeros_like(t), np.ones_like(t)
-    return np.stack(
-        [np.stack([c, -s, z], -1), np.stack([s, c, z], -1), np.stack([z, z, o], -1)], -2
-    )
+def _rx(t: Array) -> Array:
+    """``Rx(t)``: the rotation block of :func:`~plugcell.kinematics.transforms.rot_x`."""
+    return _rot(t, 0)[..., :3, :3]
 
 
 def _ry(t: Array) -> Array:
-    c, s = np.cos(t), np.sin(t)
-    z, o = np.zeros_like(t), np.ones_like(t)
-    return np.stack(
-        [np.stack([c, z, s], -1), np.stack([z, o, z], -1), np.stack([-s, z, c], -1)], -2
-    )
+    """``Ry(t)``: the rotation block of :func:`~plugcell.kinematics.transforms.rot_y`."""
+    return _rot(t, 1)[..., :3, :3]
 
 
-def _rx(t: Array) -> Array:
-    c, s = np.cos(t), np.sin(t)
-    z, o = np.zeros_like(t), np.ones_like(t)
-    return np.stack(
-        [np.stack([o, z, z], -1), np.stack([z, c, -s], -1), np.stack([z, s, c], -1)], -2
-    )
+def _rz(t: Array) -> Array:
+    """``Rz(t)``: the rotation block of :func:`~plugcell.kinematics.transforms.rot_z`."""
+    return _rot(t, 2)[..., :3, :3]
 
 
 def _bcast(*xs: ArrayLike) -> list[Array]:

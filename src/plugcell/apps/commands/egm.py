@@ -20,13 +20,14 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from .rsi import _six
 from .streaming import (
     add_limit_options,
     add_run_controls,
     add_run_options,
+    limits_of,
     run_link,
     sine_or_hold,
+    write_and_list,
 )
 
 AXES = {"joint": ("A1", "A2", "A3", "A4", "A5", "A6"),
@@ -68,24 +69,12 @@ def _config(args: argparse.Namespace, robot_host: str, listen: str):
     """The EgmConfig the options describe (limits converted to SI)."""
     from plugcell.apps.cli import CommandError
     from plugcell.devices.robot.egm import (
-        CorrectionLimits,
         EgmConfig,
         EgmConfigError,
-        default_limits,
     )
-    from plugcell.io.units import DEG, M_PER_MM
 
-    kind = "joint" if args.mode == "joint" else "cartesian"
-    scale = (DEG,) * 6 if kind == "joint" else (M_PER_MM,) * 3 + (DEG,) * 3
-    base = default_limits(kind)
-    given = {}
-    for name in ("step", "offset", "speed"):
-        vals = _six(getattr(args, f"max_{name}"), name)
-        given[name] = (tuple(v * s for v, s in zip(vals, scale, strict=True)) if vals
-                       else getattr(base, f"max_{name}"))
     try:
-        limits = CorrectionLimits(given["step"], given["offset"], given["speed"],
-                                  "refuse" if args.refuse else "clamp")
+        limits = limits_of(args, "joint" if args.mode == "joint" else "cartesian")
         return EgmConfig(robot_host=robot_host, listen_host=listen, listen_port=args.port,
                          mode=args.mode, sample_rate_ms=args.sample_ms,
                          comm_timeout_s=args.timeout, limits=limits)
@@ -94,18 +83,11 @@ def _config(args: argparse.Namespace, robot_host: str, listen: str):
 
 
 def _files(args: argparse.Namespace) -> int:
-    from plugcell.apps.cli import CommandError
     from plugcell.devices.robot.egm.controller_files import write_controller_files
 
     config = _config(args, "0.0.0.0", "0.0.0.0")
-    try:
-        paths = write_controller_files(args.out, config, args.ip, args.device)
-    except ValueError as exc:
-        raise CommandError(str(exc)) from None
-    except OSError as exc:
-        raise CommandError(f"{args.out}: cannot write: {exc.strerror or exc}") from None
-    for path in paths:
-        print(path)
+    write_and_list(lambda: write_controller_files(args.out, config, args.ip, args.device),
+                   args.out)
     print(f"then on the PC: plugcell egm run --robot-ip CONTROLLER_IP --port {args.port} "
           f"--mode {args.mode} --sample-ms {args.sample_ms} --timeout {args.timeout:g}")
     return 0

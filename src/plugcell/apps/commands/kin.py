@@ -27,8 +27,10 @@ from typing import Any
 
 import numpy as np
 
+from plugcell.apps.cli import CommandError
 from plugcell.apps.commands.deprecated import DeprecatedName
 from plugcell.apps.commands.robotargs import add_robot_args, load_robot_of
+from plugcell.apps.commands.subcommands import add_subcommands
 from plugcell.io.robot_schema import description_to_dict
 from plugcell.io.robots import available_robots
 from plugcell.kinematics import (
@@ -45,26 +47,11 @@ from plugcell.kinematics import (
 _NEGATIVE_VALUE = re.compile(r"^-\.?\d")
 
 
-def _error(msg: str) -> Exception:
-    from plugcell.apps.cli import (
-        CommandError,  # imported late: plugcell.apps.cli imports this module
-    )
-
-    return CommandError(msg)
-
-
 def configure(kin: argparse.ArgumentParser) -> None:
     """Add the ``kin`` options to its parser (declared in :mod:`plugcell.apps.cli`)."""
-    kin.description = (
-        "Forward and inverse kinematics of a described robot (see docs/kinematics.md)."
-    )
-    sub = kin.add_subparsers(dest="kin_command", metavar="SUBCOMMAND")
-
-    def no_sub(args: argparse.Namespace) -> int:
-        kin.print_help()
-        return 2
-
-    kin.set_defaults(func=no_sub)
+    sub = add_subcommands(
+        kin, "Forward and inverse kinematics of a described robot (see docs/kinematics.md).",
+        "kin_command")
 
     fk = sub.add_parser(
         "fk",
@@ -125,7 +112,7 @@ def _floats(text: str, n: int, option: str, what: str) -> np.ndarray:
     parts = [p.strip() for p in text.split(",")]
     if len(parts) != n or any(p == "" for p in parts):
         got = len([p for p in parts if p != ""])
-        raise _error(
+        raise CommandError(
             f"{option}: expected {n} comma-separated numbers ({what}), got {got}: {text!r}"
         )
     out = []
@@ -133,9 +120,9 @@ def _floats(text: str, n: int, option: str, what: str) -> np.ndarray:
         try:
             v = float(p)
         except ValueError:
-            raise _error(f"{option}: value {i + 1} ({p!r}) is not a number") from None
+            raise CommandError(f"{option}: value {i + 1} ({p!r}) is not a number") from None
         if not math.isfinite(v):
-            raise _error(f"{option}: value {i + 1} ({p!r}) is not finite")
+            raise CommandError(f"{option}: value {i + 1} ({p!r}) is not finite")
         out.append(v)
     return np.array(out)
 
@@ -178,7 +165,7 @@ def _cmd_fk(args: argparse.Namespace) -> int:
     try:
         fk = forward(desc, None, q, closure=args.closure)
     except KinematicsError as exc:
-        raise _error(f"{desc.name}: {exc}") from None
+        raise CommandError(f"{desc.name}: {exc}") from None
     xyz, zyz = matrix_to_pose(fk.flange, "zyz")
     out: dict[str, Any] = {
         "robot": desc.name,
@@ -210,7 +197,7 @@ def _cmd_ik(args: argparse.Namespace) -> int:
     try:
         res = inverse(desc, None, T, seed, closure=args.closure)
     except KinematicsError as exc:
-        raise _error(f"{desc.name}: {exc}") from None
+        raise CommandError(f"{desc.name}: {exc}") from None
     _print(
         {
             "robot": desc.name,

@@ -25,7 +25,9 @@ import sys
 
 import numpy as np
 
+from plugcell.apps.cli import CommandError
 from plugcell.apps.commands.robotargs import add_robot_args, load_robot_of
+from plugcell.apps.commands.subcommands import add_subcommands
 from plugcell.io.moves import MovesFileError, read_moves
 from plugcell.io.units import robot_from_pose
 from plugcell.motion import CartesianLimits, JointLimits, TrajectoryError, plan
@@ -36,22 +38,11 @@ DEFAULTS = {"joint_speed": 120.0, "joint_acc": 400.0, "joint_jerk": 3000.0,
             "angular_speed": 120.0, "angular_acc": 460.0, "angular_jerk": 4600.0}
 
 
-def _error(msg: str) -> Exception:
-    from plugcell.apps.cli import CommandError  # late: plugcell.apps.cli imports this module
-
-    return CommandError(msg)
-
-
 def configure(parser: argparse.ArgumentParser) -> None:
     """Add the ``motion`` sub-commands to its parser (declared in :mod:`plugcell.apps.cli`)."""
-    parser.description = "Trajectories: plan moves with limits and blends (docs/motion.md)."
-    sub = parser.add_subparsers(dest="motion_command", metavar="SUBCOMMAND")
-
-    def no_sub(args: argparse.Namespace) -> int:
-        parser.print_help()
-        return 2
-
-    parser.set_defaults(func=no_sub)
+    sub = add_subcommands(
+        parser, "Trajectories: plan moves with limits and blends (docs/motion.md).",
+        "motion_command")
     p = sub.add_parser(
         "plan", help="check a moves file and write its trajectory sampled every cycle (CSV)",
         description="Plan the moves of a moves file (PTP, LIN, CIRC; docs/motion.md), check "
@@ -84,13 +75,13 @@ def _values(text: str, option: str, n: int | None) -> np.ndarray:
     try:
         vals = np.array([float(v) for v in text.split(",")])
     except ValueError:
-        raise _error(f"{option}: expected numbers, got {text!r}") from None
+        raise CommandError(f"{option}: expected numbers, got {text!r}") from None
     if n is not None and vals.size == 1:
         vals = np.full(n, vals[0])
     if n is not None and vals.size != n:
-        raise _error(f"{option}: expected 1 or {n} values, got {vals.size}")
+        raise CommandError(f"{option}: expected 1 or {n} values, got {vals.size}")
     if not np.all(np.isfinite(vals)) or not np.all(vals > 0):
-        raise _error(f"{option}: values must be positive, got {text!r}")
+        raise CommandError(f"{option}: values must be positive, got {text!r}")
     return vals
 
 
@@ -110,27 +101,27 @@ def _cmd_plan(args: argparse.Namespace) -> int:
     n = desc.n_readings
     scale = desc.reading_scale()
     if not (math.isfinite(args.cycle) and args.cycle > 0):
-        raise _error(f"--cycle must be a positive number of seconds, got {args.cycle}")
+        raise CommandError(f"--cycle must be a positive number of seconds, got {args.cycle}")
     if args.start is None:
         q0 = np.asarray(desc.home, dtype=float)
     else:
         try:
             start = np.array([float(v) for v in args.start.split(",")])
         except ValueError:
-            raise _error(f"--start: expected {n} numbers, got {args.start!r}") from None
+            raise CommandError(f"--start: expected {n} numbers, got {args.start!r}") from None
         if start.size != n or not np.all(np.isfinite(start)):
-            raise _error(f"--start: expected {n} finite joint values for {desc.name} "
+            raise CommandError(f"--start: expected {n} finite joint values for {desc.name} "
                          f"({', '.join(desc.reading_names)}), got {args.start!r}")
         q0 = start * scale
     joint, cart = _limits(args, n, scale)
     try:
         moves = read_moves(args.moves, desc)
     except MovesFileError as exc:
-        raise _error(str(exc)) from None
+        raise CommandError(str(exc)) from None
     try:
         traj = plan(desc, q0, moves, joint, cart)
     except TrajectoryError as exc:
-        raise _error(f"{args.moves}: {exc}") from None
+        raise CommandError(f"{args.moves}: {exc}") from None
     t = traj.cycle_times(args.cycle)
     sample = traj.sample(t, 0)
     tcp = traj.tcp(t)
@@ -149,7 +140,7 @@ def _cmd_plan(args: argparse.Namespace) -> int:
             with open(args.out, "w", encoding="utf-8", newline="") as fh:
                 fh.write(buf.getvalue())
         except OSError as exc:
-            raise _error(f"--out {args.out}: {exc.strerror or exc}") from None
+            raise CommandError(f"--out {args.out}: {exc.strerror or exc}") from None
         stops = [moves[k].line for k, d in traj.blends.items() if d == 0.0]
         print(f"{desc.name}: {len(moves)} moves, {traj.duration:.3f} s, {t.size} cycles of "
               f"{args.cycle * 1e3:g} ms → {args.out}"

@@ -29,29 +29,20 @@ from typing import Any
 
 import numpy as np
 
+from plugcell.apps.cli import CommandError
 from plugcell.apps.commands.progress import ProgressBar
+from plugcell.apps.commands.subcommands import add_subcommands
 from plugcell.io.path_files import PathFileError, read_path
 
 #: The ``format`` of the result file (``--out``): what the web UI's tracked-path view reads.
 RESULT_FORMAT = "plugcell-tracked-path"
 
 
-def _error(msg: str) -> Exception:
-    from plugcell.apps.cli import CommandError  # late: plugcell.apps.cli imports this module
-
-    return CommandError(msg)
-
-
 def configure(parser: argparse.ArgumentParser) -> None:
     """Add the ``path`` sub-commands to its parser (declared in :mod:`plugcell.apps.cli`)."""
-    parser.description = "Paths with the tracker in the loop (docs/tracked-paths.md)."
-    sub = parser.add_subparsers(dest="path_command", metavar="SUBCOMMAND")
-
-    def no_sub(args: argparse.Namespace) -> int:
-        parser.print_help()
-        return 2
-
-    parser.set_defaults(func=no_sub)
+    sub = add_subcommands(
+        parser, "Paths with the tracker in the loop (docs/tracked-paths.md).",
+        "path_command")
     p = sub.add_parser(
         "run", help="run a path file on the twin with the laser tracker correcting it",
         description="Run the path of a path file (x,y,z[,a,b,c] mm/deg, speed mm/s, "
@@ -98,7 +89,7 @@ def _breaks(texts: list[str]) -> tuple[tuple[float, float], ...]:
     try:
         return parse_beam_breaks(texts)
     except ValueError as exc:
-        raise _error(f"--beam-break {exc}") from None
+        raise CommandError(f"--beam-break {exc}") from None
 
 
 def _mm(x: float) -> float:
@@ -152,11 +143,11 @@ def _read(args: argparse.Namespace) -> Any:
     """The path of ``--path`` or of ``--program`` (its straight moves)."""
     if args.path is not None:
         if args.library:
-            raise _error("--library goes with --program")
+            raise CommandError("--library goes with --program")
         try:
             return read_path(args.path, speed_mm_s=args.speed)
         except PathFileError as exc:
-            raise _error(str(exc)) from None
+            raise CommandError(str(exc)) from None
     from plugcell.io.robots import load_robot
     from plugcell.sim.path_program import path_of_program
 
@@ -164,9 +155,9 @@ def _read(args: argparse.Namespace) -> Any:
         path, trackers = path_of_program(args.program, load_robot("smart_h4"), args.speed,
                                          args.library)
     except (OSError, ValueError) as exc:
-        raise _error(str(exc)) from None
+        raise CommandError(str(exc)) from None
     if len(trackers) > 1:
-        raise _error(f"{args.program}: its moves name {len(trackers)} trackers "
+        raise CommandError(f"{args.program}: its moves name {len(trackers)} trackers "
                      f"({', '.join(sorted(trackers))}); the twin has one")
     return path
 
@@ -175,7 +166,7 @@ def _cmd_run(args: argparse.Namespace) -> int:
     from plugcell.sim.path_run import PathRunOptions, run_path  # late: the twin is heavy
 
     if not (np.isfinite(args.speed) and args.speed > 0):
-        raise _error(f"--speed must be > 0 mm/s, got {args.speed}")
+        raise CommandError(f"--speed must be > 0 mm/s, got {args.speed}")
     path = _read(args)
     calibration = None
     if args.params is not None:
@@ -190,7 +181,7 @@ def _cmd_run(args: argparse.Namespace) -> int:
                                  beam_breaks=_breaks(args.beam_break),
                                  tracker_lost_at=args.tracker_lost_at)
     except ValueError as exc:
-        raise _error(str(exc)) from None
+        raise CommandError(str(exc)) from None
 
     name = Path(args.path or args.program).name
     bar = ProgressBar(f"running {name}")
@@ -203,7 +194,7 @@ def _cmd_run(args: argparse.Namespace) -> int:
         run = run_path(path, options, progress, calibration)
     except ValueError as exc:
         where = args.params if "calibration" in str(exc) else args.path or args.program
-        raise _error(f"{where}: {exc}") from None
+        raise CommandError(f"{where}: {exc}") from None
     result = result_dict(run, name)
     if args.out:
         Path(args.out).write_text(json.dumps(result_document(run, name)) + "\n")

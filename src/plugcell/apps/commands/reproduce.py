@@ -25,6 +25,7 @@ from __future__ import annotations
 import argparse
 import json
 import sys
+from collections.abc import Callable, Iterable
 from pathlib import Path
 from typing import Any
 
@@ -80,14 +81,21 @@ def _run_8_1(args: argparse.Namespace) -> int:
     from plugcell.apps.reproduce import identification_8_1 as r81
 
     d = r81.reproduce_8_1(args.poses, args.seed)
+    return _report(args, d, r81.print_table, r81.write_page)
+
+
+def _report(args: argparse.Namespace, d: dict[str, Any], print_table: Callable[[Any], Any],
+            write: Callable[[Any, Path], Iterable[Any]]) -> int:
+    """A section's result ``d`` shown (JSON with ``--json``, else ``print_table(d)``) and,
+    unless ``--no-write``, its pages written into ``--out-dir`` (``write``: the paths)."""
     if args.json:
         print(json.dumps(d, indent=2, allow_nan=False, default=_json_default))
     else:
-        r81.print_table(d)
+        print_table(d)
     if not args.no_write:
-        r81.write_page(d, args.out_dir)
+        written = write(d, args.out_dir)
         if not args.json:
-            print(f"\nwrote {args.out_dir / '8.1.md'}", file=sys.stderr)
+            print(f"\nwrote {', '.join(str(w) for w in written)}", file=sys.stderr)
     return 0
 
 
@@ -105,15 +113,7 @@ def _run_8_2(args: argparse.Namespace) -> int:
     from plugcell.apps.reproduce import models_8_2 as r82
 
     d = r82.reproduce_8_2(args.seed, args.quick, say)
-    if args.json:
-        print(json.dumps(d, indent=2, allow_nan=False, default=_json_default))
-    else:
-        r82.print_table(d)
-    if not args.no_write:
-        r82.write_page(d, args.out_dir)
-        if not args.json:
-            print(f"\nwrote {args.out_dir / '8.2.md'}", file=sys.stderr)
-    return 0
+    return _report(args, d, r82.print_table, r82.write_page)
 
 
 # ============================================================================ 8.3
@@ -123,12 +123,5 @@ def _run_8_3(args: argparse.Namespace) -> int:
 
     bar = None if args.json else ProgressBar("8.3 points")
     d = run(fast=args.fast, seed=args.seed, progress=bar)
-    if args.json:
-        print(json.dumps(d, indent=2, allow_nan=False, default=_json_default))
-    else:
-        print(format_table(d))
-    if not args.no_write:
-        written = write_pages(d, str(args.out_dir))
-        if not args.json:
-            print(f"\nwrote {', '.join(str(w) for w in written)}", file=sys.stderr)
-    return 0
+    return _report(args, d, lambda d: print(format_table(d)),
+                   lambda d, out: write_pages(d, str(out)))

@@ -28,8 +28,10 @@ from .streaming import (
     add_limit_options,
     add_run_controls,
     add_run_options,
+    limits_of,
     run_link,
     sine_or_hold,
+    write_and_list,
 )
 
 
@@ -77,45 +79,17 @@ def configure(p: argparse.ArgumentParser) -> None:
     r.set_defaults(func=_run)
 
 
-def _six(text: str | None, what: str) -> tuple[float, ...] | None:
-    from plugcell.apps.cli import CommandError
-
-    if text is None:
-        return None
-    try:
-        vals = tuple(float(v) for v in text.split(","))
-    except ValueError:
-        raise CommandError(f"--max-{what} {text!r}: expected numbers separated by commas") \
-            from None
-    if len(vals) == 1:
-        vals *= 6
-    if len(vals) != 6:
-        raise CommandError(f"--max-{what} {text!r}: expected 1 or 6 numbers, got {len(vals)}")
-    return vals
-
-
 def _config(args: argparse.Namespace, robot_host: str, listen: str):
     """The RsiConfig the options describe (limits converted to SI)."""
     from plugcell.apps.cli import CommandError
     from plugcell.devices.robot.rsi import (
-        CorrectionLimits,
         OutputSignal,
         RsiConfig,
         RsiConfigError,
-        default_limits,
     )
-    from plugcell.io.units import DEG, M_PER_MM
 
-    scale = (DEG,) * 6 if args.correction == "joint" else (M_PER_MM,) * 3 + (DEG,) * 3
-    base = default_limits(args.correction)
-    given = {}
-    for name in ("step", "offset", "speed"):
-        vals = _six(getattr(args, f"max_{name}"), name)
-        given[name] = (tuple(v * s for v, s in zip(vals, scale, strict=True)) if vals
-                       else getattr(base, f"max_{name}"))
     try:
-        limits = CorrectionLimits(given["step"], given["offset"], given["speed"],
-                                  "refuse" if args.refuse else "clamp")
+        limits = limits_of(args, args.correction)
         return RsiConfig(robot_host=robot_host, listen_host=listen, listen_port=args.port,
                          correction=args.correction, mode=args.mode, cycle=args.cycle,
                          timeout_packets=args.timeout, limits=limits, sentype=args.sentype,
@@ -125,21 +99,13 @@ def _config(args: argparse.Namespace, robot_host: str, listen: str):
 
 
 def _files(args: argparse.Namespace) -> int:
-    from plugcell.apps.cli import CommandError
     from plugcell.devices.robot.rsi.controller_files import IoRouting, write_controller_files
 
     config = _config(args, "0.0.0.0", "0.0.0.0")
     io = IoRouting(outputs={"DiO": args.dio} if args.dio else None,
                    input_tag="DiL" if args.dil else None, input_index=args.dil or 1)
-    try:
-        paths = write_controller_files(args.out, config, args.ip, io, args.drives,
-                                       args.settle)
-    except ValueError as exc:
-        raise CommandError(str(exc)) from None
-    except OSError as exc:
-        raise CommandError(f"{args.out}: cannot write: {exc.strerror or exc}") from None
-    for path in paths:
-        print(path)
+    write_and_list(lambda: write_controller_files(args.out, config, args.ip, io, args.drives,
+                                                  args.settle), args.out)
     if args.drives == "robot":
         print(f"then on the PC: plugcell serve robot --rsi {args.ip}:{args.port} --rsi-robot "
               f"CONTROLLER_IP --rsi-timeout {args.timeout} --param rsi_correction="

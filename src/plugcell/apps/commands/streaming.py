@@ -1,13 +1,15 @@
-"""What ``plugcell rsi run`` and ``plugcell egm run`` share: the first-contact correction
-source (``--sine AXIS:AMPLITUDE:PERIOD``, else hold) and the run itself (start the link,
-print its counters every second, end on ``--duration`` or a failure)."""
+"""What ``plugcell rsi`` and ``plugcell egm`` share: the correction limits their options
+give, the controller's files written and listed, the first-contact correction source
+(``--sine AXIS:AMPLITUDE:PERIOD``, else hold) and the run itself (start the link, print its
+counters every second, end on ``--duration`` or a failure)."""
 
 from __future__ import annotations
 
 import argparse
 import json
 import time
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Iterable, Sequence
+from pathlib import Path
 from typing import Any
 
 
@@ -20,6 +22,70 @@ def add_limit_options(p: argparse.ArgumentParser, what: str, units: str) -> None
     p.add_argument("--refuse", action="store_true",
                    help=f"refuse (hold and fail) any {what} beyond the limits instead of "
                    "clamping it")
+
+
+def _six(text: str | None, what: str) -> tuple[float, ...] | None:
+    """``--max-<what>``'s value: one number for all six axes, or six; ``None`` if not given."""
+    from plugcell.apps.cli import CommandError
+
+    if text is None:
+        return None
+    try:
+        vals = tuple(float(v) for v in text.split(","))
+    except ValueError:
+        raise CommandError(f"--max-{what} {text!r}: expected numbers separated by commas") \
+            from None
+    if len(vals) == 1:
+        vals *= 6
+    if len(vals) != 6:
+        raise CommandError(f"--max-{what} {text!r}: expected 1 or 6 numbers, got {len(vals)}")
+    return vals
+
+
+def limits_of(args: argparse.Namespace, kind: str) -> Any:
+    """The limits the options of :func:`add_limit_options` give, in SI.
+
+    Parameters
+    ----------
+    args : argparse.Namespace
+        ``max_step``, ``max_offset``, ``max_speed`` (robot units: degrees per joint, or
+        mm, mm, mm, °, °, °) and ``refuse``.
+    kind : {"joint", "cartesian"}
+        What the stream corrects.
+
+    Returns
+    -------
+    CorrectionLimits
+        Each limit given converted (° → rad, mm → m), the others :func:`default_limits`'s
+        for ``kind``; policy ``"refuse"`` with ``--refuse``, else ``"clamp"``.
+    """
+    from plugcell.devices.robot.stream.limits import CorrectionLimits, default_limits
+    from plugcell.io.units import DEG, M_PER_MM
+
+    scale = (DEG,) * 6 if kind == "joint" else (M_PER_MM,) * 3 + (DEG,) * 3
+    base = default_limits(kind)  # type: ignore[arg-type]
+    given = {}
+    for name in ("step", "offset", "speed"):
+        vals = _six(getattr(args, f"max_{name}"), name)
+        given[name] = (tuple(v * s for v, s in zip(vals, scale, strict=True)) if vals
+                       else getattr(base, f"max_{name}"))
+    return CorrectionLimits(given["step"], given["offset"], given["speed"],
+                            "refuse" if args.refuse else "clamp")
+
+
+def write_and_list(write: Callable[[], Iterable[Path]], out: Path) -> None:
+    """Write the controller's files (``write()``, into the folder ``out``) and print each
+    path; a refused configuration or a folder that cannot be written is a CommandError."""
+    from plugcell.apps.cli import CommandError
+
+    try:
+        paths = write()
+    except ValueError as exc:
+        raise CommandError(str(exc)) from None
+    except OSError as exc:
+        raise CommandError(f"{out}: cannot write: {exc.strerror or exc}") from None
+    for path in paths:
+        print(path)
 
 
 def add_run_options(p: argparse.ArgumentParser, robot: str) -> None:

@@ -37,7 +37,6 @@ from __future__ import annotations
 import json
 import os
 import re
-import socket
 import time
 from collections.abc import Callable
 from dataclasses import asdict, dataclass, field
@@ -57,6 +56,7 @@ from plugcell.kinematics.pose_error import pose_error_exact
 from plugcell.kinematics.rotations import zyz_to_matrix
 from plugcell.metrology import accuracy_statistics
 from plugcell.sim.controller.rsi_twin import BANNER as RSI_TWIN_READY
+from plugcell.sim.ports import free_port
 from plugcell.sim.twin.campaign import working_volume_joints
 from plugcell.sim.twin.robot import RobotTwin
 from plugcell.sim.twin.scenario import TwinScenario
@@ -306,20 +306,13 @@ def _twin_counts(lines: list[str]) -> dict[str, int]:
     raise DemoError("the twin's RSI side ended without its counts: " + " / ".join(lines[-3:]))
 
 
-def _free_udp_port() -> int:
-    """A UDP port on loopback that is free now (where H4's service receives RSI)."""
-    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as sock:
-        sock.bind(("127.0.0.1", 0))
-        return int(sock.getsockname()[1])
-
-
 def _start_cell(procs: CellProcesses, cfg: DemoConfig, wiring: Path,
                 say: Callable[[str], None]) -> None:
     """Start the cell's processes and wait until each serves."""
     procs.serve("tracker", "TRACKER", seed=cfg.seed + 7, time_scale=1.0 / cfg.speed)
     procs.serve("compute", "COMPUTE")
     if cfg.link == "rsi":
-        port = _free_udp_port()
+        port = free_port("udp")
         say(f"== cell {procs.cell}: TRACKER, COMPUTE, H4 (Smart H4, 36 kg: the program on "
             f"the PC, every move streamed over KUKA RSI to 127.0.0.1:{port}), the twin's RSI "
             f"side (plugcell twin rsi), CONTROLLER (wiring {wiring}) — each its own "

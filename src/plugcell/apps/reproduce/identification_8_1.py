@@ -111,7 +111,7 @@ def print_table(d: dict[str, Any]) -> None:
               f"{err:>11s}  {r.get('stands_for') or ''}")
 
 
-def write_page(d: dict[str, Any], out: Path) -> None:
+def write_page(d: dict[str, Any], out: Path) -> list[Path]:
     import matplotlib
 
     matplotlib.use("Agg")
@@ -181,5 +181,6 @@ def write_page(d: dict[str, Any], out: Path) -> None:
         "the exact closure.",
     ]
     (out / "8.1.md").write_text("\n".join(lines) + "\n", encoding="utf-8")
+    return [out / "8.1.md"]
 
 

@@ -227,7 +227,7 @@ UNLOADED_MODELS = ("nominal", "nominal_fitted_frames", "model1", "model2", "mode
 LOADED_MODELS = ("nominal", "nominal_fitted_frames", "model4", "model5")
 
 
-def write_page(d: dict[str, Any], out: Path) -> None:
+def write_page(d: dict[str, Any], out: Path) -> list[Path]:
     """docs/results/8.2.md and its figure from the results of :func:`reproduce_8_2`."""
     out.mkdir(parents=True, exist_ok=True)
     _plot_models(d, out)
@@ -284,6 +284,7 @@ def write_page(d: dict[str, Any], out: Path) -> None:
                   *_table(d, case, LOADED_MODELS, "validation")]
     lines += _fit_details(d)
     (out / "8.2.md").write_text("\n".join(lines) + "\n", encoding="utf-8")
+    return [out / "8.2.md"]
 
 
 def _plot_models(d: dict[str, Any], out: Path) -> None:

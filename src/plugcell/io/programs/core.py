@@ -19,6 +19,7 @@ from __future__ import annotations
 import bisect
 import math
 import re
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -294,6 +295,60 @@ class Target:
     def values(self) -> np.ndarray:
         """The numbers' values as written, ``(k,)``."""
         return np.array([n.value for n in self.nums])
+
+    def use(self, base: str | None, tool: str | None, source: SourceFile, file: int,
+            offset: int, named: Callable[[str | None, str | None], str], *,
+            frames_matter: bool = True) -> None:
+        """A motion at ``offset`` of ``source`` (the program's file ``file``) uses the
+        target with the frame ``base`` and the tool ``tool``: recorded.
+
+        Parameters
+        ----------
+        base, tool : str or None
+            The frame and tool the motion uses.
+        source : SourceFile
+            The file the motion stands in.
+        file : int
+            Its index in :attr:`Program.files`.
+        offset : int
+            Where the motion stands in it.
+        named : callable
+            ``named(base, tool)``: the pair the dialect's way, for the error.
+        frames_matter : bool
+            Refuse a second frame or tool (``False``: the last one is kept).
+
+        Raises
+        ------
+        ProgramError
+            An earlier motion used it with another frame or tool: one set of numbers
+            cannot be compensated for both.
+        """
+        if frames_matter and self.uses and (self.base, self.tool) != (base, tool):
+            raise source.error(offset, f"{self.name} is used with {named(base, tool)} here, "
+                               f"with {named(self.base, self.tool)} before: one set of "
+                               "numbers cannot be compensated for both")
+        self.base, self.tool, self.used = base, tool, True
+        self.uses.append((file, offset))
+
+
+@dataclass(slots=True)
+class Token:
+    """A token of a program's text, as the dialects' readers cut it.
+
+    Attributes
+    ----------
+    kind : str
+        The reader's class of it (``num``, ``name``, ``str``, ``op`` …).
+    text : str
+        Its text.
+    start, end : int
+        Where it stands in its file (``text == file.text[start:end]``).
+    """
+
+    kind: str
+    text: str
+    start: int
+    end: int
 
 
 @dataclass

@@ -28,7 +28,7 @@ from pathlib import Path
 
 import numpy as np
 
-from plugcell.io.programs.core import Num, Program, ProgramError, SourceFile, Target
+from plugcell.io.programs.core import Num, Program, ProgramError, SourceFile, Target, Token
 from plugcell.io.units import pose_from_notation
 
 __all__ = ["read_krl"]
@@ -46,14 +46,6 @@ _TOKEN = re.compile(r"""[ \t\f\v]*(?:
   | (?P<op>[{}\[\]():,#=.+\-*/<>])
   | (?P<bad>\S)
 )""", re.VERBOSE)
-
-
-@dataclass(slots=True)
-class _Tok:
-    kind: str
-    text: str
-    start: int
-    end: int
 
 
 def _code_lines(f: SourceFile) -> list[tuple[int, str]]:
@@ -81,14 +73,14 @@ def _code_lines(f: SourceFile) -> list[tuple[int, str]]:
     return out
 
 
-def _tokens(f: SourceFile, offset: int, code: str) -> list[_Tok]:
+def _tokens(f: SourceFile, offset: int, code: str) -> list[Token]:
     toks = []
     for m in _TOKEN.finditer(code):
         kind = m.lastgroup
         if kind is None:  # trailing blanks
             continue
         a, b = m.span(kind)
-        toks.append(_Tok(kind, code[a:b], offset + a, offset + b))
+        toks.append(Token(kind, code[a:b], offset + a, offset + b))
     return toks
 
 
@@ -105,19 +97,19 @@ class _Agg:
 class _Parser:
     """Recursive descent over one line's tokens (KRL aggregates and references)."""
 
-    def __init__(self, f: SourceFile, toks: list[_Tok]) -> None:
+    def __init__(self, f: SourceFile, toks: list[Token]) -> None:
         self.f, self.toks, self.i = f, toks, 0
 
-    def peek(self, k: int = 0) -> _Tok | None:
+    def peek(self, k: int = 0) -> Token | None:
         j = self.i + k
         return self.toks[j] if j < len(self.toks) else None
 
-    def error(self, message: str, tok: _Tok | None = None) -> ProgramError:
+    def error(self, message: str, tok: Token | None = None) -> ProgramError:
         tok = tok or self.peek()
         off = tok.start if tok else (self.toks[-1].end if self.toks else 0)
         return self.f.error(off, message)
 
-    def expect(self, text: str) -> _Tok:
+    def expect(self, text: str) -> Token:
         t = self.peek()
         if t is None or t.text != text:
             raise self.error(f"expected {text!r}, got {t.text if t else 'end of line'!r}")
@@ -173,7 +165,7 @@ class _Parser:
             return (t.kind, t)
         raise self.error(f"unexpected {t.text!r} in an aggregate")
 
-    def reference(self) -> tuple[str, _Tok]:
+    def reference(self) -> tuple[str, Token]:
         """``NAME`` or ``NAME[index]`` → (upper-case name, first token)."""
         t = self.peek()
         if t is None or t.kind != "name":
@@ -243,7 +235,7 @@ def _bits(num: Num, value: int) -> str:
     return str(value)
 
 
-def _int_num(f: SourceFile, tok: _Tok) -> Num:
+def _int_num(f: SourceFile, tok: Token) -> Num:
     """A status/turn value: an integer or a ``'B0101'`` binary literal."""
     if tok.kind == "str" and re.fullmatch(r"'[Bb][01]+'", tok.text):
         return Num(tok.start, tok.end, tok.text, float(int(tok.text[2:-1], 2)))
@@ -442,7 +434,7 @@ class _Reader:
             elif "{" in code and head not in ("DECL",) and not self.is_decl(toks):
                 self.stray(fi, toks)
 
-    def is_decl(self, toks: list[_Tok]) -> bool:
+    def is_decl(self, toks: list[Token]) -> bool:
         """A line pass 1 read (a declaration or assignment of a position)."""
         p = _Parser(self.files[0], toks)
         self.decl_prefix(p)
@@ -450,7 +442,7 @@ class _Reader:
         return t is not None and t.kind == "name" and t.text.upper() in \
             {k.split("[")[0] for k in (*self.defs, *self.fdat, *self.frame_vars)}
 
-    def stray(self, fi: int, toks: list[_Tok]) -> None:
+    def stray(self, fi: int, toks: list[Token]) -> None:
         """An aggregate with position components where no target is expected."""
         p = _Parser(self.files[fi], toks)
         for k, t in enumerate(toks):
@@ -535,12 +527,8 @@ class _Reader:
     def use(self, tg: Target, fi: int, offset: int) -> None:
         base = self.base if self.base_set else "$BASE"
         tool = self.tool if self.tool_set else "$TOOL"
-        if tg.uses and tg.kind == "pose" and (tg.base, tg.tool) != (base, tool):
-            raise self.files[fi].error(offset, f"{tg.name} is used with base {base} and tool "
-                                       f"{tool} here, with {tg.base} and {tg.tool} before: "
-                                       "one set of numbers cannot be compensated for both")
-        tg.base, tg.tool, tg.used = base, tool, True
-        tg.uses.append((fi, offset))
+        tg.use(base, tool, self.files[fi], fi, offset, lambda b, t: f"base {b} and tool {t}",
+               frames_matter=tg.kind == "pose")
 
 
 def _data(what: str, n: int) -> str:

@@ -25,10 +25,9 @@ changed at run time (``p.X := …``) or a target reassigned are errors at file:l
 from __future__ import annotations
 
 import re
-from dataclasses import dataclass
 from pathlib import Path
 
-from plugcell.io.programs.core import Program, SourceFile, Target
+from plugcell.io.programs.core import Program, SourceFile, Target, Token
 from plugcell.io.units import pose_from_notation
 
 __all__ = ["read_pdl2"]
@@ -44,18 +43,10 @@ _TOKEN = re.compile(r"""\s*(?:
 _BREAK = {"(", "[", ","}
 
 
-@dataclass(slots=True)
-class _Tok:
-    kind: str
-    text: str
-    start: int
-    end: int
-
-
-def _statements(f: SourceFile) -> list[list[_Tok]]:
+def _statements(f: SourceFile) -> list[list[Token]]:
     """Statements: a line end closes one, unless after ``(``, ``[``, ``,`` or inside ()."""
-    out: list[list[_Tok]] = []
-    cur: list[_Tok] = []
+    out: list[list[Token]] = []
+    cur: list[Token] = []
     depth = 0
     text = f.text
     for m in _TOKEN.finditer(text):
@@ -68,7 +59,7 @@ def _statements(f: SourceFile) -> list[list[_Tok]]:
             cur = []
         if kind == "bad":
             raise f.error(a, f"unexpected character {text[a:b]!r}")
-        t = _Tok(kind, text[a:b], a, b)
+        t = Token(kind, text[a:b], a, b)
         depth += {"(": 1, "[": 1, ")": -1, "]": -1}.get(t.text, 0)
         cur.append(t)
     if cur:
@@ -84,7 +75,7 @@ class _Reader:
         self.notes: list[str] = []
         self.frame = {"$BASE": None, "$UFRAME": None, "$TOOL": None}
 
-    def literal(self, st: list[_Tok], i: int, name: str) -> tuple[Target, int]:
+    def literal(self, st: list[Token], i: int, name: str) -> tuple[Target, int]:
         """``POS(…)`` or ``JNTP(…)`` at ``st[i]`` → its target and the index after it."""
         f = self.f
         head = st[i].text.upper()
@@ -130,11 +121,11 @@ class _Reader:
             raise f.error(st[i].start, f"JNTP takes 1 to 10 joints, got {len(nums)}")
         return Target(name, 0, st[i].start, "joints", nums), j
 
-    def is_literal(self, st: list[_Tok], i: int) -> bool:
+    def is_literal(self, st: list[Token], i: int) -> bool:
         return i < len(st) and st[i].kind == "name" and st[i].text.upper() in ("POS", "JNTP") \
             and i + 1 < len(st) and st[i + 1].text == "("
 
-    def statement(self, st: list[_Tok]) -> None:
+    def statement(self, st: list[Token]) -> None:
         f = self.f
         head = st[0].text.upper()
         # name[idx] := … / name := … / $SYS := …
@@ -172,7 +163,7 @@ class _Reader:
         if head in ("MOVE", "MOVEFLY"):
             self.motion(st)
 
-    def motion(self, st: list[_Tok]) -> None:
+    def motion(self, st: list[Token]) -> None:
         f = self.f
         i = 1
         if i < len(st) and st[i].text.upper() in ("RELATIVE", "AWAY", "NEAR"):
@@ -190,7 +181,7 @@ class _Reader:
         if i < len(st) and st[i].text.upper() == "VIA":
             i = self.target(st, i + 1)
 
-    def target(self, st: list[_Tok], i: int) -> int:
+    def target(self, st: list[Token], i: int) -> int:
         f = self.f
         if i >= len(st):
             raise f.error(st[-1].end, "MOVE: expected a target")
@@ -227,18 +218,14 @@ class _Reader:
             return j
         raise f.error(t.start, f"MOVE: unexpected {t.text!r}")
 
-    def use(self, tg: Target, tok: _Tok) -> None:
+    def use(self, tg: Target, tok: Token) -> None:
         base = None
         if tg.kind == "pose":
             b, u = self.frame["$BASE"] or "$BASE", self.frame["$UFRAME"] or "$UFRAME"
             base = f"{b}⁻¹ · {u}"
             self.program.composites[base] = [(b, True), (u, False)]
         tool = self.frame["$TOOL"] or "$TOOL"
-        if tg.uses and (tg.base, tg.tool) != (base, tool):
-            raise self.f.error(tok.start, f"{tg.name} is used with {base} and {tool} here, "
-                               f"with {tg.base} and {tg.tool} before")
-        tg.base, tg.tool, tg.used = base, tool, True
-        tg.uses.append((0, tok.start))
+        tg.use(base, tool, self.f, 0, tok.start, lambda b, t: f"{b} and {t}")
 
 
 def read_pdl2(path: str | Path) -> tuple[Program, list[str]]:

@@ -29,7 +29,7 @@ from pathlib import Path
 
 import numpy as np
 
-from plugcell.io.programs.core import Num, Program, SourceFile, Target
+from plugcell.io.programs.core import Num, Program, SourceFile, Target, Token
 from plugcell.io.units import pose_from_notation
 
 __all__ = ["read_rapid"]
@@ -51,18 +51,10 @@ _BLOCK = {"MODULE", "PROC", "ENDPROC", "ENDMODULE", "FUNC", "ENDFUNC", "TRAP", "
           "ELSE", "ENDIF", "WHILE", "ENDWHILE", "FOR", "ENDFOR"}
 
 
-@dataclass(slots=True)
-class _Tok:
-    kind: str
-    text: str
-    start: int
-    end: int
-
-
-def _statements(f: SourceFile) -> list[list[_Tok]]:
+def _statements(f: SourceFile) -> list[list[Token]]:
     """The file's statements (``;`` ends one; ``PROC …``/``ENDPROC`` lines end one too)."""
-    out: list[list[_Tok]] = []
-    cur: list[_Tok] = []
+    out: list[list[Token]] = []
+    cur: list[Token] = []
     block = False  # the statement opens with a keyword a line end closes
     text = f.text
     for m in _TOKEN.finditer(text):
@@ -77,7 +69,7 @@ def _statements(f: SourceFile) -> list[list[_Tok]]:
         if block and "\n" in text[cur[-1].end:a]:
             out.append(cur)
             cur, block = [], False
-        t = _Tok(kind, text[a:b], a, b)
+        t = Token(kind, text[a:b], a, b)
         if t.text == ";":
             out.append(cur)
             cur, block = [], False
@@ -93,7 +85,7 @@ def _statements(f: SourceFile) -> list[list[_Tok]]:
 class _Value:
     """A parsed aggregate ``[…]``: nested lists of tokens (numbers keep their sign)."""
 
-    def __init__(self, f: SourceFile, toks: list[_Tok], i: int) -> None:
+    def __init__(self, f: SourceFile, toks: list[Token], i: int) -> None:
         self.f, self.toks = f, toks
         self.value, self.end = self.parse(i)
 
@@ -104,7 +96,7 @@ class _Value:
         t = toks[i]
         if t.kind == "nums":  # a flat list of numbers, one token: its numbers' spans
             a = t.start
-            return (t, [_Tok("num", m.group(), a + m.start(), a + m.end())
+            return (t, [Token("num", m.group(), a + m.start(), a + m.end())
                         for m in _NUM_RE.finditer(t.text)]), i + 1
         if t.text == "[":
             items = []
@@ -122,7 +114,7 @@ class _Value:
         if t.text in "+-" and i + 1 < len(toks) and toks[i + 1].kind == "num":
             if toks[i + 1].start != t.end:
                 raise self.f.error(t.start, "a space between the sign and the number")
-            return _Tok("num", "", t.start, toks[i + 1].end), i + 2
+            return Token("num", "", t.start, toks[i + 1].end), i + 2
         if t.kind == "num":
             return t, i + 1
         if t.kind in ("name", "str"):
@@ -143,7 +135,7 @@ def _nums(f: SourceFile, v: object, n: int, what: str, at: int) -> list[Num]:
     items = _list(f, v, n, what, at)
     out = []
     for it in items:
-        if not (isinstance(it, _Tok) and it.kind == "num"):
+        if not (isinstance(it, Token) and it.kind == "num"):
             raise f.error(it[0].start if isinstance(it, tuple) else it.start,  # type: ignore[union-attr]
                           f"{what}: expected a number")
         v = float(it.text) if it.text else math.inf
@@ -153,7 +145,7 @@ def _nums(f: SourceFile, v: object, n: int, what: str, at: int) -> list[Num]:
 
 
 def _bool(f: SourceFile, v: object, what: str, at: int) -> bool:
-    if isinstance(v, _Tok) and v.text.upper() in ("TRUE", "FALSE"):
+    if isinstance(v, Token) and v.text.upper() in ("TRUE", "FALSE"):
         return v.text.upper() == "TRUE"
     raise f.error(at, f"{what}: expected TRUE or FALSE")
 
@@ -227,7 +219,7 @@ class _Reader:
         _list(f, items[1], 6, f"{name} extax", at)
         return Target(name, 0, at, "joints", j)
 
-    def declaration(self, st: list[_Tok]) -> bool:
+    def declaration(self, st: list[Token]) -> bool:
         i = 0
         while i < len(st) and st[i].text.upper() in ("LOCAL", "TASK"):
             i += 1
@@ -286,12 +278,12 @@ class _Reader:
             self.program.frames[name] = (_pose(f, items[3], f"{name} uframe", at)
                                          @ _pose(f, items[4], f"{name} oframe", at))
 
-    def motion(self, st: list[_Tok]) -> None:
+    def motion(self, st: list[Token]) -> None:
         head = st[0].text
         n_pts = 2 if head.lower().startswith("movec") else 1
         # split the arguments at top-level commas; optional \Name[:=value] args apart
-        args: list[list[_Tok]] = [[]]
-        opts: dict[str, list[_Tok]] = {}
+        args: list[list[Token]] = [[]]
+        opts: dict[str, list[Token]] = {}
         depth = 0
         i = 1
         after_opt = False  # "MoveL \Conc, p10, …": a switch before the first argument
@@ -308,7 +300,7 @@ class _Reader:
             elif depth == 0 and t.text == "\\" and i + 1 < len(st):
                 key = st[i + 1].text.lower()
                 i += 2
-                val: list[_Tok] = []
+                val: list[Token] = []
                 if i < len(st) and st[i].text == ":=":
                     i += 1
                     d = 0
@@ -344,7 +336,7 @@ class _Reader:
         for a in args[:n_pts]:
             self.point(head, a, tool, None if absj else wobj, absj)
 
-    def point(self, head: str, a: list[_Tok], tool: str, wobj: str | None, absj: bool) -> None:
+    def point(self, head: str, a: list[Token], tool: str, wobj: str | None, absj: bool) -> None:
         f = self.f
         if not a:
             raise f.error(0, f"{head}: an empty target")
@@ -379,13 +371,8 @@ class _Reader:
         self.notes.append(f"{self.program.where(0, a[0].start)}: {head} to an expression "
                           f"({a[0].text}…): left as it is")
 
-    def use(self, tg: Target, tool: str, wobj: str | None, tok: _Tok) -> None:
-        if tg.uses and (tg.base, tg.tool) != (wobj, tool):
-            raise self.f.error(tok.start, f"{tg.name} is used with tool {tool} and work "
-                               f"object {wobj} here, with {tg.tool} and {tg.base} before: one "
-                               "set of numbers cannot be compensated for both")
-        tg.base, tg.tool, tg.used = wobj, tool, True
-        tg.uses.append((0, tok.start))
+    def use(self, tg: Target, tool: str, wobj: str | None, tok: Token) -> None:
+        tg.use(wobj, tool, self.f, 0, tok.start, lambda b, t: f"tool {t} and work object {b}")
 
 
 def read_rapid(path: str | Path) -> tuple[Program, list[str]]:

@@ -21,10 +21,9 @@ with a note.
 from __future__ import annotations
 
 import re
-from dataclasses import dataclass
 from pathlib import Path
 
-from plugcell.io.programs.core import Num, Program, ProgramError, SourceFile, Target
+from plugcell.io.programs.core import Num, Program, ProgramError, SourceFile, Target, Token
 from plugcell.io.units import pose_from_notation
 
 __all__ = ["read_urscript"]
@@ -40,15 +39,7 @@ _TOKEN = re.compile(r"""[ \t\f\v]*(?:
 )""", re.VERBOSE)
 
 
-@dataclass(slots=True)
-class _Tok:
-    kind: str
-    text: str
-    start: int
-    end: int
-
-
-def _lines(f: SourceFile) -> list[list[_Tok]]:
+def _lines(f: SourceFile) -> list[list[Token]]:
     """Tokens of each line, the ``#`` comment (outside strings) cut off."""
     out = []
     pos = 0
@@ -62,7 +53,7 @@ def _lines(f: SourceFile) -> list[list[_Tok]]:
             a, b = m.span(kind)
             if body[a] == "#":
                 break
-            toks.append(_Tok(kind, body[a:b], pos + a, pos + b))
+            toks.append(Token(kind, body[a:b], pos + a, pos + b))
         out.append(toks)
         pos += len(line)
     return out
@@ -77,7 +68,7 @@ class _Reader:
         self.tool = "TCP"
         self.listed: set[int] = set()
 
-    def literal(self, toks: list[_Tok], i: int, joints: bool = False) -> tuple[list[Num], int]:
+    def literal(self, toks: list[Token], i: int, joints: bool = False) -> tuple[list[Num], int]:
         """``p[…]`` (or ``[…]``) at ``toks[i]`` → its six numbers and the index after it."""
         if not joints:
             i += 1  # the p
@@ -113,7 +104,7 @@ class _Reader:
             raise self.f.error(open_tok.start, f"a pose has 6 numbers, this one {len(nums)}")
         return nums, i
 
-    def is_pose(self, toks: list[_Tok], i: int) -> bool:
+    def is_pose(self, toks: list[Token], i: int) -> bool:
         return (i + 1 < len(toks) and toks[i].text == "p" and toks[i + 1].text == "["
                 and toks[i + 1].start == toks[i].end)
 
@@ -124,7 +115,7 @@ class _Reader:
         for toks in lines:  # pass 2: tool and motions in order
             self.statement(toks)
 
-    def assignment(self, toks: list[_Tok]) -> None:
+    def assignment(self, toks: list[Token]) -> None:
         i = 1 if toks and toks[0].text in ("global", "local") else 0
         if len(toks) < i + 3 or toks[i].kind != "name" or toks[i + 1].text != "=":
             return
@@ -152,7 +143,7 @@ class _Reader:
         self.listed.add(id(tg))
         self.program.targets.append(tg)
 
-    def statement(self, toks: list[_Tok]) -> None:
+    def statement(self, toks: list[Token]) -> None:
         for k, t in enumerate(toks):
             if t.kind != "name" or k + 1 >= len(toks) or toks[k + 1].text != "(":
                 continue
@@ -161,7 +152,7 @@ class _Reader:
             elif t.text in MOTIONS:
                 self.motion(toks, k, MOTIONS[t.text])
 
-    def set_tcp(self, toks: list[_Tok], i: int) -> None:
+    def set_tcp(self, toks: list[Token], i: int) -> None:
         if self.is_pose(toks, i):
             nums, _ = self.literal(toks, i)
             line = self.f.position(toks[i].start)[0]
@@ -178,7 +169,7 @@ class _Reader:
                                "set_tcp: expected p[…] or a pose variable")
         self.tool = name
 
-    def motion(self, toks: list[_Tok], k: int, count: int) -> None:
+    def motion(self, toks: list[Token], k: int, count: int) -> None:
         i = k + 2
         for n in range(count):
             i = self.argument(toks, i, toks[k].text)
@@ -188,7 +179,7 @@ class _Reader:
                                        f"{toks[k].text}: expected a second pose")
                 i += 1
 
-    def argument(self, toks: list[_Tok], i: int, move: str, base: str | None = None) -> int:
+    def argument(self, toks: list[Token], i: int, move: str, base: str | None = None) -> int:
         if i >= len(toks):
             raise self.f.error(toks[-1].end, f"{move}: expected a target")
         t = toks[i]
@@ -240,15 +231,11 @@ class _Reader:
                           "expression without a pose literal: left as it is")
         return j
 
-    def use(self, tg: Target, base: str | None, tok: _Tok) -> None:
+    def use(self, tg: Target, base: str | None, tok: Token) -> None:
         if id(tg) not in self.listed:
             self.listed.add(id(tg))
             self.program.targets.append(tg)
-        if tg.uses and (tg.base, tg.tool) != (base, self.tool):
-            raise self.f.error(tok.start, f"{tg.name} is used with frame {base} and tool "
-                               f"{self.tool} here, with {tg.base} and {tg.tool} before")
-        tg.base, tg.tool, tg.used = base, self.tool, True
-        tg.uses.append((0, tok.start))
+        tg.use(base, self.tool, self.f, 0, tok.start, lambda b, t: f"frame {b} and tool {t}")
 
 
 def read_urscript(path: str | Path) -> tuple[Program, list[str]]:
