@@ -17,15 +17,21 @@ short-campaign-ur10-planned.md) — and three methods identify on it:
       (and, for the record, A's hybrid model moved the same way);
 (iii) **prior**: ``plugcell calibrate --prior A.json``
       (:class:`~plugcell.calibration.prior.PriorCalibrator`: MAP toward A with A's layer's
-      correction as an offset, τ — 0 = BASE + PROBE only included — by grouped CV over the
-      campaign's own cells, then the campaign's own stage when its CV adopts it,
-      :mod:`plugcell.calibration.campaign_stage`); and the same without the stage.
+      correction as an offset; the grouped CV over the campaign's own cells chooses among
+      τ — 0 = BASE + PROBE only included — and the baselines (ii) and (i) themselves, never
+      one whose CV error exceeds theirs (:func:`~plugcell.calibration.prior.pick`); then the
+      campaign's own stage when its CV adopts it, :mod:`plugcell.calibration.campaign_stage`);
+      and the same choice without the stage.
+
+With ``--draws K`` (random selection) K campaigns are drawn per fold and size (seeded; draw 0
+is the single draw of earlier runs): each figure is the mean over the draws of the mean
+held-out error, the table adds their sample sd.
 
 Each is scored on the held-out cells (never a campaign pose nor a neighbour in its cell):
 mean position error, mm.  Nothing is tuned on the held-out cells.
 
     .venv/bin/python benchmarks/short_campaign_ur10.py [--data DIR] [--sizes 25,50,...]
-        [--series B,C,D] [--selection random|planned] [--quick]
+        [--series B,C,D] [--selection random|planned] [--draws K] [--quick]
         [--out docs/results/short-campaign-ur10.md]
 
 Single-threaded (threadpoolctl).  Without the data folder it says so and exits 0.
@@ -72,8 +78,8 @@ METHODS = ("alone", "moved", "moved_hybrid", "prior_map", "prior")
 LABELS = {"alone": "(i) model 3 on the campaign alone",
           "moved": "(ii) A's model, BASE + PROBE re-identified",
           "moved_hybrid": "A's hybrid model, BASE + PROBE re-identified",
-          "prior_map": "--prior A --prior-stage none (MAP + A's layer)",
-          "prior": "(iii) --prior A (MAP + A's layer + campaign stage)"}
+          "prior_map": "--prior A --prior-stage none (the CV's choice, no campaign stage)",
+          "prior": "(iii) --prior A (the CV's choice + campaign stage)"}
 
 
 def _errors(d: CalibrationData, P: np.ndarray) -> np.ndarray:
@@ -282,7 +288,11 @@ def plot(d: dict[str, Any], path: Path) -> None:
         row = d["result"]["series"][key]
         for m, style in (("alone", "s--"), ("moved", "o:"), ("moved_hybrid", "x:"),
                          ("prior_map", "v-."), ("prior", "D-")):
-            ax.plot(d["sizes"], [row[m][str(n)] for n in d["sizes"]], style, label=LABELS[m])
+            sd = [np.std(v, ddof=1) if len(v := row.get("draws", {}).get(m, {})
+                                             .get(str(n), [])) > 1 else 0.0
+                  for n in d["sizes"]]
+            ax.errorbar(d["sizes"], [row[m][str(n)] for n in d["sizes"]], yerr=sd, fmt=style,
+                        capsize=2, label=LABELS[m])
         ax.set_xscale("log")
         ax.set_xticks(d["sizes"], [str(n) for n in d["sizes"]])
         ax.minorticks_off()
@@ -370,7 +380,7 @@ campaign's cell). Mean position error over all held-out poses, mm.
 {'![error against the number of new poses](' + image + ')' if image else ''}
 
 The CV's choice per fold (τ; 0: BASE + PROBE only with A's layer; moved: (ii); alone: (i)){
-    ', draw after draw' if any(len(v) > 1 for row in r['series'].values()
+    ', fold by fold, the draws of a fold in turn' if any(len(v) > 1 for row in r['series'].values()
                                for v in row.get('draws', {}).get('prior', {}).values())
     else ''}: {json.dumps(_per_fold(r, 'tau'))}
 
