@@ -338,6 +338,19 @@ def _cpu() -> str:
     return f"{os.cpu_count()} cores of {name}"
 
 
+def _draws_note(d: dict[str, Any]) -> str:
+    """" Campaigns drawn per fold: …" when the runs merged drew different numbers per size
+    (figures: the mean over the draws, ± their sd), "" when every size had one draw."""
+    counts = {n: max((len(row.get("draws", {}).get("prior", {}).get(str(n), [None]))
+                      for row in d["result"]["series"].values()), default=1)
+              for n in d["sizes"]}
+    if all(c == 1 for c in counts.values()):
+        return ""
+    return (" Campaigns drawn per fold and size: " + ", ".join(
+        f"{c} at n = {n}" for n, c in counts.items()) + " (seeded; a figure is the mean over "
+        "the draws of the mean held-out error, ± their sample sd).")
+
+
 def write_page(d: dict[str, Any], path: Path, image: str | None) -> None:
     r = d["result"]
     text = f"""# A robot moved to a new set-up: a short campaign with a prior (UR10, IPA data)
@@ -354,9 +367,10 @@ New set-ups: series {', '.join(r['series'])}.
 ## Protocol
 
 Grouped 5-fold over each series' 0.4 m workspace cells. In each fold a campaign of n poses is
-chosen among the training cells' poses ({d['selection_text']}); the three methods identify
+chosen among the training cells' poses ({d['selection_text'] if not _draws_note(d)
+                                          else 'seeded random draws'}); the three methods identify
 on it and the held-out cells are predicted (never a campaign pose, never a pose in a
-campaign's cell). Mean position error over all held-out poses, mm.
+campaign's cell). Mean position error over all held-out poses, mm.{_draws_note(d)}
 
 * (i) model 3 calibrated on the campaign alone (`plugcell calibrate --model 3`);
 * (ii) A's model with BASE + PROBE re-identified on the campaign (and A's hybrid model,
