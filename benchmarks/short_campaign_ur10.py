@@ -283,7 +283,7 @@ def plot(d: dict[str, Any], path: Path) -> None:
     import matplotlib.pyplot as plt
 
     series = list(d["result"]["series"])
-    fig, axes = plt.subplots(1, len(series), figsize=(4.2 * len(series), 3.6), squeeze=False)
+    fig, axes = plt.subplots(1, len(series), figsize=(4.2 * len(series), 4.2), squeeze=False)
     for ax, key in zip(axes[0], series, strict=True):
         row = d["result"]["series"][key]
         for m, style in (("alone", "s--"), ("moved", "o:"), ("moved_hybrid", "x:"),
@@ -300,8 +300,9 @@ def plot(d: dict[str, Any], path: Path) -> None:
         ax.set_xlabel("new poses n")
         ax.set_ylabel("mean position error (mm)")
         ax.grid(alpha=0.3)
-    axes[0][0].legend(fontsize=7)
-    fig.tight_layout()
+    handles, labels = axes[0][0].get_legend_handles_labels()
+    fig.legend(handles, labels, loc="lower center", ncol=3, fontsize=7)
+    fig.tight_layout(rect=(0, 0.12, 1, 1))
     fig.savefig(path, dpi=110)
     plt.close(fig)
 
