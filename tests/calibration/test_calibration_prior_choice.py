@@ -78,6 +78,7 @@ def _mean_mm(val, P) -> float:
     return float(np.linalg.norm(val.positions - P[:, :3, 3], axis=1).mean() * 1e3)
 
 
+@pytest.mark.slow
 def test_a_wrong_prior_is_never_worse_than_the_campaign_alone(wrong_prior):
     """The new set-up is exactly serial (noise only): the CV scores every candidate, the
     chosen one's CV score is no higher than either baseline's, and on 300 poses the
