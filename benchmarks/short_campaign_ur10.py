@@ -17,15 +17,21 @@ short-campaign-ur10-planned.md) — and three methods identify on it:
       (and, for the record, A's hybrid model moved the same way);
 (iii) **prior**: ``plugcell calibrate --prior A.json``
       (:class:`~plugcell.calibration.prior.PriorCalibrator`: MAP toward A with A's layer's
-      correction as an offset, τ — 0 = BASE + PROBE only included — by grouped CV over the
-      campaign's own cells, then the campaign's own stage when its CV adopts it,
-      :mod:`plugcell.calibration.campaign_stage`); and the same without the stage.
+      correction as an offset; the grouped CV over the campaign's own cells chooses among
+      τ — 0 = BASE + PROBE only included — and the baselines (ii) and (i) themselves, never
+      one whose CV error exceeds theirs (:func:`~plugcell.calibration.prior.pick`); then the
+      campaign's own stage when its CV adopts it, :mod:`plugcell.calibration.campaign_stage`);
+      and the same choice without the stage.
+
+With ``--draws K`` (random selection) K campaigns are drawn per fold and size (seeded; draw 0
+is the single draw of earlier runs): each figure is the mean over the draws of the mean
+held-out error, the table adds their sample sd.
 
 Each is scored on the held-out cells (never a campaign pose nor a neighbour in its cell):
 mean position error, mm.  Nothing is tuned on the held-out cells.
 
     .venv/bin/python benchmarks/short_campaign_ur10.py [--data DIR] [--sizes 25,50,...]
-        [--series B,C,D] [--selection random|planned] [--quick]
+        [--series B,C,D] [--selection random|planned] [--draws K] [--quick]
         [--out docs/results/short-campaign-ur10.md]
 
 Single-threaded (threadpoolctl).  Without the data folder it says so and exits 0.
@@ -72,8 +78,8 @@ METHODS = ("alone", "moved", "moved_hybrid", "prior_map", "prior")
 LABELS = {"alone": "(i) model 3 on the campaign alone",
           "moved": "(ii) A's model, BASE + PROBE re-identified",
           "moved_hybrid": "A's hybrid model, BASE + PROBE re-identified",
-          "prior_map": "--prior A --prior-stage none (MAP + A's layer)",
-          "prior": "(iii) --prior A (MAP + A's layer + campaign stage)"}
+          "prior_map": "--prior A --prior-stage none (the CV's choice, no campaign stage)",
+          "prior": "(iii) --prior A (the CV's choice + campaign stage)"}
 
 
 def _errors(d: CalibrationData, P: np.ndarray) -> np.ndarray:
@@ -114,7 +120,7 @@ def earlier(desc: Any, A: CalibrationData, learner: ResidualLearner,
 
 def run(desc: Any, sets: dict[str, CalibrationData], series: str, sizes: tuple[int, ...],
         selection: str, learner: ResidualLearner, folds: int = 5,
-        cache: Path | None = None) -> dict[str, Any]:
+        cache: Path | None = None, draws: int = 1) -> dict[str, Any]:
     from sklearn.model_selection import GroupKFold
 
     t0 = time.perf_counter()
@@ -134,46 +140,57 @@ def run(desc: Any, sets: dict[str, CalibrationData], series: str, sizes: tuple[i
         moved_all = refit_base(resA.model, d, probe=True)
         targets = (np.linalg.inv(moved_all.base()) @ moved_all.predict(d.q))[:, :3, 3]
         groups = workspace_cells(targets, 0.4)
-        err = {m: {n: np.full(len(d), np.nan) for n in sizes} for m in METHODS}
-        taus: dict[int, list[float]] = {n: [] for n in sizes}
+        draws_k = 1 if selection == "planned" else draws  # a plan is one draw
+        err = {m: {(n, k): np.full(len(d), np.nan) for n in sizes for k in range(draws_k)}
+               for m in METHODS}
+        taus: dict[int, list[str]] = {n: [] for n in sizes}
         stages: dict[int, list[bool]] = {n: [] for n in sizes}
         split = list(GroupKFold(n_splits=folds).split(targets, groups=groups))
         for f_no, (tr, te) in enumerate(split):
             test = d.subset(te)
             rng_model = refit_base(resA.model, d.subset(tr), probe=True).with_references(
                 base=np.eye(4))
-            for n in sizes:
+            for n, k in ((n, k) for n in sizes for k in range(draws_k)):
                 t1 = time.perf_counter()
-                rng = np.random.default_rng([s_no, f_no, n])
+                # draw 0: the seed of the single-draw runs before --draws
+                rng = np.random.default_rng([s_no, f_no, n] + ([k] if k else []))
                 pick = choose(rng_model, d, tr, n, selection, rng)
                 camp = d.subset(pick)
+                e = {m: err[m][n, k] for m in METHODS}
                 try:
                     alone = Calibrator(desc, MODEL).fit(camp)
-                    err["alone"][n][te] = _errors(test, alone.predict(test.q))
+                    e["alone"][te] = _errors(test, alone.predict(test.q))
                 except CalibrationError as exc:
                     print(f"    alone, n = {n}: {exc}", flush=True)
                 moved = refit_base(resA.model, camp, probe=True)
-                err["moved"][n][te] = _errors(test, moved.predict(test.q))
+                e["moved"][te] = _errors(test, moved.predict(test.q))
                 # A's hybrid moved: BASE + PROBE re-identified on the campaign with the
                 # layer's correction taken out, the layer's correction on the test poses
-                err["moved_hybrid"][n][te] = _hybrid_moved(resA, camp, test)
+                e["moved_hybrid"][te] = _hybrid_moved(resA, camp, test)
                 res = PriorCalibrator(prior).fit(camp)
-                taus[n].append(res.settings["prior"]["scale"])
-                stages[n].append(bool(res.settings["prior"]["stage"]["adopted"]))
+                pri = res.settings["prior"]
+                taus[n].append(pri["choice"] if pri["choice"] != "map" else f"{pri['scale']:g}")
+                stages[n].append(bool(pri["stage"]["adopted"]))
                 P, _ = res.predict_hybrid(test.q)
-                err["prior"][n][te] = _errors(test, P)
-                # the same MAP with A's layer only (--prior-stage none): no second fit
-                P, _ = res.with_residual_model(replace(
-                    prior.layer, fingerprint=calibration_fingerprint(res.model))
+                e["prior"][te] = _errors(test, P)
+                # the same choice without the campaign stage (--prior-stage none): no second
+                # fit — A's layer on the MAP, no layer on a baseline the CV chose
+                P, _ = (res.with_residual_model(replace(
+                    prior.layer, fingerprint=calibration_fingerprint(res.model)))
+                    if pri["choice"] == "map" else replace(res, residual_model=None)
                 ).predict_hybrid(test.q)
-                err["prior_map"][n][te] = _errors(test, P)
-                print(f"  {key} fold {f_no + 1}, n = {n}: " + ", ".join(
-                    f"{m} {np.nanmean(err[m][n][te]) * 1e3:.3f}" for m in METHODS)
-                    + f" mm (τ = {taus[n][-1]:g}, stage {stages[n][-1]}; "
+                e["prior_map"][te] = _errors(test, P)
+                print(f"  {key} fold {f_no + 1}, n = {n}, draw {k}: " + ", ".join(
+                    f"{m} {np.nanmean(e[m][te]) * 1e3:.3f}" for m in METHODS)
+                    + f" mm (CV chose {taus[n][-1]}, stage {stages[n][-1]}; "
                     f"{time.perf_counter() - t1:.0f} s)",
                     flush=True)
-        row = {m: {str(n): float(np.nanmean(err[m][n]) * 1e3) for n in sizes}
+        # per draw: the mean over all held-out poses (mm); the figure: their mean
+        per_draw = {m: {str(n): [float(np.nanmean(err[m][n, k]) * 1e3)
+                                 for k in range(draws_k)] for n in sizes} for m in METHODS}
+        row = {m: {str(n): float(np.mean(v)) for n, v in per_draw[m].items()}
                for m in METHODS}
+        row["draws"] = per_draw
         row["tau"] = {str(n): taus[n] for n in sizes}
         row["stage"] = {str(n): stages[n] for n in sizes}
         row["cells"] = int(groups.max()) + 1
@@ -199,6 +216,12 @@ def _hybrid_moved(resA: Any, camp: CalibrationData, test: CalibrationData) -> np
                                       pred.correction))
 
 
+def _spread(row: dict[str, Any], m: str, n: int) -> str:
+    """" ± sd" of method ``m``'s figure over the campaign draws (sample sd), "" for one."""
+    v = row.get("draws", {}).get(m, {}).get(str(n), [])
+    return f" ± {np.std(v, ddof=1):.3f}" if len(v) > 1 else ""
+
+
 def table(d: dict[str, Any]) -> str:
     sizes = d["sizes"]
     lines = ["| series | method | " + " | ".join(f"n = {n}" for n in sizes) + " |",
@@ -210,9 +233,10 @@ def table(d: dict[str, Any]) -> str:
                 v = row[m][str(n)]
                 if m in ("prior", "prior_map"):
                     best = min(row["alone"][str(n)], row["moved"][str(n)])
-                    cells.append(f"**{v:.3f}** ({(v / best - 1) * 100:+.0f}%)")
+                    cells.append(f"**{v:.3f}**{_spread(row, m, n)} "
+                                 f"({(v / best - 1) * 100:+.0f}%)")
                 else:
-                    cells.append(f"{v:.3f}")
+                    cells.append(f"{v:.3f}{_spread(row, m, n)}")
             lines.append(f"| {key} | {LABELS[m]} | " + " | ".join(cells) + " |")
     return "\n".join(lines)
 
@@ -259,12 +283,16 @@ def plot(d: dict[str, Any], path: Path) -> None:
     import matplotlib.pyplot as plt
 
     series = list(d["result"]["series"])
-    fig, axes = plt.subplots(1, len(series), figsize=(4.2 * len(series), 3.6), squeeze=False)
+    fig, axes = plt.subplots(1, len(series), figsize=(4.2 * len(series), 4.2), squeeze=False)
     for ax, key in zip(axes[0], series, strict=True):
         row = d["result"]["series"][key]
         for m, style in (("alone", "s--"), ("moved", "o:"), ("moved_hybrid", "x:"),
                          ("prior_map", "v-."), ("prior", "D-")):
-            ax.plot(d["sizes"], [row[m][str(n)] for n in d["sizes"]], style, label=LABELS[m])
+            sd = [np.std(v, ddof=1) if len(v := row.get("draws", {}).get(m, {})
+                                             .get(str(n), [])) > 1 else 0.0
+                  for n in d["sizes"]]
+            ax.errorbar(d["sizes"], [row[m][str(n)] for n in d["sizes"]], yerr=sd, fmt=style,
+                        capsize=2, label=LABELS[m])
         ax.set_xscale("log")
         ax.set_xticks(d["sizes"], [str(n) for n in d["sizes"]])
         ax.minorticks_off()
@@ -272,8 +300,9 @@ def plot(d: dict[str, Any], path: Path) -> None:
         ax.set_xlabel("new poses n")
         ax.set_ylabel("mean position error (mm)")
         ax.grid(alpha=0.3)
-    axes[0][0].legend(fontsize=7)
-    fig.tight_layout()
+    handles, labels = axes[0][0].get_legend_handles_labels()
+    fig.legend(handles, labels, loc="lower center", ncol=3, fontsize=7)
+    fig.tight_layout(rect=(0, 0.12, 1, 1))
     fig.savefig(path, dpi=110)
     plt.close(fig)
 
@@ -310,6 +339,19 @@ def _cpu() -> str:
     return f"{os.cpu_count()} cores of {name}"
 
 
+def _draws_note(d: dict[str, Any]) -> str:
+    """" Campaigns drawn per fold: …" when the runs merged drew different numbers per size
+    (figures: the mean over the draws, ± their sd), "" when every size had one draw."""
+    counts = {n: max((len(row.get("draws", {}).get("prior", {}).get(str(n), [None]))
+                      for row in d["result"]["series"].values()), default=1)
+              for n in d["sizes"]}
+    if all(c == 1 for c in counts.values()):
+        return ""
+    return (" Campaigns drawn per fold and size: " + ", ".join(
+        f"{c} at n = {n}" for n, c in counts.items()) + " (seeded; a figure is the mean over "
+        "the draws of the mean held-out error, ± their sample sd).")
+
+
 def write_page(d: dict[str, Any], path: Path, image: str | None) -> None:
     r = d["result"]
     text = f"""# A robot moved to a new set-up: a short campaign with a prior (UR10, IPA data)
@@ -326,28 +368,36 @@ New set-ups: series {', '.join(r['series'])}.
 ## Protocol
 
 Grouped 5-fold over each series' 0.4 m workspace cells. In each fold a campaign of n poses is
-chosen among the training cells' poses ({d['selection_text']}); the three methods identify
+chosen among the training cells' poses ({d['selection_text'] if not _draws_note(d)
+                                          else 'seeded random draws'}); the three methods identify
 on it and the held-out cells are predicted (never a campaign pose, never a pose in a
-campaign's cell). Mean position error over all held-out poses, mm.
+campaign's cell). Mean position error over all held-out poses, mm.{_draws_note(d)}
 
 * (i) model 3 calibrated on the campaign alone (`plugcell calibrate --model 3`);
 * (ii) A's model with BASE + PROBE re-identified on the campaign (and A's hybrid model,
   moved the same way, for the record);
 * (iii) `plugcell calibrate --prior A.json` (its default): BASE and PROBE free, A's other
   parameters pulled toward A by λ_k = σ̂_A / (τ σ_k) (MAP, docs/calibration.md), A's learned
-  layer's correction taken out of the campaign before the fit; τ ∈ {{0 (BASE + PROBE
-  only: the shrinkage to (ii) with A's layer), 1, 3, 10, …, 1000}} chosen by grouped CV
-  over the campaign's own cells (never the held-out cells); then the campaign's own stage
-  (trees on sin/cos q of what the fit leaves, on top of A's arm-shape stage) adopted only
-  when its grouped CV over the campaign's cells beats the fit without it. The row
-  *--prior-stage none* is the same fit with A's layer only. In brackets: the change
-  against the better of (i) and (ii).
+  layer's correction taken out of the campaign before the fit; the grouped CV over the
+  campaign's own cells (never the held-out cells) chooses among τ ∈ {{0 (BASE + PROBE
+  only, with A's layer), 1, 3, 10, …, 1000}} and the two baselines themselves, *moved*
+  ((ii): A's physical model, BASE + PROBE re-identified, no layer) and *alone* ((i)):
+  the first within 1 % of the best CV score that is no worse than either baseline's —
+  so the choice's CV error is never above (i)'s or (ii)'s by construction; then the
+  campaign's own stage (trees on sin/cos q of what the fit leaves, on top of A's
+  arm-shape stage when A's layer is kept) adopted only when its grouped CV over the
+  campaign's cells beats the fit without it. The row *--prior-stage none* is the same
+  choice without the campaign stage. In brackets: the change against the better of (i)
+  and (ii).
 
 {table(d)}
 
 {'![error against the number of new poses](' + image + ')' if image else ''}
 
-τ chosen per fold (0: BASE + PROBE only): {json.dumps(_per_fold(r, 'tau'))}
+The CV's choice per fold (τ; 0: BASE + PROBE only with A's layer; moved: (ii); alone: (i)){
+    ', fold by fold, the draws of a fold in turn' if any(len(v) > 1 for row in r['series'].values()
+                               for v in row.get('draws', {}).get('prior', {}).values())
+    else ''}: {json.dumps(_per_fold(r, 'tau'))}
 
 Campaign stage adopted per fold: {json.dumps(_per_fold(r, 'stage'))}
 
@@ -368,7 +418,10 @@ def merge(runs: list[dict[str, Any]]) -> dict[str, Any]:
         for key, row in r["result"]["series"].items():
             into = d["result"]["series"].setdefault(key, {})
             for k, v in row.items():
-                if isinstance(v, dict):
+                if k == "draws":
+                    for m, per_n in v.items():
+                        into.setdefault(k, {}).setdefault(m, {}).update(per_n)
+                elif isinstance(v, dict):
                     into.setdefault(k, {}).update(v)
                 else:
                     into[k] = v
@@ -390,6 +443,9 @@ def main() -> int:
     ap.add_argument("--cache", type=Path, metavar="FILE",
                     help="pickle of set-up A's fit: read if present, else written (for runs "
                          "side by side; delete it when the code or the data change)")
+    ap.add_argument("--draws", type=int, default=1,
+                    help="random campaigns drawn per fold and size (seeded); the figures are "
+                         "the mean over the draws, the table adds their sd (random only)")
     ap.add_argument("--quick", action="store_true",
                     help="A's layer: one hyper-parameter candidate, 100 trees")
     ap.add_argument("--out", type=Path, default=None,
@@ -431,11 +487,14 @@ def main() -> int:
     sets = {k: _without_temperature(v) for k, v in load_sets(data).items()}
     with threadpool_limits(1):
         result = run(desc, sets, "".join(series), sizes, args.selection,
-                     ResidualLearner(**kw), folds=args.folds, cache=args.cache)
+                     ResidualLearner(**kw), folds=args.folds, cache=args.cache,
+                     draws=args.draws)
     d = {"argv": sys.argv[1:], "sizes": list(sizes), "selection": args.selection,
          "selection_text": "I-optimal for model 3, as `plugcell plan --from` chooses among "
                            "poses already measured" if args.selection == "planned"
-                           else "a seeded random draw",
+                           else "a seeded random draw" if args.draws == 1 else
+                           f"{args.draws} seeded random draws: each figure the mean over the "
+                           "draws of the mean held-out error, ± their sd",
          "machine": f"{platform.machine()}, Python {platform.python_version()}",
          "result": result}
     print(table(d))

@@ -113,14 +113,17 @@ def test_short_campaign_skips_cleanly_without_the_data(tmp_path: Path) -> None:
 @pytest.mark.slow
 @pytest.mark.skipif(not IPA_DATA.is_dir(), reason="IPA robot-accuracy data not present")
 def test_short_campaign_runs_on_the_ipa_data(tmp_path: Path) -> None:
-    """One series, one campaign size, two folds: the table, the goal lines, the page and
-    the plot."""
+    """One series, one campaign size, two folds, two campaign draws: the table (mean ± sd
+    over the draws), the goal lines, the page with the CV's choice per fold and the
+    plot."""
     out = tmp_path / "sc.md"
     done = subprocess.run([sys.executable, str(BENCHMARKS / "short_campaign_ur10.py"),
                            "--quick", "--series", "D", "--sizes", "25", "--folds", "2",
-                           "--selection", "random", "--out", str(out)],
+                           "--selection", "random", "--draws", "2", "--out", str(out)],
                           capture_output=True, text=True, timeout=900)
     assert done.returncode == 0, done.stderr[-2000:]
     assert "| D | (iii) --prior A" in done.stdout and "D, n = 25: prior" in done.stdout
-    assert "## The goal" in out.read_text()
+    assert " ± " in done.stdout
+    page = out.read_text()
+    assert "## The goal" in page and "The CV's choice per fold" in page
     assert out.with_suffix(".png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"

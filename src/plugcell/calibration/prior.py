@@ -47,18 +47,20 @@ from __future__ import annotations
 
 import math
 import time
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, replace
 
 import numpy as np
 from numpy.typing import NDArray
 
+from plugcell.calibration.campaign_stage import CampaignStage, fit_campaign_stage
 from plugcell.calibration.configs import ModelConfig
 from plugcell.calibration.data import CalibrationData
 from plugcell.calibration.identifiability import analyse
 from plugcell.calibration.identify import (
     BACKTRACK_STEPS,
     CalibrationError,
+    Calibrator,
     DivergenceError,
     _jacobian_rows,
     _Problem,
@@ -89,9 +91,56 @@ SCALES: tuple[float, ...] = (FRAMES_ONLY, 1.0, 3.0, 10.0, 30.0, 100.0, 300.0, 10
 DEFAULT_SCALE = 10.0
 #: Workspace cell edge (m) grouping the campaign's poses for the choice of τ.
 CELL_SIZE_M = 0.4
+#: Baseline (ii) among the CV's candidates: the earlier physical model with BASE + PROBE
+#: re-identified on the raw campaign, without its learned layer.
+MOVED = "moved"
+#: Baseline (i) among the CV's candidates: the earlier calibration's model calibrated on the
+#: campaign alone (no prior, no layer).
+ALONE = "alone"
+#: A candidate of the CV: a τ of :data:`SCALES`, :data:`MOVED` or :data:`ALONE`.
+Choice = float | str
+#: The CV's candidates in order of preference (the first within 1 % of the best wins).
+CANDIDATES: tuple[Choice, ...] = (*SCALES, MOVED, ALONE)
 
-__all__ = ["CELL_SIZE_M", "DEFAULT_SCALE", "FRAMES_ONLY", "SCALES", "Prior", "PriorCalibrator",
-           "augmented_residual", "frame_keys"]
+__all__ = ["ALONE", "CANDIDATES", "CELL_SIZE_M", "DEFAULT_SCALE", "FRAMES_ONLY", "MOVED",
+           "SCALES", "Choice", "Prior", "PriorCalibrator", "augmented_residual", "frame_keys",
+           "pick"]
+
+
+def _label(choice: Choice) -> str:
+    """A candidate's key in the CV scores: ``f"{τ:g}"``, ``"moved"`` or ``"alone"``."""
+    return choice if isinstance(choice, str) else f"{choice:g}"
+
+
+def pick(scores: Mapping[str, float]) -> Choice:
+    """The CV's choice among the scored candidates (keys as :func:`_label`).
+
+    Eligible: ``s_c ≤ min(1.01 s*, s_alone, s_moved)`` (``s*`` the best score; a baseline
+    not scored counts as ∞) — within 1 % of the best and never above either baseline —
+    and of those the first of :data:`CANDIDATES` (the strongest prior the data do not
+    reject).  So ``s_choice ≤ s_alone`` and ``s_choice ≤ s_moved`` whatever the scores.
+
+    Parameters
+    ----------
+    scores : mapping of str to float
+        CV score (any unit, e.g. m) of each candidate tried.
+
+    Returns
+    -------
+    float or str
+        The chosen candidate.
+
+    Raises
+    ------
+    CalibrationError
+        No candidate of :data:`CANDIDATES` was scored.
+    """
+    known = [c for c in CANDIDATES if _label(c) in scores]
+    if not known:
+        raise CalibrationError(f"prior: no known candidate among the CV scores {list(scores)}")
+    best = min(scores[_label(c)] for c in known)
+    bound = min(best * 1.01, scores.get(ALONE, math.inf), scores.get(MOVED, math.inf))
+    return next((c for c in known if scores[_label(c)] <= bound), known[0])
 
 
 @dataclass(frozen=True, eq=False)
@@ -383,26 +432,65 @@ class PriorCalibrator:
                 break
         return model, start, keys, lam, history, converged
 
-    def choose_scale(self, data: CalibrationData) -> tuple[float, dict[float, float]]:
-        """τ by grouped K-fold CV over the campaign's workspace cells (K = min(5, cells)):
-        for each candidate of :data:`SCALES`, the mean held-out position error (m) of the
-        MAP fitted on the other cells; the smallest τ within 1 % of the best wins (the
-        strongest prior the data do not reject).  Fewer than 2 cells: :data:`DEFAULT_SCALE`.
+    def _cv_errors(self, raw: CalibrationData, offset: CalibrationData,
+                   folds: Sequence[tuple[Array, Array]], choice: Choice) -> Array:
+        """The held-out position errors (m, one a campaign pose) of candidate ``choice``
+        fitted on the other cells of each fold: a τ on the offset campaign (the hybrid's
+        error: the prior layer's correction is in the offset), :data:`MOVED` and
+        :data:`ALONE` on the raw one.  A candidate that cannot be fitted on a fold (too few
+        poses for the plain calibration) scores ``inf``."""
+        err = np.empty(len(raw))
+        for tr, te in folds:
+            data = raw if choice in (MOVED, ALONE) else offset
+            test = data.subset(te)
+            try:
+                if choice == ALONE:
+                    model = self._alone(data.subset(tr)).model
+                elif choice == MOVED:
+                    model, *_ = self.solve(data.subset(tr), FRAMES_ONLY)
+                else:
+                    model, *_ = self.solve(data.subset(tr), float(choice))
+            except CalibrationError:
+                err[te] = np.inf
+                continue
+            P = model.predict(test.q, test.payload_kg, test.temperature_c)
+            err[te] = np.linalg.norm(test.positions - P[:, :3, 3], axis=1)
+        return err
+
+    def _alone(self, data: CalibrationData) -> CalibrationResult:
+        """Baseline (i): the prior's model calibrated on ``data`` alone (no prior)."""
+        return Calibrator(self.prior.model.structure.desc, self.prior.config.number,
+                          rotation_weight=self.rotation_weight).fit(data)
+
+    def choose(self, data: CalibrationData, offset: CalibrationData | None = None
+               ) -> tuple[Choice, dict[str, float]]:
+        """The candidate of :data:`CANDIDATES` by grouped K-fold CV over the campaign's
+        workspace cells (K = min(5, cells)): each candidate's mean held-out position error
+        (m), fitted on the other cells.  Eligible: the candidates within 1 % of the best
+        that are no worse than either baseline (:data:`ALONE`, :data:`MOVED`) — so the
+        choice's CV error is never above the campaign alone's nor the earlier model
+        moved's; among them the first of :data:`CANDIDATES` (the strongest prior the data
+        do not reject).  Fewer than 2 cells: :data:`DEFAULT_SCALE`.
 
         Parameters
         ----------
         data : CalibrationData
-            The campaign (offset by the prior layer).
+            The raw campaign.
+        offset : CalibrationData, optional
+            The campaign offset by the prior layer (:meth:`offset_data`; default: computed).
 
         Returns
         -------
-        tau : float
-            The chosen τ.
-        scores : dict of float to float
-            The CV score (m) of each candidate (empty without CV).
+        choice : float or str
+            A τ, :data:`MOVED` or :data:`ALONE`.
+        scores : dict of str to float
+            The CV score (m) of each candidate, keyed ``f"{τ:g}"``, ``"moved"``, ``"alone"``
+            (empty without CV).
         """
         from sklearn.model_selection import GroupKFold
 
+        if offset is None:
+            offset, _ = self.offset_data(data)
         start = refit_base(self.prior.model, data, probe=True,
                            rotation_weight=self.rotation_weight)
         targets = (np.linalg.inv(start.base()) @ start.predict(
@@ -412,19 +500,12 @@ class PriorCalibrator:
         if cells < 2:
             return DEFAULT_SCALE, {}
         folds = list(GroupKFold(n_splits=min(5, cells)).split(targets, groups=groups))
-        scores: dict[float, float] = {}
-        for tau in SCALES:
-            err = np.empty(len(data))
-            for tr, te in folds:
-                m, *_ = self.solve(data.subset(tr), tau)
-                test = data.subset(te)
-                P = m.predict(test.q, test.payload_kg, test.temperature_c)
-                err[te] = np.linalg.norm(test.positions - P[:, :3, 3], axis=1)
-            scores[tau] = float(err.mean())
-            self._say("prior", 0, 0, f"τ = {tau:g}: held-out cells {scores[tau] * 1e3:.4f} mm")
-        best = min(scores.values())
-        tau = min(t for t, v in scores.items() if v <= best * 1.01)
-        return tau, scores
+        scores: dict[str, float] = {}
+        for c in CANDIDATES:
+            scores[_label(c)] = float(self._cv_errors(data, offset, folds, c).mean())
+            self._say("prior", 0, 0, f"{_label(c)}: held-out cells "
+                      f"{scores[_label(c)] * 1e3:.4f} mm")
+        return pick(scores), scores
 
     # ------------------------------------------------------------------ fit
     def fit(self, data: CalibrationData) -> CalibrationResult:
@@ -454,23 +535,21 @@ class PriorCalibrator:
         t0 = time.perf_counter()
         self._check(data)
         offset, in_domain = self.offset_data(data)
-        scores: dict[float, float] = {}
-        tau = self.scale
-        if tau is None:
-            tau, scores = self.choose_scale(offset)
+        scores: dict[str, float] = {}
+        choice: Choice | None = self.scale
+        if choice is None:
+            choice, scores = self.choose(data, offset)
+        if choice == ALONE:
+            return self._fit_alone(data, scores, t0)
+        earlier = self.prior.layer
+        if choice == MOVED:  # the earlier physical model moved, without its layer
+            offset, in_domain, earlier = data, None, None
+        tau = FRAMES_ONLY if choice == MOVED else float(choice)
         final, start, keys, lam, history, converged = self.solve(offset, tau)
-        self._say("prior", 1, 1, f"τ = {tau:g}: mean residual "
+        self._say("prior", 1, 1, f"{_label(choice)}: mean residual "
                   f"{history[-1].mean_position_mm if history else float('nan'):.4f} mm")
-        stage = None
-        if self.stage:
-            from plugcell.calibration.campaign_stage import fit_campaign_stage
-
-            stage = fit_campaign_stage(final, data, self.prior.layer, robot=self.prior.robot,
-                                       cell_size_m=self.cell_size_m)
-            self._say("prior", 1, 1, "campaign stage: " + (
-                "adopted" if stage.adopted else "not used") + (
-                f" ({stage.reason})" if stage.reason else ""))
-        layer = self.prior.layer
+        stage = self._stage(final, data, earlier)
+        layer = earlier
         if stage is not None and stage.adopted:
             layer = stage.layer
         elif layer is not None:
@@ -480,16 +559,56 @@ class PriorCalibrator:
             warnings.append(f"{int((~in_domain).sum())} of {len(data)} campaign poses lie "
                             "outside the prior layer's region: its correction is not applied "
                             "there")
-        settings = {"robot": self.prior.robot, "scale": tau,
-                    "scale_chosen_by": "given" if self.scale is not None
-                    else ("grouped CV" if scores else "default"),
-                    "cv_mm": {f"{t:g}": v * 1e3 for t, v in scores.items()},
-                    "regularised": [k for k, v in zip(keys, lam, strict=True) if v > 0],
-                    "sigma_y_m": self.prior.sigma_y,
-                    "layer_offset": self.prior.layer is not None,
-                    "stage": None if stage is None else stage.summary()}
+        settings = self._settings(choice, scores, [k for k, v in zip(keys, lam, strict=True)
+                                                   if v > 0], earlier is not None, stage)
         return self._result(data, offset, final, start, keys, lam, history, converged,
                             layer, warnings, settings, t0)
+
+    def _stage(self, model: ErrorModel, data: CalibrationData,
+               earlier: LearnedResidual | None) -> CampaignStage | None:
+        """The campaign's own stage on what ``model`` leaves of ``data`` (``None`` when
+        ``stage=False``), on top of ``earlier``'s arm-shape stage."""
+        if not self.stage:
+            return None
+        stage = fit_campaign_stage(model, data, earlier, robot=self.prior.robot,
+                                   cell_size_m=self.cell_size_m)
+        self._say("prior", 1, 1, "campaign stage: " + (
+            "adopted" if stage.adopted else "not used") + (
+            f" ({stage.reason})" if stage.reason else ""))
+        return stage
+
+    def _settings(self, choice: Choice, scores: Mapping[str, float], regularised: list[str],
+                  layer_offset: bool, stage: CampaignStage | None) -> dict[str, object]:
+        """``settings["prior"]`` of a result: the candidate chosen (``choice``: ``"map"``,
+        ``"moved"`` or ``"alone"``; ``scale``: its τ, ``None`` for the campaign alone), how,
+        the CV scores (mm), the regularised keys, whether the prior layer's correction was
+        an offset, the campaign stage."""
+        return {"robot": self.prior.robot,
+                "choice": choice if isinstance(choice, str) else "map",
+                "scale": None if choice == ALONE else
+                (FRAMES_ONLY if choice == MOVED else float(choice)),
+                "scale_chosen_by": "given" if self.scale is not None
+                else ("grouped CV" if scores else "default"),
+                "cv_mm": {k: v * 1e3 for k, v in scores.items()},
+                "regularised": regularised,
+                "sigma_y_m": self.prior.sigma_y,
+                "layer_offset": layer_offset,
+                "stage": None if stage is None else stage.summary()}
+
+    def _fit_alone(self, data: CalibrationData, scores: Mapping[str, float],
+                   t0: float) -> CalibrationResult:
+        """The CV chose the campaign alone (:data:`ALONE`): the plain calibration of
+        ``data`` with the campaign's own stage when its CV adopts it (no earlier layer)."""
+        res = self._alone(data)
+        stage = self._stage(res.model, data, None)
+        if stage is not None and stage.adopted and stage.layer is not None:
+            res = res.with_residual_model(stage.layer)
+        settings = self._settings(ALONE, scores, [], False, stage)
+        return replace(res, settings={**res.settings, "prior": settings},
+                       warnings=(*res.warnings, "the short campaign's cross-validation preferred "
+                                 "the campaign alone to the earlier calibration: the prior is "
+                                 "not used"),
+                       elapsed_s=time.perf_counter() - t0)
 
     def _result(self, data: CalibrationData, offset: CalibrationData, final: ErrorModel,
                 start: ErrorModel, keys: list[str], lam: Array,

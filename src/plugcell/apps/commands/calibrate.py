@@ -260,14 +260,25 @@ def _summary(d: dict[str, Any]) -> str:
                          "first stage is not")
     pri = d.get("settings", {}).get("prior")
     if pri:
+        choice = pri.get("choice", "map")
         held = (f"its other parameters held (τ = 0, {pri['scale_chosen_by']})"
                 if pri["scale"] == 0 else
                 f"{len(pri['regularised'])} parameters pulled toward it with its σ × τ = "
                 f"{pri['scale']:g} ({pri['scale_chosen_by']})")
-        lines.append(f"  prior: the earlier calibration of {pri['robot']}, BASE + PROBE "
-                     f"re-identified ('before' above), {held}"
-                     + ("; its learned layer kept (its correction an offset of the fit)"
-                        if pri["layer_offset"] else ""))
+        if choice == "alone":
+            lines.append(f"  prior: the earlier calibration of {pri['robot']} not used: the "
+                         "grouped CV over the campaign's cells preferred the campaign alone")
+        else:
+            lines.append(f"  prior: the earlier calibration of {pri['robot']}, BASE + PROBE "
+                         f"re-identified ('before' above), {held}"
+                         + ("; its learned layer kept (its correction an offset of the fit)"
+                            if pri["layer_offset"] else
+                            "; its learned layer left out (the CV preferred the model "
+                            "without it)" if choice == "moved" else ""))
+        if pri.get("cv_mm"):
+            lines.append("  grouped CV over the campaign's cells (mm): " + ", ".join(
+                f"{'τ = ' + k if k[0].isdigit() else k} {v:.3f}"
+                for k, v in pri["cv_mm"].items()))
         st = pri.get("stage")
         if st:
             lines.append("  campaign stage: " + (
