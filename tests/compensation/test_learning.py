@@ -184,3 +184,14 @@ def test_bad_learning_input_is_named():
         path_error([0.0], [[0, 0, 0]], [0.0, 0.0], [[0, 0, 0]] * 2, [0.0], T)
     with pytest.raises(ValueError, match="1-D of one length"):
         contraction(LearningSettings(), F, np.ones(3))
+
+
+def test_a_decreasing_gain_averages_the_noise_of_the_runs():
+    """L_k = L/(1 + λk): the same start, and less of the fresh noise kept at the end."""
+    sigma = 45e-6
+    fixed = LearningSettings(gain=0.8, lead_s=2 * T, cutoff_hz=4.0)
+    decaying = LearningSettings(gain=0.8, lead_s=2 * T, cutoff_hz=4.0, gain_decay=0.5)
+    a, _, _ = learn(fixed, dead=2, runs=12, noise=sigma)
+    b, il_b, _ = learn(decaying, dead=2, runs=12, noise=sigma)
+    assert b[1] == pytest.approx(a[1], rel=1e-12) and il_b.steps == 12
+    assert b[-1] < 0.8 * a[-1]

@@ -42,7 +42,11 @@ a dead time ``δ`` and a unit gain in ``Q``'s pass band, ``|1 − L| < 1``: ``0 
 where ``Q ≈ 1`` the error converges to ``≈ 0``, above ``f_c`` it stays what it was.
 Fresh measurement noise ``n_k`` (rms ``σ`` per cycle) enters ``u`` every run through
 ``L Q``: in the pass band ``u`` keeps a noise of ``σ_Q √(L / (2 − L))`` (``σ_Q`` the noise
-after ``Q``) — the price of a large gain.
+after ``Q``) — the price of a large gain.  Hence the optional decreasing gain
+``L_k = L / (1 + λ k)`` (``k`` the updates so far, ``λ`` = ``gain_decay``): each ``L_k``
+in (0, 2) keeps (2) for that run, and a gain that falls as ``1/k`` averages the noise of
+the runs (stochastic approximation: ``Σ L_k = ∞``, ``L_k → 0``) — fast at first, quiet
+later.
 
 Pure math: numpy and scipy, SI units, no I/O.
 """
@@ -85,6 +89,8 @@ class LearningSettings:
         The window ``W``'s cosine fade at each end (s), ≤ the window's half length.
     max_offset_m : float
         Bound on ``|u|`` per axis (m): a safety clip, not part of the law.
+    gain_decay : float
+        ``λ`` ≥ 0 of the decreasing gain ``L_k = L / (1 + λ k)`` (0: constant).
     """
 
     gain: float = 0.8
@@ -96,6 +102,7 @@ class LearningSettings:
     post_s: float = 0.4
     taper_s: float = 0.15
     max_offset_m: float = 2e-3
+    gain_decay: float = 0.0
 
     def __post_init__(self) -> None:
         for f in fields(self):
@@ -113,7 +120,7 @@ class LearningSettings:
             if getattr(self, name) <= 0:
                 raise ValueError(f"LearningSettings.{name} must be > 0, "
                                  f"got {getattr(self, name)!r}")
-        for name in ("lead_s", "pre_s", "post_s", "taper_s"):
+        for name in ("lead_s", "pre_s", "post_s", "taper_s", "gain_decay"):
             if getattr(self, name) < 0:
                 raise ValueError(f"LearningSettings.{name} must be ≥ 0, "
                                  f"got {getattr(self, name)!r}")
@@ -251,9 +258,12 @@ class IterativeLearning:
         The path's time of each cycle (s from the start of the motion).
     u : (G, 3) array
         The offset the next run adds to its target (m, F0).
+    steps : int
+        Updates of ``u`` so far (:meth:`step`).
     history : list of dict
-        Per update: ``rms_m`` and ``max_m`` of the measured error's magnitude over the
-        motion, ``measured`` (share of cycles measured), ``u_max_m``.
+        Per update from a run (:meth:`update`): ``rms_m`` and ``max_m`` of the measured
+        error's magnitude over the motion, ``measured`` (share of cycles measured),
+        ``u_max_m``.
 
     API note: ``feedforward(start_s)`` → the next run's :class:`LearnedOffset`;
     ``update(sample_t, sample_p, path_t, path_p, start_s)`` after the run.
@@ -264,6 +274,7 @@ class IterativeLearning:
     grid: Array = field(init=False)
     u: Array = field(init=False)
     history: list[dict[str, float]] = field(init=False, default_factory=list)
+    steps: int = field(init=False, default=0)
 
     def __post_init__(self) -> None:
         s = self.settings
@@ -290,7 +301,8 @@ class IterativeLearning:
         return LearnedOffset(self.grid + float(start_s), self.u.copy())
 
     def step(self, e: ArrayLike) -> Array:
-        """One update (1) from the error ``e`` (G, 3) on :attr:`grid` (m); the new ``u``."""
+        """One update (1) from the error ``e`` (G, 3) on :attr:`grid` (m), with the gain
+        ``L_k`` of :attr:`steps` updates so far; the new ``u``."""
         s = self.settings
         err = np.asarray(e, dtype=float)
         if err.shape != self.u.shape or not np.all(np.isfinite(err)):
@@ -298,7 +310,8 @@ class IterativeLearning:
                              f"{self.u.shape}, got {err.shape}")
         ahead = np.column_stack([np.interp(self.grid + s.lead_s, self.grid, err[:, i],
                                            right=0.0) for i in range(3)])
-        x = self.u - s.gain * ahead
+        x = self.u - s.gain / (1.0 + s.gain_decay * self.steps) * ahead
+        self.steps += 1
         u = filtfilt(self._b, self._a, x, axis=0) * self._window[:, None]
         self.u = np.clip(u, -s.max_offset_m, s.max_offset_m)
         return self.u.copy()
