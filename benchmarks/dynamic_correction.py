@@ -119,7 +119,7 @@ def rates(run: PathRun) -> tuple[float, float]:
 
 
 def case(cell: TrackedCell, shape: str, speed: float, learn_runs: int = 0,
-         learn_on: str = "model") -> dict:
+         learn_on: str = "model", learning_settings: LearningSettings = LEARNING) -> dict:
     print(f"running {shape} at {speed:g} mm/s …", file=sys.stderr, flush=True)
     t0 = time.time()
     traj = cell.plan(shape, speed)
@@ -129,7 +129,8 @@ def case(cell: TrackedCell, shape: str, speed: float, learn_runs: int = 0,
     model = cell.run(traj, "model", settings=s)
     tracked = cell.run(traj, "tracking", settings=s)
     runs = {"nominal": nominal, "model": model, "tracking": tracked}
-    learning = IterativeLearning(traj.duration, dataclasses.replace(LEARNING, lead_s=tau))
+    learning = IterativeLearning(traj.duration,
+                                 dataclasses.replace(learning_settings, lead_s=tau))
     last = runs[learn_on]
     for k in range(1, learn_runs + 1):
         learn(learning, last)
@@ -159,7 +160,7 @@ def _init_worker(seed: int, poses: int) -> None:
     _CELL = TrackedCell(seed=seed, calibration_poses=poses)
 
 
-def _case_in_worker(args: tuple[str, float, int, str]) -> dict:
+def _case_in_worker(args: tuple[str, float, int, str, LearningSettings]) -> dict:
     assert _CELL is not None
     return case(_CELL, *args)
 
@@ -235,14 +236,15 @@ def print_table(results: list[dict]) -> None:
               f"{r['rates'][0] * 1e3:.2f} | {r['rates'][1]:.3f} |")
 
 
-def print_learning(results: list[dict]) -> None:
+def print_learning(results: list[dict], ls: LearningSettings) -> None:
     """Per learning run: the true error (perp and along 3σ) and what the tracker saw."""
     runs = [r for r in results if r["final"].startswith("learning")]
     if not runs:
         return
     n = max(int(r["final"].split()[1]) for r in runs)
-    print(f"\niterative learning (run 0 = {runs[0]['learn_on']}; perp 3σ / along 3σ mm, "
-          "true; in brackets the rms the tracker measured):")
+    print(f"\niterative learning (L = {ls.gain:g}/(1 + {ls.gain_decay:g} k), Q {ls.cutoff_hz:g} Hz "
+          f"order {ls.order} zero phase, δ = τ; run 0 = {runs[0]['learn_on']}; perp 3σ / "
+          "along 3σ mm, true; in brackets the rms the tracker measured):")
     print("| path | speed mm/s | " + " | ".join(f"run {k}" for k in range(n + 1)) + " |")
     print("|---|---:|" + "---:|" * (n + 1))
     for r in runs:
@@ -316,6 +318,12 @@ def main(argv: list[str]) -> int:
                     help="runs of iterative learning after the first (default 0: none)")
     ap.add_argument("--learn-on", choices=("model", "tracking"), default="model",
                     help="the learning's runs with the model alone or with the tracker term")
+    ap.add_argument("--learn-gain", type=float, default=LEARNING.gain, help="L")
+    ap.add_argument("--learn-decay", type=float, default=LEARNING.gain_decay,
+                    help="λ of L/(1 + λk)")
+    ap.add_argument("--learn-cutoff", type=float, default=LEARNING.cutoff_hz,
+                    help="Q's cut-off (Hz)")
+    ap.add_argument("--learn-order", type=int, default=LEARNING.order, help="Q's order")
     ap.add_argument("--jobs", type=int, default=1, help="paths run in parallel processes")
     ap.add_argument("--faults", action="store_true", help="the fault runs (line, 100 mm/s)")
     ap.add_argument("--udp", action="store_true",
@@ -324,10 +332,16 @@ def main(argv: list[str]) -> int:
     args = ap.parse_args(argv)
     if args.learn < 0 or args.jobs < 1:
         ap.error(f"--learn must be ≥ 0 and --jobs ≥ 1, got {args.learn} and {args.jobs}")
+    try:
+        learning = dataclasses.replace(LEARNING, gain=args.learn_gain,
+                                       gain_decay=args.learn_decay,
+                                       cutoff_hz=args.learn_cutoff, order=args.learn_order)
+    except ValueError as exc:
+        ap.error(str(exc))
     t0 = time.time()
     cell = TrackedCell(seed=args.seed, calibration_poses=args.calibration_poses)
-    cases = [(shape, float(v), args.learn, args.learn_on) for shape in args.shapes.split(",")
-             for v in args.speeds.split(",")]
+    cases = [(shape, float(v), args.learn, args.learn_on, learning)
+             for shape in args.shapes.split(",") for v in args.speeds.split(",")]
     if args.jobs > 1:
         with ProcessPoolExecutor(args.jobs, initializer=_init_worker,
                                  initargs=(args.seed, args.calibration_poses)) as pool:
@@ -337,7 +351,7 @@ def main(argv: list[str]) -> int:
     print(f"Smart H4 twin (seed {args.seed}, 36 kg), model 5 from {args.calibration_poses} "
           f"poses, RSI mode (b) at {CYCLE * 1e3:g} ms, T-MAC stream 1 kHz")
     print_table(results)
-    print_learning(results)
+    print_learning(results, learning)
     if args.faults:
         traj = cell.plan("line", 100.0)
         tau = next((r["tau"] for r in results if r["shape"] == "line" and r["speed"] == 100),
