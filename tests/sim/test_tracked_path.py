@@ -6,7 +6,11 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from plugcell.compensation.tracking import TrackingSettings
+from plugcell.compensation.tracking import (
+    IterativeLearning,
+    LearningSettings,
+    TrackingSettings,
+)
 from plugcell.devices.robot.rsi import RsiConfig
 from plugcell.devices.robot.rsi.tracking import (
     check_tracking_config,
@@ -14,7 +18,8 @@ from plugcell.devices.robot.rsi.tracking import (
     path_pose,
 )
 from plugcell.kinematics.rotations import matrix_to_rpy
-from plugcell.sim.tracked_path import CYCLE, Fault, TrackedCell
+from plugcell.sim import tracked_path
+from plugcell.sim.tracked_path import CYCLE, Fault, TrackedCell, learn
 from plugcell.sim.tracked_udp import run_over_udp
 
 #: simulated cycles in Python: minutes on a loaded 2-core machine
@@ -63,6 +68,43 @@ def test_on_the_twin_the_tracker_lowers_what_the_model_leaves(cell):
     assert tracked.windows == [] and tracked.clamped == 0
     st = tracked.stats
     assert st.samples_bad == 0 and st.fresh_cycles > 0.9 * st.cycles
+
+
+def test_without_the_tracker_term_the_replayed_stream_is_the_live_one(cell, monkeypatch):
+    """Runs that do not feed the samples back compute the true poses at the end and
+    replay the stream over them: the same poses and samples as cycle by cycle."""
+    traj = cell.plan("line", 250.0, size_m=0.05)
+    s = TrackingSettings(lead_s=0.008)
+    replayed = cell.run(traj, "model", settings=s)
+    init = tracked_path._Simulation.__init__
+
+    def live(self, *args, **kwargs):
+        init(self, *args, **kwargs)
+        self.live = True
+
+    monkeypatch.setattr(tracked_path._Simulation, "__init__", live)
+    direct = cell.run(traj, "model", settings=s)
+    np.testing.assert_allclose(replayed.true_pose, direct.true_pose, rtol=0, atol=1e-12)
+    assert [m.time_s for m in replayed.measurements] == [m.time_s for m in direct.measurements]
+    np.testing.assert_allclose([m.pose for m in replayed.measurements if m.ok],
+                               [m.pose for m in direct.measurements if m.ok], rtol=0, atol=1e-12)
+    assert len(replayed.samples) == len(direct.samples) > 0
+
+
+def test_learning_from_the_trackers_samples_lowers_the_error_of_the_next_run(cell):
+    """Iterative learning on the twin: the model's run, then one with the offset learned
+    from its tracker samples (fresh noise) — the true error falls; nominal refuses it."""
+    traj = cell.plan("line", 250.0, size_m=0.3)
+    s = TrackingSettings(lead_s=0.008)
+    model = cell.run(traj, "model", settings=s)
+    learning = IterativeLearning(traj.duration, LearningSettings(lead_s=0.008))
+    e = learn(learning, model)
+    assert e.shape == learning.u.shape and learning.history[0]["measured"] > 0.9
+    learned = cell.run(traj, "model", settings=s, learning=learning, stream_seed=7)
+    pm, pl = _perp(model), _perp(learned)
+    assert pl.mean() + 3 * pl.std() < 0.6 * (pm.mean() + 3 * pm.std())
+    with pytest.raises(ValueError, match="needs the correction loop"):
+        cell.run(traj, "nominal", learning=learning)
 
 
 def test_a_beam_break_on_the_twin_holds_the_model_and_the_robot_never_jumps(cell):

@@ -41,6 +41,7 @@ from plugcell.calibration.identify import Calibrator
 from plugcell.compensation import IdentifiedModel, nominal_joints
 from plugcell.compensation.tracking import (
     HoldWindow,
+    IterativeLearning,
     TrackerMeasurement,
     TrackingLoop,
     TrackingSettings,
@@ -65,7 +66,7 @@ from plugcell.sim.twin.tracker_stream import StreamSample, StreamSpec, TrackerSt
 
 Array = NDArray[np.float64]
 
-__all__ = ["Fault", "LogFeed", "PathRun", "TrackedCell", "path_moves"]
+__all__ = ["Fault", "LogFeed", "PathRun", "TrackedCell", "learn", "path_moves"]
 
 CYCLE = 0.004
 #: Start of the paths: the tool point (the T-MAC) at x, y, z (m) in the volume of the
@@ -122,6 +123,8 @@ class PathRun:
     joint_feedback: Array = field(default_factory=lambda: np.zeros((0, 6)))
     joint_command: Array = field(default_factory=lambda: np.zeros((0, 6)))
     clamped: int = 0
+    #: the tracker's samples as they reached the loop (robot clock, F0), every mode
+    measurements: list[TrackerMeasurement] = field(default_factory=list)
 
 
 def path_moves(T0: Array, shape: str, speed_m_s: float,
@@ -192,19 +195,38 @@ class TrackedCell:
     def run(self, trajectory: Trajectory, mode: str, *,
             settings: TrackingSettings | None = None, six_dof: bool = True,
             clock: Callable[[float], float] | None = None, faults: tuple[Fault, ...] = (),
-            stream_spec: StreamSpec | None = None) -> PathRun:
+            stream_spec: StreamSpec | None = None, learning: IterativeLearning | None = None,
+            stream_seed: int | None = None) -> PathRun:
         """Run ``trajectory`` once: ``mode`` ``"nominal"`` (no correction), ``"model"``
         (lead + model-based feed-forward) or ``"tracking"`` (+ the tracker term).
 
         ``clock`` maps the tracker's clock to the robot's (default: the identity, exact
         only for a tracker whose clock is the robot's); ``stream_spec`` the tracker's
-        dynamics (its clock offset and drift among them).
+        dynamics (its clock offset and drift among them); ``learning``: add its learned
+        offset (:meth:`IterativeLearning.feedforward` from the motion's start) to the
+        target (modes ``model`` and ``tracking``; learn from the run with :func:`learn`);
+        ``stream_seed`` the tracker's noise (default: the cell's seed — give each run
+        of a learning its own, the noise of a real tracker is fresh every run).
         """
         if mode not in ("nominal", "model", "tracking"):
             raise ValueError(f"mode {mode!r}: expected nominal, model or tracking")
+        if learning is not None and mode == "nominal":
+            raise ValueError("a learned offset needs the correction loop: mode model or "
+                             "tracking, not nominal")
         sim = _Simulation(self, trajectory, mode, settings or TrackingSettings(), six_dof,
-                          clock or (lambda x: x), faults, stream_spec or StreamSpec())
+                          clock or (lambda x: x), faults, stream_spec or StreamSpec(),
+                          learning, self.seed if stream_seed is None else stream_seed)
         return sim.run()
+
+
+def learn(learning: IterativeLearning, run: PathRun) -> Array:
+    """One learning update from a run of its path: the good tracker samples the loop
+    received (:attr:`PathRun.measurements`) against the commanded path
+    (:meth:`IterativeLearning.update`); the error on the grid (G, 3), m."""
+    good = [m for m in run.measurements if m.ok]
+    ts = np.array([m.time_s for m in good])
+    ps = np.array([m.pose[:3, 3] for m in good]).reshape(-1, 3)
+    return learning.update(ts, ps, run.t, run.path_pose[:, :3, 3], run.motion[0])
 
 
 class _Simulation:
@@ -212,7 +234,8 @@ class _Simulation:
 
     def __init__(self, cell: TrackedCell, traj: Trajectory, mode: str,
                  settings: TrackingSettings, six_dof: bool, clock: Callable[[float], float],
-                 faults: tuple[Fault, ...], spec: StreamSpec) -> None:
+                 faults: tuple[Fault, ...], spec: StreamSpec,
+                 learning: IterativeLearning | None, stream_seed: int) -> None:
         self.cell, self.mode, self.clock, self.faults = cell, mode, clock, faults
         self.arm = DynamicTwin(cell.twin, q0=cell.q0)
         self.config = RsiConfig(robot_host="127.0.0.1", listen_host="127.0.0.1",
@@ -225,7 +248,9 @@ class _Simulation:
         self.limiter = OffsetLimiter(self.config.limits, CYCLE, ("X", "Y", "Z", "A", "B", "C"),
                                      (("mm", 1e-3),) * 3 + (("deg", math.pi / 180),) * 3)
         self.loop = TrackingLoop(cell.model, settings, payload_kg=cell.payload_kg,
-                                 tracking=mode == "tracking")
+                                 tracking=mode == "tracking",
+                                 learned=None if learning is None else
+                                 learning.feedforward(self.t_start))
         self.source = TrackingSource(self.loop, ramp=RAMP_S)
         truth = cell.twin.reveal_truth()
         self.true_probe = truth.probe
@@ -240,8 +265,12 @@ class _Simulation:
         self._poses = [cell.twin.true_reflector_in_tracker()]
         cell.tracker.point_at(self._poses[0][:3, 3])
         self.stream = TrackerStream(cell.tracker, self._target, 1000.0, six_dof=six_dof,
-                                    spec=spec, blocked=self._blocked, seed=cell.seed)
+                                    spec=spec, blocked=self._blocked, seed=stream_seed)
         self.pending: list[StreamSample] = []
+        self._delivered: list[TrackerMeasurement] = []
+        #: without the tracker term the samples do not steer the run: the true poses are
+        #: computed at its end, vectorised, and the stream replays the same cycles then
+        self.live = mode == "tracking"
         self._samples: list[StreamSample] = []
         self.killed_noticed = False
 
@@ -296,11 +325,14 @@ class _Simulation:
                                                 "q", "cmd")}
         finish_at = self.t_end + SETTLE_S
         k, clamped = 0, 0
+        live = self.live
+        links: list[Array] = []
         while True:
             t = k * CYCLE
             state = parse_rob(self.robot.packet())
-            meas = self._deliver(t)
-            if self.mode == "tracking":
+            if live:
+                meas = self._deliver(t)
+                self._delivered.extend(meas)
                 self.source.add(meas)
                 self._notice_kill(t)
             if self.mode != "nominal" and t >= finish_at:
@@ -317,11 +349,14 @@ class _Simulation:
             path_k = self.robot.path_poses[self.robot.path_index]
             k += 1
             self._times.append(k * CYCLE)
-            flange = self.cell.twin.true_flange()
-            self._poses.append(self.true_base @ flange @ self.true_probe)
+            if live:
+                flange = self.cell.twin.true_flange()
+                self._poses.append(self.true_base @ flange @ self.true_probe)
+                rec["true"].append(self.to_f0 @ flange @ self.true_probe)
+            else:
+                links.append(self.arm.link)
             out = self.source.last
             rec["t"].append(k * CYCLE)
-            rec["true"].append(self.to_f0 @ flange @ self.true_probe)
             rec["path"].append(path_k)
             rec["off"].append(lim.offset)
             rec["w"].append(0.0 if out is None else out.weight)
@@ -331,11 +366,24 @@ class _Simulation:
             if (self.mode == "nominal" and t >= finish_at) or self.source.ended() or \
                     t > finish_at + 3.0:
                 break
+        if not live:
+            rec["true"] = self._replay(np.array(links))
         return PathRun(np.array(rec["t"]), np.array(rec["true"]), np.array(rec["path"]),
                        np.array(rec["off"]), np.array(rec["w"]), rec["state"],
                        (self.t_start, self.t_end), self.loop.windows,
                        self.loop.stats if self.mode == "tracking" else None, self._samples,
-                       np.array(rec["q"]), np.array(rec["cmd"]), clamped)
+                       np.array(rec["q"]), np.array(rec["cmd"]), clamped, self._delivered)
+
+    def _replay(self, links: Array) -> Array:
+        """The true poses of the cycles from their link angles (vectorised, the static
+        physics :meth:`RobotTwin.true_flange` applies each cycle) and the tracker's
+        stream over them, cycle by cycle as a live run delivers it; the true poses in F0.
+        Exact: a sample only sees the poses up to its acquisition time."""
+        flanges = self.arm.true_flanges(links) @ self.true_probe
+        self._poses.extend(self.true_base @ flanges)
+        for k in range(len(links)):
+            self._delivered.extend(self._deliver(k * CYCLE))
+        return self.to_f0 @ flanges
 
     def _notice_kill(self, t: float) -> None:
         for f in self.faults:

@@ -25,9 +25,17 @@ Pure math (numpy, SI units, no I/O).  The RSI correction source is
 """
 
 from .estimator import JointHistory, ResidualFilter, TrackerMeasurement, steady_state_gain
+from .learning import (
+    IterativeLearning,
+    LearnedOffset,
+    LearningSettings,
+    contraction,
+    path_error,
+)
 from .limiter import RateLimiter
 from .loop import CycleOutput, HoldWindow, TrackingLoop, TrackingSettings, TrackingStats
 
-__all__ = ["CycleOutput", "HoldWindow", "JointHistory", "RateLimiter", "ResidualFilter",
-           "TrackerMeasurement", "TrackingLoop", "TrackingSettings", "TrackingStats",
+__all__ = ["CycleOutput", "HoldWindow", "IterativeLearning", "JointHistory", "LearnedOffset",
+           "LearningSettings", "RateLimiter", "ResidualFilter", "TrackerMeasurement",
+           "TrackingLoop", "TrackingSettings", "TrackingStats", "contraction", "path_error",
            "steady_state_gain"]

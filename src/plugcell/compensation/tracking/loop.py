@@ -9,7 +9,8 @@ rad) to superimpose: the controller then aims at ``T_c = (p_p + Δp, exp(φ)·R_
 The law — three terms, each for an error of a different kind::
 
     T_lead = (p_p + Δp_lead, R_p),      Δp_lead = v̂ τ + â τ²/2        (1) lead
-    T_tgt  = (p_lead − c_p, exp(−c_φ) R_lead)                          (3) tracker term
+    T_tgt  = (p_lead − c_p + u(t), exp(−c_φ) R_lead)                   (3) tracker term,
+                                                                        (4) learned offset
     q*     = argmin ‖e(T_tgt, T_model(q))‖,   T_c = T_nominal(q*)          (2) model FF
 
 1. **Lead** (feed-forward of the controller's lag, optional ``lead_s = τ``): the arm
@@ -38,8 +39,15 @@ The law — three terms, each for an error of a different kind::
    for vibration above a few hertz, which is why ``q`` (the filter's drift intensity)
    is chosen so the term's bandwidth stays below the arm's first modes.
 
-The term is bounded (:class:`~.limiter.RateLimiter`: speed, acceleration and total per
-axis) and weighted by ``w ∈ [0, 1]``, ``c* = w · x̂``: ``w`` fades out (a jerk-limited
+4. **Learned offset** ``u(t)`` (optional, a repeated path): what the previous runs of the
+   same path measured, learned by :class:`~.learning.IterativeLearning` and given as
+   ``learned`` (a function of the robot time, m in F0; zero when not given).
+
+The estimate is low-passed (``H``, a causal second-order Butterworth of cut-off
+``output_cutoff_hz``, below the arm's first structural modes: the estimate's noise is
+white, and a lightly damped mode amplified what of it reached 9–12 Hz into a ringing of
+the arm), weighted by ``w ∈ [0, 1]`` and bounded (:class:`~.limiter.RateLimiter`: speed,
+acceleration and total per axis), ``c = limit(w · H(x̂))``: ``w`` fades out (a jerk-limited
 ramp of ``fade_s``, :func:`~plugcell.motion.profile.unit_ramp`) when the estimate is not
 fresh — no sample ``ok`` within ``max_age_s`` (a beam break: the sample's status says
 why; a late or silent tracker) — so the path goes on with the model-based compensation
@@ -57,11 +65,12 @@ from __future__ import annotations
 import math
 import threading
 from collections import deque
-from collections.abc import Iterable
+from collections.abc import Callable, Iterable
 from dataclasses import dataclass, field, fields
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
+from scipy.signal import butter, sosfilt
 
 from plugcell.kinematics.pose_error import pose_error_exact
 from plugcell.kinematics.transforms import so3_exp, so3_log
@@ -123,6 +132,10 @@ class TrackingSettings:
         2 m/s², 20 m/s³ the lead of 10 ms moves at ≤ 20 mm/s and 0.2 m/s²), they keep a
         path pose recovered wrongly — the controller applied another offset than the
         one sent, after a late answer — from throwing the lead.
+    output_cutoff_hz : float
+        Cut-off of the tracker term's low-pass ``H`` (Hz; 0: none), below the arm's
+        first structural mode (9 Hz on the twin): the estimate's noise is white, and a
+        mode of damping ζ amplifies what reaches it ≈ 1/(2ζ) times.
     feedforward_step_m : float
         The model-based feed-forward is solved anew when the target has moved this far
         from where it was last solved (m); in between it is extrapolated linearly from
@@ -152,6 +165,7 @@ class TrackingSettings:
     max_lead_m: float = 0.01
     max_lead_speed_m_s: float = 0.05
     max_lead_accel_m_s2: float = 2.0
+    output_cutoff_hz: float = 2.0
 
     def __post_init__(self) -> None:
         for f in fields(self):
@@ -160,11 +174,15 @@ class TrackingSettings:
                 continue
             ok = math.isfinite(v) and (v >= 0 if f.name in ("lead_s", "position_drift",
                                                             "orientation_drift",
-                                                            "resume_s") else v > 0)
+                                                            "resume_s",
+                                                            "output_cutoff_hz") else v > 0)
             if not ok:
                 raise ValueError(f"TrackingSettings.{f.name} must be a finite number "
                                  f"{'≥' if f.name in ('lead_s', 'resume_s') else '>'} 0, "
                                  f"got {v!r}")
+        if self.output_cutoff_hz >= 0.5 / self.cycle_s:
+            raise ValueError(f"TrackingSettings.output_cutoff_hz {self.output_cutoff_hz!r} "
+                             f"must lie below the Nyquist rate {0.5 / self.cycle_s:g} Hz")
 
 
 @dataclass
@@ -231,6 +249,8 @@ class CycleOutput:
         (tracking switched off).
     fresh : bool
         This cycle took at least one new sample.
+    learned : (3,) array
+        The learned offset ``u(t)`` added to the target (zeros without learning).
     """
 
     offset: Array
@@ -241,6 +261,7 @@ class CycleOutput:
     weight: float
     state: str
     fresh: bool
+    learned: Array = field(default_factory=lambda: np.zeros(3))
 
 
 class TrackingLoop:
@@ -261,6 +282,9 @@ class TrackingLoop:
         The controller's own model with its TCP (default: the nominal model of
         ``model``'s robot with ``model.tool`` as the TCP — the controller's ``$TOOL`` is
         the calibrated reflector).
+    learned : callable, optional
+        ``u(t)``: the learned offset (3,) (m, F0) at robot time ``t``, added to the target
+        (:meth:`~.learning.IterativeLearning.feedforward`); with or without the tracker.
 
     API note: ``add(measurements)`` from any thread; ``cycle(t, q, T_path)`` once per
     robot cycle from the correction source; ``windows``, ``stats`` afterwards.
@@ -268,13 +292,18 @@ class TrackingLoop:
 
     def __init__(self, model: PoseModel, settings: TrackingSettings | None = None, *,
                  payload_kg: float = 0.0, tracking: bool = True,
-                 controller: PoseModel | None = None) -> None:
+                 controller: PoseModel | None = None,
+                 learned: Callable[[float], ArrayLike] | None = None) -> None:
         s = self.settings = settings if settings is not None else TrackingSettings()
         self.model = model
         self.controller = controller if controller is not None else \
             NominalModel(model.description, model.tool)
         self.payload_kg = float(payload_kg)
         self.tracking = bool(tracking)
+        self.learned = learned
+        self._sos = butter(2, s.output_cutoff_hz, fs=1.0 / s.cycle_s, output="sos") \
+            if s.output_cutoff_hz > 0 else None
+        self._sos_z = np.zeros((1, 2, 6))
         self._pos = ResidualFilter([s.position_drift] * 3, [s.position_noise_m] * 3,
                                    s.gate_sigma)
         self._rot = ResidualFilter([s.orientation_drift] * 3, [s.orientation_noise_rad] * 3,
@@ -360,21 +389,26 @@ class TrackingLoop:
             xhat[:3] = self._pos.x
         if self._rot.initialised and s.correct_orientation:
             xhat[3:] = self._rot.x
-        goal = np.where(np.isfinite(xhat), w * np.nan_to_num(xhat), 0.0) if self.tracking \
-            else np.zeros(6)
+        smooth = np.nan_to_num(xhat)
+        if self._sos is not None and self.tracking:
+            out, self._sos_z = sosfilt(self._sos, smooth[None], axis=0, zi=self._sos_z)
+            smooth = out[0]
+        goal = np.where(np.isfinite(xhat), w * smooth, 0.0) if self.tracking else np.zeros(6)
         c = self._limiter.apply(goal)
         if self._state == "tracking" and w >= 1.0:
             self.stats.tracking_cycles += 1
         lead = self._lead(Tp)
         T_tgt = Tp.copy()
-        T_tgt[:3, 3] += lead - c[:3]
+        u = np.zeros(3) if self.learned is None else \
+            np.asarray(self.learned(t), dtype=float).reshape(3)
+        T_tgt[:3, 3] += lead - c[:3] + u
         T_tgt[:3, :3] = so3_exp(-c[3:]) @ Tp[:3, :3]
         ff = self._feedforward(T_tgt, np.asarray(q, dtype=float))
         T_c = T_tgt.copy()
         T_c[:3, 3] += ff[:3]
         T_c[:3, :3] = so3_exp(ff[3:]) @ T_tgt[:3, :3]
         offset = np.concatenate([T_c[:3, 3] - Tp[:3, 3], so3_log(T_c[:3, :3] @ Tp[:3, :3].T)])
-        return CycleOutput(offset, ff, lead, c, xhat, w, self._state, fresh)
+        return CycleOutput(offset, ff, lead, c, xhat, w, self._state, fresh, u)
 
     # ------------------------------------------------------------------ parts
     def _take_samples(self) -> bool:
