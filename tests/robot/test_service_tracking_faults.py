@@ -32,7 +32,7 @@ import pytest
 from robot_cell import Launcher
 from robot_testlib import unique_cell
 from test_service_rsi_tracking import PROGRAM, _vector
-from test_service_streamed import _free_udp_port, _get_status, _run, _start
+from test_service_streamed import _get_status, _run, _start
 
 import plugcell.pdl
 from plugcell.apps.kinds import build
@@ -42,6 +42,7 @@ from plugcell.framework import Client, ProcessStates
 from plugcell.framework.journal import journal_dir, journal_files, read_journal
 from plugcell.kinematics import forward
 from plugcell.sim.controller.rsi_twin import RsiTwinProcess
+from plugcell.sim.ports import free_port
 from plugcell.sim.twin.robot import RobotTwin
 from plugcell.sim.twin.scenario import TwinScenario
 
@@ -145,7 +146,7 @@ def test_a_late_then_killed_tracker_mid_line(tmp_path: Path, monkeypatch,
                                              stream_process: bool) -> None:
     home = tmp_path / "home"
     monkeypatch.setenv("PLUGCELL_HOME", str(home))
-    lib, port, cell = _library(tmp_path), _free_udp_port(), unique_cell()
+    lib, port, cell = _library(tmp_path), free_port("udp"), unique_cell()
     launcher = Launcher(home, cell)
     got: dict[str, Any] = {}
     try:
@@ -249,7 +250,7 @@ def test_a_late_then_killed_tracker_mid_line(tmp_path: Path, monkeypatch,
 def test_a_beam_break_mid_line_goes_on_with_the_model(tmp_path: Path, monkeypatch) -> None:
     home = tmp_path / "home"
     monkeypatch.setenv("PLUGCELL_HOME", str(home))
-    lib, port, cell = _library(tmp_path), _free_udp_port(), unique_cell()
+    lib, port, cell = _library(tmp_path), free_port("udp"), unique_cell()
     launcher = Launcher(home, cell)
     got: dict[str, Any] = {}
     try:
