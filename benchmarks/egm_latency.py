@@ -16,6 +16,7 @@ core.  Nothing is asserted; the table says which goals the run met.
 
 from __future__ import annotations
 
+import gc
 import json
 import sys
 import time
@@ -64,6 +65,8 @@ def run_link(cycle_ms: float, rt: int | None) -> None:
                     mode="joint", sample_rate_ms=int(cycle_ms))
     link = EgmLink(cfg, SineOffset(axis=5, amplitude=2 * DEG, period=4.0, periods=10**6),
                    record_latency=True, rt_priority=rt)
+    gc.collect()  # as the link process does (stream/process.py)
+    gc.freeze()
     link.start()
     time.sleep(0.05)
     print(f"READY {link.address[1]} {link.rt_note}", flush=True)

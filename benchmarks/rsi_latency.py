@@ -26,6 +26,7 @@ from __future__ import annotations
 
 import argparse
 import contextlib
+import gc
 import json
 import os
 import resource
@@ -116,6 +117,8 @@ def run_link(cycle_ms: float, rt: int | None) -> None:
                     mode="absolute", cycle="IPO_FAST" if cycle_ms == 4 else "IPO")
     link = RsiLink(cfg, SineOffset(axis=5, amplitude=2 * DEG, period=4.0, periods=10**6),
                    record_latency=True, rt_priority=rt)
+    gc.collect()  # as the link process does (stream/process.py)
+    gc.freeze()
     link.start()
     time.sleep(0.05)
     print(f"READY {link.address[1]} {link.rt_note}", flush=True)

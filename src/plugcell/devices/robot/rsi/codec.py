@@ -336,16 +336,29 @@ def encode_sen(ipoc: int, kind: str, values: Array, outputs: dict[str, int] | No
     bytes
         The datagram (ASCII).
     """
-    if kind == "joint":
-        v = values * (1.0 / DEG)
-        body = "<AKorr A1=\"{:.6f}\" A2=\"{:.6f}\" A3=\"{:.6f}\" A4=\"{:.6f}\" A5=\"{:.6f}\" " \
-               "A6=\"{:.6f}\"/>".format(*v.tolist())
-    else:
-        v = np.concatenate([values[:3] * MM_PER_M, values[3:] * (1.0 / DEG)])
-        body = "<RKorr X=\"{:.6f}\" Y=\"{:.6f}\" Z=\"{:.6f}\" A=\"{:.6f}\" B=\"{:.6f}\" " \
-               "C=\"{:.6f}\"/>".format(*v.tolist())
+    form = _SEN_FORMS.get((kind, sentype))
+    if form is None:
+        form = _sen_form(kind, sentype)
     words = "".join(f"<{k}>{int(w)}</{k}>" for k, w in outputs.items()) if outputs else ""
-    return f"<Sen Type=\"{sentype}\">{body}{words}<IPOC>{int(ipoc)}</IPOC></Sen>".encode()
+    return form.format(*(values * _SEN_SCALE[kind]).tolist(), words, int(ipoc)).encode()
+
+
+#: Robot units per SI unit of each correction's six values (rad → deg; m → mm, rad → deg).
+_SEN_SCALE = {"joint": np.full(6, 1.0 / DEG),
+              "cartesian": np.array([MM_PER_M] * 3 + [1.0 / DEG] * 3)}
+#: The answer's format by (kind, SENTYPE): six values, the output words, the IPOC.
+_SEN_FORMS: dict[tuple[str, str], str] = {}
+
+
+def _sen_form(kind: str, sentype: str) -> str:
+    """The format of :func:`encode_sen`'s answer (kept for the next cycle)."""
+    tag, axes = ("AKorr", JOINT_AXES) if kind == "joint" else ("RKorr", CARTESIAN_AXES)
+    body = " ".join(f'{a}="{{:.6f}}"' for a in axes)
+    name = sentype.replace("{", "{{").replace("}", "}}")
+    form = f'<Sen Type="{name}"><{tag} {body}/>{{}}<IPOC>{{}}</IPOC></Sen>'
+    if len(_SEN_FORMS) < 16:  # a link uses one
+        _SEN_FORMS[kind, sentype] = form
+    return form
 
 
 # ------------------------------------------------------------------ the robot's side

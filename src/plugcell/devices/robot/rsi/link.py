@@ -78,6 +78,7 @@ class RsiLink(StreamLink):
         self._outputs_spec = {o.tag: o for o in config.outputs}
         self._outputs = {o.tag: o.initial for o in config.outputs}
         self._read = RobReader(config.max_packet_bytes)  # parse_rob, fast for the repeated layout
+        self._ipoc_step = config.ipoc_step
 
     def _parse(self, data: bytes) -> RobotState:
         return self._read(data)
@@ -86,7 +87,7 @@ class RsiLink(StreamLink):
         return state.ipoc
 
     def _lost(self, gap: int) -> int:
-        return round(gap / self.config.ipoc_step) - 1
+        return round(gap / self._ipoc_step) - 1
 
     def _clock_ms(self, state: RobotState) -> int:
         return state.ipoc  # the controller's IPOC counts milliseconds
