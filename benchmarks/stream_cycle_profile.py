@@ -1,6 +1,7 @@
 """Where the time of one real-time cycle goes: the RSI and EGM links fed recorded packets.
 
-    python benchmarks/stream_cycle_profile.py [--cycles 20000] [--vendor rsi egm] [--profile]
+    python benchmarks/stream_cycle_profile.py [--cycles 20000] [--vendor rsi egm] [--gap-ms 0]
+        [--profile]
 
 No socket and no second process: a link (``RsiLink``, absolute joint corrections;
 ``EgmLink``, joint mode) with the swinging joint offset of ``rsi_latency.py`` and the
@@ -12,8 +13,11 @@ Each cycle is timed by stage with ``time.perf_counter_ns``: *parse* (the vendor'
 parser), *ask* (the cycle's state, the correction source, the limiter), *encode* (the
 answer), and *rest* (sequence, counters, the send call, the publisher, the waiters).
 The table gives each stage's median and p99 (µs); the machine's load shows in the p99,
-the medians are the per-packet work.  ``--profile`` adds cProfile's largest functions
-(the profiler's own cost inflates every call; the shares are what matter).
+the medians are the per-packet work.  Back to back the cycles find their code and data in
+the caches; ``--gap-ms 4`` sleeps a cycle between two, as the link does, and shows the
+cost of a cycle that finds them evicted by the machine's other processes.  ``--profile``
+adds cProfile's largest functions (the profiler's own cost inflates every call; the
+shares are what matter).
 """
 
 from __future__ import annotations
@@ -86,8 +90,9 @@ def _timed(link: Any, name: str, into: list[int]) -> None:
     setattr(link, name, wrapper)
 
 
-def measure(vendor: str, cycles: int) -> dict[str, np.ndarray]:
-    """Per-stage times (ns) of ``cycles`` cycles, after as many warm-up cycles."""
+def measure(vendor: str, cycles: int, gap_s: float = 0.0) -> dict[str, np.ndarray]:
+    """Per-stage times (ns) of ``cycles`` cycles, after as many warm-up cycles, with
+    ``gap_s`` seconds of sleep between two cycles."""
     link, packet = make_link(vendor)
     packets = [packet(k) for k in range(2 * cycles)]
     addr = ("127.0.0.1", 50000)
@@ -96,6 +101,8 @@ def measure(vendor: str, cycles: int) -> dict[str, np.ndarray]:
         _timed(link, name, into)
     times = {s: np.zeros(cycles, dtype=np.int64) for s in STAGES}
     for k, data in enumerate(packets):
+        if gap_s:
+            time.sleep(gap_s)
         parse[0] = ask[0] = encode[0] = 0
         t0 = time.perf_counter_ns()
         state = link._accept(data, addr)
@@ -131,15 +138,18 @@ def main(argv: list[str]) -> int:
     ap.add_argument("--vendor", nargs="+", choices=("rsi", "egm"), default=["rsi", "egm"])
     ap.add_argument("--profile", action="store_true", help="also cProfile's largest functions")
     ap.add_argument("--top", type=int, default=20)
+    ap.add_argument("--gap-ms", type=float, default=0.0,
+                    help="sleep between two cycles, as the link waits for the next packet "
+                    "(the machine's other processes then evict the caches)")
     args = ap.parse_args(argv)
     print(f"machine: {os.cpu_count()} CPUs, load average {os.getloadavg()[0]:.2f}; "
           f"Python {sys.version.split()[0]}; {args.cycles} cycles per link "
-          "(after as many warm-up cycles)")
+          f"(after as many warm-up cycles), {args.gap_ms:g} ms between two")
     print()
     print("| link | " + " | ".join(f"{s} p50 / p99 (µs)" for s in STAGES) + " |")
     print("|---|" + "---:|" * len(STAGES))
     for vendor in args.vendor:
-        t = measure(vendor, args.cycles)
+        t = measure(vendor, args.cycles, args.gap_ms / 1000)
         cells = [f"{np.percentile(t[s], 50) / 1e3:.1f} / {np.percentile(t[s], 99) / 1e3:.1f}"
                  for s in STAGES]
         print(f"| {vendor.upper()} | " + " | ".join(cells) + " |")
