@@ -203,6 +203,8 @@ def robot(vendor: Vendor, seconds: float, cycle_ms: float,
     end = measuring_from + int(seconds * 1e9)
     measuring = False
     worst = [(0, 0.0), (0, 0.0)]  # the longest round trip and when its packet left (s)
+    late_at: list[list[float]] = [[], []]  # when the late answers' packets left (s)
+    cpu0 = _cpu_times()
     # slot j: stream j % 2 sends at start + j · cycle/2
     while True:
         slot_t = start + k * cycle_ns // 2
@@ -215,6 +217,8 @@ def robot(vendor: Vendor, seconds: float, cycle_ms: float,
                 p.stdin.flush()
             sent, rtts, late = [{}, {}], [[], []], [0, 0]
             worst = [(0, 0.0), (0, 0.0)]
+            late_at = [[], []]
+            cpu0 = _cpu_times()
         # wait for the slot, taking answers as they come
         while True:
             now = time.monotonic_ns()
@@ -233,6 +237,8 @@ def robot(vendor: Vendor, seconds: float, cycle_ms: float,
                         rtt = t - sent_at
                         rtts[i].append(rtt)
                         late[i] += rtt > cycle_ns
+                        if rtt > cycle_ns:
+                            late_at[i].append((sent_at - measuring_from) / 1e9)
                         if measuring and rtt > worst[i][0]:
                             worst[i] = (rtt, (sent_at - measuring_from) / 1e9)
         i = k % 2
@@ -242,6 +248,7 @@ def robot(vendor: Vendor, seconds: float, cycle_ms: float,
         sent[i][ipoc] = time.monotonic_ns()
         socks[i].send(packet)
         k += 1
+    steal = _steal(cpu0, _cpu_times())
     time.sleep(0.05)  # the last answers
     for i, s in enumerate(socks):
         while True:
@@ -253,6 +260,8 @@ def robot(vendor: Vendor, seconds: float, cycle_ms: float,
             if sent_at is not None:
                 rtts[i].append(time.monotonic_ns() - sent_at)
                 late[i] += rtts[i][-1] > cycle_ns
+                if rtts[i][-1] > cycle_ns:
+                    late_at[i].append((sent_at - measuring_from) / 1e9)
     results, samples = {}, {}
     link_stats = None
     for i, (name, proc) in enumerate(zip(names, (link_proc, echo_proc), strict=True)):
@@ -275,11 +284,31 @@ def robot(vendor: Vendor, seconds: float, cycle_ms: float,
             "missed": late[i] + never,
             "cpu_pct": 100 * report["cpu_s"] / report["wall_s"],
             "max_at_s": worst[i][1],
+            "missed_at_s": sorted(late_at[i] + [(t - measuring_from) / 1e9
+                                                for t in sent[i].values()]),
         }
         samples[name] = {"round trip": r, "in→out": io}
     results[vendor.link]["link_stats"] = link_stats
     results[vendor.link]["scheduling"] = link_note
+    results[vendor.link]["steal_pct"] = steal
     return results, samples
+
+
+def _cpu_times() -> list[int]:
+    """The machine's CPU time by kind (/proc/stat's first line; empty where there is none)."""
+    try:
+        with open("/proc/stat", encoding="ascii") as f:
+            return [int(x) for x in f.readline().split()[1:]]
+    except OSError:
+        return []
+
+
+def _steal(before: list[int], after: list[int]) -> float | None:
+    """The share (%) of the CPUs' time the hypervisor gave other machines (``steal``)."""
+    if len(before) < 8 or len(after) < 8:
+        return None
+    total = sum(after[:8]) - sum(before[:8])
+    return 100 * (after[7] - before[7]) / total if total else None
 
 
 def plot(samples: dict[str, dict[str, np.ndarray]], cycle_ms: float, title: str,
@@ -330,6 +359,14 @@ def table(vendor: Vendor, results: dict, seconds: float, cycle_ms: float) -> str
     lines.append("")
     lines.append("longest round trips at " + ", ".join(
         f"{name}: {r['max_at_s']:.1f} s" for name, r in results.items()) + " into the run")
+    for name, r in results.items():
+        at = r.get("missed_at_s") or []
+        if at:
+            lines.append(f"missed cycles of the {name} at (s): " + ", ".join(
+                f"{t:.3f}" for t in at[:30]) + (" …" if len(at) > 30 else ""))
+    if link.get("steal_pct") is not None:
+        lines.append(f"CPU time taken by the hypervisor (steal) during the run: "
+                     f"{link['steal_pct']:.2f} %")
     ratio = link["rtt_us"]["p99.9"] / echo["rtt_us"]["p99.9"]
     goals = [("p99.9 round trip ≤ 1 ms", link["rtt_us"]["p99.9"] <= 1000,
               f"{link['rtt_us']['p99.9']:.0f} µs"),

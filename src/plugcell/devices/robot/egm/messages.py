@@ -125,10 +125,6 @@ class EgmState:
 
 def _finite(where: str, values, bound: float = math.inf) -> list[float]:
     vals = list(values)
-    # the common case in two C loops: a sum is finite when every value is (one that
-    # overflows only takes the loop below), and the largest magnitude is within bound
-    if math.isfinite(sum(vals)) and max(map(abs, vals), default=0.0) <= bound:
-        return vals
     for v in vals:
         if not math.isfinite(v):
             raise PacketError("malformed", f"{where}: {v!r} is not a finite number")
