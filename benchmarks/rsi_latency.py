@@ -185,6 +185,11 @@ def robot(vendor: Vendor, seconds: float, cycle_ms: float,
     echo_proc, echo_port, _ = _spawn(vendor, "echo", cycle_ms, rt)
     if rt is not None:  # the robot side too: it stands for the controller's real-time core
         os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(rt))
+    # and no collector's pass may stall it (it would send the packets it owes at once,
+    # and the link answers only the newest of them): its loop frees what it allocates
+    gc.collect()
+    gc.freeze()
+    gc.disable()
     names = (vendor.link, "bare UDP echo")
     socks, sent, rtts, late = [], [{}, {}], [[], []], [0, 0]
     for port in (link_port, echo_port):
@@ -249,6 +254,7 @@ def robot(vendor: Vendor, seconds: float, cycle_ms: float,
         socks[i].send(packet)
         k += 1
     steal = _steal(cpu0, _cpu_times())
+    gc.enable()
     time.sleep(0.05)  # the last answers
     for i, s in enumerate(socks):
         while True:
