@@ -1,6 +1,7 @@
 """ABB EGM answer latency at 250 Hz: plugcell's link beside a bare UDP echo (issue 37 §7).
 
-    python benchmarks/egm_latency.py [--seconds 60] [--cycle-ms 4] [--cell N] [--json FILE]
+    python benchmarks/egm_latency.py [--seconds 60] [--cycle-ms 4] [--cell N]
+        [--rt-priority N] [--json FILE] [--plot PNG]
 
 The harness is rsi_latency.py's (its doc says how it measures): a robot side sends an
 ``EgmRobot`` (ABB's egm.proto, as the simulated controller sends it: feedback and planned

@@ -1,6 +1,7 @@
 """KUKA RSI answer latency at 250 Hz: plugcell's link beside a bare UDP echo (issue 37 §7).
 
-    python benchmarks/rsi_latency.py [--seconds 60] [--cycle-ms 4] [--json FILE]
+    python benchmarks/rsi_latency.py [--seconds 60] [--cycle-ms 4] [--cell N]
+        [--rt-priority N] [--json FILE] [--plot PNG]
 
 Three processes: a robot side (this one) that sends a ``<Rob Type="KUKA">`` packet
 every cycle (4 ms) to each of two sensors, interleaved half a cycle apart — plugcell's
@@ -19,13 +20,15 @@ on loopback, journals on), waits until each serves, and measures beside them: th
 issue's "with the cell's other services running".
 
 Goal (issue 37): p99.9 ≤ 1 ms, ≤ 3× the bare echo, zero missed cycles, ≤ 10 % of one
-core.  Nothing is asserted; the table says which goals the run met.
+core.  Nothing is asserted; the table says which goals the run met.  ``--plot PNG`` draws
+the histograms of the round trips and of the in→out times, link beside echo.
 """
 
 from __future__ import annotations
 
 import argparse
 import contextlib
+import gc
 import json
 import os
 import resource
@@ -119,9 +122,13 @@ def run_link(cycle_ms: float, rt: int | None) -> None:
 
 
 def serve_link(link) -> None:
-    """The link role of a run (RSI's or EGM's link, recording latencies): start it, say
-    ``READY <port>``, forget the warm-up when told (a line on stdin), report the measured
-    seconds and the link's counters, close it."""
+    """The link role of a run (RSI's or EGM's link, recording latencies): freeze the
+    start-up heap as the link process does (stream/process.py: a full collection then
+    scans only the cycles' objects), start it, say ``READY <port>``, forget the warm-up
+    when told (a line on stdin), report the measured seconds and the link's counters,
+    close it."""
+    gc.collect()
+    gc.freeze()
     link.start()
     time.sleep(0.05)
     print(f"READY {link.address[1]} {link.rt_note}", flush=True)
@@ -177,12 +184,19 @@ def _spawn(vendor: Vendor, role: str, cycle_ms: float,
     return proc, int(port), " ".join(note).strip()
 
 
-def robot(vendor: Vendor, seconds: float, cycle_ms: float, rt: int | None) -> dict:
+def robot(vendor: Vendor, seconds: float, cycle_ms: float,
+          rt: int | None) -> tuple[dict, dict[str, dict[str, np.ndarray]]]:
+    """Run the robot side; the figures per sensor, and its times (µs) for the plot."""
     cycle_ns = int(cycle_ms * 1e6)
     link_proc, link_port, link_note = _spawn(vendor, "link", cycle_ms, rt)
     echo_proc, echo_port, _ = _spawn(vendor, "echo", cycle_ms, rt)
     if rt is not None:  # the robot side too: it stands for the controller's real-time core
         os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(rt))
+    # and no collector's pass may stall it (it would send the packets it owes at once,
+    # and the link answers only the newest of them): its loop frees what it allocates
+    gc.collect()
+    gc.freeze()
+    gc.disable()
     names = (vendor.link, "bare UDP echo")
     socks, sent, rtts, late = [], [{}, {}], [[], []], [0, 0]
     for port in (link_port, echo_port):
@@ -201,6 +215,8 @@ def robot(vendor: Vendor, seconds: float, cycle_ms: float, rt: int | None) -> di
     end = measuring_from + int(seconds * 1e9)
     measuring = False
     worst = [(0, 0.0), (0, 0.0)]  # the longest round trip and when its packet left (s)
+    late_at: list[list[float]] = [[], []]  # when the late answers' packets left (s)
+    cpu0 = _cpu_times()
     # slot j: stream j % 2 sends at start + j · cycle/2
     while True:
         slot_t = start + k * cycle_ns // 2
@@ -213,6 +229,8 @@ def robot(vendor: Vendor, seconds: float, cycle_ms: float, rt: int | None) -> di
                 p.stdin.flush()
             sent, rtts, late = [{}, {}], [[], []], [0, 0]
             worst = [(0, 0.0), (0, 0.0)]
+            late_at = [[], []]
+            cpu0 = _cpu_times()
         # wait for the slot, taking answers as they come
         while True:
             now = time.monotonic_ns()
@@ -231,6 +249,8 @@ def robot(vendor: Vendor, seconds: float, cycle_ms: float, rt: int | None) -> di
                         rtt = t - sent_at
                         rtts[i].append(rtt)
                         late[i] += rtt > cycle_ns
+                        if rtt > cycle_ns:
+                            late_at[i].append((sent_at - measuring_from) / 1e9)
                         if measuring and rtt > worst[i][0]:
                             worst[i] = (rtt, (sent_at - measuring_from) / 1e9)
         i = k % 2
@@ -240,6 +260,8 @@ def robot(vendor: Vendor, seconds: float, cycle_ms: float, rt: int | None) -> di
         sent[i][ipoc] = time.monotonic_ns()
         socks[i].send(packet)
         k += 1
+    steal = _steal(cpu0, _cpu_times())
+    gc.enable()
     time.sleep(0.05)  # the last answers
     for i, s in enumerate(socks):
         while True:
@@ -251,7 +273,9 @@ def robot(vendor: Vendor, seconds: float, cycle_ms: float, rt: int | None) -> di
             if sent_at is not None:
                 rtts[i].append(time.monotonic_ns() - sent_at)
                 late[i] += rtts[i][-1] > cycle_ns
-    results = {}
+                if rtts[i][-1] > cycle_ns:
+                    late_at[i].append((sent_at - measuring_from) / 1e9)
+    results, samples = {}, {}
     link_stats = None
     for i, (name, proc) in enumerate(zip(names, (link_proc, echo_proc), strict=True)):
         proc.stdin.write("stop\n")
@@ -273,10 +297,63 @@ def robot(vendor: Vendor, seconds: float, cycle_ms: float, rt: int | None) -> di
             "missed": late[i] + never,
             "cpu_pct": 100 * report["cpu_s"] / report["wall_s"],
             "max_at_s": worst[i][1],
+            "missed_at_s": sorted(late_at[i] + [(t - measuring_from) / 1e9
+                                                for t in sent[i].values()]),
         }
+        samples[name] = {"round trip": r, "in→out": io}
     results[vendor.link]["link_stats"] = link_stats
     results[vendor.link]["scheduling"] = link_note
-    return results
+    results[vendor.link]["steal_pct"] = steal
+    return results, samples
+
+
+def _cpu_times() -> list[int]:
+    """The machine's CPU time by kind (/proc/stat's first line; empty where there is none)."""
+    try:
+        with open("/proc/stat", encoding="ascii") as f:
+            return [int(x) for x in f.readline().split()[1:]]
+    except OSError:
+        return []
+
+
+def _steal(before: list[int], after: list[int]) -> float | None:
+    """The share (%) of the CPUs' time the hypervisor gave other machines (``steal``)."""
+    if len(before) < 8 or len(after) < 8:
+        return None
+    total = sum(after[:8]) - sum(before[:8])
+    return 100 * (after[7] - before[7]) / total if total else None
+
+
+def plot(samples: dict[str, dict[str, np.ndarray]], cycle_ms: float, title: str,
+         path: Path) -> bool:
+    """Histograms of the round trips and the in→out times, link beside echo (log axes)."""
+    try:
+        import matplotlib
+
+        matplotlib.use("Agg")
+        import matplotlib.pyplot as plt
+    except ImportError:
+        return False
+    fig, axes = plt.subplots(1, 2, figsize=(10, 4.0), sharey=True)
+    top = max(float(v.max()) for per in samples.values() for v in per.values())
+    bins = np.geomspace(5.0, max(top, 2e3 * cycle_ms) * 1.05, 120)
+    for ax, what in zip(axes, ("round trip", "in→out"), strict=True):
+        for name, per in samples.items():
+            v = per[what]
+            ax.hist(v, bins=bins, histtype="step", lw=1.0,
+                    label=f"{name}: p99.9 {np.percentile(v, 99.9):.0f} µs, max {v.max():.0f}")
+        ax.axvline(1000, color="k", ls="--", lw=0.8)
+        ax.axvline(1000 * cycle_ms, color="r", ls=":", lw=0.8)
+        ax.set_xscale("log")
+        ax.set_yscale("log")
+        ax.set_xlabel(f"{what} (µs); dashed: the goal's 1 ms, dotted: one cycle")
+        ax.legend(fontsize=7, loc="upper right")
+    axes[0].set_ylabel("packets")
+    fig.suptitle(title, fontsize=9)
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+    return True
 
 
 def table(vendor: Vendor, results: dict, seconds: float, cycle_ms: float) -> str:
@@ -295,6 +372,14 @@ def table(vendor: Vendor, results: dict, seconds: float, cycle_ms: float) -> str
     lines.append("")
     lines.append("longest round trips at " + ", ".join(
         f"{name}: {r['max_at_s']:.1f} s" for name, r in results.items()) + " into the run")
+    for name, r in results.items():
+        at = r.get("missed_at_s") or []
+        if at:
+            lines.append(f"missed cycles of the {name} at (s): " + ", ".join(
+                f"{t:.3f}" for t in at[:30]) + (" …" if len(at) > 30 else ""))
+    if link.get("steal_pct") is not None:
+        lines.append(f"CPU time taken by the hypervisor (steal) during the run: "
+                     f"{link['steal_pct']:.2f} %")
     ratio = link["rtt_us"]["p99.9"] / echo["rtt_us"]["p99.9"]
     goals = [("p99.9 round trip ≤ 1 ms", link["rtt_us"]["p99.9"] <= 1000,
               f"{link['rtt_us']['p99.9']:.0f} µs"),
@@ -348,6 +433,8 @@ def main(argv: list[str], vendor: Vendor | None = None, doc: str | None = None) 
     ap.add_argument("--seconds", type=float, default=60.0, help="measured seconds (60)")
     ap.add_argument("--cycle-ms", type=float, default=4.0, choices=(4.0, 12.0))
     ap.add_argument("--json", type=Path, help="also write the figures as JSON")
+    ap.add_argument("--plot", type=Path, metavar="PNG",
+                    help="also draw the histograms of the times (matplotlib)")
     ap.add_argument("--rt-priority", type=int, metavar="N",
                     help="run the robot side, the link's thread and the echo's under "
                     "SCHED_FIFO priority N (Linux, root or CAP_SYS_NICE)")
@@ -373,10 +460,10 @@ def main(argv: list[str], vendor: Vendor | None = None, doc: str | None = None) 
         with cell_services(args.cell) if args.cell else contextlib.nullcontext():
             return stream_in_service.main(vendor.name, args.seconds, args.json,
                                           args.link_thread)
-    print(f"machine: {os.cpu_count()} CPUs, load average {os.getloadavg()[0]:.2f} at start",
-          flush=True)
+    load0 = os.getloadavg()[0]
+    print(f"machine: {os.cpu_count()} CPUs, load average {load0:.2f} at start", flush=True)
     with cell_services(args.cell) if args.cell else contextlib.nullcontext():
-        results = robot(vendor, args.seconds, args.cycle_ms, args.rt_priority)
+        results, samples = robot(vendor, args.seconds, args.cycle_ms, args.rt_priority)
     print(table(vendor, results, args.seconds, args.cycle_ms))
     if args.cell:
         print(f"beside {args.cell} plugcell services serving in a cell")
@@ -386,6 +473,14 @@ def main(argv: list[str], vendor: Vendor | None = None, doc: str | None = None) 
     print(f"load average {os.getloadavg()[0]:.2f} at the end")
     if args.json:
         args.json.write_text(json.dumps(results, indent=1), encoding="utf-8")
+    if args.plot:
+        title = (f"{vendor.name} at {1000 / args.cycle_ms:.0f} Hz, {args.seconds:.0f} s, "
+                 f"{args.cell} services in the cell, "
+                 f"{'SCHED_FIFO ' + str(args.rt_priority) if args.rt_priority else 'normal'}"
+                 f" priority, load average {load0:.1f} → {os.getloadavg()[0]:.1f} "
+                 f"({os.cpu_count()} CPUs)")
+        drawn = plot(samples, args.cycle_ms, title, args.plot)
+        print(f"plot: {args.plot}" if drawn else "plot: no matplotlib")
     return 0
 
 

@@ -31,6 +31,7 @@ SCRIPTS = [
     ("rsi_latency.py", ["--in-service", "--link-thread", "--seconds", "2"],
      "| robot service over RSI |"),
     ("egm_latency.py", ["--in-service", "--seconds", "2"], "| robot service over EGM |"),
+    ("stream_cycle_profile.py", ["--cycles", "50", "--profile", "--top", "3"], "| EGM | "),
     ("tracker_stream.py", ["--seconds", "0.5"], "| rate Hz | samples/message |"),
     ("twin_path_deviation.py", ["--speeds", "250"], "| speed mm/s | duration s |"),
     ("static_correction.py", ["--fast", "--points", "2", "--methods", "settling,iterative"],

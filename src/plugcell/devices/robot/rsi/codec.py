@@ -179,6 +179,12 @@ def parse_rob(data: bytes, max_bytes: int = 4096) -> RobotState:
         ``foreign``: XML but not ``<Rob Type="KUKA">`` (or a DOCTYPE, or too many
         elements).
     """
+    return read_rob(rob_root(data, max_bytes))
+
+
+def rob_root(data: bytes, max_bytes: int = 4096) -> etree._Element:
+    """The datagram's XML root, checked to be a ``<Rob Type="KUKA">`` of a bounded size
+    (:func:`parse_rob`'s first stage; its ``PacketError`` for anything else)."""
     if len(data) > max_bytes:
         raise PacketError("oversized", f"{len(data)} bytes > {max_bytes}")
     try:
@@ -192,6 +198,11 @@ def parse_rob(data: bytes, max_bytes: int = 4096) -> RobotState:
         raise PacketError("foreign", "a robot packet has no DOCTYPE")
     if len(root) > MAX_ELEMENTS:
         raise PacketError("foreign", f"{len(root)} elements > {MAX_ELEMENTS}")
+    return root
+
+
+def read_rob(root: etree._Element) -> RobotState:
+    """The :class:`RobotState` of a ``<Rob>`` root (:func:`parse_rob`'s second stage)."""
     flat: list[float] = []  # the six values of each standard element, in ``order``
     order: list[str] = []
     signals: dict[str, float | dict[str, float]] = {}
@@ -222,17 +233,9 @@ def parse_rob(data: bytes, max_bytes: int = 4096) -> RobotState:
                     _number(tag, a, attrs[a])
             order.append(tag)
         elif tag == "IPOC":
-            text = (el.text or "").strip()
-            if not text.isdigit() or not text.isascii():
-                raise PacketError("malformed", f"<IPOC> {text[:32]!r} is not a counter")
-            ipoc = int(text)
-            if ipoc > IPOC_MAX:
-                raise PacketError("malformed", f"<IPOC> {text[:32]} out of range")
+            ipoc = _ipoc((el.text or "").strip())
         elif tag == "Delay":
-            d = _number(tag, "D", el.get("D"))
-            if not 0 <= d <= DELAY_MAX or d != int(d):
-                raise PacketError("malformed", f"<Delay> D={d} is no count")
-            delay = int(d)
+            delay = _delay(_number(tag, "D", el.get("D")))
         elif len(el.attrib):
             attrs = dict(el.items())
             if not all(k.isascii() and k.isidentifier() for k in attrs):
@@ -242,22 +245,66 @@ def parse_rob(data: bytes, max_bytes: int = 4096) -> RobotState:
             signals[tag] = _number(tag, "text", (el.text or "").strip())
     if ipoc is None:
         raise PacketError("malformed", "no <IPOC>")
-    values: dict[str, Array] = {}
-    if order:
-        v = np.array(flat).reshape(len(order), 6)
-        if not np.isfinite(v).all():
-            i, j = (int(x[0]) for x in np.nonzero(~np.isfinite(v)))
-            raise PacketError("malformed", f"<{order[i]}> {_STANDARD[order[i]][0][j]}="
-                              f"{v[i, j]} is not finite")
-        key = tuple(order)
-        scale = _SCALES.get(key)
-        if scale is None:
-            scale = np.array([_STANDARD[t][1] if _STANDARD[t][1] is not None
-                                             else np.ones(6) for t in order])
-            if len(_SCALES) < 64:  # the orders a controller uses: one, in practice
-                _SCALES[key] = scale
-        v *= scale
-        values = dict(zip(order, v, strict=True))
+    v = np.array(flat).reshape(len(order), 6)
+    if not np.isfinite(v).all():
+        i, j = (int(x[0]) for x in np.nonzero(~np.isfinite(v)))
+        raise PacketError("malformed", f"<{order[i]}> {_STANDARD[order[i]][0][j]}="
+                          f"{v[i, j]} is not finite")
+    return robot_state(ipoc, tuple(order), v, delay, signals)
+
+
+def _ipoc(text: str) -> int:
+    """The IPOC of ``<IPOC>``'s stripped text."""
+    if not text.isdigit() or not text.isascii():
+        raise PacketError("malformed", f"<IPOC> {text[:32]!r} is not a counter")
+    ipoc = int(text)
+    if ipoc > IPOC_MAX:
+        raise PacketError("malformed", f"<IPOC> {text[:32]} out of range")
+    return ipoc
+
+
+def _delay(d: float) -> int:
+    """The count of ``<Delay D>``'s finite value ``d``."""
+    if not 0 <= d <= DELAY_MAX or d != int(d):
+        raise PacketError("malformed", f"<Delay> D={d} is no count")
+    return int(d)
+
+
+def scale_of(order: tuple[str, ...]) -> Array:
+    """SI per robot unit of the standard elements listed in ``order``, shape (n, 6)."""
+    scale = _SCALES.get(order)
+    if scale is None:
+        scale = np.array([_STANDARD[t][1] if _STANDARD[t][1] is not None
+                          else np.ones(6) for t in order]).reshape(len(order), 6)
+        if len(_SCALES) < 64:  # the orders a controller uses: one, in practice
+            _SCALES[order] = scale
+    return scale
+
+
+def robot_state(ipoc: int, order: tuple[str, ...], v: Array, delay: int | None,
+                signals: dict[str, float | dict[str, float]]) -> RobotState:
+    """The :class:`RobotState` of checked values.
+
+    Parameters
+    ----------
+    ipoc : int
+        The cycle's stamp.
+    order : tuple of str
+        The standard elements (``AIPos``, ``RIst`` …) in the packet's order.
+    v : ndarray, shape (len(order), 6)
+        Their values in robot units (mm, deg, as sent), finite; scaled to SI in place.
+    delay : int or None
+        ``<Delay D>``.
+    signals : dict
+        The other elements' values.
+
+    Returns
+    -------
+    RobotState
+        Row ``i`` of ``v · scale`` is the element ``order[i]``.
+    """
+    v *= scale_of(order)
+    values = dict(zip(order, v, strict=True))
     return RobotState(ipoc=ipoc, joints=values.get("AIPos"),
                       joints_setpoint=values.get("ASPos"), tcp=values.get("RIst"),
                       tcp_setpoint=values.get("RSol"), motor_currents=values.get("MACur"),
@@ -289,16 +336,29 @@ def encode_sen(ipoc: int, kind: str, values: Array, outputs: dict[str, int] | No
     bytes
         The datagram (ASCII).
     """
-    if kind == "joint":
-        v = values * (1.0 / DEG)
-        body = "<AKorr A1=\"{:.6f}\" A2=\"{:.6f}\" A3=\"{:.6f}\" A4=\"{:.6f}\" A5=\"{:.6f}\" " \
-               "A6=\"{:.6f}\"/>".format(*v.tolist())
-    else:
-        v = np.concatenate([values[:3] * MM_PER_M, values[3:] * (1.0 / DEG)])
-        body = "<RKorr X=\"{:.6f}\" Y=\"{:.6f}\" Z=\"{:.6f}\" A=\"{:.6f}\" B=\"{:.6f}\" " \
-               "C=\"{:.6f}\"/>".format(*v.tolist())
+    form = _SEN_FORMS.get((kind, sentype))
+    if form is None:
+        form = _sen_form(kind, sentype)
     words = "".join(f"<{k}>{int(w)}</{k}>" for k, w in outputs.items()) if outputs else ""
-    return f"<Sen Type=\"{sentype}\">{body}{words}<IPOC>{int(ipoc)}</IPOC></Sen>".encode()
+    return form.format(*(values * _SEN_SCALE[kind]).tolist(), words, int(ipoc)).encode()
+
+
+#: Robot units per SI unit of each correction's six values (rad → deg; m → mm, rad → deg).
+_SEN_SCALE = {"joint": np.full(6, 1.0 / DEG),
+              "cartesian": np.array([MM_PER_M] * 3 + [1.0 / DEG] * 3)}
+#: The answer's format by (kind, SENTYPE): six values, the output words, the IPOC.
+_SEN_FORMS: dict[tuple[str, str], str] = {}
+
+
+def _sen_form(kind: str, sentype: str) -> str:
+    """The format of :func:`encode_sen`'s answer (kept for the next cycle)."""
+    tag, axes = ("AKorr", JOINT_AXES) if kind == "joint" else ("RKorr", CARTESIAN_AXES)
+    body = " ".join(f'{a}="{{:.6f}}"' for a in axes)
+    name = sentype.replace("{", "{{").replace("}", "}}")
+    form = f'<Sen Type="{name}"><{tag} {body}/>{{}}<IPOC>{{}}</IPOC></Sen>'
+    if len(_SEN_FORMS) < 16:  # a link uses one
+        _SEN_FORMS[kind, sentype] = form
+    return form
 
 
 # ------------------------------------------------------------------ the robot's side

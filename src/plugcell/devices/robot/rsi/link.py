@@ -26,6 +26,7 @@ from ..stream.link import LinkStats, StreamLink
 from ..stream.source import Correction, CorrectionSource, CycleState, SourceLike
 from .codec import CARTESIAN_AXES, JOINT_AXES, RobotState, encode_sen, parse_rob
 from .config import RsiConfig
+from .reader import RobReader
 
 __all__ = [
     "ControllerStoppedError",
@@ -76,15 +77,17 @@ class RsiLink(StreamLink):
         self._kind = config.correction
         self._outputs_spec = {o.tag: o for o in config.outputs}
         self._outputs = {o.tag: o.initial for o in config.outputs}
+        self._read = RobReader(config.max_packet_bytes)  # parse_rob, fast for the repeated layout
+        self._ipoc_step = config.ipoc_step
 
     def _parse(self, data: bytes) -> RobotState:
-        return parse_rob(data, self.config.max_packet_bytes)
+        return self._read(data)
 
     def _seq(self, state: RobotState) -> int:
         return state.ipoc
 
     def _lost(self, gap: int) -> int:
-        return round(gap / self.config.ipoc_step) - 1
+        return round(gap / self._ipoc_step) - 1
 
     def _clock_ms(self, state: RobotState) -> int:
         return state.ipoc  # the controller's IPOC counts milliseconds

@@ -158,9 +158,11 @@ class OffsetLimiter:
         self.speed_step = np.array(limits.max_speed) * cycle_s
         self.bound = np.array(limits.step_bound(cycle_s))
         self.max_offset = np.array(limits.max_offset)
-        # a request within a relative 1e-12 of a limit is at the limit, not beyond it
-        self._bound_tol = self.bound * (1 + 1e-12)
-        self._offset_tol = self.max_offset * (1 + 1e-12)
+        # a request within a relative 1e-12 of a limit is at the limit, not beyond it; the
+        # tolerances stay finite, so that no infinity is within them
+        big = np.finfo(float).max
+        self._bound_tol = np.minimum(self.bound * (1 + 1e-12), big)
+        self._offset_tol = np.minimum(self.max_offset * (1 + 1e-12), big)
         self.axes = axes
         self.units = units
         self.offset = np.zeros(6)
@@ -200,15 +202,18 @@ class OffsetLimiter:
         if target.shape != (6,):
             return Limited(np.zeros(6), self.offset.copy(), refused=True,
                            reason=f"a correction has 6 values, got {target.size}")
-        if not np.all(np.isfinite(target)):
-            return Limited(np.zeros(6), self.offset.copy(), refused=True,
-                           reason=f"a correction must be finite, got {target.tolist()}")
         want = target - self.offset
-        over_step = np.abs(want) > self._bound_tol
-        over_total = np.abs(target) > self._offset_tol
-        if not (over_step.any() or over_total.any()):  # the common case: as asked
+        # the common case, as asked: every step and the offset within the limits (a NaN or
+        # an infinity fails the comparisons and is refused below)
+        if (np.abs(want) <= self._bound_tol).all() and \
+                (np.abs(target) <= self._offset_tol).all():
             self.offset = target.copy()
             return Limited(want, target.copy())
+        if not np.isfinite(target).all():
+            return Limited(np.zeros(6), self.offset.copy(), refused=True,
+                           reason=f"a correction must be finite, got {target.tolist()}")
+        over_step = np.abs(want) > self._bound_tol
+        over_total = np.abs(target) > self._offset_tol
         step = np.minimum(np.maximum(want, -self.bound), self.bound)
         new = np.minimum(np.maximum(self.offset + step, -self.max_offset), self.max_offset)
         step = new - self.offset

@@ -37,6 +37,7 @@ when the parent is gone (the pipe's end of file).
 from __future__ import annotations
 
 import contextlib
+import gc
 import importlib
 import multiprocessing
 import threading
@@ -138,6 +139,11 @@ def _child(conn: Any, corrections: Any, values: Any, text: Any, vendor: str, con
     signal.signal(signal.SIGINT, signal.SIG_IGN)  # Ctrl-C is the service's to handle
     link = link_class(vendor)(config, rt_priority=rt_priority)
     link.observer = Publisher(values, text)
+    # the objects of the imports and the link live as long as the process: out of the
+    # collector's sight, a full collection scans only what the cycles made (one over all
+    # of them takes longer than a cycle and would miss some)
+    gc.collect()
+    gc.freeze()
     try:
         host, port = link.start()
     except OSError as exc:
