@@ -193,6 +193,102 @@ def _limit_reason(desc: RobotDescription, q: Array) -> tuple[str, str, float, tu
     return ("compensated joints are outside the limits", "", float("nan"), (0.0, 0.0))
 
 
+def _newton_iterations(
+    model: PoseModel, T: Array, q0: Array, m: Array, tol: float, max_iterations: int
+) -> tuple[Array, Array, NDArray[np.int_], NDArray[np.bool_]]:
+    """Steps b.–f. of 6.5.1 on a batch: Newton's iteration, converged targets drop out.
+
+    Per active target ``Δx = e(T, T_model(q))`` (the exact pose error) and
+    ``q ← q + J(q)⁻¹ Δx`` (eqs. 4.11–4.12, :func:`joint_step`), until ``‖Δx‖ < tol`` or
+    ``max_iterations`` steps.  A target diverges — and stops — when ``‖Δx‖`` is not
+    finite or a step is not finite or above :data:`MAX_STEP` in any joint.
+
+    Parameters
+    ----------
+    model
+        The identified model.
+    T : (N, 4, 4) array, m
+        Desired tool poses.
+    q0 : (N, n) array, rad
+        Start joints (not changed).
+    m : (N,) array, kg
+        Payloads.
+    tol, max_iterations
+        Stop when ``‖Δx‖ < tol`` (m and rad); the iteration bound.
+
+    Returns
+    -------
+    q : (N, n) array, rad
+        The iterated joints.
+    dx : (N, 6) array
+        The last ``Δx = [Δp (m); φ (rad)]`` evaluated per target (``inf`` if never).
+    iterations : (N,) int array
+        Steps taken per target.
+    diverged : (N,) bool array
+        Targets stopped by a non-finite error or a too large or non-finite step.
+    """
+    N = T.shape[0]
+    q = q0.copy()
+    dx_all = np.full((N, 6), np.inf)
+    iters = np.zeros(N, dtype=int)
+    diverged = np.zeros(N, dtype=bool)
+    active = np.arange(N)
+    for it in range(max_iterations + 1):
+        if not active.size:
+            break
+        Ta, J = model.evaluate(q[active], m[active])
+        dx = pose_error_exact(T[active], Ta)
+        dx_all[active] = dx
+        res = np.linalg.norm(dx, axis=-1)
+        bad = ~np.isfinite(res)
+        keep = (res >= tol) & ~bad
+        diverged[active[bad]] = True
+        if it == max_iterations:
+            break
+        active = active[keep]
+        if not active.size:
+            break
+        dq = joint_step(J[keep], dx[keep])
+        big = ~np.all(np.isfinite(dq), axis=-1) | (np.max(np.abs(dq), axis=-1) > MAX_STEP)
+        diverged[active[big]] = True
+        active = active[~big]
+        q[active] += dq[~big]
+        iters[active] += 1
+    return q, dx_all, iters, diverged
+
+
+def _failure_reasons(
+    desc: RobotDescription, q: Array, converged: NDArray[np.bool_],
+    within: NDArray[np.bool_], diverged: NDArray[np.bool_], residual: Array, tol: float,
+    max_iterations: int,
+) -> tuple[NDArray[np.object_], NDArray[np.object_]]:
+    """Why each target of a Newton batch failed: ``(reason, kind)``, ``""`` where it did not.
+
+    ``"no_convergence"`` for a target not converged (diverged, or ``‖Δx‖ ≥ tol`` after
+    ``max_iterations``), ``"joint_limit"`` for a converged target outside the limits.
+    """
+    N = q.shape[0]
+    reason = np.full(N, "", dtype=object)
+    kind = np.full(N, "", dtype=object)
+    for k in np.flatnonzero(~converged):
+        kind[k] = "no_convergence"
+        if diverged[k]:
+            reason[k] = (
+                "model-based compensation diverged (a joint step above "
+                f"{math.degrees(MAX_STEP):g}° or a singular Jacobian); "
+                f"last ‖Δx‖ = {residual[k]:.3g}"
+            )
+        else:
+            reason[k] = (
+                f"model-based compensation did not converge in {max_iterations} iterations: "
+                f"‖Δx‖ = {residual[k]:.3g} ≥ {tol:g}"
+            )
+    for k in np.flatnonzero(converged & ~within):
+        kind[k] = "joint_limit"
+        reason[k] = _limit_reason(desc, q[k])[0]
+    return reason, kind
+
+
 def compensate_joints(
     model: PoseModel,
     T_target: ArrayLike,
@@ -253,54 +349,12 @@ def compensate_joints(
         raise ValueError("q_start: joint values must be finite")
     m = _payload(payload_kg, N)
 
-    q = q0.copy()
-    dx_all = np.full((N, 6), np.inf)
-    iters = np.zeros(N, dtype=int)
-    diverged = np.zeros(N, dtype=bool)
-    active = np.arange(N)
-    for it in range(max_iterations + 1):
-        if not active.size:
-            break
-        Ta, J = model.evaluate(q[active], m[active])
-        dx = pose_error_exact(T[active], Ta)
-        dx_all[active] = dx
-        res = np.linalg.norm(dx, axis=-1)
-        bad = ~np.isfinite(res)
-        keep = (res >= tol) & ~bad
-        diverged[active[bad]] = True
-        if it == max_iterations:
-            break
-        active = active[keep]
-        if not active.size:
-            break
-        dq = joint_step(J[keep], dx[keep])
-        big = ~np.all(np.isfinite(dq), axis=-1) | (np.max(np.abs(dq), axis=-1) > MAX_STEP)
-        diverged[active[big]] = True
-        active = active[~big]
-        q[active] += dq[~big]
-        iters[active] += 1
-
+    q, dx_all, iters, diverged = _newton_iterations(model, T, q0, m, tol, max_iterations)
     residual = np.linalg.norm(dx_all, axis=-1)
     converged = (residual < tol) & ~diverged
     within = desc.within_limits(q) if check_limits else np.ones(N, dtype=bool)
-    reason = np.full(N, "", dtype=object)
-    kind = np.full(N, "", dtype=object)
-    for k in np.flatnonzero(~converged):
-        kind[k] = "no_convergence"
-        if diverged[k]:
-            reason[k] = (
-                "model-based compensation diverged (a joint step above "
-                f"{math.degrees(MAX_STEP):g}° or a singular Jacobian); "
-                f"last ‖Δx‖ = {residual[k]:.3g}"
-            )
-        else:
-            reason[k] = (
-                f"model-based compensation did not converge in {max_iterations} iterations: "
-                f"‖Δx‖ = {residual[k]:.3g} ≥ {tol:g}"
-            )
-    for k in np.flatnonzero(converged & ~within):
-        kind[k] = "joint_limit"
-        reason[k] = _limit_reason(desc, q[k])[0]
+    reason, kind = _failure_reasons(desc, q, converged, within, diverged, residual, tol,
+                                    max_iterations)
     result = CompensationResult(
         q=q, q_start=q0, converged=converged, within_limits=within, iterations=iters,
         residual=residual, position_error=np.linalg.norm(dx_all[:, :3], axis=-1),
