@@ -20,62 +20,49 @@ def configure(p: argparse.ArgumentParser) -> None:
     """Add the ``twin`` options to its parser (declared in :mod:`plugcell.apps.cli`)."""
     p.description = "The simulated robot whose truth calibration must discover."
     tw = p.add_subparsers(dest="twin_command", metavar="SUBCOMMAND", required=True)
+    add_report_parser(tw)
+    add_measure_parser(tw)
+    add_nests_parser(tw)
+    add_robot_sides(tw, add_twin_options, _rsi, _egm)
 
-    def common(q: argparse.ArgumentParser) -> None:
-        add_robot_args(q, default="smart_h4",
-                       help="shipped robot name (default: smart_h4), a description file "
-                       "(.toml) or a URDF/xacro file; a robot without a twin profile of its "
-                       "own gets an estimated one (docs/twin.md)")
-        q.add_argument("--seed", type=int, default=0,
-                       help="seed of the twin's hidden errors (default: 0)")
-        q.add_argument(
-            "--scenario", type=Path, help="scenario JSON file (overrides --robot/--seed)"
-        )
 
+def add_twin_options(q: argparse.ArgumentParser) -> None:
+    """Add the options every ``twin`` subcommand has: the robot, the seed, the scenario."""
+    add_robot_args(q, default="smart_h4",
+                   help="shipped robot name (default: smart_h4), a description file "
+                   "(.toml) or a URDF/xacro file; a robot without a twin profile of its "
+                   "own gets an estimated one (docs/twin.md)")
+    q.add_argument("--seed", type=int, default=0,
+                   help="seed of the twin's hidden errors (default: 0)")
+    q.add_argument(
+        "--scenario", type=Path, help="scenario JSON file (overrides --robot/--seed)"
+    )
+
+
+def add_report_parser(tw: argparse._SubParsersAction) -> None:
+    """Add ``twin report``: the twin's error budget."""
     r = tw.add_parser(
         "report",
         help="the twin's error budget",
         description="Nominal accuracy and deflections of the twin in its working "
         "volume (thesis 8.2): computed, not tabulated.",
     )
-    common(r)
+    add_twin_options(r)
     r.add_argument("--poses", type=int, default=300, help="random poses (default: 300)")
     r.add_argument("--json", action="store_true", help="print JSON")
     r.set_defaults(func=_report)
 
+
+def add_measure_parser(tw: argparse._SubParsersAction) -> None:
+    """Add ``twin measure``: a simulated calibration campaign into a measurement file."""
     m = tw.add_parser(
         "measure",
         help="simulate a calibration campaign into a measurement file",
         description="Move the twin through random poses in the working volume and "
         "measure each with the simulated laser tracker (1 s).",
     )
-    common(m)
-    which = m.add_mutually_exclusive_group(required=True)
-    which.add_argument("--poses", type=int, help="number of random poses in the working volume")
-    which.add_argument("--scan", type=int, metavar="N",
-                       help="N poses of a surface scan: a horizontal patch of the working "
-                            "volume at one constant tool orientation")
-    which.add_argument("--plan", type=Path, metavar="PLAN.csv",
-                       help="measure the poses of a plan file (plugcell plan), each with its "
-                            "payload; --payload-kg is the payload of rows without one")
-    m.add_argument(
-        "--payload-kg",
-        "--payload",
-        dest="payload",
-        action=DeprecatedName,
-        old=("--payload",),
-        type=float,
-        default=0.0,
-        metavar="KG",
-        help="payload mass in kg (default: 0), mounted off the flange centre (as calibrate's "
-             "and compensate's --payload-kg; --payload is its old name)",
-    )
-    m.add_argument(
-        "--pose-seed",
-        type=int,
-        default=None,
-        help="seed of the pose draw (default: --seed + 1); use another for validation",
-    )
+    add_twin_options(m)
+    add_measure_pose_options(m)
     m.add_argument(
         "--duration",
         type=float,
@@ -102,6 +89,40 @@ def configure(p: argparse.ArgumentParser) -> None:
     m.add_argument("--quiet", action="store_true", help="no progress output")
     m.set_defaults(func=_measure)
 
+
+def add_measure_pose_options(q: argparse.ArgumentParser) -> None:
+    """Add which poses ``twin measure`` measures (random, a scan or a plan), their payload
+    and the seed of their draw."""
+    which = q.add_mutually_exclusive_group(required=True)
+    which.add_argument("--poses", type=int, help="number of random poses in the working volume")
+    which.add_argument("--scan", type=int, metavar="N",
+                       help="N poses of a surface scan: a horizontal patch of the working "
+                            "volume at one constant tool orientation")
+    which.add_argument("--plan", type=Path, metavar="PLAN.csv",
+                       help="measure the poses of a plan file (plugcell plan), each with its "
+                            "payload; --payload-kg is the payload of rows without one")
+    q.add_argument(
+        "--payload-kg",
+        "--payload",
+        dest="payload",
+        action=DeprecatedName,
+        old=("--payload",),
+        type=float,
+        default=0.0,
+        metavar="KG",
+        help="payload mass in kg (default: 0), mounted off the flange centre (as calibrate's "
+             "and compensate's --payload-kg; --payload is its old name)",
+    )
+    q.add_argument(
+        "--pose-seed",
+        type=int,
+        default=None,
+        help="seed of the pose draw (default: --seed + 1); use another for validation",
+    )
+
+
+def add_nests_parser(tw: argparse._SubParsersAction) -> None:
+    """Add ``twin nests``: the cell's reference nests measured by the simulated tracker."""
     n = tw.add_parser(
         "nests",
         help="measure the cell's reference nests (drift register / drift check)",
@@ -109,12 +130,11 @@ def configure(p: argparse.ArgumentParser) -> None:
         "simulated tracker (3-DOF, tracker frame): the file drift register and drift check "
         "read.  At another --temperature-c the twin's BASE has drifted.",
     )
-    common(n)
+    add_twin_options(n)
     n.add_argument("--temperature-c", type=float, default=None, metavar="T",
                    help="the hall's temperature (°C; default: the reference 20 °C, no drift)")
     n.add_argument("--out", type=Path, required=True, help="nest file to write: name,x,y,z (mm)")
     n.set_defaults(func=_nests)
-    add_robot_sides(tw, common, _rsi, _egm)
 
 
 def _scenario(args: argparse.Namespace):
