@@ -424,6 +424,44 @@ class LaserTracker:
         p = T[:3, 3] if T is not None else _position_of(true_pose, "true_pose")
         self.check_range(p, T)
 
+        elapsed = self._lock_on(p)
+        t_mid = self._clock + elapsed + duration_s / 2.0
+        elapsed += duration_s + spec.report_latency_s
+        measured_p, pose, n = self._reading(p, T, duration_s)
+
+        self._aim = p.copy()  # the beam follows the reflector
+        self._clock += elapsed
+        return TrackerMeasurement(
+            position=measured_p, pose=pose, mode=mode, duration_s=float(duration_s),
+            timestamp_s=float(t_mid), elapsed_s=float(elapsed),
+            range_m=float(np.linalg.norm(measured_p)), samples=n,
+        )
+
+    # -- helpers ---------------------------------------------------------------------
+
+    def _lock_on(self, p: FloatArray) -> float:
+        """Lock the beam on the reflector at ``p`` (tracker frame, m), or say why it cannot.
+
+        The reflector is acquired by ADM when it lies within ``capture_radius_m`` of the
+        beam axis (:meth:`beam_offset`) and the line of sight is clear.
+
+        Parameters
+        ----------
+        p : (3,) array, m
+            True reflector position.
+
+        Returns
+        -------
+        float, s
+            Acquisition time: ``adm_acquisition_s`` if the beam was not locked, else 0.
+
+        Raises
+        ------
+        BeamNotLockedError
+            Beam blocked, never pointed, or the reflector beyond the capture radius (an
+            unlocked beam then also spends ``acquisition_timeout_s`` searching).
+        """
+        spec = self.spec
         if self._blocked:
             self._locked = False
             raise BeamNotLockedError(
@@ -460,9 +498,44 @@ class LaserTracker:
             elapsed += spec.adm_acquisition_s
             self._locked = True
             self._lost_speed = None
-        t_mid = self._clock + elapsed + duration_s / 2.0
-        elapsed += duration_s + spec.report_latency_s
+        return elapsed
 
+    def _reading(
+        self, p: FloatArray, T: FloatArray | None, duration_s: float
+    ) -> tuple[FloatArray, FloatArray | None, int]:
+        """The error model: one reading of the reflector at ``p`` (pose ``T``) over ``duration_s``.
+
+        In the beam frame (radial, azimuth, elevation; rows ``A`` of :func:`_beam_frame`)
+        the position error is
+
+        ``e = σ_ref ∘ (√s_sys · f(az, el) + √(s_floor + s_white · n_ref / n) · ξ)``,
+        ``p̂ = p + Aᵀ e``
+
+        with ``σ_ref = (σ_r, σ_l, σ_l)`` the spec's σ at the reference duration, ``f`` the
+        tracker's unit-variance systematic field, ``n`` (``n_ref``) the samples averaged in
+        ``duration_s`` (the reference duration) and ``ξ ~ N(0, I₃)``.  In ``"6dof"`` the
+        orientation error is the rotation vector ``δφ = σ_o (√s_sys f₃…₅ + √(…) ξ')``,
+        ``σ_o = orientation_mpe / coverage``, applied as ``R̂ = exp(δφ) R``.
+
+        Parameters
+        ----------
+        p : (3,) array, m
+            True reflector position (tracker frame).
+        T : (4, 4) array or None
+            True T-MAC pose (``"6dof"``), ``None`` for ``"3dof"``.
+        duration_s : float, s
+            Integration time.
+
+        Returns
+        -------
+        position : (3,) array, m
+            Measured position ``p̂``.
+        pose : (4, 4) array or None
+            Measured pose ``[R̂, p̂]`` in ``"6dof"``.
+        samples : int
+            ``n``, the samples averaged.
+        """
+        spec = self.spec
         r, az, el, axes = _beam_frame(p)
         sys_unit = self._field(az, el)
         sr_ref, sl_ref = spec.position_sigma(r, spec.reference_duration_s)
@@ -482,16 +555,7 @@ class LaserTracker:
             pose = np.eye(4)
             pose[:3, :3] = _rotvec_matrix(dphi) @ T[:3, :3]
             pose[:3, 3] = measured_p
-
-        self._aim = p.copy()  # the beam follows the reflector
-        self._clock += elapsed
-        return TrackerMeasurement(
-            position=measured_p, pose=pose, mode=mode, duration_s=float(duration_s),
-            timestamp_s=float(t_mid), elapsed_s=float(elapsed),
-            range_m=float(np.linalg.norm(measured_p)), samples=n,
-        )
-
-    # -- helpers ---------------------------------------------------------------------
+        return measured_p, pose, n
 
     def beam_offset(self, position: ArrayLike) -> float:
         """Perpendicular distance of ``position`` from the current beam axis (m).
