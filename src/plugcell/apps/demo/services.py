@@ -447,26 +447,7 @@ def _demonstrate(cell: _Cell, cfg: DemoConfig, h4_truth: Any, kuka_truth: Any,
     watch = ReflectorPublisher(bus, "KUKA_SMR", "smr")
     watch.publish(kuka_truth.base @ np.r_[np.c_[np.eye(3), kuka_smr], [[0, 0, 0, 1]]])
     try:
-        # part localisation: the operator has the tracker measure every hole (H4 frame)
-        cell.call("COMPUTE", "Evaluate", "",
-                  f"clear('holes'); p = load_params('{PARAMS}'); b = frame(p, 'base'); "
-                  "pr = frame(p, 'probe')")
-        cell.call("TRACKER", "Set Base", "euler2tr", cell.matrix("b")[0])
-        cell.call("TRACKER", "Set Probe", "euler2tr", np.zeros(6))
-        for p in cad:
-            cell.call("TRACKER", "Move", "euler2tr", np.r_[p * 1e3, 0, 0, 0])
-            cell.call("TRACKER", "Single Measurement",
-                      "tr2euler; to=COMPUTE:Set Matrix:holes:append", 1000)
-        last = n - 1
-        corners = f"row(holes, 1), row(holes, {cfg.holes_per_bar})"
-        corners = (f"append(append(append({corners}), row(holes, {last - cfg.holes_per_bar + 2})),"
-                   f" row(holes, {last + 1}))")
-        cell.call("COMPUTE", "Evaluate", "",
-                  f"corners = {corners}; targets = calc_targets(holes, corners, "
-                  f"[0, 0, 0, 0, 0, 0], per_bar={cfg.holes_per_bar}, "
-                  f"normal=[{numbers_text(normal)}])")
-        targets = cell.matrix("targets")
-        probe = pose_from_robot(cell.matrix("pr")[0], "zyz")
+        targets, probe = _localise_part(cell, cfg, cad, normal)
     finally:
         for pub in smrs:  # the SMRs come out of the holes
             pub.close()
@@ -491,11 +472,59 @@ def _demonstrate(cell: _Cell, cfg: DemoConfig, h4_truth: Any, kuka_truth: Any,
         watch.close()
     if watch_final.state is not C:
         raise DemoError(f"KUKA DEACTIVATE: {watch_final.reason}")
+    result["demonstration"] = _demonstration_figures(cell, n, targets, t_start, run)
+    d = result["demonstration"]
+    say(f"   mean position error: nominal {d['mean_position_mm']['initial']:.2f} mm, model "
+        f"{d['mean_position_mm']['model']:.3f} mm, sensor {d['mean_position_mm']['sensor']:.3f}"
+        f" mm; tracker served H4 {d['tracker_served']['robot1']}×, KUKA "
+        f"{d['tracker_served']['robot2']}× (waited {d['tracker_wait_s']['robot1']:.1f} s / "
+        f"{d['tracker_wait_s']['robot2']:.1f} s)")
+
+
+def _localise_part(cell: _Cell, cfg: DemoConfig, cad: np.ndarray,
+                   normal: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Part localisation (8.4): the tracker measures every hole in the H4's frame and
+    CalcTarget (COMPUTE) turns them into target frames.
+
+    Returns
+    -------
+    targets : (n, 6) array
+        The hole target frames in robot units (mm, ZYZ degrees), as COMPUTE holds them.
+    probe : (4, 4) array, m
+        The identified probe (the tool point whose frames the targets are).
+    """
+    # the operator has the tracker measure every hole (H4 frame)
+    cell.call("COMPUTE", "Evaluate", "",
+              f"clear('holes'); p = load_params('{PARAMS}'); b = frame(p, 'base'); "
+              "pr = frame(p, 'probe')")
+    cell.call("TRACKER", "Set Base", "euler2tr", cell.matrix("b")[0])
+    cell.call("TRACKER", "Set Probe", "euler2tr", np.zeros(6))
+    for p in cad:
+        cell.call("TRACKER", "Move", "euler2tr", np.r_[p * 1e3, 0, 0, 0])
+        cell.call("TRACKER", "Single Measurement",
+                  "tr2euler; to=COMPUTE:Set Matrix:holes:append", 1000)
+    last = cfg.bars * cfg.holes_per_bar - 1
+    corners = f"row(holes, 1), row(holes, {cfg.holes_per_bar})"
+    corners = (f"append(append(append({corners}), row(holes, {last - cfg.holes_per_bar + 2})),"
+               f" row(holes, {last + 1}))")
+    cell.call("COMPUTE", "Evaluate", "",
+              f"corners = {corners}; targets = calc_targets(holes, corners, "
+              f"[0, 0, 0, 0, 0, 0], per_bar={cfg.holes_per_bar}, "
+              f"normal=[{numbers_text(normal)}])")
+    targets = cell.matrix("targets")
+    return targets, pose_from_robot(cell.matrix("pr")[0], "zyz")
+
+
+def _demonstration_figures(cell: _Cell, n: int, targets: np.ndarray, t_start: int,
+                           run: dict[str, Any]) -> dict[str, Any]:
+    """The demonstration's figures: the H4's position errors at the hole targets for the
+    nominal, model- and sensor-compensated poses, what the tracker served each robot
+    since ``t_start`` (ns) and how long each waited, the spread of the KUKA's fixed SMR."""
     stats = {k: _pose_stats(cell.matrix(f"m{k[0].upper()}@H4"), targets)
              for k in ("nominal", "model", "sensor")}
     served, waited = _tracker_use(cell.journal(), t_start)
     watched = cell.matrix("mW@KUKA")
-    result["demonstration"] = {
+    return {
         "targets": n,
         "mean_position_mm": {"initial": stats["nominal"]["mean_mm"],
                              "model": stats["model"]["mean_mm"],
@@ -508,12 +537,6 @@ def _demonstrate(cell: _Cell, cfg: DemoConfig, h4_truth: Any, kuka_truth: Any,
         if len(watched) > 1 else float("nan"),
         "simulated_s": run["sim_s"],
     }
-    d = result["demonstration"]
-    say(f"   mean position error: nominal {d['mean_position_mm']['initial']:.2f} mm, model "
-        f"{d['mean_position_mm']['model']:.3f} mm, sensor {d['mean_position_mm']['sensor']:.3f}"
-        f" mm; tracker served H4 {d['tracker_served']['robot1']}×, KUKA "
-        f"{d['tracker_served']['robot2']}× (waited {d['tracker_wait_s']['robot1']:.1f} s / "
-        f"{d['tracker_wait_s']['robot2']:.1f} s)")
 
 
 def _tracker_use(journal: list[dict[str, Any]], since_ns: int) -> tuple[dict[str, int],
