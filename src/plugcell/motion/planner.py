@@ -494,6 +494,48 @@ def _check_table(section: CartesianSection, J: Array, limits: JointLimits, min_c
         raise make(i)
 
 
+def _checked_arguments(
+    desc: RobotDescription, q_start: ArrayLike, moves: Sequence[Move], joint_limits: JointLimits,
+    check_step: float, length_scale: float,
+) -> tuple[Array, tuple[Move, ...]]:
+    """The arguments of :func:`plan`, checked: the start joints and the moves.
+
+    Returns
+    -------
+    q0 : (n,) array, rad
+        The start joints, finite and inside the joint and coupled limits.
+    moves : tuple of PTP, LIN, CIRC
+
+    Raises
+    ------
+    ValueError
+        ``q_start`` of another shape or not finite, ``joint_limits`` for another number of
+        joints, ``check_step`` or ``length_scale`` not positive.
+    JointRangeError
+        The start is outside the limits.
+    MoveError
+        A move that is not a PTP, LIN or CIRC.
+    """
+    n = desc.n_readings
+    q0 = np.array(q_start, dtype=float)
+    if q0.shape != (n,) or not np.all(np.isfinite(q0)):
+        raise ValueError(f"q_start: expected {n} finite joint values, got {q_start!r}")
+    if joint_limits.n != n:
+        raise ValueError(f"joint_limits has {joint_limits.n} joints, {desc.name} has {n}")
+    for name, x in (("check_step", check_step), ("length_scale", length_scale)):
+        if not (math.isfinite(x) and x > 0.0):
+            raise ValueError(f"{name} must be positive, got {x}")
+    bad = _limit_problem(desc, q0)
+    if bad:
+        raise JointRangeError("the start: " + bad[0], joint=bad[1], value=bad[2],
+                                 limit=bad[3])
+    moves = tuple(moves)
+    for k, m in enumerate(moves):
+        if not isinstance(m, (PTP, LIN, CIRC)):
+            raise MoveError(f"move {k}: expected PTP, LIN or CIRC, got {type(m).__name__}")
+    return q0, moves
+
+
 # ----------------------------------------------------------------------------- API
 def plan(
     desc: RobotDescription,
@@ -545,23 +587,7 @@ def plan(
         Bad arguments (shapes, a limit set for another number of joints).
     """
     params = desc.nominal_parameters() if params is None else params
-    n = desc.n_readings
-    q0 = np.array(q_start, dtype=float)
-    if q0.shape != (n,) or not np.all(np.isfinite(q0)):
-        raise ValueError(f"q_start: expected {n} finite joint values, got {q_start!r}")
-    if joint_limits.n != n:
-        raise ValueError(f"joint_limits has {joint_limits.n} joints, {desc.name} has {n}")
-    for name, x in (("check_step", check_step), ("length_scale", length_scale)):
-        if not (math.isfinite(x) and x > 0.0):
-            raise ValueError(f"{name} must be positive, got {x}")
-    bad = _limit_problem(desc, q0)
-    if bad:
-        raise JointRangeError("the start: " + bad[0], joint=bad[1], value=bad[2],
-                                 limit=bad[3])
-    moves = tuple(moves)
-    for k, m in enumerate(moves):
-        if not isinstance(m, (PTP, LIN, CIRC)):
-            raise MoveError(f"move {k}: expected PTP, LIN or CIRC, got {type(m).__name__}")
+    q0, moves = _checked_arguments(desc, q_start, moves, joint_limits, check_step, length_scale)
     robot = _Robot(desc, params, closure)
     sections: list[Section] = []
     starts: list[float] = []
