@@ -25,7 +25,6 @@ LINES_CEILING = {
     "kinematics/forward.py:joint_angles": 88,
     "kinematics/closure.py:fourbar_closure": 83,
     "calibration/compliance.py:compliance_regressors": 81,
-    "io/programs/fanuc.py:_point": 81,
     "kinematics/inverse.py:inverse": 81,
 }
 

@@ -99,7 +99,45 @@ def _point(f: SourceFile, m: re.Match[str]) -> Target | None:
         return None
     nxt = [g.start() for g in groups if g.start() > g1.start()]
     seg_end = nxt[0] if nxt else body_end
-    pos = g1.end()
+    fields, ufut, turns = _gp1_fields(f, m, g1.end(), seg_end)
+    name = "P[" + m[1] + "]"
+    if all(k in fields for k in CART):
+        extra_keys = [k for k in fields if k not in CART and not k.startswith("E")]
+        if extra_keys:
+            raise f.error(g1.end(), f"{name}: joint and Cartesian values mixed")
+        if "UF" not in ufut or "UT" not in ufut:
+            raise f.error(g1.end(), f"{name}: a Cartesian point needs UF and UT")
+        base = None if ufut["UF"] == "0" else f"UFRAME[{ufut['UF']}]"
+        tool = f"UTOOL[{ufut['UT']}]"
+        return Target(name, 0, m.start(1) - 2, "pose", [fields[k] for k in CART], "fanuc",
+                      base=base, tool=tool, used=False,
+                      config=FanucConfig(0, turns) if turns else None, extra=turns)
+    joints = [k for k in fields if k.startswith("J")]
+    if joints and not any(k in fields for k in CART):
+        order = sorted(joints, key=lambda k: int(k[1:]))
+        if order != [f"J{i}" for i in range(1, len(order) + 1)]:
+            raise f.error(g1.end(), f"{name}: joint values must be J1…Jn")
+        tool = f"UTOOL[{ufut['UT']}]" if "UT" in ufut else None
+        return Target(name, 0, m.start(1) - 2, "joints", [fields[k] for k in order],
+                      tool=tool, used=False)
+    missing = [k for k in CART if k not in fields]
+    raise f.error(g1.end(), f"{name}: a partial position (no {', '.join(missing)})")
+
+
+def _gp1_fields(f: SourceFile, m: re.Match[str], pos: int,
+                seg_end: int) -> tuple[dict[str, Num], dict[str, str], list[Num]]:
+    """The fields of a point's GP1 part (text ``pos``–``seg_end`` of point ``m``).
+
+    Returns
+    -------
+    fields : dict
+        ``X … R`` (mm, deg) or ``J1 … Jn``, ``E1 …`` values by key, as numbers in the text.
+    ufut : dict
+        ``"UF"``/``"UT"`` → the frame and tool numbers given.
+    turns : list of Num
+        The ``CONFIG`` string's turn numbers (J1, J4, J6), if it is given.
+    """
+    text = f.text
     fields: dict[str, Num] = {}
     ufut: dict[str, str] = {}
     turns: list[Num] = []
@@ -130,43 +168,30 @@ def _point(f: SourceFile, m: re.Match[str]) -> Target | None:
             continue
         mc = _CONFIG.match(text, pos)
         if mc is not None:
-            a = mc.start("body")
-            parts = mc["body"].split(",")
-            off = a + len(parts[0]) + 1
-            for part in parts[1:]:
-                lead = len(part) - len(part.lstrip())
-                tok = part.strip()
-                if not re.fullmatch(r"[+-]?\d+", tok):
-                    raise f.error(off + lead, f"P[{m[1]}]: CONFIG turn must be an integer, "
-                                  f"got {tok!r}")
-                turns.append(Num(off + lead, off + lead + len(tok), tok, float(tok)))
-                off += len(part) + 1
+            turns.extend(_config_turns(f, mc, m[1]))
             pos = mc.end()
             continue
         raise f.error(pos, f"P[{m[1]}]: unknown text in the point: "
                       f"{text[pos:pos + 20].splitlines()[0]!r}")
-    name = "P[" + m[1] + "]"
-    if all(k in fields for k in CART):
-        extra_keys = [k for k in fields if k not in CART and not k.startswith("E")]
-        if extra_keys:
-            raise f.error(g1.end(), f"{name}: joint and Cartesian values mixed")
-        if "UF" not in ufut or "UT" not in ufut:
-            raise f.error(g1.end(), f"{name}: a Cartesian point needs UF and UT")
-        base = None if ufut["UF"] == "0" else f"UFRAME[{ufut['UF']}]"
-        tool = f"UTOOL[{ufut['UT']}]"
-        return Target(name, 0, m.start(1) - 2, "pose", [fields[k] for k in CART], "fanuc",
-                      base=base, tool=tool, used=False,
-                      config=FanucConfig(0, turns) if turns else None, extra=turns)
-    joints = [k for k in fields if k.startswith("J")]
-    if joints and not any(k in fields for k in CART):
-        order = sorted(joints, key=lambda k: int(k[1:]))
-        if order != [f"J{i}" for i in range(1, len(order) + 1)]:
-            raise f.error(g1.end(), f"{name}: joint values must be J1…Jn")
-        tool = f"UTOOL[{ufut['UT']}]" if "UT" in ufut else None
-        return Target(name, 0, m.start(1) - 2, "joints", [fields[k] for k in order],
-                      tool=tool, used=False)
-    missing = [k for k in CART if k not in fields]
-    raise f.error(g1.end(), f"{name}: a partial position (no {', '.join(missing)})")
+    return fields, ufut, turns
+
+
+def _config_turns(f: SourceFile, mc: re.Match[str], n: str) -> list[Num]:
+    """The turn numbers of the ``CONFIG : 'N U T, 0, 0, 0'`` match ``mc`` in point ``P[n]``:
+    the integers after the flip/up/top letters, each with its place in the text."""
+    out: list[Num] = []
+    a = mc.start("body")
+    parts = mc["body"].split(",")
+    off = a + len(parts[0]) + 1
+    for part in parts[1:]:
+        lead = len(part) - len(part.lstrip())
+        tok = part.strip()
+        if not re.fullmatch(r"[+-]?\d+", tok):
+            raise f.error(off + lead, f"P[{n}]: CONFIG turn must be an integer, "
+                          f"got {tok!r}")
+        out.append(Num(off + lead, off + lead + len(tok), tok, float(tok)))
+        off += len(part) + 1
+    return out
 
 
 def read_fanuc(path: str | Path) -> tuple[Program, list[str]]:
