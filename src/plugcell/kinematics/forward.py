@@ -186,6 +186,67 @@ def _check_params(
     return params
 
 
+def _close_loops(
+    desc: RobotDescription, p: GeometricParameters, theta: Array, closure: str,
+    raise_errors: bool,
+) -> tuple[Array, Array, Array, NDArray[np.bool_]]:
+    """Close every parallelogram loop: its passive angles and their derivatives (eq. 6.10).
+
+    For loop ``k`` with links (arm ``a``, crank ``c``, coupler 3, follower 4) the closure
+    gives ``(θ_3, θ_4) = f(θ_a, θ_c; a_a, a_c, a_3, a_4)``
+    (:func:`~plugcell.kinematics.closure.fourbar_closure`, or
+    :func:`~plugcell.kinematics.closure.nominal_closure`); they are added to
+    ``theta[..., 3]`` and ``theta[..., 4]`` in place.
+
+    Parameters
+    ----------
+    desc : RobotDescription
+    p : GeometricParameters
+    theta : (..., n_links) array, rad
+        DH angles with the actuated joints in; the passive ones are added (in place).
+    closure : {"fourbar", "nominal"}
+    raise_errors : bool
+
+    Returns
+    -------
+    passive : (..., n_p) array, rad
+        ``(θ_3, θ_4)`` of every loop, ``n_p = 2·loops``.
+    d_passive_dθkin : (..., n_p, n_actuated) array, rad/rad
+        ``∂(θ_3, θ_4)/∂(θ_a, θ_c)`` in the columns of the loop's arm and crank.
+    d_passive_da : (..., n_p, n_links) array, rad/m
+        ``∂(θ_3, θ_4)/∂(a_a, a_c, a_3, a_4)``.
+    valid : (...) bool array
+        False where a loop could not close.
+    """
+    batch = theta.shape[:-1]
+    n_l, n_a = desc.n_links, desc.n_actuated
+    n_p = 2 * len(desc.loops)
+    passive = np.zeros((*batch, n_p))
+    dq = np.zeros((*batch, n_p, n_a))
+    da = np.zeros((*batch, n_p, n_l))
+    valid = np.ones(batch, dtype=bool)
+    for k, loop in enumerate(desc.loops):
+        ia, ic, i3, i4 = (desc.index(n) for n in loop.links)
+        ta, tc = theta[..., ia], theta[..., ic]
+        if closure == "nominal":
+            res = nominal_closure(ta, tc, raise_errors=raise_errors)
+        else:
+            res = fourbar_closure(
+                ta, tc, p.a[ia], p.a[ic], p.a[i3], p.a[i4], raise_errors=raise_errors
+            )
+        valid &= res.valid
+        passive[..., 2 * k] = res.coupler
+        passive[..., 2 * k + 1] = res.follower
+        theta[..., i3] += res.coupler
+        theta[..., i4] += res.follower
+        ja, jc = desc.actuated_index(loop.arm), desc.actuated_index(loop.crank)
+        dq[..., 2 * k : 2 * k + 2, ja] = res.d_driven[..., :, 0]
+        dq[..., 2 * k : 2 * k + 2, jc] = res.d_driven[..., :, 1]
+        for m, il in enumerate((ia, ic, i3, i4)):
+            da[..., 2 * k : 2 * k + 2, il] = res.d_lengths[..., :, m]
+    return passive, dq, da, valid
+
+
 def joint_angles(
     desc: RobotDescription,
     params: GeometricParameters | None,
@@ -242,37 +303,14 @@ def joint_angles(
     p = _check_params(desc, params)
     q = _check_q(desc, q)
     batch = q.shape[:-1]
-    n_l, n_a = desc.n_links, desc.n_actuated
+    n_l = desc.n_links
     theta = np.broadcast_to(p.theta, (*batch, n_l)).copy()
     q_kin = desc.kinematic_joints(q)
     prismatic = desc.prismatic_links
     for j, name in enumerate(desc.actuated):
         if not prismatic[j]:
             theta[..., desc.index(name)] += q_kin[..., j]
-    n_p = 2 * len(desc.loops)
-    passive = np.zeros((*batch, n_p))
-    dq = np.zeros((*batch, n_p, n_a))
-    da = np.zeros((*batch, n_p, n_l))
-    valid = np.ones(batch, dtype=bool)
-    for k, loop in enumerate(desc.loops):
-        ia, ic, i3, i4 = (desc.index(n) for n in loop.links)
-        ta, tc = theta[..., ia], theta[..., ic]
-        if closure == "nominal":
-            res = nominal_closure(ta, tc, raise_errors=raise_errors)
-        else:
-            res = fourbar_closure(
-                ta, tc, p.a[ia], p.a[ic], p.a[i3], p.a[i4], raise_errors=raise_errors
-            )
-        valid &= res.valid
-        passive[..., 2 * k] = res.coupler
-        passive[..., 2 * k + 1] = res.follower
-        theta[..., i3] += res.coupler
-        theta[..., i4] += res.follower
-        ja, jc = desc.actuated_index(loop.arm), desc.actuated_index(loop.crank)
-        dq[..., 2 * k : 2 * k + 2, ja] = res.d_driven[..., :, 0]
-        dq[..., 2 * k : 2 * k + 2, jc] = res.d_driven[..., :, 1]
-        for m, il in enumerate((ia, ic, i3, i4)):
-            da[..., 2 * k : 2 * k + 2, il] = res.d_lengths[..., :, m]
+    passive, dq, da, valid = _close_loops(desc, p, theta, closure, raise_errors)
     return theta, passive, dq, da, valid
 
 
