@@ -142,6 +142,44 @@ def nominal_closure(
     return ClosureResult(t3, t4, D, L, ~bad)
 
 
+def _follower_angle(r2: Array, l3: Array, l4: Array, sdiff: Array) -> tuple[Array, Array]:
+    """The follower's angle θ4' of a four-bar by the law of cosines (eq. C.1).
+
+    ``cos θ4' = (|r|² − a_cpl² − a_fol²) / (2·a_cpl·a_fol)``, ``θ4' = σ·acos(cos θ4')``
+    with ``σ = sign sin(θ_arm − θ_crank)`` (``+1`` at 0): the assembly branch of the
+    nominal parallelogram.
+
+    Parameters
+    ----------
+    r2 : (...) array, m²
+        ``|r|²``, the squared gap the coupler and follower span.
+    l3, l4 : (...) array, m
+        ``a_cpl``, ``a_fol``.
+    sdiff : (...) array
+        ``sin(θ_arm − θ_crank)``.
+
+    Returns
+    -------
+    c4 : (...) array
+        ``cos θ4'`` as computed (outside [−1, 1] where the loop cannot close).
+    t4 : (...) array, rad
+        ``θ4'`` (``acos`` of ``c4`` clipped to [−1, 1]), not yet wrapped.
+    """
+    with np.errstate(divide="ignore", invalid="ignore"):
+        c4 = (r2 - l3 * l3 - l4 * l4) / (2.0 * l3 * l4)
+    sigma = np.where(sdiff >= 0.0, 1.0, -1.0)
+    return c4, sigma * np.arccos(np.clip(c4, -1.0, 1.0))
+
+
+def _nan_where(bad: NDArray[np.bool_], t3: Array, t4: Array, Dq: Array,
+               Da: Array) -> tuple[Array, Array, Array, Array]:
+    """The closure's angles ``(...)`` and derivatives ``(..., 2, k)`` with NaN where the
+    loop failed (``bad``)."""
+    nan = np.nan
+    return (np.where(bad, nan, t3), np.where(bad, nan, t4),
+            np.where(bad[..., None, None], nan, Dq), np.where(bad[..., None, None], nan, Da))
+
+
 def fourbar_closure(
     theta_arm: ArrayLike,
     theta_crank: ArrayLike,
@@ -199,12 +237,9 @@ def fourbar_closure(
     rx = la * np.cos(ta) - lc * np.cos(tc)
     ry = la * np.sin(ta) - lc * np.sin(tc)
     r2 = rx * rx + ry * ry
-    with np.errstate(divide="ignore", invalid="ignore"):
-        c4 = (r2 - l3 * l3 - l4 * l4) / (2.0 * l3 * l4)
-    cannot = ~(np.abs(c4) <= 1.0)
     sdiff = np.sin(ta - tc)
-    sigma = np.where(sdiff >= 0.0, 1.0, -1.0)
-    t4 = sigma * np.arccos(np.clip(c4, -1.0, 1.0))
+    c4, t4 = _follower_angle(r2, l3, l4, sdiff)
+    cannot = ~(np.abs(c4) <= 1.0)
     s4 = np.sin(t4)
     collapsed = ~cannot & ((np.abs(sdiff) < min_sin) | (np.abs(s4) < min_sin))
     bad = cannot | collapsed
@@ -219,12 +254,7 @@ def fourbar_closure(
     phi4 = phi3 + t4
 
     Dq, Da = _implicit_derivatives(ta, tc, la, lc, l3, l4, phi3, phi4, bad)
-    nan = np.nan
-    t3 = np.where(bad, nan, t3)
-    t4 = np.where(bad, nan, t4)
-    Dq = np.where(bad[..., None, None], nan, Dq)
-    Da = np.where(bad[..., None, None], nan, Da)
-    return ClosureResult(t3, t4, Dq, Da, ~bad)
+    return ClosureResult(*_nan_where(bad, t3, t4, Dq, Da), ~bad)
 
 
 def _closure_error(
