@@ -22,7 +22,6 @@ GOAL_LINES = 80
 #: "path:function" (path under src/plugcell; methods as "Class.method") → the most lines
 #: it may have today (only functions over GOAL_LINES).
 LINES_CEILING = {
-    "calibration/compliance.py:compliance_regressors": 81,
     "kinematics/inverse.py:inverse": 81,
 }
 

@@ -240,6 +240,36 @@ def _gravity_torques(desc: RobotDescription, ref: GeometricParameters, q: Array)
     return tau
 
 
+def _loop_gravity_regressors(desc: RobotDescription, jidx: dict[str, int],
+                             theta: Array) -> dict[str, tuple[int, Array]]:
+    """The regressors of each parallelogram loop's gravity constants G1–G3 (eq. 6.31).
+
+    For loop ``k`` (arm ``a``, crank ``c``): ``G{3k+1}`` deflects the arm by
+    ``cos θ_a``, ``G{3k+2}`` and ``G{3k+3}`` the crank by ``cos θ_c`` and ``sin θ_c``.
+
+    Parameters
+    ----------
+    desc : RobotDescription
+        The robot, uncoupled.
+    jidx : dict
+        Actuated joint name → its column in ``theta``.
+    theta : (N, n_actuated) array, rad
+        Kinematic joints plus the nominal offsets.
+
+    Returns
+    -------
+    dict
+        ``"G…"`` → (the joint it deflects, its regressor ``(N,)``).
+    """
+    loop_g = {}
+    for k, loop in enumerate(desc.loops):
+        ja, jc = jidx[loop.arm], jidx[loop.crank]
+        loop_g[f"G{3 * k + 1}"] = (ja, np.cos(theta[:, ja]))
+        loop_g[f"G{3 * k + 2}"] = (jc, np.cos(theta[:, jc]))
+        loop_g[f"G{3 * k + 3}"] = (jc, np.sin(theta[:, jc]))
+    return loop_g
+
+
 def compliance_regressors(
     desc: RobotDescription,
     ref: GeometricParameters,
@@ -291,12 +321,7 @@ def compliance_regressors(
         return R
     jidx = {name: j for j, name in enumerate(desc.actuated)}
     theta = q + np.array([ref.theta[desc.index(nm)] for nm in desc.actuated])
-    loop_g = {}
-    for k, loop in enumerate(desc.loops):
-        ja, jc = jidx[loop.arm], jidx[loop.crank]
-        loop_g[f"G{3 * k + 1}"] = (ja, np.cos(theta[:, ja]))
-        loop_g[f"G{3 * k + 2}"] = (jc, np.cos(theta[:, jc]))
-        loop_g[f"G{3 * k + 3}"] = (jc, np.sin(theta[:, jc]))
+    loop_g = _loop_gravity_regressors(desc, jidx, theta)
     tau = None
     payload_reg = None
     for c, p in enumerate(parameters):
