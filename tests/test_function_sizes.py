@@ -21,9 +21,7 @@ GOAL_LINES = 80
 
 #: "path:function" (path under src/plugcell; methods as "Class.method") → the most lines
 #: it may have today (only functions over GOAL_LINES).
-LINES_CEILING = {
-    "kinematics/inverse.py:inverse": 81,
-}
+LINES_CEILING: dict[str, int] = {}
 
 
 def function_lines(root: Path = SRC) -> dict[str, int]:

@@ -39,6 +39,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
+from typing import NoReturn
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -445,10 +446,16 @@ def inverse(
     for k, f in failures.items():
         reason[k] = f.message
     if failures and raise_errors:
-        k = min(failures)
-        idx = tuple(int(i) for i in np.unravel_index(k, batch)) if batch else None
-        raise failures[k].exception(idx)
+        _raise_first(failures, batch)
     return search.result(batch, reason)
+
+
+def _raise_first(failures: dict[int, _Failure], batch: tuple[int, ...]) -> NoReturn:
+    """Raise the failure of the first failing target (flat index ``k``), naming its
+    index in the batch of shape ``batch`` (``None`` for a single target)."""
+    k = min(failures)
+    idx = tuple(int(i) for i in np.unravel_index(k, batch)) if batch else None
+    raise failures[k].exception(idx)
 
 
 def _flat_targets_and_seeds(
