@@ -3,9 +3,8 @@
 A function is split where the split names a concept: a step of the algorithm with its
 own equation, or a named stage (parse the header, check the coupled limits).  The goal
 is no function over :data:`GOAL_LINES` lines (``end_lineno − lineno + 1`` by ``ast``,
-docstring included).  Until then the ceilings below are a ratchet: a listed function may
-shrink (lower its ceiling in the same change), never grow, and no other function may
-pass the goal.
+docstring included) — met since issue #33's last splits: :data:`LINES_CEILING` is empty
+and stays so (a function that has to be longer is listed there with its reason).
 
 Print the table: ``.venv/bin/python tests/test_function_sizes.py``.
 """
