@@ -53,18 +53,14 @@ import numpy as np
 from plugcell.compensation.tracking import (
     IterativeLearning,
     LearningSettings,
-    TrackingLoop,
     TrackingSettings,
 )
-from plugcell.devices.robot.rsi import RsiConfig, RsiLink
-from plugcell.devices.robot.rsi.tracking import TrackingSource
 from plugcell.devices.robot.stream.source import Correction, CycleState
 from plugcell.kinematics import forward
 from plugcell.kinematics.transforms import so3_log
 from plugcell.metrology.timing import estimate_delay
-from plugcell.sim.controller.rsi_robot import RsiRobot
 from plugcell.sim.tracked_path import CYCLE, Fault, LogFeed, PathRun, TrackedCell, learn
-from plugcell.sim.twin.dynamics import DynamicTwin
+from plugcell.sim.tracked_udp import run_over_udp
 
 PUBLISHED = [
     ("Nikon Adaptive Robot Control (commercial), robot accuracy", "0.1 mm"),
@@ -259,33 +255,25 @@ def udp_timing(cell: TrackedCell, tau: float, beside: bool = False) -> dict:
     → answer out), the loop's compute time, the share of cycles the controller got its
     answer in time, and the share of answers that carried a new correction."""
     traj = cell.plan("line", 100.0, size_m=0.2)
-    arm = DynamicTwin(cell.twin, q0=cell.q0)
-    config = RsiConfig(robot_host="127.0.0.1", listen_host="127.0.0.1", listen_port=0,
-                       correction="cartesian", mode="absolute", frame="base",
-                       timeout_packets=10_000)
-    loop = TrackingLoop(cell.model, TrackingSettings(lead_s=tau), payload_kg=cell.payload_kg)
-    source = TrackingSource(loop, ramp=0.3)
-    feed = LogFeed(source, arm)
-    answer = Beside(feed) if beside else feed
-    with RsiLink(config, answer, record_latency=True) as link:
-        robot = RsiRobot(arm, dataclasses.replace(config, listen_port=link.address[1]),
-                         record=True, path=traj, tool=cell.model.tool, path_delay_s=0.5)
-        feed.robot = robot
-        robot.start()
-        try:
-            link.wait(lambda lk: robot.path_done or not robot.running,
-                      timeout=traj.duration + 120)
-            source.finish()
-            link.wait(lambda lk: source.ended(), timeout=60)
-        finally:
-            robot.stop()
-            if isinstance(answer, Beside):
-                answer.close()
+    beside_feed: list[Beside] = []
+
+    def answer(feed: LogFeed) -> Beside | LogFeed:
+        if not beside:
+            return feed
+        beside_feed.append(Beside(feed))
+        return beside_feed[0]
+
+    udp = run_over_udp(cell, traj, tau, record_latency=True, path_slack_s=120.0,
+                       end_timeout_s=60.0, answer=answer)
+    link, feed, loop, robot = udp.link, udp.feed, udp.loop, udp.robot
+    for b in beside_feed:
+        b.close()
     out = np.array(link.latencies) * 1e-6
     comp = np.array(feed.compute_s) * 1e3
     st = robot.stats()
-    if isinstance(answer, Beside):
-        wire, fresh_answers = np.array(answer.wire_s) * 1e3, float(np.mean(answer.fresh))
+    if beside_feed:
+        wire = np.array(beside_feed[0].wire_s) * 1e3
+        fresh_answers = float(np.mean(beside_feed[0].fresh))
     else:
         wire, fresh_answers = out, 1.0
     in_time = st.answered / max(st.cycles, 1)

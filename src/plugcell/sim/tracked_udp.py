@@ -14,7 +14,9 @@ fed the twin's true reflector before each answer
 from __future__ import annotations
 
 import dataclasses
+from collections.abc import Callable
 from dataclasses import dataclass
+from typing import Any
 
 from plugcell.compensation.tracking import TrackingLoop, TrackingSettings
 from plugcell.devices.robot.rsi.config import RsiConfig
@@ -56,7 +58,8 @@ class UdpRun:
 
 def run_over_udp(cell: TrackedCell, trajectory: Trajectory, lead_s: float, *,
                  record_latency: bool = False, path_slack_s: float = 60.0,
-                 end_timeout_s: float = 30.0) -> UdpRun:
+                 end_timeout_s: float = 30.0,
+                 answer: Callable[[LogFeed], Callable[..., Any]] | None = None) -> UdpRun:
     """Run ``trajectory`` on the twin with the tracker in the loop through the RSI link over
     UDP on loopback (module docstring), until the path is done and the source has ended.
 
@@ -72,6 +75,9 @@ def run_over_udp(cell: TrackedCell, trajectory: Trajectory, lead_s: float, *,
         The link records each answer's latency.
     path_slack_s, end_timeout_s : float, s
         How long past the path's duration to wait for its end, then for the source's.
+    answer : callable, optional
+        ``answer(feed)`` is what the link calls each cycle instead of the feed itself
+        (e.g. the loop in a thread beside the link); default the feed.
 
     Returns
     -------
@@ -86,7 +92,8 @@ def run_over_udp(cell: TrackedCell, trajectory: Trajectory, lead_s: float, *,
     loop = TrackingLoop(cell.model, TrackingSettings(lead_s=lead_s), payload_kg=cell.payload_kg)
     source = TrackingSource(loop, ramp=0.3)
     feed = LogFeed(source, arm)
-    with RsiLink(config, feed, record_latency=record_latency) as link:
+    with RsiLink(config, feed if answer is None else answer(feed),
+                 record_latency=record_latency) as link:
         robot = RsiRobot(arm, dataclasses.replace(config, listen_port=link.address[1]),
                          record=True, path=trajectory, tool=cell.model.tool, path_delay_s=0.5)
         feed.robot = robot
