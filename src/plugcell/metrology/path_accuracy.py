@@ -9,8 +9,8 @@ one ``c_k``::
 
 and for a set of cycles (a segment, or the cycles of a segment in one window state:
 *tracked*, *break*, *off*): ``max d``, ``3σ = mean(d) + 3 std(d)`` (the ISO 9283 path
-accuracy figure with its spread, as ``benchmarks/twin_path_deviation.py``) and
-``max |a|``.  Lengths in metres.
+accuracy figure with its spread, as ``benchmarks/twin_path_deviation.py``),
+``max |a|`` and ``3σ_a = mean(|a|) + 3 std(|a|)``.  Lengths in metres.
 """
 
 from __future__ import annotations
@@ -41,6 +41,8 @@ class SegmentAccuracy:
         Their time (s).
     perpendicular_max, perpendicular_3sigma, along_max : float
         ``max d``, ``mean(d) + 3 std(d)``, ``max |a|`` (m).
+    along_3sigma : float
+        ``mean(|a|) + 3 std(|a|)`` (m).
     """
 
     segment: int
@@ -50,6 +52,7 @@ class SegmentAccuracy:
     perpendicular_max: float
     perpendicular_3sigma: float
     along_max: float
+    along_3sigma: float = float("nan")
 
 
 @dataclass(frozen=True)
@@ -96,8 +99,10 @@ def perpendicular(x: ArrayLike, p0: ArrayLike, p1: ArrayLike) -> Array:
 
 
 def _row(segment: int, state: str, d: Array, a: Array, cycle_s: float) -> SegmentAccuracy:
+    m = np.abs(a)
     return SegmentAccuracy(segment, state, int(d.size), d.size * cycle_s, float(d.max()),
-                           float(d.mean() + 3.0 * d.std()), float(np.abs(a).max()))
+                           float(d.mean() + 3.0 * d.std()), float(m.max()),
+                           float(m.mean() + 3.0 * m.std()))
 
 
 def segment_accuracy(actual: ArrayLike, commanded: ArrayLike, points: ArrayLike,

@@ -32,7 +32,7 @@ from collections.abc import Callable
 from dataclasses import dataclass, field
 
 import numpy as np
-from numpy.typing import NDArray
+from numpy.typing import ArrayLike, NDArray
 
 from plugcell.calibration.result import CalibrationResult
 from plugcell.compensation.pose_model import IdentifiedModel, NominalModel, PoseModel
@@ -99,6 +99,10 @@ class PathRunOptions:
         The controller's ``Timeout`` (late answers before RSI stops).
     settings : TrackingSettings, optional
         The loop's settings (default: :class:`TrackingSettings` at the stream's cycle).
+    stream_seed : int, optional
+        The seed of the tracker's measurement noise (default: ``seed``): the same robot
+        and instrument, fresh noise — each run of a repeated path its own, as a real
+        tracker's noise is fresh every run.
     """
 
     robot: str = "smart_h4"
@@ -117,6 +121,7 @@ class PathRunOptions:
     max_speed_mm_s: float = 50.0
     timeout_packets: int = 1000
     settings: TrackingSettings | None = None
+    stream_seed: int | None = None
 
     def __post_init__(self) -> None:
         if not (np.isfinite(self.rate_hz) and 1.0 <= self.rate_hz <= 1000.0):
@@ -144,6 +149,9 @@ class PathRun:
     samples_ok: int
     samples_lost: int
     traces: dict[str, Array] = field(repr=False, default_factory=dict)
+    #: The path's motion (s) and the robot time it started at (s, the robot's clock).
+    motion_s: float = 0.0
+    start_s: float = 0.0
 
 
 def plan_path(desc: RobotDescription, path: PathFile) -> tuple[Array, Trajectory]:
@@ -356,7 +364,8 @@ def _blocked(options: PathRunOptions) -> Callable[[float], bool]:
 
 def run_path(path: PathFile, options: PathRunOptions | None = None,
              progress: Callable[[float], None] | None = None,
-             calibration: CalibrationResult | None = None) -> PathRun:
+             calibration: CalibrationResult | None = None,
+             learned: Callable[[float], ArrayLike] | None = None) -> PathRun:
     """Run ``path`` on the twin with the tracker in the loop (module docstring).
 
     Parameters
@@ -373,6 +382,11 @@ def run_path(path: PathFile, options: PathRunOptions | None = None,
         its identified BASE and PROBE.  Without: the controller's nominal model and the
         twin's true BASE and PROBE (the tracker term then corrects all of the model's
         millimetres).
+    learned : callable, optional
+        ``u(t)``: a learned offset (3,) (m, F0) at robot time ``t`` added to the loop's
+        target (:class:`~plugcell.compensation.tracking.TrackingLoop`'s ``learned``; the
+        motion starts at robot time ``options.settle_s``), e.g.
+        :meth:`~plugcell.compensation.tracking.IterativeLearning.feedforward`.
 
     Returns
     -------
@@ -397,11 +411,12 @@ def run_path(path: PathFile, options: PathRunOptions | None = None,
     tracker.point_at(arm.reflector_at(0.0, T)[:3, 3])
     stream = TrackerStream(tracker, lambda t: arm.reflector_at(t, T), o.rate_hz,
                            six_dof=o.six_dof, spec=StreamSpec(), blocked=_blocked(o),
-                           seed=o.seed)
+                           seed=o.seed if o.stream_seed is None else o.stream_seed)
     model, frames = _model(arm, tool, o, calibration)
     settings = o.settings or TrackingSettings(cycle_s=T, max_correction_m=o.max_offset_mm * 1e-3)
     loop = TrackingLoop(model, settings, payload_kg=o.payload_kg, tracking=o.tracking,
-                        controller=NominalModel(arm.twin.description, tool))  # its $TOOL
+                        controller=NominalModel(arm.twin.description, tool),  # its $TOOL
+                        learned=learned)
     source = TrackingSource(loop, ramp=o.ramp_s)
     t_end = o.settle_s + trajectory.duration
     with RsiLink(config) as link:
@@ -413,8 +428,10 @@ def run_path(path: PathFile, options: PathRunOptions | None = None,
         ended = _follow(link, robot, cycle, times[-1], progress)
         robot.stop()
         stats = link.stats()
-    return _result(path, o, arm, robot, loop, cycle, q_prog, tracked, moves, on_path, tool,
-                   ended or cycle.ended, stats)
+    run = _result(path, o, arm, robot, loop, cycle, q_prog, tracked, moves, on_path, tool,
+                  ended or cycle.ended, stats)
+    run.motion_s, run.start_s = float(trajectory.duration), float(o.settle_s)
+    return run
 
 
 def _model(arm: _TruthTwin, tool: Array, o: PathRunOptions,

@@ -6,7 +6,8 @@
         [--params PARAMS.json [--physical-only]]
         [--mode 6dof|3dof] [--no-tracking] [--beam-break START:DURATION …]
         [--tracker-lost-at S] [--rate HZ] [--payload KG] [--seed N] [--out result.json]
-        [--json]
+        [--json] [--learn N] [--learned FILE] [--learned-out FILE]
+        [--learn-converged PCT] [--learn-diverged PCT]
 
 The path file (:mod:`plugcell.io.path_files`): ``x, y, z`` mm, optionally ``a, b, c``
 degrees, ``speed`` mm/s and ``tracking`` 1/0 per segment.  The robot is the twin's KUKA
@@ -16,7 +17,8 @@ calibration ``--params`` (default: the nominal model).  It prints each segment's
 (perpendicular max and 3σ, along max, mm), split by what the loop did on it, the windows
 without tracking, and writes the whole result (and the traces) as JSON with ``--out``.
 Exit status 0, or 1 with the reason when the run ended early (the tracker silent, RSI
-stopped): the result is written all the same.
+stopped): the result is written all the same.  ``--learn``/``--learned``: the path run
+again and again with iterative learning (:mod:`.path_learn`).
 """
 
 from __future__ import annotations
@@ -30,6 +32,7 @@ from typing import Any
 import numpy as np
 
 from plugcell.apps.cli import CommandError
+from plugcell.apps.commands import path_learn
 from plugcell.apps.commands.progress import ProgressBar
 from plugcell.apps.commands.subcommands import add_subcommands
 from plugcell.io.path_files import PathFileError, read_path
@@ -80,6 +83,7 @@ def configure(parser: argparse.ArgumentParser) -> None:
     p.add_argument("--seed", type=int, default=0, help="the twin's and tracker's seed")
     p.add_argument("--out", metavar="FILE", help="write the result and the traces (JSON)")
     p.add_argument("--json", action="store_true", help="print the result as JSON")
+    path_learn.add_arguments(p)
     p.set_defaults(func=_cmd_run)
 
 
@@ -167,6 +171,7 @@ def _cmd_run(args: argparse.Namespace) -> int:
 
     if not (np.isfinite(args.speed) and args.speed > 0):
         raise CommandError(f"--speed must be > 0 mm/s, got {args.speed}")
+    learning = path_learn.wants_learning(args)
     path = _read(args)
     calibration = None
     if args.params is not None:
@@ -184,6 +189,8 @@ def _cmd_run(args: argparse.Namespace) -> int:
         raise CommandError(str(exc)) from None
 
     name = Path(args.path or args.program).name
+    if learning:
+        return path_learn.run_learning(args, path, name, options, calibration)
     bar = ProgressBar(f"running {name}")
 
     def progress(fraction: float) -> None:
@@ -195,6 +202,11 @@ def _cmd_run(args: argparse.Namespace) -> int:
     except ValueError as exc:
         where = args.params if "calibration" in str(exc) else args.path or args.program
         raise CommandError(f"{where}: {exc}") from None
+    return print_result(args, run, name)
+
+
+def print_result(args: argparse.Namespace, run: Any, name: str) -> int:
+    """Write ``--out``, print the table (or ``--json``); the exit status (1: ended early)."""
     result = result_dict(run, name)
     if args.out:
         Path(args.out).write_text(json.dumps(result_document(run, name)) + "\n")

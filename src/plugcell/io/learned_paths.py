@@ -1,0 +1,304 @@
+"""The learned correction of a repeated path (``plugcell path run --learned-out FILE``).
+
+A JSON document (strict: no NaN) that holds the learning's state — the offset ``u(t)``
+the next run adds to its target, on the path's time grid — and **what it was learned
+for**, so that a later run refuses it, before moving the robot, when anything it depends
+on differs::
+
+    {"format": "plugcell-learned-path", "format_version": 1,
+     "context": {"path": "line.csv", "path_sha256": "…", "speeds_mm_s": [100.0],
+                 "robot": "smart_h4", "tool_mm_deg": [x, y, z, a, b, c],
+                 "payload_kg": 36.0, "calibration": "nominal" | "sha256:…",
+                 "residual_layer": false, "loop": "tracking" | "model",
+                 "reflector": "6dof" | "3dof", "duration_s": 1.144},
+     "settings": {"gain": 0.8, "lead_s": 0.008, …},   # LearningSettings, SI
+     "steps": 4,                                        # updates so far (the gain's k)
+     "runs": [{"run": 1, "measured_rms_mm": …, "measured_max_mm": …,
+               "measured_share": …, "change_max_mm": …, "verdict": "learned"}, …],
+     "offset": {"t0_s": -0.3, "cycle_s": 0.004, "u_mm": [[x, y, z], …]}}
+
+* ``path_sha256`` — SHA-256 of the path's geometry as read (the poses in µm and µrad,
+  the tracking flags, whether it is oriented): the same path in another file, with
+  other comments or column order, is the same path; ``speeds_mm_s`` — each segment's
+  speed, compared on its own so that a mismatch names the segment;
+* ``tool_mm_deg`` — the TCP in the flange frame (mm, degrees, the robot's convention);
+* ``calibration`` — ``nominal`` or the SHA-256 of the PARAMS.json the loop's model came
+  from, and whether its residual layer was used;
+* ``loop``, ``reflector`` — the loop the offset was learned on top of (the learned
+  offset compensates what *that* loop left);
+* ``u_mm`` — millimetres in the cell's frame F0, one row per robot cycle from
+  ``t0_s`` (s from the motion's start); its length is the learning's grid for
+  ``duration_s`` and the settings.
+
+Every fault is a :class:`LearnedFileError` naming the file and the cause; SI inside,
+millimetres only in the document.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import hashlib
+import json
+from dataclasses import dataclass, fields
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from plugcell.compensation.tracking.learning import IterativeLearning, LearningSettings
+from plugcell.compensation.tracking.repeat import RunRecord
+from plugcell.io.params import ParamsError, _at, _clean, _integer, _number, _typename
+from plugcell.io.path_files import PathFile
+from plugcell.io.text_files import read_text
+from plugcell.io.units import M_PER_MM, MM_PER_M
+
+Array = NDArray[np.float64]
+
+__all__ = ["FORMAT", "FORMAT_VERSION", "LearnedContext", "LearnedFile", "LearnedFileError",
+           "load_learned", "path_sha256", "save_learned"]
+
+FORMAT = "plugcell-learned-path"
+FORMAT_VERSION = 1
+#: Tolerances of the context's comparison: speeds (relative), tool (mm, deg), payload
+#: (kg), duration (s).
+SPEED_REL, TOOL_TOL, PAYLOAD_TOL = 1e-9, 1e-3, 1e-6
+
+
+class LearnedFileError(ValueError):
+    """A learned-correction file that cannot be read or used; the message says why."""
+
+
+def path_sha256(path: PathFile) -> str:
+    """SHA-256 (hex) of a path's geometry: poses rounded to 1 µm / 1 µrad, the tracking
+    flags and whether it is oriented (not its speeds, not the file's text)."""
+    h = hashlib.sha256()
+    h.update(np.round(np.asarray(path.poses, float) * 1e6).astype(np.int64).tobytes())
+    h.update(np.asarray(path.tracking, bool).tobytes())
+    h.update(b"oriented" if path.oriented else b"position")
+    return h.hexdigest()
+
+
+@dataclass(frozen=True)
+class LearnedContext:
+    """What a learned correction was learned for (module docstring)."""
+
+    path: str
+    path_sha256: str
+    speeds_mm_s: tuple[float, ...]
+    robot: str
+    tool_mm_deg: tuple[float, ...]
+    payload_kg: float
+    calibration: str
+    residual_layer: bool
+    loop: str
+    reflector: str
+    duration_s: float
+
+    def mismatch(self, now: LearnedContext) -> str | None:
+        """Why a correction learned for ``self`` does not fit a run in ``now`` (None: it
+        fits); the first difference, precisely."""
+        if self.path_sha256 != now.path_sha256:
+            return (f"it was learned on the path {self.path!r} (sha256 "
+                    f"{self.path_sha256[:12]}…), this run's path {now.path!r} is another "
+                    f"(sha256 {now.path_sha256[:12]}…)")
+        if len(self.speeds_mm_s) != len(now.speeds_mm_s):
+            return (f"it was learned for {len(self.speeds_mm_s)} segments, the path has "
+                    f"{len(now.speeds_mm_s)}")
+        for i, (a, b) in enumerate(zip(self.speeds_mm_s, now.speeds_mm_s, strict=True)):
+            if abs(a - b) > SPEED_REL * max(abs(a), abs(b)):
+                return f"segment {i + 1} was learned at {a:g} mm/s, this run goes {b:g} mm/s"
+        if self.robot != now.robot:
+            return f"it was learned on the robot {self.robot!r}, this run is on {now.robot!r}"
+        if np.max(np.abs(np.subtract(self.tool_mm_deg, now.tool_mm_deg))) > TOOL_TOL:
+            return (f"it was learned with the tool {_six(self.tool_mm_deg)}, this run's is "
+                    f"{_six(now.tool_mm_deg)} (mm, deg)")
+        if abs(self.payload_kg - now.payload_kg) > PAYLOAD_TOL:
+            return (f"it was learned with a payload of {self.payload_kg:g} kg, this run "
+                    f"carries {now.payload_kg:g} kg")
+        if (self.calibration, self.residual_layer) != (now.calibration, now.residual_layer):
+            return (f"it was learned with the calibration {_cal(self)}, this run uses "
+                    f"{_cal(now)}")
+        for name, what in (("loop", "the loop"), ("reflector", "the reflector")):
+            if getattr(self, name) != getattr(now, name):
+                return (f"it was learned with {what} {getattr(self, name)!r}, this run's is "
+                        f"{getattr(now, name)!r}")
+        if abs(self.duration_s - now.duration_s) > 1e-6:
+            return (f"it was learned on a motion of {self.duration_s:.4f} s, this run's "
+                    f"takes {now.duration_s:.4f} s")
+        return None
+
+
+def _six(x: tuple[float, ...]) -> str:
+    return "(" + ", ".join(f"{v:.3f}" for v in x) + ")"
+
+
+def _cal(c: LearnedContext) -> str:
+    if c.calibration == "nominal":
+        return "nominal (no PARAMS.json)"
+    return f"{c.calibration[:19]}… {'with' if c.residual_layer else 'without'} residual layer"
+
+
+@dataclass
+class LearnedFile:
+    """A learned correction: its context, the learning's state and its runs so far."""
+
+    context: LearnedContext
+    learning: IterativeLearning
+    runs: list[dict[str, Any]]
+
+    def document(self) -> dict[str, Any]:
+        """The JSON document (module docstring)."""
+        lr = self.learning
+        return {"format": FORMAT, "format_version": FORMAT_VERSION,
+                "context": dataclasses.asdict(self.context),
+                "settings": dataclasses.asdict(lr.settings), "steps": int(lr.steps),
+                "runs": self.runs,
+                "offset": {"t0_s": float(lr.grid[0]), "cycle_s": lr.settings.cycle_s,
+                           "u_mm": np.round(lr.u * MM_PER_M, 6).tolist()}}
+
+
+def run_entries(records: list[RunRecord], before: list[dict[str, Any]]) -> list[dict[str, Any]]:
+    """The document's ``runs``: the earlier sessions' entries, then ``records`` numbered on."""
+    out = list(before)
+    for r in records:
+        out.append({"run": len(out) + 1, "measured_rms_mm": r.rms_m * MM_PER_M,
+                    "measured_max_mm": r.max_m * MM_PER_M, "measured_share": r.measured,
+                    "change_max_mm": r.change_m * MM_PER_M, "verdict": r.verdict})
+    return out
+
+
+def save_learned(path: str | Path, learned: LearnedFile) -> None:
+    """Write ``learned`` as JSON to ``path`` (whole or not at all: a temporary file then
+    a rename)."""
+    p = Path(path)
+    text = json.dumps(_clean(learned.document()), indent=1, allow_nan=False) + "\n"
+    tmp = p.with_name(p.name + ".tmp")
+    tmp.write_text(text, encoding="utf-8")
+    tmp.replace(p)
+
+
+def load_learned(path: str | Path) -> LearnedFile:
+    """Read a learned correction (module docstring).
+
+    Raises
+    ------
+    LearnedFileError
+        ``<file>: <cause>``: unreadable, not JSON, another format or version, a missing or
+        wrong key (named), settings the law refuses, an offset whose length is not the
+        learning's grid or beyond its bound.
+    """
+    name = str(path)
+    text = read_text(path, LearnedFileError)
+    try:
+        doc = json.loads(text)
+    except ValueError as exc:
+        raise LearnedFileError(f"{name}: not a JSON document ({exc})") from None
+    try:
+        return _from_document(doc)
+    except (ParamsError, ValueError) as exc:
+        raise LearnedFileError(f"{name}: {exc}") from None
+
+
+def _string(doc: dict[str, Any], *key: str) -> str:
+    x = _at(doc, *key)
+    if not isinstance(x, str):
+        raise ParamsError(f"{'.'.join(key)}: expected a string, got {_typename(x)}")
+    return x
+
+
+def _finite(v: Any, label: str) -> float:
+    """``v`` as a finite float; a :class:`ParamsError` naming ``label`` otherwise."""
+    try:
+        return _number({label: v}, label)
+    except OverflowError:
+        raise ParamsError(f"{label}: expected a finite number, got {_typename(v)}") from None
+
+
+def _numbers(doc: dict[str, Any], *key: str) -> tuple[float, ...]:
+    x = _at(doc, *key)
+    label = ".".join(key)
+    if not isinstance(x, list):
+        raise ParamsError(f"{label}: expected a list of numbers, got {_typename(x)}")
+    return tuple(_finite(v, f"{label}[{i}]") for i, v in enumerate(x))
+
+
+def _context(doc: dict[str, Any]) -> LearnedContext:
+    c = "context"
+    residual = _at(doc, c, "residual_layer")
+    if not isinstance(residual, bool):
+        raise ParamsError(f"context.residual_layer: expected true or false, got "
+                          f"{_typename(residual)}")
+    tool = _numbers(doc, c, "tool_mm_deg")
+    if len(tool) != 6:
+        raise ParamsError(f"context.tool_mm_deg: expected 6 numbers, got {len(tool)}")
+    speeds = _numbers(doc, c, "speeds_mm_s")
+    if not speeds or min(speeds) <= 0:
+        raise ParamsError("context.speeds_mm_s: expected one speed > 0 per segment")
+    ctx = LearnedContext(
+        _string(doc, c, "path"), _string(doc, c, "path_sha256"), speeds,
+        _string(doc, c, "robot"), tool, _number(doc, c, "payload_kg"),
+        _string(doc, c, "calibration"), residual, _string(doc, c, "loop"),
+        _string(doc, c, "reflector"), _number(doc, c, "duration_s"))
+    if ctx.duration_s <= 0:
+        raise ParamsError(f"context.duration_s must be > 0 s, got {ctx.duration_s!r}")
+    return ctx
+
+
+def _from_document(doc: Any) -> LearnedFile:
+    if not isinstance(doc, dict):
+        raise ParamsError(f"expected a JSON object, got {_typename(doc)}")
+    fmt = doc.get("format")
+    if fmt != FORMAT:
+        raise ParamsError(f"format {fmt!r}: not a learned correction (expected {FORMAT!r}, "
+                          "the file of plugcell path run --learned-out)")
+    version = _integer(doc, "format_version")
+    if version != FORMAT_VERSION:
+        raise ParamsError(f"format_version {version}: this plugcell reads version "
+                          f"{FORMAT_VERSION}")
+    ctx = _context(doc)
+    values = {}
+    for f in fields(LearningSettings):
+        values[f.name] = _integer(doc, "settings", f.name) if f.name == "order" else \
+            _number(doc, "settings", f.name)
+    try:
+        settings = LearningSettings(**values)
+        learning = IterativeLearning(ctx.duration_s, settings)
+    except ValueError as exc:
+        raise ParamsError(f"settings: {exc}") from None
+    steps = _integer(doc, "steps")
+    if steps < 0:
+        raise ParamsError(f"steps must be ≥ 0, got {steps}")
+    learning.steps = steps
+    learning.u = _offset(doc, learning)
+    runs = _at(doc, "runs")
+    if not isinstance(runs, list) or not all(isinstance(r, dict) for r in runs):
+        raise ParamsError(f"runs: expected a list of objects, got {_typename(runs)}")
+    return LearnedFile(ctx, learning, runs)
+
+
+def _offset(doc: dict[str, Any], learning: IterativeLearning) -> Array:
+    s = learning.settings
+    t0, cycle = _number(doc, "offset", "t0_s"), _number(doc, "offset", "cycle_s")
+    if abs(t0 - learning.grid[0]) > 1e-9 or abs(cycle - s.cycle_s) > 1e-12:
+        raise ParamsError(f"offset: t0_s {t0!r} and cycle_s {cycle!r} are not the "
+                          f"settings' grid ({learning.grid[0]:g} s, {s.cycle_s:g} s)")
+    rows = _at(doc, "offset", "u_mm")
+    n = learning.grid.size
+    if not isinstance(rows, list) or len(rows) != n:
+        got = f"{len(rows)} rows" if isinstance(rows, list) else _typename(rows)
+        raise ParamsError(f"offset.u_mm: expected {n} rows (the grid of a "
+                          f"{learning.duration_s:g} s motion), got {got}")
+    u = np.empty((n, 3))
+    for i, row in enumerate(rows):
+        if not (isinstance(row, list) and len(row) == 3):
+            raise ParamsError(f"offset.u_mm[{i}]: expected 3 numbers (x, y, z mm), got "
+                              f"{_typename(row)}")
+        u[i] = [_finite(v, f"offset.u_mm[{i}][{j}]") for j, v in enumerate(row)]
+    bound = s.max_offset_m * MM_PER_M
+    over = (np.abs(u) > bound * (1 + 1e-9)).any(axis=1)
+    if over.any():
+        bad = int(np.argmax(over))
+        raise ParamsError(f"offset.u_mm[{bad}]: {rows[bad]!r} is beyond the settings' "
+                          f"bound ±{bound:g} mm")
+    return u * M_PER_MM
