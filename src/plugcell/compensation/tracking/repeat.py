@@ -167,6 +167,9 @@ class RepeatedLearning:
         RunRecord
         """
         lr, rule = self.learning, self.rule
+        if np.size(sample_t) == 0:  # (path_error's integer bincount cannot take none)
+            return self._record(len(self.records) + 1, math.nan, math.nan, 0.0, math.nan,
+                                "not learned", "the tracker measured 0 % of the motion")
         e, measured = path_error(sample_t, sample_p, path_t, path_p, lr.grid + float(start_s),
                                  lr.settings.cycle_s)
         motion = self.motion
@@ -212,11 +215,12 @@ class RepeatedLearning:
 
     def never_measured(self) -> list[tuple[float, float]]:
         """Windows of the path's time (s, from the motion's start) whose cycles no learned
-        run measured; empty before any run was learned from."""
+        run measured (each cycle ``t_i`` standing for ``[t_i − T/2, t_i + T/2)``); empty
+        before any run was learned from."""
         if not any(r.verdict in ("learned", "converged") for r in self.records):
             return []
         g, T = self.learning.grid, self.learning.settings.cycle_s
         hole = self.motion & ~self._seen
         edges = np.flatnonzero(np.diff(np.concatenate([[0], hole.astype(int), [0]])))
-        return [(float(g[a]), float(g[b - 1] + T)) for a, b in zip(edges[::2], edges[1::2],
-                                                                     strict=True)]
+        return [(float(g[a] - T / 2), float(g[b - 1] + T / 2))
+                for a, b in zip(edges[::2], edges[1::2], strict=True)]

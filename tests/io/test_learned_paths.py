@@ -1,0 +1,223 @@
+"""The learned-correction file of ``plugcell path run --learned-out`` (plugcell.io.learned_paths):
+round trip, the context's refusals with their precise reasons, corrupt files (and, with
+hypothesis, any text and any mutation of a valid document: a LearnedFileError or a
+correction that loads, never another exception)."""
+
+from __future__ import annotations
+
+import contextlib
+import copy
+import dataclasses
+import json
+
+import numpy as np
+import pytest
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
+
+from plugcell.compensation.tracking.learning import IterativeLearning, LearningSettings
+from plugcell.compensation.tracking.repeat import RunRecord
+from plugcell.io.learned_paths import (
+    LearnedContext,
+    LearnedFile,
+    LearnedFileError,
+    load_learned,
+    path_sha256,
+    run_entries,
+    save_learned,
+)
+from plugcell.io.path_files import parse_path
+
+PATH = "x,y,z,speed\n1473.3,-231.7,2488.4,\n1473.3,-131.7,2488.4,100\n"
+SETTINGS = LearningSettings(gain=0.8, cutoff_hz=6.0, order=4, gain_decay=0.5, post_s=0.15,
+                            max_offset_m=5e-3)
+
+
+def _context(**kw) -> LearnedContext:
+    path = parse_path(PATH, "line.csv")
+    base = LearnedContext("line.csv", path_sha256(path), (100.0,), "smart_h4",
+                          (0.0, 0.0, 0.0, 0.0, 0.0, 0.0), 36.0, "nominal", False, "tracking",
+                          "6dof", 1.0)
+    return dataclasses.replace(base, **kw)
+
+
+def _file() -> LearnedFile:
+    lr = IterativeLearning(1.0, SETTINGS)
+    lr.u = 1e-4 * np.sin(np.outer(lr.grid, [1.0, 2.0, 3.0]))
+    lr.steps = 3
+    runs = run_entries([RunRecord(1, 3e-4, 5e-4, 1.0, 1e-4, "learned"),
+                        RunRecord(2, 1e-4, 2e-4, 0.9, float("nan"), "diverged", "why")], [])
+    return LearnedFile(_context(), lr, runs)
+
+
+def _document() -> dict:
+    return json.loads(json.dumps(_file().document()))
+
+
+def test_round_trip(tmp_path):
+    f = _file()
+    save_learned(tmp_path / "l.json", f)
+    back = load_learned(tmp_path / "l.json")
+    assert back.context == f.context and back.context.mismatch(f.context) is None
+    assert back.learning.settings == SETTINGS and back.learning.steps == 3
+    np.testing.assert_allclose(back.learning.u, f.learning.u, atol=1e-9)  # 1 nm in the file
+    assert [r["run"] for r in back.runs] == [1, 2]
+    assert back.runs[1]["change_max_mm"] is None  # NaN written as null (strict JSON)
+    # the offset fed forward is the one saved
+    ff = back.learning.feedforward(5.0)
+    np.testing.assert_allclose(ff(5.0 + 0.5), f.learning.feedforward(5.0)(5.5), atol=1e-9)
+
+
+def test_the_path_hash_is_the_geometry_not_the_text():
+    a = parse_path(PATH, "a.csv")
+    b = parse_path("# the same line\nspeed,z,y,x\n,2488.4,-231.7,1473.3\n"
+                   "250,2488.4,-131.7,1473.3\n", "b.csv")
+    c = parse_path(PATH.replace("-131.7", "-131.6"), "c.csv")
+    assert path_sha256(a) == path_sha256(b) != path_sha256(c)
+
+
+@pytest.mark.parametrize(("change", "reason"), [
+    ({"path": "other.csv", "path_sha256": "f" * 64},
+     "it was learned on the path 'line.csv' (sha256 "),
+    ({"speeds_mm_s": (250.0,)}, "segment 1 was learned at 100 mm/s, this run goes 250 mm/s"),
+    ({"speeds_mm_s": (100.0, 100.0)}, "it was learned for 1 segments, the path has 2"),
+    ({"robot": "kr16"}, "it was learned on the robot 'smart_h4', this run is on 'kr16'"),
+    ({"tool_mm_deg": (0.0, 0.0, 100.0, 0.0, 0.0, 0.0)},
+     "it was learned with the tool (0.000, 0.000, 0.000, 0.000, 0.000, 0.000), this run's "
+     "is (0.000, 0.000, 100.000, 0.000, 0.000, 0.000) (mm, deg)"),
+    ({"payload_kg": 20.0}, "it was learned with a payload of 36 kg, this run carries 20 kg"),
+    ({"calibration": "sha256:" + "a" * 64},
+     "it was learned with the calibration nominal (no PARAMS.json), this run uses "
+     "sha256:aaaaaaaaaaaa… without residual layer"),
+    ({"loop": "model"}, "it was learned with the loop 'tracking', this run's is 'model'"),
+    ({"reflector": "3dof"}, "it was learned with the reflector '6dof', this run's is '3dof'"),
+    ({"duration_s": 1.5}, "it was learned on a motion of 1.0000 s, this run's takes 1.5000 s"),
+])
+def test_a_context_that_differs_is_refused_with_the_reason(change, reason):
+    assert reason in _context().mismatch(_context(**change))
+
+
+def _write(tmp_path, doc) -> str:
+    p = tmp_path / "l.json"
+    p.write_text(doc if isinstance(doc, str) else json.dumps(doc))
+    return str(p)
+
+
+def _mutated(**edits):
+    doc = _document()
+    for key, value in edits.items():
+        *parents, last = key.split(".")
+        d = doc
+        for k in parents:
+            d = d[k]
+        if value is KeyError:
+            del d[last]
+        else:
+            d[last] = value
+    return doc
+
+
+@pytest.mark.parametrize(("doc", "message"), [
+    ("{not json", "not a JSON document"),
+    ("[1, 2]", "expected a JSON object, got a list"),
+    ({"format": "plugcell-tracked-path"}, "format 'plugcell-tracked-path': not a learned "
+     "correction (expected 'plugcell-learned-path'"),
+    (_mutated(format_version=2), "format_version 2: this plugcell reads version 1"),
+    (_mutated(**{"context.robot": KeyError}), "missing key 'context.robot'"),
+    (_mutated(**{"context.payload_kg": "36"}),
+     "context.payload_kg: expected a finite number, got the string '36'"),
+    (_mutated(**{"context.speeds_mm_s": [100, None]}),
+     "context.speeds_mm_s[1]: expected a finite number, got null"),
+    (_mutated(**{"context.speeds_mm_s": [-5]}), "context.speeds_mm_s: expected one speed > 0"),
+    (_mutated(**{"context.tool_mm_deg": [0, 0, 0]}), "context.tool_mm_deg: expected 6 numbers"),
+    (_mutated(**{"context.residual_layer": 0}), "context.residual_layer: expected true or "
+     "false, got the number 0"),
+    (_mutated(**{"settings.gain": 2.5}), "settings: LearningSettings.gain (L) must lie in (0, 2)"),
+    (_mutated(**{"settings.order": 4.0}), "settings.order: expected an integer"),
+    (_mutated(steps=-1), "steps must be ≥ 0, got -1"),
+    (_mutated(**{"offset.u_mm": [[0, 0, 0]] * 3}), "offset.u_mm: expected 363 rows (the grid "
+     "of a 1 s motion), got 3 rows"),
+    (_mutated(**{"offset.t0_s": -0.2}), "offset: t0_s -0.2 and cycle_s 0.004 are not the "
+     "settings' grid"),
+    (_mutated(runs={}), "runs: expected a list of objects, got an object"),
+])
+def test_a_corrupt_file_is_refused_naming_the_cause(tmp_path, doc, message):
+    with pytest.raises(LearnedFileError) as info:
+        load_learned(_write(tmp_path, doc))
+    assert str(info.value).startswith(str(tmp_path / "l.json") + ": ")
+    assert message in str(info.value)
+
+
+def test_an_offset_row_that_is_wrong_or_beyond_the_bound_is_named(tmp_path):
+    doc = _document()
+    doc["offset"]["u_mm"][7] = [0, "x", 0]
+    with pytest.raises(LearnedFileError, match=r"offset.u_mm\[7\]\[1\]: expected a finite "):
+        load_learned(_write(tmp_path, doc))
+    doc["offset"]["u_mm"][7] = [0, 0]
+    with pytest.raises(LearnedFileError, match=r"offset.u_mm\[7\]: expected 3 numbers"):
+        load_learned(_write(tmp_path, doc))
+    doc["offset"]["u_mm"][7] = [0, 6.0, 0]
+    with pytest.raises(LearnedFileError, match=r"offset.u_mm\[7\]: \[0, 6.0, 0\] is beyond "
+                       r"the settings' bound ±5 mm"):
+        load_learned(_write(tmp_path, doc))
+
+
+def test_a_missing_or_binary_file_is_named(tmp_path):
+    with pytest.raises(LearnedFileError, match="no such file"):
+        load_learned(tmp_path / "none.json")
+    (tmp_path / "b.json").write_bytes(b"\xff\xfe\x00")
+    with pytest.raises(LearnedFileError, match="not a UTF-8 text file"):
+        load_learned(tmp_path / "b.json")
+
+
+@settings(max_examples=150, deadline=None,
+          suppress_health_check=[HealthCheck.function_scoped_fixture])
+@given(st.text(max_size=300))
+def test_any_text_is_a_learned_file_error_or_a_correction(tmp_path, text):
+    with contextlib.suppress(LearnedFileError):
+        load_learned(_write(tmp_path, text))
+
+
+JSON = st.recursive(st.none() | st.booleans() | st.integers() | st.floats() |
+                    st.text(max_size=8),
+                    lambda inner: st.lists(inner, max_size=4) |
+                    st.dictionaries(st.text(max_size=6), inner, max_size=4), max_leaves=8)
+
+
+def _leaves(doc, prefix=()):
+    if isinstance(doc, dict):
+        for k, v in doc.items():
+            yield from _leaves(v, (*prefix, k))
+    elif isinstance(doc, list) and doc and not isinstance(doc[0], list | dict):
+        yield prefix
+    elif isinstance(doc, list):
+        for i, v in enumerate(doc[:3]):
+            yield from _leaves(v, (*prefix, i))
+    yield prefix
+
+
+LEAVES = [p for p in _leaves(_document()) if p]
+
+
+@settings(max_examples=200, deadline=None,
+          suppress_health_check=[HealthCheck.function_scoped_fixture])
+@given(st.sampled_from(LEAVES), JSON | st.just(KeyError))
+def test_any_mutation_of_a_valid_file_is_refused_or_loads(tmp_path, where, value):
+    doc = copy.deepcopy(_document())
+    d = doc
+    for k in where[:-1]:
+        d = d[k]
+    if value is KeyError:
+        del d[where[-1]]
+    else:
+        d[where[-1]] = value
+    try:
+        text = json.dumps(doc)
+    except ValueError:
+        return
+    try:
+        f = load_learned(_write(tmp_path, text))
+    except LearnedFileError:
+        return
+    assert f.learning.u.shape == (f.learning.grid.size, 3)
+    assert np.all(np.isfinite(f.learning.u))
