@@ -1,0 +1,158 @@
+"""``plugcell path run --learn N`` / ``--learned FILE`` / ``--learned-out FILE`` on the twin:
+the learned offset reaches the robot through the RSI seam, the runs learn from the
+tracker's samples and get better, the correction is saved, reused and refused for another
+path or speed, and the faults (bad N, corrupt file, beam broken in every run, a tracker
+gone) end with the reason.  Simulated time: the results do not depend on the machine."""
+
+from __future__ import annotations
+
+import json
+import os
+import re
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+import plugcell
+from plugcell.compensation.tracking.learning import IterativeLearning
+from plugcell.io.learned_paths import LearnedFile, save_learned
+from plugcell.io.path_files import parse_path
+from plugcell.sim.path_learning import learned_context, learning_settings
+from plugcell.sim.path_run import PathRunOptions, run_path
+
+#: 80 mm along y at 100 mm/s from the Smart H4's home TCP.
+PATH = """x,y,z,a,b,c,speed
+1473.3,-231.7,2488.4,-60,30,-90,
+1473.3,-151.7,2488.4,-60,30,-90,100
+"""
+
+
+def _cli(*args, cwd):
+    env = {**os.environ, "PYTHONPATH": str(Path(plugcell.__file__).parents[1])}
+    return subprocess.run([sys.executable, "-m", "plugcell", "path", "run", *args],
+                          capture_output=True, text=True, cwd=cwd, timeout=900, env=env)
+
+
+def _other_file(tmp_path: Path, text: str, name: str) -> Path:
+    """A learned correction for the path ``text`` (nothing learned yet), as the command
+    writes it."""
+    path = parse_path(text, name)
+    o = PathRunOptions()
+    ctx = learned_context(path, name, o, "nominal", False)
+    f = tmp_path / f"{name}.learned.json"
+    save_learned(f, LearnedFile(ctx, IterativeLearning(ctx.duration_s, learning_settings(o)),
+                                []))
+    return f
+
+
+@pytest.mark.parametrize(("args", "message"), [
+    (("--learn", "0"), "--learn must be ≥ 1 run, got 0"),
+    (("--learn", "-2"), "--learn must be ≥ 1 run, got -2"),
+    (("--learned-out", "l.json"), "--learned-out needs --learn N: nothing is learned without it"),
+    (("--learned", "none.json"), "none.json: cannot read: no such file"),
+    (("--learned", "p.csv"), "p.csv: not a JSON document"),
+    (("--learn", "2", "--learn-diverged", "0"), "--learn-converged/--learn-diverged: "
+     "StopRule.diverged_rel must be a finite number > 0"),
+])
+def test_bad_learning_options_are_refused_before_anything_runs(tmp_path, args, message):
+    (tmp_path / "p.csv").write_text(PATH)
+    out = _cli("--path", "p.csv", *args, cwd=tmp_path)
+    assert out.returncode == 2, out.stderr
+    assert message in out.stderr
+    assert "segment" not in out.stdout and "run " not in out.stdout
+
+
+@pytest.mark.slow
+def test_a_correction_of_another_path_or_speed_is_refused_with_the_reason(tmp_path):
+    (tmp_path / "p.csv").write_text(PATH)
+    other = _other_file(tmp_path, PATH.replace("-151.7", "-141.7"), "other.csv")
+    out = _cli("--path", "p.csv", "--learned", str(other), cwd=tmp_path)
+    assert out.returncode == 2
+    assert f"{other}: cannot be used for this run: it was learned on the path 'other.csv' " \
+           "(sha256 " in out.stderr and "this run's path 'p.csv' is another" in out.stderr
+    slow = _other_file(tmp_path, PATH, "p.csv")
+    out = _cli("--path", "p.csv", "--learned", str(slow), "--speed", "100", "--payload", "20",
+               cwd=tmp_path)
+    assert out.returncode == 2
+    assert "it was learned with a payload of 36 kg, this run carries 20 kg" in out.stderr
+    (tmp_path / "q.csv").write_text(PATH.replace(",100\n", ",250\n"))
+    out = _cli("--path", "q.csv", "--learned", str(slow), cwd=tmp_path)
+    assert "segment 1 was learned at 100 mm/s, this run goes 250 mm/s" in out.stderr
+
+
+@pytest.mark.slow
+def test_the_learned_offset_reaches_the_robot_through_the_rsi_seam():
+    """A constant learned offset of 0.2 mm in x moves the twin's true TCP by that much
+    over the path (the model alone: no tracker term to mix in)."""
+    path = parse_path(PATH, "p.csv")
+    o = PathRunOptions(tracking=False)
+    plain = run_path(path, o)
+    shifted = run_path(path, o, learned=lambda t: np.array([0.2e-3, 0.0, 0.0]))
+    on = plain.traces["segment"] >= 0
+    d = shifted.traces["actual"][on] - plain.traces["actual"][on]
+    np.testing.assert_allclose(d.mean(axis=0), [0.2e-3, 0.0, 0.0], atol=0.01e-3)
+    assert np.abs(d[:, 0] - 0.2e-3).max() < 0.03e-3
+
+
+@pytest.mark.slow
+def test_learning_runs_get_better_save_and_reuse_the_correction(tmp_path):
+    (tmp_path / "p.csv").write_text(PATH)
+    out = _cli("--path", "p.csv", "--learn", "3", "--learned-out", "l.json", "--json",
+               cwd=tmp_path)
+    assert out.returncode == 0, out.stderr
+    doc = json.loads(out.stdout)
+    runs = doc["runs"]
+    assert 2 <= len(runs) <= 3 and runs[0]["verdict"] == "learned"
+    # the tracker's view improves, and so does the truth it never saw
+    assert runs[1]["tracker_rms_mm"] < 0.6 * runs[0]["tracker_rms_mm"]
+    assert runs[1]["perpendicular_3sigma_mm"] < runs[0]["perpendicular_3sigma_mm"]
+    assert runs[1]["along_max_mm"] < runs[0]["along_max_mm"]
+    assert "run 1/3 p.csv" not in out.stderr  # --json: no progress lines
+    saved = json.loads((tmp_path / "l.json").read_text())
+    assert saved["context"]["path"] == "p.csv" and saved["context"]["speeds_mm_s"] == [100.0]
+    assert len(saved["runs"]) == len(runs) and saved["steps"] == len(runs)
+    assert 0.1 < np.abs(saved["offset"]["u_mm"]).max() < 5.0
+
+    again = _cli("--path", "p.csv", "--learned", "l.json", cwd=tmp_path)
+    assert again.returncode == 0, again.stderr
+    assert f"learned correction: l.json ({len(runs)} updates, largest offset" in again.stdout
+    assert "fed forward, not learning" in again.stdout and "   path  all" in again.stdout
+
+    more = _cli("--path", "p.csv", "--learned", "l.json", "--learn", "1", "--learned-out",
+                "l2.json", cwd=tmp_path)
+    assert more.returncode == 0, more.stderr
+    assert more.stdout.startswith("run  perp 3σ mm")
+    assert "run 1/1 p.csv" in more.stderr  # progress
+    cont = json.loads((tmp_path / "l2.json").read_text())
+    assert len(cont["runs"]) == len(runs) + 1 and cont["steps"] == len(runs) + 1
+
+
+@pytest.mark.slow
+def test_a_beam_broken_in_every_run_is_reported(tmp_path):
+    (tmp_path / "p.csv").write_text(PATH)
+    whole = _cli("--path", "p.csv", "--learn", "2", "--beam-break", "0:5", "--learned-out",
+                 "l.json", cwd=tmp_path)
+    assert whole.returncode == 1
+    assert "no run could be learned from (beam broken in every run?): the tracker measured " \
+           "0 % of the motion" in whole.stderr
+    assert "nothing learned: l.json not written" in whole.stdout
+    assert not (tmp_path / "l.json").exists()
+    part = _cli("--path", "p.csv", "--learn", "2", "--beam-break", "0.05:0.05", cwd=tmp_path)
+    assert part.returncode == 0, part.stderr
+    assert "never measured in any learned run: 0.0" in part.stdout
+    rows = [line for line in part.stdout.splitlines() if line.startswith("  ")]
+    assert len(rows) == 2  # and the window without tracking in each run
+    assert all(re.search(r" 0\.\d\d–0\.\d\d s$", line) for line in rows), rows
+
+
+@pytest.mark.slow
+def test_a_run_that_ends_early_is_not_learned_from(tmp_path):
+    (tmp_path / "p.csv").write_text(PATH)
+    out = _cli("--path", "p.csv", "--learn", "3", "--tracker-lost-at", "0.05", "--learned-out",
+               "l.json", cwd=tmp_path)
+    assert out.returncode == 1
+    assert "run 1 ended early: tracker silent for" in out.stderr
+    assert out.stdout.count("\n  ") == 1 and not (tmp_path / "l.json").exists()
