@@ -101,9 +101,11 @@ def test_the_learned_offset_reaches_the_robot_through_the_rsi_seam():
 def test_learning_runs_get_better_save_and_reuse_the_correction(tmp_path):
     (tmp_path / "p.csv").write_text(PATH)
     out = _cli("--path", "p.csv", "--learn", "3", "--learned-out", "l.json", "--json",
-               cwd=tmp_path)
+               "--out", "r.json", cwd=tmp_path)
     assert out.returncode == 0, out.stderr
     doc = json.loads(out.stdout)
+    result = json.loads((tmp_path / "r.json").read_text())
+    assert result["format"] == "plugcell-tracked-path" and result["learning"] == doc
     runs = doc["runs"]
     assert 2 <= len(runs) <= 3 and runs[0]["verdict"] == "learned"
     # the tracker's view improves, and so does the truth it never saw

@@ -27,6 +27,7 @@ import argparse
 import json
 import sys
 from pathlib import Path
+from types import SimpleNamespace
 from typing import Any
 
 import numpy as np
@@ -190,7 +191,8 @@ def _cmd_run(args: argparse.Namespace) -> int:
 
     name = Path(args.path or args.program).name
     if learning:
-        return path_learn.run_learning(args, path, name, options, calibration)
+        results = SimpleNamespace(result_document=result_document, print_result=print_result)
+        return path_learn.run_learning(args, path, name, options, calibration, results)
     bar = ProgressBar(f"running {name}")
 
     def progress(fraction: float) -> None:

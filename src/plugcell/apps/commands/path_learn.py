@@ -147,15 +147,17 @@ def _ending(rows: list[dict[str, Any]], runs: int) -> tuple[str, int]:
 
 
 def run_learning(args: argparse.Namespace, path: Any, name: str, options: Any,
-                 calibration: Any) -> int:
-    """``path run`` with ``--learn`` and/or ``--learned`` (module docstring)."""
+                 calibration: Any, results: Any) -> int:
+    """``path run`` with ``--learn`` and/or ``--learned`` (module docstring); ``results``
+    has ``path run``'s ``result_document(run, name)`` and ``print_result(args, run,
+    name)`` (:mod:`.path`, which imports this module)."""
     from plugcell.io.learned_paths import LearnedFile, run_entries, save_learned
     from plugcell.sim.path_learning import repeat_path
 
     context, repeated, before = _session(args, path, name, options, calibration)
     runs = args.learn if args.learn is not None else 1
     if args.learn is None:
-        return _feed_forward(args, path, name, options, calibration, repeated)
+        return _feed_forward(args, path, name, options, calibration, repeated, results)
     rows: list[dict[str, Any]] = []
     bars: dict[int, ProgressBar] = {}
 
@@ -185,9 +187,7 @@ def run_learning(args: argparse.Namespace, path: Any, name: str, options: Any,
         save_learned(args.learned_out, LearnedFile(
             context, repeated.learning, run_entries(repeated.records, before)))
     if args.out:
-        from plugcell.apps.commands.path import result_document
-
-        out = result_document(done[-1].run, name)
+        out = results.result_document(done[-1].run, name)
         Path(args.out).write_text(json.dumps({**out, "learning": _strict(document)}) + "\n")
     if args.json:
         print(json.dumps(_strict(document)))
@@ -221,9 +221,8 @@ def _report(message: str, holes: list[tuple[float, float]], args: argparse.Names
 
 
 def _feed_forward(args: argparse.Namespace, path: Any, name: str, options: Any,
-                  calibration: Any, repeated: Any) -> int:
+                  calibration: Any, repeated: Any, results: Any) -> int:
     """One run with the file's offset fed forward (no learning): ``path run``'s table."""
-    from plugcell.apps.commands.path import print_result
     from plugcell.sim.path_run import run_path
 
     bar = ProgressBar(f"running {name} (learned correction)")
@@ -237,4 +236,4 @@ def _feed_forward(args: argparse.Namespace, path: Any, name: str, options: Any,
     if not args.json:
         print(f"learned correction: {args.learned} ({lr.steps} updates, largest offset "
               f"{float(np.abs(lr.u).max()) * 1e3:.3f} mm), fed forward, not learning")
-    return print_result(args, run, name)
+    return results.print_result(args, run, name)
