@@ -56,6 +56,9 @@ def _other_file(tmp_path: Path, text: str, name: str) -> Path:
     (("--learned", "p.csv"), "p.csv: not a JSON document"),
     (("--learn", "2", "--learn-diverged", "0"), "--learn-converged/--learn-diverged: "
      "StopRule.diverged_rel must be a finite number > 0"),
+    (("--learn", "2", "--learn-gain", "2.5"), "--learn-gain/--learn-cutoff: LearningSettings."
+     "gain (L) must lie in (0, 2)"),
+    (("--learn-gain", "1"), "--learn-gain/--learn-cutoff set up a new learning"),
 ])
 def test_bad_learning_options_are_refused_before_anything_runs(tmp_path, args, message):
     (tmp_path / "p.csv").write_text(PATH)
@@ -158,3 +161,20 @@ def test_a_run_that_ends_early_is_not_learned_from(tmp_path):
     assert out.returncode == 1
     assert "run 1 ended early: tracker silent for" in out.stderr
     assert out.stdout.count("\n  ") == 1 and not (tmp_path / "l.json").exists()
+
+
+@pytest.mark.slow
+def test_a_diverging_learning_stops_and_keeps_the_best_runs_offset(tmp_path):
+    """A learning filter far above the arm's first mode (25 Hz, L = 1.5): the second run's
+    measured error grows, the runs stop and the saved offset is the first run's (none)."""
+    (tmp_path / "p.csv").write_text(PATH)
+    out = _cli("--path", "p.csv", "--learn", "4", "--learn-gain", "1.5", "--learn-cutoff",
+               "25", "--learned-out", "l.json", cwd=tmp_path)
+    assert out.returncode == 1
+    assert "diverged at run 2: the measured error grew to " in out.stderr
+    assert "the learned offset is rolled back to the one that run used" in out.stderr
+    rows = [line for line in out.stdout.splitlines() if line.startswith("  ")]
+    assert len(rows) == 2
+    saved = json.loads((tmp_path / "l.json").read_text())
+    assert saved["steps"] == 0 and np.abs(saved["offset"]["u_mm"]).max() == 0.0
+    assert [r["verdict"] for r in saved["runs"]] == ["learned", "diverged"]

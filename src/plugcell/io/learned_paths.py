@@ -209,10 +209,7 @@ def _string(doc: dict[str, Any], *key: str) -> str:
 
 def _finite(v: Any, label: str) -> float:
     """``v`` as a finite float; a :class:`ParamsError` naming ``label`` otherwise."""
-    try:
-        return _number({label: v}, label)
-    except OverflowError:
-        raise ParamsError(f"{label}: expected a finite number, got {_typename(v)}") from None
+    return _number({label: v}, label)
 
 
 def _numbers(doc: dict[str, Any], *key: str) -> tuple[float, ...]:

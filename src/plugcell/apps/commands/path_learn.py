@@ -43,6 +43,11 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    "without learning; with --learn, the learning goes on from it")
     g.add_argument("--learned-out", type=Path, metavar="FILE",
                    help="write the learned correction (JSON) after the runs")
+    g.add_argument("--learn-gain", type=float, metavar="L",
+                   help="the learning gain L in (0, 2) of a new learning (default 0.8)")
+    g.add_argument("--learn-cutoff", type=float, metavar="HZ",
+                   help="the learning filter's cut-off of a new learning (default 6 Hz, below "
+                   "the arm's first mode)")
     g.add_argument("--learn-converged", type=float, default=5.0, metavar="PCT",
                    help="converged when a run lowers the best measured error by less than "
                    "PCT %% (default 5)")
@@ -57,6 +62,11 @@ def wants_learning(args: argparse.Namespace) -> bool:
         raise CommandError(f"--learn must be ≥ 1 run, got {args.learn}")
     if args.learned_out is not None and args.learn is None:
         raise CommandError("--learned-out needs --learn N: nothing is learned without it")
+    tuned = args.learn_gain is not None or args.learn_cutoff is not None
+    if tuned and (args.learn is None or args.learned is not None):
+        raise CommandError("--learn-gain/--learn-cutoff set up a new learning (--learn N "
+                           "without --learned: a learning continued from a file keeps its "
+                           "settings)")
     return args.learn is not None or args.learned is not None
 
 
@@ -95,7 +105,11 @@ def _session(args: argparse.Namespace, path: Any, name: str, options: Any,
             raise CommandError(f"{args.learned}: cannot be used for this run: {why}")
         learning, before = file.learning, file.runs
     else:
-        learning = IterativeLearning(context.duration_s, learning_settings(options))
+        try:
+            settings = learning_settings(options, args.learn_gain, args.learn_cutoff)
+        except ValueError as exc:
+            raise CommandError(f"--learn-gain/--learn-cutoff: {exc}") from None
+        learning = IterativeLearning(context.duration_s, settings)
     return context, RepeatedLearning(learning, rule), before
 
 
