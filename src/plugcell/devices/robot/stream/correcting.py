@@ -10,12 +10,20 @@ value that crosses a process boundary (the link may run in a child process,
     a constant ``g`` — a seam offset, a measured shift;
 ``compensation``
     a calibration's compensation, as the thesis's (6.5.1) but continuously: at every
-    cycle the joints ``q`` of the controller's own path (``q = q_set − o``, the packet's
-    set-point joints less the offset commanded so far), the nominal pose ``T_n(q)`` the
-    controller meant, and one Newton step of eq. 4.11 on the identified model from the
-    last cycle's answer, ``Δq ← Δq + J_id(q + Δq)⁺ · e(T_n(q), T_id(q + Δq))`` — so
-    ``T_id(q + Δq) → T_n(q)``: the arm is where the program says (the step converges in a
-    few cycles and follows the path after, its change per cycle being the path's);
+    cycle the joints ``q`` of the controller's own path (joint corrections: ``q = q_set −
+    o``, the packet's set-point joints less the offset commanded so far; Cartesian ones:
+    the nominal inverse kinematics of the set-point pose with the offset taken off), the
+    nominal pose ``T_n(q)`` the controller meant, and one Newton step of eq. 4.11 on the
+    identified model from the last cycle's answer, ``Δq ← Δq + J_id(q + Δq)⁺ · e(T_n(q),
+    T_id(q + Δq))`` — so ``T_id(q + Δq) → T_n(q)``: the arm is where the program says (the
+    step converges in a few cycles and follows the path after, its change per cycle being
+    the path's).  Sent as the stream's corrections: joints ``Δq``; RSI ``RKorr`` the exact
+    Cartesian correction that makes the controller command ``q + Δq``,
+    ``o = pose_correction(T_c(q), T_c(q + Δq))`` at its TCP in its frame
+    (:mod:`plugcell.kinematics.pose_corrections`); EGM's path correction the shift of the
+    compensated point, ``p(q + Δq) − p(q)`` — the controller keeps the orientation, so
+    the rotation ``log(R(q + Δq) R(q)ᵀ)`` stays uncorrected (reported by
+    :meth:`Corrector.status`);
 ``external``
     ``g`` is whatever was last given to :meth:`Corrector.set_offset` — the hook of a
     tracker's correction loop or any other sensor, from any thread.
@@ -187,14 +195,17 @@ def _path_joints(state: CycleState) -> Array:
 
 
 class _Compensation:
-    """``g(state)`` of a calibration's compensation (module docstring), joints (rad)."""
+    """``g(state)`` of a calibration's compensation (module docstring) in the stream's
+    space: joints (rad); a Cartesian correction in the base or the tool frame (m, rad,
+    KUKA's A, B, C); or EGM's path correction (m; :attr:`uncorrected` the rotation it
+    cannot carry)."""
 
-    def __init__(self, spec: CorrectionSpec) -> None:
+    def __init__(self, spec: CorrectionSpec, space: str) -> None:
         import json
 
         from plugcell.compensation import IdentifiedModel, NominalModel
         from plugcell.io.params import result_from_params
-        from plugcell.io.robots import description_of_params
+        from plugcell.io.robots import description_of_params, load_robot
 
         path = spec.calibration
         try:
@@ -210,17 +221,74 @@ class _Compensation:
         self.nominal = NominalModel(self.model.description, tool=self.model.tool)
         self.payload = (result.model.payload_ref_kg if spec.payload_kg is None
                         else spec.payload_kg)
+        self.space = space
+        #: the controller's nominal model, its TCP the description's tool (Cartesian spaces)
+        self.controller = None if space == "joints" else load_robot(spec.robot)
         self.dq = np.zeros(6)
+        #: the rotation (rotation vector, rad, base frame) a path correction leaves
+        #: uncorrected: the identified model's orientation error at the path's pose
+        self.uncorrected = np.zeros(3)
 
     def __call__(self, state: CycleState) -> Array:
         from plugcell.compensation import compensate_joints
 
-        q = _path_joints(state)
+        q = self._path_joints(state)
         T_n = self.nominal.evaluate(q)[0]
         step = compensate_joints(self.model, T_n, q + self.dq, self.payload, max_iterations=1,
                                  check_limits=False, raise_errors=False)
         self.dq = np.asarray(step.q, dtype=float).reshape(-1) - q
-        return self.dq
+        return self._in_space(q, q + self.dq)
+
+    def _tcp(self, q: Array) -> Array:
+        from plugcell.kinematics import forward
+
+        return forward(self.controller, None, q, "nominal").tcp
+
+    def _path_joints(self, state: CycleState) -> Array:
+        """The joints of the controller's own path this cycle: ``q_set − o`` (joints);
+        else the nominal inverse kinematics, from the set-point joints, of the set-point
+        pose ``T_n(q_set)`` with the offset so far taken off (:func:`uncorrect_pose`; EGM:
+        its position less the path correction, the path frame's axes the base frame's)."""
+        if self.space == "joints":
+            return _path_joints(state)
+        from plugcell.kinematics import inverse
+        from plugcell.kinematics.pose_corrections import uncorrect_pose
+
+        robot = state.robot
+        q_set = robot.joints_setpoint if robot.joints_setpoint is not None else robot.joints
+        if q_set is None:
+            raise ValueError("the controller's packets carry no joints")
+        q_set = np.asarray(q_set, dtype=float)
+        T_set = self._tcp(q_set)
+        o = np.asarray(state.offset, dtype=float)
+        if self.space == "path":
+            T_p = T_set.copy()
+            T_p[:3, 3] -= o[:3]
+        else:
+            T_p = uncorrect_pose(T_set, o, self.space)
+        ik = inverse(self.controller, None, T_p, seed=q_set, target="tcp", closure="nominal",
+                     raise_errors=False)
+        if not ik.converged:
+            raise ValueError("the controller's path pose is out of the nominal model's reach")
+        return np.asarray(ik.q, dtype=float)
+
+    def _in_space(self, q: Array, q_c: Array) -> Array:
+        """The correction that makes the controller command ``q_c`` instead of ``q``:
+        ``q_c − q`` (joints); ``o`` with ``correct_pose(T_n(q), o) = T_n(q_c)`` at the
+        controller's TCP (base, tool: exact); the compensated point's shift
+        ``p(q_c) − p(q)`` (path: a translation keeping the orientation moves every point
+        of the tool alike; the rotation ``log(R(q_c) R(q)ᵀ)`` is left, :attr:`uncorrected`)."""
+        if self.space == "joints":
+            return q_c - q
+        if self.space == "path":
+            from plugcell.kinematics.transforms import so3_log
+
+            T_a, T_b = self.nominal.evaluate(np.stack([q, q_c]))[0]
+            self.uncorrected = so3_log(T_b[:3, :3] @ T_a[:3, :3].T)
+            return np.concatenate([T_b[:3, 3] - T_a[:3, 3], np.zeros(3)])
+        from plugcell.kinematics.pose_corrections import pose_correction
+
+        return pose_correction(self._tcp(q), self._tcp(q_c), self.space)
 
 
 #: The interpreter's thread switch interval while a correction runs (s): the link's thread
@@ -316,6 +384,12 @@ class Superimposed:
         self.offset = state.offset
         return self.goal_now(state) if self._beside is None else self._beside.offer(state)
 
+    @property
+    def uncorrected(self) -> Array:
+        """The rotation an EGM path correction leaves uncorrected (rotation vector, rad,
+        base frame; zeros for every other correction)."""
+        return np.array(getattr(self._wanted, "uncorrected", np.zeros(3)), dtype=float)
+
     def close(self) -> None:
         """Stop computing ``g`` (the correction ended)."""
         if self._beside is not None:
@@ -339,11 +413,7 @@ def make_source(spec: CorrectionSpec, config: Any) -> Superimposed:
     """
     space = correction_space(config)
     if spec.source == "compensation":
-        if space != "joints":
-            raise ValueError(f"a compensation corrects joints; the stream sends "
-                             f"{_space_text(space)} (configure joint corrections: RSI "
-                             f"AKorr, rsi_correction=joint)")
-        return Superimposed(spec, space, _Compensation(spec), _InSpace("joints", space, ""))
+        return Superimposed(spec, space, _Compensation(spec, space), _InSpace(space, space, ""))
     in_space = _InSpace(spec.frame, space, spec.robot)
     if space == "path" and any(spec.offset[3:]):
         raise ValueError("EGM path corrections carry a position only: A, B, C must be 0")
@@ -469,8 +539,13 @@ class Corrector:
         return "" if self._outcome is None else self._outcome
 
     def status(self) -> tuple[float, Array]:
-        """The blend factor ``b`` of the last cycle, and the link's offset so far (SI)."""
+        """The blend factor ``b`` of the last cycle, and the link's offset so far (SI) —
+        for an EGM path correction (position only) its last three values are the rotation
+        left uncorrected (a compensation's; rotation vector, rad)."""
         running = self._running
         if running is None:
             return 0.0, np.zeros(6)
-        return running.source.blend, np.array(running.offset, dtype=float)
+        offset = np.array(running.offset, dtype=float)
+        if running.space == "path":
+            offset[3:] = running.uncorrected
+        return running.source.blend, offset
