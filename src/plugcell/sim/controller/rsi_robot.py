@@ -241,6 +241,11 @@ class RsiRobot:
         return self._T_path
 
     @property
+    def tool(self) -> Array:
+        """The controller's TCP in the flange frame (``$TOOL``)."""
+        return self._desc.tool
+
+    @property
     def path_index(self) -> int:
         """The path's cycle whose setpoint is commanded now."""
         return self._k

@@ -55,7 +55,7 @@ from .errors import StreamLinkError
 from .source import CycleState, PathOffset
 
 __all__ = ["SOURCES", "CorrectionSpec", "Corrector", "Superimposed", "correction_space",
-           "make_source"]
+           "load_calibration", "make_source"]
 
 Array = NDArray[np.float64]
 
@@ -194,6 +194,31 @@ def _path_joints(state: CycleState) -> Array:
     return q
 
 
+def load_calibration(path: str) -> Any:
+    """The calibration (a :class:`~plugcell.calibration.result.CalibrationResult`) of a
+    PARAMS.json written by ``plugcell calibrate``.
+
+    Raises
+    ------
+    ValueError
+        The file cannot be read, or is no plugcell calibration: the file and why.
+    """
+    import json
+
+    from plugcell.io.params import result_from_params
+    from plugcell.io.robots import description_of_params
+
+    try:
+        with open(path, encoding="utf-8") as f:
+            d = json.load(f)
+        return result_from_params(d, description_of_params(d, path), check_robot=False)
+    except OSError as exc:
+        raise ValueError(f"calibration {path}: cannot read: {exc.strerror or exc}") from None
+    except Exception as exc:  # not JSON, not a plugcell calibration: say which
+        raise ValueError(f"calibration {path}: not a plugcell calibration: "
+                         f"{type(exc).__name__}: {exc}") from None
+
+
 class _Compensation:
     """``g(state)`` of a calibration's compensation (module docstring) in the stream's
     space: joints (rad); a Cartesian correction in the base or the tool frame (m, rad,
@@ -201,22 +226,10 @@ class _Compensation:
     cannot carry)."""
 
     def __init__(self, spec: CorrectionSpec, space: str) -> None:
-        import json
-
         from plugcell.compensation import IdentifiedModel, NominalModel
-        from plugcell.io.params import result_from_params
-        from plugcell.io.robots import description_of_params, load_robot
+        from plugcell.io.robots import load_robot
 
-        path = spec.calibration
-        try:
-            with open(path, encoding="utf-8") as f:
-                d = json.load(f)
-            result = result_from_params(d, description_of_params(d, path), check_robot=False)
-        except OSError as exc:
-            raise ValueError(f"calibration {path}: cannot read: {exc.strerror or exc}") from None
-        except Exception as exc:  # not JSON, not a plugcell calibration: say which
-            raise ValueError(f"calibration {path}: not a plugcell calibration: "
-                             f"{type(exc).__name__}: {exc}") from None
+        result = load_calibration(spec.calibration)
         self.model = IdentifiedModel(result.model)
         self.nominal = NominalModel(self.model.description, tool=self.model.tool)
         self.payload = (result.model.payload_ref_kg if spec.payload_kg is None
