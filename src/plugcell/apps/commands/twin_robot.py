@@ -283,6 +283,7 @@ def _write_stats(path: str | None, cycles: int, answered: int, late: int,
     """``--stats FILE``: the counts, every packet's ``(sent, round trip)`` (ns; −1: no
     answer), why the robot side stopped (``null``: it did not) and ``more`` (``twin rsi
     --lin``/``--program``: ``shift_mm``, the corrections' shift of the program's TCP, and
+    ``path_done``, whether the program had ended, and with ``--calibration``
     ``error_mm``, the T-MAC's true error from where the program means it, every 50 ms), as
     JSON."""
     if path:
@@ -327,18 +328,20 @@ class _PathWatch:
             self.frames = (model.base, model.tool)
         self.shifts: list[list[float]] = []
         self.errors: list[list[float]] = []
+        self.done: list[bool] = []
 
-    def look(self, shift, path_pose, tool) -> None:
+    def look(self, shift, path_pose, tool, done: bool) -> None:
         from plugcell.sim.controller.own_program import probe_error
 
+        self.done.append(bool(done))
         self.shifts.append([float(v) for v in np.asarray(shift) * 1e3])
         if self.frames is not None:
             e = probe_error(self.arm, path_pose, tool, self.frames)
             self.errors.append([float(v) for v in e * 1e3])
 
     def stats(self) -> dict:
-        return {"shift_mm": self.shifts, **({"error_mm": self.errors} if self.frames is not
-                                             None else {})}
+        return {"shift_mm": self.shifts, "path_done": self.done,
+                **({"error_mm": self.errors} if self.frames is not None else {})}
 
     def summary(self, done: bool) -> str:
         error = (f", T-MAC error at the end {np.linalg.norm(self.errors[-1]):.3f} mm"
@@ -367,7 +370,8 @@ def run_rsi(args: argparse.Namespace, scenario) -> int:
         if own:
             k, q = robot.setpoint
             T_p = robot.path_poses[k]
-            watch.look(path_shift(arm.twin.description, q, T_p), T_p, robot.tool)
+            watch.look(path_shift(arm.twin.description, q, T_p), T_p, robot.tool,
+                       k >= len(robot.path_poses) - 1)
         return robot.offset
 
     peak = _until_stopped(args, lambda: robot.running, offset)
@@ -420,7 +424,8 @@ def run_egm(args: argparse.Namespace, scenario) -> int:
     def moved() -> np.ndarray:
         if args.mode != "pathcorr":
             return robot.state()["joints"] - start
-        watch.look(robot.shift(), robot.path_pose(), arm.twin.description.tool)
+        watch.look(robot.shift(), robot.path_pose(), arm.twin.description.tool,
+                   robot.path_done)
         return np.concatenate([robot.state()["correction"], np.zeros(3)])
 
     peak = _until_stopped(args, lambda: robot.stopped is None, moved)
