@@ -188,7 +188,7 @@ def _arm_and_program(args: argparse.Namespace, scenario, q0, params=None):
     if args.library and not args.program:
         raise ValueError("--library goes with a .pdl --program")
     if not (np.isfinite(args.speed) and args.speed > 0):
-        raise ValueError(f"--speed must be > 0 mm/s, got {args.speed}")
+        raise ValueError(f"the TCP speed must be positive: --speed {args.speed} mm/s")
     arm = _within_limits(DynamicTwin(scenario, params, q0=q0))
     if args.program:
         start, path = program_path(arm.twin.description, args.program, args.speed,
@@ -408,8 +408,9 @@ def run_egm(args: argparse.Namespace, scenario) -> int:
             robot = TwinEgmPathRobot(arm, sensor, path, path_delay_s=args.path_delay,
                                      comm_timeout_s=args.timeout, bind=bind)
         elif path is not None:
-            raise ValueError("--lin and --program are the controller's own program of "
-                             "--mode pathcorr (EGMRunJoint follows the PC)")
+            given = "--program" if args.program else "--lin"
+            raise ValueError(f"{given} is the controller's own program of --mode pathcorr "
+                             f"(EGMRunJoint follows the PC)")
         else:
             robot = TwinEgmRobot(arm, sensor, comm_timeout_s=args.timeout, bind=bind)
     except (ValueError, OSError) as exc:
