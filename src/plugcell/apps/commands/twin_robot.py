@@ -344,8 +344,16 @@ class _PathWatch:
                 **({"error_mm": self.errors} if self.frames is not None else {})}
 
     def summary(self, done: bool) -> str:
-        error = (f", T-MAC error at the end {np.linalg.norm(self.errors[-1]):.3f} mm"
-                 if self.errors else "")
+        """``, path done, largest shift S mm[, T-MAC error 0.5 s after the path ended E1 mm,
+        at the end E2 mm]``."""
+        error = ""
+        if self.errors:
+            ended = [i for i, d in enumerate(self.done) if d]  # looked at every 50 ms
+            after = ""
+            if ended:
+                e = self.errors[min(ended[0] + 10, len(self.errors) - 1)]
+                after = f" 0.5 s after the path ended {np.linalg.norm(e):.3f} mm,"
+            error = f", T-MAC error{after} at the end {np.linalg.norm(self.errors[-1]):.3f} mm"
         return (f", path {'done' if done else 'not done'}, largest shift "
                 f"{max((np.linalg.norm(s) for s in self.shifts), default=0.0):.3f} mm"
                 + error)
