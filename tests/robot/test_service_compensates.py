@@ -48,7 +48,7 @@ async def _call(client: Client, name: str, command: str, option: str = "", data=
 
 def _compensate(tmp_path, twin, stream: dict, params) -> np.ndarray:
     """Start the service and the twin; once the twin's path has ended, compensate for
-    3 s and end the correction; CORRECT_STATUS on the plateau (robot units)."""
+    4 s and end the correction; CORRECT_STATUS on the plateau (robot units)."""
     status = []
 
     async def scenario() -> None:
@@ -58,11 +58,11 @@ def _compensate(tmp_path, twin, stream: dict, params) -> np.ndarray:
         try:
             async with Client("COMPTEST", cell=service.cell) as client:
                 assert await client.wait_for(service.name, 20)
-                await asyncio.sleep(5.0)  # the 100 mm LIN ends, the arm stands
+                await asyncio.sleep(8.0)  # the 100 mm LIN ends, the arm stands
                 started = await _call(client, service.name, "CORRECT", "",
                                       ["compensation", f"calibration={params}", "ramp=0.3"])
                 assert started.state is C, started.reason
-                await asyncio.sleep(3.0)
+                await asyncio.sleep(4.0)
                 st = await _call(client, service.name, "CORRECT_STATUS")
                 assert st.state is C, st.reason
                 status.append(np.asarray(from_data(st.data), dtype=float).reshape(-1))
@@ -91,7 +91,8 @@ def _errors_off_and_on(stats) -> tuple[float, float]:
     off = error[:first][done[:first]]
     plateau = np.flatnonzero(done & (np.abs(shift - shift.max()) < 1e-3))
     on = error[plateau[plateau >= plateau[0] + 6]]
-    assert len(off) >= 3 and len(on) >= 10, (len(off), len(on))
+    assert len(off) >= 3 and len(on) >= 10, (len(off), len(on), done.tolist(),
+                                              shift.round(3).tolist())
     np.testing.assert_allclose(shift[-1], 0.0, atol=1e-6)  # put back in the end
     return float(np.median(off)), float(np.median(on))
 

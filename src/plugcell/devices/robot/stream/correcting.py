@@ -219,6 +219,11 @@ def load_calibration(path: str) -> Any:
                          f"{type(exc).__name__}: {exc}") from None
 
 
+#: Newton steps of the path's joints from the set-point (:meth:`_Compensation._newton`),
+#: and the pose error (m and rad in one 6-vector) they stop at.
+IK_STEPS, IK_TOL = 6, 1e-12
+
+
 class _Compensation:
     """``g(state)`` of a calibration's compensation (module docstring) in the stream's
     space: joints (rad); a Cartesian correction in the base or the tool frame (m, rad,
@@ -264,7 +269,6 @@ class _Compensation:
         its position less the path correction, the path frame's axes the base frame's)."""
         if self.space == "joints":
             return _path_joints(state)
-        from plugcell.kinematics import inverse
         from plugcell.kinematics.pose_corrections import uncorrect_pose
 
         robot = state.robot
@@ -279,11 +283,25 @@ class _Compensation:
             T_p[:3, 3] -= o[:3]
         else:
             T_p = uncorrect_pose(T_set, o, self.space)
-        ik = inverse(self.controller, None, T_p, seed=q_set, target="tcp", closure="nominal",
-                     raise_errors=False)
-        if not ik.converged:
-            raise ValueError("the controller's path pose is out of the nominal model's reach")
-        return np.asarray(ik.q, dtype=float)
+        return self._newton(T_p, q_set)
+
+    def _newton(self, T: Array, q: Array) -> Array:
+        """The nominal model's joints of the pose ``T`` near ``q`` (a correction away):
+        Newton steps ``q ← q + J(q)⁺ e(T, T_c(q))`` until ``‖e‖ <`` :data:`IK_TOL`
+        (quadratic: two or three), cheaper than a full inverse kinematics each cycle."""
+        from plugcell.kinematics import forward
+        from plugcell.kinematics.jacobian import jacobian_from_fk
+        from plugcell.kinematics.transforms import so3_log
+
+        for _ in range(IK_STEPS):
+            fk = forward(self.controller, None, q, "nominal")
+            e = np.concatenate([T[:3, 3] - fk.tcp[:3, 3], so3_log(T[:3, :3] @ fk.tcp[:3, :3].T)])
+            if np.linalg.norm(e) < IK_TOL:
+                return q
+            J = jacobian_from_fk(self.controller, fk, "tcp")
+            q = q + np.linalg.lstsq(J, e, rcond=None)[0]
+        raise ValueError("the controller's path pose is out of the nominal model's reach "
+                         f"(no joints within {IK_TOL:g} of it near the set-point)")
 
     def _in_space(self, q: Array, q_c: Array) -> Array:
         """The correction that makes the controller command ``q_c`` instead of ``q``:
