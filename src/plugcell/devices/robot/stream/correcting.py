@@ -221,7 +221,7 @@ def load_calibration(path: str) -> Any:
 
 #: Newton steps of the path's joints from the set-point (:meth:`_Compensation._newton`),
 #: and the pose error (m and rad in one 6-vector) they stop at.
-IK_STEPS, IK_TOL = 6, 1e-12
+IK_STEPS, IK_TOL = 6, 1e-10
 
 
 class _Compensation:
