@@ -282,3 +282,23 @@ def test_twin_rsi_runs_a_program_file_under_the_pcs_corrections(tmp_path, capsys
     assert status == 0
     assert re.fullmatch(r"twin rsi: \d+ cycles, \d+ answered, Delay \d+, largest correction A1 "
                         r"0\.01°, path (done|not done), largest shift \S+ mm", out[-1]), out[-1]
+
+
+def test_twin_egm_runs_a_program_file_with_egmmovel(tmp_path, capsys) -> None:
+    """--mode pathcorr --program: the controller's own path from a file over EGM."""
+    f = tmp_path / "path.csv"
+    f.write_text(PATH_CSV)
+    silent = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    silent.bind(("127.0.0.1", 0))
+    try:
+        status = main(["twin", "egm", "--port", str(silent.getsockname()[1]), "--timeout", "10",
+                       "--mode", "pathcorr", "--program", str(f), "--path-delay", "0",
+                       "--duration", "1"])
+    finally:
+        silent.close()
+    out = capsys.readouterr().out.splitlines()
+    assert status == 0
+    assert out[0].startswith("twin egm: smart_h4 streaming EGM (pathcorr) from 127.0.0.1:")
+    assert re.fullmatch(r"twin egm: \d+ samples, 0 answers, \d+ unanswered, largest path "
+                        r"correction X 0\.00 mm, path (done|not done), largest shift "
+                        r"0\.000 mm", out[-1]), out[-1]
