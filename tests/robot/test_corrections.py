@@ -24,6 +24,7 @@ from plugcell.devices.robot.egm import EgmConfig
 from plugcell.devices.robot.rsi import RsiConfig
 from plugcell.devices.robot.stream.correcting import (
     CorrectionSpec,
+    controller_model,
     correction_space,
     make_source,
 )
@@ -84,6 +85,7 @@ def test_a_constant_offset_reads_in_robot_units_and_lands_in_si():
     (RSI_JOINT, ["offset", "ramp=0"], "ramp: a positive duration"),
     (RSI_JOINT, ["offset", "duration=-1"], "duration: seconds ≥ 0"),
     (RSI_JOINT, ["compensation"], "a compensation needs its calibration"),
+    (RSI_JOINT, ["offset", "tcp=1,2,3"], "tcp='1,2,3': expected 6 finite numbers"),
     (RSI_TOOL, ["offset", "frame=base"], "an offset in the base frame cannot be sent as this "
                                          "stream's corrections (Cartesian corrections in the "
                                          "tool frame): give it in the tool frame"),
@@ -188,20 +190,25 @@ def _controller_joints(desc, T, seed):
     return np.asarray(ik.q, dtype=float)
 
 
-@pytest.mark.parametrize("frame", ["base", "tool"])
+@pytest.mark.parametrize(("frame", "tcp"), [("base", ""), ("tool", ""),
+                                           ("base", "tcp=50,-30,240,20,5,-10"),
+                                           ("tool", "tcp=50,-30,240,20,5,-10")])
 def test_the_compensation_over_cartesian_corrections_commands_the_compensated_joints(
-        calibration, frame):
+        calibration, frame, tcp):
     """RSI RKorr: cycle by cycle on a moving path, the controller applying each answer in
-    its frame (its nominal IK of the corrected pose), the compensation's Cartesian
-    correction makes it command the thesis's compensated joints (eq. 4.11)."""
+    its frame about its TCP (its nominal IK of the corrected pose), the compensation's
+    Cartesian correction makes it command the thesis's compensated joints (eq. 4.11) — with
+    the description's tool as the TCP, or the one CORRECT's tcp= names."""
     result, path = calibration
     config = RsiConfig(robot_host="127.0.0.1", correction="cartesian", mode="absolute",
                        frame=frame)
     spec = _corrections(config, max_mm=5.0, max_deg=1.0).spec(
-        ["compensation", f"calibration={path}"])
+        ["compensation", f"calibration={path}", *([tcp] if tcp else [])])
     running = make_source(spec, config)
     running.close()
-    desc = load_robot("smart_h4")
+    desc = controller_model("smart_h4", spec.tcp)
+    if tcp:
+        np.testing.assert_allclose(desc.tool[:3, 3], [0.05, -0.03, 0.24])
     o = np.zeros(6)
     q_set = Q.copy()
     for k in range(60):  # the path turns A1 at 10 °/s

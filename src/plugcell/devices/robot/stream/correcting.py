@@ -54,8 +54,8 @@ from .drive import setpoint_base
 from .errors import StreamLinkError
 from .source import CycleState, PathOffset
 
-__all__ = ["SOURCES", "CorrectionSpec", "Corrector", "Superimposed", "correction_space",
-           "load_calibration", "make_source"]
+__all__ = ["SOURCES", "CorrectionSpec", "Corrector", "Superimposed", "controller_model",
+           "correction_space", "load_calibration", "make_source"]
 
 Array = NDArray[np.float64]
 
@@ -93,6 +93,10 @@ class CorrectionSpec:
         ``compensation``: the payload (default the calibration's reference payload).
     timeout_s : float
         The longest a correction may run (s).
+    tcp : tuple of 6 float or None
+        The controller's TCP in the flange frame (KUKA's ``$TOOL``: x, y, z in m and A, B,
+        C in rad, ``R = Rz(A)·Ry(B)·Rx(C)``) where it is not the robot description's
+        tool: the point a Cartesian correction moves (``None``: the description's).
     """
 
     source: str
@@ -105,8 +109,14 @@ class CorrectionSpec:
     calibration: str = ""
     payload_kg: float | None = None
     timeout_s: float = 24 * 3600.0
+    tcp: tuple[float, ...] | None = None
 
     def __post_init__(self) -> None:
+        if self.tcp is not None:
+            t = np.asarray(self.tcp, dtype=float).reshape(-1)
+            if t.shape != (6,) or not np.isfinite(t).all():
+                raise ValueError(f"tcp: six finite numbers, got {self.tcp!r}")
+            object.__setattr__(self, "tcp", tuple(float(x) for x in t))
         if self.source not in SOURCES:
             raise ValueError(f"unknown correction source {self.source!r}: one of "
                              f"{', '.join(SOURCES)}")
@@ -146,10 +156,28 @@ def correction_space(config: Any) -> str:
     return "joints" if config.correction == "joint" else str(config.frame)
 
 
+def controller_model(robot: str, tcp: Any = None) -> Any:
+    """The controller's nominal model: the robot's description, its tool the controller's
+    TCP ``tcp`` (x, y, z in m, KUKA's A, B, C in rad) if given."""
+    import dataclasses
+
+    from plugcell.io.robots import load_robot
+    from plugcell.kinematics.rotations import rpy_to_matrix
+
+    desc = load_robot(robot)
+    if tcp is None:
+        return desc
+    t = np.asarray(tcp, dtype=float)
+    T = np.eye(4)
+    T[:3, :3] = rpy_to_matrix(t[5], t[4], t[3])
+    T[:3, 3] = t[:3]
+    return dataclasses.replace(desc, tool=T)
+
+
 class _InSpace:
     """``g`` of a frame brought into the stream's space, at the cycle's path joints."""
 
-    def __init__(self, frame: str, space: str, robot: str) -> None:
+    def __init__(self, frame: str, space: str, robot: str, tcp: Any = None) -> None:
         if frame == space:
             self.convert = None
             return
@@ -158,9 +186,7 @@ class _InSpace:
             raise ValueError(f"an offset in the {frame} frame cannot be sent as this "
                              f"stream's corrections ({_space_text(space)}): give it in "
                              f"{frames} frame")
-        from plugcell.io.robots import load_robot
-
-        self.desc = load_robot(robot)
+        self.desc = controller_model(robot, tcp)
         self.tool = frame == "tool"
         self.convert = self._joints
 
@@ -232,7 +258,6 @@ class _Compensation:
 
     def __init__(self, spec: CorrectionSpec, space: str) -> None:
         from plugcell.compensation import IdentifiedModel, NominalModel
-        from plugcell.io.robots import load_robot
 
         result = load_calibration(spec.calibration)
         self.model = IdentifiedModel(result.model)
@@ -240,8 +265,9 @@ class _Compensation:
         self.payload = (result.model.payload_ref_kg if spec.payload_kg is None
                         else spec.payload_kg)
         self.space = space
-        #: the controller's nominal model, its TCP the description's tool (Cartesian spaces)
-        self.controller = None if space == "joints" else load_robot(spec.robot)
+        #: the controller's nominal model and TCP (Cartesian spaces)
+        self.controller = (None if space == "joints"
+                           else controller_model(spec.robot, spec.tcp))
         self.dq = np.zeros(6)
         #: the rotation (rotation vector, rad, base frame) a path correction leaves
         #: uncorrected: the identified model's orientation error at the path's pose
@@ -445,7 +471,7 @@ def make_source(spec: CorrectionSpec, config: Any) -> Superimposed:
     space = correction_space(config)
     if spec.source == "compensation":
         return Superimposed(spec, space, _Compensation(spec, space), _InSpace(space, space, ""))
-    in_space = _InSpace(spec.frame, space, spec.robot)
+    in_space = _InSpace(spec.frame, space, spec.robot, spec.tcp)
     if space == "path" and any(spec.offset[3:]):
         raise ValueError("EGM path corrections carry a position only: A, B, C must be 0")
     if spec.frame == space:
