@@ -433,8 +433,9 @@ def run_egm(args: argparse.Namespace, scenario) -> int:
     def moved() -> np.ndarray:
         if args.mode != "pathcorr":
             return robot.state()["joints"] - start
-        watch.look(robot.shift(), robot.path_pose(), arm.twin.description.tool,
-                   robot.path_done)
+        watch.look(robot.shift(),  # the program's pose only for the error (an FK)
+                   robot.path_pose() if watch.frames is not None else None,
+                   arm.twin.description.tool, robot.path_done)
         return np.concatenate([robot.state()["correction"], np.zeros(3)])
 
     peak = _until_stopped(args, lambda: robot.stopped is None, moved)
