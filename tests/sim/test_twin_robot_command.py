@@ -144,6 +144,8 @@ def test_twin_egm_stops_after_its_comm_timeout(capsys) -> None:
      "twin rsi: --program or --lin: the controller runs one program"),
     (["rsi", "--port", "49152", "--program", "p.csv", "--joints", "0,-90,-187,0,90,0"],
      "twin rsi: --joints with --program: the program starts at its first point"),
+    (["rsi", "--port", "49152", "--calibration", "c.json"],
+     "twin rsi: --calibration reports the error of a program of its own"),
     (["rsi", "--port", "49152", "--lin", "0,30,0", "--library", "lib"],
      "twin rsi: --library goes with a .pdl --program"),
     (["rsi", "--port", "49152", "--program", "/nonexistent/p.csv"],

@@ -187,6 +187,9 @@ def _arm_and_program(args: argparse.Namespace, scenario, q0, params=None):
         raise ValueError("--joints with --program: the program starts at its first point")
     if args.library and not args.program:
         raise ValueError("--library goes with a .pdl --program")
+    if getattr(args, "calibration", None) and not (args.program or args.lin):
+        raise ValueError("--calibration reports the error of a program of its own: give "
+                         "--lin or --program")
     if not (np.isfinite(args.speed) and args.speed > 0):
         raise ValueError(f"the TCP speed must be positive: --speed {args.speed} mm/s")
     arm = _within_limits(DynamicTwin(scenario, params, q0=q0))
