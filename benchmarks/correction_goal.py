@@ -4,7 +4,9 @@ The robot service's ``CORRECT`` (devices/robot/stream/correcting.py) computes ``
 every controller cycle: a constant offset in the stream's own space (nothing to compute),
 a Cartesian offset on a joint stream (the nominal model's forward kinematics and Jacobian
 at the path's joints, ``Δq = J⁺·o``), or a calibration's compensation (one Newton step of
-eq. 4.11 on the identified model).  Whatever costs more than a fraction of the 4 ms cycle
+eq. 4.11 on the identified model; over RSI's Cartesian corrections and EGM's path
+correction also the nominal inverse kinematics of the path's pose and the step turned into
+the stream's correction).  Whatever costs more than a fraction of the 4 ms cycle
 is computed in a thread beside the link (``_Beside``): this table is why.
 
     python benchmarks/correction_goal.py [--cycles 1000]
@@ -26,6 +28,7 @@ import types
 import numpy as np
 
 from plugcell.calibration.identify import Calibrator
+from plugcell.devices.robot.egm import EgmConfig
 from plugcell.devices.robot.rsi import RsiConfig
 from plugcell.devices.robot.stream.correcting import CorrectionSpec, make_source
 from plugcell.devices.robot.stream.source import CycleState
@@ -50,15 +53,22 @@ def _calibration(folder: str) -> str:
     return path
 
 
-def _time(spec: CorrectionSpec, cycles: int) -> np.ndarray:
-    config = RsiConfig(robot_host="127.0.0.1", correction="joint", mode="absolute")
+JOINTS = RsiConfig(robot_host="127.0.0.1", correction="joint", mode="absolute")
+RKORR = RsiConfig(robot_host="127.0.0.1", correction="cartesian", mode="absolute")
+PATHCORR = EgmConfig(robot_host="127.0.0.1", mode="pathcorr")
+
+
+def _time(spec: CorrectionSpec, cycles: int, config=JOINTS) -> np.ndarray:
     running = make_source(spec, config)
     running.close()  # g computed here, in this thread, cycle by cycle
     offset = np.zeros(6)
     times = []
     for k in range(cycles):
         q = Q + np.radians([10.0 * CYCLE_S * k, 0, 0, 0, 0, 0])
-        robot = types.SimpleNamespace(joints=q + offset, joints_setpoint=q + offset)
+        # the set-point joints: the path's plus the offset (a joint stream), or the path's
+        # (a Cartesian one: what its inverse kinematics costs does not depend on them)
+        q_set = q + offset if config is JOINTS else q
+        robot = types.SimpleNamespace(joints=q_set, joints_setpoint=q_set)
         state = CycleState(robot, offset, 1, k, CYCLE_S * k)
         t0 = time.perf_counter_ns()
         offset = running.goal_now(state)
@@ -77,12 +87,16 @@ def main(argv: list[str]) -> int:
                 ("offset, base frame on a joint stream",
                  CorrectionSpec("offset", (0, 0, 5e-4, 0, 0, 0), frame="base")),
                 ("compensation (model 5)",
-                 CorrectionSpec("compensation", calibration=params))]
+                 CorrectionSpec("compensation", calibration=params)),
+                ("compensation over RKorr (base frame)",
+                 CorrectionSpec("compensation", calibration=params), RKORR),
+                ("compensation over EGM path corrections",
+                 CorrectionSpec("compensation", calibration=params), PATHCORR)]
         print(f"one cycle's g, {args.cycles} cycles (µs); load average "
               f"{os.getloadavg()[0]:.1f} on {os.cpu_count()} cores")
         print(f"{'source':40s} {'p50':>9s} {'p99':>9s} {'max':>9s} {'p50 / 4 ms':>11s}")
-        for name, spec in rows:
-            t = _time(spec, args.cycles)
+        for name, spec, *config in rows:
+            t = _time(spec, args.cycles, *config)
             p50 = np.percentile(t, 50)
             print(f"{name:40s} {p50:9.1f} {np.percentile(t, 99):9.1f} {t.max():9.1f} "
                   f"{p50 / 4000 * 100:10.1f}%")

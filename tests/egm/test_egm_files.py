@@ -9,10 +9,14 @@ import threading
 import time
 
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from plugcell.apps.cli import main
 from plugcell.devices.robot.egm import EgmConfig
-from plugcell.devices.robot.egm.controller_files import controller_files
+from plugcell.devices.robot.egm.controller_files import ExtMotion, controller_files
+from plugcell.devices.robot.stream.limits import CorrectionLimits
+from plugcell.io.abb_cfg import parse_cfg
 from plugcell.io.units import DEG
 from plugcell.sim.controller.egm_robot import EgmRobotSim
 
@@ -62,6 +66,61 @@ def test_the_path_correction_module_corrects_the_robots_own_moves() -> None:
     assert "`EGMActMove`, `EGMMoveL`" in files["README.md"]
 
 
+def test_the_path_correction_motion_configuration_is_generated() -> None:
+    """MOC_plugcell.cfg: the External Motion Interface Data entry the module's EGMSetupUC
+    names, with the user's gain, filter, ramp and largest adjustment (the link's
+    --max-offset, m); the SIOC entry reads as the same syntax."""
+    cfg = EgmConfig(robot_host="192.168.125.1", listen_port=6513, mode="pathcorr",
+                    limits=CorrectionLimits(max_step=(2e-4,) * 6,
+                                            max_offset=(3e-3,) * 3 + (1e-3,) * 3,
+                                            max_speed=(0.05,) * 6))
+    files = controller_files(cfg, "192.168.125.100",
+                             ext_motion=ExtMotion("seamCorr", 8.0, 15.0, 0.25, 2.0))
+    domain, version, types = parse_cfg(files["MOC_plugcell.cfg"])
+    assert domain == "MOC" and version == (6, 0) and list(types) == ["EXT_MOTION_DATA"]
+    assert types["EXT_MOTION_DATA"] == [{
+        "name": "seamCorr", "ext_motion_Kp": 8, "ext_motion_filter_bandwidth": 15,
+        "ramp_time": 0.25, "max_external_pos_adjustment": 0.003,
+        "max_allowed_speed_factor": 2}]
+    assert '"seamCorr", "plugcellUC" \\PathCorr' in files["PlugcellEGM.mod"]
+    assert "`MOC_plugcell.cfg`" in files["README.md"] and "`seamCorr`" in files["README.md"]
+    domain, _, sioc = parse_cfg(files["SIOC_plugcell.cfg"])
+    assert domain == "SIOC" and sioc["COM_TRP"] == [{
+        "Name": "plugcellUC", "Type": "UDPUC", "RemoteAdress": "192.168.125.100",
+        "RemotePortNumber": 6513, "LocalPortNumber": 0}]
+    # the controller's default entry: no MOC for joint or pose targets
+    joint = controller_files(EgmConfig(robot_host="192.168.125.1"), "192.168.125.100")
+    assert "MOC_plugcell.cfg" not in joint and "`MOC_plugcell.cfg`" not in joint["README.md"]
+    with pytest.raises(ValueError, match="External Motion Interface Data goes with path"):
+        controller_files(EgmConfig(robot_host="192.168.125.1"), "192.168.125.100",
+                         ext_motion=ExtMotion())
+
+
+_positive = st.floats(1e-3, 1e3, allow_nan=False, allow_infinity=False)
+
+
+@settings(max_examples=100, deadline=None)
+@given(st.from_regex(r"[A-Za-z][A-Za-z0-9_]{0,15}", fullmatch=True), _positive, _positive,
+       _positive, st.one_of(st.none(), _positive), st.floats(1e-5, 0.5),
+       st.integers(1, 65535), st.ip_addresses(v=4).filter(lambda a: not a.is_unspecified))
+def test_the_motion_configurations_values_round_trip(name, kp, bw, ramp, factor, adjust,
+                                                      port, ip) -> None:
+    cfg = EgmConfig(robot_host="192.168.125.1", listen_port=port, mode="pathcorr",
+                    limits=CorrectionLimits(max_step=(1e-4,) * 6, max_offset=(adjust,) * 6,
+                                            max_speed=(0.05,) * 6))
+    files = controller_files(cfg, str(ip), ext_motion=ExtMotion(name, kp, bw, ramp, factor))
+    got = parse_cfg(files["MOC_plugcell.cfg"])[2]["EXT_MOTION_DATA"][0]
+    want = {"ext_motion_Kp": kp, "ext_motion_filter_bandwidth": bw, "ramp_time": ramp,
+            "max_external_pos_adjustment": adjust}
+    if factor is not None:
+        want["max_allowed_speed_factor"] = factor
+    assert got.pop("name") == name
+    assert got == pytest.approx(want, rel=1e-8)
+    trp = parse_cfg(files["SIOC_plugcell.cfg"])[2]["COM_TRP"][0]
+    assert (trp["RemoteAdress"], trp["RemotePortNumber"]) == (str(ip), port)
+    assert f'EGMSetupUC ROB_1, egm_id, "{name}", "plugcellUC"' in files["PlugcellEGM.mod"]
+
+
 def test_plugcell_egm_files_writes_them(tmp_path, capsys) -> None:
     code = main(["egm", "files", "--out", str(tmp_path), "--ip", "10.0.0.5", "--port", "6600",
                  "--mode", "joint", "--max-speed", "10"])
@@ -79,6 +138,14 @@ def test_plugcell_egm_files_writes_them(tmp_path, capsys) -> None:
     (["--ip", "10.0.0.1", "--sample-ms", "5"], "multiple of 4"),
     (["--ip", "10.0.0.1", "--max-step", "1,2"], "--max-step '1,2': expected 1 or 6"),
     (["--ip", "10.0.0.1", "--device", "bad name"], "device 'bad name'"),
+    (["--ip", "10.0.0.1", "--ext-kp", "3"], "--ext-kp: External Motion Interface Data goes "
+                                            "with --mode pathcorr"),
+    (["--ip", "10.0.0.1", "--mode", "pathcorr", "--ext-kp", "0"],
+     "External Motion Interface Data Kp: a positive number, got 0.0"),
+    (["--ip", "10.0.0.1", "--mode", "pathcorr", "--ext-ramp", "inf"],
+     "External Motion Interface Data ramp time: a positive number"),
+    (["--ip", "10.0.0.1", "--mode", "pathcorr", "--ext-config", "bad name"],
+     "ExtConfigName 'bad name': expected a RAPID name"),
 ])
 def test_plugcell_egm_files_errors(tmp_path, capsys, argv, message) -> None:
     assert main(["egm", "files", "--out", str(tmp_path), *argv]) == 2

@@ -24,13 +24,15 @@ from plugcell.devices.robot.egm import EgmConfig
 from plugcell.devices.robot.rsi import RsiConfig
 from plugcell.devices.robot.stream.correcting import (
     CorrectionSpec,
+    controller_model,
     correction_space,
     make_source,
 )
 from plugcell.devices.robot.stream.source import CycleState
 from plugcell.framework.service import DeviceError
 from plugcell.io.robots import load_robot
-from plugcell.kinematics import forward
+from plugcell.kinematics import forward, inverse
+from plugcell.kinematics.pose_corrections import correct_pose
 from plugcell.kinematics.transforms import so3_log
 from plugcell.sim.twin.scenario import TwinScenario
 
@@ -83,8 +85,7 @@ def test_a_constant_offset_reads_in_robot_units_and_lands_in_si():
     (RSI_JOINT, ["offset", "ramp=0"], "ramp: a positive duration"),
     (RSI_JOINT, ["offset", "duration=-1"], "duration: seconds ≥ 0"),
     (RSI_JOINT, ["compensation"], "a compensation needs its calibration"),
-    (EGM_PATH, ["compensation", "calibration=x.json"], "a compensation corrects joints; the "
-                                                       "stream sends EGM path corrections"),
+    (RSI_JOINT, ["offset", "tcp=1,2,3"], "tcp='1,2,3': expected 6 finite numbers"),
     (RSI_TOOL, ["offset", "frame=base"], "an offset in the base frame cannot be sent as this "
                                          "stream's corrections (Cartesian corrections in the "
                                          "tool frame): give it in the tool frame"),
@@ -171,6 +172,93 @@ def test_the_compensation_follows_the_path_to_the_thesis_compensation(calibratio
     np.testing.assert_allclose(offset, want, atol=np.radians(2e-5))
     T = model.evaluate(q_path + offset, result.model.payload_ref_kg)[0][0]
     np.testing.assert_allclose(T[:3, 3], nominal.evaluate(q_path)[0][0][:3, 3], atol=2e-6)
+
+
+def _compensated(result, q_path):
+    """The thesis's compensation of the path's joints: ``q_path + Δq`` (rad), and the
+    identified and nominal models."""
+    model = IdentifiedModel(result.model)
+    nominal = NominalModel(model.description, tool=model.tool)
+    q_c = compensate_joints(model, nominal.evaluate(q_path)[0], q_path,
+                            result.model.payload_ref_kg).q.reshape(-1)
+    return q_c, model, nominal
+
+
+def _controller_joints(desc, T, seed):
+    """What the controller commands for the pose T: its nominal inverse kinematics."""
+    ik = inverse(desc, None, T, seed=seed, target="tcp", closure="nominal")
+    return np.asarray(ik.q, dtype=float)
+
+
+@pytest.mark.parametrize(("frame", "tcp"), [("base", ""), ("tool", ""),
+                                           ("base", "tcp=50,-30,240,20,5,-10"),
+                                           ("tool", "tcp=50,-30,240,20,5,-10")])
+def test_the_compensation_over_cartesian_corrections_commands_the_compensated_joints(
+        calibration, frame, tcp):
+    """RSI RKorr: cycle by cycle on a moving path, the controller applying each answer in
+    its frame about its TCP (its nominal IK of the corrected pose), the compensation's
+    Cartesian correction makes it command the thesis's compensated joints (eq. 4.11) — with
+    the description's tool as the TCP, or the one CORRECT's tcp= names."""
+    result, path = calibration
+    config = RsiConfig(robot_host="127.0.0.1", correction="cartesian", mode="absolute",
+                       frame=frame)
+    spec = _corrections(config, max_mm=5.0, max_deg=1.0).spec(
+        ["compensation", f"calibration={path}", *([tcp] if tcp else [])])
+    running = make_source(spec, config)
+    running.close()
+    desc = controller_model("smart_h4", spec.tcp)
+    if tcp:
+        np.testing.assert_allclose(desc.tool[:3, 3], [0.05, -0.03, 0.24])
+    o = np.zeros(6)
+    q_set = Q.copy()
+    for k in range(60):  # the path turns A1 at 10 °/s
+        q_path = Q + np.radians([10.0 * 0.004 * k, 0, 0, 0, 0, 0])
+        T_c = correct_pose(forward(desc, None, q_path, "nominal").tcp, o, frame)
+        q_set = _controller_joints(desc, T_c, q_set)
+        robot = types.SimpleNamespace(joints=q_set, joints_setpoint=q_set)
+        o = running.goal_now(CycleState(robot=robot, offset=o, session=1, cycle=k,
+                                        t=0.004 * k))
+    q_c, _, _ = _compensated(result, q_path)
+    assert np.max(np.abs(o[:3])) > 0.1e-3  # a real correction: tenths of a millimetre
+    T_c = correct_pose(forward(desc, None, q_path, "nominal").tcp, o, frame)
+    np.testing.assert_allclose(_controller_joints(desc, T_c, q_set), q_c,
+                               atol=np.radians(2e-5))
+
+
+def test_the_compensation_over_egm_path_corrections_corrects_the_position_only(calibration):
+    """EGM path correction: the compensated point's shift; the controller translating its
+    TCP by it puts that point where the program meant it, and the rotation it cannot
+    carry is reported (CORRECT_STATUS's A, B, C)."""
+    result, path = calibration
+    spec = _corrections(EGM_PATH).spec(["compensation", f"calibration={path}"])
+    running = make_source(spec, EGM_PATH)
+    running.close()
+    desc = load_robot("smart_h4")
+    c = np.zeros(6)
+    q_set = Q.copy()
+    for k in range(60):
+        q_path = Q + np.radians([10.0 * 0.004 * k, 0, 0, 0, 0, 0])
+        T_c = forward(desc, None, q_path, "nominal").tcp
+        T_c[:3, 3] += c[:3]  # the path frame's axes are the base frame's (the twin's)
+        q_set = _controller_joints(desc, T_c, q_set)
+        robot = types.SimpleNamespace(joints=q_set, joints_setpoint=q_set)
+        c = running.goal_now(CycleState(robot=robot, offset=c, session=1, cycle=k,
+                                        t=0.004 * k))
+    q_c, model, nominal = _compensated(result, q_path)
+    assert np.all(c[3:] == 0)
+    p = nominal.evaluate(np.stack([q_path, q_c]))[0][:, :3, 3]
+    np.testing.assert_allclose(c[:3], p[1] - p[0], atol=2e-7)
+    T_c = forward(desc, None, q_path, "nominal").tcp
+    T_c[:3, 3] += c[:3]
+    reached = model.evaluate(_controller_joints(desc, T_c, q_set),
+                             result.model.payload_ref_kg)[0][0][:3, 3]
+    before = model.evaluate(q_path, result.model.payload_ref_kg)[0][0][:3, 3]
+    error_off = np.linalg.norm(before - p[0])
+    assert error_off > 0.3e-3
+    assert np.linalg.norm(reached - p[0]) < error_off / 20
+    R = nominal.evaluate(np.stack([q_path, q_c]))[0][:, :3, :3]
+    np.testing.assert_allclose(running.uncorrected, so3_log(R[1] @ R[0].T), atol=1e-8)
+    assert np.linalg.norm(running.uncorrected) > np.radians(0.001)
 
 
 def test_the_link_takes_the_newest_goal_computed_beside_it():

@@ -133,6 +133,22 @@ def test_plugcell_rsi_files_for_the_robot_driving(tmp_path, capsys) -> None:
     assert "WAIT SEC 2\r\n" in (out / "plugcell_rsi.src").read_bytes().decode()
 
 
+@pytest.mark.parametrize(("frame", "ref"), [("base", "1"), ("tool", "2")])
+def test_plugcell_rsi_files_for_cartesian_corrections_in_a_frame(tmp_path, capsys, frame,
+                                                                  ref) -> None:
+    """--frame: POSCORR's RefCorrSys, and the service's rsi_frame the files go with."""
+    out = tmp_path / "kuka"
+    assert main(["rsi", "files", "--out", str(out), "--ip", "192.168.1.100", "--mode",
+                 "absolute", "--drives", "robot", "--correction", "cartesian", "--frame",
+                 frame]) == 0
+    printed = capsys.readouterr().out
+    assert (f"--param rsi_correction=cartesian --param rsi_frame={frame} "
+            "--param rsi_mode=absolute") in printed
+    ref_corr = [p for p in ET.parse(out / "plugcell_rsi.rsi.xml").iter("Parameter")
+                if p.get("Name") == "RefCorrSys"]
+    assert [p.get("ParamValue") for p in ref_corr] == [ref]
+
+
 def test_the_controller_needs_a_real_address_and_port() -> None:
     config = RsiConfig(robot_host="192.168.1.147")
     with pytest.raises(ValueError, match=r"IP_NUMBER '0\.0\.0\.0'"):

@@ -139,7 +139,20 @@ def test_twin_egm_stops_after_its_comm_timeout(capsys) -> None:
     (["rsi", "--port", "49152", "--lin", "0,30,0", "--speed", "0"],
      "twin rsi: the TCP speed must be positive"),
     (["egm", "--mode", "pathcorr"], "twin egm: --mode pathcorr runs the controller's own "
-                                    "program: give it with --lin DX,DY,DZ"),
+                                    "program: give it with --lin DX,DY,DZ or --program FILE"),
+    (["rsi", "--port", "49152", "--program", "p.csv", "--lin", "0,30,0"],
+     "twin rsi: --program or --lin: the controller runs one program"),
+    (["rsi", "--port", "49152", "--program", "p.csv", "--joints", "0,-90,-187,0,90,0"],
+     "twin rsi: --joints with --program: the program starts at its first point"),
+    (["rsi", "--port", "49152", "--calibration", "c.json"],
+     "twin rsi: --calibration reports the error of a program of its own"),
+    (["rsi", "--port", "49152", "--lin", "0,30,0", "--library", "lib"],
+     "twin rsi: --library goes with a .pdl --program"),
+    (["rsi", "--port", "49152", "--program", "/nonexistent/p.csv"],
+     "twin rsi: p.csv: cannot read"),
+    (["egm", "--program", "/nonexistent/p.csv"], "twin egm: p.csv: cannot read"),
+    (["rsi", "--port", "49152", "--lin", "0,30,0", "--calibration", "/nonexistent/c.json"],
+     "twin rsi: calibration /nonexistent/c.json: cannot read"),
     (["egm", "--lin", "0,30,0"], "twin egm: --lin is the controller's own program of --mode "
                                  "pathcorr"),
     (["egm", "--mode", "pathcorr", "--lin", "0,30,0", "--path-delay", "-1"],
@@ -153,7 +166,8 @@ def test_bad_options_are_refused_with_the_reason(argv, message, capsys) -> None:
 def _args(joints: str) -> argparse.Namespace:
     return argparse.Namespace(ip="127.0.0.1", port=49152, bind="127.0.0.1:0", joints=joints,
                               correction="joint", mode="absolute", cycle="IPO_FAST",
-                              timeout=100, lockstep=0.0, lin=[], speed=100.0, path_delay=1.0)
+                              timeout=100, lockstep=0.0, lin=[], speed=100.0, path_delay=1.0,
+                              frame="base", program=None, library=[])
 
 
 @settings(max_examples=60, deadline=None)
@@ -172,3 +186,121 @@ def test_any_joints_text_starts_the_arm_there_or_is_refused(text: str) -> None:
     if q is not None:
         assert np.allclose(np.degrees(arm.measured), q, atol=0.001)
         assert not arm.twin.description.limit_violations(arm.measured, tol=1e-6)
+
+
+# ---------------------------------------------------------------- --program FILE (mode (b))
+PATH_CSV = """# the controller's own program: 100 mm along y, then 30 mm down
+x,y,z,a,b,c,speed
+1473.3,-231.7,2488.4,-60,30,-90,
+1473.3,-131.7,2488.4,-60,30,-90,100
+1473.3,-131.7,2458.4,-60,30,-90,50
+"""
+PROGRAM_PDL = """PROGRAM own
+VAR start, p : POSITION
+BEGIN
+  start := POS(1473.3, -231.7, 2488.4, -60, 30, -90)
+  p := start
+  p.Y := p.Y + 100
+  MOVE TO start
+  MOVE LINEAR TO p
+  MOVE LINEAR TO start
+END own
+"""
+
+
+def _program_args(program: str) -> argparse.Namespace:
+    args = _args("")
+    args.joints, args.program, args.path_delay = None, program, 0.0
+    return args
+
+
+@pytest.mark.parametrize(("name", "text", "points"), [
+    ("path.csv", PATH_CSV, [[1473.3, -231.7, 2488.4], [1473.3, -131.7, 2458.4]]),
+    ("own.pdl", PROGRAM_PDL, [[1473.3, -231.7, 2488.4], [1473.3, -231.7, 2488.4]]),
+])
+def test_a_program_file_is_the_controllers_own_path_from_its_first_point(
+        tmp_path, name, text, points) -> None:
+    """A path CSV (plugcell path run --path's) or a .pdl's straight moves: the arm starts
+    at the first point and the controller's path ends at the last."""
+    f = tmp_path / name
+    f.write_text(text)
+    arm, robot, _ = _rsi_side(_program_args(str(f)), TwinScenario())
+    robot.stop()
+    poses = robot.path_poses
+    np.testing.assert_allclose(poses[0][:3, 3] * 1e3, points[0], atol=1e-3)
+    np.testing.assert_allclose(poses[-1][:3, 3] * 1e3, points[1], atol=1e-3)
+    # both go 100 mm along y (the CSV then down, the program back)
+    assert np.max(poses[:, 1, 3]) * 1e3 == pytest.approx(-131.7, abs=1e-3)
+    from plugcell.kinematics import forward
+
+    T = forward(arm.twin.description, None, arm.measured, "nominal").tcp
+    np.testing.assert_allclose(T[:3, 3] * 1e3, points[0], atol=0.05)  # encoder counts
+
+
+@pytest.mark.parametrize(("text", "why"), [
+    (PATH_CSV.replace(",100\n", ",-5\n"), "path.csv: line 4, column 'speed': speed must be > 0"),
+    (PATH_CSV.replace("1473.3,-131.7,2458.4", "1473.3,-131.7,x"), "path.csv: line 5, column "
+                                                                  "'z'"),
+    (PATH_CSV.replace("2458.4", "9458.4"), "line 5"),
+    ("x,y\n1,2\n", "path.csv: line 1"),
+])
+def test_a_bad_program_file_is_refused_naming_the_line(tmp_path, text, why, capsys) -> None:
+    f = tmp_path / "path.csv"
+    f.write_text(text)
+    assert main(["twin", "rsi", "--port", "49152", "--program", str(f)]) == 2
+    err = capsys.readouterr().err
+    assert "twin rsi: " in err and why in err, err
+
+
+_LINES = [*PATH_CSV.splitlines(), "", "x,y,z", "1,2", "a,b,c,d", "1473.3,-181.7,2488.4,,,,",
+          "1473.3,-181.7,2488.4,-60,30,-90,0"]
+
+
+@settings(max_examples=25, deadline=None)
+@given(st.lists(st.sampled_from(_LINES), max_size=6))
+def test_any_program_file_plans_or_is_refused_with_a_reason(tmp_path_factory, lines) -> None:
+    f = tmp_path_factory.mktemp("p") / "path.csv"
+    f.write_text("\n".join(lines) + "\n")
+    try:
+        _, robot, _ = _rsi_side(_program_args(str(f)), TwinScenario())
+    except CommandError as exc:
+        assert str(exc).startswith("twin rsi: ") and "path.csv" in str(exc), str(exc)
+        return
+    robot.stop()
+    assert len(robot.path_poses) > 1
+
+
+def test_twin_rsi_runs_a_program_file_under_the_pcs_corrections(tmp_path, capsys) -> None:
+    f = tmp_path / "path.csv"
+    f.write_text(PATH_CSV)
+    sensor = _Sensor(0.01)
+    try:
+        status = main(["twin", "rsi", "--port", str(sensor.port), "--timeout", "10000",
+                       "--lockstep", "1", "--program", str(f), "--path-delay", "0",
+                       "--duration", "1.0"])
+    finally:
+        sensor.close()
+    out = capsys.readouterr().out.splitlines()
+    assert status == 0
+    assert re.fullmatch(r"twin rsi: \d+ cycles, \d+ answered, Delay \d+, largest correction A1 "
+                        r"0\.01°, path (done|not done), largest shift \S+ mm", out[-1]), out[-1]
+
+
+def test_twin_egm_runs_a_program_file_with_egmmovel(tmp_path, capsys) -> None:
+    """--mode pathcorr --program: the controller's own path from a file over EGM."""
+    f = tmp_path / "path.csv"
+    f.write_text(PATH_CSV)
+    silent = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    silent.bind(("127.0.0.1", 0))
+    try:
+        status = main(["twin", "egm", "--port", str(silent.getsockname()[1]), "--timeout", "10",
+                       "--mode", "pathcorr", "--program", str(f), "--path-delay", "0",
+                       "--duration", "1"])
+    finally:
+        silent.close()
+    out = capsys.readouterr().out.splitlines()
+    assert status == 0
+    assert out[0].startswith("twin egm: smart_h4 streaming EGM (pathcorr) from 127.0.0.1:")
+    assert re.fullmatch(r"twin egm: \d+ samples, 0 answers, \d+ unanswered, largest path "
+                        r"correction X 0\.00 mm, path (done|not done), largest shift "
+                        r"0\.000 mm", out[-1]), out[-1]

@@ -5,11 +5,14 @@
     plugcell egm files --out DIR --ip PC_IP [--port 6510] [--mode joint|pose|pathcorr]
                        [--sample-ms 4] [--timeout S] [--max-step V,…] [--max-offset V,…]
                        [--max-speed V,…] [--device NAME]
+                       [--ext-config pathCorr] [--ext-kp 5] [--ext-bandwidth 20]
+                       [--ext-ramp 0.5] [--ext-speed-factor F]     (--mode pathcorr)
     plugcell egm run --robot-ip IP [--listen IP] [--port 6510] [same stream options]
                      [--sine AXIS:AMPLITUDE:PERIOD] [--duration S] [--rt-priority N]
 
 ``files`` writes what the user loads into the controller (RAPID module, the UDP unit
-device's configuration); ``run`` answers the robot — holding it where EGM started, or
+device's configuration, and for path corrections the External Motion Interface Data
+entry, MOC_plugcell.cfg); ``run`` answers the robot — holding it where EGM started, or
 swinging one axis — and prints the link's counters every second.  Limits are given in
 the robot's units: degrees (joint) or mm and degrees (X, Y, Z then the rotation vector),
 per cycle for the step and per second for the speed; one number is for all six axes.
@@ -57,6 +60,19 @@ def configure(p: argparse.ArgumentParser) -> None:
                    "network (RemoteAdress)")
     f.add_argument("--device", default="plugcellUC", help="the UDP unit device's name")
     _stream_args(f)
+    x = f.add_argument_group(
+        "path corrections (--mode pathcorr): Motion > External Motion Interface Data, "
+        "written to MOC_plugcell.cfg (its largest position adjustment: --max-offset)")
+    x.add_argument("--ext-config", default="pathCorr", metavar="NAME",
+                   help="the entry's name, EGMSetupUC's ExtConfigName (pathCorr)")
+    x.add_argument("--ext-kp", type=float, default=5.0, metavar="KP",
+                   help="ext_motion_Kp, the correction's proportional gain, 1/s (5)")
+    x.add_argument("--ext-bandwidth", type=float, default=20.0, metavar="HZ",
+                   help="ext_motion_filter_bandwidth, the correction's filter, Hz (20)")
+    x.add_argument("--ext-ramp", type=float, default=0.5, metavar="S",
+                   help="ramp_time, the correction's ramp in and out, s (0.5)")
+    x.add_argument("--ext-speed-factor", type=float, metavar="F",
+                   help="max_allowed_speed_factor (default: the controller's own)")
     f.set_defaults(func=_files)
     r = sub.add_parser("run", help="answer the robot: hold it, or swing one axis")
     add_run_options(r, "the controller's address")
@@ -86,11 +102,34 @@ def _files(args: argparse.Namespace) -> int:
     from plugcell.devices.robot.egm.controller_files import write_controller_files
 
     config = _config(args, "0.0.0.0", "0.0.0.0")
-    write_and_list(lambda: write_controller_files(args.out, config, args.ip, args.device),
-                   args.out)
+    ext = _ext_motion(args)
+    write_and_list(lambda: write_controller_files(args.out, config, args.ip, args.device,
+                                                  ext_motion=ext), args.out)
     print(f"then on the PC: plugcell egm run --robot-ip CONTROLLER_IP --port {args.port} "
           f"--mode {args.mode} --sample-ms {args.sample_ms} --timeout {args.timeout:g}")
     return 0
+
+
+def _ext_motion(args: argparse.Namespace):
+    """The External Motion Interface Data entry of ``--mode pathcorr`` (``None`` for the
+    other modes; CommandError when one of its options is given there, or is bad)."""
+    from plugcell.apps.cli import CommandError
+    from plugcell.devices.robot.egm.controller_files import ExtMotion
+
+    given = {"--ext-config": args.ext_config != "pathCorr", "--ext-kp": args.ext_kp != 5.0,
+             "--ext-bandwidth": args.ext_bandwidth != 20.0, "--ext-ramp": args.ext_ramp != 0.5,
+             "--ext-speed-factor": args.ext_speed_factor is not None}
+    if args.mode != "pathcorr":
+        if any(given.values()):
+            option = next(k for k, v in given.items() if v)
+            raise CommandError(f"{option}: External Motion Interface Data goes with "
+                               "--mode pathcorr (joint and pose targets use \"default\")")
+        return None
+    try:
+        return ExtMotion(args.ext_config, args.ext_kp, args.ext_bandwidth, args.ext_ramp,
+                         args.ext_speed_factor)
+    except ValueError as exc:
+        raise CommandError(str(exc)) from None
 
 
 def _source(args: argparse.Namespace):

@@ -3,6 +3,7 @@
 ::
 
     plugcell rsi files --out DIR --ip PC_IP [--port 49152] [--correction joint|cartesian]
+                       [--frame base|tool]
                        [--mode relative|absolute] [--cycle IPO_FAST|IPO] [--timeout 100]
                        [--max-step V,…] [--max-offset V,…] [--max-speed V,…] [--dio OUT]
                        [--dil IN] [--drives pc|robot] [--settle S]
@@ -39,6 +40,9 @@ def _stream_args(p: argparse.ArgumentParser) -> None:
     p.add_argument("--port", type=int, default=49152, help="the PC's UDP port (PORT)")
     p.add_argument("--correction", choices=("joint", "cartesian"), default="joint",
                    help="AKorr A1..A6 or RKorr X Y Z A B C (default joint)")
+    p.add_argument("--frame", choices=("base", "tool"), default="base",
+                   help="RKorr's frame, POSCORR's RefCorrSys: the base or the tool (TCP) "
+                   "frame (default base)")
     p.add_argument("--mode", choices=("relative", "absolute"), default="relative",
                    help="RSI_ON(#RELATIVE) or #ABSOLUTE (default relative)")
     p.add_argument("--cycle", choices=("IPO_FAST", "IPO"), default="IPO_FAST",
@@ -92,6 +96,7 @@ def _config(args: argparse.Namespace, robot_host: str, listen: str):
         limits = limits_of(args, args.correction)
         return RsiConfig(robot_host=robot_host, listen_host=listen, listen_port=args.port,
                          correction=args.correction, mode=args.mode, cycle=args.cycle,
+                         frame=args.frame,
                          timeout_packets=args.timeout, limits=limits, sentype=args.sentype,
                          outputs=(OutputSignal("DiO", 16),) if args.dio else ())
     except RsiConfigError as exc:
@@ -109,7 +114,9 @@ def _files(args: argparse.Namespace) -> int:
     if args.drives == "robot":
         print(f"then on the PC: plugcell serve robot --rsi {args.ip}:{args.port} --rsi-robot "
               f"CONTROLLER_IP --rsi-timeout {args.timeout} --param rsi_correction="
-              f"{args.correction} --param rsi_mode={args.mode}, and once RSI is on: "
+              f"{args.correction}"
+              + (f" --param rsi_frame={args.frame}" if args.correction == "cartesian" else "")
+              + f" --param rsi_mode={args.mode}, and once RSI is on: "
               f"plugcell call ROBOT CORRECT --data '[\"offset\", \"offset=X,Y,Z,A,B,C\"]'")
         return 0
     print(f"then on the PC: plugcell rsi run --robot-ip CONTROLLER_IP --port {args.port} "

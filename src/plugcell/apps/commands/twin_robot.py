@@ -4,14 +4,15 @@ RSI, or an ABB controller's EGM loop, standalone.
 ::
 
     plugcell twin rsi --port P [--ip 127.0.0.1] [--mode absolute|relative]
-                      [--correction joint|cartesian] [--cycle IPO_FAST|IPO] [--timeout 100]
+                      [--correction joint|cartesian [--frame base|tool]]
+                      [--cycle IPO_FAST|IPO] [--timeout 100]
                       [--bind HOST[:PORT]] [--robot R] [--seed S] [--payload-kg M]
                       [--joints Q1,…,Q6] [--lockstep S] [--reflector NAME [--cell C]]
-                      [--lin DX,DY,DZ … [--speed MM_S] [--path-delay S]]
-                      [--duration S] [--stats FILE]
+                      [--lin DX,DY,DZ … | --program FILE [--library DIR …]]
+                      [--speed MM_S] [--path-delay S] [--duration S] [--stats FILE]
     plugcell twin egm [--port 6510] [--ip 127.0.0.1] [--timeout 1.0] [--bind HOST[:PORT]]
-                      [--mode joint|pathcorr --lin DX,DY,DZ … [--speed MM_S]
-                      [--path-delay S]]
+                      [--mode joint|pathcorr (--lin DX,DY,DZ … | --program FILE
+                      [--library DIR …]) [--speed MM_S] [--path-delay S]]
                       [--robot R] [--seed S] [--payload-kg M] [--joints Q1,…,Q6]
                       [--reflector NAME [--cell C]] [--duration S] [--stats FILE]
 
@@ -25,9 +26,12 @@ with its own address when it streams, one summary line when it ends, and exits 0
 ``--duration`` or SIGTERM/SIGINT, 3 when RSI stopped at ``Timeout`` (the reason on
 stderr), 2 for bad options.  ``--lin`` gives the controller a program of its own (issue
 37's mode (b), *the robot drives, the PC corrects*: LIN moves between ``RSI_ON`` and
-``RSI_OFF``, :mod:`~plugcell.sim.controller.own_program`), on which the answers'
-corrections are superimposed; the summary then says whether the program ended and the
-largest shift of its TCP.  A tracker's look at that world (a query) gets the pose at
+``RSI_OFF``, :mod:`~plugcell.sim.controller.own_program`) and ``--program FILE`` one
+from a file (a path file as ``plugcell path run --path`` reads it, or a ``.pdl`` robot
+program's straight moves; the arm starts at its first point), on which the answers'
+corrections are superimposed; the summary then says whether the program ended, the
+largest shift of its TCP and how far its T-MAC truly is from where the program means it
+at the end.  A tracker's look at that world (a query) gets the pose at
 that instant.  ``--lockstep S`` waits up to S seconds for each answer: the
 arm then moves as with a real-time PC on a machine that is not one (``plugcell demo
 --link rsi``).  ``--reflector NAME`` publishes the arm's true T-MAC pose to
@@ -39,7 +43,8 @@ answer, ns; −1: unanswered) as JSON, for ``benchmarks/stream_in_service.py``.
 ``twin egm`` is the same twin behind an ABB controller's EGM loop in joint mode
 (:class:`~plugcell.sim.controller.egm_twin.TwinEgmRobot`: the feedback pose the nominal
 model's forward kinematics of the joints); ``--timeout`` is its ``\\CommTimeout`` (s).
-``--mode pathcorr --lin …`` is a controller running its own program with ``EGMMoveL``
+``--mode pathcorr --lin …`` (or ``--program FILE``) is a controller running its
+own program with ``EGMMoveL``
 (mode (b)) and the PC's path corrections added, on the dynamic twin
 (:class:`~plugcell.sim.controller.egm_twin.TwinEgmPathRobot`).
 """
@@ -84,8 +89,18 @@ def _side_options(r: argparse.ArgumentParser, common, what: str, default_port: i
                    help="the controller's own program (mode (b), the robot drives): a LIN "
                    "moving the TCP by DX,DY,DZ mm in the base frame; repeat for more moves "
                    "(default: it holds still and follows the PC)")
+    r.add_argument("--program", metavar="FILE",
+                   help="the controller's own program (mode (b)) from a file: a path file "
+                   "(plugcell path run --path's CSV) or a robot program's straight moves "
+                   "(.pdl); the arm starts at its first point")
+    r.add_argument("--library", action="append", default=[], metavar="DIR",
+                   help="folders of the libraries a .pdl --program imports")
+    r.add_argument("--calibration", metavar="PARAMS.json",
+                   help="with a program of its own: report how far the T-MAC truly is from "
+                   "where the program means it, in this calibration's frames (BASE, PROBE: "
+                   "what a tracker in the calibrated cell sees)")
     r.add_argument("--speed", type=float, default=100.0, metavar="MM_S",
-                   help="the LINs' TCP speed, mm/s (default 100)")
+                   help="the program's TCP speed, mm/s, where it gives none (default 100)")
     r.add_argument("--path-delay", type=float, default=1.0, metavar="S",
                    help=f"seconds the program waits at {start} before its LINs (default 1)")
     add_cell_args(r)
@@ -108,6 +123,9 @@ def add_robot_sides(tw: argparse._SubParsersAction, common, rsi, egm) -> None:
     _side_options(r, common, "the ethernet file's IP_NUMBER and PORT", None, "RSI_ON")
     r.add_argument("--correction", choices=("joint", "cartesian"), default="joint",
                    help="AKorr A1..A6 or RKorr X Y Z A B C (default joint)")
+    r.add_argument("--frame", choices=("base", "tool"), default="base",
+                   help="the Cartesian corrections' frame, POSCORR's RefCorrSys (default "
+                   "base)")
     r.add_argument("--mode", choices=("absolute", "relative"), default="absolute",
                    help="RSI_ON(#ABSOLUTE) or #RELATIVE (default absolute, what "
                    "plugcell serve robot --rsi streams)")
@@ -157,24 +175,49 @@ def _within_limits(arm):
     return arm
 
 
+def _arm_and_program(args: argparse.Namespace, scenario, q0, params=None):
+    """The arm and the controller's own program (``None``: none) of ``--lin`` or
+    ``--program`` (ValueError naming a bad option or the file's line)."""
+    from plugcell.sim.controller.own_program import linear_program, parse_lins, program_path
+    from plugcell.sim.twin.dynamics import DynamicTwin
+
+    if args.program and args.lin:
+        raise ValueError("--program or --lin: the controller runs one program")
+    if args.program and args.joints:
+        raise ValueError("--joints with --program: the program starts at its first point")
+    if args.library and not args.program:
+        raise ValueError("--library goes with a .pdl --program")
+    if getattr(args, "calibration", None) and not (args.program or args.lin):
+        raise ValueError("--calibration reports the error of a program of its own: give "
+                         "--lin or --program")
+    if not (np.isfinite(args.speed) and args.speed > 0):
+        raise ValueError(f"the TCP speed must be positive: --speed {args.speed} mm/s")
+    arm = _within_limits(DynamicTwin(scenario, params, q0=q0))
+    if args.program:
+        start, path = program_path(arm.twin.description, args.program, args.speed,
+                                   args.library)
+        return _within_limits(DynamicTwin(scenario, params, q0=start)), path
+    if args.lin:
+        return arm, linear_program(arm.twin.description, arm.measured, parse_lins(args.lin),
+                                   args.speed * 1e-3)
+    return arm, None
+
+
 def _rsi_side(args: argparse.Namespace, scenario):
     """The arm and its RSI side the options describe (CommandError on bad ones)."""
     from plugcell.apps.cli import CommandError
     from plugcell.devices.robot.rsi.config import CorrectionLimits, RsiConfig, RsiConfigError
-    from plugcell.sim.controller.own_program import linear_program, parse_lins
     from plugcell.sim.controller.rsi_robot import RsiRobot
-    from plugcell.sim.twin.dynamics import DynamicParameters, DynamicTwin
+    from plugcell.sim.twin.dynamics import DynamicParameters
 
     try:
         (host, port), bind, q0 = _parse_side(args)
         big = (1e3,) * 6  # the controller's AXISCORR/POSCORR limits are the sensor's here
         config = RsiConfig(robot_host=bind[0], listen_host=host, listen_port=port,
                            correction=args.correction, mode=args.mode, cycle=args.cycle,
+                           frame=args.frame,
                            timeout_packets=args.timeout, limits=CorrectionLimits(big, big, big))
-        arm = _within_limits(DynamicTwin(scenario, DynamicParameters(cycle=config.cycle_s),
-                                         q0=q0))
-        path = (linear_program(arm.twin.description, arm.measured, parse_lins(args.lin),
-                               args.speed * 1e-3) if args.lin else None)
+        arm, path = _arm_and_program(args, scenario, q0, DynamicParameters(cycle=config.cycle_s))
         return arm, RsiRobot(arm, config, bind=bind, lockstep_s=args.lockstep, path=path,
                              path_delay_s=args.path_delay if path else 0.0), config
     except (ValueError, RsiConfigError, OSError) as exc:
@@ -242,7 +285,9 @@ def _write_stats(path: str | None, cycles: int, answered: int, late: int,
                  rtts: list, stopped: str | None, **more: object) -> None:
     """``--stats FILE``: the counts, every packet's ``(sent, round trip)`` (ns; −1: no
     answer), why the robot side stopped (``null``: it did not) and ``more`` (``twin rsi
-    --lin``: ``shift_mm``, the corrections' shift of the program's TCP every 50 ms), as
+    --lin``/``--program``: ``shift_mm``, the corrections' shift of the program's TCP, and
+    ``path_done``, whether the program had ended, and with ``--calibration``
+    ``error_mm``, the T-MAC's true error from where the program means it, every 50 ms), as
     JSON."""
     if path:
         import json
@@ -264,11 +309,65 @@ def _scenario_of(args: argparse.Namespace, scenario, what: str):
         raise CommandError(f"twin {what}: {exc}") from None
 
 
+class _PathWatch:
+    """What the controller's own program looks like from outside, every 50 ms: the
+    corrections' shift of its commanded TCP (mm) and, with ``--calibration``, the
+    T-MAC's true error from where the program means it in the calibration's frames (mm,
+    :func:`~plugcell.sim.controller.own_program.probe_error`)."""
+
+    def __init__(self, args: argparse.Namespace, arm, what: str) -> None:
+        from plugcell.apps.cli import CommandError
+
+        self.arm = arm
+        self.frames = None
+        if getattr(args, "calibration", None):
+            from plugcell.compensation import IdentifiedModel
+            from plugcell.devices.robot.stream.correcting import load_calibration
+
+            try:
+                model = IdentifiedModel(load_calibration(args.calibration).model)
+            except ValueError as exc:
+                raise CommandError(f"twin {what}: {exc}") from None
+            self.frames = (model.base, model.tool)
+        self.shifts: list[list[float]] = []
+        self.errors: list[list[float]] = []
+        self.done: list[bool] = []
+
+    def look(self, shift, path_pose, tool, done: bool) -> None:
+        from plugcell.sim.controller.own_program import probe_error
+
+        self.done.append(bool(done))
+        self.shifts.append([float(v) for v in np.asarray(shift) * 1e3])
+        if self.frames is not None:
+            e = probe_error(self.arm, path_pose, tool, self.frames)
+            self.errors.append([float(v) for v in e * 1e3])
+
+    def stats(self) -> dict:
+        return {"shift_mm": self.shifts, "path_done": self.done,
+                **({"error_mm": self.errors} if self.frames is not None else {})}
+
+    def summary(self, done: bool) -> str:
+        """``, path done, largest shift S mm[, T-MAC error 0.5 s after the path ended E1 mm,
+        at the end E2 mm]``."""
+        error = ""
+        if self.errors:
+            ended = [i for i, d in enumerate(self.done) if d]  # looked at every 50 ms
+            after = ""
+            if ended:
+                e = self.errors[min(ended[0] + 10, len(self.errors) - 1)]
+                after = f" 0.5 s after the path ended {np.linalg.norm(e):.3f} mm,"
+            error = f", T-MAC error{after} at the end {np.linalg.norm(self.errors[-1]):.3f} mm"
+        return (f", path {'done' if done else 'not done'}, largest shift "
+                f"{max((np.linalg.norm(s) for s in self.shifts), default=0.0):.3f} mm"
+                + error)
+
+
 def run_rsi(args: argparse.Namespace, scenario) -> int:
     """Run ``twin rsi`` (module docstring) for the twin ``scenario`` (a TwinScenario)."""
     from plugcell.sim.controller.own_program import path_shift
 
     arm, robot, config = _rsi_side(args, _scenario_of(args, scenario, "rsi"))
+    watch = _PathWatch(args, arm, "rsi")
     world = _World(args, arm, "rsi")
     world.start()
     robot.start()
@@ -276,13 +375,14 @@ def run_rsi(args: argparse.Namespace, scenario) -> int:
     print(f"twin rsi: {arm.twin.description.name} streaming RSI ({config.correction}, "
           f"{config.mode}, {config.cycle}) from {h}:{pt} to {config.listen_host}:"
           f"{config.listen_port}", flush=True)
-    shifts: list[list[float]] = []
+    own = bool(args.lin or args.program)  # the controller runs a program of its own
 
     def offset() -> np.ndarray:
-        if args.lin:  # the program's own path: how far the corrections moved its TCP
+        if own:
             k, q = robot.setpoint
-            shifts.append([float(v) for v in path_shift(arm.twin.description, q,
-                                                        robot.path_poses[k]) * 1e3])
+            T_p = robot.path_poses[k]
+            watch.look(path_shift(arm.twin.description, q, T_p), T_p, robot.tool,
+                       k >= len(robot.path_poses) - 1)
         return robot.offset
 
     peak = _until_stopped(args, lambda: robot.running, offset)
@@ -290,10 +390,8 @@ def run_rsi(args: argparse.Namespace, scenario) -> int:
     world.close()
     st = robot.stats()
     _write_stats(args.stats, st.cycles, st.answered, st.delay, robot.rtts, robot.stopped,
-                 shift_mm=shifts)
-    path = (f", path {'done' if robot.path_done else 'not done'}, largest shift "
-            f"{max((np.linalg.norm(s) for s in shifts), default=0.0):.3f} mm"
-            if args.lin else "")
+                 **watch.stats())
+    path = watch.summary(robot.path_done) if own else ""
     print(f"twin rsi: {st.cycles} cycles, {st.answered} answered, Delay {st.delay}, "
           f"{_largest(peak, config.correction)}{path}", flush=True)
     if robot.stopped:
@@ -306,53 +404,50 @@ def run_egm(args: argparse.Namespace, scenario) -> int:
     """Run ``twin egm`` (module docstring) for the twin ``scenario`` (a TwinScenario)."""
     from plugcell.apps.cli import CommandError
     from plugcell.sim.controller.egm_twin import TwinEgmPathRobot, TwinEgmRobot
-    from plugcell.sim.controller.own_program import linear_program, parse_lins
-    from plugcell.sim.twin.dynamics import DynamicTwin
 
     scenario = _scenario_of(args, scenario, "egm")
     try:
         sensor, bind, q0 = _parse_side(args)
         if not (args.timeout > 0):
             raise ValueError(f"--timeout must be positive seconds, not {args.timeout}")
-        arm = _within_limits(DynamicTwin(scenario, q0=q0))
+        arm, path = _arm_and_program(args, scenario, q0)
         start = arm.measured.copy()
         if args.mode == "pathcorr":
-            if not args.lin:
+            if path is None:
                 raise ValueError("--mode pathcorr runs the controller's own program: give "
-                                 "it with --lin DX,DY,DZ")
-            path = linear_program(arm.twin.description, arm.measured, parse_lins(args.lin),
-                                  args.speed * 1e-3)
+                                 "it with --lin DX,DY,DZ or --program FILE")
             robot = TwinEgmPathRobot(arm, sensor, path, path_delay_s=args.path_delay,
                                      comm_timeout_s=args.timeout, bind=bind)
-        elif args.lin:
-            raise ValueError("--lin is the controller's own program of --mode pathcorr "
-                             "(EGMRunJoint follows the PC)")
+        elif path is not None:
+            given = "--program" if args.program else "--lin"
+            raise ValueError(f"{given} is the controller's own program of --mode pathcorr "
+                             f"(EGMRunJoint follows the PC)")
         else:
             robot = TwinEgmRobot(arm, sensor, comm_timeout_s=args.timeout, bind=bind)
     except (ValueError, OSError) as exc:
         raise CommandError(f"twin egm: {exc}") from None
+    watch = _PathWatch(args, arm, "egm")
     world = _World(args, arm, "egm")
     world.start()
     robot.start()
     h, pt = robot.address
     print(f"twin egm: {arm.twin.description.name} streaming EGM ({args.mode}) from {h}:{pt} "
           f"to {sensor[0]}:{sensor[1]}", flush=True)
-    shifts: list[list[float]] = []
-
     def moved() -> np.ndarray:
         if args.mode != "pathcorr":
             return robot.state()["joints"] - start
-        shifts.append([float(v) for v in robot.shift() * 1e3])
+        watch.look(robot.shift(),  # the program's pose only for the error (an FK)
+                   robot.path_pose() if watch.frames is not None else None,
+                   arm.twin.description.tool, robot.path_done)
         return np.concatenate([robot.state()["correction"], np.zeros(3)])
 
     peak = _until_stopped(args, lambda: robot.stopped is None, moved)
     robot.stop()
     world.close()
     _write_stats(args.stats, robot.sent, robot.answers, robot.unanswered, robot.rtts,
-                 robot.stopped, **({"shift_mm": shifts} if shifts else {}))
+                 robot.stopped, **(watch.stats() if args.mode == "pathcorr" else {}))
     largest = (_largest(peak, "cartesian").replace("correction", "path correction")
-               + f", path {'done' if robot.path_done else 'not done'}, largest shift "
-               f"{max((np.linalg.norm(s) for s in shifts), default=0.0):.3f} mm"
+               + watch.summary(robot.path_done)
                if args.mode == "pathcorr" else
                _largest(peak, "joint").replace("correction", "move"))
     print(f"twin egm: {robot.sent} samples, {robot.answers} answers, {robot.unanswered} "

@@ -22,7 +22,9 @@ correction at the path's joints, every cycle) and ``external`` (the offset comes
 ``CORRECT_SET``).  Keys of every source: ``frame=base|tool|joints|path`` (default: the
 stream's own — base for RSI joint or base-frame corrections, tool for tool-frame ones,
 path for EGM), ``ramp=S`` (0.5 s, in and out), ``duration=S`` (then the ramp out;
-default: until ``CORRECT_END``), ``payload_kg=M`` (compensation).  It ends with zero
+default: until ``CORRECT_END``), ``payload_kg=M`` (compensation), ``tcp=X,Y,Z,A,B,C``
+(mm, degrees: the controller's TCP, KUKA's ``$TOOL``, when it is not the description's
+tool — the point Cartesian corrections move).  It ends with zero
 corrections (relative) or the offset ramped back to zero (absolute).  Units: mm and
 degrees here, SI inside (:mod:`plugcell.io.units`).
 """
@@ -61,7 +63,7 @@ CORRECT_COMMANDS = (
 )
 #: How often a waiting command looks at the correction (s).
 POLL_S = 0.02
-_KEYS = ("offset", "frame", "ramp", "duration", "calibration", "payload_kg")
+_KEYS = ("offset", "frame", "ramp", "duration", "calibration", "payload_kg", "tcp")
 
 
 def _scale(frame: str) -> np.ndarray:
@@ -164,7 +166,9 @@ class PathCorrections:
             max_offset=tuple(space_limit), robot=self.robot,
             calibration=keys.get("calibration", ""),
             payload_kg=(_number(keys["payload_kg"], "payload_kg") if "payload_kg" in keys
-                        else None))
+                        else None),
+            tcp=(tuple(_numbers(keys["tcp"], "tcp", 6) * _scale("base")) if "tcp" in keys
+                 else None))
 
     def _limit(self, frame: str) -> np.ndarray:
         """The largest correction per axis in ``frame``'s robot units (mm, °)."""

@@ -47,14 +47,15 @@ __all__ = ["STREAM_PARAMS", "streamed_link"]
 #: The robot service's options of a streamed robot (``--param KEY=VALUE``): name → parser.
 STREAM_PARAMS: dict[str, Callable[[str], Any]] = {
     "rsi": str, "rsi_robot": str, "rsi_timeout": int, "rsi_correction": str, "rsi_mode": str,
-    "egm": str, "egm_robot": str, "egm_timeout": float, "egm_mode": str,
+    "rsi_frame": str, "egm": str, "egm_robot": str, "egm_timeout": float, "egm_mode": str,
     "stream_process": flag, "joint_speed": float, "tcp_speed": float,
     "correct_max_mm": float, "correct_max_deg": float}
 
 
 def streamed_link(handler: BridgeHandler, *, robot: str, library: Sequence[Path], name: str,
                   rsi: str = "", rsi_robot: str = "", rsi_timeout: int = 100,
-                  rsi_correction: str = "joint", rsi_mode: str = "absolute", egm: str = "",
+                  rsi_correction: str = "joint", rsi_mode: str = "absolute",
+                  rsi_frame: str = "base", egm: str = "",
                   egm_robot: str = "", egm_timeout: float = 1.0, egm_mode: str = "joint",
                   joint_speed: float = 20.0, tcp_speed: float = 100.0,
                   stream_process: bool = True, correct_max_mm: float = 5.0,
@@ -71,11 +72,13 @@ def streamed_link(handler: BridgeHandler, *, robot: str, library: Sequence[Path]
         Folders of robot programs.
     name : str
         The service's name.
-    rsi, rsi_robot, rsi_timeout, rsi_correction, rsi_mode
+    rsi, rsi_robot, rsi_timeout, rsi_correction, rsi_mode, rsi_frame
         RSI: ``HOST:PORT`` where plugcell receives the controller's packets (the ethernet
         file's ``IP_NUMBER:PORT``), the controller's ``HOST[:PORT]`` (empty: the ``rsi``
         host unless a wildcard), the ETHERNET object's ``Timeout`` (cycles), ``joint`` or
-        ``cartesian`` corrections, ``absolute`` or ``relative`` (the controller's files).
+        ``cartesian`` corrections, ``absolute`` or ``relative``, and the Cartesian
+        corrections' frame, ``base`` or ``tool`` (POSCORR's ``RefCorrSys``; the
+        controller's files).
     egm, egm_robot, egm_timeout, egm_mode
         EGM: ``HOST:PORT`` where plugcell receives ``EgmRobot`` (the UDP unit device's
         remote address), the controller's ``HOST[:PORT]``, ``EGMSetupUC``'s
@@ -116,7 +119,7 @@ def streamed_link(handler: BridgeHandler, *, robot: str, library: Sequence[Path]
              "robot_port": robot_port}
     config: RsiConfig | EgmConfig = (
         RsiConfig(**where, correction=rsi_correction, mode=rsi_mode,  # type: ignore[arg-type]
-                  timeout_packets=rsi_timeout)
+                  frame=rsi_frame, timeout_packets=rsi_timeout)  # type: ignore[arg-type]
         if rsi else EgmConfig(**where, mode=egm_mode,  # type: ignore[arg-type]
                               comm_timeout_s=egm_timeout))
     if config.joint_targets:

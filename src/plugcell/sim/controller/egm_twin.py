@@ -127,6 +127,10 @@ class TwinEgmPathRobot(TwinEgmRobot):
         T_p = self._pose_matrix(self._path[k])
         return path_shift(self.description, q, T_p)
 
+    def path_pose(self) -> Array:
+        """The program's own nominal TCP pose now, without the corrections (F0, 4×4)."""
+        return self._pose_matrix(self._path[self.path_index])
+
     def _pose_matrix(self, q: Array) -> Array:
         from plugcell.kinematics import forward
 

@@ -5,13 +5,18 @@ motion program — a KRL program's ``LIN`` moves between ``RSI_ON`` and ``RSI_OF
 the PC superimposes corrections.  :func:`linear_program` plans such a program for the
 twin's controller (:class:`~.rsi_robot.RsiRobot`'s ``path``): straight lines from where
 the arm stands, each given as a displacement of the TCP in the base frame, at a TCP
-speed, with the controller's nominal model; :func:`path_shift` is what the corrections
-did to it at this instant — the controller's commanded TCP minus its program's.
+speed, with the controller's nominal model; :func:`program_path` plans a path file
+(``plugcell path run``'s CSV, :mod:`plugcell.io.path_files`) or the straight moves of a
+robot program (``.pdl``, :mod:`plugcell.sim.path_program`) instead; :func:`path_shift`
+is what the corrections did to it at this instant — the controller's commanded TCP
+minus its program's; :func:`probe_error` is how far the arm truly is
+from where the program means it.
 """
 
 from __future__ import annotations
 
 from collections.abc import Sequence
+from pathlib import Path
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -26,7 +31,7 @@ from plugcell.motion import (
     plan,
 )
 
-__all__ = ["linear_program", "parse_lins", "path_shift"]
+__all__ = ["linear_program", "parse_lins", "path_shift", "probe_error", "program_path"]
 
 Array = NDArray[np.float64]
 
@@ -102,3 +107,84 @@ def path_shift(desc: RobotDescription, command: ArrayLike, path_pose: ArrayLike)
     the nominal TCP of the commanded joints minus the program's own nominal TCP."""
     T = forward(desc, None, np.asarray(command, dtype=float), "nominal").tcp
     return T[:3, 3] - np.asarray(path_pose, dtype=float)[:3, 3]
+
+
+def probe_error(arm, path_pose: ArrayLike, tool: ArrayLike,
+                frames: tuple[ArrayLike, ArrayLike]) -> Array:
+    """How far the T-MAC truly is from where the program means it now, in the tracker
+    frame (m, (3,)): ``BASE_t · T_true · PROBE_t − BASE · T_path · tool⁻¹ · PROBE``, the
+    twin's true T-MAC minus the program's nominal TCP pose carried to the T-MAC and into
+    the tracker frame by a calibration's ``BASE`` and ``PROBE`` — what a laser tracker
+    in the calibrated cell sees, and what a compensation removes.  Simulators only.
+
+    Parameters
+    ----------
+    arm : DynamicTwin
+        The twin (its truth and its true flange now).
+    path_pose : (4, 4) array_like
+        The program's nominal TCP pose now (robot base frame, m).
+    tool : (4, 4) array_like
+        The controller's TCP in the flange frame.
+    frames : tuple of two (4, 4) array_like
+        ``BASE`` (the robot base in the tracker frame) and ``PROBE`` (the T-MAC in the
+        flange frame) of a calibration.
+    """
+    base, probe = (np.asarray(f, dtype=float) for f in frames)
+    twin = arm.twin
+    true = twin.true_base() @ arm.true_flange() @ twin.reveal_truth().probe
+    meant = base @ np.asarray(path_pose, dtype=float) @ np.linalg.inv(
+        np.asarray(tool, dtype=float)) @ probe
+    return true[:3, 3] - meant[:3, 3]
+
+
+def program_path(desc: RobotDescription, file: str | Path, speed_mm_s: float,
+                 library: Sequence[str | Path] = ()) -> tuple[Array, Trajectory]:
+    """The controller's own program from a file: where it starts and its motion.
+
+    A ``.pdl`` file is a robot program whose straight moves make the path
+    (:func:`~plugcell.sim.path_program.path_of_program`, run on a recorder; every
+    segment at ``speed_mm_s``); any other file is a path file, ``plugcell path run
+    --path``'s CSV (:func:`~plugcell.io.path_files.read_path`; ``speed_mm_s`` where a row
+    gives none).  Both are planned as ``plugcell path run`` plans them
+    (:func:`~plugcell.sim.path_run.plan_path`: the nominal inverse kinematics of the first
+    point, LIN moves through the others at each segment's speed).
+
+    Parameters
+    ----------
+    desc : RobotDescription
+        The robot (its nominal model is the controller's).
+    file : str or Path
+        The path file or robot program.
+    speed_mm_s : float
+        The TCP speed where the file gives none (mm/s).
+    library : sequence of str or Path
+        Folders of the libraries a robot program imports.
+
+    Returns
+    -------
+    ndarray, shape (6,)
+        The joints at the first point (rad): where the arm stands at the start.
+    Trajectory
+        The program.
+
+    Raises
+    ------
+    ValueError
+        A file that does not read (its name, the line and why), a program that fails, a
+        point out of reach or a move the planner refuses (the line and why).
+    """
+    from plugcell.io.path_files import read_path
+    from plugcell.sim.path_program import path_of_program
+    from plugcell.sim.path_run import plan_path
+
+    name = str(file)
+    try:
+        path = (path_of_program(file, desc, speed_mm_s, library)[0] if name.endswith(".pdl")
+                else read_path(file, speed_mm_s=speed_mm_s))
+    except OSError as exc:
+        raise ValueError(f"{name}: cannot read: {exc.strerror or exc}") from None
+    try:
+        q0, trajectory = plan_path(desc, path)
+    except ValueError as exc:
+        raise ValueError(f"{name}: {exc}") from None
+    return np.asarray(q0, dtype=float), trajectory

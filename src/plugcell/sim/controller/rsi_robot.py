@@ -58,7 +58,8 @@ from plugcell.devices.robot.rsi.codec import PacketError, encode_rob, parse_sen
 from plugcell.devices.robot.rsi.config import RsiConfig
 from plugcell.kinematics import forward
 from plugcell.kinematics.jacobian import manipulator_jacobian
-from plugcell.kinematics.rotations import matrix_to_rpy, rpy_to_matrix
+from plugcell.kinematics.pose_corrections import correct_pose
+from plugcell.kinematics.rotations import matrix_to_rpy
 from plugcell.kinematics.transforms import so3_log
 from plugcell.motion import Trajectory
 from plugcell.sim.twin.dynamics import DynamicTwin
@@ -240,6 +241,11 @@ class RsiRobot:
         return self._T_path
 
     @property
+    def tool(self) -> Array:
+        """The controller's TCP in the flange frame (``$TOOL``)."""
+        return self._desc.tool
+
+    @property
     def path_index(self) -> int:
         """The path's cycle whose setpoint is commanded now."""
         return self._k
@@ -383,17 +389,7 @@ class RsiRobot:
 
     def _target_pose(self) -> Array:
         """The path's pose corrected by the offset in the configured frame (module doc)."""
-        o = self._offset
-        Tp = self._T_path[self._k]
-        Ro = rpy_to_matrix(o[5], o[4], o[3])
-        T = Tp.copy()
-        if self.config.frame == "tool":
-            T[:3, 3] += Tp[:3, :3] @ o[:3]
-            T[:3, :3] = Tp[:3, :3] @ Ro
-        else:
-            T[:3, 3] += o[:3]
-            T[:3, :3] = Ro @ Tp[:3, :3]
-        return T
+        return correct_pose(self._T_path[self._k], self._offset, self.config.frame)
 
     def _follow_pose(self, T: Array, q: Array) -> Array:
         """One chord Newton step of the nominal model from ``q`` towards ``T``."""

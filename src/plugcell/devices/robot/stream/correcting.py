@@ -10,12 +10,20 @@ value that crosses a process boundary (the link may run in a child process,
     a constant ``g`` — a seam offset, a measured shift;
 ``compensation``
     a calibration's compensation, as the thesis's (6.5.1) but continuously: at every
-    cycle the joints ``q`` of the controller's own path (``q = q_set − o``, the packet's
-    set-point joints less the offset commanded so far), the nominal pose ``T_n(q)`` the
-    controller meant, and one Newton step of eq. 4.11 on the identified model from the
-    last cycle's answer, ``Δq ← Δq + J_id(q + Δq)⁺ · e(T_n(q), T_id(q + Δq))`` — so
-    ``T_id(q + Δq) → T_n(q)``: the arm is where the program says (the step converges in a
-    few cycles and follows the path after, its change per cycle being the path's);
+    cycle the joints ``q`` of the controller's own path (joint corrections: ``q = q_set −
+    o``, the packet's set-point joints less the offset commanded so far; Cartesian ones:
+    the nominal inverse kinematics of the set-point pose with the offset taken off), the
+    nominal pose ``T_n(q)`` the controller meant, and one Newton step of eq. 4.11 on the
+    identified model from the last cycle's answer, ``Δq ← Δq + J_id(q + Δq)⁺ · e(T_n(q),
+    T_id(q + Δq))`` — so ``T_id(q + Δq) → T_n(q)``: the arm is where the program says (the
+    step converges in a few cycles and follows the path after, its change per cycle being
+    the path's).  Sent as the stream's corrections: joints ``Δq``; RSI ``RKorr`` the exact
+    Cartesian correction that makes the controller command ``q + Δq``,
+    ``o = pose_correction(T_c(q), T_c(q + Δq))`` at its TCP in its frame
+    (:mod:`plugcell.kinematics.pose_corrections`); EGM's path correction the shift of the
+    compensated point, ``p(q + Δq) − p(q)`` — the controller keeps the orientation, so
+    the rotation ``log(R(q + Δq) R(q)ᵀ)`` stays uncorrected (reported by
+    :meth:`Corrector.status`);
 ``external``
     ``g`` is whatever was last given to :meth:`Corrector.set_offset` — the hook of a
     tracker's correction loop or any other sensor, from any thread.
@@ -46,8 +54,8 @@ from .drive import setpoint_base
 from .errors import StreamLinkError
 from .source import CycleState, PathOffset
 
-__all__ = ["SOURCES", "CorrectionSpec", "Corrector", "Superimposed", "correction_space",
-           "make_source"]
+__all__ = ["SOURCES", "CorrectionSpec", "Corrector", "Superimposed", "controller_model",
+           "correction_space", "load_calibration", "make_source"]
 
 Array = NDArray[np.float64]
 
@@ -85,6 +93,10 @@ class CorrectionSpec:
         ``compensation``: the payload (default the calibration's reference payload).
     timeout_s : float
         The longest a correction may run (s).
+    tcp : tuple of 6 float or None
+        The controller's TCP in the flange frame (KUKA's ``$TOOL``: x, y, z in m and A, B,
+        C in rad, ``R = Rz(A)·Ry(B)·Rx(C)``) where it is not the robot description's
+        tool: the point a Cartesian correction moves (``None``: the description's).
     """
 
     source: str
@@ -97,8 +109,14 @@ class CorrectionSpec:
     calibration: str = ""
     payload_kg: float | None = None
     timeout_s: float = 24 * 3600.0
+    tcp: tuple[float, ...] | None = None
 
     def __post_init__(self) -> None:
+        if self.tcp is not None:
+            t = np.asarray(self.tcp, dtype=float).reshape(-1)
+            if t.shape != (6,) or not np.isfinite(t).all():
+                raise ValueError(f"tcp: six finite numbers, got {self.tcp!r}")
+            object.__setattr__(self, "tcp", tuple(float(x) for x in t))
         if self.source not in SOURCES:
             raise ValueError(f"unknown correction source {self.source!r}: one of "
                              f"{', '.join(SOURCES)}")
@@ -138,10 +156,28 @@ def correction_space(config: Any) -> str:
     return "joints" if config.correction == "joint" else str(config.frame)
 
 
+def controller_model(robot: str, tcp: Any = None) -> Any:
+    """The controller's nominal model: the robot's description, its tool the controller's
+    TCP ``tcp`` (x, y, z in m, KUKA's A, B, C in rad) if given."""
+    import dataclasses
+
+    from plugcell.io.robots import load_robot
+    from plugcell.kinematics.rotations import rpy_to_matrix
+
+    desc = load_robot(robot)
+    if tcp is None:
+        return desc
+    t = np.asarray(tcp, dtype=float)
+    T = np.eye(4)
+    T[:3, :3] = rpy_to_matrix(t[5], t[4], t[3])
+    T[:3, 3] = t[:3]
+    return dataclasses.replace(desc, tool=T)
+
+
 class _InSpace:
     """``g`` of a frame brought into the stream's space, at the cycle's path joints."""
 
-    def __init__(self, frame: str, space: str, robot: str) -> None:
+    def __init__(self, frame: str, space: str, robot: str, tcp: Any = None) -> None:
         if frame == space:
             self.convert = None
             return
@@ -150,9 +186,7 @@ class _InSpace:
             raise ValueError(f"an offset in the {frame} frame cannot be sent as this "
                              f"stream's corrections ({_space_text(space)}): give it in "
                              f"{frames} frame")
-        from plugcell.io.robots import load_robot
-
-        self.desc = load_robot(robot)
+        self.desc = controller_model(robot, tcp)
         self.tool = frame == "tool"
         self.convert = self._joints
 
@@ -186,41 +220,132 @@ def _path_joints(state: CycleState) -> Array:
     return q
 
 
+def load_calibration(path: str) -> Any:
+    """The calibration (a :class:`~plugcell.calibration.result.CalibrationResult`) of a
+    PARAMS.json written by ``plugcell calibrate``.
+
+    Raises
+    ------
+    ValueError
+        The file cannot be read, or is no plugcell calibration: the file and why.
+    """
+    import json
+
+    from plugcell.io.params import result_from_params
+    from plugcell.io.robots import description_of_params
+
+    try:
+        with open(path, encoding="utf-8") as f:
+            d = json.load(f)
+        return result_from_params(d, description_of_params(d, path), check_robot=False)
+    except OSError as exc:
+        raise ValueError(f"calibration {path}: cannot read: {exc.strerror or exc}") from None
+    except Exception as exc:  # not JSON, not a plugcell calibration: say which
+        raise ValueError(f"calibration {path}: not a plugcell calibration: "
+                         f"{type(exc).__name__}: {exc}") from None
+
+
+#: Newton steps of the path's joints from the set-point (:meth:`_Compensation._newton`),
+#: and the pose error (m and rad in one 6-vector) they stop at.
+IK_STEPS, IK_TOL = 6, 1e-10
+
+
 class _Compensation:
-    """``g(state)`` of a calibration's compensation (module docstring), joints (rad)."""
+    """``g(state)`` of a calibration's compensation (module docstring) in the stream's
+    space: joints (rad); a Cartesian correction in the base or the tool frame (m, rad,
+    KUKA's A, B, C); or EGM's path correction (m; :attr:`uncorrected` the rotation it
+    cannot carry)."""
 
-    def __init__(self, spec: CorrectionSpec) -> None:
-        import json
-
+    def __init__(self, spec: CorrectionSpec, space: str) -> None:
         from plugcell.compensation import IdentifiedModel, NominalModel
-        from plugcell.io.params import result_from_params
-        from plugcell.io.robots import description_of_params
 
-        path = spec.calibration
-        try:
-            with open(path, encoding="utf-8") as f:
-                d = json.load(f)
-            result = result_from_params(d, description_of_params(d, path), check_robot=False)
-        except OSError as exc:
-            raise ValueError(f"calibration {path}: cannot read: {exc.strerror or exc}") from None
-        except Exception as exc:  # not JSON, not a plugcell calibration: say which
-            raise ValueError(f"calibration {path}: not a plugcell calibration: "
-                             f"{type(exc).__name__}: {exc}") from None
+        result = load_calibration(spec.calibration)
         self.model = IdentifiedModel(result.model)
         self.nominal = NominalModel(self.model.description, tool=self.model.tool)
         self.payload = (result.model.payload_ref_kg if spec.payload_kg is None
                         else spec.payload_kg)
+        self.space = space
+        #: the controller's nominal model and TCP (Cartesian spaces)
+        self.controller = (None if space == "joints"
+                           else controller_model(spec.robot, spec.tcp))
         self.dq = np.zeros(6)
+        #: the rotation (rotation vector, rad, base frame) a path correction leaves
+        #: uncorrected: the identified model's orientation error at the path's pose
+        self.uncorrected = np.zeros(3)
 
     def __call__(self, state: CycleState) -> Array:
         from plugcell.compensation import compensate_joints
 
-        q = _path_joints(state)
+        q = self._path_joints(state)
         T_n = self.nominal.evaluate(q)[0]
         step = compensate_joints(self.model, T_n, q + self.dq, self.payload, max_iterations=1,
                                  check_limits=False, raise_errors=False)
         self.dq = np.asarray(step.q, dtype=float).reshape(-1) - q
-        return self.dq
+        return self._in_space(q, q + self.dq)
+
+    def _tcp(self, q: Array) -> Array:
+        from plugcell.kinematics import forward
+
+        return forward(self.controller, None, q, "nominal").tcp
+
+    def _path_joints(self, state: CycleState) -> Array:
+        """The joints of the controller's own path this cycle: ``q_set − o`` (joints);
+        else the nominal inverse kinematics, from the set-point joints, of the set-point
+        pose ``T_n(q_set)`` with the offset so far taken off (:func:`uncorrect_pose`; EGM:
+        its position less the path correction, the path frame's axes the base frame's)."""
+        if self.space == "joints":
+            return _path_joints(state)
+        from plugcell.kinematics.pose_corrections import uncorrect_pose
+
+        robot = state.robot
+        q_set = robot.joints_setpoint if robot.joints_setpoint is not None else robot.joints
+        if q_set is None:
+            raise ValueError("the controller's packets carry no joints")
+        q_set = np.asarray(q_set, dtype=float)
+        T_set = self._tcp(q_set)
+        o = np.asarray(state.offset, dtype=float)
+        if self.space == "path":
+            T_p = T_set.copy()
+            T_p[:3, 3] -= o[:3]
+        else:
+            T_p = uncorrect_pose(T_set, o, self.space)
+        return self._newton(T_p, q_set)
+
+    def _newton(self, T: Array, q: Array) -> Array:
+        """The nominal model's joints of the pose ``T`` near ``q`` (a correction away):
+        Newton steps ``q ← q + J(q)⁺ e(T, T_c(q))`` until ``‖e‖ <`` :data:`IK_TOL`
+        (quadratic: two or three), cheaper than a full inverse kinematics each cycle."""
+        from plugcell.kinematics import forward
+        from plugcell.kinematics.jacobian import jacobian_from_fk
+        from plugcell.kinematics.transforms import so3_log
+
+        for _ in range(IK_STEPS):
+            fk = forward(self.controller, None, q, "nominal")
+            e = np.concatenate([T[:3, 3] - fk.tcp[:3, 3], so3_log(T[:3, :3] @ fk.tcp[:3, :3].T)])
+            if np.linalg.norm(e) < IK_TOL:
+                return q
+            J = jacobian_from_fk(self.controller, fk, "tcp")
+            q = q + np.linalg.lstsq(J, e, rcond=None)[0]
+        raise ValueError("the controller's path pose is out of the nominal model's reach "
+                         f"(no joints within {IK_TOL:g} of it near the set-point)")
+
+    def _in_space(self, q: Array, q_c: Array) -> Array:
+        """The correction that makes the controller command ``q_c`` instead of ``q``:
+        ``q_c − q`` (joints); ``o`` with ``correct_pose(T_n(q), o) = T_n(q_c)`` at the
+        controller's TCP (base, tool: exact); the compensated point's shift
+        ``p(q_c) − p(q)`` (path: a translation keeping the orientation moves every point
+        of the tool alike; the rotation ``log(R(q_c) R(q)ᵀ)`` is left, :attr:`uncorrected`)."""
+        if self.space == "joints":
+            return q_c - q
+        if self.space == "path":
+            from plugcell.kinematics.transforms import so3_log
+
+            T_a, T_b = self.nominal.evaluate(np.stack([q, q_c]))[0]
+            self.uncorrected = so3_log(T_b[:3, :3] @ T_a[:3, :3].T)
+            return np.concatenate([T_b[:3, 3] - T_a[:3, 3], np.zeros(3)])
+        from plugcell.kinematics.pose_corrections import pose_correction
+
+        return pose_correction(self._tcp(q), self._tcp(q_c), self.space)
 
 
 #: The interpreter's thread switch interval while a correction runs (s): the link's thread
@@ -316,6 +441,12 @@ class Superimposed:
         self.offset = state.offset
         return self.goal_now(state) if self._beside is None else self._beside.offer(state)
 
+    @property
+    def uncorrected(self) -> Array:
+        """The rotation an EGM path correction leaves uncorrected (rotation vector, rad,
+        base frame; zeros for every other correction)."""
+        return np.array(getattr(self._wanted, "uncorrected", np.zeros(3)), dtype=float)
+
     def close(self) -> None:
         """Stop computing ``g`` (the correction ended)."""
         if self._beside is not None:
@@ -339,12 +470,8 @@ def make_source(spec: CorrectionSpec, config: Any) -> Superimposed:
     """
     space = correction_space(config)
     if spec.source == "compensation":
-        if space != "joints":
-            raise ValueError(f"a compensation corrects joints; the stream sends "
-                             f"{_space_text(space)} (configure joint corrections: RSI "
-                             f"AKorr, rsi_correction=joint)")
-        return Superimposed(spec, space, _Compensation(spec), _InSpace("joints", space, ""))
-    in_space = _InSpace(spec.frame, space, spec.robot)
+        return Superimposed(spec, space, _Compensation(spec, space), _InSpace(space, space, ""))
+    in_space = _InSpace(spec.frame, space, spec.robot, spec.tcp)
     if space == "path" and any(spec.offset[3:]):
         raise ValueError("EGM path corrections carry a position only: A, B, C must be 0")
     if spec.frame == space:
@@ -469,8 +596,13 @@ class Corrector:
         return "" if self._outcome is None else self._outcome
 
     def status(self) -> tuple[float, Array]:
-        """The blend factor ``b`` of the last cycle, and the link's offset so far (SI)."""
+        """The blend factor ``b`` of the last cycle, and the link's offset so far (SI) —
+        for an EGM path correction (position only) its last three values are the rotation
+        left uncorrected (a compensation's; rotation vector, rad)."""
         running = self._running
         if running is None:
             return 0.0, np.zeros(6)
-        return running.source.blend, np.array(running.offset, dtype=float)
+        offset = np.array(running.offset, dtype=float)
+        if running.space == "path":
+            offset[3:] = running.uncorrected
+        return running.source.blend, offset

@@ -9,7 +9,8 @@ MODULE PlugcellEGM
     ! (or, to try the stream: plugcell egm run --robot-ip CONTROLLER_IP --port {{port}}
     !   --mode pathcorr).
     ! Teach p_start and p_end (and egm_tool, egm_wobj) for your cell first.  The
-    ! ExtConfigName "pathCorr" is a Motion > External Motion Interface Data entry.
+    ! ExtConfigName "{{ext_config}}" is a Motion > External Motion Interface Data entry
+    ! (MOC_plugcell.cfg: load it with the parameters).
     VAR egmident egm_id;
     VAR egmstate egm_state;
     ! the sensor frame in the tool frame: the path coordinates' origin
@@ -23,7 +24,7 @@ MODULE PlugcellEGM
         EGMGetId egm_id;
         egm_state := EGMGetState(egm_id);
         IF egm_state <= EGM_STATE_CONNECTED THEN
-            EGMSetupUC ROB_1, egm_id, "pathCorr", "{{device}}" \PathCorr \APTR \CommTimeout:={{timeout_s}};
+            EGMSetupUC ROB_1, egm_id, "{{ext_config}}", "{{device}}" \PathCorr \APTR \CommTimeout:={{timeout_s}};
         ENDIF
         EGMActMove egm_id, egm_sensor_frame \SampleRate:={{sample_ms}};
         ! the start of your path, without correction
