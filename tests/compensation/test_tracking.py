@@ -115,6 +115,45 @@ def test_the_limiter_reaches_a_constant_target_without_overshoot():
     assert values[-1] == pytest.approx(1e-3, abs=1e-12)
 
 
+@settings(max_examples=150, deadline=None)
+@given(moves=st.lists(st.tuples(st.floats(-5e-3, 5e-3, allow_nan=False),
+                                st.integers(1, 12)), min_size=2, max_size=150),
+       v=st.floats(1e-3, 0.05), a=st.floats(0.05, 5.0), c=st.floats(0.0, 3e-3))
+def test_the_limiter_holds_its_bounds_in_robot_time_when_cycles_are_skipped(moves, v, a, c):
+    """Updates ``n`` robot cycles apart (a loop that fell behind): speed and acceleration
+    of the outputs in robot time never exceed the bounds, nor the total (the old limiter,
+    one step a computed update, gave 40 µm after a gap of several cycles: an
+    acceleration of v/T in robot time, 2.5 m/s² for 10 mm/s at 4 ms)."""
+    lim = RateLimiter(T, [v], [a], [c])
+    prev_value, prev_speed = 0.0, 0.0
+    for x, n in moves:
+        value = lim.apply([x], cycles=n)[0]
+        speed = (value - prev_value) / (n * T)
+        assert abs(speed) <= v * (1 + 1e-9) + 1e-15
+        assert abs(speed - prev_speed) / (n * T) <= a * (1 + 1e-9) + 1e-12
+        assert abs(value) <= c + a * T * T / 8 * (1 + 1e-9) + 1e-18  # module docstring
+        prev_value, prev_speed = value, speed
+
+
+@settings(max_examples=60, deadline=None)
+@given(gaps=st.lists(st.integers(1, 20), min_size=300, max_size=300),
+       target=st.floats(-2e-3, 2e-3).filter(lambda x: abs(x) > 1e-6))
+def test_the_limiter_reaches_its_target_without_overshoot_whatever_cycles_are_skipped(
+        gaps, target):
+    lim = RateLimiter(T, [0.01], [0.5], [2e-3])
+    values = np.array([lim.apply([target], cycles=n)[0] for n in gaps])
+    # past the target by at most a/8 = a_max T²/8 (1 µm here: the module docstring)
+    assert np.all(values * np.sign(target) <= abs(target) + 0.5 * T * T / 8 * (1 + 1e-9))
+    assert values[-1] == pytest.approx(target, abs=1e-12)
+
+
+def test_the_limiter_refuses_a_bad_cycle_count():
+    lim = RateLimiter(T, [0.01], [0.5], [2e-3])
+    for bad in (0.5, 0.0, math.inf, math.nan):
+        with pytest.raises(ValueError, match="cycles must be a finite number ≥ 1, got"):
+            lim.apply([1e-3], cycles=bad)
+
+
 # -- the loop ---------------------------------------------------------------------------
 
 @pytest.fixture(scope="module")
@@ -188,6 +227,43 @@ def test_a_beam_break_holds_the_model_records_the_window_and_resumes(robot):
     s = TrackingSettings()
     assert np.abs(np.diff(x)).max() <= s.max_speed_m_s * T * (1 + 1e-9)
     assert np.abs(np.diff(x, 2)).max() <= s.max_accel_m_s2 * T * T * (1 + 1e-9)
+
+
+@settings(max_examples=20, deadline=None)
+@given(skips=st.lists(st.integers(0, 6), min_size=320, max_size=320),
+       jump=st.floats(-1.5e-3, 1.5e-3), seed=st.integers(0, 3))
+def test_the_loop_bounds_its_term_in_robot_time_when_it_skips_cycles(robot, skips, jump,
+                                                                      seed):
+    """A loop that fell behind (the robot service's on a loaded PC) is called for robot
+    cycles ``1 + skip`` apart; the residual jumps mid-run and the beam breaks: the tracker
+    term's speed and acceleration in robot time stay within the settings' bounds."""
+    model, q0 = robot
+    rng = np.random.default_rng(seed)
+    s = TrackingSettings()
+    loop = TrackingLoop(model, s)
+    Tp = model.evaluate(q0)[0][0]
+    ks = np.cumsum([1 + g for g in skips])
+    sample_t, out = 0.0, []
+    for k in ks:
+        t = k * T
+        ms = []
+        while sample_t + 0.003 <= t:
+            if 0.8 <= sample_t < 1.0:
+                ms.append(TrackerMeasurement(sample_t, None, True, "line_of_sight"))
+            else:
+                P = Tp.copy()
+                P[:3, 3] += [jump if sample_t > 0.5 else 0.0, 0.3e-3, 0.0]
+                P[:3, 3] += 60e-6 * rng.standard_normal(3)
+                ms.append(TrackerMeasurement(sample_t, P, True, "ok"))
+            sample_t += 1e-3
+        loop.add(ms)
+        out.append(loop.cycle(t, q0, Tp).tracker[:3])
+    c, dt = np.array(out), np.diff(ks * T)
+    u = np.diff(c, axis=0) / dt[:, None]
+    assert np.abs(u).max() <= s.max_speed_m_s * (1 + 1e-9)
+    acc = np.diff(u, axis=0) / dt[1:, None]
+    assert np.abs(acc).max() <= s.max_accel_m_s2 * (1 + 1e-9)
+    assert loop.stats.cycles == len(ks) and loop.windows  # the break was seen
 
 
 def test_a_silent_tracker_is_late_and_hold_names_the_reason(robot):

@@ -53,6 +53,10 @@ fresh — no sample ``ok`` within ``max_age_s`` (a beam break: the sample's stat
 why; a late or silent tracker) — so the path goes on with the model-based compensation
 alone; the window is recorded (:class:`HoldWindow`); after ``resume_s`` of good samples
 the filter restarts from them (the residual may have moved) and ``w`` fades back in.
+All of it runs in the robot's time: a cycle ``n`` robot cycles after the last one
+(a loop that fell behind skipped some) holds ``H``'s input over them, and the bounds
+scale the step with ``n`` while speed and acceleration stay bounded in robot time
+(:class:`~.limiter.RateLimiter`); in simulated time ``n`` is always 1.
 Without orientation samples (an SMR) or with ``correct_orientation=False`` only the
 position is corrected.  Blending the whole offset in and out at the path's start and end
 is the correction source's (:class:`~plugcell.devices.robot.stream.source.PathOffset`).
@@ -316,7 +320,7 @@ class TrackingLoop:
         self._joints = JointHistory(s.history_s)
         self._lock = threading.Lock()
         self._pending: deque[TrackerMeasurement] = deque()
-        self._paths: deque[Array] = deque(maxlen=3)
+        self._paths: deque[tuple[float, Array]] = deque(maxlen=3)
         self._lead_limiter = RateLimiter(s.cycle_s, [s.max_lead_speed_m_s] * 3,
                                          [s.max_lead_accel_m_s2] * 3,
                                          [s.max_lead_m] * 3)
@@ -375,6 +379,7 @@ class TrackingLoop:
         """
         s = self.settings
         Tp = np.asarray(T_path, dtype=float)
+        n = self._elapsed_cycles(t)
         self._joints.add(t, q)
         self.stats.cycles += 1
         fresh = self._take_samples() if self.tracking else False
@@ -390,14 +395,15 @@ class TrackingLoop:
         if self._rot.initialised and s.correct_orientation:
             xhat[3:] = self._rot.x
         smooth = np.nan_to_num(xhat)
-        if self._sos is not None and self.tracking:
-            out, self._sos_z = sosfilt(self._sos, smooth[None], axis=0, zi=self._sos_z)
-            smooth = out[0]
+        if self._sos is not None and self.tracking:  # held over skipped robot cycles
+            out, self._sos_z = sosfilt(self._sos, np.repeat(smooth[None], n, axis=0), axis=0,
+                                       zi=self._sos_z)
+            smooth = out[-1]
         goal = np.where(np.isfinite(xhat), w * smooth, 0.0) if self.tracking else np.zeros(6)
-        c = self._limiter.apply(goal)
+        c = self._limiter.apply(goal, n)
         if self._state == "tracking" and w >= 1.0:
             self.stats.tracking_cycles += 1
-        lead = self._lead(Tp)
+        lead = self._lead(t, Tp, n)
         T_tgt = Tp.copy()
         u = np.zeros(3) if self.learned is None else \
             np.asarray(self.learned(t), dtype=float).reshape(3)
@@ -495,17 +501,32 @@ class TrackingLoop:
         self._w = self._w_from + (self._w_to - self._w_from) * r
         return self._w
 
-    def _lead(self, Tp: Array) -> Array:
-        """``Δp_lead = v̂ τ + â τ²/2`` from the last three path positions, bounded."""
-        self._paths.append(Tp[:3, 3].copy())
+    def _elapsed_cycles(self, t: float) -> int:
+        """``n``: the robot cycles since the last :meth:`cycle` (1 when none was skipped,
+        as in simulated time; more when the loop fell behind on a loaded PC): the
+        bounds and filters run in the robot's time."""
+        last = self._joints.latest_time
+        if last is None:
+            return 1
+        return max(1, round((t - last) / self.settings.cycle_s))
+
+    def _lead(self, t: float, Tp: Array, n: int) -> Array:
+        """``Δp_lead = v̂ τ + â τ²/2`` from the last three path positions (their robot
+        times ``t_i``: ``v̂`` the last difference quotient, ``â`` the second divided
+        difference ``2 (v_2 − v_1)/(t_2 − t_0)``), bounded."""
+        self._paths.append((t, Tp[:3, 3].copy()))
         tau = self.settings.lead_s
         if tau == 0.0 or len(self._paths) < 3:
-            return self._lead_limiter.apply(np.zeros(3))
+            return self._lead_limiter.apply(np.zeros(3), n)
+        (t0, p0), (t1, p1), (t2, p2) = self._paths
         T = self.settings.cycle_s
-        p0, p1, p2 = self._paths
-        v = (p2 - p1) / T
-        a = (p2 - 2.0 * p1 + p0) / T ** 2
-        return self._lead_limiter.apply(v * tau + 0.5 * a * tau ** 2)
+        if round((t2 - t0) / T) == 2:  # no cycle skipped: as it always was computed
+            v = (p2 - p1) / T
+            a = (p2 - 2.0 * p1 + p0) / T ** 2
+        else:
+            v = (p2 - p1) / (t2 - t1)
+            a = 2.0 * (v - (p1 - p0) / (t1 - t0)) / (t2 - t0)
+        return self._lead_limiter.apply(v * tau + 0.5 * a * tau ** 2, n)
 
     def _feedforward(self, T_tgt: Array, q: Array) -> Array:
         """``e(T_nominal(q*), T_tgt)`` with ``q*`` the calibrated model's inverse, solved at
