@@ -190,22 +190,10 @@ class _Compensation:
     """``g(state)`` of a calibration's compensation (module docstring), joints (rad)."""
 
     def __init__(self, spec: CorrectionSpec) -> None:
-        import json
-
         from plugcell.compensation import IdentifiedModel, NominalModel
-        from plugcell.io.params import result_from_params
-        from plugcell.io.robots import description_of_params
+        from plugcell.devices.robot.calibration_file import read_calibration
 
-        path = spec.calibration
-        try:
-            with open(path, encoding="utf-8") as f:
-                d = json.load(f)
-            result = result_from_params(d, description_of_params(d, path), check_robot=False)
-        except OSError as exc:
-            raise ValueError(f"calibration {path}: cannot read: {exc.strerror or exc}") from None
-        except Exception as exc:  # not JSON, not a plugcell calibration: say which
-            raise ValueError(f"calibration {path}: not a plugcell calibration: "
-                             f"{type(exc).__name__}: {exc}") from None
+        result = read_calibration(spec.calibration)
         self.model = IdentifiedModel(result.model)
         self.nominal = NominalModel(self.model.description, tool=self.model.tool)
         self.payload = (result.model.payload_ref_kg if spec.payload_kg is None
