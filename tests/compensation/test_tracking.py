@@ -370,3 +370,55 @@ def test_the_learned_offset_moves_the_target_with_or_without_the_tracker(robot):
         np.testing.assert_array_equal(out1.learned, u)
         # the nominal model is the controller's own: the offset is the learned one
         np.testing.assert_allclose(out1.offset[:3] - out0.offset[:3], u, atol=1e-9)
+
+
+# -- the loop's fast path equals the plain computations it replaced ----------------------
+
+def test_the_fast_output_filter_is_sosfilt():
+    from scipy.signal import butter, sosfilt
+
+    from plugcell.compensation.tracking.loop import _sos_step
+
+    sos = butter(2, 2.0, fs=250.0, output="sos")
+    x = np.random.default_rng(0).standard_normal((400, 6)) * 1e-4
+    want = sosfilt(sos, x, axis=0, zi=np.zeros((len(sos), 2, 6)))[0]
+    z = np.zeros((len(sos), 2, 6))
+    got = np.array([_sos_step(sos, z, xi) for xi in x])
+    np.testing.assert_allclose(got, want, rtol=0, atol=1e-18)
+
+
+def test_the_joint_history_interpolates_as_np_interp_over_all_it_keeps():
+    h = JointHistory(span_s=0.5)
+    rng = np.random.default_rng(1)
+    ts, qs = [], []
+    for k in range(1000):  # many compactions and one growth of its buffer
+        ts.append(k * T + 1e-4 * rng.random())
+        qs.append(rng.standard_normal(6))
+        h.add(ts[-1], qs[-1])
+        kept = [i for i in range(len(ts)) if ts[-1] - ts[i] <= 0.5]
+        assert len(h) == len(kept) and h.earliest_time == ts[kept[0]]
+        if k % 97 == 0 and len(kept) > 1:
+            probe = np.linspace(ts[kept[0]], ts[-1], 7)
+            Q = np.array([qs[i] for i in kept])
+            want = np.stack([np.interp(probe, [ts[i] for i in kept], Q[:, j])
+                             for j in range(6)], axis=-1)
+            np.testing.assert_array_equal(h.at(probe), want)
+
+
+def test_a_models_pose_is_its_evaluate_without_the_jacobian(robot):
+    from plugcell.calibration.identify import Calibrator
+    from plugcell.compensation import IdentifiedModel
+    from plugcell.sim.twin.campaign import measure_poses, working_volume_joints
+    from plugcell.sim.twin.robot import RobotTwin
+    from plugcell.sim.twin.scenario import TwinScenario
+    from plugcell.sim.twin.tracker import LaserTracker
+
+    model, q0 = robot
+    q = q0 + np.radians(np.random.default_rng(2).uniform(-10, 10, (5, 6)))
+    np.testing.assert_array_equal(model.pose(q), model.evaluate(q)[0])
+    twin = RobotTwin(TwinScenario(robot="smart_h4", seed=1, payload_kg=20.0))
+    qc = working_volume_joints(twin.description, twin.reveal_truth().profile, 40,
+                               np.random.default_rng(3))
+    ms, _ = measure_poses(twin, LaserTracker(seed=1), qc)
+    identified = IdentifiedModel(Calibrator(twin.description, 5).fit(ms).model)
+    np.testing.assert_array_equal(identified.pose(q, 20.0), identified.evaluate(q, 20.0)[0])

@@ -74,7 +74,7 @@ from dataclasses import dataclass, field, fields
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
-from scipy.signal import butter, sosfilt
+from scipy.signal import butter
 
 from plugcell.kinematics.pose_error import pose_error_exact
 from plugcell.kinematics.transforms import so3_exp, so3_log
@@ -307,7 +307,7 @@ class TrackingLoop:
         self.learned = learned
         self._sos = butter(2, s.output_cutoff_hz, fs=1.0 / s.cycle_s, output="sos") \
             if s.output_cutoff_hz > 0 else None
-        self._sos_z = np.zeros((1, 2, 6))
+        self._sos_z = np.zeros((len(self._sos) if self._sos is not None else 0, 2, 6))
         self._pos = ResidualFilter([s.position_drift] * 3, [s.position_noise_m] * 3,
                                    s.gate_sigma)
         self._rot = ResidualFilter([s.orientation_drift] * 3, [s.orientation_noise_rad] * 3,
@@ -317,6 +317,7 @@ class TrackingLoop:
             [s.max_accel_m_s2] * 3 + [s.max_accel_rad_s2] * 3,
             [s.max_correction_m] * 3 + [s.max_correction_rad] * 3)
         self._ramp = unit_ramp(s.fade_s)
+        self._ramp_end = self._ramp.duration
         self._joints = JointHistory(s.history_s)
         self._lock = threading.Lock()
         self._pending: deque[TrackerMeasurement] = deque()
@@ -396,9 +397,9 @@ class TrackingLoop:
             xhat[3:] = self._rot.x
         smooth = np.nan_to_num(xhat)
         if self._sos is not None and self.tracking:  # held over skipped robot cycles
-            out, self._sos_z = sosfilt(self._sos, np.repeat(smooth[None], n, axis=0), axis=0,
-                                       zi=self._sos_z)
-            smooth = out[-1]
+            for _ in range(n):
+                y = _sos_step(self._sos, self._sos_z, smooth)
+            smooth = y
         goal = np.where(np.isfinite(xhat), w * smooth, 0.0) if self.tracking else np.zeros(6)
         c = self._limiter.apply(goal, n)
         if self._state == "tracking" and w >= 1.0:
@@ -440,17 +441,17 @@ class TrackingLoop:
         if not good:
             return False
         ts = np.array([m.time_s for m in good])
-        T_model = self.model.evaluate(self._joints.at(ts), self.payload_kg)[0]
+        T_model = _poses(self.model, self._joints.at(ts), self.payload_kg)
         resume = self._state == "holding" and \
             self._good_since is not None and ts[0] <= self._good_since
         if resume:  # a new run of good samples after a hold: the residual may have moved
             self._pos.reset()
             self._rot.reset()
-        for m, Tm in zip(good, T_model, strict=True):
-            z = pose_error_exact(m.pose, Tm)
-            self._pos.update(m.time_s, z[:3])
+        z = pose_error_exact(np.stack([m.pose for m in good]), T_model)
+        for m, zm in zip(good, z, strict=True):
+            self._pos.update(m.time_s, zm[:3])
             if m.six_dof:
-                self._rot.update(m.time_s, z[3:])
+                self._rot.update(m.time_s, zm[3:])
         self.stats.samples_used += len(good)
         self._last_ok = float(ts[-1])
         return True
@@ -497,7 +498,8 @@ class TrackingLoop:
         """``w``: a jerk-limited ramp from its value to ``target`` over ``fade_s``."""
         if target != self._w_to:
             self._w_from, self._w_to, self._w_t0 = self._w, target, t
-        r = float(self._ramp.sample(t - self._w_t0).s)
+        r = 1.0 if t - self._w_t0 >= self._ramp_end else \
+            float(self._ramp.sample(t - self._w_t0).s)  # (1 exactly after the ramp's end)
         self._w = self._w_from + (self._w_to - self._w_from) * r
         return self._w
 
@@ -550,7 +552,29 @@ class TrackingLoop:
             self.stats.feedforward_failures += 1
             return self._ff
         self._q_ff = res.q[0]
-        T_nom = self.controller.evaluate(self._q_ff, self.payload_kg)[0][0]
+        T_nom = _poses(self.controller, self._q_ff, self.payload_kg)[0]
         self._ff = pose_error_exact(T_nom, T_tgt)
         anchors.append((p.copy(), self._ff))
         return self._ff
+
+
+def _poses(model: PoseModel, q: ArrayLike, payload_kg: float) -> Array:
+    """``T_model(q)`` (N, 4, 4): the model's ``pose`` when it has one (no Jacobian computed),
+    else the first result of ``evaluate``."""
+    pose = getattr(model, "pose", None)
+    return np.asarray(pose(q, payload_kg) if pose is not None else
+                      model.evaluate(q, payload_kg)[0])
+
+
+def _sos_step(sos: Array, z: Array, x: Array) -> Array:
+    """One sample of second-order sections in direct form II transposed, the state ``z``
+    (sections, 2, d) updated in place — :func:`scipy.signal.sosfilt`'s recursion per
+    section ``y = b0 x + z0``, ``z0 ← b1 x − a1 y + z1``, ``z1 ← b2 x − a2 y`` without its
+    call's overhead (a few µs instead of tens, each cycle)."""
+    y = x
+    for (b0, b1, b2, _, a1, a2), zs in zip(sos, z, strict=True):
+        xin = y
+        y = b0 * xin + zs[0]
+        zs[0] = b1 * xin - a1 * y + zs[1]
+        zs[1] = b2 * xin - a2 * y
+    return y

@@ -80,6 +80,7 @@ from plugcell.compensation.pose_model import IdentifiedModel, NominalModel, Pose
 from plugcell.compensation.tracking import TrackerMeasurement, TrackingLoop, TrackingSettings
 from plugcell.devices.robot.arm_model import matrix_from_position
 from plugcell.devices.robot.poses import pose_matrix
+from plugcell.devices.robot.stream.drive import samples as planned_samples
 from plugcell.devices.robot.stream.process import LinkProcess
 from plugcell.devices.robot.stream.source import CycleState
 from plugcell.devices.robot.tracking_clocks import CycleClock, OneWayClock
@@ -330,7 +331,8 @@ class TrackedMoves:
             feed = self.last_feed = self.feeds(tracker)
             feed.start()
             padded = _Settled(traj, self.settle_s)
-            adjust, worker = self._adjust(loop, feed, cycle_s)
+            adjust, worker = self._adjust(loop, feed, cycle_s,
+                                          planned_samples(padded, cycle_s))
             # simulated time across the process boundary: the link's child waits for each
             # cycle's correction (as the in-process hook computes it in the cycle)
             wait = {} if self.realtime or not isinstance(m.drive, LinkProcess) else \
@@ -369,14 +371,25 @@ class TrackedMoves:
             return NominalModel(self.motion.description, tool)
         return IdentifiedModel(self.calibration.model, tool)
 
-    def _adjust(self, loop: TrackingLoop, feed: TrackerFeed, cycle_s: float
+    def _adjust(self, loop: TrackingLoop, feed: TrackerFeed, cycle_s: float, q_plan: Array
                 ) -> tuple[Callable[[CycleState, int, Array], Array], _Worker | None]:
         """The drive's hook: the loop's offset of the cycle as joints (``realtime``: the
-        newest the worker has, the link's thread never waits for the loop)."""
+        newest the worker has, the link's thread never waits for the loop).  The planned
+        TCP poses and the controller's Jacobians at the move's samples ``q_plan`` (K+1, 6)
+        are computed once, vectorised, before the move: a cycle only looks them up."""
         desc = self.motion.description
         ramp = unit_ramp(max(self.ramp_s, cycle_s))
         record = self.last_record = []
         self.last_dropped = 0
+        fk_plan = forward(desc, None, q_plan, "nominal")
+        T_plan, J_plan = fk_plan.tcp, jacobian_from_fk(desc, fk_plan, "tcp")
+
+        def planned(k: int, q_k: Array) -> tuple[Array, Array]:
+            """``(T_p, J_n)`` at sample ``k`` (computed now if ``q_k`` is not the plan's)."""
+            if 0 <= k < len(q_plan) and np.array_equal(q_k, q_plan[k]):
+                return T_plan[k], J_plan[k]
+            fk = forward(desc, None, q_k, "nominal")
+            return fk.tcp, jacobian_from_fk(desc, fk, "tcp")
 
         def offset(state: CycleState, k: int, q_k: Array, pc: float) -> Array:
             samples = feed.poll(state.t, pc)
@@ -387,7 +400,7 @@ class TrackedMoves:
             if feed.failure and not record_held:
                 loop.hold(f"tracker stopped: {feed.failure}")
                 record_held.append(state.t)
-            T_path = forward(desc, None, q_k, "nominal").tcp
+            T_path = planned(k, q_k)[0]
             q_fb = state.robot.joints if state.robot.joints is not None else q_k
             out = loop.cycle(state.t, q_fb, T_path)
             blend = float(ramp.sample(k * cycle_s).s)
@@ -409,8 +422,7 @@ class TrackedMoves:
                 offset(state, k, q_k, pc)
             if not np.any(o):
                 return np.zeros(len(q_k))
-            J = jacobian_from_fk(desc, forward(desc, None, q_k, "nominal"), "tcp")
-            return np.linalg.lstsq(J, o, rcond=None)[0]
+            return np.linalg.lstsq(planned(k, q_k)[1], o, rcond=None)[0]
 
         return adjust, worker
 
