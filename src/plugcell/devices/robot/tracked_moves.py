@@ -35,9 +35,11 @@ the laser tracker's correction added every cycle (the drive's ``adjust`` hook):
 
 In real time the loop runs in a thread of its own beside the link (``_Worker``): each
 cycle hands it the newest state and takes the newest offset it has computed, so the
-loop's cost (milliseconds) never makes the link's answer late; its rate bounds, which
-count one step a call, are then the more conservative.  A loop that fell behind (a
-loaded PC) takes only the newest :data:`MAX_SAMPLES_PER_CYCLE` samples of a cycle.  In
+loop's cost never makes the link's answer late; its rate bounds hold in the robot's time
+(a loop call ``n`` robot cycles after the last steps ``n`` cycles' worth, its speed and
+acceleration bounded: :class:`~plugcell.compensation.tracking.RateLimiter`).  A loop that
+fell behind (a loaded PC) takes only the newest :data:`MAX_SAMPLES_PER_CYCLE` samples of a
+cycle.  In
 simulated time (``realtime=False``) each cycle runs the loop (with the link in its child
 process, the child waits for each cycle's correction).
 
