@@ -422,3 +422,24 @@ def test_a_models_pose_is_its_evaluate_without_the_jacobian(robot):
     ms, _ = measure_poses(twin, LaserTracker(seed=1), qc)
     identified = IdentifiedModel(Calibrator(twin.description, 5).fit(ms).model)
     np.testing.assert_array_equal(identified.pose(q, 20.0), identified.evaluate(q, 20.0)[0])
+
+
+def test_an_orientation_residual_is_corrected_when_asked(robot):
+    """``correct_orientation=True``: a tool turned 0.05° about z beyond the model is turned
+    back; without it only the position is corrected (the estimate's rotation is not kept)."""
+    from plugcell.kinematics.transforms import so3_exp
+
+    model, q0 = robot
+    Tp = model.evaluate(q0)[0][0]
+    phi = np.radians([0.0, 0.0, 0.05])
+    out = {}
+    for orient in (True, False):
+        loop = TrackingLoop(model, TrackingSettings(correct_orientation=orient))
+        for k in range(400):
+            P = Tp.copy()
+            P[:3, :3] = so3_exp(phi) @ Tp[:3, :3]
+            loop.add([TrackerMeasurement(k * T - 0.003, P, True, "ok")] if k else [])
+            out[orient] = loop.cycle(k * T, q0, Tp)
+    np.testing.assert_allclose(out[True].offset[3:], -phi, atol=2e-5)
+    np.testing.assert_allclose(out[True].offset[:3], 0.0, atol=1e-5)  # turned about the tool
+    assert np.all(np.isnan(out[False].residual[3:])) and not np.any(out[False].offset[3:])

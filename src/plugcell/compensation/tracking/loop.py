@@ -409,7 +409,8 @@ class TrackingLoop:
         u = np.zeros(3) if self.learned is None else \
             np.asarray(self.learned(t), dtype=float).reshape(3)
         T_tgt[:3, 3] += lead - c[:3] + u
-        T_tgt[:3, :3] = so3_exp(-c[3:]) @ Tp[:3, :3]
+        if np.any(c[3:]):  # (exp(0) = I: nothing to turn)
+            T_tgt[:3, :3] = so3_exp(-c[3:]) @ Tp[:3, :3]
         ff = self._feedforward(T_tgt, np.asarray(q, dtype=float))
         T_c = T_tgt.copy()
         T_c[:3, 3] += ff[:3]
@@ -447,10 +448,14 @@ class TrackingLoop:
         if resume:  # a new run of good samples after a hold: the residual may have moved
             self._pos.reset()
             self._rot.reset()
-        z = pose_error_exact(np.stack([m.pose for m in good]), T_model)
+        measured = np.stack([m.pose for m in good])
+        if self.settings.correct_orientation:
+            z = pose_error_exact(measured, T_model)
+        else:  # the position's part of it: the orientation's estimate would not be used
+            z = measured[:, :3, 3] - T_model[:, :3, 3]
         for m, zm in zip(good, z, strict=True):
             self._pos.update(m.time_s, zm[:3])
-            if m.six_dof:
+            if m.six_dof and self.settings.correct_orientation:
                 self._rot.update(m.time_s, zm[3:])
         self.stats.samples_used += len(good)
         self._last_ok = float(ts[-1])
