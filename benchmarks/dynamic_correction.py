@@ -256,8 +256,21 @@ def udp_timing(cell: TrackedCell, tau: float, beside: bool = False) -> dict:
     answer in time, and the share of answers that carried a new correction."""
     traj = cell.plan("line", 100.0, size_m=0.2)
     beside_feed: list[Beside] = []
+    wall_us: list[float] = []
+    cpu_us: list[float] = []
 
     def answer(feed: LogFeed) -> Beside | LogFeed:
+        loop = feed.source.loop
+        cycle = loop.cycle
+
+        def timed(*args):  # one iteration of the loop: its wall and its thread's CPU time
+            w0, c0 = time.perf_counter_ns(), time.thread_time_ns()
+            out = cycle(*args)
+            cpu_us.append((time.thread_time_ns() - c0) / 1e3)
+            wall_us.append((time.perf_counter_ns() - w0) / 1e3)
+            return out
+
+        loop.cycle = timed
         if not beside:
             return feed
         beside_feed.append(Beside(feed))
@@ -280,20 +293,26 @@ def udp_timing(cell: TrackedCell, tau: float, beside: bool = False) -> dict:
     return {"wire_ms": np.percentile(wire, [50, 99, 100]), "out_ms":
             np.percentile(out, [50, 99, 100]), "compute_ms": np.percentile(comp, [50, 99, 100]),
             "in_time": in_time, "fresh_robot": in_time * fresh_answers,
-            "fresh": loop.stats.fresh_cycles / max(loop.stats.cycles, 1), "cycles": st.cycles}
+            "fresh": loop.stats.fresh_cycles / max(loop.stats.cycles, 1), "cycles": st.cycles,
+            "iter_wall_us": np.percentile(wall_us, [50, 99]),
+            "iter_cpu_us": np.percentile(cpu_us, [50, 99])}
 
 
 def print_udp(runs: list[tuple[str, dict]]) -> None:
     print("\nthrough UDP on loopback, real time (a 0.2 m line at 100 mm/s):")
     print("| loop | cycles | sample → correction on the wire p50/p99/max ms | packet in → "
-          "answer out p50/p99/max ms | loop p50/p99/max ms | answers in time | robot cycles "
-          "with a fresh correction | loop cycles with a fresh estimate |")
-    print("|---|---:|---|---|---|---:|---:|---:|")
+          "answer out p50/p99/max ms | loop p50/p99/max ms | loop iteration p50/p99 µs "
+          "(wall; CPU) | answers in time | robot cycles with a fresh correction | loop "
+          "cycles with a fresh estimate |")
+    print("|---|---:|---|---|---|---|---:|---:|---:|")
     for name, u in runs:
         w, o, c = (" / ".join(f"{x:.2f}" for x in u[k]) for k in ("wire_ms", "out_ms",
                                                                    "compute_ms"))
-        print(f"| {name} | {u['cycles']} | {w} | {o} | {c} | {u['in_time'] * 100:.1f} % | "
-              f"{u['fresh_robot'] * 100:.1f} % | {u['fresh'] * 100:.1f} % |")
+        it = (f"{u['iter_wall_us'][0]:.0f} / {u['iter_wall_us'][1]:.0f}; "
+              f"{u['iter_cpu_us'][0]:.0f} / {u['iter_cpu_us'][1]:.0f}")
+        print(f"| {name} | {u['cycles']} | {w} | {o} | {c} | {it} | "
+              f"{u['in_time'] * 100:.1f} % | {u['fresh_robot'] * 100:.1f} % | "
+              f"{u['fresh'] * 100:.1f} % |")
 
 
 def print_table(results: list[dict]) -> None:

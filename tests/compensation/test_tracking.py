@@ -115,6 +115,45 @@ def test_the_limiter_reaches_a_constant_target_without_overshoot():
     assert values[-1] == pytest.approx(1e-3, abs=1e-12)
 
 
+@settings(max_examples=150, deadline=None)
+@given(moves=st.lists(st.tuples(st.floats(-5e-3, 5e-3, allow_nan=False),
+                                st.integers(1, 12)), min_size=2, max_size=150),
+       v=st.floats(1e-3, 0.05), a=st.floats(0.05, 5.0), c=st.floats(0.0, 3e-3))
+def test_the_limiter_holds_its_bounds_in_robot_time_when_cycles_are_skipped(moves, v, a, c):
+    """Updates ``n`` robot cycles apart (a loop that fell behind): speed and acceleration
+    of the outputs in robot time never exceed the bounds, nor the total (the old limiter,
+    one step a computed update, gave 40 µm after a gap of several cycles: an
+    acceleration of v/T in robot time, 2.5 m/s² for 10 mm/s at 4 ms)."""
+    lim = RateLimiter(T, [v], [a], [c])
+    prev_value, prev_speed = 0.0, 0.0
+    for x, n in moves:
+        value = lim.apply([x], cycles=n)[0]
+        speed = (value - prev_value) / (n * T)
+        assert abs(speed) <= v * (1 + 1e-9) + 1e-15
+        assert abs(speed - prev_speed) / (n * T) <= a * (1 + 1e-9) + 1e-12
+        assert abs(value) <= c + a * T * T / 8 * (1 + 1e-9) + 1e-18  # module docstring
+        prev_value, prev_speed = value, speed
+
+
+@settings(max_examples=60, deadline=None)
+@given(gaps=st.lists(st.integers(1, 20), min_size=300, max_size=300),
+       target=st.floats(-2e-3, 2e-3).filter(lambda x: abs(x) > 1e-6))
+def test_the_limiter_reaches_its_target_without_overshoot_whatever_cycles_are_skipped(
+        gaps, target):
+    lim = RateLimiter(T, [0.01], [0.5], [2e-3])
+    values = np.array([lim.apply([target], cycles=n)[0] for n in gaps])
+    # past the target by at most a/8 = a_max T²/8 (1 µm here: the module docstring)
+    assert np.all(values * np.sign(target) <= abs(target) + 0.5 * T * T / 8 * (1 + 1e-9))
+    assert values[-1] == pytest.approx(target, abs=1e-12)
+
+
+def test_the_limiter_refuses_a_bad_cycle_count():
+    lim = RateLimiter(T, [0.01], [0.5], [2e-3])
+    for bad in (0.5, 0.0, math.inf, math.nan):
+        with pytest.raises(ValueError, match="cycles must be a finite number ≥ 1, got"):
+            lim.apply([1e-3], cycles=bad)
+
+
 # -- the loop ---------------------------------------------------------------------------
 
 @pytest.fixture(scope="module")
@@ -188,6 +227,43 @@ def test_a_beam_break_holds_the_model_records_the_window_and_resumes(robot):
     s = TrackingSettings()
     assert np.abs(np.diff(x)).max() <= s.max_speed_m_s * T * (1 + 1e-9)
     assert np.abs(np.diff(x, 2)).max() <= s.max_accel_m_s2 * T * T * (1 + 1e-9)
+
+
+@settings(max_examples=20, deadline=None)
+@given(skips=st.lists(st.integers(0, 6), min_size=320, max_size=320),
+       jump=st.floats(-1.5e-3, 1.5e-3), seed=st.integers(0, 3))
+def test_the_loop_bounds_its_term_in_robot_time_when_it_skips_cycles(robot, skips, jump,
+                                                                      seed):
+    """A loop that fell behind (the robot service's on a loaded PC) is called for robot
+    cycles ``1 + skip`` apart; the residual jumps mid-run and the beam breaks: the tracker
+    term's speed and acceleration in robot time stay within the settings' bounds."""
+    model, q0 = robot
+    rng = np.random.default_rng(seed)
+    s = TrackingSettings()
+    loop = TrackingLoop(model, s)
+    Tp = model.evaluate(q0)[0][0]
+    ks = np.cumsum([1 + g for g in skips])
+    sample_t, out = 0.0, []
+    for k in ks:
+        t = k * T
+        ms = []
+        while sample_t + 0.003 <= t:
+            if 0.8 <= sample_t < 1.0:
+                ms.append(TrackerMeasurement(sample_t, None, True, "line_of_sight"))
+            else:
+                P = Tp.copy()
+                P[:3, 3] += [jump if sample_t > 0.5 else 0.0, 0.3e-3, 0.0]
+                P[:3, 3] += 60e-6 * rng.standard_normal(3)
+                ms.append(TrackerMeasurement(sample_t, P, True, "ok"))
+            sample_t += 1e-3
+        loop.add(ms)
+        out.append(loop.cycle(t, q0, Tp).tracker[:3])
+    c, dt = np.array(out), np.diff(ks * T)
+    u = np.diff(c, axis=0) / dt[:, None]
+    assert np.abs(u).max() <= s.max_speed_m_s * (1 + 1e-9)
+    acc = np.diff(u, axis=0) / dt[1:, None]
+    assert np.abs(acc).max() <= s.max_accel_m_s2 * (1 + 1e-9)
+    assert loop.stats.cycles == len(ks) and loop.windows  # the break was seen
 
 
 def test_a_silent_tracker_is_late_and_hold_names_the_reason(robot):
@@ -294,3 +370,76 @@ def test_the_learned_offset_moves_the_target_with_or_without_the_tracker(robot):
         np.testing.assert_array_equal(out1.learned, u)
         # the nominal model is the controller's own: the offset is the learned one
         np.testing.assert_allclose(out1.offset[:3] - out0.offset[:3], u, atol=1e-9)
+
+
+# -- the loop's fast path equals the plain computations it replaced ----------------------
+
+def test_the_fast_output_filter_is_sosfilt():
+    from scipy.signal import butter, sosfilt
+
+    from plugcell.compensation.tracking.loop import _sos_step
+
+    sos = butter(2, 2.0, fs=250.0, output="sos")
+    x = np.random.default_rng(0).standard_normal((400, 6)) * 1e-4
+    want = sosfilt(sos, x, axis=0, zi=np.zeros((len(sos), 2, 6)))[0]
+    z = np.zeros((len(sos), 2, 6))
+    got = np.array([_sos_step(sos, z, xi) for xi in x])
+    np.testing.assert_allclose(got, want, rtol=0, atol=1e-18)
+
+
+def test_the_joint_history_interpolates_as_np_interp_over_all_it_keeps():
+    h = JointHistory(span_s=0.5)
+    rng = np.random.default_rng(1)
+    ts, qs = [], []
+    for k in range(1000):  # many compactions and one growth of its buffer
+        ts.append(k * T + 1e-4 * rng.random())
+        qs.append(rng.standard_normal(6))
+        h.add(ts[-1], qs[-1])
+        kept = [i for i in range(len(ts)) if ts[-1] - ts[i] <= 0.5]
+        assert len(h) == len(kept) and h.earliest_time == ts[kept[0]]
+        if k % 97 == 0 and len(kept) > 1:
+            probe = np.linspace(ts[kept[0]], ts[-1], 7)
+            Q = np.array([qs[i] for i in kept])
+            want = np.stack([np.interp(probe, [ts[i] for i in kept], Q[:, j])
+                             for j in range(6)], axis=-1)
+            np.testing.assert_array_equal(h.at(probe), want)
+
+
+def test_a_models_pose_is_its_evaluate_without_the_jacobian(robot):
+    from plugcell.calibration.identify import Calibrator
+    from plugcell.compensation import IdentifiedModel
+    from plugcell.sim.twin.campaign import measure_poses, working_volume_joints
+    from plugcell.sim.twin.robot import RobotTwin
+    from plugcell.sim.twin.scenario import TwinScenario
+    from plugcell.sim.twin.tracker import LaserTracker
+
+    model, q0 = robot
+    q = q0 + np.radians(np.random.default_rng(2).uniform(-10, 10, (5, 6)))
+    np.testing.assert_array_equal(model.pose(q), model.evaluate(q)[0])
+    twin = RobotTwin(TwinScenario(robot="smart_h4", seed=1, payload_kg=20.0))
+    qc = working_volume_joints(twin.description, twin.reveal_truth().profile, 40,
+                               np.random.default_rng(3))
+    ms, _ = measure_poses(twin, LaserTracker(seed=1), qc)
+    identified = IdentifiedModel(Calibrator(twin.description, 5).fit(ms).model)
+    np.testing.assert_array_equal(identified.pose(q, 20.0), identified.evaluate(q, 20.0)[0])
+
+
+def test_an_orientation_residual_is_corrected_when_asked(robot):
+    """``correct_orientation=True``: a tool turned 0.05° about z beyond the model is turned
+    back; without it only the position is corrected (the estimate's rotation is not kept)."""
+    from plugcell.kinematics.transforms import so3_exp
+
+    model, q0 = robot
+    Tp = model.evaluate(q0)[0][0]
+    phi = np.radians([0.0, 0.0, 0.05])
+    out = {}
+    for orient in (True, False):
+        loop = TrackingLoop(model, TrackingSettings(correct_orientation=orient))
+        for k in range(400):
+            P = Tp.copy()
+            P[:3, :3] = so3_exp(phi) @ Tp[:3, :3]
+            loop.add([TrackerMeasurement(k * T - 0.003, P, True, "ok")] if k else [])
+            out[orient] = loop.cycle(k * T, q0, Tp)
+    np.testing.assert_allclose(out[True].offset[3:], -phi, atol=2e-5)
+    np.testing.assert_allclose(out[True].offset[:3], 0.0, atol=1e-5)  # turned about the tool
+    assert np.all(np.isnan(out[False].residual[3:])) and not np.any(out[False].offset[3:])

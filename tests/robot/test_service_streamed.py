@@ -264,3 +264,35 @@ def test_bad_egm_options_are_refused_with_the_reason():
     # the UI's device panel shows the link
     assert "ABB EGM, listening on 127.0.0.1:6510 for the controller at 127.0.0.2" in \
         service.device.info
+
+
+def test_a_calibration_is_the_tracked_moves_model_and_a_bad_one_is_refused(tmp_path):
+    """``--param calibration=PARAMS.json``: the streamed robot's tracked moves predict with
+    it (tests/robot/test_tracked_moves.py measures what it changes); a file that cannot be
+    read, is no calibration or is of another robot stops the service with the reason."""
+    from calibrated import calibrated
+
+    from plugcell.devices.robot.tracked_moves import TrackedMoves
+
+    result, params = calibrated(tmp_path)
+    service = RobotService(rsi="127.0.0.1:49152", calibration=str(params))
+    link = service.bridge
+    assert link.calibration is not None and link.calibration_name == "params.json"
+    q = np.radians([[10.0, -30.0, -90.0, 20.0, 40.0, -10.0]])
+    np.testing.assert_allclose(link.calibration.model.predict(q, np.array([36.0])),
+                               result.model.predict(q, np.array([36.0])), atol=1e-9)
+    moves = TrackedMoves(link.motion, lambda name: None, calibration=link.calibration,
+                         calibration_name=link.calibration_name)
+    assert moves.model_text == "the calibrated model (params.json, 36 kg)"
+    assert RobotService(rsi="127.0.0.1:49152").bridge.calibration is None
+    missing = tmp_path / "none.json"
+    with pytest.raises(ValueError, match=rf"calibration {missing}: cannot read: No such file"):
+        RobotService(rsi="127.0.0.1:49152", calibration=str(missing))
+    garbled = tmp_path / "garbled.json"
+    garbled.write_text("{not json")
+    with pytest.raises(ValueError, match=rf"calibration {garbled}: not a plugcell "
+                       "calibration: JSONDecodeError"):
+        RobotService(rsi="127.0.0.1:49152", calibration=str(garbled))
+    with pytest.raises(ValueError, match=r"the calibration is of the robot 'smart_h4', this "
+                       r"robot is 'fanuc_m20ia'"):
+        RobotService(rsi="127.0.0.1:49152", robot="fanuc_m20ia", calibration=str(params))

@@ -230,22 +230,31 @@ class IdentifiedModel:
         ValueError
             ``q`` of the wrong shape or not finite.
         """
+        T, J = self._evaluate(q, payload_kg, True)
+        assert J is not None
+        return T, J
+
+    def _evaluate(self, q: ArrayLike, payload_kg: ArrayLike | float, jacobian: bool
+                  ) -> tuple[Array, Array | None]:
+        """:meth:`evaluate`, the Jacobian only if asked (``None`` else: :meth:`pose`)."""
         em = self.error_model
         qb = _as_batch(q, em.structure.n_readings)
         batch = em.batch(qb, payload_kg)
         s = em.structure
         fk = forward(s.desc, self._params, em.chain_joints(batch), closure="fourbar")  # type: ignore[attr-defined]
         flange = fk.flange
-        J = jacobian_from_fk(s.desc, fk, "flange")
+        J = jacobian_from_fk(s.desc, fk, "flange") if jacobian else None
         scale = em.thermal_scale(em.batch(qb, payload_kg, self.temperature_c)) \
             if self.temperature_c is not None else None
         if scale is not None:  # thermal term: the flange position scales, so do its rates
             flange = flange.copy()
             flange[:, :3, 3] *= scale[:, None]
-            J = J.copy()
-            J[:, :3] *= scale[:, None, None]
+            if J is not None:
+                J = J.copy()
+                J[:, :3] *= scale[:, None, None]
         T = flange @ self.tool
-        J = shift_jacobian(J, flange[:, :3, 3], T[:, :3, 3]) @ s.reading_jacobian
+        if J is not None:
+            J = shift_jacobian(J, flange[:, :3, 3], T[:, :3, 3]) @ s.reading_jacobian
         if self.residual is not None:
             T = self._correction(flange @ self._probe, qb, batch.payload_kg) @ T  # type: ignore[attr-defined]
         return T, J
@@ -327,9 +336,9 @@ class IdentifiedModel:
         Returns
         -------
         (N, 4, 4) array, m
-            Tool poses.
+            Tool poses (computed without the Jacobian).
         """
-        return self.evaluate(q, payload_kg)[0]
+        return self._evaluate(q, payload_kg, False)[0]
 
     def predict_measurement(self, q: ArrayLike, payload_kg: ArrayLike | float = 0.0) -> Array:
         """The reflector pose the tracker should read, ``BASE · T_n^0 · PROBE`` (eq. 6.23).
@@ -440,4 +449,4 @@ class NominalModel:
         ValueError
             ``q`` of the wrong shape or not finite.
         """
-        return self.evaluate(q, payload_kg)[0]
+        return forward(self.desc, self.params, _as_batch(q, self.desc.n_readings)).tcp

@@ -322,10 +322,10 @@ class _PathWatch:
         self.frames = None
         if getattr(args, "calibration", None):
             from plugcell.compensation import IdentifiedModel
-            from plugcell.devices.robot.stream.correcting import load_calibration
+            from plugcell.devices.robot.calibration_file import read_calibration
 
             try:
-                model = IdentifiedModel(load_calibration(args.calibration).model)
+                model = IdentifiedModel(read_calibration(args.calibration).model)
             except ValueError as exc:
                 raise CommandError(f"twin {what}: {exc}") from None
             self.frames = (model.base, model.tool)

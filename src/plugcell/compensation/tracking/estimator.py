@@ -40,7 +40,6 @@ nothing the gate and the gains do not already give.  Pure math, SI units, no I/O
 from __future__ import annotations
 
 import math
-from collections import deque
 from dataclasses import dataclass
 
 import numpy as np
@@ -99,21 +98,24 @@ class JointHistory:
         if not (math.isfinite(span_s) and span_s > 0):
             raise ValueError(f"span_s must be > 0 seconds, got {span_s!r}")
         self.span_s = float(span_s)
-        self._t: deque[float] = deque()
-        self._q: deque[Array] = deque()
+        # the kept samples are rows lo…hi−1 of two arrays that grow by doubling and are
+        # compacted when full: no per-cycle allocation, and :meth:`at` reads slices
+        self._tb = np.empty(0)
+        self._qb = np.empty((0, 0))
+        self._lo = self._hi = 0
 
     def __len__(self) -> int:
-        return len(self._t)
+        return self._hi - self._lo
 
     @property
     def latest_time(self) -> float | None:
         """Time of the newest feedback (s), ``None`` when empty."""
-        return self._t[-1] if self._t else None
+        return float(self._tb[self._hi - 1]) if self._hi > self._lo else None
 
     @property
     def earliest_time(self) -> float | None:
         """Time of the oldest feedback kept (s), ``None`` when empty."""
-        return self._t[0] if self._t else None
+        return float(self._tb[self._lo]) if self._hi > self._lo else None
 
     def add(self, t: float, q: ArrayLike) -> None:
         """Record the joints ``q`` (rad) read at robot time ``t`` (s).
@@ -123,17 +125,30 @@ class JointHistory:
         ValueError
             ``t`` not after the previous one, or ``q`` not finite or of another size.
         """
-        qa = np.array(q, dtype=float).reshape(-1)
-        if not np.all(np.isfinite(qa)) or (self._q and qa.shape != self._q[-1].shape):
+        qa = np.asarray(q, dtype=float).reshape(-1)
+        empty = self._hi == self._lo
+        if not np.all(np.isfinite(qa)) or (not empty and qa.shape[0] != self._qb.shape[1]):
             raise ValueError(f"joint feedback must be finite and of one size, got {q!r}")
-        if self._t and not t > self._t[-1]:
+        if not empty and not t > self._tb[self._hi - 1]:
             raise ValueError(f"joint feedback at {t} s is not after the last one "
-                             f"({self._t[-1]} s)")
-        self._t.append(float(t))
-        self._q.append(qa)
-        while self._t[-1] - self._t[0] > self.span_s:
-            self._t.popleft()
-            self._q.popleft()
+                             f"({float(self._tb[self._hi - 1])} s)")
+        if empty and (self._qb.shape[1] != qa.shape[0]):
+            self._tb, self._qb, self._lo, self._hi = np.empty(64), np.empty((64, qa.size)), 0, 0
+        if self._hi == len(self._tb):  # full: compact, and grow when half is still in use
+            live = self._hi - self._lo
+            if 2 * live > len(self._tb):
+                tb, qb = np.empty(2 * len(self._tb)), np.empty((2 * len(self._tb), qa.size))
+            else:
+                tb, qb = self._tb, self._qb
+            tb[:live] = self._tb[self._lo:self._hi]
+            qb[:live] = self._qb[self._lo:self._hi]
+            self._tb, self._qb, self._lo, self._hi = tb, qb, 0, live
+        self._tb[self._hi] = t
+        self._qb[self._hi] = qa
+        self._hi += 1
+        tb = self._tb
+        while tb[self._hi - 1] - tb[self._lo] > self.span_s:
+            self._lo += 1
 
     def at(self, t: ArrayLike) -> Array:
         """Joints at times ``t``, linear between the recorded cycles.
@@ -156,13 +171,13 @@ class JointHistory:
             or drops it as too old).
         """
         ts = np.atleast_1d(np.asarray(t, dtype=float))
-        if not self._t:
+        if self._hi == self._lo:
             raise ValueError("no joint feedback recorded yet")
-        lo, hi = self._t[0], self._t[-1]
+        tt = self._tb[self._lo:self._hi]
+        lo, hi = float(tt[0]), float(tt[-1])
         if np.any(ts < lo) or np.any(ts > hi) or not np.all(np.isfinite(ts)):
             raise ValueError(f"time outside the joint feedback's span [{lo}, {hi}] s")
-        tt = np.fromiter(self._t, float, len(self._t))
-        Q = np.stack(self._q)
+        Q = self._qb[self._lo:self._hi]
         out = np.stack([np.interp(ts, tt, Q[:, j]) for j in range(Q.shape[1])], axis=-1)
         return out[0] if np.ndim(t) == 0 else out
 

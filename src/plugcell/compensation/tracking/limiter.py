@@ -1,20 +1,36 @@
 """A jerk-free bound on how the tracker's correction may move: speed, acceleration, total.
 
-Per axis, every cycle ``T``, the term ``c`` moves towards its target ``c*`` by the step
-``s_k``, with the step's bound ``v = v_max T`` and its change's bound ``a = a_max T²``::
+Per axis the term ``c`` moves towards its target ``c*``; its state is the step a robot
+cycle ``s`` (the speed times ``T``), bounded by ``v = v_max T``, whose change is bounded
+by ``a = a_max T²`` a robot cycle.  An update is computed for a cycle ``n ≥ 1`` robot
+cycles after the last one (``n = 1`` when no cycle was skipped; a loop that fell behind
+skips some: the bounds hold in the *robot's* time, not per computed update)::
 
     d     = clip(c*, −c_max, c_max) − c                (the target inside the total bound)
-    s_brk = a (√(1/4 + 2|d|/a) − 1/2)                  (the largest step from which
-                                                         steps shrinking by a each cycle
-                                                         stop within |d|)
-    s_k   = clip(sgn(d) · min(v, s_brk, |d|),  s_{k−1} − a,  s_{k−1} + a)
-    c    ← c + s_k
+    s_brk = a (√((n − 1/2)² + 2|d|/a) − (n − 1/2))     (the largest step a cycle from which
+                                                         n cycles at it, then steps
+                                                         shrinking by a each cycle, stop
+                                                         within |d|)
+    s'    = clip(sgn(d) · min(v, s_brk, |d|/n),  s − n a,  s + n a)
+    s'    = clip(s', −v, v)
+    c    ← c + n s'
 
-The braking bound solves ``s (s/a + 1)/2 ≤ |d|`` (the steps ``s, s − a, …`` sum to at
-most ``|d|``), so the term reaches a constant target without overshoot, and every
-output satisfies ``|s_k| ≤ v``, ``|s_k − s_{k−1}| ≤ a`` and ``|c| ≤ c_max`` (a target
-that jumps, reverses or vanishes — a beam break, a wild sample — moves the robot at
-bounded speed and acceleration).  Pure math, SI units.
+The braking bound solves ``n s + s (s − a)/(2a) ≤ |d|``; for ``n = 1`` it is the familiar
+``a (√(1/4 + 2|d|/a) − 1/2)`` (the steps ``s, s − a, …`` sum to at most ``|d|``).  The
+lower end ``s − n a`` of the clip satisfies it when the last update's step did (n cycles
+at ``s − n a`` cover no more than the n cycles ``s − a, …, s − n a``), so the term comes
+to a constant target without overshoot — but for the closed form's rounding of the
+last braking step: the tail ``x (x − a)/(2a)`` undercounts a last step ``x < a`` by at
+most ``a/8``, so the term may pass its target (and ``c_max``) by at most ``a/8``, 1 µm
+with the loop's defaults.  The outputs ``c_i`` at robot times ``t_i`` satisfy, per axis,
+in robot time::
+
+    |c_i − c_{i−1}| / (t_i − t_{i−1}) ≤ v_max                      (speed)
+    |u_i − u_{i−1}| / (t_i − t_{i−1}) ≤ a_max,  u_i = (c_i − c_{i−1}) / (t_i − t_{i−1})
+    |c_i| ≤ c_max + a/8
+
+whatever cycles were skipped (a target that jumps, reverses or vanishes — a beam break,
+a wild sample — moves the robot at bounded speed and acceleration).  Pure math, SI units.
 """
 
 from __future__ import annotations
@@ -65,29 +81,37 @@ class RateLimiter:
         self.value = np.zeros_like(self.value)
         self.step = np.zeros_like(self.step)
 
-    def apply(self, target: ArrayLike) -> Array:
-        """One cycle towards ``target``; the new value (module docstring).
+    def apply(self, target: ArrayLike, cycles: float = 1.0) -> Array:
+        """One update towards ``target``, ``cycles`` robot cycles after the last; the new
+        value (module docstring).
 
         Parameters
         ----------
         target : (d,) array_like
             ``c*`` (non-finite entries hold that axis where it is).
+        cycles : float
+            ``n ≥ 1``: the robot cycles since the last update (1: none skipped).
 
         Returns
         -------
         (d,) array
-            ``c`` after this cycle.
+            ``c`` after this update.
         """
         tgt = np.array(target, dtype=float).reshape(-1)
         if tgt.shape != self.value.shape:
             raise ValueError(f"target has {tgt.size} axes, the limiter {self.value.size}")
+        n = float(cycles)
+        if not (n >= 1.0 and np.isfinite(n)):
+            raise ValueError(f"cycles must be a finite number ≥ 1, got {cycles!r}")
         tgt = np.where(np.isfinite(tgt), tgt, self.value)
         d = np.clip(tgt, -self.max_total, self.max_total) - self.value
         a = self.a_step
-        brake = a * (np.sqrt(0.25 + 2.0 * np.abs(d) / a) - 0.5)
-        want = np.sign(d) * np.minimum(np.minimum(self.v_step, brake), np.abs(d))
-        s = np.clip(want, self.step - a, self.step + a)
+        ad = np.abs(d)
+        h = n - 0.5  # n = 1: the steps' familiar a (√(1/4 + 2|d|/a) − 1/2)
+        brake = a * (np.sqrt(h * h + 2.0 * ad / a) - h)
+        want = np.sign(d) * np.minimum(np.minimum(self.v_step, brake), ad / n)
+        s = np.clip(want, self.step - n * a, self.step + n * a)
         s = np.clip(s, -self.v_step, self.v_step)
-        self.value = self.value + s
+        self.value = self.value + n * s
         self.step = s
         return self.value.copy()

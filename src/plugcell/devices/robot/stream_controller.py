@@ -39,6 +39,7 @@ from pathlib import Path
 from typing import Any
 
 from plugcell.devices.robot.bridge import BridgeError, BridgeHandler, ControllerError
+from plugcell.devices.robot.calibration_file import read_calibration
 from plugcell.devices.robot.planned_motion import PlannedMotion
 from plugcell.devices.robot.protocol import (
     VERSION,
@@ -237,12 +238,22 @@ class StreamController:
     correct_max : tuple of (float, float)
         The largest correction of mode (b) (``CORRECT``, :attr:`corrector`), mm and
         degrees per axis.
+    calibration : str
+        The robot's calibration (a PARAMS.json of ``plugcell calibrate``, of this robot):
+        the tracked moves' model (:mod:`~plugcell.devices.robot.tracked_moves`); empty:
+        the nominal model.
+
+    Raises
+    ------
+    ValueError
+        Not six axes, or a calibration that cannot be read or is of another robot.
     """
 
     def __init__(self, handler: BridgeHandler, config: Any, description: RobotDescription,
                  robot: str, joint_limits: JointLimits, cartesian_limits: CartesianLimits,
                  library: Sequence[Path] = (), name: str = "ROBOT",
-                 process: bool = True, correct_max: tuple[float, float] = (5.0, 1.0)) -> None:
+                 process: bool = True, correct_max: tuple[float, float] = (5.0, 1.0),
+                 calibration: str = "") -> None:
         self.vendor = config.vendor
         if description.n_readings != 6:
             raise ValueError(f"{self.vendor} streams six axes; {description.name} has "
@@ -254,6 +265,9 @@ class StreamController:
         self.name = name
         self.address = f"{config.listen_host}:{config.listen_port}"
         self.correct_max = correct_max
+        self.calibration = read_calibration(calibration, description.name) \
+            if calibration else None
+        self.calibration_name = Path(calibration).name if calibration else ""
         self.corrector: Corrector | CorrectorClient
         if process:
             self.link = self.drive = LinkProcess(config)
@@ -435,6 +449,12 @@ class StreamController:
             h.on_ended(message)
         elif isinstance(message, Console):
             h.on_console(message)
+
+    def say(self, line: str) -> None:
+        """A line for the running program's console (from any thread; none: dropped)."""
+        current = self.runner.current
+        if current is not None:
+            self._event(Console(current.run, line))
 
     def program_line(self, line: str) -> None:
         """A ``WRITE pc_client`` line of the program: an ACTIVATE string, or garbled."""

@@ -49,7 +49,17 @@ STREAM_PARAMS: dict[str, Callable[[str], Any]] = {
     "rsi": str, "rsi_robot": str, "rsi_timeout": int, "rsi_correction": str, "rsi_mode": str,
     "rsi_frame": str, "egm": str, "egm_robot": str, "egm_timeout": float, "egm_mode": str,
     "stream_process": flag, "joint_speed": float, "tcp_speed": float,
-    "correct_max_mm": float, "correct_max_deg": float}
+    "correct_max_mm": float, "correct_max_deg": float, "calibration": str}
+
+
+def _check_streams(rsi: str, rsi_robot: str, egm: str, egm_robot: str) -> None:
+    """Refuse both streams at once, or a controller's address without its stream."""
+    if rsi and egm:
+        raise ValueError("give rsi=HOST:PORT or egm=HOST:PORT, not both")
+    for option, address, stream in (("rsi", rsi_robot, rsi), ("egm", egm_robot, egm)):
+        if address and not stream:
+            raise ValueError(f"{option}_robot names the controller of an {option.upper()} "
+                             f"stream: give {option} too")
 
 
 def streamed_link(handler: BridgeHandler, *, robot: str, library: Sequence[Path], name: str,
@@ -59,7 +69,8 @@ def streamed_link(handler: BridgeHandler, *, robot: str, library: Sequence[Path]
                   egm_robot: str = "", egm_timeout: float = 1.0, egm_mode: str = "joint",
                   joint_speed: float = 20.0, tcp_speed: float = 100.0,
                   stream_process: bool = True, correct_max_mm: float = 5.0,
-                  correct_max_deg: float = 1.0) -> StreamController | None:
+                  correct_max_deg: float = 1.0, calibration: str = ""
+                  ) -> StreamController | None:
     """The streamed robot's controller the options ask for, or ``None`` (none asked).
 
     Parameters
@@ -91,6 +102,9 @@ def streamed_link(handler: BridgeHandler, *, robot: str, library: Sequence[Path]
     correct_max_mm, correct_max_deg : float
         The largest correction ``CORRECT`` superimposes, per axis (mm; degrees of a
         rotation or a joint).
+    calibration : str
+        The robot's calibration (PARAMS.json): the model of the tracked moves (``MOVE
+        LINEAR TO p WITH TRACKING``); empty: the nominal model.
 
     Returns
     -------
@@ -101,14 +115,9 @@ def streamed_link(handler: BridgeHandler, *, robot: str, library: Sequence[Path]
     ------
     ValueError
         Both streams, a controller address without its stream, a bad address, limit,
-        timeout or robot: the reason.
+        timeout, robot or calibration: the reason.
     """
-    if rsi and egm:
-        raise ValueError("give rsi=HOST:PORT or egm=HOST:PORT, not both")
-    for option, address, stream in (("rsi", rsi_robot, rsi), ("egm", egm_robot, egm)):
-        if address and not stream:
-            raise ValueError(f"{option}_robot names the controller of an {option.upper()} "
-                             f"stream: give {option} too")
+    _check_streams(rsi, rsi_robot, egm, egm_robot)
     if not (rsi or egm):
         return None
     option, listen, address = ("rsi", rsi, rsi_robot) if rsi else ("egm", egm, egm_robot)
@@ -128,4 +137,5 @@ def streamed_link(handler: BridgeHandler, *, robot: str, library: Sequence[Path]
         if not (v > 0 and v < float("inf")):
             raise ValueError(f"{what} must be a positive number, not {v}")
     return StreamController(handler, config, load_robot(robot), robot, joint, cart, library,
-                            name, stream_process, (correct_max_mm, correct_max_deg))
+                            name, stream_process, (correct_max_mm, correct_max_deg),
+                            calibration)

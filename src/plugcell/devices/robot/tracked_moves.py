@@ -13,22 +13,33 @@ the laser tracker's correction added every cycle (the drive's ``adjust`` hook):
    acquisition time, mapped to the PC's clock (:class:`~.tracking_clocks.OneWayClock`)
    and from it to the robot's (:class:`~.tracking_clocks.CycleClock`: the PC times the
    robot's cycles were handled);
-2. :class:`~plugcell.compensation.tracking.TrackingLoop` (the controller's nominal
-   model: its tracker term corrects the model's error) answers the Cartesian offset
-   ``o = [Δp; φ]`` (F0) on the planned TCP pose ``T_p(k)`` of the cycle;
+2. :class:`~plugcell.compensation.tracking.TrackingLoop` answers the Cartesian offset
+   ``o = [Δp; φ]`` (F0) on the planned TCP pose ``T_p(k)`` of the cycle.  Its model —
+   what predicts the TCP from the joint feedback (the residual the tracker term
+   corrects) and whose inverse is the model-based feed-forward — is the robot's
+   **calibrated model** when the service was given one (``--param
+   calibration=PARAMS.json``: ``IdentifiedModel`` with the controller's TCP in the
+   identified flange frame, at the calibration's reference payload), else the
+   controller's nominal model (the tracker term then corrects all of the model's
+   error); which one is said in the program's console at the move's end;
 3. the offset, blended in (``w = unit_ramp`` over ``ramp_s``) while the robot still
    stands at the move's start for ``settle_s`` (the loop converges before the path
    begins, and the start does not jump), becomes joints through the controller's
-   Jacobian at the planned joints, ``Δq = J(q_p(k))⁻¹ · w·o`` — first order, exact to µm
-   for the millimetres a correction is — added to the streamed ``q_p(k)``.  At the end
+   Jacobian at the planned joints, ``Δq = J_n(q_p(k))⁻¹ · w·o`` — first order, exact to
+   µm for the millimetres a correction is — added to the streamed ``q_p(k)``.  The
+   nominal Jacobian is the right one with either model: the offset is the controller's
+   (``T_c = T_n(q*)``, the nominal pose of the joints ``q*`` at which the loop's model
+   puts the tool on the target), so ``J_n⁻¹ o = q* − q_p`` to first order.  At the end
    the robot stays where the correction put it (absolute mode holds the offset); the
    next move is planned from the actual joints, so nothing jumps there either.
 
 In real time the loop runs in a thread of its own beside the link (``_Worker``): each
 cycle hands it the newest state and takes the newest offset it has computed, so the
-loop's cost (milliseconds) never makes the link's answer late; its rate bounds, which
-count one step a call, are then the more conservative.  A loop that fell behind (a
-loaded PC) takes only the newest :data:`MAX_SAMPLES_PER_CYCLE` samples of a cycle.  In
+loop's cost never makes the link's answer late; its rate bounds hold in the robot's time
+(a loop call ``n`` robot cycles after the last steps ``n`` cycles' worth, its speed and
+acceleration bounded: :class:`~plugcell.compensation.tracking.RateLimiter`).  A loop that
+fell behind (a loaded PC) takes only the newest :data:`MAX_SAMPLES_PER_CYCLE` samples of a
+cycle.  In
 simulated time (``realtime=False``) each cycle runs the loop (with the link in its child
 process, the child waits for each cycle's correction).
 
@@ -67,10 +78,11 @@ from typing import Any, Protocol
 import numpy as np
 from numpy.typing import NDArray
 
-from plugcell.compensation.pose_model import NominalModel
+from plugcell.compensation.pose_model import IdentifiedModel, NominalModel, PoseModel
 from plugcell.compensation.tracking import TrackerMeasurement, TrackingLoop, TrackingSettings
 from plugcell.devices.robot.arm_model import matrix_from_position
 from plugcell.devices.robot.poses import pose_matrix
+from plugcell.devices.robot.stream.drive import samples as planned_samples
 from plugcell.devices.robot.stream.process import LinkProcess
 from plugcell.devices.robot.stream.source import CycleState
 from plugcell.devices.robot.tracking_clocks import CycleClock, OneWayClock
@@ -261,20 +273,37 @@ class TrackedMoves:
         Blend of the correction in at the move's start (s).
     settle_s : float
         The robot stands at the start this long with the correction blending in (s).
-    payload_kg : float
+    payload_kg : float, optional
+        The payload (kg); default the calibration's reference payload (0 without one).
     realtime : bool
         True: the loop runs in a thread of its own and each cycle takes the newest offset
         it has (a real controller does not wait: the loop's cost must not make answers
         late); False: each cycle runs the loop (a controller in simulated time).
+    calibration : CalibrationResult, optional
+        The robot's calibration (:func:`~.calibration_file.read_calibration`): the loop's
+        model (module docstring); ``None``: the controller's nominal model.
+    calibration_name : str
+        What to call it in the console (its file).
+    say : callable, optional
+        ``say(line)``: a line for the program's console (the model used, at the end).
     """
 
     def __init__(self, motion: Any, feeds: Callable[[str], TrackerFeed], *,
                  after: Callable[[float], None] | None = None,
                  settings: TrackingSettings | None = None, ramp_s: float = 0.2,
-                 settle_s: float = 0.5, payload_kg: float = 0.0,
-                 realtime: bool = True) -> None:
+                 settle_s: float = 0.5, payload_kg: float | None = None,
+                 realtime: bool = True, calibration: Any = None,
+                 calibration_name: str = "", say: Callable[[str], None] | None = None
+                 ) -> None:
         self.motion, self.feeds, self.after = motion, feeds, after
-        self.settings, self.ramp_s, self.payload_kg = settings, ramp_s, payload_kg
+        self.settings, self.ramp_s = settings, ramp_s
+        self.calibration, self.say = calibration, say
+        self.payload_kg = float(payload_kg) if payload_kg is not None else \
+            float(calibration.model.payload_ref_kg) if calibration is not None else 0.0
+        #: which model the loop predicts with (the console's words)
+        self.model_text = (f"the calibrated model ({calibration_name or 'given'}, "
+                           f"{self.payload_kg:g} kg)" if calibration is not None else
+                           "the nominal model (no calibration loaded)")
         self.settle_s, self.realtime = settle_s, realtime
         self.last_loop: TrackingLoop | None = None
         self.last_feed: TrackerFeed | None = None
@@ -298,12 +327,14 @@ class TrackedMoves:
             config = m.drive.config if isinstance(m.drive, LinkProcess) else m.drive.link.config
             cycle_s = config.cycle_s
             settings = self.settings or TrackingSettings(cycle_s=cycle_s)
-            model = NominalModel(desc, tool)
-            loop = self.last_loop = TrackingLoop(model, settings, payload_kg=self.payload_kg)
+            loop = self.last_loop = TrackingLoop(
+                self.loop_model(tool), settings, payload_kg=self.payload_kg,
+                controller=NominalModel(desc, tool))
             feed = self.last_feed = self.feeds(tracker)
             feed.start()
             padded = _Settled(traj, self.settle_s)
-            adjust, worker = self._adjust(loop, feed, cycle_s)
+            adjust, worker = self._adjust(loop, feed, cycle_s,
+                                          planned_samples(padded, cycle_s))
             # simulated time across the process boundary: the link's child waits for each
             # cycle's correction (as the in-process hook computes it in the cycle)
             wait = {} if self.realtime or not isinstance(m.drive, LinkProcess) else \
@@ -320,22 +351,47 @@ class TrackedMoves:
             log.warning("MOVE WITH TRACKING to %s: the model alone from %.3f s to %s (%s)",
                         tracker, w.start_s, "the end" if w.end_s is None else
                         f"{w.end_s:.3f} s", w.reason)
+        st = loop.stats
+        line = (f"MOVE WITH TRACKING {tracker}: {self.model_text}; tracker term on "
+                f"{st.tracking_cycles} of {st.cycles} cycles, {len(loop.windows)} "
+                f"window(s) on the model alone")
+        log.info(line)
+        if self.say is not None:
+            self.say(line)
         if failure:
             raise MotionError(f"{tracker} stopped during the tracked move ({failure}): "
-                              "the move finished with the model alone")
+                              f"the move finished with the model alone ({self.model_text})")
         if self.after is None:
             return padded.duration
         self.after(padded.duration)
         return None
 
-    def _adjust(self, loop: TrackingLoop, feed: TrackerFeed, cycle_s: float
+    def loop_model(self, tool: Array) -> PoseModel:
+        """The loop's model (module docstring): the calibration's with the controller's
+        TCP ``tool`` (flange frame, m) in its identified flange frame, or the nominal."""
+        if self.calibration is None:
+            return NominalModel(self.motion.description, tool)
+        return IdentifiedModel(self.calibration.model, tool)
+
+    def _adjust(self, loop: TrackingLoop, feed: TrackerFeed, cycle_s: float, q_plan: Array
                 ) -> tuple[Callable[[CycleState, int, Array], Array], _Worker | None]:
         """The drive's hook: the loop's offset of the cycle as joints (``realtime``: the
-        newest the worker has, the link's thread never waits for the loop)."""
+        newest the worker has, the link's thread never waits for the loop).  The planned
+        TCP poses and the controller's Jacobians at the move's samples ``q_plan`` (K+1, 6)
+        are computed once, vectorised, before the move: a cycle only looks them up."""
         desc = self.motion.description
         ramp = unit_ramp(max(self.ramp_s, cycle_s))
         record = self.last_record = []
         self.last_dropped = 0
+        fk_plan = forward(desc, None, q_plan, "nominal")
+        T_plan, J_plan = fk_plan.tcp, jacobian_from_fk(desc, fk_plan, "tcp")
+
+        def planned(k: int, q_k: Array) -> tuple[Array, Array]:
+            """``(T_p, J_n)`` at sample ``k`` (computed now if ``q_k`` is not the plan's)."""
+            if 0 <= k < len(q_plan) and np.array_equal(q_k, q_plan[k]):
+                return T_plan[k], J_plan[k]
+            fk = forward(desc, None, q_k, "nominal")
+            return fk.tcp, jacobian_from_fk(desc, fk, "tcp")
 
         def offset(state: CycleState, k: int, q_k: Array, pc: float) -> Array:
             samples = feed.poll(state.t, pc)
@@ -346,7 +402,7 @@ class TrackedMoves:
             if feed.failure and not record_held:
                 loop.hold(f"tracker stopped: {feed.failure}")
                 record_held.append(state.t)
-            T_path = forward(desc, None, q_k, "nominal").tcp
+            T_path = planned(k, q_k)[0]
             q_fb = state.robot.joints if state.robot.joints is not None else q_k
             out = loop.cycle(state.t, q_fb, T_path)
             blend = float(ramp.sample(k * cycle_s).s)
@@ -368,8 +424,7 @@ class TrackedMoves:
                 offset(state, k, q_k, pc)
             if not np.any(o):
                 return np.zeros(len(q_k))
-            J = jacobian_from_fk(desc, forward(desc, None, q_k, "nominal"), "tcp")
-            return np.linalg.lstsq(J, o, rcond=None)[0]
+            return np.linalg.lstsq(planned(k, q_k)[1], o, rcond=None)[0]
 
         return adjust, worker
 
@@ -438,4 +493,7 @@ def tracked_moves_for(controller: Any) -> Callable[[Position, str], float | None
         return ServiceTrackerFeed(controller.handler.host.participant, loop, tracker,
                                   np.linalg.inv(fk.flange) @ fk.tcp)
 
-    return TrackedMoves(controller.motion, feeds, after=controller.clock.advance).move_tracked
+    return TrackedMoves(controller.motion, feeds, after=controller.clock.advance,
+                        calibration=controller.calibration,
+                        calibration_name=controller.calibration_name,
+                        say=controller.say).move_tracked

@@ -20,7 +20,8 @@ The child adds the newest ``Δq`` of its motion each cycle (zeros before the fir
 never waits for it, exactly as the in-process link takes the newest offset of its worker
 thread (``tracked_moves._Worker``): the loop's cost and the service's interpreter never
 make an answer late; an adjustment reaches the wire one or two cycles after the cycle it
-was computed for (the loop's rate bounds count steps per computed cycle, so they hold).
+was computed for (the loop's rate bounds hold in the robot's time, whatever cycles it
+skipped; between two adjustments the child holds the last one).
 Nothing but floats crosses: no pickling, no lock shared between the processes.
 
 In *simulated time* (a controller that waits for each answer: a test, ``plugcell path

@@ -55,7 +55,7 @@ from .errors import StreamLinkError
 from .source import CycleState, PathOffset
 
 __all__ = ["SOURCES", "CorrectionSpec", "Corrector", "Superimposed", "controller_model",
-           "correction_space", "load_calibration", "make_source"]
+           "correction_space", "make_source"]
 
 Array = NDArray[np.float64]
 
@@ -220,31 +220,6 @@ def _path_joints(state: CycleState) -> Array:
     return q
 
 
-def load_calibration(path: str) -> Any:
-    """The calibration (a :class:`~plugcell.calibration.result.CalibrationResult`) of a
-    PARAMS.json written by ``plugcell calibrate``.
-
-    Raises
-    ------
-    ValueError
-        The file cannot be read, or is no plugcell calibration: the file and why.
-    """
-    import json
-
-    from plugcell.io.params import result_from_params
-    from plugcell.io.robots import description_of_params
-
-    try:
-        with open(path, encoding="utf-8") as f:
-            d = json.load(f)
-        return result_from_params(d, description_of_params(d, path), check_robot=False)
-    except OSError as exc:
-        raise ValueError(f"calibration {path}: cannot read: {exc.strerror or exc}") from None
-    except Exception as exc:  # not JSON, not a plugcell calibration: say which
-        raise ValueError(f"calibration {path}: not a plugcell calibration: "
-                         f"{type(exc).__name__}: {exc}") from None
-
-
 #: Newton steps of the path's joints from the set-point (:meth:`_Compensation._newton`),
 #: and the pose error (m and rad in one 6-vector) they stop at.
 IK_STEPS, IK_TOL = 6, 1e-10
@@ -258,8 +233,9 @@ class _Compensation:
 
     def __init__(self, spec: CorrectionSpec, space: str) -> None:
         from plugcell.compensation import IdentifiedModel, NominalModel
+        from plugcell.devices.robot.calibration_file import read_calibration
 
-        result = load_calibration(spec.calibration)
+        result = read_calibration(spec.calibration)
         self.model = IdentifiedModel(result.model)
         self.nominal = NominalModel(self.model.description, tool=self.model.tool)
         self.payload = (result.model.payload_ref_kg if spec.payload_kg is None
