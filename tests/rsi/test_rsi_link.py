@@ -445,6 +445,53 @@ def test_follow_raises_the_streams_failure(robot_and) -> None:
         link.follow(lambda s: None, lambda s: True, 1.0)
 
 
+def _follow_in_thread(link, done, timeout: float) -> tuple[object, dict]:
+    import threading
+
+    outcome: dict = {}
+
+    def run() -> None:
+        try:
+            outcome["end"] = link.follow(lambda s: Correction(offset=np.zeros(6)), done,
+                                         timeout)
+        except Exception as exc:  # the test looks at what it is
+            outcome["error"] = exc
+
+    motion = threading.Thread(target=run)
+    motion.start()
+    time.sleep(0.05)  # the motion's source is set
+    return motion, outcome
+
+
+def test_a_motion_takes_its_time_on_the_controllers_clock(robot_and) -> None:
+    """A controller whose cycles come slower than real time (a loaded machine: the twin's
+    process starved, or its lockstep) runs the motion to its end: the motion's timeout is
+    the controller's time (its cycles), not the wall clock's, which such a controller
+    cannot keep up with."""
+    link, robot = robot_and(local_config(mode="absolute"))
+    robot.cycle()
+    motion, outcome = _follow_in_thread(link, lambda s: s.cycle >= 8, 0.2)
+    for _ in range(10):  # 10 cycles of 4 ms, one every 60 ms: 0.6 s of wall time
+        time.sleep(0.06)
+        robot.cycle()
+    motion.join(10)
+    assert "error" not in outcome, outcome
+    assert outcome["end"].cycle == 8
+
+
+def test_a_motion_that_outlasts_its_timeout_on_the_controllers_clock_fails(robot_and) -> None:
+    link, robot = robot_and(local_config(mode="absolute"))
+    robot.cycle()
+    motion, outcome = _follow_in_thread(link, lambda s: False, 0.1)  # 25 cycles of 4 ms
+    for _ in range(40):
+        robot.cycle()
+        if not motion.is_alive():
+            break
+    motion.join(10)
+    assert isinstance(outcome.get("error"), TimeoutError), outcome
+    assert "the motion did not end within 0.1 s (streaming)" in str(outcome["error"])
+
+
 def test_follow_times_out_without_a_controller() -> None:
     from plugcell.devices.robot.rsi import RsiLink
 
