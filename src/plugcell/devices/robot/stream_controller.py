@@ -343,7 +343,9 @@ class StreamController:
             with contextlib.suppress(asyncio.CancelledError):
                 await watch
         await asyncio.to_thread(self._stop_program, "the robot service is shutting down")
-        await asyncio.to_thread(self.link.close)
+        await asyncio.to_thread(self.link.close)  # ends a correction (CORRECT) still running
+        if isinstance(self.corrector, Corrector):  # its thread, when the link is in ours
+            await asyncio.to_thread(self.corrector.close)
 
     async def send(self, *messages: Message) -> None:
         """The program's answers, in order (as a controller reads them)."""

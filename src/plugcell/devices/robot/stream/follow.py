@@ -7,7 +7,7 @@ import threading
 from collections.abc import Callable
 from typing import Any
 
-from .errors import StreamLinkError
+from .errors import StreamLinkError, StreamStoppedError
 from .source import Correction, CycleState, SourceLike, as_source
 
 __all__ = ["Following"]
@@ -23,6 +23,7 @@ class Following:
     """
 
     _cond: threading.Condition
+    _closing: bool
     config: Any
     _failure: StreamLinkError | None
     _last_failure: StreamLinkError | None
@@ -98,7 +99,8 @@ class Following:
         StreamLinkError
             The stream failed (before or during the motion): its reason, as a
             :class:`StreamStoppedError`, :class:`CorrectionRefusedError` … — a robot
-            service turns it into a failed process.
+            service turns it into a failed process; :class:`StreamStoppedError` too when
+            the link is closed during the motion.
         TimeoutError
             ``done`` did not hold within ``timeout`` seconds.
         """
@@ -118,7 +120,8 @@ class Following:
             return corr
 
         def over(link: Any) -> bool:
-            return bool(finished) or link.failure is not None or cycles[0] > last
+            return (bool(finished) or link.failure is not None or cycles[0] > last
+                    or self._closing)
 
         self.set_source(motion)
         try:
@@ -127,6 +130,8 @@ class Following:
                 seen = cycles[0]  # the controller's cycles still come: its clock counts
             if self._failure is not None:
                 raise self._failure
+            if not finished and self._closing:
+                raise StreamStoppedError(f"{self.config.vendor} link closed")
             if not finished:
                 where = "streaming" if self._streaming else "no stream from the controller"
                 raise TimeoutError(f"the motion did not end within {timeout:g} s ({where})")
