@@ -25,6 +25,8 @@ import argparse
 from collections.abc import Callable
 from pathlib import Path
 
+from plugcell.apps.cli import CommandError
+
 from .streaming import (
     add_limit_options,
     add_run_controls,
@@ -99,7 +101,6 @@ def configure(p: argparse.ArgumentParser) -> None:
 
 def _config(args: argparse.Namespace, robot_host: str, listen: str):
     """The RsiConfig the options describe (limits converted to SI)."""
-    from plugcell.apps.cli import CommandError
     from plugcell.devices.robot.rsi import (
         OutputSignal,
         RsiConfig,
@@ -152,7 +153,6 @@ def _source(args: argparse.Namespace):
 
 
 def _run(args: argparse.Namespace) -> int:
-    from plugcell.apps.cli import CommandError
     from plugcell.devices.robot.rsi import RsiLink
 
     config = _config(args, args.robot_ip, args.listen)

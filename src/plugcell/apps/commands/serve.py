@@ -12,6 +12,7 @@ from collections.abc import Awaitable
 from pathlib import Path
 from typing import Any
 
+from plugcell.apps.cli import CommandError
 from plugcell.apps.commands.cellargs import add_cell_args, cell_of, transport_of
 from plugcell.apps.commands.deprecated import DeprecatedName
 from plugcell.apps.commands.robotargs import add_robot_args
@@ -88,7 +89,6 @@ def configure(p: argparse.ArgumentParser) -> None:
 
 
 def _params(kind: str, pairs: list[str]) -> dict[str, Any]:
-    from plugcell.apps.cli import CommandError
     from plugcell.apps.kinds import current_param, kind_params, load_kind
 
     known = kind_params(kind)
@@ -109,7 +109,6 @@ def _params(kind: str, pairs: list[str]) -> dict[str, Any]:
 
 def _device_options(kind: str, args: argparse.Namespace) -> list[str]:
     """The device flags that were given, as ``KEY=VALUE`` pairs for :func:`_params`."""
-    from plugcell.apps.cli import CommandError
     from plugcell.apps.commands.robotargs import robot_file_of
     from plugcell.apps.kinds import kind_params, load_kind
 
@@ -149,7 +148,6 @@ def _device_options(kind: str, args: argparse.Namespace) -> list[str]:
 
 
 def run(args: argparse.Namespace) -> int:
-    from plugcell.apps.cli import CommandError
     from plugcell.apps.kinds import build, current_kind, load_kind
     from plugcell.framework.participant import PartnerError
     from plugcell.framework.service import DeviceError

@@ -13,6 +13,8 @@ from collections.abc import Callable, Iterable, Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
+from plugcell.apps.cli import CommandError
+
 
 def add_limit_options(p: argparse.ArgumentParser, what: str, units: str) -> None:
     """``--max-step``, ``--max-offset``, ``--max-speed`` (one number or six, in ``units``)
@@ -29,8 +31,6 @@ def _six(text: str | None, what: str, kind: str) -> tuple[float, ...] | None:
     """``--max-<what>``'s value: one number for all six axes, or six, each finite and > 0
     (robot units: degrees, or mm for the first three Cartesian axes); ``None`` if not
     given.  A bad value is a CommandError naming it as typed, with its unit."""
-    from plugcell.apps.cli import CommandError
-
     if text is None:
         return None
     try:
@@ -116,8 +116,6 @@ def write_and_list(write: Callable[[], Iterable[Path]], out: Path,
     """Write the controller's files (``write()``, into the folder ``out``) and print each
     path; a refused configuration or a folder that cannot be written is a CommandError
     (naming the option of a refused value: ``options``, :func:`named_as_options`)."""
-    from plugcell.apps.cli import CommandError
-
     try:
         paths = write()
     except ValueError as exc:
@@ -173,7 +171,6 @@ def sine_or_hold(sine: str | None, axes: Sequence[str], unit: Callable[[int], fl
     CommandError
         A malformed option, an unknown axis, a period ≤ 0 (one line naming it).
     """
-    from plugcell.apps.cli import CommandError
     from plugcell.devices.robot.stream.source import Hold, SineOffset
 
     if not sine:

@@ -54,6 +54,7 @@ import time
 
 import numpy as np
 
+from plugcell.apps.cli import CommandError
 from plugcell.apps.commands.cellargs import add_cell_args
 
 #: Python's thread switch interval in the twin's process (s): the reflector feed computes
@@ -159,7 +160,6 @@ def _within_limits(arm):
 
 def _rsi_side(args: argparse.Namespace, scenario):
     """The arm and its RSI side the options describe (CommandError on bad ones)."""
-    from plugcell.apps.cli import CommandError
     from plugcell.devices.robot.rsi.config import CorrectionLimits, RsiConfig, RsiConfigError
     from plugcell.sim.controller.own_program import linear_program, parse_lins
     from plugcell.sim.controller.rsi_robot import RsiRobot
@@ -198,7 +198,6 @@ class _World:
     """The twin's T-MAC in the cell's simulated world (``--reflector``), or nothing."""
 
     def __init__(self, args: argparse.Namespace, arm, what: str) -> None:
-        from plugcell.apps.cli import CommandError
         from plugcell.apps.commands.cellargs import cell_of, transport_of
 
         self.truth = self.feed = None
@@ -254,8 +253,6 @@ def _write_stats(path: str | None, cycles: int, answered: int, late: int,
 
 
 def _scenario_of(args: argparse.Namespace, scenario, what: str):
-    from plugcell.apps.cli import CommandError
-
     if not (args.duration >= 0):
         raise CommandError(f"--duration must be 0 or positive, not {args.duration}")
     try:
@@ -304,7 +301,6 @@ def run_rsi(args: argparse.Namespace, scenario) -> int:
 
 def run_egm(args: argparse.Namespace, scenario) -> int:
     """Run ``twin egm`` (module docstring) for the twin ``scenario`` (a TwinScenario)."""
-    from plugcell.apps.cli import CommandError
     from plugcell.sim.controller.egm_twin import TwinEgmPathRobot, TwinEgmRobot
     from plugcell.sim.controller.own_program import linear_program, parse_lins
     from plugcell.sim.twin.dynamics import DynamicTwin
