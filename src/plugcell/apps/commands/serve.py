@@ -209,12 +209,30 @@ async def start_unless_stopped(start: Awaitable[None], stop: asyncio.Event) -> b
     return False
 
 
+async def _say_when_listening(service: Any) -> None:
+    """A robot service streaming to its controller (``--rsi``, ``--egm``) starts only once
+    the controller streams: say when its link listens — the moment to start the
+    controller's program, whose own timeout runs from its first packet."""
+    bridge = getattr(service.interface, "bridge", None)
+    listening = getattr(bridge, "listening", None)
+    if not isinstance(listening, asyncio.Event):
+        return
+    await listening.wait()
+    print(f"plugcell: {service.name} ({service.declaration.kind}) listening on "
+          f"{bridge.address} for the {bridge.vendor} stream of the controller at "
+          f"{bridge.config.robot_host}", flush=True)
+
+
 async def _serve(service: Any) -> None:
     from plugcell.framework.participant import PartnerError
 
     stop = stop_on_signals()
-    if not await start_unless_stopped(service.start(), stop):
-        return
+    listening = asyncio.create_task(_say_when_listening(service))
+    try:
+        if not await start_unless_stopped(service.start(), stop):
+            return
+    finally:
+        listening.cancel()
     print(
         f"plugcell: {service.name} ({service.declaration.kind}) serving in cell "
         f"{service.cell!r} "

@@ -262,6 +262,9 @@ class StreamController:
             self.link = link_class(self.vendor)(config)
             self.drive = StreamDrive(self.link, feedback_only=True)
             self.corrector = Corrector(self.link)
+        #: Set once the link listens for the controller's stream (a controller started
+        #: before then may give up: its own timeout runs from its first packet)
+        self.listening = asyncio.Event()
         self.clock = SimClock(speed=1.0)
         self.motion = StreamedMotion(description, self.drive, joint_limits, cartesian_limits,
                                      clock=self.clock, refusal=drive_refusal(config))
@@ -316,6 +319,7 @@ class StreamController:
                 raise BridgeError(str(exc)) from None
             self._started = True
             self.address = f"{host}:{port}"
+            self.listening.set()
 
         def ready(link: Any) -> bool:
             return link.streaming and link.failure is None and link.latest is not None
