@@ -273,6 +273,7 @@ class StreamController:
                                     library)
         self.hello: Hello | None = None
         self._started = False
+        self._closing = False  # close() ends a wait for the stream
         self._connected = False
         self._lost_reason = "not connected"
         self._ids = itertools.count(1)
@@ -322,9 +323,13 @@ class StreamController:
             self.listening.set()
 
         def ready(link: Any) -> bool:
-            return link.streaming and link.failure is None and link.latest is not None
+            return self._closing or (link.streaming and link.failure is None
+                                     and link.latest is not None)
 
-        if not await asyncio.to_thread(self.link.wait, ready, timeout):
+        streams = await asyncio.to_thread(self.link.wait, ready, timeout)
+        if self._closing:
+            raise BridgeError("the robot service is shutting down")
+        if not streams:
             why = f" (last: {self.link.failure})" if self.link.failure is not None else ""
             raise BridgeError(f"no {self.vendor} stream from the controller at "
                               f"{self.config.robot_host} to {self.address} within "
@@ -340,6 +345,7 @@ class StreamController:
 
     async def close(self) -> None:
         """Stop the running program and the link (the service is shutting down)."""
+        self._closing = True
         self._connected, self._lost_reason = False, "connection to the robot closed"
         watch, self._watch = self._watch, None
         if watch is not None and watch is not asyncio.current_task():
