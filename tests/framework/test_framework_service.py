@@ -140,6 +140,44 @@ def test_a_process_queued_behind_a_long_hold_outwaits_its_timeout(tmp_path, monk
     run(body())
 
 
+def test_a_process_sent_while_the_device_connects_outwaits_its_timeout(tmp_path, monkeypatch):
+    """The service is live (its door open) before its device is connected — a robot
+    service waiting for the controller's stream: a process sent meanwhile waits in the
+    queue and its sender hears the Queued heartbeat, instead of timing out in silence
+    ("no update from ROBOT within 10 s" when the EGM twin started slowly, issue-free
+    defect of docs/robot-service.md's EGM example under load)."""
+    monkeypatch.setattr(scheduler_module, "QUEUED_HEARTBEAT_S", 0.1)
+    connected = asyncio.Event()
+
+    async def body():
+        cell = unique_cell()
+        dev = scripted(cell=cell, journal=tmp_path / "journal")
+
+        async def connect():
+            await connected.wait()
+
+        dev.interface.connect = connect
+        starting = asyncio.create_task(dev.start())
+        client = Participant("A", cell=cell)
+        await client.start()
+        try:
+            assert await client.wait_for("DEV", 10)
+            call = await client.create_process("DEV", "Work", "w", timeout=0.5)
+            assert call.ack.state is Q
+            updates = asyncio.create_task(collect(call))  # the sender waits for updates
+            await asyncio.sleep(1.5)  # three times the sender's timeout, still connecting
+            assert not updates.done() and dev.interface.log == []
+            connected.set()
+            await starting
+            assert states(await updates)[-1] is C and dev.interface.log == ["Work:w"]
+        finally:
+            connected.set()
+            await client.close()
+            await dev.close()
+
+    run(body())
+
+
 def test_stop_data_with_nothing_running_fails(tmp_path):
     async def body():
         async with cell_with(tmp_path, "A") as (dev, a):

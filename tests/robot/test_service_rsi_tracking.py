@@ -79,8 +79,11 @@ def test_a_programs_tracked_move_streams_with_the_tracker(tmp_path: Path, monkey
         tracker = build("tracker", None, {"seed": 5}, cell=cell, journal=False)
         await tracker.start()
         try:
+            # lockstep: the twin waits for each answer as a real-time PC would give it,
+            # so a loaded machine's late answers neither shake the arm nor add up to
+            # its Timeout (this test is about the tracked move, not the PC's timing)
             robot = RsiTwinProcess(f"127.0.0.1:{port}", "--timeout", str(TIMEOUT),
-                                   "--reflector", "ROBOT", "--cell", cell)
+                                   "--lockstep", "1", "--reflector", "ROBOT", "--cell", cell)
             try:
                 service = build("robot", None, {"rsi": f"127.0.0.1:{port}",
                                                 "rsi_timeout": TIMEOUT, "library": str(lib),

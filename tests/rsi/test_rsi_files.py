@@ -174,8 +174,9 @@ def test_plugcell_rsi_files(tmp_path, capsys) -> None:
     (["--ip", "kuka"], "does not appear to be an IPv4 or IPv6 address"),
     (["--ip", "10.0.0.1", "--max-step", "1,2"], "--max-step '1,2': expected 1 or 6"),
     (["--ip", "10.0.0.1", "--max-speed", "fast"], "--max-speed 'fast': expected numbers"),
-    (["--ip", "10.0.0.1", "--max-offset", "-1"], "max_offset[0] = -0.0174"),
-    (["--ip", "10.0.0.1", "--timeout", "0"], "timeout_packets 0"),
+    (["--ip", "10.0.0.1", "--max-offset", "-1"],
+     "--max-offset '-1': -1 deg is not a finite number > 0"),
+    (["--ip", "10.0.0.1", "--timeout", "0"], "--timeout 0: expected an integer 1..10000"),
 ])
 def test_plugcell_rsi_files_errors(tmp_path, capsys, argv, message) -> None:
     assert main(["rsi", "files", "--out", str(tmp_path), *argv]) == 2

@@ -445,6 +445,105 @@ def test_follow_raises_the_streams_failure(robot_and) -> None:
         link.follow(lambda s: None, lambda s: True, 1.0)
 
 
+def _follow_in_thread(link, done, timeout: float) -> tuple[object, dict]:
+    import threading
+
+    outcome: dict = {}
+
+    def run() -> None:
+        try:
+            outcome["end"] = link.follow(lambda s: Correction(offset=np.zeros(6)), done,
+                                         timeout)
+        except Exception as exc:  # the test looks at what it is
+            outcome["error"] = exc
+
+    motion = threading.Thread(target=run)
+    motion.start()
+    time.sleep(0.05)  # the motion's source is set
+    return motion, outcome
+
+
+def test_a_motion_takes_its_time_on_the_controllers_clock(robot_and) -> None:
+    """A controller whose cycles come slower than real time (a loaded machine: the twin's
+    process starved, or its lockstep) runs the motion to its end: the motion's timeout is
+    the controller's time (its cycles), not the wall clock's, which such a controller
+    cannot keep up with."""
+    link, robot = robot_and(local_config(mode="absolute"))
+    robot.cycle()
+    motion, outcome = _follow_in_thread(link, lambda s: s.cycle >= 8, 0.2)
+    for _ in range(10):  # 10 cycles of 4 ms, one every 60 ms: 0.6 s of wall time
+        time.sleep(0.06)
+        robot.cycle()
+    motion.join(10)
+    assert "error" not in outcome, outcome
+    assert outcome["end"].cycle == 8
+
+
+def test_a_motion_that_outlasts_its_timeout_on_the_controllers_clock_fails(robot_and) -> None:
+    link, robot = robot_and(local_config(mode="absolute"))
+    robot.cycle()
+    motion, outcome = _follow_in_thread(link, lambda s: False, 0.1)  # 25 cycles of 4 ms
+    for _ in range(40):
+        robot.cycle()
+        if not motion.is_alive():
+            break
+    motion.join(10)
+    assert isinstance(outcome.get("error"), TimeoutError), outcome
+    assert "the motion did not end within 0.1 s (streaming)" in str(outcome["error"])
+
+
+@pytest.mark.parametrize("frame", ["joints", "base"])  # base: g computed in a thread too
+def test_closing_ends_and_joins_a_correction_still_running(robot_and, frame) -> None:
+    """A correction (mode (b), the link in the service's thread) still running when the
+    service closes: closing the link ends its motion (the link is gone: it fails with that
+    reason) and closing the corrector joins its thread — none lingers."""
+    import threading
+
+    from plugcell.devices.robot.stream.correcting import CorrectionSpec, Corrector
+
+    q = (-15.0, -75.0, -190.0, 0.0, 75.0, 0.0)  # H4's (the spec's robot) parallelogram open
+    link, robot = robot_and(local_config(mode="absolute"))
+    robot.cycle(joints_deg=q)
+    corrector = Corrector(link)
+    corrector.start(CorrectionSpec("offset", (1e-4,) * 6, frame=frame, ramp_s=0.01))
+    for _ in range(5):
+        robot.cycle(joints_deg=q)
+    assert corrector.poll() is None  # runs (until CORRECT_END, or 24 h)
+    link.close()
+    corrector.close()
+    assert not [t for t in threading.enumerate() if t.name.startswith("correction")]
+    assert "the correction failed: RSI link closed" in corrector.poll()
+
+
+def test_the_services_close_ends_a_correction_still_running() -> None:
+    """The robot service's stream controller with its link in a thread
+    (``stream_process=false``): its close ends and joins a CORRECT still running."""
+    import asyncio
+    import threading
+    import types
+
+    from plugcell.devices.robot.stream.correcting import CorrectionSpec
+    from plugcell.devices.robot.streamed import streamed_link
+    from plugcell.sim.ports import free_port
+
+    q = (-15.0, -75.0, -190.0, 0.0, 75.0, 0.0)
+    controller = streamed_link(types.SimpleNamespace(), robot="smart_h4", library=(),
+                               name="R", rsi=f"127.0.0.1:{free_port('udp')}",
+                               stream_process=False)
+    robot = BareRobot(controller.link.start(), controller.config.ipoc_step)
+    try:
+        robot.cycle(joints_deg=q)
+        controller.corrector.start(CorrectionSpec("offset", (1e-4,) * 6, frame="joints",
+                                                  ramp_s=0.01))
+        for _ in range(5):
+            robot.cycle(joints_deg=q)
+        assert controller.corrector.poll() is None
+        asyncio.run(controller.close())
+    finally:
+        robot.close()
+    assert not [t for t in threading.enumerate() if t.name.startswith("correction")]
+
+
 def test_follow_times_out_without_a_controller() -> None:
     from plugcell.devices.robot.rsi import RsiLink
 

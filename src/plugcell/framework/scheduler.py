@@ -113,11 +113,18 @@ class ProcessScheduler:
 
     # -- life cycle ------------------------------------------------------------------
 
+    def admit(self) -> None:
+        """Run the Queued heartbeat (on the running loop): from the moment the service
+        takes processes, even before its device is connected and :meth:`start` runs
+        them, a sender waiting in the queue hears that its process is still queued."""
+        if self._heartbeat_task is None:
+            self._heartbeat_task = asyncio.create_task(self._queued_heartbeat(),
+                                                       name=f"{self.name}-queued")
+
     def start(self) -> None:
-        """Run the ProcessHandler and the Queued heartbeat (on the running loop)."""
+        """Run the ProcessHandler (and the Queued heartbeat, :meth:`admit`)."""
+        self.admit()
         self._handler_task = asyncio.create_task(self._process_handler(), name=f"{self.name}-ph")
-        self._heartbeat_task = asyncio.create_task(self._queued_heartbeat(),
-                                                   name=f"{self.name}-queued")
 
     def shut(self, reason: str) -> None:
         """Refuse to run anything more: fail the queued processes and ask the running

@@ -298,6 +298,9 @@ class GenericDevice:
         self.outbox.loop = asyncio.get_running_loop()
         try:
             await self.participant.start()
+            # processes sent while the device connects wait in the queue, and their
+            # senders hear the Queued heartbeat (a controller may take its time)
+            self.scheduler.admit()
             connect = getattr(self.interface, "connect", None)
             if connect is not None:
                 await connect()

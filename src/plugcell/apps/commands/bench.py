@@ -4,6 +4,8 @@ from __future__ import annotations
 
 import argparse
 
+from plugcell.apps.cli import CommandError
+
 
 def configure(p: argparse.ArgumentParser) -> None:
     """Add the ``bench`` options to its parser (declared in :mod:`plugcell.apps.cli`)."""
@@ -52,7 +54,6 @@ def run_compensation(args: argparse.Namespace) -> int:
 
     from plugcell.apps.bench.compensation import format_report
     from plugcell.apps.bench.compensation import run as bench
-    from plugcell.apps.cli import CommandError
 
     if args.targets < 1:
         raise CommandError(f"--targets must be positive, got {args.targets}")

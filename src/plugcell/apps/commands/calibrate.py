@@ -36,6 +36,7 @@ from typing import TYPE_CHECKING, Any
 if TYPE_CHECKING:  # numpy is imported where it is used: `--help` does not load it
     import numpy as np
 
+from plugcell.apps.cli import CommandError
 from plugcell.apps.commands.files import write_text
 from plugcell.apps.commands.robotargs import add_robot_args
 
@@ -135,7 +136,6 @@ def _frame(text: str, what: str) -> np.ndarray:
     """A 4x4 transform from a JSON file or an inline 'x,y,z,r,p,y' (mm, degrees)."""
     import numpy as np
 
-    from plugcell.apps.cli import CommandError
     from plugcell.kinematics.rotations import rpy_to_matrix
 
     def from_xyz_rpy(xyz: Any, rpy: Any) -> np.ndarray:
@@ -180,8 +180,6 @@ def _frame(text: str, what: str) -> np.ndarray:
 
 def _positive(value: float, option: str, unit: str) -> None:
     """Refuse a ``value`` of ``option`` that is not a finite number > 0."""
-    from plugcell.apps.cli import CommandError
-
     if not (math.isfinite(value) and value > 0):
         raise CommandError(f"{option} must be a finite number > 0 ({unit}), got {value}")
 
@@ -191,7 +189,6 @@ def _read(path: Path, rot: str, n: int, payload: float | None, scale: Any = None
 
     import numpy as np
 
-    from plugcell.apps.cli import CommandError
     from plugcell.calibration import CalibrationData
     from plugcell.io.measurements import MeasurementFileError, read_measurements
 
@@ -295,7 +292,6 @@ def _summary(d: dict[str, Any]) -> str:
 def _prior_stage(path: Path, args: argparse.Namespace) -> Any:
     """The arm-shape stage of the learned layer of calibration ``path`` (--residual-prior),
     read with this command's robot: a calibration of another robot is refused."""
-    from plugcell.apps.cli import CommandError
     from plugcell.apps.commands.files import read_calibration
     from plugcell.io.residual_models import ResidualFileError, load_residual
 
@@ -320,7 +316,6 @@ def _prior(path: Path, args: argparse.Namespace) -> Any:
     earlier σ or a layer that does not load are refused, naming the mismatch."""
     import numpy as np
 
-    from plugcell.apps.cli import CommandError
     from plugcell.apps.commands.files import read_calibration
     from plugcell.calibration import CalibrationError, model_config
     from plugcell.calibration.prior import Prior
@@ -358,8 +353,6 @@ def _prior(path: Path, args: argparse.Namespace) -> Any:
 
 def _prior_conflicts(args: argparse.Namespace) -> None:
     """Refuse options that mean nothing with --prior (the earlier model decides them)."""
-    from plugcell.apps.cli import CommandError
-
     if args.prior is None:
         if args.prior_scale is not None:
             raise CommandError("--prior-scale needs --prior EARLIER.json")
@@ -385,7 +378,6 @@ def _prior_conflicts(args: argparse.Namespace) -> None:
 
 
 def _run(args: argparse.Namespace) -> int:
-    from plugcell.apps.cli import CommandError
     from plugcell.apps.commands.robotargs import load_robot_of
     from plugcell.calibration import CalibrationError
     from plugcell.calibration.residual_model import ResidualModelError
@@ -493,7 +485,6 @@ def _fit(args: argparse.Namespace, desc: Any, data: Any, base: Any, probe: Any, 
 
 def _write(args: argparse.Namespace, desc: Any, data: Any, val: Any, result: Any) -> int:
     """Write PARAMS.json, its layer, the report and the residuals; print the summary."""
-    from plugcell.apps.cli import CommandError
     from plugcell.apps.commands.robotargs import robot_source_of
     from plugcell.io.params import params_json, residuals_json
     from plugcell.io.robot_schema import description_to_dict

@@ -17,6 +17,7 @@ import sys
 import time
 from typing import Any
 
+from plugcell.apps.cli import CommandError
 from plugcell.apps.commands.cellargs import add_cell_args, cell_of, transport_of
 from plugcell.framework import eventloop
 
@@ -52,8 +53,6 @@ def _emit(obj: dict[str, Any]) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from plugcell.apps.cli import CommandError
-
     data = None
     if args.data is not None:
         try:

@@ -32,6 +32,7 @@ import time
 from pathlib import Path
 from typing import Any
 
+from plugcell.apps.cli import CommandError
 from plugcell.apps.commands.cellargs import add_cell_args, cell_of, transport_of
 from plugcell.framework import eventloop
 
@@ -276,7 +277,6 @@ async def _via(client: Any, args: argparse.Namespace, command: str, option: str,
 
 
 def run_save(args: argparse.Namespace) -> int:
-    from plugcell.apps.cli import CommandError
     from plugcell.devices.cell.wiring import WiringError, save_wiring
 
     states = eventloop.run(_states(args, args.settle))
@@ -292,7 +292,6 @@ def run_save(args: argparse.Namespace) -> int:
 
 
 def run_load(args: argparse.Namespace) -> int:
-    from plugcell.apps.cli import CommandError
     from plugcell.devices.cell.wiring import WiringError, load_wiring
 
     try:
@@ -386,8 +385,6 @@ async def _keep(client: Any, keeper: Any, args: argparse.Namespace) -> None:
 
 
 def run_run(args: argparse.Namespace) -> int:
-    from plugcell.apps.cli import CommandError
-
     if len(args.pairs) % 2:
         raise CommandError("give ROBOT PROGRAM pairs, e.g. cell run R1 example R2 example")
     pairs = [(r, program_ref(p)) for r, p in zip(args.pairs[::2], args.pairs[1::2],
@@ -414,8 +411,6 @@ def program_ref(program: str) -> str:
 
 def _values_of(values: list[str], robots: list[str]) -> dict[str, list[str]]:
     """``--value [ROBOT:]NAME=VALUE`` → each robot's ``name=value`` texts."""
-    from plugcell.apps.cli import CommandError
-
     out: dict[str, list[str]] = {r: [] for r in robots}
     for text in values:
         head, sep, rest = text.partition(":")

@@ -5,6 +5,7 @@ from __future__ import annotations
 import argparse
 import os
 
+from plugcell.apps.cli import CommandError
 from plugcell.framework.keys import DEFAULT_CELL, check_name
 from plugcell.framework.transport import TransportConfig
 
@@ -34,8 +35,6 @@ def add_cell_args(parser: argparse.ArgumentParser) -> None:
 
 def cell_of(args: argparse.Namespace) -> str:
     """The validated cell name (CommandError if invalid)."""
-    from plugcell.apps.cli import CommandError
-
     try:
         return check_name(args.cell, "cell name")
     except ValueError as exc:
@@ -45,8 +44,6 @@ def cell_of(args: argparse.Namespace) -> str:
 def transport_of(args: argparse.Namespace, mode: str | None = None) -> TransportConfig:
     """The transport the options and the ``PLUGCELL_*`` environment describe (CommandError
     with the reason if they are invalid: a bad lease, mode, or a client that listens)."""
-    from plugcell.apps.cli import CommandError
-
     try:
         return TransportConfig.from_env(connect=args.connect, listen=args.listen, mode=mode)
     except ValueError as exc:

@@ -13,6 +13,7 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
+from plugcell.apps.cli import CommandError
 from plugcell.framework.certificates import create_ca, issue_certificate
 
 DEFAULT_DIR = "plugcell-certs"
@@ -62,8 +63,6 @@ def configure(p: argparse.ArgumentParser) -> None:
 
 
 def run_init(args: argparse.Namespace) -> int:
-    from plugcell.apps.cli import CommandError
-
     if (args.dir / "ca.key").exists() and not args.force:
         raise CommandError(f"{args.dir / 'ca.key'} exists (use --force to replace the CA)")
     path = create_ca(args.dir, args.cell, args.days)
@@ -72,8 +71,6 @@ def run_init(args: argparse.Namespace) -> int:
 
 
 def run_issue(args: argparse.Namespace) -> int:
-    from plugcell.apps.cli import CommandError
-
     if not (args.dir / "ca.key").exists():
         raise CommandError(f"no CA in {args.dir}: run `plugcell certs init --dir {args.dir}`")
     for name in args.names:
@@ -86,7 +83,6 @@ def run_issue(args: argparse.Namespace) -> int:
 
 
 def run_opcua(args: argparse.Namespace) -> int:
-    from plugcell.apps.cli import CommandError
     from plugcell.devices.opcua.certificates import certificate_paths, issue_application_certificate
 
     if args.uri and len(args.names) > 1:

@@ -34,6 +34,7 @@ from typing import Any
 
 import numpy as np
 
+from plugcell.apps.cli import CommandError
 from plugcell.apps.commands.files import check_region_of, read_compensation_model
 from plugcell.apps.commands.robotargs import add_robot_args
 
@@ -89,7 +90,6 @@ def configure(p: argparse.ArgumentParser) -> None:
 
 # ----------------------------------------------------------------------------- inputs
 def _frame_arg(text: str, option: str, rot: str) -> np.ndarray:
-    from plugcell.apps.cli import CommandError
     from plugcell.compensation import frame_matrix
 
     parts = [s.strip() for s in text.split(",")]
@@ -151,7 +151,6 @@ def parse_targets(text: str, name: str) -> tuple[list[str], np.ndarray, np.ndarr
 
 # ----------------------------------------------------------------------------- run
 def _run(args: argparse.Namespace) -> int:
-    from plugcell.apps.cli import CommandError
     from plugcell.compensation import IdentifiedModel, filter_program
 
     if args.program is not None:
@@ -226,7 +225,6 @@ def _run(args: argparse.Namespace) -> int:
 def _check_temperature(args: argparse.Namespace, result: Any) -> None:
     """``--temperature-c`` is needed when the residual model uses the temperature, and
     refused when nothing of the calibration (thermal term, residual model) uses it."""
-    from plugcell.apps.cli import CommandError
     from plugcell.calibration.model import THERMAL_KEY
 
     layer = result.residual_model
@@ -256,8 +254,6 @@ def _undetermined(args: argparse.Namespace, result: Any, q: np.ndarray, payload:
     undetermined model parameters give a warning for targets beyond it.  Returns the
     warnings."""
     import math
-
-    from plugcell.apps.cli import CommandError
 
     und = result.undetermined
     if und is None:
@@ -298,8 +294,6 @@ def _undetermined(args: argparse.Namespace, result: Any, q: np.ndarray, payload:
 
 def _write(args: argparse.Namespace, result: Any, names: list[str], res: Any,
            payload: np.ndarray, region: Any = None) -> None:
-    from plugcell.apps.cli import CommandError
-
     n = res.q.shape[1]
     q = res.q / result.model.structure.source.reading_scale()  # degrees (prismatic: mm)
     buf = io.StringIO()

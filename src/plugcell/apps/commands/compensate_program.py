@@ -26,6 +26,8 @@ from typing import Any
 
 import numpy as np
 
+from plugcell.apps.cli import CommandError
+
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
     """The program options of ``plugcell compensate``."""
@@ -56,7 +58,6 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def _named(values: list[str], option: str, notation: str) -> dict[str, np.ndarray]:
-    from plugcell.apps.cli import CommandError
     from plugcell.io.units import NOTATIONS, UnitsError, pose_from_notation
 
     out: dict[str, np.ndarray] = {}
@@ -89,7 +90,6 @@ def _outputs(program: Any, out: Path) -> list[Path]:
 
 def run(args: argparse.Namespace) -> int:
     """``plugcell compensate --program`` (module docstring)."""
-    from plugcell.apps.cli import CommandError
     from plugcell.apps.commands.files import check_region_of, read_compensation_model
     from plugcell.compensation import IdentifiedModel
     from plugcell.io.programs import NOTATION, ProgramError, dialect_of, read_program
@@ -172,8 +172,6 @@ def _warn(args: argparse.Namespace, failed: list[Any], comp: list[Any], region: 
     """What the user must know before anything is written, on stderr: the targets that
     cannot be compensated (refused unless ``--partial``), those compensated for another
     arm configuration than the program names, those outside the calibrated region."""
-    from plugcell.apps.cli import CommandError
-
     if failed:
         lines = [f"{r.where} ({r.target.name}): {r.reason}" for r in failed[:10]]
         more = f"\n... and {len(failed) - 10} more" if len(failed) > 10 else ""
@@ -228,7 +226,6 @@ def _write_report(path: Path, fr: Any, comp: list[Any], region: Any) -> None:
 
 def _write_plan(path: Path, result: Any, fr: Any, payload: float, program: Path) -> None:
     """The joints the compensated program visits, in the order of its motions, each once."""
-    from plugcell.apps.cli import CommandError
     from plugcell.apps.commands.files import write_text
     from plugcell.io.plans import MeasurementPlan, format_plan
 

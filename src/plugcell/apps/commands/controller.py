@@ -17,6 +17,7 @@ import logging
 import sys
 from pathlib import Path
 
+from plugcell.apps.cli import CommandError
 from plugcell.apps.commands.cellargs import add_cell_args, cell_of, transport_of
 from plugcell.framework import eventloop
 
@@ -58,7 +59,6 @@ def _run_deprecated(args: argparse.Namespace) -> int:
 
 
 def run(args: argparse.Namespace) -> int:
-    from plugcell.apps.cli import CommandError
     from plugcell.apps.ui.reports import ReportFiles, default_docs_dir
     from plugcell.apps.ui.server import serve
     from plugcell.devices.cell.service import cell_controller

@@ -21,6 +21,8 @@ import sys
 from pathlib import Path
 from typing import Any
 
+from plugcell.apps.cli import CommandError
+
 
 def configure(p: argparse.ArgumentParser) -> None:
     """Add the ``demo`` options to its parser (declared in :mod:`plugcell.apps.cli`)."""
@@ -46,7 +48,6 @@ def configure(p: argparse.ArgumentParser) -> None:
 def _demo(args: argparse.Namespace) -> int:
     from dataclasses import replace
 
-    from plugcell.apps.cli import CommandError
     from plugcell.apps.commands.progress import ProgressBar
     from plugcell.apps.demo.processes import ServiceStartError
     from plugcell.apps.demo.services import DemoConfig, DemoError, run_demo

@@ -27,6 +27,7 @@ from typing import Any
 
 import numpy as np
 
+from plugcell.apps.cli import CommandError
 from plugcell.apps.commands.files import write_text
 
 
@@ -63,7 +64,6 @@ def _params(path: Path) -> tuple[dict[str, Any], Any]:
 
 
 def _nests(path: Path) -> tuple[list[str], np.ndarray]:
-    from plugcell.apps.cli import CommandError
     from plugcell.io.nests import NestFileError, read_nests
 
     try:
@@ -88,7 +88,6 @@ def _registered(path: Path) -> bool:
 
 
 def _register(args: argparse.Namespace) -> int:
-    from plugcell.apps.cli import CommandError
     from plugcell.io.nests import format_nests
     from plugcell.metrology.drift import nests_in_base, too_close
 
@@ -106,7 +105,6 @@ def _register(args: argparse.Namespace) -> int:
 
 
 def _check(args: argparse.Namespace) -> int:
-    from plugcell.apps.cli import CommandError
     from plugcell.metrology import MetrologyError
     from plugcell.metrology.drift import estimate_base_drift, likely_mix_up
 

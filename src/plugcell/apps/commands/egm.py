@@ -28,6 +28,7 @@ from .streaming import (
     add_run_controls,
     add_run_options,
     limits_of,
+    named_as_options,
     run_link,
     sine_or_hold,
     write_and_list,
@@ -95,7 +96,11 @@ def _config(args: argparse.Namespace, robot_host: str, listen: str):
                          mode=args.mode, sample_rate_ms=args.sample_ms,
                          comm_timeout_s=args.timeout, limits=limits)
     except EgmConfigError as exc:
-        raise CommandError(str(exc)) from None
+        raise CommandError(named_as_options(exc, {
+            "sample_rate_ms": ("--sample-ms", args.sample_ms),
+            "comm_timeout_s": ("--timeout", args.timeout), "listen_port": ("--port", args.port),
+            "robot_host": ("--robot-ip", robot_host), "listen_host": ("--listen", listen)})) \
+            from None
 
 
 def _files(args: argparse.Namespace) -> int:

@@ -24,6 +24,7 @@ import json
 import sys
 from pathlib import Path
 
+from plugcell.apps.cli import CommandError
 from plugcell.apps.commands.files import write_text
 from plugcell.apps.commands.robotargs import add_robot_args
 
@@ -63,8 +64,6 @@ EXTENSIONS = {"urdf": (".urdf", ".xml"), "ur-kinematics": (".yaml", ".yml"),
 
 def _check_extension(out: Path, fmt: str) -> None:
     """Refuse ``--out`` named for another format (``x.yaml`` with ``--format urdf``)."""
-    from plugcell.apps.cli import CommandError
-
     suffix = out.suffix.lower()
     if suffix in EXTENSIONS[fmt]:
         return
@@ -78,7 +77,6 @@ def _check_extension(out: Path, fmt: str) -> None:
 
 
 def _run(args: argparse.Namespace) -> int:
-    from plugcell.apps.cli import CommandError
     from plugcell.apps.commands.calibrate import _frame
     from plugcell.apps.commands.files import read_calibration
     from plugcell.apps.commands.robotargs import robot_source_of

@@ -15,14 +15,14 @@ import json
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
+from plugcell.apps.cli import CommandError
+
 if TYPE_CHECKING:
     from plugcell.calibration.result import CalibrationResult
 
 
 def write_text(path: Path, text: str) -> None:
     """Write ``text`` (UTF-8) to ``path``, making its folder; an OS error names the file."""
-    from plugcell.apps.cli import CommandError
-
     try:
         path.parent.mkdir(parents=True, exist_ok=True)
         path.write_text(text, encoding="utf-8")
@@ -32,8 +32,6 @@ def write_text(path: Path, text: str) -> None:
 
 def read_params_document(path: Path) -> dict[str, Any]:
     """The JSON object of a PARAMS.json file (unreadable, not JSON, not an object: error)."""
-    from plugcell.apps.cli import CommandError
-
     try:
         d = json.loads(path.read_text(encoding="utf-8"))
     except OSError as exc:
@@ -67,7 +65,6 @@ def read_calibration(path: Path, args: argparse.Namespace | None = None
     result : CalibrationResult
         The calibration, ready to predict (no residual layer: the caller loads it).
     """
-    from plugcell.apps.cli import CommandError
     from plugcell.apps.commands.robotargs import load_robot_of
     from plugcell.io.params import ParamsError, result_from_params
     from plugcell.io.robots import description_of_params
@@ -98,8 +95,6 @@ def read_compensation_model(path: Path, args: argparse.Namespace, residual: bool
     """The calibration of PARAMS.json ``path`` as ``plugcell compensate`` uses it: with its
     learned residual layer when ``residual`` and the file has one (``--physical-only``:
     without)."""
-    from plugcell.apps.cli import CommandError
-
     d, result = read_calibration(path, args)
     entry = d.get("residual_model")
     if residual and entry:

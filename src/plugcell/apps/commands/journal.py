@@ -7,6 +7,8 @@ import json
 from datetime import datetime
 from pathlib import Path
 
+from plugcell.apps.cli import CommandError
+
 
 def configure(p: argparse.ArgumentParser) -> None:
     """Add the ``journal`` options to its parser (declared in :mod:`plugcell.apps.cli`)."""
@@ -31,7 +33,6 @@ def _time(ns: int | None) -> str:
 def run(args: argparse.Namespace) -> int:
     import os
 
-    from plugcell.apps.cli import CommandError
     from plugcell.framework.journal import journal_files, read_journal
     from plugcell.framework.keys import DEFAULT_CELL, check_name
 

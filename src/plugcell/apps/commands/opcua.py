@@ -15,6 +15,7 @@ import sys
 from pathlib import Path
 from typing import Any
 
+from plugcell.apps.cli import CommandError
 from plugcell.apps.commands.cellargs import add_cell_args, cell_of, transport_of
 from plugcell.framework import eventloop
 
@@ -60,7 +61,6 @@ def configure(p: argparse.ArgumentParser) -> None:
 
 
 def run_hash(args: argparse.Namespace) -> int:
-    from plugcell.apps.cli import CommandError
     from plugcell.devices.opcua.users import hash_password
     from plugcell.framework.keys import check_name
 
@@ -83,7 +83,6 @@ def run_hash(args: argparse.Namespace) -> int:
 
 
 def run_serve(args: argparse.Namespace) -> int:
-    from plugcell.apps.cli import CommandError
     from plugcell.devices.opcua.gateway import CellGateway
     from plugcell.devices.opcua.listen import bind_error
     from plugcell.devices.opcua.server_security import GatewaySecurity

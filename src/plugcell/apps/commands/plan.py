@@ -30,6 +30,7 @@ from typing import Any
 
 import numpy as np
 
+from plugcell.apps.cli import CommandError
 from plugcell.apps.commands.deprecated import DeprecatedName
 from plugcell.apps.commands.files import write_text
 from plugcell.apps.commands.robotargs import add_robot_args, load_robot_of
@@ -97,8 +98,6 @@ def configure(p: argparse.ArgumentParser) -> None:
 
 # ---------------------------------------------------------------------- argument parsing
 def _numbers(text: str, what: str, count: tuple[int, ...]) -> list[float]:
-    from plugcell.apps.cli import CommandError
-
     try:
         vals = [float(x) for x in text.split(",")]
     except ValueError:
@@ -111,8 +110,6 @@ def _numbers(text: str, what: str, count: tuple[int, ...]) -> list[float]:
 
 
 def _payloads(text: str | None, payload_model: bool) -> list[float]:
-    from plugcell.apps.cli import CommandError
-
     if text is None:
         return [0.0, 18.0, 36.0] if payload_model else [0.0]
     vals = _numbers(text, "payloads", tuple(range(1, 33)))
@@ -138,8 +135,6 @@ def _check_dropped(args: argparse.Namespace, robot: str, dropped: dict[str, int]
                    measured: bool) -> None:
     """Say how many configurations of ``--from`` were left out and why; refuse when most
     are outside the robot's joint limits (another robot's file)."""
-    from plugcell.apps.cli import CommandError
-
     given = dropped.get("given", 0)
     left_out = {k: v for k, v in dropped.items() if k != "given"}
     if not given or not left_out:
@@ -172,7 +167,6 @@ def _twin_cell(robot: str) -> tuple[np.ndarray, np.ndarray] | None:
 
 # ---------------------------------------------------------------------- the command
 def _run(args: argparse.Namespace) -> int:
-    from plugcell.apps.cli import CommandError
     from plugcell.calibration.configs import model_config
     from plugcell.calibration.planning import PlanningError, PosePlanner, planning_keys
 
@@ -221,8 +215,6 @@ def _run(args: argparse.Namespace) -> int:
 
 def _check_options(args: argparse.Namespace) -> None:
     """The options' own ranges and pairings (CommandError naming the option)."""
-    from plugcell.apps.cli import CommandError
-
     if args.poses < 1:
         raise CommandError(f"--poses must be positive, got {args.poses}")
     if args.program_value and args.program is None:
@@ -243,7 +235,6 @@ def _check_options(args: argparse.Namespace) -> None:
 
 def _volume(args: argparse.Namespace, desc: Any) -> Any:
     """The working volume the poses keep to: the robot's, ``--volume`` or none."""
-    from plugcell.apps.cli import CommandError
     from plugcell.kinematics import Box
 
     if args.volume is None:
@@ -291,7 +282,6 @@ class _Source:
 
 def _read_from(args: argparse.Namespace, desc: Any, scale: Any) -> _Source:
     """Read ``--from``: a measurement file (it has x, y, z columns) or a plan file."""
-    from plugcell.apps.cli import CommandError
     from plugcell.calibration import CalibrationData
     from plugcell.io.measurements import MeasurementFileError, read_measurements
     from plugcell.io.plans import PlanFileError, read_plan
@@ -321,7 +311,6 @@ def _model(args: argparse.Namespace, desc: Any, cfg: Any, payloads: list[float],
            source: _Source, base: np.ndarray, probe: np.ndarray) -> Any:
     """The error model to plan for; with measured poses, BASE and PROBE estimated from
     them (refused when they do not fit the robot)."""
-    from plugcell.apps.cli import CommandError
     from plugcell.calibration import CalibrationError, Calibrator, ErrorModel
 
     try:

@@ -31,6 +31,8 @@ from typing import Any
 
 import numpy as np
 
+from plugcell.apps.cli import CommandError
+
 
 def configure(p: argparse.ArgumentParser) -> None:
     """Add the ``reproduce`` options to its parser (declared in :mod:`plugcell.apps.cli`)."""
@@ -74,8 +76,6 @@ def _common(p: argparse.ArgumentParser) -> None:
 
 
 def _run_8_1(args: argparse.Namespace) -> int:
-    from plugcell.apps.cli import CommandError
-
     if args.poses < 10:
         raise CommandError(f"--poses must be at least 10, got {args.poses}")
     from plugcell.apps.reproduce import identification_8_1 as r81

@@ -20,6 +20,8 @@ from __future__ import annotations
 import argparse
 from typing import TYPE_CHECKING, Any
 
+from plugcell.apps.cli import CommandError
+
 if TYPE_CHECKING:
     from plugcell.io.robots import RobotSource
     from plugcell.kinematics.description import RobotDescription
@@ -66,7 +68,7 @@ def robot_source_of(args: argparse.Namespace, ref: str | None = None) -> RobotSo
     try:
         xargs = parse_robot_args(getattr(args, "robot_arg", None) or [])
     except ValueError as exc:
-        raise _error(str(exc)) from None
+        raise CommandError(str(exc)) from None
     return RobotSource(str(r), xargs, tuple(getattr(args, "package_path", None) or []),
                        getattr(args, "base_link", None), getattr(args, "tip_link", None))
 
@@ -79,7 +81,7 @@ def load_robot_of(args: argparse.Namespace, ref: str | None = None) -> RobotDesc
     try:
         return src.load()
     except DescriptionError as exc:
-        raise _error(str(exc)) from None
+        raise CommandError(str(exc)) from None
 
 
 def robot_file_of(args: argparse.Namespace) -> str:
@@ -115,13 +117,6 @@ def robot_file_of(args: argparse.Namespace) -> str:
                 f.write(text)
             os.replace(tmp, path)
     except OSError as exc:
-        raise _error(f"{path}: cannot write the imported robot: {exc.strerror or exc}") from None
+        raise CommandError(f"{path}: cannot write the imported robot: "
+                           f"{exc.strerror or exc}") from None
     return str(path)
-
-
-def _error(msg: str) -> Exception:
-    try:
-        from plugcell.apps.cli import CommandError
-    except ImportError:  # pragma: no cover - plugcell.apps.cli is always there
-        return SystemExit(f"error: {msg}")
-    return CommandError(msg)

@@ -23,17 +23,37 @@ axes.
 from __future__ import annotations
 
 import argparse
+from collections.abc import Callable
 from pathlib import Path
+
+from plugcell.apps.cli import CommandError
 
 from .streaming import (
     add_limit_options,
     add_run_controls,
     add_run_options,
     limits_of,
+    named_as_options,
     run_link,
     sine_or_hold,
     write_and_list,
 )
+
+
+def _first_index(signals: str) -> Callable[[str], int]:
+    """The type of ``--dio``/``--dil``: the first index of a 16-bit word of the
+    controller's ``signals`` (``$OUT``, ``$IN``), an integer ≥ 1."""
+    def index(text: str) -> int:
+        try:
+            value = int(text)
+        except ValueError:
+            value = 0
+        if value < 1:
+            raise argparse.ArgumentTypeError(f"{text!r}: expected the first {signals} index "
+                                             "of the word, an integer >= 1")
+        return value
+
+    return index
 
 
 def _stream_args(p: argparse.ArgumentParser) -> None:
@@ -51,7 +71,7 @@ def _stream_args(p: argparse.ArgumentParser) -> None:
                    help="the ETHERNET object's Timeout: late packets before RSI stops")
     p.add_argument("--sentype", default="ImFree", help="SENTYPE (default ImFree)")
     add_limit_options(p, "correction", "deg (joint) or mm,…,deg (Cartesian)")
-    p.add_argument("--dio", type=int, metavar="OUT",
+    p.add_argument("--dio", type=_first_index("$OUT"), metavar="OUT",
                    help="route a 16-bit output word DiO to $OUT[OUT…OUT+15]")
 
 
@@ -66,7 +86,7 @@ def configure(p: argparse.ArgumentParser) -> None:
     f.add_argument("--ip", required=True, help="the PC's address on the RSI network "
                    "(IP_NUMBER)")
     _stream_args(f)
-    f.add_argument("--dil", type=int, metavar="IN",
+    f.add_argument("--dil", type=_first_index("$IN"), metavar="IN",
                    help="report a 16-bit input word DiL from $IN[IN…IN+15]")
     f.add_argument("--drives", choices=("pc", "robot"), default="pc",
                    help="pc: the KRL program holds the robot and follows the PC "
@@ -85,7 +105,6 @@ def configure(p: argparse.ArgumentParser) -> None:
 
 def _config(args: argparse.Namespace, robot_host: str, listen: str):
     """The RsiConfig the options describe (limits converted to SI)."""
-    from plugcell.apps.cli import CommandError
     from plugcell.devices.robot.rsi import (
         OutputSignal,
         RsiConfig,
@@ -100,7 +119,10 @@ def _config(args: argparse.Namespace, robot_host: str, listen: str):
                          timeout_packets=args.timeout, limits=limits, sentype=args.sentype,
                          outputs=(OutputSignal("DiO", 16),) if args.dio else ())
     except RsiConfigError as exc:
-        raise CommandError(str(exc)) from None
+        raise CommandError(named_as_options(exc, {
+            "timeout_packets": ("--timeout", args.timeout), "listen_port": ("--port", args.port),
+            "sentype": ("--sentype", args.sentype), "robot_host": ("--robot-ip", robot_host),
+            "listen_host": ("--listen", listen)})) from None
 
 
 def _files(args: argparse.Namespace) -> int:
@@ -110,7 +132,8 @@ def _files(args: argparse.Namespace) -> int:
     io = IoRouting(outputs={"DiO": args.dio} if args.dio else None,
                    input_tag="DiL" if args.dil else None, input_index=args.dil or 1)
     write_and_list(lambda: write_controller_files(args.out, config, args.ip, io, args.drives,
-                                                  args.settle), args.out)
+                                                  args.settle), args.out,
+                   {"settle": ("--settle", args.settle)})
     if args.drives == "robot":
         print(f"then on the PC: plugcell serve robot --rsi {args.ip}:{args.port} --rsi-robot "
               f"CONTROLLER_IP --rsi-timeout {args.timeout} --param rsi_correction="
@@ -137,7 +160,6 @@ def _source(args: argparse.Namespace):
 
 
 def _run(args: argparse.Namespace) -> int:
-    from plugcell.apps.cli import CommandError
     from plugcell.devices.robot.rsi import RsiLink
 
     config = _config(args, args.robot_ip, args.listen)

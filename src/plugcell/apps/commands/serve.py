@@ -12,6 +12,7 @@ from collections.abc import Awaitable
 from pathlib import Path
 from typing import Any
 
+from plugcell.apps.cli import CommandError
 from plugcell.apps.commands.cellargs import add_cell_args, cell_of, transport_of
 from plugcell.apps.commands.deprecated import DeprecatedName
 from plugcell.apps.commands.robotargs import add_robot_args
@@ -88,7 +89,6 @@ def configure(p: argparse.ArgumentParser) -> None:
 
 
 def _params(kind: str, pairs: list[str]) -> dict[str, Any]:
-    from plugcell.apps.cli import CommandError
     from plugcell.apps.kinds import current_param, kind_params, load_kind
 
     known = kind_params(kind)
@@ -109,7 +109,6 @@ def _params(kind: str, pairs: list[str]) -> dict[str, Any]:
 
 def _device_options(kind: str, args: argparse.Namespace) -> list[str]:
     """The device flags that were given, as ``KEY=VALUE`` pairs for :func:`_params`."""
-    from plugcell.apps.cli import CommandError
     from plugcell.apps.commands.robotargs import robot_file_of
     from plugcell.apps.kinds import kind_params, load_kind
 
@@ -149,7 +148,6 @@ def _device_options(kind: str, args: argparse.Namespace) -> list[str]:
 
 
 def run(args: argparse.Namespace) -> int:
-    from plugcell.apps.cli import CommandError
     from plugcell.apps.kinds import build, current_kind, load_kind
     from plugcell.framework.participant import PartnerError
     from plugcell.framework.service import DeviceError
@@ -211,12 +209,30 @@ async def start_unless_stopped(start: Awaitable[None], stop: asyncio.Event) -> b
     return False
 
 
+async def _say_when_listening(service: Any) -> None:
+    """A robot service streaming to its controller (``--rsi``, ``--egm``) starts only once
+    the controller streams: say when its link listens — the moment to start the
+    controller's program, whose own timeout runs from its first packet."""
+    bridge = getattr(service.interface, "bridge", None)
+    listening = getattr(bridge, "listening", None)
+    if not isinstance(listening, asyncio.Event):
+        return
+    await listening.wait()
+    print(f"plugcell: {service.name} ({service.declaration.kind}) listening on "
+          f"{bridge.address} for the {bridge.vendor} stream of the controller at "
+          f"{bridge.config.robot_host}", flush=True)
+
+
 async def _serve(service: Any) -> None:
     from plugcell.framework.participant import PartnerError
 
     stop = stop_on_signals()
-    if not await start_unless_stopped(service.start(), stop):
-        return
+    listening = asyncio.create_task(_say_when_listening(service))
+    try:
+        if not await start_unless_stopped(service.start(), stop):
+            return
+    finally:
+        listening.cancel()
     print(
         f"plugcell: {service.name} ({service.declaration.kind}) serving in cell "
         f"{service.cell!r} "

@@ -7,10 +7,13 @@ from __future__ import annotations
 
 import argparse
 import json
+import math
 import time
-from collections.abc import Callable, Iterable, Sequence
+from collections.abc import Callable, Iterable, Mapping, Sequence
 from pathlib import Path
 from typing import Any
+
+from plugcell.apps.cli import CommandError
 
 
 def add_limit_options(p: argparse.ArgumentParser, what: str, units: str) -> None:
@@ -24,10 +27,10 @@ def add_limit_options(p: argparse.ArgumentParser, what: str, units: str) -> None
                    "clamping it")
 
 
-def _six(text: str | None, what: str) -> tuple[float, ...] | None:
-    """``--max-<what>``'s value: one number for all six axes, or six; ``None`` if not given."""
-    from plugcell.apps.cli import CommandError
-
+def _six(text: str | None, what: str, kind: str) -> tuple[float, ...] | None:
+    """``--max-<what>``'s value: one number for all six axes, or six, each finite and > 0
+    (robot units: degrees, or mm for the first three Cartesian axes); ``None`` if not
+    given.  A bad value is a CommandError naming it as typed, with its unit."""
     if text is None:
         return None
     try:
@@ -39,7 +42,42 @@ def _six(text: str | None, what: str) -> tuple[float, ...] | None:
         vals *= 6
     if len(vals) != 6:
         raise CommandError(f"--max-{what} {text!r}: expected 1 or 6 numbers, got {len(vals)}")
+    typed = text.split(",") * (6 if "," not in text else 1)
+    for i, v in enumerate(vals):
+        if not (math.isfinite(v) and v > 0):
+            unit = "mm" if kind == "cartesian" and i < 3 else "deg"
+            where = "" if "," not in text else f" (axis {i + 1})"
+            raise CommandError(f"--max-{what} {text!r}: {typed[i].strip()} {unit}{where} is "
+                               "not a finite number > 0")
     return vals
+
+
+def named_as_options(exc: Exception, options: Mapping[str, tuple[str, Any]]) -> str:
+    """``exc``'s message (``"field value: why"``, as the stream's configuration and the
+    controller's files word it) with the field named as the option that gave it and the
+    value as the option took it (``"timeout_packets 0: …"`` → ``"--timeout 0: …"``).
+
+    Parameters
+    ----------
+    exc : Exception
+        A StreamConfigError or ValueError of the configuration.
+    options : mapping of str to (str, object)
+        Field name → (option, its parsed value): the values of these options are the
+        fields' own (same unit), so only the names change.
+
+    Returns
+    -------
+    str
+        The message for the user (``str(exc)`` if it names no field of ``options``).
+    """
+    msg = str(exc)
+    name, _, rest = msg.partition(" ")
+    if name not in options or ": " not in rest:
+        return msg
+    option, value = options[name]
+    shown = f"{value:g}" if isinstance(value, float) else (
+        repr(value) if isinstance(value, str) else str(value))
+    return f"{option} {shown}: {rest.split(': ', 1)[1]}"
 
 
 def limits_of(args: argparse.Namespace, kind: str) -> Any:
@@ -66,22 +104,22 @@ def limits_of(args: argparse.Namespace, kind: str) -> Any:
     base = default_limits(kind)  # type: ignore[arg-type]
     given = {}
     for name in ("step", "offset", "speed"):
-        vals = _six(getattr(args, f"max_{name}"), name)
+        vals = _six(getattr(args, f"max_{name}"), name, kind)
         given[name] = (tuple(v * s for v, s in zip(vals, scale, strict=True)) if vals
                        else getattr(base, f"max_{name}"))
     return CorrectionLimits(given["step"], given["offset"], given["speed"],
                             "refuse" if args.refuse else "clamp")
 
 
-def write_and_list(write: Callable[[], Iterable[Path]], out: Path) -> None:
+def write_and_list(write: Callable[[], Iterable[Path]], out: Path,
+                   options: Mapping[str, tuple[str, Any]] | None = None) -> None:
     """Write the controller's files (``write()``, into the folder ``out``) and print each
-    path; a refused configuration or a folder that cannot be written is a CommandError."""
-    from plugcell.apps.cli import CommandError
-
+    path; a refused configuration or a folder that cannot be written is a CommandError
+    (naming the option of a refused value: ``options``, :func:`named_as_options`)."""
     try:
         paths = write()
     except ValueError as exc:
-        raise CommandError(str(exc)) from None
+        raise CommandError(named_as_options(exc, options or {})) from None
     except OSError as exc:
         raise CommandError(f"{out}: cannot write: {exc.strerror or exc}") from None
     for path in paths:
@@ -133,7 +171,6 @@ def sine_or_hold(sine: str | None, axes: Sequence[str], unit: Callable[[int], fl
     CommandError
         A malformed option, an unknown axis, a period ≤ 0 (one line naming it).
     """
-    from plugcell.apps.cli import CommandError
     from plugcell.devices.robot.stream.source import Hold, SineOffset
 
     if not sine:

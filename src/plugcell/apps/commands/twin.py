@@ -10,6 +10,7 @@ from typing import Any
 
 import numpy as np
 
+from plugcell.apps.cli import CommandError
 from plugcell.apps.commands.deprecated import DeprecatedName
 from plugcell.apps.commands.progress import ProgressBar
 from plugcell.apps.commands.robotargs import add_robot_args
@@ -138,7 +139,6 @@ def add_nests_parser(tw: argparse._SubParsersAction) -> None:
 
 
 def _scenario(args: argparse.Namespace):
-    from plugcell.apps.cli import CommandError
     from plugcell.apps.commands.robotargs import load_robot_of, robot_source_of
     from plugcell.io.robot_schema import description_to_dict
     from plugcell.kinematics.errors import DescriptionError
@@ -179,7 +179,6 @@ THESIS_ROBOT = "smart_h4"
 
 
 def _report(args: argparse.Namespace) -> int:
-    from plugcell.apps.cli import CommandError
     from plugcell.sim.twin.report import error_budget
     from plugcell.sim.twin.scenario import ScenarioError
 
@@ -222,7 +221,6 @@ def _report(args: argparse.Namespace) -> int:
 
 
 def _measure(args: argparse.Namespace) -> int:
-    from plugcell.apps.cli import CommandError
     from plugcell.io.measurements import write_measurements
     from plugcell.sim.twin.campaign import (
         CampaignError,
@@ -292,7 +290,6 @@ def _measure(args: argparse.Namespace) -> int:
 
 def _plan_joints(path: Path, desc: Any, default_payload: float) -> tuple[np.ndarray, np.ndarray]:
     """Joint targets and payloads of a plan file, checked against the robot's limits."""
-    from plugcell.apps.cli import CommandError
     from plugcell.io.plans import PlanFileError, read_plan
 
     try:
@@ -310,8 +307,6 @@ def _plan_joints(path: Path, desc: Any, default_payload: float) -> tuple[np.ndar
 def _temperatures(text: str | None, n: int) -> np.ndarray | None:
     """``--temperature-c``: ``T`` or ``FROM:TO`` → the (n,) temperatures (°C), linear over
     the poses; ``None`` without the option."""
-    from plugcell.apps.cli import CommandError
-
     if text is None:
         return None
     parts = text.split(":")
@@ -328,7 +323,6 @@ def _temperatures(text: str | None, n: int) -> np.ndarray | None:
 
 
 def _nests(args: argparse.Namespace) -> int:
-    from plugcell.apps.cli import CommandError
     from plugcell.apps.commands.files import write_text
     from plugcell.io.nests import format_nests
     from plugcell.sim.twin.campaign import REFERENCE_NESTS, measure_nests

@@ -59,6 +59,7 @@ import time
 
 import numpy as np
 
+from plugcell.apps.cli import CommandError
 from plugcell.apps.commands.cellargs import add_cell_args
 
 #: Python's thread switch interval in the twin's process (s): the reflector feed computes
@@ -205,7 +206,6 @@ def _arm_and_program(args: argparse.Namespace, scenario, q0, params=None):
 
 def _rsi_side(args: argparse.Namespace, scenario):
     """The arm and its RSI side the options describe (CommandError on bad ones)."""
-    from plugcell.apps.cli import CommandError
     from plugcell.devices.robot.rsi.config import CorrectionLimits, RsiConfig, RsiConfigError
     from plugcell.sim.controller.rsi_robot import RsiRobot
     from plugcell.sim.twin.dynamics import DynamicParameters
@@ -241,7 +241,6 @@ class _World:
     """The twin's T-MAC in the cell's simulated world (``--reflector``), or nothing."""
 
     def __init__(self, args: argparse.Namespace, arm, what: str) -> None:
-        from plugcell.apps.cli import CommandError
         from plugcell.apps.commands.cellargs import cell_of, transport_of
 
         self.truth = self.feed = None
@@ -299,8 +298,6 @@ def _write_stats(path: str | None, cycles: int, answered: int, late: int,
 
 
 def _scenario_of(args: argparse.Namespace, scenario, what: str):
-    from plugcell.apps.cli import CommandError
-
     if not (args.duration >= 0):
         raise CommandError(f"--duration must be 0 or positive, not {args.duration}")
     try:
@@ -402,7 +399,6 @@ def run_rsi(args: argparse.Namespace, scenario) -> int:
 
 def run_egm(args: argparse.Namespace, scenario) -> int:
     """Run ``twin egm`` (module docstring) for the twin ``scenario`` (a TwinScenario)."""
-    from plugcell.apps.cli import CommandError
     from plugcell.sim.controller.egm_twin import TwinEgmPathRobot, TwinEgmRobot
 
     scenario = _scenario_of(args, scenario, "egm")

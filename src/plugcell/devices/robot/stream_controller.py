@@ -276,6 +276,9 @@ class StreamController:
             self.link = link_class(self.vendor)(config)
             self.drive = StreamDrive(self.link, feedback_only=True)
             self.corrector = Corrector(self.link)
+        #: Set once the link listens for the controller's stream (a controller started
+        #: before then may give up: its own timeout runs from its first packet)
+        self.listening = asyncio.Event()
         self.clock = SimClock(speed=1.0)
         self.motion = StreamedMotion(description, self.drive, joint_limits, cartesian_limits,
                                      clock=self.clock, refusal=drive_refusal(config))
@@ -284,6 +287,7 @@ class StreamController:
                                     library)
         self.hello: Hello | None = None
         self._started = False
+        self._closing = False  # close() ends a wait for the stream
         self._connected = False
         self._lost_reason = "not connected"
         self._ids = itertools.count(1)
@@ -330,11 +334,16 @@ class StreamController:
                 raise BridgeError(str(exc)) from None
             self._started = True
             self.address = f"{host}:{port}"
+            self.listening.set()
 
         def ready(link: Any) -> bool:
-            return link.streaming and link.failure is None and link.latest is not None
+            return self._closing or (link.streaming and link.failure is None
+                                     and link.latest is not None)
 
-        if not await asyncio.to_thread(self.link.wait, ready, timeout):
+        streams = await asyncio.to_thread(self.link.wait, ready, timeout)
+        if self._closing:
+            raise BridgeError("the robot service is shutting down")
+        if not streams:
             why = f" (last: {self.link.failure})" if self.link.failure is not None else ""
             raise BridgeError(f"no {self.vendor} stream from the controller at "
                               f"{self.config.robot_host} to {self.address} within "
@@ -350,6 +359,7 @@ class StreamController:
 
     async def close(self) -> None:
         """Stop the running program and the link (the service is shutting down)."""
+        self._closing = True
         self._connected, self._lost_reason = False, "connection to the robot closed"
         watch, self._watch = self._watch, None
         if watch is not None and watch is not asyncio.current_task():
@@ -357,7 +367,9 @@ class StreamController:
             with contextlib.suppress(asyncio.CancelledError):
                 await watch
         await asyncio.to_thread(self._stop_program, "the robot service is shutting down")
-        await asyncio.to_thread(self.link.close)
+        await asyncio.to_thread(self.link.close)  # ends a correction (CORRECT) still running
+        if isinstance(self.corrector, Corrector):  # its thread, when the link is in ours
+            await asyncio.to_thread(self.corrector.close)
 
     async def send(self, *messages: Message) -> None:
         """The program's answers, in order (as a controller reads them)."""

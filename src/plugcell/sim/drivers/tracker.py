@@ -80,6 +80,14 @@ NO_REFLECTOR = ("beam not locked: no reflector in the cell to lock on — the si
                 "first (plugcell serve robot --param sim=true)")
 
 
+#: Most samples :meth:`SimulatedTrackerDriver.stream` hands over between two turns of the
+#: event loop (20 ms of a 1 kHz stream): a stream that fell behind — its process was
+#: starved of CPU — catches up a few samples at a time and the service's other work runs
+#: between them; computing the whole backlog at once took longer the longer it was, on
+#: a machine too slow to make a sample a millisecond without end.
+STREAM_SAMPLES_PER_TURN = 20
+
+
 class SimulatedTrackerDriver:
     """The tracker model behind the TrackerDriver seam (module docstring).
 
@@ -265,7 +273,10 @@ class SimulatedTrackerDriver:
                 raise BeamNotLockedError(_beam_message(exc), reason=exc.reason) from None
         try:
             while True:
-                for sample in stream.advance(time.monotonic() - origin):
+                # a few at a time, the loop turning between: a process starved of CPU
+                # catches up on its backlog without blocking the service it runs in
+                for sample in stream.advance(time.monotonic() - origin,
+                                             STREAM_SAMPLES_PER_TURN):
                     yield TrackerSample(pose=sample.pose, six_dof=sample.six_dof,
                                         tracker_time_s=sample.tracker_time_s,
                                         pc_time_s=time.time(), status=sample.status,

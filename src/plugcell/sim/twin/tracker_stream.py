@@ -251,10 +251,11 @@ class TrackerStream:
         """True time at which the next sample leaves the tracker."""
         return self._t0 + (self._k + 1) / self.rate_hz + self.spec.latency_s
 
-    def advance(self, until_s: float) -> list[StreamSample]:
-        """Every sample that has left the tracker by true time ``until_s``, in order."""
+    def advance(self, until_s: float, limit: int | None = None) -> list[StreamSample]:
+        """Every sample that has left the tracker by true time ``until_s``, in order —
+        or only the first ``limit`` of them (the others at the next call)."""
         out: list[StreamSample] = []
-        while self.next_time() <= until_s:
+        while self.next_time() <= until_s and (limit is None or len(out) < limit):
             out.append(self._sample())
         return out
 

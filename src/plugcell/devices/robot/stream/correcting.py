@@ -344,7 +344,8 @@ class _Beside:
         self._result = np.zeros(6)
         self._failure: Exception | None = None
         self._stop = False
-        threading.Thread(target=self._run, name="correction-goal", daemon=True).start()
+        self._thread = threading.Thread(target=self._run, name="correction-goal", daemon=True)
+        self._thread.start()
 
     def offer(self, state: CycleState) -> Array:
         with self._cond:
@@ -375,6 +376,7 @@ class _Beside:
         with self._cond:
             self._stop = True
             self._cond.notify()
+        self._thread.join(5.0)  # after the g being computed, if any
 
 
 class Superimposed:
@@ -570,6 +572,13 @@ class Corrector:
         if self.active:
             return None
         return "" if self._outcome is None else self._outcome
+
+    def close(self, timeout: float = 5.0) -> None:
+        """After the link's close (which ends a motion still running): wait, at most
+        ``timeout`` s, for the correction's thread to end — none lingers."""
+        thread = self._thread
+        if thread is not None:
+            thread.join(timeout)
 
     def status(self) -> tuple[float, Array]:
         """The blend factor ``b`` of the last cycle, and the link's offset so far (SI) —

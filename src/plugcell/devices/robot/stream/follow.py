@@ -7,7 +7,7 @@ import threading
 from collections.abc import Callable
 from typing import Any
 
-from .errors import StreamLinkError
+from .errors import StreamLinkError, StreamStoppedError
 from .source import Correction, CycleState, SourceLike, as_source
 
 __all__ = ["Following"]
@@ -23,6 +23,8 @@ class Following:
     """
 
     _cond: threading.Condition
+    _closing: bool
+    config: Any
     _failure: StreamLinkError | None
     _last_failure: StreamLinkError | None
     _streaming: bool
@@ -81,7 +83,11 @@ class Following:
             Tested on each cycle's state after ``source`` answered it; the cycle where it
             first holds is the motion's last (its correction is sent).
         timeout : float
-            Seconds the motion may take, waiting for the controller's stream included.
+            Seconds the motion may take on the controller's clock (its cycles, ``T``
+            each: a controller whose cycles come slower than real time — on a loaded
+            machine — takes longer in wall time), and on the wall clock while no cycle
+            of the motion comes (waiting for the controller's stream; once it streams,
+            its silence fails the session after one controller timeout).
 
         Returns
         -------
@@ -93,28 +99,40 @@ class Following:
         StreamLinkError
             The stream failed (before or during the motion): its reason, as a
             :class:`StreamStoppedError`, :class:`CorrectionRefusedError` … — a robot
-            service turns it into a failed process.
+            service turns it into a failed process; :class:`StreamStoppedError` too when
+            the link is closed during the motion.
         TimeoutError
             ``done`` did not hold within ``timeout`` seconds.
         """
         self.check()  # a held session is over: the controller has to start a new one
         ask = as_source(source)
         finished: list[CycleState] = []
+        cycles = [0]  # of the motion, on the controller's clock
+        last = timeout / self.config.cycle_s
 
         def motion(state: CycleState) -> Correction | None:
-            if finished:
-                return None  # the motion is over: hold
+            if finished or cycles[0] > last:
+                return None  # the motion is over (or out of time): hold
+            cycles[0] += 1
             corr = ask(state)
             if done(state):
                 finished.append(state)
             return corr
 
+        def over(link: Any) -> bool:
+            return (bool(finished) or link.failure is not None or cycles[0] > last
+                    or self._closing)
+
         self.set_source(motion)
         try:
-            ended = self.wait(lambda lk: bool(finished) or lk.failure is not None, timeout)
+            seen = 0
+            while not self.wait(over, timeout) and cycles[0] != seen:
+                seen = cycles[0]  # the controller's cycles still come: its clock counts
             if self._failure is not None:
                 raise self._failure
-            if not ended:
+            if not finished and self._closing:
+                raise StreamStoppedError(f"{self.config.vendor} link closed")
+            if not finished:
                 where = "streaming" if self._streaming else "no stream from the controller"
                 raise TimeoutError(f"the motion did not end within {timeout:g} s ({where})")
             return finished[0]
