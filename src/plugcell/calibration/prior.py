@@ -9,7 +9,10 @@ the robot in the new set-up.  A short campaign there identifies what it can dete
   value by its earlier uncertainty;
 * the learned layer: the earlier layer is kept and its correction taken out of the new
   measurements *before* the physical fit (an offset), so the physical parameters absorb
-  what differs in the new set-up and the layer what the physics cannot express;
+  what differs in the new set-up and the layer what the physics cannot express — or,
+  when the grouped CV prefers it, left out (the candidates ``"τ/physical"``,
+  :data:`PHYSICAL_SCALES`: the same MAP on the raw campaign; the earlier layer can be
+  wrong for the new set-up);
 * the campaign's own stage (:mod:`.campaign_stage`, ``stage=True``): small trees on what
   the fit leaves, on top of the earlier layer's arm-shape stage, adopted only when their
   grouped CV over the campaign's cells beats the fit without them.
