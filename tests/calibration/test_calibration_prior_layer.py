@@ -126,3 +126,26 @@ def test_a_wrong_layer_is_left_out(earlier):
     assert not pri["layer_offset"], pri["cv_mm"]
     assert pri["choice"] in (MOVED, ALONE) or pri["choice"].endswith(PHYSICAL)
     assert err <= 1.05 * alone
+
+
+@pytest.mark.slow
+def test_the_summary_says_the_layer_was_left_out(earlier):
+    """`plugcell calibrate --prior`'s summary of a fit the CV chose without A's layer
+    (forced here: ``10/physical`` the only candidate better than the rest) says so and
+    prints the candidate's CV key."""
+    import json
+
+    from plugcell.apps.commands.calibrate import _summary
+    from plugcell.io.params import params_json
+
+    _, prior = earlier
+    _, camp = harmonic_campaign(60, 23, amplitude_rad=0.0, base=NEW_BASE)
+    scores = {_label(c): 1e-3 for c in CANDIDATES} | {f"10{PHYSICAL}": 0.5e-3}
+    calib = PriorCalibrator(prior, stage=False)
+    calib.choose = lambda data, offset=None: (f"10{PHYSICAL}", scores)  # type: ignore[method-assign]
+    out = calib.fit(camp)
+    pri = out.settings["prior"]
+    assert pri["choice"] == f"10{PHYSICAL}" and pri["scale"] == 10 and not pri["layer_offset"]
+    assert out.residual_model is None
+    text = _summary(json.loads(params_json(out)))
+    assert "its learned layer left out" in text and f"τ = 10{PHYSICAL} 0.500" in text
