@@ -9,7 +9,10 @@ the robot in the new set-up.  A short campaign there identifies what it can dete
   value by its earlier uncertainty;
 * the learned layer: the earlier layer is kept and its correction taken out of the new
   measurements *before* the physical fit (an offset), so the physical parameters absorb
-  what differs in the new set-up and the layer what the physics cannot express;
+  what differs in the new set-up and the layer what the physics cannot express — or,
+  when the grouped CV prefers it, left out (the candidates ``"τ/physical"``,
+  :data:`PHYSICAL_SCALES`: the same MAP on the raw campaign; the earlier layer can be
+  wrong for the new set-up);
 * the campaign's own stage (:mod:`.campaign_stage`, ``stage=True``): small trees on what
   the fit leaves, on top of the earlier layer's arm-shape stage, adopted only when their
   grouped CV over the campaign's cells beats the fit without them.
@@ -97,18 +100,69 @@ MOVED = "moved"
 #: Baseline (i) among the CV's candidates: the earlier calibration's model calibrated on the
 #: campaign alone (no prior, no layer).
 ALONE = "alone"
-#: A candidate of the CV: a τ of :data:`SCALES`, :data:`MOVED` or :data:`ALONE`.
+#: Suffix of a MAP candidate *without* the earlier layer (``"10/physical"``: τ = 10 on the
+#: raw campaign, no layer offset, no layer in the result).
+PHYSICAL = "/physical"
+#: The τ of the MAP candidates without the earlier layer: the CV also decides whether the
+#: earlier layer helps in the new set-up (:data:`MOVED` is τ = 0 without it).
+PHYSICAL_SCALES: tuple[float, ...] = (1.0, 3.0, 10.0, 30.0, 100.0)
+#: A candidate of the CV: a τ of :data:`SCALES`, ``f"{τ:g}/physical"`` for a τ of
+#: :data:`PHYSICAL_SCALES`, :data:`MOVED` or :data:`ALONE`.
 Choice = float | str
-#: The CV's candidates in order of preference (the first within 1 % of the best wins).
-CANDIDATES: tuple[Choice, ...] = (*SCALES, MOVED, ALONE)
+#: The CV's candidates in order of preference (the first within 1 % of the best wins): the
+#: MAP with the earlier layer, the MAP without it, then the baselines.
+CANDIDATES: tuple[Choice, ...] = (*SCALES, *(f"{t:g}{PHYSICAL}" for t in PHYSICAL_SCALES),
+                                  MOVED, ALONE)
 
 __all__ = ["ALONE", "CANDIDATES", "CELL_SIZE_M", "DEFAULT_SCALE", "FRAMES_ONLY", "MOVED",
-           "SCALES", "Choice", "Prior", "PriorCalibrator", "augmented_residual", "frame_keys",
-           "pick"]
+           "PHYSICAL", "PHYSICAL_SCALES", "SCALES", "Choice", "Prior", "PriorCalibrator",
+           "augmented_residual", "frame_keys", "parse_choice", "pick"]
+
+
+def parse_choice(choice: Choice) -> tuple[float | None, bool]:
+    """What a candidate fits: ``(τ, with the earlier layer)``.
+
+    Parameters
+    ----------
+    choice : float or str
+        A τ (with the earlier layer; also as its CV key, ``f"{τ:g}"``), ``"τ/physical"``
+        (without it), :data:`MOVED` (τ = 0 without it) or :data:`ALONE` (no prior: ``τ``
+        is ``None``).
+
+    Returns
+    -------
+    tau : float or None
+        The inflation τ of the prior's σ (:data:`FRAMES_ONLY` for :data:`MOVED`).
+    layer : bool
+        Whether the earlier layer's correction is an offset of the fit and part of the
+        result.
+
+    Raises
+    ------
+    CalibrationError
+        A string that is none of these (τ neither 0 nor a finite number ≥ 1).
+    """
+    if not isinstance(choice, str):
+        return float(choice), True
+    if choice == MOVED:
+        return FRAMES_ONLY, False
+    if choice == ALONE:
+        return None, False
+    text, layer = ((choice[:-len(PHYSICAL)], False) if choice.endswith(PHYSICAL)
+                   else (choice, True))
+    try:
+        tau = float(text)
+    except ValueError:
+        tau = math.nan
+    if not (tau == FRAMES_ONLY or (math.isfinite(tau) and tau >= 1.0)):
+        raise CalibrationError(f"prior: unknown candidate {choice!r} (a τ = 0 or ≥ 1, "
+                               f"'τ{PHYSICAL}', {MOVED!r} or {ALONE!r})")
+    return tau, layer
 
 
 def _label(choice: Choice) -> str:
-    """A candidate's key in the CV scores: ``f"{τ:g}"``, ``"moved"`` or ``"alone"``."""
+    """A candidate's key in the CV scores: ``f"{τ:g}"``, ``"τ/physical"``, ``"moved"`` or
+    ``"alone"``."""
     return choice if isinstance(choice, str) else f"{choice:g}"
 
 
@@ -436,20 +490,20 @@ class PriorCalibrator:
                    folds: Sequence[tuple[Array, Array]], choice: Choice) -> Array:
         """The held-out position errors (m, one a campaign pose) of candidate ``choice``
         fitted on the other cells of each fold: a τ on the offset campaign (the hybrid's
-        error: the prior layer's correction is in the offset), :data:`MOVED` and
-        :data:`ALONE` on the raw one.  A candidate that cannot be fitted on a fold (too few
-        poses for the plain calibration) scores ``inf``."""
+        error: the prior layer's correction is in the offset), the candidates without the
+        earlier layer (``"τ/physical"``, :data:`MOVED`, :data:`ALONE`) on the raw one.  A
+        candidate that cannot be fitted on a fold (too few poses for the plain calibration)
+        scores ``inf``."""
         err = np.empty(len(raw))
+        tau, layer = parse_choice(choice)
+        data = offset if layer else raw
         for tr, te in folds:
-            data = raw if choice in (MOVED, ALONE) else offset
             test = data.subset(te)
             try:
-                if choice == ALONE:
+                if tau is None:
                     model = self._alone(data.subset(tr)).model
-                elif choice == MOVED:
-                    model, *_ = self.solve(data.subset(tr), FRAMES_ONLY)
                 else:
-                    model, *_ = self.solve(data.subset(tr), float(choice))
+                    model, *_ = self.solve(data.subset(tr), tau)
             except CalibrationError:
                 err[te] = np.inf
                 continue
@@ -482,10 +536,10 @@ class PriorCalibrator:
         Returns
         -------
         choice : float or str
-            A τ, :data:`MOVED` or :data:`ALONE`.
+            A τ, ``"τ/physical"``, :data:`MOVED` or :data:`ALONE` (:func:`parse_choice`).
         scores : dict of str to float
-            The CV score (m) of each candidate, keyed ``f"{τ:g}"``, ``"moved"``, ``"alone"``
-            (empty without CV).
+            The CV score (m) of each candidate, keyed ``f"{τ:g}"``, ``"τ/physical"``,
+            ``"moved"``, ``"alone"`` (empty without CV).
         """
         from sklearn.model_selection import GroupKFold
 
@@ -542,9 +596,10 @@ class PriorCalibrator:
         if choice == ALONE:
             return self._fit_alone(data, scores, t0)
         earlier = self.prior.layer
-        if choice == MOVED:  # the earlier physical model moved, without its layer
+        tau, with_layer = parse_choice(choice)
+        assert tau is not None  # ALONE returned above
+        if not with_layer:  # the MAP (or the earlier model moved) without the earlier layer
             offset, in_domain, earlier = data, None, None
-        tau = FRAMES_ONLY if choice == MOVED else float(choice)
         final, start, keys, lam, history, converged = self.solve(offset, tau)
         self._say("prior", 1, 1, f"{_label(choice)}: mean residual "
                   f"{history[-1].mean_position_mm if history else float('nan'):.4f} mm")
@@ -579,14 +634,14 @@ class PriorCalibrator:
 
     def _settings(self, choice: Choice, scores: Mapping[str, float], regularised: list[str],
                   layer_offset: bool, stage: CampaignStage | None) -> dict[str, object]:
-        """``settings["prior"]`` of a result: the candidate chosen (``choice``: ``"map"``,
-        ``"moved"`` or ``"alone"``; ``scale``: its τ, ``None`` for the campaign alone), how,
+        """``settings["prior"]`` of a result: the candidate chosen (``choice``: ``"map"``
+        (with the earlier layer), ``"τ/physical"`` (without it), ``"moved"`` or ``"alone"``;
+        ``scale``: its τ, ``None`` for the campaign alone), how,
         the CV scores (mm), the regularised keys, whether the prior layer's correction was
         an offset, the campaign stage."""
         return {"robot": self.prior.robot,
                 "choice": choice if isinstance(choice, str) else "map",
-                "scale": None if choice == ALONE else
-                (FRAMES_ONLY if choice == MOVED else float(choice)),
+                "scale": parse_choice(choice)[0],
                 "scale_chosen_by": "given" if self.scale is not None
                 else ("grouped CV" if scores else "default"),
                 "cv_mm": {k: v * 1e3 for k, v in scores.items()},

@@ -271,7 +271,8 @@ def _summary(d: dict[str, Any]) -> str:
                          + ("; its learned layer kept (its correction an offset of the fit)"
                             if pri["layer_offset"] else
                             "; its learned layer left out (the CV preferred the model "
-                            "without it)" if choice == "moved" else ""))
+                            "without it)" if choice == "moved" or choice.endswith("/physical")
+                            else ""))
         if pri.get("cv_mm"):
             lines.append("  grouped CV over the campaign's cells (mm): " + ", ".join(
                 f"{'τ = ' + k if k[0].isdigit() else k} {v:.3f}"
