@@ -56,8 +56,9 @@ def _run(rep: RepeatedLearning, k: int, sign: float = 1.0,
 
 def test_the_runs_converge_and_stop_when_a_run_no_longer_pays():
     rep = _session()
-    errors = []
+    errors, used = [], []
     for k in range(12):
+        used.append(rep.learning.u.copy())
         rec, _ = _run(rep, k)
         errors.append(rec.rms_m)
         if rec.stop:
@@ -70,6 +71,9 @@ def test_the_runs_converge_and_stop_when_a_run_no_longer_pays():
     assert all(r.measured == 1.0 for r in rep.records)
     assert rep.records[0].change_m > rep.records[1].change_m > 0
     assert rep.never_measured() == []
+    # the offset kept is the one the best run used (measured), not the last update's
+    best = int(np.argmin(errors))
+    assert np.array_equal(rep.learning.u, used[best])
 
 
 def test_a_growing_error_stops_the_runs_and_rolls_the_offset_back():

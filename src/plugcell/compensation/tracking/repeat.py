@@ -15,7 +15,9 @@ around it when a path is run ``N`` times (``plugcell path run --learn N``):
   used (the one a later run can trust);
 * **converged**: the run improved the best error by less than a share ``h``,
   ``r_k > (1 − h) · min_{j<k} r_j``, or the update changed ``u`` by less than
-  ``Δu_min`` (``max |u_{k+1} − u_k|``): more runs would not pay;
+  ``Δu_min`` (``max |u_{k+1} − u_k|``): more runs would not pay; ``u`` is set to the
+  offset the best run used (``argmin_j r_j``, measured), not the last update's (never
+  run);
 * **what was never measured**: the motion's cycles no learned run measured (a beam
   break at the same place in every run), as windows of the path's time — there ``u``
   is only what ``Q`` and ``W`` spread into them, not learned.
@@ -198,15 +200,24 @@ class RepeatedLearning:
         self._seen |= seen
         change = float(np.abs(lr.u - before).max())
         if best is not None and rms > (1.0 - rule.converged_rel) * best[0]:
-            return self._record(run, rms, peak, share, change, "converged",
-                                f"the measured error {rms * 1e3:.4f} mm rms is less than "
-                                f"{100 * rule.converged_rel:g} % below the best run's "
-                                f"{best[0] * 1e3:.4f} mm")
+            return self._converged(run, rms, peak, share, change,
+                                   f"the measured error {rms * 1e3:.4f} mm rms is less than "
+                                   f"{100 * rule.converged_rel:g} % below the best run's "
+                                   f"{best[0] * 1e3:.4f} mm")
         if change < rule.min_change_m:
-            return self._record(run, rms, peak, share, change, "converged",
-                                f"the learned offset changed by {change * 1e3:.4f} mm (less "
-                                f"than {rule.min_change_m * 1e3:g} mm)")
+            return self._converged(run, rms, peak, share, change,
+                                   f"the learned offset changed by {change * 1e3:.4f} mm "
+                                   f"(less than {rule.min_change_m * 1e3:g} mm)")
         return self._record(run, rms, peak, share, change, "learned")
+
+    def _converged(self, run: int, rms: float, peak: float, share: float, change: float,
+                   reason: str) -> RunRecord:
+        """End the runs as converged, ``u`` back to the offset the best run used."""
+        assert self._best is not None
+        self.learning.u, self.learning.steps = self._best[1].copy(), self._best[2]
+        return self._record(run, rms, peak, share, change, "converged",
+                            reason + "; the offset kept is the one the best run "
+                            f"({self._best[0] * 1e3:.4f} mm rms) used")
 
     def _record(self, *args: object) -> RunRecord:
         rec = RunRecord(*args)  # type: ignore[arg-type]
