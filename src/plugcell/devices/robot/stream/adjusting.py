@@ -13,15 +13,24 @@ process boundary through two small blocks of shared memory, each a seqlock
   move maps its tracker's samples onto the robot's clock with it) and the actual joints
   ``q`` (rad; NaN if the packet had none) — what the in-process hook is given;
 * **the adjustment** — written by the service's :class:`AdjustPump` (a thread) whenever it
-  has computed one for a newer cycle: the motion's number, the cycle's ``k`` and ``Δq``
-  (rad, (6,)).
+  has computed one for a newer cycle: the motion's number, the cycle's ``k``, ``Δq``
+  (rad, (6,)) and the motion's :class:`WireLimits` (the robot cycle ``T`` and the
+  joints' speed and acceleration bounds; ``T = 0``: none).
 
-The child adds the newest ``Δq`` of its motion each cycle (zeros before the first) and
-never waits for it, exactly as the in-process link takes the newest offset of its worker
-thread (``tracked_moves._Worker``): the loop's cost and the service's interpreter never
-make an answer late; an adjustment reaches the wire one or two cycles after the cycle it
-was computed for (the loop's rate bounds hold in the robot's time, whatever cycles it
-skipped; between two adjustments the child holds the last one).
+The child never waits for an adjustment, as the in-process link takes the newest offset
+of its worker thread (``tracked_moves._Worker``): the loop's cost and the service's
+interpreter never make an answer late; an adjustment reaches the wire one or two cycles
+after the cycle it was computed for.  The newest ``Δq`` of its motion (zeros before the
+first) is the *target* of what the child sends: each robot cycle it moves the sent
+``Δq_wire`` towards it with the loop's own limiter
+(:class:`~plugcell.compensation.tracking.RateLimiter`, ``n = 1``: the child answers every
+cycle) at the motion's :class:`WireLimits`, so on the wire, in the robot's time::
+
+    |Δq_wire,k − Δq_wire,k−1| ≤ v T,     |Δq_wire,k − 2 Δq_wire,k−1 + Δq_wire,k−2| ≤ a T²
+
+whatever cycles the service's loop skipped (a loaded machine: the ``n``-cycle step the
+loop computed for a cycle ``n`` after its last would otherwise reach the robot in one),
+and a held target is reached without overshoot (but for the limiter's ``a T²/8``).
 Nothing but floats crosses: no pickling, no lock shared between the processes.
 
 In *simulated time* (a controller that waits for each answer: a test, ``plugcell path
@@ -41,16 +50,19 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
+from plugcell.compensation.tracking import RateLimiter
+
 from .source import CycleState
 
-__all__ = ["CYCLE_SLOTS", "OFFSET_SLOTS", "AdjustPump", "ChildAdjust", "SeqVector"]
+__all__ = ["CYCLE_SLOTS", "OFFSET_SLOTS", "AdjustPump", "ChildAdjust", "SeqVector",
+           "WireLimits"]
 
 Array = NDArray[np.float64]
 
 #: The cycle block: [seq, motion, k, t, pc, q × 6].
 CYCLE_SLOTS = 11
-#: The adjustment block: [seq, motion, k, Δq × 6].
-OFFSET_SLOTS = 9
+#: The adjustment block: [seq, motion, k, Δq × 6, T, v × 6, a × 6] (:class:`WireLimits`).
+OFFSET_SLOTS = 22
 
 
 class SeqVector:
@@ -93,6 +105,48 @@ class SeqVector:
 
 
 @dataclass(frozen=True)
+class WireLimits:
+    """How fast the joint correction sent to the robot may change, in the robot's time.
+
+    Attributes
+    ----------
+    cycle_s : float
+        The robot's cycle ``T`` (s), > 0.
+    max_speed : (6,) array_like
+        ``v`` per joint (rad/s), > 0.
+    max_accel : (6,) array_like
+        ``a`` per joint (rad/s²), > 0.
+    """
+
+    cycle_s: float
+    max_speed: Array
+    max_accel: Array
+
+    def __post_init__(self) -> None:
+        self.limiter()  # refuses bad values with the limiter's reason
+
+    def limiter(self) -> RateLimiter:
+        """A limiter of the rate alone (no bound on the total), at rest at zero."""
+        return RateLimiter(self.cycle_s, self.max_speed, self.max_accel, np.full(6, np.inf))
+
+    def slots(self) -> Array:
+        """``[T, v × 6, a × 6]``: the adjustment block's tail."""
+        return np.r_[self.cycle_s, np.asarray(self.max_speed, dtype=float).reshape(6),
+                     np.asarray(self.max_accel, dtype=float).reshape(6)]
+
+    @staticmethod
+    def from_slots(values: Array) -> WireLimits | None:
+        """The limits of :meth:`slots` (``None`` when ``T`` is 0: no limits)."""
+        if values[0] == 0:
+            return None
+        return WireLimits(float(values[0]), values[1:7].copy(), values[7:13].copy())
+
+
+#: The adjustment block's tail without limits.
+_NO_LIMITS = np.zeros(13)
+
+
+@dataclass(frozen=True)
 class PumpedRobot:
     """The part of a cycle's packet the service's hook is given: the actual joints (rad)
     and the PC time the child handled the packet (``time.time()``, s)."""
@@ -113,11 +167,17 @@ class ChildAdjust:
     wait_s : float
         0: take the newest adjustment at once (real time); > 0: wait for this cycle's, at
         most this long (s; simulated time), then take the newest.
+
+    Each call is one robot cycle; it answers the ``Δq`` to send (module docstring: the
+    newest adjustment as its target, moved towards at the motion's :class:`WireLimits`;
+    the target as is when the service gave none).
     """
 
     def __init__(self, cycle: SeqVector, offset: SeqVector, motion: int,
                  wait_s: float = 0.0) -> None:
         self.cycle, self.offset, self.motion, self.wait_s = cycle, offset, motion, wait_s
+        self._limiter: RateLimiter | None = None
+        self._limited = False  # the motion's limits were read (they come with its block)
 
     def __call__(self, state: CycleState, k: int, q_k: Array) -> Array:
         joints = state.robot.joints
@@ -130,7 +190,14 @@ class ChildAdjust:
                     time.monotonic() < end:
                 time.sleep(5e-5)
                 newest = self.offset.read()
-        return newest[2:8] if newest[0] == self.motion else np.zeros(6)
+        if newest[0] != self.motion:
+            return np.zeros(6) if self._limiter is None else self._limiter.apply(np.zeros(6))
+        if not self._limited:
+            self._limited = True
+            limits = WireLimits.from_slots(newest[8:21])
+            self._limiter = None if limits is None else limits.limiter()
+        target = newest[2:8]
+        return target if self._limiter is None else self._limiter.apply(target)
 
 
 class AdjustPump:
@@ -150,13 +217,18 @@ class AdjustPump:
         The motion's number.
     period_s : float
         How often the cycle block is looked at while nothing new is there (s).
+    limits : WireLimits, optional
+        How fast the child may move what it sends towards the newest ``Δq`` (module
+        docstring); ``None``: it sends the newest as is.
     """
 
     def __init__(self, adjust: Callable[[CycleState, int, Array], Array], q: Array,
-                 cycle: SeqVector, offset: SeqVector, motion: int, period_s: float) -> None:
+                 cycle: SeqVector, offset: SeqVector, motion: int, period_s: float,
+                 limits: WireLimits | None = None) -> None:
         self.adjust, self.q = adjust, q
         self.cycle, self.offset, self.motion, self.period_s = cycle, offset, motion, period_s
-        self.offset.write(np.array([motion, -1, *np.zeros(6)]))
+        self._tail = _NO_LIMITS if limits is None else limits.slots()
+        self.offset.write(np.r_[motion, -1, np.zeros(6), self._tail])
         self.failure: BaseException | None = None
         self.cycles = 0
         self._stop = threading.Event()
@@ -182,7 +254,7 @@ class AdjustPump:
             except Exception as exc:  # the motion fails with it when it ends
                 self.failure = exc
                 return
-            self.offset.write(np.array([self.motion, k, *dq]))
+            self.offset.write(np.r_[self.motion, k, dq, self._tail])
             self.cycles += 1
 
     def close(self) -> None:
