@@ -54,7 +54,11 @@ the drive's hook runs in the link's thread and takes the worker's newest offset;
 link in its child process (:class:`~.stream.process.LinkProcess`, the default) the same
 hook runs in a thread of the service on each cycle the child publishes, and the child
 adds the newest joint correction it was handed through shared memory
-(:mod:`~.stream.adjusting`) — the same semantics across the process boundary.
+(:mod:`~.stream.adjusting`) — the same semantics across the process boundary.  Either
+way the side that answers the robot does not hold the newest correction between two
+computed cycles (the ``n`` cycles' step of a loop that fell behind would reach the robot
+in one): each robot cycle it moves what it sends towards it at the loop's bounds as
+joints (:func:`wire_limits`, the loop's own limiter), in the robot's time.
 
 Faults: a beam break or a late tracker fades the tracker's term out (the loop's
 ``HoldWindow``, logged at the move's end) and the move goes on with the model; a
