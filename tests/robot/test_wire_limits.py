@@ -52,7 +52,8 @@ def _on_the_wire(updates: list[tuple[int, np.ndarray]], limits: WireLimits | Non
                  hold: int = 0) -> np.ndarray:
     """What the child sends each robot cycle (rows) when the service's adjustment ``dq``
     arrives ``gap`` robot cycles after the last (``updates``: ``(gap, dq)``), then ``hold``
-    more cycles; the blocks written as :class:`AdjustPump` writes them."""
+    more cycles; the blocks written as :class:`AdjustPump` writes them.  The peaks the
+    child publishes in the cycle block are what was sent."""
     cycle, offset = _blocks()
     tail = np.zeros(13) if limits is None else limits.slots()
     offset.write(np.r_[MOTION, -1, np.zeros(6), tail])  # the pump's first write
@@ -66,7 +67,12 @@ def _on_the_wire(updates: list[tuple[int, np.ndarray]], limits: WireLimits | Non
             k += 1
         if dq is not None:
             offset.write(np.r_[MOTION, k - 1, dq, tail])
-    return np.array(sent)
+    sent = np.array(sent)
+    step, change = _rates(sent)
+    published = cycle.read()
+    np.testing.assert_array_equal(published[10:16], step)
+    np.testing.assert_array_equal(published[16:22], change)
+    return sent
 
 
 def _rates(sent: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

@@ -86,7 +86,7 @@ from plugcell.compensation.pose_model import IdentifiedModel, NominalModel, Pose
 from plugcell.compensation.tracking import TrackerMeasurement, TrackingLoop, TrackingSettings
 from plugcell.devices.robot.arm_model import matrix_from_position
 from plugcell.devices.robot.poses import pose_matrix
-from plugcell.devices.robot.stream.adjusting import WireLimits
+from plugcell.devices.robot.stream.adjusting import WireLimits, WirePeaks
 from plugcell.devices.robot.stream.drive import samples as planned_samples
 from plugcell.devices.robot.stream.process import LinkProcess
 from plugcell.devices.robot.stream.source import CycleState
@@ -319,8 +319,10 @@ class TrackedMoves:
         #: state, its tracker term, the start's blend)`` (the rest of the offset is the
         #: model's part, zero for the nominal model but for its solver's tolerance)
         self.last_record: list[tuple[float, Array, str, Array, float]] = []
-        #: the last move's bounds on the joint correction sent each robot cycle
+        #: the last move's bounds on the joint correction sent each robot cycle, and the
+        #: largest step and change of step it sent (rad per joint: ``WirePeaks``)
         self.last_wire_limits: WireLimits | None = None
+        self.last_wire_peaks: tuple[Array, Array] | None = None
 
     def move_tracked(self, pose: Position, tracker: str) -> float | None:
         """``MOVE LINEAR TO pose WITH TRACKING tracker``: plan, subscribe, stream with
@@ -357,6 +359,8 @@ class TrackedMoves:
                 if worker is not None:
                     worker.close()
                 failure = feed.failure  # before stop(): ending the stream is ours then
+                if isinstance(m.drive, LinkProcess):
+                    self.last_wire_peaks = m.drive.wire_peaks
                 feed.stop()
             m.last = traj
         for w in loop.windows:
@@ -401,6 +405,8 @@ class TrackedMoves:
         # the link in this process: its thread's hook limits what it sends (a link
         # process's child does: LinkProcess.follow's limits)
         wire = None if isinstance(self.motion.drive, LinkProcess) else limits.limiter()
+        peaks = WirePeaks()
+        self.last_wire_peaks = None if wire is None else (peaks.step, peaks.change)
 
         def planned(k: int, q_k: Array) -> tuple[Array, Array]:
             """``(T_p, J_n)`` at sample ``k`` (computed now if ``q_k`` is not the plan's)."""
@@ -440,7 +446,11 @@ class TrackedMoves:
                 offset(state, k, q_k, pc)
             dq = np.linalg.lstsq(planned(k, q_k)[1], o, rcond=None)[0] if np.any(o) else \
                 np.zeros(len(q_k))
-            return dq if wire is None else wire.apply(dq)
+            if wire is None:
+                return dq
+            sent = peaks.add(wire.apply(dq))
+            self.last_wire_peaks = (peaks.step, peaks.change)
+            return sent
 
         return adjust, worker
 

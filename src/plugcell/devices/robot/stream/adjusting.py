@@ -11,7 +11,8 @@ process boundary through two small blocks of shared memory, each a seqlock
   motion, before the answer: the motion's number, the sample index ``k``, the robot's time
   ``t`` (s, the session's clock), the PC time it was handled (``time.time()``: a tracked
   move maps its tracker's samples onto the robot's clock with it) and the actual joints
-  ``q`` (rad; NaN if the packet had none) — what the in-process hook is given;
+  ``q`` (rad; NaN if the packet had none) — what the in-process hook is given — and,
+  again after the answer, the :class:`WirePeaks` of what it sent so far;
 * **the adjustment** — written by the service's :class:`AdjustPump` (a thread) whenever it
   has computed one for a newer cycle: the motion's number, the cycle's ``k``, ``Δq``
   (rad, (6,)) and the motion's :class:`WireLimits` (the robot cycle ``T`` and the
@@ -55,12 +56,12 @@ from plugcell.compensation.tracking import RateLimiter
 from .source import CycleState
 
 __all__ = ["CYCLE_SLOTS", "OFFSET_SLOTS", "AdjustPump", "ChildAdjust", "SeqVector",
-           "WireLimits"]
+           "WireLimits", "WirePeaks"]
 
 Array = NDArray[np.float64]
 
-#: The cycle block: [seq, motion, k, t, pc, q × 6].
-CYCLE_SLOTS = 11
+#: The cycle block: [seq, motion, k, t, pc, q × 6, peak step × 6, peak change × 6].
+CYCLE_SLOTS = 23
 #: The adjustment block: [seq, motion, k, Δq × 6, T, v × 6, a × 6] (:class:`WireLimits`).
 OFFSET_SLOTS = 22
 
@@ -142,6 +143,29 @@ class WireLimits:
         return WireLimits(float(values[0]), values[1:7].copy(), values[7:13].copy())
 
 
+class WirePeaks:
+    """The largest step a robot cycle ``|Δq_k − Δq_k−1|`` and change of step
+    ``|Δq_k − 2 Δq_k−1 + Δq_k−2|`` of the joint correction sent, per joint (rad), from
+    rest at zero: what the robot was given, in its time (:class:`WireLimits` bound them).
+    """
+
+    def __init__(self) -> None:
+        self.last, self.last_step = np.zeros(6), np.zeros(6)
+        self.step, self.change = np.zeros(6), np.zeros(6)
+
+    def add(self, sent: Array) -> Array:
+        """Count one robot cycle's ``sent`` (rad, (6,)); returns it."""
+        step = sent - self.last
+        self.step = np.maximum(self.step, np.abs(step))
+        self.change = np.maximum(self.change, np.abs(step - self.last_step))
+        self.last, self.last_step = sent, step
+        return sent
+
+    def slots(self) -> Array:
+        """``[step × 6, change × 6]``."""
+        return np.r_[self.step, self.change]
+
+
 #: The adjustment block's tail without limits.
 _NO_LIMITS = np.zeros(13)
 
@@ -178,11 +202,20 @@ class ChildAdjust:
         self.cycle, self.offset, self.motion, self.wait_s = cycle, offset, motion, wait_s
         self._limiter: RateLimiter | None = None
         self._limited = False  # the motion's limits were read (they come with its block)
+        self.peaks = WirePeaks()
 
     def __call__(self, state: CycleState, k: int, q_k: Array) -> Array:
         joints = state.robot.joints
         q = np.full(6, np.nan) if joints is None else np.asarray(joints, dtype=float)
-        self.cycle.write(np.array([self.motion, k, state.t, time.time(), *q]))
+        row = np.r_[self.motion, k, state.t, time.time(), q, self.peaks.slots()]
+        self.cycle.write(row)
+        sent = self.peaks.add(self._send(k))
+        row[10:] = self.peaks.slots()
+        self.cycle.write(row)  # the peaks with this cycle's (AdjustPump.peaks)
+        return sent
+
+    def _send(self, k: int) -> Array:
+        """The ``Δq`` to send in the cycle of sample ``k`` (class docstring)."""
         newest = self.offset.read()
         if self.wait_s > 0:
             end = time.monotonic() + self.wait_s
@@ -231,6 +264,8 @@ class AdjustPump:
         self.offset.write(np.r_[motion, -1, np.zeros(6), self._tail])
         self.failure: BaseException | None = None
         self.cycles = 0
+        #: after :meth:`close`: the child's :class:`WirePeaks` of the motion (step, change)
+        self.peaks: tuple[Array, Array] | None = None
         self._stop = threading.Event()
         self._thread = threading.Thread(target=self._run, name="adjust-pump", daemon=True)
         self._thread.start()
@@ -258,6 +293,10 @@ class AdjustPump:
             self.cycles += 1
 
     def close(self) -> None:
-        """Stop the thread (the child keeps the last adjustment to the motion's end)."""
+        """Stop the thread (the child keeps the last adjustment to the motion's end); read
+        the child's :attr:`peaks` (the motion has ended)."""
         self._stop.set()
         self._thread.join(5.0)
+        c = self.cycle.read()
+        if c[0] == self.motion:
+            self.peaks = (c[10:16].copy(), c[16:22].copy())

@@ -275,6 +275,8 @@ class LinkProcess:
         self.rt_priority = rt_priority
         self.rt_note = ""
         self.followed = 0
+        #: the last adjusted motion's wire peaks (:class:`~.adjusting.WirePeaks`: step, change)
+        self.wire_peaks: tuple[Array, Array] | None = None
         ctx = multiprocessing.get_context("spawn")
         self._values = ctx.RawArray("d", SLOTS)
         self._text = ctx.RawArray("c", TEXT_BYTES)
@@ -439,6 +441,7 @@ class LinkProcess:
             finally:
                 if pump is not None:
                     pump.close()
+                    self.wire_peaks = pump.peaks
         if reason:
             raise MotionError(reason)
         if pump is not None and pump.failure is not None:
