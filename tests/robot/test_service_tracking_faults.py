@@ -33,6 +33,7 @@ from robot_cell import Launcher
 from robot_testlib import unique_cell
 from test_service_rsi_tracking import PROGRAM, _vector
 from test_service_streamed import _get_status, _run, _start
+from test_tracked_moves import _wire_report
 
 import plugcell.pdl
 from plugcell.apps.kinds import build
@@ -102,19 +103,21 @@ async def _start_of_move(moves: Any, motion: Any, run: asyncio.Task,
     return forward(motion.description, None, motion.joint_readings(), "nominal").tcp[:3, 3]
 
 
-def _rates(record: list, part: int = 1) -> tuple[float, float, float]:
+def _rates(record: list, cycle_s: float, part: int = 1) -> tuple[float, float, float]:
     """The applied position offset's (``part`` 1; 3: its tracker term) largest step per
-    computed cycle (m) once the start's blend-in is over, and its speed (m/s) and
-    acceleration (m/s²) in robot time."""
+    robot cycle (m: a computed cycle ``n = round(Δt/T)`` robot cycles after the last one
+    — a loop that fell behind on a loaded PC — counts its step over ``n``) once the
+    start's blend-in is over, and its speed (m/s) and acceleration (m/s²) in robot time."""
     t = np.array([r[0] for r in record])
     o = np.array([r[part][:3] for r in record])
     keep = (np.array([r[4] for r in record]) >= 1.0) & np.r_[True, np.diff(t) > 0]
     t, o = t[keep], o[keep]
     if len(t) < 3:  # a loop starved by the load computed hardly a cycle
         return 0.0, 0.0, 0.0
+    n = np.maximum(1, np.round(np.diff(t) / cycle_s))
     v = np.diff(o, axis=0) / np.diff(t)[:, None]
     a = np.diff(v, axis=0) / np.diff(t)[1:, None]
-    return (float(np.abs(np.diff(o, axis=0)).max()), float(np.abs(v).max()),
+    return (float((np.abs(np.diff(o, axis=0)) / n[:, None]).max()), float(np.abs(v).max()),
             float(np.abs(a).max()))
 
 
@@ -224,12 +227,14 @@ def test_a_late_then_killed_tracker_mid_line(tmp_path: Path, monkeypatch,
     desc = got["desc"]
     tcp = forward(desc, None, got["end_joints"], "nominal").tcp[:3, 3]
     assert abs(np.linalg.norm(tcp - got["start"]) - 0.2) < 0.005, tcp - got["start"]
-    step_c = _rates(moves.last_record, part=3)[0]  # the tracker term: its limiter's bound
-    assert step_c <= loop.settings.max_speed_m_s * loop.settings.cycle_s * (1 + 1e-9), step_c
-    step, speed, accel = _rates(moves.last_record)  # the whole offset: reported
-    assert step <= 2 * loop.settings.max_speed_m_s * loop.settings.cycle_s, step
+    T = loop.settings.cycle_s
+    step_c = _rates(moves.last_record, T, part=3)[0]  # the tracker term: its limiter's bound
+    assert step_c <= loop.settings.max_speed_m_s * T * (1 + 1e-9), step_c
+    step, speed, accel = _rates(moves.last_record, T)  # the whole offset: reported
+    assert step <= 2 * loop.settings.max_speed_m_s * T, step
     print(f"\nwindows {windows}; offset step max {step * 1e6:.1f} µm/cycle, speed max "
-          f"{speed * 1e3:.2f} mm/s, accel max {accel:.3f} m/s²")
+          f"{speed * 1e3:.2f} mm/s, accel max {accel:.3f} m/s² (the loop's cycles); "
+          f"{_wire_report(moves)}")
 
     journal = read_journal(journal_files(cell, home))
     name = got["name"]
@@ -298,9 +303,11 @@ def test_a_beam_break_mid_line_goes_on_with_the_model(tmp_path: Path, monkeypatc
     # a window's reason is the samples' status or their lateness (the simulated tracker
     # may also lose the T-MAC for its speed when the loaded twin publishes it in jumps)
     assert {w[2] for w in windows} <= {"late", *SAMPLE_STATUSES} - {"ok"}, windows
-    step_c = _rates(moves.last_record, part=3)[0]  # the tracker term: its limiter's bound
-    assert step_c <= loop.settings.max_speed_m_s * loop.settings.cycle_s * (1 + 1e-9), step_c
-    step, speed, accel = _rates(moves.last_record)  # the whole offset: reported
-    assert step <= 2 * loop.settings.max_speed_m_s * loop.settings.cycle_s, step
+    T = loop.settings.cycle_s
+    step_c = _rates(moves.last_record, T, part=3)[0]  # the tracker term: its limiter's bound
+    assert step_c <= loop.settings.max_speed_m_s * T * (1 + 1e-9), step_c
+    step, speed, accel = _rates(moves.last_record, T)  # the whole offset: reported
+    assert step <= 2 * loop.settings.max_speed_m_s * T, step
     print(f"\nwindows {windows}; offset step max {step * 1e6:.1f} µm/cycle, speed max "
-          f"{speed * 1e3:.2f} mm/s, accel max {accel:.3f} m/s²")
+          f"{speed * 1e3:.2f} mm/s, accel max {accel:.3f} m/s² (the loop's cycles); "
+          f"{_wire_report(moves)}")

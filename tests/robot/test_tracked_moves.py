@@ -251,6 +251,24 @@ def _there_and_back(motion, sign: float) -> Position:
     return position_from_tcp(T)
 
 
+def _wire_report(moves) -> str:
+    """The joint correction the robot was given (the link's :class:`WirePeaks`): its largest
+    step, speed and acceleration in robot time per joint, each within the move's
+    :class:`WireLimits` (asserted); the words for the report."""
+    limits, peaks = moves.last_wire_limits, moves.last_wire_peaks
+    assert limits is not None and peaks is not None
+    T = limits.cycle_s
+    step, change = peaks
+    assert np.all(step <= limits.max_speed * T * (1 + 1e-9)), step / (limits.max_speed * T)
+    assert np.all(change <= limits.max_accel * T * T * (1 + 1e-9)), \
+        change / (limits.max_accel * T * T)
+    deg = np.degrees
+    return (f"wire: step max {deg(step.max()) * 1e3:.3f} mdeg/cycle (speed "
+            f"{deg(step.max()) / T:.4f} deg/s), accel max {deg(change.max()) / T**2:.3f} "
+            f"deg/s²; of the limits: speed {(step / (limits.max_speed * T)).max():.2f}, "
+            f"accel {(change / (limits.max_accel * T * T)).max():.2f}")
+
+
 @pytest.mark.slow
 @pytest.mark.parametrize("fault", ["beam_break", "late", "killed"])
 def test_a_fault_mid_line_never_makes_the_robot_jump(cell, fault):
@@ -304,7 +322,7 @@ def test_a_fault_mid_line_never_makes_the_robot_jump(cell, fault):
     step = np.abs(np.diff(commands, axis=0)).max(axis=0)
     assert np.all(step <= np.array(robot.config.limits.max_step)), step
     print(f"\n{fault}: windows {windows}; offset speed max {speed * 1e3:.2f} mm/s, "
-          f"accel max {accel:.3f} m/s²")
+          f"accel max {accel:.3f} m/s²; {_wire_report(tracked)}")
 
 
 @pytest.fixture(scope="module")

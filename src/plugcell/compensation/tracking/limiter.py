@@ -55,7 +55,9 @@ class RateLimiter:
     max_accel : (d,) array_like
         ``a_max`` per axis (m/s² or rad/s²), > 0.
     max_total : (d,) array_like
-        ``c_max`` per axis (m or rad), ≥ 0.
+        ``c_max`` per axis (m or rad), ≥ 0; ``inf``: no bound on the total (a limiter of
+        the rate alone, e.g. the correction on the wire:
+        :class:`~plugcell.devices.robot.stream.adjusting.WireLimits`).
     """
 
     def __init__(self, cycle_s: float, max_speed: ArrayLike, max_accel: ArrayLike,
@@ -65,10 +67,10 @@ class RateLimiter:
         c = np.array(max_total, dtype=float).reshape(-1)
         if not (cycle_s > 0 and np.isfinite(cycle_s)):
             raise ValueError(f"cycle_s must be > 0 seconds, got {cycle_s!r}")
-        if not (v.shape == a.shape == c.shape) or not np.all(np.isfinite(np.r_[v, a, c])) \
-                or np.any(v <= 0) or np.any(a <= 0) or np.any(c < 0):
-            raise ValueError(f"max_speed > 0, max_accel > 0, max_total ≥ 0 per axis, of one "
-                             f"size; got {max_speed!r}, {max_accel!r}, {max_total!r}")
+        if not (v.shape == a.shape == c.shape) or not np.all(np.isfinite(np.r_[v, a])) \
+                or np.any(v <= 0) or np.any(a <= 0) or not np.all(c >= 0):
+            raise ValueError(f"max_speed > 0, max_accel > 0 (finite), max_total ≥ 0 per axis, "
+                             f"of one size; got {max_speed!r}, {max_accel!r}, {max_total!r}")
         self.T = float(cycle_s)
         self.v_step = v * cycle_s
         self.a_step = a * cycle_s ** 2

@@ -54,7 +54,11 @@ the drive's hook runs in the link's thread and takes the worker's newest offset;
 link in its child process (:class:`~.stream.process.LinkProcess`, the default) the same
 hook runs in a thread of the service on each cycle the child publishes, and the child
 adds the newest joint correction it was handed through shared memory
-(:mod:`~.stream.adjusting`) — the same semantics across the process boundary.
+(:mod:`~.stream.adjusting`) — the same semantics across the process boundary.  Either
+way the side that answers the robot does not hold the newest correction between two
+computed cycles (the ``n`` cycles' step of a loop that fell behind would reach the robot
+in one): each robot cycle it moves what it sends towards it at the loop's bounds as
+joints (:func:`wire_limits`, the loop's own limiter), in the robot's time.
 
 Faults: a beam break or a late tracker fades the tracker's term out (the loop's
 ``HoldWindow``, logged at the move's end) and the move goes on with the model; a
@@ -82,6 +86,7 @@ from plugcell.compensation.pose_model import IdentifiedModel, NominalModel, Pose
 from plugcell.compensation.tracking import TrackerMeasurement, TrackingLoop, TrackingSettings
 from plugcell.devices.robot.arm_model import matrix_from_position
 from plugcell.devices.robot.poses import pose_matrix
+from plugcell.devices.robot.stream.adjusting import WireLimits, WirePeaks
 from plugcell.devices.robot.stream.drive import samples as planned_samples
 from plugcell.devices.robot.stream.process import LinkProcess
 from plugcell.devices.robot.stream.source import CycleState
@@ -95,7 +100,8 @@ from plugcell.pdl.values import Position
 
 Array = NDArray[np.float64]
 
-__all__ = ["CycleClock", "OneWayClock", "ServiceTrackerFeed", "TrackedMoves", "TrackerFeed"]
+__all__ = ["CycleClock", "OneWayClock", "ServiceTrackerFeed", "TrackedMoves", "TrackerFeed",
+           "wire_limits"]
 
 log = logging.getLogger("plugcell.devices.robot.tracked_moves")
 
@@ -313,6 +319,10 @@ class TrackedMoves:
         #: state, its tracker term, the start's blend)`` (the rest of the offset is the
         #: model's part, zero for the nominal model but for its solver's tolerance)
         self.last_record: list[tuple[float, Array, str, Array, float]] = []
+        #: the last move's bounds on the joint correction sent each robot cycle, and the
+        #: largest step and change of step it sent (rad per joint: ``WirePeaks``)
+        self.last_wire_limits: WireLimits | None = None
+        self.last_wire_peaks: tuple[Array, Array] | None = None
 
     def move_tracked(self, pose: Position, tracker: str) -> float | None:
         """``MOVE LINEAR TO pose WITH TRACKING tracker``: plan, subscribe, stream with
@@ -335,16 +345,22 @@ class TrackedMoves:
             padded = _Settled(traj, self.settle_s)
             adjust, worker = self._adjust(loop, feed, cycle_s,
                                           planned_samples(padded, cycle_s))
-            # simulated time across the process boundary: the link's child waits for each
-            # cycle's correction (as the in-process hook computes it in the cycle)
-            wait = {} if self.realtime or not isinstance(m.drive, LinkProcess) else \
-                {"wait_s": SIMULATED_WAIT_S}
+            # across the process boundary the child limits what it sends (the wire's
+            # limits); in simulated time it waits for each cycle's correction (as the
+            # in-process hook computes it in the cycle)
+            wait: dict[str, Any] = {}
+            if isinstance(m.drive, LinkProcess):
+                wait["limits"] = self.last_wire_limits
+                if not self.realtime:
+                    wait["wait_s"] = SIMULATED_WAIT_S
             try:
                 m.drive.follow(padded, adjust=adjust, **wait)
             finally:
                 if worker is not None:
                     worker.close()
                 failure = feed.failure  # before stop(): ending the stream is ours then
+                if isinstance(m.drive, LinkProcess):
+                    self.last_wire_peaks = m.drive.wire_peaks
                 feed.stop()
             m.last = traj
         for w in loop.windows:
@@ -385,6 +401,12 @@ class TrackedMoves:
         self.last_dropped = 0
         fk_plan = forward(desc, None, q_plan, "nominal")
         T_plan, J_plan = fk_plan.tcp, jacobian_from_fk(desc, fk_plan, "tcp")
+        limits = self.last_wire_limits = wire_limits(loop.settings, J_plan)
+        # the link in this process: its thread's hook limits what it sends (a link
+        # process's child does: LinkProcess.follow's limits)
+        wire = None if isinstance(self.motion.drive, LinkProcess) else limits.limiter()
+        peaks = WirePeaks()
+        self.last_wire_peaks = None if wire is None else (peaks.step, peaks.change)
 
         def planned(k: int, q_k: Array) -> tuple[Array, Array]:
             """``(T_p, J_n)`` at sample ``k`` (computed now if ``q_k`` is not the plan's)."""
@@ -422,11 +444,51 @@ class TrackedMoves:
             pc = getattr(state.robot, "pc_time_s", None) or time.time()
             o = worker.offer(state, k, q_k, pc) if worker is not None else \
                 offset(state, k, q_k, pc)
-            if not np.any(o):
-                return np.zeros(len(q_k))
-            return np.linalg.lstsq(planned(k, q_k)[1], o, rcond=None)[0]
+            dq = np.linalg.lstsq(planned(k, q_k)[1], o, rcond=None)[0] if np.any(o) else \
+                np.zeros(len(q_k))
+            if wire is None:
+                return dq
+            sent = peaks.add(wire.apply(dq))
+            self.last_wire_peaks = (peaks.step, peaks.change)
+            return sent
 
         return adjust, worker
+
+
+def wire_limits(settings: TrackingSettings, jacobians: Array) -> WireLimits:
+    """The bounds on the joint correction sent each robot cycle: the loop's own bounds
+    on the offset's rate, as joints, along the move.
+
+    The offset ``o`` moves at most at ``v_o = [v_c + v_l] × 3 + [ω_c] × 3`` (the tracker
+    term's speed bounds, ``max_speed_m_s`` and ``max_speed_rad_s``, plus the lead's
+    ``max_lead_speed_m_s`` when the loop leads; the same sums for the accelerations), and
+    ``Δq = J⁻¹ o``, so per joint ``|Δq̇_i| ≤ Σ_j |J⁻¹_ij| v_o,j``::
+
+        v_q,i = max_k Σ_j |J_k⁻¹|_ij v_o,j,     a_q,i = max_k Σ_j |J_k⁻¹|_ij a_o,j
+
+    over the move's samples ``k``: what the loop computes every cycle passes the wire's
+    limiter unchanged (but for its lag behind a moving target), what it computed for a
+    cycle ``n`` after its last (a loaded machine) reaches the robot at these rates.
+
+    Parameters
+    ----------
+    settings : TrackingSettings
+        The loop's.
+    jacobians : ndarray, shape (K+1, 6, 6)
+        The controller's TCP Jacobians ``J_k`` at the move's samples (m/rad, rad/rad).
+
+    Returns
+    -------
+    WireLimits
+        At the loop's cycle, rad/s and rad/s² per joint.
+    """
+    s = settings
+    lead = s.lead_s > 0
+    v = np.r_[[s.max_speed_m_s + lead * s.max_lead_speed_m_s] * 3, [s.max_speed_rad_s] * 3]
+    a = np.r_[[s.max_accel_m_s2 + lead * s.max_lead_accel_m_s2] * 3,
+              [s.max_accel_rad_s2] * 3]
+    inv = np.abs(np.linalg.pinv(np.asarray(jacobians, dtype=float)))
+    return WireLimits(s.cycle_s, (inv @ v).max(axis=0), (inv @ a).max(axis=0))
 
 
 class _Worker:

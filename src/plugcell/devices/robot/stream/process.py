@@ -52,7 +52,7 @@ from numpy.typing import NDArray
 from plugcell.motion import Trajectory
 from plugcell.pdl.interfaces import MotionError
 
-from .adjusting import CYCLE_SLOTS, OFFSET_SLOTS, AdjustPump, ChildAdjust, SeqVector
+from .adjusting import CYCLE_SLOTS, OFFSET_SLOTS, AdjustPump, ChildAdjust, SeqVector, WireLimits
 from .correcting import CorrectionSpec, Corrector
 from .drive import Adjust, StreamDrive, drive_refusal, motion_timeout, samples
 from .errors import StreamLinkError
@@ -275,6 +275,8 @@ class LinkProcess:
         self.rt_priority = rt_priority
         self.rt_note = ""
         self.followed = 0
+        #: the last adjusted motion's wire peaks (:class:`~.adjusting.WirePeaks`: step, change)
+        self.wire_peaks: tuple[Array, Array] | None = None
         ctx = multiprocessing.get_context("spawn")
         self._values = ctx.RawArray("d", SLOTS)
         self._text = ctx.RawArray("c", TEXT_BYTES)
@@ -412,13 +414,14 @@ class LinkProcess:
         return latest.joints
 
     def follow(self, trajectory: Trajectory, adjust: Adjust | None = None,
-               wait_s: float = 0.0) -> None:
+               wait_s: float = 0.0, limits: WireLimits | None = None) -> None:
         """Stream ``trajectory`` in the child (blocks for its duration).
 
         ``adjust(state, k, q_k)``, if given, runs here, in a thread of this process
         (:class:`~.adjusting.AdjustPump`), on each cycle the child answers; the child
         adds the newest result to its samples' joints (module docstring) — or, with
-        ``wait_s`` > 0 (simulated time), waits up to that long for its cycle's.
+        ``wait_s`` > 0 (simulated time), waits up to that long for its cycle's —
+        moving what it sends towards it at ``limits``, if given, each robot cycle.
 
         Raises
         ------
@@ -432,12 +435,13 @@ class LinkProcess:
             self._motions += 1
             pump = None if adjust is None else AdjustPump(
                 adjust, q, SeqVector(self._cycle), SeqVector(self._offset), self._motions,
-                self.config.cycle_s / 4)
+                self.config.cycle_s / 4, limits)
             try:
                 reason = self._follow(q, timeout, None if adjust is None else wait_s)
             finally:
                 if pump is not None:
                     pump.close()
+                    self.wire_peaks = pump.peaks
         if reason:
             raise MotionError(reason)
         if pump is not None and pump.failure is not None:
