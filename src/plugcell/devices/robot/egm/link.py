@@ -27,6 +27,7 @@ from plugcell.io.units import DEG, M_PER_MM
 from ..stream.errors import PacketError, StreamLinkError
 from ..stream.limits import Limited
 from ..stream.link import StreamLink
+from ..stream.realtime import RealTime
 from ..stream.source import SourceLike
 from .config import EgmConfig
 from .messages import (
@@ -63,17 +64,21 @@ class EgmLink(StreamLink):
     rt_priority : int, optional
         Run the link's thread under ``SCHED_FIFO`` at this priority (1..99; Linux, needs
         ``CAP_SYS_NICE``).
+    realtime : RealTime, optional
+        The loop's whole scheduling instead: priority, CPUs, locked memory
+        (:mod:`..stream.realtime`); not with ``rt_priority``.
     """
 
     VENDOR = "EGM"
     TIMEOUT_WORD = "CommTimeout in cycles"
 
     def __init__(self, config: EgmConfig, source: SourceLike | None = None,
-                 record_latency: bool = False, rt_priority: int | None = None) -> None:
+                 record_latency: bool = False, rt_priority: int | None = None,
+                 realtime: RealTime | None = None) -> None:
         joint = config.mode == "joint"
         axes = _JOINTS if joint else _CARTESIAN
         units = (("deg", DEG),) * 6 if joint else (("mm", M_PER_MM),) * 3 + (("deg", DEG),) * 3
-        super().__init__(config, source, axes, units, record_latency, rt_priority)
+        super().__init__(config, source, axes, units, record_latency, rt_priority, realtime)
         self._mode = config.mode
         self._q0 = np.zeros(6)
         self._p0 = np.zeros(3)
