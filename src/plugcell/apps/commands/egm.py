@@ -7,6 +7,7 @@
                        [--max-speed V,…] [--device NAME]
     plugcell egm run --robot-ip IP [--listen IP] [--port 6510] [same stream options]
                      [--sine AXIS:AMPLITUDE:PERIOD] [--duration S] [--rt-priority N]
+                     [--cpu CPUS] [--mlock]
 
 ``files`` writes what the user loads into the controller (RAPID module, the UDP unit
 device's configuration); ``run`` answers the robot — holding it where EGM started, or
@@ -25,6 +26,7 @@ from .streaming import (
     add_run_controls,
     add_run_options,
     limits_of,
+    realtime_of,
     run_link,
     sine_or_hold,
     write_and_list,
@@ -113,7 +115,7 @@ def _run(args: argparse.Namespace) -> int:
 
     config = _config(args, args.robot_ip, args.listen)
     try:
-        link = EgmLink(config, _source(args), rt_priority=args.rt_priority)
+        link = EgmLink(config, _source(args), realtime=realtime_of(args))
     except ValueError as exc:
         raise CommandError(str(exc)) from None
     return run_link(link, args, f"{config.mode}, {config.sample_rate_ms} ms")

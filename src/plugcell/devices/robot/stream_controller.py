@@ -62,6 +62,7 @@ from plugcell.devices.robot.stream.correcting import Corrector
 from plugcell.devices.robot.stream.drive import StreamDrive, drive_refusal
 from plugcell.devices.robot.stream.limits import CorrectionLimits
 from plugcell.devices.robot.stream.process import BUSY, CorrectorClient, LinkProcess, link_class
+from plugcell.devices.robot.stream.realtime import RealTime
 from plugcell.devices.robot.tracked_moves import tracked_moves_for
 from plugcell.kinematics import RobotDescription
 from plugcell.motion import CartesianLimits, JointLimits
@@ -237,12 +238,16 @@ class StreamController:
     correct_max : tuple of (float, float)
         The largest correction of mode (b) (``CORRECT``, :attr:`corrector`), mm and
         degrees per axis.
+    realtime : RealTime, optional
+        The link's scheduling (:mod:`~plugcell.devices.robot.stream.realtime`): its
+        thread's priority, its CPUs, its memory locked.
     """
 
     def __init__(self, handler: BridgeHandler, config: Any, description: RobotDescription,
                  robot: str, joint_limits: JointLimits, cartesian_limits: CartesianLimits,
                  library: Sequence[Path] = (), name: str = "ROBOT",
-                 process: bool = True, correct_max: tuple[float, float] = (5.0, 1.0)) -> None:
+                 process: bool = True, correct_max: tuple[float, float] = (5.0, 1.0),
+                 realtime: RealTime | None = None) -> None:
         self.vendor = config.vendor
         if description.n_readings != 6:
             raise ValueError(f"{self.vendor} streams six axes; {description.name} has "
@@ -256,10 +261,10 @@ class StreamController:
         self.correct_max = correct_max
         self.corrector: Corrector | CorrectorClient
         if process:
-            self.link = self.drive = LinkProcess(config)
+            self.link = self.drive = LinkProcess(config, realtime=realtime)
             self.corrector = self.link.corrector
         else:
-            self.link = link_class(self.vendor)(config)
+            self.link = link_class(self.vendor)(config, realtime=realtime)
             self.drive = StreamDrive(self.link, feedback_only=True)
             self.corrector = Corrector(self.link)
         self.clock = SimClock(speed=1.0)

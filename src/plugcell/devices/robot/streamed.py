@@ -26,6 +26,7 @@ limits are the vendor's correction limits (:func:`~.stream.limits.default_limits
 from __future__ import annotations
 
 import dataclasses
+import os
 from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any
@@ -34,6 +35,7 @@ from plugcell.devices.params import flag
 from plugcell.devices.robot.bridge import BridgeHandler, parse_address
 from plugcell.devices.robot.egm.config import EgmConfig
 from plugcell.devices.robot.rsi.config import RsiConfig
+from plugcell.devices.robot.stream.realtime import RealTime, parse_cpus
 from plugcell.devices.robot.stream_controller import (
     StreamController,
     planner_limits,
@@ -42,14 +44,15 @@ from plugcell.devices.robot.stream_controller import (
 )
 from plugcell.io.robots import load_robot
 
-__all__ = ["STREAM_PARAMS", "streamed_link"]
+__all__ = ["STREAM_PARAMS", "stream_realtime", "streamed_link"]
 
 #: The robot service's options of a streamed robot (``--param KEY=VALUE``): name → parser.
 STREAM_PARAMS: dict[str, Callable[[str], Any]] = {
     "rsi": str, "rsi_robot": str, "rsi_timeout": int, "rsi_correction": str, "rsi_mode": str,
     "egm": str, "egm_robot": str, "egm_timeout": float, "egm_mode": str,
     "stream_process": flag, "joint_speed": float, "tcp_speed": float,
-    "correct_max_mm": float, "correct_max_deg": float}
+    "correct_max_mm": float, "correct_max_deg": float,
+    "stream_rt_priority": int, "stream_cpu": str, "stream_mlock": flag}
 
 
 def streamed_link(handler: BridgeHandler, *, robot: str, library: Sequence[Path], name: str,
@@ -58,7 +61,9 @@ def streamed_link(handler: BridgeHandler, *, robot: str, library: Sequence[Path]
                   egm_robot: str = "", egm_timeout: float = 1.0, egm_mode: str = "joint",
                   joint_speed: float = 20.0, tcp_speed: float = 100.0,
                   stream_process: bool = True, correct_max_mm: float = 5.0,
-                  correct_max_deg: float = 1.0) -> StreamController | None:
+                  correct_max_deg: float = 1.0, stream_rt_priority: int | None = None,
+                  stream_cpu: str = "", stream_mlock: bool = False,
+                  ) -> StreamController | None:
     """The streamed robot's controller the options ask for, or ``None`` (none asked).
 
     Parameters
@@ -88,6 +93,10 @@ def streamed_link(handler: BridgeHandler, *, robot: str, library: Sequence[Path]
     correct_max_mm, correct_max_deg : float
         The largest correction ``CORRECT`` superimposes, per axis (mm; degrees of a
         rotation or a joint).
+    stream_rt_priority, stream_cpu, stream_mlock
+        The cycle loop's scheduling (:class:`~.stream.realtime.RealTime`): its thread under
+        ``SCHED_FIFO`` at this priority (1..99), the link's process (or thread) on these
+        CPUs (``taskset -c`` syntax: ``1``, ``2-3``), its memory locked (``mlockall``).
 
     Returns
     -------
@@ -98,7 +107,7 @@ def streamed_link(handler: BridgeHandler, *, robot: str, library: Sequence[Path]
     ------
     ValueError
         Both streams, a controller address without its stream, a bad address, limit,
-        timeout or robot: the reason.
+        timeout, robot, priority or CPU list: the reason.
     """
     if rsi and egm:
         raise ValueError("give rsi=HOST:PORT or egm=HOST:PORT, not both")
@@ -124,5 +133,32 @@ def streamed_link(handler: BridgeHandler, *, robot: str, library: Sequence[Path]
     for what, v in (("correct_max_mm", correct_max_mm), ("correct_max_deg", correct_max_deg)):
         if not (v > 0 and v < float("inf")):
             raise ValueError(f"{what} must be a positive number, not {v}")
+    realtime = stream_realtime(stream_rt_priority, stream_cpu, stream_mlock)
     return StreamController(handler, config, load_robot(robot), robot, joint, cart, library,
-                            name, stream_process, (correct_max_mm, correct_max_deg))
+                            name, stream_process, (correct_max_mm, correct_max_deg), realtime)
+
+
+def stream_realtime(priority: int | None, cpus: str, lock: bool) -> RealTime:
+    """The link's scheduling the options ``stream_rt_priority``, ``stream_cpu`` and
+    ``stream_mlock`` give (:func:`streamed_link`).
+
+    Raises
+    ------
+    ValueError
+        A priority outside 1..99, a malformed CPU list or one naming a CPU this process
+        may not run on: the option and the reason.
+    """
+    try:
+        given = parse_cpus(cpus) if cpus else None
+    except ValueError as exc:
+        raise ValueError(f"stream_cpu: {exc}") from None
+    try:
+        realtime = RealTime(priority, given, lock)
+    except ValueError as exc:
+        raise ValueError(f"stream_rt_priority: {exc}") from None
+    if given is not None and hasattr(os, "sched_getaffinity"):
+        have = os.sched_getaffinity(0)
+        if not given <= have:
+            raise ValueError(f"stream_cpu {cpus!r}: CPU {min(given - have)} is not one this "
+                             f"process may run on ({','.join(map(str, sorted(have)))})")
+    return realtime
