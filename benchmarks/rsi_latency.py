@@ -48,6 +48,8 @@ import numpy as np
 from plugcell.devices.robot.stream.realtime import RealTime, parse_cpus, pin
 
 WARMUP_S = 2.0
+#: The CPUs the benchmark was started on (before the robot side pins itself).
+ALL_CPUS = frozenset(os.sched_getaffinity(0))
 
 
 def rob_packet(ipoc: int, q: float) -> bytes:
@@ -170,13 +172,14 @@ def run_link(cycle_ms: float, rt: RealTime) -> None:
 
 
 def serve_link(link) -> None:
-    """The link role of a run (RSI's or EGM's link, recording latencies): pinned like
-    the link process (stream/process.py) when asked, its start-up heap frozen as the link
+    """The link role of a run (RSI's or EGM's link, recording latencies): the process
+    prepared as the link process prepares itself (stream/process.py: CPUs, switch
+    interval, its other threads' priority), its start-up heap frozen as the link
     process does (a full collection then scans only the cycles' objects), start it, say
     ``READY <port>``, forget the warm-up when told (a line on stdin), report the measured
     seconds, the link's counters and when each packet came in (its ``observer``, the
     link process's shared-memory publisher's place), close it."""
-    pin(link.realtime.cpus)  # the whole process, as the link process pins itself
+    link.realtime.prepare_process()  # as the link process does (stream/process.py)
     gc.collect()
     gc.freeze()
     arrivals: list[tuple[int, int, int]] = []
@@ -263,10 +266,11 @@ class Setup:
         return (self.sensors.cpus or frozenset()) | (self.robot_cpus or frozenset())
 
     def cell_cpus(self) -> frozenset[int] | None:
-        """Where the cell's services run (None: anywhere)."""
+        """Where the cell's services run (None: anywhere): the CPUs this process was
+        given at its start that the stream does not use."""
         if not self.isolate:
             return None
-        return frozenset(os.sched_getaffinity(0)) - self.stream_cpus
+        return ALL_CPUS - self.stream_cpus
 
     def describe(self) -> str:
         rt = self.sensors
@@ -638,7 +642,7 @@ def _cpus(text: str) -> frozenset[int]:
         cpus = parse_cpus(text)
     except ValueError as exc:
         raise argparse.ArgumentTypeError(str(exc)) from None
-    have = os.sched_getaffinity(0)
+    have = ALL_CPUS
     if not cpus <= have:
         raise argparse.ArgumentTypeError(
             f"{text!r}: CPU {min(cpus - have)} is not one this process may use "
@@ -691,7 +695,7 @@ def main(argv: list[str], vendor: Vendor | None = None, doc: str | None = None) 
     if args.isolate and not setup.cell_cpus():
         ap.error(f"--isolate: no CPU is left for the cell's services (the stream uses "
                  f"{sorted(setup.stream_cpus)}, this process may run on "
-                 f"{sorted(os.sched_getaffinity(0))})")
+                 f"{sorted(ALL_CPUS)})")
     if args.in_service:
         import stream_in_service
 

@@ -114,6 +114,23 @@ def test_locking_memory_is_done_or_refused_with_the_reason() -> None:
         "normal priority, memory not locked (")
 
 
+def test_a_link_process_prepares_its_threads_or_says_why_not() -> None:
+    """In a process of its own: the CPUs, the switch interval, the other threads one
+    priority below the link's (granted, or refused with the reason)."""
+    cpus = ",".join(map(str, sorted(MINE)))
+    code = ("import os, sys; from plugcell.devices.robot.stream.realtime import RealTime; "
+            f"print(RealTime(5, frozenset({{{cpus}}})).prepare_process()); "
+            "print(sys.getswitchinterval(), sorted(os.sched_getaffinity(0)))")
+    done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                          timeout=60)
+    assert done.returncode == 0, done.stderr
+    note, after = done.stdout.strip().splitlines()
+    assert note.startswith("CPU")
+    assert note.endswith(("other threads SCHED_FIFO priority 4", ")"))
+    assert "other threads" in note
+    assert after == f"0.0005 {sorted(MINE)}"
+
+
 def _config() -> RsiConfig:
     return RsiConfig(robot_host="127.0.0.1", listen_host="127.0.0.1", listen_port=0,
                      mode="absolute")

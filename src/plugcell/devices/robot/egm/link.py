@@ -83,9 +83,12 @@ class EgmLink(StreamLink):
         self._q0 = np.zeros(6)
         self._p0 = np.zeros(3)
         self._quat0: tuple[float, ...] = (1.0, 0.0, 0.0, 0.0)
+        # the messages parsed into and written over each cycle (the link's thread only)
+        self._robot_msg = egm_pb2.EgmRobot()
+        self._sensor_msg = egm_pb2.EgmSensor()
 
     def _parse(self, data: bytes) -> EgmState:
-        state = parse_egm_robot(data, self.config.max_packet_bytes)
+        state = parse_egm_robot(data, self.config.max_packet_bytes, self._robot_msg)
         if len(state.joints) != 6:
             raise PacketError("foreign", f"{len(state.joints)} joints: the link drives "
                               "six-axis arms")
@@ -127,7 +130,7 @@ class EgmLink(StreamLink):
     def _encode(self, state: EgmState, limited: Limited) -> bytes:
         o = limited.offset
         if self._mode == "joint":
-            return encode_joints(state.seqno, state.tm, self._q0 + o)
+            return encode_joints(state.seqno, state.tm, self._q0 + o, self._sensor_msg)
         if self._mode == "pose":
             quat = quat_multiply(rotvec_to_quat(o[3:]), self._quat0)
             return encode_pose(state.seqno, state.tm, self._p0 + o[:3], quat)
@@ -141,9 +144,10 @@ class EgmLink(StreamLink):
         fb = msg.feedBack.cartesian
         fb.pos.x = fb.pos.y = fb.pos.z = 0.0
         fb.orient.u0, fb.orient.u1, fb.orient.u2, fb.orient.u3 = 1.0, 0.0, 0.0, 0.0
-        state = parse_egm_robot(msg.SerializeToString(), self.config.max_packet_bytes)
+        state = parse_egm_robot(msg.SerializeToString(), self.config.max_packet_bytes,
+                                self._robot_msg)
         zero = Limited(np.zeros(6), np.zeros(6))
-        encode_joints(1, 0, state.joints)
+        encode_joints(1, 0, state.joints, self._sensor_msg)
         encode_pose(1, 0, np.zeros(3), quat_multiply(rotvec_to_quat(zero.offset[3:]),
                                                       (1.0, 0.0, 0.0, 0.0)))
         encode_path_correction(1, 0, zero.offset[:3])

@@ -160,6 +160,7 @@ class StreamLink(Following):
         self._limiter = OffsetLimiter(config.limits, config.cycle_s, axes, units)
         self._cycle_ns = int(config.cycle_s * 1e9)
         self._timeout_ns = int(config.timeout_s * 1e9)
+        self._timeout_packets = config.timeout_packets  # a property of some configs
         self.latencies: list[int] | None = [] if record_latency else None
         self._cond = threading.Condition()
         self._sock: socket.socket | None = None
@@ -389,7 +390,7 @@ class StreamLink(Following):
         else:
             # cycles between the last answered packet and this one: lost or superseded
             lost = max(0, self._lost(gap))
-            if lost >= self.config.timeout_packets:
+            if lost >= self._timeout_packets:
                 self._dropped["inconsistent"] += 1
                 return
             self._missed += lost
@@ -424,7 +425,7 @@ class StreamLink(Following):
         self._notify()
 
     def _check_limits(self, state: Any) -> None:
-        timeout = self.config.timeout_packets
+        timeout = self._timeout_packets
         if self._failure is not None:
             return
         if self._streak >= timeout:

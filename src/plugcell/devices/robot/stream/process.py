@@ -40,7 +40,6 @@ import contextlib
 import gc
 import importlib
 import multiprocessing
-import sys
 import threading
 import time
 from collections.abc import Callable
@@ -54,10 +53,10 @@ from plugcell.motion import Trajectory
 from plugcell.pdl.interfaces import MotionError
 
 from .adjusting import CYCLE_SLOTS, OFFSET_SLOTS, AdjustPump, ChildAdjust, SeqVector
-from .correcting import SWITCH_INTERVAL_S, CorrectionSpec, Corrector
+from .correcting import CorrectionSpec, Corrector
 from .drive import Adjust, StreamDrive, drive_refusal, motion_timeout, samples
 from .errors import StreamLinkError
-from .realtime import RealTime, pin
+from .realtime import RealTime
 
 __all__ = ["BUSY", "LINKS", "CorrectorClient", "Feedback", "LinkProcess", "Publisher",
            "link_class", "serve_corrections"]
@@ -139,11 +138,10 @@ def _child(conn: Any, corrections: Any, values: Any, text: Any, vendor: str, con
     import signal
 
     signal.signal(signal.SIGINT, signal.SIG_IGN)  # Ctrl-C is the service's to handle
-    # every thread of the process on the stream's CPUs (they start after this), and the
-    # interpreter handed to the link's thread within half a millisecond of its asking
-    # whenever another thread of this process holds it (the default waits 5 ms)
-    pin(realtime.cpus)
-    sys.setswitchinterval(SWITCH_INTERVAL_S)
+    # every thread of the process on the stream's CPUs (they start after this), the
+    # interpreter handed to the link's thread within half a millisecond of its asking,
+    # the other threads one real-time priority below it (RealTime.prepare_process)
+    realtime.prepare_process()
     link = link_class(vendor)(config, realtime=realtime)
     link.observer = Publisher(values, text)
     # the objects of the imports and the link live as long as the process: out of the
