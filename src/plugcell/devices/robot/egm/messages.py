@@ -186,13 +186,6 @@ def parse_egm_robot(data: bytes, max_bytes: int = 1400, into=None) -> EgmState:
     if h.mtype in (_CORRECTION, _PATH_CORRECTION) or (
             h.HasField("mtype") and h.mtype != _DATA):
         raise PacketError("foreign", f"header type {h.mtype}: not a robot's data message")
-    state = _read_fast(msg)
-    return state if state is not None else _read_checked(msg)
-
-
-def _read_checked(msg) -> EgmState:
-    """The state of a message whose header passed, each number checked in turn: the
-    first that fails raises :class:`PacketError` naming it."""
     fb = msg.feedBack
     if not (msg.HasField("feedBack") and fb.HasField("joints")):
         raise PacketError("foreign", "no feedback joints")
@@ -211,17 +204,8 @@ def _read_checked(msg) -> EgmState:
             planned_position, planned_quaternion = _pose("planned.cartesian", pl.cartesian)
     ext = (np.array(_finite("feedBack.externalJoints", fb.externalJoints.joints))
            if fb.HasField("externalJoints") else None)
-    return _state(msg, np.array(joints) * DEG, position, quaternion, planned_joints,
-                  planned_position, planned_quaternion, ext)
-
-
-def _state(msg, joints: Array, position: Array | None, quaternion: Array | None,
-           planned_joints: Array | None, planned_position: Array | None,
-           planned_quaternion: Array | None, ext: Array | None) -> EgmState:
-    """The :class:`EgmState` of ``msg`` with its numbers read (SI) and checked."""
-    h = msg.header
     return EgmState(
-        seqno=h.seqno, tm=h.tm, joints=joints, position=position,
+        seqno=h.seqno, tm=h.tm, joints=np.array(joints) * DEG, position=position,
         quaternion=quaternion, planned_joints=planned_joints,
         planned_position=planned_position, planned_quaternion=planned_quaternion,
         external_joints=ext,
@@ -233,84 +217,6 @@ def _state(msg, joints: Array, position: Array | None, quaternion: Array | None,
                          else None),
         test_signals=tuple(msg.testSignals.signals),
         utilization=msg.utilizationRate if msg.HasField("utilizationRate") else None)
-
-
-#: The bound of each number of a layout (:func:`_read_fast`), by the layout.
-_BOUNDS: dict[tuple[int, bool, int, bool], Array] = {}
-_POSE_BOUNDS = (MAX_COORD_MM,) * 3 + (1.5,) * 4
-
-
-def _full_pose(part) -> bool:
-    """``part`` (a ``feedBack`` or ``planned``) has a cartesian pose with both parts."""
-    if not part.HasField("cartesian"):
-        return False
-    c = part.cartesian
-    return c.HasField("pos") and c.HasField("orient")
-
-
-def _read_fast(msg) -> EgmState | None:
-    """:func:`_read_checked`'s state, the numbers read and checked in one array: every
-    feedback and planned number in one ``np.array``, held to its bound (``|v| ≤ bound``
-    fails for NaN and ±inf too) at once; ``None`` for anything else — a number beyond its
-    bound, a quaternion not unit, an unusual layout, external joints — which the checked
-    reader then reads or refuses with its reason.  Each value is the checked reader's to
-    the bit (the same products and the same norm of a fresh array)."""
-    fb = msg.feedBack
-    if not (msg.HasField("feedBack") and fb.HasField("joints")) \
-            or fb.HasField("externalJoints"):
-        return None
-    vals = list(fb.joints.joints)
-    n = len(vals)
-    if n not in (6, 7):
-        return None
-    fb_pose = _full_pose(fb)
-    if fb_pose:
-        p, o = fb.cartesian.pos, fb.cartesian.orient
-        vals += (p.x, p.y, p.z, o.u0, o.u1, o.u2, o.u3)
-    elif fb.HasField("cartesian"):
-        return None
-    planned = msg.HasField("planned")
-    pl = msg.planned
-    m = len(pl.joints.joints) if planned and pl.HasField("joints") else -1
-    if m >= 0:
-        vals.extend(pl.joints.joints)
-    pl_pose = planned and _full_pose(pl)
-    if pl_pose:
-        p, o = pl.cartesian.pos, pl.cartesian.orient
-        vals += (p.x, p.y, p.z, o.u0, o.u1, o.u2, o.u3)
-    elif planned and pl.HasField("cartesian"):
-        return None
-    key = (n, fb_pose, m, pl_pose)
-    bound = _BOUNDS.get(key)
-    if bound is None:
-        bound = _BOUNDS[key] = np.array(
-            (MAX_JOINT_DEG,) * n + _POSE_BOUNDS * fb_pose + (MAX_JOINT_DEG,) * max(m, 0)
-            + _POSE_BOUNDS * pl_pose)
-    a = np.array(vals)
-    if not (np.abs(a) <= bound).all():
-        return None
-    position = quaternion = planned_joints = planned_position = planned_quaternion = None
-    i = n
-    if fb_pose:
-        position, quaternion = a[i:i + 3] * M_PER_MM, _unit(a[i + 3:i + 7].copy())
-        i += 7
-        if quaternion is None:
-            return None
-    if m >= 0:
-        planned_joints = a[i:i + m] * DEG
-        i += m
-    if pl_pose:
-        planned_position, planned_quaternion = a[i:i + 3] * M_PER_MM, _unit(a[i + 3:i + 7].copy())
-        if planned_quaternion is None:
-            return None
-    return _state(msg, a[:n] * DEG, position, quaternion, planned_joints, planned_position,
-                  planned_quaternion, None)
-
-
-def _unit(q: Array) -> Array | None:
-    """``q / |q|`` as :func:`_pose` computes it, or ``None`` if ``|q|`` is off 1."""
-    norm = float(np.sqrt(q @ q))
-    return None if abs(norm - 1.0) > QUAT_TOL else q / norm
 
 
 def _header(header, seqno: int, tm: int, mtype: int) -> None:
