@@ -261,16 +261,13 @@ class Setup:
                  *(["--cpu", ",".join(map(str, sorted(rt.cpus)))] if rt.cpus else []),
                  *(["--mlock"] if rt.lock_memory else [])])
 
-    @property
-    def stream_cpus(self) -> frozenset[int]:
-        return (self.sensors.cpus or frozenset()) | (self.robot_cpus or frozenset())
-
     def cell_cpus(self) -> frozenset[int] | None:
         """Where the cell's services run (None: anywhere): the CPUs this process was
-        given at its start that the stream does not use."""
+        given at its start that the sensors do not use (the robot side, the controller's
+        stand-in, may share theirs: a controller is another machine)."""
         if not self.isolate:
             return None
-        return ALL_CPUS - self.stream_cpus
+        return ALL_CPUS - (self.sensors.cpus or frozenset())
 
     def describe(self) -> str:
         rt = self.sensors
@@ -667,8 +664,8 @@ def main(argv: list[str], vendor: Vendor | None = None, doc: str | None = None) 
     ap.add_argument("--robot-cpu", type=_cpus, metavar="CPUS",
                     help="pin the robot side to these CPUs")
     ap.add_argument("--isolate", action="store_true",
-                    help="run the cell's services (--cell) on the CPUs the stream does not "
-                    "use (needs --cpu)")
+                    help="run the cell's services (--cell) on the CPUs the link and the echo "
+                    "do not use (needs --cpu)")
     ap.add_argument("--mlock", action="store_true",
                     help="lock the memory of the robot side, the link and the echo "
                     "(mlockall)")
@@ -693,8 +690,8 @@ def main(argv: list[str], vendor: Vendor | None = None, doc: str | None = None) 
         return 0
     setup = Setup(rt, args.robot_cpu, args.isolate)
     if args.isolate and not setup.cell_cpus():
-        ap.error(f"--isolate: no CPU is left for the cell's services (the stream uses "
-                 f"{sorted(setup.stream_cpus)}, this process may run on "
+        ap.error(f"--isolate: no CPU is left for the cell's services (the sensors use "
+                 f"{sorted(args.cpu)}, this process may run on "
                  f"{sorted(ALL_CPUS)})")
     if args.in_service:
         import stream_in_service
