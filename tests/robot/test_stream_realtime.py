@@ -21,7 +21,7 @@ from plugcell.devices.robot.streamed import stream_realtime
 from plugcell.sim.ports import free_port
 
 MINE = frozenset(os.sched_getaffinity(0))
-NOT_MINE = max(MINE) + 1000
+NOT_MINE = max(max(MINE), os.cpu_count() or 1) + 1000
 
 
 def _format(cpus: set[int]) -> str:
@@ -162,7 +162,7 @@ def test_a_priority_and_a_scheduling_together_are_refused() -> None:
     ({"stream_cpu": "x"}, r"stream_cpu: CPU list 'x': 'x' is not a CPU number"),
     ({"stream_cpu": "2-1"}, r"stream_cpu: CPU list '2-1': '2-1' is not a range"),
     ({"stream_cpu": str(NOT_MINE)}, rf"stream_cpu '{NOT_MINE}': CPU {NOT_MINE} is not one "
-     "this process may run on"),
+     "of this machine's"),
 ])
 def test_bad_service_scheduling_options_are_refused_naming_the_option(options, message) -> None:
     with pytest.raises(ValueError, match=message):
@@ -179,9 +179,23 @@ def test_the_service_options_give_the_link_process_its_scheduling() -> None:
     assert threaded.bridge.link.realtime == RealTime(None, MINE, False)
 
 
+@pytest.mark.skipif((os.cpu_count() or 1) < 2, reason="needs two CPUs")
+def test_a_service_kept_on_one_cpu_may_put_its_link_on_another() -> None:
+    """systemd's CPUAffinity=0 for the service, stream_cpu=1 for its link process: the
+    option names this machine's CPUs, not the service's."""
+    code = ("import os; os.sched_setaffinity(0, {0}); "
+            "from plugcell.devices.robot.streamed import stream_realtime; "
+            "print(sorted(stream_realtime(None, '1', False).cpus))")
+    done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                          timeout=60)
+    assert done.returncode == 0, done.stderr
+    assert done.stdout.strip() == "[1]"
+
+
 @pytest.mark.parametrize(("argv", "message"), [
     (["--cpu", "x"], "--cpu: CPU list 'x': 'x' is not a CPU number"),
-    (["--cpu", str(NOT_MINE)], f"--cpu '{NOT_MINE}': CPU {NOT_MINE} is not one"),
+    (["--cpu", str(NOT_MINE)], f"--cpu '{NOT_MINE}': CPU {NOT_MINE} is not one of this "
+     "machine's"),
     (["--rt-priority", "0"], r"--rt-priority: rt_priority 0: expected 1..99"),
 ])
 @pytest.mark.parametrize("vendor", ["rsi", "egm"])

@@ -125,8 +125,8 @@ def realtime_of(args: argparse.Namespace) -> Any:
     Raises
     ------
     CommandError
-        A priority outside 1..99, a malformed CPU list, a CPU this process may not run
-        on: the option and the reason.
+        A priority outside 1..99, a malformed CPU list, a CPU this machine does not have:
+        the option and the reason.
     """
     from plugcell.apps.cli import CommandError
     from plugcell.devices.robot.streamed import stream_realtime

@@ -145,8 +145,8 @@ def stream_realtime(priority: int | None, cpus: str, lock: bool) -> RealTime:
     Raises
     ------
     ValueError
-        A priority outside 1..99, a malformed CPU list or one naming a CPU this process
-        may not run on: the option and the reason.
+        A priority outside 1..99, a malformed CPU list or one naming a CPU this machine
+        does not have: the option and the reason.
     """
     try:
         given = parse_cpus(cpus) if cpus else None
@@ -156,9 +156,10 @@ def stream_realtime(priority: int | None, cpus: str, lock: bool) -> RealTime:
         realtime = RealTime(priority, given, lock)
     except ValueError as exc:
         raise ValueError(f"stream_rt_priority: {exc}") from None
-    if given is not None and hasattr(os, "sched_getaffinity"):
-        have = os.sched_getaffinity(0)
-        if not given <= have:
-            raise ValueError(f"stream_cpu {cpus!r}: CPU {min(given - have)} is not one this "
-                             f"process may run on ({','.join(map(str, sorted(have)))})")
+    count = os.cpu_count()
+    if given is not None and count and max(given) >= count:
+        # this machine's, not this process's: a service kept on CPU 0 (taskset,
+        # systemd's CPUAffinity) may put its link process on CPU 1
+        raise ValueError(f"stream_cpu {cpus!r}: CPU {max(given)} is not one of this "
+                         f"machine's (0-{count - 1})")
     return realtime
