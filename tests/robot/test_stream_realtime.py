@@ -16,8 +16,7 @@ from plugcell.apps.cli import main
 from plugcell.devices.robot.rsi import RsiConfig, RsiLink
 from plugcell.devices.robot.service import RobotService
 from plugcell.devices.robot.stream.process import LinkProcess
-from plugcell.devices.robot.stream.realtime import RealTime, parse_cpus, pin
-from plugcell.devices.robot.streamed import stream_realtime
+from plugcell.devices.robot.stream.realtime import RealTime, parse_cpus, pin, stream_realtime
 from plugcell.sim.ports import free_port
 
 MINE = frozenset(os.sched_getaffinity(0))
@@ -184,7 +183,7 @@ def test_a_service_kept_on_one_cpu_may_put_its_link_on_another() -> None:
     """systemd's CPUAffinity=0 for the service, stream_cpu=1 for its link process: the
     option names this machine's CPUs, not the service's."""
     code = ("import os; os.sched_setaffinity(0, {0}); "
-            "from plugcell.devices.robot.streamed import stream_realtime; "
+            "from plugcell.devices.robot.stream.realtime import stream_realtime; "
             "print(sorted(stream_realtime(None, '1', False).cpus))")
     done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
                           timeout=60)

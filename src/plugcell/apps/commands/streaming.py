@@ -129,7 +129,7 @@ def realtime_of(args: argparse.Namespace) -> Any:
         the option and the reason.
     """
     from plugcell.apps.cli import CommandError
-    from plugcell.devices.robot.streamed import stream_realtime
+    from plugcell.devices.robot.stream.realtime import stream_realtime
 
     try:
         return stream_realtime(args.rt_priority, args.cpu or "", args.mlock)

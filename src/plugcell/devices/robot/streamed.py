@@ -26,7 +26,6 @@ limits are the vendor's correction limits (:func:`~.stream.limits.default_limits
 from __future__ import annotations
 
 import dataclasses
-import os
 from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any
@@ -35,7 +34,7 @@ from plugcell.devices.params import flag
 from plugcell.devices.robot.bridge import BridgeHandler, parse_address
 from plugcell.devices.robot.egm.config import EgmConfig
 from plugcell.devices.robot.rsi.config import RsiConfig
-from plugcell.devices.robot.stream.realtime import RealTime, parse_cpus
+from plugcell.devices.robot.stream.realtime import stream_realtime
 from plugcell.devices.robot.stream_controller import (
     StreamController,
     planner_limits,
@@ -44,7 +43,7 @@ from plugcell.devices.robot.stream_controller import (
 )
 from plugcell.io.robots import load_robot
 
-__all__ = ["STREAM_PARAMS", "stream_realtime", "streamed_link"]
+__all__ = ["STREAM_PARAMS", "streamed_link"]
 
 #: The robot service's options of a streamed robot (``--param KEY=VALUE``): name → parser.
 STREAM_PARAMS: dict[str, Callable[[str], Any]] = {
@@ -137,29 +136,3 @@ def streamed_link(handler: BridgeHandler, *, robot: str, library: Sequence[Path]
     return StreamController(handler, config, load_robot(robot), robot, joint, cart, library,
                             name, stream_process, (correct_max_mm, correct_max_deg), realtime)
 
-
-def stream_realtime(priority: int | None, cpus: str, lock: bool) -> RealTime:
-    """The link's scheduling the options ``stream_rt_priority``, ``stream_cpu`` and
-    ``stream_mlock`` give (:func:`streamed_link`).
-
-    Raises
-    ------
-    ValueError
-        A priority outside 1..99, a malformed CPU list or one naming a CPU this machine
-        does not have: the option and the reason.
-    """
-    try:
-        given = parse_cpus(cpus) if cpus else None
-    except ValueError as exc:
-        raise ValueError(f"stream_cpu: {exc}") from None
-    try:
-        realtime = RealTime(priority, given, lock)
-    except ValueError as exc:
-        raise ValueError(f"stream_rt_priority: {exc}") from None
-    count = os.cpu_count()
-    if given is not None and count and max(given) >= count:
-        # this machine's, not this process's: a service kept on CPU 0 (taskset,
-        # systemd's CPUAffinity) may put its link process on CPU 1
-        raise ValueError(f"stream_cpu {cpus!r}: CPU {max(given)} is not one of this "
-                         f"machine's (0-{count - 1})")
-    return realtime

@@ -83,12 +83,12 @@ class EgmLink(StreamLink):
         self._q0 = np.zeros(6)
         self._p0 = np.zeros(3)
         self._quat0: tuple[float, ...] = (1.0, 0.0, 0.0, 0.0)
-        # the messages parsed into and written over each cycle (the link's thread only)
-        self._robot_msg = egm_pb2.EgmRobot()
+        # the answer written over each cycle (the link's thread only); the robot's
+        # message is a new one each cycle (messages.parse_egm_robot says why)
         self._sensor_msg = egm_pb2.EgmSensor()
 
     def _parse(self, data: bytes) -> EgmState:
-        state = parse_egm_robot(data, self.config.max_packet_bytes, self._robot_msg)
+        state = parse_egm_robot(data, self.config.max_packet_bytes)
         if len(state.joints) != 6:
             raise PacketError("foreign", f"{len(state.joints)} joints: the link drives "
                               "six-axis arms")
@@ -144,8 +144,7 @@ class EgmLink(StreamLink):
         fb = msg.feedBack.cartesian
         fb.pos.x = fb.pos.y = fb.pos.z = 0.0
         fb.orient.u0, fb.orient.u1, fb.orient.u2, fb.orient.u3 = 1.0, 0.0, 0.0, 0.0
-        state = parse_egm_robot(msg.SerializeToString(), self.config.max_packet_bytes,
-                                self._robot_msg)
+        state = parse_egm_robot(msg.SerializeToString(), self.config.max_packet_bytes)
         zero = Limited(np.zeros(6), np.zeros(6))
         encode_joints(1, 0, state.joints, self._sensor_msg)
         encode_pose(1, 0, np.zeros(3), quat_multiply(rotvec_to_quat(zero.offset[3:]),

@@ -146,7 +146,7 @@ def _pose(where: str, pose) -> tuple[Array | None, Array | None]:
     return pos, q / norm
 
 
-def parse_egm_robot(data: bytes, max_bytes: int = 1400, into=None) -> EgmState:
+def parse_egm_robot(data: bytes, max_bytes: int = 1400) -> EgmState:
     """An ``EgmRobot`` datagram as an :class:`EgmState` (SI).
 
     Parameters
@@ -155,9 +155,6 @@ def parse_egm_robot(data: bytes, max_bytes: int = 1400, into=None) -> EgmState:
         The datagram.
     max_bytes : int
         Larger datagrams are ``oversized``.
-    into : EgmRobot, optional
-        A message to parse into, kept by the caller from cycle to cycle (a link: one
-        object less a cycle; protobuf clears it first); by default a new one.
 
     Returns
     -------
@@ -173,7 +170,9 @@ def parse_egm_robot(data: bytes, max_bytes: int = 1400, into=None) -> EgmState:
     """
     if len(data) > max_bytes:
         raise PacketError("oversized", f"{len(data)} bytes > {max_bytes}")
-    msg = egm_pb2.EgmRobot() if into is None else into
+    # a new message each time: parsed into a kept one, upb's arena grows with every
+    # parse (measured: 142 MB over 200 000 messages, ~13 minutes of a 4 ms stream)
+    msg = egm_pb2.EgmRobot()
     try:
         msg.ParseFromString(data)
     except (DecodeError, ValueError, RuntimeError) as exc:

@@ -31,7 +31,8 @@ import os
 import sys
 from dataclasses import dataclass
 
-__all__ = ["SWITCH_INTERVAL_S", "RealTime", "lock_memory", "parse_cpus", "pin"]
+__all__ = ["SWITCH_INTERVAL_S", "RealTime", "lock_memory", "parse_cpus", "pin",
+           "stream_realtime"]
 
 #: The interpreter's switch interval in a link's process (s): a thread that holds it when
 #: the link's thread asks for it hands it over within this (Python's default is 5 ms).
@@ -218,3 +219,45 @@ class RealTime:
         else:
             notes.insert(0, "normal priority")
         return ", ".join(n for n in notes if n)
+
+
+def stream_realtime(priority: int | None, cpus: str, lock: bool) -> RealTime:
+    """The link's scheduling the robot service's options ``stream_rt_priority``,
+    ``stream_cpu`` and ``stream_mlock`` give (:func:`~..streamed.streamed_link`; ``plugcell
+    rsi|egm run``'s ``--rt-priority``, ``--cpu``, ``--mlock`` too).
+
+    Parameters
+    ----------
+    priority : int or None
+        ``SCHED_FIFO`` priority 1..99.
+    cpus : str
+        A CPU list (:func:`parse_cpus`); empty: any CPU.
+    lock : bool
+        Lock the memory.
+
+    Returns
+    -------
+    RealTime
+        The scheduling.
+
+    Raises
+    ------
+    ValueError
+        A priority outside 1..99, a malformed CPU list or one naming a CPU this machine
+        does not have: the option and the reason.
+    """
+    try:
+        given = parse_cpus(cpus) if cpus else None
+    except ValueError as exc:
+        raise ValueError(f"stream_cpu: {exc}") from None
+    try:
+        realtime = RealTime(priority, given, lock)
+    except ValueError as exc:
+        raise ValueError(f"stream_rt_priority: {exc}") from None
+    count = os.cpu_count()
+    if given is not None and count and max(given) >= count:
+        # this machine's, not this process's: a service kept on CPU 0 (taskset,
+        # systemd's CPUAffinity) may put its link process on CPU 1
+        raise ValueError(f"stream_cpu {cpus!r}: CPU {max(given)} is not one of this "
+                         f"machine's (0-{count - 1})")
+    return realtime
