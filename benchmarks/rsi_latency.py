@@ -29,6 +29,7 @@ from __future__ import annotations
 import argparse
 import contextlib
 import gc
+import itertools
 import json
 import os
 import resource
@@ -336,6 +337,7 @@ def robot(vendor: Vendor, seconds: float, cycle_ms: float,
     end = measuring_from + int(seconds * 1e9)
     measuring = False
     cpu0 = _cpu_times()
+    steal_log: list[tuple[int, tuple[int, ...]]] = []  # (when, each CPU's steal ticks)
     # slot j: stream j % 2 sends at start + j · cycle/2; between two, the robot side
     # sleeps in select() (µs resolution: it never spins, so it takes no CPU from the
     # sensors it measures) and takes the answers as they come
@@ -368,6 +370,8 @@ def robot(vendor: Vendor, seconds: float, cycle_ms: float,
         if measuring:
             st.log.append((ipoc, slot_t, t))
         st.sock.send(packet)
+        if measuring and k % STEAL_EVERY == 0:  # after a send: it delays none
+            steal_log.append((time.monotonic_ns(), _steal_per_cpu()))
         k += 1
     steal = _steal(cpu0, _cpu_times())
     drain_end = time.monotonic_ns() + 2 * cycle_ns  # the last answers, timed as they come
@@ -385,9 +389,12 @@ def robot(vendor: Vendor, seconds: float, cycle_ms: float,
             proc.stdin.close()
             reports[0]["stats"] = json.loads(proc.stdout.readline())["stats"]
         proc.wait(timeout=10)
-    results, samples = _figures(vendor, streams, reports, cycle_ns, measuring_from)
+    results, samples = _figures(vendor, streams, reports, cycle_ns, measuring_from,
+                                _stolen(steal_log))
     results[vendor.link] |= {"link_stats": reports[0]["stats"], "scheduling": link_note,
-                             "steal_pct": steal, "robot_scheduling": robot_note}
+                             "steal_pct": steal, "robot_scheduling": robot_note,
+                             "steal_windows": len(_stolen(steal_log)),
+                             "windows": max(0, len(steal_log) - 1)}
     return results, samples
 
 
@@ -405,9 +412,11 @@ def _take_answers(st: _Stream, vendor: Vendor) -> None:
 
 
 def _figures(vendor: Vendor, streams: list[_Stream], reports: list[dict], cycle_ns: int,
-             t0: int) -> tuple[dict, dict[str, dict[str, np.ndarray]]]:
+             t0: int, stolen: list[tuple[int, int]]
+             ) -> tuple[dict, dict[str, dict[str, np.ndarray]]]:
     """Each sensor's round trips, in → out times, missed cycles (when, and why: see
-    :func:`_causes`), CPU share and thread counters."""
+    :func:`_causes`; how many near a time the hypervisor took a CPU, ``stolen``'s
+    windows), CPU share and thread counters."""
     names = (vendor.link, "bare UDP echo")
     results, samples = {}, {}
     missed_at: list[list[int]] = []
@@ -432,12 +441,42 @@ def _figures(vendor: Vendor, streams: list[_Stream], reports: list[dict], cycle_
             "missed_at_s": [(t - t0) / 1e9 for t in missed_at[i]],
             "missed_by_cause": _causes(st, missed_at[i], missed_at[1 - i], cycle_ns,
                                        link_in if i == 0 else None),
+            "missed_near_steal": sum(_near(t, stolen) for t in missed_at[i]),
             "robot_late_sends": len(robot_late),
+            "robot_late_near_steal": sum(_near(sent, stolen) for _, slot, sent in st.log
+                                         if sent - slot > cycle_ns // 4),
             "robot_longest_late_us": max(robot_late, default=0) / 1e3,
             "thread": report.get("thread", {}),
         }
         samples[name] = {"round trip": r, "in→out": io}
     return results, samples
+
+
+#: The robot side reads each CPU's steal every this many slots (100 ms at 4 ms).
+STEAL_EVERY = 50
+
+
+def _steal_per_cpu() -> tuple[int, ...]:
+    """Each CPU's ``steal`` so far (/proc/stat, clock ticks; empty where there is none)."""
+    try:
+        with open("/proc/stat", encoding="ascii") as f:
+            return tuple(int(line.split()[8]) for line in f
+                         if line.startswith("cpu") and line[3].isdigit())
+    except (OSError, IndexError, ValueError):
+        return ()
+
+
+def _stolen(log: list[tuple[int, tuple[int, ...]]]) -> list[tuple[int, int]]:
+    """The windows (from, to) ns between two readings in which the hypervisor took time
+    from any CPU (its steal grew)."""
+    return [(t0, t1) for (t0, a), (t1, b) in itertools.pairwise(log)
+            if any(y > x for x, y in zip(a, b, strict=False))]
+
+
+def _near(t: int, windows: list[tuple[int, int]], margin: int = 100_000_000) -> bool:
+    """``t`` falls within ``margin`` ns of one of the ``windows`` (steal is counted in
+    10 ms ticks, read every 100 ms)."""
+    return any(a - margin <= t <= b + margin for a, b in windows)
 
 
 def _quantiles(v: np.ndarray) -> dict[str, float]:
@@ -578,16 +617,22 @@ def table(vendor: Vendor, results: dict, seconds: float, cycle_ms: float) -> str
               f"{sum((st.get('dropped') or {}).values())}, max in→out "
               f"{(st.get('max_latency_ns') or 0) / 1e3:.0f} µs; link thread: "
               f"{link.get('scheduling')}; robot side: {link.get('robot_scheduling')}"]
-    lines += ["", "| sensor | missed: " + " / ".join(CAUSES) + " | robot side's late sends "
-              "(longest µs) | answering thread: page faults (from disk) / forced off the CPU "
-              "/ collector's passes (longest µs) |", "|---|---|---|---|"]
+    lines += ["", "| sensor | missed: " + " / ".join(CAUSES) + " | missed near steal | robot "
+              "side's late sends (longest µs; near steal) | answering thread: page faults (from "
+              "disk) / forced off the CPU / collector's passes (longest µs) |",
+              "|---|---|---:|---|---|"]
     for name, r in results.items():
         by, th = r["missed_by_cause"], r.get("thread") or {}
         lines.append(f"| {name} | " + " / ".join(str(by[c]) for c in CAUSES)
-                     + f" | {r['robot_late_sends']} ({r['robot_longest_late_us']:.0f}) | "
+                     + f" | {r['missed_near_steal']} | {r['robot_late_sends']} "
+                     f"({r['robot_longest_late_us']:.0f}; {r['robot_late_near_steal']}) | "
                      f"{th.get('minflt', '?')} ({th.get('majflt', '?')}) / "
                      f"{th.get('forced', '?')} / {th.get('collections', '?')} "
                      f"({th.get('longest_collection_ns', 0) / 1e3:.0f}) |")
+    if link.get("windows"):
+        lines.append(f"the hypervisor took time from a CPU in {link['steal_windows']} of the "
+                     f"run's {link['windows']} windows of 0.1 s (near steal: within 0.1 s of "
+                     "one)")
     return "\n".join(lines)
 
 

@@ -25,7 +25,9 @@ A vendor's link (:class:`~..rsi.link.RsiLink`, :class:`~..egm.link.EgmLink`) giv
 codec: :meth:`StreamLink._parse`, :meth:`StreamLink._encode` and the sequence of a packet.
 
 Real-time notes: the loop allocates little and waits in ``poll``; run it in a process of
-its own (the robot service's event loop would otherwise share the GIL with it) —
+its own (the robot service's event loop would otherwise share the GIL with it), under a
+real-time priority, on a CPU of its own and with its memory locked where the machine
+allows (:class:`~.realtime.RealTime`, applied by the loop's thread when it starts) —
 ``benchmarks/rsi_latency.py`` and ``benchmarks/egm_latency.py`` measure it so.
 """
 
