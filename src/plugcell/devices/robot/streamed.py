@@ -61,8 +61,7 @@ def streamed_link(handler: BridgeHandler, *, robot: str, library: Sequence[Path]
                   joint_speed: float = 20.0, tcp_speed: float = 100.0,
                   stream_process: bool = True, correct_max_mm: float = 5.0,
                   correct_max_deg: float = 1.0, stream_rt_priority: int | None = None,
-                  stream_cpu: str = "", stream_mlock: bool = False,
-                  ) -> StreamController | None:
+                  stream_cpu: str = "", stream_mlock: bool = False) -> StreamController | None:
     """The streamed robot's controller the options ask for, or ``None`` (none asked).
 
     Parameters
@@ -132,7 +131,7 @@ def streamed_link(handler: BridgeHandler, *, robot: str, library: Sequence[Path]
     for what, v in (("correct_max_mm", correct_max_mm), ("correct_max_deg", correct_max_deg)):
         if not (v > 0 and v < float("inf")):
             raise ValueError(f"{what} must be a positive number, not {v}")
-    realtime = stream_realtime(stream_rt_priority, stream_cpu, stream_mlock)
     return StreamController(handler, config, load_robot(robot), robot, joint, cart, library,
-                            name, stream_process, (correct_max_mm, correct_max_deg), realtime)
+                            name, stream_process, (correct_max_mm, correct_max_deg),
+                            stream_realtime(stream_rt_priority, stream_cpu, stream_mlock))
 

@@ -150,12 +150,8 @@ class StreamLink(Following):
     def __init__(self, config: Any, source: SourceLike | None, axes: tuple[str, ...],
                  units: tuple[tuple[str, float], ...], record_latency: bool = False,
                  rt_priority: int | None = None, realtime: RealTime | None = None) -> None:
-        if realtime is None:
-            realtime = RealTime(priority=rt_priority)
-        elif rt_priority is not None:
-            raise ValueError("give rt_priority or realtime, not both")
-        self.realtime = realtime
-        self.rt_priority = realtime.priority
+        self.realtime = RealTime.given(rt_priority, realtime)
+        self.rt_priority = self.realtime.priority
         self.rt_note = "normal priority"
         self.config = config
         self._source = as_source(source)

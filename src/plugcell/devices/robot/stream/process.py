@@ -280,9 +280,7 @@ class LinkProcess:
 
     def __init__(self, config: Any, rt_priority: int | None = None,
                  realtime: RealTime | None = None) -> None:
-        if realtime is not None and rt_priority is not None:
-            raise ValueError("give rt_priority or realtime, not both")
-        self.realtime = realtime or RealTime(rt_priority)
+        self.realtime = RealTime.given(rt_priority, realtime)
         self.config = config
         self.vendor = config.vendor
         self.rt_priority = self.realtime.priority

@@ -172,6 +172,16 @@ class RealTime:
                 raise ValueError(f"the link's CPUs: {bad[0]!r} is not a CPU number (≥ 0)")
             object.__setattr__(self, "cpus", frozenset(self.cpus))
 
+    @classmethod
+    def given(cls, priority: int | None, realtime: RealTime | None) -> RealTime:
+        """A link's ``realtime`` option, or one of its older ``rt_priority`` alone;
+        ``ValueError`` when both are given."""
+        if realtime is None:
+            return cls(priority=priority)
+        if priority is not None:
+            raise ValueError("give rt_priority or realtime, not both")
+        return realtime
+
     @property
     def asked(self) -> bool:
         """Anything other than the defaults was asked for."""
