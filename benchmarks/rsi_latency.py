@@ -669,6 +669,13 @@ def cell_services(n: int, cpus: frozenset[int] | None = None) -> Iterator[None]:
                 p.kill()
 
 
+def _service_params(rt: RealTime) -> tuple[str, ...]:
+    """The robot service's parameters of the link's scheduling ``rt`` (``--in-service``)."""
+    return ((*([f"stream_rt_priority={rt.priority}"] if rt.priority else []),
+             *([f"stream_cpu={','.join(map(str, sorted(rt.cpus)))}"] if rt.cpus else []),
+             *(["stream_mlock=true"] if rt.lock_memory else [])))
+
+
 def _priority(text: str) -> int:
     """``--rt-priority``'s value: 1..99."""
     try:
@@ -741,9 +748,10 @@ def main(argv: list[str], vendor: Vendor | None = None, doc: str | None = None) 
     if args.in_service:
         import stream_in_service
 
-        with cell_services(args.cell) if args.cell else contextlib.nullcontext():
+        with cell_services(args.cell, setup.cell_cpus()) if args.cell else \
+                contextlib.nullcontext():
             return stream_in_service.main(vendor.name, args.seconds, args.json,
-                                          args.link_thread)
+                                          args.link_thread, _service_params(rt))
     load0 = os.getloadavg()[0]
     print(f"machine: {os.cpu_count()} CPUs, load average {load0:.2f} at start", flush=True)
     with cell_services(args.cell, setup.cell_cpus()) if args.cell else \
