@@ -205,3 +205,27 @@ def test_bad_run_scheduling_options_are_refused_naming_the_option(vendor, argv, 
                  str(port), "--duration", "0.1", *argv])
     assert code == 2
     assert message in capsys.readouterr().err
+
+
+@pytest.mark.slow
+def test_the_link_process_applies_its_scheduling_to_every_thread() -> None:
+    """The robot service's link process: its note says what the kernel granted, and
+    every thread of the child runs on the CPUs asked for (numpy's, started at its import,
+    too) — the link's under SCHED_FIFO 5, the others that run Python at 4 (where
+    granted)."""
+    cpu = min(MINE)
+    link = LinkProcess(_config(), realtime=RealTime(5, frozenset({cpu})))
+    try:
+        link.start()
+        note = link.rt_note
+        assert note.startswith(("SCHED_FIFO priority 5, CPU", "SCHED_FIFO refused ("))
+        assert f"; CPU {cpu}, other threads" in note
+        tids = [int(t) for t in os.listdir(f"/proc/{link._proc.pid}/task")]
+        assert len(tids) >= 3  # main, the link's, the corrections'
+        assert all(os.sched_getaffinity(t) == {cpu} for t in tids)
+        if "refused" not in note:  # the threads that run Python; numpy's BLAS pool not
+            prios = sorted(os.sched_getparam(t).sched_priority for t in tids
+                           if os.sched_getscheduler(t) == os.SCHED_FIFO)
+            assert prios[-1] == 5 and set(prios[:-1]) == {4} and len(prios) >= 3
+    finally:
+        link.close()

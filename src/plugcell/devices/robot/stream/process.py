@@ -141,7 +141,7 @@ def _child(conn: Any, corrections: Any, values: Any, text: Any, vendor: str, con
     # every thread of the process on the stream's CPUs (they start after this), the
     # interpreter handed to the link's thread within half a millisecond of its asking,
     # the other threads one real-time priority below it (RealTime.prepare_process)
-    realtime.prepare_process()
+    prepared = realtime.prepare_process()
     link = link_class(vendor)(config, realtime=realtime)
     link.observer = Publisher(values, text)
     # the objects of the imports and the link live as long as the process: out of the
@@ -154,7 +154,7 @@ def _child(conn: Any, corrections: Any, values: Any, text: Any, vendor: str, con
     except OSError as exc:
         conn.send(("error", str(exc)))
         return
-    conn.send(("started", host, port, link.rt_note))
+    conn.send(("started", host, port, "; ".join(n for n in (link.rt_note, prepared) if n)))
     refusal = drive_refusal(config)
     drive = None if refusal else StreamDrive(link)
     corrector = Corrector(link)

@@ -29,9 +29,10 @@ import ctypes
 import ctypes.util
 import os
 import sys
+import threading
 from dataclasses import dataclass
 
-__all__ = ["SWITCH_INTERVAL_S", "RealTime", "lock_memory", "parse_cpus", "pin",
+__all__ = ["SWITCH_INTERVAL_S", "RealTime", "lock_memory", "parse_cpus", "pin", "pin_process",
            "stream_realtime"]
 
 #: The interpreter's switch interval in a link's process (s): a thread that holds it when
@@ -105,6 +106,19 @@ def pin(cpus: frozenset[int] | None, pid: int = 0) -> str:
     except OSError as exc:  # EINVAL: none of them online
         return f"CPUs {names} refused ({exc.strerror or exc}; online: {_online()})"
     return f"CPU{'s' if len(cpus) > 1 else ''} {names}"
+
+
+def pin_process(cpus: frozenset[int]) -> str:
+    """:func:`pin` every thread of this process (Linux lists them in /proc/self/task;
+    elsewhere the calling thread); the note of the calling thread's."""
+    try:
+        tids = [int(t) for t in os.listdir("/proc/self/task")]
+    except OSError:
+        tids = []
+    for tid in tids:
+        if tid != threading.get_native_id():
+            pin(cpus, tid)
+    return pin(cpus)
 
 
 def _online() -> str:
@@ -201,7 +215,7 @@ class RealTime:
         thread runs until it lets go of the interpreter, the link's thread still
         preempting it.  What happened, as a note.
         """
-        notes = [pin(self.cpus)] if self.cpus is not None else []
+        notes = [pin_process(self.cpus)] if self.cpus is not None else []
         sys.setswitchinterval(SWITCH_INTERVAL_S)
         if self.priority is not None:
             below = max(1, self.priority - 1)
