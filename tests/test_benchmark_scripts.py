@@ -29,7 +29,7 @@ SCRIPTS = [
     ("motion_sampling.py", ["--cycles", "5", "--robots", "elbow6"], "LIN (IK per sample)"),
     ("rsi_latency.py", ["--seconds", "1"], "| goal (issue 37) | this run | met |"),
     ("egm_latency.py", ["--seconds", "1", "--cpu", "0", "--mlock"],
-     "| plugcell EGM link | 0 / 0 / 0 / 0 / 0 |"),
+     "link and echo on CPU 0; robot side on CPU 0; memory locked (mlockall)"),
     ("rsi_latency.py", ["--in-service", "--link-thread", "--seconds", "2"],
      "| robot service over RSI |"),
     ("egm_latency.py", ["--in-service", "--seconds", "2"], "| robot service over EGM |"),
