@@ -13,7 +13,10 @@ run``'s ``--rt-priority``/``--cpu``/``--mlock``):
   outside): one CPU given to the stream, the cell's other services kept off it
   (``isolcpus=`` on the kernel's command line keeps every other process off it);
 * ``lock_memory`` — ``mlockall(MCL_CURRENT | MCL_FUTURE)``: no page of the process is
-  paged out, so no cycle waits on a page fault served from disk.
+  paged out, so no cycle waits on a page fault served from disk.  Only for a PC that
+  swaps: on the shared VM (Linux 6.18, not PREEMPT_RT) a benchmark process under
+  ``SCHED_FIFO`` with its memory locked once spun in the kernel for minutes, deaf to
+  ``SIGKILL`` (docs/kuka-rsi.md, "The PC's set-up for a 4 ms cycle").
 
 Each is applied where the loop runs, and a refusal (no privilege, a CPU that does not
 exist) is not fatal there: :meth:`RealTime.apply` returns what happened as a note (the
