@@ -90,6 +90,8 @@ def test_bad_scheduling_is_refused_with_the_reason(kwargs, message) -> None:
 def test_the_defaults_ask_for_nothing_and_say_so() -> None:
     rt = RealTime()
     assert not rt.asked and rt.apply() == "normal priority"
+    switch = sys.getswitchinterval()
+    assert rt.prepare_process() == "" and sys.getswitchinterval() == switch
     assert RealTime(cpus={0}).cpus == frozenset({0})  # any set is kept frozen
 
 

@@ -218,6 +218,8 @@ class RealTime:
         thread runs until it lets go of the interpreter, the link's thread still
         preempting it.  What happened, as a note.
         """
+        if not self.asked:  # the defaults: the process as Python starts it
+            return ""
         notes = [pin_process(self.cpus)] if self.cpus is not None else []
         sys.setswitchinterval(SWITCH_INTERVAL_S)
         if self.priority is not None:
