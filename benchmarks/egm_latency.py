@@ -20,6 +20,7 @@ from __future__ import annotations
 import sys
 
 from plugcell.devices.robot.egm.messages import egm_pb2
+from plugcell.devices.robot.stream.realtime import RealTime
 from rsi_latency import Vendor, main
 
 
@@ -53,7 +54,7 @@ def seqno_of(answer: bytes) -> int:
     return egm_pb2.EgmHeader.FromString(answer[2:2 + answer[1]]).seqno
 
 
-def run_link(cycle_ms: float, rt: int | None) -> None:
+def run_link(cycle_ms: float, rt: RealTime) -> None:
     from plugcell.devices.robot.egm import EgmConfig, EgmLink
     from plugcell.devices.robot.stream.source import SineOffset
     from plugcell.io.units import DEG
@@ -62,7 +63,7 @@ def run_link(cycle_ms: float, rt: int | None) -> None:
     cfg = EgmConfig(robot_host="127.0.0.1", listen_host="127.0.0.1", listen_port=0,
                     mode="joint", sample_rate_ms=int(cycle_ms))
     serve_link(EgmLink(cfg, SineOffset(axis=5, amplitude=2 * DEG, period=4.0, periods=10**6),
-                       record_latency=True, rt_priority=rt))
+                       record_latency=True, realtime=rt))
 
 
 EGM = Vendor("EGM", __file__, egm_message, seqno_of, lambda cycle_ms: 1, header_part,

@@ -27,8 +27,10 @@ the histograms of the round trips and of the in→out times, link beside echo.
 from __future__ import annotations
 
 import argparse
+import array
 import contextlib
 import gc
+import itertools
 import json
 import os
 import resource
@@ -45,7 +47,11 @@ from pathlib import Path
 
 import numpy as np
 
+from plugcell.devices.robot.stream.realtime import RealTime, parse_cpus, pin
+
 WARMUP_S = 2.0
+#: The CPUs the benchmark was started on (before the robot side pins itself).
+ALL_CPUS = frozenset(os.sched_getaffinity(0))
 
 
 def rob_packet(ipoc: int, q: float) -> bytes:
@@ -77,7 +83,7 @@ class Vendor:
     echo_part : callable
         What the bare echo sends back of a datagram (the part carrying the sequence).
     run_link : callable
-        ``run_link(cycle_ms, rt)``: the link's process.
+        ``run_link(cycle_ms, rt)``: the link's process, scheduled as ``rt`` says.
     first_seq : int
         The sequence number before the first datagram's.
     """
@@ -88,7 +94,7 @@ class Vendor:
     seq_of: Callable[[bytes], int]
     seq_step: Callable[[float], int]
     echo_part: Callable[[bytes], bytes]
-    run_link: Callable[[float, int | None], None]
+    run_link: Callable[[float, RealTime], None]
     first_seq: int = 4_000_000_000
 
     @property
@@ -103,14 +109,60 @@ def _cpu() -> float:
     return r.ru_utime + r.ru_stime
 
 
-def _report(latencies: list[int], cpu0: float, t0: float) -> None:
-    """After a line on stdin: this process's CPU share and its in → out times."""
+def _thread_counters(tid: int | None) -> dict[str, int]:
+    """A thread's page faults and context switches so far (Linux's /proc; empty elsewhere):
+    ``minflt``, ``majflt`` (served from disk), ``voluntary`` (it waited) and ``forced``
+    (``nonvoluntary_ctxt_switches``: taken off the CPU while it wanted to run)."""
+    out: dict[str, int] = {}
+    if tid is None:
+        return out
+    try:
+        with open(f"/proc/self/task/{tid}/stat", encoding="ascii") as f:
+            fields = f.read().rsplit(")", 1)[1].split()
+        out["minflt"], out["majflt"] = int(fields[7]), int(fields[9])
+        with open(f"/proc/self/task/{tid}/status", encoding="ascii") as f:
+            for line in f:
+                if line.startswith("voluntary_ctxt_switches"):
+                    out["voluntary"] = int(line.split()[1])
+                elif line.startswith("nonvoluntary_ctxt_switches"):
+                    out["forced"] = int(line.split()[1])
+    except (OSError, IndexError, ValueError):
+        return {}
+    return out
+
+
+class _Collections:
+    """The cyclic collector's passes while measuring (``gc.callbacks``): count and the
+    longest (ns)."""
+
+    def __init__(self) -> None:
+        self.count, self.longest, self._t0 = 0, 0, 0
+        gc.callbacks.append(self)
+
+    def __call__(self, phase: str, info: dict) -> None:
+        if phase == "start":
+            self._t0 = time.perf_counter_ns()
+        else:
+            self.count += 1
+            self.longest = max(self.longest, time.perf_counter_ns() - self._t0)
+
+
+def _report(latencies: list[int], cpu0: float, t0: float, tid: int | None,
+            extra: Callable[[], dict] = dict) -> None:
+    """After a line on stdin: this process's CPU share, its in → out times, and what
+    happened to the answering thread (page faults, context switches, collections)."""
+    counters0, collections = _thread_counters(tid), _Collections()
     sys.stdin.readline()
     cpu, wall = _cpu() - cpu0, time.monotonic() - t0
-    print(json.dumps({"cpu_s": cpu, "wall_s": wall, "in_out_ns": latencies}), flush=True)
+    counters = _thread_counters(tid)
+    thread = {k: counters[k] - counters0.get(k, 0) for k in counters}
+    print(json.dumps({"cpu_s": cpu, "wall_s": wall, "in_out_ns": latencies,
+                      "thread": thread | {"collections": collections.count,
+                                          "longest_collection_ns": collections.longest},
+                      **extra()}), flush=True)
 
 
-def run_link(cycle_ms: float, rt: int | None) -> None:
+def run_link(cycle_ms: float, rt: RealTime) -> None:
     from plugcell.devices.robot.rsi import RsiConfig, RsiLink
     from plugcell.devices.robot.stream.source import SineOffset
     from plugcell.io.units import DEG
@@ -118,49 +170,71 @@ def run_link(cycle_ms: float, rt: int | None) -> None:
     cfg = RsiConfig(robot_host="127.0.0.1", listen_host="127.0.0.1", listen_port=0,
                     mode="absolute", cycle="IPO_FAST" if cycle_ms == 4 else "IPO")
     serve_link(RsiLink(cfg, SineOffset(axis=5, amplitude=2 * DEG, period=4.0, periods=10**6),
-                       record_latency=True, rt_priority=rt))
+                       record_latency=True, realtime=rt))
 
 
 def serve_link(link) -> None:
-    """The link role of a run (RSI's or EGM's link, recording latencies): freeze the
-    start-up heap as the link process does (stream/process.py: a full collection then
-    scans only the cycles' objects), start it, say ``READY <port>``, forget the warm-up
-    when told (a line on stdin), report the measured seconds and the link's counters,
-    close it."""
+    """The link role of a run (RSI's or EGM's link, recording latencies): the process
+    prepared as the link process prepares itself (stream/process.py: CPUs, switch
+    interval, its other threads' priority), its start-up heap frozen as the link
+    process does (a full collection then scans only the cycles' objects), start it, say
+    ``READY <port>``, forget the warm-up when told (a line on stdin), report the measured
+    seconds, the link's counters and when each packet came in (its ``observer``, the
+    link process's shared-memory publisher's place), close it."""
+    link.realtime.prepare_process()  # as the link process does (stream/process.py)
     gc.collect()
     gc.freeze()
+    # (sequence, packet in, in → out) ns of each answer, in arrays of machine integers:
+    # no object per cycle for the collector to count (a list of tuples would trigger a
+    # pass every 700 cycles, in the link's thread, and be measured as the link's)
+    arrivals = (array.array("q"), array.array("q"), array.array("q"))
+
+    def observe(lk) -> None:
+        with contextlib.suppress(IndexError):  # the warm-up's list just emptied
+            io = lk.latencies[-1]
+            arrivals[0].append(lk._last_seq)
+            arrivals[1].append(lk._last_rx)
+            arrivals[2].append(io)
+
+    link.observer = observe
     link.start()
     time.sleep(0.05)
     print(f"READY {link.address[1]} {link.rt_note}", flush=True)
     sys.stdin.readline()  # the warm-up is over
     del link.latencies[:]
+    for a in arrivals:
+        del a[:]
     cpu0, t0 = _cpu(), time.monotonic()
-    _report(link.latencies, cpu0, t0)
+    _report(link.latencies, cpu0, t0, link._thread.native_id,
+            lambda: {"arrivals": list(zip(*arrivals, strict=False))})
     print(json.dumps({"stats": dict(link.stats().__dict__)}), flush=True)
     link.close()
 
 
-def run_echo(rt: int | None, echo_part: Callable[[bytes], bytes]) -> None:
+def run_echo(rt: RealTime, echo_part: Callable[[bytes], bytes]) -> None:
     import threading
 
+    pin(rt.cpus)
     sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
     sock.bind(("127.0.0.1", 0))
     latencies: list[int] = []
+    note: list[str] = []
 
     def loop() -> None:
-        if rt is not None:  # the same scheduling as the link's thread
-            os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(rt))
+        note.append(rt.apply())  # the same scheduling as the link's thread
         while True:
             data, addr = sock.recvfrom(65535)
             t_in = time.monotonic_ns()
             sock.sendto(echo_part(data), addr)  # the part that carries the sequence
             latencies.append(time.monotonic_ns() - t_in)
 
-    threading.Thread(target=loop, daemon=True).start()
-    print(f"READY {sock.getsockname()[1]}", flush=True)
+    thread = threading.Thread(target=loop, daemon=True)
+    thread.start()
+    time.sleep(0.05)
+    print(f"READY {sock.getsockname()[1]} {note[0] if note else ''}", flush=True)
     sys.stdin.readline()
     del latencies[:]
-    _report(latencies, _cpu(), time.monotonic())
+    _report(latencies, _cpu(), time.monotonic(), thread.native_id)
 
 
 # ------------------------------------------------------------------ the robot (parent)
@@ -171,10 +245,60 @@ def _ipoc_of(answer: bytes) -> int:
     return int(answer[start:answer.index(b"</IPOC>", start)])
 
 
+@dataclass(frozen=True)
+class Setup:
+    """How a run is scheduled (the options ``--rt-priority``, ``--cpu``, ``--robot-cpu``,
+    ``--mlock``, ``--isolate``).
+
+    Attributes
+    ----------
+    sensors : RealTime
+        The link's thread and the echo's: priority, CPUs, locked memory.
+    robot_cpus : frozenset of int or None
+        The robot side's CPUs (default: the sensors').
+    isolate : bool
+        The cell's services on the CPUs the stream does not use.
+    """
+
+    sensors: RealTime
+    robot_cpus: frozenset[int] | None = None
+    isolate: bool = False
+
+    def child_args(self) -> list[str]:
+        rt = self.sensors
+        return ([*(["--rt-priority", str(rt.priority)] if rt.priority else []),
+                 *(["--cpu", ",".join(map(str, sorted(rt.cpus)))] if rt.cpus else []),
+                 *(["--mlock"] if rt.lock_memory else [])])
+
+    def cell_cpus(self) -> frozenset[int] | None:
+        """Where the cell's services run (None: anywhere): the CPUs this process was
+        given at its start that the sensors do not use (the robot side, the controller's
+        stand-in, may share theirs: a controller is another machine)."""
+        if not self.isolate:
+            return None
+        return ALL_CPUS - (self.sensors.cpus or frozenset())
+
+    def describe(self) -> str:
+        rt = self.sensors
+        parts = [f"SCHED_FIFO priority {rt.priority} (robot side, link thread, echo thread)"
+                 if rt.priority else "normal (SCHED_OTHER)"]
+        if rt.cpus:
+            parts.append("link and echo on CPU " + ",".join(map(str, sorted(rt.cpus))))
+        if self.robot_cpus or rt.cpus:
+            parts.append("robot side on CPU " + ",".join(
+                map(str, sorted(self.robot_cpus or rt.cpus))))
+        if self.isolate:
+            parts.append("cell services on CPU " + ",".join(
+                map(str, sorted(self.cell_cpus() or ()))))
+        if rt.lock_memory:
+            parts.append("memory locked (mlockall)")
+        return "; ".join(parts)
+
+
 def _spawn(vendor: Vendor, role: str, cycle_ms: float,
-           rt: int | None) -> tuple[subprocess.Popen, int, str]:
+           setup: Setup) -> tuple[subprocess.Popen, int, str]:
     proc = subprocess.Popen([sys.executable, vendor.script, "--role", role, "--cycle-ms",
-                             str(cycle_ms), *(["--rt-priority", str(rt)] if rt else [])],
+                             str(cycle_ms), *setup.child_args()],
                             stdin=subprocess.PIPE, stdout=subprocess.PIPE,
                             text=True)
     line = proc.stdout.readline()
@@ -184,40 +308,47 @@ def _spawn(vendor: Vendor, role: str, cycle_ms: float,
     return proc, int(port), " ".join(note).strip()
 
 
+@dataclass
+class _Stream:
+    """What the robot side keeps of one sensor's stream."""
+
+    sock: socket.socket
+    sent: dict[int, tuple[int, int]]  # sequence → (slot, sent) ns, until answered
+    log: list[tuple[int, int, int]]  # (sequence, slot, sent) ns of every packet measured
+    answered: dict[int, int]  # sequence → the answer's arrival (ns)
+
+
 def robot(vendor: Vendor, seconds: float, cycle_ms: float,
-          rt: int | None) -> tuple[dict, dict[str, dict[str, np.ndarray]]]:
+          setup: Setup) -> tuple[dict, dict[str, dict[str, np.ndarray]]]:
     """Run the robot side; the figures per sensor, and its times (µs) for the plot."""
     cycle_ns = int(cycle_ms * 1e6)
-    link_proc, link_port, link_note = _spawn(vendor, "link", cycle_ms, rt)
-    echo_proc, echo_port, _ = _spawn(vendor, "echo", cycle_ms, rt)
-    if rt is not None:  # the robot side too: it stands for the controller's real-time core
-        os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(rt))
+    link_proc, link_port, link_note = _spawn(vendor, "link", cycle_ms, setup)
+    echo_proc, echo_port, _ = _spawn(vendor, "echo", cycle_ms, setup)
+    robot_note = RealTime(setup.sensors.priority, setup.robot_cpus or setup.sensors.cpus,
+                          setup.sensors.lock_memory).apply()  # the controller's real-time core
     # and no collector's pass may stall it (it would send the packets it owes at once,
     # and the link answers only the newest of them): its loop frees what it allocates
     gc.collect()
     gc.freeze()
     gc.disable()
-    names = (vendor.link, "bare UDP echo")
-    socks, sent, rtts, late = [], [{}, {}], [[], []], [0, 0]
+    streams = []
     for port in (link_port, echo_port):
         s = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
         s.bind(("127.0.0.1", 0))
         s.connect(("127.0.0.1", port))
         s.setblocking(False)
-        socks.append(s)
-    poller = select.poll()
-    for s in socks:
-        poller.register(s, select.POLLIN)
-    fd_index = {s.fileno(): i for i, s in enumerate(socks)}
+        streams.append(_Stream(s, {}, [], {}))
+    socks = [st.sock for st in streams]
     ipoc, k = vendor.first_seq, 0
     start = time.monotonic_ns()
     measuring_from = start + int(WARMUP_S * 1e9)
     end = measuring_from + int(seconds * 1e9)
     measuring = False
-    worst = [(0, 0.0), (0, 0.0)]  # the longest round trip and when its packet left (s)
-    late_at: list[list[float]] = [[], []]  # when the late answers' packets left (s)
     cpu0 = _cpu_times()
-    # slot j: stream j % 2 sends at start + j · cycle/2
+    steal_log: list[tuple[int, tuple[int, ...]]] = []  # (when, each CPU's steal ticks)
+    # slot j: stream j % 2 sends at start + j · cycle/2; between two, the robot side
+    # sleeps in select() (µs resolution: it never spins, so it takes no CPU from the
+    # sensors it measures) and takes the answers as they come
     while True:
         slot_t = start + k * cycle_ns // 2
         if slot_t >= end:
@@ -227,84 +358,184 @@ def robot(vendor: Vendor, seconds: float, cycle_ms: float,
             for p in (link_proc, echo_proc):
                 p.stdin.write("go\n")
                 p.stdin.flush()
-            sent, rtts, late = [{}, {}], [[], []], [0, 0]
-            worst = [(0, 0.0), (0, 0.0)]
-            late_at = [[], []]
+            for st in streams:
+                st.sent.clear()
+                st.answered.clear()
             cpu0 = _cpu_times()
-        # wait for the slot, taking answers as they come
         while True:
             now = time.monotonic_ns()
             if now >= slot_t:
                 break
-            for fd, _ in poller.poll(max(0, (slot_t - now) // 1_000_000)):
-                i = fd_index[fd]
-                while True:
-                    try:
-                        answer = socks[i].recv(65535)
-                    except BlockingIOError:
-                        break
-                    t = time.monotonic_ns()
-                    sent_at = sent[i].pop(vendor.seq_of(answer), None)
-                    if sent_at is not None:
-                        rtt = t - sent_at
-                        rtts[i].append(rtt)
-                        late[i] += rtt > cycle_ns
-                        if rtt > cycle_ns:
-                            late_at[i].append((sent_at - measuring_from) / 1e9)
-                        if measuring and rtt > worst[i][0]:
-                            worst[i] = (rtt, (sent_at - measuring_from) / 1e9)
-        i = k % 2
-        if i == 0:
+            ready, _, _ = select.select(socks, [], [], (slot_t - now) / 1e9)
+            for s in ready:
+                _take_answers(streams[socks.index(s)], vendor)
+        st = streams[k % 2]
+        if k % 2 == 0:
             ipoc += vendor.seq_step(cycle_ms)
         packet = vendor.packet(ipoc, (k % 1000) * 1e-3)
-        sent[i][ipoc] = time.monotonic_ns()
-        socks[i].send(packet)
+        t = time.monotonic_ns()
+        st.sent[ipoc] = (slot_t, t)
+        if measuring:
+            st.log.append((ipoc, slot_t, t))
+        st.sock.send(packet)
+        if measuring and k % STEAL_EVERY == 0:  # after a send: it delays none
+            steal_log.append((time.monotonic_ns(), _steal_per_cpu()))
         k += 1
     steal = _steal(cpu0, _cpu_times())
+    drain_end = time.monotonic_ns() + 2 * cycle_ns  # the last answers, timed as they come
+    while any(st.sent for st in streams) and (now := time.monotonic_ns()) < drain_end:
+        ready, _, _ = select.select(socks, [], [], (drain_end - now) / 1e9)
+        for s in ready:
+            _take_answers(streams[socks.index(s)], vendor)
     gc.enable()
-    time.sleep(0.05)  # the last answers
-    for i, s in enumerate(socks):
-        while True:
-            try:
-                answer = s.recv(65535)
-            except BlockingIOError:
-                break
-            sent_at = sent[i].pop(vendor.seq_of(answer), None)
-            if sent_at is not None:
-                rtts[i].append(time.monotonic_ns() - sent_at)
-                late[i] += rtts[i][-1] > cycle_ns
-                if rtts[i][-1] > cycle_ns:
-                    late_at[i].append((sent_at - measuring_from) / 1e9)
-    results, samples = {}, {}
-    link_stats = None
-    for i, (name, proc) in enumerate(zip(names, (link_proc, echo_proc), strict=True)):
+    reports = []
+    for i, proc in enumerate((link_proc, echo_proc)):
         proc.stdin.write("stop\n")
         proc.stdin.flush()
-        report = json.loads(proc.stdout.readline())
+        reports.append(json.loads(proc.stdout.readline()))
         if i == 0:
             proc.stdin.close()
-            link_stats = json.loads(proc.stdout.readline())["stats"]
+            reports[0]["stats"] = json.loads(proc.stdout.readline())["stats"]
         proc.wait(timeout=10)
-        r = np.array(rtts[i], dtype=float) / 1e3
+    results, samples = _figures(vendor, streams, reports, cycle_ns, measuring_from,
+                                _stolen(steal_log))
+    results[vendor.link] |= {"link_stats": reports[0]["stats"], "scheduling": link_note,
+                             "steal_pct": steal, "robot_scheduling": robot_note,
+                             "steal_windows": len(_stolen(steal_log)),
+                             "windows": max(0, len(steal_log) - 1)}
+    return results, samples
+
+
+def _take_answers(st: _Stream, vendor: Vendor) -> None:
+    """Read the answers queued on a stream's socket; note when each arrived."""
+    while True:
+        try:
+            answer = st.sock.recv(65535)
+        except BlockingIOError:
+            return
+        t = time.monotonic_ns()
+        seq = vendor.seq_of(answer)
+        if st.sent.pop(seq, None) is not None:
+            st.answered[seq] = t
+
+
+def _figures(vendor: Vendor, streams: list[_Stream], reports: list[dict], cycle_ns: int,
+             t0: int, stolen: list[tuple[int, int]]
+             ) -> tuple[dict, dict[str, dict[str, np.ndarray]]]:
+    """Each sensor's round trips, in → out times, missed cycles (when, and why: see
+    :func:`_causes`; how many near a time the hypervisor took a CPU, ``stolen``'s
+    windows), CPU share and thread counters."""
+    names = (vendor.link, "bare UDP echo")
+    results, samples = {}, {}
+    missed_at: list[list[int]] = []
+    for st in streams:
+        missed_at.append([sent for seq, _, sent in st.log
+                          if st.answered.get(seq, sent + cycle_ns + 1) - sent > cycle_ns])
+    link_in = {seq: (t_in, io) for seq, t_in, io in reports[0].get("arrivals", ())}
+    for i, (name, st, report) in enumerate(zip(names, streams, reports, strict=True)):
+        r = np.array([st.answered[seq] - sent for seq, _, sent in st.log
+                      if seq in st.answered], dtype=float) / 1e3
         io = np.array(report["in_out_ns"], dtype=float) / 1e3
-        never = len(sent[i])  # sent, never answered
+        worst = max(((st.answered[seq] - sent, sent) for seq, _, sent in st.log
+                     if seq in st.answered), default=(0, t0))
+        robot_late = [sent - slot for _, slot, sent in st.log if sent - slot > cycle_ns // 4]
         results[name] = {
-            "cycles": len(r) + never,
-            "rtt_us": {q: float(np.percentile(r, p)) for q, p in
-                       (("p50", 50), ("p99", 99), ("p99.9", 99.9))} | {"max": float(r.max())},
-            "in_out_us": {q: float(np.percentile(io, p)) for q, p in
-                          (("p50", 50), ("p99", 99), ("p99.9", 99.9))} | {"max": float(io.max())},
-            "missed": late[i] + never,
+            "cycles": len(st.log),
+            "rtt_us": _quantiles(r),
+            "in_out_us": _quantiles(io),
+            "missed": len(missed_at[i]),
             "cpu_pct": 100 * report["cpu_s"] / report["wall_s"],
-            "max_at_s": worst[i][1],
-            "missed_at_s": sorted(late_at[i] + [(t - measuring_from) / 1e9
-                                                for t in sent[i].values()]),
+            "max_at_s": (worst[1] - t0) / 1e9,
+            "missed_at_s": [(t - t0) / 1e9 for t in missed_at[i]],
+            "missed_by_cause": _causes(st, missed_at[i], missed_at[1 - i], cycle_ns,
+                                       link_in if i == 0 else None),
+            "missed_near_steal": sum(_near(t, stolen) for t in missed_at[i]),
+            "robot_late_sends": len(robot_late),
+            "robot_late_near_steal": sum(_near(sent, stolen) for _, slot, sent in st.log
+                                         if sent - slot > cycle_ns // 4),
+            "robot_longest_late_us": max(robot_late, default=0) / 1e3,
+            "thread": report.get("thread", {}),
         }
         samples[name] = {"round trip": r, "in→out": io}
-    results[vendor.link]["link_stats"] = link_stats
-    results[vendor.link]["scheduling"] = link_note
-    results[vendor.link]["steal_pct"] = steal
     return results, samples
+
+
+#: The robot side reads each CPU's steal every this many slots (100 ms at 4 ms).
+STEAL_EVERY = 50
+
+
+def _steal_per_cpu() -> tuple[int, ...]:
+    """Each CPU's ``steal`` so far (/proc/stat, clock ticks; empty where there is none)."""
+    try:
+        with open("/proc/stat", encoding="ascii") as f:
+            return tuple(int(line.split()[8]) for line in f
+                         if line.startswith("cpu") and line[3].isdigit())
+    except (OSError, IndexError, ValueError):
+        return ()
+
+
+def _stolen(log: list[tuple[int, tuple[int, ...]]]) -> list[tuple[int, int]]:
+    """The windows (from, to) ns between two readings in which the hypervisor took time
+    from any CPU (its steal grew)."""
+    return [(t0, t1) for (t0, a), (t1, b) in itertools.pairwise(log)
+            if any(y > x for x, y in zip(a, b, strict=False))]
+
+
+def _near(t: int, windows: list[tuple[int, int]], margin: int = 100_000_000) -> bool:
+    """``t`` falls within ``margin`` ns of one of the ``windows`` (steal is counted in
+    10 ms ticks, read every 100 ms)."""
+    return any(a - margin <= t <= b + margin for a, b in windows)
+
+
+def _quantiles(v: np.ndarray) -> dict[str, float]:
+    if not len(v):
+        return dict.fromkeys(("p50", "p99", "p99.9", "max"), float("nan"))
+    return {q: float(np.percentile(v, p)) for q, p in
+            (("p50", 50), ("p99", 99), ("p99.9", 99.9))} | {"max": float(v.max())}
+
+
+#: The causes of a missed cycle (:func:`_causes`), in the order they are tried.
+CAUSES = ("robot side", "both sensors", "woke late", "own cycle", "answer's way back")
+
+
+def _causes(st: _Stream, missed: list[int], other: list[int], cycle_ns: int,
+            arrivals: dict[int, tuple[int, int]] | None) -> dict[str, int]:
+    """Why each missed cycle of a stream was missed, the first that applies of:
+
+    * *robot side*: the robot side (the controller's stand-in, a Python process) sent
+      the packet more than a quarter cycle after its slot, or the next one less than half
+      a cycle after it (a stall, then the packets it owed at once; a sensor answering the
+      newest of queued packets, as the link does, misses the older);
+    * *both sensors*: the other sensor missed a cycle within two cycles of it (the
+      machine stalled both);
+    * where the sensor's own times are known (the link's: when each packet came in and
+      its in → out): *woke late* (it read the packet more than half a cycle after it was
+      sent, or never: a newer one was read with it — the kernel ran it late), *own cycle*
+      (its in → out took more than half a cycle), else *answer's way back*; for the echo,
+      which does not say, *woke late*.
+    """
+    log = {sent: (j, slot) for j, (_, slot, sent) in enumerate(st.log)}
+    seqs = [seq for seq, _, _ in st.log]
+    other_sorted = np.array(sorted(other), dtype=np.int64)
+    out = dict.fromkeys(CAUSES, 0)
+    for sent in missed:
+        j, slot = log[sent]
+        burst = j + 1 < len(st.log) and st.log[j + 1][2] - sent < cycle_ns // 2
+        if sent - slot > cycle_ns // 4 or burst:
+            out["robot side"] += 1
+            continue
+        near = np.searchsorted(other_sorted, sent - 2 * cycle_ns)
+        if near < len(other_sorted) and other_sorted[near] <= sent + 2 * cycle_ns:
+            out["both sensors"] += 1
+            continue
+        got = None if arrivals is None else arrivals.get(seqs[j])
+        if got is None or got[0] - sent > cycle_ns // 2:
+            out["woke late"] += 1
+        elif got[1] > cycle_ns // 2:
+            out["own cycle"] += 1
+        else:
+            out["answer's way back"] += 1
+    return out
 
 
 def _cpu_times() -> list[int]:
@@ -393,13 +624,30 @@ def table(vendor: Vendor, results: dict, seconds: float, cycle_ms: float) -> str
               f"{st.get('late')}, missed {st.get('missed')}, dropped "
               f"{sum((st.get('dropped') or {}).values())}, max in→out "
               f"{(st.get('max_latency_ns') or 0) / 1e3:.0f} µs; link thread: "
-              f"{link.get('scheduling')}"]
+              f"{link.get('scheduling')}; robot side: {link.get('robot_scheduling')}"]
+    lines += ["", "| sensor | missed: " + " / ".join(CAUSES) + " | missed near steal | robot "
+              "side's late sends (longest µs; near steal) | answering thread: page faults (from "
+              "disk) / forced off the CPU / collector's passes (longest µs) |",
+              "|---|---|---:|---|---|"]
+    for name, r in results.items():
+        by, th = r["missed_by_cause"], r.get("thread") or {}
+        lines.append(f"| {name} | " + " / ".join(str(by[c]) for c in CAUSES)
+                     + f" | {r['missed_near_steal']} | {r['robot_late_sends']} "
+                     f"({r['robot_longest_late_us']:.0f}; {r['robot_late_near_steal']}) | "
+                     f"{th.get('minflt', '?')} ({th.get('majflt', '?')}) / "
+                     f"{th.get('forced', '?')} / {th.get('collections', '?')} "
+                     f"({th.get('longest_collection_ns', 0) / 1e3:.0f}) |")
+    if link.get("windows"):
+        lines.append(f"the hypervisor took time from a CPU in {link['steal_windows']} of the "
+                     f"run's {link['windows']} windows of 0.1 s (near steal: within 0.1 s of "
+                     "one)")
     return "\n".join(lines)
 
 
 @contextlib.contextmanager
-def cell_services(n: int) -> Iterator[None]:
-    """``n`` plugcell services serving in a fresh cell while the block runs."""
+def cell_services(n: int, cpus: frozenset[int] | None = None) -> Iterator[None]:
+    """``n`` plugcell services serving in a fresh cell while the block runs (on
+    ``cpus``, every thread of theirs, when given)."""
     from idle_cost import KINDS, _wait_for  # the idle cell's kinds and start-up wait
 
     home = Path(tempfile.mkdtemp(prefix="plugcell-stream-cell-"))
@@ -412,10 +660,12 @@ def cell_services(n: int) -> Iterator[None]:
             procs.append(subprocess.Popen(
                 [sys.executable, "-m", "plugcell", "serve", kind, "--cell", cell, "--name",
                  f"{kind.upper()}{i}"], env=env, stdout=subprocess.PIPE,
-                stderr=subprocess.STDOUT, text=True))
+                stderr=subprocess.STDOUT, text=True,
+                preexec_fn=None if cpus is None else lambda: os.sched_setaffinity(0, cpus)))
         for p in procs:
             _wait_for(p, "serving in cell")
-        print(f"{n} plugcell services serving in cell {cell}", flush=True)
+        where = "" if cpus is None else " on CPU " + ",".join(map(str, sorted(cpus)))
+        print(f"{n} plugcell services serving in cell {cell}{where}", flush=True)
         yield
     finally:
         for p in procs:
@@ -427,6 +677,36 @@ def cell_services(n: int) -> Iterator[None]:
                 p.kill()
 
 
+def _service_params(rt: RealTime) -> tuple[str, ...]:
+    """The robot service's parameters of the link's scheduling ``rt`` (``--in-service``)."""
+    return ((*([f"stream_rt_priority={rt.priority}"] if rt.priority else []),
+             *([f"stream_cpu={','.join(map(str, sorted(rt.cpus)))}"] if rt.cpus else []),
+             *(["stream_mlock=true"] if rt.lock_memory else [])))
+
+
+def _priority(text: str) -> int:
+    """``--rt-priority``'s value: 1..99."""
+    try:
+        return RealTime(int(text)).priority  # type: ignore[return-value]
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r}: expected a SCHED_FIFO priority 1..99") \
+            from None
+
+
+def _cpus(text: str) -> frozenset[int]:
+    """``--cpu``'s value: CPUs this machine has."""
+    try:
+        cpus = parse_cpus(text)
+    except ValueError as exc:
+        raise argparse.ArgumentTypeError(str(exc)) from None
+    have = ALL_CPUS
+    if not cpus <= have:
+        raise argparse.ArgumentTypeError(
+            f"{text!r}: CPU {min(cpus - have)} is not one this process may use "
+            f"({','.join(map(str, sorted(have)))})")
+    return cpus
+
+
 def main(argv: list[str], vendor: Vendor | None = None, doc: str | None = None) -> int:
     vendor = vendor or RSI
     ap = argparse.ArgumentParser(description=(doc or __doc__).split("\n\n")[0])
@@ -435,9 +715,20 @@ def main(argv: list[str], vendor: Vendor | None = None, doc: str | None = None) 
     ap.add_argument("--json", type=Path, help="also write the figures as JSON")
     ap.add_argument("--plot", type=Path, metavar="PNG",
                     help="also draw the histograms of the times (matplotlib)")
-    ap.add_argument("--rt-priority", type=int, metavar="N",
+    ap.add_argument("--rt-priority", type=_priority, metavar="N",
                     help="run the robot side, the link's thread and the echo's under "
-                    "SCHED_FIFO priority N (Linux, root or CAP_SYS_NICE)")
+                    "SCHED_FIFO priority N (1-99; Linux, root or CAP_SYS_NICE)")
+    ap.add_argument("--cpu", type=_cpus, metavar="CPUS",
+                    help="pin the link's and the echo's processes (and the robot side, "
+                    "unless --robot-cpu) to these CPUs, e.g. 1 (taskset -c syntax)")
+    ap.add_argument("--robot-cpu", type=_cpus, metavar="CPUS",
+                    help="pin the robot side to these CPUs")
+    ap.add_argument("--isolate", action="store_true",
+                    help="run the cell's services (--cell) on the CPUs the link and the echo "
+                    "do not use (needs --cpu)")
+    ap.add_argument("--mlock", action="store_true",
+                    help="lock the memory of the robot side, the link and the echo "
+                    "(mlockall)")
     ap.add_argument("--cell", type=int, default=0, metavar="N",
                     help="measure beside N plugcell services serving in a cell")
     ap.add_argument("--in-service", action="store_true",
@@ -448,28 +739,36 @@ def main(argv: list[str], vendor: Vendor | None = None, doc: str | None = None) 
                     "not its own")
     ap.add_argument("--role", choices=("link", "echo"), help=argparse.SUPPRESS)
     args = ap.parse_args(argv)
+    if args.isolate and not args.cpu:
+        ap.error("--isolate keeps the cell's services off the stream's CPUs: give --cpu")
+    rt = RealTime(args.rt_priority, args.cpu, args.mlock)
     if args.role == "link":
-        vendor.run_link(args.cycle_ms, args.rt_priority)
+        vendor.run_link(args.cycle_ms, rt)
         return 0
     if args.role == "echo":
-        run_echo(args.rt_priority, vendor.echo_part)
+        run_echo(rt, vendor.echo_part)
         return 0
+    setup = Setup(rt, args.robot_cpu, args.isolate)
+    if args.isolate and not setup.cell_cpus():
+        ap.error(f"--isolate: no CPU is left for the cell's services (the sensors use "
+                 f"{sorted(args.cpu)}, this process may run on "
+                 f"{sorted(ALL_CPUS)})")
     if args.in_service:
         import stream_in_service
 
-        with cell_services(args.cell) if args.cell else contextlib.nullcontext():
+        with cell_services(args.cell, setup.cell_cpus()) if args.cell else \
+                contextlib.nullcontext():
             return stream_in_service.main(vendor.name, args.seconds, args.json,
-                                          args.link_thread)
+                                          args.link_thread, _service_params(rt))
     load0 = os.getloadavg()[0]
     print(f"machine: {os.cpu_count()} CPUs, load average {load0:.2f} at start", flush=True)
-    with cell_services(args.cell) if args.cell else contextlib.nullcontext():
-        results, samples = robot(vendor, args.seconds, args.cycle_ms, args.rt_priority)
+    with cell_services(args.cell, setup.cell_cpus()) if args.cell else \
+            contextlib.nullcontext():
+        results, samples = robot(vendor, args.seconds, args.cycle_ms, setup)
     print(table(vendor, results, args.seconds, args.cycle_ms))
     if args.cell:
         print(f"beside {args.cell} plugcell services serving in a cell")
-    print("scheduling: " + (f"SCHED_FIFO priority {args.rt_priority} (robot side, link "
-                            "thread, echo thread)" if args.rt_priority else
-                            "normal (SCHED_OTHER)"))
+    print("scheduling: " + setup.describe())
     print(f"load average {os.getloadavg()[0]:.2f} at the end")
     if args.json:
         args.json.write_text(json.dumps(results, indent=1), encoding="utf-8")
@@ -477,7 +776,8 @@ def main(argv: list[str], vendor: Vendor | None = None, doc: str | None = None) 
         title = (f"{vendor.name} at {1000 / args.cycle_ms:.0f} Hz, {args.seconds:.0f} s, "
                  f"{args.cell} services in the cell, "
                  f"{'SCHED_FIFO ' + str(args.rt_priority) if args.rt_priority else 'normal'}"
-                 f" priority, load average {load0:.1f} → {os.getloadavg()[0]:.1f} "
+                 f" priority{', CPU ' + ','.join(map(str, sorted(args.cpu))) if args.cpu else ''}"
+                 f", load average {load0:.1f} → {os.getloadavg()[0]:.1f} "
                  f"({os.cpu_count()} CPUs)")
         drawn = plot(samples, args.cycle_ms, title, args.plot)
         print(f"plot: {args.plot}" if drawn else "plot: no matplotlib")

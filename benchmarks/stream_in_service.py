@@ -151,9 +151,12 @@ def _plugcell(env: dict, *args: str, timeout: float = 60) -> str:
     return out.stdout + out.stderr
 
 
-def measure(vendor: str, seconds: float, cycle_ms: float = 4.0, thread: bool = False) -> dict:
+def measure(vendor: str, seconds: float, cycle_ms: float = 4.0, thread: bool = False,
+            params: tuple[str, ...] = ()) -> dict:
     """One in-service run (module docstring); the figures.  ``thread``: the link in a
-    thread of the service's process (``--param stream_process=false``), not its own."""
+    thread of the service's process (``--param stream_process=false``), not its own;
+    ``params``: more ``KEY=VALUE`` of the service (the link's scheduling:
+    ``stream_rt_priority=20``, ``stream_cpu=1``, ``stream_mlock=true``)."""
     side, flag, twin_timeout, service_timeout, _ = TWINS[vendor]
     home = Path(tempfile.mkdtemp(prefix="plugcell-in-service-"))
     (home / "programs").mkdir()
@@ -171,7 +174,8 @@ def measure(vendor: str, seconds: float, cycle_ms: float = 4.0, thread: bool = F
         [sys.executable, "-m", "plugcell", "serve", "robot", flag, f"127.0.0.1:{port}",
          f"{flag}-timeout", service_timeout,
          "--param", f"library={home / 'programs'}", "--cell", cell,
-         *(["--param", "stream_process=false"] if thread else [])], env=env,
+         *(["--param", "stream_process=false"] if thread else []),
+         *(a for kv in params for a in ("--param", kv))], env=env,
         stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
     try:
         _wait_line(twin, "streaming", 60)
@@ -288,12 +292,16 @@ def table(vendor: str, r: dict, seconds: float, thread: bool = False) -> str:
     return "\n".join(lines)
 
 
-def main(vendor: str, seconds: float, json_path: Path | None, thread: bool = False) -> int:
-    """Run :func:`measure` and print the table (``rsi_latency.py --in-service``)."""
+def main(vendor: str, seconds: float, json_path: Path | None, thread: bool = False,
+         params: tuple[str, ...] = ()) -> int:
+    """Run :func:`measure` and print the table (``rsi_latency.py --in-service``; its
+    ``--rt-priority``, ``--cpu`` and ``--mlock`` become the service's ``params``)."""
     print(f"machine: {os.cpu_count()} CPUs, load average {os.getloadavg()[0]:.2f} at start",
           flush=True)
-    result = measure(vendor, seconds, thread=thread)
+    result = measure(vendor, seconds, thread=thread, params=params)
     print(table(vendor, result, seconds, thread))
+    if params:
+        print("the service's link: " + " ".join(f"--param {kv}" for kv in params))
     print(f"load average {os.getloadavg()[0]:.2f} at the end")
     if json_path:
         json_path.write_text(json.dumps(result, indent=1), encoding="utf-8")

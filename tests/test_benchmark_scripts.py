@@ -28,6 +28,8 @@ SCRIPTS = [
     ("round_trip_cpu.py", ["--cycles", "30", "--rounds", "1", "--switches"], "voluntary / forced"),
     ("motion_sampling.py", ["--cycles", "5", "--robots", "elbow6"], "LIN (IK per sample)"),
     ("rsi_latency.py", ["--seconds", "1"], "| goal (issue 37) | this run | met |"),
+    ("egm_latency.py", ["--seconds", "1", "--cpu", "0", "--mlock"],
+     "link and echo on CPU 0; robot side on CPU 0; memory locked (mlockall)"),
     ("rsi_latency.py", ["--in-service", "--link-thread", "--seconds", "2"],
      "| robot service over RSI |"),
     ("egm_latency.py", ["--in-service", "--seconds", "2"], "| robot service over EGM |"),
@@ -54,6 +56,22 @@ def test_benchmark_script_runs(script: str, args: list[str], expected: str,
                           capture_output=True, text=True, timeout=120)
     assert done.returncode == 0, done.stderr[-2000:]
     assert expected in done.stdout, done.stdout[-2000:]
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize(("args", "says"), [
+    (["--cpu", "x"], "CPU list 'x': 'x' is not a CPU number"),
+    (["--cpu", "4096"], "'4096': CPU 4096 is not one this process may use"),
+    (["--robot-cpu", "2-1"], "'2-1' is not a range of CPU numbers"),
+    (["--rt-priority", "100"], "'100': expected a SCHED_FIFO priority 1..99"),
+    (["--isolate", "--cell", "2"], "--isolate keeps the cell's services off the stream's CPUs: "
+     "give --cpu"),
+])
+def test_the_latency_benchmark_refuses_bad_scheduling_options(args, says) -> None:
+    done = subprocess.run([sys.executable, str(BENCHMARKS / "rsi_latency.py"), *args],
+                          capture_output=True, text=True, timeout=120)
+    assert done.returncode == 2
+    assert says in done.stderr, done.stderr
 
 
 @pytest.mark.slow

@@ -9,6 +9,7 @@
                        [--ext-ramp 0.5] [--ext-speed-factor F]     (--mode pathcorr)
     plugcell egm run --robot-ip IP [--listen IP] [--port 6510] [same stream options]
                      [--sine AXIS:AMPLITUDE:PERIOD] [--duration S] [--rt-priority N]
+                     [--cpu CPUS] [--mlock]
 
 ``files`` writes what the user loads into the controller (RAPID module, the UDP unit
 device's configuration, and for path corrections the External Motion Interface Data
@@ -29,6 +30,7 @@ from .streaming import (
     add_run_options,
     limits_of,
     named_as_options,
+    realtime_of,
     run_link,
     sine_or_hold,
     write_and_list,
@@ -157,7 +159,7 @@ def _run(args: argparse.Namespace) -> int:
 
     config = _config(args, args.robot_ip, args.listen)
     try:
-        link = EgmLink(config, _source(args), rt_priority=args.rt_priority)
+        link = EgmLink(config, _source(args), realtime=realtime_of(args))
     except ValueError as exc:
         raise CommandError(str(exc)) from None
     return run_link(link, args, f"{config.mode}, {config.sample_rate_ms} ms")

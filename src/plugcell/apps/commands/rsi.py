@@ -9,6 +9,7 @@
                        [--dil IN] [--drives pc|robot] [--settle S]
     plugcell rsi run --robot-ip IP [--listen IP] [--port 49152] [same stream options]
                      [--sine AXIS:AMPLITUDE:PERIOD] [--duration S] [--rt-priority N]
+                     [--cpu CPUS] [--mlock]
 
 ``files`` writes what the user copies to the controller (KRL program, ethernet
 configuration, signal flow, the diagram's description) — the KRL program where the PC
@@ -34,6 +35,7 @@ from .streaming import (
     add_run_options,
     limits_of,
     named_as_options,
+    realtime_of,
     run_link,
     sine_or_hold,
     write_and_list,
@@ -164,7 +166,7 @@ def _run(args: argparse.Namespace) -> int:
 
     config = _config(args, args.robot_ip, args.listen)
     try:
-        link = RsiLink(config, _source(args), rt_priority=args.rt_priority)
+        link = RsiLink(config, _source(args), realtime=realtime_of(args))
     except ValueError as exc:
         raise CommandError(str(exc)) from None
     return run_link(link, args, f"{config.correction}, {config.mode}, {config.cycle}",

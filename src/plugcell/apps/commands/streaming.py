@@ -143,7 +143,40 @@ def add_run_controls(p: argparse.ArgumentParser) -> None:
     p.add_argument("--rt-priority", type=int, metavar="N",
                    help="run the link's thread under SCHED_FIFO priority N (1-99; Linux, "
                    "root or CAP_SYS_NICE)")
+    p.add_argument("--cpu", metavar="CPUS",
+                   help="run the link's thread on these CPUs only (taskset -c syntax: 1, "
+                   "2-3); keep the cell's other services off them")
+    p.add_argument("--mlock", action="store_true",
+                   help="lock the process's memory (mlockall): no page fault from disk in "
+                   "a cycle")
     p.add_argument("--json", action="store_true", help="print the counters as JSON lines")
+
+
+def realtime_of(args: argparse.Namespace) -> Any:
+    """The link's scheduling ``--rt-priority``, ``--cpu`` and ``--mlock`` ask for.
+
+    Returns
+    -------
+    RealTime
+        For the link's ``realtime``.
+
+    Raises
+    ------
+    CommandError
+        A priority outside 1..99, a malformed CPU list, a CPU this machine does not have:
+        the option and the reason.
+    """
+    from plugcell.apps.cli import CommandError
+    from plugcell.devices.robot.stream.realtime import stream_realtime
+
+    try:
+        return stream_realtime(args.rt_priority, args.cpu or "", args.mlock)
+    except ValueError as exc:  # named by the service's option: name the command's
+        why = str(exc)
+        for name, option in (("stream_cpu", "--cpu"), ("stream_rt_priority", "--rt-priority")):
+            if why.startswith(name):
+                why = option + why[len(name):]
+        raise CommandError(why) from None
 
 
 def sine_or_hold(sine: str | None, axes: Sequence[str], unit: Callable[[int], float],

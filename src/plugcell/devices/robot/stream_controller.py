@@ -63,6 +63,7 @@ from plugcell.devices.robot.stream.correcting import Corrector
 from plugcell.devices.robot.stream.drive import StreamDrive, drive_refusal
 from plugcell.devices.robot.stream.limits import CorrectionLimits
 from plugcell.devices.robot.stream.process import BUSY, CorrectorClient, LinkProcess, link_class
+from plugcell.devices.robot.stream.realtime import RealTime
 from plugcell.devices.robot.tracked_moves import tracked_moves_for
 from plugcell.kinematics import RobotDescription
 from plugcell.motion import CartesianLimits, JointLimits
@@ -242,6 +243,9 @@ class StreamController:
         The robot's calibration (a PARAMS.json of ``plugcell calibrate``, of this robot):
         the tracked moves' model (:mod:`~plugcell.devices.robot.tracked_moves`); empty:
         the nominal model.
+    realtime : RealTime, optional
+        The link's scheduling (:mod:`~plugcell.devices.robot.stream.realtime`): its
+        thread's priority, its CPUs, its memory locked.
 
     Raises
     ------
@@ -253,7 +257,7 @@ class StreamController:
                  robot: str, joint_limits: JointLimits, cartesian_limits: CartesianLimits,
                  library: Sequence[Path] = (), name: str = "ROBOT",
                  process: bool = True, correct_max: tuple[float, float] = (5.0, 1.0),
-                 calibration: str = "") -> None:
+                 calibration: str = "", realtime: RealTime | None = None) -> None:
         self.vendor = config.vendor
         if description.n_readings != 6:
             raise ValueError(f"{self.vendor} streams six axes; {description.name} has "
@@ -270,10 +274,10 @@ class StreamController:
         self.calibration_name = Path(calibration).name if calibration else ""
         self.corrector: Corrector | CorrectorClient
         if process:
-            self.link = self.drive = LinkProcess(config)
+            self.link = self.drive = LinkProcess(config, realtime=realtime)
             self.corrector = self.link.corrector
         else:
-            self.link = link_class(self.vendor)(config)
+            self.link = link_class(self.vendor)(config, realtime=realtime)
             self.drive = StreamDrive(self.link, feedback_only=True)
             self.corrector = Corrector(self.link)
         #: Set once the link listens for the controller's stream (a controller started

@@ -34,6 +34,7 @@ from plugcell.devices.params import flag
 from plugcell.devices.robot.bridge import BridgeHandler, parse_address
 from plugcell.devices.robot.egm.config import EgmConfig
 from plugcell.devices.robot.rsi.config import RsiConfig
+from plugcell.devices.robot.stream.realtime import stream_realtime
 from plugcell.devices.robot.stream_controller import (
     StreamController,
     planner_limits,
@@ -49,7 +50,8 @@ STREAM_PARAMS: dict[str, Callable[[str], Any]] = {
     "rsi": str, "rsi_robot": str, "rsi_timeout": int, "rsi_correction": str, "rsi_mode": str,
     "rsi_frame": str, "egm": str, "egm_robot": str, "egm_timeout": float, "egm_mode": str,
     "stream_process": flag, "joint_speed": float, "tcp_speed": float,
-    "correct_max_mm": float, "correct_max_deg": float, "calibration": str}
+    "correct_max_mm": float, "correct_max_deg": float, "calibration": str,
+    "stream_rt_priority": int, "stream_cpu": str, "stream_mlock": flag}
 
 
 def _check_streams(rsi: str, rsi_robot: str, egm: str, egm_robot: str) -> None:
@@ -62,6 +64,13 @@ def _check_streams(rsi: str, rsi_robot: str, egm: str, egm_robot: str) -> None:
                              f"stream: give {option} too")
 
 
+def _check_correction_limits(correct_max_mm: float, correct_max_deg: float) -> None:
+    """Refuse a largest ``CORRECT`` correction that is not a positive finite number."""
+    for what, v in (("correct_max_mm", correct_max_mm), ("correct_max_deg", correct_max_deg)):
+        if not (v > 0 and v < float("inf")):
+            raise ValueError(f"{what} must be a positive number, not {v}")
+
+
 def streamed_link(handler: BridgeHandler, *, robot: str, library: Sequence[Path], name: str,
                   rsi: str = "", rsi_robot: str = "", rsi_timeout: int = 100,
                   rsi_correction: str = "joint", rsi_mode: str = "absolute",
@@ -69,8 +78,9 @@ def streamed_link(handler: BridgeHandler, *, robot: str, library: Sequence[Path]
                   egm_robot: str = "", egm_timeout: float = 1.0, egm_mode: str = "joint",
                   joint_speed: float = 20.0, tcp_speed: float = 100.0,
                   stream_process: bool = True, correct_max_mm: float = 5.0,
-                  correct_max_deg: float = 1.0, calibration: str = ""
-                  ) -> StreamController | None:
+                  correct_max_deg: float = 1.0, calibration: str = "",
+                  stream_rt_priority: int | None = None, stream_cpu: str = "",
+                  stream_mlock: bool = False) -> StreamController | None:
     """The streamed robot's controller the options ask for, or ``None`` (none asked).
 
     Parameters
@@ -105,6 +115,10 @@ def streamed_link(handler: BridgeHandler, *, robot: str, library: Sequence[Path]
     calibration : str
         The robot's calibration (PARAMS.json): the model of the tracked moves (``MOVE
         LINEAR TO p WITH TRACKING``); empty: the nominal model.
+    stream_rt_priority, stream_cpu, stream_mlock
+        The cycle loop's scheduling (:class:`~.stream.realtime.RealTime`): its thread under
+        ``SCHED_FIFO`` at this priority (1..99), the link's process (or thread) on these
+        CPUs (``taskset -c`` syntax: ``1``, ``2-3``), its memory locked (``mlockall``).
 
     Returns
     -------
@@ -115,7 +129,7 @@ def streamed_link(handler: BridgeHandler, *, robot: str, library: Sequence[Path]
     ------
     ValueError
         Both streams, a controller address without its stream, a bad address, limit,
-        timeout, robot or calibration: the reason.
+        timeout, robot, calibration, priority or CPU list: the reason.
     """
     _check_streams(rsi, rsi_robot, egm, egm_robot)
     if not (rsi or egm):
@@ -133,9 +147,8 @@ def streamed_link(handler: BridgeHandler, *, robot: str, library: Sequence[Path]
                               comm_timeout_s=egm_timeout))
     if config.joint_targets:
         config = dataclasses.replace(config, limits=streaming_limits(joint, config.cycle_s))
-    for what, v in (("correct_max_mm", correct_max_mm), ("correct_max_deg", correct_max_deg)):
-        if not (v > 0 and v < float("inf")):
-            raise ValueError(f"{what} must be a positive number, not {v}")
+    _check_correction_limits(correct_max_mm, correct_max_deg)
     return StreamController(handler, config, load_robot(robot), robot, joint, cart, library,
                             name, stream_process, (correct_max_mm, correct_max_deg),
-                            calibration)
+                            calibration,
+                            stream_realtime(stream_rt_priority, stream_cpu, stream_mlock))

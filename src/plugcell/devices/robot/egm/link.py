@@ -27,6 +27,7 @@ from plugcell.io.units import DEG, M_PER_MM
 from ..stream.errors import PacketError, StreamLinkError
 from ..stream.limits import Limited
 from ..stream.link import StreamLink
+from ..stream.realtime import RealTime
 from ..stream.source import SourceLike
 from .config import EgmConfig
 from .messages import (
@@ -63,21 +64,28 @@ class EgmLink(StreamLink):
     rt_priority : int, optional
         Run the link's thread under ``SCHED_FIFO`` at this priority (1..99; Linux, needs
         ``CAP_SYS_NICE``).
+    realtime : RealTime, optional
+        The loop's whole scheduling instead: priority, CPUs, locked memory
+        (:mod:`..stream.realtime`); not with ``rt_priority``.
     """
 
     VENDOR = "EGM"
     TIMEOUT_WORD = "CommTimeout in cycles"
 
     def __init__(self, config: EgmConfig, source: SourceLike | None = None,
-                 record_latency: bool = False, rt_priority: int | None = None) -> None:
+                 record_latency: bool = False, rt_priority: int | None = None,
+                 realtime: RealTime | None = None) -> None:
         joint = config.mode == "joint"
         axes = _JOINTS if joint else _CARTESIAN
         units = (("deg", DEG),) * 6 if joint else (("mm", M_PER_MM),) * 3 + (("deg", DEG),) * 3
-        super().__init__(config, source, axes, units, record_latency, rt_priority)
+        super().__init__(config, source, axes, units, record_latency, rt_priority, realtime)
         self._mode = config.mode
         self._q0 = np.zeros(6)
         self._p0 = np.zeros(3)
         self._quat0: tuple[float, ...] = (1.0, 0.0, 0.0, 0.0)
+        # the answer written over each cycle (the link's thread only); the robot's
+        # message is a new one each cycle (messages.parse_egm_robot says why)
+        self._sensor_msg = egm_pb2.EgmSensor()
 
     def _parse(self, data: bytes) -> EgmState:
         state = parse_egm_robot(data, self.config.max_packet_bytes)
@@ -122,7 +130,7 @@ class EgmLink(StreamLink):
     def _encode(self, state: EgmState, limited: Limited) -> bytes:
         o = limited.offset
         if self._mode == "joint":
-            return encode_joints(state.seqno, state.tm, self._q0 + o)
+            return encode_joints(state.seqno, state.tm, self._q0 + o, self._sensor_msg)
         if self._mode == "pose":
             quat = quat_multiply(rotvec_to_quat(o[3:]), self._quat0)
             return encode_pose(state.seqno, state.tm, self._p0 + o[:3], quat)
@@ -138,7 +146,7 @@ class EgmLink(StreamLink):
         fb.orient.u0, fb.orient.u1, fb.orient.u2, fb.orient.u3 = 1.0, 0.0, 0.0, 0.0
         state = parse_egm_robot(msg.SerializeToString(), self.config.max_packet_bytes)
         zero = Limited(np.zeros(6), np.zeros(6))
-        encode_joints(1, 0, state.joints)
+        encode_joints(1, 0, state.joints, self._sensor_msg)
         encode_pose(1, 0, np.zeros(3), quat_multiply(rotvec_to_quat(zero.offset[3:]),
                                                       (1.0, 0.0, 0.0, 0.0)))
         encode_path_correction(1, 0, zero.offset[:3])

@@ -170,6 +170,8 @@ def parse_egm_robot(data: bytes, max_bytes: int = 1400) -> EgmState:
     """
     if len(data) > max_bytes:
         raise PacketError("oversized", f"{len(data)} bytes > {max_bytes}")
+    # a new message each time: parsed into a kept one, upb's arena grows with every
+    # parse (measured: 142 MB over 200 000 messages, ~13 minutes of a 4 ms stream)
     msg = egm_pb2.EgmRobot()
     try:
         msg.ParseFromString(data)
@@ -222,7 +224,7 @@ def _header(header, seqno: int, tm: int, mtype: int) -> None:
     header.mtype = mtype
 
 
-def encode_joints(seqno: int, tm: int, joints: Array) -> bytes:
+def encode_joints(seqno: int, tm: int, joints: Array, into=None) -> bytes:
     """``EgmSensor`` with the joint targets ``planned.joints`` (``EGMRunJoint``).
 
     Parameters
@@ -231,15 +233,18 @@ def encode_joints(seqno: int, tm: int, joints: Array) -> bytes:
         The answer's sequence number and time (ms).
     joints : ndarray, shape (n,)
         The targets (rad), sent in degrees.
+    into : EgmSensor, optional
+        A message kept by the caller and written over (a link: no new message a cycle;
+        it must hold nothing but what this function writes); by default a new one.
 
     Returns
     -------
     bytes
         The serialized message.
     """
-    msg = egm_pb2.EgmSensor()
+    msg = egm_pb2.EgmSensor() if into is None else into
     _header(msg.header, seqno, tm, _CORRECTION)
-    msg.planned.joints.joints.extend([float(q) / DEG for q in joints])
+    msg.planned.joints.joints[:] = [float(q) / DEG for q in joints]
     return msg.SerializeToString()
 
 

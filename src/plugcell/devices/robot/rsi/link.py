@@ -23,6 +23,7 @@ from ..stream.errors import (
 )
 from ..stream.limits import Limited, OffsetLimiter
 from ..stream.link import LinkStats, StreamLink
+from ..stream.realtime import RealTime
 from ..stream.source import Correction, CorrectionSource, CycleState, SourceLike
 from .codec import CARTESIAN_AXES, JOINT_AXES, RobotState, encode_sen, parse_rob
 from .config import RsiConfig
@@ -62,6 +63,9 @@ class RsiLink(StreamLink):
         ``CAP_SYS_NICE``): the kernel then runs it as soon as a packet arrives, ahead of
         every ordinary process.  What happened is in :attr:`rt_note`; without the right
         the link runs at normal priority.
+    realtime : RealTime, optional
+        The loop's whole scheduling instead: priority, CPUs, locked memory
+        (:mod:`..stream.realtime`); not with ``rt_priority``.
     """
 
     VENDOR = "RSI"
@@ -69,11 +73,12 @@ class RsiLink(StreamLink):
     DELAY_WORD = " (<Delay>)"
 
     def __init__(self, config: RsiConfig, source: SourceLike | None = None,
-                 record_latency: bool = False, rt_priority: int | None = None) -> None:
+                 record_latency: bool = False, rt_priority: int | None = None,
+                 realtime: RealTime | None = None) -> None:
         joint = config.correction == "joint"
         axes = JOINT_AXES if joint else CARTESIAN_AXES
         units = (("deg", DEG),) * 6 if joint else (("mm", M_PER_MM),) * 3 + (("deg", DEG),) * 3
-        super().__init__(config, source, axes, units, record_latency, rt_priority)
+        super().__init__(config, source, axes, units, record_latency, rt_priority, realtime)
         self._kind = config.correction
         self._outputs_spec = {o.tag: o for o in config.outputs}
         self._outputs = {o.tag: o.initial for o in config.outputs}

@@ -25,13 +25,14 @@ A vendor's link (:class:`~..rsi.link.RsiLink`, :class:`~..egm.link.EgmLink`) giv
 codec: :meth:`StreamLink._parse`, :meth:`StreamLink._encode` and the sequence of a packet.
 
 Real-time notes: the loop allocates little and waits in ``poll``; run it in a process of
-its own (the robot service's event loop would otherwise share the GIL with it) —
+its own (the robot service's event loop would otherwise share the GIL with it), under a
+real-time priority, on a CPU of its own and with its memory locked where the machine
+allows (:class:`~.realtime.RealTime`, applied by the loop's thread when it starts) —
 ``benchmarks/rsi_latency.py`` and ``benchmarks/egm_latency.py`` measure it so.
 """
 
 from __future__ import annotations
 
-import os
 import select
 import socket
 import threading
@@ -50,6 +51,7 @@ from .errors import (
 )
 from .follow import Following
 from .limits import Limited, OffsetLimiter
+from .realtime import RealTime
 from .source import Correction, CycleState, SourceLike, as_source
 
 __all__ = ["LinkStats", "StreamLink"]
@@ -114,16 +116,6 @@ class LinkStats:
     last_reason: str
 
 
-def realtime(priority: int) -> str:
-    """Put the calling thread under ``SCHED_FIFO`` at ``priority``, if allowed; what
-    happened, as a note."""
-    try:
-        os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(priority))
-    except (AttributeError, OSError) as exc:  # not Linux, or no CAP_SYS_NICE
-        return f"SCHED_FIFO refused ({exc}); normal priority"
-    return f"SCHED_FIFO priority {priority}"
-
-
 class StreamLink(Following):
     """The sensor side of one stream (module doc); subclassed per vendor.
 
@@ -144,6 +136,9 @@ class StreamLink(Following):
     rt_priority : int, optional
         Run the link's thread under ``SCHED_FIFO`` at this priority (1..99; Linux, needs
         ``CAP_SYS_NICE``).  What happened is in :attr:`rt_note`.
+    realtime : RealTime, optional
+        The loop's whole scheduling instead (:mod:`.realtime`: priority, CPUs, locked
+        memory), applied by its thread when it starts; not with ``rt_priority``.
     """
 
     #: The interface's name in messages ("RSI", "EGM").
@@ -154,21 +149,22 @@ class StreamLink(Following):
 
     def __init__(self, config: Any, source: SourceLike | None, axes: tuple[str, ...],
                  units: tuple[tuple[str, float], ...], record_latency: bool = False,
-                 rt_priority: int | None = None) -> None:
-        if rt_priority is not None and not 1 <= rt_priority <= 99:
-            raise ValueError(f"rt_priority {rt_priority}: expected 1..99 (SCHED_FIFO)")
-        self.rt_priority = rt_priority
+                 rt_priority: int | None = None, realtime: RealTime | None = None) -> None:
+        self.realtime = RealTime.given(rt_priority, realtime)
+        self.rt_priority = self.realtime.priority
         self.rt_note = "normal priority"
         self.config = config
         self._source = as_source(source)
         self._limiter = OffsetLimiter(config.limits, config.cycle_s, axes, units)
         self._cycle_ns = int(config.cycle_s * 1e9)
         self._timeout_ns = int(config.timeout_s * 1e9)
+        self._timeout_packets = config.timeout_packets  # a property of some configs
         self.latencies: list[int] | None = [] if record_latency else None
         self._cond = threading.Condition()
         self._sock: socket.socket | None = None
         self._thread: threading.Thread | None = None
         self._closing = False
+        self._scheduled = threading.Event()
         # counters (written by the link's thread only)
         self._received = self._answered = self._late = self._missed = self._superseded = 0
         self._clamped = self._refused = 0
@@ -266,6 +262,7 @@ class StreamLink(Following):
         self._thread = threading.Thread(target=self._run, name=f"{self.VENDOR.lower()}-link",
                                         daemon=True)
         self._thread.start()
+        self._scheduled.wait(5.0)  # its scheduling applied: rt_note says what happened
         return sock.getsockname()[:2]
 
     @property
@@ -321,8 +318,9 @@ class StreamLink(Following):
     def _run(self) -> None:
         sock = self._sock
         assert sock is not None
-        if self.rt_priority is not None:
-            self.rt_note = realtime(self.rt_priority)
+        if self.realtime.asked:
+            self.rt_note = self.realtime.apply()
+        self._scheduled.set()
         poller = select.poll()
         poller.register(sock, select.POLLIN)
         bufsize = self.config.max_packet_bytes + 1
@@ -390,7 +388,7 @@ class StreamLink(Following):
         else:
             # cycles between the last answered packet and this one: lost or superseded
             lost = max(0, self._lost(gap))
-            if lost >= self.config.timeout_packets:
+            if lost >= self._timeout_packets:
                 self._dropped["inconsistent"] += 1
                 return
             self._missed += lost
@@ -425,7 +423,7 @@ class StreamLink(Following):
         self._notify()
 
     def _check_limits(self, state: Any) -> None:
-        timeout = self.config.timeout_packets
+        timeout = self._timeout_packets
         if self._failure is not None:
             return
         if self._streak >= timeout:

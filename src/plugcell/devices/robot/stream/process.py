@@ -56,6 +56,7 @@ from .adjusting import CYCLE_SLOTS, OFFSET_SLOTS, AdjustPump, ChildAdjust, SeqVe
 from .correcting import CorrectionSpec, Corrector
 from .drive import Adjust, StreamDrive, drive_refusal, motion_timeout, samples
 from .errors import StreamLinkError
+from .realtime import RealTime
 
 __all__ = ["BUSY", "LINKS", "CorrectorClient", "Feedback", "LinkProcess", "Publisher",
            "link_class", "serve_corrections"]
@@ -131,13 +132,17 @@ class Publisher:
 
 
 def _child(conn: Any, corrections: Any, values: Any, text: Any, vendor: str, config: Any,
-           rt_priority: int | None, cycle: Any = None, offset: Any = None) -> None:
+           realtime: RealTime, cycle: Any = None, offset: Any = None) -> None:
     """The child process: the link, its drive, the motions from the pipe and the
     corrections of mode (b) from the other (:func:`serve_corrections`)."""
     import signal
 
     signal.signal(signal.SIGINT, signal.SIG_IGN)  # Ctrl-C is the service's to handle
-    link = link_class(vendor)(config, rt_priority=rt_priority)
+    # every thread of the process on the stream's CPUs (they start after this), the
+    # interpreter handed to the link's thread within half a millisecond of its asking,
+    # the other threads one real-time priority below it (RealTime.prepare_process)
+    prepared = realtime.prepare_process()
+    link = link_class(vendor)(config, realtime=realtime)
     link.observer = Publisher(values, text)
     # the objects of the imports and the link live as long as the process: out of the
     # collector's sight, a full collection scans only what the cycles made (one over all
@@ -149,7 +154,7 @@ def _child(conn: Any, corrections: Any, values: Any, text: Any, vendor: str, con
     except OSError as exc:
         conn.send(("error", str(exc)))
         return
-    conn.send(("started", host, port, link.rt_note))
+    conn.send(("started", host, port, "; ".join(n for n in (link.rt_note, prepared) if n)))
     refusal = drive_refusal(config)
     drive = None if refusal else StreamDrive(link)
     corrector = Corrector(link)
@@ -267,12 +272,18 @@ class LinkProcess:
     rt_priority : int, optional
         The child's link thread under ``SCHED_FIFO`` at this priority (Linux,
         ``CAP_SYS_NICE``).
+    realtime : RealTime, optional
+        The child's whole scheduling instead (:mod:`.realtime`): its link thread's
+        priority, the CPUs of all its threads, its memory locked; not with
+        ``rt_priority``.
     """
 
-    def __init__(self, config: Any, rt_priority: int | None = None) -> None:
+    def __init__(self, config: Any, rt_priority: int | None = None,
+                 realtime: RealTime | None = None) -> None:
+        self.realtime = RealTime.given(rt_priority, realtime)
         self.config = config
         self.vendor = config.vendor
-        self.rt_priority = rt_priority
+        self.rt_priority = self.realtime.priority
         self.rt_note = ""
         self.followed = 0
         #: the last adjusted motion's wire peaks (:class:`~.adjusting.WirePeaks`: step, change)
@@ -313,7 +324,7 @@ class LinkProcess:
         self._proc = self._ctx.Process(
             target=_child, name=f"plugcell-{self.vendor.lower()}-link", daemon=True,
             args=(child_end, child_corr, self._values, self._text, self.vendor, self.config,
-                  self.rt_priority, self._cycle, self._offset))
+                  self.realtime, self._cycle, self._offset))
         self._proc.start()
         child_end.close()
         child_corr.close()
