@@ -71,6 +71,15 @@ def _check_correction_limits(correct_max_mm: float, correct_max_deg: float) -> N
             raise ValueError(f"{what} must be a positive number, not {v}")
 
 
+def _endpoints(option: str, listen: str, address: str) -> dict[str, Any]:
+    """The link's ``listen_host``/``listen_port`` and the controller's ``robot_host``/
+    ``robot_port`` of the ``rsi``/``egm`` options ``listen`` and ``address``."""
+    host, port = parse_address(listen)
+    rhost, robot_port = robot_endpoint(option, host, address)
+    return {"robot_host": rhost, "listen_host": host, "listen_port": port,
+            "robot_port": robot_port}
+
+
 def streamed_link(handler: BridgeHandler, *, robot: str, library: Sequence[Path], name: str,
                   rsi: str = "", rsi_robot: str = "", rsi_timeout: int = 100,
                   rsi_correction: str = "joint", rsi_mode: str = "absolute",
@@ -134,12 +143,8 @@ def streamed_link(handler: BridgeHandler, *, robot: str, library: Sequence[Path]
     _check_streams(rsi, rsi_robot, egm, egm_robot)
     if not (rsi or egm):
         return None
-    option, listen, address = ("rsi", rsi, rsi_robot) if rsi else ("egm", egm, egm_robot)
-    host, port = parse_address(listen)
-    rhost, robot_port = robot_endpoint(option, host, address)
     joint, cart = planner_limits(joint_speed, tcp_speed)
-    where = {"robot_host": rhost, "listen_host": host, "listen_port": port,
-             "robot_port": robot_port}
+    where = _endpoints(*(("rsi", rsi, rsi_robot) if rsi else ("egm", egm, egm_robot)))
     config: RsiConfig | EgmConfig = (
         RsiConfig(**where, correction=rsi_correction, mode=rsi_mode,  # type: ignore[arg-type]
                   frame=rsi_frame, timeout_packets=rsi_timeout)  # type: ignore[arg-type]
