@@ -35,9 +35,13 @@ def joints_of(answer: bytes) -> np.ndarray:
 def pair():
     made = []
 
-    def make(mode="joint", source=None, **kw):
+    def make(mode="joint", source=None, go=True, **kw):
+        """The link and the simulated robot, streaming (``go=False``: the robot not yet
+        started, so a test can read where it stands before the first correction)."""
         link = started(local_config(mode=mode, **kw), source)
-        robot = EgmRobotSim(link.address, mode=mode).start()
+        robot = EgmRobotSim(link.address, mode=mode)
+        if go:
+            robot.start()
         made.append((link, robot))
         return link, robot
 
@@ -49,8 +53,9 @@ def pair():
 
 def test_joint_targets_move_the_simulated_robot(pair) -> None:
     target = np.array([0, 0, 0, 0, 0, 2 * DEG])
-    link, robot = pair("joint", lambda s: Correction(offset=target))
-    start = robot.state()["joints"]
+    link, robot = pair("joint", lambda s: Correction(offset=target), go=False)
+    start = robot.state()["joints"]  # before the first packet: nothing moved it yet
+    robot.start()
     assert wait_until(lambda: np.allclose(robot.state()["joints"], start + target,
                                           atol=1e-6), 3.0)
     st = link.stats()
@@ -61,8 +66,9 @@ def test_joint_targets_move_the_simulated_robot(pair) -> None:
 
 def test_pose_targets_move_and_turn_the_tcp(pair) -> None:
     offset = np.array([0.002, -0.001, 0.0, 0.0, 0.0, 1 * DEG])
-    _link, robot = pair("pose", lambda s: Correction(offset=offset))
-    p0, q0 = robot.state()["position"], robot.state()["quaternion"]
+    _link, robot = pair("pose", lambda s: Correction(offset=offset), go=False)
+    p0, q0 = robot.state()["position"], robot.state()["quaternion"]  # before it streams
+    robot.start()
     from scipy.spatial.transform import Rotation
 
     want = (Rotation.from_rotvec(offset[3:]) * Rotation.from_quat(q0, scalar_first=True))
