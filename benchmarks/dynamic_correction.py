@@ -42,15 +42,22 @@ from __future__ import annotations
 import argparse
 import dataclasses
 import math
+import os
 import sys
 import threading
 import time
 from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
 
+# one BLAS thread per process: the machine is shared, and the learning's small solves
+# run many times slower when a BLAS spreads each of them over busy cores
+os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
+os.environ.setdefault("OMP_NUM_THREADS", "1")
+
 import numpy as np
 
 from plugcell.compensation.tracking import (
+    InverseSettings,
     IterativeLearning,
     LearningSettings,
     TrackingSettings,
@@ -73,6 +80,9 @@ GOALS = {100.0: 0.05e-3, 250.0: 0.10e-3}
 #: |Q| = 0.04 at the first mode, 9 Hz; 8 Hz diverged on the line at 250 mm/s), L = 0.8
 #: falling as 1/(1 + 0.5 k) to average the tracker's noise (docs/dynamic-correction.md)
 LEARNING = LearningSettings(gain=0.8, cutoff_hz=6.0, order=4, gain_decay=0.5)
+#: The model-inverting law (learning.py (3)) after one identifying run: Q_I above the
+#: modes (9–14 Hz on the twin), γ_j = 1/(1 + j) (the running mean of the runs' estimates)
+INVERSE = InverseSettings()
 
 
 def _three_sigma(x: np.ndarray) -> float:
@@ -433,6 +443,20 @@ def main(argv: list[str]) -> int:
     ap.add_argument("--learn-cutoff", type=float, default=LEARNING.cutoff_hz,
                     help="Q's cut-off (Hz)")
     ap.add_argument("--learn-order", type=int, default=LEARNING.order, help="Q's order")
+    ap.add_argument("--learn-law", choices=("inverse", "p"), default="inverse",
+                    help="inverse: the first update is P-type and excites the next run, "
+                    "which identifies the plant; then the model-inverting law (default); "
+                    "p: the P-type law alone")
+    ap.add_argument("--inverse-gain", type=float, default=INVERSE.gain, help="γ")
+    ap.add_argument("--inverse-decay", type=float, default=INVERSE.gain_decay,
+                    help="λ_I of γ/(1 + λ_I j)")
+    ap.add_argument("--inverse-reg", type=float, default=INVERSE.regularisation, help="β")
+    ap.add_argument("--inverse-cutoff", type=float, default=INVERSE.cutoff_hz,
+                    help="Q_I's cut-off (Hz)")
+    ap.add_argument("--inverse-modes", type=int, default=INVERSE.modes,
+                    help="modes of the identified plant")
+    ap.add_argument("--excitation-um", type=float, default=INVERSE.excitation_m * 1e6,
+                    help="the identifying run's excitation, rms per axis (µm)")
     ap.add_argument("--no-tracking", action="store_true",
                     help="skip the run with the real-time tracker term (the slowest)")
     ap.add_argument("--jobs", type=int, default=1, help="paths run in parallel processes")
@@ -448,9 +472,15 @@ def main(argv: list[str]) -> int:
     if args.learn < 0 or args.jobs < 1:
         ap.error(f"--learn must be ≥ 0 and --jobs ≥ 1, got {args.learn} and {args.jobs}")
     try:
+        inverse = dataclasses.replace(
+            INVERSE, gain=args.inverse_gain, gain_decay=args.inverse_decay,
+            regularisation=args.inverse_reg, cutoff_hz=args.inverse_cutoff,
+            modes=args.inverse_modes, excitation_m=args.excitation_um * 1e-6) \
+            if args.learn_law == "inverse" else None
         learning = dataclasses.replace(LEARNING, gain=args.learn_gain,
                                        gain_decay=args.learn_decay,
-                                       cutoff_hz=args.learn_cutoff, order=args.learn_order)
+                                       cutoff_hz=args.learn_cutoff, order=args.learn_order,
+                                       inverse=inverse)
     except ValueError as exc:
         ap.error(str(exc))
     t0 = time.time()
