@@ -454,8 +454,9 @@ class IterativeLearning:
     ``settings.inverse`` the runs go: the first update is (1) and adds a known
     excitation (:func:`.plant.excitation`, windowed) to the next run's offset; the update
     after that run identifies the plant from the two runs (``e_b − e_a = P (u_b −
-    u_a)``, the cycles measured in both), takes the excitation out again (``u`` and
-    ``e − P̂ x``) and from then on every update is (3).  :attr:`plant` is then the
+    u_a)``, the cycles measured in both) and makes the first update by (3) from the run
+    before the excited one (its offset and error: the excited run serves the
+    identification only); from then on every update is (3).  :attr:`plant` is then the
     identified model (keep it with ``u`` to go on learning the same path later).
     """
 
@@ -588,15 +589,17 @@ class IterativeLearning:
         motion = (self.grid >= 0) & (self.grid <= self.duration_s) & meas
         mag = np.linalg.norm(err[motion], axis=1)
         inv = self.settings.inverse
+        applied, learn_from = self.u.copy(), err
         if inv is not None and self.plant is None and self._excitation is not None \
                 and self._last is not None:
             u_a, e_a, m_a = self._last
-            self.identify(self.u - u_a, err - e_a, m_a & meas)
-            assert self.plant is not None
-            err = err - self.plant.simulate(self._excitation)  # the run without it
-            self.u = self.u - self._excitation
+            self.identify(applied - u_a, err - e_a, m_a & meas)
+            # the excited run served the identification: the first update by (3) starts
+            # from the run before it (whose error holds no excitation, and no error of
+            # the model's answer to it)
+            self.u, learn_from = u_a.copy(), e_a
             self._excitation = None
-        self._last = (self.u.copy(), err.copy(), meas.copy())
+        self._last = (applied, err.copy(), meas.copy())
         self.history.append({
             "rms_m": float(np.sqrt(np.mean(mag ** 2))) if mag.size else math.nan,
             "max_m": float(mag.max()) if mag.size else math.nan,
@@ -604,7 +607,7 @@ class IterativeLearning:
             "u_max_m": float(np.abs(self.u).max()),
             "law": "inverse" if self.plant is not None and inv is not None else "p",
             "excited": 0.0})
-        u = self.step(err)
+        u = self.step(learn_from)
         if inv is not None and self.plant is None:
             x = excitation(self.grid.size, self.settings.cycle_s, inv.excitation_m,
                            (inv.excitation_low_hz, inv.excitation_high_hz), inv.seed)
