@@ -167,6 +167,7 @@ def case(cell: TrackedCell, shape: str, speed: float, learn_runs: int = 0,
             "rows": {m: errors(r, shape) for m, r in runs.items()},
             "runs": runs, "final": final, "learn_on": learn_on,
             "learned_rms": [h["rms_m"] for h in learning.history],
+            "plant": learning.plant,
             "fresh": st.fresh_cycles / max(st.cycles, 1) if st else math.nan,
             "age_ms": (np.percentile(ages, 50), np.percentile(ages, 99), ages.max()),
             "rates": rates(runs[final]), "traj": traj, "wall_s": time.time() - t0}
@@ -354,8 +355,16 @@ def print_learning(results: list[dict], ls: LearningSettings) -> None:
     if not runs:
         return
     n = max(int(r["final"].split()[1]) for r in runs)
-    print(f"\niterative learning (L = {ls.gain:g}/(1 + {ls.gain_decay:g} k), Q {ls.cutoff_hz:g} Hz "
-          f"order {ls.order} zero phase, δ = τ; run 0 = {runs[0]['learn_on']}; perp 3σ / "
+    law = f"L = {ls.gain:g}/(1 + {ls.gain_decay:g} k), Q {ls.cutoff_hz:g} Hz order {ls.order} " \
+        "zero phase, δ = τ"
+    if ls.inverse is not None:
+        iv = ls.inverse
+        law = (f"run 1: P-type ({law}) + excitation {iv.excitation_m * 1e6:g} µm rms "
+               f"{iv.excitation_low_hz:g}–{iv.excitation_high_hz:g} Hz, identifies the plant "
+               f"({iv.modes} modes); runs 2…: model-inverting, γ = {iv.gain:g}/(1 + "
+               f"{iv.gain_decay:g} j), β = {iv.regularisation:g}, Q_I {iv.cutoff_hz:g} Hz "
+               f"order {iv.order}")
+    print(f"\niterative learning ({law}; run 0 = {runs[0]['learn_on']}; perp 3σ / "
           "along 3σ mm, true; in brackets the rms the tracker measured):")
     print("| path | speed mm/s | " + " | ".join(f"run {k}" for k in range(n + 1)) + " |")
     print("|---|---:|" + "---:|" * (n + 1))
@@ -364,6 +373,13 @@ def print_learning(results: list[dict], ls: LearningSettings) -> None:
         cells = [f"{r['rows'][k]['perp_3s'] * 1e3:.3f} / {r['rows'][k]['along_3s'] * 1e3:.3f}"
                  f" ({rms * 1e3:.3f})" for k, rms in zip(keys, r["learned_rms"], strict=True)]
         print(f"| {r['shape']} | {r['speed']:g} | " + " | ".join(cells) + " |")
+    for r in runs:
+        p = r.get("plant")
+        if p is not None:
+            print(f"identified on the {r['shape']} at {r['speed']:g} mm/s: modes "
+                  + ", ".join(f"{f:.2f} Hz (ζ {z:.3f})" for f, z in
+                              zip(p.frequency_hz, p.damping, strict=True))
+                  + f"; R² {p.fit:.3f}")
 
 
 def print_faults(shape: str, runs: list[tuple[str, PathRun]]) -> None:
