@@ -176,6 +176,21 @@ def identify_plant(u: ArrayLike, y: ArrayLike, cycle_s: float, *, modes: int = 5
         Shapes that do not match, non-finite data, too few measured cycles for the
         parameters, a band outside ``(0, 0.5/T)``, or an input without energy.
     """
+    U, Y, m = _checked(u, y, mask, modes, taps, band_hz, cycle_s)
+    found = _search_modes(U, Y, m, taps, modes, band_hz, grid_hz, damping0, cycle_s)
+    Ym = Y[m]
+    C, _ = _fit(U, Y, taps, found, cycle_s)
+    r = (Ym - _basis(U, taps, found, cycle_s)[m] @ C).ravel()
+    fit = 1.0 - float(r @ r) / max(float(((Ym - Ym.mean(0)) ** 2).sum()), 1e-300)
+    blocks = [C[3 * b: 3 * b + 3].T for b in range(taps + 2 * len(found))]
+    return ModalPlant(cycle_s, np.array(blocks[:taps]).reshape(taps, 3, 3),
+                      np.array([f for f, _ in found]), np.array([z for _, z in found]),
+                      np.array(blocks[taps:]).reshape(len(found), 2, 3, 3), fit)
+
+
+def _checked(u: ArrayLike, y: ArrayLike, mask: ArrayLike | None, modes: int, taps: int,
+             band_hz: tuple[float, float], cycle_s: float) -> tuple[Array, Array, NDArray]:
+    """:func:`identify_plant`'s input, checked: ``u``, ``y`` (G, 3) and the mask (G,)."""
     U = np.asarray(u, dtype=float)
     Y = np.asarray(y, dtype=float)
     if U.ndim != 2 or U.shape[1] != 3 or U.shape != Y.shape:
@@ -191,8 +206,7 @@ def identify_plant(u: ArrayLike, y: ArrayLike, cycle_s: float, *, modes: int = 5
         raise ValueError(f"identify_plant: modes must be 0–12 and taps 1–200, got {modes!r} "
                          f"and {taps!r}")
     nyq = 0.5 / cycle_s
-    lo, hi = band_hz
-    if not 0 < lo < hi < nyq:
+    if not 0 < band_hz[0] < band_hz[1] < nyq:
         raise ValueError(f"identify_plant: band_hz {band_hz!r} must lie within (0, {nyq:g}) Hz")
     n_par = 3 * (taps + 2 * modes)
     if m.sum() < 3 * n_par:
@@ -200,7 +214,16 @@ def identify_plant(u: ArrayLike, y: ArrayLike, cycle_s: float, *, modes: int = 5
                          f"coefficients per axis; need at least {3 * n_par}")
     if not np.any(U):
         raise ValueError("identify_plant: the input u is zero: nothing to identify")
+    return U, Y, m
+
+
+def _search_modes(U: Array, Y: Array, m: NDArray, taps: int, modes: int,
+                  band_hz: tuple[float, float], grid_hz: float, damping0: float,
+                  cycle_s: float) -> list[tuple[float, float]]:
+    """The modes ``(f_m, ζ_m)`` by variable projection: each new one from a grid search
+    over the frequency (the others fixed), then all refined together; sorted by ``f``."""
     Ym = Y[m]
+    lo, hi = band_hz
 
     def residual(found: list[tuple[float, float]]) -> Array:
         # the normal equations, columns scaled: fast inside the search (lstsq at the end)
@@ -211,8 +234,7 @@ def identify_plant(u: ArrayLike, y: ArrayLike, cycle_s: float, *, modes: int = 5
         return (Ym - Xs @ C).ravel()
 
     found: list[tuple[float, float]] = []
-    lb = [lo, 0.01]
-    ub = [hi, 0.5]
+    lb, ub = [lo, 0.01], [hi, 0.5]
     for _ in range(modes):
         grid = np.arange(lo, hi, grid_hz)
         cost = [float(np.sum(residual([*found, (f, damping0)]) ** 2)) for f in grid]
@@ -221,14 +243,7 @@ def identify_plant(u: ArrayLike, y: ArrayLike, cycle_s: float, *, modes: int = 5
         sol = least_squares(lambda x: residual(list(zip(x[::2], x[1::2], strict=True))), x0,
                             bounds=(lb * len(found), ub * len(found)), x_scale="jac")
         found = list(zip(sol.x[::2].tolist(), sol.x[1::2].tolist(), strict=True))
-    found.sort()
-    C, _ = _fit(U, Y, taps, found, cycle_s)
-    r = residual(found)
-    fit = 1.0 - float(r @ r) / max(float(((Ym - Ym.mean(0)) ** 2).sum()), 1e-300)
-    blocks = [C[3 * b: 3 * b + 3].T for b in range(taps + 2 * len(found))]
-    return ModalPlant(cycle_s, np.array(blocks[:taps]).reshape(taps, 3, 3),
-                      np.array([f for f, _ in found]), np.array([z for _, z in found]),
-                      np.array(blocks[taps:]).reshape(len(found), 2, 3, 3), fit)
+    return sorted(found)
 
 
 def excitation(cycles: int, cycle_s: float, rms_m: float,
