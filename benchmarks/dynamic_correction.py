@@ -1,8 +1,10 @@
 """Dynamic path correction on the twin: nominal, model-based, model + tracker (issue 38 §4).
 
     .venv/bin/python benchmarks/dynamic_correction.py [--shapes line,circle]
-        [--speeds 50,100,250] [--learn 4] [--learn-on model] [--jobs 2] [--faults]
-        [--udp] [--lead-ms MS] [--seed 0] [--plot docs/results/dynamic-correction.png]
+        [--speeds 50,100,250] [--learn 6] [--learn-on model] [--learn-law inverse]
+        [--inverse-cutoff 20] [--inverse-reg 0.05] [--inverse-gain 1] [--inverse-decay 1]
+        [--inverse-modes 5] [--excitation-um 20] [--jobs 2] [--faults] [--udp]
+        [--lead-ms MS] [--seed 0] [--plot docs/results/dynamic-correction.png]
 
 ``--shapes ''`` skips the main table (``--faults``/``--udp`` alone; their lead ``τ`` is
 then ``--lead-ms``, default the 8.0 ms the line at 100 mm/s measures).
@@ -22,7 +24,12 @@ the ``model`` run (or with ``--learn-on tracking`` the ``tracking`` run) is the 
 run of the repeated path; from its tracker samples the learning computes the offset of
 the next run, which runs with it (and the tracker's noise fresh: a seed per run), and so
 on ``N`` times — the rows ``learning 1 … N``; the learning sees only the tracker's
-samples, never the twin's truth.  ``--jobs`` runs the paths in parallel processes.
+samples, never the twin's truth.  With ``--learn-law inverse`` (the default) run 1 also
+carries a seeded excitation, from which (against run 0) the learning identifies the arm's
+plant — the few-mode model of :mod:`plugcell.compensation.tracking.plant` — and runs 2 …
+N learn with its norm-optimal inverse (``learning.py`` (3)), above the arm's modes;
+``--learn-law p`` is the P-type law alone, below them.  ``--jobs`` runs the paths in
+parallel processes.
 
 Errors, over the motion (path start to end + 0.2 s), of the *true* reflector (the T-MAC,
 the controller's TCP) against the path commanded at the same time ``T_p(t)``:
