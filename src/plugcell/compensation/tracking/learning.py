@@ -129,6 +129,10 @@ class InverseSettings:
     pad_s : float
         The signals' extension at each end for the FFT (s), longer than ``L̂``'s impulse
         response.
+    backoff : float
+        The supervisor (class :class:`IterativeLearning`): when a run's measured rms
+        error exceeds ``backoff`` times the best run's, ``u`` returns to the best run's
+        and ``β`` grows tenfold (≥ 1; 0 switches it off).
     """
 
     gain: float = 1.0
@@ -145,6 +149,7 @@ class InverseSettings:
     excitation_high_hz: float = 30.0
     seed: int = 0
     pad_s: float = 2.0
+    backoff: float = 1.15
 
     def __post_init__(self) -> None:
         for f in fields(self):
@@ -168,6 +173,9 @@ class InverseSettings:
                                  f"got {getattr(self, name)!r}")
         if self.gain_decay < 0:
             raise ValueError(f"InverseSettings.gain_decay must be ≥ 0, got {self.gain_decay!r}")
+        if not (self.backoff == 0 or self.backoff >= 1):
+            raise ValueError(f"InverseSettings.backoff must be 0 (off) or ≥ 1, "
+                             f"got {self.backoff!r}")
         for lo, hi in (("band_low_hz", "band_high_hz"),
                        ("excitation_low_hz", "excitation_high_hz")):
             if not 0 < getattr(self, lo) < getattr(self, hi):
@@ -489,6 +497,8 @@ class IterativeLearning:
         self._excitation: Array | None = None
         self._last: tuple[Array, Array, Array] | None = None  # (u, e, measured) of a run
         self._spectral: tuple[int, int, Array, Array, Array] | None = None
+        self._beta_scale = 1.0
+        self._best: tuple[float, Array, Array] | None = None  # (rms, u, e) of (3)'s runs
 
     @property
     def iterations(self) -> int:
@@ -533,7 +543,7 @@ class IterativeLearning:
             f = rfftfreq(n, T)
             b, a = butter(inv.order, inv.cutoff_hz, fs=1.0 / T)
             _, B = freqz(b, a, worN=f, fs=1.0 / T)
-            Lw = inverse_gain(self.plant.response(f), inv.regularisation)
+            Lw = inverse_gain(self.plant.response(f), inv.regularisation * self._beta_scale)
             fade = np.ones(n)
             h = pad // 2  # the pad's outer half fades to 0: no jump where the FFT wraps
             ramp = 0.5 - 0.5 * np.cos(np.pi * np.arange(h) / h)
@@ -600,12 +610,16 @@ class IterativeLearning:
             self.u, learn_from = u_a.copy(), e_a
             self._excitation = None
         self._last = (applied, err.copy(), meas.copy())
+        rms = float(np.sqrt(np.mean(mag ** 2))) if mag.size else math.nan
+        law = "inverse" if self.plant is not None and inv is not None else "p"
+        if law == "inverse" and learn_from is err and math.isfinite(rms):
+            learn_from, law = self._supervise(rms, applied, err, law)
         self.history.append({
-            "rms_m": float(np.sqrt(np.mean(mag ** 2))) if mag.size else math.nan,
+            "rms_m": rms,
             "max_m": float(mag.max()) if mag.size else math.nan,
             "measured": float(meas.mean()),
             "u_max_m": float(np.abs(self.u).max()),
-            "law": "inverse" if self.plant is not None and inv is not None else "p",
+            "law": law,
             "excited": 0.0})
         u = self.step(learn_from)
         if inv is not None and self.plant is None:
@@ -615,6 +629,24 @@ class IterativeLearning:
             self.u = u = self.u + self._excitation
             self.history[-1]["excited"] = 1.0
         return u.copy()
+
+    def _supervise(self, rms: float, applied: Array, err: Array, law: str
+                   ) -> tuple[Array, str]:
+        """The supervisor of (3): a run whose measured rms error exceeds ``backoff``
+        times the best run's (more than the noise moves it) says the model's error broke
+        (4) somewhere — ``u`` returns to the best run's, the update starts from that
+        run's error, and ``β`` grows tenfold (a smaller, more robust step)."""
+        inv = self.settings.inverse
+        assert inv is not None
+        if self._best is None or rms < self._best[0]:
+            self._best = (rms, applied.copy(), err.copy())
+            return err, law
+        if inv.backoff and rms > inv.backoff * self._best[0]:
+            self.u = self._best[1].copy()
+            self._beta_scale *= 10.0
+            self._spectral = None
+            return self._best[2], "inverse, backed off"
+        return err, law
 
     def update(self, sample_t: ArrayLike, sample_p: ArrayLike, path_t: ArrayLike,
                path_p: ArrayLike, start_s: float) -> Array:
