@@ -194,11 +194,31 @@ def test_a_wrong_model_breaks_the_contraction_and_the_iteration_diverges():
     not): ρ_I > 1, and the error grows run by run."""
     true = identified()
     wrong = ModalPlant(T, true.head, true.frequency_hz * 1.1, true.damping, true.residues)
-    inv = InverseSettings(gain=1.0, gain_decay=0.0, regularisation=1e-3, cutoff_hz=30.0)
+    inv = InverseSettings(gain=1.0, gain_decay=0.0, regularisation=1e-3, cutoff_hz=30.0,
+                          backoff=0.0)
     assert contraction_inverse(inv, T, F, true_response(), wrong.response(F)) > 1.0
     il = IterativeLearning(3.0, LearningSettings(inverse=inv), plant=wrong)
     norms, _ = run_inverse(il, disturbance(il.grid), 12)
     assert norms[-1] > 3 * min(norms)
+
+
+def test_the_supervisor_stops_a_divergence_from_the_measured_error():
+    """The same wrong model with the supervisor (backoff 1.15): a run whose measured rms
+    error exceeds 1.15× the best returns u to the best run's and raises β — the error
+    stays near the best run's instead of growing."""
+    true = identified()
+    wrong = ModalPlant(T, true.head, true.frequency_hz * 1.1, true.damping, true.residues)
+    inv = InverseSettings(gain=1.0, gain_decay=0.0, regularisation=1e-3, cutoff_hz=30.0)
+    il = IterativeLearning(3.0, LearningSettings(inverse=inv), plant=wrong)
+    d = disturbance(il.grid)
+    norms = []
+    for _ in range(12):
+        e = d + arm(il.u)
+        norms.append(float(np.linalg.norm(e)))
+        il.learn_error(e)
+    assert any(h["law"] == "inverse, backed off" for h in il.history)
+    assert max(norms[3:]) < 1.5 * min(norms)
+    assert norms[-1] < norms[0]
 
 
 def test_the_flow_excites_identifies_and_inverts_from_the_measured_error_alone():
@@ -248,6 +268,7 @@ def test_excitation_is_seeded_scaled_and_in_its_band():
     ({"gain": 2.0}, "gain"), ({"regularisation": 0.0}, "regularisation"),
     ({"order": 2.5}, "order"), ({"modes": 20}, "modes"), ({"cutoff_hz": math.nan}, "cutoff"),
     ({"band_low_hz": 50.0}, "band_low_hz"), ({"gain_decay": -1.0}, "gain_decay"),
+    ({"backoff": 0.5}, "backoff"),
 ])
 def test_bad_inverse_settings_are_named(kw, words):
     with pytest.raises(ValueError, match=words):
