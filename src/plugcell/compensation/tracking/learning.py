@@ -140,7 +140,7 @@ class InverseSettings:
     regularisation: float = 0.05
     cutoff_hz: float = 20.0
     order: int = 4
-    modes: int = 5
+    modes: int = 4
     taps: int = 8
     band_low_hz: float = 3.0
     band_high_hz: float = 40.0
