@@ -3,7 +3,7 @@
     .venv/bin/python benchmarks/dynamic_correction.py [--shapes line,circle]
         [--speeds 50,100,250] [--learn 6] [--learn-on model] [--learn-law inverse]
         [--inverse-cutoff 20] [--inverse-reg 0.05] [--inverse-gain 1] [--inverse-decay 1]
-        [--inverse-modes 5] [--excitation-um 20] [--jobs 2] [--faults] [--udp]
+        [--inverse-modes 4] [--excitation-um 20] [--jobs 2] [--faults] [--udp]
         [--lead-ms MS] [--seed 0] [--plot docs/results/dynamic-correction.png]
 
 ``--shapes ''`` skips the main table (``--faults``/``--udp`` alone; their lead ``τ`` is
