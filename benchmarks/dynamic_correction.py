@@ -1,8 +1,10 @@
 """Dynamic path correction on the twin: nominal, model-based, model + tracker (issue 38 §4).
 
     .venv/bin/python benchmarks/dynamic_correction.py [--shapes line,circle]
-        [--speeds 50,100,250] [--learn 4] [--learn-on model] [--jobs 2] [--faults]
-        [--udp] [--lead-ms MS] [--seed 0] [--plot docs/results/dynamic-correction.png]
+        [--speeds 50,100,250] [--learn 6] [--learn-on model] [--learn-law inverse]
+        [--inverse-cutoff 20] [--inverse-reg 0.05] [--inverse-gain 1] [--inverse-decay 1]
+        [--inverse-modes 4] [--excitation-um 20] [--jobs 2] [--faults] [--udp]
+        [--lead-ms MS] [--seed 0] [--plot docs/results/dynamic-correction.png]
 
 ``--shapes ''`` skips the main table (``--faults``/``--udp`` alone; their lead ``τ`` is
 then ``--lead-ms``, default the 8.0 ms the line at 100 mm/s measures).
@@ -22,7 +24,12 @@ the ``model`` run (or with ``--learn-on tracking`` the ``tracking`` run) is the 
 run of the repeated path; from its tracker samples the learning computes the offset of
 the next run, which runs with it (and the tracker's noise fresh: a seed per run), and so
 on ``N`` times — the rows ``learning 1 … N``; the learning sees only the tracker's
-samples, never the twin's truth.  ``--jobs`` runs the paths in parallel processes.
+samples, never the twin's truth.  With ``--learn-law inverse`` (the default) run 1 also
+carries a seeded excitation, from which (against run 0) the learning identifies the arm's
+plant — the few-mode model of :mod:`plugcell.compensation.tracking.plant` — and runs 2 …
+N learn with its norm-optimal inverse (``learning.py`` (3)), above the arm's modes;
+``--learn-law p`` is the P-type law alone, below them.  ``--jobs`` runs the paths in
+parallel processes.
 
 Errors, over the motion (path start to end + 0.2 s), of the *true* reflector (the T-MAC,
 the controller's TCP) against the path commanded at the same time ``T_p(t)``:
@@ -42,15 +49,22 @@ from __future__ import annotations
 import argparse
 import dataclasses
 import math
+import os
 import sys
 import threading
 import time
 from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
 
+# one BLAS thread per process: the machine is shared, and the learning's small solves
+# run many times slower when a BLAS spreads each of them over busy cores
+os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
+os.environ.setdefault("OMP_NUM_THREADS", "1")
+
 import numpy as np
 
 from plugcell.compensation.tracking import (
+    InverseSettings,
     IterativeLearning,
     LearningSettings,
     TrackingSettings,
@@ -73,6 +87,9 @@ GOALS = {100.0: 0.05e-3, 250.0: 0.10e-3}
 #: |Q| = 0.04 at the first mode, 9 Hz; 8 Hz diverged on the line at 250 mm/s), L = 0.8
 #: falling as 1/(1 + 0.5 k) to average the tracker's noise (docs/dynamic-correction.md)
 LEARNING = LearningSettings(gain=0.8, cutoff_hz=6.0, order=4, gain_decay=0.5)
+#: The model-inverting law (learning.py (3)) after one identifying run: Q_I above the
+#: modes (9–14 Hz on the twin), γ_j = 1/(1 + j) (the running mean of the runs' estimates)
+INVERSE = InverseSettings()
 
 
 def _three_sigma(x: np.ndarray) -> float:
@@ -157,6 +174,7 @@ def case(cell: TrackedCell, shape: str, speed: float, learn_runs: int = 0,
             "rows": {m: errors(r, shape) for m, r in runs.items()},
             "runs": runs, "final": final, "learn_on": learn_on,
             "learned_rms": [h["rms_m"] for h in learning.history],
+            "plant": learning.plant,
             "fresh": st.fresh_cycles / max(st.cycles, 1) if st else math.nan,
             "age_ms": (np.percentile(ages, 50), np.percentile(ages, 99), ages.max()),
             "rates": rates(runs[final]), "traj": traj, "wall_s": time.time() - t0}
@@ -363,8 +381,16 @@ def print_learning(results: list[dict], ls: LearningSettings) -> None:
     if not runs:
         return
     n = max(int(r["final"].split()[1]) for r in runs)
-    print(f"\niterative learning (L = {ls.gain:g}/(1 + {ls.gain_decay:g} k), Q {ls.cutoff_hz:g} Hz "
-          f"order {ls.order} zero phase, δ = τ; run 0 = {runs[0]['learn_on']}; perp 3σ / "
+    law = f"L = {ls.gain:g}/(1 + {ls.gain_decay:g} k), Q {ls.cutoff_hz:g} Hz order {ls.order} " \
+        "zero phase, δ = τ"
+    if ls.inverse is not None:
+        iv = ls.inverse
+        law = (f"run 1: P-type ({law}) + excitation {iv.excitation_m * 1e6:g} µm rms "
+               f"{iv.excitation_low_hz:g}–{iv.excitation_high_hz:g} Hz, identifies the plant "
+               f"({iv.modes} modes); runs 2…: model-inverting, γ = {iv.gain:g}/(1 + "
+               f"{iv.gain_decay:g} j), β = {iv.regularisation:g}, Q_I {iv.cutoff_hz:g} Hz "
+               f"order {iv.order}")
+    print(f"\niterative learning ({law}; run 0 = {runs[0]['learn_on']}; perp 3σ / "
           "along 3σ mm, true; in brackets the rms the tracker measured):")
     print("| path | speed mm/s | " + " | ".join(f"run {k}" for k in range(n + 1)) + " |")
     print("|---|---:|" + "---:|" * (n + 1))
@@ -373,6 +399,13 @@ def print_learning(results: list[dict], ls: LearningSettings) -> None:
         cells = [f"{r['rows'][k]['perp_3s'] * 1e3:.3f} / {r['rows'][k]['along_3s'] * 1e3:.3f}"
                  f" ({rms * 1e3:.3f})" for k, rms in zip(keys, r["learned_rms"], strict=True)]
         print(f"| {r['shape']} | {r['speed']:g} | " + " | ".join(cells) + " |")
+    for r in runs:
+        p = r.get("plant")
+        if p is not None:
+            print(f"identified on the {r['shape']} at {r['speed']:g} mm/s: modes "
+                  + ", ".join(f"{f:.2f} Hz (ζ {z:.3f})" for f, z in
+                              zip(p.frequency_hz, p.damping, strict=True))
+                  + f"; R² {p.fit:.3f}")
 
 
 def print_faults(shape: str, runs: list[tuple[str, PathRun]]) -> None:
@@ -452,6 +485,20 @@ def main(argv: list[str]) -> int:
     ap.add_argument("--learn-cutoff", type=float, default=LEARNING.cutoff_hz,
                     help="Q's cut-off (Hz)")
     ap.add_argument("--learn-order", type=int, default=LEARNING.order, help="Q's order")
+    ap.add_argument("--learn-law", choices=("inverse", "p"), default="inverse",
+                    help="inverse: the first update is P-type and excites the next run, "
+                    "which identifies the plant; then the model-inverting law (default); "
+                    "p: the P-type law alone")
+    ap.add_argument("--inverse-gain", type=float, default=INVERSE.gain, help="γ")
+    ap.add_argument("--inverse-decay", type=float, default=INVERSE.gain_decay,
+                    help="λ_I of γ/(1 + λ_I j)")
+    ap.add_argument("--inverse-reg", type=float, default=INVERSE.regularisation, help="β")
+    ap.add_argument("--inverse-cutoff", type=float, default=INVERSE.cutoff_hz,
+                    help="Q_I's cut-off (Hz)")
+    ap.add_argument("--inverse-modes", type=int, default=INVERSE.modes,
+                    help="modes of the identified plant")
+    ap.add_argument("--excitation-um", type=float, default=INVERSE.excitation_m * 1e6,
+                    help="the identifying run's excitation, rms per axis (µm)")
     ap.add_argument("--no-tracking", action="store_true",
                     help="skip the run with the real-time tracker term (the slowest)")
     ap.add_argument("--jobs", type=int, default=1, help="paths run in parallel processes")
@@ -467,9 +514,15 @@ def main(argv: list[str]) -> int:
     if args.learn < 0 or args.jobs < 1:
         ap.error(f"--learn must be ≥ 0 and --jobs ≥ 1, got {args.learn} and {args.jobs}")
     try:
+        inverse = dataclasses.replace(
+            INVERSE, gain=args.inverse_gain, gain_decay=args.inverse_decay,
+            regularisation=args.inverse_reg, cutoff_hz=args.inverse_cutoff,
+            modes=args.inverse_modes, excitation_m=args.excitation_um * 1e-6) \
+            if args.learn_law == "inverse" else None
         learning = dataclasses.replace(LEARNING, gain=args.learn_gain,
                                        gain_decay=args.learn_decay,
-                                       cutoff_hz=args.learn_cutoff, order=args.learn_order)
+                                       cutoff_hz=args.learn_cutoff, order=args.learn_order,
+                                       inverse=inverse)
     except ValueError as exc:
         ap.error(str(exc))
     t0 = time.time()

@@ -7,6 +7,7 @@ import numpy as np
 import pytest
 
 from plugcell.compensation.tracking import (
+    InverseSettings,
     IterativeLearning,
     LearningSettings,
     TrackingSettings,
@@ -105,6 +106,28 @@ def test_learning_from_the_trackers_samples_lowers_the_error_of_the_next_run(cel
     assert pl.mean() + 3 * pl.std() < 0.6 * (pm.mean() + 3 * pm.std())
     with pytest.raises(ValueError, match="needs the correction loop"):
         cell.run(traj, "nominal", learning=learning)
+
+
+def test_the_learning_identifies_the_arms_modes_from_the_tracker_and_inverts_them(cell):
+    """The model-inverting law on the twin: the model's run, the excited run (P-type
+    update + the excitation), then a run learned with the plant identified from the two
+    runs' tracker samples — the twin's first modes (9 and 12 Hz) are found, and the
+    learned run's true error is well below the model's."""
+    traj = cell.plan("line", 250.0, size_m=0.3)
+    s = TrackingSettings(lead_s=0.008)
+    learning = IterativeLearning(traj.duration, LearningSettings(
+        lead_s=0.008, cutoff_hz=6.0, order=4, inverse=InverseSettings(modes=4)))
+    model = cell.run(traj, "model", settings=s)
+    learn(learning, model)
+    assert learning.history[0]["excited"] == 1.0 and learning.plant is None
+    excited = cell.run(traj, "model", settings=s, learning=learning, stream_seed=11)
+    learn(learning, excited)
+    assert learning.plant is not None and learning.history[1]["law"] == "inverse"
+    f = learning.plant.frequency_hz
+    assert np.min(np.abs(f - 9.0)) < 0.3 and np.min(np.abs(f - 12.0)) < 0.4
+    learned = cell.run(traj, "model", settings=s, learning=learning, stream_seed=12)
+    pm, pl = _perp(model), _perp(learned)
+    assert pl.mean() + 3 * pl.std() < 0.5 * (pm.mean() + 3 * pm.std())
 
 
 def test_a_beam_break_on_the_twin_holds_the_model_and_the_robot_never_jumps(cell):

@@ -16,6 +16,9 @@ API (stable; the correction source and ``plugcell path run`` build on it)::
   between cycles), :class:`ResidualFilter` (Kalman filter on the residual of the
   calibrated model at the sample's joints: the age compensation).
 * :mod:`.limiter` — :class:`RateLimiter` (speed, acceleration, total; no overshoot).
+* :mod:`.learning` — :class:`IterativeLearning`: learning a repeated path's offset, the
+  P-type law below the modes, the model-inverting law above them; :mod:`.plant` — the
+  plant it inverts, identified from the runs (:func:`identify_plant`, :class:`ModalPlant`).
 * :mod:`.loop` — :class:`TrackingLoop`, :class:`TrackingSettings`: the law (lead +
   model-based feed-forward + tracker term), beam breaks, hold windows.
 
@@ -26,16 +29,21 @@ Pure math (numpy, SI units, no I/O).  The RSI correction source is
 
 from .estimator import JointHistory, ResidualFilter, TrackerMeasurement, steady_state_gain
 from .learning import (
+    InverseSettings,
     IterativeLearning,
     LearnedOffset,
     LearningSettings,
     contraction,
+    contraction_inverse,
+    inverse_gain,
     path_error,
 )
 from .limiter import RateLimiter
 from .loop import CycleOutput, HoldWindow, TrackingLoop, TrackingSettings, TrackingStats
+from .plant import ModalPlant, excitation, identify_plant
 
-__all__ = ["CycleOutput", "HoldWindow", "IterativeLearning", "JointHistory", "LearnedOffset",
-           "LearningSettings", "RateLimiter", "ResidualFilter", "TrackerMeasurement",
-           "TrackingLoop", "TrackingSettings", "TrackingStats", "contraction", "path_error",
-           "steady_state_gain"]
+__all__ = ["CycleOutput", "HoldWindow", "InverseSettings", "IterativeLearning", "JointHistory",
+           "LearnedOffset", "LearningSettings", "ModalPlant", "RateLimiter", "ResidualFilter",
+           "TrackerMeasurement", "TrackingLoop", "TrackingSettings", "TrackingStats",
+           "contraction", "contraction_inverse", "excitation", "identify_plant",
+           "inverse_gain", "path_error", "steady_state_gain"]

@@ -48,6 +48,36 @@ in (0, 2) keeps (2) for that run, and a gain that falls as ``1/k`` averages the 
 the runs (stochastic approximation: ``Σ L_k = ∞``, ``L_k → 0``) — fast at first, quiet
 later.
 
+**Learning above the modes: the model-inverting law.**  (1) must keep ``Q`` below the
+arm's first structural mode: near a lightly damped mode ``|P|`` is large and its phase
+turns through 180°, so ``|1 − L e^{jωδ} P| > 1`` there whatever ``L``.  With a plant
+identified from the runs themselves (:mod:`.plant`: one run carries a known excitation,
+``e_b − e_a = P (u_b − u_a)``), the learning filter inverts it instead — the norm-optimal
+ILC (Amann, Owens & Rogers, IEE Proc. D 143(2), 1996; Bristow et al. 2006, "Plant
+inversion" and "Norm-optimal" ILC) in the frequency domain, each frequency a 3×3
+complex matrix (the Jacobian mixes the axes)::
+
+    u_{k+1} = W · Q_I[ u_k − γ_j L̂ e_k ],   L̂(ω) = (P̂ᴴ P̂ + β I)⁻¹ P̂ᴴ           (3)
+
+(``L̂`` minimises ``|e_{k+1}|² + β |u_{k+1} − u_k|²`` per frequency for the model ``P̂``;
+``Q_I`` a zero-phase Butterworth of ``cutoff_hz``, above the modes; no phase lead: ``P̂``
+holds the dead time; ``γ_j = γ / (1 + λ_I j)`` for the ``j``-th update by (3)).  With the
+true plant ``P``: ``u_{k+1} = W Q_I (I − γ_j L̂ P) u_k + …``; the iteration contracts if
+
+    ρ_I = sup_ω |Q_I(ω)| · σ_max(I − γ L̂(ω) P(ω)) < 1                           (4)
+
+(:func:`contraction_inverse`).  For an exact model (``P̂ = P``), ``L̂ P = (Pᴴ P + β I)⁻¹
+Pᴴ P`` is Hermitian with eigenvalues ``s_i = σ_i² / (σ_i² + β)`` in ``[0, 1)`` (``σ_i``
+the singular values of ``P``), so ``I − γ L̂ P`` has the eigenvalues ``1 − γ s_i``:
+``|1 − γ s_i| < 1`` for ``0 < γ < 2`` wherever ``P`` is non-singular — ``ρ_I < 1`` at
+every frequency, modes included; the error falls there by ``1 − γ s_i`` a run.  ``β``
+buys robustness to the model's error (at a frequency where ``|P|`` is small the
+inverse's gain is at most ``1 / (2√β)``) at the price of a slower convergence there.
+Noise: a run's fresh noise ``n_k`` enters ``u`` through ``γ_j L̂``; the arm turns it back
+into ``≈ γ_j Q_I n_k`` of error — in ``Q_I``'s whole band, however large ``|P|`` is — hence
+``γ_j = 1/(1 + j)`` by default: the running mean of the runs' estimates, whose noise falls
+as ``1/√(j+1)``.
+
 Pure math: numpy and scipy, SI units, no I/O.
 """
 
@@ -58,13 +88,160 @@ from dataclasses import dataclass, field, fields
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
+from scipy.fft import irfft, next_fast_len, rfft, rfftfreq
 from scipy.signal import butter, filtfilt, freqz
 from scipy.signal.windows import tukey
 
+from .plant import ModalPlant, excitation, identify_plant
+
 Array = NDArray[np.float64]
 
-__all__ = ["IterativeLearning", "LearnedOffset", "LearningSettings", "contraction",
-           "path_error"]
+__all__ = ["InverseSettings", "IterativeLearning", "LearnedOffset", "LearningSettings",
+           "contraction", "contraction_inverse", "inverse_gain", "path_error"]
+
+
+@dataclass(frozen=True)
+class InverseSettings:
+    """The model-inverting law (3) and the identification its plant comes from; SI.
+
+    Attributes
+    ----------
+    gain : float
+        ``γ`` in (0, 2).
+    gain_decay : float
+        ``λ_I`` ≥ 0 of ``γ_j = γ / (1 + λ_I j)`` (1: the running mean of the runs).
+    regularisation : float
+        ``β`` > 0 of ``L̂ = (P̂ᴴ P̂ + β I)⁻¹ P̂ᴴ`` (``P̂`` is m/m: dimensionless).
+    cutoff_hz : float
+        ``Q_I``'s cut-off (Hz), above the modes to be learned, below the Nyquist rate.
+    order : int
+        ``Q_I``'s Butterworth order (zero phase: ``|Q_I| = |B|²``).
+    modes, taps : int
+        The identified model's modes ``M`` and FIR head ``K`` (:func:`.plant.identify_plant`).
+    band_low_hz, band_high_hz : float
+        Where the modes are searched (Hz).
+    excitation_m : float
+        The identifying run's excitation, rms per axis (m) (:func:`.plant.excitation`).
+    excitation_low_hz, excitation_high_hz : float
+        Its band (Hz).
+    seed : int
+        Its noise.
+    pad_s : float
+        The signals' extension at each end for the FFT (s), longer than ``L̂``'s impulse
+        response.
+    backoff : float
+        The supervisor (class :class:`IterativeLearning`): when a run's measured rms
+        error exceeds ``backoff`` times the best run's, ``u`` returns to the best run's
+        and ``β`` grows tenfold (≥ 1; 0 switches it off).
+    """
+
+    gain: float = 1.0
+    gain_decay: float = 1.0
+    regularisation: float = 0.05
+    cutoff_hz: float = 20.0
+    order: int = 4
+    modes: int = 4
+    taps: int = 8
+    band_low_hz: float = 3.0
+    band_high_hz: float = 40.0
+    excitation_m: float = 20e-6
+    excitation_low_hz: float = 1.0
+    excitation_high_hz: float = 30.0
+    seed: int = 0
+    pad_s: float = 2.0
+    backoff: float = 1.15
+
+    def __post_init__(self) -> None:
+        for f in fields(self):
+            v = getattr(self, f.name)
+            if not (isinstance(v, int | float) and not isinstance(v, bool)
+                    and math.isfinite(v)):
+                raise ValueError(f"InverseSettings.{f.name} must be a finite number, got {v!r}")
+        if not 0 < self.gain < 2:
+            raise ValueError(f"InverseSettings.gain (γ) must lie in (0, 2) for the iteration "
+                             f"to contract, got {self.gain!r}")
+        for name in ("order", "modes", "taps", "seed"):
+            if not isinstance(getattr(self, name), int):
+                raise ValueError(f"InverseSettings.{name} must be an integer, "
+                                 f"got {getattr(self, name)!r}")
+        if not (1 <= self.order <= 8 and 0 <= self.modes <= 12 and 1 <= self.taps <= 200):
+            raise ValueError(f"InverseSettings: order must be 1–8, modes 0–12 and taps 1–200, "
+                             f"got {self.order!r}, {self.modes!r} and {self.taps!r}")
+        for name in ("regularisation", "cutoff_hz", "excitation_m", "pad_s"):
+            if getattr(self, name) <= 0:
+                raise ValueError(f"InverseSettings.{name} must be > 0, "
+                                 f"got {getattr(self, name)!r}")
+        if self.gain_decay < 0:
+            raise ValueError(f"InverseSettings.gain_decay must be ≥ 0, got {self.gain_decay!r}")
+        if not (self.backoff == 0 or self.backoff >= 1):
+            raise ValueError(f"InverseSettings.backoff must be 0 (off) or ≥ 1, "
+                             f"got {self.backoff!r}")
+        for lo, hi in (("band_low_hz", "band_high_hz"),
+                       ("excitation_low_hz", "excitation_high_hz")):
+            if not 0 < getattr(self, lo) < getattr(self, hi):
+                raise ValueError(f"InverseSettings: need 0 < {lo} < {hi}, got "
+                                 f"{getattr(self, lo)!r} and {getattr(self, hi)!r}")
+
+    def check(self, cycle_s: float) -> None:
+        """The frequencies against the Nyquist rate of ``cycle_s``."""
+        nyq = 0.5 / cycle_s
+        for name in ("cutoff_hz", "band_high_hz", "excitation_high_hz"):
+            if getattr(self, name) >= nyq:
+                raise ValueError(f"InverseSettings.{name} {getattr(self, name)!r} must lie "
+                                 f"below the Nyquist rate {nyq:g} Hz")
+
+
+def inverse_gain(plant: ArrayLike, regularisation: float) -> NDArray[np.complex128]:
+    """``L̂ = (P̂ᴴ P̂ + β I)⁻¹ P̂ᴴ`` of (3) at each frequency.
+
+    Parameters
+    ----------
+    plant : (m, 3, 3) array_like of complex
+        ``P̂(e^{jωT})``, ``[f, i, j]``.
+    regularisation : float
+        ``β`` > 0.
+
+    Returns
+    -------
+    (m, 3, 3) complex array
+    """
+    P = np.asarray(plant, dtype=complex)
+    if P.ndim != 3 or P.shape[1:] != (3, 3):
+        raise ValueError(f"inverse_gain: expected a plant (m, 3, 3), got {P.shape}")
+    if not regularisation > 0:
+        raise ValueError(f"inverse_gain: regularisation must be > 0, got {regularisation!r}")
+    Ph = np.conj(np.swapaxes(P, 1, 2))
+    return np.linalg.solve(Ph @ P + regularisation * np.eye(3), Ph)
+
+
+def contraction_inverse(settings: InverseSettings, cycle_s: float, frequency_hz: ArrayLike,
+                        plant: ArrayLike, model: ArrayLike) -> float:
+    """``ρ_I`` of (4): ``max |Q_I| · σ_max(I − γ L̂ P)``, ``L̂`` from ``model``.
+
+    Parameters
+    ----------
+    settings : InverseSettings
+    cycle_s : float
+        ``T`` (s).
+    frequency_hz : (m,) array_like
+        Frequencies (Hz), 0 to the Nyquist rate.
+    plant, model : (m, 3, 3) array_like of complex
+        The true ``P`` and the model ``P̂`` the learning inverts, at those frequencies.
+
+    Returns
+    -------
+    float
+        ``ρ_I``; the iteration (3) contracts monotonically (2-norm) when ``ρ_I < 1``.
+    """
+    f = np.asarray(frequency_hz, dtype=float).reshape(-1)
+    P = np.asarray(plant, dtype=complex)
+    if P.shape != (f.size, 3, 3) or np.shape(model) != P.shape:
+        raise ValueError(f"contraction_inverse: plant and model must be ({f.size}, 3, 3), "
+                         f"got {P.shape} and {np.shape(model)}")
+    b, a = butter(settings.order, settings.cutoff_hz, fs=1.0 / cycle_s)
+    _, B = freqz(b, a, worN=f, fs=1.0 / cycle_s)
+    M = np.eye(3) - settings.gain * inverse_gain(model, settings.regularisation) @ P
+    return float(np.max(np.abs(B) ** 2 * np.linalg.norm(M, 2, axis=(1, 2))))
 
 
 @dataclass(frozen=True)
@@ -91,6 +268,8 @@ class LearningSettings:
         Bound on ``|u|`` per axis (m): a safety clip, not part of the law.
     gain_decay : float
         ``λ`` ≥ 0 of the decreasing gain ``L_k = L / (1 + λ k)`` (0: constant).
+    inverse : InverseSettings or None
+        The model-inverting law (3) after an identifying run (``None``: (1) alone).
     """
 
     gain: float = 0.8
@@ -103,9 +282,17 @@ class LearningSettings:
     taper_s: float = 0.15
     max_offset_m: float = 2e-3
     gain_decay: float = 0.0
+    inverse: InverseSettings | None = None
 
     def __post_init__(self) -> None:
+        if not (self.inverse is None or isinstance(self.inverse, InverseSettings)):
+            raise ValueError(f"LearningSettings.inverse must be InverseSettings or None, got "
+                             f"{self.inverse!r}")
+        if self.inverse is not None:
+            self.inverse.check(self.cycle_s)
         for f in fields(self):
+            if f.name == "inverse":
+                continue
             v = getattr(self, f.name)
             if not (isinstance(v, int | float) and not isinstance(v, bool)
                     and math.isfinite(v)):
@@ -244,13 +431,16 @@ class LearnedOffset:
 
 @dataclass
 class IterativeLearning:
-    """The learning of one repeated path (module docstring, (1)).
+    """The learning of one repeated path (module docstring, (1) and (3)).
 
     Parameters
     ----------
     duration_s : float
         The path's motion (s): the window runs from ``−pre_s`` to ``duration_s + post_s``.
     settings : LearningSettings
+    plant : ModalPlant, optional
+        An identified plant (:func:`.plant.identify_plant`) for the law (3); without one,
+        and with ``settings.inverse``, the learning identifies it itself (below).
 
     Attributes
     ----------
@@ -263,17 +453,27 @@ class IterativeLearning:
     history : list of dict
         Per update from a run (:meth:`update`): ``rms_m`` and ``max_m`` of the measured
         error's magnitude over the motion, ``measured`` (share of cycles measured),
-        ``u_max_m``.
+        ``u_max_m``, ``law`` (``"p"`` (1), ``"inverse"`` (3)), ``excited`` (1.0 if the
+        next run carries the identifying excitation).
 
     API note: ``feedforward(start_s)`` → the next run's :class:`LearnedOffset`;
-    ``update(sample_t, sample_p, path_t, path_p, start_s)`` after the run.
+    ``update(sample_t, sample_p, path_t, path_p, start_s)`` after the run (or
+    ``learn_error(e, measured)`` with the error already on the grid).  With
+    ``settings.inverse`` the runs go: the first update is (1) and adds a known
+    excitation (:func:`.plant.excitation`, windowed) to the next run's offset; the update
+    after that run identifies the plant from the two runs (``e_b − e_a = P (u_b −
+    u_a)``, the cycles measured in both) and makes the first update by (3) from the run
+    before the excited one (its offset and error: the excited run serves the
+    identification only); from then on every update is (3).  :attr:`plant` is then the
+    identified model (keep it with ``u`` to go on learning the same path later).
     """
 
     duration_s: float
     settings: LearningSettings = field(default_factory=LearningSettings)
+    plant: ModalPlant | None = None
     grid: Array = field(init=False)
     u: Array = field(init=False)
-    history: list[dict[str, float]] = field(init=False, default_factory=list)
+    history: list[dict[str, float | str]] = field(init=False, default_factory=list)
     steps: int = field(init=False, default=0)
 
     def __post_init__(self) -> None:
@@ -285,11 +485,20 @@ class IterativeLearning:
         if 2 * s.taper_s > (n - 1) * s.cycle_s:
             raise ValueError(f"LearningSettings.taper_s {s.taper_s!r} s is longer than half "
                              f"the learning window ({(n - 1) * s.cycle_s:g} s)")
+        if self.plant is not None and s.inverse is None:
+            raise ValueError("IterativeLearning: a plant is given but settings.inverse is "
+                             "None: the law (3) needs InverseSettings")
         self.grid = -s.pre_s + s.cycle_s * np.arange(n)
         self.u = np.zeros((n, 3))
         span = (n - 1) * s.cycle_s
         self._window = tukey(n, 2 * s.taper_s / span) if span > 0 else np.ones(n)
         self._b, self._a = s.q_filter()
+        self._inverse_steps = 0
+        self._excitation: Array | None = None
+        self._last: tuple[Array, Array, Array] | None = None  # (u, e, measured) of a run
+        self._spectral: tuple[int, int, Array, Array, Array] | None = None
+        self._beta_scale = 1.0
+        self._best: tuple[float, Array, Array] | None = None  # (rms, u, e) of (3)'s runs
 
     @property
     def iterations(self) -> int:
@@ -300,14 +509,21 @@ class IterativeLearning:
         """The offset for the next run whose motion starts at robot time ``start_s``."""
         return LearnedOffset(self.grid + float(start_s), self.u.copy())
 
-    def step(self, e: ArrayLike) -> Array:
-        """One update (1) from the error ``e`` (G, 3) on :attr:`grid` (m), with the gain
-        ``L_k`` of :attr:`steps` updates so far; the new ``u``."""
-        s = self.settings
+    def _check_error(self, e: ArrayLike, who: str) -> Array:
         err = np.asarray(e, dtype=float)
         if err.shape != self.u.shape or not np.all(np.isfinite(err)):
-            raise ValueError(f"IterativeLearning.step: expected a finite error of shape "
+            raise ValueError(f"IterativeLearning.{who}: expected a finite error of shape "
                              f"{self.u.shape}, got {err.shape}")
+        return err
+
+    def step(self, e: ArrayLike) -> Array:
+        """One update from the error ``e`` (G, 3) on :attr:`grid` (m): (3) once
+        :attr:`plant` is known (and ``settings.inverse`` set), else (1) with the gain
+        ``L_k`` of :attr:`steps` updates so far; the new ``u``."""
+        s = self.settings
+        err = self._check_error(e, "step")
+        if self.plant is not None and s.inverse is not None:
+            return self._inverse_step(err)
         ahead = np.column_stack([np.interp(self.grid + s.lead_s, self.grid, err[:, i],
                                            right=0.0) for i in range(3)])
         x = self.u - s.gain / (1.0 + s.gain_decay * self.steps) * ahead
@@ -316,19 +532,128 @@ class IterativeLearning:
         self.u = np.clip(u, -s.max_offset_m, s.max_offset_m)
         return self.u.copy()
 
+    def _spectra(self) -> tuple[int, int, Array, Array, Array]:
+        """The FFT's length ``n``, the pad, ``Q_I``, ``L̂`` on its bins and the pad's
+        fade (computed once per plant)."""
+        if self._spectral is None:
+            inv, T, G = self.settings.inverse, self.settings.cycle_s, self.grid.size
+            assert inv is not None and self.plant is not None
+            pad = max(round(inv.pad_s / T), 2)
+            n = next_fast_len(G + 2 * pad)
+            f = rfftfreq(n, T)
+            b, a = butter(inv.order, inv.cutoff_hz, fs=1.0 / T)
+            _, B = freqz(b, a, worN=f, fs=1.0 / T)
+            Lw = inverse_gain(self.plant.response(f), inv.regularisation * self._beta_scale)
+            fade = np.ones(n)
+            h = pad // 2  # the pad's outer half fades to 0: no jump where the FFT wraps
+            ramp = 0.5 - 0.5 * np.cos(np.pi * np.arange(h) / h)
+            fade[:h], fade[G + 2 * pad - h: G + 2 * pad] = ramp, ramp[::-1]
+            fade[G + 2 * pad:] = 0.0
+            self._spectral = (n, pad, np.abs(B) ** 2, Lw, fade)
+        return self._spectral
+
+    def _inverse_step(self, err: Array) -> Array:
+        """(3): ``u ← W · Q_I[u − γ_j L̂ e]`` by FFT (the signals extended by their end
+        values over ``pad_s`` and faded to zero)."""
+        s, inv = self.settings, self.settings.inverse
+        assert inv is not None
+        n, pad, Qw, Lw, fade = self._spectra()
+        G = self.grid.size
+
+        def spectrum(x: Array) -> Array:
+            xp = np.pad(x, ((pad, n - G - pad), (0, 0)), mode="edge") * fade[:, None]
+            return rfft(xp, axis=0)
+
+        gamma = inv.gain / (1.0 + inv.gain_decay * self._inverse_steps)
+        X = spectrum(self.u) - gamma * np.einsum("fij,fj->fi", Lw, spectrum(err))
+        u = irfft(Qw[:, None] * X, n, axis=0)[pad:pad + G] * self._window[:, None]
+        self._inverse_steps += 1
+        self.steps += 1
+        self.u = np.clip(u, -s.max_offset_m, s.max_offset_m)
+        return self.u.copy()
+
+    def identify(self, du: ArrayLike, de: ArrayLike, mask: ArrayLike | None = None
+                 ) -> ModalPlant:
+        """The plant from two runs (:mod:`.plant`, (1)): ``du`` the change of the offset
+        (G, 3), ``de`` the change of the measured error (G, 3) (m), ``mask`` the cycles
+        measured in both; sets and returns :attr:`plant`."""
+        inv = self.settings.inverse
+        if inv is None:
+            raise ValueError("IterativeLearning.identify: settings.inverse is None")
+        self.plant = identify_plant(du, de, self.settings.cycle_s, modes=inv.modes,
+                                    taps=inv.taps, mask=mask,
+                                    band_hz=(inv.band_low_hz, inv.band_high_hz))
+        self._spectral = None
+        return self.plant
+
+    def learn_error(self, e: ArrayLike, measured: ArrayLike | None = None) -> Array:
+        """Learn from one run's error ``e`` (G, 3) on :attr:`grid` (m), ``measured`` (G,)
+        the cycles with samples (default all): the history, the identification (with
+        ``settings.inverse``, class docstring), :meth:`step`; the new ``u``."""
+        err = self._check_error(e, "learn_error")
+        meas = np.ones(self.grid.size, bool) if measured is None else \
+            np.asarray(measured, bool).reshape(-1)
+        if meas.size != self.grid.size:
+            raise ValueError(f"IterativeLearning.learn_error: measured has {meas.size} "
+                             f"cycles, the grid {self.grid.size}")
+        motion = (self.grid >= 0) & (self.grid <= self.duration_s) & meas
+        mag = np.linalg.norm(err[motion], axis=1)
+        inv = self.settings.inverse
+        applied, learn_from = self.u.copy(), err
+        if inv is not None and self.plant is None and self._excitation is not None \
+                and self._last is not None:
+            u_a, e_a, m_a = self._last
+            self.identify(applied - u_a, err - e_a, m_a & meas)
+            # the excited run served the identification: the first update by (3) starts
+            # from the run before it (whose error holds no excitation, and no error of
+            # the model's answer to it)
+            self.u, learn_from = u_a.copy(), e_a
+            self._excitation = None
+        self._last = (applied, err.copy(), meas.copy())
+        rms = float(np.sqrt(np.mean(mag ** 2))) if mag.size else math.nan
+        law = "inverse" if self.plant is not None and inv is not None else "p"
+        if law == "inverse" and learn_from is err and math.isfinite(rms):
+            learn_from, law = self._supervise(rms, applied, err, law)
+        self.history.append({
+            "rms_m": rms,
+            "max_m": float(mag.max()) if mag.size else math.nan,
+            "measured": float(meas.mean()),
+            "u_max_m": float(np.abs(self.u).max()),
+            "law": law,
+            "excited": 0.0})
+        u = self.step(learn_from)
+        if inv is not None and self.plant is None:
+            x = excitation(self.grid.size, self.settings.cycle_s, inv.excitation_m,
+                           (inv.excitation_low_hz, inv.excitation_high_hz), inv.seed)
+            self._excitation = x * self._window[:, None]
+            self.u = u = self.u + self._excitation
+            self.history[-1]["excited"] = 1.0
+        return u.copy()
+
+    def _supervise(self, rms: float, applied: Array, err: Array, law: str
+                   ) -> tuple[Array, str]:
+        """The supervisor of (3): a run whose measured rms error exceeds ``backoff``
+        times the best run's (more than the noise moves it) says the model's error broke
+        (4) somewhere — ``u`` returns to the best run's, the update starts from that
+        run's error, and ``β`` grows tenfold (a smaller, more robust step)."""
+        inv = self.settings.inverse
+        assert inv is not None
+        if self._best is None or rms < self._best[0]:
+            self._best = (rms, applied.copy(), err.copy())
+            return err, law
+        if inv.backoff and rms > inv.backoff * self._best[0]:
+            self.u = self._best[1].copy()
+            self._beta_scale *= 10.0
+            self._spectral = None
+            return self._best[2], "inverse, backed off"
+        return err, law
+
     def update(self, sample_t: ArrayLike, sample_p: ArrayLike, path_t: ArrayLike,
                path_p: ArrayLike, start_s: float) -> Array:
         """Learn from one run: :func:`path_error` on the grid (robot times
-        ``start_s + grid``), then :meth:`step`.  Arguments as :func:`path_error`'s;
+        ``start_s + grid``), then :meth:`learn_error`.  Arguments as :func:`path_error`'s;
         ``start_s`` the robot time the run's motion started.  Returns the error (G, 3)."""
         e, measured = path_error(sample_t, sample_p, path_t, path_p,
                                  self.grid + float(start_s), self.settings.cycle_s)
-        motion = (self.grid >= 0) & (self.grid <= self.duration_s) & measured
-        mag = np.linalg.norm(e[motion], axis=1)
-        self.history.append({
-            "rms_m": float(np.sqrt(np.mean(mag ** 2))) if mag.size else math.nan,
-            "max_m": float(mag.max()) if mag.size else math.nan,
-            "measured": float(measured.mean()),
-            "u_max_m": float(np.abs(self.u).max())})
-        self.step(e)
+        self.learn_error(e, measured)
         return e
