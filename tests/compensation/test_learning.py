@@ -147,6 +147,18 @@ def test_the_error_is_averaged_per_cycle_against_the_path_at_the_sample_time():
     assert np.all(e[~measured] == 0)
 
 
+def test_no_sample_at_all_is_nothing_measured():
+    """A run the tracker never saw (no sample, or none inside the path) is an all-zero
+    float error with nothing measured, not numpy's integer bincount failing to divide."""
+    path_t = np.arange(0.0, 1.0, T)
+    path_p = np.zeros((path_t.size, 3))
+    grid = np.arange(0.1, 0.2, T)
+    for ts in (np.zeros(0), np.array([5.0])):       # none; one outside the path
+        e, measured = path_error(ts, np.zeros((ts.size, 3)), path_t, path_p, grid, T)
+        assert e.dtype == float and e.shape == (grid.size, 3) and not measured.any()
+        assert np.all(e == 0)
+
+
 def test_the_learned_offset_is_linear_between_cycles_and_zero_outside():
     lo = LearnedOffset(np.array([1.0, 1.004, 1.008]),
                        np.array([[0.0, 0, 0], [4e-6, 0, 0], [0, 0, 0]]))

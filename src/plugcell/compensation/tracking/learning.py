@@ -396,7 +396,9 @@ def path_error(sample_t: ArrayLike, sample_p: ArrayLike, path_t: ArrayLike,
     inside = (idx >= 0) & (idx < g.size)
     idx, d = idx[inside], (ps - cmd)[inside]
     count = np.bincount(idx, minlength=g.size).astype(float)
-    e = np.column_stack([np.bincount(idx, d[:, i], minlength=g.size) for i in range(3)])
+    # (bincount gives integers when there is no sample at all, whatever its weights)
+    e = np.column_stack([np.bincount(idx, d[:, i], minlength=g.size)
+                         for i in range(3)]).astype(float)
     measured = count > 0
     e[measured] /= count[measured, None]
     return e, measured

@@ -169,7 +169,7 @@ class RepeatedLearning:
         RunRecord
         """
         lr, rule = self.learning, self.rule
-        if np.size(sample_t) == 0:  # (path_error's integer bincount cannot take none)
+        if np.size(sample_t) == 0:  # nothing to judge the run by
             return self._record(len(self.records) + 1, math.nan, math.nan, 0.0, math.nan,
                                 "not learned", "the tracker measured 0 % of the motion")
         e, measured = path_error(sample_t, sample_p, path_t, path_p, lr.grid + float(start_s),
