@@ -24,6 +24,8 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
+from plugcell.apps.cli import CommandError
+
 from .streaming import (
     add_limit_options,
     add_run_controls,
@@ -86,7 +88,6 @@ def configure(p: argparse.ArgumentParser) -> None:
 
 def _config(args: argparse.Namespace, robot_host: str, listen: str):
     """The EgmConfig the options describe (limits converted to SI)."""
-    from plugcell.apps.cli import CommandError
     from plugcell.devices.robot.egm import (
         EgmConfig,
         EgmConfigError,
@@ -120,7 +121,6 @@ def _files(args: argparse.Namespace) -> int:
 def _ext_motion(args: argparse.Namespace):
     """The External Motion Interface Data entry of ``--mode pathcorr`` (``None`` for the
     other modes; CommandError when one of its options is given there, or is bad)."""
-    from plugcell.apps.cli import CommandError
     from plugcell.devices.robot.egm.controller_files import ExtMotion
 
     given = {"--ext-config": args.ext_config != "pathCorr", "--ext-kp": args.ext_kp != 5.0,
@@ -154,7 +154,6 @@ def _source(args: argparse.Namespace):
 
 
 def _run(args: argparse.Namespace) -> int:
-    from plugcell.apps.cli import CommandError
     from plugcell.devices.robot.egm import EgmLink
 
     config = _config(args, args.robot_ip, args.listen)
