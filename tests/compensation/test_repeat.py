@@ -10,7 +10,11 @@ import numpy as np
 import pytest
 from scipy.signal import cont2discrete, lfilter
 
-from plugcell.compensation.tracking.learning import IterativeLearning, LearningSettings
+from plugcell.compensation.tracking.learning import (
+    InverseSettings,
+    IterativeLearning,
+    LearningSettings,
+)
 from plugcell.compensation.tracking.repeat import RepeatedLearning, StopRule
 
 T = 0.004
@@ -91,6 +95,27 @@ def test_a_growing_error_stops_the_runs_and_rolls_the_offset_back():
     best = int(np.argmin([r.rms_m for r in rep.records]))
     np.testing.assert_array_equal(rep.learning.u, used[best])
     assert last.rms_m > 1.25 * rep.records[best].rms_m
+
+
+def test_the_inverse_laws_identifying_run_is_learned_from_but_not_judged():
+    """The run carrying the excitation errs by more than the divergence guard allows
+    (its error holds the excitation): it neither stops the runs nor becomes the best;
+    the plant is identified from it and the next updates are the inverse law's."""
+    inv = InverseSettings(excitation_m=0.3e-3, band_high_hz=20.0)
+    s = LearningSettings(gain=0.8, lead_s=0.008, cutoff_hz=4.0, max_offset_m=5e-3, inverse=inv)
+    rep = RepeatedLearning(IterativeLearning(DURATION, s), StopRule())
+    used = []
+    for k in range(3):
+        used.append(rep.learning.u.copy())
+        _run(rep, k)
+    first, excited, third = rep.records
+    assert (first.verdict, first.law) == ("learned", "p")
+    assert excited.rms_m > 1.25 * first.rms_m  # the guard would have fired on it
+    assert (excited.verdict, excited.law, excited.stop) == \
+        ("learned", "inverse", False)
+    assert excited.reason == "the identifying run (excitation): not judged"
+    assert rep.learning.plant is not None and third.law == "inverse"
+    assert third.verdict != "diverged" and third.rms_m < first.rms_m
 
 
 def test_a_run_the_tracker_hardly_saw_is_not_learned_from():

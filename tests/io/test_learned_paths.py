@@ -15,7 +15,11 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from plugcell.compensation.tracking.learning import IterativeLearning, LearningSettings
+from plugcell.compensation.tracking.learning import (
+    InverseSettings,
+    IterativeLearning,
+    LearningSettings,
+)
 from plugcell.compensation.tracking.repeat import RunRecord
 from plugcell.io.learned_paths import (
     LearnedContext,
@@ -117,6 +121,26 @@ def _mutated(**edits):
     return doc
 
 
+def test_the_law_is_recorded_and_read_back(tmp_path):
+    """``law``: the learning's own (``inverse`` when its settings have InverseSettings);
+    the inverse law's settings are not written (its plant is not kept: the file's
+    learning is read with the P-type settings, ``law`` says ``inverse``); a file
+    without the key is ``p``."""
+    assert _file().document()["law"] == "p" and load_learned(_write(tmp_path, _document())
+                                                             ).law == "p"
+    lr = IterativeLearning(1.0, dataclasses.replace(SETTINGS, inverse=InverseSettings()))
+    lr.u = _file().learning.u
+    f = LearnedFile(_context(), lr, [])
+    assert f.law == "inverse" and "inverse" not in f.document()["settings"]
+    save_learned(tmp_path / "i.json", f)
+    back = load_learned(tmp_path / "i.json")
+    assert back.law == "inverse" and back.learning.settings == SETTINGS
+    np.testing.assert_allclose(back.learning.u, lr.u, atol=1e-9)
+    assert load_learned(_write(tmp_path, _mutated(law=KeyError))).law == "p"
+    with pytest.raises(ValueError, match="law: expected one of p, inverse, got 'x'"):
+        LearnedFile(_context(), lr, [], "x")
+
+
 @pytest.mark.parametrize(("doc", "message"), [
     ("{not json", "not a JSON document"),
     ("[1, 2]", "expected a JSON object, got a list"),
@@ -140,6 +164,8 @@ def _mutated(**edits):
     (_mutated(**{"offset.t0_s": -0.2}), "offset: t0_s -0.2 and cycle_s 0.004 are not the "
      "settings' grid"),
     (_mutated(runs={}), "runs: expected a list of objects, got an object"),
+    (_mutated(law="q"), "law: expected one of p, inverse, got 'q'"),
+    (_mutated(law=None), "law: expected one of p, inverse, got None"),
 ])
 def test_a_corrupt_file_is_refused_naming_the_cause(tmp_path, doc, message):
     with pytest.raises(LearnedFileError) as info:

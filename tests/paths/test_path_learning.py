@@ -59,6 +59,12 @@ def _other_file(tmp_path: Path, text: str, name: str) -> Path:
     (("--learn", "2", "--learn-gain", "2.5"), "--learn-gain/--learn-cutoff: LearningSettings."
      "gain (L) must lie in (0, 2)"),
     (("--learn-gain", "1"), "--learn-gain/--learn-cutoff set up a new learning"),
+    (("--learn-law", "inverse"), "--learn-law needs --learn N: it is the law of a learning"),
+    (("--learn", "2", "--learn-law", "q"), "--learn-law: invalid choice: 'q'"),
+    (("--learned", "none.json", "--learn", "1", "--learn-law", "inverse"),
+     "--learn-law inverse starts a new learning: a learning continued from --learned FILE "
+     "cannot identify its plant again (the file does not keep it); continue with "
+     "--learn-law p or start anew"),
 ])
 def test_bad_learning_options_are_refused_before_anything_runs(tmp_path, args, message):
     (tmp_path / "p.csv").write_text(PATH)
@@ -133,6 +139,25 @@ def test_learning_runs_get_better_save_and_reuse_the_correction(tmp_path):
     assert "run 1/1 p.csv" in more.stderr  # progress
     cont = json.loads((tmp_path / "l2.json").read_text())
     assert len(cont["runs"]) == len(runs) + 1 and cont["steps"] == len(runs) + 1
+
+
+@pytest.mark.slow
+def test_the_inverse_law_learns_and_its_file_is_not_continued_as_inverse(tmp_path):
+    (tmp_path / "p.csv").write_text(PATH)
+    out = _cli("--path", "p.csv", "--learn", "3", "--learn-law", "inverse", "--learned-out",
+               "l.json", "--json", cwd=tmp_path)
+    assert out.returncode == 0, out.stderr
+    runs = json.loads(out.stdout)["runs"]
+    # the first update is the P-type law's (and adds the excitation), then the inverse's
+    assert [r["law"] for r in runs] == ["p", "inverse", "inverse"]
+    assert runs[1]["reason"] == "the identifying run (excitation): not judged"
+    saved = json.loads((tmp_path / "l.json").read_text())
+    assert saved["law"] == "inverse" and [r["law"] for r in saved["runs"]] == \
+        ["p", "inverse", "inverse"]
+    more = _cli("--path", "p.csv", "--learned", "l.json", "--learn", "1", cwd=tmp_path)
+    assert more.returncode == 2 and "l.json: learned with the inverse law, whose identified " \
+        "plant the file does not keep: continue with --learn-law p or start anew" in more.stderr
+    assert "run " not in more.stdout
 
 
 @pytest.mark.slow

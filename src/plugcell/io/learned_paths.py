@@ -11,10 +11,12 @@ on differs::
                  "payload_kg": 36.0, "calibration": "nominal" | "sha256:…",
                  "residual_layer": false, "loop": "tracking" | "model",
                  "reflector": "6dof" | "3dof", "duration_s": 1.144},
+     "law": "p" | "inverse",                            # the learning law
      "settings": {"gain": 0.8, "lead_s": 0.008, …},   # LearningSettings, SI
      "steps": 4,                                        # updates so far (the gain's k)
      "runs": [{"run": 1, "measured_rms_mm": …, "measured_max_mm": …,
-               "measured_share": …, "change_max_mm": …, "verdict": "learned"}, …],
+               "measured_share": …, "change_max_mm": …, "verdict": "learned",
+               "law": "p"}, …],
      "offset": {"t0_s": -0.3, "cycle_s": 0.004, "u_mm": [[x, y, z], …]}}
 
 * ``path_sha256`` — SHA-256 of the path's geometry as read (the poses in µm and µrad,
@@ -26,6 +28,11 @@ on differs::
   from, and whether its residual layer was used;
 * ``loop``, ``reflector`` — the loop the offset was learned on top of (the learned
   offset compensates what *that* loop left);
+* ``law`` — ``p`` (the P-type law) or ``inverse`` (the norm-optimal inverse of an
+  identified plant, ``LearningSettings.inverse``; a file without the key is ``p``).  The
+  identified plant is **not** saved: an ``inverse`` file's offset can be fed forward, and
+  its learning is read with the P-type settings (:attr:`LearnedFile.law` says
+  ``inverse``, so that a caller can refuse to continue it as the inverse law);
 * ``u_mm`` — millimetres in the cell's frame F0, one row per robot cycle from
   ``t0_s`` (s from the motion's start); its length is the learning's grid for
   ``duration_s`` and the settings.
@@ -60,6 +67,8 @@ __all__ = ["FORMAT", "FORMAT_VERSION", "LearnedContext", "LearnedFile", "Learned
 
 FORMAT = "plugcell-learned-path"
 FORMAT_VERSION = 1
+#: The learning laws a file may record.
+LAWS = ("p", "inverse")
 #: Tolerances of the context's comparison: speeds (relative), tool (mm, deg), payload
 #: (kg), duration (s).
 SPEED_REL, TOOL_TOL, PAYLOAD_TOL = 1e-9, 1e-3, 1e-6
@@ -141,18 +150,29 @@ def _cal(c: LearnedContext) -> str:
 
 @dataclass
 class LearnedFile:
-    """A learned correction: its context, the learning's state and its runs so far."""
+    """A learned correction: its context, the learning's state, its runs so far and the
+    law it was learned with (``law``: None — the learning's own, ``inverse`` when its
+    settings have ``inverse``, else ``p``)."""
 
     context: LearnedContext
     learning: IterativeLearning
     runs: list[dict[str, Any]]
+    law: str | None = None
+
+    def __post_init__(self) -> None:
+        if self.law is None:
+            self.law = "p" if self.learning.settings.inverse is None else "inverse"
+        if self.law not in LAWS:
+            raise ValueError(f"law: expected one of {', '.join(LAWS)}, got {self.law!r}")
 
     def document(self) -> dict[str, Any]:
         """The JSON document (module docstring)."""
         lr = self.learning
+        settings = dataclasses.asdict(lr.settings)
+        del settings["inverse"]  # the law's own settings are InverseSettings' defaults
         return {"format": FORMAT, "format_version": FORMAT_VERSION,
-                "context": dataclasses.asdict(self.context),
-                "settings": dataclasses.asdict(lr.settings), "steps": int(lr.steps),
+                "context": dataclasses.asdict(self.context), "law": self.law,
+                "settings": settings, "steps": int(lr.steps),
                 "runs": self.runs,
                 "offset": {"t0_s": float(lr.grid[0]), "cycle_s": lr.settings.cycle_s,
                            "u_mm": np.round(lr.u * MM_PER_M, 6).tolist()}}
@@ -164,7 +184,8 @@ def run_entries(records: list[RunRecord], before: list[dict[str, Any]]) -> list[
     for r in records:
         out.append({"run": len(out) + 1, "measured_rms_mm": r.rms_m * MM_PER_M,
                     "measured_max_mm": r.max_m * MM_PER_M, "measured_share": r.measured,
-                    "change_max_mm": r.change_m * MM_PER_M, "verdict": r.verdict})
+                    "change_max_mm": r.change_m * MM_PER_M, "verdict": r.verdict,
+                    "law": r.law})
     return out
 
 
@@ -254,8 +275,13 @@ def _from_document(doc: Any) -> LearnedFile:
         raise ParamsError(f"format_version {version}: this plugcell reads version "
                           f"{FORMAT_VERSION}")
     ctx = _context(doc)
+    law = doc.get("law", "p")
+    if law not in LAWS:
+        raise ParamsError(f"law: expected one of {', '.join(LAWS)}, got {law!r}")
     values = {}
     for f in fields(LearningSettings):
+        if f.name == "inverse":
+            continue
         values[f.name] = _integer(doc, "settings", f.name) if f.name == "order" else \
             _number(doc, "settings", f.name)
     try:
@@ -271,7 +297,7 @@ def _from_document(doc: Any) -> LearnedFile:
     runs = _at(doc, "runs")
     if not isinstance(runs, list) or not all(isinstance(r, dict) for r in runs):
         raise ParamsError(f"runs: expected a list of objects, got {_typename(runs)}")
-    return LearnedFile(ctx, learning, runs)
+    return LearnedFile(ctx, learning, runs, law)
 
 
 def _offset(doc: dict[str, Any], learning: IterativeLearning) -> Array:

@@ -18,16 +18,16 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from plugcell.compensation.tracking.learning import LearningSettings
+from plugcell.compensation.tracking.learning import InverseSettings, LearningSettings
 from plugcell.compensation.tracking.repeat import RepeatedLearning, RunRecord
-from plugcell.io.learned_paths import LearnedContext, path_sha256
+from plugcell.io.learned_paths import LAWS, LearnedContext, path_sha256
 from plugcell.io.path_files import PathFile
 from plugcell.io.robots import load_robot
 from plugcell.io.units import MM_PER_M, robot_from_pose
 from plugcell.kinematics import forward
 from plugcell.sim.path_run import PathRun, PathRunOptions, plan_path, run_path
 
-__all__ = ["LEARNING", "RepeatRun", "learned_context", "learning_settings", "repeat_path"]
+__all__ = ["LAWS", "LEARNING", "RepeatRun", "learned_context", "learning_settings", "repeat_path"]
 
 #: The learning on the twin (benchmarks/dynamic_correction.py's, docs/dynamic-correction.md):
 #: Q 6 Hz order 4 below the arm's first mode (9 Hz), L = 0.8 falling as 1/(1 + 0.5 k),
@@ -41,10 +41,17 @@ SEED_STEP = 1000
 
 
 def learning_settings(options: PathRunOptions, gain: float | None = None,
-                      cutoff_hz: float | None = None) -> LearningSettings:
-    """:data:`LEARNING` at the link's cycle, bounded by the link's largest offset."""
+                      cutoff_hz: float | None = None, law: str = "p") -> LearningSettings:
+    """:data:`LEARNING` at the link's cycle, bounded by the link's largest offset, with
+    the law ``law``: ``p`` the P-type law (1) alone; ``inverse`` its first update with
+    the identifying excitation, then the norm-optimal inverse (3) of the identified plant
+    (:class:`InverseSettings`' defaults, docs/dynamic-correction.md "learning above the
+    modes")."""
+    if law not in LAWS:
+        raise ValueError(f"the learning law must be one of {', '.join(LAWS)}, got {law!r}")
     return dataclasses.replace(
-        LEARNING, cycle_s=0.004, max_offset_m=options.max_offset_mm / MM_PER_M,
+        LEARNING, inverse=InverseSettings() if law == "inverse" else None,
+        cycle_s=0.004, max_offset_m=options.max_offset_mm / MM_PER_M,
         gain=LEARNING.gain if gain is None else gain,
         cutoff_hz=LEARNING.cutoff_hz if cutoff_hz is None else cutoff_hz)
 

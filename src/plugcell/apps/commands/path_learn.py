@@ -45,6 +45,10 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="write the learned correction (JSON) after the runs")
     g.add_argument("--learn-gain", type=float, metavar="L",
                    help="the learning gain L in (0, 2) of a new learning (default 0.8)")
+    g.add_argument("--learn-law", choices=("p", "inverse"),
+                   help="the law of a new learning: p, the P-type law (default), or inverse: "
+                   "an identifying run with a known excitation, then the norm-optimal "
+                   "inverse of the identified plant")
     g.add_argument("--learn-cutoff", type=float, metavar="HZ",
                    help="the learning filter's cut-off of a new learning (default 6 Hz, below "
                    "the arm's first mode)")
@@ -67,6 +71,12 @@ def wants_learning(args: argparse.Namespace) -> bool:
         raise CommandError("--learn-gain/--learn-cutoff set up a new learning (--learn N "
                            "without --learned: a learning continued from a file keeps its "
                            "settings)")
+    if args.learn_law is not None and args.learn is None:
+        raise CommandError("--learn-law needs --learn N: it is the law of a learning")
+    if args.learn_law == "inverse" and args.learned is not None:
+        raise CommandError("--learn-law inverse starts a new learning: a learning continued "
+                           "from --learned FILE cannot identify its plant again (the file "
+                           "does not keep it); continue with --learn-law p or start anew")
     return args.learn is not None or args.learned is not None
 
 
@@ -103,10 +113,15 @@ def _session(args: argparse.Namespace, path: Any, name: str, options: Any,
         why = file.context.mismatch(context)
         if why is not None:
             raise CommandError(f"{args.learned}: cannot be used for this run: {why}")
+        if file.law == "inverse" and args.learn is not None and args.learn_law != "p":
+            raise CommandError(f"{args.learned}: learned with the inverse law, whose "
+                               "identified plant the file does not keep: continue with "
+                               "--learn-law p or start anew")
         learning, before = file.learning, file.runs
     else:
         try:
-            settings = learning_settings(options, args.learn_gain, args.learn_cutoff)
+            settings = learning_settings(options, args.learn_gain, args.learn_cutoff,
+                                         args.learn_law or "p")
         except ValueError as exc:
             raise CommandError(f"--learn-gain/--learn-cutoff: {exc}") from None
         learning = IterativeLearning(context.duration_s, settings)
@@ -128,6 +143,7 @@ def _row(k: int, run: Any, record: Any) -> dict[str, Any]:
             "measured_share": math.nan if record is None else record.measured,
             "change_max_mm": math.nan if record is None else record.change_m * mm,
             "verdict": "ended early" if record is None else record.verdict,
+            "law": None if record is None else record.law or None,
             "reason": run.ended if record is None else record.reason,
             "windows_without_tracking": [
                 [round(w.start_s, 3), None if w.end_s is None else round(w.end_s, 3),

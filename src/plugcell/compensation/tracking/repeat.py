@@ -18,6 +18,10 @@ around it when a path is run ``N`` times (``plugcell path run --learn N``):
   ``Δu_min`` (``max |u_{k+1} − u_k|``): more runs would not pay; ``u`` is set to the
   offset the best run used (``argmin_j r_j``, measured), not the last update's (never
   run);
+* **the identifying run** of the inverse law (it carried the known excitation,
+  :class:`~.learning.IterativeLearning`) is learned from (the plant is identified from
+  it) but not judged: its error holds the excitation, so it neither sets the best run
+  nor ends the runs;
 * **what was never measured**: the motion's cycles no learned run measured (a beam
   break at the same place in every run), as windows of the path's time — there ``u``
   is only what ``Q`` and ``W`` spread into them, not learned.
@@ -94,6 +98,8 @@ class RunRecord:
         ``learned``, ``converged``, ``diverged`` or ``not learned``.
     reason : str
         Why the runs stop (or why this run was not learned from); ``""`` otherwise.
+    law : str
+        The law of the update this run gave (``"p"``, ``"inverse"``; ``""``: no update).
     """
 
     run: int
@@ -103,6 +109,7 @@ class RunRecord:
     change_m: float
     verdict: str
     reason: str = ""
+    law: str = ""
 
     @property
     def stop(self) -> bool:
@@ -185,6 +192,13 @@ class RepeatedLearning:
             return self._record(run, rms, peak, share, math.nan, "not learned",
                                 f"the tracker measured {100 * share:.0f} % of the motion "
                                 f"(less than {100 * rule.min_measured:.0f} %)")
+        if lr.history and lr.history[-1]["excited"] == 1.0:  # the run carried it
+            before = lr.u.copy()
+            lr.update(sample_t, sample_p, path_t, path_p, start_s)
+            self._seen |= seen
+            return self._record(run, rms, peak, share, float(np.abs(lr.u - before).max()),
+                                "learned", "the identifying run (excitation): not judged",
+                                str(lr.history[-1]["law"]))
         best = self._best
         if best is not None and rms > (1.0 + rule.diverged_rel) * best[0]:
             lr.u, lr.steps = best[1].copy(), best[2]
@@ -199,25 +213,26 @@ class RepeatedLearning:
         lr.update(sample_t, sample_p, path_t, path_p, start_s)
         self._seen |= seen
         change = float(np.abs(lr.u - before).max())
+        law = str(lr.history[-1]["law"])
         if best is not None and rms > (1.0 - rule.converged_rel) * best[0]:
             return self._converged(run, rms, peak, share, change,
                                    f"the measured error {rms * 1e3:.4f} mm rms is less than "
                                    f"{100 * rule.converged_rel:g} % below the best run's "
-                                   f"{best[0] * 1e3:.4f} mm")
+                                   f"{best[0] * 1e3:.4f} mm", law)
         if change < rule.min_change_m:
             return self._converged(run, rms, peak, share, change,
                                    f"the learned offset changed by {change * 1e3:.4f} mm "
-                                   f"(less than {rule.min_change_m * 1e3:g} mm)")
-        return self._record(run, rms, peak, share, change, "learned")
+                                   f"(less than {rule.min_change_m * 1e3:g} mm)", law)
+        return self._record(run, rms, peak, share, change, "learned", "", law)
 
     def _converged(self, run: int, rms: float, peak: float, share: float, change: float,
-                   reason: str) -> RunRecord:
+                   reason: str, law: str) -> RunRecord:
         """End the runs as converged, ``u`` back to the offset the best run used."""
         assert self._best is not None
         self.learning.u, self.learning.steps = self._best[1].copy(), self._best[2]
         return self._record(run, rms, peak, share, change, "converged",
                             reason + "; the offset kept is the one the best run "
-                            f"({self._best[0] * 1e3:.4f} mm rms) used")
+                            f"({self._best[0] * 1e3:.4f} mm rms) used", law)
 
     def _record(self, *args: object) -> RunRecord:
         rec = RunRecord(*args)  # type: ignore[arg-type]
