@@ -60,6 +60,9 @@ def _other_file(tmp_path: Path, text: str, name: str) -> Path:
      "gain (L) must lie in (0, 2)"),
     (("--learn-gain", "1"), "--learn-gain/--learn-cutoff set up a new learning"),
     (("--learn-law", "inverse"), "--learn-law needs --learn N: it is the law of a learning"),
+    (("--learn", "1", "--learn-law", "inverse"), "--learn-law inverse needs --learn N ≥ 2, "
+     "got 1: the first run's update adds a known excitation, the second run identifies the "
+     "plant from it"),
     (("--learn", "2", "--learn-law", "q"), "--learn-law: invalid choice: 'q'"),
     (("--learned", "none.json", "--learn", "1", "--learn-law", "inverse"),
      "--learn-law inverse starts a new learning: a learning continued from --learned FILE "

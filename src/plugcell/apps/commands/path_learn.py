@@ -73,6 +73,10 @@ def wants_learning(args: argparse.Namespace) -> bool:
                            "settings)")
     if args.learn_law is not None and args.learn is None:
         raise CommandError("--learn-law needs --learn N: it is the law of a learning")
+    if args.learn_law == "inverse" and args.learn < 2:
+        raise CommandError(f"--learn-law inverse needs --learn N ≥ 2, got {args.learn}: the "
+                           "first run's update adds a known excitation, the second run "
+                           "identifies the plant from it")
     if args.learn_law == "inverse" and args.learned is not None:
         raise CommandError("--learn-law inverse starts a new learning: a learning continued "
                            "from --learned FILE cannot identify its plant again (the file "
