@@ -64,7 +64,7 @@ def _other_file(tmp_path: Path, text: str, name: str) -> Path:
      "got 1: the first run's update adds a known excitation, the second run identifies the "
      "plant from it"),
     (("--learn", "2", "--learn-law", "q"), "--learn-law: invalid choice: 'q'"),
-    (("--learned", "none.json", "--learn", "1", "--learn-law", "inverse"),
+    (("--learned", "none.json", "--learn", "2", "--learn-law", "inverse"),
      "--learn-law inverse starts a new learning: a learning continued from --learned FILE "
      "cannot identify its plant again (the file does not keep it); continue with "
      "--learn-law p or start anew"),
