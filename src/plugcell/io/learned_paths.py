@@ -80,7 +80,18 @@ class LearnedFileError(ValueError):
 
 def path_sha256(path: PathFile) -> str:
     """SHA-256 (hex) of a path's geometry: poses rounded to 1 µm / 1 µrad, the tracking
-    flags and whether it is oriented (not its speeds, not the file's text)."""
+    flags and whether it is oriented (not its speeds, not the file's text).
+
+    Parameters
+    ----------
+    path : PathFile
+        The path as read (:mod:`plugcell.io.path_files`).
+
+    Returns
+    -------
+    str
+        64 hexadecimal digits.
+    """
     h = hashlib.sha256()
     h.update(np.round(np.asarray(path.poses, float) * 1e6).astype(np.int64).tobytes())
     h.update(np.asarray(path.tracking, bool).tobytes())
@@ -90,7 +101,29 @@ def path_sha256(path: PathFile) -> str:
 
 @dataclass(frozen=True)
 class LearnedContext:
-    """What a learned correction was learned for (module docstring)."""
+    """What a learned correction was learned for (module docstring).
+
+    Attributes
+    ----------
+    path, path_sha256 : str
+        The path file's name and the SHA-256 of its geometry (not of its text).
+    speeds_mm_s : tuple of float
+        Each segment's speed (mm/s).
+    robot : str
+        The robot (its name or description file).
+    tool_mm_deg : tuple of float
+        The TCP ``(x, y, z, a, b, c)`` (mm, degrees).
+    payload_kg : float
+        The payload (kg).
+    calibration : str
+        ``nominal`` or the SHA-256 of the PARAMS.json.
+    residual_layer : bool
+        Whether the calibration's learned residual layer was used.
+    loop, reflector : str
+        The tracking loop's kind and the tracker's reflector.
+    duration_s : float
+        The motion's duration (s).
+    """
 
     path: str
     path_sha256: str
@@ -151,8 +184,20 @@ def _cal(c: LearnedContext) -> str:
 @dataclass
 class LearnedFile:
     """A learned correction: its context, the learning's state, its runs so far and the
-    law it was learned with (``law``: None — the learning's own, ``inverse`` when its
-    settings have ``inverse``, else ``p``)."""
+    law it was learned with.
+
+    Parameters
+    ----------
+    context : LearnedContext
+        What it was learned for.
+    learning : IterativeLearning
+        The learning's settings and state (``u``, the steps taken).
+    runs : list of dict
+        Each run's measured figures, as written.
+    law : {"p", "inverse"}, optional
+        None: the learning's own — ``inverse`` when its settings have ``inverse``, else
+        ``p``.
+    """
 
     context: LearnedContext
     learning: IterativeLearning
@@ -191,7 +236,15 @@ def run_entries(records: list[RunRecord], before: list[dict[str, Any]]) -> list[
 
 def save_learned(path: str | Path, learned: LearnedFile) -> None:
     """Write ``learned`` as JSON to ``path`` (whole or not at all: a temporary file then
-    a rename)."""
+    a rename).
+
+    Parameters
+    ----------
+    path : str or Path
+        The file.
+    learned : LearnedFile
+        What to write.
+    """
     p = Path(path)
     text = json.dumps(_clean(learned.document()), indent=1, allow_nan=False) + "\n"
     tmp = p.with_name(p.name + ".tmp")
@@ -201,6 +254,15 @@ def save_learned(path: str | Path, learned: LearnedFile) -> None:
 
 def load_learned(path: str | Path) -> LearnedFile:
     """Read a learned correction (module docstring).
+
+    Parameters
+    ----------
+    path : str or Path
+        The file.
+
+    Returns
+    -------
+    LearnedFile
 
     Raises
     ------
