@@ -150,7 +150,10 @@ def test_direct_handlers_and_query_replies_pin_too(
     assert until(ask)
     # the queryable's callback, the reply's and the end of the query's each pinned (a
     # query that finds nobody may end at once, on the asking thread: pinned there too)
-    assert len([t for t in pins if t != threading.get_ident()]) >= 3
+    # (which thread runs each is Zenoh's: under load the end of the query ran on the
+    # asking thread once — CI run 13 — so the pins are counted wherever they ran)
+    assert len(pins) >= 3
+    assert len([t for t in pins if t != threading.get_ident()]) >= 2
     assert handed == []
     served.undeclare()
 
