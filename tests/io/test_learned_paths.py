@@ -20,6 +20,7 @@ from plugcell.compensation.tracking.learning import (
     IterativeLearning,
     LearningSettings,
 )
+from plugcell.compensation.tracking.plant import ModalPlant
 from plugcell.compensation.tracking.repeat import RunRecord
 from plugcell.io.learned_paths import (
     LearnedContext,
@@ -30,6 +31,7 @@ from plugcell.io.learned_paths import (
     run_entries,
     save_learned,
 )
+from plugcell.io.params import _clean
 from plugcell.io.path_files import parse_path
 
 PATH = "x,y,z,speed\n1473.3,-231.7,2488.4,\n1473.3,-131.7,2488.4,100\n"
@@ -121,24 +123,128 @@ def _mutated(**edits):
     return doc
 
 
+INVERSE = InverseSettings(gain=0.9, regularisation=0.02, modes=2, taps=3, seed=7)
+
+
+def _plant() -> ModalPlant:
+    rng = np.random.default_rng(3)
+    return ModalPlant(SETTINGS.cycle_s, rng.normal(0, 0.1, (3, 3, 3)),
+                      np.array([9.2, 13.7]), np.array([0.04, 0.06]),
+                      rng.normal(0, 0.01, (2, 2, 3, 3)), 0.93)
+
+
+def _inverse_file(plant: ModalPlant | None = None) -> LearnedFile:
+    """An inverse-law learning with its plant identified and 2 updates by (3), β backed
+    off once."""
+    lr = IterativeLearning(1.0, dataclasses.replace(SETTINGS, inverse=INVERSE),
+                           _plant() if plant is None else plant)
+    lr.u = _file().learning.u
+    lr.steps = 3
+    lr.resume_inverse(2, 10.0)
+    return LearnedFile(_context(), lr, [])
+
+
 def test_the_law_is_recorded_and_read_back(tmp_path):
     """``law``: the learning's own (``inverse`` when its settings have InverseSettings);
-    the inverse law's settings are not written (its plant is not kept: the file's
-    learning is read with the P-type settings, ``law`` says ``inverse``); a file
-    without the key is ``p``."""
+    a file without the key is ``p``; a version-1 file of the inverse law (no plant) is
+    read with the P-type settings, ``law`` says ``inverse``, and is continued only by the
+    P-type law."""
     assert _file().document()["law"] == "p" and load_learned(_write(tmp_path, _document())
                                                              ).law == "p"
-    lr = IterativeLearning(1.0, dataclasses.replace(SETTINGS, inverse=InverseSettings()))
-    lr.u = _file().learning.u
-    f = LearnedFile(_context(), lr, [])
-    assert f.law == "inverse" and "inverse" not in f.document()["settings"]
+    assert "inverse" not in _document()
+    assert load_learned(_write(tmp_path, _mutated(law=KeyError))).law == "p"
+    v1 = _mutated(law="inverse", format_version=1)
+    back = load_learned(_write(tmp_path, v1))
+    assert back.law == "inverse" and back.learning.settings == SETTINGS
+    assert back.continued("p") is back.learning
+    with pytest.raises(ValueError, match=r"it was learned with the inverse law but holds no "
+                       r"identified plant .* continue it by the P-type law or start anew"):
+        back.continued()
+    with pytest.raises(ValueError, match="law: expected one of p, inverse, got 'x'"):
+        LearnedFile(_context(), _file().learning, [], "x")
+
+
+def test_the_inverse_law_keeps_its_plant_and_goes_on(tmp_path):
+    """Version 2: the inverse law's settings, updates, β's scale and identified plant are
+    saved and read back; the learning continues by (3) exactly as the one saved would."""
+    f = _inverse_file()
+    doc = f.document()
+    assert doc["format_version"] == 2 and doc["law"] == "inverse"
+    assert doc["inverse"]["steps"] == 2 and doc["inverse"]["regularisation_scale"] == 10.0
     save_learned(tmp_path / "i.json", f)
     back = load_learned(tmp_path / "i.json")
-    assert back.law == "inverse" and back.learning.settings == SETTINGS
-    np.testing.assert_allclose(back.learning.u, lr.u, atol=1e-9)
-    assert load_learned(_write(tmp_path, _mutated(law=KeyError))).law == "p"
-    with pytest.raises(ValueError, match="law: expected one of p, inverse, got 'x'"):
-        LearnedFile(_context(), lr, [], "x")
+    lr, lb = f.learning, back.learning
+    assert back.law == "inverse" and lb.settings == lr.settings and lb.settings.inverse == INVERSE
+    assert (lb.inverse_steps, lb.regularisation_scale, lb.steps) == (2, 10.0, 3)
+    for name in ("head", "frequency_hz", "damping", "residues"):
+        np.testing.assert_array_equal(getattr(lb.plant, name), getattr(lr.plant, name))
+    assert lb.plant.fit == lr.plant.fit and back.continued() is lb
+    # the same update from the same error (1 nm rounding of u in the file)
+    e = 2e-5 * np.cos(np.outer(lr.grid, [3.0, 1.0, 2.0]))
+    np.testing.assert_allclose(lb.step(e), lr.step(e), atol=1e-8)
+    # continued by the P-type law: the offset and steps kept, no plant
+    p = back.continued("p")
+    assert p.settings.inverse is None and p.plant is None and p.steps == 4  # one step above
+    np.testing.assert_allclose(p.u, lb.u)
+    with pytest.raises(ValueError, match="it was learned with the P-type law"):
+        _file().continued("inverse")
+
+
+def test_an_inverse_file_saved_before_the_identification_is_not_continued_by_it(tmp_path):
+    lr = IterativeLearning(1.0, dataclasses.replace(SETTINGS, inverse=INVERSE))
+    f = LearnedFile(_context(), lr, [])
+    assert f.document()["inverse"]["plant"] is None
+    save_learned(tmp_path / "i.json", f)
+    back = load_learned(tmp_path / "i.json")
+    assert back.learning.settings.inverse == INVERSE and back.learning.plant is None
+    with pytest.raises(ValueError, match="holds no identified plant"):
+        back.continued("inverse")
+
+
+def _inverse_mutated(**edits):
+    doc = json.loads(json.dumps(_clean(_inverse_file().document())))
+    for key, value in edits.items():
+        *parents, last = key.split(".")
+        d = doc
+        for k in parents:
+            d = d[int(k)] if isinstance(d, list) else d[k]
+        if value is KeyError:
+            del d[last]
+        else:
+            d[int(last) if isinstance(d, list) else last] = value
+    return doc
+
+
+@pytest.mark.parametrize(("edits", "message"), [
+    ({"law": "p"}, "inverse: the state of the inverse law in a file learned with the law 'p'"),
+    ({"inverse.settings.gain": 2.0}, "inverse.settings: InverseSettings.gain (γ) must lie in"),
+    ({"inverse.settings.modes": 2.5}, "inverse.settings.modes: expected an integer"),
+    ({"inverse.settings.cutoff_hz": 300.0}, "inverse.settings: InverseSettings.cutoff_hz "
+     "300.0 must lie below the Nyquist rate 125 Hz"),
+    ({"inverse.steps": -1}, "inverse.steps must be ≥ 0, got -1"),
+    ({"inverse.regularisation_scale": 0.5}, "inverse.regularisation_scale must be ≥ 1"),
+    ({"inverse.plant.cycle_s": 0.012}, "inverse.plant.cycle_s: 0.012 s is not the learning's "
+     "cycle 0.004 s"),
+    ({"inverse.plant.head": []}, "inverse.plant.head: expected 1–200 taps, got 0"),
+    ({"inverse.plant.head.1": [[0, 0, 0]] * 2}, "inverse.plant.head[1]: expected 3 entries, "
+     "got 2"),
+    ({"inverse.plant.head.0.2.1": "x"}, "inverse.plant.head[0][2][1]: expected a finite "
+     "number, got the string 'x'"),
+    ({"inverse.plant.residues.1.0.2.2": 3e6}, "inverse.plant.residues: a coefficient beyond "
+     "±1e+06 (m/m)"),
+    ({"inverse.plant.damping": [0.04]}, "inverse.plant.damping: expected 2 entries, got 1"),
+    ({"inverse.plant.damping.1": 1.5}, "inverse.plant.damping[1]: 1.5 must lie in (0, 1)"),
+    ({"inverse.plant.frequency_hz.0": 200.0}, "inverse.plant.frequency_hz[0]: 200.0 Hz must "
+     "lie in (0, 125) Hz"),
+    ({"inverse.plant.residues": [[]]}, "inverse.plant.residues: expected 2 entries, got 1"),
+    ({"inverse.plant.fit": "good"}, "fit: expected a finite number, got the string 'good'"),
+    ({"inverse.plant": 3}, "inverse.plant: expected an object, got the number 3"),
+    ({"inverse.settings.seed": KeyError}, "missing key 'inverse.settings.seed'"),
+])
+def test_a_corrupt_inverse_state_is_refused_naming_the_cause(tmp_path, edits, message):
+    with pytest.raises(LearnedFileError) as info:
+        load_learned(_write(tmp_path, _inverse_mutated(**edits)))
+    assert message in str(info.value)
 
 
 @pytest.mark.parametrize(("doc", "message"), [
@@ -146,7 +252,7 @@ def test_the_law_is_recorded_and_read_back(tmp_path):
     ("[1, 2]", "expected a JSON object, got a list"),
     ({"format": "plugcell-tracked-path"}, "format 'plugcell-tracked-path': not a learned "
      "correction (expected 'plugcell-learned-path'"),
-    (_mutated(format_version=2), "format_version 2: this plugcell reads version 1"),
+    (_mutated(format_version=3), "format_version 3: this plugcell reads versions 1, 2"),
     (_mutated(**{"context.robot": KeyError}), "missing key 'context.robot'"),
     (_mutated(**{"context.payload_kg": "36"}),
      "context.payload_kg: expected a finite number, got the string '36'"),
@@ -222,14 +328,18 @@ def _leaves(doc, prefix=()):
     yield prefix
 
 
-LEAVES = [p for p in _leaves(_document()) if p]
+DOCUMENTS = {"p": _document(),
+             "inverse": json.loads(json.dumps(_clean(_inverse_file().document())))}
+LEAVES = [(k, p) for k, d in DOCUMENTS.items() for p in _leaves(d) if p]
 
 
-@settings(max_examples=200, deadline=None,
+@settings(max_examples=300, deadline=None,
           suppress_health_check=[HealthCheck.function_scoped_fixture])
 @given(st.sampled_from(LEAVES), JSON | st.just(KeyError))
-def test_any_mutation_of_a_valid_file_is_refused_or_loads(tmp_path, where, value):
-    doc = copy.deepcopy(_document())
+def test_any_mutation_of_a_valid_file_is_refused_or_loads(tmp_path, leaf, value):
+    """Of a P-type file and of an inverse-law file with its plant."""
+    which, where = leaf
+    doc = copy.deepcopy(DOCUMENTS[which])
     d = doc
     for k in where[:-1]:
         d = d[k]
@@ -247,3 +357,7 @@ def test_any_mutation_of_a_valid_file_is_refused_or_loads(tmp_path, where, value
         return
     assert f.learning.u.shape == (f.learning.grid.size, 3)
     assert np.all(np.isfinite(f.learning.u))
+    plant = f.learning.plant
+    if plant is not None:  # a plant that loads is one the law can use
+        assert np.all(np.isfinite(plant.response(np.array([0.0, 10.0]))))
+        f.learning.step(np.zeros_like(f.learning.u))

@@ -64,10 +64,6 @@ def _other_file(tmp_path: Path, text: str, name: str) -> Path:
      "got 1: the first run's update adds a known excitation, the second run identifies the "
      "plant from it"),
     (("--learn", "2", "--learn-law", "q"), "--learn-law: invalid choice: 'q'"),
-    (("--learned", "none.json", "--learn", "2", "--learn-law", "inverse"),
-     "--learn-law inverse starts a new learning: a learning continued from --learned FILE "
-     "cannot identify its plant again (the file does not keep it); continue with "
-     "--learn-law p or start anew"),
 ])
 def test_bad_learning_options_are_refused_before_anything_runs(tmp_path, args, message):
     (tmp_path / "p.csv").write_text(PATH)
@@ -145,7 +141,7 @@ def test_learning_runs_get_better_save_and_reuse_the_correction(tmp_path):
 
 
 @pytest.mark.slow
-def test_the_inverse_law_learns_and_its_file_is_not_continued_as_inverse(tmp_path):
+def test_the_inverse_law_learns_and_its_file_is_continued_as_inverse(tmp_path):
     (tmp_path / "p.csv").write_text(PATH)
     out = _cli("--path", "p.csv", "--learn", "3", "--learn-law", "inverse", "--learned-out",
                "l.json", "--json", cwd=tmp_path)
@@ -157,10 +153,25 @@ def test_the_inverse_law_learns_and_its_file_is_not_continued_as_inverse(tmp_pat
     saved = json.loads((tmp_path / "l.json").read_text())
     assert saved["law"] == "inverse" and [r["law"] for r in saved["runs"]] == \
         ["p", "inverse", "inverse"]
-    more = _cli("--path", "p.csv", "--learned", "l.json", "--learn", "1", cwd=tmp_path)
-    assert more.returncode == 2 and "l.json: learned with the inverse law, whose identified " \
-        "plant the file does not keep: continue with --learn-law p or start anew" in more.stderr
-    assert "run " not in more.stdout
+    assert saved["format_version"] == 2 and saved["inverse"]["plant"]["frequency_hz"]
+    # the file keeps the identified plant: the learning goes on by the inverse law
+    more = _cli("--path", "p.csv", "--learned", "l.json", "--learn", "1", "--learned-out",
+                "m.json", "--json", cwd=tmp_path)
+    assert more.returncode == 0, more.stderr
+    assert [r["law"] for r in json.loads(more.stdout)["runs"]] == ["inverse"]
+    again = json.loads((tmp_path / "m.json").read_text())
+    assert again["inverse"]["plant"] == saved["inverse"]["plant"]
+    assert again["inverse"]["steps"] == saved["inverse"]["steps"] + 1
+    # by the P-type law on request; a P-type file is not continued by the inverse law
+    p = _cli("--path", "p.csv", "--learned", "l.json", "--learn", "1", "--learn-law", "p",
+             "--learned-out", "p.json", "--json", cwd=tmp_path)
+    assert p.returncode == 0 and [r["law"] for r in json.loads(p.stdout)["runs"]] == ["p"]
+    assert json.loads((tmp_path / "p.json").read_text())["law"] == "p"
+    refused = _cli("--path", "p.csv", "--learned", "p.json", "--learn", "1", "--learn-law",
+                   "inverse", cwd=tmp_path)
+    assert refused.returncode == 2 and "p.json: cannot be continued by the law inverse: it " \
+        "was learned with the P-type law" in refused.stderr
+    assert "run " not in refused.stdout
 
 
 @pytest.mark.slow

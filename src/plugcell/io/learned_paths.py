@@ -5,13 +5,14 @@ the next run adds to its target, on the path's time grid — and **what it was l
 for**, so that a later run refuses it, before moving the robot, when anything it depends
 on differs::
 
-    {"format": "plugcell-learned-path", "format_version": 1,
+    {"format": "plugcell-learned-path", "format_version": 2,
      "context": {"path": "line.csv", "path_sha256": "…", "speeds_mm_s": [100.0],
                  "robot": "smart_h4", "tool_mm_deg": [x, y, z, a, b, c],
                  "payload_kg": 36.0, "calibration": "nominal" | "sha256:…",
                  "residual_layer": false, "loop": "tracking" | "model",
                  "reflector": "6dof" | "3dof", "duration_s": 1.144},
      "law": "p" | "inverse",                            # the learning law
+     "inverse": {"settings": …, "plant": …, …},         # the inverse law's (version 2)
      "settings": {"gain": 0.8, "lead_s": 0.008, …},   # LearningSettings, SI
      "steps": 4,                                        # updates so far (the gain's k)
      "runs": [{"run": 1, "measured_rms_mm": …, "measured_max_mm": …,
@@ -29,10 +30,12 @@ on differs::
 * ``loop``, ``reflector`` — the loop the offset was learned on top of (the learned
   offset compensates what *that* loop left);
 * ``law`` — ``p`` (the P-type law) or ``inverse`` (the norm-optimal inverse of an
-  identified plant, ``LearningSettings.inverse``; a file without the key is ``p``).  The
-  identified plant is **not** saved: an ``inverse`` file's offset can be fed forward, and
-  its learning is read with the P-type settings (:attr:`LearnedFile.law` says
-  ``inverse``, so that a caller can refuse to continue it as the inverse law);
+  identified plant, ``LearningSettings.inverse``; a file without the key is ``p``);
+* ``inverse`` (version 2, only with the inverse law) — the law's settings, its updates
+  so far, ``β``'s scale and the **identified plant** (:mod:`plugcell.io.learned_plant`),
+  so that the learning goes on by the inverse law (:meth:`LearnedFile.continued`).  A
+  version-1 file (or one saved before the plant was identified) keeps no plant: its
+  offset can be fed forward and continued by the P-type law, not by the inverse law;
 * ``u_mm`` — millimetres in the cell's frame F0, one row per robot cycle from
   ``t0_s`` (s from the motion's start); its length is the learning's grid for
   ``duration_s`` and the settings.
@@ -55,6 +58,7 @@ from numpy.typing import NDArray
 
 from plugcell.compensation.tracking.learning import IterativeLearning, LearningSettings
 from plugcell.compensation.tracking.repeat import RunRecord
+from plugcell.io.learned_plant import inverse_document, read_inverse, read_plant
 from plugcell.io.params import ParamsError, _at, _clean, _integer, _number, _typename
 from plugcell.io.path_files import PathFile
 from plugcell.io.text_files import read_text
@@ -66,7 +70,9 @@ __all__ = ["FORMAT", "FORMAT_VERSION", "LearnedContext", "LearnedFile", "Learned
            "load_learned", "path_sha256", "save_learned"]
 
 FORMAT = "plugcell-learned-path"
-FORMAT_VERSION = 1
+FORMAT_VERSION = 2
+#: The versions this plugcell reads (1: without the inverse law's state).
+READ_VERSIONS = (1, 2)
 #: The learning laws a file may record.
 LAWS = ("p", "inverse")
 #: Tolerances of the context's comparison: speeds (relative), tool (mm, deg), payload
@@ -214,13 +220,53 @@ class LearnedFile:
         """The JSON document (module docstring)."""
         lr = self.learning
         settings = dataclasses.asdict(lr.settings)
-        del settings["inverse"]  # the law's own settings are InverseSettings' defaults
+        del settings["inverse"]  # in "inverse", with the law's state
+        inverse = inverse_document(lr)
         return {"format": FORMAT, "format_version": FORMAT_VERSION,
                 "context": dataclasses.asdict(self.context), "law": self.law,
+                **({} if inverse is None else {"inverse": inverse}),
                 "settings": settings, "steps": int(lr.steps),
                 "runs": self.runs,
                 "offset": {"t0_s": float(lr.grid[0]), "cycle_s": lr.settings.cycle_s,
                            "u_mm": np.round(lr.u * MM_PER_M, 6).tolist()}}
+
+
+    def continued(self, law: str | None = None) -> IterativeLearning:
+        """The learning to go on with by ``law`` (None: the file's own).
+
+        Parameters
+        ----------
+        law : {"p", "inverse"} or None
+            ``p`` continues an inverse-law file by the P-type law (its offset and steps
+            kept); ``inverse`` needs the file's identified plant.
+
+        Returns
+        -------
+        IterativeLearning
+
+        Raises
+        ------
+        ValueError
+            The law cannot continue this file (why).
+        """
+        lr, want = self.learning, self.law if law is None else law
+        if want not in LAWS:
+            raise ValueError(f"law: expected one of {', '.join(LAWS)}, got {want!r}")
+        if want == "p":
+            if lr.settings.inverse is None:
+                return lr
+            out = IterativeLearning(lr.duration_s,
+                                    dataclasses.replace(lr.settings, inverse=None))
+            out.u, out.steps = lr.u.copy(), lr.steps
+            return out
+        if self.law == "p":
+            raise ValueError("it was learned with the P-type law: the inverse law starts "
+                             "with an identifying run of its own (start anew)")
+        if lr.plant is None or lr.settings.inverse is None:
+            raise ValueError("it was learned with the inverse law but holds no identified "
+                             "plant (saved before the identifying run was learned from, or "
+                             "format version 1): continue it by the P-type law or start anew")
+        return lr
 
 
 def run_entries(records: list[RunRecord], before: list[dict[str, Any]]) -> list[dict[str, Any]]:
@@ -333,9 +379,9 @@ def _from_document(doc: Any) -> LearnedFile:
         raise ParamsError(f"format {fmt!r}: not a learned correction (expected {FORMAT!r}, "
                           "the file of plugcell path run --learned-out)")
     version = _integer(doc, "format_version")
-    if version != FORMAT_VERSION:
-        raise ParamsError(f"format_version {version}: this plugcell reads version "
-                          f"{FORMAT_VERSION}")
+    if version not in READ_VERSIONS:
+        raise ParamsError(f"format_version {version}: this plugcell reads versions "
+                          f"{', '.join(map(str, READ_VERSIONS))}")
     ctx = _context(doc)
     law = doc.get("law", "p")
     if law not in LAWS:
@@ -346,11 +392,7 @@ def _from_document(doc: Any) -> LearnedFile:
             continue
         values[f.name] = _integer(doc, "settings", f.name) if f.name == "order" else \
             _number(doc, "settings", f.name)
-    try:
-        settings = LearningSettings(**values)
-        learning = IterativeLearning(ctx.duration_s, settings)
-    except ValueError as exc:
-        raise ParamsError(f"settings: {exc}") from None
+    learning = _learning(doc, ctx, law, LearningSettings(**_checked_settings(values)))
     steps = _integer(doc, "steps")
     if steps < 0:
         raise ParamsError(f"steps must be ≥ 0, got {steps}")
@@ -360,6 +402,39 @@ def _from_document(doc: Any) -> LearnedFile:
     if not isinstance(runs, list) or not all(isinstance(r, dict) for r in runs):
         raise ParamsError(f"runs: expected a list of objects, got {_typename(runs)}")
     return LearnedFile(ctx, learning, runs, law)
+
+
+def _checked_settings(values: dict[str, Any]) -> dict[str, Any]:
+    """``values`` once LearningSettings accepts them (a ParamsError naming the cause)."""
+    try:
+        LearningSettings(**values)
+    except ValueError as exc:
+        raise ParamsError(f"settings: {exc}") from None
+    return values
+
+
+def _learning(doc: dict[str, Any], ctx: LearnedContext, law: str,
+              settings: LearningSettings) -> IterativeLearning:
+    """The learning of ``settings`` and, with ``inverse`` (version 2), the inverse law's
+    settings, plant and state."""
+    plant = None
+    if "inverse" in doc and doc.get("format_version") != 1:
+        if law != "inverse":
+            raise ParamsError(f"inverse: the state of the inverse law in a file learned with "
+                              f"the law {law!r}")
+        inv, steps, scale, raw = read_inverse(doc)
+        try:
+            settings = dataclasses.replace(settings, inverse=inv)
+        except ValueError as exc:
+            raise ParamsError(f"inverse.settings: {exc}") from None
+        plant = None if raw is None else read_plant(raw, settings.cycle_s)
+    try:
+        learning = IterativeLearning(ctx.duration_s, settings, plant)
+    except ValueError as exc:
+        raise ParamsError(f"settings: {exc}") from None
+    if plant is not None:
+        learning.resume_inverse(steps, scale)
+    return learning
 
 
 def _offset(doc: dict[str, Any], learning: IterativeLearning) -> Array:

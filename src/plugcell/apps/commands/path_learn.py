@@ -48,7 +48,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     g.add_argument("--learn-law", choices=("p", "inverse"),
                    help="the law of a new learning: p, the P-type law (default), or inverse: "
                    "an identifying run with a known excitation, then the norm-optimal "
-                   "inverse of the identified plant")
+                   "inverse of the identified plant; with --learned, the law to go on with "
+                   "(default the file's; an inverse-law file keeps its plant)")
     g.add_argument("--learn-cutoff", type=float, metavar="HZ",
                    help="the learning filter's cut-off of a new learning (default 6 Hz, below "
                    "the arm's first mode)")
@@ -73,14 +74,10 @@ def wants_learning(args: argparse.Namespace) -> bool:
                            "settings)")
     if args.learn_law is not None and args.learn is None:
         raise CommandError("--learn-law needs --learn N: it is the law of a learning")
-    if args.learn_law == "inverse" and args.learn < 2:
+    if args.learn_law == "inverse" and args.learned is None and args.learn < 2:
         raise CommandError(f"--learn-law inverse needs --learn N ≥ 2, got {args.learn}: the "
                            "first run's update adds a known excitation, the second run "
                            "identifies the plant from it")
-    if args.learn_law == "inverse" and args.learned is not None:
-        raise CommandError("--learn-law inverse starts a new learning: a learning continued "
-                           "from --learned FILE cannot identify its plant again (the file "
-                           "does not keep it); continue with --learn-law p or start anew")
     return args.learn is not None or args.learned is not None
 
 
@@ -117,11 +114,13 @@ def _session(args: argparse.Namespace, path: Any, name: str, options: Any,
         why = file.context.mismatch(context)
         if why is not None:
             raise CommandError(f"{args.learned}: cannot be used for this run: {why}")
-        if file.law == "inverse" and args.learn is not None and args.learn_law != "p":
-            raise CommandError(f"{args.learned}: learned with the inverse law, whose "
-                               "identified plant the file does not keep: continue with "
-                               "--learn-law p or start anew")
         learning, before = file.learning, file.runs
+        if args.learn is not None:
+            try:
+                learning = file.continued(args.learn_law)
+            except ValueError as exc:
+                by = "" if args.learn_law is None else f" by the law {args.learn_law}"
+                raise CommandError(f"{args.learned}: cannot be continued{by}: {exc}") from None
     else:
         try:
             settings = learning_settings(options, args.learn_gain, args.learn_cutoff,

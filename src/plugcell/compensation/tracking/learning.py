@@ -507,6 +507,29 @@ class IterativeLearning:
         """Updates so far."""
         return len(self.history)
 
+    @property
+    def inverse_steps(self) -> int:
+        """Updates by (3) so far (``j`` of ``γ_j``)."""
+        return self._inverse_steps
+
+    @property
+    def regularisation_scale(self) -> float:
+        """The factor on ``β`` after the supervisor's back-offs (1: none)."""
+        return self._beta_scale
+
+    def resume_inverse(self, steps: int, regularisation_scale: float) -> None:
+        """Go on with the law (3) of a saved learning: its updates by (3) so far and
+        ``β``'s factor (:attr:`plant` given to the constructor; the supervisor's best run
+        starts anew)."""
+        if self.plant is None or self.settings.inverse is None:
+            raise ValueError("IterativeLearning.resume_inverse: needs settings.inverse and "
+                             "an identified plant")
+        if not (steps >= 0 and regularisation_scale >= 1):
+            raise ValueError(f"IterativeLearning.resume_inverse: steps ≥ 0 and a scale ≥ 1, "
+                             f"got {steps!r} and {regularisation_scale!r}")
+        self._inverse_steps, self._beta_scale = int(steps), float(regularisation_scale)
+        self._spectral = None
+
     def feedforward(self, start_s: float) -> LearnedOffset:
         """The offset for the next run whose motion starts at robot time ``start_s``."""
         return LearnedOffset(self.grid + float(start_s), self.u.copy())
