@@ -158,3 +158,23 @@ def test_no_sample_at_all_is_a_run_not_learned_with_nan_errors():
 def test_stop_rule_refuses_bad_values(kw, message):
     with pytest.raises(ValueError, match=message.replace("[", r"\[").replace(")", r"\)")):
         StopRule(**kw)
+
+
+def test_a_learning_resumed_from_its_best_run_judges_against_it():
+    """A learning run once a session (a robot program's tracked move) goes on from the
+    earlier session's best run: a run that does not improve on it ends the runs as
+    converged and keeps the offset that best run used."""
+    lr = IterativeLearning(1.0, LearningSettings())
+    u_best = np.full_like(lr.u, 1e-5)
+    rep = RepeatedLearning(lr)
+    rep.resume((1e-4, u_best, 3))
+    assert rep.best[0] == 1e-4 and rep.best[2] == 3
+    t = np.linspace(0.0, 1.0, 1001)
+    path = np.zeros((t.size, 3))
+    worse = path + [2e-4, 0.0, 0.0]  # 0.2 mm: twice the best run's
+    rec = rep.learn(t, worse, t, path, 0.0)
+    assert rec.verdict == "diverged" and "the best run's 0.1000 mm" in rec.reason
+    np.testing.assert_array_equal(lr.u, u_best)
+    assert lr.steps == 3
+    with pytest.raises(ValueError, match="RepeatedLearning.resume"):
+        rep.resume((1e-4, np.zeros((3, 3)), 1))

@@ -53,7 +53,7 @@ def _file() -> LearnedFile:
     lr.steps = 3
     runs = run_entries([RunRecord(1, 3e-4, 5e-4, 1.0, 1e-4, "learned"),
                         RunRecord(2, 1e-4, 2e-4, 0.9, float("nan"), "diverged", "why")], [])
-    return LearnedFile(_context(), lr, runs)
+    return LearnedFile(_context(), lr, runs, best=(1e-4, 0.5 * lr.u, 2))
 
 
 def _document() -> dict:
@@ -69,6 +69,9 @@ def test_round_trip(tmp_path):
     np.testing.assert_allclose(back.learning.u, f.learning.u, atol=1e-9)  # 1 nm in the file
     assert [r["run"] for r in back.runs] == [1, 2]
     assert back.runs[1]["change_max_mm"] is None  # NaN written as null (strict JSON)
+    # the stop rule's best run (version 2): its rms, the offset it ran with, its steps
+    assert back.best[0] == pytest.approx(1e-4) and back.best[2] == 2
+    np.testing.assert_allclose(back.best[1], 0.5 * f.learning.u, atol=1e-9)
     # the offset fed forward is the one saved
     ff = back.learning.feedforward(5.0)
     np.testing.assert_allclose(ff(5.0 + 0.5), f.learning.feedforward(5.0)(5.5), atol=1e-9)
@@ -270,6 +273,10 @@ def test_a_corrupt_inverse_state_is_refused_naming_the_cause(tmp_path, edits, me
     (_mutated(**{"offset.t0_s": -0.2}), "offset: t0_s -0.2 and cycle_s 0.004 are not the "
      "settings' grid"),
     (_mutated(runs={}), "runs: expected a list of objects, got an object"),
+    (_mutated(**{"best.u_mm": [[0, 0, 0]]}), "best.u_mm: expected 363 rows"),
+    (_mutated(**{"best.steps": -2}), "best: measured_rms_mm 0.1 and steps -2 must be ≥ 0"),
+    (_mutated(**{"best.measured_rms_mm": None}), "best.measured_rms_mm: expected a finite "
+     "number, got null"),
     (_mutated(law="q"), "law: expected one of p, inverse, got 'q'"),
     (_mutated(law=None), "law: expected one of p, inverse, got None"),
 ])

@@ -18,7 +18,9 @@ on differs::
      "runs": [{"run": 1, "measured_rms_mm": …, "measured_max_mm": …,
                "measured_share": …, "change_max_mm": …, "verdict": "learned",
                "law": "p"}, …],
-     "offset": {"t0_s": -0.3, "cycle_s": 0.004, "u_mm": [[x, y, z], …]}}
+     "offset": {"t0_s": -0.3, "cycle_s": 0.004, "u_mm": [[x, y, z], …]},
+     "best": {"measured_rms_mm": …, "steps": 2, "t0_s": …, "cycle_s": …,
+              "u_mm": […]}}                             # version 2, optional
 
 * ``path_sha256`` — SHA-256 of the path's geometry as read (the poses in µm and µrad,
   the tracking flags, whether it is oriented): the same path in another file, with
@@ -36,6 +38,10 @@ on differs::
   so that the learning goes on by the inverse law (:meth:`LearnedFile.continued`).  A
   version-1 file (or one saved before the plant was identified) keeps no plant: its
   offset can be fed forward and continued by the P-type law, not by the inverse law;
+* ``best`` (version 2, optional) — the stop rule's best run so far: its measured rms and
+  the offset it ran with (:attr:`~plugcell.compensation.tracking.repeat.RepeatedLearning.best`),
+  so that a learning run once a session (a robot program's tracked move) judges its next
+  run against it and rolls back to it;
 * ``u_mm`` — millimetres in the cell's frame F0, one row per robot cycle from
   ``t0_s`` (s from the motion's start); its length is the learning's grid for
   ``duration_s`` and the settings.
@@ -203,12 +209,16 @@ class LearnedFile:
     law : {"p", "inverse"}, optional
         None: the learning's own — ``inverse`` when its settings have ``inverse``, else
         ``p``.
+    best : (float, (G, 3) array, int), optional
+        The stop rule's best run: its measured rms (m), the offset it ran with (m), the
+        learning's steps then (``RepeatedLearning.best``).
     """
 
     context: LearnedContext
     learning: IterativeLearning
     runs: list[dict[str, Any]]
     law: str | None = None
+    best: tuple[float, Array, int] | None = None
 
     def __post_init__(self) -> None:
         if self.law is None:
@@ -227,8 +237,10 @@ class LearnedFile:
                 **({} if inverse is None else {"inverse": inverse}),
                 "settings": settings, "steps": int(lr.steps),
                 "runs": self.runs,
-                "offset": {"t0_s": float(lr.grid[0]), "cycle_s": lr.settings.cycle_s,
-                           "u_mm": np.round(lr.u * MM_PER_M, 6).tolist()}}
+                "offset": _offset_document(lr, lr.u),
+                **({} if self.best is None else {"best": {
+                    "measured_rms_mm": self.best[0] * MM_PER_M, "steps": int(self.best[2]),
+                    **_offset_document(lr, self.best[1])}})}
 
 
     def continued(self, law: str | None = None) -> IterativeLearning:
@@ -267,6 +279,11 @@ class LearnedFile:
                              "plant (saved before the identifying run was learned from, or "
                              "format version 1): continue it by the P-type law or start anew")
         return lr
+
+
+def _offset_document(lr: IterativeLearning, u: Array) -> dict[str, Any]:
+    return {"t0_s": float(lr.grid[0]), "cycle_s": lr.settings.cycle_s,
+            "u_mm": np.round(np.asarray(u) * MM_PER_M, 6).tolist()}
 
 
 def run_entries(records: list[RunRecord], before: list[dict[str, Any]]) -> list[dict[str, Any]]:
@@ -401,7 +418,14 @@ def _from_document(doc: Any) -> LearnedFile:
     runs = _at(doc, "runs")
     if not isinstance(runs, list) or not all(isinstance(r, dict) for r in runs):
         raise ParamsError(f"runs: expected a list of objects, got {_typename(runs)}")
-    return LearnedFile(ctx, learning, runs, law)
+    best = None
+    if "best" in doc and version != 1:
+        rms, best_steps = _number(doc, "best", "measured_rms_mm"), _integer(doc, "best", "steps")
+        if rms < 0 or best_steps < 0:
+            raise ParamsError(f"best: measured_rms_mm {rms!r} and steps {best_steps!r} must "
+                              "be ≥ 0")
+        best = (rms * M_PER_MM, _offset(doc, learning, "best"), best_steps)
+    return LearnedFile(ctx, learning, runs, law, best)
 
 
 def _checked_settings(values: dict[str, Any]) -> dict[str, Any]:
@@ -437,28 +461,29 @@ def _learning(doc: dict[str, Any], ctx: LearnedContext, law: str,
     return learning
 
 
-def _offset(doc: dict[str, Any], learning: IterativeLearning) -> Array:
+def _offset(doc: dict[str, Any], learning: IterativeLearning, key: str = "offset") -> Array:
+    """``doc[key]``'s offset on the learning's grid (m), checked."""
     s = learning.settings
-    t0, cycle = _number(doc, "offset", "t0_s"), _number(doc, "offset", "cycle_s")
+    t0, cycle = _number(doc, key, "t0_s"), _number(doc, key, "cycle_s")
     if abs(t0 - learning.grid[0]) > 1e-9 or abs(cycle - s.cycle_s) > 1e-12:
-        raise ParamsError(f"offset: t0_s {t0!r} and cycle_s {cycle!r} are not the "
+        raise ParamsError(f"{key}: t0_s {t0!r} and cycle_s {cycle!r} are not the "
                           f"settings' grid ({learning.grid[0]:g} s, {s.cycle_s:g} s)")
-    rows = _at(doc, "offset", "u_mm")
+    rows = _at(doc, key, "u_mm")
     n = learning.grid.size
     if not isinstance(rows, list) or len(rows) != n:
         got = f"{len(rows)} rows" if isinstance(rows, list) else _typename(rows)
-        raise ParamsError(f"offset.u_mm: expected {n} rows (the grid of a "
+        raise ParamsError(f"{key}.u_mm: expected {n} rows (the grid of a "
                           f"{learning.duration_s:g} s motion), got {got}")
     u = np.empty((n, 3))
     for i, row in enumerate(rows):
         if not (isinstance(row, list) and len(row) == 3):
-            raise ParamsError(f"offset.u_mm[{i}]: expected 3 numbers (x, y, z mm), got "
+            raise ParamsError(f"{key}.u_mm[{i}]: expected 3 numbers (x, y, z mm), got "
                               f"{_typename(row)}")
-        u[i] = [_finite(v, f"offset.u_mm[{i}][{j}]") for j, v in enumerate(row)]
+        u[i] = [_finite(v, f"{key}.u_mm[{i}][{j}]") for j, v in enumerate(row)]
     bound = s.max_offset_m * MM_PER_M
     over = (np.abs(u) > bound * (1 + 1e-9)).any(axis=1)
     if over.any():
         bad = int(np.argmax(over))
-        raise ParamsError(f"offset.u_mm[{bad}]: {rows[bad]!r} is beyond the settings' "
+        raise ParamsError(f"{key}.u_mm[{bad}]: {rows[bad]!r} is beyond the settings' "
                           f"bound ±{bound:g} mm")
     return u * M_PER_MM

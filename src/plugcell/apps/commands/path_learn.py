@@ -218,7 +218,8 @@ def run_learning(args: argparse.Namespace, path: Any, name: str, options: Any,
                 "never_measured_s": [[round(a, 3), round(b, 3)] for a, b in holes]}
     if args.learned_out is not None and learned:
         save_learned(args.learned_out, LearnedFile(
-            context, repeated.learning, run_entries(repeated.records, before)))
+            context, repeated.learning, run_entries(repeated.records, before),
+            best=repeated.best))
     if args.out:
         out = results.result_document(done[-1].run, name)
         Path(args.out).write_text(json.dumps({**out, "learning": _strict(document)}) + "\n")

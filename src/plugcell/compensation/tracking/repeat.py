@@ -144,6 +144,26 @@ class RepeatedLearning:
         self._best: tuple[float, Array, int] | None = None  # (r, u it ran with, steps)
         self._seen = np.zeros(self.learning.grid.size, dtype=bool)
 
+    @property
+    def best(self) -> tuple[float, Array, int] | None:
+        """The best judged run so far: its measured rms ``r`` (m), the offset ``u`` it ran
+        with (G, 3) (m) and the learning's steps then; None before one."""
+        return self._best
+
+    def resume(self, best: tuple[float, Array, int] | None) -> None:
+        """Go on from an earlier session's :attr:`best` (the stop rule then judges this
+        session's runs against it: a learning that runs once a session, as a robot
+        program's tracked move does)."""
+        if best is None:
+            self._best = None
+            return
+        rms, u, steps = best
+        u = np.asarray(u, dtype=float)
+        if u.shape != self.learning.u.shape or not (math.isfinite(rms) and rms >= 0):
+            raise ValueError(f"RepeatedLearning.resume: a best run of rms ≥ 0 and an offset "
+                             f"{self.learning.u.shape}, got {rms!r} and {u.shape}")
+        self._best = (float(rms), u.copy(), int(steps))
+
     def feedforward(self, start_s: float) -> LearnedOffset:
         """The next run's learned offset, its motion starting at robot time ``start_s``."""
         return self.learning.feedforward(start_s)
