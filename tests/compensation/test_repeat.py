@@ -171,10 +171,10 @@ def test_a_learning_resumed_from_its_best_run_judges_against_it():
     assert rep.best[0] == 1e-4 and rep.best[2] == 3
     t = np.linspace(0.0, 1.0, 1001)
     path = np.zeros((t.size, 3))
-    worse = path + [2e-4, 0.0, 0.0]  # 0.2 mm: twice the best run's
+    worse = path + np.array([2e-4, 0.0, 0.0])  # 0.2 mm: twice the best run's
     rec = rep.learn(t, worse, t, path, 0.0)
     assert rec.verdict == "diverged" and "the best run's 0.1000 mm" in rec.reason
     np.testing.assert_array_equal(lr.u, u_best)
     assert lr.steps == 3
-    with pytest.raises(ValueError, match="RepeatedLearning.resume"):
+    with pytest.raises(ValueError, match=r"RepeatedLearning\.resume"):
         rep.resume((1e-4, np.zeros((3, 3)), 1))
