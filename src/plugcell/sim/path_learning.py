@@ -19,7 +19,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from plugcell.compensation.tracking.learning import InverseSettings, LearningSettings
-from plugcell.compensation.tracking.repeat import RepeatedLearning, RunRecord
+from plugcell.compensation.tracking.repeat import LEARNING, RepeatedLearning, RunRecord
 from plugcell.io.learned_paths import LAWS, LearnedContext, path_sha256
 from plugcell.io.path_files import PathFile
 from plugcell.io.robots import load_robot
@@ -29,13 +29,6 @@ from plugcell.sim.path_run import PathRun, PathRunOptions, plan_path, run_path
 
 __all__ = ["LAWS", "LEARNING", "RepeatRun", "learned_context", "learning_settings", "repeat_path"]
 
-#: The learning on the twin (benchmarks/dynamic_correction.py's, docs/dynamic-correction.md):
-#: Q 6 Hz order 4 below the arm's first mode (9 Hz), L = 0.8 falling as 1/(1 + 0.5 k),
-#: δ = 8 ms (the RSI twin's lead).  The window ends with its fade 0.15 s after the motion:
-#: the correction source blends the whole offset out from the path's end
-#: (:class:`~plugcell.devices.robot.rsi.tracking.TrackingSource`), so what the tracker
-#: sees after it is that blend, not a repeatable error to learn.
-LEARNING = LearningSettings(gain=0.8, cutoff_hz=6.0, order=4, gain_decay=0.5, post_s=0.15)
 #: Tracker noise seeds of successive runs: ``seed + SEED_STEP · (run − 1)``.
 SEED_STEP = 1000
 

@@ -37,11 +37,24 @@ from dataclasses import dataclass, field
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from plugcell.compensation.tracking.learning import IterativeLearning, LearnedOffset, path_error
+from plugcell.compensation.tracking.learning import (
+    IterativeLearning,
+    LearnedOffset,
+    LearningSettings,
+    path_error,
+)
 
 Array = NDArray[np.float64]
 
-__all__ = ["RepeatedLearning", "RunRecord", "StopRule"]
+__all__ = ["LEARNING", "RepeatedLearning", "RunRecord", "StopRule"]
+
+#: The learning on the twin (benchmarks/dynamic_correction.py's, docs/dynamic-correction.md):
+#: Q 6 Hz order 4 below the arm's first mode (9 Hz), L = 0.8 falling as 1/(1 + 0.5 k),
+#: δ = 8 ms (the RSI twin's lead).  The window ends with its fade 0.15 s after the motion:
+#: the correction source blends the whole offset out from the path's end
+#: (:class:`~plugcell.devices.robot.rsi.tracking.TrackingSource`), so what the tracker
+#: sees after it is that blend, not a repeatable error to learn.
+LEARNING = LearningSettings(gain=0.8, cutoff_hz=6.0, order=4, gain_decay=0.5, post_s=0.15)
 
 
 @dataclass(frozen=True)

@@ -31,6 +31,7 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
+import hashlib
 import itertools
 import logging
 import math
@@ -40,6 +41,7 @@ from typing import Any
 
 from plugcell.devices.robot.bridge import BridgeError, BridgeHandler, ControllerError
 from plugcell.devices.robot.calibration_file import read_calibration
+from plugcell.devices.robot.move_learning import MoveLearning
 from plugcell.devices.robot.planned_motion import PlannedMotion
 from plugcell.devices.robot.protocol import (
     VERSION,
@@ -246,6 +248,9 @@ class StreamController:
     realtime : RealTime, optional
         The link's scheduling (:mod:`~plugcell.devices.robot.stream.realtime`): its
         thread's priority, its CPUs, its memory locked.
+    learned_dir : str
+        Where the tracked moves' learned corrections are (:mod:`.move_learning`: each
+        tracked move of a program learns across the program's runs); empty: none learns.
 
     Raises
     ------
@@ -257,7 +262,8 @@ class StreamController:
                  robot: str, joint_limits: JointLimits, cartesian_limits: CartesianLimits,
                  library: Sequence[Path] = (), name: str = "ROBOT",
                  process: bool = True, correct_max: tuple[float, float] = (5.0, 1.0),
-                 calibration: str = "", realtime: RealTime | None = None) -> None:
+                 calibration: str = "", realtime: RealTime | None = None,
+                 learned_dir: str = "") -> None:
         self.vendor = config.vendor
         if description.n_readings != 6:
             raise ValueError(f"{self.vendor} streams six axes; {description.name} has "
@@ -272,6 +278,10 @@ class StreamController:
         self.calibration = read_calibration(calibration, description.name) \
             if calibration else None
         self.calibration_name = Path(calibration).name if calibration else ""
+        self.move_learning = MoveLearning(
+            learned_dir, description.name,
+            f"sha256:{hashlib.sha256(Path(calibration).read_bytes()).hexdigest()}"
+            if calibration else "nominal") if learned_dir else None
         self.corrector: Corrector | CorrectorClient
         if process:
             self.link = self.drive = LinkProcess(config, realtime=realtime)

@@ -50,7 +50,7 @@ STREAM_PARAMS: dict[str, Callable[[str], Any]] = {
     "rsi": str, "rsi_robot": str, "rsi_timeout": int, "rsi_correction": str, "rsi_mode": str,
     "rsi_frame": str, "egm": str, "egm_robot": str, "egm_timeout": float, "egm_mode": str,
     "stream_process": flag, "joint_speed": float, "tcp_speed": float,
-    "correct_max_mm": float, "correct_max_deg": float, "calibration": str,
+    "correct_max_mm": float, "correct_max_deg": float, "calibration": str, "learned_dir": str,
     "stream_rt_priority": int, "stream_cpu": str, "stream_mlock": flag}
 
 
@@ -89,7 +89,7 @@ def streamed_link(handler: BridgeHandler, *, robot: str, library: Sequence[Path]
                   stream_process: bool = True, correct_max_mm: float = 5.0,
                   correct_max_deg: float = 1.0, calibration: str = "",
                   stream_rt_priority: int | None = None, stream_cpu: str = "",
-                  stream_mlock: bool = False) -> StreamController | None:
+                  stream_mlock: bool = False, learned_dir: str = "") -> StreamController | None:
     """The streamed robot's controller the options ask for, or ``None`` (none asked).
 
     Parameters
@@ -128,6 +128,8 @@ def streamed_link(handler: BridgeHandler, *, robot: str, library: Sequence[Path]
         The cycle loop's scheduling (:class:`~.stream.realtime.RealTime`): its thread under
         ``SCHED_FIFO`` at this priority (1..99), the link's process (or thread) on these
         CPUs (``taskset -c`` syntax: ``1``, ``2-3``), its memory locked (``mlockall``).
+    learned_dir : str
+        The tracked moves' learned corrections (:mod:`~.move_learning`); empty: none.
 
     Returns
     -------
@@ -156,4 +158,5 @@ def streamed_link(handler: BridgeHandler, *, robot: str, library: Sequence[Path]
     return StreamController(handler, config, load_robot(robot), robot, joint, cart, library,
                             name, stream_process, (correct_max_mm, correct_max_deg),
                             calibration,
-                            stream_realtime(stream_rt_priority, stream_cpu, stream_mlock))
+                            stream_realtime(stream_rt_priority, stream_cpu, stream_mlock),
+                            learned_dir)

@@ -85,6 +85,7 @@ from numpy.typing import NDArray
 from plugcell.compensation.pose_model import IdentifiedModel, NominalModel, PoseModel
 from plugcell.compensation.tracking import TrackerMeasurement, TrackingLoop, TrackingSettings
 from plugcell.devices.robot.arm_model import matrix_from_position
+from plugcell.devices.robot.move_learning import MoveLearning, MoveSession, program_of
 from plugcell.devices.robot.poses import pose_matrix
 from plugcell.devices.robot.stream.adjusting import WireLimits, WirePeaks
 from plugcell.devices.robot.stream.drive import samples as planned_samples
@@ -292,6 +293,11 @@ class TrackedMoves:
         What to call it in the console (its file).
     say : callable, optional
         ``say(line)``: a line for the program's console (the model used, at the end).
+    learning : MoveLearning, optional
+        Learn each tracked move across the program's runs (:mod:`.move_learning`).
+    program : callable, optional
+        ``program() → (name, run)`` of the running program (None: none), the learned
+        moves' keys; without it no move learns.
     """
 
     def __init__(self, motion: Any, feeds: Callable[[str], TrackerFeed], *,
@@ -299,9 +305,17 @@ class TrackedMoves:
                  settings: TrackingSettings | None = None, ramp_s: float = 0.2,
                  settle_s: float = 0.5, payload_kg: float | None = None,
                  realtime: bool = True, calibration: Any = None,
-                 calibration_name: str = "", say: Callable[[str], None] | None = None
-                 ) -> None:
+                 calibration_name: str = "", say: Callable[[str], None] | None = None,
+                 learning: MoveLearning | None = None,
+                 program: Callable[[], tuple[str, int] | None] | None = None) -> None:
         self.motion, self.feeds, self.after = motion, feeds, after
+        self.learning, self.program = learning, program
+        #: the last move's learning (None: it did not learn) and its good tracker samples
+        #: ``(t, x, y, z)`` (robot s, m in F0)
+        self.last_session: MoveSession | None = None
+        self.last_samples: list[tuple[float, float, float, float]] = []
+        self._start_s: float | None = None  # robot time the last move's motion started
+        self._plan_p = np.zeros((0, 3))  # its planned TCP positions (m), one per sample
         self.settings, self.ramp_s = settings, ramp_s
         self.calibration, self.say = calibration, say
         self.payload_kg = float(payload_kg) if payload_kg is not None else \
@@ -340,11 +354,12 @@ class TrackedMoves:
             loop = self.last_loop = TrackingLoop(
                 self.loop_model(tool), settings, payload_kg=self.payload_kg,
                 controller=NominalModel(desc, tool))
+            padded = _Settled(traj, self.settle_s)
+            q_plan = planned_samples(padded, cycle_s)
+            session = self.last_session = self._session(q_plan, traj, tool, cycle_s)
             feed = self.last_feed = self.feeds(tracker)
             feed.start()
-            padded = _Settled(traj, self.settle_s)
-            adjust, worker = self._adjust(loop, feed, cycle_s,
-                                          planned_samples(padded, cycle_s))
+            adjust, worker = self._adjust(loop, feed, cycle_s, q_plan, session)
             # across the process boundary the child limits what it sends (the wire's
             # limits); in simulated time it waits for each cycle's correction (as the
             # in-process hook computes it in the cycle)
@@ -377,10 +392,34 @@ class TrackedMoves:
         if failure:
             raise MotionError(f"{tracker} stopped during the tracked move ({failure}): "
                               f"the move finished with the model alone ({self.model_text})")
+        if session is not None:
+            self._learn(session, len(q_plan), cycle_s)
         if self.after is None:
             return padded.duration
         self.after(padded.duration)
         return None
+
+    def _session(self, q_plan: Array, traj: Any, tool: Array, cycle_s: float
+                 ) -> MoveSession | None:
+        """The move's learning (None: no learning, or no program runs), checked before the
+        robot moves (MotionError: the learned file's reason)."""
+        running = None if self.program is None else self.program()
+        if self.learning is None or running is None:
+            return None
+        ends = forward(self.motion.description, None, q_plan[[0, -1]], "nominal").tcp
+        return self.learning.begin(self.learning.key(*running), ends[0], ends[1],
+                                   float(traj.duration), tool, self.payload_kg, cycle_s)
+
+    def _learn(self, session: MoveSession, samples: int, cycle_s: float) -> None:
+        """After the move: judge and learn from its tracker samples, say the verdict."""
+        if self._start_s is None:
+            return
+        t0 = self._start_s - round(self.settle_s / cycle_s) * cycle_s  # sample 0's time
+        rows = np.array(self.last_samples, dtype=float).reshape(-1, 4)
+        line = session.finish(rows[:, 0], rows[:, 1:], t0 + cycle_s * np.arange(samples),
+                              self._plan_p, self._start_s)
+        if self.say is not None:
+            self.say(line)
 
     def loop_model(self, tool: Array) -> PoseModel:
         """The loop's model (module docstring): the calibration's with the controller's
@@ -389,18 +428,24 @@ class TrackedMoves:
             return NominalModel(self.motion.description, tool)
         return IdentifiedModel(self.calibration.model, tool)
 
-    def _adjust(self, loop: TrackingLoop, feed: TrackerFeed, cycle_s: float, q_plan: Array
+    def _adjust(self, loop: TrackingLoop, feed: TrackerFeed, cycle_s: float, q_plan: Array,
+                session: MoveSession | None = None
                 ) -> tuple[Callable[[CycleState, int, Array], Array], _Worker | None]:
         """The drive's hook: the loop's offset of the cycle as joints (``realtime``: the
         newest the worker has, the link's thread never waits for the loop).  The planned
         TCP poses and the controller's Jacobians at the move's samples ``q_plan`` (K+1, 6)
-        are computed once, vectorised, before the move: a cycle only looks them up."""
+        are computed once, vectorised, before the move: a cycle only looks them up.  With
+        a learning ``session`` its offset is the loop's feed-forward from the motion's
+        start (robot time: the first cycle's, less its sample's, plus the settling)."""
         desc = self.motion.description
         ramp = unit_ramp(max(self.ramp_s, cycle_s))
         record = self.last_record = []
-        self.last_dropped = 0
+        kept = self.last_samples = []
+        self.last_dropped, self._start_s = 0, None
+        settle = round(self.settle_s / cycle_s) * cycle_s
         fk_plan = forward(desc, None, q_plan, "nominal")
         T_plan, J_plan = fk_plan.tcp, jacobian_from_fk(desc, fk_plan, "tcp")
+        self._plan_p = T_plan[:, :3, 3]
         limits = self.last_wire_limits = wire_limits(loop.settings, J_plan)
         # the link in this process: its thread's hook limits what it sends (a link
         # process's child does: LinkProcess.follow's limits)
@@ -421,6 +466,12 @@ class TrackedMoves:
                 self.last_dropped += len(samples) - MAX_SAMPLES_PER_CYCLE
                 samples = samples[-MAX_SAMPLES_PER_CYCLE:]
             loop.add(samples)
+            if session is not None:
+                if self._start_s is None:
+                    self._start_s = state.t - k * cycle_s + settle
+                    loop.learned = session.feedforward(self._start_s)
+                kept.extend((m.time_s, *m.pose[:3, 3]) for m in samples
+                            if m.pose is not None and m.status == "ok")
             if feed.failure and not record_held:
                 loop.hold(f"tracker stopped: {feed.failure}")
                 record_held.append(state.t)
@@ -558,4 +609,5 @@ def tracked_moves_for(controller: Any) -> Callable[[Position, str], float | None
     return TrackedMoves(controller.motion, feeds, after=controller.clock.advance,
                         calibration=controller.calibration,
                         calibration_name=controller.calibration_name,
-                        say=controller.say).move_tracked
+                        say=controller.say, learning=controller.move_learning,
+                        program=program_of(controller)).move_tracked
