@@ -3,8 +3,12 @@
 Two of the service's corrections use the calibrated model: ``CORRECT compensation
 calibration=PARAMS.json`` (:mod:`.stream.correcting`) and the tracked moves of a streamed
 robot started with ``--param calibration=PARAMS.json`` (:mod:`.tracked_moves`).  Both
-read the file here: the physical model (its learned residual layer, if any, is not used
-by the service), every failure a :class:`ValueError` naming the file and the cause.
+read the file here: the physical model and, when the file names one, its **learned
+residual layer** (the hybrid model ``plugcell compensate`` uses: its side file checked by
+:func:`~plugcell.io.residual_models.load_residual` — its SHA-256, robot, the physical
+model's fingerprint, the scikit-learn version), every failure a :class:`ValueError`
+naming the file and the cause (a layer that cannot be used is refused, not left out
+silently).
 """
 
 from __future__ import annotations
@@ -28,13 +32,15 @@ def read_calibration(path: str, robot: str | None = None) -> Any:
     Returns
     -------
     CalibrationResult
-        ``model`` (the identified :class:`~plugcell.calibration.ErrorModel`), ``robot``.
+        ``model`` (the identified :class:`~plugcell.calibration.ErrorModel`), ``robot``,
+        ``residual_model`` (its learned layer, or None).
 
     Raises
     ------
     ValueError
-        ``calibration PATH: cannot read: …``, ``…: not a plugcell calibration: …`` or
-        ``…: the calibration is of the robot 'A', this robot is 'B'``.
+        ``calibration PATH: cannot read: …``, ``…: not a plugcell calibration: …``,
+        ``…: the calibration is of the robot 'A', this robot is 'B'`` or ``…: its learned
+        residual layer cannot be used: …``.
     """
     from plugcell.io.params import result_from_params
     from plugcell.io.robots import description_of_params
@@ -51,4 +57,14 @@ def read_calibration(path: str, robot: str | None = None) -> Any:
     if robot is not None and result.robot != robot:
         raise ValueError(f"calibration {path}: the calibration is of the robot "
                          f"{result.robot!r}, this robot is {robot!r}")
+    entry = d.get("residual_model")
+    if entry:
+        from plugcell.io.residual_models import ResidualFileError, load_residual
+
+        try:
+            layer = load_residual(entry, path, robot=result.robot, model=result.model)
+        except ResidualFileError as exc:
+            raise ValueError(f"calibration {path}: its learned residual layer cannot be "
+                             f"used: {exc}") from None
+        result = result.with_residual_model(layer)
     return result

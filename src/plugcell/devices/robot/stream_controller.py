@@ -281,7 +281,9 @@ class StreamController:
         self.move_learning = MoveLearning(
             learned_dir, description.name,
             f"sha256:{hashlib.sha256(Path(calibration).read_bytes()).hexdigest()}"
-            if calibration else "nominal") if learned_dir else None
+            if calibration else "nominal",
+            getattr(self.calibration, "residual_model", None) is not None
+        ) if learned_dir else None
         self.corrector: Corrector | CorrectorClient
         if process:
             self.link = self.drive = LinkProcess(config, realtime=realtime)

@@ -19,7 +19,9 @@ the laser tracker's correction added every cycle (the drive's ``adjust`` hook):
    corrects) and whose inverse is the model-based feed-forward — is the robot's
    **calibrated model** when the service was given one (``--param
    calibration=PARAMS.json``: ``IdentifiedModel`` with the controller's TCP in the
-   identified flange frame, at the calibration's reference payload), else the
+   identified flange frame, at the calibration's reference payload; with the
+   calibration's learned residual layer when it has one: the hybrid model of
+   ``plugcell compensate``), else the
    controller's nominal model (the tracker term then corrects all of the model's
    error); which one is said in the program's console at the move's end;
 3. the offset, blended in (``w = unit_ramp`` over ``ramp_s``) while the robot still
@@ -321,8 +323,11 @@ class TrackedMoves:
         self.payload_kg = float(payload_kg) if payload_kg is not None else \
             float(calibration.model.payload_ref_kg) if calibration is not None else 0.0
         #: which model the loop predicts with (the console's words)
+        layer = getattr(calibration, "residual_model", None) is not None
         self.model_text = (f"the calibrated model ({calibration_name or 'given'}, "
-                           f"{self.payload_kg:g} kg)" if calibration is not None else
+                           f"{self.payload_kg:g} kg"
+                           f"{', with its learned residual layer' if layer else ''})"
+                           if calibration is not None else
                            "the nominal model (no calibration loaded)")
         self.settle_s, self.realtime = settle_s, realtime
         self.last_loop: TrackingLoop | None = None
@@ -426,7 +431,8 @@ class TrackedMoves:
         TCP ``tool`` (flange frame, m) in its identified flange frame, or the nominal."""
         if self.calibration is None:
             return NominalModel(self.motion.description, tool)
-        return IdentifiedModel(self.calibration.model, tool)
+        return IdentifiedModel(self.calibration.model, tool,
+                               residual=getattr(self.calibration, "residual_model", None))
 
     def _adjust(self, loop: TrackingLoop, feed: TrackerFeed, cycle_s: float, q_plan: Array,
                 session: MoveSession | None = None

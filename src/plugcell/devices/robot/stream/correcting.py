@@ -236,7 +236,8 @@ class _Compensation:
         from plugcell.devices.robot.calibration_file import read_calibration
 
         result = read_calibration(spec.calibration)
-        self.model = IdentifiedModel(result.model)
+        # the hybrid model with the calibration's learned layer, as plugcell compensate
+        self.model = IdentifiedModel(result.model, residual=result.residual_model)
         self.nominal = NominalModel(self.model.description, tool=self.model.tool)
         self.payload = (result.model.payload_ref_kg if spec.payload_kg is None
                         else spec.payload_kg)
