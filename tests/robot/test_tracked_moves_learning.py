@@ -113,10 +113,9 @@ def test_the_second_run_of_a_program_is_more_accurate_and_a_wrong_file_is_refuse
     assert lines[0].startswith("LEARNED line.1.json: run 1, tracker rms "), said
     assert saved["context"]["path"] == "line.1" and saved["context"]["loop"] == "tracking"
     # the second run (the first offset fed forward) is the more accurate, by the truth
-    # (measured 0.075–0.079 → 0.053–0.058 mm over three executions) and by the tracker
-    # (whose rms, along the path included, varied between executions: 1.27 → 0.28–1.22 mm)
-    assert rms[1] < 0.85 * rms[0], rms
-    assert runs[1]["measured_rms_mm"] < runs[0]["measured_rms_mm"], runs
+    # (measured 0.078–0.080 → 0.051–0.055 mm) and by the tracker (1.27 → 0.28 mm)
+    assert rms[1] < 0.8 * rms[0], rms
+    assert runs[1]["measured_rms_mm"] < 0.5 * runs[0]["measured_rms_mm"], runs
     assert runs[0]["verdict"] == "learned" and len(runs) >= 2
     if runs[1]["verdict"] in ("converged", "diverged"):  # the third run fed forward only
         assert len(runs) == 2 and any("fed forward, not learning (the learning ended at "

@@ -45,6 +45,13 @@ cycle.  In
 simulated time (``realtime=False``) each cycle runs the loop (with the link in its child
 process, the child waits for each cycle's correction).
 
+With a :class:`~.move_learning.MoveLearning` (``--param learned_dir=DIR``) each tracked
+move of a program learns across the program's runs: its learned file is checked before
+the robot moves (a file for another move fails it with the reason), its offset is the
+loop's ``learned`` feed-forward at the path's time of each cycle's planned sample, and
+the move's good tracker samples — placed on the path's time by the cycles' robot times
+— judge and update it after the move (:mod:`.move_learning`).
+
 The stream holds the shared tracker for the move's duration: another robot's requests
 wait in the tracker's queue until its Stop Measurement (docs/tracker-service.md).  The
 tracker's term fades out where its samples stop (a beam break) and the move goes on
@@ -316,7 +323,8 @@ class TrackedMoves:
         #: ``(t, x, y, z)`` (robot s, m in F0)
         self.last_session: MoveSession | None = None
         self.last_samples: list[tuple[float, float, float, float]] = []
-        self._start_s: float | None = None  # robot time the last move's motion started
+        #: the last move's learned feed-forward on its cycles' path time (None: no learning)
+        self._path_clock: _PathClock | None = None
         self._plan_p = np.zeros((0, 3))  # its planned TCP positions (m), one per sample
         self.settings, self.ramp_s = settings, ramp_s
         self.calibration, self.say = calibration, say
@@ -417,12 +425,13 @@ class TrackedMoves:
 
     def _learn(self, session: MoveSession, samples: int, cycle_s: float) -> None:
         """After the move: judge and learn from its tracker samples, say the verdict."""
-        if self._start_s is None:
-            return
-        t0 = self._start_s - round(self.settle_s / cycle_s) * cycle_s  # sample 0's time
+        clock = self._path_clock
         rows = np.array(self.last_samples, dtype=float).reshape(-1, 4)
-        line = session.finish(rows[:, 0], rows[:, 1:], t0 + cycle_s * np.arange(samples),
-                              self._plan_p, self._start_s)
+        if clock is None or len(clock.cycles) < 2:
+            return
+        inside, t = clock.path_times(rows[:, 0])
+        line = session.finish(t[inside], rows[inside, 1:],
+                              cycle_s * np.arange(samples) - clock.settle_s, self._plan_p, 0.0)
         if self.say is not None:
             self.say(line)
 
@@ -441,14 +450,18 @@ class TrackedMoves:
         newest the worker has, the link's thread never waits for the loop).  The planned
         TCP poses and the controller's Jacobians at the move's samples ``q_plan`` (K+1, 6)
         are computed once, vectorised, before the move: a cycle only looks them up.  With
-        a learning ``session`` its offset is the loop's feed-forward from the motion's
-        start (robot time: the first cycle's, less its sample's, plus the settling)."""
+        a learning ``session`` its offset is the loop's feed-forward at the path's time of
+        the cycle's planned sample (``k T`` less the settling), whatever the robot's clock
+        did in between; the samples are placed on the path's time by the cycles'
+        ``(robot time, k)`` after the move."""
         desc = self.motion.description
         ramp = unit_ramp(max(self.ramp_s, cycle_s))
         record = self.last_record = []
         kept = self.last_samples = []
-        self.last_dropped, self._start_s = 0, None
-        settle = round(self.settle_s / cycle_s) * cycle_s
+        self.last_dropped = 0
+        clock = self._path_clock = None if session is None else _PathClock(
+            session.feedforward(0.0), cycle_s, round(self.settle_s / cycle_s) * cycle_s)
+        loop.learned = clock
         fk_plan = forward(desc, None, q_plan, "nominal")
         T_plan, J_plan = fk_plan.tcp, jacobian_from_fk(desc, fk_plan, "tcp")
         self._plan_p = T_plan[:, :3, 3]
@@ -472,10 +485,8 @@ class TrackedMoves:
                 self.last_dropped += len(samples) - MAX_SAMPLES_PER_CYCLE
                 samples = samples[-MAX_SAMPLES_PER_CYCLE:]
             loop.add(samples)
-            if session is not None:
-                if self._start_s is None:
-                    self._start_s = state.t - k * cycle_s + settle
-                    loop.learned = session.feedforward(self._start_s)
+            if clock is not None:
+                clock.see(state.t, k)
                 kept.extend((m.time_s, *m.pose[:3, 3]) for m in samples
                             if m.pose is not None and m.status == "ok")
             if feed.failure and not record_held:
@@ -546,6 +557,39 @@ def wire_limits(settings: TrackingSettings, jacobians: Array) -> WireLimits:
               [s.max_accel_rad_s2] * 3]
     inv = np.abs(np.linalg.pinv(np.asarray(jacobians, dtype=float)))
     return WireLimits(s.cycle_s, (inv @ v).max(axis=0), (inv @ a).max(axis=0))
+
+
+class _PathClock:
+    """A learned move's cycles on the path's time (s from the motion's start): cycle ``k``
+    commands the planned sample ``k``, at path time ``k T − settle_s``.
+
+    Called with a robot time (as :class:`TrackingLoop` calls its ``learned``) it answers
+    the learned offset ``u`` at the path time of the cycle last seen; after the move
+    :meth:`path_times` places the tracker's samples on the path's time by the cycles'
+    ``(robot time, k)`` — whatever the robot's clock did between them.
+    """
+
+    def __init__(self, learned: Callable[[float], Array], cycle_s: float,
+                 settle_s: float) -> None:
+        self.learned, self.cycle_s, self.settle_s = learned, cycle_s, settle_s
+        self.k = 0
+        #: ``(robot t, k)`` of each computed cycle
+        self.cycles: list[tuple[float, int]] = []
+
+    def see(self, t: float, k: int) -> None:
+        """Cycle ``k`` at robot time ``t`` is being computed."""
+        self.k = k
+        self.cycles.append((t, k))
+
+    def __call__(self, t: float) -> Array:
+        return self.learned(self.k * self.cycle_s - self.settle_s)
+
+    def path_times(self, robot_t: Array) -> tuple[NDArray[np.bool_], Array]:
+        """The samples within the cycles seen (mask) and their path times (s)."""
+        km = np.array(self.cycles, dtype=float).reshape(-1, 2)
+        km = km[np.concatenate([[True], np.diff(km[:, 0]) > 0])]
+        inside = (robot_t >= km[0, 0]) & (robot_t <= km[-1, 0])
+        return inside, np.interp(robot_t, km[:, 0], km[:, 1]) * self.cycle_s - self.settle_s
 
 
 class _Worker:
