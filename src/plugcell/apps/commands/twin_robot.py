@@ -45,8 +45,8 @@ answer, ns; −1: unanswered) as JSON, for ``benchmarks/stream_in_service.py``.
 model's forward kinematics of the joints); ``--timeout`` is its ``\\CommTimeout`` (s).
 ``--mode pathcorr --lin …`` (or ``--program FILE``) is a controller running its
 own program with ``EGMMoveL``
-(mode (b)) and the PC's path corrections added, on the dynamic twin
-(:class:`~plugcell.sim.controller.egm_twin.TwinEgmPathRobot`).
+(mode (b)) and the PC's path corrections applied in its path coordinate system (y
+and z), on the dynamic twin (:class:`~plugcell.sim.controller.egm_twin.TwinEgmPathRobot`).
 """
 
 from __future__ import annotations

@@ -17,7 +17,10 @@ What is modelled, and what is not:
 * pose mode: the TCP pose follows the target (position first-order, orientation along
   the shortest arc); the joints stay where they were (no inverse kinematics);
 * path-correction mode: the TCP runs its own linear path along the work object's x at
-  ``path_speed`` (path frame = work object frame), and the correction is added to it.
+  ``path_speed``, its orientation kept, and the correction is added to it as a
+  controller does: in ABB's path coordinate system (x the path's direction, y = x ×
+  z_tool, z = x × y; :mod:`plugcell.kinematics.path_frame`), y and z only — with the
+  tool's z down (the default quaternion) the path frame is the work object's.
 
 The follower is the simple servo ``x ← x + (1 − e^(−T/τ)) (x* − x)`` with the speed
 capped; in joint mode the twin's dynamics model (servo loops, structural modes, friction)
@@ -41,6 +44,8 @@ from numpy.typing import ArrayLike, NDArray
 
 from plugcell.devices.robot.egm.messages import egm_pb2
 from plugcell.io.units import DEG, M_PER_MM, MM_PER_M
+from plugcell.kinematics.path_frame import applied_displacement, path_frame
+from plugcell.kinematics.rotations import quat_to_matrix
 from plugcell.sim.twin.dynamics import DynamicTwin
 
 Array = NDArray[np.float64]
@@ -147,6 +152,9 @@ class EgmRobotSim:
             self.quat.copy()
         self.path_start = self.p.copy()
         self.path_speed = path_speed
+        #: the path frame of path-correction mode (the path along x, the tool's z)
+        self.path_frame = (path_frame((1.0, 0.0, 0.0), quat_to_matrix(self.quat)[:, 2])
+                           if mode == "pathcorr" else None)
         self.correction = np.zeros(3)
         self.T = sample_s
         self.comm_timeout_s = comm_timeout_s
@@ -240,7 +248,8 @@ class EgmRobotSim:
             self.quat = _slerp_toward(self.quat, self.quat_target, frac)
         else:
             self.path_start = self.path_start + np.array([self.path_speed * dt, 0.0, 0.0])
-            self.p_target = self.path_start + self.correction
+            self.p_target = self.path_start + applied_displacement(self.correction,
+                                                                   self.path_frame)
             self.p = self.follower.step(self.p, self.p_target, dt)
 
     # ------------------------------------------------------------------ the loop
