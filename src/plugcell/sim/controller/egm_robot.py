@@ -43,6 +43,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from plugcell.devices.robot.egm.messages import egm_pb2
+from plugcell.devices.robot.stream.realtime import LoopScheduling, RealTime
 from plugcell.io.units import DEG, M_PER_MM, MM_PER_M
 from plugcell.kinematics.path_frame import applied_displacement, path_frame
 from plugcell.kinematics.rotations import quat_to_matrix
@@ -133,6 +134,9 @@ class EgmRobotSim:
         Path-correction mode: the programmed path's speed along x (m/s).
     bind : tuple of (str, int)
         The controller's own address (its source port; port 0: any).
+    realtime : RealTime, optional
+        The sample thread's scheduling (real-time priority, CPUs, locked memory), applied
+        by it when it starts; what happened is :attr:`scheduling`'s note.
     """
 
     def __init__(self, sensor: tuple[str, int], mode: Literal["joint", "pose",
@@ -140,7 +144,8 @@ class EgmRobotSim:
                  position: ArrayLike = (0.6, 0.0, 0.8), quaternion: ArrayLike = (0, 0, 1, 0),
                  sample_s: float = 0.004, comm_timeout_s: float = 1.0,
                  follower: Follower | None = None, path_speed: float = 0.0,
-                 bind: tuple[str, int] = ("127.0.0.1", 0)) -> None:
+                 bind: tuple[str, int] = ("127.0.0.1", 0),
+                 realtime: RealTime | None = None) -> None:
         if mode not in ("joint", "pose", "pathcorr"):
             raise ValueError(f"mode {mode!r}: expected 'joint', 'pose' or 'pathcorr'")
         self.sensor = sensor
@@ -176,6 +181,8 @@ class EgmRobotSim:
         self._lock = threading.Lock()
         self._thread: threading.Thread | None = None
         self._t0 = time.monotonic()
+        #: the sample thread's scheduling (``plugcell twin egm --rt-priority …``)
+        self.scheduling = LoopScheduling(realtime)
 
     @property
     def address(self) -> tuple[str, int]:
@@ -258,6 +265,7 @@ class EgmRobotSim:
         """Start sending (a thread); returns self."""
         self._thread = threading.Thread(target=self._run, name="egm-robot", daemon=True)
         self._thread.start()
+        self.scheduling.wait()
         return self
 
     def stop(self) -> None:
@@ -280,6 +288,7 @@ class EgmRobotSim:
         return self.stopped is not None
 
     def _run(self) -> None:
+        self.scheduling.apply_here()
         poller = select.poll()
         poller.register(self.sock, select.POLLIN)
         next_t = time.monotonic()
