@@ -239,7 +239,8 @@ IK_STEPS, IK_TOL = 6, 1e-10
 class _Compensation:
     """``g(state)`` of a calibration's compensation (module docstring) in the stream's
     space: joints (rad); a Cartesian correction in the base or the tool frame (m, rad,
-    KUKA's A, B, C); or EGM's path correction (m; :attr:`uncorrected` the rotation it
+    KUKA's A, B, C); or EGM's path correction (m, y and z in path coordinates;
+    :attr:`along_path` the part along the path and :attr:`uncorrected` the rotation it
     cannot carry)."""
 
     def __init__(self, spec: CorrectionSpec, space: str, path_chord: Any = None) -> None:
@@ -271,7 +272,8 @@ class _Compensation:
         #: to be sent in — no jump when the path starts to move under a running correction
         self._ramp = unit_ramp(spec.ramp_s)
         self._t_frame: float | None = None
-        self._ramped = self.path_frame is not None  # a frame from the start: the blend's
+        # a frame from the first cycle: the correction's own ramp in (PathOffset) does
+        self._ramped = self.path_frame is not None
 
     def _seed(self, q_a: Array, q_b: Array) -> None:
         """The path frame of the path's last chord ``q_a → q_b`` (the link's
