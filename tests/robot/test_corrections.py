@@ -32,6 +32,12 @@ from plugcell.devices.robot.stream.source import CycleState
 from plugcell.framework.service import DeviceError
 from plugcell.io.robots import load_robot
 from plugcell.kinematics import forward, inverse
+from plugcell.kinematics.path_frame import (
+    applied_displacement,
+    path_frame,
+    path_tangents,
+    to_path,
+)
 from plugcell.kinematics.pose_corrections import correct_pose
 from plugcell.kinematics.transforms import so3_log
 from plugcell.sim.twin.scenario import TwinScenario
@@ -91,6 +97,8 @@ def test_a_constant_offset_reads_in_robot_units_and_lands_in_si():
                                          "tool frame): give it in the tool frame"),
     (EGM_PATH, ["offset", "offset=0,0,1,0,0,0.5"], "EGM path corrections carry a position "
                                                    "only"),
+    (EGM_PATH, ["offset", "offset=0.5,1,0,0,0,0"], "X is the path's direction, which the "
+                                                   "controller does not correct"),
 ])
 def test_bad_requests_are_refused_with_the_reason(config, items, why):
     with pytest.raises(ValueError) as err:
@@ -225,40 +233,96 @@ def test_the_compensation_over_cartesian_corrections_commands_the_compensated_jo
                                atol=np.radians(2e-5))
 
 
-def test_the_compensation_over_egm_path_corrections_corrects_the_position_only(calibration):
-    """EGM path correction: the compensated point's shift; the controller translating its
-    TCP by it puts that point where the program meant it, and the rotation it cannot
-    carry is reported (CORRECT_STATUS's A, B, C)."""
+def test_the_compensation_over_egm_path_corrections_corrects_across_the_path(calibration):
+    """EGM path correction: the compensated point's shift in ABB's path coordinate system,
+    y and z sent, x (the path's direction) not; the controller displacing its TCP by
+    ``R · (0, c_y, c_z)`` (its own path frame, the program's tangent) puts that point where
+    the program meant it across the path, the part along the path and the rotation it
+    cannot carry reported (CORRECT_STATUS's X and A, B, C)."""
     result, path = calibration
-    spec = _corrections(EGM_PATH).spec(["compensation", f"calibration={path}"])
+    spec = _corrections(EGM_PATH).spec(["compensation", f"calibration={path}", "ramp=0.1"])
     running = make_source(spec, EGM_PATH)
     running.close()
     desc = load_robot("smart_h4")
+    n = 60  # the path turns A1 at 10 °/s, 4 ms a cycle
+    q_prog = Q + np.radians(10.0 * 0.004 * np.arange(n + 1))[:, None] * np.eye(6)[0]
+    T_prog = forward(desc, None, q_prog, "nominal").tcp
+    frames = path_frame(path_tangents(T_prog[:, :3, 3]), T_prog[:, :3, 2])
     c = np.zeros(6)
     q_set = Q.copy()
-    for k in range(60):
-        q_path = Q + np.radians([10.0 * 0.004 * k, 0, 0, 0, 0, 0])
-        T_c = forward(desc, None, q_path, "nominal").tcp
-        T_c[:3, 3] += c[:3]  # the path frame's axes are the base frame's (the twin's)
+    sent = []
+    for k in range(n):
+        T_c = T_prog[k].copy()
+        T_c[:3, 3] += applied_displacement(c[:3], frames[k])  # as the controller does
         q_set = _controller_joints(desc, T_c, q_set)
         robot = types.SimpleNamespace(joints=q_set, joints_setpoint=q_set)
         c = running.goal_now(CycleState(robot=robot, offset=c, session=1, cycle=k,
                                         t=0.004 * k))
+        if k <= 1:  # no frame before the path moves, then the shift ramps in from 0
+            assert not np.any(c)
+        sent.append(np.linalg.norm(c))
+    assert 0 < sent[3] < sent[10] < sent[-1]  # ramped in, not a jump
+    q_path = q_prog[n - 1]
     q_c, model, nominal = _compensated(result, q_path)
-    assert np.all(c[3:] == 0)
+    assert c[0] == 0 and np.all(c[3:] == 0)
     p = nominal.evaluate(np.stack([q_path, q_c]))[0][:, :3, 3]
-    np.testing.assert_allclose(c[:3], p[1] - p[0], atol=2e-7)
-    T_c = forward(desc, None, q_path, "nominal").tcp
-    T_c[:3, 3] += c[:3]
+    R = frames[n - 1]
+    want = to_path(p[1] - p[0], R)
+    # the sensor's tangent is the chord of the last cycle: half a cycle behind the
+    # controller's (10 °/s · 2 ms = 0.35 mrad of a millimetre: well under a micrometre)
+    np.testing.assert_allclose(c[1:3], want[1:], atol=1e-6)
+    assert running.along_path == pytest.approx(want[0], abs=1e-6)
+    T_c = T_prog[n - 1].copy()
+    T_c[:3, 3] += applied_displacement(c[:3], R)
     reached = model.evaluate(_controller_joints(desc, T_c, q_set),
                              result.model.payload_ref_kg)[0][0][:3, 3]
     before = model.evaluate(q_path, result.model.payload_ref_kg)[0][0][:3, 3]
     error_off = np.linalg.norm(before - p[0])
     assert error_off > 0.3e-3
-    assert np.linalg.norm(reached - p[0]) < error_off / 20
-    R = nominal.evaluate(np.stack([q_path, q_c]))[0][:, :3, :3]
-    np.testing.assert_allclose(running.uncorrected, so3_log(R[1] @ R[0].T), atol=1e-8)
+    left = to_path(reached - p[0], R)
+    assert np.linalg.norm(left[1:]) < error_off / 20  # across the path: corrected
+    assert left[0] == pytest.approx(-want[0], abs=error_off / 20)  # along it: left
+    Rn = nominal.evaluate(np.stack([q_path, q_c]))[0][:, :3, :3]
+    np.testing.assert_allclose(running.uncorrected, so3_log(Rn[1] @ Rn[0].T), atol=1e-8)
     assert np.linalg.norm(running.uncorrected) > np.radians(0.001)
+
+
+def test_a_compensation_where_the_arm_stands_takes_the_frame_the_path_last_moved_in(
+        calibration):
+    """The EGM link's last chord of the path (``path_chord``, taken while it sent no
+    correction) gives a compensation started at a fine point its path frame at once."""
+    from plugcell.devices.robot.egm.link import PATH_CHORD_RAD, EgmLink
+    from plugcell.devices.robot.egm.messages import EgmState
+
+    result, path = calibration
+    link = EgmLink(EGM_PATH)
+    q_b = Q + np.radians([0.5, 0, 0, 0, 0, 0])
+    for k, q in enumerate([Q, Q + 0.3 * PATH_CHORD_RAD, q_b, q_b, q_b]):
+        link._watch_path(EgmState(seqno=k, tm=4 * k, joints=q, planned_joints=q))
+    a, b = link.path_chord
+    np.testing.assert_array_equal(a, Q)
+    np.testing.assert_array_equal(b, q_b)
+    spec = _corrections(EGM_PATH).spec(["compensation", f"calibration={path}"])
+    running = make_source(spec, EGM_PATH, (a, b))
+    running.close()
+    robot = types.SimpleNamespace(joints=q_b, joints_setpoint=q_b)
+    c = running.goal_now(CycleState(robot=robot, offset=np.zeros(6), session=1, cycle=0, t=0))
+    assert np.linalg.norm(c) > 1e-4  # sent from the first cycle: no frame to wait for
+    for k in range(1, 8):  # Newton's steps converge where it stands (the shift not applied)
+        c = running.goal_now(CycleState(robot=robot, offset=np.zeros(6), session=1, cycle=k,
+                                        t=0.004 * k))
+    desc = load_robot("smart_h4")
+    T = forward(desc, None, np.stack([Q, q_b]), "nominal").tcp
+    R = path_frame(T[1, :3, 3] - T[0, :3, 3], T[1, :3, 2])
+    q_c, _, nominal = _compensated(result, q_b)
+    p = nominal.evaluate(np.stack([q_b, q_c]))[0][:, :3, 3]
+    want = to_path(p[1] - p[0], R)
+    np.testing.assert_allclose(c[:3], [0.0, *want[1:]], atol=2e-7)
+    assert running.along_path == pytest.approx(want[0], abs=2e-7)
+    # a correction sent: the joints are the path's and more, no chord of the path
+    link._limiter.offset = np.array([0, 1e-3, 0, 0, 0, 0])
+    link._watch_path(EgmState(seqno=9, tm=36, joints=Q, planned_joints=Q))
+    np.testing.assert_array_equal(link.path_chord[1], q_b)
 
 
 def test_the_link_takes_the_newest_goal_computed_beside_it():

@@ -3,7 +3,9 @@ child over the pipe and moves the robot; the feedback, the stream's state and a 
 reason come back through shared memory; a stopped stream fails a motion with the link's
 reason and a robot coming back starts a new session; closing (or losing) the parent ends
 the child.  The robot is the simulated ABB controller's EGM loop (EgmRobotSim, joint
-mode) in this process."""
+mode) in this process.  A motion in the child fails within one controller timeout of
+the stream stopping and at once when the child dies; the parent's wait for its answer
+counts the controller's cycles (:func:`await_answer`, with a fake child and clock)."""
 
 from __future__ import annotations
 
@@ -12,6 +14,7 @@ import os
 import signal
 import subprocess
 import sys
+import threading
 import time
 
 import numpy as np
@@ -20,7 +23,14 @@ import pytest
 from plugcell.devices.robot.egm import EgmConfig
 from plugcell.devices.robot.rsi import RsiConfig
 from plugcell.devices.robot.stream.drive import drive_refusal
-from plugcell.devices.robot.stream.process import LinkProcess, Publisher
+from plugcell.devices.robot.stream.process import (
+    ANSWER_GRACE_S,
+    FAILED_GRACE_S,
+    LinkProcess,
+    NoAnswerError,
+    Publisher,
+    await_answer,
+)
 from plugcell.devices.robot.stream_controller import streaming_limits
 from plugcell.io.robots import load_robot
 from plugcell.io.units import DEG
@@ -187,6 +197,107 @@ def test_a_crashed_link_process_says_so_and_starts_again():
     finally:
         robot.stop()
         link.close()
+
+
+def _long_motion(link) -> object:
+    """A PTP of some seconds from where the robot stands."""
+    target = link.joint_readings() + np.radians([60.0, 0, 0, 0, 0, 0])
+    traj = plan(load_robot("smart_h4"), link.joint_readings(), [PTP(target=target)], LIMITS)
+    assert traj.duration > 3.0
+    return traj
+
+
+@pytest.mark.slow
+def test_a_motion_fails_within_one_controller_timeout_of_the_stream_stopping():
+    """The controller gone during a motion in the child: the motion fails with the
+    stream's reason one \\CommTimeout (2 s) after the last packet, not at the motion's
+    own timeout."""
+    link = LinkProcess(_config())
+    address = link.start()
+    robot = _robot(address)
+    try:
+        assert link.wait(lambda lk: lk.streaming and lk.latest is not None, 20)
+        traj = _long_motion(link)
+        threading.Timer(0.5, robot.stop).start()  # the controller gone mid-motion
+        t0 = time.monotonic()
+        with pytest.raises(MotionError, match=r"EGM stream stopped: no packet from the "
+                                              r"controller for 2\.0"):
+            link.follow(traj)
+        assert time.monotonic() - t0 < 0.5 + 2.0 + 1.5  # the stop, one timeout, the pipe
+    finally:
+        robot.stop()
+        link.close()
+
+
+@pytest.mark.slow
+def test_a_motion_fails_at_once_when_the_child_dies():
+    link = LinkProcess(_config())
+    address = link.start()
+    robot = _robot(address)
+    try:
+        assert link.wait(lambda lk: lk.streaming and lk.latest is not None, 20)
+        traj = _long_motion(link)
+        pid = link._proc.pid
+        threading.Timer(0.5, os.kill, (pid, signal.SIGKILL)).start()
+        t0 = time.monotonic()
+        with pytest.raises(MotionError, match="the EGM link process has exited"):
+            link.follow(traj)
+        assert time.monotonic() - t0 < 0.5 + 1.5
+    finally:
+        robot.stop()
+        link.close()
+
+
+class _Child:
+    """A fake child for :func:`await_answer`: a clock, its cycles, its answer."""
+
+    def __init__(self, rate: float = 250.0, answer_at: float | None = None) -> None:
+        self.t, self.rate, self.answer_at = 0.0, rate, answer_at
+        self.alive, self.failed_at, self.cycles_until = True, None, float("inf")
+
+    def receive(self, wait: float):
+        self.t += wait
+        return "" if self.answer_at is not None and self.t >= self.answer_at else None
+
+    def cycles(self) -> int:
+        return int(self.rate * min(self.t, self.cycles_until))
+
+    def failed(self) -> bool:
+        return self.failed_at is not None and self.t >= self.failed_at
+
+    def wait(self, timeout: float = 3.0, cycle_s: float = 0.004) -> str:
+        return await_answer(self.receive, lambda: self.alive, self.cycles, self.failed,
+                            timeout, cycle_s, clock=lambda: self.t)
+
+
+def test_the_parent_waits_in_controller_cycles_not_on_the_wall_clock():
+    """A controller whose cycles come at half speed (a loaded machine): the motion takes
+    twice its time on the wall clock, and the parent still gets the child's answer."""
+    child = _Child(rate=125.0, answer_at=2 * (3.0 + ANSWER_GRACE_S) - 1.0)
+    assert child.wait() == ""
+    # … but not forever: past the motion's timeout counted in cycles, it gives up
+    child = _Child(rate=125.0)
+    with pytest.raises(NoAnswerError, match=r"within 1500 controller cycles"):
+        child.wait()
+    assert child.t == pytest.approx(2 * (3.0 + ANSWER_GRACE_S), abs=0.1)
+
+
+def test_the_parent_gives_up_without_cycles_a_dead_child_or_a_failed_session():
+    child = _Child()
+    child.cycles_until = 1.0  # the stream stopped after a second, the child silent
+    with pytest.raises(NoAnswerError, match=r"no controller cycle for 6\.\d s"):
+        child.wait()
+    assert child.t == pytest.approx(1.0 + 3.0 + ANSWER_GRACE_S, abs=0.1)
+    child = _Child()
+    child.alive = False
+    with pytest.raises(NoAnswerError, match="has exited"):
+        child.wait()
+    assert child.t == pytest.approx(0.05)
+    child = _Child()
+    child.failed_at = 0.5  # the session failed; the child does not answer
+    with pytest.raises(NoAnswerError, match="did not answer after its stream failed"):
+        child.wait()
+    assert child.t == pytest.approx(0.5 + FAILED_GRACE_S, abs=0.1)
 
 
 def test_the_publisher_writes_a_consistent_state():

@@ -8,7 +8,9 @@ different from the nominal model its controller plans with) runs a 100 mm LIN of
 and stands at its end.  There the T-MAC's true error from where the program means it
 (the twin's ``--calibration`` report: what a tracker in the calibrated cell sees) is
 millimetres; ``CORRECT compensation`` (the robot service, the link in its child process)
-brings it down to the calibration's residual, and ``CORRECT_END`` puts it back.
+brings it down to the calibration's residual — over EGM across the path only: a path
+correction is applied in ABB's path coordinate system, y and z, and the part along the
+path stays — and ``CORRECT_END`` puts it back.
 """
 
 from __future__ import annotations
@@ -133,7 +135,9 @@ def test_the_compensation_over_egm_path_corrections_brings_the_tmac_where_meant(
                                           "egm_mode": "pathcorr"}, params)
     off, on = _errors_off_and_on(stats)
     assert off > 2.0, off
+    # across the path corrected; along it (the LIN's direction, ABB's path x) not
     assert on < off / 3 and on < 1.0, (off, on)
+    assert 0.1 < abs(status[1]) < on + 0.5, status  # the part along the path, mm
     # the orientation a path correction cannot carry, reported (degrees): small, not zero
     left = np.linalg.norm(status[4:])
     assert 0.001 < left < 0.5, status

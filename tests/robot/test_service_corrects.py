@@ -29,7 +29,10 @@ from plugcell.apps.kinds import build
 from plugcell.framework import Client, ProcessStates
 from plugcell.framework.data import from_data
 from plugcell.framework.messages import ConnectionStates
+from plugcell.io.robots import load_robot
 from plugcell.io.units import M_PER_MM
+from plugcell.kinematics import forward
+from plugcell.kinematics.path_frame import path_frame
 from plugcell.sim.controller.egm_robot import EgmRobotSim
 from plugcell.sim.controller.egm_twin import EgmTwinProcess
 from plugcell.sim.controller.rsi_twin import RsiTwinProcess
@@ -182,8 +185,10 @@ def test_egm_path_corrections_reach_the_controllers_own_path(tmp_path, monkeypat
 @pytest.mark.slow
 def test_twin_egm_runs_its_own_path_under_the_services_corrections(tmp_path, monkeypatch):
     """``plugcell twin egm --mode pathcorr --lin …`` in its own process (the dynamic twin
-    running its own LIN with EGMMoveL): the service's path correction shifts its commanded
-    TCP by the requested -0.7 mm in z over UDP, and back to zero."""
+    running its own LIN with EGMMoveL): the service's path correction of -0.7 mm in the
+    path frame's z shifts its commanded TCP by -0.7 mm along that axis (ABB's path
+    coordinate system: x the LIN's direction, y = x × the TCP's z, z = x × y) over UDP,
+    and back to zero."""
     monkeypatch.setenv("PLUGCELL_HOME", str(tmp_path / "home"))
     port = _free_udp_port()
     stats = tmp_path / "twin.json"
@@ -214,8 +219,11 @@ def test_twin_egm_runs_its_own_path_under_the_services_corrections(tmp_path, mon
     # the largest |correction| of an axis (the requested -0.7 mm in z)
     assert "largest path correction Z 0.70 mm, path " in out.strip().splitlines()[-1], out
     shift = np.array(json.loads(stats.read_text())["shift_mm"])
-    low = shift[np.argmin(shift[:, 2])]  # the twin's commanded TCP lowered by 0.7 mm
-    np.testing.assert_allclose(low, [0, 0, -0.7], atol=2e-3)
+    desc = load_robot("smart_h4")
+    R = path_frame([1.0, 0.0, 0.0], forward(desc, None, desc.home, "nominal").tcp[:3, 2])
+    assert abs(R[:, 2] @ [0, 0, 1]) < 0.95  # the path frame is not the base frame here
+    top = shift[np.argmax(np.linalg.norm(shift, axis=1))]  # the twin's commanded TCP …
+    np.testing.assert_allclose(top, R @ [0, 0, -0.7], atol=2e-3)  # … moved along path z
     np.testing.assert_allclose(shift[-1], 0.0, atol=1e-6)
 
 

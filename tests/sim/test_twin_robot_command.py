@@ -157,6 +157,12 @@ def test_twin_egm_stops_after_its_comm_timeout(capsys) -> None:
                                  "pathcorr"),
     (["egm", "--mode", "pathcorr", "--lin", "0,30,0", "--path-delay", "-1"],
      "twin egm: path_delay_s must be ≥ 0"),
+    (["egm", "--rt-priority", "0"], "twin egm: --rt-priority: rt_priority 0: expected 1..99"),
+    (["rsi", "--port", "49152", "--rt-priority", "100"],
+     "twin rsi: --rt-priority: rt_priority 100: expected 1..99"),
+    (["rsi", "--port", "49152", "--cpu", "9999"], "twin rsi: --cpu '9999': CPU 9999 is not one "
+                                                  "of this machine's"),
+    (["egm", "--cpu", "1-x"], "twin egm: --cpu: CPU list '1-x': '1-x' is not a CPU number"),
 ])
 def test_bad_options_are_refused_with_the_reason(argv, message, capsys) -> None:
     assert main(["twin", *argv]) == 2
@@ -304,3 +310,90 @@ def test_twin_egm_runs_a_program_file_with_egmmovel(tmp_path, capsys) -> None:
     assert re.fullmatch(r"twin egm: \d+ samples, 0 answers, \d+ unanswered, largest path "
                         r"correction X 0\.00 mm, path (done|not done), largest shift "
                         r"0\.000 mm", out[-1]), out[-1]
+
+
+# ------------------------------------------------ --rt-priority, --cpu, --mlock (the twin's)
+class _Scheduler:
+    """os.sched_setscheduler and sched_setaffinity as the kernel would answer them, recorded
+    (never applied to the test's own process): granted, or refused as to a user without
+    CAP_SYS_NICE."""
+
+    def __init__(self, refuse: bool) -> None:
+        self.refuse, self.calls, self.pinned = refuse, [], []
+
+    def setscheduler(self, pid, policy, param) -> None:
+        self.calls.append((threading.current_thread().name, policy, param.sched_priority))
+        if self.refuse:
+            raise PermissionError(1, "Operation not permitted")
+
+    def setaffinity(self, pid, cpus) -> None:
+        self.pinned.append(frozenset(cpus))
+
+
+@pytest.mark.parametrize("refuse", [False, True])
+def test_the_twins_cycle_thread_takes_the_links_scheduling(refuse, monkeypatch, capsys):
+    """``--rt-priority 20 --cpu 0``: the cycle thread asks SCHED_FIFO 20 (the process's
+    other threads 19) on CPU 0, as a link's loop does; refused (not root, no
+    CAP_SYS_NICE), the twin says why on stderr and runs at normal priority."""
+    import os
+
+    kernel = _Scheduler(refuse)
+    monkeypatch.setattr(os, "sched_setscheduler", kernel.setscheduler)
+    monkeypatch.setattr(os, "sched_setaffinity", kernel.setaffinity)
+    sensor = _Sensor(0.5)
+    try:
+        status = main(["twin", "rsi", "--port", str(sensor.port), "--timeout", "10000",
+                       "--lockstep", "1", "--duration", "0.5", "--rt-priority", "20",
+                       "--cpu", "0"])
+    finally:
+        sensor.close()
+    out, err = capsys.readouterr()
+    assert status == 0
+    cycles = int(re.search(r"twin rsi: (\d+) cycles", out.splitlines()[-1])[1])
+    assert cycles > 10  # it ran either way
+    assert ("rsi-robot", os.SCHED_FIFO, 20) in kernel.calls
+    assert (threading.current_thread().name, os.SCHED_FIFO, 19) in kernel.calls
+    assert frozenset({0}) in kernel.pinned
+    line = [x for x in err.splitlines() if x.startswith("twin rsi: cycle thread: ")]
+    assert len(line) == 1, err
+    if refuse:
+        assert line[0].startswith("twin rsi: cycle thread: SCHED_FIFO refused (not "
+                                  "permitted: priority 20 needs root or CAP_SYS_NICE")
+        assert "; normal priority, CPU 0" in line[0]
+        assert "other threads at normal priority (SCHED_FIFO refused (not permitted" in line[0]
+    else:
+        assert line[0] == ("twin rsi: cycle thread: SCHED_FIFO priority 20, CPU 0; CPU 0, "
+                           "other threads SCHED_FIFO priority 19")
+
+
+def test_without_the_options_the_twin_schedules_nothing(monkeypatch, capsys):
+    import os
+
+    kernel = _Scheduler(False)
+    monkeypatch.setattr(os, "sched_setscheduler", kernel.setscheduler)
+    assert main(["twin", "egm", "--port", "9", "--duration", "0.3"]) == 0
+    assert kernel.calls == [] and "cycle thread" not in capsys.readouterr().err
+
+
+@pytest.mark.slow
+def test_without_cap_sys_nice_the_twin_says_why_and_runs(tmp_path):
+    """A real refusal: the twin in a process without CAP_SYS_NICE (util-linux's setpriv)."""
+    import os
+    import shutil
+    import subprocess
+    import sys
+
+    setpriv = shutil.which("setpriv")
+    if setpriv is None:
+        pytest.skip("no setpriv here")
+    run = subprocess.run([setpriv, "--inh-caps=-sys_nice", "--bounding-set=-sys_nice",
+                          sys.executable, "-m", "plugcell", "twin", "egm", "--port", "9",
+                          "--timeout", "30", "--duration", "1", "--rt-priority", "10"],
+                         capture_output=True, text=True, timeout=120, env=dict(os.environ))
+    if os.geteuid() != 0 and "bounding" in run.stderr:
+        pytest.skip(f"setpriv cannot drop the capability here: {run.stderr.strip()}")
+    assert run.returncode == 0, run.stderr
+    assert "twin egm: cycle thread: SCHED_FIFO refused (not permitted: priority 10 needs " \
+           "root or CAP_SYS_NICE" in run.stderr, run.stderr
+    assert "; normal priority" in run.stderr
+    assert re.search(r"twin egm: (\d+) samples", run.stdout.splitlines()[-1]), run.stdout

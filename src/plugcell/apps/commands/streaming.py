@@ -140,16 +140,23 @@ def add_run_controls(p: argparse.ArgumentParser) -> None:
                    help="swing one axis once: e.g. A6:2:4 (2° over 4 s) or Z:5:4 (5 mm)")
     p.add_argument("--duration", type=float, default=0.0,
                    help="seconds to run (default: until interrupted)")
+    add_realtime_options(p, "the link's thread")
+    p.add_argument("--json", action="store_true", help="print the counters as JSON lines")
+
+
+def add_realtime_options(p: argparse.ArgumentParser, loop: str) -> None:
+    """``--rt-priority``, ``--cpu``, ``--mlock``: the scheduling of ``loop`` (e.g. "the
+    link's thread"), read by :func:`realtime_of` (:mod:`~plugcell.devices.robot.stream.
+    realtime`)."""
     p.add_argument("--rt-priority", type=int, metavar="N",
-                   help="run the link's thread under SCHED_FIFO priority N (1-99; Linux, "
-                   "root or CAP_SYS_NICE)")
+                   help=f"run {loop} under SCHED_FIFO priority N (1-99; Linux, root or "
+                   "CAP_SYS_NICE; refused: it runs at normal priority and says why)")
     p.add_argument("--cpu", metavar="CPUS",
-                   help="run the link's thread on these CPUs only (taskset -c syntax: 1, "
-                   "2-3); keep the cell's other services off them")
+                   help=f"run {loop} on these CPUs only (taskset -c syntax: 1, 2-3); keep "
+                   "the cell's other services off them")
     p.add_argument("--mlock", action="store_true",
                    help="lock the process's memory (mlockall): no page fault from disk in "
                    "a cycle")
-    p.add_argument("--json", action="store_true", help="print the counters as JSON lines")
 
 
 def realtime_of(args: argparse.Namespace) -> Any:

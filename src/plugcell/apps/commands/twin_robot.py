@@ -10,11 +10,13 @@ RSI, or an ABB controller's EGM loop, standalone.
                       [--joints Q1,…,Q6] [--lockstep S] [--reflector NAME [--cell C]]
                       [--lin DX,DY,DZ … | --program FILE [--library DIR …]]
                       [--speed MM_S] [--path-delay S] [--duration S] [--stats FILE]
+                      [--rt-priority N] [--cpu CPUS] [--mlock]
     plugcell twin egm [--port 6510] [--ip 127.0.0.1] [--timeout 1.0] [--bind HOST[:PORT]]
                       [--mode joint|pathcorr (--lin DX,DY,DZ … | --program FILE
                       [--library DIR …]) [--speed MM_S] [--path-delay S]]
                       [--robot R] [--seed S] [--payload-kg M] [--joints Q1,…,Q6]
                       [--reflector NAME [--cell C]] [--duration S] [--stats FILE]
+                      [--rt-priority N] [--cpu CPUS] [--mlock]
 
 It stands where a KUKA controller running plugcell's KRL program (``plugcell rsi
 files``) stands: from ``RSI_ON`` on it sends ``<Rob>`` every cycle to the PC's ``--ip``
@@ -39,14 +41,20 @@ the cell's simulated world as it moves, for a simulated tracker
 (:class:`~plugcell.sim.controller.reflector.ReflectorFeed`).  ``--stats FILE`` writes, at
 the end, the robot side's counts and every packet's round trip (its send to the first
 answer, ns; −1: unanswered) as JSON, for ``benchmarks/stream_in_service.py``.
+``--rt-priority N``, ``--cpu CPUS``, ``--mlock`` schedule the controller's cycle thread
+as the link's options do (:func:`~plugcell.apps.commands.streaming.realtime_of`,
+:class:`~plugcell.devices.robot.stream.realtime.LoopScheduling`; the process's other
+threads one priority below and on those CPUs); what the kernel granted or refused is a
+line on stderr, and a refusal (not root, no ``CAP_SYS_NICE``) leaves the twin running at
+normal priority.
 
 ``twin egm`` is the same twin behind an ABB controller's EGM loop in joint mode
 (:class:`~plugcell.sim.controller.egm_twin.TwinEgmRobot`: the feedback pose the nominal
 model's forward kinematics of the joints); ``--timeout`` is its ``\\CommTimeout`` (s).
 ``--mode pathcorr --lin …`` (or ``--program FILE``) is a controller running its
 own program with ``EGMMoveL``
-(mode (b)) and the PC's path corrections added, on the dynamic twin
-(:class:`~plugcell.sim.controller.egm_twin.TwinEgmPathRobot`).
+(mode (b)) and the PC's path corrections applied in its path coordinate system (y
+and z), on the dynamic twin (:class:`~plugcell.sim.controller.egm_twin.TwinEgmPathRobot`).
 """
 
 from __future__ import annotations
@@ -61,6 +69,7 @@ import numpy as np
 
 from plugcell.apps.cli import CommandError
 from plugcell.apps.commands.cellargs import add_cell_args
+from plugcell.apps.commands.streaming import add_realtime_options, realtime_of
 
 #: Python's thread switch interval in the twin's process (s): the reflector feed computes
 #: for milliseconds, and the cycle thread must get the interpreter back within a fraction
@@ -110,6 +119,7 @@ def _side_options(r: argparse.ArgumentParser, common, what: str, default_port: i
     r.add_argument("--stats", metavar="FILE",
                    help="at the end, write the robot side's counts and every answer's round "
                    "trip (ns) to FILE as JSON (benchmarks)")
+    add_realtime_options(r, "the controller's cycle thread")
 
 
 def add_robot_sides(tw: argparse._SubParsersAction, common, rsi, egm) -> None:
@@ -204,7 +214,32 @@ def _arm_and_program(args: argparse.Namespace, scenario, q0, params=None):
     return arm, None
 
 
-def _rsi_side(args: argparse.Namespace, scenario):
+def _schedule(args: argparse.Namespace, what: str):
+    """The cycle thread's scheduling ``--rt-priority``/``--cpu``/``--mlock`` ask for
+    (CommandError on a value that can never work)."""
+    try:
+        return realtime_of(args)
+    except CommandError as exc:
+        raise CommandError(f"twin {what}: {exc}") from None
+
+
+def _start(world, robot, what: str) -> str:
+    """Start the world's feed and the robot side: the process's threads scheduled first
+    (:meth:`RealTime.prepare_process`: on the CPUs asked, one priority below the cycle
+    thread), then the cycle thread (its own); what the kernel granted or refused, asked
+    for, is a line on stderr, returned."""
+    realtime = robot.scheduling.realtime
+    prepared = realtime.prepare_process()
+    world.start()
+    robot.start()
+    if not realtime.asked:
+        return ""
+    note = robot.scheduling.note + (f"; {prepared}" if prepared else "")
+    print(f"twin {what}: cycle thread: {note}", file=sys.stderr, flush=True)
+    return note
+
+
+def _rsi_side(args: argparse.Namespace, scenario, realtime=None):
     """The arm and its RSI side the options describe (CommandError on bad ones)."""
     from plugcell.devices.robot.rsi.config import CorrectionLimits, RsiConfig, RsiConfigError
     from plugcell.sim.controller.rsi_robot import RsiRobot
@@ -219,7 +254,8 @@ def _rsi_side(args: argparse.Namespace, scenario):
                            timeout_packets=args.timeout, limits=CorrectionLimits(big, big, big))
         arm, path = _arm_and_program(args, scenario, q0, DynamicParameters(cycle=config.cycle_s))
         return arm, RsiRobot(arm, config, bind=bind, lockstep_s=args.lockstep, path=path,
-                             path_delay_s=args.path_delay if path else 0.0), config
+                             path_delay_s=args.path_delay if path else 0.0,
+                             realtime=realtime), config
     except (ValueError, RsiConfigError, OSError) as exc:
         raise CommandError(f"twin rsi: {exc}") from None
 
@@ -363,11 +399,11 @@ def run_rsi(args: argparse.Namespace, scenario) -> int:
     """Run ``twin rsi`` (module docstring) for the twin ``scenario`` (a TwinScenario)."""
     from plugcell.sim.controller.own_program import path_shift
 
-    arm, robot, config = _rsi_side(args, _scenario_of(args, scenario, "rsi"))
+    realtime = _schedule(args, "rsi")
+    arm, robot, config = _rsi_side(args, _scenario_of(args, scenario, "rsi"), realtime)
     watch = _PathWatch(args, arm, "rsi")
     world = _World(args, arm, "rsi")
-    world.start()
-    robot.start()
+    _start(world, robot, "rsi")
     h, pt = robot.address
     print(f"twin rsi: {arm.twin.description.name} streaming RSI ({config.correction}, "
           f"{config.mode}, {config.cycle}) from {h}:{pt} to {config.listen_host}:"
@@ -402,6 +438,7 @@ def run_egm(args: argparse.Namespace, scenario) -> int:
     from plugcell.sim.controller.egm_twin import TwinEgmPathRobot, TwinEgmRobot
 
     scenario = _scenario_of(args, scenario, "egm")
+    realtime = _schedule(args, "egm")
     try:
         sensor, bind, q0 = _parse_side(args)
         if not (args.timeout > 0):
@@ -413,19 +450,19 @@ def run_egm(args: argparse.Namespace, scenario) -> int:
                 raise ValueError("--mode pathcorr runs the controller's own program: give "
                                  "it with --lin DX,DY,DZ or --program FILE")
             robot = TwinEgmPathRobot(arm, sensor, path, path_delay_s=args.path_delay,
-                                     comm_timeout_s=args.timeout, bind=bind)
+                                     comm_timeout_s=args.timeout, bind=bind, realtime=realtime)
         elif path is not None:
             given = "--program" if args.program else "--lin"
             raise ValueError(f"{given} is the controller's own program of --mode pathcorr "
                              f"(EGMRunJoint follows the PC)")
         else:
-            robot = TwinEgmRobot(arm, sensor, comm_timeout_s=args.timeout, bind=bind)
+            robot = TwinEgmRobot(arm, sensor, comm_timeout_s=args.timeout, bind=bind,
+                                 realtime=realtime)
     except (ValueError, OSError) as exc:
         raise CommandError(f"twin egm: {exc}") from None
     watch = _PathWatch(args, arm, "egm")
     world = _World(args, arm, "egm")
-    world.start()
-    robot.start()
+    _start(world, robot, "egm")
     h, pt = robot.address
     print(f"twin egm: {arm.twin.description.name} streaming EGM ({args.mode}) from {h}:{pt} "
           f"to {sensor[0]}:{sensor[1]}", flush=True)

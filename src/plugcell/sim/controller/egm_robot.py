@@ -17,7 +17,10 @@ What is modelled, and what is not:
 * pose mode: the TCP pose follows the target (position first-order, orientation along
   the shortest arc); the joints stay where they were (no inverse kinematics);
 * path-correction mode: the TCP runs its own linear path along the work object's x at
-  ``path_speed`` (path frame = work object frame), and the correction is added to it.
+  ``path_speed``, its orientation kept, and the correction is added to it as a
+  controller does: in ABB's path coordinate system (x the path's direction, y = x ×
+  z_tool, z = x × y; :mod:`plugcell.kinematics.path_frame`), y and z only — with the
+  tool's z down (the default quaternion) the path frame is the work object's.
 
 The follower is the simple servo ``x ← x + (1 − e^(−T/τ)) (x* − x)`` with the speed
 capped; in joint mode the twin's dynamics model (servo loops, structural modes, friction)
@@ -40,7 +43,10 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from plugcell.devices.robot.egm.messages import egm_pb2
+from plugcell.devices.robot.stream.realtime import LoopScheduling, RealTime
 from plugcell.io.units import DEG, M_PER_MM, MM_PER_M
+from plugcell.kinematics.path_frame import applied_displacement, path_frame
+from plugcell.kinematics.rotations import quat_to_matrix
 from plugcell.sim.twin.dynamics import DynamicTwin
 
 Array = NDArray[np.float64]
@@ -128,6 +134,9 @@ class EgmRobotSim:
         Path-correction mode: the programmed path's speed along x (m/s).
     bind : tuple of (str, int)
         The controller's own address (its source port; port 0: any).
+    realtime : RealTime, optional
+        The sample thread's scheduling (real-time priority, CPUs, locked memory), applied
+        by it when it starts; what happened is :attr:`scheduling`'s note.
     """
 
     def __init__(self, sensor: tuple[str, int], mode: Literal["joint", "pose",
@@ -135,7 +144,8 @@ class EgmRobotSim:
                  position: ArrayLike = (0.6, 0.0, 0.8), quaternion: ArrayLike = (0, 0, 1, 0),
                  sample_s: float = 0.004, comm_timeout_s: float = 1.0,
                  follower: Follower | None = None, path_speed: float = 0.0,
-                 bind: tuple[str, int] = ("127.0.0.1", 0)) -> None:
+                 bind: tuple[str, int] = ("127.0.0.1", 0),
+                 realtime: RealTime | None = None) -> None:
         if mode not in ("joint", "pose", "pathcorr"):
             raise ValueError(f"mode {mode!r}: expected 'joint', 'pose' or 'pathcorr'")
         self.sensor = sensor
@@ -147,6 +157,9 @@ class EgmRobotSim:
             self.quat.copy()
         self.path_start = self.p.copy()
         self.path_speed = path_speed
+        #: the path frame of path-correction mode (the path along x, the tool's z)
+        self.path_frame = (path_frame((1.0, 0.0, 0.0), quat_to_matrix(self.quat)[:, 2])
+                           if mode == "pathcorr" else None)
         self.correction = np.zeros(3)
         self.T = sample_s
         self.comm_timeout_s = comm_timeout_s
@@ -168,6 +181,8 @@ class EgmRobotSim:
         self._lock = threading.Lock()
         self._thread: threading.Thread | None = None
         self._t0 = time.monotonic()
+        #: the sample thread's scheduling (``plugcell twin egm --rt-priority …``)
+        self.scheduling = LoopScheduling(realtime)
 
     @property
     def address(self) -> tuple[str, int]:
@@ -240,7 +255,8 @@ class EgmRobotSim:
             self.quat = _slerp_toward(self.quat, self.quat_target, frac)
         else:
             self.path_start = self.path_start + np.array([self.path_speed * dt, 0.0, 0.0])
-            self.p_target = self.path_start + self.correction
+            self.p_target = self.path_start + applied_displacement(self.correction,
+                                                                   self.path_frame)
             self.p = self.follower.step(self.p, self.p_target, dt)
 
     # ------------------------------------------------------------------ the loop
@@ -249,6 +265,7 @@ class EgmRobotSim:
         """Start sending (a thread); returns self."""
         self._thread = threading.Thread(target=self._run, name="egm-robot", daemon=True)
         self._thread.start()
+        self.scheduling.wait()
         return self
 
     def stop(self) -> None:
@@ -271,6 +288,7 @@ class EgmRobotSim:
         return self.stopped is not None
 
     def _run(self) -> None:
+        self.scheduling.apply_here()
         poller = select.poll()
         poller.register(self.sock, select.POLLIN)
         next_t = time.monotonic()

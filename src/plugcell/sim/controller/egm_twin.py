@@ -21,6 +21,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
+from plugcell.kinematics.path_frame import applied_displacement, path_frame, path_tangents
 from plugcell.sim.controller.egm_robot import DynamicFollower, EgmRobotSim
 from plugcell.sim.controller.twin_process import TwinProcess
 
@@ -69,14 +70,19 @@ class TwinEgmRobot(EgmRobotSim):
 
 class TwinEgmPathRobot(TwinEgmRobot):
     """``EGMMoveL`` on the dynamic twin (issue 37's mode (b)): the controller runs its own
-    program and adds the PC's path corrections (``EgmSensorPathCorr``).
+    program and adds the PC's path corrections (``EgmSensorPathCorr``) in ABB's path
+    coordinate system (:mod:`plugcell.kinematics.path_frame`).
 
-    Each sample ``k`` the program's joints ``q_p(k)`` (``path``, sampled at the sample)
-    and the correction ``c`` (m; its axes the base frame's, as
-    :class:`~.egm_robot.EgmRobotSim` takes the path frame to be the work object's) give
-    the joint command ``q_p + J(q_p)⁺ · [c; 0]`` (the nominal model's Jacobian at the
-    program's joints, computed for the whole path at once): the TCP moves by ``c`` to first
-    order, its orientation kept; the dynamic twin follows the command.
+    Each sample ``k`` the program's joints ``q_p(k)`` (``path``, sampled at the sample),
+    its nominal TCP ``T_p(k)``, its path frame ``R(k) = [x y z]`` (``x`` the program's
+    tangent, :func:`~plugcell.kinematics.path_frame.path_tangents`: where it stands
+    still, the direction it last moved in or, before it moves, the first; ``y = x ×
+    z_tool``, ``z_tool`` the TCP's z; ``z = x × y``) and the correction ``c`` (m, path
+    coordinates) give the displacement ``d = R(k) · (0, c_y, c_z)`` — the controller
+    corrects y and z, never x, the path direction — and the joint command
+    ``q_p + J(q_p)⁺ · [d; 0]`` (the nominal model's Jacobian at the program's joints,
+    computed for the whole path at once): the TCP moves by ``d`` to first order, its
+    orientation kept; the dynamic twin follows the command.
 
     Parameters
     ----------
@@ -94,6 +100,7 @@ class TwinEgmPathRobot(TwinEgmRobot):
 
     def __init__(self, arm: Any, sensor: tuple[str, int], path: Any,
                  path_delay_s: float = 0.0, **kwargs: Any) -> None:
+        from plugcell.kinematics import forward
         from plugcell.kinematics.jacobian import manipulator_jacobian
 
         super().__init__(arm, sensor, **kwargs)
@@ -103,6 +110,9 @@ class TwinEgmPathRobot(TwinEgmRobot):
             raise ValueError(f"path_delay_s must be ≥ 0 seconds, got {path_delay_s!r}")
         self._path = np.vstack([np.repeat(q[:1], round(path_delay_s / self.T), 0), q])
         self._J = manipulator_jacobian(self.description, None, self._path, "tcp", "nominal")
+        T = forward(self.description, None, self._path, "nominal").tcp
+        #: the program's path frame at each sample, (n, 3, 3)
+        self.frames = path_frame(path_tangents(T[:, :3, 3]), T[:, :3, 2])
         self.path_index = 0
 
     @property
@@ -112,7 +122,7 @@ class TwinEgmPathRobot(TwinEgmRobot):
 
     def advance(self, dt: float) -> None:
         k = self.path_index = min(self.path_index + 1, len(self._path) - 1)
-        o = np.concatenate([self.correction, np.zeros(3)])
+        o = np.concatenate([applied_displacement(self.correction, self.frames[k]), np.zeros(3)])
         self.q_target = self._path[k] + np.linalg.lstsq(self._J[k], o, rcond=None)[0]
         self.q = self.follower.step(self.q, self.q_target, dt)
         self.p, self.quat = self._pose(self.q)

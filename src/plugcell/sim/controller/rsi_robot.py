@@ -56,6 +56,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from plugcell.devices.robot.rsi.codec import PacketError, encode_rob, parse_sen
 from plugcell.devices.robot.rsi.config import RsiConfig
+from plugcell.devices.robot.stream.realtime import LoopScheduling, RealTime
 from plugcell.kinematics import forward
 from plugcell.kinematics.jacobian import manipulator_jacobian
 from plugcell.kinematics.pose_corrections import correct_pose
@@ -124,6 +125,9 @@ class RsiRobot:
         description's tool): ``RIst``/``RSol`` and Cartesian corrections refer to it.
     path_delay_s : float
         The program waits this long at ``RSI_ON`` before its path starts (s).
+    realtime : RealTime, optional
+        The cycle thread's scheduling (real-time priority, CPUs, locked memory), applied
+        by it when it starts; what happened is :attr:`scheduling`'s note.
 
     Raises
     ------
@@ -136,7 +140,8 @@ class RsiRobot:
                  bind: tuple[str, int] = ("127.0.0.1", 0), ipoc0: int = 1_000_000,
                  holdon: bool | None = None, record: bool = False,
                  path: Trajectory | None = None, tool: ArrayLike | None = None,
-                 path_delay_s: float = 0.0, lockstep_s: float = 0.0) -> None:
+                 path_delay_s: float = 0.0, lockstep_s: float = 0.0,
+                 realtime: RealTime | None = None) -> None:
         if not (lockstep_s >= 0 and lockstep_s < float("inf")):
             raise ValueError(f"lockstep_s must be 0 or a positive number of seconds, not "
                              f"{lockstep_s}")
@@ -159,6 +164,8 @@ class RsiRobot:
         self._stop = threading.Event()
         self._thread: threading.Thread | None = None
         self.stopped: str | None = None
+        #: the cycle thread's scheduling (``plugcell twin rsi --rt-priority …``)
+        self.scheduling = LoopScheduling(realtime)
         desc = arm.twin.description
         if tool is not None:
             desc = dataclasses.replace(desc, tool=np.array(tool, dtype=float))
@@ -201,6 +208,7 @@ class RsiRobot:
         """``RSI_ON``: start sending, one packet per cycle."""
         self._thread = threading.Thread(target=self._run, name="rsi-robot", daemon=True)
         self._thread.start()
+        self.scheduling.wait()
         return self
 
     def stop(self) -> None:
@@ -318,6 +326,7 @@ class RsiRobot:
         return self.stopped
 
     def _run(self) -> None:
+        self.scheduling.apply_here()
         T = self.config.cycle_s
         next_t = time.monotonic()
         packet = self.packet()

@@ -12,6 +12,11 @@ offset ``o`` (held to the limits like RSI's) into the answer:
   rotation vector ``o[3:]`` applied in the work object's frame after the pose at the
   session's start ``(p₀, q₀)``;
 * ``pathcorr``: ``EgmSensorPathCorr.pathCorr.pos = o[:3]``; a rotation is refused.
+  While it sends no correction the link watches the controller's own path —
+  :attr:`EgmLink.path_chord`, the last pair of its planned joints at least
+  :data:`PATH_CHORD_RAD` apart — from which a compensation started later, the arm
+  standing, knows the direction the path last moved in: the x of ABB's path frame
+  (:mod:`plugcell.kinematics.path_frame`).
 
 The answer's header echoes the message's ``seqno`` and ``tm`` (ABB's sensor examples
 count their own; the controller follows the newest message either way, and the echo
@@ -45,6 +50,10 @@ __all__ = ["EgmLink", "EgmLinkError"]
 
 #: Why an EGM stream failed: the one error of every streaming link.
 EgmLinkError = StreamLinkError
+
+#: The least joint motion (rad, on one axis) the link takes a chord of the controller's
+#: path from (:attr:`EgmLink.path_chord`): some 10 µm of the TCP on an arm of 1 m.
+PATH_CHORD_RAD = 1e-5
 
 _JOINTS = ("A1", "A2", "A3", "A4", "A5", "A6")
 _CARTESIAN = ("X", "Y", "Z", "RX", "RY", "RZ")
@@ -86,6 +95,11 @@ class EgmLink(StreamLink):
         # the answer written over each cycle (the link's thread only); the robot's
         # message is a new one each cycle (messages.parse_egm_robot says why)
         self._sensor_msg = egm_pb2.EgmSensor()
+        self._chord_anchor: np.ndarray | None = None
+        #: pathcorr: the last chord of the controller's own path, ``(q_a, q_b)`` — planned
+        #: joints (rad) :data:`PATH_CHORD_RAD` or more apart, taken while no correction
+        #: was sent; ``None`` before the path has moved in this session
+        self.path_chord: tuple[np.ndarray, np.ndarray] | None = None
 
     def _parse(self, data: bytes) -> EgmState:
         state = parse_egm_robot(data, self.config.max_packet_bytes)
@@ -115,11 +129,26 @@ class EgmLink(StreamLink):
 
     def _on_begin(self, state: EgmState) -> None:
         self._q0 = state.joints.copy()
+        self._chord_anchor, self.path_chord = None, None
         if state.position is not None and state.quaternion is not None:
             self._p0 = state.position.copy()
             self._quat0 = tuple(float(v) for v in state.quaternion)
 
+    def _watch_path(self, state: EgmState) -> None:
+        """Take the chord of the path (:attr:`path_chord`) while no correction is sent."""
+        q = state.planned_joints if state.planned_joints is not None else state.joints
+        if np.any(self._limiter.offset):  # the joints are the path's plus a correction
+            self._chord_anchor = None
+            return
+        a = self._chord_anchor
+        if a is None or len(a) != len(q):
+            self._chord_anchor = q
+        elif np.max(np.abs(q - a)) >= PATH_CHORD_RAD:
+            self.path_chord, self._chord_anchor = (a, q), q
+
     def _ask(self, state: EgmState) -> Limited:
+        if self._mode == "pathcorr":
+            self._watch_path(state)
         limited = super()._ask(state)
         if self._mode == "pathcorr" and not limited.refused and np.any(limited.offset[3:]):
             self._limiter.offset = self._limiter.offset - limited.step  # not sent: undo

@@ -21,9 +21,13 @@ value that crosses a process boundary (the link may run in a child process,
     Cartesian correction that makes the controller command ``q + Δq``,
     ``o = pose_correction(T_c(q), T_c(q + Δq))`` at its TCP in its frame
     (:mod:`plugcell.kinematics.pose_corrections`); EGM's path correction the shift of the
-    compensated point, ``p(q + Δq) − p(q)`` — the controller keeps the orientation, so
-    the rotation ``log(R(q + Δq) R(q)ᵀ)`` stays uncorrected (reported by
-    :meth:`Corrector.status`);
+    compensated point, ``d = p(q + Δq) − p(q)``, in ABB's path coordinate system
+    (:mod:`plugcell.kinematics.path_frame`: x the path's tangent, seen from the path's
+    own poses cycle by cycle; y = x × z_tool; z = x × y), ``c = Rᵀ d`` — of which the
+    controller corrects y and z only: the along-path part ``c_x`` is not sent (nothing
+    before the path has moved, its frame unknown), and the controller keeps the
+    orientation, so the rotation ``log(R(q + Δq) R(q)ᵀ)`` stays uncorrected (both
+    reported by :meth:`Corrector.status`);
 ``external``
     ``g`` is whatever was last given to :meth:`Corrector.set_offset` — the hook of a
     tracker's correction loop or any other sensor, from any thread.
@@ -50,9 +54,16 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
+from plugcell.kinematics.path_frame import (
+    TangentTracker,
+    applied_displacement,
+    path_frame,
+    to_path,
+)
+
 from .drive import setpoint_base
 from .errors import StreamLinkError
-from .source import CycleState, PathOffset
+from .source import CycleState, PathOffset, unit_ramp
 
 __all__ = ["SOURCES", "CorrectionSpec", "Corrector", "Superimposed", "controller_model",
            "correction_space", "make_source"]
@@ -228,10 +239,11 @@ IK_STEPS, IK_TOL = 6, 1e-10
 class _Compensation:
     """``g(state)`` of a calibration's compensation (module docstring) in the stream's
     space: joints (rad); a Cartesian correction in the base or the tool frame (m, rad,
-    KUKA's A, B, C); or EGM's path correction (m; :attr:`uncorrected` the rotation it
+    KUKA's A, B, C); or EGM's path correction (m, y and z in path coordinates;
+    :attr:`along_path` the part along the path and :attr:`uncorrected` the rotation it
     cannot carry)."""
 
-    def __init__(self, spec: CorrectionSpec, space: str) -> None:
+    def __init__(self, spec: CorrectionSpec, space: str, path_chord: Any = None) -> None:
         from plugcell.compensation import IdentifiedModel, NominalModel
         from plugcell.devices.robot.calibration_file import read_calibration
 
@@ -249,6 +261,32 @@ class _Compensation:
         #: the rotation (rotation vector, rad, base frame) a path correction leaves
         #: uncorrected: the identified model's orientation error at the path's pose
         self.uncorrected = np.zeros(3)
+        #: the part of the shift along the path (m) a path correction leaves uncorrected
+        self.along_path = 0.0
+        #: the path frame (:func:`~plugcell.kinematics.path_frame.path_frame`; ``None``
+        #: before the path has moved) and the tangent it comes from
+        self.path_frame: Array | None = None
+        self._tangent = TangentTracker() if space == "path" else None
+        if space == "path" and path_chord is not None:
+            self._seed(*path_chord)
+        #: path: the shift ramps in (the spec's ramp) from the first cycle it has a frame
+        #: to be sent in — no jump when the path starts to move under a running correction
+        self._ramp = unit_ramp(spec.ramp_s)
+        self._t_frame: float | None = None
+        # a frame from the first cycle: the correction's own ramp in (PathOffset) does
+        self._ramped = self.path_frame is not None
+
+    def _seed(self, q_a: Array, q_b: Array) -> None:
+        """The path frame of the path's last chord ``q_a → q_b`` (the link's
+        :attr:`~plugcell.devices.robot.egm.link.EgmLink.path_chord`: the direction the
+        path last moved in, where the arm may stand now)."""
+        T_a, T_b = self._tcp(np.asarray(q_a, dtype=float)), self._tcp(np.asarray(q_b,
+                                                                               dtype=float))
+        d = T_b[:3, 3] - T_a[:3, 3]
+        if np.linalg.norm(d) > 0:
+            self._tangent.tangent = d / np.linalg.norm(d)  # type: ignore[union-attr]
+            self.path_frame = path_frame(self._tangent.tangent,  # type: ignore[union-attr]
+                                         T_b[:3, 2])
 
     def __call__(self, state: CycleState) -> Array:
         from plugcell.compensation import compensate_joints
@@ -258,7 +296,14 @@ class _Compensation:
         step = compensate_joints(self.model, T_n, q + self.dq, self.payload, max_iterations=1,
                                  check_limits=False, raise_errors=False)
         self.dq = np.asarray(step.q, dtype=float).reshape(-1) - q
-        return self._in_space(q, q + self.dq)
+        g = self._in_space(q, q + self.dq)
+        if self.space != "path" or self.path_frame is None or self._ramped:
+            return g
+        if self._t_frame is None:
+            self._t_frame = state.t
+        b = float(self._ramp.sample(state.t - self._t_frame).s)
+        self._ramped = b >= 1.0
+        return g * b
 
     def _tcp(self, q: Array) -> Array:
         from plugcell.kinematics import forward
@@ -269,7 +314,10 @@ class _Compensation:
         """The joints of the controller's own path this cycle: ``q_set − o`` (joints);
         else the nominal inverse kinematics, from the set-point joints, of the set-point
         pose ``T_n(q_set)`` with the offset so far taken off (:func:`uncorrect_pose`; EGM:
-        its position less the path correction, the path frame's axes the base frame's)."""
+        its position less the displacement the controller made of the path correction,
+        ``R · (0, o_y, o_z)``, in the last path frame; the path's position then gives the
+        tangent of the next, :class:`~plugcell.kinematics.path_frame.TangentTracker`:
+        chords of a moving path, longer than the change of that displacement)."""
         if self.space == "joints":
             return _path_joints(state)
         from plugcell.kinematics.pose_corrections import uncorrect_pose
@@ -283,7 +331,12 @@ class _Compensation:
         o = np.asarray(state.offset, dtype=float)
         if self.space == "path":
             T_p = T_set.copy()
-            T_p[:3, 3] -= o[:3]
+            d = (np.zeros(3) if self.path_frame is None
+                 else applied_displacement(o[:3], self.path_frame))
+            T_p[:3, 3] -= d
+            tangent = self._tangent.update(T_p[:3, 3], state.t, d)  # type: ignore[union-attr]
+            if tangent is not None:
+                self.path_frame = path_frame(tangent, T_p[:3, 2])
         else:
             T_p = uncorrect_pose(T_set, o, self.space)
         return self._newton(T_p, q_set)
@@ -311,7 +364,9 @@ class _Compensation:
         ``q_c − q`` (joints); ``o`` with ``correct_pose(T_n(q), o) = T_n(q_c)`` at the
         controller's TCP (base, tool: exact); the compensated point's shift
         ``p(q_c) − p(q)`` (path: a translation keeping the orientation moves every point
-        of the tool alike; the rotation ``log(R(q_c) R(q)ᵀ)`` is left, :attr:`uncorrected`)."""
+        of the tool alike; in path coordinates ``c = Rᵀ d``, its y and z sent, its x along
+        the path left, :attr:`along_path`, and the rotation ``log(R(q_c) R(q)ᵀ)``,
+        :attr:`uncorrected`)."""
         if self.space == "joints":
             return q_c - q
         if self.space == "path":
@@ -319,7 +374,11 @@ class _Compensation:
 
             T_a, T_b = self.nominal.evaluate(np.stack([q, q_c]))[0]
             self.uncorrected = so3_log(T_b[:3, :3] @ T_a[:3, :3].T)
-            return np.concatenate([T_b[:3, 3] - T_a[:3, 3], np.zeros(3)])
+            if self.path_frame is None:  # the path has not moved yet: no frame to send in
+                return np.zeros(6)
+            c = to_path(T_b[:3, 3] - T_a[:3, 3], self.path_frame)
+            self.along_path = float(c[0])
+            return np.array([0.0, c[1], c[2], 0.0, 0.0, 0.0])
         from plugcell.kinematics.pose_corrections import pose_correction
 
         return pose_correction(self._tcp(q), self._tcp(q_c), self.space)
@@ -426,6 +485,12 @@ class Superimposed:
         base frame; zeros for every other correction)."""
         return np.array(getattr(self._wanted, "uncorrected", np.zeros(3)), dtype=float)
 
+    @property
+    def along_path(self) -> float:
+        """The part of a compensation's shift along the path, which an EGM path correction
+        leaves uncorrected (m; 0 for every other correction)."""
+        return float(getattr(self._wanted, "along_path", 0.0))
+
     def close(self) -> None:
         """Stop computing ``g`` (the correction ended)."""
         if self._beside is not None:
@@ -438,8 +503,10 @@ class Superimposed:
             self._value = g
 
 
-def make_source(spec: CorrectionSpec, config: Any) -> Superimposed:
-    """``spec`` as a link of ``config`` runs it (:class:`Superimposed`).
+def make_source(spec: CorrectionSpec, config: Any, path_chord: Any = None) -> Superimposed:
+    """``spec`` as a link of ``config`` runs it (:class:`Superimposed`); ``path_chord``:
+    an EGM path link's last chord of the controller's path (``(q_a, q_b)``, rad), the
+    path frame of a compensation started where the arm stands.
 
     Raises
     ------
@@ -449,13 +516,22 @@ def make_source(spec: CorrectionSpec, config: Any) -> Superimposed:
     """
     space = correction_space(config)
     if spec.source == "compensation":
-        return Superimposed(spec, space, _Compensation(spec, space), _InSpace(space, space, ""))
+        return Superimposed(spec, space, _Compensation(spec, space, path_chord),
+                            _InSpace(space, space, ""))
     in_space = _InSpace(spec.frame, space, spec.robot, spec.tcp)
     if space == "path" and any(spec.offset[3:]):
         raise ValueError("EGM path corrections carry a position only: A, B, C must be 0")
+    if space == "path" and spec.frame == "path" and spec.offset[0]:
+        raise ValueError(PATH_X)
     if spec.frame == space:
         _check(np.asarray(spec.offset), np.asarray(spec.max_offset), space)
     return Superimposed(spec, space, None, in_space)
+
+
+#: Why an EGM path correction along the path is refused.
+PATH_X = ("EGM path corrections carry y and z in path coordinates only: X is the path's "
+          "direction, which the controller does not correct (ABB, Application manual EGM, "
+          "limitations of EGM Path Correction): X must be 0")
 
 
 def _check(g: Array, limit: Array, space: str) -> Array:
@@ -516,7 +592,8 @@ class Corrector:
             switch = sys.getswitchinterval()
             sys.setswitchinterval(min(switch, SWITCH_INTERVAL_S))
             try:
-                running = make_source(spec, self.link.config)
+                running = make_source(spec, self.link.config,
+                                      getattr(self.link, "path_chord", None))
             except BaseException:
                 sys.setswitchinterval(switch)
                 raise
@@ -561,6 +638,8 @@ class Corrector:
             raise ValueError(f"an offset is six finite numbers, got {g!r}")
         if spec.frame == running.space:
             _check(g, np.asarray(spec.max_offset), spec.frame)
+        if running.space == "path" and spec.frame == "path" and g[0]:
+            raise ValueError(PATH_X)
         running.set(g)
 
     def finish(self) -> None:
@@ -583,12 +662,14 @@ class Corrector:
 
     def status(self) -> tuple[float, Array]:
         """The blend factor ``b`` of the last cycle, and the link's offset so far (SI) —
-        for an EGM path correction (position only) its last three values are the rotation
-        left uncorrected (a compensation's; rotation vector, rad)."""
+        for an EGM path correction (y and z in path coordinates) its first value is the
+        part along the path and its last three the rotation that a compensation leaves
+        uncorrected (m; rotation vector, rad)."""
         running = self._running
         if running is None:
             return 0.0, np.zeros(6)
         offset = np.array(running.offset, dtype=float)
         if running.space == "path":
+            offset[0] = running.along_path
             offset[3:] = running.uncorrected
         return running.source.blend, offset

@@ -51,7 +51,7 @@ from .errors import (
 )
 from .follow import Following
 from .limits import Limited, OffsetLimiter
-from .realtime import RealTime
+from .realtime import LoopScheduling, RealTime
 from .source import Correction, CycleState, SourceLike, as_source
 
 __all__ = ["LinkStats", "StreamLink"]
@@ -164,7 +164,7 @@ class StreamLink(Following):
         self._sock: socket.socket | None = None
         self._thread: threading.Thread | None = None
         self._closing = False
-        self._scheduled = threading.Event()
+        self._scheduling = LoopScheduling(self.realtime)
         # counters (written by the link's thread only)
         self._received = self._answered = self._late = self._missed = self._superseded = 0
         self._clamped = self._refused = 0
@@ -262,7 +262,7 @@ class StreamLink(Following):
         self._thread = threading.Thread(target=self._run, name=f"{self.VENDOR.lower()}-link",
                                         daemon=True)
         self._thread.start()
-        self._scheduled.wait(5.0)  # its scheduling applied: rt_note says what happened
+        self.rt_note = self._scheduling.wait(5.0)  # applied by the loop's thread
         return sock.getsockname()[:2]
 
     @property
@@ -318,9 +318,7 @@ class StreamLink(Following):
     def _run(self) -> None:
         sock = self._sock
         assert sock is not None
-        if self.realtime.asked:
-            self.rt_note = self.realtime.apply()
-        self._scheduled.set()
+        self._scheduling.apply_here()
         poller = select.poll()
         poller.register(sock, select.POLLIN)
         bufsize = self.config.max_packet_bytes + 1

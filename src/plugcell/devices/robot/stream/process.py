@@ -11,7 +11,9 @@ it through two channels:
 * a pipe for the motions: ``("follow", n, q, timeout, adjusted)`` — the planned
   trajectory sampled at the cycle, ``q`` of shape (K+1, 6) rad — answered ``("followed",
   n, reason)`` when the motion ended (``reason`` empty) or failed; a motion is a few
-  kilobytes once per move;
+  kilobytes once per move.  The parent waits for the answer as the child's link waits
+  for the motion (:func:`await_answer`): in the controller's cycles, on the wall clock
+  only while none come, and not at all once the child is gone or its session failed;
 * a second pipe for the corrections of mode (b), *the robot drives, the PC corrects*
   (:mod:`.correcting`): the child's :class:`~.correcting.Corrector` called through
   :class:`CorrectorClient` (start, set the offset, finish, poll), while a correction
@@ -54,12 +56,12 @@ from plugcell.pdl.interfaces import MotionError
 
 from .adjusting import CYCLE_SLOTS, OFFSET_SLOTS, AdjustPump, ChildAdjust, SeqVector, WireLimits
 from .correcting import CorrectionSpec, Corrector
-from .drive import Adjust, StreamDrive, drive_refusal, motion_timeout, samples
+from .drive import SETTLE_S, Adjust, StreamDrive, drive_refusal, motion_timeout, samples
 from .errors import StreamLinkError
 from .realtime import RealTime
 
-__all__ = ["BUSY", "LINKS", "CorrectorClient", "Feedback", "LinkProcess", "Publisher",
-           "link_class", "serve_corrections"]
+__all__ = ["BUSY", "LINKS", "CorrectorClient", "Feedback", "LinkProcess", "NoAnswerError",
+           "Publisher", "await_answer", "link_class", "serve_corrections"]
 
 Array = NDArray[np.float64]
 
@@ -73,6 +75,8 @@ SLOTS = 16
 TEXT_BYTES = 2048
 #: How often :meth:`LinkProcess.wait` looks (s).
 POLL_S = 0.01
+#: How long the parent waits on the pipe between looks at the child while a motion runs (s).
+POLL_ANSWER_S = 0.05
 #: Each vendor's link class (``module:Class``), by the configuration's ``vendor``: imported
 #: where it runs (the child imports only its own).
 LINKS = {"RSI": "plugcell.devices.robot.rsi.link:RsiLink",
@@ -185,6 +189,86 @@ def _child(conn: Any, corrections: Any, values: Any, text: Any, vendor: str, con
                 conn.send(("followed", motion, ""))
     finally:
         link.close()
+
+
+#: More than a motion's own timeout (:func:`~.drive.motion_timeout`) the parent waits for
+#: its answer: the child's exact stop (:data:`~.drive.SETTLE_S`) and the pipe (s).
+ANSWER_GRACE_S = SETTLE_S + 2.0
+#: How long the child has to answer once the parent sees its session failed (s).
+FAILED_GRACE_S = 1.0
+
+
+class NoAnswerError(Exception):
+    """The child did not answer a motion (:func:`await_answer`): why, as the end of a
+    sentence about the link process."""
+
+
+def await_answer(receive: Callable[[float], str | None], alive: Callable[[], bool],
+                 cycles: Callable[[], int], failed: Callable[[], bool], timeout: float,
+                 cycle_s: float, clock: Callable[[], float] = time.monotonic) -> str:
+    """The parent's wait for the child's answer to a motion, by the child's own rules
+    (:meth:`~.follow.Following.follow`): the motion's time is counted in the controller's
+    cycles, the wall clock counts only while none come.
+
+    It gives up (:class:`NoAnswerError`) when the child is gone (at once); when the session
+    failed and the child does not answer within :data:`FAILED_GRACE_S` (the stream
+    stopping fails the motion within one controller timeout, whatever the child does);
+    when ``(timeout + ANSWER_GRACE_S) / cycle_s`` cycles passed since the motion was sent
+    (the child's motion is over by then); when no cycle came for ``timeout +
+    ANSWER_GRACE_S`` s (no stream: the child's wait for it is over).
+
+    Parameters
+    ----------
+    receive : callable
+        ``receive(wait)``: the answer's reason (``""``: the motion ended) if it came
+        within ``wait`` s, else ``None``.
+    alive : callable
+        Whether the child runs.
+    cycles : callable
+        The child's link's answered cycles so far (any count that grows by one a cycle).
+    failed : callable
+        Whether the child's session has failed.
+    timeout : float
+        The motion's timeout (s, :func:`~.drive.motion_timeout`).
+    cycle_s : float
+        The controller's cycle (s).
+    clock : callable
+        Seconds, monotonic.
+
+    Returns
+    -------
+    str
+        The answer's reason.
+
+    Raises
+    ------
+    NoAnswerError
+        No answer, and why.
+    """
+    first = seen = cycles()
+    limit = (timeout + ANSWER_GRACE_S) / cycle_s
+    quiet_since = clock()
+    failed_since: float | None = None
+    while True:
+        reason = receive(POLL_ANSWER_S)
+        if reason is not None:
+            return reason
+        if not alive():
+            raise NoAnswerError("has exited")
+        now, count = clock(), cycles()
+        if count != seen:
+            seen, quiet_since = count, now
+        if failed():
+            failed_since = now if failed_since is None else failed_since
+            if now - failed_since > FAILED_GRACE_S:
+                raise NoAnswerError("did not answer after its stream failed")
+        else:
+            failed_since = None
+        if count - first > limit:
+            raise NoAnswerError(f"did not answer the motion within {limit:.0f} controller cycles")
+        if now - quiet_since > timeout + ANSWER_GRACE_S:
+            raise NoAnswerError(f"did not answer the motion: no controller cycle for "
+                           f"{now - quiet_since:.1f} s")
 
 
 #: Why the PC cannot move the robot now.
@@ -462,17 +546,30 @@ class LinkProcess:
 
     def _follow(self, q: Array, timeout: float, wait_s: float | None) -> str:
         """Send motion ``self._motions`` (adjusted unless ``wait_s`` is None) and wait for
-        its answer: the failure's reason (empty: it ended)."""
+        its answer (:func:`await_answer`): the failure's reason (empty: it ended)."""
         try:
             self._conn.send(("follow", self._motions, q, timeout, wait_s))
         except (OSError, AttributeError):
             raise MotionError(f"the {self.vendor} link process is not running") from None
-        end = time.monotonic() + timeout + 10.0
-        while True:  # the answer to this motion (an earlier one's, given up on, is old)
-            while not self._conn.poll(0.1):
-                if not self.alive or time.monotonic() > end:
-                    raise MotionError(str(self.failure or f"the {self.vendor} link "
-                                          "process did not answer"))
-            _, motion, reason = self._conn.recv()
-            if motion == self._motions:
-                return str(reason)
+        motion = self._motions
+
+        def receive(wait: float) -> str | None:
+            # the answer to this motion (an earlier one's, given up on, is old); the pipe's
+            # end of file: the child is gone (its exit reaped, so that alive says so)
+            if not self._conn.poll(wait):
+                return None
+            try:
+                _, m, reason = self._conn.recv()
+            except (EOFError, OSError):
+                self._proc.join(1.0)
+                return None
+            return str(reason) if m == motion else None
+
+        try:
+            return await_answer(receive, lambda: self.alive,
+                                lambda: int(self.snapshot()[ANSWERED]),
+                                lambda: self.failure is not None, timeout, self.config.cycle_s)
+        except NoAnswerError as exc:
+            failure = self.failure
+            raise MotionError(str(failure) if failure is not None
+                              else f"the {self.vendor} link process {exc}") from None

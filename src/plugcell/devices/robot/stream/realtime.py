@@ -18,10 +18,12 @@ run``'s ``--rt-priority``/``--cpu``/``--mlock``):
   ``SCHED_FIFO`` with its memory locked once spun in the kernel for minutes, deaf to
   ``SIGKILL`` (docs/kuka-rsi.md, "The PC's set-up for a 4 ms cycle").
 
-Each is applied where the loop runs, and a refusal (no privilege, a CPU that does not
-exist) is not fatal there: :meth:`RealTime.apply` returns what happened as a note (the
-link's :attr:`~.link.StreamLink.rt_note`), so a stream still runs, at normal priority,
-on a machine that does not allow it.  Values that can never work (priority 0, a CPU
+Each is applied where the loop runs (:class:`LoopScheduling`: by the loop's own thread
+when it starts — a link's, the twin's robot side's), and a refusal (no privilege, a CPU
+that does not exist) is not fatal there: :meth:`RealTime.apply` returns what happened as
+a note (the link's :attr:`~.link.StreamLink.rt_note`; a refused priority says why:
+:func:`fifo_refused`), so a stream still runs, at normal priority, on a machine that
+does not allow it.  Values that can never work (priority 0, a CPU
 number that is not one, an empty set) are refused when the options are parsed, with the
 reason.
 """
@@ -35,8 +37,8 @@ import sys
 import threading
 from dataclasses import dataclass
 
-__all__ = ["SWITCH_INTERVAL_S", "RealTime", "lock_memory", "parse_cpus", "pin", "pin_process",
-           "stream_realtime"]
+__all__ = ["SWITCH_INTERVAL_S", "LoopScheduling", "RealTime", "fifo_refused", "lock_memory",
+           "parse_cpus", "pin", "pin_process", "stream_realtime"]
 
 #: The interpreter's switch interval in a link's process (s): a thread that holds it when
 #: the link's thread asks for it hands it over within this (Python's default is 5 ms).
@@ -152,6 +154,18 @@ def lock_memory() -> str:
     return "memory locked"
 
 
+def fifo_refused(exc: BaseException, priority: int) -> str:
+    """Why ``SCHED_FIFO`` at ``priority`` was refused, for a note: ``"SCHED_FIFO refused
+    (…)"`` — for ``EPERM`` what it needs (root or ``CAP_SYS_NICE``, or ``ulimit -r``)."""
+    if isinstance(exc, PermissionError):
+        return (f"SCHED_FIFO refused (not permitted: priority {priority} needs root or "
+                f"CAP_SYS_NICE, e.g. setcap cap_sys_nice+ep on the Python binary, or "
+                f"ulimit -r {priority} or more; {exc})")
+    if isinstance(exc, AttributeError):
+        return "SCHED_FIFO refused (no sched_setscheduler here: Linux only)"
+    return f"SCHED_FIFO refused ({exc})"
+
+
 @dataclass(frozen=True)
 class RealTime:
     """The scheduling of a link's cycle loop (module doc).
@@ -227,7 +241,7 @@ class RealTime:
             try:
                 os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(below))
             except (AttributeError, OSError) as exc:
-                notes.append(f"other threads at normal priority ({exc})")
+                notes.append(f"other threads at normal priority ({fifo_refused(exc, below)})")
             else:
                 notes.append(f"other threads SCHED_FIFO priority {below}")
         return ", ".join(n for n in notes if n)
@@ -242,12 +256,41 @@ class RealTime:
             try:
                 os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(self.priority))
             except (AttributeError, OSError) as exc:  # not Linux, or no CAP_SYS_NICE
-                notes.insert(0, f"SCHED_FIFO refused ({exc}); normal priority")
+                notes.insert(0, f"{fifo_refused(exc, self.priority)}; normal priority")
             else:
                 notes.insert(0, f"SCHED_FIFO priority {self.priority}")
         else:
             notes.insert(0, "normal priority")
         return ", ".join(n for n in notes if n)
+
+
+class LoopScheduling:
+    """A cycle loop's scheduling: :class:`RealTime`, applied by the loop's own thread when
+    it starts (:meth:`apply_here`), and what happened (:meth:`wait` returns the note) — a
+    link's (:class:`~.link.StreamLink`), the twin's robot side's (``plugcell twin
+    rsi|egm``'s ``--rt-priority``/``--cpu``/``--mlock``).
+
+    Parameters
+    ----------
+    realtime : RealTime, optional
+        What to apply (default: nothing, normal scheduling).
+    """
+
+    def __init__(self, realtime: RealTime | None = None) -> None:
+        self.realtime = realtime if realtime is not None else RealTime()
+        self.note = "normal priority"
+        self._applied = threading.Event()
+
+    def apply_here(self) -> None:
+        """Apply it to the calling thread (the loop's, first thing) and its process."""
+        if self.realtime.asked:
+            self.note = self.realtime.apply()
+        self._applied.set()
+
+    def wait(self, timeout: float = 5.0) -> str:
+        """The note once the loop's thread applied it (at most ``timeout`` s)."""
+        self._applied.wait(timeout)
+        return self.note
 
 
 def stream_realtime(priority: int | None, cpus: str, lock: bool) -> RealTime:
