@@ -16,10 +16,12 @@ from __future__ import annotations
 
 import asyncio
 import uuid
+from types import SimpleNamespace
 from typing import Any
 
 import numpy as np
 import pytest
+from controller_start import start_with_controller
 
 from plugcell.apps.kinds import KINDS, build, load_kind
 from plugcell.framework import Client, Participant, ProcessStates
@@ -90,11 +92,14 @@ _SAMPLE = {DataTypes.Double: 0.0, DataTypes.Integer: 0, DataTypes.Byte: 0,
 async def _contract(kind: str, kwargs: dict[str, Any], cell: str, tmp_path,
                     device: Any = None, service: Any = None) -> None:
     """The contract of a running service; ``device()``, if given, starts the device it
-    drives while the service starts (a robot streaming to it); ``service``: the service
+    drives once the service listens (a robot streaming to it); ``service``: the service
     (default: ``kind`` built as ``plugcell serve`` builds it)."""
     if service is None:
         service = build(kind, None, kwargs, cell=cell, journal=tmp_path / "journal")
-    await asyncio.gather(service.start(), *([asyncio.to_thread(device)] if device else []))
+    if device is None:
+        await service.start()
+    else:  # a robot streaming to it: started once the service's link listens
+        await start_with_controller(service, SimpleNamespace(start=device))
     name = service.name
     try:
         async with Client("CONFORMANCE", cell=cell) as client:

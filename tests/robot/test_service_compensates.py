@@ -22,7 +22,7 @@ import socket
 import numpy as np
 import pytest
 from calibrated import calibrated
-from robot_testlib import unique_cell
+from robot_testlib import start_with_controller, unique_cell
 
 from plugcell.apps.kinds import build
 from plugcell.framework import Client, ProcessStates
@@ -56,7 +56,7 @@ def _compensate(tmp_path, twin, stream: dict, params) -> np.ndarray:
     async def scenario() -> None:
         service = build("robot", None, stream, cell=unique_cell(),
                         journal=tmp_path / "journal")
-        await asyncio.gather(service.start(), asyncio.to_thread(twin.start))
+        await start_with_controller(service, twin)
         try:
             async with Client("COMPTEST", cell=service.cell) as client:
                 assert await client.wait_for(service.name, 20)

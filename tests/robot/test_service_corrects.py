@@ -23,7 +23,7 @@ import socket
 import numpy as np
 import pytest
 from calibrated import calibrated
-from robot_testlib import unique_cell
+from robot_testlib import start_with_controller, unique_cell
 
 from plugcell.apps.kinds import build
 from plugcell.framework import Client, ProcessStates
@@ -77,7 +77,7 @@ def test_rsi_corrections_shift_the_twins_own_path(tmp_path, monkeypatch):
         service = build("robot", None, {"rsi": f"127.0.0.1:{port}", "rsi_timeout": TIMEOUT,
                                         "library": str(lib)},
                         cell=unique_cell(), journal=tmp_path / "journal")
-        await asyncio.gather(service.start(), asyncio.to_thread(twin.start))
+        await start_with_controller(service, twin)
         try:
             async with Client("CORRECTTEST", cell=service.cell) as client:
                 assert await client.wait_for(service.name, 20)
@@ -154,7 +154,7 @@ def test_egm_path_corrections_reach_the_controllers_own_path(tmp_path, monkeypat
         robot = EgmRobotSim(("127.0.0.1", port), mode="pathcorr", path_speed=0.05,
                             comm_timeout_s=4.0)
         peak = []
-        await asyncio.gather(service.start(), asyncio.to_thread(robot.start))
+        await start_with_controller(service, robot)
         try:
             async with Client("CORRECTTEST", cell=service.cell) as client:
                 assert await client.wait_for(service.name, 20)
@@ -200,7 +200,7 @@ def test_twin_egm_runs_its_own_path_under_the_services_corrections(tmp_path, mon
         service = build("robot", None, {"egm": f"127.0.0.1:{port}", "egm_timeout": 20.0,
                                         "egm_mode": "pathcorr"},
                         cell=unique_cell(), journal=tmp_path / "journal")
-        await asyncio.gather(service.start(), asyncio.to_thread(twin.start))
+        await start_with_controller(service, twin)
         try:
             async with Client("CORRECTTEST", cell=service.cell) as client:
                 assert await client.wait_for(service.name, 20)

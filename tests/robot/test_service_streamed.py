@@ -23,7 +23,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from robot_testlib import unique_cell
+from robot_testlib import start_with_controller, unique_cell
 
 from plugcell.apps.kinds import build
 from plugcell.devices.robot.service import RobotService
@@ -165,9 +165,9 @@ def test_a_program_on_the_pc_moves_the_twin(vendor, library, tmp_path, monkeypat
 
 
 async def _start(service: RobotService, twin) -> None:
-    """The service and the robot together: the service waits for the robot's stream, the
-    robot (as a controller whose timeout counts from its first packet) for answers."""
-    await asyncio.gather(service.start(), asyncio.to_thread(twin.start))
+    """The service, then the robot once the service's link listens (a controller's
+    timeout counts from its first packet)."""
+    await start_with_controller(service, twin)
 
 
 async def _get_status(client: Client, name: str) -> list[str]:
