@@ -33,7 +33,11 @@ mean position error, mm.  Nothing is tuned on the held-out cells.
 
     .venv/bin/python benchmarks/short_campaign_ur10.py [--data DIR] [--sizes 25,50,...]
         [--series B,C,D] [--selection random|planned] [--draws K] [--quick]
-        [--out docs/results/short-campaign-ur10.md]
+        [--prior-cv cells|kfold] [--out docs/results/short-campaign-ur10.md]
+
+``--prior-cv kfold``: the choice's CV over a seeded random 10-fold of the campaign's poses
+(``PriorCalibrator(cv_split="kfold")``) instead of its cells — measured in
+docs/results/short-campaign-bounds.md; write such a run elsewhere with ``--out``.
 
 Single-threaded (threadpoolctl).  Without the data folder it says so and exits 0.
 """
