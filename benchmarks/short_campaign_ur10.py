@@ -33,7 +33,11 @@ mean position error, mm.  Nothing is tuned on the held-out cells.
 
     .venv/bin/python benchmarks/short_campaign_ur10.py [--data DIR] [--sizes 25,50,...]
         [--series B,C,D] [--selection random|planned] [--draws K] [--quick]
-        [--out docs/results/short-campaign-ur10.md]
+        [--prior-cv cells|kfold] [--out docs/results/short-campaign-ur10.md]
+
+``--prior-cv kfold``: the choice's CV over a seeded random 10-fold of the campaign's poses
+(``PriorCalibrator(cv_split="kfold")``) instead of its cells — measured in
+docs/results/short-campaign-bounds.md; write such a run elsewhere with ``--out``.
 
 Single-threaded (threadpoolctl).  Without the data folder it says so and exits 0.
 """
@@ -62,7 +66,7 @@ from plugcell.calibration.planning import (
     filter_candidates,
     planning_keys,
 )
-from plugcell.calibration.prior import Prior, PriorCalibrator
+from plugcell.calibration.prior import CV_SPLITS, Prior, PriorCalibrator
 from plugcell.calibration.residual_model import (
     DEFAULT_GRID,
     ResidualLearner,
@@ -121,7 +125,7 @@ def earlier(desc: Any, A: CalibrationData, learner: ResidualLearner,
 
 def run(desc: Any, sets: dict[str, CalibrationData], series: str, sizes: tuple[int, ...],
         selection: str, learner: ResidualLearner, folds: int = 5,
-        cache: Path | None = None, draws: int = 1) -> dict[str, Any]:
+        cache: Path | None = None, draws: int = 1, cv_split: str = "cells") -> dict[str, Any]:
     from sklearn.model_selection import GroupKFold
 
     t0 = time.perf_counter()
@@ -168,7 +172,7 @@ def run(desc: Any, sets: dict[str, CalibrationData], series: str, sizes: tuple[i
                 # A's hybrid moved: BASE + PROBE re-identified on the campaign with the
                 # layer's correction taken out, the layer's correction on the test poses
                 e["moved_hybrid"][te] = _hybrid_moved(resA, camp, test)
-                res = PriorCalibrator(prior).fit(camp)
+                res = PriorCalibrator(prior, cv_split=cv_split).fit(camp)
                 pri = res.settings["prior"]
                 taus[n].append(pri["choice"] if pri["choice"] != "map" else f"{pri['scale']:g}")
                 stages[n].append(bool(pri["stage"]["adopted"]))
@@ -451,6 +455,9 @@ def main() -> int:
     ap.add_argument("--draws", type=int, default=1,
                     help="random campaigns drawn per fold and size (seeded); the figures are "
                          "the mean over the draws, the table adds their sd (random only)")
+    ap.add_argument("--prior-cv", choices=CV_SPLITS, default="cells",
+                    help="the CV splits of --prior's choice (PriorCalibrator cv_split; "
+                         "default cells: grouped over the campaign's 0.4 m cells)")
     ap.add_argument("--quick", action="store_true",
                     help="A's layer: one hyper-parameter candidate, 100 trees")
     ap.add_argument("--out", type=Path, default=None,
@@ -498,7 +505,7 @@ def main() -> int:
     with threadpool_limits(1):
         result = run(desc, sets, "".join(series), sizes, args.selection,
                      ResidualLearner(**kw), folds=args.folds, cache=args.cache,
-                     draws=args.draws)
+                     draws=args.draws, cv_split=args.prior_cv)
     d = {"argv": sys.argv[1:], "sizes": list(sizes), "selection": args.selection,
          "selection_text": "I-optimal for model 3, as `plugcell plan --from` chooses among "
                            "poses already measured" if args.selection == "planned"

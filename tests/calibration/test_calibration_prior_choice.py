@@ -16,9 +16,13 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from plugcell.calibration import CalibrationError, Calibrator
+from plugcell.calibration.identify import refit_base
 from plugcell.calibration.prior import (
     ALONE,
     CANDIDATES,
+    CELL_SIZE_M,
+    CV_SPLITS,
+    KFOLD_SPLITS,
     MOVED,
     SCALES,
     Prior,
@@ -26,6 +30,7 @@ from plugcell.calibration.prior import (
     _label,
     pick,
 )
+from plugcell.calibration.residual_model import workspace_cells
 
 NEW_BASE = random_frame(np.random.default_rng(3), 1.0, 2.0)
 
@@ -115,3 +120,54 @@ def test_when_the_cv_prefers_the_campaign_alone_the_result_is_the_plain_calibrat
     assert pri["cv_mm"][ALONE] == pytest.approx(0.5)
     assert out.residual_model is None
     assert any("campaign alone" in w for w in out.warnings)
+
+
+def test_an_unknown_cv_split_is_refused(wrong_prior):
+    """``cv_split`` is one of CV_SPLITS; anything else is refused, naming it."""
+    _, prior = wrong_prior
+    with pytest.raises(CalibrationError, match=r"unknown CV split 'loo' \(one of cells, kfold\)"):
+        PriorCalibrator(prior, cv_split="loo")
+
+
+@pytest.mark.parametrize("split", CV_SPLITS)
+def test_the_choice_sees_the_folds_of_its_split(wrong_prior, monkeypatch, split):
+    """``"kfold"``: KFOLD_SPLITS folds of the poses, each pose held out once, the same
+    folds for every candidate (seeded); ``"cells"``: no workspace cell on both sides of a
+    fold.  The scores are what ``_cv_errors`` returned, the pick applied to them."""
+    _, prior = wrong_prior
+    _, camp = harmonic_campaign(40, 14, amplitude_rad=0.0, base=NEW_BASE)
+    seen = []
+
+    def fake(self, raw, offset, folds, choice):
+        seen.append([te.tolist() for _, te in folds])
+        return np.full(len(raw), 2e-3 if choice == ALONE else 1e-3)
+
+    monkeypatch.setattr(PriorCalibrator, "_cv_errors", fake)
+    pc = PriorCalibrator(prior, stage=False, cv_split=split)
+    choice, scores = pc.choose(camp)
+    assert len(seen) == len(CANDIDATES) and all(f == seen[0] for f in seen)
+    held = sorted(i for te in seen[0] for i in te)
+    assert held == list(range(len(camp)))
+    if split == "kfold":
+        assert len(seen[0]) == KFOLD_SPLITS
+    else:
+        start = refit_base(prior.model, camp, probe=True)
+        cells = workspace_cells((np.linalg.inv(start.base()) @ start.predict(camp.q))[:, :3, 3],
+                                CELL_SIZE_M)
+        for te in seen[0]:
+            rest = np.setdiff1d(np.arange(len(camp)), te)
+            assert not set(cells[te]) & set(cells[rest])
+    assert scores[ALONE] == pytest.approx(2e-3) and choice == SCALES[0]
+
+
+@pytest.mark.slow
+def test_the_random_split_keeps_the_guarantee(wrong_prior):
+    """With ``cv_split="kfold"`` the choice's CV score is still no higher than either
+    baseline's, and the result records the split."""
+    _, prior = wrong_prior
+    _, camp = harmonic_campaign(40, 11, amplitude_rad=0.0, base=NEW_BASE)
+    pri = PriorCalibrator(prior, stage=False, cv_split="kfold").fit(camp).settings["prior"]
+    cv = pri["cv_mm"]
+    chosen = pri["choice"] if pri["choice"] != "map" else f"{pri['scale']:g}"
+    assert cv[chosen] <= cv[ALONE] and cv[chosen] <= cv[MOVED]
+    assert pri["scale_chosen_by"] == f"random {KFOLD_SPLITS}-fold CV"

@@ -46,11 +46,35 @@ def test_prior_writes_a_calibration_that_says_what_it_did(files, capsys):
                  "--out", str(files / "b.toml")]) == 0
 
 
+def test_prior_cv_kfold_reaches_the_choice_and_is_reported(files, capsys, monkeypatch):
+    """``--prior-cv kfold``: the calibrator's choice runs with ``cv_split="kfold"`` and the
+    printout names the random 10-fold CV, not the cells."""
+    from plugcell.calibration.prior import PriorCalibrator
+
+    seen = []
+
+    def choose(self, data, offset=None):
+        seen.append(self.cv_split)
+        return 10.0, {"0": 2e-4, "10": 1e-4, "moved": 2e-4, "alone": 3e-4}
+
+    monkeypatch.setattr(PriorCalibrator, "choose", choose)
+    capsys.readouterr()
+    assert main(_on_b(files, "--prior", str(files / "a.json"), "--prior-cv", "kfold",
+                      "--prior-stage", "none", "--out", str(files / "b-kfold.json"))) == 0
+    out = capsys.readouterr().out
+    assert seen == ["kfold"]
+    assert "× τ = 10 (random 10-fold CV)" in out
+    assert "random 10-fold CV (mm): τ = 0 0.200, τ = 10 0.100, moved 0.200" in out
+    pri = json.loads((files / "b-kfold.json").read_text())["settings"]["prior"]
+    assert pri["scale_chosen_by"] == "random 10-fold CV"
+
+
 @pytest.mark.parametrize(("extra", "message"), [
     (["--prior-scale", "3"], "--prior-scale needs --prior EARLIER.json"),
     (["--prior", "A", "--prior-scale", "0.5"],
      "--prior-scale must be 0 (BASE + PROBE only) or a number ≥ 1"),
     (["--prior-stage", "none"], "--prior-stage needs --prior EARLIER.json"),
+    (["--prior-cv", "kfold"], "--prior-cv needs --prior EARLIER.json"),
     (["--prior", "A"], "--prior needs --out PARAMS.json"),
     (["--prior", "A", "--thermal"], "--prior: --thermal cannot be combined with it"),
     (["--prior", "A", "--probe", "0,0,90,0,0,0"], "--prior: --probe cannot be combined"),

@@ -4,7 +4,7 @@
                        [--validate VAL.csv] [--rot rpy|zyz|xyz] [--payload-kg M]
                        [--out PARAMS.json] [--json] [--report REPORT.html]
                        [--residuals RES.json] [--prior EARLIER.json [--prior-scale TAU]
-                       [--prior-stage learned|none]]
+                       [--prior-stage learned|none] [--prior-cv cells|kfold]]
 
 A file of joint readings and tracker measurements is all it needs: BASE and
 PROBE are estimated from the data unless given (``--base``/``--probe``, e.g. from
@@ -20,6 +20,8 @@ parameters with regularisation toward it (MAP, :mod:`plugcell.calibration.prior`
 among the CV's candidates: BASE and PROBE only), the earlier learned layer kept as an
 offset, and the campaign's own learned stage on top when its grouped CV adopts it
 (:mod:`plugcell.calibration.campaign_stage`; ``--prior-stage none``: never).
+``--prior-cv kfold``: the choice's CV over a seeded random 10-fold of the campaign's poses
+instead of its workspace cells (for I-optimal campaigns, docs/calibration.md).
 ``--residual-prior`` is a different thing (a new learned layer on top of the earlier
 layer's arm-shape stage, ≥ 200 poses): kept as it is.
 """
@@ -130,6 +132,11 @@ def _add_prior_args(p: argparse.ArgumentParser) -> None:
                    help="with --prior: learn the campaign's own stage on what the fit leaves "
                         "and keep it when its grouped CV over the campaign's cells beats the "
                         "fit without it (learned, the default), or never (none)")
+    p.add_argument("--prior-cv", choices=("cells", "kfold"), default=None,
+                   help="with --prior: the splits of the cross-validation that chooses τ — "
+                        "grouped over the campaign's workspace cells (cells, the default) or "
+                        "a seeded random 10-fold over its poses (kfold: for I-optimal "
+                        "campaigns of few extreme poses)")
 
 
 def _frame(text: str, what: str) -> np.ndarray:
@@ -258,13 +265,15 @@ def _summary(d: dict[str, Any]) -> str:
     pri = d.get("settings", {}).get("prior")
     if pri:
         choice = pri.get("choice", "map")
+        how = ("grouped CV over the campaign's cells" if pri["scale_chosen_by"] == "grouped CV"
+               else pri["scale_chosen_by"])
         held = (f"its other parameters held (τ = 0, {pri['scale_chosen_by']})"
                 if pri["scale"] == 0 else
                 f"{len(pri['regularised'])} parameters pulled toward it with its σ × τ = "
                 f"{pri['scale']:g} ({pri['scale_chosen_by']})")
         if choice == "alone":
             lines.append(f"  prior: the earlier calibration of {pri['robot']} not used: the "
-                         "grouped CV over the campaign's cells preferred the campaign alone")
+                         f"{how} preferred the campaign alone")
         else:
             lines.append(f"  prior: the earlier calibration of {pri['robot']}, BASE + PROBE "
                          f"re-identified ('before' above), {held}"
@@ -274,7 +283,7 @@ def _summary(d: dict[str, Any]) -> str:
                             "without it)" if choice == "moved" or choice.endswith("/physical")
                             else ""))
         if pri.get("cv_mm"):
-            lines.append("  grouped CV over the campaign's cells (mm): " + ", ".join(
+            lines.append(f"  {how} (mm): " + ", ".join(
                 f"{'τ = ' + k if k[0].isdigit() else k} {v:.3f}"
                 for k, v in pri["cv_mm"].items()))
         st = pri.get("stage")
@@ -359,6 +368,8 @@ def _prior_conflicts(args: argparse.Namespace) -> None:
             raise CommandError("--prior-scale needs --prior EARLIER.json")
         if args.prior_stage is not None:
             raise CommandError("--prior-stage needs --prior EARLIER.json")
+        if args.prior_cv is not None:
+            raise CommandError("--prior-cv needs --prior EARLIER.json")
         return
     given = [o for o, on in (("--residual-model learned", args.residual_model != "none"),
                              ("--residual-prior", args.residual_prior is not None),
@@ -462,7 +473,7 @@ def _fit_prior(args: argparse.Namespace, earlier: Any, data: Any, progress: Any)
     return PriorCalibrator(earlier, scale=args.prior_scale, stage=args.prior_stage != "none",
                            rotation_weight=args.rotation_weight,
                            max_iterations=args.max_iterations, cell_size_m=args.residual_cell_m,
-                           progress=progress).fit(data)
+                           cv_split=args.prior_cv or "cells", progress=progress).fit(data)
 
 
 def _fit(args: argparse.Namespace, desc: Any, data: Any, base: Any, probe: Any, prior: Any,
