@@ -35,6 +35,7 @@ def test_bench_calibration_says_whether_the_target_is_met(monkeypatch, capsys, m
                                                     json=False)) == 0
     out = capsys.readouterr().out
     assert said in out and "model 5 (50 identified of its 72 parameters, one payload)" in out
+    assert f"150 poses: median {median_s * 1e3:.1f} ms over 1 runs, 4 iterations" in out, out
 
 
 def test_plan_says_identifiable_of_the_models_parameters(tmp_path, capsys):

@@ -22,6 +22,7 @@ from plugcell.compensation.tracking.learning import (
 )
 from plugcell.compensation.tracking.plant import ModalPlant
 from plugcell.compensation.tracking.repeat import RunRecord
+from plugcell.io.json_fields import strict
 from plugcell.io.learned_paths import (
     LearnedContext,
     LearnedFile,
@@ -31,7 +32,6 @@ from plugcell.io.learned_paths import (
     run_entries,
     save_learned,
 )
-from plugcell.io.params import _clean
 from plugcell.io.path_files import parse_path
 
 PATH = "x,y,z,speed\n1473.3,-231.7,2488.4,\n1473.3,-131.7,2488.4,100\n"
@@ -205,7 +205,7 @@ def test_an_inverse_file_saved_before_the_identification_is_not_continued_by_it(
 
 
 def _inverse_mutated(**edits):
-    doc = json.loads(json.dumps(_clean(_inverse_file().document())))
+    doc = json.loads(json.dumps(strict(_inverse_file().document())))
     for key, value in edits.items():
         *parents, last = key.split(".")
         d = doc
@@ -336,7 +336,7 @@ def _leaves(doc, prefix=()):
 
 
 DOCUMENTS = {"p": _document(),
-             "inverse": json.loads(json.dumps(_clean(_inverse_file().document())))}
+             "inverse": json.loads(json.dumps(strict(_inverse_file().document())))}
 LEAVES = [(k, p) for k, d in DOCUMENTS.items() for p in _leaves(d) if p]
 
 

@@ -64,8 +64,19 @@ from numpy.typing import NDArray
 
 from plugcell.compensation.tracking.learning import IterativeLearning, LearningSettings
 from plugcell.compensation.tracking.repeat import RunRecord
+from plugcell.io.json_fields import (
+    DocumentError,
+    at,
+    finite,
+    flag,
+    integer,
+    number,
+    numbers,
+    strict,
+    string,
+    typename,
+)
 from plugcell.io.learned_plant import inverse_document, read_inverse, read_plant
-from plugcell.io.params import ParamsError, _at, _clean, _integer, _number, _typename
 from plugcell.io.path_files import PathFile
 from plugcell.io.text_files import read_text
 from plugcell.io.units import M_PER_MM, MM_PER_M
@@ -309,7 +320,7 @@ def save_learned(path: str | Path, learned: LearnedFile) -> None:
         What to write.
     """
     p = Path(path)
-    text = json.dumps(_clean(learned.document()), indent=1, allow_nan=False) + "\n"
+    text = json.dumps(strict(learned.document()), indent=1, allow_nan=False) + "\n"
     tmp = p.with_name(p.name + ".tmp")
     tmp.write_text(text, encoding="utf-8")
     tmp.replace(p)
@@ -342,98 +353,75 @@ def load_learned(path: str | Path) -> LearnedFile:
         raise LearnedFileError(f"{name}: not a JSON document ({exc})") from None
     try:
         return _from_document(doc)
-    except (ParamsError, ValueError) as exc:
+    except (DocumentError, ValueError) as exc:
         raise LearnedFileError(f"{name}: {exc}") from None
-
-
-def _string(doc: dict[str, Any], *key: str) -> str:
-    x = _at(doc, *key)
-    if not isinstance(x, str):
-        raise ParamsError(f"{'.'.join(key)}: expected a string, got {_typename(x)}")
-    return x
-
-
-def _finite(v: Any, label: str) -> float:
-    """``v`` as a finite float; a :class:`ParamsError` naming ``label`` otherwise."""
-    return _number({label: v}, label)
-
-
-def _numbers(doc: dict[str, Any], *key: str) -> tuple[float, ...]:
-    x = _at(doc, *key)
-    label = ".".join(key)
-    if not isinstance(x, list):
-        raise ParamsError(f"{label}: expected a list of numbers, got {_typename(x)}")
-    return tuple(_finite(v, f"{label}[{i}]") for i, v in enumerate(x))
 
 
 def _context(doc: dict[str, Any]) -> LearnedContext:
     c = "context"
-    residual = _at(doc, c, "residual_layer")
-    if not isinstance(residual, bool):
-        raise ParamsError(f"context.residual_layer: expected true or false, got "
-                          f"{_typename(residual)}")
-    tool = _numbers(doc, c, "tool_mm_deg")
+    residual = flag(doc, c, "residual_layer")
+    tool = numbers(doc, c, "tool_mm_deg")
     if len(tool) != 6:
-        raise ParamsError(f"context.tool_mm_deg: expected 6 numbers, got {len(tool)}")
-    speeds = _numbers(doc, c, "speeds_mm_s")
+        raise DocumentError(f"context.tool_mm_deg: expected 6 numbers, got {len(tool)}")
+    speeds = numbers(doc, c, "speeds_mm_s")
     if not speeds or min(speeds) <= 0:
-        raise ParamsError("context.speeds_mm_s: expected one speed > 0 per segment")
+        raise DocumentError("context.speeds_mm_s: expected one speed > 0 per segment")
     ctx = LearnedContext(
-        _string(doc, c, "path"), _string(doc, c, "path_sha256"), speeds,
-        _string(doc, c, "robot"), tool, _number(doc, c, "payload_kg"),
-        _string(doc, c, "calibration"), residual, _string(doc, c, "loop"),
-        _string(doc, c, "reflector"), _number(doc, c, "duration_s"))
+        string(doc, c, "path"), string(doc, c, "path_sha256"), speeds,
+        string(doc, c, "robot"), tool, number(doc, c, "payload_kg"),
+        string(doc, c, "calibration"), residual, string(doc, c, "loop"),
+        string(doc, c, "reflector"), number(doc, c, "duration_s"))
     if ctx.duration_s <= 0:
-        raise ParamsError(f"context.duration_s must be > 0 s, got {ctx.duration_s!r}")
+        raise DocumentError(f"context.duration_s must be > 0 s, got {ctx.duration_s!r}")
     return ctx
 
 
 def _from_document(doc: Any) -> LearnedFile:
     if not isinstance(doc, dict):
-        raise ParamsError(f"expected a JSON object, got {_typename(doc)}")
+        raise DocumentError(f"expected a JSON object, got {typename(doc)}")
     fmt = doc.get("format")
     if fmt != FORMAT:
-        raise ParamsError(f"format {fmt!r}: not a learned correction (expected {FORMAT!r}, "
-                          "the file of plugcell path run --learned-out)")
-    version = _integer(doc, "format_version")
+        raise DocumentError(f"format {fmt!r}: not a learned correction (expected {FORMAT!r}, "
+                            "the file of plugcell path run --learned-out)")
+    version = integer(doc, "format_version")
     if version not in READ_VERSIONS:
-        raise ParamsError(f"format_version {version}: this plugcell reads versions "
-                          f"{', '.join(map(str, READ_VERSIONS))}")
+        raise DocumentError(f"format_version {version}: this plugcell reads versions "
+                            f"{', '.join(map(str, READ_VERSIONS))}")
     ctx = _context(doc)
     law = doc.get("law", "p")
     if law not in LAWS:
-        raise ParamsError(f"law: expected one of {', '.join(LAWS)}, got {law!r}")
+        raise DocumentError(f"law: expected one of {', '.join(LAWS)}, got {law!r}")
     values = {}
     for f in fields(LearningSettings):
         if f.name == "inverse":
             continue
-        values[f.name] = _integer(doc, "settings", f.name) if f.name == "order" else \
-            _number(doc, "settings", f.name)
+        values[f.name] = integer(doc, "settings", f.name) if f.name == "order" else \
+            number(doc, "settings", f.name)
     learning = _learning(doc, ctx, law, LearningSettings(**_checked_settings(values)))
-    steps = _integer(doc, "steps")
+    steps = integer(doc, "steps")
     if steps < 0:
-        raise ParamsError(f"steps must be ≥ 0, got {steps}")
+        raise DocumentError(f"steps must be ≥ 0, got {steps}")
     learning.steps = steps
     learning.u = _offset(doc, learning)
-    runs = _at(doc, "runs")
+    runs = at(doc, "runs")
     if not isinstance(runs, list) or not all(isinstance(r, dict) for r in runs):
-        raise ParamsError(f"runs: expected a list of objects, got {_typename(runs)}")
+        raise DocumentError(f"runs: expected a list of objects, got {typename(runs)}")
     best = None
     if "best" in doc and version != 1:
-        rms, best_steps = _number(doc, "best", "measured_rms_mm"), _integer(doc, "best", "steps")
+        rms, best_steps = number(doc, "best", "measured_rms_mm"), integer(doc, "best", "steps")
         if rms < 0 or best_steps < 0:
-            raise ParamsError(f"best: measured_rms_mm {rms!r} and steps {best_steps!r} must "
-                              "be ≥ 0")
+            raise DocumentError(f"best: measured_rms_mm {rms!r} and steps {best_steps!r} must "
+                                "be ≥ 0")
         best = (rms * M_PER_MM, _offset(doc, learning, "best"), best_steps)
     return LearnedFile(ctx, learning, runs, law, best)
 
 
 def _checked_settings(values: dict[str, Any]) -> dict[str, Any]:
-    """``values`` once LearningSettings accepts them (a ParamsError naming the cause)."""
+    """``values`` once LearningSettings accepts them (a DocumentError naming the cause)."""
     try:
         LearningSettings(**values)
     except ValueError as exc:
-        raise ParamsError(f"settings: {exc}") from None
+        raise DocumentError(f"settings: {exc}") from None
     return values
 
 
@@ -444,18 +432,18 @@ def _learning(doc: dict[str, Any], ctx: LearnedContext, law: str,
     plant = None
     if "inverse" in doc and doc.get("format_version") != 1:
         if law != "inverse":
-            raise ParamsError(f"inverse: the state of the inverse law in a file learned with "
-                              f"the law {law!r}")
+            raise DocumentError(f"inverse: the state of the inverse law in a file learned with "
+                                f"the law {law!r}")
         inv, steps, scale, raw = read_inverse(doc)
         try:
             settings = dataclasses.replace(settings, inverse=inv)
         except ValueError as exc:
-            raise ParamsError(f"inverse.settings: {exc}") from None
+            raise DocumentError(f"inverse.settings: {exc}") from None
         plant = None if raw is None else read_plant(raw, settings.cycle_s)
     try:
         learning = IterativeLearning(ctx.duration_s, settings, plant)
     except ValueError as exc:
-        raise ParamsError(f"settings: {exc}") from None
+        raise DocumentError(f"settings: {exc}") from None
     if plant is not None:
         learning.resume_inverse(steps, scale)
     return learning
@@ -464,26 +452,26 @@ def _learning(doc: dict[str, Any], ctx: LearnedContext, law: str,
 def _offset(doc: dict[str, Any], learning: IterativeLearning, key: str = "offset") -> Array:
     """``doc[key]``'s offset on the learning's grid (m), checked."""
     s = learning.settings
-    t0, cycle = _number(doc, key, "t0_s"), _number(doc, key, "cycle_s")
+    t0, cycle = number(doc, key, "t0_s"), number(doc, key, "cycle_s")
     if abs(t0 - learning.grid[0]) > 1e-9 or abs(cycle - s.cycle_s) > 1e-12:
-        raise ParamsError(f"{key}: t0_s {t0!r} and cycle_s {cycle!r} are not the "
-                          f"settings' grid ({learning.grid[0]:g} s, {s.cycle_s:g} s)")
-    rows = _at(doc, key, "u_mm")
+        raise DocumentError(f"{key}: t0_s {t0!r} and cycle_s {cycle!r} are not the "
+                            f"settings' grid ({learning.grid[0]:g} s, {s.cycle_s:g} s)")
+    rows = at(doc, key, "u_mm")
     n = learning.grid.size
     if not isinstance(rows, list) or len(rows) != n:
-        got = f"{len(rows)} rows" if isinstance(rows, list) else _typename(rows)
-        raise ParamsError(f"{key}.u_mm: expected {n} rows (the grid of a "
-                          f"{learning.duration_s:g} s motion), got {got}")
+        got = f"{len(rows)} rows" if isinstance(rows, list) else typename(rows)
+        raise DocumentError(f"{key}.u_mm: expected {n} rows (the grid of a "
+                            f"{learning.duration_s:g} s motion), got {got}")
     u = np.empty((n, 3))
     for i, row in enumerate(rows):
         if not (isinstance(row, list) and len(row) == 3):
-            raise ParamsError(f"{key}.u_mm[{i}]: expected 3 numbers (x, y, z mm), got "
-                              f"{_typename(row)}")
-        u[i] = [_finite(v, f"{key}.u_mm[{i}][{j}]") for j, v in enumerate(row)]
+            raise DocumentError(f"{key}.u_mm[{i}]: expected 3 numbers (x, y, z mm), got "
+                                f"{typename(row)}")
+        u[i] = [finite(v, f"{key}.u_mm[{i}][{j}]") for j, v in enumerate(row)]
     bound = s.max_offset_m * MM_PER_M
     over = (np.abs(u) > bound * (1 + 1e-9)).any(axis=1)
     if over.any():
         bad = int(np.argmax(over))
-        raise ParamsError(f"{key}.u_mm[{bad}]: {rows[bad]!r} is beyond the settings' "
-                          f"bound ±{bound:g} mm")
+        raise DocumentError(f"{key}.u_mm[{bad}]: {rows[bad]!r} is beyond the settings' "
+                            f"bound ±{bound:g} mm")
     return u * M_PER_MM

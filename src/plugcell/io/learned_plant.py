@@ -15,7 +15,7 @@ norm-optimal inverse law (3) of :mod:`plugcell.compensation.tracking.learning` n
 
 ``plant`` is null until the identifying run was learned from (a learning saved between
 its excited run and the identification cannot go on by (3)).  Every value is checked on
-reading (shapes, finite numbers, the bounds above): a :class:`~plugcell.io.params.ParamsError`
+reading (shapes, finite numbers, the bounds above): a :class:`~plugcell.io.json_fields.DocumentError`
 naming the dotted key.  SI inside, as in the document.
 """
 
@@ -31,7 +31,13 @@ from numpy.typing import NDArray
 
 from plugcell.compensation.tracking.learning import InverseSettings, IterativeLearning
 from plugcell.compensation.tracking.plant import ModalPlant
-from plugcell.io.params import ParamsError, _at, _integer, _number, _typename
+from plugcell.io.json_fields import (
+    DocumentError,
+    at,
+    integer,
+    number,
+    typename,
+)
 
 Array = NDArray[np.float64]
 
@@ -84,14 +90,14 @@ def inverse_document(learning: IterativeLearning) -> dict[str, Any] | None:
 
 def _tensor(x: Any, label: str, shape: tuple[int | None, ...]) -> Array:
     """``x`` as a float array of ``shape`` (None: any length ≥ 0), every element a finite
-    number; a ParamsError naming the first wrong element otherwise."""
+    number; a DocumentError naming the first wrong element otherwise."""
     if not shape:
-        return np.array(_number({label: x}, label))
+        return np.array(number({label: x}, label))
     if not isinstance(x, list):
-        raise ParamsError(f"{label}: expected a list, got {_typename(x)}")
+        raise DocumentError(f"{label}: expected a list, got {typename(x)}")
     want = shape[0]
     if want is not None and len(x) != want:
-        raise ParamsError(f"{label}: expected {want} entries, got {len(x)}")
+        raise DocumentError(f"{label}: expected {want} entries, got {len(x)}")
     rows = [_tensor(v, f"{label}[{i}]", shape[1:]) for i, v in enumerate(x)]
     if not rows:
         return np.zeros((0, *(s or 0 for s in shape[1:])))
@@ -117,35 +123,35 @@ def read_plant(doc: Any, cycle_s: float, label: str = f"{KEY}.plant") -> ModalPl
 
     Raises
     ------
-    ParamsError
+    DocumentError
         A missing or wrong key (named), shapes that do not agree, a mode out of bounds.
     """
     if not isinstance(doc, dict):
-        raise ParamsError(f"{label}: expected an object, got {_typename(doc)}")
-    T = _number(doc, "cycle_s")
+        raise DocumentError(f"{label}: expected an object, got {typename(doc)}")
+    T = number(doc, "cycle_s")
     if abs(T - cycle_s) > 1e-12:
-        raise ParamsError(f"{label}.cycle_s: {T!r} s is not the learning's cycle {cycle_s:g} s")
-    head = _tensor(_at(doc, "head"), f"{label}.head", (None, 3, 3))
+        raise DocumentError(f"{label}.cycle_s: {T!r} s is not the learning's cycle {cycle_s:g} s")
+    head = _tensor(at(doc, "head"), f"{label}.head", (None, 3, 3))
     if not 1 <= head.shape[0] <= MAX_TAPS:
-        raise ParamsError(f"{label}.head: expected 1–{MAX_TAPS} taps, got {head.shape[0]}")
-    f = _tensor(_at(doc, "frequency_hz"), f"{label}.frequency_hz", (None,))
+        raise DocumentError(f"{label}.head: expected 1–{MAX_TAPS} taps, got {head.shape[0]}")
+    f = _tensor(at(doc, "frequency_hz"), f"{label}.frequency_hz", (None,))
     if f.size > MAX_MODES:
-        raise ParamsError(f"{label}.frequency_hz: at most {MAX_MODES} modes, got {f.size}")
-    z = _tensor(_at(doc, "damping"), f"{label}.damping", (f.size,))
-    res = _tensor(_at(doc, "residues"), f"{label}.residues", (f.size, 2, 3, 3))
+        raise DocumentError(f"{label}.frequency_hz: at most {MAX_MODES} modes, got {f.size}")
+    z = _tensor(at(doc, "damping"), f"{label}.damping", (f.size,))
+    res = _tensor(at(doc, "residues"), f"{label}.residues", (f.size, 2, 3, 3))
     for name, x in (("head", head), ("residues", res)):
         if x.size and float(np.abs(x).max()) > MAX_GAIN:
-            raise ParamsError(f"{label}.{name}: a coefficient beyond ±{MAX_GAIN:g} (m/m)")
+            raise DocumentError(f"{label}.{name}: a coefficient beyond ±{MAX_GAIN:g} (m/m)")
     nyq = 0.5 / T
     for i in range(f.size):
         if not 0 < f[i] < nyq:
-            raise ParamsError(f"{label}.frequency_hz[{i}]: {float(f[i])!r} Hz must lie in "
-                              f"(0, {nyq:g}) Hz")
+            raise DocumentError(f"{label}.frequency_hz[{i}]: {float(f[i])!r} Hz must lie in "
+                                f"(0, {nyq:g}) Hz")
         if not 0 < z[i] < 1:
-            raise ParamsError(f"{label}.damping[{i}]: {float(z[i])!r} must lie in (0, 1) "
-                              "(a stable, lightly damped mode)")
-    fit = _at(doc, "fit")
-    fit = math.nan if fit is None else _number(doc, "fit")
+            raise DocumentError(f"{label}.damping[{i}]: {float(z[i])!r} must lie in (0, 1) "
+                                "(a stable, lightly damped mode)")
+    fit = at(doc, "fit")
+    fit = math.nan if fit is None else number(doc, "fit")
     return ModalPlant(T, head, f.reshape(-1), z.reshape(-1), res.reshape(f.size, 2, 3, 3),
                       fit)
 
@@ -171,21 +177,21 @@ def read_inverse(doc: dict[str, Any]) -> tuple[InverseSettings, int, float, Any]
 
     Raises
     ------
-    ParamsError
+    DocumentError
         A missing or wrong key (named), settings the law refuses.
     """
     values: dict[str, Any] = {}
     for f in fields(InverseSettings):
-        values[f.name] = _integer(doc, KEY, "settings", f.name) \
-            if f.type in ("int", int) else _number(doc, KEY, "settings", f.name)
+        values[f.name] = integer(doc, KEY, "settings", f.name) \
+            if f.type in ("int", int) else number(doc, KEY, "settings", f.name)
     try:
         settings = InverseSettings(**values)
     except ValueError as exc:
-        raise ParamsError(f"{KEY}.settings: {exc}") from None
-    steps = _integer(doc, KEY, "steps")
+        raise DocumentError(f"{KEY}.settings: {exc}") from None
+    steps = integer(doc, KEY, "steps")
     if steps < 0:
-        raise ParamsError(f"{KEY}.steps must be ≥ 0, got {steps}")
-    scale = _number(doc, KEY, "regularisation_scale")
+        raise DocumentError(f"{KEY}.steps must be ≥ 0, got {steps}")
+    scale = number(doc, KEY, "regularisation_scale")
     if not scale >= 1:
-        raise ParamsError(f"{KEY}.regularisation_scale must be ≥ 1, got {scale!r}")
-    return settings, steps, scale, _at(doc, KEY, "plant")
+        raise DocumentError(f"{KEY}.regularisation_scale must be ≥ 1, got {scale!r}")
+    return settings, steps, scale, at(doc, KEY, "plant")

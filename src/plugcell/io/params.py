@@ -32,6 +32,15 @@ from plugcell.calibration.model import MIN_PAYLOAD_REF_KG, THERMAL_KEY, ErrorMod
 from plugcell.calibration.result import CalibrationResult, IterationRecord, harmonic_order
 from plugcell.calibration.statistics import PoseResiduals
 from plugcell.calibration.validity import ValidityRegion
+from plugcell.io.json_fields import (
+    DocumentError,
+    at,
+    flag,
+    integer,
+    number,
+    strict,
+    typename,
+)
 from plugcell.kinematics import RobotDescription
 from plugcell.kinematics.rotations import matrix_to_rpy
 from plugcell.metrology import AccuracyStats
@@ -66,8 +75,9 @@ __all__ = [
 ]
 
 
-class ParamsError(ValueError):
-    """A PARAMS.json document that cannot be used; the message names the key."""
+#: A PARAMS.json document that cannot be used; the message names the key (the error of
+#: the document readers of :mod:`plugcell.io.json_fields`, which this module uses).
+ParamsError = DocumentError
 
 
 # ---------------------------------------------------------------------- pieces
@@ -199,19 +209,6 @@ def _hybrid_summary(result: CalibrationResult) -> dict[str, Any] | None:
             "poses": len(h), "fallbacks": result.hybrid_fallbacks}
 
 
-def _clean(x: Any) -> Any:
-    """Replace NaN/inf by None so the JSON is strict."""
-    if isinstance(x, dict):
-        return {k: _clean(v) for k, v in x.items()}
-    if isinstance(x, list | tuple):
-        return [_clean(v) for v in x]
-    if isinstance(x, float | np.floating):
-        return float(x) if math.isfinite(x) else None
-    if isinstance(x, np.integer):
-        return int(x)
-    return x
-
-
 # ---------------------------------------------------------------------- validity
 
 
@@ -337,7 +334,7 @@ def undetermined_from_document(d: dict[str, Any]) -> Undetermined:
     doc = {"undetermined": d}
 
     def names(key: str, allowed: tuple[str, ...] | None = None) -> tuple[str, ...]:
-        v = _at(doc, "undetermined", key, default=[])
+        v = at(doc, "undetermined", key, default=[])
         if not isinstance(v, list) or not all(isinstance(x, str) for x in v):
             raise ParamsError(f"undetermined.{key}: expected a list of names")
         bad = [x for x in v if allowed is not None and x not in allowed]
@@ -347,7 +344,7 @@ def undetermined_from_document(d: dict[str, Any]) -> Undetermined:
         return tuple(v)
 
     try:
-        R = np.asarray(_at(doc, "undetermined", "flange_orientation"), dtype=float)
+        R = np.asarray(at(doc, "undetermined", "flange_orientation"), dtype=float)
     except (TypeError, ValueError):
         raise ParamsError("undetermined.flange_orientation: expected a 3x3 matrix") from None
     if R.shape != (3, 3) or not np.all(np.isfinite(R)):
@@ -356,11 +353,11 @@ def undetermined_from_document(d: dict[str, Any]) -> Undetermined:
         components=names("components", COMPONENTS), probe_axes=names("probe_axes",
                                                                      ("x", "y", "z")),
         parameters=names("parameters"), given=names("given", ("base", "probe")),
-        orientation_spread_rad=math.radians(_number(doc, "undetermined", "orientation_spread_deg")),
-        required_spread_rad=math.radians(_number(doc, "undetermined", "required_spread_deg")),
-        flange_orientation=R, n_poses=_integer(doc, "undetermined", "poses"),
-        n_directions=_integer(doc, "undetermined", "directions"),
-        tolerance=_number(doc, "undetermined", "tolerance"),
+        orientation_spread_rad=math.radians(number(doc, "undetermined", "orientation_spread_deg")),
+        required_spread_rad=math.radians(number(doc, "undetermined", "required_spread_deg")),
+        flange_orientation=R, n_poses=integer(doc, "undetermined", "poses"),
+        n_directions=integer(doc, "undetermined", "directions"),
+        tolerance=number(doc, "undetermined", "tolerance"),
         messages=names("messages"))
 
 
@@ -462,77 +459,21 @@ def params_json(result: CalibrationResult, indent: int | None = 2,
     str
         The JSON text (no trailing newline).
     """
-    return json.dumps(_clean(params_document(result, residual_file)), indent=indent,
+    return json.dumps(strict(params_document(result, residual_file)), indent=indent,
                       allow_nan=False)
 
 
-def _typename(x: Any) -> str:
-    if x is None:
-        return "null"
-    if isinstance(x, bool):
-        return "a boolean"
-    if isinstance(x, int | float):
-        return f"the number {x!r}"
-    if isinstance(x, str):
-        return f"the string {x!r}"
-    if isinstance(x, list):
-        return "a list"
-    if isinstance(x, dict):
-        return "an object"
-    return type(x).__name__
-
-
-def _at(document: dict[str, Any], *path: str, default: Any = KeyError) -> Any:
-    """``document[path[0]][path[1]]…``; a :class:`ParamsError` naming the dotted key when
-    one is missing (unless ``default`` is given) or a container is not an object."""
-    x: Any = document
-    for i, key in enumerate(path):
-        if not isinstance(x, dict):
-            raise ParamsError(f"{'.'.join(path[:i])}: expected an object, got {_typename(x)}")
-        if key not in x:
-            if default is not KeyError:
-                return default
-            raise ParamsError(f"missing key {'.'.join(path[:i + 1])!r}")
-        x = x[key]
-    return x
-
-
-def _number(document: dict[str, Any], *path: str, default: Any = KeyError) -> float:
-    x = _at(document, *path, default=default)
-    try:
-        f = float("nan") if isinstance(x, bool) or not isinstance(x, int | float) else float(x)
-    except OverflowError:  # an integer beyond float
-        f = float("inf")
-    if not math.isfinite(f):
-        raise ParamsError(f"{'.'.join(path)}: expected a finite number, got {_typename(x)}")
-    return f
-
-
-def _integer(document: dict[str, Any], *path: str, default: Any = KeyError) -> int:
-    x = _at(document, *path, default=default)
-    if isinstance(x, bool) or not isinstance(x, int):
-        raise ParamsError(f"{'.'.join(path)}: expected an integer, got {_typename(x)}")
-    return x
-
-
-def _flag(document: dict[str, Any], *path: str, default: Any = KeyError) -> bool:
-    x = _at(document, *path, default=default)
-    if not isinstance(x, bool):
-        raise ParamsError(f"{'.'.join(path)}: expected true or false, got {_typename(x)}")
-    return x
-
-
 def _values(document: dict[str, Any], *path: str) -> dict[str, float]:
-    x = _at(document, *path)
+    x = at(document, *path)
     if not isinstance(x, dict):
-        raise ParamsError(f"{'.'.join(path)}: expected an object, got {_typename(x)}")
+        raise ParamsError(f"{'.'.join(path)}: expected an object, got {typename(x)}")
     for k in x:
-        _number(document, *path, k)  # names the dotted key of a bad value
+        number(document, *path, k)  # names the dotted key of a bad value
     return x
 
 
 def _transform(document: dict[str, Any], *path: str) -> Array:
-    x = _at(document, *path)
+    x = at(document, *path)
     try:
         T = np.array(x, dtype=float)
     except (TypeError, ValueError, OverflowError):
@@ -584,11 +525,11 @@ def result_from_params(document: dict[str, Any], description: RobotDescription, 
     values = _values(document, "values")
     nominal_values = _values(document, "nominal_frames", "values")
     keys = _parameter_keys(document)
-    iterations = _integer(document, "iterations")
-    converged = _flag(document, "converged")
-    six_dof = _flag(document, "data", "six_dof")
-    n_poses = _integer(document, "data", "poses")
-    warnings = _at(document, "warnings", default=[])
+    iterations = integer(document, "iterations")
+    converged = flag(document, "converged")
+    six_dof = flag(document, "data", "six_dof")
+    n_poses = integer(document, "data", "poses")
+    warnings = at(document, "warnings", default=[])
     if not isinstance(warnings, list) or not all(isinstance(w, str) for w in warnings):
         raise ParamsError("warnings: expected a list of strings")
     try:
@@ -619,9 +560,9 @@ def _robot_of(document: Any, description: RobotDescription, check_robot: bool) -
     if isinstance(version, bool) or not isinstance(version, int) or version > FORMAT_VERSION:
         raise ParamsError(f"format_version {version!r}: this plugcell reads up to "
                           f"{FORMAT_VERSION} (written by a newer plugcell?)")
-    robot = _at(document, "robot")
+    robot = at(document, "robot")
     if not isinstance(robot, str):
-        raise ParamsError(f"robot: expected a name, got {_typename(robot)}")
+        raise ParamsError(f"robot: expected a name, got {typename(robot)}")
     if check_robot and robot != description.name:
         raise ParamsError(f"a calibration of robot {robot!r}, not of {description.name!r}")
     return robot
@@ -631,22 +572,22 @@ def _model_options(document: dict[str, Any]) -> tuple[Any, dict[str, Any]]:
     """The model's configuration and the options of :meth:`ErrorModel.create` it was
     identified with: BASE/PROBE references, payload and temperature references,
     harmonics, thermal expansion (absent ones: their defaults of older files)."""
-    number = _at(document, "model", "number")
+    model_number = at(document, "model", "number")
     try:
-        cfg = model_config(number)
+        cfg = model_config(model_number)
     except ValueError as exc:
         raise ParamsError(f"model.number: {exc}") from None
     base_ref = _transform(document, "references", "base")
     probe_ref = _transform(document, "references", "probe")
-    m_ref = _number(document, "data", "payload_ref_kg")
+    m_ref = number(document, "data", "payload_ref_kg")
     if m_ref != 0.0 and m_ref < MIN_PAYLOAD_REF_KG:  # compliance scales with m / m_ref
         raise ParamsError(f"data.payload_ref_kg: 0 (no payload) or at least "
                           f"{MIN_PAYLOAD_REF_KG:g} kg, got {m_ref:g}")
-    harmonics = _integer(document, "model", "harmonics", default=0)
+    harmonics = integer(document, "model", "harmonics", default=0)
     if harmonics not in (0, 1, 2):
         raise ParamsError(f"model.harmonics: 0, 1 or 2, got {harmonics}")
-    thermal = _flag(document, "model", "thermal", default=False)
-    t_ref = _number(document, "model", "temperature_ref_c", default=0.0)
+    thermal = flag(document, "model", "thermal", default=False)
+    t_ref = number(document, "model", "temperature_ref_c", default=0.0)
     return cfg, {"gravity": cfg.gravity, "payload": cfg.payload, "base": base_ref,
                  "probe": probe_ref, "payload_ref_kg": m_ref, "harmonics": harmonics,
                  "thermal": thermal, "temperature_ref_c": t_ref}
@@ -661,9 +602,9 @@ def _model(description: RobotDescription, cfg: Any, options: dict[str, Any],
 
 def _parameter_keys(document: dict[str, Any]) -> list[str]:
     """The keys of the identified parameters (``parameters[i].key``)."""
-    rows = _at(document, "parameters")
+    rows = at(document, "parameters")
     if not isinstance(rows, list):
-        raise ParamsError(f"parameters: expected a list, got {_typename(rows)}")
+        raise ParamsError(f"parameters: expected a list, got {typename(rows)}")
     keys = []
     for i, row in enumerate(rows):
         key = row.get("key") if isinstance(row, dict) else None
@@ -680,7 +621,7 @@ def _section(document: dict[str, Any], name: str, read: Any) -> Any:
     if not v:
         return None
     if not isinstance(v, dict):
-        raise ParamsError(f"{name}: expected an object, got {_typename(v)}")
+        raise ParamsError(f"{name}: expected an object, got {typename(v)}")
     return read(v)
 
 
@@ -787,4 +728,4 @@ def residuals_json(result: CalibrationResult, indent: int | None = 2) -> str:
     str
         The JSON text (no trailing newline).
     """
-    return json.dumps(_clean(residuals_document(result)), indent=indent, allow_nan=False)
+    return json.dumps(strict(residuals_document(result)), indent=indent, allow_nan=False)

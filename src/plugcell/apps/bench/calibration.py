@@ -107,7 +107,7 @@ def run(args: argparse.Namespace) -> int:
         return 0
     met = "met" if d["t150_s"] < d["target_t150_s"] else "NOT met"
     print(f"model 5 ({d['parameters']} identified of its {d['model_parameters']} parameters, "
-          "one payload), 150 poses: median {d['t150_s'] * 1e3:.1f} ms "
+          f"one payload), 150 poses: median {d['t150_s'] * 1e3:.1f} ms "
           f"over {len(d['t150_all_s'])} runs, {d['iterations_150']} iterations "
           f"(thesis: 5 s in Matlab; target < {d['target_t150_s'] * 1e3:.0f} ms: {met})")
     for s in d["scaling"]:

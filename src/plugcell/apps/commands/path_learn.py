@@ -234,9 +234,9 @@ def run_learning(args: argparse.Namespace, path: Any, name: str, options: Any,
 
 def _strict(x: Any) -> Any:
     """NaN → None (strict JSON)."""
-    from plugcell.io.params import _clean
+    from plugcell.io.json_fields import strict
 
-    return _clean(x)
+    return strict(x)
 
 
 def _report(message: str, holes: list[tuple[float, float]], args: argparse.Namespace,
