@@ -16,7 +16,8 @@ norm-optimal inverse law (3) of :mod:`plugcell.compensation.tracking.learning` n
 ``plant`` is null until the identifying run was learned from (a learning saved between
 its excited run and the identification cannot go on by (3)).  Every value is checked on
 reading (shapes, finite numbers, the bounds above): a
-:class:`~plugcell.io.json_fields.DocumentError` naming the dotted key.  SI inside, as in the document.
+:class:`~plugcell.io.json_fields.DocumentError` naming the dotted key.  SI inside, as in
+the document.
 """
 
 from __future__ import annotations
