@@ -141,7 +141,10 @@ def rates(run: PathRun) -> tuple[float, float]:
 
 def case(cell: TrackedCell, shape: str, speed: float, learn_runs: int = 0,
          learn_on: str = "model", learning_settings: LearningSettings = LEARNING,
-         tracking: bool = True) -> dict:
+         tracking: bool = True, observe=None) -> dict:
+    """One path: its runs and their errors (module docstring).  ``observe(k, learning,
+    run)``, if given, is called after each run ``k`` of the learning (0: the first, before
+    the learning's update from it; ``learning.u`` is then the offset that run used)."""
     print(f"running {shape} at {speed:g} mm/s …", file=sys.stderr, flush=True)
     t0 = time.time()
     traj = cell.plan(shape, speed)
@@ -156,6 +159,8 @@ def case(cell: TrackedCell, shape: str, speed: float, learn_runs: int = 0,
                                  dataclasses.replace(learning_settings, lead_s=tau))
     last = runs[learn_on]
     for k in range(1, learn_runs + 1):
+        if observe is not None:
+            observe(k - 1, learning, last)
         learn(learning, last)
         print(f"  {shape} {speed:g} mm/s: learning run {k}/{learn_runs} …", file=sys.stderr,
               flush=True)
@@ -166,6 +171,8 @@ def case(cell: TrackedCell, shape: str, speed: float, learn_runs: int = 0,
               f"(model {errors(model, shape)['perp_3s'] * 1e3:.4f} mm)", file=sys.stderr,
               flush=True)
     if learn_runs:
+        if observe is not None:
+            observe(learn_runs, learning, last)
         learn(learning, last)  # the last run's error as the tracker saw it
     st = runs["tracking"].stats if "tracking" in runs else None
     ages = np.array(st.ages_s if st else [math.nan]) * 1e3
