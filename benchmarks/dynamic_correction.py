@@ -394,7 +394,8 @@ def print_learning(results: list[dict], ls: LearningSettings) -> None:
         iv = ls.inverse
         law = (f"run 1: P-type ({law}) + excitation {iv.excitation_m * 1e6:g} µm rms "
                f"{iv.excitation_low_hz:g}–{iv.excitation_high_hz:g} Hz, identifies the plant "
-               f"({iv.modes} modes); runs 2…: model-inverting, γ = {iv.gain:g}/(1 + "
+               f"({iv.modes} modes{', re-identified after each run' if iv.reidentify else ''}"
+               f"); runs 2…: model-inverting, γ = {iv.gain:g}/(1 + "
                f"{iv.gain_decay:g} j), β = {iv.regularisation:g}, Q_I {iv.cutoff_hz:g} Hz "
                f"order {iv.order}")
     print(f"\niterative learning ({law}; run 0 = {runs[0]['learn_on']}; perp 3σ / "
@@ -504,6 +505,10 @@ def main(argv: list[str]) -> int:
                     help="Q_I's cut-off (Hz)")
     ap.add_argument("--inverse-modes", type=int, default=INVERSE.modes,
                     help="modes of the identified plant")
+    ap.add_argument("--inverse-reidentify", type=int, choices=(0, 1),
+                    default=INVERSE.reidentify,
+                    help="1: identify the plant again after each run by the inverse, from "
+                    "the excited run against every run before and after it")
     ap.add_argument("--excitation-um", type=float, default=INVERSE.excitation_m * 1e6,
                     help="the identifying run's excitation, rms per axis (µm)")
     ap.add_argument("--no-tracking", action="store_true",
@@ -524,7 +529,8 @@ def main(argv: list[str]) -> int:
         inverse = dataclasses.replace(
             INVERSE, gain=args.inverse_gain, gain_decay=args.inverse_decay,
             regularisation=args.inverse_reg, cutoff_hz=args.inverse_cutoff,
-            modes=args.inverse_modes, excitation_m=args.excitation_um * 1e-6) \
+            modes=args.inverse_modes, excitation_m=args.excitation_um * 1e-6,
+            reidentify=args.inverse_reidentify) \
             if args.learn_law == "inverse" else None
         learning = dataclasses.replace(LEARNING, gain=args.learn_gain,
                                        gain_decay=args.learn_decay,

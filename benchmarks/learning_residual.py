@@ -36,7 +36,7 @@ BANDS = ((0.0, 2.0), (2.0, 8.0), (8.0, 16.0), (16.0, 20.0), (20.0, 30.0), (30.0,
 AXES = "xyz"
 
 
-def record(shape: str, speed: float, learn_runs: int, seed: int = 0) -> dict:
+def record(shape: str, speed: float, learn_runs: int, seed: int = 0, **inverse) -> dict:
     """Run the path with the benchmark's learning; the arrays described above."""
     import dataclasses
 
@@ -62,7 +62,7 @@ def record(shape: str, speed: float, learn_runs: int, seed: int = 0) -> dict:
         state["learning"] = learning
         state["motion"] = run.motion[1] - run.motion[0]
 
-    settings = dataclasses.replace(LEARNING, inverse=INVERSE)
+    settings = dataclasses.replace(LEARNING, inverse=dataclasses.replace(INVERSE, **inverse))
     r = case(cell, shape, speed, learn_runs, "model", settings, tracking=False, observe=observe)
     learning = state["learning"]
     p = learning.plant
@@ -209,6 +209,8 @@ def main(argv: list[str]) -> int:
     ap.add_argument("--shape", default="line", choices=("line", "circle"))
     ap.add_argument("--speed", type=float, default=250.0, help="mm/s")
     ap.add_argument("--learn", type=int, default=6)
+    ap.add_argument("--reidentify", type=int, default=None, choices=(0, 1),
+                    help="InverseSettings.reidentify (default: the benchmark's)")
     ap.add_argument("--save", type=Path)
     ap.add_argument("--load", type=Path)
     ap.add_argument("--plot", type=Path)
@@ -217,7 +219,8 @@ def main(argv: list[str]) -> int:
         z = np.load(args.load, allow_pickle=False)
         d = {k: z[k] for k in z.files}
     else:
-        d = record(args.shape, args.speed, args.learn)
+        extra = {} if args.reidentify is None else {"reidentify": args.reidentify}
+        d = record(args.shape, args.speed, args.learn, **extra)
         if args.save:
             np.savez(args.save, **d)
     report(d)
