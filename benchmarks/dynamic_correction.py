@@ -3,7 +3,8 @@
     .venv/bin/python benchmarks/dynamic_correction.py [--shapes line,circle]
         [--speeds 50,100,250] [--learn 6] [--learn-on model] [--learn-law inverse]
         [--inverse-cutoff 20] [--inverse-reg 0.05] [--inverse-gain 1] [--inverse-decay 1]
-        [--inverse-modes 4] [--excitation-um 20] [--jobs 2] [--faults] [--udp]
+        [--inverse-modes 4] [--inverse-reidentify 1] [--excitation-um 20] [--jobs 2]
+        [--faults] [--udp]
         [--lead-ms MS] [--seed 0] [--plot docs/results/dynamic-correction.png]
 
 ``--shapes ''`` skips the main table (``--faults``/``--udp`` alone; their lead ``τ`` is
@@ -27,7 +28,9 @@ on ``N`` times — the rows ``learning 1 … N``; the learning sees only the tra
 samples, never the twin's truth.  With ``--learn-law inverse`` (the default) run 1 also
 carries a seeded excitation, from which (against run 0) the learning identifies the arm's
 plant — the few-mode model of :mod:`plugcell.compensation.tracking.plant` — and runs 2 …
-N learn with its norm-optimal inverse (``learning.py`` (3)), above the arm's modes;
+N learn with its norm-optimal inverse (``learning.py`` (3)), above the arm's modes, the
+plant identified once (``--inverse-reidentify 1``: again after each of them, from the
+excited run against every other);
 ``--learn-law p`` is the P-type law alone, below them.  ``--jobs`` runs the paths in
 parallel processes.
 

@@ -136,7 +136,8 @@ class InverseSettings:
     reidentify : int
         1: after each run by (3) the plant is identified again, from the excited run
         against the run before it *and against every run after it* (class
-        :class:`IterativeLearning`, "Re-identification"); 0: once, from the first pair.
+        :class:`IterativeLearning`, "Re-identification"); 0 (default): once, from the first
+        pair.
     """
 
     gain: float = 1.0
