@@ -3,7 +3,8 @@
     .venv/bin/python benchmarks/dynamic_correction.py [--shapes line,circle]
         [--speeds 50,100,250] [--learn 6] [--learn-on model] [--learn-law inverse]
         [--inverse-cutoff 20] [--inverse-reg 0.05] [--inverse-gain 1] [--inverse-decay 1]
-        [--inverse-modes 4] [--excitation-um 20] [--jobs 2] [--faults] [--udp]
+        [--inverse-modes 4] [--inverse-reidentify 1] [--excitation-um 20] [--jobs 2]
+        [--faults] [--udp]
         [--lead-ms MS] [--seed 0] [--plot docs/results/dynamic-correction.png]
 
 ``--shapes ''`` skips the main table (``--faults``/``--udp`` alone; their lead ``τ`` is
@@ -27,7 +28,9 @@ on ``N`` times — the rows ``learning 1 … N``; the learning sees only the tra
 samples, never the twin's truth.  With ``--learn-law inverse`` (the default) run 1 also
 carries a seeded excitation, from which (against run 0) the learning identifies the arm's
 plant — the few-mode model of :mod:`plugcell.compensation.tracking.plant` — and runs 2 …
-N learn with its norm-optimal inverse (``learning.py`` (3)), above the arm's modes;
+N learn with its norm-optimal inverse (``learning.py`` (3)), above the arm's modes, the
+plant identified once (``--inverse-reidentify 1``: again after each of them, from the
+excited run against every other);
 ``--learn-law p`` is the P-type law alone, below them.  ``--jobs`` runs the paths in
 parallel processes.
 
@@ -141,7 +144,10 @@ def rates(run: PathRun) -> tuple[float, float]:
 
 def case(cell: TrackedCell, shape: str, speed: float, learn_runs: int = 0,
          learn_on: str = "model", learning_settings: LearningSettings = LEARNING,
-         tracking: bool = True) -> dict:
+         tracking: bool = True, observe=None) -> dict:
+    """One path: its runs and their errors (module docstring).  ``observe(k, learning,
+    run)``, if given, is called after each run ``k`` of the learning (0: the first, before
+    the learning's update from it; ``learning.u`` is then the offset that run used)."""
     print(f"running {shape} at {speed:g} mm/s …", file=sys.stderr, flush=True)
     t0 = time.time()
     traj = cell.plan(shape, speed)
@@ -156,6 +162,8 @@ def case(cell: TrackedCell, shape: str, speed: float, learn_runs: int = 0,
                                  dataclasses.replace(learning_settings, lead_s=tau))
     last = runs[learn_on]
     for k in range(1, learn_runs + 1):
+        if observe is not None:
+            observe(k - 1, learning, last)
         learn(learning, last)
         print(f"  {shape} {speed:g} mm/s: learning run {k}/{learn_runs} …", file=sys.stderr,
               flush=True)
@@ -166,6 +174,8 @@ def case(cell: TrackedCell, shape: str, speed: float, learn_runs: int = 0,
               f"(model {errors(model, shape)['perp_3s'] * 1e3:.4f} mm)", file=sys.stderr,
               flush=True)
     if learn_runs:
+        if observe is not None:
+            observe(learn_runs, learning, last)
         learn(learning, last)  # the last run's error as the tracker saw it
     st = runs["tracking"].stats if "tracking" in runs else None
     ages = np.array(st.ages_s if st else [math.nan]) * 1e3
@@ -387,7 +397,8 @@ def print_learning(results: list[dict], ls: LearningSettings) -> None:
         iv = ls.inverse
         law = (f"run 1: P-type ({law}) + excitation {iv.excitation_m * 1e6:g} µm rms "
                f"{iv.excitation_low_hz:g}–{iv.excitation_high_hz:g} Hz, identifies the plant "
-               f"({iv.modes} modes); runs 2…: model-inverting, γ = {iv.gain:g}/(1 + "
+               f"({iv.modes} modes{', re-identified after each run' if iv.reidentify else ''}"
+               f"); runs 2…: model-inverting, γ = {iv.gain:g}/(1 + "
                f"{iv.gain_decay:g} j), β = {iv.regularisation:g}, Q_I {iv.cutoff_hz:g} Hz "
                f"order {iv.order}")
     print(f"\niterative learning ({law}; run 0 = {runs[0]['learn_on']}; perp 3σ / "
@@ -497,6 +508,10 @@ def main(argv: list[str]) -> int:
                     help="Q_I's cut-off (Hz)")
     ap.add_argument("--inverse-modes", type=int, default=INVERSE.modes,
                     help="modes of the identified plant")
+    ap.add_argument("--inverse-reidentify", type=int, choices=(0, 1),
+                    default=INVERSE.reidentify,
+                    help="1: identify the plant again after each run by the inverse, from "
+                    "the excited run against every run before and after it")
     ap.add_argument("--excitation-um", type=float, default=INVERSE.excitation_m * 1e6,
                     help="the identifying run's excitation, rms per axis (µm)")
     ap.add_argument("--no-tracking", action="store_true",
@@ -517,7 +532,8 @@ def main(argv: list[str]) -> int:
         inverse = dataclasses.replace(
             INVERSE, gain=args.inverse_gain, gain_decay=args.inverse_decay,
             regularisation=args.inverse_reg, cutoff_hz=args.inverse_cutoff,
-            modes=args.inverse_modes, excitation_m=args.excitation_um * 1e-6) \
+            modes=args.inverse_modes, excitation_m=args.excitation_um * 1e-6,
+            reidentify=args.inverse_reidentify) \
             if args.learn_law == "inverse" else None
         learning = dataclasses.replace(LEARNING, gain=args.learn_gain,
                                        gain_decay=args.learn_decay,

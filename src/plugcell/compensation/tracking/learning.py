@@ -133,6 +133,11 @@ class InverseSettings:
         The supervisor (class :class:`IterativeLearning`): when a run's measured rms
         error exceeds ``backoff`` times the best run's, ``u`` returns to the best run's
         and ``β`` grows tenfold (≥ 1; 0 switches it off).
+    reidentify : int
+        1: after each run by (3) the plant is identified again, from the excited run
+        against the run before it *and against every run after it* (class
+        :class:`IterativeLearning`, "Re-identification"); 0 (default): once, from the first
+        pair.
     """
 
     gain: float = 1.0
@@ -150,6 +155,7 @@ class InverseSettings:
     seed: int = 0
     pad_s: float = 2.0
     backoff: float = 1.15
+    reidentify: int = 0
 
     def __post_init__(self) -> None:
         for f in fields(self):
@@ -160,6 +166,9 @@ class InverseSettings:
         if not 0 < self.gain < 2:
             raise ValueError(f"InverseSettings.gain (γ) must lie in (0, 2) for the iteration "
                              f"to contract, got {self.gain!r}")
+        if self.reidentify not in (0, 1):
+            raise ValueError(f"InverseSettings.reidentify must be 0 or 1, "
+                             f"got {self.reidentify!r}")
         for name in ("order", "modes", "taps", "seed"):
             if not isinstance(getattr(self, name), int):
                 raise ValueError(f"InverseSettings.{name} must be an integer, "
@@ -468,6 +477,20 @@ class IterativeLearning:
     before the excited one (its offset and error: the excited run serves the
     identification only); from then on every update is (3).  :attr:`plant` is then the
     identified model (keep it with ``u`` to go on learning the same path later).
+
+    Re-identification (``settings.inverse.reidentify``): one pair of runs leaves the
+    modes' gains and mixing uncertain (the tracker's noise in one run's difference), and a
+    model wrong at a lightly damped mode breaks (4) there.  More pairs help, but not
+    any pair: an update by (3) from run ``k`` carries run ``k``'s noise into
+    ``u_{k+1}``, so a pair ``(k, k+1)`` has ``Δu`` correlated with the noise ``−n_k``
+    of its ``Δe`` (closed-loop data: a biased plant).  The excited run ``x`` is the
+    exception: no update is made from its error, so no later ``u_c`` holds ``n_x``, and
+    each pair ``(x, c)``, ``c`` after ``x``, is open-loop data,
+    ``e_c − e_x = P (u_c − u_x) + n_c − n_x`` with ``u_c − u_x`` independent of
+    ``n_c − n_x``.  After every run ``c`` by (3) the plant is identified again
+    (:func:`.plant.identify_plant`, a fresh mode search) from the pairs
+    ``(x − 1, x), (x, x + 1), …, (x, c)`` together; the noise of ``e_x`` is common to
+    them, so the data's noise falls towards that of one run, from two.
     """
 
     duration_s: float
@@ -501,6 +524,9 @@ class IterativeLearning:
         self._spectral: tuple[int, int, Array, Array, Array] | None = None
         self._beta_scale = 1.0
         self._best: tuple[float, Array, Array] | None = None  # (rms, u, e) of (3)'s runs
+        #: re-identification: the excited run (u, e, measured) and the open-loop pairs
+        self._excited: tuple[Array, Array, Array] | None = None
+        self._pairs: list[tuple[Array, Array, Array]] = []
 
     @property
     def iterations(self) -> int:
@@ -601,7 +627,8 @@ class IterativeLearning:
                  ) -> ModalPlant:
         """The plant from two runs (:mod:`.plant`, (1)): ``du`` the change of the offset
         (G, 3), ``de`` the change of the measured error (G, 3) (m), ``mask`` the cycles
-        measured in both; sets and returns :attr:`plant`."""
+        measured in both (or ``R`` pairs: (R, G, 3), (R, G, 3), (R, G)); sets and returns
+        :attr:`plant`."""
         inv = self.settings.inverse
         if inv is None:
             raise ValueError("IterativeLearning.identify: settings.inverse is None")
@@ -628,6 +655,8 @@ class IterativeLearning:
         if inv is not None and self.plant is None and self._excitation is not None \
                 and self._last is not None:
             u_a, e_a, m_a = self._last
+            self._excited = (applied, err.copy(), meas.copy())
+            self._pairs = [(applied - u_a, err - e_a, m_a & meas)]
             self.identify(applied - u_a, err - e_a, m_a & meas)
             # the excited run served the identification: the first update by (3) starts
             # from the run before it (whose error holds no excitation, and no error of
@@ -637,6 +666,9 @@ class IterativeLearning:
         self._last = (applied, err.copy(), meas.copy())
         rms = float(np.sqrt(np.mean(mag ** 2))) if mag.size else math.nan
         law = "inverse" if self.plant is not None and inv is not None else "p"
+        if law == "inverse" and learn_from is err and inv is not None and inv.reidentify \
+                and self._excited is not None:
+            self._reidentify(applied, err, meas)
         if law == "inverse" and learn_from is err and math.isfinite(rms):
             learn_from, law = self._supervise(rms, applied, err, law)
         self.history.append({
@@ -654,6 +686,15 @@ class IterativeLearning:
             self.u = u = self.u + self._excitation
             self.history[-1]["excited"] = 1.0
         return u.copy()
+
+    def _reidentify(self, applied: Array, err: Array, meas: Array) -> None:
+        """The plant again, from the excited run's open-loop pairs and this run's (class
+        docstring, "Re-identification")."""
+        assert self._excited is not None
+        u_x, e_x, m_x = self._excited
+        self._pairs.append((applied - u_x, err - e_x, m_x & meas))
+        du, de, mask = (np.array(v) for v in zip(*self._pairs, strict=True))
+        self.identify(du, de, mask)
 
     def _supervise(self, rms: float, applied: Array, err: Array, law: str
                    ) -> tuple[Array, str]:

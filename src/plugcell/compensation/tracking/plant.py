@@ -12,7 +12,10 @@ repeats, two runs that differ only in ``u`` differ in their error by the plant's
     e_b − e_a = P (u_b − u_a) + (n_b − n_a)                                  (1)
 
 so one run with a known excitation added to its offset (:func:`excitation`) identifies
-``P`` from nothing but the tracker's samples — what a real cell can do.
+``P`` from nothing but the tracker's samples — what a real cell can do.  Several such
+pairs ``r = 1 … R`` (the excited run against the run before it and against each run
+after it) identify one ``P`` together: (1) holds for each, and the least squares below
+sums their residuals (each pair's regressors start from rest at its own first cycle).
 
 The model (a few-mode model, discrete time, cycle ``T``): the impulse response from
 input axis ``j`` to output axis ``i`` is a free FIR head plus a sum of lightly damped
@@ -128,12 +131,10 @@ class ModalPlant:
         return np.vstack([b.T for b in blocks])
 
 
-def _fit(u: Array, y: Array, taps: int, modes: list[tuple[float, float]], cycle_s: float,
-         ) -> tuple[Array, Array]:
-    """The linear least squares of (2) for given modes: coefficients and residual."""
-    X = _basis(u, taps, modes, cycle_s)
-    C, *_ = np.linalg.lstsq(X, y, rcond=None)
-    return C, y - X @ C
+def _basis_runs(u: Array, taps: int, modes: list[tuple[float, float]], cycle_s: float
+                ) -> Array:
+    """:func:`_basis` of each pair ``u[r]`` (R, G, 3), from rest, stacked: ``(R G, ·)``."""
+    return np.vstack([_basis(x, taps, modes, cycle_s) for x in u])
 
 
 def identify_plant(u: ArrayLike, y: ArrayLike, cycle_s: float, *, modes: int = 5,
@@ -144,11 +145,12 @@ def identify_plant(u: ArrayLike, y: ArrayLike, cycle_s: float, *, modes: int = 5
 
     Parameters
     ----------
-    u : (G, 3) array_like
+    u : (G, 3) or (R, G, 3) array_like
         The change of the offset between the two runs (m), on the cycle grid; it should
         start and end at rest (windowed) and excite the band of interest
-        (:func:`excitation`).
-    y : (G, 3) array_like
+        (:func:`excitation`).  ``(R, G, 3)``: ``R`` pairs of runs, fitted together
+        (module docstring).
+    y : (G, 3) or (R, G, 3) array_like
         The change of the measured error (m) on the same grid.
     cycle_s : float
         ``T`` (s).
@@ -156,7 +158,7 @@ def identify_plant(u: ArrayLike, y: ArrayLike, cycle_s: float, *, modes: int = 5
         ``M``, modes to fit (0: the FIR head alone).
     taps : int
         ``K``, the FIR head's taps (≥ the dead time and the servo's fast response).
-    mask : (G,) bool array_like, optional
+    mask : (G,) or (R, G) bool array_like, optional
         Cycles whose ``y`` was measured in both runs (default: all); the input runs on
         all of them, the residual counts only these.
     band_hz : (float, float)
@@ -179,8 +181,9 @@ def identify_plant(u: ArrayLike, y: ArrayLike, cycle_s: float, *, modes: int = 5
     U, Y, m = _checked(u, y, mask, modes, taps, band_hz, cycle_s)
     found = _search_modes(U, Y, m, taps, modes, band_hz, grid_hz, damping0, cycle_s)
     Ym = Y[m]
-    C, _ = _fit(U, Y, taps, found, cycle_s)
-    r = (Ym - _basis(U, taps, found, cycle_s)[m] @ C).ravel()
+    X = _basis_runs(U, taps, found, cycle_s)[m]
+    C, *_ = np.linalg.lstsq(X, Ym, rcond=None)
+    r = (Ym - X @ C).ravel()
     fit = 1.0 - float(r @ r) / max(float(((Ym - Ym.mean(0)) ** 2).sum()), 1e-300)
     blocks = [C[3 * b: 3 * b + 3].T for b in range(taps + 2 * len(found))]
     return ModalPlant(cycle_s, np.array(blocks[:taps]).reshape(taps, 3, 3),
@@ -190,17 +193,23 @@ def identify_plant(u: ArrayLike, y: ArrayLike, cycle_s: float, *, modes: int = 5
 
 def _checked(u: ArrayLike, y: ArrayLike, mask: ArrayLike | None, modes: int, taps: int,
              band_hz: tuple[float, float], cycle_s: float) -> tuple[Array, Array, NDArray]:
-    """:func:`identify_plant`'s input, checked: ``u``, ``y`` (G, 3) and the mask (G,)."""
+    """:func:`identify_plant`'s input, checked: ``u`` (R, G, 3), ``y`` (R G, 3) and the
+    mask (R G,)."""
     U = np.asarray(u, dtype=float)
     Y = np.asarray(y, dtype=float)
-    if U.ndim != 2 or U.shape[1] != 3 or U.shape != Y.shape:
-        raise ValueError(f"identify_plant: u and y must both be (G, 3), got {U.shape} and "
-                         f"{Y.shape}")
+    if U.ndim not in (2, 3) or U.shape[-1] != 3 or U.shape != Y.shape or 0 in U.shape:
+        raise ValueError(f"identify_plant: u and y must both be (G, 3) or (R, G, 3), got "
+                         f"{U.shape} and {Y.shape}")
     if not (np.all(np.isfinite(U)) and np.all(np.isfinite(Y))):
         raise ValueError("identify_plant: u and y must be finite")
-    m = np.ones(U.shape[0], bool) if mask is None else np.asarray(mask, bool).reshape(-1)
-    if m.size != U.shape[0]:
-        raise ValueError(f"identify_plant: mask has {m.size} cycles, u has {U.shape[0]}")
+    U, Y = U.reshape(-1, *U.shape[-2:]), Y.reshape(-1, 3)
+    m = np.ones(U.shape[:2], bool) if mask is None else np.asarray(mask, bool)
+    if m.shape == U.shape[1:2]:  # one mask (G,) for every pair
+        m = np.broadcast_to(m, U.shape[:2])
+    m = m.reshape(-1)
+    if m.size != Y.shape[0]:
+        raise ValueError(f"identify_plant: mask has {m.size} cycles, u has "
+                         f"{U.shape[0]} × {U.shape[1]}")
     if not (isinstance(modes, int) and 0 <= modes <= 12 and isinstance(taps, int)
             and 1 <= taps <= 200):
         raise ValueError(f"identify_plant: modes must be 0–12 and taps 1–200, got {modes!r} "
@@ -227,7 +236,7 @@ def _search_modes(U: Array, Y: Array, m: NDArray, taps: int, modes: int,
 
     def residual(found: list[tuple[float, float]]) -> Array:
         # the normal equations, columns scaled: fast inside the search (lstsq at the end)
-        X = _basis(U, taps, found, cycle_s)[m]
+        X = _basis_runs(U, taps, found, cycle_s)[m]
         scale = np.maximum(np.linalg.norm(X, axis=0), 1e-300)
         Xs = X / scale
         C = np.linalg.solve(Xs.T @ Xs + 1e-12 * np.eye(Xs.shape[1]), Xs.T @ Ym)
