@@ -20,7 +20,6 @@ from plugcell.compensation.tracking import (
     InverseSettings,
     IterativeLearning,
     LearningSettings,
-    ModalPlant,
     SpectralGain,
     WeightingSettings,
     contraction_inverse,
@@ -29,6 +28,8 @@ from plugcell.compensation.tracking.smoothing import noise_power, smoothed_power
 
 SIGMA = 45e-6   # the twin's tracker noise per 4 ms cycle and axis (m)
 G = 4096
+FC = F[::4]                  # a coarser grid for the property test (fast)
+TRUE = true_response(FC)
 
 
 def signal(seed: int = 0) -> np.ndarray:
@@ -111,27 +112,36 @@ def test_covariance_matching_raises_the_gain_where_a_new_error_shows():
     assert K[(f > 20.0) & (f < 40.0)].mean() < 0.05
 
 
-@settings(max_examples=40, deadline=None)
+@settings(max_examples=25, deadline=None)
 @given(gain=st.floats(0.05, 1.95), reg=st.floats(1e-3, 1.0), shift=st.floats(0.97, 1.05),
        weight=st.floats(0.0, 1.0), seed=st.integers(0, 1000))
 def test_the_weight_never_breaks_the_contraction(gain, reg, shift, weight, seed):
     """ρ_I with a weight K ∈ [0, 1] per frequency: σ_max(I − γ K L̂ P) ≤ (1 − K) +
-    K σ_max(I − γ L̂ P) — never above 1 where (4) holds; with a model whose modes sit off."""
-    true = identified()
-    model = ModalPlant(T, true.head, true.frequency_hz * shift, true.damping, true.residues)
+    K σ_max(I − γ L̂ P) — never above 1 where (4) holds; the model's modes sit off by
+    ``shift`` (its response is the arm's at ``f / shift``)."""
     s = InverseSettings(gain=gain, regularisation=reg, cutoff_hz=20.0)
-    P, M = true_response(), model.response(F)
-    K = np.clip(weight + 0.2 * np.random.default_rng(seed).standard_normal(F.size), 0.0, 1.0)
-    rho1 = contraction_inverse(s, T, F, P, M)
-    rhok = contraction_inverse(s, T, F, P, M, weight=K)
+    P, M = TRUE, true_response(FC / shift)
+    K = np.clip(weight + 0.2 * np.random.default_rng(seed).standard_normal(FC.size), 0.0, 1.0)
+    rho1 = contraction_inverse(s, T, FC, P, M)
+    rhok = contraction_inverse(s, T, FC, P, M, weight=K)
     assert rhok <= max(1.0, rho1) + 1e-12
     if rho1 < 1.0:
         assert rhok <= 1.0 + 1e-12
     if rho1 < 1.0 and K.min() > 0.0:
         assert rhok < 1.0
     c = weight
-    assert contraction_inverse(s, T, F, P, M, weight=np.full(F.size, c)) <= \
+    assert contraction_inverse(s, T, FC, P, M, weight=np.full(FC.size, c)) <= \
         (1.0 - c) + c * rho1 + 1e-12
+
+
+def test_a_weight_keeps_a_model_that_contracts_contracting_and_one_that_does_not_not():
+    """The bound is not vacuous: a model 10 % off breaks (4) (ρ_I > 1), and a weight
+    K < 1 everywhere does not mend it where K stays near 1 at the broken frequencies."""
+    s = InverseSettings(gain=1.0, regularisation=1e-3, cutoff_hz=30.0)
+    wrong = true_response(FC / 1.1)
+    assert contraction_inverse(s, T, FC, TRUE, wrong) > 1.0
+    assert contraction_inverse(s, T, FC, TRUE, wrong, weight=np.full(FC.size, 0.9)) > 1.0
+    assert contraction_inverse(s, T, FC, TRUE, TRUE, weight=np.full(FC.size, 0.5)) < 1.0
 
 
 def run(weighting: WeightingSettings | None, runs: int) -> list[float]:
@@ -147,6 +157,7 @@ def run(weighting: WeightingSettings | None, runs: int) -> list[float]:
     return out
 
 
+@pytest.mark.slow  # the identification of the plant (a minute on a loaded machine)
 def test_the_weighted_learning_converges_and_learns_less_noise():
     """On the plant with modes, the same noise: the weighted law's first runs keep about
     half the running mean's error; it goes on converging."""
