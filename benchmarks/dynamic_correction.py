@@ -395,7 +395,9 @@ def print_learning(results: list[dict], ls: LearningSettings) -> None:
             law += (f", each frequency by its Kalman gain K_j = S_j/(S_j + N) in place of "
                     f"γ_j's decay (N from {ls.weighting.noise_low_hz:g}–"
                     f"{ls.weighting.noise_high_hz:g} Hz, S averaged over "
-                    f"±{ls.weighting.smooth_hz:g} Hz)")
+                    f"±{ls.weighting.smooth_hz:g} Hz"
+                    + (f", per tile of {ls.weighting.window_s:g} s" if ls.weighting.window_s
+                       else "") + ")")
     print(f"\niterative learning ({law}; run 0 = {runs[0]['learn_on']}; perp 3σ / "
           "along 3σ mm, true; in brackets the rms the tracker measured):")
     print("| path | speed mm/s | " + " | ".join(f"run {k}" for k in range(n + 1)) + " |")
@@ -514,6 +516,9 @@ def main(argv: list[str]) -> int:
                     help="half width of the power's average over frequency (Hz)")
     ap.add_argument("--weighting-detect", type=float, default=WeightingSettings().detect,
                     help="κ of the covariance matching (standard deviations)")
+    ap.add_argument("--weighting-window-s", type=float, default=WeightingSettings().window_s,
+                    help="0: a gain per frequency over the run; > 0: per tile of a "
+                    "short-time FFT with windows this long (s)")
     ap.add_argument("--no-tracking", action="store_true",
                     help="skip the run with the real-time tracker term (the slowest)")
     ap.add_argument("--jobs", type=int, default=1, help="paths run in parallel processes")
@@ -540,7 +545,8 @@ def main(argv: list[str]) -> int:
                                        inverse=inverse,
                                        weighting=WeightingSettings(
                                            smooth_hz=args.weighting_smooth_hz,
-                                           detect=args.weighting_detect)
+                                           detect=args.weighting_detect,
+                                           window_s=args.weighting_window_s)
                                        if args.weighting == "kalman" and inverse else None)
     except ValueError as exc:
         ap.error(str(exc))

@@ -14,6 +14,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 from scipy.fft import irfft, rfft, rfftfreq
+from scipy.signal import stft
 from test_learning_inverse import F, T, arm, disturbance, identified, true_response
 
 from plugcell.compensation.tracking import (
@@ -21,6 +22,7 @@ from plugcell.compensation.tracking import (
     IterativeLearning,
     LearningSettings,
     SpectralGain,
+    TileGain,
     WeightingSettings,
     contraction_inverse,
 )
@@ -67,6 +69,33 @@ def test_the_wiener_estimate_beats_the_raw_samples_by_the_predicted_factor():
     assert 0.5 * predicted < measured < 3.0 * predicted, (measured, predicted)
     # not learning by the weight (K = 1) would keep all of it
     assert np.mean((irfft(E, G, axis=0) - x) ** 2) / np.mean(n ** 2) > 0.99
+
+
+def test_the_tile_estimate_beats_the_raw_samples_by_the_predicted_factor():
+    """The same per tile of a short-time FFT (1 s Hann windows): the error power
+    Σ S N/(S + N) over the tiles against Σ N, S from the noiseless signal's tiles (the
+    frame is tight: both sums count each sample's energy the same number of times)."""
+    x = signal()
+    kw = {"fs": 1 / T, "window": "hann", "nperseg": 250, "noverlap": 187}
+    _, _, X = stft(x.T, boundary="even", padded=True, **kw)
+    ratios = []
+    for seed in range(4):
+        n = SIGMA * np.random.default_rng(seed).standard_normal(x.shape)
+        est = TileGain(WeightingSettings(window_s=1.0), T)(x + n)
+        ratios.append(np.mean((est - x) ** 2) / np.mean(n ** 2))
+    _, _, Nx = stft(SIGMA * np.random.default_rng(99).standard_normal(x.shape).T,
+                    boundary="even", padded=True, **kw)
+    S, N = (np.abs(X) ** 2).sum(axis=0), float((np.abs(Nx) ** 2).sum(axis=0).mean())
+    predicted = float(np.sum(S * N / (S + N)) / (N * S.size))
+    measured = float(np.mean(ratios))
+    assert measured < 0.1
+    assert 0.5 * predicted < measured < 3.0 * predicted, (measured, predicted)
+
+
+def test_the_tiles_give_back_a_signal_without_noise():
+    """istft(stft(e)) = e: with no noise in the noise band every tile's K is 1."""
+    x = signal()
+    assert np.abs(TileGain(WeightingSettings(window_s=0.5), T)(x) - x).max() < 0.01 * 80e-6
 
 
 def test_the_noise_power_is_that_of_white_noise_in_every_bin():
@@ -200,6 +229,12 @@ def test_bad_weighting_input_is_named():
         wiener_gain(-np.ones((3, 3)), 1.0)
     with pytest.raises(ValueError, match="gain"):
         SpectralGain(WeightingSettings(), gain=2.0)
+    with pytest.raises(ValueError, match="16 cycles"):
+        TileGain(WeightingSettings(window_s=0.02), T)
+    with pytest.raises(ValueError, match="G ≥"):
+        TileGain(WeightingSettings(window_s=1.0), T)(np.zeros((100, 3)))
+    with pytest.raises(ValueError, match="window_s"):
+        WeightingSettings(window_s=-1.0)
     with pytest.raises(ValueError, match="weight"):
         contraction_inverse(InverseSettings(), T, F, true_response(), true_response(),
                             weight=np.full(F.size, 1.5))

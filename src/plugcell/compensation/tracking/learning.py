@@ -100,7 +100,7 @@ from scipy.signal import butter, filtfilt, freqz
 from scipy.signal.windows import tukey
 
 from .plant import ModalPlant, excitation, identify_plant
-from .smoothing import SpectralGain, WeightingSettings
+from .smoothing import SpectralGain, TileGain, WeightingSettings
 
 Array = NDArray[np.float64]
 
@@ -526,7 +526,8 @@ class IterativeLearning:
         self._beta_scale = 1.0
         self._best: tuple[float, Array, Array] | None = None  # (rms, u, e) of (3)'s runs
         self._weighting = None if s.weighting is None or s.inverse is None else \
-            SpectralGain(s.weighting, s.inverse.gain)
+            SpectralGain(s.weighting, s.inverse.gain) if s.weighting.window_s == 0 else \
+            TileGain(s.weighting, s.cycle_s, s.inverse.gain)
 
     @property
     def iterations(self) -> int:
@@ -592,11 +593,13 @@ class IterativeLearning:
             xp = np.pad(x, ((pad, n - G - pad), (0, 0)), mode="edge") * fade[:, None]
             return rfft(xp, axis=0)
 
-        E = spectrum(err)
-        if self._weighting is not None:  # K_j of .smoothing in place of γ_j's decay
-            gamma = inv.gain
+        if isinstance(self._weighting, TileGain):  # K_j of .smoothing, not γ_j's decay
+            gamma, E = inv.gain, spectrum(self._weighting(err))
+        elif self._weighting is not None:
+            gamma, E = inv.gain, spectrum(err)
             E = self._weighting(E, rfftfreq(n, s.cycle_s))[:, None] * E
         else:
+            E = spectrum(err)
             gamma = inv.gain / (1.0 + inv.gain_decay * self._inverse_steps)
         X = spectrum(self.u) - gamma * np.einsum("fij,fj->fi", Lw, E)
         u = irfft(Qw[:, None] * X, n, axis=0)[pad:pad + G] * self._window[:, None]

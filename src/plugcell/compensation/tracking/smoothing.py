@@ -57,11 +57,12 @@ from dataclasses import dataclass, fields
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
-from scipy.ndimage import uniform_filter1d
+from scipy.ndimage import uniform_filter, uniform_filter1d
+from scipy.signal import istft, stft
 
 Array = NDArray[np.float64]
 
-__all__ = ["SpectralGain", "WeightingSettings", "noise_power", "smoothed_power",
+__all__ = ["SpectralGain", "TileGain", "WeightingSettings", "noise_power", "smoothed_power",
            "wiener_gain"]
 
 
@@ -78,12 +79,17 @@ class WeightingSettings:
         Half width of the moving average of the power over frequency (Hz).
     detect : float
         ``κ`` of the covariance matching, in standard deviations of the average (≥ 0).
+    window_s : float
+        0: one gain per frequency over the whole run (:class:`SpectralGain`); > 0: one per
+        tile of a short-time Fourier transform with Hann windows of this length (s), 3/4
+        overlap (:class:`TileGain`: the error the path keeps is where and when it rings).
     """
 
     noise_low_hz: float = 50.0
     noise_high_hz: float = 110.0
     smooth_hz: float = 0.5
     detect: float = 3.0
+    window_s: float = 0.0
 
     def __post_init__(self) -> None:
         for f in fields(self):
@@ -95,9 +101,10 @@ class WeightingSettings:
         if not 0 < self.noise_low_hz < self.noise_high_hz:
             raise ValueError(f"WeightingSettings: need 0 < noise_low_hz < noise_high_hz, got "
                              f"{self.noise_low_hz!r} and {self.noise_high_hz!r}")
-        if self.smooth_hz <= 0 or self.detect < 0:
-            raise ValueError(f"WeightingSettings: smooth_hz must be > 0 and detect ≥ 0, got "
-                             f"{self.smooth_hz!r} and {self.detect!r}")
+        if self.smooth_hz <= 0 or self.detect < 0 or self.window_s < 0:
+            raise ValueError(f"WeightingSettings: smooth_hz must be > 0, detect and window_s "
+                             f"≥ 0, got {self.smooth_hz!r}, {self.detect!r} and "
+                             f"{self.window_s!r}")
 
     def check(self, cycle_s: float) -> None:
         """The noise band against the Nyquist rate of ``cycle_s``."""
@@ -251,3 +258,77 @@ class SpectralGain:
         self.history.append({"noise": N, "mean_gain": float(K[low].mean()),
                              "rematched": float(raised[low].mean())})
         return K
+
+
+class TileGain:
+    """(1) and (2) per tile of a short-time Fourier transform (Hann windows of
+    ``window_s``, 3/4 overlap: a tight frame, ``istft(stft(e)) = e``): the error a path
+    keeps after a few runs sits in a few places (its start, its stop, where a joint turns)
+    at the modes' frequencies, so a tile there holds far more of it than the whole run's
+    bin does, against the same noise per tile.  ``N``: the mean tile power in the noise
+    band; ``S``: the tiles' power averaged over 3 × 3 neighbours less ``N`` (``M`` = 9 ×
+    the axes), the covariance matching as :class:`SpectralGain`'s.  The estimate
+    ``ê = istft(K ⊙ stft(e))`` with ``0 ≤ K ≤ 1`` is ``𝒦 e``, ``𝒦 = A* diag(K) A``
+    Hermitian with eigenvalues in [0, 1] (``A`` the frame's analysis, ``A* A = I``); for
+    an exact model (``L̂ P ≈ I`` in ``Q_I``'s band) the iteration ``I − γ 𝒦`` has its
+    eigenvalues in ``[1 − γ, 1]``: it never expands.  (With a model error ``𝒦`` and
+    ``L̂ P`` do not commute: no frequency-wise bound; the supervisor watches.)
+
+    Parameters
+    ----------
+    settings : WeightingSettings
+        ``window_s`` > 0.
+    cycle_s : float
+        ``T`` (s).
+    gain : float
+        ``γ`` in (0, 2).
+
+    API note: ``ê = TileGain(settings, T)(e)`` with ``e`` (G, 3) on the cycle grid; the
+    state (``prior``, ``history``) as :class:`SpectralGain`'s.
+    """
+
+    def __init__(self, settings: WeightingSettings, cycle_s: float, gain: float = 1.0) -> None:
+        if not 0 < gain < 2:
+            raise ValueError(f"TileGain: gain must lie in (0, 2), got {gain!r}")
+        self.nperseg = round(settings.window_s / cycle_s)
+        if self.nperseg < 16:
+            raise ValueError(f"TileGain: window_s {settings.window_s!r} s is under 16 cycles")
+        settings.check(cycle_s)
+        self.settings, self.cycle_s, self.gain = settings, float(cycle_s), float(gain)
+        self.prior: Array | None = None
+        self.noise = math.nan
+        self.history: list[dict[str, float]] = []
+
+    def __call__(self, error: ArrayLike) -> Array:
+        """``ê`` (G, 3) for the run's error ``e`` (G, 3) (m); advances ``S`` by (2)."""
+        e = np.asarray(error, dtype=float)
+        if e.ndim != 2 or e.shape[0] < 2 * self.nperseg or not np.all(np.isfinite(e)):
+            raise ValueError(f"TileGain: expected a finite error (G ≥ {2 * self.nperseg}, a), "
+                             f"got {e.shape}")
+        s, n = self.settings, self.nperseg
+        kw = {"fs": 1.0 / self.cycle_s, "window": "hann", "nperseg": n,
+              "noverlap": 3 * n // 4}
+        f, _, X = stft(e.T, boundary="even", padded=True, **kw)     # (a, F, tiles)
+        power = (np.abs(X) ** 2).sum(axis=0)
+        band = (f >= s.noise_low_hz) & (f <= s.noise_high_hz)
+        if band.sum() < 2:
+            raise ValueError(f"TileGain: the noise band holds {int(band.sum())} bins of "
+                             f"{f[1] - f[0]:g} Hz; need 2 (a longer window_s)")
+        N = float(power[band].mean())
+        M = 9 * e.shape[1]
+        avg = uniform_filter(power, size=3, mode="nearest")
+        seen = np.maximum(avg - N, 0.0)
+        if self.prior is None or self.prior.shape != avg.shape:
+            S, raised = seen, np.zeros(avg.shape, bool)
+        else:
+            raised = avg > (self.prior + N) * (1.0 + s.detect / math.sqrt(M))
+            S = np.where(raised, np.maximum(seen, self.prior), self.prior)
+        K = wiener_gain(S, N)
+        g = self.gain * K
+        self.prior = (1.0 - g) ** 2 * S + g ** 2 * N
+        self.noise = N
+        low = f < s.noise_low_hz
+        self.history.append({"noise": N, "mean_gain": float(K[low].mean()),
+                             "rematched": float(raised[low].mean())})
+        _, est = istft(K[None] * X, boundary=True, **kw)
+        return np.ascontiguousarray(est[:, :e.shape[0]].T)
