@@ -187,10 +187,13 @@ def run(weighting: WeightingSettings | None, runs: int) -> list[float]:
 
 
 @pytest.mark.slow  # the identification of the plant (a minute on a loaded machine)
-def test_the_weighted_learning_converges_and_learns_less_noise():
-    """On the plant with modes, the same noise: the weighted law's first runs keep about
-    half the running mean's error; it goes on converging."""
-    plain, weighted = run(None, 4), run(WeightingSettings(), 4)
+@pytest.mark.parametrize("window_s", [0.0, 1.0])
+def test_the_weighted_learning_converges_and_learns_less_noise(window_s):
+    """On the plant with modes, the same noise: the weighted law's first runs keep well
+    under the running mean's error (per frequency and per 1 s tile); it goes on
+    converging."""
+    plain = run(None, 4)
+    weighted = run(WeightingSettings(window_s=window_s), 4)
     assert weighted[0] == plain[0]
     assert weighted[1] < 0.7 * plain[1]
     assert weighted[3] < plain[3]

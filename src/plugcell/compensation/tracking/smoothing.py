@@ -262,7 +262,8 @@ class SpectralGain:
 
 class TileGain:
     """(1) and (2) per tile of a short-time Fourier transform (Hann windows of
-    ``window_s``, 3/4 overlap: a tight frame, ``istft(stft(e)) = e``): the error a path
+    ``window_s``, 3/4 overlap: a tight frame up to the record's ends (extended evenly),
+    ``istft(stft(e)) = e``): the error a path
     keeps after a few runs sits in a few places (its start, its stop, where a joint turns)
     at the modes' frequencies, so a tile there holds far more of it than the whole run's
     bin does, against the same noise per tile.  ``N``: the mean tile power in the noise
