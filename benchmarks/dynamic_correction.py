@@ -395,7 +395,9 @@ def print_learning(results: list[dict], ls: LearningSettings) -> None:
             law += (f", each frequency by its Kalman gain K_j = S_j/(S_j + N) in place of "
                     f"γ_j's decay (N from {ls.weighting.noise_low_hz:g}–"
                     f"{ls.weighting.noise_high_hz:g} Hz, S averaged over "
-                    f"±{ls.weighting.smooth_hz:g} Hz"
+                    f"±{ls.weighting.smooth_hz:g} Hz, covariance matching "
+                    + (f"κ {ls.weighting.detect:g}" if math.isfinite(ls.weighting.detect)
+                       else "off")
                     + (f", per tile of {ls.weighting.window_s:g} s" if ls.weighting.window_s
                        else "") + ")")
     print(f"\niterative learning ({law}; run 0 = {runs[0]['learn_on']}; perp 3σ / "
@@ -515,7 +517,8 @@ def main(argv: list[str]) -> int:
                     default=WeightingSettings().smooth_hz,
                     help="half width of the power's average over frequency (Hz)")
     ap.add_argument("--weighting-detect", type=float, default=WeightingSettings().detect,
-                    help="κ of the covariance matching (standard deviations)")
+                    help="κ of the covariance matching (standard deviations; inf, the "
+                    "default: off)")
     ap.add_argument("--weighting-window-s", type=float, default=WeightingSettings().window_s,
                     help="0: a gain per frequency over the run; > 0: per tile of a "
                     "short-time FFT with windows this long (s)")

@@ -127,18 +127,22 @@ def test_the_kalman_gain_is_the_running_mean_where_the_error_is_large_and_small_
 
 def test_covariance_matching_raises_the_gain_where_a_new_error_shows():
     """A run whose 8 Hz power exceeds what (2) expects (the model's residual): K rises
-    there again, and nowhere else."""
+    there again, and nowhere else; with the matching off (the default) it does not."""
     t = np.arange(G) * T
     f = rfftfreq(G, T)
-    gain = SpectralGain(WeightingSettings())
+    gain, off = SpectralGain(WeightingSettings(detect=3.0)), SpectralGain(WeightingSettings())
     at8 = np.argmin(np.abs(f - 8.0))
     big = 1e-3 * np.sin(2 * np.pi * f[at8] * t)[:, None] * np.ones(3)
     rng = np.random.default_rng(20)
     for j in range(4):
-        gain(rfft((big if j == 0 else 0.0) + SIGMA * rng.standard_normal((G, 3)), axis=0), f)
-    K = gain(rfft(0.3 * big + SIGMA * rng.standard_normal((G, 3)), axis=0), f)
+        E = rfft((big if j == 0 else 0.0) + SIGMA * rng.standard_normal((G, 3)), axis=0)
+        gain(E, f)
+        off(E, f)
+    E = rfft(0.3 * big + SIGMA * rng.standard_normal((G, 3)), axis=0)
+    K = gain(E, f)
     assert K[at8] > 0.9
     assert K[(f > 20.0) & (f < 40.0)].mean() < 0.05
+    assert off(E, f)[at8] == pytest.approx(1.0 / 5.0, rel=0.05)      # 1/(1 + j), j = 4
 
 
 @settings(max_examples=25, deadline=None)
@@ -203,7 +207,8 @@ def test_the_weighted_learning_converges_and_learns_less_noise(window_s):
 @pytest.mark.parametrize("kw, words", [
     ({"noise_low_hz": 0.0}, "noise_low_hz"), ({"noise_high_hz": 40.0}, "noise_low_hz"),
     ({"smooth_hz": 0.0}, "smooth_hz"), ({"detect": -1.0}, "detect"),
-    ({"detect": math.inf}, "finite"), ({"smooth_hz": True}, "finite"),
+    ({"detect": math.nan}, "finite"), ({"smooth_hz": True}, "finite"),
+    ({"smooth_hz": math.inf}, "finite"),
 ])
 def test_bad_weighting_settings_are_named(kw, words):
     with pytest.raises(ValueError, match=words):

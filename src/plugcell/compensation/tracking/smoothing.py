@@ -32,7 +32,8 @@ power is the mean of ``|E_j|²`` in a band where the arm does not answer (``nois
 above the modes and ``Q_I``; its bins' noise is that of every bin, the padding of the
 record included).  ``S_0``: the first run's power, smoothed over ``±smooth_hz`` (``M``
 bins, a Bartlett–Welch average: its relative spread ``1/√M``), less ``N``, not below 0.
-**Covariance matching** (Mehra, IEEE Trans. Autom. Control 15(2), 1970): an
+**Covariance matching** (optional, ``detect``; Mehra, IEEE Trans. Autom. Control 15(2),
+1970): an
 update on a model with errors leaves more than (2) predicts; when a run's smoothed
 power exceeds what (2) expects, ``S_j + N``, by more than ``κ`` standard deviations of
 the average (``(S_j + N)(1 + κ/√M)``), ``S_j`` is reset to that power less ``N`` — the
@@ -78,7 +79,10 @@ class WeightingSettings:
     smooth_hz : float
         Half width of the moving average of the power over frequency (Hz).
     detect : float
-        ``κ`` of the covariance matching, in standard deviations of the average (≥ 0).
+        ``κ`` of the covariance matching, in standard deviations of the average (≥ 0);
+        ``math.inf`` (the default) switches it off: then ``K_j ≤ 1/(1 + j)`` everywhere,
+        never more gain than the running mean (on the twin's line at 250 mm/s the
+        matching at ``κ`` = 3 raised the gain where the model is wrong, and diverged).
     window_s : float
         0: one gain per frequency over the whole run (:class:`SpectralGain`); > 0: one per
         tile of a short-time Fourier transform with Hann windows of this length (s), 3/4
@@ -88,16 +92,16 @@ class WeightingSettings:
     noise_low_hz: float = 50.0
     noise_high_hz: float = 110.0
     smooth_hz: float = 0.5
-    detect: float = 3.0
+    detect: float = math.inf
     window_s: float = 0.0
 
     def __post_init__(self) -> None:
         for f in fields(self):
             v = getattr(self, f.name)
             if not (isinstance(v, int | float) and not isinstance(v, bool)
-                    and math.isfinite(v)):
-                raise ValueError(f"WeightingSettings.{f.name} must be a finite number, "
-                                 f"got {v!r}")
+                    and (math.isfinite(v) or (f.name == "detect" and v == math.inf))):
+                raise ValueError(f"WeightingSettings.{f.name} must be a finite number "
+                                 f"(detect: or inf), got {v!r}")
         if not 0 < self.noise_low_hz < self.noise_high_hz:
             raise ValueError(f"WeightingSettings: need 0 < noise_low_hz < noise_high_hz, got "
                              f"{self.noise_low_hz!r} and {self.noise_high_hz!r}")
