@@ -71,6 +71,7 @@ from plugcell.compensation.tracking import (
     IterativeLearning,
     LearningSettings,
     TrackingSettings,
+    WeightingSettings,
 )
 from plugcell.devices.robot.stream.source import Correction, CycleState
 from plugcell.kinematics import forward
@@ -401,6 +402,15 @@ def print_learning(results: list[dict], ls: LearningSettings) -> None:
                f"); runs 2…: model-inverting, γ = {iv.gain:g}/(1 + "
                f"{iv.gain_decay:g} j), β = {iv.regularisation:g}, Q_I {iv.cutoff_hz:g} Hz "
                f"order {iv.order}")
+        if ls.weighting is not None:
+            law += (f", each frequency by its Kalman gain K_j = S_j/(S_j + N) in place of "
+                    f"γ_j's decay (N from {ls.weighting.noise_low_hz:g}–"
+                    f"{ls.weighting.noise_high_hz:g} Hz, S averaged over "
+                    f"±{ls.weighting.smooth_hz:g} Hz, covariance matching "
+                    + (f"κ {ls.weighting.detect:g}" if math.isfinite(ls.weighting.detect)
+                       else "off")
+                    + (f", per tile of {ls.weighting.window_s:g} s" if ls.weighting.window_s
+                       else "") + ")")
     print(f"\niterative learning ({law}; run 0 = {runs[0]['learn_on']}; perp 3σ / "
           "along 3σ mm, true; in brackets the rms the tracker measured):")
     print("| path | speed mm/s | " + " | ".join(f"run {k}" for k in range(n + 1)) + " |")
@@ -514,6 +524,19 @@ def main(argv: list[str]) -> int:
                     "the excited run against every run before and after it")
     ap.add_argument("--excitation-um", type=float, default=INVERSE.excitation_m * 1e6,
                     help="the identifying run's excitation, rms per axis (µm)")
+    ap.add_argument("--weighting", choices=("kalman", "none"), default="none",
+                    help="kalman: the inverse law learns each frequency by its Kalman gain "
+                    "against the tracker's noise (compensation/tracking/smoothing.py); "
+                    "none: all of the error, γ/(1 + λ_I j)")
+    ap.add_argument("--weighting-smooth-hz", type=float,
+                    default=WeightingSettings().smooth_hz,
+                    help="half width of the power's average over frequency (Hz)")
+    ap.add_argument("--weighting-detect", type=float, default=WeightingSettings().detect,
+                    help="κ of the covariance matching (standard deviations; inf, the "
+                    "default: off)")
+    ap.add_argument("--weighting-window-s", type=float, default=WeightingSettings().window_s,
+                    help="0: a gain per frequency over the run; > 0: per tile of a "
+                    "short-time FFT with windows this long (s)")
     ap.add_argument("--no-tracking", action="store_true",
                     help="skip the run with the real-time tracker term (the slowest)")
     ap.add_argument("--jobs", type=int, default=1, help="paths run in parallel processes")
@@ -538,7 +561,12 @@ def main(argv: list[str]) -> int:
         learning = dataclasses.replace(LEARNING, gain=args.learn_gain,
                                        gain_decay=args.learn_decay,
                                        cutoff_hz=args.learn_cutoff, order=args.learn_order,
-                                       inverse=inverse)
+                                       inverse=inverse,
+                                       weighting=WeightingSettings(
+                                           smooth_hz=args.weighting_smooth_hz,
+                                           detect=args.weighting_detect,
+                                           window_s=args.weighting_window_s)
+                                       if args.weighting == "kalman" and inverse else None)
     except ValueError as exc:
         ap.error(str(exc))
     t0 = time.time()

@@ -167,6 +167,18 @@ def test_the_law_is_recorded_and_read_back(tmp_path):
         LearnedFile(_context(), _file().learning, [], "x")
 
 
+def test_a_learning_with_a_weighted_input_is_not_saved():
+    """The weighting's state (the noise and signal powers per frequency) is not in the
+    file: saving such a learning is refused with the reason instead of losing it."""
+    from plugcell.compensation.tracking import InverseSettings, WeightingSettings
+
+    s = dataclasses.replace(SETTINGS, inverse=InverseSettings(), weighting=WeightingSettings())
+    f = _file()
+    with pytest.raises(ValueError, match=r"input is weighted .* keeps no weighting state"):
+        LearnedFile(f.context, IterativeLearning(1.0, s), [], "inverse").document()
+    assert "weighting" not in _document()["settings"]
+
+
 def test_the_inverse_law_keeps_its_plant_and_goes_on(tmp_path):
     """Version 2: the inverse law's settings, updates, β's scale and identified plant are
     saved and read back; the learning continues by (3) exactly as the one saved would."""

@@ -242,6 +242,10 @@ class LearnedFile:
         lr = self.learning
         settings = dataclasses.asdict(lr.settings)
         del settings["inverse"]  # in "inverse", with the law's state
+        if settings.pop("weighting") is not None:
+            raise ValueError("a learning whose input is weighted (LearningSettings."
+                             "weighting) cannot be saved: the learned file keeps no "
+                             "weighting state")
         inverse = inverse_document(lr)
         return {"format": FORMAT, "format_version": FORMAT_VERSION,
                 "context": dataclasses.asdict(self.context), "law": self.law,
@@ -393,7 +397,7 @@ def _from_document(doc: Any) -> LearnedFile:
         raise DocumentError(f"law: expected one of {', '.join(LAWS)}, got {law!r}")
     values = {}
     for f in fields(LearningSettings):
-        if f.name == "inverse":
+        if f.name in ("inverse", "weighting"):  # the law's state; never saved
             continue
         values[f.name] = integer(doc, "settings", f.name) if f.name == "order" else \
             number(doc, "settings", f.name)

@@ -41,9 +41,11 @@ from .learning import (
 from .limiter import RateLimiter
 from .loop import CycleOutput, HoldWindow, TrackingLoop, TrackingSettings, TrackingStats
 from .plant import ModalPlant, excitation, identify_plant
+from .smoothing import SpectralGain, TileGain, WeightingSettings
 
 __all__ = ["CycleOutput", "HoldWindow", "InverseSettings", "IterativeLearning", "JointHistory",
            "LearnedOffset", "LearningSettings", "ModalPlant", "RateLimiter", "ResidualFilter",
-           "TrackerMeasurement", "TrackingLoop", "TrackingSettings", "TrackingStats",
+           "SpectralGain", "TileGain", "TrackerMeasurement", "TrackingLoop", "TrackingSettings",
+           "TrackingStats", "WeightingSettings",
            "contraction", "contraction_inverse", "excitation", "identify_plant",
            "inverse_gain", "path_error", "steady_state_gain"]

@@ -78,6 +78,13 @@ into ``≈ γ_j Q_I n_k`` of error — in ``Q_I``'s whole band, however large ``
 ``γ_j = 1/(1 + j)`` by default: the running mean of the runs' estimates, whose noise falls
 as ``1/√(j+1)``.
 
+**Weighting by the signal-to-noise per frequency** (``LearningSettings.weighting``,
+:mod:`.smoothing`): the update learns ``K_j(f) E_j(f)`` instead of ``E_j(f)``, ``K_j`` the
+Kalman gain of the runs at each frequency (``S_j / (S_j + N)``: the error still to learn
+against the tracker's noise, both estimated from the records), and ``γ_j = γ`` (``K_j``
+holds the ``1/(1 + j)`` where the error is far above the noise); (4) becomes
+``ρ_I = sup_ω |Q_I| σ_max(I − γ K L̂ P)``, never above (4)'s factor where that is < 1.
+
 Pure math: numpy and scipy, SI units, no I/O.
 """
 
@@ -93,6 +100,7 @@ from scipy.signal import butter, filtfilt, freqz
 from scipy.signal.windows import tukey
 
 from .plant import ModalPlant, excitation, identify_plant
+from .smoothing import SpectralGain, TileGain, WeightingSettings
 
 Array = NDArray[np.float64]
 
@@ -224,8 +232,9 @@ def inverse_gain(plant: ArrayLike, regularisation: float) -> NDArray[np.complex1
 
 
 def contraction_inverse(settings: InverseSettings, cycle_s: float, frequency_hz: ArrayLike,
-                        plant: ArrayLike, model: ArrayLike) -> float:
-    """``ρ_I`` of (4): ``max |Q_I| · σ_max(I − γ L̂ P)``, ``L̂`` from ``model``.
+                        plant: ArrayLike, model: ArrayLike,
+                        weight: ArrayLike | None = None) -> float:
+    """``ρ_I`` of (4): ``max |Q_I| · σ_max(I − γ K L̂ P)``, ``L̂`` from ``model``.
 
     Parameters
     ----------
@@ -236,6 +245,8 @@ def contraction_inverse(settings: InverseSettings, cycle_s: float, frequency_hz:
         Frequencies (Hz), 0 to the Nyquist rate.
     plant, model : (m, 3, 3) array_like of complex
         The true ``P`` and the model ``P̂`` the learning inverts, at those frequencies.
+    weight : (m,) array_like, optional
+        ``K`` in [0, 1] per frequency (:mod:`.smoothing`; default 1).
 
     Returns
     -------
@@ -247,9 +258,13 @@ def contraction_inverse(settings: InverseSettings, cycle_s: float, frequency_hz:
     if P.shape != (f.size, 3, 3) or np.shape(model) != P.shape:
         raise ValueError(f"contraction_inverse: plant and model must be ({f.size}, 3, 3), "
                          f"got {P.shape} and {np.shape(model)}")
+    K = np.ones(f.size) if weight is None else np.asarray(weight, dtype=float).reshape(-1)
+    if K.size != f.size or not np.all((K >= 0) & (K <= 1)):
+        raise ValueError(f"contraction_inverse: weight must be {f.size} values in [0, 1]")
     b, a = butter(settings.order, settings.cutoff_hz, fs=1.0 / cycle_s)
     _, B = freqz(b, a, worN=f, fs=1.0 / cycle_s)
-    M = np.eye(3) - settings.gain * inverse_gain(model, settings.regularisation) @ P
+    M = np.eye(3) - settings.gain * K[:, None, None] * \
+        (inverse_gain(model, settings.regularisation) @ P)
     return float(np.max(np.abs(B) ** 2 * np.linalg.norm(M, 2, axis=(1, 2))))
 
 
@@ -279,6 +294,9 @@ class LearningSettings:
         ``λ`` ≥ 0 of the decreasing gain ``L_k = L / (1 + λ k)`` (0: constant).
     inverse : InverseSettings or None
         The model-inverting law (3) after an identifying run (``None``: (1) alone).
+    weighting : WeightingSettings or None
+        (3) learns each frequency by its Kalman gain (module docstring, :mod:`.smoothing`;
+        ``None``: all of the error, ``γ_j``); needs ``inverse``.
     """
 
     gain: float = 0.8
@@ -292,6 +310,7 @@ class LearningSettings:
     max_offset_m: float = 2e-3
     gain_decay: float = 0.0
     inverse: InverseSettings | None = None
+    weighting: WeightingSettings | None = None
 
     def __post_init__(self) -> None:
         if not (self.inverse is None or isinstance(self.inverse, InverseSettings)):
@@ -299,8 +318,13 @@ class LearningSettings:
                              f"{self.inverse!r}")
         if self.inverse is not None:
             self.inverse.check(self.cycle_s)
+        if self.weighting is not None:
+            if not isinstance(self.weighting, WeightingSettings) or self.inverse is None:
+                raise ValueError(f"LearningSettings.weighting must be WeightingSettings (with "
+                                 f"inverse set) or None, got {self.weighting!r}")
+            self.weighting.check(self.cycle_s)
         for f in fields(self):
-            if f.name == "inverse":
+            if f.name in ("inverse", "weighting"):
                 continue
             v = getattr(self, f.name)
             if not (isinstance(v, int | float) and not isinstance(v, bool)
@@ -527,6 +551,9 @@ class IterativeLearning:
         #: re-identification: the excited run (u, e, measured) and the open-loop pairs
         self._excited: tuple[Array, Array, Array] | None = None
         self._pairs: list[tuple[Array, Array, Array]] = []
+        self._weighting = None if s.weighting is None or s.inverse is None else \
+            SpectralGain(s.weighting, s.inverse.gain) if s.weighting.window_s == 0 else \
+            TileGain(s.weighting, s.cycle_s, s.inverse.gain)
 
     @property
     def iterations(self) -> int:
@@ -615,8 +642,15 @@ class IterativeLearning:
             xp = np.pad(x, ((pad, n - G - pad), (0, 0)), mode="edge") * fade[:, None]
             return rfft(xp, axis=0)
 
-        gamma = inv.gain / (1.0 + inv.gain_decay * self._inverse_steps)
-        X = spectrum(self.u) - gamma * np.einsum("fij,fj->fi", Lw, spectrum(err))
+        if isinstance(self._weighting, TileGain):  # K_j of .smoothing, not γ_j's decay
+            gamma, E = inv.gain, spectrum(self._weighting(err))
+        elif self._weighting is not None:
+            gamma, E = inv.gain, spectrum(err)
+            E = self._weighting(E, rfftfreq(n, s.cycle_s))[:, None] * E
+        else:
+            E = spectrum(err)
+            gamma = inv.gain / (1.0 + inv.gain_decay * self._inverse_steps)
+        X = spectrum(self.u) - gamma * np.einsum("fij,fj->fi", Lw, E)
         u = irfft(Qw[:, None] * X, n, axis=0)[pad:pad + G] * self._window[:, None]
         self._inverse_steps += 1
         self.steps += 1
