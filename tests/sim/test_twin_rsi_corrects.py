@@ -177,7 +177,11 @@ def test_a_correction_beyond_the_limits_is_clamped_and_counted():
 @pytest.mark.slow
 def test_a_correction_beyond_the_limits_is_refused_and_the_robot_held():
     traj = _line(0.1)
+    # the offset's limit on its own: the ramp is in the sensor's time, so a cycle the
+    # loaded link missed makes the next step larger (CI run 15: "Z step 0.01288 mm per
+    # cycle" refused first); the step's own refusal is the clamping test's
     tight = dataclasses.replace(LIMITS, max_offset=(0.3 * MM,) * 3 + (1 * DEG,) * 3,
+                                max_step=(0.1 * MM,) * 3 + (0.1 * DEG,) * 3,
                                 policy="refuse")
     link, robot = _run(traj, PathOffset(OFFSET, ramp=RAMP), _config(limits=tight))
     assert isinstance(link.failure, CorrectionRefusedError)
