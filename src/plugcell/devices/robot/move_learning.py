@@ -1,5 +1,6 @@
 """Iterative learning of a robot program's repeated tracked moves (``--param
-learned_dir=DIR`` of a streamed robot service; docs/tracked-moves-learning.md).
+learned_dir=DIR`` of a streamed robot service; docs/tracked-paths.md, "Learning a
+program's repeated tracked moves").
 
 A program that runs the same ``MOVE LINEAR TO p WITH TRACKING`` on every part repeats
 the move's error: what ``plugcell path run --learn`` learns across the runs of a path
