@@ -313,6 +313,29 @@ def test_an_offset_row_that_is_wrong_or_beyond_the_bound_is_named(tmp_path):
         load_learned(_write(tmp_path, doc))
 
 
+@pytest.mark.parametrize("leaf, value", [(("context", "duration_s"), 1e6),
+                                         (("settings", "pre_s"), 1e9),
+                                         (("settings", "post_s"), 1e308)])
+def test_a_learning_window_too_long_to_hold_is_refused_before_it_is_allocated(
+        tmp_path, leaf, value):
+    """A mutated duration or margin would make a grid of 2.5·10⁸ cycles and more (CI run
+    16: the worker was killed; 1e308 raised OverflowError, not the file's error)."""
+    doc = _document()
+    doc[leaf[0]][leaf[1]] = value
+    with pytest.raises(LearnedFileError, match=r"cycles; at most 1048576"):
+        load_learned(_write(tmp_path, doc))
+
+
+def test_an_inverse_pad_too_long_to_hold_is_refused(tmp_path):
+    """The inverse law pads the FFT by ``pad_s`` on each side: a mutated pad of 10⁹ s was
+    allocated by the first step (a segmentation fault under a memory limit)."""
+    doc = json.loads(json.dumps(strict(_inverse_file().document())))
+    doc["inverse"]["settings"]["pad_s"] = 1e9
+    with pytest.raises(LearnedFileError, match=r"the inverse law's pads of 2 × 1e\+09 s .*"
+                                               r"cycles; at most 1048576"):
+        load_learned(_write(tmp_path, doc))
+
+
 def test_a_missing_or_binary_file_is_named(tmp_path):
     with pytest.raises(LearnedFileError, match="no such file"):
         load_learned(tmp_path / "none.json")

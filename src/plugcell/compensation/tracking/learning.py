@@ -464,6 +464,11 @@ class LearnedOffset:
         return (1.0 - a) * self.u[i] + a * self.u[i + 1]
 
 
+#: The most cycles a learning's grid may have (its offset, window and FFT buffers are
+#: held in memory: 2**20 cycles ≈ 70 min of path at 4 ms, ≈ 25 MB an array of 3 axes).
+MAX_GRID = 2**20
+
+
 @dataclass
 class IterativeLearning:
     """The learning of one repeated path (module docstring, (1) and (3)).
@@ -530,7 +535,16 @@ class IterativeLearning:
         if not (math.isfinite(self.duration_s) and self.duration_s > 0):
             raise ValueError(f"IterativeLearning: the path's duration must be > 0 s, "
                              f"got {self.duration_s!r}")
-        n = round((self.duration_s + s.pre_s + s.post_s) / s.cycle_s) + 1
+        cycles = (self.duration_s + s.pre_s + s.post_s) / s.cycle_s
+        padded = cycles + (0.0 if s.inverse is None else 2 * s.inverse.pad_s / s.cycle_s)
+        if not padded <= MAX_GRID:  # also inf: the grid and its FFTs are held in memory
+            pad = "" if s.inverse is None else f" and the inverse law's pads of 2 × " \
+                f"{s.inverse.pad_s:g} s"
+            raise ValueError(f"IterativeLearning: a learning window of "
+                             f"{self.duration_s + s.pre_s + s.post_s:g} s{pad} at "
+                             f"{s.cycle_s:g} s a cycle is {padded:.3g} cycles; at most "
+                             f"{MAX_GRID} (≈ {MAX_GRID * s.cycle_s / 60:.0f} min)")
+        n = round(cycles) + 1
         if 2 * s.taper_s > (n - 1) * s.cycle_s:
             raise ValueError(f"LearningSettings.taper_s {s.taper_s!r} s is longer than half "
                              f"the learning window ({(n - 1) * s.cycle_s:g} s)")
