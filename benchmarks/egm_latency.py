@@ -1,15 +1,16 @@
 """ABB EGM answer latency at 250 Hz: plugcell's link beside a bare UDP echo (issue 37 §7).
 
     python benchmarks/egm_latency.py [--seconds 60] [--cycle-ms 4] [--cell N]
-        [--rt-priority N] [--json FILE] [--plot PNG]
+        [--rt-priority N] [--no-native] [--json FILE] [--plot PNG]
 
 The harness is rsi_latency.py's (its doc says how it measures): a robot side sends an
 ``EgmRobot`` (ABB's egm.proto, as the simulated controller sends it: feedback and planned
 joints and pose, motor/MCI/RAPID state, test signals; ~250 bytes) every cycle to
 plugcell's :class:`~plugcell.devices.robot.egm.EgmLink` (a process of its own, joint
 mode, a swinging joint offset as the target, as ``plugcell egm run`` runs it) and to a
-bare UDP echo (``recvfrom`` → ``sendto`` of the message's header), interleaved half a
-cycle apart, and times each answer by the ``seqno`` it echoes.
+bare UDP echo (``recvfrom`` → ``sendto`` of the message's header) and the same echo in
+Rust (rust_echo.py), interleaved a third of a cycle apart, and times each answer by the
+``seqno`` it echoes.
 
 Goal (issue 37): p99.9 ≤ 1 ms, ≤ 3× the bare echo, zero missed cycles, ≤ 10 % of one
 core.  Nothing is asserted; the table says which goals the run met.
@@ -21,7 +22,7 @@ import sys
 
 from plugcell.devices.robot.egm.messages import egm_pb2
 from plugcell.devices.robot.stream.realtime import RealTime
-from rsi_latency import Vendor, main
+from rsi_latency import EchoPart, Vendor, main
 
 
 def egm_message(seqno: int, q: float) -> bytes:
@@ -44,11 +45,6 @@ def egm_message(seqno: int, q: float) -> bytes:
     return msg.SerializeToString()
 
 
-def header_part(data: bytes) -> bytes:
-    """The header field of a message (field 1, serialized first; < 128 bytes)."""
-    return data[:2 + data[1]]
-
-
 def seqno_of(answer: bytes) -> int:
     """The seqno of an answer: an EgmSensor's or the echoed header."""
     return egm_pb2.EgmHeader.FromString(answer[2:2 + answer[1]]).seqno
@@ -66,7 +62,8 @@ def run_link(cycle_ms: float, rt: RealTime) -> None:
                        record_latency=True, realtime=rt))
 
 
-EGM = Vendor("EGM", __file__, egm_message, seqno_of, lambda cycle_ms: 1, header_part,
+EGM = Vendor("EGM", __file__, egm_message, seqno_of, lambda cycle_ms: 1,
+             EchoPart(),  # the header (field 1, serialized first) carries the seqno
              run_link, first_seq=0)
 
 if __name__ == "__main__":

@@ -1,18 +1,20 @@
 """KUKA RSI answer latency at 250 Hz: plugcell's link beside a bare UDP echo (issue 37 §7).
 
     python benchmarks/rsi_latency.py [--seconds 60] [--cycle-ms 4] [--cell N]
-        [--rt-priority N] [--json FILE] [--plot PNG]
+        [--rt-priority N] [--no-native] [--json FILE] [--plot PNG]
 
-Three processes: a robot side (this one) that sends a ``<Rob Type="KUKA">`` packet
-every cycle (4 ms) to each of two sensors, interleaved half a cycle apart — plugcell's
-:class:`~plugcell.devices.robot.rsi.RsiLink` (in a process of its own, its thread
-answering, a swinging joint offset as the correction, as ``plugcell rsi run`` runs it)
-and a bare UDP echo (``recvfrom`` → ``sendto`` in a loop, the floor of Python and the
-kernel) — and times each answer from its send to its arrival (the round trip the
-controller sees).  Each sensor also times itself, packet in → answer out.  A *missed
-cycle* is an answer that arrived more than one cycle after its packet left, or never.
-CPU is each sensor process's user + system time over the measured seconds (% of one
-core).  The first two seconds are warm-up, not counted.
+Four processes: a robot side (this one) that sends a ``<Rob Type="KUKA">`` packet
+every cycle (4 ms) to each of three sensors, interleaved a third of a cycle apart —
+plugcell's :class:`~plugcell.devices.robot.rsi.RsiLink` (in a process of its own, its
+thread answering, a swinging joint offset as the correction, as ``plugcell rsi run`` runs
+it), a bare UDP echo (``recvfrom`` → ``sendto`` in a loop, the floor of Python and the
+kernel) and the same echo in Rust (rust_echo.py: the floor of any implementation, built
+with cargo; left out with ``--no-native`` or where there is no cargo) — and times each
+answer from its send to its arrival (the round trip the controller sees).  Each sensor
+also times itself, packet in → answer out.  A *missed cycle* is an answer that arrived
+more than one cycle after its packet left, or never.  CPU is each sensor process's user
++ system time over the measured seconds (% of one core).  The first two seconds are
+warm-up, not counted.
 
 ``--cell N`` first starts N plugcell services in a fresh cell (``plugcell serve`` of the
 kinds idle_cost.py uses: cameras, drills, benchmark publishers, compute services — Zenoh
@@ -65,6 +67,30 @@ def rob_packet(ipoc: int, q: float) -> bytes:
 
 
 @dataclass(frozen=True)
+class EchoPart:
+    """What the bare echoes (Python's, :func:`run_echo`, and Rust's, rust_echo.py) send
+    back of a datagram: the part that carries its sequence number, so the robot side
+    times their answers as it times the link's.
+
+    Attributes
+    ----------
+    tail : int or None
+        Its last ``tail`` bytes (RSI: the tail carries the IPOC); ``None``: the first
+        field of a protobuf message, its tag, one length byte and the field,
+        ``data[:2 + data[1]]`` (EGM: the header carries the seqno; < 128 bytes).
+    """
+
+    tail: int | None = None
+
+    def __call__(self, data: bytes) -> bytes:
+        return data[-self.tail:] if self.tail is not None else data[:2 + data[1]]
+
+    def args(self) -> list[str]:
+        """The native echo's options for the same part."""
+        return ["--tail", str(self.tail)] if self.tail is not None else ["--first-field"]
+
+
+@dataclass(frozen=True)
 class Vendor:
     """What the harness needs of one interface (this file: RSI; egm_latency.py: EGM).
 
@@ -80,8 +106,8 @@ class Vendor:
         The sequence number an answer (the link's or the echo's) carries.
     seq_step : callable
         ``seq_step(cycle_ms)``: the sequence's advance per cycle.
-    echo_part : callable
-        What the bare echo sends back of a datagram (the part carrying the sequence).
+    echo : EchoPart
+        What the bare echoes send back of a datagram (the part carrying the sequence).
     run_link : callable
         ``run_link(cycle_ms, rt)``: the link's process, scheduled as ``rt`` says.
     first_seq : int
@@ -93,7 +119,7 @@ class Vendor:
     packet: Callable[[int, float], bytes]
     seq_of: Callable[[bytes], int]
     seq_step: Callable[[float], int]
-    echo_part: Callable[[bytes], bytes]
+    echo: EchoPart
     run_link: Callable[[float, RealTime], None]
     first_seq: int = 4_000_000_000
 
@@ -318,12 +344,23 @@ class _Stream:
     answered: dict[int, int]  # sequence → the answer's arrival (ns)
 
 
-def robot(vendor: Vendor, seconds: float, cycle_ms: float,
-          setup: Setup) -> tuple[dict, dict[str, dict[str, np.ndarray]]]:
-    """Run the robot side; the figures per sensor, and its times (µs) for the plot."""
+#: The Python echo's row.
+ECHO = "bare UDP echo"
+
+
+def robot(vendor: Vendor, seconds: float, cycle_ms: float, setup: Setup,
+          native: Path | None = None) -> tuple[dict, dict[str, dict[str, np.ndarray]]]:
+    """Run the robot side; the figures per sensor, and its times (µs) for the plot.
+    ``native``: the Rust echo's binary (rust_echo.py), a third sensor."""
     cycle_ns = int(cycle_ms * 1e6)
-    link_proc, link_port, link_note = _spawn(vendor, "link", cycle_ms, setup)
-    echo_proc, echo_port, _ = _spawn(vendor, "echo", cycle_ms, setup)
+    names = [vendor.link, ECHO]
+    sensors = [_spawn(vendor, "link", cycle_ms, setup), _spawn(vendor, "echo", cycle_ms, setup)]
+    if native is not None:
+        import rust_echo
+
+        names.append(rust_echo.NAME)
+        sensors.append(rust_echo.spawn(native, vendor.echo.args(), setup.sensors))
+    procs = [proc for proc, _, _ in sensors]
     robot_note = RealTime(setup.sensors.priority, setup.robot_cpus or setup.sensors.cpus,
                           setup.sensors.lock_memory).apply()  # the controller's real-time core
     # and no collector's pass may stall it (it would send the packets it owes at once,
@@ -332,7 +369,7 @@ def robot(vendor: Vendor, seconds: float, cycle_ms: float,
     gc.freeze()
     gc.disable()
     streams = []
-    for port in (link_port, echo_port):
+    for _, port, _ in sensors:
         s = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
         s.bind(("127.0.0.1", 0))
         s.connect(("127.0.0.1", port))
@@ -346,16 +383,17 @@ def robot(vendor: Vendor, seconds: float, cycle_ms: float,
     measuring = False
     cpu0 = _cpu_times()
     steal_log: list[tuple[int, tuple[int, ...]]] = []  # (when, each CPU's steal ticks)
-    # slot j: stream j % 2 sends at start + j · cycle/2; between two, the robot side
+    # slot j: stream j % n sends at start + j · cycle/n; between two, the robot side
     # sleeps in select() (µs resolution: it never spins, so it takes no CPU from the
     # sensors it measures) and takes the answers as they come
+    n = len(streams)
     while True:
-        slot_t = start + k * cycle_ns // 2
+        slot_t = start + k * cycle_ns // n
         if slot_t >= end:
             break
         if not measuring and slot_t >= measuring_from:
             measuring = True
-            for p in (link_proc, echo_proc):
+            for p in procs:
                 p.stdin.write("go\n")
                 p.stdin.flush()
             for st in streams:
@@ -369,8 +407,8 @@ def robot(vendor: Vendor, seconds: float, cycle_ms: float,
             ready, _, _ = select.select(socks, [], [], (slot_t - now) / 1e9)
             for s in ready:
                 _take_answers(streams[socks.index(s)], vendor)
-        st = streams[k % 2]
-        if k % 2 == 0:
+        st = streams[k % n]
+        if k % n == 0:
             ipoc += vendor.seq_step(cycle_ms)
         packet = vendor.packet(ipoc, (k % 1000) * 1e-3)
         t = time.monotonic_ns()
@@ -389,7 +427,7 @@ def robot(vendor: Vendor, seconds: float, cycle_ms: float,
             _take_answers(streams[socks.index(s)], vendor)
     gc.enable()
     reports = []
-    for i, proc in enumerate((link_proc, echo_proc)):
+    for i, proc in enumerate(procs):
         proc.stdin.write("stop\n")
         proc.stdin.flush()
         reports.append(json.loads(proc.stdout.readline()))
@@ -397,9 +435,11 @@ def robot(vendor: Vendor, seconds: float, cycle_ms: float,
             proc.stdin.close()
             reports[0]["stats"] = json.loads(proc.stdout.readline())["stats"]
         proc.wait(timeout=10)
-    results, samples = _figures(vendor, streams, reports, cycle_ns, measuring_from,
+    results, samples = _figures(names, streams, reports, cycle_ns, measuring_from,
                                 _stolen(steal_log))
-    results[vendor.link] |= {"link_stats": reports[0]["stats"], "scheduling": link_note,
+    for name, (_, _, note) in zip(names[1:], sensors[1:], strict=True):
+        results[name]["scheduling"] = note
+    results[vendor.link] |= {"link_stats": reports[0]["stats"], "scheduling": sensors[0][2],
                              "steal_pct": steal, "robot_scheduling": robot_note,
                              "steal_windows": len(_stolen(steal_log)),
                              "windows": max(0, len(steal_log) - 1)}
@@ -419,20 +459,23 @@ def _take_answers(st: _Stream, vendor: Vendor) -> None:
             st.answered[seq] = t
 
 
-def _figures(vendor: Vendor, streams: list[_Stream], reports: list[dict], cycle_ns: int,
+def _figures(names: list[str], streams: list[_Stream], reports: list[dict], cycle_ns: int,
              t0: int, stolen: list[tuple[int, int]]
              ) -> tuple[dict, dict[str, dict[str, np.ndarray]]]:
     """Each sensor's round trips, in → out times, missed cycles (when, and why: see
     :func:`_causes`; how many near a time the hypervisor took a CPU, ``stolen``'s
-    windows), CPU share and thread counters."""
-    names = (vendor.link, "bare UDP echo")
+    windows; near a late send of the robot side, :func:`_late_windows`; within two
+    cycles of each other sensor's), CPU share and thread counters.  The first sensor is
+    the link (its report says when each packet came in)."""
     results, samples = {}, {}
     missed_at: list[list[int]] = []
     for st in streams:
         missed_at.append([sent for seq, _, sent in st.log
                           if st.answered.get(seq, sent + cycle_ns + 1) - sent > cycle_ns])
     link_in = {seq: (t_in, io) for seq, t_in, io in reports[0].get("arrivals", ())}
+    late = _late_windows(streams, cycle_ns)
     for i, (name, st, report) in enumerate(zip(names, streams, reports, strict=True)):
+        others = [t for j, at in enumerate(missed_at) if j != i for t in at]
         r = np.array([st.answered[seq] - sent for seq, _, sent in st.log
                       if seq in st.answered], dtype=float) / 1e3
         io = np.array(report["in_out_ns"], dtype=float) / 1e3
@@ -447,9 +490,12 @@ def _figures(vendor: Vendor, streams: list[_Stream], reports: list[dict], cycle_
             "cpu_pct": 100 * report["cpu_s"] / report["wall_s"],
             "max_at_s": (worst[1] - t0) / 1e9,
             "missed_at_s": [(t - t0) / 1e9 for t in missed_at[i]],
-            "missed_by_cause": _causes(st, missed_at[i], missed_at[1 - i], cycle_ns,
+            "missed_by_cause": _causes(st, missed_at[i], others, cycle_ns,
                                        link_in if i == 0 else None),
             "missed_near_steal": sum(_near(t, stolen) for t in missed_at[i]),
+            "missed_near_late_send": sum(_near(t, late, 0) for t in missed_at[i]),
+            "missed_with": {other: _within(missed_at[i], missed_at[j], 2 * cycle_ns)
+                            for j, other in enumerate(names) if j != i},
             "robot_late_sends": len(robot_late),
             "robot_late_near_steal": sum(_near(sent, stolen) for _, slot, sent in st.log
                                          if sent - slot > cycle_ns // 4),
@@ -458,6 +504,25 @@ def _figures(vendor: Vendor, streams: list[_Stream], reports: list[dict], cycle_
         }
         samples[name] = {"round trip": r, "in→out": io}
     return results, samples
+
+
+def _late_windows(streams: list[_Stream], cycle_ns: int) -> list[tuple[int, int]]:
+    """When the robot side stalled: for each packet of any stream it sent more than a
+    quarter cycle after its slot, (slot − 2 cycles, sent + 2 cycles) ns — a sensor's
+    missed cycle in one of these came with the machine's stall, not the sensor's."""
+    return [(slot - 2 * cycle_ns, sent + 2 * cycle_ns) for st in streams
+            for _, slot, sent in st.log if sent - slot > cycle_ns // 4]
+
+
+def _within(times: list[int], others: list[int], margin: int) -> int:
+    """How many of ``times`` (ns) lie within ``margin`` ns of one of ``others``."""
+    ref = np.sort(np.asarray(others, dtype=np.int64))
+    if not len(ref):
+        return 0
+    t = np.asarray(times, dtype=np.int64)
+    i = np.clip(np.searchsorted(ref, t), 1, len(ref)) - 1
+    nearest = np.minimum(np.abs(ref[i] - t), np.abs(ref[np.minimum(i + 1, len(ref) - 1)] - t))
+    return int(np.count_nonzero(nearest <= margin))
 
 
 #: The robot side reads each CPU's steal every this many slots (100 ms at 4 ms).
@@ -506,8 +571,8 @@ def _causes(st: _Stream, missed: list[int], other: list[int], cycle_ns: int,
       the packet more than a quarter cycle after its slot, or the next one less than half
       a cycle after it (a stall, then the packets it owed at once; a sensor answering the
       newest of queued packets, as the link does, misses the older);
-    * *both sensors*: the other sensor missed a cycle within two cycles of it (the
-      machine stalled both);
+    * *both sensors*: another sensor (``other``: their missed cycles) missed a cycle
+      within two cycles of it (the machine stalled both);
     * where the sensor's own times are known (the link's: when each packet came in and
       its in → out): *woke late* (it read the packet more than half a cycle after it was
       sent, or never: a newer one was read with it — the kernel ran it late), *own cycle*
@@ -588,9 +653,10 @@ def plot(samples: dict[str, dict[str, np.ndarray]], cycle_ms: float, title: str,
 
 
 def table(vendor: Vendor, results: dict, seconds: float, cycle_ms: float) -> str:
-    link, echo = results[vendor.link], results["bare UDP echo"]
+    link, echo = results[vendor.link], results[ECHO]
+    apart = "half a cycle" if len(results) == 2 else f"1/{len(results)} of a cycle"
     lines = [f"{vendor.name} answer latency, {1000 / cycle_ms:.0f} Hz, {seconds:.0f} s measured "
-             f"(+{WARMUP_S:.0f} s warm-up), two streams interleaved half a cycle apart",
+             f"(+{WARMUP_S:.0f} s warm-up), {len(results)} streams interleaved {apart} apart",
              "",
              "| sensor | cycles | round trip p50 / p99 / p99.9 / max (µs) | in→out p50 / p99 / "
              "p99.9 / max (µs) | missed | CPU % of a core |",
@@ -625,22 +691,33 @@ def table(vendor: Vendor, results: dict, seconds: float, cycle_ms: float) -> str
               f"{sum((st.get('dropped') or {}).values())}, max in→out "
               f"{(st.get('max_latency_ns') or 0) / 1e3:.0f} µs; link thread: "
               f"{link.get('scheduling')}; robot side: {link.get('robot_scheduling')}"]
-    lines += ["", "| sensor | missed: " + " / ".join(CAUSES) + " | missed near steal | robot "
-              "side's late sends (longest µs; near steal) | answering thread: page faults (from "
-              "disk) / forced off the CPU / collector's passes (longest µs) |",
-              "|---|---|---:|---|---|"]
+    lines += ["", "| sensor | missed: " + " / ".join(CAUSES) + " | missed near steal | missed "
+              "near a late send | missed with another's | robot side's late sends (longest "
+              "µs; near steal) | answering thread: page faults (from disk) / forced off the "
+              "CPU / collector's passes (longest µs) |",
+              "|---|---|---:|---:|---|---|---|"]
     for name, r in results.items():
         by, th = r["missed_by_cause"], r.get("thread") or {}
         lines.append(f"| {name} | " + " / ".join(str(by[c]) for c in CAUSES)
-                     + f" | {r['missed_near_steal']} | {r['robot_late_sends']} "
+                     + f" | {r['missed_near_steal']} | {r.get('missed_near_late_send', '?')} | "
+                     + (", ".join(f"{o}: {c}" for o, c in (r.get("missed_with") or {}).items())
+                        or "–")
+                     + f" | {r['robot_late_sends']} "
                      f"({r['robot_longest_late_us']:.0f}; {r['robot_late_near_steal']}) | "
                      f"{th.get('minflt', '?')} ({th.get('majflt', '?')}) / "
                      f"{th.get('forced', '?')} / {th.get('collections', '?')} "
                      f"({th.get('longest_collection_ns', 0) / 1e3:.0f}) |")
+    for name, r in results.items():
+        if name not in (vendor.link, ECHO):
+            lines.append(f"{vendor.link}'s p99.9 ÷ the {name}'s: "
+                         f"{link['rtt_us']['p99.9'] / r['rtt_us']['p99.9']:.2f}×")
     if link.get("windows"):
         lines.append(f"the hypervisor took time from a CPU in {link['steal_windows']} of the "
                      f"run's {link['windows']} windows of 0.1 s (near steal: within 0.1 s of "
                      "one)")
+    lines.append("near a late send: within two cycles of a packet the robot side sent over a "
+                 "quarter cycle after its slot (any stream's); missed with another's: within "
+                 "two cycles of that sensor's missed cycle")
     return "\n".join(lines)
 
 
@@ -737,6 +814,9 @@ def main(argv: list[str], vendor: Vendor | None = None, doc: str | None = None) 
     ap.add_argument("--link-thread", action="store_true",
                     help="with --in-service: the link in a thread of the service's process, "
                     "not its own")
+    ap.add_argument("--no-native", action="store_true",
+                    help="leave out the bare UDP echo in Rust (benchmarks/native_echo, built "
+                    "with cargo; left out anyway where there is no cargo)")
     ap.add_argument("--role", choices=("link", "echo"), help=argparse.SUPPRESS)
     args = ap.parse_args(argv)
     if args.isolate and not args.cpu:
@@ -746,7 +826,7 @@ def main(argv: list[str], vendor: Vendor | None = None, doc: str | None = None) 
         vendor.run_link(args.cycle_ms, rt)
         return 0
     if args.role == "echo":
-        run_echo(rt, vendor.echo_part)
+        run_echo(rt, vendor.echo)
         return 0
     setup = Setup(rt, args.robot_cpu, args.isolate)
     if args.isolate and not setup.cell_cpus():
@@ -760,11 +840,19 @@ def main(argv: list[str], vendor: Vendor | None = None, doc: str | None = None) 
                 contextlib.nullcontext():
             return stream_in_service.main(vendor.name, args.seconds, args.json,
                                           args.link_thread, _service_params(rt))
+    native = None
+    if not args.no_native:
+        import rust_echo
+
+        native = rust_echo.build()
+        if isinstance(native, str):
+            print(native, flush=True)
+            native = None
     load0 = os.getloadavg()[0]
     print(f"machine: {os.cpu_count()} CPUs, load average {load0:.2f} at start", flush=True)
     with cell_services(args.cell, setup.cell_cpus()) if args.cell else \
             contextlib.nullcontext():
-        results, samples = robot(vendor, args.seconds, args.cycle_ms, setup)
+        results, samples = robot(vendor, args.seconds, args.cycle_ms, setup, native)
     print(table(vendor, results, args.seconds, args.cycle_ms))
     if args.cell:
         print(f"beside {args.cell} plugcell services serving in a cell")
@@ -785,8 +873,7 @@ def main(argv: list[str], vendor: Vendor | None = None, doc: str | None = None) 
 
 
 RSI = Vendor("RSI", __file__, rob_packet, _ipoc_of, lambda cycle_ms: int(cycle_ms),
-             lambda data: data[-64:],  # the tail carries the IPOC
-             run_link)
+             EchoPart(tail=64), run_link)  # the tail carries the IPOC
 
 
 if __name__ == "__main__":
