@@ -126,8 +126,8 @@ fn main() {
         let stdin = std::io::stdin();
         let mut line = String::new();
         stdin.lock().read_line(&mut line).ok(); // the warm-up is over
-        control.lock().unwrap().clear();
         let (c0, cpu0, t0) = (counters(tid), cpu_ns(), Instant::now());
+        control.lock().unwrap().clear();
         line.clear();
         stdin.lock().read_line(&mut line).ok(); // report
         let (cpu, wall) = (cpu_ns() - cpu0, t0.elapsed().as_secs_f64());
