@@ -416,7 +416,7 @@ def robot(vendor: Vendor, seconds: float, cycle_ms: float, setup: Setup,
         if measuring:
             st.log.append((ipoc, slot_t, t))
         st.sock.send(packet)
-        if measuring and k % STEAL_EVERY == 0:  # after a send: it delays none
+        if measuring and k % (STEAL_EVERY * n) == 0:  # after a send: it delays none
             steal_log.append((time.monotonic_ns(), _steal_per_cpu()))
         k += 1
     steal = _steal(cpu0, _cpu_times())
@@ -525,8 +525,8 @@ def _within(times: list[int], others: list[int], margin: int) -> int:
     return int(np.count_nonzero(nearest <= margin))
 
 
-#: The robot side reads each CPU's steal every this many slots (100 ms at 4 ms).
-STEAL_EVERY = 50
+#: The robot side reads each CPU's steal every this many cycles (100 ms at 4 ms).
+STEAL_EVERY = 25
 
 
 def _steal_per_cpu() -> tuple[int, ...]:
