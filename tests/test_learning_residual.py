@@ -163,3 +163,14 @@ def test_the_floor_of_a_cell_is_its_own_trackers_error_moved_onto_the_circle():
     constant = _three_sigma(perpendicular(circ - f["mean"], circ[0], "circle"))
     assert f["floor"] == pytest.approx(constant, rel=0.1)
     assert np.all(np.abs(f["beam"]) < 4 * f["sigma"])
+
+
+def test_the_goal_scale_is_where_the_3_sigma_crosses_the_goal(capsys):
+    def p3(v):
+        return float(np.abs(v).max())
+
+    lr._goal_scale(p3, np.array([-20.0]), np.array([60.0]))  # 20 + 60 α = 50
+    assert "r scaled by 0.50 (r alone then 30.0 µm)" in capsys.readouterr().out
+    lr._goal_scale(p3, np.array([-60.0]), np.array([10.0]))  # s alone above the goal
+    lr._goal_scale(p3, np.array([-10.0]), np.array([10.0]))  # all of it below
+    assert capsys.readouterr().out == ""
