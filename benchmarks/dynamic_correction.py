@@ -100,6 +100,19 @@ def _three_sigma(x: np.ndarray) -> float:
     return float(x.mean() + 3 * x.std())
 
 
+def perpendicular(p: np.ndarray, p0: np.ndarray, shape: str) -> np.ndarray:
+    """Distance (m) of the points ``p`` (N, 3; F0) from the taught geometry through the
+    path's start ``p0``: the 1 m line along y, or the 300 mm circle in the plane z =
+    ``p0[2]`` with its centre ``p0 + (0, 0.15, 0)`` — radial and out-of-plane together,
+    ``√((|ρ_xy| − R)² + ρ_z²)``, ``ρ = p − centre``."""
+    if shape == "line":
+        rel = p - p0
+        return np.hypot(rel[:, 0], rel[:, 2])
+    centre, R = p0 + np.array([0.0, 0.15, 0.0]), 0.15
+    rp = p - centre
+    return np.hypot(np.hypot(rp[:, 0], rp[:, 1]) - R, rp[:, 2])
+
+
 def errors(run: PathRun, shape: str, mask: np.ndarray | None = None) -> dict[str, float]:
     """The run's error statistics (module docstring), metres and radians (over the cycles
     of ``mask`` too, if given)."""
@@ -108,16 +121,12 @@ def errors(run: PathRun, shape: str, mask: np.ndarray | None = None) -> dict[str
         w &= mask
     p, c = run.true_pose[w, :3, 3], run.path_pose[w, :3, 3]
     p0 = run.path_pose[0, :3, 3]  # the path's start (before the mask)
+    perp = perpendicular(p, p0, shape)
     if shape == "line":
-        u = np.array([0.0, 1.0, 0.0])
-        rel = p - p0
-        perp = np.linalg.norm(rel - np.outer(rel @ u, u), axis=1)
-        along = (p - c) @ u
+        along = (p - c) @ np.array([0.0, 1.0, 0.0])
     else:
-        centre, R, nrm = p0 + np.array([0.0, 0.15, 0.0]), 0.15, np.array([0.0, 0.0, 1.0])
+        centre, R = p0 + np.array([0.0, 0.15, 0.0]), 0.15
         rp, rc = p - centre, c - centre
-        radial = np.linalg.norm(rp - np.outer(rp @ nrm, nrm), axis=1) - R
-        perp = np.hypot(radial, rp @ nrm)
         ang = np.arctan2(rp[:, 1], rp[:, 0]) - np.arctan2(rc[:, 1], rc[:, 0])
         along = R * ((ang + np.pi) % (2 * np.pi) - np.pi)
     rot = np.array([np.linalg.norm(so3_log(a[:3, :3] @ b[:3, :3].T))

@@ -161,14 +161,19 @@ class TrackedCell:
         Payload (kg), carried in the campaign and on the paths.
     calibration_poses : int
         Poses of the campaign (model 5).
+    tracker_seed : int or None
+        The tracker's seed — its systematic error field, the campaign's and the paths'
+        (default: ``seed``, as before).
     """
 
     def __init__(self, seed: int = 0, payload_kg: float = 36.0,
-                 calibration_poses: int = 150) -> None:
+                 calibration_poses: int = 150, tracker_seed: int | None = None) -> None:
         self.seed, self.payload_kg = seed, payload_kg
-        self.scenario = TwinScenario(robot="smart_h4", seed=seed, payload_kg=payload_kg)
+        self.tracker_seed = seed if tracker_seed is None else tracker_seed
+        self.scenario = TwinScenario(robot="smart_h4", seed=seed, payload_kg=payload_kg,
+                                     tracker_seed=self.tracker_seed)
         self.twin = RobotTwin(self.scenario)
-        self.tracker = LaserTracker(seed=seed)
+        self.tracker = LaserTracker(seed=self.tracker_seed)
         desc = self.twin.description
         rng = np.random.default_rng(seed + 1)
         q = working_volume_joints(desc, self.twin.reveal_truth().profile, calibration_poses,
