@@ -1,6 +1,13 @@
 # The two commands of the README:  `make demo`  and  `make test`.
 # Both create .venv and install what they need on a fresh machine.
 PYTHON ?= python3
+# Python writes its bytecode caches (__pycache__/, gitignored) even where the environment
+# says not to (PYTHONDONTWRITEBYTECODE=1, as on the development VM): the tests start
+# hundreds of Python processes (services, the CLI, the docs' commands) and each pytest
+# worker rewrites the asserts of every test module; without the caches each of them
+# compiled plugcell from source again (collecting the tests: 19 s of CPU per worker
+# without, 7 s with, at load 15 on the shared 2-core VM)
+export PYTHONDONTWRITEBYTECODE =
 VENV   ?= .venv
 BIN     = $(VENV)/bin
 
@@ -36,11 +43,13 @@ demo: $(BIN)/.plugcell-installed
 
 # two pytest workers, each test file whole in one (its module fixtures and order kept; the
 # docs' examples, which use fixed ports, are one file): most tests wait on service
-# processes, so two workers cut the wall time even on two cores
+# processes, so two workers cut the wall time even on two cores.  The files go out
+# longest first (tests/conftest.py; --no-loadscope-reorder keeps that order), so that the
+# two workers end together; the 30 slowest tests are listed at the end
 test: $(BIN)/.plugcell-installed $(OPCUA_JS)/node_modules/.installed \
       $(UI_WEB)/node_modules/.installed
 	$(BIN)/ruff check src tests benchmarks
-	$(BIN)/python -m pytest -q -n 2 --dist loadfile
+	$(BIN)/python -m pytest -q -n 2 --dist loadfile --no-loadscope-reorder --durations=30
 
 # the inner loop while developing: lint and every test not marked slow (the slow ones
 # start services as processes, a browser or node-opcua); CI runs `make test`, all of them

@@ -82,3 +82,32 @@ def pytest_terminal_summary(terminalreporter, exitstatus, config) -> None:
         tr.write_line(f"  skipped {where}: {reason}")
     for where, _, _, s in failed:
         tr.write_line(f"  FAILED  {where} ({s:.1f} s)")
+
+
+#: What a test is assumed to take when the order of the files is chosen (s): one marked
+#: ``slow`` (a multi-process end-to-end test, a docs page) and one not.
+ASSUMED_SLOW_S, ASSUMED_FAST_S = 20.0, 0.2
+
+
+def _file(item: pytest.Item) -> str:
+    return item.nodeid.split("::", 1)[0]
+
+
+@pytest.hookimpl(trylast=True)  # after -m/-k have deselected
+def pytest_collection_modifyitems(config, items: list[pytest.Item]) -> None:
+    """The test files run longest-first, each file's tests together and in their order.
+
+    ``make test`` hands each of its two pytest-xdist workers one file at a time
+    (``--dist loadfile --no-loadscope-reorder``), in this order: with the long files first
+    the last ones a worker takes are short and the two end together.  (xdist's own order,
+    files with the most tests first, left the files of one or two long end-to-end tests
+    for the end, where one worker ran them while the other had nothing left.)  How long a
+    file takes is estimated from its tests: ``ASSUMED_SLOW_S`` for each marked slow,
+    ``ASSUMED_FAST_S`` for each other one.
+    """
+    weight: dict[str, float] = {}
+    for item in items:
+        slow = item.get_closest_marker("slow") is not None
+        f = _file(item)
+        weight[f] = weight.get(f, 0.0) + (ASSUMED_SLOW_S if slow else ASSUMED_FAST_S)
+    items.sort(key=lambda item: -weight[_file(item)])  # stable: a file's order is kept

@@ -17,6 +17,7 @@ import numpy as np
 import pytest
 
 import plugcell
+from plugcell.apps.cli import main
 from plugcell.compensation.tracking.learning import IterativeLearning
 from plugcell.io.learned_paths import LearnedFile, save_learned
 from plugcell.io.path_files import parse_path
@@ -65,12 +66,21 @@ def _other_file(tmp_path: Path, text: str, name: str) -> Path:
      "plant from it"),
     (("--learn", "2", "--learn-law", "q"), "--learn-law: invalid choice: 'q'"),
 ])
-def test_bad_learning_options_are_refused_before_anything_runs(tmp_path, args, message):
+def test_bad_learning_options_are_refused_before_anything_runs(tmp_path, monkeypatch, capsys,
+                                                            args, message):
+    """In this process (``plugcell.apps.cli.main``, what ``python -m plugcell`` runs): the
+    refusals are the parser's and the command's checks; the exit code 2 of the real
+    process is the next test's."""
     (tmp_path / "p.csv").write_text(PATH)
-    out = _cli("--path", "p.csv", *args, cwd=tmp_path)
-    assert out.returncode == 2, out.stderr
-    assert message in out.stderr
-    assert "segment" not in out.stdout and "run " not in out.stdout
+    monkeypatch.chdir(tmp_path)
+    try:
+        code = main(["path", "run", "--path", "p.csv", *args])
+    except SystemExit as exc:  # argparse's own refusals (an invalid choice)
+        code = exc.code
+    out = capsys.readouterr()
+    assert code == 2, out.err
+    assert message in out.err
+    assert "segment" not in out.out and "run " not in out.out
 
 
 @pytest.mark.slow
