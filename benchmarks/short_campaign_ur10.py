@@ -66,7 +66,7 @@ from plugcell.calibration.planning import (
     filter_candidates,
     planning_keys,
 )
-from plugcell.calibration.prior import CV_SPLITS, Prior, PriorCalibrator
+from plugcell.calibration.prior import CV_SPLITS, SE_RULE_K, Prior, PriorCalibrator
 from plugcell.calibration.residual_model import (
     DEFAULT_GRID,
     ResidualLearner,
@@ -125,7 +125,8 @@ def earlier(desc: Any, A: CalibrationData, learner: ResidualLearner,
 
 def run(desc: Any, sets: dict[str, CalibrationData], series: str, sizes: tuple[int, ...],
         selection: str, learner: ResidualLearner, folds: int = 5,
-        cache: Path | None = None, draws: int = 1, cv_split: str = "cells") -> dict[str, Any]:
+        cache: Path | None = None, draws: int = 1, cv_split: str = "kfold",
+        se_k: float = SE_RULE_K) -> dict[str, Any]:
     from sklearn.model_selection import GroupKFold
 
     t0 = time.perf_counter()
@@ -172,7 +173,7 @@ def run(desc: Any, sets: dict[str, CalibrationData], series: str, sizes: tuple[i
                 # A's hybrid moved: BASE + PROBE re-identified on the campaign with the
                 # layer's correction taken out, the layer's correction on the test poses
                 e["moved_hybrid"][te] = _hybrid_moved(resA, camp, test)
-                res = PriorCalibrator(prior, cv_split=cv_split).fit(camp)
+                res = PriorCalibrator(prior, cv_split=cv_split, se_k=se_k).fit(camp)
                 pri = res.settings["prior"]
                 taus[n].append(pri["choice"] if pri["choice"] != "map" else f"{pri['scale']:g}")
                 stages[n].append(bool(pri["stage"]["adopted"]))
@@ -455,9 +456,12 @@ def main() -> int:
     ap.add_argument("--draws", type=int, default=1,
                     help="random campaigns drawn per fold and size (seeded); the figures are "
                          "the mean over the draws, the table adds their sd (random only)")
-    ap.add_argument("--prior-cv", choices=CV_SPLITS, default="cells",
+    ap.add_argument("--prior-cv", choices=CV_SPLITS, default="kfold",
                     help="the CV splits of --prior's choice (PriorCalibrator cv_split; "
-                         "default cells: grouped over the campaign's 0.4 m cells)")
+                         "default kfold: a seeded random 10-fold over the campaign's poses)")
+    ap.add_argument("--prior-se", type=float, default=SE_RULE_K, metavar="K",
+                    help="the choice's k-standard-error rule (PriorCalibrator se_k; default "
+                         f"{SE_RULE_K:g})")
     ap.add_argument("--quick", action="store_true",
                     help="A's layer: one hyper-parameter candidate, 100 trees")
     ap.add_argument("--out", type=Path, default=None,
@@ -505,7 +509,7 @@ def main() -> int:
     with threadpool_limits(1):
         result = run(desc, sets, "".join(series), sizes, args.selection,
                      ResidualLearner(**kw), folds=args.folds, cache=args.cache,
-                     draws=args.draws, cv_split=args.prior_cv)
+                     draws=args.draws, cv_split=args.prior_cv, se_k=args.prior_se)
     d = {"argv": sys.argv[1:], "sizes": list(sizes), "selection": args.selection,
          "selection_text": "I-optimal for model 3, as `plugcell plan --from` chooses among "
                            "poses already measured" if args.selection == "planned"

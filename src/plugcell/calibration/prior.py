@@ -120,9 +120,15 @@ Choice = float | str
 CANDIDATES: tuple[Choice, ...] = (*SCALES, *(f"{t:g}{PHYSICAL}" for t in PHYSICAL_SCALES),
                                   MOVED, ALONE)
 
+#: k of the choice's k-standard-error rule (:func:`pick_significant`): a candidate other
+#: than the baselines is adopted only when its CV error is below the better baseline's by
+#: more than k standard errors of the paired difference (k = 1: the one-standard-error rule).
+SE_RULE_K = 1.0
+
 __all__ = ["ALONE", "CANDIDATES", "CELL_SIZE_M", "CV_SPLITS", "DEFAULT_SCALE", "FRAMES_ONLY",
-           "KFOLD_SPLITS", "MOVED", "PHYSICAL", "PHYSICAL_SCALES", "SCALES", "Choice", "Prior",
-           "PriorCalibrator", "augmented_residual", "frame_keys", "parse_choice", "pick"]
+           "KFOLD_SPLITS", "MOVED", "PHYSICAL", "PHYSICAL_SCALES", "SCALES", "SE_RULE_K",
+           "Choice", "Prior", "PriorCalibrator", "augmented_residual", "frame_keys",
+           "paired_difference", "parse_choice", "pick", "pick_significant"]
 
 
 def parse_choice(choice: Choice) -> tuple[float | None, bool]:
@@ -201,6 +207,105 @@ def pick(scores: Mapping[str, float]) -> Choice:
     best = min(scores[_label(c)] for c in known)
     bound = min(best * 1.01, scores.get(ALONE, math.inf), scores.get(MOVED, math.inf))
     return next((c for c in known if scores[_label(c)] <= bound), known[0])
+
+
+def paired_difference(e: Array, e_ref: Array, fold: Array) -> tuple[float, float]:
+    """The mean paired CV difference of a candidate to a reference and its standard error,
+    clustered by CV fold.
+
+    With ``d_i = e_i − e_ref,i`` over the ``N`` poses and ``G`` folds (the poses a fold
+    holds out share the fit made without them, so their errors are correlated; the folds
+    are the independent units)::
+
+        d̄ = (1/N) Σ_i d_i,     SE² = G / (G − 1) · Σ_g (Σ_{i∈g} (d_i − d̄))² / N²
+
+    (the cluster-robust variance of a mean; with equal folds ``SE = sd_g(d̄_g) / √G``,
+    the standard error over folds of the one-standard-error rule).
+
+    Parameters
+    ----------
+    e, e_ref : (N,) array
+        Held-out errors of the candidate and of the reference, one per pose (any unit).
+    fold : (N,) int array
+        The CV fold that held each pose out.
+
+    Returns
+    -------
+    mean : float
+        ``d̄`` (the unit of ``e``); ``inf`` when ``e`` has a non-finite error, ``nan`` when
+        ``e_ref`` has one.
+    se : float
+        ``SE`` (``inf`` with fewer than 2 folds).
+    """
+    e = np.asarray(e, float)
+    e_ref = np.asarray(e_ref, float)
+    if not np.all(np.isfinite(e_ref)):
+        return math.nan, math.inf
+    if not np.all(np.isfinite(e)):
+        return math.inf, math.inf
+    d = e - e_ref
+    mean = float(d.mean())
+    _, g = np.unique(np.asarray(fold), return_inverse=True)
+    n_g = int(g.max()) + 1 if g.size else 0
+    if n_g < 2:
+        return mean, math.inf
+    sums = np.bincount(g, weights=d - mean, minlength=n_g)
+    return mean, float(np.sqrt(n_g / (n_g - 1) * np.sum(sums**2)) / d.size)
+
+
+def pick_significant(errors: Mapping[str, Array], fold: Array,
+                     k: float = SE_RULE_K) -> Choice:
+    """The CV's choice with a k-standard-error rule: a candidate other than the baselines
+    only when its CV shows it better than the better baseline beyond noise.
+
+    ``b`` is the baseline (:data:`ALONE`, :data:`MOVED`) with the lower CV score.  A
+    candidate ``c`` is eligible when its mean paired difference to ``b`` over the
+    campaign's poses (:func:`paired_difference`, SE clustered by fold) satisfies
+    ``d̄_c + k·SE_c < 0``; among the eligible and the baselines :func:`pick` chooses (the
+    first of :data:`CANDIDATES` within 1 % of the best, never above either baseline).  No
+    candidate eligible: ``b``.  Under the null that ``c`` is no better than ``b`` the CV
+    difference is ≥ 0 in expectation, so a candidate is adopted by chance with
+    probability ≈ Φ(−k) (16 % at k = 1) and then is, in truth, no worse than ``b`` beyond
+    the CV's noise; a candidate truly worse than ``b`` is adopted with a probability that
+    falls with its CV deficit.  ``k = 0``: the plain sign of the difference.
+
+    Parameters
+    ----------
+    errors : mapping of str to (N,) array
+        Each candidate's held-out CV errors (keys as :func:`_label`), one per pose, in
+        one unit; the baselines among them.
+    fold : (N,) int array
+        The fold that held each pose out.
+    k : float
+        The number of standard errors (≥ 0).
+
+    Returns
+    -------
+    float or str
+        The chosen candidate.
+
+    Raises
+    ------
+    CalibrationError
+        ``k`` negative or not finite, no candidate of :data:`CANDIDATES` among ``errors``.
+    """
+    if not (math.isfinite(k) and k >= 0):
+        raise CalibrationError(f"prior: the standard-error factor k must be a number ≥ 0, "
+                               f"got {k!r}")
+    scores = {c: float(np.mean(v)) for c, v in errors.items()}
+    bases = [b for b in (MOVED, ALONE) if b in scores and math.isfinite(scores[b])]
+    if not bases:
+        return pick(scores)
+    base = min(bases, key=lambda b: scores[b])
+    keep = {}
+    for c, s in scores.items():
+        if c in (MOVED, ALONE):
+            keep[c] = s
+            continue
+        mean, se = paired_difference(errors[c], errors[base], fold)
+        if mean + k * se < 0:
+            keep[c] = s
+    return pick(keep)
 
 
 @dataclass(frozen=True, eq=False)
@@ -370,7 +475,8 @@ class PriorCalibrator:
 
     def __init__(self, prior: Prior, *, scale: float | None = None, stage: bool = True,
                  rotation_weight: float = 1.0, tol: float = 1e-7, max_iterations: int = 30,
-                 cell_size_m: float = CELL_SIZE_M, cv_split: str = "cells",
+                 cell_size_m: float = CELL_SIZE_M, cv_split: str = "kfold",
+                 se_k: float = SE_RULE_K,
                  progress: Callable[[str, int, int, str], None] | None = None) -> None:
         if scale is not None and not (scale == FRAMES_ONLY
                                       or (math.isfinite(scale) and scale >= 1.0)):
@@ -378,6 +484,9 @@ class PriorCalibrator:
                                    f"or a number ≥ 1, got {scale}")
         if not (tol > 0 and max_iterations >= 1 and rotation_weight > 0 and cell_size_m > 0):
             raise CalibrationError("tol, max_iterations, rotation_weight, cell_size_m must be > 0")
+        if not (math.isfinite(se_k) and se_k >= 0):
+            raise CalibrationError(f"prior: the standard-error factor k must be a number ≥ 0, "
+                                   f"got {se_k!r}")
         if cv_split not in CV_SPLITS:
             raise CalibrationError(f"prior: unknown CV split {cv_split!r} (one of "
                                    f"{', '.join(CV_SPLITS)})")
@@ -389,6 +498,7 @@ class PriorCalibrator:
         self.max_iterations = int(max_iterations)
         self.cell_size_m = float(cell_size_m)
         self.cv_split = cv_split
+        self.se_k = float(se_k)
         self.progress = progress
 
     def _say(self, stage: str, i: int, n: int, msg: str) -> None:
@@ -581,12 +691,16 @@ class PriorCalibrator:
             if cells < 2:
                 return DEFAULT_SCALE, {}
             folds = list(GroupKFold(n_splits=min(5, cells)).split(targets, groups=groups))
-        scores: dict[str, float] = {}
+        fold = np.empty(len(data), int)
+        for i, (_, te) in enumerate(folds):
+            fold[te] = i
+        errors: dict[str, Array] = {}
         for c in CANDIDATES:
-            scores[_label(c)] = float(self._cv_errors(data, offset, folds, c).mean())
-            self._say("prior", 0, 0, f"{_label(c)}: held-out cells "
-                      f"{scores[_label(c)] * 1e3:.4f} mm")
-        return pick(scores), scores
+            errors[_label(c)] = self._cv_errors(data, offset, folds, c)
+            self._say("prior", 0, 0, f"{_label(c)}: held-out "
+                      f"{errors[_label(c)].mean() * 1e3:.4f} mm")
+        scores = {c: float(e.mean()) for c, e in errors.items()}
+        return pick_significant(errors, fold, self.se_k), scores
 
     # ------------------------------------------------------------------ fit
     def fit(self, data: CalibrationData) -> CalibrationResult:
@@ -664,7 +778,8 @@ class PriorCalibrator:
         """``settings["prior"]`` of a result: the candidate chosen (``choice``: ``"map"``
         (with the earlier layer), ``"τ/physical"`` (without it), ``"moved"`` or ``"alone"``;
         ``scale``: its τ, ``None`` for the campaign alone), how,
-        the CV scores (mm), the regularised keys, whether the prior layer's correction was
+        the CV scores (mm), the k of the k-standard-error rule (``se_k``), the regularised
+        keys, whether the prior layer's correction was
         an offset, the campaign stage."""
         return {"robot": self.prior.robot,
                 "choice": choice if isinstance(choice, str) else "map",
@@ -673,6 +788,7 @@ class PriorCalibrator:
                 else (("grouped CV" if self.cv_split == "cells" else f"random "
                        f"{KFOLD_SPLITS}-fold CV") if scores else "default"),
                 "cv_mm": {k: v * 1e3 for k, v in scores.items()},
+                "se_k": self.se_k if scores else None,
                 "regularised": regularised,
                 "sigma_y_m": self.prior.sigma_y,
                 "layer_offset": layer_offset,
