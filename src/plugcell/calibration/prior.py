@@ -10,7 +10,7 @@ the robot in the new set-up.  A short campaign there identifies what it can dete
 * the learned layer: the earlier layer is kept and its correction taken out of the new
   measurements *before* the physical fit (an offset), so the physical parameters absorb
   what differs in the new set-up and the layer what the physics cannot express — or,
-  when the grouped CV prefers it, left out (the candidates ``"τ/physical"``,
+  when the CV prefers it, left out (the candidates ``"τ/physical"``,
   :data:`PHYSICAL_SCALES`: the same MAP on the raw campaign; the earlier layer can be
   wrong for the new set-up);
 * the campaign's own stage (:mod:`.campaign_stage`, ``stage=True``): small trees on what
@@ -29,11 +29,14 @@ of parameter ``k`` (eq. 8.5), ``σ_y = √σ̂²`` its residual standard deviati
 and ``τ ≥ 1`` an inflation: eq. 8.5 assumes independent pose errors, which the residuals
 of a real robot are not (the σ are optimistic), and a robot moved to another set-up
 differs from the earlier one by more than the earlier fit's noise.  ``τ`` is chosen by
-grouped cross-validation over the campaign's own workspace cells (the held-out cells'
-mean position error; never a pose outside the campaign) among :data:`SCALES`, or given.
+cross-validation over the campaign's own poses (a seeded random K-fold, or grouped over
+its workspace cells; never a pose outside the campaign) among :data:`SCALES`, or given.
 ``τ = 0`` (:data:`FRAMES_ONLY`) is the prior held exactly — only BASE and PROBE
 re-identified, the earlier model moved; as the first candidate it makes the choice a
-shrinkage estimator: where the campaign's cells cannot show a gain, the CV keeps it.
+shrinkage estimator: where the campaign cannot show a gain, the CV keeps it.  The two
+baselines (the earlier physical model moved, the campaign alone) are candidates too, and
+any other candidate is adopted only when it beats the better of them by more than k
+standard errors of the paired CV difference (:func:`pick_significant`).
 
 Gauss–Newton on the augmented system: with the stacked residual
 ``F(x) = [W (y − f(x)); Λ (x_p − x)]`` and its Jacobian ``∂F/∂x = −[W H; Λ]``
@@ -87,7 +90,7 @@ Array = NDArray[np.float64]
 
 #: τ = 0: the prior held exactly — only BASE and PROBE re-identified (the earlier model moved).
 FRAMES_ONLY = 0.0
-#: Candidate inflations τ of the prior's σ, chosen by grouped CV over the campaign's cells
+#: Candidate inflations τ of the prior's σ, chosen by CV over the campaign
 #: (:data:`FRAMES_ONLY` first: the shrinkage to the earlier model when the CV cannot tell).
 SCALES: tuple[float, ...] = (FRAMES_ONLY, 1.0, 3.0, 10.0, 30.0, 100.0, 300.0, 1000.0)
 #: τ used when the campaign covers fewer than 2 workspace cells (no CV possible).
@@ -95,8 +98,8 @@ DEFAULT_SCALE = 10.0
 #: Workspace cell edge (m) grouping the campaign's poses for the choice of τ.
 CELL_SIZE_M = 0.4
 #: The CV splits of the choice: ``"cells"`` (grouped K-fold over the campaign's workspace
-#: cells, K = min(5, cells); the default) or ``"kfold"`` (seeded random K-fold over the
-#: poses, K = min(:data:`KFOLD_SPLITS`, N)).
+#: cells, K = min(5, cells)) or ``"kfold"`` (seeded random K-fold over the poses,
+#: K = min(:data:`KFOLD_SPLITS`, N); the default).
 CV_SPLITS: tuple[str, ...] = ("cells", "kfold")
 #: K of the random split ``cv_split="kfold"``.
 KFOLD_SPLITS = 10
@@ -442,8 +445,8 @@ class PriorCalibrator:
         The earlier calibration.
     scale : float, optional
         The inflation τ ≥ 1 of the prior's σ, or 0 (:data:`FRAMES_ONLY`: the prior held
-        exactly, BASE and PROBE alone re-identified); default: chosen by grouped CV over
-        the campaign's workspace cells among :data:`SCALES`.
+        exactly, BASE and PROBE alone re-identified); default: chosen by CV over the
+        campaign among :data:`CANDIDATES` (:meth:`choose`).
     stage : bool
         Learn the campaign's own stage on what the physical fit leaves and adopt it when
         its grouped CV says it helps (:mod:`.campaign_stage`); default True.
@@ -456,13 +459,16 @@ class PriorCalibrator:
     cell_size_m : float, m
         Workspace cell edge of the CV's groups.
     cv_split : str
-        The CV splits of the choice (:data:`CV_SPLITS`): ``"cells"`` (default), grouped
-        over the campaign's workspace cells, or ``"kfold"``, a seeded random
-        :data:`KFOLD_SPLITS`-fold over the poses — on I-optimal campaigns, whose few
+        The CV splits of the choice (:data:`CV_SPLITS`): ``"kfold"`` (default), a seeded
+        random :data:`KFOLD_SPLITS`-fold over the poses, or ``"cells"``, grouped over the
+        campaign's workspace cells — on I-optimal campaigns, whose few
         extreme poses a held-out cell takes away, the grouped split penalises the weakly
         regularised candidates (the campaign alone, large τ) more than the fit on the
         whole campaign deserves (docs/results/short-campaign-bounds.md).  The campaign
         stage keeps its grouped CV.
+    se_k : float
+        k ≥ 0 of the choice's k-standard-error rule (:func:`pick_significant`; default
+        :data:`SE_RULE_K`).
     progress : callable, optional
         ``(stage, i, n, message)``.
 
@@ -647,15 +653,17 @@ class PriorCalibrator:
 
     def choose(self, data: CalibrationData, offset: CalibrationData | None = None
                ) -> tuple[Choice, dict[str, float]]:
-        """The candidate of :data:`CANDIDATES` by grouped K-fold CV over the campaign's
-        workspace cells (K = min(5, cells); ``cv_split="kfold"``: a seeded random K-fold
-        over the poses, K = min(:data:`KFOLD_SPLITS`, N)): each candidate's mean held-out
-        position error (m), fitted on the other folds.  Eligible: the candidates within
-        1 % of the best that are no worse than either baseline (:data:`ALONE`,
-        :data:`MOVED`) — so the choice's CV error is never above the campaign alone's nor
-        the earlier model moved's; among them the first of :data:`CANDIDATES` (the
-        strongest prior the data do not reject).  Fewer than 2 cells (``"kfold"``: 2
-        poses): :data:`DEFAULT_SCALE`.
+        """The candidate of :data:`CANDIDATES` by K-fold CV over the campaign (default
+        ``cv_split="kfold"``: a seeded random K-fold over the poses, K =
+        min(:data:`KFOLD_SPLITS`, N); ``"cells"``: grouped over its workspace cells, K =
+        min(5, cells)): each candidate's held-out position error per pose (m), fitted on
+        the other folds, and :func:`pick_significant` — a candidate other than the
+        baselines (:data:`ALONE`, :data:`MOVED`) only when it beats the better of them by
+        more than ``se_k`` standard errors of the paired difference (clustered by fold);
+        among those and the baselines the first of :data:`CANDIDATES` within 1 % of the
+        best and no worse than either baseline, so the choice's CV error is never above
+        the campaign alone's nor the earlier model moved's.  Fewer than 2 poses
+        (``"cells"``: 2 cells): :data:`DEFAULT_SCALE`.
 
         Parameters
         ----------
