@@ -87,7 +87,7 @@ def test_the_default_choice_is_the_random_split_with_the_one_se_rule(files, caps
     assert main(_on_b(files, "--prior", str(files / "a.json"), "--prior-stage", "none",
                       "--out", str(files / "b-default.json"))) == 0
     out = capsys.readouterr().out
-    assert "more than 1 standard errors of the paired CV difference below the better" in out
+    assert "more than 1 standard error of the paired CV difference below the better" in out
     pri = json.loads((files / "b-default.json").read_text())["settings"]["prior"]
     assert pri["se_k"] == 1.0 and pri["scale_chosen_by"] == "random 10-fold CV"
     assert main(_on_b(files, "--prior", str(files / "a.json"), "--prior-stage", "none",

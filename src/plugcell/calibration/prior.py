@@ -787,8 +787,8 @@ class PriorCalibrator:
         (with the earlier layer), ``"τ/physical"`` (without it), ``"moved"`` or ``"alone"``;
         ``scale``: its τ, ``None`` for the campaign alone), how,
         the CV scores (mm), the k of the k-standard-error rule (``se_k``), the regularised
-        keys, whether the prior layer's correction was
-        an offset, the campaign stage."""
+        keys, whether the prior layer's correction was an offset, whether the earlier
+        calibration had a layer (``earlier_layer``), the campaign stage."""
         return {"robot": self.prior.robot,
                 "choice": choice if isinstance(choice, str) else "map",
                 "scale": parse_choice(choice)[0],
@@ -800,6 +800,7 @@ class PriorCalibrator:
                 "regularised": regularised,
                 "sigma_y_m": self.prior.sigma_y,
                 "layer_offset": layer_offset,
+                "earlier_layer": self.prior.layer is not None,
                 "stage": None if stage is None else stage.summary()}
 
     def _fit_alone(self, data: CalibrationData, scores: Mapping[str, float],

@@ -291,15 +291,17 @@ def _summary(d: dict[str, Any]) -> str:
                          + ("; its learned layer kept (its correction an offset of the fit)"
                             if pri["layer_offset"] else
                             "; its learned layer left out (the CV preferred the model "
-                            "without it)" if choice == "moved" or choice.endswith("/physical")
+                            "without it)" if pri.get("earlier_layer", True) and (
+                                choice == "moved" or choice.endswith("/physical"))
                             else ""))
         if pri.get("cv_mm"):
             lines.append(f"  {how} (mm): " + ", ".join(
                 f"{'τ = ' + k if k[0].isdigit() else k} {v:.3f}"
                 for k, v in pri["cv_mm"].items()) + (
                 f"; a candidate other than moved and alone only when more than "
-                f"{pri['se_k']:g} standard errors of the paired CV difference below the "
-                "better of them" if pri.get("se_k") is not None else ""))
+                f"{pri['se_k']:g} standard error{'' if pri['se_k'] == 1 else 's'} of the "
+                "paired CV difference below the better of them"
+                if pri.get("se_k") is not None else ""))
         st = pri.get("stage")
         if st:
             lines.append("  campaign stage: " + (
