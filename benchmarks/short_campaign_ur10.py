@@ -17,10 +17,12 @@ short-campaign-ur10-planned.md) — and three methods identify on it:
       (and, for the record, A's hybrid model moved the same way);
 (iii) **prior**: ``plugcell calibrate --prior A.json``
       (:class:`~plugcell.calibration.prior.PriorCalibrator`: MAP toward A with A's layer's
-      correction as an offset; the grouped CV over the campaign's own cells chooses among
-      τ — 0 = BASE + PROBE only included —, the same MAP without A's layer (``τ/physical``:
-      the CV decides whether A's layer helps) and the baselines (ii) and (i) themselves, never
-      one whose CV error exceeds theirs (:func:`~plugcell.calibration.prior.pick`); then the
+      correction as an offset; a seeded random 10-fold CV over the campaign's poses chooses
+      among τ — 0 = BASE + PROBE only included —, the same MAP without A's layer
+      (``τ/physical``: the CV decides whether A's layer helps) and the baselines (ii) and (i)
+      themselves, another candidate than these only when it beats the better of them by
+      more than k standard errors of the paired CV difference, never one whose CV error
+      exceeds theirs (:func:`~plugcell.calibration.prior.pick_significant`); then the
       campaign's own stage when its CV adopts it, :mod:`plugcell.calibration.campaign_stage`);
       and the same choice without the stage.
 
@@ -33,10 +35,11 @@ mean position error, mm.  Nothing is tuned on the held-out cells.
 
     .venv/bin/python benchmarks/short_campaign_ur10.py [--data DIR] [--sizes 25,50,...]
         [--series B,C,D] [--selection random|planned] [--draws K] [--quick]
-        [--prior-cv cells|kfold] [--out docs/results/short-campaign-ur10.md]
+        [--prior-cv kfold|cells] [--prior-se K] [--out docs/results/short-campaign-ur10.md]
 
-``--prior-cv kfold``: the choice's CV over a seeded random 10-fold of the campaign's poses
-(``PriorCalibrator(cv_split="kfold")``) instead of its cells — measured in
+``--prior-cv cells``: the choice's CV grouped over the campaign's 0.4 m cells instead of the
+default seeded random 10-fold of its poses (``PriorCalibrator(cv_split=…)``); ``--prior-se
+K``: the k of the choice's k-standard-error rule (default 1) — both measured in
 docs/results/short-campaign-bounds.md; write such a run elsewhere with ``--out``.
 
 Single-threaded (threadpoolctl).  Without the data folder it says so and exits 0.
@@ -66,7 +69,7 @@ from plugcell.calibration.planning import (
     filter_candidates,
     planning_keys,
 )
-from plugcell.calibration.prior import CV_SPLITS, Prior, PriorCalibrator
+from plugcell.calibration.prior import CV_SPLITS, SE_RULE_K, Prior, PriorCalibrator
 from plugcell.calibration.residual_model import (
     DEFAULT_GRID,
     ResidualLearner,
@@ -125,7 +128,8 @@ def earlier(desc: Any, A: CalibrationData, learner: ResidualLearner,
 
 def run(desc: Any, sets: dict[str, CalibrationData], series: str, sizes: tuple[int, ...],
         selection: str, learner: ResidualLearner, folds: int = 5,
-        cache: Path | None = None, draws: int = 1, cv_split: str = "cells") -> dict[str, Any]:
+        cache: Path | None = None, draws: int = 1, cv_split: str = "kfold",
+        se_k: float = SE_RULE_K) -> dict[str, Any]:
     from sklearn.model_selection import GroupKFold
 
     t0 = time.perf_counter()
@@ -172,7 +176,7 @@ def run(desc: Any, sets: dict[str, CalibrationData], series: str, sizes: tuple[i
                 # A's hybrid moved: BASE + PROBE re-identified on the campaign with the
                 # layer's correction taken out, the layer's correction on the test poses
                 e["moved_hybrid"][te] = _hybrid_moved(resA, camp, test)
-                res = PriorCalibrator(prior, cv_split=cv_split).fit(camp)
+                res = PriorCalibrator(prior, cv_split=cv_split, se_k=se_k).fit(camp)
                 pri = res.settings["prior"]
                 taus[n].append(pri["choice"] if pri["choice"] != "map" else f"{pri['scale']:g}")
                 stages[n].append(bool(pri["stage"]["adopted"]))
@@ -357,6 +361,23 @@ def _draws_note(d: dict[str, Any]) -> str:
         "the draws of the mean held-out error, ± their sample sd).")
 
 
+def _cv_text(d: dict[str, Any]) -> str:
+    """The choice's CV split as the page names it (runs before ``prior_cv`` was recorded:
+    the grouped split, then the default)."""
+    return ("a seeded random 10-fold CV" if d.get("prior_cv", "cells") == "kfold"
+            else "the grouped CV over the campaign's 0.4 m cells")
+
+
+def _rule_text(d: dict[str, Any]) -> str:
+    """The choice's k-standard-error rule as the page names it ("" for runs before it)."""
+    k = d.get("prior_se")
+    if k is None:
+        return ""
+    return (f"a candidate other than the baselines only when it beats the better of them by "
+            f"more than {k:g} standard error{'s' if k != 1 else ''} of the paired CV "
+            "difference (clustered by fold), and among those and the baselines ")
+
+
 def write_page(d: dict[str, Any], path: Path, image: str | None) -> None:
     r = d["result"]
     text = f"""# A robot moved to a new set-up: a short campaign with a prior (UR10, IPA data)
@@ -384,14 +405,14 @@ campaign's cell). Mean position error over all held-out poses, mm.{_draws_note(d
   moved the same way, for the record);
 * (iii) `plugcell calibrate --prior A.json` (its default): BASE and PROBE free, A's other
   parameters pulled toward A by λ_k = σ̂_A / (τ σ_k) (MAP, docs/calibration.md), A's learned
-  layer's correction taken out of the campaign before the fit; the grouped CV over the
-  campaign's own cells (never the held-out cells) chooses among τ ∈ {{0 (BASE + PROBE
+  layer's correction taken out of the campaign before the fit; {_cv_text(d)} over the
+  campaign's own poses (never the held-out cells) chooses among τ ∈ {{0 (BASE + PROBE
   only, with A's layer), 1, 3, 10, …, 1000}}, the same MAP without A's layer for
   τ ∈ {{1, 3, 10, 30, 100}} (*τ/physical*: whether A's layer helps in the new set-up is the
   CV's choice too) and the two baselines themselves, *moved*
   ((ii): A's physical model, BASE + PROBE re-identified, no layer) and *alone* ((i)):
-  the first within 1 % of the best CV score that is no worse than either baseline's —
-  so the choice's CV error is never above (i)'s or (ii)'s by construction; then the
+  {_rule_text(d)}the first within 1 % of the best CV score that is no worse than either
+  baseline's — so the choice's CV error is never above (i)'s or (ii)'s by construction; then the
   campaign's own stage (trees on sin/cos q of what the fit leaves, on top of A's
   arm-shape stage when A's layer is kept) adopted only when its grouped CV over the
   campaign's cells beats the fit without it. The row *--prior-stage none* is the same
@@ -437,6 +458,9 @@ def merge(runs: list[dict[str, Any]]) -> dict[str, Any]:
         d["sizes"] = sorted(set(d["sizes"]) | set(r["sizes"]))
         d["result"]["elapsed_s"] += r["result"]["elapsed_s"]
         d["argv"] = d["argv"] + ["+"] + r["argv"]
+        for k in ("prior_cv", "prior_se"):  # the page describes the last run's choice
+            if k in r:
+                d[k] = r[k]
     return d
 
 
@@ -455,9 +479,12 @@ def main() -> int:
     ap.add_argument("--draws", type=int, default=1,
                     help="random campaigns drawn per fold and size (seeded); the figures are "
                          "the mean over the draws, the table adds their sd (random only)")
-    ap.add_argument("--prior-cv", choices=CV_SPLITS, default="cells",
+    ap.add_argument("--prior-cv", choices=CV_SPLITS, default="kfold",
                     help="the CV splits of --prior's choice (PriorCalibrator cv_split; "
-                         "default cells: grouped over the campaign's 0.4 m cells)")
+                         "default kfold: a seeded random 10-fold over the campaign's poses)")
+    ap.add_argument("--prior-se", type=float, default=SE_RULE_K, metavar="K",
+                    help="the choice's k-standard-error rule (PriorCalibrator se_k; default "
+                         f"{SE_RULE_K:g})")
     ap.add_argument("--quick", action="store_true",
                     help="A's layer: one hyper-parameter candidate, 100 trees")
     ap.add_argument("--out", type=Path, default=None,
@@ -505,7 +532,7 @@ def main() -> int:
     with threadpool_limits(1):
         result = run(desc, sets, "".join(series), sizes, args.selection,
                      ResidualLearner(**kw), folds=args.folds, cache=args.cache,
-                     draws=args.draws, cv_split=args.prior_cv)
+                     draws=args.draws, cv_split=args.prior_cv, se_k=args.prior_se)
     d = {"argv": sys.argv[1:], "sizes": list(sizes), "selection": args.selection,
          "selection_text": "I-optimal for model 3, as `plugcell plan --from` chooses among "
                            "poses already measured" if args.selection == "planned"
@@ -513,6 +540,7 @@ def main() -> int:
                            f"{args.draws} seeded random draws: each figure the mean over the "
                            "draws of the mean held-out error, ± their sd",
          "machine": f"{platform.machine()}, Python {platform.python_version()}",
+         "prior_cv": args.prior_cv, "prior_se": args.prior_se,
          "result": result}
     print(table(d))
     print("\n".join(goal(d)))

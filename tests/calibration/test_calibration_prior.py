@@ -149,9 +149,9 @@ def test_the_prior_vanishes_with_many_poses(desc, earlier, truth_a):
 @pytest.mark.slow
 def test_a_moved_robot_from_30_poses_beats_both_baselines(desc, earlier, truth_a):
     """The twin case: a calibrated robot moved (new BASE, joints 2, 3 re-zeroed, the base
-    re-shimmed), 30 positions measured (0.05 mm noise).  The prior (τ by grouped CV over
-    the campaign's cells) beats the model calibrated on the 30 positions alone and the
-    earlier model with BASE + PROBE re-identified, on 400 other poses."""
+    re-shimmed), 30 positions measured (0.05 mm noise).  The prior (its candidate chosen
+    by the default random 10-fold CV with the one-SE rule) beats the model calibrated on the
+    30 positions alone and the earlier model with BASE + PROBE re-identified, on 400 other poses."""
     res, prior = earlier
     truth = _moved(truth_a)
     data = _campaign(truth, 30, 2, noise=5e-5, position_only=True)
@@ -160,7 +160,7 @@ def test_a_moved_robot_from_30_poses_beats_both_baselines(desc, earlier, truth_a
     moved = _error_mm(refit_base(res.model, data, probe=True), val)
     out = PriorCalibrator(prior).fit(data)
     with_prior = _error_mm(out.model, val)
-    assert out.settings["prior"]["scale_chosen_by"] == "grouped CV"
+    assert out.settings["prior"]["scale_chosen_by"] == "random 10-fold CV"
     assert with_prior < 0.9 * alone and with_prior < 0.5 * moved
 
 

@@ -69,12 +69,42 @@ def test_prior_cv_kfold_reaches_the_choice_and_is_reported(files, capsys, monkey
     assert pri["scale_chosen_by"] == "random 10-fold CV"
 
 
+def test_the_default_choice_is_the_random_split_with_the_one_se_rule(files, capsys,
+                                                                    monkeypatch):
+    """Without ``--prior-cv``/``--prior-se`` the choice runs on the random 10-fold with k = 1;
+    ``--prior-se 2 --prior-cv cells`` reach the calibrator; the printout and PARAMS.json
+    name the rule."""
+    from plugcell.calibration.prior import PriorCalibrator
+
+    seen = []
+
+    def choose(self, data, offset=None):
+        seen.append((self.cv_split, self.se_k))
+        return 10.0, {"0": 2e-4, "10": 1e-4, "moved": 2e-4, "alone": 3e-4}
+
+    monkeypatch.setattr(PriorCalibrator, "choose", choose)
+    capsys.readouterr()
+    assert main(_on_b(files, "--prior", str(files / "a.json"), "--prior-stage", "none",
+                      "--out", str(files / "b-default.json"))) == 0
+    out = capsys.readouterr().out
+    assert "more than 1 standard error of the paired CV difference below the better" in out
+    pri = json.loads((files / "b-default.json").read_text())["settings"]["prior"]
+    assert pri["se_k"] == 1.0 and pri["scale_chosen_by"] == "random 10-fold CV"
+    assert main(_on_b(files, "--prior", str(files / "a.json"), "--prior-stage", "none",
+                      "--prior-se", "2", "--prior-cv", "cells",
+                      "--out", str(files / "b-se2.json"))) == 0
+    assert seen == [("kfold", 1.0), ("cells", 2.0)]
+
+
 @pytest.mark.parametrize(("extra", "message"), [
     (["--prior-scale", "3"], "--prior-scale needs --prior EARLIER.json"),
     (["--prior", "A", "--prior-scale", "0.5"],
      "--prior-scale must be 0 (BASE + PROBE only) or a number ≥ 1"),
     (["--prior-stage", "none"], "--prior-stage needs --prior EARLIER.json"),
     (["--prior-cv", "kfold"], "--prior-cv needs --prior EARLIER.json"),
+    (["--prior-se", "1"], "--prior-se needs --prior EARLIER.json"),
+    (["--prior", "A", "--prior-se", "-1"], "--prior-se must be a number ≥ 0 (standard errors), "
+                                           "got -1.0"),
     (["--prior", "A"], "--prior needs --out PARAMS.json"),
     (["--prior", "A", "--thermal"], "--prior: --thermal cannot be combined with it"),
     (["--prior", "A", "--probe", "0,0,90,0,0,0"], "--prior: --probe cannot be combined"),

@@ -10,7 +10,7 @@ the robot in the new set-up.  A short campaign there identifies what it can dete
 * the learned layer: the earlier layer is kept and its correction taken out of the new
   measurements *before* the physical fit (an offset), so the physical parameters absorb
   what differs in the new set-up and the layer what the physics cannot express — or,
-  when the grouped CV prefers it, left out (the candidates ``"τ/physical"``,
+  when the CV prefers it, left out (the candidates ``"τ/physical"``,
   :data:`PHYSICAL_SCALES`: the same MAP on the raw campaign; the earlier layer can be
   wrong for the new set-up);
 * the campaign's own stage (:mod:`.campaign_stage`, ``stage=True``): small trees on what
@@ -29,11 +29,14 @@ of parameter ``k`` (eq. 8.5), ``σ_y = √σ̂²`` its residual standard deviati
 and ``τ ≥ 1`` an inflation: eq. 8.5 assumes independent pose errors, which the residuals
 of a real robot are not (the σ are optimistic), and a robot moved to another set-up
 differs from the earlier one by more than the earlier fit's noise.  ``τ`` is chosen by
-grouped cross-validation over the campaign's own workspace cells (the held-out cells'
-mean position error; never a pose outside the campaign) among :data:`SCALES`, or given.
+cross-validation over the campaign's own poses (a seeded random K-fold, or grouped over
+its workspace cells; never a pose outside the campaign) among :data:`SCALES`, or given.
 ``τ = 0`` (:data:`FRAMES_ONLY`) is the prior held exactly — only BASE and PROBE
 re-identified, the earlier model moved; as the first candidate it makes the choice a
-shrinkage estimator: where the campaign's cells cannot show a gain, the CV keeps it.
+shrinkage estimator: where the campaign cannot show a gain, the CV keeps it.  The two
+baselines (the earlier physical model moved, the campaign alone) are candidates too, and
+any other candidate is adopted only when it beats the better of them by more than k
+standard errors of the paired CV difference (:func:`pick_significant`).
 
 Gauss–Newton on the augmented system: with the stacked residual
 ``F(x) = [W (y − f(x)); Λ (x_p − x)]`` and its Jacobian ``∂F/∂x = −[W H; Λ]``
@@ -87,7 +90,7 @@ Array = NDArray[np.float64]
 
 #: τ = 0: the prior held exactly — only BASE and PROBE re-identified (the earlier model moved).
 FRAMES_ONLY = 0.0
-#: Candidate inflations τ of the prior's σ, chosen by grouped CV over the campaign's cells
+#: Candidate inflations τ of the prior's σ, chosen by CV over the campaign
 #: (:data:`FRAMES_ONLY` first: the shrinkage to the earlier model when the CV cannot tell).
 SCALES: tuple[float, ...] = (FRAMES_ONLY, 1.0, 3.0, 10.0, 30.0, 100.0, 300.0, 1000.0)
 #: τ used when the campaign covers fewer than 2 workspace cells (no CV possible).
@@ -95,8 +98,8 @@ DEFAULT_SCALE = 10.0
 #: Workspace cell edge (m) grouping the campaign's poses for the choice of τ.
 CELL_SIZE_M = 0.4
 #: The CV splits of the choice: ``"cells"`` (grouped K-fold over the campaign's workspace
-#: cells, K = min(5, cells); the default) or ``"kfold"`` (seeded random K-fold over the
-#: poses, K = min(:data:`KFOLD_SPLITS`, N)).
+#: cells, K = min(5, cells)) or ``"kfold"`` (seeded random K-fold over the poses,
+#: K = min(:data:`KFOLD_SPLITS`, N); the default).
 CV_SPLITS: tuple[str, ...] = ("cells", "kfold")
 #: K of the random split ``cv_split="kfold"``.
 KFOLD_SPLITS = 10
@@ -120,9 +123,15 @@ Choice = float | str
 CANDIDATES: tuple[Choice, ...] = (*SCALES, *(f"{t:g}{PHYSICAL}" for t in PHYSICAL_SCALES),
                                   MOVED, ALONE)
 
+#: k of the choice's k-standard-error rule (:func:`pick_significant`): a candidate other
+#: than the baselines is adopted only when its CV error is below the better baseline's by
+#: more than k standard errors of the paired difference (k = 1: the one-standard-error rule).
+SE_RULE_K = 1.0
+
 __all__ = ["ALONE", "CANDIDATES", "CELL_SIZE_M", "CV_SPLITS", "DEFAULT_SCALE", "FRAMES_ONLY",
-           "KFOLD_SPLITS", "MOVED", "PHYSICAL", "PHYSICAL_SCALES", "SCALES", "Choice", "Prior",
-           "PriorCalibrator", "augmented_residual", "frame_keys", "parse_choice", "pick"]
+           "KFOLD_SPLITS", "MOVED", "PHYSICAL", "PHYSICAL_SCALES", "SCALES", "SE_RULE_K",
+           "Choice", "Prior", "PriorCalibrator", "augmented_residual", "frame_keys",
+           "paired_difference", "parse_choice", "pick", "pick_significant"]
 
 
 def parse_choice(choice: Choice) -> tuple[float | None, bool]:
@@ -201,6 +210,105 @@ def pick(scores: Mapping[str, float]) -> Choice:
     best = min(scores[_label(c)] for c in known)
     bound = min(best * 1.01, scores.get(ALONE, math.inf), scores.get(MOVED, math.inf))
     return next((c for c in known if scores[_label(c)] <= bound), known[0])
+
+
+def paired_difference(e: Array, e_ref: Array, fold: Array) -> tuple[float, float]:
+    """The mean paired CV difference of a candidate to a reference and its standard error,
+    clustered by CV fold.
+
+    With ``d_i = e_i − e_ref,i`` over the ``N`` poses and ``G`` folds (the poses a fold
+    holds out share the fit made without them, so their errors are correlated; the folds
+    are the independent units)::
+
+        d̄ = (1/N) Σ_i d_i,     SE² = G / (G − 1) · Σ_g (Σ_{i∈g} (d_i − d̄))² / N²
+
+    (the cluster-robust variance of a mean; with equal folds ``SE = sd_g(d̄_g) / √G``,
+    the standard error over folds of the one-standard-error rule).
+
+    Parameters
+    ----------
+    e, e_ref : (N,) array
+        Held-out errors of the candidate and of the reference, one per pose (any unit).
+    fold : (N,) int array
+        The CV fold that held each pose out.
+
+    Returns
+    -------
+    mean : float
+        ``d̄`` (the unit of ``e``); ``inf`` when ``e`` has a non-finite error, ``nan`` when
+        ``e_ref`` has one.
+    se : float
+        ``SE`` (``inf`` with fewer than 2 folds).
+    """
+    e = np.asarray(e, float)
+    e_ref = np.asarray(e_ref, float)
+    if not np.all(np.isfinite(e_ref)):
+        return math.nan, math.inf
+    if not np.all(np.isfinite(e)):
+        return math.inf, math.inf
+    d = e - e_ref
+    mean = float(d.mean())
+    _, g = np.unique(np.asarray(fold), return_inverse=True)
+    n_g = int(g.max()) + 1 if g.size else 0
+    if n_g < 2:
+        return mean, math.inf
+    sums = np.bincount(g, weights=d - mean, minlength=n_g)
+    return mean, float(np.sqrt(n_g / (n_g - 1) * np.sum(sums**2)) / d.size)
+
+
+def pick_significant(errors: Mapping[str, Array], fold: Array,
+                     k: float = SE_RULE_K) -> Choice:
+    """The CV's choice with a k-standard-error rule: a candidate other than the baselines
+    only when its CV shows it better than the better baseline beyond noise.
+
+    ``b`` is the baseline (:data:`ALONE`, :data:`MOVED`) with the lower CV score.  A
+    candidate ``c`` is eligible when its mean paired difference to ``b`` over the
+    campaign's poses (:func:`paired_difference`, SE clustered by fold) satisfies
+    ``d̄_c + k·SE_c < 0``; among the eligible and the baselines :func:`pick` chooses (the
+    first of :data:`CANDIDATES` within 1 % of the best, never above either baseline).  No
+    candidate eligible: ``b``.  Under the null that ``c`` is no better than ``b`` the CV
+    difference is ≥ 0 in expectation, so a candidate is adopted by chance with
+    probability ≈ Φ(−k) (16 % at k = 1) and then is, in truth, no worse than ``b`` beyond
+    the CV's noise; a candidate truly worse than ``b`` is adopted with a probability that
+    falls with its CV deficit.  ``k = 0``: the plain sign of the difference.
+
+    Parameters
+    ----------
+    errors : mapping of str to (N,) array
+        Each candidate's held-out CV errors (keys as :func:`_label`), one per pose, in
+        one unit; the baselines among them.
+    fold : (N,) int array
+        The fold that held each pose out.
+    k : float
+        The number of standard errors (≥ 0).
+
+    Returns
+    -------
+    float or str
+        The chosen candidate.
+
+    Raises
+    ------
+    CalibrationError
+        ``k`` negative or not finite, no candidate of :data:`CANDIDATES` among ``errors``.
+    """
+    if not (math.isfinite(k) and k >= 0):
+        raise CalibrationError(f"prior: the standard-error factor k must be a number ≥ 0, "
+                               f"got {k!r}")
+    scores = {c: float(np.mean(v)) for c, v in errors.items()}
+    bases = [b for b in (MOVED, ALONE) if b in scores and math.isfinite(scores[b])]
+    if not bases:
+        return pick(scores)
+    base = min(bases, key=lambda b: scores[b])
+    keep = {}
+    for c, s in scores.items():
+        if c in (MOVED, ALONE):
+            keep[c] = s
+            continue
+        mean, se = paired_difference(errors[c], errors[base], fold)
+        if mean + k * se < 0:
+            keep[c] = s
+    return pick(keep)
 
 
 @dataclass(frozen=True, eq=False)
@@ -337,8 +445,8 @@ class PriorCalibrator:
         The earlier calibration.
     scale : float, optional
         The inflation τ ≥ 1 of the prior's σ, or 0 (:data:`FRAMES_ONLY`: the prior held
-        exactly, BASE and PROBE alone re-identified); default: chosen by grouped CV over
-        the campaign's workspace cells among :data:`SCALES`.
+        exactly, BASE and PROBE alone re-identified); default: chosen by CV over the
+        campaign among :data:`CANDIDATES` (:meth:`choose`).
     stage : bool
         Learn the campaign's own stage on what the physical fit leaves and adopt it when
         its grouped CV says it helps (:mod:`.campaign_stage`); default True.
@@ -351,13 +459,16 @@ class PriorCalibrator:
     cell_size_m : float, m
         Workspace cell edge of the CV's groups.
     cv_split : str
-        The CV splits of the choice (:data:`CV_SPLITS`): ``"cells"`` (default), grouped
-        over the campaign's workspace cells, or ``"kfold"``, a seeded random
-        :data:`KFOLD_SPLITS`-fold over the poses — on I-optimal campaigns, whose few
+        The CV splits of the choice (:data:`CV_SPLITS`): ``"kfold"`` (default), a seeded
+        random :data:`KFOLD_SPLITS`-fold over the poses, or ``"cells"``, grouped over the
+        campaign's workspace cells — on I-optimal campaigns, whose few
         extreme poses a held-out cell takes away, the grouped split penalises the weakly
         regularised candidates (the campaign alone, large τ) more than the fit on the
         whole campaign deserves (docs/results/short-campaign-bounds.md).  The campaign
         stage keeps its grouped CV.
+    se_k : float
+        k ≥ 0 of the choice's k-standard-error rule (:func:`pick_significant`; default
+        :data:`SE_RULE_K`).
     progress : callable, optional
         ``(stage, i, n, message)``.
 
@@ -370,7 +481,8 @@ class PriorCalibrator:
 
     def __init__(self, prior: Prior, *, scale: float | None = None, stage: bool = True,
                  rotation_weight: float = 1.0, tol: float = 1e-7, max_iterations: int = 30,
-                 cell_size_m: float = CELL_SIZE_M, cv_split: str = "cells",
+                 cell_size_m: float = CELL_SIZE_M, cv_split: str = "kfold",
+                 se_k: float = SE_RULE_K,
                  progress: Callable[[str, int, int, str], None] | None = None) -> None:
         if scale is not None and not (scale == FRAMES_ONLY
                                       or (math.isfinite(scale) and scale >= 1.0)):
@@ -378,6 +490,9 @@ class PriorCalibrator:
                                    f"or a number ≥ 1, got {scale}")
         if not (tol > 0 and max_iterations >= 1 and rotation_weight > 0 and cell_size_m > 0):
             raise CalibrationError("tol, max_iterations, rotation_weight, cell_size_m must be > 0")
+        if not (math.isfinite(se_k) and se_k >= 0):
+            raise CalibrationError(f"prior: the standard-error factor k must be a number ≥ 0, "
+                                   f"got {se_k!r}")
         if cv_split not in CV_SPLITS:
             raise CalibrationError(f"prior: unknown CV split {cv_split!r} (one of "
                                    f"{', '.join(CV_SPLITS)})")
@@ -389,6 +504,7 @@ class PriorCalibrator:
         self.max_iterations = int(max_iterations)
         self.cell_size_m = float(cell_size_m)
         self.cv_split = cv_split
+        self.se_k = float(se_k)
         self.progress = progress
 
     def _say(self, stage: str, i: int, n: int, msg: str) -> None:
@@ -537,15 +653,17 @@ class PriorCalibrator:
 
     def choose(self, data: CalibrationData, offset: CalibrationData | None = None
                ) -> tuple[Choice, dict[str, float]]:
-        """The candidate of :data:`CANDIDATES` by grouped K-fold CV over the campaign's
-        workspace cells (K = min(5, cells); ``cv_split="kfold"``: a seeded random K-fold
-        over the poses, K = min(:data:`KFOLD_SPLITS`, N)): each candidate's mean held-out
-        position error (m), fitted on the other folds.  Eligible: the candidates within
-        1 % of the best that are no worse than either baseline (:data:`ALONE`,
-        :data:`MOVED`) — so the choice's CV error is never above the campaign alone's nor
-        the earlier model moved's; among them the first of :data:`CANDIDATES` (the
-        strongest prior the data do not reject).  Fewer than 2 cells (``"kfold"``: 2
-        poses): :data:`DEFAULT_SCALE`.
+        """The candidate of :data:`CANDIDATES` by K-fold CV over the campaign (default
+        ``cv_split="kfold"``: a seeded random K-fold over the poses, K =
+        min(:data:`KFOLD_SPLITS`, N); ``"cells"``: grouped over its workspace cells, K =
+        min(5, cells)): each candidate's held-out position error per pose (m), fitted on
+        the other folds, and :func:`pick_significant` — a candidate other than the
+        baselines (:data:`ALONE`, :data:`MOVED`) only when it beats the better of them by
+        more than ``se_k`` standard errors of the paired difference (clustered by fold);
+        among those and the baselines the first of :data:`CANDIDATES` within 1 % of the
+        best and no worse than either baseline, so the choice's CV error is never above
+        the campaign alone's nor the earlier model moved's.  Fewer than 2 poses
+        (``"cells"``: 2 cells): :data:`DEFAULT_SCALE`.
 
         Parameters
         ----------
@@ -581,12 +699,16 @@ class PriorCalibrator:
             if cells < 2:
                 return DEFAULT_SCALE, {}
             folds = list(GroupKFold(n_splits=min(5, cells)).split(targets, groups=groups))
-        scores: dict[str, float] = {}
+        fold = np.empty(len(data), int)
+        for i, (_, te) in enumerate(folds):
+            fold[te] = i
+        errors: dict[str, Array] = {}
         for c in CANDIDATES:
-            scores[_label(c)] = float(self._cv_errors(data, offset, folds, c).mean())
-            self._say("prior", 0, 0, f"{_label(c)}: held-out cells "
-                      f"{scores[_label(c)] * 1e3:.4f} mm")
-        return pick(scores), scores
+            errors[_label(c)] = self._cv_errors(data, offset, folds, c)
+            self._say("prior", 0, 0, f"{_label(c)}: held-out "
+                      f"{errors[_label(c)].mean() * 1e3:.4f} mm")
+        scores = {c: float(e.mean()) for c, e in errors.items()}
+        return pick_significant(errors, fold, self.se_k), scores
 
     # ------------------------------------------------------------------ fit
     def fit(self, data: CalibrationData) -> CalibrationResult:
@@ -664,8 +786,9 @@ class PriorCalibrator:
         """``settings["prior"]`` of a result: the candidate chosen (``choice``: ``"map"``
         (with the earlier layer), ``"τ/physical"`` (without it), ``"moved"`` or ``"alone"``;
         ``scale``: its τ, ``None`` for the campaign alone), how,
-        the CV scores (mm), the regularised keys, whether the prior layer's correction was
-        an offset, the campaign stage."""
+        the CV scores (mm), the k of the k-standard-error rule (``se_k``), the regularised
+        keys, whether the prior layer's correction was an offset, whether the earlier
+        calibration had a layer (``earlier_layer``), the campaign stage."""
         return {"robot": self.prior.robot,
                 "choice": choice if isinstance(choice, str) else "map",
                 "scale": parse_choice(choice)[0],
@@ -673,9 +796,11 @@ class PriorCalibrator:
                 else (("grouped CV" if self.cv_split == "cells" else f"random "
                        f"{KFOLD_SPLITS}-fold CV") if scores else "default"),
                 "cv_mm": {k: v * 1e3 for k, v in scores.items()},
+                "se_k": self.se_k if scores else None,
                 "regularised": regularised,
                 "sigma_y_m": self.prior.sigma_y,
                 "layer_offset": layer_offset,
+                "earlier_layer": self.prior.layer is not None,
                 "stage": None if stage is None else stage.summary()}
 
     def _fit_alone(self, data: CalibrationData, scores: Mapping[str, float],

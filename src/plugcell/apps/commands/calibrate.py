@@ -4,7 +4,8 @@
                        [--validate VAL.csv] [--rot rpy|zyz|xyz] [--payload-kg M]
                        [--out PARAMS.json] [--json] [--report REPORT.html]
                        [--residuals RES.json] [--prior EARLIER.json [--prior-scale TAU]
-                       [--prior-stage learned|none] [--prior-cv cells|kfold]]
+                       [--prior-stage learned|none] [--prior-cv kfold|cells]
+                       [--prior-se K]]
 
 A file of joint readings and tracker measurements is all it needs: BASE and
 PROBE are estimated from the data unless given (``--base``/``--probe``, e.g. from
@@ -19,9 +20,12 @@ short campaign here identifies BASE and PROBE freely and the earlier calibration
 parameters with regularisation toward it (MAP, :mod:`plugcell.calibration.prior`; τ = 0
 among the CV's candidates: BASE and PROBE only), the earlier learned layer kept as an
 offset, and the campaign's own learned stage on top when its grouped CV adopts it
-(:mod:`plugcell.calibration.campaign_stage`; ``--prior-stage none``: never).
-``--prior-cv kfold``: the choice's CV over a seeded random 10-fold of the campaign's poses
-instead of its workspace cells (for I-optimal campaigns, docs/calibration.md).
+(:mod:`plugcell.calibration.campaign_stage`; ``--prior-stage none``: never).  The
+choice among the candidates is cross-validated over a seeded random 10-fold of the
+campaign's poses (``--prior-cv cells``: grouped over its workspace cells instead) and
+adopts a candidate other than the two baselines (the earlier model moved, the campaign
+alone) only when it beats the better baseline by more than ``--prior-se K`` standard
+errors of the paired CV difference (default 1; docs/calibration.md).
 ``--residual-prior`` is a different thing (a new learned layer on top of the earlier
 layer's arm-shape stage, ≥ 200 poses): kept as it is.
 """
@@ -127,16 +131,23 @@ def _add_prior_args(p: argparse.ArgumentParser) -> None:
     p.add_argument("--prior-scale", type=float, metavar="TAU",
                    help="with --prior: inflate the earlier σ by TAU ≥ 1, or 0: BASE and PROBE "
                         "only (default: chosen by grouped cross-validation over the "
-                        "campaign's workspace cells, 0 among the candidates)")
+                        "campaign's poses, 0 among the candidates)")
     p.add_argument("--prior-stage", choices=("learned", "none"), default=None,
                    help="with --prior: learn the campaign's own stage on what the fit leaves "
                         "and keep it when its grouped CV over the campaign's cells beats the "
                         "fit without it (learned, the default), or never (none)")
-    p.add_argument("--prior-cv", choices=("cells", "kfold"), default=None,
-                   help="with --prior: the splits of the cross-validation that chooses τ — "
-                        "grouped over the campaign's workspace cells (cells, the default) or "
-                        "a seeded random 10-fold over its poses (kfold: for I-optimal "
-                        "campaigns of few extreme poses)")
+    p.add_argument("--prior-cv", choices=("kfold", "cells"), default=None,
+                   help="with --prior: the splits of the cross-validation that chooses among "
+                        "the candidates — a seeded random 10-fold over the campaign's poses "
+                        "(kfold, the default) or grouped over its workspace cells (cells: "
+                        "biased against the weakly regularised candidates on I-optimal "
+                        "campaigns, docs/results/short-campaign-bounds.md)")
+    p.add_argument("--prior-se", type=float, metavar="K", default=None,
+                   help="with --prior: adopt a candidate other than the baselines (the "
+                        "earlier model moved, the campaign alone) only when its CV error is "
+                        "below the better baseline's by more than K standard errors of the "
+                        "paired difference (default 1: the one-standard-error rule; 0: any "
+                        "gain)")
 
 
 def _frame(text: str, what: str) -> np.ndarray:
@@ -280,12 +291,17 @@ def _summary(d: dict[str, Any]) -> str:
                          + ("; its learned layer kept (its correction an offset of the fit)"
                             if pri["layer_offset"] else
                             "; its learned layer left out (the CV preferred the model "
-                            "without it)" if choice == "moved" or choice.endswith("/physical")
+                            "without it)" if pri.get("earlier_layer", True) and (
+                                choice == "moved" or choice.endswith("/physical"))
                             else ""))
         if pri.get("cv_mm"):
             lines.append(f"  {how} (mm): " + ", ".join(
                 f"{'τ = ' + k if k[0].isdigit() else k} {v:.3f}"
-                for k, v in pri["cv_mm"].items()))
+                for k, v in pri["cv_mm"].items()) + (
+                f"; a candidate other than moved and alone only when more than "
+                f"{pri['se_k']:g} standard error{'' if pri['se_k'] == 1 else 's'} of the "
+                "paired CV difference below the better of them"
+                if pri.get("se_k") is not None else ""))
         st = pri.get("stage")
         if st:
             lines.append("  campaign stage: " + (
@@ -370,6 +386,8 @@ def _prior_conflicts(args: argparse.Namespace) -> None:
             raise CommandError("--prior-stage needs --prior EARLIER.json")
         if args.prior_cv is not None:
             raise CommandError("--prior-cv needs --prior EARLIER.json")
+        if args.prior_se is not None:
+            raise CommandError("--prior-se needs --prior EARLIER.json")
         return
     given = [o for o, on in (("--residual-model learned", args.residual_model != "none"),
                              ("--residual-prior", args.residual_prior is not None),
@@ -387,6 +405,9 @@ def _prior_conflicts(args: argparse.Namespace) -> None:
             math.isfinite(args.prior_scale) and args.prior_scale >= 1)):
         raise CommandError(f"--prior-scale must be 0 (BASE + PROBE only) or a number ≥ 1, "
                            f"got {args.prior_scale}")
+    if args.prior_se is not None and not (math.isfinite(args.prior_se) and args.prior_se >= 0):
+        raise CommandError(f"--prior-se must be a number ≥ 0 (standard errors), got "
+                           f"{args.prior_se}")
 
 
 def _run(args: argparse.Namespace) -> int:
@@ -468,12 +489,14 @@ def _run(args: argparse.Namespace) -> int:
 
 def _fit_prior(args: argparse.Namespace, earlier: Any, data: Any, progress: Any) -> Any:
     """The short campaign with the earlier calibration as prior (--prior)."""
-    from plugcell.calibration.prior import PriorCalibrator
+    from plugcell.calibration.prior import SE_RULE_K, PriorCalibrator
 
     return PriorCalibrator(earlier, scale=args.prior_scale, stage=args.prior_stage != "none",
                            rotation_weight=args.rotation_weight,
                            max_iterations=args.max_iterations, cell_size_m=args.residual_cell_m,
-                           cv_split=args.prior_cv or "cells", progress=progress).fit(data)
+                           cv_split=args.prior_cv or "kfold",
+                           se_k=SE_RULE_K if args.prior_se is None else args.prior_se,
+                           progress=progress).fit(data)
 
 
 def _fit(args: argparse.Namespace, desc: Any, data: Any, base: Any, probe: Any, prior: Any,
