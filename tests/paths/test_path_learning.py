@@ -151,6 +151,7 @@ def test_learning_runs_get_better_save_and_reuse_the_correction(tmp_path):
 
 
 @pytest.mark.slow
+@pytest.mark.timeout(1200)  # nine runs of the path, two laws
 def test_the_inverse_law_learns_and_its_file_is_continued_as_inverse(tmp_path):
     (tmp_path / "p.csv").write_text(PATH)
     out = _cli("--path", "p.csv", "--learn", "3", "--learn-law", "inverse", "--learned-out",
@@ -182,7 +183,7 @@ def test_the_inverse_law_learns_and_its_file_is_continued_as_inverse(tmp_path):
     assert again["inverse"]["steps"] == saved["inverse"]["steps"] + 1
     # the old law on request: identified once, all of the error learned — a continued
     # file keeps its plant
-    old = _cli("--path", "p.csv", "--learn", "3", "--learn-law", "inverse",
+    old = _cli("--path", "p.csv", "--learn", "2", "--learn-law", "inverse",
                "--inverse-reidentify", "0", "--weighting", "none", "--learned-out",
                "o.json", "--json", cwd=tmp_path)
     assert old.returncode == 0, old.stderr

@@ -75,14 +75,15 @@ buys robustness to the model's error (at a frequency where ``|P|`` is small the
 inverse's gain is at most ``1 / (2√β)``) at the price of a slower convergence there.
 Noise: a run's fresh noise ``n_k`` enters ``u`` through ``γ_j L̂``; the arm turns it back
 into ``≈ γ_j Q_I n_k`` of error — in ``Q_I``'s whole band, however large ``|P|`` is — hence
-``γ_j = 1/(1 + j)`` by default: the running mean of the runs' estimates, whose noise falls
-as ``1/√(j+1)``.
+``γ_j = 1/(1 + j)`` (``gain_decay`` 1) for an unweighted input: the running mean of the
+runs' estimates, whose noise falls as ``1/√(j+1)``.
 
-**Weighting by the signal-to-noise per frequency** (``LearningSettings.weighting``,
-:mod:`.smoothing`): the update learns ``K_j(f) E_j(f)`` instead of ``E_j(f)``, ``K_j`` the
-Kalman gain of the runs at each frequency (``S_j / (S_j + N)``: the error still to learn
-against the tracker's noise, both estimated from the records), and ``γ_j = γ`` (``K_j``
-holds the ``1/(1 + j)`` where the error is far above the noise); (4) becomes
+**Weighting by the signal-to-noise per frequency** (``LearningSettings.weighting``, the
+default with (3), :mod:`.smoothing`): the update learns ``K_j(f) E_j(f)`` instead of
+``E_j(f)``, ``K_j`` the Kalman gain of the runs at each frequency (``S_j / (S_j + N)``:
+the error still to learn against the tracker's noise, both estimated from the records),
+and ``γ_j = γ`` (``K_j`` holds the ``1/(1 + j)`` where the error is far above the noise);
+(4) becomes
 ``ρ_I = sup_ω |Q_I| σ_max(I − γ K L̂ P)``, never above (4)'s factor where that is < 1.
 
 Pure math: numpy and scipy, SI units, no I/O.
