@@ -3,7 +3,8 @@
     .venv/bin/python benchmarks/dynamic_correction.py [--shapes line,circle]
         [--speeds 50,100,250] [--learn 6] [--learn-on model] [--learn-law inverse]
         [--inverse-cutoff 20] [--inverse-reg 0.05] [--inverse-gain 1] [--inverse-decay 1]
-        [--inverse-modes 4] [--inverse-reidentify 1] [--excitation-um 20] [--jobs 2]
+        [--inverse-modes 4] [--inverse-reidentify 1] [--weighting kalman]
+        [--excitation-um 20] [--jobs 2]
         [--faults] [--udp]
         [--lead-ms MS] [--seed 0] [--plot docs/results/dynamic-correction.png]
 
@@ -29,8 +30,10 @@ samples, never the twin's truth.  With ``--learn-law inverse`` (the default) run
 carries a seeded excitation, from which (against run 0) the learning identifies the arm's
 plant — the few-mode model of :mod:`plugcell.compensation.tracking.plant` — and runs 2 …
 N learn with its norm-optimal inverse (``learning.py`` (3)), above the arm's modes, the
-plant identified once (``--inverse-reidentify 1``: again after each of them, from the
-excited run against every other);
+plant identified again after each of them, from the excited run against every other
+(the default ``--inverse-reidentify 1``; ``0``: once, from the first pair), each
+frequency learned by its Kalman gain against the tracker's noise (the default
+``--weighting kalman``; ``none``: all of the error, ``γ/(1 + λ_I j)``);
 ``--learn-law p`` is the P-type law alone, below them.  ``--jobs`` runs the paths in
 parallel processes.
 
@@ -90,7 +93,9 @@ GOALS = {100.0: 0.05e-3, 250.0: 0.10e-3}
 #: The learning on the twin (δ = the estimated lead τ): Q at 6 Hz, order 4 (zero phase:
 #: |Q| = 0.04 at the first mode, 9 Hz; 8 Hz diverged on the line at 250 mm/s), L = 0.8
 #: falling as 1/(1 + 0.5 k) to average the tracker's noise (docs/dynamic-correction.md)
-LEARNING = LearningSettings(gain=0.8, cutoff_hz=6.0, order=4, gain_decay=0.5)
+#: (its weighting is set by main() from --weighting; None here keeps what other scripts
+#: build on it, benchmarks/learning_residual.py, the unweighted law they were measured with)
+LEARNING = LearningSettings(gain=0.8, cutoff_hz=6.0, order=4, gain_decay=0.5, weighting=None)
 #: The model-inverting law (learning.py (3)) after one identifying run: Q_I above the
 #: modes (9–14 Hz on the twin), γ_j = 1/(1 + j) (the running mean of the runs' estimates)
 INVERSE = InverseSettings()
@@ -529,14 +534,16 @@ def main(argv: list[str]) -> int:
                     help="modes of the identified plant")
     ap.add_argument("--inverse-reidentify", type=int, choices=(0, 1),
                     default=INVERSE.reidentify,
-                    help="1: identify the plant again after each run by the inverse, from "
-                    "the excited run against every run before and after it")
+                    help="1 (default): identify the plant again after each run by the "
+                    "inverse, from the excited run against every run before and after it; "
+                    "0: once, from the first pair")
     ap.add_argument("--excitation-um", type=float, default=INVERSE.excitation_m * 1e6,
                     help="the identifying run's excitation, rms per axis (µm)")
-    ap.add_argument("--weighting", choices=("kalman", "none"), default="none",
-                    help="kalman: the inverse law learns each frequency by its Kalman gain "
-                    "against the tracker's noise (compensation/tracking/smoothing.py); "
-                    "none: all of the error, γ/(1 + λ_I j)")
+    ap.add_argument("--weighting", choices=("kalman", "none"), default="kalman",
+                    help="kalman (default): the inverse law learns each frequency by its "
+                    "Kalman gain against the tracker's noise "
+                    "(compensation/tracking/smoothing.py); none: all of the error, "
+                    "γ/(1 + λ_I j)")
     ap.add_argument("--weighting-smooth-hz", type=float,
                     default=WeightingSettings().smooth_hz,
                     help="half width of the power's average over frequency (Hz)")

@@ -3,7 +3,11 @@ plugcell.compensation.tracking.plant): the identification of a plant with known 
 the model-inverting law's contraction condition (exact where the model is exact,
 property-tested; violated by a wrong model, and then divergent), the convergence on a
 plant whose modes the P-type law cannot pass, the whole flow (excite, identify, invert)
-from the measured error alone, and bad input.  Seeded and deterministic."""
+from the measured error alone, and bad input.  Seeded and deterministic.
+
+These are tests of the law (3) as such: its input unweighted (``weighting=None``) and
+the identification once or again as each test says; the defaults (both options) are in
+tests/io/test_learned_continuation.py and test_learning_weighting.py."""
 
 from __future__ import annotations
 
@@ -165,7 +169,7 @@ def run_inverse(il: IterativeLearning, d: np.ndarray, runs: int, noise: float = 
 
 def test_the_inverse_law_converges_monotonically_where_the_contraction_holds():
     inv = InverseSettings(gain=0.8, gain_decay=0.0, regularisation=0.05, cutoff_hz=20.0)
-    s = LearningSettings(inverse=inv)
+    s = LearningSettings(inverse=inv, weighting=None)
     model = identified()
     rho = contraction_inverse(inv, T, F, true_response(), model.response(F))
     assert rho < 1.0
@@ -183,7 +187,8 @@ def test_the_p_type_law_leaves_the_ringing_that_the_inverse_removes():
     for _ in range(8):
         p.step(d + arm(p.u))
     left_p = np.linalg.norm(d + arm(p.u))
-    inv = IterativeLearning(3.0, LearningSettings(inverse=InverseSettings(gain_decay=0.0)),
+    inv = IterativeLearning(3.0, LearningSettings(
+        inverse=InverseSettings(gain_decay=0.0), weighting=None),
                             plant=identified())
     norms, _ = run_inverse(inv, d, 8)
     assert norms[-1] < left_p / 3
@@ -197,7 +202,7 @@ def test_a_wrong_model_breaks_the_contraction_and_the_iteration_diverges():
     inv = InverseSettings(gain=1.0, gain_decay=0.0, regularisation=1e-3, cutoff_hz=30.0,
                           backoff=0.0)
     assert contraction_inverse(inv, T, F, true_response(), wrong.response(F)) > 1.0
-    il = IterativeLearning(3.0, LearningSettings(inverse=inv), plant=wrong)
+    il = IterativeLearning(3.0, LearningSettings(inverse=inv, weighting=None), plant=wrong)
     norms, _ = run_inverse(il, disturbance(il.grid), 12)
     assert norms[-1] > 3 * min(norms)
 
@@ -209,7 +214,7 @@ def test_the_supervisor_stops_a_divergence_from_the_measured_error():
     true = identified()
     wrong = ModalPlant(T, true.head, true.frequency_hz * 1.1, true.damping, true.residues)
     inv = InverseSettings(gain=1.0, gain_decay=0.0, regularisation=1e-3, cutoff_hz=30.0)
-    il = IterativeLearning(3.0, LearningSettings(inverse=inv), plant=wrong)
+    il = IterativeLearning(3.0, LearningSettings(inverse=inv, weighting=None), plant=wrong)
     d = disturbance(il.grid)
     norms = []
     for _ in range(12):
@@ -224,9 +229,10 @@ def test_the_supervisor_stops_a_divergence_from_the_measured_error():
 def test_the_flow_excites_identifies_and_inverts_from_the_measured_error_alone():
     """No plant given: update 1 is P-type and adds the excitation; update 2 identifies the
     plant from the two runs' measured errors and inverts it; the noise fresh each run."""
-    inv = InverseSettings(modes=3)
+    inv = InverseSettings(modes=3, reidentify=0)
     il = IterativeLearning(3.0, LearningSettings(cutoff_hz=6.0, order=4, lead_s=DEAD * T,
-                                                 gain_decay=0.5, inverse=inv))
+                                                 gain_decay=0.5, inverse=inv,
+                                                 weighting=None))
     d = disturbance(il.grid)
     true = []
     for k in range(7):
@@ -278,7 +284,8 @@ def learn_flow(reidentify: int, noise: float, runs: int = 7
     error per run, and the offsets and measured errors of the runs."""
     inv = InverseSettings(modes=3, reidentify=reidentify)
     il = IterativeLearning(3.0, LearningSettings(cutoff_hz=6.0, order=4, lead_s=DEAD * T,
-                                                 gain_decay=0.5, inverse=inv))
+                                                 gain_decay=0.5, inverse=inv,
+                                                 weighting=None))
     d = disturbance(il.grid)
     true, us, seen = [], [], []
     for k in range(runs):
@@ -328,7 +335,8 @@ def test_closed_loop_pairs_bias_the_plant_the_excited_runs_pairs_do_not():
 def test_the_noise_left_falls_with_the_running_mean():
     """γ_j = 1/(1 + j): the noise the learned offset carries falls as 1/√(j + 1)."""
     inv = InverseSettings(gain=1.0, gain_decay=1.0, cutoff_hz=20.0)
-    il = IterativeLearning(3.0, LearningSettings(inverse=inv), plant=identified())
+    il = IterativeLearning(3.0, LearningSettings(inverse=inv, weighting=None),
+                           plant=identified())
     zero = np.zeros((il.grid.size, 3))
     rms = []
     for k in range(16):

@@ -216,8 +216,15 @@ def test_bad_weighting_settings_are_named(kw, words):
 
 
 def test_bad_weighting_input_is_named():
-    with pytest.raises(ValueError, match="with inverse set"):
-        LearningSettings(weighting=WeightingSettings())
+    # the default weighting is inert without the law (3): the P-type law learns all of
+    # the error, whatever the cycle (its noise band is checked only with the law (3))
+    assert LearningSettings().weighting == WeightingSettings()
+    assert IterativeLearning(3.0, LearningSettings()).prior_shape() is None
+    LearningSettings(cycle_s=0.012)
+    with pytest.raises(ValueError, match=r"noise_high_hz 110.0 must lie below the Nyquist "
+                       r"rate 41.6667 Hz"):
+        LearningSettings(cycle_s=0.012, inverse=InverseSettings(
+            cutoff_hz=20.0, band_high_hz=40.0, excitation_high_hz=30.0))
     with pytest.raises(ValueError, match="Nyquist"):
         LearningSettings(inverse=InverseSettings(),
                          weighting=WeightingSettings(noise_high_hz=130.0))

@@ -17,11 +17,13 @@ from hypothesis import strategies as st
 
 from plugcell.compensation.tracking.learning import (
     InverseSettings,
+    InverseState,
     IterativeLearning,
     LearningSettings,
 )
 from plugcell.compensation.tracking.plant import ModalPlant
 from plugcell.compensation.tracking.repeat import RunRecord
+from plugcell.compensation.tracking.smoothing import WeightingSettings
 from plugcell.io.json_fields import strict
 from plugcell.io.learned_paths import (
     LearnedContext,
@@ -167,16 +169,99 @@ def test_the_law_is_recorded_and_read_back(tmp_path):
         LearnedFile(_context(), _file().learning, [], "x")
 
 
-def test_a_learning_with_a_weighted_input_is_not_saved():
-    """The weighting's state (the noise and signal powers per frequency) is not in the
-    file: saving such a learning is refused with the reason instead of losing it."""
-    from plugcell.compensation.tracking import InverseSettings, WeightingSettings
+def _stated_file() -> LearnedFile:
+    """An inverse-law learning with the defaults (re-identification, the weighting) in the
+    middle of its runs: the excited run, two pairs, the supervisor's best run, the
+    weighting's S_j — a state made by hand (no identification: fast)."""
+    f = _inverse_file()
+    lr = f.learning
+    G = lr.grid.size
+    rng = np.random.default_rng(11)
 
-    s = dataclasses.replace(SETTINGS, inverse=InverseSettings(), weighting=WeightingSettings())
-    f = _file()
-    with pytest.raises(ValueError, match=r"input is weighted .* keeps no weighting state"):
-        LearnedFile(f.context, IterativeLearning(1.0, s), [], "inverse").document()
-    assert "weighting" not in _document()["settings"]
+    def run() -> tuple:
+        m = np.ones(G, bool)
+        m[40:50] = False
+        return rng.normal(0, 1e-5, (G, 3)), rng.normal(0, 2e-5, (G, 3)), m
+
+    state = InverseState(excited=run(), pairs=[run(), run()],
+                         best=(2.5e-5, rng.normal(0, 1e-5, (G, 3)), rng.normal(0, 1e-5, (G, 3))),
+                         prior=rng.uniform(0, 1e-9, lr.prior_shape()), noise=3e-10,
+                         weighting_history=[{"noise": 3e-10, "mean_gain": 0.4,
+                                             "rematched": 0.0}])
+    lr.resume_inverse(2, 10.0, state)
+    return f
+
+
+def test_the_weighting_and_the_reidentifications_runs_are_saved_and_go_on(tmp_path):
+    """Version 3: the weighting's settings and state (S_j, N, its history) and the
+    re-identification's runs (the excited run, the pairs) and the supervisor's best run
+    are written at full precision and read back; the next update is the same."""
+    f = _stated_file()
+    doc = f.document()
+    assert doc["format_version"] == 3 and doc["inverse"]["weighting"]["smooth_hz"] == 0.5
+    st = doc["inverse"]["state"]
+    assert len(st["pairs"]) == 2 and st["excited"]["measured"][38:52] == "11" + "0" * 10 + "11"
+    save_learned(tmp_path / "s.json", f)
+    back = load_learned(tmp_path / "s.json")
+    lr, lb = f.learning, back.learning
+    assert lb.settings == lr.settings and lb.settings.weighting == WeightingSettings()
+    a, b = lr.inverse_state(), lb.inverse_state()
+    for x, y in zip([*a.excited, *(v for p in a.pairs for v in p), *a.best[1:], a.prior],
+                    [*b.excited, *(v for p in b.pairs for v in p), *b.best[1:], b.prior],
+                    strict=True):
+        np.testing.assert_array_equal(x, y)  # exactly: the state is SI at full precision
+    assert (b.best[0], b.noise, b.weighting_history) == (a.best[0], a.noise,
+                                                         a.weighting_history)
+    e = 2e-5 * np.cos(np.outer(lr.grid, [3.0, 1.0, 2.0]))
+    np.testing.assert_allclose(lb.step(e), lr.step(e), rtol=0, atol=1e-15)
+    np.testing.assert_array_equal(lb.inverse_state().prior, lr.inverse_state().prior)
+    # per tile: S_j is (bins, tiles)
+    tiles = dataclasses.replace(SETTINGS, inverse=INVERSE,
+                                weighting=WeightingSettings(window_s=0.25))
+    t = IterativeLearning(1.0, tiles, _plant())
+    t.step(e)
+    assert t.inverse_state().prior.ndim == 2
+    save_learned(tmp_path / "t.json", LearnedFile(_context(), t, []))
+    tb = load_learned(tmp_path / "t.json").learning
+    np.testing.assert_array_equal(tb.inverse_state().prior, t.inverse_state().prior)
+    np.testing.assert_allclose(tb.step(e), t.step(e), rtol=0, atol=1e-15)
+    # no weighting: null, read back as none
+    none = LearnedFile(_context(), IterativeLearning(
+        1.0, dataclasses.replace(tiles, weighting=None), _plant()), [])
+    assert none.document()["inverse"]["weighting"] is None
+    save_learned(tmp_path / "n.json", none)
+    assert load_learned(tmp_path / "n.json").learning.settings.weighting is None
+
+
+def test_a_version_2_file_goes_on_unweighted_and_without_its_runs(tmp_path):
+    """A version-2 file of the inverse law learned all of the error: it is read with no
+    weighting, and, holding no runs, goes on without re-identifying."""
+    doc = json.loads(json.dumps(strict(_stated_file().document())))
+    doc["format_version"] = 2
+    del doc["inverse"]["weighting"], doc["inverse"]["state"]
+    back = load_learned(_write(tmp_path, doc))
+    lb = back.learning
+    assert lb.settings.weighting is None and lb.settings.inverse == INVERSE
+    s = lb.inverse_state()
+    assert (s.excited, s.pairs, s.best, s.prior) == (None, [], None, None)
+    assert back.continued() is lb and lb.plant is not None
+
+
+def test_a_state_beyond_the_files_bound_is_refused_on_writing_and_reading(tmp_path,
+                                                                          monkeypatch):
+    import plugcell.io.learned_state as ls
+
+    f = _stated_file()
+    doc = json.loads(json.dumps(strict(f.document())))
+    G = f.learning.grid.size
+    monkeypatch.setattr(ls, "MAX_STATE_CYCLES", 4 * G)  # excited + 2 pairs + supervisor: 5 G
+    with pytest.raises(ValueError, match=r"holds 2 pairs of runs of 363 cycles \(1815 rows\); "
+                       r"a learned file holds at most 1452: learn this path with "
+                       r"InverseSettings.reidentify 0"):
+        f.document()
+    with pytest.raises(LearnedFileError, match=r"inverse.state.pairs: 2 pairs of 363 cycles "
+                       r"exceed the file's bound of 1452 rows"):
+        load_learned(_write(tmp_path, doc))
 
 
 def test_the_inverse_law_keeps_its_plant_and_goes_on(tmp_path):
@@ -184,7 +269,7 @@ def test_the_inverse_law_keeps_its_plant_and_goes_on(tmp_path):
     saved and read back; the learning continues by (3) exactly as the one saved would."""
     f = _inverse_file()
     doc = f.document()
-    assert doc["format_version"] == 2 and doc["law"] == "inverse"
+    assert doc["format_version"] == 3 and doc["law"] == "inverse"
     assert doc["inverse"]["steps"] == 2 and doc["inverse"]["regularisation_scale"] == 10.0
     save_learned(tmp_path / "i.json", f)
     back = load_learned(tmp_path / "i.json")
@@ -262,12 +347,84 @@ def test_a_corrupt_inverse_state_is_refused_naming_the_cause(tmp_path, edits, me
     assert message in str(info.value)
 
 
+def _stated_mutated(**edits):
+    doc = json.loads(json.dumps(strict(_stated_file().document())))
+    for key, value in edits.items():
+        *parents, last = key.split(".")
+        d = doc
+        for k in parents:
+            d = d[int(k)] if isinstance(d, list) else d[k]
+        key = int(last) if isinstance(d, list) else last
+        if value is KeyError:
+            del d[key]
+        else:
+            d[key] = value
+    return doc
+
+
+S = "inverse.state"
+
+
+@pytest.mark.parametrize(("edits", "message"), [
+    ({"inverse.weighting": 3}, "inverse.weighting: expected an object or null, got the number"),
+    ({"inverse.weighting.smooth_hz": 0.0}, "inverse.weighting: WeightingSettings: smooth_hz "
+     "must be > 0"),
+    ({"inverse.weighting.noise_high_hz": 130.0}, "inverse.settings: WeightingSettings."
+     "noise_high_hz 130.0 must lie below the Nyquist rate 125 Hz"),
+    ({"inverse.weighting.window_s": KeyError}, "missing key 'inverse.weighting.window_s'"),
+    ({"inverse.weighting.noise_low_hz": "50"}, "inverse.weighting.noise_low_hz: expected a "
+     "finite number, got the string '50'"),
+    ({"inverse.state": KeyError}, "missing key 'inverse.state'"),
+    ({S: []}, "inverse.state: expected an object, got a list"),
+    ({f"{S}.pairs": {}}, "inverse.state.pairs: expected a list, got an object"),
+    ({f"{S}.excited": None}, "inverse.state.pairs: pairs of the re-identification without "
+     "the excited run"),
+    ({f"{S}.excited.u_m": [[0, 0, 0]]}, "inverse.state.excited.u_m: expected 363 rows"),
+    ({f"{S}.pairs.1.de_m.5.2": "x"}, "inverse.state.pairs[1].de_m[5][2]: expected a finite "
+     "number, got the string 'x'"),
+    ({f"{S}.pairs.0.du_m.7": [0, 0]}, "inverse.state.pairs[0].du_m[7]: expected 3 numbers"),
+    ({f"{S}.pairs.0.du_m.7.0": 10**400}, "inverse.state.pairs[0].du_m[7][0]: expected a "
+     "finite number"),
+    ({f"{S}.pairs.0.du_m.7.0": True}, "inverse.state.pairs[0].du_m[7][0]: expected a "
+     "finite number, got a boolean"),
+    ({f"{S}.pairs.0.mask": "01"}, "inverse.state.pairs[0].mask: expected a string of 363 "
+     "characters 0 or 1 (one a cycle of the grid), got 2 characters"),
+    ({f"{S}.pairs.0.mask": "2" * 363}, "got 363 characters with others"),
+    ({f"{S}.pairs.1": KeyError}, None),  # one pair fewer: a valid state
+    ({f"{S}.pairs.0.mask": KeyError}, "missing key 'inverse.state.pairs[0].mask'"),
+    ({f"{S}.supervisor.rms_m": -1.0}, "inverse.state.supervisor.rms_m must be ≥ 0"),
+    ({f"{S}.supervisor": "best"}, "inverse.state.supervisor: expected an object or null"),
+    ({f"{S}.supervisor.e_m": None}, "inverse.state.supervisor.e_m: expected 363 rows of the "
+     "learning's grid, got null"),
+    ({f"{S}.weighting.prior": [1.0, 2.0]}, "inverse.state.weighting.prior: expected 687 "
+     "finite powers ≥ 0 (the weighting's S_j on this learning's bins)"),
+    ({f"{S}.weighting.prior.3": -1.0}, "inverse.state.weighting.prior: expected 687"),
+    ({f"{S}.weighting.noise": -1.0}, "inverse.state.weighting.noise must be ≥ 0"),
+    ({f"{S}.weighting.history": {}}, "inverse.state.weighting.history: expected a list"),
+    ({f"{S}.weighting.history.0.mean_gain": "x"}, "inverse.state.weighting.history[0]."
+     "mean_gain: expected a finite number"),
+    ({f"{S}.weighting.history.0": 1}, "inverse.state.weighting.history[0]: expected an "
+     "object, got the number 1"),
+    ({"inverse.weighting": None}, "inverse.state.weighting.prior: a weighting state in a "
+     "learning without weighting"),
+])
+def test_a_corrupt_weighting_or_run_state_is_refused_naming_the_cause(tmp_path, edits,
+                                                                       message):
+    if message is None:
+        assert len(load_learned(_write(tmp_path, _stated_mutated(**edits))).learning
+                   .inverse_state().pairs) == 1
+        return
+    with pytest.raises(LearnedFileError) as info:
+        load_learned(_write(tmp_path, _stated_mutated(**edits)))
+    assert message in str(info.value)
+
+
 @pytest.mark.parametrize(("doc", "message"), [
     ("{not json", "not a JSON document"),
     ("[1, 2]", "expected a JSON object, got a list"),
     ({"format": "plugcell-tracked-path"}, "format 'plugcell-tracked-path': not a learned "
      "correction (expected 'plugcell-learned-path'"),
-    (_mutated(format_version=3), "format_version 3: this plugcell reads versions 1, 2"),
+    (_mutated(format_version=4), "format_version 4: this plugcell reads versions 1, 2, 3"),
     (_mutated(**{"context.robot": KeyError}), "missing key 'context.robot'"),
     (_mutated(**{"context.payload_kg": "36"}),
      "context.payload_kg: expected a finite number, got the string '36'"),
@@ -371,7 +528,8 @@ def _leaves(doc, prefix=()):
 
 
 DOCUMENTS = {"p": _document(),
-             "inverse": json.loads(json.dumps(strict(_inverse_file().document())))}
+             "inverse": json.loads(json.dumps(strict(_inverse_file().document()))),
+             "stated": json.loads(json.dumps(strict(_stated_file().document())))}
 LEAVES = [(k, p) for k, d in DOCUMENTS.items() for p in _leaves(d) if p]
 
 
@@ -379,7 +537,8 @@ LEAVES = [(k, p) for k, d in DOCUMENTS.items() for p in _leaves(d) if p]
           suppress_health_check=[HealthCheck.function_scoped_fixture])
 @given(st.sampled_from(LEAVES), JSON | st.just(KeyError))
 def test_any_mutation_of_a_valid_file_is_refused_or_loads(tmp_path, leaf, value):
-    """Of a P-type file and of an inverse-law file with its plant."""
+    """Of a P-type file, of an inverse-law file with its plant, and of one (version 3)
+    with the weighting's and the re-identification's state."""
     which, where = leaf
     doc = copy.deepcopy(DOCUMENTS[which])
     d = doc
@@ -403,3 +562,7 @@ def test_any_mutation_of_a_valid_file_is_refused_or_loads(tmp_path, leaf, value)
     if plant is not None:  # a plant that loads is one the law can use
         assert np.all(np.isfinite(plant.response(np.array([0.0, 10.0]))))
         f.learning.step(np.zeros_like(f.learning.u))
+        s = f.learning.inverse_state()  # a state that loads fits the learning
+        G = f.learning.grid.size
+        assert all(np.shape(x) == (G, 3) for p in s.pairs for x in p[:2])
+        assert all(np.all(np.isfinite(x)) for p in s.pairs for x in p[:2])

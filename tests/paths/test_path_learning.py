@@ -65,6 +65,16 @@ def _other_file(tmp_path: Path, text: str, name: str) -> Path:
      "got 1: the first run's update adds a known excitation, the second run identifies the "
      "plant from it"),
     (("--learn", "2", "--learn-law", "q"), "--learn-law: invalid choice: 'q'"),
+    (("--learn", "2", "--weighting", "none"), "--inverse-reidentify/--weighting set up the "
+     "inverse law of a new learning (--learn N --learn-law inverse without --learned"),
+    (("--learn", "2", "--learn-law", "p", "--inverse-reidentify", "0"),
+     "--inverse-reidentify/--weighting set up the inverse law of a new learning"),
+    (("--learned", "p.csv", "--learn", "2", "--learn-law", "inverse", "--weighting", "none"),
+     "--inverse-reidentify/--weighting set up the inverse law of a new learning"),
+    (("--learn", "2", "--learn-law", "inverse", "--inverse-reidentify", "2"),
+     "--inverse-reidentify: invalid choice: 2"),
+    (("--learn", "2", "--learn-law", "inverse", "--weighting", "wiener"),
+     "--weighting: invalid choice: 'wiener'"),
 ])
 def test_bad_learning_options_are_refused_before_anything_runs(tmp_path, monkeypatch, capsys,
                                                             args, message):
@@ -155,6 +165,7 @@ def test_learning_runs_get_better_save_and_reuse_the_correction(tmp_path):
 
 
 @pytest.mark.slow
+@pytest.mark.timeout(1200)  # nine runs of the path, two laws
 def test_the_inverse_law_learns_and_its_file_is_continued_as_inverse(tmp_path):
     (tmp_path / "p.csv").write_text(PATH)
     out = _cli("--path", "p.csv", "--learn", "3", "--learn-law", "inverse", "--learned-out",
@@ -167,15 +178,36 @@ def test_the_inverse_law_learns_and_its_file_is_continued_as_inverse(tmp_path):
     saved = json.loads((tmp_path / "l.json").read_text())
     assert saved["law"] == "inverse" and [r["law"] for r in saved["runs"]] == \
         ["p", "inverse", "inverse"]
-    assert saved["format_version"] == 2 and saved["inverse"]["plant"]["frequency_hz"]
-    # the file keeps the identified plant: the learning goes on by the inverse law
+    assert saved["format_version"] == 3 and saved["inverse"]["plant"]["frequency_hz"]
+    # the defaults: re-identified after each run (the excited run and its pairs kept), the
+    # input weighted (its settings and S_j kept)
+    assert saved["inverse"]["settings"]["reidentify"] == 1 and saved["inverse"]["weighting"]
+    state = saved["inverse"]["state"]
+    assert state["excited"] and len(state["pairs"]) == 2 and state["weighting"]["prior"]
+    # the file keeps the identified plant and the runs: the learning goes on by the
+    # inverse law, the plant identified again from the saved pairs and the new run's
     more = _cli("--path", "p.csv", "--learned", "l.json", "--learn", "1", "--learned-out",
                 "m.json", "--json", cwd=tmp_path)
     assert more.returncode == 0, more.stderr
     assert [r["law"] for r in json.loads(more.stdout)["runs"]] == ["inverse"]
     again = json.loads((tmp_path / "m.json").read_text())
-    assert again["inverse"]["plant"] == saved["inverse"]["plant"]
+    assert again["inverse"]["plant"] != saved["inverse"]["plant"]
+    assert again["inverse"]["state"]["pairs"][:2] == state["pairs"]
+    assert len(again["inverse"]["state"]["pairs"]) == 3
     assert again["inverse"]["steps"] == saved["inverse"]["steps"] + 1
+    # the old law on request: identified once, all of the error learned — a continued
+    # file keeps its plant
+    old = _cli("--path", "p.csv", "--learn", "2", "--learn-law", "inverse",
+               "--inverse-reidentify", "0", "--weighting", "none", "--learned-out",
+               "o.json", "--json", cwd=tmp_path)
+    assert old.returncode == 0, old.stderr
+    first = json.loads((tmp_path / "o.json").read_text())
+    assert first["inverse"]["weighting"] is None
+    assert _cli("--path", "p.csv", "--learned", "o.json", "--learn", "1", "--learned-out",
+                "o2.json", cwd=tmp_path).returncode == 0
+    second = json.loads((tmp_path / "o2.json").read_text())
+    assert second["inverse"]["plant"] == first["inverse"]["plant"]
+    assert second["inverse"]["state"]["pairs"] == first["inverse"]["state"]["pairs"]
     # by the P-type law on request; a P-type file is not continued by the inverse law
     p = _cli("--path", "p.csv", "--learned", "l.json", "--learn", "1", "--learn-law", "p",
              "--learned-out", "p.json", "--json", cwd=tmp_path)

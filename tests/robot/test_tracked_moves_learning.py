@@ -167,3 +167,59 @@ def test_the_service_parameter_makes_its_tracked_moves_learn(tmp_path):
     assert learning.key("line", 1) == "line.1" and learning.key("line", 1) == "line.2"
     assert learning.key("line", 2) == "line.1"  # each program run counts anew
     assert RobotService(rsi="127.0.0.1:49152").bridge.move_learning is None
+
+
+def test_a_move_continues_an_inverse_law_file_with_its_state(tmp_path):
+    """A move's file learned by the inverse law with its defaults (version 3): the move
+    goes on from the file's re-identification runs and weighting state, re-identifies
+    the plant from the saved pairs and its own run, and saves the state grown by one
+    run."""
+    from plugcell.compensation.tracking.learning import (
+        InverseSettings,
+        InverseState,
+        IterativeLearning,
+    )
+    from plugcell.compensation.tracking.plant import ModalPlant
+    from plugcell.compensation.tracking.repeat import LEARNING
+    from plugcell.io.learned_paths import LearnedFile, load_learned, save_learned
+
+    ml = MoveLearning(tmp_path, "smart_h4")
+    key = ml.key("line", 1)
+    start, end = np.eye(4), np.eye(4)
+    start[:3, 3], end[:3, 3] = [1.4, -0.2, 2.4], [1.4, 0.0, 2.4]
+    ctx = ml.context(key, start, end, 1.0, np.eye(4), 36.0)
+    T = 0.004
+    head = np.zeros((4, 3, 3))
+    head[2] = 0.5 * np.eye(3)
+    true = ModalPlant(T, head, np.array([10.0]), np.array([0.05]),
+                      np.array([[0.05 * np.eye(3), -0.03 * np.eye(3)]]))
+    lr = IterativeLearning(1.0, dataclasses.replace(
+        LEARNING, cycle_s=T, inverse=InverseSettings(modes=1, taps=4)), true)
+    rng = np.random.default_rng(4)
+    G = lr.grid.size
+    du = 2e-5 * rng.standard_normal((G, 3))
+    u_x = rng.normal(0, 1e-5, (G, 3))
+    every = np.ones(G, bool)
+    lr.resume_inverse(1, 1.0, InverseState(
+        excited=(u_x, 1e-5 * rng.standard_normal((G, 3)), every),
+        pairs=[(du, true.simulate(du) + 1e-6 * rng.standard_normal((G, 3)), every)],
+        prior=np.full(lr.prior_shape(), 1e-12), noise=1e-12,
+        weighting_history=[{"noise": 1e-12, "mean_gain": 0.5, "rematched": 0.0}]))
+    save_learned(tmp_path / f"{key}.json", LearnedFile(ctx, lr, [{"run": 1, "verdict":
+                                                                    "learned"}]))
+    session = ml.begin(ml.key("line", 2), start, end, 1.0, np.eye(4), 36.0, T)
+    got = session.repeated.learning.inverse_state()
+    assert len(got.pairs) == 1 and got.excited is not None and got.prior is not None
+    path_t = np.linspace(0.0, 1.0, 251)
+    path_p = np.outer(1 - path_t, start[:3, 3]) + np.outer(path_t, end[:3, 3])
+    t = np.arange(0.0, 1.0, 0.001)
+    p = np.column_stack([np.interp(t, path_t, path_p[:, i]) for i in range(3)])
+    p[:, 0] += 3e-5 * np.sin(2 * np.pi * t) + 1e-5 * rng.standard_normal(t.size)
+    line = session.finish(t, p, path_t, path_p, 0.0)
+    assert line.startswith(f"LEARNED {key}.json: run 2")
+    saved = load_learned(tmp_path / f"{key}.json")
+    s = saved.learning.inverse_state()
+    assert len(s.pairs) == 2 and len(s.weighting_history) == 2
+    assert saved.learning.inverse_steps == 2
+    doc = json.loads((tmp_path / f"{key}.json").read_text())
+    assert doc["format_version"] == 3 and doc["inverse"]["weighting"] is not None

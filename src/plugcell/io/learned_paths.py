@@ -5,14 +5,15 @@ the next run adds to its target, on the path's time grid — and **what it was l
 for**, so that a later run refuses it, before moving the robot, when anything it depends
 on differs::
 
-    {"format": "plugcell-learned-path", "format_version": 2,
+    {"format": "plugcell-learned-path", "format_version": 3,
      "context": {"path": "line.csv", "path_sha256": "…", "speeds_mm_s": [100.0],
                  "robot": "smart_h4", "tool_mm_deg": [x, y, z, a, b, c],
                  "payload_kg": 36.0, "calibration": "nominal" | "sha256:…",
                  "residual_layer": false, "loop": "tracking" | "model",
                  "reflector": "6dof" | "3dof", "duration_s": 1.144},
      "law": "p" | "inverse",                            # the learning law
-     "inverse": {"settings": …, "plant": …, …},         # the inverse law's (version 2)
+     "inverse": {"settings": …, "plant": …, …},         # the inverse law's (version 2;
+                                                        # 3: "weighting", "state")
      "settings": {"gain": 0.8, "lead_s": 0.008, …},   # LearningSettings, SI
      "steps": 4,                                        # updates so far (the gain's k)
      "runs": [{"run": 1, "measured_rms_mm": …, "measured_max_mm": …,
@@ -35,7 +36,11 @@ on differs::
   identified plant, ``LearningSettings.inverse``; a file without the key is ``p``);
 * ``inverse`` (version 2, only with the inverse law) — the law's settings, its updates
   so far, ``β``'s scale and the **identified plant** (:mod:`plugcell.io.learned_plant`),
-  so that the learning goes on by the inverse law (:meth:`LearnedFile.continued`).  A
+  so that the learning goes on by the inverse law (:meth:`LearnedFile.continued`);
+  version 3 adds the weighting's settings and state and the re-identification's runs
+  (:mod:`plugcell.io.learned_state`): a file continued goes on exactly as the learning
+  saved would have.  A version-2 file of the inverse law is read with no weighting (its
+  law learned all of the error) and goes on without re-identifying.  A
   version-1 file (or one saved before the plant was identified) keeps no plant: its
   offset can be fed forward and continued by the P-type law, not by the inverse law;
 * ``best`` (version 2, optional) — the stop rule's best run so far: its measured rms and
@@ -44,7 +49,8 @@ on differs::
   run against it and rolls back to it;
 * ``u_mm`` — millimetres in the cell's frame F0, one row per robot cycle from
   ``t0_s`` (s from the motion's start); its length is the learning's grid for
-  ``duration_s`` and the settings.
+  ``duration_s`` and the settings (version 3: at full precision; versions 1 and 2
+  rounded to 1 nm).
 
 Every fault is a :class:`LearnedFileError` naming the file and the cause; SI inside,
 millimetres only in the document.
@@ -77,6 +83,7 @@ from plugcell.io.json_fields import (
     typename,
 )
 from plugcell.io.learned_plant import inverse_document, read_inverse, read_plant
+from plugcell.io.learned_state import read_state, read_weighting
 from plugcell.io.path_files import PathFile
 from plugcell.io.text_files import read_text
 from plugcell.io.units import M_PER_MM, MM_PER_M
@@ -87,9 +94,10 @@ __all__ = ["FORMAT", "FORMAT_VERSION", "LearnedContext", "LearnedFile", "Learned
            "load_learned", "path_sha256", "save_learned"]
 
 FORMAT = "plugcell-learned-path"
-FORMAT_VERSION = 2
-#: The versions this plugcell reads (1: without the inverse law's state).
-READ_VERSIONS = (1, 2)
+FORMAT_VERSION = 3
+#: The versions this plugcell reads (1: without the inverse law's state; 2: without the
+#: weighting and the re-identification's runs).
+READ_VERSIONS = (1, 2, 3)
 #: The learning laws a file may record.
 LAWS = ("p", "inverse")
 #: Tolerances of the context's comparison: speeds (relative), tool (mm, deg), payload
@@ -241,11 +249,7 @@ class LearnedFile:
         """The JSON document (module docstring)."""
         lr = self.learning
         settings = dataclasses.asdict(lr.settings)
-        del settings["inverse"]  # in "inverse", with the law's state
-        if settings.pop("weighting") is not None:
-            raise ValueError("a learning whose input is weighted (LearningSettings."
-                             "weighting) cannot be saved: the learned file keeps no "
-                             "weighting state")
+        del settings["inverse"], settings["weighting"]  # in "inverse", with the law's state
         inverse = inverse_document(lr)
         return {"format": FORMAT, "format_version": FORMAT_VERSION,
                 "context": dataclasses.asdict(self.context), "law": self.law,
@@ -298,7 +302,7 @@ class LearnedFile:
 
 def _offset_document(lr: IterativeLearning, u: Array) -> dict[str, Any]:
     return {"t0_s": float(lr.grid[0]), "cycle_s": lr.settings.cycle_s,
-            "u_mm": np.round(np.asarray(u) * MM_PER_M, 6).tolist()}
+            "u_mm": (np.asarray(u, float) * MM_PER_M).tolist()}
 
 
 def run_entries(records: list[RunRecord], before: list[dict[str, Any]]) -> list[dict[str, Any]]:
@@ -397,11 +401,12 @@ def _from_document(doc: Any) -> LearnedFile:
         raise DocumentError(f"law: expected one of {', '.join(LAWS)}, got {law!r}")
     values = {}
     for f in fields(LearningSettings):
-        if f.name in ("inverse", "weighting"):  # the law's state; never saved
+        if f.name in ("inverse", "weighting"):  # the inverse law's: in "inverse"
             continue
         values[f.name] = integer(doc, "settings", f.name) if f.name == "order" else \
             number(doc, "settings", f.name)
-    learning = _learning(doc, ctx, law, LearningSettings(**_checked_settings(values)))
+    learning = _learning(doc, ctx, law, LearningSettings(**_checked_settings(values)),
+                         version)
     steps = integer(doc, "steps")
     if steps < 0:
         raise DocumentError(f"steps must be ≥ 0, got {steps}")
@@ -430,17 +435,19 @@ def _checked_settings(values: dict[str, Any]) -> dict[str, Any]:
 
 
 def _learning(doc: dict[str, Any], ctx: LearnedContext, law: str,
-              settings: LearningSettings) -> IterativeLearning:
+              settings: LearningSettings, version: int) -> IterativeLearning:
     """The learning of ``settings`` and, with ``inverse`` (version 2), the inverse law's
-    settings, plant and state."""
+    settings, plant and state (version 3: its weighting and run-to-run state)."""
     plant = None
-    if "inverse" in doc and doc.get("format_version") != 1:
+    if "inverse" in doc and version != 1:
         if law != "inverse":
             raise DocumentError(f"inverse: the state of the inverse law in a file learned with "
                                 f"the law {law!r}")
         inv, steps, scale, raw = read_inverse(doc)
+        weighting = None if version == 2 else \
+            read_weighting(at(doc, "inverse", "weighting"), "inverse.weighting")
         try:
-            settings = dataclasses.replace(settings, inverse=inv)
+            settings = dataclasses.replace(settings, inverse=inv, weighting=weighting)
         except ValueError as exc:
             raise DocumentError(f"inverse.settings: {exc}") from None
         plant = None if raw is None else read_plant(raw, settings.cycle_s)
@@ -448,8 +455,10 @@ def _learning(doc: dict[str, Any], ctx: LearnedContext, law: str,
         learning = IterativeLearning(ctx.duration_s, settings, plant)
     except ValueError as exc:
         raise DocumentError(f"settings: {exc}") from None
+    state = None if version < 3 or settings.inverse is None else \
+        read_state(at(doc, "inverse", "state"), learning)
     if plant is not None:
-        learning.resume_inverse(steps, scale)
+        learning.resume_inverse(steps, scale, state)
     return learning
 
 

@@ -1,6 +1,6 @@
 """The inverse learning law's state in a learned-correction file (``"inverse"`` of
-:mod:`plugcell.io.learned_paths`, format version 2): what continuing a learning by the
-norm-optimal inverse law (3) of :mod:`plugcell.compensation.tracking.learning` needs::
+:mod:`plugcell.io.learned_paths`, format versions 2 and 3): what continuing a learning by
+the norm-optimal inverse law (3) of :mod:`plugcell.compensation.tracking.learning` needs::
 
     "inverse": {"settings": {"gain": 1.0, "regularisation": 0.05, …},  # InverseSettings
                 "steps": 3,                    # updates by (3) so far (γ_j's j)
@@ -11,8 +11,12 @@ norm-optimal inverse law (3) of :mod:`plugcell.compensation.tracking.learning` n
                     "frequency_hz": [f_m…],    # 0 < f_m < 1/(2T)  (M ≤ 12)
                     "damping": [ζ_m…],         # 0 < ζ_m < 1
                     "residues": [[B, C]…M],    # each 3×3 (m/m)
-                    "fit": R² | null}}
+                    "fit": R² | null},
+                "weighting": null | {…},       # version 3: WeightingSettings
+                "state": {…}}                  # version 3: the runs, the supervisor, S_j
 
+(``weighting`` and ``state``: :mod:`plugcell.io.learned_state`; a version-2 file has
+neither: its law learned all of the error, and it goes on without re-identifying.)
 ``plant`` is null until the identifying run was learned from (a learning saved between
 its excited run and the identification cannot go on by (3)).  Every value is checked on
 reading (shapes, finite numbers, the bounds above): a
@@ -39,6 +43,7 @@ from plugcell.io.json_fields import (
     number,
     typename,
 )
+from plugcell.io.learned_state import state_document, weighting_document
 
 Array = NDArray[np.float64]
 
@@ -80,13 +85,20 @@ def inverse_document(learning: IterativeLearning) -> dict[str, Any] | None:
     Returns
     -------
     dict or None
+
+    Raises
+    ------
+    ValueError
+        A state beyond the file's bound (:func:`~plugcell.io.learned_state.state_document`).
     """
     inv = learning.settings.inverse
     if inv is None:
         return None
     return {"settings": dataclasses.asdict(inv), "steps": learning.inverse_steps,
             "regularisation_scale": learning.regularisation_scale,
-            "plant": None if learning.plant is None else plant_document(learning.plant)}
+            "plant": None if learning.plant is None else plant_document(learning.plant),
+            "weighting": weighting_document(learning.settings.weighting),
+            "state": state_document(learning)}
 
 
 def _tensor(x: Any, label: str, shape: tuple[int | None, ...]) -> Array:

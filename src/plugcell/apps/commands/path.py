@@ -7,7 +7,8 @@
         [--mode 6dof|3dof] [--no-tracking] [--beam-break START:DURATION …]
         [--tracker-lost-at S] [--rate HZ] [--payload KG] [--seed N] [--out result.json]
         [--json] [--learn N] [--learned FILE] [--learned-out FILE]
-        [--learn-law p|inverse] [--learn-gain L] [--learn-cutoff HZ] [--learn-converged PCT]
+        [--learn-law p|inverse] [--inverse-reidentify 0|1] [--weighting kalman|none]
+        [--learn-gain L] [--learn-cutoff HZ] [--learn-converged PCT]
         [--learn-diverged PCT]
 
 The path file (:mod:`plugcell.io.path_files`): ``x, y, z`` mm, optionally ``a, b, c``

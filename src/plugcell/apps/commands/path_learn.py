@@ -50,6 +50,14 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    "an identifying run with a known excitation, then the norm-optimal "
                    "inverse of the identified plant; with --learned, the law to go on with "
                    "(default the file's; an inverse-law file keeps its plant)")
+    g.add_argument("--inverse-reidentify", type=int, choices=(0, 1),
+                   help="the inverse law of a new learning: 1 (default) identifies the plant "
+                   "again after each run, from the excited run against every later run; "
+                   "0: once, from the first pair")
+    g.add_argument("--weighting", choices=("kalman", "none"),
+                   help="the inverse law of a new learning: kalman (default) learns each "
+                   "frequency by its Kalman gain against the tracker's noise; none: all of "
+                   "the error, the running mean of the runs")
     g.add_argument("--learn-cutoff", type=float, metavar="HZ",
                    help="the learning filter's cut-off of a new learning (default 6 Hz, below "
                    "the arm's first mode)")
@@ -72,6 +80,12 @@ def wants_learning(args: argparse.Namespace) -> bool:
         raise CommandError("--learn-gain/--learn-cutoff set up a new learning (--learn N "
                            "without --learned: a learning continued from a file keeps its "
                            "settings)")
+    inverse = args.inverse_reidentify is not None or args.weighting is not None
+    if inverse and (args.learn is None or args.learned is not None
+                    or args.learn_law != "inverse"):
+        raise CommandError("--inverse-reidentify/--weighting set up the inverse law of a new "
+                           "learning (--learn N --learn-law inverse without --learned: a "
+                           "learning continued from a file keeps its settings)")
     if args.learn_law is not None and args.learn is None:
         raise CommandError("--learn-law needs --learn N: it is the law of a learning")
     if args.learn_law == "inverse" and args.learned is None and args.learn < 2:
@@ -124,7 +138,8 @@ def _session(args: argparse.Namespace, path: Any, name: str, options: Any,
     else:
         try:
             settings = learning_settings(options, args.learn_gain, args.learn_cutoff,
-                                         args.learn_law or "p")
+                                         args.learn_law or "p", args.inverse_reidentify,
+                                         args.weighting)
         except ValueError as exc:
             raise CommandError(f"--learn-gain/--learn-cutoff: {exc}") from None
         learning = IterativeLearning(context.duration_s, settings)

@@ -30,6 +30,7 @@ Pure math (numpy, SI units, no I/O).  The RSI correction source is
 from .estimator import JointHistory, ResidualFilter, TrackerMeasurement, steady_state_gain
 from .learning import (
     InverseSettings,
+    InverseState,
     IterativeLearning,
     LearnedOffset,
     LearningSettings,
@@ -43,7 +44,8 @@ from .loop import CycleOutput, HoldWindow, TrackingLoop, TrackingSettings, Track
 from .plant import ModalPlant, excitation, identify_plant
 from .smoothing import SpectralGain, TileGain, WeightingSettings
 
-__all__ = ["CycleOutput", "HoldWindow", "InverseSettings", "IterativeLearning", "JointHistory",
+__all__ = ["CycleOutput", "HoldWindow", "InverseSettings", "InverseState", "IterativeLearning",
+           "JointHistory",
            "LearnedOffset", "LearningSettings", "ModalPlant", "RateLimiter", "ResidualFilter",
            "SpectralGain", "TileGain", "TrackerMeasurement", "TrackingLoop", "TrackingSettings",
            "TrackingStats", "WeightingSettings",

@@ -75,14 +75,15 @@ buys robustness to the model's error (at a frequency where ``|P|`` is small the
 inverse's gain is at most ``1 / (2√β)``) at the price of a slower convergence there.
 Noise: a run's fresh noise ``n_k`` enters ``u`` through ``γ_j L̂``; the arm turns it back
 into ``≈ γ_j Q_I n_k`` of error — in ``Q_I``'s whole band, however large ``|P|`` is — hence
-``γ_j = 1/(1 + j)`` by default: the running mean of the runs' estimates, whose noise falls
-as ``1/√(j+1)``.
+``γ_j = 1/(1 + j)`` (``gain_decay`` 1) for an unweighted input: the running mean of the
+runs' estimates, whose noise falls as ``1/√(j+1)``.
 
-**Weighting by the signal-to-noise per frequency** (``LearningSettings.weighting``,
-:mod:`.smoothing`): the update learns ``K_j(f) E_j(f)`` instead of ``E_j(f)``, ``K_j`` the
-Kalman gain of the runs at each frequency (``S_j / (S_j + N)``: the error still to learn
-against the tracker's noise, both estimated from the records), and ``γ_j = γ`` (``K_j``
-holds the ``1/(1 + j)`` where the error is far above the noise); (4) becomes
+**Weighting by the signal-to-noise per frequency** (``LearningSettings.weighting``, the
+default with (3), :mod:`.smoothing`): the update learns ``K_j(f) E_j(f)`` instead of
+``E_j(f)``, ``K_j`` the Kalman gain of the runs at each frequency (``S_j / (S_j + N)``:
+the error still to learn against the tracker's noise, both estimated from the records),
+and ``γ_j = γ`` (``K_j`` holds the ``1/(1 + j)`` where the error is far above the noise);
+(4) becomes
 ``ρ_I = sup_ω |Q_I| σ_max(I − γ K L̂ P)``, never above (4)'s factor where that is < 1.
 
 Pure math: numpy and scipy, SI units, no I/O.
@@ -104,8 +105,8 @@ from .smoothing import SpectralGain, TileGain, WeightingSettings
 
 Array = NDArray[np.float64]
 
-__all__ = ["InverseSettings", "IterativeLearning", "LearnedOffset", "LearningSettings",
-           "contraction", "contraction_inverse", "inverse_gain", "path_error"]
+__all__ = ["InverseSettings", "InverseState", "IterativeLearning", "LearnedOffset",
+           "LearningSettings", "contraction", "contraction_inverse", "inverse_gain", "path_error"]
 
 
 @dataclass(frozen=True)
@@ -144,8 +145,8 @@ class InverseSettings:
     reidentify : int
         1: after each run by (3) the plant is identified again, from the excited run
         against the run before it *and against every run after it* (class
-        :class:`IterativeLearning`, "Re-identification"); 0 (default): once, from the first
-        pair.
+        :class:`IterativeLearning`, "Re-identification"; the default); 0: once, from the
+        first pair.
     """
 
     gain: float = 1.0
@@ -163,7 +164,7 @@ class InverseSettings:
     seed: int = 0
     pad_s: float = 2.0
     backoff: float = 1.15
-    reidentify: int = 0
+    reidentify: int = 1
 
     def __post_init__(self) -> None:
         for f in fields(self):
@@ -296,7 +297,10 @@ class LearningSettings:
         The model-inverting law (3) after an identifying run (``None``: (1) alone).
     weighting : WeightingSettings or None
         (3) learns each frequency by its Kalman gain (module docstring, :mod:`.smoothing`;
-        ``None``: all of the error, ``γ_j``); needs ``inverse``.
+        the default, ``WeightingSettings()``); ``None``: all of the error, ``γ_j``.  Used
+        by the law (3) only: without ``inverse`` it is inert (the P-type law (1) learns
+        all of the error), so ``dataclasses.replace(settings, inverse=…)`` switches the
+        law without touching it.
     """
 
     gain: float = 0.8
@@ -310,7 +314,7 @@ class LearningSettings:
     max_offset_m: float = 2e-3
     gain_decay: float = 0.0
     inverse: InverseSettings | None = None
-    weighting: WeightingSettings | None = None
+    weighting: WeightingSettings | None = field(default_factory=WeightingSettings)
 
     def __post_init__(self) -> None:
         if not (self.inverse is None or isinstance(self.inverse, InverseSettings)):
@@ -319,10 +323,11 @@ class LearningSettings:
         if self.inverse is not None:
             self.inverse.check(self.cycle_s)
         if self.weighting is not None:
-            if not isinstance(self.weighting, WeightingSettings) or self.inverse is None:
-                raise ValueError(f"LearningSettings.weighting must be WeightingSettings (with "
-                                 f"inverse set) or None, got {self.weighting!r}")
-            self.weighting.check(self.cycle_s)
+            if not isinstance(self.weighting, WeightingSettings):
+                raise ValueError(f"LearningSettings.weighting must be WeightingSettings or "
+                                 f"None, got {self.weighting!r}")
+            if self.inverse is not None:  # inert without the law (3)
+                self.weighting.check(self.cycle_s)
         for f in fields(self):
             if f.name in ("inverse", "weighting"):
                 continue
@@ -464,6 +469,40 @@ class LearnedOffset:
         return (1.0 - a) * self.u[i] + a * self.u[i + 1]
 
 
+@dataclass
+class InverseState:
+    """What the law (3) of :class:`IterativeLearning` carries from run to run besides the
+    offset, the plant, its updates and ``β``'s factor: what a saved learning needs to go
+    on exactly (:meth:`IterativeLearning.inverse_state`, :meth:`~IterativeLearning.
+    resume_inverse`); SI.
+
+    Attributes
+    ----------
+    excited : ((G, 3), (G, 3), (G,) bool) arrays or None
+        The excited run's offset ``u_x``, measured error ``e_x`` and measured cycles
+        (class docstring, "Re-identification"; None before the identification).
+    pairs : list of ((G, 3), (G, 3), (G,) bool) arrays
+        The identification's pairs so far ``(Δu, Δe, mask)``: the excited run against the
+        run before it, then against each later run by (3).
+    best : (float, (G, 3), (G, 3)) or None
+        The supervisor's best run by (3): its measured rms (m), offset and error (m).
+    prior : (m,) or (bins, tiles) array or None
+        The weighting's ``S_j`` (:mod:`.smoothing`; None: before its first update or no
+        weighting).
+    noise : float
+        The weighting's last ``N`` (NaN: none yet).
+    weighting_history : list of dict
+        The weighting's per-update figures (``noise``, ``mean_gain``, ``rematched``).
+    """
+
+    excited: tuple[Array, Array, Array] | None = None
+    pairs: list[tuple[Array, Array, Array]] = field(default_factory=list)
+    best: tuple[float, Array, Array] | None = None
+    prior: Array | None = None
+    noise: float = math.nan
+    weighting_history: list[dict[str, float]] = field(default_factory=list)
+
+
 #: The most cycles a learning's grid may have (its offset, window and FFT buffers are
 #: held in memory: 2**20 cycles ≈ 70 min of path at 4 ms, ≈ 25 MB an array of 3 axes).
 MAX_GRID = 2**20
@@ -584,18 +623,85 @@ class IterativeLearning:
         """The factor on ``β`` after the supervisor's back-offs (1: none)."""
         return self._beta_scale
 
-    def resume_inverse(self, steps: int, regularisation_scale: float) -> None:
-        """Go on with the law (3) of a saved learning: its updates by (3) so far and
-        ``β``'s factor (:attr:`plant` given to the constructor; the supervisor's best run
-        starts anew)."""
+    def resume_inverse(self, steps: int, regularisation_scale: float,
+                       state: InverseState | None = None) -> None:
+        """Go on with the law (3) of a saved learning: its updates by (3) so far, ``β``'s
+        factor and (``state``, :meth:`inverse_state` of the learning saved) the
+        re-identification's runs, the supervisor's best run and the weighting's state —
+        with it the learning goes on exactly as the saved one would (:attr:`plant` given
+        to the constructor); without it those start anew.
+
+        Raises
+        ------
+        ValueError
+            No law (3) or plant, or a state that does not fit this learning (why).
+        """
         if self.plant is None or self.settings.inverse is None:
             raise ValueError("IterativeLearning.resume_inverse: needs settings.inverse and "
                              "an identified plant")
         if not (steps >= 0 and regularisation_scale >= 1):
             raise ValueError(f"IterativeLearning.resume_inverse: steps ≥ 0 and a scale ≥ 1, "
                              f"got {steps!r} and {regularisation_scale!r}")
+        if state is not None:
+            self._restore(state)
         self._inverse_steps, self._beta_scale = int(steps), float(regularisation_scale)
         self._spectral = None
+
+    def inverse_state(self) -> InverseState:
+        """What the law (3) carries from run to run besides :attr:`u`, :attr:`plant`,
+        :attr:`inverse_steps` and :attr:`regularisation_scale` (copies)."""
+        w = self._weighting
+        return InverseState(
+            excited=None if self._excited is None else tuple(x.copy() for x in self._excited),
+            pairs=[tuple(x.copy() for x in p) for p in self._pairs],
+            best=None if self._best is None else (self._best[0], self._best[1].copy(),
+                                                 self._best[2].copy()),
+            prior=None if w is None or w.prior is None else w.prior.copy(),
+            noise=math.nan if w is None else w.noise,
+            weighting_history=[] if w is None else [dict(h) for h in w.history])
+
+    def prior_shape(self) -> tuple[int, ...] | None:
+        """The shape of the weighting's ``S_j`` for this learning's grid (None: no
+        weighting): bins of the padded FFT, or (bins, tiles) of the tiles."""
+        if self._weighting is None or self.settings.inverse is None:
+            return None
+        if isinstance(self._weighting, TileGain):
+            return self._weighting.shape(self.grid.size)
+        pad = max(round(self.settings.inverse.pad_s / self.settings.cycle_s), 2)
+        return (next_fast_len(self.grid.size + 2 * pad) // 2 + 1,)
+
+    def _restore(self, state: InverseState) -> None:
+        """:meth:`resume_inverse`'s ``state``, checked against the grid and settings."""
+        G, who = self.grid.size, "IterativeLearning.resume_inverse"
+        runs = ([] if state.excited is None else [state.excited]) + list(state.pairs)
+        for r in runs:
+            if len(r) != 3 or np.shape(r[0]) != (G, 3) or np.shape(r[1]) != (G, 3) \
+                    or np.shape(r[2]) != (G,):
+                raise ValueError(f"{who}: a run of the re-identification must be (u, e, "
+                                 f"measured) of shapes ({G}, 3), ({G}, 3), ({G},)")
+        if state.pairs and state.excited is None:
+            raise ValueError(f"{who}: pairs of the re-identification without the excited run")
+        if state.best is not None and (np.shape(state.best[1]) != (G, 3)
+                                       or np.shape(state.best[2]) != (G, 3)):
+            raise ValueError(f"{who}: the supervisor's best run must be (rms, u, e) of "
+                             f"shapes ({G}, 3)")
+        want = self.prior_shape()
+        if state.prior is not None and (want is None or np.shape(state.prior) != want):
+            raise ValueError(f"{who}: the weighting's S_j must be of shape {want} (None: no "
+                             f"weighting), got {np.shape(state.prior)}")
+        self._excited = None if state.excited is None else \
+            tuple(np.asarray(x, float if i < 2 else bool).copy()
+                  for i, x in enumerate(state.excited))  # type: ignore[assignment]
+        self._pairs = [(np.asarray(a, float).copy(), np.asarray(b, float).copy(),
+                        np.asarray(m, bool).copy()) for a, b, m in state.pairs]
+        self._best = None if state.best is None else (
+            float(state.best[0]), np.asarray(state.best[1], float).copy(),
+            np.asarray(state.best[2], float).copy())
+        if self._weighting is not None:
+            self._weighting.prior = None if state.prior is None else \
+                np.asarray(state.prior, float).copy()
+            self._weighting.noise = float(state.noise)
+            self._weighting.history = [dict(h) for h in state.weighting_history]
 
     def feedforward(self, start_s: float) -> LearnedOffset:
         """The offset for the next run whose motion starts at robot time ``start_s``."""

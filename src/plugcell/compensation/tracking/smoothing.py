@@ -55,6 +55,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, fields
+from typing import Any
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -304,15 +305,24 @@ class TileGain:
         self.noise = math.nan
         self.history: list[dict[str, float]] = []
 
+    def _stft(self) -> dict[str, Any]:
+        n = self.nperseg
+        return {"fs": 1.0 / self.cycle_s, "window": "hann", "nperseg": n,
+                "noverlap": 3 * n // 4}
+
+    def shape(self, cycles: int) -> tuple[int, int]:
+        """``(bins, tiles)``: the shape of ``S`` (:attr:`prior`) for a record of
+        ``cycles``."""
+        _, _, X = stft(np.zeros(cycles), boundary="even", padded=True, **self._stft())
+        return X.shape
+
     def __call__(self, error: ArrayLike) -> Array:
         """``ê`` (G, 3) for the run's error ``e`` (G, 3) (m); advances ``S`` by (2)."""
         e = np.asarray(error, dtype=float)
         if e.ndim != 2 or e.shape[0] < 2 * self.nperseg or not np.all(np.isfinite(e)):
             raise ValueError(f"TileGain: expected a finite error (G ≥ {2 * self.nperseg}, a), "
                              f"got {e.shape}")
-        s, n = self.settings, self.nperseg
-        kw = {"fs": 1.0 / self.cycle_s, "window": "hann", "nperseg": n,
-              "noverlap": 3 * n // 4}
+        s, kw = self.settings, self._stft()
         f, _, X = stft(e.T, boundary="even", padded=True, **kw)     # (a, F, tiles)
         power = (np.abs(X) ** 2).sum(axis=0)
         band = (f >= s.noise_low_hz) & (f <= s.noise_high_hz)

@@ -20,8 +20,10 @@ runs of a program, one run of each tracked move per program run:
   difference, and the program stops at that line; a file that cannot be read fails it
   with the cause.  A new file starts the P-type law
   (:data:`~plugcell.compensation.tracking.repeat.LEARNING` at the link's cycle); a file
-  continues by its own law (an inverse-law file with its plant,
-  :meth:`~plugcell.io.learned_paths.LearnedFile.continued`);
+  continues by its own law (an inverse-law file with its plant and — format version 3 —
+  the weighting's state and the re-identification's runs, so that it goes on as an
+  uninterrupted learning would; :meth:`~plugcell.io.learned_paths.LearnedFile.continued`),
+  and after the move the file is written with that state grown by the run;
 * **during the move** its learned offset is the loop's feed-forward (``TrackingLoop``'s
   ``learned``), on the path's time from the motion's start;
 * **after the move** the tracker's good samples of the motion judge the run and update
