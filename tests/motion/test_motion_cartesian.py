@@ -325,6 +325,30 @@ def test_random_lines_stay_straight_and_keep_the_limits(
     _cart_fd_limits(tr.sections[0].path, cl.scaled(speed))
 
 
+@pytest.mark.parametrize("speed", [0.1, 0.25])
+def test_two_tangent_circs_fly_by_at_speed(elbow: RobotDescription, jl: JointLimits,
+                                            speed: float) -> None:
+    """A full circle as two CIRCs blended: the moves are tangent at the junction, so a
+    blend whose window ``r/2`` holds the braking distance keeps the path's speed there
+    (the superposed speed of mirrored profiles); the scalar edge bound of joint moves
+    had forced the overlap down to a quarter of the speed at the junction."""
+    cl = CartesianLimits(speed, 2.0, 20.0, 1.0, 4.0, 40.0)
+    q0 = _start(elbow)
+    Ta = tcp(elbow, q0)
+    rho = 0.1
+    half = moved(Ta, [0.0, 2 * rho, 0.0])
+    moves = [CIRC(via=Ta[:3, 3] + [rho, rho, 0.0], target=half, blend=0.1),
+             CIRC(via=Ta[:3, 3] + [-rho, rho, 0.0], target=Ta.copy())]
+    tr = plan(elbow, q0, moves, jl, cl)
+    path = tr.sections[0].path
+    tm = path.timing
+    assert tr.blends[0] > 0.0
+    t = np.linspace(tm.start[1], tm.start[0] + tm.durations[0], 301)
+    v = np.linalg.norm(path.sample(t).v, axis=1)
+    assert v.min() >= 0.95 * speed and v.max() <= speed * (1 + 1e-6)
+    _cart_fd_limits(path, cl)
+
+
 @pytest.mark.slow
 @settings(max_examples=5, deadline=None)
 @given(r=st.floats(0.005, 0.2), turn=st.floats(-2.5, 2.5), ang=st.floats(-0.6, 0.6),

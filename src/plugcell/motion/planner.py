@@ -23,15 +23,21 @@ the move, its program line, the time and path fraction, the joint, value and lim
    * lies in those two phases: ``d ≤ T_a2,k``, ``d ≤ T_a1,k+1`` (then move ``k``'s
      speed only falls and move ``k+1``'s only rises in the overlap, and each
      channel's speed is at most its value at the overlap's edges);
-   * keeps the speeds at the edges: ``w_k·σ̇_k(T_k − d) + w_{k+1}·σ̇_{k+1}(d) ≤ v``
-     per channel (``w = |Δq_j|`` per joint; the length and the angle of a Cartesian
-     move), by bisection — the left side grows with ``d``.
+   * for joint moves, keeps the speeds at the edges:
+     ``w_k·σ̇_k(T_k − d) + w_{k+1}·σ̇_{k+1}(d) ≤ v`` per joint (``w = |Δq_j|``), by
+     bisection — the left side grows with ``d``.  Cartesian moves skip this scalar
+     bound: it is the speed of two moves in the *same* direction, so it forced the
+     overlap of two tangent moves (a circle as two CIRCs) down to where both move at
+     under half speed — the path slowed to a quarter of its speed at the junction,
+     where the superposed speed ``‖f'_k σ̇_k + f'_{k+1} σ̇_{k+1}‖`` of tangent moves
+     with mirrored profiles stays at ``v``; the grid check below bounds the speed of
+     the superposition itself.
 
    The overlap is then verified on a dense grid (:data:`BLEND_SAMPLES`) against all
-   limits (for Cartesian moves the angular acceleration has a cross term
-   ``ω_{k+1} × ω_k``), and if it fails the largest of :data:`BLEND_CANDIDATES`
-   shorter overlaps that passes is taken (0: an exact stop; :attr:`Trajectory.blends`
-   tells which overlap each blend got).
+   limits (for Cartesian moves the norms of the superposed velocity, acceleration and
+   jerk, and the angular acceleration's cross term ``ω_{k+1} × ω_k``), and if it fails
+   the largest of :data:`BLEND_CANDIDATES` shorter overlaps that passes is taken (0: an
+   exact stop; :attr:`Trajectory.blends` tells which overlap each blend got).
 4. Cartesian sections are followed in joint space every ``check_step`` seconds
    (:func:`~plugcell.motion.tracking.track`, falling back on
    :func:`plugcell.kinematics.inverse` seeded with the previous solution), and at
@@ -138,15 +144,19 @@ def _sections(moves: Sequence[Move]) -> list[list[int]]:
     return groups
 
 
-def _overlap(pa: DoubleS, frac_a: float, pb: DoubleS, frac_b: float, wa: Array, wb: Array,
-             vmax: Array) -> float:
+def _overlap(pa: DoubleS, frac_a: float, pb: DoubleS, frac_b: float,
+             edges: tuple[Array, Array, Array] | None) -> float:
     """The overlap of a blend (module docstring, step 3).
 
-    ``min(T_a − t_a(σ_a), t_b(σ_b), T_a2,a, T_a1,b)``, then the largest ``d`` below it
-    with ``wa·σ̇_a(T_a − d) + wb·σ̇_b(d) ≤ vmax`` in every channel (bisection).
+    ``min(T_a − t_a(σ_a), t_b(σ_b), T_a2,a, T_a1,b)``; with ``edges = (wa, wb, vmax)``
+    (joint moves) the largest ``d`` below it with ``wa·σ̇_a(T_a − d) + wb·σ̇_b(d) ≤ vmax``
+    in every channel (bisection).
     """
     Ta = pa.duration
     d = max(0.0, min(Ta - pa.time_at(frac_a), pb.time_at(frac_b), pa.t_a2, pb.t_a))
+    if edges is None:
+        return d
+    wa, wb, vmax = edges
 
     def fits(x: float) -> bool:
         return bool(np.all(wa * pa.speed_at(Ta - x) + wb * pb.speed_at(x) <= vmax))
@@ -256,8 +266,8 @@ def _joint_section(
         r = radii[i]
         la, lb = float(np.linalg.norm(deltas[i])), float(np.linalg.norm(deltas[i + 1]))
         return _overlap(profiles[i], max(0.0, 1.0 - 0.5 * r / la), profiles[i + 1],
-                        min(1.0, 0.5 * r / lb), np.abs(deltas[i]), np.abs(deltas[i + 1]),
-                        keep(i)[0])
+                        min(1.0, 0.5 * r / lb),
+                        (np.abs(deltas[i]), np.abs(deltas[i + 1]), keep(i)[0]))
 
     def excess(profiles: list[DoubleS], i: int, tm: Timing, lo: float, hi: float) -> bool:
         v, a, j = keep(i)
@@ -340,8 +350,7 @@ def _cartesian_section(
     def bound(profiles: list[DoubleS], i: int) -> float:
         sa, sb, r = segments[i], segments[i + 1], radii[i]
         return _overlap(profiles[i], sa.fraction_within(0.5 * r, True), profiles[i + 1],
-                        sb.fraction_within(0.5 * r, False), np.array([sa.length, sa.angle]),
-                        np.array([sb.length, sb.angle]), keep(i)[[0, 3]])
+                        sb.fraction_within(0.5 * r, False), None)
 
     def excess(profiles: list[DoubleS], i: int, tm: Timing, lo: float, hi: float) -> bool:
         return _cartesian_excess(CartesianPath(tuple(segments), tm), lo, hi, keep(i))
