@@ -49,6 +49,35 @@ def _other_file(tmp_path: Path, text: str, name: str) -> Path:
     return f
 
 
+def test_a_continued_learning_judges_its_runs_against_the_files_best_run(tmp_path):
+    """``--learned FILE --learn N``: the stop rule starts from the file's best run (as the
+    robot service's tracked moves do), so a continued learning stops and rolls back as an
+    uninterrupted one would; fed forward only (no ``--learn``), nothing is judged."""
+    import argparse
+
+    from plugcell.apps.commands.path import configure  # the command's own options
+    from plugcell.apps.commands.path_learn import _session
+
+    path = parse_path(PATH, "p.csv")
+    o = PathRunOptions()
+    ctx = learned_context(path, "p.csv", o, "nominal", False)
+    learning = IterativeLearning(ctx.duration_s, learning_settings(o))
+    u = np.full_like(learning.u, 0.1e-3)
+    f = tmp_path / "l.json"
+    save_learned(f, LearnedFile(ctx, learning, [], best=(0.05e-3, u, 2)))
+    parser = argparse.ArgumentParser()
+    configure(parser)
+    for extra, judged in ((["--learn", "1"], True), ([], False)):
+        args = parser.parse_args(["run", "--path", "p.csv", "--learned", str(f), *extra])
+        _, repeated, _ = _session(args, path, "p.csv", o, None)
+        if judged:
+            rms, best_u, steps = repeated.best
+            assert rms == pytest.approx(0.05e-3, rel=1e-9) and steps == 2
+            np.testing.assert_allclose(best_u, u, rtol=0, atol=1e-12)
+        else:
+            assert repeated.best is None
+
+
 @pytest.mark.parametrize(("args", "message"), [
     (("--learn", "0"), "--learn must be ≥ 1 run, got 0"),
     (("--learn", "-2"), "--learn must be ≥ 1 run, got -2"),

@@ -104,8 +104,9 @@ def _calibration_id(args: argparse.Namespace, calibration: Any) -> tuple[str, bo
 
 def _session(args: argparse.Namespace, path: Any, name: str, options: Any,
              calibration: Any) -> tuple[Any, Any, list[dict[str, Any]]]:
-    """The context of this run, the learning (fresh or from ``--learned``) and the runs
-    the file recorded."""
+    """The context of this run, the learning (fresh or from ``--learned``; a continued
+    one's stop rule judges the new runs against the file's best run, as an uninterrupted
+    learning would) and the runs the file recorded."""
     from plugcell.compensation.tracking.learning import IterativeLearning
     from plugcell.compensation.tracking.repeat import RepeatedLearning, StopRule
     from plugcell.io.learned_paths import LearnedFileError, load_learned
@@ -120,6 +121,7 @@ def _session(args: argparse.Namespace, path: Any, name: str, options: Any,
         raise CommandError(f"{args.path or args.program}: {exc}" if "StopRule" not in str(exc)
                            else f"--learn-converged/--learn-diverged: {exc}") from None
     before: list[dict[str, Any]] = []
+    best = None
     if args.learned is not None:
         try:
             file = load_learned(args.learned)
@@ -130,6 +132,7 @@ def _session(args: argparse.Namespace, path: Any, name: str, options: Any,
             raise CommandError(f"{args.learned}: cannot be used for this run: {why}")
         learning, before = file.learning, file.runs
         if args.learn is not None:
+            best = file.best
             try:
                 learning = file.continued(args.learn_law)
             except ValueError as exc:
@@ -143,7 +146,9 @@ def _session(args: argparse.Namespace, path: Any, name: str, options: Any,
         except ValueError as exc:
             raise CommandError(f"--learn-gain/--learn-cutoff: {exc}") from None
         learning = IterativeLearning(context.duration_s, settings)
-    return context, RepeatedLearning(learning, rule), before
+    repeated = RepeatedLearning(learning, rule)
+    repeated.resume(best)
+    return context, repeated, before
 
 
 HEADER = ("run  perp 3σ mm  perp max mm  along 3σ mm  along max mm  tracker rms mm"
