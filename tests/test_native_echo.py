@@ -131,7 +131,10 @@ def test_it_reports_what_the_harness_reads_after_the_warm_up(rust_echo, binary,
     assert 0 <= report["cpu_s"] <= report["wall_s"] * os.cpu_count() and report["wall_s"] > 0
     assert set(report["thread"]) == {"minflt", "majflt", "voluntary", "forced", "collections",
                                      "longest_collection_ns"}
-    assert report["thread"]["voluntary"] >= 5  # it waited for each packet
+    # it waited for the first packet (sent 0.5 s after "go"); a later one may already be
+    # there when it calls recv again (the answer woke this thread, which sent the next
+    # at once: CI run 18 counted 4 waits for 5 packets)
+    assert report["thread"]["voluntary"] >= 1
 
 
 @NO_CARGO

@@ -72,12 +72,41 @@ def _number(doc: dict[str, Any], key: str, label: str, none: float | None = None
 
 def weighting_document(w: WeightingSettings | None) -> dict[str, float] | None:
     """``"weighting"``: the settings (``detect`` inf is written null by the strict
-    writer)."""
+    writer).
+
+    Parameters
+    ----------
+    w : WeightingSettings or None
+        The learning's weighting (None: the learning is not weighted).
+
+    Returns
+    -------
+    dict or None
+        The settings by field name (``N``'s band in Hz, the averaging width, …), or None.
+    """
     return None if w is None else dataclasses.asdict(w)
 
 
 def read_weighting(doc: Any, label: str) -> WeightingSettings | None:
-    """The weighting's settings of ``doc`` (null: none); ``detect`` null is inf."""
+    """The weighting's settings of ``doc`` (null: none); ``detect`` null is inf.
+
+    Parameters
+    ----------
+    doc : object
+        The ``"weighting"`` value of a learned file (an object or null).
+    label : str
+        Where it sits in the file, for the error (e.g. ``inverse.weighting``).
+
+    Returns
+    -------
+    WeightingSettings or None
+
+    Raises
+    ------
+    DocumentError
+        Not an object or null, a missing or non-finite field (named), settings the
+        weighting refuses (its reason).
+    """
     if doc is None:
         return None
     if not isinstance(doc, dict):
@@ -101,6 +130,18 @@ def _run(u: Array, e: Array, m: Array, names: tuple[str, str, str]) -> dict[str,
 
 def state_document(learning: IterativeLearning) -> dict[str, Any]:
     """``"state"`` of a learning by the inverse law (module docstring).
+
+    Parameters
+    ----------
+    learning : IterativeLearning
+        A learning by the inverse law (its grid of ``G`` cycles).
+
+    Returns
+    -------
+    dict
+        The state's document: the excited run and the pairs of runs (offsets and errors
+        (G, 3) in m, masks as strings of ``G`` characters 0/1), the weighting's
+        ``S_j``/``N`` and the supervisor's best run.
 
     Raises
     ------
@@ -207,6 +248,20 @@ def _read_weighting_state(doc: Any, label: str, shape: tuple[int, ...] | None
 def read_state(doc: Any, learning: IterativeLearning, label: str = "inverse.state"
                ) -> InverseState:
     """``"state"`` (module docstring) for ``learning`` (its grid, its weighting).
+
+    Parameters
+    ----------
+    doc : object
+        The ``"state"`` value of a learned file.
+    learning : IterativeLearning
+        The learning it continues (its grid of ``G`` cycles and its weighting).
+    label : str
+        Where it sits in the file, for the errors.
+
+    Returns
+    -------
+    InverseState
+        What :meth:`IterativeLearning.resume_inverse` continues from (SI units).
 
     Raises
     ------
