@@ -49,14 +49,16 @@ async def _call(client: Client, name: str, command: str, option: str = "", data=
 
 
 async def _until_standing(client: Client, name: str, limit_s: float = 60.0) -> None:
-    """Wait until two joint readings 0.5 s apart agree (the arm stands): on a loaded
-    machine the twin's path may end later than its 0.5 s delay and 1 s of motion."""
+    """Wait until two joint readings (°) 0.5 s apart agree within 0.01° (the arm stands;
+    moving, the LIN's 100 mm/s turns the joints by degrees in 0.5 s; standing, the
+    twin's feedback still trembles by its encoder and modes): on a loaded machine the
+    twin's path may end later than its 0.5 s delay and 1 s of motion."""
     last = None
     for _ in range(int(limit_s / 0.5)):
         got = await _call(client, name, "ARM_JNTP")
         assert got.state is C, got.reason
         q = np.asarray(from_data(got.data), dtype=float).reshape(-1)
-        if last is not None and np.allclose(q, last, rtol=0.0, atol=1e-6):
+        if last is not None and np.allclose(q, last, rtol=0.0, atol=0.01):
             return
         last = q
         await asyncio.sleep(0.5)
