@@ -12,6 +12,7 @@ never read by a service.
 from __future__ import annotations
 
 import threading
+import time
 from typing import Any
 
 import numpy as np
@@ -31,7 +32,8 @@ class FlangeSMRs:
     robot's flange (centres ``smr_offset`` above the face), following the robot."""
 
     def __init__(self, cell: str, robot: str, true_probe: np.ndarray,
-                 smr_offset: float = SMR_RADIUS_HALF_INCH) -> None:
+                 smr_offset: float = SMR_RADIUS_HALF_INCH,
+                 ready_timeout_s: float = 30.0) -> None:
         self.robot = robot
         self._probe_inv = np.linalg.inv(np.asarray(true_probe, dtype=float))
         self._holes = [np.r_[h[:2], h[2] + smr_offset] for h in DOWEL_HOLES]
@@ -42,6 +44,23 @@ class FlangeSMRs:
                       for i in range(len(self._holes))]
         self.moves = 0
         self._view = WorldView(bus, on_change=self._moved)
+        self._wait_for_robot(ready_timeout_s)
+
+    def _wait_for_robot(self, timeout_s: float) -> None:
+        """Return once the SMRs sit on the robot's flange.  A session opened just now
+        may not have met the robot's yet (peer discovery takes a while on a loaded
+        machine): the view's first look at the world then finds nobody, and a robot pose
+        published before the robot's session learns of our subscriber is lost — the
+        tracker would be aimed at a dowel hole with no SMR in it (CI run 20: "nearest:
+        H4, 119.1 mm off the axis").  A reply from the robot proves both sessions met, and
+        our subscriber was declared before the query on that link."""
+        deadline = time.monotonic() + timeout_s
+        while self._view.get(self.robot) is None:
+            if time.monotonic() > deadline:
+                self.close()
+                raise TimeoutError(f"robot {self.robot}'s reflector not seen in the cell "
+                                   f"within {timeout_s:g} s: no flange to put the SMRs on")
+            time.sleep(0.1)
 
     def _moved(self, state: ReflectorState) -> None:
         if state.name != self.robot:
