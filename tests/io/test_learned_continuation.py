@@ -9,6 +9,7 @@ plant, the tracker's noise seeded per run (what ``plugcell path run --learned FI
 from __future__ import annotations
 
 import dataclasses
+import json
 
 import numpy as np
 import pytest
@@ -19,7 +20,14 @@ from plugcell.compensation.tracking.learning import (
     LearningSettings,
 )
 from plugcell.compensation.tracking.plant import ModalPlant
-from plugcell.io.learned_paths import LearnedContext, LearnedFile, load_learned, save_learned
+from plugcell.io.json_fields import strict
+from plugcell.io.learned_paths import (
+    LearnedContext,
+    LearnedFile,
+    LearnedFileError,
+    load_learned,
+    save_learned,
+)
 
 T = 0.004
 J = np.array([[1.0, 0.3, 0.1], [-0.2, 0.9, 0.2], [0.1, -0.1, 1.1]])
@@ -92,3 +100,49 @@ def test_a_continued_file_goes_on_as_the_uninterrupted_learning(tmp_path):
     for k in range(3, 6):
         run(v2, k)
     assert np.abs(v2.u - whole.u).max() > 1e-7
+
+
+@pytest.mark.slow  # three identifications of the plant (≈ 6 s)
+def test_a_file_saved_before_its_identifying_run_goes_on_with_the_identification(tmp_path):
+    """A robot program's tracked move learns one run a program run: its file is saved
+    after the first update, whose offset carries the excitation — the next program run is
+    the identifying run, the identification's reference the run before it."""
+    whole = IterativeLearning(1.0, SETTINGS)
+    run(whole, 0)
+    assert whole.identifying_next and whole.plant is None
+    save_learned(tmp_path / "l.json", LearnedFile(CONTEXT, whole, []))
+    doc_state = load_learned(tmp_path / "l.json").document()["inverse"]["state"]
+    assert doc_state["identifying"] is not None and doc_state["excited"] is None
+    part = load_learned(tmp_path / "l.json").continued()
+    assert part.identifying_next and part.plant is None
+    np.testing.assert_allclose(part.u, whole.u, rtol=0, atol=1e-11)  # with the excitation
+    for k in range(1, 4):
+        run(whole, k)
+        run(part, k)
+        np.testing.assert_allclose(part.u, whole.u, rtol=0, atol=1e-11)
+        for name in ("head", "frequency_hz", "damping", "residues"):
+            np.testing.assert_allclose(getattr(part.plant, name), getattr(whole.plant, name),
+                                       rtol=1e-5, atol=1e-10)
+    assert [h["law"] for h in part.history] == ["inverse"] * 3
+    assert not part.identifying_next and part.inverse_state().identifying is None
+    # without the run before it, the file cannot be continued by the inverse law
+    doc = load_learned(tmp_path / "l.json").document()
+    doc["inverse"]["state"]["identifying"] = None
+    (tmp_path / "m.json").write_text(json.dumps(strict(doc)))
+    with pytest.raises(ValueError, match="no identifying run ahead"):
+        load_learned(tmp_path / "m.json").continued()
+
+
+def test_the_run_before_the_identifying_one_is_refused_beside_an_identified_state(tmp_path):
+    whole = IterativeLearning(1.0, SETTINGS)
+    run(whole, 0)
+    doc = LearnedFile(CONTEXT, whole, []).document()
+    doc["inverse"]["state"]["excited"] = doc["inverse"]["state"]["identifying"]
+    (tmp_path / "x.json").write_text(json.dumps(strict(doc)))
+    with pytest.raises(LearnedFileError, match=r"inverse\.state\.identifying: the run before"):
+        load_learned(tmp_path / "x.json")
+    doc["inverse"]["state"]["excited"] = None
+    doc["inverse"]["state"]["identifying"]["measured"] = "01"
+    (tmp_path / "y.json").write_text(json.dumps(strict(doc)))
+    with pytest.raises(LearnedFileError, match=r"inverse\.state\.identifying\.measured"):
+        load_learned(tmp_path / "y.json")

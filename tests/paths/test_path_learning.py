@@ -92,7 +92,8 @@ def test_a_continued_learning_judges_its_runs_against_the_files_best_run(tmp_pat
     (("--learn-law", "inverse"), "--learn-law needs --learn N: it is the law of a learning"),
     (("--learn", "1", "--learn-law", "inverse"), "--learn-law inverse needs --learn N ≥ 2, "
      "got 1: the first run's update adds a known excitation, the second run identifies the "
-     "plant from it"),
+     "plant from it (or keep the learning with --learned-out FILE and go on with --learned "
+     "FILE --learn N)"),
     (("--learn", "2", "--learn-law", "q"), "--learn-law: invalid choice: 'q'"),
     (("--learn", "2", "--weighting", "none"), "--inverse-reidentify/--weighting set up the "
      "inverse law of a new learning (--learn N --learn-law inverse without --learned"),
@@ -202,7 +203,7 @@ def test_learning_runs_get_better_save_and_reuse_the_correction(tmp_path):
 
 
 @pytest.mark.slow
-@pytest.mark.timeout(1200)  # nine runs of the path, two laws
+@pytest.mark.timeout(1200)  # ten runs of the path, two laws
 def test_the_inverse_law_learns_and_its_file_is_continued_as_inverse(tmp_path):
     (tmp_path / "p.csv").write_text(PATH)
     out = _cli("--path", "p.csv", "--learn", "3", "--learn-law", "inverse", "--learned-out",
@@ -232,15 +233,25 @@ def test_the_inverse_law_learns_and_its_file_is_continued_as_inverse(tmp_path):
     assert again["inverse"]["state"]["pairs"][:2] == state["pairs"]
     assert len(again["inverse"]["state"]["pairs"]) == 3
     assert again["inverse"]["steps"] == saved["inverse"]["steps"] + 1
-    # the old law on request: identified once, all of the error learned — a continued
-    # file keeps its plant
-    old = _cli("--path", "p.csv", "--learn", "2", "--learn-law", "inverse",
+    # the old law on request: identified once, all of the error learned; one run a
+    # session: the file saved before its identifying run keeps the run before it, the
+    # next session identifies the plant, and a continued file keeps its plant
+    old = _cli("--path", "p.csv", "--learn", "1", "--learn-law", "inverse",
                "--inverse-reidentify", "0", "--weighting", "none", "--learned-out",
                "o.json", "--json", cwd=tmp_path)
     assert old.returncode == 0, old.stderr
-    first = json.loads((tmp_path / "o.json").read_text())
-    assert first["inverse"]["weighting"] is None
-    assert _cli("--path", "p.csv", "--learned", "o.json", "--learn", "1", "--learned-out",
+    zeroth = json.loads((tmp_path / "o.json").read_text())
+    assert zeroth["inverse"]["weighting"] is None and zeroth["inverse"]["plant"] is None
+    assert zeroth["inverse"]["state"]["identifying"] is not None
+    ident = _cli("--path", "p.csv", "--learned", "o.json", "--learn", "1", "--learned-out",
+                 "o1.json", "--json", cwd=tmp_path)
+    assert ident.returncode == 0, ident.stderr
+    assert json.loads(ident.stdout)["runs"][0]["reason"] == \
+        "the identifying run (excitation): not judged"
+    first = json.loads((tmp_path / "o1.json").read_text())
+    assert first["inverse"]["plant"]["frequency_hz"]
+    assert first["inverse"]["state"]["identifying"] is None
+    assert _cli("--path", "p.csv", "--learned", "o1.json", "--learn", "1", "--learned-out",
                 "o2.json", cwd=tmp_path).returncode == 0
     second = json.loads((tmp_path / "o2.json").read_text())
     assert second["inverse"]["plant"] == first["inverse"]["plant"]

@@ -223,3 +223,62 @@ def test_a_move_continues_an_inverse_law_file_with_its_state(tmp_path):
     assert saved.learning.inverse_steps == 2
     doc = json.loads((tmp_path / f"{key}.json").read_text())
     assert doc["format_version"] == 3 and doc["inverse"]["weighting"] is not None
+
+
+@pytest.mark.slow  # two identifications of the plant (≈ 5 s)
+def test_a_service_learning_by_the_inverse_law_identifies_in_its_second_program_run(tmp_path):
+    """``--param learning_law=inverse``: a new file starts the inverse law; the first
+    program run's update adds the identifying excitation and the file keeps the run
+    before it, so the second program run — a new session, read from the file — is the
+    identifying run (learned from, not judged), and the third learns by the inverse of
+    the identified plant."""
+    from plugcell.compensation.tracking.plant import ModalPlant
+    from plugcell.io.learned_paths import load_learned
+
+    T = 0.004
+    head = np.zeros((4, 3, 3))
+    head[2] = 0.5 * np.eye(3)
+    true = ModalPlant(T, head, np.array([10.0]), np.array([0.05]),
+                      np.array([[0.05 * np.eye(3), -0.03 * np.eye(3)]]))
+    ml = MoveLearning(tmp_path, "smart_h4", law="inverse")
+    start, end = np.eye(4), np.eye(4)
+    start[:3, 3], end[:3, 3] = [1.4, -0.2, 2.4], [1.4, 0.0, 2.4]
+    path_t = np.linspace(0.0, 1.0, 251)
+    path_p = np.outer(1 - path_t, start[:3, 3]) + np.outer(path_t, end[:3, 3])
+    t = np.arange(0.0, 1.0, 0.001)
+    lines, laws = [], []
+    for run in (1, 2, 3):
+        session = ml.begin(ml.key("line", run), start, end, 1.0, np.eye(4), 36.0, T)
+        lr = session.repeated.learning
+        assert lr.settings.inverse is not None
+        assert lr.identifying_next == (run == 2)
+        # the arm: the path, its repeating error and its answer to the learned offset
+        arm = true.simulate(lr.u)
+        rng = np.random.default_rng(run)
+        p = np.column_stack([np.interp(t, path_t, path_p[:, i]) + np.interp(t, lr.grid, arm[:, i])
+                             for i in range(3)])
+        p[:, 0] += 3e-5 * np.sin(2 * np.pi * t)
+        p += 1e-6 * rng.standard_normal(p.shape)
+        lines.append(session.finish(t, p, path_t, path_p, 0.0))
+        laws.append(session.repeated.records[-1].law)
+        saved = load_learned(tmp_path / "line.1.json")
+        assert (saved.learning.plant is None) == (run == 1)
+        assert (saved.learning.inverse_state().identifying is not None) == (run == 1)
+    assert "the identifying run (excitation): not judged" in lines[1], lines
+    assert laws == ["p", "inverse", "inverse"], laws
+    assert [r["verdict"] for r in saved.runs] == ["learned", "learned", "learned"] or \
+        saved.runs[2]["verdict"] == "converged", saved.runs
+
+
+def test_the_service_refuses_an_unknown_learning_law_or_one_without_a_folder(tmp_path):
+    from plugcell.devices.robot.service import RobotService
+
+    with pytest.raises(ValueError, match="learning_law must be one of p, inverse, got 'ilc'"):
+        MoveLearning(tmp_path, "smart_h4", law="ilc")
+    with pytest.raises(ValueError, match="learning_law must be one of p, inverse, got 'ilc'"):
+        RobotService(rsi="127.0.0.1:49152", learned_dir=str(tmp_path), learning_law="ilc")
+    with pytest.raises(ValueError, match="learning_law=inverse needs learned_dir=DIR"):
+        RobotService(rsi="127.0.0.1:49152", learning_law="inverse")
+    link = RobotService(rsi="127.0.0.1:49152", learned_dir=str(tmp_path),
+                        learning_law="inverse").bridge
+    assert link.move_learning is not None and link.move_learning.law == "inverse"

@@ -39,10 +39,12 @@ on differs::
   so that the learning goes on by the inverse law (:meth:`LearnedFile.continued`);
   version 3 adds the weighting's settings and state and the re-identification's runs
   (:mod:`plugcell.io.learned_state`): a file continued goes on exactly as the learning
-  saved would have.  A version-2 file of the inverse law is read with no weighting (its
-  law learned all of the error) and goes on without re-identifying.  A
-  version-1 file (or one saved before the plant was identified) keeps no plant: its
-  offset can be fed forward and continued by the P-type law, not by the inverse law;
+  saved would have — also one saved after its first update, before the identifying run
+  (``state.identifying``: the run before it).  A version-2 file of the inverse law is
+  read with no weighting (its law learned all of the error) and goes on without
+  re-identifying.  A version-1 file (or a version-2 one saved before the plant was
+  identified) keeps no plant: its offset can be fed forward and continued by the P-type
+  law, not by the inverse law;
 * ``best`` (version 2, optional) — the stop rule's best run so far: its measured rms and
   the offset it ran with (:attr:`~plugcell.compensation.tracking.repeat.RepeatedLearning.best`),
   so that a learning run once a session (a robot program's tracked move) judges its next
@@ -293,10 +295,11 @@ class LearnedFile:
         if self.law == "p":
             raise ValueError("it was learned with the P-type law: the inverse law starts "
                              "with an identifying run of its own (start anew)")
-        if lr.plant is None or lr.settings.inverse is None:
+        if lr.settings.inverse is None or (lr.plant is None and not lr.identifying_next):
             raise ValueError("it was learned with the inverse law but holds no identified "
-                             "plant (saved before the identifying run was learned from, or "
-                             "format version 1): continue it by the P-type law or start anew")
+                             "plant and no identifying run ahead (format version 1, or saved "
+                             "by a plugcell that did not keep the run before the identifying "
+                             "one): continue it by the P-type law or start anew")
         return lr
 
 
@@ -457,8 +460,11 @@ def _learning(doc: dict[str, Any], ctx: LearnedContext, law: str,
         raise DocumentError(f"settings: {exc}") from None
     state = None if version < 3 or settings.inverse is None else \
         read_state(at(doc, "inverse", "state"), learning)
-    if plant is not None:
-        learning.resume_inverse(steps, scale, state)
+    if plant is not None or (state is not None and state.identifying is not None):
+        try:
+            learning.resume_inverse(steps, scale, state)
+        except ValueError as exc:
+            raise DocumentError(f"inverse: {exc}") from None
     return learning
 
 

@@ -12,7 +12,14 @@ learning.InverseState`).  Inside ``"inverse"`` of :mod:`plugcell.io.learned_path
       "pairs": [{"du_m": […G], "de_m": […G], "mask": "0111…1"}, …],
       "supervisor": null | {"rms_m": 2.1e-05, "u_m": […G], "e_m": […G]},
       "weighting": {"prior": null | [S_j…] | [[S…]…], "noise": null | N,
-                    "history": [{"noise": N, "mean_gain": K̄, "rematched": r}, …]}}
+                    "history": [{"noise": N, "mean_gain": K̄, "rematched": r}, …]},
+      "identifying": null | {"u_m": […G], "e_m": […G], "measured": "0111…1"}}
+
+``identifying`` (optional, absent is null) is the run before the identifying run while
+that run is still ahead — a learning saved after its first update (whose offset carries
+the excitation) goes on with the identification exactly (a robot program's tracked move
+learns one run a program run).  A plugcell that does not know the key finds no plant in
+such a file and refuses to continue it by the inverse law, so the format stays version 3.
 
 Why the runs themselves and not sufficient statistics: the identification
 (:func:`~plugcell.compensation.tracking.plant.identify_plant`) searches the modes
@@ -141,7 +148,8 @@ def state_document(learning: IterativeLearning) -> dict[str, Any]:
     dict
         The state's document: the excited run and the pairs of runs (offsets and errors
         (G, 3) in m, masks as strings of ``G`` characters 0/1), the weighting's
-        ``S_j``/``N`` and the supervisor's best run.
+        ``S_j``/``N``, the supervisor's best run and, before the identification, the run
+        before the identifying one.
 
     Raises
     ------
@@ -150,7 +158,8 @@ def state_document(learning: IterativeLearning) -> dict[str, Any]:
     """
     s = learning.inverse_state()
     G = learning.grid.size
-    rows = G * ((s.excited is not None) + len(s.pairs) + 2 * (s.best is not None))
+    rows = G * ((s.excited is not None) + len(s.pairs) + 2 * (s.best is not None)
+                + (s.identifying is not None))
     if rows > MAX_STATE_CYCLES:
         raise ValueError(f"the inverse law's state holds {len(s.pairs)} pairs of runs of "
                          f"{G} cycles ({rows} rows); a learned file holds at most "
@@ -162,7 +171,9 @@ def state_document(learning: IterativeLearning) -> dict[str, Any]:
         "supervisor": None if s.best is None else {
             "rms_m": s.best[0], "u_m": s.best[1].tolist(), "e_m": s.best[2].tolist()},
         "weighting": {"prior": None if s.prior is None else s.prior.tolist(),
-                      "noise": s.noise, "history": s.weighting_history}}
+                      "noise": s.noise, "history": s.weighting_history},
+        "identifying": None if s.identifying is None else _run(*s.identifying,
+                                                                ("u_m", "e_m", "measured"))}
 
 
 def _rows(x: Any, label: str, n: int) -> Array:
@@ -301,4 +312,11 @@ def read_state(doc: Any, learning: IterativeLearning, label: str = "inverse.stat
     prior, noise, history = _read_weighting_state(_get(doc, "weighting", label),
                                                   f"{label}.weighting",
                                                   learning.prior_shape())
-    return InverseState(excited, read, best, prior, noise, history)
+    raw = doc.get("identifying")
+    identifying = None if raw is None else _read_run(raw, f"{label}.identifying", G,
+                                                     ("u_m", "e_m", "measured"))
+    if identifying is not None and (excited is not None or read or best is not None):
+        raise DocumentError(f"{label}.identifying: the run before the identifying one in a "
+                            "learning that has identified its plant (excited, pairs or "
+                            "supervisor set)")
+    return InverseState(excited, read, best, prior, noise, history, identifying)

@@ -88,10 +88,12 @@ def wants_learning(args: argparse.Namespace) -> bool:
                            "learning continued from a file keeps its settings)")
     if args.learn_law is not None and args.learn is None:
         raise CommandError("--learn-law needs --learn N: it is the law of a learning")
-    if args.learn_law == "inverse" and args.learned is None and args.learn < 2:
+    if args.learn_law == "inverse" and args.learned is None and args.learn < 2 \
+            and args.learned_out is None:
         raise CommandError(f"--learn-law inverse needs --learn N ≥ 2, got {args.learn}: the "
                            "first run's update adds a known excitation, the second run "
-                           "identifies the plant from it")
+                           "identifies the plant from it (or keep the learning with "
+                           "--learned-out FILE and go on with --learned FILE --learn N)")
     return args.learn is not None or args.learned is not None
 
 

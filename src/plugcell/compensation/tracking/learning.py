@@ -493,6 +493,11 @@ class InverseState:
         The weighting's last ``N`` (NaN: none yet).
     weighting_history : list of dict
         The weighting's per-update figures (``noise``, ``mean_gain``, ``rematched``).
+    identifying : ((G, 3), (G, 3), (G,) bool) arrays or None
+        Before the identification, while the next run carries the excitation: the run
+        before it — its offset ``u_a``, measured error ``e_a`` and measured cycles, the
+        reference of the identifying pair ``e_x − e_a = P (u_x − u_a)`` and the run the
+        first update by (3) starts from (class docstring); None otherwise.
     """
 
     excited: tuple[Array, Array, Array] | None = None
@@ -501,6 +506,7 @@ class InverseState:
     prior: Array | None = None
     noise: float = math.nan
     weighting_history: list[dict[str, float]] = field(default_factory=list)
+    identifying: tuple[Array, Array, Array] | None = None
 
 
 #: The most cycles a learning's grid may have (its offset, window and FFT buffers are
@@ -623,22 +629,36 @@ class IterativeLearning:
         """The factor on ``β`` after the supervisor's back-offs (1: none)."""
         return self._beta_scale
 
+    @property
+    def identifying_next(self) -> bool:
+        """True while the next run carries the identifying excitation (law (3) before
+        its plant is identified): that run is learned from, not judged."""
+        return self.plant is None and self._excitation is not None
+
     def resume_inverse(self, steps: int, regularisation_scale: float,
                        state: InverseState | None = None) -> None:
         """Go on with the law (3) of a saved learning: its updates by (3) so far, ``β``'s
         factor and (``state``, :meth:`inverse_state` of the learning saved) the
         re-identification's runs, the supervisor's best run and the weighting's state —
         with it the learning goes on exactly as the saved one would (:attr:`plant` given
-        to the constructor); without it those start anew.
+        to the constructor); without it those start anew.  A learning saved between its
+        first update and the identifying run (no plant yet, ``state.identifying``) goes
+        on with that run: its offset (:attr:`u`, set by the caller) carries the
+        excitation, and the run before it is the identification's reference.
 
         Raises
         ------
         ValueError
-            No law (3) or plant, or a state that does not fit this learning (why).
+            No law (3), no plant and no identifying run ahead, or a state that does not
+            fit this learning (why).
         """
-        if self.plant is None or self.settings.inverse is None:
-            raise ValueError("IterativeLearning.resume_inverse: needs settings.inverse and "
-                             "an identified plant")
+        if self.settings.inverse is None:
+            raise ValueError("IterativeLearning.resume_inverse: needs settings.inverse")
+        ahead = state is not None and state.identifying is not None
+        if (self.plant is None) != ahead:
+            raise ValueError("IterativeLearning.resume_inverse: needs an identified plant, "
+                             "or — before the identification — the run before the "
+                             "identifying one (state.identifying), not both")
         if not (steps >= 0 and regularisation_scale >= 1):
             raise ValueError(f"IterativeLearning.resume_inverse: steps ≥ 0 and a scale ≥ 1, "
                              f"got {steps!r} and {regularisation_scale!r}")
@@ -658,7 +678,9 @@ class IterativeLearning:
                                                  self._best[2].copy()),
             prior=None if w is None or w.prior is None else w.prior.copy(),
             noise=math.nan if w is None else w.noise,
-            weighting_history=[] if w is None else [dict(h) for h in w.history])
+            weighting_history=[] if w is None else [dict(h) for h in w.history],
+            identifying=None if not self.identifying_next or self._last is None else
+            tuple(x.copy() for x in self._last))  # type: ignore[arg-type]
 
     def prior_shape(self) -> tuple[int, ...] | None:
         """The shape of the weighting's ``S_j`` for this learning's grid (None: no
@@ -673,7 +695,8 @@ class IterativeLearning:
     def _restore(self, state: InverseState) -> None:
         """:meth:`resume_inverse`'s ``state``, checked against the grid and settings."""
         G, who = self.grid.size, "IterativeLearning.resume_inverse"
-        runs = ([] if state.excited is None else [state.excited]) + list(state.pairs)
+        runs = ([] if state.excited is None else [state.excited]) + list(state.pairs) + (
+            [] if state.identifying is None else [state.identifying])
         for r in runs:
             if len(r) != 3 or np.shape(r[0]) != (G, 3) or np.shape(r[1]) != (G, 3) \
                     or np.shape(r[2]) != (G,):
@@ -697,6 +720,11 @@ class IterativeLearning:
         self._best = None if state.best is None else (
             float(state.best[0]), np.asarray(state.best[1], float).copy(),
             np.asarray(state.best[2], float).copy())
+        if state.identifying is not None:
+            u_a, e_a, m_a = state.identifying
+            self._last = (np.asarray(u_a, float).copy(), np.asarray(e_a, float).copy(),
+                          np.asarray(m_a, bool).copy())
+            self._excitation = self._identifying_excitation()
         if self._weighting is not None:
             self._weighting.prior = None if state.prior is None else \
                 np.asarray(state.prior, float).copy()
@@ -834,12 +862,19 @@ class IterativeLearning:
             "excited": 0.0})
         u = self.step(learn_from)
         if inv is not None and self.plant is None:
-            x = excitation(self.grid.size, self.settings.cycle_s, inv.excitation_m,
-                           (inv.excitation_low_hz, inv.excitation_high_hz), inv.seed)
-            self._excitation = x * self._window[:, None]
+            self._excitation = self._identifying_excitation()
             self.u = u = self.u + self._excitation
             self.history[-1]["excited"] = 1.0
         return u.copy()
+
+    def _identifying_excitation(self) -> Array:
+        """The identifying run's excitation (:func:`.plant.excitation`, seeded), windowed
+        by ``W`` (G, 3), m."""
+        inv = self.settings.inverse
+        assert inv is not None
+        x = excitation(self.grid.size, self.settings.cycle_s, inv.excitation_m,
+                       (inv.excitation_low_hz, inv.excitation_high_hz), inv.seed)
+        return x * self._window[:, None]
 
     def _reidentify(self, applied: Array, err: Array, meas: Array) -> None:
         """The plant again, from the excited run's open-loop pairs and this run's (class

@@ -225,7 +225,7 @@ class RepeatedLearning:
             return self._record(run, rms, peak, share, math.nan, "not learned",
                                 f"the tracker measured {100 * share:.0f} % of the motion "
                                 f"(less than {100 * rule.min_measured:.0f} %)")
-        if lr.history and lr.history[-1]["excited"] == 1.0:  # the run carried it
+        if lr.identifying_next:  # the run carried the excitation
             before = lr.u.copy()
             lr.update(sample_t, sample_p, path_t, path_p, start_s)
             self._seen |= seen

@@ -18,8 +18,14 @@ runs of a program, one run of each tracked move per program run:
   (``nominal`` or the SHA-256 of its PARAMS.json), the loop and the reflector, the
   motion's duration — a file learned for anything else fails the move with the first
   difference, and the program stops at that line; a file that cannot be read fails it
-  with the cause.  A new file starts the P-type law
-  (:data:`~plugcell.compensation.tracking.repeat.LEARNING` at the link's cycle); a file
+  with the cause.  A new file starts the service's law (``--param learning_law``):
+  ``p``, the P-type law (:data:`~plugcell.compensation.tracking.repeat.LEARNING` at the
+  link's cycle; the default), or ``inverse``, the model-inverting law with its defaults
+  (:class:`~plugcell.compensation.tracking.learning.InverseSettings`: the first program
+  run's update adds the identifying excitation, the second run carries it — its error
+  is larger than the model's, the price of the identification — and from the third run
+  on the plant is inverted; the file keeps the run before the identifying one, so the
+  identification happens in the next program run); a file
   continues by its own law (an inverse-law file with its plant and — format version 3 —
   the weighting's state and the re-identification's runs, so that it goes on as an
   uninterrupted learning would; :meth:`~plugcell.io.learned_paths.LearnedFile.continued`),
@@ -48,9 +54,14 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from plugcell.compensation.tracking.learning import IterativeLearning, LearnedOffset
+from plugcell.compensation.tracking.learning import (
+    InverseSettings,
+    IterativeLearning,
+    LearnedOffset,
+)
 from plugcell.compensation.tracking.repeat import LEARNING, RepeatedLearning, StopRule
 from plugcell.io.learned_paths import (
+    LAWS,
     LearnedContext,
     LearnedFile,
     LearnedFileError,
@@ -188,10 +199,21 @@ class MoveLearning:
         The calibration's learned residual layer is part of the loop's model.
     rule : StopRule, optional
         When the learning ends (``path run``'s defaults).
+    law : {"p", "inverse"}
+        The law of a new file (module docstring); a file goes on by its own.
+
+    Raises
+    ------
+    ValueError
+        An unknown law.
     """
 
     def __init__(self, folder: str | Path, robot: str, calibration: str = "nominal",
-                 residual_layer: bool = False, rule: StopRule | None = None) -> None:
+                 residual_layer: bool = False, rule: StopRule | None = None,
+                 law: str = "p") -> None:
+        if law not in LAWS:
+            raise ValueError(f"learning_law must be one of {', '.join(LAWS)}, got {law!r}")
+        self.law = law
         self.folder = Path(folder)
         self.robot, self.calibration, self.residual_layer = robot, calibration, residual_layer
         self.rule = rule or StopRule()
@@ -249,7 +271,9 @@ class MoveLearning:
         file = self.folder / f"{key}.json"
         if not file.exists():
             self.folder.mkdir(parents=True, exist_ok=True)
-            settings = dataclasses.replace(LEARNING, cycle_s=cycle_s)
+            settings = dataclasses.replace(
+                LEARNING, cycle_s=cycle_s,
+                inverse=InverseSettings() if self.law == "inverse" else None)
             return MoveSession(file, ctx, RepeatedLearning(
                 IterativeLearning(duration_s, settings), self.rule))
         try:

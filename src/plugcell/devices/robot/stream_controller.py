@@ -251,6 +251,8 @@ class StreamController:
     learned_dir : str
         Where the tracked moves' learned corrections are (:mod:`.move_learning`: each
         tracked move of a program learns across the program's runs); empty: none learns.
+    learning_law : {"p", "inverse"}
+        The law a new learned correction starts with (:class:`~.move_learning.MoveLearning`).
 
     Raises
     ------
@@ -263,7 +265,7 @@ class StreamController:
                  library: Sequence[Path] = (), name: str = "ROBOT",
                  process: bool = True, correct_max: tuple[float, float] = (5.0, 1.0),
                  calibration: str = "", realtime: RealTime | None = None,
-                 learned_dir: str = "") -> None:
+                 learned_dir: str = "", learning_law: str = "p") -> None:
         self.vendor = config.vendor
         if description.n_readings != 6:
             raise ValueError(f"{self.vendor} streams six axes; {description.name} has "
@@ -282,7 +284,7 @@ class StreamController:
             learned_dir, description.name,
             f"sha256:{hashlib.sha256(Path(calibration).read_bytes()).hexdigest()}"
             if calibration else "nominal",
-            getattr(self.calibration, "residual_model", None) is not None
+            getattr(self.calibration, "residual_model", None) is not None, law=learning_law
         ) if learned_dir else None
         self.corrector: Corrector | CorrectorClient
         if process:

@@ -41,6 +41,7 @@ from plugcell.devices.robot.stream_controller import (
     robot_endpoint,
     streaming_limits,
 )
+from plugcell.io.learned_paths import LAWS
 from plugcell.io.robots import load_robot
 
 __all__ = ["STREAM_PARAMS", "streamed_link"]
@@ -51,7 +52,16 @@ STREAM_PARAMS: dict[str, Callable[[str], Any]] = {
     "rsi_frame": str, "egm": str, "egm_robot": str, "egm_timeout": float, "egm_mode": str,
     "stream_process": flag, "joint_speed": float, "tcp_speed": float,
     "correct_max_mm": float, "correct_max_deg": float, "calibration": str, "learned_dir": str,
-    "stream_rt_priority": int, "stream_cpu": str, "stream_mlock": flag}
+    "learning_law": str, "stream_rt_priority": int, "stream_cpu": str, "stream_mlock": flag}
+
+
+def _check_learning(learned_dir: str, learning_law: str) -> None:
+    """Refuse an unknown learning law, or one without a folder to learn into."""
+    if learning_law not in LAWS:
+        raise ValueError(f"learning_law must be one of {', '.join(LAWS)}, got {learning_law!r}")
+    if learning_law != "p" and not learned_dir:
+        raise ValueError(f"learning_law={learning_law} needs learned_dir=DIR: nothing is "
+                         "learned without it")
 
 
 def _check_streams(rsi: str, rsi_robot: str, egm: str, egm_robot: str) -> None:
@@ -83,13 +93,13 @@ def _endpoints(option: str, listen: str, address: str) -> dict[str, Any]:
 def streamed_link(handler: BridgeHandler, *, robot: str, library: Sequence[Path], name: str,
                   rsi: str = "", rsi_robot: str = "", rsi_timeout: int = 100,
                   rsi_correction: str = "joint", rsi_mode: str = "absolute",
-                  rsi_frame: str = "base", egm: str = "",
-                  egm_robot: str = "", egm_timeout: float = 1.0, egm_mode: str = "joint",
-                  joint_speed: float = 20.0, tcp_speed: float = 100.0,
-                  stream_process: bool = True, correct_max_mm: float = 5.0,
-                  correct_max_deg: float = 1.0, calibration: str = "",
-                  stream_rt_priority: int | None = None, stream_cpu: str = "",
-                  stream_mlock: bool = False, learned_dir: str = "") -> StreamController | None:
+                  rsi_frame: str = "base", egm: str = "", egm_robot: str = "",
+                  egm_timeout: float = 1.0, egm_mode: str = "joint", joint_speed: float = 20.0,
+                  tcp_speed: float = 100.0, stream_process: bool = True,
+                  correct_max_mm: float = 5.0, correct_max_deg: float = 1.0,
+                  calibration: str = "", stream_rt_priority: int | None = None,
+                  stream_cpu: str = "", stream_mlock: bool = False, learned_dir: str = "",
+                  learning_law: str = "p") -> StreamController | None:
     """The streamed robot's controller the options ask for, or ``None`` (none asked).
 
     Parameters
@@ -122,14 +132,14 @@ def streamed_link(handler: BridgeHandler, *, robot: str, library: Sequence[Path]
         The largest correction ``CORRECT`` superimposes, per axis (mm; degrees of a
         rotation or a joint).
     calibration : str
-        The robot's calibration (PARAMS.json): the model of the tracked moves (``MOVE
-        LINEAR TO p WITH TRACKING``); empty: the nominal model.
+        The tracked moves' model, the robot's PARAMS.json (empty: the nominal model).
     stream_rt_priority, stream_cpu, stream_mlock
         The cycle loop's scheduling (:class:`~.stream.realtime.RealTime`): its thread under
         ``SCHED_FIFO`` at this priority (1..99), the link's process (or thread) on these
         CPUs (``taskset -c`` syntax: ``1``, ``2-3``), its memory locked (``mlockall``).
-    learned_dir : str
-        The tracked moves' learned corrections (:mod:`~.move_learning`); empty: none.
+    learned_dir, learning_law : str
+        The tracked moves' learned corrections (:mod:`~.move_learning`; empty: none) and
+        the law a new one starts with, ``p`` (the default) or ``inverse``.
 
     Returns
     -------
@@ -140,9 +150,10 @@ def streamed_link(handler: BridgeHandler, *, robot: str, library: Sequence[Path]
     ------
     ValueError
         Both streams, a controller address without its stream, a bad address, limit,
-        timeout, robot, calibration, priority or CPU list: the reason.
+        timeout, robot, calibration, priority, CPU list or learning law: the reason.
     """
     _check_streams(rsi, rsi_robot, egm, egm_robot)
+    _check_learning(learned_dir, learning_law)
     if not (rsi or egm):
         return None
     joint, cart = planner_limits(joint_speed, tcp_speed)
@@ -156,7 +167,6 @@ def streamed_link(handler: BridgeHandler, *, robot: str, library: Sequence[Path]
         config = dataclasses.replace(config, limits=streaming_limits(joint, config.cycle_s))
     _check_correction_limits(correct_max_mm, correct_max_deg)
     return StreamController(handler, config, load_robot(robot), robot, joint, cart, library,
-                            name, stream_process, (correct_max_mm, correct_max_deg),
-                            calibration,
+                            name, stream_process, (correct_max_mm, correct_max_deg), calibration,
                             stream_realtime(stream_rt_priority, stream_cpu, stream_mlock),
-                            learned_dir)
+                            learned_dir, learning_law)
