@@ -101,7 +101,6 @@ from plugcell.devices.robot.protocol import (
     parse_fields,
     parse_numbers,
 )
-from plugcell.devices.robot.stream_controller import StreamController
 from plugcell.devices.robot.streamed import STREAM_PARAMS, streamed_link
 from plugcell.framework.declaration import Declaration
 from plugcell.framework.messages import Command, CommandTypes, ConnectionStates, DataTypes
@@ -243,6 +242,7 @@ class RobotService:
         # programs (line protocol), or the programs on the PC streaming over RSI or EGM
         streamed = streamed_link(self, robot=robot, library=self.library,
                                  name=self.declaration.name(), **stream)
+        self.streamed = streamed
         self.bridge: RobotLink = streamed or ControllerBridge(self)
         self.corrections = PathCorrections(streamed, robot)  # mode (b): CORRECT …
         if sim and launcher is None:
@@ -259,10 +259,10 @@ class RobotService:
 
     def bind(self, service: GenericDevice) -> None:
         self.service = service
-        if isinstance(self.bridge, StreamController):  # the UI's device panel shows it
-            self.bridge.name = service.name
+        if self.streamed is not None:  # the UI's device panel shows its link
+            self.streamed.name = service.name
             service.device.info = (f"{service.declaration.info} Robot link: "
-                                   f"{self.bridge.describe()}.")
+                                   f"{self.streamed.describe()}.")
 
     @property
     def host(self) -> GenericDevice:
