@@ -33,6 +33,7 @@ from __future__ import annotations
 import dataclasses
 from collections.abc import Callable, Sequence
 from pathlib import Path
+from types import ModuleType
 from typing import TYPE_CHECKING, Any
 
 from plugcell.devices.params import flag
@@ -86,13 +87,18 @@ def _check_correction_limits(correct_max_mm: float, correct_max_deg: float) -> N
             raise ValueError(f"{what} must be a positive number, not {v}")
 
 
+def _stream_controller() -> ModuleType:
+    """:mod:`.stream_controller`, imported on first use (module docstring)."""
+    import plugcell.devices.robot.stream_controller as module
+
+    return module
+
+
 def _endpoints(option: str, listen: str, address: str) -> dict[str, Any]:
     """The link's ``listen_host``/``listen_port`` and the controller's ``robot_host``/
     ``robot_port`` of the ``rsi``/``egm`` options ``listen`` and ``address``."""
-    from plugcell.devices.robot.stream_controller import robot_endpoint  # module docstring
-
     host, port = parse_address(listen)
-    rhost, robot_port = robot_endpoint(option, host, address)
+    rhost, robot_port = _stream_controller().robot_endpoint(option, host, address)
     return {"robot_host": rhost, "listen_host": host, "listen_port": port,
             "robot_port": robot_port}
 
@@ -115,10 +121,8 @@ def streamed_link(handler: BridgeHandler, *, robot: str, library: Sequence[Path]
         The robot service.
     robot : str
         The robot (a shipped name or a description file): its nominal model plans.
-    library : sequence of Path
-        Folders of robot programs.
-    name : str
-        The service's name.
+    library, name : sequence of Path, str
+        Folders of robot programs; the service's name.
     rsi, rsi_robot, rsi_timeout, rsi_correction, rsi_mode, rsi_frame
         RSI: ``HOST:PORT`` where plugcell receives the controller's packets (the ethernet
         file's ``IP_NUMBER:PORT``), the controller's ``HOST[:PORT]`` (empty: the ``rsi``
@@ -163,13 +167,8 @@ def streamed_link(handler: BridgeHandler, *, robot: str, library: Sequence[Path]
     _check_learning(learned_dir, learning_law)
     if not (rsi or egm):
         return None
-    from plugcell.devices.robot.stream_controller import (  # module docstring
-        StreamController,
-        planner_limits,
-        streaming_limits,
-    )
-
-    joint, cart = planner_limits(joint_speed, tcp_speed)
+    sc = _stream_controller()
+    joint, cart = sc.planner_limits(joint_speed, tcp_speed)
     where = _endpoints(*(("rsi", rsi, rsi_robot) if rsi else ("egm", egm, egm_robot)))
     config: RsiConfig | EgmConfig = (
         RsiConfig(**where, correction=rsi_correction, mode=rsi_mode,  # type: ignore[arg-type]
@@ -177,9 +176,10 @@ def streamed_link(handler: BridgeHandler, *, robot: str, library: Sequence[Path]
         if rsi else EgmConfig(**where, mode=egm_mode,  # type: ignore[arg-type]
                               comm_timeout_s=egm_timeout))
     if config.joint_targets:
-        config = dataclasses.replace(config, limits=streaming_limits(joint, config.cycle_s))
+        config = dataclasses.replace(config, limits=sc.streaming_limits(joint, config.cycle_s))
     _check_correction_limits(correct_max_mm, correct_max_deg)
-    return StreamController(handler, config, load_robot(robot), robot, joint, cart, library,
-                            name, stream_process, (correct_max_mm, correct_max_deg), calibration,
-                            stream_realtime(stream_rt_priority, stream_cpu, stream_mlock),
-                            learned_dir, learning_law)
+    return sc.StreamController(handler, config, load_robot(robot), robot, joint, cart, library,
+                               name, stream_process, (correct_max_mm, correct_max_deg),
+                               calibration,
+                               stream_realtime(stream_rt_priority, stream_cpu, stream_mlock),
+                               learned_dir, learning_law)
