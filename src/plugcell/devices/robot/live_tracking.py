@@ -77,6 +77,8 @@ DEFAULT_RATE_HZ = 10.0
 MAX_POINTS_PER_BATCH = 25
 #: What a decoder accepts at most: points of one batch, windows of one move.
 MAX_DECODED_POINTS, MAX_WINDOWS = 10_000, 1_000
+#: Cycles a sample's own cycle is looked up among (2 s at 4 ms).
+HISTORY = 500
 
 _Text = Annotated[str, msgspec.Meta(max_length=512)]
 
@@ -218,27 +220,29 @@ class _Move:
 
     def read(self) -> tuple[Array, Array, Array]:
         """Path times, corrected and measured deviations (m) of the cycles since the last
-        read."""
+        read (a sample's cycle is looked up among the last :data:`HISTORY` cycles: older
+        ones — a tracker seconds late — are put at the oldest of them)."""
         n = min(len(self.record), len(self.cycles))
         rec, cyc = self.record[self.done:n], self.cycles[self.done:n]
         self.done = n
-        for r, (k, _) in zip(rec, cyc, strict=True):
-            self.t.append(float(r[0]))
-            self.k.append(int(k))
-        corrected = np.array([float(np.linalg.norm(np.asarray(r[1])[:3])) for r in rec])
-        t_path = np.array([k * self.cycle_s - self.settle_s for k, _ in cyc], dtype=float)
+        if not rec:
+            return np.zeros(0), np.zeros(0), np.zeros(0)
+        self.t.extend(float(r[0]) for r in rec)
+        k = np.array([c[0] for c in cyc], dtype=float)
+        self.k.extend(k.astype(int).tolist())
+        corrected = np.linalg.norm(np.array([np.asarray(r[1])[:3] for r in rec]), axis=1)
         measured = np.full(len(cyc), np.nan)
-        rows = [(i, s) for i, (_, s) in enumerate(cyc) if s is not None]
+        rows = [(i, c[1]) for i, c in enumerate(cyc) if c[1] is not None]
         if rows:
-            t_all, k_all = np.asarray(self.t), np.asarray(self.k, dtype=float)
+            t_all = np.asarray(self.t[-(len(rec) + HISTORY):])
+            k_all = np.asarray(self.k[-(len(rec) + HISTORY):], dtype=float)
             keep = np.concatenate([[True], np.diff(t_all) > 0])
-            ts = np.array([s[0] for _, s in rows])
-            ks = np.interp(ts, t_all[keep], k_all[keep])
+            smp = np.array([s for _, s in rows], dtype=float)
+            ks = np.interp(smp[:, 0], t_all[keep], k_all[keep])
             idx = np.arange(len(self.plan_p), dtype=float)
             p_c = np.stack([np.interp(ks, idx, self.plan_p[:, j]) for j in range(3)], 1)
-            p_s = np.array([s[1:4] for _, s in rows], dtype=float)
-            measured[[i for i, _ in rows]] = np.linalg.norm(p_s - p_c, axis=1)
-        return t_path, corrected, measured
+            measured[[i for i, _ in rows]] = np.linalg.norm(smp[:, 1:4] - p_c, axis=1)
+        return k * self.cycle_s - self.settle_s, corrected, measured
 
 
 class LiveTracking:
