@@ -219,3 +219,23 @@ def test_the_identity_counts_the_moves_of_a_program_run():
     assert identity_now(None, 1, "T").move == "move.1"
     with pytest.raises(ValueError, match="must be positive"):
         LiveTracking("H4", print, rate_hz=0)
+
+
+def test_a_live_view_that_fails_never_fails_the_move(caplog):
+    """A service whose live display cannot be made (its bus refusing): the move is not
+    shown, the reason logged, and nothing raised into the move."""
+    from plugcell.devices.robot.tracked_moves import TrackedMoves
+
+    def broken() -> LiveTracking:
+        raise RuntimeError("the session is closed")
+
+    moves = TrackedMoves(None, lambda name: None, live=broken)
+    moves._live_begin("TRACKER", 0.004)
+    assert moves._live is None
+    assert "not shown live (RuntimeError: the session is closed)" in caplog.text
+    counted: list[bytes] = []
+    moves.live = lambda: LiveTracking("H4", counted.append)
+    moves.program = lambda: ("/p/line.pdl", 7)
+    moves._live_begin("TRACKER", 0.004)
+    moves._live_begin("TRACKER", 0.004)  # the run's second tracked move
+    assert [decode_tracking(b).identity.move for b in counted] == ["line.1", "line.2"]

@@ -308,7 +308,8 @@ class LiveTracking:
         if move is None:
             return
         if self.loop is None:
-            self._publish(move, end)
+            with self._lock:
+                self._publish(move, end)
         else:
             self._call(self._finish, move, end)
 
@@ -369,8 +370,9 @@ def identity_now(program: tuple[str, int] | None, number: int, tracker: str
     """The identity of the ``number``-th tracked move of ``program`` ``(name, run)``
     (None: no program runs), starting now."""
     name, run = program if program is not None else ("", 0)
-    stem = Path(name).stem if name else "move"
-    return MoveIdentity(name, run, f"{stem}.{number}", number, tracker, time.time_ns())
+    stem = Path(name).stem[:400] if name else "move"
+    return MoveIdentity(name[-512:], run, f"{stem}.{number}", number, tracker[:512],
+                        time.time_ns())
 
 
 def live_tracking_of(device: Callable[[], Any],

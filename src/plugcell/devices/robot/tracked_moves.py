@@ -434,17 +434,22 @@ class TrackedMoves:
 
     def _live_begin(self, tracker: str, cycle_s: float) -> None:
         """Show the move live (:mod:`.live_tracking`), if the service does: its identity
-        (the ``n``-th tracked move of the program's run) and what its cycles append."""
-        live = None if self.live is None else self.live()
-        self._live = live
-        if live is None:
-            return
-        running = None if self.program is None else self.program()
-        self._live_count = (running, (self._live_count[1] if self._live_count[0] == running
-                                      else 0) + 1)
-        live.begin(identity_now(running, self._live_count[1], tracker), cycle_s,
-                   round(self.settle_s / cycle_s) * cycle_s, self._plan_p, self.last_record,
-                   self.last_cycles)
+        (the ``n``-th tracked move of the program's run) and what its cycles append.  A
+        display: what fails here is logged, the move goes on."""
+        self._live = None
+        try:
+            live = None if self.live is None else self.live()
+            if live is None:
+                return
+            running = None if self.program is None else self.program()
+            n = (self._live_count[1] if self._live_count[0] == running else 0) + 1
+            self._live_count = (running, n)
+            live.begin(identity_now(running, n, tracker), cycle_s,
+                       round(self.settle_s / cycle_s) * cycle_s, self._plan_p,
+                       self.last_record, self.last_cycles)
+            self._live = live
+        except Exception as exc:
+            log.warning("MOVE WITH TRACKING: not shown live (%s: %s)", type(exc).__name__, exc)
 
     def _live_end(self, loop: TrackingLoop, failure: str) -> None:
         """The live move's last batch: the loop's counts and windows, why it failed (the
@@ -455,9 +460,14 @@ class TrackedMoves:
         error = sys.exc_info()[1]
         why = failure or ("" if error is None else str(error) or type(error).__name__)
         st = loop.stats
-        live.end(TrackingEnd(st.cycles, st.tracking_cycles,
-                             [HoldSpan(w.start_s, w.end_s, w.reason) for w in loop.windows],
-                             self.model_text, why))
+        try:
+            live.end(TrackingEnd(st.cycles, st.tracking_cycles,
+                                 [HoldSpan(w.start_s, w.end_s, w.reason[:512])
+                                  for w in loop.windows[:1000]], self.model_text[:512],
+                                 why[:512]))
+        except Exception as exc:
+            log.warning("MOVE WITH TRACKING: its end not shown live (%s: %s)",
+                        type(exc).__name__, exc)
 
     def _session(self, q_plan: Array, traj: Any, tool: Array, cycle_s: float
                  ) -> MoveSession | None:
