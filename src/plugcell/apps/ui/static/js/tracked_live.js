@@ -119,6 +119,7 @@ export function renderLive(box) {
 window.plugcellTracking = {
   robots: () => [...moves.keys()].sort(),
   points: (service) => (moves.get(service) || { points: [] }).points.length,
+  lastT: (service) => { const p = (moves.get(service) || { points: [] }).points; return p.length ? p[p.length - 1][0] : null; },
   batches: (service) => (moves.get(service) || { batches: 0 }).batches,
   running: (service) => (moves.get(service) || {}).running,
 };
