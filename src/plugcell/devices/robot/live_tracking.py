@@ -184,6 +184,11 @@ def decimate(t_s: Array, corrected: Array, measured: Array, max_points: int
         Path times (s) and deviations (m) of the cycles.
     max_points : int
         Points at most (≥ 1).
+
+    Returns
+    -------
+    list of TrackingPoint
+        ``⌈n / ⌈n / max_points⌉⌉`` points, in order (none for no cycle).
     """
     n = len(t_s)
     if n == 0:
