@@ -59,7 +59,7 @@ def test_batches_become_events_and_the_latest_move_is_kept() -> None:
                 for e in events] == [("tracking", "H4", 0, 3, True),
                                      ("tracking", "H4", 1, 2, True),
                                      ("tracking", "H4", 2, 0, False)]
-        assert events[1]["points"] == [[0.012, 0.0, None], [0.016, 1e-5, None]]
+        assert events[1]["points"] == [[0.012, 0.0, None, False], [0.016, 1e-5, None, False]]
         assert events[0]["identity"] == {"program": "line.pdl", "run": 1, "move": "line.1",
                                           "number": 1, "tracker": "TRACKER",
                                           "start_ns": 10**18}

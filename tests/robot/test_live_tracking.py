@@ -95,10 +95,13 @@ def test_decimation_keeps_each_bins_largest_deviations_and_its_gaps():
     t = np.arange(10) * 0.004
     corrected = np.array([1, 5, 2, 0, 0, 0, 3, 0, 9, 1], float) * 1e-5
     measured = np.array([2, np.nan, 1, np.nan, np.nan, np.nan, np.nan, 4, np.nan, 3]) * 1e-5
-    every = decimate(t, corrected, measured, 10)  # no decimation: one point a cycle
+    holding = np.arange(10) == 4
+    every = decimate(t, corrected, measured, 10, holding)  # no decimation: one a cycle
     assert [p.t_s for p in every] == pytest.approx(t)
     assert [p.measured_m is None for p in every] == list(np.isnan(measured))
-    points = decimate(t, corrected, measured, 4)  # bins of 3: [0-2] [3-5] [6-8] [9]
+    assert [p.holding for p in every] == list(holding)
+    points = decimate(t, corrected, measured, 4, holding)  # bins of 3: [0-2] [3-5] [6-8] [9]
+    assert [p.holding for p in points] == [False, True, False, False]
     assert [p.t_s for p in points] == pytest.approx(t[[2, 5, 8, 9]])
     assert [p.corrected_m for p in points] == pytest.approx(np.array([5, 0, 9, 1]) * 1e-5)
     assert [p.measured_m for p in points] == [pytest.approx(2e-5), None, pytest.approx(4e-5),
@@ -109,7 +112,7 @@ def test_decimation_keeps_each_bins_largest_deviations_and_its_gaps():
 def _line_move(n: int, cycle_s: float = 0.004) -> tuple[np.ndarray, list, list]:
     """A planned line along x at 0.1 m/s (n+1 samples), its cycles' offsets (1 mm along z
     from cycle 20) and their newest samples: 0.3 mm off the line in y, taken 2 cycles
-    before their cycle, none in cycles 40-59 (a beam break)."""
+    before their cycle, none in cycles 40-59 (a beam break, the loop holding in 42-61)."""
     plan_p = np.zeros((n + 1, 3))
     plan_p[:, 0] = 0.1 * cycle_s * np.arange(n + 1)
     record, cycles = [], []
@@ -117,7 +120,7 @@ def _line_move(n: int, cycle_s: float = 0.004) -> tuple[np.ndarray, list, list]:
         t = 10.0 + k * cycle_s
         o = np.zeros(6)
         o[2] = 1e-3 if k >= 20 else 0.0
-        record.append((t, o, "tracking", o, 1.0))
+        record.append((t, o, "holding" if 42 <= k < 62 else "tracking", o, 1.0))
         ks = max(k - 2, 0)
         sample = None if 40 <= k < 60 else (t - (k - ks) * cycle_s, plan_p[ks, 0], 3e-4, 0.0)
         cycles.append((k, sample))
@@ -146,6 +149,8 @@ def test_live_tracking_publishes_the_deviations_on_the_paths_time():
     assert batch is not None and len(batch.points) == 70 and batch.seq == first.seq + 2
     gap = [p.t_s for p in batch.points if p.measured_m is None]
     assert gap == pytest.approx(np.arange(40, 60) * 0.004 - 0.2)
+    held = [p.t_s for p in batch.points if p.holding]
+    assert held == pytest.approx(np.arange(42, 62) * 0.004 - 0.2)
     live.end(TrackingEnd(100, 80, [HoldSpan(10.0 + 40 * 0.004, 10.0 + 62 * 0.004,
                                             "line_of_sight")], "the nominal model", ""))
     last = decode_tracking(sent[-1])

@@ -6,7 +6,8 @@ cycle of the move (settle and line), in order on the path's time; their correcte
 deviations are the applied offsets' positions; the measured one is millimetres at the
 start (the nominal model), a fraction of one once the correction is in, and one gap
 (no good sample) from the break until the tracker has the reflector again; the last
-batch ends the move with the loop's counts and its window on the path's time.
+batch ends the move with the loop's counts and its window on the path's time, the
+window the points marked as holding as they went.
 """
 
 from __future__ import annotations
@@ -67,6 +68,12 @@ def test_a_tracked_move_is_published_as_it_goes(cell):  # noqa: F811
     loop = tracked.last_loop
     assert (end.cycles, end.tracking_cycles) == (loop.stats.cycles, loop.stats.tracking_cycles)
     assert [w.reason for w in end.windows] == ["line_of_sight"] and end.failure == ""
+    # the cycles the loop held, shown as they went: the window the loop reports
+    held = np.array([p.t_s for p in points if p.holding])
+    window = end.windows[0]
+    assert held.min() == pytest.approx(window.start_s, abs=1e-9)
+    assert window.end_s is not None and held.max() == pytest.approx(window.end_s - cycle_s,
+                                                                    abs=1e-9)
     start = end.windows[0].start_s + round(0.5 / cycle_s) * cycle_s  # from the move's start
     assert 0.7 <= start <= 0.7 + loop.settings.max_age_s + 0.02, start
     print(f"\n{len(batches)} batches, {len(points)} points; measured max "

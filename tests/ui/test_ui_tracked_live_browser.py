@@ -5,7 +5,8 @@ service does, while the test appends the cycles of a 3 s move at the robot's rat
 page in headless chromium, Metrology → Tracked path → Live.
 
 While the move runs the page says so and its points grow batch by batch (several
-batches, not one at the end); the measured line breaks where the beam was (two runs of
+batches, not one at the end), the stretch the loop holds on the model alone shaded as
+it comes; the measured line breaks where the beam was (two runs of
 polyline, the gap counted); at the end it says "ended" with the window on the model
 alone, and a page opened after the move finds the whole move in the snapshot.
 Screenshots under ``test-artifacts/ui/``.
@@ -42,16 +43,18 @@ pytestmark = [
 
 CYCLE_S, N, SETTLE_S = 0.004, 750, 0.2
 BREAK = (300, 400)  # cycles without a fresh sample
+HOLD = (305, 410)  # cycles the loop holds on the model alone
 
 
 def _cycle(k: int, plan_p: np.ndarray) -> tuple[tuple[Any, ...], tuple[Any, Any]]:
     """Cycle k of the move: an offset blending in to 0.6 mm, a sample 0.1 mm off (none in
-    the break)."""
+    the break; the loop holding in HOLD)."""
     t = 100.0 + k * CYCLE_S
     o = np.zeros(6)
     o[1] = 6e-4 * min(1.0, k / 50)
     sample = None if BREAK[0] <= k < BREAK[1] else (t, plan_p[k, 0], plan_p[k, 1] + 1e-4, 0.0)
-    return (t, o, "tracking", o, 1.0), (k, sample)
+    state = "holding" if HOLD[0] <= k < HOLD[1] else "tracking"
+    return (t, o, state, o, 1.0), (k, sample)
 
 
 def test_a_tracked_move_is_plotted_as_it_goes(launcher: Any) -> None:
@@ -89,14 +92,19 @@ def test_a_tracked_move_is_plotted_as_it_goes(launcher: Any) -> None:
             expect(status).to_contain_text("move 2 of program line.pdl (run 3) with TRACKER")
             expect(status).to_contain_text("running")
             counts = []
+            result = page.locator('.result[data-result="tracked-live"]')
             for k in range(N):  # at the robot's rate, roughly
+                if k == HOLD[1] + 50:  # the window without tracking, shaded as it goes
+                    expect(result.locator('[data-window="holding"]')).to_contain_text(
+                        f"{HOLD[0] * CYCLE_S - SETTLE_S:.3f} s")
+                    shot("tracked-live-01-held")
                 r, c = _cycle(k, plan_p)
                 cycles.append(c)
                 record.append(r)
                 if k % 25 == 24:
                     time.sleep(0.1)
                     counts.append(page.evaluate("window.plugcellTracking.points('H4')"))
-            shot("tracked-live-01-running")
+            shot("tracked-live-02-running")
             live.end(TrackingEnd(N, N - 150, [HoldSpan(100.0 + BREAK[0] * CYCLE_S,
                                                        100.0 + (BREAK[1] + 10) * CYCLE_S,
                                                        "line_of_sight")],
@@ -106,9 +114,8 @@ def test_a_tracked_move_is_plotted_as_it_goes(launcher: Any) -> None:
             assert page.evaluate("window.plugcellTracking.lastT('H4')") == pytest.approx(
                 (N - 1) * CYCLE_S - SETTLE_S)
             final = page.evaluate("window.plugcellTracking.points('H4')")
-            result = page.locator('.result[data-result="tracked-live"]')
             expect(result).to_have_attribute("data-running", "false")
-            shot("tracked-live-02-ended")
+            shot("tracked-live-03-ended")
             # live: the points grew while the move ran, batch after batch
             assert len({c for c in counts if 0 < c < N}) >= 3, counts
             assert page.evaluate("window.plugcellTracking.batches('H4')") >= 5

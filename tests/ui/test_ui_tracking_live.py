@@ -68,10 +68,11 @@ def test_batches_reach_the_websocket_and_the_snapshot(cell_with_robot) -> None:
         assert event["service"] == "H4" and event["running"]
         assert event["identity"]["move"] == "line.1"
         # ≤ MAX_POINTS_PER_BATCH (25): the 30 cycles by bins of 2
-        t, corrected, measured = np.array(event["points"], dtype=float).T
+        t, corrected, measured, holding = np.array(event["points"], dtype=float).T
         np.testing.assert_allclose(t, 0.004 * np.arange(1, 30, 2))
         np.testing.assert_allclose(corrected, 5e-4)
         np.testing.assert_allclose(measured, 2e-4, atol=1e-12)
+        assert not holding.any()
         shown_r.extend(record[30:])
         shown_c.extend(cycles[30:])
         live.end(TrackingEnd(60, 60, [], "the nominal model"))

@@ -27,8 +27,8 @@ MAX_POINTS = 4000
 
 
 class _Move:
-    """One robot's latest move: its identity, points ``[t_s, corrected_m, measured_m]``
-    so far (``measured_m`` None: no fresh sample), end (None: running)."""
+    """One robot's latest move: its identity, points ``[t_s, corrected_m, measured_m,
+    holding]`` so far (``measured_m`` None: no fresh sample), end (None: running)."""
 
     def __init__(self, batch: TrackingBatch) -> None:
         self.identity = msgspec.to_builtins(batch.identity)
@@ -39,10 +39,10 @@ class _Move:
     def add(self, points: list[list[float | None]]) -> None:
         self.points.extend(points)
         if len(self.points) > MAX_POINTS:
-            arr = np.array([[p[0], p[1], np.nan if p[2] is None else p[2]]
+            arr = np.array([[p[0], p[1], np.nan if p[2] is None else p[2], p[3]]
                             for p in self.points], dtype=float)
-            self.points = msgspec.to_builtins(
-                decimate(arr[:, 0], arr[:, 1], arr[:, 2], len(self.points) // 2))
+            self.points = msgspec.to_builtins(decimate(
+                arr[:, 0], arr[:, 1], arr[:, 2], len(self.points) // 2, arr[:, 3] > 0))
 
 
 class LiveMoves:
@@ -57,7 +57,8 @@ class LiveMoves:
     def on_payload(self, service: str, payload: bytes) -> None:
         """A batch published by robot service ``service`` → a ``tracking`` event
         ``{"type": "tracking", "service", "identity", "seq", "points", "end", "running"}``
-        (``points``: this batch's ``[t_s, corrected_m, measured_m]``; SI units)."""
+        (``points``: this batch's ``[t_s, corrected_m, measured_m, holding]``; SI
+        units)."""
         try:
             batch = decode_tracking(payload)
         except ValueError:  # msgspec.DecodeError, or a number not finite

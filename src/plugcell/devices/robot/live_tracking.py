@@ -25,7 +25,9 @@ never hidden).  Per cycle ``k`` of the move, in SI units (m, s):
   robot time ``t``) against the planned TCP position ``p_c`` at the sample's own cycle
   ``k_s`` (the cycles' robot times ``(t_j, k_j)`` interpolated at ``t``, ``p_c``
   interpolated between samples) — ``None`` when the cycle got no good sample (a beam
-  break, a late tracker).
+  break, a late tracker);
+* ``holding`` — the loop held on the model alone in the cycle (a window without
+  tracking, shown as it goes).
 
 The last batch of a move carries ``end`` (:class:`TrackingEnd`): the loop's counts, its
 windows on the model alone (on the path's time) and why the move failed, if it did.
@@ -85,11 +87,13 @@ _Text = Annotated[str, msgspec.Meta(max_length=512)]
 
 class TrackingPoint(msgspec.Struct, frozen=True, array_like=True):
     """One plotted cycle (module doc): path time (s), deviations (m) of the corrected
-    command and of the measurement (None: no fresh sample) from the commanded path."""
+    command and of the measurement (None: no fresh sample) from the commanded path, and
+    whether the loop held on the model alone (its state ``"holding"``)."""
 
     t_s: float
     corrected_m: float
     measured_m: float | None
+    holding: bool = False
 
 
 class HoldSpan(msgspec.Struct, frozen=True, array_like=True):
@@ -172,16 +176,19 @@ def decode_tracking(payload: bytes) -> TrackingBatch:
     return batch
 
 
-def decimate(t_s: Array, corrected: Array, measured: Array, max_points: int
-             ) -> list[TrackingPoint]:
+def decimate(t_s: Array, corrected: Array, measured: Array, max_points: int,
+             holding: NDArray[np.bool_] | None = None) -> list[TrackingPoint]:
     """At most ``max_points`` points of consecutive cycles: bins of ``⌈n / max_points⌉``
     cycles, each the bin's last path time and largest deviations (``measured`` NaN where
-    a cycle had no sample: the bin's None when none of its cycles had one).
+    a cycle had no sample: the bin's None when none of its cycles had one), holding if
+    any of its cycles held.
 
     Parameters
     ----------
     t_s, corrected, measured : (n,) arrays
         Path times (s) and deviations (m) of the cycles.
+    holding : (n,) bool array, optional
+        The cycles the loop held on the model alone (default: none).
     max_points : int
         Points at most (≥ 1).
 
@@ -200,8 +207,10 @@ def decimate(t_s: Array, corrected: Array, measured: Array, max_points: int
     seen = ~np.isnan(measured)
     any_seen = np.logical_or.reduceat(seen, starts)
     m = np.maximum.reduceat(np.where(seen, measured, -np.inf), starts)
-    return [TrackingPoint(float(t_s[j]), float(ci), float(mi) if ok else None)
-            for j, ci, mi, ok in zip(last, c, m, any_seen, strict=True)]
+    held = np.zeros(len(starts), bool) if holding is None else \
+        np.logical_or.reduceat(np.asarray(holding, bool), starts)
+    return [TrackingPoint(float(t_s[j]), float(ci), float(mi) if ok else None, bool(hi))
+            for j, ci, mi, ok, hi in zip(last, c, m, any_seen, held, strict=True)]
 
 
 class _Move:
@@ -223,19 +232,21 @@ class _Move:
         keep = np.concatenate([[True], np.diff(t) > 0])
         return float(np.interp(robot_t, t[keep], k[keep])) * self.cycle_s - self.settle_s
 
-    def read(self) -> tuple[Array, Array, Array]:
-        """Path times, corrected and measured deviations (m) of the cycles since the last
-        read (a sample's cycle is looked up among the last :data:`HISTORY` cycles: older
-        ones — a tracker seconds late — are put at the oldest of them)."""
+    def read(self) -> tuple[Array, Array, Array, NDArray[np.bool_]]:
+        """Path times, corrected and measured deviations (m) and whether the loop held, of
+        the cycles since the last read (a sample's cycle is looked up among the last
+        :data:`HISTORY` cycles: older ones — a tracker seconds late — are put at the
+        oldest of them)."""
         n = min(len(self.record), len(self.cycles))
         rec, cyc = self.record[self.done:n], self.cycles[self.done:n]
         self.done = n
         if not rec:
-            return np.zeros(0), np.zeros(0), np.zeros(0)
+            return np.zeros(0), np.zeros(0), np.zeros(0), np.zeros(0, bool)
         self.t.extend(float(r[0]) for r in rec)
         k = np.array([c[0] for c in cyc], dtype=float)
         self.k.extend(k.astype(int).tolist())
         corrected = np.linalg.norm(np.array([np.asarray(r[1])[:3] for r in rec]), axis=1)
+        holding = np.array([r[2] == "holding" for r in rec], dtype=bool)
         measured = np.full(len(cyc), np.nan)
         rows = [(i, c[1]) for i, c in enumerate(cyc) if c[1] is not None]
         if rows:
@@ -247,7 +258,7 @@ class _Move:
             idx = np.arange(len(self.plan_p), dtype=float)
             p_c = np.stack([np.interp(ks, idx, self.plan_p[:, j]) for j in range(3)], 1)
             measured[[i for i, _ in rows]] = np.linalg.norm(smp[:, 1:4] - p_c, axis=1)
-        return k * self.cycle_s - self.settle_s, corrected, measured
+        return k * self.cycle_s - self.settle_s, corrected, measured, holding
 
 
 class LiveTracking:
@@ -320,14 +331,14 @@ class LiveTracking:
 
     def _publish(self, move: _Move, end: TrackingEnd | None) -> TrackingBatch:
         """Publish ``move``'s cycles since its last batch, with ``end``."""
-        t, c, m = move.read()
+        t, c, m, held = move.read()
         if end is not None:
             end = msgspec.structs.replace(end, windows=[
                 HoldSpan(move.path_time(w.start_s),
                          None if w.end_s is None else move.path_time(w.end_s), w.reason)
                 for w in end.windows])
         batch = TrackingBatch(self.service, move.identity, self.seq,
-                              decimate(t, c, m, self.max_points), end)
+                              decimate(t, c, m, self.max_points, held), end)
         self.seq += 1
         try:
             self.publish(encode_tracking(batch))

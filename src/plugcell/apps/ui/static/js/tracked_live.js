@@ -3,13 +3,14 @@
 // each robot's latest move and draws it live in Metrology → Tracked path → Live: the
 // deviations of the corrected command and of the tracker's measurement from the commanded
 // path over the path's time (mm; the measured line breaks where no fresh sample came: a
-// beam break), "move N of program P, running / ended", and the robot to follow.
+// beam break; the stretches the loop held on the model alone shaded as they come),
+// "move N of program P, running / ended", and the robot to follow.
 import { clear, h } from "./dom.js";
 import { on } from "./store.js";
 import { SERIES, mm, plot } from "./deviation_plot.js";
 
 const MAX_POINTS = 8000;      // points of one move kept at most (then halved by pairs)
-const moves = new Map();      // service → {identity, points: [[t_s, corr_m, meas_m|null]], end, running, batches}
+const moves = new Map();      // service → {identity, points: [[t_s, corr_m, meas_m|null, holding]], end, running, batches}
 let ui = null;                // the live pane while it is shown
 let chosen = "";              // the robot followed
 let drawing = false;
@@ -18,13 +19,14 @@ function sameMove(a, b) {
   return a && b && a.start_ns === b.start_ns && a.move === b.move;
 }
 
-/** Half the points, each pair's last time and largest deviations (null: neither had one). */
+/** Half the points, each pair's last time and largest deviations (null: neither had one),
+ * holding if either held. */
 function halve(points) {
   const out = [];
   for (let i = 0; i < points.length; i += 2) {
     const a = points[i], b = points[i + 1] || a;
     const m = [a[2], b[2]].filter((v) => v !== null);
-    out.push([b[0], Math.max(a[1], b[1]), m.length ? Math.max(...m) : null]);
+    out.push([b[0], Math.max(a[1], b[1]), m.length ? Math.max(...m) : null, Boolean(a[3] || b[3])]);
   }
   return out;
 }
@@ -60,6 +62,18 @@ function status(move) {
   return `move ${id.number} of ${prog} with ${id.tracker}, started ${new Date(id.start_ns / 1e6).toLocaleTimeString()} — ${state}`;
 }
 
+/** While the move runs: its stretches on the model alone so far (the loop held). */
+function holdingRuns(pts) {
+  const out = [];
+  let start = null;
+  pts.forEach((p) => {
+    if (p[3] && start === null) start = p[0];
+    if (!p[3] && start !== null) { out.push({ start_s: start, end_s: p[0], reason: "holding" }); start = null; }
+  });
+  if (start !== null) out.push({ start_s: start, end_s: null, reason: "holding" });
+  return out;
+}
+
 /** The plot's view of a move (m → mm here, the one place they are shown). */
 function view(move) {
   const pts = move.points;
@@ -67,7 +81,8 @@ function view(move) {
   const measured = pts.map((p) => [p[0], p[2] === null ? null : p[2] * 1e3]);
   const top = (s) => Math.max(0, ...s.filter((p) => p[1] !== null).map((p) => p[1]));
   const t0 = pts.length ? pts[0][0] : 0, t1 = pts.length ? pts[pts.length - 1][0] : 1;
-  const windows = (move.end ? move.end.windows : []).map(([start_s, end_s, reason]) => ({ start_s, end_s, reason }));
+  const windows = move.end ? move.end.windows.map(([start_s, end_s, reason]) => ({ start_s, end_s, reason }))
+    : holdingRuns(pts);
   return { span_s: [t0, Math.max(t1, t0 + 1e-3)], max_mm: { corrected: top(corrected), measured: top(measured) },
     windows, series: { corrected, measured } };
 }
