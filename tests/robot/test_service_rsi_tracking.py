@@ -24,6 +24,7 @@ from test_service_streamed import TIMEOUT, _get_status, _run, _start
 
 import plugcell.pdl
 from plugcell.apps.kinds import build
+from plugcell.devices.robot.live_tracking import decode_tracking
 from plugcell.devices.robot.service import RobotService
 from plugcell.framework import Client, ProcessStates
 from plugcell.io.units import robot_from_pose
@@ -57,6 +58,26 @@ BEGIN
   WRITE LUN_CRT ('tracked')
 END tracked
 """
+
+
+async def _live_move_heard(heard: list[bytes], name: str, stats) -> None:
+    """The service published the move as it went (devices/robot/live_tracking.py): its
+    identity, batches in order whose points cover its cycles, and its end."""
+    for _ in range(100):
+        if heard and decode_tracking(heard[-1]).end is not None:
+            break
+        await asyncio.sleep(0.1)
+    batches = [decode_tracking(b) for b in heard]
+    assert batches and batches[-1].end is not None, batches[-1:]
+    assert {b.service for b in batches} == {name}
+    assert {(b.identity.program, b.identity.run, b.identity.move, b.identity.tracker)
+            for b in batches} == {("tracked", batches[0].identity.run, "tracked.1", "TRACKER")}
+    seqs = [b.seq for b in batches]
+    assert seqs == sorted(seqs) and len(batches) >= 3, seqs  # as it went, not at the end
+    points = [p for b in batches for p in b.points]
+    assert 0 < len(points) <= stats.cycles and points[-1].t_s > 0
+    assert batches[-1].end.cycles == stats.cycles
+    assert any(p.measured_m is not None for p in points)
 
 
 def _vector(T: np.ndarray) -> str:
@@ -93,6 +114,9 @@ def test_a_programs_tracked_move_streams_with_the_tracker(tmp_path: Path, monkey
                 await _start(service, robot)
                 try:
                     async with Client("RSITEST", cell=cell) as client:
+                        heard: list[bytes] = []  # the move, live (as the controller hears it)
+                        client.own(client.bus.watch_tracking(
+                            lambda name, payload: heard.append(payload)))
                         assert await client.wait_for(service.name, 20)
                         assert await client.wait_for("TRACKER", 20)
                         wired = await client.ask_subscribe(service.name, "TRACKER")
@@ -104,6 +128,7 @@ def test_a_programs_tracked_move_streams_with_the_tracker(tmp_path: Path, monkey
                         moves = service.interface.bridge.motion.move_tracked.__self__  # type: ignore
                         stats = moves.last_loop.stats
                         assert stats.samples_used > 200, stats
+                        await _live_move_heard(heard, service.name, stats)
                         # the tracker is free again: another requester is served at once
                         other = await client.create_process("TRACKER", "Set Base", "euler2tr",
                                                             [0, 0, 0, 0, 0, 0], timeout=10)

@@ -264,6 +264,25 @@ class Bus:
 
         return self.session.declare_subscriber(keys.joints(), self._callback(on_sample))
 
+    # -- a robot's tracked move as it goes (devices/robot/live_tracking.py) -------------
+
+    def tracking_publisher(self, name: str) -> Entity:
+        """Robot service ``name``'s publisher of its live tracked moves (drops rather than
+        blocks: a display stream, never a late robot cycle)."""
+        return self.session.declare_publisher(
+            self.keys.tracking(name), congestion_control=zenoh.CongestionControl.DROP)
+
+    def watch_tracking(self, handler: Callable[[str, bytes], None]) -> Entity:
+        """``handler(robot service, payload)`` for every live tracking batch of the cell."""
+        keys = self.keys
+
+        def on_sample(sample: zenoh.Sample) -> None:
+            name = keys.parse_tracking(str(sample.key_expr))
+            if name is not None:
+                handler(name, sample.payload.to_bytes())
+
+        return self.session.declare_subscriber(keys.tracking(), self._callback(on_sample))
+
     # -- the simulated world's reflectors (sim/world.py) ---------------------------
 
     def reflector(self, name: str, latest: Callable[[], bytes | None]) -> tuple[Entity, Entity]:

@@ -19,6 +19,8 @@ key                                    Zenoh       message
 ``svc/<name>/shutdown``                pub/sub     Shutdown
 ``joints/<name>``                      pub/sub     a robot service's joint state (a display
                                                    stream, several times a second)
+``tracking/<name>``                    pub/sub     a robot service's tracked move as it goes
+                                                   (a display stream, ≤ 10 batches a second)
 =====================================  ==========  ==========================================
 """
 
@@ -134,8 +136,20 @@ class KeySpace:
 
     def parse_joints(self, key: str) -> str | None:
         """The robot service a :meth:`joints` key of this cell names, else None."""
+        return self._parse_robot_stream(key, "joints")
+
+    # a robot's tracked move as it goes (devices/robot/live_tracking.py), beside its joints
+    def tracking(self, name: str = "*") -> str:
+        """Pub/sub of robot service ``name``'s live tracked move (``*``: every robot)."""
+        return f"{self.prefix}/tracking/{name}"
+
+    def parse_tracking(self, key: str) -> str | None:
+        """The robot service a :meth:`tracking` key of this cell names, else None."""
+        return self._parse_robot_stream(key, "tracking")
+
+    def _parse_robot_stream(self, key: str, kind: str) -> str | None:
         parts = key.split("/")
-        if len(parts) != 4 or parts[:3] != [ROOT, self.cell, "joints"]:
+        if len(parts) != 4 or parts[:3] != [ROOT, self.cell, kind]:
             return None
         return parts[3]
 

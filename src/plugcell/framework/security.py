@@ -137,7 +137,8 @@ def zenoh_acl(names: Iterable[str]) -> dict[str, object]:
     accepts from a peer whose CN is N only the publications, queryables and
     liveliness tokens of N (``plugcell/*/svc/N/**``, ``plugcell/*/live/*/N/*``),
     N's own published requests (``plugcell/*/svc/*/create/N``) and, of a robot service,
-    its joint state (``plugcell/*/joints/N``):
+    its joint state and live tracked moves (``plugcell/*/joints/N``,
+    ``plugcell/*/tracking/N``):
     nobody can publish a forged Shutdown or StateUpdate of another service, answer its
     queries, or declare its presence (which would make the real one withdraw).
     Subscriptions, queries and replies are open to every certified peer; who may
@@ -165,7 +166,8 @@ def zenoh_acl(names: Iterable[str]) -> dict[str, object]:
                       "messages": writes,
                       "key_exprs": [f"plugcell/*/svc/{name}/**", f"plugcell/*/live/*/{name}/*",
                                     f"plugcell/*/svc/*/create/{name}",
-                                    f"plugcell/*/joints/{name}"]})
+                                    f"plugcell/*/joints/{name}",
+                                    f"plugcell/*/tracking/{name}"]})
         subjects.append({"id": f"cn{i}", "cert_common_names": [name]})
         policies.append({"id": f"as{i}", "rules": [f"as{i}"], "subjects": [f"cn{i}"]})
     return {"enabled": True, "default_permission": "deny", "rules": rules,

@@ -6,7 +6,8 @@
   served from ``/static``; nothing from the Internet);
 * ``/api/…`` — the actions (:mod:`plugcell.apps.ui.api`);
 * ``/ws`` — live events: a snapshot, then ``cell``, ``processes``, ``run``,
-  ``task`` and ``log`` events as they happen (:meth:`CellController.listen`);
+  ``task`` and ``log`` events as they happen, each robot's joint state (``robot``) and
+  tracked move as it goes (``tracking``) (:meth:`CellController.listen`);
 * ``/reports/…`` — the calibration report and the reproduced thesis figures.
 
 The controller service runs in the app's event loop: started by the app's

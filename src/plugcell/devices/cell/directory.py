@@ -19,7 +19,7 @@ from typing import Any
 
 from plugcell.devices.cell.feed import UiFeed
 from plugcell.devices.cell.monitor import ProcessMonitor
-from plugcell.devices.cell.robot_states import RobotStates
+from plugcell.devices.cell.robot_states import RobotStreams
 from plugcell.devices.cell.tasks import describe_command
 from plugcell.devices.cell.wiring import Wire, WiringKeeper, wires_in_place
 from plugcell.framework.keys import Presence
@@ -74,7 +74,7 @@ class CellDirectory:
     log; ``spawn(coro)`` runs a task the controller cancels when it closes."""
 
     def __init__(self, participant: Participant, *, feed: UiFeed, keeper: WiringKeeper,
-                 monitor: ProcessMonitor, robots: RobotStates,
+                 monitor: ProcessMonitor, robots: RobotStreams,
                  log: Callable[[str, str], None], spawn: Callable[[Any], Any]) -> None:
         self.participant = participant
         self.feed = feed

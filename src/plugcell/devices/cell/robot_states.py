@@ -1,4 +1,5 @@
-"""The robots' joint states, relayed by the cell controller to its listeners (the 3-D view).
+"""What the robots stream, relayed by the cell controller to its listeners: their joint
+states (the 3-D view) and their tracked moves as they go (the live plot, ``live_moves.py``).
 
 Each robot service publishes its joint state (``plugcell.devices.robot.joint_state``:
 readings and link frames, several times a second); :class:`RobotStates` turns each one
@@ -8,14 +9,17 @@ follows it live — and keeps the latest per robot for a new listener's snapshot
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from typing import Any
 
 import msgspec
 
 from plugcell.devices.cell.feed import UiFeed
+from plugcell.devices.cell.live_moves import LiveMoves
 from plugcell.devices.robot.joint_state import decode_joint_state
+from plugcell.framework.bus import Bus, Entity
 
-__all__ = ["RobotStates"]
+__all__ = ["RobotStates", "RobotStreams"]
 
 
 class RobotStates:
@@ -47,3 +51,27 @@ class RobotStates:
     def snapshot(self) -> list[dict[str, Any]]:
         """The latest event of every robot."""
         return list(self.latest.values())
+
+
+class RobotStreams:
+    """The robots' joint states (:class:`RobotStates`) and tracked moves
+    (:class:`~plugcell.devices.cell.live_moves.LiveMoves`), each event to ``feed``."""
+
+    def __init__(self, feed: UiFeed) -> None:
+        self.states = RobotStates(feed)
+        self.moves = LiveMoves(feed)
+
+    def watch(self, bus: Bus, own: Callable[[Entity], Any]) -> None:
+        """Subscribe to every robot's joint state and tracked move on ``bus``; ``own``
+        keeps each subscriber (and undeclares it when the service closes)."""
+        own(bus.watch_joint_states(self.states.on_payload))
+        own(bus.watch_tracking(self.moves.on_payload))
+
+    def forget(self, service: str) -> None:
+        """``service`` left the cell."""
+        self.states.forget(service)
+        self.moves.forget(service)
+
+    def snapshot(self) -> dict[str, list[dict[str, Any]]]:
+        """``{"robots": …, "tracking": …}``: the latest of each robot, for a new listener."""
+        return {"robots": self.states.snapshot(), "tracking": self.moves.snapshot()}

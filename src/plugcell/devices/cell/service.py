@@ -43,7 +43,7 @@ from plugcell.devices.cell.directory import CellDirectory
 from plugcell.devices.cell.feed import UiFeed
 from plugcell.devices.cell.journal_tail import JournalTail
 from plugcell.devices.cell.monitor import ProcessMonitor, data_view
-from plugcell.devices.cell.robot_states import RobotStates
+from plugcell.devices.cell.robot_states import RobotStreams
 from plugcell.devices.cell.runs import (
     MODES,
     ProgramRun,
@@ -177,8 +177,8 @@ class CellController:
         self.feed = UiFeed(service.name, cell=self.cell_json, processes=self._processes_event,
                            log=log)
         """What the web UI hears (cell/feed.py)."""
-        self.robots = RobotStates(self.feed)
-        """The latest joint state of each robot (robot_states.py)."""
+        self.robots = RobotStreams(self.feed)
+        """The latest joint state and tracked move of each robot (robot_states.py)."""
         self.processes = MonitoredProcesses(service, self.monitor, self.feed)
         """Creates the controller's processes, each monitored."""
         self.directory = CellDirectory(service.participant, feed=self.feed, keeper=self.keeper,
@@ -197,12 +197,12 @@ class CellController:
     # -- life cycle ----------------------------------------------------------------------
 
     async def connect(self) -> None:
-        """Once live in the cell: follow every process and joint state, load the wiring,
-        start discovery, refresh, the UI feed and the journal reader."""
+        """Once live in the cell: follow every process, joint state and tracked move, load
+        the wiring, start discovery, refresh, the UI feed and the journal reader."""
         host, participant = self.host, self.host.participant
         assert participant.bus is not None
         host.own(participant.watch_processes(self._on_any_process))
-        host.own(participant.bus.watch_joint_states(self.robots.on_payload))
+        self.robots.watch(participant.bus, host.own)
         if self.wiring_file is not None:
             try:
                 self.load(self.wiring_file)
@@ -282,7 +282,7 @@ class CellController:
             "runs": [r.to_json() for r in self.runs.values()],
             "log": list(self.activity),
             "journals": self.journal_tail is not None,
-            "robots": self.robots.snapshot(),
+            **self.robots.snapshot(),
         }
 
     def _processes_event(self, keys: Iterable[tuple[str, str, int]]) -> dict[str, Any]:

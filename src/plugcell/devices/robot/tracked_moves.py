@@ -82,6 +82,7 @@ from __future__ import annotations
 
 import asyncio
 import logging
+import sys
 import threading
 import time
 from collections import deque
@@ -94,6 +95,13 @@ from numpy.typing import NDArray
 from plugcell.compensation.pose_model import IdentifiedModel, NominalModel, PoseModel
 from plugcell.compensation.tracking import TrackerMeasurement, TrackingLoop, TrackingSettings
 from plugcell.devices.robot.arm_model import matrix_from_position
+from plugcell.devices.robot.live_tracking import (
+    HoldSpan,
+    LiveTracking,
+    TrackingEnd,
+    identity_now,
+    live_tracking_of,
+)
 from plugcell.devices.robot.move_learning import MoveLearning, MoveSession, program_of
 from plugcell.devices.robot.poses import pose_matrix
 from plugcell.devices.robot.stream.adjusting import WireLimits, WirePeaks
@@ -307,6 +315,9 @@ class TrackedMoves:
     program : callable, optional
         ``program() → (name, run)`` of the running program (None: none), the learned
         moves' keys; without it no move learns.
+    live : callable, optional
+        ``live() → LiveTracking`` (None: not now): publishes each move as it goes for the
+        web UI's live plot (:mod:`.live_tracking`), from the service's event loop.
     """
 
     def __init__(self, motion: Any, feeds: Callable[[str], TrackerFeed], *,
@@ -316,8 +327,15 @@ class TrackedMoves:
                  realtime: bool = True, calibration: Any = None,
                  calibration_name: str = "", say: Callable[[str], None] | None = None,
                  learning: MoveLearning | None = None,
-                 program: Callable[[], tuple[str, int] | None] | None = None) -> None:
+                 program: Callable[[], tuple[str, int] | None] | None = None,
+                 live: Callable[[], LiveTracking | None] | None = None) -> None:
         self.motion, self.feeds, self.after = motion, feeds, after
+        #: ``live()``: the service's live display of its tracked moves (None: none)
+        self.live, self._live = live, None
+        self._live_count: tuple[tuple[str, int] | None, int] = (None, 0)
+        #: the last move's computed cycles: ``(k, newest good tracker sample (t, x, y, z)
+        #: robot s and m in F0, or None)``, beside :attr:`last_record`
+        self.last_cycles: list[tuple[int, tuple[float, float, float, float] | None]] = []
         self.learning, self.program = learning, program
         #: the last move's learning (None: it did not learn) and its good tracker samples
         #: ``(t, x, y, z)`` (robot s, m in F0)
@@ -373,6 +391,7 @@ class TrackedMoves:
             feed = self.last_feed = self.feeds(tracker)
             feed.start()
             adjust, worker = self._adjust(loop, feed, cycle_s, q_plan, session)
+            self._live_begin(tracker, cycle_s)
             # across the process boundary the child limits what it sends (the wire's
             # limits); in simulated time it waits for each cycle's correction (as the
             # in-process hook computes it in the cycle)
@@ -390,6 +409,7 @@ class TrackedMoves:
                 if isinstance(m.drive, LinkProcess):
                     self.last_wire_peaks = m.drive.wire_peaks
                 feed.stop()
+                self._live_end(loop, failure)
             m.last = traj
         for w in loop.windows:
             log.warning("MOVE WITH TRACKING to %s: the model alone from %.3f s to %s (%s)",
@@ -411,6 +431,43 @@ class TrackedMoves:
             return padded.duration
         self.after(padded.duration)
         return None
+
+    def _live_begin(self, tracker: str, cycle_s: float) -> None:
+        """Show the move live (:mod:`.live_tracking`), if the service does: its identity
+        (the ``n``-th tracked move of the program's run) and what its cycles append.  A
+        display: what fails here is logged, the move goes on."""
+        self._live = None
+        try:
+            live = None if self.live is None else self.live()
+            if live is None:
+                return
+            running = None if self.program is None else self.program()
+            n = (self._live_count[1] if self._live_count[0] == running else 0) + 1
+            self._live_count = (running, n)
+            live.begin(identity_now(running, n, tracker), cycle_s,
+                       round(self.settle_s / cycle_s) * cycle_s, self._plan_p,
+                       self.last_record, self.last_cycles)
+            self._live = live
+        except Exception as exc:
+            log.warning("MOVE WITH TRACKING: not shown live (%s: %s)", type(exc).__name__, exc)
+
+    def _live_end(self, loop: TrackingLoop, failure: str) -> None:
+        """The live move's last batch: the loop's counts and windows, why it failed (the
+        tracker's failure, or the exception that ends the move)."""
+        live, self._live = self._live, None
+        if live is None:
+            return
+        error = sys.exc_info()[1]
+        why = failure or ("" if error is None else str(error) or type(error).__name__)
+        st = loop.stats
+        try:
+            live.end(TrackingEnd(st.cycles, st.tracking_cycles,
+                                 [HoldSpan(w.start_s, w.end_s, w.reason[:512])
+                                  for w in loop.windows[:1000]], self.model_text[:512],
+                                 why[:512]))
+        except Exception as exc:
+            log.warning("MOVE WITH TRACKING: its end not shown live (%s: %s)",
+                        type(exc).__name__, exc)
 
     def _session(self, q_plan: Array, traj: Any, tool: Array, cycle_s: float
                  ) -> MoveSession | None:
@@ -458,6 +515,7 @@ class TrackedMoves:
         ramp = unit_ramp(max(self.ramp_s, cycle_s))
         record = self.last_record = []
         kept = self.last_samples = []
+        cycles = self.last_cycles = []
         self.last_dropped = 0
         clock = self._path_clock = None if session is None else _PathClock(
             session.feedforward(0.0), cycle_s, round(self.settle_s / cycle_s) * cycle_s)
@@ -485,6 +543,7 @@ class TrackedMoves:
                 self.last_dropped += len(samples) - MAX_SAMPLES_PER_CYCLE
                 samples = samples[-MAX_SAMPLES_PER_CYCLE:]
             loop.add(samples)
+            cycles.append((k, _newest_good(samples)))
             if clock is not None:
                 clock.see(state.t, k)
                 kept.extend((m.time_s, *m.pose[:3, 3]) for m in samples
@@ -557,6 +616,15 @@ def wire_limits(settings: TrackingSettings, jacobians: Array) -> WireLimits:
               [s.max_accel_rad_s2] * 3]
     inv = np.abs(np.linalg.pinv(np.asarray(jacobians, dtype=float)))
     return WireLimits(s.cycle_s, (inv @ v).max(axis=0), (inv @ a).max(axis=0))
+
+
+def _newest_good(samples: list[TrackerMeasurement]
+                 ) -> tuple[float, float, float, float] | None:
+    """``(t, x, y, z)`` of the newest sample with a pose (robot s, m), None if none."""
+    for m in reversed(samples):
+        if m.pose is not None and m.status == "ok":
+            return (m.time_s, *m.pose[:3, 3].tolist())
+    return None
 
 
 class _PathClock:
@@ -644,7 +712,7 @@ def tracked_moves_for(controller: Any) -> Callable[[Position, str], float | None
     """The ``move_tracked`` of a streaming robot link (the hook of
     :class:`~.stream_controller.StreamController`): the tracker's samples through the link's
     robot service (``controller.handler.host``, in its event loop), the move's time on the
-    program's clock."""
+    program's clock, each move shown live on the service's bus (:mod:`.live_tracking`)."""
 
     def feeds(tracker: str) -> TrackerFeed:
         loop = controller.event_loop
@@ -660,4 +728,6 @@ def tracked_moves_for(controller: Any) -> Callable[[Position, str], float | None
                         calibration=controller.calibration,
                         calibration_name=controller.calibration_name,
                         say=controller.say, learning=controller.move_learning,
-                        program=program_of(controller)).move_tracked
+                        program=program_of(controller),
+                        live=live_tracking_of(lambda: controller.handler.host,
+                                              lambda: controller.event_loop)).move_tracked

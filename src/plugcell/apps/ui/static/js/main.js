@@ -25,8 +25,13 @@ function connect() {
   ws.addEventListener("message", (ev) => {
     const msg = JSON.parse(ev.data);
     switch (msg.type) {
-      case "snapshot": applySnapshot(msg); for (const r of msg.robots || []) emit("robot", r); break;
+      case "snapshot":
+        applySnapshot(msg);
+        for (const r of msg.robots || []) emit("robot", r);
+        for (const t of msg.tracking || []) emit("tracking", t);
+        break;
       case "robot": emit("robot", msg); break;
+      case "tracking": emit("tracking", msg); break;
       case "cell": applyCell(msg); break;
       case "processes": applyProcesses(msg.processes, msg.queues); break;
       case "run": state.runs.set(msg.run.id, msg.run); emit("runs", msg.run); break;

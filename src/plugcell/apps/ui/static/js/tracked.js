@@ -2,59 +2,16 @@
 // The API (/api/tracked-path) checks it and gives each path's deviation from the commanded
 // one over time — corrected (the loop's correction), actual (the TCP's true deviation) and
 // measured (the tracker's samples) — which this draws as an SVG plot, with the windows
-// without tracking shaded and the accuracy table of the run.
-import { clear, h, s } from "./dom.js";
+// without tracking shaded and the accuracy table of the run.  Its "Live" mode follows a
+// robot's tracked move as it goes (tracked_live.js).
+import { clear, h } from "./dom.js";
 import { post } from "./api.js";
+import { SERIES, mm, plot } from "./deviation_plot.js";
+import { renderLive } from "./tracked_live.js";
 
 let shown = null;   // the last answer (kept across sub-tab switches)
 let ui = null;
-
-const W = 760, H = 260, M = { l: 48, r: 12, t: 10, b: 28 };
-const SERIES = [
-  ["measured", "#7fa7d9", "measured (tracker)"],
-  ["corrected", "#e0b050", "corrected (command)"],
-  ["actual", "#5fd39b", "actual (true TCP)"],
-];
-
-function mm(x) { return typeof x === "number" ? x.toFixed(3) : "—"; }
-
-function ticks(lo, hi, n) {
-  const step = (hi - lo) / n;
-  return Array.from({ length: n + 1 }, (_, i) => lo + i * step);
-}
-
-/** The SVG plot of the deviations (mm) over time (s). */
-function plot(view) {
-  const [t0, t1] = view.span_s;
-  const ymax = Math.max(1e-3, ...Object.values(view.max_mm)) * 1.08;
-  const x = (t) => M.l + ((t - t0) / Math.max(t1 - t0, 1e-9)) * (W - M.l - M.r);
-  const y = (v) => H - M.b - (v / ymax) * (H - M.t - M.b);
-  const svg = s("svg", { viewBox: `0 0 ${W} ${H}`, class: "tracked-plot", role: "img",
-    "aria-label": "deviation from the commanded path" });
-  for (const w of view.windows) {
-    const a = x(Math.max(w.start_s, t0)), b = x(w.end_s === null ? t1 : Math.min(w.end_s, t1));
-    svg.append(s("rect", { x: a, y: M.t, width: Math.max(b - a, 1), height: H - M.t - M.b,
-      fill: "#553333", "fill-opacity": 0.5, class: "window", dataset: { reason: w.reason } },
-    s("title", { text: `without tracking: ${w.reason}` })));
-  }
-  for (const v of ticks(0, ymax, 4)) {
-    svg.append(s("line", { x1: M.l, x2: W - M.r, y1: y(v), y2: y(v), stroke: "#2a3a3a" }),
-      s("text", { x: M.l - 4, y: y(v) + 4, "text-anchor": "end", fill: "#8aa", "font-size": 10, text: v.toFixed(2) }));
-  }
-  for (const t of ticks(t0, t1, 6)) {
-    svg.append(s("text", { x: x(t), y: H - 10, "text-anchor": "middle", fill: "#8aa", "font-size": 10, text: t.toFixed(2) }));
-  }
-  svg.append(s("text", { x: 4, y: M.t + 8, fill: "#8aa", "font-size": 10, text: "mm" }),
-    s("text", { x: W - M.r, y: H - 10, "text-anchor": "end", fill: "#8aa", "font-size": 10, text: "s" }));
-  for (const [name, colour] of SERIES) {
-    const pts = view.series[name];
-    if (!pts || !pts.length) continue;
-    const d = pts.map(([t, v]) => `${x(t).toFixed(1)},${y(v).toFixed(1)}`).join(" ");
-    svg.append(s("polyline", { points: d, fill: "none", stroke: colour, "stroke-width": name === "measured" ? 1 : 1.6,
-      class: "series", dataset: { series: name, points: pts.length } }));
-  }
-  return svg;
-}
+let mode = "file";  // "file": a run's result; "live": a robot's tracked move as it goes
 
 function table(view) {
   const head = ["segment", "state", "cycles", "perp max", "perp 3σ", "along max"];
@@ -98,8 +55,14 @@ async function submit() {
   show(res);
 }
 
-/** The "Tracked path" sub-tab of the metrology panel. */
+/** The "Tracked path" sub-tab of the metrology panel: a run's result file, or live. */
 export function renderTracked(box) {
+  const modes = h("div", { class: "subtabs", role: "tablist" },
+    ...[["file", "Result file"], ["live", "Live"]].map(([m, label]) => h("button", {
+      type: "button", class: m === mode ? "active" : undefined, dataset: { mode: m }, text: label,
+      onclick: () => { mode = m; renderTracked(clear(box)); } })));
+  box.append(modes);
+  if (mode === "live") { renderLive(box); return; }
   const file = h("input", { type: "file", accept: ".json,application/json", "aria-label": "tracked path result" });
   const text = h("textarea", { name: "tracked-text", spellcheck: "false", placeholder: "the result file of plugcell path run … --out result.json" });
   const error = h("span", { class: "field-error", dataset: { for: "tracked" } });
