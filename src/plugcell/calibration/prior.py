@@ -15,7 +15,8 @@ the robot in the new set-up.  A short campaign there identifies what it can dete
   wrong for the new set-up);
 * the campaign's own stage (:mod:`.campaign_stage`, ``stage=True``): small trees on what
   the fit leaves, on top of the earlier layer's arm-shape stage, adopted only when their
-  grouped CV over the campaign's cells beats the fit without them.
+  grouped CV over the campaign's cells beats the fit without them by more than the same
+  k standard errors (:func:`.se_rule.beats`).
 
 The problem (MAP with Gaussian measurement noise ``σ_y`` per residual row and a Gaussian
 prior ``N(x_p, (τ σ_k)²)`` on each regularised parameter)::
@@ -83,6 +84,7 @@ from plugcell.calibration.residual_model import (
     workspace_cells,
 )
 from plugcell.calibration.result import CalibrationResult, IterationRecord
+from plugcell.calibration.se_rule import SE_RULE_K, beats, check_k, paired_difference
 from plugcell.calibration.statistics import PoseResiduals, parameter_statistics
 from plugcell.calibration.validity import ValidityRegion
 
@@ -123,10 +125,6 @@ Choice = float | str
 CANDIDATES: tuple[Choice, ...] = (*SCALES, *(f"{t:g}{PHYSICAL}" for t in PHYSICAL_SCALES),
                                   MOVED, ALONE)
 
-#: k of the choice's k-standard-error rule (:func:`pick_significant`): a candidate other
-#: than the baselines is adopted only when its CV error is below the better baseline's by
-#: more than k standard errors of the paired difference (k = 1: the one-standard-error rule).
-SE_RULE_K = 1.0
 
 __all__ = ["ALONE", "CANDIDATES", "CELL_SIZE_M", "CV_SPLITS", "DEFAULT_SCALE", "FRAMES_ONLY",
            "KFOLD_SPLITS", "MOVED", "PHYSICAL", "PHYSICAL_SCALES", "SCALES", "SE_RULE_K",
@@ -212,50 +210,6 @@ def pick(scores: Mapping[str, float]) -> Choice:
     return next((c for c in known if scores[_label(c)] <= bound), known[0])
 
 
-def paired_difference(e: Array, e_ref: Array, fold: Array) -> tuple[float, float]:
-    """The mean paired CV difference of a candidate to a reference and its standard error,
-    clustered by CV fold.
-
-    With ``d_i = e_i − e_ref,i`` over the ``N`` poses and ``G`` folds (the poses a fold
-    holds out share the fit made without them, so their errors are correlated; the folds
-    are the independent units)::
-
-        d̄ = (1/N) Σ_i d_i,     SE² = G / (G − 1) · Σ_g (Σ_{i∈g} (d_i − d̄))² / N²
-
-    (the cluster-robust variance of a mean; with equal folds ``SE = sd_g(d̄_g) / √G``,
-    the standard error over folds of the one-standard-error rule).
-
-    Parameters
-    ----------
-    e, e_ref : (N,) array
-        Held-out errors of the candidate and of the reference, one per pose (any unit).
-    fold : (N,) int array
-        The CV fold that held each pose out.
-
-    Returns
-    -------
-    mean : float
-        ``d̄`` (the unit of ``e``); ``inf`` when ``e`` has a non-finite error, ``nan`` when
-        ``e_ref`` has one.
-    se : float
-        ``SE`` (``inf`` with fewer than 2 folds).
-    """
-    e = np.asarray(e, float)
-    e_ref = np.asarray(e_ref, float)
-    if not np.all(np.isfinite(e_ref)):
-        return math.nan, math.inf
-    if not np.all(np.isfinite(e)):
-        return math.inf, math.inf
-    d = e - e_ref
-    mean = float(d.mean())
-    _, g = np.unique(np.asarray(fold), return_inverse=True)
-    n_g = int(g.max()) + 1 if g.size else 0
-    if n_g < 2:
-        return mean, math.inf
-    sums = np.bincount(g, weights=d - mean, minlength=n_g)
-    return mean, float(np.sqrt(n_g / (n_g - 1) * np.sum(sums**2)) / d.size)
-
-
 def pick_significant(errors: Mapping[str, Array], fold: Array,
                      k: float = SE_RULE_K) -> Choice:
     """The CV's choice with a k-standard-error rule: a candidate other than the baselines
@@ -292,9 +246,7 @@ def pick_significant(errors: Mapping[str, Array], fold: Array,
     CalibrationError
         ``k`` negative or not finite, no candidate of :data:`CANDIDATES` among ``errors``.
     """
-    if not (math.isfinite(k) and k >= 0):
-        raise CalibrationError(f"prior: the standard-error factor k must be a number ≥ 0, "
-                               f"got {k!r}")
+    k = check_k(k)
     scores = {c: float(np.mean(v)) for c, v in errors.items()}
     bases = [b for b in (MOVED, ALONE) if b in scores and math.isfinite(scores[b])]
     if not bases:
@@ -305,8 +257,7 @@ def pick_significant(errors: Mapping[str, Array], fold: Array,
         if c in (MOVED, ALONE):
             keep[c] = s
             continue
-        mean, se = paired_difference(errors[c], errors[base], fold)
-        if mean + k * se < 0:
+        if beats(errors[c], errors[base], fold, k)[0]:
             keep[c] = s
     return pick(keep)
 
@@ -449,7 +400,8 @@ class PriorCalibrator:
         campaign among :data:`CANDIDATES` (:meth:`choose`).
     stage : bool
         Learn the campaign's own stage on what the physical fit leaves and adopt it when
-        its grouped CV says it helps (:mod:`.campaign_stage`); default True.
+        its grouped CV beats the fit without it by more than ``se_k`` standard errors
+        (:mod:`.campaign_stage`); default True.
     rotation_weight : float, m/rad
         Weight ``w`` of the orientation rows.
     tol : float
@@ -467,8 +419,9 @@ class PriorCalibrator:
         whole campaign deserves (docs/results/short-campaign-bounds.md).  The campaign
         stage keeps its grouped CV.
     se_k : float
-        k ≥ 0 of the choice's k-standard-error rule (:func:`pick_significant`; default
-        :data:`SE_RULE_K`).
+        k ≥ 0 of the k-standard-error rule of the choice (:func:`pick_significant`) and of
+        the campaign stage's adoption (:func:`.campaign_stage.fit_campaign_stage`); default
+        :data:`SE_RULE_K`.
     progress : callable, optional
         ``(stage, i, n, message)``.
 
@@ -490,9 +443,6 @@ class PriorCalibrator:
                                    f"or a number ≥ 1, got {scale}")
         if not (tol > 0 and max_iterations >= 1 and rotation_weight > 0 and cell_size_m > 0):
             raise CalibrationError("tol, max_iterations, rotation_weight, cell_size_m must be > 0")
-        if not (math.isfinite(se_k) and se_k >= 0):
-            raise CalibrationError(f"prior: the standard-error factor k must be a number ≥ 0, "
-                                   f"got {se_k!r}")
         if cv_split not in CV_SPLITS:
             raise CalibrationError(f"prior: unknown CV split {cv_split!r} (one of "
                                    f"{', '.join(CV_SPLITS)})")
@@ -504,7 +454,7 @@ class PriorCalibrator:
         self.max_iterations = int(max_iterations)
         self.cell_size_m = float(cell_size_m)
         self.cv_split = cv_split
-        self.se_k = float(se_k)
+        self.se_k = check_k(se_k)
         self.progress = progress
 
     def _say(self, stage: str, i: int, n: int, msg: str) -> None:
@@ -775,7 +725,7 @@ class PriorCalibrator:
         if not self.stage:
             return None
         stage = fit_campaign_stage(model, data, earlier, robot=self.prior.robot,
-                                   cell_size_m=self.cell_size_m)
+                                   cell_size_m=self.cell_size_m, se_k=self.se_k)
         self._say("prior", 1, 1, "campaign stage: " + (
             "adopted" if stage.adopted else "not used") + (
             f" ({stage.reason})" if stage.reason else ""))

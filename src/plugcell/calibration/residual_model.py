@@ -195,6 +195,12 @@ class CrossValidation:
         Edge of the workspace cells.
     scores : tuple of (dict, float)
         ``(hyper-parameters, hybrid_mm)`` for each candidate of the grid, in grid order.
+    physical_errors, hybrid_errors : (N,) array or None, m
+        Per pose, ``‖e_i‖`` and ``‖e_i − ê_i‖`` with the chosen hyper-parameters (the
+        paired difference of :func:`.se_rule.beats`); ``None`` for a layer read from a
+        file (not stored there).
+    fold : (N,) int array or None
+        The fold that held each pose out.
     """
 
     physical_mm: float
@@ -205,6 +211,9 @@ class CrossValidation:
     cells: int
     cell_size_m: float
     scores: tuple[tuple[dict[str, Any], float], ...]
+    physical_errors: Array | None = field(default=None, compare=False, repr=False)
+    hybrid_errors: Array | None = field(default=None, compare=False, repr=False)
+    fold: Array | None = field(default=None, compare=False, repr=False)
 
     def as_dict(self) -> dict[str, Any]:
         """The record as PARAMS.json stores it (``residual_model.cross_validation``).
@@ -966,10 +975,15 @@ class ResidualLearner:
         threshold = float(np.quantile(dist, self.domain_quantile))
         self._say(f"fitting {n_out} regressors on {n} poses with {params}")
         estimators = tuple(self._regressor(params).fit(X, E[:, j]) for j in range(n_out))
+        fold = np.empty(n, int)
+        for i, (_, te) in enumerate(folds):
+            fold[te] = i
         cv = CrossValidation(physical_mm=float(phys_norm.mean() * 1e3), hybrid_mm=score * 1e3,
                              physical_orientation_deg=ori_phys, hybrid_orientation_deg=ori_hyb,
                              folds=self.n_splits, cells=n_cells, cell_size_m=self.cell_size_m,
-                             scores=tuple(scores))
+                             scores=tuple(scores), physical_errors=phys_norm,
+                             hybrid_errors=np.linalg.norm(E[:, :k_pos] - pred, axis=1),
+                             fold=fold)
         return LearnedResidual(
             robot=robot, fingerprint=calibration_fingerprint(model), estimators=estimators,
             neighbours=NearestNeighbors(n_neighbors=1).fit(X), threshold=threshold,
