@@ -15,8 +15,8 @@ the robot in the new set-up.  A short campaign there identifies what it can dete
   wrong for the new set-up);
 * the campaign's own stage (:mod:`.campaign_stage`, ``stage=True``): small trees on what
   the fit leaves, on top of the earlier layer's arm-shape stage, adopted only when their
-  grouped CV over the campaign's cells beats the fit without them by more than the same
-  k standard errors (:func:`.se_rule.beats`).
+  grouped CV over the campaign's cells beats the fit without them by more than k
+  standard errors of the paired difference (:func:`.se_rule.beats`; its own k, default 0).
 
 The problem (MAP with Gaussian measurement noise ``σ_y`` per residual row and a Gaussian
 prior ``N(x_p, (τ σ_k)²)`` on each regularised parameter)::
@@ -60,7 +60,7 @@ from dataclasses import dataclass, replace
 import numpy as np
 from numpy.typing import NDArray
 
-from plugcell.calibration.campaign_stage import CampaignStage, fit_campaign_stage
+from plugcell.calibration.campaign_stage import STAGE_SE_K, CampaignStage, fit_campaign_stage
 from plugcell.calibration.configs import ModelConfig
 from plugcell.calibration.data import CalibrationData
 from plugcell.calibration.identifiability import analyse
@@ -81,6 +81,7 @@ from plugcell.calibration.residual_model import (
     LearnedResidual,
     _remove_correction,
     calibration_fingerprint,
+    fold_labels,
     workspace_cells,
 )
 from plugcell.calibration.result import CalibrationResult, IterationRecord
@@ -400,8 +401,8 @@ class PriorCalibrator:
         campaign among :data:`CANDIDATES` (:meth:`choose`).
     stage : bool
         Learn the campaign's own stage on what the physical fit leaves and adopt it when
-        its grouped CV beats the fit without it by more than ``se_k`` standard errors
-        (:mod:`.campaign_stage`); default True.
+        its grouped CV beats the fit without it by more than ``stage_se_k`` standard
+        errors (:mod:`.campaign_stage`); default True.
     rotation_weight : float, m/rad
         Weight ``w`` of the orientation rows.
     tol : float
@@ -419,9 +420,12 @@ class PriorCalibrator:
         whole campaign deserves (docs/results/short-campaign-bounds.md).  The campaign
         stage keeps its grouped CV.
     se_k : float
-        k ≥ 0 of the k-standard-error rule of the choice (:func:`pick_significant`) and of
-        the campaign stage's adoption (:func:`.campaign_stage.fit_campaign_stage`); default
-        :data:`SE_RULE_K`.
+        k ≥ 0 of the choice's k-standard-error rule (:func:`pick_significant`; default
+        :data:`SE_RULE_K`).
+    stage_se_k : float
+        k ≥ 0 of the campaign stage's adoption, the same rule on its grouped CV
+        (:func:`.campaign_stage.fit_campaign_stage`; default
+        :data:`~.campaign_stage.STAGE_SE_K` = 0, the plain comparison).
     progress : callable, optional
         ``(stage, i, n, message)``.
 
@@ -435,7 +439,7 @@ class PriorCalibrator:
     def __init__(self, prior: Prior, *, scale: float | None = None, stage: bool = True,
                  rotation_weight: float = 1.0, tol: float = 1e-7, max_iterations: int = 30,
                  cell_size_m: float = CELL_SIZE_M, cv_split: str = "kfold",
-                 se_k: float = SE_RULE_K,
+                 se_k: float = SE_RULE_K, stage_se_k: float = STAGE_SE_K,
                  progress: Callable[[str, int, int, str], None] | None = None) -> None:
         if scale is not None and not (scale == FRAMES_ONLY
                                       or (math.isfinite(scale) and scale >= 1.0)):
@@ -455,6 +459,7 @@ class PriorCalibrator:
         self.cell_size_m = float(cell_size_m)
         self.cv_split = cv_split
         self.se_k = check_k(se_k)
+        self.stage_se_k = check_k(stage_se_k)
         self.progress = progress
 
     def _say(self, stage: str, i: int, n: int, msg: str) -> None:
@@ -649,9 +654,7 @@ class PriorCalibrator:
             if cells < 2:
                 return DEFAULT_SCALE, {}
             folds = list(GroupKFold(n_splits=min(5, cells)).split(targets, groups=groups))
-        fold = np.empty(len(data), int)
-        for i, (_, te) in enumerate(folds):
-            fold[te] = i
+        fold = fold_labels(folds, len(data))
         errors: dict[str, Array] = {}
         for c in CANDIDATES:
             errors[_label(c)] = self._cv_errors(data, offset, folds, c)
@@ -725,7 +728,7 @@ class PriorCalibrator:
         if not self.stage:
             return None
         stage = fit_campaign_stage(model, data, earlier, robot=self.prior.robot,
-                                   cell_size_m=self.cell_size_m, se_k=self.se_k)
+                                   cell_size_m=self.cell_size_m, se_k=self.stage_se_k)
         self._say("prior", 1, 1, "campaign stage: " + (
             "adopted" if stage.adopted else "not used") + (
             f" ({stage.reason})" if stage.reason else ""))
