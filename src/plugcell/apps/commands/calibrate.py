@@ -315,8 +315,10 @@ def _summary(d: dict[str, Any]) -> str:
             lines.append("  campaign stage: " + (
                 f"adopted (grouped CV over {st['cells']} cells: {st['physical_mm']:.3f} -> "
                 f"{st['hybrid_mm']:.3f} mm" + (
-                    f", gain {-st['gain_mm']:.3f} mm > {st['se_k']:g} × its standard error "
-                    f"{st['se_mm']:.3f} mm" if st.get("gain_mm") is not None else "") + ")"
+                    f", gain {-st['gain_mm']:.3f} mm " + (
+                        f"> {st['se_k']:g} × its standard error {st['se_mm']:.3f} mm"
+                        if st["se_k"] else f"(standard error {st['se_mm']:.3f} mm)")
+                    if st.get("gain_mm") is not None else "") + ")"
                 if st["adopted"] else f"not used: {st['reason']}"))
     if hv:
         lines.append(f"  validation  physical {hv['physical']['mean_mm']:7.3f} mm, hybrid "
