@@ -35,12 +35,15 @@ mean position error, mm.  Nothing is tuned on the held-out cells.
 
     .venv/bin/python benchmarks/short_campaign_ur10.py [--data DIR] [--sizes 25,50,...]
         [--series B,C,D] [--selection random|planned] [--draws K] [--quick]
-        [--prior-cv kfold|cells] [--prior-se K] [--out docs/results/short-campaign-ur10.md]
+        [--prior-cv kfold|cells] [--prior-se K] [--prior-stage-se K]
+        [--out docs/results/short-campaign-ur10.md]
 
 ``--prior-cv cells``: the choice's CV grouped over the campaign's 0.4 m cells instead of the
 default seeded random 10-fold of its poses (``PriorCalibrator(cv_split=…)``); ``--prior-se
-K``: the k of the choice's k-standard-error rule (default 1) — both measured in
-docs/results/short-campaign-bounds.md; write such a run elsewhere with ``--out``.
+K``: the k of the choice's k-standard-error rule (default 1); ``--prior-stage-se K``: the
+k of the same rule on the campaign stage's grouped CV (default 0, the plain comparison) —
+all measured in docs/results/short-campaign-bounds.md; write such a run elsewhere with
+``--out``.
 
 Single-threaded (threadpoolctl).  Without the data folder it says so and exits 0.
 """
@@ -63,6 +66,7 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from calibration_ur10 import ur10_toml
 from plugcell.calibration import CalibrationData, CalibrationError, Calibrator
+from plugcell.calibration.campaign_stage import STAGE_SE_K
 from plugcell.calibration.identify import refit_base
 from plugcell.calibration.planning import (
     PosePlanner,
@@ -129,7 +133,7 @@ def earlier(desc: Any, A: CalibrationData, learner: ResidualLearner,
 def run(desc: Any, sets: dict[str, CalibrationData], series: str, sizes: tuple[int, ...],
         selection: str, learner: ResidualLearner, folds: int = 5,
         cache: Path | None = None, draws: int = 1, cv_split: str = "kfold",
-        se_k: float = SE_RULE_K) -> dict[str, Any]:
+        se_k: float = SE_RULE_K, stage_se_k: float = STAGE_SE_K) -> dict[str, Any]:
     from sklearn.model_selection import GroupKFold
 
     t0 = time.perf_counter()
@@ -176,7 +180,8 @@ def run(desc: Any, sets: dict[str, CalibrationData], series: str, sizes: tuple[i
                 # A's hybrid moved: BASE + PROBE re-identified on the campaign with the
                 # layer's correction taken out, the layer's correction on the test poses
                 e["moved_hybrid"][te] = _hybrid_moved(resA, camp, test)
-                res = PriorCalibrator(prior, cv_split=cv_split, se_k=se_k).fit(camp)
+                res = PriorCalibrator(prior, cv_split=cv_split, se_k=se_k,
+                                      stage_se_k=stage_se_k).fit(camp)
                 pri = res.settings["prior"]
                 taus[n].append(pri["choice"] if pri["choice"] != "map" else f"{pri['scale']:g}")
                 stages[n].append(bool(pri["stage"]["adopted"]))
@@ -378,6 +383,14 @@ def _rule_text(d: dict[str, Any]) -> str:
             "difference (clustered by fold), and among those and the baselines ")
 
 
+def _stage_rule_text(d: dict[str, Any]) -> str:
+    """The campaign stage's k-standard-error rule as the page names it ("" for k = 0 and
+    for runs before it)."""
+    k = d.get("prior_stage_se") or 0.0
+    return (f" by more than {k:g} standard error{'s' if k != 1 else ''} of the paired "
+            "difference (clustered by fold, `--prior-stage-se`)" if k else "")
+
+
 def write_page(d: dict[str, Any], path: Path, image: str | None) -> None:
     r = d["result"]
     text = f"""# A robot moved to a new set-up: a short campaign with a prior (UR10, IPA data)
@@ -415,9 +428,9 @@ campaign's cell). Mean position error over all held-out poses, mm.{_draws_note(d
   baseline's — so the choice's CV error is never above (i)'s or (ii)'s by construction; then the
   campaign's own stage (trees on sin/cos q of what the fit leaves, on top of A's
   arm-shape stage when A's layer is kept) adopted only when its grouped CV over the
-  campaign's cells beats the fit without it. The row *--prior-stage none* is the same
-  choice without the campaign stage. In brackets: the change against the better of (i)
-  and (ii).
+  campaign's cells beats the fit without it{_stage_rule_text(d)}. The row
+  *--prior-stage none* is the same choice without the campaign stage. In brackets: the
+  change against the better of (i) and (ii).
 
 {table(d)}
 
@@ -458,7 +471,7 @@ def merge(runs: list[dict[str, Any]]) -> dict[str, Any]:
         d["sizes"] = sorted(set(d["sizes"]) | set(r["sizes"]))
         d["result"]["elapsed_s"] += r["result"]["elapsed_s"]
         d["argv"] = d["argv"] + ["+"] + r["argv"]
-        for k in ("prior_cv", "prior_se"):  # the page describes the last run's choice
+        for k in ("prior_cv", "prior_se", "prior_stage_se"):  # the last run's choice
             if k in r:
                 d[k] = r[k]
     return d
@@ -485,6 +498,9 @@ def main() -> int:
     ap.add_argument("--prior-se", type=float, default=SE_RULE_K, metavar="K",
                     help="the choice's k-standard-error rule (PriorCalibrator se_k; default "
                          f"{SE_RULE_K:g})")
+    ap.add_argument("--prior-stage-se", type=float, default=STAGE_SE_K, metavar="K",
+                    help="the campaign stage's k-standard-error rule (PriorCalibrator "
+                         f"stage_se_k; default {STAGE_SE_K:g})")
     ap.add_argument("--quick", action="store_true",
                     help="A's layer: one hyper-parameter candidate, 100 trees")
     ap.add_argument("--out", type=Path, default=None,
@@ -532,7 +548,8 @@ def main() -> int:
     with threadpool_limits(1):
         result = run(desc, sets, "".join(series), sizes, args.selection,
                      ResidualLearner(**kw), folds=args.folds, cache=args.cache,
-                     draws=args.draws, cv_split=args.prior_cv, se_k=args.prior_se)
+                     draws=args.draws, cv_split=args.prior_cv, se_k=args.prior_se,
+                     stage_se_k=args.prior_stage_se)
     d = {"argv": sys.argv[1:], "sizes": list(sizes), "selection": args.selection,
          "selection_text": "I-optimal for model 3, as `plugcell plan --from` chooses among "
                            "poses already measured" if args.selection == "planned"
@@ -541,6 +558,7 @@ def main() -> int:
                            "draws of the mean held-out error, ± their sd",
          "machine": f"{platform.machine()}, Python {platform.python_version()}",
          "prior_cv": args.prior_cv, "prior_se": args.prior_se,
+         "prior_stage_se": args.prior_stage_se,
          "result": result}
     print(table(d))
     print("\n".join(goal(d)))

@@ -96,6 +96,43 @@ def test_the_default_choice_is_the_random_split_with_the_one_se_rule(files, caps
     assert seen == [("kfold", 1.0), ("cells", 2.0)]
 
 
+def test_the_summary_says_the_stage_rule(files):
+    """The summary line of the campaign stage: adopted with its CV, its gain and the SE it
+    beat; refused with the reason (what PARAMS.json's ``settings.prior.stage`` holds)."""
+    from plugcell.apps.commands.calibrate import _summary
+
+    assert main(_on_b(files, "--prior", str(files / "a.json"), "--prior-scale", "10",
+                      "--prior-stage", "none", "--out", str(files / "b-summary.json"))) == 0
+    d = json.loads((files / "b-summary.json").read_text())
+    d["settings"]["prior"]["stage"] = {
+        "adopted": True, "reason": "", "physical_mm": 0.40, "hybrid_mm": 0.35,
+        "gain_mm": -0.05, "se_mm": 0.02, "se_k": 1.0, "cells": 9, "folds": 5, "params": {}}
+    assert ("campaign stage: adopted (grouped CV over 9 cells: 0.400 -> 0.350 mm, gain 0.050 "
+            "mm > 1 × its standard error 0.020 mm)") in _summary(d)
+    d["settings"]["prior"]["stage"]["se_k"] = 0.0
+    assert "gain 0.050 mm (standard error 0.020 mm))" in _summary(d)
+    d["settings"]["prior"]["stage"].update(adopted=False, reason="its grouped CV gain …")
+    assert "campaign stage: not used: its grouped CV gain …" in _summary(d)
+
+
+def test_the_stage_k_is_its_own_option(files, capsys, monkeypatch):
+    """``--prior-stage-se K`` reaches the calibrator's ``stage_se_k`` (default 0: the plain
+    comparison) and leaves the choice's ``se_k`` alone."""
+    from plugcell.calibration.prior import PriorCalibrator
+
+    seen = []
+
+    def choose(self, data, offset=None):
+        seen.append((self.se_k, self.stage_se_k))
+        return 10.0, {"0": 2e-4, "10": 1e-4, "moved": 2e-4, "alone": 3e-4}
+
+    monkeypatch.setattr(PriorCalibrator, "choose", choose)
+    for extra in ([], ["--prior-stage-se", "1.5"]):
+        assert main(_on_b(files, "--prior", str(files / "a.json"), "--prior-stage", "none",
+                          *extra, "--out", str(files / "b-stage-se.json"))) == 0
+    assert seen == [(1.0, 0.0), (1.0, 1.5)]
+
+
 @pytest.mark.parametrize(("extra", "message"), [
     (["--prior-scale", "3"], "--prior-scale needs --prior EARLIER.json"),
     (["--prior", "A", "--prior-scale", "0.5"],
@@ -105,6 +142,9 @@ def test_the_default_choice_is_the_random_split_with_the_one_se_rule(files, caps
     (["--prior-se", "1"], "--prior-se needs --prior EARLIER.json"),
     (["--prior", "A", "--prior-se", "-1"], "--prior-se must be a number ≥ 0 (standard errors), "
                                            "got -1.0"),
+    (["--prior-stage-se", "1"], "--prior-stage-se needs --prior EARLIER.json"),
+    (["--prior", "A", "--prior-stage-se", "nan"],
+     "--prior-stage-se must be a number ≥ 0 (standard errors), got nan"),
     (["--prior", "A"], "--prior needs --out PARAMS.json"),
     (["--prior", "A", "--thermal"], "--prior: --thermal cannot be combined with it"),
     (["--prior", "A", "--probe", "0,0,90,0,0,0"], "--prior: --probe cannot be combined"),

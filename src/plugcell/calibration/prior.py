@@ -15,7 +15,8 @@ the robot in the new set-up.  A short campaign there identifies what it can dete
   wrong for the new set-up);
 * the campaign's own stage (:mod:`.campaign_stage`, ``stage=True``): small trees on what
   the fit leaves, on top of the earlier layer's arm-shape stage, adopted only when their
-  grouped CV over the campaign's cells beats the fit without them.
+  grouped CV over the campaign's cells beats the fit without them by more than k
+  standard errors of the paired difference (:func:`.se_rule.beats`; its own k, default 0).
 
 The problem (MAP with Gaussian measurement noise ``σ_y`` per residual row and a Gaussian
 prior ``N(x_p, (τ σ_k)²)`` on each regularised parameter)::
@@ -59,7 +60,7 @@ from dataclasses import dataclass, replace
 import numpy as np
 from numpy.typing import NDArray
 
-from plugcell.calibration.campaign_stage import CampaignStage, fit_campaign_stage
+from plugcell.calibration.campaign_stage import STAGE_SE_K, CampaignStage, fit_campaign_stage
 from plugcell.calibration.configs import ModelConfig
 from plugcell.calibration.data import CalibrationData
 from plugcell.calibration.identifiability import analyse
@@ -80,9 +81,11 @@ from plugcell.calibration.residual_model import (
     LearnedResidual,
     _remove_correction,
     calibration_fingerprint,
+    fold_labels,
     workspace_cells,
 )
 from plugcell.calibration.result import CalibrationResult, IterationRecord
+from plugcell.calibration.se_rule import SE_RULE_K, beats, check_k, paired_difference
 from plugcell.calibration.statistics import PoseResiduals, parameter_statistics
 from plugcell.calibration.validity import ValidityRegion
 
@@ -123,10 +126,6 @@ Choice = float | str
 CANDIDATES: tuple[Choice, ...] = (*SCALES, *(f"{t:g}{PHYSICAL}" for t in PHYSICAL_SCALES),
                                   MOVED, ALONE)
 
-#: k of the choice's k-standard-error rule (:func:`pick_significant`): a candidate other
-#: than the baselines is adopted only when its CV error is below the better baseline's by
-#: more than k standard errors of the paired difference (k = 1: the one-standard-error rule).
-SE_RULE_K = 1.0
 
 __all__ = ["ALONE", "CANDIDATES", "CELL_SIZE_M", "CV_SPLITS", "DEFAULT_SCALE", "FRAMES_ONLY",
            "KFOLD_SPLITS", "MOVED", "PHYSICAL", "PHYSICAL_SCALES", "SCALES", "SE_RULE_K",
@@ -212,50 +211,6 @@ def pick(scores: Mapping[str, float]) -> Choice:
     return next((c for c in known if scores[_label(c)] <= bound), known[0])
 
 
-def paired_difference(e: Array, e_ref: Array, fold: Array) -> tuple[float, float]:
-    """The mean paired CV difference of a candidate to a reference and its standard error,
-    clustered by CV fold.
-
-    With ``d_i = e_i − e_ref,i`` over the ``N`` poses and ``G`` folds (the poses a fold
-    holds out share the fit made without them, so their errors are correlated; the folds
-    are the independent units)::
-
-        d̄ = (1/N) Σ_i d_i,     SE² = G / (G − 1) · Σ_g (Σ_{i∈g} (d_i − d̄))² / N²
-
-    (the cluster-robust variance of a mean; with equal folds ``SE = sd_g(d̄_g) / √G``,
-    the standard error over folds of the one-standard-error rule).
-
-    Parameters
-    ----------
-    e, e_ref : (N,) array
-        Held-out errors of the candidate and of the reference, one per pose (any unit).
-    fold : (N,) int array
-        The CV fold that held each pose out.
-
-    Returns
-    -------
-    mean : float
-        ``d̄`` (the unit of ``e``); ``inf`` when ``e`` has a non-finite error, ``nan`` when
-        ``e_ref`` has one.
-    se : float
-        ``SE`` (``inf`` with fewer than 2 folds).
-    """
-    e = np.asarray(e, float)
-    e_ref = np.asarray(e_ref, float)
-    if not np.all(np.isfinite(e_ref)):
-        return math.nan, math.inf
-    if not np.all(np.isfinite(e)):
-        return math.inf, math.inf
-    d = e - e_ref
-    mean = float(d.mean())
-    _, g = np.unique(np.asarray(fold), return_inverse=True)
-    n_g = int(g.max()) + 1 if g.size else 0
-    if n_g < 2:
-        return mean, math.inf
-    sums = np.bincount(g, weights=d - mean, minlength=n_g)
-    return mean, float(np.sqrt(n_g / (n_g - 1) * np.sum(sums**2)) / d.size)
-
-
 def pick_significant(errors: Mapping[str, Array], fold: Array,
                      k: float = SE_RULE_K) -> Choice:
     """The CV's choice with a k-standard-error rule: a candidate other than the baselines
@@ -292,9 +247,7 @@ def pick_significant(errors: Mapping[str, Array], fold: Array,
     CalibrationError
         ``k`` negative or not finite, no candidate of :data:`CANDIDATES` among ``errors``.
     """
-    if not (math.isfinite(k) and k >= 0):
-        raise CalibrationError(f"prior: the standard-error factor k must be a number ≥ 0, "
-                               f"got {k!r}")
+    k = check_k(k)
     scores = {c: float(np.mean(v)) for c, v in errors.items()}
     bases = [b for b in (MOVED, ALONE) if b in scores and math.isfinite(scores[b])]
     if not bases:
@@ -305,8 +258,7 @@ def pick_significant(errors: Mapping[str, Array], fold: Array,
         if c in (MOVED, ALONE):
             keep[c] = s
             continue
-        mean, se = paired_difference(errors[c], errors[base], fold)
-        if mean + k * se < 0:
+        if beats(errors[c], errors[base], fold, k)[0]:
             keep[c] = s
     return pick(keep)
 
@@ -449,7 +401,8 @@ class PriorCalibrator:
         campaign among :data:`CANDIDATES` (:meth:`choose`).
     stage : bool
         Learn the campaign's own stage on what the physical fit leaves and adopt it when
-        its grouped CV says it helps (:mod:`.campaign_stage`); default True.
+        its grouped CV beats the fit without it by more than ``stage_se_k`` standard
+        errors (:mod:`.campaign_stage`); default True.
     rotation_weight : float, m/rad
         Weight ``w`` of the orientation rows.
     tol : float
@@ -469,6 +422,10 @@ class PriorCalibrator:
     se_k : float
         k ≥ 0 of the choice's k-standard-error rule (:func:`pick_significant`; default
         :data:`SE_RULE_K`).
+    stage_se_k : float
+        k ≥ 0 of the campaign stage's adoption, the same rule on its grouped CV
+        (:func:`.campaign_stage.fit_campaign_stage`; default
+        :data:`~.campaign_stage.STAGE_SE_K` = 0, the plain comparison).
     progress : callable, optional
         ``(stage, i, n, message)``.
 
@@ -482,7 +439,7 @@ class PriorCalibrator:
     def __init__(self, prior: Prior, *, scale: float | None = None, stage: bool = True,
                  rotation_weight: float = 1.0, tol: float = 1e-7, max_iterations: int = 30,
                  cell_size_m: float = CELL_SIZE_M, cv_split: str = "kfold",
-                 se_k: float = SE_RULE_K,
+                 se_k: float = SE_RULE_K, stage_se_k: float = STAGE_SE_K,
                  progress: Callable[[str, int, int, str], None] | None = None) -> None:
         if scale is not None and not (scale == FRAMES_ONLY
                                       or (math.isfinite(scale) and scale >= 1.0)):
@@ -490,9 +447,6 @@ class PriorCalibrator:
                                    f"or a number ≥ 1, got {scale}")
         if not (tol > 0 and max_iterations >= 1 and rotation_weight > 0 and cell_size_m > 0):
             raise CalibrationError("tol, max_iterations, rotation_weight, cell_size_m must be > 0")
-        if not (math.isfinite(se_k) and se_k >= 0):
-            raise CalibrationError(f"prior: the standard-error factor k must be a number ≥ 0, "
-                                   f"got {se_k!r}")
         if cv_split not in CV_SPLITS:
             raise CalibrationError(f"prior: unknown CV split {cv_split!r} (one of "
                                    f"{', '.join(CV_SPLITS)})")
@@ -504,7 +458,8 @@ class PriorCalibrator:
         self.max_iterations = int(max_iterations)
         self.cell_size_m = float(cell_size_m)
         self.cv_split = cv_split
-        self.se_k = float(se_k)
+        self.se_k = check_k(se_k)
+        self.stage_se_k = check_k(stage_se_k)
         self.progress = progress
 
     def _say(self, stage: str, i: int, n: int, msg: str) -> None:
@@ -699,9 +654,7 @@ class PriorCalibrator:
             if cells < 2:
                 return DEFAULT_SCALE, {}
             folds = list(GroupKFold(n_splits=min(5, cells)).split(targets, groups=groups))
-        fold = np.empty(len(data), int)
-        for i, (_, te) in enumerate(folds):
-            fold[te] = i
+        fold = fold_labels(folds, len(data))
         errors: dict[str, Array] = {}
         for c in CANDIDATES:
             errors[_label(c)] = self._cv_errors(data, offset, folds, c)
@@ -775,7 +728,7 @@ class PriorCalibrator:
         if not self.stage:
             return None
         stage = fit_campaign_stage(model, data, earlier, robot=self.prior.robot,
-                                   cell_size_m=self.cell_size_m)
+                                   cell_size_m=self.cell_size_m, se_k=self.stage_se_k)
         self._say("prior", 1, 1, "campaign stage: " + (
             "adopted" if stage.adopted else "not used") + (
             f" ({stage.reason})" if stage.reason else ""))

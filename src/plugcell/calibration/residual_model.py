@@ -165,6 +165,27 @@ def workspace_cells(points: ArrayLike, cell_size_m: float) -> Array:
     return np.asarray(groups).reshape(-1)
 
 
+def fold_labels(folds: Sequence[tuple[ArrayLike, ArrayLike]], n: int) -> Array:
+    """The fold that holds each pose out.
+
+    Parameters
+    ----------
+    folds : sequence of (train, test) index arrays
+        A K-fold split of ``n`` poses (each pose in one test set).
+    n : int
+        Number of poses.
+
+    Returns
+    -------
+    (n,) int array
+        ``g`` with ``i ∈ test_g``.
+    """
+    fold = np.empty(n, int)
+    for g, (_, te) in enumerate(folds):
+        fold[te] = g
+    return fold
+
+
 @dataclass(frozen=True)
 class CrossValidation:
     """Grouped cross-validation of the layer on the calibration set (mm, deg).
@@ -195,6 +216,12 @@ class CrossValidation:
         Edge of the workspace cells.
     scores : tuple of (dict, float)
         ``(hyper-parameters, hybrid_mm)`` for each candidate of the grid, in grid order.
+    physical_errors, hybrid_errors : (N,) array or None, m
+        Per pose, ``‖e_i‖`` and ``‖e_i − ê_i‖`` with the chosen hyper-parameters (the
+        paired difference of :func:`.se_rule.beats`); ``None`` for a layer read from a
+        file (not stored there).
+    fold : (N,) int array or None
+        The fold that held each pose out.
     """
 
     physical_mm: float
@@ -205,6 +232,9 @@ class CrossValidation:
     cells: int
     cell_size_m: float
     scores: tuple[tuple[dict[str, Any], float], ...]
+    physical_errors: Array | None = field(default=None, compare=False, repr=False)
+    hybrid_errors: Array | None = field(default=None, compare=False, repr=False)
+    fold: Array | None = field(default=None, compare=False, repr=False)
 
     def as_dict(self) -> dict[str, Any]:
         """The record as PARAMS.json stores it (``residual_model.cross_validation``).
@@ -958,18 +988,15 @@ class ResidualLearner:
                     pred_o[te, j] = self._regressor(params).fit(X[tr], E[tr, 3 + j]).predict(X[te])
             ori_phys = math.degrees(float(np.linalg.norm(E[:, 3:], axis=1).mean()))
             ori_hyb = math.degrees(float(np.linalg.norm(E[:, 3:] - pred_o, axis=1).mean()))
-        # the in-domain threshold: how far the held-out cells were from the training poses
-        dist = np.empty(n)
-        for tr, te in folds:
-            nn = NearestNeighbors(n_neighbors=1).fit(X[tr])
-            dist[te] = nn.kneighbors(X[te])[0][:, 0]
-        threshold = float(np.quantile(dist, self.domain_quantile))
+        threshold = self._domain_threshold(X, folds)
         self._say(f"fitting {n_out} regressors on {n} poses with {params}")
         estimators = tuple(self._regressor(params).fit(X, E[:, j]) for j in range(n_out))
         cv = CrossValidation(physical_mm=float(phys_norm.mean() * 1e3), hybrid_mm=score * 1e3,
                              physical_orientation_deg=ori_phys, hybrid_orientation_deg=ori_hyb,
                              folds=self.n_splits, cells=n_cells, cell_size_m=self.cell_size_m,
-                             scores=tuple(scores))
+                             scores=tuple(scores), physical_errors=phys_norm,
+                             hybrid_errors=np.linalg.norm(E[:, :k_pos] - pred, axis=1),
+                             fold=fold_labels(folds, n))
         return LearnedResidual(
             robot=robot, fingerprint=calibration_fingerprint(model), estimators=estimators,
             neighbours=NearestNeighbors(n_neighbors=1).fit(X), threshold=threshold,
@@ -977,6 +1004,30 @@ class ResidualLearner:
             params={**_FIXED, "max_iter": self.trees, **params},
             cv=cv, useful=score < float(phys_norm.mean()), n_poses=n,
             sklearn_version=sklearn.__version__, shape=shape, prior=prior)
+
+    def _domain_threshold(self, X: Array, folds: list[tuple[Array, Array]]) -> float:
+        """The in-domain threshold: the ``domain_quantile`` of how far each held-out pose
+        lay from the nearest training pose of its fold, in feature space.
+
+        Parameters
+        ----------
+        X : (N, F) array
+            The features of the poses.
+        folds : list of (train, test) index arrays
+            The grouped CV's folds.
+
+        Returns
+        -------
+        float
+            The threshold distance (feature units).
+        """
+        from sklearn.neighbors import NearestNeighbors
+
+        dist = np.empty(len(X))
+        for tr, te in folds:
+            nn = NearestNeighbors(n_neighbors=1).fit(X[tr])
+            dist[te] = nn.kneighbors(X[te])[0][:, 0]
+        return float(np.quantile(dist, self.domain_quantile))
 
     def _fit_shape(self, q: ArrayLike, E: Array, folds: list[tuple[Array, Array]],
                    phys_norm: Array) -> ShapeStage:

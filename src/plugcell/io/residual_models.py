@@ -27,7 +27,7 @@ arm-shape stage of another set-up the layer was learned on top of
 from __future__ import annotations
 
 import hashlib
-from dataclasses import asdict
+from dataclasses import fields
 from pathlib import Path
 from typing import Any
 
@@ -120,7 +120,9 @@ def save_residual(layer: LearnedResidual, path: str | Path) -> dict[str, Any]:
     p = Path(path)
     meta = layer.summary()
     obj = {"format": FORMAT, "format_version": FORMAT_VERSION, "meta": meta,
-           "cv": {**asdict(layer.cv), "scores": [[dict(s), v] for s, v in layer.cv.scores]},
+           # the record without the per-pose CV errors (fields with compare=False)
+           "cv": {**{f.name: getattr(layer.cv, f.name) for f in fields(layer.cv) if f.compare},
+                  "scores": [[dict(s), v] for s, v in layer.cv.scores]},
            "estimators": list(layer.estimators), "neighbours": layer.neighbours}
     for key, stage in (("shape", layer.shape), ("prior", layer.prior)):
         if stage is not None:

@@ -5,7 +5,7 @@
                        [--out PARAMS.json] [--json] [--report REPORT.html]
                        [--residuals RES.json] [--prior EARLIER.json [--prior-scale TAU]
                        [--prior-stage learned|none] [--prior-cv kfold|cells]
-                       [--prior-se K]]
+                       [--prior-se K] [--prior-stage-se K]]
 
 A file of joint readings and tracker measurements is all it needs: BASE and
 PROBE are estimated from the data unless given (``--base``/``--probe``, e.g. from
@@ -25,7 +25,11 @@ choice among the candidates is cross-validated over a seeded random 10-fold of t
 campaign's poses (``--prior-cv cells``: grouped over its workspace cells instead) and
 adopts a candidate other than the two baselines (the earlier model moved, the campaign
 alone) only when it beats the better baseline by more than ``--prior-se K`` standard
-errors of the paired CV difference (default 1; docs/calibration.md).
+errors of the paired CV difference (default 1; docs/calibration.md).  The campaign
+stage is adopted when its grouped CV beats the fit without it by more than
+``--prior-stage-se K`` standard errors of their paired difference (the same rule; default
+0, the plain comparison: with at most 5 grouped folds the SE is noisy and k = 1 refused
+stages that helped, docs/results/short-campaign-bounds.md).
 ``--residual-prior`` is a different thing (a new learned layer on top of the earlier
 layer's arm-shape stage, ≥ 200 poses): kept as it is.
 """
@@ -148,6 +152,10 @@ def _add_prior_args(p: argparse.ArgumentParser) -> None:
                         "below the better baseline's by more than K standard errors of the "
                         "paired difference (default 1: the one-standard-error rule; 0: any "
                         "gain)")
+    p.add_argument("--prior-stage-se", type=float, metavar="K", default=None,
+                   help="with --prior: adopt the campaign stage only when its grouped CV "
+                        "beats the fit without it by more than K standard errors of the "
+                        "paired difference (default 0: any gain; the same rule as --prior-se)")
 
 
 def _frame(text: str, what: str) -> np.ndarray:
@@ -306,7 +314,12 @@ def _summary(d: dict[str, Any]) -> str:
         if st:
             lines.append("  campaign stage: " + (
                 f"adopted (grouped CV over {st['cells']} cells: {st['physical_mm']:.3f} -> "
-                f"{st['hybrid_mm']:.3f} mm)" if st["adopted"] else f"not used: {st['reason']}"))
+                f"{st['hybrid_mm']:.3f} mm" + (
+                    f", gain {-st['gain_mm']:.3f} mm " + (
+                        f"> {st['se_k']:g} × its standard error {st['se_mm']:.3f} mm"
+                        if st["se_k"] else f"(standard error {st['se_mm']:.3f} mm)")
+                    if st.get("gain_mm") is not None else "") + ")"
+                if st["adopted"] else f"not used: {st['reason']}"))
     if hv:
         lines.append(f"  validation  physical {hv['physical']['mean_mm']:7.3f} mm, hybrid "
                      f"{hv['hybrid']['mean_mm']:7.3f} mm ({hv['fallbacks']} of {hv['poses']} "
@@ -388,6 +401,8 @@ def _prior_conflicts(args: argparse.Namespace) -> None:
             raise CommandError("--prior-cv needs --prior EARLIER.json")
         if args.prior_se is not None:
             raise CommandError("--prior-se needs --prior EARLIER.json")
+        if args.prior_stage_se is not None:
+            raise CommandError("--prior-stage-se needs --prior EARLIER.json")
         return
     given = [o for o, on in (("--residual-model learned", args.residual_model != "none"),
                              ("--residual-prior", args.residual_prior is not None),
@@ -405,9 +420,9 @@ def _prior_conflicts(args: argparse.Namespace) -> None:
             math.isfinite(args.prior_scale) and args.prior_scale >= 1)):
         raise CommandError(f"--prior-scale must be 0 (BASE + PROBE only) or a number ≥ 1, "
                            f"got {args.prior_scale}")
-    if args.prior_se is not None and not (math.isfinite(args.prior_se) and args.prior_se >= 0):
-        raise CommandError(f"--prior-se must be a number ≥ 0 (standard errors), got "
-                           f"{args.prior_se}")
+    for opt, k in (("--prior-se", args.prior_se), ("--prior-stage-se", args.prior_stage_se)):
+        if k is not None and not (math.isfinite(k) and k >= 0):
+            raise CommandError(f"{opt} must be a number ≥ 0 (standard errors), got {k}")
 
 
 def _run(args: argparse.Namespace) -> int:
@@ -489,6 +504,7 @@ def _run(args: argparse.Namespace) -> int:
 
 def _fit_prior(args: argparse.Namespace, earlier: Any, data: Any, progress: Any) -> Any:
     """The short campaign with the earlier calibration as prior (--prior)."""
+    from plugcell.calibration.campaign_stage import STAGE_SE_K
     from plugcell.calibration.prior import SE_RULE_K, PriorCalibrator
 
     return PriorCalibrator(earlier, scale=args.prior_scale, stage=args.prior_stage != "none",
@@ -496,7 +512,8 @@ def _fit_prior(args: argparse.Namespace, earlier: Any, data: Any, progress: Any)
                            max_iterations=args.max_iterations, cell_size_m=args.residual_cell_m,
                            cv_split=args.prior_cv or "kfold",
                            se_k=SE_RULE_K if args.prior_se is None else args.prior_se,
-                           progress=progress).fit(data)
+                           stage_se_k=STAGE_SE_K if args.prior_stage_se is None
+                           else args.prior_stage_se, progress=progress).fit(data)
 
 
 def _fit(args: argparse.Namespace, desc: Any, data: Any, base: Any, probe: Any, prior: Any,
