@@ -121,7 +121,9 @@ def test_an_adjusted_motion_adds_what_the_service_computes_each_cycle():
         ks = np.array([k for k, _, _ in seen])
         ts = np.array([t for _, t, _ in seen])
         assert len(seen) > 0.5 * traj.duration / 0.004  # most cycles (a loaded PC skips)
-        assert np.all(np.diff(ks) > 0) and np.all(np.diff(ts) > 0)
+        # the robot's time is EgmHeader.tm, whole milliseconds: two packets sent within a
+        # millisecond (the robot catching up after a stall, CI run 21) share it
+        assert np.all(np.diff(ks) > 0) and np.all(np.diff(ts) >= 0)
         assert ks[-1] >= round(traj.duration / 0.004) - 5  # … up to the motion's end
         assert all(np.all(np.isfinite(q)) for _, _, q in seen)  # the actual joints
 

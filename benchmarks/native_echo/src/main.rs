@@ -120,7 +120,10 @@ fn main() {
     let sock = UdpSocket::bind("127.0.0.1:0").expect("bind a UDP port on 127.0.0.1");
     let port = sock.local_addr().expect("the bound address").port();
     let tid = std::process::id();
-    let times: Arc<Mutex<Vec<u64>>> = Arc::new(Mutex::new(Vec::with_capacity(1 << 20)));
+    // (packet in, in -> out ns) of every datagram answered: the report keeps those that came
+    // in after the warm-up ended (one answered just before "go" may be recorded just after)
+    let times: Arc<Mutex<Vec<(Instant, u64)>>> =
+        Arc::new(Mutex::new(Vec::with_capacity(1 << 20)));
     let control = Arc::clone(&times);
     std::thread::spawn(move || {
         let stdin = std::io::stdin();
@@ -138,7 +141,8 @@ fn main() {
         }).collect();
         // no collector here: the Python echo's columns, zero by construction
         thread.push("\"collections\": 0, \"longest_collection_ns\": 0".into());
-        let io: Vec<String> = control.lock().unwrap().iter().map(u64::to_string).collect();
+        let io: Vec<String> = control.lock().unwrap().iter()
+            .filter(|(t_in, _)| *t_in >= t0).map(|(_, took)| took.to_string()).collect();
         let mut out = std::io::stdout().lock();
         writeln!(out, "{{\"cpu_s\": {}, \"wall_s\": {wall}, \"in_out_ns\": [{}], \"thread\": {{{}}}}}",
                  cpu as f64 / 1e9, io.join(", "), thread.join(", ")).ok();
@@ -159,6 +163,6 @@ fn main() {
         let t_in = Instant::now();
         sock.send_to(part.of(&buf[..n]), addr).ok();
         let took = t_in.elapsed().as_nanos() as u64;
-        times.lock().unwrap().push(took);
+        times.lock().unwrap().push((t_in, took));
     }
 }
