@@ -32,6 +32,10 @@ tracker seed (each seed draws the tracker's systematic field; the cell is calibr
 that tracker, as the benchmark's with its own): no learning runs, about a minute a seed.
 
 ``--plot`` draws the last run's residual per axis in time and its amplitude spectrum.
+``--gains`` also replays the learning on the recorded measured errors (its offsets checked
+against the recorded ones) and prints the weighting's gain ``K_j`` per band and update
+beside the arm's residual ``r`` per band and run: how much of the error each update
+learned, against how much it fell.
 """
 
 from __future__ import annotations
