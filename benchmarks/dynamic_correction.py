@@ -7,9 +7,12 @@
         [--excitation-um 20] [--jobs 2]
         [--faults] [--udp]
         [--lead-ms MS] [--seed 0] [--plot docs/results/dynamic-correction.png]
+        [--plan-speeds]
 
 ``--shapes ''`` skips the main table (``--faults``/``--udp`` alone; their lead ``τ`` is
-then ``--lead-ms``, default the 8.0 ms the line at 100 mm/s measures).
+then ``--lead-ms``, default the 8.0 ms the line at 100 mm/s measures).  ``--plan-speeds``
+prints only the planned TCP speed of each path (the lowest in the middle of the motion:
+the circle's tangent junction) and runs nothing.
 
 The Smart H4 twin with 36 kg is calibrated from its own campaign (model 5,
 :class:`plugcell.sim.tracked_path.TrackedCell`); each path (a 1 m line along y, a circle
@@ -389,6 +392,32 @@ def print_table(results: list[dict]) -> None:
               f"{r['rates'][0] * 1e3:.2f} | {r['rates'][1]:.3f} |")
 
 
+def plan_speeds(cell: TrackedCell, shape: str, speed: float, step_s: float = 0.001) -> dict:
+    """The planned TCP speed of one path (the controller's program, :meth:`TrackedCell.plan`,
+    its first section sampled every ``step_s``): the programmed speed, the highest
+    planned one, and the lowest in the middle half of the motion (``t`` from ``D/4`` to
+    ``3D/4``, ``D`` the section's duration) with where it is — on the circle the tangent
+    junction of its two CIRCs, half-way."""
+    path = cell.plan(shape, speed).sections[0].path
+    t = np.arange(0.0, path.duration, step_s)
+    v = np.linalg.norm(path.sample(t).v, axis=1)
+    mid = (t >= path.duration / 4) & (t <= 3 * path.duration / 4)
+    k = int(np.flatnonzero(mid)[np.argmin(v[mid])])
+    return {"shape": shape, "speed": speed, "duration": path.duration,
+            "max": float(v.max()), "mid_min": float(v[k]), "at": t[k] / path.duration}
+
+
+def print_plan_speeds(rows: list[dict]) -> None:
+    print("\nplanned TCP speed (the controller's program, sections[0].path; middle: t from "
+          "D/4 to 3D/4 of the motion's duration D):")
+    print("| path | speed mm/s | duration s | max planned mm/s | middle's min mm/s | "
+          "where (t/D) |")
+    print("|---|---:|---:|---:|---:|---:|")
+    for r in rows:
+        print(f"| {r['shape']} | {r['speed']:g} | {r['duration']:.3f} | {r['max'] * 1e3:.1f} | "
+              f"{r['mid_min'] * 1e3:.1f} | {r['at']:.3f} |")
+
+
 def _perp_3s_where(run: PathRun, shape: str, held: bool) -> float:
     """Perpendicular 3σ (m) over the motion's cycles in which the loop held (model alone,
     ``held``) or tracked (NaN if none)."""
@@ -562,6 +591,9 @@ def main(argv: list[str]) -> int:
     ap.add_argument("--lead-ms", type=float, default=8.0,
                     help="the lead τ of --faults/--udp without the main table (ms)")
     ap.add_argument("--plot", type=Path)
+    ap.add_argument("--plan-speeds", action="store_true",
+                    help="only the planned TCP speed of --shapes at --speeds (the middle's "
+                    "minimum: the circle's tangent junction), no runs")
     args = ap.parse_args(argv)
     if not (math.isfinite(args.lead_ms) and 0 <= args.lead_ms <= 100):
         ap.error(f"--lead-ms must be 0…100 ms, got {args.lead_ms}")
@@ -587,6 +619,12 @@ def main(argv: list[str]) -> int:
         ap.error(str(exc))
     t0 = time.time()
     cell = TrackedCell(seed=args.seed, calibration_poses=args.calibration_poses)
+    if args.plan_speeds:
+        print_plan_speeds([plan_speeds(cell, shape, float(v))
+                           for shape in filter(None, args.shapes.split(","))
+                           for v in args.speeds.split(",")])
+        print(f"wall time {time.time() - t0:.0f} s")
+        return 0
     cases = [(shape, float(v), args.learn, args.learn_on, learning, not args.no_tracking)
              for shape in filter(None, args.shapes.split(",")) for v in args.speeds.split(",")]
     if args.jobs > 1 and cases:

@@ -32,6 +32,10 @@ tracker seed (each seed draws the tracker's systematic field; the cell is calibr
 that tracker, as the benchmark's with its own): no learning runs, about a minute a seed.
 
 ``--plot`` draws the last run's residual per axis in time and its amplitude spectrum.
+``--gains`` also replays the learning on the recorded measured errors (its offsets checked
+against the recorded ones) and prints the weighting's gain ``K_j`` per band and update
+beside the arm's residual ``r`` per band and run: how much of the error each update
+learned, against how much it fell.
 """
 
 from __future__ import annotations
@@ -46,6 +50,8 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 BANDS = ((0.0, 2.0), (2.0, 8.0), (8.0, 16.0), (16.0, 20.0), (20.0, 30.0), (30.0, 125.0))
 AXES = "xyz"
+#: the bands of :func:`gain_table`: the modes' band split at 12 Hz
+GAIN_BANDS = ((0.0, 2.0), (2.0, 8.0), (8.0, 12.0), (12.0, 16.0), (16.0, 20.0), (20.0, 30.0))
 
 
 def tracker_error_f0(cell, p_f0: np.ndarray) -> np.ndarray:
@@ -201,13 +207,13 @@ def floor_table(seeds: list[int], speed: float, twin_seed: int = 0) -> None:
                       for i, n in enumerate(("radial", "azimuth", "elevation"))))
 
 
-def band_rms(x: np.ndarray, cycle_s: float) -> list[float]:
-    """rms (per column summed) of ``x`` (n, 3) within each of :data:`BANDS`."""
+def band_rms(x: np.ndarray, cycle_s: float, bands=BANDS) -> list[float]:
+    """rms (per column summed) of ``x`` (n, 3) within each of ``bands`` (Hz)."""
     X = np.fft.rfft(x - x.mean(0), axis=0)
     f = np.fft.rfftfreq(x.shape[0], cycle_s)
     n = x.shape[0]
     out = []
-    for lo, hi in BANDS:
+    for lo, hi in bands:
         sel = (f >= lo) & (f < hi)
         w = np.where((f == 0) | (f == f[-1]), 1.0, 2.0)[sel]
         out.append(float(np.sqrt((w[:, None] * np.abs(X[sel]) ** 2).sum(0).sum() / n ** 2)))
@@ -255,6 +261,64 @@ def report(d: dict) -> None:
         plant_check(d)
     if "sys" in d:
         decompose(d)
+
+
+def replay_gains(d: dict, reidentify: int = 1) -> tuple[list[np.ndarray], np.ndarray, float]:
+    """The benchmark's learning (its settings, the weighting as ``d`` was recorded with,
+    ``reidentify``) replayed on the recorded measured errors ``e``/``m``: the weighting's
+    ``K_j`` per update (each (m,), on ``f``) and the largest difference of the replayed
+    offsets from the recorded ``u`` (m; 0 when the replay is the recorded learning)."""
+    import dataclasses
+
+    from scipy.fft import next_fast_len, rfftfreq
+
+    from dynamic_correction import INVERSE, LEARNING
+    from plugcell.compensation.tracking import IterativeLearning, WeightingSettings
+
+    inv = dataclasses.replace(INVERSE, reidentify=reidentify)
+    settings = dataclasses.replace(LEARNING, lead_s=float(d["tau"]), inverse=inv,
+                                   weighting=WeightingSettings() if bool(d["weighting"])
+                                   else None)
+    learning = IterativeLearning(float(d["duration"]), settings)
+    gains, diff = [], 0.0
+    for k in range(len(d["e"])):
+        learning.learn_error(d["e"][k], d["m"][k])
+        w = learning.weighting
+        if w is not None and w.last_gain is not None and len(w.history) > len(gains):
+            gains.append(w.last_gain.copy())
+        if k + 1 < len(d["u"]):
+            diff = max(diff, float(np.abs(learning.u - d["u"][k + 1]).max()))
+    pad = max(round(inv.pad_s / settings.cycle_s), 2)
+    f = rfftfreq(next_fast_len(learning.grid.size + 2 * pad), settings.cycle_s)
+    return gains, f, diff
+
+
+def gain_table(d: dict, reidentify: int = 1) -> None:
+    """Per update by (3): the weighting's mean ``K_j`` in :data:`GAIN_BANDS`, and per run
+    the arm's residual ``r = true + s`` (µm rms over the motion, three axes) in those bands
+    — how much of ``r`` each update learns, against how much it fell."""
+    T = 0.004
+    gains, f, diff = replay_gains(d, reidentify)
+    names = [f"{lo:g}–{hi:g} Hz" for lo, hi in GAIN_BANDS]
+    print(f"\nthe weighting's K_j, mean per band (the learning replayed on the recorded "
+          f"errors, reidentify {reidentify}; its offsets differ from the recorded ones by "
+          f"{diff * 1e6:.3g} µm at most):")
+    print("| update by (3) | " + " | ".join(names) + " |")
+    print("|---:|" + "---:|" * len(names))
+    for j, K in enumerate(gains):
+        print(f"| {j} | " + " | ".join(f"{K[(f >= lo) & (f < hi)].mean():.3f}"
+                                      for lo, hi in GAIN_BANDS) + " |")
+    if "sys" not in d:
+        return
+    dur = float(d["duration"])
+    print("\nthe arm's residual r = true + s per run, rms µm (three axes) over the motion:")
+    print("| run | " + " | ".join(names) + " |")
+    print("|---:|" + "---:|" * len(names))
+    for k in range(len(d["true"])):
+        w = (d["t"][k] >= 0) & (d["t"][k] <= dur + 0.2)
+        r = (d["true"][k] + d["sys"][k])[w]
+        print(f"| {k} | " + " | ".join(f"{x * 1e6:.1f}" for x in band_rms(r, T, GAIN_BANDS))
+              + " |")
 
 
 def path_axes(c: np.ndarray, shape: str) -> np.ndarray:
@@ -467,6 +531,9 @@ def main(argv: list[str]) -> int:
     ap.add_argument("--save", type=Path)
     ap.add_argument("--load", type=Path)
     ap.add_argument("--plot", type=Path)
+    ap.add_argument("--gains", action="store_true",
+                    help="also the weighting's K_j per band and update (the learning replayed "
+                    "on the recorded errors) beside the residual r per band and run")
     args = ap.parse_args(argv)
     if args.floor_seeds is not None:
         try:
@@ -487,6 +554,8 @@ def main(argv: list[str]) -> int:
         if args.save:
             np.savez(args.save, **d)
     report(d)
+    if args.gains:
+        gain_table(d, 1 if args.reidentify is None else args.reidentify)
     if args.plot:
         plot(d, args.plot)
     return 0

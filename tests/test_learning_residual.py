@@ -174,3 +174,61 @@ def test_the_goal_scale_is_where_the_3_sigma_crosses_the_goal(capsys):
     lr._goal_scale(p3, np.array([-60.0]), np.array([10.0]))  # s alone above the goal
     lr._goal_scale(p3, np.array([-10.0]), np.array([10.0]))  # all of it below
     assert capsys.readouterr().out == ""
+
+
+def _recorded_learning(runs: int = 4) -> dict:
+    """A learning recorded as :func:`learning_residual.record` saves it (``e``, ``m``,
+    ``u`` per run, the weighting on), on a linear arm: the offset through two cycles of
+    dead time and a 10 Hz mode (damping 0.04) on every axis, a repeating error rung at
+    the mode, and 45 µm of seeded tracker noise per cycle."""
+    import dataclasses
+
+    from scipy.signal import cont2discrete, lfilter
+
+    from dynamic_correction import INVERSE, LEARNING
+    from plugcell.compensation.tracking import IterativeLearning, WeightingSettings
+
+    w = 2 * np.pi * 10.0
+    b, a, _ = cont2discrete(([0.08 * w, w * w], [1, 0.08 * w, w * w]), 0.004, method="zoh")
+    settings = dataclasses.replace(LEARNING, lead_s=0.008, inverse=INVERSE,
+                                   weighting=WeightingSettings())
+    learning = IterativeLearning(2.0, settings)
+    t = learning.grid
+    d = np.zeros((t.size, 3))
+    after = np.clip(t - 0.5, 0, None)
+    d[:, 0] = 60e-6 * np.exp(-2.0 * after) * np.sin(w * after) * (t >= 0.5)
+    d[:, 1] = 80e-6 * np.sin(np.pi * np.clip(t / 2.0, 0, 1)) ** 2
+    rec: dict[str, list] = {"u": [], "e": [], "m": []}
+    for k in range(runs):
+        y = lfilter(np.ravel(b), np.ravel(a), learning.u, axis=0)
+        e = d + np.vstack([np.zeros((2, 3)), y[:-2]]) \
+            + 45e-6 * np.random.default_rng(k).standard_normal(d.shape)
+        m = np.ones(t.size, bool)
+        rec["u"].append(learning.u.copy())
+        rec["e"].append(e)
+        rec["m"].append(m)
+        learning.learn_error(e, m)
+    return {**{k: np.array(v) for k, v in rec.items()}, "tau": 0.008, "duration": 2.0,
+            "weighting": True}
+
+
+@pytest.mark.slow  # three plant identifications: ≈ 10 s of CPU
+def test_the_gains_replay_is_the_recorded_learning_and_its_gains_fall_run_by_run(capsys):
+    d = _recorded_learning()
+    gains, f, diff = lr.replay_gains(d)
+    assert diff == 0.0                       # the replay reproduces the recorded offsets
+    # runs 0 (P-type), 1 (excited: identifies; the first update by (3) from run 0), 2, 3
+    assert len(gains) == 3
+    for K in gains:
+        assert K.shape == f.shape and np.all((K >= 0) & (K <= 1))
+    # K_j = S_j/(S_j + N): large where the repeating error is (the mode), small where the
+    # record is noise, and falling with the updates (the matching off)
+    mode = (f > 8) & (f < 12)
+    assert gains[0][mode].mean() > 2 * gains[0][(f > 30) & (f < 45)].mean()
+    assert gains[-1][mode].mean() < 0.8 * gains[0][mode].mean()
+    # the learning replayed with other settings is not the recorded one: the check sees it
+    assert lr.replay_gains(d, reidentify=0)[2] > 0
+    lr.gain_table(d)
+    out = capsys.readouterr().out
+    assert "differ from the recorded ones by 0 µm" in out
+    assert "| 2 |" in out and "arm's residual" not in out   # no truth recorded: no r table

@@ -95,7 +95,9 @@ def test_the_tile_estimate_beats_the_raw_samples_by_the_predicted_factor():
 def test_the_tiles_give_back_a_signal_without_noise():
     """istft(stft(e)) = e: with no noise in the noise band every tile's K is 1."""
     x = signal()
-    assert np.abs(TileGain(WeightingSettings(window_s=0.5), T)(x) - x).max() < 0.01 * 80e-6
+    tiles = TileGain(WeightingSettings(window_s=0.5), T)
+    assert np.abs(tiles(x) - x).max() < 0.01 * 80e-6
+    assert tiles.last_gain is not None and tiles.last_gain.shape == tiles.shape(x.shape[0])
 
 
 def test_the_noise_power_is_that_of_white_noise_in_every_bin():
@@ -119,7 +121,10 @@ def test_the_kalman_gain_is_the_running_mean_where_the_error_is_large_and_small_
     x = 2e-3 * np.sin(2 * np.pi * f[at5] * t)[:, None] * np.ones(3)  # on a bin: no leak
     for j in range(6):
         n = SIGMA * np.random.default_rng(10 + j).standard_normal((G, 3))
+        assert (gain.last_gain is None) == (j == 0)
         K = gain(rfft((x if j == 0 else 0.0) + n, axis=0), f)
+        np.testing.assert_array_equal(gain.last_gain, K)   # kept for a look, a copy
+        assert gain.last_gain is not K
         assert K[at5] == pytest.approx(1.0 / (1.0 + j), rel=0.05)
         assert K[at30].mean() < 0.05
     assert len(gain.history) == 6

@@ -615,6 +615,12 @@ class IterativeLearning:
             TileGain(s.weighting, s.cycle_s, s.inverse.gain)
 
     @property
+    def weighting(self) -> SpectralGain | TileGain | None:
+        """The weighting of (3) (:mod:`.smoothing`; ``None`` without one): its ``prior``,
+        ``history`` and ``last_gain`` (``K_j`` of the last update) to look at."""
+        return self._weighting
+
+    @property
     def iterations(self) -> int:
         """Updates so far."""
         return len(self.history)

@@ -227,6 +227,8 @@ class SpectralGain:
         Per call: ``noise`` (``N``), ``mean_gain`` (``K`` averaged over the bins below
         ``noise_low_hz``), ``rematched`` (share of those bins whose ``S`` the covariance
         matching raised).
+    last_gain : (m,) array or None
+        ``K_j`` of the last call (``None`` before the first; not part of the saved state).
 
     API note: ``gain = SpectralGain(settings); K = gain(E, f)`` once per update, ``E``
     the record's spectrum (m, a), then learn ``K[:, None] * E``.
@@ -240,6 +242,7 @@ class SpectralGain:
         self.prior: Array | None = None
         self.noise = math.nan
         self.history: list[dict[str, float]] = []
+        self.last_gain: Array | None = None
 
     def __call__(self, spectrum: ArrayLike, frequency_hz: ArrayLike) -> Array:
         """``K_j`` (m,) for the record ``E_j`` (m, a) on the bins ``frequency_hz`` (m,);
@@ -262,6 +265,7 @@ class SpectralGain:
         low = f < s.noise_low_hz
         self.history.append({"noise": N, "mean_gain": float(K[low].mean()),
                              "rematched": float(raised[low].mean())})
+        self.last_gain = K.copy()
         return K
 
 
@@ -290,7 +294,7 @@ class TileGain:
         ``γ`` in (0, 2).
 
     API note: ``ê = TileGain(settings, T)(e)`` with ``e`` (G, 3) on the cycle grid; the
-    state (``prior``, ``history``) as :class:`SpectralGain`'s.
+    state (``prior``, ``history``, ``last_gain``: (bins, tiles)) as :class:`SpectralGain`'s.
     """
 
     def __init__(self, settings: WeightingSettings, cycle_s: float, gain: float = 1.0) -> None:
@@ -304,6 +308,7 @@ class TileGain:
         self.prior: Array | None = None
         self.noise = math.nan
         self.history: list[dict[str, float]] = []
+        self.last_gain: Array | None = None
 
     def _stft(self) -> dict[str, Any]:
         n = self.nperseg
@@ -345,5 +350,6 @@ class TileGain:
         low = f < s.noise_low_hz
         self.history.append({"noise": N, "mean_gain": float(K[low].mean()),
                              "rematched": float(raised[low].mean())})
+        self.last_gain = K.copy()
         _, est = istft(K[None] * X, boundary=True, **kw)
         return np.ascontiguousarray(est[:, :e.shape[0]].T)
