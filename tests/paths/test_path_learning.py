@@ -105,6 +105,16 @@ def test_a_continued_learning_judges_its_runs_against_the_files_best_run(tmp_pat
      "--inverse-reidentify: invalid choice: 2"),
     (("--learn", "2", "--learn-law", "inverse", "--weighting", "wiener"),
      "--weighting: invalid choice: 'wiener'"),
+    (("--learn", "2", "--weighting-detect", "3"),
+     "--inverse-reidentify/--weighting set up the inverse law of a new learning"),
+    (("--learn", "2", "--learn-law", "inverse", "--weighting", "none", "--weighting-window-s",
+      "1"), "--weighting-detect/--weighting-window-s set up the Kalman weighting: not with "
+     "--weighting none"),
+    (("--learn", "2", "--learn-law", "inverse", "--weighting-detect", "-1"),
+     "--weighting-detect/--weighting-window-s: WeightingSettings: smooth_hz must be > 0, "
+     "detect and window_s ≥ 0, got 0.5, -1.0 and 0.0"),
+    (("--learn", "2", "--learn-law", "inverse", "--weighting-window-s", "nan"),
+     "--weighting-detect/--weighting-window-s: WeightingSettings.window_s"),
 ])
 def test_bad_learning_options_are_refused_before_anything_runs(tmp_path, monkeypatch, capsys,
                                                             args, message):
@@ -311,3 +321,31 @@ def test_a_diverging_learning_stops_and_keeps_the_best_runs_offset(tmp_path):
     saved = json.loads((tmp_path / "l.json").read_text())
     assert saved["steps"] == 0 and np.abs(saved["offset"]["u_mm"]).max() == 0.0
     assert [r["verdict"] for r in saved["runs"]] == ["learned", "diverged"]
+
+
+def test_the_kalman_weightings_options_reach_a_new_learning():
+    """``--weighting-detect``/``--weighting-window-s``: the weighting's settings of a new
+    inverse-law learning; the defaults otherwise; refused beside ``--weighting none``."""
+    from plugcell.compensation.tracking.smoothing import WeightingSettings
+
+    o = PathRunOptions()
+    s = learning_settings(o, law="inverse", kalman=WeightingSettings(detect=3.0, window_s=1.0))
+    assert (s.weighting.detect, s.weighting.window_s) == (3.0, 1.0)
+    assert learning_settings(o, law="inverse").weighting == WeightingSettings()
+    with pytest.raises(ValueError, match="the Kalman weighting's settings with the weighting"):
+        learning_settings(o, law="inverse", weighting="none", kalman=WeightingSettings())
+
+
+@pytest.mark.slow  # one run of the path
+def test_the_kalman_weightings_options_are_kept_in_the_learned_file(tmp_path, monkeypatch,
+                                                                    capsys):
+    (tmp_path / "p.csv").write_text(PATH)
+    monkeypatch.chdir(tmp_path)
+    code = main(["path", "run", "--path", "p.csv", "--learn", "1", "--learn-law", "inverse",
+                 "--weighting-detect", "3", "--weighting-window-s", "1", "--learned-out",
+                 "f.json"])
+    assert code == 0, capsys.readouterr().err
+    saved = json.loads((tmp_path / "f.json").read_text())
+    assert saved["inverse"]["weighting"]["detect"] == 3.0
+    assert saved["inverse"]["weighting"]["window_s"] == 1.0
+    assert saved["inverse"]["state"]["identifying"] is not None  # goes on with --learned

@@ -20,6 +20,7 @@ import numpy as np
 
 from plugcell.compensation.tracking.learning import InverseSettings, LearningSettings
 from plugcell.compensation.tracking.repeat import LEARNING, RepeatedLearning, RunRecord
+from plugcell.compensation.tracking.smoothing import WeightingSettings
 from plugcell.io.learned_paths import LAWS, LearnedContext, path_sha256
 from plugcell.io.path_files import PathFile
 from plugcell.io.robots import load_robot
@@ -35,23 +36,27 @@ SEED_STEP = 1000
 
 def learning_settings(options: PathRunOptions, gain: float | None = None,
                       cutoff_hz: float | None = None, law: str = "p",
-                      reidentify: int | None = None, weighting: str | None = None
-                      ) -> LearningSettings:
+                      reidentify: int | None = None, weighting: str | None = None,
+                      kalman: WeightingSettings | None = None) -> LearningSettings:
     """:data:`LEARNING` at the link's cycle, bounded by the link's largest offset, with
     the law ``law``: ``p`` the P-type law (1) alone; ``inverse`` its first update with
     the identifying excitation, then the norm-optimal inverse (3) of the identified plant
     (:class:`InverseSettings`' defaults, docs/dynamic-correction.md "learning above the
     modes"): ``reidentify`` (None: the default, 1) its plant identified again after each
     run, ``weighting`` (None: the default, ``"kalman"``) each frequency learned by its
-    Kalman gain, ``"none"`` all of the error."""
+    Kalman gain — with ``kalman``'s settings (None: :class:`WeightingSettings`'
+    defaults; e.g. its covariance matching ``detect`` or gains per tile ``window_s``) —,
+    ``"none"`` all of the error."""
     if law not in LAWS:
         raise ValueError(f"the learning law must be one of {', '.join(LAWS)}, got {law!r}")
     if weighting not in (None, "kalman", "none"):
         raise ValueError(f"the weighting must be kalman or none, got {weighting!r}")
+    if kalman is not None and weighting == "none":
+        raise ValueError("the Kalman weighting's settings with the weighting none")
     inverse = InverseSettings() if reidentify is None else InverseSettings(reidentify=reidentify)
     return dataclasses.replace(
         LEARNING, inverse=inverse if law == "inverse" else None,
-        weighting=None if weighting == "none" else LEARNING.weighting,
+        weighting=None if weighting == "none" else kalman or LEARNING.weighting,
         cycle_s=0.004, max_offset_m=options.max_offset_mm / MM_PER_M,
         gain=LEARNING.gain if gain is None else gain,
         cutoff_hz=LEARNING.cutoff_hz if cutoff_hz is None else cutoff_hz)

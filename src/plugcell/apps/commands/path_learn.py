@@ -58,6 +58,14 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="the inverse law of a new learning: kalman (default) learns each "
                    "frequency by its Kalman gain against the tracker's noise; none: all of "
                    "the error, the running mean of the runs")
+    g.add_argument("--weighting-detect", type=float, metavar="K",
+                   help="the Kalman weighting of a new inverse-law learning: raise a "
+                   "frequency's gain where a run's error exceeds K times what the weighting "
+                   "predicted (covariance matching; default inf: off)")
+    g.add_argument("--weighting-window-s", type=float, metavar="S",
+                   help="the Kalman weighting of a new inverse-law learning: a gain per S "
+                   "seconds of the path (a short-time FFT) rather than one per frequency "
+                   "over the whole path (default 0)")
     g.add_argument("--learn-cutoff", type=float, metavar="HZ",
                    help="the learning filter's cut-off of a new learning (default 6 Hz, below "
                    "the arm's first mode)")
@@ -80,7 +88,8 @@ def wants_learning(args: argparse.Namespace) -> bool:
         raise CommandError("--learn-gain/--learn-cutoff set up a new learning (--learn N "
                            "without --learned: a learning continued from a file keeps its "
                            "settings)")
-    inverse = args.inverse_reidentify is not None or args.weighting is not None
+    inverse = args.inverse_reidentify is not None or args.weighting is not None \
+        or args.weighting_detect is not None or args.weighting_window_s is not None
     if inverse and (args.learn is None or args.learned is not None
                     or args.learn_law != "inverse"):
         raise CommandError("--inverse-reidentify/--weighting set up the inverse law of a new "
@@ -95,6 +104,26 @@ def wants_learning(args: argparse.Namespace) -> bool:
                            "identifies the plant from it (or keep the learning with "
                            "--learned-out FILE and go on with --learned FILE --learn N)")
     return args.learn is not None or args.learned is not None
+
+
+def _kalman(args: argparse.Namespace) -> Any:
+    """The Kalman weighting's settings of ``--weighting-detect``/``--weighting-window-s``
+    (None: neither given, the defaults)."""
+    from plugcell.compensation.tracking.smoothing import WeightingSettings
+
+    if args.weighting_detect is None and args.weighting_window_s is None:
+        return None
+    if args.weighting == "none":
+        raise CommandError("--weighting-detect/--weighting-window-s set up the Kalman "
+                           "weighting: not with --weighting none")
+    default = WeightingSettings()
+    try:
+        return WeightingSettings(
+            detect=default.detect if args.weighting_detect is None else args.weighting_detect,
+            window_s=default.window_s if args.weighting_window_s is None
+            else args.weighting_window_s)
+    except ValueError as exc:
+        raise CommandError(f"--weighting-detect/--weighting-window-s: {exc}") from None
 
 
 def _calibration_id(args: argparse.Namespace, calibration: Any) -> tuple[str, bool]:
@@ -141,10 +170,11 @@ def _session(args: argparse.Namespace, path: Any, name: str, options: Any,
                 by = "" if args.learn_law is None else f" by the law {args.learn_law}"
                 raise CommandError(f"{args.learned}: cannot be continued{by}: {exc}") from None
     else:
+        kalman = _kalman(args)
         try:
             settings = learning_settings(options, args.learn_gain, args.learn_cutoff,
                                          args.learn_law or "p", args.inverse_reidentify,
-                                         args.weighting)
+                                         args.weighting, kalman)
         except ValueError as exc:
             raise CommandError(f"--learn-gain/--learn-cutoff: {exc}") from None
         learning = IterativeLearning(context.duration_s, settings)
