@@ -30,7 +30,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from plugcell.io.units import ROBOT_CONVENTION, UnitsError, pose_from_robot, robot_from_pose
-from plugcell.metrology import invert_transform
+from plugcell.kinematics.transforms import invert
 
 Array = NDArray[np.float64]
 
@@ -115,7 +115,7 @@ class RequesterFrames:
     def to_robot(self, measured: ArrayLike) -> Array:
         """Eq. (7.2): a measurement (tracker frame, 4×4 m) in the robot frame."""
         M = np.asarray(measured, dtype=float)
-        return invert_transform(self.base) @ M @ invert_transform(self.probe)
+        return invert(self.base) @ M @ invert(self.probe)
 
     def measurement(self, measured: ArrayLike, option: str = "") -> Array:
         """Eq. (7.2) then the conversion of Table 7-3: the 6-vector the robot receives."""
