@@ -26,6 +26,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from childproc import wait_until
 from metrology_cell import H4, KUKA, SPEED, MetrologyCell
 from robot_testlib import Proc, until
 
@@ -204,7 +205,15 @@ def test_two_robot_programs_share_the_tracker_each_in_its_own_frame(
     print(f"KUKA waited {m_kuka.waited_ms} simulated ms for the tracker; "
           f"H4 {m_h4.waited_ms} ms")
 
-    # the queue: KUKA asked while H4 held the tracker, and was served after H4's Stop
+    # the queue: KUKA asked while H4 held the tracker, and was served after H4's Stop.
+    # A process's last state reaches the tracker's journal file just after its answer
+    # (CI run 23 read a row not yet Completed right after the programs ended): wait,
+    # bounded, then judge what the journal holds
+    def settled() -> bool:
+        mine = [r for r in tracker_rows(cell, t0) if r["sender"] in ("H4", "KUKA")]
+        return len(mine) == 10 and all(r["state"] == "Completed" for r in mine)
+
+    wait_until(settled, 10.0)
     rows = tracker_rows(cell, t0)
     h4_rows, kuka_rows = program_rows(rows, "H4"), program_rows(rows, "KUKA")
     assert [r["command"] for r in h4_rows] == [
