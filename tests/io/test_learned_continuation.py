@@ -56,6 +56,20 @@ def run(lr: IterativeLearning, k: int) -> None:
     lr.learn_error(e + 10e-6 * np.random.default_rng(50 + k).standard_normal(e.shape))
 
 
+def run_both(part: IterativeLearning, whole: IterativeLearning, runs: range) -> None:
+    """Runs ``runs`` of the continued and the uninterrupted learning: the same offset and
+    the same re-identified plant after every run, to the arithmetic's precision (the
+    offset is in mm in the file: an ulp from ×1000 and back, which the mode search's
+    stopping tolerance carries to ≈ 2e-6 of a coefficient)."""
+    for k in runs:
+        run(whole, k)
+        run(part, k)
+        np.testing.assert_allclose(part.u, whole.u, rtol=0, atol=1e-11)
+        for name in ("head", "frequency_hz", "damping", "residues"):
+            np.testing.assert_allclose(getattr(part.plant, name), getattr(whole.plant, name),
+                                       rtol=1e-5, atol=1e-10)
+
+
 def test_the_defaults_are_both_options():
     s = LearningSettings(inverse=InverseSettings())
     assert s.inverse.reidentify == 1 and s.weighting is not None
@@ -74,17 +88,7 @@ def test_a_continued_file_goes_on_as_the_uninterrupted_learning(tmp_path):
     part = back.continued()
     saved = part.inverse_state()
     assert len(saved.pairs) == 2 and saved.excited is not None and saved.prior is not None
-    for k in range(3, 6):
-        run(whole, k)
-        run(part, k)
-        # the same offset and the same re-identified plant after every run, to the
-        # arithmetic's precision (the offset is in mm in the file: an ulp from ×1000 and
-        # back, which the mode search's stopping tolerance carries to ≈ 2e-6 of a
-        # coefficient)
-        np.testing.assert_allclose(part.u, whole.u, rtol=0, atol=1e-11)
-        for name in ("head", "frequency_hz", "damping", "residues"):
-            np.testing.assert_allclose(getattr(part.plant, name), getattr(whole.plant, name),
-                                       rtol=1e-5, atol=1e-10)
+    run_both(part, whole, range(3, 6))
     a, b = part.inverse_state(), whole.inverse_state()
     assert len(a.pairs) == len(b.pairs) == 5
     np.testing.assert_allclose(a.prior, b.prior, rtol=1e-5, atol=1e-6 * b.prior.max())
@@ -116,13 +120,7 @@ def test_a_file_saved_before_its_identifying_run_goes_on_with_the_identification
     part = load_learned(tmp_path / "l.json").continued()
     assert part.identifying_next and part.plant is None
     np.testing.assert_allclose(part.u, whole.u, rtol=0, atol=1e-11)  # with the excitation
-    for k in range(1, 4):
-        run(whole, k)
-        run(part, k)
-        np.testing.assert_allclose(part.u, whole.u, rtol=0, atol=1e-11)
-        for name in ("head", "frequency_hz", "damping", "residues"):
-            np.testing.assert_allclose(getattr(part.plant, name), getattr(whole.plant, name),
-                                       rtol=1e-5, atol=1e-10)
+    run_both(part, whole, range(1, 4))
     assert [h["law"] for h in part.history] == ["inverse"] * 3
     assert not part.identifying_next and part.inverse_state().identifying is None
     # without the run before it, the file cannot be continued by the inverse law

@@ -255,14 +255,19 @@ class Bus:
 
     def watch_joint_states(self, handler: Callable[[str, bytes], None]) -> Entity:
         """``handler(robot service, payload)`` for every joint state of the cell."""
-        keys = self.keys
+        return self._watch_named(self.keys.joints(), self.keys.parse_joints, handler)
+
+    def _watch_named(self, pattern: str, parse: Callable[[str], str | None],
+                     handler: Callable[[str, bytes], None]) -> Entity:
+        """``handler(name, payload)`` for every sample on ``pattern`` whose key ``parse``
+        names a service (a display stream of each robot service)."""
 
         def on_sample(sample: zenoh.Sample) -> None:
-            name = keys.parse_joints(str(sample.key_expr))
+            name = parse(str(sample.key_expr))
             if name is not None:
                 handler(name, sample.payload.to_bytes())
 
-        return self.session.declare_subscriber(keys.joints(), self._callback(on_sample))
+        return self.session.declare_subscriber(pattern, self._callback(on_sample))
 
     # -- a robot's tracked move as it goes (devices/robot/live_tracking.py) -------------
 
@@ -274,14 +279,7 @@ class Bus:
 
     def watch_tracking(self, handler: Callable[[str, bytes], None]) -> Entity:
         """``handler(robot service, payload)`` for every live tracking batch of the cell."""
-        keys = self.keys
-
-        def on_sample(sample: zenoh.Sample) -> None:
-            name = keys.parse_tracking(str(sample.key_expr))
-            if name is not None:
-                handler(name, sample.payload.to_bytes())
-
-        return self.session.declare_subscriber(keys.tracking(), self._callback(on_sample))
+        return self._watch_named(self.keys.tracking(), self.keys.parse_tracking, handler)
 
     # -- the simulated world's reflectors (sim/world.py) ---------------------------
 
