@@ -3,7 +3,7 @@
 // result file (tracked.js) and for a robot's tracked move as it goes (tracked_live.js).
 import { s } from "./dom.js";
 
-const W = 760, H = 260, M = { l: 48, r: 12, t: 10, b: 28 };
+const W = 760, H = 270, M = { l: 48, r: 16, t: 16, b: 36 };
 export const SERIES = [
   ["measured", "#7fa7d9", "measured (tracker)"],
   ["corrected", "#e0b050", "corrected (command)"],
@@ -12,9 +12,19 @@ export const SERIES = [
 
 export function mm(x) { return typeof x === "number" ? x.toFixed(3) : "—"; }
 
-function ticks(lo, hi, n) {
-  const step = (hi - lo) / n;
-  return Array.from({ length: n + 1 }, (_, i) => lo + i * step);
+/**
+ * About n "nice" ticks in [lo, hi]: multiples of a step 1, 2 or 5 × 10^k, with the
+ * decimals the step needs ({values, decimals}), so that labels neither repeat nor crowd.
+ */
+export function ticks(lo, hi, n) {
+  const span = Math.max(hi - lo, 1e-9);
+  const pow = 10 ** Math.floor(Math.log10(span / n));
+  const step = [1, 2, 5, 10].map((m) => m * pow)
+    .reduce((a, b) => (Math.abs(span / b - n) < Math.abs(span / a - n) ? b : a));
+  const decimals = Math.max(0, -Math.floor(Math.log10(step) + 1e-9));
+  const values = [];
+  for (let k = Math.ceil(lo / step - 1e-9); k * step <= hi + step * 1e-9; k++) values.push(k * step);
+  return { values, decimals };
 }
 
 /** Runs of consecutive points with a value ([t, v] with v null: a gap between runs). */
@@ -46,15 +56,19 @@ export function plot(view) {
       fill: "#553333", "fill-opacity": 0.5, class: "window", dataset: { reason: w.reason } },
     s("title", { text: `without tracking: ${w.reason}` })));
   }
-  for (const v of ticks(0, ymax, 4)) {
+  const label = { fill: "#8aa", "font-size": 10, class: "tick" };
+  const yt = ticks(0, ymax, 4);
+  for (const v of yt.values) {
     svg.append(s("line", { x1: M.l, x2: W - M.r, y1: y(v), y2: y(v), stroke: "#2a3a3a" }),
-      s("text", { x: M.l - 4, y: y(v) + 4, "text-anchor": "end", fill: "#8aa", "font-size": 10, text: v.toFixed(2) }));
+      s("text", { ...label, x: M.l - 4, y: y(v) + 4, "text-anchor": "end", text: v.toFixed(yt.decimals) }));
   }
-  for (const t of ticks(t0, t1, 6)) {
-    svg.append(s("text", { x: x(t), y: H - 10, "text-anchor": "middle", fill: "#8aa", "font-size": 10, text: t.toFixed(2) }));
+  const xt = ticks(t0, t1, 6);
+  for (const t of xt.values) {
+    svg.append(s("text", { ...label, x: x(t), y: H - M.b + 14, "text-anchor": "middle", text: t.toFixed(xt.decimals) }));
   }
-  svg.append(s("text", { x: 4, y: M.t + 8, fill: "#8aa", "font-size": 10, text: "mm" }),
-    s("text", { x: W - M.r, y: H - 10, "text-anchor": "end", fill: "#8aa", "font-size": 10, text: "s" }));
+  svg.append(s("text", { fill: "#8aa", "font-size": 10, x: 4, y: M.t - 5, text: "deviation (mm)" }),
+    s("text", { fill: "#8aa", "font-size": 10, x: (M.l + W - M.r) / 2, y: H - 4, "text-anchor": "middle",
+      text: "time on the path (s)" }));
   for (const [name, colour] of SERIES) {
     const pts = view.series[name];
     if (!pts || !pts.length) continue;
