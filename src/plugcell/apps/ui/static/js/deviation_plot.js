@@ -19,12 +19,16 @@ export function mm(x) { return typeof x === "number" ? x.toFixed(3) : "—"; }
 export function ticks(lo, hi, n) {
   const span = Math.max(hi - lo, 1e-9);
   const pow = 10 ** Math.floor(Math.log10(span / n));
-  const step = [1, 2, 5, 10].map((m) => m * pow)
-    .reduce((a, b) => (Math.abs(span / b - n) < Math.abs(span / a - n) ? b : a));
-  const decimals = Math.max(0, -Math.floor(Math.log10(step) + 1e-9));
-  const values = [];
-  for (let k = Math.ceil(lo / step - 1e-9); k * step <= hi + step * 1e-9; k++) values.push(k * step);
-  return { values, decimals };
+  const at = (step) => {
+    const values = [];
+    for (let k = Math.ceil(lo / step - 1e-9); k * step <= hi + step * 1e-9; k++) values.push(k * step);
+    return values;
+  };
+  // the step whose count of ticks is nearest n, among those that give two or more (the
+  // finest, 10^k ≤ span/n, always does)
+  const steps = [1, 2, 5, 10].map((m) => m * pow).filter((st) => at(st).length >= 2);
+  const step = steps.reduce((a, b) => (Math.abs(at(b).length - 1 - n) < Math.abs(at(a).length - 1 - n) ? b : a));
+  return { values: at(step), decimals: Math.max(0, -Math.floor(Math.log10(step) + 1e-9)) };
 }
 
 /** Runs of consecutive points with a value ([t, v] with v null: a gap between runs). */
