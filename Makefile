@@ -16,10 +16,13 @@ BIN     = $(VENV)/bin
 OPCUA_JS = tests/opcua/js
 UI_WEB   = src/plugcell/apps/ui/web
 
+# --no-compile: pip would compile every installed module (SciPy, pandas, Playwright, …: 47 s
+# of a 124 s install at load 6 on the shared 2-core VM); Python writes the caches of the
+# modules a run imports when it first imports them (above)
 $(BIN)/.plugcell-installed: pyproject.toml
 	$(PYTHON) -m venv $(VENV)
 	$(BIN)/pip install --quiet --upgrade pip
-	$(BIN)/pip install --quiet -e '.[dev]'
+	$(BIN)/pip install --quiet --no-compile -e '.[dev]'
 	touch $@
 
 # node-opcua, the independent OPC UA stack the OPC UA tests run against (npm ci: exactly
