@@ -101,8 +101,20 @@ class Proc:
 
     def stop(self) -> None:
         """SIGTERM the group, SIGKILL after 15 s; every wait bounded."""
-        if self.popen.poll() is None:
-            os.killpg(self.popen.pid, signal.SIGTERM)
+        self.reap(self.terminate())
+
+    def terminate(self) -> bool:
+        """SIGTERM the group if its leader still runs; whether it did (for :meth:`reap`)."""
+        if self.popen.poll() is not None:
+            return False
+        os.killpg(self.popen.pid, signal.SIGTERM)
+        return True
+
+    def reap(self, terminated: bool) -> None:
+        """After :meth:`terminate`: wait for the leader it sent SIGTERM (SIGKILL the group
+        after 15 s); where the leader had already gone, SIGKILL what is left of its
+        group."""
+        if terminated:
             try:
                 self.popen.wait(15)
             except subprocess.TimeoutExpired:
@@ -159,9 +171,11 @@ class Launcher:
         return proc
 
     def stop(self) -> None:
-        """Stop every child started (its whole process group)."""
-        for proc in self.started:
-            proc.stop()
+        """Stop every child started (its whole process group): all are sent SIGTERM first,
+        then each is waited for, so that they shut down side by side."""
+        terminated = [proc.terminate() for proc in self.started]
+        for proc, sent in zip(self.started, terminated, strict=True):
+            proc.reap(sent)
 
 
 class CellProcesses:
