@@ -28,9 +28,10 @@ def lines(out: str) -> list[dict[str, Any]]:
 
 def test_cell_cli_discovers_wires_saves_loads_runs_and_monitors(
         cell: str, home: Path, procs: Any, tmp_path: Path) -> None:
-    procs.serve("camera", cell, "--param", "time_scale=0.001")
-    procs.serve("drill", cell, "--param", "time_scale=0.001")
-    procs.serve("robot", cell, "--param", "sim=true", name="R1")
+    for proc in (procs.serve("camera", cell, "--param", "time_scale=0.001", wait=False),
+                 procs.serve("drill", cell, "--param", "time_scale=0.001", wait=False),
+                 procs.serve("robot", cell, "--param", "sim=true", name="R1", wait=False)):
+        proc.wait_serving()  # started side by side
 
     ls = cli(home, "cell", "ls", "--json", "--cell", cell)
     assert ls.returncode == 0, ls.stderr

@@ -27,8 +27,10 @@ def lines(result: subprocess.CompletedProcess[str]) -> list[dict]:
 
 
 def test_services_call_wire_journal(procs, cell):
-    procs.serve("camera", cell, "--param", "time_scale=0.01")
-    procs.serve("drill", cell, "--param", "time_scale=0.001", name="TOOL")
+    for proc in (procs.serve("camera", cell, "--param", "time_scale=0.01", wait=False),
+                 procs.serve("drill", cell, "--param", "time_scale=0.001", name="TOOL",
+                             wait=False)):
+        proc.wait_serving()  # started side by side
 
     listed = json.loads(cli(procs, "services", "--json", "--cell", cell).stdout)
     assert listed["cell"] == cell and listed["wires"] == []

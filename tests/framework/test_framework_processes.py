@@ -25,8 +25,9 @@ def partners_of(client: BlockingClient, name: str) -> list[str]:
 
 
 def test_two_services_in_two_processes_kill_and_restart(procs, cell, home):
-    camera = procs.serve("camera", cell, "--param", "time_scale=0.01")
-    procs.serve("drill", cell, "--param", "time_scale=0.001")
+    camera = procs.serve("camera", cell, "--param", "time_scale=0.01", wait=False)
+    procs.serve("drill", cell, "--param", "time_scale=0.001", wait=False).wait_serving()
+    camera.wait_serving()  # the two started side by side
     with BlockingClient("ROBOT", cell=cell) as robot:
         # discovery without any router: liveliness tokens over loopback
         assert robot.wait_for("CAMERA") and robot.wait_for("TOOL")

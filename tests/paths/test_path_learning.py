@@ -6,6 +6,8 @@ gone) end with the reason.  Simulated time: the results do not depend on the mac
 
 from __future__ import annotations
 
+import contextlib
+import io
 import json
 import os
 import re
@@ -32,9 +34,29 @@ PATH = """x,y,z,a,b,c,speed
 
 
 def _cli(*args, cwd):
+    """``plugcell path run ARGS`` as a process of its own (the real exit code)."""
     env = {**os.environ, "PYTHONPATH": str(Path(plugcell.__file__).parents[1])}
     return subprocess.run([sys.executable, "-m", "plugcell", "path", "run", *args],
                           capture_output=True, text=True, cwd=cwd, timeout=900, env=env)
+
+
+def _main(*args, cwd):
+    """``plugcell path run ARGS`` in ``cwd`` in this process (``plugcell.apps.cli.main``,
+    what ``python -m plugcell`` runs; the exit code of the real process is
+    :func:`_cli`'s): its exit code, stdout and stderr.  The learning's modules (SciPy's
+    signal, the calibration) are loaded once, not again by a process a run."""
+    out, err = io.StringIO(), io.StringIO()
+    here = os.getcwd()
+    os.chdir(cwd)
+    try:
+        with contextlib.redirect_stdout(out), contextlib.redirect_stderr(err):
+            try:
+                code = main(["path", "run", *args])
+            except SystemExit as exc:  # argparse's own refusals
+                code = exc.code
+    finally:
+        os.chdir(here)
+    return subprocess.CompletedProcess(args, code, out.getvalue(), err.getvalue())
 
 
 def _other_file(tmp_path: Path, text: str, name: str) -> Path:
@@ -172,7 +194,7 @@ def test_the_learned_offset_reaches_the_robot_through_the_rsi_seam():
 @pytest.mark.slow
 def test_learning_runs_get_better_save_and_reuse_the_correction(tmp_path):
     (tmp_path / "p.csv").write_text(PATH)
-    out = _cli("--path", "p.csv", "--learn", "3", "--learned-out", "l.json", "--json",
+    out = _main("--path", "p.csv", "--learn", "3", "--learned-out", "l.json", "--json",
                "--out", "r.json", cwd=tmp_path)
     assert out.returncode == 0, out.stderr
     doc = json.loads(out.stdout)
@@ -190,12 +212,12 @@ def test_learning_runs_get_better_save_and_reuse_the_correction(tmp_path):
     assert len(saved["runs"]) == len(runs) and saved["steps"] == len(runs)
     assert 0.1 < np.abs(saved["offset"]["u_mm"]).max() < 5.0
 
-    again = _cli("--path", "p.csv", "--learned", "l.json", cwd=tmp_path)
+    again = _main("--path", "p.csv", "--learned", "l.json", cwd=tmp_path)
     assert again.returncode == 0, again.stderr
     assert f"learned correction: l.json ({len(runs)} updates, largest offset" in again.stdout
     assert "fed forward, not learning" in again.stdout and "   path  all" in again.stdout
 
-    more = _cli("--path", "p.csv", "--learned", "l.json", "--learn", "1", "--learned-out",
+    more = _main("--path", "p.csv", "--learned", "l.json", "--learn", "1", "--learned-out",
                 "l2.json", cwd=tmp_path)
     assert more.returncode == 0, more.stderr
     assert more.stdout.startswith("run  perp 3σ mm")
@@ -216,7 +238,7 @@ def test_learning_runs_get_better_save_and_reuse_the_correction(tmp_path):
 @pytest.mark.timeout(1200)  # ten runs of the path, two laws
 def test_the_inverse_law_learns_and_its_file_is_continued_as_inverse(tmp_path):
     (tmp_path / "p.csv").write_text(PATH)
-    out = _cli("--path", "p.csv", "--learn", "3", "--learn-law", "inverse", "--learned-out",
+    out = _main("--path", "p.csv", "--learn", "3", "--learn-law", "inverse", "--learned-out",
                "l.json", "--json", cwd=tmp_path)
     assert out.returncode == 0, out.stderr
     runs = json.loads(out.stdout)["runs"]
@@ -234,7 +256,7 @@ def test_the_inverse_law_learns_and_its_file_is_continued_as_inverse(tmp_path):
     assert state["excited"] and len(state["pairs"]) == 2 and state["weighting"]["prior"]
     # the file keeps the identified plant and the runs: the learning goes on by the
     # inverse law, the plant identified again from the saved pairs and the new run's
-    more = _cli("--path", "p.csv", "--learned", "l.json", "--learn", "1", "--learned-out",
+    more = _main("--path", "p.csv", "--learned", "l.json", "--learn", "1", "--learned-out",
                 "m.json", "--json", cwd=tmp_path)
     assert more.returncode == 0, more.stderr
     assert [r["law"] for r in json.loads(more.stdout)["runs"]] == ["inverse"]
@@ -246,14 +268,14 @@ def test_the_inverse_law_learns_and_its_file_is_continued_as_inverse(tmp_path):
     # the old law on request: identified once, all of the error learned; one run a
     # session: the file saved before its identifying run keeps the run before it, the
     # next session identifies the plant, and a continued file keeps its plant
-    old = _cli("--path", "p.csv", "--learn", "1", "--learn-law", "inverse",
+    old = _main("--path", "p.csv", "--learn", "1", "--learn-law", "inverse",
                "--inverse-reidentify", "0", "--weighting", "none", "--learned-out",
                "o.json", "--json", cwd=tmp_path)
     assert old.returncode == 0, old.stderr
     zeroth = json.loads((tmp_path / "o.json").read_text())
     assert zeroth["inverse"]["weighting"] is None and zeroth["inverse"]["plant"] is None
     assert zeroth["inverse"]["state"]["identifying"] is not None
-    ident = _cli("--path", "p.csv", "--learned", "o.json", "--learn", "1", "--learned-out",
+    ident = _main("--path", "p.csv", "--learned", "o.json", "--learn", "1", "--learned-out",
                  "o1.json", "--json", cwd=tmp_path)
     assert ident.returncode == 0, ident.stderr
     assert json.loads(ident.stdout)["runs"][0]["reason"] == \
@@ -261,17 +283,17 @@ def test_the_inverse_law_learns_and_its_file_is_continued_as_inverse(tmp_path):
     first = json.loads((tmp_path / "o1.json").read_text())
     assert first["inverse"]["plant"]["frequency_hz"]
     assert first["inverse"]["state"]["identifying"] is None
-    assert _cli("--path", "p.csv", "--learned", "o1.json", "--learn", "1", "--learned-out",
+    assert _main("--path", "p.csv", "--learned", "o1.json", "--learn", "1", "--learned-out",
                 "o2.json", cwd=tmp_path).returncode == 0
     second = json.loads((tmp_path / "o2.json").read_text())
     assert second["inverse"]["plant"] == first["inverse"]["plant"]
     assert second["inverse"]["state"]["pairs"] == first["inverse"]["state"]["pairs"]
     # by the P-type law on request; a P-type file is not continued by the inverse law
-    p = _cli("--path", "p.csv", "--learned", "l.json", "--learn", "1", "--learn-law", "p",
+    p = _main("--path", "p.csv", "--learned", "l.json", "--learn", "1", "--learn-law", "p",
              "--learned-out", "p.json", "--json", cwd=tmp_path)
     assert p.returncode == 0 and [r["law"] for r in json.loads(p.stdout)["runs"]] == ["p"]
     assert json.loads((tmp_path / "p.json").read_text())["law"] == "p"
-    refused = _cli("--path", "p.csv", "--learned", "p.json", "--learn", "1", "--learn-law",
+    refused = _main("--path", "p.csv", "--learned", "p.json", "--learn", "1", "--learn-law",
                    "inverse", cwd=tmp_path)
     assert refused.returncode == 2 and "p.json: cannot be continued by the law inverse: it " \
         "was learned with the P-type law" in refused.stderr
@@ -281,14 +303,14 @@ def test_the_inverse_law_learns_and_its_file_is_continued_as_inverse(tmp_path):
 @pytest.mark.slow
 def test_a_beam_broken_in_every_run_is_reported(tmp_path):
     (tmp_path / "p.csv").write_text(PATH)
-    whole = _cli("--path", "p.csv", "--learn", "2", "--beam-break", "0:5", "--learned-out",
+    whole = _main("--path", "p.csv", "--learn", "2", "--beam-break", "0:5", "--learned-out",
                  "l.json", cwd=tmp_path)
     assert whole.returncode == 1
     assert "no run could be learned from (beam broken in every run?): the tracker measured " \
            "0 % of the motion" in whole.stderr
     assert "nothing learned: l.json not written" in whole.stdout
     assert not (tmp_path / "l.json").exists()
-    part = _cli("--path", "p.csv", "--learn", "2", "--beam-break", "0.05:0.05", cwd=tmp_path)
+    part = _main("--path", "p.csv", "--learn", "2", "--beam-break", "0.05:0.05", cwd=tmp_path)
     assert part.returncode == 0, part.stderr
     assert "never measured in any learned run: 0.0" in part.stdout
     rows = [line for line in part.stdout.splitlines() if line.startswith("  ")]
@@ -299,7 +321,7 @@ def test_a_beam_broken_in_every_run_is_reported(tmp_path):
 @pytest.mark.slow
 def test_a_run_that_ends_early_is_not_learned_from(tmp_path):
     (tmp_path / "p.csv").write_text(PATH)
-    out = _cli("--path", "p.csv", "--learn", "3", "--tracker-lost-at", "0.05", "--learned-out",
+    out = _main("--path", "p.csv", "--learn", "3", "--tracker-lost-at", "0.05", "--learned-out",
                "l.json", cwd=tmp_path)
     assert out.returncode == 1
     assert "run 1 ended early: tracker silent for" in out.stderr
@@ -311,7 +333,7 @@ def test_a_diverging_learning_stops_and_keeps_the_best_runs_offset(tmp_path):
     """A learning filter far above the arm's first mode (25 Hz, L = 1.5): the second run's
     measured error grows, the runs stop and the saved offset is the first run's (none)."""
     (tmp_path / "p.csv").write_text(PATH)
-    out = _cli("--path", "p.csv", "--learn", "4", "--learn-gain", "1.5", "--learn-cutoff",
+    out = _main("--path", "p.csv", "--learn", "4", "--learn-gain", "1.5", "--learn-cutoff",
                "25", "--learned-out", "l.json", cwd=tmp_path)
     assert out.returncode == 1
     assert "diverged at run 2: the measured error grew to " in out.stderr

@@ -48,6 +48,25 @@ async def _call(client: Client, name: str, command: str, option: str = "", data=
     return await call.result()
 
 
+async def _joints(client: Client, name: str) -> np.ndarray:
+    got = await _call(client, name, "ARM_JNTP")
+    assert got.state is C, got.reason
+    return np.asarray(from_data(got.data), dtype=float).reshape(-1)
+
+
+async def _until_moved(client: Client, name: str, bound_s: float = 8.0) -> None:
+    """Wait until the LIN has been seen moving the arm — a joint reading more than 0.5° from
+    the first one (the 100 mm LIN turns the joints by degrees) — or ``bound_s`` has passed
+    (the path may have ended before the first reading: then the arm stands at its end)."""
+    loop = asyncio.get_running_loop()
+    end = loop.time() + bound_s
+    first = await _joints(client, name)
+    while loop.time() < end:
+        if np.abs(await _joints(client, name) - first).max() > 0.5:
+            return
+        await asyncio.sleep(0.1)
+
+
 async def _until_standing(client: Client, name: str, limit_s: float = 60.0) -> None:
     """Wait until two joint readings (°) 0.5 s apart agree within 0.01° (the arm stands;
     moving, the LIN's 100 mm/s turns the joints by degrees in 0.5 s; standing, the
@@ -55,9 +74,7 @@ async def _until_standing(client: Client, name: str, limit_s: float = 60.0) -> N
     twin's path may end later than its 0.5 s delay and 1 s of motion."""
     last = None
     for _ in range(int(limit_s / 0.5)):
-        got = await _call(client, name, "ARM_JNTP")
-        assert got.state is C, got.reason
-        q = np.asarray(from_data(got.data), dtype=float).reshape(-1)
+        q = await _joints(client, name)
         if last is not None and np.allclose(q, last, rtol=0.0, atol=0.01):
             return
         last = q
@@ -77,8 +94,8 @@ def _compensate(tmp_path, twin, stream: dict, params) -> np.ndarray:
         try:
             async with Client("COMPTEST", cell=service.cell) as client:
                 assert await client.wait_for(service.name, 20)
-                await asyncio.sleep(8.0)  # the 100 mm LIN ends, the arm stands …
-                await _until_standing(client, service.name)  # … also on a loaded machine
+                await _until_moved(client, service.name)  # the 100 mm LIN runs …
+                await _until_standing(client, service.name)  # … ends, the arm stands
                 started = await _call(client, service.name, "CORRECT", "",
                                       ["compensation", f"calibration={params}", "ramp=0.3"])
                 assert started.state is C, started.reason

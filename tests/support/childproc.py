@@ -89,6 +89,11 @@ class Proc:
                 self._cond.wait(min(left, 0.2))
         raise AssertionError(f"no such line from {self.argv}: {self.lines} {self.errors[-20:]}")
 
+    def wait_serving(self, timeout: float = 30.0) -> Proc:
+        """Wait until the service says it serves (``plugcell serve``'s line); itself."""
+        self.wait_line(lambda line: "serving in cell" in line, timeout)
+        return self
+
     @property
     def pid(self) -> int:
         return self.popen.pid
@@ -101,8 +106,20 @@ class Proc:
 
     def stop(self) -> None:
         """SIGTERM the group, SIGKILL after 15 s; every wait bounded."""
-        if self.popen.poll() is None:
-            os.killpg(self.popen.pid, signal.SIGTERM)
+        self.reap(self.terminate())
+
+    def terminate(self) -> bool:
+        """SIGTERM the group if its leader still runs; whether it did (for :meth:`reap`)."""
+        if self.popen.poll() is not None:
+            return False
+        os.killpg(self.popen.pid, signal.SIGTERM)
+        return True
+
+    def reap(self, terminated: bool) -> None:
+        """After :meth:`terminate`: wait for the leader it sent SIGTERM (SIGKILL the group
+        after 15 s); where the leader had already gone, SIGKILL what is left of its
+        group."""
+        if terminated:
             try:
                 self.popen.wait(15)
             except subprocess.TimeoutExpired:
@@ -149,19 +166,20 @@ class Launcher:
     def serve(self, kind: str, cell: str, *extra: str, name: str | None = None,
               env: dict[str, str] | None = None, wait: bool = True) -> Proc:
         """``plugcell serve KIND --cell CELL …`` (``--name NAME``), waited for until it
-        serves unless ``wait`` is False."""
+        serves unless ``wait`` is False (then :meth:`Proc.wait_serving`: services that do
+        not need each other start side by side)."""
         argv = plugcell_argv("serve", kind, "--cell", cell, *extra)
         if name:
             argv += ["--name", name]
         proc = self.start(argv, env)
-        if wait:
-            proc.wait_line(lambda line: "serving in cell" in line, 30.0)
-        return proc
+        return proc.wait_serving() if wait else proc
 
     def stop(self) -> None:
-        """Stop every child started (its whole process group)."""
-        for proc in self.started:
-            proc.stop()
+        """Stop every child started (its whole process group): all are sent SIGTERM first,
+        then each is waited for, so that they shut down side by side."""
+        terminated = [proc.terminate() for proc in self.started]
+        for proc, sent in zip(self.started, terminated, strict=True):
+            proc.reap(sent)
 
 
 class CellProcesses:

@@ -133,9 +133,12 @@ def test_an_engineer_session_in_the_browser(module_cell: str, launcher: Any,
     from playwright.sync_api import expect
 
     cell = module_cell
-    launcher.serve("drill", cell, "--param", "time_scale=0.001")
-    camera = launcher.serve("camera", cell, "--param", "time_scale=0.001")
-    launcher.serve("robot", cell, "--param", "sim=true", name="R1")
+    started = (launcher.serve("drill", cell, "--param", "time_scale=0.001", wait=False),
+               launcher.serve("camera", cell, "--param", "time_scale=0.001", wait=False),
+               launcher.serve("robot", cell, "--param", "sim=true", name="R1", wait=False))
+    camera = started[1]
+    for proc in started:
+        proc.wait_serving()  # started side by side
     url = _controller_ui(launcher, cell)
     errors: list[str] = []
     wiring = tmp_path / "cell-wiring.json"
@@ -315,10 +318,12 @@ def test_the_metrology_cell_calibrated_in_the_browser(launcher: Any, tmp_path: P
 
     t0 = time.monotonic()
     cell = unique_cell("m")
-    launcher.serve("tracker", cell, "--param", "time_scale=0.01")
-    launcher.serve("compute", cell)
-    launcher.serve("robot", cell, "--param", "sim=true", "--param", "speed=100",
-                   "--param", "payload_kg=36", "--param", "link_baud=19200", name="H4")
+    for proc in (launcher.serve("tracker", cell, "--param", "time_scale=0.01", wait=False),
+                 launcher.serve("compute", cell, wait=False),
+                 launcher.serve("robot", cell, "--param", "sim=true", "--param", "speed=100",
+                                "--param", "payload_kg=36", "--param", "link_baud=19200",
+                                name="H4", wait=False)):
+        proc.wait_serving()  # started side by side
     url = _controller_ui(launcher, cell)
     twin = RobotTwin(H4_TWIN)
     truth = twin.reveal_truth()

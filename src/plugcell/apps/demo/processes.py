@@ -54,9 +54,18 @@ class _Service:
             self.errors = [*self.errors[-30:], line.rstrip()]
 
     def stop(self, timeout: float = 10.0) -> None:
+        self.terminate()
+        self.reap(timeout)
+
+    def terminate(self) -> None:
+        """SIGTERM its process group (:meth:`reap` waits for it)."""
         if self.popen.poll() is None:
             with contextlib.suppress(ProcessLookupError):
                 os.killpg(self.popen.pid, signal.SIGTERM)
+
+    def reap(self, timeout: float = 10.0) -> None:
+        """Wait ``timeout`` s for it to end (then SIGKILL); nothing of its group is left."""
+        if self.popen.poll() is None:
             try:
                 self.popen.wait(timeout)
             except subprocess.TimeoutExpired:
@@ -103,8 +112,12 @@ class CellProcesses:
                     raise ServiceStartError(f"{service.name} did not serve within {timeout:g} s")
 
     def stop_all(self) -> None:
+        """SIGTERM every process (the last started first), then wait for each: they
+        shut down side by side."""
         for service in reversed(self.services):
-            service.stop()
+            service.terminate()
+        for service in reversed(self.services):
+            service.reap()
 
     def stop(self, name: str) -> list[str]:
         """Stop one process; the last lines it printed."""

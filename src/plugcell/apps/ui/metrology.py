@@ -19,14 +19,6 @@ from typing import Any
 import numpy as np
 
 from plugcell.io.units import UnitsError, pose_from_robot, robot_from_pose
-from plugcell.metrology import (
-    MetrologyError,
-    base_from_features,
-    fit_circle,
-    fit_line,
-    fit_plane,
-    probe_from_flange_features,
-)
 
 MM = 1e-3
 MAX_POINTS = 100_000
@@ -107,6 +99,9 @@ def fit_json(kind: Any, points: Any) -> dict[str, Any]:
 
 
 def _fit(kind: Any, points: Any) -> dict[str, Any]:
+    # here, not at the top: the UI server starts without the fits' SciPy
+    from plugcell.metrology import MetrologyError, fit_circle, fit_line, fit_plane
+
     if kind not in KINDS:
         raise FitInputError({"kind": f"one of {', '.join(KINDS)}"})
     p = points_mm(points, "points", {"circle": 3, "line": 2, "plane": 3}[kind])
@@ -174,6 +169,8 @@ def wizard_probe(body: dict[str, Any]) -> dict[str, Any]:
 
 
 def _probe(body: dict[str, Any]) -> dict[str, Any]:
+    from plugcell.metrology import MetrologyError, probe_from_flange_features
+
     circle = points_mm(body.get("circle"), "circle", 3)
     holes = points_mm(body.get("holes"), "holes", 2)
     tmac = _pose(body.get("tmac"), "tmac")
@@ -202,6 +199,8 @@ def wizard_base(body: dict[str, Any]) -> dict[str, Any]:
 
 
 def _base(body: dict[str, Any]) -> dict[str, Any]:
+    from plugcell.metrology import MetrologyError, base_from_features
+
     circle = points_mm(body.get("circle"), "circle", 3)
     plane = points_mm(body.get("plane"), "plane", 3)
     line = points_mm(body.get("line"), "line", 2)

@@ -27,7 +27,6 @@ from plugcell.apps.ui.metrology import MAX_POINTS, FitInputError
 from plugcell.devices.compute.workspace import NAME as MATRIX_NAME
 from plugcell.framework.data import from_data
 from plugcell.framework.keys import check_name
-from plugcell.io.params import RESIDUALS_FORMAT, RESIDUALS_FORMAT_VERSION
 
 SETS = ("calibration", "validation")
 #: Largest coordinate accepted (mm): 1000 km, far beyond any cell.
@@ -61,6 +60,10 @@ def _count(value: Any, field: str, what: str) -> list[Any]:
 
 def residuals_from_document(doc: Any) -> dict[str, Any]:
     """The view of a residual file (``plugcell calibrate --residuals``)."""
+    # here, not at the top: io.params loads the calibration package (SciPy), which the UI
+    # server needs only when a residual file is shown
+    from plugcell.io.params import RESIDUALS_FORMAT, RESIDUALS_FORMAT_VERSION
+
     field = "document"
     if not isinstance(doc, dict) or doc.get("format") != RESIDUALS_FORMAT:
         raise FitInputError({field: f"not a residual file (format {RESIDUALS_FORMAT!r}): write "

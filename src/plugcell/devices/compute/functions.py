@@ -38,18 +38,13 @@ import tempfile
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from plugcell.calibration import CalibrationData, CalibrationError, CalibrationResult, Calibrator
-from plugcell.compensation import IdentifiedModel, NominalModel
-from plugcell.compensation import compensate as _compensate
-from plugcell.compensation import compensate_joints as _compensate_joints
 from plugcell.devices.compute.expr import EvaluationError
 from plugcell.devices.compute.workspace import Workspace, WorkspaceError, as_matrix
 from plugcell.framework.keys import check_name as _check_file_name
-from plugcell.io.params import params_json, rebase_document, result_from_params
 from plugcell.io.robots import available_robots, load_robot
 from plugcell.io.units import (
     M_PER_MM,
@@ -63,15 +58,9 @@ from plugcell.io.units import (
 )
 from plugcell.kinematics import RobotDescription
 from plugcell.kinematics.rotations import angles_to_matrix
-from plugcell.metrology import (
-    MetrologyError,
-    fit_line,
-    fit_plane,
-    frame_from_axes,
-    probe_from_flange_features,
-)
-from plugcell.metrology import base_from_features as _base_from_features
-from plugcell.metrology import invert_transform as _inv
+
+if TYPE_CHECKING:
+    from plugcell.calibration import CalibrationData, CalibrationResult
 
 __all__ = ["FUNCTIONS", "FunctionContext", "Parameters", "register"]
 
@@ -204,6 +193,8 @@ def _poses(rows: np.ndarray, convention: str) -> np.ndarray:
 
 def _data(desc: RobotDescription, mJ: Any, mT: Any, payload: Any, angles: Any,
           names: tuple[str, str]) -> CalibrationData:
+    from plugcell.calibration import CalibrationData
+
     J = _matrix(mJ, names[0], (desc.n_readings,))
     T = _matrix(mT, names[1], (3, 6))
     if len(J) != len(T):
@@ -228,6 +219,9 @@ def calibrate(ctx: FunctionContext, mJ: Any, mT: Any, model: Any = 5.0, payload:
               angles: Any = "zyz", robot: Any = None) -> Parameters:
     """Identify the error parameters from joint readings ``mJ`` (N×n, deg) and tracker
     measurements ``mT`` (N×6 poses mm/deg, or N×3 positions mm) — H4Calibration."""
+    from plugcell.calibration import CalibrationError, Calibrator
+    from plugcell.io.params import params_json
+
     desc = _description(ctx, robot)
     data = _data(desc, mJ, mT, payload, angles, ("mJ", "mT"))
     spec: int | str = model if isinstance(model, str) else _integer(model, "model")
@@ -322,6 +316,8 @@ def save_params(ctx: FunctionContext, params: Any, name: Any) -> None:
 def load_params(ctx: FunctionContext, name: Any) -> Parameters:
     """Load parameters saved by :func:`save_params` (or written by ``plugcell calibrate``)
     — LoadParams of 8.3.2."""
+    from plugcell.io.params import result_from_params
+
     path = _params_path(ctx, name)
     try:
         doc = json.loads(path.read_text(encoding="utf-8"))
@@ -388,6 +384,7 @@ def base_drift(ctx: FunctionContext, params: Any, nests: Any, measured: Any,
 def rebase(ctx: FunctionContext, params: Any, drift: Any) -> Parameters:
     """Parameters with BASE re-registered by a :func:`base_drift` row: ``BASE' = D·BASE``
     (the robot's parameters and a learned residual layer unchanged)."""
+    from plugcell.io.params import rebase_document, result_from_params
     from plugcell.kinematics.transforms import so3_exp
 
     p = _params(params)
@@ -441,6 +438,9 @@ def compensate(ctx: FunctionContext, params: Any, targets: Any, payload: Any = 0
     """Model-based compensation (6.5.1): target poses N×6 (robot base frame, mm/deg) →
     the joints (N×n, deg) that reach them on the identified model.  ``tool``: the
     compensated point in the flange frame (6-vector; default the identified PROBE)."""
+    from plugcell.compensation import IdentifiedModel
+    from plugcell.compensation import compensate as _compensate
+
     p = _params(params)
     convention = _convention(angles)
     T = _poses(_matrix(targets, "targets", (6,)), convention)
@@ -461,6 +461,9 @@ def compensate_joints(ctx: FunctionContext, params: Any, joints: Any, payload: A
                       angles: Any = "zyz", tool: Any = None) -> np.ndarray:
     """H4Compensation (8.3.2): the nominal joints of a target (POS_TO_JNTP, N×n deg) →
     the compensated joints (N×n, deg) that put the tool where the nominal robot would."""
+    from plugcell.compensation import IdentifiedModel, NominalModel
+    from plugcell.compensation import compensate_joints as _compensate_joints
+
     p = _params(params)
     desc = p.description
     q = joints_to_si(_matrix(joints, "joints", (desc.n_readings,)), desc.reading_scale())
@@ -511,6 +514,9 @@ def calc_targets(ctx: FunctionContext, holes: Any, corners: Any, base: Any,
     ``base`` (a 1×6 BASE in mm/deg, or identified parameters) and returned as
     (k·per_bar)×6 poses (mm, deg in ``angles``).
     """
+    from plugcell.metrology import MetrologyError, fit_line, fit_plane, frame_from_axes
+    from plugcell.metrology import invert_transform as _inv
+
     convention = _convention(angles)
     H = _matrix(holes, "holes", (3, 6))[:, :3] * M_PER_MM
     C = _matrix(corners, "corners", (3, 6))[:, :3] * M_PER_MM
@@ -550,6 +556,8 @@ def probe_from_features(ctx: FunctionContext, circle: Any, holes: Any, tmac: Any
     """App. D.1: PROBE (1×6, mm/deg) from SMR positions while the last joint turns
     (``circle``, N×3 mm), the two dowel holes from −y to +y (``holes``), and the T-MAC
     pose measured without moving (``tmac``, 1×6); ``smr_offset``: SMR centre height (mm)."""
+    from plugcell.metrology import MetrologyError, probe_from_flange_features
+
     convention = _convention(angles)
     T = pose_from_robot(_matrix(tmac, "tmac", (6,)).reshape(-1), convention)
     try:
@@ -566,6 +574,9 @@ def base_from_features(ctx: FunctionContext, circle: Any, plane: Any, line: Any,
     """App. D.2: BASE (1×6, mm/deg) from SMR positions on joint 1 while it turns
     (``circle``), on the base surface (``plane``), and T-MAC positions while the robot
     moves along its +x (``line``), all N×3 mm in the tracker frame."""
+    from plugcell.metrology import MetrologyError
+    from plugcell.metrology import base_from_features as _base_from_features
+
     try:
         est = _base_from_features(_points(circle, "circle"), _points(plane, "plane"),
                                  _points(line, "line"),

@@ -58,7 +58,6 @@ from typing import Any
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
-from scipy.linalg import expm
 
 from plugcell.sim.twin.physics import gravity_torques
 from plugcell.sim.twin.robot import RobotTwin, true_flange_poses
@@ -251,6 +250,8 @@ def _stop_time(w0: float, acc: float, a: float) -> float:
 def _mode_transition(fn: float, zeta: float, h: float) -> tuple[Array, Array]:
     """Exact ZOH discretisation of ``θ̈ = ω²(x − θ) + 2ζω(ẋ − θ̇)`` over ``h``:
     ``[θ, θ̇]⁺ = Φ [θ, θ̇] + Γ [x, ẋ]``."""
+    from scipy.linalg import expm  # here: the controller without --dynamics never loads SciPy
+
     w = 2 * math.pi * fn
     A = np.array([[0.0, 1.0], [-w * w, -2 * zeta * w]])
     B = np.array([[0.0, 0.0], [w * w, 2 * zeta * w]])
