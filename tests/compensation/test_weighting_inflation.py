@@ -34,6 +34,11 @@ def test_the_sign_rule_multiplies_where_the_power_fell_and_divides_elsewhere():
     np.testing.assert_array_equal(c, [8.0, 1.0])
     c = inflation(c, [2.0, 0.5], [1.0, 1.0], 8.0, 2.0)      # rose / fell
     np.testing.assert_array_equal(c, [4.0, 2.0])
+    # a margin: a fall of 10 % counts at 0.05, not at 0.2 (then ÷ a)
+    np.testing.assert_array_equal(inflation([2.0, 2.0], [0.9, 0.9], [1.0, 1.0], 8.0, 2.0,
+                                            0.05), [4.0, 4.0])
+    np.testing.assert_array_equal(inflation([2.0, 2.0], [0.9, 0.9], [1.0, 1.0], 8.0, 2.0,
+                                            0.2), [1.0, 1.0])
     # another shape of the last record (another grid): a first update
     np.testing.assert_array_equal(inflation(c, [1.0, 1.0, 1.0], [2.0, 2.0], 8.0, 2.0),
                                   [1.0, 1.0, 1.0])
@@ -133,9 +138,10 @@ def test_the_tiles_inflate_where_a_tile_falls():
     ({"adapt_step": 1.0}, "adapt_step > 1"),
     ({"adapt_max": math.inf}, "adapt_max must be a finite number"),
     ({"adapt_step": math.nan}, "adapt_step must be a finite number"),
+    ({"adapt_margin": -1.0}, "adapt_margin ≥ 0"),
 ])
 def test_bad_settings_are_refused_with_the_reason(kw, msg):
     with pytest.raises(ValueError, match=msg):
         WeightingSettings(**kw)
-    with pytest.raises(ValueError, match="adapt_max ≥ 1 and adapt_step > 1"):
+    with pytest.raises(ValueError, match="adapt_max ≥ 1, adapt_step > 1 and 0 ≤ margin < 1"):
         inflation(None, [1.0], None, 0.5, 2.0)

@@ -46,7 +46,7 @@ slowly.  Each bin (each tile, :class:`TileGain`) keeps a factor ``c_j ∈ [1, c_
 its prior, updated from the powers ``P`` the update sees (the smoothed ``|E|²`` summed
 over the axes, :math:`S + N`'s estimate) of this record and the last one::
 
-    c_0 = 1,   c_j = clip(c_{j−1} · a,  1, c_max)   where P_j < P_{j−1}     (5)
+    c_0 = 1,   c_j = clip(c_{j−1} · a,  1, c_max)   where P_j < P_{j−1} (1 − κ_a/√M)   (5)
                c_j = clip(c_{j−1} / a,  1, c_max)   elsewhere
 
     K_j = c_j S_j / (c_j S_j + N),   S_{j+1} = (1 − γ K_j)² c_j S_j + γ² K_j² N
@@ -58,7 +58,10 @@ last update lowered the error the learning forgets its older runs faster and lea
 of this one; where the error rose (a model wrong there, or the noise floor reached) the
 factor falls back to 1, (2)'s gain.  ``K_j`` is monotone in ``c_j`` and in ``[K_j(c=1),
 c_max S_j/(c_max S_j + N)]``: never below (2)'s gain, never 1 where ``S_j`` is finite, 0
-where ``S_j`` is 0 (no signal seen, no inflation); ``c_max`` = 1 is (2) exactly.
+where ``S_j`` is 0 (no signal seen, no inflation); ``c_max`` = 1 is (2) exactly.  ``κ_a``
+(``adapt_margin``, ≥ 0) asks the fall to exceed that many standard deviations of the
+average of ``M`` values (as the matching's ``κ``): where the power is the noise's, the
+sign of a difference is a coin's, and ``c`` then falls back to 1 more often than not.
 (With ``c_j = c`` held, (2) from the inflated prior settles where ``S = c S N/(c S + N)``:
 ``S* = (c − 1) N``, ``K* = 1 − 1/c`` at ``γ`` = 1 — the gain no longer decays to 0.)
 
@@ -116,6 +119,9 @@ class WeightingSettings:
         1 (the default) switches it off: (2) exactly.
     adapt_step : float
         ``a`` > 1 of (5): the factor on ``c`` per update.
+    adapt_margin : float
+        ``κ_a`` ≥ 0 of (5): how many standard deviations of the average the power must
+        fall by to count as fallen (0: any fall).
     """
 
     noise_low_hz: float = 50.0
@@ -125,6 +131,7 @@ class WeightingSettings:
     window_s: float = 0.0
     adapt_max: float = 1.0
     adapt_step: float = 2.0
+    adapt_margin: float = 0.0
 
     def __post_init__(self) -> None:
         for f in fields(self):
@@ -140,10 +147,10 @@ class WeightingSettings:
             raise ValueError(f"WeightingSettings: smooth_hz must be > 0, detect and window_s "
                              f"≥ 0, got {self.smooth_hz!r}, {self.detect!r} and "
                              f"{self.window_s!r}")
-        if not (self.adapt_max >= 1 and self.adapt_step > 1):
-            raise ValueError(f"WeightingSettings: adapt_max must be ≥ 1 (1: off) and "
-                             f"adapt_step > 1, got {self.adapt_max!r} and "
-                             f"{self.adapt_step!r}")
+        if not (self.adapt_max >= 1 and self.adapt_step > 1 and self.adapt_margin >= 0):
+            raise ValueError(f"WeightingSettings: adapt_max must be ≥ 1 (1: off), "
+                             f"adapt_step > 1 and adapt_margin ≥ 0, got {self.adapt_max!r}, "
+                             f"{self.adapt_step!r} and {self.adapt_margin!r}")
 
     def check(self, cycle_s: float) -> None:
         """The noise band against the Nyquist rate of ``cycle_s``."""
@@ -242,7 +249,7 @@ def wiener_gain(signal: ArrayLike, noise: ArrayLike) -> Array:
 
 
 def inflation(scale: ArrayLike | None, power: ArrayLike, last_power: ArrayLike | None,
-              adapt_max: float, adapt_step: float) -> Array:
+              adapt_max: float, adapt_step: float, margin: float = 0.0) -> Array:
     """(5): the prior's factor ``c_j`` per bin (or tile) from the last one and the powers
     of this record and the last.
 
@@ -257,22 +264,24 @@ def inflation(scale: ArrayLike | None, power: ArrayLike, last_power: ArrayLike |
         ``c_max`` ≥ 1.
     adapt_step : float
         ``a`` > 1.
+    margin : float
+        ``κ_a/√M`` in [0, 1): the relative fall that counts (0: any).
 
     Returns
     -------
     array of ``power``'s shape
-        ``c_j`` in ``[1, c_max]``: ``c_{j−1} a`` where ``P_j < P_{j−1}``, ``c_{j−1} / a``
-        elsewhere, clipped.
+        ``c_j`` in ``[1, c_max]``: ``c_{j−1} a`` where ``P_j < P_{j−1} (1 − margin)``,
+        ``c_{j−1} / a`` elsewhere, clipped.
     """
     P = np.asarray(power, dtype=float)
-    if not (adapt_max >= 1 and adapt_step > 1):
-        raise ValueError(f"inflation: need adapt_max ≥ 1 and adapt_step > 1, got "
-                         f"{adapt_max!r} and {adapt_step!r}")
+    if not (adapt_max >= 1 and adapt_step > 1 and 0 <= margin < 1):
+        raise ValueError(f"inflation: need adapt_max ≥ 1, adapt_step > 1 and 0 ≤ margin < 1, "
+                         f"got {adapt_max!r}, {adapt_step!r} and {margin!r}")
     if scale is None or last_power is None or np.shape(last_power) != P.shape \
             or np.shape(scale) != P.shape:
         return np.ones(P.shape)
     c, last = np.asarray(scale, dtype=float), np.asarray(last_power, dtype=float)
-    fell = np.less(P, last)
+    fell = np.less(P, last * (1.0 - margin))
     step = np.where(fell, adapt_step, 1.0 / adapt_step)
     return np.clip(c * step, 1.0, adapt_max)
 
@@ -305,7 +314,8 @@ class _RunGain:
             raised = power > (self.prior + N) * (1.0 + s.detect / math.sqrt(M))
             S = np.where(raised, np.maximum(seen, self.prior), self.prior)
         if s.adapt_max > 1:
-            self.scale = inflation(self.scale, power, self.power, s.adapt_max, s.adapt_step)
+            self.scale = inflation(self.scale, power, self.power, s.adapt_max, s.adapt_step,
+                                   min(s.adapt_margin / math.sqrt(M), 0.99))
             S = self.scale * S
         self.power = power.copy()
         K = wiener_gain(S.reshape(S.shape[0], -1), N).reshape(S.shape)
