@@ -5,6 +5,7 @@
         [--inverse-cutoff 20] [--inverse-reg 0.05] [--inverse-gain 1] [--inverse-decay 1]
         [--inverse-modes 4] [--inverse-reidentify 1] [--weighting kalman]
         [--weighting-adapt 1] [--weighting-adapt-step 2] [--weighting-adapt-margin 0]
+        [--weighting-detect-fell 0]
         [--excitation-um 20] [--jobs 2]
         [--faults] [--udp]
         [--lead-ms MS] [--seed 0] [--plot docs/results/dynamic-correction.png]
@@ -453,6 +454,7 @@ def print_learning(results: list[dict], ls: LearningSettings) -> None:
                     f"±{ls.weighting.smooth_hz:g} Hz, covariance matching "
                     + (f"κ {ls.weighting.detect:g}" if math.isfinite(ls.weighting.detect)
                        else "off")
+                    + (" only where the error fell" if ls.weighting.detect_fell else "")
                     + (f", per tile of {ls.weighting.window_s:g} s" if ls.weighting.window_s
                        else "")
                     + (f", prior inflated up to {ls.weighting.adapt_max:g}× (× or ÷ "
@@ -593,6 +595,11 @@ def main(argv: list[str]) -> int:
     ap.add_argument("--weighting-adapt-step", type=float,
                     default=WeightingSettings().adapt_step,
                     help="a of (5): the inflation's factor per update")
+    ap.add_argument("--weighting-detect-fell", type=int, choices=(0, 1),
+                    default=WeightingSettings().detect_fell,
+                    help="1: the covariance matching only where the error fell after the "
+                    "last update (smoothing.py (6)); 0 (default): wherever it exceeds the "
+                    "prediction")
     ap.add_argument("--weighting-adapt-margin", type=float,
                     default=WeightingSettings().adapt_margin,
                     help="κ_a of (5): the fall that counts, in standard deviations of the "
@@ -631,7 +638,8 @@ def main(argv: list[str]) -> int:
                                            window_s=args.weighting_window_s,
                                            adapt_max=args.weighting_adapt,
                                            adapt_step=args.weighting_adapt_step,
-                                           adapt_margin=args.weighting_adapt_margin)
+                                           adapt_margin=args.weighting_adapt_margin,
+                                           detect_fell=args.weighting_detect_fell)
                                        if args.weighting == "kalman" and inverse else None)
     except ValueError as exc:
         ap.error(str(exc))

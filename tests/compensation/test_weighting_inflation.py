@@ -145,3 +145,29 @@ def test_bad_settings_are_refused_with_the_reason(kw, msg):
         WeightingSettings(**kw)
     with pytest.raises(ValueError, match="adapt_max ≥ 1, adapt_step > 1 and 0 ≤ margin < 1"):
         inflation(None, [1.0], None, 0.5, 2.0)
+
+
+def test_the_matching_only_where_the_error_fell():
+    """(6): with ``detect_fell`` the covariance matching resets ``S_j`` only where the
+    record's power also fell below the last record's.  A tone that the runs do not
+    lower (the same amplitude every run, fresh noise) is re-matched by the plain matching
+    and not with (6); a tone that falls, but slower than (2) predicts, by both."""
+    f = rfftfreq(G, T)
+    tone = np.argmin(np.abs(f - 12.0))
+    for fall, both in ((1.0, False), (0.9, True)):
+        plain = SpectralGain(WeightingSettings(detect=3.0))
+        fell = SpectralGain(WeightingSettings(detect=3.0, detect_fell=1))
+        for E in records(5, fall):
+            K0, K1 = plain(E, f), fell(E, f)
+        assert K0[tone] > 0.5                    # the plain matching keeps re-raising it
+        assert (K1[tone] > 0.5) == both
+
+
+def test_the_matching_only_where_the_error_fell_is_off_by_default():
+    f = rfftfreq(G, T)
+    a = SpectralGain(WeightingSettings(detect=3.0))
+    b = SpectralGain(WeightingSettings(detect=3.0, detect_fell=0))
+    for E in records(4, 0.9):
+        np.testing.assert_array_equal(a(E, f), b(E, f))
+    with pytest.raises(ValueError, match="detect_fell must be 0 or 1"):
+        WeightingSettings(detect_fell=2)

@@ -8,7 +8,7 @@ learning.InverseState`).  Inside ``"inverse"`` of :mod:`plugcell.io.learned_path
     "weighting": null | {"noise_low_hz": 50.0, "noise_high_hz": 110.0,   # WeightingSettings
                          "smooth_hz": 0.5, "detect": null, "window_s": 0.0,  # null: inf
                          "adapt_max": 1.0, "adapt_step": 2.0,   # optional: absent → these
-                         "adapt_margin": 0.0},
+                         "adapt_margin": 0.0, "detect_fell": 0},
     "state": {
       "excited": null | {"u_m": [[x, y, z]…G], "e_m": […G], "measured": "0111…1"},
       "pairs": [{"du_m": […G], "de_m": […G], "mask": "0111…1"}, …],
@@ -18,7 +18,7 @@ learning.InverseState`).  Inside ``"inverse"`` of :mod:`plugcell.io.learned_path
                     "scale": null | [c_j…] | [[c…]…], "power": null | [P_j…] | …},
       "identifying": null | {"u_m": […G], "e_m": […G], "measured": "0111…1"}}
 
-The weighting's ``adapt_max``/``adapt_step``/``adapt_margin`` and its state's
+The weighting's ``adapt_*`` and ``detect_fell`` settings and its state's
 ``scale``/``power`` (the inflation (5) of :mod:`~plugcell.compensation.tracking.smoothing`)
 are optional: a file written before them has none, and loads as the law without
 inflation, ``adapt_max`` 1.
@@ -66,7 +66,7 @@ __all__ = ["MAX_STATE_CYCLES", "read_state", "read_weighting", "state_document",
 #: run, each a grid of the learning): 2**20, ≈ 7 million numbers, ≈ 150 MB of JSON.
 MAX_STATE_CYCLES = MAX_GRID
 #: The weighting's settings a file may lack (written before them: their defaults).
-OPTIONAL_WEIGHTING = ("adapt_max", "adapt_step", "adapt_margin")
+OPTIONAL_WEIGHTING = ("adapt_max", "adapt_step", "adapt_margin", "detect_fell")
 #: The history entries of the weighting.
 HISTORY_KEYS = ("noise", "mean_gain", "rematched")
 

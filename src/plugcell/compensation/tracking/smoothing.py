@@ -65,6 +65,15 @@ sign of a difference is a coin's, and ``c`` then falls back to 1 more often than
 (With ``c_j = c`` held, (2) from the inflated prior settles where ``S = c S N/(c S + N)``:
 ``S* = (c − 1) N``, ``K* = 1 − 1/c`` at ``γ`` = 1 — the gain no longer decays to 0.)
 
+**The matching only where the error fell** (optional, ``detect_fell`` 1): the matching
+raises ``S_j`` where a run's error stays above (2)'s prediction — the residual a model
+learns slowly, but also where the model is wrong and a larger gain makes it worse (the
+twin's line at 250 mm/s).  With ``detect_fell`` the reset acts only where, besides,
+``P_j < P_{j−1}``: the last update lowered the error there, so the model's direction is
+right and only its step was short::
+
+    S_j ← max(P_j − N, S_j)   where P_j > (S_j + N)(1 + κ/√M)  and  P_j < P_{j−1}     (6)
+
 The three axes share one gain per frequency (``S`` and ``N`` are the powers summed
 over the axes): the weight is then a scalar ``K ∈ [0, 1]`` at each frequency and
 
@@ -122,6 +131,9 @@ class WeightingSettings:
     adapt_margin : float
         ``κ_a`` ≥ 0 of (5): how many standard deviations of the average the power must
         fall by to count as fallen (0: any fall).
+    detect_fell : int
+        1: the covariance matching acts only where the power fell below the last
+        record's ((6)); 0 (the default): wherever it exceeds the prediction.
     """
 
     noise_low_hz: float = 50.0
@@ -132,6 +144,7 @@ class WeightingSettings:
     adapt_max: float = 1.0
     adapt_step: float = 2.0
     adapt_margin: float = 0.0
+    detect_fell: int = 0
 
     def __post_init__(self) -> None:
         for f in fields(self):
@@ -147,6 +160,9 @@ class WeightingSettings:
             raise ValueError(f"WeightingSettings: smooth_hz must be > 0, detect and window_s "
                              f"≥ 0, got {self.smooth_hz!r}, {self.detect!r} and "
                              f"{self.window_s!r}")
+        if self.detect_fell not in (0, 1):
+            raise ValueError(f"WeightingSettings.detect_fell must be 0 or 1, "
+                             f"got {self.detect_fell!r}")
         if not (self.adapt_max >= 1 and self.adapt_step > 1 and self.adapt_margin >= 0):
             raise ValueError(f"WeightingSettings: adapt_max must be ≥ 1 (1: off), "
                              f"adapt_step > 1 and adapt_margin ≥ 0, got {self.adapt_max!r}, "
@@ -312,6 +328,8 @@ class _RunGain:
             S, raised = seen, np.zeros(power.shape, bool)
         else:
             raised = power > (self.prior + N) * (1.0 + s.detect / math.sqrt(M))
+            if s.detect_fell and self.power is not None and self.power.shape == power.shape:
+                raised &= np.less(power, self.power)  # (6)
             S = np.where(raised, np.maximum(seen, self.prior), self.prior)
         if s.adapt_max > 1:
             self.scale = inflation(self.scale, power, self.power, s.adapt_max, s.adapt_step,
