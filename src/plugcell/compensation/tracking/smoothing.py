@@ -368,6 +368,9 @@ class SpectralGain(_RunGain):
         matching raised).
     last_gain : (m,) array or None
         ``K_j`` of the last call (``None`` before the first; not part of the saved state).
+    scale, power : (m,) arrays or None
+        (5)'s ``c_j`` (None while ``adapt_max`` is 1) and the power ``P_j`` of the last
+        record ((5), (6)); None before the first call.
 
     API note: ``gain = SpectralGain(settings); K = gain(E, f)`` once per update, ``E``
     the record's spectrum (m, a), then learn ``K[:, None] * E``.
@@ -415,7 +418,8 @@ class TileGain(_RunGain):
         ``γ`` in (0, 2).
 
     API note: ``ê = TileGain(settings, T)(e)`` with ``e`` (G, 3) on the cycle grid; the
-    state (``prior``, ``history``, ``last_gain``: (bins, tiles)) as :class:`SpectralGain`'s.
+    state (``prior``, ``history``, ``last_gain``, ``scale``, ``power``: (bins, tiles)) as
+    :class:`SpectralGain`'s.
     """
 
     def __init__(self, settings: WeightingSettings, cycle_s: float, gain: float = 1.0) -> None:
