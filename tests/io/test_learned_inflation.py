@@ -16,8 +16,8 @@ from plugcell.compensation.tracking import WeightingSettings
 from plugcell.compensation.tracking.learning import IterativeLearning
 from plugcell.io.learned_paths import LearnedFile, LearnedFileError, load_learned, save_learned
 
-ADAPT = dataclasses.replace(SETTINGS, weighting=WeightingSettings(adapt_max=4.0,
-                                                                  adapt_step=2.0))
+ADAPT = dataclasses.replace(SETTINGS, weighting=WeightingSettings(
+    adapt_max=4.0, adapt_step=2.0, adapt_margin=0.5, detect=3.0, detect_fell=1))
 
 
 def saved(tmp_path, settings, runs: int):
@@ -36,6 +36,7 @@ def test_a_continued_file_with_the_inflation_goes_on_exactly(tmp_path):
     assert doc["inverse"]["state"]["weighting"]["scale"] is not None
     back = load_learned(tmp_path / "l.json")
     assert back.learning.settings == ADAPT
+    assert type(back.learning.settings.weighting.detect_fell) is int
     part = back.continued()
     a = part.inverse_state()
     np.testing.assert_array_equal(a.scale, whole.inverse_state().scale)
@@ -65,3 +66,8 @@ def test_a_file_from_before_the_inflation_loads_as_the_law_without_it(tmp_path):
     (tmp_path / "bad.json").write_text(json.dumps(doc))
     with pytest.raises(LearnedFileError, match=r"inverse\.state\.weighting\.scale"):
         load_learned(tmp_path / "bad.json").continued()
+    doc = json.loads((tmp_path / "l.json").read_text())
+    doc["inverse"]["weighting"]["detect_fell"] = 2
+    (tmp_path / "bad2.json").write_text(json.dumps(doc))
+    with pytest.raises(LearnedFileError, match="detect_fell must be 0 or 1"):
+        load_learned(tmp_path / "bad2.json")

@@ -130,6 +130,8 @@ def read_weighting(doc: Any, label: str) -> WeightingSettings | None:
     values = {f.name: _number(doc, f.name, label, math.inf if f.name == "detect" else None)
               for f in dataclasses.fields(WeightingSettings)
               if f.name not in OPTIONAL_WEIGHTING or f.name in doc}
+    if values.get("detect_fell") in (0, 1):  # a flag: 0 or 1 (other values refused below)
+        values["detect_fell"] = int(values["detect_fell"])
     try:
         return WeightingSettings(**values)
     except ValueError as exc:
