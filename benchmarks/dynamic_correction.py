@@ -4,6 +4,8 @@
         [--speeds 50,100,250] [--learn 6] [--learn-on model] [--learn-law inverse]
         [--inverse-cutoff 20] [--inverse-reg 0.05] [--inverse-gain 1] [--inverse-decay 1]
         [--inverse-modes 4] [--inverse-reidentify 1] [--weighting kalman]
+        [--weighting-adapt 1] [--weighting-adapt-step 2] [--weighting-adapt-margin 0]
+        [--weighting-detect-fell 0]
         [--excitation-um 20] [--jobs 2]
         [--faults] [--udp]
         [--lead-ms MS] [--seed 0] [--plot docs/results/dynamic-correction.png]
@@ -452,8 +454,13 @@ def print_learning(results: list[dict], ls: LearningSettings) -> None:
                     f"±{ls.weighting.smooth_hz:g} Hz, covariance matching "
                     + (f"κ {ls.weighting.detect:g}" if math.isfinite(ls.weighting.detect)
                        else "off")
+                    + (" only where the error fell" if ls.weighting.detect_fell else "")
                     + (f", per tile of {ls.weighting.window_s:g} s" if ls.weighting.window_s
-                       else "") + ")")
+                       else "")
+                    + (f", prior inflated up to {ls.weighting.adapt_max:g}× (× or ÷ "
+                       f"{ls.weighting.adapt_step:g} as the error fell by "
+                       f"{ls.weighting.adapt_margin:g} σ or not)"
+                       if ls.weighting.adapt_max > 1 else "") + ")")
     print(f"\niterative learning ({law}; run 0 = {runs[0]['learn_on']}; perp 3σ / "
           "along 3σ mm, true; in brackets the rms the tracker measured):")
     print("| path | speed mm/s | " + " | ".join(f"run {k}" for k in range(n + 1)) + " |")
@@ -582,6 +589,21 @@ def main(argv: list[str]) -> int:
     ap.add_argument("--weighting-window-s", type=float, default=WeightingSettings().window_s,
                     help="0: a gain per frequency over the run; > 0: per tile of a "
                     "short-time FFT with windows this long (s)")
+    ap.add_argument("--weighting-adapt", type=float, default=WeightingSettings().adapt_max,
+                    help="c_max of the weighting's inflation where the last update made the "
+                    "error fall (smoothing.py (5); 1, the default: off)")
+    ap.add_argument("--weighting-adapt-step", type=float,
+                    default=WeightingSettings().adapt_step,
+                    help="a of (5): the inflation's factor per update")
+    ap.add_argument("--weighting-detect-fell", type=int, choices=(0, 1),
+                    default=WeightingSettings().detect_fell,
+                    help="1: the covariance matching only where the error fell after the "
+                    "last update (smoothing.py (6)); 0 (default): wherever it exceeds the "
+                    "prediction")
+    ap.add_argument("--weighting-adapt-margin", type=float,
+                    default=WeightingSettings().adapt_margin,
+                    help="κ_a of (5): the fall that counts, in standard deviations of the "
+                    "power's average (0: any)")
     ap.add_argument("--no-tracking", action="store_true",
                     help="skip the run with the real-time tracker term (the slowest)")
     ap.add_argument("--jobs", type=int, default=1, help="paths run in parallel processes")
@@ -613,7 +635,11 @@ def main(argv: list[str]) -> int:
                                        weighting=WeightingSettings(
                                            smooth_hz=args.weighting_smooth_hz,
                                            detect=args.weighting_detect,
-                                           window_s=args.weighting_window_s)
+                                           window_s=args.weighting_window_s,
+                                           adapt_max=args.weighting_adapt,
+                                           adapt_step=args.weighting_adapt_step,
+                                           adapt_margin=args.weighting_adapt_margin,
+                                           detect_fell=args.weighting_detect_fell)
                                        if args.weighting == "kalman" and inverse else None)
     except ValueError as exc:
         ap.error(str(exc))

@@ -6,15 +6,22 @@ go on **exactly** as the learning saved would (:class:`~plugcell.compensation.tr
 learning.InverseState`).  Inside ``"inverse"`` of :mod:`plugcell.io.learned_paths`::
 
     "weighting": null | {"noise_low_hz": 50.0, "noise_high_hz": 110.0,   # WeightingSettings
-                         "smooth_hz": 0.5, "detect": null, "window_s": 0.0},  # null: inf
+                         "smooth_hz": 0.5, "detect": null, "window_s": 0.0,  # null: inf
+                         "adapt_max": 1.0, "adapt_step": 2.0,   # optional: absent → these
+                         "adapt_margin": 0.0, "detect_fell": 0},
     "state": {
       "excited": null | {"u_m": [[x, y, z]…G], "e_m": […G], "measured": "0111…1"},
       "pairs": [{"du_m": […G], "de_m": […G], "mask": "0111…1"}, …],
       "supervisor": null | {"rms_m": 2.1e-05, "u_m": […G], "e_m": […G]},
       "weighting": {"prior": null | [S_j…] | [[S…]…], "noise": null | N,
-                    "history": [{"noise": N, "mean_gain": K̄, "rematched": r}, …]},
+                    "history": [{"noise": N, "mean_gain": K̄, "rematched": r}, …],
+                    "scale": null | [c_j…] | [[c…]…], "power": null | [P_j…] | …},
       "identifying": null | {"u_m": […G], "e_m": […G], "measured": "0111…1"}}
 
+The weighting's ``adapt_*`` and ``detect_fell`` settings and its state's
+``scale``/``power`` (the inflation (5) of :mod:`~plugcell.compensation.tracking.smoothing`)
+are optional: a file written before them has none, and loads as the law without
+inflation, ``adapt_max`` 1.
 ``identifying`` (optional, absent is null) is the run before the identifying run while
 that run is still ahead — a learning saved after its first update (whose offset carries
 the excitation) goes on with the identification exactly (a robot program's tracked move
@@ -58,6 +65,8 @@ __all__ = ["MAX_STATE_CYCLES", "read_state", "read_weighting", "state_document",
 #: The most grid rows the state may hold (the excited run, the pairs and the supervisor's
 #: run, each a grid of the learning): 2**20, ≈ 7 million numbers, ≈ 150 MB of JSON.
 MAX_STATE_CYCLES = MAX_GRID
+#: The weighting's settings a file may lack (written before them: their defaults).
+OPTIONAL_WEIGHTING = ("adapt_max", "adapt_step", "adapt_margin", "detect_fell")
 #: The history entries of the weighting.
 HISTORY_KEYS = ("noise", "mean_gain", "rematched")
 
@@ -119,7 +128,10 @@ def read_weighting(doc: Any, label: str) -> WeightingSettings | None:
     if not isinstance(doc, dict):
         raise DocumentError(f"{label}: expected an object or null, got {typename(doc)}")
     values = {f.name: _number(doc, f.name, label, math.inf if f.name == "detect" else None)
-              for f in dataclasses.fields(WeightingSettings)}
+              for f in dataclasses.fields(WeightingSettings)
+              if f.name not in OPTIONAL_WEIGHTING or f.name in doc}
+    if values.get("detect_fell") in (0, 1):  # a flag: 0 or 1 (other values refused below)
+        values["detect_fell"] = int(values["detect_fell"])
     try:
         return WeightingSettings(**values)
     except ValueError as exc:
@@ -171,7 +183,9 @@ def state_document(learning: IterativeLearning) -> dict[str, Any]:
         "supervisor": None if s.best is None else {
             "rms_m": s.best[0], "u_m": s.best[1].tolist(), "e_m": s.best[2].tolist()},
         "weighting": {"prior": None if s.prior is None else s.prior.tolist(),
-                      "noise": s.noise, "history": s.weighting_history},
+                      "noise": s.noise, "history": s.weighting_history,
+                      "scale": None if s.scale is None else s.scale.tolist(),
+                      "power": None if s.power is None else s.power.tolist()},
         "identifying": None if s.identifying is None else _run(*s.identifying,
                                                                 ("u_m", "e_m", "measured"))}
 
@@ -217,7 +231,8 @@ def _read_run(doc: Any, label: str, n: int, names: tuple[str, str, str]
             _cycles(_get(doc, names[2], label), f"{label}.{names[2]}", n))
 
 
-def _prior(x: Any, label: str, shape: tuple[int, ...] | None) -> Array | None:
+def _prior(x: Any, label: str, shape: tuple[int, ...] | None, what: str = "S_j"
+           ) -> Array | None:
     if x is None:
         return None
     if shape is None:
@@ -231,15 +246,20 @@ def _prior(x: Any, label: str, shape: tuple[int, ...] | None) -> Array | None:
         arr = None
     if arr is None or arr.shape != shape or not np.all(np.isfinite(arr)) or np.any(arr < 0):
         raise DocumentError(f"{label}: expected {' × '.join(map(str, shape))} finite powers "
-                            f"≥ 0 (the weighting's S_j on this learning's bins)")
+                            f"≥ 0 (the weighting's {what} on this learning's bins)")
     return arr
 
 
 def _read_weighting_state(doc: Any, label: str, shape: tuple[int, ...] | None
-                          ) -> tuple[Array | None, float, list[dict[str, float]]]:
+                          ) -> tuple[Array | None, float, list[dict[str, float]],
+                                     Array | None, Array | None]:
     if not isinstance(doc, dict):
         raise DocumentError(f"{label}: expected an object, got {typename(doc)}")
     prior = _prior(_get(doc, "prior", label), f"{label}.prior", shape)
+    scale = _prior(doc.get("scale"), f"{label}.scale", shape, "inflation c_j")
+    power = _prior(doc.get("power"), f"{label}.power", shape, "power P_j")
+    if scale is not None and np.any(scale < 1):
+        raise DocumentError(f"{label}.scale: the inflation c_j must be ≥ 1")
     noise = _number(doc, "noise", label, math.nan)
     if not (math.isnan(noise) or noise >= 0):
         raise DocumentError(f"{label}.noise must be ≥ 0 (a power), got {noise!r}")
@@ -253,7 +273,7 @@ def _read_weighting_state(doc: Any, label: str, shape: tuple[int, ...] | None
                                 f"{typename(h)}")
         out.append({k: _number(h, k, f"{label}.history[{i}]", math.nan)
                     for k in HISTORY_KEYS})
-    return prior, noise, out
+    return prior, noise, out, scale, power
 
 
 def read_state(doc: Any, learning: IterativeLearning, label: str = "inverse.state"
@@ -309,7 +329,7 @@ def read_state(doc: Any, learning: IterativeLearning, label: str = "inverse.stat
         best = (rms, _rows(_get(sup, "u_m", f"{label}.supervisor"),
                            f"{label}.supervisor.u_m", G),
                 _rows(_get(sup, "e_m", f"{label}.supervisor"), f"{label}.supervisor.e_m", G))
-    prior, noise, history = _read_weighting_state(_get(doc, "weighting", label),
+    prior, noise, history, scale, power = _read_weighting_state(_get(doc, "weighting", label),
                                                   f"{label}.weighting",
                                                   learning.prior_shape())
     raw = doc.get("identifying")
@@ -319,4 +339,5 @@ def read_state(doc: Any, learning: IterativeLearning, label: str = "inverse.stat
         raise DocumentError(f"{label}.identifying: the run before the identifying one in a "
                             "learning that has identified its plant (excited, pairs or "
                             "supervisor set)")
-    return InverseState(excited, read, best, prior, noise, history, identifying)
+    return InverseState(excited, read, best, prior, noise, history, identifying, scale,
+                        power)

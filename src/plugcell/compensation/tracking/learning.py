@@ -493,6 +493,9 @@ class InverseState:
         The weighting's last ``N`` (NaN: none yet).
     weighting_history : list of dict
         The weighting's per-update figures (``noise``, ``mean_gain``, ``rematched``).
+    scale, power : (m,) or (bins, tiles) arrays or None
+        The weighting's inflation ``c_j`` and the power ``P_j`` of its last record
+        (:mod:`.smoothing` (5); None: not used or no update yet).
     identifying : ((G, 3), (G, 3), (G,) bool) arrays or None
         Before the identification, while the next run carries the excitation: the run
         before it — its offset ``u_a``, measured error ``e_a`` and measured cycles, the
@@ -507,6 +510,8 @@ class InverseState:
     noise: float = math.nan
     weighting_history: list[dict[str, float]] = field(default_factory=list)
     identifying: tuple[Array, Array, Array] | None = None
+    scale: Array | None = None
+    power: Array | None = None
 
 
 #: The most cycles a learning's grid may have (its offset, window and FFT buffers are
@@ -686,7 +691,9 @@ class IterativeLearning:
             noise=math.nan if w is None else w.noise,
             weighting_history=[] if w is None else [dict(h) for h in w.history],
             identifying=None if not self.identifying_next or self._last is None else
-            tuple(x.copy() for x in self._last))  # type: ignore[arg-type]
+            tuple(x.copy() for x in self._last),  # type: ignore[arg-type]
+            scale=None if w is None or w.scale is None else w.scale.copy(),
+            power=None if w is None or w.power is None else w.power.copy())
 
     def prior_shape(self) -> tuple[int, ...] | None:
         """The shape of the weighting's ``S_j`` for this learning's grid (None: no
@@ -715,9 +722,11 @@ class IterativeLearning:
             raise ValueError(f"{who}: the supervisor's best run must be (rms, u, e) of "
                              f"shapes ({G}, 3)")
         want = self.prior_shape()
-        if state.prior is not None and (want is None or np.shape(state.prior) != want):
-            raise ValueError(f"{who}: the weighting's S_j must be of shape {want} (None: no "
-                             f"weighting), got {np.shape(state.prior)}")
+        for name in ("prior", "scale", "power"):
+            x = getattr(state, name)
+            if x is not None and (want is None or np.shape(x) != want):
+                raise ValueError(f"{who}: the weighting's {name} must be of shape {want} "
+                                 f"(None: no weighting), got {np.shape(x)}")
         self._excited = None if state.excited is None else \
             tuple(np.asarray(x, float if i < 2 else bool).copy()
                   for i, x in enumerate(state.excited))  # type: ignore[assignment]
@@ -736,6 +745,9 @@ class IterativeLearning:
                 np.asarray(state.prior, float).copy()
             self._weighting.noise = float(state.noise)
             self._weighting.history = [dict(h) for h in state.weighting_history]
+            self._weighting.scale, self._weighting.power = (
+                None if x is None else np.asarray(x, float).copy()
+                for x in (state.scale, state.power))
 
     def feedforward(self, start_s: float) -> LearnedOffset:
         """The offset for the next run whose motion starts at robot time ``start_s``."""

@@ -39,6 +39,41 @@ power exceeds what (2) expects, ``S_j + N``, by more than ``κ`` standard deviat
 the average (``(S_j + N)(1 + κ/√M)``), ``S_j`` is reset to that power less ``N`` — the
 gain rises again where the model's residual or a new error shows, and only there.
 
+**Inflation where the last update made the error fall** (optional, ``adapt_max`` > 1):
+(2) lets ``K_j`` decay like a whole run's Wiener gain, also where the error that is left
+sits in a small part of the run (a second of ringing at a stop) and is learnt only
+slowly.  Each bin (each tile, :class:`TileGain`) keeps a factor ``c_j ∈ [1, c_max]`` on
+its prior, updated from the powers ``P`` the update sees (the smoothed ``|E|²`` summed
+over the axes, :math:`S + N`'s estimate) of this record and the last one::
+
+    c_0 = 1,   c_j = clip(c_{j−1} · a,  1, c_max)   where P_j < P_{j−1} (1 − κ_a/√M)   (5)
+               c_j = clip(c_{j−1} / a,  1, c_max)   elsewhere
+
+    K_j = c_j S_j / (c_j S_j + N),   S_{j+1} = (1 − γ K_j)² c_j S_j + γ² K_j² N
+
+— the sign rule of resilient back-propagation (Riedmiller & Braun, IEEE ICNN 1993) on the
+fading-memory Kalman filter's inflation of the prior (Sorenson & Sacks, Inf. Sci. 3,
+1971; Jazwinski, *Stochastic processes and filtering theory*, 1970, §7.6): where the
+last update lowered the error the learning forgets its older runs faster and learns more
+of this one; where the error rose (a model wrong there, or the noise floor reached) the
+factor falls back to 1, (2)'s gain.  ``K_j`` is monotone in ``c_j`` and in ``[K_j(c=1),
+c_max S_j/(c_max S_j + N)]``: never below (2)'s gain, never 1 where ``S_j`` is finite, 0
+where ``S_j`` is 0 (no signal seen, no inflation); ``c_max`` = 1 is (2) exactly.  ``κ_a``
+(``adapt_margin``, ≥ 0) asks the fall to exceed that many standard deviations of the
+average of ``M`` values (as the matching's ``κ``): where the power is the noise's, the
+sign of a difference is a coin's, and ``c`` then falls back to 1 more often than not.
+(With ``c_j = c`` held, (2) from the inflated prior settles where ``S = c S N/(c S + N)``:
+``S* = (c − 1) N``, ``K* = 1 − 1/c`` at ``γ`` = 1 — the gain no longer decays to 0.)
+
+**The matching only where the error fell** (optional, ``detect_fell`` 1): the matching
+raises ``S_j`` where a run's error stays above (2)'s prediction — the residual a model
+learns slowly, but also where the model is wrong and a larger gain makes it worse (the
+twin's line at 250 mm/s).  With ``detect_fell`` the reset acts only where, besides,
+``P_j < P_{j−1}``: the last update lowered the error there, so the model's direction is
+right and only its step was short::
+
+    S_j ← max(P_j − N, S_j)   where P_j > (S_j + N)(1 + κ/√M)  and  P_j < P_{j−1}     (6)
+
 The three axes share one gain per frequency (``S`` and ``N`` are the powers summed
 over the axes): the weight is then a scalar ``K ∈ [0, 1]`` at each frequency and
 
@@ -64,8 +99,8 @@ from scipy.signal import istft, stft
 
 Array = NDArray[np.float64]
 
-__all__ = ["SpectralGain", "TileGain", "WeightingSettings", "noise_power", "smoothed_power",
-           "wiener_gain"]
+__all__ = ["SpectralGain", "TileGain", "WeightingSettings", "inflation", "noise_power",
+           "smoothed_power", "wiener_gain"]
 
 
 @dataclass(frozen=True)
@@ -88,6 +123,17 @@ class WeightingSettings:
         0: one gain per frequency over the whole run (:class:`SpectralGain`); > 0: one per
         tile of a short-time Fourier transform with Hann windows of this length (s), 3/4
         overlap (:class:`TileGain`: the error the path keeps is where and when it rings).
+    adapt_max : float
+        ``c_max`` ≥ 1 of the inflation (5) where the last update made the error fall;
+        1 (the default) switches it off: (2) exactly.
+    adapt_step : float
+        ``a`` > 1 of (5): the factor on ``c`` per update.
+    adapt_margin : float
+        ``κ_a`` ≥ 0 of (5): how many standard deviations of the average the power must
+        fall by to count as fallen (0: any fall).
+    detect_fell : int
+        1: the covariance matching acts only where the power fell below the last
+        record's ((6)); 0 (the default): wherever it exceeds the prediction.
     """
 
     noise_low_hz: float = 50.0
@@ -95,6 +141,10 @@ class WeightingSettings:
     smooth_hz: float = 0.5
     detect: float = math.inf
     window_s: float = 0.0
+    adapt_max: float = 1.0
+    adapt_step: float = 2.0
+    adapt_margin: float = 0.0
+    detect_fell: int = 0
 
     def __post_init__(self) -> None:
         for f in fields(self):
@@ -110,6 +160,13 @@ class WeightingSettings:
             raise ValueError(f"WeightingSettings: smooth_hz must be > 0, detect and window_s "
                              f"≥ 0, got {self.smooth_hz!r}, {self.detect!r} and "
                              f"{self.window_s!r}")
+        if self.detect_fell not in (0, 1):
+            raise ValueError(f"WeightingSettings.detect_fell must be 0 or 1, "
+                             f"got {self.detect_fell!r}")
+        if not (self.adapt_max >= 1 and self.adapt_step > 1 and self.adapt_margin >= 0):
+            raise ValueError(f"WeightingSettings: adapt_max must be ≥ 1 (1: off), "
+                             f"adapt_step > 1 and adapt_margin ≥ 0, got {self.adapt_max!r}, "
+                             f"{self.adapt_step!r} and {self.adapt_margin!r}")
 
     def check(self, cycle_s: float) -> None:
         """The noise band against the Nyquist rate of ``cycle_s``."""
@@ -207,7 +264,89 @@ def wiener_gain(signal: ArrayLike, noise: ArrayLike) -> Array:
     return np.divide(S, total, out=np.zeros_like(S), where=total > 0)
 
 
-class SpectralGain:
+def inflation(scale: ArrayLike | None, power: ArrayLike, last_power: ArrayLike | None,
+              adapt_max: float, adapt_step: float, margin: float = 0.0) -> Array:
+    """(5): the prior's factor ``c_j`` per bin (or tile) from the last one and the powers
+    of this record and the last.
+
+    Parameters
+    ----------
+    scale : array_like or None
+        ``c_{j−1}`` (None: the first update, ``c_0`` = 1).
+    power, last_power : array_like
+        ``P_j`` and ``P_{j−1}`` (any power unit, one shape; ``last_power`` None or of
+        another shape: the first update).
+    adapt_max : float
+        ``c_max`` ≥ 1.
+    adapt_step : float
+        ``a`` > 1.
+    margin : float
+        ``κ_a/√M`` in [0, 1): the relative fall that counts (0: any).
+
+    Returns
+    -------
+    array of ``power``'s shape
+        ``c_j`` in ``[1, c_max]``: ``c_{j−1} a`` where ``P_j < P_{j−1} (1 − margin)``,
+        ``c_{j−1} / a`` elsewhere, clipped.
+    """
+    P = np.asarray(power, dtype=float)
+    if not (adapt_max >= 1 and adapt_step > 1 and 0 <= margin < 1):
+        raise ValueError(f"inflation: need adapt_max ≥ 1, adapt_step > 1 and 0 ≤ margin < 1, "
+                         f"got {adapt_max!r}, {adapt_step!r} and {margin!r}")
+    if scale is None or last_power is None or np.shape(last_power) != P.shape \
+            or np.shape(scale) != P.shape:
+        return np.ones(P.shape)
+    c, last = np.asarray(scale, dtype=float), np.asarray(last_power, dtype=float)
+    fell = np.less(P, last * (1.0 - margin))
+    step = np.where(fell, adapt_step, 1.0 / adapt_step)
+    return np.clip(c * step, 1.0, adapt_max)
+
+
+class _RunGain:
+    """What :class:`SpectralGain` and :class:`TileGain` share: the state of (1), (2), the
+    covariance matching and (5), and one update of it from a record's smoothed power."""
+
+    settings: WeightingSettings
+    gain: float
+
+    def _init_state(self) -> None:
+        self.prior: Array | None = None
+        self.noise = math.nan
+        self.history: list[dict[str, float]] = []
+        self.last_gain: Array | None = None
+        #: (5): ``c_j`` of the last update and the power ``P_j`` it saw (None: none yet)
+        self.scale: Array | None = None
+        self.power: Array | None = None
+
+    def _advance(self, power: Array, N: float, M: int, low: NDArray[np.bool_]) -> Array:
+        """``K_j`` for the smoothed power ``P`` (the record's ``S + N``, any shape) of
+        ``M`` averaged values, the noise ``N``; ``low`` the bins below the noise band
+        (the history's mean); advances ``S`` by (2) from the prior inflated by (5)."""
+        s = self.settings
+        seen = np.maximum(power - N, 0.0)
+        if self.prior is None or self.prior.shape != power.shape:
+            S, raised = seen, np.zeros(power.shape, bool)
+        else:
+            raised = power > (self.prior + N) * (1.0 + s.detect / math.sqrt(M))
+            if s.detect_fell and self.power is not None and self.power.shape == power.shape:
+                raised &= np.less(power, self.power)  # (6)
+            S = np.where(raised, np.maximum(seen, self.prior), self.prior)
+        if s.adapt_max > 1:
+            self.scale = inflation(self.scale, power, self.power, s.adapt_max, s.adapt_step,
+                                   min(s.adapt_margin / math.sqrt(M), 0.99))
+            S = self.scale * S
+        self.power = power.copy()
+        K = wiener_gain(S.reshape(S.shape[0], -1), N).reshape(S.shape)
+        g = self.gain * K
+        self.prior = (1.0 - g) ** 2 * S + g ** 2 * N
+        self.noise = N
+        self.history.append({"noise": N, "mean_gain": float(K[low].mean()),
+                             "rematched": float(raised[low].mean())})
+        self.last_gain = K.copy()
+        return K
+
+
+class SpectralGain(_RunGain):
     """The per-frequency Kalman gain of the runs (module docstring, (1), (2)), one for the
     three axes (the powers summed over them).
 
@@ -229,6 +368,9 @@ class SpectralGain:
         matching raised).
     last_gain : (m,) array or None
         ``K_j`` of the last call (``None`` before the first; not part of the saved state).
+    scale, power : (m,) arrays or None
+        (5)'s ``c_j`` (None while ``adapt_max`` is 1) and the power ``P_j`` of the last
+        record ((5), (6)); None before the first call.
 
     API note: ``gain = SpectralGain(settings); K = gain(E, f)`` once per update, ``E``
     the record's spectrum (m, a), then learn ``K[:, None] * E``.
@@ -239,37 +381,19 @@ class SpectralGain:
             raise ValueError(f"SpectralGain: gain must lie in (0, 2), got {gain!r}")
         self.settings = settings
         self.gain = float(gain)
-        self.prior: Array | None = None
-        self.noise = math.nan
-        self.history: list[dict[str, float]] = []
-        self.last_gain: Array | None = None
+        self._init_state()
 
     def __call__(self, spectrum: ArrayLike, frequency_hz: ArrayLike) -> Array:
         """``K_j`` (m,) for the record ``E_j`` (m, a) on the bins ``frequency_hz`` (m,);
-        advances ``S`` by (2)."""
+        advances ``S`` by (2) (and ``c`` by (5))."""
         s = self.settings
         f = np.asarray(frequency_hz, dtype=float).reshape(-1)
         N = float(noise_power(spectrum, f, (s.noise_low_hz, s.noise_high_hz)).sum())
         power, M = smoothed_power(spectrum, f, s.smooth_hz)
-        total = power.sum(axis=1)
-        seen = np.maximum(total - N, 0.0)
-        if self.prior is None or self.prior.shape != total.shape:
-            S, raised = seen, np.zeros(total.shape, bool)
-        else:
-            raised = total > (self.prior + N) * (1.0 + s.detect / math.sqrt(M))
-            S = np.where(raised, np.maximum(seen, self.prior), self.prior)
-        K = wiener_gain(S[:, None], N)[:, 0]
-        g = self.gain * K
-        self.prior = (1.0 - g) ** 2 * S + g ** 2 * N
-        self.noise = N
-        low = f < s.noise_low_hz
-        self.history.append({"noise": N, "mean_gain": float(K[low].mean()),
-                             "rematched": float(raised[low].mean())})
-        self.last_gain = K.copy()
-        return K
+        return self._advance(power.sum(axis=1), N, M, f < s.noise_low_hz)
 
 
-class TileGain:
+class TileGain(_RunGain):
     """(1) and (2) per tile of a short-time Fourier transform (Hann windows of
     ``window_s``, 3/4 overlap: a tight frame up to the record's ends (extended evenly),
     ``istft(stft(e)) = e``): the error a path
@@ -294,7 +418,8 @@ class TileGain:
         ``γ`` in (0, 2).
 
     API note: ``ê = TileGain(settings, T)(e)`` with ``e`` (G, 3) on the cycle grid; the
-    state (``prior``, ``history``, ``last_gain``: (bins, tiles)) as :class:`SpectralGain`'s.
+    state (``prior``, ``history``, ``last_gain``, ``scale``, ``power``: (bins, tiles)) as
+    :class:`SpectralGain`'s.
     """
 
     def __init__(self, settings: WeightingSettings, cycle_s: float, gain: float = 1.0) -> None:
@@ -305,10 +430,7 @@ class TileGain:
             raise ValueError(f"TileGain: window_s {settings.window_s!r} s is under 16 cycles")
         settings.check(cycle_s)
         self.settings, self.cycle_s, self.gain = settings, float(cycle_s), float(gain)
-        self.prior: Array | None = None
-        self.noise = math.nan
-        self.history: list[dict[str, float]] = []
-        self.last_gain: Array | None = None
+        self._init_state()
 
     def _stft(self) -> dict[str, Any]:
         n = self.nperseg
@@ -335,21 +457,7 @@ class TileGain:
             raise ValueError(f"TileGain: the noise band holds {int(band.sum())} bins of "
                              f"{f[1] - f[0]:g} Hz; need 2 (a longer window_s)")
         N = float(power[band].mean())
-        M = 9 * e.shape[1]
         avg = uniform_filter(power, size=3, mode="nearest")
-        seen = np.maximum(avg - N, 0.0)
-        if self.prior is None or self.prior.shape != avg.shape:
-            S, raised = seen, np.zeros(avg.shape, bool)
-        else:
-            raised = avg > (self.prior + N) * (1.0 + s.detect / math.sqrt(M))
-            S = np.where(raised, np.maximum(seen, self.prior), self.prior)
-        K = wiener_gain(S, N)
-        g = self.gain * K
-        self.prior = (1.0 - g) ** 2 * S + g ** 2 * N
-        self.noise = N
-        low = f < s.noise_low_hz
-        self.history.append({"noise": N, "mean_gain": float(K[low].mean()),
-                             "rematched": float(raised[low].mean())})
-        self.last_gain = K.copy()
+        K = self._advance(avg, N, 9 * e.shape[1], f < s.noise_low_hz)
         _, est = istft(K[None] * X, boundary=True, **kw)
         return np.ascontiguousarray(est[:, :e.shape[0]].T)
