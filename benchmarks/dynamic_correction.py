@@ -444,12 +444,13 @@ def print_learning(results: list[dict], ls: LearningSettings) -> None:
         law = (f"run 1: P-type ({law}) + excitation {iv.excitation_m * 1e6:g} µm rms "
                f"{iv.excitation_low_hz:g}–{iv.excitation_high_hz:g} Hz, identifies the plant "
                f"({iv.modes} modes{', re-identified after each run' if iv.reidentify else ''}"
-               f"); runs 2…: model-inverting, γ = {iv.gain:g}/(1 + "
-               f"{iv.gain_decay:g} j), β = {iv.regularisation:g}, Q_I {iv.cutoff_hz:g} Hz "
-               f"order {iv.order}")
+               f"); runs 2…: model-inverting, γ_j = "
+               + (f"{iv.gain:g}" if ls.weighting is not None else
+                  f"{iv.gain:g}/(1 + {iv.gain_decay:g} j)")
+               + f", β = {iv.regularisation:g}, Q_I {iv.cutoff_hz:g} Hz order {iv.order}")
         if ls.weighting is not None:
-            law += (f", each frequency by its Kalman gain K_j = S_j/(S_j + N) in place of "
-                    f"γ_j's decay (N from {ls.weighting.noise_low_hz:g}–"
+            law += (f", each frequency by its Kalman gain K_j = S_j/(S_j + N), which holds "
+                    f"the decay γ_j has without it (N from {ls.weighting.noise_low_hz:g}–"
                     f"{ls.weighting.noise_high_hz:g} Hz, S averaged over "
                     f"±{ls.weighting.smooth_hz:g} Hz, covariance matching "
                     + (f"κ {ls.weighting.detect:g}" if math.isfinite(ls.weighting.detect)
