@@ -82,8 +82,9 @@ def cv_weights(res: Any, camp: CalibrationData, layer: Any) -> tuple[dict[float,
 def held_out(res: Any, prior: Prior, layer: Any, test: CalibrationData) -> dict[float, Any]:
     """Held-out errors (m, per pose) of ``p_w`` for each weight (w = 0: without the stage)."""
     with_layer = res.settings["prior"]["choice"] == "map"
-    no_stage = res.with_residual_model(replace(
-        prior.layer, fingerprint=calibration_fingerprint(res.model)) if with_layer else None)
+    no_stage = (res.with_residual_model(replace(
+        prior.layer, fingerprint=calibration_fingerprint(res.model))) if with_layer
+        else replace(res, residual_model=None))
     out = {0.0: _errors(test, no_stage.predict_hybrid(test.q)[0])}
     P_full, _ = res.with_residual_model(layer).predict_hybrid(test.q)
     pr = layer.predict(test.q, np.zeros(len(test)))
