@@ -146,3 +146,26 @@ def test_short_campaign_runs_on_the_ipa_data(tmp_path: Path) -> None:
     page = out.read_text()
     assert "## The goal" in page and "The CV's choice per fold" in page
     assert out.with_suffix(".png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+
+
+def test_stage_weight_skips_cleanly_without_the_data(tmp_path: Path) -> None:
+    """short_campaign_stage_weight.py (issue 36 §2) says so and exits 0 without the data."""
+    done = subprocess.run([sys.executable, str(BENCHMARKS / "short_campaign_stage_weight.py"),
+                           "--data", str(tmp_path / "none")],
+                          capture_output=True, text=True, timeout=120)
+    assert done.returncode == 0, done.stderr[-2000:]
+    assert "data not found" in done.stdout
+
+
+@pytest.mark.slow
+@pytest.mark.skipif(not IPA_DATA.is_dir(), reason="IPA robot-accuracy data not present")
+def test_stage_weight_runs_on_the_ipa_data() -> None:
+    """Two folds, one campaign each: the stage's out-of-fold predictions recomputed by the
+    script match the stage's recorded CV errors exactly, and the weight's line is printed."""
+    done = subprocess.run([sys.executable, str(BENCHMARKS / "short_campaign_stage_weight.py"),
+                           "--quick", "--series", "D", "--size", "50", "--folds", "2"],
+                          capture_output=True, text=True, timeout=900)
+    assert done.returncode == 0, done.stderr[-2000:]
+    lines = [x for x in done.stdout.splitlines() if x.startswith("  D fold")]
+    assert len(lines) == 2 and all("CV check 0e+00 m" in x for x in lines), done.stdout
+    assert "w by the stage's CV" in done.stdout
