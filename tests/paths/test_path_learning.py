@@ -130,8 +130,14 @@ def test_a_continued_learning_judges_its_runs_against_the_files_best_run(tmp_pat
     (("--learn", "2", "--weighting-detect", "3"),
      "--inverse-reidentify/--weighting set up the inverse law of a new learning"),
     (("--learn", "2", "--learn-law", "inverse", "--weighting", "none", "--weighting-window-s",
-      "1"), "--weighting-detect/--weighting-window-s set up the Kalman weighting: not with "
-     "--weighting none"),
+      "1"), "--weighting-detect/--weighting-window-s/--weighting-detect-fell set up the Kalman "
+     "weighting: not with --weighting none"),
+    (("--learn", "2", "--learn-law", "inverse", "--weighting", "none",
+      "--weighting-detect-fell", "1"), "not with --weighting none"),
+    (("--learn", "2", "--learn-law", "inverse", "--weighting-detect-fell", "2"),
+     "--weighting-detect-fell: invalid choice: 2"),
+    (("--learn", "2", "--learn-law", "p", "--weighting-detect-fell", "1"),
+     "--inverse-reidentify/--weighting set up the inverse law of a new learning"),
     (("--learn", "2", "--learn-law", "inverse", "--weighting-detect", "-1"),
      "--weighting-detect/--weighting-window-s: WeightingSettings: smooth_hz must be > 0, "
      "detect and window_s ≥ 0, got 0.5, -1.0 and 0.0"),
@@ -364,10 +370,11 @@ def test_the_kalman_weightings_options_are_kept_in_the_learned_file(tmp_path, mo
     (tmp_path / "p.csv").write_text(PATH)
     monkeypatch.chdir(tmp_path)
     code = main(["path", "run", "--path", "p.csv", "--learn", "1", "--learn-law", "inverse",
-                 "--weighting-detect", "3", "--weighting-window-s", "1", "--learned-out",
-                 "f.json"])
+                 "--weighting-detect", "3", "--weighting-window-s", "1",
+                 "--weighting-detect-fell", "1", "--learned-out", "f.json"])
     assert code == 0, capsys.readouterr().err
     saved = json.loads((tmp_path / "f.json").read_text())
     assert saved["inverse"]["weighting"]["detect"] == 3.0
     assert saved["inverse"]["weighting"]["window_s"] == 1.0
+    assert saved["inverse"]["weighting"]["detect_fell"] == 1
     assert saved["inverse"]["state"]["identifying"] is not None  # goes on with --learned

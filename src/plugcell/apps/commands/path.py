@@ -8,8 +8,8 @@
         [--tracker-lost-at S] [--rate HZ] [--payload KG] [--seed N] [--out result.json]
         [--json] [--learn N] [--learned FILE] [--learned-out FILE]
         [--learn-law p|inverse] [--inverse-reidentify 0|1] [--weighting kalman|none]
-        [--weighting-detect K] [--weighting-window-s S] [--learn-gain L]
-        [--learn-cutoff HZ] [--learn-converged PCT] [--learn-diverged PCT]
+        [--weighting-detect K] [--weighting-window-s S] [--weighting-detect-fell 0|1]
+        [--learn-gain L] [--learn-cutoff HZ] [--learn-converged PCT] [--learn-diverged PCT]
 
 The path file (:mod:`plugcell.io.path_files`): ``x, y, z`` mm, optionally ``a, b, c``
 degrees, ``speed`` mm/s and ``tracking`` 1/0 per segment.  The robot is the twin's KUKA

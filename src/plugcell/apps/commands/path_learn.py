@@ -66,6 +66,10 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="the Kalman weighting of a new inverse-law learning: a gain per S "
                    "seconds of the path (a short-time FFT) rather than one per frequency "
                    "over the whole path (default 0)")
+    g.add_argument("--weighting-detect-fell", type=int, choices=(0, 1), metavar="0|1",
+                   help="the Kalman weighting of a new inverse-law learning: 1 raises a "
+                   "frequency's gain (--weighting-detect) only where the last run's update "
+                   "made its error fall (default 0: wherever it exceeds the prediction)")
     g.add_argument("--learn-cutoff", type=float, metavar="HZ",
                    help="the learning filter's cut-off of a new learning (default 6 Hz, below "
                    "the arm's first mode)")
@@ -89,7 +93,8 @@ def wants_learning(args: argparse.Namespace) -> bool:
                            "without --learned: a learning continued from a file keeps its "
                            "settings)")
     inverse = args.inverse_reidentify is not None or args.weighting is not None \
-        or args.weighting_detect is not None or args.weighting_window_s is not None
+        or args.weighting_detect is not None or args.weighting_window_s is not None \
+        or args.weighting_detect_fell is not None
     if inverse and (args.learn is None or args.learned is not None
                     or args.learn_law != "inverse"):
         raise CommandError("--inverse-reidentify/--weighting set up the inverse law of a new "
@@ -107,21 +112,21 @@ def wants_learning(args: argparse.Namespace) -> bool:
 
 
 def _kalman(args: argparse.Namespace) -> Any:
-    """The Kalman weighting's settings of ``--weighting-detect``/``--weighting-window-s``
-    (None: neither given, the defaults)."""
+    """The Kalman weighting's settings of ``--weighting-detect``/``--weighting-window-s``/
+    ``--weighting-detect-fell`` (None: none given, the defaults)."""
     from plugcell.compensation.tracking.smoothing import WeightingSettings
 
-    if args.weighting_detect is None and args.weighting_window_s is None:
+    given = {name: value for name, value in (("detect", args.weighting_detect),
+                                             ("window_s", args.weighting_window_s),
+                                             ("detect_fell", args.weighting_detect_fell))
+             if value is not None}
+    if not given:
         return None
     if args.weighting == "none":
-        raise CommandError("--weighting-detect/--weighting-window-s set up the Kalman "
-                           "weighting: not with --weighting none")
-    default = WeightingSettings()
+        raise CommandError("--weighting-detect/--weighting-window-s/--weighting-detect-fell "
+                           "set up the Kalman weighting: not with --weighting none")
     try:
-        return WeightingSettings(
-            detect=default.detect if args.weighting_detect is None else args.weighting_detect,
-            window_s=default.window_s if args.weighting_window_s is None
-            else args.weighting_window_s)
+        return WeightingSettings(**given)
     except ValueError as exc:
         raise CommandError(f"--weighting-detect/--weighting-window-s: {exc}") from None
 
