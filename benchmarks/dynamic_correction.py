@@ -75,6 +75,7 @@ os.environ.setdefault("OMP_NUM_THREADS", "1")
 import numpy as np
 
 from plugcell.compensation.tracking import (
+    DEFAULT_WEIGHTING,
     InverseSettings,
     IterativeLearning,
     LearningSettings,
@@ -582,27 +583,27 @@ def main(argv: list[str]) -> int:
                     "(compensation/tracking/smoothing.py); none: all of the error, "
                     "γ/(1 + λ_I j)")
     ap.add_argument("--weighting-smooth-hz", type=float,
-                    default=WeightingSettings().smooth_hz,
+                    default=DEFAULT_WEIGHTING.smooth_hz,
                     help="half width of the power's average over frequency (Hz)")
-    ap.add_argument("--weighting-detect", type=float, default=WeightingSettings().detect,
-                    help="κ of the covariance matching (standard deviations; inf, the "
-                    "default: off)")
-    ap.add_argument("--weighting-window-s", type=float, default=WeightingSettings().window_s,
-                    help="0: a gain per frequency over the run; > 0: per tile of a "
+    ap.add_argument("--weighting-detect", type=float, default=DEFAULT_WEIGHTING.detect,
+                    help="κ of the covariance matching (standard deviations; default 3; inf: "
+                    "off)")
+    ap.add_argument("--weighting-window-s", type=float, default=DEFAULT_WEIGHTING.window_s,
+                    help="0: a gain per frequency over the run; > 0 (default 1): per tile of a "
                     "short-time FFT with windows this long (s)")
-    ap.add_argument("--weighting-adapt", type=float, default=WeightingSettings().adapt_max,
+    ap.add_argument("--weighting-adapt", type=float, default=DEFAULT_WEIGHTING.adapt_max,
                     help="c_max of the weighting's inflation where the last update made the "
                     "error fall (smoothing.py (5); 1, the default: off)")
     ap.add_argument("--weighting-adapt-step", type=float,
-                    default=WeightingSettings().adapt_step,
+                    default=DEFAULT_WEIGHTING.adapt_step,
                     help="a of (5): the inflation's factor per update")
     ap.add_argument("--weighting-detect-fell", type=int, choices=(0, 1),
-                    default=WeightingSettings().detect_fell,
+                    default=DEFAULT_WEIGHTING.detect_fell,
                     help="1: the covariance matching only where the error fell after the "
-                    "last update (smoothing.py (6)); 0 (default): wherever it exceeds the "
+                    "last update (smoothing.py (6); the default); 0: wherever it exceeds the "
                     "prediction")
     ap.add_argument("--weighting-adapt-margin", type=float,
-                    default=WeightingSettings().adapt_margin,
+                    default=DEFAULT_WEIGHTING.adapt_margin,
                     help="κ_a of (5): the fall that counts, in standard deviations of the "
                     "power's average (0: any)")
     ap.add_argument("--no-tracking", action="store_true",

@@ -18,6 +18,7 @@ from scipy.signal import stft
 from test_learning_inverse import F, T, arm, disturbance, identified, true_response
 
 from plugcell.compensation.tracking import (
+    DEFAULT_WEIGHTING,
     InverseSettings,
     IterativeLearning,
     LearningSettings,
@@ -25,6 +26,7 @@ from plugcell.compensation.tracking import (
     TileGain,
     WeightingSettings,
     contraction_inverse,
+    weighting_for,
 )
 from plugcell.compensation.tracking.smoothing import noise_power, smoothed_power, wiener_gain
 
@@ -223,7 +225,7 @@ def test_bad_weighting_settings_are_named(kw, words):
 def test_bad_weighting_input_is_named():
     # the default weighting is inert without the law (3): the P-type law learns all of
     # the error, whatever the cycle (its noise band is checked only with the law (3))
-    assert LearningSettings().weighting == WeightingSettings()
+    assert LearningSettings().weighting == DEFAULT_WEIGHTING
     assert IterativeLearning(3.0, LearningSettings()).prior_shape() is None
     LearningSettings(cycle_s=0.012)
     with pytest.raises(ValueError, match=r"noise_high_hz 110.0 must lie below the Nyquist "
@@ -258,3 +260,30 @@ def test_bad_weighting_input_is_named():
     with pytest.raises(ValueError, match="weight"):
         contraction_inverse(InverseSettings(), T, F, true_response(), true_response(),
                             weight=np.full(F.size, 1.5))
+
+
+def test_a_record_shorter_than_two_tiles_is_learned_by_one_gain_per_frequency():
+    """The default weighting tiles by 1 s: a record of ≥ 2 tiles (500 cycles of 4 ms) gets
+    :class:`TileGain`, a shorter one (a short path) the whole-run :class:`SpectralGain`
+    without the matching — the learning of a 1 s path runs its updates instead of
+    refusing the record; ``window_s`` 0 keeps the settings as asked."""
+    assert DEFAULT_WEIGHTING.window_s == 1.0 and DEFAULT_WEIGHTING.detect == 3.0
+    assert isinstance(weighting_for(DEFAULT_WEIGHTING, 1.0, T, 500), TileGain)
+    short = weighting_for(DEFAULT_WEIGHTING, 1.0, T, 499)
+    assert isinstance(short, SpectralGain)
+    assert short.settings == WeightingSettings(adapt_max=DEFAULT_WEIGHTING.adapt_max,
+                                               detect_fell=DEFAULT_WEIGHTING.detect_fell)
+    whole = weighting_for(WeightingSettings(detect=3.0), 1.0, T, 5000)
+    assert isinstance(whole, SpectralGain) and whole.settings.detect == 3.0  # as asked
+    settings = LearningSettings(lead_s=0.008, inverse=InverseSettings())
+    short, long = IterativeLearning(0.5, settings), IterativeLearning(3.0, settings)
+    assert isinstance(short.weighting, SpectralGain) and isinstance(long.weighting, TileGain)
+    rng = np.random.default_rng(3)
+    for learning in (short, long):
+        G = learning.grid.size
+        learning.learn_error(1e-4 * rng.standard_normal((G, 3)), np.ones(G, bool))
+        excited = learning.u.copy()
+        for _ in range(2):
+            learning.learn_error(1e-4 * rng.standard_normal((G, 3)), np.ones(G, bool))
+        assert learning.inverse_steps >= 1 and np.all(np.isfinite(learning.u))
+        assert not np.array_equal(learning.u, excited)

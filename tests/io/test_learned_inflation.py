@@ -13,7 +13,7 @@ import pytest
 from test_learned_continuation import CONTEXT, SETTINGS, run, run_both
 
 from plugcell.compensation.tracking import WeightingSettings
-from plugcell.compensation.tracking.learning import IterativeLearning
+from plugcell.compensation.tracking.learning import DEFAULT_WEIGHTING, IterativeLearning
 from plugcell.io.learned_paths import LearnedFile, LearnedFileError, load_learned, save_learned
 
 ADAPT = dataclasses.replace(SETTINGS, weighting=WeightingSettings(
@@ -56,7 +56,7 @@ def test_a_file_from_before_the_inflation_loads_as_the_law_without_it(tmp_path):
         del doc["inverse"]["state"]["weighting"][key]
     (tmp_path / "old.json").write_text(json.dumps(doc))
     back = load_learned(tmp_path / "old.json")
-    assert back.learning.settings.weighting == WeightingSettings()
+    assert back.learning.settings.weighting == DEFAULT_WEIGHTING
     state = back.continued().inverse_state()
     assert state.scale is None and state.power is None
     # a scale below 1 is refused, named

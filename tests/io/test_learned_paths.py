@@ -16,6 +16,7 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from plugcell.compensation.tracking.learning import (
+    DEFAULT_WEIGHTING,
     InverseSettings,
     InverseState,
     IterativeLearning,
@@ -204,7 +205,7 @@ def test_the_weighting_and_the_reidentifications_runs_are_saved_and_go_on(tmp_pa
     save_learned(tmp_path / "s.json", f)
     back = load_learned(tmp_path / "s.json")
     lr, lb = f.learning, back.learning
-    assert lb.settings == lr.settings and lb.settings.weighting == WeightingSettings()
+    assert lb.settings == lr.settings and lb.settings.weighting == DEFAULT_WEIGHTING
     a, b = lr.inverse_state(), lb.inverse_state()
     for x, y in zip([*a.excited, *(v for p in a.pairs for v in p), *a.best[1:], a.prior],
                     [*b.excited, *(v for p in b.pairs for v in p), *b.best[1:], b.prior],

@@ -20,7 +20,7 @@ import pytest
 
 import plugcell
 from plugcell.apps.cli import main
-from plugcell.compensation.tracking.learning import IterativeLearning
+from plugcell.compensation.tracking.learning import DEFAULT_WEIGHTING, IterativeLearning
 from plugcell.io.learned_paths import LearnedFile, save_learned
 from plugcell.io.path_files import parse_path
 from plugcell.sim.path_learning import learned_context, learning_settings
@@ -140,7 +140,7 @@ def test_a_continued_learning_judges_its_runs_against_the_files_best_run(tmp_pat
      "--inverse-reidentify/--weighting set up the inverse law of a new learning"),
     (("--learn", "2", "--learn-law", "inverse", "--weighting-detect", "-1"),
      "--weighting-detect/--weighting-window-s: WeightingSettings: smooth_hz must be > 0, "
-     "detect and window_s ≥ 0, got 0.5, -1.0 and 0.0"),
+     "detect and window_s ≥ 0, got 0.5, -1.0 and 1.0"),
     (("--learn", "2", "--learn-law", "inverse", "--weighting-window-s", "nan"),
      "--weighting-detect/--weighting-window-s: WeightingSettings.window_s"),
 ])
@@ -359,7 +359,7 @@ def test_the_kalman_weightings_options_reach_a_new_learning():
     o = PathRunOptions()
     s = learning_settings(o, law="inverse", kalman=WeightingSettings(detect=3.0, window_s=1.0))
     assert (s.weighting.detect, s.weighting.window_s) == (3.0, 1.0)
-    assert learning_settings(o, law="inverse").weighting == WeightingSettings()
+    assert learning_settings(o, law="inverse").weighting == DEFAULT_WEIGHTING
     with pytest.raises(ValueError, match="the Kalman weighting's settings with the weighting"):
         learning_settings(o, law="inverse", weighting="none", kalman=WeightingSettings())
 

@@ -44,8 +44,9 @@ def learning_settings(options: PathRunOptions, gain: float | None = None,
     (:class:`InverseSettings`' defaults, docs/dynamic-correction.md "learning above the
     modes"): ``reidentify`` (None: the default, 1) its plant identified again after each
     run, ``weighting`` (None: the default, ``"kalman"``) each frequency learned by its
-    Kalman gain — with ``kalman``'s settings (None: :class:`WeightingSettings`'
-    defaults; e.g. its covariance matching ``detect`` or gains per tile ``window_s``) —,
+    Kalman gain — with ``kalman``'s settings (None: ``DEFAULT_WEIGHTING`` of
+    :mod:`plugcell.compensation.tracking.learning`: gains per 1 s tile ``window_s``, the
+    covariance matching ``detect`` 3 where the error fell) —,
     ``"none"`` all of the error."""
     if law not in LAWS:
         raise ValueError(f"the learning law must be one of {', '.join(LAWS)}, got {law!r}")

@@ -19,6 +19,7 @@ something was learned).
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import hashlib
 import json
 import math
@@ -61,15 +62,15 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     g.add_argument("--weighting-detect", type=float, metavar="K",
                    help="the Kalman weighting of a new inverse-law learning: raise a "
                    "frequency's gain where a run's error exceeds K times what the weighting "
-                   "predicted (covariance matching; default inf: off)")
+                   "predicted (covariance matching; default 3; inf: off)")
     g.add_argument("--weighting-window-s", type=float, metavar="S",
                    help="the Kalman weighting of a new inverse-law learning: a gain per S "
                    "seconds of the path (a short-time FFT) rather than one per frequency "
-                   "over the whole path (default 0)")
+                   "over the whole path (default 1; 0: one per frequency over the path)")
     g.add_argument("--weighting-detect-fell", type=int, choices=(0, 1), metavar="0|1",
                    help="the Kalman weighting of a new inverse-law learning: 1 raises a "
                    "frequency's gain (--weighting-detect) only where the last run's update "
-                   "made its error fall (default 0: wherever it exceeds the prediction)")
+                   "made its error fall (default 1; 0: wherever it exceeds the prediction)")
     g.add_argument("--learn-cutoff", type=float, metavar="HZ",
                    help="the learning filter's cut-off of a new learning (default 6 Hz, below "
                    "the arm's first mode)")
@@ -114,7 +115,7 @@ def wants_learning(args: argparse.Namespace) -> bool:
 def _kalman(args: argparse.Namespace) -> Any:
     """The Kalman weighting's settings of ``--weighting-detect``/``--weighting-window-s``/
     ``--weighting-detect-fell`` (None: none given, the defaults)."""
-    from plugcell.compensation.tracking.smoothing import WeightingSettings
+    from plugcell.compensation.tracking import DEFAULT_WEIGHTING
 
     given = {name: value for name, value in (("detect", args.weighting_detect),
                                              ("window_s", args.weighting_window_s),
@@ -126,7 +127,7 @@ def _kalman(args: argparse.Namespace) -> Any:
         raise CommandError("--weighting-detect/--weighting-window-s/--weighting-detect-fell "
                            "set up the Kalman weighting: not with --weighting none")
     try:
-        return WeightingSettings(**given)
+        return dataclasses.replace(DEFAULT_WEIGHTING, **given)
     except ValueError as exc:
         raise CommandError(f"--weighting-detect/--weighting-window-s: {exc}") from None
 

@@ -29,6 +29,7 @@ Pure math (numpy, SI units, no I/O).  The RSI correction source is
 
 from .estimator import JointHistory, ResidualFilter, TrackerMeasurement, steady_state_gain
 from .learning import (
+    DEFAULT_WEIGHTING,
     InverseSettings,
     InverseState,
     IterativeLearning,
@@ -38,16 +39,17 @@ from .learning import (
     contraction_inverse,
     inverse_gain,
     path_error,
+    weighting_for,
 )
 from .limiter import RateLimiter
 from .loop import CycleOutput, HoldWindow, TrackingLoop, TrackingSettings, TrackingStats
 from .plant import ModalPlant, excitation, identify_plant
 from .smoothing import SpectralGain, TileGain, WeightingSettings
 
-__all__ = ["CycleOutput", "HoldWindow", "InverseSettings", "InverseState", "IterativeLearning",
-           "JointHistory",
+__all__ = ["DEFAULT_WEIGHTING", "CycleOutput", "HoldWindow", "InverseSettings",
+           "InverseState", "IterativeLearning", "JointHistory",
            "LearnedOffset", "LearningSettings", "ModalPlant", "RateLimiter", "ResidualFilter",
            "SpectralGain", "TileGain", "TrackerMeasurement", "TrackingLoop", "TrackingSettings",
            "TrackingStats", "WeightingSettings",
            "contraction", "contraction_inverse", "excitation", "identify_plant",
-           "inverse_gain", "path_error", "steady_state_gain"]
+           "inverse_gain", "path_error", "steady_state_gain", "weighting_for"]

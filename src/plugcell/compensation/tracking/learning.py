@@ -92,7 +92,7 @@ Pure math: numpy and scipy, SI units, no I/O.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field, fields
+from dataclasses import dataclass, field, fields, replace
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -103,10 +103,21 @@ from scipy.signal.windows import tukey
 from .plant import ModalPlant, excitation, identify_plant
 from .smoothing import SpectralGain, TileGain, WeightingSettings
 
+#: The weighting of a new learning by (3): the Kalman gain per 1 s tile, raised again by
+#: the covariance matching at ``κ`` = 3 only where the last update made the error fall
+#: ((6) of :mod:`.smoothing`).  On the twin's six benchmark paths (Smart H4, 36 kg; docs/
+#: results/dynamic-correction.md) it ends six runs below the whole-run gain without the
+#: matching on five (the circle at 100 mm/s 0.058 → 0.047 mm perpendicular 3σ) and above it
+#: on one (the line at 250 mm/s 0.028 → 0.036 mm, still 5.5× below the model).  A record
+#: shorter than two tiles (a path under ≈ 1.3 s with the learning's margins) is one tile:
+#: the whole-run gain without the matching (:func:`weighting_for`).
+DEFAULT_WEIGHTING = WeightingSettings(window_s=1.0, detect=3.0, detect_fell=1)
+
 Array = NDArray[np.float64]
 
-__all__ = ["InverseSettings", "InverseState", "IterativeLearning", "LearnedOffset",
-           "LearningSettings", "contraction", "contraction_inverse", "inverse_gain", "path_error"]
+__all__ = ["DEFAULT_WEIGHTING", "InverseSettings", "InverseState", "IterativeLearning",
+           "LearnedOffset", "LearningSettings", "contraction", "contraction_inverse",
+           "inverse_gain", "path_error", "weighting_for"]
 
 
 @dataclass(frozen=True)
@@ -297,7 +308,7 @@ class LearningSettings:
         The model-inverting law (3) after an identifying run (``None``: (1) alone).
     weighting : WeightingSettings or None
         (3) learns each frequency by its Kalman gain (module docstring, :mod:`.smoothing`;
-        the default, ``WeightingSettings()``); ``None``: all of the error, ``γ_j``.  Used
+        the default, :data:`DEFAULT_WEIGHTING`); ``None``: all of the error, ``γ_j``.  Used
         by the law (3) only: without ``inverse`` it is inert (the P-type law (1) learns
         all of the error), so ``dataclasses.replace(settings, inverse=…)`` switches the
         law without touching it.
@@ -314,7 +325,7 @@ class LearningSettings:
     max_offset_m: float = 2e-3
     gain_decay: float = 0.0
     inverse: InverseSettings | None = None
-    weighting: WeightingSettings | None = field(default_factory=WeightingSettings)
+    weighting: WeightingSettings | None = field(default_factory=lambda: DEFAULT_WEIGHTING)
 
     def __post_init__(self) -> None:
         if not (self.inverse is None or isinstance(self.inverse, InverseSettings)):
@@ -519,6 +530,25 @@ class InverseState:
 MAX_GRID = 2**20
 
 
+def weighting_for(settings: WeightingSettings, gain: float, cycle_s: float,
+                  cycles: int) -> SpectralGain | TileGain:
+    """The weighting of (3) for a learning over ``cycles`` cycles of ``cycle_s`` (s); ``gain``
+    is ``γ``.
+
+    ``settings.window_s`` > 0: per tile (:class:`.smoothing.TileGain`) where the record
+    holds two tiles or more (``cycles ≥ 2 round(window_s / cycle_s)``); a shorter record
+    is one tile, learned by the whole-run gain (2) without the covariance matching
+    (:class:`.smoothing.SpectralGain` with ``window_s`` 0, ``detect`` ∞: on the 80 mm path
+    of docs/tracked-paths.md, 1.8 s of record, the matching per frequency ended at
+    0.119 mm perpendicular 3σ against its 0.092 mm).  ``window_s`` 0: ``settings`` as
+    they are, per frequency over the run."""
+    if settings.window_s == 0:
+        return SpectralGain(settings, gain)
+    if cycles >= 2 * round(settings.window_s / cycle_s):
+        return TileGain(settings, cycle_s, gain)
+    return SpectralGain(replace(settings, window_s=0.0, detect=math.inf), gain)
+
+
 @dataclass
 class IterativeLearning:
     """The learning of one repeated path (module docstring, (1) and (3)).
@@ -616,8 +646,7 @@ class IterativeLearning:
         self._excited: tuple[Array, Array, Array] | None = None
         self._pairs: list[tuple[Array, Array, Array]] = []
         self._weighting = None if s.weighting is None or s.inverse is None else \
-            SpectralGain(s.weighting, s.inverse.gain) if s.weighting.window_s == 0 else \
-            TileGain(s.weighting, s.cycle_s, s.inverse.gain)
+            weighting_for(s.weighting, s.inverse.gain, s.cycle_s, n)
 
     @property
     def weighting(self) -> SpectralGain | TileGain | None:

@@ -107,6 +107,9 @@ __all__ = ["SpectralGain", "TileGain", "WeightingSettings", "inflation", "noise_
 class WeightingSettings:
     """The per-frequency gain (module docstring); SI.
 
+    ``WeightingSettings()`` is the whole-run gain (2) without the options; the learning's
+    default is ``DEFAULT_WEIGHTING`` of :mod:`.learning` (per 1 s tile, (6) at ``κ`` = 3).
+
     Attributes
     ----------
     noise_low_hz, noise_high_hz : float
