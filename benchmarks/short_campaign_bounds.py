@@ -83,7 +83,7 @@ from plugcell.calibration.residual_model import (
 )
 from plugcell.io.robots import load_robot
 from residual_ur10 import _without_temperature, find_data, load_sets, read_column
-from short_campaign_ur10 import MODEL, choose, earlier
+from short_campaign_ur10 import MODEL, choose, earlier, outer_folds
 
 RIDGE_ALPHAS = np.logspace(-4, 3, 15)
 FEATURES = ("h1", "h2", "lin", "poly2")
@@ -91,21 +91,10 @@ FEATURES = ("h1", "h2", "lin", "poly2")
 ORACLE_POSES = 800
 
 
-def _split(resA: Any, d: CalibrationData) -> list[tuple[np.ndarray, np.ndarray]]:
-    """The benchmark's outer folds: grouped 5-fold over the series' 0.4 m cells."""
-    from sklearn.model_selection import GroupKFold
-
-    moved = refit_base(resA.model, d, probe=True)
-    targets = (np.linalg.inv(moved.base()) @ moved.predict(d.q))[:, :3, 3]
-    return list(GroupKFold(n_splits=5).split(targets, groups=workspace_cells(targets, 0.4)))
-
-
 def _campaigns(resA: Any, d: CalibrationData, sizes: tuple[int, ...], selection: str):
     """(fold, n, campaign, held-out set, training cells' poses) with the seeds of
     ``short_campaign_ur10.py`` run on one series (draw 0)."""
-    for f_no, (tr, te) in enumerate(_split(resA, d)):
-        rng_model = refit_base(resA.model, d.subset(tr), probe=True).with_references(
-            base=np.eye(4))
+    for f_no, (tr, te, rng_model) in enumerate(outer_folds(resA.model, d)[2]):
         for n in sizes:
             rng = np.random.default_rng([0, f_no, n])
             yield (f_no, n, d.subset(choose(rng_model, d, tr, n, selection, rng)),

@@ -41,7 +41,6 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 from calibration_ur10 import ur10_toml
 from plugcell.calibration import CalibrationData
 from plugcell.calibration.campaign_stage import fit_campaign_stage
-from plugcell.calibration.identify import refit_base
 from plugcell.calibration.prior import Prior, PriorCalibrator
 from plugcell.calibration.residual_model import (
     DEFAULT_GRID,
@@ -52,7 +51,7 @@ from plugcell.calibration.residual_model import (
 )
 from plugcell.io.robots import load_robot
 from residual_ur10 import _without_temperature, find_data, load_sets
-from short_campaign_ur10 import _errors, choose, earlier
+from short_campaign_ur10 import _errors, choose, earlier, outer_folds
 
 WEIGHTS = (0.0, 0.25, 0.5, 0.75, 1.0)
 
@@ -114,20 +113,13 @@ def campaign(prior: Prior, camp: CalibrationData, test: CalibrationData
 
 def run(sets: dict[str, CalibrationData], resA: Any, key: str, n: int, draws: int,
         folds: int = 5) -> None:
-    from sklearn.model_selection import GroupKFold
-
     prior = Prior.from_result(resA)
     d = sets[key]
-    moved_all = refit_base(resA.model, d, probe=True)
-    targets = (np.linalg.inv(moved_all.base()) @ moved_all.predict(d.q))[:, :3, 3]
-    split = list(GroupKFold(n_splits=folds).split(targets,
-                                                  groups=workspace_cells(targets, 0.4)))
+    split = outer_folds(resA.model, d, folds)[2]
     today = np.full((draws, len(d)), np.nan)
     chosen = np.full((draws, len(d)), np.nan)
-    for f_no, (tr, te) in enumerate(split):
+    for f_no, (tr, te, rng_model) in enumerate(split):
         test = d.subset(te)
-        rng_model = refit_base(resA.model, d.subset(tr), probe=True).with_references(
-            base=np.eye(4))
         for k in range(draws):
             t1 = time.perf_counter()
             # short_campaign_ur10.py's seeds (one series per run: series index 0)

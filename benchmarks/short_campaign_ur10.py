@@ -112,6 +112,25 @@ def choose(model: Any, d: CalibrationData, pool: np.ndarray, n: int, selection: 
     return pool[cands.source[plan.index]]
 
 
+def outer_folds(model: Any, d: CalibrationData, folds: int = 5
+                ) -> tuple[Any, np.ndarray, list[tuple[np.ndarray, np.ndarray, Any]]]:
+    """The benchmark's outer folds of a series ``d``: grouped ``folds``-fold over its 0.4 m
+    workspace cells (the TCP positions of A's ``model`` with BASE and PROBE re-identified
+    on all of ``d``, in its base frame).  Returns that re-identified model, the cells
+    ``(len(d),)`` and per fold ``(train, test, planner)``: the pose indices and the model a
+    campaign is drawn or planned with (A's, BASE and PROBE refitted on the training cells,
+    BASE = I)."""
+    from sklearn.model_selection import GroupKFold
+
+    moved_all = refit_base(model, d, probe=True)
+    targets = (np.linalg.inv(moved_all.base()) @ moved_all.predict(d.q))[:, :3, 3]
+    cells = workspace_cells(targets, 0.4)
+    split = GroupKFold(n_splits=folds).split(targets, groups=cells)
+    return moved_all, cells, [
+        (tr, te, refit_base(model, d.subset(tr), probe=True).with_references(base=np.eye(4)))
+        for tr, te in split]
+
+
 def earlier(desc: Any, A: CalibrationData, learner: ResidualLearner,
             cache: Path | None) -> Any:
     """Set-up A: model 3 and its learned layer fitted on all of A — or, with ``cache``,
@@ -134,8 +153,6 @@ def run(desc: Any, sets: dict[str, CalibrationData], series: str, sizes: tuple[i
         selection: str, learner: ResidualLearner, folds: int = 5,
         cache: Path | None = None, draws: int = 1, cv_split: str = "kfold",
         se_k: float = SE_RULE_K, stage_se_k: float = STAGE_SE_K) -> dict[str, Any]:
-    from sklearn.model_selection import GroupKFold
-
     t0 = time.perf_counter()
     A = sets["A"]
     resA = earlier(desc, A, learner, cache)
@@ -150,19 +167,14 @@ def run(desc: Any, sets: dict[str, CalibrationData], series: str, sizes: tuple[i
                            "series": {}}
     for s_no, key in enumerate(series):
         d = sets[key]
-        moved_all = refit_base(resA.model, d, probe=True)
-        targets = (np.linalg.inv(moved_all.base()) @ moved_all.predict(d.q))[:, :3, 3]
-        groups = workspace_cells(targets, 0.4)
+        moved_all, groups, split = outer_folds(resA.model, d, folds)
         draws_k = 1 if selection == "planned" else draws  # a plan is one draw
         err = {m: {(n, k): np.full(len(d), np.nan) for n in sizes for k in range(draws_k)}
                for m in METHODS}
         taus: dict[int, list[str]] = {n: [] for n in sizes}
         stages: dict[int, list[bool]] = {n: [] for n in sizes}
-        split = list(GroupKFold(n_splits=folds).split(targets, groups=groups))
-        for f_no, (tr, te) in enumerate(split):
+        for f_no, (tr, te, rng_model) in enumerate(split):
             test = d.subset(te)
-            rng_model = refit_base(resA.model, d.subset(tr), probe=True).with_references(
-                base=np.eye(4))
             for n, k in ((n, k) for n in sizes for k in range(draws_k)):
                 t1 = time.perf_counter()
                 # draw 0: the seed of the single-draw runs before --draws

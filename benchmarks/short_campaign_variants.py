@@ -64,7 +64,7 @@ from plugcell.calibration.residual_model import (
 )
 from plugcell.io.robots import load_robot
 from residual_ur10 import _without_temperature, find_data, load_sets
-from short_campaign_ur10 import MODEL, choose, earlier
+from short_campaign_ur10 import MODEL, choose, earlier, outer_folds
 
 TAUS = (1.0, 3.0, 10.0, 30.0, 100.0)
 ALPHAS = (0.0, 0.5, 1.0)
@@ -184,19 +184,13 @@ def _test_error(prior: Prior, camp: CalibrationData, test: CalibrationData, c: s
 
 def run(desc: Any, sets: dict[str, CalibrationData], key: str, sizes: tuple[int, ...],
         selection: str, draws: int, cache: Path | None) -> dict[int, dict[str, list[float]]]:
-    from sklearn.model_selection import GroupKFold
 
     resA = earlier(desc, sets["A"], ResidualLearner(), cache)
     prior = Prior.from_result(resA)
     d = sets[key]
-    moved_all = refit_base(resA.model, d, probe=True)
-    targets = (np.linalg.inv(moved_all.base()) @ moved_all.predict(d.q))[:, :3, 3]
-    split = list(GroupKFold(n_splits=5).split(targets, groups=workspace_cells(targets, 0.4)))
     out: dict[int, dict[str, list[float]]] = {n: {} for n in sizes}
-    for f_no, (tr, te) in enumerate(split):
+    for f_no, (tr, te, rng_model) in enumerate(outer_folds(resA.model, d)[2]):
         test = d.subset(te)
-        rng_model = refit_base(resA.model, d.subset(tr), probe=True).with_references(
-            base=np.eye(4))
         for n, k in itertools.product(sizes, range(1 if selection == "planned" else draws)):
             rng = np.random.default_rng(["BCD".index(key), f_no, n] + ([k] if k else []))
             camp = d.subset(choose(rng_model, d, tr, n, selection, rng))
