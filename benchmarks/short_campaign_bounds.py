@@ -52,7 +52,6 @@ from __future__ import annotations
 import argparse
 import math
 import sys
-import tempfile
 import time
 import warnings
 from dataclasses import replace
@@ -62,7 +61,7 @@ from typing import Any
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from calibration_ur10 import SERIES, ur10_toml
+from calibration_ur10 import SERIES
 from plugcell.calibration import CalibrationData, Calibrator
 from plugcell.calibration.identify import refit_base
 from plugcell.calibration.prior import (
@@ -81,9 +80,8 @@ from plugcell.calibration.residual_model import (
     hybrid_poses,
     workspace_cells,
 )
-from plugcell.io.robots import load_robot
-from residual_ur10 import _without_temperature, find_data, load_sets, read_column
-from short_campaign_ur10 import MODEL, choose, earlier, outer_folds
+from residual_ur10 import find_data, read_column
+from short_campaign_ur10 import MODEL, choose, earlier, outer_folds, ur10_and_sets
 
 RIDGE_ALPHAS = np.logspace(-4, 3, 15)
 FEATURES = ("h1", "h2", "lin", "poly2")
@@ -363,10 +361,7 @@ def main() -> int:
     from threadpoolctl import threadpool_limits
 
     warnings.filterwarnings("ignore", module="sklearn")  # GP bound warnings
-    with tempfile.TemporaryDirectory() as work:
-        (Path(work) / "ur10_masses.toml").write_text(ur10_toml(masses=True), encoding="utf-8")
-        desc = load_robot(Path(work) / "ur10_masses.toml")
-    sets = {k: _without_temperature(v) for k, v in load_sets(data).items()}
+    desc, sets = ur10_and_sets(data)
     sizes = tuple(int(x) for x in args.sizes.split(","))
     with threadpool_limits(1):
         resA = earlier(desc, sets["A"], ResidualLearner(), args.cache)

@@ -29,7 +29,6 @@ from __future__ import annotations
 
 import argparse
 import sys
-import tempfile
 import time
 from dataclasses import replace
 from pathlib import Path
@@ -38,7 +37,6 @@ from typing import Any
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from calibration_ur10 import ur10_toml
 from plugcell.calibration import CalibrationData
 from plugcell.calibration.campaign_stage import fit_campaign_stage
 from plugcell.calibration.prior import Prior, PriorCalibrator
@@ -49,9 +47,8 @@ from plugcell.calibration.residual_model import (
     residual_targets,
     workspace_cells,
 )
-from plugcell.io.robots import load_robot
-from residual_ur10 import _without_temperature, find_data, load_sets
-from short_campaign_ur10 import _errors, choose, earlier, outer_folds
+from residual_ur10 import find_data
+from short_campaign_ur10 import _errors, choose, earlier, outer_folds, ur10_and_sets
 
 WEIGHTS = (0.0, 0.25, 0.5, 0.75, 1.0)
 
@@ -161,10 +158,7 @@ def main() -> int:
         return 0
     from threadpoolctl import threadpool_limits
 
-    with tempfile.TemporaryDirectory() as work:
-        (Path(work) / "ur10_masses.toml").write_text(ur10_toml(masses=True), encoding="utf-8")
-        desc = load_robot(Path(work) / "ur10_masses.toml")
-    sets = {k: _without_temperature(v) for k, v in load_sets(data).items()}
+    desc, sets = ur10_and_sets(data)
     with threadpool_limits(1):
         kw: dict[str, Any] = ({"grid": DEFAULT_GRID[1:2], "trees": 100} if args.quick
                               else {"grid": (DEFAULT_GRID[1], DEFAULT_GRID[2]), "trees": 200})

@@ -131,6 +131,16 @@ def outer_folds(model: Any, d: CalibrationData, folds: int = 5
         for tr, te in split]
 
 
+def ur10_and_sets(data: Path) -> tuple[Any, dict[str, CalibrationData]]:
+    """The UR10 with its link masses (``calibration_ur10.ur10_toml``, loaded from a
+    temporary file of its own: runs side by side) and the IPA series A–D of ``data``
+    without their temperature columns."""
+    with tempfile.TemporaryDirectory() as work:
+        (Path(work) / "ur10_masses.toml").write_text(ur10_toml(masses=True), encoding="utf-8")
+        desc = load_robot(Path(work) / "ur10_masses.toml")
+    return desc, {k: _without_temperature(v) for k, v in load_sets(data).items()}
+
+
 def earlier(desc: Any, A: CalibrationData, learner: ResidualLearner,
             cache: Path | None) -> Any:
     """Set-up A: model 3 and its learned layer fitted on all of A — or, with ``cache``,
@@ -553,10 +563,7 @@ def main() -> int:
     series = [s for s in args.series.replace(",", "") if s in "BCD"]
     kw: dict[str, Any] = ({"grid": DEFAULT_GRID[1:2], "trees": 100} if args.quick
                           else {"grid": (DEFAULT_GRID[1], DEFAULT_GRID[2]), "trees": 200})
-    with tempfile.TemporaryDirectory() as work:  # one per run: runs side by side
-        (Path(work) / "ur10_masses.toml").write_text(ur10_toml(masses=True), encoding="utf-8")
-        desc = load_robot(Path(work) / "ur10_masses.toml")
-    sets = {k: _without_temperature(v) for k, v in load_sets(data).items()}
+    desc, sets = ur10_and_sets(data)
     with threadpool_limits(1):
         result = run(desc, sets, "".join(series), sizes, args.selection,
                      ResidualLearner(**kw), folds=args.folds, cache=args.cache,

@@ -36,7 +36,6 @@ import argparse
 import itertools
 import math
 import sys
-import tempfile
 import warnings
 from dataclasses import replace
 from pathlib import Path
@@ -45,7 +44,6 @@ from typing import Any
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from calibration_ur10 import ur10_toml
 from plugcell.calibration import CalibrationData, Calibrator
 from plugcell.calibration.identify import refit_base
 from plugcell.calibration.prior import (
@@ -62,9 +60,8 @@ from plugcell.calibration.residual_model import (
     hybrid_poses,
     workspace_cells,
 )
-from plugcell.io.robots import load_robot
-from residual_ur10 import _without_temperature, find_data, load_sets
-from short_campaign_ur10 import MODEL, choose, earlier, outer_folds
+from residual_ur10 import find_data
+from short_campaign_ur10 import MODEL, choose, earlier, outer_folds, ur10_and_sets
 
 TAUS = (1.0, 3.0, 10.0, 30.0, 100.0)
 ALPHAS = (0.0, 0.5, 1.0)
@@ -225,10 +222,7 @@ def main() -> int:
     from threadpoolctl import threadpool_limits
 
     warnings.filterwarnings("ignore", module="sklearn")  # GP bound warnings
-    with tempfile.TemporaryDirectory() as work:
-        (Path(work) / "ur10_masses.toml").write_text(ur10_toml(masses=True), encoding="utf-8")
-        desc = load_robot(Path(work) / "ur10_masses.toml")
-    sets = {k: _without_temperature(v) for k, v in load_sets(data).items()}
+    desc, sets = ur10_and_sets(data)
     sizes = tuple(int(x) for x in args.sizes.split(","))
     with threadpool_limits(1):
         out = run(desc, sets, args.series, sizes, args.selection, args.draws, args.cache)
