@@ -1,6 +1,6 @@
 """How long ``plugcell`` takes to start: wall time of a whole process, best and median.
 
-    .venv/bin/python benchmarks/cli_startup.py [--repeat 15] [--limit 0.3]
+    .venv/bin/python benchmarks/cli_startup.py [--repeat 15] [--limit 0.3] [--imports]
 
 Each command is run ``--repeat`` times as its own process (the installed ``plugcell``
 script beside this Python, else ``python -m plugcell``), output discarded; the
@@ -10,6 +10,11 @@ The start-up a user feels is what the parser and the chosen sub-command import: 
 that sub-command's module is loaded (:mod:`plugcell.apps.cli`), so ``--help`` of any command
 does not load Zenoh or the web server.  On a loaded machine run it with ``nice -n 0``
 (or not at all under ``nice``): the figures are wall time.
+
+``--imports`` adds what three long-running processes import before they serve, each as
+``python -c "import MODULE"`` (the tests start them hundreds of times): the compute
+service's functions, the web UI's server and the twin's dynamics (the simulated
+controller).  Run it on older sources with ``PYTHONPATH=OLD/src`` to compare.
 """
 
 from __future__ import annotations
@@ -30,6 +35,12 @@ COMMANDS: tuple[tuple[str, list[str]], ...] = (
     ("plugcell kin fk (Smart H4)",
      ["kin", "fk", "--robot", "smart_h4", "--joints", "0,-90,-187,0,90,0"]),
     ("plugcell calibrate --help", ["calibrate", "--help"]),
+)
+#: (label, module) of ``--imports``: what a service process imports before it serves
+IMPORTS: tuple[tuple[str, str], ...] = (
+    ("import: compute functions", "plugcell.devices.compute.functions"),
+    ("import: web UI server", "plugcell.apps.ui.server"),
+    ("import: twin dynamics", "plugcell.sim.twin.dynamics"),
 )
 
 
@@ -58,6 +69,8 @@ def main(argv: list[str]) -> int:
     ap.add_argument("--repeat", type=int, default=15, help="runs per command (default 15)")
     ap.add_argument("--limit", type=float, default=0.3,
                     help="target start-up, s (default 0.3); rows above it are marked")
+    ap.add_argument("--imports", action="store_true",
+                    help="also the imports of three service processes (module docstring)")
     args = ap.parse_args(argv)
     base = plugcell_command()
     print(f"plugcell start-up, {platform.processor() or platform.machine()}, "
@@ -68,6 +81,9 @@ def main(argv: list[str]) -> int:
     print("-" * 83)
     rows = [("python -c pass (interpreter)", [sys.executable, "-c", "pass"])]
     rows += [(label, base + extra) for label, extra in COMMANDS]
+    if args.imports:
+        rows += [(label, [sys.executable, "-c", f"import {module}"])
+                 for label, module in IMPORTS]
     for label, cmd in rows:
         t, cpu = run_times(cmd, args.repeat)
         med = statistics.median(t)
