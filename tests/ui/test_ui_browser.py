@@ -318,12 +318,12 @@ def test_the_metrology_cell_calibrated_in_the_browser(launcher: Any, tmp_path: P
 
     t0 = time.monotonic()
     cell = unique_cell("m")
-    for proc in (launcher.serve("tracker", cell, "--param", "time_scale=0.01", wait=False),
-                 launcher.serve("compute", cell, wait=False),
-                 launcher.serve("robot", cell, "--param", "sim=true", "--param", "speed=100",
-                                "--param", "payload_kg=36", "--param", "link_baud=19200",
-                                name="H4", wait=False)):
-        proc.wait_serving()  # started side by side
+    # one after another (started side by side, the live PROBE wizard's result came out
+    # 282 mm / 180° off in CI runs 25 and 27; it had not before)
+    launcher.serve("tracker", cell, "--param", "time_scale=0.01")
+    launcher.serve("compute", cell)
+    launcher.serve("robot", cell, "--param", "sim=true", "--param", "speed=100",
+                   "--param", "payload_kg=36", "--param", "link_baud=19200", name="H4")
     url = _controller_ui(launcher, cell)
     twin = RobotTwin(H4_TWIN)
     truth = twin.reveal_truth()
