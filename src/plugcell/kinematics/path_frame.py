@@ -31,6 +31,8 @@ watching the controller's path).  Pure numpy, SI units.
 
 from __future__ import annotations
 
+from collections import deque
+
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
@@ -189,17 +191,27 @@ def path_tangents(positions: ArrayLike, min_step: float = MIN_STEP_M) -> Array:
 
 class TangentTracker:
     """The tangent of a path seen one sample at a time, where something else may move the
-    point too (a correction being applied): the chord from the last point it was taken at,
-    ``t = (p − a)/|p − a|`` (then ``a ← p``), accepted when
+    point too (a correction being applied): the chord from the point it was last taken
+    at, ``t = (p − a)/|p − a|`` (then ``a ← p``), accepted when
 
     * ``|p − a| ≥ min_step`` — a motion, not rounding;
     * it took at most ``max_chord_s`` — a path moving (≥ ``min_step/max_chord_s``), not
       a standing one creeping (the second-order error of a correction taken off);
-    * ``|p − a| ≥ ratio · |e − e_a|``, ``e`` what was taken off ``p`` (a correction,
-      applied by the controller a cycle later or sooner than assumed) — the chord is the
-      path's, not the correction's change.
+    * ``|p − a| ≥ ratio · (|e − e_a| + m(t) + m(t_a))`` — the chord is the path's, not
+      the correction's change.  ``e`` is what was taken off ``p`` (the correction as the
+      sender assumes it applied), and ``m(s) = max |e(s) − e(s')|`` over
+      ``s' ∈ [s − lag_s, s]``: the controller may apply a correction up to ``lag_s``
+      later than assumed, so that ``p`` is off by up to ``m`` at either end of the
+      chord.  (Without ``m``, a controller catching up with a correction that has
+      stopped changing — ``e − e_a = 0`` — moved a standing point by the catch-up, and
+      that was taken for the path's tangent.)
 
-    A chord that fails is dropped (``a ← p``).  ``None`` before the first accepted chord.
+    Two chords are tried each sample: a short one, dropped (``a ← p``) when it fails the
+    ratio, so that a correction's step does not stay in the next chord, and a long one,
+    kept until it is accepted or outlasts ``max_chord_s``, so that a slow path under a
+    changing correction still gives chords long enough (either kind's error from the
+    correction is at most ``1/ratio`` of its length).  An accepted chord, or one that
+    outlasts ``max_chord_s``, starts the next.  ``None`` before the first accepted chord.
 
     Parameters
     ----------
@@ -208,14 +220,30 @@ class TangentTracker:
     max_chord_s : float
         The longest a chord may take (s).
     ratio : float
-        How much longer than the change of what was taken off a chord must be.
+        How much longer than the correction's change (and possible lag) a chord must be.
+    lag_s : float
+        The longest the controller may apply a correction later than assumed (s).
     """
 
     def __init__(self, min_step: float = 10 * MIN_STEP_M, max_chord_s: float = 0.1,
-                 ratio: float = 4.0) -> None:
+                 ratio: float = 4.0, lag_s: float = 0.05) -> None:
         self.min_step, self.max_chord_s, self.ratio = float(min_step), max_chord_s, ratio
-        self._anchor: tuple[Array, float, Array] | None = None
+        self.lag_s = float(lag_s)
+        #: the short and the long chord's start: its point, time, what was taken off and
+        #: ``m`` there
+        self._anchor: tuple[Array, float, Array, float] | None = None
+        self._long: tuple[Array, float, Array, float] | None = None
+        #: what was taken off in the last ``lag_s``: ``(t, e)``, oldest first
+        self._recent: deque[tuple[float, Array]] = deque()
         self.tangent: Array | None = None
+
+    def _lag_bound(self, t: float, e: Array) -> float:
+        """``m(t) = max |e(t) − e(s')|`` over the samples ``s' ∈ [t − lag_s, t]``."""
+        recent = self._recent
+        recent.append((t, e))
+        while recent and recent[0][0] < t - self.lag_s:
+            recent.popleft()
+        return max(float(np.linalg.norm(e - e_s)) for _, e_s in recent)
 
     def update(self, p: ArrayLike, t: float, taken_off: ArrayLike = (0.0, 0.0, 0.0)
                ) -> Array | None:
@@ -237,9 +265,47 @@ class TangentTracker:
         """
         p = np.array(p, dtype=float).reshape(3)
         e = np.array(taken_off, dtype=float).reshape(3)
-        if self._anchor is None:
-            self._anchor = (p, t, e)
+        now = (p, float(t), e, self._lag_bound(float(t), e))
+        if self._anchor is None or self._long is None:
+            self._anchor = self._long = now
             return self.tangent
+        short, long_ = self._chord(self._anchor, now), self._chord(self._long, now)
+        for verdict, d in (short, long_):
+            if verdict == "path":
+                self.tangent = d / np.linalg.norm(d)
+                self._anchor = self._long = now
+                return self.tangent
+        if short[0] != "short":  # failed the ratio, or too old: dropped
+            self._anchor = now
+        if long_[0] == "old":
+            self._long = now
+        return self.tangent
+
+    def _chord(self, anchor: tuple[Array, float, Array, float],
+               now: tuple[Array, float, Array, float]) -> tuple[str, Array]:
+        """The chord from ``anchor`` to ``now`` and what it is: ``"path"`` (accepted),
+        ``"old"`` (longer than ``max_chord_s``), ``"short"`` (under ``min_step``) or
+        ``"correction"`` (failed the ratio)."""
+        (a, t_a, e_a, m_a), (p, t, e, m) = anchor, now
+        d = p - a
+        n = float(np.linalg.norm(d))
+        if t - t_a > self.max_chord_s:
+            return "old", d
+        if n < self.min_step:
+            return "short", d
+        if n >= self.ratio * (float(np.linalg.norm(e - e_a)) + m + m_a):
+            return "path", d
+        return "correction", d
+        a, t_a, e_a, m_a = self._anchor
+        d = p - a
+        n = float(np.linalg.norm(d))
+        if t - t_a > self.max_chord_s:
+            self._anchor = (p, t, e, m)  # standing (or too slow to tell): start again
+        elif n >= self.min_step:
+            if n >= self.ratio * (float(np.linalg.norm(e - e_a)) + m + m_a):
+                self.tangent = d / n
+            self._anchor = (p, t, e, m)
+        return self.tangent
         a, t_a, e_a = self._anchor
         d = p - a
         n = float(np.linalg.norm(d))
