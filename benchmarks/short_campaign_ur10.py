@@ -144,18 +144,24 @@ def ur10_and_sets(data: Path) -> tuple[Any, dict[str, CalibrationData]]:
 def earlier(desc: Any, A: CalibrationData, learner: ResidualLearner,
             cache: Path | None) -> Any:
     """Set-up A: model 3 and its learned layer fitted on all of A — or, with ``cache``,
-    read from the pickle an earlier run of this script wrote there (runs side by side,
-    one per series, then fit A once)."""
+    read from the pickle an earlier run of this script (or of the scripts that share
+    its set-up A) wrote there with the same model and learner (runs side by side, one
+    per series, then fit A once); a cache of another learner is fitted again and
+    overwritten."""
     import pickle
 
+    key = (MODEL, repr(sorted((k, v) for k, v in vars(learner).items() if k != "progress")))
     if cache is not None and cache.is_file():
         with cache.open("rb") as f:
-            return pickle.load(f)  # this script's own file
+            kept = pickle.load(f)  # these scripts' own file
+        if isinstance(kept, dict) and kept.get("key") == key:
+            return kept["result"]
+        print(f"{cache}: set-up A of another model or learner: fitted again", flush=True)
     resA = Calibrator(desc, MODEL).fit(A)
     resA = resA.with_residual_model(learner.fit(resA.model, A, robot=desc.name))
     if cache is not None:
         with cache.open("wb") as f:
-            pickle.dump(resA, f)
+            pickle.dump({"key": key, "result": resA}, f)
     return resA
 
 

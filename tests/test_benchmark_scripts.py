@@ -129,16 +129,25 @@ def test_short_campaign_skips_cleanly_without_the_data(tmp_path: Path) -> None:
     assert "data not found" in done.stdout and not (tmp_path / "x.md").exists()
 
 
+@pytest.fixture(scope="module")
+def set_up_a(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """Where the short-campaign scripts keep set-up A's fit (``--cache``): the first of
+    their tests here fits it, the next reads it (the same model and ``--quick`` learner:
+    the cache's key)."""
+    return tmp_path_factory.mktemp("set-up-a") / "A.pkl"
+
+
 @pytest.mark.slow
 @pytest.mark.skipif(not IPA_DATA.is_dir(), reason="IPA robot-accuracy data not present")
-def test_short_campaign_runs_on_the_ipa_data(tmp_path: Path) -> None:
+def test_short_campaign_runs_on_the_ipa_data(tmp_path: Path, set_up_a: Path) -> None:
     """One series, one campaign size, two folds, two campaign draws: the table (mean ± sd
     over the draws), the goal lines, the page with the CV's choice per fold and the
     plot."""
     out = tmp_path / "sc.md"
     done = subprocess.run([sys.executable, str(BENCHMARKS / "short_campaign_ur10.py"),
                            "--quick", "--series", "D", "--sizes", "25", "--folds", "2",
-                           "--selection", "random", "--draws", "2", "--out", str(out)],
+                           "--selection", "random", "--draws", "2", "--out", str(out),
+                           "--cache", str(set_up_a)],
                           capture_output=True, text=True, timeout=900)
     assert done.returncode == 0, done.stderr[-2000:]
     assert "| D | (iii) --prior A" in done.stdout and "D, n = 25: prior" in done.stdout
@@ -146,6 +155,53 @@ def test_short_campaign_runs_on_the_ipa_data(tmp_path: Path) -> None:
     page = out.read_text()
     assert "## The goal" in page and "The CV's choice per fold" in page
     assert out.with_suffix(".png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+
+
+def test_set_up_a_is_read_from_the_cache_only_for_the_same_learner(tmp_path: Path,
+                                                                    monkeypatch) -> None:
+    """``earlier``'s cache: the same model and learner read back; another learner's (or an
+    older file without the key) fitted again and the file overwritten."""
+    sys.path.insert(0, str(BENCHMARKS))
+    try:
+        import short_campaign_ur10 as sc
+    finally:
+        sys.path.remove(str(BENCHMARKS))
+    from plugcell.calibration.residual_model import ResidualLearner
+
+    fits: list[int] = []
+
+    class Fitted:
+        model = "model"
+
+        def __init__(self, trees: int) -> None:
+            self.trees = trees
+
+        def with_residual_model(self, layer: int) -> tuple[str, int]:
+            return ("A", layer)
+
+    class Calibrator:  # counts the fits of set-up A
+        def __init__(self, desc, model) -> None:
+            pass
+
+        def fit(self, data) -> Fitted:
+            fits.append(1)
+            return Fitted(len(fits))
+
+    monkeypatch.setattr(sc, "Calibrator", Calibrator)
+    monkeypatch.setattr(ResidualLearner, "fit", lambda self, model, data, robot: self.trees)
+    cache, ur10 = tmp_path / "A.pkl", type("Robot", (), {"name": "ur10"})()
+    assert sc.earlier(ur10, None, ResidualLearner(trees=100), cache) == ("A", 100)
+    assert sc.earlier(ur10, None, ResidualLearner(trees=100), cache) == ("A", 100)
+    assert len(fits) == 1  # read back
+    assert sc.earlier(ur10, None, ResidualLearner(trees=50), cache) == ("A", 50)
+    assert len(fits) == 2  # another learner: fitted again …
+    assert sc.earlier(ur10, None, ResidualLearner(trees=50), cache) == ("A", 50)
+    assert len(fits) == 2  # … and kept
+    import pickle
+
+    cache.write_bytes(pickle.dumps(("A", 100)))  # a file of the format before the key
+    assert sc.earlier(ur10, None, ResidualLearner(trees=50), cache) == ("A", 50)
+    assert len(fits) == 3
 
 
 def test_stage_weight_skips_cleanly_without_the_data(tmp_path: Path) -> None:
@@ -159,11 +215,12 @@ def test_stage_weight_skips_cleanly_without_the_data(tmp_path: Path) -> None:
 
 @pytest.mark.slow
 @pytest.mark.skipif(not IPA_DATA.is_dir(), reason="IPA robot-accuracy data not present")
-def test_stage_weight_runs_on_the_ipa_data() -> None:
+def test_stage_weight_runs_on_the_ipa_data(set_up_a: Path) -> None:
     """Two folds, one campaign each: the stage's out-of-fold predictions recomputed by the
     script match the stage's recorded CV errors exactly, and the weight's line is printed."""
     done = subprocess.run([sys.executable, str(BENCHMARKS / "short_campaign_stage_weight.py"),
-                           "--quick", "--series", "D", "--size", "50", "--folds", "2"],
+                           "--quick", "--series", "D", "--size", "50", "--folds", "2",
+                           "--cache", str(set_up_a)],
                           capture_output=True, text=True, timeout=900)
     assert done.returncode == 0, done.stderr[-2000:]
     lines = [x for x in done.stdout.splitlines() if x.startswith("  D fold")]
