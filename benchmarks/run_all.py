@@ -56,6 +56,7 @@ def main(argv: list[str]) -> int:
         ("an idle cell: 20 services, CPU share",
          [sys.executable, str(HERE / "idle_cost.py"), *([] if full else ["--seconds", "15"])]),
         ("command start-up", [sys.executable, str(HERE / "cli_startup.py")]),
+        ("OpenBLAS threads on small matrices", [sys.executable, str(HERE / "blas_threads.py")]),
         ("UR10 from ur_description: xacro in, calibration, UR kinematics out",
          [sys.executable, str(HERE / "urdf_roundtrip_ur10.py"),
           *([] if full else ["--out", str(scratch / "urdf_ur10.md")])]),

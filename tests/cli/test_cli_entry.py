@@ -174,3 +174,30 @@ def test_services_is_cell_ls_under_a_short_name():
     mine = {k: v for k, v in vars(short).items() if k not in ("command", "cell_command")}
     theirs = {k: v for k, v in vars(long).items() if k not in ("command", "cell_command")}
     assert mine == theirs
+
+
+@pytest.mark.parametrize(("given", "threads"), [
+    ({}, 1),                               # one thread by default
+    ({"OPENBLAS_NUM_THREADS": "2"}, 2),    # a count the environment names is kept
+    ({"OMP_NUM_THREADS": "2"}, 2),
+])
+def test_openblas_runs_one_thread_unless_the_environment_names_a_count(given, threads):
+    """``main`` sets ``OPENBLAS_NUM_THREADS=1`` before NumPy is imported (its BLAS then
+    runs the count ``threadpoolctl`` reports) and for the processes it starts."""
+    env = {k: v for k, v in os.environ.items()
+           if k not in ("OPENBLAS_NUM_THREADS", "GOTO_NUM_THREADS", "OMP_NUM_THREADS")}
+    code = ("import os, subprocess, sys\n"
+            "from plugcell.apps.cli import main\n"
+            "try:\n    main(['--version'])\nexcept SystemExit:\n    pass\n"
+            "import numpy, threadpoolctl\n"
+            "blas = threadpoolctl.threadpool_info()\n"
+            "print([p['num_threads'] for p in blas if p['user_api'] == 'blas'])\n"
+            "print(subprocess.run([sys.executable, '-c', 'import os; "
+            "print(os.environ.get(\"OPENBLAS_NUM_THREADS\"))'], capture_output=True, "
+            "text=True).stdout.strip())\n")
+    done = subprocess.run([sys.executable, "-c", code], env={**env, **given},
+                          capture_output=True, text=True, timeout=60)
+    assert done.returncode == 0, done.stderr
+    counts, child = done.stdout.splitlines()[-2:]
+    assert counts == f"[{threads}]", done.stdout
+    assert child == given.get("OPENBLAS_NUM_THREADS", "1" if not given else "None")

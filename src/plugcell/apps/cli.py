@@ -25,6 +25,9 @@ from dataclasses import dataclass
 
 from plugcell import __version__
 
+#: Environment variables that set OpenBLAS's thread count (:func:`main`).
+BLAS_THREAD_VARIABLES = ("OPENBLAS_NUM_THREADS", "GOTO_NUM_THREADS", "OMP_NUM_THREADS")
+
 #: Exit status after the reader of stdout went away (``plugcell … | head``): 128 + SIGPIPE,
 #: what a shell reports for a program that SIGPIPE ended.
 EXIT_BROKEN_PIPE = 141
@@ -147,7 +150,17 @@ def main(argv: list[str] | None = None) -> int:
 
     A reader of stdout that went away (``plugcell … | head``) ends the command quietly
     with :data:`EXIT_BROKEN_PIPE` instead of a ``BrokenPipeError`` traceback.
+
+    OpenBLAS runs one thread (``OPENBLAS_NUM_THREADS=1``, for this process — set before
+    NumPy is first imported — and the services it starts) unless the environment names
+    a count (``OPENBLAS_NUM_THREADS``, ``GOTO_NUM_THREADS`` or ``OMP_NUM_THREADS``):
+    plugcell's matrices are small (a calibration's 900 × 72 Jacobian, the learning's
+    plant identification), and on busy cores OpenBLAS's threads spin waiting for each
+    other — 32× and 40× slower than one thread with one other process busy on the
+    2-core VM (``benchmarks/blas_threads.py``).
     """
+    if not any(os.environ.get(v) for v in BLAS_THREAD_VARIABLES):
+        os.environ["OPENBLAS_NUM_THREADS"] = "1"
     argv = sys.argv[1:] if argv is None else argv
     try:
         try:
