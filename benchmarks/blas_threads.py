@@ -14,9 +14,10 @@ Cases (seeded, the arithmetic of the product's own functions):
 On a machine whose cores are busy (other processes, a CI beside it) OpenBLAS's threads
 spin waiting for each other; on these sizes one thread is the faster.  Usage::
 
-    python benchmarks/blas_threads.py [--repeat 3]
+    python benchmarks/blas_threads.py [--repeat 3] [--quick]
 
-prints a table of the median wall time of each case (s) and the ratio.
+prints a table of the median wall time of each case (s) and the ratio (``--quick``: one
+mode and 4 factorisations, to check that it runs).
 """
 
 from __future__ import annotations
@@ -39,12 +40,12 @@ true = ModalPlant(T, head, np.array([10.0]), np.array([0.05]), np.array([[0.05 *
 u = np.stack([excitation(300, T, 1e-4, seed=s) for s in range(3)])
 noise = 1e-7 * np.random.default_rng(0).standard_normal(u.shape)
 y = np.stack([true.simulate(x) for x in u]) + noise
-identify_plant(u, y, T, modes=3, taps=4)
+identify_plant(u, y, T, modes={modes}, taps=4)
 """,
     "QR 900×72": """
 import numpy as np
 a = np.random.default_rng(0).standard_normal((900, 72))
-for _ in range(40):
+for _ in range({qr}):
     np.linalg.qr(a)
 """,
 }
@@ -67,13 +68,17 @@ def _once(code: str, one_thread: bool) -> float:
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--repeat", type=int, default=3, help="runs of each case (default 3)")
+    parser.add_argument("--quick", action="store_true",
+                        help="smaller cases (one mode, 4 factorisations): a check that it runs")
     args = parser.parse_args(argv)
     if args.repeat < 1:
         parser.error(f"--repeat must be at least 1, not {args.repeat}")
     print(f"{os.cpu_count()} CPUs, load {os.getloadavg()[0]:.1f}; median of {args.repeat} "
           f"runs, s ({time.strftime('%Y-%m-%d %H:%M UTC', time.gmtime())})")
     print("| case | OpenBLAS's default threads | one thread | ratio |\n|---|---:|---:|---:|")
-    for name, code in CASES.items():
+    sizes = {"modes": 1, "qr": 4} if args.quick else {"modes": 3, "qr": 40}
+    for name, template in CASES.items():
+        code = template.format(**sizes)
         many = statistics.median(_once(code, False) for _ in range(args.repeat))
         one = statistics.median(_once(code, True) for _ in range(args.repeat))
         print(f"| {name} | {many:.3f} | {one:.3f} | {many / one:.1f}× |", flush=True)
