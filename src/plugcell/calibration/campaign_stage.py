@@ -312,7 +312,7 @@ def judge_stage(layer: LearnedResidual, weights: tuple[float, ...], se_k: float
     better, mean, se = beats(errors[best], cv.physical_errors, cv.fold, se_k)
     stats = {"gain_mm": mean * 1e3, "se_mm": se * 1e3, "se_k": se_k, "weights": weights,
              "cv_mm": {w: m * 1e3 for w, m in means.items()}}
-    at = "" if weights == (1.0,) else f" at weight {best:g}, the best of {len(weights)}"
+    at = "" if weights == (1.0,) else f" at weight {best:g}, the grid's best"
     cmp = f"{means[0.0] * 1e3:.3f} -> {means[best] * 1e3:.3f} mm{at}"
     if not means[best] < means[0.0]:
         return CampaignStage(layer, False, f"its grouped CV did not beat the physical fit "
