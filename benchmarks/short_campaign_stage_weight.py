@@ -2,10 +2,11 @@
 
 Before ``--prior-stage-weights``, ``plugcell calibrate --prior`` adopted the campaign's own
 stage (trees on what the fit leaves, :mod:`plugcell.calibration.campaign_stage`) or not: a
-weight w ∈ {0, 1} (today ``--prior-stage-weights 1``, ``stage_weights=(1,)``). Here w is
-chosen on the fixed grid {0, ¼, ½, ¾, 1} by the same grouped CV over the campaign's cells
-(a one-weight stacking of the stage, Breiman 1996), recomputed independently of the
-product — the measurement that made it the default, ``stage_weights``' default grid::
+weight w ∈ {0, 1} (still the default, ``--prior-stage-weights 1``). Here w is chosen on
+the fixed grid {0, ¼, ½, ¾, 1} by the same grouped CV over the campaign's cells (a
+one-weight stacking of the stage, Breiman 1996), recomputed independently of the product
+— the measurement behind ``--prior-stage-weights 0,0.25,0.5,0.75,1``
+(:data:`~plugcell.calibration.campaign_stage.STAGE_WEIGHT_GRID`)::
 
     w* = argmin_w  mean_i ‖E_i − w ê_i‖          (ê: the stage's out-of-fold predictions)
     p_w = p_MAP + R_B (c_shape,A + w ê_c(q))     (w > 0; ê_c only where the stage's
@@ -20,8 +21,8 @@ the held-out cells are only scored. Same campaigns as ``short_campaign_ur10.py``
 seeds, its grouped 5-fold over the series' 0.4 m cells, draw k of its ``--draws``) and
 ``--prior``'s defaults but the stage whole or not at all (``stage_weights=(1,)``, "today"
 in the printout: the rule before the weight); prints per campaign the CV error and the
-held-out error per w, the weight ``--prior``'s default chose (``product w``, which must be
-w* at k = 0), and per draw the pooled held-out mean error (mm) of the rule before and of
+held-out error per w, the weight ``--prior`` chose with that grid (``product w``, which
+must be w* at k = 0), and per draw the pooled held-out mean error (mm) of the rule before and of
 w*.
 
     .venv/bin/python benchmarks/short_campaign_stage_weight.py --series B --size 100
@@ -43,7 +44,7 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from plugcell.calibration import CalibrationData
-from plugcell.calibration.campaign_stage import fit_campaign_stage
+from plugcell.calibration.campaign_stage import STAGE_WEIGHT_GRID, fit_campaign_stage
 from plugcell.calibration.prior import Prior, PriorCalibrator
 from plugcell.calibration.residual_model import (
     DEFAULT_GRID,
@@ -55,7 +56,7 @@ from plugcell.calibration.residual_model import (
 from residual_ur10 import find_data
 from short_campaign_ur10 import _errors, choose, earlier, outer_folds, ur10_and_sets
 
-WEIGHTS = (0.0, 0.25, 0.5, 0.75, 1.0)
+WEIGHTS = STAGE_WEIGHT_GRID
 
 
 def cv_weights(res: Any, camp: CalibrationData, layer: Any) -> tuple[dict[float, float], float]:
@@ -130,7 +131,8 @@ def run(sets: dict[str, CalibrationData], resA: Any, key: str, n: int, draws: in
             camp = d.subset(choose(rng_model, d, tr, n, "random", rng))
             res, cv, check, err, e_today = campaign(prior, camp, test)
             w = min(WEIGHTS, key=lambda x: cv[x])
-            product = PriorCalibrator(prior).fit(camp).settings["prior"]["stage"]["weight"]
+            product = PriorCalibrator(prior, stage_weights=WEIGHTS).fit(camp).settings[
+                "prior"]["stage"]["weight"]
             today[k, te], chosen[k, te] = e_today, err[w]
             pri = res.settings["prior"]
             print(f"  {key} fold {f_no + 1}, n = {n}, draw {k}: {pri['choice']} "

@@ -43,8 +43,8 @@ mean position error, mm.  Nothing is tuned on the held-out cells.
 default seeded random 10-fold of its poses (``PriorCalibrator(cv_split=…)``); ``--prior-se
 K``: the k of the choice's k-standard-error rule (default 1); ``--prior-stage-se K``: the
 k of the same rule on the campaign stage's grouped CV (default 0, the plain comparison);
-``--prior-stage-weights W,…``: the grid of the stage's CV-chosen weight (default 0, 0.25,
-0.5, 0.75, 1; ``1``: the stage whole or not at all, the rule before) —
+``--prior-stage-weights W,…``: the grid of the stage's CV-chosen weight (default ``1``:
+the stage whole or not at all; ``0,0.25,0.5,0.75,1`` the grid measured) —
 all measured in docs/results/short-campaign-bounds.md; write such a run elsewhere with
 ``--out``.
 
@@ -69,7 +69,12 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from calibration_ur10 import ur10_toml
 from plugcell.calibration import CalibrationData, CalibrationError, Calibrator
-from plugcell.calibration.campaign_stage import STAGE_SE_K, STAGE_WEIGHTS, check_weights
+from plugcell.calibration.campaign_stage import (
+    STAGE_SE_K,
+    STAGE_WEIGHT_GRID,
+    STAGE_WEIGHTS,
+    check_weights,
+)
 from plugcell.calibration.identify import refit_base
 from plugcell.calibration.planning import (
     PosePlanner,
@@ -542,8 +547,9 @@ def main() -> int:
                          f"{SE_RULE_K:g})")
     ap.add_argument("--prior-stage-weights", default=None, metavar="W[,W…]",
                     help="the campaign stage's weight grid (PriorCalibrator stage_weights; "
-                         f"default {','.join(f'{w:g}' for w in STAGE_WEIGHTS)}; 1: the stage "
-                         "whole or not at all, the rule before)")
+                         f"default {','.join(f'{w:g}' for w in STAGE_WEIGHTS)}: the stage "
+                         "whole or not at all; the grid measured: "
+                         f"{','.join(f'{w:g}' for w in STAGE_WEIGHT_GRID)})")
     ap.add_argument("--prior-stage-se", type=float, default=STAGE_SE_K, metavar="K",
                     help="the campaign stage's k-standard-error rule (PriorCalibrator "
                          f"stage_se_k; default {STAGE_SE_K:g})")

@@ -162,8 +162,8 @@ def test_stage_weight_skips_cleanly_without_the_data(tmp_path: Path) -> None:
 @pytest.mark.skipif(not IPA_DATA.is_dir(), reason="IPA robot-accuracy data not present")
 def test_stage_weight_runs_on_the_ipa_data() -> None:
     """Two folds, one campaign each: the stage's out-of-fold predictions recomputed by the
-    script match the stage's recorded CV errors exactly, the weight ``--prior``'s default
-    chose is the script's w*, and the weight's line is printed."""
+    script match the stage's recorded CV errors exactly, the weight ``--prior`` chose with
+    the same grid is the script's w*, and the weight's line is printed."""
     done = subprocess.run([sys.executable, str(BENCHMARKS / "short_campaign_stage_weight.py"),
                            "--quick", "--series", "D", "--size", "50", "--folds", "2"],
                           capture_output=True, text=True, timeout=900)

@@ -135,8 +135,8 @@ def test_the_stage_k_is_its_own_option(files, capsys, monkeypatch):
 
 def test_the_stage_weights_are_their_own_option(files, monkeypatch):
     """``--prior-stage-weights W,…`` reaches the calibrator's ``stage_weights`` (sorted;
-    default 0, ¼, ½, ¾, 1) and PARAMS.json's stage record holds the grid and the weight
-    applied."""
+    default {1}: the stage whole or not at all) and PARAMS.json's stage record holds the
+    grid and the weight applied."""
     from plugcell.calibration.campaign_stage import STAGE_WEIGHTS
     from plugcell.calibration.prior import PriorCalibrator
 

@@ -18,6 +18,7 @@ from hypothesis import strategies as st
 
 from plugcell.calibration import CalibrationError, Calibrator
 from plugcell.calibration.campaign_stage import (
+    STAGE_WEIGHT_GRID,
     STAGE_WEIGHTS,
     check_weights,
     fit_campaign_stage,
@@ -73,14 +74,14 @@ def test_the_weight_is_the_cv_minimiser_where_it_is_known(fitted, scale, expecte
     ``s = ½``: 1, the grid's end) — the weight chosen and the layer's weight."""
     layer = fitted[0]
     E = np.random.default_rng(0).normal(0.0, 1e-4, (len(layer.cv.fold), 3))
-    out = judge_stage(_with_cv(layer, E, scale * E), STAGE_WEIGHTS, 0.0)
+    out = judge_stage(_with_cv(layer, E, scale * E), STAGE_WEIGHT_GRID, 0.0)
     assert out.adopted and out.weight == expected and out.layer.weight == expected
     assert out.layer.useful
-    m = {w: float(np.mean(np.abs(1 - w * scale))) for w in STAGE_WEIGHTS}
+    m = {w: float(np.mean(np.abs(1 - w * scale))) for w in STAGE_WEIGHT_GRID}
     assert min(m, key=lambda w: (m[w], w)) == expected  # the model above, independently
     assert out.cv_mm[0.0] == pytest.approx(np.linalg.norm(E, axis=1).mean() * 1e3, abs=1e-15)
     s = out.summary()
-    assert s["weight"] == expected and s["weights"] == list(STAGE_WEIGHTS)
+    assert s["weight"] == expected and s["weights"] == list(STAGE_WEIGHT_GRID)
     assert s["cv_by_weight_mm"][f"{expected:g}"] == min(s["cv_by_weight_mm"].values())
 
 
@@ -89,14 +90,14 @@ def test_a_stage_that_points_the_wrong_way_gets_weight_zero(fitted):
     as fitted (weight 1, not used), the reason names the weight the rule judged."""
     layer = fitted[0]
     E = np.random.default_rng(1).normal(0.0, 1e-4, (len(layer.cv.fold), 3))
-    out = judge_stage(_with_cv(layer, E, -E), STAGE_WEIGHTS, 0.0)
+    out = judge_stage(_with_cv(layer, E, -E), STAGE_WEIGHT_GRID, 0.0)
     assert not out.adopted and out.weight == 0.0 and out.layer.weight == 1.0
     assert "did not beat the physical fit" in out.reason and "at weight 0.25" in out.reason
 
 
 @settings(max_examples=40, deadline=None)
 @given(seed=st.integers(0, 2**32 - 1), shrink=st.floats(-0.5, 3.0),
-       grid=st.sets(st.sampled_from((*STAGE_WEIGHTS, 0.1, 0.6, 0.9)), min_size=1))
+       grid=st.sets(st.sampled_from((*STAGE_WEIGHT_GRID, 0.1, 0.6, 0.9)), min_size=1))
 def test_the_chosen_weight_is_the_argmin_of_the_cv_over_the_grid(fitted, seed, shrink, grid):
     """For any targets, predictions and grid: ``w̃`` is the grid's ``w > 0`` of least
     ``mean ‖e − w ê‖`` (brute force here), adopted (k = 0) exactly when it beats
@@ -147,6 +148,21 @@ def test_the_grid_one_verdicts_differ_across_these_campaigns(harmonic):
     assert verdicts == {True, False}
 
 
+def test_the_default_is_the_rule_before_the_weight(harmonic):
+    """The default grid is {1} (the grid measured was worse at 200–400 poses on the IPA
+    UR10, docs/results/short-campaign-bounds.md §8): the calibrator's result is that of
+    ``stage_weights=(1,)`` to the bit, the stage whole (weight 1) where adopted."""
+    _, prior = harmonic
+    camp, _ = _campaign(harmonic[0], 1)
+    _, val = harmonic_campaign(60, 2, amplitude_rad=1e-3, base=NEW_BASE)
+    assert STAGE_WEIGHTS == (1.0,)
+    default = PriorCalibrator(prior).fit(camp)
+    one = PriorCalibrator(prior, stage_weights=(1.0,)).fit(camp)
+    np.testing.assert_array_equal(default.predict_hybrid(val.q)[0], one.predict_hybrid(val.q)[0])
+    s = default.settings["prior"]["stage"]
+    assert s["adopted"] and s["weight"] == 1.0 and default.residual_model.weight == 1.0
+
+
 def test_the_grid_zero_is_no_stage_bit_for_bit(harmonic):
     """``W = {0}`` gives the result of ``stage=False`` to the bit (model, predictions, no
     layer) where the default adopts a stage that changes the prediction."""
@@ -165,17 +181,17 @@ def test_the_grid_zero_is_no_stage_bit_for_bit(harmonic):
     assert not np.array_equal(default.predict_hybrid(val.q)[0], none.predict_hybrid(val.q)[0])
 
 
-def test_the_default_records_its_weight_and_applies_it(harmonic):
-    """The default grid: PARAMS.json's stage record holds the weight, the result's layer
-    carries it, and the hybrid prediction is the fit plus ``w̃`` times the stage's
-    regressors (its correction at weight 1 scaled)."""
+def test_the_grid_records_its_weight_and_applies_it(harmonic):
+    """The grid measured (:data:`STAGE_WEIGHT_GRID`): PARAMS.json's stage record holds the
+    weight, the result's layer carries it, and the hybrid prediction is the fit plus ``w̃``
+    times the stage's regressors (its correction at weight 1 scaled)."""
     _, prior = harmonic
     camp, _ = _campaign(harmonic[0], 1)
     _, val = harmonic_campaign(60, 2, amplitude_rad=1e-3, base=NEW_BASE)
-    out = PriorCalibrator(prior).fit(camp)
+    out = PriorCalibrator(prior, stage_weights=STAGE_WEIGHT_GRID).fit(camp)
     s = out.settings["prior"]["stage"]
     layer = out.residual_model
-    assert s["adopted"] and s["weight"] == layer.weight and s["weights"] == list(STAGE_WEIGHTS)
+    assert s["adopted"] and s["weight"] == layer.weight and s["weights"] == list(STAGE_WEIGHT_GRID)
     whole = replace(layer, weight=1.0).predict(val.q).correction
     np.testing.assert_allclose(layer.predict(val.q).correction, layer.weight * whole,
                                rtol=0, atol=1e-18)
@@ -188,7 +204,7 @@ def test_the_default_records_its_weight_and_applies_it(harmonic):
 
 # ------------------------------------------------------------------- bad grids
 _BAD = st.sampled_from([math.nan, math.inf, -math.inf, -0.25, 1.5, True, "0.5", None])
-_GOOD = st.sampled_from(STAGE_WEIGHTS)
+_GOOD = st.sampled_from(STAGE_WEIGHT_GRID)
 
 
 @settings(max_examples=60, deadline=None)

@@ -14,8 +14,9 @@ A small stage learns it, on top of the earlier layer's transferable arm-shape st
 stronger shrinkage toward zero), chosen by grouped K-fold cross-validation over the
 campaign's workspace cells (``K = min(5, cells)``).  Its correction enters with a
 **weight** chosen by that same CV on a grid fixed in advance (``stage_weights``,
-``--prior-stage-weights``, default :data:`STAGE_WEIGHTS` = {0, ¼, ½, ¾, 1}: a
-one-weight stacking of the stage, Breiman 1996), and the weighted stage is **adopted only
+``--prior-stage-weights``: a one-weight stacking of the stage, Breiman 1996; default
+:data:`STAGE_WEIGHTS` = {1}, the stage whole or not at all; :data:`STAGE_WEIGHT_GRID` =
+{0, ¼, ½, ¾, 1} the grid measured), and the weighted stage is **adopted only
 when it beats the physical fit with the earlier layer by more than k standard errors** on
 the campaign's held-out cells — the k-standard-error rule of the candidate choice
 (:func:`.se_rule.beats`) with its own ``k`` (``--prior-stage-se``, default
@@ -74,11 +75,18 @@ STAGE_TREES: tuple[int, ...] = (25, 100)
 #: that helped on held-out cells (IPA C, n = 100: −12 % → −2 %,
 #: docs/results/short-campaign-bounds.md).
 STAGE_SE_K = 0.0
-#: Default grid of the stage's weight ``w`` (module docstring), fixed before it was measured
-#: on the IPA UR10 (docs/results/short-campaign-bounds.md §7, §8).
-STAGE_WEIGHTS: tuple[float, ...] = (0.0, 0.25, 0.5, 0.75, 1.0)
+#: Default grid of the stage's weight ``w`` (module docstring): {1}, the stage whole or not at
+#: all, the rule before the weight.
+STAGE_WEIGHTS: tuple[float, ...] = (1.0,)
+#: The grid measured on the IPA UR10 (fixed before it was; docs/results/short-campaign-bounds.md
+#: §7, §8): better than {1} on every series at n ≤ 100 poses, worse on 3 of 6 at n = 200,
+#: 400, where the whole stage helps most and its CV's weight (fitted on 4/5 of the
+#: campaign) shrinks it too far — hence an option (``--prior-stage-weights
+#: 0,0.25,0.5,0.75,1``), not the default.
+STAGE_WEIGHT_GRID: tuple[float, ...] = (0.0, 0.25, 0.5, 0.75, 1.0)
 
-__all__ = ["MIN_STAGE_POSES", "STAGE_SE_K", "STAGE_TREES", "STAGE_WEIGHTS", "CampaignStage",
+__all__ = ["MIN_STAGE_POSES", "STAGE_SE_K", "STAGE_TREES", "STAGE_WEIGHTS", "STAGE_WEIGHT_GRID",
+           "CampaignStage",
            "check_weights", "fit_campaign_stage", "judge_stage", "stage_grid", "weighted_cv"]
 
 
@@ -251,8 +259,8 @@ def fit_campaign_stage(model: ErrorModel, data: CalibrationData, earlier: Learne
         :data:`STAGE_SE_K` = 0: the plain comparison of the CV means).
     weights : sequence of float
         The grid ``W`` of the stage's weight (:func:`check_weights`; default
-        :data:`STAGE_WEIGHTS`; ``(0,)``: no stage, nothing fitted; ``(1,)``: the stage
-        whole or not at all).
+        :data:`STAGE_WEIGHTS` = ``(1,)``: the stage whole or not at all;
+        :data:`STAGE_WEIGHT_GRID` the grid measured; ``(0,)``: no stage, nothing fitted).
 
     Returns
     -------

@@ -15,10 +15,10 @@ the robot in the new set-up.  A short campaign there identifies what it can dete
   wrong for the new set-up);
 * the campaign's own stage (:mod:`.campaign_stage`, ``stage=True``): small trees on what
   the fit leaves, on top of the earlier layer's arm-shape stage, weighted by their
-  grouped CV over the campaign's cells (``w`` from a grid fixed in advance, default
-  {0, ¼, ½, ¾, 1}) and adopted only when the weighted stage beats the fit without it by
-  more than k standard errors of the paired difference (:func:`.se_rule.beats`; its own
-  k, default 0).
+  grouped CV over the campaign's cells (``w`` from a grid fixed in advance, default {1}:
+  whole or not at all; e.g. {0, ¼, ½, ¾, 1}) and adopted only when the weighted stage
+  beats the fit without it by more than k standard errors of the paired difference
+  (:func:`.se_rule.beats`; its own k, default 0).
 
 The problem (MAP with Gaussian measurement noise ``σ_y`` per residual row and a Gaussian
 prior ``N(x_p, (τ σ_k)²)`` on each regularised parameter)::
@@ -441,8 +441,9 @@ class PriorCalibrator:
         out-of-fold predictions), ``w̃ = argmin_{w ∈ W, w > 0} m(w)``, adopted when
         ``m(w̃) < m(0)`` and ``d̄ + k·SE < 0`` for ``d_i = ‖e_i − w̃ ê_i‖ − ‖e_i‖``, then
         ``p = p_MAP + R_B (c_shape + w̃ ê_c(q))`` (:func:`.campaign_stage.judge_stage`;
-        default :data:`~.campaign_stage.STAGE_WEIGHTS` = (0, ¼, ½, ¾, 1); ``(1,)``: the
-        stage whole or not at all, the rule before; ``(0,)``: no stage).
+        default :data:`~.campaign_stage.STAGE_WEIGHTS` = ``(1,)``, the stage whole or not
+        at all; :data:`~.campaign_stage.STAGE_WEIGHT_GRID` = (0, ¼, ½, ¾, 1) the grid
+        measured; ``(0,)``: no stage).
     progress : callable, optional
         ``(stage, i, n, message)``.
 
