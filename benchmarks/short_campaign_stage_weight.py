@@ -1,9 +1,12 @@
 """The campaign stage weighted by its own CV instead of adopted or not (issue 36 §2, B).
 
-``plugcell calibrate --prior`` adopts the campaign's own stage (trees on what the fit
-leaves, :mod:`plugcell.calibration.campaign_stage`) or not: a weight w ∈ {0, 1}. Here
-w is chosen on the fixed grid {0, ¼, ½, ¾, 1} by the same grouped CV over the campaign's
-cells (a one-weight stacking of the stage, Breiman 1996)::
+Before ``--prior-stage-weights``, ``plugcell calibrate --prior`` adopted the campaign's own
+stage (trees on what the fit leaves, :mod:`plugcell.calibration.campaign_stage`) or not: a
+weight w ∈ {0, 1} (still the default, ``--prior-stage-weights 1``). Here w is chosen on
+the fixed grid {0, ¼, ½, ¾, 1} by the same grouped CV over the campaign's cells (a
+one-weight stacking of the stage, Breiman 1996), recomputed independently of the product
+— the measurement behind ``--prior-stage-weights 0,0.25,0.5,0.75,1``
+(:data:`~plugcell.calibration.campaign_stage.STAGE_WEIGHT_GRID`)::
 
     w* = argmin_w  mean_i ‖E_i − w ê_i‖          (ê: the stage's out-of-fold predictions)
     p_w = p_MAP + R_B (c_shape,A + w ê_c(q))     (w > 0; ê_c only where the stage's
@@ -16,8 +19,11 @@ out-of-fold predictions are recomputed and checked against the stage's recorded 
 errors). The grid is fixed in advance, w is chosen per campaign on the campaign alone,
 the held-out cells are only scored. Same campaigns as ``short_campaign_ur10.py`` (its
 seeds, its grouped 5-fold over the series' 0.4 m cells, draw k of its ``--draws``) and
-``--prior``'s defaults; prints per campaign the CV error and the held-out error per w,
-and per draw the pooled held-out mean error (mm) of today's ``--prior`` and of w*.
+``--prior``'s defaults but the stage whole or not at all (``stage_weights=(1,)``, "today"
+in the printout: the rule before the weight); prints per campaign the CV error and the
+held-out error per w, the weight ``--prior`` chose with that grid (``product w``, which
+must be w* at k = 0), and per draw the pooled held-out mean error (mm) of the rule before and of
+w*.
 
     .venv/bin/python benchmarks/short_campaign_stage_weight.py --series B --size 100
         [--draws 3] [--folds 5] [--quick] [--cache A.pkl]
@@ -38,7 +44,7 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from plugcell.calibration import CalibrationData
-from plugcell.calibration.campaign_stage import fit_campaign_stage
+from plugcell.calibration.campaign_stage import STAGE_WEIGHT_GRID, fit_campaign_stage
 from plugcell.calibration.prior import Prior, PriorCalibrator
 from plugcell.calibration.residual_model import (
     DEFAULT_GRID,
@@ -50,7 +56,7 @@ from plugcell.calibration.residual_model import (
 from residual_ur10 import find_data
 from short_campaign_ur10 import _errors, choose, earlier, outer_folds, ur10_and_sets
 
-WEIGHTS = (0.0, 0.25, 0.5, 0.75, 1.0)
+WEIGHTS = STAGE_WEIGHT_GRID
 
 
 def cv_weights(res: Any, camp: CalibrationData, layer: Any) -> tuple[dict[float, float], float]:
@@ -100,9 +106,10 @@ def held_out(res: Any, prior: Prior, layer: Any, test: CalibrationData) -> dict[
 def campaign(prior: Prior, camp: CalibrationData, test: CalibrationData
              ) -> tuple[Any, dict[float, float], float, dict[float, Any], Any]:
     """One campaign: today's ``--prior``, the stage's CV per weight, held-out per weight."""
-    res = PriorCalibrator(prior).fit(camp)
+    res = PriorCalibrator(prior, stage_weights=(1.0,)).fit(camp)
     earlier_layer = prior.layer if res.settings["prior"]["choice"] == "map" else None
-    layer = fit_campaign_stage(res.model, camp, earlier_layer, robot=prior.robot).layer
+    layer = fit_campaign_stage(res.model, camp, earlier_layer, robot=prior.robot,
+                               weights=(1.0,)).layer
     cv, check = cv_weights(res, camp, layer)
     return res, cv, check, held_out(res, prior, layer, test), _errors(
         test, res.predict_hybrid(test.q)[0])
@@ -124,12 +131,15 @@ def run(sets: dict[str, CalibrationData], resA: Any, key: str, n: int, draws: in
             camp = d.subset(choose(rng_model, d, tr, n, "random", rng))
             res, cv, check, err, e_today = campaign(prior, camp, test)
             w = min(WEIGHTS, key=lambda x: cv[x])
+            product = PriorCalibrator(prior, stage_weights=WEIGHTS).fit(camp).settings[
+                "prior"]["stage"]["weight"]
             today[k, te], chosen[k, te] = e_today, err[w]
             pri = res.settings["prior"]
             print(f"  {key} fold {f_no + 1}, n = {n}, draw {k}: {pri['choice']} "
                   f"{pri['scale']}, stage {pri['stage']['adopted']}; CV check {check:.0e} m; "
                   "CV " + " ".join(f"{x:g}: {cv[x] * 1e3:.4f}" for x in WEIGHTS)
-                  + f" -> w {w:g}; held-out: today {e_today.mean() * 1e3:.3f}, "
+                  + f" -> w {w:g} (product w {product:g}); held-out: today "
+                  f"{e_today.mean() * 1e3:.3f}, "
                   + " ".join(f"{x:g}: {err[x].mean() * 1e3:.3f}" for x in WEIGHTS)
                   + f" mm ({time.perf_counter() - t1:.0f} s)", flush=True)
     for k in range(draws):

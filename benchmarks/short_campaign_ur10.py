@@ -36,12 +36,15 @@ mean position error, mm.  Nothing is tuned on the held-out cells.
     .venv/bin/python benchmarks/short_campaign_ur10.py [--data DIR] [--sizes 25,50,...]
         [--series B,C,D] [--selection random|planned] [--draws K] [--quick]
         [--prior-cv kfold|cells] [--prior-se K] [--prior-stage-se K]
+        [--prior-stage-weights W,…]
         [--out docs/results/short-campaign-ur10.md]
 
 ``--prior-cv cells``: the choice's CV grouped over the campaign's 0.4 m cells instead of the
 default seeded random 10-fold of its poses (``PriorCalibrator(cv_split=…)``); ``--prior-se
 K``: the k of the choice's k-standard-error rule (default 1); ``--prior-stage-se K``: the
-k of the same rule on the campaign stage's grouped CV (default 0, the plain comparison) —
+k of the same rule on the campaign stage's grouped CV (default 0, the plain comparison);
+``--prior-stage-weights W,…``: the grid of the stage's CV-chosen weight (default ``1``:
+the stage whole or not at all; ``0,0.25,0.5,0.75,1`` the grid measured) —
 all measured in docs/results/short-campaign-bounds.md; write such a run elsewhere with
 ``--out``.
 
@@ -66,7 +69,12 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from calibration_ur10 import ur10_toml
 from plugcell.calibration import CalibrationData, CalibrationError, Calibrator
-from plugcell.calibration.campaign_stage import STAGE_SE_K
+from plugcell.calibration.campaign_stage import (
+    STAGE_SE_K,
+    STAGE_WEIGHT_GRID,
+    STAGE_WEIGHTS,
+    check_weights,
+)
 from plugcell.calibration.identify import refit_base
 from plugcell.calibration.planning import (
     PosePlanner,
@@ -168,7 +176,8 @@ def earlier(desc: Any, A: CalibrationData, learner: ResidualLearner,
 def run(desc: Any, sets: dict[str, CalibrationData], series: str, sizes: tuple[int, ...],
         selection: str, learner: ResidualLearner, folds: int = 5,
         cache: Path | None = None, draws: int = 1, cv_split: str = "kfold",
-        se_k: float = SE_RULE_K, stage_se_k: float = STAGE_SE_K) -> dict[str, Any]:
+        se_k: float = SE_RULE_K, stage_se_k: float = STAGE_SE_K,
+        stage_weights: tuple[float, ...] = STAGE_WEIGHTS) -> dict[str, Any]:
     t0 = time.perf_counter()
     A = sets["A"]
     resA = earlier(desc, A, learner, cache)
@@ -189,6 +198,7 @@ def run(desc: Any, sets: dict[str, CalibrationData], series: str, sizes: tuple[i
                for m in METHODS}
         taus: dict[int, list[str]] = {n: [] for n in sizes}
         stages: dict[int, list[bool]] = {n: [] for n in sizes}
+        weights: dict[int, list[float]] = {n: [] for n in sizes}
         for f_no, (tr, te, rng_model) in enumerate(split):
             test = d.subset(te)
             for n, k in ((n, k) for n in sizes for k in range(draws_k)):
@@ -209,10 +219,12 @@ def run(desc: Any, sets: dict[str, CalibrationData], series: str, sizes: tuple[i
                 # layer's correction taken out, the layer's correction on the test poses
                 e["moved_hybrid"][te] = _hybrid_moved(resA, camp, test)
                 res = PriorCalibrator(prior, cv_split=cv_split, se_k=se_k,
-                                      stage_se_k=stage_se_k).fit(camp)
+                                      stage_se_k=stage_se_k,
+                                      stage_weights=stage_weights).fit(camp)
                 pri = res.settings["prior"]
                 taus[n].append(pri["choice"] if pri["choice"] != "map" else f"{pri['scale']:g}")
                 stages[n].append(bool(pri["stage"]["adopted"]))
+                weights[n].append(float(pri["stage"]["weight"]))
                 P, _ = res.predict_hybrid(test.q)
                 e["prior"][te] = _errors(test, P)
                 # the same choice without the campaign stage (--prior-stage none): no second
@@ -224,7 +236,8 @@ def run(desc: Any, sets: dict[str, CalibrationData], series: str, sizes: tuple[i
                 e["prior_map"][te] = _errors(test, P)
                 print(f"  {key} fold {f_no + 1}, n = {n}, draw {k}: " + ", ".join(
                     f"{m} {np.nanmean(e[m][te]) * 1e3:.3f}" for m in METHODS)
-                    + f" mm (CV chose {taus[n][-1]}, stage {stages[n][-1]}; "
+                    + f" mm (CV chose {taus[n][-1]}, stage {stages[n][-1]}, weight "
+                    f"{weights[n][-1]:g}; "
                     f"{time.perf_counter() - t1:.0f} s)",
                     flush=True)
         # per draw: the mean over all held-out poses (mm); the figure: their mean
@@ -235,6 +248,7 @@ def run(desc: Any, sets: dict[str, CalibrationData], series: str, sizes: tuple[i
         row["draws"] = per_draw
         row["tau"] = {str(n): taus[n] for n in sizes}
         row["stage"] = {str(n): stages[n] for n in sizes}
+        row["stage_weight"] = {str(n): weights[n] for n in sizes}
         row["cells"] = int(groups.max()) + 1
         row["poses"] = len(d)
         row["physical_all_mm"] = float(_errors(d, moved_all.predict(d.q)).mean() * 1e3)
@@ -415,8 +429,12 @@ def _stage_rule_text(d: dict[str, Any]) -> str:
     """The campaign stage's k-standard-error rule as the page names it ("" for k = 0 and
     for runs before it)."""
     k = d.get("prior_stage_se") or 0.0
-    return (f" by more than {k:g} standard error{'s' if k != 1 else ''} of the paired "
-            "difference (clustered by fold, `--prior-stage-se`)" if k else "")
+    w = d.get("prior_stage_weights") or [1.0]
+    return ((f" by more than {k:g} standard error{'s' if k != 1 else ''} of the paired "
+             "difference (clustered by fold, `--prior-stage-se`)" if k else "")
+            + ("" if w == [1.0] else ", its correction weighted by w, the value of "
+               f"{{{', '.join(f'{x:g}' for x in w)}}} (`--prior-stage-weights`) whose grouped "
+               "CV error is least (the weighted stage judged against the fit)"))
 
 
 def write_page(d: dict[str, Any], path: Path, image: str | None) -> None:
@@ -424,7 +442,7 @@ def write_page(d: dict[str, Any], path: Path, image: str | None) -> None:
     text = f"""# A robot moved to a new set-up: a short campaign with a prior (UR10, IPA data)
 
 Generated by {_commands(d['argv'])} (do not edit by hand);
-{d['machine']}, {_cpu()}, single-threaded, {r['elapsed_s']:.0f} s{
+{d['machine']}, {d.get('cpu') or _cpu()}, single-threaded, {r['elapsed_s']:.0f} s{
     ' (summed over the runs)' if '+' in d['argv'] else ''}.{
     chr(10) + chr(10) + d['note'] if d.get('note') else ''}
 
@@ -470,7 +488,11 @@ without A's layer; moved: (ii); alone: (i)){
                                for v in row.get('draws', {}).get('prior', {}).values())
     else ''}: {json.dumps(_per_fold(r, 'tau'))}
 
-Campaign stage adopted per fold: {json.dumps(_per_fold(r, 'stage'))}
+Campaign stage adopted per fold: {json.dumps(_per_fold(r, 'stage'))}{
+    chr(10) + chr(10) + 'Campaign stage weight per fold (0: not adopted): '
+    + json.dumps(_per_fold(r, 'stage_weight')) if any('stage_weight' in row
+                                                      for row in r['series'].values())
+    else ''}
 
 ## The goal (≥ 20 % lower than (i) and (ii) with ≤ 100 new poses on B and D; never worse on C)
 
@@ -499,7 +521,10 @@ def merge(runs: list[dict[str, Any]]) -> dict[str, Any]:
         d["sizes"] = sorted(set(d["sizes"]) | set(r["sizes"]))
         d["result"]["elapsed_s"] += r["result"]["elapsed_s"]
         d["argv"] = d["argv"] + ["+"] + r["argv"]
-        for k in ("prior_cv", "prior_se", "prior_stage_se"):  # the last run's choice
+        if r.get("cpu") and r.get("cpu") != d.get("cpu"):
+            d["cpu"] = " / ".join(x for x in (d.get("cpu"), r["cpu"]) if x)
+        for k in ("prior_cv", "prior_se", "prior_stage_se",
+                  "prior_stage_weights"):  # the last run's choice
             if k in r:
                 d[k] = r[k]
     return d
@@ -526,6 +551,11 @@ def main() -> int:
     ap.add_argument("--prior-se", type=float, default=SE_RULE_K, metavar="K",
                     help="the choice's k-standard-error rule (PriorCalibrator se_k; default "
                          f"{SE_RULE_K:g})")
+    ap.add_argument("--prior-stage-weights", default=None, metavar="W[,W…]",
+                    help="the campaign stage's weight grid (PriorCalibrator stage_weights; "
+                         f"default {','.join(f'{w:g}' for w in STAGE_WEIGHTS)}: the stage "
+                         "whole or not at all; the grid measured: "
+                         f"{','.join(f'{w:g}' for w in STAGE_WEIGHT_GRID)})")
     ap.add_argument("--prior-stage-se", type=float, default=STAGE_SE_K, metavar="K",
                     help="the campaign stage's k-standard-error rule (PriorCalibrator "
                          f"stage_se_k; default {STAGE_SE_K:g})")
@@ -566,6 +596,8 @@ def main() -> int:
     from threadpoolctl import threadpool_limits
 
     sizes = tuple(int(x) for x in args.sizes.split(","))
+    weights = (STAGE_WEIGHTS if args.prior_stage_weights is None
+               else check_weights([float(x) for x in args.prior_stage_weights.split(",")]))
     series = [s for s in args.series.replace(",", "") if s in "BCD"]
     kw: dict[str, Any] = ({"grid": DEFAULT_GRID[1:2], "trees": 100} if args.quick
                           else {"grid": (DEFAULT_GRID[1], DEFAULT_GRID[2]), "trees": 200})
@@ -574,7 +606,7 @@ def main() -> int:
         result = run(desc, sets, "".join(series), sizes, args.selection,
                      ResidualLearner(**kw), folds=args.folds, cache=args.cache,
                      draws=args.draws, cv_split=args.prior_cv, se_k=args.prior_se,
-                     stage_se_k=args.prior_stage_se)
+                     stage_se_k=args.prior_stage_se, stage_weights=weights)
     d = {"argv": sys.argv[1:], "sizes": list(sizes), "selection": args.selection,
          "selection_text": "I-optimal for model 3, as `plugcell plan --from` chooses among "
                            "poses already measured" if args.selection == "planned"
@@ -582,8 +614,9 @@ def main() -> int:
                            f"{args.draws} seeded random draws: each figure the mean over the "
                            "draws of the mean held-out error, ± their sd",
          "machine": f"{platform.machine()}, Python {platform.python_version()}",
+         "cpu": _cpu(),  # where it ran (a page re-rendered elsewhere says this one)
          "prior_cv": args.prior_cv, "prior_se": args.prior_se,
-         "prior_stage_se": args.prior_stage_se,
+         "prior_stage_se": args.prior_stage_se, "prior_stage_weights": list(weights),
          "result": result}
     print(table(d))
     print("\n".join(goal(d)))

@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import json
 import os
+import re
 import shutil
 import subprocess
 import sys
@@ -218,7 +219,8 @@ def test_stage_weight_skips_cleanly_without_the_data(tmp_path: Path) -> None:
 @pytest.mark.skipif(not IPA_DATA.is_dir(), reason="IPA robot-accuracy data not present")
 def test_stage_weight_runs_on_the_ipa_data(set_up_a: Path) -> None:
     """Two folds, one campaign each: the stage's out-of-fold predictions recomputed by the
-    script match the stage's recorded CV errors exactly, and the weight's line is printed."""
+    script match the stage's recorded CV errors exactly, the weight ``--prior`` chose with
+    the same grid is the script's w*, and the weight's line is printed."""
     done = subprocess.run([sys.executable, str(BENCHMARKS / "short_campaign_stage_weight.py"),
                            "--quick", "--series", "D", "--size", "50", "--folds", "2",
                            "--cache", str(set_up_a)],
@@ -226,4 +228,6 @@ def test_stage_weight_runs_on_the_ipa_data(set_up_a: Path) -> None:
     assert done.returncode == 0, done.stderr[-2000:]
     lines = [x for x in done.stdout.splitlines() if x.startswith("  D fold")]
     assert len(lines) == 2 and all("CV check 0e+00 m" in x for x in lines), done.stdout
+    for x in lines:
+        assert re.search(r"-> w ([\d.]+) \(product w \1\)", x), x
     assert "w by the stage's CV" in done.stdout

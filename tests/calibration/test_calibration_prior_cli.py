@@ -133,6 +133,44 @@ def test_the_stage_k_is_its_own_option(files, capsys, monkeypatch):
     assert seen == [(1.0, 0.0), (1.0, 1.5)]
 
 
+def test_the_stage_weights_are_their_own_option(files, monkeypatch):
+    """``--prior-stage-weights W,…`` reaches the calibrator's ``stage_weights`` (sorted;
+    default {1}: the stage whole or not at all) and PARAMS.json's stage record holds the
+    grid and the weight applied."""
+    from plugcell.calibration.campaign_stage import STAGE_WEIGHTS
+    from plugcell.calibration.prior import PriorCalibrator
+
+    seen = []
+
+    def choose(self, data, offset=None):
+        seen.append(self.stage_weights)
+        return 10.0, {"0": 2e-4, "10": 1e-4, "moved": 2e-4, "alone": 3e-4}
+
+    monkeypatch.setattr(PriorCalibrator, "choose", choose)
+    for extra in ([], ["--prior-stage-weights", "1, 0.5"]):
+        assert main(_on_b(files, "--prior", str(files / "a.json"), *extra,
+                          "--out", str(files / "b-weights.json"))) == 0
+    assert seen == [STAGE_WEIGHTS, (0.5, 1.0)]
+    st = json.loads((files / "b-weights.json").read_text())["settings"]["prior"]["stage"]
+    assert st["weights"] == [0.5, 1.0] and st["weight"] in (0.0, 0.5, 1.0)
+    assert (st["weight"] > 0) == st["adopted"]
+
+
+def test_the_summary_says_the_stage_weight(files):
+    """An adopted stage with a weight below 1: the summary gives the CV at that weight."""
+    from plugcell.apps.commands.calibrate import _summary
+
+    assert main(_on_b(files, "--prior", str(files / "a.json"), "--prior-scale", "10",
+                      "--prior-stage", "none", "--out", str(files / "b-summary-w.json"))) == 0
+    d = json.loads((files / "b-summary-w.json").read_text())
+    d["settings"]["prior"]["stage"] = {
+        "adopted": True, "reason": "", "physical_mm": 0.40, "hybrid_mm": 0.41,
+        "cv_by_weight_mm": {"0": 0.40, "0.5": 0.37, "1": 0.41}, "weight": 0.5,
+        "gain_mm": -0.03, "se_mm": 0.01, "se_k": 0.0, "cells": 9, "folds": 5, "params": {}}
+    assert ("campaign stage: adopted (grouped CV over 9 cells: 0.400 -> 0.370 mm at weight "
+            "0.5, gain 0.030 mm (standard error 0.010 mm))") in _summary(d)
+
+
 @pytest.mark.parametrize(("extra", "message"), [
     (["--prior-scale", "3"], "--prior-scale needs --prior EARLIER.json"),
     (["--prior", "A", "--prior-scale", "0.5"],
@@ -145,6 +183,17 @@ def test_the_stage_k_is_its_own_option(files, capsys, monkeypatch):
     (["--prior-stage-se", "1"], "--prior-stage-se needs --prior EARLIER.json"),
     (["--prior", "A", "--prior-stage-se", "nan"],
      "--prior-stage-se must be a number ≥ 0 (standard errors), got nan"),
+    (["--prior-stage-weights", "0.5"], "--prior-stage-weights needs --prior EARLIER.json"),
+    (["--prior", "A", "--prior-stage-weights", "0.5,x"],
+     "--prior-stage-weights: 'x' is not a number (W[,W…], each in [0, 1])"),
+    (["--prior", "A", "--prior-stage-weights", ""],
+     "--prior-stage-weights: the campaign stage's weights are empty (give 0 for no stage)"),
+    (["--prior", "A", "--prior-stage-weights", "0,1.5"],
+     "--prior-stage-weights: each campaign stage weight must be a number in [0, 1], got 1.5"),
+    (["--prior", "A", "--prior-stage-weights", "nan"],
+     "--prior-stage-weights: each campaign stage weight must be a number in [0, 1], got nan"),
+    (["--prior", "A", "--prior-stage-weights", "0.5,1,0.5"],
+     "--prior-stage-weights: the campaign stage's weights list 0.5 twice"),
     (["--prior", "A"], "--prior needs --out PARAMS.json"),
     (["--prior", "A", "--thermal"], "--prior: --thermal cannot be combined with it"),
     (["--prior", "A", "--probe", "0,0,90,0,0,0"], "--prior: --probe cannot be combined"),

@@ -84,16 +84,19 @@ def test_a_clear_gain_is_adopted(earlier):
     s = stage.summary()
     assert stage.adopted and stage.reason == ""
     assert s["gain_mm"] + s["se_k"] * s["se_mm"] < 0 and s["se_k"] == 1.0
-    assert s["gain_mm"] == pytest.approx(s["hybrid_mm"] - s["physical_mm"], abs=1e-9)
+    assert s["gain_mm"] == pytest.approx(
+        s["cv_by_weight_mm"][f"{s['weight']:g}"] - s["physical_mm"], abs=1e-9)
+    assert s["cv_by_weight_mm"]["0"] == pytest.approx(s["physical_mm"], abs=1e-12)
+    assert s["cv_by_weight_mm"]["1"] == pytest.approx(s["hybrid_mm"], abs=1e-12)
 
 
 def test_a_gain_within_one_standard_error_is_refused(earlier):
-    """Seed 2: the stage's CV is better than the fit (``useful``, adopted by the plain
-    comparison at k = 0) but by less than one standard error: refused at k = 1, and the
-    reason gives the gain and the SE."""
+    """Seed 2, the stage whole or not at all (weights {1}): the stage's CV is better than
+    the fit (``useful``, adopted by the plain comparison at k = 0) but by less than one
+    standard error: refused at k = 1, and the reason gives the gain and the SE."""
     camp, moved = _campaign(earlier, 2)
-    at1 = fit_campaign_stage(moved, camp, None, robot="r", se_k=1.0)
-    at0 = fit_campaign_stage(moved, camp, None, robot="r", se_k=0.0)
+    at1 = fit_campaign_stage(moved, camp, None, robot="r", se_k=1.0, weights=(1.0,))
+    at0 = fit_campaign_stage(moved, camp, None, robot="r", se_k=0.0, weights=(1.0,))
     assert at1.layer is not None and at1.layer.useful
     assert not at1.adopted and "within 1 standard error" in at1.reason
     assert -at1.se_mm < at1.gain_mm < 0
@@ -102,12 +105,12 @@ def test_a_gain_within_one_standard_error_is_refused(earlier):
 
 @pytest.mark.parametrize("seed", [1, 2, 5, 7])
 def test_k_zero_is_the_plain_comparison(earlier, seed):
-    """The property the rule keeps: at k = 0 the stage is adopted exactly when its grouped
-    CV mean beats the fit's (``LearnedResidual.useful``, the rule before the SE); at
-    k = 1 only when it is adopted at k = 0 too."""
+    """The property the rule keeps (weights {1}): at k = 0 the stage is adopted exactly when
+    its grouped CV mean beats the fit's (``LearnedResidual.useful``, the rule before the
+    SE); at k = 1 only when it is adopted at k = 0 too."""
     camp, moved = _campaign(earlier, seed)
-    at0 = fit_campaign_stage(moved, camp, None, robot="r", se_k=0.0)
-    at1 = fit_campaign_stage(moved, camp, None, robot="r", se_k=1.0)
+    at0 = fit_campaign_stage(moved, camp, None, robot="r", se_k=0.0, weights=(1.0,))
+    at1 = fit_campaign_stage(moved, camp, None, robot="r", se_k=1.0, weights=(1.0,))
     assert at0.layer is not None
     assert at0.adopted == at0.layer.useful
     assert not at1.adopted or at0.adopted
@@ -116,14 +119,15 @@ def test_k_zero_is_the_plain_comparison(earlier, seed):
 def test_the_calibrator_gives_its_stage_k_to_the_stage(earlier):
     """``PriorCalibrator(stage_se_k=…)`` (``--prior-stage-se``) rules the stage, the
     choice's ``se_k`` does not: on seed 2's campaign (τ = 0 given: no candidate choice)
-    the stage is refused at stage k = 1 — the result has no layer — and adopted by the
-    default (:data:`STAGE_SE_K` = 0) whatever ``se_k``; PARAMS.json's stage record says
-    which k."""
+    the stage (whole or not at all: weights {1}) is refused at stage k = 1 — the result has
+    no layer — and adopted by the default (:data:`STAGE_SE_K` = 0) whatever ``se_k``;
+    PARAMS.json's stage record says which k."""
     assert STAGE_SE_K == 0.0
     prior = Prior.from_result(earlier)
     camp, _ = _campaign(earlier, 2)
-    out1 = PriorCalibrator(prior, scale=FRAMES_ONLY, stage_se_k=1.0).fit(camp)
-    out0 = PriorCalibrator(prior, scale=FRAMES_ONLY, se_k=3.0).fit(camp)
+    out1 = PriorCalibrator(prior, scale=FRAMES_ONLY, stage_se_k=1.0,
+                           stage_weights=(1.0,)).fit(camp)
+    out0 = PriorCalibrator(prior, scale=FRAMES_ONLY, se_k=3.0, stage_weights=(1.0,)).fit(camp)
     s1, s0 = out1.settings["prior"]["stage"], out0.settings["prior"]["stage"]
     assert not s1["adopted"] and s1["se_k"] == 1.0 and out1.residual_model is None
     assert "within 1 standard error" in s1["reason"]

@@ -14,9 +14,11 @@ the robot in the new set-up.  A short campaign there identifies what it can dete
   :data:`PHYSICAL_SCALES`: the same MAP on the raw campaign; the earlier layer can be
   wrong for the new set-up);
 * the campaign's own stage (:mod:`.campaign_stage`, ``stage=True``): small trees on what
-  the fit leaves, on top of the earlier layer's arm-shape stage, adopted only when their
-  grouped CV over the campaign's cells beats the fit without them by more than k
-  standard errors of the paired difference (:func:`.se_rule.beats`; its own k, default 0).
+  the fit leaves, on top of the earlier layer's arm-shape stage, weighted by their
+  grouped CV over the campaign's cells (``w`` from a grid fixed in advance, default {1}:
+  whole or not at all; e.g. {0, ¼, ½, ¾, 1}) and adopted only when the weighted stage
+  beats the fit without it by more than k standard errors of the paired difference
+  (:func:`.se_rule.beats`; its own k, default 0).
 
 The problem (MAP with Gaussian measurement noise ``σ_y`` per residual row and a Gaussian
 prior ``N(x_p, (τ σ_k)²)`` on each regularised parameter)::
@@ -60,7 +62,13 @@ from dataclasses import dataclass, replace
 import numpy as np
 from numpy.typing import NDArray
 
-from plugcell.calibration.campaign_stage import STAGE_SE_K, CampaignStage, fit_campaign_stage
+from plugcell.calibration.campaign_stage import (
+    STAGE_SE_K,
+    STAGE_WEIGHTS,
+    CampaignStage,
+    check_weights,
+    fit_campaign_stage,
+)
 from plugcell.calibration.configs import ModelConfig
 from plugcell.calibration.data import CalibrationData
 from plugcell.calibration.identifiability import analyse
@@ -400,9 +408,10 @@ class PriorCalibrator:
         exactly, BASE and PROBE alone re-identified); default: chosen by CV over the
         campaign among :data:`CANDIDATES` (:meth:`choose`).
     stage : bool
-        Learn the campaign's own stage on what the physical fit leaves and adopt it when
-        its grouped CV beats the fit without it by more than ``stage_se_k`` standard
-        errors (:mod:`.campaign_stage`); default True.
+        Learn the campaign's own stage on what the physical fit leaves, weight it by its
+        grouped CV (``stage_weights``) and adopt it when the weighted stage beats the fit
+        without it by more than ``stage_se_k`` standard errors (:mod:`.campaign_stage`);
+        default True.
     rotation_weight : float, m/rad
         Weight ``w`` of the orientation rows.
     tol : float
@@ -426,6 +435,15 @@ class PriorCalibrator:
         k ≥ 0 of the campaign stage's adoption, the same rule on its grouped CV
         (:func:`.campaign_stage.fit_campaign_stage`; default
         :data:`~.campaign_stage.STAGE_SE_K` = 0, the plain comparison).
+    stage_weights : sequence of float
+        The grid ``W ⊂ [0, 1]`` of the campaign stage's weight: with
+        ``m(w) = mean_i ‖e_i − w ê_i‖`` over the stage's grouped CV (``ê`` its
+        out-of-fold predictions), ``w̃ = argmin_{w ∈ W, w > 0} m(w)``, adopted when
+        ``m(w̃) < m(0)`` and ``d̄ + k·SE < 0`` for ``d_i = ‖e_i − w̃ ê_i‖ − ‖e_i‖``, then
+        ``p = p_MAP + R_B (c_shape + w̃ ê_c(q))`` (:func:`.campaign_stage.judge_stage`;
+        default :data:`~.campaign_stage.STAGE_WEIGHTS` = ``(1,)``, the stage whole or not
+        at all; :data:`~.campaign_stage.STAGE_WEIGHT_GRID` = (0, ¼, ½, ¾, 1) the grid
+        measured; ``(0,)``: no stage).
     progress : callable, optional
         ``(stage, i, n, message)``.
 
@@ -433,13 +451,14 @@ class PriorCalibrator:
     ------
     CalibrationError
         τ neither 0 nor a number ≥ 1, non-positive tolerances or weights, an unknown
-        ``cv_split``.
+        ``cv_split``, a bad k, a bad stage weight grid (:func:`.campaign_stage.check_weights`).
     """
 
     def __init__(self, prior: Prior, *, scale: float | None = None, stage: bool = True,
                  rotation_weight: float = 1.0, tol: float = 1e-7, max_iterations: int = 30,
                  cell_size_m: float = CELL_SIZE_M, cv_split: str = "kfold",
                  se_k: float = SE_RULE_K, stage_se_k: float = STAGE_SE_K,
+                 stage_weights: Sequence[float] = STAGE_WEIGHTS,
                  progress: Callable[[str, int, int, str], None] | None = None) -> None:
         if scale is not None and not (scale == FRAMES_ONLY
                                       or (math.isfinite(scale) and scale >= 1.0)):
@@ -460,6 +479,7 @@ class PriorCalibrator:
         self.cv_split = cv_split
         self.se_k = check_k(se_k)
         self.stage_se_k = check_k(stage_se_k)
+        self.stage_weights = check_weights(stage_weights)
         self.progress = progress
 
     def _say(self, stage: str, i: int, n: int, msg: str) -> None:
@@ -677,11 +697,11 @@ class PriorCalibrator:
         -------
         CalibrationResult
             The MAP model; ``nominal`` is the prior re-registered on the campaign (BASE +
-            PROBE: the "before"); its learned layer: the campaign's own stage on top of the
-            prior layer's arm-shape stage when adopted (:mod:`.campaign_stage`), else the
-            prior's layer (rebound to the new model: its correction was the offset the
-            physical fit saw); ``settings["prior"]`` records τ, its CV scores, the
-            regularised keys and the stage.
+            PROBE: the "before"); its learned layer: the campaign's own stage (with its
+            weight) on top of the prior layer's arm-shape stage when adopted
+            (:mod:`.campaign_stage`), else the prior's layer (rebound to the new model: its
+            correction was the offset the physical fit saw); ``settings["prior"]`` records
+            τ, its CV scores, the regularised keys and the stage.
 
         Raises
         ------
@@ -728,9 +748,10 @@ class PriorCalibrator:
         if not self.stage:
             return None
         stage = fit_campaign_stage(model, data, earlier, robot=self.prior.robot,
-                                   cell_size_m=self.cell_size_m, se_k=self.stage_se_k)
+                                   cell_size_m=self.cell_size_m, se_k=self.stage_se_k,
+                                   weights=self.stage_weights)
         self._say("prior", 1, 1, "campaign stage: " + (
-            "adopted" if stage.adopted else "not used") + (
+            f"adopted, weight {stage.weight:g}" if stage.adopted else "not used") + (
             f" ({stage.reason})" if stage.reason else ""))
         return stage
 

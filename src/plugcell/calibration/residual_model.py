@@ -78,6 +78,7 @@ __all__ = [
     "ResidualPrediction",
     "ShapeStage",
     "calibration_fingerprint",
+    "check_weight",
     "from_joint1_frame",
     "hybrid_poses",
     "hybrid_residuals",
@@ -222,6 +223,11 @@ class CrossValidation:
         file (not stored there).
     fold : (N,) int array or None
         The fold that held each pose out.
+    targets, predictions : (N, 3) array or None, m
+        Per pose, the position target ``e_i`` and its out-of-fold prediction ``ê_i``
+        with the chosen hyper-parameters (so a weighted layer's CV error
+        ``‖e_i − w ê_i‖`` needs no refit: :mod:`.campaign_stage`); ``None`` for a layer
+        read from a file.
     """
 
     physical_mm: float
@@ -235,6 +241,8 @@ class CrossValidation:
     physical_errors: Array | None = field(default=None, compare=False, repr=False)
     hybrid_errors: Array | None = field(default=None, compare=False, repr=False)
     fold: Array | None = field(default=None, compare=False, repr=False)
+    targets: Array | None = field(default=None, compare=False, repr=False)
+    predictions: Array | None = field(default=None, compare=False, repr=False)
 
     def as_dict(self) -> dict[str, Any]:
         """The record as PARAMS.json stores it (``residual_model.cross_validation``).
@@ -524,6 +532,12 @@ class LearnedResidual:
         same robot), applied underneath: this layer's stages were fitted on the residual
         it leaves, and every prediction adds its correction where its own in-domain test
         passes; or ``None``.
+    weight : float
+        The factor ``w ∈ [0, 1]`` on this layer's own regressors' correction where it
+        applies (``local``): ``(e, φ) = w · ê(x)``; the shape and prior stages are not
+        scaled.  1 (the default, and every layer written before the weight existed) but
+        for a campaign stage shrunk by its own CV (:mod:`.campaign_stage`), whose
+        ``useful`` then says that the weighted correction beat the fit on held-out cells.
     """
 
     robot: str
@@ -541,6 +555,10 @@ class LearnedResidual:
     sklearn_version: str = field(default="")
     shape: ShapeStage | None = None
     prior: ShapeStage | None = None
+    weight: float = 1.0
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "weight", check_weight(self.weight, "the layer's weight"))
 
     def features(self, q: ArrayLike, payload_kg: ArrayLike | float | None = None,
                  temperature_c: ArrayLike | float | None = None) -> Array:
@@ -577,8 +595,9 @@ class LearnedResidual:
         regressors give ``(e, φ)``.  Elsewhere (everywhere when the layer is not
         ``useful``) the shape stage's correction
         ``R_z(q1) · s(sin q_J, cos q_J)`` is used where its own test passes, else zero
-        (physical model).  A ``prior`` stage's correction is added everywhere its own test
-        passes (the stages above were fitted on what it leaves).
+        (physical model).  The regressors' ``(e, φ)`` is scaled by ``weight``.  A
+        ``prior`` stage's correction is added everywhere its own test passes (the stages
+        above were fitted on what it leaves).
 
         Parameters
         ----------
@@ -617,6 +636,8 @@ class LearnedResidual:
             with threadpool_limits(1):
                 for j, est in enumerate(self.estimators):
                     corr[local, j] = est.predict(Xi)
+            if self.weight != 1.0:  # a shrunk campaign stage (1: the prediction untouched)
+                corr[local] *= self.weight
         if self.prior is not None:
             c, prior_in, _ = self.prior.predict(q)
             corr[:, :c.shape[1]] += c
@@ -631,7 +652,7 @@ class LearnedResidual:
         dict
             ``kind``, ``learner``, ``robot``, ``fingerprint``, ``features`` (names),
             ``frame`` (``"robot base"``), ``orientation``, ``params``, ``threshold``
-            (dimensionless), ``useful``, ``poses``, ``cross_validation``
+            (dimensionless), ``useful``, ``weight``, ``poses``, ``cross_validation``
             (:meth:`CrossValidation.as_dict`, mm and deg), ``sklearn_version`` and
             ``shape_stage`` and ``prior_stage`` (:meth:`ShapeStage.summary` or ``None``).
         """
@@ -640,10 +661,36 @@ class LearnedResidual:
                 "features": feature_names(self.uses_payload, self.uses_temperature),
                 "frame": "robot base", "orientation": self.orientation,
                 "params": dict(self.params), "threshold": self.threshold,
-                "useful": self.useful, "poses": self.n_poses,
+                "useful": self.useful, "weight": self.weight, "poses": self.n_poses,
                 "cross_validation": self.cv.as_dict(), "sklearn_version": self.sklearn_version,
                 "shape_stage": None if self.shape is None else self.shape.summary(),
                 "prior_stage": None if self.prior is None else self.prior.summary()}
+
+
+def check_weight(w: Any, what: str = "weight") -> float:
+    """A weight ``w ∈ [0, 1]`` of a learned correction, as a float, checked.
+
+    Parameters
+    ----------
+    w : float
+        The weight.
+    what : str
+        Its name in the error message.
+
+    Returns
+    -------
+    float
+        ``w``.
+
+    Raises
+    ------
+    ResidualModelError
+        ``w`` not a real number (a bool included), not finite, or outside [0, 1].
+    """
+    ok = isinstance(w, (int, float, np.integer, np.floating)) and not isinstance(w, bool)
+    if not (ok and math.isfinite(w) and 0.0 <= w <= 1.0):
+        raise ResidualModelError(f"{what} must be a number in [0, 1], got {w!r}")
+    return float(w)
 
 
 def feature_names(payload: bool, temperature: bool) -> list[str]:
@@ -996,7 +1043,8 @@ class ResidualLearner:
                              folds=self.n_splits, cells=n_cells, cell_size_m=self.cell_size_m,
                              scores=tuple(scores), physical_errors=phys_norm,
                              hybrid_errors=np.linalg.norm(E[:, :k_pos] - pred, axis=1),
-                             fold=fold_labels(folds, n))
+                             fold=fold_labels(folds, n), targets=E[:, :k_pos].copy(),
+                             predictions=pred)
         return LearnedResidual(
             robot=robot, fingerprint=calibration_fingerprint(model), estimators=estimators,
             neighbours=NearestNeighbors(n_neighbors=1).fit(X), threshold=threshold,

@@ -190,6 +190,9 @@ def _hybrid_section(result: CalibrationResult) -> list[str]:
            f"workspace cells of {cv.cell_size_m:g} m: held-out mean position error "
            f"{cv.physical_mm:.3f} mm (physical) → {cv.hybrid_mm:.3f} mm (hybrid)"
            + ("" if layer.useful else " — <b>no gain: this stage is not applied</b>")
+           + ("" if layer.weight == 1 else
+              f"; its correction applied with weight {layer.weight:g}, the value its grouped "
+              "cross-validation chose (a campaign stage, <code>--prior</code>)")
            + ("" if layer.shape is None else
               f"; arm-shape stage (joint-1 frame, sin/cos of "
               f"{', '.join(f'q{j + 1}' for j in layer.shape.joints)}): "

@@ -19,9 +19,13 @@ Loading checks, each failure a :class:`ResidualFileError` naming the file:
 
 Format 2 added the transferable arm-shape stage
 (:class:`~plugcell.calibration.residual_model.ShapeStage`: its estimators,
-nearest-neighbour index and summary); format 3 (this version) adds the prior stage, an
-arm-shape stage of another set-up the layer was learned on top of
-(``calibrate --residual-prior``).  Format-1 and format-2 files still load.
+nearest-neighbour index and summary); format 3 adds the prior stage, an arm-shape stage
+of another set-up the layer was learned on top of (``calibrate --residual-prior``);
+format 4 (this version) adds the layer's ``weight`` (a campaign stage shrunk by its own
+CV, ``calibrate --prior``: the factor on its regressors' correction).  Files of formats
+1–3 still load, with weight 1 (their layers were applied whole); a weight that is not a
+number in [0, 1] is refused.  An older plugcell refuses a format-4 file rather than apply
+a shrunk stage whole.
 """
 
 from __future__ import annotations
@@ -34,17 +38,20 @@ from typing import Any
 from plugcell.calibration.residual_model import (
     CrossValidation,
     LearnedResidual,
+    ResidualModelError,
     ShapeStage,
     calibration_fingerprint,
+    check_weight,
 )
 
 __all__ = ["FORMAT", "TRUSTED_TYPES", "ResidualFileError", "load_residual", "residual_path",
            "save_residual"]
 
 FORMAT = "plugcell-residual-model"
-FORMAT_VERSION = 3
-#: versions :func:`load_residual` reads (1: no arm-shape stage; 2: no prior stage).
-READABLE_VERSIONS = (1, 2, 3)
+FORMAT_VERSION = 4
+#: versions :func:`load_residual` reads (1: no arm-shape stage; 2: no prior stage; 3: no
+#: weight, read as 1).
+READABLE_VERSIONS = (1, 2, 3, 4)
 #: The only non-builtin types a side file may contain.
 TRUSTED_TYPES = (
     "sklearn.ensemble._hist_gradient_boosting.gradient_boosting.HistGradientBoostingRegressor",
@@ -161,7 +168,8 @@ def load_residual(entry: dict[str, Any], params_path: str | Path, *, robot: str,
     -------
     LearnedResidual
         The layer (with its arm-shape stage and its prior stage when the file has them;
-        format 1 has neither, format 2 no prior stage).
+        format 1 has neither, format 2 no prior stage) and its ``weight`` (1 when the
+        file has none: formats 1–3).
 
     Raises
     ------
@@ -169,7 +177,8 @@ def load_residual(entry: dict[str, Any], params_path: str | Path, *, robot: str,
         The entry lacks ``file``/``sha256``, or the file is missing, differs from the
         recorded SHA-256, is not a skops file, contains untrusted types, is not a
         plugcell residual model of a readable version, belongs to another robot or
-        calibration, or was written by another scikit-learn major.minor version.
+        calibration, was written by another scikit-learn major.minor version, or its
+        ``weight`` is not a number in [0, 1].
     """
     import sklearn
 
@@ -197,6 +206,10 @@ def load_residual(entry: dict[str, Any], params_path: str | Path, *, robot: str,
     features = list(meta["features"])
     shape = _stage(meta.get("shape_stage"), obj.get("shape"), p, "shape")
     prior = _stage(meta.get("prior_stage"), obj.get("prior"), p, "prior")
+    try:
+        weight = check_weight(meta.get("weight", 1.0), f"{p}: the layer's 'weight'")
+    except ResidualModelError as exc:
+        raise ResidualFileError(str(exc)) from None
     return LearnedResidual(
         robot=robot, fingerprint=fp, estimators=tuple(obj["estimators"]),
         neighbours=obj["neighbours"], threshold=float(meta["threshold"]),
@@ -204,7 +217,7 @@ def load_residual(entry: dict[str, Any], params_path: str | Path, *, robot: str,
         uses_payload=any(f.startswith("payload") for f in features),
         orientation=bool(meta["orientation"]), params=dict(meta["params"]),
         cv=CrossValidation(**cvd), useful=bool(meta["useful"]), n_poses=int(meta["poses"]),
-        sklearn_version=str(meta["sklearn_version"]), shape=shape, prior=prior)
+        sklearn_version=str(meta["sklearn_version"]), shape=shape, prior=prior, weight=weight)
 
 
 def _trusted_document(p: Path, want: str, params_path: str | Path) -> dict[str, Any]:

@@ -5,7 +5,8 @@
                        [--out PARAMS.json] [--json] [--report REPORT.html]
                        [--residuals RES.json] [--prior EARLIER.json [--prior-scale TAU]
                        [--prior-stage learned|none] [--prior-cv kfold|cells]
-                       [--prior-se K] [--prior-stage-se K]]
+                       [--prior-se K] [--prior-stage-se K]
+                       [--prior-stage-weights W[,W…]]]
 
 A file of joint readings and tracker measurements is all it needs: BASE and
 PROBE are estimated from the data unless given (``--base``/``--probe``, e.g. from
@@ -29,7 +30,12 @@ errors of the paired CV difference (default 1; docs/calibration.md).  The campai
 stage is adopted when its grouped CV beats the fit without it by more than
 ``--prior-stage-se K`` standard errors of their paired difference (the same rule; default
 0, the plain comparison: with at most 5 grouped folds the SE is noisy and k = 1 refused
-stages that helped, docs/results/short-campaign-bounds.md).
+stages that helped, docs/results/short-campaign-bounds.md), its correction weighted by
+the value ``w̃`` of ``--prior-stage-weights`` whose grouped CV error
+``m(w) = mean_i ‖e_i − w ê_i‖`` is least (``ê``: the stage's out-of-fold predictions; the
+rule judges the weighted stage; default ``1``: the stage whole or not at all;
+``0,0.25,0.5,0.75,1`` the grid measured on the IPA UR10, better at ≤ 100 poses and worse
+at 200–400 there; ``0``: no stage).
 ``--residual-prior`` is a different thing (a new learned layer on top of the earlier
 layer's arm-shape stage, ≥ 200 poses): kept as it is.
 """
@@ -156,6 +162,11 @@ def _add_prior_args(p: argparse.ArgumentParser) -> None:
                    help="with --prior: adopt the campaign stage only when its grouped CV "
                         "beats the fit without it by more than K standard errors of the "
                         "paired difference (default 0: any gain; the same rule as --prior-se)")
+    p.add_argument("--prior-stage-weights", metavar="W[,W…]", default=None,
+                   help="with --prior: the weights in [0, 1] the campaign stage's grouped CV "
+                        "chooses among for its correction, m(w) = mean ‖e − w ê‖ least "
+                        "(default 1: the stage whole or not at all; 0,0.25,0.5,0.75,1: the "
+                        "grid measured, docs/calibration.md; 0: no stage)")
 
 
 def _frame(text: str, what: str) -> np.ndarray:
@@ -312,9 +323,11 @@ def _summary(d: dict[str, Any]) -> str:
                 if pri.get("se_k") is not None else ""))
         st = pri.get("stage")
         if st:
+            w = st.get("weight", 1.0)
             lines.append("  campaign stage: " + (
                 f"adopted (grouped CV over {st['cells']} cells: {st['physical_mm']:.3f} -> "
-                f"{st['hybrid_mm']:.3f} mm" + (
+                f"{(st.get('cv_by_weight_mm') or {}).get(f'{w:g}', st['hybrid_mm']):.3f} mm"
+                + ("" if w == 1 else f" at weight {w:g}") + (
                     f", gain {-st['gain_mm']:.3f} mm " + (
                         f"> {st['se_k']:g} × its standard error {st['se_mm']:.3f} mm"
                         if st["se_k"] else f"(standard error {st['se_mm']:.3f} mm)")
@@ -403,6 +416,8 @@ def _prior_conflicts(args: argparse.Namespace) -> None:
             raise CommandError("--prior-se needs --prior EARLIER.json")
         if args.prior_stage_se is not None:
             raise CommandError("--prior-stage-se needs --prior EARLIER.json")
+        if args.prior_stage_weights is not None:
+            raise CommandError("--prior-stage-weights needs --prior EARLIER.json")
         return
     given = [o for o, on in (("--residual-model learned", args.residual_model != "none"),
                              ("--residual-prior", args.residual_prior is not None),
@@ -423,6 +438,45 @@ def _prior_conflicts(args: argparse.Namespace) -> None:
     for opt, k in (("--prior-se", args.prior_se), ("--prior-stage-se", args.prior_stage_se)):
         if k is not None and not (math.isfinite(k) and k >= 0):
             raise CommandError(f"{opt} must be a number ≥ 0 (standard errors), got {k}")
+    if args.prior_stage_weights is not None:
+        stage_weights(args.prior_stage_weights)
+
+
+def stage_weights(text: str) -> tuple[float, ...]:
+    """The grid of ``--prior-stage-weights W[,W…]``, checked
+    (:func:`~plugcell.calibration.campaign_stage.check_weights`).
+
+    Parameters
+    ----------
+    text : str
+        Comma-separated weights, e.g. ``"0,0.5,1"``.
+
+    Returns
+    -------
+    tuple of float
+        The weights, sorted.
+
+    Raises
+    ------
+    CommandError
+        A part that is not a number, or a grid :func:`check_weights` refuses (empty, a
+        weight outside [0, 1] or not finite, a weight twice), naming the option.
+    """
+    from plugcell.calibration import CalibrationError
+    from plugcell.calibration.campaign_stage import check_weights
+
+    values = []
+    for part in (x.strip() for x in text.split(",")) if text.strip() else ():
+        try:
+            values.append(float(part))
+        except ValueError:
+            raise CommandError(f"--prior-stage-weights: {part!r} is not a number (W[,W…], "
+                               "each in [0, 1])") from None
+    try:
+        return check_weights(values)
+    except CalibrationError as exc:
+        raise CommandError(f"--prior-stage-weights: {str(exc).removeprefix('prior: ')}"
+                           ) from None
 
 
 def _run(args: argparse.Namespace) -> int:
@@ -504,7 +558,7 @@ def _run(args: argparse.Namespace) -> int:
 
 def _fit_prior(args: argparse.Namespace, earlier: Any, data: Any, progress: Any) -> Any:
     """The short campaign with the earlier calibration as prior (--prior)."""
-    from plugcell.calibration.campaign_stage import STAGE_SE_K
+    from plugcell.calibration.campaign_stage import STAGE_SE_K, STAGE_WEIGHTS
     from plugcell.calibration.prior import SE_RULE_K, PriorCalibrator
 
     return PriorCalibrator(earlier, scale=args.prior_scale, stage=args.prior_stage != "none",
@@ -513,7 +567,10 @@ def _fit_prior(args: argparse.Namespace, earlier: Any, data: Any, progress: Any)
                            cv_split=args.prior_cv or "kfold",
                            se_k=SE_RULE_K if args.prior_se is None else args.prior_se,
                            stage_se_k=STAGE_SE_K if args.prior_stage_se is None
-                           else args.prior_stage_se, progress=progress).fit(data)
+                           else args.prior_stage_se,
+                           stage_weights=STAGE_WEIGHTS if args.prior_stage_weights is None
+                           else stage_weights(args.prior_stage_weights),
+                           progress=progress).fit(data)
 
 
 def _fit(args: argparse.Namespace, desc: Any, data: Any, base: Any, probe: Any, prior: Any,
