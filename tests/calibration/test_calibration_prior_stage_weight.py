@@ -254,6 +254,12 @@ def test_the_side_file_keeps_the_weight_and_an_older_file_reads_as_weight_one(fi
     params = tmp_path / "p.json"
     entry = save_residual(half, tmp_path / "p.residual.skops")
     assert entry["weight"] == 0.5
+    blob = (tmp_path / "p.residual.skops").read_bytes()
+    assert sio.loads(blob, trusted=sio.get_untrusted_types(data=blob))["format_version"] == 4
+    whole = save_residual(layer, tmp_path / "whole.skops")  # weight 1: what older plugcell reads
+    blob = (tmp_path / "whole.skops").read_bytes()
+    assert sio.loads(blob, trusted=sio.get_untrusted_types(data=blob))["format_version"] == 3
+    assert load_residual(whole, params, robot="r", model=model).weight == 1.0
     back = load_residual(entry, params, robot="r", model=model)
     assert back.weight == 0.5
     np.testing.assert_array_equal(back.predict(camp.q).correction,

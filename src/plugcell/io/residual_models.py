@@ -24,8 +24,9 @@ of another set-up the layer was learned on top of (``calibrate --residual-prior`
 format 4 (this version) adds the layer's ``weight`` (a campaign stage shrunk by its own
 CV, ``calibrate --prior``: the factor on its regressors' correction).  Files of formats
 1–3 still load, with weight 1 (their layers were applied whole); a weight that is not a
-number in [0, 1] is refused.  An older plugcell refuses a format-4 file rather than apply
-a shrunk stage whole.
+number in [0, 1] is refused.  Only a layer whose weight is not 1 is written as format 4
+(an older plugcell refuses it rather than apply a shrunk stage whole); a layer applied
+whole is written as format 3, which it reads.
 """
 
 from __future__ import annotations
@@ -49,6 +50,9 @@ __all__ = ["FORMAT", "TRUSTED_TYPES", "ResidualFileError", "load_residual", "res
 
 FORMAT = "plugcell-residual-model"
 FORMAT_VERSION = 4
+#: The version a layer of weight 1 is written as (format 3: what a plugcell before the
+#: weight reads; its ``weight`` in the summary is then ignored, as it may be).
+WHOLE_FORMAT_VERSION = 3
 #: versions :func:`load_residual` reads (1: no arm-shape stage; 2: no prior stage; 3: no
 #: weight, read as 1).
 READABLE_VERSIONS = (1, 2, 3, 4)
@@ -96,7 +100,8 @@ def _minor(version: str) -> str:
 
 
 def save_residual(layer: LearnedResidual, path: str | Path) -> dict[str, Any]:
-    """Write ``layer`` to ``path`` (skops, format :data:`FORMAT_VERSION`).
+    """Write ``layer`` to ``path`` (skops, format :data:`FORMAT_VERSION`; a layer of
+    weight 1, :data:`WHOLE_FORMAT_VERSION`, which older plugcell reads).
 
     The file holds the layer's summary, cross-validation, estimators and nearest-
     neighbour index (and those of its shape stage); its SHA-256 goes into the entry.
@@ -126,7 +131,9 @@ def save_residual(layer: LearnedResidual, path: str | Path) -> dict[str, Any]:
 
     p = Path(path)
     meta = layer.summary()
-    obj = {"format": FORMAT, "format_version": FORMAT_VERSION, "meta": meta,
+    # a layer applied whole is written as format 3, which a plugcell before the weight reads
+    version = FORMAT_VERSION if layer.weight != 1.0 else WHOLE_FORMAT_VERSION
+    obj = {"format": FORMAT, "format_version": version, "meta": meta,
            # the record without the per-pose CV errors (fields with compare=False)
            "cv": {**{f.name: getattr(layer.cv, f.name) for f in fields(layer.cv) if f.compare},
                   "scores": [[dict(s), v] for s, v in layer.cv.scores]},
