@@ -57,6 +57,8 @@ def main(argv: list[str]) -> int:
          [sys.executable, str(HERE / "idle_cost.py"), *([] if full else ["--seconds", "15"])]),
         ("command start-up", [sys.executable, str(HERE / "cli_startup.py")]),
         ("OpenBLAS threads on small matrices", [sys.executable, str(HERE / "blas_threads.py")]),
+        ("EGM path tangent under a late correction",
+         [sys.executable, str(HERE / "path_tangent_lag.py")]),
         ("UR10 from ur_description: xacro in, calibration, UR kinematics out",
          [sys.executable, str(HERE / "urdf_roundtrip_ur10.py"),
           *([] if full else ["--out", str(scratch / "urdf_ur10.md")])]),

@@ -45,6 +45,7 @@ SCRIPTS = [
     ("idle_cost.py", ["--services", "2", "--seconds", "1", "--settle", "0.5", "--settings",
                       "lean", "--topology", "star"], "(router "),
     ("blas_threads.py", ["--repeat", "1", "--quick"], "| QR 900×72 |"),
+    ("path_tangent_lag.py", ["--seeds", "1"], "| circle | 250 | 1–11 samples |"),
 ]
 
 
