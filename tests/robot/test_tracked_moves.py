@@ -18,6 +18,7 @@ fails with the reason); in each the correction's speed and acceleration stay bou
 from __future__ import annotations
 
 import dataclasses
+import itertools
 import math
 
 import numpy as np
@@ -33,6 +34,7 @@ from plugcell.devices.robot.rsi.drive import RsiDrive
 from plugcell.devices.robot.stream.process import LinkProcess
 from plugcell.devices.robot.stream_controller import streaming_limits
 from plugcell.devices.robot.tracked_moves import CycleClock, OneWayClock, TrackedMoves
+from plugcell.devices.robot.tracking_clocks import InOrder
 from plugcell.kinematics import forward
 from plugcell.motion import CartesianLimits, JointLimits
 from plugcell.pdl import MotionError
@@ -234,6 +236,40 @@ def test_one_way_clock_takes_the_lower_envelope():
     for d, p in zip(device, pc, strict=True):
         clock.see(d, p)
     assert clock.pc(0.5) == pytest.approx(100.5 + 0.002, abs=2e-5)
+
+
+@settings(max_examples=200, deadline=None)
+@given(st.lists(st.floats(-1e3, 1e3), min_size=1, max_size=60))
+def test_in_order_hands_on_increasing_times_and_moves_only_those_out_of_order(times):
+    """A map that moved back (a faster delivery lowered OneWayClock's offset between two
+    polls: CI of 2026-11-28) never reorders the samples; a time in order is kept."""
+    keep, out = InOrder(), []
+    for t in times:
+        out.append(keep(t))
+    assert all(b > a for a, b in itertools.pairwise(out))
+    for i, (t, o) in enumerate(zip(times, out, strict=True)):
+        if i == 0 or t > out[i - 1]:
+            assert o == t
+        else:
+            assert o == math.nextafter(out[i - 1], math.inf)
+
+
+def test_samples_mapped_after_the_tracker_clock_moved_back_stay_in_order():
+    """Two polls' worth of 1 kHz samples through OneWayClock and InOrder: the second
+    poll's first delivery is 3 ms faster than any before, the map moves 3 ms back, and
+    without InOrder its samples would land before the first poll's last."""
+    clock, keep = OneWayClock(), InOrder()
+    first = [(k * 1e-3, 100.0 + k * 1e-3 + 0.005) for k in range(10)]
+    second = [(k * 1e-3, 100.0 + k * 1e-3 + 0.002) for k in range(10, 20)]
+    mapped = []
+    for rows in (first, second):
+        for d, p in rows:
+            clock.see(d, p)
+        mapped += [keep(clock.pc(d)) for d, _ in rows]
+    raw = [100.005 + k * 1e-3 for k in range(10)] + [100.002 + k * 1e-3 for k in range(10, 20)]
+    assert any(b <= a for a, b in itertools.pairwise(raw))  # the map alone reorders them …
+    assert all(b > a for a, b in itertools.pairwise(mapped))  # … InOrder does not
+    assert mapped[:10] == pytest.approx(raw[:10]) and mapped[-1] == pytest.approx(raw[-1])
 
 
 def _offset_rates(record, part: int = 1) -> tuple[float, float]:

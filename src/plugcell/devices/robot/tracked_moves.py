@@ -108,7 +108,7 @@ from plugcell.devices.robot.stream.adjusting import WireLimits, WirePeaks
 from plugcell.devices.robot.stream.drive import samples as planned_samples
 from plugcell.devices.robot.stream.process import LinkProcess
 from plugcell.devices.robot.stream.source import CycleState
-from plugcell.devices.robot.tracking_clocks import CycleClock, OneWayClock
+from plugcell.devices.robot.tracking_clocks import CycleClock, InOrder, OneWayClock
 from plugcell.kinematics import forward
 from plugcell.kinematics.jacobian import jacobian_from_fk
 from plugcell.motion import LIN
@@ -181,6 +181,7 @@ class ServiceTrackerFeed:
         self._call: Any = None
         self._task: asyncio.Task[None] | None = None
         self.tracker_clock, self.robot_clock = OneWayClock(), CycleClock()
+        self._in_order = InOrder()
         self.failure = ""
         #: the ``seq`` of every data update received (each is in the tracker's journal)
         self.update_seqs: list[int] = []
@@ -228,7 +229,9 @@ class ServiceTrackerFeed:
     def poll(self, t_robot: float, pc_time: float) -> list[TrackerMeasurement]:
         """The samples taken before the cycle of robot time ``t_robot`` was handled at PC
         time ``pc_time``, on the robot's clock; later ones wait for a later cycle (placed
-        between two cycles, a sample keeps its order whatever the robot's clock does)."""
+        between two cycles, a sample keeps its order whatever the robot's clock does, and
+        :class:`~.tracking_clocks.InOrder` keeps it where the tracker's clock map moved
+        back between two polls)."""
         self.robot_clock.see(t_robot, pc_time)
         with self._lock:
             rows, self._rows = list(self._rows), deque()
@@ -240,7 +243,7 @@ class ServiceTrackerFeed:
             if pc > pc_time:
                 later.append(r)
                 continue
-            t = self.robot_clock.robot(pc)
+            t = self._in_order(self.robot_clock.robot(pc))
             status = _STATUS.get(int(r[9]), "device")
             if status != "ok" or int(r[8]) != 1:
                 out.append(TrackerMeasurement(t, None, bool(r[8]), status if status != "ok"

@@ -23,7 +23,7 @@ from collections import deque
 
 import numpy as np
 
-__all__ = ["CycleClock", "OneWayClock"]
+__all__ = ["CycleClock", "InOrder", "OneWayClock"]
 
 
 class OneWayClock:
@@ -85,3 +85,24 @@ class CycleClock:
         if pc_s <= self._pc[0]:
             return self._t[0] + (pc_s - self._pc[0])
         return float(np.interp(pc_s, self._pc, self._t))
+
+
+class InOrder:
+    """Sample times handed on in increasing order: ``t' = max(t, next(t_last))``,
+    ``next`` the next float after the last time handed on.
+
+    The two clocks' maps move as they learn (:class:`OneWayClock`'s offset falls when a
+    faster delivery is seen), so a sample mapped after such a step can land before one
+    mapped before it — by the step, rarely more than a millisecond; a tracked move's
+    samples must stay in the order the tracker took them (CI of 2026-11-28: one of 3 289
+    samples out of order)."""
+
+    def __init__(self) -> None:
+        self.last = -math.inf
+
+    def __call__(self, t: float) -> float:
+        """``t``, or just after the last time handed on where ``t`` is not after it."""
+        if not t > self.last:
+            t = math.nextafter(self.last, math.inf)
+        self.last = t
+        return t
