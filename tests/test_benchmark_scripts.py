@@ -77,6 +77,16 @@ def test_the_latency_benchmark_refuses_bad_scheduling_options(args, says) -> Non
     assert says in done.stderr, done.stderr
 
 
+@pytest.mark.parametrize(("script", "args", "says"), [
+    ("blas_threads.py", ["--repeat", "0"], "--repeat must be at least 1, not 0"),
+    ("path_tangent_lag.py", ["--seeds", "0"], "--seeds must be at least 1, not 0"),
+])
+def test_a_count_below_one_is_refused(script, args, says) -> None:
+    done = subprocess.run([sys.executable, str(BENCHMARKS / script), *args],
+                          capture_output=True, text=True, timeout=120)
+    assert done.returncode == 2 and says in done.stderr, done.stderr
+
+
 @pytest.mark.slow
 def test_durability_floor_writes_its_rounds_and_plot(tmp_path: Path) -> None:
     """durability_floor.py runs every variant, raw Zenoh and plugcell included, and
