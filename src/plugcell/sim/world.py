@@ -14,6 +14,11 @@ key                                            Zenoh       payload
 
 * The simulated robot controller publishes its T-MAC's true pose after every
   move (:class:`ReflectorPublisher`); a fixed SMR in the cell is published once.
+* A reflector fixed *on* another (an SMR in a dowel hole of a robot's flange, whose
+  T-MAC the controller publishes) is published once with its ``mount``: its pose is in
+  the mount's frame, and whoever looks at the world places it with :func:`placed`,
+  ``T = T_mount · T_rel``, from the same look — so it is where its mount is at that
+  instant, never a step behind it.
 * The simulated tracker driver keeps the latest state of every reflector
   (:class:`WorldView`): on start it queries them all, then follows the updates.
 
@@ -24,7 +29,7 @@ cell).  Messages are msgpack (msgspec).
 from __future__ import annotations
 
 import threading
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 
 import msgspec
 import numpy as np
@@ -41,9 +46,56 @@ class ReflectorState(msgspec.Struct, frozen=True):
     pose: list[float]  # 16 numbers, row-major 4x4, metres, tracker frame
     moving: bool = False
     seq: int = 0
+    mount: str = ""  # the reflector it is fixed on ("": the cell); pose is then in its frame
 
     def matrix(self) -> np.ndarray:
         return np.asarray(self.pose, dtype=float).reshape(4, 4)
+
+
+#: Longest chain of reflectors mounted on reflectors that :func:`placed` follows.
+MAX_MOUNT_DEPTH = 4
+
+
+def placed(states: Mapping[str, ReflectorState]) -> dict[str, ReflectorState]:
+    """Every reflector of one look at the world with its pose in the tracker frame.
+
+    A reflector fixed in the cell is as published.  A mounted one (``mount`` set) is
+    placed on its mount's pose of the same look, ``T = T_mount · T_rel``, and moves
+    when its mount moves (``moving`` is the mount's).  One whose mount is not in the
+    world (a robot that is gone takes its SMRs with it), or whose mounts form a cycle
+    or a chain longer than :data:`MAX_MOUNT_DEPTH`, is left out.
+
+    Parameters
+    ----------
+    states : mapping of str to ReflectorState
+        One look at the world, by reflector name (poses as published).
+
+    Returns
+    -------
+    dict of str to ReflectorState
+        The reflectors that are somewhere, every pose 4×4 in metres, tracker frame,
+        ``mount`` empty.
+    """
+    out: dict[str, ReflectorState] = {}
+
+    def place(state: ReflectorState, depth: int) -> ReflectorState | None:
+        if not state.mount:
+            return state
+        mount = states.get(state.mount)
+        if mount is None or depth >= MAX_MOUNT_DEPTH:
+            return None
+        carrier = place(mount, depth + 1)
+        if carrier is None:
+            return None
+        pose = carrier.matrix() @ state.matrix()
+        return msgspec.structs.replace(state, pose=pose.ravel().tolist(),
+                                       moving=carrier.moving, mount="")
+
+    for name, state in states.items():
+        where = place(state, 0)
+        if where is not None:
+            out[name] = where
+    return out
 
 
 _ENCODER = msgspec.msgpack.Encoder()
@@ -58,14 +110,19 @@ class ReflectorPublisher:
     ``current``: for a reflector that moves in time, a callable giving its true pose
     *now*: a query (a tracker's look at the world) is then answered with the pose at that
     instant — the pose a physical tracker would see — instead of the latest one published
-    (flagged moving as the latest was)."""
+    (flagged moving as the latest was).  ``mount``: the reflector this one is fixed on;
+    its poses are then in the mount's frame (module docstring, :func:`placed`)."""
 
     def __init__(self, bus: Bus, name: str, kind: str = "tmac",
-                 current: Callable[[], np.ndarray] | None = None) -> None:
+                 current: Callable[[], np.ndarray] | None = None, mount: str = "") -> None:
         check_name(name, "reflector name")
         if kind not in ("tmac", "smr"):
             raise ValueError(f"reflector kind must be 'tmac' or 'smr', got {kind!r}")
-        self.name, self.kind = name, kind
+        if mount:
+            check_name(mount, "reflector mount")
+            if mount == name:
+                raise ValueError(f"reflector {name} cannot be mounted on itself")
+        self.name, self.kind, self.mount = name, kind, mount
         self._lock = threading.Lock()
         self._last: bytes | None = None
         self._moving = False
@@ -88,7 +145,7 @@ class ReflectorPublisher:
             self._seq += 1
             self._moving = self._moving if moving is None else moving
             state = ReflectorState(self.name, self.kind, pose.ravel().tolist(), self._moving,
-                                   self._seq)
+                                   self._seq, self.mount)
             self._last = _ENCODER.encode(state)
             return self._last
 

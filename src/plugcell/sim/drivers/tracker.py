@@ -24,8 +24,10 @@ controllers publish their T-MAC's true pose, fixed SMRs are published once).
 The world is *asked* (a Zenoh query of every reflector's queryable) at each Move and
 each measurement, so the instrument sees it as it is at that instant: a robot that
 publishes its pose and then asks for a measurement is always measured where it is,
-and a reflector whose publisher is gone is gone.  Time is simulated; with
-``time_scale`` > 0 each call also sleeps ``elapsed × time_scale`` of real time.
+a reflector mounted on it (an SMR in its flange) is placed on that same pose
+(:func:`~plugcell.sim.world.placed`), and a reflector whose publisher is gone is gone.
+Time is simulated; with ``time_scale`` > 0 each call also sleeps ``elapsed ×
+time_scale`` of real time.
 """
 
 from __future__ import annotations
@@ -53,7 +55,7 @@ from plugcell.sim.beam_breaks import parse_beam_breaks
 from plugcell.sim.twin import tracker as twin
 from plugcell.sim.twin.tracker import LaserTracker
 from plugcell.sim.twin.tracker_stream import StreamSpec, TrackerStream
-from plugcell.sim.world import ReflectorState, WorldView
+from plugcell.sim.world import ReflectorState, WorldView, placed
 
 __all__ = ["SimulatedTrackerDriver"]
 
@@ -244,7 +246,8 @@ class SimulatedTrackerDriver:
         spec = self.stream_spec
         if not (np.isfinite(rate_hz) and 1.0 <= rate_hz <= spec.max_rate_hz):
             raise ValueError(f"stream rate {rate_hz} Hz outside 1…{spec.max_rate_hz:g} Hz")
-        world = await self._world()
+        seen = await asyncio.to_thread(self._query)  # as published: mounts kept
+        world = placed(seen)
         with self._lock:
             self._follow(world)
             name = self._target
@@ -253,10 +256,10 @@ class SimulatedTrackerDriver:
                                          reason="not_pointed")
             six_dof = world[name].kind == "tmac"
         view = WorldView(self._world_bus.direct())
-        latest = {name: world[name]}
 
         def target(_t: float) -> np.ndarray | None:
-            state = view.all().get(name) or latest.get(name)
+            # the view's latest states over the first look's, placed together
+            state = placed({**seen, **view.all()}).get(name)
             return None if state is None else state.matrix()
 
         origin = time.monotonic()
@@ -304,7 +307,8 @@ class SimulatedTrackerDriver:
     # -- the world --------------------------------------------------------------------------
 
     async def _world(self) -> dict[str, ReflectorState]:
-        return await asyncio.to_thread(self._query)
+        """One look: every reflector placed in the tracker frame."""
+        return placed(await asyncio.to_thread(self._query))
 
     def _query(self) -> dict[str, ReflectorState]:
         found: dict[str, ReflectorState] = {}
