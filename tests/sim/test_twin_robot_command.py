@@ -7,6 +7,7 @@ import argparse
 import re
 import socket
 import threading
+import time
 
 import numpy as np
 import pytest
@@ -130,6 +131,14 @@ def test_twin_egm_stops_after_its_comm_timeout(capsys) -> None:
     (["rsi", "--port", "49152", "--timeout", "0"], "twin rsi: timeout_packets 0"),
     (["rsi", "--port", "49152", "--lockstep", "-1"], "twin rsi: lockstep_s must be 0"),
     (["rsi", "--port", "49152", "--duration", "-1"], "--duration must be 0 or positive"),
+    (["rsi", "--port", "49152", "--lin", "0,30,0", "--end-after", "-1"],
+     "--end-after must be 0 or positive seconds, not -1.0"),
+    (["egm", "--mode", "pathcorr", "--lin", "0,30,0", "--end-after", "nan"],
+     "--end-after must be 0 or positive seconds, not nan"),
+    (["rsi", "--port", "49152", "--end-after", "1"],
+     "twin rsi: --end-after ends the stream after the controller's own program: give it "
+     "with --lin or --program"),
+    (["egm", "--end-after", "1"], "twin egm: --end-after ends the stream after"),
     (["rsi", "--port", "49152", "--payload-kg", "-3"], "twin rsi: payload_kg must be ≥ 0"),
     (["egm", "--timeout", "0"], "twin egm: --timeout must be positive seconds, not 0.0"),
     (["rsi", "--port", "49152", "--lin", "0,300"], "twin rsi: --lin '0,300': expected "
@@ -274,6 +283,32 @@ def test_any_program_file_plans_or_is_refused_with_a_reason(tmp_path_factory, li
         return
     robot.stop()
     assert len(robot.path_poses) > 1
+
+
+@pytest.mark.parametrize("side", ["rsi", "egm"])
+def test_end_after_ends_the_stream_that_long_after_the_program(side, capsys) -> None:
+    """--end-after S: the twin stops by itself S seconds after its program ended (exit 0,
+    "path done"), as a controller whose program is done — a script waits for it instead
+    of sleeping (docs/abb-egm.md, kuka-rsi.md).  The 20 mm LIN at 100 mm/s takes ~0.2 s
+    plus its ramps, so the twin must end long before the 60 s --duration."""
+    sensor = _Sensor(0.0) if side == "rsi" else None  # EGM: a PC that never answers
+    silent = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    silent.bind(("127.0.0.1", 0))
+    port = sensor.port if sensor is not None else silent.getsockname()[1]
+    start = time.monotonic()
+    try:
+        mode = ["--lockstep", "1"] if side == "rsi" else ["--mode", "pathcorr"]
+        status = main(["twin", side, "--port", str(port), "--timeout", "10000", *mode,
+                       "--lin", "0,20,0", "--path-delay", "0", "--end-after", "0.5",
+                       "--duration", "60"])
+    finally:
+        silent.close()
+        if sensor is not None:
+            sensor.close()
+    took = time.monotonic() - start
+    out = capsys.readouterr().out.splitlines()
+    assert status == 0 and ", path done, " in out[-1], out[-1]
+    assert took < 30, took  # ended by --end-after, not by --duration (a loose bound)
 
 
 def test_twin_rsi_runs_a_program_file_under_the_pcs_corrections(tmp_path, capsys) -> None:

@@ -9,11 +9,11 @@ RSI, or an ABB controller's EGM loop, standalone.
                       [--bind HOST[:PORT]] [--robot R] [--seed S] [--payload-kg M]
                       [--joints Q1,…,Q6] [--lockstep S] [--reflector NAME [--cell C]]
                       [--lin DX,DY,DZ … | --program FILE [--library DIR …]]
-                      [--speed MM_S] [--path-delay S] [--duration S] [--stats FILE]
-                      [--rt-priority N] [--cpu CPUS] [--mlock]
+                      [--speed MM_S] [--path-delay S] [--end-after S] [--duration S]
+                      [--stats FILE] [--rt-priority N] [--cpu CPUS] [--mlock]
     plugcell twin egm [--port 6510] [--ip 127.0.0.1] [--timeout 1.0] [--bind HOST[:PORT]]
                       [--mode joint|pathcorr (--lin DX,DY,DZ … | --program FILE
-                      [--library DIR …]) [--speed MM_S] [--path-delay S]]
+                      [--library DIR …]) [--speed MM_S] [--path-delay S] [--end-after S]]
                       [--robot R] [--seed S] [--payload-kg M] [--joints Q1,…,Q6]
                       [--reflector NAME [--cell C]] [--duration S] [--stats FILE]
                       [--rt-priority N] [--cpu CPUS] [--mlock]
@@ -33,7 +33,9 @@ from a file (a path file as ``plugcell path run --path`` reads it, or a ``.pdl``
 program's straight moves; the arm starts at its first point), on which the answers'
 corrections are superimposed; the summary then says whether the program ended, the
 largest shift of its TCP and how far its T-MAC truly is from where the program means it
-at the end.  A tracker's look at that world (a query) gets the pose at
+at the end; ``--end-after S`` ends the stream (exit 0) S seconds after the program
+ended, as a controller whose program is done, so that a script waits for the twin
+instead of sleeping.  A tracker's look at that world (a query) gets the pose at
 that instant.  ``--lockstep S`` waits up to S seconds for each answer: the
 arm then moves as with a real-time PC on a machine that is not one (``plugcell demo
 --link rsi``).  ``--reflector NAME`` publishes the arm's true T-MAC pose to
@@ -116,6 +118,10 @@ def _side_options(r: argparse.ArgumentParser, common, what: str, default_port: i
     add_cell_args(r)
     r.add_argument("--duration", type=float, default=0.0,
                    help="seconds to stream, then stop (default: until interrupted)")
+    r.add_argument("--end-after", type=float, default=None, metavar="S",
+                   help="with a program of its own: stop streaming S seconds after the "
+                   "program ended, as a controller whose program is done (default: stream "
+                   "until --duration or interrupted); a script can then wait for the twin")
     r.add_argument("--stats", metavar="FILE",
                    help="at the end, write the robot side's counts and every answer's round "
                    "trip (ns) to FILE as JSON (benchmarks)")
@@ -302,17 +308,24 @@ class _World:
             self.truth.close()
 
 
-def _until_stopped(args: argparse.Namespace, running, offset) -> np.ndarray:
-    """Run until ``--duration``, SIGTERM/SIGINT or ``running()`` turns false; the largest
+def _until_stopped(args: argparse.Namespace, running, offset,
+                   path_done=lambda: False) -> np.ndarray:
+    """Run until ``--duration``, SIGTERM/SIGINT, ``running()`` turns false or — with
+    ``--end-after S`` — S seconds after ``path_done()`` first turned true; the largest
     ``|offset()|`` of each axis, looked at every 50 ms."""
     sys.setswitchinterval(SWITCH_INTERVAL_S)
     done = threading.Event()
     for sig in (signal.SIGTERM, signal.SIGINT):
         signal.signal(sig, lambda *_: done.set())
     end = time.monotonic() + args.duration if args.duration else float("inf")
+    end_after = getattr(args, "end_after", None)
+    lingering = False
     peak = np.zeros(6)
     while not done.wait(0.05) and running() and time.monotonic() < end:
         peak = np.maximum(peak, np.abs(offset()))
+        if end_after is not None and not lingering and path_done():
+            lingering = True  # the program ended: linger, then stop
+            end = min(end, time.monotonic() + end_after)
     return peak
 
 
@@ -336,6 +349,13 @@ def _write_stats(path: str | None, cycles: int, answered: int, late: int,
 def _scenario_of(args: argparse.Namespace, scenario, what: str):
     if not (args.duration >= 0):
         raise CommandError(f"--duration must be 0 or positive, not {args.duration}")
+    end_after = getattr(args, "end_after", None)
+    if end_after is not None:
+        if not (end_after >= 0):
+            raise CommandError(f"--end-after must be 0 or positive seconds, not {end_after}")
+        if not (args.lin or args.program):
+            raise CommandError(f"twin {what}: --end-after ends the stream after the "
+                               "controller's own program: give it with --lin or --program")
     try:
         return scenario.with_payload(args.payload_kg)
     except ValueError as exc:
@@ -418,7 +438,7 @@ def run_rsi(args: argparse.Namespace, scenario) -> int:
                        k >= len(robot.path_poses) - 1)
         return robot.offset
 
-    peak = _until_stopped(args, lambda: robot.running, offset)
+    peak = _until_stopped(args, lambda: robot.running, offset, lambda: robot.path_done)
     robot.stop()
     world.close()
     st = robot.stats()
@@ -474,7 +494,8 @@ def run_egm(args: argparse.Namespace, scenario) -> int:
                    arm.twin.description.tool, robot.path_done)
         return np.concatenate([robot.state()["correction"], np.zeros(3)])
 
-    peak = _until_stopped(args, lambda: robot.stopped is None, moved)
+    peak = _until_stopped(args, lambda: robot.stopped is None, moved,
+                          lambda: args.mode == "pathcorr" and robot.path_done)
     robot.stop()
     world.close()
     _write_stats(args.stats, robot.sent, robot.answers, robot.unanswered, robot.rtts,
