@@ -4,9 +4,13 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from hypothesis import given
+from hypothesis import strategies as st
+from hypothesis.extra import numpy as hnp
 from scipy.spatial.transform import Rotation
 
 from plugcell.kinematics import (
+    cross,
     dh_hayati,
     invert,
     rot_x,
@@ -107,3 +111,44 @@ def test_so3_log_robust_near_zero_and_pi(angle):
     np.testing.assert_allclose(np.linalg.norm(got, axis=1), angle, atol=1e-9)
     if angle < 3.0:
         np.testing.assert_allclose(got, w, atol=1e-12 + 1e-9 * angle)
+
+
+# -------------------------------------------------------------------------- cross
+@st.composite
+def _cross_pairs(draw):
+    """Two arrays with a length-3 axis at the same place from the end, broadcasting."""
+    batch = draw(hnp.array_shapes(min_dims=0, max_dims=3, min_side=1, max_side=4))
+    tail = draw(hnp.array_shapes(min_dims=0, max_dims=2, min_side=1, max_side=3))
+    axis = -1 - len(tail)
+    shapes = hnp.mutually_broadcastable_shapes(num_shapes=2, base_shape=batch + tail)
+    sa, sb = draw(shapes).input_shapes
+
+    def with_vector(s):  # the length-3 axis put back in front of the tail
+        cut = len(s) - len(tail) if len(s) >= len(tail) else 0
+        return (*s[:cut], 3, *s[cut:]) if len(s) >= len(tail) else (3, *tail)
+
+    values = st.floats(-1e3, 1e3, allow_nan=False)
+    a = draw(hnp.arrays(np.float64, with_vector(sa), elements=values))
+    b = draw(hnp.arrays(np.float64, with_vector(sb), elements=values))
+    return a, b, axis
+
+
+@given(_cross_pairs())
+def test_cross_is_numpys_to_the_last_bit(pair):
+    """``cross`` computes numpy.cross's products and differences: the same bits, any
+    shapes that broadcast, any axis from the end (the one-pair path included)."""
+    a, b, axis = pair
+    np.testing.assert_array_equal(cross(a, b, axis=axis), np.cross(a, b, axis=axis))
+
+
+def test_cross_of_one_pair_and_its_refusals():
+    a, b = RNG.normal(size=3), RNG.normal(size=3)
+    assert np.array_equal(cross(a, b), np.cross(a, b))
+    np.testing.assert_allclose(cross(a, b) @ a, 0.0, atol=1e-12)  # ⟂ to both
+    np.testing.assert_allclose(cross(a, b), skew(a) @ b, atol=1e-12)
+    with pytest.raises(ValueError, match=r"cross: a of shape \(2,\) has no length-3 axis -1"):
+        cross([1.0, 2.0], [1.0, 2.0, 3.0])
+    with pytest.raises(ValueError, match="cross: b of shape"):
+        cross(np.ones((3, 2)), np.ones(3), axis=-2)
+    with pytest.raises(ValueError, match="is not the same axis from the end"):
+        cross(np.ones((3, 5)), np.ones(3), axis=0)

@@ -59,6 +59,7 @@ from numpy.typing import ArrayLike, NDArray
 from plugcell.calibration.parameters import ErrorParameter
 from plugcell.calibration.structure import CLASS_GRAVITY, CLASS_HARMONIC, CLASS_PAYLOAD
 from plugcell.kinematics import GeometricParameters, RobotDescription, forward, jacobian_from_fk
+from plugcell.kinematics.transforms import cross
 
 Array = NDArray[np.float64]
 
@@ -236,7 +237,7 @@ def _gravity_torques(desc: RobotDescription, ref: GeometricParameters, q: Array)
                 tau[..., j] += np.sum(m * g * z, axis=-1)
                 continue
             c = np.einsum("...ij,j->...i", F[..., :3, :3], com) + F[..., :3, 3]
-            tau[..., j] += np.sum(np.cross(c - o, m * g) * z, axis=-1)
+            tau[..., j] += np.sum(cross(c - o, m * g) * z, axis=-1)
     return tau
 
 

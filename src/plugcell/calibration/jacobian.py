@@ -44,7 +44,7 @@ from numpy.typing import NDArray
 from plugcell.calibration.model import ErrorModel, PoseBatch
 from plugcell.kinematics import GeometricParameters, RobotDescription, forward
 from plugcell.kinematics.forward import FKResult
-from plugcell.kinematics.transforms import dh_hayati, rot_x, rot_y, translation
+from plugcell.kinematics.transforms import cross, dh_hayati, rot_x, rot_y, translation
 
 Array = NDArray[np.float64]
 
@@ -203,11 +203,11 @@ def _link_columns(
     on_chain[list(desc.chain)] = True
     m = on_chain[None, :, None]
     cols = {
-        "theta": _cat(np.cross(z, pp - op), z) * m,
+        "theta": _cat(cross(z, pp - op), z) * m,
         "d": _cat(z, None) * m * (1.0 if scale is None else scale[:, None, None]),
         "a": _cat(xt, None) * m * (1.0 if scale is None else scale[:, None, None]),
-        "alpha": _cat(np.cross(xt, pp - o), xt) * m,
-        "beta": _cat(np.cross(y, pp - o), y) * m,
+        "alpha": _cat(cross(xt, pp - o), xt) * m,
+        "beta": _cat(cross(y, pp - o), y) * m,
     }
     return cols
 
@@ -270,7 +270,7 @@ def _base_columns(model: ErrorModel, p: Array) -> dict[str, Array]:
     ones = np.ones((len(p), 1))
 
     def rot(u: Array) -> Array:
-        return np.concatenate([np.cross(u, r), ones * u], axis=-1)
+        return np.concatenate([cross(u, r), ones * u], axis=-1)
 
     def tra(u: Array) -> Array:
         return np.concatenate([ones * u, np.zeros((len(p), 3))], axis=-1)
@@ -287,8 +287,8 @@ def _probe_columns(model: ErrorModel, T_fl: Array, p: Array) -> dict[str, Array]
     z, op = Pv[:, :3, 2], Pv[:, :3, 3]
     x, o = F7[:, :3, 0], F7[:, :3, 3]
     return {
-        "theta": _cat(np.cross(z, p - op), z),
+        "theta": _cat(cross(z, p - op), z),
         "d": _cat(z, None),
         "a": _cat(x, None),
-        "alpha": _cat(np.cross(x, p - o), x),
+        "alpha": _cat(cross(x, p - o), x),
     }

@@ -43,7 +43,7 @@ from plugcell.kinematics import (
     forward,
     jacobian_from_fk,
 )
-from plugcell.kinematics.transforms import invert, so3_exp
+from plugcell.kinematics.transforms import cross, invert, so3_exp
 
 Array = NDArray[np.float64]
 
@@ -120,7 +120,7 @@ def shift_jacobian(J_flange: Array, p_flange: Array, p_tool: Array) -> Array:
     """
     r = p_tool - p_flange  # (N, 3)
     Jw = J_flange[..., 3:, :]
-    Jv = J_flange[..., :3, :] + np.cross(Jw, r[..., :, None], axis=-2)
+    Jv = J_flange[..., :3, :] + cross(Jw, r[..., :, None], axis=-2)
     return np.concatenate([Jv, Jw], axis=-2)
 
 

@@ -53,6 +53,7 @@ from plugcell.kinematics.rotations import (
     zyz_to_matrix,
 )
 from plugcell.kinematics.transforms import (
+    cross,
     dh_hayati,
     identity,
     invert,
@@ -89,6 +90,7 @@ __all__ = [
     "UnreachableError",
     "angles_to_matrix",
     "branch_cut_transform",
+    "cross",
     "description_from_chain",
     "dh_hayati",
     "forward",

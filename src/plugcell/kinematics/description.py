@@ -1230,18 +1230,24 @@ class RobotDescription:
         -------
         GeometricParameters
             ``theta``, ``alpha``, ``beta`` (rad), ``d``, ``a`` (m) per link in
-            :attr:`links` order, ``base`` and ``tool`` (4, 4) m.
+            :attr:`links` order, ``base`` and ``tool`` (4, 4) m.  Made once, then the
+            same (immutable: read-only arrays) object: forward kinematics without
+            parameters asks for it every call.
         """
-        return GeometricParameters(
-            link_names=self.link_names,
-            theta=[lk.theta for lk in self.links],
-            d=[lk.d for lk in self.links],
-            a=[lk.a for lk in self.links],
-            alpha=[lk.alpha for lk in self.links],
-            beta=[lk.beta for lk in self.links],
-            base=self.base,
-            tool=self.tool,
-        )
+        made = self.__dict__.get("_nominal")
+        if made is None:
+            made = GeometricParameters(
+                link_names=self.link_names,
+                theta=[lk.theta for lk in self.links],
+                d=[lk.d for lk in self.links],
+                a=[lk.a for lk in self.links],
+                alpha=[lk.alpha for lk in self.links],
+                beta=[lk.beta for lk in self.links],
+                base=self.base,
+                tool=self.tool,
+            )
+            object.__setattr__(self, "_nominal", made)
+        return made
 
     def limit_violations(self, q: Any, tol: float = 0.0) -> list[str]:
         """Human-readable list of limit violations of one reading vector.

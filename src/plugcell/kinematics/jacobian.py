@@ -34,6 +34,7 @@ from numpy.typing import ArrayLike, NDArray
 from plugcell.kinematics.description import RobotDescription
 from plugcell.kinematics.forward import FKResult, forward
 from plugcell.kinematics.parameters import GeometricParameters
+from plugcell.kinematics.transforms import cross
 
 Array = NDArray[np.float64]
 
@@ -129,7 +130,7 @@ def kinematic_jacobian_from_fk(
         if lk.is_prismatic:  # d moves along the parent's z: [z; 0]
             col = np.concatenate([z, np.zeros_like(z)], axis=-1)
         else:
-            col = np.concatenate([np.cross(z, p - o), z], axis=-1)  # (..., 6)
+            col = np.concatenate([cross(z, p - o), z], axis=-1)  # (..., 6)
         if lk.is_actuated:
             J[..., :, act_pos[lk.name]] += col
         else:

@@ -37,7 +37,7 @@ from numpy.typing import NDArray
 from plugcell.kinematics.description import JointCoupling, Link, RobotDescription
 from plugcell.kinematics.errors import DescriptionError
 from plugcell.kinematics.parameters import GeometricParameters
-from plugcell.kinematics.transforms import dh_hayati, rot_z
+from plugcell.kinematics.transforms import cross, dh_hayati, rot_z
 
 Array = NDArray[np.float64]
 
@@ -170,7 +170,7 @@ def line_step(frame: Array, point: Array, direction: Array) -> _Row:
     R, o = frame[:3, :3], frame[:3, 3]
     x, z = R[:, 0], R[:, 2]
     w = direction / np.linalg.norm(direction)
-    c = np.cross(z, w)
+    c = cross(z, w)
     s = float(np.linalg.norm(c))
     r = point - o
     if s > PARALLEL_SIN:
@@ -181,8 +181,8 @@ def line_step(frame: Array, point: Array, direction: Array) -> _Row:
         foot = point + u * w
         d = float(t)
         a = float((foot - (o + t * z)) @ xn)
-        theta = math.atan2(float(np.cross(x, xn) @ z), float(x @ xn))
-        alpha = math.atan2(float(np.cross(z, w) @ xn), zw)
+        theta = math.atan2(float(cross(x, xn) @ z), float(x @ xn))
+        alpha = math.atan2(float(cross(z, w) @ xn), zw)
         return _Row(_clean(theta), _clean(d), _clean(a), _clean(alpha), 0.0, False)
     u = -float(r @ z) / float(w @ z)
     v = r + u * w  # new origin − o, in the x-y plane of frame
@@ -191,11 +191,11 @@ def line_step(frame: Array, point: Array, direction: Array) -> _Row:
     xn = v / a if a > _ZERO else x  # below _ZERO the lines coincide (a rounds to 0)
     if a <= _ZERO:
         a = 0.0
-    yn = np.cross(z, xn)
+    yn = cross(z, xn)
     wx, wy, wz = float(w @ xn), float(w @ yn), float(w @ z)
     beta = math.asin(max(-1.0, min(1.0, wx)))
     alpha = math.atan2(-wy, wz)
-    theta = math.atan2(float(np.cross(x, xn) @ z), float(x @ xn))
+    theta = math.atan2(float(cross(x, xn) @ z), float(x @ xn))
     return _Row(_clean(theta), 0.0, _clean(a), _clean(alpha), _clean(beta), True)
 
 
@@ -382,7 +382,7 @@ def _dh_rows(frames: list[Array], axes: list[Array], tip: Array
         else:
             z, x, o = F[:3, 2], F[:3, 0], F[:3, 3]
             xt = tip[:3, 0] - (tip[:3, 0] @ z) * z
-            th = math.atan2(float(np.cross(x, xt) @ z), float(x @ xt)) if np.linalg.norm(
+            th = math.atan2(float(cross(x, xt) @ z), float(x @ xt)) if np.linalg.norm(
                 xt) > 1e-9 else 0.0
             row = _Row(_clean(th), _clean(float((tip[:3, 3] - o) @ z)), 0.0, 0.0, 0.0, False)
         F = F @ _row_transform(row)

@@ -36,6 +36,8 @@ from collections import deque
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from plugcell.kinematics.transforms import cross
+
 __all__ = ["MIN_STEP_M", "TangentTracker", "applied_displacement", "from_path",
            "path_frame", "path_tangents", "to_path"]
 
@@ -85,13 +87,13 @@ def path_frame(tangent: ArrayLike, tool_z: ArrayLike) -> Array:
         raise ValueError("no path frame where the path does not move (a zero tangent) or "
                          "of a zero tool z")
     x = t / nt
-    y = np.cross(x, zt / nz)
+    y = cross(x, zt / nz)
     ny = np.linalg.norm(y, axis=-1, keepdims=True)
     if np.any(ny < _PARALLEL):
         raise ValueError("no path frame where the path runs along the tool's z axis "
                          "(y = x × z_tool vanishes)")
     y = y / ny
-    z = np.cross(x, y)
+    z = cross(x, y)
     return np.stack([x, y, z], axis=-1)
 
 

@@ -18,6 +18,7 @@ from numpy.typing import ArrayLike, NDArray
 Array = NDArray[np.float64]
 
 __all__ = [
+    "cross",
     "dh_hayati",
     "identity",
     "invert",
@@ -225,6 +226,56 @@ def dh_hayati(
     T[..., 2, 3] = d
     T[..., 3, 3] = 1.0
     return T
+
+
+#: The components of ``a × b``: (k, i, j) with ``(a × b)_k = a_i b_j − a_j b_i``.
+_CROSS = ((0, 1, 2), (1, 2, 0), (2, 0, 1))
+
+
+def cross(a: ArrayLike, b: ArrayLike, axis: int = -1) -> Array:
+    """Cross product of 3-vectors along ``axis``, broadcasting the other axes.
+
+    ``a × b = (a₁b₂ − a₂b₁, a₂b₀ − a₀b₂, a₀b₁ − a₁b₀)``, computed as
+    :func:`numpy.cross` computes it (the same products and differences, so the same
+    result to the last bit) without its axis handling, which costs tens of µs a call: a
+    real-time cycle's Jacobians call it dozens of times.
+
+    Parameters
+    ----------
+    a, b : (..., 3, ...) array_like
+        The vectors; their length-3 axis is ``axis`` (negative counts from the end, as
+        the other axes broadcast).
+    axis : int
+        The vectors' axis in ``a``, ``b`` and the result.
+
+    Returns
+    -------
+    c : array
+        ``a × b``, shape the broadcast of ``a`` and ``b``.
+
+    Raises
+    ------
+    ValueError
+        ``a`` or ``b`` has no length-3 axis ``axis``, or they do not broadcast.
+    """
+    a, b = _f(a), _f(b)
+    if a.shape == b.shape == (3,) and axis in (0, -1):  # one pair: plain floats
+        (a0, a1, a2), (b0, b1, b2) = a.tolist(), b.tolist()
+        return np.array([a1 * b2 - a2 * b1, a2 * b0 - a0 * b2, a0 * b1 - a1 * b0])
+    axes = []
+    for name, x in (("a", a), ("b", b)):
+        if not -x.ndim <= axis < x.ndim or x.shape[axis] != 3:
+            raise ValueError(f"cross: {name} of shape {x.shape} has no length-3 axis {axis}")
+        axes.append(axis - x.ndim if axis >= 0 else axis)
+    if axes[0] != axes[1]:
+        raise ValueError(f"cross: axis {axis} is not the same axis from the end of shapes "
+                         f"{a.shape} and {b.shape}")
+    tail = (slice(None),) * (-axes[0] - 1)
+    out = np.empty(np.broadcast_shapes(a.shape, b.shape))
+    for k, i, j in _CROSS:
+        ai, aj, bi, bj = (x[(..., m, *tail)] for x, m in ((a, i), (a, j), (b, i), (b, j)))
+        out[(..., k, *tail)] = ai * bj - aj * bi
+    return out
 
 
 def skew(v: ArrayLike) -> Array:

@@ -46,7 +46,7 @@ from dataclasses import dataclass, field
 import numpy as np
 from numpy.typing import NDArray
 
-from plugcell.kinematics.transforms import so3_exp, so3_log
+from plugcell.kinematics.transforms import cross, so3_exp, so3_log
 from plugcell.motion.limits import CartesianLimits
 from plugcell.motion.profile import DoubleS
 from plugcell.motion.timing import Timing
@@ -165,18 +165,18 @@ def circle_through(a: Array, b: Array, c: Array) -> tuple[Array, float, Array, A
         line ``a–c`` below :data:`COLLINEAR_TOL`).
     """
     al, be = b - a, c - a
-    n = np.cross(al, be)
+    n = cross(al, be)
     nn = float(np.linalg.norm(n))
     la, lb, lc = (float(np.linalg.norm(x)) for x in (al, be, c - b))
     if min(la, lb, lc) < COLLINEAR_TOL:
         raise ValueError("two of the circle's points (start, via, end) coincide")
     if nn / lb < COLLINEAR_TOL:
         raise ValueError("the start, via and end points are collinear: no unique circle")
-    centre = a + (lb * lb * np.cross(n, al) + la * la * np.cross(be, n)) / (2.0 * nn * nn)
+    centre = a + (lb * lb * cross(n, al) + la * la * cross(be, n)) / (2.0 * nn * nn)
     rho = float(np.linalg.norm(a - centre))
     nz = n / nn
     u = (a - centre) / rho
-    w = np.cross(nz, u)
+    w = cross(nz, u)
     e = c - centre
     sweep = math.atan2(float(e @ w), float(e @ u)) % (2.0 * math.pi)
     return centre, rho, u, w, sweep
@@ -323,7 +323,7 @@ class CartesianPath:
         R = A @ Rp @ g["Rs"][k]
         wk, wp = axk * vk, np.einsum("bij,bj->bi", A, axp * vp)
         omega = wk + wp
-        alpha = axk * ak + np.einsum("bij,bj->bi", A, axp * ap) + np.cross(wk, wp)
+        alpha = axk * ak + np.einsum("bij,bj->bi", A, axp * ap) + cross(wk, wp)
         T = np.zeros((t.size, 4, 4))
         T[:, :3, :3], T[:, :3, 3], T[:, 3, 3] = R, p, 1.0
         return CartesianState(T, v, a, jerk, omega, alpha)

@@ -36,6 +36,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from plugcell.kinematics import GeometricParameters, RobotDescription, forward
+from plugcell.kinematics.transforms import cross
 
 Array = NDArray[np.float64]
 
@@ -182,15 +183,15 @@ def bending(desc: RobotDescription, frames: Array, flange: Array, beams: Sequenc
             F = np.take(frames, i, axis=-3)
             r = (F[..., :3, :3] @ c[..., None])[..., 0] + F[..., :3, 3]
             forces = m[:, None] * GRAVITY_VECTOR
-            moment = moment + np.cross(r - root[..., None, :], forces).sum(axis=-2)
+            moment = moment + cross(r - root[..., None, :], forces).sum(axis=-2)
         if payload.mass > 0:
             rp = (flange[..., :3, :3] @ np.asarray(payload.com)) + flange[..., :3, 3]
-            moment = moment + np.cross(rp - root, payload.mass * GRAVITY_VECTOR)
+            moment = moment + cross(rp - root, payload.mass * GRAVITY_VECTOR)
         length = tip - root
         u = length / np.linalg.norm(length, axis=-1, keepdims=True)
         m_perp = moment - (moment * u).sum(axis=-1, keepdims=True) * u
         phi = beam.compliance * m_perp
-        delta = (2.0 / 3.0) * np.cross(phi, length)
+        delta = (2.0 / 3.0) * cross(phi, length)
         R = _rotation(phi)
         step = np.broadcast_to(np.eye(4), flange.shape).copy()
         step[..., :3, :3] = R
