@@ -46,6 +46,7 @@ SCRIPTS = [
                       "lean", "--topology", "star"], "(router "),
     ("blas_threads.py", ["--repeat", "1", "--quick"], "| QR 900×72 |"),
     ("path_tangent_lag.py", ["--seeds", "1"], "| circle | 250 | 1–11 samples |"),
+    ("cpu_busy.py", ["--", sys.executable, "-c", "sum(range(10**7))"], "| busy |"),
 ]
 
 
@@ -85,6 +86,31 @@ def test_a_count_below_one_is_refused(script, args, says) -> None:
     done = subprocess.run([sys.executable, str(BENCHMARKS / script), *args],
                           capture_output=True, text=True, timeout=120)
     assert done.returncode == 2 and says in done.stderr, done.stderr
+
+
+def test_cpu_busy_reads_proc_stat_and_refuses_what_it_cannot_read() -> None:
+    """cpu_busy.py: the shares of the ticks between two readings of /proc/stat's cpu line
+    (hand-made readings); a line it cannot read, no time between, no command: refused."""
+    sys.path.insert(0, str(BENCHMARKS))
+    try:
+        import cpu_busy
+    finally:
+        sys.path.remove(str(BENCHMARKS))
+    before = cpu_busy.cpu_ticks("cpu  100 0 50 800 10 0 0 40 0 0\ncpu0 1 2 3 4 5 6 7 8\n")
+    after = cpu_busy.cpu_ticks("cpu  400 0 100 1200 10 0 0 40 0 0\n")
+    share = cpu_busy.shares(before, after)
+    # 300 user, 50 system, 400 idle ticks passed: 750 in all
+    assert share == pytest.approx({"user": 40.0, "nice": 0.0, "system": 100 / 15,
+                                   "idle": 160 / 3, "iowait": 0.0, "irq": 0.0,
+                                   "softirq": 0.0, "steal": 0.0})
+    for text in ("", "cpu 1 2 3\n", "intr 5\n"):
+        with pytest.raises(ValueError, match="no 'cpu' line"):
+            cpu_busy.cpu_ticks(text)
+    with pytest.raises(ValueError, match="no CPU time passed"):
+        cpu_busy.shares(before, before)
+    done = subprocess.run([sys.executable, str(BENCHMARKS / "cpu_busy.py"), "--"],
+                          capture_output=True, text=True, timeout=120)
+    assert done.returncode == 2 and "give the command to measure after --" in done.stderr
 
 
 @pytest.mark.slow
