@@ -39,7 +39,11 @@ def test_equals_plugcell_compensate(calibrated_result, params_file, tmp_path):
     prog, _ = read_program(FIX)
     fr = filter_targets(prog, model_for(calibrated_result), payload_kg=36.0,
                         joints="compensate")
-    assert assert_equals_plugcell_compensate(prog, fr, calibrated_result) == 6
+    # the targets left out, named with their reasons if the count is off (once in CI,
+    # 2026-11-28: 5, cause unknown)
+    skipped = [(r.target.name, r.target.kind, r.reason) for r in fr.reports
+               if not r.compensated]
+    assert assert_equals_plugcell_compensate(prog, fr, calibrated_result) == 6, skipped
     jt = next(r for r in fr.reports if r.target.name == "movej line 18")
     assert jt.compensated and np.abs(jt.after - jt.before).max() > 1e-4  # radians moved
     out = tmp_path / "o.script"
