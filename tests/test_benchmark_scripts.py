@@ -47,6 +47,8 @@ SCRIPTS = [
     ("blas_threads.py", ["--repeat", "1", "--quick"], "| QR 900×72 |"),
     ("path_tangent_lag.py", ["--seeds", "1"], "| circle | 250 | 1–11 samples |"),
     ("cpu_busy.py", ["--", sys.executable, "-c", "sum(range(10**7))"], "| busy |"),
+    ("kinematics_cycle.py", ["--calls", "20", "--repeat", "1", "--robots", "smart_h4,elbow6"],
+     "| elbow6 |"),
 ]
 
 
@@ -81,6 +83,8 @@ def test_the_latency_benchmark_refuses_bad_scheduling_options(args, says) -> Non
 @pytest.mark.parametrize(("script", "args", "says"), [
     ("blas_threads.py", ["--repeat", "0"], "--repeat must be at least 1, not 0"),
     ("path_tangent_lag.py", ["--seeds", "0"], "--seeds must be at least 1, not 0"),
+    ("kinematics_cycle.py", ["--calls", "0"], "--calls and --repeat must be at least 1"),
+    ("kinematics_cycle.py", ["--robots", "nope"], "--robots: unknown robot 'nope'"),
 ])
 def test_a_count_below_one_is_refused(script, args, says) -> None:
     done = subprocess.run([sys.executable, str(BENCHMARKS / script), *args],

@@ -4,6 +4,8 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from plugcell.kinematics import LoopClosureError, fourbar_closure, nominal_closure
 
@@ -138,3 +140,45 @@ def test_error_names_the_configuration():
     with pytest.raises(LoopClosureError, match=r"configuration 1\b") as exc:
         nominal_closure(t2, t2p)
     assert exc.value.index == (1,)
+
+
+_ANGLE = st.floats(-7.0, 7.0, allow_nan=False)
+_LENGTH = st.floats(0.05, 2.0, allow_nan=False)
+
+
+@settings(max_examples=300, deadline=None)
+@given(ta=_ANGLE, tc=_ANGLE, lengths=st.tuples(_LENGTH, _LENGTH, _LENGTH, _LENGTH),
+       shape=st.sampled_from([(), (1,), (1, 1)]))
+def test_one_configuration_is_the_batchs_row(ta, tc, lengths, shape):
+    """One configuration (however batched) takes the float path: the same angles and
+    derivatives as that configuration in a batch of three, the batch's shape, and where
+    the loop fails the same refusal (or, without errors, NaN and invalid)."""
+    others = np.array([ta + 0.3, ta, ta - 0.2]), np.array([tc, tc, tc - 0.1])
+    batch = fourbar_closure(*others, *lengths, raise_errors=False)
+    one = fourbar_closure(*(np.reshape(x, shape) for x in (ta, tc, *lengths)),
+                          raise_errors=False)
+    assert one.coupler.shape == one.follower.shape == one.valid.shape == shape
+    assert one.d_driven.shape == (*shape, 2, 2) and one.d_lengths.shape == (*shape, 2, 4)
+    assert bool(one.valid) == bool(batch.valid[1])
+    for name in ("coupler", "follower", "d_driven", "d_lengths"):
+        np.testing.assert_allclose(np.reshape(getattr(one, name), -1),
+                                   np.reshape(getattr(batch, name)[1], -1),
+                                   rtol=1e-13, atol=1e-15, err_msg=name)
+    if not batch.valid[1]:
+        with pytest.raises(LoopClosureError, match=r"cannot be assembled|collapses"):
+            fourbar_closure(ta, tc, *lengths)
+
+
+def test_one_configuration_fails_as_a_batch_does():
+    """A single configuration that cannot assemble is refused with its reason, and a
+    single valid one's derivatives still match finite differences."""
+    with pytest.raises(LoopClosureError, match="cannot be assembled") as exc:
+        fourbar_closure(np.array([-1.5]), np.array([-3.2]), A2, A2P, 0.25, 0.25)
+    assert exc.value.index == (0,)
+    h = 1e-6
+    t2, t2p, a = -1.2, -2.4, (1.0, 0.4, 1.1, 0.5)
+    r = fourbar_closure(t2, t2p, *a)
+    fd = [(np.array([x.coupler, x.follower]) - np.array([y.coupler, y.follower])) / (2 * h)
+          for x, y in ((fourbar_closure(t2 + h, t2p, *a), fourbar_closure(t2 - h, t2p, *a)),
+                       (fourbar_closure(t2, t2p + h, *a), fourbar_closure(t2, t2p - h, *a)))]
+    np.testing.assert_allclose(r.d_driven, np.stack(fd, -1), rtol=1e-7, atol=1e-8)

@@ -47,6 +47,20 @@ def test_shipped_robots(h4, elbow):
     assert elbow.loops == () and elbow.n_actuated == 6
 
 
+def test_the_link_tree_is_read_once(h4):
+    """What forward kinematics asks every call is made once and cannot be changed: the
+    parents' positions, the revolute joints' links, which joints are prismatic."""
+    names = h4.link_names
+    assert h4.parent_indices == tuple(-1 if lk.parent == "base" else names.index(lk.parent)
+                                      for lk in h4.links)
+    j, i = h4.revolute_links
+    assert [h4.actuated[k] for k in j] == [names[k] for k in i] == list(h4.actuated)
+    assert h4.prismatic_links is h4.prismatic_links
+    for a in (h4.prismatic_links, j, i):
+        with pytest.raises(ValueError, match="read-only"):
+            a[0] = 1
+
+
 def test_coupled_limit_keeps_loop_away_from_collapse(h4):
     (cl,) = h4.coupled_limits
     assert cl.joints == ("2", "2'")

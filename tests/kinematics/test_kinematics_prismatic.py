@@ -88,6 +88,8 @@ def test_track_robot_is_seven_axes_with_a_prismatic_first(track: tuple[RobotDesc
     assert desc.link("track").is_prismatic and desc.link("track").is_actuated
     assert list(desc.prismatic_readings) == [True] + [False] * 6
     assert list(desc.periodic_readings) == [False] + [True] * 6
+    assert list(desc.prismatic_links) == [True] + [False] * 6
+    assert list(desc.revolute_links[0]) == list(range(1, 7))  # the track moves d, not θ
     np.testing.assert_allclose(desc.joint_limits[0], [0.0, 3.0])
 
 

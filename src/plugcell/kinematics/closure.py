@@ -36,6 +36,7 @@ The closure uses the planar lengths ``a`` and the driven angles only; twists,
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -73,6 +74,14 @@ class ClosureResult:
     d_driven: Array
     d_lengths: Array
     valid: NDArray[np.bool_]
+
+    def reshaped(self, shape: tuple[int, ...]) -> ClosureResult:
+        """The same closure of one configuration with batch ``shape`` (of size 1)."""
+        if not shape:
+            return self
+        return ClosureResult(self.coupler.reshape(shape), self.follower.reshape(shape),
+                             self.d_driven.reshape(*shape, 2, 2),
+                             self.d_lengths.reshape(*shape, 2, 4), self.valid.reshape(shape))
 
 
 def _wrap_near(x: Array, ref: Array) -> Array:
@@ -202,7 +211,9 @@ def fourbar_closure(
     i.e. the assembly branch continuous with the nominal parallelogram, each angle
     wrapped to the 2π-representative nearest its nominal value (6.10).  Derivatives
     by the implicit-function theorem on ``F = a_crank·e(θ_c) + a_cpl·e(φ3) +
-    a_fol·e(φ4) − a_arm·e(θ_a) = 0``: ``∂φ/∂x = −(∂F/∂φ)⁻¹ ∂F/∂x``.
+    a_fol·e(φ4) − a_arm·e(θ_a) = 0``: ``∂φ/∂x = −(∂F/∂φ)⁻¹ ∂F/∂x``.  One
+    configuration (arguments of size 1, any shape) is computed on floats
+    (:func:`_fourbar_point`), with the same result.
 
     Parameters
     ----------
@@ -228,12 +239,13 @@ def fourbar_closure(
         cannot span the gap) or collapses (sin θ4' ≈ 0 or sin(θ_arm − θ_crank) ≈ 0),
         unless ``raise_errors=False``.
     """
-    ta, tc, la, lc, l3, l4 = np.broadcast_arrays(
-        *(
-            np.asarray(x, float)
-            for x in (theta_arm, theta_crank, a_arm, a_crank, a_coupler, a_follower)
-        )
-    )
+    args = (theta_arm, theta_crank, a_arm, a_crank, a_coupler, a_follower)
+    shape = np.broadcast_shapes(*(np.shape(x) for x in args))
+    if math.prod(shape) == 1:  # one configuration, however batched
+        point = _fourbar_point(*(float(np.reshape(x, -1)[0]) for x in args), min_sin)
+        if point is not None:
+            return point.reshaped(shape)
+    ta, tc, la, lc, l3, l4 = np.broadcast_arrays(*(np.asarray(x, float) for x in args))
     rx = la * np.cos(ta) - lc * np.cos(tc)
     ry = la * np.sin(ta) - lc * np.sin(tc)
     r2 = rx * rx + ry * ry
@@ -255,6 +267,51 @@ def fourbar_closure(
 
     Dq, Da = _implicit_derivatives(ta, tc, la, lc, l3, l4, phi3, phi4, bad)
     return ClosureResult(*_nan_where(bad, t3, t4, Dq, Da), ~bad)
+
+
+def _fourbar_point(ta: float, tc: float, la: float, lc: float, l3: float, l4: float,
+                   min_sin: float) -> ClosureResult | None:
+    """:func:`fourbar_closure` of one configuration in floats, or ``None`` if it fails.
+
+    The same equations in the same order (C.1–C.2, the wrap, the closed-form
+    derivatives of :func:`_implicit_derivatives`), with :mod:`math` on floats instead of
+    numpy on 0-d arrays: a single configuration — every cycle of a real-time loop —
+    costs a fifth (benchmarks/kinematics_cycle.py).  A loop that cannot assemble or
+    collapses returns ``None``, and the array code names the reason (or marks it
+    invalid).
+    """
+    rx = la * math.cos(ta) - lc * math.cos(tc)
+    ry = la * math.sin(ta) - lc * math.sin(tc)
+    r2 = rx * rx + ry * ry
+    sdiff = math.sin(ta - tc)
+    if l3 == 0.0 or l4 == 0.0:
+        return None
+    c4 = (r2 - l3 * l3 - l4 * l4) / (2.0 * l3 * l4)
+    if not abs(c4) <= 1.0:
+        return None
+    t4 = (1.0 if sdiff >= 0.0 else -1.0) * math.acos(c4)
+    s4 = math.sin(t4)
+    if abs(sdiff) < min_sin or abs(s4) < min_sin:
+        return None
+    phi3 = math.atan2(ry, rx) - math.atan2(l4 * s4, l3 + l4 * math.cos(t4))
+    diff = ta - tc
+    t3 = diff + (phi3 - tc - diff + math.pi) % (2.0 * math.pi) - math.pi
+    ref4 = math.pi - diff
+    t4 = ref4 + (t4 - ref4 + math.pi) % (2.0 * math.pi) - math.pi
+    phi3 = tc + t3
+    phi4 = phi3 + t4
+    S = math.sin(phi4 - phi3)
+    g3 = -1.0 / (l3 * S)
+    g4 = 1.0 / (l4 * S)
+    d3 = (la * math.sin(ta - phi4) * g3, lc * math.sin(phi4 - tc) * g3)
+    d4 = (la * math.sin(ta - phi3) * g4, lc * math.sin(phi3 - tc) * g4)
+    c34 = math.cos(phi4 - phi3)
+    a3 = (-math.cos(ta - phi4) * g3, math.cos(tc - phi4) * g3, c34 * g3, 1.0 * g3)
+    a4 = (-math.cos(ta - phi3) * g4, math.cos(tc - phi3) * g4, 1.0 * g4, c34 * g4)
+    Dq = np.array([d3, (d4[0] - d3[0], d4[1] - d3[1])])
+    Dq[0, 1] -= 1.0
+    Da = np.array([a3, [x - y for x, y in zip(a4, a3, strict=True)]])
+    return ClosureResult(np.array(t3), np.array(t4), Dq, Da, np.array(True))
 
 
 def _closure_error(
@@ -321,8 +378,15 @@ def _implicit_derivatives(
     """Derivatives of θ3', θ4' by the implicit-function theorem on the closure.
 
     ``F(φ3, φ4; θa, θc, a) = a_crank·e(θc) + a_cpl·e(φ3) + a_fol·e(φ4) − a_arm·e(θa) = 0``
-    (two equations) gives ``∂φ/∂x = −(∂F/∂φ)⁻¹ ∂F/∂x``, ``∂F/∂φ = [a_cpl·e⊥(φ3),
-    a_fol·e⊥(φ4)]`` with determinant ``a_cpl·a_fol·sin(φ4 − φ3)``; then
+    (two equations) gives ``∂φ/∂x = −(∂F/∂φ)⁻¹ ∂F/∂x`` with ``∂F/∂φ = [a_cpl·e⊥(φ3),
+    a_fol·e⊥(φ4)]``, ``e⊥(φ) = (−sin φ, cos φ)``, determinant ``a_cpl·a_fol·S``,
+    ``S = sin(φ4 − φ3)``.  Its inverse in closed form: for a column ``f = ∂F/∂x``::
+
+        ∂φ3/∂x = −e(φ4)·f / (a_cpl·S),    ∂φ4/∂x = e(φ3)·f / (a_fol·S)
+
+    and the columns ``f`` are ``a_arm·(sin θa, −cos θa)`` (θa), ``a_crank·e⊥(θc)``
+    (θc), ``−e(θa)``, ``e(θc)``, ``e(φ3)``, ``e(φ4)`` (the four lengths), so every
+    entry is a sine or cosine of an angle difference over ``a·S``; then
     ``θ3' = φ3 − θc`` and ``θ4' = φ4 − φ3``.
 
     Parameters
@@ -334,7 +398,7 @@ def _implicit_derivatives(
     phi3, phi4 : (...) arrays, rad
         Absolute coupler and follower angles φ3 = θc + θ3', φ4 = φ3 + θ4'.
     bad : (...) bool array
-        Failing configurations (their determinant is replaced by 1; callers mask them).
+        Failing configurations (their ``S`` is replaced by 1; callers mask them).
 
     Returns
     -------
@@ -343,32 +407,19 @@ def _implicit_derivatives(
     d_lengths : (..., 2, 4) array, rad/m
         Rows (θ3', θ4'), columns (a_arm, a_crank, a_cpl, a_fol).
     """
-    def perp(phi: Array) -> Array:
-        return np.stack([-np.sin(phi), np.cos(phi)], axis=-1)
-
-    def unit(phi: Array) -> Array:
-        return np.stack([np.cos(phi), np.sin(phi)], axis=-1)
-
-    M = np.stack([l3[..., None] * perp(phi3), l4[..., None] * perp(phi4)], axis=-1)  # (...,2,2)
-    det = l3 * l4 * np.sin(phi4 - phi3)
-    det = np.where(bad, 1.0, det)
-    Minv = np.empty_like(M)
-    Minv[..., 0, 0] = M[..., 1, 1]
-    Minv[..., 0, 1] = -M[..., 0, 1]
-    Minv[..., 1, 0] = -M[..., 1, 0]
-    Minv[..., 1, 1] = M[..., 0, 0]
-    Minv /= det[..., None, None]
-    # ∂F/∂(θa, θc) and ∂F/∂(a_arm, a_crank, a_cpl, a_fol), columns
-    Fq = np.stack([-la[..., None] * perp(ta), lc[..., None] * perp(tc)], axis=-1)
-    Fa = np.stack([-unit(ta), unit(tc), unit(phi3), unit(phi4)], axis=-1)
-    dphi_dq = -Minv @ Fq  # rows (φ3, φ4)
-    dphi_da = -Minv @ Fa
+    S = np.where(bad, 1.0, np.sin(phi4 - phi3))
+    g3 = -1.0 / (l3 * S)  # ∂φ3/∂x = g3·e(φ4)·f
+    g4 = 1.0 / (l4 * S)  # ∂φ4/∂x = g4·e(φ3)·f
+    # e(φ)·f for each column f: a difference of angles' sine or cosine
+    d3 = np.stack([la * np.sin(ta - phi4), lc * np.sin(phi4 - tc)], axis=-1) * g3[..., None]
+    d4 = np.stack([la * np.sin(ta - phi3), lc * np.sin(phi3 - tc)], axis=-1) * g4[..., None]
+    c34 = np.cos(phi4 - phi3)
+    a3 = np.stack([-np.cos(ta - phi4), np.cos(tc - phi4), c34, np.ones_like(c34)],
+                  axis=-1) * g3[..., None]
+    a4 = np.stack([-np.cos(ta - phi3), np.cos(tc - phi3), np.ones_like(c34), c34],
+                  axis=-1) * g4[..., None]
     # θ3' = φ3 − θc, θ4' = φ4 − φ3
-    Dq = np.empty_like(dphi_dq)
-    Dq[..., 0, 0] = dphi_dq[..., 0, 0]
-    Dq[..., 0, 1] = dphi_dq[..., 0, 1] - 1.0
-    Dq[..., 1, :] = dphi_dq[..., 1, :] - dphi_dq[..., 0, :]
-    Da = np.empty_like(dphi_da)
-    Da[..., 0, :] = dphi_da[..., 0, :]
-    Da[..., 1, :] = dphi_da[..., 1, :] - dphi_da[..., 0, :]
+    Dq = np.stack([d3, d4 - d3], axis=-2)
+    Dq[..., 0, 1] -= 1.0
+    Da = np.stack([a3, a4 - a3], axis=-2)
     return Dq, Da

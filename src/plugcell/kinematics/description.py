@@ -521,6 +521,11 @@ class RobotDescription:
     # derived (filled in __post_init__)
     _index: dict[str, int] = field(default_factory=dict, init=False, repr=False)
     _chain: tuple[int, ...] = field(default=(), init=False, repr=False)
+    _parents: tuple[int, ...] = field(default=(), init=False, repr=False)
+    _prismatic: NDArray[np.bool_] = field(default_factory=lambda: np.zeros(0, bool),
+                                          init=False, repr=False)
+    _revolute: tuple[NDArray[np.intp], NDArray[np.intp]] = field(
+        default=(np.zeros(0, np.intp), np.zeros(0, np.intp)), init=False, repr=False)
 
     # ------------------------------------------------------------------ validation
     def __post_init__(self) -> None:
@@ -536,6 +541,7 @@ class RobotDescription:
         index = {lk.name: i for i, lk in enumerate(self.links)}
         S(self, "_index", index)
         self._check_actuated(index)
+        self._derive_tree(index)
         chain = self._check_flange(index)
         S(self, "_chain", chain)
         self._check_loops(index, chain)
@@ -694,6 +700,21 @@ class RobotDescription:
             if not lk.hayati and lk.beta != 0.0:
                 raise DescriptionError(f"{loc}.beta", "beta is non-zero but hayati is false")
             seen[lk.name] = i
+
+    def _derive_tree(self, index: dict[str, int]) -> None:
+        """What forward kinematics asks every call, made once and read-only: the
+        parents' positions, the prismatic mask and the revolute joints' links."""
+        S = object.__setattr__
+        S(self, "_parents", tuple(index.get(lk.parent, -1) for lk in self.links))
+        prismatic = np.array([self.links[index[n]].is_prismatic for n in self.actuated],
+                             dtype=bool)
+        revolute = (np.flatnonzero(~prismatic),
+                    np.array([index[n] for n, p in zip(self.actuated, prismatic, strict=True)
+                              if not p], dtype=np.intp))
+        for a in (prismatic, *revolute):
+            a.setflags(write=False)
+        S(self, "_prismatic", prismatic)
+        S(self, "_revolute", revolute)
 
     def _check_actuated(self, index: dict[str, int]) -> None:
         seen: set[str] = set()
@@ -919,7 +940,18 @@ class RobotDescription:
     @property
     def link_names(self) -> tuple[str, ...]:
         """Link names, in :attr:`links` order."""
-        return tuple(lk.name for lk in self.links)
+        return tuple(self._index)
+
+    @property
+    def revolute_links(self) -> tuple[NDArray[np.intp], NDArray[np.intp]]:
+        """``(j, i)``: the revolute actuated joints' positions ``j`` in θ_kin and their
+        links' positions ``i`` in :attr:`links` (``θ_i += θ_kin,j``; read-only)."""
+        return self._revolute
+
+    @property
+    def parent_indices(self) -> tuple[int, ...]:
+        """Position of every link's parent in :attr:`links` (−1 for the root, the first)."""
+        return self._parents
 
     def index(self, name: str) -> int:
         """Position of link ``name`` in :attr:`links` (and in parameter arrays).
@@ -1099,9 +1131,9 @@ class RobotDescription:
 
     @property
     def prismatic_links(self) -> NDArray[np.bool_]:
-        """``(n_actuated,)``: which actuated links are prismatic (``actuated`` order)."""
-        return np.array([self.links[self._index[n]].is_prismatic for n in self.actuated],
-                        dtype=bool)
+        """``(n_actuated,)``: which actuated links are prismatic (``actuated`` order;
+        read-only, made once)."""
+        return self._prismatic
 
     def reading_scale(self, units: str = "robot") -> Array:
         """SI per unit of each reading, ``q_SI = scale · q_units``.

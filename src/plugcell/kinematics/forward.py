@@ -240,10 +240,8 @@ def _close_loops(
         theta[..., i3] += res.coupler
         theta[..., i4] += res.follower
         ja, jc = desc.actuated_index(loop.arm), desc.actuated_index(loop.crank)
-        dq[..., 2 * k : 2 * k + 2, ja] = res.d_driven[..., :, 0]
-        dq[..., 2 * k : 2 * k + 2, jc] = res.d_driven[..., :, 1]
-        for m, il in enumerate((ia, ic, i3, i4)):
-            da[..., 2 * k : 2 * k + 2, il] = res.d_lengths[..., :, m]
+        dq[..., 2 * k : 2 * k + 2, [ja, jc]] = res.d_driven
+        da[..., 2 * k : 2 * k + 2, [ia, ic, i3, i4]] = res.d_lengths
     return passive, dq, da, valid
 
 
@@ -305,11 +303,8 @@ def joint_angles(
     batch = q.shape[:-1]
     n_l = desc.n_links
     theta = np.broadcast_to(p.theta, (*batch, n_l)).copy()
-    q_kin = desc.kinematic_joints(q)
-    prismatic = desc.prismatic_links
-    for j, name in enumerate(desc.actuated):
-        if not prismatic[j]:
-            theta[..., desc.index(name)] += q_kin[..., j]
+    j, i = desc.revolute_links
+    theta[..., i] += desc.kinematic_joints(q)[..., j]
     passive, dq, da, valid = _close_loops(desc, p, theta, closure, raise_errors)
     return theta, passive, dq, da, valid
 
@@ -370,11 +365,9 @@ def compose_frames(desc: RobotDescription, params: GeometricParameters, theta: A
     """
     local = dh_hayati(theta, params.d if d is None else d, params.a, params.alpha, params.beta)
     frames = np.empty_like(local)
-    for i, lk in enumerate(desc.links):
-        if i == 0:
-            frames[..., 0, :, :] = local[..., 0, :, :]
-        else:
-            frames[..., i, :, :] = frames[..., desc.index(lk.parent), :, :] @ local[..., i, :, :]
+    frames[..., 0, :, :] = local[..., 0, :, :]
+    for i, parent in enumerate(desc.parent_indices[1:], start=1):
+        np.matmul(frames[..., parent, :, :], local[..., i, :, :], out=frames[..., i, :, :])
     return frames
 
 
