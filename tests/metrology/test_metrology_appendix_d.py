@@ -151,6 +151,25 @@ def test_feature_errors_are_precise():
         base_from_features(j1, plane, line, smr_offset=float("nan"))
 
 
+def test_a_circle_in_no_order_is_refused_without_a_hint_and_a_repeat_is_not():
+    """z_n and z_0 are signed by the joint's rotation sense: points shuffled around the
+    circle cannot give it (the axis would be the SVD's, PROBE or BASE turned by 180°
+    without a word), so the frame is refused — unless a hint signs the axis; a point
+    measured twice in a row (the live wizard's lag) keeps the sense."""
+    circle, holes, j1, plane, line = _appendix_d_features(lambda p: p)
+    T = FLANGE_TRUE @ PROBE_TRUE
+    shuffled = circle[np.random.default_rng(3).permutation(len(circle))]
+    with pytest.raises(MetrologyError, match="circle_points: the points go back and forth"):
+        probe_from_flange_features(shuffled, holes, T)
+    hinted = probe_from_flange_features(shuffled, holes, T, normal_hint=FLANGE_TRUE[:3, 2])
+    np.testing.assert_allclose(hinted.probe, PROBE_TRUE, atol=1e-9)
+    twice = np.insert(circle, 5, circle[4], axis=0)
+    np.testing.assert_allclose(probe_from_flange_features(twice, holes, T).probe, PROBE_TRUE,
+                               atol=1e-9)
+    with pytest.raises(MetrologyError, match=r"joint1_circle_points: .* signs z_0"):
+        base_from_features(j1[[0, 5, 2, 9, 1, 20, 3]], plane, line)
+
+
 def test_probe_inverse_relation_d3():
     """PROBE = (T_n^LT)⁻¹ T_TMAC^LT, so T_n^LT · PROBE reproduces the T-MAC reading."""
     circle, holes, *_ = _appendix_d_features(lambda p: p)

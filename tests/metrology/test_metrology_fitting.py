@@ -158,8 +158,30 @@ def test_circle_hint_overrides_order_and_random_order_falls_back():
     pts = _circle_points(np.zeros(3), R, 1.0, np.array([0.0, 2.0, 1.0, 4.0, 3.0]))
     fit = fit_circle(pts)  # not in angular order: plane convention (+z largest)
     np.testing.assert_allclose(fit.normal, [0, 0, 1.0], atol=1e-12)
+    assert not fit.oriented  # and it says its sign means nothing
     fit = fit_circle(pts, normal_hint=[0, 0, -1])
     np.testing.assert_allclose(fit.normal, [0, 0, -1.0], atol=1e-12)
+    assert fit.oriented
+
+
+@pytest.mark.parametrize("sense", [1.0, -1.0])
+@pytest.mark.parametrize("repeat", [0, 2, 4])
+def test_a_point_measured_twice_does_not_lose_the_rotation_sense(sense, repeat):
+    """The live PROBE wizard's 180° flip: one reflector position measured twice in a row
+    (with the tracker's 10 µm noise) made the points "not in order" and the normal's sign
+    the SVD's.  A repeat less than SAME_ANGLE apart is no turn back: the normal follows
+    the rotation, either way round; a real turn back still leaves it unoriented."""
+    rng = np.random.default_rng(7)
+    R = _random_rotation(5)
+    ang = sense * np.radians([0.0, 30.0, 60.0, 90.0, 120.0, 150.0])
+    ang = np.insert(ang, repeat + 1, ang[repeat])
+    pts = _circle_points(np.array([0.3, 0.1, 0.9]), R, 0.06, ang) + rng.normal(0, 10e-6, (7, 3))
+    fit = fit_circle(pts)
+    assert fit.oriented
+    np.testing.assert_allclose(fit.normal, sense * R[:, 2], atol=1e-3)
+    assert fit.sweep == pytest.approx(np.radians(150.0), abs=1e-3)
+    back = _circle_points(np.zeros(3), R, 0.06, sense * np.radians([0.0, 40.0, 30.0, 90.0]))
+    assert not fit_circle(back).oriented
 
 
 @pytest.mark.parametrize(

@@ -222,6 +222,9 @@ def test_fits_and_the_appendix_d_wizards(client: TestClient) -> None:
     post = lambda url, body: client.post(url, json=body, headers=HEADERS).json()  # noqa: E731
     fit = post("/api/fit", {"kind": "circle", "points": circle()})
     assert fit["ok"] and abs(fit["radius"] - 100) < 1e-9 and len(fit["residuals"]) == 12
+    assert fit["oriented"] and fit["normal"] == pytest.approx([0, 0, 1])
+    back = post("/api/fit", {"kind": "circle", "points": [circle()[i] for i in (0, 3, 1, 5)]})
+    assert back["ok"] and back["oriented"] is False  # its normal's sign means nothing
     bad = post("/api/fit", {"kind": "circle", "points": [[0, 0, 0], [1, 1, 1]]})
     assert bad["ok"] is False and "at least 3 points" in bad["errors"]["points"]
     bad = post("/api/fit", {"kind": "line", "points": [[0, 0, 0], [0, 0, 0]]})

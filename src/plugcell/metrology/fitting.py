@@ -18,8 +18,11 @@ Orientation conventions (a fitted line or plane has no intrinsic sign):
 * **circle** — the normal follows the right-hand rule along the order of the
   points: if the points are the positions of a reflector while a revolute joint
   turns in its *positive* direction, the fitted normal is the joint's ``+z``
-  axis (App. D.1, D.2). ``normal_hint`` overrides it; if the traversal is
-  ambiguous (points in no angular order) the plane convention is used.
+  axis (App. D.1, D.2). ``normal_hint`` overrides it; a point measured twice in a
+  row (consecutive points less than ``SAME_ANGLE`` apart) does not count as a turn
+  back; if the traversal is ambiguous (points in no angular order) the plane
+  convention is used and the fit says so (``CircleFit.oriented`` False) — the frames
+  built on a circle's axis (:mod:`plugcell.metrology.frames`) refuse it without a hint.
 """
 
 from __future__ import annotations
@@ -46,6 +49,10 @@ FloatArray = NDArray[np.float64]
 #: Default relative tolerance on singular values below which a point cloud is
 #: declared coincident (for a line) or collinear (for a plane or circle).
 DEGENERACY_RTOL = 1e-9
+
+#: Two consecutive circle points less than this angle apart (rad, 0.057°) are one point
+#: measured twice: they neither keep nor break the points' rotation sense.
+SAME_ANGLE = 1e-3
 
 
 def _centred_svd(p: FloatArray) -> tuple[FloatArray, FloatArray, FloatArray]:
@@ -384,6 +391,10 @@ class CircleFit:
     sweep : float, rad
         Angle swept from the first to the last point about ``normal`` (unwrapped;
         ``2π`` for one full turn).
+    oriented : bool
+        Whether ``normal``'s sign means something: it follows the points' rotation
+        sense (they turn one way, repeated points aside) or the caller's hint.  False:
+        the points go back and forth, and the sign is the plane fit's, arbitrary.
     """
 
     centre: FloatArray
@@ -394,6 +405,7 @@ class CircleFit:
     rms: float
     plane: PlaneFit
     sweep: float
+    oriented: bool = True
 
     @property
     def distances(self) -> FloatArray:
@@ -510,7 +522,9 @@ def fit_circle(
     ----------
     points : (N, 3) array_like, m
         Points, ``N ≥ 3``, not collinear, in angular order if the normal's sign is
-        to follow the rotation.
+        to follow the rotation (a point measured twice in a row, less than
+        ``SAME_ANGLE`` apart, does not break the order); otherwise the result says
+        ``oriented=False``.
     normal_hint : (3,) array_like, optional
         The normal is signed so that ``normal·hint ≥ 0``.
     rtol : float
@@ -537,21 +551,23 @@ def fit_circle(
     # Orientation by the right-hand rule along the point order.
     ang = np.unwrap(np.arctan2(y - yc, x - xc))
     sweep = float(ang[-1] - ang[0])
+    # steps below SAME_ANGLE are one point measured twice, not a turn back
     steps = np.diff(ang)
-    if normal_hint is None:
-        monotone = bool(np.all(steps > 0) or np.all(steps < 0))
-        if monotone and sweep < -1e-9:
-            n, v, y, yc = -n, -v, -y, -yc
-            sweep = -sweep
-            plane = PlaneFit(
-                centroid=plane.centroid, normal=n, residuals=-plane.residuals,
-                rms=plane.rms, singular_values=plane.singular_values,
-            )
+    steps = steps[np.abs(steps) > SAME_ANGLE]
+    oriented = normal_hint is not None or bool(
+        steps.size and (np.all(steps > 0) or np.all(steps < 0)))
+    if normal_hint is None and oriented and sweep < -1e-9:
+        n, v, y, yc = -n, -v, -y, -yc
+        sweep = -sweep
+        plane = PlaneFit(
+            centroid=plane.centroid, normal=n, residuals=-plane.residuals,
+            rms=plane.rms, singular_values=plane.singular_values,
+        )
     centre = plane.centroid + xc * u + yc * v
     res = np.hypot(x - xc, y - yc) - r
     h = plane.residuals
     dist = np.hypot(res, h)
     return CircleFit(
         centre=centre, normal=n, radius=r, residuals=res, out_of_plane=h,
-        rms=_rms(dist), plane=plane, sweep=sweep,
+        rms=_rms(dist), plane=plane, sweep=sweep, oriented=oriented,
     )

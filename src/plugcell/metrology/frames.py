@@ -335,6 +335,18 @@ class ProbeEstimate:
     hole_line_tilt: float
 
 
+def _turned_one_way(circle: CircleFit, name: str, axis: str) -> CircleFit:
+    """``circle`` if its normal's sign is known; refused when the points went back and
+    forth without a hint (the axis, signed by an arbitrary SVD, would turn the frame by
+    180° without a word)."""
+    if not circle.oriented:
+        raise MetrologyError(
+            f"{name}: the points go back and forth around the circle, so the rotation "
+            f"sense that signs {axis} is unknown; give them in the order the joint turned "
+            "(one way), or give normal_hint")
+    return circle
+
+
 def probe_from_flange_features(
     circle_points: ArrayLike,
     hole_points: ArrayLike,
@@ -384,7 +396,8 @@ def probe_from_flange_features(
     T_tmac = as_transform(tmac_measurement, "tmac_measurement")
     if not np.isfinite(smr_offset):
         raise MetrologyError(f"smr_offset: must be finite, got {smr_offset}")
-    circle = fit_circle(circle_points, normal_hint=normal_hint)
+    circle = _turned_one_way(fit_circle(circle_points, normal_hint=normal_hint),
+                             "circle_points", "z_n")
     holes = as_points(hole_points, "hole_points", 2)
     line = fit_line(holes)
     z = circle.normal
@@ -494,7 +507,8 @@ def base_from_features(
     """
     if not np.isfinite(smr_offset):
         raise MetrologyError(f"smr_offset: must be finite, got {smr_offset}")
-    circle = fit_circle(joint1_circle_points, normal_hint=normal_hint)
+    circle = _turned_one_way(fit_circle(joint1_circle_points, normal_hint=normal_hint),
+                             "joint1_circle_points", "z_0")
     z = circle.normal
     plane = fit_plane(base_plane_points, normal_hint=z)
     line = fit_line(x_axis_line_points)

@@ -112,6 +112,7 @@ def _fit(kind: Any, points: Any) -> dict[str, Any]:
                 "kind": kind, "centre": _mm(c.centre), "normal": [float(x) for x in c.normal],
                 "radius": c.radius / MM, "rms": c.rms / MM,
                 "residuals": _mm(c.distances), "sweep_deg": math.degrees(c.sweep),
+                "oriented": c.oriented,
             }
         if kind == "line":
             line = fit_line(p)

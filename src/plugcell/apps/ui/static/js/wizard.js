@@ -310,7 +310,7 @@ async function showPreview() {
 }
 
 function fitText(r) {
-  if (r.kind === "circle") return `circle: centre ${fmt(r.centre)} mm, radius ${r.radius.toFixed(3)} mm, normal ${fmt(r.normal, 4)}, rms ${r.rms.toFixed(4)} mm, sweep ${r.sweep_deg.toFixed(1)}°`;
+  if (r.kind === "circle") return `circle: centre ${fmt(r.centre)} mm, radius ${r.radius.toFixed(3)} mm, normal ${fmt(r.normal, 4)}, rms ${r.rms.toFixed(4)} mm, sweep ${r.sweep_deg.toFixed(1)}°${r.oriented ? "" : " (the normal's sign is arbitrary: the points go back and forth)"}`;
   if (r.kind === "line") return `line: through ${fmt(r.point)} mm, direction ${fmt(r.direction, 4)}, rms ${r.rms.toFixed(4)} mm`;
   return `plane: centroid ${fmt(r.centroid)} mm, normal ${fmt(r.normal, 4)}, rms ${r.rms.toFixed(4)} mm, flatness ${r.flatness.toFixed(4)} mm`;
 }
