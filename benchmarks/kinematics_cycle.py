@@ -12,7 +12,8 @@ of
 
 * ``forward`` of one configuration, and per configuration of a batch of 1 000;
 * ``manipulator_jacobian`` of one configuration;
-* ``fourbar_closure`` of one configuration (robots with a parallelogram loop).
+* ``fourbar_closure`` of one configuration (robots with a parallelogram loop);
+* ``so3_log`` of one rotation (the TCP's: every pose error takes one).
 
 To compare two versions, run the script of one under ``PYTHONPATH`` of the other's
 ``src``.  Timings are of one Python thread on whatever machine runs it (say which).
@@ -31,6 +32,7 @@ import numpy as np
 from plugcell.io.robots import RobotNotFoundError, load_robot
 from plugcell.kinematics import forward, fourbar_closure
 from plugcell.kinematics.jacobian import manipulator_jacobian
+from plugcell.kinematics.transforms import so3_log
 
 BATCH = 1000
 
@@ -64,6 +66,8 @@ def _row(name: str, calls: int, repeat: int) -> list[str]:
         cells.append(f"{_us(lambda: fourbar_closure(*args), calls, repeat):.0f}")
     else:
         cells.append("–")
+    R = forward(desc, None, q).tcp[:3, :3].copy()
+    cells.append(f"{_us(lambda: so3_log(R), calls, repeat):.0f}")
     return [name, *cells]
 
 
@@ -86,8 +90,8 @@ def main(argv: list[str] | None = None) -> int:
           f"load average {os.getloadavg()[0]:.1f}; CPU µs per configuration, best of "
           f"{args.repeat} rounds of {args.calls} calls\n")
     print(f"| robot | forward, one | forward, in a batch of {BATCH} | Jacobian, one "
-          "| four-bar closure, one |")
-    print("|---|---:|---:|---:|---:|")
+          "| four-bar closure, one | so3_log, one |")
+    print("|---|---:|---:|---:|---:|---:|")
     for name in names:
         print("| " + " | ".join(_row(name, args.calls, args.repeat)) + " |")
     return 0

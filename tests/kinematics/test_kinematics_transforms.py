@@ -152,3 +152,33 @@ def test_cross_of_one_pair_and_its_refusals():
         cross(np.ones((3, 2)), np.ones(3), axis=-2)
     with pytest.raises(ValueError, match="is not the same axis from the end"):
         cross(np.ones((3, 5)), np.ones(3), axis=0)
+
+
+_ROTVEC = hnp.arrays(np.float64, 3, elements=st.floats(-4.0, 4.0, allow_nan=False))
+
+
+@given(w=_ROTVEC, scale=st.sampled_from([1.0, 1e-9, 1e-5, "pi"]))
+def test_so3_log_of_one_rotation_is_the_batchs_to_the_last_bit(w, scale):
+    """One rotation takes the float path of Shepperd's method (one case, not four): the
+    same rotation vector as its row in a batch, bit for bit, near 0 and π too."""
+    if scale == "pi":
+        n = np.linalg.norm(w)
+        w = w / n * np.pi if n > 1e-3 else np.array([np.pi, 0.0, 0.0])
+    else:
+        w = w * scale
+    R = so3_exp(np.stack([w, 0.5 * w + 0.1, -w]))
+    batch = so3_log(R)
+    for i in range(3):
+        np.testing.assert_array_equal(so3_log(R[i]), batch[i])
+
+
+def test_so3_log_of_one_matrix_far_from_any_rotation_is_the_batchs():
+    """Axis-aligned half turns (ties of Shepperd's cases), −I, zeros, NaN and inf: one
+    matrix gives what its row in a batch gives (the array code, NaN where it fails)."""
+    R = np.stack([np.diag([1.0, -1.0, -1.0]), np.diag([-1.0, 1.0, -1.0]),
+                  np.diag([-1.0, -1.0, 1.0]), -np.eye(3), np.zeros((3, 3)),
+                  np.full((3, 3), np.nan), np.full((3, 3), np.inf), np.eye(3)])
+    with np.errstate(all="ignore"):
+        batch = so3_log(R)
+        for i in range(len(R)):
+            np.testing.assert_array_equal(so3_log(R[i]), batch[i])

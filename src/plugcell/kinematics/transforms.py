@@ -12,6 +12,8 @@ which reduces to the plain Denavit–Hartenberg link (A.2) for β = 0.
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
@@ -356,6 +358,10 @@ def so3_exp(w: ArrayLike) -> Array:
 
 def _matrix_to_quat(R: Array) -> Array:
     """Unit quaternions ``(w, x, y, z)`` with ``w ≥ 0`` by Shepperd's method (robust)."""
+    if R.shape == (3, 3):
+        one = _matrix_to_quat_one(R)
+        if one is not None:
+            return one
     m00, m11, m22 = R[..., 0, 0], R[..., 1, 1], R[..., 2, 2]
     tr = m00 + m11 + m22
     cand = np.stack([tr, m00, m11, m22], axis=-1)
@@ -383,6 +389,37 @@ def _matrix_to_quat(R: Array) -> Array:
     q = np.where((k == 3)[..., None], q3, q)
     q = np.where((q[..., :1] < 0), -q, q)
     return q / np.linalg.norm(q, axis=-1, keepdims=True)
+
+
+def _matrix_to_quat_one(R: Array) -> Array | None:
+    """:func:`_matrix_to_quat` of one rotation on floats: only the case Shepperd's method
+    picks (the largest of the trace and the diagonal, the first of equals), the same
+    operations in the same order, so the same quaternion — without numpy's per-call
+    cost of the four cases, a real-time cycle's pose errors call it dozens of times.
+    ``None`` for a matrix no rotation is near (the picked ``4|q_k|`` not positive, or
+    not finite): the array code gives what it gives."""
+    (m00, m01, m02), (m10, m11, m12), (m20, m21, m22) = R.tolist()
+    tr = m00 + m11 + m22
+    cand = (tr, m00, m11, m22)
+    k = cand.index(max(cand))
+    d = (1.0 + tr, 1.0 + m00 - m11 - m22, 1.0 - m00 + m11 - m22, 1.0 - m00 - m11 + m22)[k]
+    t = math.sqrt(max(d, 0.0)) * 2.0  # 4|q_k|
+    if not 0.0 < t < math.inf:
+        return None
+    r21_12, r02_20, r10_01 = m21 - m12, m02 - m20, m10 - m01
+    r01_10, r02p20, r12_21 = m01 + m10, m02 + m20, m12 + m21
+    if k == 0:
+        q = [t / 4, r21_12 / t, r02_20 / t, r10_01 / t]
+    elif k == 1:
+        q = [r21_12 / t, t / 4, r01_10 / t, r02p20 / t]
+    elif k == 2:
+        q = [r02_20 / t, r01_10 / t, t / 4, r12_21 / t]
+    else:
+        q = [r10_01 / t, r02p20 / t, r12_21 / t, t / 4]
+    out = np.array(q)
+    if out[0] < 0:
+        out = -out
+    return out / np.linalg.norm(out, axis=-1, keepdims=True)
 
 
 def so3_log(R: ArrayLike) -> Array:
