@@ -144,6 +144,10 @@ def test_cross_is_numpys_to_the_last_bit(pair):
 def test_cross_of_one_pair_and_its_refusals():
     a, b = RNG.normal(size=3), RNG.normal(size=3)
     assert np.array_equal(cross(a, b), np.cross(a, b))
+    for sa, sb in (((1, 3), (3,)), ((3,), (1, 1, 3)), ((1, 3), (1, 3))):  # one pair, batched
+        got = cross(a.reshape(sa), b.reshape(sb))
+        assert np.array_equal(got, np.cross(a.reshape(sa), b.reshape(sb))), (sa, sb)
+        assert got.shape == np.broadcast_shapes(sa, sb)
     np.testing.assert_allclose(cross(a, b) @ a, 0.0, atol=1e-12)  # ⟂ to both
     np.testing.assert_allclose(cross(a, b), skew(a) @ b, atol=1e-12)
     with pytest.raises(ValueError, match=r"cross: a of shape \(2,\) has no length-3 axis -1"):
@@ -170,6 +174,9 @@ def test_so3_log_of_one_rotation_is_the_batchs_to_the_last_bit(w, scale):
     batch = so3_log(R)
     for i in range(3):
         np.testing.assert_array_equal(so3_log(R[i]), batch[i])
+        one = so3_log(R[i][None, None])  # one rotation in a batch of one
+        assert one.shape == (1, 1, 3)
+        np.testing.assert_array_equal(one[0, 0], batch[i])
 
 
 def test_so3_log_of_one_matrix_far_from_any_rotation_is_the_batchs():

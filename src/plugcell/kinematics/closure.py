@@ -240,11 +240,10 @@ def fourbar_closure(
         unless ``raise_errors=False``.
     """
     args = (theta_arm, theta_crank, a_arm, a_crank, a_coupler, a_follower)
-    shape = np.broadcast_shapes(*(np.shape(x) for x in args))
-    if math.prod(shape) == 1:  # one configuration, however batched
+    if all(np.size(x) == 1 for x in args):  # one configuration, however batched
         point = _fourbar_point(*(float(np.reshape(x, -1)[0]) for x in args), min_sin)
         if point is not None:
-            return point.reshaped(shape)
+            return point.reshaped((1,) * max(np.ndim(x) for x in args))
     ta, tc, la, lc, l3, l4 = np.broadcast_arrays(*(np.asarray(x, float) for x in args))
     rx = la * np.cos(ta) - lc * np.cos(tc)
     ry = la * np.sin(ta) - lc * np.sin(tc)

@@ -261,9 +261,11 @@ def cross(a: ArrayLike, b: ArrayLike, axis: int = -1) -> Array:
         ``a`` or ``b`` has no length-3 axis ``axis``, or they do not broadcast.
     """
     a, b = _f(a), _f(b)
-    if a.shape == b.shape == (3,) and axis in (0, -1):  # one pair: plain floats
-        (a0, a1, a2), (b0, b1, b2) = a.tolist(), b.tolist()
-        return np.array([a1 * b2 - a2 * b1, a2 * b0 - a0 * b2, a0 * b1 - a1 * b0])
+    if (a.size == b.size == 3 and a.shape[-1:] == b.shape[-1:] == (3,)
+            and axis in (-1, max(a.ndim, b.ndim) - 1)):  # one pair, however batched: floats
+        (a0, a1, a2), (b0, b1, b2) = a.reshape(3).tolist(), b.reshape(3).tolist()
+        out = np.array([a1 * b2 - a2 * b1, a2 * b0 - a0 * b2, a0 * b1 - a1 * b0])
+        return out.reshape((1,) * (max(a.ndim, b.ndim) - 1) + (3,))
     axes = []
     for name, x in (("a", a), ("b", b)):
         if not -x.ndim <= axis < x.ndim or x.shape[axis] != 3:
@@ -358,10 +360,10 @@ def so3_exp(w: ArrayLike) -> Array:
 
 def _matrix_to_quat(R: Array) -> Array:
     """Unit quaternions ``(w, x, y, z)`` with ``w ≥ 0`` by Shepperd's method (robust)."""
-    if R.shape == (3, 3):
-        one = _matrix_to_quat_one(R)
+    if R.shape[-2:] == (3, 3) and R.size == 9:  # one rotation, however batched
+        one = _matrix_to_quat_one(R.reshape(3, 3))
         if one is not None:
-            return one
+            return one.reshape(*R.shape[:-2], 4)
     m00, m11, m22 = R[..., 0, 0], R[..., 1, 1], R[..., 2, 2]
     tr = m00 + m11 + m22
     cand = np.stack([tr, m00, m11, m22], axis=-1)
