@@ -56,6 +56,9 @@ def test_the_link_tree_is_read_once(h4):
     j, i = h4.revolute_links
     assert [h4.actuated[k] for k in j] == [names[k] for k in i] == list(h4.actuated)
     assert h4.prismatic_links is h4.prismatic_links
+    (loop,) = h4.loops
+    assert h4.loop_indices == ((*(names.index(n) for n in loop.links),
+                                h4.actuated.index(loop.arm), h4.actuated.index(loop.crank)),)
     for a in (h4.prismatic_links, j, i):
         with pytest.raises(ValueError, match="read-only"):
             a[0] = 1

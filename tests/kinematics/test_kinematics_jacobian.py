@@ -92,3 +92,25 @@ def test_batch_shape(h4):
     np.testing.assert_allclose(J[2, 1], manipulator_jacobian(h4, None, q[2, 1]))
     with pytest.raises(ValueError, match="point"):
         manipulator_jacobian(h4, None, q, point="wrist")
+
+
+@pytest.mark.parametrize("closure", ["fourbar", "nominal"])
+@pytest.mark.parametrize("point", ["flange", "tcp"])
+def test_one_configuration_matches_finite_differences_and_its_batch_row(h4, elbow, closure,
+                                                                        point):
+    """One configuration (or a batch of one) takes the float path of the Jacobian: the
+    same matrix as its row in a batch (to the last bit here; 1e-12 for machines whose
+    math and numpy sines differ by an ulp) and central differences of forward()."""
+    for desc, seed in ((h4, 21), (elbow, 22)):
+        params = perturbed_params(desc, seed).replace(tool=translation([0.05, -0.02, 0.3]))
+        q = random_configs(desc, 8, seed)
+        batch = manipulator_jacobian(desc, params, q, point=point, closure=closure)
+        for i in range(len(q)):
+            one = manipulator_jacobian(desc, params, q[i], point=point, closure=closure)
+            in_one = manipulator_jacobian(desc, params, q[i][None], point=point,
+                                          closure=closure)
+            assert one.shape == (6, desc.n_actuated) and in_one.shape == (1, *one.shape)
+            np.testing.assert_allclose(one, batch[i], rtol=1e-12, atol=1e-14)
+            np.testing.assert_array_equal(in_one[0], one)
+            J_fd = _fd_jacobian(desc, params, q[i], point, closure)
+            assert (np.abs(one - J_fd) / np.abs(J_fd).max()).max() < 1e-7

@@ -123,6 +123,9 @@ def test_manipulator_jacobian_matches_central_differences(track: tuple[RobotDesc
         T0 = pose(q)
         fd = central_differences(lambda qq, pose=pose, T0=T0: pose_error(pose(qq), T0), q)
         np.testing.assert_allclose(J, fd, atol=1e-7)
+        for i in range(len(q)):  # one configuration: the float path, the same columns
+            np.testing.assert_allclose(manipulator_jacobian(desc, None, q[i], point=point),
+                                       J[i], rtol=1e-12, atol=1e-14)
     assert np.allclose(J[:, 3:, 0], 0.0)  # a prismatic joint does not turn the tool
 
 

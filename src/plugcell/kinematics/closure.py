@@ -84,6 +84,11 @@ class ClosureResult:
                              self.d_lengths.reshape(*shape, 2, 4), self.valid.reshape(shape))
 
 
+#: ∂(θ3', θ4')/∂(θ2, θ2') of the parallelogram, eq. (6.16)
+_NOMINAL_D = np.array([[1.0, -1.0], [-1.0, 1.0]])
+_NOMINAL_D.setflags(write=False)
+
+
 def _wrap_near(x: Array, ref: Array) -> Array:
     """The 2π-representative of ``x`` nearest ``ref``."""
     return ref + (x - ref + np.pi) % (2.0 * np.pi) - np.pi
@@ -133,6 +138,12 @@ def nominal_closure(
         When ``|sin(θ2 − θ2')| < min_sin`` (the parallelogram collapses into a line),
         unless ``raise_errors=False``.
     """
+    if np.size(theta_arm) == np.size(theta_crank) == 1:  # one configuration: floats
+        diff = float(np.reshape(theta_arm, -1)[0]) - float(np.reshape(theta_crank, -1)[0])
+        if abs(math.sin(diff)) >= min_sin:
+            return ClosureResult(np.array(diff), np.array(np.pi - diff), _NOMINAL_D.copy(),
+                                 np.zeros((2, 4)), np.array(True)).reshaped(
+                (1,) * max(np.ndim(theta_arm), np.ndim(theta_crank)))
     ta, tc = np.broadcast_arrays(np.asarray(theta_arm, float), np.asarray(theta_crank, float))
     diff = ta - tc
     bad = np.abs(np.sin(diff)) < min_sin
@@ -146,7 +157,7 @@ def nominal_closure(
         )
     t3 = np.where(bad, np.nan, diff)
     t4 = np.where(bad, np.nan, np.pi - diff)
-    D = np.broadcast_to(np.array([[1.0, -1.0], [-1.0, 1.0]]), (*ta.shape, 2, 2)).copy()
+    D = np.broadcast_to(_NOMINAL_D, (*ta.shape, 2, 2)).copy()
     L = np.zeros((*ta.shape, 2, 4))
     return ClosureResult(t3, t4, D, L, ~bad)
 

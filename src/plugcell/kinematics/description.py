@@ -526,6 +526,7 @@ class RobotDescription:
                                           init=False, repr=False)
     _revolute: tuple[NDArray[np.intp], NDArray[np.intp]] = field(
         default=(np.zeros(0, np.intp), np.zeros(0, np.intp)), init=False, repr=False)
+    _loop_indices: tuple[tuple[int, ...], ...] = field(default=(), init=False, repr=False)
 
     # ------------------------------------------------------------------ validation
     def __post_init__(self) -> None:
@@ -545,6 +546,9 @@ class RobotDescription:
         chain = self._check_flange(index)
         S(self, "_chain", chain)
         self._check_loops(index, chain)
+        object.__setattr__(self, "_loop_indices", tuple(  # checked: forward's every call
+            (*(index[n] for n in loop.links), self.actuated.index(loop.arm),
+             self.actuated.index(loop.crank)) for loop in self.loops))
         self._check_coupling()
         n = self.n_readings
         for key in ("base", "tool"):
@@ -947,6 +951,12 @@ class RobotDescription:
         """``(j, i)``: the revolute actuated joints' positions ``j`` in θ_kin and their
         links' positions ``i`` in :attr:`links` (``θ_i += θ_kin,j``; read-only)."""
         return self._revolute
+
+    @property
+    def loop_indices(self) -> tuple[tuple[int, int, int, int, int, int], ...]:
+        """Per loop, the positions ``(arm, crank, coupler, follower)`` of its links in
+        :attr:`links` and ``(arm, crank)`` in θ_kin."""
+        return self._loop_indices  # type: ignore[return-value]
 
     @property
     def parent_indices(self) -> tuple[int, ...]:

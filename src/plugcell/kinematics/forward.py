@@ -225,8 +225,7 @@ def _close_loops(
     dq = np.zeros((*batch, n_p, n_a))
     da = np.zeros((*batch, n_p, n_l))
     valid = np.ones(batch, dtype=bool)
-    for k, loop in enumerate(desc.loops):
-        ia, ic, i3, i4 = (desc.index(n) for n in loop.links)
+    for k, (ia, ic, i3, i4, ja, jc) in enumerate(desc.loop_indices):
         ta, tc = theta[..., ia], theta[..., ic]
         if closure == "nominal":
             res = nominal_closure(ta, tc, raise_errors=raise_errors)
@@ -239,7 +238,6 @@ def _close_loops(
         passive[..., 2 * k + 1] = res.follower
         theta[..., i3] += res.coupler
         theta[..., i4] += res.follower
-        ja, jc = desc.actuated_index(loop.arm), desc.actuated_index(loop.crank)
         dq[..., 2 * k : 2 * k + 2, [ja, jc]] = res.d_driven
         da[..., 2 * k : 2 * k + 2, [ia, ic, i3, i4]] = res.d_lengths
     return passive, dq, da, valid

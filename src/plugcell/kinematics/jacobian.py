@@ -28,6 +28,8 @@ i.e. linear velocity of the point and angular velocity, both in the base frame.
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
@@ -113,6 +115,8 @@ def kinematic_jacobian_from_fk(
     else:
         raise ValueError(f"point must be 'flange' or 'tcp', got {point!r}")
     batch = fk.frames.shape[:-3]
+    if math.prod(batch) == 1:
+        return _kinematic_jacobian_one(desc, fk, p).reshape(*batch, 6, desc.n_actuated)
     J = np.zeros((*batch, 6, desc.n_actuated))
     passive_pos = {name: k for k, name in enumerate(fk.passive_names)}
     act_pos = {name: j for j, name in enumerate(desc.actuated)}
@@ -137,6 +141,45 @@ def kinematic_jacobian_from_fk(
             dq = fk.passive_jacobian[..., passive_pos[lk.name], :]  # (..., n)
             J += col[..., :, None] * dq[..., None, :]
     return J
+
+
+def _kinematic_jacobian_one(desc: RobotDescription, fk: FKResult, p: Array) -> Array:
+    """:func:`kinematic_jacobian_from_fk` of one configuration on floats, ``(6,
+    n_actuated)``: the same columns ``[z × (p − o); z]`` (``[z; 0]`` prismatic), added in
+    the same order, so the same Jacobian — without numpy's per-call cost, which is most
+    of it for one configuration (a real-time cycle's Newton steps ask for one)."""
+    n_a = desc.n_actuated
+    frames = fk.frames.reshape(-1, 4, 4).tolist()
+    px, py, pz = p.reshape(3).tolist()
+    dq = fk.passive_jacobian.reshape(-1, n_a).tolist()
+    passive_pos = {name: k for k, name in enumerate(fk.passive_names)}
+    J = [[0.0] * n_a for _ in range(6)]
+    for i in desc.chain:
+        lk = desc.links[i]
+        if lk.is_fixed:
+            continue
+        parent = desc.parent_indices[i]
+        if parent < 0:
+            zx, zy, zz, ox, oy, oz = 0.0, 0.0, 1.0, 0.0, 0.0, 0.0
+        else:
+            (r0, r1, r2, _) = frames[parent]
+            zx, zy, zz, ox, oy, oz = r0[2], r1[2], r2[2], r0[3], r1[3], r2[3]
+        if lk.is_prismatic:
+            col = (zx, zy, zz, 0.0, 0.0, 0.0)
+        else:
+            dx, dy, dz = px - ox, py - oy, pz - oz
+            col = (zy * dz - zz * dy, zz * dx - zx * dz, zx * dy - zy * dx, zx, zy, zz)
+        if lk.is_actuated:
+            j = desc.actuated_index(lk.name)
+            for r in range(6):
+                J[r][j] += col[r]
+        else:
+            row = dq[passive_pos[lk.name]]
+            for r in range(6):
+                Jr, c = J[r], col[r]
+                for m in range(n_a):
+                    Jr[m] += c * row[m]
+    return np.array(J)
 
 
 def manipulator_jacobian(
