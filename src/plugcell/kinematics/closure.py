@@ -286,7 +286,7 @@ def _fourbar_point(ta: float, tc: float, la: float, lc: float, l3: float, l4: fl
     The same equations in the same order (C.1–C.2, the wrap, the closed-form
     derivatives of :func:`_implicit_derivatives`), with :mod:`math` on floats instead of
     numpy on 0-d arrays: a single configuration — every cycle of a real-time loop —
-    costs a fifth (benchmarks/kinematics_cycle.py).  A loop that cannot assemble or
+    costs a third or less (benchmarks/kinematics_cycle.py).  A loop that cannot assemble or
     collapses returns ``None``, and the array code names the reason (or marks it
     invalid).
     """
