@@ -59,8 +59,7 @@ def _row(name: str, calls: int, repeat: int) -> list[str]:
              f"{_us(lambda: manipulator_jacobian(desc, None, q), calls, repeat):.0f}"]
     if desc.loops:
         p = desc.nominal_parameters()
-        loop = desc.loops[0]
-        ia, ic, i3, i4 = (desc.index(n) for n in loop.links)
+        ia, ic, i3, i4, _, _ = desc.loop_indices[0]
         theta = forward(desc, None, q).theta
         args = (theta[ia], theta[ic], p.a[ia], p.a[ic], p.a[i3], p.a[i4])
         cells.append(f"{_us(lambda: fourbar_closure(*args), calls, repeat):.0f}")

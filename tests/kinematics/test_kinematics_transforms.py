@@ -156,6 +156,8 @@ def test_cross_of_one_pair_and_its_refusals():
         cross(np.ones((3, 2)), np.ones(3), axis=-2)
     with pytest.raises(ValueError, match="is not the same axis from the end"):
         cross(np.ones((3, 5)), np.ones(3), axis=0)
+    with pytest.raises(ValueError, match=r"a of shape \(3,\) has no length-3 axis 1"):
+        cross(np.ones(3), np.ones((1, 3)), axis=1)  # one pair, an axis one of them lacks
 
 
 _ROTVEC = hnp.arrays(np.float64, 3, elements=st.floats(-4.0, 4.0, allow_nan=False))

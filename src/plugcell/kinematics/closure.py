@@ -90,7 +90,7 @@ _NOMINAL_D.setflags(write=False)
 
 
 def _wrap_near(x: Array, ref: Array) -> Array:
-    """The 2π-representative of ``x`` nearest ``ref``."""
+    """The 2π-representative of ``x`` nearest ``ref`` (arrays or floats alike)."""
     return ref + (x - ref + np.pi) % (2.0 * np.pi) - np.pi
 
 
@@ -305,9 +305,8 @@ def _fourbar_point(ta: float, tc: float, la: float, lc: float, l3: float, l4: fl
         return None
     phi3 = math.atan2(ry, rx) - math.atan2(l4 * s4, l3 + l4 * math.cos(t4))
     diff = ta - tc
-    t3 = diff + (phi3 - tc - diff + math.pi) % (2.0 * math.pi) - math.pi
-    ref4 = math.pi - diff
-    t4 = ref4 + (t4 - ref4 + math.pi) % (2.0 * math.pi) - math.pi
+    t3 = _wrap_near(phi3 - tc, diff)
+    t4 = _wrap_near(t4, math.pi - diff)
     phi3 = tc + t3
     phi4 = phi3 + t4
     S = math.sin(phi4 - phi3)

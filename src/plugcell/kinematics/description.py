@@ -542,13 +542,10 @@ class RobotDescription:
         index = {lk.name: i for i, lk in enumerate(self.links)}
         S(self, "_index", index)
         self._check_actuated(index)
-        self._derive_tree(index)
         chain = self._check_flange(index)
         S(self, "_chain", chain)
         self._check_loops(index, chain)
-        object.__setattr__(self, "_loop_indices", tuple(  # checked: forward's every call
-            (*(index[n] for n in loop.links), self.actuated.index(loop.arm),
-             self.actuated.index(loop.crank)) for loop in self.loops))
+        self._derive_tree(index)
         self._check_coupling()
         n = self.n_readings
         for key in ("base", "tool"):
@@ -706,8 +703,9 @@ class RobotDescription:
             seen[lk.name] = i
 
     def _derive_tree(self, index: dict[str, int]) -> None:
-        """What forward kinematics asks every call, made once and read-only: the
-        parents' positions, the prismatic mask and the revolute joints' links."""
+        """What forward kinematics asks every call, made once (read-only) from the
+        checked links, joints and loops: the parents' positions, the prismatic mask, the
+        revolute joints' links and each loop's link and joint positions."""
         S = object.__setattr__
         S(self, "_parents", tuple(index.get(lk.parent, -1) for lk in self.links))
         prismatic = np.array([self.links[index[n]].is_prismatic for n in self.actuated],
@@ -719,6 +717,9 @@ class RobotDescription:
             a.setflags(write=False)
         S(self, "_prismatic", prismatic)
         S(self, "_revolute", revolute)
+        S(self, "_loop_indices", tuple(
+            (*(index[n] for n in loop.links), self.actuated.index(loop.arm),
+             self.actuated.index(loop.crank)) for loop in self.loops))
 
     def _check_actuated(self, index: dict[str, int]) -> None:
         seen: set[str] = set()

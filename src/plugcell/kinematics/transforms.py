@@ -262,7 +262,7 @@ def cross(a: ArrayLike, b: ArrayLike, axis: int = -1) -> Array:
     """
     a, b = _f(a), _f(b)
     if (a.size == b.size == 3 and a.shape[-1:] == b.shape[-1:] == (3,)
-            and axis in (-1, max(a.ndim, b.ndim) - 1)):  # one pair, however batched: floats
+            and (axis == -1 or axis == a.ndim - 1 == b.ndim - 1)):  # one pair: floats
         (a0, a1, a2), (b0, b1, b2) = a.reshape(3).tolist(), b.reshape(3).tolist()
         out = np.array([a1 * b2 - a2 * b1, a2 * b0 - a0 * b2, a0 * b1 - a1 * b0])
         return out.reshape((1,) * (max(a.ndim, b.ndim) - 1) + (3,))
