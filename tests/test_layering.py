@@ -1,20 +1,21 @@
 """The packages of plugcell in layers, and no import upward (read with ``ast``, nothing
 imported — so an import inside a function counts as much as one at the top).
 
-====================  =====================================================  ===========
-layer                 packages                                               may import
-====================  =====================================================  ===========
-math                  kinematics, metrology, calibration, compensation,      math
+====================  ========================================================  ===================
+layer                 packages                                                  may import
+====================  ========================================================  ===================
+base                  lazy (a package's names imported on first use)            nothing
+math                  kinematics, metrology, calibration, compensation,         math, base
                       motion
-io                    io (file formats: robots, URDF, measurements, units)   math, io
-framework             framework (Zenoh, the service base, the journal)       framework
-pdl                   pdl (the robot language: parser, checker, interpreter)  math, io, pdl
-devices               devices (camera, drill, robot, tracker, compute,       all but sim
-                      cell, opcua)                                           and apps
-sim                   sim (twin, simulated controller, drivers, world)       all but apps
-apps                  apps (cli, commands, ui, demo, reproduce, bench), every everything
+io                    io (file formats: robots, URDF, measurements, units)      math, io, base
+framework             framework (Zenoh, the service base, the journal)          framework, base
+pdl                   pdl (the robot language: parser, checker, interpreter)    math, io, pdl, base
+devices               devices (camera, drill, robot, tracker, compute,          all but sim
+                      cell, opcua)                                              and apps
+sim                   sim (twin, simulated controller, drivers, world)          all but apps
+apps                  apps (cli, commands, ui, demo, reproduce, bench), every   everything
                       ``__main__`` module (a program, not a library)
-====================  =====================================================  ===========
+====================  ========================================================  ===================
 
 A module named in a string (for importlib, or run as ``-m``) counts as an import.
 The math never reads a file, speaks Zenoh or knows a device; the framework knows no
@@ -38,8 +39,11 @@ import pytest
 SRC = Path(__file__).resolve().parents[1] / "src" / "plugcell"
 
 MATH = {"kinematics", "metrology", "calibration", "compensation", "motion"}
+#: Modules of the package's top level below every layer: they import nothing of plugcell.
+BASE = {"lazy"}
 #: What each layer must not import.
 FORBIDDEN = {
+    "base": {"math", "io", "framework", "pdl", "sim", "devices", "apps"},
     "math": {"io", "framework", "pdl", "sim", "devices", "apps"},
     "io": {"framework", "pdl", "sim", "devices", "apps"},
     "framework": {"math", "io", "pdl", "sim", "devices", "apps"},
@@ -58,6 +62,8 @@ def layer_of(module: str) -> str | None:
     if len(parts) == 1:
         return "apps"  # the package itself: its version, nothing else
     top = parts[1]
+    if len(parts) == 2 and top in BASE:
+        return "base"
     if parts[-1] == "__main__" or top in ("apps", "__main__"):
         return "apps"
     if top in MATH:

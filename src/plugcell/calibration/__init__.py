@@ -21,46 +21,21 @@ Pure math (numpy, SI units), no I/O, no framework imports; files go through
 * :mod:`.prior` — a short campaign in a new set-up with an earlier calibration as prior (MAP).
 """
 
-from plugcell.calibration.configs import MODELS, ModelConfig, model_config
-from plugcell.calibration.data import CalibrationData
-from plugcell.calibration.identifiability import (
-    Identifiability,
-    analyse,
-    combinations_at,
-    structural_identifiability,
-)
-from plugcell.calibration.identify import (
-    CalibrationError,
-    Calibrator,
-    DivergenceError,
-)
-from plugcell.calibration.jacobian import JacobianResult, identification_jacobian
-from plugcell.calibration.model import ErrorModel, PoseBatch
-from plugcell.calibration.parameters import ErrorParameter, ParameterSpace
-from plugcell.calibration.result import CalibrationResult
-from plugcell.calibration.statistics import PoseResiduals
-from plugcell.calibration.structure import KinematicStructure, kinematic_structure
+from plugcell.lazy import exports
 
-__all__ = [
-    "MODELS",
-    "CalibrationData",
-    "CalibrationError",
-    "CalibrationResult",
-    "Calibrator",
-    "DivergenceError",
-    "ErrorModel",
-    "ErrorParameter",
-    "Identifiability",
-    "JacobianResult",
-    "KinematicStructure",
-    "ModelConfig",
-    "ParameterSpace",
-    "PoseBatch",
-    "PoseResiduals",
-    "analyse",
-    "combinations_at",
-    "identification_jacobian",
-    "kinematic_structure",
-    "model_config",
-    "structural_identifiability",
-]
+#: Module → the public names it defines (imported on first use: :mod:`plugcell.lazy`).
+_NAMES = {
+    "configs": ("MODELS", "ModelConfig", "model_config"),
+    "data": ("CalibrationData",),
+    "identifiability": (
+        "Identifiability", "analyse", "combinations_at", "structural_identifiability",
+    ),
+    "identify": ("CalibrationError", "Calibrator", "DivergenceError"),
+    "jacobian": ("JacobianResult", "identification_jacobian"),
+    "model": ("ErrorModel", "PoseBatch"),
+    "parameters": ("ErrorParameter", "ParameterSpace"),
+    "result": ("CalibrationResult",),
+    "statistics": ("PoseResiduals",),
+    "structure": ("KinematicStructure", "kinematic_structure"),
+}
+__getattr__, __dir__, __all__ = exports(__name__, _NAMES)

@@ -17,77 +17,25 @@ is the T-MAC (the identified PROBE), as in thesis 8.3.  No I/O, no framework or
 twin imports.  See docs/compensation.md.
 """
 
-from plugcell.compensation.errors import CompensationError, CorrectionError, SensorError
-from plugcell.compensation.frames import MetrologyFrames, RobotFrameSensor
-from plugcell.compensation.model_based import (
-    CompensationResult,
-    compensate,
-    compensate_joints,
-    nominal_joints,
-)
-from plugcell.compensation.pose_model import IdentifiedModel, NominalModel, PoseModel
-from plugcell.compensation.program import filter_program, frame_matrix, target_poses
-from plugcell.compensation.protocols import (
-    CartesianRobot,
-    JointRobot,
-    MovingRobot,
-    PoseSensor,
-    PoseStream,
-    PositionSensor,
-    Reading,
-    StreamReading,
-)
-from plugcell.compensation.sensor_based import (
-    CorrectionResult,
-    CorrectionSettings,
-    CorrectionStep,
-    correct_3dof,
-    correct_6dof,
-)
-from plugcell.compensation.settling import (
-    RestEstimate,
-    SettlingResult,
-    SettlingSettings,
-    SettlingStep,
-    bounded_step,
-    correct_while_settling,
-    estimate_rest_pose,
-)
+from plugcell.lazy import exports
 
-__all__ = [
-    "CartesianRobot",
-    "CompensationError",
-    "CompensationResult",
-    "CorrectionError",
-    "CorrectionResult",
-    "CorrectionSettings",
-    "CorrectionStep",
-    "IdentifiedModel",
-    "JointRobot",
-    "MetrologyFrames",
-    "MovingRobot",
-    "NominalModel",
-    "PoseModel",
-    "PoseSensor",
-    "PoseStream",
-    "PositionSensor",
-    "Reading",
-    "RestEstimate",
-    "RobotFrameSensor",
-    "SensorError",
-    "SettlingResult",
-    "SettlingSettings",
-    "SettlingStep",
-    "StreamReading",
-    "bounded_step",
-    "compensate",
-    "compensate_joints",
-    "correct_3dof",
-    "correct_6dof",
-    "correct_while_settling",
-    "estimate_rest_pose",
-    "filter_program",
-    "frame_matrix",
-    "nominal_joints",
-    "target_poses",
-]
+#: Module → the public names it defines (imported on first use: :mod:`plugcell.lazy`).
+_NAMES = {
+    "errors": ("CompensationError", "CorrectionError", "SensorError"),
+    "frames": ("MetrologyFrames", "RobotFrameSensor"),
+    "model_based": ("CompensationResult", "compensate", "compensate_joints", "nominal_joints"),
+    "pose_model": ("IdentifiedModel", "NominalModel", "PoseModel"),
+    "program": ("filter_program", "frame_matrix", "target_poses"),
+    "protocols": (
+        "CartesianRobot", "JointRobot", "MovingRobot", "PoseSensor", "PoseStream",
+        "PositionSensor", "Reading", "StreamReading",
+    ),
+    "sensor_based": (
+        "CorrectionResult", "CorrectionSettings", "CorrectionStep", "correct_3dof", "correct_6dof",
+    ),
+    "settling": (
+        "RestEstimate", "SettlingResult", "SettlingSettings", "SettlingStep", "bounded_step",
+        "correct_while_settling", "estimate_rest_pose",
+    ),
+}
+__getattr__, __dir__, __all__ = exports(__name__, _NAMES)

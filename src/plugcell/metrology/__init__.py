@@ -10,70 +10,22 @@ the framework. Degenerate input raises :class:`MetrologyError` (a ``ValueError``
 See ``docs/metrology.md``.
 """
 
-from ._validate import MetrologyError
-from .accuracy import (
-    AccuracyStats,
-    ComponentStats,
-    ErrorStats,
-    Iso9283Result,
-    NormStats,
-    StraightnessResult,
-    accuracy_statistics,
-    iso9283_pose_accuracy,
-    pose_errors,
-    straightness,
-    wrap_angle,
-)
-from .fitting import CircleFit, LineFit, PlaneFit, fit_circle, fit_line, fit_plane
-from .frames import (
-    SMR_RADIUS_HALF_INCH,
-    BaseEstimate,
-    BaseParameters,
-    ProbeEstimate,
-    RigidFit,
-    base_from_features,
-    base_matrix_from_parameters,
-    base_parameters_from_matrix,
-    fit_rigid_transform,
-    frame_from_axes,
-    invert_transform,
-    probe_from_flange_features,
-)
-from .timing import ClockMap, DelayEstimate, estimate_delay, fit_clock_map
+from plugcell.lazy import exports
 
-__all__ = [
-    "SMR_RADIUS_HALF_INCH",
-    "AccuracyStats",
-    "BaseEstimate",
-    "BaseParameters",
-    "CircleFit",
-    "ClockMap",
-    "ComponentStats",
-    "DelayEstimate",
-    "ErrorStats",
-    "Iso9283Result",
-    "LineFit",
-    "MetrologyError",
-    "NormStats",
-    "PlaneFit",
-    "ProbeEstimate",
-    "RigidFit",
-    "StraightnessResult",
-    "accuracy_statistics",
-    "base_from_features",
-    "base_matrix_from_parameters",
-    "base_parameters_from_matrix",
-    "estimate_delay",
-    "fit_circle",
-    "fit_clock_map",
-    "fit_line",
-    "fit_plane",
-    "fit_rigid_transform",
-    "frame_from_axes",
-    "invert_transform",
-    "iso9283_pose_accuracy",
-    "pose_errors",
-    "probe_from_flange_features",
-    "straightness",
-    "wrap_angle",
-]
+#: Module → the public names it defines (imported on first use: :mod:`plugcell.lazy`).
+_NAMES = {
+    "_validate": ("MetrologyError",),
+    "accuracy": (
+        "AccuracyStats", "ComponentStats", "ErrorStats", "Iso9283Result", "NormStats",
+        "StraightnessResult", "accuracy_statistics", "iso9283_pose_accuracy", "pose_errors",
+        "straightness", "wrap_angle",
+    ),
+    "fitting": ("CircleFit", "LineFit", "PlaneFit", "fit_circle", "fit_line", "fit_plane"),
+    "frames": (
+        "SMR_RADIUS_HALF_INCH", "BaseEstimate", "BaseParameters", "ProbeEstimate", "RigidFit",
+        "base_from_features", "base_matrix_from_parameters", "base_parameters_from_matrix",
+        "fit_rigid_transform", "frame_from_axes", "invert_transform", "probe_from_flange_features",
+    ),
+    "timing": ("ClockMap", "DelayEstimate", "estimate_delay", "fit_clock_map"),
+}
+__getattr__, __dir__, __all__ = exports(__name__, _NAMES)

@@ -27,29 +27,19 @@ Pure math (numpy, SI units, no I/O).  The RSI correction source is
 :mod:`plugcell.sim.tracked_path`; results in docs/dynamic-correction.md.
 """
 
-from .estimator import JointHistory, ResidualFilter, TrackerMeasurement, steady_state_gain
-from .learning import (
-    DEFAULT_WEIGHTING,
-    InverseSettings,
-    InverseState,
-    IterativeLearning,
-    LearnedOffset,
-    LearningSettings,
-    contraction,
-    contraction_inverse,
-    inverse_gain,
-    path_error,
-    weighting_for,
-)
-from .limiter import RateLimiter
-from .loop import CycleOutput, HoldWindow, TrackingLoop, TrackingSettings, TrackingStats
-from .plant import ModalPlant, excitation, identify_plant
-from .smoothing import SpectralGain, TileGain, WeightingSettings
+from plugcell.lazy import exports
 
-__all__ = ["DEFAULT_WEIGHTING", "CycleOutput", "HoldWindow", "InverseSettings",
-           "InverseState", "IterativeLearning", "JointHistory",
-           "LearnedOffset", "LearningSettings", "ModalPlant", "RateLimiter", "ResidualFilter",
-           "SpectralGain", "TileGain", "TrackerMeasurement", "TrackingLoop", "TrackingSettings",
-           "TrackingStats", "WeightingSettings",
-           "contraction", "contraction_inverse", "excitation", "identify_plant",
-           "inverse_gain", "path_error", "steady_state_gain", "weighting_for"]
+#: Module → the public names it defines (imported on first use: :mod:`plugcell.lazy`).
+_NAMES = {
+    "estimator": ("JointHistory", "ResidualFilter", "TrackerMeasurement", "steady_state_gain"),
+    "learning": (
+        "DEFAULT_WEIGHTING", "InverseSettings", "InverseState", "IterativeLearning",
+        "LearnedOffset", "LearningSettings", "contraction", "contraction_inverse", "inverse_gain",
+        "path_error", "weighting_for",
+    ),
+    "limiter": ("RateLimiter",),
+    "loop": ("CycleOutput", "HoldWindow", "TrackingLoop", "TrackingSettings", "TrackingStats"),
+    "plant": ("ModalPlant", "excitation", "identify_plant"),
+    "smoothing": ("SpectralGain", "TileGain", "WeightingSettings"),
+}
+__getattr__, __dir__, __all__ = exports(__name__, _NAMES)
