@@ -16,6 +16,7 @@ import ast
 from pathlib import Path
 
 import pytest
+from source_trees import parsed
 
 from plugcell.apps.kinds import KINDS, load_kind
 from plugcell.framework.participant import Participant
@@ -42,7 +43,7 @@ def class_lines() -> dict[str, int]:
     out = {}
     for package in ("framework", "devices"):
         for path in sorted((SRC / package).rglob("*.py")):
-            for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"))):
+            for node in ast.walk(parsed(path.read_text(encoding="utf-8"))):
                 if isinstance(node, ast.ClassDef):
                     key = f"{path.relative_to(SRC).as_posix()}:{node.name}"
                     out[key] = node.end_lineno - node.lineno + 1  # type: ignore[operator]

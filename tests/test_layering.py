@@ -35,6 +35,7 @@ import re
 from pathlib import Path
 
 import pytest
+from source_trees import parsed
 
 SRC = Path(__file__).resolve().parents[1] / "src" / "plugcell"
 
@@ -82,7 +83,7 @@ def imports(source: str) -> list[tuple[int, str]]:
     """``(line, module)`` of every absolute import in ``source``, also inside functions,
     and of every module a string names whole (loaded by name, or run as a program)."""
     found = []
-    for node in ast.walk(ast.parse(source)):
+    for node in ast.walk(parsed(source)):
         if isinstance(node, ast.Import):
             found += [(node.lineno, a.name) for a in node.names]
         elif isinstance(node, ast.ImportFrom) and node.level == 0 and node.module:
@@ -185,7 +186,7 @@ def programs(source: str) -> list[str]:
     """What makes ``source`` a program: a top-level ``main`` function, or an
     ``if __name__ == "__main__":`` block."""
     found = []
-    for node in ast.parse(source).body:
+    for node in parsed(source).body:
         if isinstance(node, ast.FunctionDef | ast.AsyncFunctionDef) and node.name == "main":
             found.append(f"def main (line {node.lineno})")
         elif (isinstance(node, ast.If) and isinstance(node.test, ast.Compare)

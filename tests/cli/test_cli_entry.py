@@ -10,6 +10,7 @@ from pathlib import Path
 
 import pytest
 from loaded_modules import modules_loaded_by
+from source_trees import parsed
 
 import plugcell.apps.commands
 from plugcell.apps.cli import COMMANDS, EXIT_BROKEN_PIPE, build_parser, chosen_command, main
@@ -67,7 +68,7 @@ def test_every_command_module_is_declared_once():
     assert len({c.name for c in COMMANDS}) == len(COMMANDS)
     found = set()
     for path in Path(plugcell.apps.commands.__file__).parent.glob("*.py"):
-        tree = ast.parse(path.read_text(encoding="utf-8"))
+        tree = parsed(path.read_text(encoding="utf-8"))
         names = [n.name for n in tree.body if isinstance(n, ast.FunctionDef)]
         assert "register" not in names, f"{path.name}: register() is never called; " \
             "declare the command in plugcell.apps.cli.COMMANDS with a configure function"

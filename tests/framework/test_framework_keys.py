@@ -11,6 +11,7 @@ from pathlib import Path
 import pytest
 from hypothesis import given
 from hypothesis import strategies as st
+from source_trees import parsed
 
 from plugcell.framework.keys import KeySpace
 
@@ -83,7 +84,7 @@ def key_offences(source: str, where: str) -> list[str]:
     may: write a ``plugcell/`` key (literal or f-string), use a KeySpace layout
     (``keys.state(name)``, ``KeySpace(cell).process(...)``), import the key root, or read
     a sample's key to parse it."""
-    tree = ast.parse(source)
+    tree = parsed(source)
     aliases = _key_space_aliases(tree)
     in_fstring = {id(part) for node in ast.walk(tree) if isinstance(node, ast.JoinedStr)
                   for part in node.values}
@@ -162,7 +163,7 @@ def test_no_module_outside_the_framework_reaches_into_a_participant(private):
     """``x._loop`` etc. of another object (``self._…`` is a class's own business)."""
     offenders = []
     for path in _outside_framework():
-        tree = ast.parse(path.read_text(encoding="utf-8"))
+        tree = parsed(path.read_text(encoding="utf-8"))
         for node in ast.walk(tree):
             if (isinstance(node, ast.Attribute) and node.attr == private
                     and not (isinstance(node.value, ast.Name) and node.value.id == "self")):

@@ -12,6 +12,8 @@ import ast
 import sys
 from pathlib import Path
 
+from source_trees import parsed
+
 SRC = Path(__file__).resolve().parents[2] / "src" / "plugcell"
 
 #: (importing module, imported module): why the circle stays.
@@ -59,7 +61,7 @@ def _graph(mods: dict[str, Path]) -> tuple[dict[str, set[str]], dict[str, set[st
                 child, ast.FunctionDef | ast.AsyncFunctionDef))
 
     for m, p in mods.items():
-        visit(m, ast.parse(p.read_text(encoding="utf-8")), False)
+        visit(m, parsed(p.read_text(encoding="utf-8")), False)
     return top, inner
 
 

@@ -18,6 +18,7 @@ import pytest
 from childproc import until
 from hypothesis import given, settings
 from hypothesis import strategies as st
+from source_trees import parsed
 
 from plugcell.framework.bus import Bus
 from plugcell.framework.keys import KeySpace, Presence
@@ -211,7 +212,7 @@ def transport_offences(source: str, where: str) -> list[str]:
     """What ``source`` (a module outside the framework) does that only the transport
     adapter may: import Zenoh, open a session, reach for a participant's session."""
     found = []
-    for node in ast.walk(ast.parse(source)):
+    for node in ast.walk(parsed(source)):
         if isinstance(node, ast.Import):
             found += [f"{where}:{node.lineno}: imports zenoh" for a in node.names
                       if a.name.split(".")[0] == "zenoh"]
