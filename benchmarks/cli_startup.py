@@ -11,10 +11,12 @@ that sub-command's module is loaded (:mod:`plugcell.apps.cli`), so ``--help`` of
 does not load Zenoh or the web server.  On a loaded machine run it with ``nice -n 0``
 (or not at all under ``nice``): the figures are wall time.
 
-``--imports`` adds what three long-running processes import before they serve, each as
+``--imports`` adds what five long-running processes import before they serve, each as
 ``python -c "import MODULE"`` (the tests start them hundreds of times): the compute
-service's functions, the web UI's server and the twin's dynamics (the simulated
-controller).  Run it on older sources with ``PYTHONPATH=OLD/src`` to compare.
+service's functions, the web UI's server, the twin's dynamics (the simulated
+controller), the robot service's streaming controller and the robot's link process (the
+child that answers the controller's cycles).  Run it on older sources with
+``PYTHONPATH=OLD/src`` to compare.
 """
 
 from __future__ import annotations
@@ -41,6 +43,8 @@ IMPORTS: tuple[tuple[str, str], ...] = (
     ("import: compute functions", "plugcell.devices.compute.functions"),
     ("import: web UI server", "plugcell.apps.ui.server"),
     ("import: twin dynamics", "plugcell.sim.twin.dynamics"),
+    ("import: robot stream controller", "plugcell.devices.robot.stream_controller"),
+    ("import: robot link process", "plugcell.devices.robot.stream.process"),
 )
 
 
@@ -70,15 +74,15 @@ def main(argv: list[str]) -> int:
     ap.add_argument("--limit", type=float, default=0.3,
                     help="target start-up, s (default 0.3); rows above it are marked")
     ap.add_argument("--imports", action="store_true",
-                    help="also the imports of three service processes (module docstring)")
+                    help="also the imports of five service processes (module docstring)")
     args = ap.parse_args(argv)
     base = plugcell_command()
     print(f"plugcell start-up, {platform.processor() or platform.machine()}, "
           f"{os.cpu_count()} cores, Python {platform.python_version()}, "
           f"nice {os.nice(0)}, load {os.getloadavg()[0]:.2f}; {args.repeat} runs each")
-    print(f"{'command':32s} | {'best s':>7s} | {'median s':>8s} | {'worst s':>7s} | "
+    print(f"{'command':34s} | {'best s':>7s} | {'median s':>8s} | {'worst s':>7s} | "
           f"{'CPU s':>6s} | {'< ' + format(args.limit, 'g') + ' s':>8s}")
-    print("-" * 83)
+    print("-" * 85)
     rows = [("python -c pass (interpreter)", [sys.executable, "-c", "pass"])]
     rows += [(label, base + extra) for label, extra in COMMANDS]
     if args.imports:
@@ -88,7 +92,7 @@ def main(argv: list[str]) -> int:
         t, cpu = run_times(cmd, args.repeat)
         med = statistics.median(t)
         ok = med < args.limit
-        print(f"{label:32s} | {min(t):7.3f} | {med:8.3f} | {max(t):7.3f} | "
+        print(f"{label:34s} | {min(t):7.3f} | {med:8.3f} | {max(t):7.3f} | "
               f"{statistics.median(cpu):6.3f} | {'yes' if ok else 'NO':>8s}")
     return 0
 

@@ -272,3 +272,54 @@ def test_stage_weight_runs_on_the_ipa_data(set_up_a: Path) -> None:
     for x in lines:
         assert re.search(r"-> w ([\d.]+) \(product w \1\)", x), x
     assert "w by the stage's CV" in done.stdout
+
+
+#: py-spy's raw format: an idle worker, a worker's test, a service importing SciPy through
+#: plugcell's calibration, and a docs example whose bash command line spans two lines.
+SUITE_RAW = (
+    'process 1:"";process 2:"python -u -c import sys;exec(eval(sys.stdin.readline()))" 500\n'
+    'process 1:"";process 2:"python -u -c import sys;exec(eval(sys.stdin.readline()))";'
+    "pytest_pyfunc_call (_pytest/python.py:187);test_x (test_x.py:3);"
+    "forward (plugcell/kinematics/forward.py:417) 50\n"
+    'process 1:"";process 3:"python -m plugcell serve robot --name R";'
+    "<module> (plugcell/__main__.py:5);_find_and_load (<frozen importlib._bootstrap>:1176);"
+    "<module> (plugcell/calibration/linalg.py:14);"
+    "_find_and_load (<frozen importlib._bootstrap>:1176);<module> (scipy/linalg/__init__.py:202);"
+    "<module> (scipy/linalg/_basic.py:9) 25\n"
+    'process 1:"";process 4:"bash -c set -e\nplugcell kin fk --joints 0,0";'
+    'process 5:"python -m plugcell kin fk --joints 0,0";'
+    "main (plugcell/apps/cli.py:167);forward (plugcell/kinematics/forward.py:417) 25\n"
+)
+
+
+def test_suite_profile_reads_a_py_spy_recording(tmp_path: Path) -> None:
+    raw = tmp_path / "suite.raw"
+    raw.write_text(SUITE_RAW)
+    done = subprocess.run([sys.executable, str(BENCHMARKS / "suite_profile.py"), str(raw)],
+                          capture_output=True, text=True, timeout=60)
+    assert done.returncode == 0, done.stderr
+    out = done.stdout
+    assert "busy samples: 100 (4 s of CPU at 25 samples/s); importing: 1 s (25.0%)" in out
+    assert "| pytest worker (the tests' own code) | 2.0 | 50.0% |" in out
+    assert "| plugcell serve robot | 1.0 | 25.0% |" in out
+    assert "| plugcell kin fk | 1.0 | 25.0% |" in out  # the bash line's newline kept apart
+    assert "| scipy | 1.0 | 25.0% |" in out
+    assert "| plugcell.calibration.linalg → scipy | 1.0 | 25.0% |" in out
+    assert "| forward (plugcell/kinematics/forward.py:417) | 3.0 | 75.0% |" in out
+
+
+@pytest.mark.parametrize(("text", "says"), [
+    ("not a recording\n", "not py-spy's raw format"),
+    ('process 1:"python" 40\n', "no busy sample in the recording"),
+])
+def test_suite_profile_refuses_what_it_cannot_read(tmp_path: Path, text: str,
+                                                   says: str) -> None:
+    raw = tmp_path / "suite.raw"
+    raw.write_text(text)
+    done = subprocess.run([sys.executable, str(BENCHMARKS / "suite_profile.py"), str(raw)],
+                          capture_output=True, text=True, timeout=60)
+    assert done.returncode == 2 and says in done.stderr, done.stderr
+    done = subprocess.run([sys.executable, str(BENCHMARKS / "suite_profile.py"),
+                           str(tmp_path / "absent.raw")], capture_output=True, text=True,
+                          timeout=60)
+    assert done.returncode == 2 and "absent.raw" in done.stderr
