@@ -199,7 +199,8 @@ def small_layer_row(prior: Prior, camp: CalibrationData, test: CalibrationData,
         out[f"+ ridge {kind}, cv"] = errs[i] if cvs[i] < cv0 else out["A's layer kept (MAP)"]
         out[f"+ ridge {kind}, oracle α"] = min([out["A's layer kept (MAP)"], *errs],
                                                key=np.mean)
-    out |= _mapped_layer(res, camp, test, train, folds, cv0, out["A's layer kept (MAP)"])
+    out |= _mapped_layer(res, (camp, Pc), (test, Pt), train, folds, cv0,
+                         out["A's layer kept (MAP)"])
     Xc = np.hstack([np.sin(camp.q), np.cos(camp.q)])
     Xt = np.hstack([np.sin(test.q), np.cos(test.q)])
     e = np.empty(len(camp))
@@ -211,32 +212,35 @@ def small_layer_row(prior: Prior, camp: CalibrationData, test: CalibrationData,
     return out | _oracle_gp(res, train, Xc, E, Xt, Pt, test)
 
 
-def _mapped_layer(res: Any, camp: CalibrationData, test: CalibrationData,
-                  train: CalibrationData, folds: list, cv0: float,
-                  kept: np.ndarray) -> dict[str, np.ndarray]:
+def _mapped_layer(res: Any, camp: tuple[CalibrationData, np.ndarray],
+                  test: tuple[CalibrationData, np.ndarray], train: CalibrationData,
+                  folds: list, cv0: float, kept: np.ndarray) -> dict[str, np.ndarray]:
     """A's layer mapped by a 3 × 3 matrix: with ``p₀(q)`` the MAP's physical prediction
     and ``L(q) = R_Bᵀ (p_hybrid − p₀)`` A's layer's correction (base frame), the campaign's
     ``E₀ = R_Bᵀ (p_M − p₀) ≈ L M`` by least squares (9 parameters; ``M = I`` is A's layer
     as it is); *cv*: adopted when its grouped CV over the campaign's cells beats A's layer
-    kept; *oracle*: ``M`` from all the training cells' poses (hindsight)."""
+    kept; *oracle*: ``M`` from all the training cells' poses (hindsight).  ``camp`` and
+    ``test`` come with their hybrid positions (``small_layer_row``'s)."""
     Rb = res.model.base()[:3, :3]
 
-    def parts(d: CalibrationData) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    def parts(d: CalibrationData, hybrid: np.ndarray) -> tuple[np.ndarray, ...]:
         p0 = res.model.predict(d.q)[:, :3, 3]
-        return p0, (res.predict_hybrid(d.q)[0][:, :3, 3] - p0) @ Rb, (d.positions - p0) @ Rb
+        return p0, (hybrid - p0) @ Rb, (d.positions - p0) @ Rb
 
-    _, Lc, Ec = parts(camp)
-    p0t, Lt, _ = parts(test)
-    _, La, Ea = parts(train)
-    e = np.empty(len(camp))
+    def fit(L: np.ndarray, E: np.ndarray) -> np.ndarray:
+        return np.linalg.lstsq(L, E, rcond=None)[0]
+
+    _, Lc, Ec = parts(*camp)
+    p0t, Lt, _ = parts(*test)
+    _, La, Ea = parts(train, res.predict_hybrid(train.q)[0][:, :3, 3])
+    e = np.empty(len(Lc))
     for tr, te in folds:
-        M = np.linalg.lstsq(Lc[tr], Ec[tr], rcond=None)[0]
-        e[te] = np.linalg.norm(Ec[te] - Lc[te] @ M, axis=1)
-    mapped = _err(test, p0t + (Lt @ np.linalg.lstsq(Lc, Ec, rcond=None)[0]) @ Rb.T)
+        e[te] = np.linalg.norm(Ec[te] - Lc[te] @ fit(Lc[tr], Ec[tr]), axis=1)
+    mapped = _err(test[0], p0t + (Lt @ fit(Lc, Ec)) @ Rb.T)
     return {"+ A's layer mapped by 3 × 3 (least squares), always": mapped,
             "+ A's layer mapped by 3 × 3, cv": mapped if e.mean() < cv0 else kept,
             "+ A's layer mapped by 3 × 3 from the training cells (oracle)":
-            _err(test, p0t + (Lt @ np.linalg.lstsq(La, Ea, rcond=None)[0]) @ Rb.T)}
+            _err(test[0], p0t + (Lt @ fit(La, Ea)) @ Rb.T)}
 
 
 def _oracle_gp(res: Any, train: CalibrationData, Xc: np.ndarray, E: np.ndarray,
