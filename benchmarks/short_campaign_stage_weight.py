@@ -47,14 +47,19 @@ from plugcell.calibration import CalibrationData
 from plugcell.calibration.campaign_stage import STAGE_WEIGHT_GRID, fit_campaign_stage
 from plugcell.calibration.prior import Prior, PriorCalibrator
 from plugcell.calibration.residual_model import (
-    DEFAULT_GRID,
-    ResidualLearner,
     calibration_fingerprint,
     residual_targets,
     workspace_cells,
 )
 from residual_ur10 import find_data
-from short_campaign_ur10 import _errors, choose, earlier, outer_folds, ur10_and_sets
+from short_campaign_ur10 import (
+    _errors,
+    choose,
+    earlier,
+    outer_folds,
+    set_up_a,
+    ur10_and_sets,
+)
 
 WEIGHTS = STAGE_WEIGHT_GRID
 
@@ -158,7 +163,7 @@ def main() -> int:
     ap.add_argument("--draws", type=int, default=1)
     ap.add_argument("--folds", type=int, default=5)
     ap.add_argument("--quick", action="store_true",
-                    help="A's layer: one hyper-parameter candidate, 100 trees")
+                    help="set-up A as short_campaign_ur10.py --quick")
     ap.add_argument("--cache", type=Path, default=None, metavar="FILE",
                     help="set-up A's fit, as short_campaign_ur10.py --cache")
     args = ap.parse_args()
@@ -170,9 +175,7 @@ def main() -> int:
 
     desc, sets = ur10_and_sets(data)
     with threadpool_limits(1):
-        kw: dict[str, Any] = ({"grid": DEFAULT_GRID[1:2], "trees": 100} if args.quick
-                              else {"grid": (DEFAULT_GRID[1], DEFAULT_GRID[2]), "trees": 200})
-        resA = earlier(desc, sets["A"], ResidualLearner(**kw), args.cache)
+        resA = earlier(desc, *set_up_a(sets["A"], args.quick), args.cache)
         run(sets, resA, args.series, args.size, args.draws, args.folds)
     return 0
 

@@ -16,6 +16,7 @@ import subprocess
 import sys
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 BENCHMARKS = Path(__file__).resolve().parents[1] / "benchmarks"
@@ -202,8 +203,9 @@ def test_short_campaign_runs_on_the_ipa_data(tmp_path: Path, set_up_a: Path) -> 
 
 def test_set_up_a_is_read_from_the_cache_only_for_the_same_learner(tmp_path: Path,
                                                                     monkeypatch) -> None:
-    """``earlier``'s cache: the same model and learner read back; another learner's (or an
-    older file without the key) fitted again and the file overwritten."""
+    """``earlier``'s cache: the same model, poses and learner read back; another learner's,
+    other poses' (or an older file without the key) fitted again and the file
+    overwritten."""
     sys.path.insert(0, str(BENCHMARKS))
     try:
         import short_campaign_ur10 as sc
@@ -233,18 +235,22 @@ def test_set_up_a_is_read_from_the_cache_only_for_the_same_learner(tmp_path: Pat
     monkeypatch.setattr(sc, "Calibrator", Calibrator)
     monkeypatch.setattr(ResidualLearner, "fit", lambda self, model, data, robot: self.trees)
     cache, ur10 = tmp_path / "A.pkl", type("Robot", (), {"name": "ur10"})()
-    assert sc.earlier(ur10, None, ResidualLearner(trees=100), cache) == ("A", 100)
-    assert sc.earlier(ur10, None, ResidualLearner(trees=100), cache) == ("A", 100)
+    A = type("Data", (), {"q": np.zeros((4, 6))})()
+    assert sc.earlier(ur10, A, ResidualLearner(trees=100), cache) == ("A", 100)
+    assert sc.earlier(ur10, A, ResidualLearner(trees=100), cache) == ("A", 100)
     assert len(fits) == 1  # read back
-    assert sc.earlier(ur10, None, ResidualLearner(trees=50), cache) == ("A", 50)
+    assert sc.earlier(ur10, A, ResidualLearner(trees=50), cache) == ("A", 50)
     assert len(fits) == 2  # another learner: fitted again …
-    assert sc.earlier(ur10, None, ResidualLearner(trees=50), cache) == ("A", 50)
+    assert sc.earlier(ur10, A, ResidualLearner(trees=50), cache) == ("A", 50)
     assert len(fits) == 2  # … and kept
+    quick = type("Data", (), {"q": np.zeros((1, 6))})()  # other poses of A (--quick's)
+    assert sc.earlier(ur10, quick, ResidualLearner(trees=50), cache) == ("A", 50)
+    assert len(fits) == 3  # fitted again
     import pickle
 
     cache.write_bytes(pickle.dumps(("A", 100)))  # a file of the format before the key
-    assert sc.earlier(ur10, None, ResidualLearner(trees=50), cache) == ("A", 50)
-    assert len(fits) == 3
+    assert sc.earlier(ur10, A, ResidualLearner(trees=50), cache) == ("A", 50)
+    assert len(fits) == 4
 
 
 def test_stage_weight_skips_cleanly_without_the_data(tmp_path: Path) -> None:

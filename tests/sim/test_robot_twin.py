@@ -230,3 +230,29 @@ def test_backlash_shows_on_reversal_except_where_gravity_preloads_the_gear(joint
     twin.move_joints(q + step)
     twin.move_joints(q)
     np.testing.assert_allclose(twin.true_flange(), a, atol=1e-12)
+
+
+def test_the_flange_asked_again_at_rest_is_the_physics_after_every_change(truth, joints):
+    """``true_flange`` remembers its last pose: asked again with nothing changed it is the
+    same; after a new state, a new payload or a temperature it is the physics of the new
+    state; a caller writing into the pose it got changes nothing."""
+    from plugcell.sim.twin.thermal import ThermalDrift
+
+    twin = RobotTwin(truth, seed=5)
+    for k, payload in ((0, 0.0), (1, 0.0), (1, 20.0), (2, 20.0)):
+        reached = joints[k] + 1e-4
+        twin.set_payload(payload)
+        twin.follow(joints[k], reached)
+        physics = true_flange_poses(truth, reached, twin.payload)
+        got = twin.true_flange()
+        np.testing.assert_array_equal(got, physics)
+        got[:3, 3] += 1.0  # the caller's copy
+        np.testing.assert_array_equal(twin.true_flange(), physics)
+    assert not np.allclose(true_flange_poses(truth, joints[1] + 1e-4, Payload(20.0)),
+                           true_flange_poses(truth, joints[1] + 1e-4, Payload()))
+    drift = ThermalDrift()
+    twin.set_thermal_drift(drift, 25.0)
+    warm = twin.true_flange()
+    np.testing.assert_allclose(warm[:3, 3], physics[:3, 3] * drift.length_scale(25.0),
+                               rtol=0, atol=1e-15)
+    assert np.linalg.norm(warm[:3, 3] - physics[:3, 3]) > 1e-6

@@ -93,6 +93,9 @@ class RobotTwin:
         self.moves = 0
         self._thermal: ThermalDrift | None = None
         self._temperature_c = 20.0
+        # the last true flange: the same reached angles and payload give the same pose
+        # (the physics is deterministic), asked again by every tracker sample at rest
+        self._last_flange: tuple[bytes, Payload, Array] | None = None
 
     # ------------------------------------------------------------------ thermal drift
     def set_thermal_drift(self, drift: ThermalDrift | None, temperature_c: float | None = None
@@ -186,9 +189,12 @@ class RobotTwin:
     # ------------------------------------------------------------------ truth (simulators only)
     def true_flange(self) -> Array:
         """True flange pose in the robot base frame — for simulated devices only."""
-        T = true_flange_poses(self._truth, self._reached, self._payload)
+        reached, payload, last = self._reached, self._payload, self._last_flange
+        if last is None or last[0] != reached.tobytes() or last[1] != payload:
+            last = (reached.tobytes(), payload, true_flange_poses(self._truth, reached, payload))
+            self._last_flange = last
+        T = np.array(last[2], copy=True)
         if self._thermal is not None:
-            T = np.array(T, copy=True)
             T[..., :3, 3] *= self._thermal.length_scale(self._temperature_c)
         return T
 
