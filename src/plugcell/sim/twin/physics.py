@@ -5,9 +5,12 @@ first principles rather than from the thesis's error model:
 
 * **Gravity torques** at the actuated joints are the negative gradient of the
   potential energy ``V(q) = g Σ m_k z_k(q)`` of every link mass, point mass
-  (counterweight) and payload, evaluated through the *exact* loop closure — the
-  principle of virtual work.  For the parallelogram this yields the joint-2/2'
-  torques of thesis eqs. (6.28)–(6.30) and (6.38) without writing them down.
+  (counterweight) and payload, taken through the *exact* loop closure — the
+  principle of virtual work: each joint's torque from the masses it carries, a
+  passive joint's passed to the actuated ones by the closure's derivatives.  For the
+  parallelogram this yields the joint-2/2' torques of thesis eqs. (6.28)–(6.30) and
+  (6.38) without writing them down; the tests check it against central differences
+  of :func:`potential_energy`.
 * **Joint compliance**: a joint's link side yields to its torque through the
   gearbox stiffness k_i:  θ_link = θ_motor + τ_i / k_i  (thesis eq. 4.15).  The
   torque depends on the deflected pose, so the deflection is a fixed point,
@@ -35,7 +38,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
-from plugcell.kinematics import GeometricParameters, RobotDescription, forward
+from plugcell.kinematics import FKResult, GeometricParameters, RobotDescription, forward
 from plugcell.kinematics.transforms import cross
 
 Array = NDArray[np.float64]
@@ -43,8 +46,6 @@ Array = NDArray[np.float64]
 GRAVITY = 9.81
 #: Gravity in the robot base frame (floor-mounted robot, z0 up).
 GRAVITY_VECTOR = np.array([0.0, 0.0, -GRAVITY])
-#: Step of the central differences of the potential energy (rad).
-_FD_STEP = 1e-6
 
 
 @dataclass(frozen=True)
@@ -88,34 +89,93 @@ def _masses(desc: RobotDescription) -> tuple[Array, Array, Array]:
     return np.array(idx, dtype=int), np.array(mass), np.array(com, dtype=float).reshape(-1, 3)
 
 
-def _mass_heights(frames: Array, flange: Array, masses: tuple[Array, Array, Array],
-                  payload: Payload) -> Array:
-    """Potential energy / g of all masses for FK frames ``(..., n_links, 4, 4)``."""
-    idx, mass, com = masses
-    F = np.take(frames, idx, axis=-3)
-    z = (F[..., 2, :3] * com).sum(axis=-1) + F[..., 2, 3]
-    energy = (z * mass).sum(axis=-1)
+def potential_energy(desc: RobotDescription, params: GeometricParameters, q: Array,
+                     payload: Payload = Payload()) -> Array:
+    """``V(q) = g Σ_k m_k z_k(q)`` (J): every link mass, point mass and the payload at
+    the heights the exact four-bar closure puts them, for joint readings ``q`` ``(..., n)``;
+    returns ``(...)``."""
+    fk = forward(desc, params, np.asarray(q, dtype=float), closure="fourbar")
+    points, mass, _ = _mass_points(desc, fk, payload)
+    return GRAVITY * (points[..., 2] * mass).sum(axis=-1)
+
+
+def _mass_points(desc: RobotDescription, fk: FKResult, payload: Payload
+                 ) -> tuple[Array, Array, Array]:
+    """Every lumped mass (the payload last): its position ``(..., M, 3)`` (m, robot base
+    frame), mass ``(M,)`` (kg) and link ``(M,)`` (position in ``desc.links``)."""
+    idx, mass, com = _masses(desc)
+    F = np.take(fk.frames, idx, axis=-3)
+    points = (F[..., :3, :3] @ com[..., None])[..., 0] + F[..., :3, 3]
     if payload.mass > 0:
-        zp = (flange[..., :3, :3] @ np.asarray(payload.com))[..., 2] + flange[..., 2, 3]
-        energy = energy + payload.mass * zp
-    return energy
+        flange = fk.flange
+        p = flange[..., :3, :3] @ np.asarray(payload.com, dtype=float) + flange[..., :3, 3]
+        points = np.concatenate([points, p[..., None, :]], axis=-2)
+        mass = np.r_[mass, payload.mass]
+        idx = np.r_[idx, desc.index(desc.flange)]
+    return points, mass, idx
+
+
+def _carried(desc: RobotDescription, links: Array) -> Array:
+    """``(n_links, M)``: 1 where mass ``k`` (on link ``links[k]``) rides on link ``i``'s
+    joint — on link ``i`` itself or beyond it."""
+    parents = desc.parent_indices
+    carried = np.zeros((desc.n_links, len(links)))
+    for k, link in enumerate(links):
+        i = int(link)
+        while i >= 0:
+            carried[i, k] = 1.0
+            i = parents[i]
+    return carried
 
 
 def gravity_torques(desc: RobotDescription, params: GeometricParameters, q: Array,
                     payload: Payload = Payload()) -> Array:
-    """τ = −∂V/∂q at the actuated joints (N·m), by the principle of virtual work.
+    """τ = −∂V/∂q at the actuated joints (N·m; N for a prismatic one), by the principle
+    of virtual work.
 
-    ``V`` is evaluated through the exact four-bar closure; the gradient by central
-    differences of step 1e-6 rad (truncation error ~1e-12 relative: the twin's
-    truth, not a model to be checked).
+    Joint ``i`` turns about its parent frame's ``z_{i−1}`` through ``o_{i−1}`` (DH) and
+    carries the masses on its link and beyond (forces ``f_k = m_k g``, g down the robot
+    base frame's z, at ``p_k``)::
+
+        τ_i = z_{i−1} · Σ_k (p_k − o_{i−1}) × f_k        (revolute)
+        τ_i = z_{i−1} · Σ_k f_k                           (prismatic)
+
+    A loop's passive joints pass theirs to the actuated ones through the exact closure's
+    derivatives, ``τ_kin = τ_actuated + (∂θ_passive/∂θ_kin)ᵀ τ_passive``, and a joint
+    coupling ``θ_kin = M q + c`` to the readings, ``τ_q = Mᵀ τ_kin``.  Equal to the
+    central differences of :func:`potential_energy` (tests).
+
+    Parameters
+    ----------
+    desc : RobotDescription
+    params : GeometricParameters
+    q : (..., n_readings) array, rad (m for a prismatic joint)
+    payload : Payload
+
+    Returns
+    -------
+    (..., n_readings) array
     """
     q = np.asarray(q, dtype=float)
-    n = q.shape[-1]
-    steps = np.eye(n) * _FD_STEP
-    qq = np.concatenate([q[..., None, :] + steps, q[..., None, :] - steps], axis=-2)
-    fk = forward(desc, params, qq, closure="fourbar")
-    V = GRAVITY * _mass_heights(fk.frames, fk.flange, _masses(desc), payload)
-    return -(V[..., :n] - V[..., n:]) / (2 * _FD_STEP)
+    fk = forward(desc, params, q, closure="fourbar")
+    points, mass, links = _mass_points(desc, fk, payload)
+    force = mass[:, None] * GRAVITY_VECTOR  # (M, 3)
+    carried = _carried(desc, links)
+    total = carried @ force  # (n_links, 3): the force each joint carries
+    moment = np.einsum("lm,...mc->...lc", carried, cross(points, force))
+    base = np.broadcast_to(np.eye(4), (*fk.frames.shape[:-3], 1, 4, 4))
+    parent = np.take(np.concatenate([fk.frames, base], axis=-3),
+                     list(desc.parent_indices), axis=-3)  # −1: the base, appended last
+    z, o = parent[..., :3, 2], parent[..., :3, 3]
+    prismatic = np.array([lk.is_prismatic for lk in desc.links])
+    tau = np.where(prismatic, (z * total).sum(axis=-1),
+                   (z * (moment - cross(o, total))).sum(axis=-1))  # (..., n_links)
+    tau_kin = np.take(tau, [desc.index(n) for n in desc.actuated], axis=-1)
+    if desc.loops:
+        passive = [i for (_, _, i3, i4, _, _) in desc.loop_indices for i in (i3, i4)]
+        tau_kin = tau_kin + np.einsum("...p,...pa->...a", np.take(tau, passive, axis=-1),
+                                      fk.passive_jacobian)
+    return tau_kin if desc.coupling is None else tau_kin @ desc.coupling.matrix
 
 
 def deflected_joints(desc: RobotDescription, params: GeometricParameters, q_motor: Array,
