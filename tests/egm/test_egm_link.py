@@ -281,3 +281,45 @@ def test_a_wrong_configuration_names_the_field(kw, says) -> None:
     args = {"robot_host": "127.0.0.1"} | kw
     with pytest.raises(EgmConfigError, match=says):
         EgmConfig(**args)
+
+
+def test_a_correction_ramped_out_faster_than_the_limits_ends_only_at_zero() -> None:
+    """The controller's clock jumps past a correction's ramp out (its samples came late on
+    a loaded machine, as the simulated controller's do): the ramp asks zero at once, the
+    limits let the offset down 0.2 mm a cycle, and the correction ends when what the link
+    sends is zero again — ending at the first cycle the ramp asked zero left the rest on
+    the robot's path (0.16–0.39 mm in two CI runs under load)."""
+    from plugcell.devices.robot.stream.correcting import CorrectionSpec, Corrector
+
+    link = started(local_config(mode="pathcorr"))
+    robot = BareRobot(link.address)
+
+    def correction_mm(answer: bytes) -> float:
+        m = egm_pb2.EgmSensorPathCorr()
+        m.ParseFromString(answer)
+        return m.pathCorr.pos.y
+
+    try:
+        robot.cycle()
+        assert link.wait(lambda lk: lk.streaming, 2.0)
+        corrector = Corrector(link)
+        corrector.start(CorrectionSpec("offset", (0, 0.5e-3, 0, 0, 0, 0), frame="path",
+                                       ramp_s=0.02, duration_s=0.2))
+        sent = [correction_mm(robot.cycle()) for _ in range(20)]  # in, held (80 ms)
+        assert sent[-1] == pytest.approx(0.5), sent
+        tm = robot.seqno * 4 + 200  # the clock 200 ms on: the ramp out starts …
+        assert correction_mm(robot.cycle(tm=tm)) == pytest.approx(0.5)
+        tm += 100  # … and the next sample comes after its end
+        sent.append(correction_mm(robot.cycle(tm=tm)))
+        assert sent[-1] == pytest.approx(0.3)  # down the limits' 0.2 mm, not to zero
+        for _ in range(10):
+            tm += 4
+            sent.append(correction_mm(robot.cycle(tm=tm)))
+        assert wait_until(lambda: corrector.poll() is not None)
+        assert corrector.poll() == ""
+        np.testing.assert_allclose(sent[-11:-7], [0.3, 0.1, 0.0, 0.0], atol=1e-12)
+        tm += 4  # after the end the link holds what it sent last: zero
+        assert correction_mm(robot.cycle(tm=tm)) == 0.0
+    finally:
+        robot.close()
+        link.close()

@@ -605,8 +605,15 @@ class Corrector:
 
     def _run(self, running: Superimposed, spec: CorrectionSpec) -> None:
         source = running.source
+
+        def done(state: CycleState) -> bool:
+            # ramped out, and what the link sent is zero again: a controller clock that
+            # jumped (samples late on a loaded machine) ends the ramp faster than the
+            # limits let the offset down, which then takes the cycles it needs
+            return source.ended() and not np.any(state.offset)
+
         try:
-            self.link.follow(source, done=source.ended, timeout=spec.timeout_s)
+            self.link.follow(source, done=done, timeout=spec.timeout_s)
         except (StreamLinkError, TimeoutError) as exc:
             self._outcome = f"the correction failed: {exc}"
         else:
