@@ -106,12 +106,8 @@ def _compensate(tmp_path, twin, stream: dict, params) -> np.ndarray:
                 ended = await _call(client, service.name, "CORRECT_END")
                 assert ended.state is C, ended.reason
                 # the link has sent its last (zero) correction; the twin applies it a few
-                # cycles later (its interface's dead time) and the arm follows it back:
-                # let it stand again before the twin is stopped (on a loaded machine the
-                # twin's cycles, and its look every 50 ms, lag: a profiler beside the
-                # suite left it 0.39 mm short after a fixed second)
+                # cycles later (its interface's dead time): let it before it is stopped
                 await asyncio.sleep(1.0)
-                await _until_standing(client, service.name)
         finally:
             await service.close()
 
