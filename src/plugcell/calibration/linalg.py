@@ -5,13 +5,16 @@ The identification Jacobian has ``6N`` rows and ``k ≤ ~80`` columns.  Up to
 ``k × k`` Gram matrix ``HᵀH`` (one BLAS pass over the rows, linear in N) and its
 Cholesky factor — the normal equations of eq. (4.8), accurate enough for the
 column-scaled Jacobians of calibration (κ ≲ 1e4, so κ² ≲ 1e8 ≪ 1/ε).
+
+SciPy's triangular and Cholesky solvers are imported where they are called: a process
+that reads a calibration (the robot's link process, a service) without solving one does
+not import SciPy (0.4 s of start-up).
 """
 
 from __future__ import annotations
 
 import numpy as np
 from numpy.typing import NDArray
-from scipy.linalg import LinAlgError, cho_factor, cho_solve, solve_triangular
 
 Array = NDArray[np.float64]
 
@@ -41,11 +44,13 @@ def r_factor(H: Array) -> Array:
     H = np.asarray(H, dtype=float)
     if H.shape[0] <= max(GRAM_ROWS, 2 * H.shape[1]):
         return np.asarray(np.linalg.qr(H, mode="r"))
+    from scipy.linalg import cho_factor
+
     G = H.T @ H
     try:
         c, _ = cho_factor(G, lower=False)
         return np.triu(c)
-    except LinAlgError:
+    except np.linalg.LinAlgError:
         return np.asarray(np.linalg.qr(H, mode="r"))
 
 
@@ -68,12 +73,14 @@ def least_squares(A: Array, b: Array) -> Array:
     x : (k,) array
         The least-squares solution.
     """
+    from scipy.linalg import cho_factor, cho_solve, solve_triangular
+
     A = np.asarray(A, dtype=float)
     if A.shape[0] > GRAM_ROWS:
         try:
             c = cho_factor(A.T @ A, lower=False)
             return np.asarray(cho_solve(c, A.T @ b), dtype=float)
-        except LinAlgError:
+        except np.linalg.LinAlgError:
             return np.linalg.lstsq(A, b, rcond=None)[0]
     Q, R = np.linalg.qr(A, mode="reduced")
     d = np.abs(np.diag(R))

@@ -35,11 +35,11 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from functools import cached_property
 from typing import Any
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
-from scipy.spatial import cKDTree
 
 from plugcell.calibration.model import ErrorModel
 
@@ -245,7 +245,15 @@ class ValidityRegion:
             object.__setattr__(self, name, a)
         if self.poses.ndim != 2 or self.poses.shape[1] != n or self.lever_m.shape != (n,):
             raise ValueError(f"validity region: poses must be (P, {n}) and lever ({n},)")
-        object.__setattr__(self, "_tree", cKDTree(self.poses * self.lever_m))
+
+    @cached_property
+    def _tree(self) -> Any:
+        """The k-d tree of the scaled poses, built on the first distance asked: a process
+        that reads a calibration without checking poses (the robot's link process) does
+        not import SciPy for it."""
+        from scipy.spatial import cKDTree
+
+        return cKDTree(self.poses * self.lever_m)
 
     # ------------------------------------------------------------------ building
     @classmethod
@@ -298,6 +306,8 @@ class ValidityRegion:
         # below is measured against all of them)
         pre = np.unique(np.linspace(0, len(q) - 1, min(len(q), 10 * max_poses)).astype(int))
         keep = pre[_farthest_points(X[pre], max_poses)]
+        from scipy.spatial import cKDTree
+
         cover = 0.0
         if len(keep) < len(q):
             cover = float(cKDTree(X[keep]).query(X)[0].max())
@@ -327,7 +337,7 @@ class ValidityRegion:
             Distances in m of target motion.
         """
         q = np.atleast_2d(np.asarray(q, dtype=float))
-        d, _ = self._tree.query(q * self.lever_m)  # type: ignore[attr-defined]
+        d, _ = self._tree.query(q * self.lever_m)
         return np.asarray(d, dtype=float)
 
     def check(self, q: ArrayLike, payload_kg: ArrayLike | float | None = None,

@@ -35,7 +35,6 @@ from typing import Literal
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
-from scipy.spatial.transform import Rotation
 
 from ._validate import MetrologyError, as_points
 from .fitting import LineFit, fit_line
@@ -131,6 +130,8 @@ def pose_errors(
         )
     if not (np.isfinite(M).all() and np.isfinite(E).all()):
         raise MetrologyError("pose_errors: non-finite entries (NaN or inf) in the poses")
+    from scipy.spatial.transform import Rotation  # here: importing accuracy costs no SciPy
+
     dp = M[:, :3, 3] - E[:, :3, 3]
     Rm = Rotation.from_matrix(M[:, :3, :3])
     Re = Rotation.from_matrix(E[:, :3, :3])

@@ -31,7 +31,6 @@ from dataclasses import dataclass
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
-from scipy.optimize import least_squares
 
 from ._validate import MetrologyError, as_points, as_vector3
 
@@ -487,6 +486,8 @@ def _geometric_circle(x: FloatArray, y: FloatArray, xc: float, yc: float, r: flo
     def jac(q: FloatArray) -> FloatArray:
         rho = np.maximum(np.hypot(x - q[0], y - q[1]), 1e-300)
         return np.column_stack([-(x - q[0]) / rho, -(y - q[1]) / rho, -np.ones_like(x)])
+
+    from scipy.optimize import least_squares  # here: importing fitting costs no SciPy
 
     sol = least_squares(
         resid, np.array([xc, yc, r]), jac=jac, method="lm", xtol=1e-15, ftol=1e-15, gtol=1e-15
