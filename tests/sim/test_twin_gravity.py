@@ -58,3 +58,14 @@ def test_a_serial_arm_and_a_prismatic_track(payload, tmp_path):
     assert track.links[track.index(track.actuated[0])].is_prismatic
     assert np.all(np.abs(tau[:, 0]) > 0.01)  # the tilted track: gravity along it
     _check(track, track.nominal_parameters(), q, payload)
+
+
+@pytest.mark.parametrize(("q", "says"), [
+    (np.zeros(5), r"q: expected shape \(\.\.\., 6\)"),
+    (np.full(6, np.nan), "q: joint values must be finite"),
+])
+def test_bad_joints_are_refused_with_the_reason(q, says):
+    desc = load_robot("smart_h4")
+    for f in (gravity_torques, potential_energy):
+        with pytest.raises(ValueError, match=says):
+            f(desc, desc.nominal_parameters(), q)
